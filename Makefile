@@ -1,0 +1,51 @@
+# imucal: the two commands of the quick start are `make demo` and `make test`.
+# Build trees: build/release (demo, benchmarks) and build/test (sanitizers, the test suite).
+
+JOBS ?= $(shell nproc)
+CMAKE_GEN := -G Ninja
+RELEASE_DIR := build/release
+TEST_DIR := build/test
+FORMAT_FILES = $(shell git ls-files '*.cpp' '*.hpp' 2>/dev/null)
+
+.PHONY: all deps test-deps build demo test bench format format-check clean
+
+all: build
+
+deps:
+	@scripts/install-deps.sh
+
+test-deps:
+	@scripts/install-deps.sh --test
+
+$(RELEASE_DIR)/build.ninja:
+	cmake -S . -B $(RELEASE_DIR) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Release -DIMUCAL_BUILD_TESTS=OFF
+
+build: deps $(RELEASE_DIR)/build.ninja
+	cmake --build $(RELEASE_DIR) -j $(JOBS)
+
+# Runs the main job on the built-in simulated rig (see scripts/demo.sh).
+demo: build
+	scripts/demo.sh $(RELEASE_DIR)/daemon/imucal
+
+$(TEST_DIR)/build.ninja:
+	cmake -S . -B $(TEST_DIR) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DIMUCAL_SANITIZE=ON -DIMUCAL_WERROR=ON
+
+# Builds with AddressSanitizer + UndefinedBehaviorSanitizer and runs every test through ctest.
+test: test-deps format-check $(TEST_DIR)/build.ninja
+	cmake --build $(TEST_DIR) -j $(JOBS)
+	ctest --test-dir $(TEST_DIR) --output-on-failure -j $(JOBS) --timeout 900
+
+bench: deps
+	cmake -S . -B build/bench $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Release -DIMUCAL_BUILD_TESTS=ON
+	cmake --build build/bench -j $(JOBS)
+	scripts/bench.sh build/bench
+
+format:
+	clang-format -i $(FORMAT_FILES)
+
+format-check:
+	@clang-format --dry-run --Werror $(FORMAT_FILES) && echo "format-check: OK"
+
+clean:
+	rm -rf build

@@ -1,0 +1,65 @@
+#pragma once
+// Subcommands of the offline CLI register themselves: each cmd_*.cpp defines one static
+// CommandRegistrar whose setup function adds a CLI11 subcommand to the root app. The
+// subcommand's callback throws CliExit to end with a given exit code and message.
+
+#include <CLI/CLI.hpp>
+#include <functional>
+#include <string>
+
+#include "core/result.hpp"
+
+namespace imucal::cli {
+
+/// Exit codes of `imucal` (documented in docs/cli.md).
+enum ExitCode : int {
+  kExitOk = 0,
+  kExitFailure = 1,  // unexpected failure (a bug)
+  kExitUsage = 2,    // bad command line (CLI11 parse errors also end here)
+  kExitInput = 3,    // unreadable, malformed or damaged input file
+  kExitData = 4,     // input readable but not enough / not suitable for the method
+  kExitSolver = 5,   // estimation failed or failed its quality checks
+  kExitDevice = 6,   // hardware or device file problem
+  kExitIo = 7,       // could not write the output
+};
+
+/// Thrown from a subcommand callback to end the program with `code` after printing `message`
+/// to stderr (when not empty).
+struct CliExit {
+  int code;
+  std::string message;
+};
+
+/// Maps an error code to the CLI exit code.
+int exit_code_for(Errc code);
+
+/// Throws CliExit for a failed Result, with the error's message prefixed by `what`.
+[[noreturn]] void fail(const Error& error, const std::string& what = "");
+
+class CommandRegistrar {
+ public:
+  using Setup = std::function<void(CLI::App& root)>;
+  /// `order` sorts the subcommands in --help.
+  CommandRegistrar(int order, Setup setup);
+};
+
+/// True when stderr is a terminal (progress bars are shown only then).
+bool stderr_is_tty();
+
+/// A one-line progress display on stderr when attached to a terminal; silent otherwise.
+class Progress {
+ public:
+  Progress(std::string label, double total);
+  ~Progress();
+  void update(double done);
+  void finish();
+
+ private:
+  std::string label_;
+  double total_;
+  bool enabled_;
+  bool finished_ = false;
+  int last_permille_ = -1;
+};
+
+}  // namespace imucal::cli

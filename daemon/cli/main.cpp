@@ -1,0 +1,114 @@
+// imucal: the offline command-line tool. Subcommands live in cmd_*.cpp.
+
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <iostream>
+#include <utility>
+#include <vector>
+
+#include "core/version.hpp"
+#include "daemon/cli/command.hpp"
+
+namespace imucal::cli {
+namespace {
+
+std::vector<std::pair<int, CommandRegistrar::Setup>>& registry() {
+  static std::vector<std::pair<int, CommandRegistrar::Setup>> commands;
+  return commands;
+}
+
+}  // namespace
+
+CommandRegistrar::CommandRegistrar(int order, Setup setup) {
+  registry().emplace_back(order, std::move(setup));
+}
+
+int exit_code_for(Errc code) {
+  switch (code) {
+    case Errc::kInvalidArgument:
+      return kExitUsage;
+    case Errc::kNotFound:
+    case Errc::kCorrupt:
+      return kExitInput;
+    case Errc::kIo:
+      return kExitIo;
+    case Errc::kInsufficientData:
+      return kExitData;
+    case Errc::kSolverFailed:
+      return kExitSolver;
+    case Errc::kDevice:
+    case Errc::kTimeout:
+      return kExitDevice;
+    case Errc::kUnsupported:
+    case Errc::kInternal:
+      return kExitFailure;
+  }
+  return kExitFailure;
+}
+
+void fail(const Error& error, const std::string& what) {
+  throw CliExit{exit_code_for(error.code), what.empty() ? error.message : what + ": " + error.message};
+}
+
+bool stderr_is_tty() { return isatty(STDERR_FILENO) == 1; }
+
+Progress::Progress(std::string label, double total)
+    : label_(std::move(label)), total_(total), enabled_(stderr_is_tty()) {}
+
+Progress::~Progress() { finish(); }
+
+void Progress::update(double done) {
+  if (!enabled_ || finished_ || total_ <= 0) return;
+  const int permille = static_cast<int>(std::clamp(done / total_, 0.0, 1.0) * 1000.0);
+  if (permille == last_permille_) return;
+  last_permille_ = permille;
+  std::fprintf(stderr, "\r%s %5.1f%%", label_.c_str(), permille / 10.0);
+  std::fflush(stderr);
+}
+
+void Progress::finish() {
+  if (!enabled_ || finished_) return;
+  finished_ = true;
+  if (last_permille_ >= 0) std::fprintf(stderr, "\r%s done  \n", label_.c_str());
+}
+
+}  // namespace imucal::cli
+
+int main(int argc, char** argv) {
+  using namespace imucal::cli;
+  spdlog::set_pattern("%^%l%$: %v");
+  spdlog::set_level(spdlog::level::warn);
+
+  CLI::App app{
+      "imucal: calibrate MPU-6000 IMUs and camera-IMU rigs, offline tools.\n"
+      "Run 'imucal COMMAND --help' for the options of a command."};
+  app.set_version_flag("--version", std::string("imucal ") + imucal::kVersion);
+  app.require_subcommand(1);
+  app.fallthrough();
+  bool verbose = false;
+  app.add_flag("-v,--verbose", verbose, "Log more (info level)")->each([](const std::string&) {
+    spdlog::set_level(spdlog::level::info);
+  });
+
+  auto commands = registry();
+  std::stable_sort(commands.begin(), commands.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (auto& [order, setup] : commands) setup(app);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int rc = app.exit(e);
+    return rc == 0 ? kExitOk : kExitUsage;
+  } catch (const CliExit& e) {
+    if (!e.message.empty()) std::cerr << "imucal: " << e.message << "\n";
+    return e.code;
+  } catch (const std::exception& e) {
+    std::cerr << "imucal: unexpected error: " << e.what() << "\n";
+    return kExitFailure;
+  }
+  return kExitOk;
+}

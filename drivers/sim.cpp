@@ -1,0 +1,1 @@
+// Anchor translation unit so the library exists before its first source lands.
