@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Runs every benchmark binary of a build tree (Google Benchmark or bench commands) and prints
+# their figures. Usage: scripts/bench.sh [BUILD_DIR]   (make bench does this)
+set -euo pipefail
+dir=${1:-build/bench}
+shopt -s nullglob
+for b in "$dir"/tests/bench_*; do
+  [ -x "$b" ] || continue
+  echo "=== $(basename "$b")"
+  "$b"
+done
