@@ -15,6 +15,8 @@ struct BusCounters {
   std::uint64_t transfers = 0;
   std::uint64_t transfer_errors = 0;  // ioctl/read failed
   std::uint64_t timeouts = 0;
+  std::uint64_t open_errors = 0;      // the device node could not be opened or configured
+  std::uint64_t short_transfers = 0;  // the kernel moved fewer bytes than asked
 };
 
 class RegisterBus {

@@ -1,0 +1,94 @@
+#pragma once
+// The MPU-6000 on a Linux spidev node (/dev/spidevB.C): SPI mode 3, 8-bit words, MSB first.
+// A read sends the register address with bit 7 set (reg | 0x80) and clocks out the data in the
+// same full-duplex transfer; a write sends (reg & 0x7F, value). Every transfer carries its own
+// clock (spi_ioc_transfer.speed_hz): register writes never exceed the configuration clock
+// (the MPU-6000 product specification allows 1 MHz "for communicating with all registers"),
+// reads use the clock chosen with set_speed_hz(), up to 20 MHz (allowed "for reading sensor
+// and interrupt registers", which includes FIFO_R_W).
+//
+// Errors are values; failures are counted per cause in counters(). Not thread-safe: one owner
+// (the driver's thread) uses the bus.
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/result.hpp"
+#include "drivers/bus/register_bus.hpp"
+
+namespace imucal::drivers {
+
+/// The system calls SpidevBus makes. The default forwards to the kernel; tests substitute a
+/// fake to check the transfers the bus builds without an SPI controller.
+class SpidevIo {
+ public:
+  virtual ~SpidevIo() = default;
+  /// open(2) read-write: a file descriptor, or -errno.
+  virtual int open(const std::string& path) = 0;
+  virtual void close(int fd) = 0;
+  /// ioctl(2) (SPI_IOC_WR_MODE, SPI_IOC_RD_MODE, SPI_IOC_WR_BITS_PER_WORD,
+  /// SPI_IOC_WR_MAX_SPEED_HZ, SPI_IOC_MESSAGE(n)): the ioctl's result, or -errno.
+  virtual int ioctl(int fd, unsigned long request, void* arg) = 0;
+};
+
+/// The kernel's spidev interface.
+std::unique_ptr<SpidevIo> make_system_spidev_io();
+
+struct SpidevOptions {
+  /// Clock for register writes and for reads until set_speed_hz() is called.
+  std::uint32_t config_speed_hz = 1'000'000;
+  /// Highest clock set_speed_hz() accepts (sensor and FIFO reads).
+  std::uint32_t max_speed_hz = 20'000'000;
+};
+
+class SpidevBus final : public RegisterBus {
+ public:
+  /// Largest transfer spidev accepts by default (module parameter spidev.bufsiz = 4096),
+  /// including the address byte.
+  static constexpr std::size_t kMaxTransferBytes = 4096;
+
+  /// Opens and configures `device` ("/dev/spidev0.0" or "spidev0.0"). A missing device,
+  /// missing permissions or a node that is not spidev give an error that says what to check.
+  [[nodiscard]] static Result<std::unique_ptr<SpidevBus>> open(const std::string& device,
+                                                               const SpidevOptions& options = {},
+                                                               std::unique_ptr<SpidevIo> io = nullptr);
+  ~SpidevBus() override;
+  SpidevBus(const SpidevBus&) = delete;
+  SpidevBus& operator=(const SpidevBus&) = delete;
+
+  [[nodiscard]] Status read(std::uint8_t reg, std::span<std::uint8_t> out) override;
+  [[nodiscard]] Status write(std::uint8_t reg, std::uint8_t value) override;
+
+  /// Clock for the following reads, clamped to [1 kHz, max_speed_hz]; 0 restores the
+  /// configuration clock. Writes always use min(this, config_speed_hz).
+  void set_speed_hz(std::uint32_t hz) override;
+  std::uint32_t speed_hz() const { return speed_hz_; }
+
+  /// Closes the device and opens it again (recovery after repeated transfer errors).
+  [[nodiscard]] Status reopen();
+
+  std::string name() const override { return name_; }
+  const std::string& path() const { return path_; }
+  const BusCounters& counters() const override { return counters_; }
+
+ private:
+  SpidevBus(std::string path, const SpidevOptions& options, std::unique_ptr<SpidevIo> io);
+  [[nodiscard]] Status open_and_configure();
+  [[nodiscard]] Status transfer(std::uint8_t reg, std::size_t len, std::uint32_t speed_hz);
+  void close_fd();
+
+  std::string path_;
+  std::string name_;
+  SpidevOptions options_;
+  std::unique_ptr<SpidevIo> io_;
+  int fd_ = -1;
+  std::uint32_t speed_hz_ = 0;
+  BusCounters counters_;
+  std::vector<std::uint8_t> tx_;
+  std::vector<std::uint8_t> rx_;
+};
+
+}  // namespace imucal::drivers
