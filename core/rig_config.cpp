@@ -1,0 +1,726 @@
+#include "core/rig_config.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+namespace imucal {
+
+const char* imu_bus_name(ImuBus bus) {
+  switch (bus) {
+    case ImuBus::kSpi:
+      return "spi";
+    case ImuBus::kI2c:
+      return "i2c";
+    case ImuBus::kSim:
+      return "sim";
+  }
+  return "?";
+}
+
+const char* camera_backend_name(CameraBackend backend) {
+  switch (backend) {
+    case CameraBackend::kV4l2:
+      return "v4l2";
+    case CameraBackend::kLibcamera:
+      return "libcamera";
+    case CameraBackend::kAravis:
+      return "aravis";
+    case CameraBackend::kSim:
+      return "sim";
+  }
+  return "?";
+}
+
+const char* storage_backend_name(StorageBackend backend) {
+  switch (backend) {
+    case StorageBackend::kFile:
+      return "file";
+    case StorageBackend::kNvmem:
+      return "nvmem";
+    case StorageBackend::kI2cEeprom:
+      return "i2c-eeprom";
+  }
+  return "?";
+}
+
+namespace {
+
+constexpr double kRotationTolerance = 1e-4;
+
+/// Shortest text that reads back to the same double (so 0.06 stays "0.06").
+std::string num(double v) {
+  char buf[64];
+  auto [ptr, ec] = std::to_chars(buf, buf + sizeof buf, v);
+  (void)ec;  // 64 bytes always hold the shortest form of a double
+  return std::string(buf, ptr);
+}
+
+std::string hex(int v) {
+  char buf[16];
+  std::snprintf(buf, sizeof buf, "0x%02x", v);
+  return buf;
+}
+
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> prev(b.size() + 1), cur(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) prev[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    cur[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (a[i - 1] == b[j - 1] ? 0 : 1)});
+    }
+    std::swap(prev, cur);
+  }
+  return prev[b.size()];
+}
+
+std::string join(const std::vector<std::string>& items, const std::string& sep = ", ") {
+  std::string out;
+  for (std::size_t i = 0; i < items.size(); ++i) out += (i ? sep : "") + items[i];
+  return out;
+}
+
+/// Parses one configuration document, keeping the source name for error messages.
+class ConfigParser {
+ public:
+  ConfigParser(std::string source, std::string base_dir)
+      : source_(std::move(source)), base_dir_(std::move(base_dir)) {}
+
+  Result<RigConfig> parse(const std::string& text);
+
+ private:
+  Error error(const YAML::Node& node, const std::string& path, const std::string& what) const {
+    std::string where = source_;
+    if (node.IsDefined() && !node.Mark().is_null()) where += ":" + std::to_string(node.Mark().line + 1);
+    return make_error(Errc::kInvalidArgument, where + ": " + (path.empty() ? "" : path + ": ") + what);
+  }
+
+  Status check_map(const YAML::Node& node, const std::string& path,
+                   const std::vector<std::string>& allowed) const;
+  Result<long long> get_int(const YAML::Node& node, const std::string& path) const;
+  Result<double> get_double(const YAML::Node& node, const std::string& path) const;
+  Result<std::string> get_string(const YAML::Node& node, const std::string& path) const;
+  Result<std::vector<double>> get_doubles(const YAML::Node& node, const std::string& path) const;
+
+  Status parse_imu(const YAML::Node& node, ImuConfig& imu) const;
+  Status parse_mounting(const YAML::Node& node, Eigen::Matrix3d& R_rig_imu) const;
+  Status parse_camera(const YAML::Node& node, const std::string& path, CameraConfig& cam) const;
+  Status parse_target(const YAML::Node& node, RigConfig& config) const;
+  Status parse_storage(const YAML::Node& node, StorageConfig& storage) const;
+
+  std::string source_;
+  std::string base_dir_;
+};
+
+Status ConfigParser::check_map(const YAML::Node& node, const std::string& path,
+                               const std::vector<std::string>& allowed) const {
+  if (!node.IsMap()) return error(node, path, "expected a mapping with keys " + join(allowed));
+  for (const auto& kv : node) {
+    const std::string key = kv.first.Scalar();
+    if (std::find(allowed.begin(), allowed.end(), key) != allowed.end()) continue;
+    std::string hint;
+    std::size_t best = 3;
+    for (const auto& a : allowed) {
+      const std::size_t d = edit_distance(key, a);
+      if (d < best) {
+        best = d;
+        hint = " (did you mean '" + a + "'?)";
+      }
+    }
+    return error(kv.first, path.empty() ? key : path + "." + key,
+                 "unknown key" + hint + "; allowed keys here: " + join(allowed));
+  }
+  return {};
+}
+
+Result<long long> ConfigParser::get_int(const YAML::Node& node, const std::string& path) const {
+  if (!node.IsScalar()) return error(node, path, "expected an integer");
+  const std::string& s = node.Scalar();
+  long long v = 0;
+  const char* first = s.data();
+  const char* last = s.data() + s.size();
+  int base = 10;
+  if (s.size() > 2 && s[0] == '0' && (s[1] == 'x' || s[1] == 'X')) {
+    first += 2;
+    base = 16;
+  }
+  auto [ptr, ec] = std::from_chars(first, last, v, base);
+  if (ec != std::errc() || ptr != last || first == last) {
+    return error(node, path, "'" + s + "' is not an integer (decimal, or hex with 0x)");
+  }
+  return v;
+}
+
+Result<double> ConfigParser::get_double(const YAML::Node& node, const std::string& path) const {
+  if (!node.IsScalar()) return error(node, path, "expected a number");
+  const std::string& s = node.Scalar();
+  double v = 0;
+  const char* first = s.data() + (!s.empty() && s[0] == '+' ? 1 : 0);
+  auto [ptr, ec] = std::from_chars(first, s.data() + s.size(), v);
+  if (ec != std::errc() || ptr != s.data() + s.size() || s.empty() || !std::isfinite(v)) {
+    return error(node, path, "'" + s + "' is not a finite number");
+  }
+  return v;
+}
+
+Result<std::string> ConfigParser::get_string(const YAML::Node& node, const std::string& path) const {
+  if (!node.IsScalar()) return error(node, path, "expected a string");
+  return node.Scalar();
+}
+
+Result<std::vector<double>> ConfigParser::get_doubles(const YAML::Node& node, const std::string& path) const {
+  if (!node.IsSequence()) return error(node, path, "expected a list of numbers");
+  std::vector<double> out;
+  for (std::size_t i = 0; i < node.size(); ++i) {
+    auto v = get_double(node[i], path + "[" + std::to_string(i) + "]");
+    if (!v.ok()) return v.error();
+    out.push_back(*v);
+  }
+  return out;
+}
+
+// Reads `key` of `map` into `out` when present, checking it with `cond` (an expression in x); `allowed`
+// describes the accepted values for the message.
+#define IMUCAL_CFG_INT(map, key, path, out, cond, allowed)                                                 \
+  if (const YAML::Node n_ = (map)[key]; n_) {                                                              \
+    auto v_ = get_int(n_, path);                                                                           \
+    if (!v_.ok()) return v_.error();                                                                       \
+    const long long x = *v_;                                                                               \
+    if (!(cond)) return error(n_, path, std::string(n_.Scalar()) + " is not allowed (" + (allowed) + ")"); \
+    (out) = static_cast<int>(x);                                                                           \
+  }
+
+Status ConfigParser::parse_imu(const YAML::Node& node, ImuConfig& imu) const {
+  IMUCAL_TRY(check_map(node, "imu",
+                       {"bus", "device", "i2c_address", "spi_config_speed_hz", "spi_data_speed_hz",
+                        "accel_range_g", "gyro_range_dps", "rate_hz", "dlpf_hz", "data_ready", "mounting"}));
+  const YAML::Node bus = node["bus"];
+  if (!bus) return error(node, "imu.bus", "missing (spi, i2c or sim)");
+  auto bus_name = get_string(bus, "imu.bus");
+  if (!bus_name.ok()) return bus_name.error();
+  if (*bus_name == "spi") {
+    imu.bus = ImuBus::kSpi;
+    imu.device = "/dev/spidev0.0";
+  } else if (*bus_name == "i2c") {
+    imu.bus = ImuBus::kI2c;
+    imu.device = "/dev/i2c-1";
+  } else if (*bus_name == "sim") {
+    imu.bus = ImuBus::kSim;
+    imu.device = "sim";
+  } else {
+    return error(bus, "imu.bus", "'" + *bus_name + "' is not allowed (spi, i2c or sim)");
+  }
+
+  if (const YAML::Node n = node["device"]) {
+    auto d = get_string(n, "imu.device");
+    if (!d.ok()) return d.error();
+    if (imu.bus == ImuBus::kSim && *d != "sim") {
+      return error(n, "imu.device", "must be 'sim' (or absent) with bus: sim");
+    }
+    if (imu.bus != ImuBus::kSim && (d->empty() || (*d)[0] != '/')) {
+      return error(n, "imu.device", "'" + *d + "' is not a device path (e.g. /dev/spidev0.0 or /dev/i2c-1)");
+    }
+    imu.device = *d;
+  }
+  // Keys that belong to the other bus are mistakes, not options to ignore.
+  for (const char* key : {"spi_config_speed_hz", "spi_data_speed_hz"}) {
+    if (node[key] && imu.bus != ImuBus::kSpi) {
+      return error(node[key], std::string("imu.") + key, "applies only to bus: spi");
+    }
+  }
+  if (node["i2c_address"] && imu.bus != ImuBus::kI2c) {
+    return error(node["i2c_address"], "imu.i2c_address", "applies only to bus: i2c");
+  }
+  IMUCAL_CFG_INT(node, "i2c_address", "imu.i2c_address", imu.i2c_address, x == 0x68 || x == 0x69,
+                 "0x68 with AD0 low, 0x69 with AD0 high");
+  IMUCAL_CFG_INT(node, "spi_config_speed_hz", "imu.spi_config_speed_hz", imu.spi_config_speed_hz,
+                 x >= 100'000 && x <= 1'000'000,
+                 "100000..1000000: the MPU-6000 takes register writes at 1 MHz at most");
+  IMUCAL_CFG_INT(node, "spi_data_speed_hz", "imu.spi_data_speed_hz", imu.spi_data_speed_hz,
+                 x >= 100'000 && x <= 20'000'000,
+                 "100000..20000000: the MPU-6000 reads sensor registers at 20 MHz at most");
+  IMUCAL_CFG_INT(node, "accel_range_g", "imu.accel_range_g", imu.accel_range_g,
+                 x == 2 || x == 4 || x == 8 || x == 16, "allowed: 2, 4, 8, 16");
+  IMUCAL_CFG_INT(node, "gyro_range_dps", "imu.gyro_range_dps", imu.gyro_range_dps,
+                 x == 250 || x == 500 || x == 1000 || x == 2000, "allowed: 250, 500, 1000, 2000");
+  IMUCAL_CFG_INT(
+      node, "dlpf_hz", "imu.dlpf_hz", imu.dlpf_hz,
+      std::find(std::begin(kMpu6000DlpfHz), std::end(kMpu6000DlpfHz), x) != std::end(kMpu6000DlpfHz),
+      "allowed: 256, 188, 98, 42, 20, 10, 5 (gyro bandwidth of DLPF_CFG 0..6)");
+  if (const YAML::Node n = node["rate_hz"]) {
+    auto r = get_double(n, "imu.rate_hz");
+    if (!r.ok()) return r.error();
+    imu.rate_hz = *r;
+  }
+  // SMPLRT_DIV: rate = base / (1 + div), div in 0..255; base is 8 kHz with DLPF_CFG 0, else 1 kHz.
+  const double base_hz = imu.dlpf_hz == 256 ? 8000.0 : 1000.0;
+  const double divisor = base_hz / imu.rate_hz;
+  if (!(imu.rate_hz > 0) || std::abs(divisor - std::round(divisor)) > 1e-9 || divisor < 1 || divisor > 256) {
+    const YAML::Node n = node["rate_hz"] ? node["rate_hz"] : node;
+    std::ostringstream msg;
+    msg << imu.rate_hz << " Hz cannot be produced with dlpf_hz " << imu.dlpf_hz << ": the rate must be "
+        << base_hz << " / N for an integer N in 1..256 (e.g. " << base_hz << ", " << base_hz / 2 << ", "
+        << base_hz / 5 << ", " << base_hz / 10 << ")";
+    return error(n, "imu.rate_hz", msg.str());
+  }
+
+  if (const YAML::Node n = node["data_ready"]) {
+    IMUCAL_TRY(check_map(n, "imu.data_ready", {"chip", "line"}));
+    GpioLineConfig line;
+    if (!n["chip"]) return error(n, "imu.data_ready.chip", "missing (e.g. gpiochip0)");
+    auto chip = get_string(n["chip"], "imu.data_ready.chip");
+    if (!chip.ok()) return chip.error();
+    if (chip->empty()) return error(n["chip"], "imu.data_ready.chip", "is empty (e.g. gpiochip0)");
+    line.chip = *chip;
+    if (!n["line"]) return error(n, "imu.data_ready.line", "missing (the line offset on the chip)");
+    IMUCAL_CFG_INT(n, "line", "imu.data_ready.line", line.line, x >= 0 && x < 4096, "a line offset 0..4095");
+    imu.data_ready = line;
+  }
+  if (const YAML::Node n = node["mounting"]) IMUCAL_TRY(parse_mounting(n, imu.R_rig_imu));
+  return {};
+}
+
+Status ConfigParser::parse_mounting(const YAML::Node& node, Eigen::Matrix3d& R_rig_imu) const {
+  IMUCAL_TRY(check_map(node, "imu.mounting", {"R_rig_imu", "rpy_deg"}));
+  if (node["R_rig_imu"] && node["rpy_deg"]) {
+    return error(node, "imu.mounting", "give either R_rig_imu or rpy_deg, not both");
+  }
+  if (const YAML::Node n = node["rpy_deg"]) {
+    auto v = get_doubles(n, "imu.mounting.rpy_deg");
+    if (!v.ok()) return v.error();
+    if (v->size() != 3) return error(n, "imu.mounting.rpy_deg", "expected [roll, pitch, yaw] in degrees");
+    const double k = M_PI / 180.0;
+    R_rig_imu = (Eigen::AngleAxisd((*v)[2] * k, Eigen::Vector3d::UnitZ()) *
+                 Eigen::AngleAxisd((*v)[1] * k, Eigen::Vector3d::UnitY()) *
+                 Eigen::AngleAxisd((*v)[0] * k, Eigen::Vector3d::UnitX()))
+                    .toRotationMatrix();
+    return {};
+  }
+  const YAML::Node n = node["R_rig_imu"];
+  if (!n) return error(node, "imu.mounting", "give R_rig_imu (3x3 rows) or rpy_deg [roll, pitch, yaw]");
+  const std::string path = "imu.mounting.R_rig_imu";
+  std::vector<double> values;
+  if (n.IsSequence() && n.size() == 3 && n[0].IsSequence()) {
+    for (std::size_t r = 0; r < 3; ++r) {
+      auto row = get_doubles(n[r], path + "[" + std::to_string(r) + "]");
+      if (!row.ok()) return row.error();
+      if (row->size() != 3) return error(n[r], path, "each row needs 3 numbers");
+      values.insert(values.end(), row->begin(), row->end());
+    }
+  } else {
+    auto flat = get_doubles(n, path);
+    if (!flat.ok()) return flat.error();
+    values = *flat;
+  }
+  if (values.size() != 9) return error(n, path, "expected 3 rows of 3 numbers (or 9 numbers, row-major)");
+  Eigen::Matrix3d R;
+  for (int i = 0; i < 9; ++i) R(i / 3, i % 3) = values[static_cast<std::size_t>(i)];
+  const double ortho = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  if (ortho > kRotationTolerance) {
+    std::ostringstream msg;
+    msg << "not orthonormal (largest entry of R^T R - I is " << ortho << ", tolerance " << kRotationTolerance
+        << "); give a rotation matrix, or use rpy_deg";
+    return error(n, path, msg.str());
+  }
+  if (R.determinant() < 0) return error(n, path, "has determinant -1 (a reflection, not a rotation)");
+  // Project a matrix with visible round-off (e.g. 0.7071) onto the nearest rotation; leave one
+  // that is orthonormal to machine precision as written, so normalized output round-trips.
+  if (ortho > 1e-12) {
+    Eigen::JacobiSVD<Eigen::Matrix3d> svd(R, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    R = svd.matrixU() * svd.matrixV().transpose();
+  }
+  R_rig_imu = R;
+  return {};
+}
+
+Status ConfigParser::parse_camera(const YAML::Node& node, const std::string& path, CameraConfig& cam) const {
+  IMUCAL_TRY(
+      check_map(node, path, {"name", "backend", "device", "width", "height", "rate_hz", "pixel_format"}));
+  if (!node["name"]) return error(node, path + ".name", "missing (e.g. cam0)");
+  auto name = get_string(node["name"], path + ".name");
+  if (!name.ok()) return name.error();
+  if (name->empty() || !std::all_of(name->begin(), name->end(), [](char c) {
+        return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
+      })) {
+    return error(node["name"], path + ".name", "'" + *name + "' is not allowed (letters, digits, _ and -)");
+  }
+  cam.name = *name;
+  if (!node["backend"]) return error(node, path + ".backend", "missing (v4l2, libcamera, aravis or sim)");
+  auto backend = get_string(node["backend"], path + ".backend");
+  if (!backend.ok()) return backend.error();
+  if (*backend == "v4l2") {
+    cam.backend = CameraBackend::kV4l2;
+    cam.pixel_format = "GREY";
+  } else if (*backend == "libcamera") {
+    cam.backend = CameraBackend::kLibcamera;
+    cam.pixel_format = "YUV420";
+  } else if (*backend == "aravis") {
+    cam.backend = CameraBackend::kAravis;
+    cam.pixel_format = "Mono8";
+  } else if (*backend == "sim") {
+    cam.backend = CameraBackend::kSim;
+    cam.pixel_format = "GREY";
+    cam.device = "sim";
+  } else {
+    return error(node["backend"], path + ".backend",
+                 "'" + *backend + "' is not allowed (v4l2, libcamera, aravis or sim)");
+  }
+  if (const YAML::Node n = node["device"]) {
+    auto d = get_string(n, path + ".device");
+    if (!d.ok()) return d.error();
+    cam.device = *d;
+  }
+  if (cam.backend == CameraBackend::kV4l2 && cam.device.rfind("/dev/", 0) != 0) {
+    return error(node["device"] ? node["device"] : node, path + ".device",
+                 "v4l2 needs a device node such as /dev/video0");
+  }
+  if (cam.backend == CameraBackend::kAravis && cam.device.empty()) {
+    return error(node, path + ".device",
+                 "aravis needs a device id (see arv-tool-0.8; Fake_1 for the fake camera)");
+  }
+  if (cam.backend == CameraBackend::kSim && cam.device != "sim") {
+    return error(node["device"], path + ".device", "must be 'sim' (or absent) with backend: sim");
+  }
+  for (const char* key : {"width", "height"}) {
+    if (!node[key]) return error(node, path + "." + key, "missing (pixels)");
+  }
+  IMUCAL_CFG_INT(node, "width", path + ".width", cam.width, x >= 16 && x <= 16384, "16..16384 pixels");
+  IMUCAL_CFG_INT(node, "height", path + ".height", cam.height, x >= 16 && x <= 16384, "16..16384 pixels");
+  if (!node["rate_hz"]) return error(node, path + ".rate_hz", "missing (frames per second)");
+  auto rate = get_double(node["rate_hz"], path + ".rate_hz");
+  if (!rate.ok()) return rate.error();
+  if (!(*rate > 0.0 && *rate <= 1000.0)) {
+    return error(node["rate_hz"], path + ".rate_hz", "must be > 0 and <= 1000 frames per second");
+  }
+  cam.rate_hz = *rate;
+  if (const YAML::Node n = node["pixel_format"]) {
+    auto f = get_string(n, path + ".pixel_format");
+    if (!f.ok()) return f.error();
+    const bool printable = !f->empty() && std::all_of(f->begin(), f->end(), [](char c) {
+      return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == ' ';
+    });
+    if (!printable) return error(n, path + ".pixel_format", "'" + *f + "' is not a pixel format name");
+    if ((cam.backend == CameraBackend::kV4l2 || cam.backend == CameraBackend::kSim) && f->size() != 4) {
+      return error(n, path + ".pixel_format",
+                   "'" + *f + "' is not a V4L2 fourcc (4 characters, e.g. GREY, YUYV, Y16 )");
+    }
+    cam.pixel_format = *f;
+  }
+  return {};
+}
+
+Status ConfigParser::parse_target(const YAML::Node& node, RigConfig& config) const {
+  if (node.IsScalar()) {
+    std::filesystem::path p(node.Scalar());
+    if (p.is_relative()) p = std::filesystem::path(base_dir_) / p;
+    std::ifstream in(p);
+    if (!in) return error(node, "target", "cannot open target file " + p.string());
+    std::stringstream ss;
+    ss << in.rdbuf();
+    auto t = parse_target_yaml(ss.str(), p.string());
+    if (!t.ok()) return error(node, "target", t.error().message);
+    config.target = *t;
+    return {};
+  }
+  if (!node.IsMap())
+    return error(node, "target", "expected a Kalibr target mapping or a path to a target YAML");
+  // Kalibr keys for either target type; parse_target_yaml checks which ones the type needs.
+  IMUCAL_TRY(check_map(node, "target",
+                       {"target_type", "targetCols", "targetRows", "rowSpacingMeters", "colSpacingMeters",
+                        "tagCols", "tagRows", "tagSize", "tagSpacing", "codeOffset"}));
+  YAML::Emitter out;
+  out << node;
+  auto t = parse_target_yaml(out.c_str(), source_);
+  if (!t.ok()) {
+    std::string msg = t.error().message;
+    if (msg.rfind(source_ + ": ", 0) == 0) msg = msg.substr(source_.size() + 2);
+    return error(node, "target", msg);
+  }
+  config.target = *t;
+  return {};
+}
+
+Status ConfigParser::parse_storage(const YAML::Node& node, StorageConfig& storage) const {
+  IMUCAL_TRY(check_map(node, "storage",
+                       {"backend", "path", "i2c_device", "i2c_address", "size_bytes", "offset_bytes"}));
+  if (!node["backend"]) return error(node, "storage.backend", "missing (file, nvmem or i2c-eeprom)");
+  auto backend = get_string(node["backend"], "storage.backend");
+  if (!backend.ok()) return backend.error();
+  if (*backend == "file") {
+    storage.backend = StorageBackend::kFile;
+  } else if (*backend == "nvmem") {
+    storage.backend = StorageBackend::kNvmem;
+  } else if (*backend == "i2c-eeprom") {
+    storage.backend = StorageBackend::kI2cEeprom;
+  } else {
+    return error(node["backend"], "storage.backend",
+                 "'" + *backend + "' is not allowed (file, nvmem or i2c-eeprom)");
+  }
+  const bool i2c = storage.backend == StorageBackend::kI2cEeprom;
+  for (const char* key : {"i2c_device", "i2c_address"}) {
+    if (node[key] && !i2c)
+      return error(node[key], std::string("storage.") + key, "applies only to backend: i2c-eeprom");
+  }
+  if (node["path"] && i2c)
+    return error(node["path"], "storage.path", "does not apply to backend: i2c-eeprom (use i2c_device)");
+  if (!i2c) {
+    if (!node["path"] && storage.backend == StorageBackend::kNvmem) {
+      return error(node, "storage.path", "missing (e.g. /sys/bus/nvmem/devices/0-00500/nvmem)");
+    }
+    if (const YAML::Node n = node["path"]) {
+      auto p = get_string(n, "storage.path");
+      if (!p.ok()) return p.error();
+      if (p->empty()) return error(n, "storage.path", "is empty");
+      storage.path = *p;
+    }
+  } else {
+    if (!node["i2c_device"]) return error(node, "storage.i2c_device", "missing (e.g. /dev/i2c-1)");
+    auto d = get_string(node["i2c_device"], "storage.i2c_device");
+    if (!d.ok()) return d.error();
+    if (d->rfind("/dev/", 0) != 0)
+      return error(node["i2c_device"], "storage.i2c_device",
+                   "'" + *d + "' is not a device path (e.g. /dev/i2c-1)");
+    storage.i2c_device = *d;
+    IMUCAL_CFG_INT(node, "i2c_address", "storage.i2c_address", storage.i2c_address, x >= 0x50 && x <= 0x57,
+                   "an EEPROM address 0x50..0x57");
+  }
+  IMUCAL_CFG_INT(node, "size_bytes", "storage.size_bytes", storage.size_bytes, x >= 256 && x <= (1 << 24),
+                 "256..16777216 bytes; two A/B slots must fit");
+  IMUCAL_CFG_INT(node, "offset_bytes", "storage.offset_bytes", storage.offset_bytes, x >= 0 && x <= (1 << 24),
+                 "0..16777216 bytes");
+  return {};
+}
+
+Result<RigConfig> ConfigParser::parse(const std::string& text) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::ParserException& e) {
+    return make_error(Errc::kInvalidArgument,
+                      source_ + ":" + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg);
+  }
+  if (!root.IsMap())
+    return error(root, "", "expected a mapping with keys name, imu, cameras, target, storage");
+  IMUCAL_TRY(check_map(root, "", {"name", "imu", "cameras", "target", "storage"}));
+  RigConfig config;
+  if (const YAML::Node n = root["name"]) {
+    auto name = get_string(n, "name");
+    if (!name.ok()) return name.error();
+    if (name->empty() || !std::all_of(name->begin(), name->end(), [](char c) {
+          return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
+        })) {
+      return error(n, "name", "'" + *name + "' is not allowed (letters, digits, '_', '-', '.')");
+    }
+    config.name = *name;
+  }
+  if (!root["imu"]) return error(root, "imu", "missing (the MPU-6000 settings, at least imu.bus)");
+  IMUCAL_TRY(parse_imu(root["imu"], config.imu));
+  if (const YAML::Node n = root["cameras"]) {
+    if (!n.IsSequence()) return error(n, "cameras", "expected a list of cameras");
+    std::set<std::string> names;
+    for (std::size_t i = 0; i < n.size(); ++i) {
+      const std::string path = "cameras[" + std::to_string(i) + "]";
+      CameraConfig cam;
+      IMUCAL_TRY(parse_camera(n[i], path, cam));
+      if (!names.insert(cam.name).second) {
+        return error(n[i]["name"], path + ".name", "'" + cam.name + "' is used by another camera");
+      }
+      config.cameras.push_back(cam);
+    }
+  }
+  if (const YAML::Node n = root["target"]) IMUCAL_TRY(parse_target(n, config));
+  if (!config.cameras.empty() && !config.target) {
+    return error(root, "target",
+                 "missing: cameras are configured, so a calibration target is needed "
+                 "(a Kalibr target mapping or a path to a target YAML)");
+  }
+  if (const YAML::Node n = root["storage"]) IMUCAL_TRY(parse_storage(n, config.storage));
+  return config;
+}
+
+#undef IMUCAL_CFG_INT
+
+}  // namespace
+
+Status validate_rig_config(const RigConfig& config) {
+  // Round-trip through the normalized YAML, so code-built configurations obey the same rules.
+  auto reparsed = parse_rig_config(rig_config_to_yaml(config), "<rig config>");
+  if (!reparsed.ok()) return reparsed.error();
+  return {};
+}
+
+Result<RigConfig> parse_rig_config(const std::string& text, const std::string& source,
+                                   const std::string& base_dir) {
+  ConfigParser parser(source, base_dir);
+  return parser.parse(text);
+}
+
+Result<RigConfig> load_rig_config(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) {
+    return make_error(Errc::kNotFound, path +
+                                           ": cannot open the rig configuration (check the path; "
+                                           "the default one is config/rig.yaml)");
+  }
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string dir = std::filesystem::path(path).parent_path().string();
+  return parse_rig_config(ss.str(), path, dir.empty() ? "." : dir);
+}
+
+namespace {
+
+void emit_target(YAML::Emitter& out, const TargetDescription& t) {
+  out << YAML::BeginMap;
+  if (t.type == TargetDescription::Type::kCheckerboard) {
+    out << YAML::Key << "target_type" << YAML::Value << "checkerboard";
+    out << YAML::Key << "targetCols" << YAML::Value << t.cols;
+    out << YAML::Key << "targetRows" << YAML::Value << t.rows;
+    out << YAML::Key << "rowSpacingMeters" << YAML::Value << num(t.row_spacing_m);
+    out << YAML::Key << "colSpacingMeters" << YAML::Value << num(t.col_spacing_m);
+  } else {
+    out << YAML::Key << "target_type" << YAML::Value << "aprilgrid";
+    out << YAML::Key << "tagCols" << YAML::Value << t.tag_cols;
+    out << YAML::Key << "tagRows" << YAML::Value << t.tag_rows;
+    out << YAML::Key << "tagSize" << YAML::Value << num(t.tag_size_m);
+    out << YAML::Key << "tagSpacing" << YAML::Value << num(t.tag_spacing);
+  }
+  out << YAML::EndMap;
+}
+
+}  // namespace
+
+std::string rig_config_to_yaml(const RigConfig& c) {
+  YAML::Emitter out;
+  out << YAML::BeginMap;
+  out << YAML::Key << "name" << YAML::Value << c.name;
+  out << YAML::Key << "imu" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "bus" << YAML::Value << imu_bus_name(c.imu.bus);
+  out << YAML::Key << "device" << YAML::Value << c.imu.device;
+  if (c.imu.bus == ImuBus::kI2c) out << YAML::Key << "i2c_address" << YAML::Value << hex(c.imu.i2c_address);
+  if (c.imu.bus == ImuBus::kSpi) {
+    out << YAML::Key << "spi_config_speed_hz" << YAML::Value << c.imu.spi_config_speed_hz;
+    out << YAML::Key << "spi_data_speed_hz" << YAML::Value << c.imu.spi_data_speed_hz;
+  }
+  out << YAML::Key << "accel_range_g" << YAML::Value << c.imu.accel_range_g;
+  out << YAML::Key << "gyro_range_dps" << YAML::Value << c.imu.gyro_range_dps;
+  out << YAML::Key << "rate_hz" << YAML::Value << num(c.imu.rate_hz);
+  out << YAML::Key << "dlpf_hz" << YAML::Value << c.imu.dlpf_hz;
+  if (c.imu.data_ready) {
+    out << YAML::Key << "data_ready" << YAML::Value << YAML::BeginMap;
+    out << YAML::Key << "chip" << YAML::Value << c.imu.data_ready->chip;
+    out << YAML::Key << "line" << YAML::Value << c.imu.data_ready->line;
+    out << YAML::EndMap;
+  }
+  out << YAML::Key << "mounting" << YAML::Value << YAML::BeginMap << YAML::Key << "R_rig_imu" << YAML::Value
+      << YAML::BeginSeq;
+  for (int r = 0; r < 3; ++r) {
+    out << YAML::Flow << YAML::BeginSeq;
+    for (int k = 0; k < 3; ++k) out << num(c.imu.R_rig_imu(r, k));
+    out << YAML::EndSeq;
+  }
+  out << YAML::EndSeq << YAML::EndMap;
+  out << YAML::EndMap;
+
+  out << YAML::Key << "cameras" << YAML::Value << YAML::BeginSeq;
+  for (const auto& cam : c.cameras) {
+    out << YAML::BeginMap;
+    out << YAML::Key << "name" << YAML::Value << cam.name;
+    out << YAML::Key << "backend" << YAML::Value << camera_backend_name(cam.backend);
+    out << YAML::Key << "device" << YAML::Value << cam.device;
+    out << YAML::Key << "width" << YAML::Value << cam.width;
+    out << YAML::Key << "height" << YAML::Value << cam.height;
+    out << YAML::Key << "rate_hz" << YAML::Value << num(cam.rate_hz);
+    out << YAML::Key << "pixel_format" << YAML::Value << YAML::DoubleQuoted << cam.pixel_format;
+    out << YAML::EndMap;
+  }
+  out << YAML::EndSeq;
+  if (c.target) {
+    out << YAML::Key << "target" << YAML::Value;
+    emit_target(out, *c.target);
+  }
+  out << YAML::Key << "storage" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "backend" << YAML::Value << storage_backend_name(c.storage.backend);
+  if (c.storage.backend == StorageBackend::kI2cEeprom) {
+    out << YAML::Key << "i2c_device" << YAML::Value << c.storage.i2c_device;
+    out << YAML::Key << "i2c_address" << YAML::Value << hex(c.storage.i2c_address);
+  } else {
+    out << YAML::Key << "path" << YAML::Value << c.storage.path;
+  }
+  out << YAML::Key << "size_bytes" << YAML::Value << c.storage.size_bytes;
+  out << YAML::Key << "offset_bytes" << YAML::Value << c.storage.offset_bytes;
+  out << YAML::EndMap;
+  out << YAML::EndMap;
+  return std::string(out.c_str()) + "\n";
+}
+
+std::string rig_config_to_json(const RigConfig& c) {
+  using nlohmann::json;
+  json imu = {{"bus", imu_bus_name(c.imu.bus)},
+              {"device", c.imu.device},
+              {"accel_range_g", c.imu.accel_range_g},
+              {"gyro_range_dps", c.imu.gyro_range_dps},
+              {"rate_hz", c.imu.rate_hz},
+              {"dlpf_hz", c.imu.dlpf_hz}};
+  if (c.imu.bus == ImuBus::kI2c) imu["i2c_address"] = c.imu.i2c_address;
+  if (c.imu.bus == ImuBus::kSpi) {
+    imu["spi_config_speed_hz"] = c.imu.spi_config_speed_hz;
+    imu["spi_data_speed_hz"] = c.imu.spi_data_speed_hz;
+  }
+  if (c.imu.data_ready)
+    imu["data_ready"] = {{"chip", c.imu.data_ready->chip}, {"line", c.imu.data_ready->line}};
+  json R = json::array();
+  for (int r = 0; r < 3; ++r)
+    R.push_back({c.imu.R_rig_imu(r, 0), c.imu.R_rig_imu(r, 1), c.imu.R_rig_imu(r, 2)});
+  imu["mounting"] = {{"R_rig_imu", R}};
+  json cams = json::array();
+  for (const auto& cam : c.cameras) {
+    cams.push_back({{"name", cam.name},
+                    {"backend", camera_backend_name(cam.backend)},
+                    {"device", cam.device},
+                    {"width", cam.width},
+                    {"height", cam.height},
+                    {"rate_hz", cam.rate_hz},
+                    {"pixel_format", cam.pixel_format}});
+  }
+  json storage = {{"backend", storage_backend_name(c.storage.backend)},
+                  {"size_bytes", c.storage.size_bytes},
+                  {"offset_bytes", c.storage.offset_bytes}};
+  if (c.storage.backend == StorageBackend::kI2cEeprom) {
+    storage["i2c_device"] = c.storage.i2c_device;
+    storage["i2c_address"] = c.storage.i2c_address;
+  } else {
+    storage["path"] = c.storage.path;
+  }
+  json root = {{"name", c.name}, {"imu", imu}, {"cameras", cams}, {"storage", storage}};
+  if (c.target) {
+    const auto& t = *c.target;
+    if (t.type == TargetDescription::Type::kCheckerboard) {
+      root["target"] = {{"target_type", "checkerboard"},
+                        {"targetCols", t.cols},
+                        {"targetRows", t.rows},
+                        {"rowSpacingMeters", t.row_spacing_m},
+                        {"colSpacingMeters", t.col_spacing_m}};
+    } else {
+      root["target"] = {{"target_type", "aprilgrid"},
+                        {"tagCols", t.tag_cols},
+                        {"tagRows", t.tag_rows},
+                        {"tagSize", t.tag_size_m},
+                        {"tagSpacing", t.tag_spacing}};
+    }
+  }
+  return root.dump(2) + "\n";
+}
+
+}  // namespace imucal

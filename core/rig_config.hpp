@@ -1,0 +1,100 @@
+#pragma once
+// Rig configuration: which IMU bus and settings, which cameras, which calibration target, where
+// the calibration is stored. Read from YAML (docs/config.md lists every key and its default).
+// Loading validates every field; unknown keys are errors, so typos do not pass silently. An
+// error names the file, the line, the key path (e.g. "imu.accel_range_g"), what is wrong and
+// what is allowed.
+
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/result.hpp"
+#include "core/target.hpp"
+
+namespace imucal {
+
+enum class ImuBus { kSpi, kI2c, kSim };
+const char* imu_bus_name(ImuBus bus);
+
+/// A GPIO line (libgpiod): chip name or path ("gpiochip0", "/dev/gpiochip0") and line offset.
+struct GpioLineConfig {
+  std::string chip;
+  int line = 0;
+};
+
+/// MPU-6000 settings.
+struct ImuConfig {
+  ImuBus bus = ImuBus::kSim;
+  /// spidev or i2c-dev node; "sim" for the simulated rig.
+  std::string device = "sim";
+  /// I2C only: 0x68 (AD0 low) or 0x69 (AD0 high).
+  int i2c_address = 0x68;
+  /// SPI only. The MPU-6000 accepts at most 1 MHz for register access and 20 MHz for reading
+  /// the sensor and interrupt registers (datasheet section 6.5 / register map p. 46).
+  int spi_config_speed_hz = 1'000'000;
+  int spi_data_speed_hz = 20'000'000;
+  int accel_range_g = 4;                     // 2, 4, 8, 16
+  int gyro_range_dps = 500;                  // 250, 500, 1000, 2000
+  double rate_hz = 200.0;                    // output rate: base / (1 + SMPLRT_DIV), base 8 kHz or 1 kHz
+  int dlpf_hz = 98;                          // gyro bandwidth of a DLPF_CFG setting: 256,188,98,42,20,10,5
+  std::optional<GpioLineConfig> data_ready;  // absent: poll the FIFO
+  /// Mounting: rotates IMU-frame vectors into the rig frame (v_rig = R_rig_imu * v_imu).
+  Eigen::Matrix3d R_rig_imu = Eigen::Matrix3d::Identity();
+};
+
+enum class CameraBackend { kV4l2, kLibcamera, kAravis, kSim };
+const char* camera_backend_name(CameraBackend backend);
+
+struct CameraConfig {
+  std::string name;  // unique among the rig's cameras, e.g. "cam0"
+  CameraBackend backend = CameraBackend::kSim;
+  std::string device;  // /dev/videoN (v4l2), camera id (libcamera, aravis), "sim"
+  int width = 0;
+  int height = 0;
+  double rate_hz = 0.0;
+  std::string pixel_format;  // V4L2 fourcc ("GREY", "YUYV") or GenICam name ("Mono8")
+};
+
+enum class StorageBackend { kFile, kNvmem, kI2cEeprom };
+const char* storage_backend_name(StorageBackend backend);
+
+/// Where the accepted calibration record lives on the rig.
+struct StorageConfig {
+  StorageBackend backend = StorageBackend::kFile;
+  std::string path = "/var/lib/imucal/calibration.bin";  // file / nvmem: the file to use
+  std::string i2c_device;                                // i2c-eeprom: the i2c-dev node
+  int i2c_address = 0x50;                                // i2c-eeprom: 0x50..0x57
+  int size_bytes = 4096;                                 // bytes available to imucal (both A/B slots)
+  int offset_bytes = 0;                                  // where imucal's region starts inside the device
+};
+
+struct RigConfig {
+  std::string name = "rig";
+  ImuConfig imu;
+  std::vector<CameraConfig> cameras;
+  std::optional<TargetDescription> target;  // required when cameras are configured
+  StorageConfig storage;
+};
+
+/// MPU-6000 DLPF bandwidths (gyro, Hz) indexed by DLPF_CFG 0..6.
+inline constexpr int kMpu6000DlpfHz[] = {256, 188, 98, 42, 20, 10, 5};
+
+/// Parses rig configuration YAML. `source` names the file in errors; `base_dir` resolves a
+/// target given as a relative path.
+[[nodiscard]] Result<RigConfig> parse_rig_config(const std::string& text,
+                                                 const std::string& source = "<config>",
+                                                 const std::string& base_dir = ".");
+/// Reads and parses a configuration file; a relative target path is relative to the file.
+[[nodiscard]] Result<RigConfig> load_rig_config(const std::string& path);
+
+/// Checks the cross-field rules on a configuration built in code (parsing already does).
+[[nodiscard]] Status validate_rig_config(const RigConfig& config);
+
+/// Normalized forms: every key with its value, defaults filled in, target inline. The YAML
+/// form parses back to the same configuration.
+std::string rig_config_to_yaml(const RigConfig& config);
+std::string rig_config_to_json(const RigConfig& config);
+
+}  // namespace imucal

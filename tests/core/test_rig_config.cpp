@@ -1,0 +1,268 @@
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <Eigen/LU>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "core/rig_config.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal {
+namespace {
+
+using ::testing::HasSubstr;
+
+TEST(RigConfig, ShippedSimRigLoads) {
+  auto cfg = load_rig_config(test::source_path("config/rig.yaml"));
+  ASSERT_TRUE(cfg.ok()) << cfg.error().message;
+  EXPECT_EQ(cfg->name, "sim");
+  EXPECT_EQ(cfg->imu.bus, ImuBus::kSim);
+  EXPECT_EQ(cfg->imu.device, "sim");
+  ASSERT_EQ(cfg->cameras.size(), 1u);
+  EXPECT_EQ(cfg->cameras[0].backend, CameraBackend::kSim);
+  ASSERT_TRUE(cfg->target.has_value());
+  // The target is a path relative to the config file.
+  EXPECT_EQ(cfg->target->cols, 7);
+  EXPECT_EQ(cfg->target->rows, 6);
+  EXPECT_DOUBLE_EQ(cfg->target->col_spacing_m, 0.06);
+  EXPECT_EQ(cfg->storage.backend, StorageBackend::kFile);
+}
+
+TEST(RigConfig, ShippedSpiExampleLoads) {
+  auto cfg = load_rig_config(test::source_path("config/rig-spi-example.yaml"));
+  ASSERT_TRUE(cfg.ok()) << cfg.error().message;
+  EXPECT_EQ(cfg->imu.bus, ImuBus::kSpi);
+  EXPECT_EQ(cfg->imu.device, "/dev/spidev0.0");
+  EXPECT_EQ(cfg->imu.spi_config_speed_hz, 1'000'000);
+  EXPECT_EQ(cfg->imu.spi_data_speed_hz, 20'000'000);
+  EXPECT_EQ(cfg->imu.accel_range_g, 8);
+  EXPECT_EQ(cfg->imu.gyro_range_dps, 1000);
+  EXPECT_EQ(cfg->imu.rate_hz, 500.0);
+  EXPECT_EQ(cfg->imu.dlpf_hz, 188);
+  ASSERT_TRUE(cfg->imu.data_ready.has_value());
+  EXPECT_EQ(cfg->imu.data_ready->chip, "gpiochip0");
+  EXPECT_EQ(cfg->imu.data_ready->line, 17);
+  Eigen::Matrix3d expected;
+  expected << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+  EXPECT_TRUE(cfg->imu.R_rig_imu.isApprox(expected, 1e-15));
+  EXPECT_EQ(cfg->cameras.at(0).device, "/dev/video0");
+  EXPECT_EQ(cfg->storage.backend, StorageBackend::kNvmem);
+  ASSERT_TRUE(cfg->target.has_value());
+}
+
+TEST(RigConfig, CheckerboardTargetFileIsKalibrYaml) {
+  auto t = load_target_yaml(test::source_path("config/checkerboard-7x6.yaml"));
+  ASSERT_TRUE(t.ok()) << t.error().message;
+  EXPECT_EQ(t->type, TargetDescription::Type::kCheckerboard);
+  EXPECT_EQ(t->cols, 7);
+  EXPECT_EQ(t->rows, 6);
+}
+
+TEST(RigConfig, MinimalConfigGetsDefaults) {
+  auto cfg = parse_rig_config("imu: {bus: i2c}\n", "min.yaml");
+  ASSERT_TRUE(cfg.ok()) << cfg.error().message;
+  EXPECT_EQ(cfg->name, "rig");
+  EXPECT_EQ(cfg->imu.device, "/dev/i2c-1");
+  EXPECT_EQ(cfg->imu.i2c_address, 0x68);
+  EXPECT_EQ(cfg->imu.accel_range_g, 4);
+  EXPECT_EQ(cfg->imu.gyro_range_dps, 500);
+  EXPECT_EQ(cfg->imu.rate_hz, 200.0);
+  EXPECT_EQ(cfg->imu.dlpf_hz, 98);
+  EXPECT_FALSE(cfg->imu.data_ready.has_value());
+  EXPECT_TRUE(cfg->imu.R_rig_imu.isIdentity());
+  EXPECT_TRUE(cfg->cameras.empty());
+  EXPECT_FALSE(cfg->target.has_value());
+  EXPECT_EQ(cfg->storage.path, "/var/lib/imucal/calibration.bin");
+}
+
+TEST(RigConfig, HexAddressAndSpiDefaults) {
+  auto i2c = parse_rig_config("imu: {bus: i2c, i2c_address: 0x69}\n");
+  ASSERT_TRUE(i2c.ok()) << i2c.error().message;
+  EXPECT_EQ(i2c->imu.i2c_address, 0x69);
+  auto spi = parse_rig_config("imu: {bus: spi}\n");
+  ASSERT_TRUE(spi.ok()) << spi.error().message;
+  EXPECT_EQ(spi->imu.device, "/dev/spidev0.0");
+  EXPECT_EQ(spi->imu.spi_config_speed_hz, 1'000'000);
+  EXPECT_EQ(spi->imu.spi_data_speed_hz, 20'000'000);
+}
+
+TEST(RigConfig, RpyMountingIsZYX) {
+  auto cfg = parse_rig_config("imu:\n  bus: sim\n  mounting: {rpy_deg: [0, 0, 90]}\n");
+  ASSERT_TRUE(cfg.ok()) << cfg.error().message;
+  // Yaw +90 deg: the IMU's x axis points along the rig's y axis.
+  const Eigen::Vector3d v = cfg->imu.R_rig_imu * Eigen::Vector3d::UnitX();
+  EXPECT_TRUE(v.isApprox(Eigen::Vector3d::UnitY(), 1e-12)) << v.transpose();
+  auto roll = parse_rig_config("imu:\n  bus: sim\n  mounting: {rpy_deg: [90, 0, 0]}\n");
+  ASSERT_TRUE(roll.ok());
+  EXPECT_TRUE((roll->imu.R_rig_imu * Eigen::Vector3d::UnitY()).isApprox(Eigen::Vector3d::UnitZ(), 1e-12));
+}
+
+TEST(RigConfig, MountingMatrixAcceptsFlatAndRows) {
+  auto flat = parse_rig_config("imu:\n  bus: sim\n  mounting: {R_rig_imu: [0,-1,0, 1,0,0, 0,0,1]}\n");
+  ASSERT_TRUE(flat.ok()) << flat.error().message;
+  EXPECT_DOUBLE_EQ(flat->imu.R_rig_imu(0, 1), -1.0);
+  EXPECT_DOUBLE_EQ(flat->imu.R_rig_imu(1, 0), 1.0);
+  // Four-digit values are accepted and projected onto the nearest rotation.
+  auto rounded = parse_rig_config(
+      "imu:\n  bus: sim\n  mounting:\n    R_rig_imu: [[0.7071, -0.7071, 0], [0.7071, 0.7071, 0], [0, 0, "
+      "1]]\n");
+  ASSERT_TRUE(rounded.ok()) << rounded.error().message;
+  const Eigen::Matrix3d& R = rounded->imu.R_rig_imu;
+  EXPECT_LT((R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff(), 1e-14);
+  EXPECT_NEAR(R(0, 0), std::sqrt(0.5), 1e-12);
+  EXPECT_NEAR(R.determinant(), 1.0, 1e-14);
+}
+
+TEST(RigConfig, NormalizedYamlRoundTrips) {
+  auto cfg = load_rig_config(test::source_path("config/rig-spi-example.yaml"));
+  ASSERT_TRUE(cfg.ok()) << cfg.error().message;
+  const std::string yaml = rig_config_to_yaml(*cfg);
+  auto again = parse_rig_config(yaml, "normalized.yaml");
+  ASSERT_TRUE(again.ok()) << again.error().message << "\n" << yaml;
+  EXPECT_EQ(rig_config_to_yaml(*again), yaml);
+  EXPECT_EQ(again->imu.R_rig_imu, cfg->imu.R_rig_imu);
+  EXPECT_EQ(again->storage.path, cfg->storage.path);
+  EXPECT_TRUE(validate_rig_config(*cfg).ok());
+  const std::string json = rig_config_to_json(*cfg);
+  EXPECT_THAT(json, HasSubstr("\"spi_data_speed_hz\": 20000000"));
+  EXPECT_THAT(json, HasSubstr("\"targetCols\": 7"));
+}
+
+TEST(RigConfig, ValidateCatchesCodeBuiltMistakes) {
+  RigConfig cfg;
+  EXPECT_TRUE(validate_rig_config(cfg).ok());
+  cfg.imu.accel_range_g = 3;
+  auto s = validate_rig_config(cfg);
+  ASSERT_FALSE(s.ok());
+  EXPECT_THAT(s.error().message, HasSubstr("imu.accel_range_g"));
+}
+
+struct InvalidCase {
+  const char* yaml;
+  const char* key_path;  // must appear in the message
+  int line;              // 1-based line the message must name
+  const char* hint;      // what is allowed / wrong, must appear in the message
+};
+
+class RigConfigInvalid : public ::testing::TestWithParam<InvalidCase> {};
+
+TEST_P(RigConfigInvalid, NamesFileLineKeyAndWhatIsAllowed) {
+  const InvalidCase& c = GetParam();
+  auto cfg = parse_rig_config(c.yaml, "bad.yaml");
+  ASSERT_FALSE(cfg.ok()) << c.yaml;
+  const std::string& msg = cfg.error().message;
+  EXPECT_EQ(cfg.error().code, Errc::kInvalidArgument);
+  EXPECT_THAT(msg, HasSubstr("bad.yaml:" + std::to_string(c.line) + ":")) << msg;
+  EXPECT_THAT(msg, HasSubstr(std::string(c.key_path) + ":")) << msg;
+  EXPECT_THAT(msg, HasSubstr(c.hint)) << msg;
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Cases, RigConfigInvalid,
+    ::testing::Values(
+        InvalidCase{"imu:\n  bus: usb\n", "imu.bus", 2, "spi, i2c or sim"},
+        InvalidCase{"name: x\n", "imu", 1, "missing"},
+        InvalidCase{"imu:\n  bus: sim\n  accel_range_g: 3\n", "imu.accel_range_g", 3, "2, 4, 8, 16"},
+        InvalidCase{"imu:\n  bus: sim\n  gyro_range_dps: 300\n", "imu.gyro_range_dps", 3,
+                    "250, 500, 1000, 2000"},
+        InvalidCase{"imu:\n  bus: sim\n  dlpf_hz: 100\n", "imu.dlpf_hz", 3, "256, 188, 98"},
+        InvalidCase{"imu:\n  bus: sim\n  rate_hz: 300\n", "imu.rate_hz", 3, "1000 / N"},
+        InvalidCase{"imu:\n  bus: sim\n  rate_hz: fast\n", "imu.rate_hz", 3, "not a finite number"},
+        InvalidCase{"imu:\n  bus: i2c\n  i2c_address: 0x70\n", "imu.i2c_address", 3, "0x68"},
+        InvalidCase{"imu:\n  bus: i2c\n  spi_data_speed_hz: 1000000\n", "imu.spi_data_speed_hz", 3,
+                    "only to bus: spi"},
+        InvalidCase{"imu:\n  bus: spi\n  spi_data_speed_hz: 40000000\n", "imu.spi_data_speed_hz", 3,
+                    "20 MHz"},
+        InvalidCase{"imu:\n  bus: spi\n  spi_config_speed_hz: 20000000\n", "imu.spi_config_speed_hz", 3,
+                    "1 MHz"},
+        InvalidCase{"imu:\n  bus: spi\n  device: spidev0.0\n", "imu.device", 3, "not a device path"},
+        InvalidCase{"imu:\n  bus: sim\n  acel_range_g: 4\n", "imu.acel_range_g", 3,
+                    "did you mean 'accel_range_g'"},
+        InvalidCase{"imu: {bus: sim}\ncamras: []\n", "camras", 2, "unknown key"},
+        InvalidCase{"imu:\n  bus: sim\n  data_ready: {chip: gpiochip0}\n", "imu.data_ready.line", 3,
+                    "missing"},
+        InvalidCase{"imu:\n  bus: sim\n  mounting:\n    R_rig_imu: [[1,0,0],[0,1,0],[0,0.5,1]]\n",
+                    "imu.mounting.R_rig_imu", 4, "not orthonormal"},
+        InvalidCase{"imu:\n  bus: sim\n  mounting:\n    R_rig_imu: [[1,0,0],[0,1,0],[0,0,-1]]\n",
+                    "imu.mounting.R_rig_imu", 4, "reflection"},
+        InvalidCase{"imu:\n  bus: sim\n  mounting:\n    rpy_deg: [1, 2]\n", "imu.mounting.rpy_deg", 4,
+                    "roll, pitch, yaw"},
+        InvalidCase{
+            "imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: usb, width: 640, height: 480, rate_hz: "
+            "20}\n"
+            "target: {target_type: checkerboard, targetCols: 7, targetRows: 6, rowSpacingMeters: 0.06, "
+            "colSpacingMeters: 0.06}\n",
+            "cameras[0].backend", 3, "v4l2, libcamera, aravis or sim"},
+        InvalidCase{"imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: v4l2, width: 640, height: 480, "
+                    "rate_hz: 20}\n",
+                    "cameras[0].device", 3, "/dev/video0"},
+        InvalidCase{"imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: sim, width: 0, height: 480, "
+                    "rate_hz: 20}\n",
+                    "cameras[0].width", 3, "16..16384"},
+        InvalidCase{"imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: sim, width: 640, height: 480}\n",
+                    "cameras[0].rate_hz", 3, "missing"},
+        InvalidCase{"imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: sim, width: 640, height: 480, "
+                    "rate_hz: 20, pixel_format: GRAY8}\n",
+                    "cameras[0].pixel_format", 3, "fourcc"},
+        InvalidCase{
+            "imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: sim, width: 640, height: 480, "
+            "rate_hz: 20}\n  - {name: cam0, backend: sim, width: 640, height: 480, rate_hz: 20}\n"
+            "target: {target_type: checkerboard, targetCols: 7, targetRows: 6, rowSpacingMeters: 0.06, "
+            "colSpacingMeters: 0.06}\n",
+            "cameras[1].name", 4, "used by another camera"},
+        InvalidCase{"imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: sim, width: 640, height: 480, "
+                    "rate_hz: 20}\n",
+                    "target", 1, "calibration target is needed"},
+        InvalidCase{
+            "imu: {bus: sim}\ntarget:\n  target_type: checkerboard\n  targetCols: 1\n  targetRows: 6\n"
+            "  rowSpacingMeters: 0.06\n  colSpacingMeters: 0.06\n",
+            "target", 3, "2x2 inner corners"},
+        InvalidCase{"imu: {bus: sim}\ntarget: {target_type: checkerboard, targetCol: 7}\n",
+                    "target.targetCol", 2, "did you mean 'targetCols'"},
+        InvalidCase{"imu: {bus: sim}\ntarget: no-such-target.yaml\n", "target", 2, "cannot open target file"},
+        InvalidCase{"imu: {bus: sim}\nstorage:\n  backend: flash\n", "storage.backend", 3,
+                    "file, nvmem or i2c-eeprom"},
+        InvalidCase{"imu: {bus: sim}\nstorage:\n  backend: nvmem\n", "storage.path", 3, "missing"},
+        InvalidCase{"imu: {bus: sim}\nstorage:\n  backend: i2c-eeprom\n  i2c_device: /dev/i2c-1\n"
+                    "  i2c_address: 0x68\n",
+                    "storage.i2c_address", 5, "0x50..0x57"},
+        InvalidCase{"imu: {bus: sim}\nstorage:\n  backend: file\n  i2c_address: 0x50\n",
+                    "storage.i2c_address", 4, "only to backend: i2c-eeprom"},
+        InvalidCase{"imu: {bus: sim}\nstorage:\n  backend: file\n  size_bytes: 16\n", "storage.size_bytes", 4,
+                    "256..16777216"},
+        InvalidCase{"imu:\n  bus: sim\n  accel_range_g: [4]\n", "imu.accel_range_g", 3,
+                    "expected an integer"},
+        InvalidCase{"imu:\n  bus: sim\n  accel_range_g: 010\n", "imu.accel_range_g", 3, "not allowed"}));
+
+TEST(RigConfig, YamlSyntaxErrorNamesLine) {
+  auto cfg = parse_rig_config("imu:\n  bus: sim\n  rate_hz: [200\n", "broken.yaml");
+  ASSERT_FALSE(cfg.ok());
+  EXPECT_THAT(cfg.error().message, HasSubstr("broken.yaml:"));
+  EXPECT_THAT(cfg.error().message, HasSubstr("not valid YAML"));
+}
+
+TEST(RigConfig, MissingFileIsNotFound) {
+  auto cfg = load_rig_config(test::scratch_dir() + "/nope.yaml");
+  ASSERT_FALSE(cfg.ok());
+  EXPECT_EQ(cfg.error().code, Errc::kNotFound);
+  EXPECT_THAT(cfg.error().message, HasSubstr("nope.yaml"));
+}
+
+TEST(RigConfig, TargetPathIsRelativeToConfigFile) {
+  const std::string dir = test::scratch_dir();
+  std::filesystem::create_directories(dir + "/sub/targets");
+  std::ofstream(dir + "/sub/targets/board.yaml")
+      << "target_type: checkerboard\ntargetCols: 5\ntargetRows: 4\nrowSpacingMeters: 0.03\n"
+         "colSpacingMeters: 0.03\n";
+  std::ofstream(dir + "/sub/rig.yaml") << "imu: {bus: sim}\ntarget: targets/board.yaml\n";
+  auto cfg = load_rig_config(dir + "/sub/rig.yaml");
+  ASSERT_TRUE(cfg.ok()) << cfg.error().message;
+  ASSERT_TRUE(cfg->target.has_value());
+  EXPECT_EQ(cfg->target->cols, 5);
+  EXPECT_DOUBLE_EQ(cfg->target->row_spacing_m, 0.03);
+}
+
+}  // namespace
+}  // namespace imucal
