@@ -1,0 +1,124 @@
+#pragma once
+// Quaternion integration of body angular rates by the normalised fourth-order Runge-Kutta
+// method (RK4n), Tedaldi 2013 eqs. 3.10-3.16, with its exact reverse-mode derivative.
+//
+// Quaternions are Eigen::Vector4d [w, x, y, z]; q rotates body vectors into the start frame,
+// q_dot = 1/2 Omega(w) q = 1/2 q (x) (0, w) (eqs. 3.10, 3.11), w in the body frame. Between
+// samples i and i+1 the rate at the half step is the mean of the two samples (c_2 = c_3 = 1/2).
+
+#include <Eigen/Core>
+#include <span>
+#include <vector>
+
+namespace imucal::calib {
+
+using Quat4 = Eigen::Vector4d;
+
+/// One RK4n step (eqs. 3.12-3.16) from rate w0 to rate w1 over dt_s.
+Quat4 rk4n_step(const Quat4& q, const Eigen::Vector3d& w0, const Eigen::Vector3d& w1, double dt_s);
+
+/// Integrates rates w[i] sampled at t_s[i] (seconds) from the identity; returns the rotation of
+/// the last sample relative to the first. Fewer than two samples give the identity.
+Quat4 integrate_rk4n(std::span<const Eigen::Vector3d> w, std::span<const double> t_s);
+
+/// Rotation matrix of a unit quaternion (eq. 2.13).
+Eigen::Matrix3d quat_to_matrix(const Quat4& q);
+
+/// Integrates like integrate_rk4n and computes, for a function f(q_end) with the 3x4 Jacobian
+/// `df_dq_end` evaluated by the callback at the final quaternion, the derivatives of f with
+/// respect to every rate sample: dfdw[i] is 3x3 (row = component of f, column = rate axis).
+/// `q_buffer` is scratch storage reused between calls.
+struct Rk4nGradient {
+  Quat4 q_end;
+  std::vector<Eigen::Matrix3d> df_dw;  // one per sample
+};
+template <class DfDq>
+void integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d> w, std::span<const double> t_s,
+                                  const DfDq& df_dq_end, std::vector<Quat4>& q_buffer, Rk4nGradient& out);
+
+// ---------------------------------------------------------------------------------------------
+
+namespace detail {
+
+/// q (x) (0, w): the product Omega(w) q of eq. 3.11.
+inline Quat4 omega_mul(const Quat4& q, const Eigen::Vector3d& w) {
+  return {-(q[1] * w[0] + q[2] * w[1] + q[3] * w[2]), q[0] * w[0] + q[2] * w[2] - q[3] * w[1],
+          q[0] * w[1] + q[3] * w[0] - q[1] * w[2], q[0] * w[2] + q[1] * w[1] - q[2] * w[0]};
+}
+
+/// Adjoint of y = Omega(w) x with respect to w: (dy/dw)^T ybar.
+inline Eigen::Vector3d omega_mul_dw(const Quat4& x, const Quat4& ybar) {
+  return {-ybar[0] * x[1] + ybar[1] * x[0] + ybar[2] * x[3] - ybar[3] * x[2],
+          -ybar[0] * x[2] - ybar[1] * x[3] + ybar[2] * x[0] + ybar[3] * x[1],
+          -ybar[0] * x[3] + ybar[1] * x[2] - ybar[2] * x[1] + ybar[3] * x[0]};
+}
+
+}  // namespace detail
+
+template <class DfDq>
+void integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d> w, std::span<const double> t_s,
+                                  const DfDq& df_dq_end, std::vector<Quat4>& q, Rk4nGradient& out) {
+  using detail::omega_mul;
+  using detail::omega_mul_dw;
+  const std::size_t n = w.size();
+  q.resize(n == 0 ? 1 : n);
+  q[0] = Quat4(1, 0, 0, 0);
+  for (std::size_t i = 0; i + 1 < n; ++i) q[i + 1] = rk4n_step(q[i], w[i], w[i + 1], t_s[i + 1] - t_s[i]);
+  out.q_end = q[n == 0 ? 0 : n - 1];
+  out.df_dw.assign(n, Eigen::Matrix3d::Zero());
+  if (n < 2) return;
+  // Adjoint rows: qbar[r] = d f_r / d q_i, propagated backwards through every step.
+  const Eigen::Matrix<double, 3, 4> J = df_dq_end(out.q_end);
+  Quat4 qbar[3] = {J.row(0).transpose(), J.row(1).transpose(), J.row(2).transpose()};
+  for (std::size_t i = n - 1; i-- > 0;) {
+    const double h = t_s[i + 1] - t_s[i];
+    const Eigen::Vector3d& w0 = w[i];
+    const Eigen::Vector3d& w1 = w[i + 1];
+    const Eigen::Vector3d wm = 0.5 * (w0 + w1);
+    const Quat4& x1 = q[i];
+    const Quat4 k1 = 0.5 * omega_mul(x1, w0);
+    const Quat4 x2 = x1 + 0.5 * h * k1;
+    const Quat4 k2 = 0.5 * omega_mul(x2, wm);
+    const Quat4 x3 = x1 + 0.5 * h * k2;
+    const Quat4 k3 = 0.5 * omega_mul(x3, wm);
+    const Quat4 x4 = x1 + h * k3;
+    const Quat4 k4 = 0.5 * omega_mul(x4, w1);
+    const Quat4 p = x1 + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
+    const double p_norm = p.norm();
+    const Quat4& q_next = q[i + 1];
+    for (int r = 0; r < 3; ++r) {
+      // Normalisation (eq. 3.16).
+      const Quat4 pbar = (qbar[r] - qbar[r].dot(q_next) * q_next) / p_norm;
+      Quat4 x1bar = pbar;
+      Quat4 k1bar = (h / 6.0) * pbar;
+      Quat4 k2bar = (h / 3.0) * pbar;
+      Quat4 k3bar = (h / 3.0) * pbar;
+      const Quat4 k4bar = (h / 6.0) * pbar;
+      Eigen::Vector3d w0bar = Eigen::Vector3d::Zero();
+      Eigen::Vector3d w1bar = Eigen::Vector3d::Zero();
+      Eigen::Vector3d wmbar = Eigen::Vector3d::Zero();
+      // Omega is skew-symmetric, so the adjoint through x is -Omega(w) ybar.
+      Quat4 xbar = -0.5 * omega_mul(k4bar, w1);
+      w1bar += 0.5 * omega_mul_dw(x4, k4bar);
+      x1bar += xbar;
+      k3bar += h * xbar;
+      xbar = -0.5 * omega_mul(k3bar, wm);
+      wmbar += 0.5 * omega_mul_dw(x3, k3bar);
+      x1bar += xbar;
+      k2bar += 0.5 * h * xbar;
+      xbar = -0.5 * omega_mul(k2bar, wm);
+      wmbar += 0.5 * omega_mul_dw(x2, k2bar);
+      x1bar += xbar;
+      k1bar += 0.5 * h * xbar;
+      x1bar += -0.5 * omega_mul(k1bar, w0);
+      w0bar += 0.5 * omega_mul_dw(x1, k1bar);
+      w0bar += 0.5 * wmbar;
+      w1bar += 0.5 * wmbar;
+      out.df_dw[i].row(r) += w0bar.transpose();
+      out.df_dw[i + 1].row(r) += w1bar.transpose();
+      qbar[r] = x1bar;
+    }
+  }
+}
+
+}  // namespace imucal::calib

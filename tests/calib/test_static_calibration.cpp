@@ -1,0 +1,277 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "calib/static_calibration.hpp"
+#include "calib/static_detector.hpp"
+#include "tests/calib/test_static_synth.hpp"
+
+namespace imucal::calib {
+namespace {
+
+using test::make_static_recording;
+using test::SynthConfig;
+
+/// Every estimated parameter within k sigma of the truth (plus a tiny absolute floor for
+/// parameters whose sigma is far below the numerical resolution).
+void expect_within(const TedaldiTriad& est, const TriadSigma& sigma, const TedaldiTriad& truth, double k,
+                   const std::string& what) {
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      if (i == j) continue;
+      if (sigma.T(i, j) == 0.0) {
+        EXPECT_NEAR(est.T(i, j), truth.T(i, j), 1e-12) << what << " T(" << i << "," << j << ") is fixed";
+        continue;
+      }
+      EXPECT_NEAR(est.T(i, j), truth.T(i, j), k * sigma.T(i, j) + 1e-9)
+          << what << " T(" << i << "," << j << ")";
+    }
+    EXPECT_NEAR(est.scale[i], truth.scale[i], k * sigma.scale[i] + 1e-12) << what << " scale " << i;
+    EXPECT_NEAR(est.bias[i], truth.bias[i], k * sigma.bias[i] + 1e-12) << what << " bias " << i;
+    EXPECT_GT(sigma.scale[i], 0.0) << what;
+    EXPECT_GT(sigma.bias[i], 0.0) << what;
+  }
+}
+
+TEST(StaticDetector, RunningVarianceMatchesDirect) {
+  std::vector<Eigen::Vector3d> v;
+  for (int i = 0; i < 300; ++i)
+    v.emplace_back(32768 + std::sin(0.3 * i) * 40, 16000 + (i % 7), 1e5 + i * 0.5);
+  const auto s = variance_magnitude_sq(v, 21);
+  for (int i : {0, 5, 10, 150, 290, 299}) {
+    const int a = std::max(0, i - 10), b = std::min(300, i + 11);
+    EXPECT_NEAR(s[i], variance_magnitude_sq_of(std::span<const Eigen::Vector3d>(v.data() + a, b - a)),
+                1e-6 * (1.0 + s[i]))
+        << i;
+  }
+}
+
+TEST(StaticDetector, IntervalsSplitAtBreaksAndRespectMinimum) {
+  std::vector<double> s = {0, 0, 0, 5, 0, 0, 0, 0, 0, 0};
+  std::vector<bool> usable(10, true), brk(10, false);
+  brk[6] = true;
+  const auto iv = detect_static_intervals(s, 1.0, usable, brk, 2);
+  ASSERT_EQ(iv.size(), 3u);
+  EXPECT_EQ(iv[0].begin, 0u);
+  EXPECT_EQ(iv[0].end, 3u);
+  EXPECT_EQ(iv[1].begin, 4u);
+  EXPECT_EQ(iv[1].end, 6u);
+  EXPECT_EQ(iv[2].begin, 6u);
+  EXPECT_EQ(iv[2].end, 10u);
+}
+
+TEST(StaticCalibration, RecoversTruthWithinUncertaintySi) {
+  SynthConfig cfg;
+  cfg.seed = 3;
+  cfg.truth = test::random_truth(3);
+  const auto rec = make_static_recording(cfg);
+  StaticCalibrationOptions opt;
+  opt.gravity_mps2 = cfg.gravity;
+  opt.accel_init = AxisConversion{};
+  opt.gyro_init = AxisConversion{};
+  auto res = calibrate_static(rec.samples, opt);
+  ASSERT_TRUE(res.ok()) << res.error().message;
+  expect_within(res->model.accel, res->accel_sigma, cfg.truth.accel, 4.5, "accel");
+  TedaldiTriad gyro_truth = cfg.truth.gyro;
+  expect_within(res->model.gyro, res->gyro_sigma, gyro_truth, 4.5, "gyro");
+  EXPECT_GE(res->distinct_attitudes, 30);
+  EXPECT_GE(res->threshold_multiplier, opt.multiplier_min);
+  EXPECT_TRUE(res->init_still_from_allan);
+  EXPECT_GT(res->init_still_s, 20.0);
+  // Quality: calibration improves both figures by a large factor (Tedaldi tables 4.4, 4.5).
+  ASSERT_TRUE(res->quality.before_available);
+  EXPECT_LT(res->quality.accel_after.mean_mps2 * 5, res->quality.accel_before.mean_mps2);
+  EXPECT_LT(res->quality.gyro_after.mean_rad * 5, res->quality.gyro_before.mean_rad);
+  EXPECT_LT(res->quality.gyro_after.mean_rad, 2e-3);
+  // Canonical form applies the same correction.
+  const Eigen::Vector3d raw(1.0, 2.0, -9.0);
+  EXPECT_TRUE(res->canonical.correct_accel(raw).isApprox(res->model.accel.apply(raw), 1e-12));
+  EXPECT_TRUE(res->warnings.empty()) << res->warnings.front();
+}
+
+TEST(StaticCalibration, RawCountsWithLargeOffsetsAndEllipsoidStart) {
+  SynthConfig cfg;
+  cfg.seed = 11;
+  cfg.truth = test::random_truth(11);
+  cfg.raw_counts = true;
+  const auto rec = make_static_recording(cfg);
+  // Truth in counts: ideal = T (K lsb) (c - offset + b / lsb).
+  TedaldiTriad accel_truth = cfg.truth.accel, gyro_truth = cfg.truth.gyro;
+  accel_truth.scale *= cfg.accel_lsb;
+  accel_truth.bias = cfg.truth.accel.bias / cfg.accel_lsb - Eigen::Vector3d::Constant(cfg.accel_offset);
+  gyro_truth.scale *= cfg.gyro_lsb;
+  gyro_truth.bias = cfg.truth.gyro.bias / cfg.gyro_lsb - Eigen::Vector3d::Constant(cfg.gyro_offset);
+
+  StaticCalibrationOptions opt;
+  opt.gravity_mps2 = cfg.gravity;
+  opt.gyro_init = test::counts_conversion(cfg.gyro_lsb, 0.0);  // scale only; no accel guess
+  auto res = calibrate_static(rec.samples, opt);
+  ASSERT_TRUE(res.ok()) << res.error().message;
+  EXPECT_FALSE(res->quality.before_available);
+  expect_within(res->model.accel, res->accel_sigma, accel_truth, 4.5, "accel");
+  expect_within(res->model.gyro, res->gyro_sigma, gyro_truth, 4.5, "gyro");
+
+  // With the nominal conversion as the initial guess the answer is the same.
+  opt.accel_init = test::counts_conversion(cfg.accel_lsb, cfg.accel_offset);
+  auto res2 = calibrate_static(rec.samples, opt);
+  ASSERT_TRUE(res2.ok()) << res2.error().message;
+  EXPECT_TRUE(res2->model.accel.scale.isApprox(res->model.accel.scale, 1e-6));
+  EXPECT_TRUE(res2->quality.before_available);
+}
+
+TEST(StaticCalibration, EstimatedGyroBiasAgreesWithStillBias) {
+  SynthConfig cfg;
+  cfg.seed = 5;
+  cfg.truth = test::random_truth(5);
+  const auto rec = make_static_recording(cfg);
+  StaticCalibrationOptions opt;
+  opt.init_still_s = 40.0;
+  opt.estimate_gyro_bias = true;
+  auto res = calibrate_static(rec.samples, opt);
+  ASSERT_TRUE(res.ok()) << res.error().message;
+  EXPECT_FALSE(res->init_still_from_allan);
+  EXPECT_EQ(res->gyro_covariance.rows(), 12);
+  expect_within(res->model.gyro, res->gyro_sigma, cfg.truth.gyro, 4.5, "gyro");
+}
+
+TEST(StaticCalibration, TooFewPosesSaysWhatToRecord) {
+  SynthConfig cfg;
+  cfg.poses = 5;
+  cfg.truth = test::random_truth(2);
+  const auto rec = make_static_recording(cfg);
+  auto res = calibrate_static(rec.samples, StaticCalibrationOptions{});
+  ASSERT_FALSE(res.ok());
+  EXPECT_EQ(res.error().code, Errc::kInsufficientData);
+  EXPECT_NE(res.error().message.find("at least 9"), std::string::npos) << res.error().message;
+  EXPECT_NE(res.error().message.find("36-50 different attitudes"), std::string::npos) << res.error().message;
+}
+
+TEST(StaticCalibration, FewPosesWarn) {
+  SynthConfig cfg;
+  cfg.poses = 14;
+  cfg.seed = 21;
+  cfg.truth = test::random_truth(21);
+  const auto rec = make_static_recording(cfg);
+  auto res = calibrate_static(rec.samples, StaticCalibrationOptions{});
+  ASSERT_TRUE(res.ok()) << res.error().message;
+  ASSERT_FALSE(res->warnings.empty());
+  EXPECT_NE(res->warnings.front().find("distinct attitudes"), std::string::npos);
+}
+
+TEST(StaticCalibration, MissingStillStartIsAnError) {
+  SynthConfig cfg;
+  cfg.still_s = 2.0;
+  cfg.truth = test::random_truth(4);
+  const auto rec = make_static_recording(cfg);
+  auto res = calibrate_static(rec.samples, StaticCalibrationOptions{});
+  ASSERT_FALSE(res.ok());
+  EXPECT_EQ(res.error().code, Errc::kInsufficientData);
+  EXPECT_NE(res.error().message.find("no still period at the start"), std::string::npos)
+      << res.error().message;
+  // A given still period that contains motion is refused too.
+  StaticCalibrationOptions opt;
+  opt.init_still_s = 10.0;
+  res = calibrate_static(rec.samples, opt);
+  ASSERT_FALSE(res.ok());
+  EXPECT_NE(res.error().message.find("not still"), std::string::npos) << res.error().message;
+}
+
+TEST(StaticCalibration, GapsAndSaturationAreExcludedWithWarnings) {
+  SynthConfig cfg;
+  cfg.seed = 8;
+  cfg.truth = test::random_truth(8);
+  auto rec = make_static_recording(cfg);
+  // A gap of 0.5 s in the middle of the 10th motion and saturated gyro samples in the 20th.
+  const double t_gap = rec.holds_s[10].second + 0.8;
+  const double t_sat = rec.holds_s[20].second + 0.8;
+  std::vector<ImuSample> cut;
+  bool flagged = false;
+  for (auto s : rec.samples) {
+    const double t = ns_to_s(s.t_ns);
+    if (t > t_gap && t < t_gap + 0.5) {
+      flagged = false;
+      continue;
+    }
+    if (t >= t_gap + 0.5 && !flagged) {
+      s.flags |= kImuFlagGapBefore;
+      flagged = true;
+    }
+    if (t > t_sat && t < t_sat + 0.05) s.flags |= kImuFlagGyroSaturated;
+    cut.push_back(s);
+  }
+  auto res = calibrate_static(cut, StaticCalibrationOptions{});
+  ASSERT_TRUE(res.ok()) << res.error().message;
+  std::string all;
+  for (const auto& w : res->warnings) all += w + "\n";
+  EXPECT_NE(all.find("gap"), std::string::npos) << all;
+  EXPECT_NE(all.find("saturated"), std::string::npos) << all;
+  EXPECT_NE(all.find("were not used for the gyroscope"), std::string::npos) << all;
+  EXPECT_LE(res->gyro_transfers, static_cast<int>(res->intervals.size()) - 3);
+  expect_within(res->model.gyro, res->gyro_sigma, cfg.truth.gyro, 4.5, "gyro");
+}
+
+TEST(StaticCalibration, MotionInsideAPoseDoesNotDegradeTheResult) {
+  SynthConfig cfg;
+  cfg.seed = 9;
+  cfg.truth = test::random_truth(9);
+  cfg.hold_min_s = 3.0;
+  cfg.hold_max_s = 4.0;
+  auto rec = make_static_recording(cfg);
+  // Shake the rig (accel and gyro) for 0.3 s in the middle of several holds.
+  for (int h : {5, 12, 25}) {
+    const double tm = 0.5 * (rec.holds_s[h].first + rec.holds_s[h].second);
+    for (auto& s : rec.samples) {
+      const double t = ns_to_s(s.t_ns);
+      if (t > tm && t < tm + 0.3) {
+        const double ph = 60.0 * (t - tm);
+        s.accel += Eigen::Vector3d(2.0 * std::sin(ph), 1.5 * std::cos(ph), 0.0);
+      }
+    }
+  }
+  auto res = calibrate_static(rec.samples, StaticCalibrationOptions{});
+  ASSERT_TRUE(res.ok()) << res.error().message;
+  expect_within(res->model.accel, res->accel_sigma, cfg.truth.accel, 4.5, "accel");
+  expect_within(res->model.gyro, res->gyro_sigma, cfg.truth.gyro, 4.5, "gyro");
+}
+
+TEST(StaticCalibration, RotationInsideAStaticIntervalIsDropped) {
+  SynthConfig cfg;
+  cfg.seed = 10;
+  cfg.truth = test::random_truth(10);
+  cfg.hold_min_s = 3.0;
+  cfg.hold_max_s = 4.0;
+  auto rec = make_static_recording(cfg);
+  // A slow, smooth 3 deg creep during one hold that the variance detector cannot see.
+  const auto [h0, h1] = rec.holds_s[7];
+  const double rate = 3.0 * M_PI / 180.0 / (h1 - h0);
+  for (auto& s : rec.samples) {
+    const double t = ns_to_s(s.t_ns);
+    if (t >= h0 && t <= h1) s.gyro += cfg.truth.gyro.TK().inverse() * Eigen::Vector3d(rate, 0, 0);
+  }
+  auto res = calibrate_static(rec.samples, StaticCalibrationOptions{});
+  ASSERT_TRUE(res.ok()) << res.error().message;
+  std::string all;
+  for (const auto& w : res->warnings) all += w + "\n";
+  EXPECT_NE(all.find("rotation inside"), std::string::npos) << all;
+}
+
+TEST(StaticCalibration, BadInputsAreRefused) {
+  StaticCalibrationOptions opt;
+  std::string why;
+  opt.gravity_mps2 = 1.0;
+  EXPECT_FALSE(opt.is_valid(&why));
+  EXPECT_NE(why.find("gravity"), std::string::npos);
+  std::vector<ImuSample> few(10);
+  auto r = calibrate_static(few, StaticCalibrationOptions{});
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, Errc::kInsufficientData);
+  std::vector<ImuSample> backwards(2000);
+  for (std::size_t i = 0; i < backwards.size(); ++i) backwards[i].t_ns = 1000 - static_cast<TimeNs>(i);
+  r = calibrate_static(backwards, StaticCalibrationOptions{});
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, Errc::kCorrupt);
+}
+
+}  // namespace
+}  // namespace imucal::calib
