@@ -1,0 +1,270 @@
+#include "acquisition/recorder.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <ctime>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+namespace imucal::acq {
+
+namespace mpu = drivers::mpu6000;
+
+void MonotonicClock::sleep_until(TimeNs t_ns) {
+  timespec ts{};
+  ts.tv_sec = static_cast<time_t>(t_ns / kNsPerSecond);
+  ts.tv_nsec = static_cast<long>(t_ns % kNsPerSecond);
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+FifoBatchTiming batch_timing(const mpu::FifoBatch& batch) {
+  FifoBatchTiming t;
+  t.has_edge = batch.edge.has_value();
+  if (batch.edge) {
+    t.edge_t_ns = batch.edge->t_ns;
+    t.edge_sequence = batch.edge->sequence;
+    t.has_edge_sequence = true;
+  }
+  t.read_t_ns = batch.read_t_ns;
+  t.sample_count = static_cast<std::uint32_t>(batch.samples.size());
+  t.fifo_overflow = (batch.flags & kImuFlagGapBefore) != 0 || batch.frames_discarded > 0;
+  t.device_reset = (batch.flags & kImuFlagDeviceReset) != 0;
+  return t;
+}
+
+ImuAcquisition::ImuAcquisition(mpu::Mpu6000& driver, drivers::DataReadyLine* line, AcquisitionClock& clock,
+                               MountingMap mounting, AcquisitionOptions options)
+    : driver_(driver),
+      line_(line),
+      clock_(clock),
+      mounting_(std::move(mounting)),
+      options_([&] {
+        options.timestamps.nominal_rate_hz = driver.settings().sample_rate_hz();
+        return options;
+      }()),
+      timestamper_(options_.timestamps) {
+  edges_per_read_ =
+      options_.edges_per_read > 0
+          ? options_.edges_per_read
+          : std::max(1, static_cast<int>(std::lround(options_.timestamps.nominal_rate_hz / 1000.0)));
+  next_poll_ns_ = clock_.now_ns();
+}
+
+Status ImuAcquisition::step(std::vector<ImuSample>& out) {
+  out.clear();
+  std::optional<drivers::DataReadyEdge> edge;
+  if (driver_.state() != mpu::State::kStream) {
+    // Configuring: edges from before streaming must not anchor the timestamps.
+    if (line_ != nullptr) {
+      for (;;) {
+        auto e = line_->wait(0);
+        if (!e.ok()) return e.error().context("data-ready line");
+        if (!e->has_value()) break;
+      }
+    }
+    clock_.sleep_until(next_poll_ns_);
+  } else if (line_ != nullptr) {
+    for (int i = 0; i < edges_per_read_; ++i) {
+      const TimeNs timeout = std::clamp<TimeNs>(next_poll_ns_ - clock_.now_ns(), 0, options_.edge_timeout_ns);
+      auto e = line_->wait(timeout);
+      if (!e.ok()) return e.error().context("data-ready line");
+      if (!e->has_value()) {
+        ++stats_.edge_timeouts;
+        break;
+      }
+      if (edge) driver_.on_edge(*edge);
+      edge = **e;
+    }
+  } else {
+    clock_.sleep_until(next_poll_ns_);
+  }
+
+  auto polled = driver_.poll(clock_.now_ns(), edge);
+  if (!polled.ok()) return polled.error();
+  ++stats_.polls;
+  next_poll_ns_ = polled->next_poll_ns;
+  if (!polled->batch) return {};
+  const mpu::FifoBatch& batch = *polled->batch;
+  if (batch.samples.empty() && batch.flags == kImuFlagNone) return {};
+
+  const FifoBatchTiming timing = batch_timing(batch);
+  const std::size_t n = batch.samples.size();
+  t_buf_.assign(n, 0);
+  flag_buf_.assign(n, 0);
+  IMUCAL_TRY(timestamper_.process(timing, t_buf_, flag_buf_));
+  ++stats_.batches;
+  if (!timing.has_edge) ++stats_.batches_without_edge;
+  stats_.samples += n;
+
+  out.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const mpu::RawSample& r = batch.samples[i];
+    ImuSample& s = out[i];
+    s.t_ns = t_buf_[i];
+    s.accel = Eigen::Vector3d(r.accel[0], r.accel[1], r.accel[2]);
+    s.gyro = Eigen::Vector3d(r.gyro[0], r.gyro[1], r.gyro[2]);
+    s.temperature = static_cast<double>(r.temp);
+    s.flags = r.flags | flag_buf_[i];
+    if (i == 0) s.flags |= batch.flags;
+    if (mounting_.exact_on_raw()) mounting_.remap_raw_sample(s);
+  }
+  return {};
+}
+
+namespace {
+
+std::string timing_json(const RecordSummary& s, const TimestamperOptions& o) {
+  nlohmann::json j;
+  j["nominal_rate_hz"] = o.nominal_rate_hz;
+  j["measured_rate_hz"] = s.rate_hz;
+  j["period_error_ppm"] = s.period_error_ppm;
+  j["edge_latency_ns"] = o.edge_latency_ns;
+  j["edge_jitter_ns"] = o.edge_jitter_ns;
+  j["batches"] = s.timing.batches;
+  j["edges_accepted"] = s.timing.edges_accepted;
+  j["edges_rejected"] = s.timing.edges_rejected;
+  j["gaps"] = s.timing.gaps;
+  j["resets"] = s.timing.resets;
+  j["overflows"] = s.timing.overflows;
+  j["reanchors"] = s.timing.reanchors;
+  j["samples_lost"] = s.timing.samples_lost;
+  j["monotonic_clamps"] = s.timing.monotonic_clamps;
+  j["batches_without_edge"] = s.acquisition.batches_without_edge;
+  return j.dump();
+}
+
+std::string stream_json(const ImuStreamStats& s) {
+  nlohmann::json j;
+  j["published"] = s.published;
+  j["log_written"] = s.log_written;
+  j["log_dropped"] = s.log_dropped;
+  j["log_batches"] = s.log_batches;
+  j["log_queue_high_water"] = s.log_queue_high_water;
+  j["events_dropped"] = s.events_dropped;
+  for (const auto& c : s.consumers)
+    j["consumers"][c.name] = {{"delivered", c.delivered}, {"dropped", c.dropped}};
+  return j.dump();
+}
+
+std::string driver_json(const mpu::Mpu6000& d) {
+  const auto& c = d.counters();
+  const auto& st = d.settings();
+  nlohmann::json j;
+  j["settings"] = {{"bus", st.bus == mpu::BusKind::kSpi ? "spi" : "i2c"},
+                   {"accel_full_scale_g", mpu::accel_full_scale_g(st.accel_range)},
+                   {"gyro_full_scale_dps", mpu::gyro_full_scale_dps(st.gyro_range)},
+                   {"dlpf_cfg", st.dlpf_cfg},
+                   {"smplrt_div", st.smplrt_div},
+                   {"sample_rate_hz", st.sample_rate_hz()},
+                   {"read_interval_ns", st.read_interval_ns}};
+  j["counters"] = {{"bad_transfers", c.bad_transfers},
+                   {"fifo_overflows", c.fifo_overflows},
+                   {"fifo_resets", c.fifo_resets},
+                   {"bad_fifo_counts", c.bad_fifo_counts},
+                   {"implausible_data", c.implausible_data},
+                   {"config_mismatches", c.config_mismatches},
+                   {"resets", c.resets},
+                   {"missed_data_ready", c.missed_data_ready},
+                   {"no_data_timeouts", c.no_data_timeouts},
+                   {"samples", c.samples},
+                   {"frames_discarded", c.frames_discarded}};
+  return j.dump();
+}
+
+std::string mounting_json(const MountingMap& m) {
+  nlohmann::json j;
+  j["kind"] = mounting_kind_name(m.kind());
+  j["description"] = m.describe();
+  j["samples_frame"] = m.exact_on_raw() ? "rig" : "imu";
+  nlohmann::json rows = nlohmann::json::array();
+  for (int r = 0; r < 3; ++r) rows.push_back({m.R_rig_imu()(r, 0), m.R_rig_imu()(r, 1), m.R_rig_imu()(r, 2)});
+  j["R_rig_imu"] = rows;
+  return j.dump();
+}
+
+}  // namespace
+
+Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu::Mpu6000& driver,
+                                         const RecordOptions& options) {
+  if (!(options.duration_s > 0.0) || !std::isfinite(options.duration_s)) {
+    return make_error(Errc::kInvalidArgument, "record: the duration must be a positive number of seconds");
+  }
+  SessionLogWriterOptions wo;
+  wo.overwrite = options.overwrite;
+  auto writer_r = SessionLogWriter::create(options.log_path, wo);
+  if (!writer_r.ok()) return writer_r.error().context("creating the session log " + options.log_path);
+  auto writer = std::move(writer_r).value();
+
+  for (const auto& [key, value] : options.metadata) IMUCAL_TRY(writer->set_metadata(key, value));
+  IMUCAL_TRY(writer->set_metadata("imu.mounting", mounting_json(acquisition.mounting())));
+  auto stream_id = writer->add_imu_stream(options.stream_info);
+  if (!stream_id.ok()) return stream_id.error().context("declaring the IMU stream");
+
+  ImuStream stream(options.stream);
+  IMUCAL_TRY(stream.start_log(*writer, *stream_id));
+
+  RecordSummary summary;
+  std::vector<ImuSample> samples;
+  const TimeNs duration_ns = s_to_ns(options.duration_s);
+  TimeNs first_t_ns = 0, last_t_ns = 0;
+  bool have_first = false;
+  Status failure;
+  std::uint64_t last_gaps = 0;
+  while (true) {
+    auto st = acquisition.step(samples);
+    if (!st.ok()) {
+      failure = st.error();
+      break;
+    }
+    if (samples.empty()) continue;
+    if (!have_first) {
+      first_t_ns = samples.front().t_ns;
+      have_first = true;
+    }
+    // Keep exactly the requested span of sample time.
+    std::size_t keep = samples.size();
+    while (keep > 0 && samples[keep - 1].t_ns - first_t_ns >= duration_ns) --keep;
+    stream.publish(std::span<const ImuSample>(samples.data(), keep));
+    summary.samples += keep;
+    if (keep > 0) last_t_ns = samples[keep - 1].t_ns;
+    const auto gaps = acquisition.timestamper().stats().gaps;
+    if (gaps != last_gaps) {
+      Event e;
+      e.t_ns = samples.front().t_ns;
+      e.kind = "fault";
+      e.message = "IMU sample gap (FIFO reset, overflow or lost samples); see imu.timing";
+      stream.post_event(std::move(e));
+      last_gaps = gaps;
+    }
+    if (options.progress) {
+      options.progress(std::min(1.0, ns_to_s(last_t_ns - first_t_ns) / options.duration_s));
+    }
+    if (keep < samples.size() || stream.log_failed()) break;
+  }
+  auto stop_status = stream.stop();
+
+  summary.timing = acquisition.timestamper().stats();
+  summary.acquisition = acquisition.stats();
+  summary.stream = stream.stats();
+  summary.duration_s = ns_to_s(last_t_ns - first_t_ns);
+  summary.rate_hz = summary.samples > 1 && summary.duration_s > 0
+                        ? static_cast<double>(summary.samples - 1) / summary.duration_s
+                        : 0.0;
+  summary.period_error_ppm = acquisition.timestamper().period_error_ppm();
+
+  // Counters go into the log even when recording stopped early.
+  (void)writer->set_metadata("imu.timing", timing_json(summary, acquisition.timestamper().options()));
+  (void)writer->set_metadata("imu.stream", stream_json(summary.stream));
+  (void)writer->set_metadata("imu.driver", driver_json(driver));
+  if (!stop_status.ok()) return stop_status.error();
+  if (!failure.ok()) {
+    (void)writer->close();
+    return failure.error().context("recording stopped after " + std::to_string(summary.samples) + " samples");
+  }
+  IMUCAL_TRY(writer->close());
+  return summary;
+}
+
+}  // namespace imucal::acq
