@@ -1,0 +1,155 @@
+#include "core/camera_model.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <vector>
+
+namespace imucal {
+
+const char* distortion_model_name(DistortionModel model) {
+  switch (model) {
+    case DistortionModel::kRadtan:
+      return "radtan";
+    case DistortionModel::kEquidistant:
+      return "equidistant";
+  }
+  return "unknown";
+}
+
+Status validate_camera(const CameraModel& c) {
+  if (c.width <= 0 || c.height <= 0 || c.width > 65536 || c.height > 65536) {
+    return make_error(Errc::kInvalidArgument,
+                      "camera resolution must be positive [width, height] in pixels, got [" +
+                          std::to_string(c.width) + ", " + std::to_string(c.height) + "]");
+  }
+  if (!c.intrinsics.allFinite() || !(c.intrinsics[0] > 0.0) || !(c.intrinsics[1] > 0.0)) {
+    return make_error(Errc::kInvalidArgument,
+                      "camera intrinsics must be [fu, fv, pu, pv] in pixels with fu, fv > 0");
+  }
+  if (c.intrinsics[2] < -0.5 || c.intrinsics[3] < -0.5 || c.intrinsics[2] > c.width - 0.5 ||
+      c.intrinsics[3] > c.height - 0.5) {
+    return make_error(Errc::kInvalidArgument,
+                      "camera principal point (pu, pv) lies outside the image: check that intrinsics are in "
+                      "pixels of the stated resolution");
+  }
+  if (!c.distortion_coeffs.allFinite()) {
+    return make_error(Errc::kInvalidArgument, "camera distortion_coeffs must be finite");
+  }
+  return {};
+}
+
+namespace {
+
+Result<std::vector<double>> read_numbers(const YAML::Node& node, const char* key, std::size_t count,
+                                         const std::string& source) {
+  const YAML::Node value = node[key];
+  if (!value) return make_error(Errc::kInvalidArgument, source + ": missing key '" + key + "'");
+  if (!value.IsSequence() || value.size() != count) {
+    return make_error(Errc::kInvalidArgument,
+                      source + ": '" + key + "' must be a list of " + std::to_string(count) + " numbers");
+  }
+  std::vector<double> out;
+  try {
+    for (const auto& v : value) out.push_back(v.as<double>());
+  } catch (const YAML::Exception&) {
+    return make_error(Errc::kInvalidArgument, source + ": '" + key + "' must hold numbers");
+  }
+  return out;
+}
+
+Result<std::string> read_string(const YAML::Node& node, const char* key, const std::string& source) {
+  const YAML::Node value = node[key];
+  if (!value) return make_error(Errc::kInvalidArgument, source + ": missing key '" + key + "'");
+  try {
+    return value.as<std::string>();
+  } catch (const YAML::Exception&) {
+    return make_error(Errc::kInvalidArgument, source + ": '" + key + "' must be a string");
+  }
+}
+
+}  // namespace
+
+Result<CameraModel> camera_from_yaml(const YAML::Node& node, const std::string& source) {
+  if (!node.IsMap()) {
+    return make_error(Errc::kInvalidArgument,
+                      source +
+                          ": expected a camera map with camera_model, intrinsics, distortion_model, "
+                          "distortion_coeffs, resolution");
+  }
+  auto model = read_string(node, "camera_model", source);
+  if (!model.ok()) return model.error();
+  if (*model != "pinhole") {
+    return make_error(Errc::kUnsupported,
+                      source + ": camera_model '" + *model + "' is not supported (use pinhole)");
+  }
+  auto distortion = read_string(node, "distortion_model", source);
+  if (!distortion.ok()) return distortion.error();
+  CameraModel camera;
+  if (*distortion == "radtan") {
+    camera.distortion_model = DistortionModel::kRadtan;
+  } else if (*distortion == "equidistant") {
+    camera.distortion_model = DistortionModel::kEquidistant;
+  } else {
+    return make_error(Errc::kUnsupported, source + ": distortion_model '" + *distortion +
+                                              "' is not supported (use radtan or equidistant)");
+  }
+  auto intrinsics = read_numbers(node, "intrinsics", 4, source);
+  if (!intrinsics.ok()) return intrinsics.error();
+  auto coeffs = read_numbers(node, "distortion_coeffs", 4, source);
+  if (!coeffs.ok()) return coeffs.error();
+  auto resolution = read_numbers(node, "resolution", 2, source);
+  if (!resolution.ok()) return resolution.error();
+  for (int i = 0; i < 4; ++i) {
+    camera.intrinsics[i] = (*intrinsics)[static_cast<std::size_t>(i)];
+    camera.distortion_coeffs[i] = (*coeffs)[static_cast<std::size_t>(i)];
+  }
+  const double w = (*resolution)[0];
+  const double h = (*resolution)[1];
+  if (w != static_cast<int>(w) || h != static_cast<int>(h)) {
+    return make_error(Errc::kInvalidArgument, source + ": resolution must be whole pixels [width, height]");
+  }
+  camera.width = static_cast<int>(w);
+  camera.height = static_cast<int>(h);
+  if (auto s = validate_camera(camera); !s.ok()) return s.error().context(source);
+  return camera;
+}
+
+void camera_to_yaml(const CameraModel& camera, YAML::Node& node) {
+  node["camera_model"] = "pinhole";
+  YAML::Node intrinsics(YAML::NodeType::Sequence);
+  YAML::Node coeffs(YAML::NodeType::Sequence);
+  for (int i = 0; i < 4; ++i) {
+    intrinsics.push_back(camera.intrinsics[i]);
+    coeffs.push_back(camera.distortion_coeffs[i]);
+  }
+  intrinsics.SetStyle(YAML::EmitterStyle::Flow);
+  coeffs.SetStyle(YAML::EmitterStyle::Flow);
+  node["intrinsics"] = intrinsics;
+  node["distortion_model"] = distortion_model_name(camera.distortion_model);
+  node["distortion_coeffs"] = coeffs;
+  YAML::Node resolution(YAML::NodeType::Sequence);
+  resolution.push_back(camera.width);
+  resolution.push_back(camera.height);
+  resolution.SetStyle(YAML::EmitterStyle::Flow);
+  node["resolution"] = resolution;
+}
+
+Result<CameraModel> parse_camera_yaml(const std::string& text, const std::string& source) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    return make_error(Errc::kInvalidArgument, source + ": not valid YAML: " + e.what());
+  }
+  return camera_from_yaml(root, source);
+}
+
+std::string camera_to_yaml_text(const CameraModel& camera) {
+  YAML::Node node(YAML::NodeType::Map);
+  camera_to_yaml(camera, node);
+  YAML::Emitter out;
+  out << node;
+  return std::string(out.c_str()) + "\n";
+}
+
+}  // namespace imucal
