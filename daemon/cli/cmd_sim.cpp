@@ -1,0 +1,274 @@
+// imucal sim static|gsens|still|camimu: simulated MPU-6000 recordings with their ground truth
+// (docs/simulator.md, docs/simulator-camera.md).
+
+#include <cmath>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "acquisition/sim_camimu.hpp"
+#include "acquisition/sim_session.hpp"
+#include "daemon/cli/command.hpp"
+#include "drivers/sim/imu_model.hpp"
+#include "drivers/sim/motion.hpp"
+#include "drivers/sim/truth.hpp"
+
+namespace imucal::cli {
+namespace {
+
+struct SimCommon {
+  std::uint64_t seed = 1;
+  double imu_rate_hz = 100.0;
+  int accel_range_g = 4;
+  int gyro_range_dps = 500;
+  std::string truth_in;
+  std::string out_path;
+  bool force = false;
+  bool tremor = false;
+  bool no_noise = false;
+  std::vector<std::string> drops;
+};
+
+void add_common(CLI::App* cmd, SimCommon& o, bool drops = true) {
+  cmd->add_option("--seed", o.seed, "Random seed: the same seed gives the same recording")->required();
+  cmd->add_option("--imu-rate", o.imu_rate_hz, "IMU output rate in Hz (default 100; camimu 200)")
+      ->check(CLI::Range(4.0, 8000.0));
+  cmd->add_option("--accel-range", o.accel_range_g,
+                  "Accelerometer full-scale range in g: 2, 4, 8, 16 (default 4)")
+      ->check(CLI::IsMember({2, 4, 8, 16}));
+  cmd->add_option("--gyro-range", o.gyro_range_dps,
+                  "Gyroscope full-scale range in deg/s: 250, 500, 1000, 2000 (default 500)")
+      ->check(CLI::IsMember({250, 500, 1000, 2000}));
+  cmd->add_option("--truth", o.truth_in,
+                  "Take the IMU parameters from this truth file (its imu: section) instead of drawing them "
+                  "from the seed; --accel-range/--gyro-range still apply when given")
+      ->check(CLI::ExistingFile);
+  cmd->add_flag("--tremor", o.tremor, "Add a small hand tremor to the whole script");
+  cmd->add_flag("--no-noise", o.no_noise, "Switch off white noise and bias random walks (for tests)");
+  if (drops) {
+    cmd->add_option(
+        "--drop", o.drops,
+        "Lose the samples in START:DURATION (seconds); the next sample is flagged as after a gap. "
+        "Repeatable");
+  }
+  cmd->add_option("-o,--output", o.out_path, "Session log to write (.imulog); the truth goes to .truth.yaml")
+      ->required();
+  cmd->add_flag("--force", o.force, "Replace the log and truth file if they exist");
+}
+
+std::vector<acq::SampleDrop> parse_drops(const std::vector<std::string>& specs) {
+  std::vector<acq::SampleDrop> drops;
+  for (const std::string& spec : specs) {
+    const auto colon = spec.find(':');
+    acq::SampleDrop d;
+    try {
+      if (colon == std::string::npos) throw std::invalid_argument("no colon");
+      std::size_t used = 0;
+      d.start_s = std::stod(spec.substr(0, colon), &used);
+      if (used != colon) throw std::invalid_argument("trailing text");
+      const std::string dur = spec.substr(colon + 1);
+      d.duration_s = std::stod(dur, &used);
+      if (used != dur.size()) throw std::invalid_argument("trailing text");
+    } catch (const std::exception&) {
+      throw CliExit{kExitUsage,
+                    "--drop: expected START:DURATION in seconds (e.g. 120:0.5), got '" + spec + "'"};
+    }
+    if (!(d.start_s >= 0.0 && d.duration_s > 0.0)) {
+      throw CliExit{kExitUsage, "--drop: START must be >= 0 and DURATION > 0, got '" + spec + "'"};
+    }
+    drops.push_back(d);
+  }
+  return drops;
+}
+
+/// The IMU parameters: from --truth or drawn from the seed; ranges and noise switches applied.
+sim::ImuModelParams make_params(const SimCommon& o, const CLI::App* cmd, bool* from_file) {
+  sim::ImuModelParams p;
+  *from_file = !o.truth_in.empty();
+  if (*from_file) {
+    auto loaded = sim::load_imu_params(o.truth_in);
+    if (!loaded.ok()) fail(loaded.error(), "--truth");
+    p = *loaded;
+    if (cmd->count("--accel-range") > 0) p.accel_full_scale_g = o.accel_range_g;
+    if (cmd->count("--gyro-range") > 0) p.gyro_full_scale_dps = o.gyro_range_dps;
+  } else {
+    p = sim::ImuModelParams::draw(o.seed);
+    p.accel_full_scale_g = o.accel_range_g;
+    p.gyro_full_scale_dps = o.gyro_range_dps;
+  }
+  if (o.no_noise) {
+    p.accel_noise_density = p.gyro_noise_density = 0.0;
+    p.accel_bias_random_walk = p.gyro_bias_random_walk = 0.0;
+  }
+  auto status = p.validate();
+  if (!status.ok()) fail(status.error(), "IMU parameters");
+  return p;
+}
+
+void refuse_overwrite(const SimCommon& o, const std::string& truth_path) {
+  if (o.force) return;
+  std::error_code ec;
+  for (const std::string& p : {o.out_path, truth_path}) {
+    if (std::filesystem::exists(p, ec)) throw CliExit{kExitIo, p + " exists; pass --force to replace it"};
+  }
+}
+
+void run(const SimCommon& o, const CLI::App* cmd, const std::string& kind, const std::string& script,
+         const sim::Trajectory& traj, int poses) {
+  acq::SimImuSessionOptions opt;
+  opt.kind = kind;
+  opt.script = script;
+  opt.poses = poses;
+  opt.seed = o.seed;
+  opt.imu_rate_hz = o.imu_rate_hz;
+  opt.imu = make_params(o, cmd, &opt.params_from_file);
+  opt.drops = parse_drops(o.drops);
+  opt.overwrite = o.force;
+  const std::string truth_path = sim::truth_path_for(o.out_path);
+  refuse_overwrite(o, truth_path);
+  Progress progress("simulating " + kind, 1.0);
+  auto truth = acq::write_sim_imu_session(opt, traj, o.out_path, truth_path,
+                                          [&progress](double done) { progress.update(done); });
+  progress.finish();
+  if (!truth.ok()) {
+    const Error& e = truth.error();
+    // A refused overwrite or an unwritable path is an output problem, not a usage one.
+    if (e.message.find("exists") != std::string::npos) throw CliExit{kExitIo, e.message};
+    fail(e, "sim " + kind);
+  }
+  std::ostringstream msg;
+  msg.precision(4);
+  msg << "wrote " << truth->recording.samples << " samples (" << truth->trajectory.duration_s << " s at "
+      << o.imu_rate_hz << " Hz";
+  if (poses > 1) msg << ", " << poses << " poses";
+  msg << ") to " << o.out_path << "\n";
+  msg << "truth: " << truth_path << "\n";
+  msg << "mean |a| " << truth->trajectory.mean_accel_mps2 << " m/s^2, mean |w| "
+      << truth->trajectory.mean_rate_radps << " rad/s";
+  if (truth->recording.accel_saturated + truth->recording.gyro_saturated > 0) {
+    msg << "\nsaturated samples: accel " << truth->recording.accel_saturated << ", gyro "
+        << truth->recording.gyro_saturated;
+  }
+  if (truth->recording.dropped_samples > 0) msg << "\ndropped samples: " << truth->recording.dropped_samples;
+  std::cout << msg.str() << "\n";
+}
+
+template <class T>
+T take(Result<T> r, const std::string& what) {
+  if (!r.ok()) fail(r.error(), what);
+  return std::move(r).value();
+}
+
+void setup(CLI::App& root) {
+  CLI::App* sim = root.add_subcommand(
+      "sim", "Simulate an MPU-6000 rig recording (static protocol, six faces, long still) with ground truth");
+  sim->require_subcommand(1);
+
+  {
+    auto o = std::make_shared<SimCommon>();
+    auto so = std::make_shared<sim::StaticProtocolOptions>();
+    CLI::App* cmd = sim->add_subcommand(
+        "static", "Multi-position protocol (Tedaldi et al.): still period, then N attitudes held 1-4 s");
+    add_common(cmd, *o);
+    cmd->add_option("--poses", so->poses, "Number of attitudes, 9..100 (default 40)")
+        ->check(CLI::Range(9, 100));
+    cmd->add_option("--still", so->initial_still_s, "Initial still period in s (default 50)")
+        ->check(CLI::Range(1.0, 3600.0));
+    cmd->add_option("--hold-min", so->hold_min_s, "Shortest hold in s (default 1)")
+        ->check(CLI::PositiveNumber);
+    cmd->add_option("--hold-max", so->hold_max_s, "Longest hold in s (default 4)")
+        ->check(CLI::PositiveNumber);
+    cmd->add_option("--excitation", so->excitation,
+                    "Speed of the moves: 1 is a calm hand; 3 exceeds +-2 g and +-250 deg/s (default 1)")
+        ->check(CLI::Range(0.1, 10.0));
+    cmd->callback([o, so, cmd]() {
+      so->tremor.enabled = o->tremor;
+      auto traj = take(sim::make_static_protocol(*so, o->seed), "sim static");
+      run(*o, cmd, "static", "static", *traj, traj->poses());
+    });
+  }
+  {
+    auto o = std::make_shared<SimCommon>();
+    auto fo = std::make_shared<sim::SixFaceOptions>();
+    CLI::App* cmd = sim->add_subcommand(
+        "gsens", "Six-face holds for the gyroscope g-sensitivity experiment (Krebs 5.2.3)");
+    add_common(cmd, *o);
+    cmd->add_option("--hold", fo->hold_s, "Hold per face in s (default 30)")->check(CLI::Range(1.0, 3600.0));
+    cmd->callback([o, fo, cmd]() {
+      fo->tremor.enabled = o->tremor;
+      auto traj = take(sim::make_six_face(*fo, o->seed), "sim gsens");
+      run(*o, cmd, "gsens", "six-face", *traj, traj->poses());
+    });
+  }
+  {
+    auto o = std::make_shared<SimCommon>();
+    auto co = std::make_shared<acq::CamImuSimOptions>();
+    o->imu_rate_hz = co->imu_rate_hz;
+    CLI::App* cmd = sim->add_subcommand(
+        "camimu", "Camera-IMU session: checkerboard motion (Krebs 5.1.1) with rendered camera frames");
+    add_common(cmd, *o, false);
+    cmd->add_option("--duration", co->motion.duration_s,
+                    "Length in s (default " + std::to_string(static_cast<int>(co->motion.duration_s)) + ")")
+        ->check(CLI::Range(10.0, 3600.0));
+    cmd->add_option("--camera-rate", co->camera_rate_hz, "Camera frame rate in Hz (default 20)")
+        ->check(CLI::Range(1.0, 200.0));
+    cmd->add_option("--excitation", co->motion.excitation,
+                    "Scales the motion: mean |a| 3.12 m/s^2 and mean |w| 0.366 rad/s times this (default 1)")
+        ->check(CLI::Range(0.1, 10.0));
+    cmd->callback([o, co, cmd]() {
+      co->seed = o->seed;
+      co->imu_rate_hz = o->imu_rate_hz;
+      co->motion.tremor.enabled = o->tremor;
+      co->imu = make_params(*o, cmd, &co->imu_params_from_file);
+      co->overwrite = o->force;
+      const std::string truth_path = sim::truth_path_for(o->out_path);
+      refuse_overwrite(*o, truth_path);
+      auto valid = co->validate();
+      if (!valid.ok()) fail(valid.error(), "sim camimu");
+      acq::CamImuSimSummary summary;
+      Progress progress("simulating camimu", 1.0);
+      auto status = acq::simulate_camimu_session(
+          *co, o->out_path, truth_path, [&progress](double done) { progress.update(done); }, &summary);
+      progress.finish();
+      if (!status.ok()) {
+        if (status.error().message.find("exists") != std::string::npos) {
+          throw CliExit{kExitIo, status.error().message};
+        }
+        fail(status.error(), "sim camimu");
+      }
+      std::ostringstream msg;
+      msg.precision(4);
+      msg << "wrote " << summary.imu_samples << " samples and " << summary.frames << " frames ("
+          << summary.duration_s << " s, IMU " << co->imu_rate_hz << " Hz, camera " << co->camera_rate_hz
+          << " Hz) to " << o->out_path << "\n";
+      msg << "truth: " << truth_path << "\n";
+      msg << "mean |a| " << summary.mean_accel_mps2 << " m/s^2, mean |w| " << summary.mean_rate_radps
+          << " rad/s; frames with the whole board " << summary.frames_all_corners_visible
+          << ", without any corner " << summary.frames_no_corner_visible;
+      std::cout << msg.str() << "\n";
+    });
+  }
+  {
+    auto o = std::make_shared<SimCommon>();
+    auto so = std::make_shared<sim::StillOptions>();
+    CLI::App* cmd =
+        sim->add_subcommand("still", "A long still recording (Allan variance), on a table by default");
+    add_common(cmd, *o);
+    cmd->add_option("--duration", so->duration_s, "Length in s (default 600)")
+        ->check(CLI::Range(1.0, 172800.0));
+    cmd->callback([o, so, cmd]() {
+      so->tremor.enabled = o->tremor;
+      auto traj = take(sim::make_still(*so, o->seed), "sim still");
+      run(*o, cmd, "still", "still", *traj, 1);
+    });
+  }
+}
+
+const CommandRegistrar registrar(10, setup);
+
+}  // namespace
+}  // namespace imucal::cli
