@@ -1,9 +1,9 @@
 #include "calib/static_calibration.hpp"
 
 #include <ceres/ceres.h>
+#include <time.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -16,11 +16,17 @@
 namespace imucal::calib {
 namespace {
 
-using Clock = std::chrono::steady_clock;
+/// CPU time of the calling thread: the timings mean the same on a loaded machine as on an idle one.
+struct Clock {
+  using time_point = double;
+  static double now() {
+    timespec ts{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+  }
+};
 
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+double seconds_since(Clock::time_point t0) { return Clock::now() - t0; }
 
 std::string fmt(const char* format, double v) {
   char buf[64];
@@ -371,12 +377,13 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   }
   const double period_s = percentile(dt_s, 0.5);
   const double rate_hz = 1.0 / period_s;
-  std::vector<bool> break_before(n, false), accel_ok(n, true), gyro_ok(n, true);
+  std::vector<bool> break_before(n, false), reset_before(n, false), accel_ok(n, true), gyro_ok(n, true);
   int gaps = 0, accel_sat = 0, gyro_sat = 0;
   for (std::size_t i = 0; i < n; ++i) {
     const auto f = samples[i].flags;
     if (i > 0 && ((f & (kImuFlagGapBefore | kImuFlagDeviceReset)) || dt_s[i - 1] > 1.5 * period_s)) {
       break_before[i] = true;
+      reset_before[i] = (f & kImuFlagDeviceReset) != 0;
       ++gaps;
     }
     if ((f & kImuFlagAccelSaturated) || !samples[i].accel.allFinite()) {
@@ -440,10 +447,10 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
     for (std::size_t i = 0; i < n_init; ++i) {
       const bool interior = i >= half && i + half < n_init;
       if ((interior && (sigma_sq[i] > 10.0 * med || sigma_sq[i] > 10.0 * floor_sq)) || !accel_ok[i] ||
-          (i > 0 && break_before[i])) {
+          (i > 0 && reset_before[i])) {
         return make_error(Errc::kInsufficientData,
-                          "the given initial still period is not still: the rig moves (or the log has a gap "
-                          "or saturation) at t = " +
+                          "the given initial still period is not still: the rig moves (or the log has a "
+                          "device reset or saturation) at t = " +
                               fmt("%.2f", time_of(i)) +
                               " s. Give --init-still no longer than the still start, "
                               "or record again starting with the rig at rest for about 50 s");
@@ -451,7 +458,9 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
     }
   } else {
     std::size_t end = 0;
-    while (end < n && accel_ok[end] && sigma_sq[end] <= 10.0 * floor_sq && (end == 0 || !break_before[end]))
+    // A gap (samples lost while the rig stays still) does not end the still start: the bias mean
+    // and the white-noise level do not depend on it. A device reset does.
+    while (end < n && accel_ok[end] && sigma_sq[end] <= 10.0 * floor_sq && (end == 0 || !reset_before[end]))
       ++end;
     const double still_s = end > 0 ? time_of(end - 1) : 0.0;
     if (still_s < opt.min_init_still_s) {
@@ -466,6 +475,15 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
     const double t_init = choose_init_period_s(*curve, still_s);
     res.init_still_from_allan = true;
     while (n_init < end && time_of(n_init) <= t_init) ++n_init;
+  }
+  {
+    int init_gaps = 0;
+    for (std::size_t i = 1; i < n_init; ++i) init_gaps += break_before[i] ? 1 : 0;
+    if (init_gaps > 0) {
+      res.warnings.push_back("the initial still period contains " + std::to_string(init_gaps) +
+                             " gap(s): its samples were used as one still period (bias mean and Allan "
+                             "deviation); no integration crosses a gap");
+    }
   }
   res.init_still_s = time_of(n_init - 1) + period_s;
   res.sigma_init_sq = variance_magnitude_sq_of(std::span<const Eigen::Vector3d>(accel.data(), n_init));
@@ -604,16 +622,19 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   // ---- gyroscope ----
   t0 = Clock::now();
   std::vector<Transfer> transfers;
-  int dropped = 0;
+  int dropped = 0, dropped_gap = 0, dropped_sat = 0;
   for (std::size_t k = 0; k + 1 < best->intervals.size(); ++k) {
     const std::size_t a = best->intervals[k].end - 1;
     const std::size_t b = best->intervals[k + 1].begin;
-    bool ok = true;
-    for (std::size_t i = a; i <= b && ok; ++i) {
-      if (!gyro_ok[i] || (i > a && break_before[i])) ok = false;
+    bool has_gap = false, has_sat = false;
+    for (std::size_t i = a; i <= b; ++i) {
+      has_sat = has_sat || !gyro_ok[i];
+      has_gap = has_gap || (i > a && break_before[i]);
     }
-    if (!ok) {
+    if (has_gap || has_sat) {
       ++dropped;
+      dropped_gap += has_gap ? 1 : 0;
+      dropped_sat += has_sat ? 1 : 0;
       continue;
     }
     Transfer tr;
@@ -625,19 +646,23 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
     transfers.push_back(std::move(tr));
   }
   if (dropped > 0) {
-    res.warnings.push_back(std::to_string(dropped) +
-                           " motion(s) between static poses were not used for the gyroscope: they contain a "
-                           "gap, a device reset or saturated gyro samples");
+    res.warnings.push_back(
+        std::to_string(dropped) + " motion(s) between static poses were not used for the " +
+        "gyroscope: " + std::to_string(dropped_gap) + " contain a gap or a device reset, " +
+        std::to_string(dropped_sat) + " contain saturated gyro samples");
   }
   res.gyro_transfers = static_cast<int>(transfers.size());
   const int min_transfers = opt.min_attitudes - 1;
   if (res.gyro_transfers < min_transfers) {
     return make_error(Errc::kInsufficientData,
-                      "only " + std::to_string(res.gyro_transfers) +
+                      "only " + std::to_string(res.gyro_transfers) + " of " +
+                          std::to_string(res.gyro_transfers + dropped) +
                           " motions between consecutive static poses can be integrated (at least " +
-                          std::to_string(min_transfers) +
-                          " needed for the gyroscope): avoid gaps and gyro saturation while turning the rig, "
-                          "and record more poses");
+                          std::to_string(min_transfers) + " needed for the gyroscope; " +
+                          std::to_string(dropped_sat) + " contain saturated gyro samples (" +
+                          std::to_string(gyro_sat) + " saturated in all), " + std::to_string(dropped_gap) +
+                          " contain a gap or a device reset): turn the rig more slowly than the gyro "
+                          "full-scale range (or raise it), avoid gaps, and record more poses");
   }
 
   TedaldiTriad gyro0;

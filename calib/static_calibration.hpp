@@ -77,6 +77,7 @@ struct StaticQuality {
   ErrorFigures gyro_before, gyro_after;
 };
 
+/// CPU time of the calling thread spent in each step, s.
 struct StaticTimings {
   double detector_s = 0.0;
   double threshold_search_s = 0.0;

@@ -2,9 +2,8 @@
 // docs/static-calibration.md.
 
 #include <spdlog/spdlog.h>
-#include <yaml-cpp/yaml.h>
-
 #include <time.h>
+#include <yaml-cpp/yaml.h>
 
 #include <cmath>
 #include <fstream>
@@ -281,9 +280,11 @@ void run(const StaticCliOptions& o) {
                                                     "): calibrated from its readable part only");
   }
   for (const auto& w : res->warnings) spdlog::warn("{}", w);
-  spdlog::info("CPU time: import {:.4f} s, detector {:.4f} s, threshold search {:.4f} s, accel {:.4f} s, gyro {:.4f} s",
-               import_s, res->timings.detector_s, res->timings.threshold_search_s, res->timings.accel_s,
-               res->timings.gyro_s);
+  spdlog::info(
+      "CPU time: import {:.4f} s, detector {:.4f} s, threshold search {:.4f} s, accel {:.4f} s, gyro {:.4f} "
+      "s",
+      import_s, res->timings.detector_s, res->timings.threshold_search_s, res->timings.accel_s,
+      res->timings.gyro_s);
 
   if (!o.yaml_path.empty()) write_text(o.yaml_path, result_yaml(*res, info));
   if (!o.json_path.empty())

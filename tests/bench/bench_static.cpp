@@ -191,8 +191,10 @@ void run_speed(int runs) {
       std::exit(1);
     }
   }
-  std::printf("== speed: %.1f s recording, %zu samples at 100 Hz, one thread, %d runs (median CPU time of the thread)\n",
-              static_cast<double>(rec.samples.size()) / kRateHz, rec.samples.size(), runs);
+  std::printf(
+      "== speed: %.1f s recording, %zu samples at 100 Hz, one thread, %d runs (median CPU time of the "
+      "thread)\n",
+      static_cast<double>(rec.samples.size()) / kRateHz, rec.samples.size(), runs);
   std::vector<double> t_import, t_det, t_thr, t_acc, t_gyro, t_total, t_wall;
   int transfers = 0, intervals = 0;
   for (int r = 0; r < runs; ++r) {

@@ -28,7 +28,8 @@ struct Fixture {
 
 /// The fixture pair, or empty paths when it is missing (the caller skips).
 Fixture fixture(const std::string& name) {
-  Fixture f{test::source_path("fixtures/" + name + ".imulog"), test::source_path("fixtures/" + name + ".truth.yaml")};
+  Fixture f{test::source_path("fixtures/" + name + ".imulog"),
+            test::source_path("fixtures/" + name + ".truth.yaml")};
   if (!std::filesystem::exists(f.log) || !std::filesystem::exists(f.truth)) return {};
   return f;
 }
@@ -41,11 +42,13 @@ void expect_matches_truth(const nlohmann::json& j, const std::string& truth_path
   const YAML::Node si = truth["tedaldi"]["si"];
   ASSERT_TRUE(t && si) << "truth file has no tedaldi section";
   for (int i = 0; i < 3; ++i) {
-    EXPECT_NEAR(vec(j["accel"]["scale"])[i], t["K_a"][i].as<double>(), k * vec(j["accel"]["sigma"]["scale"])[i])
+    EXPECT_NEAR(vec(j["accel"]["scale"])[i], t["K_a"][i].as<double>(),
+                k * vec(j["accel"]["sigma"]["scale"])[i])
         << "accel scale " << i;
     const double lsb = si["b_a"][i].as<double>() / t["b_a"][i].as<double>();
     const double bias_mean = truth["recording"]["accel_bias_mean_mps2"][i].as<double>() / lsb;
-    EXPECT_NEAR(vec(j["accel"]["bias"])[i], bias_mean, k * vec(j["accel"]["sigma"]["bias"])[i]) << "accel bias " << i;
+    EXPECT_NEAR(vec(j["accel"]["bias"])[i], bias_mean, k * vec(j["accel"]["sigma"]["bias"])[i])
+        << "accel bias " << i;
     EXPECT_NEAR(vec(j["gyro"]["scale"])[i], t["K_g"][i].as<double>(), k * vec(j["gyro"]["sigma"]["scale"])[i])
         << "gyro scale " << i;
     for (int c = 0; c < 3; ++c) {
@@ -93,7 +96,8 @@ TEST(CliCalibrateBroken, GapIsWarnedAndNotIntegratedAcross) {
 /// Motion beyond the full-scale ranges: the flagged samples are excluded and reported.
 TEST(CliCalibrateBroken, SaturatedSamplesAreExcludedAndWarned) {
   const Fixture f = fixture("broken-saturated");
-  if (f.log.empty()) GTEST_SKIP() << "fixtures/broken-saturated.imulog is missing: run scripts/make-fixtures.sh";
+  if (f.log.empty())
+    GTEST_SKIP() << "fixtures/broken-saturated.imulog is missing: run scripts/make-fixtures.sh";
   const std::string dir = test::scratch_dir();
   const auto r = run_cli({"calibrate", "static", f.log, "--gravity", "9.80665", "--json", dir + "/r.json"});
   if (r.exit_code != 0) {
@@ -113,7 +117,8 @@ TEST(CliCalibrateBroken, SaturatedSamplesAreExcludedAndWarned) {
 /// or fails as unsuitable data (exit 4).
 TEST(CliCalibrateBroken, TruncatedIsRefusedUnlessAllowed) {
   const Fixture f = fixture("broken-truncated");
-  if (f.log.empty()) GTEST_SKIP() << "fixtures/broken-truncated.imulog is missing: run scripts/make-fixtures.sh";
+  if (f.log.empty())
+    GTEST_SKIP() << "fixtures/broken-truncated.imulog is missing: run scripts/make-fixtures.sh";
   const std::string dir = test::scratch_dir();
   // Work on a copy: opening a damaged log must not be allowed to touch the fixture.
   const std::string log = dir + "/truncated.imulog";
@@ -124,7 +129,8 @@ TEST(CliCalibrateBroken, TruncatedIsRefusedUnlessAllowed) {
   EXPECT_NE(r.err.find("--allow-damaged"), std::string::npos) << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir + "/r.json"));
 
-  r = run_cli({"calibrate", "static", log, "--gravity", "9.80665", "--allow-damaged", "--json", dir + "/r.json"});
+  r = run_cli(
+      {"calibrate", "static", log, "--gravity", "9.80665", "--allow-damaged", "--json", dir + "/r.json"});
   if (r.exit_code == 0) {
     const auto j = nlohmann::json::parse(test::read_file(dir + "/r.json"));
     EXPECT_TRUE(any_warning_contains(j, "damaged")) << j["warnings"].dump();
