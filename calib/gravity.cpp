@@ -6,12 +6,12 @@ namespace imucal::calib {
 
 double wgs84_gravity(double latitude_deg, double height_m) {
   // WGS-84 constants (NIMA TR8350.2, 2000, section 4).
-  constexpr double kGammaEquator = 9.7803253359;   // m/s^2
-  constexpr double kK = 0.00193185265241;          // Somigliana constant
-  constexpr double kE2 = 0.00669437999013;         // first eccentricity squared
-  constexpr double kA = 6378137.0;                 // semi-major axis, m
-  constexpr double kF = 1.0 / 298.257223563;       // flattening
-  constexpr double kM = 0.00344978650684;          // omega^2 a^2 b / GM
+  constexpr double kGammaEquator = 9.7803253359;  // m/s^2
+  constexpr double kK = 0.00193185265241;         // Somigliana constant
+  constexpr double kE2 = 0.00669437999013;        // first eccentricity squared
+  constexpr double kA = 6378137.0;                // semi-major axis, m
+  constexpr double kF = 1.0 / 298.257223563;      // flattening
+  constexpr double kM = 0.00344978650684;         // omega^2 a^2 b / GM
   const double phi = latitude_deg * M_PI / 180.0;
   const double s2 = std::sin(phi) * std::sin(phi);
   const double gamma0 = kGammaEquator * (1.0 + kK * s2) / std::sqrt(1.0 - kE2 * s2);
