@@ -1,5 +1,6 @@
 // imucal: the offline command-line tool. Subcommands live in cmd_*.cpp.
 
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
@@ -79,6 +80,8 @@ void Progress::finish() {
 
 int main(int argc, char** argv) {
   using namespace imucal::cli;
+  // Results go to stdout, diagnostics (warnings, progress, logs) to stderr.
+  spdlog::set_default_logger(spdlog::stderr_color_mt("imucal"));
   spdlog::set_pattern("%^%l%$: %v");
   spdlog::set_level(spdlog::level::warn);
 
