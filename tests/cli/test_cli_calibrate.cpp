@@ -129,9 +129,8 @@ TEST(CliCalibrateStatic, MissingFileIsAUsageError) {
 TEST(CliCalibrateStatic, FixtureRecoversTruth) {
   const std::string log = test::source_path("fixtures/static.imulog");
   const std::string truth_path = test::source_path("fixtures/static.truth.yaml");
-  if (!std::filesystem::exists(log) || !std::filesystem::exists(truth_path)) {
-    GTEST_SKIP() << "fixtures/static.imulog or its truth file is missing: run scripts/make-fixtures.sh";
-  }
+  ASSERT_TRUE(std::filesystem::exists(log) && std::filesystem::exists(truth_path))
+      << "fixtures/static.imulog or its truth file is missing: run scripts/make-fixtures.sh";
   const std::string dir = test::scratch_dir();
   const auto r = run_cli({"calibrate", "static", log, "--gravity", "9.80665", "--json", dir + "/r.json"});
   ASSERT_EQ(r.exit_code, 0) << r.err;

@@ -1,7 +1,8 @@
-// `imucal calibrate static` on the damaged fixture logs (fixtures/README.md): each run either gives
-// a result that agrees with the truth within its reported sigma and says what was wrong with the
-// log, or fails with a clear message and a documented exit code (docs/cli.md). Never a silently
-// degraded result.
+// `imucal calibrate static` on the damaged fixture logs (fixtures/README.md). The gap and
+// saturation fixtures keep enough usable poses (40 recorded): the result must agree with the truth
+// within its reported sigma and say what was excluded. The truncated log is refused unless
+// --allow-damaged, and then gives a correct result with a warning or a clear data error
+// (docs/cli.md). Never a silently degraded result.
 
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
@@ -26,7 +27,8 @@ struct Fixture {
   std::string log, truth;
 };
 
-/// The fixture pair, or empty paths when it is missing (the caller skips).
+/// The committed fixture pair; empty paths when it is missing (the caller fails: fixtures are
+/// part of the repository, scripts/make-fixtures.sh regenerates them).
 Fixture fixture(const std::string& name) {
   Fixture f{test::source_path("fixtures/" + name + ".imulog"),
             test::source_path("fixtures/" + name + ".truth.yaml")};
@@ -76,15 +78,10 @@ bool any_warning_contains(const nlohmann::json& j, const std::string& what) {
 /// contains a gap is integrated.
 TEST(CliCalibrateBroken, GapIsWarnedAndNotIntegratedAcross) {
   const Fixture f = fixture("broken-gap");
-  if (f.log.empty()) GTEST_SKIP() << "fixtures/broken-gap.imulog is missing: run scripts/make-fixtures.sh";
+  ASSERT_FALSE(f.log.empty()) << "fixtures/broken-gap.imulog is missing: run scripts/make-fixtures.sh";
   const std::string dir = test::scratch_dir();
   const auto r = run_cli({"calibrate", "static", f.log, "--gravity", "9.80665", "--json", dir + "/r.json"});
-  if (r.exit_code != 0) {
-    // Too little left to calibrate is acceptable only as a data error that says so.
-    EXPECT_EQ(r.exit_code, 4) << r.err;
-    EXPECT_NE(r.err.find("imucal:"), std::string::npos) << r.err;
-    return;
-  }
+  ASSERT_EQ(r.exit_code, 0) << "the gaps leave 30+ usable poses; calibration must succeed: " << r.err;
   EXPECT_NE(r.err.find("gap"), std::string::npos) << "the gap must be warned about on stderr: " << r.err;
   const auto j = nlohmann::json::parse(test::read_file(dir + "/r.json"));
   EXPECT_TRUE(any_warning_contains(j, "gap")) << j["warnings"].dump();
@@ -96,16 +93,10 @@ TEST(CliCalibrateBroken, GapIsWarnedAndNotIntegratedAcross) {
 /// Motion beyond the full-scale ranges: the flagged samples are excluded and reported.
 TEST(CliCalibrateBroken, SaturatedSamplesAreExcludedAndWarned) {
   const Fixture f = fixture("broken-saturated");
-  if (f.log.empty())
-    GTEST_SKIP() << "fixtures/broken-saturated.imulog is missing: run scripts/make-fixtures.sh";
+  ASSERT_FALSE(f.log.empty()) << "fixtures/broken-saturated.imulog is missing: run scripts/make-fixtures.sh";
   const std::string dir = test::scratch_dir();
   const auto r = run_cli({"calibrate", "static", f.log, "--gravity", "9.80665", "--json", dir + "/r.json"});
-  if (r.exit_code != 0) {
-    EXPECT_EQ(r.exit_code, 4) << r.err;
-    EXPECT_NE(r.err.find("saturat"), std::string::npos) << "the failure must name the saturation: " << r.err;
-    EXPECT_FALSE(std::filesystem::exists(dir + "/r.json"));
-    return;
-  }
+  ASSERT_EQ(r.exit_code, 0) << "saturation spoils some motions but leaves enough poses: " << r.err;
   EXPECT_NE(r.err.find("saturated"), std::string::npos) << r.err;
   const auto j = nlohmann::json::parse(test::read_file(dir + "/r.json"));
   EXPECT_TRUE(any_warning_contains(j, "saturated")) << j["warnings"].dump();
@@ -117,8 +108,7 @@ TEST(CliCalibrateBroken, SaturatedSamplesAreExcludedAndWarned) {
 /// or fails as unsuitable data (exit 4).
 TEST(CliCalibrateBroken, TruncatedIsRefusedUnlessAllowed) {
   const Fixture f = fixture("broken-truncated");
-  if (f.log.empty())
-    GTEST_SKIP() << "fixtures/broken-truncated.imulog is missing: run scripts/make-fixtures.sh";
+  ASSERT_FALSE(f.log.empty()) << "fixtures/broken-truncated.imulog is missing: run scripts/make-fixtures.sh";
   const std::string dir = test::scratch_dir();
   // Work on a copy: opening a damaged log must not be allowed to touch the fixture.
   const std::string log = dir + "/truncated.imulog";

@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# Regenerates the fixture logs in fixtures/ and their ground truth with the built imucal:
+#   scripts/make-fixtures.sh [IMUCAL]      (default build/release/daemon/imucal)
+#   SKIP_CAMIMU=1 scripts/make-fixtures.sh  leaves camimu.imulog alone (it takes longest)
+# The samples, events and truth files are deterministic (fixed seeds); only the log's
+# created_utc metadata differs between runs. fixtures/README.md lists what each one is for.
+set -euo pipefail
+
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+IMUCAL=${1:-$root/build/release/daemon/imucal}
+out=$root/fixtures
+[ -x "$IMUCAL" ] || { echo "make-fixtures: $IMUCAL not found or not executable; build it first (make build)" >&2; exit 1; }
+mkdir -p "$out"
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+
+sim() { echo "+ imucal sim $*"; "$IMUCAL" sim "$@" --force; }
+
+# Multi-position static protocol (Tedaldi et al.): 50 s still + 36 poses held 1-4 s, 100 Hz,
+# at the MPU-6000 power-on ranges (+-2 g, +-250 deg/s).
+sim static --seed 101 --poses 36 --still 50 --imu-rate 100 --accel-range 2 --gyro-range 250 \
+  -o "$out/static.imulog"
+
+# Six faces up, 30 s each, for the gyroscope g-sensitivity (Krebs 5.2.3).
+sim gsens --seed 102 --hold 30 --imu-rate 100 --accel-range 2 --gyro-range 250 -o "$out/gsens.imulog"
+
+# Ten minutes on a table, 100 Hz, for the Allan variance.
+sim still --seed 103 --duration 600 --imu-rate 100 --accel-range 2 --gyro-range 250 -o "$out/still.imulog"
+
+# Camera-IMU session (checkerboard motion with rendered frames), when this build has it.
+if [ -n "${SKIP_CAMIMU:-}" ]; then
+  echo "make-fixtures: SKIP_CAMIMU set; camimu.imulog not regenerated"
+elif "$IMUCAL" sim camimu --help >/dev/null 2>&1; then
+  sim camimu --seed 104 -o "$out/camimu.imulog"
+else
+  echo "make-fixtures: this imucal has no 'sim camimu'; camimu.imulog not regenerated" >&2
+fi
+
+# Broken logs.
+# Truncated: a complete short static session cut at a byte offset inside its sample pages.
+sim static --seed 105 --poses 12 --still 20 --accel-range 2 --gyro-range 250 -o "$tmp/whole.imulog"
+size=$(stat -c %s "$tmp/whole.imulog")
+cut=$((size * 6 / 10 + 123))
+head -c "$cut" "$tmp/whole.imulog" > "$out/broken-truncated.imulog"
+cp "$tmp/whole.truth.yaml" "$out/broken-truncated.truth.yaml"
+echo "+ cut $size bytes to $cut -> broken-truncated.imulog"
+
+# Gap: 2.5 s of samples lost during the poses and 0.3 s in the still period; the first sample
+# after each gap carries the gap flag. Enough poses remain for a calibration with a warning.
+sim static --seed 106 --poses 40 --still 50 --accel-range 2 --gyro-range 250 \
+  --drop 100:2.5 --drop 10:0.3 -o "$out/broken-gap.imulog"
+
+# Saturated: fast moves beyond +-2 g and +-250 deg/s.
+sim static --seed 107 --poses 40 --still 50 --accel-range 2 --gyro-range 250 --excitation 4 \
+  -o "$out/broken-saturated.imulog"
+
+leftovers=$(find "$out" -name '*-wal' -o -name '*-shm' -o -name '*-journal' -o -name '*.tmp')
+if [ -n "$leftovers" ]; then
+  echo "make-fixtures: leftover files beside the fixtures:" >&2
+  echo "$leftovers" >&2
+  exit 1
+fi
+du -ch "$out"/*.imulog | tail -1
