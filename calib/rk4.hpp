@@ -27,14 +27,16 @@ Eigen::Matrix3d quat_to_matrix(const Quat4& q);
 /// Integrates like integrate_rk4n and computes, for a function f(q_end) with the 3x4 Jacobian
 /// `df_dq_end` evaluated by the callback at the final quaternion, the derivatives of f with
 /// respect to every rate sample: dfdw[i] is 3x3 (row = component of f, column = rate axis).
-/// `q_buffer` is scratch storage reused between calls.
+/// `q_buffer` is scratch storage reused between calls; with `q_precomputed` it must already hold
+/// the forward quaternions of these rates (q_buffer[i] at sample i, as rk4n_step produces them).
 struct Rk4nGradient {
   Quat4 q_end;
   std::vector<Eigen::Matrix3d> df_dw;  // one per sample
 };
 template <class DfDq>
 void integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d> w, std::span<const double> t_s,
-                                  const DfDq& df_dq_end, std::vector<Quat4>& q_buffer, Rk4nGradient& out);
+                                  const DfDq& df_dq_end, std::vector<Quat4>& q_buffer, Rk4nGradient& out,
+                                  bool q_precomputed = false);
 
 // ---------------------------------------------------------------------------------------------
 
@@ -53,23 +55,49 @@ inline Eigen::Vector3d omega_mul_dw(const Quat4& x, const Quat4& ybar) {
           -ybar[0] * x[3] + ybar[1] * x[2] - ybar[2] * x[1] + ybar[3] * x[0]};
 }
 
+/// The 4x4 matrix Omega(w) of eq. 3.11: omega_mul(q, w) == omega_mat(w) * q.
+inline Eigen::Matrix4d omega_mat(const Eigen::Vector3d& w) {
+  Eigen::Matrix4d m;
+  m << 0, -w[0], -w[1], -w[2],  //
+      w[0], 0, w[2], -w[1],     //
+      w[1], -w[2], 0, w[0],     //
+      w[2], w[1], -w[0], 0;
+  return m;
+}
+
+/// The 4x3 matrix M(x) with omega_mul(x, w) == M(x) * w, so omega_mul_dw(x, y) == M(x)^T y.
+inline Eigen::Matrix<double, 4, 3> omega_jac(const Quat4& x) {
+  Eigen::Matrix<double, 4, 3> m;
+  m << -x[1], -x[2], -x[3],  //
+      x[0], -x[3], x[2],     //
+      x[3], x[0], -x[1],     //
+      -x[2], x[1], x[0];
+  return m;
+}
+
 }  // namespace detail
 
 template <class DfDq>
 void integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d> w, std::span<const double> t_s,
-                                  const DfDq& df_dq_end, std::vector<Quat4>& q, Rk4nGradient& out) {
+                                  const DfDq& df_dq_end, std::vector<Quat4>& q, Rk4nGradient& out,
+                                  bool q_precomputed) {
+  using detail::omega_mat;
   using detail::omega_mul;
-  using detail::omega_mul_dw;
+  using detail::omega_jac;
+  using Adj = Eigen::Matrix<double, 4, 3>;  // column r: d f_r / d q (the three adjoint rows at once)
   const std::size_t n = w.size();
-  q.resize(n == 0 ? 1 : n);
-  q[0] = Quat4(1, 0, 0, 0);
-  for (std::size_t i = 0; i + 1 < n; ++i) q[i + 1] = rk4n_step(q[i], w[i], w[i + 1], t_s[i + 1] - t_s[i]);
+  if (!q_precomputed || q.size() != (n == 0 ? 1 : n)) {
+    q.resize(n == 0 ? 1 : n);
+    q[0] = Quat4(1, 0, 0, 0);
+    for (std::size_t i = 0; i + 1 < n; ++i) q[i + 1] = rk4n_step(q[i], w[i], w[i + 1], t_s[i + 1] - t_s[i]);
+  }
   out.q_end = q[n == 0 ? 0 : n - 1];
-  out.df_dw.assign(n, Eigen::Matrix3d::Zero());
+  out.df_dw.resize(n);
+  if (n == 0) return;
+  out.df_dw[n - 1].setZero();
   if (n < 2) return;
-  // Adjoint rows: qbar[r] = d f_r / d q_i, propagated backwards through every step.
-  const Eigen::Matrix<double, 3, 4> J = df_dq_end(out.q_end);
-  Quat4 qbar[3] = {J.row(0).transpose(), J.row(1).transpose(), J.row(2).transpose()};
+  // Adjoint rows, propagated backwards through every step.
+  Adj qbar = df_dq_end(out.q_end).transpose();
   for (std::size_t i = n - 1; i-- > 0;) {
     const double h = t_s[i + 1] - t_s[i];
     const Eigen::Vector3d& w0 = w[i];
@@ -84,40 +112,33 @@ void integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d> w, std::span<
     const Quat4 x4 = x1 + h * k3;
     const Quat4 k4 = 0.5 * omega_mul(x4, w1);
     const Quat4 p = x1 + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
-    const double p_norm = p.norm();
     const Quat4& q_next = q[i + 1];
-    for (int r = 0; r < 3; ++r) {
-      // Normalisation (eq. 3.16).
-      const Quat4 pbar = (qbar[r] - qbar[r].dot(q_next) * q_next) / p_norm;
-      Quat4 x1bar = pbar;
-      Quat4 k1bar = (h / 6.0) * pbar;
-      Quat4 k2bar = (h / 3.0) * pbar;
-      Quat4 k3bar = (h / 3.0) * pbar;
-      const Quat4 k4bar = (h / 6.0) * pbar;
-      Eigen::Vector3d w0bar = Eigen::Vector3d::Zero();
-      Eigen::Vector3d w1bar = Eigen::Vector3d::Zero();
-      Eigen::Vector3d wmbar = Eigen::Vector3d::Zero();
-      // Omega is skew-symmetric, so the adjoint through x is -Omega(w) ybar.
-      Quat4 xbar = -0.5 * omega_mul(k4bar, w1);
-      w1bar += 0.5 * omega_mul_dw(x4, k4bar);
-      x1bar += xbar;
-      k3bar += h * xbar;
-      xbar = -0.5 * omega_mul(k3bar, wm);
-      wmbar += 0.5 * omega_mul_dw(x3, k3bar);
-      x1bar += xbar;
-      k2bar += 0.5 * h * xbar;
-      xbar = -0.5 * omega_mul(k2bar, wm);
-      wmbar += 0.5 * omega_mul_dw(x2, k2bar);
-      x1bar += xbar;
-      k1bar += 0.5 * h * xbar;
-      x1bar += -0.5 * omega_mul(k1bar, w0);
-      w0bar += 0.5 * omega_mul_dw(x1, k1bar);
-      w0bar += 0.5 * wmbar;
-      w1bar += 0.5 * wmbar;
-      out.df_dw[i].row(r) += w0bar.transpose();
-      out.df_dw[i + 1].row(r) += w1bar.transpose();
-      qbar[r] = x1bar;
-    }
+    // Normalisation (eq. 3.16).
+    const Adj pbar = (qbar - q_next * (q_next.transpose() * qbar)) * (1.0 / p.norm());
+    // Omega is skew-symmetric, so the adjoint through x is -Omega(w) ybar = Omega(w)^T ybar.
+    const Eigen::Matrix4d O0t = omega_mat(w0).transpose();
+    const Eigen::Matrix4d Omt = omega_mat(wm).transpose();
+    const Eigen::Matrix4d O1t = omega_mat(w1).transpose();
+    const Adj k4bar = (h / 6.0) * pbar;
+    Adj xbar = 0.5 * (O1t * k4bar);
+    Eigen::Matrix3d w1bar = 0.5 * (omega_jac(x4).transpose() * k4bar);
+    Adj x1bar = pbar + xbar;
+    const Adj k3bar = (h / 3.0) * pbar + h * xbar;
+    xbar = 0.5 * (Omt * k3bar);
+    Eigen::Matrix3d wmbar = 0.5 * (omega_jac(x3).transpose() * k3bar);
+    x1bar += xbar;
+    const Adj k2bar = (h / 3.0) * pbar + (0.5 * h) * xbar;
+    xbar = 0.5 * (Omt * k2bar);
+    wmbar += 0.5 * (omega_jac(x2).transpose() * k2bar);
+    x1bar += xbar;
+    const Adj k1bar = (h / 6.0) * pbar + (0.5 * h) * xbar;
+    x1bar += 0.5 * (O0t * k1bar);
+    Eigen::Matrix3d w0bar = 0.5 * (omega_jac(x1).transpose() * k1bar);
+    w0bar += 0.5 * wmbar;
+    w1bar += 0.5 * wmbar;
+    out.df_dw[i] = w0bar.transpose();
+    out.df_dw[i + 1] += w1bar.transpose();
+    qbar = x1bar;
   }
 }
 

@@ -1,5 +1,6 @@
 #include "calib/static_calibration.hpp"
 
+#include <Eigen/SVD>
 #include <ceres/ceres.h>
 #include <time.h>
 
@@ -196,12 +197,24 @@ class GyroTransferCost : public ceres::CostFunction {
       return J;
     };
     const bool want_jacobian = jacobians && (jacobians[0] || (!fixed_bias_ && jacobians[1]));
-    Quat4 q_end;
+    // The solver evaluates the residual at a candidate step and, once it is accepted, the
+    // Jacobian at the same point: keep the forward quaternions of the last evaluation.
+    Eigen::Matrix<double, 12, 1> key;
+    key << Eigen::Map<const Eigen::Matrix<double, 9, 1>>(p), b;
+    const bool cached = cache_valid_ && key == cache_key_;
+    if (!cached) {
+      q_buf_.resize(n == 0 ? 1 : n);
+      q_buf_[0] = Quat4(1, 0, 0, 0);
+      for (std::size_t i = 0; i + 1 < n; ++i) {
+        q_buf_[i + 1] = rk4n_step(q_buf_[i], w_[i], w_[i + 1], tr_->t_s[i + 1] - tr_->t_s[i]);
+      }
+      cache_key_ = key;
+      cache_valid_ = true;
+    }
+    Quat4 q_end = q_buf_[n == 0 ? 0 : n - 1];
     if (want_jacobian) {
-      integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d>(w_), tr_->t_s, df_dq, q_buf_, grad_);
+      integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d>(w_), tr_->t_s, df_dq, q_buf_, grad_, true);
       q_end = grad_.q_end;
-    } else {
-      q_end = integrate_rk4n(w_, tr_->t_s);
     }
     const Eigen::Vector3d f = rotate_back(q_end.data(), u0);
     Eigen::Map<Eigen::Vector3d> r(residuals);
@@ -243,6 +256,8 @@ class GyroTransferCost : public ceres::CostFunction {
   mutable std::vector<Eigen::Vector3d> w_;
   mutable std::vector<Quat4> q_buf_;
   mutable Rk4nGradient grad_;
+  mutable Eigen::Matrix<double, 12, 1> cache_key_ = Eigen::Matrix<double, 12, 1>::Zero();
+  mutable bool cache_valid_ = false;
 };
 
 // ---- helpers ---------------------------------------------------------------------------------
@@ -708,33 +723,34 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   res.model.gyro.scale = gp.tail<3>();
   res.model.gyro.bias = opt.estimate_gyro_bias ? gb : gyro0.bias;
   {
-    ceres::Covariance::Options copt;
-    copt.algorithm_type = ceres::DENSE_SVD;
-    copt.null_space_rank = -1;
-    copt.num_threads = 1;
-    ceres::Covariance cov(copt);
-    std::vector<std::pair<const double*, const double*>> blocks = {{gp.data(), gp.data()}};
-    if (opt.estimate_gyro_bias) {
-      blocks.push_back({gb.data(), gb.data()});
-      blocks.push_back({gp.data(), gb.data()});
-    }
-    if (!cov.Compute(blocks, &problem)) {
+    // One Jacobian evaluation at the solution serves both the covariance and the propagation of
+    // the accelerometer uncertainty below. The covariance is (J^T J)^+ from the SVD of J, singular
+    // values below sqrt(1e-14) of the largest being dropped (what ceres::Covariance does with
+    // DENSE_SVD and automatic null-space truncation).
+    ceres::Problem::EvaluateOptions eo;
+    eo.parameter_blocks = {gp.data()};
+    if (opt.estimate_gyro_bias) eo.parameter_blocks.push_back(gb.data());
+    eo.num_threads = 1;
+    ceres::CRSMatrix crs;
+    if (!problem.Evaluate(eo, nullptr, nullptr, nullptr, &crs) || crs.num_cols != n_par) {
       return make_error(Errc::kSolverFailed,
                         "the gyroscope covariance could not be computed: the motions between poses do not "
                         "constrain all gyro parameters; turn the rig about all three axes between poses");
     }
-    res.gyro_covariance = Eigen::MatrixXd::Zero(n_par, n_par);
-    Eigen::Matrix<double, 9, 9, Eigen::RowMajor> c99;
-    (void)cov.GetCovarianceBlock(gp.data(), gp.data(), c99.data());
-    res.gyro_covariance.topLeftCorner<9, 9>() = c99;
-    if (opt.estimate_gyro_bias) {
-      Eigen::Matrix<double, 3, 3, Eigen::RowMajor> c33;
-      Eigen::Matrix<double, 9, 3, Eigen::RowMajor> c93;
-      (void)cov.GetCovarianceBlock(gb.data(), gb.data(), c33.data());
-      (void)cov.GetCovarianceBlock(gp.data(), gb.data(), c93.data());
-      res.gyro_covariance.bottomRightCorner<3, 3>() = c33;
-      res.gyro_covariance.topRightCorner<9, 3>() = c93;
-      res.gyro_covariance.bottomLeftCorner<3, 9>() = c93.transpose();
+    Eigen::MatrixXd Jg = Eigen::MatrixXd::Zero(crs.num_rows, crs.num_cols);
+    for (int r = 0; r < crs.num_rows; ++r) {
+      for (int idx = crs.rows[r]; idx < crs.rows[r + 1]; ++idx) Jg(r, crs.cols[idx]) = crs.values[idx];
+    }
+    {
+      const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Jg, Eigen::ComputeThinV);
+      const Eigen::VectorXd sv = svd.singularValues();
+      Eigen::VectorXd inv_sq = Eigen::VectorXd::Zero(sv.size());
+      const double min_ratio = std::sqrt(1e-14);
+      for (Eigen::Index i = 0; i < sv.size(); ++i) {
+        if (!(sv[i] / sv[0] >= min_ratio)) break;
+        inv_sq[i] = 1.0 / (sv[i] * sv[i]);
+      }
+      res.gyro_covariance = svd.matrixV() * inv_sq.asDiagonal() * svd.matrixV().transpose();
     }
     res.gyro_covariance *= 2.0 * summary.final_cost / std::max(1.0, m_res - n_par);
     // The reference directions come from the calibrated accelerometer, whose errors are common
@@ -766,16 +782,7 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
         const Eigen::Matrix3d R = quat_to_matrix(integrate_rk4n(w, tr.t_s));
         Ja.middleRows(3 * t, 3) = du[tr.pose0 + 1] - R.transpose() * du[tr.pose0];
       }
-      ceres::Problem::EvaluateOptions eo;
-      eo.parameter_blocks = {gp.data()};
-      if (opt.estimate_gyro_bias) eo.parameter_blocks.push_back(gb.data());
-      eo.num_threads = 1;
-      ceres::CRSMatrix crs;
-      if (problem.Evaluate(eo, nullptr, nullptr, nullptr, &crs)) {
-        Eigen::MatrixXd Jg = Eigen::MatrixXd::Zero(crs.num_rows, crs.num_cols);
-        for (int r = 0; r < crs.num_rows; ++r) {
-          for (int idx = crs.rows[r]; idx < crs.rows[r + 1]; ++idx) Jg(r, crs.cols[idx]) = crs.values[idx];
-        }
+      {
         const Eigen::MatrixXd D = -(Jg.transpose() * Jg).ldlt().solve(Jg.transpose() * Ja);
         res.gyro_covariance += D * res.accel_covariance * D.transpose();
       }
