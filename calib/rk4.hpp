@@ -81,9 +81,9 @@ template <class DfDq>
 void integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d> w, std::span<const double> t_s,
                                   const DfDq& df_dq_end, std::vector<Quat4>& q, Rk4nGradient& out,
                                   bool q_precomputed) {
+  using detail::omega_jac;
   using detail::omega_mat;
   using detail::omega_mul;
-  using detail::omega_jac;
   using Adj = Eigen::Matrix<double, 4, 3>;  // column r: d f_r / d q (the three adjoint rows at once)
   const std::size_t n = w.size();
   if (!q_precomputed || q.size() != (n == 0 ? 1 : n)) {

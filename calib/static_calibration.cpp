@@ -1,9 +1,9 @@
 #include "calib/static_calibration.hpp"
 
-#include <Eigen/SVD>
 #include <ceres/ceres.h>
 #include <time.h>
 
+#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -213,7 +213,8 @@ class GyroTransferCost : public ceres::CostFunction {
     }
     Quat4 q_end = q_buf_[n == 0 ? 0 : n - 1];
     if (want_jacobian) {
-      integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d>(w_), tr_->t_s, df_dq, q_buf_, grad_, true);
+      integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d>(w_), tr_->t_s, df_dq, q_buf_, grad_,
+                                   true);
       q_end = grad_.q_end;
     }
     const Eigen::Vector3d f = rotate_back(q_end.data(), u0);
