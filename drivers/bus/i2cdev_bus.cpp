@@ -1,45 +1,16 @@
 #include "drivers/bus/i2cdev_bus.hpp"
 
-#include <fcntl.h>
 #include <linux/i2c-dev.h>
 #include <linux/i2c.h>
-#include <sys/ioctl.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
-#include <cstdio>
 #include <cstring>
 
 namespace imucal::drivers {
 namespace {
 
 constexpr unsigned long kSmbusNeeded = I2C_FUNC_SMBUS_READ_I2C_BLOCK | I2C_FUNC_SMBUS_WRITE_BYTE_DATA;
-
-class SystemI2cDevIo final : public I2cDevIo {
- public:
-  int open(const std::string& path) override {
-    int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
-    return fd < 0 ? -errno : fd;
-  }
-  void close(int fd) override { ::close(fd); }
-  int ioctl(int fd, unsigned long request, void* arg) override {
-    int r = ::ioctl(fd, request, arg);
-    return r < 0 ? -errno : r;
-  }
-};
-
-std::string hex2(unsigned v) {
-  char buf[8];
-  std::snprintf(buf, sizeof buf, "0x%02X", v & 0xFFu);
-  return buf;
-}
-
-std::string hex_funcs(unsigned long v) {
-  char buf[24];
-  std::snprintf(buf, sizeof buf, "0x%08lX", v);
-  return buf;
-}
 
 Error open_error(const std::string& path, int err) {
   std::string what = "cannot open I2C device " + path + ": " + std::strerror(err);
@@ -77,31 +48,30 @@ const char* i2c_transfer_mode_name(I2cTransferMode mode) {
   return "?";
 }
 
-std::unique_ptr<I2cDevIo> make_system_i2cdev_io() { return std::make_unique<SystemI2cDevIo>(); }
-
 Result<std::unique_ptr<I2cDevBus>> I2cDevBus::open(const std::string& device, const I2cDevOptions& options,
-                                                   std::unique_ptr<I2cDevIo> io) {
+                                                   std::unique_ptr<DeviceIo> io) {
   if (device.empty()) {
     return make_error(Errc::kInvalidArgument,
                       "no I2C device given; set imu.device in the rig configuration (e.g. /dev/i2c-1)");
   }
   if (options.address != 0x68 && options.address != 0x69) {
     return make_error(Errc::kInvalidArgument,
-                      "I2C address " + hex2(options.address) +
+                      "I2C address " + format_hex(options.address, 2) +
                           " is not an MPU-6000 address: it answers at 0x68 (AD0 low) or 0x69 (AD0 high); "
                           "check imu.i2c_address in the rig configuration");
   }
   std::string path = device.front() == '/' ? device : "/dev/" + device;
-  if (!io) io = make_system_i2cdev_io();
+  if (!io) io = system_device_io();
   std::unique_ptr<I2cDevBus> bus(new I2cDevBus(std::move(path), options, std::move(io)));
   IMUCAL_TRY(bus->open_and_check());
   return bus;
 }
 
-I2cDevBus::I2cDevBus(std::string path, const I2cDevOptions& options, std::unique_ptr<I2cDevIo> io)
+I2cDevBus::I2cDevBus(std::string path, const I2cDevOptions& options, std::unique_ptr<DeviceIo> io)
     : path_(std::move(path)), options_(options), io_(std::move(io)) {
   auto slash = path_.find_last_of('/');
-  name_ = (slash == std::string::npos ? path_ : path_.substr(slash + 1)) + "@" + hex2(options_.address);
+  name_ =
+      (slash == std::string::npos ? path_ : path_.substr(slash + 1)) + "@" + format_hex(options_.address, 2);
 }
 
 I2cDevBus::~I2cDevBus() { close_fd(); }
@@ -140,7 +110,7 @@ Status I2cDevBus::open_and_check() {
                     path_ +
                         ": the adapter supports neither plain I2C transfers (I2C_FUNC_I2C) nor SMBus "
                         "I2C-block reads with byte writes (functionality " +
-                        hex_funcs(funcs) + "); the MPU-6000 needs one of them. Use another I2C bus.");
+                        format_hex(funcs, 8) + "); the MPU-6000 needs one of them. Use another I2C bus.");
       }
       mode_ = can_rdwr ? I2cTransferMode::kI2cRdwr : I2cTransferMode::kSmbus;
       break;
@@ -149,7 +119,7 @@ Status I2cDevBus::open_and_check() {
         return fail(Errc::kUnsupported, path_ +
                                             ": the adapter cannot do plain I2C transfers (I2C_RDWR; "
                                             "functionality " +
-                                            hex_funcs(funcs) +
+                                            format_hex(funcs, 8) +
                                             "), it is SMBus-only; use the SMBus or auto transfer mode.");
       }
       mode_ = options_.mode;
@@ -159,7 +129,8 @@ Status I2cDevBus::open_and_check() {
         return fail(Errc::kUnsupported, path_ +
                                             ": the adapter lacks SMBus I2C-block reads or byte writes "
                                             "(functionality " +
-                                            hex_funcs(funcs) + "); use the I2C_RDWR or auto transfer mode.");
+                                            format_hex(funcs, 8) +
+                                            "); use the I2C_RDWR or auto transfer mode.");
       }
       mode_ = options_.mode;
       break;
@@ -170,7 +141,8 @@ Status I2cDevBus::open_and_check() {
   if (int r =
           io_->ioctl(fd_, I2C_SLAVE, reinterpret_cast<void*>(static_cast<unsigned long>(options_.address)));
       r < 0) {
-    std::string msg = path_ + ": cannot use address " + hex2(options_.address) + ": " + std::strerror(-r);
+    std::string msg =
+        path_ + ": cannot use address " + format_hex(options_.address, 2) + ": " + std::strerror(-r);
     if (-r == EBUSY) {
       msg +=
           ". A kernel driver (likely inv-mpu6050) is bound to it; unbind it (see "
@@ -189,7 +161,8 @@ Status I2cDevBus::reopen() {
 Error I2cDevBus::transfer_error(const char* what, std::uint8_t reg, int r) {
   ++counters_.transfer_errors;
   if (-r == ETIMEDOUT) ++counters_.timeouts;
-  std::string msg = name_ + ": " + what + " at register " + hex2(reg) + " failed: " + std::strerror(-r);
+  std::string msg =
+      name_ + ": " + what + " at register " + format_hex(reg, 2) + " failed: " + std::strerror(-r);
   if (-r == ENXIO || -r == EREMOTEIO || -r == EIO || -r == ENODEV) {
     msg += " (no acknowledge: check wiring, power and the AD0 level: 0x68 low, 0x69 high)";
   }
@@ -227,8 +200,8 @@ Status I2cDevBus::read_rdwr(std::uint8_t reg, std::span<std::uint8_t> out) {
   if (r < 0) return transfer_error("I2C_RDWR read", reg, r);
   if (r != 2) {
     ++counters_.short_transfers;
-    return make_error(Errc::kDevice, name_ + ": short I2C_RDWR read at register " + hex2(reg) + ": " +
-                                         std::to_string(r) + " of 2 messages");
+    return make_error(Errc::kDevice, name_ + ": short I2C_RDWR read at register " + format_hex(reg, 2) +
+                                         ": " + std::to_string(r) + " of 2 messages");
   }
   return {};
 }
@@ -237,7 +210,7 @@ Status I2cDevBus::read_smbus(std::uint8_t reg, std::span<std::uint8_t> out) {
   const bool fifo = reg == options_.fifo_register;
   if (!fifo && static_cast<std::size_t>(reg) + out.size() > 0x100) {
     return make_error(Errc::kInvalidArgument, name_ + ": read of " + std::to_string(out.size()) +
-                                                  " bytes from register " + hex2(reg) +
+                                                  " bytes from register " + format_hex(reg, 2) +
                                                   " runs past register 0xFF");
   }
   std::size_t done = 0;
@@ -256,9 +229,9 @@ Status I2cDevBus::read_smbus(std::uint8_t reg, std::span<std::uint8_t> out) {
     if (r < 0) return transfer_error("SMBus I2C-block read", chunk_reg, r);
     if (block.block[0] != n) {
       ++counters_.short_transfers;
-      return make_error(Errc::kDevice, name_ + ": short SMBus block read at register " + hex2(chunk_reg) +
-                                           ": " + std::to_string(block.block[0]) + " of " +
-                                           std::to_string(n) + " bytes");
+      return make_error(Errc::kDevice, name_ + ": short SMBus block read at register " +
+                                           format_hex(chunk_reg, 2) + ": " + std::to_string(block.block[0]) +
+                                           " of " + std::to_string(n) + " bytes");
     }
     std::copy_n(block.block + 1, n, out.begin() + static_cast<std::ptrdiff_t>(done));
     done += n;
@@ -284,7 +257,7 @@ Status I2cDevBus::write(std::uint8_t reg, std::uint8_t value) {
     if (r < 0) return transfer_error("I2C_RDWR write", reg, r);
     if (r != 1) {
       ++counters_.short_transfers;
-      return make_error(Errc::kDevice, name_ + ": short I2C_RDWR write at register " + hex2(reg));
+      return make_error(Errc::kDevice, name_ + ": short I2C_RDWR write at register " + format_hex(reg, 2));
     }
     return {};
   }

@@ -18,24 +18,10 @@
 #include <string>
 
 #include "core/result.hpp"
+#include "drivers/bus/device_io.hpp"
 #include "drivers/bus/register_bus.hpp"
 
 namespace imucal::drivers {
-
-/// The system calls I2cDevBus makes. The default forwards to the kernel; tests substitute a
-/// fake to check the transactions the bus builds without an adapter.
-class I2cDevIo {
- public:
-  virtual ~I2cDevIo() = default;
-  /// open(2) read-write: a file descriptor, or -errno.
-  virtual int open(const std::string& path) = 0;
-  virtual void close(int fd) = 0;
-  /// ioctl(2) (I2C_FUNCS, I2C_SLAVE, I2C_RDWR, I2C_SMBUS): the ioctl's result, or -errno.
-  virtual int ioctl(int fd, unsigned long request, void* arg) = 0;
-};
-
-/// The kernel's i2c-dev interface.
-std::unique_ptr<I2cDevIo> make_system_i2cdev_io();
 
 enum class I2cTransferMode {
   kAuto,     // I2C_RDWR when the adapter can, else SMBus
@@ -62,9 +48,11 @@ class I2cDevBus final : public RegisterBus {
   /// Opens `device` ("/dev/i2c-1" or "i2c-1"), checks the adapter's functionality and claims
   /// the address. A missing device, missing permissions, an adapter that cannot serve the
   /// MPU-6000 or an address held by a kernel driver give an error that says what to check.
+  /// `io` makes the system calls (system_device_io() when null): open(2), close(2) and the
+  /// ioctls I2C_FUNCS, I2C_SLAVE, I2C_RDWR and I2C_SMBUS.
   [[nodiscard]] static Result<std::unique_ptr<I2cDevBus>> open(const std::string& device,
                                                                const I2cDevOptions& options = {},
-                                                               std::unique_ptr<I2cDevIo> io = nullptr);
+                                                               std::unique_ptr<DeviceIo> io = nullptr);
   ~I2cDevBus() override;
   I2cDevBus(const I2cDevBus&) = delete;
   I2cDevBus& operator=(const I2cDevBus&) = delete;
@@ -85,7 +73,7 @@ class I2cDevBus final : public RegisterBus {
   const BusCounters& counters() const override { return counters_; }
 
  private:
-  I2cDevBus(std::string path, const I2cDevOptions& options, std::unique_ptr<I2cDevIo> io);
+  I2cDevBus(std::string path, const I2cDevOptions& options, std::unique_ptr<DeviceIo> io);
   [[nodiscard]] Status open_and_check();
   [[nodiscard]] Status read_rdwr(std::uint8_t reg, std::span<std::uint8_t> out);
   [[nodiscard]] Status read_smbus(std::uint8_t reg, std::span<std::uint8_t> out);
@@ -95,7 +83,7 @@ class I2cDevBus final : public RegisterBus {
   std::string path_;
   std::string name_;
   I2cDevOptions options_;
-  std::unique_ptr<I2cDevIo> io_;
+  std::unique_ptr<DeviceIo> io_;
   int fd_ = -1;
   unsigned long funcs_ = 0;
   I2cTransferMode mode_ = I2cTransferMode::kAuto;

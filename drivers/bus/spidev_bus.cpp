@@ -1,13 +1,9 @@
 #include "drivers/bus/spidev_bus.hpp"
 
-#include <fcntl.h>
 #include <linux/spi/spidev.h>
-#include <sys/ioctl.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
-#include <cstdio>
 #include <cstring>
 
 namespace imucal::drivers {
@@ -15,25 +11,6 @@ namespace {
 
 constexpr std::uint8_t kReadFlag = 0x80;
 constexpr std::uint32_t kMinSpeedHz = 1'000;
-
-class SystemSpidevIo final : public SpidevIo {
- public:
-  int open(const std::string& path) override {
-    int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
-    return fd < 0 ? -errno : fd;
-  }
-  void close(int fd) override { ::close(fd); }
-  int ioctl(int fd, unsigned long request, void* arg) override {
-    int r = ::ioctl(fd, request, arg);
-    return r < 0 ? -errno : r;
-  }
-};
-
-std::string hex2(unsigned v) {
-  char buf[8];
-  std::snprintf(buf, sizeof buf, "0x%02X", v & 0xFFu);
-  return buf;
-}
 
 Error open_error(const std::string& path, int err) {
   std::string what = "cannot open SPI device " + path + ": " + std::strerror(err);
@@ -61,10 +38,8 @@ Error open_error(const std::string& path, int err) {
 
 }  // namespace
 
-std::unique_ptr<SpidevIo> make_system_spidev_io() { return std::make_unique<SystemSpidevIo>(); }
-
 Result<std::unique_ptr<SpidevBus>> SpidevBus::open(const std::string& device, const SpidevOptions& options,
-                                                   std::unique_ptr<SpidevIo> io) {
+                                                   std::unique_ptr<DeviceIo> io) {
   if (device.empty()) {
     return make_error(Errc::kInvalidArgument,
                       "no SPI device given; set imu.device in the rig configuration (e.g. "
@@ -77,13 +52,13 @@ Result<std::unique_ptr<SpidevBus>> SpidevBus::open(const std::string& device, co
                           " (need 1 kHz <= config <= max; the MPU-6000 allows 1 MHz and 20 MHz)");
   }
   std::string path = device.front() == '/' ? device : "/dev/" + device;
-  if (!io) io = make_system_spidev_io();
+  if (!io) io = system_device_io();
   std::unique_ptr<SpidevBus> bus(new SpidevBus(std::move(path), options, std::move(io)));
   IMUCAL_TRY(bus->open_and_configure());
   return bus;
 }
 
-SpidevBus::SpidevBus(std::string path, const SpidevOptions& options, std::unique_ptr<SpidevIo> io)
+SpidevBus::SpidevBus(std::string path, const SpidevOptions& options, std::unique_ptr<DeviceIo> io)
     : path_(std::move(path)), options_(options), io_(std::move(io)), speed_hz_(options.config_speed_hz) {
   auto slash = path_.find_last_of('/');
   name_ = slash == std::string::npos ? path_ : path_.substr(slash + 1);
@@ -185,14 +160,15 @@ Status SpidevBus::transfer(std::uint8_t reg, std::size_t len, std::uint32_t spee
   int r = io_->ioctl(fd_, SPI_IOC_MESSAGE(1), &xfer);
   if (r < 0) {
     ++counters_.transfer_errors;
-    std::string msg = name_ + ": SPI transfer of " + std::to_string(len) + " bytes at register " + hex2(reg) +
-                      " (" + std::to_string(speed_hz) + " Hz) failed: " + std::strerror(-r);
+    std::string msg = name_ + ": SPI transfer of " + std::to_string(len) + " bytes at register " +
+                      format_hex(reg, 2) + " (" + std::to_string(speed_hz) +
+                      " Hz) failed: " + std::strerror(-r);
     if (-r == EMSGSIZE) msg += " (larger than the spidev buffer, module parameter spidev.bufsiz)";
     return make_error(Errc::kIo, msg);
   }
   if (static_cast<std::size_t>(r) != len) {
     ++counters_.short_transfers;
-    return make_error(Errc::kDevice, name_ + ": short SPI transfer at register " + hex2(reg) + ": " +
+    return make_error(Errc::kDevice, name_ + ": short SPI transfer at register " + format_hex(reg, 2) + ": " +
                                          std::to_string(r) + " of " + std::to_string(len) + " bytes");
   }
   return {};

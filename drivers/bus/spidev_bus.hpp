@@ -17,25 +17,10 @@
 #include <vector>
 
 #include "core/result.hpp"
+#include "drivers/bus/device_io.hpp"
 #include "drivers/bus/register_bus.hpp"
 
 namespace imucal::drivers {
-
-/// The system calls SpidevBus makes. The default forwards to the kernel; tests substitute a
-/// fake to check the transfers the bus builds without an SPI controller.
-class SpidevIo {
- public:
-  virtual ~SpidevIo() = default;
-  /// open(2) read-write: a file descriptor, or -errno.
-  virtual int open(const std::string& path) = 0;
-  virtual void close(int fd) = 0;
-  /// ioctl(2) (SPI_IOC_WR_MODE, SPI_IOC_RD_MODE, SPI_IOC_WR_BITS_PER_WORD,
-  /// SPI_IOC_WR_MAX_SPEED_HZ, SPI_IOC_MESSAGE(n)): the ioctl's result, or -errno.
-  virtual int ioctl(int fd, unsigned long request, void* arg) = 0;
-};
-
-/// The kernel's spidev interface.
-std::unique_ptr<SpidevIo> make_system_spidev_io();
 
 struct SpidevOptions {
   /// Clock for register writes and for reads until set_speed_hz() is called.
@@ -52,9 +37,12 @@ class SpidevBus final : public RegisterBus {
 
   /// Opens and configures `device` ("/dev/spidev0.0" or "spidev0.0"). A missing device,
   /// missing permissions or a node that is not spidev give an error that says what to check.
+  /// `io` makes the system calls (system_device_io() when null): open(2), close(2) and the
+  /// ioctls SPI_IOC_WR_MODE, SPI_IOC_RD_MODE, SPI_IOC_WR_BITS_PER_WORD, SPI_IOC_WR_MAX_SPEED_HZ
+  /// and SPI_IOC_MESSAGE(1).
   [[nodiscard]] static Result<std::unique_ptr<SpidevBus>> open(const std::string& device,
                                                                const SpidevOptions& options = {},
-                                                               std::unique_ptr<SpidevIo> io = nullptr);
+                                                               std::unique_ptr<DeviceIo> io = nullptr);
   ~SpidevBus() override;
   SpidevBus(const SpidevBus&) = delete;
   SpidevBus& operator=(const SpidevBus&) = delete;
@@ -75,7 +63,7 @@ class SpidevBus final : public RegisterBus {
   const BusCounters& counters() const override { return counters_; }
 
  private:
-  SpidevBus(std::string path, const SpidevOptions& options, std::unique_ptr<SpidevIo> io);
+  SpidevBus(std::string path, const SpidevOptions& options, std::unique_ptr<DeviceIo> io);
   [[nodiscard]] Status open_and_configure();
   [[nodiscard]] Status transfer(std::uint8_t reg, std::size_t len, std::uint32_t speed_hz);
   void close_fd();
@@ -83,7 +71,7 @@ class SpidevBus final : public RegisterBus {
   std::string path_;
   std::string name_;
   SpidevOptions options_;
-  std::unique_ptr<SpidevIo> io_;
+  std::unique_ptr<DeviceIo> io_;
   int fd_ = -1;
   std::uint32_t speed_hz_ = 0;
   BusCounters counters_;

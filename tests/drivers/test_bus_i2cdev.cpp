@@ -11,6 +11,7 @@
 #include <memory>
 #include <vector>
 
+#include "drivers/bus/device_io.hpp"
 #include "drivers/bus/i2cdev_bus.hpp"
 
 namespace imucal::drivers {
@@ -40,7 +41,7 @@ struct FakeI2c {
   std::vector<I2cRecord> log;
 };
 
-class FakeI2cDevIo final : public I2cDevIo {
+class FakeI2cDevIo final : public DeviceIo {
  public:
   explicit FakeI2cDevIo(std::shared_ptr<FakeI2c> dev) : dev_(std::move(dev)) {}
   int open(const std::string& path) override { return path == "/dev/i2c-1" ? 5 : -ENOENT; }

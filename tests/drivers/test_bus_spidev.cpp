@@ -11,6 +11,7 @@
 #include <memory>
 #include <vector>
 
+#include "drivers/bus/device_io.hpp"
 #include "drivers/bus/spidev_bus.hpp"
 
 namespace imucal::drivers {
@@ -39,7 +40,7 @@ struct FakeSpidev {
   std::vector<SpiTransferRecord> transfers;
 };
 
-class FakeSpidevIo final : public SpidevIo {
+class FakeSpidevIo final : public DeviceIo {
  public:
   explicit FakeSpidevIo(std::shared_ptr<FakeSpidev> dev) : dev_(std::move(dev)) {}
   int open(const std::string& path) override {

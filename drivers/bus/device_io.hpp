@@ -1,0 +1,29 @@
+#pragma once
+// What the Linux bus drivers (SpidevBus, I2cDevBus) share: the system calls they make on their
+// device node, behind an interface so that tests can substitute a fake kernel, and the hex
+// formatting of register numbers and addresses in their messages.
+
+#include <memory>
+#include <string>
+
+namespace imucal::drivers {
+
+/// The system calls a bus makes on its device node. The default forwards to the kernel; tests
+/// substitute a fake to check the transfers a bus builds without a controller or adapter.
+class DeviceIo {
+ public:
+  virtual ~DeviceIo() = default;
+  /// open(2) read-write: a file descriptor, or -errno.
+  virtual int open(const std::string& path) = 0;
+  virtual void close(int fd) = 0;
+  /// ioctl(2): the ioctl's result, or -errno.
+  virtual int ioctl(int fd, unsigned long request, void* arg) = 0;
+};
+
+/// The kernel's open(2), close(2) and ioctl(2).
+std::unique_ptr<DeviceIo> system_device_io();
+
+/// `value` as "0x" and `digits` upper-case hex digits (at least): format_hex(0x68, 2) is "0x68".
+std::string format_hex(unsigned long value, int digits);
+
+}  // namespace imucal::drivers
