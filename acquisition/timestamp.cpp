@@ -95,6 +95,9 @@ Status SampleTimestamper::process(const FifoBatchTiming& batch, std::span<TimeNs
   pending_reset_ = false;
   pending_loss_ = false;
   const auto ki = static_cast<std::int64_t>(k);
+  // Samples newer than the batch that were in the FIFO at the read: the edge and the read time
+  // refer to the newest of them, not to the batch's last sample.
+  const auto left = static_cast<std::int64_t>(batch.samples_left);
   // The measurement: the edge, else the read time, else none.
   const bool has_measurement = batch.has_edge || batch.read_t_ns != 0;
   TimeNs z_abs = batch.edge_t_ns - options_.edge_latency_ns;
@@ -118,28 +121,34 @@ Status SampleTimestamper::process(const FifoBatchTiming& batch, std::span<TimeNs
       base_ns_ = z_abs;
     }
     newest_ = ki - 1;
-    anchor(0.0, newest_, has_measurement ? r_var : 1e12);
-    if (!has_measurement) have_accepted_ = false;
+    if (has_measurement) {
+      anchor(0.0, newest_ + left, r_var);
+    } else {
+      anchor(0.0, newest_, 1e12);  // base_ns_ is the newest delivered sample's time
+      have_accepted_ = false;
+    }
     initialized_ = has_measurement;
     first_index = 0;
     if (has_measurement) ++stats_.edges_accepted;
-    if (use_sequence) assoc_history_.push_back(newest_ - static_cast<std::int64_t>(batch.edge_sequence));
+    if (use_sequence)
+      assoc_history_.push_back(newest_ + left - static_cast<std::int64_t>(batch.edge_sequence));
   } else {
     const double z = static_cast<double>(z_abs - base_ns_);
     first_index = newest_ + 1;
     std::int64_t new_newest = newest_ + ki;
-    std::int64_t edge_index = new_newest;
+    std::int64_t edge_index = new_newest + left;  // the newest sample in the FIFO at the read
     bool anchored = false;
 
     if (lossy) {
       // Samples were lost. Count them from the edge sequence when it is available and
-      // consistent with time, else from time; the newest sample is taken to be the edge's.
+      // consistent with time, else from time; the newest sample in the FIFO is taken to be the
+      // edge's.
       gap = true;
       std::int64_t lost = -1;
       if (use_sequence && !assoc_history_.empty()) {
         const std::int64_t cmin = *std::min_element(assoc_history_.begin(), assoc_history_.end());
         const std::int64_t seq_edge_index = static_cast<std::int64_t>(batch.edge_sequence) + cmin;
-        const std::int64_t seq_lost = seq_edge_index - new_newest;
+        const std::int64_t seq_lost = seq_edge_index - edge_index;
         const double dt = z - time_of(seq_edge_index);
         if (seq_lost >= 0 &&
             std::abs(dt) < 0.5 * period_ns_ + options_.gate_sigma * options_.edge_jitter_ns) {
@@ -150,8 +159,8 @@ Status SampleTimestamper::process(const FifoBatchTiming& batch, std::span<TimeNs
       bool ambiguous = false;
       if (!from_sequence) {
         lost = 0;
-        if (has_measurement && new_newest > n_ref_) {
-          predict_to(new_newest);
+        if (has_measurement && edge_index > n_ref_) {
+          predict_to(edge_index);
           lost = std::max<std::int64_t>(0, std::llround((z - phi_ns_) / period_ns_));
           // The count is trustworthy only while the prediction is much better than a period.
           ambiguous = std::sqrt(c_pp_ + r_var) > 0.25 * period_ns_;
@@ -160,7 +169,7 @@ Status SampleTimestamper::process(const FifoBatchTiming& batch, std::span<TimeNs
       stats_.samples_lost += static_cast<std::uint64_t>(lost);
       first_index += lost;
       new_newest += lost;
-      edge_index = new_newest;
+      edge_index = new_newest + left;
       assoc_history_.clear();
       if (ambiguous) {
         predict_to(edge_index);
@@ -173,12 +182,12 @@ Status SampleTimestamper::process(const FifoBatchTiming& batch, std::span<TimeNs
         // The line's counter went backwards or stalled: it cannot be trusted for association.
         assoc_history_.clear();
       }
-      assoc_history_.push_back(new_newest - static_cast<std::int64_t>(batch.edge_sequence));
+      assoc_history_.push_back(new_newest + left - static_cast<std::int64_t>(batch.edge_sequence));
       while (static_cast<int>(assoc_history_.size()) > options_.association_window)
         assoc_history_.pop_front();
       const std::int64_t cmin = *std::min_element(assoc_history_.begin(), assoc_history_.end());
-      const std::int64_t lead = std::clamp<std::int64_t>(assoc_history_.back() - cmin, 0, ki - 1);
-      edge_index = new_newest - lead;
+      const std::int64_t lead = std::clamp<std::int64_t>(assoc_history_.back() - cmin, 0, ki + left - 1);
+      edge_index = new_newest + left - lead;
     }
 
     if (!anchored && !has_measurement) {

@@ -14,14 +14,17 @@
 // t(n) from the updated state, so times are smooth (corrections are a small fraction of the
 // jitter) and are then forced strictly increasing.
 //
-// Which sample an edge belongs to: the newest sample in the batch, unless the line's edge
-// sequence says that more samples arrived between the edge and the FIFO read (then
+// Which sample an edge belongs to: the newest sample in the FIFO when it was read, unless the
+// line's edge sequence says that more samples arrived between the edge and the FIFO read (then
 // newest_index - edge_index = cumulative samples minus cumulative edges, normalised by its
-// running minimum over recent batches, see docs/acquisition.md).
+// running minimum over recent batches, see docs/acquisition.md). The newest sample in the FIFO
+// is the batch's last one plus FifoBatchTiming::samples_left: a reader that keeps frames back
+// in the FIFO (the MPU-6000 driver keeps the newest) delivers them with the next batch.
 //
 // Without an edge (no data-ready line, or a wait that timed out) the read time stands in for
-// it: the newest sample was taken on average half a period before the read, with a uniform
-// spread of one period; without either the times are extrapolated (kImuFlagTimeEstimated).
+// it: the newest sample in the FIFO was taken on average half a period before the read, with a
+// uniform spread of one period; without either the times are extrapolated
+// (kImuFlagTimeEstimated).
 //
 // Gaps. A batch flagged FIFO reset / overflow / device reset, or a run of consecutive rejected
 // edges (samples lost silently), re-anchors the phase on the new edge; the first sample after
@@ -37,8 +40,9 @@
 
 namespace imucal::acq {
 
-/// Timing of one FIFO read: the data-ready edge that triggered it and how many samples the
-/// read returned. The MPU-6000 driver's FIFO batch converts to this one-to-one.
+/// Timing of one FIFO read: the data-ready edge that triggered it, how many samples the read
+/// returned and how many newer ones it left in the FIFO. The MPU-6000 driver's FIFO batch
+/// converts to this one-to-one.
 struct FifoBatchTiming {
   bool has_edge = true;             // false: read without a data-ready edge (polling, timeout)
   TimeNs edge_t_ns = 0;             // kernel timestamp of the data-ready edge (CLOCK_MONOTONIC)
@@ -49,6 +53,10 @@ struct FifoBatchTiming {
   bool fifo_reset = false;          // the FIFO was reset before this batch (samples lost)
   bool fifo_overflow = false;       // the FIFO overflowed before this batch (samples lost)
   bool device_reset = false;        // the device was reset and reconfigured before this batch
+  /// Samples newer than the batch's last that were in the FIFO when its count was read and were
+  /// not read (kept back for the next read, or dropped with the FIFO). The edge and the read
+  /// time refer to the newest of them; the batch's last sample is this many periods older.
+  std::uint32_t samples_left = 0;
 };
 
 struct TimestamperOptions {

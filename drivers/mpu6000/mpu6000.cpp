@@ -62,8 +62,10 @@ bool Settings::validate(std::string* error) const {
   };
   if (dlpf_cfg > 6) return fail("dlpf_cfg " + std::to_string(dlpf_cfg) + " is reserved; use 0..6");
   if (read_interval_ns <= 0) return fail("read_interval_ns must be positive");
+  // At a read the FIFO holds what arrived in one interval, one frame more for the sampling
+  // phase, and the frame the previous read left behind.
   const double bytes_per_interval = sample_rate_hz() * ns_to_s(read_interval_ns) * FIFO::kFrameBytes;
-  if (bytes_per_interval + FIFO::kFrameBytes > fifo_watermark_bytes()) {
+  if (bytes_per_interval + 2 * FIFO::kFrameBytes > fifo_watermark_bytes()) {
     return fail("read interval " + std::to_string(read_interval_ns / 1000) + " us is too long for " +
                 std::to_string(sample_rate_hz()) +
                 " Hz: " + std::to_string(static_cast<int>(bytes_per_interval)) +
@@ -219,6 +221,15 @@ Status Mpu6000::reset_fifo() {
   IMUCAL_TRY(write_reg(Register::USER_CTRL, static_cast<std::uint8_t>(base | FIFO_RESET)));
   IMUCAL_TRY(write_reg(Register::USER_CTRL, user_ctrl.set_bits));
   return {};
+}
+
+std::optional<std::uint16_t> Mpu6000::read_fifo_count() {
+  std::array<std::uint8_t, 2> bytes{};
+  if (!bus_.read(u8(Register::FIFO_COUNTH), bytes).ok()) {
+    ++counters_.bad_transfers;
+    return std::nullopt;
+  }
+  return static_cast<std::uint16_t>((bytes[0] << 8) | bytes[1]);
 }
 
 void Mpu6000::on_edge(const DataReadyEdge& edge) {
@@ -425,27 +436,13 @@ Result<PollResult> Mpu6000::poll_stream(TimeNs now_ns, std::optional<DataReadyEd
   }
 
   bus_.set_speed_hz(settings_.fifo_speed_hz);
-  std::array<std::uint8_t, 2> count_bytes{};
-  if (!bus_.read(u8(Register::FIFO_COUNTH), count_bytes).ok()) {
-    ++counters_.bad_transfers;
-    return escalate();  // nothing read, nothing lost: the data waits in the FIFO
-  }
-  const auto count = static_cast<std::uint16_t>((count_bytes[0] << 8) | count_bytes[1]);
+  const std::optional<std::uint16_t> counted = read_fifo_count();
+  if (!counted) return escalate();  // nothing read, nothing lost: the data waits in the FIFO
+  const std::uint16_t count = *counted;
   batch.fifo_bytes = count;
+  // More than the frame a read keeps back: the chip is writing (even if what follows is a reset).
+  if (count > FIFO::kFrameBytes) last_data_t_ns_ = now_ns;
 
-  if (count == 0) {
-    consecutive_failures_ = 0;
-    const TimeNs timeout_ns = std::max<TimeNs>(50'000'000, 10 * settings_.sample_period_ns());
-    if (now_ns - last_data_t_ns_ > timeout_ns) {
-      ++counters_.no_data_timeouts;
-      last_problem_ = "no FIFO data while streaming";
-      request_reset(now_ns);
-      batch.flags |= kImuFlagGapBefore | kImuFlagDeviceReset;
-      result.next_poll_ns = now_ns;
-    }
-    return result;
-  }
-  last_data_t_ns_ = now_ns;
   if (count > kFifoSizeBytes) {
     ++counters_.bad_fifo_counts;  // impossible value: the transfer itself was bad
     discard_and_reset_fifo(batch, 0);
@@ -461,13 +458,29 @@ Result<PollResult> Mpu6000::poll_stream(TimeNs now_ns, std::optional<DataReadyEd
     discard_and_reset_fifo(batch, count / FIFO::kFrameBytes);
     return result;
   }
+  batch.frames_left = count / FIFO::kFrameBytes;
+  if (count <= FIFO::kFrameBytes) {
+    // Empty, or a single frame, which is kept back: nothing to read yet.
+    consecutive_failures_ = 0;
+    const TimeNs timeout_ns = std::max<TimeNs>(50'000'000, 10 * settings_.sample_period_ns());
+    if (now_ns - last_data_t_ns_ > timeout_ns) {
+      ++counters_.no_data_timeouts;
+      last_problem_ = "no FIFO data while streaming";
+      request_reset(now_ns);
+      batch.flags |= kImuFlagGapBefore | kImuFlagDeviceReset;
+      result.next_poll_ns = now_ns;
+    }
+    return result;
+  }
   if (count > settings_.fifo_watermark_bytes()) {
     // Reading this late risks reading data the chip is overwriting: drop it cleanly instead.
     discard_and_reset_fifo(batch, count / FIFO::kFrameBytes);
     return result;
   }
 
-  buffer_.resize(count);
+  // Read every frame but the newest: it stays in the FIFO and is read first next time.
+  const std::size_t frames = count / FIFO::kFrameBytes - 1;
+  buffer_.resize(frames * FIFO::kFrameBytes);
   if (!bus_.read(u8(Register::FIFO_R_W), buffer_).ok()) {
     ++counters_.bad_transfers;
     // A failed burst may have consumed part of the FIFO: its alignment is unknown.
@@ -476,21 +489,35 @@ Result<PollResult> Mpu6000::poll_stream(TimeNs now_ns, std::optional<DataReadyEd
   }
   consecutive_failures_ = 0;
 
-  const std::size_t frames = count / FIFO::kFrameBytes;
-  // The FIFO must still hold whole frames after the burst. If it does not, a byte was lost or
-  // gained on the bus during (or before) this read, and the frames just read are misaligned
-  // even where their temperature field happens to look plausible.
-  std::array<std::uint8_t, 2> after{};
-  if (bus_.read(u8(Register::FIFO_COUNTH), after).ok()) {
-    const auto count_after = static_cast<std::uint16_t>((after[0] << 8) | after[1]);
-    if (count_after <= kFifoSizeBytes && count_after % FIFO::kFrameBytes != 0) {
-      ++counters_.bad_fifo_counts;
-      last_problem_ = "FIFO misaligned after a read";
-      discard_and_reset_fifo(batch, static_cast<std::uint32_t>(frames));
-      return result;
-    }
-  } else {
-    ++counters_.bad_transfers;  // the data already read is not affected
+  // The FIFO now holds the frame left behind plus the frames written since FIFO_COUNT was read:
+  // (1 + m) * 14 bytes, m >= 0, whatever m is. A byte lost on the bus during this burst (or
+  // gained) leaves the count one byte off a whole number of frames, wherever in the burst it
+  // happened, and the frames just read misaligned from that byte on even where their
+  // temperature field happens to look plausible. Without a verified count nothing is passed on.
+  std::optional<std::uint16_t> after;
+  for (int attempt = 0; attempt < 2 && !(after && *after <= kFifoSizeBytes); ++attempt) {
+    after = read_fifo_count();
+    if (after && *after > kFifoSizeBytes) ++counters_.bad_fifo_counts;
+  }
+  if (!after || *after > kFifoSizeBytes) {
+    last_problem_ = "FIFO count after a read could not be read";
+    discard_and_reset_fifo(batch, static_cast<std::uint32_t>(count / FIFO::kFrameBytes));
+    return escalate();
+  }
+  const std::uint16_t count_after = *after;
+  // Frames in the FIFO now, counting one that lost a byte.
+  const std::uint32_t frames_after = (count_after + FIFO::kFrameBytes - 1) / FIFO::kFrameBytes;
+  if (count_after == kFifoSizeBytes) {
+    ++counters_.fifo_overflows;  // filled up during the burst: what was read may have been overwritten
+    last_problem_ = "FIFO overflowed during a read";
+    discard_and_reset_fifo(batch, static_cast<std::uint32_t>(frames + count_after / FIFO::kFrameBytes));
+    return result;
+  }
+  if (count_after < FIFO::kFrameBytes || count_after % FIFO::kFrameBytes != 0) {
+    ++counters_.bad_fifo_counts;
+    last_problem_ = "FIFO misaligned after a read";
+    discard_and_reset_fifo(batch, static_cast<std::uint32_t>(frames) + frames_after);
+    return result;
   }
 
   const auto max_step = static_cast<int>(std::lround(settings_.max_temperature_step_c * kTempLsbPerDegC));
@@ -512,7 +539,7 @@ Result<PollResult> Mpu6000::poll_stream(TimeNs now_ns, std::optional<DataReadyEd
     if (all_ones || all_zero || !temp_in_range || temp_jump) {
       ++counters_.implausible_data;
       last_problem_ = "implausible FIFO data (misaligned or corrupted frame)";
-      discard_and_reset_fifo(batch, static_cast<std::uint32_t>(frames - i));
+      discard_and_reset_fifo(batch, static_cast<std::uint32_t>(frames - i) + frames_after);
       break;
     }
     last_temp_ = s.temp;
@@ -528,6 +555,7 @@ Result<PollResult> Mpu6000::poll_stream(TimeNs now_ns, std::optional<DataReadyEd
     }
     batch.samples.push_back(s);
   }
+  batch.frames_left -= static_cast<std::uint32_t>(batch.samples.size());
   counters_.samples += batch.samples.size();
   return result;
 }

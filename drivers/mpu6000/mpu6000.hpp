@@ -76,12 +76,17 @@ struct RawSample {
   std::uint32_t flags = kImuFlagNone;  // ImuFlag bits: gap / reset before this sample, saturation
 };
 
-/// The result of one FIFO read.
+/// The result of one FIFO read. The newest frame counted in FIFO_COUNT is not read: it stays in
+/// the FIFO so that the count after the burst shows any byte lost or gained on the bus, and it
+/// comes out first in the next read. `frames_left` says how many frames newer than the batch's
+/// last sample the FIFO held when its count was read (1 normally; more when a damaged frame made
+/// the driver stop early and reset the FIFO): the data-ready edge belongs to the newest of them.
 struct FifoBatch {
   TimeNs read_t_ns = 0;                // host time passed to poll(), just before FIFO_COUNT was read
   std::optional<DataReadyEdge> edge;   // the edge passed to poll(), if any
   std::uint16_t fifo_bytes = 0;        // FIFO_COUNT read in this poll (before the data was read)
-  std::vector<RawSample> samples;      // oldest first; the newest was sampled before read_t_ns
+  std::vector<RawSample> samples;      // oldest first; sampled frames_left periods before the newest
+  std::uint32_t frames_left = 0;       // frames counted in fifo_bytes that are newer than samples
   std::uint32_t flags = kImuFlagNone;  // union of what happened before samples[0] (gap, reset)
   std::uint32_t frames_discarded = 0;  // whole frames dropped in this poll (FIFO reset, bad data)
 };
@@ -94,7 +99,7 @@ struct Counters {
   std::uint64_t bad_transfers = 0;      // a bus read or write failed
   std::uint64_t fifo_overflows = 0;     // FIFO full (count 1024 or FIFO_OFLOW_INT)
   std::uint64_t fifo_resets = 0;        // FIFO resets while streaming (any cause)
-  std::uint64_t bad_fifo_counts = 0;    // FIFO_COUNT not a multiple of 14 or > 1024
+  std::uint64_t bad_fifo_counts = 0;    // FIFO_COUNT > 1024 or not whole frames (before or after a burst)
   std::uint64_t implausible_data = 0;   // temperature jump / out of range, blank frame
   std::uint64_t config_mismatches = 0;  // a configuration row read back wrong
   std::uint64_t resets = 0;             // chip resets (first start included)
@@ -179,6 +184,8 @@ class Mpu6000 {
   void enter(State s, TimeNs at_ns);
   void request_reset(TimeNs now_ns);
   [[nodiscard]] Status reset_fifo();
+  /// Reads FIFO_COUNT (fast clock); nullopt after a failed transfer.
+  std::optional<std::uint16_t> read_fifo_count();
   Result<PollResult> poll_reset(TimeNs now_ns);
   Result<PollResult> poll_wait_for_reset(TimeNs now_ns);
   Result<PollResult> poll_configure(TimeNs now_ns);

@@ -316,16 +316,18 @@ Status Mpu6000Emulator::read(std::uint8_t first_reg, std::span<std::uint8_t> out
     return {};
   }
   std::optional<Corruption> corruption;
-  if (!corruption_.empty() && (corruption_.front() == Corruption::kStuckHigh || is_fifo)) {
-    corruption = corruption_.front();
+  std::size_t slip_at = 0;
+  if (!corruption_.empty() && (corruption_.front().kind == Corruption::kStuckHigh || is_fifo)) {
+    corruption = corruption_.front().kind;
+    slip_at = std::min(corruption_.front().slip_at_byte, out.empty() ? 0 : out.size() - 1);
     corruption_.pop_front();
     ++stats_.injected_corruptions;
   }
-  if (corruption == Corruption::kByteSlip && !fifo_.empty()) fifo_.pop_front();
   bool clear_int_status = false;
   for (std::size_t i = 0; i < out.size(); ++i) {
     const auto a = static_cast<std::uint8_t>(is_fifo ? first_reg : ((first_reg + i) & 0x7F));
     if (a == addr(Register::INT_STATUS)) clear_int_status = true;
+    if (corruption == Corruption::kByteSlip && i == slip_at && !fifo_.empty()) fifo_.pop_front();
     out[i] = read_byte(a);
   }
   if (clear_int_status) regs_[addr(Register::INT_STATUS)] = 0;

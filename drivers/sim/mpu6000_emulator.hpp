@@ -134,7 +134,12 @@ class Mpu6000Emulator : public drivers::RegisterBus, public SimTimeSource {
   /// The next `n` transfers fail (Errc::kIo). A failed FIFO read has already clocked out half of
   /// the requested bytes, which are lost.
   void fail_next_transfers(int n) { fail_remaining_ += n; }
-  void corrupt_next_read(Corruption kind) { corruption_.push_back(kind); }
+  /// kByteSlip: the FIFO byte at offset `slip_at_byte` of the next FIFO burst (clamped to its
+  /// last byte) is clocked out of the FIFO but never reaches the host, which receives the next
+  /// byte in its place.
+  void corrupt_next_read(Corruption kind, std::size_t slip_at_byte = 0) {
+    corruption_.push_back({kind, slip_at_byte});
+  }
   /// The next transfer waits `stall_ns` for the bus first (another device holds it).
   void stall_next_transfer(TimeNs stall_ns) { stall_ns_ += stall_ns; }
   /// The chip resets itself now (brown-out): registers to reset values, FIFO cleared, asleep.
@@ -189,7 +194,11 @@ class Mpu6000Emulator : public drivers::RegisterBus, public SimTimeSource {
   Eigen::Vector3d accel_si_ = Eigen::Vector3d::Zero();
   std::uint64_t sample_index_ = 0;
   int fail_remaining_ = 0;
-  std::deque<Corruption> corruption_;
+  struct PendingCorruption {
+    Corruption kind;
+    std::size_t slip_at_byte;
+  };
+  std::deque<PendingCorruption> corruption_;
   TimeNs stall_ns_ = 0;
   drivers::BusCounters bus_counters_;
   EmulatorStats stats_;

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <numbers>
@@ -275,6 +276,34 @@ TEST(Mpu6000Emulator, InjectedFaults) {
   const auto n = e.stats().samples;
   e.advance_to(e.now_ns() + 10 * kMs);
   EXPECT_EQ(e.stats().samples, n);
+}
+
+// A byte slip at offset k of a FIFO burst: the host gets bytes 0..k-1, then the FIFO's bytes
+// from k + 1 on; the FIFO is one byte short of whole frames afterwards.
+TEST(Mpu6000Emulator, ByteSlipLosesOneFifoByteAtTheGivenOffset) {
+  for (const std::size_t at :
+       {std::size_t{0}, std::size_t{7}, std::size_t{20}, std::size_t{27}, std::size_t{500}}) {
+    Mpu6000Emulator e(ramp_source, untimed());
+    wake(e, 1, 0);
+    e.advance_to(e.now_ns() + 3 * kMs + kMs / 2);  // 3 frames
+    ASSERT_EQ(e.fifo_bytes(), 42u);
+    std::vector<std::uint8_t> clean(42);
+    {
+      Mpu6000Emulator ref(ramp_source, untimed());
+      wake(ref, 1, 0);
+      ref.advance_to(ref.now_ns() + 3 * kMs + kMs / 2);
+      ASSERT_TRUE(ref.read(reg_addr(Register::FIFO_R_W), clean).ok());
+    }
+    e.corrupt_next_read(sim::Corruption::kByteSlip, at);
+    std::vector<std::uint8_t> got(28);
+    ASSERT_TRUE(e.read(reg_addr(Register::FIFO_R_W), got).ok());
+    const std::size_t k = std::min<std::size_t>(at, got.size() - 1);
+    for (std::size_t i = 0; i < got.size(); ++i) {
+      EXPECT_EQ(got[i], clean[i < k ? i : i + 1]) << "slip at " << at << ", byte " << i;
+    }
+    EXPECT_EQ(e.fifo_bytes(), 13u) << "slip at " << at;
+    EXPECT_EQ(e.stats().injected_corruptions, 1u);
+  }
 }
 
 TEST(SimDataReadyLine, DeliversEdgesInOrderWithSequence) {

@@ -409,9 +409,9 @@ TEST(Mpu6000Driver, StuckHighReadsAreRejected) {
 }
 
 TEST(Mpu6000Driver, MisalignedFifoIsDetectedAndReset) {
-  // A slip on a read that empties the FIFO is seen only by the temperature check, which cannot
-  // see it when the temperature's two bytes are nearly equal (docs/mpu6000.md, limits). Around
-  // 40 +- 0.2 deg C they never are (raw 0x0458..0x04E0), so every slip here must be caught.
+  // Every slip leaves the FIFO one byte short of the frame kept back in it, so the count after
+  // the burst catches it before the temperature check runs (at 40 +- 0.2 deg C, raw
+  // 0x0458..0x04E0, the temperature check would catch it too).
   auto source = [](TimeNs t_ns) {
     SensorReading r = moving_source(t_ns);
     r.temperature_c = 40.0 + 0.2 * std::sin(2.0 * std::numbers::pi * 0.1 * ns_to_s(t_ns));
@@ -428,10 +428,105 @@ TEST(Mpu6000Driver, MisalignedFifoIsDetectedAndReset) {
                }).ok());
   const Counters& c = h.driver.counters();
   EXPECT_EQ(h.emu.stats().injected_corruptions, 5u);
-  // Caught by the temperature check or by the FIFO count after the read.
-  EXPECT_GE(c.implausible_data + c.bad_fifo_counts, 5u) << h.driver.status_line();
-  EXPECT_GE(c.fifo_resets, 5u);
+  EXPECT_EQ(c.bad_fifo_counts, 5u) << h.driver.status_line();
+  EXPECT_EQ(c.implausible_data, 0u) << h.driver.status_line();
+  EXPECT_EQ(c.fifo_resets, 5u);
   expect_never_corrupt(h);
+}
+
+/// The moving source with the temperature at raw 0xF0F0 +- 1 (25.19 C): its high and low bytes
+/// are nearly equal, so a frame shifted by one byte carries a temperature (the old low byte, then
+/// the gyro X high byte) within the plausible step of the true one.
+SensorReading moving_source_equal_temp_bytes(TimeNs t_ns) {
+  SensorReading r = moving_source(t_ns);
+  r.temperature_c = 25.19 + 0.003 * std::sin(2.0 * std::numbers::pi * 0.7 * ns_to_s(t_ns));
+  return r;
+}
+
+// Byte slips where the temperature check cannot see them: every one must still be caught (by
+// the FIFO count after the burst, which the frame kept back in the FIFO makes sensitive to it),
+// flagged as a gap, and no shifted frame delivered.
+TEST(Mpu6000Driver, EveryByteSlipIsCaughtWhereTheTemperatureCannotSeeIt) {
+  constexpr int kSlips = 120;
+  struct Case {
+    const char* name;
+    Settings settings;
+    EmulatorOptions options;
+  };
+  for (const Case& c : {Case{"SPI 8 kHz", spi_8khz(), {}}, Case{"I2C 1 kHz", i2c_1khz(), i2c_options()}}) {
+    Harness h(c.settings, c.options, {}, moving_source_equal_temp_bytes);
+    const TimeNs spacing = std::max<TimeNs>(11'100'000, 5 * c.settings.read_interval_ns);
+    std::vector<Harness::Hook> hooks;
+    for (int i = 0; i < kSlips; ++i) {
+      // Slips at every phase of the sample clock and of the polls (the spacing is no multiple of
+      // either), and at every position in the burst: its first byte (the slip the temperature
+      // check could not see on a read that emptied the FIFO), inside the temperature field, in
+      // later frames, at its last byte.
+      const std::size_t at = i % 3 == 0 ? 0 : static_cast<std::size_t>(i * 37) % 130;
+      hooks.push_back(Harness::at(400 * kMs + i * spacing,
+                                  [&h, at] { h.emu.corrupt_next_read(Corruption::kByteSlip, at); }));
+    }
+    ASSERT_TRUE(h.run_for(400 * kMs + kSlips * spacing + 100 * kMs, [&](TimeNs now) {
+                   for (auto& f : hooks) f(now);
+                 }).ok());
+    // The formerly undetectable case: for every sample the chip produced, a one-byte shift
+    // gives a temperature within the allowed step.
+    const int max_step = static_cast<int>(std::lround(c.settings.max_temperature_step_c * kTempLsbPerDegC));
+    std::size_t plausible_when_shifted = 0;
+    for (const TruthSample& t : h.emu.truth()) {
+      const auto temp = static_cast<std::uint16_t>(t.temp);
+      const auto gyro_x = static_cast<std::uint16_t>(t.gyro[0]);
+      const std::int16_t shifted =
+          be16(static_cast<std::uint8_t>(temp & 0xFF), static_cast<std::uint8_t>(gyro_x >> 8));
+      plausible_when_shifted += std::abs(shifted - t.temp) <= max_step;
+    }
+    EXPECT_EQ(plausible_when_shifted, h.emu.truth().size()) << c.name;
+
+    const Counters& k = h.driver.counters();
+    EXPECT_EQ(h.emu.stats().injected_corruptions, static_cast<std::uint64_t>(kSlips)) << c.name;
+    EXPECT_EQ(k.bad_fifo_counts, static_cast<std::uint64_t>(kSlips))
+        << c.name << ": " << h.driver.status_line();
+    EXPECT_EQ(k.implausible_data, 0u) << c.name;
+    EXPECT_EQ(k.fifo_resets, static_cast<std::uint64_t>(kSlips)) << c.name;
+    EXPECT_EQ(k.resets, 1u) << c.name;
+    expect_never_corrupt(h);
+    const TruthCheck t = check_against_truth(h.out, h.emu.truth());
+    EXPECT_GT(t.lost, 0u) << c.name;
+    std::size_t gaps = 0;
+    for (std::size_t i = 1; i < h.out.size(); ++i) gaps += (h.out[i].flags & kImuFlagGapBefore) != 0;
+    EXPECT_EQ(gaps, static_cast<std::size_t>(kSlips)) << c.name << ": one flagged gap per slip";
+    std::printf(
+        "  %s: %d slips injected, %llu caught by the FIFO count, %llu by the temperature, %zu samples "
+        "delivered, %zu lost (flagged), %zu unmatched\n",
+        c.name, kSlips, static_cast<unsigned long long>(k.bad_fifo_counts),
+        static_cast<unsigned long long>(k.implausible_data), t.delivered, t.lost, t.unmatched);
+  }
+}
+
+// Long clean runs: every frame the chip wrote is delivered exactly once and in order; what is
+// not delivered yet is still in the FIFO.
+TEST(Mpu6000Driver, LongRunsDeliverEverySampleExactlyOnce) {
+  Settings spi_1khz = spi_8khz();
+  spi_1khz.dlpf_cfg = 1;
+  spi_1khz.read_interval_ns = 1 * kMs;
+  struct Case {
+    const char* name;
+    Settings settings;
+    EmulatorOptions options;
+    std::size_t min_samples;
+  };
+  for (const Case& c : {Case{"SPI 8 kHz", spi_8khz(), {}, 150'000}, Case{"SPI 1 kHz", spi_1khz, {}, 19'000},
+                        Case{"I2C 1 kHz", i2c_1khz(), i2c_options(), 19'000}}) {
+    SCOPED_TRACE(c.name);
+    Harness h(c.settings, c.options);
+    ASSERT_TRUE(h.run_for(20 * kS).ok());
+    expect_clean_stream(h, c.min_samples);
+    const TruthCheck t = check_against_truth(h.out, h.emu.truth());
+    EXPECT_EQ(t.last_index - t.first_index + 1, t.delivered) << "consecutive frames, none twice";
+    EXPECT_EQ(h.emu.fifo_bytes() % FIFO::kFrameBytes, 0u);
+    EXPECT_GE(h.emu.fifo_bytes(), FIFO::kFrameBytes) << "the newest frame stays in the FIFO";
+    EXPECT_EQ(h.driver.counters().samples, t.delivered);
+  }
 }
 
 TEST(Mpu6000Driver, FifoOverflowFromStalledReadsIsFlagged) {
