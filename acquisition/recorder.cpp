@@ -29,6 +29,7 @@ FifoBatchTiming batch_timing(const mpu::FifoBatch& batch) {
   }
   t.read_t_ns = batch.read_t_ns;
   t.sample_count = static_cast<std::uint32_t>(batch.samples.size());
+  t.samples_left = batch.frames_left;
   t.fifo_overflow = (batch.flags & kImuFlagGapBefore) != 0 || batch.frames_discarded > 0;
   t.device_reset = (batch.flags & kImuFlagDeviceReset) != 0;
   return t;
@@ -77,6 +78,15 @@ Status ImuAcquisition::step(std::vector<ImuSample>& out) {
       if (edge) driver_.on_edge(*edge);
       edge = **e;
     }
+    // With a backlog (the host was late) the FIFO is read now, so the newest edge is the one
+    // that belongs to its newest sample; the older ones are only counted.
+    while (edge) {
+      auto e = line_->wait(0);
+      if (!e.ok()) return e.error().context("data-ready line");
+      if (!e->has_value()) break;
+      driver_.on_edge(*edge);
+      edge = **e;
+    }
   } else {
     clock_.sleep_until(next_poll_ns_);
   }
@@ -113,9 +123,7 @@ Status ImuAcquisition::step(std::vector<ImuSample>& out) {
   return {};
 }
 
-namespace {
-
-std::string timing_json(const RecordSummary& s, const TimestamperOptions& o) {
+std::string timing_metadata_json(const RecordSummary& s, const TimestamperOptions& o) {
   nlohmann::json j;
   j["nominal_rate_hz"] = o.nominal_rate_hz;
   j["measured_rate_hz"] = s.rate_hz;
@@ -135,6 +143,8 @@ std::string timing_json(const RecordSummary& s, const TimestamperOptions& o) {
   return j.dump();
 }
 
+namespace {
+
 std::string stream_json(const ImuStreamStats& s) {
   nlohmann::json j;
   j["published"] = s.published;
@@ -148,7 +158,9 @@ std::string stream_json(const ImuStreamStats& s) {
   return j.dump();
 }
 
-std::string driver_json(const mpu::Mpu6000& d) {
+}  // namespace
+
+std::string driver_metadata_json(const mpu::Mpu6000& d) {
   const auto& c = d.counters();
   const auto& st = d.settings();
   nlohmann::json j;
@@ -173,7 +185,7 @@ std::string driver_json(const mpu::Mpu6000& d) {
   return j.dump();
 }
 
-std::string mounting_json(const MountingMap& m) {
+std::string mounting_metadata_json(const MountingMap& m) {
   nlohmann::json j;
   j["kind"] = mounting_kind_name(m.kind());
   j["description"] = m.describe();
@@ -183,8 +195,6 @@ std::string mounting_json(const MountingMap& m) {
   j["R_rig_imu"] = rows;
   return j.dump();
 }
-
-}  // namespace
 
 Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu::Mpu6000& driver,
                                          const RecordOptions& options) {
@@ -198,7 +208,7 @@ Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu:
   auto writer = std::move(writer_r).value();
 
   for (const auto& [key, value] : options.metadata) IMUCAL_TRY(writer->set_metadata(key, value));
-  IMUCAL_TRY(writer->set_metadata("imu.mounting", mounting_json(acquisition.mounting())));
+  IMUCAL_TRY(writer->set_metadata("imu.mounting", mounting_metadata_json(acquisition.mounting())));
   auto stream_id = writer->add_imu_stream(options.stream_info);
   if (!stream_id.ok()) return stream_id.error().context("declaring the IMU stream");
 
@@ -255,9 +265,10 @@ Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu:
   summary.period_error_ppm = acquisition.timestamper().period_error_ppm();
 
   // Counters go into the log even when recording stopped early.
-  (void)writer->set_metadata("imu.timing", timing_json(summary, acquisition.timestamper().options()));
+  (void)writer->set_metadata("imu.timing",
+                             timing_metadata_json(summary, acquisition.timestamper().options()));
   (void)writer->set_metadata("imu.stream", stream_json(summary.stream));
-  (void)writer->set_metadata("imu.driver", driver_json(driver));
+  (void)writer->set_metadata("imu.driver", driver_metadata_json(driver));
   if (!stop_status.ok()) return stop_status.error();
   if (!failure.ok()) {
     (void)writer->close();

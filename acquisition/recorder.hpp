@@ -125,4 +125,11 @@ struct RecordSummary {
                                                        const drivers::mpu6000::Mpu6000& driver,
                                                        const RecordOptions& options);
 
+/// Session-log metadata written by record_imu_session(), for other writers of IMU sessions:
+/// "imu.timing" (timestamper counters), "imu.driver" (settings and failure counters per
+/// cause), "imu.mounting".
+std::string timing_metadata_json(const RecordSummary& summary, const TimestamperOptions& options);
+std::string driver_metadata_json(const drivers::mpu6000::Mpu6000& driver);
+std::string mounting_metadata_json(const MountingMap& mounting);
+
 }  // namespace imucal::acq

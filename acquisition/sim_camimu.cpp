@@ -212,6 +212,7 @@ Status simulate_camimu_session(const CamImuSimOptions& options, const std::strin
   imu_opt.script = "checkerboard";
   imu_opt.seed = options.seed;
   imu_opt.imu_rate_hz = options.imu_rate_hz;
+  imu_opt.path = options.imu_path;
   imu_opt.imu = options.imu ? *options.imu : sim::ImuModelParams::draw(options.seed);
   imu_opt.params_from_file = options.imu_params_from_file;
   imu_opt.overwrite = true;

@@ -15,6 +15,7 @@
 #include <optional>
 #include <string>
 
+#include "acquisition/sim_session.hpp"
 #include "core/camera_model.hpp"
 #include "core/result.hpp"
 #include "core/target.hpp"
@@ -33,6 +34,7 @@ struct CamImuSimOptions {
   std::optional<sim::ImuModelParams> imu;
   bool imu_params_from_file = false;  // recorded in the truth
   double imu_rate_hz = 200.0;         // MPU-6000 output rate
+  SimImuPath imu_path;                // how the emulated chip is read (sim_session.hpp)
   double camera_rate_hz = 20.0;
   TimeNs exposure_ns = 4'000'000;  // frames are stamped at mid-exposure
 

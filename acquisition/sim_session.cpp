@@ -6,7 +6,10 @@
 #include <nlohmann/json.hpp>
 #include <numbers>
 
+#include "acquisition/recorder.hpp"
 #include "acquisition/session_log.hpp"
+#include "acquisition/sim_rig.hpp"
+#include "drivers/mpu6000/output_settings.hpp"
 #include "drivers/sim/motion.hpp"
 
 namespace imucal::acq {
@@ -36,23 +39,22 @@ Status SimImuSessionOptions::validate() const {
       return make_error(Errc::kInvalidArgument, "dropped spans need start >= 0 s and a positive duration");
     }
   }
-  return imu.validate();
+  IMUCAL_TRY(imu.validate());
+  if (!(std::abs(path.clock_ppm) <= 80'000.0)) {
+    return make_error(Errc::kInvalidArgument, "the chip clock error must be within +-80000 ppm");
+  }
+  auto settings = sim_driver_settings(*this);
+  if (!settings.ok()) return settings.error();
+  return {};
 }
 
-ImuStreamInfo sim_imu_stream_info(const sim::ImuModelParams& imu, double rate_hz) {
-  ImuStreamInfo info;
-  info.name = "imu0";
-  info.units = ImuUnits::kRaw;
-  info.rate_hz = rate_hz;
-  info.accel.scale = Eigen::Vector3d::Constant(imu.accel_mps2_per_count());
-  info.gyro.scale = Eigen::Vector3d::Constant(imu.gyro_radps_per_count());
-  info.temperature_scale = 1.0 / sim::kMpu6000TempLsbPerDegC;
-  info.temperature_offset = sim::kMpu6000TempOffsetDegC;
-  info.accel_full_scale_g = imu.accel_full_scale_g;
-  info.gyro_full_scale_dps = imu.gyro_full_scale_dps;
-  info.dlpf_hz = 0;
-  info.device = "sim";
-  return info;
+Result<drivers::mpu6000::Settings> sim_driver_settings(const SimImuSessionOptions& options) {
+  drivers::mpu6000::OutputRequest req;
+  req.bus = options.path.bus;
+  req.rate_hz = options.imu_rate_hz;
+  req.accel_full_scale_g = options.imu.accel_full_scale_g;
+  req.gyro_full_scale_dps = options.imu.gyro_full_scale_dps;
+  return drivers::mpu6000::settings_for(req);
 }
 
 Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
@@ -69,6 +71,9 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
     }
   }
 
+  auto settings = sim_driver_settings(options);
+  if (!settings.ok()) return settings.error();
+
   SessionLogWriterOptions wopt;
   wopt.overwrite = options.overwrite;
   wopt.commit_interval_ns = 5 * kNsPerSecond;  // simulated: commit every 5 s of sample time
@@ -76,13 +81,17 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
   if (!writer_r.ok()) return writer_r.error();
   auto& writer = *writer_r;
 
-  const ImuStreamInfo info = sim_imu_stream_info(options.imu, options.imu_rate_hz);
-  nlohmann::json rig = {{"imu",
-                         {{"device", info.device},
-                          {"model", "MPU-6000 (simulated)"},
-                          {"rate_hz", options.imu_rate_hz},
-                          {"accel_full_scale_g", info.accel_full_scale_g},
-                          {"gyro_full_scale_dps", info.gyro_full_scale_dps}}}};
+  ImuStreamInfo info = drivers::mpu6000::make_stream_info(*settings, "sim");
+  info.name = "imu0";
+  const char* bus_name = options.path.bus == drivers::mpu6000::BusKind::kSpi ? "spi" : "i2c";
+  nlohmann::json rig_json = {{"imu",
+                              {{"device", info.device},
+                               {"model", "MPU-6000 (simulated: register emulator)"},
+                               {"bus", bus_name},
+                               {"rate_hz", options.imu_rate_hz},
+                               {"dlpf_hz", info.dlpf_hz},
+                               {"accel_full_scale_g", info.accel_full_scale_g},
+                               {"gyro_full_scale_dps", info.gyro_full_scale_dps}}}};
   nlohmann::json simj = {
       {"kind", options.kind},
       {"script", options.script},
@@ -95,12 +104,16 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
       {"accel_noise_density", options.imu.accel_noise_density},
       {"gyro_noise_density", options.imu.gyro_noise_density},
       {"accel_bias_random_walk", options.imu.accel_bias_random_walk},
-      {"gyro_bias_random_walk", options.imu.gyro_bias_random_walk}};
+      {"gyro_bias_random_walk", options.imu.gyro_bias_random_walk},
+      {"path", "emulator+driver+acquisition"},
+      {"clock_ppm", options.path.clock_ppm},
+      {"edge_latency_ns", options.path.data_ready.latency_ns},
+      {"edge_jitter_ns", options.path.data_ready.sigma_ns}};
   nlohmann::json drops = nlohmann::json::array();
   for (const SampleDrop& d : options.drops)
     drops.push_back({{"start_s", d.start_s}, {"duration_s", d.duration_s}});
-  simj["dropped_spans"] = drops;
-  IMUCAL_TRY(writer->set_metadata("rig_config", rig.dump()));
+  simj["host_stalls"] = drops;
+  IMUCAL_TRY(writer->set_metadata("rig_config", rig_json.dump()));
   IMUCAL_TRY(writer->set_metadata("sim", simj.dump()));
   IMUCAL_TRY(writer->set_metadata("device", "sim"));
   auto stream = writer->add_imu_stream(info);
@@ -139,61 +152,88 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
   sim::RecordingSummary& rec = truth.recording;
   rec.imu_rate_hz = options.imu_rate_hz;
 
-  const double period_s = 1.0 / options.imu_rate_hz;
-  const std::int64_t n =
-      static_cast<std::int64_t>(std::floor(truth.trajectory.duration_s * options.imu_rate_hz)) + 1;
-  sim::ImuSimulator imu(options.imu, options.seed, trajectory.start_ns());
-  std::vector<ImuSample> batch;
+  // The emulated chip powers up kSetupNs of host time before the trajectory starts, so that the
+  // driver has reset and configured it and the timestamper has locked on to its clock when the
+  // first sample of the trajectory arrives. Samples are written on the trajectory's clock:
+  // host time minus a constant offset (an exact integer shift of the reconstructed stamps).
+  constexpr TimeNs kSetupNs = kNsPerSecond;
+  SimRigOptions ro;
+  ro.settings = *settings;
+  ro.clock_ppm = options.path.clock_ppm;
+  ro.data_ready = options.path.data_ready;
+  ro.data_ready.seed ^= options.seed;
+  const TimeNs offset = ro.start_ns + kSetupNs - trajectory.start_ns();
+  auto sensor = std::make_shared<TrajectorySensor>(options.imu, options.seed, trajectory, offset,
+                                                   1.0 / settings->sample_rate_hz());
+  auto rig_r = SimImuRig::create(TrajectorySensor::source(sensor), ro);
+  if (!rig_r.ok()) return rig_r.error();
+  SimImuRig& rig = **rig_r;
+
+  const TimeNs t_start = trajectory.start_ns(), t_end = trajectory.end_ns();
+  const TimeNs duration_ns = std::max<TimeNs>(1, t_end - t_start);
+  std::vector<ImuSample> out, batch;
   constexpr std::size_t kBatch = 2000;
   batch.reserve(kBatch);
-  bool gap_pending = false;
-  double sum_a = 0.0, sum_w = 0.0;
-  Eigen::Vector3d sum_ba = Eigen::Vector3d::Zero(), sum_bg = Eigen::Vector3d::Zero();
-  for (std::int64_t k = 0; k < n; ++k) {
-    const TimeNs t_ns = trajectory.start_ns() + s_to_ns(static_cast<double>(k) * period_s);
-    const sim::RigState st = trajectory.at(t_ns);
-    sim::ImuSimDetail d;
-    ImuSample s = imu.sample(t_ns, st, period_s, &d);
-    const double a = st.a_world.norm(), w = st.omega_body.norm();
-    sum_a += a;
-    sum_w += w;
-    truth.trajectory.max_accel_mps2 = std::max(truth.trajectory.max_accel_mps2, a);
-    truth.trajectory.max_rate_radps = std::max(truth.trajectory.max_rate_radps, w);
-    sum_ba += d.accel_bias;
-    sum_bg += d.gyro_bias;
-    if (k == 0) rec.temperature_start_c = d.temperature_c;
-    rec.temperature_end_c = d.temperature_c;
-    rec.accel_bias_end = d.accel_bias;
-    rec.gyro_bias_end = d.gyro_bias;
-
-    const double t_rel_s = ns_to_s(t_ns - trajectory.start_ns());
-    const bool dropped = std::any_of(options.drops.begin(), options.drops.end(), [&](const SampleDrop& dr) {
-      return t_rel_s >= dr.start_s && t_rel_s < dr.start_s + dr.duration_s;
-    });
-    if (dropped) {
-      ++rec.dropped_samples;
-      gap_pending = true;
-      continue;
+  bool done = false;
+  double last_progress = 0.0;
+  while (!done) {
+    const TimeNs now = rig.clock().now_ns() - offset;
+    for (const SampleDrop& d : options.drops) {
+      const TimeNs s0 = t_start + s_to_ns(d.start_s), s1 = s0 + s_to_ns(d.duration_s);
+      if (now >= s0 && now < s1) rig.stall_until(s1 + offset);
     }
-    if (gap_pending) s.flags |= kImuFlagGapBefore;
-    gap_pending = false;
-    if (s.flags & kImuFlagAccelSaturated) ++rec.accel_saturated;
-    if (s.flags & kImuFlagGyroSaturated) ++rec.gyro_saturated;
-    ++rec.samples;
-    batch.push_back(s);
-    if (batch.size() == kBatch) {
+    if (rig.clock().now_ns() - offset > t_end + kSetupNs) break;  // the chip stopped delivering
+    if (auto st = rig.acquisition().step(out); !st.ok()) return st.error().context("simulated acquisition");
+    for (ImuSample& s : out) {
+      s.t_ns -= offset;
+      if (s.t_ns < t_start) continue;
+      if (s.t_ns > t_end) {
+        done = true;
+        break;
+      }
+      if (s.flags & kImuFlagAccelSaturated) ++rec.accel_saturated;
+      if (s.flags & kImuFlagGyroSaturated) ++rec.gyro_saturated;
+      ++rec.samples;
+      batch.push_back(s);
+    }
+    if (batch.size() >= kBatch) {
       IMUCAL_TRY(writer->append_imu(*stream, batch));
       batch.clear();
-      if (progress) progress(static_cast<double>(k + 1) / static_cast<double>(n));
+    }
+    const double f =
+        static_cast<double>(rig.clock().now_ns() - offset - t_start) / static_cast<double>(duration_ns);
+    if (progress && f - last_progress >= 0.01) {
+      last_progress = f;
+      progress(std::clamp(f, 0.0, 1.0));
     }
   }
   if (!batch.empty()) IMUCAL_TRY(writer->append_imu(*stream, batch));
-  const double count = static_cast<double>(n);
-  truth.trajectory.mean_accel_mps2 = sum_a / count;
-  truth.trajectory.mean_rate_radps = sum_w / count;
-  rec.accel_bias_mean = sum_ba / count;
-  rec.gyro_bias_mean = sum_bg / count;
 
+  const TrajectorySensorStats& ss = sensor->stats();
+  const double count = static_cast<double>(std::max<std::int64_t>(1, ss.samples));
+  truth.trajectory.mean_accel_mps2 = ss.sum_accel_mps2 / count;
+  truth.trajectory.mean_rate_radps = ss.sum_rate_radps / count;
+  truth.trajectory.max_accel_mps2 = ss.max_accel_mps2;
+  truth.trajectory.max_rate_radps = ss.max_rate_radps;
+  rec.accel_bias_mean = ss.sum_accel_bias / count;
+  rec.gyro_bias_mean = ss.sum_gyro_bias / count;
+  rec.accel_bias_end = ss.accel_bias_end;
+  rec.gyro_bias_end = ss.gyro_bias_end;
+  rec.temperature_start_c = ss.temperature_start_c;
+  rec.temperature_end_c = ss.temperature_end_c;
+  rec.dropped_samples = std::max<std::int64_t>(0, ss.samples - rec.samples);
+
+  RecordSummary summary;
+  summary.samples = static_cast<std::uint64_t>(rec.samples);
+  summary.timing = rig.acquisition().timestamper().stats();
+  summary.acquisition = rig.acquisition().stats();
+  summary.period_error_ppm = rig.acquisition().timestamper().period_error_ppm();
+  summary.duration_s = truth.trajectory.duration_s;
+  summary.rate_hz = summary.duration_s > 0 ? static_cast<double>(rec.samples) / summary.duration_s : 0.0;
+  IMUCAL_TRY(writer->set_metadata("imu.timing",
+                                  timing_metadata_json(summary, rig.acquisition().timestamper().options())));
+  IMUCAL_TRY(writer->set_metadata("imu.driver", driver_metadata_json(rig.driver())));
+  IMUCAL_TRY(writer->set_metadata("imu.mounting", mounting_metadata_json(rig.acquisition().mounting())));
   IMUCAL_TRY(writer->close());
   if (!truth_path.empty()) {
     auto st = sim::write_truth_yaml(truth_path, sim::truth_to_yaml(truth), options.overwrite);

@@ -2,8 +2,9 @@
 # Regenerates the fixture logs in fixtures/ and their ground truth with the built imucal:
 #   scripts/make-fixtures.sh [IMUCAL]      (default build/release/daemon/imucal)
 #   SKIP_CAMIMU=1 scripts/make-fixtures.sh  leaves camimu.imulog alone (it takes longest)
-# The samples, events and truth files are deterministic (fixed seeds); only the log's
-# created_utc metadata differs between runs. fixtures/README.md lists what each one is for.
+# Every sample goes through the MPU-6000 register emulator, the driver and the acquisition loop
+# (docs/simulator.md). The samples, events and truth files are deterministic (fixed seeds); only
+# the log's created_utc metadata differs between runs. fixtures/README.md lists what each one is for.
 set -euo pipefail
 
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -45,10 +46,12 @@ head -c "$cut" "$tmp/whole.imulog" > "$out/broken-truncated.imulog"
 cp "$tmp/whole.truth.yaml" "$out/broken-truncated.truth.yaml"
 echo "+ cut $size bytes to $cut -> broken-truncated.imulog"
 
-# Gap: 2.5 s of samples lost during the poses and 0.3 s in the still period; the first sample
-# after each gap carries the gap flag. Enough poses remain for a calibration with a warning.
+# Gap: the host stops reading the chip for 2.5 s during the poses and for 1 s in the still
+# period. The FIFO holds 0.73 s at 100 Hz; the driver finds it overflowed, resets it, and the
+# first sample after each gap carries the gap flag. Enough poses remain for a calibration with
+# a warning.
 sim static --seed 106 --poses 40 --still 50 --accel-range 2 --gyro-range 250 \
-  --drop 100:2.5 --drop 10:0.3 -o "$out/broken-gap.imulog"
+  --drop 100:2.5 --drop 10:1 -o "$out/broken-gap.imulog"
 
 # Saturated: fast moves beyond +-2 g and +-250 deg/s.
 sim static --seed 107 --poses 40 --still 50 --accel-range 2 --gyro-range 250 --excitation 4 \

@@ -14,16 +14,16 @@
 
 #include "acquisition/mounting.hpp"
 #include "acquisition/recorder.hpp"
+#include "acquisition/sim_rig.hpp"
 #include "core/rig_config.hpp"
 #include "daemon/cli/command.hpp"
 #include "drivers/bus/i2cdev_bus.hpp"
 #include "drivers/bus/spidev_bus.hpp"
 #include "drivers/gpio/gpiod_line.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
+#include "drivers/mpu6000/output_settings.hpp"
 #include "drivers/sim/imu_model.hpp"
 #include "drivers/sim/motion.hpp"
-#include "drivers/sim/mpu6000_emulator.hpp"
-#include "drivers/sim/sim_data_ready.hpp"
 
 namespace imucal::cli {
 namespace {
@@ -40,6 +40,7 @@ struct RecordArgs {
   std::uint64_t seed = 1;
   double sim_clock_ppm = -15'000.0;
   double sim_jitter_us = 30.0;
+  std::string sim_motion = "still";
 };
 
 template <class T>
@@ -57,74 +58,19 @@ T take_device(Result<T> r, const std::string& what) {
 }
 
 /// Driver settings from the rig configuration (already validated by the loader).
-mpu::Settings settings_from(const ImuConfig& imu) {
-  mpu::Settings s;
-  s.bus = imu.bus == ImuBus::kI2c ? mpu::BusKind::kI2c : mpu::BusKind::kSpi;
-  switch (imu.accel_range_g) {
-    case 2:
-      s.accel_range = mpu::AccelRange::k2g;
-      break;
-    case 4:
-      s.accel_range = mpu::AccelRange::k4g;
-      break;
-    case 8:
-      s.accel_range = mpu::AccelRange::k8g;
-      break;
-    default:
-      s.accel_range = mpu::AccelRange::k16g;
-      break;
-  }
-  switch (imu.gyro_range_dps) {
-    case 250:
-      s.gyro_range = mpu::GyroRange::k250dps;
-      break;
-    case 500:
-      s.gyro_range = mpu::GyroRange::k500dps;
-      break;
-    case 1000:
-      s.gyro_range = mpu::GyroRange::k1000dps;
-      break;
-    default:
-      s.gyro_range = mpu::GyroRange::k2000dps;
-      break;
-  }
-  s.dlpf_cfg = 1;
-  for (std::uint8_t i = 0; i < 7; ++i) {
-    if (kMpu6000DlpfHz[i] == imu.dlpf_hz) s.dlpf_cfg = i;
-  }
-  const double base_hz = s.gyro_rate_hz();
-  s.smplrt_div = static_cast<std::uint8_t>(std::clamp(std::lround(base_hz / imu.rate_hz) - 1, 0L, 255L));
-  // Read about every millisecond, or every sample at lower rates, with room for one late read.
-  const double period_ns = 1e9 / s.sample_rate_hz();
-  const double per_read = std::max(1.0, std::round(s.sample_rate_hz() / 1000.0));
-  s.read_interval_ns = static_cast<TimeNs>(2.0 * per_read * period_ns);
-  s.config_speed_hz = static_cast<std::uint32_t>(imu.spi_config_speed_hz);
-  s.fifo_speed_hz = static_cast<std::uint32_t>(imu.spi_data_speed_hz);
-  return s;
+mpu::Settings settings_from(const ImuConfig& imu, const std::string& config_path) {
+  mpu::OutputRequest req;
+  req.bus = imu.bus == ImuBus::kI2c ? mpu::BusKind::kI2c : mpu::BusKind::kSpi;
+  req.rate_hz = imu.rate_hz;
+  req.dlpf_hz = imu.dlpf_hz;
+  req.accel_full_scale_g = imu.accel_range_g;
+  req.gyro_full_scale_dps = imu.gyro_range_dps;
+  req.spi_config_speed_hz = static_cast<std::uint32_t>(imu.spi_config_speed_hz);
+  req.spi_data_speed_hz = static_cast<std::uint32_t>(imu.spi_data_speed_hz);
+  auto s = mpu::settings_for(req);
+  if (!s.ok()) throw CliExit{kExitUsage, "imu settings in " + config_path + ": " + s.error().message};
+  return *s;
 }
-
-/// Mean of max(0, N(mean, sigma)): the simulated line clips its latency at zero, which moves
-/// the mean edge latency above the nominal one.
-TimeNs clipped_latency_mean_ns(TimeNs mean_ns, TimeNs sigma_ns) {
-  if (sigma_ns <= 0) return std::max<TimeNs>(0, mean_ns);
-  const double m = static_cast<double>(mean_ns), s = static_cast<double>(sigma_ns), a = m / s;
-  const double cdf = 0.5 * std::erfc(-a / std::sqrt(2.0));
-  const double pdf = std::exp(-0.5 * a * a) / std::sqrt(2.0 * std::numbers::pi);
-  return static_cast<TimeNs>(std::llround(m * cdf + s * pdf));
-}
-
-/// The emulator's clock, seen by the acquisition loop.
-class SimClock final : public acq::AcquisitionClock {
- public:
-  explicit SimClock(sim::Mpu6000Emulator& emu) : emu_(emu) {}
-  TimeNs now_ns() override { return emu_.now_ns(); }
-  void sleep_until(TimeNs t_ns) override {
-    if (t_ns > emu_.now_ns()) emu_.advance_to(t_ns);
-  }
-
- private:
-  sim::Mpu6000Emulator& emu_;
-};
 
 void print_summary(const RecordArgs& a, const acq::RecordSummary& s, const std::string& extra_json) {
   if (a.json) {
@@ -143,7 +89,7 @@ void print_summary(const RecordArgs& a, const acq::RecordSummary& s, const std::
     return;
   }
   std::printf(
-      "recorded %llu samples over %.3f s (%.3f Hz measured; chip rate %+.0f ppm from nominal) to %s\n",
+      "recorded %llu samples over %.3f s (%.3f Hz measured; chip period %+.0f ppm from nominal) to %s\n",
       static_cast<unsigned long long>(s.samples), s.duration_s, s.rate_hz, s.period_error_ppm,
       a.out_path.c_str());
   std::printf("timing: %llu edges rejected, %llu gaps, %llu samples lost; log: %llu dropped\n",
@@ -161,9 +107,7 @@ void run_record(const RecordArgs& a) {
   const bool sim = a.sim || config.imu.bus == ImuBus::kSim;
   const acq::MountingMap mounting =
       take(acq::MountingMap::from_rotation(config.imu.R_rig_imu), "imu mounting in " + a.config_path);
-  const mpu::Settings settings = settings_from(config.imu);
-  std::string why;
-  if (!settings.validate(&why)) throw CliExit{kExitUsage, "imu settings in " + a.config_path + ": " + why};
+  const mpu::Settings settings = settings_from(config.imu, a.config_path);
 
   acq::RecordOptions ro;
   ro.log_path = a.out_path;
@@ -176,54 +120,40 @@ void run_record(const RecordArgs& a) {
 
   acq::AcquisitionOptions ao;
   if (sim) {
-    // The virtual rig at rest (gravity, sensor noise, warm-up), read through the emulated chip.
-    sim::StillOptions still;
-    still.duration_s = a.duration_s + 30.0;
-    auto trajectory = take(sim::make_still(still, a.seed), "simulated rig");
+    // The virtual rig at rest (gravity, sensor noise, warm-up) or moved through the static
+    // protocol, read through the emulated chip.
+    std::unique_ptr<sim::Trajectory> trajectory;
+    if (a.sim_motion == "static") {
+      sim::StaticProtocolOptions so;
+      trajectory = take(sim::make_static_protocol(so, a.seed), "simulated rig");
+    } else {
+      sim::StillOptions still;
+      still.duration_s = a.duration_s + 30.0;
+      trajectory = take(sim::make_still(still, a.seed), "simulated rig");
+    }
     sim::ImuModelParams params = sim::ImuModelParams::draw(a.seed);
-    auto simulator = std::make_shared<sim::ImuSimulator>(params, a.seed);
-    sim::EmulatorOptions eo;
-    eo.bus = settings.bus;
-    eo.timing = settings.bus == mpu::BusKind::kSpi ? sim::BusTiming::spi() : sim::BusTiming::i2c();
-    eo.clock_ppm = a.sim_clock_ppm;
-    eo.start_ns = 100 * kNsPerSecond;
-    eo.record_truth = false;
-    const TimeNs t0 = eo.start_ns;
-    TimeNs last_t = t0;
-    const sim::Trajectory* traj = trajectory.get();
-    sim::SensorSource source = [&, traj, simulator](TimeNs t_ns) {
-      const TimeNs t = std::max(t_ns, last_t);
-      const double dt = ns_to_s(t - last_t);
-      last_t = t;
-      const TimeNs rel = std::clamp<TimeNs>(t - t0, traj->start_ns(), traj->end_ns());
-      const auto d = simulator->sample_si(rel, traj->at(rel), dt);
-      sim::SensorReading r;
-      r.specific_force = d.accel_si;
-      r.angular_rate = d.gyro_si;
-      r.temperature_c = d.temperature_c;
-      return r;
-    };
-    sim::Mpu6000Emulator emu(source, eo);
-    sim::DataReadyTiming dt;
-    dt.sigma_ns = static_cast<TimeNs>(a.sim_jitter_us * 1e3);
-    dt.seed = a.seed;
-    sim::SimDataReadyLine line(emu, dt);
-    emu.connect(line);
-    mpu::Mpu6000 driver(emu, settings);
-    if (auto s = driver.probe(); !s.ok()) fail(s.error(), "simulated MPU-6000");
-    SimClock clock(emu);
-    ao.timestamps.edge_latency_ns = clipped_latency_mean_ns(dt.latency_ns, dt.sigma_ns);
-    ao.timestamps.edge_jitter_ns = std::max<TimeNs>(1, dt.sigma_ns);
-    acq::ImuAcquisition acquisition(driver, &line, clock, mounting, ao);
+    acq::SimRigOptions rig_options;
+    rig_options.settings = settings;
+    rig_options.clock_ppm = a.sim_clock_ppm;
+    rig_options.data_ready.sigma_ns = static_cast<TimeNs>(a.sim_jitter_us * 1e3);
+    rig_options.data_ready.seed = a.seed;
+    rig_options.mounting = mounting;
+    rig_options.acquisition = ao;
+    // The rig rests from power-on: trajectory time 0 is the emulator's start.
+    auto sensor = std::make_shared<acq::TrajectorySensor>(params, a.seed, *trajectory, rig_options.start_ns,
+                                                          1.0 / settings.sample_rate_hz());
+    auto rig =
+        take(acq::SimImuRig::create(acq::TrajectorySensor::source(sensor), rig_options), "simulated rig");
+    const sim::DataReadyTiming& dt = rig_options.data_ready;
     ro.stream_info = mpu::make_stream_info(settings, "sim");
     ro.stream_info.name = "imu0";
     nlohmann::json sim_meta = {{"seed", a.seed},
                                {"clock_ppm", a.sim_clock_ppm},
                                {"edge_latency_ns", dt.latency_ns},
                                {"edge_jitter_ns", dt.sigma_ns},
-                               {"script", "still"}};
+                               {"script", a.sim_motion}};
     ro.metadata.emplace_back("sim", sim_meta.dump());
-    const auto summary = take(acq::record_imu_session(acquisition, driver, ro), "recording");
+    const auto summary = take(acq::record_imu_session(rig->acquisition(), rig->driver(), ro), "recording");
     progress.finish();
     print_summary(a, summary, sim_meta.dump());
     return;
@@ -282,6 +212,11 @@ const CommandRegistrar kRegistrar(20, [](CLI::App& root) {
   cmd->add_option("--sim-jitter-us", args->sim_jitter_us,
                   "Simulation: standard deviation of the data-ready edge latency, us (default 30)")
       ->check(CLI::Range(0.0, 1000.0));
+  cmd->add_option(
+         "--sim-motion", args->sim_motion,
+         "Simulation: what the rig does: still (at rest on a table) or static (the multi-position "
+         "protocol of `imucal sim static`: 50 s still, then 40 poses; about 3.5 min) (default still)")
+      ->check(CLI::IsMember({"still", "static"}));
   cmd->add_flag("--force", args->force, "Replace the log if it exists");
   cmd->add_flag("--json", args->json, "Print the summary as JSON");
   cmd->callback([args] { run_record(*args); });

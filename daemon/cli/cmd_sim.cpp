@@ -31,12 +31,36 @@ struct SimCommon {
   bool tremor = false;
   bool no_noise = false;
   std::vector<std::string> drops;
+  std::string bus = "spi";
+  double clock_ppm = -15'000.0;
+  double jitter_us = 30.0;
+
+  acq::SimImuPath path() const {
+    acq::SimImuPath p;
+    p.bus = bus == "i2c" ? drivers::mpu6000::BusKind::kI2c : drivers::mpu6000::BusKind::kSpi;
+    p.clock_ppm = clock_ppm;
+    p.data_ready.sigma_ns = static_cast<TimeNs>(std::llround(jitter_us * 1e3));
+    return p;
+  }
 };
 
 void add_common(CLI::App* cmd, SimCommon& o, bool drops = true) {
   cmd->add_option("--seed", o.seed, "Random seed: the same seed gives the same recording")->required();
-  cmd->add_option("--imu-rate", o.imu_rate_hz, "IMU output rate in Hz (default 100; camimu 200)")
+  cmd->add_option("--imu-rate", o.imu_rate_hz,
+                  "IMU output rate in Hz: 1000/n (DLPF on) or 8000/n (DLPF off), n = 1..256 (default 100; "
+                  "camimu 200)")
       ->check(CLI::Range(4.0, 8000.0));
+  cmd->add_option("--bus", o.bus,
+                  "Bus of the emulated MPU-6000: spi (20 MHz reads) or i2c (400 kHz) (default spi)")
+      ->check(CLI::IsMember({"spi", "i2c"}));
+  cmd->add_option(
+         "--clock-ppm", o.clock_ppm,
+         "The emulated chip's oscillator error against the host clock in ppm; it sets how many samples a "
+         "second arrive (default -15000: 1.5 % slow)")
+      ->check(CLI::Range(-80'000.0, 80'000.0));
+  cmd->add_option("--jitter-us", o.jitter_us,
+                  "Standard deviation of the data-ready interrupt latency in us (default 30)")
+      ->check(CLI::Range(0.0, 1000.0));
   cmd->add_option("--accel-range", o.accel_range_g,
                   "Accelerometer full-scale range in g: 2, 4, 8, 16 (default 4)")
       ->check(CLI::IsMember({2, 4, 8, 16}));
@@ -52,8 +76,8 @@ void add_common(CLI::App* cmd, SimCommon& o, bool drops = true) {
   if (drops) {
     cmd->add_option(
         "--drop", o.drops,
-        "Lose the samples in START:DURATION (seconds); the next sample is flagged as after a gap. "
-        "Repeatable");
+        "Stall the host for START:DURATION (seconds from the start): the chip's FIFO holds 73 samples, "
+        "what it cannot hold is lost and the next sample is flagged as after a gap. Repeatable");
   }
   cmd->add_option("-o,--output", o.out_path, "Session log to write (.imulog); the truth goes to .truth.yaml")
       ->required();
@@ -125,6 +149,7 @@ void run(const SimCommon& o, const CLI::App* cmd, const std::string& kind, const
   opt.poses = poses;
   opt.seed = o.seed;
   opt.imu_rate_hz = o.imu_rate_hz;
+  opt.path = o.path();
   opt.imu = make_params(o, cmd, &opt.params_from_file);
   opt.drops = parse_drops(o.drops);
   opt.overwrite = o.force;
@@ -143,7 +168,8 @@ void run(const SimCommon& o, const CLI::App* cmd, const std::string& kind, const
   std::ostringstream msg;
   msg.precision(4);
   msg << "wrote " << truth->recording.samples << " samples (" << truth->trajectory.duration_s << " s at "
-      << o.imu_rate_hz << " Hz";
+      << o.imu_rate_hz << " Hz nominal, chip clock " << std::showpos << std::lround(o.clock_ppm)
+      << std::noshowpos << " ppm";
   if (poses > 1) msg << ", " << poses << " poses";
   msg << ") to " << o.out_path << "\n";
   msg << "truth: " << truth_path << "\n";
@@ -222,6 +248,7 @@ void setup(CLI::App& root) {
     cmd->callback([o, co, cmd]() {
       co->seed = o->seed;
       co->imu_rate_hz = o->imu_rate_hz;
+      co->imu_path = o->path();
       co->motion.tremor.enabled = o->tremor;
       co->imu = make_params(*o, cmd, &co->imu_params_from_file);
       co->overwrite = o->force;

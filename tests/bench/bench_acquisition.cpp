@@ -21,6 +21,7 @@
 #include "acquisition/imu_stream.hpp"
 #include "acquisition/recorder.hpp"
 #include "acquisition/session_log.hpp"
+#include "acquisition/sim_rig.hpp"
 #include "acquisition/timestamp.hpp"
 #include "acquisition/timestamp_synthetic.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
@@ -100,57 +101,39 @@ sim::SensorReading chirp(TimeNs t_ns) {
   return r;
 }
 
-/// Mean of max(0, N(mean, sigma)): the simulated line clips its latency at zero, which moves
-/// the mean edge latency above the nominal one.
-TimeNs clipped_latency_mean_ns(TimeNs mean_ns, TimeNs sigma_ns) {
-  if (sigma_ns <= 0) return std::max<TimeNs>(0, mean_ns);
-  const double m = static_cast<double>(mean_ns), s = static_cast<double>(sigma_ns), a = m / s;
-  const double cdf = 0.5 * std::erfc(-a / std::sqrt(2.0));
-  const double pdf = std::exp(-0.5 * a * a) / std::sqrt(2.0 * std::numbers::pi);
-  return static_cast<TimeNs>(std::llround(m * cdf + s * pdf));
-}
-
-class EmuClock final : public acq::AcquisitionClock {
- public:
-  explicit EmuClock(sim::Mpu6000Emulator& e) : e_(e) {}
-  TimeNs now_ns() override { return e_.now_ns(); }
-  void sleep_until(TimeNs t) override {
-    if (t > e_.now_ns()) e_.advance_to(t);
-  }
-
- private:
-  sim::Mpu6000Emulator& e_;
-};
-
 struct EndToEnd {
   double rms_us = 0, max_us = 0;
   std::size_t matched = 0, delivered = 0;
   double cpu_ms_per_s = 0;
   double period_error_ppm = 0;
+  std::size_t lost = 0;        // frames the chip wrote (from the first delivered on) never delivered
+  std::size_t mismatched = 0;  // delivered samples that are no frame the chip wrote
+  std::size_t gaps = 0;        // samples flagged as after a gap
+  double bus_busy_pct = 0;     // bus time of all transfers / simulated time
+  std::uint16_t max_fifo_bytes = 0;
 };
 
 /// Runs emulator + line + driver + acquisition (+ stream and log when `log_path` is given).
 EndToEnd end_to_end(std::uint8_t dlpf_cfg, std::uint8_t div, double seconds, double clock_ppm,
-                    const std::string& log_path, bool record_truth) {
+                    const std::string& log_path, bool record_truth, mpu::BusKind bus = mpu::BusKind::kSpi) {
   mpu::Settings s;
+  s.bus = bus;
   s.dlpf_cfg = dlpf_cfg;
   s.smplrt_div = div;
   const double per_read = std::max(1.0, std::round(s.sample_rate_hz() / 1000.0));
   s.read_interval_ns = static_cast<TimeNs>(2.0 * per_read * 1e9 / s.sample_rate_hz());
-  sim::EmulatorOptions eo;
-  eo.clock_ppm = clock_ppm;
-  eo.start_ns = 100 * kNsPerSecond;
-  eo.record_truth = record_truth;
-  sim::Mpu6000Emulator emu(chirp, eo);
-  sim::DataReadyTiming dt;  // 20 us mean latency, 30 us jitter
-  sim::SimDataReadyLine line(emu, dt);
-  emu.connect(line);
-  mpu::Mpu6000 driver(emu, s);
-  EmuClock clock(emu);
-  acq::AcquisitionOptions ao;
-  ao.timestamps.edge_latency_ns = clipped_latency_mean_ns(dt.latency_ns, dt.sigma_ns);
-  ao.timestamps.edge_jitter_ns = dt.sigma_ns;
-  acq::ImuAcquisition acq(driver, &line, clock, acq::MountingMap{}, ao);
+  acq::SimRigOptions ro;  // 20 us mean latency, 30 us jitter
+  ro.settings = s;
+  ro.clock_ppm = clock_ppm;
+  ro.record_truth = record_truth;
+  auto rig_r = acq::SimImuRig::create(chirp, ro);
+  if (!rig_r.ok()) {
+    std::fprintf(stderr, "bench: %s\n", rig_r.error().message.c_str());
+    std::exit(1);
+  }
+  acq::SimImuRig& rig = **rig_r;
+  sim::Mpu6000Emulator& emu = rig.emulator();
+  acq::ImuAcquisition& acq = rig.acquisition();
 
   std::unique_ptr<acq::SessionLogWriter> writer;
   std::unique_ptr<acq::ImuStream> stream;
@@ -179,8 +162,11 @@ EndToEnd end_to_end(std::uint8_t dlpf_cfg, std::uint8_t div, double seconds, dou
     }
     if (stream) stream->publish(out);
     if (record_truth) all.insert(all.end(), out.begin(), out.end());
+    for (const ImuSample& x : out) r.gaps += (x.flags & kImuFlagGapBefore) != 0;
     r.delivered += out.size();
   }
+  r.bus_busy_pct = 100.0 * static_cast<double>(emu.stats().bus_busy_ns) / (seconds * 1e9);
+  r.max_fifo_bytes = emu.stats().max_fifo_bytes;
   if (stream) {
     if (!stream->stop().ok()) std::fprintf(stderr, "bench: log write failed\n");
     if (!writer->close().ok()) std::fprintf(stderr, "bench: log close failed\n");
@@ -199,23 +185,30 @@ EndToEnd end_to_end(std::uint8_t dlpf_cfg, std::uint8_t div, double seconds, dou
     return a.gyro == Eigen::Vector3d(b.gyro[0], b.gyro[1], b.gyro[2]) &&
            a.accel == Eigen::Vector3d(b.accel[0], b.accel[1], b.accel[2]) && a.temperature == b.temp;
   };
+  // Every delivered sample must be a frame the chip wrote, in order; frames skipped between two
+  // delivered ones are lost.
   std::size_t j = 0;
   while (j < fifo.size() && !same(all[0], *fifo[j])) ++j;
+  const std::size_t first = j;
   double sum2 = 0;
-  for (std::size_t i = 0; i < all.size() && j < fifo.size(); ++i, ++j) {
-    if (!same(all[i], *fifo[j])) {
-      // Resynchronise after a gap.
-      std::size_t k = j;
-      while (k < fifo.size() && !same(all[i], *fifo[k])) ++k;
-      if (k == fifo.size()) continue;
-      j = k;
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    std::size_t k = j;
+    while (k < fifo.size() && !same(all[i], *fifo[k])) ++k;
+    if (k == fifo.size()) {
+      ++r.mismatched;
+      continue;
     }
-    if (ns_to_s(fifo[j]->t_ns - fifo[0]->t_ns) < 2.0) continue;  // settling
-    const double e = static_cast<double>(all[i].t_ns - fifo[j]->t_ns);
+    r.lost += k - j;
+    j = k + 1;
+    if (ns_to_s(fifo[k]->t_ns - fifo[first]->t_ns) < 2.0) continue;  // settling
+    const double e = static_cast<double>(all[i].t_ns - fifo[k]->t_ns);
     sum2 += e * e;
     r.max_us = std::max(r.max_us, std::abs(e) / 1e3);
     ++r.matched;
   }
+  // Frames still in the FIFO at the end are not lost.
+  const std::size_t in_fifo = emu.fifo_bytes() / mpu::FIFO::kFrameBytes;
+  r.lost += fifo.size() - j > in_fifo ? fifo.size() - j - in_fifo : 0;
   if (r.matched) r.rms_us = std::sqrt(sum2 / static_cast<double>(r.matched)) / 1e3;
   return r;
 }
@@ -223,19 +216,23 @@ EndToEnd end_to_end(std::uint8_t dlpf_cfg, std::uint8_t div, double seconds, dou
 void emulator_table(double seconds) {
   std::printf(
       "2. end to end: emulator + driver + acquisition, 20 us mean / 30 us RMS edge latency,\n"
-      "   chip oscillator -15000 ppm, %.0f s (error after the first 2 s)\n",
+      "   chip oscillator -15000 ppm, %.0f s of rig time (time error after the first 2 s)\n",
       seconds);
   struct Case {
     const char* name;
     std::uint8_t dlpf, div;
+    mpu::BusKind bus;
   };
-  const Case cases[] = {{"1 kHz (DLPF on, div 0), FIFO read per edge", 1, 0},
-                        {"8 kHz (DLPF off), FIFO read every 8 edges", 0, 0},
-                        {"200 Hz (DLPF on, div 4), FIFO read per edge", 1, 4}};
+  const Case cases[] = {{"SPI, 8 kHz gyro / 1 kHz accel, read every 8 edges", 0, 0, mpu::BusKind::kSpi},
+                        {"SPI, 1 kHz (DLPF on), read per edge", 1, 0, mpu::BusKind::kSpi},
+                        {"I2C 400 kHz, 1 kHz (DLPF on), read per edge", 1, 0, mpu::BusKind::kI2c},
+                        {"SPI, 200 Hz (DLPF on, div 4), read per edge", 1, 4, mpu::BusKind::kSpi}};
   for (const auto& c : cases) {
-    const auto r = end_to_end(c.dlpf, c.div, seconds, -15'000.0, "", true);
-    std::printf("   %-48s rms %5.2f us  max %5.1f us  (%zu of %zu samples matched, chip %+.0f ppm)\n", c.name,
-                r.rms_us, r.max_us, r.matched, r.delivered, r.period_error_ppm);
+    const auto r = end_to_end(c.dlpf, c.div, seconds, -15'000.0, "", true, c.bus);
+    std::printf("   %-52s rms %5.2f us  max %5.1f us  delivered %zu  lost %zu  wrong %zu  gaps %zu\n", c.name,
+                r.rms_us, r.max_us, r.delivered, r.lost, r.mismatched, r.gaps);
+    std::printf("   %-52s bus busy %.1f %%, FIFO peak %u bytes, chip %+.0f ppm (period)\n", "",
+                r.bus_busy_pct, static_cast<unsigned>(r.max_fifo_bytes), r.period_error_ppm);
   }
 }
 
