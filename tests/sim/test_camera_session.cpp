@@ -4,8 +4,11 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -55,9 +58,9 @@ TEST(CameraSession, WritesLogAndTruthWithMidExposureStamps) {
   const std::string log = dir + "/camimu.imulog";
   const std::string truth_path = dir + "/camimu.truth.yaml";
   CamImuSimOptions o = short_options();
+  o.motion.duration_s = 4.0;
   o.exposure_ns = 20'000'000;     // long, so that start and middle of the exposure differ clearly
   o.timeshift_cam_imu_s = 0.015;  // large, so that its sign shows
-  o.motion.excitation = 2.0;
   CamImuSimSummary summary;
   double last_progress = -1.0;
   auto st = simulate_camimu_session(
@@ -74,7 +77,8 @@ TEST(CameraSession, WritesLogAndTruthWithMidExposureStamps) {
   ASSERT_TRUE(imu_id.ok());
   auto imu_count = reader.imu_count(*imu_id);
   ASSERT_TRUE(imu_count.ok());
-  EXPECT_NEAR(static_cast<double>(*imu_count), 5.0 * 200.0, 2.0);
+  // 4 s at 200 Hz from the emulated chip, whose clock runs 1.5 % slow by default.
+  EXPECT_NEAR(static_cast<double>(*imu_count), 4.0 * 200.0 * 0.985, 2.0);
   EXPECT_EQ(*imu_count, summary.imu_samples);
   auto cam_id = reader.find_camera_stream("cam0");
   ASSERT_TRUE(cam_id.ok());
@@ -84,7 +88,7 @@ TEST(CameraSession, WritesLogAndTruthWithMidExposureStamps) {
   EXPECT_EQ(info.rate_hz, 20.0);
   auto times = reader.frame_times(*cam_id);
   ASSERT_TRUE(times.ok());
-  ASSERT_GE(times->size(), 95u);
+  ASSERT_GE(times->size(), 75u);
   EXPECT_EQ(static_cast<std::int64_t>(times->size()), summary.frames);
   for (std::size_t i = 1; i < times->size(); ++i) EXPECT_EQ((*times)[i] - (*times)[i - 1], 50'000'000);
   EXPECT_NE(reader.metadata().at("target").find("checkerboard"), std::string::npos);
@@ -120,52 +124,107 @@ TEST(CameraSession, WritesLogAndTruthWithMidExposureStamps) {
     T_world_body.translation() = s.p_world_body;
     return (*renderer)->project_corners(o.T_cam_imu * T_world_body.inverse() * T_world_board);
   };
+  auto max_distance = [](const sim::CornerTruth& a, const sim::CornerTruth& b) {
+    double d = 0.0;
+    for (std::size_t i = 0; i < a.px.size(); ++i) d = std::max(d, (a.px[i] - b.px[i]).norm());
+    return d;
+  };
+  const int cols = o.target.cols;
+  const int rows = o.target.rows;
   const TimeNs shift = 15'000'000;
+  const TimeNs half_exposure = o.exposure_ns / 2;
   double sq_mid = 0, sq_start = 0, sq_flipped = 0;
-  int corners = 0, frames = 0;
+  int corners = 0, frames = 0, blurred = 0, still = 0, not_found = 0, unmatched = 0;
+  int frames_mid_best = 0;
   auto visited = reader.for_each_frame(*cam_id, kTimeMin, kTimeMax, [&](const CameraFrame& f) {
     EXPECT_EQ(f.exposure_ns, o.exposure_ns);
     const auto mid = corners_at(f.t_ns + shift);
     if (mid.visible_count != static_cast<int>(mid.px.size())) return true;
-    const auto start = corners_at(f.t_ns + shift - o.exposure_ns / 2);
+    const auto start = corners_at(f.t_ns + shift - half_exposure);
+    const auto end = corners_at(f.t_ns + shift - half_exposure + o.exposure_ns);
     const auto flipped = corners_at(f.t_ns - shift);
+    // Square size: the shortest distance between neighbouring corners at mid-exposure.
+    double square_px = std::numeric_limits<double>::infinity();
+    for (int r = 0; r < rows; ++r) {
+      for (int c = 0; c < cols; ++c) {
+        const Eigen::Vector2d& p = mid.px[r * cols + c];
+        if (c + 1 < cols) square_px = std::min(square_px, (mid.px[r * cols + c + 1] - p).norm());
+        if (r + 1 < rows) square_px = std::min(square_px, (mid.px[(r + 1) * cols + c] - p).norm());
+      }
+    }
+    // A corner smeared over more than half a square is no corner to locate.
+    if (max_distance(start, end) > 0.5 * square_px) {
+      ++blurred;
+      return true;
+    }
     // Only frames with clear motion discriminate.
-    if ((start.px[0] - mid.px[0]).norm() < 0.3) return true;
+    if (max_distance(start, mid) < 0.3) {
+      ++still;
+      return true;
+    }
     const cv::Mat image = decode(f);
     std::vector<cv::Point2f> found;
-    if (!cv::findChessboardCorners(image, cv::Size(o.target.cols, o.target.rows), found,
+    if (!cv::findChessboardCorners(image, cv::Size(cols, rows), found,
                                    cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE)) {
+      ++not_found;
       return true;
     }
     cv::cornerSubPix(image, found, cv::Size(4, 4), cv::Size(-1, -1),
                      cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 1e-3));
-    const std::size_t n = found.size();
-    const bool reversed = (Eigen::Vector2d(found[0].x, found[0].y) - mid.px[0]).norm() >
-                          (Eigen::Vector2d(found[0].x, found[0].y) - mid.px[n - 1]).norm();
-    for (std::size_t i = 0; i < n; ++i) {
+    // Each detected corner is the nearest true corner, well within a square of it, and no true
+    // corner is claimed twice; the detector's ordering of the grid is not relied upon.
+    const std::size_t n = mid.px.size();
+    const double gate_px = 0.25 * square_px;
+    std::vector<std::size_t> match(found.size());
+    std::vector<bool> taken(n, false);
+    for (std::size_t i = 0; i < found.size(); ++i) {
       const Eigen::Vector2d d(found[i].x, found[i].y);
-      const std::size_t j = reversed ? n - 1 - i : i;
-      sq_mid += (d - mid.px[j]).squaredNorm();
-      sq_start += (d - start.px[j]).squaredNorm();
-      sq_flipped += (d - flipped.px[j]).squaredNorm();
-      ++corners;
+      std::size_t best = 0;
+      for (std::size_t j = 1; j < n; ++j) {
+        if ((d - mid.px[j]).squaredNorm() < (d - mid.px[best]).squaredNorm()) best = j;
+      }
+      if ((d - mid.px[best]).norm() > gate_px || taken[best]) {
+        ++unmatched;
+        return true;
+      }
+      taken[best] = true;
+      match[i] = best;
     }
+    double f_mid = 0, f_start = 0, f_flipped = 0;
+    for (std::size_t i = 0; i < found.size(); ++i) {
+      const Eigen::Vector2d d(found[i].x, found[i].y);
+      f_mid += (d - mid.px[match[i]]).squaredNorm();
+      f_start += (d - start.px[match[i]]).squaredNorm();
+      f_flipped += (d - flipped.px[match[i]]).squaredNorm();
+    }
+    sq_mid += f_mid;
+    sq_start += f_start;
+    sq_flipped += f_flipped;
+    corners += static_cast<int>(found.size());
+    if (f_mid < f_start && f_mid < f_flipped) ++frames_mid_best;
     ++frames;
     return true;
   });
   ASSERT_TRUE(visited.ok()) << visited.error().message;
-  ASSERT_GE(frames, 10) << "too few moving frames with the whole board in view";
+  ASSERT_GE(frames, 20) << "too few moving frames with the whole board in view";
   const double rms_mid = std::sqrt(sq_mid / corners);
   const double rms_start = std::sqrt(sq_start / corners);
   const double rms_flipped = std::sqrt(sq_flipped / corners);
-  std::printf(
-      "%d frames: corner RMS vs mid-exposure %.3f px, vs exposure start %.3f px, vs -timeshift %.3f px\n",
-      frames, rms_mid, rms_start, rms_flipped);
-  // Heavily blurred frames (20 ms at twice the default excitation): the detector is coarse here;
-  // the comparison with the wrong instants below is what this test is about.
-  EXPECT_LT(rms_mid, 1.0);
-  EXPECT_LT(rms_mid, 0.6 * rms_start);
-  EXPECT_LT(rms_mid, 0.6 * rms_flipped);
+  std::printf("%d frames (skipped: %d blurred over half a square, %d still, %d not found, %d not matched)\n",
+              frames, blurred, still, not_found, unmatched);
+  std::printf("corner RMS vs mid-exposure %.3f px, vs exposure start %.3f px, vs -timeshift %.3f px\n",
+              rms_mid, rms_start, rms_flipped);
+  // Near the half-square limit the detector now and then misses the board or places an outer
+  // corner squares off; such frames are few.
+  EXPECT_LE(not_found + unmatched, frames / 10);
+  // Mid-exposure: the renderer's accuracy (0.055 px RMS for still frames, see
+  // test_camera_render.cpp). The wrong instants are pixels away, in every frame.
+  EXPECT_LT(rms_mid, 0.1);
+  EXPECT_GT(rms_start, 0.5);
+  EXPECT_GT(rms_flipped, 1.5);
+  EXPECT_LT(rms_mid, 0.1 * rms_start);
+  EXPECT_LT(rms_mid, 0.1 * rms_flipped);
+  EXPECT_EQ(frames_mid_best, frames) << "frames whose corners are not closest to the mid-exposure truth";
 }
 
 TEST(CameraSession, DeterministicUnderSeed) {
