@@ -51,7 +51,7 @@ echo "+ cut $size bytes to $cut -> broken-truncated.imulog"
 # first sample after each gap carries the gap flag. Enough poses remain for a calibration with
 # a warning.
 sim static --seed 106 --poses 40 --still 50 --accel-range 2 --gyro-range 250 \
-  --drop 100:2.5 --drop 10:1 -o "$out/broken-gap.imulog"
+  --drop 100:2.5 --drop 20:1 -o "$out/broken-gap.imulog"
 
 # Saturated: fast moves beyond +-2 g and +-250 deg/s.
 sim static --seed 107 --poses 40 --still 50 --accel-range 2 --gyro-range 250 --excitation 4 \

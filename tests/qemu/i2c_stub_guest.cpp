@@ -223,11 +223,13 @@ void driver_checks(I2cDevBus& bus) {
   auto smplrt = bus.read_u8(reg(mpu::Register::SMPLRT_DIV));
   check(smplrt.ok() && *smplrt == 4, "SMPLRT_DIV = 4 in the stub");
 
-  // FIFO: two frames behind FIFO_COUNT = 28. The stub returns registers 0x74.. for the block
-  // read, so the frames are seeded there. Byte 1 lands on WHO_AM_I (0x75): the first
-  // sample's accel x (0x1068) keeps it at 0x68.
-  std::array<std::uint8_t, 28> frames{};
-  for (int f = 0; f < 2; ++f) {
+  // FIFO: three frames behind FIFO_COUNT = 42; the driver reads all but the newest, which it
+  // leaves in the FIFO (docs/mpu6000.md). The stub returns registers 0x74.. for the block read,
+  // so the frames are seeded there. Byte 1 lands on WHO_AM_I (0x75): the first sample's accel x
+  // (0x1068) keeps it at 0x68. The stub's FIFO_COUNT does not go down after the read, which the
+  // driver takes for frames that arrived meanwhile.
+  std::array<std::uint8_t, 42> frames{};
+  for (int f = 0; f < 3; ++f) {
     std::uint8_t* p = frames.data() + 14 * f;
     const std::int16_t values[7] = {static_cast<std::int16_t>(0x1068 + f),
                                     static_cast<std::int16_t>(-200 - f),
@@ -242,12 +244,12 @@ void driver_checks(I2cDevBus& bus) {
     }
   }
   std::vector<std::pair<std::uint8_t, std::uint8_t>> fifo_seed{{reg(mpu::Register::FIFO_COUNTH), 0},
-                                                               {reg(mpu::Register::FIFO_COUNTH) + 1, 28}};
-  for (int i = 0; i < 28; ++i) fifo_seed.emplace_back(static_cast<std::uint8_t>(0x74 + i), frames[i]);
-  check(seed(bus, fifo_seed), "seed FIFO_COUNT = 28 and two frames");
+                                                               {reg(mpu::Register::FIFO_COUNTH) + 1, 42}};
+  for (int i = 0; i < 42; ++i) fifo_seed.emplace_back(static_cast<std::uint8_t>(0x74 + i), frames[i]);
+  check(seed(bus, fifo_seed), "seed FIFO_COUNT = 42 and three frames");
   auto polled = driver.poll(now_ns + settings.read_interval_ns);
   const bool got = polled.ok() && polled->batch && polled->batch->samples.size() == 2;
-  check(got, "one FIFO read yields two samples",
+  check(got, "one FIFO read yields two samples, the newest frame stays in the FIFO",
         polled.ok()
             ? (polled->batch ? std::to_string(polled->batch->samples.size()) + " samples" : "no batch")
             : polled.error().message);
