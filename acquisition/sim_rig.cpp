@@ -17,6 +17,10 @@ TimeNs clipped_latency_mean_ns(TimeNs mean_ns, TimeNs sigma_ns) {
   return static_cast<TimeNs>(std::llround(m * cdf + s * pdf));
 }
 
+double chip_sample_period_s(const mpu::Settings& settings, double clock_ppm) {
+  return 1.0 / (settings.sample_rate_hz() * (1.0 + clock_ppm * 1e-6));
+}
+
 namespace {
 
 sim::EmulatorOptions emulator_options(const SimRigOptions& o) {

@@ -29,6 +29,10 @@ namespace imucal::acq {
 /// mean edge latency above the nominal one. This is the latency the timestamper is told.
 TimeNs clipped_latency_mean_ns(TimeNs mean_ns, TimeNs sigma_ns);
 
+/// The emulated chip's true sample period: the nominal one on an oscillator off by `clock_ppm`.
+/// White noise drawn for this period has the model's density on the chip's own sample clock.
+double chip_sample_period_s(const drivers::mpu6000::Settings& settings, double clock_ppm);
+
 struct SimRigOptions {
   drivers::mpu6000::Settings settings;  // bus, rate, ranges (drivers/mpu6000/output_settings.hpp)
   /// The chip's oscillator against the host clock, ppm; negative: the chip samples slower. The

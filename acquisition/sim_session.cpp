@@ -164,7 +164,7 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
   ro.data_ready.seed ^= options.seed;
   const TimeNs offset = ro.start_ns + kSetupNs - trajectory.start_ns();
   auto sensor = std::make_shared<TrajectorySensor>(options.imu, options.seed, trajectory, offset,
-                                                   1.0 / settings->sample_rate_hz());
+                                                   chip_sample_period_s(*settings, ro.clock_ppm));
   auto rig_r = SimImuRig::create(TrajectorySensor::source(sensor), ro);
   if (!rig_r.ok()) return rig_r.error();
   SimImuRig& rig = **rig_r;
