@@ -1,11 +1,17 @@
 #include "acquisition/recorder.hpp"
 
 #include <algorithm>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/signal_set.hpp>
 #include <cerrno>
 #include <cmath>
+#include <csignal>
 #include <ctime>
 #include <nlohmann/json.hpp>
+#include <span>
 #include <sstream>
+
+#include "acquisition/asio_acquisition.hpp"
 
 namespace imucal::acq {
 
@@ -53,18 +59,22 @@ ImuAcquisition::ImuAcquisition(mpu::Mpu6000& driver, drivers::DataReadyLine* lin
   next_poll_ns_ = clock_.now_ns();
 }
 
+Status ImuAcquisition::discard_pending_edges() {
+  if (line_ == nullptr) return {};
+  for (;;) {
+    auto e = line_->wait(0);
+    if (!e.ok()) return e.error().context("data-ready line");
+    if (!e->has_value()) return {};
+    ++stats_.edges;
+  }
+}
+
 Status ImuAcquisition::step(std::vector<ImuSample>& out) {
   out.clear();
   std::optional<drivers::DataReadyEdge> edge;
   if (driver_.state() != mpu::State::kStream) {
     // Configuring: edges from before streaming must not anchor the timestamps.
-    if (line_ != nullptr) {
-      for (;;) {
-        auto e = line_->wait(0);
-        if (!e.ok()) return e.error().context("data-ready line");
-        if (!e->has_value()) break;
-      }
-    }
+    IMUCAL_TRY(discard_pending_edges());
     clock_.sleep_until(next_poll_ns_);
   } else if (line_ != nullptr) {
     for (int i = 0; i < edges_per_read_; ++i) {
@@ -75,6 +85,7 @@ Status ImuAcquisition::step(std::vector<ImuSample>& out) {
         ++stats_.edge_timeouts;
         break;
       }
+      ++stats_.edges;
       if (edge) driver_.on_edge(*edge);
       edge = **e;
     }
@@ -84,14 +95,51 @@ Status ImuAcquisition::step(std::vector<ImuSample>& out) {
       auto e = line_->wait(0);
       if (!e.ok()) return e.error().context("data-ready line");
       if (!e->has_value()) break;
+      ++stats_.edges;
       driver_.on_edge(*edge);
       edge = **e;
     }
   } else {
     clock_.sleep_until(next_poll_ns_);
   }
+  return poll_driver(clock_.now_ns(), edge, out);
+}
 
-  auto polled = driver_.poll(clock_.now_ns(), edge);
+Status ImuAcquisition::service(std::vector<ImuSample>& out) {
+  out.clear();
+  if (driver_.state() != mpu::State::kStream) {
+    IMUCAL_TRY(discard_pending_edges());
+    pending_edges_ = 0;
+    pending_edge_.reset();
+    const TimeNs now_ns = clock_.now_ns();
+    if (now_ns < next_poll_ns_) return {};
+    return poll_driver(now_ns, std::nullopt, out);
+  }
+  if (line_ != nullptr) {
+    // As in step(): with a backlog the newest edge belongs to the newest sample in the FIFO;
+    // the older ones are only counted.
+    for (;;) {
+      auto e = line_->wait(0);
+      if (!e.ok()) return e.error().context("data-ready line");
+      if (!e->has_value()) break;
+      ++stats_.edges;
+      if (pending_edge_) driver_.on_edge(*pending_edge_);
+      pending_edge_ = **e;
+      ++pending_edges_;
+    }
+  }
+  const TimeNs now_ns = clock_.now_ns();
+  if (pending_edges_ < edges_per_read_ && now_ns < next_poll_ns_) return {};
+  if (line_ != nullptr && pending_edges_ < edges_per_read_) ++stats_.edge_timeouts;
+  const std::optional<drivers::DataReadyEdge> edge = pending_edge_;
+  pending_edges_ = 0;
+  pending_edge_.reset();
+  return poll_driver(now_ns, edge, out);
+}
+
+Status ImuAcquisition::poll_driver(TimeNs now_ns, std::optional<drivers::DataReadyEdge> edge,
+                                   std::vector<ImuSample>& out) {
+  auto polled = driver_.poll(now_ns, edge);
   if (!polled.ok()) return polled.error();
   ++stats_.polls;
   next_poll_ns_ = polled->next_poll_ns;
@@ -196,11 +244,73 @@ std::string mounting_metadata_json(const MountingMap& m) {
   return j.dump();
 }
 
+namespace {
+
+/// What record_imu_session() does with each batch, in either loop: keeps exactly the requested
+/// span of sample time, publishes, posts a fault event per new gap and reports progress.
+class SessionSamples {
+ public:
+  SessionSamples(ImuAcquisition& acquisition, ImuStream& stream, const RecordOptions& options)
+      : acquisition_(acquisition),
+        stream_(stream),
+        options_(options),
+        duration_ns_(s_to_ns(options.duration_s)) {}
+
+  /// False once the duration is recorded or the log failed.
+  bool take(std::span<const ImuSample> samples) {
+    if (samples.empty()) return true;
+    if (!have_first_) {
+      first_t_ns_ = samples.front().t_ns;
+      have_first_ = true;
+    }
+    std::size_t keep = samples.size();
+    while (keep > 0 && samples[keep - 1].t_ns - first_t_ns_ >= duration_ns_) --keep;
+    stream_.publish(samples.first(keep));
+    count_ += keep;
+    if (keep > 0) last_t_ns_ = samples[keep - 1].t_ns;
+    const auto gaps = acquisition_.timestamper().stats().gaps;
+    if (gaps != last_gaps_) {
+      Event e;
+      e.t_ns = samples.front().t_ns;
+      e.kind = "fault";
+      e.message = "IMU sample gap (FIFO reset, overflow or lost samples); see imu.timing";
+      stream_.post_event(std::move(e));
+      last_gaps_ = gaps;
+    }
+    if (options_.progress) {
+      options_.progress(std::min(1.0, ns_to_s(last_t_ns_ - first_t_ns_) / options_.duration_s));
+    }
+    return keep == samples.size() && !stream_.log_failed();
+  }
+
+  std::uint64_t count() const { return count_; }
+  double span_s() const { return ns_to_s(last_t_ns_ - first_t_ns_); }
+
+ private:
+  ImuAcquisition& acquisition_;
+  ImuStream& stream_;
+  const RecordOptions& options_;
+  TimeNs duration_ns_;
+  TimeNs first_t_ns_ = 0, last_t_ns_ = 0;
+  bool have_first_ = false;
+  std::uint64_t count_ = 0;
+  std::uint64_t last_gaps_ = 0;
+};
+
+}  // namespace
+
 Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu::Mpu6000& driver,
                                          const RecordOptions& options) {
   if (!(options.duration_s > 0.0) || !std::isfinite(options.duration_s)) {
     return make_error(Errc::kInvalidArgument, "record: the duration must be a positive number of seconds");
   }
+  RecordSummary summary;
+  // The event loop and its signal handlers exist before the log does, so that a signal that
+  // comes once the log exists always closes it cleanly; they go after the log is closed.
+  boost::asio::io_context io;
+  std::optional<boost::asio::signal_set> signals;
+  if (options.loop == RecordLoop::kEventLoop && options.stop_on_signals) signals.emplace(io, SIGINT, SIGTERM);
+
   SessionLogWriterOptions wo;
   wo.overwrite = options.overwrite;
   auto writer_r = SessionLogWriter::create(options.log_path, wo);
@@ -215,50 +325,37 @@ Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu:
   ImuStream stream(options.stream);
   IMUCAL_TRY(stream.start_log(*writer, *stream_id));
 
-  RecordSummary summary;
-  std::vector<ImuSample> samples;
-  const TimeNs duration_ns = s_to_ns(options.duration_s);
-  TimeNs first_t_ns = 0, last_t_ns = 0;
-  bool have_first = false;
+  SessionSamples session(acquisition, stream, options);
   Status failure;
-  std::uint64_t last_gaps = 0;
-  while (true) {
-    auto st = acquisition.step(samples);
-    if (!st.ok()) {
-      failure = st.error();
-      break;
+  if (options.loop == RecordLoop::kStep) {
+    std::vector<ImuSample> samples;
+    while (true) {
+      auto st = acquisition.step(samples);
+      if (!st.ok()) {
+        failure = st.error();
+        break;
+      }
+      if (!session.take(samples)) break;
     }
-    if (samples.empty()) continue;
-    if (!have_first) {
-      first_t_ns = samples.front().t_ns;
-      have_first = true;
+  } else {
+    AsioAcquisition runner(io, acquisition, [&](std::span<const ImuSample> s) { return session.take(s); });
+    if (signals) {
+      signals->async_wait([&](const boost::system::error_code& ec, int signal) {
+        if (ec) return;
+        summary.interrupted = true;
+        summary.signal = signal;
+        runner.stop();
+      });
     }
-    // Keep exactly the requested span of sample time.
-    std::size_t keep = samples.size();
-    while (keep > 0 && samples[keep - 1].t_ns - first_t_ns >= duration_ns) --keep;
-    stream.publish(std::span<const ImuSample>(samples.data(), keep));
-    summary.samples += keep;
-    if (keep > 0) last_t_ns = samples[keep - 1].t_ns;
-    const auto gaps = acquisition.timestamper().stats().gaps;
-    if (gaps != last_gaps) {
-      Event e;
-      e.t_ns = samples.front().t_ns;
-      e.kind = "fault";
-      e.message = "IMU sample gap (FIFO reset, overflow or lost samples); see imu.timing";
-      stream.post_event(std::move(e));
-      last_gaps = gaps;
-    }
-    if (options.progress) {
-      options.progress(std::min(1.0, ns_to_s(last_t_ns - first_t_ns) / options.duration_s));
-    }
-    if (keep < samples.size() || stream.log_failed()) break;
+    failure = runner.run();
   }
   auto stop_status = stream.stop();
 
+  summary.samples = session.count();
   summary.timing = acquisition.timestamper().stats();
   summary.acquisition = acquisition.stats();
   summary.stream = stream.stats();
-  summary.duration_s = ns_to_s(last_t_ns - first_t_ns);
+  summary.duration_s = session.span_s();
   summary.rate_hz = summary.samples > 1 && summary.duration_s > 0
                         ? static_cast<double>(summary.samples - 1) / summary.duration_s
                         : 0.0;

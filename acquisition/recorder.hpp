@@ -1,12 +1,14 @@
 #pragma once
 // The IMU acquisition loop and the recording session around it.
 //
-// ImuAcquisition turns the MPU-6000 driver's FIFO batches into timestamped samples: it waits
-// for data-ready edges (or, without a line, for the driver's next poll time), polls the driver,
-// reconstructs per-sample times (timestamp.hpp), remaps axes exactly when the mounting allows
-// it (mounting.hpp) and hands the samples to an ImuStream. It works the same on a rig (real
-// clock, spidev/i2c-dev, libgpiod) and in simulation (the emulator's clock, which runs as fast
-// as the host can compute).
+// ImuAcquisition turns the MPU-6000 driver's FIFO batches into timestamped samples: it takes
+// data-ready edges (or, without a line, waits for the driver's next poll time), polls the
+// driver, reconstructs per-sample times (timestamp.hpp), remaps axes exactly when the mounting
+// allows it (mounting.hpp) and hands the samples to an ImuStream. Two forms of the same loop:
+// step() blocks in the line's wait() or the clock's sleep_until() (the simulated rig, whose
+// clock only moves when asked, runs on it deterministically); service() never blocks and is
+// called by an event loop whenever the line's file descriptor is readable or the poll time
+// has come (asio_acquisition.hpp, the form a rig runs).
 //
 // record_imu_session() creates the session log, writes the metadata (rig configuration,
 // driver settings, mounting, timing), records for a given duration of sample time and closes
@@ -54,7 +56,8 @@ struct AcquisitionOptions {
   /// Edges per FIFO read: the loop collects this many data-ready edges before it polls
   /// (0: chosen from the rate so that reads happen at about 1 kHz or slower).
   int edges_per_read = 0;
-  /// Longest wait for a data-ready edge before polling anyway.
+  /// Longest wait for a data-ready edge before polling anyway (step(); service() polls at the
+  /// driver's next poll time at the latest).
   TimeNs edge_timeout_ns = 20'000'000;
 };
 
@@ -62,7 +65,8 @@ struct AcquisitionStats {
   std::uint64_t polls = 0;
   std::uint64_t batches = 0;
   std::uint64_t samples = 0;
-  std::uint64_t edge_timeouts = 0;  // waits that ended without an edge
+  std::uint64_t edge_timeouts = 0;  // waits (or service polls) that ended without enough edges
+  std::uint64_t edges = 0;          // data-ready edges taken from the line
   std::uint64_t batches_without_edge = 0;
 };
 
@@ -76,6 +80,20 @@ class ImuAcquisition {
   /// batch, if any, to `out` (cleared first). Errors are the driver's unrecoverable ones.
   [[nodiscard]] Status step(std::vector<ImuSample>& out);
 
+  /// The event-loop form of step(); never blocks. Takes the edges already pending on the line
+  /// (each older one is reported to the driver with on_edge()) and polls the driver when
+  /// `edges_per_read` edges have come since the last poll or next_poll_ns() has come, appending
+  /// the samples of the batch, if any, to `out` (cleared first). Call it when the line's fd()
+  /// is readable and at next_poll_ns(). Use either step() or service() on one acquisition.
+  [[nodiscard]] Status service(std::vector<ImuSample>& out);
+
+  /// When service() polls the driver at the latest (the clock's time base; CLOCK_MONOTONIC on
+  /// a rig), unless edges come first.
+  TimeNs next_poll_ns() const { return next_poll_ns_; }
+
+  /// The data-ready line, or null (FIFO polling).
+  drivers::DataReadyLine* line() const { return line_; }
+
   const SampleTimestamper& timestamper() const { return timestamper_; }
   const AcquisitionStats& stats() const { return stats_; }
   const MountingMap& mounting() const { return mounting_; }
@@ -84,6 +102,13 @@ class ImuAcquisition {
   bool samples_in_rig_frame() const { return mounting_.exact_on_raw(); }
 
  private:
+  /// Polls the driver at `now_ns` with the newest edge and converts the batch, if any, into
+  /// timestamped, remapped samples in `out`.
+  [[nodiscard]] Status poll_driver(TimeNs now_ns, std::optional<drivers::DataReadyEdge> edge,
+                                   std::vector<ImuSample>& out);
+  /// Takes and drops every pending edge (before streaming they must not anchor the timestamps).
+  [[nodiscard]] Status discard_pending_edges();
+
   drivers::mpu6000::Mpu6000& driver_;
   drivers::DataReadyLine* line_;
   AcquisitionClock& clock_;
@@ -92,9 +117,22 @@ class ImuAcquisition {
   SampleTimestamper timestamper_;
   int edges_per_read_ = 1;
   TimeNs next_poll_ns_ = 0;
+  // service(): edges taken since the last poll and the newest of them.
+  int pending_edges_ = 0;
+  std::optional<drivers::DataReadyEdge> pending_edge_;
   std::vector<TimeNs> t_buf_;
   std::vector<std::uint32_t> flag_buf_;
   AcquisitionStats stats_;
+};
+
+/// How record_imu_session() drives the acquisition.
+enum class RecordLoop {
+  /// ImuAcquisition::step() in a loop: for the simulated rig, whose clock advances only when
+  /// the loop waits (deterministic, as fast as the host computes).
+  kStep,
+  /// ImuAcquisition::service() on a Boost.Asio event loop (asio_acquisition.hpp): for a real
+  /// clock (a rig, or the real-time simulated rig). The line's fd and a poll timer wake it.
+  kEventLoop,
 };
 
 struct RecordOptions {
@@ -107,6 +145,11 @@ struct RecordOptions {
   ImuStreamOptions stream;
   /// Receives the recorded fraction in [0, 1] (may be empty).
   std::function<void(double)> progress;
+  RecordLoop loop = RecordLoop::kStep;
+  /// kEventLoop only: SIGINT and SIGTERM end the recording early but cleanly (everything
+  /// acquired so far written, counters stored, log closed; RecordSummary::interrupted). The
+  /// handlers are installed before the log is created and removed after it is closed.
+  bool stop_on_signals = false;
 };
 
 struct RecordSummary {
@@ -117,10 +160,13 @@ struct RecordSummary {
   TimestamperStats timing;
   ImuStreamStats stream;
   AcquisitionStats acquisition;
+  bool interrupted = false;  // ended early by a signal (RecordOptions::stop_on_signals)
+  int signal = 0;            // which one
 };
 
-/// Records `options.duration_s` of samples through `acquisition` into a new session log.
-/// Driver counters and the timing/stream counters are stored in the log's metadata.
+/// Records `options.duration_s` of samples through `acquisition` into a new session log, in the
+/// loop `options.loop` names. Driver counters and the timing/stream counters are stored in the
+/// log's metadata.
 [[nodiscard]] Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition,
                                                        const drivers::mpu6000::Mpu6000& driver,
                                                        const RecordOptions& options);

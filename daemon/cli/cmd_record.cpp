@@ -1,9 +1,12 @@
 // imucal record: acquire the rig's MPU-6000 into a session log, on hardware (spidev / i2c-dev,
-// data-ready through libgpiod) or, with --sim, through the same driver and acquisition code
-// against the register-level emulator (docs/acquisition.md).
+// data-ready through libgpiod, on the Boost.Asio event loop) or, with --sim, through the same
+// driver and acquisition code against the register-level emulator: on simulated time (as fast
+// as the host computes), or with --realtime in real time through the event loop a rig runs
+// (docs/acquisition.md). On the event loop SIGINT / SIGTERM end the recording cleanly.
 
 #include <algorithm>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -14,6 +17,7 @@
 
 #include "acquisition/mounting.hpp"
 #include "acquisition/recorder.hpp"
+#include "acquisition/sim_realtime.hpp"
 #include "acquisition/sim_rig.hpp"
 #include "core/rig_config.hpp"
 #include "daemon/cli/command.hpp"
@@ -35,6 +39,7 @@ struct RecordArgs {
   std::string out_path;
   double duration_s = 10.0;
   bool sim = false;
+  bool realtime = false;
   bool force = false;
   bool json = false;
   std::uint64_t seed = 1;
@@ -84,6 +89,7 @@ void print_summary(const RecordArgs& a, const acq::RecordSummary& s, const std::
     j["samples_lost"] = s.timing.samples_lost;
     j["edges_rejected"] = s.timing.edges_rejected;
     j["log_dropped"] = s.stream.log_dropped;
+    j["interrupted"] = s.interrupted;
     if (!extra_json.empty()) j["sim"] = nlohmann::json::parse(extra_json);
     std::cout << j.dump(2) << "\n";
     return;
@@ -99,12 +105,59 @@ void print_summary(const RecordArgs& a, const acq::RecordSummary& s, const std::
               static_cast<unsigned long long>(s.stream.log_dropped));
 }
 
+/// Ends a recording stopped by a signal: the log is complete, so this is a success.
+void note_interrupted(const RecordArgs& a, const acq::RecordSummary& s) {
+  if (!s.interrupted) return;
+  std::fprintf(stderr,
+               "record: interrupted by %s after %.3f s of samples (%llu); %s is closed and complete\n",
+               s.signal == SIGTERM ? "SIGTERM" : "SIGINT", s.duration_s,
+               static_cast<unsigned long long>(s.samples), a.out_path.c_str());
+}
+
+/// `record --sim --realtime`: the emulated chip runs on CLOCK_MONOTONIC (a ticker thread) and
+/// is recorded through the event loop and the eventfd data-ready line, as a rig is.
+void run_record_realtime(const RecordArgs& a, const mpu::Settings& settings, const acq::MountingMap& mounting,
+                         const sim::ImuModelParams& params, const sim::Trajectory& trajectory,
+                         acq::RecordOptions& ro, Progress& progress) {
+  acq::RealtimeSimRigOptions rig_options;
+  rig_options.settings = settings;
+  rig_options.clock_ppm = a.sim_clock_ppm;
+  rig_options.data_ready.sigma_ns = static_cast<TimeNs>(a.sim_jitter_us * 1e3);
+  rig_options.data_ready.seed = a.seed;
+  rig_options.mounting = mounting;
+  rig_options.start_ns = monotonic_now_ns();
+  // The rig rests from power-on: trajectory time 0 is the emulator's start.
+  auto sensor =
+      std::make_shared<acq::TrajectorySensor>(params, a.seed, trajectory, rig_options.start_ns,
+                                              acq::chip_sample_period_s(settings, rig_options.clock_ppm));
+  auto rig =
+      take(acq::RealtimeSimRig::create(acq::TrajectorySensor::source(sensor), rig_options), "simulated rig");
+  const sim::DataReadyTiming& dt = rig_options.data_ready;
+  ro.stream_info = mpu::make_stream_info(settings, "sim");
+  ro.stream_info.name = "imu0";
+  nlohmann::json sim_meta = {{"seed", a.seed},
+                             {"clock_ppm", a.sim_clock_ppm},
+                             {"edge_latency_ns", dt.latency_ns},
+                             {"edge_jitter_ns", dt.sigma_ns},
+                             {"script", a.sim_motion},
+                             {"realtime", true}};
+  ro.metadata.emplace_back("sim", sim_meta.dump());
+  ro.loop = acq::RecordLoop::kEventLoop;
+  ro.stop_on_signals = true;
+  const auto summary = take(acq::record_imu_session(rig->acquisition(), rig->driver(), ro), "recording");
+  rig->stop_ticker();
+  progress.finish();
+  print_summary(a, summary, sim_meta.dump());
+  note_interrupted(a, summary);
+}
+
 void run_record(const RecordArgs& a) {
   if (!(a.duration_s > 0.0) || !std::isfinite(a.duration_s)) {
     throw CliExit{kExitUsage, "--duration must be a positive number of seconds"};
   }
   const RigConfig config = take(load_rig_config(a.config_path), "reading the rig configuration");
   const bool sim = a.sim || config.imu.bus == ImuBus::kSim;
+  if (a.realtime && !sim) throw CliExit{kExitUsage, "--realtime needs --sim (or imu.bus: sim)"};
   const acq::MountingMap mounting =
       take(acq::MountingMap::from_rotation(config.imu.R_rig_imu), "imu mounting in " + a.config_path);
   const mpu::Settings settings = settings_from(config.imu, a.config_path);
@@ -132,6 +185,10 @@ void run_record(const RecordArgs& a) {
       trajectory = take(sim::make_still(still, a.seed), "simulated rig");
     }
     sim::ImuModelParams params = sim::ImuModelParams::draw(a.seed);
+    if (a.realtime) {
+      run_record_realtime(a, settings, mounting, params, *trajectory, ro, progress);
+      return;
+    }
     acq::SimRigOptions rig_options;
     rig_options.settings = settings;
     rig_options.clock_ppm = a.sim_clock_ppm;
@@ -140,8 +197,9 @@ void run_record(const RecordArgs& a) {
     rig_options.mounting = mounting;
     rig_options.acquisition = ao;
     // The rig rests from power-on: trajectory time 0 is the emulator's start.
-    auto sensor = std::make_shared<acq::TrajectorySensor>(params, a.seed, *trajectory, rig_options.start_ns,
-                                                          1.0 / settings.sample_rate_hz());
+    auto sensor =
+        std::make_shared<acq::TrajectorySensor>(params, a.seed, *trajectory, rig_options.start_ns,
+                                                acq::chip_sample_period_s(settings, rig_options.clock_ppm));
     auto rig =
         take(acq::SimImuRig::create(acq::TrajectorySensor::source(sensor), rig_options), "simulated rig");
     const sim::DataReadyTiming& dt = rig_options.data_ready;
@@ -186,9 +244,12 @@ void run_record(const RecordArgs& a) {
   acq::ImuAcquisition acquisition(driver, line.get(), clock, mounting, ao);
   ro.stream_info = mpu::make_stream_info(settings, "mpu6000@" + bus->name());
   ro.stream_info.name = "imu0";
+  ro.loop = acq::RecordLoop::kEventLoop;
+  ro.stop_on_signals = true;
   const auto summary = take(acq::record_imu_session(acquisition, driver, ro), "recording");
   progress.finish();
   print_summary(a, summary, "");
+  note_interrupted(a, summary);
 }
 
 const CommandRegistrar kRegistrar(20, [](CLI::App& root) {
@@ -205,6 +266,10 @@ const CommandRegistrar kRegistrar(20, [](CLI::App& root) {
   cmd->add_flag("--sim", args->sim,
                 "Record the simulated rig (MPU-6000 register emulator, data-ready jitter) instead of "
                 "hardware; simulated time runs as fast as the host allows");
+  cmd->add_flag("--realtime", args->realtime,
+                "With --sim: run the emulated chip in real time (CLOCK_MONOTONIC) and record it through "
+                "the event loop a rig uses (data-ready edges on a file descriptor, a poll timer); takes "
+                "--duration seconds of wall-clock time. SIGINT/SIGTERM stop it with a complete log");
   cmd->add_option("--seed", args->seed, "Simulation: random seed (default 1)");
   cmd->add_option("--sim-clock-ppm", args->sim_clock_ppm,
                   "Simulation: the chip oscillator's error in ppm (default -15000, a 1.5 % slow chip)")
