@@ -114,40 +114,61 @@ void note_interrupted(const RecordArgs& a, const acq::RecordSummary& s) {
                static_cast<unsigned long long>(s.samples), a.out_path.c_str());
 }
 
+/// The parts of a simulated rig's options that come from the command line (SimRigOptions and
+/// RealtimeSimRigOptions share them).
+template <class RigOptions>
+void fill_sim_rig(RigOptions& o, const RecordArgs& a, const mpu::Settings& settings,
+                  const acq::MountingMap& mounting) {
+  o.settings = settings;
+  o.clock_ppm = a.sim_clock_ppm;
+  o.data_ready.sigma_ns = static_cast<TimeNs>(a.sim_jitter_us * 1e3);
+  o.data_ready.seed = a.seed;
+  o.mounting = mounting;
+}
+
+/// The sensor source of a simulated rig that rests from power-on: trajectory time 0 is the
+/// emulator's start.
+sim::SensorSource sim_source(const RecordArgs& a, const mpu::Settings& settings,
+                             const sim::ImuModelParams& params, const sim::Trajectory& trajectory,
+                             TimeNs start_ns) {
+  auto sensor = std::make_shared<acq::TrajectorySensor>(params, a.seed, trajectory, start_ns,
+                                                        acq::chip_sample_period_s(settings, a.sim_clock_ppm));
+  return acq::TrajectorySensor::source(std::move(sensor));
+}
+
+/// Stream description and "sim" metadata of a simulated recording; returns the metadata.
+std::string describe_sim_record(const RecordArgs& a, const mpu::Settings& settings,
+                                const sim::DataReadyTiming& dt, acq::RecordOptions& ro) {
+  ro.stream_info = mpu::make_stream_info(settings, "sim");
+  ro.stream_info.name = "imu0";
+  nlohmann::json meta = {{"seed", a.seed},
+                         {"clock_ppm", a.sim_clock_ppm},
+                         {"edge_latency_ns", dt.latency_ns},
+                         {"edge_jitter_ns", dt.sigma_ns},
+                         {"script", a.sim_motion}};
+  if (a.realtime) meta["realtime"] = true;
+  ro.metadata.emplace_back("sim", meta.dump());
+  return meta.dump();
+}
+
 /// `record --sim --realtime`: the emulated chip runs on CLOCK_MONOTONIC (a ticker thread) and
 /// is recorded through the event loop and the eventfd data-ready line, as a rig is.
 void run_record_realtime(const RecordArgs& a, const mpu::Settings& settings, const acq::MountingMap& mounting,
                          const sim::ImuModelParams& params, const sim::Trajectory& trajectory,
                          acq::RecordOptions& ro, Progress& progress) {
   acq::RealtimeSimRigOptions rig_options;
-  rig_options.settings = settings;
-  rig_options.clock_ppm = a.sim_clock_ppm;
-  rig_options.data_ready.sigma_ns = static_cast<TimeNs>(a.sim_jitter_us * 1e3);
-  rig_options.data_ready.seed = a.seed;
-  rig_options.mounting = mounting;
+  fill_sim_rig(rig_options, a, settings, mounting);
   rig_options.start_ns = monotonic_now_ns();
-  // The rig rests from power-on: trajectory time 0 is the emulator's start.
-  auto sensor =
-      std::make_shared<acq::TrajectorySensor>(params, a.seed, trajectory, rig_options.start_ns,
-                                              acq::chip_sample_period_s(settings, rig_options.clock_ppm));
-  auto rig =
-      take(acq::RealtimeSimRig::create(acq::TrajectorySensor::source(sensor), rig_options), "simulated rig");
-  const sim::DataReadyTiming& dt = rig_options.data_ready;
-  ro.stream_info = mpu::make_stream_info(settings, "sim");
-  ro.stream_info.name = "imu0";
-  nlohmann::json sim_meta = {{"seed", a.seed},
-                             {"clock_ppm", a.sim_clock_ppm},
-                             {"edge_latency_ns", dt.latency_ns},
-                             {"edge_jitter_ns", dt.sigma_ns},
-                             {"script", a.sim_motion},
-                             {"realtime", true}};
-  ro.metadata.emplace_back("sim", sim_meta.dump());
+  auto rig = take(acq::RealtimeSimRig::create(
+                      sim_source(a, settings, params, trajectory, rig_options.start_ns), rig_options),
+                  "simulated rig");
+  const std::string sim_meta = describe_sim_record(a, settings, rig_options.data_ready, ro);
   ro.loop = acq::RecordLoop::kEventLoop;
   ro.stop_on_signals = true;
   const auto summary = take(acq::record_imu_session(rig->acquisition(), rig->driver(), ro), "recording");
   rig->stop_ticker();
   progress.finish();
-  print_summary(a, summary, sim_meta.dump());
+  print_summary(a, summary, sim_meta);
   note_interrupted(a, summary);
 }
 
@@ -190,30 +211,15 @@ void run_record(const RecordArgs& a) {
       return;
     }
     acq::SimRigOptions rig_options;
-    rig_options.settings = settings;
-    rig_options.clock_ppm = a.sim_clock_ppm;
-    rig_options.data_ready.sigma_ns = static_cast<TimeNs>(a.sim_jitter_us * 1e3);
-    rig_options.data_ready.seed = a.seed;
-    rig_options.mounting = mounting;
+    fill_sim_rig(rig_options, a, settings, mounting);
     rig_options.acquisition = ao;
-    // The rig rests from power-on: trajectory time 0 is the emulator's start.
-    auto sensor =
-        std::make_shared<acq::TrajectorySensor>(params, a.seed, *trajectory, rig_options.start_ns,
-                                                acq::chip_sample_period_s(settings, rig_options.clock_ppm));
-    auto rig =
-        take(acq::SimImuRig::create(acq::TrajectorySensor::source(sensor), rig_options), "simulated rig");
-    const sim::DataReadyTiming& dt = rig_options.data_ready;
-    ro.stream_info = mpu::make_stream_info(settings, "sim");
-    ro.stream_info.name = "imu0";
-    nlohmann::json sim_meta = {{"seed", a.seed},
-                               {"clock_ppm", a.sim_clock_ppm},
-                               {"edge_latency_ns", dt.latency_ns},
-                               {"edge_jitter_ns", dt.sigma_ns},
-                               {"script", a.sim_motion}};
-    ro.metadata.emplace_back("sim", sim_meta.dump());
+    auto rig = take(acq::SimImuRig::create(sim_source(a, settings, params, *trajectory, rig_options.start_ns),
+                                           rig_options),
+                    "simulated rig");
+    const std::string sim_meta = describe_sim_record(a, settings, rig_options.data_ready, ro);
     const auto summary = take(acq::record_imu_session(rig->acquisition(), rig->driver(), ro), "recording");
     progress.finish();
-    print_summary(a, summary, sim_meta.dump());
+    print_summary(a, summary, sim_meta);
     return;
   }
 
