@@ -39,23 +39,17 @@
 #include "acquisition/sim_realtime.hpp"
 #include "acquisition/sim_rig.hpp"
 #include "drivers/mpu6000/output_settings.hpp"
+#include "tests/acquisition/emulator_accounting.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::acq {
 namespace {
 
 namespace mpu = drivers::mpu6000;
+using emutest::account;
+using emutest::Accounting;
+using emutest::wobble;
 using namespace std::chrono_literals;
-
-sim::SensorReading wobble(TimeNs t_ns) {
-  const double t = ns_to_s(t_ns), two_pi = 2.0 * std::numbers::pi;
-  sim::SensorReading r;
-  r.specific_force = {2.0 * std::sin(two_pi * 2.3 * t), 1.5 * std::cos(two_pi * 1.1 * t), 9.81};
-  r.angular_rate = {0.8 * std::sin(two_pi * 3.7 * t), 0.6 * std::cos(two_pi * 1.9 * t),
-                    0.5 * std::sin(two_pi * 4.3 * t + 0.2)};
-  r.temperature_c = 31.0;
-  return r;
-}
 
 mpu::Settings settings_at(double rate_hz) {
   mpu::OutputRequest req;
@@ -63,67 +57,6 @@ mpu::Settings settings_at(double rate_hz) {
   auto s = mpu::settings_for(req);
   EXPECT_TRUE(s.ok());
   return s.ok() ? *s : mpu::Settings{};
-}
-
-/// Delivered samples against the frames the chip wrote into its FIFO.
-struct Accounting {
-  std::size_t delivered = 0;
-  std::size_t produced = 0;          // frames written from the first delivered one on
-  std::size_t mismatched = 0;        // delivered samples that are no later frame written
-  std::size_t lost = 0;              // frames after the first delivered one that were skipped
-  std::size_t unflagged_losses = 0;  // skips without kImuFlagGapBefore on the next sample
-  std::size_t still_in_fifo = 0;
-  std::size_t gap_flags = 0;
-  double rms_time_error_ns = 0.0;  // after the first 0.5 s
-};
-
-Accounting account(const std::vector<ImuSample>& all, const sim::Mpu6000Emulator& emulator) {
-  Accounting r;
-  std::vector<const sim::TruthSample*> fifo;
-  for (const auto& t : emulator.truth()) {
-    if (t.to_fifo) fifo.push_back(&t);
-  }
-  auto same = [](const ImuSample& a, const sim::TruthSample& b) {
-    return a.accel == Eigen::Vector3d(b.accel[0], b.accel[1], b.accel[2]) &&
-           a.gyro == Eigen::Vector3d(b.gyro[0], b.gyro[1], b.gyro[2]) && a.temperature == b.temp;
-  };
-  // The first delivered sample: the first frame from which the next 16 delivered ones follow.
-  std::size_t j0 = 0;
-  auto run_matches = [&](std::size_t j) {
-    for (std::size_t i = 0; i < 16 && i < all.size(); ++i) {
-      if (j + i >= fifo.size() || !same(all[i], *fifo[j + i])) return false;
-    }
-    return true;
-  };
-  while (j0 < fifo.size() && !run_matches(j0)) ++j0;
-  EXPECT_LT(j0, fifo.size());
-  r.delivered = all.size();
-  r.produced = fifo.size() - std::min(j0, fifo.size());
-  r.still_in_fifo = emulator.fifo_bytes() / mpu::FIFO::kFrameBytes;
-  double sum2 = 0.0;
-  std::size_t n = 0;
-  std::size_t j = j0;  // the next frame expected
-  for (std::size_t i = 0; i < all.size(); ++i) {
-    if (all[i].flags & kImuFlagGapBefore) ++r.gap_flags;
-    std::size_t k = j;
-    while (k < fifo.size() && !same(all[i], *fifo[k])) ++k;
-    if (k == fifo.size()) {
-      ++r.mismatched;
-      continue;
-    }
-    if (k > j) {
-      r.lost += k - j;
-      if (!(all[i].flags & kImuFlagGapBefore)) ++r.unflagged_losses;
-    }
-    j = k + 1;
-    const sim::TruthSample& t = *fifo[k];
-    if (t.t_ns - fifo[j0]->t_ns < kNsPerSecond / 2) continue;
-    const double e = static_cast<double>(all[i].t_ns - t.t_ns);
-    sum2 += e * e;
-    ++n;
-  }
-  if (n > 0) r.rms_time_error_ns = std::sqrt(sum2 / static_cast<double>(n));
-  return r;
 }
 
 struct RealtimeRun {

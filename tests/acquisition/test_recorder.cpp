@@ -14,6 +14,7 @@
 
 #include "acquisition/session_log.hpp"
 #include "acquisition/sim_rig.hpp"
+#include "tests/acquisition/emulator_accounting.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::acq {
@@ -60,88 +61,28 @@ Recorded read_log(const std::string& path) {
   return r;
 }
 
-sim::SensorReading chirp_source(TimeNs t_ns) {
-  const double t = ns_to_s(t_ns);
-  const double two_pi = 2.0 * std::numbers::pi;
-  sim::SensorReading r;
-  r.specific_force = {3.0 * std::sin(two_pi * 3.1 * t), 2.5 * std::cos(two_pi * 1.7 * t),
-                      9.81 + std::sin(two_pi * 0.37 * t)};
-  r.angular_rate = {1.1 * std::sin(two_pi * 5.3 * t), 0.9 * std::cos(two_pi * 2.9 * t),
-                    0.7 * std::sin(two_pi * 7.7 * t + 0.3)};
-  r.temperature_c = 30.0 + 0.5 * std::sin(two_pi * 0.01 * t);
-  return r;
-}
-
-struct EndToEndTiming {
-  double rms_ns = 0.0;  // sample time error after the first 2 s
-  double max_ns = 0.0;
-  std::size_t delivered = 0;
-  std::size_t produced = 0;    // frames the chip wrote into the FIFO from the first delivered one on
-  std::size_t mismatched = 0;  // delivered samples that are not the next frame the chip wrote
-  std::size_t still_in_fifo = 0;
-  std::size_t gap_flags = 0;
-};
-
 /// Emulator + data-ready line + driver + acquisition loop at the settings `imucal record` uses
 /// (a FIFO read every max(1, rate / 1 kHz) edges, read interval twice that), chip 1.5 % slow.
-EndToEndTiming run_sim_rig(std::uint8_t dlpf_cfg, std::uint8_t smplrt_div, double seconds) {
+emutest::Accounting run_sim_rig(std::uint8_t dlpf_cfg, std::uint8_t smplrt_div, double seconds) {
   SimRigOptions o;
   o.settings.dlpf_cfg = dlpf_cfg;
   o.settings.smplrt_div = smplrt_div;
   const double per_read = std::max(1.0, std::round(o.settings.sample_rate_hz() / 1000.0));
   o.settings.read_interval_ns = static_cast<TimeNs>(2.0 * per_read * 1e9 / o.settings.sample_rate_hz());
   o.record_truth = true;
-  auto created = SimImuRig::create(chirp_source, o);
+  auto created = SimImuRig::create(emutest::wobble, o);
   EXPECT_TRUE(created.ok());
-  EndToEndTiming r;
-  if (!created.ok()) return r;
+  if (!created.ok()) return {};
   SimImuRig& rig = **created;
   std::vector<ImuSample> out, all;
   const TimeNs end = rig.emulator().now_ns() + s_to_ns(seconds);
   while (rig.emulator().now_ns() < end) {
     const auto st = rig.acquisition().step(out);
     EXPECT_TRUE(st.ok());
-    if (!st.ok()) return r;
+    if (!st.ok()) return {};
     all.insert(all.end(), out.begin(), out.end());
   }
-  std::vector<const sim::TruthSample*> fifo;
-  for (const auto& t : rig.emulator().truth()) {
-    if (t.to_fifo) fifo.push_back(&t);
-  }
-  auto same = [](const ImuSample& a, const sim::TruthSample& b) {
-    return a.accel == Eigen::Vector3d(b.accel[0], b.accel[1], b.accel[2]) &&
-           a.gyro == Eigen::Vector3d(b.gyro[0], b.gyro[1], b.gyro[2]) && a.temperature == b.temp;
-  };
-  // The first delivered sample: the first frame from which the next 16 delivered ones follow.
-  std::size_t j0 = 0;
-  auto run_matches = [&](std::size_t j) {
-    for (std::size_t i = 0; i < 16 && i < all.size(); ++i) {
-      if (j + i >= fifo.size() || !same(all[i], *fifo[j + i])) return false;
-    }
-    return true;
-  };
-  while (j0 < fifo.size() && !run_matches(j0)) ++j0;
-  EXPECT_LT(j0, fifo.size());
-  r.delivered = all.size();
-  r.produced = fifo.size() - j0;
-  r.still_in_fifo = rig.emulator().fifo_bytes() / drivers::mpu6000::FIFO::kFrameBytes;
-  double sum2 = 0.0;
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < all.size(); ++i) {
-    if (all[i].flags & kImuFlagGapBefore) ++r.gap_flags;
-    if (j0 + i >= fifo.size() || !same(all[i], *fifo[j0 + i])) {
-      ++r.mismatched;
-      continue;
-    }
-    const sim::TruthSample& t = *fifo[j0 + i];
-    if (t.t_ns - fifo[j0]->t_ns < 2 * kNsPerSecond) continue;
-    const double e = static_cast<double>(all[i].t_ns - t.t_ns);
-    sum2 += e * e;
-    r.max_ns = std::max(r.max_ns, std::abs(e));
-    ++n;
-  }
-  if (n > 0) r.rms_ns = std::sqrt(sum2 / static_cast<double>(n));
-  return r;
+  return emutest::account(all, rig.emulator(), 2 * kNsPerSecond);
 }
 
 // Sample times from the whole chain (the chip's own oscillator 1.5 % slow, 30 us RMS edge
@@ -154,11 +95,12 @@ TEST(SimRigTiming, SampleTimesMatchTheChipEndToEnd) {
   };
   for (const Case c : {Case{"1 kHz, FIFO read per edge", 1, 0}, Case{"8 kHz, FIFO read every 8 edges", 0, 0},
                        Case{"200 Hz, FIFO read per edge", 1, 4}}) {
-    const EndToEndTiming r = run_sim_rig(c.dlpf_cfg, c.smplrt_div, 10.0);
+    const emutest::Accounting r = run_sim_rig(c.dlpf_cfg, c.smplrt_div, 10.0);
     std::printf("  %s: rms %.2f us, max %.1f us, %zu samples delivered, %zu left in the FIFO\n", c.name,
-                r.rms_ns / 1e3, r.max_ns / 1e3, r.delivered, r.still_in_fifo);
-    EXPECT_LT(r.rms_ns, 5'000.0) << c.name;
-    EXPECT_LT(r.max_ns, 25'000.0) << c.name;
+                r.rms_time_error_ns / 1e3, r.max_time_error_ns / 1e3, r.delivered, r.still_in_fifo);
+    EXPECT_LT(r.rms_time_error_ns, 5'000.0) << c.name;
+    EXPECT_LT(r.max_time_error_ns, 25'000.0) << c.name;
+    EXPECT_EQ(r.lost, 0u) << c.name;
     EXPECT_GT(r.delivered, 1500u) << c.name;
     EXPECT_EQ(r.mismatched, 0u) << c.name;
     EXPECT_EQ(r.delivered + r.still_in_fifo, r.produced) << c.name;
