@@ -69,6 +69,10 @@ Result<std::optional<drivers::DataReadyEdge>> RealtimeDataReadyLine::wait(TimeNs
       return make_error(Errc::kIo, name() + ": waiting for an edge failed: " + std::strerror(errno));
     }
   }
+  if (catch_up_) {
+    catch_up_();
+    release(monotonic_now_ns());
+  }
   std::lock_guard<std::mutex> lock(mutex_);
   std::uint64_t one = 0;
   if (::read(fd_, &one, sizeof one) < 0) {
@@ -131,7 +135,13 @@ sim::EmulatorOptions emulator_options(const RealtimeSimRigOptions& o) {
 RealtimeSimRig::RealtimeSimRig(sim::SensorSource source, const RealtimeSimRigOptions& options,
                                std::unique_ptr<RealtimeDataReadyLine> line)
     : options_(options), emulator_(std::move(source), emulator_options(options)), line_(std::move(line)) {
-  if (line_) emulator_.set_interrupt_sink([line = line_.get()](TimeNs t_ns) { line->raise(t_ns); });
+  if (line_) {
+    emulator_.set_interrupt_sink([line = line_.get()](TimeNs t_ns) { line->raise(t_ns); });
+    line_->set_catch_up([this] {
+      std::lock_guard<std::mutex> lock(mutex_);
+      emulator_.advance_to(monotonic_now_ns());
+    });
+  }
   bus_ = std::make_unique<Bus>(*this);
   driver_ = std::make_unique<mpu::Mpu6000>(*bus_, options.settings);
   AcquisitionOptions ao = options.acquisition;

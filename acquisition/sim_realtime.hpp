@@ -16,6 +16,7 @@
 #include <atomic>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -51,6 +52,10 @@ class RealtimeDataReadyLine final : public drivers::DataReadyLine {
   /// Makes the scheduled edges with timestamps up to `now_ns` readable. Returns the timestamp
   /// of the next scheduled edge, or SimTimeSource::kNever.
   TimeNs release(TimeNs now_ns);
+  /// Called by wait() before it looks for edges, to bring the chip up to the present. A kernel
+  /// timestamps every edge when it happens, however late the reader is; the ticker thread that
+  /// plays the chip can be descheduled, so a reader catches the chip up itself.
+  void set_catch_up(std::function<void()> catch_up) { catch_up_ = std::move(catch_up); }
 
   [[nodiscard]] Result<std::optional<drivers::DataReadyEdge>> wait(TimeNs timeout_ns) override;
   int fd() const override { return fd_; }
@@ -68,6 +73,7 @@ class RealtimeDataReadyLine final : public drivers::DataReadyLine {
   std::normal_distribution<double> normal_{0.0, 1.0};
   std::deque<drivers::DataReadyEdge> scheduled_;  // not yet readable
   std::deque<drivers::DataReadyEdge> ready_;      // readable, counted in the eventfd
+  std::function<void()> catch_up_;
   TimeNs last_edge_t_ns_ = 0;
   std::uint64_t sequence_ = 0;
 };
