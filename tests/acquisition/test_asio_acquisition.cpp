@@ -40,6 +40,7 @@
 #include "acquisition/sim_rig.hpp"
 #include "drivers/mpu6000/output_settings.hpp"
 #include "tests/acquisition/emulator_accounting.hpp"
+#include "tests/acquisition/test_session_log_util.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::acq {
@@ -402,28 +403,6 @@ std::string write_config(const std::string& dir) {
   return path;
 }
 
-struct LogContents {
-  std::vector<ImuSample> samples;
-  std::map<std::string, std::string> metadata;
-  bool complete = false;
-};
-
-LogContents read_log(const std::string& path) {
-  LogContents r;
-  auto reader = SessionLogReader::open(path);
-  EXPECT_TRUE(reader.ok()) << (reader.ok() ? "" : reader.error().message);
-  if (!reader.ok()) return r;
-  auto id = (*reader)->find_imu_stream("imu0");
-  EXPECT_TRUE(id.ok());
-  if (!id.ok()) return r;
-  auto samples = (*reader)->read_imu(*id);
-  EXPECT_TRUE(samples.ok());
-  if (samples.ok()) r.samples = *samples;
-  r.metadata = (*reader)->metadata();
-  r.complete = (*reader)->health().complete;
-  return r;
-}
-
 void expect_increasing_times(const std::vector<ImuSample>& samples) {
   for (std::size_t i = 1; i < samples.size(); ++i) ASSERT_GT(samples[i].t_ns, samples[i - 1].t_ns) << i;
 }
@@ -437,7 +416,7 @@ TEST(RecordCliRealtime, RecordsThroughTheEventLoop) {
   ASSERT_EQ(res.exit_code, 0) << res.err;
   const auto summary = nlohmann::json::parse(res.out);
   EXPECT_FALSE(summary["interrupted"].get<bool>());
-  const LogContents rec = read_log(log);
+  const RecordedLog rec = read_recorded_log(log);
   EXPECT_TRUE(rec.complete);
   // 1 s of sample time from a chip 1.5 % slow (less what a host stall cost, which is counted).
   EXPECT_NEAR(static_cast<double>(rec.samples.size() + summary["samples_lost"].get<std::size_t>()), 985.0,
@@ -520,7 +499,7 @@ TEST(RecordCliRealtime, SigintEndsWithACompleteLog) {
 
   const auto summary = nlohmann::json::parse(test::read_file(out_path));
   EXPECT_TRUE(summary["interrupted"].get<bool>());
-  const LogContents rec = read_log(log);
+  const RecordedLog rec = read_recorded_log(log);
   EXPECT_TRUE(rec.complete);
   EXPECT_GT(rec.samples.size(), 0u);
   EXPECT_LT(rec.samples.size(), 29'000u);

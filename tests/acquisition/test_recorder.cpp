@@ -15,6 +15,7 @@
 #include "acquisition/session_log.hpp"
 #include "acquisition/sim_rig.hpp"
 #include "tests/acquisition/emulator_accounting.hpp"
+#include "tests/acquisition/test_session_log_util.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::acq {
@@ -35,30 +36,6 @@ std::string write_config(const std::string& dir, const std::string& name, const 
       << "  backend: file\n"
       << "  path: " << dir << "/calibration.bin\n";
   return path;
-}
-
-struct Recorded {
-  std::vector<ImuSample> samples;
-  std::map<std::string, std::string> metadata;
-  ImuStreamInfo info;
-  bool complete = false;
-};
-
-Recorded read_log(const std::string& path) {
-  Recorded r;
-  auto reader = SessionLogReader::open(path);
-  EXPECT_TRUE(reader.ok()) << (reader.ok() ? "" : reader.error().message);
-  if (!reader.ok()) return r;
-  auto id = (*reader)->find_imu_stream("imu0");
-  EXPECT_TRUE(id.ok());
-  if (!id.ok()) return r;
-  auto samples = (*reader)->read_imu(*id);
-  EXPECT_TRUE(samples.ok());
-  if (samples.ok()) r.samples = *samples;
-  r.metadata = (*reader)->metadata();
-  r.info = (*reader)->imu_streams().at(*id);
-  r.complete = (*reader)->health().complete;
-  return r;
 }
 
 /// Emulator + data-ready line + driver + acquisition loop at the settings `imucal record` uses
@@ -120,7 +97,7 @@ TEST(RecordCli, SimRecordsTimestampedRawSamples) {
   EXPECT_NEAR(summary["period_error_ppm"].get<double>(), 15'228.0, 300.0);  // 1/(1-0.015) - 1
   EXPECT_EQ(summary["gaps"].get<int>(), 0);
 
-  const auto rec = read_log(log);
+  const auto rec = read_recorded_log(log);
   EXPECT_TRUE(rec.complete);
   EXPECT_EQ(rec.info.units, ImuUnits::kRaw);
   EXPECT_EQ(rec.info.accel_full_scale_g, 4);
@@ -159,7 +136,7 @@ TEST(RecordCli, AxisPermutationMountingRemapsRawCountsExactly) {
             0);
   const auto res = test::run_cli({"record", "--config", rot_cfg, "-o", b, "--sim", "--duration", "0.5"});
   ASSERT_EQ(res.exit_code, 0) << res.err;
-  const auto ra = read_log(a), rb = read_log(b);
+  const auto ra = read_recorded_log(a), rb = read_recorded_log(b);
   ASSERT_EQ(ra.samples.size(), rb.samples.size());
   ASSERT_GT(ra.samples.size(), 400u);
   for (std::size_t i = 0; i < ra.samples.size(); ++i) {
@@ -189,7 +166,7 @@ TEST(RecordCli, GeneralMountingKeepsImuFrameAndRecordsRotation) {
             0);
   const auto res = test::run_cli({"record", "--config", rot_cfg, "-o", b, "--sim", "--duration", "0.3"});
   ASSERT_EQ(res.exit_code, 0) << res.err;
-  const auto ra = read_log(a), rb = read_log(b);
+  const auto ra = read_recorded_log(a), rb = read_recorded_log(b);
   ASSERT_EQ(ra.samples.size(), rb.samples.size());
   for (std::size_t i = 0; i < ra.samples.size(); ++i) ASSERT_EQ(ra.samples[i].accel, rb.samples[i].accel);
   const auto m = nlohmann::json::parse(rb.metadata.at("imu.mounting"));

@@ -5,6 +5,8 @@
 
 #include <cmath>
 #include <cstring>
+#include <map>
+#include <string>
 #include <vector>
 
 #include "acquisition/session_log.hpp"
@@ -80,6 +82,32 @@ inline void expect_same_samples(const std::vector<ImuSample>& got, const std::ve
         << got[i].temperature << " vs " << want[i].temperature;
     EXPECT_EQ(got[i].flags, want[i].flags);
   }
+}
+
+/// What a recording left in its log: the IMU stream "imu0", the metadata, the stream
+/// description and whether the log was closed complete.
+struct RecordedLog {
+  std::vector<ImuSample> samples;
+  std::map<std::string, std::string> metadata;
+  ImuStreamInfo info;
+  bool complete = false;
+};
+
+inline RecordedLog read_recorded_log(const std::string& path) {
+  RecordedLog r;
+  auto reader = SessionLogReader::open(path);
+  EXPECT_TRUE(reader.ok()) << (reader.ok() ? "" : reader.error().message);
+  if (!reader.ok()) return r;
+  auto id = (*reader)->find_imu_stream("imu0");
+  EXPECT_TRUE(id.ok());
+  if (!id.ok()) return r;
+  auto samples = (*reader)->read_imu(*id);
+  EXPECT_TRUE(samples.ok());
+  if (samples.ok()) r.samples = *samples;
+  r.metadata = (*reader)->metadata();
+  r.info = (*reader)->imu_streams().at(*id);
+  r.complete = (*reader)->health().complete;
+  return r;
 }
 
 }  // namespace imucal::acq

@@ -124,16 +124,22 @@ TEST(Timestamper, DisturbedLine) {
   }
 }
 
+/// 20 s at 1 kHz with two 200 ms host stalls (at 6 s and 13 s) that overflow the FIFO.
+SyntheticTimingOptions two_stalls(bool edge_sequence) {
+  SyntheticTimingOptions g;
+  g.duration_s = 20.0;
+  g.stall_at_s = {6.0, 13.0};
+  g.stall_ns = 200'000'000;
+  g.edge_sequence = edge_sequence;
+  return g;
+}
+
 // A host stall overflows the FIFO; the driver resets it and flags the next batch. The gap is
 // flagged on the first sample after it and the lost samples are counted, from the edge
 // sequence or, without one, from time.
 TEST(Timestamper, FifoOverflowFlagsGapAndCountsLostSamples) {
   for (const bool sequence : {true, false}) {
-    SyntheticTimingOptions g;
-    g.duration_s = 20.0;
-    g.stall_at_s = {6.0, 13.0};
-    g.stall_ns = 200'000'000;
-    g.edge_sequence = sequence;
+    const SyntheticTimingOptions g = two_stalls(sequence);
     const auto timing = generate_synthetic_timing(g);
     ASSERT_GT(timing.samples_lost, 300u);
     SampleTimestamper ts(options_for(g));
@@ -306,11 +312,7 @@ TEST(Timestamper, SampleKeptBackInTheFifo) {
 // times after the gap are as accurate as before.
 TEST(Timestamper, SampleKeptBackIsLostWithTheFifo) {
   for (const bool sequence : {true, false}) {
-    SyntheticTimingOptions g;
-    g.duration_s = 20.0;
-    g.stall_at_s = {6.0, 13.0};
-    g.stall_ns = 200'000'000;
-    g.edge_sequence = sequence;
+    const SyntheticTimingOptions g = two_stalls(sequence);
     const auto timing = generate_synthetic_timing(g);
     SyntheticTiming kept = keep_newest_back(timing, true);
     // The reset drops the kept-back sample: the first batch after it does not deliver it.
