@@ -179,7 +179,13 @@ void run(const SimCommon& o, const CLI::App* cmd, const std::string& kind, const
     msg << "\nsaturated samples: accel " << truth->recording.accel_saturated << ", gyro "
         << truth->recording.gyro_saturated;
   }
-  if (truth->recording.dropped_samples > 0) msg << "\ndropped samples: " << truth->recording.dropped_samples;
+  if (truth->recording.dropped_samples > 0) {
+    msg << "\ndropped samples: " << truth->recording.dropped_samples;
+    if (o.drops.empty()) {
+      msg << " (no host stall was asked for: the bus cannot carry this rate; docs/mpu6000.md gives the FIFO "
+             "budget per bus)";
+    }
+  }
   std::cout << msg.str() << "\n";
 }
 

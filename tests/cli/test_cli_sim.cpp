@@ -95,5 +95,20 @@ TEST(CliSim, BadOptionsAreUsageErrors) {
   EXPECT_FALSE(fs::exists(log));
 }
 
+// 8 kHz does not fit through I2C at 400 kHz: the session is written, the losses are flagged
+// and counted, and the summary says why.
+TEST(CliSim, ARateTheBusCannotCarryIsRecordedWithItsLossesExplained) {
+  const fs::path dir = test::scratch_dir();
+  const std::string log = (dir / "i2c.imulog").string();
+  auto r = test::run_cli(
+      {"sim", "still", "--seed", "2", "--duration", "2", "--imu-rate", "8000", "--bus", "i2c", "-o", log});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("dropped samples"));
+  EXPECT_THAT(r.out, HasSubstr("the bus cannot carry this rate"));
+  const YAML::Node truth = YAML::LoadFile((dir / "i2c.truth.yaml").string());
+  EXPECT_GT(truth["recording"]["dropped_samples"].as<int>(), 8000);
+  EXPECT_EQ(truth["recording"]["samples"].as<std::int64_t>(), sample_count(log));
+}
+
 }  // namespace
 }  // namespace imucal
