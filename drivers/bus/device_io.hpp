@@ -23,6 +23,33 @@ class DeviceIo {
 /// The kernel's open(2), close(2) and ioctl(2).
 std::unique_ptr<DeviceIo> system_device_io();
 
+/// A device node opened through a DeviceIo. It owns the descriptor: close() and the destructor
+/// close it, and so does open() before opening again.
+class DeviceFile {
+ public:
+  /// A `path` without a directory is a node in /dev. A null `io` means system_device_io().
+  DeviceFile(std::string path, std::unique_ptr<DeviceIo> io);
+  ~DeviceFile() { close(); }
+  DeviceFile(const DeviceFile&) = delete;
+  DeviceFile& operator=(const DeviceFile&) = delete;
+
+  /// Opens the node read-write: 0, or -errno.
+  int open();
+  void close();
+  bool is_open() const { return fd_ >= 0; }
+  /// ioctl(2) on the open node: its result, or -errno (-EBADF when closed).
+  int ioctl(unsigned long request, void* arg);
+
+  const std::string& path() const { return path_; }
+  /// The node's file name: "spidev0.0" for /dev/spidev0.0.
+  std::string node_name() const;
+
+ private:
+  std::string path_;
+  std::unique_ptr<DeviceIo> io_;
+  int fd_ = -1;
+};
+
 /// `value` as "0x" and `digits` upper-case hex digits (at least): format_hex(0x68, 2) is "0x68".
 std::string format_hex(unsigned long value, int digits);
 

@@ -60,43 +60,32 @@ Result<std::unique_ptr<I2cDevBus>> I2cDevBus::open(const std::string& device, co
                           " is not an MPU-6000 address: it answers at 0x68 (AD0 low) or 0x69 (AD0 high); "
                           "check imu.i2c_address in the rig configuration");
   }
-  std::string path = device.front() == '/' ? device : "/dev/" + device;
-  if (!io) io = system_device_io();
-  std::unique_ptr<I2cDevBus> bus(new I2cDevBus(std::move(path), options, std::move(io)));
+  std::unique_ptr<I2cDevBus> bus(new I2cDevBus(device, options, std::move(io)));
   IMUCAL_TRY(bus->open_and_check());
   return bus;
 }
 
 I2cDevBus::I2cDevBus(std::string path, const I2cDevOptions& options, std::unique_ptr<DeviceIo> io)
-    : path_(std::move(path)), options_(options), io_(std::move(io)) {
-  auto slash = path_.find_last_of('/');
-  name_ =
-      (slash == std::string::npos ? path_ : path_.substr(slash + 1)) + "@" + format_hex(options_.address, 2);
-}
+    : file_(std::move(path), std::move(io)),
+      name_(file_.node_name() + "@" + format_hex(options.address, 2)),
+      options_(options) {}
 
-I2cDevBus::~I2cDevBus() { close_fd(); }
-
-void I2cDevBus::close_fd() {
-  if (fd_ >= 0) io_->close(fd_);
-  fd_ = -1;
-}
+I2cDevBus::~I2cDevBus() = default;
 
 Status I2cDevBus::open_and_check() {
-  int fd = io_->open(path_);
-  if (fd < 0) {
+  if (int err = file_.open(); err < 0) {
     ++counters_.open_errors;
-    return open_error(path_, -fd);
+    return open_error(file_.path(), -err);
   }
-  fd_ = fd;
   auto fail = [&](Errc code, std::string msg) -> Error {
     ++counters_.open_errors;
-    close_fd();
+    file_.close();
     return make_error(code, std::move(msg));
   };
 
   unsigned long funcs = 0;
-  if (int r = io_->ioctl(fd_, I2C_FUNCS, &funcs); r < 0) {
-    return fail(Errc::kDevice, path_ + ": I2C_FUNCS failed: " + std::strerror(-r) +
+  if (int r = file_.ioctl(I2C_FUNCS, &funcs); r < 0) {
+    return fail(Errc::kDevice, file_.path() + ": I2C_FUNCS failed: " + std::strerror(-r) +
                                    ". This node is not an i2c-dev adapter; check the rig configuration key "
                                    "imu.device.");
   }
@@ -107,7 +96,7 @@ Status I2cDevBus::open_and_check() {
     case I2cTransferMode::kAuto:
       if (!can_rdwr && !can_smbus) {
         return fail(Errc::kUnsupported,
-                    path_ +
+                    file_.path() +
                         ": the adapter supports neither plain I2C transfers (I2C_FUNC_I2C) nor SMBus "
                         "I2C-block reads with byte writes (functionality " +
                         format_hex(funcs, 8) + "); the MPU-6000 needs one of them. Use another I2C bus.");
@@ -116,7 +105,7 @@ Status I2cDevBus::open_and_check() {
       break;
     case I2cTransferMode::kI2cRdwr:
       if (!can_rdwr) {
-        return fail(Errc::kUnsupported, path_ +
+        return fail(Errc::kUnsupported, file_.path() +
                                             ": the adapter cannot do plain I2C transfers (I2C_RDWR; "
                                             "functionality " +
                                             format_hex(funcs, 8) +
@@ -126,7 +115,7 @@ Status I2cDevBus::open_and_check() {
       break;
     case I2cTransferMode::kSmbus:
       if (!can_smbus) {
-        return fail(Errc::kUnsupported, path_ +
+        return fail(Errc::kUnsupported, file_.path() +
                                             ": the adapter lacks SMBus I2C-block reads or byte writes "
                                             "(functionality " +
                                             format_hex(funcs, 8) +
@@ -138,11 +127,10 @@ Status I2cDevBus::open_and_check() {
 
   // I2C_SLAVE (not _FORCE) fails with EBUSY when a kernel driver owns the address, which would
   // otherwise fight us for the chip.
-  if (int r =
-          io_->ioctl(fd_, I2C_SLAVE, reinterpret_cast<void*>(static_cast<unsigned long>(options_.address)));
+  if (int r = file_.ioctl(I2C_SLAVE, reinterpret_cast<void*>(static_cast<unsigned long>(options_.address)));
       r < 0) {
     std::string msg =
-        path_ + ": cannot use address " + format_hex(options_.address, 2) + ": " + std::strerror(-r);
+        file_.path() + ": cannot use address " + format_hex(options_.address, 2) + ": " + std::strerror(-r);
     if (-r == EBUSY) {
       msg +=
           ". A kernel driver (likely inv-mpu6050) is bound to it; unbind it (see "
@@ -154,7 +142,7 @@ Status I2cDevBus::open_and_check() {
 }
 
 Status I2cDevBus::reopen() {
-  close_fd();
+  file_.close();
   return open_and_check();
 }
 
@@ -171,7 +159,7 @@ Error I2cDevBus::transfer_error(const char* what, std::uint8_t reg, int r) {
 
 Status I2cDevBus::read(std::uint8_t reg, std::span<std::uint8_t> out) {
   if (out.empty()) return {};
-  if (fd_ < 0) {
+  if (!file_.is_open()) {
     ++counters_.transfer_errors;
     return make_error(Errc::kIo, name_ + ": device is closed after a failed reopen; reopen() it");
   }
@@ -196,7 +184,7 @@ Status I2cDevBus::read_rdwr(std::uint8_t reg, std::span<std::uint8_t> out) {
   msgs[1].buf = out.data();
   i2c_rdwr_ioctl_data data{msgs, 2};
   ++counters_.transfers;
-  int r = io_->ioctl(fd_, I2C_RDWR, &data);
+  int r = file_.ioctl(I2C_RDWR, &data);
   if (r < 0) return transfer_error("I2C_RDWR read", reg, r);
   if (r != 2) {
     ++counters_.short_transfers;
@@ -225,7 +213,7 @@ Status I2cDevBus::read_smbus(std::uint8_t reg, std::span<std::uint8_t> out) {
     args.size = I2C_SMBUS_I2C_BLOCK_DATA;
     args.data = &block;
     ++counters_.transfers;
-    int r = io_->ioctl(fd_, I2C_SMBUS, &args);
+    int r = file_.ioctl(I2C_SMBUS, &args);
     if (r < 0) return transfer_error("SMBus I2C-block read", chunk_reg, r);
     if (block.block[0] != n) {
       ++counters_.short_transfers;
@@ -240,7 +228,7 @@ Status I2cDevBus::read_smbus(std::uint8_t reg, std::span<std::uint8_t> out) {
 }
 
 Status I2cDevBus::write(std::uint8_t reg, std::uint8_t value) {
-  if (fd_ < 0) {
+  if (!file_.is_open()) {
     ++counters_.transfer_errors;
     return make_error(Errc::kIo, name_ + ": device is closed after a failed reopen; reopen() it");
   }
@@ -253,7 +241,7 @@ Status I2cDevBus::write(std::uint8_t reg, std::uint8_t value) {
     msg.len = 2;
     msg.buf = buf;
     i2c_rdwr_ioctl_data data{&msg, 1};
-    int r = io_->ioctl(fd_, I2C_RDWR, &data);
+    int r = file_.ioctl(I2C_RDWR, &data);
     if (r < 0) return transfer_error("I2C_RDWR write", reg, r);
     if (r != 1) {
       ++counters_.short_transfers;
@@ -268,7 +256,7 @@ Status I2cDevBus::write(std::uint8_t reg, std::uint8_t value) {
   args.command = reg;
   args.size = I2C_SMBUS_BYTE_DATA;
   args.data = &byte;
-  int r = io_->ioctl(fd_, I2C_SMBUS, &args);
+  int r = file_.ioctl(I2C_SMBUS, &args);
   if (r < 0) return transfer_error("SMBus byte write", reg, r);
   return {};
 }

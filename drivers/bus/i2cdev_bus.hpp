@@ -69,7 +69,7 @@ class I2cDevBus final : public RegisterBus {
   unsigned long functionality() const { return funcs_; }
 
   std::string name() const override { return name_; }
-  const std::string& path() const { return path_; }
+  const std::string& path() const { return file_.path(); }
   const BusCounters& counters() const override { return counters_; }
 
  private:
@@ -78,13 +78,10 @@ class I2cDevBus final : public RegisterBus {
   [[nodiscard]] Status read_rdwr(std::uint8_t reg, std::span<std::uint8_t> out);
   [[nodiscard]] Status read_smbus(std::uint8_t reg, std::span<std::uint8_t> out);
   [[nodiscard]] Error transfer_error(const char* what, std::uint8_t reg, int r);
-  void close_fd();
 
-  std::string path_;
+  DeviceFile file_;
   std::string name_;
   I2cDevOptions options_;
-  std::unique_ptr<DeviceIo> io_;
-  int fd_ = -1;
   unsigned long funcs_ = 0;
   I2cTransferMode mode_ = I2cTransferMode::kAuto;
   BusCounters counters_;

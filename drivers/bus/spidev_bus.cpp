@@ -51,38 +51,29 @@ Result<std::unique_ptr<SpidevBus>> SpidevBus::open(const std::string& device, co
                           ", max_speed_hz=" + std::to_string(options.max_speed_hz) +
                           " (need 1 kHz <= config <= max; the MPU-6000 allows 1 MHz and 20 MHz)");
   }
-  std::string path = device.front() == '/' ? device : "/dev/" + device;
-  if (!io) io = system_device_io();
-  std::unique_ptr<SpidevBus> bus(new SpidevBus(std::move(path), options, std::move(io)));
+  std::unique_ptr<SpidevBus> bus(new SpidevBus(device, options, std::move(io)));
   IMUCAL_TRY(bus->open_and_configure());
   return bus;
 }
 
 SpidevBus::SpidevBus(std::string path, const SpidevOptions& options, std::unique_ptr<DeviceIo> io)
-    : path_(std::move(path)), options_(options), io_(std::move(io)), speed_hz_(options.config_speed_hz) {
-  auto slash = path_.find_last_of('/');
-  name_ = slash == std::string::npos ? path_ : path_.substr(slash + 1);
-}
+    : file_(std::move(path), std::move(io)),
+      name_(file_.node_name()),
+      options_(options),
+      speed_hz_(options.config_speed_hz) {}
 
-SpidevBus::~SpidevBus() { close_fd(); }
-
-void SpidevBus::close_fd() {
-  if (fd_ >= 0) io_->close(fd_);
-  fd_ = -1;
-}
+SpidevBus::~SpidevBus() = default;
 
 Status SpidevBus::open_and_configure() {
-  int fd = io_->open(path_);
-  if (fd < 0) {
+  if (int err = file_.open(); err < 0) {
     ++counters_.open_errors;
-    return open_error(path_, -fd);
+    return open_error(file_.path(), -err);
   }
-  fd_ = fd;
 
   auto config_error = [&](const char* what, int r) -> Error {
     ++counters_.open_errors;
-    close_fd();
-    std::string msg = path_ + ": " + what + " failed: " + std::strerror(-r);
+    file_.close();
+    std::string msg = file_.path() + ": " + what + " failed: " + std::strerror(-r);
     if (-r == ENOTTY || -r == EINVAL) {
       msg +=
           ". This node is not a spidev device, or its controller does not support SPI mode 3 "
@@ -93,30 +84,30 @@ Status SpidevBus::open_and_configure() {
 
   // MPU-6000: CPOL=1, CPHA=1 (mode 3), MSB first, 8-bit words.
   std::uint8_t mode = SPI_MODE_3;
-  if (int r = io_->ioctl(fd_, SPI_IOC_WR_MODE, &mode); r < 0) return config_error("SPI_IOC_WR_MODE", r);
+  if (int r = file_.ioctl(SPI_IOC_WR_MODE, &mode); r < 0) return config_error("SPI_IOC_WR_MODE", r);
   std::uint8_t mode_back = 0;
-  if (int r = io_->ioctl(fd_, SPI_IOC_RD_MODE, &mode_back); r < 0) return config_error("SPI_IOC_RD_MODE", r);
+  if (int r = file_.ioctl(SPI_IOC_RD_MODE, &mode_back); r < 0) return config_error("SPI_IOC_RD_MODE", r);
   if ((mode_back & (SPI_CPHA | SPI_CPOL)) != SPI_MODE_3) {
     ++counters_.open_errors;
-    close_fd();
-    return make_error(Errc::kDevice, path_ + ": the controller kept SPI mode " +
+    file_.close();
+    return make_error(Errc::kDevice, file_.path() + ": the controller kept SPI mode " +
                                          std::to_string(mode_back & 3) +
                                          " instead of mode 3; the MPU-6000 needs mode 3");
   }
   std::uint8_t bits = 8;
-  if (int r = io_->ioctl(fd_, SPI_IOC_WR_BITS_PER_WORD, &bits); r < 0) {
+  if (int r = file_.ioctl(SPI_IOC_WR_BITS_PER_WORD, &bits); r < 0) {
     return config_error("SPI_IOC_WR_BITS_PER_WORD", r);
   }
   // The device default clock; every transfer still names its own.
   std::uint32_t max_hz = options_.max_speed_hz;
-  if (int r = io_->ioctl(fd_, SPI_IOC_WR_MAX_SPEED_HZ, &max_hz); r < 0) {
+  if (int r = file_.ioctl(SPI_IOC_WR_MAX_SPEED_HZ, &max_hz); r < 0) {
     return config_error("SPI_IOC_WR_MAX_SPEED_HZ", r);
   }
   return {};
 }
 
 Status SpidevBus::reopen() {
-  close_fd();
+  file_.close();
   return open_and_configure();
 }
 
@@ -145,7 +136,7 @@ Status SpidevBus::write(std::uint8_t reg, std::uint8_t value) {
 }
 
 Status SpidevBus::transfer(std::uint8_t reg, std::size_t len, std::uint32_t speed_hz) {
-  if (fd_ < 0) {
+  if (!file_.is_open()) {
     ++counters_.transfer_errors;
     return make_error(Errc::kIo, name_ + ": device is closed after a failed reopen; reopen() it");
   }
@@ -157,7 +148,7 @@ Status SpidevBus::transfer(std::uint8_t reg, std::size_t len, std::uint32_t spee
   xfer.speed_hz = speed_hz;
   xfer.bits_per_word = 8;
   ++counters_.transfers;
-  int r = io_->ioctl(fd_, SPI_IOC_MESSAGE(1), &xfer);
+  int r = file_.ioctl(SPI_IOC_MESSAGE(1), &xfer);
   if (r < 0) {
     ++counters_.transfer_errors;
     std::string msg = name_ + ": SPI transfer of " + std::to_string(len) + " bytes at register " +

@@ -59,20 +59,17 @@ class SpidevBus final : public RegisterBus {
   [[nodiscard]] Status reopen();
 
   std::string name() const override { return name_; }
-  const std::string& path() const { return path_; }
+  const std::string& path() const { return file_.path(); }
   const BusCounters& counters() const override { return counters_; }
 
  private:
   SpidevBus(std::string path, const SpidevOptions& options, std::unique_ptr<DeviceIo> io);
   [[nodiscard]] Status open_and_configure();
   [[nodiscard]] Status transfer(std::uint8_t reg, std::size_t len, std::uint32_t speed_hz);
-  void close_fd();
 
-  std::string path_;
+  DeviceFile file_;
   std::string name_;
   SpidevOptions options_;
-  std::unique_ptr<DeviceIo> io_;
-  int fd_ = -1;
   std::uint32_t speed_hz_ = 0;
   BusCounters counters_;
   std::vector<std::uint8_t> tx_;
