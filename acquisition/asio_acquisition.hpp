@@ -25,7 +25,7 @@
 #include <span>
 #include <vector>
 
-#include "acquisition/recorder.hpp"
+#include "acquisition/imu_acquisition.hpp"
 #include "core/imu.hpp"
 #include "core/result.hpp"
 #include "core/time.hpp"

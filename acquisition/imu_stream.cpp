@@ -16,7 +16,7 @@ std::shared_ptr<ImuConsumer> ImuStream::add_consumer(std::string name, std::size
   return consumer;
 }
 
-Status ImuStream::start_log(SessionLogWriter& writer, int stream_id) {
+Status ImuStream::start_log(log::SessionLogWriter& writer, int stream_id) {
   if (thread_.joinable()) return make_error(Errc::kInternal, "imu stream: the log writer is already running");
   writer_ = &writer;
   stream_id_ = stream_id;
@@ -43,7 +43,7 @@ void ImuStream::publish(std::span<const ImuSample> samples) {
   }
 }
 
-void ImuStream::post_event(Event event) {
+void ImuStream::post_event(log::Event event) {
   if (writer_ == nullptr || !event_ring_.try_push(std::move(event))) {
     events_dropped_.fetch_add(1, std::memory_order_relaxed);
   }
@@ -62,7 +62,7 @@ void ImuStream::writer_loop() {
     // Read the stop flag before draining, so that everything published before stop() is written.
     const bool stopping = stop_requested_.load(std::memory_order_acquire);
     bool did_work = false;
-    Event event;
+    log::Event event;
     while (event_ring_.try_pop(event)) {
       did_work = true;
       if (log_failed()) continue;

@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "acquisition/ring_buffer.hpp"
-#include "acquisition/session_log.hpp"
+#include "log/session_log.hpp"
 #include "core/imu.hpp"
 #include "core/result.hpp"
 #include "core/time.hpp"
@@ -90,12 +90,12 @@ class ImuStream {
 
   /// Starts the writer thread, which appends to `writer` under `stream_id`. The writer is
   /// borrowed and must not be used by anyone else until stop() returns.
-  [[nodiscard]] Status start_log(SessionLogWriter& writer, int stream_id);
+  [[nodiscard]] Status start_log(log::SessionLogWriter& writer, int stream_id);
 
   /// Producer: hands samples to every consumer and to the log. Never blocks.
   void publish(std::span<const ImuSample> samples);
   /// Producer: queues an event for the log (a fault, a gap). Never blocks; counted when full.
-  void post_event(Event event);
+  void post_event(log::Event event);
 
   /// True once the writer thread failed to write; it stops writing then (see stop()).
   bool log_failed() const { return log_failed_.load(std::memory_order_acquire); }
@@ -112,8 +112,8 @@ class ImuStream {
   ImuStreamOptions options_;
   std::vector<std::shared_ptr<ImuConsumer>> consumers_;
   SpscRingBuffer<ImuSample> log_ring_;
-  SpscRingBuffer<Event> event_ring_;
-  SessionLogWriter* writer_ = nullptr;
+  SpscRingBuffer<log::Event> event_ring_;
+  log::SessionLogWriter* writer_ = nullptr;
   int stream_id_ = -1;
   std::thread thread_;
   std::atomic<bool> stop_requested_{false};

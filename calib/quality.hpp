@@ -5,7 +5,7 @@
 #include <Eigen/Core>
 #include <span>
 
-#include "calib/imu_model.hpp"
+#include "core/imu_model.hpp"
 
 namespace imucal::calib {
 

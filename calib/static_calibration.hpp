@@ -15,7 +15,7 @@
 #include <string>
 #include <vector>
 
-#include "calib/imu_model.hpp"
+#include "core/imu_model.hpp"
 #include "calib/quality.hpp"
 #include "calib/static_detector.hpp"
 #include "core/imu.hpp"

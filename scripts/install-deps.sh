@@ -9,7 +9,7 @@ build_pkgs=(
   libeigen3-dev libceres-dev
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev libopencv-calib3d-dev
   libboost-dev libgpiod-dev libsqlite3-dev sqlite3 libyaml-cpp-dev nlohmann-json3-dev
-  libspdlog-dev libcli11-dev libsystemd-dev
+  libspdlog-dev libcli11-dev
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 test_pkgs=(

@@ -1,21 +1,44 @@
 #!/usr/bin/env bash
-# Fails when a module includes a header from a layer it must not depend on
-# (see docs/architecture.md): calib sees neither drivers nor acquisition; drivers and core
-# never see calib, acquisition or daemon; acquisition never sees calib.
+# Fails when a module includes a header of a module it must not depend on. The rules are the
+# table in docs/architecture.md:
+#   core          nothing of ours
+#   drivers       core; real backends never include a fake (drivers/*/fake/)
+#   log           core
+#   acquisition   core, drivers (no fakes), log
+#   calib         core
+#   sim           everything below app (it drives the fakes through drivers and acquisition)
+#   app           core, drivers (no fakes), log, acquisition, calib: it is on the rig's path
+#   daemon        everything
 set -u
 root=${1:?usage: check_layering.sh SOURCE_DIR}
 cd "$root" || exit 2
 bad=0
-check() {  # check DIR PATTERN
-  local hits
-  hits=$(grep -rnE "#include [<\"]($2)/" "$1" --include='*.hpp' --include='*.cpp' 2>/dev/null)
+# check WHAT PATTERN [FILES...]: none of FILES (default: the folder WHAT) may include a header
+# whose path matches PATTERN.
+check() {
+  local what=$1 pattern=$2 hits
+  shift 2
+  if [ $# -eq 0 ]; then
+    [ -d "$what" ] || return 0
+    set -- "$what"
+  fi
+  hits=$(grep -rnE "#include [<\"]($pattern)" "$@" --include='*.hpp' --include='*.cpp' 2>/dev/null)
   if [ -n "$hits" ]; then
-    echo "layering violation: $1 must not include $2:"; echo "$hits"; bad=1
+    echo "layering violation: $what must not include $pattern:"
+    echo "$hits"
+    bad=1
   fi
 }
-check calib 'drivers|acquisition|daemon'
-check drivers 'calib|acquisition|daemon'
-check core 'calib|acquisition|daemon|drivers'
-check acquisition 'calib|daemon'
+others='app/|daemon/'
+check core "drivers/|log/|acquisition/|calib/|sim/|$others"
+check log "drivers/|acquisition/|calib/|sim/|$others"
+check calib "drivers/|acquisition/|log/|sim/|$others"
+check drivers "log/|acquisition/|calib/|sim/|$others"
+real_drivers=$(find drivers -name '*.?pp' -not -path '*/fake/*')
+# shellcheck disable=SC2086
+check "drivers (real backends)" "drivers/[a-z0-9_]+/fake/" $real_drivers
+check acquisition "calib/|sim/|drivers/[a-z0-9_]+/fake/|$others"
+check sim "$others"
+check app "sim/|daemon/|drivers/[a-z0-9_]+/fake/"
 [ "$bad" = 0 ] && echo "layering OK"
 exit $bad

@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "acquisition/session_log.hpp"
+#include "log/session_log.hpp"
 #include "calib/allan.hpp"
 #include "calib/static_detector.hpp"
 #include "daemon/cli/command.hpp"
@@ -73,7 +73,7 @@ nlohmann::json sensor_json(const calib::AllanCurve& curve, const std::vector<cal
 }
 
 void run(const AllanCliOptions& o) {
-  auto log = acq::SessionLogReader::open(o.log_path);
+  auto log = log::SessionLogReader::open(o.log_path);
   if (!log.ok()) fail(log.error(), "cannot read " + o.log_path);
   const auto& reader = **log;
   if (reader.health().damaged && !o.allow_damaged) {

@@ -14,7 +14,7 @@
 #include <sstream>
 #include <string>
 
-#include "acquisition/session_log.hpp"
+#include "log/session_log.hpp"
 #include "calib/gravity.hpp"
 #include "calib/static_calibration.hpp"
 #include "daemon/cli/calibrate_group.hpp"
@@ -74,7 +74,7 @@ nlohmann::json figures_json(const calib::ErrorFigures& f) {
 }
 
 /// One triad in the JSON convention corrected = misalignment * diag(scale) * (raw - bias).
-nlohmann::json triad_json(const calib::TedaldiTriad& t, const calib::TriadSigma& s) {
+nlohmann::json triad_json(const TedaldiTriad& t, const calib::TriadSigma& s) {
   return {
       {"misalignment", mat_json(t.T)},
       {"scale", vec_json(t.scale)},
@@ -82,7 +82,7 @@ nlohmann::json triad_json(const calib::TedaldiTriad& t, const calib::TriadSigma&
       {"sigma", {{"misalignment", mat_json(s.T)}, {"scale", vec_json(s.scale)}, {"bias", vec_json(s.bias)}}}};
 }
 
-nlohmann::json result_json(const calib::StaticCalibrationResult& r, const acq::SessionLogReader& log,
+nlohmann::json result_json(const calib::StaticCalibrationResult& r, const log::SessionLogReader& log,
                            const ImuStreamInfo& info, const std::string& gravity_source) {
   using nlohmann::json;
   json j;
@@ -96,7 +96,7 @@ nlohmann::json result_json(const calib::StaticCalibrationResult& r, const acq::S
                                   {"alpha_zx", -r.model.accel.T(1, 2)}};
   j["accel"]["residual_rms_m2ps4"] = r.accel_residual_rms;
   j["gyro"] = triad_json(r.model.gyro, r.gyro_sigma);
-  const auto g = calib::gyro_angles(r.model.gyro.T);
+  const auto g = gyro_angles(r.model.gyro.T);
   j["gyro"]["tedaldi_angles"] = {{"gamma_yz", g[0]}, {"gamma_zy", g[1]}, {"gamma_xz", g[2]},
                                  {"gamma_zx", g[3]}, {"gamma_xy", g[4]}, {"gamma_yx", g[5]}};
   j["gyro"]["residual_rms"] = r.gyro_residual_rms;
@@ -149,7 +149,7 @@ void emit_vector(YAML::Emitter& y, const std::string& key, const Eigen::Vector3d
   y << YAML::Key << key << YAML::Value << YAML::Flow << YAML::BeginSeq << v[0] << v[1] << v[2]
     << YAML::EndSeq;
 }
-void emit_triad(YAML::Emitter& y, const std::string& key, const calib::TedaldiTriad& t,
+void emit_triad(YAML::Emitter& y, const std::string& key, const TedaldiTriad& t,
                 const calib::TriadSigma& s) {
   y << YAML::Key << key << YAML::Value << YAML::BeginMap;
   emit_matrix(y, "misalignment", t.T);
@@ -216,7 +216,7 @@ void run(const StaticCliOptions& o) {
     return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
   };
   const double t0 = cpu_now();
-  auto log = acq::SessionLogReader::open(o.log_path);
+  auto log = log::SessionLogReader::open(o.log_path);
   if (!log.ok()) fail(log.error(), "cannot read " + o.log_path);
   const auto& reader = **log;
   if (reader.health().damaged && !o.allow_damaged) {

@@ -3,7 +3,7 @@
 #include <iostream>
 #include <memory>
 
-#include "acquisition/dataset_io.hpp"
+#include "log/dataset_io.hpp"
 #include "daemon/cli/command.hpp"
 
 namespace imucal::cli {
@@ -27,12 +27,12 @@ void setup(CLI::App& root) {
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Export what is readable from a damaged log");
   cmd->callback([o] {
     Progress progress("exporting", 1.0);
-    acq::OutputOptions options;
+    log::OutputOptions options;
     options.force = o->force;
     options.progress = [&progress](double done, double total) {
       progress.update(total > 0 ? done / total : 0.0);
     };
-    auto summary = acq::export_euroc(o->log_path, o->dir, options, o->allow_damaged);
+    auto summary = log::export_euroc(o->log_path, o->dir, options, o->allow_damaged);
     progress.finish();
     if (!summary.ok()) fail(summary.error(), "export failed");
     std::cout << "exported " << summary->imu_samples << " IMU samples and " << summary->frames

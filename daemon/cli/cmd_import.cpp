@@ -4,7 +4,7 @@
 #include <memory>
 #include <sstream>
 
-#include "acquisition/dataset_io.hpp"
+#include "log/dataset_io.hpp"
 #include "daemon/cli/command.hpp"
 
 namespace imucal::cli {
@@ -50,7 +50,7 @@ void parse_triple(const std::string& text, const std::string& flag, Eigen::Vecto
   std::stringstream ss(text);
   std::string item;
   while (std::getline(ss, item, ',')) {
-    auto v = acq::parse_double(item);
+    auto v = log::parse_double(item);
     if (!v.ok()) throw CliExit{kExitUsage, flag + ": " + v.error().message + " (give S or Sx,Sy,Sz)"};
     values.push_back(*v);
   }
@@ -85,12 +85,12 @@ void apply_raw(const RawOptions& o, ImuUnits& units, AxisConversion& accel, Axis
 template <class F>
 void run_import(const std::string& out_path, bool force, F&& do_import) {
   Progress progress("importing", 1.0);
-  acq::OutputOptions options;
+  log::OutputOptions options;
   options.force = force;
   options.progress = [&progress](double done, double total) {
     progress.update(total > 0 ? done / total : 0.0);
   };
-  Result<acq::ImportSummary> summary = do_import(options);
+  Result<log::ImportSummary> summary = do_import(options);
   progress.finish();
   if (!summary.ok()) fail(summary.error(), "import failed");
   const auto& s = *summary;
@@ -122,13 +122,13 @@ void setup(CLI::App& root) {
     add_common(cmd, *common);
     cmd->callback([common, dir] {
       run_import(common->out_path, common->force,
-                 [&](const acq::OutputOptions& o) { return acq::import_euroc(*dir, common->out_path, o); });
+                 [&](const log::OutputOptions& o) { return log::import_euroc(*dir, common->out_path, o); });
     });
   }
   {
     auto common = std::make_shared<CommonOptions>();
     auto raw = std::make_shared<RawOptions>();
-    auto in = std::make_shared<acq::AsciiImport>();
+    auto in = std::make_shared<log::AsciiImport>();
     CLI::App* cmd = import_cmd->add_subcommand(
         "ascii", "Accelerometer and gyroscope text files with 't x y z' rows, t in seconds (imu_tk format)");
     cmd->add_option("--accel", in->accel_path, "Accelerometer file")->required();
@@ -140,13 +140,13 @@ void setup(CLI::App& root) {
       in->rate_hz = raw->rate_hz;
       in->unit_check = !raw->no_unit_check;
       run_import(common->out_path, common->force,
-                 [&](const acq::OutputOptions& o) { return acq::import_ascii(*in, common->out_path, o); });
+                 [&](const log::OutputOptions& o) { return log::import_ascii(*in, common->out_path, o); });
     });
   }
   {
     auto common = std::make_shared<CommonOptions>();
     auto raw = std::make_shared<RawOptions>();
-    auto in = std::make_shared<acq::CsvImport>();
+    auto in = std::make_shared<log::CsvImport>();
     auto columns = std::make_shared<std::string>();
     auto time_unit = std::make_shared<std::string>("s");
     auto delimiter = std::make_shared<std::string>(",");
@@ -172,10 +172,10 @@ void setup(CLI::App& root) {
     add_raw(cmd, *raw);
     add_common(cmd, *common);
     cmd->callback([=] {
-      auto cols = acq::parse_csv_columns(*columns);
+      auto cols = log::parse_csv_columns(*columns);
       if (!cols.ok()) throw CliExit{kExitUsage, cols.error().message};
       in->format.columns = *cols;
-      in->format.time_unit = *acq::parse_time_unit(*time_unit);
+      in->format.time_unit = *log::parse_time_unit(*time_unit);
       if (*delimiter == "tab" || *delimiter == "\\t" || *delimiter == "\t") {
         in->format.delimiter = '\t';
       } else if (*delimiter == "space" || *delimiter == " ") {
@@ -192,7 +192,7 @@ void setup(CLI::App& root) {
       in->temperature_scale = ts->count() ? *temp_scale : (raw_units ? 1.0 / 340.0 : 1.0);
       in->temperature_offset = to->count() ? *temp_offset : (raw_units ? 36.53 : 0.0);
       run_import(common->out_path, common->force,
-                 [&](const acq::OutputOptions& o) { return acq::import_csv(*in, common->out_path, o); });
+                 [&](const log::OutputOptions& o) { return log::import_csv(*in, common->out_path, o); });
     });
   }
 }

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "acquisition/session_log.hpp"
+#include "log/session_log.hpp"
 #include "daemon/cli/command.hpp"
 
 namespace imucal::cli {
@@ -100,12 +100,12 @@ std::string one_line(const std::string& value, std::size_t max_chars) {
 }
 
 int run_info(const std::string& path, bool as_json) {
-  auto opened = acq::SessionLogReader::open(path);
+  auto opened = log::SessionLogReader::open(path);
   if (!opened.ok()) {
     // Anything that prevents reading the log is an input problem, including a newer schema.
     throw CliExit{kExitInput, opened.error().message};
   }
-  const acq::SessionLogReader& log = **opened;
+  const log::SessionLogReader& log = **opened;
 
   json out;
   std::ostringstream text;
@@ -134,7 +134,7 @@ int run_info(const std::string& path, bool as_json) {
     std::vector<TimeNs> times;
     std::int64_t flagged_gap = 0, flagged_reset = 0, flagged_saturated = 0, flagged_estimated = 0;
     if (auto count = log.imu_count(id); count.ok()) times.reserve(static_cast<std::size_t>(*count));
-    const Status read = log.for_each_imu(id, acq::kTimeMin, acq::kTimeMax, [&](const ImuSample& s) {
+    const Status read = log.for_each_imu(id, imucal::log::kTimeMin, imucal::log::kTimeMax, [&](const ImuSample& s) {
       times.push_back(s.t_ns);
       if (s.flags & kImuFlagGapBefore) ++flagged_gap;
       if (s.flags & kImuFlagDeviceReset) ++flagged_reset;

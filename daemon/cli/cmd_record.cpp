@@ -17,8 +17,8 @@
 
 #include "acquisition/mounting.hpp"
 #include "acquisition/recorder.hpp"
-#include "acquisition/sim_realtime.hpp"
-#include "acquisition/sim_rig.hpp"
+#include "sim/realtime.hpp"
+#include "sim/rig.hpp"
 #include "core/rig_config.hpp"
 #include "daemon/cli/command.hpp"
 #include "drivers/bus/i2cdev_bus.hpp"
@@ -26,8 +26,8 @@
 #include "drivers/gpio/gpiod_line.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
 #include "drivers/mpu6000/output_settings.hpp"
-#include "drivers/sim/imu_model.hpp"
-#include "drivers/sim/motion.hpp"
+#include "sim/imu_error_model.hpp"
+#include "sim/motion.hpp"
 
 namespace imucal::cli {
 namespace {
@@ -128,17 +128,17 @@ void fill_sim_rig(RigOptions& o, const RecordArgs& a, const mpu::Settings& setti
 
 /// The sensor source of a simulated rig that rests from power-on: trajectory time 0 is the
 /// emulator's start.
-sim::SensorSource sim_source(const RecordArgs& a, const mpu::Settings& settings,
+fake::SensorSource sim_source(const RecordArgs& a, const mpu::Settings& settings,
                              const sim::ImuModelParams& params, const sim::Trajectory& trajectory,
                              TimeNs start_ns) {
-  auto sensor = std::make_shared<acq::TrajectorySensor>(params, a.seed, trajectory, start_ns,
-                                                        acq::chip_sample_period_s(settings, a.sim_clock_ppm));
-  return acq::TrajectorySensor::source(std::move(sensor));
+  auto sensor = std::make_shared<sim::TrajectorySensor>(params, a.seed, trajectory, start_ns,
+                                                        sim::chip_sample_period_s(settings, a.sim_clock_ppm));
+  return sim::TrajectorySensor::source(std::move(sensor));
 }
 
 /// Stream description and "sim" metadata of a simulated recording; returns the metadata.
 std::string describe_sim_record(const RecordArgs& a, const mpu::Settings& settings,
-                                const sim::DataReadyTiming& dt, acq::RecordOptions& ro) {
+                                const fake::DataReadyTiming& dt, acq::RecordOptions& ro) {
   ro.stream_info = mpu::make_stream_info(settings, "sim");
   ro.stream_info.name = "imu0";
   nlohmann::json meta = {{"seed", a.seed},
@@ -156,10 +156,10 @@ std::string describe_sim_record(const RecordArgs& a, const mpu::Settings& settin
 void run_record_realtime(const RecordArgs& a, const mpu::Settings& settings, const acq::MountingMap& mounting,
                          const sim::ImuModelParams& params, const sim::Trajectory& trajectory,
                          acq::RecordOptions& ro, Progress& progress) {
-  acq::RealtimeSimRigOptions rig_options;
+  sim::RealtimeSimRigOptions rig_options;
   fill_sim_rig(rig_options, a, settings, mounting);
   rig_options.start_ns = monotonic_now_ns();
-  auto rig = take(acq::RealtimeSimRig::create(
+  auto rig = take(sim::RealtimeSimRig::create(
                       sim_source(a, settings, params, trajectory, rig_options.start_ns), rig_options),
                   "simulated rig");
   const std::string sim_meta = describe_sim_record(a, settings, rig_options.data_ready, ro);
@@ -210,10 +210,10 @@ void run_record(const RecordArgs& a) {
       run_record_realtime(a, settings, mounting, params, *trajectory, ro, progress);
       return;
     }
-    acq::SimRigOptions rig_options;
+    sim::SimRigOptions rig_options;
     fill_sim_rig(rig_options, a, settings, mounting);
     rig_options.acquisition = ao;
-    auto rig = take(acq::SimImuRig::create(sim_source(a, settings, params, *trajectory, rig_options.start_ns),
+    auto rig = take(sim::SimImuRig::create(sim_source(a, settings, params, *trajectory, rig_options.start_ns),
                                            rig_options),
                     "simulated rig");
     const std::string sim_meta = describe_sim_record(a, settings, rig_options.data_ready, ro);

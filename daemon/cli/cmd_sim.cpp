@@ -10,12 +10,12 @@
 #include <string>
 #include <vector>
 
-#include "acquisition/sim_camimu.hpp"
-#include "acquisition/sim_session.hpp"
+#include "sim/camimu.hpp"
+#include "sim/session.hpp"
 #include "daemon/cli/command.hpp"
-#include "drivers/sim/imu_model.hpp"
-#include "drivers/sim/motion.hpp"
-#include "drivers/sim/truth.hpp"
+#include "sim/imu_error_model.hpp"
+#include "sim/motion.hpp"
+#include "sim/truth.hpp"
 
 namespace imucal::cli {
 namespace {
@@ -35,8 +35,8 @@ struct SimCommon {
   double clock_ppm = -15'000.0;
   double jitter_us = 30.0;
 
-  acq::SimImuPath path() const {
-    acq::SimImuPath p;
+  sim::SimImuPath path() const {
+    sim::SimImuPath p;
     p.bus = bus == "i2c" ? drivers::mpu6000::BusKind::kI2c : drivers::mpu6000::BusKind::kSpi;
     p.clock_ppm = clock_ppm;
     p.data_ready.sigma_ns = static_cast<TimeNs>(std::llround(jitter_us * 1e3));
@@ -84,11 +84,11 @@ void add_common(CLI::App* cmd, SimCommon& o, bool drops = true) {
   cmd->add_flag("--force", o.force, "Replace the log and truth file if they exist");
 }
 
-std::vector<acq::SampleDrop> parse_drops(const std::vector<std::string>& specs) {
-  std::vector<acq::SampleDrop> drops;
+std::vector<sim::SampleDrop> parse_drops(const std::vector<std::string>& specs) {
+  std::vector<sim::SampleDrop> drops;
   for (const std::string& spec : specs) {
     const auto colon = spec.find(':');
-    acq::SampleDrop d;
+    sim::SampleDrop d;
     try {
       if (colon == std::string::npos) throw std::invalid_argument("no colon");
       std::size_t used = 0;
@@ -143,7 +143,7 @@ void refuse_overwrite(const SimCommon& o, const std::string& truth_path) {
 
 void run(const SimCommon& o, const CLI::App* cmd, const std::string& kind, const std::string& script,
          const sim::Trajectory& traj, int poses) {
-  acq::SimImuSessionOptions opt;
+  sim::SimImuSessionOptions opt;
   opt.kind = kind;
   opt.script = script;
   opt.poses = poses;
@@ -156,7 +156,7 @@ void run(const SimCommon& o, const CLI::App* cmd, const std::string& kind, const
   const std::string truth_path = sim::truth_path_for(o.out_path);
   refuse_overwrite(o, truth_path);
   Progress progress("simulating " + kind, 1.0);
-  auto truth = acq::write_sim_imu_session(opt, traj, o.out_path, truth_path,
+  auto truth = sim::write_sim_imu_session(opt, traj, o.out_path, truth_path,
                                           [&progress](double done) { progress.update(done); });
   progress.finish();
   if (!truth.ok()) {
@@ -238,7 +238,7 @@ void setup(CLI::App& root) {
   }
   {
     auto o = std::make_shared<SimCommon>();
-    auto co = std::make_shared<acq::CamImuSimOptions>();
+    auto co = std::make_shared<sim::CamImuSimOptions>();
     o->imu_rate_hz = co->imu_rate_hz;
     CLI::App* cmd = sim->add_subcommand(
         "camimu", "Camera-IMU session: checkerboard motion (Krebs 5.1.1) with rendered camera frames");
@@ -262,9 +262,9 @@ void setup(CLI::App& root) {
       refuse_overwrite(*o, truth_path);
       auto valid = co->validate();
       if (!valid.ok()) fail(valid.error(), "sim camimu");
-      acq::CamImuSimSummary summary;
+      sim::CamImuSimSummary summary;
       Progress progress("simulating camimu", 1.0);
-      auto status = acq::simulate_camimu_session(
+      auto status = sim::simulate_camimu_session(
           *co, o->out_path, truth_path, [&progress](double done) { progress.update(done); }, &summary);
       progress.finish();
       if (!status.ok()) {

@@ -35,16 +35,18 @@
 #include <vector>
 
 #include "acquisition/asio_acquisition.hpp"
-#include "acquisition/session_log.hpp"
-#include "acquisition/sim_realtime.hpp"
-#include "acquisition/sim_rig.hpp"
+#include "log/session_log.hpp"
+#include "sim/realtime.hpp"
+#include "sim/rig.hpp"
 #include "drivers/mpu6000/output_settings.hpp"
-#include "tests/acquisition/emulator_accounting.hpp"
-#include "tests/acquisition/test_session_log_util.hpp"
+#include "tests/support/emulator_accounting.hpp"
+#include "tests/support/session_log_util.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::acq {
 namespace {
+
+using namespace imucal::test;  // shared session-log helpers (tests/support)
 
 namespace mpu = drivers::mpu6000;
 using emutest::account;
@@ -72,15 +74,15 @@ struct RealtimeRun {
 
 /// The real-time simulated rig on the Asio loop for `wall` of wall-clock time.
 RealtimeRun run_realtime(bool with_line, std::chrono::milliseconds wall) {
-  RealtimeSimRigOptions o;
+  sim::RealtimeSimRigOptions o;
   o.settings = settings_at(1000.0);
   o.record_truth = true;
   o.with_line = with_line;
-  auto created = RealtimeSimRig::create(wobble, o);
+  auto created = sim::RealtimeSimRig::create(wobble, o);
   EXPECT_TRUE(created.ok()) << (created.ok() ? "" : created.error().message);
   RealtimeRun r;
   if (!created.ok()) return r;
-  RealtimeSimRig& rig = **created;
+  sim::RealtimeSimRig& rig = **created;
 
   boost::asio::io_context io;
   std::vector<ImuSample> all;
@@ -145,11 +147,11 @@ TEST(AsioAcquisition, SteadyClockIsClockMonotonic) {
 // The real-time line: an edge is readable on its eventfd only once CLOCK_MONOTONIC has passed
 // its timestamp, and the descriptor is readable exactly while edges are.
 TEST(RealtimeDataReadyLine, EdgesBecomeReadableAtTheirTimestamps) {
-  sim::DataReadyTiming timing;
+  fake::DataReadyTiming timing;
   timing.sigma_ns = 0;
-  auto line = RealtimeDataReadyLine::create(timing);
+  auto line = sim::RealtimeDataReadyLine::create(timing);
   ASSERT_TRUE(line.ok());
-  RealtimeDataReadyLine& l = **line;
+  sim::RealtimeDataReadyLine& l = **line;
   auto readable = [&] {
     pollfd p{l.fd(), POLLIN, 0};
     return ::poll(&p, 1, 0) == 1;
@@ -171,7 +173,7 @@ TEST(RealtimeDataReadyLine, EdgesBecomeReadableAtTheirTimestamps) {
   e = l.wait(0);
   ASSERT_TRUE(e.ok());
   EXPECT_FALSE(e->has_value());
-  EXPECT_EQ(l.release(t0 + 2'000'000), sim::SimTimeSource::kNever);
+  EXPECT_EQ(l.release(t0 + 2'000'000), fake::SimTimeSource::kNever);
   e = l.wait(1'000'000);
   ASSERT_TRUE(e.ok());
   ASSERT_TRUE(e->has_value());
@@ -182,12 +184,12 @@ TEST(RealtimeDataReadyLine, EdgesBecomeReadableAtTheirTimestamps) {
 // service(), the non-blocking step, on the deterministic simulated rig: an event loop that
 // looks every 100 us gets every frame the chip wrote, in order, timed as well as by step().
 TEST(AcquisitionService, DeliversEveryFrameOnTheSimulatedRig) {
-  SimRigOptions o;
+  sim::SimRigOptions o;
   o.settings = settings_at(1000.0);
   o.record_truth = true;
-  auto created = SimImuRig::create(wobble, o);
+  auto created = sim::SimImuRig::create(wobble, o);
   ASSERT_TRUE(created.ok());
-  SimImuRig& rig = **created;
+  sim::SimImuRig& rig = **created;
   std::vector<ImuSample> out, all;
   const TimeNs end = rig.clock().now_ns() + s_to_ns(5.0);
   while (rig.clock().now_ns() < end) {

@@ -8,14 +8,14 @@
 #include <vector>
 
 #include "acquisition/imu_stream.hpp"
-#include "acquisition/session_log.hpp"
+#include "log/session_log.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::acq {
 namespace {
 
 /// A writer that records what it gets; can be slowed down or made to fail.
-class FakeWriter final : public SessionLogWriter {
+class FakeWriter final : public log::SessionLogWriter {
  public:
   Status set_metadata(const std::string&, const std::string&) override { return {}; }
   Result<int> add_imu_stream(const ImuStreamInfo&) override { return 3; }
@@ -32,7 +32,7 @@ class FakeWriter final : public SessionLogWriter {
     return {};
   }
   Status append_frame(int, const CameraFrame&) override { return {}; }
-  Status append_event(const Event& e) override {
+  Status append_event(const log::Event& e) override {
     std::lock_guard<std::mutex> lock(mutex);
     events.push_back(e);
     return {};
@@ -46,7 +46,7 @@ class FakeWriter final : public SessionLogWriter {
   std::mutex mutex;
   std::vector<ImuSample> samples_seen;
   std::vector<int> ids;
-  std::vector<Event> events;
+  std::vector<log::Event> events;
   int appends = 0;
   std::atomic<int> flushes{0};
   int delay_ms = 0;
@@ -72,7 +72,7 @@ TEST(ImuStream, FeedsConsumersAndLogInOrder) {
     const auto batch = make_samples(k * 10, 10);
     stream.publish(batch);
   }
-  Event e;
+  log::Event e;
   e.kind = "note";
   e.message = "hello";
   stream.post_event(e);
@@ -202,7 +202,7 @@ TEST(ImuStream, ThreadedConsumersSeeEverySample) {
 // With the SQLite session log: what the stream writes reads back.
 TEST(ImuStream, WritesASessionLog) {
   const std::string path = test::scratch_dir() + "/stream.imulog";
-  auto w = SessionLogWriter::create(path);
+  auto w = log::SessionLogWriter::create(path);
   ASSERT_TRUE(w.ok()) << w.error().message;
   ImuStreamInfo info;
   info.name = "imu0";
@@ -216,7 +216,7 @@ TEST(ImuStream, WritesASessionLog) {
     ASSERT_TRUE(stream.stop().ok());
   }
   ASSERT_TRUE((*w)->close().ok());
-  auto r = SessionLogReader::open(path);
+  auto r = log::SessionLogReader::open(path);
   ASSERT_TRUE(r.ok()) << r.error().message;
   auto samples = (*r)->read_imu(*id);
   ASSERT_TRUE(samples.ok());

@@ -12,14 +12,16 @@
 #include <numbers>
 #include <string>
 
-#include "acquisition/session_log.hpp"
-#include "acquisition/sim_rig.hpp"
-#include "tests/acquisition/emulator_accounting.hpp"
-#include "tests/acquisition/test_session_log_util.hpp"
+#include "log/session_log.hpp"
+#include "sim/rig.hpp"
+#include "tests/support/emulator_accounting.hpp"
+#include "tests/support/session_log_util.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::acq {
 namespace {
+
+using namespace imucal::test;  // shared session-log helpers (tests/support)
 
 std::string write_config(const std::string& dir, const std::string& name, const std::string& imu_extra,
                          const std::string& bus = "sim") {
@@ -41,16 +43,16 @@ std::string write_config(const std::string& dir, const std::string& name, const 
 /// Emulator + data-ready line + driver + acquisition loop at the settings `imucal record` uses
 /// (a FIFO read every max(1, rate / 1 kHz) edges, read interval twice that), chip 1.5 % slow.
 emutest::Accounting run_sim_rig(std::uint8_t dlpf_cfg, std::uint8_t smplrt_div, double seconds) {
-  SimRigOptions o;
+  sim::SimRigOptions o;
   o.settings.dlpf_cfg = dlpf_cfg;
   o.settings.smplrt_div = smplrt_div;
   const double per_read = std::max(1.0, std::round(o.settings.sample_rate_hz() / 1000.0));
   o.settings.read_interval_ns = static_cast<TimeNs>(2.0 * per_read * 1e9 / o.settings.sample_rate_hz());
   o.record_truth = true;
-  auto created = SimImuRig::create(emutest::wobble, o);
+  auto created = sim::SimImuRig::create(emutest::wobble, o);
   EXPECT_TRUE(created.ok());
   if (!created.ok()) return {};
-  SimImuRig& rig = **created;
+  sim::SimImuRig& rig = **created;
   std::vector<ImuSample> out, all;
   const TimeNs end = rig.emulator().now_ns() + s_to_ns(seconds);
   while (rig.emulator().now_ns() < end) {

@@ -5,7 +5,7 @@
 #include <random>
 
 #include "acquisition/timestamp.hpp"
-#include "acquisition/timestamp_synthetic.hpp"
+#include "tests/support/timestamp_synthetic.hpp"
 #include "core/imu.hpp"
 
 namespace imucal::acq {

@@ -20,13 +20,13 @@
 
 #include "acquisition/imu_stream.hpp"
 #include "acquisition/recorder.hpp"
-#include "acquisition/session_log.hpp"
-#include "acquisition/sim_rig.hpp"
+#include "log/session_log.hpp"
+#include "sim/rig.hpp"
 #include "acquisition/timestamp.hpp"
-#include "acquisition/timestamp_synthetic.hpp"
+#include "tests/support/timestamp_synthetic.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
-#include "drivers/sim/mpu6000_emulator.hpp"
-#include "drivers/sim/sim_data_ready.hpp"
+#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
+#include "drivers/gpio/fake/sim_data_ready.hpp"
 
 namespace {
 
@@ -88,9 +88,9 @@ void synthetic_table(double seconds) {
   }
 }
 
-sim::SensorReading chirp(TimeNs t_ns) {
+fake::SensorReading chirp(TimeNs t_ns) {
   const double t = ns_to_s(t_ns);
-  sim::SensorReading r;
+  fake::SensorReading r;
   r.specific_force = {3.0 * std::sin(2 * std::numbers::pi * 3.1 * t),
                       2.5 * std::cos(2 * std::numbers::pi * 1.7 * t),
                       9.81 + std::sin(2 * std::numbers::pi * 0.37 * t)};
@@ -122,25 +122,25 @@ EndToEnd end_to_end(std::uint8_t dlpf_cfg, std::uint8_t div, double seconds, dou
   s.smplrt_div = div;
   const double per_read = std::max(1.0, std::round(s.sample_rate_hz() / 1000.0));
   s.read_interval_ns = static_cast<TimeNs>(2.0 * per_read * 1e9 / s.sample_rate_hz());
-  acq::SimRigOptions ro;  // 20 us mean latency, 30 us jitter
+  sim::SimRigOptions ro;  // 20 us mean latency, 30 us jitter
   ro.settings = s;
   ro.clock_ppm = clock_ppm;
   ro.record_truth = record_truth;
-  auto rig_r = acq::SimImuRig::create(chirp, ro);
+  auto rig_r = sim::SimImuRig::create(chirp, ro);
   if (!rig_r.ok()) {
     std::fprintf(stderr, "bench: %s\n", rig_r.error().message.c_str());
     std::exit(1);
   }
-  acq::SimImuRig& rig = **rig_r;
-  sim::Mpu6000Emulator& emu = rig.emulator();
+  sim::SimImuRig& rig = **rig_r;
+  fake::Mpu6000Emulator& emu = rig.emulator();
   acq::ImuAcquisition& acq = rig.acquisition();
 
-  std::unique_ptr<acq::SessionLogWriter> writer;
+  std::unique_ptr<log::SessionLogWriter> writer;
   std::unique_ptr<acq::ImuStream> stream;
   if (!log_path.empty()) {
-    acq::SessionLogWriterOptions wo;
+    log::SessionLogWriterOptions wo;
     wo.overwrite = true;
-    auto w = acq::SessionLogWriter::create(log_path, wo);
+    auto w = log::SessionLogWriter::create(log_path, wo);
     if (!w.ok()) {
       std::fprintf(stderr, "bench: %s\n", w.error().message.c_str());
       std::exit(1);
@@ -177,11 +177,11 @@ EndToEnd end_to_end(std::uint8_t dlpf_cfg, std::uint8_t div, double seconds, dou
   if (!record_truth || all.empty()) return r;
 
   // Match delivered samples to the emulator's truth by their exact counts.
-  std::vector<const sim::TruthSample*> fifo;
+  std::vector<const fake::TruthSample*> fifo;
   for (const auto& t : emu.truth()) {
     if (t.to_fifo) fifo.push_back(&t);
   }
-  auto same = [](const ImuSample& a, const sim::TruthSample& b) {
+  auto same = [](const ImuSample& a, const fake::TruthSample& b) {
     return a.gyro == Eigen::Vector3d(b.gyro[0], b.gyro[1], b.gyro[2]) &&
            a.accel == Eigen::Vector3d(b.accel[0], b.accel[1], b.accel[2]) && a.temperature == b.temp;
   };
@@ -259,9 +259,9 @@ void cpu_table(double seconds) {
   std::filesystem::create_directories(dir);
   // Stream + SQLite writer thread, 1 kHz samples published in batches of 1.
   {
-    acq::SessionLogWriterOptions wo;
+    log::SessionLogWriterOptions wo;
     wo.overwrite = true;
-    auto w = acq::SessionLogWriter::create(dir + "/stream.imulog", wo);
+    auto w = log::SessionLogWriter::create(dir + "/stream.imulog", wo);
     if (!w.ok()) {
       std::fprintf(stderr, "bench: %s\n", w.error().message.c_str());
       return;

@@ -14,17 +14,17 @@
 #include <string>
 
 #include "drivers/mpu6000/mpu6000.hpp"
-#include "drivers/sim/mpu6000_emulator.hpp"
-#include "drivers/sim/sim_data_ready.hpp"
+#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
+#include "drivers/gpio/fake/sim_data_ready.hpp"
 
 using namespace imucal;
 using namespace imucal::drivers::mpu6000;
 
 namespace {
 
-sim::SensorReading source(TimeNs t_ns) {
+fake::SensorReading source(TimeNs t_ns) {
   const double t = ns_to_s(t_ns);
-  sim::SensorReading r;
+  fake::SensorReading r;
   r.specific_force = {0.5 * std::sin(2 * std::numbers::pi * 1.3 * t), 0.1, kStandardGravity};
   r.angular_rate = {0.2 * std::sin(2 * std::numbers::pi * 0.7 * t), -0.1, 1.0};
   r.temperature_c = 30.0;
@@ -58,12 +58,12 @@ Figures run(const Case& c, double seconds) {
   s.smplrt_div = 0;
   s.read_interval_ns = c.read_interval_ns;
   s.fifo_speed_hz = c.fifo_speed_hz;
-  sim::EmulatorOptions o;
+  fake::EmulatorOptions o;
   o.bus = c.bus;
-  o.timing = c.bus == BusKind::kSpi ? sim::BusTiming::spi() : sim::BusTiming::i2c();
+  o.timing = c.bus == BusKind::kSpi ? fake::BusTiming::spi() : fake::BusTiming::i2c();
   o.record_truth = false;
-  sim::Mpu6000Emulator emu(source, o);
-  sim::SimDataReadyLine line(emu, {});
+  fake::Mpu6000Emulator emu(source, o);
+  fake::SimDataReadyLine line(emu, {});
   emu.connect(line);
   Mpu6000 driver(emu, s);
 

@@ -6,12 +6,12 @@
 #include <opencv2/imgcodecs.hpp>
 #include <vector>
 
-#include "acquisition/sim_camimu.hpp"
-#include "drivers/sim/camera_render.hpp"
+#include "sim/camimu.hpp"
+#include "sim/camera_render.hpp"
 
 namespace {
 
-using imucal::acq::CamImuSimOptions;
+using imucal::sim::CamImuSimOptions;
 using imucal::sim::CheckerboardRenderer;
 
 /// The default simulated camera looking at the default board from 0.8 m, slightly tilted.

@@ -11,12 +11,12 @@
 #include <string>
 #include <vector>
 
-#include "acquisition/session_log.hpp"
+#include "log/session_log.hpp"
 
 namespace {
 
 using namespace imucal;
-using namespace imucal::acq;
+using namespace imucal::log;
 
 std::string bench_path(const std::string& name) {
   const char* dir = std::getenv("IMUCAL_BENCH_DIR");
@@ -59,7 +59,7 @@ void insert_imu(benchmark::State& state, bool raw) {
   const auto batch_size = static_cast<std::size_t>(state.range(0));
   const std::string path = bench_path(raw ? "insert-raw" : "insert-si");
   remove_log(path);
-  auto writer = SessionLogWriter::create(path);
+  auto writer = log::SessionLogWriter::create(path);
   if (!writer.ok()) {
     state.SkipWithError(writer.error().message.c_str());
     return;
@@ -92,7 +92,7 @@ const std::string& read_fixture() {
   static const std::string path = [] {
     const std::string p = bench_path("read");
     remove_log(p);
-    auto writer = SessionLogWriter::create(p);
+    auto writer = log::SessionLogWriter::create(p);
     if (!writer.ok()) return std::string();
     const int id = *(*writer)->add_imu_stream(stream_info(true));
     for (int b = 0; b < 1000; ++b) {
@@ -111,7 +111,7 @@ void BM_ReadImuAll(benchmark::State& state) {
     state.SkipWithError("could not write the fixture log");
     return;
   }
-  auto reader = SessionLogReader::open(read_fixture());
+  auto reader = log::SessionLogReader::open(read_fixture());
   if (!reader.ok()) {
     state.SkipWithError(reader.error().message.c_str());
     return;
@@ -137,7 +137,7 @@ void BM_ReadImuWindow(benchmark::State& state) {
     state.SkipWithError("could not write the fixture log");
     return;
   }
-  auto reader = SessionLogReader::open(read_fixture());
+  auto reader = log::SessionLogReader::open(read_fixture());
   if (!reader.ok()) {
     state.SkipWithError(reader.error().message.c_str());
     return;
@@ -164,7 +164,7 @@ void BM_OpenReader(benchmark::State& state) {
     return;
   }
   for (auto _ : state) {
-    auto reader = SessionLogReader::open(read_fixture());
+    auto reader = log::SessionLogReader::open(read_fixture());
     if (!reader.ok()) state.SkipWithError(reader.error().message.c_str());
   }
   state.SetItemsProcessed(state.iterations() * 1'000'000);

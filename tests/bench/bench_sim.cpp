@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
-#include "acquisition/sim_session.hpp"
-#include "drivers/sim/imu_model.hpp"
-#include "drivers/sim/motion.hpp"
+#include "sim/session.hpp"
+#include "sim/imu_error_model.hpp"
+#include "sim/motion.hpp"
 
 namespace {
 
@@ -80,13 +80,13 @@ int main(int argc, char** argv) {
   for (const Case& c : {cases[0], cases[2]}) {
     std::vector<double> wall;
     for (int r = 0; r < kRuns; ++r) {
-      acq::SimImuSessionOptions o;
+      sim::SimImuSessionOptions o;
       o.imu = sim::ImuModelParams::draw(1);
       o.imu_rate_hz = c.rate_hz;
       o.overwrite = true;
       const std::string log = dir + "/bench.imulog";
       const auto t0 = Clock::now();
-      auto truth = acq::write_sim_imu_session(o, *c.traj, log, dir + "/bench.truth.yaml");
+      auto truth = sim::write_sim_imu_session(o, *c.traj, log, dir + "/bench.truth.yaml");
       wall.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
       if (!truth.ok()) {
         std::fprintf(stderr, "bench_sim: %s\n", truth.error().message.c_str());

@@ -17,11 +17,11 @@
 #include <string>
 #include <vector>
 
-#include "acquisition/session_log.hpp"
+#include "log/session_log.hpp"
 #include "calib/static_calibration.hpp"
-#include "drivers/sim/imu_model.hpp"
-#include "drivers/sim/motion.hpp"
-#include "drivers/sim/truth.hpp"
+#include "sim/imu_error_model.hpp"
+#include "sim/motion.hpp"
+#include "sim/truth.hpp"
 
 using namespace imucal;
 
@@ -32,7 +32,7 @@ constexpr double kRateHz = 100.0;
 struct Recording {
   std::vector<ImuSample> samples;
   ImuStreamInfo info;
-  calib::TedaldiImuModel truth;  // in counts
+  TedaldiImuModel truth;  // in counts
 };
 
 /// The statistical configuration: the Tedaldi model only (no g-sensitivity, no bias drift, no
@@ -96,9 +96,9 @@ const char* kNames[kParams] = {
     "a.b_y",      "a.b_z",      "g.gamma_yz", "g.gamma_zy", "g.gamma_xz", "g.gamma_zx", "g.gamma_xy",
     "g.gamma_yx", "g.s_x",      "g.s_y",      "g.s_z",      "g.b_x",      "g.b_y",      "g.b_z"};
 
-Eigen::Matrix<double, kParams, 1> flatten(const calib::TedaldiImuModel& m) {
+Eigen::Matrix<double, kParams, 1> flatten(const TedaldiImuModel& m) {
   Eigen::Matrix<double, kParams, 1> v;
-  v << calib::accel_angles(m.accel.T), m.accel.scale, m.accel.bias, calib::gyro_angles(m.gyro.T),
+  v << accel_angles(m.accel.T), m.accel.scale, m.accel.bias, gyro_angles(m.gyro.T),
       m.gyro.scale, m.gyro.bias;
   return v;
 }
@@ -178,9 +178,9 @@ void run_speed(int runs) {
   std::filesystem::create_directories(dir);
   const std::string path = dir + "/static.imulog";
   {
-    acq::SessionLogWriterOptions wo;
+    log::SessionLogWriterOptions wo;
     wo.overwrite = true;
-    auto w = acq::SessionLogWriter::create(path, wo);
+    auto w = log::SessionLogWriter::create(path, wo);
     if (!w.ok()) {
       std::fprintf(stderr, "cannot write %s: %s\n", path.c_str(), w.error().message.c_str());
       std::exit(1);
@@ -200,7 +200,7 @@ void run_speed(int runs) {
   for (int r = 0; r < runs; ++r) {
     const auto w0 = std::chrono::steady_clock::now();
     const double t0 = cpu_now();
-    auto log = acq::SessionLogReader::open(path);
+    auto log = log::SessionLogReader::open(path);
     if (!log.ok()) std::exit(1);
     auto id = (*log)->find_imu_stream();
     auto samples = (*log)->read_imu(*id);

@@ -9,7 +9,7 @@
 #include <random>
 #include <vector>
 
-#include "calib/imu_model.hpp"
+#include "core/imu_model.hpp"
 #include "core/imu.hpp"
 
 namespace imucal::test {
@@ -27,19 +27,19 @@ struct SynthConfig {
   bool raw_counts = false;                          // output counts: si = lsb * (raw - offset)
   double accel_lsb = 9.80665 / 8192.0, gyro_lsb = M_PI / 180.0 / 65.5;
   double accel_offset = 32768.0, gyro_offset = 32768.0;
-  calib::TedaldiImuModel truth;  // maps sensor values (after count conversion) to ideal
+  TedaldiImuModel truth;  // maps sensor values (after count conversion) to ideal
 };
 
-inline calib::TedaldiImuModel random_truth(unsigned seed) {
+inline TedaldiImuModel random_truth(unsigned seed) {
   std::mt19937 rng(seed * 7919u + 13u);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  calib::TedaldiImuModel m;
-  m.accel.T = calib::accel_misalignment(Eigen::Vector3d(u(rng), u(rng), u(rng)) * 0.01);
+  TedaldiImuModel m;
+  m.accel.T = accel_misalignment(Eigen::Vector3d(u(rng), u(rng), u(rng)) * 0.01);
   m.accel.scale = Eigen::Vector3d::Ones() + 0.02 * Eigen::Vector3d(u(rng), u(rng), u(rng));
   m.accel.bias = 0.3 * Eigen::Vector3d(u(rng), u(rng), u(rng));
   Eigen::Matrix<double, 6, 1> g;
   for (int i = 0; i < 6; ++i) g[i] = 0.015 * u(rng);
-  m.gyro.T = calib::gyro_misalignment(g);
+  m.gyro.T = gyro_misalignment(g);
   m.gyro.scale = Eigen::Vector3d::Ones() + 0.03 * Eigen::Vector3d(u(rng), u(rng), u(rng));
   m.gyro.bias = 0.02 * Eigen::Vector3d(u(rng), u(rng), u(rng));
   return m;

@@ -10,16 +10,16 @@
 #include <vector>
 
 #include "drivers/mpu6000/registers.hpp"
-#include "drivers/sim/mpu6000_emulator.hpp"
-#include "drivers/sim/sim_data_ready.hpp"
+#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
+#include "drivers/gpio/fake/sim_data_ready.hpp"
 
 namespace imucal {
 namespace {
 
 using namespace drivers::mpu6000;
-using sim::EmulatorOptions;
-using sim::Mpu6000Emulator;
-using sim::SensorReading;
+using fake::EmulatorOptions;
+using fake::Mpu6000Emulator;
+using fake::SensorReading;
 
 constexpr TimeNs kMs = 1'000'000;
 constexpr TimeNs kS = 1'000'000'000;
@@ -226,11 +226,11 @@ TEST(Mpu6000Emulator, OffsetAndSelfTestRegistersChangeTheOutput) {
 }
 
 TEST(Mpu6000Emulator, BusTimingModel) {
-  const sim::BusTiming spi = sim::BusTiming::spi();
+  const fake::BusTiming spi = fake::BusTiming::spi();
   // 14 FIFO bytes + address byte at 20 MHz: 6 us, plus 20 us per transfer.
   EXPECT_EQ(spi.transfer_ns(14, true, 20'000'000), 26'000);
   EXPECT_EQ(spi.transfer_ns(1, false, 1'000'000), 36'000);
-  const sim::BusTiming i2c = sim::BusTiming::i2c();
+  const fake::BusTiming i2c = fake::BusTiming::i2c();
   // (14 + 3) bytes x 9 bits at 400 kHz = 382.5 us, plus 50 us.
   EXPECT_EQ(i2c.transfer_ns(14, true, 20'000'000), 432'500);
 
@@ -265,7 +265,7 @@ TEST(Mpu6000Emulator, InjectedFaults) {
   EXPECT_FALSE(e.write(reg_addr(Register::GYRO_CONFIG), 0x18).ok());
   EXPECT_EQ(rd(e, Register::GYRO_CONFIG), 0) << "a failed write changes nothing";
   EXPECT_EQ(e.counters().transfer_errors, 2u);
-  e.corrupt_next_read(sim::Corruption::kStuckHigh);
+  e.corrupt_next_read(fake::Corruption::kStuckHigh);
   EXPECT_EQ(rd(e, Register::WHO_AM_I), 0xFF);
   EXPECT_EQ(rd(e, Register::WHO_AM_I), WHOAMI);
   wake(e, 1, 0);
@@ -294,7 +294,7 @@ TEST(Mpu6000Emulator, ByteSlipLosesOneFifoByteAtTheGivenOffset) {
       ref.advance_to(ref.now_ns() + 3 * kMs + kMs / 2);
       ASSERT_TRUE(ref.read(reg_addr(Register::FIFO_R_W), clean).ok());
     }
-    e.corrupt_next_read(sim::Corruption::kByteSlip, at);
+    e.corrupt_next_read(fake::Corruption::kByteSlip, at);
     std::vector<std::uint8_t> got(28);
     ASSERT_TRUE(e.read(reg_addr(Register::FIFO_R_W), got).ok());
     const std::size_t k = std::min<std::size_t>(at, got.size() - 1);
@@ -308,7 +308,7 @@ TEST(Mpu6000Emulator, ByteSlipLosesOneFifoByteAtTheGivenOffset) {
 
 TEST(SimDataReadyLine, DeliversEdgesInOrderWithSequence) {
   Mpu6000Emulator e(ramp_source, untimed());
-  sim::SimDataReadyLine line(e, {.latency_ns = 50'000, .sigma_ns = 0, .seed = 1});
+  fake::SimDataReadyLine line(e, {.latency_ns = 50'000, .sigma_ns = 0, .seed = 1});
   e.connect(line);
   wr(e, Register::INT_ENABLE, DATA_RDY_EN);
   wake(e, 1, 0, false);

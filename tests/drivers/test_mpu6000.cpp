@@ -15,20 +15,20 @@
 #include "core/imu.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
 #include "drivers/mpu6000/registers.hpp"
-#include "drivers/sim/mpu6000_emulator.hpp"
-#include "drivers/sim/sim_data_ready.hpp"
+#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
+#include "drivers/gpio/fake/sim_data_ready.hpp"
 
 namespace imucal {
 namespace {
 
 using drivers::DataReadyEdge;
 using namespace drivers::mpu6000;
-using sim::Corruption;
-using sim::EmulatorOptions;
-using sim::Mpu6000Emulator;
-using sim::SensorReading;
-using sim::SimDataReadyLine;
-using sim::TruthSample;
+using fake::Corruption;
+using fake::EmulatorOptions;
+using fake::Mpu6000Emulator;
+using fake::SensorReading;
+using fake::SimDataReadyLine;
+using fake::TruthSample;
 
 constexpr TimeNs kMs = 1'000'000;
 constexpr TimeNs kS = 1'000'000'000;
@@ -88,8 +88,8 @@ TruthCheck check_against_truth(const std::vector<RawSample>& out, const std::vec
 /// read interval with the latest edge.
 class Harness {
  public:
-  Harness(Settings settings, EmulatorOptions options = {}, sim::DataReadyTiming timing = {},
-          sim::SensorSource source = moving_source)
+  Harness(Settings settings, EmulatorOptions options = {}, fake::DataReadyTiming timing = {},
+          fake::SensorSource source = moving_source)
       : emu(std::move(source), options), line(emu, timing), driver(emu, settings) {
     emu.connect(line);
   }
@@ -176,7 +176,7 @@ Settings i2c_1khz() {
 EmulatorOptions i2c_options() {
   EmulatorOptions o;
   o.bus = BusKind::kI2c;
-  o.timing = sim::BusTiming::i2c();
+  o.timing = fake::BusTiming::i2c();
   return o;
 }
 

@@ -5,7 +5,7 @@
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
-#include "drivers/sim/camera_render.hpp"
+#include "sim/camera_render.hpp"
 
 namespace imucal::sim {
 namespace {

@@ -13,12 +13,12 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "acquisition/session_log.hpp"
-#include "acquisition/sim_camimu.hpp"
-#include "drivers/sim/camera_render.hpp"
+#include "log/session_log.hpp"
+#include "sim/camimu.hpp"
+#include "sim/camera_render.hpp"
 #include "tests/support/test_support.hpp"
 
-namespace imucal::acq {
+namespace imucal::sim {
 namespace {
 
 /// A short session: enough motion for timing checks, few enough frames for a fast test.
@@ -69,9 +69,9 @@ TEST(CameraSession, WritesLogAndTruthWithMidExposureStamps) {
   EXPECT_EQ(last_progress, 1.0);
   EXPECT_FALSE(std::filesystem::exists(log + ".imu-part"));
 
-  auto reader_r = SessionLogReader::open(log);
+  auto reader_r = log::SessionLogReader::open(log);
   ASSERT_TRUE(reader_r.ok()) << reader_r.error().message;
-  const SessionLogReader& reader = **reader_r;
+  const log::SessionLogReader& reader = **reader_r;
   EXPECT_TRUE(reader.health().complete);
   auto imu_id = reader.find_imu_stream();
   ASSERT_TRUE(imu_id.ok());
@@ -136,7 +136,7 @@ TEST(CameraSession, WritesLogAndTruthWithMidExposureStamps) {
   double sq_mid = 0, sq_start = 0, sq_flipped = 0;
   int corners = 0, frames = 0, blurred = 0, still = 0, not_found = 0, unmatched = 0;
   int frames_mid_best = 0;
-  auto visited = reader.for_each_frame(*cam_id, kTimeMin, kTimeMax, [&](const CameraFrame& f) {
+  auto visited = reader.for_each_frame(*cam_id, log::kTimeMin, log::kTimeMax, [&](const CameraFrame& f) {
     EXPECT_EQ(f.exposure_ns, o.exposure_ns);
     const auto mid = corners_at(f.t_ns + shift);
     if (mid.visible_count != static_cast<int>(mid.px.size())) return true;
@@ -240,12 +240,12 @@ TEST(CameraSession, DeterministicUnderSeed) {
     auto st = simulate_camimu_session(o, dir + "/" + name + ".imulog", dir + "/" + name + ".truth.yaml");
     EXPECT_TRUE(st.ok()) << st.error().message;
     if (!st.ok()) return out;
-    auto reader = SessionLogReader::open(dir + "/" + name + ".imulog");
+    auto reader = log::SessionLogReader::open(dir + "/" + name + ".imulog");
     EXPECT_TRUE(reader.ok());
     if (!reader.ok()) return out;
     auto cam = (*reader)->find_camera_stream();
     EXPECT_TRUE(cam.ok());
-    auto visited = (*reader)->for_each_frame(*cam, kTimeMin, kTimeMax, [&](const CameraFrame& f) {
+    auto visited = (*reader)->for_each_frame(*cam, log::kTimeMin, log::kTimeMax, [&](const CameraFrame& f) {
       EXPECT_EQ(f.encoding, "webp");
       out.push_back(f.data);
       return true;
@@ -294,4 +294,4 @@ TEST(CameraSession, BadOptionsSayWhatIsWrong) {
 }
 
 }  // namespace
-}  // namespace imucal::acq
+}  // namespace imucal::sim

@@ -8,7 +8,7 @@
 #include <numbers>
 
 #include "core/target.hpp"
-#include "drivers/sim/motion.hpp"
+#include "sim/motion.hpp"
 
 namespace imucal::sim {
 namespace {

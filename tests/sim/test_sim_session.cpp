@@ -8,13 +8,13 @@
 #include <nlohmann/json.hpp>
 #include <numbers>
 
-#include "acquisition/session_log.hpp"
-#include "acquisition/sim_session.hpp"
-#include "drivers/sim/motion.hpp"
-#include "drivers/sim/truth.hpp"
+#include "log/session_log.hpp"
+#include "sim/session.hpp"
+#include "sim/motion.hpp"
+#include "sim/truth.hpp"
 #include "tests/support/test_support.hpp"
 
-namespace imucal::acq {
+namespace imucal::sim {
 namespace {
 
 std::unique_ptr<sim::PoseScript> short_static(std::uint64_t seed, double excitation = 1.0) {
@@ -36,7 +36,7 @@ SimImuSessionOptions options(std::uint64_t seed) {
 }
 
 std::vector<ImuSample> read_all(const std::string& path, ImuStreamInfo* info = nullptr) {
-  auto reader = SessionLogReader::open(path);
+  auto reader = log::SessionLogReader::open(path);
   EXPECT_TRUE(reader.ok()) << (reader.ok() ? "" : reader.error().message);
   if (!reader.ok()) return {};
   auto id = (*reader)->find_imu_stream();
@@ -95,13 +95,13 @@ TEST(SimSession, WritesRawCountsWithNominalConversionEventsAndTruth) {
   const double az_g = samples[0].accel.z() * info.accel.scale.z() / 9.80665;
   EXPECT_NEAR(az_g, 1.0, 0.15);
 
-  auto reader = SessionLogReader::open(log);
+  auto reader = log::SessionLogReader::open(log);
   ASSERT_TRUE(reader.ok());
   EXPECT_TRUE((*reader)->health().complete);
   auto events = (*reader)->events();
   ASSERT_TRUE(events.ok());
   int begins = 0, ends = 0, stills = 0;
-  for (const Event& e : *events) {
+  for (const log::Event& e : *events) {
     begins += e.kind == "pose_begin";
     ends += e.kind == "pose_end";
     stills += e.kind == "still_begin";
@@ -238,7 +238,7 @@ TEST(SimSession, HostStallsBeyondTheFifoLeaveAFlaggedGap) {
     }
   }
   EXPECT_EQ(gaps, 1);
-  auto reader = SessionLogReader::open(log);
+  auto reader = log::SessionLogReader::open(log);
   ASSERT_TRUE(reader.ok());
   const auto driver = nlohmann::json::parse((*reader)->metadata().at("imu.driver"));
   EXPECT_GE(driver["counters"]["fifo_overflows"].get<int>(), 1);
@@ -265,7 +265,7 @@ TEST(SimSession, ChipClockAndBusAreThoseAskedFor) {
   EXPECT_NEAR(mean_dt, 1e6 / 1.02, 0.5);
   EXPECT_EQ(truth->recording.dropped_samples, 0);
   for (const ImuSample& s : samples) ASSERT_EQ(s.flags & kImuFlagGapBefore, 0u);
-  auto reader = SessionLogReader::open(log);
+  auto reader = log::SessionLogReader::open(log);
   ASSERT_TRUE(reader.ok());
   const auto rig = nlohmann::json::parse((*reader)->metadata().at("rig_config"));
   EXPECT_EQ(rig["imu"]["bus"].get<std::string>(), "i2c");
@@ -352,4 +352,4 @@ TEST(SimTruth, BadTruthFilesGiveClearErrors) {
 }
 
 }  // namespace
-}  // namespace imucal::acq
+}  // namespace imucal::sim

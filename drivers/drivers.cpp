@@ -1,1 +1,0 @@
-// Anchor translation unit so the library exists before its first backend lands.

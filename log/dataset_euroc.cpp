@@ -1,0 +1,541 @@
+// EuRoC/ASL dataset folders, both ways. Layout (per sensor folder under mav0/):
+//   imuN/data.csv    #timestamp [ns],w_RS_S_x [rad s^-1],...,a_RS_S_z [m s^-2]
+//   camN/data.csv    #timestamp [ns],filename       camN/data/<filename> (PNG)
+//   */sensor.yaml    sensor_type, T_BS, rate_hz, resolution (cameras), ...
+// Import keeps the original sensor.yaml text in the log metadata so that an export writes it
+// back unchanged; logs recorded on a rig get a generated one.
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <optional>
+#include <regex>
+#include <set>
+
+#include "log/dataset_io.hpp"
+#include "log/session_log.hpp"
+
+namespace imucal::log {
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* kImuHeader =
+    "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],a_RS_S_x [m s^-2],"
+    "a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]";
+constexpr const char* kCameraHeader = "#timestamp [ns],filename";
+
+std::string sensor_yaml_key(const std::string& stream) { return "euroc." + stream + ".sensor_yaml"; }
+
+struct SensorYaml {
+  std::string text;  // empty when there is no sensor.yaml
+  double rate_hz = 0.0;
+  int width = 0;
+  int height = 0;
+};
+
+Result<SensorYaml> read_sensor_yaml(const fs::path& folder) {
+  SensorYaml s;
+  const fs::path path = folder / "sensor.yaml";
+  std::error_code ec;
+  if (!fs::exists(path, ec)) return s;
+  auto text = read_text_file(path.string());
+  if (!text.ok()) return text.error();
+  s.text = *text;
+  YAML::Node root;
+  try {
+    root = YAML::Load(s.text);
+  } catch (const YAML::ParserException& e) {
+    return make_error(Errc::kCorrupt,
+                      path.string() + ":" + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg);
+  }
+  if (!root.IsMap()) return s;
+  try {
+    if (root["rate_hz"]) s.rate_hz = root["rate_hz"].as<double>();
+    if (const YAML::Node r = root["resolution"]) {
+      if (!r.IsSequence() || r.size() != 2) throw YAML::Exception(r.Mark(), "resolution");
+      s.width = r[0].as<int>();
+      s.height = r[1].as<int>();
+    }
+  } catch (const YAML::Exception& e) {
+    return make_error(Errc::kCorrupt, path.string() + ":" + std::to_string(e.mark.line + 1) +
+                                          ": rate_hz must be a number and resolution [width, height]");
+  }
+  if (!(s.rate_hz >= 0.0) || s.width < 0 || s.height < 0) {
+    return make_error(Errc::kCorrupt, path.string() + ": rate_hz and resolution must not be negative");
+  }
+  return s;
+}
+
+/// Sensor folders named <prefix><number>, sorted by number.
+std::vector<std::pair<int, fs::path>> sensor_folders(const fs::path& root, const std::string& prefix) {
+  std::vector<std::pair<int, fs::path>> out;
+  const std::regex pattern(prefix + "([0-9]+)");
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(root, ec)) {
+    std::smatch m;
+    const std::string name = entry.path().filename().string();
+    if (entry.is_directory(ec) && std::regex_match(name, m, pattern))
+      out.emplace_back(std::stoi(m[1]), entry.path());
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+bool png_size(const std::vector<std::uint8_t>& data, int& width, int& height) {
+  static constexpr std::uint8_t kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (data.size() < 24 || !std::equal(kSignature, kSignature + 8, data.begin())) return false;
+  if (data[12] != 'I' || data[13] != 'H' || data[14] != 'D' || data[15] != 'R') return false;
+  const auto be32 = [&](std::size_t i) {
+    return static_cast<int>((std::uint32_t{data[i]} << 24) | (std::uint32_t{data[i + 1]} << 16) |
+                            (std::uint32_t{data[i + 2]} << 8) | std::uint32_t{data[i + 3]});
+  };
+  width = be32(16);
+  height = be32(20);
+  return width > 0 && height > 0;
+}
+
+Result<std::vector<std::uint8_t>> read_binary(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return make_error(Errc::kNotFound, "cannot open " + path.string());
+  std::vector<std::uint8_t> data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) return make_error(Errc::kIo, "cannot read " + path.string());
+  return data;
+}
+
+/// PNG bytes of a stored frame: PNG as is, other encodings decoded and encoded losslessly.
+Result<std::vector<std::uint8_t>> frame_png(const CameraFrame& frame) {
+  if (frame.encoding == "png") return frame.data;
+  cv::Mat image;
+  const std::size_t pixels = static_cast<std::size_t>(std::max(frame.width, 0)) * std::max(frame.height, 0);
+  if (frame.encoding == "gray8" || frame.encoding == "GREY" || frame.encoding == "Y800") {
+    if (frame.data.size() != pixels || pixels == 0) {
+      return make_error(Errc::kCorrupt, "frame at t_ns " + std::to_string(frame.t_ns) + " holds " +
+                                            std::to_string(frame.data.size()) + " bytes, expected " +
+                                            std::to_string(pixels) + " for " + frame.encoding);
+    }
+    image = cv::Mat(frame.height, frame.width, CV_8UC1, const_cast<std::uint8_t*>(frame.data.data())).clone();
+  } else if (frame.encoding == "Y16 " || frame.encoding == "gray16") {
+    if (frame.data.size() != 2 * pixels || pixels == 0) {
+      return make_error(Errc::kCorrupt, "frame at t_ns " + std::to_string(frame.t_ns) +
+                                            " has the wrong size for " + frame.encoding);
+    }
+    image = cv::Mat(frame.height, frame.width, CV_16UC1);
+    std::memcpy(image.data, frame.data.data(), frame.data.size());  // little-endian host
+  } else {
+    image = cv::imdecode(cv::Mat(1, static_cast<int>(frame.data.size()), CV_8UC1,
+                                 const_cast<std::uint8_t*>(frame.data.data())),
+                         cv::IMREAD_UNCHANGED);
+    if (image.empty()) {
+      return make_error(Errc::kUnsupported, "frame at t_ns " + std::to_string(frame.t_ns) +
+                                                " has encoding '" + frame.encoding +
+                                                "', which cannot be converted to PNG");
+    }
+  }
+  std::vector<std::uint8_t> png;
+  if (!cv::imencode(".png", image, png)) return make_error(Errc::kInternal, "PNG encoding failed");
+  return png;
+}
+
+struct ImuFolder {
+  std::string name;
+  std::vector<ImuSample> samples;
+  SensorYaml sensor;
+};
+
+struct CameraFolder {
+  std::string name;
+  fs::path data_dir;
+  std::vector<EurocImageRow> rows;
+  SensorYaml sensor;
+};
+
+Result<fs::path> euroc_root(const std::string& dir) {
+  std::error_code ec;
+  const fs::path p(dir);
+  if (!fs::is_directory(p, ec)) {
+    return make_error(Errc::kNotFound,
+                      dir + " is not a folder (expected an EuRoC dataset folder or its mav0/)");
+  }
+  if (fs::is_directory(p / "mav0", ec)) return p / "mav0";
+  if (!sensor_folders(p, "imu").empty() || !sensor_folders(p, "cam").empty()) return p;
+  return make_error(Errc::kNotFound, dir +
+                                         " is not an EuRoC dataset: it has neither mav0/ nor imuN/ or camN/ "
+                                         "folders (give the dataset folder or its mav0/)");
+}
+
+double median_rate_hz(const std::vector<TimeNs>& t) {
+  if (t.size() < 2) return 0.0;
+  std::vector<TimeNs> dt(t.size() - 1);
+  for (std::size_t i = 1; i < t.size(); ++i) dt[i - 1] = t[i] - t[i - 1];
+  std::nth_element(dt.begin(), dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2), dt.end());
+  return dt[dt.size() / 2] > 0 ? 1e9 / static_cast<double>(dt[dt.size() / 2]) : 0.0;
+}
+
+}  // namespace
+
+Result<ImportSummary> import_euroc(const std::string& dir, const std::string& out_path,
+                                   const OutputOptions& options) {
+  auto out = PendingOutput::begin(out_path, PendingOutput::Kind::kFile, options.force);
+  if (!out.ok()) return out.error();
+  auto root = euroc_root(dir);
+  if (!root.ok()) return root.error();
+
+  // Parse every CSV before writing anything, so a malformed file fails fast.
+  std::vector<ImuFolder> imus;
+  for (const auto& [index, folder] : sensor_folders(*root, "imu")) {
+    ImuFolder f;
+    f.name = folder.filename().string();
+    const std::string csv = (folder / "data.csv").string();
+    auto text = read_text_file(csv);
+    if (!text.ok()) return text.error();
+    auto samples = parse_euroc_imu_csv(*text, csv);
+    if (!samples.ok()) return samples.error();
+    if (samples->empty()) return make_error(Errc::kInsufficientData, csv + ": no data rows");
+    f.samples = std::move(*samples);
+    auto sensor = read_sensor_yaml(folder);
+    if (!sensor.ok()) return sensor.error();
+    f.sensor = std::move(*sensor);
+    imus.push_back(std::move(f));
+  }
+  std::vector<CameraFolder> cams;
+  for (const auto& [index, folder] : sensor_folders(*root, "cam")) {
+    CameraFolder f;
+    f.name = folder.filename().string();
+    f.data_dir = folder / "data";
+    const std::string csv = (folder / "data.csv").string();
+    auto text = read_text_file(csv);
+    if (!text.ok()) return text.error();
+    auto rows = parse_euroc_camera_csv(*text, csv);
+    if (!rows.ok()) return rows.error();
+    f.rows = std::move(*rows);
+    auto sensor = read_sensor_yaml(folder);
+    if (!sensor.ok()) return sensor.error();
+    f.sensor = std::move(*sensor);
+    cams.push_back(std::move(f));
+  }
+  if (imus.empty() && cams.empty()) {
+    return make_error(Errc::kInsufficientData, root->string() + " has no imuN/ or camN/ folders");
+  }
+
+  ImportSummary summary;
+  double total_work = 0;
+  for (const auto& f : imus) total_work += static_cast<double>(f.samples.size());
+  for (const auto& f : cams) total_work += 50.0 * static_cast<double>(f.rows.size());
+  double work = 0;
+  const auto advance = [&](double amount) {
+    work += amount;
+    if (options.progress) options.progress(work, total_work);
+  };
+
+  {
+    auto writer = SessionLogWriter::create(out->temp_path());
+    if (!writer.ok()) return writer.error().context("cannot create the session log");
+    SessionLogWriter& w = **writer;
+    nlohmann::json source = {{"format", "euroc"}, {"path", fs::absolute(*root).string()}};
+    IMUCAL_TRY(w.set_metadata("import", source.dump()));
+
+    for (const auto& f : imus) {
+      ImuStreamInfo info;
+      info.name = f.name;
+      info.units = ImuUnits::kSi;
+      std::vector<TimeNs> t(f.samples.size());
+      for (std::size_t i = 0; i < t.size(); ++i) t[i] = f.samples[i].t_ns;
+      info.rate_hz = f.sensor.rate_hz > 0 ? f.sensor.rate_hz : median_rate_hz(t);
+      info.device = "euroc:" + f.name;
+      if (!f.sensor.text.empty()) IMUCAL_TRY(w.set_metadata(sensor_yaml_key(f.name), f.sensor.text));
+      auto id = w.add_imu_stream(info);
+      if (!id.ok()) return id.error();
+      constexpr std::size_t kBatch = 8192;
+      for (std::size_t i = 0; i < f.samples.size(); i += kBatch) {
+        const std::size_t n = std::min(kBatch, f.samples.size() - i);
+        IMUCAL_TRY(w.append_imu(*id, std::span<const ImuSample>(f.samples.data() + i, n)));
+        advance(static_cast<double>(n));
+      }
+      summary.imu_samples += static_cast<std::int64_t>(f.samples.size());
+      if (summary.imu_streams++ == 0) {
+        summary.rate_hz = info.rate_hz;
+        summary.t_first_ns = f.samples.front().t_ns;
+        summary.t_last_ns = f.samples.back().t_ns;
+      }
+    }
+
+    for (const auto& f : cams) {
+      CameraStreamInfo info;
+      info.name = f.name;
+      info.backend = "euroc";
+      info.device = "euroc:" + f.name;
+      info.timestamp_source = "dataset";
+      std::vector<TimeNs> t(f.rows.size());
+      for (std::size_t i = 0; i < t.size(); ++i) t[i] = f.rows[i].t_ns;
+      info.rate_hz = f.sensor.rate_hz > 0 ? f.sensor.rate_hz : median_rate_hz(t);
+      info.width = f.sensor.width;
+      info.height = f.sensor.height;
+      // Without a resolution in sensor.yaml, the first image gives it.
+      if ((info.width == 0 || info.height == 0) && !f.rows.empty()) {
+        auto data = read_binary(f.data_dir / f.rows.front().filename);
+        if (data.ok()) png_size(*data, info.width, info.height);
+      }
+      if (!f.sensor.text.empty()) IMUCAL_TRY(w.set_metadata(sensor_yaml_key(f.name), f.sensor.text));
+      auto id = w.add_camera_stream(info);
+      if (!id.ok()) return id.error();
+      int converted = 0, mismatched = 0;
+      std::uint32_t sequence = 0;
+      for (const auto& row : f.rows) {
+        const fs::path image_path = f.data_dir / row.filename;
+        auto data = read_binary(image_path);
+        if (!data.ok()) {
+          return make_error(Errc::kNotFound, (f.data_dir.parent_path() / "data.csv").string() + ":" +
+                                                 std::to_string(row.line) + ": image " + image_path.string() +
+                                                 " is missing or unreadable");
+        }
+        CameraFrame frame;
+        frame.t_ns = row.t_ns;
+        frame.sequence = sequence++;
+        frame.encoding = "png";
+        if (png_size(*data, frame.width, frame.height)) {
+          frame.data = std::move(*data);
+        } else {
+          cv::Mat image = cv::imdecode(
+              cv::Mat(1, static_cast<int>(data->size()), CV_8UC1, static_cast<void*>(data->data())),
+              cv::IMREAD_UNCHANGED);
+          if (image.empty()) {
+            return make_error(Errc::kCorrupt, (f.data_dir.parent_path() / "data.csv").string() + ":" +
+                                                  std::to_string(row.line) + ": " + image_path.string() +
+                                                  " is not a readable image");
+          }
+          if (!cv::imencode(".png", image, frame.data))
+            return make_error(Errc::kInternal, "PNG encoding failed");
+          frame.width = image.cols;
+          frame.height = image.rows;
+          ++converted;
+        }
+        if (frame.width != info.width || frame.height != info.height) ++mismatched;
+        IMUCAL_TRY(w.append_frame(*id, frame));
+        advance(50.0);
+      }
+      summary.frames += static_cast<std::int64_t>(f.rows.size());
+      ++summary.camera_streams;
+      if (converted > 0) {
+        summary.notes.push_back(f.name + ": " + std::to_string(converted) +
+                                " images were not PNG and were stored as lossless PNG");
+      }
+      if (mismatched > 0) {
+        summary.notes.push_back(f.name + ": " + std::to_string(mismatched) + " images differ in size from " +
+                                std::to_string(info.width) + "x" + std::to_string(info.height) +
+                                " (sensor.yaml resolution or first image)");
+      }
+    }
+    IMUCAL_TRY(w.close());
+  }
+  IMUCAL_TRY(out->commit());
+  return summary;
+}
+
+namespace {
+
+std::string identity_t_bs() {
+  return "T_BS:\n  cols: 4\n  rows: 4\n  data: [1.0, 0.0, 0.0, 0.0,\n         0.0, 1.0, 0.0, 0.0,\n"
+         "         0.0, 0.0, 1.0, 0.0,\n         0.0, 0.0, 0.0, 1.0]\n";
+}
+
+std::string imu_sensor_yaml(const ImuStreamInfo& info, const std::string& log_path) {
+  std::string s = "# Written by imucal from " + log_path + ".\n";
+  s += "# T_BS is unknown here and written as identity. Noise densities and random walks are not\n";
+  s += "# known from a recording alone: estimate them with 'imucal allan'.\n";
+  s += "sensor_type: imu\n";
+  s += "comment: \"" + info.name + " (" + (info.device.empty() ? "unknown device" : info.device) + ")\"\n";
+  s += identity_t_bs();
+  s += "rate_hz: " + format_double(info.rate_hz) + "\n";
+  return s;
+}
+
+std::string camera_sensor_yaml(const CameraStreamInfo& info, const std::string& log_path) {
+  std::string s = "# Written by imucal from " + log_path + ".\n";
+  s += "# T_BS is unknown here and written as identity. Intrinsics are not part of a recording:\n";
+  s += "# calibrate them with 'imucal calibrate camera'.\n";
+  s += "sensor_type: camera\n";
+  s += "comment: \"" + info.name + " (" + info.backend + (info.device.empty() ? "" : " " + info.device) +
+       ")\"\n";
+  s += identity_t_bs();
+  s += "rate_hz: " + format_double(info.rate_hz) + "\n";
+  s += "resolution: [" + std::to_string(info.width) + ", " + std::to_string(info.height) + "]\n";
+  return s;
+}
+
+Status write_text(const fs::path& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary);
+  out << text;
+  out.close();
+  if (!out) return make_error(Errc::kIo, "cannot write " + path.string());
+  return {};
+}
+
+/// Folder names for streams: the stream's own name when it is <prefix>N and unique, else <prefix><index>.
+template <class Info>
+std::map<int, std::string> folder_names(const std::map<int, Info>& streams, const std::string& prefix) {
+  std::map<int, std::string> names;
+  std::set<std::string> used;
+  const std::regex pattern(prefix + "[0-9]+");
+  for (const auto& [id, info] : streams) {
+    if (std::regex_match(info.name, pattern) && used.insert(info.name).second) names[id] = info.name;
+  }
+  int next = 0;
+  for (const auto& [id, info] : streams) {
+    if (names.count(id)) continue;
+    while (used.count(prefix + std::to_string(next))) ++next;
+    names[id] = prefix + std::to_string(next);
+    used.insert(names[id]);
+  }
+  return names;
+}
+
+}  // namespace
+
+Result<ExportSummary> export_euroc(const std::string& log_path, const std::string& dir,
+                                   const OutputOptions& options, bool allow_damaged) {
+  auto reader = SessionLogReader::open(log_path);
+  if (!reader.ok()) return reader.error();
+  const SessionLogReader& r = **reader;
+  if (r.health().damaged && !allow_damaged) {
+    return make_error(Errc::kCorrupt, log_path + " is damaged (" + r.health().damage_message +
+                                          "); pass --allow-damaged to export what is readable");
+  }
+  std::error_code ec;
+  if (options.force && fs::is_directory(dir, ec) && !fs::is_empty(dir, ec) &&
+      !fs::exists(fs::path(dir) / "mav0")) {
+    return make_error(Errc::kInvalidArgument,
+                      dir +
+                          " exists and does not look like an EuRoC dataset (no mav0/); "
+                          "refusing to replace it even with --force");
+  }
+  if (r.imu_streams().empty() && r.camera_streams().empty()) {
+    return make_error(Errc::kInsufficientData, log_path + " has no IMU or camera streams to export");
+  }
+  auto out = PendingOutput::begin(dir, PendingOutput::Kind::kDirectory, options.force);
+  if (!out.ok()) return out.error();
+  const fs::path mav0 = fs::path(out->temp_path()) / "mav0";
+  ExportSummary summary;
+  if (!r.health().complete) {
+    summary.notes.push_back(log_path + " was not closed cleanly; exported what it holds");
+  }
+  if (r.health().damaged) summary.notes.push_back("log damaged: " + r.health().damage_message);
+
+  double total_work = 0;
+  for (const auto& [id, info] : r.imu_streams()) {
+    auto n = r.imu_count(id);
+    if (n.ok()) total_work += static_cast<double>(*n);
+  }
+  for (const auto& [id, info] : r.camera_streams()) {
+    auto n = r.frame_count(id);
+    if (n.ok()) total_work += 50.0 * static_cast<double>(*n);
+  }
+  double work = 0;
+  const auto advance = [&](double amount) {
+    work += amount;
+    if (options.progress) options.progress(work, total_work);
+  };
+
+  const auto& metadata = r.metadata();
+  const auto imu_names = folder_names(r.imu_streams(), "imu");
+  for (const auto& [id, info] : r.imu_streams()) {
+    const fs::path folder = mav0 / imu_names.at(id);
+    fs::create_directories(folder, ec);
+    if (ec) return make_error(Errc::kIo, "cannot create " + folder.string() + ": " + ec.message());
+    std::ofstream csv(folder / "data.csv", std::ios::binary);
+    csv << kImuHeader << "\n";
+    const bool raw = info.units == ImuUnits::kRaw;
+    std::string line;
+    std::int64_t count = 0;
+    Status visit = r.for_each_imu(id, kTimeMin, kTimeMax, [&](const ImuSample& s) {
+      const Eigen::Vector3d a = raw ? info.accel.to_si(s.accel) : s.accel;
+      const Eigen::Vector3d w = raw ? info.gyro.to_si(s.gyro) : s.gyro;
+      line = std::to_string(s.t_ns);
+      for (double v : {w.x(), w.y(), w.z(), a.x(), a.y(), a.z()}) {
+        line += ',';
+        line += format_double(v);
+      }
+      line += '\n';
+      csv << line;
+      ++count;
+      advance(1.0);
+      return static_cast<bool>(csv);
+    });
+    csv.close();
+    if (!csv) return make_error(Errc::kIo, "cannot write " + (folder / "data.csv").string());
+    if (!visit.ok()) return visit.error().context("reading " + info.name + " from " + log_path);
+    const auto meta = metadata.find(sensor_yaml_key(info.name));
+    IMUCAL_TRY(write_text(folder / "sensor.yaml",
+                          meta != metadata.end() ? meta->second : imu_sensor_yaml(info, log_path)));
+    summary.imu_samples += count;
+    if (raw) {
+      summary.notes.push_back(info.name +
+                              " holds raw counts: exported in SI (rad/s, m/s^2) with the stream's "
+                              "nominal conversion si = scale * (raw - offset); temperature is not "
+                              "part of the EuRoC format");
+    }
+  }
+
+  const auto cam_names = folder_names(r.camera_streams(), "cam");
+  for (const auto& [id, info] : r.camera_streams()) {
+    const fs::path folder = mav0 / cam_names.at(id);
+    fs::create_directories(folder / "data", ec);
+    if (ec) return make_error(Errc::kIo, "cannot create " + folder.string() + ": " + ec.message());
+    std::ofstream csv(folder / "data.csv", std::ios::binary);
+    csv << kCameraHeader << "\n";
+    std::int64_t count = 0, converted = 0;
+    std::optional<Error> failure;
+    Status visit = r.for_each_frame(id, kTimeMin, kTimeMax, [&](const CameraFrame& frame) {
+      const std::string name = std::to_string(frame.t_ns) + ".png";
+      const fs::path path = folder / "data" / name;
+      if (fs::exists(path)) {
+        failure =
+            make_error(Errc::kCorrupt, info.name + ": two frames share the timestamp " +
+                                           std::to_string(frame.t_ns) + " ns; EuRoC names images by time");
+        return false;
+      }
+      auto png = frame_png(frame);
+      if (!png.ok()) {
+        failure = png.error();
+        return false;
+      }
+      if (frame.encoding != "png") ++converted;
+      std::ofstream image(path, std::ios::binary);
+      image.write(reinterpret_cast<const char*>(png->data()), static_cast<std::streamsize>(png->size()));
+      image.close();
+      if (!image) {
+        failure = make_error(Errc::kIo, "cannot write " + path.string());
+        return false;
+      }
+      csv << frame.t_ns << ',' << name << '\n';
+      ++count;
+      advance(50.0);
+      return true;
+    });
+    csv.close();
+    if (failure) return *failure;
+    if (!csv) return make_error(Errc::kIo, "cannot write " + (folder / "data.csv").string());
+    if (!visit.ok()) return visit.error().context("reading " + info.name + " from " + log_path);
+    const auto meta = metadata.find(sensor_yaml_key(info.name));
+    IMUCAL_TRY(write_text(folder / "sensor.yaml",
+                          meta != metadata.end() ? meta->second : camera_sensor_yaml(info, log_path)));
+    summary.frames += count;
+    if (converted > 0) {
+      summary.notes.push_back(info.name + ": " + std::to_string(converted) +
+                              " frames were stored in other encodings and were written as lossless PNG");
+    }
+  }
+  IMUCAL_TRY(
+      write_text(mav0 / "body.yaml", "comment: 'Body frame: identity with every sensor (unknown here)'\n"));
+  IMUCAL_TRY(out->commit());
+  return summary;
+}
+
+}  // namespace imucal::log

@@ -1,0 +1,221 @@
+#pragma once
+// Import and export of dataset formats (docs/datasets.md):
+//   - EuRoC/ASL folders (mav0/imuN/data.csv, mav0/camN/data.csv + data/<t_ns>.png, sensor.yaml),
+//     both ways, exact: timestamps are integer nanoseconds, values are written in the shortest
+//     form that reads back to the same double, PNG bytes are copied unchanged;
+//   - plain-text accelerometer and gyroscope files ("t x y z" rows, t in seconds), as imu_tk
+//     and many IMU tools write them, in raw counts or SI;
+//   - generic CSV with a column mapping.
+// Every import writes a session log through a temporary file next to the output, renamed into
+// place only when complete; a failure removes it. An existing output is replaced only with
+// `force`. Parse errors name the file, the line (and column) and what is wrong.
+
+#include <Eigen/Core>
+#include <functional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/imu.hpp"
+#include "core/result.hpp"
+#include "core/time.hpp"
+
+namespace imucal::log {
+
+/// Progress callback: `done` out of `total` units of work (rows or bytes).
+using ProgressFn = std::function<void(double done, double total)>;
+
+struct OutputOptions {
+  bool force = false;   // replace an existing output
+  ProgressFn progress;  // may be empty
+};
+
+/// An output file or folder written under a temporary name next to its final path
+/// ("<path>.partial-<pid>") and renamed into place by commit(). Destroyed without commit, it
+/// removes what was written, so a failed import or export never leaves a partial output that
+/// looks complete.
+class PendingOutput {
+ public:
+  enum class Kind { kFile, kDirectory };
+
+  /// Checks that `final_path` can be written (its folder exists; it does not exist, or `force`).
+  /// For a folder, the temporary folder is created; for a file, only the name is chosen.
+  [[nodiscard]] static Result<PendingOutput> begin(const std::string& final_path, Kind kind, bool force);
+
+  PendingOutput(PendingOutput&& other) noexcept;
+  PendingOutput& operator=(PendingOutput&&) = delete;
+  PendingOutput(const PendingOutput&) = delete;
+  PendingOutput& operator=(const PendingOutput&) = delete;
+  ~PendingOutput();
+
+  const std::string& temp_path() const { return temp_path_; }
+  const std::string& final_path() const { return final_path_; }
+
+  /// Renames the temporary output into place, replacing an existing one (only with `force`).
+  [[nodiscard]] Status commit();
+
+ private:
+  PendingOutput(std::string final_path, std::string temp_path, Kind kind, bool force);
+  void discard();
+
+  std::string final_path_;
+  std::string temp_path_;
+  Kind kind_;
+  bool force_;
+  bool done_ = false;
+};
+
+/// Reads a whole file; the error names the path.
+[[nodiscard]] Result<std::string> read_text_file(const std::string& path);
+
+// ---------------------------------------------------------------------------------------------
+// Text primitives (exposed for tests and other readers).
+
+enum class TimeUnit { kS, kMs, kUs, kNs };
+/// "s", "ms", "us", "ns".
+[[nodiscard]] Result<TimeUnit> parse_time_unit(const std::string& name);
+const char* time_unit_name(TimeUnit unit);
+
+/// A decimal time value in `unit` to integer nanoseconds. Plain decimals ("1403636579.763555527")
+/// convert exactly; exponent notation is accepted; the result is rounded to the nearest ns.
+[[nodiscard]] Result<TimeNs> parse_time_ns(std::string_view text, TimeUnit unit);
+
+/// A finite double; accepts a leading '+'. Reads exactly what format_double writes.
+[[nodiscard]] Result<double> parse_double(std::string_view text);
+
+/// Shortest decimal text that reads back to exactly `value` (std::to_chars).
+std::string format_double(double value);
+
+// ---------------------------------------------------------------------------------------------
+// Plain-text triads and generic CSV.
+
+/// Timed 3-vectors from one file, with the line each came from.
+struct TriadSeries {
+  std::string source;
+  std::vector<TimeNs> t_ns;
+  std::vector<Eigen::Vector3d> xyz;
+  std::vector<int> line;
+};
+
+/// Parses whitespace-separated "t x y z" rows (t in seconds); '#' comments and blank lines are
+/// skipped. Timestamps must increase strictly.
+[[nodiscard]] Result<TriadSeries> parse_triad_text(std::string_view text, const std::string& source,
+                                                   const ProgressFn& progress = {});
+
+/// Sample period used to pair accelerometer and gyroscope rows: from rate_hz if > 0, else the
+/// median interval of `t_ns`. Fails when the median interval is not plausible (the message
+/// names `unit_flag`, e.g. "--time-unit").
+[[nodiscard]] Result<TimeNs> sample_period_ns(const std::vector<TimeNs>& t_ns, double rate_hz,
+                                              const std::string& source, const std::string& unit_flag);
+
+struct PairingStats {
+  int exact = 0;          // rows whose timestamps matched exactly
+  int nearest = 0;        // rows paired with the nearest row within half a period
+  int dropped_accel = 0;  // accelerometer rows outside the gyroscope's time span
+  int dropped_gyro = 0;   // gyroscope rows outside the accelerometer's time span
+};
+
+/// Pairs accelerometer and gyroscope rows into samples stamped with the accelerometer's time.
+/// Rows outside the common time span are dropped (and counted); inside it, every row must
+/// have a partner within half a sample period, else the error names both files and lines.
+[[nodiscard]] Result<std::vector<ImuSample>> pair_accel_gyro(const TriadSeries& accel,
+                                                             const TriadSeries& gyro, TimeNs period_ns,
+                                                             PairingStats* stats = nullptr);
+
+/// Column indexes (0-based) of a generic CSV; -1 = absent.
+struct CsvColumns {
+  int t = -1, ax = -1, ay = -1, az = -1, gx = -1, gy = -1, gz = -1, temp = -1;
+};
+/// Parses "t=0,ax=1,ay=2,az=3,gx=4,gy=5,gz=6[,temp=7]".
+[[nodiscard]] Result<CsvColumns> parse_csv_columns(const std::string& spec);
+
+struct CsvFormat {
+  CsvColumns columns;
+  TimeUnit time_unit = TimeUnit::kS;
+  char delimiter = ',';  // ' ' means any run of spaces or tabs
+  int skip_header = 0;   // lines skipped before parsing (headers)
+};
+/// Parses a CSV into samples (temperature NaN when there is no temp column).
+[[nodiscard]] Result<std::vector<ImuSample>> parse_imu_csv(std::string_view text, const std::string& source,
+                                                           const CsvFormat& format,
+                                                           const ProgressFn& progress = {});
+
+/// Unit sanity check: SI data whose accelerometer magnitude is far above 100 look like raw
+/// counts; raw data with a magnitude near 9.8 and non-integral values look like SI. The error
+/// names the flag to use.
+[[nodiscard]] Status check_units(const std::vector<ImuSample>& samples, ImuUnits units,
+                                 const std::string& source);
+
+// ---------------------------------------------------------------------------------------------
+// Imports and exports.
+
+struct ImportSummary {
+  std::int64_t imu_samples = 0;
+  std::int64_t frames = 0;
+  int imu_streams = 0;
+  int camera_streams = 0;
+  double rate_hz = 0.0;  // first IMU stream
+  TimeNs t_first_ns = 0;
+  TimeNs t_last_ns = 0;
+  std::vector<std::string> notes;  // things the user should know (dropped rows, conversions)
+};
+
+/// Nominal raw->SI conversions used when a raw import gives none: the MPU-6000 power-on ranges,
+/// +-2 g (16384 LSB/g) and +-250 deg/s (131 LSB/(deg/s)).
+AxisConversion default_raw_accel_conversion();
+AxisConversion default_raw_gyro_conversion();
+
+struct AsciiImport {
+  std::string accel_path;
+  std::string gyro_path;
+  ImuUnits units = ImuUnits::kSi;
+  double rate_hz = 0.0;                                   // 0: estimate from the timestamps
+  AxisConversion accel = default_raw_accel_conversion();  // raw only
+  AxisConversion gyro = default_raw_gyro_conversion();    // raw only
+  bool unit_check = true;
+};
+[[nodiscard]] Result<ImportSummary> import_ascii(const AsciiImport& in, const std::string& out_path,
+                                                 const OutputOptions& options);
+
+struct CsvImport {
+  std::string path;
+  CsvFormat format;
+  ImuUnits units = ImuUnits::kSi;
+  double rate_hz = 0.0;
+  AxisConversion accel = default_raw_accel_conversion();
+  AxisConversion gyro = default_raw_gyro_conversion();
+  bool unit_check = true;
+  double temperature_scale = 1.0;  // deg C = scale * value + offset (raw streams)
+  double temperature_offset = 0.0;
+};
+[[nodiscard]] Result<ImportSummary> import_csv(const CsvImport& in, const std::string& out_path,
+                                               const OutputOptions& options);
+
+/// EuRoC/ASL folder: `dir` may be the dataset folder or its mav0/.
+[[nodiscard]] Result<ImportSummary> import_euroc(const std::string& dir, const std::string& out_path,
+                                                 const OutputOptions& options);
+
+struct ExportSummary {
+  std::int64_t imu_samples = 0;
+  std::int64_t frames = 0;
+  std::vector<std::string> notes;
+};
+
+/// Writes a session log as an EuRoC/ASL folder `dir`/mav0/. Raw-count streams are converted to
+/// SI with the stream's nominal conversion (and a note says so). A damaged or incomplete log is
+/// refused unless `allow_damaged`.
+[[nodiscard]] Result<ExportSummary> export_euroc(const std::string& log_path, const std::string& dir,
+                                                 const OutputOptions& options, bool allow_damaged = false);
+
+// EuRoC pieces, exposed for tests.
+struct EurocImageRow {
+  TimeNs t_ns = 0;
+  std::string filename;
+  int line = 0;
+};
+[[nodiscard]] Result<std::vector<ImuSample>> parse_euroc_imu_csv(std::string_view text,
+                                                                 const std::string& source);
+[[nodiscard]] Result<std::vector<EurocImageRow>> parse_euroc_camera_csv(std::string_view text,
+                                                                        const std::string& source);
+
+}  // namespace imucal::log

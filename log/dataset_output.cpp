@@ -1,0 +1,149 @@
+// Outputs that appear only when complete: write under a temporary name, rename on success.
+
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <system_error>
+
+#include "log/dataset_io.hpp"
+
+namespace imucal::log {
+namespace fs = std::filesystem;
+
+namespace {
+
+void remove_file_family(const std::string& path) {
+  std::error_code ec;
+  for (const char* suffix : {"", "-wal", "-shm", "-journal"}) fs::remove(path + suffix, ec);
+}
+
+}  // namespace
+
+PendingOutput::PendingOutput(std::string final_path, std::string temp_path, Kind kind, bool force)
+    : final_path_(std::move(final_path)), temp_path_(std::move(temp_path)), kind_(kind), force_(force) {}
+
+PendingOutput::PendingOutput(PendingOutput&& other) noexcept
+    : final_path_(std::move(other.final_path_)),
+      temp_path_(std::move(other.temp_path_)),
+      kind_(other.kind_),
+      force_(other.force_),
+      done_(other.done_) {
+  other.done_ = true;
+}
+
+PendingOutput::~PendingOutput() { discard(); }
+
+void PendingOutput::discard() {
+  if (done_) return;
+  done_ = true;
+  std::error_code ec;
+  if (kind_ == Kind::kDirectory) {
+    fs::remove_all(temp_path_, ec);
+  } else {
+    remove_file_family(temp_path_);
+  }
+}
+
+Result<PendingOutput> PendingOutput::begin(const std::string& final_path, Kind kind, bool force) {
+  if (final_path.empty()) return make_error(Errc::kInvalidArgument, "the output path is empty");
+  std::error_code ec;
+  const fs::path path(final_path);
+  fs::path parent = path.parent_path();
+  if (parent.empty()) parent = ".";
+  if (!fs::is_directory(parent, ec)) {
+    return make_error(Errc::kIo, "cannot write " + final_path + ": folder " + parent.string() +
+                                     " does not exist (create it first)");
+  }
+  const auto status = fs::symlink_status(path, ec);
+  if (fs::exists(status)) {
+    const bool is_dir = fs::is_directory(status);
+    if (kind == Kind::kFile && is_dir) {
+      return make_error(Errc::kInvalidArgument, "output " + final_path + " is a folder; give a file name");
+    }
+    if (kind == Kind::kDirectory && !is_dir) {
+      return make_error(Errc::kInvalidArgument, "output " + final_path + " exists and is not a folder");
+    }
+    const bool empty_dir = is_dir && fs::is_empty(path, ec);
+    if (!force && !empty_dir) {
+      return make_error(
+          Errc::kInvalidArgument,
+          "output " + final_path + " already exists; pass --force to replace it, or choose another");
+    }
+  }
+  std::string temp = final_path;
+  while (!temp.empty() && temp.back() == '/') temp.pop_back();
+  temp += ".partial-" + std::to_string(::getpid());
+  PendingOutput out(final_path, temp, kind, force);
+  // A leftover from an earlier crash of a process with the same id.
+  if (kind == Kind::kDirectory) {
+    fs::remove_all(temp, ec);
+    if (!fs::create_directory(temp, ec)) {
+      out.done_ = true;
+      return make_error(Errc::kIo, "cannot create " + temp + ": " + ec.message());
+    }
+  } else {
+    remove_file_family(temp);
+  }
+  return out;
+}
+
+Status PendingOutput::commit() {
+  if (done_)
+    return make_error(Errc::kInternal, "output " + final_path_ + " was already committed or discarded");
+  std::error_code ec;
+  std::string final_path = final_path_;
+  while (final_path.size() > 1 && final_path.back() == '/') final_path.pop_back();
+  if (kind_ == Kind::kFile) {
+    if (force_) {
+      // A stale -wal next to the replaced log would be replayed into the new one.
+      for (const char* suffix : {"-wal", "-shm", "-journal"}) fs::remove(final_path + suffix, ec);
+    }
+    fs::rename(temp_path_, final_path, ec);
+    if (ec)
+      return make_error(Errc::kIo, "cannot move " + temp_path_ + " to " + final_path + ": " + ec.message());
+    done_ = true;
+    return {};
+  }
+  const bool exists = fs::exists(final_path, ec);
+  if (exists && !fs::is_empty(final_path, ec)) {
+    if (!force_)
+      return make_error(Errc::kInvalidArgument, "output " + final_path + " appeared while writing");
+    const std::string old = final_path + ".replaced-" + std::to_string(::getpid());
+    fs::rename(final_path, old, ec);
+    if (ec) return make_error(Errc::kIo, "cannot move the old " + final_path + " aside: " + ec.message());
+    fs::rename(temp_path_, final_path, ec);
+    if (ec) {
+      std::error_code ignored;
+      fs::rename(old, final_path, ignored);
+      return make_error(Errc::kIo, "cannot move " + temp_path_ + " to " + final_path + ": " + ec.message());
+    }
+    fs::remove_all(old, ec);
+  } else {
+    if (exists) fs::remove(final_path, ec);  // an empty folder
+    fs::rename(temp_path_, final_path, ec);
+    if (ec)
+      return make_error(Errc::kIo, "cannot move " + temp_path_ + " to " + final_path + ": " + ec.message());
+  }
+  done_ = true;
+  return {};
+}
+
+Result<std::string> read_text_file(const std::string& path) {
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) return make_error(Errc::kNotFound, path + " is a folder, expected a file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    return make_error(Errc::kNotFound,
+                      "cannot open " + path + ": " + std::strerror(errno) + " (check the path)");
+  }
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  if (in.bad()) return make_error(Errc::kIo, "cannot read " + path);
+  return ss.str();
+}
+
+}  // namespace imucal::log

@@ -1,0 +1,594 @@
+// Text parsing for dataset imports: exact decimal times, shortest round-trip doubles, "t x y z"
+// files, generic CSV, accelerometer/gyroscope pairing and the unit sanity check.
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <optional>
+#include <set>
+#include <sstream>
+
+#include "log/dataset_io.hpp"
+
+namespace imucal::log {
+namespace {
+
+std::string_view trim(std::string_view s) {
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t' || s.front() == '\r')) s.remove_prefix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r')) s.remove_suffix(1);
+  return s;
+}
+
+/// Iterates the lines of a text, counting from 1.
+class Lines {
+ public:
+  explicit Lines(std::string_view text) : text_(text) {}
+  bool next(std::string_view& line) {
+    if (pos_ >= text_.size()) return false;
+    const std::size_t end = text_.find('\n', pos_);
+    const std::size_t stop = end == std::string_view::npos ? text_.size() : end;
+    line = text_.substr(pos_, stop - pos_);
+    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    pos_ = stop + 1;
+    ++number_;
+    return true;
+  }
+  int number() const { return number_; }
+  std::size_t offset() const { return std::min(pos_, text_.size()); }
+
+ private:
+  std::string_view text_;
+  std::size_t pos_ = 0;
+  int number_ = 0;
+};
+
+void split_whitespace(std::string_view s, std::vector<std::string_view>& out) {
+  out.clear();
+  std::size_t i = 0;
+  while (i < s.size()) {
+    while (i < s.size() && (s[i] == ' ' || s[i] == '\t')) ++i;
+    if (i >= s.size()) break;
+    std::size_t j = i;
+    while (j < s.size() && s[j] != ' ' && s[j] != '\t') ++j;
+    out.push_back(s.substr(i, j - i));
+    i = j;
+  }
+}
+
+void split_delimited(std::string_view s, char delimiter, std::vector<std::string_view>& out) {
+  if (delimiter == ' ') {
+    split_whitespace(s, out);
+    return;
+  }
+  out.clear();
+  std::size_t start = 0;
+  while (true) {
+    const std::size_t end = s.find(delimiter, start);
+    out.push_back(
+        trim(s.substr(start, end == std::string_view::npos ? std::string_view::npos : end - start)));
+    if (end == std::string_view::npos) break;
+    start = end + 1;
+  }
+}
+
+Error at(const std::string& source, int line, const std::string& what) {
+  return make_error(Errc::kCorrupt, source + ":" + std::to_string(line) + ": " + what);
+}
+
+std::string seconds_text(TimeNs t_ns) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.9f s", ns_to_s(t_ns));
+  return buf;
+}
+
+/// Strictly increasing time check shared by all parsers.
+std::optional<Error> check_increasing(const std::string& source, TimeNs prev_t, int prev_line, TimeNs t,
+                                      int line) {
+  if (prev_line <= 0 || t > prev_t) return std::nullopt;
+  if (t == prev_t) {
+    return at(
+        source, line,
+        "duplicate timestamp (same as line " + std::to_string(prev_line) + "); timestamps must increase");
+  }
+  return at(source, line,
+            "timestamp goes backwards (" + seconds_text(t) + " after " + seconds_text(prev_t) + " on line " +
+                std::to_string(prev_line) + "); rows must be in time order");
+}
+
+}  // namespace
+
+Result<TimeUnit> parse_time_unit(const std::string& name) {
+  if (name == "s") return TimeUnit::kS;
+  if (name == "ms") return TimeUnit::kMs;
+  if (name == "us") return TimeUnit::kUs;
+  if (name == "ns") return TimeUnit::kNs;
+  return make_error(Errc::kInvalidArgument, "time unit '" + name + "' is not one of s, ms, us, ns");
+}
+
+const char* time_unit_name(TimeUnit unit) {
+  switch (unit) {
+    case TimeUnit::kS:
+      return "s";
+    case TimeUnit::kMs:
+      return "ms";
+    case TimeUnit::kUs:
+      return "us";
+    case TimeUnit::kNs:
+      return "ns";
+  }
+  return "?";
+}
+
+namespace {
+
+/// 'text' followed by `rest`. Built by appending: "'" + std::string(...) makes GCC 12 at -O3
+/// report a false -Wrestrict inside libstdc++.
+std::string quoted(std::string_view text, std::string_view rest) {
+  std::string msg(1, '\'');
+  msg.append(text).append(1, '\'').append(rest);
+  return msg;
+}
+
+}  // namespace
+
+Result<TimeNs> parse_time_ns(std::string_view text, TimeUnit unit) {
+  const std::string_view s = trim(text);
+  const auto bad = [&](const std::string& why) {
+    return make_error(Errc::kCorrupt, quoted(s, " is not a time value" + why));
+  };
+  if (s.empty()) return bad(" (empty)");
+  std::size_t i = 0;
+  bool negative = false;
+  if (s[0] == '+' || s[0] == '-') {
+    negative = s[0] == '-';
+    ++i;
+  }
+  std::string digits;
+  long long frac_digits = 0;
+  bool seen_dot = false;
+  long long exponent = 0;
+  for (; i < s.size(); ++i) {
+    const char c = s[i];
+    if (c >= '0' && c <= '9') {
+      digits.push_back(c);
+      if (seen_dot) ++frac_digits;
+    } else if (c == '.' && !seen_dot) {
+      seen_dot = true;
+    } else if ((c == 'e' || c == 'E') && !digits.empty()) {
+      std::size_t k = i + 1;
+      if (k < s.size() && s[k] == '+') ++k;
+      auto [ptr, ec] = std::from_chars(s.data() + k, s.data() + s.size(), exponent);
+      if (ec != std::errc() || ptr != s.data() + s.size() || std::llabs(exponent) > 400) return bad("");
+      break;
+    } else {
+      return bad("");
+    }
+  }
+  if (digits.empty()) return bad("");
+  const long long unit_exp = unit == TimeUnit::kS    ? 9
+                             : unit == TimeUnit::kMs ? 6
+                             : unit == TimeUnit::kUs ? 3
+                                                     : 0;
+  const long long exp10 = exponent - frac_digits + unit_exp;
+  const std::size_t nz = digits.find_first_not_of('0');
+  if (nz == std::string::npos) return TimeNs{0};
+  digits.erase(0, nz);
+  bool round_up = false;
+  if (exp10 >= 0) {
+    if (static_cast<long long>(digits.size()) + exp10 > 19) return bad(" (too large for int64 nanoseconds)");
+    digits.append(static_cast<std::size_t>(exp10), '0');
+  } else {
+    const long long keep = static_cast<long long>(digits.size()) + exp10;
+    if (keep < 0) return TimeNs{0};
+    round_up =
+        static_cast<std::size_t>(keep) < digits.size() && digits[static_cast<std::size_t>(keep)] >= '5';
+    digits.resize(static_cast<std::size_t>(keep));
+    if (digits.size() > 19) return bad(" (too large for int64 nanoseconds)");
+  }
+  std::uint64_t value = 0;
+  if (!digits.empty()) {
+    auto [ptr, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+    if (ec != std::errc()) return bad(" (too large for int64 nanoseconds)");
+  }
+  if (round_up) ++value;
+  if (value > static_cast<std::uint64_t>(std::numeric_limits<TimeNs>::max())) {
+    return bad(" (too large for int64 nanoseconds)");
+  }
+  const auto signed_value = static_cast<TimeNs>(value);
+  return negative ? -signed_value : signed_value;
+}
+
+Result<double> parse_double(std::string_view text) {
+  std::string_view s = trim(text);
+  std::string_view body = s;
+  if (!body.empty() && body[0] == '+') body.remove_prefix(1);
+  double v = 0.0;
+  auto [ptr, ec] = std::from_chars(body.data(), body.data() + body.size(), v);
+  if (body.empty() || ec != std::errc() || ptr != body.data() + body.size()) {
+    return make_error(Errc::kCorrupt, quoted(s, " is not a number"));
+  }
+  if (!std::isfinite(v)) return make_error(Errc::kCorrupt, quoted(s, " is not a finite number"));
+  return v;
+}
+
+std::string format_double(double value) {
+  char buf[64];
+  auto [ptr, ec] = std::to_chars(buf, buf + sizeof buf, value);
+  (void)ec;  // 64 bytes always hold the shortest form of a double
+  return std::string(buf, ptr);
+}
+
+Result<TriadSeries> parse_triad_text(std::string_view text, const std::string& source,
+                                     const ProgressFn& progress) {
+  TriadSeries series;
+  series.source = source;
+  Lines lines(text);
+  std::string_view line;
+  std::vector<std::string_view> fields;
+  static constexpr const char* kNames[] = {"t", "x", "y", "z"};
+  while (lines.next(line)) {
+    if (progress && (lines.number() & 0xffff) == 0)
+      progress(static_cast<double>(lines.offset()), text.size());
+    const std::size_t hash = line.find('#');
+    if (hash != std::string_view::npos) line = line.substr(0, hash);
+    split_whitespace(line, fields);
+    if (fields.empty()) continue;
+    if (fields.size() != 4) {
+      std::string msg =
+          "expected 4 whitespace-separated fields (t x y z), found " + std::to_string(fields.size());
+      if (fields.size() == 1 && line.find(',') != std::string_view::npos) {
+        msg += "; for comma-separated files use 'imucal import csv'";
+      }
+      return at(source, lines.number(), msg);
+    }
+    auto t = parse_time_ns(fields[0], TimeUnit::kS);
+    if (!t.ok()) return at(source, lines.number(), "field 1 (t, seconds): " + t.error().message);
+    Eigen::Vector3d v;
+    for (int k = 0; k < 3; ++k) {
+      auto x = parse_double(fields[static_cast<std::size_t>(k + 1)]);
+      if (!x.ok()) {
+        return at(source, lines.number(),
+                  "field " + std::to_string(k + 2) + " (" + kNames[k + 1] + "): " + x.error().message);
+      }
+      v[k] = *x;
+    }
+    if (!series.t_ns.empty()) {
+      if (auto e = check_increasing(source, series.t_ns.back(), series.line.back(), *t, lines.number()))
+        return *e;
+    }
+    series.t_ns.push_back(*t);
+    series.xyz.push_back(v);
+    series.line.push_back(lines.number());
+  }
+  if (progress) progress(static_cast<double>(text.size()), text.size());
+  if (series.t_ns.empty()) {
+    return make_error(Errc::kInsufficientData, source + ": no data rows (expected 't x y z' lines)");
+  }
+  return series;
+}
+
+Result<TimeNs> sample_period_ns(const std::vector<TimeNs>& t_ns, double rate_hz, const std::string& source,
+                                const std::string& unit_flag) {
+  if (rate_hz > 0.0) {
+    if (!(rate_hz <= 100'000.0)) {
+      return make_error(Errc::kInvalidArgument, "--rate " + format_double(rate_hz) + " Hz is above 100 kHz");
+    }
+    return static_cast<TimeNs>(std::llround(1e9 / rate_hz));
+  }
+  if (t_ns.size() < 2) {
+    return make_error(Errc::kInsufficientData,
+                      source + ": fewer than 2 samples, cannot estimate the sample rate (pass --rate HZ)");
+  }
+  std::vector<TimeNs> dt(t_ns.size() - 1);
+  for (std::size_t i = 1; i < t_ns.size(); ++i) dt[i - 1] = t_ns[i] - t_ns[i - 1];
+  std::nth_element(dt.begin(), dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2), dt.end());
+  const TimeNs median = dt[dt.size() / 2];
+  if (median < 10'000 || median > 2 * kNsPerSecond) {
+    return make_error(Errc::kCorrupt,
+                      source + ": the median interval between samples is " + seconds_text(median) +
+                          ", which is implausible for an IMU (0.5 Hz..100 kHz): check " + unit_flag);
+  }
+  return median;
+}
+
+Result<std::vector<ImuSample>> pair_accel_gyro(const TriadSeries& accel, const TriadSeries& gyro,
+                                               TimeNs period_ns, PairingStats* stats) {
+  PairingStats local;
+  PairingStats& st = stats ? *stats : local;
+  st = {};
+  std::vector<ImuSample> samples;
+  if (accel.t_ns.empty() || gyro.t_ns.empty()) return samples;
+  const TimeNs half = period_ns / 2;
+  // Common span: rows further than half a period outside the other file's span are dropped.
+  std::size_t a0 = 0, a1 = accel.t_ns.size(), g0 = 0, g1 = gyro.t_ns.size();
+  while (a0 < a1 && accel.t_ns[a0] <= gyro.t_ns.front() - half) ++a0;
+  while (a1 > a0 && accel.t_ns[a1 - 1] >= gyro.t_ns.back() + half) --a1;
+  while (g0 < g1 && gyro.t_ns[g0] <= accel.t_ns.front() - half) ++g0;
+  while (g1 > g0 && gyro.t_ns[g1 - 1] >= accel.t_ns.back() + half) --g1;
+  st.dropped_accel = static_cast<int>(accel.t_ns.size() - (a1 - a0));
+  st.dropped_gyro = static_cast<int>(gyro.t_ns.size() - (g1 - g0));
+  if (a0 == a1 || g0 == g1) {
+    return make_error(Errc::kInsufficientData,
+                      accel.source + " (" + seconds_text(accel.t_ns.front()) + " .. " +
+                          seconds_text(accel.t_ns.back()) + ") and " + gyro.source + " (" +
+                          seconds_text(gyro.t_ns.front()) + " .. " + seconds_text(gyro.t_ns.back()) +
+                          ") do not overlap in time: are they from the same recording?");
+  }
+  const auto where = [](const TriadSeries& s, std::size_t i) {
+    return s.source + ":" + std::to_string(s.line[i]) + " (t = " + seconds_text(s.t_ns[i]) + ")";
+  };
+  const std::string advice =
+      "; accelerometer and gyroscope rows must come from the same sampling instants (pairing tolerance is "
+      "half "
+      "the sample period, " +
+      seconds_text(half) + "): resample one file, or pass --rate if the estimated rate is wrong";
+  samples.reserve(a1 - a0);
+  std::size_t j = g0;
+  for (std::size_t i = a0; i < a1; ++i) {
+    const TimeNs t = accel.t_ns[i];
+    if (j < g1 && gyro.t_ns[j] <= t - half) {
+      return make_error(Errc::kCorrupt, "no accelerometer row pairs with " + where(gyro, j) +
+                                            "; nearest is " + where(accel, i) + advice);
+    }
+    if (j >= g1 || std::llabs(gyro.t_ns[j] - t) >= half) {
+      std::string nearest = j < g1 ? "; nearest gyroscope row is " + where(gyro, j) : "";
+      return make_error(Errc::kCorrupt, "no gyroscope row pairs with " + where(accel, i) + nearest + advice);
+    }
+    if (gyro.t_ns[j] == t) {
+      ++st.exact;
+    } else {
+      ++st.nearest;
+    }
+    ImuSample s;
+    s.t_ns = t;
+    s.accel = accel.xyz[i];
+    s.gyro = gyro.xyz[j];
+    samples.push_back(s);
+    ++j;
+  }
+  if (j < g1) {
+    return make_error(Errc::kCorrupt, "no accelerometer row pairs with " + where(gyro, j) + advice);
+  }
+  return samples;
+}
+
+Result<CsvColumns> parse_csv_columns(const std::string& spec) {
+  CsvColumns c;
+  const std::pair<const char*, int CsvColumns::*> names[] = {
+      {"t", &CsvColumns::t},   {"ax", &CsvColumns::ax}, {"ay", &CsvColumns::ay}, {"az", &CsvColumns::az},
+      {"gx", &CsvColumns::gx}, {"gy", &CsvColumns::gy}, {"gz", &CsvColumns::gz}, {"temp", &CsvColumns::temp}};
+  const std::string usage =
+      " (expected e.g. t=0,ax=1,ay=2,az=3,gx=4,gy=5,gz=6[,temp=7]; columns count from 0)";
+  std::set<int> used;
+  std::set<std::string> seen;
+  std::vector<std::string_view> items;
+  split_delimited(spec, ',', items);
+  for (std::string_view item : items) {
+    const std::size_t eq = item.find('=');
+    if (eq == std::string_view::npos) {
+      return make_error(Errc::kInvalidArgument,
+                        "--columns: '" + std::string(item) + "' is not name=index" + usage);
+    }
+    const std::string name(trim(item.substr(0, eq)));
+    const std::string_view index_text = trim(item.substr(eq + 1));
+    int index = -1;
+    auto [ptr, ec] = std::from_chars(index_text.data(), index_text.data() + index_text.size(), index);
+    if (ec != std::errc() || ptr != index_text.data() + index_text.size() || index < 0 || index > 1000) {
+      return make_error(Errc::kInvalidArgument, "--columns: index '" + std::string(index_text) + "' of " +
+                                                    name + " is not 0..1000" + usage);
+    }
+    const auto it =
+        std::find_if(std::begin(names), std::end(names), [&](const auto& n) { return name == n.first; });
+    if (it == std::end(names)) {
+      return make_error(Errc::kInvalidArgument, "--columns: unknown name '" + name + "'" + usage);
+    }
+    if (!seen.insert(name).second) {
+      return make_error(Errc::kInvalidArgument, "--columns: " + name + " is given twice");
+    }
+    if (!used.insert(index).second) {
+      return make_error(Errc::kInvalidArgument,
+                        "--columns: column " + std::to_string(index) + " is mapped twice (" + name + ")");
+    }
+    c.*(it->second) = index;
+  }
+  for (const auto& [name, member] : names) {
+    if (std::string(name) != "temp" && c.*member < 0) {
+      return make_error(Errc::kInvalidArgument, std::string("--columns: ") + name + " is missing" + usage);
+    }
+  }
+  return c;
+}
+
+Result<std::vector<ImuSample>> parse_imu_csv(std::string_view text, const std::string& source,
+                                             const CsvFormat& format, const ProgressFn& progress) {
+  const CsvColumns& c = format.columns;
+  const std::pair<const char*, int> mapped[] = {{"t", c.t},   {"ax", c.ax}, {"ay", c.ay}, {"az", c.az},
+                                                {"gx", c.gx}, {"gy", c.gy}, {"gz", c.gz}, {"temp", c.temp}};
+  int max_column = 0;
+  for (const auto& [name, index] : mapped) max_column = std::max(max_column, index);
+  std::vector<ImuSample> samples;
+  Lines lines(text);
+  std::string_view line;
+  std::vector<std::string_view> fields;
+  int prev_line = 0;
+  while (lines.next(line)) {
+    if (progress && (lines.number() & 0xffff) == 0)
+      progress(static_cast<double>(lines.offset()), text.size());
+    if (lines.number() <= format.skip_header) continue;
+    const std::string_view content = trim(line);
+    if (content.empty() || content.front() == '#') continue;
+    split_delimited(content, format.delimiter, fields);
+    const bool first_row = samples.empty();
+    const std::string header_hint =
+        first_row && format.skip_header == 0 ? " (if this line is a header, pass --skip-header 1)" : "";
+    if (static_cast<int>(fields.size()) <= max_column) {
+      std::string delim = format.delimiter == ' ' ? "whitespace" : std::string("'") + format.delimiter + "'";
+      return at(source, lines.number(),
+                "has " + std::to_string(fields.size()) + " columns separated by " + delim +
+                    ", the mapping needs column " + std::to_string(max_column) +
+                    " (columns count from 0; check --columns and --delimiter)" + header_hint);
+    }
+    ImuSample s;
+    for (const auto& [name, index] : mapped) {
+      if (index < 0) continue;
+      const std::string_view field = fields[static_cast<std::size_t>(index)];
+      const std::string col = "column " + std::to_string(index) + " (" + name + "): ";
+      if (std::string(name) == "t") {
+        auto t = parse_time_ns(field, format.time_unit);
+        if (!t.ok()) return at(source, lines.number(), col + t.error().message + header_hint);
+        s.t_ns = *t;
+        continue;
+      }
+      auto v = parse_double(field);
+      if (!v.ok()) return at(source, lines.number(), col + v.error().message + header_hint);
+      const std::string n(name);
+      if (n == "ax") s.accel.x() = *v;
+      if (n == "ay") s.accel.y() = *v;
+      if (n == "az") s.accel.z() = *v;
+      if (n == "gx") s.gyro.x() = *v;
+      if (n == "gy") s.gyro.y() = *v;
+      if (n == "gz") s.gyro.z() = *v;
+      if (n == "temp") s.temperature = *v;
+    }
+    if (!samples.empty()) {
+      if (auto e = check_increasing(source, samples.back().t_ns, prev_line, s.t_ns, lines.number()))
+        return *e;
+    }
+    prev_line = lines.number();
+    samples.push_back(s);
+  }
+  if (progress) progress(static_cast<double>(text.size()), text.size());
+  if (samples.empty()) return make_error(Errc::kInsufficientData, source + ": no data rows");
+  return samples;
+}
+
+Status check_units(const std::vector<ImuSample>& samples, ImuUnits units, const std::string& source) {
+  if (samples.empty()) return {};
+  // At most ~20000 evenly spaced samples: the median is robust and this stays cheap.
+  const std::size_t step = std::max<std::size_t>(1, samples.size() / 20000);
+  std::vector<double> norms;
+  std::size_t components = 0, non_integral = 0;
+  for (std::size_t i = 0; i < samples.size(); i += step) {
+    const Eigen::Vector3d& a = samples[i].accel;
+    norms.push_back(a.norm());
+    for (int k = 0; k < 3; ++k) {
+      ++components;
+      if (a[k] != std::floor(a[k])) ++non_integral;
+    }
+  }
+  std::nth_element(norms.begin(), norms.begin() + static_cast<std::ptrdiff_t>(norms.size() / 2), norms.end());
+  const double median = norms[norms.size() / 2];
+  std::ostringstream about;
+  about << source << ": the accelerometer magnitude is about " << median << " (median |a|)";
+  if (units == ImuUnits::kSi && median > 100.0) {
+    return make_error(Errc::kCorrupt,
+                      about.str() +
+                          ", far above gravity (9.8 m/s^2): these look like raw counts. Import "
+                          "with --units raw (with --accel-scale/--gyro-scale for the nominal "
+                          "conversion), or pass --no-unit-check if the values really are SI");
+  }
+  if (units == ImuUnits::kSi && median > 0.5 && median < 2.0) {
+    return make_error(Errc::kCorrupt,
+                      about.str() +
+                          ": these look like g, not m/s^2. Import with --units raw "
+                          "--accel-scale 9.80665 (and --gyro-scale for the gyroscope unit), or "
+                          "pass --no-unit-check if the values really are m/s^2");
+  }
+  if (units == ImuUnits::kRaw && median > 5.0 && median < 15.0 &&
+      static_cast<double>(non_integral) > 0.5 * static_cast<double>(components)) {
+    return make_error(Errc::kCorrupt,
+                      about.str() +
+                          " with non-integral values: these look like SI units (m/s^2, rad/s), "
+                          "not raw counts. Import with --units si, or pass --no-unit-check if "
+                          "they really are raw counts");
+  }
+  return {};
+}
+
+Result<std::vector<ImuSample>> parse_euroc_imu_csv(std::string_view text, const std::string& source) {
+  std::vector<ImuSample> samples;
+  Lines lines(text);
+  std::string_view line;
+  std::vector<std::string_view> fields;
+  static constexpr const char* kNames[] = {"timestamp [ns]", "w_RS_S_x", "w_RS_S_y", "w_RS_S_z",
+                                           "a_RS_S_x",       "a_RS_S_y", "a_RS_S_z"};
+  int prev_line = 0;
+  while (lines.next(line)) {
+    const std::string_view content = trim(line);
+    if (content.empty() || content.front() == '#') continue;
+    split_delimited(content, ',', fields);
+    if (fields.size() != 7) {
+      return at(source, lines.number(),
+                "expected 7 comma-separated columns (timestamp [ns], w_RS_S_x/y/z [rad s^-1], "
+                "a_RS_S_x/y/z [m s^-2]), found " +
+                    std::to_string(fields.size()));
+    }
+    ImuSample s;
+    auto [ptr, ec] = std::from_chars(fields[0].data(), fields[0].data() + fields[0].size(), s.t_ns);
+    if (fields[0].empty() || ec != std::errc() || ptr != fields[0].data() + fields[0].size()) {
+      return at(
+          source, lines.number(),
+          "column 1 (timestamp [ns]): '" + std::string(fields[0]) + "' is not an integer nanosecond time");
+    }
+    for (int k = 0; k < 6; ++k) {
+      auto v = parse_double(fields[static_cast<std::size_t>(k + 1)]);
+      if (!v.ok()) {
+        return at(source, lines.number(),
+                  "column " + std::to_string(k + 2) + " (" + kNames[k + 1] + "): " + v.error().message);
+      }
+      if (k < 3) {
+        s.gyro[k] = *v;
+      } else {
+        s.accel[k - 3] = *v;
+      }
+    }
+    if (!samples.empty()) {
+      if (auto e = check_increasing(source, samples.back().t_ns, prev_line, s.t_ns, lines.number()))
+        return *e;
+    }
+    prev_line = lines.number();
+    samples.push_back(s);
+  }
+  return samples;
+}
+
+Result<std::vector<EurocImageRow>> parse_euroc_camera_csv(std::string_view text, const std::string& source) {
+  std::vector<EurocImageRow> rows;
+  Lines lines(text);
+  std::string_view line;
+  std::vector<std::string_view> fields;
+  while (lines.next(line)) {
+    const std::string_view content = trim(line);
+    if (content.empty() || content.front() == '#') continue;
+    split_delimited(content, ',', fields);
+    if (fields.size() != 2) {
+      return at(source, lines.number(),
+                "expected 2 comma-separated columns (timestamp [ns], filename), found " +
+                    std::to_string(fields.size()));
+    }
+    EurocImageRow row;
+    row.line = lines.number();
+    auto [ptr, ec] = std::from_chars(fields[0].data(), fields[0].data() + fields[0].size(), row.t_ns);
+    if (fields[0].empty() || ec != std::errc() || ptr != fields[0].data() + fields[0].size()) {
+      return at(
+          source, lines.number(),
+          "column 1 (timestamp [ns]): '" + std::string(fields[0]) + "' is not an integer nanosecond time");
+    }
+    row.filename = std::string(fields[1]);
+    if (row.filename.empty() || row.filename.find('/') != std::string::npos || row.filename == "." ||
+        row.filename == "..") {
+      return at(source, lines.number(),
+                "column 2 (filename): '" + row.filename + "' must be a plain file name inside data/");
+    }
+    if (!rows.empty()) {
+      if (auto e = check_increasing(source, rows.back().t_ns, rows.back().line, row.t_ns, row.line))
+        return *e;
+    }
+    rows.push_back(std::move(row));
+  }
+  return rows;
+}
+
+}  // namespace imucal::log

@@ -1,0 +1,1085 @@
+// The session log on SQLite: SessionLogWriter::create and SessionLogReader::open.
+// Schema and guarantees: docs/session-log.md.
+
+#include "log/session_log_sqlite.hpp"
+
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <set>
+#include <system_error>
+
+#include "log/session_log.hpp"
+#include "core/version.hpp"
+
+namespace imucal::log {
+namespace {
+
+using sqlite::Stmt;
+
+// Reserved metadata keys, set by the writer only.
+constexpr const char* kKeySchemaVersion = "schema_version";
+constexpr const char* kKeySoftwareVersion = "software_version";
+constexpr const char* kKeyCreatedUtc = "created_utc";
+constexpr const char* kKeyComplete = "complete";
+
+std::string utc_now_iso8601() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char text[32];
+  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return text;
+}
+
+// Binds one sample value: NaN as NULL; in raw streams an integral value as INTEGER (exact up
+// to 2^53); everything else as REAL (an exact double round trip).
+void bind_value(sqlite3_stmt* stmt, int index, double value, bool raw) {
+  constexpr double kExactIntLimit = 9007199254740992.0;  // 2^53
+  if (std::isnan(value)) {
+    sqlite3_bind_null(stmt, index);
+  } else if (raw && std::trunc(value) == value && std::fabs(value) <= kExactIntLimit) {
+    sqlite3_bind_int64(stmt, index, static_cast<sqlite3_int64>(value));
+  } else {
+    sqlite3_bind_double(stmt, index, value);
+  }
+}
+
+double column_value(sqlite3_stmt* stmt, int index) {
+  if (sqlite3_column_type(stmt, index) == SQLITE_NULL) return std::numeric_limits<double>::quiet_NaN();
+  return sqlite3_column_double(stmt, index);
+}
+
+std::string column_text(sqlite3_stmt* stmt, int index) {
+  const auto* text = sqlite3_column_text(stmt, index);
+  return text ? std::string(reinterpret_cast<const char*>(text)) : std::string();
+}
+
+void bind_text(sqlite3_stmt* stmt, int index, const std::string& text) {
+  sqlite3_bind_text(stmt, index, text.data(), static_cast<int>(text.size()), SQLITE_TRANSIENT);
+}
+
+ImuSample read_sample_columns(sqlite3_stmt* stmt, int first) {
+  ImuSample s;
+  s.t_ns = sqlite3_column_int64(stmt, first);
+  s.accel = {column_value(stmt, first + 1), column_value(stmt, first + 2), column_value(stmt, first + 3)};
+  s.gyro = {column_value(stmt, first + 4), column_value(stmt, first + 5), column_value(stmt, first + 6)};
+  s.temperature = column_value(stmt, first + 7);
+  s.flags = static_cast<std::uint32_t>(sqlite3_column_int64(stmt, first + 8));
+  return s;
+}
+
+// ------------------------------------------------------------------------------------------
+// Writer
+
+class SqliteSessionLogWriter final : public SessionLogWriter {
+ public:
+  SqliteSessionLogWriter(std::string path, SessionLogWriterOptions options, sqlite::Db db)
+      : path_(std::move(path)), options_(options), db_(std::move(db)) {}
+
+  ~SqliteSessionLogWriter() override {
+    if (closed_) return;
+    // Keep what was appended; the log stays marked incomplete.
+    if (in_txn_) (void)commit();
+    (void)release();
+  }
+
+  Status init() {
+    static constexpr const char* kSetup =
+        "PRAGMA journal_mode=WAL;"
+        "PRAGMA synchronous=FULL;"
+        "PRAGMA wal_autocheckpoint=4096;";
+    if (sqlite::exec(db_.get(), kSetup) != SQLITE_OK) return sql_error("configure");
+    const std::string header = "PRAGMA application_id=" + std::to_string(sqlite::kApplicationId) +
+                               ";PRAGMA user_version=" + std::to_string(kSessionLogSchemaVersion) + ";";
+    if (sqlite::exec(db_.get(), "BEGIN") != SQLITE_OK) return sql_error("begin");
+    if (sqlite::exec(db_.get(), header.c_str()) != SQLITE_OK) return sql_error("write header");
+    if (sqlite::exec(db_.get(), sqlite::kSchemaSql) != SQLITE_OK) return sql_error("create schema");
+    IMUCAL_TRY(prepare_statements());
+    IMUCAL_TRY(put_metadata(kKeySchemaVersion, std::to_string(kSessionLogSchemaVersion)));
+    IMUCAL_TRY(put_metadata(kKeySoftwareVersion, kVersion));
+    IMUCAL_TRY(put_metadata(kKeyCreatedUtc, utc_now_iso8601()));
+    IMUCAL_TRY(put_metadata(kKeyComplete, "0"));
+    if (sqlite::exec(db_.get(), "COMMIT") != SQLITE_OK) return sql_error("commit schema");
+    return {};
+  }
+
+  Status set_metadata(const std::string& key, const std::string& value) override {
+    IMUCAL_TRY(check_usable());
+    if (key.empty()) return make_error(Errc::kInvalidArgument, "session log metadata key is empty");
+    if (key == kKeySchemaVersion || key == kKeySoftwareVersion || key == kKeyCreatedUtc ||
+        key == kKeyComplete) {
+      return make_error(Errc::kInvalidArgument,
+                        "session log metadata key '" + key + "' is set by the writer itself");
+    }
+    IMUCAL_TRY(begin_if_needed());
+    IMUCAL_TRY(put_metadata(key, value));
+    return maybe_commit();
+  }
+
+  Result<int> add_imu_stream(const ImuStreamInfo& info) override {
+    IMUCAL_TRY(check_usable());
+    IMUCAL_TRY(check_new_name(info.name, imu_names_, "IMU"));
+    if (!(info.rate_hz >= 0.0) || !std::isfinite(info.rate_hz)) {
+      return make_error(Errc::kInvalidArgument,
+                        "IMU stream '" + info.name + "': rate_hz must be >= 0 and finite");
+    }
+    int rc = 0;
+    Stmt stmt =
+        sqlite::prepare(db_.get(),
+                        "INSERT INTO imu_streams VALUES(?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,"
+                        "?15,?16,?17,?18,?19,?20,?21,?22)",
+                        &rc);
+    if (rc != SQLITE_OK) return sql_error("prepare stream insert");
+    const int id = next_stream_id_;
+    sqlite3_stmt* s = stmt.get();
+    sqlite3_bind_int(s, 1, id);
+    bind_text(s, 2, info.name);
+    bind_text(s, 3, imu_units_name(info.units));
+    sqlite3_bind_double(s, 4, info.rate_hz);
+    int col = 5;
+    for (const AxisConversion* conv : {&info.accel, &info.gyro}) {
+      for (int i = 0; i < 3; ++i) sqlite3_bind_double(s, col++, conv->scale[i]);
+      for (int i = 0; i < 3; ++i) sqlite3_bind_double(s, col++, conv->offset[i]);
+    }
+    sqlite3_bind_double(s, 17, info.temperature_scale);
+    sqlite3_bind_double(s, 18, info.temperature_offset);
+    sqlite3_bind_int(s, 19, info.accel_full_scale_g);
+    sqlite3_bind_int(s, 20, info.gyro_full_scale_dps);
+    sqlite3_bind_int(s, 21, info.dlpf_hz);
+    bind_text(s, 22, info.device);
+    IMUCAL_TRY(begin_if_needed());
+    if (sqlite3_step(s) != SQLITE_DONE) return fail_with("add IMU stream '" + info.name + "'");
+    ++next_stream_id_;
+    imu_units_[id] = info.units;
+    imu_names_.insert(info.name);
+    IMUCAL_TRY(maybe_commit());
+    return id;
+  }
+
+  Result<int> add_camera_stream(const CameraStreamInfo& info) override {
+    IMUCAL_TRY(check_usable());
+    IMUCAL_TRY(check_new_name(info.name, camera_names_, "camera"));
+    int rc = 0;
+    Stmt stmt = sqlite::prepare(db_.get(), "INSERT INTO camera_streams VALUES(?1,?2,?3,?4,?5,?6,?7,?8)", &rc);
+    if (rc != SQLITE_OK) return sql_error("prepare stream insert");
+    const int id = next_stream_id_;
+    sqlite3_stmt* s = stmt.get();
+    sqlite3_bind_int(s, 1, id);
+    bind_text(s, 2, info.name);
+    sqlite3_bind_int(s, 3, info.width);
+    sqlite3_bind_int(s, 4, info.height);
+    sqlite3_bind_double(s, 5, info.rate_hz);
+    bind_text(s, 6, info.backend);
+    bind_text(s, 7, info.device);
+    bind_text(s, 8, info.timestamp_source);
+    IMUCAL_TRY(begin_if_needed());
+    if (sqlite3_step(s) != SQLITE_DONE) return fail_with("add camera stream '" + info.name + "'");
+    ++next_stream_id_;
+    camera_ids_.insert(id);
+    camera_names_.insert(info.name);
+    IMUCAL_TRY(maybe_commit());
+    return id;
+  }
+
+  Status append_imu(int stream_id, std::span<const ImuSample> samples) override {
+    IMUCAL_TRY(check_usable());
+    const auto it = imu_units_.find(stream_id);
+    if (it == imu_units_.end()) {
+      return make_error(Errc::kInvalidArgument,
+                        "append_imu: no IMU stream with id " + std::to_string(stream_id) + " in this log");
+    }
+    const bool raw = it->second == ImuUnits::kRaw;
+    IMUCAL_TRY(begin_if_needed());
+    sqlite3_stmt* s = insert_imu_.get();
+    for (const ImuSample& sample : samples) {
+      sqlite3_bind_int(s, 1, stream_id);
+      sqlite3_bind_int64(s, 2, sample.t_ns);
+      for (int i = 0; i < 3; ++i) bind_value(s, 3 + i, sample.accel[i], raw);
+      for (int i = 0; i < 3; ++i) bind_value(s, 6 + i, sample.gyro[i], raw);
+      bind_value(s, 9, sample.temperature, raw);
+      sqlite3_bind_int64(s, 10, sample.flags);
+      const int rc = sqlite3_step(s);
+      sqlite3_reset(s);
+      if (rc != SQLITE_DONE) return fail_with("append IMU samples");
+    }
+    return maybe_commit();
+  }
+
+  Status append_frame(int stream_id, const CameraFrame& frame) override {
+    IMUCAL_TRY(check_usable());
+    if (!camera_ids_.contains(stream_id)) {
+      return make_error(Errc::kInvalidArgument, "append_frame: no camera stream with id " +
+                                                    std::to_string(stream_id) + " in this log");
+    }
+    if (frame.data.size() > static_cast<std::size_t>(std::numeric_limits<int>::max())) {
+      return make_error(Errc::kInvalidArgument, "append_frame: frame data larger than 2 GiB");
+    }
+    IMUCAL_TRY(begin_if_needed());
+    sqlite3_stmt* s = insert_frame_.get();
+    sqlite3_bind_int(s, 1, stream_id);
+    sqlite3_bind_int64(s, 2, frame.t_ns);
+    sqlite3_bind_int(s, 3, frame.width);
+    sqlite3_bind_int(s, 4, frame.height);
+    bind_text(s, 5, frame.encoding);
+    sqlite3_bind_int64(s, 6, frame.exposure_ns);
+    sqlite3_bind_int64(s, 7, frame.sequence);
+    sqlite3_bind_int64(s, 8, frame.flags);
+    // A zero-length blob still has to be a BLOB, not NULL.
+    static constexpr std::uint8_t kEmpty = 0;
+    sqlite3_bind_blob(s, 9, frame.data.empty() ? &kEmpty : frame.data.data(),
+                      static_cast<int>(frame.data.size()), SQLITE_STATIC);
+    sqlite3_bind_int64(s, 10, sqlite::crc32(frame.data.data(), frame.data.size()));
+    const int rc = sqlite3_step(s);
+    sqlite3_reset(s);
+    sqlite3_clear_bindings(s);
+    if (rc != SQLITE_DONE) return fail_with("append frame");
+    return maybe_commit();
+  }
+
+  Status append_event(const Event& event) override {
+    IMUCAL_TRY(check_usable());
+    IMUCAL_TRY(begin_if_needed());
+    sqlite3_stmt* s = insert_event_.get();
+    sqlite3_bind_int64(s, 1, event.t_ns);
+    bind_text(s, 2, event.kind);
+    bind_text(s, 3, event.message);
+    const int rc = sqlite3_step(s);
+    sqlite3_reset(s);
+    if (rc != SQLITE_DONE) return fail_with("append event");
+    return maybe_commit();
+  }
+
+  Status flush() override {
+    IMUCAL_TRY(check_usable());
+    return in_txn_ ? commit() : Status{};
+  }
+
+  Status close() override {
+    IMUCAL_TRY(check_usable());
+    IMUCAL_TRY(begin_if_needed());
+    IMUCAL_TRY(put_metadata(kKeyComplete, "1"));
+    IMUCAL_TRY(commit());
+    // Move everything into the main file. Switching back to a rollback journal leaves a
+    // single self-contained file that opens read-only even where no -shm can be created; it
+    // fails harmlessly (the log stays in WAL mode) while another process has the log open.
+    if (sqlite3_wal_checkpoint_v2(db_.get(), nullptr, SQLITE_CHECKPOINT_TRUNCATE, nullptr, nullptr) !=
+        SQLITE_OK) {
+      return fail_with("checkpoint");
+    }
+    (void)sqlite::exec(db_.get(), "PRAGMA journal_mode=DELETE");
+    closed_ = true;
+    return release();
+  }
+
+ private:
+  Status prepare_statements() {
+    int rc = 0;
+    insert_imu_ =
+        sqlite::prepare(db_.get(), "INSERT INTO imu_samples VALUES(?1,?2,?3,?4,?5,?6,?7,?8,?9,?10)", &rc);
+    if (rc != SQLITE_OK) return sql_error("prepare");
+    insert_frame_ =
+        sqlite::prepare(db_.get(), "INSERT INTO frames VALUES(?1,?2,?3,?4,?5,?6,?7,?8,?9,?10)", &rc);
+    if (rc != SQLITE_OK) return sql_error("prepare");
+    insert_event_ = sqlite::prepare(db_.get(), "INSERT INTO events VALUES(?1,?2,?3)", &rc);
+    if (rc != SQLITE_OK) return sql_error("prepare");
+    set_metadata_ = sqlite::prepare(db_.get(), "INSERT OR REPLACE INTO metadata VALUES(?1,?2)", &rc);
+    if (rc != SQLITE_OK) return sql_error("prepare");
+    return {};
+  }
+
+  Status put_metadata(const std::string& key, const std::string& value) {
+    sqlite3_stmt* s = set_metadata_.get();
+    bind_text(s, 1, key);
+    bind_text(s, 2, value);
+    const int rc = sqlite3_step(s);
+    sqlite3_reset(s);
+    if (rc != SQLITE_DONE) return fail_with("write metadata '" + key + "'");
+    return {};
+  }
+
+  Status check_usable() const {
+    if (closed_) return make_error(Errc::kInvalidArgument, "session log " + path_ + " is already closed");
+    if (failed_) return *failed_;
+    return {};
+  }
+
+  static Status check_new_name(const std::string& name, const std::set<std::string>& names,
+                               const char* kind) {
+    if (name.empty()) return make_error(Errc::kInvalidArgument, std::string(kind) + " stream name is empty");
+    if (names.contains(name)) {
+      return make_error(Errc::kInvalidArgument, std::string(kind) + " stream '" + name +
+                                                    "' already exists in this log; use another name");
+    }
+    return {};
+  }
+
+  Status begin_if_needed() {
+    if (in_txn_) return {};
+    if (sqlite::exec(db_.get(), "BEGIN") != SQLITE_OK) return fail_with("begin transaction");
+    in_txn_ = true;
+    txn_start_ns_ = monotonic_now_ns();
+    return {};
+  }
+
+  Status maybe_commit() {
+    if (in_txn_ && monotonic_now_ns() - txn_start_ns_ >= options_.commit_interval_ns) return commit();
+    return {};
+  }
+
+  Status commit() {
+    if (sqlite::exec(db_.get(), "COMMIT") != SQLITE_OK) return fail_with("commit");
+    in_txn_ = false;
+    return {};
+  }
+
+  Error sql_error(const std::string& what) const {
+    const int rc = sqlite3_extended_errcode(db_.get());
+    const Errc code = (rc & 0xff) == SQLITE_FULL || (rc & 0xff) == SQLITE_IOERR ? Errc::kIo : Errc::kInternal;
+    std::string message = "session log " + path_ + ": " + what + " failed: " + sqlite::errmsg(db_.get());
+    if ((rc & 0xff) == SQLITE_FULL) message += " (the disk is full: free space and record again)";
+    return make_error(code, message);
+  }
+
+  // A failed write leaves the transaction in an unknown state: every later call reports it.
+  Error fail_with(const std::string& what) {
+    Error error = sql_error(what);
+    failed_ = error;
+    return error;
+  }
+
+  Status release() {
+    insert_imu_.reset();
+    insert_frame_.reset();
+    insert_event_.reset();
+    set_metadata_.reset();
+    sqlite3* db = db_.release();
+    if (sqlite3_close(db) != SQLITE_OK) {
+      const std::string message = sqlite::errmsg(db);
+      sqlite3_close_v2(db);
+      return make_error(Errc::kIo, "session log " + path_ + ": close failed: " + message);
+    }
+    return {};
+  }
+
+  std::string path_;
+  SessionLogWriterOptions options_;
+  sqlite::Db db_;
+  Stmt insert_imu_, insert_frame_, insert_event_, set_metadata_;
+  std::map<int, ImuUnits> imu_units_;
+  std::set<int> camera_ids_;
+  std::set<std::string> imu_names_, camera_names_;
+  int next_stream_id_ = 1;
+  bool in_txn_ = false;
+  TimeNs txn_start_ns_ = 0;
+  bool closed_ = false;
+  std::optional<Error> failed_;
+};
+
+}  // namespace
+
+Result<std::unique_ptr<SessionLogWriter>> SessionLogWriter::create(const std::string& path,
+                                                                   const SessionLogWriterOptions& options) {
+  namespace fs = std::filesystem;
+  if (path.empty()) return make_error(Errc::kInvalidArgument, "session log path is empty");
+  if (options.commit_interval_ns < 0) {
+    return make_error(Errc::kInvalidArgument, "session log commit_interval_ns must be >= 0");
+  }
+  std::error_code ec;
+  const auto status = fs::symlink_status(path, ec);
+  if (fs::exists(status)) {
+    if (!options.overwrite) {
+      return make_error(
+          Errc::kInvalidArgument,
+          "session log " + path + " already exists; choose a new file name or allow overwriting");
+    }
+    if (fs::is_directory(status)) {
+      return make_error(Errc::kInvalidArgument, "session log path " + path + " is a directory");
+    }
+  }
+  if (options.overwrite) {
+    for (const char* suffix : {"", "-wal", "-shm", "-journal"}) {
+      const std::string victim = path + suffix;
+      if (std::remove(victim.c_str()) != 0 && errno != ENOENT) {
+        return make_error(Errc::kIo, "cannot replace " + victim + ": " + std::strerror(errno));
+      }
+    }
+  }
+  sqlite3* raw = nullptr;
+  const int rc = sqlite3_open_v2(path.c_str(), &raw, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, nullptr);
+  sqlite::Db db(raw);
+  if (rc != SQLITE_OK) {
+    return make_error(Errc::kIo, "cannot create session log " + path + ": " + sqlite::errmsg(raw) +
+                                     " (check that the directory exists and is writable)");
+  }
+  auto writer = std::make_unique<SqliteSessionLogWriter>(path, options, std::move(db));
+  if (auto init = writer->init(); !init.ok()) {
+    writer.reset();
+    for (const char* suffix : {"", "-wal", "-shm"}) std::remove((path + suffix).c_str());
+    return init.error();
+  }
+  return std::unique_ptr<SessionLogWriter>(std::move(writer));
+}
+
+// ------------------------------------------------------------------------------------------
+// Reader
+
+namespace {
+
+class SqliteSessionLogReader final : public SessionLogReader {
+ public:
+  explicit SqliteSessionLogReader(std::string path) : path_(std::move(path)) {}
+
+  Status open();
+
+  const SessionLogHealth& health() const override { return health_; }
+  const std::map<std::string, std::string>& metadata() const override { return metadata_; }
+  const std::map<int, ImuStreamInfo>& imu_streams() const override { return imu_streams_; }
+  const std::map<int, CameraStreamInfo>& camera_streams() const override { return camera_streams_; }
+
+  Result<int> find_imu_stream(const std::string& name) const override {
+    return find_stream(imu_streams_, name, "IMU");
+  }
+  Result<int> find_camera_stream(const std::string& name) const override {
+    return find_stream(camera_streams_, name, "camera");
+  }
+
+  Status for_each_imu(int stream_id, TimeNs t0_ns, TimeNs t1_ns,
+                      const std::function<bool(const ImuSample&)>& visit) const override;
+  Status for_each_frame(int stream_id, TimeNs t0_ns, TimeNs t1_ns,
+                        const std::function<bool(const CameraFrame&)>& visit) const override;
+  Result<std::vector<TimeNs>> frame_times(int stream_id) const override;
+  Result<std::vector<Event>> events() const override { return events_; }
+  Result<std::int64_t> imu_count(int stream_id) const override;
+  Result<std::int64_t> frame_count(int stream_id) const override;
+
+ private:
+  template <class Info>
+  static Result<int> find_stream(const std::map<int, Info>& streams, const std::string& name,
+                                 const char* kind) {
+    for (const auto& [id, info] : streams) {
+      if (name.empty() || info.name == name) return id;
+    }
+    std::string names;
+    for (const auto& [id, info] : streams) names += (names.empty() ? "" : ", ") + info.name;
+    if (name.empty())
+      return make_error(Errc::kNotFound, std::string("the session log has no ") + kind + " stream");
+    return make_error(Errc::kNotFound, std::string("the session log has no ") + kind + " stream named '" +
+                                           name + "' (it has: " + (names.empty() ? "none" : names) + ")");
+  }
+
+  Error sql_error(const std::string& what) const {
+    return make_error(Errc::kCorrupt,
+                      "session log " + path_ + ": " + what + ": " + sqlite::errmsg(db_.get()));
+  }
+  void note_damage(const std::string& what) const;
+  // Copies the blob in column `col` (its CRC in `col + 1`) into frame->data; false, with the
+  // damage noted, when the data does not match its CRC.
+  bool load_frame_data(sqlite3_stmt* stmt, int col, CameraFrame* frame) const;
+
+  Status read_schema();
+  Status read_metadata();
+  void read_streams();
+  void scan_imu();
+  void scan_frames();
+  void read_events();
+  void apply_salvage();
+  // Visits the rows of `sql` (rowid first, "WHERE rowid >= ?1 ORDER BY rowid") in storage
+  // order. At a damaged page it looks for the next readable row by seeking ever further ahead
+  // (rowids are assigned in insertion order), so rows behind a damaged leaf page are still
+  // found when the pages above it are intact. Returns the number of damaged stretches skipped.
+  int scan_skipping_damage(const char* sql, const char* table, const std::function<void(sqlite3_stmt*)>& row);
+
+  std::string path_;
+  sqlite::Db db_;
+  mutable SessionLogHealth health_;
+  std::map<std::string, std::string> metadata_;
+  std::map<int, ImuStreamInfo> imu_streams_;
+  std::map<int, CameraStreamInfo> camera_streams_;
+  std::set<std::string> tables_;
+  std::vector<Event> events_;
+  std::map<int, std::int64_t> imu_counts_, frame_counts_;
+
+  // When the IMU table or its time index cannot be trusted, the readable samples are held
+  // here per stream, sorted by time, and reads are served from memory.
+  bool imu_in_memory_ = false;
+  std::map<int, std::vector<ImuSample>> imu_memory_;
+  // Likewise for frames; `data` of these is loaded on demand by rowid (or held, when it came
+  // from the salvage scanner).
+  struct FrameRef {
+    CameraFrame frame;  // without data unless `has_data`
+    sqlite3_int64 rowid = 0;
+    bool has_data = false;
+  };
+  bool frames_in_memory_ = false;
+  std::map<int, std::vector<FrameRef>> frame_memory_;
+};
+
+void SqliteSessionLogReader::note_damage(const std::string& what) const {
+  health_.damaged = true;
+  if (!health_.damage_message.empty()) health_.damage_message += "; ";
+  health_.damage_message += what;
+}
+
+bool SqliteSessionLogReader::load_frame_data(sqlite3_stmt* stmt, int col, CameraFrame* frame) const {
+  const auto* data = static_cast<const std::uint8_t*>(sqlite3_column_blob(stmt, col));
+  const auto bytes = static_cast<std::size_t>(sqlite3_column_bytes(stmt, col));
+  const auto stored = static_cast<std::uint32_t>(sqlite3_column_int64(stmt, col + 1));
+  if (bytes > 0 && data == nullptr) return false;
+  if (sqlite::crc32(data, bytes) != stored) {
+    note_damage("image data of the frame at t_ns=" + std::to_string(frame->t_ns) +
+                " is corrupt (CRC mismatch); the frame was skipped");
+    return false;
+  }
+  frame->data.assign(data, data + bytes);
+  return true;
+}
+
+// Checks the file before SQLite sees it, so that the common mistakes get a precise message.
+Status precheck_file(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) {
+    if (errno == ENOENT)
+      return make_error(Errc::kNotFound, "no such session log: " + path + " (check the path)");
+    return make_error(Errc::kNotFound, "cannot access session log " + path + ": " + std::strerror(errno));
+  }
+  if (S_ISDIR(st.st_mode)) {
+    return make_error(Errc::kNotFound, path + " is a directory, not a session log (.imulog file)");
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in)
+    return make_error(Errc::kNotFound, "cannot read session log " + path + ": " + std::strerror(errno));
+  char header[16] = {};
+  in.read(header, sizeof header);
+  const auto got = static_cast<std::size_t>(in.gcount());
+  static constexpr char kMagic[16] = {'S', 'Q', 'L', 'i', 't', 'e', ' ', 'f',
+                                      'o', 'r', 'm', 'a', 't', ' ', '3', '\0'};
+  if (st.st_size == 0) {
+    return make_error(Errc::kCorrupt, path +
+                                          " is empty (0 bytes): the recording was lost before its first "
+                                          "commit; record the session again");
+  }
+  if (got < sizeof header || std::memcmp(header, kMagic, sizeof kMagic) != 0) {
+    if (std::memcmp(header, kMagic, got) == 0 && got < sizeof header) {
+      return make_error(Errc::kCorrupt, path + " is truncated to " + std::to_string(st.st_size) +
+                                            " bytes; nothing is readable");
+    }
+    return make_error(Errc::kCorrupt, path +
+                                          " is not a session log (not an SQLite database); pass an .imulog "
+                                          "file written by 'imucal record' or the imucal daemon");
+  }
+  if (st.st_size < 512) {
+    return make_error(Errc::kCorrupt, path + " is truncated to " + std::to_string(st.st_size) +
+                                          " bytes; nothing is readable");
+  }
+  return {};
+}
+
+// The page count in the file header against the file size: a copy that stopped early, or a
+// file cut by a full disk, is shorter than its header says.
+std::string truncation_of(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  unsigned char h[100] = {};
+  in.read(reinterpret_cast<char*>(h), sizeof h);
+  if (in.gcount() != sizeof h) return {};
+  const auto be32 = [&](int at) {
+    return (std::uint32_t{h[at]} << 24) | (std::uint32_t{h[at + 1]} << 16) | (std::uint32_t{h[at + 2]} << 8) |
+           h[at + 3];
+  };
+  std::uint64_t page_size = (std::uint64_t{h[16]} << 8) | h[17];
+  if (page_size == 1) page_size = 65536;
+  // The header page count is valid only when it was written by the same change as the counter.
+  if (be32(24) != be32(92)) return {};
+  const std::uint64_t expected = page_size * be32(28);
+  std::error_code ec;
+  const std::uint64_t actual = std::filesystem::file_size(path, ec);
+  if (ec || actual >= expected) return {};
+  return "the file is truncated: " + std::to_string(actual) + " of " + std::to_string(expected) +
+         " bytes present, the rest is lost";
+}
+
+Status SqliteSessionLogReader::open() {
+  IMUCAL_TRY(precheck_file(path_));
+  if (const std::string truncated = truncation_of(path_); !truncated.empty()) note_damage(truncated);
+  sqlite3* raw = nullptr;
+  const int rc = sqlite3_open_v2(path_.c_str(), &raw, SQLITE_OPEN_READONLY, sqlite::strict_vfs_name());
+  db_.reset(raw);
+  if (rc != SQLITE_OK) {
+    return make_error(Errc::kNotFound, "cannot open session log " + path_ + ": " + sqlite::errmsg(raw));
+  }
+  // No memory mapping (a file truncated underneath would fault); extra checks of every page
+  // as it is read so that damage shows up as an error, early.
+  (void)sqlite::exec(db_.get(), "PRAGMA mmap_size=0; PRAGMA cell_size_check=ON;");
+  // One read transaction for all checks, so that a log still being written is seen as one
+  // consistent snapshot (the table and index counts must agree).
+  (void)sqlite::exec(db_.get(), "BEGIN");
+  IMUCAL_TRY(read_schema());
+  IMUCAL_TRY(read_metadata());
+  read_streams();
+  scan_imu();
+  scan_frames();
+  read_events();
+  (void)sqlite::exec(db_.get(), "COMMIT");
+  if (health_.damaged) apply_salvage();
+  const auto complete = metadata_.find(kKeyComplete);
+  health_.complete = complete != metadata_.end() && complete->second == "1";
+  return {};
+}
+
+Status SqliteSessionLogReader::read_schema() {
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    int rc = 0;
+    Stmt stmt = sqlite::prepare(db_.get(), "SELECT name FROM sqlite_schema WHERE type='table'", &rc);
+    while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW)
+      tables_.insert(column_text(stmt.get(), 0));
+    if (rc == SQLITE_DONE) break;
+    const int primary = sqlite3_extended_errcode(db_.get()) & 0xff;
+    if (primary == SQLITE_NOTADB) {
+      return make_error(Errc::kCorrupt, path_ + " is not a session log (" + sqlite::errmsg(db_.get()) + ")");
+    }
+    if (primary == SQLITE_BUSY || primary == SQLITE_CANTOPEN) {
+      return make_error(Errc::kIo, "cannot read session log " + path_ + ": " + sqlite::errmsg(db_.get()) +
+                                       " (a log still being written needs write access to its directory for "
+                                       "the -shm file)");
+    }
+    if (attempt == 1 || !sqlite::is_corruption(primary)) {
+      return make_error(Errc::kCorrupt, "session log " + path_ +
+                                            " is damaged beyond recovery: its schema is "
+                                            "unreadable (" +
+                                            sqlite::errmsg(db_.get()) + ")");
+    }
+    // A truncated file fails the page-count check before anything is read; reading what
+    // remains is allowed with writable_schema (which changes nothing on a read-only connection).
+    tables_.clear();
+    (void)sqlite::exec(db_.get(), "PRAGMA writable_schema=ON");
+  }
+  if (!tables_.contains("metadata")) {
+    return make_error(Errc::kCorrupt, path_ +
+                                          " is an SQLite database but not a session log (it has no metadata "
+                                          "table); pass an .imulog file");
+  }
+  return {};
+}
+
+Status SqliteSessionLogReader::read_metadata() {
+  int rc = 0;
+  Stmt stmt = sqlite::prepare(db_.get(), "SELECT key, value FROM metadata", &rc);
+  while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+    metadata_[column_text(stmt.get(), 0)] = column_text(stmt.get(), 1);
+  }
+  if (rc != SQLITE_DONE) note_damage("metadata partly unreadable (" + sqlite::errmsg(db_.get()) + ")");
+  const auto version = metadata_.find(kKeySchemaVersion);
+  if (version == metadata_.end()) {
+    if (health_.damaged) {
+      return make_error(Errc::kCorrupt, "session log " + path_ +
+                                            " is damaged beyond recovery: its metadata is "
+                                            "unreadable (" +
+                                            health_.damage_message + ")");
+    }
+    return make_error(Errc::kCorrupt, path_ + " is not a session log (its metadata has no schema_version)");
+  }
+  int schema = 0;
+  if (std::sscanf(version->second.c_str(), "%d", &schema) != 1 || schema < 1) {
+    return make_error(Errc::kCorrupt, path_ + " is not a session log (schema_version '" + version->second +
+                                          "' is not a number)");
+  }
+  if (schema > kSessionLogSchemaVersion) {
+    const auto writer = metadata_.find(kKeySoftwareVersion);
+    return make_error(Errc::kUnsupported,
+                      "session log " + path_ + " has schema version " + std::to_string(schema) +
+                          " (written by imucal " +
+                          (writer == metadata_.end() ? std::string("?") : writer->second) +
+                          "); this imucal " + kVersion + " reads up to version " +
+                          std::to_string(kSessionLogSchemaVersion) + ": update imucal to read it");
+  }
+  for (const char* table : {"imu_streams", "camera_streams", "imu_samples", "frames", "events"}) {
+    if (!tables_.contains(table)) {
+      note_damage(std::string("table ") + table + " is missing");
+    }
+  }
+  return {};
+}
+
+void SqliteSessionLogReader::read_streams() {
+  int rc = 0;
+  if (tables_.contains("imu_streams")) {
+    Stmt stmt = sqlite::prepare(db_.get(), "SELECT * FROM imu_streams ORDER BY id", &rc);
+    while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+      sqlite3_stmt* s = stmt.get();
+      ImuStreamInfo info;
+      info.name = column_text(s, 1);
+      info.units = column_text(s, 2) == "raw" ? ImuUnits::kRaw : ImuUnits::kSi;
+      info.rate_hz = sqlite3_column_double(s, 3);
+      int col = 4;
+      for (AxisConversion* conv : {&info.accel, &info.gyro}) {
+        for (int i = 0; i < 3; ++i) conv->scale[i] = sqlite3_column_double(s, col++);
+        for (int i = 0; i < 3; ++i) conv->offset[i] = sqlite3_column_double(s, col++);
+      }
+      info.temperature_scale = sqlite3_column_double(s, 16);
+      info.temperature_offset = sqlite3_column_double(s, 17);
+      info.accel_full_scale_g = sqlite3_column_int(s, 18);
+      info.gyro_full_scale_dps = sqlite3_column_int(s, 19);
+      info.dlpf_hz = sqlite3_column_int(s, 20);
+      info.device = column_text(s, 21);
+      imu_streams_[sqlite3_column_int(s, 0)] = std::move(info);
+    }
+    if (rc != SQLITE_DONE)
+      note_damage("IMU stream table partly unreadable (" + sqlite::errmsg(db_.get()) + ")");
+  }
+  if (tables_.contains("camera_streams")) {
+    Stmt stmt = sqlite::prepare(db_.get(), "SELECT * FROM camera_streams ORDER BY id", &rc);
+    while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+      sqlite3_stmt* s = stmt.get();
+      CameraStreamInfo info;
+      info.name = column_text(s, 1);
+      info.width = sqlite3_column_int(s, 2);
+      info.height = sqlite3_column_int(s, 3);
+      info.rate_hz = sqlite3_column_double(s, 4);
+      info.backend = column_text(s, 5);
+      info.device = column_text(s, 6);
+      info.timestamp_source = column_text(s, 7);
+      camera_streams_[sqlite3_column_int(s, 0)] = std::move(info);
+    }
+    if (rc != SQLITE_DONE)
+      note_damage("camera stream table partly unreadable (" + sqlite::errmsg(db_.get()) + ")");
+  }
+}
+
+int SqliteSessionLogReader::scan_skipping_damage(const char* sql, const char* table,
+                                                 const std::function<void(sqlite3_stmt*)>& row) {
+  // The largest rowid, if the right edge of the table is readable; else search a wide range.
+  sqlite3_int64 max_rowid = 0;
+  bool max_known = false;
+  {
+    int rc = 0;
+    const std::string max_sql = std::string("SELECT max(rowid) FROM ") + table;
+    Stmt stmt = sqlite::prepare(db_.get(), max_sql.c_str(), &rc);
+    if (rc == SQLITE_OK && sqlite3_step(stmt.get()) == SQLITE_ROW) {
+      max_rowid = sqlite3_column_int64(stmt.get(), 0);
+      max_known = true;
+    }
+  }
+  int rc = 0;
+  Stmt stmt = sqlite::prepare(db_.get(), sql, &rc);
+  if (rc != SQLITE_OK) return 1;
+  int skipped = 0;
+  sqlite3_int64 last = 0;  // rowids start at 1
+  sqlite3_int64 from = std::numeric_limits<sqlite3_int64>::min();
+  for (;;) {
+    sqlite3_reset(stmt.get());
+    sqlite3_bind_int64(stmt.get(), 1, from);
+    while ((rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+      last = sqlite3_column_int64(stmt.get(), 0);
+      row(stmt.get());
+    }
+    if (rc == SQLITE_DONE) return skipped;
+    ++skipped;
+    // Find the next readable row after `last`: probe last+1, +2, +4, ... and take the first
+    // probe that yields a row.
+    bool resumed = false;
+    const sqlite3_int64 limit = max_known ? max_rowid : last + (sqlite3_int64{1} << 40);
+    for (sqlite3_int64 step = 1; last + step <= limit && step < (sqlite3_int64{1} << 41); step *= 2) {
+      sqlite3_reset(stmt.get());
+      sqlite3_bind_int64(stmt.get(), 1, last + step);
+      rc = sqlite3_step(stmt.get());
+      if (rc == SQLITE_DONE) return skipped;
+      if (rc == SQLITE_ROW) {
+        from = last + step;
+        resumed = true;
+        break;
+      }
+    }
+    if (!resumed) return skipped;
+  }
+}
+
+// Walks the IMU table in storage order (which needs no index) and checks the time index
+// against it. Any error switches to serving samples from memory.
+void SqliteSessionLogReader::scan_imu() {
+  if (!tables_.contains("imu_samples")) return;
+  int rc = 0;
+  std::map<int, std::int64_t> counts;
+  {
+    Stmt stmt = sqlite::prepare(db_.get(), "SELECT stream_id FROM imu_samples NOT INDEXED", &rc);
+    while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW)
+      ++counts[sqlite3_column_int(stmt.get(), 0)];
+  }
+  bool table_ok = rc == SQLITE_DONE;
+  std::string table_error = table_ok ? "" : sqlite::errmsg(db_.get());
+  bool index_ok = false;
+  if (table_ok) {
+    std::map<int, std::int64_t> index_counts;
+    Stmt stmt = sqlite::prepare(
+        db_.get(),
+        "SELECT stream_id, count(*) FROM imu_samples INDEXED BY imu_samples_by_time GROUP BY stream_id", &rc);
+    while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+      index_counts[sqlite3_column_int(stmt.get(), 0)] = sqlite3_column_int64(stmt.get(), 1);
+    }
+    index_ok = rc == SQLITE_DONE && index_counts == counts;
+    if (index_ok) {
+      imu_counts_ = std::move(counts);
+      return;
+    }
+  }
+  // Load what the table yields, in storage order, and sort.
+  imu_in_memory_ = true;
+  std::int64_t loaded = 0;
+  const int skipped = scan_skipping_damage(
+      "SELECT rowid, stream_id, t_ns, ax, ay, az, gx, gy, gz, temperature, flags FROM imu_samples "
+      "WHERE rowid >= ?1 ORDER BY rowid",
+      "imu_samples", [&](sqlite3_stmt* s) {
+        imu_memory_[sqlite3_column_int(s, 1)].push_back(read_sample_columns(s, 2));
+        ++loaded;
+      });
+  if (table_ok) {
+    note_damage("the IMU time index is damaged (all " + std::to_string(loaded) +
+                " samples were read from the table instead)");
+  } else {
+    note_damage("IMU sample table damaged (" + table_error + "): " + std::to_string(loaded) +
+                " samples readable, samples lost in " + std::to_string(std::max(skipped, 1)) +
+                " place(s) (from the first damaged page to the next readable one)");
+  }
+}
+
+void SqliteSessionLogReader::scan_frames() {
+  if (!tables_.contains("frames")) return;
+  int rc = 0;
+  std::map<int, std::int64_t> counts;
+  {
+    Stmt stmt = sqlite::prepare(db_.get(), "SELECT stream_id FROM frames NOT INDEXED", &rc);
+    while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW)
+      ++counts[sqlite3_column_int(stmt.get(), 0)];
+  }
+  const bool table_ok = rc == SQLITE_DONE;
+  const std::string table_error = table_ok ? "" : sqlite::errmsg(db_.get());
+  if (table_ok) {
+    std::map<int, std::int64_t> index_counts;
+    Stmt stmt = sqlite::prepare(
+        db_.get(), "SELECT stream_id, count(*) FROM frames INDEXED BY frames_by_time GROUP BY stream_id",
+        &rc);
+    while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+      index_counts[sqlite3_column_int(stmt.get(), 0)] = sqlite3_column_int64(stmt.get(), 1);
+    }
+    if (rc == SQLITE_DONE && index_counts == counts) {
+      frame_counts_ = std::move(counts);
+      return;
+    }
+  }
+  frames_in_memory_ = true;
+  std::int64_t loaded = 0;
+  const int skipped = scan_skipping_damage(
+      "SELECT rowid, stream_id, t_ns, width, height, encoding, exposure_ns, sequence, flags FROM frames "
+      "WHERE rowid >= ?1 ORDER BY rowid",
+      "frames", [&](sqlite3_stmt* s) {
+        FrameRef ref;
+        ref.rowid = sqlite3_column_int64(s, 0);
+        ref.frame.t_ns = sqlite3_column_int64(s, 2);
+        ref.frame.width = sqlite3_column_int(s, 3);
+        ref.frame.height = sqlite3_column_int(s, 4);
+        ref.frame.encoding = column_text(s, 5);
+        ref.frame.exposure_ns = sqlite3_column_int64(s, 6);
+        ref.frame.sequence = static_cast<std::uint32_t>(sqlite3_column_int64(s, 7));
+        ref.frame.flags = static_cast<std::uint32_t>(sqlite3_column_int64(s, 8));
+        frame_memory_[sqlite3_column_int(s, 1)].push_back(std::move(ref));
+        ++loaded;
+      });
+  if (table_ok) {
+    note_damage("the frame time index is damaged (all " + std::to_string(loaded) +
+                " frames were read from the table instead)");
+  } else {
+    note_damage("frame table damaged (" + table_error + "): " + std::to_string(loaded) +
+                " frames readable, frames lost in " + std::to_string(std::max(skipped, 1)) + " place(s)");
+  }
+}
+
+void SqliteSessionLogReader::read_events() {
+  if (!tables_.contains("events")) return;
+  int rc = 0;
+  Stmt stmt = sqlite::prepare(db_.get(), "SELECT t_ns, kind, message FROM events NOT INDEXED", &rc);
+  while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+    events_.push_back(
+        {sqlite3_column_int64(stmt.get(), 0), column_text(stmt.get(), 1), column_text(stmt.get(), 2)});
+  }
+  if (rc != SQLITE_DONE) {
+    note_damage("event table damaged (" + sqlite::errmsg(db_.get()) + "): " + std::to_string(events_.size()) +
+                " events readable before the damage");
+  }
+  std::stable_sort(events_.begin(), events_.end(),
+                   [](const Event& a, const Event& b) { return a.t_ns < b.t_ns; });
+}
+
+// Sorts what was loaded into memory, so reads come in time order.
+void SqliteSessionLogReader::apply_salvage() {
+  if (imu_in_memory_) {
+    imu_counts_.clear();
+    for (auto& [id, samples] : imu_memory_) {
+      std::stable_sort(samples.begin(), samples.end(),
+                       [](const ImuSample& a, const ImuSample& b) { return a.t_ns < b.t_ns; });
+      imu_counts_[id] = static_cast<std::int64_t>(samples.size());
+    }
+  }
+  if (frames_in_memory_) {
+    frame_counts_.clear();
+    for (auto& [id, frames] : frame_memory_) {
+      std::stable_sort(frames.begin(), frames.end(),
+                       [](const FrameRef& a, const FrameRef& b) { return a.frame.t_ns < b.frame.t_ns; });
+      frame_counts_[id] = static_cast<std::int64_t>(frames.size());
+    }
+  }
+}
+
+Status SqliteSessionLogReader::for_each_imu(int stream_id, TimeNs t0_ns, TimeNs t1_ns,
+                                            const std::function<bool(const ImuSample&)>& visit) const {
+  if (!imu_streams_.contains(stream_id)) {
+    return make_error(Errc::kNotFound,
+                      "session log " + path_ + " has no IMU stream with id " + std::to_string(stream_id));
+  }
+  if (t0_ns >= t1_ns) return {};
+  if (imu_in_memory_) {
+    const auto it = imu_memory_.find(stream_id);
+    if (it == imu_memory_.end()) return {};
+    const auto& samples = it->second;
+    auto first = std::lower_bound(samples.begin(), samples.end(), t0_ns,
+                                  [](const ImuSample& s, TimeNs t) { return s.t_ns < t; });
+    for (; first != samples.end() && first->t_ns < t1_ns; ++first) {
+      if (!visit(*first)) break;
+    }
+    return {};
+  }
+  int rc = 0;
+  Stmt stmt = sqlite::prepare(db_.get(),
+                              "SELECT t_ns, ax, ay, az, gx, gy, gz, temperature, flags FROM imu_samples "
+                              "WHERE stream_id=?1 AND t_ns>=?2 AND t_ns<?3 ORDER BY t_ns",
+                              &rc);
+  if (rc != SQLITE_OK) return sql_error("cannot query IMU samples");
+  sqlite3_bind_int(stmt.get(), 1, stream_id);
+  sqlite3_bind_int64(stmt.get(), 2, t0_ns);
+  sqlite3_bind_int64(stmt.get(), 3, t1_ns);
+  while ((rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+    if (!visit(read_sample_columns(stmt.get(), 0))) return {};
+  }
+  if (rc != SQLITE_DONE) {
+    note_damage("IMU samples unreadable while reading (" + sqlite::errmsg(db_.get()) + ")");
+    return sql_error("IMU samples damaged");
+  }
+  return {};
+}
+
+Status SqliteSessionLogReader::for_each_frame(int stream_id, TimeNs t0_ns, TimeNs t1_ns,
+                                              const std::function<bool(const CameraFrame&)>& visit) const {
+  if (!camera_streams_.contains(stream_id)) {
+    return make_error(Errc::kNotFound,
+                      "session log " + path_ + " has no camera stream with id " + std::to_string(stream_id));
+  }
+  if (t0_ns >= t1_ns) return {};
+  int rc = 0;
+  if (frames_in_memory_) {
+    const auto it = frame_memory_.find(stream_id);
+    if (it == frame_memory_.end()) return {};
+    Stmt stmt = sqlite::prepare(db_.get(), "SELECT data, data_crc32 FROM frames WHERE rowid=?1", &rc);
+    if (rc != SQLITE_OK) return sql_error("cannot query frames");
+    const auto& frames = it->second;
+    auto first = std::lower_bound(frames.begin(), frames.end(), t0_ns,
+                                  [](const FrameRef& f, TimeNs t) { return f.frame.t_ns < t; });
+    for (; first != frames.end() && first->frame.t_ns < t1_ns; ++first) {
+      CameraFrame frame = first->frame;
+      if (!first->has_data) {
+        sqlite3_reset(stmt.get());
+        sqlite3_bind_int64(stmt.get(), 1, first->rowid);
+        if (sqlite3_step(stmt.get()) != SQLITE_ROW) {
+          note_damage("image data of the frame at t_ns=" + std::to_string(frame.t_ns) + " is unreadable (" +
+                      sqlite::errmsg(db_.get()) + ")");
+          continue;
+        }
+        if (!load_frame_data(stmt.get(), 0, &frame)) continue;
+      }
+      if (!visit(frame)) break;
+    }
+    return {};
+  }
+  Stmt stmt = sqlite::prepare(
+      db_.get(),
+      "SELECT t_ns, width, height, encoding, exposure_ns, sequence, flags, data, data_crc32 FROM frames "
+      "WHERE stream_id=?1 AND t_ns>=?2 AND t_ns<?3 ORDER BY t_ns",
+      &rc);
+  if (rc != SQLITE_OK) return sql_error("cannot query frames");
+  sqlite3_bind_int(stmt.get(), 1, stream_id);
+  sqlite3_bind_int64(stmt.get(), 2, t0_ns);
+  sqlite3_bind_int64(stmt.get(), 3, t1_ns);
+  while ((rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+    sqlite3_stmt* s = stmt.get();
+    CameraFrame frame;
+    frame.t_ns = sqlite3_column_int64(s, 0);
+    frame.width = sqlite3_column_int(s, 1);
+    frame.height = sqlite3_column_int(s, 2);
+    frame.encoding = column_text(s, 3);
+    frame.exposure_ns = sqlite3_column_int64(s, 4);
+    frame.sequence = static_cast<std::uint32_t>(sqlite3_column_int64(s, 5));
+    frame.flags = static_cast<std::uint32_t>(sqlite3_column_int64(s, 6));
+    if (!load_frame_data(s, 7, &frame)) continue;
+    if (!visit(frame)) return {};
+  }
+  if (rc != SQLITE_DONE) {
+    note_damage("frames unreadable while reading (" + sqlite::errmsg(db_.get()) + ")");
+    return sql_error("frames damaged");
+  }
+  return {};
+}
+
+Result<std::vector<TimeNs>> SqliteSessionLogReader::frame_times(int stream_id) const {
+  if (!camera_streams_.contains(stream_id)) {
+    return make_error(Errc::kNotFound,
+                      "session log " + path_ + " has no camera stream with id " + std::to_string(stream_id));
+  }
+  std::vector<TimeNs> times;
+  if (frames_in_memory_) {
+    const auto it = frame_memory_.find(stream_id);
+    if (it != frame_memory_.end()) {
+      for (const auto& ref : it->second) times.push_back(ref.frame.t_ns);
+    }
+    return times;
+  }
+  int rc = 0;
+  Stmt stmt = sqlite::prepare(db_.get(), "SELECT t_ns FROM frames WHERE stream_id=?1 ORDER BY t_ns", &rc);
+  if (rc != SQLITE_OK) return sql_error("cannot query frames");
+  sqlite3_bind_int(stmt.get(), 1, stream_id);
+  while ((rc = sqlite3_step(stmt.get())) == SQLITE_ROW) times.push_back(sqlite3_column_int64(stmt.get(), 0));
+  if (rc != SQLITE_DONE) return sql_error("frame times damaged");
+  return times;
+}
+
+Result<std::int64_t> SqliteSessionLogReader::imu_count(int stream_id) const {
+  if (!imu_streams_.contains(stream_id)) {
+    return make_error(Errc::kNotFound,
+                      "session log " + path_ + " has no IMU stream with id " + std::to_string(stream_id));
+  }
+  const auto it = imu_counts_.find(stream_id);
+  return it == imu_counts_.end() ? std::int64_t{0} : it->second;
+}
+
+Result<std::int64_t> SqliteSessionLogReader::frame_count(int stream_id) const {
+  if (!camera_streams_.contains(stream_id)) {
+    return make_error(Errc::kNotFound,
+                      "session log " + path_ + " has no camera stream with id " + std::to_string(stream_id));
+  }
+  const auto it = frame_counts_.find(stream_id);
+  return it == frame_counts_.end() ? std::int64_t{0} : it->second;
+}
+
+}  // namespace
+
+Result<std::unique_ptr<SessionLogReader>> SessionLogReader::open(const std::string& path) {
+  auto reader = std::make_unique<SqliteSessionLogReader>(path);
+  IMUCAL_TRY(reader->open());
+  return std::unique_ptr<SessionLogReader>(std::move(reader));
+}
+
+}  // namespace imucal::log

@@ -1,0 +1,368 @@
+#include "sim/camimu.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <opencv2/imgcodecs.hpp>
+#include <set>
+#include <vector>
+
+#include "log/session_log.hpp"
+#include "sim/session.hpp"
+#include "sim/camera_render.hpp"
+#include "sim/motion_random.hpp"
+#include "sim/truth.hpp"
+
+namespace imucal::sim {
+namespace {
+
+constexpr std::uint64_t kNoiseSubstream = 0xCA3E7A;  // camera noise stream, independent of the IMU's
+
+double deg(double d) { return d * std::numbers::pi / 180.0; }
+
+YAML::Node matrix_yaml(const Eigen::Matrix4d& m) {
+  YAML::Node rows(YAML::NodeType::Sequence);
+  for (int r = 0; r < 4; ++r) {
+    YAML::Node row(YAML::NodeType::Sequence);
+    for (int c = 0; c < 4; ++c) row.push_back(m(r, c));
+    row.SetStyle(YAML::EmitterStyle::Flow);
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+Eigen::Isometry3d pose_of(const sim::RigState& s) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = s.q_world_body.toRotationMatrix();
+  T.translation() = s.p_world_body;
+  return T;
+}
+
+void remove_log_files(const std::string& path) {
+  std::error_code ec;
+  for (const char* suffix : {"", "-wal", "-shm", "-journal"}) std::filesystem::remove(path + suffix, ec);
+}
+
+/// Copies metadata, the IMU stream and the events of the IMU-only log into `writer`.
+Status copy_imu_part(const log::SessionLogReader& reader, log::SessionLogWriter& writer,
+                     const nlohmann::json& camera_rig, std::int64_t* samples) {
+  static const std::set<std::string> kWriterKeys = {"schema_version", "software_version", "created_utc",
+                                                    "complete"};
+  for (const auto& [key, value] : reader.metadata()) {
+    if (kWriterKeys.count(key) != 0) continue;
+    if (key == "rig_config") {
+      nlohmann::json rig = nlohmann::json::parse(value, nullptr, false);
+      if (rig.is_discarded() || !rig.is_object()) rig = nlohmann::json::object();
+      rig["camera"] = camera_rig;
+      IMUCAL_TRY(writer.set_metadata(key, rig.dump()));
+    } else {
+      IMUCAL_TRY(writer.set_metadata(key, value));
+    }
+  }
+  if (reader.metadata().count("rig_config") == 0) {
+    IMUCAL_TRY(writer.set_metadata("rig_config", nlohmann::json{{"camera", camera_rig}}.dump()));
+  }
+  for (const auto& [id, info] : reader.imu_streams()) {
+    auto out_id = writer.add_imu_stream(info);
+    if (!out_id.ok()) return out_id.error();
+    std::vector<ImuSample> batch;
+    batch.reserve(4096);
+    Status status;
+    auto visited = reader.for_each_imu(id, log::kTimeMin, log::kTimeMax, [&](const ImuSample& s) {
+      batch.push_back(s);
+      ++*samples;
+      if (batch.size() == 4096) {
+        status = writer.append_imu(*out_id, batch);
+        batch.clear();
+        return status.ok();
+      }
+      return true;
+    });
+    IMUCAL_TRY(status);
+    IMUCAL_TRY(visited);
+    if (!batch.empty()) IMUCAL_TRY(writer.append_imu(*out_id, batch));
+  }
+  auto events = reader.events();
+  if (!events.ok()) return events.error();
+  for (const log::Event& e : *events) IMUCAL_TRY(writer.append_event(e));
+  return {};
+}
+
+}  // namespace
+
+sim::CheckerboardMotionOptions CamImuSimOptions::default_motion() {
+  sim::CheckerboardMotionOptions m;
+  m.duration_s = 60.0;
+  return m;
+}
+
+CameraModel CamImuSimOptions::default_sim_camera() {
+  // A global-shutter WVGA module (MT9V034 class) binned 2x2 to 376x240, with a wide lens:
+  // about 86 x 62 deg field of view and moderate barrel distortion.
+  CameraModel c;
+  c.distortion_model = DistortionModel::kRadtan;
+  c.intrinsics << 200.3, 199.8, 189.1, 117.3;
+  c.distortion_coeffs << -0.2865, 0.0731, 2.1e-4, -3.4e-4;
+  c.width = 376;
+  c.height = 240;
+  return c;
+}
+
+Eigen::Isometry3d CamImuSimOptions::default_T_cam_imu() {
+  // The IMU sits on the camera board rotated by 180 deg about the optical axis (camera x = -body
+  // x, camera y = -body y), with an assembly tilt of a degree or two, 3.9 cm from the optical
+  // centre.
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = (Eigen::AngleAxisd(deg(180.0), Eigen::Vector3d::UnitZ()) *
+                Eigen::AngleAxisd(deg(1.3), Eigen::Vector3d::UnitX()) *
+                Eigen::AngleAxisd(deg(-0.8), Eigen::Vector3d::UnitY()) *
+                Eigen::AngleAxisd(deg(1.7), Eigen::Vector3d::UnitZ()))
+                   .toRotationMatrix();
+  T.translation() = Eigen::Vector3d(0.0312, -0.0184, -0.0136);  // IMU origin in the camera frame, m
+  return T;
+}
+
+TargetDescription CamImuSimOptions::default_sim_target() {
+  // 7 x 6 inner corners (as Kalibr's example board), 5 cm squares: with the default camera and
+  // motion the whole grid is in view in about 98 % of the frames.
+  TargetDescription t;
+  t.type = TargetDescription::Type::kCheckerboard;
+  t.cols = 7;
+  t.rows = 6;
+  t.col_spacing_m = 0.05;
+  t.row_spacing_m = 0.05;
+  return t;
+}
+
+Status CamImuSimOptions::validate() const {
+  IMUCAL_TRY(motion.validate());
+  if (imu) IMUCAL_TRY(imu->validate());
+  if (!(imu_rate_hz >= 4.0 && imu_rate_hz <= 8000.0)) {
+    return make_error(Errc::kInvalidArgument, "IMU rate must be within 4..8000 Hz (MPU-6000 output rates)");
+  }
+  if (!(camera_rate_hz >= 0.5 && camera_rate_hz <= 200.0)) {
+    return make_error(Errc::kInvalidArgument, "camera rate must be within 0.5..200 Hz");
+  }
+  const double period_ns = 1e9 / camera_rate_hz;
+  if (exposure_ns <= 0 || static_cast<double>(exposure_ns) > period_ns) {
+    return make_error(Errc::kInvalidArgument,
+                      "camera exposure must be positive and no longer than the frame period (" +
+                          std::to_string(static_cast<std::int64_t>(period_ns)) + " ns); it is given in ns");
+  }
+  IMUCAL_TRY(validate_camera(camera));
+  if (target.type != TargetDescription::Type::kCheckerboard) {
+    return make_error(Errc::kUnsupported, "the simulated camera renders checkerboard targets only");
+  }
+  IMUCAL_TRY(target.validate());
+  if (!T_cam_imu.matrix().allFinite() ||
+      !(T_cam_imu.linear().transpose() * T_cam_imu.linear()).isApprox(Eigen::Matrix3d::Identity(), 1e-9) ||
+      T_cam_imu.linear().determinant() < 0.0) {
+    return make_error(Errc::kInvalidArgument,
+                      "T_cam_imu must be a rigid transform (rotation and translation)");
+  }
+  if (T_cam_imu.translation().norm() > 1.0) {
+    return make_error(Errc::kInvalidArgument, "T_cam_imu translation must be in metres and below 1 m");
+  }
+  if (!(std::abs(timeshift_cam_imu_s) <= 0.5)) {
+    return make_error(Errc::kInvalidArgument, "timeshift_cam_imu must be in seconds, within +-0.5 s");
+  }
+  if (image_encoding != "png" && image_encoding != "webp") {
+    return make_error(Errc::kInvalidArgument, "image encoding '" + image_encoding +
+                                                  "' is not supported (use png or webp, both lossless)");
+  }
+  sim::CameraRenderOptions render;
+  render.noise_sigma_dn = noise_sigma_dn;
+  render.supersampling = supersampling;
+  render.optics_blur_sigma_px = optics_blur_sigma_px;
+  return render.validate();
+}
+
+Status simulate_camimu_session(const CamImuSimOptions& options, const std::string& log_path,
+                               const std::string& truth_path, const std::function<void(double)>& progress,
+                               CamImuSimSummary* summary) {
+  IMUCAL_TRY(options.validate());
+  std::error_code ec;
+  if (!options.overwrite) {
+    for (const std::string& p : {log_path, truth_path}) {
+      if (!p.empty() && std::filesystem::exists(p, ec)) {
+        return make_error(Errc::kInvalidArgument, p + " exists; pass --force to replace it");
+      }
+    }
+  }
+  auto motion = sim::CheckerboardMotion::create(options.motion, options.seed);
+  if (!motion.ok()) return motion.error();
+  const sim::CheckerboardMotion& traj = **motion;
+
+  sim::CameraRenderOptions render_opt;
+  render_opt.noise_sigma_dn = options.noise_sigma_dn;
+  render_opt.supersampling = options.supersampling;
+  render_opt.optics_blur_sigma_px = options.optics_blur_sigma_px;
+  auto renderer_r = sim::CheckerboardRenderer::create(options.camera, options.target, render_opt);
+  if (!renderer_r.ok()) return renderer_r.error();
+  const sim::CheckerboardRenderer& renderer = **renderer_r;
+
+  // 1. The IMU part, through the same code as the other simulated sessions, into a scratch log
+  //    next to the output; its content is copied into the final log below.
+  SimImuSessionOptions imu_opt;
+  imu_opt.kind = "camimu";
+  imu_opt.script = "checkerboard";
+  imu_opt.seed = options.seed;
+  imu_opt.imu_rate_hz = options.imu_rate_hz;
+  imu_opt.path = options.imu_path;
+  imu_opt.imu = options.imu ? *options.imu : sim::ImuModelParams::draw(options.seed);
+  imu_opt.params_from_file = options.imu_params_from_file;
+  imu_opt.overwrite = true;
+  const std::string imu_part = log_path + ".imu-part";
+  remove_log_files(imu_part);
+  constexpr double kImuShare = 0.05;  // of the progress
+  auto imu_truth = write_sim_imu_session(imu_opt, traj, imu_part, "", [&](double f) {
+    if (progress) progress(kImuShare * f);
+  });
+  if (!imu_truth.ok()) {
+    remove_log_files(imu_part);
+    return imu_truth.error().context("camimu IMU part");
+  }
+
+  // 2. The final log: IMU part + camera stream.
+  const Eigen::Isometry3d T_world_board = traj.T_world_board(options.target);
+  nlohmann::json camera_rig = {{"device", "sim"},
+                               {"model", "checkerboard renderer (simulated)"},
+                               {"width", options.camera.width},
+                               {"height", options.camera.height},
+                               {"rate_hz", options.camera_rate_hz},
+                               {"exposure_ns", options.exposure_ns},
+                               {"encoding", options.image_encoding},
+                               {"timestamp_source", "mid-exposure"}};
+  log::SessionLogWriterOptions wopt;
+  wopt.overwrite = options.overwrite;
+  wopt.commit_interval_ns = 5 * kNsPerSecond;
+  CamImuSimSummary sum;
+  Status status = [&]() -> Status {
+    auto reader = log::SessionLogReader::open(imu_part);
+    if (!reader.ok()) return reader.error().context("camimu IMU part");
+    auto writer_r = log::SessionLogWriter::create(log_path, wopt);
+    if (!writer_r.ok()) return writer_r.error();
+    log::SessionLogWriter& writer = **writer_r;
+    IMUCAL_TRY(copy_imu_part(**reader, writer, camera_rig, &sum.imu_samples));
+    IMUCAL_TRY(writer.set_metadata("target", target_to_yaml(options.target)));
+
+    CameraStreamInfo cam_info;
+    cam_info.name = "cam0";
+    cam_info.width = options.camera.width;
+    cam_info.height = options.camera.height;
+    cam_info.rate_hz = options.camera_rate_hz;
+    cam_info.backend = "sim";
+    cam_info.device = "sim";
+    cam_info.timestamp_source = "mid-exposure";
+    auto cam_id = writer.add_camera_stream(cam_info);
+    if (!cam_id.ok()) return cam_id.error();
+
+    // Frame k is stamped t_cam = k * period on the camera's clock and shows the scene of IMU
+    // time t_cam + timeshift, integrated over the exposure centred there. Only frames whose
+    // whole exposure lies inside the trajectory are recorded.
+    const TimeNs shift_ns = s_to_ns(options.timeshift_cam_imu_s);
+    const TimeNs half_exposure_ns = options.exposure_ns / 2;
+    const double period_ns = 1e9 / options.camera_rate_hz;
+    const TimeNs t_begin = traj.start_ns() + half_exposure_ns - shift_ns;  // earliest t_cam
+    const TimeNs t_end = traj.end_ns() - (options.exposure_ns - half_exposure_ns) - shift_ns;
+    const std::int64_t k0 = static_cast<std::int64_t>(std::ceil(static_cast<double>(t_begin) / period_ns));
+    const std::int64_t k1 = static_cast<std::int64_t>(std::floor(static_cast<double>(t_end) / period_ns));
+    if (k1 < k0) {
+      return make_error(Errc::kInvalidArgument, "camimu: the motion is too short for a single frame");
+    }
+    auto T_cam_board_at = [&](TimeNs t_imu_ns) {
+      return options.T_cam_imu * pose_of(traj.at(t_imu_ns)).inverse() * T_world_board;
+    };
+    sim::Rng noise(sim::Rng::substream(options.seed, kNoiseSubstream));
+    const std::vector<int> encode_params =
+        options.image_encoding == "png" ? std::vector<int>{cv::IMWRITE_PNG_COMPRESSION, 9}
+                                        : std::vector<int>{cv::IMWRITE_WEBP_QUALITY, 101};  // > 100: lossless
+    const std::string ext = "." + options.image_encoding;
+    std::vector<Eigen::Isometry3d> subs;
+    for (std::int64_t k = k0; k <= k1; ++k) {
+      const TimeNs t_cam = static_cast<TimeNs>(std::llround(static_cast<double>(k) * period_ns));
+      const TimeNs t_open = t_cam + shift_ns - half_exposure_ns;  // IMU time the exposure starts
+      int n_sub = 1;
+      if (options.motion_blur) {
+        n_sub = renderer.sub_exposures_needed(T_cam_board_at(t_open),
+                                              T_cam_board_at(t_open + options.exposure_ns));
+      }
+      subs.clear();
+      for (int i = 0; i < n_sub; ++i) {
+        const double f = options.motion_blur ? (i + 0.5) / n_sub : 0.5;
+        subs.push_back(T_cam_board_at(t_open + static_cast<TimeNs>(std::llround(f * options.exposure_ns))));
+      }
+      const cv::Mat image = renderer.render(subs, &noise);
+      const sim::CornerTruth truth = renderer.project_corners(T_cam_board_at(t_cam + shift_ns));
+      if (truth.visible_count == static_cast<int>(truth.px.size())) ++sum.frames_all_corners_visible;
+      if (truth.visible_count == 0) ++sum.frames_no_corner_visible;
+
+      CameraFrame frame;
+      frame.t_ns = t_cam;
+      frame.width = image.cols;
+      frame.height = image.rows;
+      frame.encoding = options.image_encoding;
+      frame.exposure_ns = options.exposure_ns;
+      frame.sequence = static_cast<std::uint32_t>(k - k0);
+      if (!cv::imencode(ext, image, frame.data, encode_params)) {
+        return make_error(Errc::kUnsupported,
+                          "this OpenCV build cannot encode " + options.image_encoding + " images; use png");
+      }
+      sum.image_bytes += static_cast<std::int64_t>(frame.data.size());
+      IMUCAL_TRY(writer.append_frame(*cam_id, frame));
+      ++sum.frames;
+      if (progress && (k - k0) % 20 == 0) {
+        progress(kImuShare +
+                 (1.0 - kImuShare) * static_cast<double>(k - k0 + 1) / static_cast<double>(k1 - k0 + 1));
+      }
+    }
+    return writer.close();
+  }();
+  remove_log_files(imu_part);
+  if (!status.ok()) return status;
+
+  // 3. The truth: the IMU truth plus the camera in Kalibr camchain naming.
+  sim::SimTruth truth = *imu_truth;
+  sum.duration_s = truth.trajectory.duration_s;
+  sum.mean_accel_mps2 = truth.trajectory.mean_accel_mps2;
+  sum.mean_rate_radps = truth.trajectory.mean_rate_radps;
+  if (!truth_path.empty()) {
+    YAML::Node doc = sim::truth_to_yaml(truth);
+    YAML::Node cam0(YAML::NodeType::Map);
+    cam0["T_cam_imu"] = matrix_yaml(options.T_cam_imu.matrix());
+    camera_to_yaml(options.camera, cam0);
+    cam0["timeshift_cam_imu"] = options.timeshift_cam_imu_s;
+    cam0["rate_hz"] = options.camera_rate_hz;
+    cam0["exposure_ns"] = options.exposure_ns;
+    cam0["timestamp"] = "mid-exposure";
+    YAML::Node camera(YAML::NodeType::Map);
+    camera["convention"] =
+        "T_cam_imu maps IMU (body) points into the camera frame; t_imu = t_cam + timeshift_cam_imu";
+    camera["cam0"] = cam0;
+    camera["target"] = YAML::Load(target_to_yaml(options.target));
+    camera["T_world_target"] = matrix_yaml(T_world_board.matrix());
+    YAML::Node render(YAML::NodeType::Map);
+    render["noise_sigma_dn"] = options.noise_sigma_dn;
+    render["supersampling"] = options.supersampling;
+    render["optics_blur_sigma_px"] = options.optics_blur_sigma_px;
+    render["motion_blur"] = options.motion_blur;
+    render["encoding"] = options.image_encoding;
+    camera["render"] = render;
+    YAML::Node frames(YAML::NodeType::Map);
+    frames["count"] = sum.frames;
+    frames["all_corners_visible"] = sum.frames_all_corners_visible;
+    frames["no_corner_visible"] = sum.frames_no_corner_visible;
+    camera["frames"] = frames;
+    doc["camera"] = camera;
+    IMUCAL_TRY(sim::write_truth_yaml(truth_path, doc, options.overwrite));
+  }
+  if (progress) progress(1.0);
+  if (summary) *summary = sum;
+  return {};
+}
+
+}  // namespace imucal::sim

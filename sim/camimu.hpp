@@ -1,0 +1,93 @@
+#pragma once
+// The simulated camera-IMU session: the virtual rig moved in front of a checkerboard, its IMU
+// recorded at imu_rate_hz and its camera rendered at camera_rate_hz into one session log, with
+// the ground truth (IMU errors, camera model, T_cam_imu, timeshift_cam_imu, target) written to a
+// truth YAML. See docs/simulator-camera.md.
+//
+// Conventions (DESIGN.md section 3):
+//   T_cam_imu maps points from the IMU (body, accelerometer) frame into the camera frame.
+//   t_imu = t_cam + timeshift_cam_imu: a frame stamped t_cam on the camera's clock shows the
+//   scene of IMU time t_cam + timeshift_cam_imu. Frame stamps are mid-exposure.
+
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+
+#include "sim/session.hpp"
+#include "core/camera_model.hpp"
+#include "core/result.hpp"
+#include "core/target.hpp"
+#include "core/time.hpp"
+#include "sim/imu_error_model.hpp"
+#include "sim/motion.hpp"
+
+namespace imucal::sim {
+
+struct CamImuSimOptions {
+  std::uint64_t seed = 1;
+  /// The motion in front of the board (drivers/sim/motion.hpp): 60-90 s is what the
+  /// camera-IMU calibration expects (Krebs 2012, section 5.2); the default is 60 s.
+  sim::CheckerboardMotionOptions motion = default_motion();
+  /// The IMU; empty: drawn from the seed (sim::ImuModelParams::draw), as `imucal sim` does.
+  std::optional<sim::ImuModelParams> imu;
+  bool imu_params_from_file = false;  // recorded in the truth
+  double imu_rate_hz = 200.0;         // MPU-6000 output rate
+  SimImuPath imu_path;                // how the emulated chip is read (sim_session.hpp)
+  double camera_rate_hz = 20.0;
+  TimeNs exposure_ns = 4'000'000;  // frames are stamped at mid-exposure
+
+  /// The camera model and its resolution (default: a 376x240 pinhole-radtan camera).
+  CameraModel camera = default_sim_camera();
+  /// Points in the IMU (body) frame -> camera frame.
+  Eigen::Isometry3d T_cam_imu = default_T_cam_imu();
+  /// t_imu = t_cam + timeshift_cam_imu_s.
+  double timeshift_cam_imu_s = 0.0042;
+  /// The board: inner corners and spacing (Kalibr semantics).
+  TargetDescription target = default_sim_target();
+
+  // Image formation (drivers/sim/camera_render.hpp).
+  /// Gaussian sensor noise, grey levels. Low by default to keep the fixture small (noise is
+  /// what lossless codecs cannot compress; docs/simulator-camera.md has the measurements).
+  double noise_sigma_dn = 0.2;
+  int supersampling = 2;              // n x n area samples per pixel
+  double optics_blur_sigma_px = 0.7;  // lens point-spread function (Gaussian sigma)
+  bool motion_blur = true;            // average sub-exposure renders over the exposure time
+  /// Lossless image codec for the frames in the log: "png" or "webp".
+  std::string image_encoding = "webp";
+
+  /// Replace existing output files.
+  bool overwrite = false;
+
+  static sim::CheckerboardMotionOptions default_motion();
+  static CameraModel default_sim_camera();
+  static Eigen::Isometry3d default_T_cam_imu();
+  static TargetDescription default_sim_target();
+
+  /// Checks ranges; the message says which field is wrong and what is accepted.
+  [[nodiscard]] Status validate() const;
+};
+
+/// What a simulated session holds (for the command's summary line).
+struct CamImuSimSummary {
+  std::int64_t imu_samples = 0;
+  std::int64_t frames = 0;
+  std::int64_t frames_all_corners_visible = 0;  // the whole inner-corner grid on the sensor
+  std::int64_t frames_no_corner_visible = 0;
+  double duration_s = 0.0;
+  double mean_accel_mps2 = 0.0;
+  double mean_rate_radps = 0.0;
+  std::int64_t image_bytes = 0;  // encoded frames, total
+};
+
+/// Simulates the session and writes the session log at `log_path` and the ground truth at
+/// `truth_path` (YAML: the IMU truth of drivers/sim/truth.hpp plus a `camera:` section in
+/// Kalibr camchain naming). `progress` (may be empty) receives the completed fraction in
+/// [0, 1]; `summary` (may be null) receives what was written.
+[[nodiscard]] Status simulate_camimu_session(const CamImuSimOptions& options, const std::string& log_path,
+                                             const std::string& truth_path,
+                                             const std::function<void(double)>& progress = {},
+                                             CamImuSimSummary* summary = nullptr);
+
+}  // namespace imucal::sim

@@ -1,0 +1,169 @@
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "log/session_log.hpp"
+#include "core/imu_model.hpp"
+#include "tests/calib/test_static_synth.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal {
+namespace {
+
+using test::run_cli;
+
+/// Writes a synthetic static recording (raw counts centred at 32768) as a session log.
+std::string write_log(const std::string& dir, const test::SynthConfig& cfg,
+                      const std::string& name = "static.imulog") {
+  const auto rec = test::make_static_recording(cfg);
+  const std::string path = dir + "/" + name;
+  auto w = log::SessionLogWriter::create(path);
+  EXPECT_TRUE(w.ok()) << w.error().message;
+  ImuStreamInfo info;
+  info.units = cfg.raw_counts ? ImuUnits::kRaw : ImuUnits::kSi;
+  info.rate_hz = cfg.rate_hz;
+  if (cfg.raw_counts) {
+    info.accel = test::counts_conversion(cfg.accel_lsb, cfg.accel_offset);
+    info.gyro = test::counts_conversion(cfg.gyro_lsb, cfg.gyro_offset);
+    info.accel_full_scale_g = 4;
+    info.gyro_full_scale_dps = 500;
+  }
+  auto id = (*w)->add_imu_stream(info);
+  EXPECT_TRUE(id.ok());
+  EXPECT_TRUE((*w)->append_imu(*id, rec.samples).ok());
+  EXPECT_TRUE((*w)->close().ok());
+  return path;
+}
+
+Eigen::Vector3d vec(const nlohmann::json& j) {
+  return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()};
+}
+
+TEST(CliCalibrateStatic, RawLogToYamlAndJson) {
+  const std::string dir = test::scratch_dir();
+  test::SynthConfig cfg;
+  cfg.seed = 31;
+  cfg.truth = test::random_truth(31);
+  cfg.raw_counts = true;
+  const std::string log = write_log(dir, cfg);
+  const auto r = run_cli({"calibrate", "static", log, "--latitude", "47.37", "--height", "408", "-o",
+                          dir + "/result.yaml", "--json", dir + "/result.json"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("distinct attitudes"), std::string::npos) << r.out;
+
+  const auto j = nlohmann::json::parse(test::read_file(dir + "/result.json"));
+  EXPECT_EQ(j["convention"], "corrected = misalignment * diag(scale) * (raw - bias)");
+  EXPECT_EQ(j["input_units"], "raw");
+  // Truth in counts, JSON convention: scale = K * lsb, bias = offset - b / lsb.
+  const Eigen::Vector3d accel_scale = cfg.truth.accel.scale * cfg.accel_lsb;
+  const Eigen::Vector3d accel_bias =
+      Eigen::Vector3d::Constant(cfg.accel_offset) - cfg.truth.accel.bias / cfg.accel_lsb;
+  const Eigen::Vector3d gyro_scale = cfg.truth.gyro.scale * cfg.gyro_lsb;
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(vec(j["accel"]["scale"])[i], accel_scale[i], 4.5 * vec(j["accel"]["sigma"]["scale"])[i]);
+    EXPECT_NEAR(vec(j["accel"]["bias"])[i], accel_bias[i], 4.5 * vec(j["accel"]["sigma"]["bias"])[i]);
+    EXPECT_NEAR(vec(j["gyro"]["scale"])[i], gyro_scale[i], 4.5 * vec(j["gyro"]["sigma"]["scale"])[i]);
+    EXPECT_GT(vec(j["accel"]["bias"])[i], 32000.0);  // raw counts centred at 32768
+  }
+  ASSERT_EQ(j["accel"]["misalignment"].size(), 3u);
+  EXPECT_DOUBLE_EQ(j["accel"]["misalignment"][1][0].get<double>(), 0.0);  // upper triangular
+  EXPECT_NEAR(j["gyro"]["misalignment"][1][0].get<double>(), cfg.truth.gyro.T(1, 0),
+              4.5 * j["gyro"]["sigma"]["misalignment"][1][0].get<double>());
+  EXPECT_NEAR(j["gravity"].get<double>(), 9.8072, 1e-3);  // WGS-84 at 47.37 deg, 408 m
+  EXPECT_GE(j["threshold_multiplier"].get<int>(), 2);
+  EXPECT_GE(j["static_intervals"].size(), 30u);
+  EXPECT_FALSE(j["quality"]["accel_gravity_magnitude"]["before"].is_null());
+  EXPECT_LT(j["quality"]["gyro_gravity_direction"]["after"]["mean_rad"].get<double>(),
+            j["quality"]["gyro_gravity_direction"]["before"]["mean_rad"].get<double>());
+
+  const YAML::Node y = YAML::LoadFile(dir + "/result.yaml");
+  ASSERT_TRUE(y["canonical"]["A_a"]);
+  EXPECT_EQ(y["canonical"]["A_a"].size(), 3u);
+  EXPECT_NEAR(y["canonical"]["b_a"][0].as<double>(), accel_bias[0],
+              5.0 * vec(j["accel"]["sigma"]["bias"])[0]);
+  EXPECT_DOUBLE_EQ(y["canonical"]["G"][0][0].as<double>(), 0.0);
+}
+
+TEST(CliCalibrateStatic, InitOptionsAndErrors) {
+  const std::string dir = test::scratch_dir();
+  test::SynthConfig cfg;
+  cfg.seed = 32;
+  cfg.truth = test::random_truth(32);
+  const std::string log = write_log(dir, cfg);
+  // SI log, init given per axis and for all axes.
+  auto r = run_cli({"calibrate", "static", log, "--gravity", "9.80665", "--accel-scale-init", "1,1,1",
+                    "--gyro-scale-init", "1", "--init-still", "45", "--json", dir + "/r.json"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(test::read_file(dir + "/r.json"));
+  EXPECT_EQ(j["init_still_source"], "given");
+  // Malformed init value: usage error naming the option.
+  r = run_cli({"calibrate", "static", log, "--accel-scale-init", "1,2"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--accel-scale-init"), std::string::npos) << r.err;
+  // --gravity and --latitude exclude each other.
+  r = run_cli({"calibrate", "static", log, "--gravity", "9.81", "--latitude", "10"});
+  EXPECT_EQ(r.exit_code, 2);
+}
+
+TEST(CliCalibrateStatic, TooFewPosesExitsWithDataError) {
+  const std::string dir = test::scratch_dir();
+  test::SynthConfig cfg;
+  cfg.poses = 6;
+  cfg.truth = test::random_truth(33);
+  const std::string log = write_log(dir, cfg);
+  const auto r = run_cli({"calibrate", "static", log, "--json", dir + "/r.json"});
+  EXPECT_EQ(r.exit_code, 4);
+  EXPECT_NE(r.err.find("at least 9"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/r.json"));
+}
+
+TEST(CliCalibrateStatic, MissingFileIsAUsageError) {
+  const auto r = run_cli({"calibrate", "static", "/nonexistent/x.imulog"});
+  EXPECT_NE(r.exit_code, 0);
+}
+
+/// The committed fixture: the estimate agrees with the truth file within the reported sigma.
+TEST(CliCalibrateStatic, FixtureRecoversTruth) {
+  const std::string log = test::source_path("fixtures/static.imulog");
+  const std::string truth_path = test::source_path("fixtures/static.truth.yaml");
+  ASSERT_TRUE(std::filesystem::exists(log) && std::filesystem::exists(truth_path))
+      << "fixtures/static.imulog or its truth file is missing: run scripts/make-fixtures.sh";
+  const std::string dir = test::scratch_dir();
+  const auto r = run_cli({"calibrate", "static", log, "--gravity", "9.80665", "--json", dir + "/r.json"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(test::read_file(dir + "/r.json"));
+  const YAML::Node t = YAML::LoadFile(truth_path)["tedaldi"]["counts"];
+  ASSERT_TRUE(t) << "truth file has no tedaldi.counts section";
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(vec(j["accel"]["scale"])[i], t["K_a"][i].as<double>(),
+                4.0 * vec(j["accel"]["sigma"]["scale"])[i])
+        << "accel scale " << i;
+    // The simulated bias wanders (random walk): compare with its mean over the recording.
+    const YAML::Node si = YAML::LoadFile(truth_path)["tedaldi"]["si"];
+    const double lsb = si["b_a"][i].as<double>() / t["b_a"][i].as<double>();
+    const double bias_mean =
+        YAML::LoadFile(truth_path)["recording"]["accel_bias_mean_mps2"][i].as<double>() / lsb;
+    EXPECT_NEAR(vec(j["accel"]["bias"])[i], bias_mean, 4.0 * vec(j["accel"]["sigma"]["bias"])[i])
+        << "accel bias " << i;
+    EXPECT_NEAR(vec(j["gyro"]["scale"])[i], t["K_g"][i].as<double>(),
+                4.0 * vec(j["gyro"]["sigma"]["scale"])[i])
+        << "gyro scale " << i;
+    for (int k = 0; k < 3; ++k) {
+      if (i == k) continue;
+      const double s_a = j["accel"]["sigma"]["misalignment"][i][k].get<double>();
+      const double s_g = j["gyro"]["sigma"]["misalignment"][i][k].get<double>();
+      if (s_a > 0) {
+        EXPECT_NEAR(j["accel"]["misalignment"][i][k].get<double>(), t["T_a"][i][k].as<double>(), 4.0 * s_a)
+            << "accel T " << i << k;
+      }
+      EXPECT_NEAR(j["gyro"]["misalignment"][i][k].get<double>(), t["T_g"][i][k].as<double>(), 4.0 * s_g)
+          << "gyro T " << i << k;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace imucal

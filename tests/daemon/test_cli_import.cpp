@@ -1,0 +1,160 @@
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "log/session_log.hpp"
+#include "daemon/cli/command.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+void write(const fs::path& path, const std::string& text) {
+  fs::create_directories(path.parent_path());
+  std::ofstream(path, std::ios::binary) << text;
+}
+
+/// Static MPU-6000 at +-2 g / +-250 dps, 200 Hz, imu_tk-style files.
+void write_ascii(const fs::path& dir, bool si) {
+  std::string acc, gyr;
+  for (int i = 0; i < 400; ++i) {
+    const double t = 0.005 * i;
+    char buf[128];
+    if (si) {
+      std::snprintf(buf, sizeof buf, "%.3f %.5f %.5f %.5f\n", t, 0.01 * (i % 3), -0.02, 9.81);
+    } else {
+      std::snprintf(buf, sizeof buf, "%.3f %d %d %d\n", t, 10 + i % 3, -20, 16384 + i % 4);
+    }
+    acc += buf;
+    std::snprintf(buf, sizeof buf, si ? "%.3f 0.001 0.002 0.003\n" : "%.3f -5 6 7\n", t);
+    gyr += buf;
+  }
+  write(dir / "acc.txt", acc);
+  write(dir / "gyr.txt", gyr);
+}
+
+TEST(CliImport, AsciiRawAndSi) {
+  const fs::path dir = test::scratch_dir();
+  write_ascii(dir / "raw", false);
+  auto raw =
+      test::run_cli({"import", "ascii", "--accel", (dir / "raw/acc.txt").string(), "--gyro",
+                     (dir / "raw/gyr.txt").string(), "--units", "raw", "--accel-scale",
+                     "0.0006,0.0006,0.0006", "--gyro-offset=-5,6,7", "-o", (dir / "raw.imulog").string()});
+  ASSERT_EQ(raw.exit_code, 0) << raw.err;
+  EXPECT_THAT(raw.out, HasSubstr("imported 400 IMU samples (200 Hz"));
+  EXPECT_THAT(raw.out, HasSubstr("raw counts kept"));
+  auto reader = log::SessionLogReader::open((dir / "raw.imulog").string());
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  const ImuStreamInfo& info = (*reader)->imu_streams().begin()->second;
+  EXPECT_EQ(info.units, ImuUnits::kRaw);
+  EXPECT_EQ(info.accel.scale, Eigen::Vector3d::Constant(0.0006));
+  EXPECT_EQ(info.gyro.offset, Eigen::Vector3d(-5, 6, 7));
+
+  write_ascii(dir / "si", true);
+  auto si =
+      test::run_cli({"import", "ascii", "--accel", (dir / "si/acc.txt").string(), "--gyro",
+                     (dir / "si/gyr.txt").string(), "--units", "si", "-o", (dir / "si.imulog").string()});
+  ASSERT_EQ(si.exit_code, 0) << si.err;
+
+  // The same SI files declared raw: refused, naming the flag.
+  auto wrong =
+      test::run_cli({"import", "ascii", "--accel", (dir / "si/acc.txt").string(), "--gyro",
+                     (dir / "si/gyr.txt").string(), "--units", "raw", "-o", (dir / "w.imulog").string()});
+  EXPECT_EQ(wrong.exit_code, cli::kExitInput);
+  EXPECT_THAT(wrong.err, HasSubstr("--units si"));
+  EXPECT_FALSE(fs::exists(dir / "w.imulog"));
+}
+
+TEST(CliImport, CsvAndOverwriteRefusal) {
+  const fs::path dir = test::scratch_dir();
+  std::string csv = "t_ns\tgx\tgy\tgz\tax\tay\taz\n";
+  for (int i = 0; i < 100; ++i) {
+    csv += std::to_string(5'000'000LL * i) + "\t0.01\t0.02\t0.03\t0.1\t0.2\t9.8\n";
+  }
+  write(dir / "d.tsv", csv);
+  const std::vector<std::string> args = {"import",
+                                         "csv",
+                                         (dir / "d.tsv").string(),
+                                         "--columns",
+                                         "t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6",
+                                         "--time-unit",
+                                         "ns",
+                                         "--delimiter",
+                                         "tab",
+                                         "--skip-header",
+                                         "1",
+                                         "--units",
+                                         "si",
+                                         "-o",
+                                         (dir / "d.imulog").string()};
+  auto r = test::run_cli(args);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("imported 100 IMU samples (200 Hz"));
+  const std::string before = test::read_file((dir / "d.imulog").string());
+  auto again = test::run_cli(args);
+  EXPECT_EQ(again.exit_code, cli::kExitUsage);
+  EXPECT_THAT(again.err, HasSubstr("already exists; pass --force"));
+  EXPECT_EQ(test::read_file((dir / "d.imulog").string()), before);
+  auto forced_args = args;
+  forced_args.push_back("--force");
+  EXPECT_EQ(test::run_cli(forced_args).exit_code, 0);
+
+  write(dir / "bad.csv", "0,1,2,3,4,5,6\n0.005,1,2,3,4,5,6\n0.01,1,2,3,4,5\n");
+  auto bad = test::run_cli({"import", "csv", (dir / "bad.csv").string(), "--columns",
+                            "t=0,ax=1,ay=2,az=3,gx=4,gy=5,gz=6", "--units", "raw", "-o",
+                            (dir / "b.imulog").string()});
+  EXPECT_EQ(bad.exit_code, cli::kExitInput);
+  EXPECT_THAT(bad.err, HasSubstr("bad.csv:3: has 6 columns"));
+  EXPECT_FALSE(fs::exists(dir / "b.imulog"));
+  for (const auto& e : fs::directory_iterator(dir)) {
+    EXPECT_EQ(e.path().filename().string().find(".partial-"), std::string::npos) << e.path();
+  }
+}
+
+TEST(CliImport, EurocRoundTripThroughTheCli) {
+  const fs::path dir = test::scratch_dir();
+  std::string csv =
+      "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+      "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n";
+  for (int i = 0; i < 50; ++i) {
+    csv += std::to_string(1'000'000'000LL + 5'000'000LL * i) + ",0.1,-0.2,0.30000000000000004,1e-3,2.5," +
+           std::to_string(9.80665 + 1e-5 * i) + "\n";
+  }
+  write(dir / "in/mav0/imu0/data.csv", csv);
+  auto imp = test::run_cli({"import", "euroc", (dir / "in").string(), "-o", (dir / "a.imulog").string()});
+  ASSERT_EQ(imp.exit_code, 0) << imp.err;
+  auto exp = test::run_cli({"export", "euroc", (dir / "a.imulog").string(), (dir / "out").string()});
+  ASSERT_EQ(exp.exit_code, 0) << exp.err;
+  EXPECT_THAT(exp.out, HasSubstr("exported 50 IMU samples"));
+  const std::string exported = test::read_file((dir / "out/mav0/imu0/data.csv").string());
+  EXPECT_THAT(exported, HasSubstr("1000000000,0.1,-0.2,0.30000000000000004,0.001,2.5,"));
+  auto exp2 = test::run_cli({"export", "euroc", (dir / "a.imulog").string(), (dir / "out").string()});
+  EXPECT_EQ(exp2.exit_code, cli::kExitUsage);
+  EXPECT_THAT(exp2.err, HasSubstr("--force"));
+  auto missing =
+      test::run_cli({"import", "euroc", (dir / "nope").string(), "-o", (dir / "n.imulog").string()});
+  EXPECT_EQ(missing.exit_code, cli::kExitInput);
+  EXPECT_THAT(missing.err, HasSubstr("not a folder"));
+}
+
+TEST(CliImport, UsageErrors) {
+  const fs::path dir = test::scratch_dir();
+  write_ascii(dir, false);
+  auto r = test::run_cli({"import", "ascii", "--accel", (dir / "acc.txt").string(), "--gyro",
+                          (dir / "gyr.txt").string(), "--units", "raw", "--accel-scale", "1,2", "-o",
+                          (dir / "x.imulog").string()});
+  EXPECT_EQ(r.exit_code, cli::kExitUsage);
+  EXPECT_THAT(r.err, HasSubstr("--accel-scale"));
+  auto cols = test::run_cli({"import", "csv", (dir / "acc.txt").string(), "--columns", "t=0,ax=1", "--units",
+                             "raw", "-o", (dir / "x.imulog").string()});
+  EXPECT_EQ(cols.exit_code, cli::kExitUsage);
+  EXPECT_THAT(cols.err, HasSubstr("--columns"));
+}
+
+}  // namespace
+}  // namespace imucal

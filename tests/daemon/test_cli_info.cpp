@@ -1,0 +1,165 @@
+// imucal info: text and JSON summaries of a real log, gaps, incomplete and damaged logs, and
+// files that are not logs.
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "log/session_log.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+// 2000 samples at a nominal 1 kHz with one 10 ms hole after sample 999 (flagged on the sample
+// after it), 20 frames at 20 Hz, 3 events.
+std::string write_log(const std::string& path, bool close = true) {
+  auto writer = log::SessionLogWriter::create(path);
+  EXPECT_TRUE(writer.ok()) << writer.error().message;
+  auto& w = **writer;
+  ImuStreamInfo info;
+  info.name = "imu0";
+  info.units = ImuUnits::kRaw;
+  info.rate_hz = 1000.0;
+  info.device = "mpu6000@spi0.0";
+  info.accel_full_scale_g = 4;
+  info.gyro_full_scale_dps = 500;
+  info.dlpf_hz = 98;
+  const int imu = *w.add_imu_stream(info);
+  CameraStreamInfo cam_info;
+  cam_info.name = "cam0";
+  cam_info.width = 8;
+  cam_info.height = 8;
+  cam_info.rate_hz = 20.0;
+  cam_info.backend = "sim";
+  cam_info.timestamp_source = "mid-exposure";
+  const int cam = *w.add_camera_stream(cam_info);
+  EXPECT_TRUE(w.set_metadata("rig", "bench rig 7").ok());
+  std::vector<ImuSample> samples(2000);
+  TimeNs t_ns = 10 * kNsPerSecond;
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    samples[i].t_ns = t_ns;
+    samples[i].accel = {1.0, 2.0, 16384.0};
+    if (i == 1000) samples[i].flags = kImuFlagGapBefore;
+    t_ns += (i == 999) ? 10'000'000 : 1'000'000;
+  }
+  EXPECT_TRUE(w.append_imu(imu, samples).ok());
+  for (int f = 0; f < 20; ++f) {
+    CameraFrame frame;
+    frame.t_ns = 10 * kNsPerSecond + TimeNs{f} * 50'000'000;
+    frame.width = 8;
+    frame.height = 8;
+    frame.encoding = "gray8";
+    frame.data.assign(64, 128);
+    EXPECT_TRUE(w.append_frame(cam, frame).ok());
+  }
+  EXPECT_TRUE(w.append_event({10 * kNsPerSecond, "prompt", "Hold still"}).ok());
+  EXPECT_TRUE(w.append_event({11 * kNsPerSecond, "pose_begin", "{}"}).ok());
+  EXPECT_TRUE(w.append_event({12 * kNsPerSecond, "pose_end", "{}"}).ok());
+  if (close) {
+    EXPECT_TRUE(w.close().ok());
+  } else {
+    EXPECT_TRUE(w.flush().ok());
+  }
+  return path;
+}
+
+TEST(CliInfo, TextSummaryOfARealLog) {
+  const std::string log = write_log(test::scratch_dir() + "/session.imulog");
+  auto r = test::run_cli({"info", log});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("status: complete"));
+  EXPECT_THAT(r.out, HasSubstr("imu0 (id 1, raw counts, device mpu6000@spi0.0, accel +-4 g, gyro +-500 dps"));
+  EXPECT_THAT(r.out, HasSubstr("samples: 2000, nominal 1000 Hz"));
+  EXPECT_THAT(r.out, HasSubstr("1 longer than 1.5x median, longest 10 ms"));
+  EXPECT_THAT(r.out, HasSubstr("flagged: 1 after a gap"));
+  EXPECT_THAT(r.out, HasSubstr("frames: 20, nominal 20 Hz, measured 20 Hz"));
+  EXPECT_THAT(r.out, HasSubstr("events: 3 (pose_begin 1, pose_end 1, prompt 1)"));
+  EXPECT_THAT(r.out, HasSubstr("rig: bench rig 7"));
+  EXPECT_THAT(r.out, HasSubstr("duration: 2.008 s"));
+  EXPECT_TRUE(r.err.empty()) << r.err;
+}
+
+TEST(CliInfo, JsonSummaryHasEveryDocumentedField) {
+  const std::string log = write_log(test::scratch_dir() + "/session.imulog");
+  auto r = test::run_cli({"info", "--json", log});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["path"], log);
+  EXPECT_EQ(j["complete"], true);
+  EXPECT_EQ(j["damaged"], false);
+  EXPECT_EQ(j["schema_version"], std::to_string(log::kSessionLogSchemaVersion));
+  EXPECT_EQ(j["t_start_ns"], 10 * kNsPerSecond);
+  EXPECT_EQ(j["t_end_ns"], 10 * kNsPerSecond + 2'008'000'000);
+  EXPECT_DOUBLE_EQ(j["duration_s"].get<double>(), 2.008);
+  ASSERT_EQ(j["imu_streams"].size(), 1u);
+  const auto& imu = j["imu_streams"][0];
+  EXPECT_EQ(imu["name"], "imu0");
+  EXPECT_EQ(imu["units"], "raw");
+  EXPECT_EQ(imu["count"], 2000);
+  EXPECT_EQ(imu["median_period_ns"], 1'000'000);
+  EXPECT_EQ(imu["gap_intervals"], 1);
+  EXPECT_EQ(imu["longest_interval_ns"], 10'000'000);
+  EXPECT_EQ(imu["longest_interval_at_ns"], 10 * kNsPerSecond + 1'009'000'000);
+  EXPECT_EQ(imu["flagged_gap_samples"], 1);
+  EXPECT_DOUBLE_EQ(imu["nominal_rate_hz"].get<double>(), 1000.0);
+  EXPECT_NEAR(imu["measured_rate_hz"].get<double>(), 1999.0 / 2.008, 1e-9);
+  EXPECT_EQ(imu["dlpf_hz"], 98);
+  const auto& cam = j["camera_streams"][0];
+  EXPECT_EQ(cam["count"], 20);
+  EXPECT_EQ(cam["gap_intervals"], 0);
+  EXPECT_EQ(cam["timestamp_source"], "mid-exposure");
+  EXPECT_EQ(j["events"]["count"], 3);
+  EXPECT_EQ(j["events"]["by_kind"]["prompt"], 1);
+  EXPECT_EQ(j["metadata"]["rig"], "bench rig 7");
+  EXPECT_EQ(j["metadata"]["complete"], "1");
+}
+
+TEST(CliInfo, IncompleteLogIsReportedButReadable) {
+  const std::string dir = test::scratch_dir();
+  const std::string log = dir + "/open.imulog";
+  {
+    // The writer is destroyed without close(): the data stays, complete stays 0.
+    write_log(log, /*close=*/false);
+  }
+  auto r = test::run_cli({"info", log});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("INCOMPLETE"));
+  EXPECT_THAT(r.out, HasSubstr("samples: 2000"));
+}
+
+TEST(CliInfo, DamagedLogPrintsWhatWasReadAndWarns) {
+  const std::string dir = test::scratch_dir();
+  const std::string log = write_log(dir + "/session.imulog");
+  fs::resize_file(log, fs::file_size(log) - 3000);
+  auto r = test::run_cli({"info", "--json", log});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("WARNING"));
+  EXPECT_THAT(r.err, HasSubstr("truncated"));
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["damaged"], true);
+  EXPECT_THAT(j["damage_message"].get<std::string>(), HasSubstr("truncated"));
+}
+
+TEST(CliInfo, NotALogIsAnInputError) {
+  const std::string dir = test::scratch_dir();
+  std::ofstream(dir + "/notes.txt") << "hello\n";
+  auto r = test::run_cli({"info", dir + "/notes.txt"});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_THAT(r.err, HasSubstr("not a session log"));
+  EXPECT_TRUE(r.out.empty());
+  r = test::run_cli({"info", dir + "/missing.imulog"});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_THAT(r.err, HasSubstr("no such session log"));
+  r = test::run_cli({"info"});
+  EXPECT_EQ(r.exit_code, 2);
+}
+
+}  // namespace
+}  // namespace imucal

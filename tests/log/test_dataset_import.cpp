@@ -1,0 +1,199 @@
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "log/dataset_io.hpp"
+#include "log/session_log.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal::log {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+void write(const fs::path& path, const std::string& text) { std::ofstream(path, std::ios::binary) << text; }
+
+struct Log {
+  ImuStreamInfo info;
+  std::vector<ImuSample> samples;
+  std::map<std::string, std::string> metadata;
+};
+
+Log read_log(const std::string& path) {
+  Log log;
+  auto reader = SessionLogReader::open(path);
+  EXPECT_TRUE(reader.ok()) << reader.error().message;
+  if (!reader.ok()) return log;
+  EXPECT_EQ((*reader)->imu_streams().size(), 1u);
+  auto id = (*reader)->find_imu_stream();
+  EXPECT_TRUE(id.ok());
+  log.info = (*reader)->imu_streams().at(*id);
+  log.samples = *(*reader)->read_imu(*id);
+  log.metadata = (*reader)->metadata();
+  return log;
+}
+
+/// imu_tk-style files: 100 Hz, a static pose, counts of a +-2 g / +-250 dps MPU-6000.
+void write_raw_pair(const fs::path& dir, int rows, double gyro_time_jitter_s = 0.0) {
+  std::string acc = "# accelerometer, raw counts\n", gyr = "# gyroscope, raw counts\n";
+  for (int i = 0; i < rows; ++i) {
+    const double t = 10.0 + 0.01 * i;
+    char buf[128];
+    std::snprintf(buf, sizeof buf, "%.9f %d %d %d\n", t, 120 + i % 3, -340, 16100 + i % 5);
+    acc += buf;
+    std::snprintf(buf, sizeof buf, "%.9f %d %d %d\n", t + (i % 2 ? gyro_time_jitter_s : 0.0), -12, 7 + i % 2,
+                  3);
+    gyr += buf;
+  }
+  write(dir / "acc.txt", acc);
+  write(dir / "gyr.txt", gyr);
+}
+
+TEST(DatasetAscii, RawCountsKeepCountsAndNominalConversion) {
+  const fs::path dir = test::scratch_dir();
+  write_raw_pair(dir, 300);
+  AsciiImport in;
+  in.accel_path = (dir / "acc.txt").string();
+  in.gyro_path = (dir / "gyr.txt").string();
+  in.units = ImuUnits::kRaw;
+  in.accel.scale = Eigen::Vector3d(0.0006, 0.0006, 0.0006);
+  in.accel.offset = Eigen::Vector3d(1, 2, 3);
+  auto r = import_ascii(in, (dir / "raw.imulog").string(), {});
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_EQ(r->imu_samples, 300);
+  EXPECT_NEAR(r->rate_hz, 100.0, 1e-9);
+  const Log log = read_log((dir / "raw.imulog").string());
+  EXPECT_EQ(log.info.units, ImuUnits::kRaw);
+  EXPECT_EQ(log.info.accel.scale, in.accel.scale);
+  EXPECT_EQ(log.info.accel.offset, in.accel.offset);
+  EXPECT_EQ(log.info.gyro.scale, default_raw_gyro_conversion().scale);
+  ASSERT_EQ(log.samples.size(), 300u);
+  EXPECT_EQ(log.samples[0].t_ns, 10'000'000'000);
+  EXPECT_EQ(log.samples[299].t_ns, 12'990'000'000);
+  EXPECT_EQ(log.samples[7].accel, Eigen::Vector3d(121, -340, 16102));
+  EXPECT_EQ(log.samples[7].gyro, Eigen::Vector3d(-12, 8, 3));
+  EXPECT_THAT(log.metadata.at("import"), HasSubstr("ascii"));
+}
+
+TEST(DatasetAscii, SiValuesExactAndNearestPairing) {
+  const fs::path dir = test::scratch_dir();
+  write(dir / "acc.txt", "0.000 0.1 0.2 9.7\n0.005 0.15 0.25 9.75\n0.010 0.125 0.2 9.8\n");
+  // Gyroscope stamped 0.4 ms later: within half a 5 ms period, so paired.
+  write(dir / "gyr.txt", "0.0004 0.01 0.02 0.03\n0.0054 0.04 0.05 0.06\n0.0104 0.07 0.08 0.09\n");
+  AsciiImport in;
+  in.accel_path = (dir / "acc.txt").string();
+  in.gyro_path = (dir / "gyr.txt").string();
+  in.units = ImuUnits::kSi;
+  auto r = import_ascii(in, (dir / "si.imulog").string(), {});
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  ASSERT_FALSE(r->notes.empty());
+  EXPECT_THAT(r->notes[0], HasSubstr("nearest"));
+  const Log log = read_log((dir / "si.imulog").string());
+  EXPECT_EQ(log.info.units, ImuUnits::kSi);
+  ASSERT_EQ(log.samples.size(), 3u);
+  EXPECT_EQ(log.samples[1].t_ns, 5'000'000);
+  EXPECT_EQ(log.samples[1].accel, Eigen::Vector3d(0.15, 0.25, 9.75));
+  EXPECT_EQ(log.samples[1].gyro, Eigen::Vector3d(0.04, 0.05, 0.06));
+}
+
+TEST(DatasetAscii, UnitMismatchFailsAndLeavesNoOutput) {
+  const fs::path dir = test::scratch_dir();
+  write_raw_pair(dir, 50);
+  AsciiImport in;
+  in.accel_path = (dir / "acc.txt").string();
+  in.gyro_path = (dir / "gyr.txt").string();
+  in.units = ImuUnits::kSi;
+  auto r = import_ascii(in, (dir / "x.imulog").string(), {});
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.error().message, HasSubstr("--units raw"));
+  EXPECT_FALSE(fs::exists(dir / "x.imulog"));
+  in.unit_check = false;
+  EXPECT_TRUE(import_ascii(in, (dir / "x.imulog").string(), {}).ok());
+}
+
+TEST(DatasetAscii, UnpairableFilesAndMalformedRows) {
+  const fs::path dir = test::scratch_dir();
+  write_raw_pair(dir, 50, 0.004);  // every other gyro row 4 ms late: within half of 10 ms
+  AsciiImport in;
+  in.accel_path = (dir / "acc.txt").string();
+  in.gyro_path = (dir / "gyr.txt").string();
+  in.units = ImuUnits::kRaw;
+  ASSERT_TRUE(import_ascii(in, (dir / "ok.imulog").string(), {}).ok());
+  write_raw_pair(dir, 50, 0.006);  // 6 ms late: no partner within 5 ms
+  auto r = import_ascii(in, (dir / "x.imulog").string(), {});
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.error().message, HasSubstr("gyr.txt:"));
+  EXPECT_THAT(r.error().message, HasSubstr("half"));
+  EXPECT_FALSE(fs::exists(dir / "x.imulog"));
+
+  write(dir / "acc.txt", "0 1 2 3\n0.01 1 2 3\n0.02 1 2\n");
+  auto bad = import_ascii(in, (dir / "x.imulog").string(), {});
+  ASSERT_FALSE(bad.ok());
+  EXPECT_THAT(bad.error().message, HasSubstr("acc.txt:3: expected 4"));
+  EXPECT_FALSE(fs::exists(dir / "x.imulog"));
+}
+
+TEST(DatasetCsvImport, ColumnMappingTimeUnitAndTemperature) {
+  const fs::path dir = test::scratch_dir();
+  std::string csv = "time_us,ax,ay,az,gx,gy,gz,temp_raw\n";
+  for (int i = 0; i < 20; ++i) {
+    csv += std::to_string(1000000 + 2500 * i) + ",100,-200," + std::to_string(8192 + i) + ",1,2,3," +
+           std::to_string(-521 + i) + "\n";
+  }
+  write(dir / "d.csv", csv);
+  CsvImport in;
+  in.path = (dir / "d.csv").string();
+  in.format.columns = *parse_csv_columns("t=0,ax=1,ay=2,az=3,gx=4,gy=5,gz=6,temp=7");
+  in.format.time_unit = TimeUnit::kUs;
+  in.format.skip_header = 1;
+  in.units = ImuUnits::kRaw;
+  in.temperature_scale = 1.0 / 340.0;
+  in.temperature_offset = 36.53;
+  auto r = import_csv(in, (dir / "d.imulog").string(), {});
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_NEAR(r->rate_hz, 400.0, 1e-9);
+  const Log log = read_log((dir / "d.imulog").string());
+  ASSERT_EQ(log.samples.size(), 20u);
+  EXPECT_EQ(log.samples[3].t_ns, 1'007'500'000);
+  EXPECT_EQ(log.samples[3].accel, Eigen::Vector3d(100, -200, 8195));
+  EXPECT_EQ(log.samples[3].temperature, -518.0);
+  EXPECT_DOUBLE_EQ(log.info.temperature_scale, 1.0 / 340.0);
+  EXPECT_DOUBLE_EQ(log.info.temperature_offset, 36.53);
+
+  // Wrong time unit: microseconds read as seconds give a 2500 s period.
+  in.format.time_unit = TimeUnit::kS;
+  auto wrong = import_csv(in, (dir / "w.imulog").string(), {});
+  ASSERT_FALSE(wrong.ok());
+  EXPECT_THAT(wrong.error().message, HasSubstr("--time-unit"));
+  EXPECT_FALSE(fs::exists(dir / "w.imulog"));
+}
+
+TEST(DatasetOutput, PendingOutputRemovesUncommittedAndRefusesExisting) {
+  const fs::path dir = test::scratch_dir();
+  {
+    auto out = PendingOutput::begin((dir / "o.imulog").string(), PendingOutput::Kind::kFile, false);
+    ASSERT_TRUE(out.ok());
+    write(out->temp_path(), "half written");
+    write(out->temp_path() + "-wal", "wal");
+  }
+  EXPECT_TRUE(fs::is_empty(dir));
+  {
+    auto out = PendingOutput::begin((dir / "o.imulog").string(), PendingOutput::Kind::kFile, false);
+    ASSERT_TRUE(out.ok());
+    write(out->temp_path(), "complete");
+    ASSERT_TRUE(out->commit().ok());
+  }
+  EXPECT_EQ(test::read_file((dir / "o.imulog").string()), "complete");
+  auto again = PendingOutput::begin((dir / "o.imulog").string(), PendingOutput::Kind::kFile, false);
+  ASSERT_FALSE(again.ok());
+  EXPECT_THAT(again.error().message, HasSubstr("already exists"));
+  auto no_dir = PendingOutput::begin((dir / "nope/o.imulog").string(), PendingOutput::Kind::kFile, false);
+  ASSERT_FALSE(no_dir.ok());
+  EXPECT_THAT(no_dir.error().message, HasSubstr("does not exist"));
+}
+
+}  // namespace
+}  // namespace imucal::log

@@ -1,0 +1,346 @@
+// Session log: round trips of every field, time-range reads, writer rules.
+
+#include <gtest/gtest.h>
+#include <sqlite3.h>
+
+#include <cmath>
+#include <filesystem>
+#include <limits>
+
+#include "log/session_log.hpp"
+#include "tests/support/session_log_util.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal::log {
+namespace {
+
+using namespace imucal::test;  // shared session-log helpers (tests/support)
+
+using test::scratch_dir;
+
+TEST(SessionLog, RoundTripsEveryField) {
+  const std::string path = scratch_dir() + "/all.imulog";
+  ImuStreamInfo raw_info = test_raw_imu_info();
+  ImuStreamInfo si_info;
+  si_info.name = "imu_si";
+  si_info.units = ImuUnits::kSi;
+  si_info.rate_hz = 200.5;
+  si_info.device = "euroc:imu0";
+  CameraStreamInfo cam_info;
+  cam_info.name = "cam0";
+  cam_info.width = 640;
+  cam_info.height = 480;
+  cam_info.rate_hz = 20.0;
+  cam_info.backend = "v4l2";
+  cam_info.device = "/dev/video0";
+  cam_info.timestamp_source = "end-of-frame";
+
+  std::vector<ImuSample> raw_samples, si_samples;
+  for (int i = 0; i < 50; ++i) {
+    ImuSample s;
+    s.t_ns = 1'000'000'000 + TimeNs{i} * 1'000'000;
+    s.accel = {-32768.0 + i, 32767.0 - i, 65535.0 * (i % 2)};  // signed and unsigned ADC counts
+    s.gyro = {static_cast<double>(i), static_cast<double>(-i), 0.0};
+    s.temperature = i == 3 ? std::numeric_limits<double>::quiet_NaN() : -521.0 + i;
+    s.flags = static_cast<std::uint32_t>(i % 32);
+    raw_samples.push_back(s);
+    ImuSample q;
+    q.t_ns = 2'000'000'000 + TimeNs{i} * 5'000'000;
+    q.accel = {0.1 * i, -9.80665 + 1e-17 * i, std::nextafter(1.0, 2.0)};
+    q.gyro = {1.0 / 3.0, -std::numeric_limits<double>::min(), std::numeric_limits<double>::max()};
+    q.temperature = i == 7 ? std::numeric_limits<double>::quiet_NaN() : 25.0 + i / 7.0;
+    q.flags = kImuFlagGapBefore | kImuFlagTimeEstimated;
+    si_samples.push_back(q);
+  }
+  CameraFrame frame;
+  frame.t_ns = 1'500'000'000;
+  frame.width = 4;
+  frame.height = 2;
+  frame.encoding = "gray8";
+  frame.data = {0, 1, 2, 3, 250, 251, 0, 255};
+  frame.exposure_ns = 4'000'000;
+  frame.sequence = 4'000'000'000u;
+  frame.flags = 1;
+  CameraFrame empty_frame = frame;
+  empty_frame.t_ns += 50'000'000;
+  empty_frame.encoding = "png";
+  empty_frame.data.clear();
+
+  int raw_id = 0, si_id = 0, cam_id = 0;
+  {
+    auto writer = SessionLogWriter::create(path);
+    ASSERT_TRUE(writer.ok()) << writer.error().message;
+    auto& w = **writer;
+    ASSERT_TRUE(w.set_metadata("rig", "{\"serial\": \"A-17\"}").ok());
+    ASSERT_TRUE(w.set_metadata("note", "").ok());
+    auto r = w.add_imu_stream(raw_info);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    raw_id = *r;
+    auto s = w.add_imu_stream(si_info);
+    ASSERT_TRUE(s.ok()) << s.error().message;
+    si_id = *s;
+    auto c = w.add_camera_stream(cam_info);
+    ASSERT_TRUE(c.ok()) << c.error().message;
+    cam_id = *c;
+    EXPECT_NE(raw_id, si_id);
+    EXPECT_NE(raw_id, cam_id);
+    EXPECT_NE(si_id, cam_id);
+    ASSERT_TRUE(w.append_imu(raw_id, raw_samples).ok());
+    ASSERT_TRUE(w.append_imu(si_id, si_samples).ok());
+    ASSERT_TRUE(w.append_frame(cam_id, frame).ok());
+    ASSERT_TRUE(w.append_frame(cam_id, empty_frame).ok());
+    ASSERT_TRUE(w.append_event({1'200'000'000, "pose_begin", "{\"pose\": 1}"}).ok());
+    ASSERT_TRUE(w.append_event({1'100'000'000, "prompt", "Hold still"}).ok());
+    ASSERT_TRUE(w.close().ok());
+  }
+  EXPECT_FALSE(std::filesystem::exists(path + "-wal"));
+  EXPECT_FALSE(std::filesystem::exists(path + "-shm"));
+
+  auto reader = SessionLogReader::open(path);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  const auto& r = **reader;
+  EXPECT_TRUE(r.health().complete);
+  EXPECT_FALSE(r.health().damaged) << r.health().damage_message;
+  EXPECT_EQ(r.metadata().at("rig"), "{\"serial\": \"A-17\"}");
+  EXPECT_EQ(r.metadata().at("note"), "");
+  EXPECT_EQ(r.metadata().at("schema_version"), std::to_string(kSessionLogSchemaVersion));
+  EXPECT_FALSE(r.metadata().at("software_version").empty());
+  EXPECT_EQ(r.metadata().at("created_utc").size(), 20u);
+  EXPECT_EQ(r.metadata().at("complete"), "1");
+
+  ASSERT_EQ(r.imu_streams().size(), 2u);
+  expect_same_info(r.imu_streams().at(raw_id), raw_info);
+  expect_same_info(r.imu_streams().at(si_id), si_info);
+  ASSERT_EQ(r.camera_streams().size(), 1u);
+  const auto& cam = r.camera_streams().at(cam_id);
+  EXPECT_EQ(cam.name, cam_info.name);
+  EXPECT_EQ(cam.width, cam_info.width);
+  EXPECT_EQ(cam.height, cam_info.height);
+  EXPECT_EQ(cam.rate_hz, cam_info.rate_hz);
+  EXPECT_EQ(cam.backend, cam_info.backend);
+  EXPECT_EQ(cam.device, cam_info.device);
+  EXPECT_EQ(cam.timestamp_source, cam_info.timestamp_source);
+
+  EXPECT_EQ(*r.find_imu_stream(), raw_id);
+  EXPECT_EQ(*r.find_imu_stream("imu_si"), si_id);
+  EXPECT_EQ(*r.find_camera_stream("cam0"), cam_id);
+  auto missing = r.find_imu_stream("nope");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.error().message.find("imu_si"), std::string::npos) << missing.error().message;
+
+  auto raw_back = r.read_imu(raw_id);
+  ASSERT_TRUE(raw_back.ok()) << raw_back.error().message;
+  expect_same_samples(*raw_back, raw_samples);
+  auto si_back = r.read_imu(si_id);
+  ASSERT_TRUE(si_back.ok()) << si_back.error().message;
+  expect_same_samples(*si_back, si_samples);
+  EXPECT_EQ(*r.imu_count(raw_id), 50);
+  EXPECT_EQ(*r.imu_count(si_id), 50);
+
+  std::vector<CameraFrame> frames;
+  ASSERT_TRUE(r.for_each_frame(cam_id, kTimeMin, kTimeMax, [&](const CameraFrame& f) {
+                 frames.push_back(f);
+                 return true;
+               }).ok());
+  ASSERT_EQ(frames.size(), 2u);
+  for (const auto& [got, want] : {std::pair{frames[0], frame}, std::pair{frames[1], empty_frame}}) {
+    EXPECT_EQ(got.t_ns, want.t_ns);
+    EXPECT_EQ(got.width, want.width);
+    EXPECT_EQ(got.height, want.height);
+    EXPECT_EQ(got.encoding, want.encoding);
+    EXPECT_EQ(got.data, want.data);
+    EXPECT_EQ(got.exposure_ns, want.exposure_ns);
+    EXPECT_EQ(got.sequence, want.sequence);
+    EXPECT_EQ(got.flags, want.flags);
+  }
+  EXPECT_EQ(*r.frame_count(cam_id), 2);
+  EXPECT_EQ(*r.frame_times(cam_id), (std::vector<TimeNs>{frame.t_ns, empty_frame.t_ns}));
+
+  auto events = r.events();
+  ASSERT_TRUE(events.ok());
+  ASSERT_EQ(events->size(), 2u);
+  EXPECT_EQ((*events)[0].t_ns, 1'100'000'000);  // in time order
+  EXPECT_EQ((*events)[0].kind, "prompt");
+  EXPECT_EQ((*events)[0].message, "Hold still");
+  EXPECT_EQ((*events)[1].kind, "pose_begin");
+  EXPECT_EQ((*events)[1].message, "{\"pose\": 1}");
+}
+
+// The file is inspectable: raw counts are INTEGER columns, SI values REAL, NaN is NULL.
+TEST(SessionLog, StoresPlainTypedColumns) {
+  const std::string path = scratch_dir() + "/types.imulog";
+  {
+    auto writer = SessionLogWriter::create(path);
+    ASSERT_TRUE(writer.ok()) << writer.error().message;
+    const int raw_id = *(*writer)->add_imu_stream(test_raw_imu_info());
+    ImuStreamInfo si;
+    si.name = "si";
+    const int si_id = *(*writer)->add_imu_stream(si);
+    ImuSample s;
+    s.t_ns = 10;
+    s.accel = {-5.0, 7.0, 16384.0};
+    s.gyro = {1.0, 2.0, 3.0};
+    ASSERT_TRUE((*writer)->append_imu(raw_id, s).ok());
+    s.accel = {0.5, 1.0, 9.81};
+    ASSERT_TRUE((*writer)->append_imu(si_id, s).ok());
+    ASSERT_TRUE((*writer)->close().ok());
+  }
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr), SQLITE_OK);
+  sqlite3_stmt* stmt = nullptr;
+  ASSERT_EQ(
+      sqlite3_prepare_v2(db,
+                         "SELECT typeof(ax), typeof(gz), typeof(temperature), typeof(t_ns), typeof(flags) "
+                         "FROM imu_samples ORDER BY rowid",
+                         -1, &stmt, nullptr),
+      SQLITE_OK);
+  ASSERT_EQ(sqlite3_step(stmt), SQLITE_ROW);
+  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(stmt, 0)), "integer");
+  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(stmt, 1)), "integer");
+  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(stmt, 2)), "null");
+  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(stmt, 3)), "integer");
+  ASSERT_EQ(sqlite3_step(stmt), SQLITE_ROW);
+  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(stmt, 0)), "real");
+  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(stmt, 1)), "real");
+  sqlite3_finalize(stmt);
+  ASSERT_EQ(sqlite3_prepare_v2(db, "PRAGMA journal_mode", -1, &stmt, nullptr), SQLITE_OK);
+  ASSERT_EQ(sqlite3_step(stmt), SQLITE_ROW);
+  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(stmt, 0)), "delete");
+  sqlite3_finalize(stmt);
+  sqlite3_close(db);
+}
+
+TEST(SessionLog, TimeRangeReadsAreHalfOpenAndOrdered) {
+  const std::string path = scratch_dir() + "/range.imulog";
+  int imu_id = 0, cam_id = 0;
+  {
+    auto writer = SessionLogWriter::create(path);
+    ASSERT_TRUE(writer.ok()) << writer.error().message;
+    imu_id = *(*writer)->add_imu_stream(test_raw_imu_info());
+    CameraStreamInfo cam;
+    cam_id = *(*writer)->add_camera_stream(cam);
+    // Out of order on purpose (a late-arriving batch): reads must come back sorted.
+    std::vector<ImuSample> samples;
+    for (int i : {5, 6, 7, 8, 9, 0, 1, 2, 3, 4}) {
+      ImuSample s;
+      s.t_ns = i * 100;
+      s.accel.x() = i;
+      samples.push_back(s);
+    }
+    ASSERT_TRUE((*writer)->append_imu(imu_id, samples).ok());
+    for (int i : {3, 1, 2, 0}) {
+      CameraFrame f;
+      f.t_ns = i * 1000;
+      f.sequence = static_cast<std::uint32_t>(i);
+      f.data = {static_cast<std::uint8_t>(i)};
+      ASSERT_TRUE((*writer)->append_frame(cam_id, f).ok());
+    }
+    ASSERT_TRUE((*writer)->close().ok());
+  }
+  auto reader = SessionLogReader::open(path);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  std::vector<TimeNs> times;
+  ASSERT_TRUE((*reader)
+                  ->for_each_imu(imu_id, 200, 700,
+                                 [&](const ImuSample& s) {
+                                   times.push_back(s.t_ns);
+                                   EXPECT_EQ(s.accel.x() * 100, s.t_ns);
+                                   return true;
+                                 })
+                  .ok());
+  EXPECT_EQ(times, (std::vector<TimeNs>{200, 300, 400, 500, 600}));
+  times.clear();
+  ASSERT_TRUE((*reader)
+                  ->for_each_imu(imu_id, 0, 1000,
+                                 [&](const ImuSample& s) {
+                                   times.push_back(s.t_ns);
+                                   return times.size() < 3;  // stop early
+                                 })
+                  .ok());
+  EXPECT_EQ(times, (std::vector<TimeNs>{0, 100, 200}));
+  times.clear();
+  ASSERT_TRUE((*reader)
+                  ->for_each_imu(imu_id, 450, 450,
+                                 [&](const ImuSample& s) {
+                                   times.push_back(s.t_ns);
+                                   return true;
+                                 })
+                  .ok());
+  EXPECT_TRUE(times.empty());
+  std::vector<std::uint32_t> sequences;
+  ASSERT_TRUE((*reader)
+                  ->for_each_frame(
+                      cam_id, 1000, 3000,
+                      [&](const CameraFrame& f) {
+                        sequences.push_back(f.sequence);
+                        EXPECT_EQ(f.data, std::vector<std::uint8_t>{static_cast<std::uint8_t>(f.sequence)});
+                        return true;
+                      })
+                  .ok());
+  EXPECT_EQ(sequences, (std::vector<std::uint32_t>{1, 2}));
+  EXPECT_EQ(*(*reader)->frame_times(cam_id), (std::vector<TimeNs>{0, 1000, 2000, 3000}));
+  EXPECT_FALSE((*reader)->for_each_imu(cam_id, 0, 1, [](const ImuSample&) { return true; }).ok());
+  EXPECT_FALSE((*reader)->imu_count(99).ok());
+}
+
+TEST(SessionLog, RefusesToOverwriteUnlessAsked) {
+  const std::string path = scratch_dir() + "/exists.imulog";
+  {
+    auto writer = SessionLogWriter::create(path);
+    ASSERT_TRUE(writer.ok()) << writer.error().message;
+    (void)(*writer)->add_imu_stream(test_raw_imu_info());
+    ASSERT_TRUE((*writer)->close().ok());
+  }
+  auto again = SessionLogWriter::create(path);
+  ASSERT_FALSE(again.ok());
+  EXPECT_NE(again.error().message.find("already exists"), std::string::npos) << again.error().message;
+  ASSERT_TRUE(SessionLogReader::open(path).ok());  // untouched
+  EXPECT_EQ((*SessionLogReader::open(path))->imu_streams().size(), 1u);
+
+  SessionLogWriterOptions options;
+  options.overwrite = true;
+  auto replaced = SessionLogWriter::create(path, options);
+  ASSERT_TRUE(replaced.ok()) << replaced.error().message;
+  ASSERT_TRUE((*replaced)->close().ok());
+  auto reader = SessionLogReader::open(path);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_TRUE((*reader)->imu_streams().empty());
+}
+
+TEST(SessionLog, WriterRejectsMisuse) {
+  const std::string path = scratch_dir() + "/misuse.imulog";
+  auto writer = SessionLogWriter::create(path);
+  ASSERT_TRUE(writer.ok()) << writer.error().message;
+  auto& w = **writer;
+  const int id = *w.add_imu_stream(test_raw_imu_info());
+  EXPECT_FALSE(w.add_imu_stream(test_raw_imu_info()).ok());  // duplicate name
+  EXPECT_FALSE(w.set_metadata("complete", "1").ok());
+  EXPECT_FALSE(w.set_metadata("schema_version", "9").ok());
+  EXPECT_FALSE(w.append_imu(id + 7, ImuSample{}).ok());
+  EXPECT_FALSE(w.append_frame(id, CameraFrame{}).ok());  // an IMU id is not a camera
+  ASSERT_TRUE(w.close().ok());
+  EXPECT_FALSE(w.append_imu(id, ImuSample{}).ok());
+  EXPECT_FALSE(w.close().ok());
+  EXPECT_FALSE(SessionLogWriter::create(scratch_dir() + "/no/such/dir/x.imulog").ok());
+}
+
+// Without close(), the destructor keeps what was appended but the log stays incomplete.
+TEST(SessionLog, DestructorWithoutCloseKeepsDataIncomplete) {
+  const std::string path = scratch_dir() + "/unclosed.imulog";
+  SessionLogWriterOptions options;
+  options.commit_interval_ns = 3600 * kNsPerSecond;
+  {
+    auto writer = SessionLogWriter::create(path, options);
+    ASSERT_TRUE(writer.ok()) << writer.error().message;
+    const int id = *(*writer)->add_imu_stream(test_raw_imu_info());
+    ASSERT_TRUE((*writer)->append_imu(id, make_raw_samples(123, 0)).ok());
+  }
+  auto reader = SessionLogReader::open(path);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_FALSE((*reader)->health().complete);
+  EXPECT_FALSE((*reader)->health().damaged) << (*reader)->health().damage_message;
+  EXPECT_EQ(*(*reader)->imu_count(*(*reader)->find_imu_stream()), 123);
+}
+
+}  // namespace
+}  // namespace imucal::log
