@@ -8,7 +8,6 @@
 #include <span>
 #include <sstream>
 
-
 namespace imucal::acq {
 
 namespace mpu = drivers::mpu6000;

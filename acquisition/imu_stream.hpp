@@ -19,10 +19,10 @@
 #include <vector>
 
 #include "acquisition/ring_buffer.hpp"
-#include "log/session_log.hpp"
 #include "core/imu.hpp"
 #include "core/result.hpp"
 #include "core/time.hpp"
+#include "log/session_log.hpp"
 
 namespace imucal::acq {
 

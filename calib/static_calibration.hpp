@@ -15,10 +15,10 @@
 #include <string>
 #include <vector>
 
-#include "core/imu_model.hpp"
 #include "calib/quality.hpp"
 #include "calib/static_detector.hpp"
 #include "core/imu.hpp"
+#include "core/imu_model.hpp"
 #include "core/result.hpp"
 
 namespace imucal::calib {

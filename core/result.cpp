@@ -22,6 +22,8 @@ const char* errc_name(Errc code) {
       return "insufficient data";
     case Errc::kSolverFailed:
       return "solver failed";
+    case Errc::kAlreadyExists:
+      return "already exists";
     case Errc::kInternal:
       return "internal error";
   }

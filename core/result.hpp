@@ -13,6 +13,7 @@ namespace imucal {
 enum class Errc {
   kInvalidArgument,   // the caller passed something out of range or malformed
   kNotFound,          // a file, device, key or stream does not exist
+  kAlreadyExists,     // an output that must not be replaced exists (the caller may allow it)
   kIo,                // a read or write failed at the OS level
   kCorrupt,           // data exists but is damaged or truncated
   kUnsupported,       // a valid request this build or device cannot serve

@@ -69,9 +69,7 @@ Result<PendingOutput> PendingOutput::begin(const std::string& final_path, Kind k
     }
     const bool empty_dir = is_dir && fs::is_empty(path, ec);
     if (!force && !empty_dir) {
-      return make_error(
-          Errc::kInvalidArgument,
-          "output " + final_path + " already exists; pass --force to replace it, or choose another");
+      return make_error(Errc::kAlreadyExists, "output " + final_path + " already exists");
     }
   }
   std::string temp = final_path;

@@ -17,8 +17,8 @@
 #include <set>
 #include <system_error>
 
-#include "log/session_log.hpp"
 #include "core/version.hpp"
+#include "log/session_log.hpp"
 
 namespace imucal::log {
 namespace {
@@ -397,9 +397,7 @@ Result<std::unique_ptr<SessionLogWriter>> SessionLogWriter::create(const std::st
   const auto status = fs::symlink_status(path, ec);
   if (fs::exists(status)) {
     if (!options.overwrite) {
-      return make_error(
-          Errc::kInvalidArgument,
-          "session log " + path + " already exists; choose a new file name or allow overwriting");
+      return make_error(Errc::kAlreadyExists, "session log " + path + " already exists");
     }
     if (fs::is_directory(status)) {
       return make_error(Errc::kInvalidArgument, "session log path " + path + " is a directory");

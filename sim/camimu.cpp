@@ -12,9 +12,9 @@
 #include <vector>
 
 #include "log/session_log.hpp"
-#include "sim/session.hpp"
 #include "sim/camera_render.hpp"
 #include "sim/motion_random.hpp"
+#include "sim/session.hpp"
 #include "sim/truth.hpp"
 
 namespace imucal::sim {
@@ -189,7 +189,7 @@ Status simulate_camimu_session(const CamImuSimOptions& options, const std::strin
   if (!options.overwrite) {
     for (const std::string& p : {log_path, truth_path}) {
       if (!p.empty() && std::filesystem::exists(p, ec)) {
-        return make_error(Errc::kInvalidArgument, p + " exists; pass --force to replace it");
+        return make_error(Errc::kAlreadyExists, p + " already exists");
       }
     }
   }

@@ -15,13 +15,13 @@
 #include <optional>
 #include <string>
 
-#include "sim/session.hpp"
 #include "core/camera_model.hpp"
 #include "core/result.hpp"
 #include "core/target.hpp"
 #include "core/time.hpp"
 #include "sim/imu_error_model.hpp"
 #include "sim/motion.hpp"
+#include "sim/session.hpp"
 
 namespace imucal::sim {
 

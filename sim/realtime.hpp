@@ -30,9 +30,9 @@
 #include "core/time.hpp"
 #include "drivers/bus/register_bus.hpp"
 #include "drivers/gpio/data_ready_line.hpp"
-#include "drivers/mpu6000/mpu6000.hpp"
-#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
 #include "drivers/gpio/fake/sim_data_ready.hpp"
+#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
+#include "drivers/mpu6000/mpu6000.hpp"
 
 namespace imucal::sim {
 
@@ -81,7 +81,7 @@ class RealtimeDataReadyLine final : public drivers::DataReadyLine {
 struct RealtimeSimRigOptions {
   drivers::mpu6000::Settings settings;  // bus, rate, ranges (drivers/mpu6000/output_settings.hpp)
   double clock_ppm = -15'000.0;         // the chip's oscillator against CLOCK_MONOTONIC
-  fake::DataReadyTiming data_ready;      // edge latency 20 us, jitter 30 us RMS
+  fake::DataReadyTiming data_ready;     // edge latency 20 us, jitter 30 us RMS
   /// False: no data-ready line (the acquisition polls the FIFO on its timer).
   bool with_line = true;
   /// The ticker advances the emulator at least this often.

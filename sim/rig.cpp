@@ -49,7 +49,8 @@ SimImuRig::SimImuRig(fake::SensorSource source, const SimRigOptions& options)
   acquisition_ = std::make_unique<acq::ImuAcquisition>(driver_, &line_, clock_, options.mounting, ao);
 }
 
-Result<std::unique_ptr<SimImuRig>> SimImuRig::create(fake::SensorSource source, const SimRigOptions& options) {
+Result<std::unique_ptr<SimImuRig>> SimImuRig::create(fake::SensorSource source,
+                                                     const SimRigOptions& options) {
   std::string why;
   if (!options.settings.validate(&why)) {
     return make_error(Errc::kInvalidArgument, "simulated MPU-6000 settings: " + why);

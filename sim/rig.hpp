@@ -17,10 +17,10 @@
 #include "acquisition/recorder.hpp"
 #include "core/result.hpp"
 #include "core/time.hpp"
+#include "drivers/gpio/fake/sim_data_ready.hpp"
+#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
 #include "sim/imu_error_model.hpp"
-#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
-#include "drivers/gpio/fake/sim_data_ready.hpp"
 #include "sim/trajectory.hpp"
 
 namespace imucal::sim {
@@ -38,11 +38,11 @@ struct SimRigOptions {
   /// The chip's oscillator against the host clock, ppm; negative: the chip samples slower. The
   /// default is a chip 1.5 % slow, within the few percent the MPU-6000 drifts over temperature.
   double clock_ppm = -15'000.0;
-  fake::DataReadyTiming data_ready;       // edge latency 20 us, jitter 30 us RMS
+  fake::DataReadyTiming data_ready;      // edge latency 20 us, jitter 30 us RMS
   TimeNs start_ns = 100 * kNsPerSecond;  // host time at power-on
   bool record_truth = false;             // keep every sample's true time and counts (tests)
-  acq::MountingMap mounting;                  // identity: the IMU's axes are the rig's
-  acq::AcquisitionOptions acquisition;        // edge latency and jitter are set from data_ready
+  acq::MountingMap mounting;             // identity: the IMU's axes are the rig's
+  acq::AcquisitionOptions acquisition;   // edge latency and jitter are set from data_ready
 };
 
 /// Emulator + data-ready line + driver + acquisition loop, wired together. Not movable: the

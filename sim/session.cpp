@@ -7,10 +7,10 @@
 #include <numbers>
 
 #include "acquisition/recorder.hpp"
-#include "log/session_log.hpp"
-#include "sim/rig.hpp"
 #include "drivers/mpu6000/output_settings.hpp"
+#include "log/session_log.hpp"
 #include "sim/motion.hpp"
+#include "sim/rig.hpp"
 
 namespace imucal::sim {
 namespace {
@@ -66,7 +66,7 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
   if (!options.overwrite) {
     for (const std::string& p : {log_path, truth_path}) {
       if (!p.empty() && std::filesystem::exists(p, ec)) {
-        return make_error(Errc::kInvalidArgument, p + " exists; pass --force to replace it");
+        return make_error(Errc::kAlreadyExists, p + " already exists");
       }
     }
   }
@@ -230,8 +230,8 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
   summary.period_error_ppm = rig.acquisition().timestamper().period_error_ppm();
   summary.duration_s = truth.trajectory.duration_s;
   summary.rate_hz = summary.duration_s > 0 ? static_cast<double>(rec.samples) / summary.duration_s : 0.0;
-  IMUCAL_TRY(writer->set_metadata("imu.timing",
-                                  acq::timing_metadata_json(summary, rig.acquisition().timestamper().options())));
+  IMUCAL_TRY(writer->set_metadata(
+      "imu.timing", acq::timing_metadata_json(summary, rig.acquisition().timestamper().options())));
   IMUCAL_TRY(writer->set_metadata("imu.driver", acq::driver_metadata_json(rig.driver())));
   IMUCAL_TRY(writer->set_metadata("imu.mounting", acq::mounting_metadata_json(rig.acquisition().mounting())));
   IMUCAL_TRY(writer->close());

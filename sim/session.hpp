@@ -15,9 +15,9 @@
 
 #include "core/imu.hpp"
 #include "core/result.hpp"
+#include "drivers/gpio/fake/sim_data_ready.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
 #include "sim/imu_error_model.hpp"
-#include "drivers/gpio/fake/sim_data_ready.hpp"
 #include "sim/trajectory.hpp"
 #include "sim/truth.hpp"
 

@@ -362,7 +362,7 @@ YAML::Node truth_to_yaml(const SimTruth& truth) {
 Status write_truth_yaml(const std::string& path, const YAML::Node& doc, bool overwrite) {
   std::error_code ec;
   if (!overwrite && std::filesystem::exists(path, ec)) {
-    return make_error(Errc::kInvalidArgument, path + " exists; pass --force to replace it");
+    return make_error(Errc::kAlreadyExists, path + " already exists");
   }
   YAML::Emitter out;
   out.SetDoublePrecision(17);

@@ -13,10 +13,10 @@
 #include <string>
 #include <vector>
 
-#include "log/session_log.hpp"
 #include "calib/allan.hpp"
 #include "calib/static_detector.hpp"
 #include "daemon/cli/command.hpp"
+#include "log/session_log.hpp"
 
 namespace imucal::cli {
 namespace {

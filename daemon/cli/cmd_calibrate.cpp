@@ -14,11 +14,11 @@
 #include <sstream>
 #include <string>
 
-#include "log/session_log.hpp"
 #include "calib/gravity.hpp"
 #include "calib/static_calibration.hpp"
 #include "daemon/cli/calibrate_group.hpp"
 #include "daemon/cli/command.hpp"
+#include "log/session_log.hpp"
 
 namespace imucal::cli {
 namespace {
@@ -149,8 +149,7 @@ void emit_vector(YAML::Emitter& y, const std::string& key, const Eigen::Vector3d
   y << YAML::Key << key << YAML::Value << YAML::Flow << YAML::BeginSeq << v[0] << v[1] << v[2]
     << YAML::EndSeq;
 }
-void emit_triad(YAML::Emitter& y, const std::string& key, const TedaldiTriad& t,
-                const calib::TriadSigma& s) {
+void emit_triad(YAML::Emitter& y, const std::string& key, const TedaldiTriad& t, const calib::TriadSigma& s) {
   y << YAML::Key << key << YAML::Value << YAML::BeginMap;
   emit_matrix(y, "misalignment", t.T);
   emit_vector(y, "scale", t.scale);

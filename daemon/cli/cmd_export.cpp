@@ -3,8 +3,8 @@
 #include <iostream>
 #include <memory>
 
-#include "log/dataset_io.hpp"
 #include "daemon/cli/command.hpp"
+#include "log/dataset_io.hpp"
 
 namespace imucal::cli {
 namespace {

@@ -4,8 +4,8 @@
 #include <memory>
 #include <sstream>
 
-#include "log/dataset_io.hpp"
 #include "daemon/cli/command.hpp"
+#include "log/dataset_io.hpp"
 
 namespace imucal::cli {
 namespace {

@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "log/session_log.hpp"
 #include "daemon/cli/command.hpp"
+#include "log/session_log.hpp"
 
 namespace imucal::cli {
 namespace {
@@ -134,14 +134,15 @@ int run_info(const std::string& path, bool as_json) {
     std::vector<TimeNs> times;
     std::int64_t flagged_gap = 0, flagged_reset = 0, flagged_saturated = 0, flagged_estimated = 0;
     if (auto count = log.imu_count(id); count.ok()) times.reserve(static_cast<std::size_t>(*count));
-    const Status read = log.for_each_imu(id, imucal::log::kTimeMin, imucal::log::kTimeMax, [&](const ImuSample& s) {
-      times.push_back(s.t_ns);
-      if (s.flags & kImuFlagGapBefore) ++flagged_gap;
-      if (s.flags & kImuFlagDeviceReset) ++flagged_reset;
-      if (s.flags & (kImuFlagAccelSaturated | kImuFlagGyroSaturated)) ++flagged_saturated;
-      if (s.flags & kImuFlagTimeEstimated) ++flagged_estimated;
-      return true;
-    });
+    const Status read =
+        log.for_each_imu(id, imucal::log::kTimeMin, imucal::log::kTimeMax, [&](const ImuSample& s) {
+          times.push_back(s.t_ns);
+          if (s.flags & kImuFlagGapBefore) ++flagged_gap;
+          if (s.flags & kImuFlagDeviceReset) ++flagged_reset;
+          if (s.flags & (kImuFlagAccelSaturated | kImuFlagGyroSaturated)) ++flagged_saturated;
+          if (s.flags & kImuFlagTimeEstimated) ++flagged_estimated;
+          return true;
+        });
     const StreamTiming t = timing_of(times);
     extend(t);
     json j = {{"id", id},

@@ -17,8 +17,6 @@
 
 #include "acquisition/mounting.hpp"
 #include "acquisition/recorder.hpp"
-#include "sim/realtime.hpp"
-#include "sim/rig.hpp"
 #include "core/rig_config.hpp"
 #include "daemon/cli/command.hpp"
 #include "drivers/bus/i2cdev_bus.hpp"
@@ -28,6 +26,8 @@
 #include "drivers/mpu6000/output_settings.hpp"
 #include "sim/imu_error_model.hpp"
 #include "sim/motion.hpp"
+#include "sim/realtime.hpp"
+#include "sim/rig.hpp"
 
 namespace imucal::cli {
 namespace {
@@ -129,8 +129,8 @@ void fill_sim_rig(RigOptions& o, const RecordArgs& a, const mpu::Settings& setti
 /// The sensor source of a simulated rig that rests from power-on: trajectory time 0 is the
 /// emulator's start.
 fake::SensorSource sim_source(const RecordArgs& a, const mpu::Settings& settings,
-                             const sim::ImuModelParams& params, const sim::Trajectory& trajectory,
-                             TimeNs start_ns) {
+                              const sim::ImuModelParams& params, const sim::Trajectory& trajectory,
+                              TimeNs start_ns) {
   auto sensor = std::make_shared<sim::TrajectorySensor>(params, a.seed, trajectory, start_ns,
                                                         sim::chip_sample_period_s(settings, a.sim_clock_ppm));
   return sim::TrajectorySensor::source(std::move(sensor));

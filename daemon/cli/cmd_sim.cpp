@@ -10,11 +10,11 @@
 #include <string>
 #include <vector>
 
-#include "sim/camimu.hpp"
-#include "sim/session.hpp"
 #include "daemon/cli/command.hpp"
+#include "sim/camimu.hpp"
 #include "sim/imu_error_model.hpp"
 #include "sim/motion.hpp"
+#include "sim/session.hpp"
 #include "sim/truth.hpp"
 
 namespace imucal::cli {
@@ -162,7 +162,7 @@ void run(const SimCommon& o, const CLI::App* cmd, const std::string& kind, const
   if (!truth.ok()) {
     const Error& e = truth.error();
     // A refused overwrite or an unwritable path is an output problem, not a usage one.
-    if (e.message.find("exists") != std::string::npos) throw CliExit{kExitIo, e.message};
+    if (e.code == Errc::kAlreadyExists) throw CliExit{kExitIo, e.message + "; pass --force to replace it"};
     fail(e, "sim " + kind);
   }
   std::ostringstream msg;
@@ -268,8 +268,8 @@ void setup(CLI::App& root) {
           *co, o->out_path, truth_path, [&progress](double done) { progress.update(done); }, &summary);
       progress.finish();
       if (!status.ok()) {
-        if (status.error().message.find("exists") != std::string::npos) {
-          throw CliExit{kExitIo, status.error().message};
+        if (status.error().code == Errc::kAlreadyExists) {
+          throw CliExit{kExitIo, status.error().message + "; pass --force to replace it"};
         }
         fail(status.error(), "sim camimu");
       }

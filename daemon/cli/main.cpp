@@ -30,6 +30,7 @@ CommandRegistrar::CommandRegistrar(int order, Setup setup) {
 int exit_code_for(Errc code) {
   switch (code) {
     case Errc::kInvalidArgument:
+    case Errc::kAlreadyExists:  // replacing needs --force: a command-line matter
       return kExitUsage;
     case Errc::kNotFound:
     case Errc::kCorrupt:
@@ -51,7 +52,10 @@ int exit_code_for(Errc code) {
 }
 
 void fail(const Error& error, const std::string& what) {
-  throw CliExit{exit_code_for(error.code), what.empty() ? error.message : what + ": " + error.message};
+  std::string message = what.empty() ? error.message : what + ": " + error.message;
+  // Libraries say what exists; replacing it is the CLI's --force.
+  if (error.code == Errc::kAlreadyExists) message += "; pass --force to replace it";
+  throw CliExit{exit_code_for(error.code), message};
 }
 
 bool stderr_is_tty() { return isatty(STDERR_FILENO) == 1; }

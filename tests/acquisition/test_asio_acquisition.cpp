@@ -35,10 +35,10 @@
 #include <vector>
 
 #include "acquisition/asio_acquisition.hpp"
+#include "drivers/mpu6000/output_settings.hpp"
 #include "log/session_log.hpp"
 #include "sim/realtime.hpp"
 #include "sim/rig.hpp"
-#include "drivers/mpu6000/output_settings.hpp"
 #include "tests/support/emulator_accounting.hpp"
 #include "tests/support/session_log_util.hpp"
 #include "tests/support/test_support.hpp"

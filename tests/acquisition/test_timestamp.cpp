@@ -5,8 +5,8 @@
 #include <random>
 
 #include "acquisition/timestamp.hpp"
-#include "tests/support/timestamp_synthetic.hpp"
 #include "core/imu.hpp"
+#include "tests/support/timestamp_synthetic.hpp"
 
 namespace imucal::acq {
 namespace {

@@ -20,13 +20,13 @@
 
 #include "acquisition/imu_stream.hpp"
 #include "acquisition/recorder.hpp"
+#include "acquisition/timestamp.hpp"
+#include "drivers/gpio/fake/sim_data_ready.hpp"
+#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
+#include "drivers/mpu6000/mpu6000.hpp"
 #include "log/session_log.hpp"
 #include "sim/rig.hpp"
-#include "acquisition/timestamp.hpp"
 #include "tests/support/timestamp_synthetic.hpp"
-#include "drivers/mpu6000/mpu6000.hpp"
-#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
-#include "drivers/gpio/fake/sim_data_ready.hpp"
 
 namespace {
 

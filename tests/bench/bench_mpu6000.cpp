@@ -13,9 +13,9 @@
 #include <optional>
 #include <string>
 
-#include "drivers/mpu6000/mpu6000.hpp"
-#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
 #include "drivers/gpio/fake/sim_data_ready.hpp"
+#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
+#include "drivers/mpu6000/mpu6000.hpp"
 
 using namespace imucal;
 using namespace imucal::drivers::mpu6000;

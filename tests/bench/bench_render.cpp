@@ -6,8 +6,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <vector>
 
-#include "sim/camimu.hpp"
 #include "sim/camera_render.hpp"
+#include "sim/camimu.hpp"
 
 namespace {
 

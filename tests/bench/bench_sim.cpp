@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
-#include "sim/session.hpp"
 #include "sim/imu_error_model.hpp"
 #include "sim/motion.hpp"
+#include "sim/session.hpp"
 
 namespace {
 

@@ -17,8 +17,8 @@
 #include <string>
 #include <vector>
 
-#include "log/session_log.hpp"
 #include "calib/static_calibration.hpp"
+#include "log/session_log.hpp"
 #include "sim/imu_error_model.hpp"
 #include "sim/motion.hpp"
 #include "sim/truth.hpp"
@@ -98,8 +98,7 @@ const char* kNames[kParams] = {
 
 Eigen::Matrix<double, kParams, 1> flatten(const TedaldiImuModel& m) {
   Eigen::Matrix<double, kParams, 1> v;
-  v << accel_angles(m.accel.T), m.accel.scale, m.accel.bias, gyro_angles(m.gyro.T),
-      m.gyro.scale, m.gyro.bias;
+  v << accel_angles(m.accel.T), m.accel.scale, m.accel.bias, gyro_angles(m.gyro.T), m.gyro.scale, m.gyro.bias;
   return v;
 }
 

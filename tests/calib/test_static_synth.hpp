@@ -9,8 +9,8 @@
 #include <random>
 #include <vector>
 
-#include "core/imu_model.hpp"
 #include "core/imu.hpp"
+#include "core/imu_model.hpp"
 
 namespace imucal::test {
 

@@ -5,8 +5,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "log/session_log.hpp"
 #include "core/imu_model.hpp"
+#include "log/session_log.hpp"
 #include "tests/calib/test_static_synth.hpp"
 #include "tests/support/test_support.hpp"
 

@@ -4,8 +4,8 @@
 #include <filesystem>
 #include <fstream>
 
-#include "log/session_log.hpp"
 #include "daemon/cli/command.hpp"
+#include "log/session_log.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal {

@@ -9,9 +9,9 @@
 #include <numbers>
 #include <vector>
 
-#include "drivers/mpu6000/registers.hpp"
-#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
 #include "drivers/gpio/fake/sim_data_ready.hpp"
+#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
+#include "drivers/mpu6000/registers.hpp"
 
 namespace imucal {
 namespace {

@@ -13,10 +13,10 @@
 #include <vector>
 
 #include "core/imu.hpp"
+#include "drivers/gpio/fake/sim_data_ready.hpp"
+#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
 #include "drivers/mpu6000/registers.hpp"
-#include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
-#include "drivers/gpio/fake/sim_data_ready.hpp"
 
 namespace imucal {
 namespace {

@@ -189,6 +189,7 @@ TEST(DatasetOutput, PendingOutputRemovesUncommittedAndRefusesExisting) {
   EXPECT_EQ(test::read_file((dir / "o.imulog").string()), "complete");
   auto again = PendingOutput::begin((dir / "o.imulog").string(), PendingOutput::Kind::kFile, false);
   ASSERT_FALSE(again.ok());
+  EXPECT_EQ(again.error().code, Errc::kAlreadyExists);
   EXPECT_THAT(again.error().message, HasSubstr("already exists"));
   auto no_dir = PendingOutput::begin((dir / "nope/o.imulog").string(), PendingOutput::Kind::kFile, false);
   ASSERT_FALSE(no_dir.ok());

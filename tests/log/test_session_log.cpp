@@ -293,6 +293,7 @@ TEST(SessionLog, RefusesToOverwriteUnlessAsked) {
   }
   auto again = SessionLogWriter::create(path);
   ASSERT_FALSE(again.ok());
+  EXPECT_EQ(again.error().code, Errc::kAlreadyExists);
   EXPECT_NE(again.error().message.find("already exists"), std::string::npos) << again.error().message;
   ASSERT_TRUE(SessionLogReader::open(path).ok());  // untouched
   EXPECT_EQ((*SessionLogReader::open(path))->imu_streams().size(), 1u);

@@ -14,8 +14,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include "log/session_log.hpp"
-#include "sim/camimu.hpp"
 #include "sim/camera_render.hpp"
+#include "sim/camimu.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::sim {

@@ -12,8 +12,8 @@
 #include <numbers>
 #include <vector>
 
-#include "sim/rig.hpp"
 #include "drivers/mpu6000/output_settings.hpp"
+#include "sim/rig.hpp"
 #include "tests/support/emulator_accounting.hpp"
 #include "tests/support/test_support.hpp"
 

@@ -9,8 +9,8 @@
 #include <numbers>
 
 #include "log/session_log.hpp"
-#include "sim/session.hpp"
 #include "sim/motion.hpp"
+#include "sim/session.hpp"
 #include "sim/truth.hpp"
 #include "tests/support/test_support.hpp"
 
@@ -316,7 +316,8 @@ TEST(SimSession, RefusesToOverwriteAndRejectsBadOptions) {
   ASSERT_TRUE(write_sim_imu_session(options(2), *traj, log, "").ok());
   auto again = write_sim_imu_session(options(2), *traj, log, "");
   ASSERT_FALSE(again.ok());
-  EXPECT_NE(again.error().message.find("--force"), std::string::npos);
+  EXPECT_EQ(again.error().code, Errc::kAlreadyExists) << again.error().message;
+  EXPECT_NE(again.error().message.find(log + " already exists"), std::string::npos);
   SimImuSessionOptions forced = options(2);
   forced.overwrite = true;
   EXPECT_TRUE(write_sim_imu_session(forced, *traj, log, "").ok());

@@ -12,8 +12,8 @@
 
 #include "core/imu.hpp"
 #include "core/time.hpp"
-#include "drivers/mpu6000/registers.hpp"
 #include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
+#include "drivers/mpu6000/registers.hpp"
 
 namespace imucal::emutest {
 

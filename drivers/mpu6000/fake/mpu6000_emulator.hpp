@@ -25,9 +25,9 @@
 #include "core/result.hpp"
 #include "core/time.hpp"
 #include "drivers/bus/register_bus.hpp"
+#include "drivers/gpio/fake/sim_data_ready.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
 #include "drivers/mpu6000/registers.hpp"
-#include "drivers/gpio/fake/sim_data_ready.hpp"
 
 namespace imucal::fake {
 
