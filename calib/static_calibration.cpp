@@ -339,11 +339,8 @@ std::vector<PoseDirections> pose_directions(const std::vector<StaticInterval>& i
 
 }  // namespace
 
-bool StaticCalibrationOptions::is_valid(std::string* error) const {
-  auto fail = [error](const std::string& msg) {
-    if (error) *error = msg;
-    return false;
-  };
+Status StaticCalibrationOptions::validate() const {
+  auto fail = [](const std::string& msg) -> Status { return make_error(Errc::kInvalidArgument, msg); };
   if (!(gravity_mps2 > 9.7 && gravity_mps2 < 9.9)) {
     return fail("gravity " + fmt("%g", gravity_mps2) + " m/s^2 is not a terrestrial value (9.7..9.9)");
   }
@@ -364,13 +361,12 @@ bool StaticCalibrationOptions::is_valid(std::string* error) const {
       return fail("a nominal scale is zero or not finite");
     }
   }
-  return true;
+  return {};
 }
 
 Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samples,
                                                  const StaticCalibrationOptions& opt) {
-  std::string why;
-  if (!opt.is_valid(&why)) return make_error(Errc::kInvalidArgument, why);
+  IMUCAL_TRY(opt.validate());
   StaticCalibrationResult res;
   res.gravity_mps2 = opt.gravity_mps2;
   const std::size_t n = samples.size();

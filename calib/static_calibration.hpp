@@ -53,8 +53,8 @@ struct StaticCalibrationOptions {
   /// Estimate the gyro bias in the gyroscope solve instead of keeping the still-period mean.
   bool estimate_gyro_bias = false;
 
-  /// Checks ranges; on failure sets *error to what is wrong.
-  bool is_valid(std::string* error) const;
+  /// Checks ranges; the error says what is wrong.
+  [[nodiscard]] Status validate() const;
 };
 
 /// Standard deviations of a TedaldiTriad's entries (0 for entries that are fixed).

@@ -153,10 +153,8 @@ RealtimeSimRig::RealtimeSimRig(fake::SensorSource source, const RealtimeSimRigOp
 
 Result<std::unique_ptr<RealtimeSimRig>> RealtimeSimRig::create(fake::SensorSource source,
                                                                const RealtimeSimRigOptions& options) {
-  std::string why;
-  if (!options.settings.validate(&why)) {
-    return make_error(Errc::kInvalidArgument, "simulated MPU-6000 settings: " + why);
-  }
+  if (auto valid = options.settings.validate(); !valid.ok())
+    return valid.error().context("simulated MPU-6000 settings");
   if (options.tick_ns <= 0)
     return make_error(Errc::kInvalidArgument, "real-time simulated rig: tick_ns must be > 0");
   RealtimeSimRigOptions o = options;

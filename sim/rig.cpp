@@ -51,10 +51,8 @@ SimImuRig::SimImuRig(fake::SensorSource source, const SimRigOptions& options)
 
 Result<std::unique_ptr<SimImuRig>> SimImuRig::create(fake::SensorSource source,
                                                      const SimRigOptions& options) {
-  std::string why;
-  if (!options.settings.validate(&why)) {
-    return make_error(Errc::kInvalidArgument, "simulated MPU-6000 settings: " + why);
-  }
+  if (auto valid = options.settings.validate(); !valid.ok())
+    return valid.error().context("simulated MPU-6000 settings");
   std::unique_ptr<SimImuRig> rig(new SimImuRig(std::move(source), options));
   if (auto st = rig->driver_.probe(); !st.ok()) return st.error().context("simulated MPU-6000");
   return rig;

@@ -269,8 +269,7 @@ void run(const StaticCliOptions& o) {
                   "the gyro stream is in raw counts and the log does not give its full-scale range: "
                   "give --gyro-scale-init in rad/s per count (e.g. 1.3323e-4 for +-250 deg/s)"};
   }
-  std::string why;
-  if (!opt.is_valid(&why)) throw CliExit{kExitUsage, why};
+  if (auto valid = opt.validate(); !valid.ok()) throw CliExit{kExitUsage, valid.error().message};
 
   auto res = calib::calibrate_static(*samples, opt);
   if (!res.ok()) fail(res.error(), "static calibration of " + o.log_path);

@@ -55,11 +55,8 @@ std::uint16_t Settings::fifo_watermark_bytes() const {
   return static_cast<std::uint16_t>(std::max(wm, static_cast<double>(FIFO::kFrameBytes)));
 }
 
-bool Settings::validate(std::string* error) const {
-  auto fail = [&](const std::string& m) {
-    if (error) *error = m;
-    return false;
-  };
+Status Settings::validate() const {
+  auto fail = [](const std::string& m) -> Status { return make_error(Errc::kInvalidArgument, m); };
   if (dlpf_cfg > 6) return fail("dlpf_cfg " + std::to_string(dlpf_cfg) + " is reserved; use 0..6");
   if (read_interval_ns <= 0) return fail("read_interval_ns must be positive");
   // At a read the FIFO holds what arrived in one interval, one frame more for the sampling
@@ -82,7 +79,7 @@ bool Settings::validate(std::string* error) const {
   }
   if (config_check_interval_ns <= 0) return fail("config_check_interval_ns must be positive");
   if (!(max_temperature_step_c > 0)) return fail("max_temperature_step_c must be positive");
-  return true;
+  return {};
 }
 
 ImuStreamInfo make_stream_info(const Settings& s, const std::string& device) {

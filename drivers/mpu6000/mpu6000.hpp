@@ -60,9 +60,9 @@ struct Settings {
   /// the driver resets the FIFO instead of reading it (see docs/mpu6000.md).
   std::uint16_t fifo_watermark_bytes() const;
 
-  /// False with a message when the combination cannot work (e.g. the FIFO would overflow within
-  /// one read interval).
-  bool validate(std::string* error) const;
+  /// An error that says why when the combination cannot work (e.g. the FIFO would overflow
+  /// within one read interval).
+  [[nodiscard]] Status validate() const;
 };
 
 /// Nominal raw->SI description of the stream this driver produces (units kRaw).

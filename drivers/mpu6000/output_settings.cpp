@@ -95,8 +95,7 @@ Result<Settings> settings_for(const OutputRequest& request) {
   s.smplrt_div = static_cast<std::uint8_t>(*div - 1);
   const double per_read = std::max(1.0, std::round(s.sample_rate_hz() / 1000.0));
   s.read_interval_ns = static_cast<TimeNs>(2.0 * per_read * 1e9 / s.sample_rate_hz());
-  std::string why;
-  if (!s.validate(&why)) return make_error(Errc::kInvalidArgument, why);
+  IMUCAL_TRY(s.validate());
   return s;
 }
 

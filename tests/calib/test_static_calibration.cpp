@@ -258,10 +258,11 @@ TEST(StaticCalibration, RotationInsideAStaticIntervalIsDropped) {
 
 TEST(StaticCalibration, BadInputsAreRefused) {
   StaticCalibrationOptions opt;
-  std::string why;
   opt.gravity_mps2 = 1.0;
-  EXPECT_FALSE(opt.is_valid(&why));
-  EXPECT_NE(why.find("gravity"), std::string::npos);
+  const Status valid = opt.validate();
+  ASSERT_FALSE(valid.ok());
+  EXPECT_EQ(valid.error().code, Errc::kInvalidArgument);
+  EXPECT_NE(valid.error().message.find("gravity"), std::string::npos);
   std::vector<ImuSample> few(10);
   auto r = calibrate_static(few, StaticCalibrationOptions{});
   ASSERT_FALSE(r.ok());

@@ -2,6 +2,7 @@
 // read-back, streaming with every sample checked against the emulator's truth, and recovery
 // from each injected fault without passing on a damaged sample.
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -699,21 +700,22 @@ TEST(Mpu6000Driver, OffsetRegistersRoundTripAndShiftTheOutput) {
 }
 
 TEST(Mpu6000Settings, ValidationExplainsWhatIsWrong) {
-  std::string why;
-  EXPECT_TRUE(spi_8khz().validate(&why)) << why;
-  EXPECT_TRUE(i2c_1khz().validate(&why)) << why;
+  // The message of a failed validation, or "" when it passed.
+  auto why = [](const Settings& settings) {
+    const Status valid = settings.validate();
+    return valid.ok() ? std::string() : valid.error().message;
+  };
+  EXPECT_EQ(why(spi_8khz()), "");
+  EXPECT_EQ(why(i2c_1khz()), "");
   Settings s = spi_8khz();
   s.read_interval_ns = 20 * kMs;
-  EXPECT_FALSE(s.validate(&why));
-  EXPECT_NE(why.find("too long"), std::string::npos) << why;
+  EXPECT_THAT(why(s), ::testing::HasSubstr("too long"));
   s = spi_8khz();
   s.dlpf_cfg = 7;
-  EXPECT_FALSE(s.validate(&why));
-  EXPECT_NE(why.find("reserved"), std::string::npos) << why;
+  EXPECT_THAT(why(s), ::testing::HasSubstr("reserved"));
   s = spi_8khz();
   s.config_speed_hz = 20'000'000;
-  EXPECT_FALSE(s.validate(&why));
-  EXPECT_NE(why.find("1 MHz"), std::string::npos) << why;
+  EXPECT_THAT(why(s), ::testing::HasSubstr("1 MHz"));
 }
 
 TEST(Mpu6000Settings, RatesAndScales) {

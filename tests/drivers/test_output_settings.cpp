@@ -27,8 +27,8 @@ TEST(OutputSettings, ExactRatesWithTheWidestFilterBelowNyquist) {
     EXPECT_EQ(s->dlpf_cfg, c.dlpf_cfg) << c.rate;
     EXPECT_EQ(s->smplrt_div, c.div) << c.rate;
     EXPECT_DOUBLE_EQ(s->sample_rate_hz(), c.rate);
-    std::string why;
-    EXPECT_TRUE(s->validate(&why)) << c.rate << ": " << why;
+    const Status valid = s->validate();
+    EXPECT_TRUE(valid.ok()) << c.rate << ": " << (valid.ok() ? "" : valid.error().message);
   }
 }
 

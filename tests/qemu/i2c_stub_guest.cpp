@@ -158,8 +158,8 @@ void driver_checks(I2cDevBus& bus) {
   settings.dlpf_cfg = 2;
   settings.smplrt_div = 4;  // 200 Hz
   settings.read_interval_ns = 5'000'000;
-  std::string why;
-  check(settings.validate(&why), "driver settings valid", why);
+  const imucal::Status valid = settings.validate();
+  check(valid.ok(), "driver settings valid", valid.ok() ? "" : valid.error().message);
 
   // Probe: WHO_AM_I.
   check(seed(bus, {{reg(mpu::Register::WHO_AM_I), 0x70}}), "seed WHO_AM_I = 0x70");
