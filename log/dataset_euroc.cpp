@@ -13,13 +13,12 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <optional>
 #include <regex>
 #include <set>
 
 #include "log/dataset_io.hpp"
+#include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
 
 namespace imucal::log {
@@ -113,7 +112,7 @@ Result<std::vector<std::uint8_t>> read_binary(const fs::path& path) {
 /// PNG bytes of a stored frame: PNG as is, other encodings decoded and encoded losslessly.
 Result<std::vector<std::uint8_t>> frame_png(const CameraFrame& frame) {
   if (frame.encoding == "png") return frame.data;
-  cv::Mat image;
+  Image image;
   const std::size_t pixels = static_cast<std::size_t>(std::max(frame.width, 0)) * std::max(frame.height, 0);
   if (frame.encoding == "gray8" || frame.encoding == "GREY" || frame.encoding == "Y800") {
     if (frame.data.size() != pixels || pixels == 0) {
@@ -121,27 +120,23 @@ Result<std::vector<std::uint8_t>> frame_png(const CameraFrame& frame) {
                                             std::to_string(frame.data.size()) + " bytes, expected " +
                                             std::to_string(pixels) + " for " + frame.encoding);
     }
-    image = cv::Mat(frame.height, frame.width, CV_8UC1, const_cast<std::uint8_t*>(frame.data.data())).clone();
+    image = Image{frame.width, frame.height, 1, 8, frame.data};
   } else if (frame.encoding == "Y16 " || frame.encoding == "gray16") {
     if (frame.data.size() != 2 * pixels || pixels == 0) {
       return make_error(Errc::kCorrupt, "frame at t_ns " + std::to_string(frame.t_ns) +
                                             " has the wrong size for " + frame.encoding);
     }
-    image = cv::Mat(frame.height, frame.width, CV_16UC1);
-    std::memcpy(image.data, frame.data.data(), frame.data.size());  // little-endian host
+    image = Image{frame.width, frame.height, 1, 16, frame.data};  // little-endian host
   } else {
-    image = cv::imdecode(cv::Mat(1, static_cast<int>(frame.data.size()), CV_8UC1,
-                                 const_cast<std::uint8_t*>(frame.data.data())),
-                         cv::IMREAD_UNCHANGED);
-    if (image.empty()) {
-      return make_error(Errc::kUnsupported, "frame at t_ns " + std::to_string(frame.t_ns) +
-                                                " has encoding '" + frame.encoding +
-                                                "', which cannot be converted to PNG");
+    auto decoded = decode_image(frame.data);
+    if (!decoded.ok()) {
+      return make_error(Errc::kUnsupported,
+                        "frame at t_ns " + std::to_string(frame.t_ns) + " has encoding '" + frame.encoding +
+                            "', which cannot be converted to PNG (" + decoded.error().message + ")");
     }
+    image = std::move(*decoded);
   }
-  std::vector<std::uint8_t> png;
-  if (!cv::imencode(".png", image, png)) return make_error(Errc::kInternal, "PNG encoding failed");
-  return png;
+  return encode_png(image);
 }
 
 struct ImuFolder {
@@ -181,16 +176,13 @@ double median_rate_hz(const std::vector<TimeNs>& t) {
 
 }  // namespace
 
-Result<ImportSummary> import_euroc(const std::string& dir, const std::string& out_path,
-                                   const OutputOptions& options) {
-  auto out = PendingOutput::begin(out_path, PendingOutput::Kind::kFile, options.force);
-  if (!out.ok()) return out.error();
-  auto root = euroc_root(dir);
-  if (!root.ok()) return root.error();
+namespace {
 
-  // Parse every CSV before writing anything, so a malformed file fails fast.
+/// Every imuN/ folder's samples and sensor.yaml, parsed before anything is written so that a
+/// malformed file fails fast.
+Result<std::vector<ImuFolder>> read_imu_folders(const fs::path& root) {
   std::vector<ImuFolder> imus;
-  for (const auto& [index, folder] : sensor_folders(*root, "imu")) {
+  for (const auto& [index, folder] : sensor_folders(root, "imu")) {
     ImuFolder f;
     f.name = folder.filename().string();
     const std::string csv = (folder / "data.csv").string();
@@ -205,8 +197,13 @@ Result<ImportSummary> import_euroc(const std::string& dir, const std::string& ou
     f.sensor = std::move(*sensor);
     imus.push_back(std::move(f));
   }
+  return imus;
+}
+
+/// Every camN/ folder's image list and sensor.yaml (the images are read while writing).
+Result<std::vector<CameraFolder>> read_camera_folders(const fs::path& root) {
   std::vector<CameraFolder> cams;
-  for (const auto& [index, folder] : sensor_folders(*root, "cam")) {
+  for (const auto& [index, folder] : sensor_folders(root, "cam")) {
     CameraFolder f;
     f.name = folder.filename().string();
     f.data_dir = folder / "data";
@@ -221,118 +218,162 @@ Result<ImportSummary> import_euroc(const std::string& dir, const std::string& ou
     f.sensor = std::move(*sensor);
     cams.push_back(std::move(f));
   }
-  if (imus.empty() && cams.empty()) {
+  return cams;
+}
+
+/// Work units for progress: one per IMU sample, 50 per image.
+class ImportProgress {
+ public:
+  ImportProgress(const std::vector<ImuFolder>& imus, const std::vector<CameraFolder>& cams,
+                 const ProgressFn& report)
+      : report_(report) {
+    for (const auto& f : imus) total_ += static_cast<double>(f.samples.size());
+    for (const auto& f : cams) total_ += kPerImage * static_cast<double>(f.rows.size());
+  }
+  void advance(double amount) {
+    done_ += amount;
+    if (report_) report_(done_, total_);
+  }
+  static constexpr double kPerImage = 50.0;
+
+ private:
+  const ProgressFn& report_;
+  double total_ = 0.0;
+  double done_ = 0.0;
+};
+
+Status write_imu_folder(SessionLogWriter& w, const ImuFolder& f, ImportSummary& summary,
+                        ImportProgress& progress) {
+  ImuStreamInfo info;
+  info.name = f.name;
+  info.units = ImuUnits::kSi;
+  std::vector<TimeNs> t(f.samples.size());
+  for (std::size_t i = 0; i < t.size(); ++i) t[i] = f.samples[i].t_ns;
+  info.rate_hz = f.sensor.rate_hz > 0 ? f.sensor.rate_hz : median_rate_hz(t);
+  info.device = "euroc:" + f.name;
+  if (!f.sensor.text.empty()) IMUCAL_TRY(w.set_metadata(sensor_yaml_key(f.name), f.sensor.text));
+  auto id = w.add_imu_stream(info);
+  if (!id.ok()) return id.error();
+  constexpr std::size_t kBatch = 8192;
+  for (std::size_t i = 0; i < f.samples.size(); i += kBatch) {
+    const std::size_t n = std::min(kBatch, f.samples.size() - i);
+    IMUCAL_TRY(w.append_imu(*id, std::span<const ImuSample>(f.samples.data() + i, n)));
+    progress.advance(static_cast<double>(n));
+  }
+  summary.imu_samples += static_cast<std::int64_t>(f.samples.size());
+  if (summary.imu_streams++ == 0) {
+    summary.rate_hz = info.rate_hz;
+    summary.t_first_ns = f.samples.front().t_ns;
+    summary.t_last_ns = f.samples.back().t_ns;
+  }
+  return {};
+}
+
+/// One image file as a stored frame: a PNG as it is, a WebP decoded and stored as lossless PNG
+/// (*converted set). EuRoC folders hold PNG; other formats are refused with the file named.
+Result<CameraFrame> image_frame(const CameraFolder& f, const EurocImageRow& row, bool* converted) {
+  const fs::path image_path = f.data_dir / row.filename;
+  const std::string where = (f.data_dir.parent_path() / "data.csv").string() + ":" + std::to_string(row.line);
+  auto data = read_binary(image_path);
+  if (!data.ok()) {
+    return make_error(Errc::kNotFound,
+                      where + ": image " + image_path.string() + " is missing or unreadable");
+  }
+  CameraFrame frame;
+  frame.t_ns = row.t_ns;
+  frame.encoding = "png";
+  *converted = false;
+  if (png_size(*data, frame.width, frame.height)) {
+    frame.data = std::move(*data);
+    return frame;
+  }
+  auto image = decode_image(*data);
+  if (!image.ok()) {
+    return make_error(Errc::kCorrupt, where + ": " + image_path.string() +
+                                          " is not a readable PNG or WebP image (" + image.error().message +
+                                          ")");
+  }
+  auto png = encode_png(*image);
+  if (!png.ok()) return png.error();
+  frame.data = std::move(*png);
+  frame.width = image->width;
+  frame.height = image->height;
+  *converted = true;
+  return frame;
+}
+
+Status write_camera_folder(SessionLogWriter& w, const CameraFolder& f, ImportSummary& summary,
+                           ImportProgress& progress) {
+  CameraStreamInfo info;
+  info.name = f.name;
+  info.backend = "euroc";
+  info.device = "euroc:" + f.name;
+  info.timestamp_source = "dataset";
+  std::vector<TimeNs> t(f.rows.size());
+  for (std::size_t i = 0; i < t.size(); ++i) t[i] = f.rows[i].t_ns;
+  info.rate_hz = f.sensor.rate_hz > 0 ? f.sensor.rate_hz : median_rate_hz(t);
+  info.width = f.sensor.width;
+  info.height = f.sensor.height;
+  // Without a resolution in sensor.yaml, the first image gives it.
+  if ((info.width == 0 || info.height == 0) && !f.rows.empty()) {
+    auto data = read_binary(f.data_dir / f.rows.front().filename);
+    if (data.ok()) png_size(*data, info.width, info.height);
+  }
+  if (!f.sensor.text.empty()) IMUCAL_TRY(w.set_metadata(sensor_yaml_key(f.name), f.sensor.text));
+  auto id = w.add_camera_stream(info);
+  if (!id.ok()) return id.error();
+  int converted = 0, mismatched = 0;
+  std::uint32_t sequence = 0;
+  for (const auto& row : f.rows) {
+    bool was_converted = false;
+    auto frame = image_frame(f, row, &was_converted);
+    if (!frame.ok()) return frame.error();
+    frame->sequence = sequence++;
+    converted += was_converted ? 1 : 0;
+    if (frame->width != info.width || frame->height != info.height) ++mismatched;
+    IMUCAL_TRY(w.append_frame(*id, *frame));
+    progress.advance(ImportProgress::kPerImage);
+  }
+  summary.frames += static_cast<std::int64_t>(f.rows.size());
+  ++summary.camera_streams;
+  if (converted > 0) {
+    summary.notes.push_back(f.name + ": " + std::to_string(converted) +
+                            " images were not PNG and were stored as lossless PNG");
+  }
+  if (mismatched > 0) {
+    summary.notes.push_back(f.name + ": " + std::to_string(mismatched) + " images differ in size from " +
+                            std::to_string(info.width) + "x" + std::to_string(info.height) +
+                            " (sensor.yaml resolution or first image)");
+  }
+  return {};
+}
+
+}  // namespace
+
+Result<ImportSummary> import_euroc(const std::string& dir, const std::string& out_path,
+                                   const OutputOptions& options) {
+  auto out = PendingOutput::begin(out_path, PendingOutput::Kind::kFile, options.force);
+  if (!out.ok()) return out.error();
+  auto root = euroc_root(dir);
+  if (!root.ok()) return root.error();
+  auto imus = read_imu_folders(*root);
+  if (!imus.ok()) return imus.error();
+  auto cams = read_camera_folders(*root);
+  if (!cams.ok()) return cams.error();
+  if (imus->empty() && cams->empty()) {
     return make_error(Errc::kInsufficientData, root->string() + " has no imuN/ or camN/ folders");
   }
 
   ImportSummary summary;
-  double total_work = 0;
-  for (const auto& f : imus) total_work += static_cast<double>(f.samples.size());
-  for (const auto& f : cams) total_work += 50.0 * static_cast<double>(f.rows.size());
-  double work = 0;
-  const auto advance = [&](double amount) {
-    work += amount;
-    if (options.progress) options.progress(work, total_work);
-  };
-
+  ImportProgress progress(*imus, *cams, options.progress);
   {
     auto writer = SessionLogWriter::create(out->temp_path());
     if (!writer.ok()) return writer.error().context("cannot create the session log");
     SessionLogWriter& w = **writer;
     nlohmann::json source = {{"format", "euroc"}, {"path", fs::absolute(*root).string()}};
     IMUCAL_TRY(w.set_metadata("import", source.dump()));
-
-    for (const auto& f : imus) {
-      ImuStreamInfo info;
-      info.name = f.name;
-      info.units = ImuUnits::kSi;
-      std::vector<TimeNs> t(f.samples.size());
-      for (std::size_t i = 0; i < t.size(); ++i) t[i] = f.samples[i].t_ns;
-      info.rate_hz = f.sensor.rate_hz > 0 ? f.sensor.rate_hz : median_rate_hz(t);
-      info.device = "euroc:" + f.name;
-      if (!f.sensor.text.empty()) IMUCAL_TRY(w.set_metadata(sensor_yaml_key(f.name), f.sensor.text));
-      auto id = w.add_imu_stream(info);
-      if (!id.ok()) return id.error();
-      constexpr std::size_t kBatch = 8192;
-      for (std::size_t i = 0; i < f.samples.size(); i += kBatch) {
-        const std::size_t n = std::min(kBatch, f.samples.size() - i);
-        IMUCAL_TRY(w.append_imu(*id, std::span<const ImuSample>(f.samples.data() + i, n)));
-        advance(static_cast<double>(n));
-      }
-      summary.imu_samples += static_cast<std::int64_t>(f.samples.size());
-      if (summary.imu_streams++ == 0) {
-        summary.rate_hz = info.rate_hz;
-        summary.t_first_ns = f.samples.front().t_ns;
-        summary.t_last_ns = f.samples.back().t_ns;
-      }
-    }
-
-    for (const auto& f : cams) {
-      CameraStreamInfo info;
-      info.name = f.name;
-      info.backend = "euroc";
-      info.device = "euroc:" + f.name;
-      info.timestamp_source = "dataset";
-      std::vector<TimeNs> t(f.rows.size());
-      for (std::size_t i = 0; i < t.size(); ++i) t[i] = f.rows[i].t_ns;
-      info.rate_hz = f.sensor.rate_hz > 0 ? f.sensor.rate_hz : median_rate_hz(t);
-      info.width = f.sensor.width;
-      info.height = f.sensor.height;
-      // Without a resolution in sensor.yaml, the first image gives it.
-      if ((info.width == 0 || info.height == 0) && !f.rows.empty()) {
-        auto data = read_binary(f.data_dir / f.rows.front().filename);
-        if (data.ok()) png_size(*data, info.width, info.height);
-      }
-      if (!f.sensor.text.empty()) IMUCAL_TRY(w.set_metadata(sensor_yaml_key(f.name), f.sensor.text));
-      auto id = w.add_camera_stream(info);
-      if (!id.ok()) return id.error();
-      int converted = 0, mismatched = 0;
-      std::uint32_t sequence = 0;
-      for (const auto& row : f.rows) {
-        const fs::path image_path = f.data_dir / row.filename;
-        auto data = read_binary(image_path);
-        if (!data.ok()) {
-          return make_error(Errc::kNotFound, (f.data_dir.parent_path() / "data.csv").string() + ":" +
-                                                 std::to_string(row.line) + ": image " + image_path.string() +
-                                                 " is missing or unreadable");
-        }
-        CameraFrame frame;
-        frame.t_ns = row.t_ns;
-        frame.sequence = sequence++;
-        frame.encoding = "png";
-        if (png_size(*data, frame.width, frame.height)) {
-          frame.data = std::move(*data);
-        } else {
-          cv::Mat image = cv::imdecode(
-              cv::Mat(1, static_cast<int>(data->size()), CV_8UC1, static_cast<void*>(data->data())),
-              cv::IMREAD_UNCHANGED);
-          if (image.empty()) {
-            return make_error(Errc::kCorrupt, (f.data_dir.parent_path() / "data.csv").string() + ":" +
-                                                  std::to_string(row.line) + ": " + image_path.string() +
-                                                  " is not a readable image");
-          }
-          if (!cv::imencode(".png", image, frame.data))
-            return make_error(Errc::kInternal, "PNG encoding failed");
-          frame.width = image.cols;
-          frame.height = image.rows;
-          ++converted;
-        }
-        if (frame.width != info.width || frame.height != info.height) ++mismatched;
-        IMUCAL_TRY(w.append_frame(*id, frame));
-        advance(50.0);
-      }
-      summary.frames += static_cast<std::int64_t>(f.rows.size());
-      ++summary.camera_streams;
-      if (converted > 0) {
-        summary.notes.push_back(f.name + ": " + std::to_string(converted) +
-                                " images were not PNG and were stored as lossless PNG");
-      }
-      if (mismatched > 0) {
-        summary.notes.push_back(f.name + ": " + std::to_string(mismatched) + " images differ in size from " +
-                                std::to_string(info.width) + "x" + std::to_string(info.height) +
-                                " (sensor.yaml resolution or first image)");
-      }
-    }
+    for (const auto& f : *imus) IMUCAL_TRY(write_imu_folder(w, f, summary, progress));
+    for (const auto& f : *cams) IMUCAL_TRY(write_camera_folder(w, f, summary, progress));
     IMUCAL_TRY(w.close());
   }
   IMUCAL_TRY(out->commit());
