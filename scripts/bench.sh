@@ -9,3 +9,5 @@ for b in "$dir"/tests/bench_*; do
   echo "=== $(basename "$b")"
   "$b"
 done
+echo "=== program start (scripts/bench-startup.sh)"
+"$(dirname "$0")/bench-startup.sh" "$dir/daemon/imucal"
