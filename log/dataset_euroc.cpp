@@ -221,20 +221,15 @@ Result<std::vector<CameraFolder>> read_camera_folders(const fs::path& root) {
   return cams;
 }
 
-/// Work units for progress: one per IMU sample, 50 per image.
-class ImportProgress {
+/// Progress in work units: one per IMU sample, kPerImage per image.
+class WorkProgress {
  public:
-  ImportProgress(const std::vector<ImuFolder>& imus, const std::vector<CameraFolder>& cams,
-                 const ProgressFn& report)
-      : report_(report) {
-    for (const auto& f : imus) total_ += static_cast<double>(f.samples.size());
-    for (const auto& f : cams) total_ += kPerImage * static_cast<double>(f.rows.size());
-  }
+  static constexpr double kPerImage = 50.0;
+  WorkProgress(double total, const ProgressFn& report) : report_(report), total_(total) {}
   void advance(double amount) {
     done_ += amount;
     if (report_) report_(done_, total_);
   }
-  static constexpr double kPerImage = 50.0;
 
  private:
   const ProgressFn& report_;
@@ -242,8 +237,15 @@ class ImportProgress {
   double done_ = 0.0;
 };
 
+double import_work(const std::vector<ImuFolder>& imus, const std::vector<CameraFolder>& cams) {
+  double total = 0.0;
+  for (const auto& f : imus) total += static_cast<double>(f.samples.size());
+  for (const auto& f : cams) total += WorkProgress::kPerImage * static_cast<double>(f.rows.size());
+  return total;
+}
+
 Status write_imu_folder(SessionLogWriter& w, const ImuFolder& f, ImportSummary& summary,
-                        ImportProgress& progress) {
+                        WorkProgress& progress) {
   ImuStreamInfo info;
   info.name = f.name;
   info.units = ImuUnits::kSi;
@@ -303,7 +305,7 @@ Result<CameraFrame> image_frame(const CameraFolder& f, const EurocImageRow& row,
 }
 
 Status write_camera_folder(SessionLogWriter& w, const CameraFolder& f, ImportSummary& summary,
-                           ImportProgress& progress) {
+                           WorkProgress& progress) {
   CameraStreamInfo info;
   info.name = f.name;
   info.backend = "euroc";
@@ -332,7 +334,7 @@ Status write_camera_folder(SessionLogWriter& w, const CameraFolder& f, ImportSum
     converted += was_converted ? 1 : 0;
     if (frame->width != info.width || frame->height != info.height) ++mismatched;
     IMUCAL_TRY(w.append_frame(*id, *frame));
-    progress.advance(ImportProgress::kPerImage);
+    progress.advance(WorkProgress::kPerImage);
   }
   summary.frames += static_cast<std::int64_t>(f.rows.size());
   ++summary.camera_streams;
@@ -365,7 +367,7 @@ Result<ImportSummary> import_euroc(const std::string& dir, const std::string& ou
   }
 
   ImportSummary summary;
-  ImportProgress progress(*imus, *cams, options.progress);
+  WorkProgress progress(import_work(*imus, *cams), options.progress);
   {
     auto writer = SessionLogWriter::create(out->temp_path());
     if (!writer.ok()) return writer.error().context("cannot create the session log");
@@ -440,11 +442,11 @@ std::map<int, std::string> folder_names(const std::map<int, Info>& streams, cons
 
 }  // namespace
 
-Result<ExportSummary> export_euroc(const std::string& log_path, const std::string& dir,
-                                   const OutputOptions& options, bool allow_damaged) {
-  auto reader = SessionLogReader::open(log_path);
-  if (!reader.ok()) return reader.error();
-  const SessionLogReader& r = **reader;
+namespace {
+
+/// Refuses what must not be exported or replaced, before anything is written.
+Status check_export(const SessionLogReader& r, const std::string& log_path, const std::string& dir,
+                    const OutputOptions& options, bool allow_damaged) {
   if (r.health().damaged && !allow_damaged) {
     return make_error(Errc::kCorrupt, log_path + " is damaged (" + r.health().damage_message +
                                           "); pass --allow-damaged to export what is readable");
@@ -460,6 +462,126 @@ Result<ExportSummary> export_euroc(const std::string& log_path, const std::strin
   if (r.imu_streams().empty() && r.camera_streams().empty()) {
     return make_error(Errc::kInsufficientData, log_path + " has no IMU or camera streams to export");
   }
+  return {};
+}
+
+double export_work(const SessionLogReader& r) {
+  double total = 0;
+  for (const auto& [id, info] : r.imu_streams()) {
+    auto n = r.imu_count(id);
+    if (n.ok()) total += static_cast<double>(*n);
+  }
+  for (const auto& [id, info] : r.camera_streams()) {
+    auto n = r.frame_count(id);
+    if (n.ok()) total += WorkProgress::kPerImage * static_cast<double>(*n);
+  }
+  return total;
+}
+
+/// imuN/data.csv (SI, as EuRoC wants) and sensor.yaml of one stream.
+Status export_imu_stream(const SessionLogReader& r, int id, const ImuStreamInfo& info, const fs::path& folder,
+                         const std::string& log_path, ExportSummary& summary, WorkProgress& progress) {
+  std::error_code ec;
+  fs::create_directories(folder, ec);
+  if (ec) return make_error(Errc::kIo, "cannot create " + folder.string() + ": " + ec.message());
+  std::ofstream csv(folder / "data.csv", std::ios::binary);
+  csv << kImuHeader << "\n";
+  const bool raw = info.units == ImuUnits::kRaw;
+  std::string line;
+  std::int64_t count = 0;
+  Status visit = r.for_each_imu(id, kTimeMin, kTimeMax, [&](const ImuSample& s) {
+    const Eigen::Vector3d a = raw ? info.accel.to_si(s.accel) : s.accel;
+    const Eigen::Vector3d w = raw ? info.gyro.to_si(s.gyro) : s.gyro;
+    line = std::to_string(s.t_ns);
+    for (double v : {w.x(), w.y(), w.z(), a.x(), a.y(), a.z()}) {
+      line += ',';
+      line += format_double(v);
+    }
+    line += '\n';
+    csv << line;
+    ++count;
+    progress.advance(1.0);
+    return static_cast<bool>(csv);
+  });
+  csv.close();
+  if (!csv) return make_error(Errc::kIo, "cannot write " + (folder / "data.csv").string());
+  if (!visit.ok()) return visit.error().context("reading " + info.name + " from " + log_path);
+  const auto& metadata = r.metadata();
+  const auto meta = metadata.find(sensor_yaml_key(info.name));
+  IMUCAL_TRY(write_text(folder / "sensor.yaml",
+                        meta != metadata.end() ? meta->second : imu_sensor_yaml(info, log_path)));
+  summary.imu_samples += count;
+  if (raw) {
+    summary.notes.push_back(info.name +
+                            " holds raw counts: exported in SI (rad/s, m/s^2) with the stream's "
+                            "nominal conversion si = scale * (raw - offset); temperature is not "
+                            "part of the EuRoC format");
+  }
+  return {};
+}
+
+/// camN/data.csv, one PNG per frame named by its time, and sensor.yaml of one stream.
+Status export_camera_stream(const SessionLogReader& r, int id, const CameraStreamInfo& info,
+                            const fs::path& folder, const std::string& log_path, ExportSummary& summary,
+                            WorkProgress& progress) {
+  std::error_code ec;
+  fs::create_directories(folder / "data", ec);
+  if (ec) return make_error(Errc::kIo, "cannot create " + folder.string() + ": " + ec.message());
+  std::ofstream csv(folder / "data.csv", std::ios::binary);
+  csv << kCameraHeader << "\n";
+  std::int64_t count = 0, converted = 0;
+  std::optional<Error> failure;
+  Status visit = r.for_each_frame(id, kTimeMin, kTimeMax, [&](const CameraFrame& frame) {
+    const std::string name = std::to_string(frame.t_ns) + ".png";
+    const fs::path path = folder / "data" / name;
+    if (fs::exists(path)) {
+      failure =
+          make_error(Errc::kCorrupt, info.name + ": two frames share the timestamp " +
+                                         std::to_string(frame.t_ns) + " ns; EuRoC names images by time");
+      return false;
+    }
+    auto png = frame_png(frame);
+    if (!png.ok()) {
+      failure = png.error();
+      return false;
+    }
+    if (frame.encoding != "png") ++converted;
+    std::ofstream image(path, std::ios::binary);
+    image.write(reinterpret_cast<const char*>(png->data()), static_cast<std::streamsize>(png->size()));
+    image.close();
+    if (!image) {
+      failure = make_error(Errc::kIo, "cannot write " + path.string());
+      return false;
+    }
+    csv << frame.t_ns << ',' << name << '\n';
+    ++count;
+    progress.advance(WorkProgress::kPerImage);
+    return true;
+  });
+  csv.close();
+  if (failure) return *failure;
+  if (!csv) return make_error(Errc::kIo, "cannot write " + (folder / "data.csv").string());
+  if (!visit.ok()) return visit.error().context("reading " + info.name + " from " + log_path);
+  const auto& metadata = r.metadata();
+  const auto meta = metadata.find(sensor_yaml_key(info.name));
+  IMUCAL_TRY(write_text(folder / "sensor.yaml",
+                        meta != metadata.end() ? meta->second : camera_sensor_yaml(info, log_path)));
+  summary.frames += count;
+  if (converted > 0) {
+    summary.notes.push_back(info.name + ": " + std::to_string(converted) +
+                            " frames were stored in other encodings and were written as lossless PNG");
+  }
+  return {};
+}
+
+}  // namespace
+
+Result<ExportSummary> export_euroc(const std::string& log_path, const std::string& dir,
+                                   const OutputOptions& options, bool allow_damaged) {
+  auto reader = SessionLogReader::open(log_path);
+  if (!reader.ok()) return reader.error();
+  const SessionLogReader& r = **reader;
+  IMUCAL_TRY(check_export(r, log_path, dir, options, allow_damaged));
   auto out = PendingOutput::begin(dir, PendingOutput::Kind::kDirectory, options.force);
   if (!out.ok()) return out.error();
   const fs::path mav0 = fs::path(out->temp_path()) / "mav0";
@@ -469,109 +591,14 @@ Result<ExportSummary> export_euroc(const std::string& log_path, const std::strin
   }
   if (r.health().damaged) summary.notes.push_back("log damaged: " + r.health().damage_message);
 
-  double total_work = 0;
-  for (const auto& [id, info] : r.imu_streams()) {
-    auto n = r.imu_count(id);
-    if (n.ok()) total_work += static_cast<double>(*n);
-  }
-  for (const auto& [id, info] : r.camera_streams()) {
-    auto n = r.frame_count(id);
-    if (n.ok()) total_work += 50.0 * static_cast<double>(*n);
-  }
-  double work = 0;
-  const auto advance = [&](double amount) {
-    work += amount;
-    if (options.progress) options.progress(work, total_work);
-  };
-
-  const auto& metadata = r.metadata();
+  WorkProgress progress(export_work(r), options.progress);
   const auto imu_names = folder_names(r.imu_streams(), "imu");
   for (const auto& [id, info] : r.imu_streams()) {
-    const fs::path folder = mav0 / imu_names.at(id);
-    fs::create_directories(folder, ec);
-    if (ec) return make_error(Errc::kIo, "cannot create " + folder.string() + ": " + ec.message());
-    std::ofstream csv(folder / "data.csv", std::ios::binary);
-    csv << kImuHeader << "\n";
-    const bool raw = info.units == ImuUnits::kRaw;
-    std::string line;
-    std::int64_t count = 0;
-    Status visit = r.for_each_imu(id, kTimeMin, kTimeMax, [&](const ImuSample& s) {
-      const Eigen::Vector3d a = raw ? info.accel.to_si(s.accel) : s.accel;
-      const Eigen::Vector3d w = raw ? info.gyro.to_si(s.gyro) : s.gyro;
-      line = std::to_string(s.t_ns);
-      for (double v : {w.x(), w.y(), w.z(), a.x(), a.y(), a.z()}) {
-        line += ',';
-        line += format_double(v);
-      }
-      line += '\n';
-      csv << line;
-      ++count;
-      advance(1.0);
-      return static_cast<bool>(csv);
-    });
-    csv.close();
-    if (!csv) return make_error(Errc::kIo, "cannot write " + (folder / "data.csv").string());
-    if (!visit.ok()) return visit.error().context("reading " + info.name + " from " + log_path);
-    const auto meta = metadata.find(sensor_yaml_key(info.name));
-    IMUCAL_TRY(write_text(folder / "sensor.yaml",
-                          meta != metadata.end() ? meta->second : imu_sensor_yaml(info, log_path)));
-    summary.imu_samples += count;
-    if (raw) {
-      summary.notes.push_back(info.name +
-                              " holds raw counts: exported in SI (rad/s, m/s^2) with the stream's "
-                              "nominal conversion si = scale * (raw - offset); temperature is not "
-                              "part of the EuRoC format");
-    }
+    IMUCAL_TRY(export_imu_stream(r, id, info, mav0 / imu_names.at(id), log_path, summary, progress));
   }
-
   const auto cam_names = folder_names(r.camera_streams(), "cam");
   for (const auto& [id, info] : r.camera_streams()) {
-    const fs::path folder = mav0 / cam_names.at(id);
-    fs::create_directories(folder / "data", ec);
-    if (ec) return make_error(Errc::kIo, "cannot create " + folder.string() + ": " + ec.message());
-    std::ofstream csv(folder / "data.csv", std::ios::binary);
-    csv << kCameraHeader << "\n";
-    std::int64_t count = 0, converted = 0;
-    std::optional<Error> failure;
-    Status visit = r.for_each_frame(id, kTimeMin, kTimeMax, [&](const CameraFrame& frame) {
-      const std::string name = std::to_string(frame.t_ns) + ".png";
-      const fs::path path = folder / "data" / name;
-      if (fs::exists(path)) {
-        failure =
-            make_error(Errc::kCorrupt, info.name + ": two frames share the timestamp " +
-                                           std::to_string(frame.t_ns) + " ns; EuRoC names images by time");
-        return false;
-      }
-      auto png = frame_png(frame);
-      if (!png.ok()) {
-        failure = png.error();
-        return false;
-      }
-      if (frame.encoding != "png") ++converted;
-      std::ofstream image(path, std::ios::binary);
-      image.write(reinterpret_cast<const char*>(png->data()), static_cast<std::streamsize>(png->size()));
-      image.close();
-      if (!image) {
-        failure = make_error(Errc::kIo, "cannot write " + path.string());
-        return false;
-      }
-      csv << frame.t_ns << ',' << name << '\n';
-      ++count;
-      advance(50.0);
-      return true;
-    });
-    csv.close();
-    if (failure) return *failure;
-    if (!csv) return make_error(Errc::kIo, "cannot write " + (folder / "data.csv").string());
-    if (!visit.ok()) return visit.error().context("reading " + info.name + " from " + log_path);
-    const auto meta = metadata.find(sensor_yaml_key(info.name));
-    IMUCAL_TRY(write_text(folder / "sensor.yaml",
-                          meta != metadata.end() ? meta->second : camera_sensor_yaml(info, log_path)));
-    summary.frames += count;
-    if (converted > 0) {
-      summary.notes.push_back(info.name + ": " + std::to_string(converted) +
-                              " frames were stored in other encodings and were written as lossless PNG");
-    }
+    IMUCAL_TRY(export_camera_stream(r, id, info, mav0 / cam_names.at(id), log_path, summary, progress));
   }
   IMUCAL_TRY(
       write_text(mav0 / "body.yaml", "comment: 'Body frame: identity with every sensor (unknown here)'\n"));
