@@ -1,0 +1,148 @@
+#include "app/stream_stats.hpp"
+
+#include <algorithm>
+
+#include "calib/static_detector.hpp"
+
+namespace imucal::app {
+
+StreamTiming timing_of(const std::vector<TimeNs>& times) {
+  StreamTiming t;
+  t.count = static_cast<std::int64_t>(times.size());
+  if (times.empty()) return t;
+  t.t_first_ns = times.front();
+  t.t_last_ns = times.back();
+  if (times.size() < 2) return t;
+  std::vector<TimeNs> periods(times.size() - 1);
+  for (std::size_t i = 1; i < times.size(); ++i) periods[i - 1] = times[i] - times[i - 1];
+  std::vector<TimeNs> sorted = periods;
+  auto mid = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
+  std::nth_element(sorted.begin(), mid, sorted.end());
+  t.median_period_ns = *mid;
+  const TimeNs span_ns = t.t_last_ns - t.t_first_ns;
+  if (span_ns > 0) t.measured_rate_hz = static_cast<double>(times.size() - 1) / ns_to_s(span_ns);
+  for (std::size_t i = 0; i < periods.size(); ++i) {
+    const TimeNs p = periods[i];
+    if (p <= 0) ++t.non_increasing;
+    if (t.median_period_ns > 0 && 2 * p > 3 * t.median_period_ns) ++t.gap_intervals;
+    if (p > t.longest_interval_ns) {
+      t.longest_interval_ns = p;
+      t.longest_interval_at_ns = times[i + 1];
+    }
+  }
+  return t;
+}
+
+std::string LogSummary::meta(const std::string& key) const {
+  const auto it = metadata.find(key);
+  return it == metadata.end() ? std::string() : it->second;
+}
+
+namespace {
+
+ImuStreamStats imu_stats(const log::SessionLogReader& log, int id, const ImuStreamInfo& info) {
+  ImuStreamStats st;
+  st.id = id;
+  st.info = info;
+  std::vector<TimeNs> times;
+  if (auto count = log.imu_count(id); count.ok()) times.reserve(static_cast<std::size_t>(*count));
+  const Status read = log.for_each_imu(id, log::kTimeMin, log::kTimeMax, [&](const ImuSample& s) {
+    times.push_back(s.t_ns);
+    if (s.flags & kImuFlagGapBefore) ++st.flagged_gap;
+    if (s.flags & kImuFlagDeviceReset) ++st.flagged_reset;
+    if (s.flags & (kImuFlagAccelSaturated | kImuFlagGyroSaturated)) ++st.flagged_saturated;
+    if (s.flags & kImuFlagTimeEstimated) ++st.flagged_time_estimated;
+    return true;
+  });
+  // A damaged stream still has statistics for what was read before the damage.
+  if (!read.ok()) st.read_error = read.error().message;
+  st.timing = timing_of(times);
+  return st;
+}
+
+CameraStreamStats camera_stats(const log::SessionLogReader& log, int id, const CameraStreamInfo& info) {
+  CameraStreamStats st;
+  st.id = id;
+  st.info = info;
+  auto times = log.frame_times(id);
+  st.timing = timing_of(times.ok() ? *times : std::vector<TimeNs>{});
+  if (!times.ok()) st.read_error = times.error().message;
+  return st;
+}
+
+void extend(LogSummary& s, const StreamTiming& t) {
+  if (t.count == 0) return;
+  s.t_start_ns = s.any_time ? std::min(s.t_start_ns, t.t_first_ns) : t.t_first_ns;
+  s.t_end_ns = s.any_time ? std::max(s.t_end_ns, t.t_last_ns) : t.t_last_ns;
+  s.any_time = true;
+}
+
+}  // namespace
+
+LogSummary summarize_log(const log::SessionLogReader& reader) {
+  LogSummary s;
+  s.metadata = reader.metadata();
+  s.health = reader.health();
+  for (const auto& [id, info] : reader.imu_streams()) {
+    s.imu.push_back(imu_stats(reader, id, info));
+    extend(s, s.imu.back().timing);
+  }
+  for (const auto& [id, info] : reader.camera_streams()) {
+    s.cameras.push_back(camera_stats(reader, id, info));
+    extend(s, s.cameras.back().timing);
+  }
+  if (auto events = reader.events(); events.ok()) {
+    for (const auto& e : *events) ++s.events_by_kind[e.kind];
+    s.event_count = static_cast<std::int64_t>(events->size());
+  }
+  return s;
+}
+
+Result<LogSummary> summarize_log(const std::string& path) {
+  auto opened = log::SessionLogReader::open(path);
+  if (!opened.ok()) return opened.error();
+  return summarize_log(**opened);
+}
+
+Result<CleanRun> longest_clean_run(const std::vector<ImuSample>& s) {
+  if (s.size() < 2) return make_error(Errc::kInsufficientData, "a clean run needs at least 2 samples");
+  CleanRun run;
+  std::vector<TimeNs> dts;
+  for (std::size_t i = 1; i < s.size(); ++i) dts.push_back(s[i].t_ns - s[i - 1].t_ns);
+  std::nth_element(dts.begin(), dts.begin() + static_cast<std::ptrdiff_t>(dts.size() / 2), dts.end());
+  run.period_ns = dts[dts.size() / 2];
+  if (run.period_ns <= 0) return make_error(Errc::kCorrupt, "the timestamps do not increase");
+  run.rate_hz = 1e9 / static_cast<double>(run.period_ns);
+  constexpr std::uint32_t kSaturated = kImuFlagAccelSaturated | kImuFlagGyroSaturated;
+  constexpr std::uint32_t kBreak = kImuFlagGapBefore | kImuFlagDeviceReset | kSaturated;
+  std::size_t run0 = 0;
+  for (std::size_t i = 0; i <= s.size(); ++i) {
+    const bool brk =
+        i == s.size() || (s[i].flags & kBreak) ||
+        (i > 0 && (s[i].t_ns - s[i - 1].t_ns > run.period_ns * 3 / 2 || s[i].t_ns <= s[i - 1].t_ns));
+    if (!brk) continue;
+    if (i < s.size()) ++run.breaks;
+    if (i - run0 > run.end - run.begin) {
+      run.begin = run0;
+      run.end = i;
+    }
+    // A saturated sample itself is left out; after a gap or reset the sample starts the next run.
+    run0 = (i < s.size() && (s[i].flags & kSaturated)) ? i + 1 : i;
+  }
+  return run;
+}
+
+std::optional<double> first_motion_s(const std::vector<Eigen::Vector3d>& accel, double rate_hz) {
+  const auto var = calib::variance_magnitude_sq(accel, static_cast<std::size_t>(std::max(3.0, rate_hz)));
+  if (var.empty()) return std::nullopt;
+  std::vector<double> sorted = var;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
+                   sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  for (std::size_t i = 0; i < var.size(); ++i) {
+    if (var[i] > 25.0 * median) return static_cast<double>(i) / rate_hz;
+  }
+  return std::nullopt;
+}
+
+}  // namespace imucal::app

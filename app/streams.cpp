@@ -1,0 +1,34 @@
+#include "app/streams.hpp"
+
+#include <utility>
+
+namespace imucal::app {
+
+std::string LoadedStream::damage_warning() const {
+  if (!damaged()) return {};
+  return "the log is damaged (" + reader->health().damage_message + ")";
+}
+
+Result<LoadedStream> load_imu_stream(const std::string& path, const std::string& stream_name,
+                                     DamagePolicy policy, bool* refused_as_damaged) {
+  if (refused_as_damaged != nullptr) *refused_as_damaged = false;
+  auto opened = log::SessionLogReader::open(path);
+  if (!opened.ok()) return opened.error().context("cannot read " + path);
+  LoadedStream loaded;
+  loaded.reader = std::move(*opened);
+  const auto& reader = *loaded.reader;
+  if (reader.health().damaged && policy == DamagePolicy::kRefuse) {
+    if (refused_as_damaged != nullptr) *refused_as_damaged = true;
+    return make_error(Errc::kCorrupt, path + " is damaged (" + reader.health().damage_message + ")");
+  }
+  auto id = reader.find_imu_stream(stream_name);
+  if (!id.ok()) return id.error().context("no IMU stream in " + path);
+  loaded.stream_id = *id;
+  loaded.info = reader.imu_streams().at(*id);
+  auto samples = reader.read_imu(*id);
+  if (!samples.ok()) return samples.error().context("cannot read the IMU samples of " + path);
+  loaded.samples = std::move(*samples);
+  return loaded;
+}
+
+}  // namespace imucal::app

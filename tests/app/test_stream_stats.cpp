@@ -1,0 +1,83 @@
+// Stream statistics and the clean run of the Allan deviation, against the fixtures' known
+// figures (fixtures/README.md: 98.5 Hz measured at a nominal 100 Hz).
+
+#include <gtest/gtest.h>
+
+#include "app/stream_stats.hpp"
+#include "app/streams.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal::app {
+namespace {
+
+TEST(StreamStats, StaticFixture) {
+  auto s = summarize_log(test::source_path("fixtures/static.imulog"));
+  ASSERT_TRUE(s.ok()) << s.error().message;
+  ASSERT_EQ(s->imu.size(), 1u);
+  const auto& imu = s->imu[0];
+  EXPECT_EQ(imu.timing.count, 18744);
+  EXPECT_NEAR(imu.timing.measured_rate_hz, 98.5, 1e-3);
+  EXPECT_EQ(imu.timing.median_period_ns, 10152131);
+  EXPECT_EQ(imu.timing.gap_intervals, 0);
+  EXPECT_EQ(imu.timing.non_increasing, 0);
+  EXPECT_NEAR(imu.timing.duration_s(), 190.284, 1e-3);
+  EXPECT_EQ(imu.flagged_gap, 0);
+  EXPECT_TRUE(imu.read_error.empty());
+  EXPECT_TRUE(s->any_time);
+  EXPECT_EQ(s->t_start_ns, 1930143);
+  EXPECT_FALSE(s->health.damaged);
+  EXPECT_EQ(s->meta("schema_version"), "1");
+}
+
+TEST(StreamStats, GapFixtureCountsItsGaps) {
+  auto s = summarize_log(test::source_path("fixtures/broken-gap.imulog"));
+  ASSERT_TRUE(s.ok());
+  EXPECT_EQ(s->imu[0].flagged_gap, 2);
+  EXPECT_EQ(s->imu[0].timing.gap_intervals, 2);
+  EXPECT_GT(s->imu[0].timing.longest_interval_ns, 900'000'000);
+}
+
+TEST(StreamStats, TimingOfHandMadeTimes) {
+  const StreamTiming t = timing_of({0, 10, 20, 20, 50, 60});
+  EXPECT_EQ(t.count, 6);
+  EXPECT_EQ(t.median_period_ns, 10);
+  EXPECT_EQ(t.gap_intervals, 1);  // 30 > 1.5 x 10
+  EXPECT_EQ(t.non_increasing, 1);
+  EXPECT_EQ(t.longest_interval_ns, 30);
+  EXPECT_EQ(t.longest_interval_at_ns, 50);
+  EXPECT_EQ(timing_of({}).count, 0);
+}
+
+TEST(CleanRun, LongestRunBetweenGaps) {
+  auto loaded = load_imu_stream(test::source_path("fixtures/broken-gap.imulog"), "", DamagePolicy::kRefuse);
+  ASSERT_TRUE(loaded.ok());
+  auto run = longest_clean_run(loaded->samples);
+  ASSERT_TRUE(run.ok());
+  EXPECT_EQ(run->breaks, 2);
+  EXPECT_NEAR(run->rate_hz, 98.5, 0.1);
+  // `imucal allan` reports 100.5 s of 199.5 s for this log.
+  EXPECT_NEAR(static_cast<double>(run->size()) / run->rate_hz, 100.5, 0.05);
+  for (std::size_t i = run->begin + 1; i < run->end; ++i) {
+    ASSERT_EQ(loaded->samples[i].flags & kImuFlagGapBefore, 0u);
+  }
+}
+
+TEST(CleanRun, RefusesTimestampsThatDoNotIncrease) {
+  std::vector<ImuSample> s(10);
+  auto run = longest_clean_run(s);
+  ASSERT_FALSE(run.ok());
+  EXPECT_EQ(run.error().code, Errc::kCorrupt);
+}
+
+TEST(FirstMotion, StillAndMoving) {
+  std::vector<Eigen::Vector3d> accel;
+  for (int i = 0; i < 2000; ++i) accel.emplace_back(0.01 * ((i * 7919) % 13 - 6), 0.0, 9.81);
+  EXPECT_FALSE(first_motion_s(accel, 100.0).has_value());
+  for (int i = 1500; i < 1600; ++i) accel[i].x() += (i % 2 ? 5.0 : -5.0);
+  const auto moved = first_motion_s(accel, 100.0);
+  ASSERT_TRUE(moved.has_value());
+  EXPECT_NEAR(*moved, 15.0, 1.5);
+}
+
+}  // namespace
+}  // namespace imucal::app
