@@ -95,185 +95,215 @@ Status SampleTimestamper::process(const FifoBatchTiming& batch, std::span<TimeNs
   pending_reset_ = false;
   pending_loss_ = false;
   const auto ki = static_cast<std::int64_t>(k);
+  const Measurement m = measure(batch);
+  Placement p;
   // Samples newer than the batch that were in the FIFO at the read: the edge and the read time
   // refer to the newest of them, not to the batch's last sample.
-  const auto left = static_cast<std::int64_t>(batch.samples_left);
-  // The measurement: the edge, else the read time, else none.
-  const bool has_measurement = batch.has_edge || batch.read_t_ns != 0;
-  TimeNs z_abs = batch.edge_t_ns - options_.edge_latency_ns;
-  double r_var = jitter_var_;
-  if (!batch.has_edge) {
-    z_abs = batch.read_t_ns - static_cast<TimeNs>(std::llround(0.5 * period_ns_));
-    r_var = jitter_var_ + period_ns_ * period_ns_ / 12.0;
-  }
-  const bool use_sequence = batch.has_edge && batch.has_edge_sequence;
-
-  bool gap = false;
-  bool estimated = false;
-  std::int64_t first_index = 0;
-
+  p.left = static_cast<std::int64_t>(batch.samples_left);
   if (!initialized_) {
-    if (!has_measurement) {
-      // Nothing to anchor on yet: nominal spacing after the last output is all there is.
-      base_ns_ = have_out_ ? last_out_ns_ + ki * static_cast<TimeNs>(period_ns_) : 0;
-      estimated = true;
-    } else {
-      base_ns_ = z_abs;
-    }
-    newest_ = ki - 1;
-    if (has_measurement) {
-      anchor(0.0, newest_ + left, r_var);
-    } else {
-      anchor(0.0, newest_, 1e12);  // base_ns_ is the newest delivered sample's time
-      have_accepted_ = false;
-    }
-    initialized_ = has_measurement;
-    first_index = 0;
-    if (has_measurement) ++stats_.edges_accepted;
-    if (use_sequence)
-      assoc_history_.push_back(newest_ + left - static_cast<std::int64_t>(batch.edge_sequence));
+    start(batch, m, ki, p);
   } else {
-    const double z = static_cast<double>(z_abs - base_ns_);
-    first_index = newest_ + 1;
-    std::int64_t new_newest = newest_ + ki;
-    std::int64_t edge_index = new_newest + left;  // the newest sample in the FIFO at the read
-    bool anchored = false;
-
-    if (lossy) {
-      // Samples were lost. Count them from the edge sequence when it is available and
-      // consistent with time, else from time; the newest sample in the FIFO is taken to be the
-      // edge's.
-      gap = true;
-      std::int64_t lost = -1;
-      if (use_sequence && !assoc_history_.empty()) {
-        const std::int64_t cmin = *std::min_element(assoc_history_.begin(), assoc_history_.end());
-        const std::int64_t seq_edge_index = static_cast<std::int64_t>(batch.edge_sequence) + cmin;
-        const std::int64_t seq_lost = seq_edge_index - edge_index;
-        const double dt = z - time_of(seq_edge_index);
-        if (seq_lost >= 0 &&
-            std::abs(dt) < 0.5 * period_ns_ + options_.gate_sigma * options_.edge_jitter_ns) {
-          lost = seq_lost;
-        }
-      }
-      const bool from_sequence = lost >= 0;
-      bool ambiguous = false;
-      if (!from_sequence) {
-        lost = 0;
-        if (has_measurement && edge_index > n_ref_) {
-          predict_to(edge_index);
-          lost = std::max<std::int64_t>(0, std::llround((z - phi_ns_) / period_ns_));
-          // The count is trustworthy only while the prediction is much better than a period.
-          ambiguous = std::sqrt(c_pp_ + r_var) > 0.25 * period_ns_;
-        }
-      }
-      stats_.samples_lost += static_cast<std::uint64_t>(lost);
-      first_index += lost;
-      new_newest += lost;
-      edge_index = new_newest + left;
-      assoc_history_.clear();
-      if (ambiguous) {
-        predict_to(edge_index);
-        anchor(z, edge_index, r_var);
-        anchored = true;
-        ++stats_.edges_accepted;
-      }
-    } else if (use_sequence) {
-      if (have_sequence_ && batch.edge_sequence <= last_sequence_) {
-        // The line's counter went backwards or stalled: it cannot be trusted for association.
-        assoc_history_.clear();
-      }
-      assoc_history_.push_back(new_newest + left - static_cast<std::int64_t>(batch.edge_sequence));
-      while (static_cast<int>(assoc_history_.size()) > options_.association_window)
-        assoc_history_.pop_front();
-      const std::int64_t cmin = *std::min_element(assoc_history_.begin(), assoc_history_.end());
-      const std::int64_t lead = std::clamp<std::int64_t>(assoc_history_.back() - cmin, 0, ki + left - 1);
-      edge_index = new_newest + left - lead;
-    }
-
-    if (!anchored && !has_measurement) {
-      predict_to(edge_index);
-      estimated = true;
-    } else if (!anchored) {
-      if (edge_index <= n_ref_) {
-        // Cannot happen with consistent counters; treat like a rejected edge.
-        estimated = true;
-        ++stats_.edges_rejected;
-      } else {
-        predict_to(edge_index);
-        const double nu = z - phi_ns_;
-        const double s = c_pp_ + r_var;
-        bool accept = std::abs(nu) <= options_.gate_sigma * std::sqrt(s);
-        if (accept && have_accepted_ && edge_index > last_accepted_index_) {
-          // Bounded window around nominal for the period implied by the edge interval.
-          const double di = static_cast<double>(edge_index - last_accepted_index_);
-          const double implied = (z - last_accepted_z_) / di;
-          const double tol = options_.gate_sigma * 1.5 * std::sqrt(r_var) / di;
-          accept = implied >= period_min_ns_ - tol && implied <= period_max_ns_ + tol;
-        }
-        if (accept) {
-          const double k0 = c_pp_ / s;
-          const double k1 = c_pt_ / s;
-          phi_ns_ += k0 * nu;
-          period_ns_ = std::clamp(period_ns_ + k1 * nu, period_min_ns_, period_max_ns_);
-          const double pp = c_pp_, pt = c_pt_;
-          c_pp_ = pp - k0 * pp;
-          c_pt_ = pt - k0 * pt;
-          c_tt_ = c_tt_ - k1 * pt;
-          last_accepted_z_ = z;
-          last_accepted_index_ = edge_index;
-          have_accepted_ = true;
-          consecutive_rejects_ = 0;
-          ++stats_.edges_accepted;
-        } else {
-          ++stats_.edges_rejected;
-          estimated = true;
-          if (++consecutive_rejects_ >= options_.max_consecutive_rejects) {
-            // Time and sample count disagree for good: samples were lost without a flag. When
-            // the disagreement is a whole number of periods, shift the count and keep the
-            // filter; otherwise start again from this edge.
-            const std::int64_t lost = std::max<std::int64_t>(0, std::llround(nu / period_ns_));
-            const double residual = nu - static_cast<double>(lost) * period_ns_;
-            stats_.samples_lost += static_cast<std::uint64_t>(lost);
-            first_index += lost;
-            new_newest += lost;
-            edge_index += lost;
-            predict_to(edge_index);
-            if (lost > 0 && std::abs(residual) <= options_.gate_sigma * std::sqrt(s)) {
-              const double s2 = c_pp_ + r_var;
-              const double k0 = c_pp_ / s2, k1 = c_pt_ / s2, nu2 = z - phi_ns_;
-              phi_ns_ += k0 * nu2;
-              period_ns_ = std::clamp(period_ns_ + k1 * nu2, period_min_ns_, period_max_ns_);
-              const double pp = c_pp_, pt = c_pt_;
-              c_pp_ = pp - k0 * pp;
-              c_pt_ = pt - k0 * pt;
-              c_tt_ = c_tt_ - k1 * pt;
-              last_accepted_z_ = z;
-              last_accepted_index_ = edge_index;
-              consecutive_rejects_ = 0;
-            } else {
-              anchor(z, edge_index, r_var);
-            }
-            assoc_history_.clear();
-            ++stats_.reanchors;
-            gap = true;
-            estimated = false;
-          }
-        }
-      }
-    }
-    newest_ = new_newest;
+    align(batch, m, lossy, ki, p);
   }
-
-  if (use_sequence) {
+  if (m.use_sequence) {
     have_sequence_ = true;
     last_sequence_ = batch.edge_sequence;
   }
-  if (gap) ++stats_.gaps;
+  if (p.gap) ++stats_.gaps;
+  assign_times(p, t_ns, flags);
+  if (p.gap) flags[0] |= kImuFlagGapBefore;
+  if (reset) flags[0] |= kImuFlagDeviceReset;
+  rebase();
+  return {};
+}
 
+SampleTimestamper::Measurement SampleTimestamper::measure(const FifoBatchTiming& batch) const {
+  Measurement m;
+  m.present = batch.has_edge || batch.read_t_ns != 0;
+  m.z_abs = batch.edge_t_ns - options_.edge_latency_ns;
+  m.var = jitter_var_;
+  if (!batch.has_edge) {
+    // The newest sample in the FIFO was taken on average half a period before the read, spread
+    // uniformly over one period.
+    m.z_abs = batch.read_t_ns - static_cast<TimeNs>(std::llround(0.5 * period_ns_));
+    m.var = jitter_var_ + period_ns_ * period_ns_ / 12.0;
+  }
+  m.use_sequence = batch.has_edge && batch.has_edge_sequence;
+  return m;
+}
+
+void SampleTimestamper::start(const FifoBatchTiming& batch, const Measurement& m, std::int64_t k,
+                              Placement& p) {
+  if (!m.present) {
+    // Nothing to anchor on yet: nominal spacing after the last output is all there is.
+    base_ns_ = have_out_ ? last_out_ns_ + k * static_cast<TimeNs>(period_ns_) : 0;
+    p.estimated = true;
+  } else {
+    base_ns_ = m.z_abs;
+  }
+  newest_ = k - 1;
+  if (m.present) {
+    anchor(0.0, newest_ + p.left, m.var);
+  } else {
+    anchor(0.0, newest_, 1e12);  // base_ns_ is the newest delivered sample's time
+    have_accepted_ = false;
+  }
+  initialized_ = m.present;
+  p.first_index = 0;
+  if (m.present) ++stats_.edges_accepted;
+  if (m.use_sequence)
+    assoc_history_.push_back(newest_ + p.left - static_cast<std::int64_t>(batch.edge_sequence));
+}
+
+void SampleTimestamper::align(const FifoBatchTiming& batch, const Measurement& m, bool lossy, std::int64_t k,
+                              Placement& p) {
+  const double z = static_cast<double>(m.z_abs - base_ns_);
+  p.first_index = newest_ + 1;
+  p.newest = newest_ + k;
+  p.edge_index = p.newest + p.left;  // the newest sample in the FIFO at the read
+  if (lossy) {
+    count_lost_samples(batch, m, z, p);
+  } else if (m.use_sequence) {
+    p.edge_index = associate_edge(batch.edge_sequence, k, p);
+  }
+
+  if (p.anchored) {
+    // The measurement re-anchored the state while the lost samples were counted.
+  } else if (!m.present) {
+    predict_to(p.edge_index);
+    p.estimated = true;
+  } else if (p.edge_index <= n_ref_) {
+    // Cannot happen with consistent counters; treat like a rejected edge.
+    p.estimated = true;
+    ++stats_.edges_rejected;
+  } else {
+    update_with_edge(z, m.var, p);
+  }
+  newest_ = p.newest;
+}
+
+void SampleTimestamper::count_lost_samples(const FifoBatchTiming& batch, const Measurement& m, double z,
+                                           Placement& p) {
+  // Samples were lost. Count them from the edge sequence when it is available and consistent
+  // with time, else from time; the newest sample in the FIFO is taken to be the edge's.
+  p.gap = true;
+  std::int64_t lost = -1;
+  if (m.use_sequence && !assoc_history_.empty()) {
+    const std::int64_t cmin = *std::min_element(assoc_history_.begin(), assoc_history_.end());
+    const std::int64_t seq_edge_index = static_cast<std::int64_t>(batch.edge_sequence) + cmin;
+    const std::int64_t seq_lost = seq_edge_index - p.edge_index;
+    const double dt = z - time_of(seq_edge_index);
+    if (seq_lost >= 0 && std::abs(dt) < 0.5 * period_ns_ + options_.gate_sigma * options_.edge_jitter_ns) {
+      lost = seq_lost;
+    }
+  }
+  const bool from_sequence = lost >= 0;
+  bool ambiguous = false;
+  if (!from_sequence) {
+    lost = 0;
+    if (m.present && p.edge_index > n_ref_) {
+      predict_to(p.edge_index);
+      lost = std::max<std::int64_t>(0, std::llround((z - phi_ns_) / period_ns_));
+      // The count is trustworthy only while the prediction is much better than a period.
+      ambiguous = std::sqrt(c_pp_ + m.var) > 0.25 * period_ns_;
+    }
+  }
+  stats_.samples_lost += static_cast<std::uint64_t>(lost);
+  p.first_index += lost;
+  p.newest += lost;
+  p.edge_index = p.newest + p.left;
+  assoc_history_.clear();
+  if (ambiguous) {
+    predict_to(p.edge_index);
+    anchor(z, p.edge_index, m.var);
+    p.anchored = true;
+    ++stats_.edges_accepted;
+  }
+}
+
+std::int64_t SampleTimestamper::associate_edge(std::uint64_t sequence, std::int64_t k, const Placement& p) {
+  if (have_sequence_ && sequence <= last_sequence_) {
+    // The line's counter went backwards or stalled: it cannot be trusted for association.
+    assoc_history_.clear();
+  }
+  assoc_history_.push_back(p.newest + p.left - static_cast<std::int64_t>(sequence));
+  while (static_cast<int>(assoc_history_.size()) > options_.association_window) assoc_history_.pop_front();
+  const std::int64_t cmin = *std::min_element(assoc_history_.begin(), assoc_history_.end());
+  const std::int64_t lead = std::clamp<std::int64_t>(assoc_history_.back() - cmin, 0, k + p.left - 1);
+  return p.newest + p.left - lead;
+}
+
+void SampleTimestamper::update_with_edge(double z, double r_var, Placement& p) {
+  predict_to(p.edge_index);
+  const double nu = z - phi_ns_;
+  const double s = c_pp_ + r_var;
+  const bool accept =
+      std::abs(nu) <= options_.gate_sigma * std::sqrt(s) && period_in_window(z, p.edge_index, r_var);
+  if (accept) {
+    correct(nu, s);
+    last_accepted_z_ = z;
+    last_accepted_index_ = p.edge_index;
+    have_accepted_ = true;
+    consecutive_rejects_ = 0;
+    ++stats_.edges_accepted;
+    return;
+  }
+  ++stats_.edges_rejected;
+  p.estimated = true;
+  if (++consecutive_rejects_ >= options_.max_consecutive_rejects) resync_after_rejects(z, nu, s, r_var, p);
+}
+
+bool SampleTimestamper::period_in_window(double z, std::int64_t edge_index, double r_var) const {
+  if (!have_accepted_ || edge_index <= last_accepted_index_) return true;
+  // Bounded window around nominal for the period implied by the edge interval.
+  const double di = static_cast<double>(edge_index - last_accepted_index_);
+  const double implied = (z - last_accepted_z_) / di;
+  const double tol = options_.gate_sigma * 1.5 * std::sqrt(r_var) / di;
+  return implied >= period_min_ns_ - tol && implied <= period_max_ns_ + tol;
+}
+
+void SampleTimestamper::correct(double nu, double s) {
+  const double k0 = c_pp_ / s;
+  const double k1 = c_pt_ / s;
+  phi_ns_ += k0 * nu;
+  period_ns_ = std::clamp(period_ns_ + k1 * nu, period_min_ns_, period_max_ns_);
+  const double pp = c_pp_, pt = c_pt_;
+  c_pp_ = pp - k0 * pp;
+  c_pt_ = pt - k0 * pt;
+  c_tt_ = c_tt_ - k1 * pt;
+}
+
+void SampleTimestamper::resync_after_rejects(double z, double nu, double s, double r_var, Placement& p) {
+  // Time and sample count disagree for good: samples were lost without a flag. When the
+  // disagreement is a whole number of periods, shift the count and keep the filter; otherwise
+  // start again from this edge.
+  const std::int64_t lost = std::max<std::int64_t>(0, std::llround(nu / period_ns_));
+  const double residual = nu - static_cast<double>(lost) * period_ns_;
+  stats_.samples_lost += static_cast<std::uint64_t>(lost);
+  p.first_index += lost;
+  p.newest += lost;
+  p.edge_index += lost;
+  predict_to(p.edge_index);
+  if (lost > 0 && std::abs(residual) <= options_.gate_sigma * std::sqrt(s)) {
+    correct(z - phi_ns_, c_pp_ + r_var);
+    last_accepted_z_ = z;
+    last_accepted_index_ = p.edge_index;
+    consecutive_rejects_ = 0;
+  } else {
+    anchor(z, p.edge_index, r_var);
+  }
+  assoc_history_.clear();
+  ++stats_.reanchors;
+  p.gap = true;
+  p.estimated = false;
+}
+
+void SampleTimestamper::assign_times(const Placement& p, std::span<TimeNs> t_ns,
+                                     std::span<std::uint32_t> flags) {
   // Times of the batch's samples from the state; strictly increasing.
   const auto min_step = static_cast<TimeNs>(std::max(1.0, 0.5 * period_min_ns_));
-  for (std::size_t i = 0; i < k; ++i) {
-    const std::int64_t index = first_index + static_cast<std::int64_t>(i);
+  for (std::size_t i = 0; i < t_ns.size(); ++i) {
+    const std::int64_t index = p.first_index + static_cast<std::int64_t>(i);
     TimeNs t = base_ns_ + static_cast<TimeNs>(std::llround(time_of(index)));
     if (have_out_ && t < last_out_ns_ + min_step) {
       t = last_out_ns_ + min_step;
@@ -282,12 +312,8 @@ Status SampleTimestamper::process(const FifoBatchTiming& batch, std::span<TimeNs
     t_ns[i] = t;
     last_out_ns_ = t;
     have_out_ = true;
-    if (estimated) flags[i] |= kImuFlagTimeEstimated;
+    if (p.estimated) flags[i] |= kImuFlagTimeEstimated;
   }
-  if (gap) flags[0] |= kImuFlagGapBefore;
-  if (reset) flags[0] |= kImuFlagDeviceReset;
-  rebase();
-  return {};
 }
 
 }  // namespace imucal::acq

@@ -117,6 +117,39 @@ class SampleTimestamper {
   const TimestamperOptions& options() const { return options_; }
 
  private:
+  /// What a batch offers to measure time with: its data-ready edge, else its read time.
+  struct Measurement {
+    bool present = false;       // an edge or a read time
+    TimeNs z_abs = 0;           // time of the newest sample in the FIFO (latency removed)
+    double var = 0.0;           // variance of z_abs, ns^2
+    bool use_sequence = false;  // the line's edge counter can place the edge among the samples
+  };
+  /// Where one batch's samples fall in the chip's sample sequence.
+  struct Placement {
+    std::int64_t left = 0;         // samples newer than the batch left in the FIFO
+    std::int64_t first_index = 0;  // the batch's first sample
+    std::int64_t newest = 0;       // the batch's last sample
+    std::int64_t edge_index = 0;   // the sample the measurement belongs to
+    bool gap = false;              // samples were lost before the batch
+    bool estimated = false;        // times extrapolated, not measured
+    bool anchored = false;         // the measurement already re-anchored the state
+  };
+
+  Measurement measure(const FifoBatchTiming& batch) const;
+  // The steps of process(), after the helpers of the kernel's inv_sensors_timestamp.c: the
+  // first batch anchors the filter; later ones are aligned with the sample sequence (lost
+  // samples counted, the edge associated with its sample), then the edge updates phase and
+  // period if it passes the gate and the period window; finally every sample gets its time.
+  void start(const FifoBatchTiming& batch, const Measurement& m, std::int64_t k, Placement& p);
+  void align(const FifoBatchTiming& batch, const Measurement& m, bool lossy, std::int64_t k, Placement& p);
+  void count_lost_samples(const FifoBatchTiming& batch, const Measurement& m, double z, Placement& p);
+  std::int64_t associate_edge(std::uint64_t sequence, std::int64_t k, const Placement& p);
+  void update_with_edge(double z, double r_var, Placement& p);
+  bool period_in_window(double z, std::int64_t edge_index, double r_var) const;
+  void correct(double nu, double s);
+  void resync_after_rejects(double z, double nu, double s, double r_var, Placement& p);
+  void assign_times(const Placement& p, std::span<TimeNs> t_ns, std::span<std::uint32_t> flags);
+
   void anchor(double z_rel, std::int64_t edge_index, double var);
   void predict_to(std::int64_t index);
   void rebase();
