@@ -390,52 +390,84 @@ Result<PollResult> Mpu6000::poll_stream(TimeNs now_ns, std::optional<DataReadyEd
   batch.read_t_ns = now_ns;
   batch.edge = edge;
   if (edge) on_edge(*edge);
-
-  auto escalate = [&]() -> Result<PollResult> {
-    if (++consecutive_failures_ >= kMaxConsecutiveFailures) {
-      last_problem_ = std::to_string(kMaxConsecutiveFailures) + " consecutive failed reads";
-      batch.flags |= pending_flags_;
-      request_reset(now_ns);
-      result.next_poll_ns = now_ns;
-    }
+  // A step that ends the poll: a failure counts towards a reset, anything else stands as is.
+  auto finish = [&](StreamStep step) {
+    if (step == StreamStep::kFailed) count_failure(now_ns, result);
     return result;
   };
 
   // One configuration row per interval, rotating (a chip that reset itself shows up here).
   if (now_ns - last_check_t_ns_ >= settings_.config_check_interval_ns) {
-    last_check_t_ns_ = now_ns;
-    bus_.set_speed_hz(settings_.config_speed_hz);
-    const ConfigRow& row = config_[checked_row_];
-    auto good = check_row(row);
-    if (!good.ok()) return escalate();
-    bool lost = !*good;
-    if (lost) {
-      // Read again: a corrupted transfer is not a lost configuration.
-      auto again = check_row(row);
-      if (!again.ok()) return escalate();
-      lost = !*again;
-      if (!lost) ++counters_.bad_transfers;
-    }
-    if (lost) {
-      ++counters_.config_mismatches;
-      last_problem_ = "register " + hex2(u8(row.reg)) + " lost its configuration";
-      request_reset(now_ns);
-      batch.flags |= kImuFlagGapBefore | kImuFlagDeviceReset;
-      result.next_poll_ns = now_ns;
-      return result;
-    }
-    checked_row_ = (checked_row_ + 1) % config_.size();
+    if (const StreamStep step = check_next_config_row(now_ns, result); step != StreamStep::kContinue)
+      return finish(step);
   }
-
   if (fifo_reset_needed_) {
     fifo_reset_needed_ = !reset_fifo().ok();
-    if (fifo_reset_needed_) return escalate();
+    if (fifo_reset_needed_) return finish(StreamStep::kFailed);
   }
+  std::uint16_t count = 0;
+  if (const StreamStep step = check_fifo_count(now_ns, result, count); step != StreamStep::kContinue)
+    return finish(step);
 
+  // Read every frame but the newest: it stays in the FIFO and is read first next time.
+  const std::size_t frames = count / FIFO::kFrameBytes - 1;
+  buffer_.resize(frames * FIFO::kFrameBytes);
+  if (!bus_.read(u8(Register::FIFO_R_W), buffer_).ok()) {
+    ++counters_.bad_transfers;
+    // A failed burst may have consumed part of the FIFO: its alignment is unknown.
+    discard_and_reset_fifo(batch, count / FIFO::kFrameBytes);
+    return finish(StreamStep::kFailed);
+  }
+  consecutive_failures_ = 0;
+  std::uint32_t frames_after = 0;
+  if (const StreamStep step = verify_fifo_after_burst(count, frames, batch, frames_after);
+      step != StreamStep::kContinue)
+    return finish(step);
+  decode_frames(frames, frames_after, batch);
+  return result;
+}
+
+void Mpu6000::count_failure(TimeNs now_ns, PollResult& result) {
+  if (++consecutive_failures_ >= kMaxConsecutiveFailures) {
+    last_problem_ = std::to_string(kMaxConsecutiveFailures) + " consecutive failed reads";
+    result.batch->flags |= pending_flags_;
+    request_reset(now_ns);
+    result.next_poll_ns = now_ns;
+  }
+}
+
+Mpu6000::StreamStep Mpu6000::check_next_config_row(TimeNs now_ns, PollResult& result) {
+  last_check_t_ns_ = now_ns;
+  bus_.set_speed_hz(settings_.config_speed_hz);
+  const ConfigRow& row = config_[checked_row_];
+  auto good = check_row(row);
+  if (!good.ok()) return StreamStep::kFailed;
+  bool lost = !*good;
+  if (lost) {
+    // Read again: a corrupted transfer is not a lost configuration.
+    auto again = check_row(row);
+    if (!again.ok()) return StreamStep::kFailed;
+    lost = !*again;
+    if (!lost) ++counters_.bad_transfers;
+  }
+  if (lost) {
+    ++counters_.config_mismatches;
+    last_problem_ = "register " + hex2(u8(row.reg)) + " lost its configuration";
+    request_reset(now_ns);
+    result.batch->flags |= kImuFlagGapBefore | kImuFlagDeviceReset;
+    result.next_poll_ns = now_ns;
+    return StreamStep::kDone;
+  }
+  checked_row_ = (checked_row_ + 1) % config_.size();
+  return StreamStep::kContinue;
+}
+
+Mpu6000::StreamStep Mpu6000::check_fifo_count(TimeNs now_ns, PollResult& result, std::uint16_t& count) {
+  FifoBatch& batch = *result.batch;
   bus_.set_speed_hz(settings_.fifo_speed_hz);
   const std::optional<std::uint16_t> counted = read_fifo_count();
-  if (!counted) return escalate();  // nothing read, nothing lost: the data waits in the FIFO
-  const std::uint16_t count = *counted;
+  if (!counted) return StreamStep::kFailed;  // nothing read, nothing lost: the data waits in the FIFO
+  count = *counted;
   batch.fifo_bytes = count;
   // More than the frame a read keeps back: the chip is writing (even if what follows is a reset).
   if (count > FIFO::kFrameBytes) last_data_t_ns_ = now_ns;
@@ -443,17 +475,17 @@ Result<PollResult> Mpu6000::poll_stream(TimeNs now_ns, std::optional<DataReadyEd
   if (count > kFifoSizeBytes) {
     ++counters_.bad_fifo_counts;  // impossible value: the transfer itself was bad
     discard_and_reset_fifo(batch, 0);
-    return escalate();
+    return StreamStep::kFailed;
   }
   if (count == kFifoSizeBytes) {
     ++counters_.fifo_overflows;  // full: the oldest data has been overwritten, alignment is lost
     discard_and_reset_fifo(batch, count / FIFO::kFrameBytes);
-    return result;
+    return StreamStep::kDone;
   }
   if (count % FIFO::kFrameBytes != 0) {
     ++counters_.bad_fifo_counts;
     discard_and_reset_fifo(batch, count / FIFO::kFrameBytes);
-    return result;
+    return StreamStep::kDone;
   }
   batch.frames_left = count / FIFO::kFrameBytes;
   if (count <= FIFO::kFrameBytes) {
@@ -467,25 +499,18 @@ Result<PollResult> Mpu6000::poll_stream(TimeNs now_ns, std::optional<DataReadyEd
       batch.flags |= kImuFlagGapBefore | kImuFlagDeviceReset;
       result.next_poll_ns = now_ns;
     }
-    return result;
+    return StreamStep::kDone;
   }
   if (count > settings_.fifo_watermark_bytes()) {
     // Reading this late risks reading data the chip is overwriting: drop it cleanly instead.
     discard_and_reset_fifo(batch, count / FIFO::kFrameBytes);
-    return result;
+    return StreamStep::kDone;
   }
+  return StreamStep::kContinue;
+}
 
-  // Read every frame but the newest: it stays in the FIFO and is read first next time.
-  const std::size_t frames = count / FIFO::kFrameBytes - 1;
-  buffer_.resize(frames * FIFO::kFrameBytes);
-  if (!bus_.read(u8(Register::FIFO_R_W), buffer_).ok()) {
-    ++counters_.bad_transfers;
-    // A failed burst may have consumed part of the FIFO: its alignment is unknown.
-    discard_and_reset_fifo(batch, count / FIFO::kFrameBytes);
-    return escalate();
-  }
-  consecutive_failures_ = 0;
-
+Mpu6000::StreamStep Mpu6000::verify_fifo_after_burst(std::uint16_t count, std::size_t frames,
+                                                     FifoBatch& batch, std::uint32_t& frames_after) {
   // The FIFO now holds the frame left behind plus the frames written since FIFO_COUNT was read:
   // (1 + m) * 14 bytes, m >= 0, whatever m is. A byte lost on the bus during this burst (or
   // gained) leaves the count one byte off a whole number of frames, wherever in the burst it
@@ -499,24 +524,27 @@ Result<PollResult> Mpu6000::poll_stream(TimeNs now_ns, std::optional<DataReadyEd
   if (!after || *after > kFifoSizeBytes) {
     last_problem_ = "FIFO count after a read could not be read";
     discard_and_reset_fifo(batch, static_cast<std::uint32_t>(count / FIFO::kFrameBytes));
-    return escalate();
+    return StreamStep::kFailed;
   }
   const std::uint16_t count_after = *after;
   // Frames in the FIFO now, counting one that lost a byte.
-  const std::uint32_t frames_after = (count_after + FIFO::kFrameBytes - 1) / FIFO::kFrameBytes;
+  frames_after = (count_after + FIFO::kFrameBytes - 1) / FIFO::kFrameBytes;
   if (count_after == kFifoSizeBytes) {
     ++counters_.fifo_overflows;  // filled up during the burst: what was read may have been overwritten
     last_problem_ = "FIFO overflowed during a read";
     discard_and_reset_fifo(batch, static_cast<std::uint32_t>(frames + count_after / FIFO::kFrameBytes));
-    return result;
+    return StreamStep::kDone;
   }
   if (count_after < FIFO::kFrameBytes || count_after % FIFO::kFrameBytes != 0) {
     ++counters_.bad_fifo_counts;
     last_problem_ = "FIFO misaligned after a read";
     discard_and_reset_fifo(batch, static_cast<std::uint32_t>(frames) + frames_after);
-    return result;
+    return StreamStep::kDone;
   }
+  return StreamStep::kContinue;
+}
 
+void Mpu6000::decode_frames(std::size_t frames, std::uint32_t frames_after, FifoBatch& batch) {
   const auto max_step = static_cast<int>(std::lround(settings_.max_temperature_step_c * kTempLsbPerDegC));
   batch.samples.reserve(frames);
   for (std::size_t i = 0; i < frames; ++i) {
@@ -554,7 +582,6 @@ Result<PollResult> Mpu6000::poll_stream(TimeNs now_ns, std::optional<DataReadyEd
   }
   batch.frames_left -= static_cast<std::uint32_t>(batch.samples.size());
   counters_.samples += batch.samples.size();
-  return result;
 }
 
 Result<std::array<double, 6>> Mpu6000::average_outputs(int samples, const DelayFn& delay) {

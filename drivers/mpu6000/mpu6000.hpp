@@ -190,6 +190,19 @@ class Mpu6000 {
   Result<PollResult> poll_wait_for_reset(TimeNs now_ns);
   Result<PollResult> poll_configure(TimeNs now_ns);
   Result<PollResult> poll_stream(TimeNs now_ns, std::optional<DataReadyEdge> edge);
+  // The steps of a streaming poll. kDone ends the poll with the result as it stands, kFailed
+  // ends it as a failed read (count_failure: enough in a row reset the chip).
+  enum class StreamStep { kContinue, kDone, kFailed };
+  void count_failure(TimeNs now_ns, PollResult& result);
+  StreamStep check_next_config_row(TimeNs now_ns, PollResult& result);
+  /// Reads FIFO_COUNT into `count`; kContinue when it holds frames to read now.
+  StreamStep check_fifo_count(TimeNs now_ns, PollResult& result, std::uint16_t& count);
+  /// After the burst of `frames` frames (of `count` bytes counted): FIFO_COUNT must again be a
+  /// whole number of frames. `frames_after` receives the frames now in the FIFO.
+  StreamStep verify_fifo_after_burst(std::uint16_t count, std::size_t frames, FifoBatch& batch,
+                                     std::uint32_t& frames_after);
+  /// Turns the frames read into samples, up to the first implausible one.
+  void decode_frames(std::size_t frames, std::uint32_t frames_after, FifoBatch& batch);
   void discard_and_reset_fifo(FifoBatch& batch, std::uint32_t frames);
   [[nodiscard]] Result<std::array<double, 6>> average_outputs(int samples, const DelayFn& delay);
 
