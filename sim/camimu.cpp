@@ -181,18 +181,181 @@ Status CamImuSimOptions::validate() const {
   return render.validate();
 }
 
-Status simulate_camimu_session(const CamImuSimOptions& options, const std::string& log_path,
-                               const std::string& truth_path, const std::function<void(double)>& progress,
-                               CamImuSimSummary* summary) {
-  IMUCAL_TRY(options.validate());
-  std::error_code ec;
-  if (!options.overwrite) {
-    for (const std::string& p : {log_path, truth_path}) {
-      if (!p.empty() && std::filesystem::exists(p, ec)) {
-        return make_error(Errc::kAlreadyExists, p + " already exists");
-      }
+namespace {
+
+constexpr double kImuShare = 0.05;  // of the progress: the IMU part is quick next to rendering
+
+/// The IMU part, through the same code as the other simulated sessions, into the scratch log
+/// `imu_part` (removed again on failure).
+Result<sim::SimTruth> write_imu_part(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj,
+                                     const std::string& imu_part,
+                                     const std::function<void(double fraction)>& progress) {
+  SimImuSessionOptions imu_opt;
+  imu_opt.kind = "camimu";
+  imu_opt.script = "checkerboard";
+  imu_opt.seed = options.seed;
+  imu_opt.imu_rate_hz = options.imu_rate_hz;
+  imu_opt.path = options.imu_path;
+  imu_opt.imu = options.imu ? *options.imu : sim::ImuModelParams::draw(options.seed);
+  imu_opt.params_from_file = options.imu_params_from_file;
+  imu_opt.overwrite = true;
+  remove_log_files(imu_part);
+  auto imu_truth = write_sim_imu_session(imu_opt, traj, imu_part, "", [&](double f) {
+    if (progress) progress(kImuShare * f);
+  });
+  if (!imu_truth.ok()) {
+    remove_log_files(imu_part);
+    return imu_truth.error().context("camimu IMU part");
+  }
+  return imu_truth;
+}
+
+/// Renders the frames and appends them to camera stream `cam_id`. Frame k is stamped
+/// t_cam = k * period on the camera's clock and shows the scene of IMU time t_cam + timeshift,
+/// integrated over the exposure centred there. Only frames whose whole exposure lies inside the
+/// trajectory are recorded.
+Status write_frames(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj,
+                    const sim::CheckerboardRenderer& renderer, const Eigen::Isometry3d& T_world_board,
+                    log::SessionLogWriter& writer, int cam_id, CamImuSimSummary& sum,
+                    const std::function<void(double fraction)>& progress) {
+  const TimeNs shift_ns = s_to_ns(options.timeshift_cam_imu_s);
+  const TimeNs half_exposure_ns = options.exposure_ns / 2;
+  const double period_ns = 1e9 / options.camera_rate_hz;
+  const TimeNs t_begin = traj.start_ns() + half_exposure_ns - shift_ns;  // earliest t_cam
+  const TimeNs t_end = traj.end_ns() - (options.exposure_ns - half_exposure_ns) - shift_ns;
+  const std::int64_t k0 = static_cast<std::int64_t>(std::ceil(static_cast<double>(t_begin) / period_ns));
+  const std::int64_t k1 = static_cast<std::int64_t>(std::floor(static_cast<double>(t_end) / period_ns));
+  if (k1 < k0) {
+    return make_error(Errc::kInvalidArgument, "camimu: the motion is too short for a single frame");
+  }
+  auto T_cam_board_at = [&](TimeNs t_imu_ns) {
+    return options.T_cam_imu * pose_of(traj.at(t_imu_ns)).inverse() * T_world_board;
+  };
+  sim::Rng noise(sim::Rng::substream(options.seed, kNoiseSubstream));
+  const std::vector<int> encode_params =
+      options.image_encoding == "png" ? std::vector<int>{cv::IMWRITE_PNG_COMPRESSION, 9}
+                                      : std::vector<int>{cv::IMWRITE_WEBP_QUALITY, 101};  // > 100: lossless
+  const std::string ext = "." + options.image_encoding;
+  std::vector<Eigen::Isometry3d> subs;
+  for (std::int64_t k = k0; k <= k1; ++k) {
+    const TimeNs t_cam = static_cast<TimeNs>(std::llround(static_cast<double>(k) * period_ns));
+    const TimeNs t_open = t_cam + shift_ns - half_exposure_ns;  // IMU time the exposure starts
+    int n_sub = 1;
+    if (options.motion_blur) {
+      n_sub =
+          renderer.sub_exposures_needed(T_cam_board_at(t_open), T_cam_board_at(t_open + options.exposure_ns));
+    }
+    subs.clear();
+    for (int i = 0; i < n_sub; ++i) {
+      const double f = options.motion_blur ? (i + 0.5) / n_sub : 0.5;
+      subs.push_back(T_cam_board_at(t_open + static_cast<TimeNs>(std::llround(f * options.exposure_ns))));
+    }
+    const cv::Mat image = renderer.render(subs, &noise);
+    const sim::CornerTruth truth = renderer.project_corners(T_cam_board_at(t_cam + shift_ns));
+    if (truth.visible_count == static_cast<int>(truth.px.size())) ++sum.frames_all_corners_visible;
+    if (truth.visible_count == 0) ++sum.frames_no_corner_visible;
+
+    CameraFrame frame;
+    frame.t_ns = t_cam;
+    frame.width = image.cols;
+    frame.height = image.rows;
+    frame.encoding = options.image_encoding;
+    frame.exposure_ns = options.exposure_ns;
+    frame.sequence = static_cast<std::uint32_t>(k - k0);
+    if (!cv::imencode(ext, image, frame.data, encode_params)) {
+      return make_error(Errc::kUnsupported,
+                        "this OpenCV build cannot encode " + options.image_encoding + " images; use png");
+    }
+    sum.image_bytes += static_cast<std::int64_t>(frame.data.size());
+    IMUCAL_TRY(writer.append_frame(cam_id, frame));
+    ++sum.frames;
+    if (progress && (k - k0) % 20 == 0) {
+      progress(kImuShare +
+               (1.0 - kImuShare) * static_cast<double>(k - k0 + 1) / static_cast<double>(k1 - k0 + 1));
     }
   }
+  return {};
+}
+
+/// The final log: the IMU part copied from `imu_part`, the target and the camera stream.
+Status write_camimu_log(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj,
+                        const sim::CheckerboardRenderer& renderer, const Eigen::Isometry3d& T_world_board,
+                        const std::string& imu_part, const std::string& log_path, CamImuSimSummary& sum,
+                        const std::function<void(double fraction)>& progress) {
+  nlohmann::json camera_rig = {{"device", "sim"},
+                               {"model", "checkerboard renderer (simulated)"},
+                               {"width", options.camera.width},
+                               {"height", options.camera.height},
+                               {"rate_hz", options.camera_rate_hz},
+                               {"exposure_ns", options.exposure_ns},
+                               {"encoding", options.image_encoding},
+                               {"timestamp_source", "mid-exposure"}};
+  log::SessionLogWriterOptions wopt;
+  wopt.overwrite = options.overwrite;
+  wopt.commit_interval_ns = 5 * kNsPerSecond;
+  auto reader = log::SessionLogReader::open(imu_part);
+  if (!reader.ok()) return reader.error().context("camimu IMU part");
+  auto writer_r = log::SessionLogWriter::create(log_path, wopt);
+  if (!writer_r.ok()) return writer_r.error();
+  log::SessionLogWriter& writer = **writer_r;
+  IMUCAL_TRY(copy_imu_part(**reader, writer, camera_rig, &sum.imu_samples));
+  IMUCAL_TRY(writer.set_metadata("target", target_to_yaml(options.target)));
+
+  CameraStreamInfo cam_info;
+  cam_info.name = "cam0";
+  cam_info.width = options.camera.width;
+  cam_info.height = options.camera.height;
+  cam_info.rate_hz = options.camera_rate_hz;
+  cam_info.backend = "sim";
+  cam_info.device = "sim";
+  cam_info.timestamp_source = "mid-exposure";
+  auto cam_id = writer.add_camera_stream(cam_info);
+  if (!cam_id.ok()) return cam_id.error();
+  IMUCAL_TRY(write_frames(options, traj, renderer, T_world_board, writer, *cam_id, sum, progress));
+  return writer.close();
+}
+
+/// The truth file: the IMU truth plus the camera in Kalibr camchain naming.
+YAML::Node camimu_truth_yaml(const CamImuSimOptions& options, const sim::SimTruth& truth,
+                             const Eigen::Isometry3d& T_world_board, const CamImuSimSummary& sum) {
+  YAML::Node doc = sim::truth_to_yaml(truth);
+  YAML::Node cam0(YAML::NodeType::Map);
+  cam0["T_cam_imu"] = matrix_yaml(options.T_cam_imu.matrix());
+  camera_to_yaml(options.camera, cam0);
+  cam0["timeshift_cam_imu"] = options.timeshift_cam_imu_s;
+  cam0["rate_hz"] = options.camera_rate_hz;
+  cam0["exposure_ns"] = options.exposure_ns;
+  cam0["timestamp"] = "mid-exposure";
+  YAML::Node camera(YAML::NodeType::Map);
+  camera["convention"] =
+      "T_cam_imu maps IMU (body) points into the camera frame; t_imu = t_cam + timeshift_cam_imu";
+  camera["cam0"] = cam0;
+  camera["target"] = YAML::Load(target_to_yaml(options.target));
+  camera["T_world_target"] = matrix_yaml(T_world_board.matrix());
+  YAML::Node render(YAML::NodeType::Map);
+  render["noise_sigma_dn"] = options.noise_sigma_dn;
+  render["supersampling"] = options.supersampling;
+  render["optics_blur_sigma_px"] = options.optics_blur_sigma_px;
+  render["motion_blur"] = options.motion_blur;
+  render["encoding"] = options.image_encoding;
+  camera["render"] = render;
+  YAML::Node frames(YAML::NodeType::Map);
+  frames["count"] = sum.frames;
+  frames["all_corners_visible"] = sum.frames_all_corners_visible;
+  frames["no_corner_visible"] = sum.frames_no_corner_visible;
+  camera["frames"] = frames;
+  doc["camera"] = camera;
+  return doc;
+}
+
+}  // namespace
+
+Status simulate_camimu_session(const CamImuSimOptions& options, const std::string& log_path,
+                               const std::string& truth_path,
+                               const std::function<void(double fraction)>& progress,
+                               CamImuSimSummary* summary) {
+  IMUCAL_TRY(options.validate());
+  IMUCAL_TRY(refuse_existing_outputs({log_path, truth_path}, options.overwrite));
   auto motion = sim::CheckerboardMotion::create(options.motion, options.seed);
   if (!motion.ok()) return motion.error();
   const sim::CheckerboardMotion& traj = **motion;
@@ -205,160 +368,25 @@ Status simulate_camimu_session(const CamImuSimOptions& options, const std::strin
   if (!renderer_r.ok()) return renderer_r.error();
   const sim::CheckerboardRenderer& renderer = **renderer_r;
 
-  // 1. The IMU part, through the same code as the other simulated sessions, into a scratch log
-  //    next to the output; its content is copied into the final log below.
-  SimImuSessionOptions imu_opt;
-  imu_opt.kind = "camimu";
-  imu_opt.script = "checkerboard";
-  imu_opt.seed = options.seed;
-  imu_opt.imu_rate_hz = options.imu_rate_hz;
-  imu_opt.path = options.imu_path;
-  imu_opt.imu = options.imu ? *options.imu : sim::ImuModelParams::draw(options.seed);
-  imu_opt.params_from_file = options.imu_params_from_file;
-  imu_opt.overwrite = true;
+  // The IMU part goes into a scratch log next to the output first; the final log copies it and
+  // adds the camera stream.
   const std::string imu_part = log_path + ".imu-part";
-  remove_log_files(imu_part);
-  constexpr double kImuShare = 0.05;  // of the progress
-  auto imu_truth = write_sim_imu_session(imu_opt, traj, imu_part, "", [&](double f) {
-    if (progress) progress(kImuShare * f);
-  });
-  if (!imu_truth.ok()) {
-    remove_log_files(imu_part);
-    return imu_truth.error().context("camimu IMU part");
-  }
-
-  // 2. The final log: IMU part + camera stream.
+  auto imu_truth = write_imu_part(options, traj, imu_part, progress);
+  if (!imu_truth.ok()) return imu_truth.error();
   const Eigen::Isometry3d T_world_board = traj.T_world_board(options.target);
-  nlohmann::json camera_rig = {{"device", "sim"},
-                               {"model", "checkerboard renderer (simulated)"},
-                               {"width", options.camera.width},
-                               {"height", options.camera.height},
-                               {"rate_hz", options.camera_rate_hz},
-                               {"exposure_ns", options.exposure_ns},
-                               {"encoding", options.image_encoding},
-                               {"timestamp_source", "mid-exposure"}};
-  log::SessionLogWriterOptions wopt;
-  wopt.overwrite = options.overwrite;
-  wopt.commit_interval_ns = 5 * kNsPerSecond;
   CamImuSimSummary sum;
-  Status status = [&]() -> Status {
-    auto reader = log::SessionLogReader::open(imu_part);
-    if (!reader.ok()) return reader.error().context("camimu IMU part");
-    auto writer_r = log::SessionLogWriter::create(log_path, wopt);
-    if (!writer_r.ok()) return writer_r.error();
-    log::SessionLogWriter& writer = **writer_r;
-    IMUCAL_TRY(copy_imu_part(**reader, writer, camera_rig, &sum.imu_samples));
-    IMUCAL_TRY(writer.set_metadata("target", target_to_yaml(options.target)));
-
-    CameraStreamInfo cam_info;
-    cam_info.name = "cam0";
-    cam_info.width = options.camera.width;
-    cam_info.height = options.camera.height;
-    cam_info.rate_hz = options.camera_rate_hz;
-    cam_info.backend = "sim";
-    cam_info.device = "sim";
-    cam_info.timestamp_source = "mid-exposure";
-    auto cam_id = writer.add_camera_stream(cam_info);
-    if (!cam_id.ok()) return cam_id.error();
-
-    // Frame k is stamped t_cam = k * period on the camera's clock and shows the scene of IMU
-    // time t_cam + timeshift, integrated over the exposure centred there. Only frames whose
-    // whole exposure lies inside the trajectory are recorded.
-    const TimeNs shift_ns = s_to_ns(options.timeshift_cam_imu_s);
-    const TimeNs half_exposure_ns = options.exposure_ns / 2;
-    const double period_ns = 1e9 / options.camera_rate_hz;
-    const TimeNs t_begin = traj.start_ns() + half_exposure_ns - shift_ns;  // earliest t_cam
-    const TimeNs t_end = traj.end_ns() - (options.exposure_ns - half_exposure_ns) - shift_ns;
-    const std::int64_t k0 = static_cast<std::int64_t>(std::ceil(static_cast<double>(t_begin) / period_ns));
-    const std::int64_t k1 = static_cast<std::int64_t>(std::floor(static_cast<double>(t_end) / period_ns));
-    if (k1 < k0) {
-      return make_error(Errc::kInvalidArgument, "camimu: the motion is too short for a single frame");
-    }
-    auto T_cam_board_at = [&](TimeNs t_imu_ns) {
-      return options.T_cam_imu * pose_of(traj.at(t_imu_ns)).inverse() * T_world_board;
-    };
-    sim::Rng noise(sim::Rng::substream(options.seed, kNoiseSubstream));
-    const std::vector<int> encode_params =
-        options.image_encoding == "png" ? std::vector<int>{cv::IMWRITE_PNG_COMPRESSION, 9}
-                                        : std::vector<int>{cv::IMWRITE_WEBP_QUALITY, 101};  // > 100: lossless
-    const std::string ext = "." + options.image_encoding;
-    std::vector<Eigen::Isometry3d> subs;
-    for (std::int64_t k = k0; k <= k1; ++k) {
-      const TimeNs t_cam = static_cast<TimeNs>(std::llround(static_cast<double>(k) * period_ns));
-      const TimeNs t_open = t_cam + shift_ns - half_exposure_ns;  // IMU time the exposure starts
-      int n_sub = 1;
-      if (options.motion_blur) {
-        n_sub = renderer.sub_exposures_needed(T_cam_board_at(t_open),
-                                              T_cam_board_at(t_open + options.exposure_ns));
-      }
-      subs.clear();
-      for (int i = 0; i < n_sub; ++i) {
-        const double f = options.motion_blur ? (i + 0.5) / n_sub : 0.5;
-        subs.push_back(T_cam_board_at(t_open + static_cast<TimeNs>(std::llround(f * options.exposure_ns))));
-      }
-      const cv::Mat image = renderer.render(subs, &noise);
-      const sim::CornerTruth truth = renderer.project_corners(T_cam_board_at(t_cam + shift_ns));
-      if (truth.visible_count == static_cast<int>(truth.px.size())) ++sum.frames_all_corners_visible;
-      if (truth.visible_count == 0) ++sum.frames_no_corner_visible;
-
-      CameraFrame frame;
-      frame.t_ns = t_cam;
-      frame.width = image.cols;
-      frame.height = image.rows;
-      frame.encoding = options.image_encoding;
-      frame.exposure_ns = options.exposure_ns;
-      frame.sequence = static_cast<std::uint32_t>(k - k0);
-      if (!cv::imencode(ext, image, frame.data, encode_params)) {
-        return make_error(Errc::kUnsupported,
-                          "this OpenCV build cannot encode " + options.image_encoding + " images; use png");
-      }
-      sum.image_bytes += static_cast<std::int64_t>(frame.data.size());
-      IMUCAL_TRY(writer.append_frame(*cam_id, frame));
-      ++sum.frames;
-      if (progress && (k - k0) % 20 == 0) {
-        progress(kImuShare +
-                 (1.0 - kImuShare) * static_cast<double>(k - k0 + 1) / static_cast<double>(k1 - k0 + 1));
-      }
-    }
-    return writer.close();
-  }();
+  const Status status =
+      write_camimu_log(options, traj, renderer, T_world_board, imu_part, log_path, sum, progress);
   remove_log_files(imu_part);
   if (!status.ok()) return status;
 
-  // 3. The truth: the IMU truth plus the camera in Kalibr camchain naming.
-  sim::SimTruth truth = *imu_truth;
+  const sim::SimTruth& truth = *imu_truth;
   sum.duration_s = truth.trajectory.duration_s;
   sum.mean_accel_mps2 = truth.trajectory.mean_accel_mps2;
   sum.mean_rate_radps = truth.trajectory.mean_rate_radps;
   if (!truth_path.empty()) {
-    YAML::Node doc = sim::truth_to_yaml(truth);
-    YAML::Node cam0(YAML::NodeType::Map);
-    cam0["T_cam_imu"] = matrix_yaml(options.T_cam_imu.matrix());
-    camera_to_yaml(options.camera, cam0);
-    cam0["timeshift_cam_imu"] = options.timeshift_cam_imu_s;
-    cam0["rate_hz"] = options.camera_rate_hz;
-    cam0["exposure_ns"] = options.exposure_ns;
-    cam0["timestamp"] = "mid-exposure";
-    YAML::Node camera(YAML::NodeType::Map);
-    camera["convention"] =
-        "T_cam_imu maps IMU (body) points into the camera frame; t_imu = t_cam + timeshift_cam_imu";
-    camera["cam0"] = cam0;
-    camera["target"] = YAML::Load(target_to_yaml(options.target));
-    camera["T_world_target"] = matrix_yaml(T_world_board.matrix());
-    YAML::Node render(YAML::NodeType::Map);
-    render["noise_sigma_dn"] = options.noise_sigma_dn;
-    render["supersampling"] = options.supersampling;
-    render["optics_blur_sigma_px"] = options.optics_blur_sigma_px;
-    render["motion_blur"] = options.motion_blur;
-    render["encoding"] = options.image_encoding;
-    camera["render"] = render;
-    YAML::Node frames(YAML::NodeType::Map);
-    frames["count"] = sum.frames;
-    frames["all_corners_visible"] = sum.frames_all_corners_visible;
-    frames["no_corner_visible"] = sum.frames_no_corner_visible;
-    camera["frames"] = frames;
-    doc["camera"] = camera;
-    IMUCAL_TRY(sim::write_truth_yaml(truth_path, doc, options.overwrite));
+    IMUCAL_TRY(sim::write_truth_yaml(truth_path, camimu_truth_yaml(options, truth, T_world_board, sum),
+                                     options.overwrite));
   }
   if (progress) progress(1.0);
   if (summary) *summary = sum;

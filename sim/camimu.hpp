@@ -87,7 +87,7 @@ struct CamImuSimSummary {
 /// [0, 1]; `summary` (may be null) receives what was written.
 [[nodiscard]] Status simulate_camimu_session(const CamImuSimOptions& options, const std::string& log_path,
                                              const std::string& truth_path,
-                                             const std::function<void(double)>& progress = {},
+                                             const std::function<void(double fraction)>& progress = {},
                                              CamImuSimSummary* summary = nullptr);
 
 }  // namespace imucal::sim

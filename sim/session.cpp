@@ -57,32 +57,21 @@ Result<drivers::mpu6000::Settings> sim_driver_settings(const SimImuSessionOption
   return drivers::mpu6000::settings_for(req);
 }
 
-Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
-                                            const sim::Trajectory& trajectory, const std::string& log_path,
-                                            const std::string& truth_path,
-                                            const std::function<void(double)>& progress) {
-  IMUCAL_TRY(options.validate());
+Status refuse_existing_outputs(std::initializer_list<std::string> paths, bool overwrite) {
+  if (overwrite) return {};
   std::error_code ec;
-  if (!options.overwrite) {
-    for (const std::string& p : {log_path, truth_path}) {
-      if (!p.empty() && std::filesystem::exists(p, ec)) {
-        return make_error(Errc::kAlreadyExists, p + " already exists");
-      }
-    }
+  for (const std::string& p : paths) {
+    if (!p.empty() && std::filesystem::exists(p, ec))
+      return make_error(Errc::kAlreadyExists, p + " already exists");
   }
+  return {};
+}
 
-  auto settings = sim_driver_settings(options);
-  if (!settings.ok()) return settings.error();
+namespace {
 
-  log::SessionLogWriterOptions wopt;
-  wopt.overwrite = options.overwrite;
-  wopt.commit_interval_ns = 5 * kNsPerSecond;  // simulated: commit every 5 s of sample time
-  auto writer_r = log::SessionLogWriter::create(log_path, wopt);
-  if (!writer_r.ok()) return writer_r.error();
-  auto& writer = *writer_r;
-
-  ImuStreamInfo info = drivers::mpu6000::make_stream_info(*settings, "sim");
-  info.name = "imu0";
+/// The rig description and the simulation parameters, as log metadata.
+Status write_session_metadata(log::SessionLogWriter& writer, const SimImuSessionOptions& options,
+                              const ImuStreamInfo& info, const std::string& truth_path) {
   const char* bus_name = options.path.bus == drivers::mpu6000::BusKind::kSpi ? "spi" : "i2c";
   nlohmann::json rig_json = {{"imu",
                               {{"device", info.device},
@@ -113,13 +102,13 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
   for (const SampleDrop& d : options.drops)
     drops.push_back({{"start_s", d.start_s}, {"duration_s", d.duration_s}});
   simj["host_stalls"] = drops;
-  IMUCAL_TRY(writer->set_metadata("rig_config", rig_json.dump()));
-  IMUCAL_TRY(writer->set_metadata("sim", simj.dump()));
-  IMUCAL_TRY(writer->set_metadata("device", "sim"));
-  auto stream = writer->add_imu_stream(info);
-  if (!stream.ok()) return stream.error();
+  IMUCAL_TRY(writer.set_metadata("rig_config", rig_json.dump()));
+  IMUCAL_TRY(writer.set_metadata("sim", simj.dump()));
+  return writer.set_metadata("device", "sim");
+}
 
-  // Segment events, with a pose counter for holds and faces.
+/// Segment events, with a pose counter for holds and faces, in time order.
+Status write_segment_events(log::SessionLogWriter& writer, const sim::Trajectory& trajectory) {
   std::vector<log::Event> events;
   int pose = 0;
   for (const sim::Segment& seg : trajectory.segments()) {
@@ -138,7 +127,115 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
   }
   std::stable_sort(events.begin(), events.end(),
                    [](const log::Event& a, const log::Event& b) { return a.t_ns < b.t_ns; });
-  for (const log::Event& e : events) IMUCAL_TRY(writer->append_event(e));
+  for (const log::Event& e : events) IMUCAL_TRY(writer.append_event(e));
+  return {};
+}
+
+/// Runs the rig until the trajectory's end and writes the samples inside it (trajectory clock:
+/// host time minus `offset`), stalling the host over the options' drops. Counts into `rec`.
+Status record_trajectory(SimImuRig& rig, const SimImuSessionOptions& options,
+                         const sim::Trajectory& trajectory, TimeNs offset, TimeNs setup_ns,
+                         log::SessionLogWriter& writer, int stream, sim::RecordingSummary& rec,
+                         const std::function<void(double fraction)>& progress) {
+  const TimeNs t_start = trajectory.start_ns(), t_end = trajectory.end_ns();
+  const TimeNs duration_ns = std::max<TimeNs>(1, t_end - t_start);
+  std::vector<ImuSample> out, batch;
+  constexpr std::size_t kBatch = 2000;
+  batch.reserve(kBatch);
+  bool done = false;
+  double last_progress = 0.0;
+  while (!done) {
+    const TimeNs now = rig.clock().now_ns() - offset;
+    for (const SampleDrop& d : options.drops) {
+      const TimeNs s0 = t_start + s_to_ns(d.start_s), s1 = s0 + s_to_ns(d.duration_s);
+      if (now >= s0 && now < s1) rig.stall_until(s1 + offset);
+    }
+    if (rig.clock().now_ns() - offset > t_end + setup_ns) break;  // the chip stopped delivering
+    if (auto st = rig.acquisition().step(out); !st.ok()) return st.error().context("simulated acquisition");
+    for (ImuSample& s : out) {
+      s.t_ns -= offset;
+      if (s.t_ns < t_start) continue;
+      if (s.t_ns > t_end) {
+        done = true;
+        break;
+      }
+      if (s.flags & kImuFlagAccelSaturated) ++rec.accel_saturated;
+      if (s.flags & kImuFlagGyroSaturated) ++rec.gyro_saturated;
+      ++rec.samples;
+      batch.push_back(s);
+    }
+    if (batch.size() >= kBatch) {
+      IMUCAL_TRY(writer.append_imu(stream, batch));
+      batch.clear();
+    }
+    const double f =
+        static_cast<double>(rig.clock().now_ns() - offset - t_start) / static_cast<double>(duration_ns);
+    if (progress && f - last_progress >= 0.01) {
+      last_progress = f;
+      progress(std::clamp(f, 0.0, 1.0));
+    }
+  }
+  if (!batch.empty()) IMUCAL_TRY(writer.append_imu(stream, batch));
+  return {};
+}
+
+/// What the sensing elements saw, into the truth.
+void add_sensor_truth(const TrajectorySensorStats& ss, sim::SimTruth& truth) {
+  sim::RecordingSummary& rec = truth.recording;
+  const double count = static_cast<double>(std::max<std::int64_t>(1, ss.samples));
+  truth.trajectory.mean_accel_mps2 = ss.sum_accel_mps2 / count;
+  truth.trajectory.mean_rate_radps = ss.sum_rate_radps / count;
+  truth.trajectory.max_accel_mps2 = ss.max_accel_mps2;
+  truth.trajectory.max_rate_radps = ss.max_rate_radps;
+  rec.accel_bias_mean = ss.sum_accel_bias / count;
+  rec.gyro_bias_mean = ss.sum_gyro_bias / count;
+  rec.accel_bias_end = ss.accel_bias_end;
+  rec.gyro_bias_end = ss.gyro_bias_end;
+  rec.temperature_start_c = ss.temperature_start_c;
+  rec.temperature_end_c = ss.temperature_end_c;
+  rec.dropped_samples = std::max<std::int64_t>(0, ss.samples - rec.samples);
+}
+
+/// Timing, driver and mounting metadata, as a recording on a rig writes them.
+Status write_acquisition_metadata(log::SessionLogWriter& writer, SimImuRig& rig, const sim::SimTruth& truth) {
+  acq::RecordSummary summary;
+  summary.samples = static_cast<std::uint64_t>(truth.recording.samples);
+  summary.timing = rig.acquisition().timestamper().stats();
+  summary.acquisition = rig.acquisition().stats();
+  summary.period_error_ppm = rig.acquisition().timestamper().period_error_ppm();
+  summary.duration_s = truth.trajectory.duration_s;
+  summary.rate_hz =
+      summary.duration_s > 0 ? static_cast<double>(truth.recording.samples) / summary.duration_s : 0.0;
+  IMUCAL_TRY(writer.set_metadata(
+      "imu.timing", acq::timing_metadata_json(summary, rig.acquisition().timestamper().options())));
+  IMUCAL_TRY(writer.set_metadata("imu.driver", acq::driver_metadata_json(rig.driver())));
+  return writer.set_metadata("imu.mounting", acq::mounting_metadata_json(rig.acquisition().mounting()));
+}
+
+}  // namespace
+
+Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
+                                            const sim::Trajectory& trajectory, const std::string& log_path,
+                                            const std::string& truth_path,
+                                            const std::function<void(double fraction)>& progress) {
+  IMUCAL_TRY(options.validate());
+  IMUCAL_TRY(refuse_existing_outputs({log_path, truth_path}, options.overwrite));
+  auto settings = sim_driver_settings(options);
+  if (!settings.ok()) return settings.error();
+
+  log::SessionLogWriterOptions wopt;
+  wopt.overwrite = options.overwrite;
+  wopt.commit_interval_ns = 5 * kNsPerSecond;  // simulated: commit every 5 s of sample time
+  auto writer_r = log::SessionLogWriter::create(log_path, wopt);
+  if (!writer_r.ok()) return writer_r.error();
+  auto& writer = *writer_r;
+
+  ImuStreamInfo info = drivers::mpu6000::make_stream_info(*settings, "sim");
+  info.name = "imu0";
+  IMUCAL_TRY(write_session_metadata(*writer, options, info, truth_path));
+  auto stream = writer->add_imu_stream(info);
+  if (!stream.ok()) return stream.error();
+  IMUCAL_TRY(write_segment_events(*writer, trajectory));
 
   sim::SimTruth truth;
   truth.kind = options.kind;
@@ -149,8 +246,7 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
   truth.trajectory.poses = options.poses;
   truth.trajectory.segments = trajectory.segments();
   truth.trajectory.duration_s = ns_to_s(trajectory.end_ns() - trajectory.start_ns());
-  sim::RecordingSummary& rec = truth.recording;
-  rec.imu_rate_hz = options.imu_rate_hz;
+  truth.recording.imu_rate_hz = options.imu_rate_hz;
 
   // The emulated chip powers up kSetupNs of host time before the trajectory starts, so that the
   // driver has reset and configured it and the timestamper has locked on to its clock when the
@@ -168,72 +264,10 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
   auto rig_r = SimImuRig::create(TrajectorySensor::source(sensor), ro);
   if (!rig_r.ok()) return rig_r.error();
   SimImuRig& rig = **rig_r;
-
-  const TimeNs t_start = trajectory.start_ns(), t_end = trajectory.end_ns();
-  const TimeNs duration_ns = std::max<TimeNs>(1, t_end - t_start);
-  std::vector<ImuSample> out, batch;
-  constexpr std::size_t kBatch = 2000;
-  batch.reserve(kBatch);
-  bool done = false;
-  double last_progress = 0.0;
-  while (!done) {
-    const TimeNs now = rig.clock().now_ns() - offset;
-    for (const SampleDrop& d : options.drops) {
-      const TimeNs s0 = t_start + s_to_ns(d.start_s), s1 = s0 + s_to_ns(d.duration_s);
-      if (now >= s0 && now < s1) rig.stall_until(s1 + offset);
-    }
-    if (rig.clock().now_ns() - offset > t_end + kSetupNs) break;  // the chip stopped delivering
-    if (auto st = rig.acquisition().step(out); !st.ok()) return st.error().context("simulated acquisition");
-    for (ImuSample& s : out) {
-      s.t_ns -= offset;
-      if (s.t_ns < t_start) continue;
-      if (s.t_ns > t_end) {
-        done = true;
-        break;
-      }
-      if (s.flags & kImuFlagAccelSaturated) ++rec.accel_saturated;
-      if (s.flags & kImuFlagGyroSaturated) ++rec.gyro_saturated;
-      ++rec.samples;
-      batch.push_back(s);
-    }
-    if (batch.size() >= kBatch) {
-      IMUCAL_TRY(writer->append_imu(*stream, batch));
-      batch.clear();
-    }
-    const double f =
-        static_cast<double>(rig.clock().now_ns() - offset - t_start) / static_cast<double>(duration_ns);
-    if (progress && f - last_progress >= 0.01) {
-      last_progress = f;
-      progress(std::clamp(f, 0.0, 1.0));
-    }
-  }
-  if (!batch.empty()) IMUCAL_TRY(writer->append_imu(*stream, batch));
-
-  const TrajectorySensorStats& ss = sensor->stats();
-  const double count = static_cast<double>(std::max<std::int64_t>(1, ss.samples));
-  truth.trajectory.mean_accel_mps2 = ss.sum_accel_mps2 / count;
-  truth.trajectory.mean_rate_radps = ss.sum_rate_radps / count;
-  truth.trajectory.max_accel_mps2 = ss.max_accel_mps2;
-  truth.trajectory.max_rate_radps = ss.max_rate_radps;
-  rec.accel_bias_mean = ss.sum_accel_bias / count;
-  rec.gyro_bias_mean = ss.sum_gyro_bias / count;
-  rec.accel_bias_end = ss.accel_bias_end;
-  rec.gyro_bias_end = ss.gyro_bias_end;
-  rec.temperature_start_c = ss.temperature_start_c;
-  rec.temperature_end_c = ss.temperature_end_c;
-  rec.dropped_samples = std::max<std::int64_t>(0, ss.samples - rec.samples);
-
-  acq::RecordSummary summary;
-  summary.samples = static_cast<std::uint64_t>(rec.samples);
-  summary.timing = rig.acquisition().timestamper().stats();
-  summary.acquisition = rig.acquisition().stats();
-  summary.period_error_ppm = rig.acquisition().timestamper().period_error_ppm();
-  summary.duration_s = truth.trajectory.duration_s;
-  summary.rate_hz = summary.duration_s > 0 ? static_cast<double>(rec.samples) / summary.duration_s : 0.0;
-  IMUCAL_TRY(writer->set_metadata(
-      "imu.timing", acq::timing_metadata_json(summary, rig.acquisition().timestamper().options())));
-  IMUCAL_TRY(writer->set_metadata("imu.driver", acq::driver_metadata_json(rig.driver())));
-  IMUCAL_TRY(writer->set_metadata("imu.mounting", acq::mounting_metadata_json(rig.acquisition().mounting())));
+  IMUCAL_TRY(record_trajectory(rig, options, trajectory, offset, kSetupNs, *writer, *stream, truth.recording,
+                               progress));
+  add_sensor_truth(sensor->stats(), truth);
+  IMUCAL_TRY(write_acquisition_metadata(*writer, rig, truth));
   IMUCAL_TRY(writer->close());
   if (!truth_path.empty()) {
     auto st = sim::write_truth_yaml(truth_path, sim::truth_to_yaml(truth), options.overwrite);

@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <initializer_list>
 #include <string>
 #include <utility>
 #include <vector>
@@ -60,13 +61,15 @@ struct SimImuSessionOptions {
 /// chip can produce), the DLPF chosen for it, the full-scale ranges of `options.imu`.
 [[nodiscard]] Result<drivers::mpu6000::Settings> sim_driver_settings(const SimImuSessionOptions& options);
 
+/// Fails with kAlreadyExists naming the first of `paths` (empty ones skipped) that exists,
+/// unless `overwrite`: the simulated session writers check all their outputs before writing any.
+[[nodiscard]] Status refuse_existing_outputs(std::initializer_list<std::string> paths, bool overwrite);
+
 /// Simulates `trajectory` and writes the log at `log_path` and the truth at `truth_path` (no
 /// truth file when empty). `progress` (may be empty) receives the completed fraction. Returns
 /// the truth that was written.
-[[nodiscard]] Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
-                                                          const sim::Trajectory& trajectory,
-                                                          const std::string& log_path,
-                                                          const std::string& truth_path,
-                                                          const std::function<void(double)>& progress = {});
+[[nodiscard]] Result<sim::SimTruth> write_sim_imu_session(
+    const SimImuSessionOptions& options, const sim::Trajectory& trajectory, const std::string& log_path,
+    const std::string& truth_path, const std::function<void(double fraction)>& progress = {});
 
 }  // namespace imucal::sim
