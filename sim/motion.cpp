@@ -117,8 +117,8 @@ void min_jerk(double tau, double* s, double* ds, double* dds) {
 Status StaticProtocolOptions::validate() const {
   if (poses < 9 || poses > 100) {
     return make_error(Errc::kInvalidArgument,
-                      "static protocol: --poses must be within 9..100 (Tedaldi et "
-                      "al. need at least 9 attitudes; 36-50 is recommended), got " +
+                      "the static protocol needs 9..100 poses (Tedaldi et al. need at least 9 "
+                      "attitudes; 36-50 is recommended), got " +
                           std::to_string(poses));
   }
   if (!(initial_still_s >= 1.0 && initial_still_s <= 3600.0)) {
