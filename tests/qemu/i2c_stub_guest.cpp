@@ -150,6 +150,53 @@ void error_checks() {
   }
 }
 
+/// A FIFO read through i2c-dev, from a driver that streams: frames decoded, the newest kept back.
+void fifo_read_checks(I2cDevBus& bus, mpu::Mpu6000& driver, const mpu::Settings& settings, TimeNs now_ns,
+                      std::int16_t temp_raw) {
+  // FIFO: three frames behind FIFO_COUNT = 42; the driver reads all but the newest, which it
+  // leaves in the FIFO (docs/mpu6000.md). The stub returns registers 0x74.. for the block read,
+  // so the frames are seeded there. Byte 1 lands on WHO_AM_I (0x75): the first sample's accel x
+  // (0x1068) keeps it at 0x68. The stub's FIFO_COUNT does not go down after the read, which the
+  // driver takes for frames that arrived meanwhile.
+  std::array<std::uint8_t, 42> frames{};
+  for (int f = 0; f < 3; ++f) {
+    std::uint8_t* p = frames.data() + 14 * f;
+    const std::int16_t values[7] = {static_cast<std::int16_t>(0x1068 + f),
+                                    static_cast<std::int16_t>(-200 - f),
+                                    4096,
+                                    temp_raw,
+                                    static_cast<std::int16_t>(10 + f),
+                                    -20,
+                                    static_cast<std::int16_t>(300 * (f + 1))};
+    for (int i = 0; i < 7; ++i) {
+      p[2 * i] = static_cast<std::uint8_t>(static_cast<std::uint16_t>(values[i]) >> 8);
+      p[2 * i + 1] = static_cast<std::uint8_t>(static_cast<std::uint16_t>(values[i]) & 0xFF);
+    }
+  }
+  std::vector<std::pair<std::uint8_t, std::uint8_t>> fifo_seed{{reg(mpu::Register::FIFO_COUNTH), 0},
+                                                               {reg(mpu::Register::FIFO_COUNTH) + 1, 42}};
+  for (int i = 0; i < 42; ++i) fifo_seed.emplace_back(static_cast<std::uint8_t>(0x74 + i), frames[i]);
+  check(seed(bus, fifo_seed), "seed FIFO_COUNT = 42 and three frames");
+  auto polled = driver.poll(now_ns + settings.read_interval_ns);
+  const bool got = polled.ok() && polled->batch && polled->batch->samples.size() == 2;
+  check(got, "one FIFO read yields two samples, the newest frame stays in the FIFO",
+        polled.ok()
+            ? (polled->batch ? std::to_string(polled->batch->samples.size()) + " samples" : "no batch")
+            : polled.error().message);
+  if (got) {
+    const auto& a = polled->batch->samples[0];
+    const auto& b = polled->batch->samples[1];
+    check(a.accel[0] == 0x1068 && a.accel[1] == -200 && a.accel[2] == 4096 && a.temp == temp_raw &&
+              a.gyro[0] == 10 && a.gyro[1] == -20 && a.gyro[2] == 300,
+          "first sample decoded from the FIFO bytes");
+    check(b.accel[0] == 0x1069 && b.accel[1] == -201 && b.gyro[0] == 11 && b.gyro[2] == 600,
+          "second sample decoded from the FIFO bytes");
+    check((a.flags & imucal::kImuFlagDeviceReset) != 0, "first sample after configuration flagged as reset");
+  }
+  check(driver.counters().bad_transfers == 0, "driver counted no bad transfers",
+        std::to_string(driver.counters().bad_transfers));
+}
+
 void driver_checks(I2cDevBus& bus) {
   mpu::Settings settings;
   settings.bus = mpu::BusKind::kI2c;
@@ -223,48 +270,7 @@ void driver_checks(I2cDevBus& bus) {
   auto smplrt = bus.read_u8(reg(mpu::Register::SMPLRT_DIV));
   check(smplrt.ok() && *smplrt == 4, "SMPLRT_DIV = 4 in the stub");
 
-  // FIFO: three frames behind FIFO_COUNT = 42; the driver reads all but the newest, which it
-  // leaves in the FIFO (docs/mpu6000.md). The stub returns registers 0x74.. for the block read,
-  // so the frames are seeded there. Byte 1 lands on WHO_AM_I (0x75): the first sample's accel x
-  // (0x1068) keeps it at 0x68. The stub's FIFO_COUNT does not go down after the read, which the
-  // driver takes for frames that arrived meanwhile.
-  std::array<std::uint8_t, 42> frames{};
-  for (int f = 0; f < 3; ++f) {
-    std::uint8_t* p = frames.data() + 14 * f;
-    const std::int16_t values[7] = {static_cast<std::int16_t>(0x1068 + f),
-                                    static_cast<std::int16_t>(-200 - f),
-                                    4096,
-                                    temp_raw,
-                                    static_cast<std::int16_t>(10 + f),
-                                    -20,
-                                    static_cast<std::int16_t>(300 * (f + 1))};
-    for (int i = 0; i < 7; ++i) {
-      p[2 * i] = static_cast<std::uint8_t>(static_cast<std::uint16_t>(values[i]) >> 8);
-      p[2 * i + 1] = static_cast<std::uint8_t>(static_cast<std::uint16_t>(values[i]) & 0xFF);
-    }
-  }
-  std::vector<std::pair<std::uint8_t, std::uint8_t>> fifo_seed{{reg(mpu::Register::FIFO_COUNTH), 0},
-                                                               {reg(mpu::Register::FIFO_COUNTH) + 1, 42}};
-  for (int i = 0; i < 42; ++i) fifo_seed.emplace_back(static_cast<std::uint8_t>(0x74 + i), frames[i]);
-  check(seed(bus, fifo_seed), "seed FIFO_COUNT = 42 and three frames");
-  auto polled = driver.poll(now_ns + settings.read_interval_ns);
-  const bool got = polled.ok() && polled->batch && polled->batch->samples.size() == 2;
-  check(got, "one FIFO read yields two samples, the newest frame stays in the FIFO",
-        polled.ok()
-            ? (polled->batch ? std::to_string(polled->batch->samples.size()) + " samples" : "no batch")
-            : polled.error().message);
-  if (got) {
-    const auto& a = polled->batch->samples[0];
-    const auto& b = polled->batch->samples[1];
-    check(a.accel[0] == 0x1068 && a.accel[1] == -200 && a.accel[2] == 4096 && a.temp == temp_raw &&
-              a.gyro[0] == 10 && a.gyro[1] == -20 && a.gyro[2] == 300,
-          "first sample decoded from the FIFO bytes");
-    check(b.accel[0] == 0x1069 && b.accel[1] == -201 && b.gyro[0] == 11 && b.gyro[2] == 600,
-          "second sample decoded from the FIFO bytes");
-    check((a.flags & imucal::kImuFlagDeviceReset) != 0, "first sample after configuration flagged as reset");
-  }
-  check(driver.counters().bad_transfers == 0, "driver counted no bad transfers",
-        std::to_string(driver.counters().bad_transfers));
+  fifo_read_checks(bus, driver, settings, now_ns, temp_raw);
 }
 
 }  // namespace

@@ -53,6 +53,156 @@ TEST(CameraSession, DefaultsAreValidAndDocumented) {
   EXPECT_GT(Eigen::AngleAxisd(o.T_cam_imu.linear()).angle(), 0.1);
 }
 
+/// The shortest distance between neighbouring corners: the square size in the image.
+double square_size_px(const sim::CornerTruth& corners, int cols, int rows) {
+  double square_px = std::numeric_limits<double>::infinity();
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      const Eigen::Vector2d& p = corners.px[r * cols + c];
+      if (c + 1 < cols) square_px = std::min(square_px, (corners.px[r * cols + c + 1] - p).norm());
+      if (r + 1 < rows) square_px = std::min(square_px, (corners.px[(r + 1) * cols + c] - p).norm());
+    }
+  }
+  return square_px;
+}
+
+/// Each detected corner is the nearest true corner, within `gate_px` of it, and no true corner
+/// is claimed twice; the detector's ordering of the grid is not relied upon. Fills `match`
+/// (detected index -> true index); false when a corner does not match.
+bool match_corners(const std::vector<cv::Point2f>& found, const sim::CornerTruth& truth, double gate_px,
+                   std::vector<std::size_t>& match) {
+  const std::size_t n = truth.px.size();
+  match.assign(found.size(), 0);
+  std::vector<bool> taken(n, false);
+  for (std::size_t i = 0; i < found.size(); ++i) {
+    const Eigen::Vector2d d(found[i].x, found[i].y);
+    std::size_t best = 0;
+    for (std::size_t j = 1; j < n; ++j) {
+      if ((d - truth.px[j]).squaredNorm() < (d - truth.px[best]).squaredNorm()) best = j;
+    }
+    if ((d - truth.px[best]).norm() > gate_px || taken[best]) return false;
+    taken[best] = true;
+    match[i] = best;
+  }
+  return true;
+}
+
+/// The truth file holds the camera in Kalibr camchain naming, and the IMU truth.
+void expect_camera_truth(const std::string& truth_path, const CamImuSimOptions& o) {
+  const YAML::Node doc = YAML::LoadFile(truth_path);
+  ASSERT_TRUE(doc["camera"]) << "truth has no camera section";
+  const YAML::Node cam0 = doc["camera"]["cam0"];
+  auto cam = camera_from_yaml(cam0, truth_path);
+  ASSERT_TRUE(cam.ok()) << cam.error().message;
+  EXPECT_EQ(cam->intrinsics, o.camera.intrinsics);
+  EXPECT_EQ(cam->distortion_coeffs, o.camera.distortion_coeffs);
+  EXPECT_DOUBLE_EQ(cam0["timeshift_cam_imu"].as<double>(), 0.015);
+  Eigen::Matrix4d T;
+  for (int r = 0; r < 4; ++r) {
+    for (int c = 0; c < 4; ++c) T(r, c) = cam0["T_cam_imu"][r][c].as<double>();
+  }
+  EXPECT_TRUE(T.isApprox(o.T_cam_imu.matrix(), 1e-12));
+  EXPECT_EQ(doc["camera"]["target"]["targetCols"].as<int>(), o.target.cols);
+  EXPECT_TRUE(doc["imu"]) << "the IMU truth is kept";
+}
+
+/// Corners detected in the frames sit where the board is at IMU time t_cam + timeshift
+/// (mid-exposure), not at the exposure start and not with the opposite sign.
+void expect_mid_exposure_stamps(const log::SessionLogReader& reader, int cam_id, const CamImuSimOptions& o) {
+  auto motion = sim::CheckerboardMotion::create(o.motion, o.seed);
+  ASSERT_TRUE(motion.ok());
+  const Eigen::Isometry3d T_world_board = (*motion)->T_world_board(o.target);
+  auto renderer = sim::CheckerboardRenderer::create(o.camera, o.target, {});
+  ASSERT_TRUE(renderer.ok());
+  auto corners_at = [&](TimeNs t_imu) {
+    const sim::RigState s = (*motion)->at(t_imu);
+    Eigen::Isometry3d T_world_body = Eigen::Isometry3d::Identity();
+    T_world_body.linear() = s.q_world_body.toRotationMatrix();
+    T_world_body.translation() = s.p_world_body;
+    return (*renderer)->project_corners(o.T_cam_imu * T_world_body.inverse() * T_world_board);
+  };
+  auto max_distance = [](const sim::CornerTruth& a, const sim::CornerTruth& b) {
+    double d = 0.0;
+    for (std::size_t i = 0; i < a.px.size(); ++i) d = std::max(d, (a.px[i] - b.px[i]).norm());
+    return d;
+  };
+  const int cols = o.target.cols;
+  const int rows = o.target.rows;
+  const TimeNs shift = 15'000'000;
+  const TimeNs half_exposure = o.exposure_ns / 2;
+  double sq_mid = 0, sq_start = 0, sq_flipped = 0;
+  int corners = 0, frames = 0, blurred = 0, still = 0, not_found = 0, unmatched = 0;
+  int frames_mid_best = 0;
+  auto visited = reader.for_each_frame(cam_id, log::kTimeMin, log::kTimeMax, [&](const CameraFrame& f) {
+    EXPECT_EQ(f.exposure_ns, o.exposure_ns);
+    const auto mid = corners_at(f.t_ns + shift);
+    if (mid.visible_count != static_cast<int>(mid.px.size())) return true;
+    const auto start = corners_at(f.t_ns + shift - half_exposure);
+    const auto end = corners_at(f.t_ns + shift - half_exposure + o.exposure_ns);
+    const auto flipped = corners_at(f.t_ns - shift);
+    const double square_px = square_size_px(mid, cols, rows);
+    // A corner smeared over more than half a square is no corner to locate.
+    if (max_distance(start, end) > 0.5 * square_px) {
+      ++blurred;
+      return true;
+    }
+    // Only frames with clear motion discriminate.
+    if (max_distance(start, mid) < 0.3) {
+      ++still;
+      return true;
+    }
+    const cv::Mat image = decode(f);
+    std::vector<cv::Point2f> found;
+    if (!cv::findChessboardCorners(image, cv::Size(cols, rows), found,
+                                   cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE)) {
+      ++not_found;
+      return true;
+    }
+    cv::cornerSubPix(image, found, cv::Size(4, 4), cv::Size(-1, -1),
+                     cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 1e-3));
+    // Each detected corner well within a square of its true corner.
+    std::vector<std::size_t> match;
+    if (!match_corners(found, mid, 0.25 * square_px, match)) {
+      ++unmatched;
+      return true;
+    }
+    double f_mid = 0, f_start = 0, f_flipped = 0;
+    for (std::size_t i = 0; i < found.size(); ++i) {
+      const Eigen::Vector2d d(found[i].x, found[i].y);
+      f_mid += (d - mid.px[match[i]]).squaredNorm();
+      f_start += (d - start.px[match[i]]).squaredNorm();
+      f_flipped += (d - flipped.px[match[i]]).squaredNorm();
+    }
+    sq_mid += f_mid;
+    sq_start += f_start;
+    sq_flipped += f_flipped;
+    corners += static_cast<int>(found.size());
+    if (f_mid < f_start && f_mid < f_flipped) ++frames_mid_best;
+    ++frames;
+    return true;
+  });
+  ASSERT_TRUE(visited.ok()) << visited.error().message;
+  ASSERT_GE(frames, 20) << "too few moving frames with the whole board in view";
+  const double rms_mid = std::sqrt(sq_mid / corners);
+  const double rms_start = std::sqrt(sq_start / corners);
+  const double rms_flipped = std::sqrt(sq_flipped / corners);
+  std::printf("%d frames (skipped: %d blurred over half a square, %d still, %d not found, %d not matched)\n",
+              frames, blurred, still, not_found, unmatched);
+  std::printf("corner RMS vs mid-exposure %.3f px, vs exposure start %.3f px, vs -timeshift %.3f px\n",
+              rms_mid, rms_start, rms_flipped);
+  // Near the half-square limit the detector now and then misses the board or places an outer
+  // corner squares off; such frames are few.
+  EXPECT_LE(not_found + unmatched, frames / 10);
+  // Mid-exposure: the renderer's accuracy (0.055 px RMS for still frames, see
+  // test_camera_render.cpp). The wrong instants are pixels away, in every frame.
+  EXPECT_LT(rms_mid, 0.1);
+  EXPECT_GT(rms_start, 0.5);
+  EXPECT_GT(rms_flipped, 1.5);
+  EXPECT_LT(rms_mid, 0.1 * rms_start);
+  EXPECT_LT(rms_mid, 0.1 * rms_flipped);
+  EXPECT_EQ(frames_mid_best, frames) << "frames whose corners are not closest to the mid-exposure truth";
+}
+
 TEST(CameraSession, WritesLogAndTruthWithMidExposureStamps) {
   const std::string dir = test::scratch_dir();
   const std::string log = dir + "/camimu.imulog";
@@ -93,138 +243,8 @@ TEST(CameraSession, WritesLogAndTruthWithMidExposureStamps) {
   for (std::size_t i = 1; i < times->size(); ++i) EXPECT_EQ((*times)[i] - (*times)[i - 1], 50'000'000);
   EXPECT_NE(reader.metadata().at("target").find("checkerboard"), std::string::npos);
 
-  // Truth: the camera in Kalibr camchain naming.
-  const YAML::Node doc = YAML::LoadFile(truth_path);
-  ASSERT_TRUE(doc["camera"]) << "truth has no camera section";
-  const YAML::Node cam0 = doc["camera"]["cam0"];
-  auto cam = camera_from_yaml(cam0, truth_path);
-  ASSERT_TRUE(cam.ok()) << cam.error().message;
-  EXPECT_EQ(cam->intrinsics, o.camera.intrinsics);
-  EXPECT_EQ(cam->distortion_coeffs, o.camera.distortion_coeffs);
-  EXPECT_DOUBLE_EQ(cam0["timeshift_cam_imu"].as<double>(), 0.015);
-  Eigen::Matrix4d T;
-  for (int r = 0; r < 4; ++r) {
-    for (int c = 0; c < 4; ++c) T(r, c) = cam0["T_cam_imu"][r][c].as<double>();
-  }
-  EXPECT_TRUE(T.isApprox(o.T_cam_imu.matrix(), 1e-12));
-  EXPECT_EQ(doc["camera"]["target"]["targetCols"].as<int>(), o.target.cols);
-  EXPECT_TRUE(doc["imu"]) << "the IMU truth is kept";
-
-  // Timing: corners detected in the frames sit where the board is at IMU time
-  // t_cam + timeshift (mid-exposure), not at the exposure start and not with the opposite sign.
-  auto motion = sim::CheckerboardMotion::create(o.motion, o.seed);
-  ASSERT_TRUE(motion.ok());
-  const Eigen::Isometry3d T_world_board = (*motion)->T_world_board(o.target);
-  auto renderer = sim::CheckerboardRenderer::create(o.camera, o.target, {});
-  ASSERT_TRUE(renderer.ok());
-  auto corners_at = [&](TimeNs t_imu) {
-    const sim::RigState s = (*motion)->at(t_imu);
-    Eigen::Isometry3d T_world_body = Eigen::Isometry3d::Identity();
-    T_world_body.linear() = s.q_world_body.toRotationMatrix();
-    T_world_body.translation() = s.p_world_body;
-    return (*renderer)->project_corners(o.T_cam_imu * T_world_body.inverse() * T_world_board);
-  };
-  auto max_distance = [](const sim::CornerTruth& a, const sim::CornerTruth& b) {
-    double d = 0.0;
-    for (std::size_t i = 0; i < a.px.size(); ++i) d = std::max(d, (a.px[i] - b.px[i]).norm());
-    return d;
-  };
-  const int cols = o.target.cols;
-  const int rows = o.target.rows;
-  const TimeNs shift = 15'000'000;
-  const TimeNs half_exposure = o.exposure_ns / 2;
-  double sq_mid = 0, sq_start = 0, sq_flipped = 0;
-  int corners = 0, frames = 0, blurred = 0, still = 0, not_found = 0, unmatched = 0;
-  int frames_mid_best = 0;
-  auto visited = reader.for_each_frame(*cam_id, log::kTimeMin, log::kTimeMax, [&](const CameraFrame& f) {
-    EXPECT_EQ(f.exposure_ns, o.exposure_ns);
-    const auto mid = corners_at(f.t_ns + shift);
-    if (mid.visible_count != static_cast<int>(mid.px.size())) return true;
-    const auto start = corners_at(f.t_ns + shift - half_exposure);
-    const auto end = corners_at(f.t_ns + shift - half_exposure + o.exposure_ns);
-    const auto flipped = corners_at(f.t_ns - shift);
-    // Square size: the shortest distance between neighbouring corners at mid-exposure.
-    double square_px = std::numeric_limits<double>::infinity();
-    for (int r = 0; r < rows; ++r) {
-      for (int c = 0; c < cols; ++c) {
-        const Eigen::Vector2d& p = mid.px[r * cols + c];
-        if (c + 1 < cols) square_px = std::min(square_px, (mid.px[r * cols + c + 1] - p).norm());
-        if (r + 1 < rows) square_px = std::min(square_px, (mid.px[(r + 1) * cols + c] - p).norm());
-      }
-    }
-    // A corner smeared over more than half a square is no corner to locate.
-    if (max_distance(start, end) > 0.5 * square_px) {
-      ++blurred;
-      return true;
-    }
-    // Only frames with clear motion discriminate.
-    if (max_distance(start, mid) < 0.3) {
-      ++still;
-      return true;
-    }
-    const cv::Mat image = decode(f);
-    std::vector<cv::Point2f> found;
-    if (!cv::findChessboardCorners(image, cv::Size(cols, rows), found,
-                                   cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE)) {
-      ++not_found;
-      return true;
-    }
-    cv::cornerSubPix(image, found, cv::Size(4, 4), cv::Size(-1, -1),
-                     cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 1e-3));
-    // Each detected corner is the nearest true corner, well within a square of it, and no true
-    // corner is claimed twice; the detector's ordering of the grid is not relied upon.
-    const std::size_t n = mid.px.size();
-    const double gate_px = 0.25 * square_px;
-    std::vector<std::size_t> match(found.size());
-    std::vector<bool> taken(n, false);
-    for (std::size_t i = 0; i < found.size(); ++i) {
-      const Eigen::Vector2d d(found[i].x, found[i].y);
-      std::size_t best = 0;
-      for (std::size_t j = 1; j < n; ++j) {
-        if ((d - mid.px[j]).squaredNorm() < (d - mid.px[best]).squaredNorm()) best = j;
-      }
-      if ((d - mid.px[best]).norm() > gate_px || taken[best]) {
-        ++unmatched;
-        return true;
-      }
-      taken[best] = true;
-      match[i] = best;
-    }
-    double f_mid = 0, f_start = 0, f_flipped = 0;
-    for (std::size_t i = 0; i < found.size(); ++i) {
-      const Eigen::Vector2d d(found[i].x, found[i].y);
-      f_mid += (d - mid.px[match[i]]).squaredNorm();
-      f_start += (d - start.px[match[i]]).squaredNorm();
-      f_flipped += (d - flipped.px[match[i]]).squaredNorm();
-    }
-    sq_mid += f_mid;
-    sq_start += f_start;
-    sq_flipped += f_flipped;
-    corners += static_cast<int>(found.size());
-    if (f_mid < f_start && f_mid < f_flipped) ++frames_mid_best;
-    ++frames;
-    return true;
-  });
-  ASSERT_TRUE(visited.ok()) << visited.error().message;
-  ASSERT_GE(frames, 20) << "too few moving frames with the whole board in view";
-  const double rms_mid = std::sqrt(sq_mid / corners);
-  const double rms_start = std::sqrt(sq_start / corners);
-  const double rms_flipped = std::sqrt(sq_flipped / corners);
-  std::printf("%d frames (skipped: %d blurred over half a square, %d still, %d not found, %d not matched)\n",
-              frames, blurred, still, not_found, unmatched);
-  std::printf("corner RMS vs mid-exposure %.3f px, vs exposure start %.3f px, vs -timeshift %.3f px\n",
-              rms_mid, rms_start, rms_flipped);
-  // Near the half-square limit the detector now and then misses the board or places an outer
-  // corner squares off; such frames are few.
-  EXPECT_LE(not_found + unmatched, frames / 10);
-  // Mid-exposure: the renderer's accuracy (0.055 px RMS for still frames, see
-  // test_camera_render.cpp). The wrong instants are pixels away, in every frame.
-  EXPECT_LT(rms_mid, 0.1);
-  EXPECT_GT(rms_start, 0.5);
-  EXPECT_GT(rms_flipped, 1.5);
-  EXPECT_LT(rms_mid, 0.1 * rms_start);
-  EXPECT_LT(rms_mid, 0.1 * rms_flipped);
-  EXPECT_EQ(frames_mid_best, frames) << "frames whose corners are not closest to the mid-exposure truth";
+  ASSERT_NO_FATAL_FAILURE(expect_camera_truth(truth_path, o));
+  expect_mid_exposure_stamps(reader, *cam_id, o);
 }
 
 TEST(CameraSession, DeterministicUnderSeed) {

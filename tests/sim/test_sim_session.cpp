@@ -47,19 +47,9 @@ std::vector<ImuSample> read_all(const std::string& path, ImuStreamInfo* info = n
   return samples.ok() ? *samples : std::vector<ImuSample>{};
 }
 
-TEST(SimSession, WritesRawCountsWithNominalConversionEventsAndTruth) {
-  const std::string dir = test::scratch_dir();
-  const std::string log = dir + "/s.imulog", truth_path = sim::truth_path_for(log);
-  EXPECT_EQ(truth_path, dir + "/s.truth.yaml");
-  auto traj = short_static(4);
-  SimImuSessionOptions o = options(4);
-  o.imu.accel_full_scale_g = 8;
-  o.imu.gyro_full_scale_dps = 1000;
-  auto truth = write_sim_imu_session(o, *traj, log, truth_path);
-  ASSERT_TRUE(truth.ok()) << truth.error().message;
+// The checks of the session below, one per part of what it wrote.
 
-  ImuStreamInfo info;
-  const auto samples = read_all(log, &info);
+void expect_raw_counts_with_nominal_conversion(const ImuStreamInfo& info) {
   EXPECT_EQ(info.units, ImuUnits::kRaw);
   EXPECT_EQ(info.device, "sim");
   EXPECT_EQ(info.accel_full_scale_g, 8);
@@ -69,18 +59,21 @@ TEST(SimSession, WritesRawCountsWithNominalConversionEventsAndTruth) {
   EXPECT_DOUBLE_EQ(info.temperature_scale, 1.0 / 340.0);
   EXPECT_DOUBLE_EQ(info.temperature_offset, 36.53);
   EXPECT_EQ(info.rate_hz, 100.0);
+}
 
+void expect_samples_at_the_chips_rate(const std::vector<ImuSample>& samples, const ImuStreamInfo& info,
+                                      const sim::Trajectory& traj, const sim::SimTruth& truth) {
   // The emulated chip runs 1.5 % slow (the default): 98.5 samples per second of trajectory, each
   // stamped by the timestamper from the data-ready edges.
-  const double duration = ns_to_s(traj->end_ns() - traj->start_ns());
+  const double duration = ns_to_s(traj.end_ns() - traj.start_ns());
   const double chip_period_ns = 1e7 / (1.0 - 0.015);
   EXPECT_NEAR(static_cast<double>(samples.size()), duration * 1e9 / chip_period_ns, 1.0);
-  EXPECT_EQ(truth->recording.samples, static_cast<std::int64_t>(samples.size()));
-  EXPECT_EQ(truth->recording.dropped_samples, 0);
+  EXPECT_EQ(truth.recording.samples, static_cast<std::int64_t>(samples.size()));
+  EXPECT_EQ(truth.recording.dropped_samples, 0);
   ASSERT_FALSE(samples.empty());
-  EXPECT_GE(samples.front().t_ns, traj->start_ns());
-  EXPECT_LE(samples.front().t_ns, traj->start_ns() + static_cast<TimeNs>(chip_period_ns) + 1);
-  EXPECT_LE(samples.back().t_ns, traj->end_ns());
+  EXPECT_GE(samples.front().t_ns, traj.start_ns());
+  EXPECT_LE(samples.front().t_ns, traj.start_ns() + static_cast<TimeNs>(chip_period_ns) + 1);
+  EXPECT_LE(samples.back().t_ns, traj.end_ns());
   for (std::size_t k = 0; k < samples.size(); ++k) {
     if (k > 0) {
       ASSERT_NEAR(static_cast<double>(samples[k].t_ns - samples[k - 1].t_ns), chip_period_ns, 20'000.0) << k;
@@ -94,7 +87,9 @@ TEST(SimSession, WritesRawCountsWithNominalConversionEventsAndTruth) {
   // First sample: flat rig, z reads about +1 g (within scale error, bias and noise).
   const double az_g = samples[0].accel.z() * info.accel.scale.z() / 9.80665;
   EXPECT_NEAR(az_g, 1.0, 0.15);
+}
 
+void expect_events_and_driver_metadata(const std::string& log, std::size_t samples) {
   auto reader = log::SessionLogReader::open(log);
   ASSERT_TRUE(reader.ok());
   EXPECT_TRUE((*reader)->health().complete);
@@ -117,12 +112,17 @@ TEST(SimSession, WritesRawCountsWithNominalConversionEventsAndTruth) {
   EXPECT_EQ(driver["settings"]["accel_full_scale_g"].get<int>(), 8);
   EXPECT_EQ(driver["counters"]["fifo_overflows"].get<int>(), 0);
   EXPECT_EQ(driver["counters"]["bad_transfers"].get<int>(), 0);
-  EXPECT_GE(driver["counters"]["samples"].get<std::int64_t>(), static_cast<std::int64_t>(samples.size()));
+  EXPECT_GE(driver["counters"]["samples"].get<std::int64_t>(), static_cast<std::int64_t>(samples));
   const auto timing = nlohmann::json::parse((*reader)->metadata().at("imu.timing"));
   // The period is 1 / (1 - 0.015) = 1.015228 times nominal.
   EXPECT_NEAR(timing["period_error_ppm"].get<double>(), 15'228.4, 100.0);
+}
 
-  // The truth file round trip: the imu: section reads back to the same parameters, bit for bit.
+/// The truth file round trip: the imu: section reads back to the same parameters, bit for bit,
+/// and a session from them has the same samples.
+void expect_truth_round_trip(const std::string& dir, const std::string& truth_path,
+                             const SimImuSessionOptions& o, const sim::Trajectory& traj,
+                             const std::vector<ImuSample>& samples) {
   auto loaded = sim::load_imu_params(truth_path);
   ASSERT_TRUE(loaded.ok()) << loaded.error().message;
   EXPECT_EQ(loaded->accel_scale, o.imu.accel_scale);
@@ -148,13 +148,32 @@ TEST(SimSession, WritesRawCountsWithNominalConversionEventsAndTruth) {
   SimImuSessionOptions o2 = o;
   o2.imu = *loaded;
   o2.params_from_file = true;
-  ASSERT_TRUE(write_sim_imu_session(o2, *traj, log2, "").ok());
+  ASSERT_TRUE(write_sim_imu_session(o2, traj, log2, "").ok());
   const auto again = read_all(log2);
   ASSERT_EQ(again.size(), samples.size());
   for (std::size_t k = 0; k < samples.size(); ++k) {
     ASSERT_EQ(again[k].accel, samples[k].accel);
     ASSERT_EQ(again[k].gyro, samples[k].gyro);
   }
+}
+
+TEST(SimSession, WritesRawCountsWithNominalConversionEventsAndTruth) {
+  const std::string dir = test::scratch_dir();
+  const std::string log = dir + "/s.imulog", truth_path = sim::truth_path_for(log);
+  EXPECT_EQ(truth_path, dir + "/s.truth.yaml");
+  auto traj = short_static(4);
+  SimImuSessionOptions o = options(4);
+  o.imu.accel_full_scale_g = 8;
+  o.imu.gyro_full_scale_dps = 1000;
+  auto truth = write_sim_imu_session(o, *traj, log, truth_path);
+  ASSERT_TRUE(truth.ok()) << truth.error().message;
+
+  ImuStreamInfo info;
+  const auto samples = read_all(log, &info);
+  expect_raw_counts_with_nominal_conversion(info);
+  ASSERT_NO_FATAL_FAILURE(expect_samples_at_the_chips_rate(samples, info, *traj, *truth));
+  ASSERT_NO_FATAL_FAILURE(expect_events_and_driver_metadata(log, samples.size()));
+  expect_truth_round_trip(dir, truth_path, o, *traj, samples);
 }
 
 TEST(SimSession, SameSeedSameSamplesOtherSeedOtherSamples) {
