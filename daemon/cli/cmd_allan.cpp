@@ -2,21 +2,18 @@
 // written as a Kalibr imu.yaml and as JSON with the curves (docs/static-calibration.md).
 
 #include <spdlog/spdlog.h>
-#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <iostream>
 #include <memory>
-#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
-#include "calib/allan.hpp"
-#include "calib/static_detector.hpp"
+#include "app/result_writers.hpp"
+#include "app/stream_stats.hpp"
+#include "app/streams.hpp"
 #include "daemon/cli/command.hpp"
-#include "log/session_log.hpp"
 
 namespace imucal::cli {
 namespace {
@@ -31,61 +28,18 @@ struct AllanCliOptions {
   std::string json_path;
 };
 
-void write_text(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out << text;
-  out.close();
-  if (!out) throw CliExit{kExitIo, "could not write " + path + ": check the folder exists and is writable"};
-}
-
-nlohmann::json sensor_json(const calib::AllanCurve& curve, const std::vector<calib::AllanNoise>& fits,
-                           const std::string& unit) {
-  using nlohmann::json;
-  json j;
-  j["unit"] = unit;
-  json axes = json::array();
-  for (int a = 0; a < 3; ++a) {
-    const auto& f = fits[a];
-    axes.push_back(
-        {{"axis", std::string(1, "xyz"[a])},
-         {"noise_density", f.noise_density},
-         {"random_walk", f.random_walk},
-         {"random_walk_is_upper_bound", f.random_walk_is_bound},
-         {"bias_instability", f.bias_instability},
-         {"bias_instability_tau_s", f.bias_instability_tau_s},
-         {"bias_instability_is_upper_bound", f.bias_instability_is_bound},
-         {"lines",
-          {{"white_noise", {{"adev", "N / sqrt(tau)"}, {"tau_s", {f.white_tau_min_s, f.white_tau_max_s}}}},
-           {"random_walk", {{"adev", "K * sqrt(tau / 3)"}, {"tau_s", {f.rw_tau_min_s, f.rw_tau_max_s}}}},
-           {"bias_instability", {{"adev", "0.664 * B"}, {"tau_s", f.bias_instability_tau_s}}}}}});
-  }
-  j["axes"] = axes;
-  json c;
-  c["tau_s"] = curve.tau_s;
-  for (int a = 0; a < 3; ++a) {
-    std::vector<double> v;
-    for (const auto& d : curve.adev) v.push_back(d[a]);
-    c[std::string("adev_") + "xyz"[a]] = v;
-  }
-  c["clusters"] = curve.clusters;
-  j["curve"] = c;
-  return j;
-}
-
 void run(const AllanCliOptions& o) {
-  auto log = log::SessionLogReader::open(o.log_path);
-  if (!log.ok()) fail(log.error(), "cannot read " + o.log_path);
-  const auto& reader = **log;
-  if (reader.health().damaged && !o.allow_damaged) {
-    throw CliExit{kExitInput, o.log_path + " is damaged (" + reader.health().damage_message +
-                                  "); pass --allow-damaged to use what is readable"};
+  bool refused = false;
+  auto loaded = app::load_imu_stream(o.log_path, o.stream,
+                                     o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse,
+                                     &refused);
+  if (!loaded.ok()) {
+    if (refused)
+      throw CliExit{kExitInput, loaded.error().message + "; pass --allow-damaged to use what is readable"};
+    fail(loaded.error());
   }
-  auto id = reader.find_imu_stream(o.stream);
-  if (!id.ok()) fail(id.error(), "no IMU stream in " + o.log_path);
-  const ImuStreamInfo info = reader.imu_streams().at(*id);
-  auto samples = reader.read_imu(*id);
-  if (!samples.ok()) fail(samples.error(), "cannot read the IMU samples of " + o.log_path);
-  const auto& s = *samples;
+  const ImuStreamInfo& info = loaded->info;
+  const auto& s = loaded->samples;
   if (s.size() < 1000) {
     throw CliExit{kExitData, "the stream has " + std::to_string(s.size()) +
                                  " samples: record at least several minutes with the rig at rest (hours for "
@@ -93,28 +47,11 @@ void run(const AllanCliOptions& o) {
   }
 
   // The longest run without gaps, resets or saturation: the Allan deviation needs even sampling.
-  std::vector<TimeNs> dts;
-  for (std::size_t i = 1; i < s.size(); ++i) dts.push_back(s[i].t_ns - s[i - 1].t_ns);
-  std::nth_element(dts.begin(), dts.begin() + static_cast<std::ptrdiff_t>(dts.size() / 2), dts.end());
-  const TimeNs period_ns = dts[dts.size() / 2];
-  if (period_ns <= 0) throw CliExit{kExitInput, "the timestamps of " + o.log_path + " do not increase"};
-  const double rate_hz = 1e9 / static_cast<double>(period_ns);
-  std::size_t best0 = 0, best1 = 0, run0 = 0;
-  int breaks = 0;
-  for (std::size_t i = 0; i <= s.size(); ++i) {
-    const bool brk = i == s.size() ||
-                     (s[i].flags & (kImuFlagGapBefore | kImuFlagDeviceReset | kImuFlagAccelSaturated |
-                                    kImuFlagGyroSaturated)) ||
-                     (i > 0 && (s[i].t_ns - s[i - 1].t_ns > period_ns * 3 / 2 || s[i].t_ns <= s[i - 1].t_ns));
-    if (brk) {
-      if (i < s.size()) ++breaks;
-      if (i - run0 > best1 - best0) {
-        best0 = run0;
-        best1 = i;
-      }
-      run0 = (i < s.size() && (s[i].flags & (kImuFlagAccelSaturated | kImuFlagGyroSaturated))) ? i + 1 : i;
-    }
-  }
+  auto clean = app::longest_clean_run(s);
+  if (!clean.ok()) throw CliExit{kExitInput, "the timestamps of " + o.log_path + " do not increase"};
+  const double rate_hz = clean->rate_hz;
+  const std::size_t best0 = clean->begin, best1 = clean->end;
+  const int breaks = clean->breaks;
   if (breaks > 0) {
     spdlog::warn(
         "the log has {} gap(s), reset(s) or saturated sample(s): using the longest clean run, {:.1f} s of "
@@ -134,40 +71,22 @@ void run(const AllanCliOptions& o) {
 
   // The recording must be still: motion inflates every figure.
   if (!o.allow_motion) {
-    const auto var = calib::variance_magnitude_sq(accel, static_cast<std::size_t>(std::max(3.0, rate_hz)));
-    std::vector<double> sorted = var;
-    std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
-                     sorted.end());
-    const double median = sorted[sorted.size() / 2];
-    for (std::size_t i = 0; i < var.size(); ++i) {
-      if (var[i] > 25.0 * median) {
-        throw CliExit{kExitData,
-                      "the rig moves at t = " + std::to_string((i) / rate_hz) +
-                          " s of the clean run: the Allan deviation needs a still recording. Record "
-                          "again with the rig at rest, or pass --allow-motion to accept it"};
-      }
+    if (const auto moved_s = app::first_motion_s(accel, rate_hz)) {
+      throw CliExit{kExitData, "the rig moves at t = " + std::to_string(*moved_s) +
+                                   " s of the clean run: the Allan deviation needs a still recording. Record "
+                                   "again with the rig at rest, or pass --allow-motion to accept it"};
     }
   }
 
-  auto ca = calib::allan_deviation(accel, rate_hz);
-  if (!ca.ok()) fail(ca.error(), "accelerometer Allan deviation");
-  auto cg = calib::allan_deviation(gyro, rate_hz);
-  if (!cg.ok()) fail(cg.error(), "gyroscope Allan deviation");
-  std::vector<calib::AllanNoise> fa, fg;
-  for (int a = 0; a < 3; ++a) {
-    fa.push_back(calib::fit_allan_noise(*ca, a));
-    fg.push_back(calib::fit_allan_noise(*cg, a));
-  }
-  auto worst = [](const std::vector<calib::AllanNoise>& f, double calib::AllanNoise::*m) {
-    return std::max({f[0].*m, f[1].*m, f[2].*m});
-  };
-  const double a_nd = worst(fa, &calib::AllanNoise::noise_density);
-  const double a_rw = worst(fa, &calib::AllanNoise::random_walk);
-  const double g_nd = worst(fg, &calib::AllanNoise::noise_density);
-  const double g_rw = worst(fg, &calib::AllanNoise::random_walk);
-  const bool rw_bound = fa[0].random_walk_is_bound || fa[1].random_walk_is_bound ||
-                        fa[2].random_walk_is_bound || fg[0].random_walk_is_bound ||
-                        fg[1].random_walk_is_bound || fg[2].random_walk_is_bound;
+  auto analysed = app::analyse_allan(accel, gyro, rate_hz);
+  if (!analysed.ok()) fail(analysed.error());
+  app::AllanReport& report = *analysed;
+  report.log_path = o.log_path;
+  report.stream = info.name;
+  report.rostopic = o.rostopic;
+  const auto& fa = report.accel_fits;
+  const auto& fg = report.gyro_fits;
+  const bool rw_bound = report.random_walk_is_upper_bound();
   if (rw_bound) {
     spdlog::warn(
         "the recording is too short to show the random-walk slope: the random walks are upper bounds "
@@ -175,35 +94,10 @@ void run(const AllanCliOptions& o) {
   }
 
   if (!o.yaml_path.empty()) {
-    YAML::Emitter y;
-    y.SetDoublePrecision(8);
-    y << YAML::Comment("Kalibr IMU noise model: worst axis, from imucal allan " + o.log_path);
-    y << YAML::BeginMap;
-    y << YAML::Key << "accelerometer_noise_density" << YAML::Value << a_nd;
-    y << YAML::Key << "accelerometer_random_walk" << YAML::Value << a_rw;
-    y << YAML::Key << "gyroscope_noise_density" << YAML::Value << g_nd;
-    y << YAML::Key << "gyroscope_random_walk" << YAML::Value << g_rw;
-    y << YAML::Key << "rostopic" << YAML::Value << o.rostopic;
-    y << YAML::Key << "update_rate" << YAML::Value << rate_hz;
-    y << YAML::EndMap;
-    write_text(o.yaml_path, std::string(y.c_str()) + "\n");
+    if (auto w = app::write_text_file(o.yaml_path, app::allan_kalibr_yaml(report)); !w.ok()) fail(w.error());
   }
   if (!o.json_path.empty()) {
-    nlohmann::json j;
-    j["log"] = o.log_path;
-    j["stream"] = info.name;
-    j["rate_hz"] = rate_hz;
-    j["duration_s"] = static_cast<double>(accel.size()) / rate_hz;
-    j["accelerometer"] = sensor_json(*ca, fa, "m/s^2");
-    j["gyroscope"] = sensor_json(*cg, fg, "rad/s");
-    j["kalibr"] = {{"accelerometer_noise_density", a_nd},
-                   {"accelerometer_random_walk", a_rw},
-                   {"gyroscope_noise_density", g_nd},
-                   {"gyroscope_random_walk", g_rw},
-                   {"rostopic", o.rostopic},
-                   {"update_rate", rate_hz}};
-    j["random_walk_is_upper_bound"] = rw_bound;
-    write_text(o.json_path, j.dump(2) + "\n");
+    if (auto w = app::write_text_file(o.json_path, app::allan_json(report)); !w.ok()) fail(w.error());
   }
   std::cout << "Allan deviation of " << o.log_path << " (" << info.name << ", " << accel.size() / rate_hz
             << " s at " << rate_hz << " Hz)\n";
