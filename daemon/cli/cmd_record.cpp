@@ -15,15 +15,11 @@
 #include <sstream>
 #include <string>
 
-#include "acquisition/mounting.hpp"
 #include "acquisition/recorder.hpp"
+#include "app/rig.hpp"
 #include "core/rig_config.hpp"
 #include "daemon/cli/command.hpp"
-#include "drivers/bus/i2cdev_bus.hpp"
-#include "drivers/bus/spidev_bus.hpp"
-#include "drivers/gpio/gpiod_line.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
-#include "drivers/mpu6000/output_settings.hpp"
 #include "sim/imu_error_model.hpp"
 #include "sim/motion.hpp"
 #include "sim/realtime.hpp"
@@ -54,25 +50,9 @@ T take(Result<T> r, const std::string& what) {
   return std::move(r).value();
 }
 
-/// Like take(), but any failure to open or probe hardware ends with the device exit code (a
-/// missing node is a device problem here, not a missing input file).
-template <class T>
-T take_device(Result<T> r, const std::string& what) {
-  if (!r.ok()) throw CliExit{kExitDevice, what + ": " + r.error().message};
-  return std::move(r).value();
-}
-
 /// Driver settings from the rig configuration (already validated by the loader).
 mpu::Settings settings_from(const ImuConfig& imu, const std::string& config_path) {
-  mpu::OutputRequest req;
-  req.bus = imu.bus == ImuBus::kI2c ? mpu::BusKind::kI2c : mpu::BusKind::kSpi;
-  req.rate_hz = imu.rate_hz;
-  req.dlpf_hz = imu.dlpf_hz;
-  req.accel_full_scale_g = imu.accel_range_g;
-  req.gyro_full_scale_dps = imu.gyro_range_dps;
-  req.spi_config_speed_hz = static_cast<std::uint32_t>(imu.spi_config_speed_hz);
-  req.spi_data_speed_hz = static_cast<std::uint32_t>(imu.spi_data_speed_hz);
-  auto s = mpu::settings_for(req);
+  auto s = app::driver_settings(imu);
   if (!s.ok()) throw CliExit{kExitUsage, "imu settings in " + config_path + ": " + s.error().message};
   return *s;
 }
@@ -179,16 +159,13 @@ void run_record(const RecordArgs& a) {
   const RigConfig config = take(load_rig_config(a.config_path), "reading the rig configuration");
   const bool sim = a.sim || config.imu.bus == ImuBus::kSim;
   if (a.realtime && !sim) throw CliExit{kExitUsage, "--realtime needs --sim (or imu.bus: sim)"};
-  const acq::MountingMap mounting =
-      take(acq::MountingMap::from_rotation(config.imu.R_rig_imu), "imu mounting in " + a.config_path);
+  const acq::MountingMap mounting = take(app::imu_mounting(config.imu), "imu mounting in " + a.config_path);
   const mpu::Settings settings = settings_from(config.imu, a.config_path);
 
-  acq::RecordOptions ro;
+  acq::RecordOptions ro = app::record_options(config, sim);
   ro.log_path = a.out_path;
   ro.overwrite = a.force;
   ro.duration_s = a.duration_s;
-  ro.metadata.emplace_back("rig_config", rig_config_to_json(config));
-  ro.metadata.emplace_back("source", sim ? "sim" : "hardware");
   Progress progress("recording", a.duration_s);
   ro.progress = [&](double f) { progress.update(f * a.duration_s); };
 
@@ -223,36 +200,14 @@ void run_record(const RecordArgs& a) {
     return;
   }
 
-  // Hardware.
-  std::unique_ptr<drivers::RegisterBus> bus;
-  if (config.imu.bus == ImuBus::kSpi) {
-    drivers::SpidevOptions so;
-    so.config_speed_hz = static_cast<std::uint32_t>(config.imu.spi_config_speed_hz);
-    so.max_speed_hz = static_cast<std::uint32_t>(config.imu.spi_data_speed_hz);
-    bus = take_device(drivers::SpidevBus::open(config.imu.device, so), "opening the IMU bus");
-  } else {
-    drivers::I2cDevOptions io;
-    io.address = static_cast<std::uint8_t>(config.imu.i2c_address);
-    bus = take_device(drivers::I2cDevBus::open(config.imu.device, io), "opening the IMU bus");
-  }
-  std::unique_ptr<drivers::DataReadyLine> line;
-  if (config.imu.data_ready) {
-    drivers::GpiodLineOptions lo;
-    lo.chip = config.imu.data_ready->chip;
-    lo.line = std::to_string(config.imu.data_ready->line);
-    line = take_device(drivers::GpiodDataReadyLine::open(lo), "opening the data-ready line");
-  }
-  mpu::Mpu6000 driver(*bus, settings);
-  if (auto s = driver.probe(); !s.ok()) {
-    throw CliExit{kExitDevice, "MPU-6000 on " + bus->name() + ": " + s.error().message};
-  }
-  acq::MonotonicClock clock;
-  acq::ImuAcquisition acquisition(driver, line.get(), clock, mounting, ao);
-  ro.stream_info = mpu::make_stream_info(settings, "mpu6000@" + bus->name());
-  ro.stream_info.name = "imu0";
+  // Hardware: a missing node or a silent chip is a device problem here, not a missing input.
+  auto rig = app::open_imu_rig(config, ao);
+  if (!rig.ok()) throw CliExit{kExitDevice, rig.error().message};
+  ro.stream_info = (*rig)->stream_info();
   ro.loop = acq::RecordLoop::kEventLoop;
   ro.stop_on_signals = true;
-  const auto summary = take(acq::record_imu_session(acquisition, driver, ro), "recording");
+  const auto summary =
+      take(acq::record_imu_session((*rig)->acquisition(), (*rig)->driver(), ro), "recording");
   progress.finish();
   print_summary(a, summary, "");
   note_interrupted(a, summary);
