@@ -3,10 +3,9 @@
 // way a rig does: the MPU-6000 register emulator is advanced to CLOCK_MONOTONIC by a ticker
 // thread (at each sample instant, when a data-ready edge falls due, and at least every
 // `tick_ns`) and before every bus transfer, with a mutex serialising the ticker against the
-// driver's transfers; its INT pin feeds a data-ready line whose fd() is a real eventfd,
-// readable while edges are pending, as libgpiod's line event fd is. Each edge carries a
-// kernel-like timestamp (the chip's true sample time plus a latency with Gaussian jitter,
-// clipped at zero) and becomes readable only once CLOCK_MONOTONIC has passed that timestamp.
+// driver's transfers; its INT pin feeds a data-ready line whose fd() is a real eventfd
+// (drivers/gpio/fake/eventfd_line.hpp), each edge readable only once CLOCK_MONOTONIC has
+// passed its kernel-like timestamp.
 // The host clock is CLOCK_MONOTONIC itself.
 //
 // Bus transfers take no simulated time here: the real time they take is their bus time.
@@ -15,13 +14,8 @@
 
 #include <atomic>
 #include <cstdint>
-#include <deque>
-#include <functional>
 #include <memory>
 #include <mutex>
-#include <optional>
-#include <random>
-#include <string>
 #include <thread>
 
 #include "acquisition/mounting.hpp"
@@ -29,54 +23,12 @@
 #include "core/result.hpp"
 #include "core/time.hpp"
 #include "drivers/bus/register_bus.hpp"
-#include "drivers/gpio/data_ready_line.hpp"
+#include "drivers/gpio/fake/eventfd_line.hpp"
 #include "drivers/gpio/fake/sim_data_ready.hpp"
 #include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
 
 namespace imucal::sim {
-
-/// A simulated data-ready line with a real file descriptor (an eventfd in semaphore mode: its
-/// count is the number of readable edges). Thread-safe: raise() and release() come from the
-/// emulator's side, wait() from the acquisition.
-class RealtimeDataReadyLine final : public drivers::DataReadyLine {
- public:
-  [[nodiscard]] static Result<std::unique_ptr<RealtimeDataReadyLine>> create(fake::DataReadyTiming timing);
-  ~RealtimeDataReadyLine() override;
-  RealtimeDataReadyLine(const RealtimeDataReadyLine&) = delete;
-  RealtimeDataReadyLine& operator=(const RealtimeDataReadyLine&) = delete;
-
-  /// The chip raised INT at `true_t_ns` (CLOCK_MONOTONIC): an edge is scheduled at its
-  /// timestamp (true time plus latency, strictly increasing).
-  void raise(TimeNs true_t_ns);
-  /// Makes the scheduled edges with timestamps up to `now_ns` readable. Returns the timestamp
-  /// of the next scheduled edge, or SimTimeSource::kNever.
-  TimeNs release(TimeNs now_ns);
-  /// Called by wait() before it looks for edges, to bring the chip up to the present. A kernel
-  /// timestamps every edge when it happens, however late the reader is; the ticker thread that
-  /// plays the chip can be descheduled, so a reader catches the chip up itself.
-  void set_catch_up(std::function<void()> catch_up) { catch_up_ = std::move(catch_up); }
-
-  [[nodiscard]] Result<std::optional<drivers::DataReadyEdge>> wait(TimeNs timeout_ns) override;
-  int fd() const override { return fd_; }
-  std::string name() const override { return "sim-data-ready-rt"; }
-
-  std::uint64_t raised() const;
-
- private:
-  RealtimeDataReadyLine(int fd, fake::DataReadyTiming timing);
-
-  int fd_ = -1;
-  fake::DataReadyTiming timing_;
-  mutable std::mutex mutex_;
-  std::mt19937_64 rng_;
-  std::normal_distribution<double> normal_{0.0, 1.0};
-  std::deque<drivers::DataReadyEdge> scheduled_;  // not yet readable
-  std::deque<drivers::DataReadyEdge> ready_;      // readable, counted in the eventfd
-  std::function<void()> catch_up_;
-  TimeNs last_edge_t_ns_ = 0;
-  std::uint64_t sequence_ = 0;
-};
 
 struct RealtimeSimRigOptions {
   drivers::mpu6000::Settings settings;  // bus, rate, ranges (drivers/mpu6000/output_settings.hpp)
@@ -107,7 +59,7 @@ class RealtimeSimRig {
   acq::ImuAcquisition& acquisition() { return *acquisition_; }
   drivers::mpu6000::Mpu6000& driver() { return *driver_; }
   /// Null without a line (options.with_line false).
-  RealtimeDataReadyLine* line() { return line_.get(); }
+  fake::RealtimeDataReadyLine* line() { return line_.get(); }
   acq::AcquisitionClock& clock() { return clock_; }
   const RealtimeSimRigOptions& options() const { return options_; }
   TimeNs start_ns() const { return options_.start_ns; }
@@ -122,13 +74,13 @@ class RealtimeSimRig {
  private:
   class Bus;
   RealtimeSimRig(fake::SensorSource source, const RealtimeSimRigOptions& options,
-                 std::unique_ptr<RealtimeDataReadyLine> line);
+                 std::unique_ptr<fake::RealtimeDataReadyLine> line);
   void tick_loop();
 
   RealtimeSimRigOptions options_;
   std::mutex mutex_;  // the emulator
   fake::Mpu6000Emulator emulator_;
-  std::unique_ptr<RealtimeDataReadyLine> line_;
+  std::unique_ptr<fake::RealtimeDataReadyLine> line_;
   std::unique_ptr<Bus> bus_;
   std::unique_ptr<drivers::mpu6000::Mpu6000> driver_;
   acq::MonotonicClock clock_;

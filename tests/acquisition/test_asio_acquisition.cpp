@@ -1,5 +1,5 @@
 // The event-loop acquisition (acquisition/asio_acquisition.hpp) for real: the real-time
-// simulated rig (acquisition/sim_realtime.hpp) ticks the emulated chip along CLOCK_MONOTONIC
+// simulated rig (sim/realtime.hpp) ticks the emulated chip along CLOCK_MONOTONIC
 // and signals data-ready edges on an eventfd, the Asio loop wakes on that descriptor and on its
 // poll timer, and every sample it delivers is compared with the frames the chip wrote. Then
 // `imucal record --sim --realtime` through the CLI, including SIGINT in the middle of it.
@@ -142,43 +142,6 @@ TEST(AsioAcquisition, SteadyClockIsClockMonotonic) {
   EXPECT_LE(before_ns, steady_ns);
   EXPECT_LE(steady_ns, after_ns);
   EXPECT_EQ(steady_time_point(before_ns).time_since_epoch().count(), before_ns);
-}
-
-// The real-time line: an edge is readable on its eventfd only once CLOCK_MONOTONIC has passed
-// its timestamp, and the descriptor is readable exactly while edges are.
-TEST(RealtimeDataReadyLine, EdgesBecomeReadableAtTheirTimestamps) {
-  fake::DataReadyTiming timing;
-  timing.sigma_ns = 0;
-  auto line = sim::RealtimeDataReadyLine::create(timing);
-  ASSERT_TRUE(line.ok());
-  sim::RealtimeDataReadyLine& l = **line;
-  auto readable = [&] {
-    pollfd p{l.fd(), POLLIN, 0};
-    return ::poll(&p, 1, 0) == 1;
-  };
-  const TimeNs t0 = 1'000'000'000;
-  l.raise(t0);
-  l.raise(t0 + 1'000'000);
-  EXPECT_FALSE(readable());
-  EXPECT_EQ(l.release(t0 + 19'999), t0 + 20'000);
-  EXPECT_FALSE(readable());
-  EXPECT_EQ(l.release(t0 + 20'000), t0 + 1'020'000);
-  EXPECT_TRUE(readable());
-  auto e = l.wait(0);
-  ASSERT_TRUE(e.ok());
-  ASSERT_TRUE(e->has_value());
-  EXPECT_EQ((*e)->t_ns, t0 + 20'000);
-  EXPECT_EQ((*e)->sequence, 1u);
-  EXPECT_FALSE(readable());
-  e = l.wait(0);
-  ASSERT_TRUE(e.ok());
-  EXPECT_FALSE(e->has_value());
-  EXPECT_EQ(l.release(t0 + 2'000'000), fake::SimTimeSource::kNever);
-  e = l.wait(1'000'000);
-  ASSERT_TRUE(e.ok());
-  ASSERT_TRUE(e->has_value());
-  EXPECT_EQ((*e)->sequence, 2u);
-  EXPECT_FALSE(l.wait(-1).ok());
 }
 
 // service(), the non-blocking step, on the deterministic simulated rig: an event loop that
