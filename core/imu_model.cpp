@@ -9,14 +9,13 @@ namespace {
 
 constexpr double kSingular = 1e-12;
 
-struct QrSplit {
-  Eigen::Matrix3d Q;  // proper rotation
-  Eigen::Matrix3d U;  // upper triangular, positive diagonal except possibly U(2,2)
-};
+bool invertible(const Eigen::Matrix3d& M) {
+  return std::abs(M.determinant()) > kSingular * std::pow(M.norm(), 3) && M.allFinite();
+}
 
-/// X = Q U with Q a rotation and U upper triangular; diag(U) positive unless det(X) < 0, in
-/// which case U(2,2) is negative.
-QrSplit qr_rotation(const Eigen::Matrix3d& X) {
+}  // namespace
+
+RotationTriangular rotation_triangular_split(const Eigen::Matrix3d& X) {
   Eigen::HouseholderQR<Eigen::Matrix3d> qr(X);
   Eigen::Matrix3d Q = qr.householderQ();
   Eigen::Matrix3d U = qr.matrixQR().triangularView<Eigen::Upper>();
@@ -26,6 +25,8 @@ QrSplit qr_rotation(const Eigen::Matrix3d& X) {
       Q.col(i) *= -1.0;
     }
   }
+  // After the sign flips Q is a reflection exactly when det(X) < 0. A frame change must be a
+  // rotation, so the reflection moves into U(2, 2).
   if (Q.determinant() < 0) {
     U.row(2) *= -1.0;
     Q.col(2) *= -1.0;
@@ -33,11 +34,31 @@ QrSplit qr_rotation(const Eigen::Matrix3d& X) {
   return {Q, U};
 }
 
-bool invertible(const Eigen::Matrix3d& M) {
-  return std::abs(M.determinant()) > kSingular * std::pow(M.norm(), 3) && M.allFinite();
+CanonicalInAof canonical_in_aof(const CanonicalImuModel& model) {
+  const RotationTriangular split = rotation_triangular_split(model.A_a);
+  const Eigen::Matrix3d R_aof_canonical = split.Q.transpose();
+  CanonicalInAof out;
+  out.R_canonical_aof = split.Q;
+  out.model = model;
+  // U itself rather than Q^T A_a, which equals it only up to rounding: the entries below the
+  // diagonal are exact zeros, as the Tedaldi form requires.
+  out.model.A_a = split.U;
+  out.model.A_g = R_aof_canonical * model.A_g;
+  out.model.G = R_aof_canonical * model.G * R_aof_canonical.transpose();
+  return out;
 }
 
-}  // namespace
+TedaldiTriad tedaldi_triad(const Eigen::Matrix3d& A, const Eigen::Vector3d& b_canonical) {
+  TedaldiTriad t;
+  t.scale = A.diagonal();
+  // K^-1 as the inverse of the full diagonal matrix rather than 1 / diag: the simulator's truth
+  // files have always been computed this way, and the last bit of T would otherwise change in
+  // every one of them.
+  const Eigen::Matrix3d K = A.diagonal().asDiagonal();
+  t.T = A * K.inverse();
+  t.bias = -b_canonical;
+  return t;
+}
 
 CanonicalImuModel CanonicalImuModel::expressed_in(const Eigen::Matrix3d& R_new_old) const {
   CanonicalImuModel out = *this;
@@ -102,23 +123,18 @@ Result<TedaldiConversion> tedaldi_from_canonical(const CanonicalImuModel& model)
   if (!invertible(model.A_a) || !invertible(model.A_g)) {
     return make_error(Errc::kInvalidArgument, "A_a or A_g is singular: not a usable calibration");
   }
-  TedaldiConversion out;
-  const QrSplit split = qr_rotation(model.A_a);
-  out.R_canonical_aof = split.Q;
-  out.model.accel.scale = split.U.diagonal();
-  out.model.accel.T = split.U * split.U.diagonal().cwiseInverse().asDiagonal();
-  out.model.accel.bias = -model.b_a;
-  const Eigen::Matrix3d A_g_aof = split.Q.transpose() * model.A_g;
+  const CanonicalInAof aof = canonical_in_aof(model);
   for (int i = 0; i < 3; ++i) {
-    if (std::abs(A_g_aof(i, i)) < kSingular * A_g_aof.norm()) {
+    if (std::abs(aof.model.A_g(i, i)) < kSingular * aof.model.A_g.norm()) {
       return make_error(Errc::kInvalidArgument,
                         "A_g has a zero diagonal entry in the accelerometer frame: the gyro axes "
                         "cannot be mapped to the Tedaldi form");
     }
   }
-  out.model.gyro.scale = A_g_aof.diagonal();
-  out.model.gyro.T = A_g_aof * A_g_aof.diagonal().cwiseInverse().asDiagonal();
-  out.model.gyro.bias = -model.b_g;
+  TedaldiConversion out;
+  out.R_canonical_aof = aof.R_canonical_aof;
+  out.model.accel = tedaldi_triad(aof.model.A_a, aof.model.b_a);
+  out.model.gyro = tedaldi_triad(aof.model.A_g, aof.model.b_g);
   return out;
 }
 
@@ -143,7 +159,7 @@ Result<KrebsConversion> krebs_from_canonical(const CanonicalImuModel& model) {
   }
   KrebsConversion out;
   // A_a^-1 = S_a M_a R^T (an LQ split), from the QR split of its transpose.
-  const QrSplit sa = qr_rotation(model.A_a.inverse().transpose());
+  const RotationTriangular sa = rotation_triangular_split(model.A_a.inverse().transpose());
   const Eigen::Matrix3d La = sa.U.transpose();
   out.R_canonical_body = sa.Q;
   out.model.S_a = La.diagonal();
@@ -152,7 +168,7 @@ Result<KrebsConversion> krebs_from_canonical(const CanonicalImuModel& model) {
 
   const Eigen::Matrix3d A_g_body = sa.Q.transpose() * model.A_g;
   const Eigen::Matrix3d G_body = sa.Q.transpose() * model.G * sa.Q;
-  const QrSplit sg = qr_rotation(A_g_body.inverse().transpose());
+  const RotationTriangular sg = rotation_triangular_split(A_g_body.inverse().transpose());
   const Eigen::Matrix3d Lg = sg.U.transpose();
   out.model.C_bg = sg.Q;
   out.model.S_g = Lg.diagonal();

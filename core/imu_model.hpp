@@ -82,6 +82,30 @@ struct KrebsImuModel {
 Eigen::Matrix3d krebs_misalignment(const Eigen::Vector3d& m);
 Eigen::Vector3d krebs_entries(const Eigen::Matrix3d& M);
 
+/// X = Q U with Q a proper rotation and U upper triangular. diag(U) is positive, except U(2,2),
+/// which is negative when det(X) < 0: a rotation cannot absorb a reflection, so the reflection
+/// stays in U (for the Tedaldi form: a negative z scale). This is the one decomposition every
+/// conversion to an upper (Tedaldi) or lower (Krebs, through the transpose) triangular form uses.
+struct RotationTriangular {
+  Eigen::Matrix3d Q = Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d U = Eigen::Matrix3d::Identity();
+};
+RotationTriangular rotation_triangular_split(const Eigen::Matrix3d& X);
+
+/// A canonical model re-expressed in Tedaldi's accelerometer frame (AOF): with A_a = Q U,
+/// model.A_a = U exactly (zeros below the diagonal), A_g and G rotated by Q^T. G is kept, so a
+/// model with g-sensitivity (a simulator's truth) can be compared with a Tedaldi estimate.
+/// No checks: A_a must be invertible.
+struct CanonicalInAof {
+  CanonicalImuModel model;                                        // outputs in the AOF
+  Eigen::Matrix3d R_canonical_aof = Eigen::Matrix3d::Identity();  // canonical frame <- AOF (= Q)
+};
+CanonicalInAof canonical_in_aof(const CanonicalImuModel& model);
+
+/// One triad in Tedaldi's form from a canonical A and b in the same frame: T K = A with T unit
+/// diagonal (K = diag(A)), bias = -b. No checks: diag(A) must have no zero.
+TedaldiTriad tedaldi_triad(const Eigen::Matrix3d& A, const Eigen::Vector3d& b_canonical);
+
 /// Tedaldi -> canonical (body frame = Tedaldi's AOF, G = 0).
 CanonicalImuModel canonical_from_tedaldi(const TedaldiImuModel& model);
 
@@ -89,8 +113,8 @@ struct TedaldiConversion {
   TedaldiImuModel model;
   Eigen::Matrix3d R_canonical_aof = Eigen::Matrix3d::Identity();  // canonical frame <- AOF
 };
-/// Canonical -> Tedaldi. Fails when G is not zero (the Tedaldi form has no g-sensitivity) or a
-/// matrix is singular.
+/// Canonical -> Tedaldi (canonical_in_aof, then tedaldi_triad for each triad). Fails when G is
+/// not zero (the Tedaldi form has no g-sensitivity) or a matrix is singular.
 [[nodiscard]] Result<TedaldiConversion> tedaldi_from_canonical(const CanonicalImuModel& model);
 
 /// Krebs -> canonical (body frame = Krebs body frame).

@@ -1,6 +1,5 @@
 #include "sim/truth.hpp"
 
-#include <Eigen/QR>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
@@ -34,7 +33,7 @@ YAML::Node quat(const Eigen::Quaterniond& q) {
   return n;
 }
 
-YAML::Node canonical_node(const CanonicalCorrection& c) {
+YAML::Node canonical_node(const CanonicalImuModel& c) {
   YAML::Node n;
   n["A_a"] = mat(c.A_a);
   n["b_a"] = vec(c.b_a);
@@ -44,14 +43,14 @@ YAML::Node canonical_node(const CanonicalCorrection& c) {
   return n;
 }
 
-YAML::Node tedaldi_node(const TedaldiForm& t) {
+YAML::Node tedaldi_node(const TedaldiImuModel& t) {
   YAML::Node n;
-  n["T_a"] = mat(t.T_a);
-  n["K_a"] = vec(t.K_a.diagonal());
-  n["b_a"] = vec(t.b_a);
-  n["T_g"] = mat(t.T_g);
-  n["K_g"] = vec(t.K_g.diagonal());
-  n["b_g"] = vec(t.b_g);
+  n["T_a"] = mat(t.accel.T);
+  n["K_a"] = vec(t.accel.scale);
+  n["b_a"] = vec(t.accel.bias);
+  n["T_g"] = mat(t.gyro.T);
+  n["K_g"] = vec(t.gyro.scale);
+  n["b_g"] = vec(t.gyro.bias);
   return n;
 }
 
@@ -123,10 +122,10 @@ struct Reader {
 
 }  // namespace
 
-CanonicalCorrection canonical_correction(const ImuModelParams& p, bool counts) {
+CanonicalImuModel canonical_correction(const ImuModelParams& p, bool counts) {
   // a_raw = S_a M_a f + b_a  =>  f = (S_a M_a)^-1 (a_raw - b_a)
   // w_raw = S_g M_g C_bg^T w + B_g f + b_g  =>  w = A_g (w_raw - b_g) - A_g B_g f
-  CanonicalCorrection c;
+  CanonicalImuModel c;
   c.A_a = p.accel_matrix().inverse();
   c.b_a = p.accel_bias;
   c.A_g = p.gyro_matrix().inverse();
@@ -142,51 +141,18 @@ CanonicalCorrection canonical_correction(const ImuModelParams& p, bool counts) {
   return c;
 }
 
-namespace {
-
-/// L = Q U with Q a rotation and U upper-triangular with a positive diagonal.
-void qu_decompose(const Eigen::Matrix3d& L, Eigen::Matrix3d* Q, Eigen::Matrix3d* U) {
-  Eigen::HouseholderQR<Eigen::Matrix3d> qr(L);
-  Eigen::Matrix3d q = qr.householderQ();
-  Eigen::Matrix3d u = qr.matrixQR().triangularView<Eigen::Upper>();
-  for (int i = 0; i < 3; ++i) {
-    if (u(i, i) < 0.0) {
-      u.row(i) *= -1.0;
-      q.col(i) *= -1.0;
-    }
-  }
-  *Q = q;
-  *U = u;
+CanonicalImuModel canonical_in_tedaldi_frame(const ImuModelParams& p, bool counts) {
+  return canonical_in_aof(canonical_correction(p, counts)).model;
 }
 
-}  // namespace
-
-CanonicalCorrection canonical_in_tedaldi_frame(const ImuModelParams& p, bool counts) {
-  const CanonicalCorrection body = canonical_correction(p, counts);
-  Eigen::Matrix3d Q, U;
-  qu_decompose(body.A_a, &Q, &U);
-  const Eigen::Matrix3d R_o_b = Q.transpose();  // a_O = Q^T f_B = U (a_raw - b_a)
-  CanonicalCorrection c = body;
-  c.A_a = U;
-  c.A_g = R_o_b * body.A_g;
-  c.G = R_o_b * body.G * R_o_b.transpose();
-  return c;
-}
-
-TedaldiForm tedaldi_form(const ImuModelParams& p, bool counts) {
-  const CanonicalCorrection body = canonical_correction(p, counts);
-  const CanonicalCorrection o = canonical_in_tedaldi_frame(p, counts);
-  Eigen::Matrix3d Q, U;
-  qu_decompose(body.A_a, &Q, &U);
-  TedaldiForm t;
-  t.q_tedaldi_body = Eigen::Quaterniond(Eigen::Matrix3d(Q.transpose())).normalized();
-  // T K = A with T unit-diagonal: K = diag(A), T = A K^-1. b_tedaldi = -b_canonical.
-  t.K_a = o.A_a.diagonal().asDiagonal();
-  t.T_a = o.A_a * t.K_a.inverse();
-  t.b_a = -o.b_a;
-  t.K_g = o.A_g.diagonal().asDiagonal();
-  t.T_g = o.A_g * t.K_g.inverse();
-  t.b_g = -o.b_g;
+TedaldiConversion tedaldi_form(const ImuModelParams& p, bool counts) {
+  // The Tedaldi form has no g-sensitivity: G stays out, as in tedaldi_from_canonical, which
+  // refuses a model with G rather than dropping it.
+  const CanonicalInAof o = canonical_in_aof(canonical_correction(p, counts));
+  TedaldiConversion t;
+  t.R_canonical_aof = o.R_canonical_aof;
+  t.model.accel = tedaldi_triad(o.model.A_a, o.model.b_a);
+  t.model.gyro = tedaldi_triad(o.model.A_g, o.model.b_g);
   return t;
 }
 
@@ -307,16 +273,19 @@ YAML::Node truth_to_yaml(const SimTruth& truth) {
   canon["counts"] = canonical_node(canonical_correction(truth.imu, true));
   doc["canonical"] = canon;
 
-  const TedaldiForm ts = tedaldi_form(truth.imu, false);
+  const TedaldiConversion ts = tedaldi_form(truth.imu, false);
+  // Body vectors -> frame O.
+  const Eigen::Quaterniond q_tedaldi_body =
+      Eigen::Quaterniond(Eigen::Matrix3d(ts.R_canonical_aof.transpose())).normalized();
   YAML::Node ted;
   ted["note"] =
       "a_O = T_a K_a (a_S + b_a), w_O = T_g K_g (w_S + b_g) (Tedaldi eqs. 2.6, 2.7); frame O has z along the "
       "accel z axis; q_tedaldi_body rotates body vectors into O; canonical_* is the canonical correction in "
       "O";
-  ted["q_tedaldi_body"] = quat(ts.q_tedaldi_body);
-  ted["angle_deg"] = Eigen::AngleAxisd(ts.q_tedaldi_body).angle() * 180.0 / std::numbers::pi;
-  ted["si"] = tedaldi_node(ts);
-  ted["counts"] = tedaldi_node(tedaldi_form(truth.imu, true));
+  ted["q_tedaldi_body"] = quat(q_tedaldi_body);
+  ted["angle_deg"] = Eigen::AngleAxisd(q_tedaldi_body).angle() * 180.0 / std::numbers::pi;
+  ted["si"] = tedaldi_node(ts.model);
+  ted["counts"] = tedaldi_node(tedaldi_form(truth.imu, true).model);
   ted["canonical_si"] = canonical_node(canonical_in_tedaldi_frame(truth.imu, false));
   ted["canonical_counts"] = canonical_node(canonical_in_tedaldi_frame(truth.imu, true));
   doc["tedaldi"] = ted;

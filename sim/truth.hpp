@@ -13,44 +13,27 @@
 #include <string>
 #include <vector>
 
+#include "core/imu_model.hpp"
 #include "core/result.hpp"
 #include "sim/imu_error_model.hpp"
 #include "sim/trajectory.hpp"
 
 namespace imucal::sim {
 
-/// a = A_a (a_raw - b_a), w = A_g (w_raw - b_g) - G a. In SI form a_raw, w_raw are the sensor
-/// outputs converted with the nominal full-scale sensitivity (m/s^2, rad/s); in counts form they
-/// are the int16 counts and A maps counts to SI. G is (rad/s)/(m/s^2) in both.
-struct CanonicalCorrection {
-  Eigen::Matrix3d A_a = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d b_a = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d A_g = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d b_g = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d G = Eigen::Matrix3d::Zero();
-};
-
-/// Tedaldi et al. eqs. 2.6/2.7: a_O = T_a K_a (a_S + b_a), w_O = T_g K_g (w_S + b_g), T_a unit
-/// upper-triangular, T_g unit-diagonal, K diagonal. The frame O of this form has its z axis
-/// along the accelerometer's z sensing axis and y in its y-z plane (that is what an upper-
-/// triangular T_a implies for sensors that measure projections); it differs from the body frame
-/// (AOF) by a rotation of the order of the misalignments, given by q_tedaldi_body.
-struct TedaldiForm {
-  Eigen::Matrix3d T_a = Eigen::Matrix3d::Identity();
-  Eigen::Matrix3d K_a = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d b_a = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d T_g = Eigen::Matrix3d::Identity();
-  Eigen::Matrix3d K_g = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d b_g = Eigen::Vector3d::Zero();
-  Eigen::Quaterniond q_tedaldi_body = Eigen::Quaterniond::Identity();  // body vectors -> frame O
-};
-
-/// The correction that inverts the model at the turn-on biases, in the body frame (AOF).
-CanonicalCorrection canonical_correction(const ImuModelParams& p, bool counts);
-/// The Tedaldi form and, for direct comparison with a Tedaldi estimate, the canonical
-/// correction expressed in Tedaldi's frame O (A_a upper-triangular there).
-TedaldiForm tedaldi_form(const ImuModelParams& p, bool counts);
-CanonicalCorrection canonical_in_tedaldi_frame(const ImuModelParams& p, bool counts);
+/// The correction that inverts the model at the turn-on biases, in the body frame (AOF):
+/// a = A_a (a_raw - b_a), w = A_g (w_raw - b_g) - G a (core/imu_model.hpp). In SI form a_raw, w_raw
+/// are the sensor outputs converted with the nominal full-scale sensitivity (m/s^2, rad/s); in
+/// counts form they are the int16 counts and A maps counts to SI. G is (rad/s)/(m/s^2) in both.
+CanonicalImuModel canonical_correction(const ImuModelParams& p, bool counts);
+/// The Tedaldi form of the correction (Tedaldi et al. eqs. 2.6/2.7: a_O = T_a K_a (a_S + b_a),
+/// w_O = T_g K_g (w_S + b_g), without the g-sensitivity, which the form cannot hold), for direct
+/// comparison with a Tedaldi estimate. The frame O of this form has its z axis along the
+/// accelerometer's z sensing axis and y in its y-z plane (what an upper-triangular T_a implies for
+/// sensors that measure projections); it differs from the body frame by a rotation of the order
+/// of the misalignments: R_canonical_aof maps O vectors to body vectors.
+TedaldiConversion tedaldi_form(const ImuModelParams& p, bool counts);
+/// The canonical correction expressed in Tedaldi's frame O (A_a upper-triangular there, G kept).
+CanonicalImuModel canonical_in_tedaldi_frame(const ImuModelParams& p, bool counts);
 
 struct TrajectorySummary {
   std::string script;  // "static", "gsens", "still", "checkerboard"

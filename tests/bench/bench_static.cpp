@@ -71,13 +71,7 @@ Recording simulate(std::uint64_t seed, int poses, bool model_only, double still_
   rec.info.accel_full_scale_g = p.accel_full_scale_g;
   rec.info.gyro_full_scale_dps = p.gyro_full_scale_dps;
   rec.info.device = "sim";
-  const sim::TedaldiForm tf = sim::tedaldi_form(p, /*counts=*/true);
-  rec.truth.accel.T = tf.T_a;
-  rec.truth.accel.scale = tf.K_a.diagonal();
-  rec.truth.accel.bias = tf.b_a;
-  rec.truth.gyro.T = tf.T_g;
-  rec.truth.gyro.scale = tf.K_g.diagonal();
-  rec.truth.gyro.bias = tf.b_g;
+  rec.truth = sim::tedaldi_form(p, /*counts=*/true).model;
   return rec;
 }
 

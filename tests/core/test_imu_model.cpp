@@ -134,6 +134,103 @@ TEST(ImuModel, TedaldiToKrebsToCanonicalIsSameCorrectionUpToFrame) {
   EXPECT_TRUE(t2->model.accel.scale.isApprox(t.accel.scale, 1e-12));
 }
 
+/// A general canonical model: full A_a, A_g in an arbitrary body frame, no g-sensitivity.
+CanonicalImuModel sample_canonical() {
+  CanonicalImuModel c;
+  c.A_a << 1.02, 0.013, -0.021, -0.008, 0.97, 0.017, 0.011, -0.019, 1.04;
+  c.b_a = Eigen::Vector3d(0.12, -0.07, 0.3);
+  c.A_g << 0.99, -0.024, 0.015, 0.031, 1.03, -0.012, -0.017, 0.026, 0.96;
+  c.b_g = Eigen::Vector3d(0.004, -0.002, 0.001);
+  const Eigen::Matrix3d R =
+      Eigen::AngleAxisd(0.4, Eigen::Vector3d(-1, 2, 0.5).normalized()).toRotationMatrix();
+  return c.expressed_in(R);
+}
+
+void expect_same_correction(const CanonicalImuModel& a, const CanonicalImuModel& b, double tol) {
+  EXPECT_TRUE(a.A_a.isApprox(b.A_a, tol)) << a.A_a << "\n" << b.A_a;
+  EXPECT_TRUE(a.b_a.isApprox(b.b_a, tol));
+  EXPECT_TRUE(a.A_g.isApprox(b.A_g, tol)) << a.A_g << "\n" << b.A_g;
+  EXPECT_TRUE(a.b_g.isApprox(b.b_g, tol));
+  EXPECT_LT((a.G - b.G).norm(), tol);
+}
+
+void expect_rotation(const Eigen::Matrix3d& R) {
+  EXPECT_NEAR(R.determinant(), 1.0, 1e-12);
+  EXPECT_TRUE((R.transpose() * R).isIdentity(1e-12));
+}
+
+TEST(ImuModel, RotationTriangularSplitIsAProperRotationTimesUpperTriangular) {
+  Eigen::Matrix3d X = sample_canonical().A_a;
+  for (bool reflect : {false, true}) {
+    if (reflect) X.col(1) *= -1.0;  // det < 0
+    ASSERT_EQ(X.determinant() < 0, reflect);
+    const RotationTriangular s = rotation_triangular_split(X);
+    expect_rotation(s.Q);
+    EXPECT_TRUE((s.Q * s.U).isApprox(X, 1e-14));
+    EXPECT_EQ(s.U(1, 0), 0.0);
+    EXPECT_EQ(s.U(2, 0), 0.0);
+    EXPECT_EQ(s.U(2, 1), 0.0);
+    EXPECT_GT(s.U(0, 0), 0.0);
+    EXPECT_GT(s.U(1, 1), 0.0);
+    // The reflection stays in U, at (2, 2).
+    EXPECT_EQ(s.U(2, 2) < 0, reflect);
+  }
+}
+
+TEST(ImuModel, CanonicalTedaldiCanonicalRoundTrip) {
+  const CanonicalImuModel c = sample_canonical();
+  auto t = tedaldi_from_canonical(c);
+  ASSERT_TRUE(t.ok()) << t.error().message;
+  expect_rotation(t->R_canonical_aof);
+  EXPECT_TRUE(t->model.accel.T.isUpperTriangular(0.0));
+  EXPECT_TRUE(t->model.accel.T.diagonal().isOnes(1e-15));
+  EXPECT_TRUE(t->model.gyro.T.diagonal().isOnes(1e-15));
+  EXPECT_TRUE((t->model.accel.scale.array() > 0).all());
+  expect_same_correction(canonical_from_tedaldi(t->model).expressed_in(t->R_canonical_aof), c, 1e-12);
+}
+
+// An accelerometer axis wired with the wrong sign (det A_a < 0): the frame change must stay a
+// rotation, the sign goes into the z scale, and the round trip gives back the same correction.
+TEST(ImuModel, TedaldiFormOfAReflectedAccelerometerKeepsAProperFrame) {
+  CanonicalImuModel c = sample_canonical();
+  c.A_a.col(0) *= -1.0;
+  ASSERT_LT(c.A_a.determinant(), 0.0);
+  auto t = tedaldi_from_canonical(c);
+  ASSERT_TRUE(t.ok()) << t.error().message;
+  expect_rotation(t->R_canonical_aof);
+  EXPECT_LT(t->model.accel.scale[2], 0.0);
+  EXPECT_GT(t->model.accel.scale[0], 0.0);
+  EXPECT_GT(t->model.accel.scale[1], 0.0);
+  expect_same_correction(canonical_from_tedaldi(t->model).expressed_in(t->R_canonical_aof), c, 1e-12);
+  // The same split serves the Krebs form.
+  auto k = krebs_from_canonical(c);
+  ASSERT_TRUE(k.ok()) << k.error().message;
+  expect_rotation(k->R_canonical_body);
+}
+
+TEST(ImuModel, CanonicalInAofKeepsGAndMakesAaExactlyUpperTriangular) {
+  CanonicalImuModel c = sample_canonical();
+  c.G << 1e-4, -2e-4, 3e-5, 5e-5, 1e-4, -1e-4, 2e-5, 0.0, 1.5e-4;
+  const CanonicalInAof o = canonical_in_aof(c);
+  expect_rotation(o.R_canonical_aof);
+  EXPECT_EQ(o.model.A_a(1, 0), 0.0);
+  EXPECT_EQ(o.model.A_a(2, 0), 0.0);
+  EXPECT_EQ(o.model.A_a(2, 1), 0.0);
+  expect_same_correction(o.model.expressed_in(o.R_canonical_aof), c, 1e-12);
+  // The strict conversion refuses what canonical_in_aof carries along.
+  EXPECT_FALSE(tedaldi_from_canonical(c).ok());
+}
+
+TEST(ImuModel, TedaldiTriadSplitsTKWithUnitDiagonal) {
+  Eigen::Matrix3d A;
+  A << 2.0, 0.1, -0.2, 0.05, 0.5, 0.3, -0.1, 0.02, -1.5;
+  const TedaldiTriad t = tedaldi_triad(A, Eigen::Vector3d(1, 2, 3));
+  EXPECT_TRUE(t.TK().isApprox(A, 1e-15));
+  EXPECT_TRUE(t.T.diagonal().isOnes(1e-15));
+  EXPECT_EQ(t.scale, Eigen::Vector3d(2.0, 0.5, -1.5));
+  EXPECT_EQ(t.bias, Eigen::Vector3d(-1, -2, -3));
+}
+
 TEST(ImuModel, SingularModelsAreRejected) {
   CanonicalImuModel c;
   c.A_a.setZero();

@@ -82,8 +82,8 @@ TEST(ImuModel, EarthRotationIsAddedWhenEnabled) {
 TEST(ImuModel, CanonicalCorrectionInvertsTheModelInSiAndCounts) {
   const ImuModelParams p = noise_free(17);
   ImuSimulator imu(p, 17);
-  const CanonicalCorrection si = canonical_correction(p, false);
-  const CanonicalCorrection counts = canonical_correction(p, true);
+  const CanonicalImuModel si = canonical_correction(p, false);
+  const CanonicalImuModel counts = canonical_correction(p, true);
   RigState s;
   s.q_world_body = Eigen::Quaterniond(Eigen::AngleAxisd(1.1, Eigen::Vector3d(0.3, -1, 0.2).normalized()));
   s.a_world = Eigen::Vector3d(1.5, -0.7, 2.0);
@@ -107,15 +107,19 @@ TEST(ImuModel, TedaldiFormReproducesTheCalibratedVectorInItsFrame) {
   const ImuModelParams p = noise_free(29);
   ImuSimulator imu(p, 29);
   for (bool counts : {false, true}) {
-    const TedaldiForm t = tedaldi_form(p, counts);
+    const TedaldiConversion t = tedaldi_form(p, counts);
+    const TedaldiTriad& ta = t.model.accel;
+    const TedaldiTriad& tg = t.model.gyro;
     // Shapes: T_a unit upper-triangular, T_g unit diagonal, K diagonal.
-    EXPECT_NEAR(t.T_a(1, 0), 0.0, 1e-15);
-    EXPECT_NEAR(t.T_a(2, 0), 0.0, 1e-15);
-    EXPECT_NEAR(t.T_a(2, 1), 0.0, 1e-15);
-    EXPECT_NEAR((t.T_a.diagonal() - Eigen::Vector3d::Ones()).norm(), 0.0, 1e-15);
-    EXPECT_NEAR((t.T_g.diagonal() - Eigen::Vector3d::Ones()).norm(), 0.0, 1e-15);
+    EXPECT_NEAR(ta.T(1, 0), 0.0, 1e-15);
+    EXPECT_NEAR(ta.T(2, 0), 0.0, 1e-15);
+    EXPECT_NEAR(ta.T(2, 1), 0.0, 1e-15);
+    EXPECT_NEAR((ta.T.diagonal() - Eigen::Vector3d::Ones()).norm(), 0.0, 1e-15);
+    EXPECT_NEAR((tg.T.diagonal() - Eigen::Vector3d::Ones()).norm(), 0.0, 1e-15);
     // Frame O differs from the body frame by a rotation of the order of the misalignments.
-    const double angle = Eigen::AngleAxisd(t.q_tedaldi_body).angle();
+    ASSERT_NEAR(t.R_canonical_aof.determinant(), 1.0, 1e-12);
+    const Eigen::Quaterniond q_tedaldi_body(Eigen::Matrix3d(t.R_canonical_aof.transpose()));
+    const double angle = Eigen::AngleAxisd(q_tedaldi_body).angle();
     EXPECT_GT(angle, 0.1 * kDeg);
     EXPECT_LT(angle, 4.0 * kDeg);
     const double sa = counts ? p.accel_mps2_per_count() : 1.0, sg = counts ? p.gyro_radps_per_count() : 1.0;
@@ -123,12 +127,19 @@ TEST(ImuModel, TedaldiFormReproducesTheCalibratedVectorInItsFrame) {
     s.q_world_body = Eigen::Quaterniond(Eigen::AngleAxisd(2.0, Eigen::Vector3d(1, 1, -0.5).normalized()));
     s.omega_body = Eigen::Vector3d(0.2, 0.1, -0.3);
     const ImuSimDetail d = imu.sample_si(0, s, 0.01);
-    const Eigen::Vector3d a_O = t.T_a * t.K_a * (d.accel_si / sa + t.b_a);
-    EXPECT_LT((a_O - t.q_tedaldi_body * d.specific_force_body).norm(), 1e-10);
+    const Eigen::Vector3d a_O = ta.apply(d.accel_si / sa);
+    EXPECT_LT((a_O - q_tedaldi_body * d.specific_force_body).norm(), 1e-10);
     // Tedaldi's gyro model has no g-sensitivity: remove B_g f before comparing.
     const Eigen::Vector3d w_S = (d.gyro_si - p.g_sensitivity * d.specific_force_body) / sg;
-    const Eigen::Vector3d w_O = t.T_g * t.K_g * (w_S + t.b_g);
-    EXPECT_LT((w_O - t.q_tedaldi_body * s.omega_body).norm(), 1e-10);
+    const Eigen::Vector3d w_O = tg.apply(w_S);
+    EXPECT_LT((w_O - q_tedaldi_body * s.omega_body).norm(), 1e-10);
+    // The canonical correction in frame O is the same correction, rotated, with A_a exactly
+    // upper-triangular.
+    const CanonicalImuModel o = canonical_in_tedaldi_frame(p, counts);
+    EXPECT_EQ(o.A_a(1, 0), 0.0);
+    EXPECT_EQ(o.A_a(2, 0), 0.0);
+    EXPECT_EQ(o.A_a(2, 1), 0.0);
+    EXPECT_LT((o.correct_accel(d.accel_si / sa) - q_tedaldi_body * d.specific_force_body).norm(), 1e-10);
   }
 }
 
