@@ -4,8 +4,6 @@
 #include <cerrno>
 #include <ctime>
 
-#include "sim/rig.hpp"
-
 namespace imucal::sim {
 
 namespace mpu = drivers::mpu6000;
@@ -39,14 +37,9 @@ class RealtimeSimRig::Bus final : public drivers::RegisterBus {
 
 namespace {
 
-fake::EmulatorOptions emulator_options(const RealtimeSimRigOptions& o) {
-  fake::EmulatorOptions eo;
-  eo.bus = o.settings.bus;
-  eo.timing = o.settings.bus == mpu::BusKind::kSpi ? fake::BusTiming::spi() : fake::BusTiming::i2c();
+fake::EmulatorOptions realtime_emulator_options(const RealtimeSimRigOptions& o) {
+  fake::EmulatorOptions eo = emulator_options(o);
   eo.timing.enabled = false;  // transfers take real time instead
-  eo.clock_ppm = o.clock_ppm;
-  eo.start_ns = o.start_ns;
-  eo.record_truth = o.record_truth;
   return eo;
 }
 
@@ -54,7 +47,9 @@ fake::EmulatorOptions emulator_options(const RealtimeSimRigOptions& o) {
 
 RealtimeSimRig::RealtimeSimRig(fake::SensorSource source, const RealtimeSimRigOptions& options,
                                std::unique_ptr<fake::RealtimeDataReadyLine> line)
-    : options_(options), emulator_(std::move(source), emulator_options(options)), line_(std::move(line)) {
+    : options_(options),
+      emulator_(std::move(source), realtime_emulator_options(options)),
+      line_(std::move(line)) {
   if (line_) {
     emulator_.set_interrupt_sink([line = line_.get()](TimeNs t_ns) { line->raise(t_ns); });
     line_->set_catch_up([this] {
@@ -64,11 +59,8 @@ RealtimeSimRig::RealtimeSimRig(fake::SensorSource source, const RealtimeSimRigOp
   }
   bus_ = std::make_unique<Bus>(*this);
   driver_ = std::make_unique<mpu::Mpu6000>(*bus_, options.settings);
-  acq::AcquisitionOptions ao = options.acquisition;
-  ao.timestamps.edge_latency_ns =
-      clipped_latency_mean_ns(options.data_ready.latency_ns, options.data_ready.sigma_ns);
-  ao.timestamps.edge_jitter_ns = std::max<TimeNs>(1, options.data_ready.sigma_ns);
-  acquisition_ = std::make_unique<acq::ImuAcquisition>(*driver_, line_.get(), clock_, options.mounting, ao);
+  acquisition_ = std::make_unique<acq::ImuAcquisition>(*driver_, line_.get(), clock_, options.mounting,
+                                                       acquisition_options(options));
 }
 
 Result<std::unique_ptr<RealtimeSimRig>> RealtimeSimRig::create(fake::SensorSource source,

@@ -18,7 +18,6 @@
 #include <mutex>
 #include <thread>
 
-#include "acquisition/mounting.hpp"
 #include "acquisition/recorder.hpp"
 #include "core/result.hpp"
 #include "core/time.hpp"
@@ -27,22 +26,19 @@
 #include "drivers/gpio/fake/sim_data_ready.hpp"
 #include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
+#include "sim/rig.hpp"
 
 namespace imucal::sim {
 
-struct RealtimeSimRigOptions {
-  drivers::mpu6000::Settings settings;  // bus, rate, ranges (drivers/mpu6000/output_settings.hpp)
-  double clock_ppm = -15'000.0;         // the chip's oscillator against CLOCK_MONOTONIC
-  fake::DataReadyTiming data_ready;     // edge latency 20 us, jitter 30 us RMS
+/// The shared rig settings (rig.hpp) on CLOCK_MONOTONIC, plus what only the real-time rig has.
+struct RealtimeSimRigOptions : SimRigOptions {
+  /// Here start_ns is CLOCK_MONOTONIC at the chip's power-on, by default 0: when the rig is
+  /// created (the shared default, a fixed time, lies anywhere on this machine's clock).
+  RealtimeSimRigOptions() { start_ns = 0; }
   /// False: no data-ready line (the acquisition polls the FIFO on its timer).
   bool with_line = true;
   /// The ticker advances the emulator at least this often.
   TimeNs tick_ns = 200'000;
-  /// CLOCK_MONOTONIC at the chip's power-on; 0: when the rig is created.
-  TimeNs start_ns = 0;
-  bool record_truth = false;
-  acq::MountingMap mounting;
-  acq::AcquisitionOptions acquisition;  // edge latency and jitter are set from data_ready
 };
 
 /// Emulator + ticker + real-time line + driver + acquisition (on acq::MonotonicClock). Not movable.

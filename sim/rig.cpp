@@ -21,8 +21,6 @@ double chip_sample_period_s(const mpu::Settings& settings, double clock_ppm) {
   return 1.0 / (settings.sample_rate_hz() * (1.0 + clock_ppm * 1e-6));
 }
 
-namespace {
-
 fake::EmulatorOptions emulator_options(const SimRigOptions& o) {
   fake::EmulatorOptions eo;
   eo.bus = o.settings.bus;
@@ -33,7 +31,12 @@ fake::EmulatorOptions emulator_options(const SimRigOptions& o) {
   return eo;
 }
 
-}  // namespace
+acq::AcquisitionOptions acquisition_options(const SimRigOptions& o) {
+  acq::AcquisitionOptions ao = o.acquisition;
+  ao.timestamps.edge_latency_ns = clipped_latency_mean_ns(o.data_ready.latency_ns, o.data_ready.sigma_ns);
+  ao.timestamps.edge_jitter_ns = std::max<TimeNs>(1, o.data_ready.sigma_ns);
+  return ao;
+}
 
 SimImuRig::SimImuRig(fake::SensorSource source, const SimRigOptions& options)
     : options_(options),
@@ -42,11 +45,8 @@ SimImuRig::SimImuRig(fake::SensorSource source, const SimRigOptions& options)
       driver_(emulator_, options.settings),
       clock_(emulator_) {
   emulator_.connect(line_);
-  acq::AcquisitionOptions ao = options.acquisition;
-  ao.timestamps.edge_latency_ns =
-      clipped_latency_mean_ns(options.data_ready.latency_ns, options.data_ready.sigma_ns);
-  ao.timestamps.edge_jitter_ns = std::max<TimeNs>(1, options.data_ready.sigma_ns);
-  acquisition_ = std::make_unique<acq::ImuAcquisition>(driver_, &line_, clock_, options.mounting, ao);
+  acquisition_ = std::make_unique<acq::ImuAcquisition>(driver_, &line_, clock_, options.mounting,
+                                                       acquisition_options(options));
 }
 
 Result<std::unique_ptr<SimImuRig>> SimImuRig::create(fake::SensorSource source,

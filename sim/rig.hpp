@@ -33,17 +33,28 @@ TimeNs clipped_latency_mean_ns(TimeNs mean_ns, TimeNs sigma_ns);
 /// White noise drawn for this period has the model's density on the chip's own sample clock.
 double chip_sample_period_s(const drivers::mpu6000::Settings& settings, double clock_ppm);
 
+/// The chip's oscillator against the host clock when nobody says otherwise, ppm: a chip 1.5 %
+/// slow (negative: it samples slower), within the few percent the MPU-6000 drifts over
+/// temperature. The simulated sessions and both virtual rigs default to this one figure.
+inline constexpr double kDefaultClockPpm = -15'000.0;
+
+/// The settings both virtual rigs share: the deterministic one (SimImuRig) takes them as they
+/// are, the real-time one (realtime.hpp) extends them with its own.
 struct SimRigOptions {
-  drivers::mpu6000::Settings settings;  // bus, rate, ranges (drivers/mpu6000/output_settings.hpp)
-  /// The chip's oscillator against the host clock, ppm; negative: the chip samples slower. The
-  /// default is a chip 1.5 % slow, within the few percent the MPU-6000 drifts over temperature.
-  double clock_ppm = -15'000.0;
+  drivers::mpu6000::Settings settings;   // bus, rate, ranges (drivers/mpu6000/output_settings.hpp)
+  double clock_ppm = kDefaultClockPpm;   // the chip's oscillator against the host clock
   fake::DataReadyTiming data_ready;      // edge latency 20 us, jitter 30 us RMS
   TimeNs start_ns = 100 * kNsPerSecond;  // host time at power-on
   bool record_truth = false;             // keep every sample's true time and counts (tests)
   acq::MountingMap mounting;             // identity: the IMU's axes are the rig's
   acq::AcquisitionOptions acquisition;   // edge latency and jitter are set from data_ready
 };
+
+/// The emulated chip of a rig: its bus with that bus's transfer timing, its oscillator.
+fake::EmulatorOptions emulator_options(const SimRigOptions& options);
+/// The rig's acquisition options: `options.acquisition` with the timestamper told the simulated
+/// line's mean latency and jitter, as a rig's configuration tells it its platform's.
+acq::AcquisitionOptions acquisition_options(const SimRigOptions& options);
 
 /// Emulator + data-ready line + driver + acquisition loop, wired together. Not movable: the
 /// parts refer to each other.

@@ -19,6 +19,7 @@
 #include "drivers/gpio/fake/sim_data_ready.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
 #include "sim/imu_error_model.hpp"
+#include "sim/rig.hpp"
 #include "sim/trajectory.hpp"
 #include "sim/truth.hpp"
 
@@ -37,8 +38,8 @@ struct SampleDrop {
 /// data-ready timing.
 struct SimImuPath {
   drivers::mpu6000::BusKind bus = drivers::mpu6000::BusKind::kSpi;
-  /// Against the host clock, ppm; the default is a chip 1.5 % slow (SimRigOptions).
-  double clock_ppm = -15'000.0;
+  /// Against the host clock, ppm; the default is a chip 1.5 % slow (rig.hpp).
+  double clock_ppm = kDefaultClockPpm;
   fake::DataReadyTiming data_ready;  // 20 us mean latency, 30 us RMS jitter
 };
 

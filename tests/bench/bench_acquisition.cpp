@@ -228,7 +228,7 @@ void emulator_table(double seconds) {
                         {"I2C 400 kHz, 1 kHz (DLPF on), read per edge", 1, 0, mpu::BusKind::kI2c},
                         {"SPI, 200 Hz (DLPF on, div 4), read per edge", 1, 4, mpu::BusKind::kSpi}};
   for (const auto& c : cases) {
-    const auto r = end_to_end(c.dlpf, c.div, seconds, -15'000.0, "", true, c.bus);
+    const auto r = end_to_end(c.dlpf, c.div, seconds, sim::kDefaultClockPpm, "", true, c.bus);
     std::printf("   %-52s rms %5.2f us  max %5.1f us  delivered %zu  lost %zu  wrong %zu  gaps %zu\n", c.name,
                 r.rms_us, r.max_us, r.delivered, r.lost, r.mismatched, r.gaps);
     std::printf("   %-52s bus busy %.1f %%, FIFO peak %u bytes, chip %+.0f ppm (period)\n", "",
@@ -293,10 +293,10 @@ void cpu_table(double seconds) {
   }
   // The whole simulated chain.
   {
-    const auto r = end_to_end(1, 0, seconds, -15'000.0, dir + "/chain.imulog", false);
+    const auto r = end_to_end(1, 0, seconds, sim::kDefaultClockPpm, dir + "/chain.imulog", false);
     std::printf("   %-58s %8.3f ms/s (emulator included)\n", "emulator + driver + acquisition + stream + log",
                 r.cpu_ms_per_s);
-    const auto d = end_to_end(1, 0, seconds, -15'000.0, "", false);
+    const auto d = end_to_end(1, 0, seconds, sim::kDefaultClockPpm, "", false);
     std::printf("   %-58s %8.3f ms/s\n", "emulator + driver + acquisition (no log)", d.cpu_ms_per_s);
   }
   std::filesystem::remove_all(dir);
