@@ -5,18 +5,12 @@
 #include <Eigen/Core>
 #include <span>
 
+#include "core/imu_calibration.hpp"
 #include "core/imu_model.hpp"
 
 namespace imucal::calib {
 
-/// Error figures as a magnitude (m/s^2) and an angle (rad), mean and max over the intervals.
-struct ErrorFigures {
-  int count = 0;
-  double mean_mps2 = 0.0;
-  double max_mps2 = 0.0;
-  double mean_rad = 0.0;
-  double max_rad = 0.0;
-};
+using imucal::ErrorFigures;  // part of the result record, core/imu_calibration.hpp
 
 /// Accelerometer divergence (4.1.1, metric 3): | |a_k| - g | for every static mean a_k after the
 /// triad's correction, and the worst-case tilt angle asin(err / g) it causes.

@@ -13,6 +13,7 @@
 #include "calib/allan.hpp"
 #include "calib/ellipsoid.hpp"
 #include "calib/rk4.hpp"
+#include "calib/static_detector.hpp"
 
 namespace imucal::calib {
 namespace {

@@ -7,7 +7,8 @@
 // from the solver covariance, scaled by the observed residual variance.
 //
 // Input: the samples of one IMU stream in time order, raw counts or SI. Output parameters are in
-// Tedaldi's form (out = T K (raw + b)) and in the canonical form of calib/imu_model.hpp.
+// Tedaldi's form (out = T K (raw + b)) and in the canonical form of core/imu_model.hpp;
+// the record is core/imu_calibration.hpp.
 
 #include <Eigen/Core>
 #include <optional>
@@ -16,8 +17,8 @@
 #include <vector>
 
 #include "calib/quality.hpp"
-#include "calib/static_detector.hpp"
 #include "core/imu.hpp"
+#include "core/imu_calibration.hpp"
 #include "core/imu_model.hpp"
 #include "core/result.hpp"
 
@@ -57,59 +58,13 @@ struct StaticCalibrationOptions {
   [[nodiscard]] Status validate() const;
 };
 
-/// Standard deviations of a TedaldiTriad's entries (0 for entries that are fixed).
-struct TriadSigma {
-  Eigen::Matrix3d T = Eigen::Matrix3d::Zero();
-  Eigen::Vector3d scale = Eigen::Vector3d::Zero();
-  Eigen::Vector3d bias = Eigen::Vector3d::Zero();
-};
-
-struct StaticIntervalInfo {
-  TimeNs t0_ns = 0;
-  TimeNs t1_ns = 0;  // last sample
-  std::size_t samples = 0;
-  Eigen::Vector3d accel_mean_raw = Eigen::Vector3d::Zero();
-};
-
-struct StaticQuality {
-  bool before_available = false;  // false when no nominal accelerometer conversion was given
-  ErrorFigures accel_before, accel_after;
-  ErrorFigures gyro_before, gyro_after;
-};
-
-/// CPU time of the calling thread spent in each step, s.
-struct StaticTimings {
-  double detector_s = 0.0;
-  double threshold_search_s = 0.0;
-  double accel_s = 0.0;
-  double gyro_s = 0.0;
-};
-
-struct StaticCalibrationResult {
-  TedaldiImuModel model;
-  TriadSigma accel_sigma, gyro_sigma;
-  /// Covariances of the parameter vectors of eqs. 3.2 and 3.6 (gyro: + 3 bias entries when the
-  /// bias is estimated), already scaled by the residual variance.
-  Eigen::MatrixXd accel_covariance, gyro_covariance;
-  CanonicalImuModel canonical;
-
-  double gravity_mps2 = 0.0;
-  double init_still_s = 0.0;
-  bool init_still_from_allan = false;
-  int threshold_multiplier = 0;
-  double threshold = 0.0;  // on varsigma^2, input units^4
-  double sigma_init_sq = 0.0;
-  std::vector<StaticIntervalInfo> intervals;
-  int distinct_attitudes = 0;
-  int gyro_transfers = 0;
-  double accel_residual_rms = 0.0;  // of eq. 3.4 residuals, m^2/s^4
-  double gyro_residual_rms = 0.0;   // of eq. 3.8 residuals (unit vectors)
-  int accel_iterations = 0;
-  int gyro_iterations = 0;
-  StaticQuality quality;
-  StaticTimings timings;
-  std::vector<std::string> warnings;
-};
+// The result record lives in core (core/imu_calibration.hpp) so that code reading or writing
+// calibrations needs no solver; these names keep calib::X working for the estimator's callers.
+using imucal::StaticCalibrationResult;
+using imucal::StaticIntervalInfo;
+using imucal::StaticQuality;
+using imucal::StaticTimings;
+using imucal::TriadSigma;
 
 /// Runs the whole method on one recording.
 [[nodiscard]] Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samples,
