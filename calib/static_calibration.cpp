@@ -14,6 +14,7 @@
 #include "calib/ellipsoid.hpp"
 #include "calib/rk4.hpp"
 #include "calib/static_detector.hpp"
+#include "calib/static_steps.hpp"
 
 namespace imucal::calib {
 namespace {
@@ -151,7 +152,8 @@ AccelSolve solve_accel(std::span<const Eigen::Vector3d> means, double g, const T
 struct Transfer {
   std::vector<Eigen::Vector3d> gyro_raw;
   std::vector<double> t_s;
-  Eigen::Vector3d u0, u1;
+  // Set before every solve; initialised so that copies of a fresh transfer read defined values.
+  Eigen::Vector3d u0 = Eigen::Vector3d::Zero(), u1 = Eigen::Vector3d::Zero();
   std::size_t pose0 = 0;  // index of the static interval the motion starts from
 };
 
@@ -340,6 +342,624 @@ std::vector<PoseDirections> pose_directions(const std::vector<StaticInterval>& i
 
 }  // namespace
 
+// ---- steps of calibrate_static, in the order it runs them ------------------------------------
+
+Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
+                                        std::vector<std::string>* warnings) {
+  const std::size_t n = samples.size();
+  if (n < 1000) {
+    return make_error(Errc::kInsufficientData,
+                      "the recording has " + std::to_string(n) +
+                          " samples: a static calibration needs a still start (about 50 s) and 36-50 "
+                          "held poses; record again");
+  }
+  std::vector<double> dt_s(n - 1);
+  for (std::size_t i = 1; i < n; ++i) {
+    const TimeNs d = samples[i].t_ns - samples[i - 1].t_ns;
+    if (d <= 0) {
+      return make_error(Errc::kCorrupt, "timestamps do not increase at sample " + std::to_string(i) +
+                                            ": the log is damaged or its samples are out of order");
+    }
+    dt_s[i - 1] = ns_to_s(d);
+  }
+  ScannedRecording s;
+  s.period_s = percentile(dt_s, 0.5);
+  s.rate_hz = 1.0 / s.period_s;
+  s.break_before.assign(n, false);
+  s.reset_before.assign(n, false);
+  s.accel_ok.assign(n, true);
+  s.gyro_ok.assign(n, true);
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto f = samples[i].flags;
+    if (i > 0 && ((f & (kImuFlagGapBefore | kImuFlagDeviceReset)) || dt_s[i - 1] > 1.5 * s.period_s)) {
+      s.break_before[i] = true;
+      s.reset_before[i] = (f & kImuFlagDeviceReset) != 0;
+      ++s.gaps;
+    }
+    if ((f & kImuFlagAccelSaturated) || !samples[i].accel.allFinite()) {
+      s.accel_ok[i] = false;
+      ++s.accel_saturated;
+    }
+    if ((f & kImuFlagGyroSaturated) || !samples[i].gyro.allFinite()) {
+      s.gyro_ok[i] = false;
+      ++s.gyro_saturated;
+    }
+  }
+  if (s.accel_saturated + s.gyro_saturated > 0) {
+    warnings->push_back(std::to_string(s.accel_saturated) + " accelerometer and " +
+                        std::to_string(s.gyro_saturated) +
+                        " gyroscope samples are saturated or invalid: they were excluded (static "
+                        "intervals never contain them and no gyro integration crosses them); if this "
+                        "is frequent, raise the full-scale range or move the rig more gently");
+  }
+  if (s.gaps > 0) {
+    warnings->push_back("the log has " + std::to_string(s.gaps) +
+                        " gap(s) or device reset(s): static intervals are split there and no gyro "
+                        "integration crosses them");
+  }
+  s.accel.resize(n);
+  s.gyro.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    s.accel[i] = s.accel_ok[i] ? samples[i].accel : Eigen::Vector3d::Zero();
+    s.gyro[i] = samples[i].gyro;
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!s.accel_ok[i]) s.accel[i] = i > 0 ? s.accel[i - 1] : Eigen::Vector3d::Zero();
+  }
+  return s;
+}
+
+StaticDetection detect_variance(const ScannedRecording& scan, double window_s) {
+  StaticDetection d;
+  d.window = std::max<std::size_t>(3, static_cast<std::size_t>(std::lround(window_s * scan.rate_hz)));
+  d.half = d.window / 2;
+  d.sigma_sq = variance_magnitude_sq(scan.accel, d.window);
+  std::vector<double> usable_sigma;
+  usable_sigma.reserve(d.sigma_sq.size());
+  for (std::size_t i = 0; i < d.sigma_sq.size(); ++i) {
+    if (scan.accel_ok[i]) usable_sigma.push_back(d.sigma_sq[i]);
+  }
+  d.floor_sq = std::max(percentile(usable_sigma, 0.1), 1e-300);
+  return d;
+}
+
+namespace {
+
+double seconds_from_start(std::span<const ImuSample> samples, std::size_t i) {
+  return ns_to_s(samples[i].t_ns - samples[0].t_ns);
+}
+
+/// Samples of the given initial still period, refused when the rig moves in it.
+Result<std::size_t> given_still_start(std::span<const ImuSample> samples, const ScannedRecording& scan,
+                                      const StaticDetection& det, double init_still_s) {
+  const std::size_t n = samples.size();
+  std::size_t n_init = 0;
+  while (n_init < n && seconds_from_start(samples, n_init) < init_still_s) ++n_init;
+  if (n_init >= n) {
+    return make_error(Errc::kInvalidArgument, "the initial still period " + fmt("%.1f", init_still_s) +
+                                                  " s is longer than the recording (" +
+                                                  fmt("%.1f", seconds_from_start(samples, n - 1)) + " s)");
+  }
+  std::vector<double> inner;
+  for (std::size_t i = std::min(det.half, n_init); i + det.half < n_init; ++i)
+    inner.push_back(det.sigma_sq[i]);
+  const double med = percentile(inner, 0.5);
+  for (std::size_t i = 0; i < n_init; ++i) {
+    const bool interior = i >= det.half && i + det.half < n_init;
+    if ((interior && (det.sigma_sq[i] > 10.0 * med || det.sigma_sq[i] > 10.0 * det.floor_sq)) ||
+        !scan.accel_ok[i] || (i > 0 && scan.reset_before[i])) {
+      return make_error(Errc::kInsufficientData,
+                        "the given initial still period is not still: the rig moves (or the log has a "
+                        "device reset or saturation) at t = " +
+                            fmt("%.2f", seconds_from_start(samples, i)) +
+                            " s. Give --init-still no longer than the still start, "
+                            "or record again starting with the rig at rest for about 50 s");
+    }
+  }
+  return n_init;
+}
+
+/// Samples of the still start found by the detector, its length chosen from the gyroscope Allan
+/// deviation (section 3.4.3).
+Result<std::size_t> automatic_still_start(std::span<const ImuSample> samples, const ScannedRecording& scan,
+                                          const StaticDetection& det, double min_init_still_s) {
+  const std::size_t n = samples.size();
+  std::size_t end = 0;
+  // A gap (samples lost while the rig stays still) does not end the still start: the bias mean
+  // and the white-noise level do not depend on it. A device reset does.
+  while (end < n && scan.accel_ok[end] && det.sigma_sq[end] <= 10.0 * det.floor_sq &&
+         (end == 0 || !scan.reset_before[end]))
+    ++end;
+  const double still_s = end > 0 ? seconds_from_start(samples, end - 1) : 0.0;
+  if (still_s < min_init_still_s) {
+    return make_error(Errc::kInsufficientData,
+                      "no still period at the start of the recording: the rig is still for only " +
+                          fmt("%.1f", still_s) + " s (at least " + fmt("%.0f", min_init_still_s) +
+                          " s needed). Record again starting with the rig at rest for about 50 s, or give "
+                          "--init-still if the start is still but noisier than the later poses");
+  }
+  auto curve = allan_deviation(std::span<const Eigen::Vector3d>(scan.gyro.data(), end), scan.rate_hz);
+  if (!curve.ok()) return curve.error();
+  const double t_init = choose_init_period_s(*curve, still_s);
+  std::size_t n_init = 0;
+  while (n_init < end && seconds_from_start(samples, n_init) <= t_init) ++n_init;
+  return n_init;
+}
+
+}  // namespace
+
+Result<StillStart> find_still_start(std::span<const ImuSample> samples, const ScannedRecording& scan,
+                                    const StaticDetection& detection, const StaticCalibrationOptions& opt,
+                                    std::vector<std::string>* warnings) {
+  StillStart still;
+  still.from_allan = !(opt.init_still_s > 0.0);
+  Result<std::size_t> found = still.from_allan
+                                  ? automatic_still_start(samples, scan, detection, opt.min_init_still_s)
+                                  : given_still_start(samples, scan, detection, opt.init_still_s);
+  if (!found.ok()) return found.error();
+  const std::size_t n_init = *found;
+  int init_gaps = 0;
+  for (std::size_t i = 1; i < n_init; ++i) init_gaps += scan.break_before[i] ? 1 : 0;
+  if (init_gaps > 0) {
+    warnings->push_back("the initial still period contains " + std::to_string(init_gaps) +
+                        " gap(s): its samples were used as one still period (bias mean and Allan "
+                        "deviation); no integration crosses a gap");
+  }
+  still.samples = n_init;
+  still.length_s = seconds_from_start(samples, n_init - 1) + scan.period_s;
+  still.sigma_init_sq = variance_magnitude_sq_of(std::span<const Eigen::Vector3d>(scan.accel.data(), n_init));
+  Eigen::Vector3d gyro_sq = Eigen::Vector3d::Zero();
+  for (std::size_t i = 0; i < n_init; ++i) still.gyro_bias_raw += scan.gyro[i];
+  still.gyro_bias_raw /= static_cast<double>(n_init);
+  for (std::size_t i = 0; i < n_init; ++i) gyro_sq += (scan.gyro[i] - still.gyro_bias_raw).cwiseAbs2();
+  still.gyro_bias_sigma =
+      (gyro_sq / static_cast<double>(n_init - 1)).cwiseSqrt() / std::sqrt(static_cast<double>(n_init));
+  return still;
+}
+
+Eigen::MatrixXd normal_pseudo_inverse(const Eigen::MatrixXd& J) {
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(J, Eigen::ComputeThinV);
+  const Eigen::VectorXd sv = svd.singularValues();
+  Eigen::VectorXd inv_sq = Eigen::VectorXd::Zero(sv.size());
+  const double min_ratio = std::sqrt(1e-14);
+  for (Eigen::Index i = 0; i < sv.size(); ++i) {
+    if (!(sv[i] / sv[0] >= min_ratio)) break;
+    inv_sq[i] = 1.0 / (sv[i] * sv[i]);
+  }
+  return svd.matrixV() * inv_sq.asDiagonal() * svd.matrixV().transpose();
+}
+
+namespace {
+
+// ---- threshold search (Algorithm 1) ----------------------------------------------------------
+
+/// Prefix sums over the whole recording, so that the mean of any interval costs O(1) for every
+/// multiplier tried: accelerometer values about the first one (no precision lost on raw counts
+/// with large offsets) and gyro rates about the still-period bias (for the rotation check).
+struct PrefixSums {
+  std::vector<Eigen::Vector3d> accel, gyro;
+  Eigen::Vector3d accel_center = Eigen::Vector3d::Zero();
+};
+
+PrefixSums prefix_sums(const ScannedRecording& scan, const Eigen::Vector3d& gyro_bias_raw) {
+  const std::size_t n = scan.accel.size();
+  PrefixSums p;
+  p.accel.resize(n + 1);
+  p.gyro.resize(n + 1);
+  p.accel[0].setZero();
+  p.gyro[0].setZero();
+  p.accel_center = scan.accel[0];
+  for (std::size_t i = 0; i < n; ++i) {
+    p.accel[i + 1] = p.accel[i] + (scan.accel[i] - p.accel_center);
+    p.gyro[i + 1] = p.gyro[i] + (scan.gyro[i] - gyro_bias_raw);
+  }
+  return p;
+}
+
+/// The static poses found with one threshold multiplier and the accelerometer fitted to them.
+struct Candidate {
+  int multiplier = 0;
+  std::vector<StaticInterval> intervals;
+  std::vector<Eigen::Vector3d> means;
+  AccelSolve solve;
+  int distinct = 0;
+  int rotated = 0;  // intervals dropped for rotation inside them
+};
+
+/// Distinct attitudes among the static means: their directions through the nominal conversion,
+/// else about the centre of the means' bounding box.
+int distinct_attitudes(const std::vector<Eigen::Vector3d>& means, const StaticCalibrationOptions& opt) {
+  std::vector<Eigen::Vector3d> dirs;
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+  for (const auto& m : means) {
+    lo = lo.cwiseMin(m);
+    hi = hi.cwiseMax(m);
+  }
+  for (const auto& m : means) {
+    const Eigen::Vector3d d =
+        opt.accel_init ? opt.accel_init->to_si(m) : Eigen::Vector3d(m - 0.5 * (lo + hi));
+    dirs.push_back(d.normalized());
+  }
+  return count_distinct(dirs, opt.distinct_attitude_deg * M_PI / 180.0);
+}
+
+/// Accelerometer fit (no covariance) from the nominal guess, or from the ellipsoid fit when there
+/// is no guess or it fits poorly.
+AccelSolve first_accel_solve(const std::vector<Eigen::Vector3d>& means, const StaticCalibrationOptions& opt) {
+  AccelSolve solve;
+  std::optional<TedaldiTriad> init;
+  if (opt.accel_init) init = triad_from_conversion(*opt.accel_init);
+  if (init) solve = solve_accel(means, opt.gravity_mps2, *init, nullptr);
+  if (!init || !solve.ok || solve.rms > 0.02 * opt.gravity_mps2 * opt.gravity_mps2) {
+    auto ell = fit_ellipsoid(means, opt.gravity_mps2);
+    if (ell.ok()) {
+      AccelSolve s2 = solve_accel(means, opt.gravity_mps2, *ell, nullptr);
+      if (s2.ok && (!solve.ok || s2.rms < solve.rms)) solve = s2;
+    }
+  }
+  return solve;
+}
+
+/// Everything the threshold search reads.
+struct SearchInput {
+  const ScannedRecording& scan;
+  const StaticDetection& detection;
+  const StillStart& still;
+  const PrefixSums& sums;
+  std::size_t min_samples = 0;
+  double max_rot_rad = 0.0;
+  Eigen::Vector3d gyro_scale0 = Eigen::Vector3d::Ones();
+};
+
+/// The static intervals at threshold k * varsigma_init^2 without the rotated ones, their means and
+/// attitude count; the accelerometer is fitted only when there are enough attitudes.
+Candidate evaluate_multiplier(int k, const SearchInput& in, const StaticCalibrationOptions& opt) {
+  Candidate c;
+  c.multiplier = k;
+  const auto raw_intervals = detect_static_intervals(in.detection.sigma_sq, k * in.still.sigma_init_sq,
+                                                     in.scan.accel_ok, in.scan.break_before, in.min_samples);
+  for (const auto& iv : raw_intervals) {
+    const double m = static_cast<double>(iv.size());
+    const Eigen::Vector3d rot =
+        in.gyro_scale0.cwiseProduct(in.sums.gyro[iv.end] - in.sums.gyro[iv.begin]) * in.scan.period_s;
+    if (rot.norm() > in.max_rot_rad) {
+      ++c.rotated;
+      continue;
+    }
+    c.intervals.push_back(iv);
+    c.means.push_back((in.sums.accel[iv.end] - in.sums.accel[iv.begin]) / m + in.sums.accel_center);
+  }
+  c.distinct = distinct_attitudes(c.means, opt);
+  if (c.distinct >= opt.min_attitudes) c.solve = first_accel_solve(c.means, opt);
+  return c;
+}
+
+/// Algorithm 1: the multiplier whose static poses give the lowest accelerometer residual.
+Result<Candidate> search_threshold(const ScannedRecording& scan, const StaticDetection& detection,
+                                   const StillStart& still, const StaticCalibrationOptions& opt,
+                                   std::vector<std::string>* warnings) {
+  const PrefixSums sums = prefix_sums(scan, still.gyro_bias_raw);
+  SearchInput in{scan, detection, still, sums};
+  in.gyro_scale0 = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
+  in.min_samples =
+      std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(opt.min_interval_s * scan.rate_hz)));
+  in.max_rot_rad = opt.max_rotation_in_static_deg * M_PI / 180.0;
+  std::optional<Candidate> best;
+  int best_distinct_seen = 0;
+  std::size_t best_intervals_seen = 0;
+  for (int k = opt.multiplier_min; k <= opt.multiplier_max; ++k) {
+    Candidate c = evaluate_multiplier(k, in, opt);
+    if (c.distinct > best_distinct_seen) {
+      best_distinct_seen = c.distinct;
+      best_intervals_seen = c.intervals.size();
+    }
+    if (c.distinct < opt.min_attitudes || !c.solve.ok) continue;
+    if (!best || c.solve.rms < best->solve.rms) best = std::move(c);
+  }
+  if (!best) {
+    return make_error(Errc::kInsufficientData,
+                      "found at most " + std::to_string(best_distinct_seen) + " distinct static attitudes (" +
+                          std::to_string(best_intervals_seen) + " static intervals of at least " +
+                          fmt("%.1f", opt.min_interval_s) + " s) with any threshold multiplier in [" +
+                          std::to_string(opt.multiplier_min) + ", " + std::to_string(opt.multiplier_max) +
+                          "]; at least " + std::to_string(opt.min_attitudes) + " are needed (" +
+                          std::to_string(opt.recommended_attitudes) +
+                          " or more recommended). Record again: after the still start, hold the rig still "
+                          "for 1-4 s in 36-50 different attitudes, turning it between holds");
+  }
+  if (best->distinct < opt.recommended_attitudes) {
+    warnings->push_back("only " + std::to_string(best->distinct) + " distinct attitudes were found (" +
+                        std::to_string(opt.recommended_attitudes) +
+                        " or more recommended, 36-50 ideal): the result is less certain, see the sigmas");
+  }
+  if (best->rotated > 0) {
+    warnings->push_back(std::to_string(best->rotated) +
+                        " static interval(s) were dropped because the gyro shows rotation inside them (more "
+                        "than " +
+                        fmt("%.1f", opt.max_rotation_in_static_deg) + " deg): hold the poses steadier");
+  }
+  return std::move(*best);
+}
+
+// ---- accelerometer: final solve with covariance ----------------------------------------------
+
+Status solve_accelerometer(const Candidate& best, std::span<const ImuSample> samples,
+                           const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
+  const AccelSolve final =
+      solve_accel(best.means, opt.gravity_mps2, accel_triad(best.solve.p), &res->accel_covariance);
+  if (!final.ok) {
+    return make_error(Errc::kSolverFailed,
+                      "the accelerometer covariance could not be computed: the static attitudes do not "
+                      "constrain all 9 parameters; record poses covering more directions");
+  }
+  res->model.accel = accel_triad(final.p);
+  res->accel_residual_rms = final.rms;
+  res->accel_iterations = best.solve.iterations + final.iterations;
+  res->accel_sigma = accel_sigma(res->accel_covariance);
+  for (std::size_t k = 0; k < best.intervals.size(); ++k) {
+    const auto& iv = best.intervals[k];
+    res->intervals.push_back({samples[iv.begin].t_ns, samples[iv.end - 1].t_ns, iv.size(), best.means[k]});
+  }
+  return {};
+}
+
+// ---- gyroscope -------------------------------------------------------------------------------
+
+/// The motions between consecutive static poses that can be integrated: none crossing a gap, a
+/// reset or a saturated gyro sample. Refuses when fewer than min_attitudes - 1 remain.
+Result<std::vector<Transfer>> collect_transfers(const std::vector<StaticInterval>& intervals,
+                                                const ScannedRecording& scan,
+                                                std::span<const ImuSample> samples,
+                                                const StaticCalibrationOptions& opt,
+                                                StaticCalibrationResult* res) {
+  std::vector<Transfer> transfers;
+  int dropped = 0, dropped_gap = 0, dropped_sat = 0;
+  for (std::size_t k = 0; k + 1 < intervals.size(); ++k) {
+    const std::size_t a = intervals[k].end - 1;
+    const std::size_t b = intervals[k + 1].begin;
+    bool has_gap = false, has_sat = false;
+    for (std::size_t i = a; i <= b; ++i) {
+      has_sat = has_sat || !scan.gyro_ok[i];
+      has_gap = has_gap || (i > a && scan.break_before[i]);
+    }
+    if (has_gap || has_sat) {
+      ++dropped;
+      dropped_gap += has_gap ? 1 : 0;
+      dropped_sat += has_sat ? 1 : 0;
+      continue;
+    }
+    Transfer tr;
+    tr.gyro_raw.assign(scan.gyro.begin() + static_cast<std::ptrdiff_t>(a),
+                       scan.gyro.begin() + static_cast<std::ptrdiff_t>(b) + 1);
+    tr.t_s.resize(tr.gyro_raw.size());
+    for (std::size_t i = a; i <= b; ++i) tr.t_s[i - a] = ns_to_s(samples[i].t_ns - samples[a].t_ns);
+    tr.pose0 = k;
+    transfers.push_back(std::move(tr));
+  }
+  if (dropped > 0) {
+    res->warnings.push_back(
+        std::to_string(dropped) + " motion(s) between static poses were not used for the " +
+        "gyroscope: " + std::to_string(dropped_gap) + " contain a gap or a device reset, " +
+        std::to_string(dropped_sat) + " contain saturated gyro samples");
+  }
+  res->gyro_transfers = static_cast<int>(transfers.size());
+  const int min_transfers = opt.min_attitudes - 1;
+  if (res->gyro_transfers < min_transfers) {
+    return make_error(Errc::kInsufficientData,
+                      "only " + std::to_string(res->gyro_transfers) + " of " +
+                          std::to_string(res->gyro_transfers + dropped) +
+                          " motions between consecutive static poses can be integrated (at least " +
+                          std::to_string(min_transfers) + " needed for the gyroscope; " +
+                          std::to_string(dropped_sat) + " contain saturated gyro samples (" +
+                          std::to_string(scan.gyro_saturated) + " saturated in all), " +
+                          std::to_string(dropped_gap) +
+                          " contain a gap or a device reset): turn the rig more slowly than the gyro "
+                          "full-scale range (or raise it), avoid gaps, and record more poses");
+  }
+  return transfers;
+}
+
+/// The least-squares problem of eq. 3.8 over all transfers. The cost functions point at the
+/// transfers and at this object's fixed bias, so it is built in place and never moved.
+class GyroFit {
+ public:
+  GyroFit(const std::vector<Transfer>& transfers, const TedaldiTriad& gyro0, bool estimate_bias)
+      : gyro0_(gyro0), estimate_bias_(estimate_bias), gb_(gyro0.bias) {
+    gp_ << gyro_angles(gyro0_.T), gyro0_.scale;
+    for (const auto& tr : transfers) {
+      if (estimate_bias_) {
+        problem_.AddResidualBlock(new GyroTransferCost(&tr, nullptr), nullptr, gp_.data(), gb_.data());
+      } else {
+        problem_.AddResidualBlock(new GyroTransferCost(&tr, &gyro0_.bias), nullptr, gp_.data());
+      }
+    }
+  }
+  GyroFit(const GyroFit&) = delete;
+  GyroFit& operator=(const GyroFit&) = delete;
+
+  /// One solve from the current parameters; the transfers' directions must be set.
+  Status solve(int* iterations) {
+    ceres::Solver::Options so = solver_options(50);
+    so.function_tolerance = 1e-10;
+    so.parameter_tolerance = 1e-10;
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem_, &summary);
+    if (!summary.IsSolutionUsable() || !gp_.allFinite()) {
+      return make_error(Errc::kSolverFailed, "the gyroscope solve failed: " + summary.message);
+    }
+    *iterations += static_cast<int>(summary.iterations.size());
+    final_cost_ = summary.final_cost;
+    return {};
+  }
+
+  TedaldiTriad triad() const {
+    TedaldiTriad t;
+    t.T = gyro_misalignment(gp_.head<6>());
+    t.scale = gp_.tail<3>();
+    t.bias = estimate_bias_ ? gb_ : gyro0_.bias;
+    return t;
+  }
+  int parameters() const { return estimate_bias_ ? 12 : 9; }
+  double final_cost() const { return final_cost_; }
+
+  /// The Jacobian of all residuals at the current parameters, dense.
+  Result<Eigen::MatrixXd> jacobian() {
+    ceres::Problem::EvaluateOptions eo;
+    eo.parameter_blocks = {gp_.data()};
+    if (estimate_bias_) eo.parameter_blocks.push_back(gb_.data());
+    eo.num_threads = 1;
+    ceres::CRSMatrix crs;
+    if (!problem_.Evaluate(eo, nullptr, nullptr, nullptr, &crs) || crs.num_cols != parameters()) {
+      return make_error(Errc::kSolverFailed,
+                        "the gyroscope covariance could not be computed: the motions between poses do not "
+                        "constrain all gyro parameters; turn the rig about all three axes between poses");
+    }
+    Eigen::MatrixXd J = Eigen::MatrixXd::Zero(crs.num_rows, crs.num_cols);
+    for (int r = 0; r < crs.num_rows; ++r) {
+      for (int idx = crs.rows[r]; idx < crs.rows[r + 1]; ++idx) J(r, crs.cols[idx]) = crs.values[idx];
+    }
+    return J;
+  }
+
+ private:
+  const TedaldiTriad gyro0_;
+  const bool estimate_bias_;
+  Eigen::Matrix<double, 9, 1> gp_;
+  Eigen::Vector3d gb_;
+  ceres::Problem problem_;
+  double final_cost_ = 0.0;
+};
+
+/// Sets the transfers' gravity directions (u0 at the end of the start pose, u1 at the start of
+/// the next) from the given accelerometer and gyro models.
+void set_transfer_directions(std::vector<Transfer>* transfers, const std::vector<StaticInterval>& intervals,
+                             const ScannedRecording& scan, std::span<const ImuSample> samples,
+                             const TedaldiTriad& accel, const TedaldiTriad& gyro) {
+  const auto dirs = pose_directions(intervals, scan.accel, scan.gyro, samples, accel, gyro);
+  for (auto& tr : *transfers) {
+    tr.u0 = dirs[tr.pose0].u_end;
+    tr.u1 = dirs[tr.pose0 + 1].u_start;
+  }
+}
+
+/// The effect of the accelerometer's uncertainty on the gyro parameters. The reference
+/// directions come from the calibrated accelerometer, whose errors are common to all transfers:
+/// D Sigma_a D^T with D = -(J_g^T J_g)^-1 J_g^T dr/dtheta_a (Gauss-Newton sensitivity of the gyro
+/// solution; the small rotation inside the static intervals is neglected in dr/dtheta_a).
+Eigen::MatrixXd accel_uncertainty_in_gyro(const Eigen::MatrixXd& Jg, const std::vector<Transfer>& transfers,
+                                          const std::vector<Eigen::Vector3d>& means,
+                                          const StaticCalibrationResult& res) {
+  const Vec9 pa = accel_params(res.model.accel);
+  std::vector<Eigen::Matrix<double, 3, 9>> du(means.size());
+  for (std::size_t k = 0; k < means.size(); ++k) {
+    for (int i = 0; i < 9; ++i) {
+      const double h = 1e-6 * std::max(1.0, std::abs(pa[i]));
+      Vec9 pp = pa, pm = pa;
+      pp[i] += h;
+      pm[i] -= h;
+      du[k].col(i) =
+          (accel_triad(pp).apply(means[k]).normalized() - accel_triad(pm).apply(means[k]).normalized()) /
+          (2 * h);
+    }
+  }
+  const std::size_t m_rows = 3 * transfers.size();
+  Eigen::MatrixXd Ja(m_rows, 9);
+  const Eigen::Matrix3d A = res.model.gyro.TK();
+  std::vector<Eigen::Vector3d> w;
+  for (std::size_t t = 0; t < transfers.size(); ++t) {
+    const auto& tr = transfers[t];
+    w.resize(tr.gyro_raw.size());
+    for (std::size_t i = 0; i < w.size(); ++i) w[i] = A * (tr.gyro_raw[i] + res.model.gyro.bias);
+    const Eigen::Matrix3d R = quat_to_matrix(integrate_rk4n(w, tr.t_s));
+    Ja.middleRows(3 * t, 3) = du[tr.pose0 + 1] - R.transpose() * du[tr.pose0];
+  }
+  const Eigen::MatrixXd D = -(Jg.transpose() * Jg).ldlt().solve(Jg.transpose() * Ja);
+  return D * res.accel_covariance * D.transpose();
+}
+
+TriadSigma gyro_sigma(const Eigen::MatrixXd& cov, bool bias_estimated,
+                      const Eigen::Vector3d& still_bias_sigma) {
+  const Eigen::VectorXd d = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  TriadSigma s;
+  s.T(0, 1) = d[0];
+  s.T(0, 2) = d[1];
+  s.T(1, 0) = d[2];
+  s.T(1, 2) = d[3];
+  s.T(2, 0) = d[4];
+  s.T(2, 1) = d[5];
+  s.scale = d.segment<3>(6);
+  s.bias = bias_estimated ? Eigen::Vector3d(d.tail<3>()) : still_bias_sigma;
+  return s;
+}
+
+/// The gyro model before the solve: the nominal scale, the still-period bias.
+TedaldiTriad initial_gyro(const StillStart& still, const StaticCalibrationOptions& opt) {
+  TedaldiTriad gyro0;
+  gyro0.scale = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
+  gyro0.bias = -still.gyro_bias_raw;
+  return gyro0;
+}
+
+/// Eqs. 3.5-3.16: the gyro solve, then its covariance with the accelerometer's share.
+Status solve_gyroscope(std::vector<Transfer>* transfers, const Candidate& best, const ScannedRecording& scan,
+                       std::span<const ImuSample> samples, const StillStart& still,
+                       const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
+  const TedaldiTriad gyro0 = initial_gyro(still, opt);
+  GyroFit fit(*transfers, gyro0, opt.estimate_gyro_bias);
+  // Two passes: the directions at the ends of the static intervals depend (weakly) on the gyro
+  // model through the rotation inside the intervals; the second pass uses the first estimate.
+  TedaldiTriad gyro_current = gyro0;
+  for (int pass = 0; pass < 2; ++pass) {
+    set_transfer_directions(transfers, best.intervals, scan, samples, res->model.accel, gyro_current);
+    IMUCAL_TRY(fit.solve(&res->gyro_iterations));
+    gyro_current = fit.triad();
+  }
+  const double m_res = 3.0 * static_cast<double>(transfers->size());
+  res->gyro_residual_rms = std::sqrt(2.0 * fit.final_cost() / m_res);
+  res->model.gyro = fit.triad();
+  // One Jacobian evaluation at the solution serves both the covariance and the propagation of
+  // the accelerometer uncertainty.
+  Result<Eigen::MatrixXd> Jg = fit.jacobian();
+  if (!Jg.ok()) return Jg.error();
+  res->gyro_covariance = normal_pseudo_inverse(*Jg);
+  res->gyro_covariance *= 2.0 * fit.final_cost() / std::max(1.0, m_res - fit.parameters());
+  res->gyro_covariance += accel_uncertainty_in_gyro(*Jg, *transfers, best.means, *res);
+  res->gyro_sigma = gyro_sigma(res->gyro_covariance, opt.estimate_gyro_bias, still.gyro_bias_sigma);
+  return {};
+}
+
+// ---- quality figures (4.1.1) -----------------------------------------------------------------
+
+StaticQuality quality_figures(const std::vector<Transfer>& transfers, const Candidate& best,
+                              const ScannedRecording& scan, std::span<const ImuSample> samples,
+                              const StillStart& still, const StaticCalibrationOptions& opt,
+                              const TedaldiImuModel& model) {
+  StaticQuality q;
+  std::vector<GravityTransfer> checks;
+  for (const auto& tr : transfers) checks.push_back({tr.u0, tr.u1, tr.gyro_raw, tr.t_s});
+  q.accel_after = gravity_magnitude_error(best.means, model.accel, opt.gravity_mps2);
+  q.gyro_after = gravity_direction_error(checks, model.gyro, opt.gravity_mps2);
+  if (!opt.accel_init) return q;
+  TedaldiTriad gyro_nominal;
+  gyro_nominal.scale = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
+  gyro_nominal.bias = opt.gyro_init ? Eigen::Vector3d(-opt.gyro_init->offset) : Eigen::Vector3d::Zero();
+  q.before_available = true;
+  const TedaldiTriad accel_nominal = triad_from_conversion(*opt.accel_init);
+  q.accel_before = gravity_magnitude_error(best.means, accel_nominal, opt.gravity_mps2);
+  // Gravity directions from the nominal accelerometer, rates from the nominal gyro.
+  std::vector<GravityTransfer> nominal = checks;
+  const auto dirs = pose_directions(best.intervals, scan.accel, scan.gyro, samples, accel_nominal,
+                                    initial_gyro(still, opt));
+  for (std::size_t k = 0; k < nominal.size(); ++k) {
+    nominal[k].u0 = dirs[transfers[k].pose0].u_end;
+    nominal[k].u1 = dirs[transfers[k].pose0 + 1].u_start;
+  }
+  q.gyro_before = gravity_direction_error(nominal, gyro_nominal, opt.gravity_mps2);
+  return q;
+}
+
+}  // namespace
+
 Status StaticCalibrationOptions::validate() const {
   auto fail = [](const std::string& msg) -> Status { return make_error(Errc::kInvalidArgument, msg); };
   if (!(gravity_mps2 > 9.7 && gravity_mps2 < 9.9)) {
@@ -370,454 +990,37 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   IMUCAL_TRY(opt.validate());
   StaticCalibrationResult res;
   res.gravity_mps2 = opt.gravity_mps2;
-  const std::size_t n = samples.size();
-  if (n < 1000) {
-    return make_error(Errc::kInsufficientData,
-                      "the recording has " + std::to_string(n) +
-                          " samples: a static calibration needs a still start (about 50 s) and 36-50 "
-                          "held poses; record again");
-  }
+  Result<ScannedRecording> scan = scan_recording(samples, &res.warnings);
+  if (!scan.ok()) return scan.error();
 
-  // Time base, gaps, saturation.
-  std::vector<double> dt_s(n - 1);
-  for (std::size_t i = 1; i < n; ++i) {
-    const TimeNs d = samples[i].t_ns - samples[i - 1].t_ns;
-    if (d <= 0) {
-      return make_error(Errc::kCorrupt, "timestamps do not increase at sample " + std::to_string(i) +
-                                            ": the log is damaged or its samples are out of order");
-    }
-    dt_s[i - 1] = ns_to_s(d);
-  }
-  const double period_s = percentile(dt_s, 0.5);
-  const double rate_hz = 1.0 / period_s;
-  std::vector<bool> break_before(n, false), reset_before(n, false), accel_ok(n, true), gyro_ok(n, true);
-  int gaps = 0, accel_sat = 0, gyro_sat = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const auto f = samples[i].flags;
-    if (i > 0 && ((f & (kImuFlagGapBefore | kImuFlagDeviceReset)) || dt_s[i - 1] > 1.5 * period_s)) {
-      break_before[i] = true;
-      reset_before[i] = (f & kImuFlagDeviceReset) != 0;
-      ++gaps;
-    }
-    if ((f & kImuFlagAccelSaturated) || !samples[i].accel.allFinite()) {
-      accel_ok[i] = false;
-      ++accel_sat;
-    }
-    if ((f & kImuFlagGyroSaturated) || !samples[i].gyro.allFinite()) {
-      gyro_ok[i] = false;
-      ++gyro_sat;
-    }
-  }
-  if (accel_sat + gyro_sat > 0) {
-    res.warnings.push_back(std::to_string(accel_sat) + " accelerometer and " + std::to_string(gyro_sat) +
-                           " gyroscope samples are saturated or invalid: they were excluded (static "
-                           "intervals never contain them and no gyro integration crosses them); if this "
-                           "is frequent, raise the full-scale range or move the rig more gently");
-  }
-  if (gaps > 0) {
-    res.warnings.push_back("the log has " + std::to_string(gaps) +
-                           " gap(s) or device reset(s): static intervals are split there and no gyro "
-                           "integration crosses them");
-  }
-
-  std::vector<Eigen::Vector3d> accel(n), gyro(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    accel[i] = accel_ok[i] ? samples[i].accel : Eigen::Vector3d::Zero();
-    gyro[i] = samples[i].gyro;
-  }
-  // Replace invalid accel values by their neighbours so that the running sums stay finite (they
-  // are never part of a static interval).
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!accel_ok[i]) accel[i] = i > 0 ? accel[i - 1] : Eigen::Vector3d::Zero();
-  }
-
-  // ---- static detector (eq. 3.9) ----
   auto t0 = Clock::now();
-  const std::size_t window =
-      std::max<std::size_t>(3, static_cast<std::size_t>(std::lround(opt.window_s * rate_hz)));
-  const std::size_t half = window / 2;
-  const std::vector<double> sigma_sq = variance_magnitude_sq(accel, window);
-  std::vector<double> usable_sigma;
-  usable_sigma.reserve(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (accel_ok[i]) usable_sigma.push_back(sigma_sq[i]);
-  }
-  const double floor_sq = std::max(percentile(usable_sigma, 0.1), 1e-300);
-
-  // ---- initial still period ----
-  auto time_of = [&](std::size_t i) { return ns_to_s(samples[i].t_ns - samples[0].t_ns); };
-  std::size_t n_init = 0;
-  if (opt.init_still_s > 0.0) {
-    while (n_init < n && time_of(n_init) < opt.init_still_s) ++n_init;
-    if (n_init >= n) {
-      return make_error(Errc::kInvalidArgument, "the initial still period " + fmt("%.1f", opt.init_still_s) +
-                                                    " s is longer than the recording (" +
-                                                    fmt("%.1f", time_of(n - 1)) + " s)");
-    }
-    std::vector<double> inner;
-    for (std::size_t i = std::min(half, n_init); i + half < n_init; ++i) inner.push_back(sigma_sq[i]);
-    const double med = percentile(inner, 0.5);
-    for (std::size_t i = 0; i < n_init; ++i) {
-      const bool interior = i >= half && i + half < n_init;
-      if ((interior && (sigma_sq[i] > 10.0 * med || sigma_sq[i] > 10.0 * floor_sq)) || !accel_ok[i] ||
-          (i > 0 && reset_before[i])) {
-        return make_error(Errc::kInsufficientData,
-                          "the given initial still period is not still: the rig moves (or the log has a "
-                          "device reset or saturation) at t = " +
-                              fmt("%.2f", time_of(i)) +
-                              " s. Give --init-still no longer than the still start, "
-                              "or record again starting with the rig at rest for about 50 s");
-      }
-    }
-  } else {
-    std::size_t end = 0;
-    // A gap (samples lost while the rig stays still) does not end the still start: the bias mean
-    // and the white-noise level do not depend on it. A device reset does.
-    while (end < n && accel_ok[end] && sigma_sq[end] <= 10.0 * floor_sq && (end == 0 || !reset_before[end]))
-      ++end;
-    const double still_s = end > 0 ? time_of(end - 1) : 0.0;
-    if (still_s < opt.min_init_still_s) {
-      return make_error(Errc::kInsufficientData,
-                        "no still period at the start of the recording: the rig is still for only " +
-                            fmt("%.1f", still_s) + " s (at least " + fmt("%.0f", opt.min_init_still_s) +
-                            " s needed). Record again starting with the rig at rest for about 50 s, or give "
-                            "--init-still if the start is still but noisier than the later poses");
-    }
-    auto curve = allan_deviation(std::span<const Eigen::Vector3d>(gyro.data(), end), rate_hz);
-    if (!curve.ok()) return curve.error();
-    const double t_init = choose_init_period_s(*curve, still_s);
-    res.init_still_from_allan = true;
-    while (n_init < end && time_of(n_init) <= t_init) ++n_init;
-  }
-  {
-    int init_gaps = 0;
-    for (std::size_t i = 1; i < n_init; ++i) init_gaps += break_before[i] ? 1 : 0;
-    if (init_gaps > 0) {
-      res.warnings.push_back("the initial still period contains " + std::to_string(init_gaps) +
-                             " gap(s): its samples were used as one still period (bias mean and Allan "
-                             "deviation); no integration crosses a gap");
-    }
-  }
-  res.init_still_s = time_of(n_init - 1) + period_s;
-  res.sigma_init_sq = variance_magnitude_sq_of(std::span<const Eigen::Vector3d>(accel.data(), n_init));
-  Eigen::Vector3d gyro_bias_raw = Eigen::Vector3d::Zero();
-  Eigen::Vector3d gyro_sq = Eigen::Vector3d::Zero();
-  for (std::size_t i = 0; i < n_init; ++i) gyro_bias_raw += gyro[i];
-  gyro_bias_raw /= static_cast<double>(n_init);
-  for (std::size_t i = 0; i < n_init; ++i) gyro_sq += (gyro[i] - gyro_bias_raw).cwiseAbs2();
-  const Eigen::Vector3d gyro_bias_sigma =
-      (gyro_sq / static_cast<double>(n_init - 1)).cwiseSqrt() / std::sqrt(static_cast<double>(n_init));
+  const StaticDetection detection = detect_variance(*scan, opt.window_s);
+  Result<StillStart> still = find_still_start(samples, *scan, detection, opt, &res.warnings);
+  if (!still.ok()) return still.error();
+  res.init_still_s = still->length_s;
+  res.init_still_from_allan = still->from_allan;
+  res.sigma_init_sq = still->sigma_init_sq;
   res.timings.detector_s = seconds_since(t0);
 
-  // ---- threshold search (Algorithm 1) ----
   t0 = Clock::now();
-  const Eigen::Vector3d gyro_scale0 = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
-  std::vector<Eigen::Vector3d> accel_sum(n + 1), gyro_sum(n + 1);
-  accel_sum[0].setZero();
-  gyro_sum[0].setZero();
-  const Eigen::Vector3d accel_center = accel[0];
-  for (std::size_t i = 0; i < n; ++i) {
-    accel_sum[i + 1] = accel_sum[i] + (accel[i] - accel_center);
-    gyro_sum[i + 1] = gyro_sum[i] + (gyro[i] - gyro_bias_raw);
-  }
-  const std::size_t min_samples =
-      std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(opt.min_interval_s * rate_hz)));
-  const double max_rot_rad = opt.max_rotation_in_static_deg * M_PI / 180.0;
-
-  struct Candidate {
-    int multiplier = 0;
-    std::vector<StaticInterval> intervals;
-    std::vector<Eigen::Vector3d> means;
-    AccelSolve solve;
-    int distinct = 0;
-    int rotated = 0;
-  };
-  std::optional<Candidate> best;
-  int best_distinct_seen = 0;
-  std::size_t best_intervals_seen = 0;
-  for (int k = opt.multiplier_min; k <= opt.multiplier_max; ++k) {
-    Candidate c;
-    c.multiplier = k;
-    const auto raw_intervals =
-        detect_static_intervals(sigma_sq, k * res.sigma_init_sq, accel_ok, break_before, min_samples);
-    for (const auto& iv : raw_intervals) {
-      const double m = static_cast<double>(iv.size());
-      const Eigen::Vector3d rot = gyro_scale0.cwiseProduct(gyro_sum[iv.end] - gyro_sum[iv.begin]) * period_s;
-      if (rot.norm() > max_rot_rad) {
-        ++c.rotated;
-        continue;
-      }
-      c.intervals.push_back(iv);
-      c.means.push_back((accel_sum[iv.end] - accel_sum[iv.begin]) / m + accel_center);
-    }
-    // Directions for counting attitudes: through the nominal conversion, else about the centre
-    // of the means' bounding box.
-    std::vector<Eigen::Vector3d> dirs;
-    Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
-    for (const auto& m : c.means) {
-      lo = lo.cwiseMin(m);
-      hi = hi.cwiseMax(m);
-    }
-    for (const auto& m : c.means) {
-      const Eigen::Vector3d d =
-          opt.accel_init ? opt.accel_init->to_si(m) : Eigen::Vector3d(m - 0.5 * (lo + hi));
-      dirs.push_back(d.normalized());
-    }
-    c.distinct = count_distinct(dirs, opt.distinct_attitude_deg * M_PI / 180.0);
-    if (c.distinct > best_distinct_seen) {
-      best_distinct_seen = c.distinct;
-      best_intervals_seen = c.intervals.size();
-    }
-    if (c.distinct < opt.min_attitudes) continue;
-    std::optional<TedaldiTriad> init;
-    if (opt.accel_init) init = triad_from_conversion(*opt.accel_init);
-    if (init) c.solve = solve_accel(c.means, opt.gravity_mps2, *init, nullptr);
-    // A poor fit from the nominal guess (or no guess): start from the ellipsoid fit instead.
-    if (!init || !c.solve.ok || c.solve.rms > 0.02 * opt.gravity_mps2 * opt.gravity_mps2) {
-      auto ell = fit_ellipsoid(c.means, opt.gravity_mps2);
-      if (ell.ok()) {
-        AccelSolve s2 = solve_accel(c.means, opt.gravity_mps2, *ell, nullptr);
-        if (s2.ok && (!c.solve.ok || s2.rms < c.solve.rms)) c.solve = s2;
-      }
-    }
-    if (!c.solve.ok) continue;
-    if (!best || c.solve.rms < best->solve.rms) best = std::move(c);
-  }
+  Result<Candidate> best = search_threshold(*scan, detection, *still, opt, &res.warnings);
   res.timings.threshold_search_s = seconds_since(t0);
-  if (!best) {
-    return make_error(Errc::kInsufficientData,
-                      "found at most " + std::to_string(best_distinct_seen) + " distinct static attitudes (" +
-                          std::to_string(best_intervals_seen) + " static intervals of at least " +
-                          fmt("%.1f", opt.min_interval_s) + " s) with any threshold multiplier in [" +
-                          std::to_string(opt.multiplier_min) + ", " + std::to_string(opt.multiplier_max) +
-                          "]; at least " + std::to_string(opt.min_attitudes) + " are needed (" +
-                          std::to_string(opt.recommended_attitudes) +
-                          " or more recommended). Record again: after the still start, hold the rig still "
-                          "for 1-4 s in 36-50 different attitudes, turning it between holds");
-  }
-  if (best->distinct < opt.recommended_attitudes) {
-    res.warnings.push_back("only " + std::to_string(best->distinct) + " distinct attitudes were found (" +
-                           std::to_string(opt.recommended_attitudes) +
-                           " or more recommended, 36-50 ideal): the result is less certain, see the sigmas");
-  }
-  if (best->rotated > 0) {
-    res.warnings.push_back(
-        std::to_string(best->rotated) +
-        " static interval(s) were dropped because the gyro shows rotation inside them (more "
-        "than " +
-        fmt("%.1f", opt.max_rotation_in_static_deg) + " deg): hold the poses steadier");
-  }
+  if (!best.ok()) return best.error();
   res.threshold_multiplier = best->multiplier;
   res.threshold = best->multiplier * res.sigma_init_sq;
   res.distinct_attitudes = best->distinct;
 
-  // ---- accelerometer: final solve with covariance ----
   t0 = Clock::now();
-  {
-    const AccelSolve final =
-        solve_accel(best->means, opt.gravity_mps2, accel_triad(best->solve.p), &res.accel_covariance);
-    if (!final.ok) {
-      return make_error(Errc::kSolverFailed,
-                        "the accelerometer covariance could not be computed: the static attitudes do not "
-                        "constrain all 9 parameters; record poses covering more directions");
-    }
-    res.model.accel = accel_triad(final.p);
-    res.accel_residual_rms = final.rms;
-    res.accel_iterations = best->solve.iterations + final.iterations;
-    res.accel_sigma = accel_sigma(res.accel_covariance);
-  }
-  for (std::size_t k = 0; k < best->intervals.size(); ++k) {
-    const auto& iv = best->intervals[k];
-    res.intervals.push_back({samples[iv.begin].t_ns, samples[iv.end - 1].t_ns, iv.size(), best->means[k]});
-  }
+  IMUCAL_TRY(solve_accelerometer(*best, samples, opt, &res));
   res.timings.accel_s = seconds_since(t0);
 
-  // ---- gyroscope ----
   t0 = Clock::now();
-  std::vector<Transfer> transfers;
-  int dropped = 0, dropped_gap = 0, dropped_sat = 0;
-  for (std::size_t k = 0; k + 1 < best->intervals.size(); ++k) {
-    const std::size_t a = best->intervals[k].end - 1;
-    const std::size_t b = best->intervals[k + 1].begin;
-    bool has_gap = false, has_sat = false;
-    for (std::size_t i = a; i <= b; ++i) {
-      has_sat = has_sat || !gyro_ok[i];
-      has_gap = has_gap || (i > a && break_before[i]);
-    }
-    if (has_gap || has_sat) {
-      ++dropped;
-      dropped_gap += has_gap ? 1 : 0;
-      dropped_sat += has_sat ? 1 : 0;
-      continue;
-    }
-    Transfer tr;
-    tr.gyro_raw.assign(gyro.begin() + static_cast<std::ptrdiff_t>(a),
-                       gyro.begin() + static_cast<std::ptrdiff_t>(b) + 1);
-    tr.t_s.resize(tr.gyro_raw.size());
-    for (std::size_t i = a; i <= b; ++i) tr.t_s[i - a] = ns_to_s(samples[i].t_ns - samples[a].t_ns);
-    tr.pose0 = k;
-    transfers.push_back(std::move(tr));
-  }
-  if (dropped > 0) {
-    res.warnings.push_back(
-        std::to_string(dropped) + " motion(s) between static poses were not used for the " +
-        "gyroscope: " + std::to_string(dropped_gap) + " contain a gap or a device reset, " +
-        std::to_string(dropped_sat) + " contain saturated gyro samples");
-  }
-  res.gyro_transfers = static_cast<int>(transfers.size());
-  const int min_transfers = opt.min_attitudes - 1;
-  if (res.gyro_transfers < min_transfers) {
-    return make_error(Errc::kInsufficientData,
-                      "only " + std::to_string(res.gyro_transfers) + " of " +
-                          std::to_string(res.gyro_transfers + dropped) +
-                          " motions between consecutive static poses can be integrated (at least " +
-                          std::to_string(min_transfers) + " needed for the gyroscope; " +
-                          std::to_string(dropped_sat) + " contain saturated gyro samples (" +
-                          std::to_string(gyro_sat) + " saturated in all), " + std::to_string(dropped_gap) +
-                          " contain a gap or a device reset): turn the rig more slowly than the gyro "
-                          "full-scale range (or raise it), avoid gaps, and record more poses");
-  }
-
-  TedaldiTriad gyro0;
-  gyro0.scale = gyro_scale0;
-  gyro0.bias = -gyro_bias_raw;
-  Eigen::Matrix<double, 9, 1> gp;
-  gp << gyro_angles(gyro0.T), gyro0.scale;
-  Eigen::Vector3d gb = gyro0.bias;
-  ceres::Problem problem;
-  for (const auto& tr : transfers) {
-    if (opt.estimate_gyro_bias) {
-      problem.AddResidualBlock(new GyroTransferCost(&tr, nullptr), nullptr, gp.data(), gb.data());
-    } else {
-      problem.AddResidualBlock(new GyroTransferCost(&tr, &gyro0.bias), nullptr, gp.data());
-    }
-  }
-  ceres::Solver::Options so = solver_options(50);
-  so.function_tolerance = 1e-10;
-  so.parameter_tolerance = 1e-10;
-  ceres::Solver::Summary summary;
-  // Two passes: the directions at the ends of the static intervals depend (weakly) on the gyro
-  // model through the rotation inside the intervals; the second pass uses the first estimate.
-  TedaldiTriad gyro_current = gyro0;
-  for (int pass = 0; pass < 2; ++pass) {
-    const auto dirs = pose_directions(best->intervals, accel, gyro, samples, res.model.accel, gyro_current);
-    for (auto& tr : transfers) {
-      tr.u0 = dirs[tr.pose0].u_end;
-      tr.u1 = dirs[tr.pose0 + 1].u_start;
-    }
-    ceres::Solve(so, &problem, &summary);
-    if (!summary.IsSolutionUsable() || !gp.allFinite()) {
-      return make_error(Errc::kSolverFailed, "the gyroscope solve failed: " + summary.message);
-    }
-    res.gyro_iterations += static_cast<int>(summary.iterations.size());
-    gyro_current.T = gyro_misalignment(gp.head<6>());
-    gyro_current.scale = gp.tail<3>();
-    gyro_current.bias = opt.estimate_gyro_bias ? gb : gyro0.bias;
-  }
-  const double m_res = 3.0 * static_cast<double>(transfers.size());
-  const int n_par = opt.estimate_gyro_bias ? 12 : 9;
-  res.gyro_residual_rms = std::sqrt(2.0 * summary.final_cost / m_res);
-  res.model.gyro.T = gyro_misalignment(gp.head<6>());
-  res.model.gyro.scale = gp.tail<3>();
-  res.model.gyro.bias = opt.estimate_gyro_bias ? gb : gyro0.bias;
-  {
-    // One Jacobian evaluation at the solution serves both the covariance and the propagation of
-    // the accelerometer uncertainty below. The covariance is (J^T J)^+ from the SVD of J, singular
-    // values below sqrt(1e-14) of the largest being dropped (what ceres::Covariance does with
-    // DENSE_SVD and automatic null-space truncation).
-    ceres::Problem::EvaluateOptions eo;
-    eo.parameter_blocks = {gp.data()};
-    if (opt.estimate_gyro_bias) eo.parameter_blocks.push_back(gb.data());
-    eo.num_threads = 1;
-    ceres::CRSMatrix crs;
-    if (!problem.Evaluate(eo, nullptr, nullptr, nullptr, &crs) || crs.num_cols != n_par) {
-      return make_error(Errc::kSolverFailed,
-                        "the gyroscope covariance could not be computed: the motions between poses do not "
-                        "constrain all gyro parameters; turn the rig about all three axes between poses");
-    }
-    Eigen::MatrixXd Jg = Eigen::MatrixXd::Zero(crs.num_rows, crs.num_cols);
-    for (int r = 0; r < crs.num_rows; ++r) {
-      for (int idx = crs.rows[r]; idx < crs.rows[r + 1]; ++idx) Jg(r, crs.cols[idx]) = crs.values[idx];
-    }
-    {
-      const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Jg, Eigen::ComputeThinV);
-      const Eigen::VectorXd sv = svd.singularValues();
-      Eigen::VectorXd inv_sq = Eigen::VectorXd::Zero(sv.size());
-      const double min_ratio = std::sqrt(1e-14);
-      for (Eigen::Index i = 0; i < sv.size(); ++i) {
-        if (!(sv[i] / sv[0] >= min_ratio)) break;
-        inv_sq[i] = 1.0 / (sv[i] * sv[i]);
-      }
-      res.gyro_covariance = svd.matrixV() * inv_sq.asDiagonal() * svd.matrixV().transpose();
-    }
-    res.gyro_covariance *= 2.0 * summary.final_cost / std::max(1.0, m_res - n_par);
-    // The reference directions come from the calibrated accelerometer, whose errors are common
-    // to all transfers: add their effect, D Sigma_a D^T with D = -(J_g^T J_g)^-1 J_g^T dr/dtheta_a
-    // (Gauss-Newton sensitivity of the gyro solution; the small rotation inside the static
-    // intervals is neglected in dr/dtheta_a).
-    {
-      const Vec9 pa = accel_params(res.model.accel);
-      std::vector<Eigen::Matrix<double, 3, 9>> du(best->means.size());
-      for (std::size_t k = 0; k < best->means.size(); ++k) {
-        for (int i = 0; i < 9; ++i) {
-          const double h = 1e-6 * std::max(1.0, std::abs(pa[i]));
-          Vec9 pp = pa, pm = pa;
-          pp[i] += h;
-          pm[i] -= h;
-          du[k].col(i) = (accel_triad(pp).apply(best->means[k]).normalized() -
-                          accel_triad(pm).apply(best->means[k]).normalized()) /
-                         (2 * h);
-        }
-      }
-      const std::size_t m_rows = 3 * transfers.size();
-      Eigen::MatrixXd Ja(m_rows, 9);
-      const Eigen::Matrix3d A = res.model.gyro.TK();
-      std::vector<Eigen::Vector3d> w;
-      for (std::size_t t = 0; t < transfers.size(); ++t) {
-        const auto& tr = transfers[t];
-        w.resize(tr.gyro_raw.size());
-        for (std::size_t i = 0; i < w.size(); ++i) w[i] = A * (tr.gyro_raw[i] + res.model.gyro.bias);
-        const Eigen::Matrix3d R = quat_to_matrix(integrate_rk4n(w, tr.t_s));
-        Ja.middleRows(3 * t, 3) = du[tr.pose0 + 1] - R.transpose() * du[tr.pose0];
-      }
-      {
-        const Eigen::MatrixXd D = -(Jg.transpose() * Jg).ldlt().solve(Jg.transpose() * Ja);
-        res.gyro_covariance += D * res.accel_covariance * D.transpose();
-      }
-    }
-    const Eigen::VectorXd d = res.gyro_covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
-    res.gyro_sigma.T(0, 1) = d[0];
-    res.gyro_sigma.T(0, 2) = d[1];
-    res.gyro_sigma.T(1, 0) = d[2];
-    res.gyro_sigma.T(1, 2) = d[3];
-    res.gyro_sigma.T(2, 0) = d[4];
-    res.gyro_sigma.T(2, 1) = d[5];
-    res.gyro_sigma.scale = d.segment<3>(6);
-    res.gyro_sigma.bias = opt.estimate_gyro_bias ? Eigen::Vector3d(d.tail<3>()) : gyro_bias_sigma;
-  }
+  Result<std::vector<Transfer>> transfers = collect_transfers(best->intervals, *scan, samples, opt, &res);
+  if (!transfers.ok()) return transfers.error();
+  IMUCAL_TRY(solve_gyroscope(&*transfers, *best, *scan, samples, *still, opt, &res));
   res.timings.gyro_s = seconds_since(t0);
 
-  // ---- quality figures (4.1.1) ----
-  std::vector<GravityTransfer> checks;
-  for (const auto& tr : transfers) checks.push_back({tr.u0, tr.u1, tr.gyro_raw, tr.t_s});
-  res.quality.accel_after = gravity_magnitude_error(best->means, res.model.accel, opt.gravity_mps2);
-  res.quality.gyro_after = gravity_direction_error(checks, res.model.gyro, opt.gravity_mps2);
-  TedaldiTriad gyro_nominal;
-  gyro_nominal.scale = gyro_scale0;
-  gyro_nominal.bias = opt.gyro_init ? Eigen::Vector3d(-opt.gyro_init->offset) : Eigen::Vector3d::Zero();
-  if (opt.accel_init) {
-    res.quality.before_available = true;
-    const TedaldiTriad accel_nominal = triad_from_conversion(*opt.accel_init);
-    res.quality.accel_before = gravity_magnitude_error(best->means, accel_nominal, opt.gravity_mps2);
-    // Gravity directions from the nominal accelerometer, rates from the nominal gyro.
-    std::vector<GravityTransfer> nominal = checks;
-    const auto dirs = pose_directions(best->intervals, accel, gyro, samples, accel_nominal, gyro0);
-    for (std::size_t k = 0; k < nominal.size(); ++k) {
-      nominal[k].u0 = dirs[transfers[k].pose0].u_end;
-      nominal[k].u1 = dirs[transfers[k].pose0 + 1].u_start;
-    }
-    res.quality.gyro_before = gravity_direction_error(nominal, gyro_nominal, opt.gravity_mps2);
-  }
+  res.quality = quality_figures(*transfers, *best, *scan, samples, *still, opt, res.model);
   res.canonical = canonical_from_tedaldi(res.model);
   return res;
 }

@@ -5,6 +5,7 @@
 
 #include "calib/static_calibration.hpp"
 #include "calib/static_detector.hpp"
+#include "calib/static_steps.hpp"
 #include "tests/calib/test_static_synth.hpp"
 
 namespace imucal::calib {
@@ -174,6 +175,7 @@ TEST(StaticCalibration, MissingStillStartIsAnError) {
   opt.init_still_s = 10.0;
   res = calibrate_static(rec.samples, opt);
   ASSERT_FALSE(res.ok());
+  EXPECT_EQ(res.error().code, Errc::kInsufficientData);
   EXPECT_NE(res.error().message.find("not still"), std::string::npos) << res.error().message;
 }
 
@@ -254,6 +256,103 @@ TEST(StaticCalibration, RotationInsideAStaticIntervalIsDropped) {
   std::string all;
   for (const auto& w : res->warnings) all += w + "\n";
   EXPECT_NE(all.find("rotation inside"), std::string::npos) << all;
+}
+
+// ---- the steps on their own ----
+
+std::vector<ImuSample> still_samples(std::size_t n) {
+  std::vector<ImuSample> v(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    v[i].t_ns = static_cast<TimeNs>(i) * 10'000'000;  // 100 Hz
+    v[i].accel = Eigen::Vector3d(0.0, 0.0, 9.8);
+    v[i].gyro = Eigen::Vector3d(0.01, 0.0, 0.0);
+  }
+  return v;
+}
+
+TEST(StaticSteps, ScanFindsBreaksAndInvalidSamplesAndWarns) {
+  std::vector<ImuSample> v = still_samples(1200);
+  for (std::size_t i = 500; i < v.size(); ++i) v[i].t_ns += 50'000'000;  // 5 periods lost
+  v[700].flags |= kImuFlagDeviceReset;
+  v[800].flags |= kImuFlagAccelSaturated;
+  v[801].accel.x() = std::nan("");
+  v[900].flags |= kImuFlagGyroSaturated;
+  std::vector<std::string> warnings;
+  auto scan = scan_recording(v, &warnings);
+  ASSERT_TRUE(scan.ok()) << scan.error().message;
+  EXPECT_NEAR(scan->rate_hz, 100.0, 1e-9);
+  EXPECT_EQ(scan->gaps, 2);
+  EXPECT_TRUE(scan->break_before[500]);
+  EXPECT_FALSE(scan->reset_before[500]);
+  EXPECT_TRUE(scan->break_before[700]);
+  EXPECT_TRUE(scan->reset_before[700]);
+  EXPECT_EQ(scan->accel_saturated, 2);
+  EXPECT_EQ(scan->gyro_saturated, 1);
+  EXPECT_FALSE(scan->accel_ok[800]);
+  EXPECT_FALSE(scan->accel_ok[801]);
+  EXPECT_FALSE(scan->gyro_ok[900]);
+  // Invalid accelerometer values are replaced by the last valid one, so running sums stay finite.
+  EXPECT_EQ(scan->accel[801], v[799].accel);
+  ASSERT_EQ(warnings.size(), 2u);
+  EXPECT_NE(warnings[0].find("saturated"), std::string::npos) << warnings[0];
+  EXPECT_NE(warnings[1].find("gap"), std::string::npos) << warnings[1];
+
+  v[1000].t_ns = v[999].t_ns;
+  scan = scan_recording(v, &warnings);
+  ASSERT_FALSE(scan.ok());
+  EXPECT_EQ(scan.error().code, Errc::kCorrupt);
+  scan = scan_recording(still_samples(999), &warnings);
+  ASSERT_FALSE(scan.ok());
+  EXPECT_EQ(scan.error().code, Errc::kInsufficientData);
+}
+
+TEST(StaticSteps, StillStartGivenOrFromAllanDeviation) {
+  SynthConfig cfg;
+  cfg.seed = 6;
+  cfg.truth = test::random_truth(6);
+  const auto rec = make_static_recording(cfg);
+  std::vector<std::string> warnings;
+  auto scan = scan_recording(rec.samples, &warnings);
+  ASSERT_TRUE(scan.ok()) << scan.error().message;
+  const StaticDetection det = detect_variance(*scan, 1.0);
+  EXPECT_EQ(det.window, 100u);
+  EXPECT_GT(det.floor_sq, 0.0);
+
+  StaticCalibrationOptions opt;
+  opt.init_still_s = 30.0;
+  auto given = find_still_start(rec.samples, *scan, det, opt, &warnings);
+  ASSERT_TRUE(given.ok()) << given.error().message;
+  EXPECT_FALSE(given->from_allan);
+  EXPECT_EQ(given->samples, 3000u);
+  EXPECT_NEAR(given->length_s, 30.0, 1e-9);
+  // The still-period mean is the gyro bias (Tedaldi's sign: raw = ... - bias).
+  EXPECT_LT((given->gyro_bias_raw + cfg.truth.gyro.bias).norm(), 5.0 * given->gyro_bias_sigma.norm());
+
+  opt.init_still_s = 0.0;
+  auto automatic = find_still_start(rec.samples, *scan, det, opt, &warnings);
+  ASSERT_TRUE(automatic.ok()) << automatic.error().message;
+  EXPECT_TRUE(automatic->from_allan);
+  EXPECT_GT(automatic->length_s, 20.0);
+  EXPECT_LE(automatic->length_s, cfg.still_s + 1.0);
+  EXPECT_TRUE(warnings.empty());
+
+  opt.init_still_s = 1e6;
+  auto too_long = find_still_start(rec.samples, *scan, det, opt, &warnings);
+  ASSERT_FALSE(too_long.ok());
+  EXPECT_EQ(too_long.error().code, Errc::kInvalidArgument);
+  EXPECT_NE(too_long.error().message.find("longer than the recording"), std::string::npos);
+}
+
+TEST(StaticSteps, NormalPseudoInverseDropsTheNullSpace) {
+  Eigen::MatrixXd J(6, 3);
+  J << 1, 2, 0, 0, 1, 1, 3, 0, 1, 1, 1, 1, 0, 2, 5, 4, 1, 0;
+  EXPECT_TRUE(normal_pseudo_inverse(J).isApprox((J.transpose() * J).inverse(), 1e-12));
+  // A column that repeats another: the covariance has no component along the null direction.
+  J.col(2) = J.col(0);
+  const Eigen::MatrixXd P = normal_pseudo_inverse(J);
+  EXPECT_TRUE(P.allFinite());
+  EXPECT_LT((P * Eigen::Vector3d(1, 0, -1)).norm(), 1e-12);
+  EXPECT_TRUE((J.transpose() * J * P * J.transpose() * J).isApprox(J.transpose() * J, 1e-12));
 }
 
 TEST(StaticCalibration, BadInputsAreRefused) {

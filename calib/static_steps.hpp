@@ -1,0 +1,69 @@
+#pragma once
+// The steps of calibrate_static (calib/static_calibration.hpp) that stand on their own: the scan
+// of the input, the static detector and the initial still period. They are declared here so that
+// tests can check each step without running the whole method; callers outside calib use
+// calibrate_static.
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "calib/static_calibration.hpp"
+#include "core/imu.hpp"
+#include "core/result.hpp"
+
+namespace imucal::calib {
+
+/// The recording as the method sees it: time base, breaks and invalid samples.
+struct ScannedRecording {
+  double period_s = 0.0;  // median sample interval
+  double rate_hz = 0.0;
+  /// A gap (flagged, or an interval over 1.5 periods) or a device reset before sample i.
+  std::vector<bool> break_before;
+  std::vector<bool> reset_before;  // a device reset before sample i
+  std::vector<bool> accel_ok, gyro_ok;
+  int gaps = 0, accel_saturated = 0, gyro_saturated = 0;
+  /// The samples' values; an invalid accelerometer value is replaced by the previous one so that
+  /// running sums stay finite (such samples are never part of a static interval).
+  std::vector<Eigen::Vector3d> accel, gyro;
+};
+
+/// Checks the time base (kInsufficientData when too short, kCorrupt when timestamps do not
+/// increase) and finds breaks and saturated samples; warns about them.
+[[nodiscard]] Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
+                                                      std::vector<std::string>* warnings);
+
+/// The variance static detector (eq. 3.9) over the whole recording.
+struct StaticDetection {
+  std::size_t window = 0;  // samples
+  std::size_t half = 0;    // window / 2
+  std::vector<double> sigma_sq;
+  /// 10th percentile of sigma_sq over the valid samples: the noise floor of a still rig.
+  double floor_sq = 0.0;
+};
+StaticDetection detect_variance(const ScannedRecording& scan, double window_s);
+
+/// The initial still period (section 3.4.3) and what is estimated from it.
+struct StillStart {
+  std::size_t samples = 0;
+  double length_s = 0.0;
+  bool from_allan = false;     // length chosen from the gyroscope Allan deviation
+  double sigma_init_sq = 0.0;  // varsigma_init^2 of Algorithm 1
+  Eigen::Vector3d gyro_bias_raw = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_bias_sigma = Eigen::Vector3d::Zero();
+};
+/// The given initial still period (options.init_still_s > 0), checked to be still, or the still
+/// start found from the detector with its length chosen from the gyroscope Allan deviation.
+[[nodiscard]] Result<StillStart> find_still_start(std::span<const ImuSample> samples,
+                                                  const ScannedRecording& scan,
+                                                  const StaticDetection& detection,
+                                                  const StaticCalibrationOptions& options,
+                                                  std::vector<std::string>* warnings);
+
+/// (J^T J)^+ from the SVD of J, singular values below sqrt(1e-14) of the largest being dropped
+/// (what ceres::Covariance does with DENSE_SVD and automatic null-space truncation).
+Eigen::MatrixXd normal_pseudo_inverse(const Eigen::MatrixXd& J);
+
+}  // namespace imucal::calib
