@@ -452,8 +452,8 @@ Result<std::size_t> given_still_start(std::span<const ImuSample> samples, const 
                         "the given initial still period is not still: the rig moves (or the log has a "
                         "device reset or saturation) at t = " +
                             fmt("%.2f", seconds_from_start(samples, i)) +
-                            " s. Give --init-still no longer than the still start, "
-                            "or record again starting with the rig at rest for about 50 s");
+                            " s. Give an initial still period (init_still_s) no longer than the still "
+                            "start, or record again starting with the rig at rest for about 50 s");
     }
   }
   return n_init;
@@ -476,7 +476,8 @@ Result<std::size_t> automatic_still_start(std::span<const ImuSample> samples, co
                       "no still period at the start of the recording: the rig is still for only " +
                           fmt("%.1f", still_s) + " s (at least " + fmt("%.0f", min_init_still_s) +
                           " s needed). Record again starting with the rig at rest for about 50 s, or give "
-                          "--init-still if the start is still but noisier than the later poses");
+                          "the initial still period (init_still_s) if the start is still but noisier than "
+                          "the later poses");
   }
   auto curve = allan_deviation(std::span<const Eigen::Vector3d>(scan.gyro.data(), end), scan.rate_hz);
   if (!curve.ok()) return curve.error();

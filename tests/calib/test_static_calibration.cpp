@@ -177,6 +177,9 @@ TEST(StaticCalibration, MissingStillStartIsAnError) {
   ASSERT_FALSE(res.ok());
   EXPECT_EQ(res.error().code, Errc::kInsufficientData);
   EXPECT_NE(res.error().message.find("not still"), std::string::npos) << res.error().message;
+  // The library speaks of its options, not of a command line's flags.
+  EXPECT_NE(res.error().message.find("init_still_s"), std::string::npos) << res.error().message;
+  EXPECT_EQ(res.error().message.find("--"), std::string::npos) << res.error().message;
 }
 
 TEST(StaticCalibration, GapsAndSaturationAreExcludedWithWarnings) {
