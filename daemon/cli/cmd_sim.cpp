@@ -195,110 +195,119 @@ T take(Result<T> r, const std::string& what) {
   return std::move(r).value();
 }
 
+/// `sim static`: the multi-position protocol.
+void add_static(CLI::App* sim) {
+  auto o = std::make_shared<SimCommon>();
+  auto so = std::make_shared<sim::StaticProtocolOptions>();
+  CLI::App* cmd = sim->add_subcommand(
+      "static", "Multi-position protocol (Tedaldi et al.): still period, then N attitudes held 1-4 s");
+  add_common(cmd, *o);
+  cmd->add_option("--poses", so->poses, "Number of attitudes, 9..100 (default 40)")
+      ->check(CLI::Range(9, 100));
+  cmd->add_option("--still", so->initial_still_s, "Initial still period in s (default 50)")
+      ->check(CLI::Range(1.0, 3600.0));
+  cmd->add_option("--hold-min", so->hold_min_s, "Shortest hold in s (default 1)")->check(CLI::PositiveNumber);
+  cmd->add_option("--hold-max", so->hold_max_s, "Longest hold in s (default 4)")->check(CLI::PositiveNumber);
+  cmd->add_option("--excitation", so->excitation,
+                  "Speed of the moves: 1 is a calm hand; 3 exceeds +-2 g and +-250 deg/s (default 1)")
+      ->check(CLI::Range(0.1, 10.0));
+  cmd->callback([o, so, cmd]() {
+    so->tremor.enabled = o->tremor;
+    auto traj = take(sim::make_static_protocol(*so, o->seed), "sim static");
+    run(*o, cmd, "static", "static", *traj, traj->poses());
+  });
+}
+
+/// `sim gsens`: six faces for the g-sensitivity experiment.
+void add_gsens(CLI::App* sim) {
+  auto o = std::make_shared<SimCommon>();
+  auto fo = std::make_shared<sim::SixFaceOptions>();
+  CLI::App* cmd =
+      sim->add_subcommand("gsens", "Six-face holds for the gyroscope g-sensitivity experiment (Krebs 5.2.3)");
+  add_common(cmd, *o);
+  cmd->add_option("--hold", fo->hold_s, "Hold per face in s (default 30)")->check(CLI::Range(1.0, 3600.0));
+  cmd->callback([o, fo, cmd]() {
+    fo->tremor.enabled = o->tremor;
+    auto traj = take(sim::make_six_face(*fo, o->seed), "sim gsens");
+    run(*o, cmd, "gsens", "six-face", *traj, traj->poses());
+  });
+}
+
+/// `sim camimu`: checkerboard motion with rendered frames, through its own session writer.
+void add_camimu(CLI::App* sim) {
+  auto o = std::make_shared<SimCommon>();
+  auto co = std::make_shared<sim::CamImuSimOptions>();
+  o->imu_rate_hz = co->imu_rate_hz;
+  CLI::App* cmd = sim->add_subcommand(
+      "camimu", "Camera-IMU session: checkerboard motion (Krebs 5.1.1) with rendered camera frames");
+  add_common(cmd, *o, false);
+  cmd->add_option("--duration", co->motion.duration_s,
+                  "Length in s (default " + std::to_string(static_cast<int>(co->motion.duration_s)) + ")")
+      ->check(CLI::Range(10.0, 3600.0));
+  cmd->add_option("--camera-rate", co->camera_rate_hz, "Camera frame rate in Hz (default 20)")
+      ->check(CLI::Range(1.0, 200.0));
+  cmd->add_option("--excitation", co->motion.excitation,
+                  "Scales the motion: mean |a| 3.12 m/s^2 and mean |w| 0.366 rad/s times this (default 1)")
+      ->check(CLI::Range(0.1, 10.0));
+  cmd->callback([o, co, cmd]() {
+    co->seed = o->seed;
+    co->imu_rate_hz = o->imu_rate_hz;
+    co->imu_path = o->path();
+    co->motion.tremor.enabled = o->tremor;
+    co->imu = make_params(*o, cmd, &co->imu_params_from_file);
+    co->overwrite = o->force;
+    const std::string truth_path = sim::truth_path_for(o->out_path);
+    refuse_overwrite(*o, truth_path);
+    auto valid = co->validate();
+    if (!valid.ok()) fail(valid.error(), "sim camimu");
+    sim::CamImuSimSummary summary;
+    Progress progress("simulating camimu", 1.0);
+    auto status = sim::simulate_camimu_session(
+        *co, o->out_path, truth_path, [&progress](double done) { progress.update(done); }, &summary);
+    progress.finish();
+    if (!status.ok()) {
+      if (status.error().code == Errc::kAlreadyExists) {
+        throw CliExit{kExitIo, status.error().message + "; pass --force to replace it"};
+      }
+      fail(status.error(), "sim camimu");
+    }
+    std::ostringstream msg;
+    msg.precision(4);
+    msg << "wrote " << summary.imu_samples << " samples and " << summary.frames << " frames ("
+        << summary.duration_s << " s, IMU " << co->imu_rate_hz << " Hz, camera " << co->camera_rate_hz
+        << " Hz) to " << o->out_path << "\n";
+    msg << "truth: " << truth_path << "\n";
+    msg << "mean |a| " << summary.mean_accel_mps2 << " m/s^2, mean |w| " << summary.mean_rate_radps
+        << " rad/s; frames with the whole board " << summary.frames_all_corners_visible
+        << ", without any corner " << summary.frames_no_corner_visible;
+    std::cout << msg.str() << "\n";
+  });
+}
+
+/// `sim still`: a long still recording.
+void add_still(CLI::App* sim) {
+  auto o = std::make_shared<SimCommon>();
+  auto so = std::make_shared<sim::StillOptions>();
+  CLI::App* cmd =
+      sim->add_subcommand("still", "A long still recording (Allan variance), on a table by default");
+  add_common(cmd, *o);
+  cmd->add_option("--duration", so->duration_s, "Length in s (default 600)")
+      ->check(CLI::Range(1.0, 172800.0));
+  cmd->callback([o, so, cmd]() {
+    so->tremor.enabled = o->tremor;
+    auto traj = take(sim::make_still(*so, o->seed), "sim still");
+    run(*o, cmd, "still", "still", *traj, 1);
+  });
+}
+
 void setup(CLI::App& root) {
   CLI::App* sim = root.add_subcommand(
       "sim", "Simulate an MPU-6000 rig recording (static protocol, six faces, long still) with ground truth");
   sim->require_subcommand(1);
-
-  {
-    auto o = std::make_shared<SimCommon>();
-    auto so = std::make_shared<sim::StaticProtocolOptions>();
-    CLI::App* cmd = sim->add_subcommand(
-        "static", "Multi-position protocol (Tedaldi et al.): still period, then N attitudes held 1-4 s");
-    add_common(cmd, *o);
-    cmd->add_option("--poses", so->poses, "Number of attitudes, 9..100 (default 40)")
-        ->check(CLI::Range(9, 100));
-    cmd->add_option("--still", so->initial_still_s, "Initial still period in s (default 50)")
-        ->check(CLI::Range(1.0, 3600.0));
-    cmd->add_option("--hold-min", so->hold_min_s, "Shortest hold in s (default 1)")
-        ->check(CLI::PositiveNumber);
-    cmd->add_option("--hold-max", so->hold_max_s, "Longest hold in s (default 4)")
-        ->check(CLI::PositiveNumber);
-    cmd->add_option("--excitation", so->excitation,
-                    "Speed of the moves: 1 is a calm hand; 3 exceeds +-2 g and +-250 deg/s (default 1)")
-        ->check(CLI::Range(0.1, 10.0));
-    cmd->callback([o, so, cmd]() {
-      so->tremor.enabled = o->tremor;
-      auto traj = take(sim::make_static_protocol(*so, o->seed), "sim static");
-      run(*o, cmd, "static", "static", *traj, traj->poses());
-    });
-  }
-  {
-    auto o = std::make_shared<SimCommon>();
-    auto fo = std::make_shared<sim::SixFaceOptions>();
-    CLI::App* cmd = sim->add_subcommand(
-        "gsens", "Six-face holds for the gyroscope g-sensitivity experiment (Krebs 5.2.3)");
-    add_common(cmd, *o);
-    cmd->add_option("--hold", fo->hold_s, "Hold per face in s (default 30)")->check(CLI::Range(1.0, 3600.0));
-    cmd->callback([o, fo, cmd]() {
-      fo->tremor.enabled = o->tremor;
-      auto traj = take(sim::make_six_face(*fo, o->seed), "sim gsens");
-      run(*o, cmd, "gsens", "six-face", *traj, traj->poses());
-    });
-  }
-  {
-    auto o = std::make_shared<SimCommon>();
-    auto co = std::make_shared<sim::CamImuSimOptions>();
-    o->imu_rate_hz = co->imu_rate_hz;
-    CLI::App* cmd = sim->add_subcommand(
-        "camimu", "Camera-IMU session: checkerboard motion (Krebs 5.1.1) with rendered camera frames");
-    add_common(cmd, *o, false);
-    cmd->add_option("--duration", co->motion.duration_s,
-                    "Length in s (default " + std::to_string(static_cast<int>(co->motion.duration_s)) + ")")
-        ->check(CLI::Range(10.0, 3600.0));
-    cmd->add_option("--camera-rate", co->camera_rate_hz, "Camera frame rate in Hz (default 20)")
-        ->check(CLI::Range(1.0, 200.0));
-    cmd->add_option("--excitation", co->motion.excitation,
-                    "Scales the motion: mean |a| 3.12 m/s^2 and mean |w| 0.366 rad/s times this (default 1)")
-        ->check(CLI::Range(0.1, 10.0));
-    cmd->callback([o, co, cmd]() {
-      co->seed = o->seed;
-      co->imu_rate_hz = o->imu_rate_hz;
-      co->imu_path = o->path();
-      co->motion.tremor.enabled = o->tremor;
-      co->imu = make_params(*o, cmd, &co->imu_params_from_file);
-      co->overwrite = o->force;
-      const std::string truth_path = sim::truth_path_for(o->out_path);
-      refuse_overwrite(*o, truth_path);
-      auto valid = co->validate();
-      if (!valid.ok()) fail(valid.error(), "sim camimu");
-      sim::CamImuSimSummary summary;
-      Progress progress("simulating camimu", 1.0);
-      auto status = sim::simulate_camimu_session(
-          *co, o->out_path, truth_path, [&progress](double done) { progress.update(done); }, &summary);
-      progress.finish();
-      if (!status.ok()) {
-        if (status.error().code == Errc::kAlreadyExists) {
-          throw CliExit{kExitIo, status.error().message + "; pass --force to replace it"};
-        }
-        fail(status.error(), "sim camimu");
-      }
-      std::ostringstream msg;
-      msg.precision(4);
-      msg << "wrote " << summary.imu_samples << " samples and " << summary.frames << " frames ("
-          << summary.duration_s << " s, IMU " << co->imu_rate_hz << " Hz, camera " << co->camera_rate_hz
-          << " Hz) to " << o->out_path << "\n";
-      msg << "truth: " << truth_path << "\n";
-      msg << "mean |a| " << summary.mean_accel_mps2 << " m/s^2, mean |w| " << summary.mean_rate_radps
-          << " rad/s; frames with the whole board " << summary.frames_all_corners_visible
-          << ", without any corner " << summary.frames_no_corner_visible;
-      std::cout << msg.str() << "\n";
-    });
-  }
-  {
-    auto o = std::make_shared<SimCommon>();
-    auto so = std::make_shared<sim::StillOptions>();
-    CLI::App* cmd =
-        sim->add_subcommand("still", "A long still recording (Allan variance), on a table by default");
-    add_common(cmd, *o);
-    cmd->add_option("--duration", so->duration_s, "Length in s (default 600)")
-        ->check(CLI::Range(1.0, 172800.0));
-    cmd->callback([o, so, cmd]() {
-      so->tremor.enabled = o->tremor;
-      auto traj = take(sim::make_still(*so, o->seed), "sim still");
-      run(*o, cmd, "still", "still", *traj, 1);
-    });
-  }
+  add_static(sim);
+  add_gsens(sim);
+  add_camimu(sim);
+  add_still(sim);
 }
 
 const CommandRegistrar registrar(10, setup);
