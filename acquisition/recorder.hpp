@@ -38,7 +38,7 @@ struct RecordOptions {
   std::vector<std::pair<std::string, std::string>> metadata;
   ImuStreamOptions stream;
   /// Receives the recorded fraction in [0, 1] (may be empty).
-  std::function<void(double)> progress;
+  std::function<void(double fraction)> progress;
   RecordLoop loop = RecordLoop::kStep;
   /// kEventLoop only: SIGINT and SIGTERM end the recording early but cleanly (everything
   /// acquired so far written, counters stored, log closed; RecordSummary::interrupted). The
