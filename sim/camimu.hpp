@@ -27,14 +27,14 @@ namespace imucal::sim {
 
 struct CamImuSimOptions {
   std::uint64_t seed = 1;
-  /// The motion in front of the board (drivers/sim/motion.hpp): 60-90 s is what the
+  /// The motion in front of the board (sim/motion.hpp): 60-90 s is what the
   /// camera-IMU calibration expects (Krebs 2012, section 5.2); the default is 60 s.
   sim::CheckerboardMotionOptions motion = default_motion();
   /// The IMU; empty: drawn from the seed (sim::ImuModelParams::draw), as `imucal sim` does.
   std::optional<sim::ImuModelParams> imu;
   bool imu_params_from_file = false;  // recorded in the truth
   double imu_rate_hz = 200.0;         // MPU-6000 output rate
-  SimImuPath imu_path;                // how the emulated chip is read (sim_session.hpp)
+  SimImuPath imu_path;                // how the emulated chip is read (sim/session.hpp)
   double camera_rate_hz = 20.0;
   TimeNs exposure_ns = 4'000'000;  // frames are stamped at mid-exposure
 
@@ -47,7 +47,7 @@ struct CamImuSimOptions {
   /// The board: inner corners and spacing (Kalibr semantics).
   TargetDescription target = default_sim_target();
 
-  // Image formation (drivers/sim/camera_render.hpp).
+  // Image formation (sim/camera_render.hpp).
   /// Gaussian sensor noise, grey levels. Low by default to keep the fixture small (noise is
   /// what lossless codecs cannot compress; docs/simulator-camera.md has the measurements).
   double noise_sigma_dn = 0.2;
@@ -82,7 +82,7 @@ struct CamImuSimSummary {
 };
 
 /// Simulates the session and writes the session log at `log_path` and the ground truth at
-/// `truth_path` (YAML: the IMU truth of drivers/sim/truth.hpp plus a `camera:` section in
+/// `truth_path` (YAML: the IMU truth of sim/truth.hpp plus a `camera:` section in
 /// Kalibr camchain naming). `progress` (may be empty) receives the completed fraction in
 /// [0, 1]; `summary` (may be null) receives what was written.
 [[nodiscard]] Status simulate_camimu_session(const CamImuSimOptions& options, const std::string& log_path,

@@ -9,7 +9,7 @@
 // The host clock is CLOCK_MONOTONIC itself.
 //
 // Bus transfers take no simulated time here: the real time they take is their bus time.
-// Unlike SimImuRig (sim_rig.hpp) a run is not reproducible: the host's scheduling decides when
+// Unlike SimImuRig (sim/rig.hpp) a run is not reproducible: the host's scheduling decides when
 // the FIFO is read. The chip's samples themselves (values and true times) are.
 
 #include <atomic>

@@ -7,7 +7,7 @@
 // exercise the code a rig runs.
 //
 // TrajectorySensor is the usual sample source: it moves the virtual rig along a trajectory and
-// passes the motion through the IMU error model (drivers/sim/imu_model.hpp).
+// passes the motion through the IMU error model (sim/imu_error_model.hpp).
 
 #include <Eigen/Core>
 #include <cstdint>

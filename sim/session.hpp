@@ -1,8 +1,8 @@
 #pragma once
 // Writes a simulated IMU session into a session log: the virtual rig moves along a
-// sim::Trajectory, the MPU-6000 error model (drivers/sim/imu_model.hpp) turns the motion into
+// sim::Trajectory, the MPU-6000 error model (sim/imu_error_model.hpp) turns the motion into
 // what the sensing elements see, and the samples reach the log the way they do on a rig: through
-// the register emulator, the data-ready line, the driver and the acquisition loop (sim_rig.hpp),
+// the register emulator, the data-ready line, the driver and the acquisition loop (sim/rig.hpp),
 // as raw int16 counts with per-sample timestamps reconstructed from the data-ready edges. The
 // script's segments become events, and the ground truth is written as YAML next to the log.
 // Used by `imucal sim static|gsens|still|camimu`.
@@ -34,7 +34,7 @@ struct SampleDrop {
   double duration_s = 0.0;
 };
 
-/// How the simulated chip is read (sim_rig.hpp): the bus, the chip's oscillator error and the
+/// How the simulated chip is read (sim/rig.hpp): the bus, the chip's oscillator error and the
 /// data-ready timing.
 struct SimImuPath {
   drivers::mpu6000::BusKind bus = drivers::mpu6000::BusKind::kSpi;

@@ -1,4 +1,4 @@
-// The simulated IMU path (acquisition/sim_rig.hpp) under host stalls: what the FIFO holds is
+// The simulated IMU path (sim/rig.hpp) under host stalls: what the FIFO holds is
 // delivered late but intact, what it cannot hold is lost behind one flagged gap, and every
 // delivered sample is a frame the chip wrote, stamped near its true instant.
 
