@@ -4,13 +4,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <numbers>
-#include <opencv2/imgcodecs.hpp>
 #include <set>
 #include <vector>
 
+#include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
 #include "sim/camera_render.hpp"
 #include "sim/motion_random.hpp"
@@ -19,6 +20,17 @@
 
 namespace imucal::sim {
 namespace {
+
+/// A rendered 8-bit gray image, losslessly encoded as the log stores frames (log/frame_codec.hpp:
+/// WebP lossless, or PNG at the highest compression).
+Result<std::vector<std::uint8_t>> encode_frame(const cv::Mat& gray, const std::string& encoding) {
+  log::Image image = log::Image::zeros(gray.cols, gray.rows, 1, 8);
+  for (int r = 0; r < gray.rows; ++r) {
+    std::memcpy(image.data.data() + static_cast<std::size_t>(r) * image.row_bytes(),
+                gray.ptr<std::uint8_t>(r), image.row_bytes());
+  }
+  return encoding == "png" ? log::encode_png(image, 9) : log::encode_webp_lossless(image);
+}
 
 constexpr std::uint64_t kNoiseSubstream = 0xCA3E7A;  // camera noise stream, independent of the IMU's
 
@@ -232,10 +244,6 @@ Status write_frames(const CamImuSimOptions& options, const sim::CheckerboardMoti
     return options.T_cam_imu * pose_of(traj.at(t_imu_ns)).inverse() * T_world_board;
   };
   sim::Rng noise(sim::Rng::substream(options.seed, kNoiseSubstream));
-  const std::vector<int> encode_params =
-      options.image_encoding == "png" ? std::vector<int>{cv::IMWRITE_PNG_COMPRESSION, 9}
-                                      : std::vector<int>{cv::IMWRITE_WEBP_QUALITY, 101};  // > 100: lossless
-  const std::string ext = "." + options.image_encoding;
   std::vector<Eigen::Isometry3d> subs;
   for (std::int64_t k = k0; k <= k1; ++k) {
     const TimeNs t_cam = static_cast<TimeNs>(std::llround(static_cast<double>(k) * period_ns));
@@ -262,10 +270,9 @@ Status write_frames(const CamImuSimOptions& options, const sim::CheckerboardMoti
     frame.encoding = options.image_encoding;
     frame.exposure_ns = options.exposure_ns;
     frame.sequence = static_cast<std::uint32_t>(k - k0);
-    if (!cv::imencode(ext, image, frame.data, encode_params)) {
-      return make_error(Errc::kUnsupported,
-                        "this OpenCV build cannot encode " + options.image_encoding + " images; use png");
-    }
+    auto encoded = encode_frame(image, options.image_encoding);
+    if (!encoded.ok()) return encoded.error().context("camimu: encoding frame " + std::to_string(k - k0));
+    frame.data = std::move(*encoded);
     sum.image_bytes += static_cast<std::int64_t>(frame.data.size());
     IMUCAL_TRY(writer.append_frame(cam_id, frame));
     ++sum.frames;

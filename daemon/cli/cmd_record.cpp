@@ -39,7 +39,7 @@ struct RecordArgs {
   bool force = false;
   bool json = false;
   std::uint64_t seed = 1;
-  double sim_clock_ppm = -15'000.0;
+  double sim_clock_ppm = sim::kDefaultClockPpm;
   double sim_jitter_us = 30.0;
   std::string sim_motion = "still";
 };
@@ -94,10 +94,9 @@ void note_interrupted(const RecordArgs& a, const acq::RecordSummary& s) {
                static_cast<unsigned long long>(s.samples), a.out_path.c_str());
 }
 
-/// The parts of a simulated rig's options that come from the command line (SimRigOptions and
-/// RealtimeSimRigOptions share them).
-template <class RigOptions>
-void fill_sim_rig(RigOptions& o, const RecordArgs& a, const mpu::Settings& settings,
+/// The parts of a simulated rig's options that come from the command line (the real-time rig's
+/// options extend these).
+void fill_sim_rig(sim::SimRigOptions& o, const RecordArgs& a, const mpu::Settings& settings,
                   const acq::MountingMap& mounting) {
   o.settings = settings;
   o.clock_ppm = a.sim_clock_ppm;

@@ -14,6 +14,7 @@
 #include "sim/camimu.hpp"
 #include "sim/imu_error_model.hpp"
 #include "sim/motion.hpp"
+#include "sim/rig.hpp"
 #include "sim/session.hpp"
 #include "sim/truth.hpp"
 
@@ -32,7 +33,7 @@ struct SimCommon {
   bool no_noise = false;
   std::vector<std::string> drops;
   std::string bus = "spi";
-  double clock_ppm = -15'000.0;
+  double clock_ppm = sim::kDefaultClockPpm;
   double jitter_us = 30.0;
 
   sim::SimImuPath path() const {
