@@ -10,16 +10,16 @@ std::string LoadedStream::damage_warning() const {
 }
 
 Result<LoadedStream> load_imu_stream(const std::string& path, const std::string& stream_name,
-                                     DamagePolicy policy, bool* refused_as_damaged) {
-  if (refused_as_damaged != nullptr) *refused_as_damaged = false;
+                                     DamagePolicy policy) {
   auto opened = log::SessionLogReader::open(path);
   if (!opened.ok()) return opened.error().context("cannot read " + path);
   LoadedStream loaded;
   loaded.reader = std::move(*opened);
   const auto& reader = *loaded.reader;
   if (reader.health().damaged && policy == DamagePolicy::kRefuse) {
-    if (refused_as_damaged != nullptr) *refused_as_damaged = true;
-    return make_error(Errc::kCorrupt, path + " is damaged (" + reader.health().damage_message + ")");
+    return make_error(Errc::kCorrupt, path + " is damaged (" + reader.health().damage_message +
+                                          "); only its readable part can be used")
+        .with_remedy("allow_damaged");
   }
   auto id = reader.find_imu_stream(stream_name);
   if (!id.ok()) return id.error().context("no IMU stream in " + path);

@@ -33,9 +33,9 @@ struct LoadedStream {
 
 /// Opens `path`, applies `policy`, finds the IMU stream `stream_name` (empty: the first) and
 /// reads all its samples. Errors carry the path as context. A damaged log refused by the
-/// policy fails with Errc::kCorrupt and sets `*refused_as_damaged` (when given), so that a
-/// caller can say how to allow it; every other failure leaves it false.
+/// policy fails with Errc::kCorrupt and the remedy "allow_damaged", so that a caller can say
+/// how to allow it in its own terms.
 [[nodiscard]] Result<LoadedStream> load_imu_stream(const std::string& path, const std::string& stream_name,
-                                                   DamagePolicy policy, bool* refused_as_damaged = nullptr);
+                                                   DamagePolicy policy);
 
 }  // namespace imucal::app

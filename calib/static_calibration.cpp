@@ -453,7 +453,8 @@ Result<std::size_t> given_still_start(std::span<const ImuSample> samples, const 
                         "device reset or saturation) at t = " +
                             fmt("%.2f", seconds_from_start(samples, i)) +
                             " s. Give an initial still period (init_still_s) no longer than the still "
-                            "start, or record again starting with the rig at rest for about 50 s");
+                            "start, or record again starting with the rig at rest for about 50 s")
+          .with_remedy("init_still_s");
     }
   }
   return n_init;
@@ -477,7 +478,8 @@ Result<std::size_t> automatic_still_start(std::span<const ImuSample> samples, co
                           fmt("%.1f", still_s) + " s (at least " + fmt("%.0f", min_init_still_s) +
                           " s needed). Record again starting with the rig at rest for about 50 s, or give "
                           "the initial still period (init_still_s) if the start is still but noisier than "
-                          "the later poses");
+                          "the later poses")
+        .with_remedy("init_still_s");
   }
   auto curve = allan_deviation(std::span<const Eigen::Vector3d>(scan.gyro.data(), end), scan.rate_hz);
   if (!curve.ok()) return curve.error();

@@ -7,6 +7,7 @@
 #include <string>
 #include <utility>
 #include <variant>
+#include <vector>
 
 namespace imucal {
 
@@ -26,12 +27,28 @@ enum class Errc {
 
 const char* errc_name(Errc code);
 
+/// An option that would resolve an error, named as the library's option field ("rate_hz",
+/// "units", "allow_damaged"), with the value to give it when one follows from the error ("raw").
+/// Libraries describe the problem in their own words and attach remedies; each program shows
+/// them in its own terms (the CLI as its flags, the service as its settings).
+struct Remedy {
+  std::string option;
+  std::string value;
+};
+
 struct Error {
   Errc code = Errc::kInternal;
   std::string message;
+  std::vector<Remedy> remedies;
 
   /// The message with a prefix, for adding context while an error travels up.
-  Error context(const std::string& where) const { return {code, where + ": " + message}; }
+  Error context(const std::string& where) const { return {code, where + ": " + message, remedies}; }
+  /// The same error with one more remedy.
+  Error with_remedy(std::string option, std::string value = {}) const {
+    Error e = *this;
+    e.remedies.push_back({std::move(option), std::move(value)});
+    return e;
+  }
 };
 
 template <class T>
@@ -88,7 +105,7 @@ class [[nodiscard]] Result<void> {
 
 using Status = Result<void>;
 
-inline Error make_error(Errc code, std::string message) { return Error{code, std::move(message)}; }
+inline Error make_error(Errc code, std::string message) { return Error{code, std::move(message), {}}; }
 
 }  // namespace imucal
 

@@ -449,7 +449,8 @@ Status check_export(const SessionLogReader& r, const std::string& log_path, cons
                     const OutputOptions& options, bool allow_damaged) {
   if (r.health().damaged && !allow_damaged) {
     return make_error(Errc::kCorrupt, log_path + " is damaged (" + r.health().damage_message +
-                                          "); pass --allow-damaged to export what is readable");
+                                          "); only what is readable can be exported")
+        .with_remedy("allow_damaged");
   }
   std::error_code ec;
   if (options.force && fs::is_directory(dir, ec) && !fs::is_empty(dir, ec) &&
@@ -457,7 +458,7 @@ Status check_export(const SessionLogReader& r, const std::string& log_path, cons
     return make_error(Errc::kInvalidArgument,
                       dir +
                           " exists and does not look like an EuRoC dataset (no mav0/); "
-                          "refusing to replace it even with --force");
+                          "refusing to replace it even when replacing is allowed");
   }
   if (r.imu_streams().empty() && r.camera_streams().empty()) {
     return make_error(Errc::kInsufficientData, log_path + " has no IMU or camera streams to export");

@@ -152,8 +152,10 @@ Result<ImportSummary> import_csv(const CsvImport& in, const std::string& out_pat
   std::vector<TimeNs> t(samples->size());
   for (std::size_t i = 0; i < t.size(); ++i) t[i] = (*samples)[i].t_ns;
   auto period = sample_period_ns(
-      t, in.rate_hz, in.path, std::string("--time-unit (now ") + time_unit_name(in.format.time_unit) + ")");
-  if (!period.ok()) return period.error();
+      t, in.rate_hz, in.path, std::string("the time unit (now ") + time_unit_name(in.format.time_unit) + ")");
+  if (!period.ok()) {
+    return period.error().code == Errc::kCorrupt ? period.error().with_remedy("time_unit") : period.error();
+  }
   if (in.unit_check) IMUCAL_TRY(check_units(*samples, in.units, in.path));
 
   ImuStreamInfo info;

@@ -103,10 +103,10 @@ struct TriadSeries {
                                                    const ProgressFn& progress = {});
 
 /// Sample period used to pair accelerometer and gyroscope rows: from rate_hz if > 0, else the
-/// median interval of `t_ns`. Fails when the median interval is not plausible (the message
-/// names `unit_flag`, e.g. "--time-unit").
+/// median interval of `t_ns`. Fails when the median interval is not plausible: the message says
+/// to check `time_hint` (e.g. "the time unit (now ms)").
 [[nodiscard]] Result<TimeNs> sample_period_ns(const std::vector<TimeNs>& t_ns, double rate_hz,
-                                              const std::string& source, const std::string& unit_flag);
+                                              const std::string& source, const std::string& time_hint);
 
 struct PairingStats {
   int exact = 0;          // rows whose timestamps matched exactly

@@ -270,16 +270,19 @@ Result<TriadSeries> parse_triad_text(std::string_view text, const std::string& s
 }
 
 Result<TimeNs> sample_period_ns(const std::vector<TimeNs>& t_ns, double rate_hz, const std::string& source,
-                                const std::string& unit_flag) {
+                                const std::string& time_hint) {
   if (rate_hz > 0.0) {
     if (!(rate_hz <= 100'000.0)) {
-      return make_error(Errc::kInvalidArgument, "--rate " + format_double(rate_hz) + " Hz is above 100 kHz");
+      return make_error(Errc::kInvalidArgument,
+                        "the given sample rate " + format_double(rate_hz) + " Hz is above 100 kHz")
+          .with_remedy("rate_hz");
     }
     return static_cast<TimeNs>(std::llround(1e9 / rate_hz));
   }
   if (t_ns.size() < 2) {
     return make_error(Errc::kInsufficientData,
-                      source + ": fewer than 2 samples, cannot estimate the sample rate (pass --rate HZ)");
+                      source + ": fewer than 2 samples, cannot estimate the sample rate; give it")
+        .with_remedy("rate_hz");
   }
   std::vector<TimeNs> dt(t_ns.size() - 1);
   for (std::size_t i = 1; i < t_ns.size(); ++i) dt[i - 1] = t_ns[i] - t_ns[i - 1];
@@ -288,7 +291,7 @@ Result<TimeNs> sample_period_ns(const std::vector<TimeNs>& t_ns, double rate_hz,
   if (median < 10'000 || median > 2 * kNsPerSecond) {
     return make_error(Errc::kCorrupt,
                       source + ": the median interval between samples is " + seconds_text(median) +
-                          ", which is implausible for an IMU (0.5 Hz..100 kHz): check " + unit_flag);
+                          ", which is implausible for an IMU (0.5 Hz..100 kHz): check " + time_hint);
   }
   return median;
 }
@@ -323,7 +326,7 @@ Result<std::vector<ImuSample>> pair_accel_gyro(const TriadSeries& accel, const T
       "; accelerometer and gyroscope rows must come from the same sampling instants (pairing tolerance is "
       "half "
       "the sample period, " +
-      seconds_text(half) + "): resample one file, or pass --rate if the estimated rate is wrong";
+      seconds_text(half) + "): resample one file, or give the sample rate if the estimated one is wrong";
   samples.reserve(a1 - a0);
   std::size_t j = g0;
   for (std::size_t i = a0; i < a1; ++i) {
@@ -369,33 +372,39 @@ Result<CsvColumns> parse_csv_columns(const std::string& spec) {
     const std::size_t eq = item.find('=');
     if (eq == std::string_view::npos) {
       return make_error(Errc::kInvalidArgument,
-                        "--columns: '" + std::string(item) + "' is not name=index" + usage);
+                        "column map: '" + std::string(item) + "' is not name=index" + usage)
+          .with_remedy("columns");
     }
     const std::string name(trim(item.substr(0, eq)));
     const std::string_view index_text = trim(item.substr(eq + 1));
     int index = -1;
     auto [ptr, ec] = std::from_chars(index_text.data(), index_text.data() + index_text.size(), index);
     if (ec != std::errc() || ptr != index_text.data() + index_text.size() || index < 0 || index > 1000) {
-      return make_error(Errc::kInvalidArgument, "--columns: index '" + std::string(index_text) + "' of " +
-                                                    name + " is not 0..1000" + usage);
+      return make_error(Errc::kInvalidArgument, "column map: index '" + std::string(index_text) + "' of " +
+                                                    name + " is not 0..1000" + usage)
+          .with_remedy("columns");
     }
     const auto it =
         std::find_if(std::begin(names), std::end(names), [&](const auto& n) { return name == n.first; });
     if (it == std::end(names)) {
-      return make_error(Errc::kInvalidArgument, "--columns: unknown name '" + name + "'" + usage);
+      return make_error(Errc::kInvalidArgument, "column map: unknown name '" + name + "'" + usage)
+          .with_remedy("columns");
     }
     if (!seen.insert(name).second) {
-      return make_error(Errc::kInvalidArgument, "--columns: " + name + " is given twice");
+      return make_error(Errc::kInvalidArgument, "column map: " + name + " is given twice")
+          .with_remedy("columns");
     }
     if (!used.insert(index).second) {
       return make_error(Errc::kInvalidArgument,
-                        "--columns: column " + std::to_string(index) + " is mapped twice (" + name + ")");
+                        "column map: column " + std::to_string(index) + " is mapped twice (" + name + ")")
+          .with_remedy("columns");
     }
     c.*(it->second) = index;
   }
   for (const auto& [name, member] : names) {
     if (std::string(name) != "temp" && c.*member < 0) {
-      return make_error(Errc::kInvalidArgument, std::string("--columns: ") + name + " is missing" + usage);
+      return make_error(Errc::kInvalidArgument, std::string("column map: ") + name + " is missing" + usage)
+          .with_remedy("columns");
     }
   }
   return c;
@@ -421,14 +430,17 @@ Result<std::vector<ImuSample>> parse_imu_csv(std::string_view text, const std::s
     if (content.empty() || content.front() == '#') continue;
     split_delimited(content, format.delimiter, fields);
     const bool first_row = samples.empty();
-    const std::string header_hint =
-        first_row && format.skip_header == 0 ? " (if this line is a header, pass --skip-header 1)" : "";
+    const bool maybe_header = first_row && format.skip_header == 0;
+    const std::string header_hint = maybe_header ? " (if this line is a header, skip it)" : "";
     if (static_cast<int>(fields.size()) <= max_column) {
       std::string delim = format.delimiter == ' ' ? "whitespace" : std::string("'") + format.delimiter + "'";
-      return at(source, lines.number(),
-                "has " + std::to_string(fields.size()) + " columns separated by " + delim +
-                    ", the mapping needs column " + std::to_string(max_column) +
-                    " (columns count from 0; check --columns and --delimiter)" + header_hint);
+      Error e = at(source, lines.number(),
+                   "has " + std::to_string(fields.size()) + " columns separated by " + delim +
+                       ", the mapping needs column " + std::to_string(max_column) +
+                       " (columns count from 0; check the column map and the delimiter)" + header_hint)
+                    .with_remedy("columns")
+                    .with_remedy("delimiter");
+      return maybe_header ? e.with_remedy("skip_header", "1") : e;
     }
     ImuSample s;
     for (const auto& [name, index] : mapped) {
@@ -437,12 +449,18 @@ Result<std::vector<ImuSample>> parse_imu_csv(std::string_view text, const std::s
       const std::string col = "column " + std::to_string(index) + " (" + name + "): ";
       if (std::string(name) == "t") {
         auto t = parse_time_ns(field, format.time_unit);
-        if (!t.ok()) return at(source, lines.number(), col + t.error().message + header_hint);
+        if (!t.ok()) {
+          Error e = at(source, lines.number(), col + t.error().message + header_hint);
+          return maybe_header ? e.with_remedy("skip_header", "1") : e;
+        }
         s.t_ns = *t;
         continue;
       }
       auto v = parse_double(field);
-      if (!v.ok()) return at(source, lines.number(), col + v.error().message + header_hint);
+      if (!v.ok()) {
+        Error e = at(source, lines.number(), col + v.error().message + header_hint);
+        return maybe_header ? e.with_remedy("skip_header", "1") : e;
+      }
       const std::string n(name);
       if (n == "ax") s.accel.x() = *v;
       if (n == "ay") s.accel.y() = *v;
@@ -483,26 +501,34 @@ Status check_units(const std::vector<ImuSample>& samples, ImuUnits units, const 
   std::ostringstream about;
   about << source << ": the accelerometer magnitude is about " << median << " (median |a|)";
   if (units == ImuUnits::kSi && median > 100.0) {
-    return make_error(Errc::kCorrupt,
-                      about.str() +
-                          ", far above gravity (9.8 m/s^2): these look like raw counts. Import "
-                          "with --units raw (with --accel-scale/--gyro-scale for the nominal "
-                          "conversion), or pass --no-unit-check if the values really are SI");
+    return make_error(Errc::kCorrupt, about.str() +
+                                          ", far above gravity (9.8 m/s^2): these look like raw counts. "
+                                          "Import them as raw counts with their nominal scales, or skip "
+                                          "the unit check if the values really are SI")
+        .with_remedy("units", "raw")
+        .with_remedy("accel_scale")
+        .with_remedy("gyro_scale")
+        .with_remedy("unit_check", "off");
   }
   if (units == ImuUnits::kSi && median > 0.5 && median < 2.0) {
     return make_error(Errc::kCorrupt,
                       about.str() +
-                          ": these look like g, not m/s^2. Import with --units raw "
-                          "--accel-scale 9.80665 (and --gyro-scale for the gyroscope unit), or "
-                          "pass --no-unit-check if the values really are m/s^2");
+                          ": these look like g, not m/s^2. Import them as raw values with "
+                          "an accelerometer scale of 9.80665 (and the gyroscope's unit as its "
+                          "scale), or skip the unit check if the values really are m/s^2")
+        .with_remedy("units", "raw")
+        .with_remedy("accel_scale", "9.80665")
+        .with_remedy("gyro_scale")
+        .with_remedy("unit_check", "off");
   }
   if (units == ImuUnits::kRaw && median > 5.0 && median < 15.0 &&
       static_cast<double>(non_integral) > 0.5 * static_cast<double>(components)) {
-    return make_error(Errc::kCorrupt,
-                      about.str() +
-                          " with non-integral values: these look like SI units (m/s^2, rad/s), "
-                          "not raw counts. Import with --units si, or pass --no-unit-check if "
-                          "they really are raw counts");
+    return make_error(Errc::kCorrupt, about.str() +
+                                          " with non-integral values: these look like SI units (m/s^2, "
+                                          "rad/s), not raw counts. Import them as SI, or skip the unit "
+                                          "check if they really are raw counts")
+        .with_remedy("units", "si")
+        .with_remedy("unit_check", "off");
   }
   return {};
 }

@@ -29,15 +29,9 @@ struct AllanCliOptions {
 };
 
 void run(const AllanCliOptions& o) {
-  bool refused = false;
-  auto loaded = app::load_imu_stream(o.log_path, o.stream,
-                                     o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse,
-                                     &refused);
-  if (!loaded.ok()) {
-    if (refused)
-      throw CliExit{kExitInput, loaded.error().message + "; pass --allow-damaged to use what is readable"};
-    fail(loaded.error());
-  }
+  auto loaded = app::load_imu_stream(
+      o.log_path, o.stream, o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse);
+  if (!loaded.ok()) fail(loaded.error());
   const ImuStreamInfo& info = loaded->info;
   const auto& s = loaded->samples;
   if (s.size() < 1000) {

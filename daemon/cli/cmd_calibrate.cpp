@@ -57,13 +57,6 @@ Eigen::Vector3d parse_triple(const std::string& text, const std::string& option)
   throw CliExit{kExitUsage, option + " takes one value for all three axes or three comma-separated values"};
 }
 
-/// Throws CliExit for a failed load, adding the flag that allows a damaged log.
-[[noreturn]] void fail_load(const Error& error, bool refused_as_damaged) {
-  if (refused_as_damaged)
-    throw CliExit{kExitInput, error.message + "; pass --allow-damaged to calibrate from what is readable"};
-  fail(error);
-}
-
 void run(const StaticCliOptions& o) {
   // CPU time of this thread, like the timings of calibrate_static.
   auto cpu_now = [] {
@@ -72,11 +65,9 @@ void run(const StaticCliOptions& o) {
     return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
   };
   const double t0 = cpu_now();
-  bool refused = false;
-  auto loaded = app::load_imu_stream(o.log_path, o.stream,
-                                     o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse,
-                                     &refused);
-  if (!loaded.ok()) fail_load(loaded.error(), refused);
+  auto loaded = app::load_imu_stream(
+      o.log_path, o.stream, o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse);
+  if (!loaded.ok()) fail(loaded.error());
   const ImuStreamInfo& info = loaded->info;
   const std::vector<ImuSample>& samples = loaded->samples;
   const double import_s = cpu_now() - t0;

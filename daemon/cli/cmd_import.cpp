@@ -173,7 +173,7 @@ void setup(CLI::App& root) {
     add_common(cmd, *common);
     cmd->callback([=] {
       auto cols = log::parse_csv_columns(*columns);
-      if (!cols.ok()) throw CliExit{kExitUsage, cols.error().message};
+      if (!cols.ok()) fail(cols.error());  // kInvalidArgument: a usage error, with the --columns hint
       in->format.columns = *cols;
       in->format.time_unit = *log::parse_time_unit(*time_unit);
       if (*delimiter == "tab" || *delimiter == "\\t" || *delimiter == "\t") {

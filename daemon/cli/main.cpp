@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <iostream>
+#include <map>
 #include <utility>
 #include <vector>
 
@@ -51,11 +52,36 @@ int exit_code_for(Errc code) {
   return kExitFailure;
 }
 
-void fail(const Error& error, const std::string& what) {
+std::string remedy_flag(const Remedy& remedy) {
+  // Library option names (the fields of the options structs) and the flags that set them.
+  static const std::map<std::string, std::string> kFlags = {{"accel_scale", "--accel-scale"},
+                                                            {"allow_damaged", "--allow-damaged"},
+                                                            {"columns", "--columns"},
+                                                            {"delimiter", "--delimiter"},
+                                                            {"gyro_scale", "--gyro-scale"},
+                                                            {"init_still_s", "--init-still"},
+                                                            {"rate_hz", "--rate"},
+                                                            {"skip_header", "--skip-header"},
+                                                            {"time_unit", "--time-unit"},
+                                                            {"units", "--units"}};
+  if (remedy.option == "unit_check" && remedy.value == "off") return "--no-unit-check";
+  const auto it = kFlags.find(remedy.option);
+  const std::string flag = it != kFlags.end() ? it->second : remedy.option;
+  return remedy.value.empty() ? flag : flag + " " + remedy.value;
+}
+
+std::string with_flag_hints(const Error& error, const std::string& what) {
   std::string message = what.empty() ? error.message : what + ": " + error.message;
   // Libraries say what exists; replacing it is the CLI's --force.
   if (error.code == Errc::kAlreadyExists) message += "; pass --force to replace it";
-  throw CliExit{exit_code_for(error.code), message};
+  for (std::size_t i = 0; i < error.remedies.size(); ++i) {
+    message += (i == 0 ? "; options: " : ", ") + remedy_flag(error.remedies[i]);
+  }
+  return message;
+}
+
+void fail(const Error& error, const std::string& what) {
+  throw CliExit{exit_code_for(error.code), with_flag_hints(error, what)};
 }
 
 bool stderr_is_tty() { return isatty(STDERR_FILENO) == 1; }

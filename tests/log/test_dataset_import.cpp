@@ -11,6 +11,14 @@
 namespace imucal::log {
 namespace {
 
+/// True when `error` names the remedy `option` (with `value`, when given).
+bool has_remedy(const Error& error, const std::string& option, const std::string& value = "") {
+  for (const auto& r : error.remedies) {
+    if (r.option == option && (value.empty() || r.value == value)) return true;
+  }
+  return false;
+}
+
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
@@ -108,7 +116,8 @@ TEST(DatasetAscii, UnitMismatchFailsAndLeavesNoOutput) {
   in.units = ImuUnits::kSi;
   auto r = import_ascii(in, (dir / "x.imulog").string(), {});
   ASSERT_FALSE(r.ok());
-  EXPECT_THAT(r.error().message, HasSubstr("--units raw"));
+  EXPECT_TRUE(has_remedy(r.error(), "units", "raw")) << r.error().message;
+  EXPECT_THAT(r.error().message, HasSubstr("raw counts"));
   EXPECT_FALSE(fs::exists(dir / "x.imulog"));
   in.unit_check = false;
   EXPECT_TRUE(import_ascii(in, (dir / "x.imulog").string(), {}).ok());
@@ -167,7 +176,8 @@ TEST(DatasetCsvImport, ColumnMappingTimeUnitAndTemperature) {
   in.format.time_unit = TimeUnit::kS;
   auto wrong = import_csv(in, (dir / "w.imulog").string(), {});
   ASSERT_FALSE(wrong.ok());
-  EXPECT_THAT(wrong.error().message, HasSubstr("--time-unit"));
+  EXPECT_TRUE(has_remedy(wrong.error(), "time_unit")) << wrong.error().message;
+  EXPECT_THAT(wrong.error().message, HasSubstr("the time unit (now s)"));
   EXPECT_FALSE(fs::exists(dir / "w.imulog"));
 }
 
