@@ -1,7 +1,7 @@
 #pragma once
 // IMU error models and the conversions between them.
 //
-// Canonical correction (stored and applied at run time, DESIGN.md section 3):
+// Canonical correction (stored and applied at run time; docs/conventions.md section 4):
 //   a = A_a (a_raw - b_a)
 //   w = A_g (w_raw - b_g) - G a
 // with A full 3x3 and G the g-sensitivity (rad/s per m/s^2). a and w are in an orthogonal body

@@ -4,7 +4,7 @@
 // the ground truth (IMU errors, camera model, T_cam_imu, timeshift_cam_imu, target) written to a
 // truth YAML. See docs/simulator-camera.md.
 //
-// Conventions (DESIGN.md section 3):
+// Conventions (docs/conventions.md):
 //   T_cam_imu maps points from the IMU (body, accelerometer) frame into the camera frame.
 //   t_imu = t_cam + timeshift_cam_imu: a frame stamped t_cam on the camera's clock shows the
 //   scene of IMU time t_cam + timeshift_cam_imu. Frame stamps are mid-exposure.

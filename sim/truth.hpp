@@ -1,6 +1,6 @@
 #pragma once
 // Ground truth of a simulated recording: the IMU model parameters, the corrections a calibration
-// should find (in the canonical form of DESIGN.md section 3 and in the Tedaldi form), and a
+// should find (in the canonical form of docs/conventions.md section 4 and in the Tedaldi form), and a
 // summary of the motion. Written as YAML next to the log (LOG.imulog -> LOG.truth.yaml); the
 // `imu:` section is also what `imucal sim --truth FILE` reads back, so a run can be repeated with
 // fixed parameters. Format: docs/simulator.md.
