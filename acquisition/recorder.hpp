@@ -14,6 +14,7 @@
 #include "acquisition/imu_stream.hpp"
 #include "acquisition/timestamp.hpp"
 #include "core/imu.hpp"
+#include "core/progress.hpp"
 #include "core/result.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
 
@@ -38,7 +39,7 @@ struct RecordOptions {
   std::vector<std::pair<std::string, std::string>> metadata;
   ImuStreamOptions stream;
   /// Receives the recorded fraction in [0, 1] (may be empty).
-  std::function<void(double fraction)> progress;
+  ProgressFn progress;
   RecordLoop loop = RecordLoop::kStep;
   /// kEventLoop only: SIGINT and SIGTERM end the recording early but cleanly (everything
   /// acquired so far written, counters stored, log closed; RecordSummary::interrupted). The

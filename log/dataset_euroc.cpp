@@ -228,7 +228,7 @@ class WorkProgress {
   WorkProgress(double total, const ProgressFn& report) : report_(report), total_(total) {}
   void advance(double amount) {
     done_ += amount;
-    if (report_) report_(done_, total_);
+    report_progress(report_, done_, total_);
   }
 
  private:

@@ -45,7 +45,7 @@ Status write_imu_log(PendingOutput& out, const ImuStreamInfo& info, const std::v
   for (std::size_t i = 0; i < samples.size(); i += kBatch) {
     const std::size_t n = std::min(kBatch, samples.size() - i);
     IMUCAL_TRY(w.append_imu(*id, std::span<const ImuSample>(samples.data() + i, n)));
-    if (progress) progress(static_cast<double>(i + n), static_cast<double>(samples.size()));
+    report_progress(progress, static_cast<double>(i + n), static_cast<double>(samples.size()));
   }
   IMUCAL_TRY(w.close());
   writer->reset();
@@ -67,9 +67,7 @@ ImportSummary summarize(const ImuStreamInfo& info, const std::vector<ImuSample>&
 /// Progress over the three phases of an import: parse, check, write.
 ProgressFn phase(const ProgressFn& progress, double start, double share) {
   if (!progress) return {};
-  return [progress, start, share](double done, double total) {
-    progress(start + share * (total > 0 ? done / total : 1.0), 1.0);
-  };
+  return [progress, start, share](double fraction) { progress(start + share * fraction); };
 }
 
 }  // namespace

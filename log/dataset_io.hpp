@@ -17,13 +17,11 @@
 #include <vector>
 
 #include "core/imu.hpp"
+#include "core/progress.hpp"
 #include "core/result.hpp"
 #include "core/time.hpp"
 
 namespace imucal::log {
-
-/// Progress callback: `done` out of `total` units of work (rows or bytes).
-using ProgressFn = std::function<void(double done, double total)>;
 
 struct OutputOptions {
   bool force = false;   // replace an existing output

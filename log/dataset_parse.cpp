@@ -230,7 +230,7 @@ Result<TriadSeries> parse_triad_text(std::string_view text, const std::string& s
   static constexpr const char* kNames[] = {"t", "x", "y", "z"};
   while (lines.next(line)) {
     if (progress && (lines.number() & 0xffff) == 0)
-      progress(static_cast<double>(lines.offset()), text.size());
+      report_progress(progress, static_cast<double>(lines.offset()), static_cast<double>(text.size()));
     const std::size_t hash = line.find('#');
     if (hash != std::string_view::npos) line = line.substr(0, hash);
     split_whitespace(line, fields);
@@ -262,7 +262,7 @@ Result<TriadSeries> parse_triad_text(std::string_view text, const std::string& s
     series.xyz.push_back(v);
     series.line.push_back(lines.number());
   }
-  if (progress) progress(static_cast<double>(text.size()), text.size());
+  report_progress(progress, 1.0, 1.0);
   if (series.t_ns.empty()) {
     return make_error(Errc::kInsufficientData, source + ": no data rows (expected 't x y z' lines)");
   }
@@ -424,7 +424,7 @@ Result<std::vector<ImuSample>> parse_imu_csv(std::string_view text, const std::s
   int prev_line = 0;
   while (lines.next(line)) {
     if (progress && (lines.number() & 0xffff) == 0)
-      progress(static_cast<double>(lines.offset()), text.size());
+      report_progress(progress, static_cast<double>(lines.offset()), static_cast<double>(text.size()));
     if (lines.number() <= format.skip_header) continue;
     const std::string_view content = trim(line);
     if (content.empty() || content.front() == '#') continue;
@@ -477,7 +477,7 @@ Result<std::vector<ImuSample>> parse_imu_csv(std::string_view text, const std::s
     prev_line = lines.number();
     samples.push_back(s);
   }
-  if (progress) progress(static_cast<double>(text.size()), text.size());
+  report_progress(progress, 1.0, 1.0);
   if (samples.empty()) return make_error(Errc::kInsufficientData, source + ": no data rows");
   return samples;
 }

@@ -200,8 +200,7 @@ constexpr double kImuShare = 0.05;  // of the progress: the IMU part is quick ne
 /// The IMU part, through the same code as the other simulated sessions, into the scratch log
 /// `imu_part` (removed again on failure).
 Result<sim::SimTruth> write_imu_part(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj,
-                                     const std::string& imu_part,
-                                     const std::function<void(double fraction)>& progress) {
+                                     const std::string& imu_part, const ProgressFn& progress) {
   SimImuSessionOptions imu_opt;
   imu_opt.kind = "camimu";
   imu_opt.script = "checkerboard";
@@ -229,7 +228,7 @@ Result<sim::SimTruth> write_imu_part(const CamImuSimOptions& options, const sim:
 Status write_frames(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj,
                     const sim::CheckerboardRenderer& renderer, const Eigen::Isometry3d& T_world_board,
                     log::SessionLogWriter& writer, int cam_id, CamImuSimSummary& sum,
-                    const std::function<void(double fraction)>& progress) {
+                    const ProgressFn& progress) {
   const TimeNs shift_ns = s_to_ns(options.timeshift_cam_imu_s);
   const TimeNs half_exposure_ns = options.exposure_ns / 2;
   const double period_ns = 1e9 / options.camera_rate_hz;
@@ -288,7 +287,7 @@ Status write_frames(const CamImuSimOptions& options, const sim::CheckerboardMoti
 Status write_camimu_log(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj,
                         const sim::CheckerboardRenderer& renderer, const Eigen::Isometry3d& T_world_board,
                         const std::string& imu_part, const std::string& log_path, CamImuSimSummary& sum,
-                        const std::function<void(double fraction)>& progress) {
+                        const ProgressFn& progress) {
   nlohmann::json camera_rig = {{"device", "sim"},
                                {"model", "checkerboard renderer (simulated)"},
                                {"width", options.camera.width},
@@ -358,8 +357,7 @@ YAML::Node camimu_truth_yaml(const CamImuSimOptions& options, const sim::SimTrut
 }  // namespace
 
 Status simulate_camimu_session(const CamImuSimOptions& options, const std::string& log_path,
-                               const std::string& truth_path,
-                               const std::function<void(double fraction)>& progress,
+                               const std::string& truth_path, const ProgressFn& progress,
                                CamImuSimSummary* summary) {
   IMUCAL_TRY(options.validate());
   IMUCAL_TRY(refuse_existing_outputs({log_path, truth_path}, options.overwrite));

@@ -16,6 +16,7 @@
 #include <string>
 
 #include "core/camera_model.hpp"
+#include "core/progress.hpp"
 #include "core/result.hpp"
 #include "core/target.hpp"
 #include "core/time.hpp"
@@ -86,8 +87,7 @@ struct CamImuSimSummary {
 /// Kalibr camchain naming). `progress` (may be empty) receives the completed fraction in
 /// [0, 1]; `summary` (may be null) receives what was written.
 [[nodiscard]] Status simulate_camimu_session(const CamImuSimOptions& options, const std::string& log_path,
-                                             const std::string& truth_path,
-                                             const std::function<void(double fraction)>& progress = {},
+                                             const std::string& truth_path, const ProgressFn& progress = {},
                                              CamImuSimSummary* summary = nullptr);
 
 }  // namespace imucal::sim

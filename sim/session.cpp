@@ -136,7 +136,7 @@ Status write_segment_events(log::SessionLogWriter& writer, const sim::Trajectory
 Status record_trajectory(SimImuRig& rig, const SimImuSessionOptions& options,
                          const sim::Trajectory& trajectory, TimeNs offset, TimeNs setup_ns,
                          log::SessionLogWriter& writer, int stream, sim::RecordingSummary& rec,
-                         const std::function<void(double fraction)>& progress) {
+                         const ProgressFn& progress) {
   const TimeNs t_start = trajectory.start_ns(), t_end = trajectory.end_ns();
   const TimeNs duration_ns = std::max<TimeNs>(1, t_end - t_start);
   std::vector<ImuSample> out, batch;
@@ -216,8 +216,7 @@ Status write_acquisition_metadata(log::SessionLogWriter& writer, SimImuRig& rig,
 
 Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
                                             const sim::Trajectory& trajectory, const std::string& log_path,
-                                            const std::string& truth_path,
-                                            const std::function<void(double fraction)>& progress) {
+                                            const std::string& truth_path, const ProgressFn& progress) {
   IMUCAL_TRY(options.validate());
   IMUCAL_TRY(refuse_existing_outputs({log_path, truth_path}, options.overwrite));
   auto settings = sim_driver_settings(options);

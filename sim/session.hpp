@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/imu.hpp"
+#include "core/progress.hpp"
 #include "core/result.hpp"
 #include "drivers/gpio/fake/sim_data_ready.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
@@ -69,8 +70,10 @@ struct SimImuSessionOptions {
 /// Simulates `trajectory` and writes the log at `log_path` and the truth at `truth_path` (no
 /// truth file when empty). `progress` (may be empty) receives the completed fraction. Returns
 /// the truth that was written.
-[[nodiscard]] Result<sim::SimTruth> write_sim_imu_session(
-    const SimImuSessionOptions& options, const sim::Trajectory& trajectory, const std::string& log_path,
-    const std::string& truth_path, const std::function<void(double fraction)>& progress = {});
+[[nodiscard]] Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
+                                                          const sim::Trajectory& trajectory,
+                                                          const std::string& log_path,
+                                                          const std::string& truth_path,
+                                                          const ProgressFn& progress = {});
 
 }  // namespace imucal::sim

@@ -29,9 +29,7 @@ void setup(CLI::App& root) {
     Progress progress("exporting", 1.0);
     log::OutputOptions options;
     options.force = o->force;
-    options.progress = [&progress](double done, double total) {
-      progress.update(total > 0 ? done / total : 0.0);
-    };
+    options.progress = [&progress](double fraction) { progress.update(fraction); };
     auto summary = log::export_euroc(o->log_path, o->dir, options, o->allow_damaged);
     progress.finish();
     if (!summary.ok()) fail(summary.error(), "export failed");

@@ -87,9 +87,7 @@ void run_import(const std::string& out_path, bool force, F&& do_import) {
   Progress progress("importing", 1.0);
   log::OutputOptions options;
   options.force = force;
-  options.progress = [&progress](double done, double total) {
-    progress.update(total > 0 ? done / total : 0.0);
-  };
+  options.progress = [&progress](double fraction) { progress.update(fraction); };
   Result<log::ImportSummary> summary = do_import(options);
   progress.finish();
   if (!summary.ok()) fail(summary.error(), "import failed");

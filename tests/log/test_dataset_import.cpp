@@ -1,6 +1,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 
@@ -69,8 +70,16 @@ TEST(DatasetAscii, RawCountsKeepCountsAndNominalConversion) {
   in.units = ImuUnits::kRaw;
   in.accel.scale = Eigen::Vector3d(0.0006, 0.0006, 0.0006);
   in.accel.offset = Eigen::Vector3d(1, 2, 3);
-  auto r = import_ascii(in, (dir / "raw.imulog").string(), {});
+  std::vector<double> fractions;
+  OutputOptions options;
+  options.progress = [&fractions](double f) { fractions.push_back(f); };
+  auto r = import_ascii(in, (dir / "raw.imulog").string(), options);
   ASSERT_TRUE(r.ok()) << r.error().message;
+  // Progress is a fraction: it never goes back, stays in [0, 1] and ends at 1.
+  ASSERT_FALSE(fractions.empty());
+  EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
+  EXPECT_GE(fractions.front(), 0.0);
+  EXPECT_DOUBLE_EQ(fractions.back(), 1.0);
   EXPECT_EQ(r->imu_samples, 300);
   EXPECT_NEAR(r->rate_hz, 100.0, 1e-9);
   const Log log = read_log((dir / "raw.imulog").string());
