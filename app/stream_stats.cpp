@@ -15,10 +15,7 @@ StreamTiming timing_of(const std::vector<TimeNs>& times) {
   if (times.size() < 2) return t;
   std::vector<TimeNs> periods(times.size() - 1);
   for (std::size_t i = 1; i < times.size(); ++i) periods[i - 1] = times[i] - times[i - 1];
-  std::vector<TimeNs> sorted = periods;
-  auto mid = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
-  std::nth_element(sorted.begin(), mid, sorted.end());
-  t.median_period_ns = *mid;
+  t.median_period_ns = median_interval_ns(times);
   const TimeNs span_ns = t.t_last_ns - t.t_first_ns;
   if (span_ns > 0) t.measured_rate_hz = static_cast<double>(times.size() - 1) / ns_to_s(span_ns);
   for (std::size_t i = 0; i < periods.size(); ++i) {
@@ -107,10 +104,9 @@ Result<LogSummary> summarize_log(const std::string& path) {
 Result<CleanRun> longest_clean_run(const std::vector<ImuSample>& s) {
   if (s.size() < 2) return make_error(Errc::kInsufficientData, "a clean run needs at least 2 samples");
   CleanRun run;
-  std::vector<TimeNs> dts;
-  for (std::size_t i = 1; i < s.size(); ++i) dts.push_back(s[i].t_ns - s[i - 1].t_ns);
-  std::nth_element(dts.begin(), dts.begin() + static_cast<std::ptrdiff_t>(dts.size() / 2), dts.end());
-  run.period_ns = dts[dts.size() / 2];
+  std::vector<TimeNs> times(s.size());
+  for (std::size_t i = 0; i < s.size(); ++i) times[i] = s[i].t_ns;
+  run.period_ns = median_interval_ns(times);
   if (run.period_ns <= 0) return make_error(Errc::kCorrupt, "the timestamps do not increase");
   run.rate_hz = 1e9 / static_cast<double>(run.period_ns);
   constexpr std::uint32_t kSaturated = kImuFlagAccelSaturated | kImuFlagGyroSaturated;

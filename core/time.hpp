@@ -2,9 +2,12 @@
 // Time is int64 nanoseconds on CLOCK_MONOTONIC. Names carry the unit (t_ns, period_ns).
 // Doubles in seconds appear only inside estimators, converted at the boundary with these.
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <ctime>
+#include <span>
+#include <vector>
 
 namespace imucal {
 
@@ -21,6 +24,17 @@ inline TimeNs monotonic_now_ns() {
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return static_cast<TimeNs>(ts.tv_sec) * kNsPerSecond + ts.tv_nsec;
+}
+
+/// The median interval between consecutive times (the upper median for an even count), the
+/// robust sample period of a stream with gaps; 0 for fewer than two times.
+inline TimeNs median_interval_ns(std::span<const TimeNs> t_ns) {
+  if (t_ns.size() < 2) return 0;
+  std::vector<TimeNs> dt(t_ns.size() - 1);
+  for (std::size_t i = 1; i < t_ns.size(); ++i) dt[i - 1] = t_ns[i] - t_ns[i - 1];
+  const auto mid = dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2);
+  std::nth_element(dt.begin(), mid, dt.end());
+  return *mid;
 }
 
 }  // namespace imucal

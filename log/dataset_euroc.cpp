@@ -167,11 +167,8 @@ Result<fs::path> euroc_root(const std::string& dir) {
 }
 
 double median_rate_hz(const std::vector<TimeNs>& t) {
-  if (t.size() < 2) return 0.0;
-  std::vector<TimeNs> dt(t.size() - 1);
-  for (std::size_t i = 1; i < t.size(); ++i) dt[i - 1] = t[i] - t[i - 1];
-  std::nth_element(dt.begin(), dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2), dt.end());
-  return dt[dt.size() / 2] > 0 ? 1e9 / static_cast<double>(dt[dt.size() / 2]) : 0.0;
+  const TimeNs period_ns = median_interval_ns(t);
+  return period_ns > 0 ? 1e9 / static_cast<double>(period_ns) : 0.0;
 }
 
 }  // namespace

@@ -284,10 +284,7 @@ Result<TimeNs> sample_period_ns(const std::vector<TimeNs>& t_ns, double rate_hz,
                       source + ": fewer than 2 samples, cannot estimate the sample rate; give it")
         .with_remedy("rate_hz");
   }
-  std::vector<TimeNs> dt(t_ns.size() - 1);
-  for (std::size_t i = 1; i < t_ns.size(); ++i) dt[i - 1] = t_ns[i] - t_ns[i - 1];
-  std::nth_element(dt.begin(), dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2), dt.end());
-  const TimeNs median = dt[dt.size() / 2];
+  const TimeNs median = median_interval_ns(t_ns);
   if (median < 10'000 || median > 2 * kNsPerSecond) {
     return make_error(Errc::kCorrupt,
                       source + ": the median interval between samples is " + seconds_text(median) +
