@@ -23,28 +23,10 @@
 #include "core/camera_model.hpp"
 #include "core/result.hpp"
 #include "core/target.hpp"
+#include "sim/camera_render_options.hpp"
 #include "sim/motion_random.hpp"
 
 namespace imucal::sim {
-
-struct BoardAppearance {
-  double white_dn = 215.0;       // printed white, grey levels
-  double black_dn = 30.0;        // printed black
-  double background_dn = 105.0;  // everything beyond the board
-  /// White margin around the squares, in units of the square size.
-  double margin_squares = 0.75;
-};
-
-struct CameraRenderOptions {
-  int supersampling = 2;      // n x n samples per pixel, 1..8
-  double noise_sigma_dn = 0;  // Gaussian sensor noise, grey levels, >= 0
-  /// Lens point-spread function: a Gaussian of this sigma (pixels) applied to the irradiance;
-  /// 0 leaves the pure pixel-area sampling. Real lenses blur by 0.5-1 px.
-  double optics_blur_sigma_px = 0.0;
-  BoardAppearance appearance;
-
-  [[nodiscard]] Status validate() const;
-};
 
 /// Projected inner corners of one frame: the ground truth a corner detector should find.
 struct CornerTruth {

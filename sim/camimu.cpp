@@ -34,8 +34,6 @@ Result<std::vector<std::uint8_t>> encode_frame(const cv::Mat& gray, const std::s
 
 constexpr std::uint64_t kNoiseSubstream = 0xCA3E7A;  // camera noise stream, independent of the IMU's
 
-double deg(double d) { return d * std::numbers::pi / 180.0; }
-
 YAML::Node matrix_yaml(const Eigen::Matrix4d& m) {
   YAML::Node rows(YAML::NodeType::Sequence);
   for (int r = 0; r < 4; ++r) {
@@ -105,93 +103,6 @@ Status copy_imu_part(const log::SessionLogReader& reader, log::SessionLogWriter&
 }
 
 }  // namespace
-
-sim::CheckerboardMotionOptions CamImuSimOptions::default_motion() {
-  sim::CheckerboardMotionOptions m;
-  m.duration_s = 60.0;
-  return m;
-}
-
-CameraModel CamImuSimOptions::default_sim_camera() {
-  // A global-shutter WVGA module (MT9V034 class) binned 2x2 to 376x240, with a wide lens:
-  // about 86 x 62 deg field of view and moderate barrel distortion.
-  CameraModel c;
-  c.distortion_model = DistortionModel::kRadtan;
-  c.intrinsics << 200.3, 199.8, 189.1, 117.3;
-  c.distortion_coeffs << -0.2865, 0.0731, 2.1e-4, -3.4e-4;
-  c.width = 376;
-  c.height = 240;
-  return c;
-}
-
-Eigen::Isometry3d CamImuSimOptions::default_T_cam_imu() {
-  // The IMU sits on the camera board rotated by 180 deg about the optical axis (camera x = -body
-  // x, camera y = -body y), with an assembly tilt of a degree or two, 3.9 cm from the optical
-  // centre.
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() = (Eigen::AngleAxisd(deg(180.0), Eigen::Vector3d::UnitZ()) *
-                Eigen::AngleAxisd(deg(1.3), Eigen::Vector3d::UnitX()) *
-                Eigen::AngleAxisd(deg(-0.8), Eigen::Vector3d::UnitY()) *
-                Eigen::AngleAxisd(deg(1.7), Eigen::Vector3d::UnitZ()))
-                   .toRotationMatrix();
-  T.translation() = Eigen::Vector3d(0.0312, -0.0184, -0.0136);  // IMU origin in the camera frame, m
-  return T;
-}
-
-TargetDescription CamImuSimOptions::default_sim_target() {
-  // 7 x 6 inner corners (as Kalibr's example board), 5 cm squares: with the default camera and
-  // motion the whole grid is in view in about 98 % of the frames.
-  TargetDescription t;
-  t.type = TargetDescription::Type::kCheckerboard;
-  t.cols = 7;
-  t.rows = 6;
-  t.col_spacing_m = 0.05;
-  t.row_spacing_m = 0.05;
-  return t;
-}
-
-Status CamImuSimOptions::validate() const {
-  IMUCAL_TRY(motion.validate());
-  if (imu) IMUCAL_TRY(imu->validate());
-  if (!(imu_rate_hz >= 4.0 && imu_rate_hz <= 8000.0)) {
-    return make_error(Errc::kInvalidArgument, "IMU rate must be within 4..8000 Hz (MPU-6000 output rates)");
-  }
-  if (!(camera_rate_hz >= 0.5 && camera_rate_hz <= 200.0)) {
-    return make_error(Errc::kInvalidArgument, "camera rate must be within 0.5..200 Hz");
-  }
-  const double period_ns = 1e9 / camera_rate_hz;
-  if (exposure_ns <= 0 || static_cast<double>(exposure_ns) > period_ns) {
-    return make_error(Errc::kInvalidArgument,
-                      "camera exposure must be positive and no longer than the frame period (" +
-                          std::to_string(static_cast<std::int64_t>(period_ns)) + " ns); it is given in ns");
-  }
-  IMUCAL_TRY(validate_camera(camera));
-  if (target.type != TargetDescription::Type::kCheckerboard) {
-    return make_error(Errc::kUnsupported, "the simulated camera renders checkerboard targets only");
-  }
-  IMUCAL_TRY(target.validate());
-  if (!T_cam_imu.matrix().allFinite() ||
-      !(T_cam_imu.linear().transpose() * T_cam_imu.linear()).isApprox(Eigen::Matrix3d::Identity(), 1e-9) ||
-      T_cam_imu.linear().determinant() < 0.0) {
-    return make_error(Errc::kInvalidArgument,
-                      "T_cam_imu must be a rigid transform (rotation and translation)");
-  }
-  if (T_cam_imu.translation().norm() > 1.0) {
-    return make_error(Errc::kInvalidArgument, "T_cam_imu translation must be in metres and below 1 m");
-  }
-  if (!(std::abs(timeshift_cam_imu_s) <= 0.5)) {
-    return make_error(Errc::kInvalidArgument, "timeshift_cam_imu must be in seconds, within +-0.5 s");
-  }
-  if (image_encoding != "png" && image_encoding != "webp") {
-    return make_error(Errc::kInvalidArgument, "image encoding '" + image_encoding +
-                                                  "' is not supported (use png or webp, both lossless)");
-  }
-  sim::CameraRenderOptions render;
-  render.noise_sigma_dn = noise_sigma_dn;
-  render.supersampling = supersampling;
-  render.optics_blur_sigma_px = optics_blur_sigma_px;
-  return render.validate();
-}
 
 namespace {
 

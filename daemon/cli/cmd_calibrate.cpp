@@ -14,6 +14,7 @@
 
 #include "app/initial_guess.hpp"
 #include "app/result_writers.hpp"
+#include "app/solvers.hpp"
 #include "app/streams.hpp"
 #include "calib/static_calibration.hpp"
 #include "daemon/cli/calibrate_group.hpp"
@@ -98,7 +99,7 @@ void run(const StaticCliOptions& o) {
   opt.gyro_init = guess->gyro;
   if (auto valid = opt.validate(); !valid.ok()) throw CliExit{kExitUsage, valid.error().message};
 
-  auto res = calib::calibrate_static(samples, opt);
+  auto res = app::calibrate_static(samples, opt);
   if (!res.ok()) fail(res.error(), "static calibration of " + o.log_path);
   if (loaded->damaged()) {
     res->warnings.insert(res->warnings.begin(),

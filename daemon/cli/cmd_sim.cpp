@@ -10,10 +10,12 @@
 #include <string>
 #include <vector>
 
+#include "app/module_loader.hpp"
 #include "daemon/cli/command.hpp"
 #include "sim/camimu.hpp"
 #include "sim/imu_error_model.hpp"
 #include "sim/motion.hpp"
+#include "sim/render_module.hpp"
 #include "sim/rig.hpp"
 #include "sim/session.hpp"
 #include "sim/truth.hpp"
@@ -261,9 +263,11 @@ void add_camimu(CLI::App* sim) {
     refuse_overwrite(*o, truth_path);
     auto valid = co->validate();
     if (!valid.ok()) fail(valid.error(), "sim camimu");
+    auto render = app::load_module<sim::RenderModuleApi>(sim::kRenderModule, sim::kRenderModuleEntry);
+    if (!render.ok()) fail(render.error(), "sim camimu");
     sim::CamImuSimSummary summary;
     Progress progress("simulating camimu", 1.0);
-    auto status = sim::simulate_camimu_session(
+    auto status = (*render)->camimu_session(
         *co, o->out_path, truth_path, [&progress](double done) { progress.update(done); }, &summary);
     progress.finish();
     if (!status.ok()) {

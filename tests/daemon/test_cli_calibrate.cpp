@@ -1,4 +1,5 @@
 #include <gtest/gtest.h>
+#include <stdlib.h>
 #include <yaml-cpp/yaml.h>
 
 #include <filesystem>
@@ -163,6 +164,20 @@ TEST(CliCalibrateStatic, FixtureRecoversTruth) {
           << "gyro T " << i << k;
     }
   }
+}
+
+TEST(CliCalibrate, MissingSolverModuleIsAnInstallationErrorThatNamesIt) {
+  // The program loads Ceres only in the solver module; without it the command says which file
+  // is missing and where it looked, and writes nothing.
+  const std::string dir = test::scratch_dir();
+  setenv("IMUCAL_MODULE_DIR", dir.c_str(), 1);
+  const auto r = run_cli({"calibrate", "static", test::source_path("fixtures/static.imulog"), "--gravity",
+                          "9.81", "-o", dir + "/r.yaml"});
+  unsetenv("IMUCAL_MODULE_DIR");
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_NE(r.err.find("libimucal_solve.so is not in " + dir), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("IMUCAL_MODULE_DIR"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/r.yaml"));
 }
 
 }  // namespace

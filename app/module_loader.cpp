@@ -1,0 +1,84 @@
+#include "app/module_loader.hpp"
+
+#include <dlfcn.h>
+
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <mutex>
+#include <system_error>
+#include <vector>
+
+#include "core/version.hpp"
+
+namespace imucal::app {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::vector<fs::path> search_dirs() {
+  if (const char* dir = std::getenv("IMUCAL_MODULE_DIR"); dir != nullptr && *dir != '\0')
+    return {fs::path(dir)};
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (ec) return {};
+  const fs::path dir = exe.parent_path();
+  return {dir, dir.parent_path() / "lib" / "imucal"};
+}
+
+Result<const void*> load_uncached(std::string_view name, const char* entry) {
+  const std::string file = "lib" + std::string(name) + ".so";
+  const auto dirs = search_dirs();
+  std::string tried;
+  for (const auto& dir : dirs) {
+    const fs::path path = dir / file;
+    std::error_code ec;
+    if (!fs::exists(path, ec)) {
+      tried += (tried.empty() ? "" : ", ") + dir.string();
+      continue;
+    }
+    // RTLD_LOCAL: the module's own copies of the libraries stay private to it.
+    void* handle = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
+    if (handle == nullptr) {
+      const char* why = dlerror();
+      return make_error(Errc::kUnsupported,
+                        "cannot load " + path.string() + ": " + (why ? why : "unknown reason") +
+                            "; reinstall imucal (the module or a library it needs is broken)");
+    }
+    using EntryFn = const void* (*)();
+    auto fn = reinterpret_cast<EntryFn>(dlsym(handle, entry));
+    if (fn == nullptr) {
+      return make_error(Errc::kUnsupported, path.string() + " has no entry point " + entry +
+                                                "; it is not an imucal module of this kind");
+    }
+    const void* api = fn();
+    const auto* header = static_cast<const ModuleHeader*>(api);
+    if (header == nullptr || header->abi != kModuleAbi || header->version == nullptr ||
+        std::strcmp(header->version, kVersion) != 0) {
+      return make_error(Errc::kUnsupported,
+                        path.string() + " is from another build of imucal (version " +
+                            (header && header->version ? header->version : "unknown") + ", this program is " +
+                            kVersion + "); reinstall imucal so that the program and its modules match");
+    }
+    return api;
+  }
+  return make_error(Errc::kUnsupported,
+                    "the module " + file + " is not in " + (tried.empty() ? "any folder" : tried) +
+                        "; reinstall imucal, or set IMUCAL_MODULE_DIR to the folder that holds it");
+}
+
+}  // namespace
+
+Result<const void*> load_module_api(std::string_view name, const char* entry) {
+  static std::mutex mutex;
+  static std::map<std::string, const void*, std::less<>> loaded;
+  const std::lock_guard lock(mutex);
+  const std::string key = std::string(name) + "/" + entry;
+  if (auto it = loaded.find(key); it != loaded.end()) return it->second;
+  auto api = load_uncached(name, entry);
+  if (api.ok()) loaded.emplace(key, *api);
+  return api;
+}
+
+}  // namespace imucal::app

@@ -1,0 +1,15 @@
+#include "app/solvers.hpp"
+
+#include "app/module_loader.hpp"
+#include "calib/solve_module.hpp"
+
+namespace imucal::app {
+
+Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samples,
+                                                 const calib::StaticCalibrationOptions& options) {
+  auto api = load_module<calib::SolveModuleApi>(calib::kSolveModule, calib::kSolveModuleEntry);
+  if (!api.ok()) return api.error();
+  return (*api)->static_calibration(samples, options);
+}
+
+}  // namespace imucal::app

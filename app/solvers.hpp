@@ -1,0 +1,18 @@
+#pragma once
+// The estimators that need Ceres, called through the solver module libimucal_solve.so
+// (app/module_loader.hpp), so that programs load Ceres and its BLAS/LAPACK/SuiteSparse chain only
+// when they solve.
+
+#include <span>
+
+#include "calib/static_calibration.hpp"
+#include "core/imu.hpp"
+#include "core/result.hpp"
+
+namespace imucal::app {
+
+/// calib::calibrate_static; fails with the loader's error when the module cannot be loaded.
+[[nodiscard]] Result<StaticCalibrationResult> calibrate_static(
+    std::span<const ImuSample> samples, const calib::StaticCalibrationOptions& options);
+
+}  // namespace imucal::app

@@ -1,0 +1,39 @@
+// The options of the static calibration, checked without the solver (so that a program can
+// validate them before it loads libimucal_solve.so).
+
+#include <cmath>
+#include <cstdio>
+#include <string>
+
+#include "calib/static_calibration.hpp"
+
+namespace imucal::calib {
+
+Status StaticCalibrationOptions::validate() const {
+  char gravity[32];
+  std::snprintf(gravity, sizeof(gravity), "%g", gravity_mps2);
+  auto fail = [](const std::string& msg) -> Status { return make_error(Errc::kInvalidArgument, msg); };
+  if (!(gravity_mps2 > 9.7 && gravity_mps2 < 9.9)) {
+    return fail("gravity " + std::string(gravity) + " m/s^2 is not a terrestrial value (9.7..9.9)");
+  }
+  if (!(init_still_s >= 0.0) || !std::isfinite(init_still_s))
+    return fail("the initial still period must be >= 0 s");
+  if (!(window_s > 0.0 && window_s <= 10.0)) return fail("the detector window must be in (0, 10] s");
+  if (!(min_interval_s > 0.0)) return fail("the minimum static interval must be positive");
+  if (multiplier_min < 1 || multiplier_max < multiplier_min)
+    return fail("threshold multipliers must satisfy 1 <= min <= max");
+  if (min_attitudes < 9)
+    return fail("at least 9 distinct attitudes are needed for observability (Tedaldi 3.5)");
+  if (!(distinct_attitude_deg > 0.0)) return fail("the distinct-attitude angle must be positive");
+  if (!(max_rotation_in_static_deg > 0.0))
+    return fail("the rotation limit inside a static interval must be positive");
+  for (const auto* c : {&accel_init, &gyro_init}) {
+    if (*c &&
+        (!(*c)->scale.allFinite() || !(*c)->offset.allFinite() || (*c)->scale.cwiseAbs().minCoeff() == 0.0)) {
+      return fail("a nominal scale is zero or not finite");
+    }
+  }
+  return {};
+}
+
+}  // namespace imucal::calib

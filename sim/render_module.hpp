@@ -1,0 +1,18 @@
+#pragma once
+// The renderer module, libimucal_render.so: the simulated camera-IMU session, whose camera
+// renderer needs OpenCV, loaded by the CLI only for `sim camimu` (app/module_loader.hpp).
+
+#include "core/module.hpp"
+#include "sim/camimu.hpp"
+
+namespace imucal::sim {
+
+inline constexpr const char* kRenderModule = "imucal_render";
+inline constexpr const char* kRenderModuleEntry = "imucal_render_module";
+
+struct RenderModuleApi {
+  ModuleHeader header;
+  decltype(&simulate_camimu_session) camimu_session;
+};
+
+}  // namespace imucal::sim

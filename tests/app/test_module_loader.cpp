@@ -1,0 +1,81 @@
+#include <gtest/gtest.h>
+#include <stdlib.h>
+
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "app/module_loader.hpp"
+#include "app/solvers.hpp"
+#include "calib/solve_module.hpp"
+#include "core/version.hpp"
+#include "sim/render_module.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal {
+namespace {
+
+/// Sets IMUCAL_MODULE_DIR for the scope of one test.
+class ModuleDir {
+ public:
+  explicit ModuleDir(const std::string& dir) { setenv("IMUCAL_MODULE_DIR", dir.c_str(), 1); }
+  ~ModuleDir() { unsetenv("IMUCAL_MODULE_DIR"); }
+};
+
+TEST(ModuleLoader, LoadsTheSolverModuleAndCallsThroughIt) {
+  ModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
+  auto api = app::load_module<calib::SolveModuleApi>(calib::kSolveModule, calib::kSolveModuleEntry);
+  ASSERT_TRUE(api.ok()) << api.error().message;
+  EXPECT_STREQ((*api)->header.version, kVersion);
+  EXPECT_EQ((*api)->header.abi, kModuleAbi);
+  // Loaded once: the second call returns the same table.
+  auto again = app::load_module<calib::SolveModuleApi>(calib::kSolveModule, calib::kSolveModuleEntry);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(*api, *again);
+  // The call crosses into the module and its error comes back whole.
+  const std::vector<ImuSample> none;
+  auto res = app::calibrate_static(none, calib::StaticCalibrationOptions{});
+  ASSERT_FALSE(res.ok());
+  EXPECT_EQ(res.error().code, Errc::kInsufficientData) << res.error().message;
+}
+
+TEST(ModuleLoader, LoadsTheRendererModule) {
+  ModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
+  auto api = app::load_module<sim::RenderModuleApi>(sim::kRenderModule, sim::kRenderModuleEntry);
+  ASSERT_TRUE(api.ok()) << api.error().message;
+  EXPECT_NE((*api)->camimu_session, nullptr);
+}
+
+TEST(ModuleLoader, MissingModuleNamesWhereItLookedAndWhatToDo) {
+  const std::string empty = test::scratch_dir();
+  ModuleDir dir(empty);
+  auto api = app::load_module_api("imucal_nosuch", "imucal_nosuch_module");
+  ASSERT_FALSE(api.ok());
+  EXPECT_EQ(api.error().code, Errc::kUnsupported);
+  EXPECT_NE(api.error().message.find("libimucal_nosuch.so"), std::string::npos) << api.error().message;
+  EXPECT_NE(api.error().message.find(empty), std::string::npos) << api.error().message;
+  EXPECT_NE(api.error().message.find("IMUCAL_MODULE_DIR"), std::string::npos) << api.error().message;
+}
+
+TEST(ModuleLoader, ABrokenFileIsRefusedWithTheLoadersReason) {
+  const std::string scratch = test::scratch_dir();
+  std::ofstream(scratch + "/libimucal_junk.so") << "not an ELF file\n";
+  ModuleDir dir(scratch);
+  auto api = app::load_module_api("imucal_junk", "imucal_junk_module");
+  ASSERT_FALSE(api.ok());
+  EXPECT_EQ(api.error().code, Errc::kUnsupported);
+  EXPECT_NE(api.error().message.find("cannot load"), std::string::npos) << api.error().message;
+}
+
+TEST(ModuleLoader, AModuleWithoutTheEntryIsRefused) {
+  ModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
+  // The renderer module asked for the solver's entry point.
+  auto api = app::load_module_api(sim::kRenderModule, calib::kSolveModuleEntry);
+  ASSERT_FALSE(api.ok());
+  EXPECT_EQ(api.error().code, Errc::kUnsupported);
+  EXPECT_NE(api.error().message.find("no entry point imucal_solve_module"), std::string::npos)
+      << api.error().message;
+}
+
+}  // namespace
+}  // namespace imucal
