@@ -116,6 +116,38 @@ json sensor_json(const calib::AllanCurve& curve, const std::vector<calib::AllanN
 
 }  // namespace
 
+Result<Eigen::Matrix3d> read_gsens_matrix(const std::string& path) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::BadFile&) {
+    return make_error(Errc::kNotFound, path + ": cannot be read");
+  } catch (const YAML::Exception& e) {
+    return make_error(Errc::kCorrupt, path + ": not valid YAML (" + std::string(e.what()) + ")");
+  }
+  YAML::Node g = root.IsMap() && root["canonical"] && root["canonical"]["G"] ? root["canonical"]["G"]
+                 : root.IsMap() && root["G"]                                 ? root["G"]
+                                                                             : YAML::Node();
+  if (!g) return make_error(Errc::kCorrupt, path + ": has neither canonical.G nor G");
+  Eigen::Matrix3d G;
+  try {
+    if (!g.IsSequence() || g.size() != 3) throw YAML::Exception(YAML::Mark::null_mark(), "not 3 rows");
+    for (int r = 0; r < 3; ++r) {
+      if (!g[r].IsSequence() || g[r].size() != 3)
+        throw YAML::Exception(YAML::Mark::null_mark(), "not 3 columns");
+      for (int c = 0; c < 3; ++c) G(r, c) = g[r][c].as<double>();
+    }
+  } catch (const YAML::Exception&) {
+    return make_error(Errc::kCorrupt, path + ": G must be 3 rows of 3 numbers (rad/s per m/s^2)");
+  }
+  if (!G.allFinite() || G.cwiseAbs().maxCoeff() > 0.1) {
+    return make_error(
+        Errc::kInvalidArgument,
+        path + ": G must be finite and in rad/s per m/s^2 (MEMS gyros: below 1e-3; 0.1 at most)");
+  }
+  return G;
+}
+
 std::string static_result_yaml(const calib::StaticCalibrationResult& r, const ImuStreamInfo& info) {
   YAML::Emitter y;
   y.SetDoublePrecision(12);
@@ -130,6 +162,11 @@ std::string static_result_yaml(const calib::StaticCalibrationResult& r, const Im
   emit_matrix(y, "A_g", r.canonical.A_g);
   emit_vector(y, "b_g", r.canonical.b_g);
   emit_matrix(y, "G", r.canonical.G);
+  y << YAML::EndMap;
+  y << YAML::Key << "gsens" << YAML::Value << YAML::BeginMap;
+  y << YAML::Key << "mode" << YAML::Value << gsens_mode_name(r.gsens_mode);
+  emit_matrix(y, "G_sigma", r.gsens_sigma);
+  y << YAML::Key << "earth_rate_removed" << YAML::Value << r.earth_rate_removed;
   y << YAML::EndMap;
   y << YAML::Key << "convention" << YAML::Value << "corrected = misalignment * diag(scale) * (raw - bias)";
   emit_triad(y, "accel", r.model.accel, r.accel_sigma);
@@ -168,7 +205,19 @@ std::string static_result_json(const calib::StaticCalibrationResult& r, const Im
                                  {"gamma_zx", g[3]}, {"gamma_xy", g[4]}, {"gamma_yx", g[5]}};
   j["gyro"]["residual_rms"] = r.gyro_residual_rms;
   // The gyro covariance has 12 parameters only when the bias was estimated in the gyro solve.
-  j["gyro"]["bias_source"] = r.gyro_covariance.rows() == 12 ? "estimated" : "initial still period mean";
+  j["gyro"]["bias_source"] = r.gyro_covariance.rows() == 12           ? "estimated in the gyro solve"
+                             : r.gsens_mode == GSensitivityMode::kOff ? "initial still period mean"
+                                                                      : "still poses, with the g-sensitivity";
+  j["gsens"] = {{"mode", gsens_mode_name(r.gsens_mode)},
+                {"G", mat_json(r.canonical.G)},
+                {"G_sigma", mat_json(r.gsens_sigma)},
+                {"earth_rate_removed", r.earth_rate_removed},
+                {"pose_residual_rms_radps", r.gsens_residual_rms}};
+  auto dof_json = [](const FitDof& d) {
+    return json{{"residuals", d.residuals}, {"parameters", d.parameters}, {"dof", d.dof()}};
+  };
+  j["degrees_of_freedom"] = {
+      {"accel", dof_json(r.accel_dof)}, {"gyro", dof_json(r.gyro_dof)}, {"gsens", dof_json(r.gsens_dof)}};
   j["canonical"] = {{"A_a", mat_json(r.canonical.A_a)},
                     {"b_a", vec_json(r.canonical.b_a)},
                     {"A_g", mat_json(r.canonical.A_g)},
@@ -180,6 +229,17 @@ std::string static_result_json(const calib::StaticCalibrationResult& r, const Im
   j["init_still_source"] = r.init_still_from_allan ? "gyro Allan deviation" : "given";
   j["threshold_multiplier"] = r.threshold_multiplier;
   j["threshold"] = r.threshold;
+  json candidates = json::array();
+  for (const auto& c : r.threshold_candidates) {
+    candidates.push_back({{"multiplier", c.multiplier},
+                          {"intervals", c.intervals},
+                          {"distinct_attitudes", c.distinct_attitudes},
+                          {"dropped_for_rotation", c.dropped_for_rotation},
+                          {"accel_rms_m2ps4", c.accel_rms},
+                          {"gyro_pose_rms", c.gyro_rms},
+                          {"score", c.score}});
+  }
+  j["threshold_search"] = candidates;
   j["distinct_attitudes"] = r.distinct_attitudes;
   j["gyro_transfers"] = r.gyro_transfers;
   j["static_intervals"] = intervals_json(r);

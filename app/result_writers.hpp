@@ -15,6 +15,10 @@
 namespace imucal::app {
 
 /// Static calibration as YAML: the canonical form, the triads with their sigmas, quality.
+/// The g-sensitivity matrix G (rad/s per m/s^2) of a YAML file: `canonical: G:` of a static
+/// result written by static_result_yaml, or a top-level `G:` (3 rows of 3). Errors name the file.
+[[nodiscard]] Result<Eigen::Matrix3d> read_gsens_matrix(const std::string& path);
+
 std::string static_result_yaml(const calib::StaticCalibrationResult& result, const ImuStreamInfo& info);
 
 /// Static calibration as JSON (indented, ending in a newline): the YAML's content plus the

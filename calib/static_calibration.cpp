@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <memory>
 #include <string>
 
@@ -136,9 +137,9 @@ AccelSolve solve_accel(std::span<const Eigen::Vector3d> means, double g, const T
     std::vector<std::pair<const double*, const double*>> blocks = {{pn.data(), pn.data()}};
     Eigen::Matrix<double, 9, 9, Eigen::RowMajor> cn;
     if (cov.Compute(blocks, &problem) && cov.GetCovarianceBlock(pn.data(), pn.data(), cn.data())) {
-      const double dof = std::max(1.0, n - 9.0);
-      *covariance =
-          c.asDiagonal() * Eigen::Matrix<double, 9, 9>(cn) * c.asDiagonal() * (2.0 * out.cost / dof);
+      // With no degrees of freedom left the residual variance, and so every sigma, is unknown.
+      const double scale = n > 9.0 ? 2.0 * out.cost / (n - 9.0) : std::numeric_limits<double>::quiet_NaN();
+      *covariance = c.asDiagonal() * Eigen::Matrix<double, 9, 9>(cn) * c.asDiagonal() * scale;
     } else {
       out.ok = false;
     }
@@ -296,9 +297,14 @@ TedaldiTriad triad_from_conversion(const AxisConversion& c) {
   return t;
 }
 
+/// Square roots of a covariance's diagonal; NaN (undetermined) stays NaN.
+Eigen::VectorXd sigmas_of(const Eigen::MatrixXd& cov) {
+  return cov.diagonal().unaryExpr([](double v) { return std::isnan(v) ? v : std::sqrt(std::max(v, 0.0)); });
+}
+
 TriadSigma accel_sigma(const Eigen::MatrixXd& cov) {
   TriadSigma s;
-  const Eigen::VectorXd d = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  const Eigen::VectorXd d = sigmas_of(cov);
   s.T(0, 1) = d[0];
   s.T(0, 2) = d[1];
   s.T(1, 2) = d[2];
@@ -414,13 +420,22 @@ StaticDetection detect_variance(const ScannedRecording& scan, double window_s) {
   d.window = std::max<std::size_t>(3, static_cast<std::size_t>(std::lround(window_s * scan.rate_hz)));
   d.half = d.window / 2;
   d.sigma_sq = variance_magnitude_sq(scan.accel, d.window);
-  std::vector<double> usable_sigma;
+  d.gyro_sigma_sq = variance_magnitude_sq(scan.gyro, d.window);
+  std::vector<double> usable_sigma, usable_gyro;
   usable_sigma.reserve(d.sigma_sq.size());
+  usable_gyro.reserve(d.sigma_sq.size());
   for (std::size_t i = 0; i < d.sigma_sq.size(); ++i) {
     if (scan.accel_ok[i]) usable_sigma.push_back(d.sigma_sq[i]);
+    if (scan.gyro_ok[i]) usable_gyro.push_back(d.gyro_sigma_sq[i]);
   }
   d.floor_sq = std::max(percentile(usable_sigma, 0.1), 1e-300);
+  d.gyro_floor_sq = std::max(percentile(usable_gyro, 0.1), 1e-300);
   return d;
+}
+
+bool StaticDetection::moving(std::size_t i) const {
+  const double ra = sigma_sq[i] / floor_sq, rg = gyro_sigma_sq[i] / gyro_floor_sq;
+  return (ra > kStillRatio && rg > kStillRatio) || ra > kStrongRatio || rg > kStrongRatio;
 }
 
 namespace {
@@ -429,7 +444,8 @@ double seconds_from_start(std::span<const ImuSample> samples, std::size_t i) {
   return ns_to_s(samples[i].t_ns - samples[0].t_ns);
 }
 
-/// Samples of the given initial still period, refused when the rig moves in it.
+/// Samples of the given initial still period, refused when the rig moves in it (by the same
+/// absolute criterion as the automatic still start, StaticDetection::moving).
 Result<std::size_t> given_still_start(std::span<const ImuSample> samples, const ScannedRecording& scan,
                                       const StaticDetection& det, double init_still_s) {
   const std::size_t n = samples.size();
@@ -440,20 +456,16 @@ Result<std::size_t> given_still_start(std::span<const ImuSample> samples, const 
                                                   " s is longer than the recording (" +
                                                   fmt("%.1f", seconds_from_start(samples, n - 1)) + " s)");
   }
-  std::vector<double> inner;
-  for (std::size_t i = std::min(det.half, n_init); i + det.half < n_init; ++i)
-    inner.push_back(det.sigma_sq[i]);
-  const double med = percentile(inner, 0.5);
   for (std::size_t i = 0; i < n_init; ++i) {
     const bool interior = i >= det.half && i + det.half < n_init;
-    if ((interior && (det.sigma_sq[i] > 10.0 * med || det.sigma_sq[i] > 10.0 * det.floor_sq)) ||
-        !scan.accel_ok[i] || (i > 0 && scan.reset_before[i])) {
+    if ((interior && det.moving(i)) || !scan.accel_ok[i] || !scan.gyro_ok[i] ||
+        (i > 0 && scan.reset_before[i])) {
       return make_error(Errc::kInsufficientData,
                         "the given initial still period is not still: the rig moves (or the log has a "
                         "device reset or saturation) at t = " +
                             fmt("%.2f", seconds_from_start(samples, i)) +
-                            " s. Give an initial still period (init_still_s) no longer than the still "
-                            "start, or record again starting with the rig at rest for about 50 s")
+                            " s. Give an initial still period (init_still_s) no longer than that, or "
+                            "record again starting with the rig at rest for about 50 s")
           .with_remedy("init_still_s");
     }
   }
@@ -468,7 +480,7 @@ Result<std::size_t> automatic_still_start(std::span<const ImuSample> samples, co
   std::size_t end = 0;
   // A gap (samples lost while the rig stays still) does not end the still start: the bias mean
   // and the white-noise level do not depend on it. A device reset does.
-  while (end < n && scan.accel_ok[end] && det.sigma_sq[end] <= 10.0 * det.floor_sq &&
+  while (end < n && scan.accel_ok[end] && scan.gyro_ok[end] && !det.moving(end) &&
          (end == 0 || !scan.reset_before[end]))
     ++end;
   const double still_s = end > 0 ? seconds_from_start(samples, end - 1) : 0.0;
@@ -476,9 +488,9 @@ Result<std::size_t> automatic_still_start(std::span<const ImuSample> samples, co
     return make_error(Errc::kInsufficientData,
                       "no still period at the start of the recording: the rig is still for only " +
                           fmt("%.1f", still_s) + " s (at least " + fmt("%.0f", min_init_still_s) +
-                          " s needed). Record again starting with the rig at rest for about 50 s, or give "
-                          "the initial still period (init_still_s) if the start is still but noisier than "
-                          "the later poses")
+                          " s needed; it moves at t = " + fmt("%.2f", still_s) +
+                          " s, where both sensors' variance exceeds 10 times their quietest level). "
+                          "Record again starting with the rig at rest for about 50 s")
         .with_remedy("init_still_s");
   }
   auto curve = allan_deviation(std::span<const Eigen::Vector3d>(scan.gyro.data(), end), scan.rate_hz);
@@ -512,11 +524,21 @@ Result<StillStart> find_still_start(std::span<const ImuSample> samples, const Sc
   still.length_s = seconds_from_start(samples, n_init - 1) + scan.period_s;
   still.sigma_init_sq = variance_magnitude_sq_of(std::span<const Eigen::Vector3d>(scan.accel.data(), n_init));
   Eigen::Vector3d gyro_sq = Eigen::Vector3d::Zero();
-  for (std::size_t i = 0; i < n_init; ++i) still.gyro_bias_raw += scan.gyro[i];
+  for (std::size_t i = 0; i < n_init; ++i) {
+    still.gyro_bias_raw += scan.gyro[i];
+    still.accel_mean_raw += scan.accel[i] - scan.accel[0];
+  }
   still.gyro_bias_raw /= static_cast<double>(n_init);
+  still.accel_mean_raw = still.accel_mean_raw / static_cast<double>(n_init) + scan.accel[0];
   for (std::size_t i = 0; i < n_init; ++i) gyro_sq += (scan.gyro[i] - still.gyro_bias_raw).cwiseAbs2();
   still.gyro_bias_sigma =
       (gyro_sq / static_cast<double>(n_init - 1)).cwiseSqrt() / std::sqrt(static_cast<double>(n_init));
+  // The mean stands for the bias over the whole session, which wanders (random walk, bias
+  // instability): its uncertainty is at least the Allan deviation at the longest averaging time
+  // the still start supports, not only the white noise over sqrt(n).
+  auto curve = allan_deviation(std::span<const Eigen::Vector3d>(scan.gyro.data(), n_init), scan.rate_hz);
+  if (curve.ok() && !curve->adev.empty())
+    still.gyro_bias_sigma = still.gyro_bias_sigma.cwiseMax(curve->adev.back());
   return still;
 }
 
@@ -559,14 +581,89 @@ PrefixSums prefix_sums(const ScannedRecording& scan, const Eigen::Vector3d& gyro
   return p;
 }
 
+/// The gyroscope at rest: the mean of still pose k is b_g + H a_k + noise (the bias, the
+/// g-sensitivity H = A_g^-1 G in input units per m/s^2 acting on the calibrated specific force
+/// a_k, and whatever rotation or bias drift the pose holds). One linear fit per axis over the
+/// still start and every pose, unweighted, its covariance scaled by the residual variance.
+struct GyroStaticFit {
+  Eigen::Vector3d bias = Eigen::Vector3d::Zero();  // b_g, input units (canonical sign)
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d bias_sigma = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d H_sigma = Eigen::Matrix3d::Zero();
+  FitDof dof;
+  double rms = 0.0;                       // of the residual rates, input units
+  std::vector<Eigen::Vector3d> residual;  // per pose: mean - b_g - H a
+};
+
+/// `gyro_means[0]`, `accel_si[0]` are the still start's; the rest are the poses'.
+GyroStaticFit fit_gyro_static(const std::vector<Eigen::Vector3d>& gyro_means,
+                              const std::vector<Eigen::Vector3d>& accel_si, const StillStart& still,
+                              GSensitivityMode mode, const Eigen::Matrix3d& H_fixed) {
+  GyroStaticFit f;
+  const std::size_t n = gyro_means.size();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  if (mode == GSensitivityMode::kEstimate) {
+    Eigen::MatrixXd X(n, 4), Y(n, 3);
+    for (std::size_t k = 0; k < n; ++k) {
+      X.row(k) << 1.0, accel_si[k].transpose();
+      Y.row(k) = gyro_means[k].transpose();
+    }
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(X);
+    const Eigen::MatrixXd beta = qr.solve(Y);  // 4 x 3: [b; H^T]
+    f.bias = beta.row(0).transpose();
+    f.H = beta.bottomRows(3).transpose();
+    f.dof = {static_cast<int>(n), 4};
+    const Eigen::MatrixXd R = Y - X * beta;
+    const bool full_rank = qr.rank() == 4;
+    const Eigen::Matrix4d XtX_inv =
+        full_rank ? Eigen::Matrix4d((X.transpose() * X).inverse()) : Eigen::Matrix4d::Constant(nan);
+    for (int axis = 0; axis < 3; ++axis) {
+      const double s2 = f.dof.determined() ? R.col(axis).squaredNorm() / f.dof.dof() : nan;
+      const Eigen::Vector4d sd = (XtX_inv.diagonal() * s2).cwiseMax(0.0).cwiseSqrt();
+      f.bias_sigma[axis] = sd[0];
+      f.H_sigma.row(axis) = sd.tail<3>().transpose();
+    }
+    if (!full_rank) f.H_sigma.setConstant(nan);
+  } else {
+    f.H = mode == GSensitivityMode::kFixed ? H_fixed : Eigen::Matrix3d::Zero();
+    if (mode == GSensitivityMode::kFixed) {
+      for (std::size_t k = 0; k < n; ++k) f.bias += gyro_means[k] - f.H * accel_si[k];
+      f.bias /= static_cast<double>(n);
+      f.dof = {static_cast<int>(n), 1};
+    } else {
+      f.bias = still.gyro_bias_raw;
+      f.bias_sigma = still.gyro_bias_sigma;
+      f.dof = {static_cast<int>(n), 0};
+    }
+  }
+  f.residual.resize(n);
+  double sum_sq = 0.0;
+  for (std::size_t k = 0; k < n; ++k) {
+    f.residual[k] = gyro_means[k] - f.bias - f.H * accel_si[k];
+    sum_sq += f.residual[k].squaredNorm();
+  }
+  f.rms = std::sqrt(sum_sq / (3.0 * static_cast<double>(std::max<std::size_t>(n, 1))));
+  if (mode == GSensitivityMode::kFixed) {
+    for (int axis = 0; axis < 3; ++axis) {
+      double ss = 0.0;
+      for (std::size_t k = 0; k < n; ++k) ss += f.residual[k][axis] * f.residual[k][axis];
+      f.bias_sigma[axis] = n > 1 ? std::sqrt(ss / static_cast<double>(n - 1) / static_cast<double>(n)) : nan;
+    }
+  }
+  return f;
+}
+
 /// The static poses found with one threshold multiplier and the accelerometer fitted to them.
 struct Candidate {
   int multiplier = 0;
   std::vector<StaticInterval> intervals;
-  std::vector<Eigen::Vector3d> means;
+  std::vector<Eigen::Vector3d> means;       // accelerometer, input units
+  std::vector<Eigen::Vector3d> gyro_means;  // gyroscope, input units
   AccelSolve solve;
+  GyroStaticFit gyro;  // with the still start as its first pose
   int distinct = 0;
-  int rotated = 0;  // intervals dropped for rotation inside them
+  int rotated = 0;                  // intervals dropped for rotation inside them
+  double worst_rotation_deg = 0.0;  // of the dropped ones
 };
 
 /// Distinct attitudes among the static means: their directions through the nominal conversion,
@@ -612,42 +709,79 @@ struct SearchInput {
   std::size_t min_samples = 0;
   double max_rot_rad = 0.0;
   Eigen::Vector3d gyro_scale0 = Eigen::Vector3d::Ones();
+  Eigen::Matrix3d H_fixed = Eigen::Matrix3d::Zero();  // input units per m/s^2, when G is given
 };
 
-/// The static intervals at threshold k * varsigma_init^2 without the rotated ones, their means and
-/// attitude count; the accelerometer is fitted only when there are enough attitudes.
+/// The gyro's static model fitted to a candidate's poses (through its accelerometer solve).
+void fit_candidate_gyro(Candidate* c, const SearchInput& in, const StaticCalibrationOptions& opt) {
+  const TedaldiTriad accel = accel_triad(c->solve.p);
+  std::vector<Eigen::Vector3d> g{in.still.gyro_bias_raw}, a{accel.apply(in.still.accel_mean_raw)};
+  for (std::size_t k = 0; k < c->means.size(); ++k) {
+    g.push_back(c->gyro_means[k]);
+    a.push_back(accel.apply(c->means[k]));
+  }
+  c->gyro = fit_gyro_static(g, a, in.still, opt.gsens, in.H_fixed);
+}
+
+/// The static intervals at threshold (k varsigma_init)^2 with their means and attitude count, the
+/// accelerometer fitted to them when there are enough attitudes, and the gyro's static model.
+/// Intervals whose gyro shows rotation beyond what the bias and the g-sensitivity explain are
+/// dropped, and the fits repeated without them.
 Candidate evaluate_multiplier(int k, const SearchInput& in, const StaticCalibrationOptions& opt) {
   Candidate c;
   c.multiplier = k;
-  const auto raw_intervals = detect_static_intervals(in.detection.sigma_sq, k * in.still.sigma_init_sq,
-                                                     in.scan.accel_ok, in.scan.break_before, in.min_samples);
+  const double threshold = static_cast<double>(k) * static_cast<double>(k) * in.still.sigma_init_sq;
+  const auto raw_intervals = detect_static_intervals(in.detection.sigma_sq, threshold, in.scan.accel_ok,
+                                                     in.scan.break_before, in.min_samples);
   for (const auto& iv : raw_intervals) {
     const double m = static_cast<double>(iv.size());
-    const Eigen::Vector3d rot =
-        in.gyro_scale0.cwiseProduct(in.sums.gyro[iv.end] - in.sums.gyro[iv.begin]) * in.scan.period_s;
-    if (rot.norm() > in.max_rot_rad) {
-      ++c.rotated;
-      continue;
-    }
     c.intervals.push_back(iv);
     c.means.push_back((in.sums.accel[iv.end] - in.sums.accel[iv.begin]) / m + in.sums.accel_center);
+    c.gyro_means.push_back((in.sums.gyro[iv.end] - in.sums.gyro[iv.begin]) / m + in.still.gyro_bias_raw);
   }
-  c.distinct = distinct_attitudes(c.means, opt);
-  if (c.distinct >= opt.min_attitudes) c.solve = first_accel_solve(c.means, opt);
+  for (int round = 0; round < 2; ++round) {
+    c.distinct = distinct_attitudes(c.means, opt);
+    if (c.distinct < opt.min_attitudes) return c;
+    c.solve = first_accel_solve(c.means, opt);
+    if (!c.solve.ok) return c;
+    fit_candidate_gyro(&c, in, opt);
+    if (round == 1) break;
+    Candidate kept = c;
+    kept.intervals.clear();
+    kept.means.clear();
+    kept.gyro_means.clear();
+    for (std::size_t j = 0; j < c.intervals.size(); ++j) {
+      const double duration = static_cast<double>(c.intervals[j].size()) * in.scan.period_s;
+      const double rot = in.gyro_scale0.cwiseProduct(c.gyro.residual[j + 1]).norm() * duration;
+      if (rot > in.max_rot_rad) {
+        ++kept.rotated;
+        kept.worst_rotation_deg = std::max(kept.worst_rotation_deg, rot * 180.0 / M_PI);
+        continue;
+      }
+      kept.intervals.push_back(c.intervals[j]);
+      kept.means.push_back(c.means[j]);
+      kept.gyro_means.push_back(c.gyro_means[j]);
+    }
+    if (kept.rotated == 0) break;
+    c = std::move(kept);
+  }
   return c;
 }
 
 /// Algorithm 1: the multiplier whose static poses give the lowest accelerometer residual.
 Result<Candidate> search_threshold(const ScannedRecording& scan, const StaticDetection& detection,
                                    const StillStart& still, const StaticCalibrationOptions& opt,
+                                   std::vector<ThresholdCandidate>* scored,
                                    std::vector<std::string>* warnings) {
   const PrefixSums sums = prefix_sums(scan, still.gyro_bias_raw);
   SearchInput in{scan, detection, still, sums};
   in.gyro_scale0 = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
+  // A given G (rad/s per m/s^2) in input units through the nominal gyro scale.
+  in.H_fixed = in.gyro_scale0.cwiseInverse().asDiagonal() * opt.gsens_fixed;
   in.min_samples =
       std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(opt.min_interval_s * scan.rate_hz)));
   in.max_rot_rad = opt.max_rotation_in_static_deg * M_PI / 180.0;
-  std::optional<Candidate> best;
+  std::vector<Candidate> valid;
   int best_distinct_seen = 0;
   std::size_t best_intervals_seen = 0;
   for (int k = opt.multiplier_min; k <= opt.multiplier_max; ++k) {
@@ -656,8 +790,26 @@ Result<Candidate> search_threshold(const ScannedRecording& scan, const StaticDet
       best_distinct_seen = c.distinct;
       best_intervals_seen = c.intervals.size();
     }
-    if (c.distinct < opt.min_attitudes || !c.solve.ok) continue;
-    if (!best || c.solve.rms < best->solve.rms) best = std::move(c);
+    if (c.distinct >= opt.min_attitudes && c.solve.ok) valid.push_back(std::move(c));
+  }
+  // Score: the accelerometer residual (eq. 3.4, Algorithm 1) and the gyro's residual about its
+  // static model (motion let into the intervals shows there first), each relative to its best
+  // over the multipliers, summed. A threshold whose intervals had to be dropped for rotation
+  // loses to any that did not.
+  double min_a = std::numeric_limits<double>::infinity(), min_g = min_a;
+  for (const auto& c : valid) {
+    min_a = std::min(min_a, c.solve.rms);
+    min_g = std::min(min_g, c.gyro.rms);
+  }
+  const auto key = [&](const Candidate& c) {
+    const double score = c.solve.rms / std::max(min_a, 1e-300) + c.gyro.rms / std::max(min_g, 1e-300);
+    return std::make_pair(c.rotated > 0, score);
+  };
+  std::optional<Candidate> best;
+  for (auto& c : valid) {
+    scored->push_back({c.multiplier, static_cast<int>(c.intervals.size()), c.distinct, c.rotated, c.solve.rms,
+                       c.gyro.rms, key(c).second});
+    if (!best || key(c) < key(*best)) best = std::move(c);
   }
   if (!best) {
     return make_error(Errc::kInsufficientData,
@@ -676,10 +828,12 @@ Result<Candidate> search_threshold(const ScannedRecording& scan, const StaticDet
                         " or more recommended, 36-50 ideal): the result is less certain, see the sigmas");
   }
   if (best->rotated > 0) {
-    warnings->push_back(std::to_string(best->rotated) +
-                        " static interval(s) were dropped because the gyro shows rotation inside them (more "
-                        "than " +
-                        fmt("%.1f", opt.max_rotation_in_static_deg) + " deg): hold the poses steadier");
+    warnings->push_back(
+        std::to_string(best->rotated) +
+        " static interval(s) were dropped because the rig turned inside them: " + "the gyro shows up to " +
+        fmt("%.1f", best->worst_rotation_deg) + " deg beyond its bias" +
+        (opt.gsens == GSensitivityMode::kOff ? "" : " and g-sensitivity") + " (more than " +
+        fmt("%.1f", opt.max_rotation_in_static_deg) + " deg): hold the poses steadier");
   }
   return std::move(*best);
 }
@@ -696,6 +850,7 @@ Status solve_accelerometer(const Candidate& best, std::span<const ImuSample> sam
                       "constrain all 9 parameters; record poses covering more directions");
   }
   res->model.accel = accel_triad(final.p);
+  res->accel_dof = {static_cast<int>(best.means.size()), 9};
   res->accel_residual_rms = final.rms;
   res->accel_iterations = best.solve.iterations + final.iterations;
   res->accel_sigma = accel_sigma(res->accel_covariance);
@@ -882,7 +1037,7 @@ Eigen::MatrixXd accel_uncertainty_in_gyro(const Eigen::MatrixXd& Jg, const std::
 
 TriadSigma gyro_sigma(const Eigen::MatrixXd& cov, bool bias_estimated,
                       const Eigen::Vector3d& still_bias_sigma) {
-  const Eigen::VectorXd d = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  const Eigen::VectorXd d = sigmas_of(cov);
   TriadSigma s;
   s.T(0, 1) = d[0];
   s.T(0, 2) = d[1];
@@ -895,19 +1050,19 @@ TriadSigma gyro_sigma(const Eigen::MatrixXd& cov, bool bias_estimated,
   return s;
 }
 
-/// The gyro model before the solve: the nominal scale, the still-period bias.
-TedaldiTriad initial_gyro(const StillStart& still, const StaticCalibrationOptions& opt) {
+/// The gyro model before the solve: the nominal scale, the given bias (input units, canonical sign).
+TedaldiTriad initial_gyro(const Eigen::Vector3d& bias_raw, const StaticCalibrationOptions& opt) {
   TedaldiTriad gyro0;
   gyro0.scale = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
-  gyro0.bias = -still.gyro_bias_raw;
+  gyro0.bias = -bias_raw;
   return gyro0;
 }
 
 /// Eqs. 3.5-3.16: the gyro solve, then its covariance with the accelerometer's share.
 Status solve_gyroscope(std::vector<Transfer>* transfers, const Candidate& best, const ScannedRecording& scan,
-                       std::span<const ImuSample> samples, const StillStart& still,
+                       std::span<const ImuSample> samples, const GyroStaticFit& gfit,
                        const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
-  const TedaldiTriad gyro0 = initial_gyro(still, opt);
+  const TedaldiTriad gyro0 = initial_gyro(gfit.bias, opt);
   GyroFit fit(*transfers, gyro0, opt.estimate_gyro_bias);
   // Two passes: the directions at the ends of the static intervals depend (weakly) on the gyro
   // model through the rotation inside the intervals; the second pass uses the first estimate.
@@ -924,11 +1079,72 @@ Status solve_gyroscope(std::vector<Transfer>* transfers, const Candidate& best, 
   // the accelerometer uncertainty.
   Result<Eigen::MatrixXd> Jg = fit.jacobian();
   if (!Jg.ok()) return Jg.error();
+  res->gyro_dof = {static_cast<int>(m_res), fit.parameters()};
   res->gyro_covariance = normal_pseudo_inverse(*Jg);
-  res->gyro_covariance *= 2.0 * fit.final_cost() / std::max(1.0, m_res - fit.parameters());
+  res->gyro_covariance *= res->gyro_dof.determined() ? 2.0 * fit.final_cost() / res->gyro_dof.dof()
+                                                     : std::numeric_limits<double>::quiet_NaN();
   res->gyro_covariance += accel_uncertainty_in_gyro(*Jg, *transfers, best.means, *res);
-  res->gyro_sigma = gyro_sigma(res->gyro_covariance, opt.estimate_gyro_bias, still.gyro_bias_sigma);
+  res->gyro_sigma = gyro_sigma(res->gyro_covariance, opt.estimate_gyro_bias, gfit.bias_sigma);
   return {};
+}
+
+// ---- g-sensitivity ---------------------------------------------------------------------------
+
+/// The gyro's static model with the final accelerometer calibration.
+GyroStaticFit final_gyro_static_fit(const Candidate& best, const StillStart& still,
+                                    const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
+  std::vector<Eigen::Vector3d> g{still.gyro_bias_raw}, a{res->model.accel.apply(still.accel_mean_raw)};
+  for (std::size_t k = 0; k < best.means.size(); ++k) {
+    g.push_back(best.gyro_means[k]);
+    a.push_back(res->model.accel.apply(best.means[k]));
+  }
+  // A given G in input units through the nominal gyro scale (the solved scale differs from it by
+  // far less than G's own uncertainty).
+  const Eigen::Vector3d s0 = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
+  const Eigen::Matrix3d H_fixed = s0.cwiseInverse().asDiagonal() * opt.gsens_fixed;
+  GyroStaticFit f = fit_gyro_static(g, a, still, opt.gsens, H_fixed);
+  res->gsens_dof = f.dof;
+  return f;
+}
+
+/// The recording with every gyro sample's g-sensitivity removed (w_raw - H a(t), a(t) the
+/// calibrated accelerometer sample), so that the transfers integrate rates that carry only the
+/// bias besides the rotation.
+ScannedRecording without_gsens(const ScannedRecording& scan, const Eigen::Matrix3d& H,
+                               const TedaldiTriad& accel) {
+  ScannedRecording out = scan;
+  if (H.isZero(0.0)) return out;
+  for (std::size_t i = 0; i < out.gyro.size(); ++i) out.gyro[i] -= H * accel.apply(scan.accel[i]);
+  return out;
+}
+
+/// Canonical G = A_g H (minus the Earth's vertical rate when the latitude is known) and its sigma.
+void set_gsens_result(const GyroStaticFit& f, const StaticCalibrationOptions& opt,
+                      StaticCalibrationResult* res) {
+  res->gsens_mode = opt.gsens;
+  res->gsens_residual_rms = f.rms;
+  const Eigen::Matrix3d A = res->model.gyro.TK();
+  if (opt.gsens == GSensitivityMode::kFixed) {
+    res->canonical.G = opt.gsens_fixed;
+    res->gsens_residual_rms = (opt.gyro_init ? opt.gyro_init->scale.mean() : 1.0) * f.rms;
+    return;
+  }
+  if (opt.gsens == GSensitivityMode::kOff) return;
+  res->canonical.G = A * f.H;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      double var = 0.0;
+      for (int k = 0; k < 3; ++k) var += A(i, k) * A(i, k) * f.H_sigma(k, j) * f.H_sigma(k, j);
+      res->gsens_sigma(i, j) = std::sqrt(var);
+    }
+  }
+  if (opt.latitude_deg) {
+    constexpr double kEarthRate = 7.2921150e-5;  // rad/s (WGS-84)
+    res->earth_rate_removed = kEarthRate * std::sin(*opt.latitude_deg * M_PI / 180.0) / opt.gravity_mps2;
+    res->canonical.G -= res->earth_rate_removed * Eigen::Matrix3d::Identity();
+  }
+  const Eigen::Vector3d s0 = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
+  res->gsens_residual_rms = s0.mean() * f.rms;
 }
 
 // ---- quality figures (4.1.1) -----------------------------------------------------------------
@@ -952,7 +1168,7 @@ StaticQuality quality_figures(const std::vector<Transfer>& transfers, const Cand
   // Gravity directions from the nominal accelerometer, rates from the nominal gyro.
   std::vector<GravityTransfer> nominal = checks;
   const auto dirs = pose_directions(best.intervals, scan.accel, scan.gyro, samples, accel_nominal,
-                                    initial_gyro(still, opt));
+                                    initial_gyro(still.gyro_bias_raw, opt));
   for (std::size_t k = 0; k < nominal.size(); ++k) {
     nominal[k].u0 = dirs[transfers[k].pose0].u_end;
     nominal[k].u1 = dirs[transfers[k].pose0 + 1].u_start;
@@ -981,11 +1197,12 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   res.timings.detector_s = seconds_since(t0);
 
   t0 = Clock::now();
-  Result<Candidate> best = search_threshold(*scan, detection, *still, opt, &res.warnings);
+  Result<Candidate> best =
+      search_threshold(*scan, detection, *still, opt, &res.threshold_candidates, &res.warnings);
   res.timings.threshold_search_s = seconds_since(t0);
   if (!best.ok()) return best.error();
   res.threshold_multiplier = best->multiplier;
-  res.threshold = best->multiplier * res.sigma_init_sq;
+  res.threshold = static_cast<double>(best->multiplier) * best->multiplier * res.sigma_init_sq;
   res.distinct_attitudes = best->distinct;
 
   t0 = Clock::now();
@@ -993,13 +1210,16 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   res.timings.accel_s = seconds_since(t0);
 
   t0 = Clock::now();
-  Result<std::vector<Transfer>> transfers = collect_transfers(best->intervals, *scan, samples, opt, &res);
+  const GyroStaticFit gfit = final_gyro_static_fit(*best, *still, opt, &res);
+  const ScannedRecording corrected = without_gsens(*scan, gfit.H, res.model.accel);
+  Result<std::vector<Transfer>> transfers = collect_transfers(best->intervals, corrected, samples, opt, &res);
   if (!transfers.ok()) return transfers.error();
-  IMUCAL_TRY(solve_gyroscope(&*transfers, *best, *scan, samples, *still, opt, &res));
+  IMUCAL_TRY(solve_gyroscope(&*transfers, *best, corrected, samples, gfit, opt, &res));
   res.timings.gyro_s = seconds_since(t0);
 
   res.quality = quality_figures(*transfers, *best, *scan, samples, *still, opt, res.model);
   res.canonical = canonical_from_tedaldi(res.model);
+  set_gsens_result(gfit, opt, &res);
   return res;
 }
 

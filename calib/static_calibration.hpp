@@ -36,7 +36,9 @@ struct StaticCalibrationOptions {
   double window_s = 1.0;
   /// Shortest static interval used, s.
   double min_interval_s = 0.5;
-  /// Threshold multipliers tried (Algorithm 1): threshold = k * varsigma_init^2.
+  /// Threshold multipliers tried (Algorithm 1): a sample is static when varsigma < k *
+  /// varsigma_init (imu_tk's rule; the thesis text states k * varsigma_init^2 on varsigma^2,
+  /// which for the same k is far stricter).
   int multiplier_min = 2;
   int multiplier_max = 10;
   /// Distinct attitudes: at least min_attitudes (observability, section 3.5), a warning below
@@ -51,8 +53,18 @@ struct StaticCalibrationOptions {
   /// is 1 (SI input). The gyro offset is not used: the bias comes from the still period.
   std::optional<AxisConversion> accel_init;
   std::optional<AxisConversion> gyro_init;
-  /// Estimate the gyro bias in the gyroscope solve instead of keeping the still-period mean.
+  /// Estimate the gyro bias in the gyroscope solve (eq. 3.8) instead of fixing it beforehand.
   bool estimate_gyro_bias = false;
+  /// Gyroscope g-sensitivity: estimated with the gyro bias from the per-pose gyro means (the
+  /// mean of a still pose is b_g + H a, H = A_g^-1 G; default), fixed to `gsens_fixed` (canonical
+  /// G, rad/s per m/s^2, frame of the result), or neglected as in Tedaldi's model (the bias is
+  /// then the still start's mean).
+  GSensitivityMode gsens = GSensitivityMode::kEstimate;
+  Eigen::Matrix3d gsens_fixed = Eigen::Matrix3d::Zero();
+  /// Latitude, deg, when known: the vertical part of the Earth's rotation (which a still gyro
+  /// sees as Omega sin(latitude) along gravity, indistinguishable from g-sensitivity) is removed
+  /// from the estimated G.
+  std::optional<double> latitude_deg;
 
   /// Checks ranges; the error says what is wrong.
   [[nodiscard]] Status validate() const;

@@ -35,13 +35,25 @@ struct ScannedRecording {
 [[nodiscard]] Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
                                                       std::vector<std::string>* warnings);
 
-/// The variance static detector (eq. 3.9) over the whole recording.
+/// The variance static detector (eq. 3.9) over the whole recording, for the accelerometer (which
+/// selects the static poses) and the gyroscope (which, with it, tells a still start from motion).
 struct StaticDetection {
-  std::size_t window = 0;  // samples
-  std::size_t half = 0;    // window / 2
-  std::vector<double> sigma_sq;
-  /// 10th percentile of sigma_sq over the valid samples: the noise floor of a still rig.
+  std::size_t window = 0;             // samples
+  std::size_t half = 0;               // window / 2
+  std::vector<double> sigma_sq;       // accelerometer
+  std::vector<double> gyro_sigma_sq;  // the same statistic of the gyroscope
+  /// 10th percentile of sigma_sq (gyro_sigma_sq) over the valid samples: the noise floor of a
+  /// still rig.
   double floor_sq = 0.0;
+  double gyro_floor_sq = 0.0;
+
+  /// Ratios to the floors (on varsigma^2) for the still start: a sample is moving when both
+  /// sensors exceed kStillRatio, or either exceeds kStrongRatio. One sensor alone being noisier
+  /// than in the later poses (an accelerometer that settles after power-up, a gyro on a rig
+  /// held by hand) is not motion: turning the rig by hand raises both.
+  static constexpr double kStillRatio = 10.0;
+  static constexpr double kStrongRatio = 1000.0;
+  bool moving(std::size_t i) const;
 };
 StaticDetection detect_variance(const ScannedRecording& scan, double window_s);
 
@@ -51,8 +63,11 @@ struct StillStart {
   double length_s = 0.0;
   bool from_allan = false;     // length chosen from the gyroscope Allan deviation
   double sigma_init_sq = 0.0;  // varsigma_init^2 of Algorithm 1
-  Eigen::Vector3d gyro_bias_raw = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_bias_raw = Eigen::Vector3d::Zero();  // the gyro's mean over the still start
+  /// Its uncertainty as the bias of the whole session: white noise over sqrt(n), at least the
+  /// Allan deviation at the longest averaging time the still start supports.
   Eigen::Vector3d gyro_bias_sigma = Eigen::Vector3d::Zero();
+  Eigen::Vector3d accel_mean_raw = Eigen::Vector3d::Zero();
 };
 /// The given initial still period (options.init_still_s > 0), checked to be still, or the still
 /// start found from the detector with its length chosen from the gyroscope Allan deviation.

@@ -54,20 +54,72 @@ struct StaticTimings {
   double gyro_s = 0.0;
 };
 
+/// How the gyroscope g-sensitivity was treated (StaticCalibrationOptions::gsens).
+enum class GSensitivityMode {
+  kEstimate,  // estimated from the static poses with the gyro bias
+  kFixed,     // given, not estimated
+  kOff,       // neglected (Tedaldi's model: G = 0, bias from the still start)
+};
+inline const char* gsens_mode_name(GSensitivityMode mode) {
+  switch (mode) {
+    case GSensitivityMode::kEstimate:
+      return "estimate";
+    case GSensitivityMode::kFixed:
+      return "fixed";
+    case GSensitivityMode::kOff:
+      return "off";
+  }
+  return "off";
+}
+
+/// Degrees of freedom of a least-squares fit (residuals minus parameters). With none left the
+/// residual variance is unknown and the parameters' sigmas are undetermined (NaN).
+struct FitDof {
+  int residuals = 0;
+  int parameters = 0;
+  int dof() const { return residuals - parameters; }
+  bool determined() const { return dof() > 0; }
+};
+
+/// One threshold multiplier tried by the search (Algorithm 1), as scored.
+struct ThresholdCandidate {
+  int multiplier = 0;
+  int intervals = 0;
+  int distinct_attitudes = 0;
+  int dropped_for_rotation = 0;
+  double accel_rms = 0.0;  // of eq. 3.4, m^2/s^4
+  double gyro_rms = 0.0;   // of the pose means about the gyro's static model, input units
+  double score = 0.0;      // lower is better (docs/static-calibration.md, step 4)
+};
+
 struct StaticCalibrationResult {
   TedaldiImuModel model;
+  /// Standard deviations; NaN where undetermined (no degrees of freedom left, see the dof fields).
   TriadSigma accel_sigma, gyro_sigma;
   /// Covariances of the parameter vectors of eqs. 3.2 and 3.6 (gyro: + 3 bias entries when the
   /// bias is estimated), already scaled by the residual variance.
   Eigen::MatrixXd accel_covariance, gyro_covariance;
   CanonicalImuModel canonical;
+  /// Gyroscope g-sensitivity (canonical G, rad/s per m/s^2, output frame) and how it was found.
+  /// The gyro bias of the model is the one fitted with it (the still start's mean when kOff).
+  GSensitivityMode gsens_mode = GSensitivityMode::kOff;
+  Eigen::Matrix3d gsens_sigma = Eigen::Matrix3d::Zero();  // of canonical.G; 0 when fixed or off
+  /// Earth rate removed from G (its vertical part, Omega sin(latitude) / g on the diagonal); 0
+  /// when the latitude is not known (then G holds it: at most 7.4e-6 rad/s per m/s^2).
+  double earth_rate_removed = 0.0;
+  /// Residual RMS of the per-pose gyro means about b_g + H a (rad/s, with the nominal gyro scale).
+  double gsens_residual_rms = 0.0;
+  FitDof accel_dof, gyro_dof, gsens_dof;
 
   double gravity_mps2 = 0.0;
   double init_still_s = 0.0;
   bool init_still_from_allan = false;
+  /// Static samples have varsigma < multiplier * varsigma_init (imu_tk's rule), that is
+  /// varsigma^2 < threshold = multiplier^2 * varsigma_init^2.
   int threshold_multiplier = 0;
   double threshold = 0.0;  // on varsigma^2, input units^4
   double sigma_init_sq = 0.0;
+  std::vector<ThresholdCandidate> threshold_candidates;  // those with enough attitudes
   std::vector<StaticIntervalInfo> intervals;
   int distinct_attitudes = 0;
   int gyro_transfers = 0;

@@ -32,6 +32,7 @@ struct StaticCliOptions {
   double init_still_s = 0.0;
   std::string accel_scale_init, accel_offset_init, gyro_scale_init;
   bool estimate_gyro_bias = false;
+  std::vector<std::string> gsens{"estimate"};
   double window_s = 1.0;
   double min_interval_s = 0.5;
   bool allow_damaged = false;
@@ -81,6 +82,20 @@ void run(const StaticCliOptions& o) {
   }
   opt.init_still_s = o.init_still_s;
   opt.estimate_gyro_bias = o.estimate_gyro_bias;
+  opt.latitude_deg = o.latitude_deg;
+  const std::string& mode = o.gsens.front();
+  if (mode == "estimate" && o.gsens.size() == 1) {
+    opt.gsens = GSensitivityMode::kEstimate;
+  } else if (mode == "off" && o.gsens.size() == 1) {
+    opt.gsens = GSensitivityMode::kOff;
+  } else if (mode == "fix" && o.gsens.size() == 2) {
+    opt.gsens = GSensitivityMode::kFixed;
+    auto G = app::read_gsens_matrix(o.gsens[1]);
+    if (!G.ok()) fail(G.error(), "--gsens fix");
+    opt.gsens_fixed = *G;
+  } else {
+    throw CliExit{kExitUsage, "--gsens takes 'estimate', 'off' or 'fix FILE'"};
+  }
   opt.window_s = o.window_s;
   opt.min_interval_s = o.min_interval_s;
 
@@ -135,6 +150,16 @@ void run(const StaticCliOptions& o) {
             << q.gyro_after.max_rad << " rad";
   if (q.before_available) std::cout << " (before: mean " << q.gyro_before.mean_rad << ")";
   std::cout << "\n";
+  if (res->gsens_mode != GSensitivityMode::kOff) {
+    const Eigen::Matrix3d& G = res->canonical.G;
+    std::cout << "  gyro g-sensitivity (" << gsens_mode_name(res->gsens_mode) << ", deg/s per g): ";
+    const double k = 180.0 / M_PI * res->gravity_mps2;
+    for (int r = 0; r < 3; ++r) {
+      std::cout << (r ? "; " : "[");
+      for (int c = 0; c < 3; ++c) std::cout << (c ? " " : "") << G(r, c) * k;
+    }
+    std::cout << "]\n";
+  }
   if (res->warnings.empty()) std::cout << "  no warnings\n";
 }
 
@@ -165,7 +190,14 @@ void setup(CLI::App& root) {
   cmd->add_option("--gyro-scale-init", o->gyro_scale_init,
                   "Nominal gyro scale, rad/s per input unit: one value or 'x,y,z'");
   cmd->add_flag("--estimate-gyro-bias", o->estimate_gyro_bias,
-                "Estimate the gyro bias in the gyro solve (default: mean of the still period)");
+                "Estimate the gyro bias in the gyro solve (default: fitted to the still poses with the "
+                "g-sensitivity, or the still start's mean with --gsens off)");
+  cmd->add_option("--gsens", o->gsens,
+                  "Gyro g-sensitivity: 'estimate' (default: with the gyro bias, from the still poses), 'off' "
+                  "(Tedaldi's model: none, bias from the still start) or 'fix FILE' (G from a result YAML's "
+                  "canonical.G or a file with G: 3 rows of 3, rad/s per m/s^2)")
+      ->expected(1, 2)
+      ->type_name("MODE [FILE]");
   cmd->add_option("--window", o->window_s, "Static detector window t_w, s")->check(CLI::Range(0.05, 10.0));
   cmd->add_option("--min-interval", o->min_interval_s, "Shortest static interval used, s")
       ->check(CLI::Range(0.05, 60.0));

@@ -28,6 +28,11 @@ struct SynthConfig {
   double accel_lsb = 9.80665 / 8192.0, gyro_lsb = M_PI / 180.0 / 65.5;
   double accel_offset = 32768.0, gyro_offset = 32768.0;
   TedaldiImuModel truth;  // maps sensor values (after count conversion) to ideal
+  /// Gyro g-sensitivity, canonical G (rad/s per m/s^2): the gyro senses w + G f.
+  Eigen::Matrix3d gsens = Eigen::Matrix3d::Zero();
+  /// Accelerometer noise during the still start, as a multiple of accel_noise (an accelerometer
+  /// that settles after power-up).
+  double accel_noise_start = 1.0;
 };
 
 inline TedaldiImuModel random_truth(unsigned seed) {
@@ -66,9 +71,11 @@ inline SynthRecording make_static_recording(const SynthConfig& cfg) {
     ImuSample s;
     s.t_ns = index * static_cast<TimeNs>(std::llround(dt * 1e9));
     Eigen::Vector3d a = inv_a * f - cfg.truth.accel.bias;
-    Eigen::Vector3d w = inv_g * w_body - cfg.truth.gyro.bias;
+    Eigen::Vector3d w = inv_g * (w_body + cfg.gsens * f) - cfg.truth.gyro.bias;
+    const bool in_still_start = static_cast<double>(index) * dt < cfg.still_s;
+    const double accel_noise = cfg.accel_noise * (in_still_start ? cfg.accel_noise_start : 1.0);
     for (int i = 0; i < 3; ++i) {
-      a[i] += cfg.accel_noise * gauss(rng);
+      a[i] += accel_noise * gauss(rng);
       w[i] += cfg.gyro_noise * gauss(rng);
     }
     if (cfg.raw_counts) {
