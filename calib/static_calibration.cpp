@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <memory>
 #include <string>
@@ -375,6 +376,8 @@ Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
   s.reset_before.assign(n, false);
   s.accel_ok.assign(n, true);
   s.gyro_ok.assign(n, true);
+  s.t_s.resize(n);
+  for (std::size_t i = 0; i < n; ++i) s.t_s[i] = ns_to_s(samples[i].t_ns - samples[0].t_ns);
   for (std::size_t i = 0; i < n; ++i) {
     const auto f = samples[i].flags;
     if (i > 0 && ((f & (kImuFlagGapBefore | kImuFlagDeviceReset)) || dt_s[i - 1] > 1.5 * s.period_s)) {
@@ -586,8 +589,17 @@ PrefixSums prefix_sums(const ScannedRecording& scan, const Eigen::Vector3d& gyro
 /// a_k, and whatever rotation or bias drift the pose holds). One linear fit per axis over the
 /// still start and every pose, unweighted, its covariance scaled by the residual variance.
 struct GyroStaticFit {
-  Eigen::Vector3d bias = Eigen::Vector3d::Zero();  // b_g, input units (canonical sign)
+  Eigen::Vector3d bias = Eigen::Vector3d::Zero();  // b_g over the session, input units (canonical sign)
   Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  /// Bias drift over the session: b(t) = bias + drift_at(t), a quadratic in
+  /// tau = (t - t_mid_s) / t_half_s that averages to zero over the poses' span (zero when not fitted).
+  Eigen::Matrix<double, 3, 2> drift = Eigen::Matrix<double, 3, 2>::Zero();
+  double t_mid_s = 0.0, t_half_s = 1.0;
+  Eigen::Vector3d drift_offset = Eigen::Vector3d::Zero();  // makes the drift average to 0
+  Eigen::Vector3d drift_at(double t_s) const {
+    const double tau = (t_s - t_mid_s) / t_half_s;
+    return drift.col(0) * tau + drift.col(1) * tau * tau + drift_offset;
+  }
   Eigen::Vector3d bias_sigma = Eigen::Vector3d::Zero();
   Eigen::Matrix3d H_sigma = Eigen::Matrix3d::Zero();
   FitDof dof;
@@ -595,33 +607,91 @@ struct GyroStaticFit {
   std::vector<Eigen::Vector3d> residual;  // per pose: mean - b_g - H a
 };
 
-/// `gyro_means[0]`, `accel_si[0]` are the still start's; the rest are the poses'.
-GyroStaticFit fit_gyro_static(const std::vector<Eigen::Vector3d>& gyro_means,
-                              const std::vector<Eigen::Vector3d>& accel_si, const StillStart& still,
-                              GSensitivityMode mode, const Eigen::Matrix3d& H_fixed) {
+/// The still start's and the poses' means (the still start first) and their mid times.
+struct PoseMeans {
+  std::vector<Eigen::Vector3d> gyro, accel_si;
+  std::vector<double> t_s;
+};
+
+/// Bias drift terms fitted with `poses` means: a quadratic in time once there are enough poses
+/// to spare the degrees of freedom, then a line, then none.
+int drift_terms(std::size_t poses) { return poses >= 20 ? 2 : poses >= 12 ? 1 : 0; }
+
+GyroStaticFit fit_gyro_static(const PoseMeans& m, const StillStart& still, GSensitivityMode mode,
+                              const Eigen::Matrix3d& H_fixed) {
   GyroStaticFit f;
+  const auto& gyro_means = m.gyro;
+  const auto& accel_si = m.accel_si;
   const std::size_t n = gyro_means.size();
   const double nan = std::numeric_limits<double>::quiet_NaN();
   if (mode == GSensitivityMode::kEstimate) {
-    Eigen::MatrixXd X(n, 4), Y(n, 3);
+    // Regressors [1, a, tau, tau^2]: the bias wanders over a session (random walk, warm-up) by as
+    // much as the g-sensitivity moves the pose means, so a smooth drift is fitted with them.
+    const int nd = drift_terms(n);
+    const int p = 4 + nd;
+    const auto [t_lo, t_hi] = std::minmax_element(m.t_s.begin(), m.t_s.end());
+    f.t_mid_s = 0.5 * (*t_lo + *t_hi);
+    f.t_half_s = std::max(0.5 * (*t_hi - *t_lo), 1e-9);
+    Eigen::MatrixXd X(n, p), Y(n, 3);
     for (std::size_t k = 0; k < n; ++k) {
-      X.row(k) << 1.0, accel_si[k].transpose();
+      const double tau = (m.t_s[k] - f.t_mid_s) / f.t_half_s;
+      X(k, 0) = 1.0;
+      X.row(k).segment<3>(1) = accel_si[k].transpose();
+      for (int d = 0; d < nd; ++d) X(k, 4 + d) = std::pow(tau, d + 1);
       Y.row(k) = gyro_means[k].transpose();
     }
     const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(X);
-    const Eigen::MatrixXd beta = qr.solve(Y);  // 4 x 3: [b; H^T]
+    const Eigen::MatrixXd beta = qr.solve(Y);  // p x 3: [b; H^T; drift]
     f.bias = beta.row(0).transpose();
-    f.H = beta.bottomRows(3).transpose();
-    f.dof = {static_cast<int>(n), 4};
+    f.H = beta.middleRows(1, 3).transpose();
+    for (int d = 0; d < nd; ++d) f.drift.col(d) = beta.row(4 + d).transpose();
+    // Report the bias averaged over the span (see the sigma below) and keep the drift about it.
+    if (nd == 2) {
+      f.bias += f.drift.col(1) / 3.0;
+      f.drift_offset = -f.drift.col(1) / 3.0;
+    }
+    f.dof = {static_cast<int>(n), p};
     const Eigen::MatrixXd R = Y - X * beta;
-    const bool full_rank = qr.rank() == 4;
-    const Eigen::Matrix4d XtX_inv =
-        full_rank ? Eigen::Matrix4d((X.transpose() * X).inverse()) : Eigen::Matrix4d::Constant(nan);
+    const bool full_rank = qr.rank() == p;
+    const Eigen::MatrixXd XtX_inv =
+        full_rank ? Eigen::MatrixXd((X.transpose() * X).inverse()) : Eigen::MatrixXd::Constant(p, p, nan);
+    // The pose errors are not independent: the bias wanders (a random walk) and consecutive poses
+    // are close in attitude, so errors and regressors are both correlated from pose to pose, and
+    // the textbook s^2 (X'X)^-1 is too small (by about 2 on the virtual rig). Newey-West's
+    // covariance (Bartlett weights, lag 4 (n/100)^(2/9)) holds with such errors. Undetermined
+    // (NaN) without degrees of freedom.
+    const int lag = static_cast<int>(std::floor(4.0 * std::pow(static_cast<double>(n) / 100.0, 2.0 / 9.0)));
+    // Residuals inflated by their leverage (HC3): the sandwich is otherwise too small for the
+    // few tens of poses a session has.
+    Eigen::MatrixXd Ra = R;
+    for (std::size_t k = 0; k < n; ++k) {
+      const double h = X.row(k) * XtX_inv * X.row(k).transpose();
+      Ra.row(k) /= std::max(1.0 - h, 0.05);
+    }
     for (int axis = 0; axis < 3; ++axis) {
-      const double s2 = f.dof.determined() ? R.col(axis).squaredNorm() / f.dof.dof() : nan;
-      const Eigen::Vector4d sd = (XtX_inv.diagonal() * s2).cwiseMax(0.0).cwiseSqrt();
-      f.bias_sigma[axis] = sd[0];
-      f.H_sigma.row(axis) = sd.tail<3>().transpose();
+      Eigen::MatrixXd S = Eigen::MatrixXd::Zero(p, p);
+      for (std::size_t k = 0; k < n; ++k) S += Ra(k, axis) * Ra(k, axis) * X.row(k).transpose() * X.row(k);
+      for (int l = 1; l <= lag; ++l) {
+        const double w = 1.0 - static_cast<double>(l) / (lag + 1.0);
+        for (std::size_t k = static_cast<std::size_t>(l); k < n; ++k) {
+          const Eigen::MatrixXd xx = X.row(k).transpose() * X.row(k - l);
+          S += w * Ra(k, axis) * Ra(k - l, axis) * (xx + xx.transpose());
+        }
+      }
+      const Eigen::MatrixXd V = XtX_inv * S * XtX_inv;
+      const Eigen::VectorXd sd = V.diagonal().unaryExpr([](double v) { return std::sqrt(std::max(v, 0.0)); });
+      // The reported bias is b(t) averaged over the span of the poses (tau uniform in [-1, 1]:
+      // mean tau 0, mean tau^2 1/3), the bias a user of the whole recording saw.
+      Eigen::VectorXd l = Eigen::VectorXd::Zero(p);
+      l[0] = 1.0;
+      if (nd == 2) l[5] = 1.0 / 3.0;
+      f.bias_sigma[axis] = std::sqrt(std::max(l.dot(V * l), 0.0));
+      if (!f.dof.determined()) {
+        f.bias_sigma[axis] = nan;
+        f.H_sigma.row(axis).setConstant(nan);
+        continue;
+      }
+      f.H_sigma.row(axis) = sd.segment<3>(1).transpose();
     }
     if (!full_rank) f.H_sigma.setConstant(nan);
   } else {
@@ -639,7 +709,7 @@ GyroStaticFit fit_gyro_static(const std::vector<Eigen::Vector3d>& gyro_means,
   f.residual.resize(n);
   double sum_sq = 0.0;
   for (std::size_t k = 0; k < n; ++k) {
-    f.residual[k] = gyro_means[k] - f.bias - f.H * accel_si[k];
+    f.residual[k] = gyro_means[k] - f.bias - f.H * accel_si[k] - f.drift_at(m.t_s[k]);
     sum_sq += f.residual[k].squaredNorm();
   }
   f.rms = std::sqrt(sum_sq / (3.0 * static_cast<double>(std::max<std::size_t>(n, 1))));
@@ -712,15 +782,25 @@ struct SearchInput {
   Eigen::Matrix3d H_fixed = Eigen::Matrix3d::Zero();  // input units per m/s^2, when G is given
 };
 
+/// The still start's and a candidate's pose means, the accelerometer's calibrated with `accel`.
+PoseMeans pose_means(const Candidate& c, const StillStart& still, const TedaldiTriad& accel,
+                     const ScannedRecording& scan) {
+  PoseMeans m;
+  m.gyro.push_back(still.gyro_bias_raw);
+  m.accel_si.push_back(accel.apply(still.accel_mean_raw));
+  m.t_s.push_back(0.5 * (scan.t_s.front() + scan.t_s[still.samples - 1]));
+  for (std::size_t k = 0; k < c.means.size(); ++k) {
+    m.gyro.push_back(c.gyro_means[k]);
+    m.accel_si.push_back(accel.apply(c.means[k]));
+    m.t_s.push_back(0.5 * (scan.t_s[c.intervals[k].begin] + scan.t_s[c.intervals[k].end - 1]));
+  }
+  return m;
+}
+
 /// The gyro's static model fitted to a candidate's poses (through its accelerometer solve).
 void fit_candidate_gyro(Candidate* c, const SearchInput& in, const StaticCalibrationOptions& opt) {
-  const TedaldiTriad accel = accel_triad(c->solve.p);
-  std::vector<Eigen::Vector3d> g{in.still.gyro_bias_raw}, a{accel.apply(in.still.accel_mean_raw)};
-  for (std::size_t k = 0; k < c->means.size(); ++k) {
-    g.push_back(c->gyro_means[k]);
-    a.push_back(accel.apply(c->means[k]));
-  }
-  c->gyro = fit_gyro_static(g, a, in.still, opt.gsens, in.H_fixed);
+  c->gyro = fit_gyro_static(pose_means(*c, in.still, accel_triad(c->solve.p), in.scan), in.still, opt.gsens,
+                            in.H_fixed);
 }
 
 /// The static intervals at threshold (k varsigma_init)^2 with their means and attitude count, the
@@ -1091,18 +1171,15 @@ Status solve_gyroscope(std::vector<Transfer>* transfers, const Candidate& best, 
 // ---- g-sensitivity ---------------------------------------------------------------------------
 
 /// The gyro's static model with the final accelerometer calibration.
-GyroStaticFit final_gyro_static_fit(const Candidate& best, const StillStart& still,
-                                    const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
-  std::vector<Eigen::Vector3d> g{still.gyro_bias_raw}, a{res->model.accel.apply(still.accel_mean_raw)};
-  for (std::size_t k = 0; k < best.means.size(); ++k) {
-    g.push_back(best.gyro_means[k]);
-    a.push_back(res->model.accel.apply(best.means[k]));
-  }
+GyroStaticFit final_gyro_static_fit(const Candidate& best, const ScannedRecording& scan,
+                                    const StillStart& still, const StaticCalibrationOptions& opt,
+                                    StaticCalibrationResult* res) {
   // A given G in input units through the nominal gyro scale (the solved scale differs from it by
   // far less than G's own uncertainty).
   const Eigen::Vector3d s0 = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
   const Eigen::Matrix3d H_fixed = s0.cwiseInverse().asDiagonal() * opt.gsens_fixed;
-  GyroStaticFit f = fit_gyro_static(g, a, still, opt.gsens, H_fixed);
+  GyroStaticFit f =
+      fit_gyro_static(pose_means(best, still, res->model.accel, scan), still, opt.gsens, H_fixed);
   res->gsens_dof = f.dof;
   return f;
 }
@@ -1110,11 +1187,13 @@ GyroStaticFit final_gyro_static_fit(const Candidate& best, const StillStart& sti
 /// The recording with every gyro sample's g-sensitivity removed (w_raw - H a(t), a(t) the
 /// calibrated accelerometer sample), so that the transfers integrate rates that carry only the
 /// bias besides the rotation.
-ScannedRecording without_gsens(const ScannedRecording& scan, const Eigen::Matrix3d& H,
+ScannedRecording without_gsens(const ScannedRecording& scan, const GyroStaticFit& f,
                                const TedaldiTriad& accel) {
   ScannedRecording out = scan;
-  if (H.isZero(0.0)) return out;
-  for (std::size_t i = 0; i < out.gyro.size(); ++i) out.gyro[i] -= H * accel.apply(scan.accel[i]);
+  if (f.H.isZero(0.0) && f.drift.isZero(0.0)) return out;
+  for (std::size_t i = 0; i < out.gyro.size(); ++i) {
+    out.gyro[i] -= f.H * accel.apply(scan.accel[i]) + f.drift_at(scan.t_s[i]);
+  }
   return out;
 }
 
@@ -1210,8 +1289,8 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   res.timings.accel_s = seconds_since(t0);
 
   t0 = Clock::now();
-  const GyroStaticFit gfit = final_gyro_static_fit(*best, *still, opt, &res);
-  const ScannedRecording corrected = without_gsens(*scan, gfit.H, res.model.accel);
+  const GyroStaticFit gfit = final_gyro_static_fit(*best, *scan, *still, opt, &res);
+  const ScannedRecording corrected = without_gsens(*scan, gfit, res.model.accel);
   Result<std::vector<Transfer>> transfers = collect_transfers(best->intervals, corrected, samples, opt, &res);
   if (!transfers.ok()) return transfers.error();
   IMUCAL_TRY(solve_gyroscope(&*transfers, *best, corrected, samples, gfit, opt, &res));

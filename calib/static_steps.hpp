@@ -24,6 +24,7 @@ struct ScannedRecording {
   std::vector<bool> break_before;
   std::vector<bool> reset_before;  // a device reset before sample i
   std::vector<bool> accel_ok, gyro_ok;
+  std::vector<double> t_s;  // sample times from the first, s
   int gaps = 0, accel_saturated = 0, gyro_saturated = 0;
   /// The samples' values; an invalid accelerometer value is replaced by the previous one so that
   /// running sums stay finite (such samples are never part of a static interval).

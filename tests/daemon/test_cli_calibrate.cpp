@@ -96,7 +96,7 @@ TEST(CliCalibrateStatic, RawLogToYamlAndJson) {
     }
   }
   EXPECT_EQ(j["gsens"]["mode"], "estimate");
-  EXPECT_EQ(j["degrees_of_freedom"]["gsens"]["parameters"], 4);
+  EXPECT_EQ(j["degrees_of_freedom"]["gsens"]["parameters"], 6);  // per axis: bias, H row, quadratic drift
 }
 
 TEST(CliCalibrateStatic, InitOptionsAndErrors) {
