@@ -60,6 +60,8 @@ std::string remedy_flag(const Remedy& remedy) {
                                                             {"delimiter", "--delimiter"},
                                                             {"gyro_scale", "--gyro-scale"},
                                                             {"init_still_s", "--init-still"},
+                                                            {"min_interval_s", "--min-interval"},
+                                                            {"multiplier", "--multiplier"},
                                                             {"rate_hz", "--rate"},
                                                             {"skip_header", "--skip-header"},
                                                             {"time_unit", "--time-unit"},

@@ -107,7 +107,7 @@ inline SynthRecording make_static_recording(const SynthConfig& cfg) {
     for (long i = 0; i < n; ++i) {
       const double s = static_cast<double>(i) / static_cast<double>(n);
       const double frac = s - std::sin(2 * M_PI * s) / (2 * M_PI);
-      const double rate = angle / dur * (1 - std::cos(2 * M_PI * s));
+      const double rate = angle / (static_cast<double>(n) * dt) * (1 - std::cos(2 * M_PI * s));
       const Eigen::Quaterniond qi = q0 * Eigen::Quaterniond(Eigen::AngleAxisd(angle * frac, axis));
       emit(qi, rate * axis);
     }
