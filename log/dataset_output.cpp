@@ -1,5 +1,7 @@
 // Outputs that appear only when complete: write under a temporary name, rename on success.
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -131,17 +133,39 @@ Status PendingOutput::commit() {
 }
 
 Result<std::string> read_text_file(const std::string& path) {
-  std::error_code ec;
-  if (fs::is_directory(path, ec)) return make_error(Errc::kNotFound, path + " is a folder, expected a file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
+  // One read of the known size into one buffer: no stream growing and copying, and a read error
+  // is an error, not an early end of the file.
+  // O_NONBLOCK: opening a FIFO without a writer returns at once (and is refused below) instead
+  // of blocking; it does not change reads of a regular file.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  if (fd < 0) {
     return make_error(Errc::kNotFound,
                       "cannot open " + path + ": " + std::strerror(errno) + " (check the path)");
   }
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) return make_error(Errc::kIo, "cannot read " + path);
-  return ss.str();
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    const bool dir = S_ISDIR(st.st_mode);
+    ::close(fd);
+    return make_error(Errc::kNotFound,
+                      path + (dir ? " is a folder, expected a file" : " is not a regular file"));
+  }
+  std::string text(static_cast<std::size_t>(st.st_size), '\0');
+  std::size_t got = 0;
+  while (got < text.size()) {
+    const ssize_t r = ::read(fd, text.data() + got, text.size() - got);
+    if (r < 0 && errno == EINTR) continue;
+    if (r < 0) {
+      const int err = errno;
+      ::close(fd);
+      return make_error(Errc::kIo, "cannot read " + path + " (after " + std::to_string(got) +
+                                       " bytes): " + std::strerror(err));
+    }
+    if (r == 0) break;  // the file shrank while being read
+    got += static_cast<std::size_t>(r);
+  }
+  ::close(fd);
+  text.resize(got);
+  return text;
 }
 
 }  // namespace imucal::log

@@ -1,5 +1,6 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -213,6 +214,35 @@ TEST(DatasetOutput, PendingOutputRemovesUncommittedAndRefusesExisting) {
   auto no_dir = PendingOutput::begin((dir / "nope/o.imulog").string(), PendingOutput::Kind::kFile, false);
   ASSERT_FALSE(no_dir.ok());
   EXPECT_THAT(no_dir.error().message, HasSubstr("does not exist"));
+}
+
+}  // namespace
+}  // namespace imucal::log
+
+namespace imucal::log {
+namespace {
+
+TEST(ReadTextFile, ReadsWholeFilesAndRefusesWhatIsNotARegularFile) {
+  const std::string dir = test::scratch_dir();
+  const std::string path = dir + "/a.txt";
+  std::string big(3'000'000, 'x');
+  big += "end\n";
+  std::ofstream(path, std::ios::binary) << big;
+  auto text = read_text_file(path);
+  ASSERT_TRUE(text.ok()) << text.error().message;
+  EXPECT_EQ(*text, big);
+  auto folder = read_text_file(dir);
+  ASSERT_FALSE(folder.ok());
+  EXPECT_NE(folder.error().message.find("is a folder"), std::string::npos) << folder.error().message;
+  // A FIFO without a writer would block a reader forever; it is refused at once.
+  const std::string fifo = dir + "/fifo";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  auto piped = read_text_file(fifo);
+  ASSERT_FALSE(piped.ok());
+  EXPECT_NE(piped.error().message.find("not a regular file"), std::string::npos) << piped.error().message;
+  auto missing = read_text_file(dir + "/none.txt");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.error().code, Errc::kNotFound);
 }
 
 }  // namespace
