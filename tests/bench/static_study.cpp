@@ -144,11 +144,12 @@ int run(int seeds, const std::string& scratch, GSensitivityMode mode) {
     const double ss = r.spread > 0 ? r.sigma_rms / r.spread : 0.0;
     bias_fail += ms > 0.3 ? 1 : 0;
     sigma_fail += (ss > 1.5 || ss < 1.0 / 1.5) ? 1 : 0;
-    std::printf("%-16s %12.4g %12.4g %12.4g %8.2f %8.2f%s\n", r.name.c_str(), r.mean, r.spread, r.sigma_rms, ms, ss,
-                (ms > 0.3 || ss > 1.5 || ss < 1.0 / 1.5) ? "  <-" : "");
+    std::printf("%-16s %12.4g %12.4g %12.4g %8.2f %8.2f%s\n", r.name.c_str(), r.mean, r.spread, r.sigma_rms,
+                ms, ss, (ms > 0.3 || ss > 1.5 || ss < 1.0 / 1.5) ? "  <-" : "");
   }
-  std::printf("parameters with |mean error| > 0.3 spread: %d; with sigma outside spread/1.5..1.5 spread: %d\n",
-              bias_fail, sigma_fail);
+  std::printf(
+      "parameters with |mean error| > 0.3 spread: %d; with sigma outside spread/1.5..1.5 spread: %d\n",
+      bias_fail, sigma_fail);
   return 0;
 }
 
