@@ -450,8 +450,16 @@ double seconds_from_start(std::span<const ImuSample> samples, std::size_t i) {
 /// Samples of the given initial still period, refused when the rig moves in it (by the same
 /// absolute criterion as the automatic still start, StaticDetection::moving).
 Result<std::size_t> given_still_start(std::span<const ImuSample> samples, const ScannedRecording& scan,
-                                      const StaticDetection& det, double init_still_s) {
+                                      const StaticDetection& det, double init_still_s,
+                                      double min_init_still_s) {
   const std::size_t n = samples.size();
+  if (init_still_s < min_init_still_s) {
+    return make_error(Errc::kInvalidArgument,
+                      "the initial still period " + fmt("%.1f", init_still_s) + " s is too short: at least " +
+                          fmt("%.0f", min_init_still_s) +
+                          " s are needed for the bias and the noise level (the protocol asks for about 50 s)")
+        .with_remedy("init_still_s");
+  }
   std::size_t n_init = 0;
   while (n_init < n && seconds_from_start(samples, n_init) < init_still_s) ++n_init;
   if (n_init >= n) {
@@ -511,9 +519,9 @@ Result<StillStart> find_still_start(std::span<const ImuSample> samples, const Sc
                                     std::vector<std::string>* warnings) {
   StillStart still;
   still.from_allan = !(opt.init_still_s > 0.0);
-  Result<std::size_t> found = still.from_allan
-                                  ? automatic_still_start(samples, scan, detection, opt.min_init_still_s)
-                                  : given_still_start(samples, scan, detection, opt.init_still_s);
+  Result<std::size_t> found =
+      still.from_allan ? automatic_still_start(samples, scan, detection, opt.min_init_still_s)
+                       : given_still_start(samples, scan, detection, opt.init_still_s, opt.min_init_still_s);
   if (!found.ok()) return found.error();
   const std::size_t n_init = *found;
   int init_gaps = 0;
@@ -525,6 +533,11 @@ Result<StillStart> find_still_start(std::span<const ImuSample> samples, const Sc
   }
   still.samples = n_init;
   still.length_s = seconds_from_start(samples, n_init - 1) + scan.period_s;
+  if (still.length_s < 10.0) {
+    warnings->push_back("the still start is only " + fmt("%.1f", still.length_s) +
+                        " s: the noise level that sets the static threshold and the Allan check of the "
+                        "bias rest on few samples; record about 50 s of rest before the first pose");
+  }
   still.sigma_init_sq = variance_magnitude_sq_of(std::span<const Eigen::Vector3d>(scan.accel.data(), n_init));
   Eigen::Vector3d gyro_sq = Eigen::Vector3d::Zero();
   for (std::size_t i = 0; i < n_init; ++i) {
@@ -782,6 +795,14 @@ struct SearchInput {
   Eigen::Matrix3d H_fixed = Eigen::Matrix3d::Zero();  // input units per m/s^2, when G is given
 };
 
+/// The g-sensitivity treatment used with `poses` static poses: an estimate needs enough of them.
+GSensitivityMode effective_gsens(const StaticCalibrationOptions& opt, std::size_t poses) {
+  if (opt.gsens == GSensitivityMode::kEstimate && poses < static_cast<std::size_t>(opt.min_poses_for_gsens)) {
+    return GSensitivityMode::kOff;
+  }
+  return opt.gsens;
+}
+
 /// The still start's and a candidate's pose means, the accelerometer's calibrated with `accel`.
 PoseMeans pose_means(const Candidate& c, const StillStart& still, const TedaldiTriad& accel,
                      const ScannedRecording& scan) {
@@ -799,8 +820,8 @@ PoseMeans pose_means(const Candidate& c, const StillStart& still, const TedaldiT
 
 /// The gyro's static model fitted to a candidate's poses (through its accelerometer solve).
 void fit_candidate_gyro(Candidate* c, const SearchInput& in, const StaticCalibrationOptions& opt) {
-  c->gyro = fit_gyro_static(pose_means(*c, in.still, accel_triad(c->solve.p), in.scan), in.still, opt.gsens,
-                            in.H_fixed);
+  c->gyro = fit_gyro_static(pose_means(*c, in.still, accel_triad(c->solve.p), in.scan), in.still,
+                            effective_gsens(opt, c->means.size()), in.H_fixed);
 }
 
 /// The static intervals at threshold (k varsigma_init)^2 with their means and attitude count, the
@@ -819,31 +840,42 @@ Candidate evaluate_multiplier(int k, const SearchInput& in, const StaticCalibrat
     c.means.push_back((in.sums.accel[iv.end] - in.sums.accel[iv.begin]) / m + in.sums.accel_center);
     c.gyro_means.push_back((in.sums.gyro[iv.end] - in.sums.gyro[iv.begin]) / m + in.still.gyro_bias_raw);
   }
-  for (int round = 0; round < 2; ++round) {
-    c.distinct = distinct_attitudes(c.means, opt);
-    if (c.distinct < opt.min_attitudes) return c;
-    c.solve = first_accel_solve(c.means, opt);
-    if (!c.solve.ok) return c;
-    fit_candidate_gyro(&c, in, opt);
-    if (round == 1) break;
-    Candidate kept = c;
-    kept.intervals.clear();
-    kept.means.clear();
-    kept.gyro_means.clear();
+  c.distinct = distinct_attitudes(c.means, opt);
+  if (c.distinct < opt.min_attitudes) return c;
+  c.solve = first_accel_solve(c.means, opt);
+  if (!c.solve.ok) return c;
+  fit_candidate_gyro(&c, in, opt);
+  // Drop the interval whose gyro shows the most rotation beyond the static model, one at a time
+  // with a refit after each: a pose turned about gravity (which the accelerometer cannot see)
+  // pulls the fit towards itself, and dropping everything above the limit after one fit would
+  // throw out good poses with it.
+  bool dropped = false;
+  for (;;) {
+    std::size_t worst = 0;
+    double worst_rot = 0.0;
     for (std::size_t j = 0; j < c.intervals.size(); ++j) {
       const double duration = static_cast<double>(c.intervals[j].size()) * in.scan.period_s;
       const double rot = in.gyro_scale0.cwiseProduct(c.gyro.residual[j + 1]).norm() * duration;
-      if (rot > in.max_rot_rad) {
-        ++kept.rotated;
-        kept.worst_rotation_deg = std::max(kept.worst_rotation_deg, rot * 180.0 / M_PI);
-        continue;
+      if (rot > worst_rot) {
+        worst_rot = rot;
+        worst = j;
       }
-      kept.intervals.push_back(c.intervals[j]);
-      kept.means.push_back(c.means[j]);
-      kept.gyro_means.push_back(c.gyro_means[j]);
     }
-    if (kept.rotated == 0) break;
-    c = std::move(kept);
+    if (worst_rot <= in.max_rot_rad) break;
+    ++c.rotated;
+    c.worst_rotation_deg = std::max(c.worst_rotation_deg, worst_rot * 180.0 / M_PI);
+    const auto at = static_cast<std::ptrdiff_t>(worst);
+    c.intervals.erase(c.intervals.begin() + at);
+    c.means.erase(c.means.begin() + at);
+    c.gyro_means.erase(c.gyro_means.begin() + at);
+    dropped = true;
+    c.distinct = distinct_attitudes(c.means, opt);
+    if (c.distinct < opt.min_attitudes) return c;
+    fit_candidate_gyro(&c, in, opt);  // with the accelerometer of all the poses: close enough here
+  }
+  if (dropped) {
+    c.solve = first_accel_solve(c.means, opt);
+    if (c.solve.ok) fit_candidate_gyro(&c, in, opt);
   }
   return c;
 }
@@ -931,6 +963,11 @@ Status solve_accelerometer(const Candidate& best, std::span<const ImuSample> sam
   }
   res->model.accel = accel_triad(final.p);
   res->accel_dof = {static_cast<int>(best.means.size()), 9};
+  if (!res->accel_dof.determined()) {
+    res->warnings.push_back("the accelerometer fit is exact: " + std::to_string(best.means.size()) +
+                            " static means for its 9 parameters leave nothing to check it against, and its "
+                            "sigmas are undetermined. Record more poses (36-50)");
+  }
   res->accel_residual_rms = final.rms;
   res->accel_iterations = best.solve.iterations + final.iterations;
   res->accel_sigma = accel_sigma(res->accel_covariance);
@@ -1174,12 +1211,20 @@ Status solve_gyroscope(std::vector<Transfer>* transfers, const Candidate& best, 
 GyroStaticFit final_gyro_static_fit(const Candidate& best, const ScannedRecording& scan,
                                     const StillStart& still, const StaticCalibrationOptions& opt,
                                     StaticCalibrationResult* res) {
+  res->gsens_mode = effective_gsens(opt, best.means.size());
+  if (res->gsens_mode != opt.gsens) {
+    res->warnings.push_back("the gyro g-sensitivity was not estimated: " + std::to_string(best.means.size()) +
+                            " static poses are too few to fit it (" +
+                            std::to_string(opt.min_poses_for_gsens) +
+                            " needed); it is neglected (Tedaldi's model), which costs gyro accuracy on MEMS "
+                            "gyros. Record more poses, or give a known G");
+  }
   // A given G in input units through the nominal gyro scale (the solved scale differs from it by
   // far less than G's own uncertainty).
   const Eigen::Vector3d s0 = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
   const Eigen::Matrix3d H_fixed = s0.cwiseInverse().asDiagonal() * opt.gsens_fixed;
   GyroStaticFit f =
-      fit_gyro_static(pose_means(best, still, res->model.accel, scan), still, opt.gsens, H_fixed);
+      fit_gyro_static(pose_means(best, still, res->model.accel, scan), still, res->gsens_mode, H_fixed);
   res->gsens_dof = f.dof;
   return f;
 }
@@ -1200,15 +1245,14 @@ ScannedRecording without_gsens(const ScannedRecording& scan, const GyroStaticFit
 /// Canonical G = A_g H (minus the Earth's vertical rate when the latitude is known) and its sigma.
 void set_gsens_result(const GyroStaticFit& f, const StaticCalibrationOptions& opt,
                       StaticCalibrationResult* res) {
-  res->gsens_mode = opt.gsens;
   res->gsens_residual_rms = f.rms;
   const Eigen::Matrix3d A = res->model.gyro.TK();
-  if (opt.gsens == GSensitivityMode::kFixed) {
+  if (res->gsens_mode == GSensitivityMode::kFixed) {
     res->canonical.G = opt.gsens_fixed;
     res->gsens_residual_rms = (opt.gyro_init ? opt.gyro_init->scale.mean() : 1.0) * f.rms;
     return;
   }
-  if (opt.gsens == GSensitivityMode::kOff) return;
+  if (res->gsens_mode == GSensitivityMode::kOff) return;
   res->canonical.G = A * f.H;
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {

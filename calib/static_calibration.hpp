@@ -30,8 +30,9 @@ struct StaticCalibrationOptions {
   /// Length of the initial still period T_init, s; 0 = find the still start and choose T_init
   /// from the gyroscope Allan deviation (section 3.4.3).
   double init_still_s = 0.0;
-  /// Shortest still start accepted when it is found automatically, s.
-  double min_init_still_s = 10.0;
+  /// Shortest still start accepted, found or given, s (a warning below 10 s: the protocol asks
+  /// for about 50).
+  double min_init_still_s = 3.0;
   /// Variance window t_w of eq. 3.9, s.
   double window_s = 1.0;
   /// Shortest static interval used, s.
@@ -60,6 +61,9 @@ struct StaticCalibrationOptions {
   /// G, rad/s per m/s^2, frame of the result), or neglected as in Tedaldi's model (the bias is
   /// then the still start's mean).
   GSensitivityMode gsens = GSensitivityMode::kEstimate;
+  /// Fewest static poses (besides the still start) with which G is estimated; with fewer it is
+  /// neglected, with a warning (4 unknowns per gyro axis would be fitted to a handful of poses).
+  int min_poses_for_gsens = 15;
   Eigen::Matrix3d gsens_fixed = Eigen::Matrix3d::Zero();
   /// Latitude, deg, when known: the vertical part of the Earth's rotation (which a still gyro
   /// sees as Omega sin(latitude) along gravity, indistinguishable from g-sensitivity) is removed

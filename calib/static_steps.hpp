@@ -48,12 +48,14 @@ struct StaticDetection {
   double floor_sq = 0.0;
   double gyro_floor_sq = 0.0;
 
-  /// Ratios to the floors (on varsigma^2) for the still start: a sample is moving when both
-  /// sensors exceed kStillRatio, or either exceeds kStrongRatio. One sensor alone being noisier
-  /// than in the later poses (an accelerometer that settles after power-up, a gyro on a rig
-  /// held by hand) is not motion: turning the rig by hand raises both.
+  /// Ratios to the floors (on varsigma^2, the squared variance) for the still start: a sample is
+  /// moving when both sensors exceed kStillRatio (variance 3.2 times the floor), or either
+  /// exceeds kStrongRatio (variance 1000 times). One sensor alone being noisier than in the later
+  /// poses (an accelerometer that settles after power-up; a gyro on a rig held by hand, 40 times
+  /// the floor's variance in a real recording) is not motion: turning the rig raises both, by
+  /// far more.
   static constexpr double kStillRatio = 10.0;
-  static constexpr double kStrongRatio = 1000.0;
+  static constexpr double kStrongRatio = 1e6;
   bool moving(std::size_t i) const;
 };
 StaticDetection detect_variance(const ScannedRecording& scan, double window_s);

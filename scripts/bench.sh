@@ -11,3 +11,5 @@ for b in "$dir"/tests/bench_*; do
 done
 echo "=== program start (scripts/bench-startup.sh)"
 "$(dirname "$0")/bench-startup.sh" "$dir/daemon/imucal"
+echo "=== static calibration end to end (scripts/bench-static-e2e.sh)"
+"$(dirname "$0")/bench-static-e2e.sh" "$dir/daemon/imucal"

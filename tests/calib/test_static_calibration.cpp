@@ -269,6 +269,60 @@ TEST(StaticCalibration, ANoisyAccelerometerInTheStillStartIsStillAStillStart) {
   expect_within(given->model.accel, given->accel_sigma, cfg.truth.accel, 4.5, "accel");
 }
 
+TEST(StaticCalibration, AGyroHeldByHandInTheStillStartIsStillAStillStart) {
+  // The rig is held by hand at the start: the gyro's variance is 40 times its later level while
+  // the accelerometer stays quiet (a real recording does this). Not motion.
+  SynthConfig cfg;
+  cfg.seed = 49;
+  cfg.truth = test::random_truth(49);
+  cfg.gyro_noise_start = std::sqrt(40.0);
+  const auto rec = make_static_recording(cfg);
+  StaticCalibrationOptions opt;
+  opt.gravity_mps2 = cfg.gravity;
+  auto res = calibrate_static(rec.samples, opt);
+  ASSERT_TRUE(res.ok()) << res.error().message;
+  EXPECT_GT(res->init_still_s, 20.0);
+}
+
+TEST(StaticCalibration, AShortStillStartIsUsedWithAWarningAndATinyOneIsRefused) {
+  SynthConfig cfg;
+  cfg.seed = 51;
+  cfg.truth = test::random_truth(51);
+  cfg.still_s = 6.0;
+  const auto rec = make_static_recording(cfg);
+  StaticCalibrationOptions opt;
+  opt.gravity_mps2 = cfg.gravity;
+  auto res = calibrate_static(rec.samples, opt);
+  ASSERT_TRUE(res.ok()) << res.error().message;
+  EXPECT_LT(res->init_still_s, 6.5);
+  std::string all;
+  for (const auto& w : res->warnings) all += w + "\n";
+  EXPECT_NE(all.find("the still start is only"), std::string::npos) << all;
+  opt.init_still_s = 0.5;
+  auto tiny = calibrate_static(rec.samples, opt);
+  ASSERT_FALSE(tiny.ok());
+  EXPECT_NE(tiny.error().message.find("too short"), std::string::npos) << tiny.error().message;
+}
+
+TEST(StaticCalibration, TooFewPosesForTheGSensitivityNeglectItWithAWarning) {
+  SynthConfig cfg;
+  cfg.seed = 53;
+  cfg.truth = test::random_truth(53);
+  cfg.poses = 11;
+  cfg.hold_min_s = 3.0;
+  cfg.hold_max_s = 4.0;
+  const auto rec = make_static_recording(cfg);
+  StaticCalibrationOptions opt;
+  opt.gravity_mps2 = cfg.gravity;
+  auto res = calibrate_static(rec.samples, opt);
+  ASSERT_TRUE(res.ok()) << res.error().message;
+  EXPECT_EQ(res->gsens_mode, GSensitivityMode::kOff);
+  EXPECT_TRUE(res->canonical.G.isZero(0.0));
+  std::string all;
+  for (const auto& w : res->warnings) all += w + "\n";
+  EXPECT_NE(all.find("g-sensitivity was not estimated"), std::string::npos) << all;
+}
+
 TEST(StaticCalibration, AsManyPosesAsParametersLeaveTheSigmasUndetermined) {
   // With exactly 9 static means the 9 accelerometer parameters fit them exactly: no residual
   // variance is left to scale the covariance, so the sigmas are NaN (undetermined), never 1e-15.
@@ -289,6 +343,9 @@ TEST(StaticCalibration, AsManyPosesAsParametersLeaveTheSigmasUndetermined) {
   ASSERT_EQ(res->intervals.size(), 9u) << "the detector split or merged a pose";
   EXPECT_EQ(res->accel_dof.dof(), 0);
   EXPECT_FALSE(res->accel_dof.determined());
+  std::string all;
+  for (const auto& w : res->warnings) all += w + "\n";
+  EXPECT_NE(all.find("the accelerometer fit is exact"), std::string::npos) << all;
   for (int i = 0; i < 3; ++i) {
     EXPECT_TRUE(std::isnan(res->accel_sigma.scale[i])) << res->accel_sigma.scale[i];
     EXPECT_TRUE(std::isnan(res->accel_sigma.bias[i])) << res->accel_sigma.bias[i];

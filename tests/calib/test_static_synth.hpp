@@ -33,6 +33,7 @@ struct SynthConfig {
   /// Accelerometer noise during the still start, as a multiple of accel_noise (an accelerometer
   /// that settles after power-up).
   double accel_noise_start = 1.0;
+  double gyro_noise_start = 1.0;  // the same for the gyro (a rig held by hand)
 };
 
 inline TedaldiImuModel random_truth(unsigned seed) {
@@ -74,9 +75,10 @@ inline SynthRecording make_static_recording(const SynthConfig& cfg) {
     Eigen::Vector3d w = inv_g * (w_body + cfg.gsens * f) - cfg.truth.gyro.bias;
     const bool in_still_start = static_cast<double>(index) * dt < cfg.still_s;
     const double accel_noise = cfg.accel_noise * (in_still_start ? cfg.accel_noise_start : 1.0);
+    const double gyro_noise = cfg.gyro_noise * (in_still_start ? cfg.gyro_noise_start : 1.0);
     for (int i = 0; i < 3; ++i) {
       a[i] += accel_noise * gauss(rng);
-      w[i] += cfg.gyro_noise * gauss(rng);
+      w[i] += gyro_noise * gauss(rng);
     }
     if (cfg.raw_counts) {
       for (int i = 0; i < 3; ++i) {
