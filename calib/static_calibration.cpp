@@ -691,7 +691,8 @@ GyroStaticFit fit_gyro_static(const PoseMeans& m, const StillStart& still, GSens
           S += w * Ra(k, axis) * Ra(k - l, axis) * (xx + xx.transpose());
         }
       }
-      const Eigen::MatrixXd V = XtX_inv * S * XtX_inv;
+      // With the degrees-of-freedom factor n / (n - p) of Stata's newey.
+      const Eigen::MatrixXd V = XtX_inv * S * XtX_inv * (static_cast<double>(n) / std::max(1, f.dof.dof()));
       const Eigen::VectorXd sd = V.diagonal().unaryExpr([](double v) { return std::sqrt(std::max(v, 0.0)); });
       // The reported bias is b(t) averaged over the span of the poses (tau uniform in [-1, 1]:
       // mean tau 0, mean tau^2 1/3), the bias a user of the whole recording saw.

@@ -5,7 +5,8 @@
 // register emulator, driver and acquisition loop, and calibrates the log as `imucal calibrate
 // static` does.
 //
-//   static_study [SEEDS] [SCRATCH_DIR] [--gsens estimate|off]      (defaults: 50, /tmp, estimate)
+//   static_study [SEEDS] [SCRATCH_DIR] [--gsens estimate|off] [--first-seed N]
+//   (defaults: 50, /tmp, estimate, 1)
 //
 // docs/static-calibration.md ("On the virtual rig") records its output.
 
@@ -52,7 +53,7 @@ Row summarize(const std::string& name, const Stat& s) {
   return r;
 }
 
-int run(int seeds, const std::string& scratch, GSensitivityMode mode) {
+int run(int first_seed, int seeds, const std::string& scratch, GSensitivityMode mode) {
   std::map<std::string, Stat> stats;
   std::vector<std::string> order;
   auto add = [&](const std::string& name, double err, double sigma) {
@@ -63,7 +64,7 @@ int run(int seeds, const std::string& scratch, GSensitivityMode mode) {
   double dir_sum = 0;
   int done = 0;
   const std::string log = scratch + "/static_study_" + std::to_string(getpid()) + ".imulog";
-  for (int seed = 1; seed <= seeds; ++seed) {
+  for (int seed = first_seed; seed < first_seed + seeds; ++seed) {
     sim::SimImuSessionOptions so;
     so.seed = static_cast<std::uint64_t>(seed);
     so.imu = sim::ImuModelParams::draw(so.seed);
@@ -126,12 +127,12 @@ int run(int seeds, const std::string& scratch, GSensitivityMode mode) {
         }
       }
     }
-    std::fprintf(stderr, "\rseed %d/%d", seed, seeds);
+    std::fprintf(stderr, "\rseed %d", seed);
   }
   std::filesystem::remove(log);
   std::fprintf(stderr, "\n");
-  std::printf("static calibration on the virtual rig: %d of %d seeds calibrated, --gsens %s\n", done, seeds,
-              gsens_mode_name(mode));
+  std::printf("static calibration on the virtual rig: %d of %d seeds (from %d) calibrated, --gsens %s\n",
+              done, seeds, first_seed, gsens_mode_name(mode));
   std::printf("gravity direction error after (mean over seeds of the per-session mean): %.3f mrad\n",
               1e3 * dir_sum / std::max(1, done));
   std::printf("units: T and G as stored, scale as a ratio to the truth, bias in counts\n");
@@ -158,6 +159,7 @@ int run(int seeds, const std::string& scratch, GSensitivityMode mode) {
 
 int main(int argc, char** argv) {
   int seeds = 50;
+  int first_seed = 1;
   std::string scratch = "/tmp";
   auto mode = imucal::GSensitivityMode::kEstimate;
   std::vector<std::string> positional;
@@ -166,8 +168,10 @@ int main(int argc, char** argv) {
     if (a == "--gsens" && i + 1 < argc) {
       const std::string m = argv[++i];
       mode = m == "off" ? imucal::GSensitivityMode::kOff : imucal::GSensitivityMode::kEstimate;
+    } else if (a == "--first-seed" && i + 1 < argc) {
+      first_seed = std::atoi(argv[++i]);
     } else if (a == "-h" || a == "--help") {
-      std::printf("usage: static_study [SEEDS] [SCRATCH_DIR] [--gsens estimate|off]\n");
+      std::printf("usage: static_study [SEEDS] [SCRATCH_DIR] [--gsens estimate|off] [--first-seed N]\n");
       return 0;
     } else {
       positional.push_back(a);
@@ -179,5 +183,5 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "static_study: SEEDS must be at least 2\n");
     return 2;
   }
-  return imucal::run(seeds, scratch, mode);
+  return imucal::run(first_seed, seeds, scratch, mode);
 }
