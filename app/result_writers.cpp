@@ -1,8 +1,13 @@
 #include "app/result_writers.hpp"
 
+#include <fcntl.h>
+#include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
@@ -324,12 +329,48 @@ std::string allan_json(const AllanReport& r) {
   return j.dump(2) + "\n";
 }
 
-Status write_text_file(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out << text;
-  out.close();
-  if (!out)
-    return make_error(Errc::kIo, "could not write " + path + ": check the folder exists and is writable");
+Status check_output(const std::string& path, const OutputPolicy& policy) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  for (const auto& input : policy.inputs) {
+    if (fs::exists(path, ec) && fs::equivalent(path, input, ec)) {
+      return make_error(Errc::kInvalidArgument,
+                        path + " is an input of this command; write the result to another file");
+    }
+  }
+  if (fs::is_directory(path, ec))
+    return make_error(Errc::kInvalidArgument, path + " is a folder, not a file");
+  if (!policy.overwrite && fs::exists(path, ec)) return make_error(Errc::kAlreadyExists, path + " exists");
+  return {};
+}
+
+Status write_text_file(const std::string& path, const std::string& text, const OutputPolicy& policy) {
+  IMUCAL_TRY(check_output(path, policy));
+  const std::string temp = path + ".tmp-" + std::to_string(::getpid());
+  const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) {
+    return make_error(Errc::kIo, "could not write " + path + ": " + std::strerror(errno) +
+                                     " (check the folder exists and is writable)");
+  }
+  std::size_t done = 0;
+  int err = 0;
+  while (done < text.size()) {
+    const ssize_t w = ::write(fd, text.data() + done, text.size() - done);
+    if (w < 0 && errno == EINTR) continue;
+    if (w < 0) {
+      err = errno;
+      break;
+    }
+    done += static_cast<std::size_t>(w);
+  }
+  if (err == 0 && ::fsync(fd) != 0) err = errno;
+  if (::close(fd) != 0 && err == 0) err = errno;
+  if (err == 0 && ::rename(temp.c_str(), path.c_str()) != 0) err = errno;
+  if (err != 0) {
+    ::unlink(temp.c_str());
+    return make_error(Errc::kIo, "could not write " + path + ": " + std::strerror(err) +
+                                     (err == ENOSPC ? " (the disk is full)" : "") + "; nothing was replaced");
+  }
   return {};
 }
 

@@ -57,7 +57,21 @@ std::string allan_kalibr_yaml(const AllanReport& report);
 /// The report as JSON with the curves and fitted lines (indented, ending in a newline).
 std::string allan_json(const AllanReport& report);
 
-/// Writes `text` as the whole content of `path` (replaced if it exists). Errc::kIo on failure.
-[[nodiscard]] Status write_text_file(const std::string& path, const std::string& text);
+/// How a result file may be written.
+struct OutputPolicy {
+  bool overwrite = false;           // replace an existing file
+  std::vector<std::string> inputs;  // files the command reads: never written over
+};
+
+/// Whether `path` may be written under `policy`, checked before the work that produces it:
+/// kInvalidArgument when it is one of the inputs (whatever the policy), kAlreadyExists when it
+/// exists and may not be replaced.
+[[nodiscard]] Status check_output(const std::string& path, const OutputPolicy& policy);
+
+/// Writes `text` as the whole content of `path` after check_output: into a temporary file beside
+/// it, flushed to disk, then renamed over `path`, so that a reader never sees a partial file and
+/// a failure (a full disk) leaves any earlier file as it was. Errc::kIo on failure.
+[[nodiscard]] Status write_text_file(const std::string& path, const std::string& text,
+                                     const OutputPolicy& policy = {});
 
 }  // namespace imucal::app

@@ -19,13 +19,13 @@ step "What the log holds"
 "$IMUCAL" info "$OUT/static.imulog"
 
 step "Calibrating accelerometer and gyroscope (Tedaldi multi-position method)"
-"$IMUCAL" calibrate static "$OUT/static.imulog" -o "$OUT/static-result.yaml" --json "$OUT/static-result.json"
+"$IMUCAL" calibrate static "$OUT/static.imulog" --force -o "$OUT/static-result.yaml" --json "$OUT/static-result.json"
 
 step "Recording 10 minutes of a still rig for the noise model"
 "$IMUCAL" sim still --seed 7 --duration 600 --force -o "$OUT/still.imulog"
 
 step "Allan deviation: noise densities and random walks (Kalibr imu.yaml)"
-"$IMUCAL" allan "$OUT/still.imulog" -o "$OUT/imu.yaml"
+"$IMUCAL" allan "$OUT/still.imulog" --force -o "$OUT/imu.yaml"
 
 step "Done"
 echo "Calibration: $OUT/static-result.yaml (ground truth of the simulated IMU: $OUT/static.truth.yaml)"

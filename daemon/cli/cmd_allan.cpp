@@ -24,11 +24,18 @@ struct AllanCliOptions {
   std::string rostopic = "/imu0";
   bool allow_motion = false;
   bool allow_damaged = false;
+  bool force = false;
   std::string yaml_path;
   std::string json_path;
 };
 
 void run(const AllanCliOptions& o) {
+  const app::OutputPolicy outputs{o.force, {o.log_path}};
+  for (const auto* path : {&o.yaml_path, &o.json_path}) {
+    if (!path->empty()) {
+      if (auto s = app::check_output(*path, outputs); !s.ok()) fail(s.error());
+    }
+  }
   auto loaded = app::load_imu_stream(
       o.log_path, o.stream, o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse);
   if (!loaded.ok()) fail(loaded.error());
@@ -88,10 +95,12 @@ void run(const AllanCliOptions& o) {
   }
 
   if (!o.yaml_path.empty()) {
-    if (auto w = app::write_text_file(o.yaml_path, app::allan_kalibr_yaml(report)); !w.ok()) fail(w.error());
+    if (auto w = app::write_text_file(o.yaml_path, app::allan_kalibr_yaml(report), outputs); !w.ok())
+      fail(w.error());
   }
   if (!o.json_path.empty()) {
-    if (auto w = app::write_text_file(o.json_path, app::allan_json(report)); !w.ok()) fail(w.error());
+    if (auto w = app::write_text_file(o.json_path, app::allan_json(report), outputs); !w.ok())
+      fail(w.error());
   }
   std::cout << "Allan deviation of " << o.log_path << " (" << info.name << ", " << accel.size() / rate_hz
             << " s at " << rate_hz << " Hz)\n";
@@ -124,6 +133,7 @@ void setup(CLI::App& root) {
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Use what is readable in a damaged log");
   cmd->add_option("-o,--output", o->yaml_path, "Write the Kalibr imu.yaml");
   cmd->add_option("--json", o->json_path, "Write the figures and the curves as JSON");
+  cmd->add_flag("--force", o->force, "Replace result files that exist (never the log)");
   cmd->callback([o] { run(*o); });
 }
 

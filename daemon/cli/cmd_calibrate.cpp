@@ -36,6 +36,7 @@ struct StaticCliOptions {
   double window_s = 1.0;
   double min_interval_s = 0.5;
   bool allow_damaged = false;
+  bool force = false;
   std::string yaml_path;
   std::string json_path;
 };
@@ -60,6 +61,14 @@ Eigen::Vector3d parse_triple(const std::string& text, const std::string& option)
 }
 
 void run(const StaticCliOptions& o) {
+  // Outputs are checked before the work: never the log itself, never an existing file without
+  // --force.
+  const app::OutputPolicy outputs{o.force, {o.log_path}};
+  for (const auto* path : {&o.yaml_path, &o.json_path}) {
+    if (!path->empty()) {
+      if (auto s = app::check_output(*path, outputs); !s.ok()) fail(s.error());
+    }
+  }
   // CPU time of this thread, like the timings of calibrate_static.
   auto cpu_now = [] {
     timespec ts{};
@@ -128,12 +137,12 @@ void run(const StaticCliOptions& o) {
       res->timings.gyro_s);
 
   if (!o.yaml_path.empty()) {
-    if (auto s = app::write_text_file(o.yaml_path, app::static_result_yaml(*res, info)); !s.ok())
+    if (auto s = app::write_text_file(o.yaml_path, app::static_result_yaml(*res, info), outputs); !s.ok())
       fail(s.error());
   }
   if (!o.json_path.empty()) {
     const std::string json = app::static_result_json(*res, info, gravity.source, loaded->reader->metadata());
-    if (auto s = app::write_text_file(o.json_path, json); !s.ok()) fail(s.error());
+    if (auto s = app::write_text_file(o.json_path, json, outputs); !s.ok()) fail(s.error());
   }
 
   const auto& q = res->quality;
@@ -204,6 +213,7 @@ void setup(CLI::App& root) {
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");
   cmd->add_option("-o,--output", o->yaml_path, "Write the result as YAML");
   cmd->add_option("--json", o->json_path, "Write the result as JSON");
+  cmd->add_flag("--force", o->force, "Replace result files that exist (never the log)");
   cmd->callback([o] { run(*o); });
 }
 

@@ -34,6 +34,7 @@ struct CheckCliOptions {
   double multiplier = 6.0;
   double min_interval_s = 1.0;
   bool allow_damaged = false;
+  bool force = false;
   std::string json_path;
 };
 
@@ -105,6 +106,16 @@ void print_table(const std::vector<app::NamedCalibration>& cals,
 }
 
 void run(const CheckCliOptions& o) {
+  app::OutputPolicy outputs{o.force, {o.log_path}};
+  for (const auto& y : o.yaml_paths) outputs.inputs.push_back(y);
+  for (const auto& pair : o.imu_tk_pairs) {
+    const auto comma = pair.find(',');
+    outputs.inputs.push_back(pair.substr(0, comma));
+    if (comma != std::string::npos) outputs.inputs.push_back(pair.substr(comma + 1));
+  }
+  if (!o.json_path.empty()) {
+    if (auto s = app::check_output(o.json_path, outputs); !s.ok()) fail(s.error());
+  }
   if (o.yaml_paths.empty() && o.imu_tk_pairs.empty()) {
     throw CliExit{
         kExitUsage,
@@ -158,7 +169,7 @@ void run(const CheckCliOptions& o) {
   if (!o.json_path.empty()) {
     const std::string json =
         app::calibration_check_json(o.log_path, info, *set, gravity.mps2, gravity.source, cals, figs);
-    if (auto s = app::write_text_file(o.json_path, json); !s.ok()) fail(s.error());
+    if (auto s = app::write_text_file(o.json_path, json, outputs); !s.ok()) fail(s.error());
   }
 
   std::cout << "calibration check on " << o.log_path << " (" << info.name << ", " << loaded->samples.size()
@@ -215,6 +226,7 @@ void setup(CLI::App& root) {
       ->check(CLI::Range(0.05, 60.0));
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Check on what is readable in a damaged log");
   cmd->add_option("--json", o->json_path, "Write the fixed set and the figures as JSON");
+  cmd->add_flag("--force", o->force, "Replace the JSON file if it exists (never an input)");
   cmd->callback([o] { run(*o); });
 }
 

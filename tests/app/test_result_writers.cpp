@@ -117,7 +117,15 @@ TEST(AllanWriters, KalibrYamlAndJson) {
 TEST(WriteTextFile, WritesWholeTextAndReportsFailure) {
   const std::string path = test::scratch_dir() + "/out.txt";
   ASSERT_TRUE(write_text_file(path, "first, longer\n").ok());
-  ASSERT_TRUE(write_text_file(path, "second\n").ok());
+  // An existing file is replaced only when the policy allows it, and never when it is an input.
+  auto kept = write_text_file(path, "second\n");
+  ASSERT_FALSE(kept.ok());
+  EXPECT_EQ(kept.error().code, Errc::kAlreadyExists);
+  EXPECT_EQ(test::read_file(path), "first, longer\n");
+  auto input = write_text_file(path, "second\n", {true, {path}});
+  ASSERT_FALSE(input.ok());
+  EXPECT_EQ(input.error().code, Errc::kInvalidArgument);
+  ASSERT_TRUE(write_text_file(path, "second\n", {true, {}}).ok());
   EXPECT_EQ(test::read_file(path), "second\n");
   auto s = write_text_file(test::scratch_dir() + "/no/such/dir/out.txt", "x");
   ASSERT_FALSE(s.ok());

@@ -3,6 +3,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -189,6 +190,43 @@ TEST(CliCalibrate, MissingSolverModuleIsAnInstallationErrorThatNamesIt) {
   EXPECT_NE(r.err.find("libimucal_solve.so is not in " + dir), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("IMUCAL_MODULE_DIR"), std::string::npos) << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir + "/r.yaml"));
+}
+
+}  // namespace
+}  // namespace imucal
+
+namespace imucal {
+namespace {
+
+TEST(CliCalibrateStatic, ResultFilesNeverReplaceTheLogAndNeedForceToReplaceAFile) {
+  const std::string dir = test::scratch_dir();
+  const std::string log = dir + "/static.imulog";
+  std::filesystem::copy_file(test::source_path("fixtures/static.imulog"), log);
+  const auto size = std::filesystem::file_size(log);
+  // The log as its own output: refused, whatever --force says, and the log is untouched.
+  for (const char* out : {"-o", "--json"}) {
+    auto r = test::run_cli({"calibrate", "static", log, "--gravity", "9.81", out, log, "--force"});
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_NE(r.err.find("is an input of this command"), std::string::npos) << r.err;
+    EXPECT_EQ(std::filesystem::file_size(log), size);
+  }
+  auto r = test::run_cli({"allan", log, "--json", log, "--allow-motion"});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_EQ(std::filesystem::file_size(log), size);
+  // An existing result is kept without --force (refused before the work) and replaced with it.
+  const std::string result = dir + "/result.yaml";
+  std::ofstream(result) << "keep me\n";
+  r = test::run_cli({"calibrate", "static", log, "--gravity", "9.81", "-o", result});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("exists; pass --force to replace it"), std::string::npos) << r.err;
+  EXPECT_EQ(test::read_file(result), "keep me\n");
+  r = test::run_cli({"calibrate", "static", log, "--gravity", "9.81", "-o", result, "--force"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(test::read_file(result).find("canonical:"), std::string::npos);
+  // No temporary file is left beside it.
+  int files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) files += e.is_regular_file() ? 1 : 0;
+  EXPECT_EQ(files, 2) << "only the log and the result";
 }
 
 }  // namespace
