@@ -450,12 +450,30 @@ Status check_export(const SessionLogReader& r, const std::string& log_path, cons
         .with_remedy("allow_damaged");
   }
   std::error_code ec;
-  if (options.force && fs::is_directory(dir, ec) && !fs::is_empty(dir, ec) &&
-      !fs::exists(fs::path(dir) / "mav0")) {
-    return make_error(Errc::kInvalidArgument,
-                      dir +
-                          " exists and does not look like an EuRoC dataset (no mav0/); "
-                          "refusing to replace it even when replacing is allowed");
+  // Never into the folder that holds the log (replacing it would delete the log).
+  const fs::path log_abs = fs::weakly_canonical(log_path, ec);
+  const fs::path dir_abs = fs::weakly_canonical(dir, ec);
+  for (fs::path p = log_abs.parent_path(); !p.empty(); p = p.parent_path()) {
+    if (p == dir_abs) {
+      return make_error(Errc::kInvalidArgument,
+                        dir + " holds the log being exported (" + log_path + "); export to another folder");
+    }
+    if (p == p.root_path()) break;
+  }
+  // Replacing is allowed only for what an export writes: a folder holding mav0/ and nothing else.
+  if (options.force && fs::is_directory(dir, ec) && !fs::is_empty(dir, ec)) {
+    std::string other;
+    for (const auto& e : fs::directory_iterator(dir, ec)) {
+      if (e.path().filename() == "mav0" && e.is_directory(ec)) continue;
+      other = e.path().filename().string();
+      break;
+    }
+    if (!other.empty() || !fs::is_directory(fs::path(dir) / "mav0", ec)) {
+      return make_error(Errc::kInvalidArgument,
+                        dir + " exists and is not an EuRoC export (" +
+                            (other.empty() ? std::string("no mav0/ folder") : "it holds " + other) +
+                            "); refusing to replace it even when replacing is allowed");
+    }
   }
   if (r.imu_streams().empty() && r.camera_streams().empty()) {
     return make_error(Errc::kInsufficientData, log_path + " has no IMU or camera streams to export");

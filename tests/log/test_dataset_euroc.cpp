@@ -260,8 +260,26 @@ TEST(DatasetEuroc, RefusesToOverwriteUnlessForced) {
   write(dir / "other/notes.txt", "keep me");
   auto into_other = export_euroc((dir / "x.imulog").string(), (dir / "other").string(), force);
   ASSERT_FALSE(into_other.ok());
-  EXPECT_THAT(into_other.error().message, HasSubstr("does not look like an EuRoC dataset"));
+  EXPECT_THAT(into_other.error().message, HasSubstr("is not an EuRoC export"));
   EXPECT_EQ(test::read_file((dir / "other/notes.txt").string()), "keep me");
+  // A plain file named mav0 does not make a folder an export, nor does mav0/ beside other files.
+  write(dir / "other/mav0", "not a folder");
+  auto plain_mav0 = export_euroc((dir / "x.imulog").string(), (dir / "other").string(), force);
+  ASSERT_FALSE(plain_mav0.ok());
+  EXPECT_EQ(test::read_file((dir / "other/notes.txt").string()), "keep me");
+  fs::remove(dir / "other/mav0");
+  fs::create_directories(dir / "other/mav0");
+  auto mixed = export_euroc((dir / "x.imulog").string(), (dir / "other").string(), force);
+  ASSERT_FALSE(mixed.ok());
+  EXPECT_THAT(mixed.error().message, HasSubstr("it holds notes.txt"));
+  EXPECT_EQ(test::read_file((dir / "other/notes.txt").string()), "keep me");
+  // Never into the folder that holds the log, even when it looks like an export.
+  fs::create_directories(dir / "logdir/mav0");
+  fs::copy_file(dir / "x.imulog", dir / "logdir/x.imulog");
+  auto onto_log = export_euroc((dir / "logdir/x.imulog").string(), (dir / "logdir").string(), force);
+  ASSERT_FALSE(onto_log.ok());
+  EXPECT_THAT(onto_log.error().message, HasSubstr("holds the log being exported"));
+  EXPECT_TRUE(fs::exists(dir / "logdir/x.imulog"));
   ASSERT_TRUE(export_euroc((dir / "x.imulog").string(), (dir / "out").string(), {}).ok());
   auto again = export_euroc((dir / "x.imulog").string(), (dir / "out").string(), {});
   ASSERT_FALSE(again.ok());
