@@ -7,6 +7,7 @@
 #include <cmath>
 #include <csignal>
 #include <ctime>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <span>
 #include <sstream>
@@ -155,7 +156,12 @@ Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu:
   // comes once the log exists always closes it cleanly; they go after the log is closed.
   boost::asio::io_context io;
   std::optional<boost::asio::signal_set> signals;
-  if (options.loop == RecordLoop::kEventLoop && options.stop_on_signals) signals.emplace(io, SIGINT, SIGTERM);
+  // SIGHUP (the terminal or an ssh session went away) and SIGQUIT end a recording as cleanly as
+  // SIGINT and SIGTERM; later signals while it is closing are ignored rather than killing it.
+  if (options.loop == RecordLoop::kEventLoop && options.stop_on_signals) {
+    signals.emplace(io, SIGINT, SIGTERM, SIGHUP);
+    signals->add(SIGQUIT);
+  }
 
   log::SessionLogWriterOptions wo;
   wo.overwrite = options.overwrite;
@@ -185,14 +191,17 @@ Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu:
     }
   } else {
     AsioAcquisition runner(io, acquisition, [&](std::span<const ImuSample> s) { return session.take(s); });
-    if (signals) {
-      signals->async_wait([&](const boost::system::error_code& ec, int signal) {
-        if (ec) return;
+    std::function<void(const boost::system::error_code&, int)> on_signal;
+    on_signal = [&](const boost::system::error_code& ec, int signal) {
+      if (ec) return;
+      if (!summary.interrupted) {
         summary.interrupted = true;
         summary.signal = signal;
         runner.stop();
-      });
-    }
+      }
+      signals->async_wait(on_signal);  // stay armed: a second Ctrl-C must not kill the close
+    };
+    if (signals) signals->async_wait(on_signal);
     failure = runner.run();
   }
   auto stop_status = stream.stop();

@@ -2,7 +2,8 @@
 // data-ready through libgpiod, on the Boost.Asio event loop) or, with --sim, through the same
 // driver and acquisition code against the register-level emulator: on simulated time (as fast
 // as the host computes), or with --realtime in real time through the event loop a rig runs
-// (docs/acquisition.md). On the event loop SIGINT / SIGTERM end the recording cleanly.
+// (docs/acquisition.md). On the event loop SIGINT, SIGTERM, SIGHUP and SIGQUIT end the recording
+// cleanly; further signals while it closes are ignored.
 
 #include <algorithm>
 #include <cmath>
@@ -90,8 +91,11 @@ void note_interrupted(const RecordArgs& a, const acq::RecordSummary& s) {
   if (!s.interrupted) return;
   std::fprintf(stderr,
                "record: interrupted by %s after %.3f s of samples (%llu); %s is closed and complete\n",
-               s.signal == SIGTERM ? "SIGTERM" : "SIGINT", s.duration_s,
-               static_cast<unsigned long long>(s.samples), a.out_path.c_str());
+               s.signal == SIGTERM   ? "SIGTERM"
+               : s.signal == SIGHUP  ? "SIGHUP"
+               : s.signal == SIGQUIT ? "SIGQUIT"
+                                     : "SIGINT",
+               s.duration_s, static_cast<unsigned long long>(s.samples), a.out_path.c_str());
 }
 
 /// The parts of a simulated rig's options that come from the command line (the real-time rig's
@@ -226,10 +230,11 @@ const CommandRegistrar kRegistrar(20, [](CLI::App& root) {
   cmd->add_flag("--sim", args->sim,
                 "Record the simulated rig (MPU-6000 register emulator, data-ready jitter) instead of "
                 "hardware; simulated time runs as fast as the host allows");
-  cmd->add_flag("--realtime", args->realtime,
-                "With --sim: run the emulated chip in real time (CLOCK_MONOTONIC) and record it through "
-                "the event loop a rig uses (data-ready edges on a file descriptor, a poll timer); takes "
-                "--duration seconds of wall-clock time. SIGINT/SIGTERM stop it with a complete log");
+  cmd->add_flag(
+      "--realtime", args->realtime,
+      "With --sim: run the emulated chip in real time (CLOCK_MONOTONIC) and record it through "
+      "the event loop a rig uses (data-ready edges on a file descriptor, a poll timer); takes "
+      "--duration seconds of wall-clock time. SIGINT/SIGTERM/SIGHUP/SIGQUIT stop it with a complete log");
   cmd->add_option("--seed", args->seed, "Simulation: random seed (default 1)");
   cmd->add_option("--sim-clock-ppm", args->sim_clock_ppm,
                   "Simulation: the chip oscillator's error in ppm (default -15000, a 1.5 % slow chip)")

@@ -421,9 +421,19 @@ std::optional<int> wait_exit(pid_t pid, std::chrono::seconds timeout) {
   return std::nullopt;
 }
 
-// SIGINT in the middle of a real-time recording: exit 0 with a note, and a complete log with
-// every sample recorded until then.
-TEST(RecordCliRealtime, SigintEndsWithACompleteLog) {
+// A signal in the middle of a real-time recording (SIGINT, SIGHUP from a lost ssh session,
+// SIGQUIT, or Ctrl-C twice): exit 0 with a note, and a complete log with every sample recorded
+// until then.
+struct SignalCase {
+  int signal;
+  int times;
+  const char* name;
+};
+
+class RecordCliSignal : public ::testing::TestWithParam<SignalCase> {};
+
+TEST_P(RecordCliSignal, EndsWithACompleteLog) {
+  const SignalCase sc = GetParam();
   const std::string dir = test::scratch_dir();
   const std::string cfg = write_config(dir);
   const std::string log = dir + "/rt.imulog";
@@ -454,13 +464,16 @@ TEST(RecordCliRealtime, SigintEndsWithACompleteLog) {
   ASSERT_FALSE(exited_early) << test::read_file(err_path);
   ASSERT_TRUE(std::filesystem::exists(log)) << "no log after 120 s";
   std::this_thread::sleep_for(2s);
-  ASSERT_EQ(::kill(pid, SIGINT), 0);
+  for (int i = 0; i < sc.times; ++i) {
+    ASSERT_EQ(::kill(pid, sc.signal), 0);
+    std::this_thread::sleep_for(1ms);
+  }
   const auto status = wait_exit(pid, 120s);
-  ASSERT_TRUE(status.has_value()) << "imucal record did not end after SIGINT";
+  ASSERT_TRUE(status.has_value()) << "imucal record did not end after " << sc.name;
   const std::string err = test::read_file(err_path);
   ASSERT_TRUE(WIFEXITED(*status)) << "ended by signal " << WTERMSIG(*status) << "\n" << err;
   ASSERT_EQ(WEXITSTATUS(*status), 0) << err;
-  EXPECT_NE(err.find("interrupted by SIGINT"), std::string::npos) << err;
+  EXPECT_NE(err.find(std::string("interrupted by ") + sc.name), std::string::npos) << err;
 
   const auto summary = nlohmann::json::parse(test::read_file(out_path));
   EXPECT_TRUE(summary["interrupted"].get<bool>());
@@ -476,6 +489,14 @@ TEST(RecordCliRealtime, SigintEndsWithACompleteLog) {
   EXPECT_EQ(stream["log_dropped"].get<int>(), 0);
   EXPECT_EQ(stream["log_written"].get<std::size_t>(), rec.samples.size());
 }
+
+INSTANTIATE_TEST_SUITE_P(Signals, RecordCliSignal,
+                         ::testing::Values(SignalCase{SIGINT, 1, "SIGINT"}, SignalCase{SIGHUP, 1, "SIGHUP"},
+                                           SignalCase{SIGQUIT, 1, "SIGQUIT"},
+                                           SignalCase{SIGINT, 3, "SIGINT"}),
+                         [](const ::testing::TestParamInfo<SignalCase>& info) {
+                           return std::string(info.param.name) + "x" + std::to_string(info.param.times);
+                         });
 
 }  // namespace
 }  // namespace imucal::acq
