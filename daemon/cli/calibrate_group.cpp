@@ -1,5 +1,7 @@
 #include "daemon/cli/calibrate_group.hpp"
 
+#include <spdlog/spdlog.h>
+
 namespace imucal::cli {
 
 CLI::App* calibrate_group(CLI::App& root) {
@@ -9,6 +11,26 @@ CLI::App* calibrate_group(CLI::App& root) {
       root.add_subcommand("calibrate", "Estimate a calibration from a session log, or check given ones");
   group->require_subcommand(1);
   return group;
+}
+
+void add_gravity_options(CLI::App* cmd, GravityArgs* args) {
+  auto* g = cmd->add_option("--gravity", args->gravity, "Local gravity magnitude, m/s^2")
+                ->check(CLI::Range(9.7, 9.9));
+  auto* lat =
+      cmd->add_option("--latitude", args->latitude_deg, "Geodetic latitude, deg (WGS-84 normal gravity)")
+          ->check(CLI::Range(-90.0, 90.0));
+  cmd->add_option("--height", args->height_m, "Ellipsoidal height, m (with --latitude)")
+      ->check(CLI::Range(-1000.0, 10000.0))
+      ->needs(lat);
+  g->excludes(lat);
+}
+
+app::GravityChoice resolve_gravity(const GravityArgs& args) {
+  const app::GravityChoice gravity = app::choose_gravity(args.gravity, args.latitude_deg, args.height_m);
+  if (gravity.standard_assumed) {
+    spdlog::warn("no --gravity or --latitude given: using standard gravity 9.80665 m/s^2 (up to 0.3% off)");
+  }
+  return gravity;
 }
 
 }  // namespace imucal::cli

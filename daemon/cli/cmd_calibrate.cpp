@@ -26,9 +26,7 @@ namespace {
 struct StaticCliOptions {
   std::string log_path;
   std::string stream;
-  std::optional<double> gravity;
-  std::optional<double> latitude_deg;
-  double height_m = 0.0;
+  GravityArgs grav;
   double init_still_s = 0.0;
   std::string accel_scale_init, accel_offset_init, gyro_scale_init;
   bool estimate_gyro_bias = false;
@@ -84,14 +82,11 @@ void run(const StaticCliOptions& o) {
   const double import_s = cpu_now() - t0;
 
   calib::StaticCalibrationOptions opt;
-  const app::GravityChoice gravity = app::choose_gravity(o.gravity, o.latitude_deg, o.height_m);
+  const app::GravityChoice gravity = resolve_gravity(o.grav);
   opt.gravity_mps2 = gravity.mps2;
-  if (gravity.standard_assumed) {
-    spdlog::warn("no --gravity or --latitude given: using standard gravity 9.80665 m/s^2 (up to 0.3% off)");
-  }
   opt.init_still_s = o.init_still_s;
   opt.estimate_gyro_bias = o.estimate_gyro_bias;
-  opt.latitude_deg = o.latitude_deg;
+  opt.latitude_deg = o.grav.latitude_deg;
   const std::string& mode = o.gsens.front();
   if (mode == "estimate" && o.gsens.size() == 1) {
     opt.gsens = GSensitivityMode::kEstimate;
@@ -181,14 +176,7 @@ void setup(CLI::App& root) {
       ->required()
       ->check(CLI::ExistingFile);
   cmd->add_option("--stream", o->stream, "IMU stream name (default: the first)");
-  auto* g =
-      cmd->add_option("--gravity", o->gravity, "Local gravity magnitude, m/s^2")->check(CLI::Range(9.7, 9.9));
-  auto* lat = cmd->add_option("--latitude", o->latitude_deg, "Geodetic latitude, deg (WGS-84 normal gravity)")
-                  ->check(CLI::Range(-90.0, 90.0));
-  cmd->add_option("--height", o->height_m, "Ellipsoidal height, m (with --latitude)")
-      ->check(CLI::Range(-1000.0, 10000.0))
-      ->needs(lat);
-  g->excludes(lat);
+  add_gravity_options(cmd, &o->grav);
   cmd->add_option("--init-still", o->init_still_s,
                   "Length of the initial still period, s (default: found, then chosen by Allan deviation)")
       ->check(CLI::NonNegativeNumber);

@@ -28,9 +28,7 @@ struct CheckCliOptions {
   std::string stream;
   std::vector<std::string> yaml_paths;
   std::vector<std::string> imu_tk_pairs;
-  std::optional<double> gravity;
-  std::optional<double> latitude_deg;
-  double height_m = 0.0;
+  GravityArgs grav;
   double multiplier = 6.0;
   double min_interval_s = 1.0;
   bool allow_damaged = false;
@@ -141,10 +139,7 @@ void run(const CheckCliOptions& o) {
     }
   }
 
-  const app::GravityChoice gravity = app::choose_gravity(o.gravity, o.latitude_deg, o.height_m);
-  if (gravity.standard_assumed) {
-    spdlog::warn("no --gravity or --latitude given: using standard gravity 9.80665 m/s^2 (up to 0.3% off)");
-  }
+  const app::GravityChoice gravity = resolve_gravity(o.grav);
 
   auto set = app::build_check_set(loaded->samples, set_opt);
   if (!set.ok()) fail(set.error(), "check of " + o.log_path);
@@ -209,14 +204,7 @@ void setup(CLI::App& root) {
          "imu_tk calib files, accelerometer and gyroscope (calibrated = T K (raw - B)); repeat for several")
       ->allow_extra_args(false)
       ->type_name("ACC.calib,GYRO.calib");
-  auto* g =
-      cmd->add_option("--gravity", o->gravity, "Local gravity magnitude, m/s^2")->check(CLI::Range(9.7, 9.9));
-  auto* lat = cmd->add_option("--latitude", o->latitude_deg, "Geodetic latitude, deg (WGS-84 normal gravity)")
-                  ->check(CLI::Range(-90.0, 90.0));
-  cmd->add_option("--height", o->height_m, "Ellipsoidal height, m (with --latitude)")
-      ->check(CLI::Range(-1000.0, 10000.0))
-      ->needs(lat);
-  g->excludes(lat);
+  add_gravity_options(cmd, &o->grav);
   cmd->add_option("--multiplier", o->multiplier,
                   "Static where varsigma < K x the quiet floor (its 10th percentile)")
       ->capture_default_str()

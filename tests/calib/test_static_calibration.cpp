@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include "calib/static_calibration.hpp"
 #include "calib/static_detector.hpp"
@@ -13,6 +14,20 @@ namespace {
 
 using test::make_static_recording;
 using test::SynthConfig;
+
+/// The method's default options with the recording's gravity.
+StaticCalibrationOptions options_for(const SynthConfig& cfg) {
+  StaticCalibrationOptions opt;
+  opt.gravity_mps2 = cfg.gravity;
+  return opt;
+}
+
+/// All warnings, one per line, for searching.
+std::string joined(const std::vector<std::string>& warnings) {
+  std::string all;
+  for (const auto& w : warnings) all += w + "\n";
+  return all;
+}
 
 /// Every estimated parameter within k sigma of the truth (plus a tiny absolute floor for
 /// parameters whose sigma is far below the numerical resolution).
@@ -67,8 +82,7 @@ TEST(StaticCalibration, RecoversTruthWithinUncertaintySi) {
   cfg.seed = 3;
   cfg.truth = test::random_truth(3);
   const auto rec = make_static_recording(cfg);
-  StaticCalibrationOptions opt;
-  opt.gravity_mps2 = cfg.gravity;
+  StaticCalibrationOptions opt = options_for(cfg);
   opt.accel_init = AxisConversion{};
   opt.gyro_init = AxisConversion{};
   auto res = calibrate_static(rec.samples, opt);
@@ -197,8 +211,7 @@ TEST(StaticCalibration, GSensitivityIsEstimatedFromThePosesAndRemovedFromTheGyro
   cfg.truth = test::random_truth(41);
   cfg.gsens = mpu_gsens();
   const auto rec = make_static_recording(cfg);
-  StaticCalibrationOptions opt;
-  opt.gravity_mps2 = cfg.gravity;
+  StaticCalibrationOptions opt = options_for(cfg);
   auto res = calibrate_static(rec.samples, opt);
   ASSERT_TRUE(res.ok()) << res.error().message;
   EXPECT_EQ(res->gsens_mode, GSensitivityMode::kEstimate);
@@ -237,8 +250,7 @@ TEST(StaticCalibration, EarthRateIsRemovedFromGWhenTheLatitudeIsKnown) {
   cfg.seed = 43;
   cfg.truth = test::random_truth(43);
   const auto rec = make_static_recording(cfg);
-  StaticCalibrationOptions opt;
-  opt.gravity_mps2 = cfg.gravity;
+  StaticCalibrationOptions opt = options_for(cfg);
   auto without = calibrate_static(rec.samples, opt);
   opt.latitude_deg = 47.37;
   auto with = calibrate_static(rec.samples, opt);
@@ -257,8 +269,7 @@ TEST(StaticCalibration, ANoisyAccelerometerInTheStillStartIsStillAStillStart) {
   cfg.truth = test::random_truth(45);
   cfg.accel_noise_start = 4.0;
   const auto rec = make_static_recording(cfg);
-  StaticCalibrationOptions opt;
-  opt.gravity_mps2 = cfg.gravity;
+  StaticCalibrationOptions opt = options_for(cfg);
   auto found = calibrate_static(rec.samples, opt);
   ASSERT_TRUE(found.ok()) << found.error().message;
   EXPECT_GT(found->init_still_s, 20.0);
@@ -277,8 +288,7 @@ TEST(StaticCalibration, AGyroHeldByHandInTheStillStartIsStillAStillStart) {
   cfg.truth = test::random_truth(49);
   cfg.gyro_noise_start = std::sqrt(40.0);
   const auto rec = make_static_recording(cfg);
-  StaticCalibrationOptions opt;
-  opt.gravity_mps2 = cfg.gravity;
+  StaticCalibrationOptions opt = options_for(cfg);
   auto res = calibrate_static(rec.samples, opt);
   ASSERT_TRUE(res.ok()) << res.error().message;
   EXPECT_GT(res->init_still_s, 20.0);
@@ -290,13 +300,11 @@ TEST(StaticCalibration, AShortStillStartIsUsedWithAWarningAndATinyOneIsRefused) 
   cfg.truth = test::random_truth(51);
   cfg.still_s = 6.0;
   const auto rec = make_static_recording(cfg);
-  StaticCalibrationOptions opt;
-  opt.gravity_mps2 = cfg.gravity;
+  StaticCalibrationOptions opt = options_for(cfg);
   auto res = calibrate_static(rec.samples, opt);
   ASSERT_TRUE(res.ok()) << res.error().message;
   EXPECT_LT(res->init_still_s, 6.5);
-  std::string all;
-  for (const auto& w : res->warnings) all += w + "\n";
+  const std::string all = joined(res->warnings);
   EXPECT_NE(all.find("the still start is only"), std::string::npos) << all;
   opt.init_still_s = 0.5;
   auto tiny = calibrate_static(rec.samples, opt);
@@ -312,14 +320,12 @@ TEST(StaticCalibration, TooFewPosesForTheGSensitivityNeglectItWithAWarning) {
   cfg.hold_min_s = 3.0;
   cfg.hold_max_s = 4.0;
   const auto rec = make_static_recording(cfg);
-  StaticCalibrationOptions opt;
-  opt.gravity_mps2 = cfg.gravity;
+  StaticCalibrationOptions opt = options_for(cfg);
   auto res = calibrate_static(rec.samples, opt);
   ASSERT_TRUE(res.ok()) << res.error().message;
   EXPECT_EQ(res->gsens_mode, GSensitivityMode::kOff);
   EXPECT_TRUE(res->canonical.G.isZero(0.0));
-  std::string all;
-  for (const auto& w : res->warnings) all += w + "\n";
+  const std::string all = joined(res->warnings);
   EXPECT_NE(all.find("g-sensitivity was not estimated"), std::string::npos) << all;
 }
 
@@ -335,16 +341,14 @@ TEST(StaticCalibration, AsManyPosesAsParametersLeaveTheSigmasUndetermined) {
   cfg.move_min_s = 2.0;
   cfg.move_max_s = 3.0;
   const auto rec = make_static_recording(cfg);
-  StaticCalibrationOptions opt;
-  opt.gravity_mps2 = cfg.gravity;
+  StaticCalibrationOptions opt = options_for(cfg);
   opt.min_attitudes = 9;
   auto res = calibrate_static(rec.samples, opt);
   if (!res.ok()) GTEST_SKIP() << "this seed does not give 9 distinct attitudes: " << res.error().message;
   ASSERT_EQ(res->intervals.size(), 9u) << "the detector split or merged a pose";
   EXPECT_EQ(res->accel_dof.dof(), 0);
   EXPECT_FALSE(res->accel_dof.determined());
-  std::string all;
-  for (const auto& w : res->warnings) all += w + "\n";
+  const std::string all = joined(res->warnings);
   EXPECT_NE(all.find("the accelerometer fit is exact"), std::string::npos) << all;
   for (int i = 0; i < 3; ++i) {
     EXPECT_TRUE(std::isnan(res->accel_sigma.scale[i])) << res->accel_sigma.scale[i];
@@ -377,8 +381,7 @@ TEST(StaticCalibration, GapsAndSaturationAreExcludedWithWarnings) {
   }
   auto res = calibrate_static(cut, StaticCalibrationOptions{});
   ASSERT_TRUE(res.ok()) << res.error().message;
-  std::string all;
-  for (const auto& w : res->warnings) all += w + "\n";
+  const std::string all = joined(res->warnings);
   EXPECT_NE(all.find("gap"), std::string::npos) << all;
   EXPECT_NE(all.find("saturated"), std::string::npos) << all;
   EXPECT_NE(all.find("were not used for the gyroscope"), std::string::npos) << all;
@@ -426,8 +429,7 @@ TEST(StaticCalibration, RotationInsideAStaticIntervalIsDropped) {
   }
   auto res = calibrate_static(rec.samples, StaticCalibrationOptions{});
   ASSERT_TRUE(res.ok()) << res.error().message;
-  std::string all;
-  for (const auto& w : res->warnings) all += w + "\n";
+  const std::string all = joined(res->warnings);
   EXPECT_NE(all.find("the rig turned inside them"), std::string::npos) << all;
 }
 

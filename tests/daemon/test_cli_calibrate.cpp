@@ -231,3 +231,34 @@ TEST(CliCalibrateStatic, ResultFilesNeverReplaceTheLogAndNeedForceToReplaceAFile
 
 }  // namespace
 }  // namespace imucal
+
+namespace imucal {
+namespace {
+
+TEST(CliCalibrateStatic, GSensitivityModes) {
+  const std::string dir = test::scratch_dir();
+  const std::string log = test::source_path("fixtures/static.imulog");
+  auto r = test::run_cli(
+      {"calibrate", "static", log, "--gravity", "9.81", "--gsens", "off", "--json", dir + "/off.json"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  auto j = nlohmann::json::parse(test::read_file(dir + "/off.json"));
+  EXPECT_EQ(j["gsens"]["mode"], "off");
+  EXPECT_EQ(j["canonical"]["G"][0][0].get<double>(), 0.0);
+  std::ofstream(dir + "/g.yaml") << "G:\n  - [1.0e-4, 0, 0]\n  - [0, 2.0e-4, 0]\n  - [0, 0, 3.0e-4]\n";
+  r = test::run_cli({"calibrate", "static", log, "--gravity", "9.81", "--gsens", "fix", dir + "/g.yaml",
+                     "--json", dir + "/fix.json"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  j = nlohmann::json::parse(test::read_file(dir + "/fix.json"));
+  EXPECT_EQ(j["gsens"]["mode"], "fixed");
+  EXPECT_DOUBLE_EQ(j["canonical"]["G"][1][1].get<double>(), 2.0e-4);
+  r = test::run_cli({"calibrate", "static", log, "--gsens", "sometimes"});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("--gsens takes 'estimate', 'off' or 'fix FILE'"), std::string::npos) << r.err;
+  std::ofstream(dir + "/bad.yaml") << "G: [1, 2, 3]\n";
+  r = test::run_cli({"calibrate", "static", log, "--gsens", "fix", dir + "/bad.yaml"});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("3 rows of 3"), std::string::npos) << r.err;
+}
+
+}  // namespace
+}  // namespace imucal
