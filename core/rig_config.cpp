@@ -126,8 +126,14 @@ class ConfigParser {
 Status ConfigParser::check_map(const YAML::Node& node, const std::string& path,
                                const std::vector<std::string>& allowed) const {
   if (!node.IsMap()) return error(node, path, "expected a mapping with keys " + join(allowed));
+  std::vector<std::string> seen;
   for (const auto& kv : node) {
     const std::string key = kv.first.Scalar();
+    if (std::find(seen.begin(), seen.end(), key) != seen.end()) {
+      return error(kv.first, path.empty() ? key : path + "." + key,
+                   "given twice; only one value can apply (YAML would keep the first silently)");
+    }
+    seen.push_back(key);
     if (std::find(allowed.begin(), allowed.end(), key) != allowed.end()) continue;
     std::string hint;
     std::size_t best = 3;
@@ -505,7 +511,13 @@ Status ConfigParser::parse_storage(const YAML::Node& node, StorageConfig& storag
 Result<RigConfig> ConfigParser::parse(const std::string& text) {
   YAML::Node root;
   try {
-    root = YAML::Load(text);
+    const std::vector<YAML::Node> docs = YAML::LoadAll(text);
+    if (docs.size() > 1) {
+      return make_error(Errc::kInvalidArgument,
+                        source_ + ":" + std::to_string(docs[1].Mark().line + 1) +
+                            ": a second YAML document ('---'); a rig configuration is one document");
+    }
+    if (!docs.empty()) root = docs.front();
   } catch (const YAML::ParserException& e) {
     return make_error(Errc::kInvalidArgument,
                       source_ + ":" + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg);

@@ -148,6 +148,12 @@ struct InvalidCase {
 
 class RigConfigInvalid : public ::testing::TestWithParam<InvalidCase> {};
 
+TEST(RigConfig, ASecondYamlDocumentIsRefused) {
+  auto cfg = parse_rig_config("imu: {bus: sim}\n---\nimu: {bus: spi}\n", "two.yaml");
+  ASSERT_FALSE(cfg.ok());
+  EXPECT_THAT(cfg.error().message, HasSubstr("two.yaml:3: a second YAML document")) << cfg.error().message;
+}
+
 TEST_P(RigConfigInvalid, NamesFileLineKeyAndWhatIsAllowed) {
   const InvalidCase& c = GetParam();
   auto cfg = parse_rig_config(c.yaml, "bad.yaml");
@@ -181,6 +187,8 @@ INSTANTIATE_TEST_SUITE_P(
         InvalidCase{"imu:\n  bus: sim\n  acel_range_g: 4\n", "imu.acel_range_g", 3,
                     "did you mean 'accel_range_g'"},
         InvalidCase{"imu: {bus: sim}\ncamras: []\n", "camras", 2, "unknown key"},
+        InvalidCase{"imu:\n  bus: sim\n  rate_hz: 200\n  rate_hz: 100\n", "imu.rate_hz", 4, "given twice"},
+        InvalidCase{"imu: {bus: sim}\nname: a\nname: b\n", "name", 3, "given twice"},
         InvalidCase{"imu:\n  bus: sim\n  data_ready: {chip: gpiochip0}\n", "imu.data_ready.line", 3,
                     "missing"},
         InvalidCase{"imu:\n  bus: sim\n  mounting:\n    R_rig_imu: [[1,0,0],[0,1,0],[0,0.5,1]]\n",
