@@ -159,6 +159,8 @@ Result<TimeNs> parse_time_ns(std::string_view text, TimeUnit unit) {
     } else if ((c == 'e' || c == 'E') && !digits.empty()) {
       std::size_t k = i + 1;
       if (k < s.size() && s[k] == '+') ++k;
+      // One sign at most: "1e+-5" is not a number.
+      if (k < s.size() && (s[k] == '+' || (s[k] == '-' && k > i + 1))) return bad("");
       auto [ptr, ec] = std::from_chars(s.data() + k, s.data() + s.size(), exponent);
       if (ec != std::errc() || ptr != s.data() + s.size() || std::llabs(exponent) > 400) return bad("");
       break;
@@ -203,7 +205,13 @@ Result<TimeNs> parse_time_ns(std::string_view text, TimeUnit unit) {
 Result<double> parse_double(std::string_view text) {
   std::string_view s = trim(text);
   std::string_view body = s;
-  if (!body.empty() && body[0] == '+') body.remove_prefix(1);
+  if (!body.empty() && body[0] == '+') {
+    body.remove_prefix(1);
+    // One sign at most: "+-1" and "++1" are not numbers.
+    if (!body.empty() && (body[0] == '+' || body[0] == '-')) {
+      return make_error(Errc::kCorrupt, quoted(s, " is not a number"));
+    }
+  }
   double v = 0.0;
   auto [ptr, ec] = std::from_chars(body.data(), body.data() + body.size(), v);
   if (body.empty() || ec != std::errc() || ptr != body.data() + body.size()) {

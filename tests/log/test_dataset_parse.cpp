@@ -37,10 +37,17 @@ TEST(DatasetTime, ParsesDecimalSecondsExactly) {
 }
 
 TEST(DatasetTime, RejectsGarbageAndOverflow) {
-  for (const char* bad : {"", "abc", "1.2.3", "1e", "--1", "1,5", "nan", "inf", "0x10"}) {
+  for (const char* bad :
+       {"", "abc", "1.2.3", "1e", "--1", "+-1", "1e+-5", "1e++5", "1,5", "nan", "inf", "0x10"}) {
     auto t = parse_time_ns(bad, TimeUnit::kS);
     EXPECT_FALSE(t.ok()) << bad;
   }
+  for (const char* bad : {"+-1", "++1", "+", "1e+-5", "inf", "nan", ""}) {
+    auto v = parse_double(bad);
+    EXPECT_FALSE(v.ok()) << bad;
+  }
+  EXPECT_EQ(*parse_double("+1.5e-3"), 1.5e-3);
+  EXPECT_EQ(*parse_double("-2"), -2.0);
   auto big = parse_time_ns("1e12", TimeUnit::kS);  // 1e21 ns
   ASSERT_FALSE(big.ok());
   EXPECT_THAT(big.error().message, HasSubstr("too large"));
