@@ -13,16 +13,10 @@
 
 #include "calib/rk4.hpp"
 #include "calib/static_detector.hpp"
+#include "calib/static_scan.hpp"
 
 namespace imucal::app {
 namespace {
-
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  const std::size_t k = std::min(v.size() - 1, static_cast<std::size_t>(p * static_cast<double>(v.size())));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
-}
 
 std::string seconds_text(double s) {
   std::ostringstream os;
@@ -128,95 +122,14 @@ Status CheckSetOptions::validate() const {
   return {};
 }
 
-Result<CheckSet> build_check_set(std::span<const ImuSample> samples, const CheckSetOptions& opt) {
-  IMUCAL_TRY(opt.validate());
-  const std::size_t n = samples.size();
-  CheckSet set;
-  set.options = opt;
-  set.samples = n;
-  if (n < 10) {
-    return make_error(Errc::kInsufficientData, "the recording has " + std::to_string(n) +
-                                                   " samples: record static poses (hold each for at least " +
-                                                   seconds_text(opt.min_interval_s) + " s)");
-  }
-  std::vector<TimeNs> t_ns(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    t_ns[i] = samples[i].t_ns;
-    if (i > 0 && t_ns[i] <= t_ns[i - 1]) {
-      return make_error(Errc::kCorrupt, "timestamps do not increase at sample " + std::to_string(i) +
-                                            ": the log is damaged or its samples are out of order");
-    }
-  }
-  set.t_first_ns = t_ns.front();
-  const TimeNs period_ns = median_interval_ns(t_ns);
-  set.rate_hz = 1.0 / ns_to_s(period_ns);
+namespace {
 
-  // Breaks in the time base and unusable samples, as the static calibration scans them.
-  std::vector<bool> break_before(n, false), accel_ok(n, true), gyro_ok(n, true), usable(n, true);
-  for (std::size_t i = 0; i < n; ++i) {
-    const auto f = samples[i].flags;
-    if (i > 0 && ((f & (kImuFlagGapBefore | kImuFlagDeviceReset)) ||
-                  static_cast<double>(t_ns[i] - t_ns[i - 1]) > 1.5 * static_cast<double>(period_ns))) {
-      break_before[i] = true;
-      ++set.gaps;
-    }
-    if ((f & kImuFlagAccelSaturated) || !samples[i].accel.allFinite()) {
-      accel_ok[i] = false;
-      ++set.accel_saturated;
-    }
-    if ((f & kImuFlagGyroSaturated) || !samples[i].gyro.allFinite()) {
-      gyro_ok[i] = false;
-      ++set.gyro_saturated;
-    }
-    usable[i] = accel_ok[i] && gyro_ok[i];
-  }
-
-  // Variance detector over the raw accelerometer; unusable samples repeat the previous value.
-  std::vector<Eigen::Vector3d> accel(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    accel[i] = accel_ok[i] ? samples[i].accel : (i > 0 ? accel[i - 1] : Eigen::Vector3d::Zero());
-  }
-  const std::size_t window =
-      std::max<std::size_t>(3, static_cast<std::size_t>(std::lround(opt.window_s * set.rate_hz)));
-  const std::vector<double> sigma_sq = calib::variance_magnitude_sq(accel, window);
-  std::vector<double> quiet;
-  quiet.reserve(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (accel_ok[i]) quiet.push_back(sigma_sq[i]);
-  }
-  set.floor_sq = std::max(percentile(quiet, opt.floor_percentile), 1e-300);
-  set.threshold = opt.multiplier * std::sqrt(set.floor_sq);
-  const std::size_t min_samples =
-      std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(opt.min_interval_s * set.rate_hz)));
-  const auto found = calib::detect_static_intervals(sigma_sq, set.threshold * set.threshold, usable,
-                                                    break_before, min_samples);
-  for (const auto& iv : found) {
-    CheckInterval c;
-    c.begin = iv.begin;
-    c.end = iv.end;
-    c.t0_ns = t_ns[iv.begin];
-    c.t1_ns = t_ns[iv.end - 1];
-    for (std::size_t i = iv.begin; i < iv.end; ++i) {
-      c.accel_mean_raw += samples[i].accel;
-      c.t_s.push_back(ns_to_s(t_ns[i] - t_ns[iv.begin]));
-      c.accel_raw.push_back(samples[i].accel);
-      c.gyro_raw.push_back(samples[i].gyro);
-    }
-    c.accel_mean_raw /= static_cast<double>(iv.size());
-    set.intervals.push_back(c);
-  }
-  if (set.intervals.size() < 2) {
-    return make_error(Errc::kInsufficientData,
-                      "found " + std::to_string(set.intervals.size()) + " static interval(s) of at least " +
-                          seconds_text(opt.min_interval_s) + " s (varsigma below " +
-                          seconds_text(opt.multiplier) +
-                          " times the quiet floor); the check needs a recording of static poses: hold the "
-                          "rig still in several attitudes, turning it between holds")
-        .with_remedy("multiplier")
-        .with_remedy("min_interval_s");
-  }
-
-  // Transfers: the motion from the last sample of one interval to the first of the next.
+/// The motions from the last sample of one interval to the first of the next that can be
+/// integrated (no break, no invalid sample), into `set`.
+Status add_transfers(std::span<const ImuSample> samples, const std::vector<bool>& break_before,
+                     const std::vector<bool>& usable, CheckSet* set_out) {
+  CheckSet& set = *set_out;
+  auto t_ns = [&samples](std::size_t i) { return samples[i].t_ns; };
   for (std::size_t k = 0; k + 1 < set.intervals.size(); ++k) {
     ++set.motions;
     const std::size_t a = set.intervals[k].end - 1;
@@ -234,7 +147,7 @@ Result<CheckSet> build_check_set(std::span<const ImuSample> samples, const Check
     CheckTransfer tr;
     tr.from = k;
     for (std::size_t i = a; i <= b; ++i) {
-      tr.t_s.push_back(ns_to_s(t_ns[i] - t_ns[a]));
+      tr.t_s.push_back(ns_to_s(t_ns(i) - t_ns(a)));
       tr.accel_raw.push_back(samples[i].accel);
       tr.gyro_raw.push_back(samples[i].gyro);
     }
@@ -248,6 +161,79 @@ Result<CheckSet> build_check_set(std::span<const ImuSample> samples, const Check
                           std::to_string(set.motions_with_saturation) +
                           " saturated samples): record again without gaps, turning the rig more gently");
   }
+  return {};
+}
+
+}  // namespace
+
+Result<CheckSet> build_check_set(std::span<const ImuSample> samples, const CheckSetOptions& opt) {
+  IMUCAL_TRY(opt.validate());
+  const std::size_t n = samples.size();
+  CheckSet set;
+  set.options = opt;
+  set.samples = n;
+  if (n < 10) {
+    return make_error(Errc::kInsufficientData, "the recording has " + std::to_string(n) +
+                                                   " samples: record static poses (hold each for at least " +
+                                                   seconds_text(opt.min_interval_s) + " s)");
+  }
+  // The time base, breaks and invalid samples as the static calibration scans them.
+  std::vector<std::string> scan_notes;  // the counts below say the same
+  auto scan = calib::scan_recording(samples, &scan_notes);
+  if (!scan.ok()) return scan.error();
+  set.t_first_ns = samples.front().t_ns;
+  set.rate_hz = scan->rate_hz;
+  set.gaps = scan->gaps;
+  set.accel_saturated = scan->accel_saturated;
+  set.gyro_saturated = scan->gyro_saturated;
+  const std::vector<bool>& break_before = scan->break_before;
+  std::vector<bool> usable(n);
+  for (std::size_t i = 0; i < n; ++i) usable[i] = scan->accel_ok[i] && scan->gyro_ok[i];
+  const std::vector<bool>& accel_ok = scan->accel_ok;
+  const std::vector<Eigen::Vector3d>& accel = scan->accel;  // invalid samples repeat the previous
+  auto t_ns = [&samples](std::size_t i) { return samples[i].t_ns; };
+
+  const std::size_t window =
+      std::max<std::size_t>(3, static_cast<std::size_t>(std::lround(opt.window_s * set.rate_hz)));
+  const std::vector<double> sigma_sq = calib::variance_magnitude_sq(accel, window);
+  std::vector<double> quiet;
+  quiet.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (accel_ok[i]) quiet.push_back(sigma_sq[i]);
+  }
+  set.floor_sq = std::max(calib::percentile(quiet, opt.floor_percentile), 1e-300);
+  set.threshold = opt.multiplier * std::sqrt(set.floor_sq);
+  const std::size_t min_samples =
+      std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(opt.min_interval_s * set.rate_hz)));
+  const auto found = calib::detect_static_intervals(sigma_sq, set.threshold * set.threshold, usable,
+                                                    break_before, min_samples);
+  for (const auto& iv : found) {
+    CheckInterval c;
+    c.begin = iv.begin;
+    c.end = iv.end;
+    c.t0_ns = t_ns(iv.begin);
+    c.t1_ns = t_ns(iv.end - 1);
+    for (std::size_t i = iv.begin; i < iv.end; ++i) {
+      c.accel_mean_raw += samples[i].accel;
+      c.t_s.push_back(ns_to_s(t_ns(i) - t_ns(iv.begin)));
+      c.accel_raw.push_back(samples[i].accel);
+      c.gyro_raw.push_back(samples[i].gyro);
+    }
+    c.accel_mean_raw /= static_cast<double>(iv.size());
+    set.intervals.push_back(c);
+  }
+  if (set.intervals.size() < 2) {
+    return make_error(Errc::kInsufficientData,
+                      "found " + std::to_string(set.intervals.size()) + " static interval(s) of at least " +
+                          seconds_text(opt.min_interval_s) + " s (varsigma below " +
+                          seconds_text(opt.multiplier) +
+                          " times the quiet floor); the check needs a recording of static poses: hold the "
+                          "rig still in several attitudes, turning it between holds")
+        .with_remedy("multiplier")
+        .with_remedy("min_interval_s");
+  }
+
+  IMUCAL_TRY(add_transfers(samples, break_before, usable, &set));
   return set;
 }
 

@@ -268,13 +268,6 @@ class GyroTransferCost : public ceres::CostFunction {
 
 // ---- helpers ---------------------------------------------------------------------------------
 
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  const std::size_t k = std::min(v.size() - 1, static_cast<std::size_t>(p * static_cast<double>(v.size())));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
-}
-
 int count_distinct(std::span<const Eigen::Vector3d> directions, double min_angle_rad) {
   std::vector<Eigen::Vector3d> reps;
   const double cos_min = std::cos(min_angle_rad);
@@ -350,73 +343,6 @@ std::vector<PoseDirections> pose_directions(const std::vector<StaticInterval>& i
 }  // namespace
 
 // ---- steps of calibrate_static, in the order it runs them ------------------------------------
-
-Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
-                                        std::vector<std::string>* warnings) {
-  const std::size_t n = samples.size();
-  if (n < 1000) {
-    return make_error(Errc::kInsufficientData,
-                      "the recording has " + std::to_string(n) +
-                          " samples: a static calibration needs a still start (about 50 s) and 36-50 "
-                          "held poses; record again");
-  }
-  std::vector<double> dt_s(n - 1);
-  for (std::size_t i = 1; i < n; ++i) {
-    const TimeNs d = samples[i].t_ns - samples[i - 1].t_ns;
-    if (d <= 0) {
-      return make_error(Errc::kCorrupt, "timestamps do not increase at sample " + std::to_string(i) +
-                                            ": the log is damaged or its samples are out of order");
-    }
-    dt_s[i - 1] = ns_to_s(d);
-  }
-  ScannedRecording s;
-  s.period_s = percentile(dt_s, 0.5);
-  s.rate_hz = 1.0 / s.period_s;
-  s.break_before.assign(n, false);
-  s.reset_before.assign(n, false);
-  s.accel_ok.assign(n, true);
-  s.gyro_ok.assign(n, true);
-  s.t_s.resize(n);
-  for (std::size_t i = 0; i < n; ++i) s.t_s[i] = ns_to_s(samples[i].t_ns - samples[0].t_ns);
-  for (std::size_t i = 0; i < n; ++i) {
-    const auto f = samples[i].flags;
-    if (i > 0 && ((f & (kImuFlagGapBefore | kImuFlagDeviceReset)) || dt_s[i - 1] > 1.5 * s.period_s)) {
-      s.break_before[i] = true;
-      s.reset_before[i] = (f & kImuFlagDeviceReset) != 0;
-      ++s.gaps;
-    }
-    if ((f & kImuFlagAccelSaturated) || !samples[i].accel.allFinite()) {
-      s.accel_ok[i] = false;
-      ++s.accel_saturated;
-    }
-    if ((f & kImuFlagGyroSaturated) || !samples[i].gyro.allFinite()) {
-      s.gyro_ok[i] = false;
-      ++s.gyro_saturated;
-    }
-  }
-  if (s.accel_saturated + s.gyro_saturated > 0) {
-    warnings->push_back(std::to_string(s.accel_saturated) + " accelerometer and " +
-                        std::to_string(s.gyro_saturated) +
-                        " gyroscope samples are saturated or invalid: they were excluded (static "
-                        "intervals never contain them and no gyro integration crosses them); if this "
-                        "is frequent, raise the full-scale range or move the rig more gently");
-  }
-  if (s.gaps > 0) {
-    warnings->push_back("the log has " + std::to_string(s.gaps) +
-                        " gap(s) or device reset(s): static intervals are split there and no gyro "
-                        "integration crosses them");
-  }
-  s.accel.resize(n);
-  s.gyro.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    s.accel[i] = s.accel_ok[i] ? samples[i].accel : Eigen::Vector3d::Zero();
-    s.gyro[i] = samples[i].gyro;
-  }
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!s.accel_ok[i]) s.accel[i] = i > 0 ? s.accel[i - 1] : Eigen::Vector3d::Zero();
-  }
-  return s;
-}
 
 StaticDetection detect_variance(const ScannedRecording& scan, double window_s) {
   StaticDetection d;
@@ -630,6 +556,36 @@ struct PoseMeans {
 /// to spare the degrees of freedom, then a line, then none.
 int drift_terms(std::size_t poses) { return poses >= 20 ? 2 : poses >= 12 ? 1 : 0; }
 
+/// Newey-West covariances of a least-squares fit Y = X beta + R, one per column of R (Bartlett
+/// weights, lag 4 (n/100)^(2/9)), with leverage-inflated residuals (HC3: the sandwich is otherwise
+/// too small for the few tens of poses a session has) and Stata's degrees-of-freedom factor
+/// n / (n - p).
+std::vector<Eigen::MatrixXd> newey_west_covariances(const Eigen::MatrixXd& X, const Eigen::MatrixXd& R,
+                                                    const Eigen::MatrixXd& XtX_inv, int dof) {
+  const auto n = static_cast<std::size_t>(X.rows());
+  const Eigen::Index p = X.cols();
+  const int lag = static_cast<int>(std::floor(4.0 * std::pow(static_cast<double>(n) / 100.0, 2.0 / 9.0)));
+  Eigen::MatrixXd Ra = R;
+  for (std::size_t k = 0; k < n; ++k) {
+    const double h = X.row(k) * XtX_inv * X.row(k).transpose();
+    Ra.row(k) /= std::max(1.0 - h, 0.05);
+  }
+  std::vector<Eigen::MatrixXd> out;
+  for (Eigen::Index col = 0; col < R.cols(); ++col) {
+    Eigen::MatrixXd S = Eigen::MatrixXd::Zero(p, p);
+    for (std::size_t k = 0; k < n; ++k) S += Ra(k, col) * Ra(k, col) * X.row(k).transpose() * X.row(k);
+    for (int l = 1; l <= lag; ++l) {
+      const double w = 1.0 - static_cast<double>(l) / (lag + 1.0);
+      for (std::size_t k = static_cast<std::size_t>(l); k < n; ++k) {
+        const Eigen::MatrixXd xx = X.row(k).transpose() * X.row(k - l);
+        S += w * Ra(k, col) * Ra(k - l, col) * (xx + xx.transpose());
+      }
+    }
+    out.push_back(XtX_inv * S * XtX_inv * (static_cast<double>(n) / std::max(1, dof)));
+  }
+  return out;
+}
+
 GyroStaticFit fit_gyro_static(const PoseMeans& m, const StillStart& still, GSensitivityMode mode,
                               const Eigen::Matrix3d& H_fixed) {
   GyroStaticFit f;
@@ -673,26 +629,9 @@ GyroStaticFit fit_gyro_static(const PoseMeans& m, const StillStart& still, GSens
     // the textbook s^2 (X'X)^-1 is too small (by about 2 on the virtual rig). Newey-West's
     // covariance (Bartlett weights, lag 4 (n/100)^(2/9)) holds with such errors. Undetermined
     // (NaN) without degrees of freedom.
-    const int lag = static_cast<int>(std::floor(4.0 * std::pow(static_cast<double>(n) / 100.0, 2.0 / 9.0)));
-    // Residuals inflated by their leverage (HC3): the sandwich is otherwise too small for the
-    // few tens of poses a session has.
-    Eigen::MatrixXd Ra = R;
-    for (std::size_t k = 0; k < n; ++k) {
-      const double h = X.row(k) * XtX_inv * X.row(k).transpose();
-      Ra.row(k) /= std::max(1.0 - h, 0.05);
-    }
+    const std::vector<Eigen::MatrixXd> cov = newey_west_covariances(X, R, XtX_inv, f.dof.dof());
     for (int axis = 0; axis < 3; ++axis) {
-      Eigen::MatrixXd S = Eigen::MatrixXd::Zero(p, p);
-      for (std::size_t k = 0; k < n; ++k) S += Ra(k, axis) * Ra(k, axis) * X.row(k).transpose() * X.row(k);
-      for (int l = 1; l <= lag; ++l) {
-        const double w = 1.0 - static_cast<double>(l) / (lag + 1.0);
-        for (std::size_t k = static_cast<std::size_t>(l); k < n; ++k) {
-          const Eigen::MatrixXd xx = X.row(k).transpose() * X.row(k - l);
-          S += w * Ra(k, axis) * Ra(k - l, axis) * (xx + xx.transpose());
-        }
-      }
-      // With the degrees-of-freedom factor n / (n - p) of Stata's newey.
-      const Eigen::MatrixXd V = XtX_inv * S * XtX_inv * (static_cast<double>(n) / std::max(1, f.dof.dof()));
+      const Eigen::MatrixXd& V = cov[static_cast<std::size_t>(axis)];
       const Eigen::VectorXd sd = V.diagonal().unaryExpr([](double v) { return std::sqrt(std::max(v, 0.0)); });
       // The reported bias is b(t) averaged over the span of the poses (tau uniform in [-1, 1]:
       // mean tau 0, mean tau^2 1/3), the bias a user of the whole recording saw.
@@ -1308,6 +1247,12 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   IMUCAL_TRY(opt.validate());
   StaticCalibrationResult res;
   res.gravity_mps2 = opt.gravity_mps2;
+  if (samples.size() < 1000) {
+    return make_error(Errc::kInsufficientData,
+                      "the recording has " + std::to_string(samples.size()) +
+                          " samples: a static calibration needs a still start (about 50 s) and 36-50 "
+                          "held poses; record again");
+  }
   Result<ScannedRecording> scan = scan_recording(samples, &res.warnings);
   if (!scan.ok()) return scan.error();
 

@@ -4,6 +4,13 @@
 
 namespace imucal::calib {
 
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  const std::size_t k = std::min(v.size() - 1, static_cast<std::size_t>(p * static_cast<double>(v.size())));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
 std::vector<double> variance_magnitude_sq(std::span<const Eigen::Vector3d> values, std::size_t window) {
   const std::size_t n = values.size();
   std::vector<double> out(n, 0.0);

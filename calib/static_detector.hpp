@@ -15,6 +15,9 @@ struct StaticInterval {
   std::size_t size() const { return end - begin; }
 };
 
+/// The p-quantile (0..1) of `v` by selection; 0 for an empty vector.
+double percentile(std::vector<double> v, double p);
+
 /// varsigma(t)^2 of eq. 3.9 for every sample: the sum over the three axes of the squared
 /// variance of the signal in a window of `window` samples centred on the sample (truncated at
 /// the ends of the recording). The data are centred on their mean before the running sums are

@@ -58,32 +58,10 @@ Eigen::Vector3d parse_triple(const std::string& text, const std::string& option)
   throw CliExit{kExitUsage, option + " takes one value for all three axes or three comma-separated values"};
 }
 
-void run(const StaticCliOptions& o) {
-  // Outputs are checked before the work: never the log itself, never an existing file without
-  // --force.
-  const app::OutputPolicy outputs{o.force, {o.log_path}};
-  for (const auto* path : {&o.yaml_path, &o.json_path}) {
-    if (!path->empty()) {
-      if (auto s = app::check_output(*path, outputs); !s.ok()) fail(s.error());
-    }
-  }
-  // CPU time of this thread, like the timings of calibrate_static.
-  auto cpu_now = [] {
-    timespec ts{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-    return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
-  };
-  const double t0 = cpu_now();
-  auto loaded = app::load_imu_stream(
-      o.log_path, o.stream, o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse);
-  if (!loaded.ok()) fail(loaded.error());
-  const ImuStreamInfo& info = loaded->info;
-  const std::vector<ImuSample>& samples = loaded->samples;
-  const double import_s = cpu_now() - t0;
-
+/// The method's options from the command line (without the nominal guesses, which need the log).
+calib::StaticCalibrationOptions method_options(const StaticCliOptions& o, double gravity_mps2) {
   calib::StaticCalibrationOptions opt;
-  const app::GravityChoice gravity = resolve_gravity(o.grav);
-  opt.gravity_mps2 = gravity.mps2;
+  opt.gravity_mps2 = gravity_mps2;
   opt.init_still_s = o.init_still_s;
   opt.estimate_gyro_bias = o.estimate_gyro_bias;
   opt.latitude_deg = o.grav.latitude_deg;
@@ -102,6 +80,67 @@ void run(const StaticCliOptions& o) {
   }
   opt.window_s = o.window_s;
   opt.min_interval_s = o.min_interval_s;
+
+  return opt;
+}
+
+/// The command's summary on stdout.
+void print_summary(const std::string& log_path, const ImuStreamInfo& info, std::size_t samples,
+                   const StaticCalibrationResult& result) {
+  const StaticCalibrationResult* res = &result;
+  const auto& q = res->quality;
+  std::cout << "static calibration of " << log_path << " (" << info.name << ", " << samples << " samples, "
+            << imu_units_name(info.units) << ")\n"
+            << "  still start " << res->init_still_s << " s, threshold multiplier "
+            << res->threshold_multiplier << ", " << res->intervals.size() << " static intervals, "
+            << res->distinct_attitudes << " distinct attitudes, " << res->gyro_transfers
+            << " gyro transfers\n"
+            << "  gravity magnitude error after: mean " << q.accel_after.mean_mps2 << " m/s^2, max "
+            << q.accel_after.max_mps2 << " m/s^2";
+  if (q.before_available) std::cout << " (before: mean " << q.accel_before.mean_mps2 << ")";
+  std::cout << "\n  gravity direction error after: mean " << q.gyro_after.mean_rad << " rad, max "
+            << q.gyro_after.max_rad << " rad";
+  if (q.before_available) std::cout << " (before: mean " << q.gyro_before.mean_rad << ")";
+  std::cout << "\n";
+  if (res->gsens_mode != GSensitivityMode::kOff) {
+    const Eigen::Matrix3d& G = res->canonical.G;
+    std::cout << "  gyro g-sensitivity (" << gsens_mode_name(res->gsens_mode) << ", deg/s per g): ";
+    const double k = 180.0 / M_PI * res->gravity_mps2;
+    for (int r = 0; r < 3; ++r) {
+      std::cout << (r ? "; " : "[");
+      for (int c = 0; c < 3; ++c) std::cout << (c ? " " : "") << G(r, c) * k;
+    }
+    std::cout << "]\n";
+  }
+  if (res->warnings.empty()) std::cout << "  no warnings\n";
+}
+
+void run(const StaticCliOptions& o) {
+  // Outputs are checked before the work: never the log itself, never an existing file without
+  // --force.
+  const app::OutputPolicy outputs{o.force, {o.log_path}};
+  for (const auto* path : {&o.yaml_path, &o.json_path}) {
+    if (!path->empty()) {
+      if (auto s = app::check_output(*path, outputs); !s.ok()) fail(s.error());
+    }
+  }
+  // The options are checked before the log is read.
+  const app::GravityChoice gravity = resolve_gravity(o.grav);
+  calib::StaticCalibrationOptions opt = method_options(o, gravity.mps2);
+
+  // CPU time of this thread, like the timings of calibrate_static.
+  auto cpu_now = [] {
+    timespec ts{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+  };
+  const double t0 = cpu_now();
+  auto loaded = app::load_imu_stream(
+      o.log_path, o.stream, o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse);
+  if (!loaded.ok()) fail(loaded.error());
+  const ImuStreamInfo& info = loaded->info;
+  const std::vector<ImuSample>& samples = loaded->samples;
+  const double import_s = cpu_now() - t0;
 
   app::NominalOverrides given;
   if (!o.accel_scale_init.empty()) given.accel_scale = parse_triple(o.accel_scale_init, "--accel-scale-init");
@@ -140,31 +179,7 @@ void run(const StaticCliOptions& o) {
     if (auto s = app::write_text_file(o.json_path, json, outputs); !s.ok()) fail(s.error());
   }
 
-  const auto& q = res->quality;
-  std::cout << "static calibration of " << o.log_path << " (" << info.name << ", " << samples.size()
-            << " samples, " << imu_units_name(info.units) << ")\n"
-            << "  still start " << res->init_still_s << " s, threshold multiplier "
-            << res->threshold_multiplier << ", " << res->intervals.size() << " static intervals, "
-            << res->distinct_attitudes << " distinct attitudes, " << res->gyro_transfers
-            << " gyro transfers\n"
-            << "  gravity magnitude error after: mean " << q.accel_after.mean_mps2 << " m/s^2, max "
-            << q.accel_after.max_mps2 << " m/s^2";
-  if (q.before_available) std::cout << " (before: mean " << q.accel_before.mean_mps2 << ")";
-  std::cout << "\n  gravity direction error after: mean " << q.gyro_after.mean_rad << " rad, max "
-            << q.gyro_after.max_rad << " rad";
-  if (q.before_available) std::cout << " (before: mean " << q.gyro_before.mean_rad << ")";
-  std::cout << "\n";
-  if (res->gsens_mode != GSensitivityMode::kOff) {
-    const Eigen::Matrix3d& G = res->canonical.G;
-    std::cout << "  gyro g-sensitivity (" << gsens_mode_name(res->gsens_mode) << ", deg/s per g): ";
-    const double k = 180.0 / M_PI * res->gravity_mps2;
-    for (int r = 0; r < 3; ++r) {
-      std::cout << (r ? "; " : "[");
-      for (int c = 0; c < 3; ++c) std::cout << (c ? " " : "") << G(r, c) * k;
-    }
-    std::cout << "]\n";
-  }
-  if (res->warnings.empty()) std::cout << "  no warnings\n";
+  print_summary(o.log_path, info, samples.size(), *res);
 }
 
 void setup(CLI::App& root) {

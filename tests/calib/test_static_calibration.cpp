@@ -476,9 +476,13 @@ TEST(StaticSteps, ScanFindsBreaksAndInvalidSamplesAndWarns) {
   scan = scan_recording(v, &warnings);
   ASSERT_FALSE(scan.ok());
   EXPECT_EQ(scan.error().code, Errc::kCorrupt);
-  scan = scan_recording(still_samples(999), &warnings);
+  scan = scan_recording(still_samples(2), &warnings);
   ASSERT_FALSE(scan.ok());
   EXPECT_EQ(scan.error().code, Errc::kInsufficientData);
+  // The method itself needs a still start and poses.
+  auto short_run = calibrate_static(still_samples(999), StaticCalibrationOptions{});
+  ASSERT_FALSE(short_run.ok());
+  EXPECT_EQ(short_run.error().code, Errc::kInsufficientData);
 }
 
 TEST(StaticSteps, StillStartGivenOrFromAllanDeviation) {

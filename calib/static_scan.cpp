@@ -1,0 +1,81 @@
+// The scan of a recording before a static method: time base, breaks and invalid samples
+// (calib/static_scan.hpp).
+
+#include "calib/static_scan.hpp"
+
+#include <string>
+#include <vector>
+
+#include "core/time.hpp"
+
+namespace imucal::calib {
+
+Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
+                                        std::vector<std::string>* warnings) {
+  const std::size_t n = samples.size();
+  if (n < 3) {
+    return make_error(Errc::kInsufficientData,
+                      "the recording has " + std::to_string(n) + " samples: too few for a time base");
+  }
+  std::vector<TimeNs> t_ns(n);
+  std::vector<double> dt_s(n - 1);
+  for (std::size_t i = 0; i < n; ++i) {
+    t_ns[i] = samples[i].t_ns;
+    if (i == 0) continue;
+    const TimeNs d = t_ns[i] - t_ns[i - 1];
+    if (d <= 0) {
+      return make_error(Errc::kCorrupt, "timestamps do not increase at sample " + std::to_string(i) +
+                                            ": the log is damaged or its samples are out of order");
+    }
+    dt_s[i - 1] = ns_to_s(d);
+  }
+  ScannedRecording s;
+  s.period_s = ns_to_s(median_interval_ns(t_ns));
+  s.rate_hz = 1.0 / s.period_s;
+  s.break_before.assign(n, false);
+  s.reset_before.assign(n, false);
+  s.accel_ok.assign(n, true);
+  s.gyro_ok.assign(n, true);
+  s.t_s.resize(n);
+  for (std::size_t i = 0; i < n; ++i) s.t_s[i] = ns_to_s(samples[i].t_ns - samples[0].t_ns);
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto f = samples[i].flags;
+    if (i > 0 && ((f & (kImuFlagGapBefore | kImuFlagDeviceReset)) || dt_s[i - 1] > 1.5 * s.period_s)) {
+      s.break_before[i] = true;
+      s.reset_before[i] = (f & kImuFlagDeviceReset) != 0;
+      ++s.gaps;
+    }
+    if ((f & kImuFlagAccelSaturated) || !samples[i].accel.allFinite()) {
+      s.accel_ok[i] = false;
+      ++s.accel_saturated;
+    }
+    if ((f & kImuFlagGyroSaturated) || !samples[i].gyro.allFinite()) {
+      s.gyro_ok[i] = false;
+      ++s.gyro_saturated;
+    }
+  }
+  if (s.accel_saturated + s.gyro_saturated > 0) {
+    warnings->push_back(std::to_string(s.accel_saturated) + " accelerometer and " +
+                        std::to_string(s.gyro_saturated) +
+                        " gyroscope samples are saturated or invalid: they were excluded (static "
+                        "intervals never contain them and no gyro integration crosses them); if this "
+                        "is frequent, raise the full-scale range or move the rig more gently");
+  }
+  if (s.gaps > 0) {
+    warnings->push_back("the log has " + std::to_string(s.gaps) +
+                        " gap(s) or device reset(s): static intervals are split there and no gyro "
+                        "integration crosses them");
+  }
+  s.accel.resize(n);
+  s.gyro.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    s.accel[i] = s.accel_ok[i] ? samples[i].accel : Eigen::Vector3d::Zero();
+    s.gyro[i] = samples[i].gyro;
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!s.accel_ok[i]) s.accel[i] = i > 0 ? s.accel[i - 1] : Eigen::Vector3d::Zero();
+  }
+  return s;
+}
+
+}  // namespace imucal::calib
