@@ -33,4 +33,4 @@ heavy=$(grep -ciE 'gdal|poppler|hdf5' <<< "$libs" || true)
 echo "  of which GDAL, poppler or HDF5: $heavy"
 measure "imucal --version" "$IMUCAL" --version
 measure "imucal calibrate static fixtures/static.imulog" \
-  "$IMUCAL" calibrate static "$root/fixtures/static.imulog" -o "$tmp/r.yaml"
+  "$IMUCAL" calibrate static "$root/fixtures/static.imulog" --force -o "$tmp/r.yaml"

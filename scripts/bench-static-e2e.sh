@@ -26,9 +26,11 @@ for _ in $(seq "$RUNS"); do
   rm -f "$tmp/x.imulog"
   /usr/bin/time -f "%e %M" -o "$tmp/ti" "$IMUCAL" import ascii --accel "$DATA/xsens_acc.txt" \
     --gyro "$DATA/xsens_gyro.txt" --units raw --accel-offset 32768 --accel-scale 0.00241 \
-    --gyro-offset 32768 --gyro-scale 0.0001598 -o "$tmp/x.imulog" > /dev/null 2>&1
+    --gyro-offset 32768 --gyro-scale 0.0001598 -o "$tmp/x.imulog" > /dev/null 2> "$tmp/err" ||
+    { echo "bench-static-e2e: import failed:" >&2; cat "$tmp/err" >&2; exit 1; }
   /usr/bin/time -f "%e %M" -o "$tmp/tc" "$IMUCAL" calibrate static "$tmp/x.imulog" --gravity 9.81744 \
-    -o "$tmp/r.yaml" > /dev/null 2>&1
+    --force -o "$tmp/r.yaml" > /dev/null 2> "$tmp/err" ||
+    { echo "bench-static-e2e: calibrate failed:" >&2; cat "$tmp/err" >&2; exit 1; }
   cat "$tmp/ti" >> "$tmp/import"
   cat "$tmp/tc" >> "$tmp/calib"
   paste "$tmp/ti" "$tmp/tc" | awk '{ print $1 + $3 }' >> "$tmp/total"
