@@ -10,6 +10,7 @@ build_pkgs=(
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev libopencv-calib3d-dev
   libboost-dev libgpiod-dev libpng-dev libwebp-dev libsqlite3-dev sqlite3 libyaml-cpp-dev nlohmann-json3-dev
   libspdlog-dev libcli11-dev
+  libaravis-dev libusb-1.0-0-dev libcamera-dev libapriltag-dev
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 test_pkgs=(
