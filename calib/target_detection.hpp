@@ -21,11 +21,11 @@ namespace imucal::calib {
 
 /// The target points one image shows.
 struct TargetObservation {
-  TimeNs t_ns = 0;                    // the frame's time (stamped by the caller)
-  int width = 0;                      // image size, pixels
+  TimeNs t_ns = 0;  // the frame's time (stamped by the caller)
+  int width = 0;    // image size, pixels
   int height = 0;
-  std::vector<int> ids;               // indices into TargetDescription::points(), ascending
-  std::vector<Eigen::Vector2d> px;    // the corners, pixels (integer = pixel centre, OpenCV)
+  std::vector<int> ids;             // indices into TargetDescription::points(), ascending
+  std::vector<Eigen::Vector2d> px;  // the corners, pixels (integer = pixel centre, OpenCV)
   bool empty() const { return ids.empty(); }
 };
 

@@ -17,6 +17,32 @@ std::vector<Eigen::Vector3d> TargetDescription::corner_points() const {
   return points;
 }
 
+std::vector<Eigen::Vector3d> TargetDescription::points() const {
+  if (type == Type::kCheckerboard) return corner_points();
+  std::vector<Eigen::Vector3d> points;
+  const int rows = 2 * tag_rows;
+  const int cols = 2 * tag_cols;
+  points.reserve(static_cast<std::size_t>(rows * cols));
+  const double pitch = (1.0 + tag_spacing) * tag_size_m;
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      points.emplace_back((c / 2) * pitch + (c % 2) * tag_size_m, (r / 2) * pitch + (r % 2) * tag_size_m,
+                          0.0);
+    }
+  }
+  return points;
+}
+
+int TargetDescription::point_count() const {
+  return type == Type::kCheckerboard ? rows * cols : 4 * tag_rows * tag_cols;
+}
+
+std::array<int, 4> TargetDescription::tag_point_ids(int tag) const {
+  const int cols = 2 * tag_cols;
+  const int base = (tag / tag_cols) * 2 * cols + (tag % tag_cols) * 2;
+  return {base, base + 1, base + cols + 1, base + cols};
+}
+
 Status TargetDescription::validate() const {
   if (type == Type::kCheckerboard) {
     if (cols < 2 || rows < 2) {

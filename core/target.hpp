@@ -5,6 +5,7 @@
 // targetCols/targetRows count *inner* corners, as in Kalibr.
 
 #include <Eigen/Core>
+#include <array>
 #include <string>
 #include <vector>
 
@@ -29,6 +30,20 @@ struct TargetDescription {
   /// Target-frame 3D positions (z = 0) of the checkerboard's inner corners, row-major:
   /// index = r * cols + c, position (c * col_spacing_m, r * row_spacing_m, 0).
   std::vector<Eigen::Vector3d> corner_points() const;
+
+  /// Every point a detector can report, in the order of its ids (Kalibr's):
+  ///   checkerboard: corner_points();
+  ///   aprilgrid: a (2 tag_rows) x (2 tag_cols) grid, id = r * 2 tag_cols + c, at
+  ///     x = (c / 2) (1 + tag_spacing) tag_size + (c % 2) tag_size, y likewise with r, z = 0:
+  ///     the four corners of each tag's black square. Tag t (row t / tag_cols, column
+  ///     t % tag_cols) has the ids b, b + 1, b + 2 tag_cols + 1, b + 2 tag_cols with
+  ///     b = (t / tag_cols) 4 tag_cols + (t % tag_cols) 2: the tag's corners counter-clockwise from
+  ///     its (x, y)-lowest one.
+  std::vector<Eigen::Vector3d> points() const;
+  /// points().size() without building them.
+  int point_count() const;
+  /// Aprilgrid: the ids of tag `tag`'s four corners in the order above.
+  std::array<int, 4> tag_point_ids(int tag) const;
 
   [[nodiscard]] Status validate() const;
 };

@@ -48,9 +48,9 @@ struct FrameFormat {
 
 /// Counters of one camera since open(); monotonic.
 struct CameraCounters {
-  std::uint64_t frames = 0;        // frames handed out by dequeue()
-  std::uint64_t dropped = 0;       // frames the device produced but nobody got (sequence gaps, no free buffer)
-  std::uint64_t incomplete = 0;    // frames the device reported as damaged or truncated (not handed out)
+  std::uint64_t frames = 0;      // frames handed out by dequeue()
+  std::uint64_t dropped = 0;     // frames the device produced but nobody got (sequence gaps, no free buffer)
+  std::uint64_t incomplete = 0;  // frames the device reported as damaged or truncated (not handed out)
   std::uint64_t packets_lost = 0;  // GigE Vision / USB3 Vision only: packets missing or resent
   std::uint64_t errors = 0;        // failed dequeue/requeue calls
 };
@@ -65,8 +65,8 @@ class Frame {
   Frame& operator=(Frame&& other) noexcept;
   ~Frame() { release(); }
 
-  TimeNs t_ns = 0;          // CLOCK_MONOTONIC, the instant timestamp_meaning() names
-  TimeNs exposure_ns = 0;   // 0 when unknown
+  TimeNs t_ns = 0;             // CLOCK_MONOTONIC, the instant timestamp_meaning() names
+  TimeNs exposure_ns = 0;      // 0 when unknown
   std::uint32_t sequence = 0;  // the device's frame counter (gaps mean dropped frames)
   int width = 0;
   int height = 0;
