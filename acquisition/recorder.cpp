@@ -1,7 +1,10 @@
 #include "acquisition/recorder.hpp"
 
+#include <fcntl.h>
+
 #include <algorithm>
 #include <boost/asio/io_context.hpp>
+#include <boost/asio/posix/stream_descriptor.hpp>
 #include <boost/asio/signal_set.hpp>
 #include <cerrno>
 #include <cmath>
@@ -80,6 +83,26 @@ std::string driver_metadata_json(const mpu::Mpu6000& d) {
   return j.dump();
 }
 
+std::string camera_metadata_json(const CameraAcquisitionStats& s) {
+  nlohmann::json j;
+  j["frames_published"] = s.stream.published;
+  j["frames_written"] = s.stream.written;
+  j["queue_dropped"] = s.stream.queue_dropped;
+  j["device_dropped"] = s.stream.device_dropped + s.device.dropped;
+  j["wrong_size"] = s.stream.wrong_size;
+  j["encoded_bytes"] = s.stream.encoded_bytes;
+  j["queue_high_water"] = s.stream.queue_high_water;
+  j["device"] = {{"frames", s.device.frames},
+                 {"dropped", s.device.dropped},
+                 {"incomplete", s.device.incomplete},
+                 {"packets_lost", s.device.packets_lost},
+                 {"errors", s.device.errors}};
+  j["stalls"] = s.stalls;
+  j["failed"] = s.failed;
+  if (s.failed) j["failure"] = s.failure;
+  return j.dump();
+}
+
 std::string mounting_metadata_json(const MountingMap& m) {
   nlohmann::json j;
   j["kind"] = mounting_kind_name(m.kind());
@@ -132,6 +155,7 @@ class SessionSamples {
 
   std::uint64_t count() const { return count_; }
   double span_s() const { return ns_to_s(last_t_ns_ - first_t_ns_); }
+  TimeNs last_t_ns() const { return last_t_ns_; }
 
  private:
   ImuAcquisition& acquisition_;
@@ -142,6 +166,94 @@ class SessionSamples {
   bool have_first_ = false;
   std::uint64_t count_ = 0;
   std::uint64_t last_gaps_ = 0;
+};
+
+/// The cameras of a recording: their streams into the log, serviced from the acquisition thread
+/// after every IMU batch and, on the event loop, whenever a camera's descriptor turns readable.
+class CameraSet {
+ public:
+  /// Declares each camera's stream, starts its encoder and the camera. Nothing has been recorded
+  /// yet when this fails.
+  Status open(const RecordOptions& options, log::SessionLogWriter& writer, ImuStream& events) {
+    for (const RecordCamera& rc : options.cameras) {
+      if (rc.camera == nullptr)
+        return make_error(Errc::kInvalidArgument, "record: a camera entry without a camera");
+      drivers::camera::Camera& cam = *rc.camera;
+      const drivers::camera::FrameFormat format = cam.format();
+      CameraStreamOptions so = rc.stream;
+      // The step loop runs on a simulated clock, which stands still while the encoder catches
+      // up: waiting loses nothing there, where dropping would lose frames a real-time rig keeps.
+      if (options.loop == RecordLoop::kStep) so.block_when_full = true;
+      auto stream = CameraStream::create(format, cam.timestamp_meaning(), so);
+      if (!stream.ok()) return stream.error().context("camera " + rc.info.name);
+      CameraStreamInfo info = rc.info;
+      info.width = format.width;
+      info.height = format.height;
+      info.rate_hz = format.rate_hz;
+      info.timestamp_source = (*stream)->timestamp_source();
+      auto id = writer.add_camera_stream(info);
+      if (!id.ok()) return id.error().context("declaring camera stream " + info.name);
+      IMUCAL_TRY((*stream)->start_log(writer, *id));
+      cameras_.push_back(std::make_unique<CameraAcquisition>(
+          cam, info.name, std::move(*stream), [&events](log::Event e) { events.post_event(std::move(e)); },
+          options.camera_stall_timeout_ns));
+      auto st = cam.start();
+      if (!st.ok()) return st.error().context("starting camera " + info.name);
+    }
+    return {};
+  }
+
+  void service(TimeNs now_ns) {
+    for (auto& c : cameras_) c->service(now_ns);
+  }
+
+  /// Event loop: waits on each camera's descriptor (a duplicate of it) and services the camera
+  /// when it turns readable. Cameras without one are serviced after every IMU batch only.
+  void arm(boost::asio::io_context& io, const std::function<TimeNs()>& now) {
+    for (auto& c : cameras_) {
+      const int fd = c->camera().fd();
+      if (fd < 0) continue;
+      const int dup_fd = ::fcntl(fd, F_DUPFD_CLOEXEC, 0);
+      if (dup_fd < 0) continue;
+      descriptors_.push_back(std::make_unique<boost::asio::posix::stream_descriptor>(io, dup_fd));
+      wait(*descriptors_.back(), *c, now);
+    }
+  }
+
+  /// Stops the cameras, then writes what their encoders still hold. Returns the first error.
+  Status close() {
+    for (auto& d : descriptors_) d->cancel();
+    Status first;
+    for (auto& c : cameras_) {
+      auto st = c->camera().stop();
+      if (!st.ok() && first.ok()) first = st;
+    }
+    for (auto& c : cameras_) {
+      auto st = c->stream().stop();
+      if (!st.ok() && first.ok()) first = st.error().context("camera " + c->name());
+    }
+    return first;
+  }
+
+  void summarize(RecordSummary& summary, log::SessionLogWriter& writer) const {
+    for (const auto& c : cameras_) {
+      summary.cameras.push_back({c->name(), c->stats()});
+      (void)writer.set_metadata("camera." + c->name(), camera_metadata_json(summary.cameras.back().stats));
+    }
+  }
+
+ private:
+  void wait(boost::asio::posix::stream_descriptor& d, CameraAcquisition& c,
+            const std::function<TimeNs()>& now) {
+    d.async_wait(boost::asio::posix::stream_descriptor::wait_read,
+                 [this, &d, &c, now](const boost::system::error_code& ec) {
+                   if (ec) return;
+                   if (c.service(now())) wait(d, c, now);
+                 });
+  }
+
+  std::vector<std::unique_ptr<CameraAcquisition>> cameras_;
+  std::vector<std::unique_ptr<boost::asio::posix::stream_descriptor>> descriptors_;
 };
 
 }  // namespace
@@ -174,8 +286,17 @@ Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu:
   auto stream_id = writer->add_imu_stream(options.stream_info);
   if (!stream_id.ok()) return stream_id.error().context("declaring the IMU stream");
 
+  // The IMU stream's writer thread and each camera's encoder share the log.
+  auto shared_writer = log::synchronized_writer(*writer);
   ImuStream stream(options.stream);
-  IMUCAL_TRY(stream.start_log(*writer, *stream_id));
+  IMUCAL_TRY(stream.start_log(*shared_writer, *stream_id));
+  CameraSet cameras;
+  if (auto st = cameras.open(options, *shared_writer, stream); !st.ok()) {
+    (void)cameras.close();
+    (void)stream.stop();
+    (void)writer->close();
+    return st.error();
+  }
 
   SessionSamples session(acquisition, stream, options);
   Status failure;
@@ -187,10 +308,17 @@ Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu:
         failure = st.error();
         break;
       }
-      if (!session.take(samples)) break;
+      const bool more = session.take(samples);
+      if (!samples.empty()) cameras.service(samples.back().t_ns);
+      if (!more) break;
     }
   } else {
-    AsioAcquisition runner(io, acquisition, [&](std::span<const ImuSample> s) { return session.take(s); });
+    AsioAcquisition runner(io, acquisition, [&](std::span<const ImuSample> s) {
+      const bool more = session.take(s);
+      cameras.service(s.back().t_ns);
+      return more;
+    });
+    cameras.arm(io, [&] { return session.last_t_ns(); });
     std::function<void(const boost::system::error_code&, int)> on_signal;
     on_signal = [&](const boost::system::error_code& ec, int signal) {
       if (ec) return;
@@ -204,6 +332,7 @@ Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu:
     if (signals) signals->async_wait(on_signal);
     failure = runner.run();
   }
+  auto camera_status = cameras.close();
   auto stop_status = stream.stop();
 
   summary.samples = session.count();
@@ -221,7 +350,12 @@ Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu:
                              timing_metadata_json(summary, acquisition.timestamper().options()));
   (void)writer->set_metadata("imu.stream", stream_json(summary.stream));
   (void)writer->set_metadata("imu.driver", driver_metadata_json(driver));
+  cameras.summarize(summary, *writer);
   if (!stop_status.ok()) return stop_status.error();
+  if (!camera_status.ok()) {
+    (void)writer->close();
+    return camera_status.error().context("writing camera frames");
+  }
   if (!failure.ok()) {
     (void)writer->close();
     return failure.error().context("recording stopped after " + std::to_string(summary.samples) + " samples");

@@ -10,12 +10,15 @@
 #include <utility>
 #include <vector>
 
+#include "acquisition/camera_acquisition.hpp"
+#include "acquisition/camera_stream.hpp"
 #include "acquisition/imu_acquisition.hpp"
 #include "acquisition/imu_stream.hpp"
 #include "acquisition/timestamp.hpp"
 #include "core/imu.hpp"
 #include "core/progress.hpp"
 #include "core/result.hpp"
+#include "drivers/camera/camera.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
 
 namespace imucal::acq {
@@ -28,6 +31,17 @@ enum class RecordLoop {
   /// ImuAcquisition::service() on a Boost.Asio event loop (asio_acquisition.hpp): for a real
   /// clock (a rig, or the real-time simulated rig). The line's fd and a poll timer wake it.
   kEventLoop,
+};
+
+/// A camera recorded beside the IMU.
+struct RecordCamera {
+  /// Opened and configured (set_format); the recorder starts it after the log exists and stops it
+  /// at the end. Borrowed.
+  drivers::camera::Camera* camera = nullptr;
+  /// The stream's name, backend and device as the log describes it; size, rate and timestamp
+  /// source are filled in from the camera.
+  CameraStreamInfo info;
+  CameraStreamOptions stream;
 };
 
 struct RecordOptions {
@@ -45,6 +59,17 @@ struct RecordOptions {
   /// acquired so far written, counters stored, log closed; RecordSummary::interrupted). The
   /// handlers are installed before the log is created and removed after it is closed.
   bool stop_on_signals = false;
+  /// Cameras recorded into the same log on the same clock. A camera that fails or stalls
+  /// while recording is reported in the log's events and the summary; the IMU goes on.
+  std::vector<RecordCamera> cameras;
+  /// A camera silent for longer than this is reported (once per silence).
+  TimeNs camera_stall_timeout_ns = 2 * kNsPerSecond;
+};
+
+/// What one camera of a recording did.
+struct CameraRecordSummary {
+  std::string name;
+  CameraAcquisitionStats stats;
 };
 
 struct RecordSummary {
@@ -57,6 +82,7 @@ struct RecordSummary {
   AcquisitionStats acquisition;
   bool interrupted = false;  // ended early by a signal (RecordOptions::stop_on_signals)
   int signal = 0;            // which one
+  std::vector<CameraRecordSummary> cameras;
 };
 
 /// Records `options.duration_s` of samples through `acquisition` into a new session log, in the
@@ -72,5 +98,7 @@ struct RecordSummary {
 std::string timing_metadata_json(const RecordSummary& summary, const TimestamperOptions& options);
 std::string driver_metadata_json(const drivers::mpu6000::Mpu6000& driver);
 std::string mounting_metadata_json(const MountingMap& mounting);
+/// "camera.<name>" metadata: the stream's and the device's counters.
+std::string camera_metadata_json(const CameraAcquisitionStats& stats);
 
 }  // namespace imucal::acq

@@ -69,6 +69,11 @@ class SessionLogWriter {
   [[nodiscard]] virtual Status close() = 0;
 };
 
+/// A writer shared by several threads (the IMU stream's writer thread and each camera's encoder
+/// thread): every call on the returned writer takes a mutex and forwards to `inner`, which is
+/// borrowed and must outlive it.
+std::unique_ptr<SessionLogWriter> synchronized_writer(SessionLogWriter& inner);
+
 /// Summary of what a reader found, including damage.
 struct SessionLogHealth {
   bool complete = false;       // the writer closed it cleanly

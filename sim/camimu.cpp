@@ -11,8 +11,7 @@
 #include <set>
 #include <vector>
 
-#include "log/frame_codec.hpp"
-#include "log/session_log.hpp"
+#include "drivers/camera/fake/virtual_camera.hpp"
 #include "sim/camera_render.hpp"
 #include "sim/motion_random.hpp"
 #include "sim/session.hpp"
@@ -20,17 +19,6 @@
 
 namespace imucal::sim {
 namespace {
-
-/// A rendered 8-bit gray image, losslessly encoded as the log stores frames (log/frame_codec.hpp:
-/// WebP lossless, or PNG at the highest compression).
-Result<std::vector<std::uint8_t>> encode_frame(const cv::Mat& gray, const std::string& encoding) {
-  log::Image image = log::Image::zeros(gray.cols, gray.rows, 1, 8);
-  for (int r = 0; r < gray.rows; ++r) {
-    std::memcpy(image.data.data() + static_cast<std::size_t>(r) * image.row_bytes(),
-                gray.ptr<std::uint8_t>(r), image.row_bytes());
-  }
-  return encoding == "png" ? log::encode_png(image, 9) : log::encode_webp_lossless(image);
-}
 
 constexpr std::uint64_t kNoiseSubstream = 0xCA3E7A;  // camera noise stream, independent of the IMU's
 
@@ -52,184 +40,144 @@ Eigen::Isometry3d pose_of(const sim::RigState& s) {
   return T;
 }
 
-void remove_log_files(const std::string& path) {
-  std::error_code ec;
-  for (const char* suffix : {"", "-wal", "-shm", "-journal"}) std::filesystem::remove(path + suffix, ec);
-}
-
-/// Copies metadata, the IMU stream and the events of the IMU-only log into `writer`.
-Status copy_imu_part(const log::SessionLogReader& reader, log::SessionLogWriter& writer,
-                     const nlohmann::json& camera_rig, std::int64_t* samples) {
-  static const std::set<std::string> kWriterKeys = {"schema_version", "software_version", "created_utc",
-                                                    "complete"};
-  for (const auto& [key, value] : reader.metadata()) {
-    if (kWriterKeys.count(key) != 0) continue;
-    if (key == "rig_config") {
-      nlohmann::json rig = nlohmann::json::parse(value, nullptr, false);
-      if (rig.is_discarded() || !rig.is_object()) rig = nlohmann::json::object();
-      rig["camera"] = camera_rig;
-      IMUCAL_TRY(writer.set_metadata(key, rig.dump()));
-    } else {
-      IMUCAL_TRY(writer.set_metadata(key, value));
-    }
-  }
-  if (reader.metadata().count("rig_config") == 0) {
-    IMUCAL_TRY(writer.set_metadata("rig_config", nlohmann::json{{"camera", camera_rig}}.dump()));
-  }
-  for (const auto& [id, info] : reader.imu_streams()) {
-    auto out_id = writer.add_imu_stream(info);
-    if (!out_id.ok()) return out_id.error();
-    std::vector<ImuSample> batch;
-    batch.reserve(4096);
-    Status status;
-    auto visited = reader.for_each_imu(id, log::kTimeMin, log::kTimeMax, [&](const ImuSample& s) {
-      batch.push_back(s);
-      ++*samples;
-      if (batch.size() == 4096) {
-        status = writer.append_imu(*out_id, batch);
-        batch.clear();
-        return status.ok();
-      }
-      return true;
-    });
-    IMUCAL_TRY(status);
-    IMUCAL_TRY(visited);
-    if (!batch.empty()) IMUCAL_TRY(writer.append_imu(*out_id, batch));
-  }
-  auto events = reader.events();
-  if (!events.ok()) return events.error();
-  for (const log::Event& e : *events) IMUCAL_TRY(writer.append_event(e));
-  return {};
-}
-
 }  // namespace
 
 namespace {
 
-constexpr double kImuShare = 0.05;  // of the progress: the IMU part is quick next to rendering
+/// The frames of the session: frame k (k = 0, 1, ...) is stamped t_cam = (k0 + k) * period on
+/// the camera's clock and shows the scene of IMU time t_cam + timeshift, integrated over the
+/// exposure centred there. Only frames whose whole exposure lies inside the trajectory exist.
+struct FramePlan {
+  std::int64_t k0 = 0, k1 = -1;
+  TimeNs period_ns = 0;
+};
 
-/// The IMU part, through the same code as the other simulated sessions, into the scratch log
-/// `imu_part` (removed again on failure).
-Result<sim::SimTruth> write_imu_part(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj,
-                                     const std::string& imu_part, const ProgressFn& progress) {
-  SimImuSessionOptions imu_opt;
-  imu_opt.kind = "camimu";
-  imu_opt.script = "checkerboard";
-  imu_opt.seed = options.seed;
-  imu_opt.imu_rate_hz = options.imu_rate_hz;
-  imu_opt.path = options.imu_path;
-  imu_opt.imu = options.imu ? *options.imu : sim::ImuModelParams::draw(options.seed);
-  imu_opt.params_from_file = options.imu_params_from_file;
-  imu_opt.overwrite = true;
-  remove_log_files(imu_part);
-  auto imu_truth = write_sim_imu_session(imu_opt, traj, imu_part, "", [&](double f) {
-    if (progress) progress(kImuShare * f);
-  });
-  if (!imu_truth.ok()) {
-    remove_log_files(imu_part);
-    return imu_truth.error().context("camimu IMU part");
-  }
-  return imu_truth;
-}
-
-/// Renders the frames and appends them to camera stream `cam_id`. Frame k is stamped
-/// t_cam = k * period on the camera's clock and shows the scene of IMU time t_cam + timeshift,
-/// integrated over the exposure centred there. Only frames whose whole exposure lies inside the
-/// trajectory are recorded.
-Status write_frames(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj,
-                    const sim::CheckerboardRenderer& renderer, const Eigen::Isometry3d& T_world_board,
-                    log::SessionLogWriter& writer, int cam_id, CamImuSimSummary& sum,
-                    const ProgressFn& progress) {
+Result<FramePlan> plan_frames(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj) {
+  FramePlan plan;
   const TimeNs shift_ns = s_to_ns(options.timeshift_cam_imu_s);
   const TimeNs half_exposure_ns = options.exposure_ns / 2;
-  const double period_ns = 1e9 / options.camera_rate_hz;
+  plan.period_ns = static_cast<TimeNs>(std::llround(1e9 / options.camera_rate_hz));
+  const double period = static_cast<double>(plan.period_ns);
   const TimeNs t_begin = traj.start_ns() + half_exposure_ns - shift_ns;  // earliest t_cam
   const TimeNs t_end = traj.end_ns() - (options.exposure_ns - half_exposure_ns) - shift_ns;
-  const std::int64_t k0 = static_cast<std::int64_t>(std::ceil(static_cast<double>(t_begin) / period_ns));
-  const std::int64_t k1 = static_cast<std::int64_t>(std::floor(static_cast<double>(t_end) / period_ns));
-  if (k1 < k0) {
+  plan.k0 = static_cast<std::int64_t>(std::ceil(static_cast<double>(t_begin) / period));
+  plan.k1 = static_cast<std::int64_t>(std::floor(static_cast<double>(t_end) / period));
+  if (plan.k1 < plan.k0) {
     return make_error(Errc::kInvalidArgument, "camimu: the motion is too short for a single frame");
   }
-  auto T_cam_board_at = [&](TimeNs t_imu_ns) {
-    return options.T_cam_imu * pose_of(traj.at(t_imu_ns)).inverse() * T_world_board;
-  };
-  sim::Rng noise(sim::Rng::substream(options.seed, kNoiseSubstream));
-  std::vector<Eigen::Isometry3d> subs;
-  for (std::int64_t k = k0; k <= k1; ++k) {
-    const TimeNs t_cam = static_cast<TimeNs>(std::llround(static_cast<double>(k) * period_ns));
-    const TimeNs t_open = t_cam + shift_ns - half_exposure_ns;  // IMU time the exposure starts
-    int n_sub = 1;
-    if (options.motion_blur) {
-      n_sub =
-          renderer.sub_exposures_needed(T_cam_board_at(t_open), T_cam_board_at(t_open + options.exposure_ns));
-    }
-    subs.clear();
-    for (int i = 0; i < n_sub; ++i) {
-      const double f = options.motion_blur ? (i + 0.5) / n_sub : 0.5;
-      subs.push_back(T_cam_board_at(t_open + static_cast<TimeNs>(std::llround(f * options.exposure_ns))));
-    }
-    const cv::Mat image = renderer.render(subs, &noise);
-    const sim::CornerTruth truth = renderer.project_corners(T_cam_board_at(t_cam + shift_ns));
-    if (truth.visible_count == static_cast<int>(truth.px.size())) ++sum.frames_all_corners_visible;
-    if (truth.visible_count == 0) ++sum.frames_no_corner_visible;
-
-    CameraFrame frame;
-    frame.t_ns = t_cam;
-    frame.width = image.cols;
-    frame.height = image.rows;
-    frame.encoding = options.image_encoding;
-    frame.exposure_ns = options.exposure_ns;
-    frame.sequence = static_cast<std::uint32_t>(k - k0);
-    auto encoded = encode_frame(image, options.image_encoding);
-    if (!encoded.ok()) return encoded.error().context("camimu: encoding frame " + std::to_string(k - k0));
-    frame.data = std::move(*encoded);
-    sum.image_bytes += static_cast<std::int64_t>(frame.data.size());
-    IMUCAL_TRY(writer.append_frame(cam_id, frame));
-    ++sum.frames;
-    if (progress && (k - k0) % 20 == 0) {
-      progress(kImuShare +
-               (1.0 - kImuShare) * static_cast<double>(k - k0 + 1) / static_cast<double>(k1 - k0 + 1));
-    }
-  }
-  return {};
+  return plan;
 }
 
-/// The final log: the IMU part copied from `imu_part`, the target and the camera stream.
-Status write_camimu_log(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj,
-                        const sim::CheckerboardRenderer& renderer, const Eigen::Isometry3d& T_world_board,
-                        const std::string& imu_part, const std::string& log_path, CamImuSimSummary& sum,
-                        const ProgressFn& progress) {
-  nlohmann::json camera_rig = {{"device", "sim"},
-                               {"model", "checkerboard renderer (simulated)"},
-                               {"width", options.camera.width},
-                               {"height", options.camera.height},
-                               {"rate_hz", options.camera_rate_hz},
-                               {"exposure_ns", options.exposure_ns},
-                               {"encoding", options.image_encoding},
-                               {"timestamp_source", "mid-exposure"}};
-  log::SessionLogWriterOptions wopt;
-  wopt.overwrite = options.overwrite;
-  wopt.commit_interval_ns = 5 * kNsPerSecond;
-  auto reader = log::SessionLogReader::open(imu_part);
-  if (!reader.ok()) return reader.error().context("camimu IMU part");
-  auto writer_r = log::SessionLogWriter::create(log_path, wopt);
-  if (!writer_r.ok()) return writer_r.error();
-  log::SessionLogWriter& writer = **writer_r;
-  IMUCAL_TRY(copy_imu_part(**reader, writer, camera_rig, &sum.imu_samples));
-  IMUCAL_TRY(writer.set_metadata("target", target_to_yaml(options.target)));
+/// Renders the virtual camera's frames: the board seen from the camera at the frame's IMU time,
+/// motion-blurred over the exposure, with sensor noise from the seed's camera substream.
+class FrameSource {
+ public:
+  FrameSource(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj,
+              const sim::CheckerboardRenderer& renderer, const Eigen::Isometry3d& T_world_board,
+              CamImuSimSummary& sum)
+      : options_(options),
+        traj_(traj),
+        renderer_(renderer),
+        T_world_board_(T_world_board),
+        sum_(sum),
+        noise_(sim::Rng::substream(options.seed, kNoiseSubstream)) {}
 
-  CameraStreamInfo cam_info;
-  cam_info.name = "cam0";
-  cam_info.width = options.camera.width;
-  cam_info.height = options.camera.height;
-  cam_info.rate_hz = options.camera_rate_hz;
-  cam_info.backend = "sim";
-  cam_info.device = "sim";
-  cam_info.timestamp_source = "mid-exposure";
-  auto cam_id = writer.add_camera_stream(cam_info);
-  if (!cam_id.ok()) return cam_id.error();
-  IMUCAL_TRY(write_frames(options, traj, renderer, T_world_board, writer, *cam_id, sum, progress));
-  return writer.close();
+  /// Host time = trajectory (IMU) time + host_offset_ns.
+  Status render(TimeNs t_mid_host_ns, TimeNs host_offset_ns, std::span<std::uint8_t> pixels) {
+    const TimeNs t_mid_imu = t_mid_host_ns - host_offset_ns + s_to_ns(options_.timeshift_cam_imu_s);
+    const TimeNs t_open = t_mid_imu - options_.exposure_ns / 2;
+    int n_sub = 1;
+    if (options_.motion_blur) {
+      n_sub = renderer_.sub_exposures_needed(T_cam_board_at(t_open),
+                                             T_cam_board_at(t_open + options_.exposure_ns));
+    }
+    subs_.clear();
+    for (int i = 0; i < n_sub; ++i) {
+      const double f = options_.motion_blur ? (i + 0.5) / n_sub : 0.5;
+      subs_.push_back(T_cam_board_at(t_open + static_cast<TimeNs>(std::llround(f * options_.exposure_ns))));
+    }
+    const cv::Mat image = renderer_.render(subs_, &noise_);
+    const sim::CornerTruth truth = renderer_.project_corners(T_cam_board_at(t_mid_imu));
+    if (truth.visible_count == static_cast<int>(truth.px.size())) ++sum_.frames_all_corners_visible;
+    if (truth.visible_count == 0) ++sum_.frames_no_corner_visible;
+    const std::size_t w = static_cast<std::size_t>(image.cols);
+    if (pixels.size() != w * static_cast<std::size_t>(image.rows)) {
+      return make_error(Errc::kInvalidArgument, "camimu: the camera's buffer does not match the render size");
+    }
+    for (int r = 0; r < image.rows; ++r) {
+      std::memcpy(pixels.data() + w * static_cast<std::size_t>(r), image.ptr<std::uint8_t>(r), w);
+    }
+    ++sum_.frames;
+    return {};
+  }
+
+ private:
+  Eigen::Isometry3d T_cam_board_at(TimeNs t_imu_ns) const {
+    return options_.T_cam_imu * pose_of(traj_.at(t_imu_ns)).inverse() * T_world_board_;
+  }
+
+  const CamImuSimOptions& options_;
+  const sim::CheckerboardMotion& traj_;
+  const sim::CheckerboardRenderer& renderer_;
+  Eigen::Isometry3d T_world_board_;
+  CamImuSimSummary& sum_;
+  sim::Rng noise_;
+  std::vector<Eigen::Isometry3d> subs_;
+};
+
+/// The IMU session's options with the virtual camera attached.
+SimImuSessionOptions session_options(const CamImuSimOptions& options, const FramePlan& plan,
+                                     FrameSource& source, const ProgressFn& progress,
+                                     acq::CameraAcquisitionStats* stats) {
+  SimImuSessionOptions o;
+  o.kind = "camimu";
+  o.script = "checkerboard";
+  o.seed = options.seed;
+  o.imu_rate_hz = options.imu_rate_hz;
+  o.path = options.imu_path;
+  o.imu = options.imu ? *options.imu : sim::ImuModelParams::draw(options.seed);
+  o.params_from_file = options.imu_params_from_file;
+  o.overwrite = options.overwrite;
+  o.rig_camera_json = nlohmann::json{
+      {"device", "sim"},
+      {"model", "target renderer (simulated)"},
+      {"width", options.camera.width},
+      {"height", options.camera.height},
+      {"rate_hz", options.camera_rate_hz},
+      {"exposure_ns", options.exposure_ns},
+      {"encoding", options.image_encoding},
+      {"timestamp_source",
+       "mid-exposure"}}.dump();
+  o.metadata.emplace_back("target", target_to_yaml(options.target));
+  SimSessionCamera cam;
+  cam.info.name = "cam0";
+  cam.info.backend = "sim";
+  cam.info.device = "sim";
+  cam.stream.encoding = options.image_encoding;
+  cam.stream.png_level = 9;
+  cam.stats_out = stats;
+  const std::int64_t frames = plan.k1 - plan.k0 + 1;
+  cam.make = [&options, plan, frames, &source, progress](
+                 std::function<TimeNs()> clock,
+                 TimeNs offset) -> Result<std::unique_ptr<drivers::camera::Camera>> {
+    drivers::camera::fake::VirtualCameraOptions vo;
+    vo.width = options.camera.width;
+    vo.height = options.camera.height;
+    vo.rate_hz = options.camera_rate_hz;
+    vo.exposure_ns = options.exposure_ns;
+    vo.first_frame_ns = plan.k0 * plan.period_ns + offset;
+    vo.frame_limit = static_cast<std::uint32_t>(frames);
+    vo.clock = std::move(clock);
+    auto camera = drivers::camera::fake::VirtualCamera::create(
+        vo, [&source, offset, frames, progress](TimeNs t_mid, std::uint32_t k, std::span<std::uint8_t> px) {
+          if (progress && k % 20 == 0) progress(static_cast<double>(k + 1) / static_cast<double>(frames));
+          return source.render(t_mid, offset, px);
+        });
+    if (!camera.ok()) return camera.error();
+    return std::unique_ptr<drivers::camera::Camera>(std::move(*camera));
+  };
+  o.cameras.push_back(std::move(cam));
+  return o;
 }
 
 /// The truth file: the IMU truth plus the camera in Kalibr camchain naming.
@@ -284,17 +232,21 @@ Status simulate_camimu_session(const CamImuSimOptions& options, const std::strin
   if (!renderer_r.ok()) return renderer_r.error();
   const sim::CheckerboardRenderer& renderer = **renderer_r;
 
-  // The IMU part goes into a scratch log next to the output first; the final log copies it and
-  // adds the camera stream.
-  const std::string imu_part = log_path + ".imu-part";
-  auto imu_truth = write_imu_part(options, traj, imu_part, progress);
-  if (!imu_truth.ok()) return imu_truth.error();
+  auto plan = plan_frames(options, traj);
+  if (!plan.ok()) return plan.error();
   const Eigen::Isometry3d T_world_board = traj.T_world_board(options.target);
   CamImuSimSummary sum;
-  const Status status =
-      write_camimu_log(options, traj, renderer, T_world_board, imu_part, log_path, sum, progress);
-  remove_log_files(imu_part);
-  if (!status.ok()) return status;
+  FrameSource source(options, traj, renderer, T_world_board, sum);
+  acq::CameraAcquisitionStats camera_stats;
+  auto imu_truth = write_sim_imu_session(session_options(options, *plan, source, progress, &camera_stats),
+                                         traj, log_path, "");
+  if (!imu_truth.ok()) return imu_truth.error();
+  sum.imu_samples = imu_truth->recording.samples;
+  sum.image_bytes = static_cast<std::int64_t>(camera_stats.stream.encoded_bytes);
+  if (camera_stats.stream.written != static_cast<std::uint64_t>(sum.frames)) {
+    return make_error(Errc::kInternal, "camimu: " + std::to_string(sum.frames) + " frames rendered but " +
+                                           std::to_string(camera_stats.stream.written) + " written");
+  }
 
   const sim::SimTruth& truth = *imu_truth;
   sum.duration_s = truth.trajectory.duration_s;

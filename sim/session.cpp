@@ -102,8 +102,10 @@ Status write_session_metadata(log::SessionLogWriter& writer, const SimImuSession
   for (const SampleDrop& d : options.drops)
     drops.push_back({{"start_s", d.start_s}, {"duration_s", d.duration_s}});
   simj["host_stalls"] = drops;
+  if (!options.rig_camera_json.empty()) rig_json["camera"] = nlohmann::json::parse(options.rig_camera_json);
   IMUCAL_TRY(writer.set_metadata("rig_config", rig_json.dump()));
   IMUCAL_TRY(writer.set_metadata("sim", simj.dump()));
+  for (const auto& [key, value] : options.metadata) IMUCAL_TRY(writer.set_metadata(key, value));
   return writer.set_metadata("device", "sim");
 }
 
@@ -136,7 +138,7 @@ Status write_segment_events(log::SessionLogWriter& writer, const sim::Trajectory
 Status record_trajectory(SimImuRig& rig, const SimImuSessionOptions& options,
                          const sim::Trajectory& trajectory, TimeNs offset, TimeNs setup_ns,
                          log::SessionLogWriter& writer, int stream, sim::RecordingSummary& rec,
-                         const ProgressFn& progress) {
+                         const std::function<void()>& after_step, const ProgressFn& progress) {
   const TimeNs t_start = trajectory.start_ns(), t_end = trajectory.end_ns();
   const TimeNs duration_ns = std::max<TimeNs>(1, t_end - t_start);
   std::vector<ImuSample> out, batch;
@@ -152,6 +154,7 @@ Status record_trajectory(SimImuRig& rig, const SimImuSessionOptions& options,
     }
     if (rig.clock().now_ns() - offset > t_end + setup_ns) break;  // the chip stopped delivering
     if (auto st = rig.acquisition().step(out); !st.ok()) return st.error().context("simulated acquisition");
+    after_step();
     for (ImuSample& s : out) {
       s.t_ns -= offset;
       if (s.t_ns < t_start) continue;
@@ -178,6 +181,67 @@ Status record_trajectory(SimImuRig& rig, const SimImuSessionOptions& options,
   if (!batch.empty()) IMUCAL_TRY(writer.append_imu(stream, batch));
   return {};
 }
+
+/// The session's cameras, recorded through the camera path (acquisition/camera_acquisition.hpp).
+class SimCameras {
+ public:
+  Status open(const SimImuSessionOptions& options, SimImuRig& rig, TimeNs offset,
+              log::SessionLogWriter& writer) {
+    for (const SimSessionCamera& sc : options.cameras) {
+      auto camera = sc.make([&rig] { return rig.clock().now_ns(); }, offset);
+      if (!camera.ok()) return camera.error().context("simulated camera " + sc.info.name);
+      acq::CameraStreamOptions so = sc.stream;
+      so.block_when_full = true;  // simulated time waits for the encoder, as a real-time rig need not
+      so.time_offset_ns = offset;
+      auto stream = acq::CameraStream::create((*camera)->format(), (*camera)->timestamp_meaning(), so);
+      if (!stream.ok()) return stream.error().context("camera " + sc.info.name);
+      CameraStreamInfo info = sc.info;
+      const auto format = (*camera)->format();
+      info.width = format.width;
+      info.height = format.height;
+      info.rate_hz = format.rate_hz;
+      info.timestamp_source = (*stream)->timestamp_source();
+      auto id = writer.add_camera_stream(info);
+      if (!id.ok()) return id.error();
+      IMUCAL_TRY((*stream)->start_log(writer, *id));
+      IMUCAL_TRY((*camera)->start());
+      cameras_.push_back(std::move(*camera));
+      stats_out_.push_back(sc.stats_out);
+      acquisitions_.push_back(std::make_unique<acq::CameraAcquisition>(
+          *cameras_.back(), info.name, std::move(*stream),
+          [&writer](log::Event e) { (void)writer.append_event(e); }, 2 * kNsPerSecond));
+    }
+    return {};
+  }
+
+  void service(TimeNs host_now_ns) {
+    for (auto& a : acquisitions_) a->service(host_now_ns);
+  }
+
+  /// Stops the cameras and writes what their encoders hold; the first error, and the counters
+  /// as "camera.<name>" metadata.
+  Status close(log::SessionLogWriter& writer) {
+    Status first;
+    for (auto& c : cameras_) (void)c->stop();
+    for (std::size_t i = 0; i < acquisitions_.size(); ++i) {
+      auto& a = acquisitions_[i];
+      auto st = a->stream().stop();
+      if (!st.ok() && first.ok()) first = st;
+      (void)writer.set_metadata("camera." + a->name(), acq::camera_metadata_json(a->stats()));
+      if (stats_out_[i] != nullptr) *stats_out_[i] = a->stats();
+    }
+    acquisitions_.clear();
+    cameras_.clear();
+    return first;
+  }
+
+  bool empty() const { return cameras_.empty(); }
+
+ private:
+  std::vector<std::unique_ptr<drivers::camera::Camera>> cameras_;
+  std::vector<std::unique_ptr<acq::CameraAcquisition>> acquisitions_;
+  std::vector<acq::CameraAcquisitionStats*> stats_out_;
+};
 
 /// What the sensing elements saw, into the truth.
 void add_sensor_truth(const TrajectorySensorStats& ss, sim::SimTruth& truth) {
@@ -227,7 +291,9 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
   wopt.commit_interval_ns = 5 * kNsPerSecond;  // simulated: commit every 5 s of sample time
   auto writer_r = log::SessionLogWriter::create(log_path, wopt);
   if (!writer_r.ok()) return writer_r.error();
-  auto& writer = *writer_r;
+  auto& raw_writer = *writer_r;
+  // The camera streams' encoder threads share the log with this thread.
+  auto writer = log::synchronized_writer(*raw_writer);
 
   ImuStreamInfo info = drivers::mpu6000::make_stream_info(*settings, "sim");
   info.name = "imu0";
@@ -263,8 +329,21 @@ Result<sim::SimTruth> write_sim_imu_session(const SimImuSessionOptions& options,
   auto rig_r = SimImuRig::create(TrajectorySensor::source(sensor), ro);
   if (!rig_r.ok()) return rig_r.error();
   SimImuRig& rig = **rig_r;
-  IMUCAL_TRY(record_trajectory(rig, options, trajectory, offset, kSetupNs, *writer, *stream, truth.recording,
-                               progress));
+  SimCameras cameras;
+  Status recorded = cameras.open(options, rig, offset, *writer);
+  if (recorded.ok()) {
+    recorded = record_trajectory(
+        rig, options, trajectory, offset, kSetupNs, *writer, *stream, truth.recording,
+        [&] { cameras.service(rig.clock().now_ns()); }, progress);
+  }
+  if (recorded.ok() && !cameras.empty()) {
+    // Frames whose exposure ends after the last sample: let the host clock run on a little.
+    rig.clock().sleep_until(rig.clock().now_ns() + kNsPerSecond);
+    cameras.service(rig.clock().now_ns());
+  }
+  const Status cameras_closed = cameras.close(*writer);
+  IMUCAL_TRY(recorded);
+  IMUCAL_TRY(cameras_closed);
   add_sensor_truth(sensor->stats(), truth);
   IMUCAL_TRY(write_acquisition_metadata(*writer, rig, truth));
   IMUCAL_TRY(writer->close());

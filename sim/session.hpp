@@ -10,13 +10,18 @@
 #include <cstdint>
 #include <functional>
 #include <initializer_list>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "acquisition/camera_acquisition.hpp"
+#include "acquisition/camera_stream.hpp"
+#include "core/frame.hpp"
 #include "core/imu.hpp"
 #include "core/progress.hpp"
 #include "core/result.hpp"
+#include "drivers/camera/camera.hpp"
 #include "drivers/gpio/fake/sim_data_ready.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
 #include "sim/imu_error_model.hpp"
@@ -44,6 +49,21 @@ struct SimImuPath {
   fake::DataReadyTiming data_ready;  // 20 us mean latency, 30 us RMS jitter
 };
 
+/// A camera of a simulated session (the virtual camera, drivers/camera/fake), recorded through
+/// the same camera path as a rig's: its frames are dequeued after every acquisition step, copied
+/// into the camera stream and encoded into the log by the stream's encoder thread.
+struct SimSessionCamera {
+  CameraStreamInfo info;            // name, backend, device as the log describes them
+  acq::CameraStreamOptions stream;  // encoding; the session sets the time offset and waits when full
+  /// Builds the camera on the rig's host clock, once it exists; host time = trajectory time +
+  /// host_offset_ns.
+  std::function<Result<std::unique_ptr<drivers::camera::Camera>>(std::function<TimeNs()> host_clock,
+                                                                 TimeNs host_offset_ns)>
+      make;
+  /// Receives the camera's counters at the end of the session (may be null).
+  acq::CameraAcquisitionStats* stats_out = nullptr;
+};
+
 struct SimImuSessionOptions {
   std::string kind = "static";    // recorded as the truth's `kind` and in the metadata
   std::string script = "static";  // motion script name for the truth's trajectory summary
@@ -55,6 +75,11 @@ struct SimImuSessionOptions {
   bool params_from_file = false;
   std::vector<SampleDrop> drops;
   bool overwrite = false;  // replace an existing log and truth file
+  std::vector<SimSessionCamera> cameras;
+  /// Merged into the rig_config metadata under "camera" (empty: none).
+  std::string rig_camera_json;
+  /// Further metadata for the log.
+  std::vector<std::pair<std::string, std::string>> metadata;
 
   [[nodiscard]] Status validate() const;
 };
