@@ -26,7 +26,8 @@ Result<Layout> layout_of(const std::string& pixel_format) {
   std::string list;
   for (const auto& f : supported_pixel_formats()) list += (list.empty() ? "" : ", ") + f;
   return make_error(Errc::kUnsupported, "pixel format '" + pixel_format +
-                                            "' cannot be recorded; set the camera's pixel_format to one of " + list);
+                                            "' cannot be recorded; set the camera's pixel_format to one of " +
+                                            list);
 }
 
 /// Copies the luma of one frame into `out` (width * height bytes). False when the frame's
@@ -82,7 +83,8 @@ CameraStream::CameraStream(const cam::FrameFormat& format, cam::TimestampMeaning
       slots_(options_.queue_frames),
       free_(options_.queue_frames),
       filled_(options_.queue_frames) {
-  const std::size_t bytes = static_cast<std::size_t>(format_.width) * static_cast<std::size_t>(format_.height);
+  const std::size_t bytes =
+      static_cast<std::size_t>(format_.width) * static_cast<std::size_t>(format_.height);
   for (std::size_t i = 0; i < slots_.size(); ++i) {
     slots_[i].pixels.resize(bytes);
     (void)free_.try_push(static_cast<int>(i));
@@ -92,7 +94,8 @@ CameraStream::CameraStream(const cam::FrameFormat& format, cam::TimestampMeaning
 CameraStream::~CameraStream() { (void)stop(); }
 
 std::string CameraStream::timestamp_source() const {
-  return meaning_ == cam::TimestampMeaning::kEndOfFrame ? cam::timestamp_meaning_name(meaning_) : "mid-exposure";
+  return meaning_ == cam::TimestampMeaning::kEndOfFrame ? cam::timestamp_meaning_name(meaning_)
+                                                        : "mid-exposure";
 }
 
 Status CameraStream::start_log(log::SessionLogWriter& writer, int stream_id) {
@@ -135,7 +138,8 @@ bool CameraStream::publish(cam::Frame& frame) {
     frame.release();
     return false;
   }
-  const TimeNs t = meaning_ == cam::TimestampMeaning::kEndOfFrame ? frame.t_ns : cam::mid_exposure_ns(frame, meaning_);
+  const TimeNs t =
+      meaning_ == cam::TimestampMeaning::kEndOfFrame ? frame.t_ns : cam::mid_exposure_ns(frame, meaning_);
   s.t_ns = t - options_.time_offset_ns;
   s.exposure_ns = frame.exposure_ns;
   s.sequence = frame.sequence;
@@ -157,7 +161,8 @@ Status CameraStream::write_slot(Slot& slot) {
   image.channels = 1;
   image.depth = 8;
   image.data = slot.pixels;  // the encoders take an Image; the copy keeps the slot reusable early
-  auto encoded = options_.encoding == "webp" ? log::encode_webp_lossless(image) : log::encode_png(image, options_.png_level);
+  auto encoded = options_.encoding == "webp" ? log::encode_webp_lossless(image)
+                                             : log::encode_png(image, options_.png_level);
   if (!encoded.ok()) return encoded.error().context("encoding frame " + std::to_string(slot.sequence));
   CameraFrame frame;
   frame.t_ns = slot.t_ns;

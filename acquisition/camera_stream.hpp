@@ -61,9 +61,9 @@ class CameraStream {
  public:
   /// `format` is the camera's configured format; `meaning` what its stamps mark. Fails for a
   /// pixel format that cannot be recorded (the message lists those that can).
-  [[nodiscard]] static Result<std::unique_ptr<CameraStream>> create(const drivers::camera::FrameFormat& format,
-                                                                   drivers::camera::TimestampMeaning meaning,
-                                                                   CameraStreamOptions options = {});
+  [[nodiscard]] static Result<std::unique_ptr<CameraStream>> create(
+      const drivers::camera::FrameFormat& format, drivers::camera::TimestampMeaning meaning,
+      CameraStreamOptions options = {});
   ~CameraStream();  // stops the encoder thread (its error, if any, is lost: call stop() first)
   CameraStream(const CameraStream&) = delete;
   CameraStream& operator=(const CameraStream&) = delete;

@@ -13,14 +13,13 @@
 
 #include "drivers/camera/fake/virtual_camera.hpp"
 #include "sim/camera_render.hpp"
+#include "sim/camera_scene.hpp"
 #include "sim/motion_random.hpp"
 #include "sim/session.hpp"
 #include "sim/truth.hpp"
 
 namespace imucal::sim {
 namespace {
-
-constexpr std::uint64_t kNoiseSubstream = 0xCA3E7A;  // camera noise stream, independent of the IMU's
 
 YAML::Node matrix_yaml(const Eigen::Matrix4d& m) {
   YAML::Node rows(YAML::NodeType::Sequence);
@@ -31,13 +30,6 @@ YAML::Node matrix_yaml(const Eigen::Matrix4d& m) {
     rows.push_back(row);
   }
   return rows;
-}
-
-Eigen::Isometry3d pose_of(const sim::RigState& s) {
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() = s.q_world_body.toRotationMatrix();
-  T.translation() = s.p_world_body;
-  return T;
 }
 
 }  // namespace
@@ -68,67 +60,27 @@ Result<FramePlan> plan_frames(const CamImuSimOptions& options, const sim::Checke
   return plan;
 }
 
-/// Renders the virtual camera's frames: the board seen from the camera at the frame's IMU time,
-/// motion-blurred over the exposure, with sensor noise from the seed's camera substream.
-class FrameSource {
- public:
-  FrameSource(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj,
-              const sim::CheckerboardRenderer& renderer, const Eigen::Isometry3d& T_world_board,
-              CamImuSimSummary& sum)
-      : options_(options),
-        traj_(traj),
-        renderer_(renderer),
-        T_world_board_(T_world_board),
-        sum_(sum),
-        noise_(sim::Rng::substream(options.seed, kNoiseSubstream)) {}
-
-  /// Host time = trajectory (IMU) time + host_offset_ns.
-  Status render(TimeNs t_mid_host_ns, TimeNs host_offset_ns, std::span<std::uint8_t> pixels) {
-    const TimeNs t_mid_imu = t_mid_host_ns - host_offset_ns + s_to_ns(options_.timeshift_cam_imu_s);
-    const TimeNs t_open = t_mid_imu - options_.exposure_ns / 2;
-    int n_sub = 1;
-    if (options_.motion_blur) {
-      n_sub = renderer_.sub_exposures_needed(T_cam_board_at(t_open),
-                                             T_cam_board_at(t_open + options_.exposure_ns));
-    }
-    subs_.clear();
-    for (int i = 0; i < n_sub; ++i) {
-      const double f = options_.motion_blur ? (i + 0.5) / n_sub : 0.5;
-      subs_.push_back(T_cam_board_at(t_open + static_cast<TimeNs>(std::llround(f * options_.exposure_ns))));
-    }
-    const cv::Mat image = renderer_.render(subs_, &noise_);
-    const sim::CornerTruth truth = renderer_.project_corners(T_cam_board_at(t_mid_imu));
-    if (truth.visible_count == static_cast<int>(truth.px.size())) ++sum_.frames_all_corners_visible;
-    if (truth.visible_count == 0) ++sum_.frames_no_corner_visible;
-    const std::size_t w = static_cast<std::size_t>(image.cols);
-    if (pixels.size() != w * static_cast<std::size_t>(image.rows)) {
-      return make_error(Errc::kInvalidArgument, "camimu: the camera's buffer does not match the render size");
-    }
-    for (int r = 0; r < image.rows; ++r) {
-      std::memcpy(pixels.data() + w * static_cast<std::size_t>(r), image.ptr<std::uint8_t>(r), w);
-    }
-    ++sum_.frames;
-    return {};
-  }
-
- private:
-  Eigen::Isometry3d T_cam_board_at(TimeNs t_imu_ns) const {
-    return options_.T_cam_imu * pose_of(traj_.at(t_imu_ns)).inverse() * T_world_board_;
-  }
-
-  const CamImuSimOptions& options_;
-  const sim::CheckerboardMotion& traj_;
-  const sim::CheckerboardRenderer& renderer_;
-  Eigen::Isometry3d T_world_board_;
-  CamImuSimSummary& sum_;
-  sim::Rng noise_;
-  std::vector<Eigen::Isometry3d> subs_;
-};
+SimCameraScene scene_of(const CamImuSimOptions& options, TimeNs host_offset_ns) {
+  SimCameraScene scene;
+  scene.camera = options.camera;
+  scene.target = options.target;
+  scene.T_cam_imu = options.T_cam_imu;
+  scene.timeshift_cam_imu_s = options.timeshift_cam_imu_s;
+  scene.exposure_ns = options.exposure_ns;
+  scene.render.noise_sigma_dn = options.noise_sigma_dn;
+  scene.render.supersampling = options.supersampling;
+  scene.render.optics_blur_sigma_px = options.optics_blur_sigma_px;
+  scene.motion_blur = options.motion_blur;
+  scene.seed = options.seed;
+  scene.host_offset_ns = host_offset_ns;
+  return scene;
+}
 
 /// The IMU session's options with the virtual camera attached.
 SimImuSessionOptions session_options(const CamImuSimOptions& options, const FramePlan& plan,
-                                     FrameSource& source, const ProgressFn& progress,
-                                     acq::CameraAcquisitionStats* stats) {
+                                     const sim::CheckerboardMotion& traj,
+                                     std::shared_ptr<SceneFrameSource>* source_out,
+                                     const ProgressFn& progress, acq::CameraAcquisitionStats* stats) {
   SimImuSessionOptions o;
   o.kind = "camimu";
   o.script = "checkerboard";
@@ -157,9 +109,13 @@ SimImuSessionOptions session_options(const CamImuSimOptions& options, const Fram
   cam.stream.png_level = 9;
   cam.stats_out = stats;
   const std::int64_t frames = plan.k1 - plan.k0 + 1;
-  cam.make = [&options, plan, frames, &source, progress](
+  cam.make = [&options, plan, frames, &traj, source_out, progress](
                  std::function<TimeNs()> clock,
                  TimeNs offset) -> Result<std::unique_ptr<drivers::camera::Camera>> {
+    auto source = SceneFrameSource::create(scene_of(options, offset), traj);
+    if (!source.ok()) return source.error();
+    *source_out = std::move(*source);
+    auto render = SceneFrameSource::as_renderer(*source_out);
     drivers::camera::fake::VirtualCameraOptions vo;
     vo.width = options.camera.width;
     vo.height = options.camera.height;
@@ -169,9 +125,9 @@ SimImuSessionOptions session_options(const CamImuSimOptions& options, const Fram
     vo.frame_limit = static_cast<std::uint32_t>(frames);
     vo.clock = std::move(clock);
     auto camera = drivers::camera::fake::VirtualCamera::create(
-        vo, [&source, offset, frames, progress](TimeNs t_mid, std::uint32_t k, std::span<std::uint8_t> px) {
+        vo, [render, frames, progress](TimeNs t_mid, std::uint32_t k, std::span<std::uint8_t> px) {
           if (progress && k % 20 == 0) progress(static_cast<double>(k + 1) / static_cast<double>(frames));
-          return source.render(t_mid, offset, px);
+          return render(t_mid, k, px);
         });
     if (!camera.ok()) return camera.error();
     return std::unique_ptr<drivers::camera::Camera>(std::move(*camera));
@@ -224,29 +180,25 @@ Status simulate_camimu_session(const CamImuSimOptions& options, const std::strin
   if (!motion.ok()) return motion.error();
   const sim::CheckerboardMotion& traj = **motion;
 
-  sim::CameraRenderOptions render_opt;
-  render_opt.noise_sigma_dn = options.noise_sigma_dn;
-  render_opt.supersampling = options.supersampling;
-  render_opt.optics_blur_sigma_px = options.optics_blur_sigma_px;
-  auto renderer_r = sim::CheckerboardRenderer::create(options.camera, options.target, render_opt);
-  if (!renderer_r.ok()) return renderer_r.error();
-  const sim::CheckerboardRenderer& renderer = **renderer_r;
-
   auto plan = plan_frames(options, traj);
   if (!plan.ok()) return plan.error();
-  const Eigen::Isometry3d T_world_board = traj.T_world_board(options.target);
-  CamImuSimSummary sum;
-  FrameSource source(options, traj, renderer, T_world_board, sum);
   acq::CameraAcquisitionStats camera_stats;
-  auto imu_truth = write_sim_imu_session(session_options(options, *plan, source, progress, &camera_stats),
-                                         traj, log_path, "");
+  std::shared_ptr<SceneFrameSource> source;
+  auto imu_truth = write_sim_imu_session(
+      session_options(options, *plan, traj, &source, progress, &camera_stats), traj, log_path, "");
   if (!imu_truth.ok()) return imu_truth.error();
+  if (!source) return make_error(Errc::kInternal, "camimu: the camera was never built");
+  CamImuSimSummary sum;
   sum.imu_samples = imu_truth->recording.samples;
+  sum.frames = source->stats().frames;
+  sum.frames_all_corners_visible = source->stats().frames_all_points_visible;
+  sum.frames_no_corner_visible = source->stats().frames_no_point_visible;
   sum.image_bytes = static_cast<std::int64_t>(camera_stats.stream.encoded_bytes);
   if (camera_stats.stream.written != static_cast<std::uint64_t>(sum.frames)) {
     return make_error(Errc::kInternal, "camimu: " + std::to_string(sum.frames) + " frames rendered but " +
                                            std::to_string(camera_stats.stream.written) + " written");
   }
+  const Eigen::Isometry3d T_world_board = source->T_world_target();
 
   const sim::SimTruth& truth = *imu_truth;
   sum.duration_s = truth.trajectory.duration_s;

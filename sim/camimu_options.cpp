@@ -103,4 +103,14 @@ Status CamImuSimOptions::validate() const {
   return render.validate();
 }
 
+CameraModel sim_camera_for(int width, int height) {
+  CameraModel c = CamImuSimOptions::default_sim_camera();
+  if (width == c.width && height == c.height) return c;
+  const double scale = static_cast<double>(width) / c.width;
+  c.intrinsics << c.intrinsics[0] * scale, c.intrinsics[1] * scale, (width - 1) / 2.0, (height - 1) / 2.0;
+  c.width = width;
+  c.height = height;
+  return c;
+}
+
 }  // namespace imucal::sim

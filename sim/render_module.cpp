@@ -7,6 +7,7 @@
 
 extern "C" __attribute__((visibility("default"))) const void* imucal_render_module() {
   static const imucal::sim::RenderModuleApi api{{imucal::kVersion, imucal::kModuleAbi},
-                                                &imucal::sim::simulate_camimu_session};
+                                                &imucal::sim::simulate_camimu_session,
+                                                &imucal::sim::make_scene_renderer};
   return &api;
 }

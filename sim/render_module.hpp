@@ -3,6 +3,7 @@
 // renderer needs OpenCV, loaded by the CLI only for `sim camimu` (app/module_loader.hpp).
 
 #include "core/module.hpp"
+#include "sim/camera_scene.hpp"
 #include "sim/camimu.hpp"
 
 namespace imucal::sim {
@@ -13,6 +14,7 @@ inline constexpr const char* kRenderModuleEntry = "imucal_render_module";
 struct RenderModuleApi {
   ModuleHeader header;
   decltype(&simulate_camimu_session) camimu_session;
+  decltype(&make_scene_renderer) scene_renderer;
 };
 
 }  // namespace imucal::sim

@@ -17,13 +17,17 @@
 #include <string>
 
 #include "acquisition/recorder.hpp"
+#include "app/module_loader.hpp"
 #include "app/rig.hpp"
 #include "core/rig_config.hpp"
 #include "daemon/cli/command.hpp"
+#include "drivers/camera/fake/virtual_camera.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
+#include "sim/camimu.hpp"
 #include "sim/imu_error_model.hpp"
 #include "sim/motion.hpp"
 #include "sim/realtime.hpp"
+#include "sim/render_module.hpp"
 #include "sim/rig.hpp"
 
 namespace imucal::cli {
@@ -42,7 +46,7 @@ struct RecordArgs {
   std::uint64_t seed = 1;
   double sim_clock_ppm = sim::kDefaultClockPpm;
   double sim_jitter_us = 30.0;
-  std::string sim_motion = "still";
+  std::string sim_motion;  // empty: checkerboard with simulated cameras, else still
 };
 
 template <class T>
@@ -72,6 +76,10 @@ void print_summary(const RecordArgs& a, const acq::RecordSummary& s, const std::
     j["log_dropped"] = s.stream.log_dropped;
     j["interrupted"] = s.interrupted;
     if (!extra_json.empty()) j["sim"] = nlohmann::json::parse(extra_json);
+    for (const auto& c : s.cameras) {
+      j["cameras"].push_back(nlohmann::json::parse(acq::camera_metadata_json(c.stats)));
+      j["cameras"].back()["name"] = c.name;
+    }
     std::cout << j.dump(2) << "\n";
     return;
   }
@@ -84,6 +92,16 @@ void print_summary(const RecordArgs& a, const acq::RecordSummary& s, const std::
               static_cast<unsigned long long>(s.timing.gaps),
               static_cast<unsigned long long>(s.timing.samples_lost),
               static_cast<unsigned long long>(s.stream.log_dropped));
+  for (const auto& c : s.cameras) {
+    const auto& st = c.stats;
+    std::printf(
+        "camera %s: %llu frames written, %llu dropped by the device, %llu dropped for want of a free "
+        "buffer (encoder or disk too slow), %llu stalls%s%s\n",
+        c.name.c_str(), static_cast<unsigned long long>(st.stream.written),
+        static_cast<unsigned long long>(st.stream.device_dropped + st.device.dropped),
+        static_cast<unsigned long long>(st.stream.queue_dropped), static_cast<unsigned long long>(st.stalls),
+        st.failed ? "; FAILED: " : "", st.failed ? st.failure.c_str() : "");
+  }
 }
 
 /// Ends a recording stopped by a signal: the log is complete, so this is a success.
@@ -134,17 +152,64 @@ std::string describe_sim_record(const RecordArgs& a, const mpu::Settings& settin
   return meta.dump();
 }
 
+/// The configured cameras of the simulated rig: virtual cameras (drivers/camera/fake) rendering
+/// the configured target as the rig moves along `motion` (the render module), on the simulated
+/// clock `clock` or, when it is empty, in real time. Frames start a second after the rig powers up.
+std::vector<std::unique_ptr<drivers::camera::Camera>> make_sim_cameras(
+    const RigConfig& config, const RecordArgs& a, std::shared_ptr<const sim::CheckerboardMotion> motion,
+    TimeNs start_ns, const std::function<TimeNs()>& clock, acq::RecordOptions& ro) {
+  std::vector<std::unique_ptr<drivers::camera::Camera>> cameras;
+  if (config.cameras.empty()) return cameras;
+  auto render = app::load_module<sim::RenderModuleApi>(sim::kRenderModule, sim::kRenderModuleEntry);
+  if (!render.ok()) fail(render.error(), "simulated cameras");
+  for (const CameraConfig& cc : config.cameras) {
+    sim::SimCameraScene scene;
+    scene.camera = sim::sim_camera_for(cc.width, cc.height);
+    scene.target = *config.target;
+    scene.T_cam_imu = sim::CamImuSimOptions::default_T_cam_imu();
+    scene.timeshift_cam_imu_s = 0.0;  // the virtual camera stamps on the host clock exactly
+    scene.exposure_ns = 4'000'000;
+    scene.seed = a.seed + cameras.size();
+    scene.host_offset_ns = start_ns;
+    auto renderer = take((*render)->scene_renderer(scene, motion), "simulated camera " + cc.name);
+    drivers::camera::fake::VirtualCameraOptions vo;
+    vo.id = cc.name;
+    vo.width = cc.width;
+    vo.height = cc.height;
+    vo.rate_hz = cc.rate_hz;
+    vo.exposure_ns = scene.exposure_ns;
+    vo.first_frame_ns = start_ns + kNsPerSecond;
+    vo.clock = clock;
+    auto camera = take(drivers::camera::fake::VirtualCamera::create(vo, std::move(renderer)),
+                       "simulated camera " + cc.name);
+    auto st = camera->set_format({cc.width, cc.height, cc.pixel_format, cc.rate_hz});
+    if (!st.ok())
+      throw CliExit{kExitUsage, "camera " + cc.name + " in " + a.config_path + ": " + st.error().message};
+    acq::RecordCamera rc;
+    rc.camera = camera.get();
+    rc.info.name = cc.name;
+    rc.info.backend = "sim";
+    rc.info.device = "sim";
+    ro.cameras.push_back(rc);
+    cameras.push_back(std::move(camera));
+  }
+  return cameras;
+}
+
 /// `record --sim --realtime`: the emulated chip runs on CLOCK_MONOTONIC (a ticker thread) and
 /// is recorded through the event loop and the eventfd data-ready line, as a rig is.
-void run_record_realtime(const RecordArgs& a, const mpu::Settings& settings, const acq::MountingMap& mounting,
-                         const sim::ImuModelParams& params, const sim::Trajectory& trajectory,
-                         acq::RecordOptions& ro, Progress& progress) {
+void run_record_realtime(const RecordArgs& a, const RigConfig& config, const mpu::Settings& settings,
+                         const acq::MountingMap& mounting, const sim::ImuModelParams& params,
+                         const sim::Trajectory& trajectory,
+                         std::shared_ptr<const sim::CheckerboardMotion> board, acq::RecordOptions& ro,
+                         Progress& progress) {
   sim::RealtimeSimRigOptions rig_options;
   fill_sim_rig(rig_options, a, settings, mounting);
   rig_options.start_ns = monotonic_now_ns();
   auto rig = take(sim::RealtimeSimRig::create(
                       sim_source(a, settings, params, trajectory, rig_options.start_ns), rig_options),
                   "simulated rig");
+  auto cameras = make_sim_cameras(config, a, board, rig_options.start_ns, {}, ro);
   const std::string sim_meta = describe_sim_record(a, settings, rig_options.data_ready, ro);
   ro.loop = acq::RecordLoop::kEventLoop;
   ro.stop_on_signals = true;
@@ -153,6 +218,65 @@ void run_record_realtime(const RecordArgs& a, const mpu::Settings& settings, con
   progress.finish();
   print_summary(a, summary, sim_meta);
   note_interrupted(a, summary);
+}
+
+/// The motion of the simulated rig: the script --sim-motion names, by default the checkerboard
+/// motion when cameras are configured (they look at the target) and rest otherwise.
+std::shared_ptr<const sim::Trajectory> sim_trajectory(RecordArgs& a, const RigConfig& config,
+                                                      std::shared_ptr<const sim::CheckerboardMotion>* board) {
+  if (a.sim_motion.empty()) a.sim_motion = config.cameras.empty() ? "still" : "checkerboard";
+  if (!config.cameras.empty() && a.sim_motion != "checkerboard") {
+    throw CliExit{kExitUsage,
+                  "the simulated cameras look at the target during --sim-motion checkerboard; "
+                  "use it, or remove the cameras from " +
+                      a.config_path};
+  }
+  if (a.sim_motion == "static") {
+    sim::StaticProtocolOptions so;
+    return take(sim::make_static_protocol(so, a.seed), "simulated rig");
+  }
+  if (a.sim_motion == "checkerboard") {
+    sim::CheckerboardMotionOptions mo;
+    mo.duration_s = std::max(10.0, a.duration_s + 5.0);
+    std::shared_ptr<const sim::CheckerboardMotion> motion =
+        take(sim::CheckerboardMotion::create(mo, a.seed), "simulated rig");
+    *board = motion;
+    return motion;
+  }
+  sim::StillOptions still;
+  still.duration_s = a.duration_s + 30.0;
+  return take(sim::make_still(still, a.seed), "simulated rig");
+}
+
+/// `record --sim`: the virtual rig (and its cameras) on simulated time, or in real time.
+void run_record_sim(RecordArgs a, const RigConfig& config, const mpu::Settings& settings,
+                    const acq::MountingMap& mounting, acq::RecordOptions& ro, Progress& progress) {
+  for (const CameraConfig& cc : config.cameras) {
+    if (cc.backend != CameraBackend::kSim) {
+      throw CliExit{kExitUsage, std::string("--sim records simulated cameras only; camera ") + cc.name +
+                                    " in " + a.config_path + " has backend " +
+                                    camera_backend_name(cc.backend)};
+    }
+  }
+  std::shared_ptr<const sim::CheckerboardMotion> board;
+  const auto trajectory = sim_trajectory(a, config, &board);
+  sim::ImuModelParams params = sim::ImuModelParams::draw(a.seed);
+  if (a.realtime) {
+    run_record_realtime(a, config, settings, mounting, params, *trajectory, board, ro, progress);
+    return;
+  }
+  sim::SimRigOptions rig_options;
+  fill_sim_rig(rig_options, a, settings, mounting);
+  auto rig = take(
+      sim::SimImuRig::create(sim_source(a, settings, params, *trajectory, rig_options.start_ns), rig_options),
+      "simulated rig");
+  sim::SimImuRig* r = rig.get();
+  auto cameras = make_sim_cameras(
+      config, a, board, rig_options.start_ns, [r] { return r->clock().now_ns(); }, ro);
+  const std::string sim_meta = describe_sim_record(a, settings, rig_options.data_ready, ro);
+  const auto summary = take(acq::record_imu_session(rig->acquisition(), rig->driver(), ro), "recording");
+  progress.finish();
+  print_summary(a, summary, sim_meta);
 }
 
 void run_record(const RecordArgs& a) {
@@ -174,32 +298,7 @@ void run_record(const RecordArgs& a) {
 
   acq::AcquisitionOptions ao;
   if (sim) {
-    // The virtual rig at rest (gravity, sensor noise, warm-up) or moved through the static
-    // protocol, read through the emulated chip.
-    std::unique_ptr<sim::Trajectory> trajectory;
-    if (a.sim_motion == "static") {
-      sim::StaticProtocolOptions so;
-      trajectory = take(sim::make_static_protocol(so, a.seed), "simulated rig");
-    } else {
-      sim::StillOptions still;
-      still.duration_s = a.duration_s + 30.0;
-      trajectory = take(sim::make_still(still, a.seed), "simulated rig");
-    }
-    sim::ImuModelParams params = sim::ImuModelParams::draw(a.seed);
-    if (a.realtime) {
-      run_record_realtime(a, settings, mounting, params, *trajectory, ro, progress);
-      return;
-    }
-    sim::SimRigOptions rig_options;
-    fill_sim_rig(rig_options, a, settings, mounting);
-    rig_options.acquisition = ao;
-    auto rig = take(sim::SimImuRig::create(sim_source(a, settings, params, *trajectory, rig_options.start_ns),
-                                           rig_options),
-                    "simulated rig");
-    const std::string sim_meta = describe_sim_record(a, settings, rig_options.data_ready, ro);
-    const auto summary = take(acq::record_imu_session(rig->acquisition(), rig->driver(), ro), "recording");
-    progress.finish();
-    print_summary(a, summary, sim_meta);
+    run_record_sim(a, config, settings, mounting, ro, progress);
     return;
   }
 
@@ -244,9 +343,11 @@ const CommandRegistrar kRegistrar(20, [](CLI::App& root) {
       ->check(CLI::Range(0.0, 1000.0));
   cmd->add_option(
          "--sim-motion", args->sim_motion,
-         "Simulation: what the rig does: still (at rest on a table) or static (the multi-position "
-         "protocol of `imucal sim static`: 50 s still, then 40 poses; about 3.5 min) (default still)")
-      ->check(CLI::IsMember({"still", "static"}));
+         "Simulation: what the rig does: still (at rest on a table), static (the multi-position "
+         "protocol of `imucal sim static`: 50 s still, then 40 poses; about 3.5 min) or checkerboard "
+         "(moved in front of the configured target, as `imucal sim camimu`; the simulated cameras need it) "
+         "(default: checkerboard when the configuration has cameras, else still)")
+      ->check(CLI::IsMember({"still", "static", "checkerboard"}));
   cmd->add_flag("--force", args->force, "Replace the log if it exists");
   cmd->add_flag("--json", args->json, "Print the summary as JSON");
   cmd->callback([args] { run_record(*args); });

@@ -60,10 +60,12 @@ std::vector<CameraFrame> read_frames(const std::string& path) {
   if (!r.ok()) return out;
   auto id = (*r)->find_camera_stream();
   EXPECT_TRUE(id.ok());
-  EXPECT_TRUE((*r)->for_each_frame(*id, log::kTimeMin, log::kTimeMax, [&](const CameraFrame& f) {
-                    out.push_back(f);
-                    return true;
-                  }).ok());
+  EXPECT_TRUE((*r)->for_each_frame(*id, log::kTimeMin, log::kTimeMax,
+                                   [&](const CameraFrame& f) {
+                                     out.push_back(f);
+                                     return true;
+                                   })
+                  .ok());
   return out;
 }
 
@@ -107,10 +109,13 @@ TEST(CameraStream, RecordsGreyAndTheLumaOfYuyvLosslesslyAndReleasesBuffersAtOnce
   ASSERT_TRUE(reader.ok());
   std::vector<CameraFrame> got;
   for (int id : {*gid, *yid}) {
-    ASSERT_TRUE((*reader)->for_each_frame(id, log::kTimeMin, log::kTimeMax, [&](const CameraFrame& f) {
-                           got.push_back(f);
-                           return true;
-                         }).ok());
+    ASSERT_TRUE((*reader)
+                    ->for_each_frame(id, log::kTimeMin, log::kTimeMax,
+                                     [&](const CameraFrame& f) {
+                                       got.push_back(f);
+                                       return true;
+                                     })
+                    .ok());
   }
   ASSERT_EQ(got.size(), 2u);
   EXPECT_EQ(got[0].t_ns, 1'200'000);  // start of exposure + half the exposure
@@ -121,8 +126,10 @@ TEST(CameraStream, RecordsGreyAndTheLumaOfYuyvLosslesslyAndReleasesBuffersAtOnce
   ASSERT_TRUE(gi_img.ok() && yi_img.ok());
   for (int r = 0; r < h; ++r) {
     for (int c = 0; c < w; ++c) {
-      EXPECT_EQ(gi_img->data[static_cast<std::size_t>(r * w + c)], g.bytes[static_cast<std::size_t>(r * 8 + c)]);
-      EXPECT_EQ(yi_img->data[static_cast<std::size_t>(r * w + c)], y.bytes[static_cast<std::size_t>(2 * (r * w + c))]);
+      EXPECT_EQ(gi_img->data[static_cast<std::size_t>(r * w + c)],
+                g.bytes[static_cast<std::size_t>(r * 8 + c)]);
+      EXPECT_EQ(yi_img->data[static_cast<std::size_t>(r * w + c)],
+                y.bytes[static_cast<std::size_t>(2 * (r * w + c))]);
     }
   }
 }
@@ -166,7 +173,8 @@ TEST(CameraStream, AFullPoolDropsAndCountsAndMarksTheNextFrame) {
   EXPECT_EQ((*s)->stats().queue_dropped, 3u);
   auto shared = log::synchronized_writer(*writer);
   ASSERT_TRUE((*s)->start_log(*shared, *id).ok());
-  for (int i = 0; i < 200 && (*s)->stats().written < 2; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  for (int i = 0; i < 200 && (*s)->stats().written < 2; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
   auto f = frame_over(b, 8, 8, "GREY", 9, 9000);  // sequence 5..8 missing as well
   EXPECT_TRUE((*s)->publish(f));
   ASSERT_TRUE((*s)->stop().ok());
@@ -183,8 +191,11 @@ TEST(CameraStream, AFullPoolDropsAndCountsAndMarksTheNextFrame) {
 /// A log writer whose frame appends take `delay` (a slow card): frames must drop, samples not.
 class SlowFrameWriter final : public log::SessionLogWriter {
  public:
-  SlowFrameWriter(log::SessionLogWriter& inner, std::chrono::milliseconds delay) : inner_(inner), delay_(delay) {}
-  Status set_metadata(const std::string& k, const std::string& v) override { return inner_.set_metadata(k, v); }
+  SlowFrameWriter(log::SessionLogWriter& inner, std::chrono::milliseconds delay)
+      : inner_(inner), delay_(delay) {}
+  Status set_metadata(const std::string& k, const std::string& v) override {
+    return inner_.set_metadata(k, v);
+  }
   Result<int> add_imu_stream(const ImuStreamInfo& i) override { return inner_.add_imu_stream(i); }
   Result<int> add_camera_stream(const CameraStreamInfo& i) override { return inner_.add_camera_stream(i); }
   Status append_imu(int id, std::span<const ImuSample> s) override { return inner_.append_imu(id, s); }
@@ -239,8 +250,9 @@ TEST(CameraStream, ASlowDiskDropsFramesNeverImuSamples) {
   EXPECT_EQ(is.log_written, 1500u);
   EXPECT_GT(fs.queue_dropped, 0u);
   EXPECT_EQ(fs.written + fs.queue_dropped, published_frames);
-  std::printf("  %u frames published, %llu written, %llu dropped; 1500 IMU samples written\n", published_frames,
-              static_cast<unsigned long long>(fs.written), static_cast<unsigned long long>(fs.queue_dropped));
+  std::printf("  %u frames published, %llu written, %llu dropped; 1500 IMU samples written\n",
+              published_frames, static_cast<unsigned long long>(fs.written),
+              static_cast<unsigned long long>(fs.queue_dropped));
   ASSERT_TRUE(writer->close().ok());
 }
 

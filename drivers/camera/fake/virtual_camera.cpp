@@ -59,8 +59,8 @@ Status VirtualCamera::set_format(const FrameFormat& f) {
     return make_error(Errc::kUnsupported,
                       "virtual camera " + options_.id + ": format " + std::to_string(f.width) + "x" +
                           std::to_string(f.height) + " " + f.pixel_format + " is not offered; it offers " +
-                          std::to_string(options_.width) + "x" + std::to_string(options_.height) + " GREY at " +
-                          std::to_string(options_.rate_hz) + " Hz");
+                          std::to_string(options_.width) + "x" + std::to_string(options_.height) +
+                          " GREY at " + std::to_string(options_.rate_hz) + " Hz");
   }
   return {};
 }
@@ -184,7 +184,8 @@ Result<Frame> VirtualCamera::dequeue() {
     while (due(next_, now)) {
       const std::uint32_t k = next_++;
       Status st = produce(k);
-      if (!st.ok()) return st.error().context("virtual camera " + options_.id + " frame " + std::to_string(k));
+      if (!st.ok())
+        return st.error().context("virtual camera " + options_.id + " frame " + std::to_string(k));
     }
   }
   if (ready_.empty()) {

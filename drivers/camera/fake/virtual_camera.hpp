@@ -97,9 +97,9 @@ class VirtualCamera final : public Camera {
 
   mutable std::mutex mutex_;
   std::condition_variable wake_;
-  std::vector<int> free_;                                 // buffer indices the device may fill
-  std::deque<std::pair<int, std::uint32_t>> ready_;       // filled buffers and their frame index
-  std::uint32_t next_ = 0;                                // next frame index to produce
+  std::vector<int> free_;                            // buffer indices the device may fill
+  std::deque<std::pair<int, std::uint32_t>> ready_;  // filled buffers and their frame index
+  std::uint32_t next_ = 0;                           // next frame index to produce
   bool streaming_ = false;
   bool stopping_ = false;
   bool lost_ = false;

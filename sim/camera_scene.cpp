@@ -1,0 +1,86 @@
+#include "sim/camera_scene.hpp"
+
+#include <cmath>
+#include <cstring>
+
+#include "sim/camera_render.hpp"
+#include "sim/camimu.hpp"
+
+namespace imucal::sim {
+namespace {
+
+constexpr std::uint64_t kNoiseSubstream = 0xCA3E7A;  // camera noise stream, independent of the IMU's
+
+Eigen::Isometry3d pose_of(const RigState& s) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = s.q_world_body.toRotationMatrix();
+  T.translation() = s.p_world_body;
+  return T;
+}
+
+}  // namespace
+
+SceneFrameSource::SceneFrameSource(const SimCameraScene& scene, const CheckerboardMotion& motion)
+    : scene_(scene), motion_(motion), noise_(Rng::substream(scene.seed, kNoiseSubstream)) {}
+
+Result<std::unique_ptr<SceneFrameSource>> SceneFrameSource::create(const SimCameraScene& scene,
+                                                                   const CheckerboardMotion& motion) {
+  auto renderer = CheckerboardRenderer::create(scene.camera, scene.target, scene.render);
+  if (!renderer.ok()) return renderer.error();
+  std::unique_ptr<SceneFrameSource> source(new SceneFrameSource(scene, motion));
+  source->renderer_ = std::move(*renderer);
+  source->T_world_board_ = motion.T_world_board(scene.target);
+  return source;
+}
+
+SceneFrameSource::~SceneFrameSource() = default;
+
+Result<drivers::camera::fake::FrameRenderer> make_scene_renderer(const SimCameraScene& scene,
+                                                                 std::shared_ptr<const CheckerboardMotion> motion) {
+  if (!motion) return make_error(Errc::kInvalidArgument, "simulated camera: no motion");
+  auto source = SceneFrameSource::create(scene, *motion);
+  if (!source.ok()) return source.error();
+  std::shared_ptr<SceneFrameSource> shared(std::move(*source));
+  return drivers::camera::fake::FrameRenderer(
+      [shared, motion](TimeNs t_mid, std::uint32_t, std::span<std::uint8_t> px) { return shared->render(t_mid, px); });
+}
+
+Eigen::Isometry3d SceneFrameSource::T_cam_board_at(TimeNs t_imu_ns) const {
+  return scene_.T_cam_imu * pose_of(motion_.at(t_imu_ns)).inverse() * T_world_board_;
+}
+
+Status SceneFrameSource::render(TimeNs t_mid_host_ns, std::span<std::uint8_t> pixels) {
+  const TimeNs t_mid_imu = t_mid_host_ns - scene_.host_offset_ns + s_to_ns(scene_.timeshift_cam_imu_s);
+  const TimeNs t_open = t_mid_imu - scene_.exposure_ns / 2;
+  int n_sub = 1;
+  if (scene_.motion_blur) {
+    n_sub = renderer_->sub_exposures_needed(T_cam_board_at(t_open), T_cam_board_at(t_open + scene_.exposure_ns));
+  }
+  subs_.clear();
+  for (int i = 0; i < n_sub; ++i) {
+    const double f = scene_.motion_blur ? (i + 0.5) / n_sub : 0.5;
+    subs_.push_back(T_cam_board_at(t_open + static_cast<TimeNs>(std::llround(f * scene_.exposure_ns))));
+  }
+  const cv::Mat image = renderer_->render(subs_, &noise_);
+  const CornerTruth truth = renderer_->project_corners(T_cam_board_at(t_mid_imu));
+  if (truth.visible_count == static_cast<int>(truth.px.size())) ++stats_.frames_all_points_visible;
+  if (truth.visible_count == 0) ++stats_.frames_no_point_visible;
+  const std::size_t w = static_cast<std::size_t>(image.cols);
+  if (pixels.size() != w * static_cast<std::size_t>(image.rows)) {
+    return make_error(Errc::kInvalidArgument, "simulated camera: the buffer does not match the render size");
+  }
+  for (int r = 0; r < image.rows; ++r) {
+    std::memcpy(pixels.data() + w * static_cast<std::size_t>(r), image.ptr<std::uint8_t>(r), w);
+  }
+  ++stats_.frames;
+  return {};
+}
+
+drivers::camera::fake::FrameRenderer SceneFrameSource::as_renderer(std::shared_ptr<SceneFrameSource> source) {
+  return [source = std::move(source)](TimeNs t_mid, std::uint32_t, std::span<std::uint8_t> px) {
+    return source->render(t_mid, px);
+  };
+}
+
+
+}  // namespace imucal::sim

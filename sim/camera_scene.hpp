@@ -1,0 +1,91 @@
+#pragma once
+// What the virtual rig's camera sees: the target fixed in the world, the rig moving along a
+// checkerboard motion, the camera mounted at T_cam_imu, frames exposed around their stamps and
+// shifted by timeshift_cam_imu. A SceneFrameSource renders the frames the virtual camera
+// (drivers/camera/fake/virtual_camera.hpp) delivers; `imucal sim camimu` and `imucal record --sim`
+// with cameras both use it.
+//
+// Conventions (docs/conventions.md): T_cam_imu maps IMU (body) points into the camera frame;
+// t_imu = t_cam + timeshift_cam_imu.
+
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "core/camera_model.hpp"
+#include "core/result.hpp"
+#include "core/target.hpp"
+#include "core/time.hpp"
+#include "drivers/camera/fake/virtual_camera.hpp"
+#include "sim/camera_render_options.hpp"
+#include "sim/motion.hpp"
+#include "sim/motion_random.hpp"
+
+namespace imucal::sim {
+
+class CheckerboardRenderer;
+
+struct SimCameraScene {
+  CameraModel camera;
+  TargetDescription target;
+  Eigen::Isometry3d T_cam_imu = Eigen::Isometry3d::Identity();
+  double timeshift_cam_imu_s = 0.0;
+  TimeNs exposure_ns = 4'000'000;
+  CameraRenderOptions render;
+  bool motion_blur = true;
+  /// Seeds the sensor noise (its own substream, independent of the IMU's).
+  std::uint64_t seed = 1;
+  /// Host time = trajectory (IMU) time + host_offset_ns.
+  TimeNs host_offset_ns = 0;
+};
+
+/// Frame counts of a rendered session.
+struct SceneFrameStats {
+  std::int64_t frames = 0;
+  std::int64_t frames_all_points_visible = 0;
+  std::int64_t frames_no_point_visible = 0;
+};
+
+class SceneFrameSource {
+ public:
+  /// The motion is borrowed and must outlive the source.
+  [[nodiscard]] static Result<std::unique_ptr<SceneFrameSource>> create(const SimCameraScene& scene,
+                                                                        const CheckerboardMotion& motion);
+  ~SceneFrameSource();
+
+  /// Renders the frame whose mid-exposure is at host time t_mid_host_ns into `pixels`
+  /// (width * height bytes, rows of `width`). Frames must be rendered in order for the noise to
+  /// be reproducible.
+  [[nodiscard]] Status render(TimeNs t_mid_host_ns, std::span<std::uint8_t> pixels);
+
+  /// The virtual camera's renderer: this source, shared.
+  static drivers::camera::fake::FrameRenderer as_renderer(std::shared_ptr<SceneFrameSource> source);
+
+  const SceneFrameStats& stats() const { return stats_; }
+  const Eigen::Isometry3d& T_world_target() const { return T_world_board_; }
+
+ private:
+  SceneFrameSource(const SimCameraScene& scene, const CheckerboardMotion& motion);
+  Eigen::Isometry3d T_cam_board_at(TimeNs t_imu_ns) const;
+
+  SimCameraScene scene_;
+  const CheckerboardMotion& motion_;
+  std::unique_ptr<CheckerboardRenderer> renderer_;
+  Eigen::Isometry3d T_world_board_ = Eigen::Isometry3d::Identity();
+  Rng noise_;
+  std::vector<Eigen::Isometry3d> subs_;
+  SceneFrameStats stats_;
+};
+
+/// The virtual camera's renderer for `scene` along `motion` (kept alive by the renderer). The
+/// render module's entry for `imucal record --sim` with cameras.
+[[nodiscard]] Result<drivers::camera::fake::FrameRenderer> make_scene_renderer(
+    const SimCameraScene& scene, std::shared_ptr<const CheckerboardMotion> motion);
+
+/// The simulated camera at another resolution: the default camera's lens (its field of view
+/// across the width, its distortion) on a sensor of width x height, principal point centred.
+CameraModel sim_camera_for(int width, int height);
+
+}  // namespace imucal::sim
