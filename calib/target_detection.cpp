@@ -27,8 +27,9 @@ Status check_image(const GrayView& image) {
     return make_error(Errc::kInvalidArgument, "target detection: empty image (no pixels or a zero size)");
   }
   if (image.stride != 0 && image.stride < static_cast<std::size_t>(image.width)) {
-    return make_error(Errc::kInvalidArgument, "target detection: image stride " + std::to_string(image.stride) +
-                                                  " is smaller than its width " + std::to_string(image.width));
+    return make_error(Errc::kInvalidArgument,
+                      "target detection: image stride " + std::to_string(image.stride) +
+                          " is smaller than its width " + std::to_string(image.width));
   }
   return {};
 }
@@ -166,7 +167,8 @@ int CheckerboardDetector::subpix_half_window(const std::vector<cv::Point2f>& px)
       const cv::Point2f p = px[r * target_.cols + c];
       const cv::Point2f a = px[r * target_.cols + c + 1] - p;
       const cv::Point2f b = px[(r + 1) * target_.cols + c] - p;
-      side = std::min({side, static_cast<double>(std::hypot(a.x, a.y)), static_cast<double>(std::hypot(b.x, b.y))});
+      side = std::min(
+          {side, static_cast<double>(std::hypot(a.x, a.y)), static_cast<double>(std::hypot(b.x, b.y))});
     }
   }
   return std::clamp(static_cast<int>(side * 0.45), 2, 5);
@@ -180,7 +182,8 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
   std::vector<cv::Point2f> px;
   const bool sector_based = options_.checkerboard_method == CheckerboardMethod::kSectorBased;
   if (sector_based) {
-    if (!cv::findChessboardCornersSB(image, pattern, px, cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_ACCURACY)) {
+    if (!cv::findChessboardCornersSB(image, pattern, px,
+                                     cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_ACCURACY)) {
       return obs;
     }
   } else {
@@ -274,7 +277,8 @@ std::unique_ptr<AprilTagContext> make_apriltag_context(double decimate) {
 /// afterwards). With 0.3: 90 % of the tags (docs/targets.md).
 cv::Mat separation_curve() {
   cv::Mat lut(1, 256, CV_8U);
-  for (int i = 0; i < 256; ++i) lut.at<std::uint8_t>(i) = cv::saturate_cast<std::uint8_t>(255.0 * std::pow(i / 255.0, 0.3));
+  for (int i = 0; i < 256; ++i)
+    lut.at<std::uint8_t>(i) = cv::saturate_cast<std::uint8_t>(255.0 * std::pow(i / 255.0, 0.3));
   return lut;
 }
 

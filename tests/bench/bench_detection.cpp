@@ -91,14 +91,16 @@ const std::vector<cv::Mat>& aprilgrid_frames() {
     opt.blur_sigma_px = 0.7;
     std::vector<cv::Mat> out;
     for (int i = 0; i < kFrames; ++i) {
-      const Eigen::Matrix3d R = (Eigen::AngleAxisd(0.3, Eigen::Vector3d(0.6, 0.8 - 0.1 * i, 0.1).normalized()) *
-                                 Eigen::AngleAxisd(0.4 * i, Eigen::Vector3d::UnitZ()))
-                                    .toRotationMatrix() *
-                                Eigen::Vector3d(1, -1, -1).asDiagonal();
+      const Eigen::Matrix3d R =
+          (Eigen::AngleAxisd(0.3, Eigen::Vector3d(0.6, 0.8 - 0.1 * i, 0.1).normalized()) *
+           Eigen::AngleAxisd(0.4 * i, Eigen::Vector3d::UnitZ()))
+              .toRotationMatrix() *
+          Eigen::Vector3d(1, -1, -1).asDiagonal();
       const Eigen::Vector3d t_cam = Eigen::Vector3d(0.03 * (i % 3 - 1), 0.0, 0.95 + 0.05 * i) - R * centre;
-      out.push_back(imucal::test::render_aprilgrid(
-                        t, imucal::test::plane_homography(Eigen::Vector4d(450, 450, 375.5, 239.5), R, t_cam), opt)
-                        .image);
+      out.push_back(
+          imucal::test::render_aprilgrid(
+              t, imucal::test::plane_homography(Eigen::Vector4d(450, 450, 375.5, 239.5), R, t_cam), opt)
+              .image);
     }
     return out;
   }();
@@ -123,7 +125,8 @@ void run_single(benchmark::State& state, const TargetDetector& det, const std::v
     }
     points += obs->ids.size();
   }
-  state.counters["frames/s"] = benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+  state.counters["frames/s"] =
+      benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
   state.counters["points/frame"] = static_cast<double>(points) / static_cast<double>(state.iterations());
 }
 

@@ -60,7 +60,7 @@ struct Page {
     if (!has_tag[pos]) return 1;
     const int b = static_cast<int>(fx / s * kBits);
     const int a = kBits - 1 - static_cast<int>(fy / s * kBits);  // bit row from the top
-    if (a < 2 || a > 7 || b < 2 || b > 7) return 0;                // the black border
+    if (a < 2 || a > 7 || b < 2 || b > 7) return 0;              // the black border
     return bits[pos][a - 2][b - 2] ? 1 : 0;
   }
 };
@@ -104,7 +104,8 @@ AprilGridImage render_aprilgrid(const TargetDescription& target, const Eigen::Ma
       double sum = 0.0;
       for (int sv = 0; sv < n; ++sv) {
         for (int su = 0; su < n; ++su) {
-          const Eigen::Vector3d p = H_target_img * Eigen::Vector3d(u + (su + 0.5) / n - 0.5, v + (sv + 0.5) / n - 0.5, 1.0);
+          const Eigen::Vector3d p =
+              H_target_img * Eigen::Vector3d(u + (su + 0.5) / n - 0.5, v + (sv + 0.5) / n - 0.5, 1.0);
           sum += p.z() > 0 ? levels[page.at(p.x() / p.z(), p.y() / p.z())] : options.background_dn;
         }
       }

@@ -29,9 +29,9 @@ namespace imucal::test {
 struct AprilGridImageOptions {
   int width = 752;
   int height = 480;
-  int supersampling = 4;     // per axis
-  double white_dn = 215.0;   // printed white
-  double black_dn = 30.0;    // printed black
+  int supersampling = 4;    // per axis
+  double white_dn = 215.0;  // printed white
+  double black_dn = 30.0;   // printed black
   double background_dn = 105.0;
   double blur_sigma_px = 0.0;  // Gaussian lens blur in image pixels, after sampling
   double margin_tags = 0.5;    // white page beyond the corner squares, in tag sizes

@@ -20,9 +20,7 @@ using sim::CornerTruth;
 
 constexpr double kPi = std::numbers::pi;
 
-GrayView view_of(const cv::Mat& image) {
-  return GrayView{image.data, image.cols, image.rows, image.step[0]};
-}
+GrayView view_of(const cv::Mat& image) { return GrayView{image.data, image.cols, image.rows, image.step[0]}; }
 
 // ---------------------------------------------------------------------------------------------
 // Checkerboard, on frames of the virtual camera (sim/camera_render.hpp)
@@ -61,8 +59,8 @@ TargetDescription checkerboard(int cols, int rows) {
 /// Board centred `distance_m` ahead (offset sideways), turned by `roll` about the optical axis
 /// and tilted by the rotation vector `tilt` (camera frame). Identity: the board's x to the
 /// right and y down the image (its z away from the camera).
-Eigen::Isometry3d board_pose(const TargetDescription& t, double roll, const Eigen::Vector3d& tilt, double distance_m,
-                             double offset_x_m = 0.0, double offset_y_m = 0.0) {
+Eigen::Isometry3d board_pose(const TargetDescription& t, double roll, const Eigen::Vector3d& tilt,
+                             double distance_m, double offset_x_m = 0.0, double offset_y_m = 0.0) {
   const Eigen::Vector3d centre((t.cols - 1) * t.col_spacing_m / 2, (t.rows - 1) * t.row_spacing_m / 2, 0.0);
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.translate(Eigen::Vector3d(offset_x_m, offset_y_m, distance_m));
@@ -287,8 +285,8 @@ const Eigen::Vector4d kPinhole(450.0, 450.0, 375.5, 239.5);
 /// The grid centred `distance_m` ahead, seen from its printed side (its z towards the
 /// camera), turned by `roll` about the optical axis and tilted by `tilt`; roll 0 shows the page
 /// upright.
-Eigen::Matrix3d grid_homography(const TargetDescription& t, double roll, const Eigen::Vector3d& tilt, double distance_m,
-                                double offset_x_m = 0.0, double offset_y_m = 0.0) {
+Eigen::Matrix3d grid_homography(const TargetDescription& t, double roll, const Eigen::Vector3d& tilt,
+                                double distance_m, double offset_x_m = 0.0, double offset_y_m = 0.0) {
   const double pitch = t.tag_size_m * (1 + t.tag_spacing);
   const Eigen::Vector3d centre((t.tag_cols * pitch - t.tag_spacing * t.tag_size_m) / 2,
                                (t.tag_rows * pitch - t.tag_spacing * t.tag_size_m) / 2, 0.0);
@@ -343,7 +341,8 @@ TEST(AprilGridDetection, IdsAndAccuracyAtAnyTurn) {
   int frames = 0;
   for (int k = 0; k < 8; ++k) {
     const double roll = k * kPi / 4 + 0.1;
-    const Eigen::Vector3d tilt = k % 2 == 0 ? Eigen::Vector3d(0.3, -0.2, 0.0) : Eigen::Vector3d(-0.2, 0.35, 0.0);
+    const Eigen::Vector3d tilt =
+        k % 2 == 0 ? Eigen::Vector3d(0.3, -0.2, 0.0) : Eigen::Vector3d(-0.2, 0.35, 0.0);
     const test::AprilGridImage img = test::render_aprilgrid(t, grid_homography(t, roll, tilt, 0.95));
     ASSERT_TRUE(std::all_of(img.inside.begin(), img.inside.end(), [](std::uint8_t v) { return v != 0; }))
         << "pose " << k << " must keep the grid in view";
@@ -369,7 +368,8 @@ TEST(AprilGridDetection, RawCornersInOpenCvPixelConvention) {
   opt.subpixel = false;
   auto det = make_detector(t, opt);
   ASSERT_TRUE(det);
-  const test::AprilGridImage img = test::render_aprilgrid(t, grid_homography(t, 0.2, Eigen::Vector3d(0.2, 0.1, 0), 0.9));
+  const test::AprilGridImage img =
+      test::render_aprilgrid(t, grid_homography(t, 0.2, Eigen::Vector3d(0.2, 0.1, 0), 0.9));
   const GridResult g = detect_grid(*det, img);
   ASSERT_EQ(static_cast<int>(g.obs.ids.size()), t.point_count());
   Eigen::Vector2d mean = Eigen::Vector2d::Zero();
@@ -377,8 +377,8 @@ TEST(AprilGridDetection, RawCornersInOpenCvPixelConvention) {
   mean /= static_cast<double>(g.obs.ids.size());
   EXPECT_LT(mean.norm(), 0.15) << "mean offset " << mean.transpose();
   EXPECT_LT(g.err.max_px, 1.0);
-  std::printf("aprilgrid raw corners: mean error %.3f px, mean offset (%.3f, %.3f) px\n", g.err.mean_px, mean.x(),
-              mean.y());
+  std::printf("aprilgrid raw corners: mean error %.3f px, mean offset (%.3f, %.3f) px\n", g.err.mean_px,
+              mean.x(), mean.y());
 }
 
 TEST(AprilGridDetection, PartialViewGivesTheTagsInView) {
@@ -434,7 +434,8 @@ TEST(AprilGridDetection, FewerTagsThanTheMinimumGiveNothing) {
   opt.min_tags = 37;  // more than the grid has
   auto strict = make_detector(t, opt);
   ASSERT_TRUE(strict);
-  const test::AprilGridImage img = test::render_aprilgrid(t, grid_homography(t, 0.0, Eigen::Vector3d::Zero(), 0.95));
+  const test::AprilGridImage img =
+      test::render_aprilgrid(t, grid_homography(t, 0.0, Eigen::Vector3d::Zero(), 0.95));
   auto obs = strict->detect(view_of(img.image));
   ASSERT_TRUE(obs.ok());
   EXPECT_TRUE(obs->empty());
@@ -446,7 +447,8 @@ TEST(AprilGridDetection, ConcurrentCallsAgree) {
   const TargetDescription t = aprilgrid();
   auto det = make_detector(t);
   ASSERT_TRUE(det);
-  const test::AprilGridImage img = test::render_aprilgrid(t, grid_homography(t, 0.3, Eigen::Vector3d(0.2, 0, 0), 0.9));
+  const test::AprilGridImage img =
+      test::render_aprilgrid(t, grid_homography(t, 0.3, Eigen::Vector3d(0.2, 0, 0), 0.9));
   auto ref = det->detect(view_of(img.image));
   ASSERT_TRUE(ref.ok());
   ASSERT_FALSE(ref->empty());
