@@ -35,14 +35,16 @@ Result<std::unique_ptr<SceneFrameSource>> SceneFrameSource::create(const SimCame
 
 SceneFrameSource::~SceneFrameSource() = default;
 
-Result<drivers::camera::fake::FrameRenderer> make_scene_renderer(const SimCameraScene& scene,
-                                                                 std::shared_ptr<const CheckerboardMotion> motion) {
+Result<drivers::camera::fake::FrameRenderer> make_scene_renderer(
+    const SimCameraScene& scene, std::shared_ptr<const CheckerboardMotion> motion) {
   if (!motion) return make_error(Errc::kInvalidArgument, "simulated camera: no motion");
   auto source = SceneFrameSource::create(scene, *motion);
   if (!source.ok()) return source.error();
   std::shared_ptr<SceneFrameSource> shared(std::move(*source));
   return drivers::camera::fake::FrameRenderer(
-      [shared, motion](TimeNs t_mid, std::uint32_t, std::span<std::uint8_t> px) { return shared->render(t_mid, px); });
+      [shared, motion](TimeNs t_mid, std::uint32_t, std::span<std::uint8_t> px) {
+        return shared->render(t_mid, px);
+      });
 }
 
 Eigen::Isometry3d SceneFrameSource::T_cam_board_at(TimeNs t_imu_ns) const {
@@ -54,7 +56,8 @@ Status SceneFrameSource::render(TimeNs t_mid_host_ns, std::span<std::uint8_t> pi
   const TimeNs t_open = t_mid_imu - scene_.exposure_ns / 2;
   int n_sub = 1;
   if (scene_.motion_blur) {
-    n_sub = renderer_->sub_exposures_needed(T_cam_board_at(t_open), T_cam_board_at(t_open + scene_.exposure_ns));
+    n_sub =
+        renderer_->sub_exposures_needed(T_cam_board_at(t_open), T_cam_board_at(t_open + scene_.exposure_ns));
   }
   subs_.clear();
   for (int i = 0; i < n_sub; ++i) {
@@ -81,6 +84,5 @@ drivers::camera::fake::FrameRenderer SceneFrameSource::as_renderer(std::shared_p
     return source->render(t_mid, px);
   };
 }
-
 
 }  // namespace imucal::sim

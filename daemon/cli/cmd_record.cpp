@@ -47,6 +47,7 @@ struct RecordArgs {
   double sim_clock_ppm = sim::kDefaultClockPpm;
   double sim_jitter_us = 30.0;
   std::string sim_motion;  // empty: checkerboard with simulated cameras, else still
+  std::string sim_camera = "render";
 };
 
 template <class T>
@@ -160,8 +161,12 @@ std::vector<std::unique_ptr<drivers::camera::Camera>> make_sim_cameras(
     TimeNs start_ns, const std::function<TimeNs()>& clock, acq::RecordOptions& ro) {
   std::vector<std::unique_ptr<drivers::camera::Camera>> cameras;
   if (config.cameras.empty()) return cameras;
-  auto render = app::load_module<sim::RenderModuleApi>(sim::kRenderModule, sim::kRenderModuleEntry);
-  if (!render.ok()) fail(render.error(), "simulated cameras");
+  const sim::RenderModuleApi* render = nullptr;
+  if (a.sim_camera == "render") {
+    auto module = app::load_module<sim::RenderModuleApi>(sim::kRenderModule, sim::kRenderModuleEntry);
+    if (!module.ok()) fail(module.error(), "simulated cameras");
+    render = *module;
+  }
   for (const CameraConfig& cc : config.cameras) {
     sim::SimCameraScene scene;
     scene.camera = sim::sim_camera_for(cc.width, cc.height);
@@ -171,7 +176,9 @@ std::vector<std::unique_ptr<drivers::camera::Camera>> make_sim_cameras(
     scene.exposure_ns = 4'000'000;
     scene.seed = a.seed + cameras.size();
     scene.host_offset_ns = start_ns;
-    auto renderer = take((*render)->scene_renderer(scene, motion), "simulated camera " + cc.name);
+    auto renderer = render != nullptr
+                        ? take(render->scene_renderer(scene, motion), "simulated camera " + cc.name)
+                        : drivers::camera::fake::test_pattern_renderer(cc.width, cc.height, scene.seed);
     drivers::camera::fake::VirtualCameraOptions vo;
     vo.id = cc.name;
     vo.width = cc.width;
@@ -348,6 +355,12 @@ const CommandRegistrar kRegistrar(20, [](CLI::App& root) {
          "(moved in front of the configured target, as `imucal sim camimu`; the simulated cameras need it) "
          "(default: checkerboard when the configuration has cameras, else still)")
       ->check(CLI::IsMember({"still", "static", "checkerboard"}));
+  cmd->add_option(
+         "--sim-camera", args->sim_camera,
+         "Simulation: what the simulated cameras show: render (the configured target as the rig "
+         "moves, through the camera model; costly at high resolutions) or pattern (a cheap moving test "
+         "pattern, for measuring the recording path at any frame rate) (default render)")
+      ->check(CLI::IsMember({"render", "pattern"}));
   cmd->add_flag("--force", args->force, "Replace the log if it exists");
   cmd->add_flag("--json", args->json, "Print the summary as JSON");
   cmd->callback([args] { run_record(*args); });

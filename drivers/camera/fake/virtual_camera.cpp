@@ -3,6 +3,7 @@
 #include <sys/eventfd.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -10,6 +11,35 @@
 #include <ctime>
 
 namespace imucal::drivers::camera::fake {
+FrameRenderer test_pattern_renderer(int width, int height, std::uint64_t seed) {
+  const std::size_t w = static_cast<std::size_t>(std::max(width, 1));
+  const std::size_t h = static_cast<std::size_t>(std::max(height, 1));
+  auto texture = std::make_shared<std::vector<std::uint8_t>>(w * h);
+  std::uint64_t state = seed * 0x9E3779B97F4A7C15ull + 1;
+  for (std::size_t r = 0; r < h; ++r) {
+    for (std::size_t c = 0; c < w; ++c) {
+      state ^= state << 13;
+      state ^= state >> 7;
+      state ^= state << 17;
+      const double smooth =
+          96.0 + 64.0 * std::sin(static_cast<double>(c) * 0.031) * std::cos(static_cast<double>(r) * 0.047);
+      (*texture)[r * w + c] =
+          static_cast<std::uint8_t>(std::clamp(smooth + static_cast<double>(state % 9) - 4.0, 0.0, 255.0));
+    }
+  }
+  return [texture, w, h](TimeNs, std::uint32_t k, std::span<std::uint8_t> px) -> Status {
+    if (px.size() != w * h) return make_error(Errc::kInvalidArgument, "test pattern: wrong buffer size");
+    const std::size_t shift = (3 * static_cast<std::size_t>(k)) % w;
+    for (std::size_t r = 0; r < h; ++r) {
+      const std::uint8_t* src = texture->data() + r * w;
+      std::uint8_t* dst = px.data() + r * w;
+      std::memcpy(dst, src + shift, w - shift);
+      std::memcpy(dst + (w - shift), src, shift);
+    }
+    return {};
+  };
+}
+
 Result<std::unique_ptr<VirtualCamera>> VirtualCamera::create(const VirtualCameraOptions& options,
                                                              FrameRenderer renderer) {
   if (options.width < 8 || options.height < 8 || options.width > 8192 || options.height > 8192) {
@@ -129,6 +159,17 @@ void VirtualCamera::thread_main() {
     // steady_clock is CLOCK_MONOTONIC with nanosecond ticks on Linux (libstdc++).
     const auto deadline = std::chrono::steady_clock::time_point(std::chrono::nanoseconds(due_ns));
     if (wake_.wait_until(lock, deadline, [this] { return stopping_; })) break;
+    // A frame whose time has long passed (the renderer could not keep up) is lost, as a sensor
+    // that was not read out in time loses it; stamps never drift behind the clock.
+    const TimeNs late_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                               std::chrono::steady_clock::now().time_since_epoch())
+                               .count() -
+                           due_ns;
+    if (late_ns > period_ns_) {
+      ++counters_.dropped;
+      ++next_;
+      continue;
+    }
     if (free_.empty()) {
       ++counters_.dropped;
       ++next_;

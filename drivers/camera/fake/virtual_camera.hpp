@@ -36,6 +36,12 @@ namespace imucal::drivers::camera::fake {
 using FrameRenderer =
     std::function<Status(TimeNs t_mid_ns, std::uint32_t sequence, std::span<std::uint8_t> pixels)>;
 
+/// A test pattern, cheap enough for any frame rate (as vivid's and Aravis's fake cameras have):
+/// a fixed texture of smooth gradients and pixel noise, shifted sideways by 3 pixels a frame, so
+/// frames differ and compress as a textured scene does. For measuring the recording path
+/// without the cost of rendering.
+FrameRenderer test_pattern_renderer(int width, int height, std::uint64_t seed = 1);
+
 struct VirtualCameraOptions {
   std::string id = "sim";
   int width = 640;
