@@ -17,6 +17,7 @@
 #include <string>
 
 #include "acquisition/recorder.hpp"
+#include "app/cameras.hpp"
 #include "app/module_loader.hpp"
 #include "app/rig.hpp"
 #include "core/rig_config.hpp"
@@ -312,6 +313,15 @@ void run_record(const RecordArgs& a) {
   // Hardware: a missing node or a silent chip is a device problem here, not a missing input.
   auto rig = app::open_imu_rig(config, ao);
   if (!rig.ok()) throw CliExit{kExitDevice, rig.error().message};
+  // Every configured camera is opened and configured before the log exists: a missing camera or a
+  // refused format stops here, with nothing written.
+  auto cameras = app::open_rig_cameras(config);
+  if (!cameras.ok()) {
+    const Errc code = cameras.error().code;
+    throw CliExit{code == Errc::kNotFound || code == Errc::kDevice ? kExitDevice : kExitUsage,
+                  cameras.error().message};
+  }
+  ro.cameras = cameras->record;
   ro.stream_info = (*rig)->stream_info();
   ro.loop = acq::RecordLoop::kEventLoop;
   ro.stop_on_signals = true;
@@ -326,8 +336,10 @@ const CommandRegistrar kRegistrar(20, [](CLI::App& root) {
   auto args = std::make_shared<RecordArgs>();
   auto* cmd = root.add_subcommand(
       "record",
-      "Record the rig's IMU into a session log: timestamps reconstructed per sample from the data-ready "
-      "interrupt, gaps flagged. --sim records the virtual rig through the same driver code.");
+      "Record the rig's IMU and every configured camera into one session log on one clock: IMU timestamps "
+      "reconstructed per sample from the data-ready interrupt, gaps flagged; frames stamped by their camera "
+      "on CLOCK_MONOTONIC and stored losslessly. --sim records the virtual rig (and its virtual cameras) "
+      "through the same driver and acquisition code.");
   cmd->add_option("--config", args->config_path, "Rig configuration (YAML, docs/config.md)")
       ->required()
       ->check(CLI::ExistingFile);
