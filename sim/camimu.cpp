@@ -200,7 +200,7 @@ Status write_camimu_log(const CamImuSimOptions& options, const sim::Checkerboard
                         const std::string& imu_part, const std::string& log_path, CamImuSimSummary& sum,
                         const ProgressFn& progress) {
   nlohmann::json camera_rig = {{"device", "sim"},
-                               {"model", "checkerboard renderer (simulated)"},
+                               {"model", "target renderer (simulated)"},
                                {"width", options.camera.width},
                                {"height", options.camera.height},
                                {"rate_hz", options.camera_rate_hz},
