@@ -28,6 +28,11 @@ Status CameraRenderOptions::validate() const {
   if (!(a.margin_squares >= 0.0) || a.margin_squares > 100.0) {
     return make_error(Errc::kInvalidArgument, "board margin must be 0..100 squares");
   }
+  if (a.tag_border_bits < 1 || a.tag_border_bits > 4) {
+    return make_error(
+        Errc::kInvalidArgument,
+        "AprilGrid tag border must be 1..4 bits (Kalibr prints 2), got " + std::to_string(a.tag_border_bits));
+  }
   return {};
 }
 

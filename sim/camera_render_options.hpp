@@ -10,8 +10,16 @@ struct BoardAppearance {
   double white_dn = 215.0;       // printed white, grey levels
   double black_dn = 30.0;        // printed black
   double background_dn = 105.0;  // everything beyond the board
-  /// White margin around the squares, in units of the square size.
+  /// White margin around the pattern, in units of its square size: the checkerboard's squares,
+  /// the AprilGrid's small corner squares (tagSpacing x tagSize), measured from the outermost
+  /// of them.
   double margin_squares = 0.75;
+  /// AprilGrid: black border of each tag in bits. Kalibr prints 2 (kalibr_create_target_pdf,
+  /// borderBits; its detector expects it); libapriltag's tag36h11 has 1.
+  int tag_border_bits = 2;
+  /// AprilGrid: Kalibr's black squares in the gaps at the tag corners (symmCorners). They make
+  /// the tag corners checkerboard-like X-junctions, and they break libapriltag's detection.
+  bool tag_corner_squares = true;
 };
 
 struct CameraRenderOptions {

@@ -25,7 +25,7 @@ SceneFrameSource::SceneFrameSource(const SimCameraScene& scene, const Checkerboa
 
 Result<std::unique_ptr<SceneFrameSource>> SceneFrameSource::create(const SimCameraScene& scene,
                                                                    const CheckerboardMotion& motion) {
-  auto renderer = CheckerboardRenderer::create(scene.camera, scene.target, scene.render);
+  auto renderer = TargetRenderer::create(scene.camera, scene.target, scene.render);
   if (!renderer.ok()) return renderer.error();
   std::unique_ptr<SceneFrameSource> source(new SceneFrameSource(scene, motion));
   source->renderer_ = std::move(*renderer);

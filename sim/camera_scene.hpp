@@ -25,7 +25,7 @@
 
 namespace imucal::sim {
 
-class CheckerboardRenderer;
+class TargetRenderer;
 
 struct SimCameraScene {
   CameraModel camera;
@@ -72,7 +72,7 @@ class SceneFrameSource {
 
   SimCameraScene scene_;
   const CheckerboardMotion& motion_;
-  std::unique_ptr<CheckerboardRenderer> renderer_;
+  std::unique_ptr<TargetRenderer> renderer_;
   Eigen::Isometry3d T_world_board_ = Eigen::Isometry3d::Identity();
   Rng noise_;
   std::vector<Eigen::Isometry3d> subs_;

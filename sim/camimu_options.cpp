@@ -76,10 +76,14 @@ Status CamImuSimOptions::validate() const {
                           std::to_string(static_cast<std::int64_t>(period_ns)) + " ns); it is given in ns");
   }
   IMUCAL_TRY(validate_camera(camera));
-  if (target.type != TargetDescription::Type::kCheckerboard) {
-    return make_error(Errc::kUnsupported, "the simulated camera renders checkerboard targets only");
-  }
   IMUCAL_TRY(target.validate());
+  // The renderer draws tag36h11 (libapriltag's family, 587 codes), checked here without loading it.
+  constexpr int kTag36h11Codes = 587;
+  if (target.type == TargetDescription::Type::kAprilgrid &&
+      target.tag_cols * target.tag_rows > kTag36h11Codes) {
+    return make_error(Errc::kInvalidArgument,
+                      "an AprilGrid of tag36h11 has at most 587 tags (tagCols x tagRows)");
+  }
   if (!T_cam_imu.matrix().allFinite() ||
       !(T_cam_imu.linear().transpose() * T_cam_imu.linear()).isApprox(Eigen::Matrix3d::Identity(), 1e-9) ||
       T_cam_imu.linear().determinant() < 0.0) {

@@ -357,12 +357,23 @@ Eigen::Vector3d CheckerboardMotion::p_world_body_nominal() const {
 }
 
 Eigen::Isometry3d CheckerboardMotion::T_world_board(const TargetDescription& target) const {
-  Eigen::Matrix3d R;  // board x along world x, board y down, board z along world y
+  Eigen::Matrix3d R;
   R.col(0) = Eigen::Vector3d::UnitX();
-  R.col(1) = -Eigen::Vector3d::UnitZ();
-  R.col(2) = Eigen::Vector3d::UnitY();
-  const double w = std::max(0, target.cols - 1) * target.col_spacing_m;
-  const double h = std::max(0, target.rows - 1) * target.row_spacing_m;
+  double w, h;  // extent of the target's points
+  if (target.type == TargetDescription::Type::kAprilgrid) {
+    // Printed on its z > 0 side (Kalibr's frame, y up the page): board y up, z towards the rig.
+    R.col(1) = Eigen::Vector3d::UnitZ();
+    R.col(2) = -Eigen::Vector3d::UnitY();
+    const double pitch = (1.0 + target.tag_spacing) * target.tag_size_m;
+    w = std::max(0, target.tag_cols - 1) * pitch + target.tag_size_m;
+    h = std::max(0, target.tag_rows - 1) * pitch + target.tag_size_m;
+  } else {
+    // Printed on its z < 0 side: board y down, z away from the rig.
+    R.col(1) = -Eigen::Vector3d::UnitZ();
+    R.col(2) = Eigen::Vector3d::UnitY();
+    w = std::max(0, target.cols - 1) * target.col_spacing_m;
+    h = std::max(0, target.rows - 1) * target.row_spacing_m;
+  }
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.linear() = R;
   T.translation() = options_.board_centre_world - R * Eigen::Vector3d(0.5 * w, 0.5 * h, 0.0);

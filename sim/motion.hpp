@@ -137,8 +137,10 @@ class CheckerboardMotion : public Trajectory {
   const std::vector<Segment>& segments() const override { return segments_; }
 
   const CheckerboardMotionOptions& options() const { return options_; }
-  /// Board frame -> world for a board whose inner-corner grid is centred on the board centre
-  /// (the corner with index 0 at the top left, seen from the rig).
+  /// Board frame -> world for a target whose points are centred on the board centre, printed
+  /// side towards the rig: a checkerboard (printed on its z < 0 side) with corner 0 at the top
+  /// left seen from the rig, an AprilGrid (printed on z > 0, Kalibr's frame) with tag 0 at the
+  /// bottom left.
   Eigen::Isometry3d T_world_board(const TargetDescription& target) const;
   /// Nominal (rest) pose of the body, q_world_body and p_world_body.
   Eigen::Quaterniond q_world_body_nominal() const;

@@ -252,7 +252,18 @@ void add_camimu(CLI::App* sim) {
   cmd->add_option("--excitation", co->motion.excitation,
                   "Scales the motion: mean |a| 3.12 m/s^2 and mean |w| 0.366 rad/s times this (default 1)")
       ->check(CLI::Range(0.1, 10.0));
-  cmd->callback([o, co, cmd]() {
+  auto target_path = std::make_shared<std::string>();
+  cmd->add_option(
+         "--target", *target_path,
+         "Kalibr target YAML to render: checkerboard or aprilgrid (default: checkerboard, 7 x 6 inner "
+         "corners, 5 cm; e.g. config/aprilgrid-6x6.yaml)")
+      ->check(CLI::ExistingFile);
+  cmd->callback([o, co, cmd, target_path]() {
+    if (!target_path->empty()) {
+      auto target = load_target_yaml(*target_path);
+      if (!target.ok()) fail(target.error(), "sim camimu --target");
+      co->target = *target;
+    }
     co->seed = o->seed;
     co->imu_rate_hz = o->imu_rate_hz;
     co->imu_path = o->path();
