@@ -4,6 +4,18 @@
 // set of target points seen in one image, each with its id, so a board only partly in view
 // still gives what it shows. Point ids index TargetDescription::points().
 //
+// Point ids (core/target.hpp) and the conventions that fix them, for both targets:
+//   checkerboard: id = r * cols + c. As OpenCV and Kalibr, the board's x axis (along a row)
+//     turns to its y axis clockwise in the image (the board's z axis points away from the
+//     camera), and corner 0 is the inner corner whose diagonal outer square is black. A board
+//     with cols + rows odd is thereby unique in every view; a board that a half turn maps onto
+//     itself (cols + rows even) is not, and of the orderings its pattern allows the one whose
+//     x axis points most to the right of the image is reported.
+//   aprilgrid: Kalibr's grid (tag 0 at the lower left of the page, x to the right, y up the
+//     page, z towards the camera that sees the printed side), tags with a 2-bit black border;
+//     each tag's corners by TargetDescription::tag_point_ids().
+// docs/targets.md has the details, the methods and the measured accuracy and speed.
+//
 // Threads: a TargetDetector is immutable after create(); detect() may run on many threads at
 // once (each call uses its own scratch state).
 
@@ -37,14 +49,27 @@ struct GrayView {
   std::size_t stride = 0;  // bytes per row; 0 = width
 };
 
+/// OpenCV's two checkerboard detectors (docs/targets.md compares them).
+enum class CheckerboardMethod {
+  kClassic,      // findChessboardCorners (FAST_CHECK) + cornerSubPix: the default, measured faster
+  kSectorBased,  // findChessboardCornersSB (ACCURACY), no further refinement
+};
+
 struct DetectionOptions {
   /// Subpixel refinement of the corners (cornerSubPix for both targets).
   bool subpixel = true;
-  /// Checkerboard: also accept a board only partly in view (fewer than all inner corners), for
-  /// the detectors that can; a full board is always preferred.
+  /// Checkerboard: also accept a board only partly in view. OpenCV 4.6 cannot place a plain
+  /// board's corners without seeing all of them (its partial mode needs boards with markers),
+  /// so this has no effect today: a checkerboard is reported only when every inner corner is
+  /// found (docs/targets.md, "Partial views"). An AprilGrid always gives the tags in view.
   bool partial = true;
-  /// AprilGrid: fewest tags for a detection (Kalibr uses 4 tags' corners as the minimum).
+  /// AprilGrid: fewest tags for a detection (Kalibr asks for 4).
   int min_tags = 1;
+  CheckerboardMethod checkerboard_method = CheckerboardMethod::kClassic;
+  /// AprilGrid: libapriltag's quad_decimate (quads are found on an image this many times
+  /// smaller; decoding and corners use the full image). 1 is measured to find far more of
+  /// Kalibr's tags (its corner squares merge with the tags at 2; docs/targets.md).
+  double aprilgrid_decimate = 1.0;
 };
 
 class TargetDetector {

@@ -1,0 +1,458 @@
+#include "calib/target_detection.hpp"
+
+#include <apriltag/apriltag.h>
+#include <apriltag/tag36h11.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <mutex>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <utility>
+
+namespace imucal::calib {
+namespace {
+
+// The caller's pixels as a cv::Mat header (no copy). OpenCV's detectors only read them.
+cv::Mat as_mat(const GrayView& image) {
+  const std::size_t stride = image.stride == 0 ? static_cast<std::size_t>(image.width) : image.stride;
+  return cv::Mat(image.height, image.width, CV_8UC1, const_cast<std::uint8_t*>(image.data), stride);
+}
+
+Status check_image(const GrayView& image) {
+  if (image.data == nullptr || image.width <= 0 || image.height <= 0) {
+    return make_error(Errc::kInvalidArgument, "target detection: empty image (no pixels or a zero size)");
+  }
+  if (image.stride != 0 && image.stride < static_cast<std::size_t>(image.width)) {
+    return make_error(Errc::kInvalidArgument,
+                      "target detection: image stride " + std::to_string(image.stride) +
+                          " is smaller than its width " + std::to_string(image.width));
+  }
+  return {};
+}
+
+TargetObservation empty_observation(const GrayView& image) {
+  TargetObservation obs;
+  obs.width = image.width;
+  obs.height = image.height;
+  return obs;
+}
+
+// cornerSubPix's stopping rule for both targets: 0.01 px or 40 iterations (it converges in a
+// few on clean corners; the tolerance is well below the detector's own error).
+const cv::TermCriteria kSubpixCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 40, 0.01);
+
+// ---------------------------------------------------------------------------------------------
+// Checkerboard
+
+/// Mean grey level of a small square around `centre`, or -1 when it is not inside the image.
+double mean_around(const cv::Mat& image, const cv::Point2f& centre, int half) {
+  const int x0 = static_cast<int>(std::lround(centre.x)) - half;
+  const int y0 = static_cast<int>(std::lround(centre.y)) - half;
+  const cv::Rect box(x0, y0, 2 * half + 1, 2 * half + 1);
+  if ((box & cv::Rect(0, 0, image.cols, image.rows)) != box) return -1.0;
+  return cv::mean(image(box))[0];
+}
+
+/// OpenCV reports misuse by exceptions; they must not leave the library.
+template <class F>
+Result<TargetObservation> guarded(F&& f) {
+  try {
+    return f();
+  } catch (const cv::Exception& e) {
+    return make_error(Errc::kInternal, std::string("target detection: OpenCV failed: ") + e.what());
+  } catch (const std::bad_alloc&) {
+    return make_error(Errc::kInternal, "target detection: out of memory");
+  }
+}
+
+class CheckerboardDetector final : public TargetDetector {
+ public:
+  CheckerboardDetector(TargetDescription target, DetectionOptions options)
+      : target_(std::move(target)), options_(options) {}
+
+  Result<TargetObservation> detect(const GrayView& image) const override {
+    return guarded([&] { return detect_impl(image); });
+  }
+  const TargetDescription& target() const override { return target_; }
+
+ private:
+  Result<TargetObservation> detect_impl(const GrayView& image) const;
+  // Detected index of target corner (r, c) under candidate ordering `turn` (quarter turns of
+  // the index grid; 1 and 3 only for square boards).
+  int index(int turn, int r, int c) const;
+  // Whether the square diagonally outside target corner 0 is black under ordering `turn`
+  // (1 black, 0 white, -1 undecided: out of view or no contrast).
+  int outer_square_black(const cv::Mat& image, const std::vector<cv::Point2f>& px, int turn) const;
+  // The ordering of the detected corners that matches the target's ids (see the header).
+  int resolve_turn(const cv::Mat& image, const std::vector<cv::Point2f>& px) const;
+  int subpix_half_window(const std::vector<cv::Point2f>& px) const;
+
+  TargetDescription target_;
+  DetectionOptions options_;
+};
+
+int CheckerboardDetector::index(int turn, int r, int c) const {
+  const int rows = target_.rows;
+  const int cols = target_.cols;
+  switch (turn) {
+    case 0:
+      return r * cols + c;
+    case 1:  // square boards only: rows == cols
+      return c * cols + (cols - 1 - r);
+    case 2:
+      return (rows - 1 - r) * cols + (cols - 1 - c);
+    default:
+      return (cols - 1 - c) * cols + r;
+  }
+}
+
+int CheckerboardDetector::outer_square_black(const cv::Mat& image, const std::vector<cv::Point2f>& px,
+                                             int turn) const {
+  // Local affine frame at corner 0 from its two neighbours: square (i, j) has its centre at
+  // corner 0 + (i + 0.5) dx + (j + 0.5) dy; (-1, -1) is the one in question. The threshold is
+  // halfway between two neighbouring inner squares (one black, one white, whatever the
+  // ordering).
+  auto centre = [&](int t, double i, double j) {
+    const cv::Point2f p0 = px[index(t, 0, 0)];
+    const cv::Point2f dx = px[index(t, 0, 1)] - p0;
+    const cv::Point2f dy = px[index(t, 1, 0)] - p0;
+    return p0 + static_cast<float>(i + 0.5) * dx + static_cast<float>(j + 0.5) * dy;
+  };
+  const cv::Point2f d = px[1] - px[0];
+  const int half = std::max(1, static_cast<int>(0.2 * std::hypot(d.x, d.y)));
+  const double a = mean_around(image, centre(0, 0, 0), half);
+  const double b = mean_around(image, centre(0, 1, 0), half);
+  const double outer = mean_around(image, centre(turn, -1, -1), half);
+  if (a < 0 || b < 0 || outer < 0 || std::abs(a - b) < 10.0) return -1;
+  return outer < 0.5 * (a + b) ? 1 : 0;
+}
+
+int CheckerboardDetector::resolve_turn(const cv::Mat& image, const std::vector<cv::Point2f>& px) const {
+  const int turns = target_.rows == target_.cols ? 4 : 2;
+  const int step = target_.rows == target_.cols ? 1 : 2;
+  // Orderings the printed pattern allows: the square outside corner 0 is black. When none
+  // qualifies (lighting, glare), every ordering stays a candidate.
+  std::array<bool, 4> allowed{};
+  int count = 0;
+  for (int turn = 0; turn < turns; turn += step) {
+    allowed[turn] = outer_square_black(image, px, turn) != 0;
+    count += allowed[turn] ? 1 : 0;
+  }
+  // Among what the pattern cannot tell apart (boards with 180-degree symmetry), the one whose
+  // x axis points most to the right in the image.
+  int best = 0;
+  double best_right = -2.0;
+  for (int turn = 0; turn < turns; turn += step) {
+    if (count > 0 && !allowed[turn]) continue;
+    const cv::Point2f x_axis = px[index(turn, 0, target_.cols - 1)] - px[index(turn, 0, 0)];
+    const double right = x_axis.x / std::max(1e-9, static_cast<double>(std::hypot(x_axis.x, x_axis.y)));
+    if (right > best_right) {
+      best_right = right;
+      best = turn;
+    }
+  }
+  return best;
+}
+
+int CheckerboardDetector::subpix_half_window(const std::vector<cv::Point2f>& px) const {
+  // Half the window stays below half the smallest square seen, so that no window reaches a
+  // neighbouring corner; capped at 5 (an 11 x 11 window), where the accuracy levels off.
+  double side = 1e9;
+  for (int r = 0; r + 1 < target_.rows; ++r) {
+    for (int c = 0; c + 1 < target_.cols; ++c) {
+      const cv::Point2f p = px[r * target_.cols + c];
+      const cv::Point2f a = px[r * target_.cols + c + 1] - p;
+      const cv::Point2f b = px[(r + 1) * target_.cols + c] - p;
+      side = std::min(
+          {side, static_cast<double>(std::hypot(a.x, a.y)), static_cast<double>(std::hypot(b.x, b.y))});
+    }
+  }
+  return std::clamp(static_cast<int>(side * 0.45), 2, 5);
+}
+
+Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view) const {
+  IMUCAL_TRY(check_image(view));
+  TargetObservation obs = empty_observation(view);
+  const cv::Mat image = as_mat(view);
+  const cv::Size pattern(target_.cols, target_.rows);
+  std::vector<cv::Point2f> px;
+  const bool sector_based = options_.checkerboard_method == CheckerboardMethod::kSectorBased;
+  if (sector_based) {
+    if (!cv::findChessboardCornersSB(image, pattern, px,
+                                     cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_ACCURACY)) {
+      return obs;
+    }
+  } else {
+    // FAST_CHECK rejects a frame without a board in a fraction of the full search.
+    const int flags = cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_FAST_CHECK;
+    if (!cv::findChessboardCorners(image, pattern, px, flags)) return obs;
+  }
+  if (px.size() != static_cast<std::size_t>(target_.cols * target_.rows)) return obs;
+  // OpenCV returns the rows with x -> y turning clockwise in the image (the board's z axis
+  // away from the camera), the convention kept here; a mirrored result is turned back.
+  const std::size_t n = px.size();
+  const cv::Point2f quad[4] = {px[0], px[target_.cols - 1], px[n - 1], px[n - target_.cols]};
+  double area = 0.0;
+  for (int i = 0; i < 4; ++i) area += quad[i].x * quad[(i + 1) % 4].y - quad[(i + 1) % 4].x * quad[i].y;
+  if (area < 0) {
+    for (int r = 0; r < target_.rows; ++r) {
+      std::reverse(px.begin() + r * target_.cols, px.begin() + (r + 1) * target_.cols);
+    }
+  }
+  if (options_.subpixel && !sector_based) {
+    const int half = subpix_half_window(px);
+    cv::cornerSubPix(image, px, cv::Size(half, half), cv::Size(-1, -1), kSubpixCriteria);
+  }
+  const int turn = resolve_turn(image, px);
+  obs.ids.resize(n);
+  obs.px.resize(n);
+  for (int r = 0; r < target_.rows; ++r) {
+    for (int c = 0; c < target_.cols; ++c) {
+      const int id = r * target_.cols + c;
+      const cv::Point2f& p = px[index(turn, r, c)];
+      obs.ids[id] = id;
+      obs.px[id] = Eigen::Vector2d(p.x, p.y);
+    }
+  }
+  return obs;
+}
+
+// ---------------------------------------------------------------------------------------------
+// AprilGrid
+
+// Kalibr's tags have a black border two bits wide (its detector's blackTagBorder = 2, and
+// kalibr_create_target_pdf draws borderBits = 2): the black square is 10 bits across, not the
+// 8 of libapriltag's tag36h11. The same codes with the bits moved one place inwards and a
+// border width of 10 decode them (the quad is still the black square's outline).
+constexpr int kKalibrBorderBits = 2;
+
+struct AprilTagDeleter {
+  void operator()(apriltag_detector_t* d) const { apriltag_detector_destroy(d); }
+  void operator()(apriltag_family_t* f) const { tag36h11_destroy(f); }
+};
+
+/// One libapriltag detector with its own family (the family holds the detector's decode
+/// table, so it cannot be shared). Not thread-safe: one user at a time.
+struct AprilTagContext {
+  std::unique_ptr<apriltag_family_t, AprilTagDeleter> family;
+  std::unique_ptr<apriltag_detector_t, AprilTagDeleter> detector;
+};
+
+std::unique_ptr<AprilTagContext> make_apriltag_context(double decimate) {
+  auto ctx = std::make_unique<AprilTagContext>();
+  ctx->family.reset(tag36h11_create());
+  apriltag_family_t* f = ctx->family.get();
+  const int extra = kKalibrBorderBits - 1;
+  f->width_at_border += 2 * extra;
+  f->total_width += 2 * extra;
+  for (std::uint32_t i = 0; i < f->nbits; ++i) {
+    f->bit_x[i] += extra;
+    f->bit_y[i] += extra;
+  }
+  ctx->detector.reset(apriltag_detector_create());
+  apriltag_detector_t* d = ctx->detector.get();
+  // One thread per detector: callers detect several frames at once instead.
+  d->nthreads = 1;
+  d->quad_decimate = static_cast<float>(decimate);
+  d->quad_sigma = 0.0f;
+  d->refine_edges = true;
+  d->decode_sharpening = 0.25;
+  apriltag_detector_add_family_bits(d, f, 2);
+  return ctx;
+}
+
+/// The grey-level curve applied before libapriltag sees the image: v' = 255 (v / 255)^0.3.
+///
+/// On Kalibr's grid every tag corner is an X junction with a small black square. The pixels
+/// at a junction are partly black from both sides, so libapriltag's thresholded image joins
+/// the tag's black square to the corner squares, the tag's outline is no longer a quad, and
+/// the tag is lost (on images of known geometry, 29 % of the tags were found over all turns
+/// and distances, and almost none near 45 degrees). Brightening the mid-greys moves the
+/// threshold towards black: a partly covered pixel turns white and the squares come apart,
+/// while edges move by a fraction of a pixel (the corners are refined on the original image
+/// afterwards). With 0.3: 90 % of the tags (docs/targets.md).
+cv::Mat separation_curve() {
+  cv::Mat lut(1, 256, CV_8U);
+  for (int i = 0; i < 256; ++i)
+    lut.at<std::uint8_t>(i) = cv::saturate_cast<std::uint8_t>(255.0 * std::pow(i / 255.0, 0.3));
+  return lut;
+}
+
+struct TagCorners {
+  int id = 0;
+  std::array<cv::Point2f, 4> px;  // in the order of TargetDescription::tag_point_ids()
+};
+
+class AprilGridDetector final : public TargetDetector {
+ public:
+  AprilGridDetector(TargetDescription target, DetectionOptions options)
+      : target_(std::move(target)), options_(options), curve_(separation_curve()) {}
+
+  Result<TargetObservation> detect(const GrayView& image) const override {
+    return guarded([&] { return detect_impl(image); });
+  }
+  const TargetDescription& target() const override { return target_; }
+
+ private:
+  Result<TargetObservation> detect_impl(const GrayView& image) const;
+  std::vector<TagCorners> find_tags(const GrayView& view) const;
+  void refine(const cv::Mat& image, std::vector<TagCorners>* tags) const;
+  int subpix_half_window(const TagCorners& tag) const;
+  // A pool of libapriltag detectors: detect() borrows one (creating it when all are busy), so
+  // calls on several threads never share one, and none lives beyond this object (no global or
+  // thread-local state, which matters in a module that is unloaded).
+  std::unique_ptr<AprilTagContext> borrow() const;
+  void give_back(std::unique_ptr<AprilTagContext> ctx) const;
+
+  TargetDescription target_;
+  DetectionOptions options_;
+  cv::Mat curve_;  // separation_curve(), read-only
+  mutable std::mutex pool_mutex_;
+  mutable std::vector<std::unique_ptr<AprilTagContext>> pool_;
+};
+
+std::unique_ptr<AprilTagContext> AprilGridDetector::borrow() const {
+  {
+    std::lock_guard<std::mutex> lock(pool_mutex_);
+    if (!pool_.empty()) {
+      auto ctx = std::move(pool_.back());
+      pool_.pop_back();
+      return ctx;
+    }
+  }
+  return make_apriltag_context(options_.aprilgrid_decimate);
+}
+
+void AprilGridDetector::give_back(std::unique_ptr<AprilTagContext> ctx) const {
+  std::lock_guard<std::mutex> lock(pool_mutex_);
+  pool_.push_back(std::move(ctx));
+}
+
+std::vector<TagCorners> AprilGridDetector::find_tags(const GrayView& view) const {
+  cv::Mat separated;
+  cv::LUT(as_mat(view), curve_, separated);
+  std::unique_ptr<AprilTagContext> ctx = borrow();
+  image_u8_t im{separated.cols, separated.rows, static_cast<std::int32_t>(separated.step[0]), separated.data};
+  zarray_t* found = apriltag_detector_detect(ctx->detector.get(), &im);
+  const int tag_count = target_.tag_rows * target_.tag_cols;
+  std::vector<TagCorners> tags;
+  for (int i = 0; i < zarray_size(found); ++i) {
+    apriltag_detection_t* det = nullptr;
+    zarray_get(found, i, &det);
+    if (det->id < 0 || det->id >= tag_count) continue;  // not on this grid
+    TagCorners tag;
+    tag.id = det->id;
+    // libapriltag's corners are p[0] = tag (-1, 1), p[1] = (1, 1), p[2] = (1, -1),
+    // p[3] = (-1, -1), with the tag's y axis along its bit rows, down the tag as drawn: the
+    // lower left corner of an upright tag first, counter-clockwise, which on Kalibr's grid
+    // (y up the page) is the order of tag_point_ids(). Its pixel centres are at +0.5
+    // (tests/calib/test_target_detection.cpp checks both on images of known geometry).
+    for (int k = 0; k < 4; ++k) {
+      tag.px[k] = cv::Point2f(static_cast<float>(det->p[k][0] - 0.5), static_cast<float>(det->p[k][1] - 0.5));
+    }
+    tags.push_back(tag);
+  }
+  apriltag_detections_destroy(found);
+  give_back(std::move(ctx));
+  // A tag id seen twice means a stray tag in view: neither copy can be trusted.
+  std::sort(tags.begin(), tags.end(), [](const TagCorners& a, const TagCorners& b) { return a.id < b.id; });
+  std::vector<TagCorners> unique;
+  for (std::size_t i = 0; i < tags.size(); ++i) {
+    const bool dup_prev = i > 0 && tags[i - 1].id == tags[i].id;
+    const bool dup_next = i + 1 < tags.size() && tags[i + 1].id == tags[i].id;
+    if (!dup_prev && !dup_next) unique.push_back(tags[i]);
+  }
+  return unique;
+}
+
+int AprilGridDetector::subpix_half_window(const TagCorners& tag) const {
+  // Around a tag corner the image is a clean X junction out to the tag's 2-bit border (0.2 of
+  // its edge) and the corner square (tag_spacing of it); three quarters of that, 2..8 px.
+  double edge = 1e9;
+  for (int k = 0; k < 4; ++k) {
+    const cv::Point2f d = tag.px[(k + 1) % 4] - tag.px[k];
+    edge = std::min(edge, static_cast<double>(std::hypot(d.x, d.y)));
+  }
+  const double clean = std::min(0.2, target_.tag_spacing) * edge;
+  return std::clamp(static_cast<int>(0.75 * clean), 2, 8);
+}
+
+void AprilGridDetector::refine(const cv::Mat& image, std::vector<TagCorners>* tags) const {
+  // As Kalibr: cornerSubPix on every tag corner (each an X junction with the grid's small
+  // corner squares), and tags whose corners moved more than Kalibr's limit (squared 1.5 px^2)
+  // dropped: the refinement found something else. A tag with a corner nearer the image edge
+  // than its window is dropped first (the window would read replicated border pixels).
+  constexpr double kMaxMove2 = 1.5;
+  std::vector<TagCorners> kept;
+  for (TagCorners tag : *tags) {
+    const int half = subpix_half_window(tag);
+    const float lo = half + 1.0f;
+    const float hi_x = static_cast<float>(image.cols) - half - 2.0f;
+    const float hi_y = static_cast<float>(image.rows) - half - 2.0f;
+    bool ok = true;
+    for (const cv::Point2f& p : tag.px) ok = ok && p.x >= lo && p.y >= lo && p.x <= hi_x && p.y <= hi_y;
+    if (!ok) continue;
+    std::vector<cv::Point2f> corners(tag.px.begin(), tag.px.end());
+    cv::cornerSubPix(image, corners, cv::Size(half, half), cv::Size(-1, -1), kSubpixCriteria);
+    for (int k = 0; k < 4; ++k) {
+      const cv::Point2f d = corners[k] - tag.px[k];
+      ok = ok && d.dot(d) <= kMaxMove2;
+    }
+    if (!ok) continue;
+    std::copy(corners.begin(), corners.end(), tag.px.begin());
+    kept.push_back(tag);
+  }
+  *tags = std::move(kept);
+}
+
+Result<TargetObservation> AprilGridDetector::detect_impl(const GrayView& view) const {
+  IMUCAL_TRY(check_image(view));
+  TargetObservation obs = empty_observation(view);
+  std::vector<TagCorners> tags = find_tags(view);
+  if (options_.subpixel) refine(as_mat(view), &tags);
+  if (static_cast<int>(tags.size()) < std::max(1, options_.min_tags)) return obs;
+  // Tags are in id order, and a tag's point ids grow with its id row by row; sorting the
+  // pairs gives the ascending ids the observation promises.
+  std::vector<std::pair<int, Eigen::Vector2d>> points;
+  points.reserve(4 * tags.size());
+  for (const TagCorners& tag : tags) {
+    const std::array<int, 4> ids = target_.tag_point_ids(tag.id);
+    for (int k = 0; k < 4; ++k) points.emplace_back(ids[k], Eigen::Vector2d(tag.px[k].x, tag.px[k].y));
+  }
+  std::sort(points.begin(), points.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  obs.ids.reserve(points.size());
+  obs.px.reserve(points.size());
+  for (const auto& [id, p] : points) {
+    obs.ids.push_back(id);
+    obs.px.push_back(p);
+  }
+  return obs;
+}
+
+}  // namespace
+
+Result<std::unique_ptr<TargetDetector>> TargetDetector::create(const TargetDescription& target,
+                                                               const DetectionOptions& options) {
+  if (auto s = target.validate(); !s.ok()) return s.error().context("target detection");
+  if (options.min_tags < 1) {
+    return make_error(Errc::kInvalidArgument, "target detection: min_tags must be at least 1");
+  }
+  if (!(options.aprilgrid_decimate >= 1.0 && options.aprilgrid_decimate <= 8.0)) {
+    return make_error(Errc::kInvalidArgument, "target detection: aprilgrid_decimate must be in [1, 8]");
+  }
+  if (target.type == TargetDescription::Type::kCheckerboard) {
+    if (target.cols < 3 || target.rows < 3) {
+      return make_error(Errc::kUnsupported,
+                        "checkerboard detection needs at least 3 x 3 inner corners (OpenCV's "
+                        "detector); use a board with more squares");
+    }
+    return std::unique_ptr<TargetDetector>(new CheckerboardDetector(target, options));
+  }
+  return std::unique_ptr<TargetDetector>(new AprilGridDetector(target, options));
+}
+
+}  // namespace imucal::calib
