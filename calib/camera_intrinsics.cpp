@@ -88,7 +88,8 @@ struct ReprojectionCost {
     // Behind the camera the projection means nothing: the step is refused.
     if (!(c[2] > T(1e-9))) return false;
     const auto camera = CameraModelT<T>::from_params(model_, intrinsics, distortion, 0, 0);
-    const Eigen::Matrix<T, 2, 1> uv = camera.to_pixel(camera.distort(Eigen::Matrix<T, 2, 1>(c[0] / c[2], c[1] / c[2])));
+    const Eigen::Matrix<T, 2, 1> uv =
+        camera.to_pixel(camera.distort(Eigen::Matrix<T, 2, 1>(c[0] / c[2], c[1] / c[2])));
     residual[0] = uv.x() - T(px_.x());
     residual[1] = uv.y() - T(px_.y());
     return true;
@@ -370,12 +371,13 @@ Result<std::vector<View>> make_views(const TargetDescription& target, std::span<
       result->camera.width = o.width;
       result->camera.height = o.height;
     }
-    if (o.width != result->camera.width || o.height != result->camera.height || o.width <= 0 || o.height <= 0) {
-      return make_error(Errc::kInvalidArgument,
-                        "the observations come from images of different sizes (" +
-                            std::to_string(result->camera.width) + "x" + std::to_string(result->camera.height) +
-                            " and " + std::to_string(o.width) + "x" + std::to_string(o.height) +
-                            "): calibrate one camera at one resolution");
+    if (o.width != result->camera.width || o.height != result->camera.height || o.width <= 0 ||
+        o.height <= 0) {
+      return make_error(Errc::kInvalidArgument, "the observations come from images of different sizes (" +
+                                                    std::to_string(result->camera.width) + "x" +
+                                                    std::to_string(result->camera.height) + " and " +
+                                                    std::to_string(o.width) + "x" + std::to_string(o.height) +
+                                                    "): calibrate one camera at one resolution");
     }
     CameraViewReport report;
     report.t_ns = o.t_ns;
@@ -384,8 +386,9 @@ Result<std::vector<View>> make_views(const TargetDescription& target, std::span<
     v.report = result->views.size();
     for (std::size_t i = 0; i < o.ids.size(); ++i) {
       if (o.ids[i] < 0 || o.ids[i] >= static_cast<int>(points.size()) || !o.px[i].allFinite()) {
-        return make_error(Errc::kInvalidArgument, "an observation holds point id " + std::to_string(o.ids[i]) +
-                                                      ", which the target does not have");
+        return make_error(
+            Errc::kInvalidArgument,
+            "an observation holds point id " + std::to_string(o.ids[i]) + ", which the target does not have");
       }
       v.target.push_back(points[static_cast<std::size_t>(o.ids[i])]);
       v.px.push_back(o.px[i]);
@@ -398,7 +401,8 @@ Result<std::vector<View>> make_views(const TargetDescription& target, std::span<
       // Points along one line fix no pose: the smaller spread of the target points must be
       // at least a tenth of the larger.
       Eigen::MatrixXd xy(2, static_cast<Eigen::Index>(v.target.size()));
-      for (std::size_t i = 0; i < v.target.size(); ++i) xy.col(static_cast<Eigen::Index>(i)) = v.target[i].head<2>();
+      for (std::size_t i = 0; i < v.target.size(); ++i)
+        xy.col(static_cast<Eigen::Index>(i)) = v.target[i].head<2>();
       const Eigen::MatrixXd centred = xy.colwise() - xy.rowwise().mean();
       const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(centred * centred.transpose());
       if (!(es.eigenvalues()[0] > 0.01 * es.eigenvalues()[1])) {
@@ -437,15 +441,15 @@ void reject_views(const CameraModel& camera, std::vector<View>& views, const Cam
     result->views[views[i].report].rms_px = rms[i];
     if (!(rms[i] <= limit)) {
       reject_view(views[i], result,
-                  "reprojection RMS " + fmt("%.3g", rms[i]) + " px, above " + fmt("%.3g", limit) +
-                      " px (" + fmt("%g", options.view_rms_factor) + " x the median " + fmt("%.3g", med) + " px)");
+                  "reprojection RMS " + fmt("%.3g", rms[i]) + " px, above " + fmt("%.3g", limit) + " px (" +
+                      fmt("%g", options.view_rms_factor) + " x the median " + fmt("%.3g", med) + " px)");
     }
   }
 }
 
 /// Drops corners beyond corner_sigmas robust sigmas; returns how many were dropped.
-int reject_corners(const CameraModel& camera, std::vector<View>& views, const CameraIntrinsicsOptions& options,
-                   CameraIntrinsicsResult* result) {
+int reject_corners(const CameraModel& camera, std::vector<View>& views,
+                   const CameraIntrinsicsOptions& options, CameraIntrinsicsResult* result) {
   std::vector<double> abs_res;
   for (const View& v : views) {
     if (!v.active) continue;
@@ -490,18 +494,19 @@ Error too_few_views(const std::vector<View>& views, const CameraIntrinsicsResult
   for (const auto& [reason, n] : reasons) why += "; " + std::to_string(n) + " x " + reason;
   return make_error(Errc::kInsufficientData,
                     std::to_string(active_count(views)) + " usable views of " + std::to_string(views.size()) +
-                        " with the target, fewer than the " + std::to_string(options.min_views) + " needed" + why +
+                        " with the target, fewer than the " + std::to_string(options.min_views) + " needed" +
+                        why +
                         ": record more views of the whole target, tilted in different directions at several "
                         "distances, across the image");
 }
 
 // ---- figures -------------------------------------------------------------------------------
 
-void fill_figures(const CameraModel& camera, const std::vector<View>& views, const CameraIntrinsicsOptions& options,
-                  CameraIntrinsicsResult* result) {
+void fill_figures(const CameraModel& camera, const std::vector<View>& views,
+                  const CameraIntrinsicsOptions& options, CameraIntrinsicsResult* result) {
   result->coverage_cols = options.coverage_cols;
-  result->coverage_rows = std::max(1, static_cast<int>(std::lround(options.coverage_cols * double(camera.height) /
-                                                                   double(camera.width))));
+  result->coverage_rows = std::max(
+      1, static_cast<int>(std::lround(options.coverage_cols * double(camera.height) / double(camera.width))));
   result->coverage_counts.assign(static_cast<std::size_t>(result->coverage_cols * result->coverage_rows), 0);
   double sum = 0.0;
   int n = 0;
@@ -517,10 +522,10 @@ void fill_figures(const CameraModel& camera, const std::vector<View>& views, con
       if (!v.keep[i]) continue;
       sum += residual_of(camera, v, i).squaredNorm();
       ++n;
-      const int cx = std::clamp(static_cast<int>((v.px[i].x() + 0.5) / camera.width * result->coverage_cols), 0,
-                                result->coverage_cols - 1);
-      const int cy = std::clamp(static_cast<int>((v.px[i].y() + 0.5) / camera.height * result->coverage_rows), 0,
-                                result->coverage_rows - 1);
+      const int cx = std::clamp(static_cast<int>((v.px[i].x() + 0.5) / camera.width * result->coverage_cols),
+                                0, result->coverage_cols - 1);
+      const int cy = std::clamp(static_cast<int>((v.px[i].y() + 0.5) / camera.height * result->coverage_rows),
+                                0, result->coverage_rows - 1);
       ++result->coverage_counts[static_cast<std::size_t>(cy * result->coverage_cols + cx)];
     }
   }
@@ -533,12 +538,13 @@ void fill_figures(const CameraModel& camera, const std::vector<View>& views, con
 }
 
 /// Sigmas from the covariance, the degeneracy check and the warnings.
-void fill_uncertainty(IntrinsicsProblem& problem, double cost, const CameraIntrinsicsOptions& options, int threads,
-                      CameraIntrinsicsResult* result) {
+void fill_uncertainty(IntrinsicsProblem& problem, double cost, const CameraIntrinsicsOptions& options,
+                      int threads, CameraIntrinsicsResult* result) {
   const double n = 2.0 * problem.residuals();  // coordinates: 2 per corner
   const double p = 8.0 + 6.0 * problem.poses();
   const double dof = n - p;
-  result->residual_sigma_px = dof > 0.0 ? std::sqrt(2.0 * cost / dof) : std::numeric_limits<double>::quiet_NaN();
+  result->residual_sigma_px =
+      dof > 0.0 ? std::sqrt(2.0 * cost / dof) : std::numeric_limits<double>::quiet_NaN();
   const auto cov = problem.covariance(threads);
   const double inf = std::numeric_limits<double>::infinity();
   if (cov && dof > 0.0) {
@@ -557,7 +563,8 @@ void fill_uncertainty(IntrinsicsProblem& problem, double cost, const CameraIntri
   if (!result->focal_well_determined) {
     result->warnings.push_back(
         std::string("the focal length is not determined by these views (") +
-        (result->covariance_ok ? "relative sigma " + fmt("%.2g", rel) : std::string("rank-deficient covariance")) +
+        (result->covariance_ok ? "relative sigma " + fmt("%.2g", rel)
+                               : std::string("rank-deficient covariance")) +
         "): views all facing the camera cannot tell the focal length from the distance; record the target "
         "tilted by 30-45 degrees in several directions and at several distances");
   }
@@ -595,14 +602,16 @@ Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(const TargetDescripti
   if (active_count(views) < options.min_views) return too_few_views(views, result, options);
   const int width = result.camera.width;
   const int height = result.camera.height;
-  const int threads =
-      options.threads > 0 ? options.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const int threads = options.threads > 0
+                          ? options.threads
+                          : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
 
   // Start.
   std::vector<View> usable;
   for (const View& v : views)
     if (v.active) usable.push_back(v);
-  CameraModel camera = start_camera(options.model, width, height, start_focal(options.model, width, height, usable));
+  CameraModel camera =
+      start_camera(options.model, width, height, start_focal(options.model, width, height, usable));
   for (View& v : views) {
     if (!v.active) continue;
     const auto pose = pose_from_pnp(camera, v);
@@ -622,8 +631,9 @@ Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(const TargetDescripti
     IntrinsicsProblem robust(&intrinsics, &distortion, &views, options.model, true, options.robust_loss_px);
     ProgressCallback cb(progress, 0.05, 0.5, options.max_iterations);
     if (!robust.solve(options.max_iterations, threads, &cb, &result.iterations, &cost)) {
-      return make_error(Errc::kSolverFailed, "the camera solve (robust pass) did not converge; check the target "
-                                             "description against the target that was recorded");
+      return make_error(Errc::kSolverFailed,
+                        "the camera solve (robust pass) did not converge; check the target "
+                        "description against the target that was recorded");
     }
   }
   camera.intrinsics = intrinsics;
@@ -634,15 +644,16 @@ Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(const TargetDescripti
 
   IntrinsicsProblem plain(&intrinsics, &distortion, &views, options.model, false, options.robust_loss_px);
   ProgressCallback cb(progress, 0.5, 0.9, options.max_iterations);
-  if (!plain.solve(options.max_iterations, threads, &cb, &result.iterations, &cost) || !intrinsics.allFinite() ||
-      !distortion.allFinite()) {
+  if (!plain.solve(options.max_iterations, threads, &cb, &result.iterations, &cost) ||
+      !intrinsics.allFinite() || !distortion.allFinite()) {
     return make_error(Errc::kSolverFailed, "the camera solve (final pass) did not converge");
   }
   result.camera.distortion_model = options.model;
   result.camera.intrinsics = intrinsics;
   result.camera.distortion_coeffs = distortion;
   if (auto valid = validate_camera(result.camera); !valid.ok()) {
-    return make_error(Errc::kSolverFailed, "the camera solve gave an unusable camera (" + valid.error().message +
+    return make_error(Errc::kSolverFailed, "the camera solve gave an unusable camera (" +
+                                               valid.error().message +
                                                "); check the target description and the detections");
   }
   fill_figures(result.camera, views, options, &result);

@@ -11,7 +11,8 @@ namespace imucal::calib {
 Status CameraIntrinsicsOptions::validate() const {
   auto fail = [](const std::string& msg) -> Status { return make_error(Errc::kInvalidArgument, msg); };
   if (min_views < 3) return fail("at least 3 views are needed to calibrate a camera (min_views)");
-  if (min_points_per_view < 4) return fail("a view needs at least 4 points for its pose (min_points_per_view)");
+  if (min_points_per_view < 4)
+    return fail("a view needs at least 4 points for its pose (min_points_per_view)");
   if (!(robust_loss_px > 0.0) || !std::isfinite(robust_loss_px))
     return fail("the robust loss scale must be a positive number of pixels");
   if (!(view_rms_factor > 1.0) || !std::isfinite(view_rms_factor))

@@ -1,8 +1,6 @@
 // Camera intrinsics on synthetic observations: target points projected through a known camera at
 // known poses, with pixel noise; the estimate must hold the truth within its reported sigmas.
 
-#include "calib/camera_intrinsics.hpp"
-
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -11,6 +9,8 @@
 #include <random>
 #include <string>
 #include <vector>
+
+#include "calib/camera_intrinsics.hpp"
 
 namespace imucal::calib {
 namespace {
@@ -68,10 +68,12 @@ std::vector<TargetObservation> synthesize(const CameraModel& camera, const Targe
     Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
     Eigen::Vector3d at(0.0, 0.0, 0.5);
     if (!o.fronto_parallel) {
-      const Eigen::Vector3d axis = Eigen::Vector3d(uni(rng) - 0.5, uni(rng) - 0.5, 0.2 * (uni(rng) - 0.5)).normalized();
+      const Eigen::Vector3d axis =
+          Eigen::Vector3d(uni(rng) - 0.5, uni(rng) - 0.5, 0.2 * (uni(rng) - 0.5)).normalized();
       R = Eigen::AngleAxisd((10.0 + 30.0 * uni(rng)) * M_PI / 180.0, axis).toRotationMatrix();
       Eigen::Vector3d ray;
-      const Eigen::Vector2d px(camera.width * (0.15 + 0.7 * uni(rng)), camera.height * (0.15 + 0.7 * uni(rng)));
+      const Eigen::Vector2d px(camera.width * (0.15 + 0.7 * uni(rng)),
+                               camera.height * (0.15 + 0.7 * uni(rng)));
       if (!camera.unproject(px, &ray)) continue;
       at = ray / ray.z() * (o.depth_min_m + (o.depth_max_m - o.depth_min_m) * uni(rng));
     } else {
@@ -105,7 +107,8 @@ Eigen::Matrix<double, 8, 1> sigmas(const CameraIntrinsicsResult& r) {
   return s;
 }
 
-void expect_within_sigmas(const CameraIntrinsicsResult& r, const CameraModel& truth, double k, const std::string& what) {
+void expect_within_sigmas(const CameraIntrinsicsResult& r, const CameraModel& truth, double k,
+                          const std::string& what) {
   const auto est = params(r.camera);
   const auto ref = params(truth);
   const auto s = sigmas(r);
@@ -202,7 +205,8 @@ TEST(CameraIntrinsics, RejectsOutlierViewsAndCorners) {
   for (auto& px : obs[17].px) px += Eigen::Vector2d(big(rng), big(rng));
   // Single corners off by 4 px in otherwise good views.
   const std::vector<std::pair<int, int>> bad_corners = {{0, 5}, {1, 20}, {5, 0}, {8, 30}, {20, 12}};
-  for (const auto& [v, i] : bad_corners) obs[static_cast<std::size_t>(v)].px[static_cast<std::size_t>(i)] += Eigen::Vector2d(4.0, -3.0);
+  for (const auto& [v, i] : bad_corners)
+    obs[static_cast<std::size_t>(v)].px[static_cast<std::size_t>(i)] += Eigen::Vector2d(4.0, -3.0);
 
   auto r = calibrate_camera_intrinsics(board(), obs, options_for(truth), {});
   ASSERT_TRUE(r.ok()) << r.error().message;
@@ -254,7 +258,8 @@ TEST(CameraIntrinsics, WarnsWhenEveryViewFacesTheCamera) {
   ASSERT_TRUE(r.ok()) << r.error().message;
   EXPECT_FALSE(r->focal_well_determined);
   ASSERT_FALSE(r->warnings.empty());
-  EXPECT_NE(r->warnings.front().find("focal length is not determined"), std::string::npos) << r->warnings.front();
+  EXPECT_NE(r->warnings.front().find("focal length is not determined"), std::string::npos)
+      << r->warnings.front();
 }
 
 TEST(CameraIntrinsics, CoverageCountsTheCellsHit) {
