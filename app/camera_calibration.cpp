@@ -72,7 +72,8 @@ Result<log::Image> gray_of(const CameraFrame& frame) {
     image.data = frame.data;
     return image;
   }
-  if (frame.encoding == "png" || frame.encoding == "webp") return log::decode_image(frame.data, log::ReadMode::kGray8);
+  if (frame.encoding == "png" || frame.encoding == "webp")
+    return log::decode_image(frame.data, log::ReadMode::kGray8);
   return make_error(Errc::kUnsupported, "frames encoded as '" + frame.encoding + "' cannot be decoded here");
 }
 
@@ -83,8 +84,9 @@ struct Detected {
 };
 
 /// Searches every frame of the stream on `threads` workers; frames are decoded in the workers.
-Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_id, const calib::TargetDetector& detector,
-                               int threads, const ProgressFn& progress) {
+Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_id,
+                               const calib::TargetDetector& detector, int threads,
+                               const ProgressFn& progress) {
   auto times = reader.frame_times(stream_id);
   if (!times.ok()) return times.error();
   const std::size_t total = times->size();
@@ -108,7 +110,8 @@ Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_i
         out.observations[index] = std::move(*found);
       } else {
         const std::lock_guard lock(failure_mutex);
-        if (out.failed++ == 0) out.first_failure = "t_ns " + std::to_string(frame.t_ns) + ": " + found.error().message;
+        if (out.failed++ == 0)
+          out.first_failure = "t_ns " + std::to_string(frame.t_ns) + ": " + found.error().message;
       }
       done.fetch_add(1);
     }
@@ -132,8 +135,9 @@ Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_i
 }
 
 /// Stored detections for the key, when the log holds a set for this many frames.
-std::optional<std::vector<calib::TargetObservation>> stored_detections(const CameraCalibrationRequest& q, int stream_id,
-                                                                       const std::string& key, std::int64_t frames,
+std::optional<std::vector<calib::TargetObservation>> stored_detections(const CameraCalibrationRequest& q,
+                                                                       int stream_id, const std::string& key,
+                                                                       std::int64_t frames,
                                                                        std::vector<std::string>* warnings) {
   auto set = log::read_target_detections(q.log_path, stream_id, key);
   if (!set.ok()) {
@@ -155,15 +159,16 @@ std::optional<std::vector<calib::TargetObservation>> stored_detections(const Cam
 
 /// Stores the detections in the log when it is safe to write there; a warning says why not.
 bool store_detections(const CameraCalibrationRequest& q, const log::SessionLogReader& reader, int stream_id,
-                      const std::string& key, std::int64_t frames, const std::vector<calib::TargetObservation>& obs,
-                      std::vector<std::string>* warnings) {
+                      const std::string& key, std::int64_t frames,
+                      const std::vector<calib::TargetObservation>& obs, std::vector<std::string>* warnings) {
   if (reader.health().damaged) {
     warnings->push_back("detections not stored in the log: it is damaged, and writing could lose more of it");
     return false;
   }
   if (!reader.health().complete) {
-    warnings->push_back("detections not stored in the log: it is not marked complete (still being recorded, or "
-                        "its writer stopped without closing it)");
+    warnings->push_back(
+        "detections not stored in the log: it is not marked complete (still being recorded, or "
+        "its writer stopped without closing it)");
     return false;
   }
   log::DetectionSet set;
@@ -220,12 +225,13 @@ Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequ
   if (!count.ok()) return count.error();
   report.frames = *count;
   if (report.frames == 0) {
-    return make_error(Errc::kInsufficientData, "camera stream '" + report.stream.name + "' of " + q.log_path +
-                                                   " holds no frames");
+    return make_error(Errc::kInsufficientData,
+                      "camera stream '" + report.stream.name + "' of " + q.log_path + " holds no frames");
   }
   report.detection_key = detection_key(q.target, q.detection);
   std::optional<std::vector<calib::TargetObservation>> obs;
-  if (q.reuse_detections) obs = stored_detections(q, report.stream_id, report.detection_key, report.frames, &report.warnings);
+  if (q.reuse_detections)
+    obs = stored_detections(q, report.stream_id, report.detection_key, report.frames, &report.warnings);
   report.detections_reused = obs.has_value();
   if (!obs) {
     auto detector = calib::TargetDetector::create(q.target, q.detection);
@@ -233,18 +239,19 @@ Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequ
     report.detection_threads =
         q.threads > 0 ? q.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
     const auto start = std::chrono::steady_clock::now();
-    auto found = detect_frames(**reader, report.stream_id, **detector, report.detection_threads, q.detection_progress);
+    auto found =
+        detect_frames(**reader, report.stream_id, **detector, report.detection_threads, q.detection_progress);
     if (!found.ok()) return found.error();
     report.detection_wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     report.frames_failed = found->failed;
     if (found->failed > 0) {
-      report.warnings.push_back(std::to_string(found->failed) + " frames could not be searched (first: " +
-                                found->first_failure + ")");
+      report.warnings.push_back(std::to_string(found->failed) +
+                                " frames could not be searched (first: " + found->first_failure + ")");
     }
     obs = std::move(found->observations);
     if (q.store_detections) {
-      report.detections_stored =
-          store_detections(q, **reader, report.stream_id, report.detection_key, report.frames, *obs, &report.warnings);
+      report.detections_stored = store_detections(q, **reader, report.stream_id, report.detection_key,
+                                                  report.frames, *obs, &report.warnings);
     }
   }
   report.frames_with_target =
@@ -252,7 +259,8 @@ Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequ
   auto result = calib::calibrate_camera_intrinsics(q.target, *obs, q.intrinsics, q.solve_progress);
   if (!result.ok()) return result.error().context("camera '" + report.stream.name + "' of " + q.log_path);
   report.intrinsics = std::move(*result);
-  report.warnings.insert(report.warnings.end(), report.intrinsics.warnings.begin(), report.intrinsics.warnings.end());
+  report.warnings.insert(report.warnings.end(), report.intrinsics.warnings.begin(),
+                         report.intrinsics.warnings.end());
   return report;
 }
 

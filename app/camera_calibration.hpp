@@ -44,7 +44,7 @@ struct CameraCalibrationReport {
   TargetDescription target;
   std::string target_source;
   std::string software_version;  // of the imucal that wrote the log
-  std::int64_t frames = 0;        // frames read (or searched by the run whose detections were reused)
+  std::int64_t frames = 0;       // frames read (or searched by the run whose detections were reused)
   int frames_with_target = 0;
   int frames_failed = 0;  // frames that could not be decoded or searched
   std::string detection_key;

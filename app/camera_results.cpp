@@ -49,10 +49,13 @@ json vec(const Eigen::Vector4d& v) { return json::array({v[0], v[1], v[2], v[3]}
 json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
 json sigma_vec(const Eigen::Vector4d& v) {
-  return json::array({finite_or_null(v[0]), finite_or_null(v[1]), finite_or_null(v[2]), finite_or_null(v[3])});
+  return json::array(
+      {finite_or_null(v[0]), finite_or_null(v[1]), finite_or_null(v[2]), finite_or_null(v[3])});
 }
 
-int views_rejected(const CameraCalibrationReport& r) { return r.intrinsics.views_total - r.intrinsics.views_used; }
+int views_rejected(const CameraCalibrationReport& r) {
+  return r.intrinsics.views_total - r.intrinsics.views_used;
+}
 
 }  // namespace
 
@@ -62,7 +65,8 @@ Result<TargetChoice> target_from_log_metadata(const std::map<std::string, std::s
     try {
       root = YAML::Load(it->second);  // JSON is YAML
     } catch (const YAML::Exception& e) {
-      return make_error(Errc::kCorrupt, std::string("the log's rig_config metadata is not valid JSON: ") + e.what());
+      return make_error(Errc::kCorrupt,
+                        std::string("the log's rig_config metadata is not valid JSON: ") + e.what());
     }
     if (root.IsMap() && root["target"]) {
       auto t = parse_target_node(root["target"], "the log's rig_config metadata");
@@ -75,18 +79,19 @@ Result<TargetChoice> target_from_log_metadata(const std::map<std::string, std::s
     if (!t.ok()) return make_error(Errc::kCorrupt, t.error().message);
     return TargetChoice{*t, "target metadata"};
   }
-  return make_error(Errc::kNotFound, "the log names no calibration target (no target in its rig_config or target "
-                                     "metadata): give the target's Kalibr YAML")
+  return make_error(Errc::kNotFound,
+                    "the log names no calibration target (no target in its rig_config or target "
+                    "metadata): give the target's Kalibr YAML")
       .with_remedy("target");
 }
 
 std::string detection_key(const TargetDescription& target, const calib::DetectionOptions& options) {
-  const std::string what = target_to_yaml(target) + "|subpixel=" + std::to_string(options.subpixel) +
-                           "|partial=" + std::to_string(options.partial) +
-                           "|min_tags=" + std::to_string(options.min_tags) +
-                           "|checkerboard_method=" + std::to_string(static_cast<int>(options.checkerboard_method)) +
-                           "|aprilgrid_decimate=" + std::to_string(options.aprilgrid_decimate) + "|imucal=" + kVersion +
-                           "|format=" + std::to_string(kDetectionFormat);
+  const std::string what =
+      target_to_yaml(target) + "|subpixel=" + std::to_string(options.subpixel) +
+      "|partial=" + std::to_string(options.partial) + "|min_tags=" + std::to_string(options.min_tags) +
+      "|checkerboard_method=" + std::to_string(static_cast<int>(options.checkerboard_method)) +
+      "|aprilgrid_decimate=" + std::to_string(options.aprilgrid_decimate) + "|imucal=" + kVersion +
+      "|format=" + std::to_string(kDetectionFormat);
   char text[40];
   std::snprintf(text, sizeof text, "v%d-%016llx", kDetectionFormat,
                 static_cast<unsigned long long>(fnv1a(what)));
@@ -114,7 +119,8 @@ Result<calib::TargetObservation> decode_detection(const std::string& text, TimeN
     if (px.size() != 2 * o.ids.size()) throw std::runtime_error("px and ids differ in length");
     for (std::size_t i = 0; i < o.ids.size(); ++i) o.px.emplace_back(px[2 * i], px[2 * i + 1]);
   } catch (const std::exception& e) {
-    return make_error(Errc::kCorrupt, "a stored detection (t_ns " + std::to_string(t_ns) + ") is malformed: " + e.what());
+    return make_error(Errc::kCorrupt,
+                      "a stored detection (t_ns " + std::to_string(t_ns) + ") is malformed: " + e.what());
   }
   return o;
 }
@@ -168,7 +174,8 @@ std::string camera_result_json(const CameraCalibrationReport& r) {
     json jv = {{"t_ns", v.t_ns}, {"points", v.points}, {"used", v.used}, {"rms_px", v.rms_px}};
     if (v.used) {
       jv["points_used"] = v.points_used;
-      jv["q_cam_target_wxyz"] = {v.q_cam_target.w(), v.q_cam_target.x(), v.q_cam_target.y(), v.q_cam_target.z()};
+      jv["q_cam_target_wxyz"] = {v.q_cam_target.w(), v.q_cam_target.x(), v.q_cam_target.y(),
+                                 v.q_cam_target.z()};
       jv["t_cam_target_m"] = {v.t_cam_target.x(), v.t_cam_target.y(), v.t_cam_target.z()};
     } else {
       jv["rejected_because"] = v.rejected_because;
@@ -194,7 +201,8 @@ std::string camera_result_json(const CameraCalibrationReport& r) {
       {"residual_sigma_px", res.residual_sigma_px},
       {"focal_well_determined", res.focal_well_determined},
       {"coverage", res.coverage},
-      {"coverage_grid", {{"cols", res.coverage_cols}, {"rows", res.coverage_rows}, {"counts", res.coverage_counts}}},
+      {"coverage_grid",
+       {{"cols", res.coverage_cols}, {"rows", res.coverage_rows}, {"counts", res.coverage_counts}}},
       {"frames", r.frames},
       {"frames_with_target", r.frames_with_target},
       {"frames_failed", r.frames_failed},
@@ -209,8 +217,12 @@ std::string camera_result_json(const CameraCalibrationReport& r) {
       {"camera_stream", r.stream.name},
       {"target_yaml", target_to_yaml(r.target)},
       {"target_source", r.target_source},
-      {"detections", {{"key", r.detection_key}, {"reused", r.detections_reused}, {"stored", r.detections_stored},
-                      {"threads", r.detection_threads}, {"wall_s", r.detection_wall_s}}},
+      {"detections",
+       {{"key", r.detection_key},
+        {"reused", r.detections_reused},
+        {"stored", r.detections_stored},
+        {"threads", r.detection_threads},
+        {"wall_s", r.detection_wall_s}}},
       {"solver", {{"iterations", res.iterations}, {"cpu_s", res.solve_cpu_s}}},
       {"warnings", r.warnings},
       {"software_version", kVersion},

@@ -23,7 +23,8 @@ struct TargetChoice {
 /// recordings), else its `target` metadata key (Kalibr YAML, written by the simulator).
 /// Errc::kNotFound when it names none (the caller asks for --target); kCorrupt when the one it
 /// names is malformed.
-[[nodiscard]] Result<TargetChoice> target_from_log_metadata(const std::map<std::string, std::string>& metadata);
+[[nodiscard]] Result<TargetChoice> target_from_log_metadata(
+    const std::map<std::string, std::string>& metadata);
 
 /// Fingerprint of what a detection depends on: the target description, the detection options,
 /// and the detector (imucal's version and the stored format). Two runs with equal keys find the

@@ -39,7 +39,8 @@ std::string utc_now_iso8601() {
 
 std::string column_text(sqlite3_stmt* stmt, int index) {
   const auto* text = sqlite3_column_text(stmt, index);
-  return text ? std::string(reinterpret_cast<const char*>(text), static_cast<std::size_t>(sqlite3_column_bytes(stmt, index)))
+  return text ? std::string(reinterpret_cast<const char*>(text),
+                            static_cast<std::size_t>(sqlite3_column_bytes(stmt, index)))
               : std::string();
 }
 
@@ -83,7 +84,8 @@ Status read_rows(sqlite3* db, const std::string& path, int stream_id, DetectionS
   Stmt stmt = sqlite::prepare(
       db, "SELECT t_ns, data FROM target_detections WHERE stream_id=?1 AND target_key=?2 ORDER BY t_ns", &rc);
   if (rc != SQLITE_OK) {
-    return make_error(Errc::kCorrupt, "session log " + path + ": stored detections unreadable: " + sqlite::errmsg(db));
+    return make_error(Errc::kCorrupt,
+                      "session log " + path + ": stored detections unreadable: " + sqlite::errmsg(db));
   }
   sqlite3_bind_int(stmt.get(), 1, stream_id);
   bind_text(stmt.get(), 2, set->target_key);
@@ -91,7 +93,8 @@ Status read_rows(sqlite3* db, const std::string& path, int stream_id, DetectionS
     set->detections.push_back({sqlite3_column_int64(stmt.get(), 0), column_text(stmt.get(), 1)});
   }
   if (rc != SQLITE_DONE) {
-    return make_error(Errc::kCorrupt, "session log " + path + ": stored detections unreadable: " + sqlite::errmsg(db));
+    return make_error(Errc::kCorrupt,
+                      "session log " + path + ": stored detections unreadable: " + sqlite::errmsg(db));
   }
   return {};
 }
@@ -141,16 +144,16 @@ Result<std::optional<DetectionSet>> read_target_detections(const std::string& lo
                               "WHERE stream_id=?1 AND target_key=?2",
                               &rc);
   if (rc != SQLITE_OK) {
-    return make_error(Errc::kCorrupt,
-                      "session log " + log_path + ": stored detections unreadable: " + sqlite::errmsg(db->get()));
+    return make_error(Errc::kCorrupt, "session log " + log_path +
+                                          ": stored detections unreadable: " + sqlite::errmsg(db->get()));
   }
   sqlite3_bind_int(stmt.get(), 1, stream_id);
   bind_text(stmt.get(), 2, target_key);
   rc = sqlite3_step(stmt.get());
   if (rc == SQLITE_DONE) return std::optional<DetectionSet>{};
   if (rc != SQLITE_ROW) {
-    return make_error(Errc::kCorrupt,
-                      "session log " + log_path + ": stored detections unreadable: " + sqlite::errmsg(db->get()));
+    return make_error(Errc::kCorrupt, "session log " + log_path +
+                                          ": stored detections unreadable: " + sqlite::errmsg(db->get()));
   }
   DetectionSet set;
   set.target_key = target_key;

@@ -27,10 +27,10 @@ struct StoredDetection {
 
 /// The detections of one camera stream for one key.
 struct DetectionSet {
-  std::string target_key;   // fingerprint of what produced the detections
-  std::string description;  // for people (the target, the detector); not interpreted
-  std::int64_t frames = 0;  // frames searched; frames without a detection have no row
-  std::string created_utc;  // set by write_target_detections
+  std::string target_key;                   // fingerprint of what produced the detections
+  std::string description;                  // for people (the target, the detector); not interpreted
+  std::int64_t frames = 0;                  // frames searched; frames without a detection have no row
+  std::string created_utc;                  // set by write_target_detections
   std::vector<StoredDetection> detections;  // in time order
 };
 
@@ -46,6 +46,7 @@ struct DetectionSet {
 /// cannot write (read-only file or folder, a writer still holding it: Errc::kIo) and a file that
 /// is not a session log (Errc::kCorrupt); callers must not write into a log the reader found
 /// damaged.
-[[nodiscard]] Status write_target_detections(const std::string& log_path, int stream_id, const DetectionSet& set);
+[[nodiscard]] Status write_target_detections(const std::string& log_path, int stream_id,
+                                             const DetectionSet& set);
 
 }  // namespace imucal::log

@@ -45,8 +45,9 @@ app::TargetChoice resolve_target(const CameraCliOptions& o) {
   auto t = app::target_from_log_metadata((*reader)->metadata());
   if (!t.ok()) {
     if (t.error().code == Errc::kNotFound) {
-      throw CliExit{kExitUsage, o.log_path + " names no calibration target (neither its rig configuration nor its "
-                                             "metadata has one): pass --target TARGET.yaml (Kalibr target YAML)"};
+      throw CliExit{kExitUsage, o.log_path +
+                                    " names no calibration target (neither its rig configuration nor its "
+                                    "metadata has one): pass --target TARGET.yaml (Kalibr target YAML)"};
     }
     fail(t.error(), o.log_path);
   }
@@ -56,11 +57,13 @@ app::TargetChoice resolve_target(const CameraCliOptions& o) {
 void print_summary(const app::CameraCalibrationReport& r, const std::string& yaml_path) {
   const auto& res = r.intrinsics;
   const auto& c = res.camera;
-  std::printf("camera calibration of %s (%s, %lld frames, %d with the target; detections %s)\n", r.log_path.c_str(),
-              r.stream.name.c_str(), static_cast<long long>(r.frames), r.frames_with_target,
-              r.detections_reused ? "reused from the log" : (r.detections_stored ? "stored in the log" : "not stored"));
-  std::printf("  model %s, %d x %d, target from %s\n", calib::camera_model_option_name(c.distortion_model), c.width,
-              c.height, r.target_source.c_str());
+  std::printf("camera calibration of %s (%s, %lld frames, %d with the target; detections %s)\n",
+              r.log_path.c_str(), r.stream.name.c_str(), static_cast<long long>(r.frames),
+              r.frames_with_target,
+              r.detections_reused ? "reused from the log"
+                                  : (r.detections_stored ? "stored in the log" : "not stored"));
+  std::printf("  model %s, %d x %d, target from %s\n", calib::camera_model_option_name(c.distortion_model),
+              c.width, c.height, r.target_source.c_str());
   static const char* kIntrinsics[] = {"fu", "fv", "pu", "pv"};
   static const char* kRadtan[] = {"k1", "k2", "p1", "p2"};
   static const char* kEqui[] = {"k1", "k2", "k3", "k4"};
@@ -69,10 +72,11 @@ void print_summary(const app::CameraCalibrationReport& r, const std::string& yam
     std::printf("  %s %12.5f +- %.5f px\n", kIntrinsics[i], c.intrinsics[i], res.intrinsics_sigma[i]);
   for (int i = 0; i < 4; ++i)
     std::printf("  %s %12.6f +- %.6f\n", dist[i], c.distortion_coeffs[i], res.distortion_sigma[i]);
-  std::printf("  reprojection RMS %.4f px (residual sigma %.4f px per coordinate) over %d corners in %d views; "
-              "%d views and %d corners rejected\n",
-              res.rms_px, res.residual_sigma_px, res.points_used, res.views_used, res.views_total - res.views_used,
-              res.corners_rejected);
+  std::printf(
+      "  reprojection RMS %.4f px (residual sigma %.4f px per coordinate) over %d corners in %d views; "
+      "%d views and %d corners rejected\n",
+      res.rms_px, res.residual_sigma_px, res.points_used, res.views_used, res.views_total - res.views_used,
+      res.corners_rejected);
   std::printf("  coverage: %.0f %% of a %d x %d grid of the image\n", 100.0 * res.coverage, res.coverage_cols,
               res.coverage_rows);
   std::printf("  wrote %s\n", yaml_path.c_str());
@@ -113,7 +117,8 @@ void run(const CameraCliOptions& o) {
   solving.finish();
   if (!report.ok()) fail(report.error(), "calibrate camera");
   for (const auto& w : report->warnings) spdlog::warn("{}", w);
-  if (auto s = app::write_text_file(o.yaml_path, app::camera_result_yaml(*report), outputs); !s.ok()) fail(s.error());
+  if (auto s = app::write_text_file(o.yaml_path, app::camera_result_yaml(*report), outputs); !s.ok())
+    fail(s.error());
   if (o.json) {
     std::cout << app::camera_result_json(*report);
   } else {
@@ -131,22 +136,26 @@ void setup(CLI::App& root) {
       ->required()
       ->check(CLI::ExistingFile);
   cmd->add_option("--camera", o->camera, "Camera stream name (default: the first)");
-  cmd->add_option("--target", o->target_path,
-                  "Calibration target, Kalibr target YAML (default: the target in the log's rig configuration or "
-                  "metadata)")
+  cmd->add_option(
+         "--target", o->target_path,
+         "Calibration target, Kalibr target YAML (default: the target in the log's rig configuration or "
+         "metadata)")
       ->check(CLI::ExistingFile);
   cmd->add_option("--model", o->model, "Camera model: pinhole-radtan (default) or pinhole-equi (fisheye)")
       ->check(CLI::IsMember({"pinhole-radtan", "pinhole-equi"}));
-  cmd->add_option("--threads", o->threads, "Worker threads for the detection and the solver (default: all cores)")
+  cmd->add_option("--threads", o->threads,
+                  "Worker threads for the detection and the solver (default: all cores)")
       ->check(CLI::Range(0, 256));
   cmd->add_flag("--no-reuse", o->no_reuse,
                 "Search the frames again even when the log holds detections for this target (the new ones "
                 "replace them)");
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");
-  cmd->add_option("-o,--output", o->yaml_path, "Write the camera as Kalibr camchain YAML (cam0) with imucal's figures")
+  cmd->add_option("-o,--output", o->yaml_path,
+                  "Write the camera as Kalibr camchain YAML (cam0) with imucal's figures")
       ->required();
   cmd->add_flag("--force", o->force, "Replace the output file if it exists (never the log or the target)");
-  cmd->add_flag("--json", o->json, "Print the result and its figures as JSON on stdout instead of the summary");
+  cmd->add_flag("--json", o->json,
+                "Print the result and its figures as JSON on stdout instead of the summary");
   cmd->callback([o] { run(*o); });
 }
 

@@ -1,13 +1,12 @@
 // The camera calibration's solver-free pieces: the target a log names, stored detections' key
 // and text, the result YAML (read back as a Kalibr camera) and JSON.
 
-#include "app/camera_results.hpp"
-
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
 #include <nlohmann/json.hpp>
 
+#include "app/camera_results.hpp"
 #include "core/rig_config.hpp"
 
 namespace imucal::app {

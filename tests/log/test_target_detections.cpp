@@ -1,8 +1,6 @@
 // Stored target detections in a session log: round trip, replacement, what they leave alone, and
 // logs they must not write into.
 
-#include "log/target_detections.hpp"
-
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 #include <sys/stat.h>
@@ -13,6 +11,7 @@
 #include <fstream>
 
 #include "log/session_log.hpp"
+#include "log/target_detections.hpp"
 #include "tests/support/session_log_util.hpp"
 #include "tests/support/test_support.hpp"
 
@@ -134,7 +133,9 @@ TEST(TargetDetections, WritesWhileAReaderHasTheLogOpen) {
   ASSERT_TRUE(reader.ok());
   ASSERT_TRUE(write_target_detections(path, 2, sample_set("k1")).ok());
   int frames = 0;
-  ASSERT_TRUE((*reader)->for_each_frame(2, kTimeMin, kTimeMax, [&](const CameraFrame&) { return ++frames > 0; }).ok());
+  ASSERT_TRUE((*reader)
+                  ->for_each_frame(2, kTimeMin, kTimeMax, [&](const CameraFrame&) { return ++frames > 0; })
+                  .ok());
   EXPECT_EQ(frames, 3);
 }
 
@@ -156,7 +157,8 @@ TEST(TargetDetections, ARefusedWriteLeavesAReadOnlyLogAsItWas) {
   int status = 0;
   ASSERT_EQ(waitpid(pid, &status, 0), pid);
   ASSERT_TRUE(WIFEXITED(status));
-  if (WEXITSTATUS(status) == 20) GTEST_SKIP() << "cannot drop to an unprivileged user to make the log read-only";
+  if (WEXITSTATUS(status) == 20)
+    GTEST_SKIP() << "cannot drop to an unprivileged user to make the log read-only";
   EXPECT_EQ(WEXITSTATUS(status), 0) << "1: the write succeeded, 2: wrong error";
   EXPECT_EQ(file_bytes(path), before);
   EXPECT_FALSE(std::filesystem::exists(path + "-journal"));
