@@ -48,7 +48,8 @@ void expect_truth_within_three_sigmas(const std::string& yaml_path) {
     const double s = cam0["imucal"]["intrinsics_sigma"][i].as<double>();
     EXPECT_GT(s, 0.0);
     EXPECT_LE(std::abs(est->intrinsics[i] - truth.intrinsics[i]), 3.0 * s)
-        << "intrinsics[" << i << "] " << est->intrinsics[i] << " truth " << truth.intrinsics[i] << " sigma " << s;
+        << "intrinsics[" << i << "] " << est->intrinsics[i] << " truth " << truth.intrinsics[i] << " sigma "
+        << s;
     const double sd = cam0["imucal"]["distortion_coeffs_sigma"][i].as<double>();
     EXPECT_GT(sd, 0.0);
     EXPECT_LE(std::abs(est->distortion_coeffs[i] - truth.distortion_coeffs[i]), 3.0 * sd)
@@ -86,9 +87,7 @@ TEST(CliCalibrateCamera, OutputRules) {
   const std::string dir = scratch_dir();
   const std::string log = fixture_copy(dir);
   const std::string out = dir + "/cam.yaml";
-  {
-    std::ofstream(out) << "keep me\n";
-  }
+  { std::ofstream(out) << "keep me\n"; }
   // Refusals come before any work: the log is not searched (no detections are stored).
   auto r = run_cli({"calibrate", "camera", log, "-o", out});
   EXPECT_EQ(r.exit_code, 2);
@@ -111,6 +110,26 @@ TEST(CliCalibrateCamera, OutputRules) {
   EXPECT_EQ(r.exit_code, 3);
   EXPECT_NE(r.err.find("cam9"), std::string::npos) << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir + "/x.yaml"));
+}
+
+// A damaged log is refused, or with --allow-damaged calibrated from its readable part and left
+// exactly as it was (no detections are written into it).
+TEST(CliCalibrateCamera, DamagedLogIsNeverWritten) {
+  const std::string dir = scratch_dir();
+  const std::string log = fixture_copy(dir);
+  std::filesystem::resize_file(log, std::filesystem::file_size(log) * 7 / 10);
+  const std::string before = read_file(log);
+  auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml"});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("--allow-damaged"), std::string::npos) << r.err;
+  r = run_cli({"calibrate", "camera", log, "--allow-damaged", "-o", dir + "/cam.yaml", "--json"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("detections not stored in the log: it is damaged"), std::string::npos) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_FALSE(j["detections"]["stored"].get<bool>());
+  EXPECT_GT(j["views_used"].get<int>(), 5);
+  EXPECT_EQ(read_file(log), before);
+  EXPECT_FALSE(std::filesystem::exists(log + "-journal"));
 }
 
 // A log imported from a EuRoC folder has PNG frames and no target: it needs --target, then it
