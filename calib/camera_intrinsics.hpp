@@ -74,7 +74,7 @@ struct CameraIntrinsicsResult {
   Eigen::Matrix<double, 8, 8> covariance = Eigen::Matrix<double, 8, 8>::Zero();
   bool covariance_ok = false;  // false: the problem is rank deficient (sigmas are infinite)
 
-  double rms_px = 0.0;             // reprojection RMS (per coordinate... see docs) over used points
+  double rms_px = 0.0;             // RMS of the used corners' reprojection errors (Euclidean, px)
   double residual_sigma_px = 0.0;  // sqrt(RSS / (n - p)), per coordinate
   int views_total = 0;
   int views_used = 0;
