@@ -1,5 +1,6 @@
 #include "app/solvers.hpp"
 
+#include "app/camera_module.hpp"
 #include "app/module_loader.hpp"
 #include "calib/solve_module.hpp"
 
@@ -10,6 +11,12 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   auto api = load_module<calib::SolveModuleApi>(calib::kSolveModule, calib::kSolveModuleEntry);
   if (!api.ok()) return api.error();
   return (*api)->static_calibration(samples, options);
+}
+
+Result<CameraCalibrationReport> calibrate_camera(const CameraCalibrationRequest& request) {
+  auto api = load_module<CameraModuleApi>(kCameraModule, kCameraModuleEntry);
+  if (!api.ok()) return api.error();
+  return (*api)->calibrate_camera(request);
 }
 
 }  // namespace imucal::app

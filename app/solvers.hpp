@@ -5,6 +5,7 @@
 
 #include <span>
 
+#include "app/camera_calibration.hpp"
 #include "calib/static_calibration.hpp"
 #include "core/imu.hpp"
 #include "core/result.hpp"
@@ -14,5 +15,9 @@ namespace imucal::app {
 /// calib::calibrate_static; fails with the loader's error when the module cannot be loaded.
 [[nodiscard]] Result<StaticCalibrationResult> calibrate_static(
     std::span<const ImuSample> samples, const calib::StaticCalibrationOptions& options);
+
+/// app::calibrate_camera_log through the camera module libimucal_camera.so (detection and the
+/// intrinsics solve); fails with the loader's error when the module cannot be loaded.
+[[nodiscard]] Result<CameraCalibrationReport> calibrate_camera(const CameraCalibrationRequest& request);
 
 }  // namespace imucal::app

@@ -1,0 +1,267 @@
+// Camera calibration of a log's camera stream (app/camera_calibration.hpp): detection over the
+// frames on worker threads, stored detections, the intrinsics solve. Compiled into the camera
+// module libimucal_camera.so.
+
+#include "app/camera_calibration.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <mutex>
+#include <optional>
+#include <thread>
+
+#include "app/camera_results.hpp"
+#include "log/frame_codec.hpp"
+#include "log/session_log.hpp"
+#include "log/target_detections.hpp"
+
+namespace imucal::app {
+namespace {
+
+/// A queue of encoded frames with a fixed capacity: the reader waits while the workers are
+/// behind, so memory stays bounded whatever the length of the log.
+class FrameQueue {
+ public:
+  explicit FrameQueue(std::size_t capacity) : capacity_(capacity) {}
+
+  void push(std::size_t index, CameraFrame frame) {
+    std::unique_lock lock(mutex_);
+    not_full_.wait(lock, [&] { return items_.size() < capacity_; });
+    items_.emplace_back(index, std::move(frame));
+    not_empty_.notify_one();
+  }
+
+  /// The next frame, or nullopt once the queue is closed and empty.
+  std::optional<std::pair<std::size_t, CameraFrame>> pop() {
+    std::unique_lock lock(mutex_);
+    not_empty_.wait(lock, [&] { return !items_.empty() || closed_; });
+    if (items_.empty()) return std::nullopt;
+    auto item = std::move(items_.front());
+    items_.pop_front();
+    not_full_.notify_one();
+    return item;
+  }
+
+  void close() {
+    const std::lock_guard lock(mutex_);
+    closed_ = true;
+    not_empty_.notify_all();
+  }
+
+ private:
+  std::size_t capacity_;
+  std::mutex mutex_;
+  std::condition_variable not_full_, not_empty_;
+  std::deque<std::pair<std::size_t, CameraFrame>> items_;
+  bool closed_ = false;
+};
+
+/// One frame as 8-bit grey.
+Result<log::Image> gray_of(const CameraFrame& frame) {
+  if (frame.encoding == "gray8") {
+    if (frame.width <= 0 || frame.height <= 0 ||
+        frame.data.size() != static_cast<std::size_t>(frame.width) * static_cast<std::size_t>(frame.height)) {
+      return make_error(Errc::kCorrupt, "a gray8 frame's data does not match its size");
+    }
+    log::Image image;
+    image.width = frame.width;
+    image.height = frame.height;
+    image.data = frame.data;
+    return image;
+  }
+  if (frame.encoding == "png" || frame.encoding == "webp")
+    return log::decode_image(frame.data, log::ReadMode::kGray8);
+  return make_error(Errc::kUnsupported, "frames encoded as '" + frame.encoding + "' cannot be decoded here");
+}
+
+struct Detected {
+  std::vector<calib::TargetObservation> observations;  // one per frame, in time order
+  int failed = 0;
+  std::string first_failure;
+};
+
+/// Searches every frame of the stream on `threads` workers; frames are decoded in the workers.
+Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_id,
+                               const calib::TargetDetector& detector, int threads,
+                               const ProgressFn& progress) {
+  auto times = reader.frame_times(stream_id);
+  if (!times.ok()) return times.error();
+  const std::size_t total = times->size();
+  Detected out;
+  out.observations.resize(total);
+  std::mutex failure_mutex;
+  std::atomic<std::size_t> done{0};
+  FrameQueue queue(static_cast<std::size_t>(2 * threads));
+  auto work = [&] {
+    while (auto item = queue.pop()) {
+      auto& [index, frame] = *item;
+      Result<calib::TargetObservation> found = make_error(Errc::kInternal, "");
+      auto gray = gray_of(frame);
+      if (gray.ok()) {
+        found = detector.detect({gray->data.data(), gray->width, gray->height, 0});
+      } else {
+        found = gray.error();
+      }
+      if (found.ok()) {
+        found->t_ns = frame.t_ns;
+        out.observations[index] = std::move(*found);
+      } else {
+        const std::lock_guard lock(failure_mutex);
+        if (out.failed++ == 0)
+          out.first_failure = "t_ns " + std::to_string(frame.t_ns) + ": " + found.error().message;
+      }
+      done.fetch_add(1);
+    }
+  };
+  std::vector<std::thread> workers;
+  for (int i = 0; i < threads; ++i) workers.emplace_back(work);
+  std::size_t next = 0;
+  auto status = reader.for_each_frame(stream_id, log::kTimeMin, log::kTimeMax, [&](const CameraFrame& frame) {
+    // Frames whose data failed its check are skipped by the reader: their slots stay empty.
+    while (next < total && (*times)[next] < frame.t_ns) ++next;
+    if (next >= total) return false;
+    queue.push(next++, frame);
+    report_progress(progress, static_cast<double>(done.load()), static_cast<double>(total));
+    return true;
+  });
+  queue.close();
+  for (auto& w : workers) w.join();
+  if (!status.ok()) return status.error();
+  report_progress(progress, 1.0, 1.0);
+  return out;
+}
+
+/// Stored detections for the key, when the log holds a set for this many frames.
+std::optional<std::vector<calib::TargetObservation>> stored_detections(const CameraCalibrationRequest& q,
+                                                                       int stream_id, const std::string& key,
+                                                                       std::int64_t frames,
+                                                                       std::vector<std::string>* warnings) {
+  auto set = log::read_target_detections(q.log_path, stream_id, key);
+  if (!set.ok()) {
+    warnings->push_back("stored detections not used: " + set.error().message);
+    return std::nullopt;
+  }
+  if (!*set || (*set)->frames != frames) return std::nullopt;
+  std::vector<calib::TargetObservation> obs;
+  for (const auto& d : (*set)->detections) {
+    auto o = decode_detection(d.data, d.t_ns);
+    if (!o.ok()) {
+      warnings->push_back("stored detections not used: " + o.error().message);
+      return std::nullopt;
+    }
+    obs.push_back(std::move(*o));
+  }
+  return obs;
+}
+
+/// Stores the detections in the log when it is safe to write there; a warning says why not.
+bool store_detections(const CameraCalibrationRequest& q, const log::SessionLogReader& reader, int stream_id,
+                      const std::string& key, std::int64_t frames,
+                      const std::vector<calib::TargetObservation>& obs, std::vector<std::string>* warnings) {
+  if (reader.health().damaged) {
+    warnings->push_back("detections not stored in the log: it is damaged, and writing could lose more of it");
+    return false;
+  }
+  if (!reader.health().complete) {
+    warnings->push_back(
+        "detections not stored in the log: it is not marked complete (still being recorded, or "
+        "its writer stopped without closing it)");
+    return false;
+  }
+  log::DetectionSet set;
+  set.target_key = key;
+  set.description = target_to_yaml(q.target);
+  set.frames = frames;
+  for (const auto& o : obs) {
+    if (!o.empty()) set.detections.push_back({o.t_ns, encode_detection(o)});
+  }
+  if (auto s = log::write_target_detections(q.log_path, stream_id, set); !s.ok()) {
+    warnings->push_back("detections not stored in the log (the next run searches the frames again): " +
+                        s.error().message);
+    return false;
+  }
+  return true;
+}
+
+/// Opens the log, picks the stream and applies the damage policy.
+Result<std::unique_ptr<log::SessionLogReader>> open_log(const CameraCalibrationRequest& q,
+                                                        CameraCalibrationReport* report) {
+  auto reader = log::SessionLogReader::open(q.log_path);
+  if (!reader.ok()) return reader.error();
+  const auto& health = (*reader)->health();
+  if (health.damaged) {
+    if (!q.allow_damaged) {
+      return make_error(Errc::kCorrupt, q.log_path + " is damaged (" + health.damage_message +
+                                            "); only its readable part can be used")
+          .with_remedy("allow_damaged");
+    }
+    report->warnings.push_back(q.log_path + " is damaged (" + health.damage_message +
+                               "): calibrated from its readable part only");
+  }
+  auto id = (*reader)->find_camera_stream(q.camera);
+  if (!id.ok()) return id.error().with_remedy("camera");
+  report->stream_id = *id;
+  report->stream = (*reader)->camera_streams().at(*id);
+  const auto& meta = (*reader)->metadata();
+  if (auto it = meta.find("software_version"); it != meta.end()) report->software_version = it->second;
+  return std::move(*reader);
+}
+
+}  // namespace
+
+Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequest& q) {
+  IMUCAL_TRY(q.intrinsics.validate());
+  IMUCAL_TRY(q.target.validate());
+  CameraCalibrationReport report;
+  report.log_path = q.log_path;
+  report.target = q.target;
+  report.target_source = q.target_source;
+  auto reader = open_log(q, &report);
+  if (!reader.ok()) return reader.error();
+  auto count = (*reader)->frame_count(report.stream_id);
+  if (!count.ok()) return count.error();
+  report.frames = *count;
+  if (report.frames == 0) {
+    return make_error(Errc::kInsufficientData,
+                      "camera stream '" + report.stream.name + "' of " + q.log_path + " holds no frames");
+  }
+  report.detection_key = detection_key(q.target, q.detection);
+  std::optional<std::vector<calib::TargetObservation>> obs;
+  if (q.reuse_detections)
+    obs = stored_detections(q, report.stream_id, report.detection_key, report.frames, &report.warnings);
+  report.detections_reused = obs.has_value();
+  if (!obs) {
+    auto detector = calib::TargetDetector::create(q.target, q.detection);
+    if (!detector.ok()) return detector.error();
+    report.detection_threads =
+        q.threads > 0 ? q.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+    const auto start = std::chrono::steady_clock::now();
+    auto found =
+        detect_frames(**reader, report.stream_id, **detector, report.detection_threads, q.detection_progress);
+    if (!found.ok()) return found.error();
+    report.detection_wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    report.frames_failed = found->failed;
+    if (found->failed > 0) {
+      report.warnings.push_back(std::to_string(found->failed) +
+                                " frames could not be searched (first: " + found->first_failure + ")");
+    }
+    obs = std::move(found->observations);
+    if (q.store_detections) {
+      report.detections_stored = store_detections(q, **reader, report.stream_id, report.detection_key,
+                                                  report.frames, *obs, &report.warnings);
+    }
+  }
+  report.frames_with_target =
+      static_cast<int>(std::count_if(obs->begin(), obs->end(), [](const auto& o) { return !o.empty(); }));
+  auto result = calib::calibrate_camera_intrinsics(q.target, *obs, q.intrinsics, q.solve_progress);
+  if (!result.ok()) return result.error().context("camera '" + report.stream.name + "' of " + q.log_path);
+  report.intrinsics = std::move(*result);
+  report.warnings.insert(report.warnings.end(), report.intrinsics.warnings.begin(),
+                         report.intrinsics.warnings.end());
+  return report;
+}
+
+}  // namespace imucal::app

@@ -1,0 +1,64 @@
+#pragma once
+// Camera intrinsic calibration of a camera stream in a session log: the target is searched in
+// every frame on all cores (or the detections stored in the log by an earlier run are reused),
+// then calib::calibrate_camera_intrinsics. Method and outputs: docs/camera-calibration.md.
+//
+// calibrate_camera_log needs OpenCV, libapriltag and Ceres: it is compiled into the camera module
+// libimucal_camera.so (app/camera_module.hpp); programs call it through app::calibrate_camera
+// (app/solvers.hpp), which loads the module. The result writers are in app/camera_results.hpp.
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "calib/camera_intrinsics.hpp"
+#include "calib/target_detection.hpp"
+#include "core/frame.hpp"
+#include "core/progress.hpp"
+#include "core/result.hpp"
+#include "core/target.hpp"
+
+namespace imucal::app {
+
+struct CameraCalibrationRequest {
+  std::string log_path;
+  std::string camera;  // camera stream name; empty = the first
+  TargetDescription target;
+  std::string target_source;  // for the outputs: the file, or where in the log it came from
+  calib::DetectionOptions detection;
+  calib::CameraIntrinsicsOptions intrinsics;
+  int threads = 0;  // detection workers; 0 = all cores
+  /// Calibrate from the readable part of a damaged log (else a damaged log is refused).
+  bool allow_damaged = false;
+  /// Use detections stored in the log for the same target and detector, and store new ones.
+  bool reuse_detections = true;
+  bool store_detections = true;
+  ProgressFn detection_progress;
+  ProgressFn solve_progress;
+};
+
+struct CameraCalibrationReport {
+  std::string log_path;
+  int stream_id = 0;
+  CameraStreamInfo stream;
+  TargetDescription target;
+  std::string target_source;
+  std::string software_version;  // of the imucal that wrote the log
+  std::int64_t frames = 0;       // frames read (or searched by the run whose detections were reused)
+  int frames_with_target = 0;
+  int frames_failed = 0;  // frames that could not be decoded or searched
+  std::string detection_key;
+  bool detections_reused = false;
+  bool detections_stored = false;
+  double detection_wall_s = 0.0;  // 0 when reused
+  int detection_threads = 0;
+  calib::CameraIntrinsicsResult intrinsics;
+  std::vector<std::string> warnings;  // of the detection, the log and the solve
+};
+
+/// Runs the detection (or reuses stored detections) and the intrinsics solve. Errors: the log's
+/// (kNotFound, kCorrupt: a damaged log without allow_damaged), kInsufficientData (too few views
+/// with the target), the solver's.
+[[nodiscard]] Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequest& request);
+
+}  // namespace imucal::app

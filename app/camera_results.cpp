@@ -1,0 +1,233 @@
+#include "app/camera_results.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+
+#include "core/version.hpp"
+
+namespace imucal::app {
+namespace {
+
+using nlohmann::json;
+
+/// Bumped when the detector's output for the same image and options can change (a detector
+/// fix) or the stored text changes shape: stored detections with another key are not reused.
+constexpr int kDetectionFormat = 1;
+
+/// FNV-1a, 64 bits: a fingerprint, not a security measure.
+std::uint64_t fnv1a(const std::string& text) {
+  std::uint64_t h = 0xcbf29ce484222325ULL;
+  for (unsigned char c : text) {
+    h ^= c;
+    h *= 0x100000001b3ULL;
+  }
+  return h;
+}
+
+Result<TargetDescription> parse_target_node(const YAML::Node& node, const std::string& source) {
+  YAML::Emitter out;
+  out << node;
+  auto t = parse_target_yaml(out.c_str(), source);
+  if (!t.ok()) return make_error(Errc::kCorrupt, t.error().message);
+  return t;
+}
+
+YAML::Node flow(const Eigen::Vector4d& v) {
+  YAML::Node n(YAML::NodeType::Sequence);
+  for (int i = 0; i < 4; ++i) n.push_back(v[i]);
+  n.SetStyle(YAML::EmitterStyle::Flow);
+  return n;
+}
+
+json vec(const Eigen::Vector4d& v) { return json::array({v[0], v[1], v[2], v[3]}); }
+
+/// A sigma for JSON: infinite (undetermined) as null.
+json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+json sigma_vec(const Eigen::Vector4d& v) {
+  return json::array(
+      {finite_or_null(v[0]), finite_or_null(v[1]), finite_or_null(v[2]), finite_or_null(v[3])});
+}
+
+int views_rejected(const CameraCalibrationReport& r) {
+  return r.intrinsics.views_total - r.intrinsics.views_used;
+}
+
+}  // namespace
+
+Result<TargetChoice> target_from_log_metadata(const std::map<std::string, std::string>& metadata) {
+  if (auto it = metadata.find("rig_config"); it != metadata.end()) {
+    YAML::Node root;
+    try {
+      root = YAML::Load(it->second);  // JSON is YAML
+    } catch (const YAML::Exception& e) {
+      return make_error(Errc::kCorrupt,
+                        std::string("the log's rig_config metadata is not valid JSON: ") + e.what());
+    }
+    if (root.IsMap() && root["target"]) {
+      auto t = parse_target_node(root["target"], "the log's rig_config metadata");
+      if (!t.ok()) return t.error();
+      return TargetChoice{*t, "rig_config metadata"};
+    }
+  }
+  if (auto it = metadata.find("target"); it != metadata.end()) {
+    auto t = parse_target_yaml(it->second, "the log's target metadata");
+    if (!t.ok()) return make_error(Errc::kCorrupt, t.error().message);
+    return TargetChoice{*t, "target metadata"};
+  }
+  return make_error(Errc::kNotFound,
+                    "the log names no calibration target (no target in its rig_config or target "
+                    "metadata): give the target's Kalibr YAML")
+      .with_remedy("target");
+}
+
+std::string detection_key(const TargetDescription& target, const calib::DetectionOptions& options) {
+  const std::string what =
+      target_to_yaml(target) + "|subpixel=" + std::to_string(options.subpixel) +
+      "|partial=" + std::to_string(options.partial) + "|min_tags=" + std::to_string(options.min_tags) +
+      "|checkerboard_method=" + std::to_string(static_cast<int>(options.checkerboard_method)) +
+      "|aprilgrid_decimate=" + std::to_string(options.aprilgrid_decimate) + "|imucal=" + kVersion +
+      "|format=" + std::to_string(kDetectionFormat);
+  char text[40];
+  std::snprintf(text, sizeof text, "v%d-%016llx", kDetectionFormat,
+                static_cast<unsigned long long>(fnv1a(what)));
+  return text;
+}
+
+std::string encode_detection(const calib::TargetObservation& o) {
+  json px = json::array();
+  for (const auto& p : o.px) {
+    px.push_back(p.x());
+    px.push_back(p.y());
+  }
+  return json{{"width", o.width}, {"height", o.height}, {"ids", o.ids}, {"px", px}}.dump();
+}
+
+Result<calib::TargetObservation> decode_detection(const std::string& text, TimeNs t_ns) {
+  calib::TargetObservation o;
+  o.t_ns = t_ns;
+  try {
+    const json j = json::parse(text);
+    o.width = j.at("width").get<int>();
+    o.height = j.at("height").get<int>();
+    o.ids = j.at("ids").get<std::vector<int>>();
+    const auto px = j.at("px").get<std::vector<double>>();
+    if (px.size() != 2 * o.ids.size()) throw std::runtime_error("px and ids differ in length");
+    for (std::size_t i = 0; i < o.ids.size(); ++i) o.px.emplace_back(px[2 * i], px[2 * i + 1]);
+  } catch (const std::exception& e) {
+    return make_error(Errc::kCorrupt,
+                      "a stored detection (t_ns " + std::to_string(t_ns) + ") is malformed: " + e.what());
+  }
+  return o;
+}
+
+std::string camera_result_yaml(const CameraCalibrationReport& r) {
+  const auto& res = r.intrinsics;
+  YAML::Node cam(YAML::NodeType::Map);
+  camera_to_yaml(res.camera, cam);
+  cam["rostopic"] = "/" + r.stream.name + "/image_raw";
+  YAML::Node q(YAML::NodeType::Map);
+  q["intrinsics_sigma"] = flow(res.intrinsics_sigma);
+  q["distortion_coeffs_sigma"] = flow(res.distortion_sigma);
+  q["reprojection_rms_px"] = res.rms_px;
+  q["residual_sigma_px"] = res.residual_sigma_px;
+  q["focal_well_determined"] = res.focal_well_determined;
+  q["coverage"] = res.coverage;
+  YAML::Node grid(YAML::NodeType::Sequence);
+  grid.push_back(res.coverage_cols);
+  grid.push_back(res.coverage_rows);
+  grid.SetStyle(YAML::EmitterStyle::Flow);
+  q["coverage_grid"] = grid;
+  q["frames"] = r.frames;
+  q["frames_with_target"] = r.frames_with_target;
+  q["views_used"] = res.views_used;
+  q["views_rejected"] = views_rejected(r);
+  q["corners_used"] = res.points_used;
+  q["corners_rejected"] = res.corners_rejected;
+  q["log"] = r.log_path;
+  q["camera_stream"] = r.stream.name;
+  q["target"] = YAML::Load(target_to_yaml(r.target));
+  q["target_source"] = r.target_source;
+  q["software_version"] = kVersion;
+  YAML::Node warnings(YAML::NodeType::Sequence);
+  for (const auto& w : r.warnings) warnings.push_back(w);
+  q["warnings"] = warnings;
+  cam["imucal"] = q;
+  YAML::Node root(YAML::NodeType::Map);
+  root["cam0"] = cam;
+  YAML::Emitter out;
+  out.SetDoublePrecision(17);
+  out << root;
+  return "# Camera intrinsics (imucal calibrate camera); Kalibr camchain format, imucal's figures under "
+         "cam0.imucal\n# (docs/camera-calibration.md)\n" +
+         std::string(out.c_str()) + "\n";
+}
+
+std::string camera_result_json(const CameraCalibrationReport& r) {
+  const auto& res = r.intrinsics;
+  json views = json::array();
+  for (const auto& v : res.views) {
+    json jv = {{"t_ns", v.t_ns}, {"points", v.points}, {"used", v.used}, {"rms_px", v.rms_px}};
+    if (v.used) {
+      jv["points_used"] = v.points_used;
+      jv["q_cam_target_wxyz"] = {v.q_cam_target.w(), v.q_cam_target.x(), v.q_cam_target.y(),
+                                 v.q_cam_target.z()};
+      jv["t_cam_target_m"] = {v.t_cam_target.x(), v.t_cam_target.y(), v.t_cam_target.z()};
+    } else {
+      jv["rejected_because"] = v.rejected_because;
+    }
+    views.push_back(jv);
+  }
+  json cov = json::array();
+  for (int i = 0; i < 8; ++i) {
+    json row = json::array();
+    for (int j = 0; j < 8; ++j) row.push_back(res.covariance_ok ? json(res.covariance(i, j)) : json(nullptr));
+    cov.push_back(row);
+  }
+  json j = {
+      {"camera_model", "pinhole"},
+      {"distortion_model", distortion_model_name(res.camera.distortion_model)},
+      {"intrinsics", vec(res.camera.intrinsics)},
+      {"distortion_coeffs", vec(res.camera.distortion_coeffs)},
+      {"resolution", {res.camera.width, res.camera.height}},
+      {"intrinsics_sigma", sigma_vec(res.intrinsics_sigma)},
+      {"distortion_coeffs_sigma", sigma_vec(res.distortion_sigma)},
+      {"covariance", cov},
+      {"reprojection_rms_px", res.rms_px},
+      {"residual_sigma_px", res.residual_sigma_px},
+      {"focal_well_determined", res.focal_well_determined},
+      {"coverage", res.coverage},
+      {"coverage_grid",
+       {{"cols", res.coverage_cols}, {"rows", res.coverage_rows}, {"counts", res.coverage_counts}}},
+      {"frames", r.frames},
+      {"frames_with_target", r.frames_with_target},
+      {"frames_failed", r.frames_failed},
+      {"views_total", res.views_total},
+      {"views_used", res.views_used},
+      {"views_rejected", views_rejected(r)},
+      {"corners_used", res.points_used},
+      {"corners_rejected", res.corners_rejected},
+      {"views", views},
+      {"log", r.log_path},
+      {"log_software_version", r.software_version},
+      {"camera_stream", r.stream.name},
+      {"target_yaml", target_to_yaml(r.target)},
+      {"target_source", r.target_source},
+      {"detections",
+       {{"key", r.detection_key},
+        {"reused", r.detections_reused},
+        {"stored", r.detections_stored},
+        {"threads", r.detection_threads},
+        {"wall_s", r.detection_wall_s}}},
+      {"solver", {{"iterations", res.iterations}, {"cpu_s", res.solve_cpu_s}}},
+      {"warnings", r.warnings},
+      {"software_version", kVersion},
+  };
+  return j.dump(2) + "\n";
+}
+
+}  // namespace imucal::app

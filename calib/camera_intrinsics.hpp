@@ -1,0 +1,114 @@
+#pragma once
+// Camera intrinsic calibration from target observations: a pinhole camera with radtan or
+// equidistant distortion (core/camera_model.hpp) and one target pose per view, by
+// Levenberg-Marquardt on the reprojection errors (Ceres), with outlier views and corners
+// rejected and the parameters' standard deviations from the solver covariance.
+// Method, figures and their meaning: docs/camera-calibration.md.
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "calib/target_detection.hpp"
+#include "core/camera_model.hpp"
+#include "core/progress.hpp"
+#include "core/result.hpp"
+#include "core/target.hpp"
+#include "core/time.hpp"
+
+namespace imucal::calib {
+
+struct CameraIntrinsicsOptions {
+  DistortionModel model = DistortionModel::kRadtan;
+  /// Fewest usable views; fewer is refused (the pose of every view is unknown, and a handful of
+  /// views at different tilts is what separates the focal length from the distance).
+  int min_views = 5;
+  /// Fewest target points for a view to be used (a pose has 6 unknowns).
+  int min_points_per_view = 8;
+  /// Robust loss of the first pass (Cauchy), scale in pixels.
+  double robust_loss_px = 1.0;
+  /// A view is dropped when its RMS is above view_rms_factor x the median view RMS and above
+  /// view_rms_floor_px (a clean set has views within a small factor of each other).
+  double view_rms_factor = 3.0;
+  double view_rms_floor_px = 1.0;
+  /// A corner is dropped when its residual is above corner_sigmas robust standard deviations
+  /// (1.4826 x the median absolute residual per coordinate) and above corner_floor_px.
+  double corner_sigmas = 5.0;
+  double corner_floor_px = 0.5;
+  /// Solver iterations per pass.
+  int max_iterations = 100;
+  /// Coverage grid: the image is cut into coverage_cols columns and as many rows as make the
+  /// cells about square.
+  int coverage_cols = 10;
+  /// Warn when the relative standard deviation of a focal length exceeds this.
+  double max_focal_relative_sigma = 0.01;
+  /// Threads for the solver (0 = all cores).
+  int threads = 0;
+
+  [[nodiscard]] Status validate() const;
+};
+
+/// What became of one view.
+struct CameraViewReport {
+  TimeNs t_ns = 0;
+  int points = 0;       // target points observed
+  int points_used = 0;  // after corner rejection
+  double rms_px = 0.0;  // of the used points at the solution (or at rejection, for a dropped view)
+  bool used = false;
+  std::string rejected_because;  // empty when used
+  /// The target's pose in the camera frame (p_cam = R_cam_target p_target + t_cam_target); set
+  /// for used views.
+  Eigen::Quaterniond q_cam_target = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d t_cam_target = Eigen::Vector3d::Zero();
+};
+
+struct CameraIntrinsicsResult {
+  CameraModel camera;
+  /// Standard deviations of fu, fv, pu, pv and of the distortion coefficients, from the
+  /// covariance of the final solve scaled by the residual variance (sigma^2 = RSS / (n - p)).
+  Eigen::Vector4d intrinsics_sigma = Eigen::Vector4d::Zero();
+  Eigen::Vector4d distortion_sigma = Eigen::Vector4d::Zero();
+  /// The 8 x 8 covariance of [intrinsics, distortion_coeffs].
+  Eigen::Matrix<double, 8, 8> covariance = Eigen::Matrix<double, 8, 8>::Zero();
+  bool covariance_ok = false;  // false: the problem is rank deficient (sigmas are infinite)
+
+  double rms_px = 0.0;             // RMS of the used corners' reprojection errors (Euclidean, px)
+  double residual_sigma_px = 0.0;  // sqrt(RSS / (n - p)), per coordinate
+  int views_total = 0;
+  int views_used = 0;
+  int points_used = 0;
+  int corners_rejected = 0;  // by the per-corner test, in the views kept
+  std::vector<CameraViewReport> views;
+
+  /// Fraction of the coverage grid's cells holding at least one used corner, and the grid
+  /// itself (row-major, corners per cell).
+  double coverage = 0.0;
+  int coverage_cols = 0;
+  int coverage_rows = 0;
+  std::vector<int> coverage_counts;
+
+  /// The focal lengths are determined (relative sigma below the option's limit, covariance of
+  /// full rank). False for degenerate sets such as fronto-parallel views at one distance.
+  bool focal_well_determined = false;
+  std::vector<std::string> warnings;
+  int iterations = 0;  // solver iterations over all passes
+  double solve_cpu_s = 0.0;
+};
+
+/// Estimates the camera and the view poses from the observations of `target` (validated).
+/// All observations must have the same image size; empty ones are ignored. Fails with
+/// kInsufficientData (fewer usable views than options.min_views: the message says how many
+/// were usable and why the others were not) or kSolverFailed. `progress` receives the fraction
+/// of the passes done.
+[[nodiscard]] Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(
+    const TargetDescription& target, std::span<const TargetObservation> observations,
+    const CameraIntrinsicsOptions& options, const ProgressFn& progress);
+
+/// Kalibr's model name for the option: "pinhole-radtan" or "pinhole-equi".
+const char* camera_model_option_name(DistortionModel model);
+/// Parses "pinhole-radtan" / "pinhole-equi" (also "radtan", "equidistant", "pinhole-equidistant").
+[[nodiscard]] Result<DistortionModel> parse_camera_model_option(const std::string& text);
+
+}  // namespace imucal::calib

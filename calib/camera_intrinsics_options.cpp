@@ -1,0 +1,45 @@
+// The options of the camera intrinsic calibration, checked without the solver (so that a
+// program can refuse bad options before it loads the camera module).
+
+#include <cmath>
+#include <string>
+
+#include "calib/camera_intrinsics.hpp"
+
+namespace imucal::calib {
+
+Status CameraIntrinsicsOptions::validate() const {
+  auto fail = [](const std::string& msg) -> Status { return make_error(Errc::kInvalidArgument, msg); };
+  if (min_views < 3) return fail("at least 3 views are needed to calibrate a camera (min_views)");
+  if (min_points_per_view < 4)
+    return fail("a view needs at least 4 points for its pose (min_points_per_view)");
+  if (!(robust_loss_px > 0.0) || !std::isfinite(robust_loss_px))
+    return fail("the robust loss scale must be a positive number of pixels");
+  if (!(view_rms_factor > 1.0) || !std::isfinite(view_rms_factor))
+    return fail("the view rejection factor must be above 1");
+  if (!(view_rms_floor_px >= 0.0) || !std::isfinite(view_rms_floor_px))
+    return fail("the view rejection floor must be >= 0 px");
+  if (!(corner_sigmas >= 2.0) || !std::isfinite(corner_sigmas))
+    return fail("the corner rejection threshold must be at least 2 sigmas");
+  if (!(corner_floor_px >= 0.0) || !std::isfinite(corner_floor_px))
+    return fail("the corner rejection floor must be >= 0 px");
+  if (max_iterations < 1) return fail("the solver needs at least one iteration");
+  if (coverage_cols < 1 || coverage_cols > 100) return fail("the coverage grid needs 1 to 100 columns");
+  if (!(max_focal_relative_sigma > 0.0)) return fail("the focal sigma limit must be positive");
+  if (threads < 0) return fail("threads must be >= 0 (0 = all cores)");
+  return {};
+}
+
+const char* camera_model_option_name(DistortionModel model) {
+  return model == DistortionModel::kRadtan ? "pinhole-radtan" : "pinhole-equi";
+}
+
+Result<DistortionModel> parse_camera_model_option(const std::string& text) {
+  if (text == "pinhole-radtan" || text == "radtan") return DistortionModel::kRadtan;
+  if (text == "pinhole-equi" || text == "pinhole-equidistant" || text == "equidistant")
+    return DistortionModel::kEquidistant;
+  return make_error(Errc::kInvalidArgument,
+                    "unknown camera model '" + text + "': use pinhole-radtan or pinhole-equi");
+}
+
+}  // namespace imucal::calib

@@ -1,0 +1,194 @@
+// Stored target detections in a session log (log/target_detections.hpp, docs/session-log.md).
+
+#include "log/target_detections.hpp"
+
+#include <ctime>
+
+#include "log/session_log_sqlite.hpp"
+
+namespace imucal::log {
+namespace {
+
+using sqlite::Stmt;
+
+// Created when a set is first stored; IF NOT EXISTS so that a second writer changes nothing.
+constexpr const char* kDetectionSchemaSql = R"sql(
+CREATE TABLE IF NOT EXISTS target_detection_sets(
+  stream_id INTEGER NOT NULL,
+  target_key TEXT NOT NULL,
+  description TEXT NOT NULL,
+  frames INTEGER NOT NULL,
+  created_utc TEXT NOT NULL,
+  PRIMARY KEY(stream_id, target_key));
+CREATE TABLE IF NOT EXISTS target_detections(
+  stream_id INTEGER NOT NULL,
+  target_key TEXT NOT NULL,
+  t_ns INTEGER NOT NULL,
+  data TEXT NOT NULL,
+  PRIMARY KEY(stream_id, target_key, t_ns));
+)sql";
+
+std::string utc_now_iso8601() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char text[32];
+  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return text;
+}
+
+std::string column_text(sqlite3_stmt* stmt, int index) {
+  const auto* text = sqlite3_column_text(stmt, index);
+  return text ? std::string(reinterpret_cast<const char*>(text),
+                            static_cast<std::size_t>(sqlite3_column_bytes(stmt, index)))
+              : std::string();
+}
+
+void bind_text(sqlite3_stmt* stmt, int index, const std::string& text) {
+  sqlite3_bind_text(stmt, index, text.data(), static_cast<int>(text.size()), SQLITE_TRANSIENT);
+}
+
+/// Opens the log; a file that is not a session log (application id) is refused.
+Result<sqlite::Db> open_log(const std::string& path, bool write) {
+  sqlite3* raw = nullptr;
+  const int flags = write ? SQLITE_OPEN_READWRITE : SQLITE_OPEN_READONLY;
+  const int rc = sqlite3_open_v2(path.c_str(), &raw, flags, nullptr);
+  sqlite::Db db(raw);
+  if (rc != SQLITE_OK) {
+    return make_error(rc == SQLITE_CANTOPEN ? Errc::kNotFound : Errc::kIo,
+                      "cannot open session log " + path + ": " + sqlite::errmsg(raw));
+  }
+  // A writer that holds the log (a recording in progress) gets a moment, then we give up.
+  sqlite3_busy_timeout(db.get(), 2000);
+  int prc = 0;
+  Stmt stmt = sqlite::prepare(db.get(), "PRAGMA application_id", &prc);
+  if (prc != SQLITE_OK || sqlite3_step(stmt.get()) != SQLITE_ROW) {
+    return make_error(Errc::kCorrupt, "cannot read session log " + path + ": " + sqlite::errmsg(db.get()));
+  }
+  if (sqlite3_column_int(stmt.get(), 0) != sqlite::kApplicationId) {
+    return make_error(Errc::kCorrupt, path + " is not a session log (wrong application id)");
+  }
+  return db;
+}
+
+bool has_table(sqlite3* db, const char* name) {
+  int rc = 0;
+  Stmt stmt = sqlite::prepare(db, "SELECT 1 FROM sqlite_schema WHERE type='table' AND name=?1", &rc);
+  if (rc != SQLITE_OK) return false;
+  sqlite3_bind_text(stmt.get(), 1, name, -1, SQLITE_STATIC);
+  return sqlite3_step(stmt.get()) == SQLITE_ROW;
+}
+
+Status read_rows(sqlite3* db, const std::string& path, int stream_id, DetectionSet* set) {
+  int rc = 0;
+  Stmt stmt = sqlite::prepare(
+      db, "SELECT t_ns, data FROM target_detections WHERE stream_id=?1 AND target_key=?2 ORDER BY t_ns", &rc);
+  if (rc != SQLITE_OK) {
+    return make_error(Errc::kCorrupt,
+                      "session log " + path + ": stored detections unreadable: " + sqlite::errmsg(db));
+  }
+  sqlite3_bind_int(stmt.get(), 1, stream_id);
+  bind_text(stmt.get(), 2, set->target_key);
+  while ((rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+    set->detections.push_back({sqlite3_column_int64(stmt.get(), 0), column_text(stmt.get(), 1)});
+  }
+  if (rc != SQLITE_DONE) {
+    return make_error(Errc::kCorrupt,
+                      "session log " + path + ": stored detections unreadable: " + sqlite::errmsg(db));
+  }
+  return {};
+}
+
+/// Inserts the set's rows inside the caller's transaction.
+Status insert_set(sqlite3* db, int stream_id, const DetectionSet& set, const std::string& created) {
+  int rc = 0;
+  Stmt del = sqlite::prepare(db, "DELETE FROM target_detections WHERE stream_id=?1 AND target_key=?2", &rc);
+  if (rc != SQLITE_OK) return make_error(Errc::kIo, sqlite::errmsg(db));
+  sqlite3_bind_int(del.get(), 1, stream_id);
+  bind_text(del.get(), 2, set.target_key);
+  if (sqlite3_step(del.get()) != SQLITE_DONE) return make_error(Errc::kIo, sqlite::errmsg(db));
+  Stmt head = sqlite::prepare(db, "INSERT OR REPLACE INTO target_detection_sets VALUES(?1,?2,?3,?4,?5)", &rc);
+  if (rc != SQLITE_OK) return make_error(Errc::kIo, sqlite::errmsg(db));
+  sqlite3_bind_int(head.get(), 1, stream_id);
+  bind_text(head.get(), 2, set.target_key);
+  bind_text(head.get(), 3, set.description);
+  sqlite3_bind_int64(head.get(), 4, set.frames);
+  bind_text(head.get(), 5, created);
+  if (sqlite3_step(head.get()) != SQLITE_DONE) return make_error(Errc::kIo, sqlite::errmsg(db));
+  Stmt row = sqlite::prepare(db, "INSERT OR REPLACE INTO target_detections VALUES(?1,?2,?3,?4)", &rc);
+  if (rc != SQLITE_OK) return make_error(Errc::kIo, sqlite::errmsg(db));
+  for (const StoredDetection& d : set.detections) {
+    sqlite3_bind_int(row.get(), 1, stream_id);
+    bind_text(row.get(), 2, set.target_key);
+    sqlite3_bind_int64(row.get(), 3, d.t_ns);
+    bind_text(row.get(), 4, d.data);
+    const int step = sqlite3_step(row.get());
+    sqlite3_reset(row.get());
+    if (step != SQLITE_DONE) return make_error(Errc::kIo, sqlite::errmsg(db));
+  }
+  return {};
+}
+
+}  // namespace
+
+Result<std::optional<DetectionSet>> read_target_detections(const std::string& log_path, int stream_id,
+                                                           const std::string& target_key) {
+  auto db = open_log(log_path, false);
+  if (!db.ok()) return db.error();
+  if (!has_table(db->get(), "target_detection_sets")) return std::optional<DetectionSet>{};
+  // One read transaction: the set row and its detections are one snapshot.
+  (void)sqlite::exec(db->get(), "BEGIN");
+  int rc = 0;
+  Stmt stmt = sqlite::prepare(db->get(),
+                              "SELECT description, frames, created_utc FROM target_detection_sets "
+                              "WHERE stream_id=?1 AND target_key=?2",
+                              &rc);
+  if (rc != SQLITE_OK) {
+    return make_error(Errc::kCorrupt, "session log " + log_path +
+                                          ": stored detections unreadable: " + sqlite::errmsg(db->get()));
+  }
+  sqlite3_bind_int(stmt.get(), 1, stream_id);
+  bind_text(stmt.get(), 2, target_key);
+  rc = sqlite3_step(stmt.get());
+  if (rc == SQLITE_DONE) return std::optional<DetectionSet>{};
+  if (rc != SQLITE_ROW) {
+    return make_error(Errc::kCorrupt, "session log " + log_path +
+                                          ": stored detections unreadable: " + sqlite::errmsg(db->get()));
+  }
+  DetectionSet set;
+  set.target_key = target_key;
+  set.description = column_text(stmt.get(), 0);
+  set.frames = sqlite3_column_int64(stmt.get(), 1);
+  set.created_utc = column_text(stmt.get(), 2);
+  IMUCAL_TRY(read_rows(db->get(), log_path, stream_id, &set));
+  (void)sqlite::exec(db->get(), "COMMIT");
+  return std::optional<DetectionSet>(std::move(set));
+}
+
+Status write_target_detections(const std::string& log_path, int stream_id, const DetectionSet& set) {
+  if (set.target_key.empty()) return make_error(Errc::kInvalidArgument, "a detection set needs a target key");
+  auto db = open_log(log_path, true);
+  if (!db.ok()) return db.error();
+  sqlite3* h = db->get();
+  if (sqlite3_db_readonly(h, "main") == 1) {
+    return make_error(Errc::kIo, "session log " + log_path + " is read-only: detections not stored");
+  }
+  auto failed = [&](const std::string& why) -> Status {
+    const int code = sqlite3_extended_errcode(h);
+    (void)sqlite::exec(h, "ROLLBACK");
+    std::string message = "session log " + log_path + ": storing detections failed: " + why;
+    if (code == SQLITE_READONLY_DIRECTORY || (code & 0xff) == SQLITE_CANTOPEN)
+      message += " (its folder must be writable for the journal)";
+    return make_error(Errc::kIo, message + "; the log is unchanged");
+  };
+  // The journal mode the log has (DELETE once closed, WAL while recording) is kept; FULL sync
+  // makes the commit durable.
+  if (sqlite::exec(h, "PRAGMA synchronous=FULL") != SQLITE_OK) return failed(sqlite::errmsg(h));
+  if (sqlite::exec(h, "BEGIN IMMEDIATE") != SQLITE_OK) return failed(sqlite::errmsg(h));
+  if (sqlite::exec(h, kDetectionSchemaSql) != SQLITE_OK) return failed(sqlite::errmsg(h));
+  if (auto s = insert_set(h, stream_id, set, utc_now_iso8601()); !s.ok()) return failed(s.error().message);
+  if (sqlite::exec(h, "COMMIT") != SQLITE_OK) return failed(sqlite::errmsg(h));
+  return {};
+}
+
+}  // namespace imucal::log

@@ -1,0 +1,162 @@
+// The camera calibration's solver-free pieces: the target a log names, stored detections' key
+// and text, the result YAML (read back as a Kalibr camera) and JSON.
+
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include <nlohmann/json.hpp>
+
+#include "app/camera_results.hpp"
+#include "core/rig_config.hpp"
+
+namespace imucal::app {
+namespace {
+
+TargetDescription board(int cols = 7) {
+  TargetDescription t;
+  t.cols = cols;
+  t.rows = 6;
+  t.col_spacing_m = 0.05;
+  t.row_spacing_m = 0.05;
+  return t;
+}
+
+TEST(CameraResults, TargetFromTheRigConfigurationFirst) {
+  RigConfig config;
+  CameraConfig cam;
+  cam.name = "cam0";
+  config.cameras.push_back(cam);
+  TargetDescription grid;
+  grid.type = TargetDescription::Type::kAprilgrid;
+  grid.tag_cols = 6;
+  grid.tag_rows = 6;
+  grid.tag_size_m = 0.088;
+  grid.tag_spacing = 0.3;
+  config.target = grid;
+  std::map<std::string, std::string> meta = {{"rig_config", rig_config_to_json(config)},
+                                             {"target", target_to_yaml(board())}};
+  auto t = target_from_log_metadata(meta);
+  ASSERT_TRUE(t.ok()) << t.error().message;
+  EXPECT_EQ(t->source, "rig_config metadata");
+  EXPECT_EQ(t->target.type, TargetDescription::Type::kAprilgrid);
+  EXPECT_EQ(t->target.tag_cols, 6);
+  EXPECT_DOUBLE_EQ(t->target.tag_size_m, 0.088);
+
+  // A rig configuration without a target: the simulator's target key.
+  config.target.reset();
+  config.cameras.clear();
+  meta["rig_config"] = rig_config_to_json(config);
+  t = target_from_log_metadata(meta);
+  ASSERT_TRUE(t.ok()) << t.error().message;
+  EXPECT_EQ(t->source, "target metadata");
+  EXPECT_EQ(t->target.cols, 7);
+
+  meta.erase("target");
+  t = target_from_log_metadata(meta);
+  ASSERT_FALSE(t.ok());
+  EXPECT_EQ(t.error().code, Errc::kNotFound);
+  ASSERT_EQ(t.error().remedies.size(), 1u);
+  EXPECT_EQ(t.error().remedies[0].option, "target");
+
+  meta["target"] = "target_type: checkerboard\ntargetCols: -3\n";
+  t = target_from_log_metadata(meta);
+  ASSERT_FALSE(t.ok());
+  EXPECT_EQ(t.error().code, Errc::kCorrupt);
+}
+
+TEST(CameraResults, DetectionKeyFollowsTargetAndOptions) {
+  const calib::DetectionOptions o;
+  EXPECT_EQ(detection_key(board(), o), detection_key(board(), o));
+  EXPECT_NE(detection_key(board(), o), detection_key(board(8), o));
+  calib::DetectionOptions no_subpixel;
+  no_subpixel.subpixel = false;
+  EXPECT_NE(detection_key(board(), o), detection_key(board(), no_subpixel));
+}
+
+TEST(CameraResults, DetectionTextRoundTripsExactly) {
+  calib::TargetObservation o;
+  o.t_ns = 123;
+  o.width = 376;
+  o.height = 240;
+  o.ids = {0, 5, 41};
+  o.px = {{0.1, 1.0 / 3.0}, {375.49999999999994, 2e-300}, {-0.5, 239.123456789012345}};
+  auto back = decode_detection(encode_detection(o), 123);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(back->t_ns, 123);
+  EXPECT_EQ(back->width, 376);
+  EXPECT_EQ(back->height, 240);
+  EXPECT_EQ(back->ids, o.ids);
+  ASSERT_EQ(back->px.size(), 3u);
+  for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(back->px[i], o.px[i]);  // bit-exact
+
+  EXPECT_EQ(decode_detection("{\"width\":1}", 5).error().code, Errc::kCorrupt);
+  EXPECT_FALSE(decode_detection(R"({"width":1,"height":1,"ids":[1,2],"px":[1,2,3]})", 5).ok());
+  EXPECT_FALSE(decode_detection("not json", 5).ok());
+}
+
+CameraCalibrationReport sample_report() {
+  CameraCalibrationReport r;
+  r.log_path = "x.imulog";
+  r.stream.name = "cam0";
+  r.target = board();
+  r.target_source = "target metadata";
+  r.frames = 10;
+  r.frames_with_target = 9;
+  auto& res = r.intrinsics;
+  res.camera.distortion_model = DistortionModel::kRadtan;
+  res.camera.width = 376;
+  res.camera.height = 240;
+  res.camera.intrinsics = {200.25, 199.75, 188.5, 117.125};
+  res.camera.distortion_coeffs = {-0.28, 0.07, 0.0002, -0.0003};
+  res.intrinsics_sigma = {0.1, 0.1, 0.05, 0.05};
+  res.distortion_sigma = {0.001, 0.002, 1e-5, 1e-5};
+  res.covariance_ok = true;
+  res.covariance.setIdentity();
+  res.views_total = 9;
+  res.views_used = 8;
+  res.views.resize(9);
+  res.views[0].rejected_because = "too few points (3)";
+  res.views[1].used = true;
+  res.coverage = 0.75;
+  res.coverage_cols = 10;
+  res.coverage_rows = 6;
+  res.coverage_counts.assign(60, 1);
+  res.focal_well_determined = true;
+  r.warnings = {"a warning"};
+  return r;
+}
+
+TEST(CameraResults, YamlIsAKalibrCamchainWithImucalKeys) {
+  const std::string text = camera_result_yaml(sample_report());
+  const YAML::Node root = YAML::Load(text);
+  ASSERT_TRUE(root["cam0"]);
+  auto camera = camera_from_yaml(root["cam0"], "result");
+  ASSERT_TRUE(camera.ok()) << camera.error().message;
+  EXPECT_EQ(camera->intrinsics, sample_report().intrinsics.camera.intrinsics);
+  EXPECT_EQ(camera->distortion_coeffs, sample_report().intrinsics.camera.distortion_coeffs);
+  EXPECT_EQ(camera->width, 376);
+  EXPECT_EQ(root["cam0"]["rostopic"].as<std::string>(), "/cam0/image_raw");
+  const YAML::Node q = root["cam0"]["imucal"];
+  EXPECT_DOUBLE_EQ(q["intrinsics_sigma"][0].as<double>(), 0.1);
+  EXPECT_DOUBLE_EQ(q["distortion_coeffs_sigma"][1].as<double>(), 0.002);
+  EXPECT_EQ(q["views_used"].as<int>(), 8);
+  EXPECT_EQ(q["views_rejected"].as<int>(), 1);
+  EXPECT_TRUE(q["focal_well_determined"].as<bool>());
+  EXPECT_EQ(q["target"]["targetCols"].as<int>(), 7);
+  EXPECT_EQ(q["warnings"][0].as<std::string>(), "a warning");
+}
+
+TEST(CameraResults, JsonCarriesViewsAndUndeterminedSigmasAsNull) {
+  auto r = sample_report();
+  r.intrinsics.intrinsics_sigma[0] = std::numeric_limits<double>::infinity();
+  const auto j = nlohmann::json::parse(camera_result_json(r));
+  EXPECT_TRUE(j["intrinsics_sigma"][0].is_null());
+  EXPECT_DOUBLE_EQ(j["intrinsics_sigma"][1].get<double>(), 0.1);
+  EXPECT_EQ(j["views"].size(), 9u);
+  EXPECT_EQ(j["views"][0]["rejected_because"], "too few points (3)");
+  EXPECT_EQ(j["coverage_grid"]["counts"].size(), 60u);
+  EXPECT_EQ(j["camera_stream"], "cam0");
+}
+
+}  // namespace
+}  // namespace imucal::app
