@@ -33,7 +33,8 @@ TEST(RecordCameras, SimulatedRigRecordsTheRenderedTargetBesideTheImu) {
   const std::string dir = test::scratch_dir();
   const std::string cfg = write_config(dir, kSimCamera);
   const std::string log_path = dir + "/cam.imulog";
-  const auto res = test::run_cli({"record", "--config", cfg, "-o", log_path, "--sim", "--duration", "3", "--json"});
+  const auto res =
+      test::run_cli({"record", "--config", cfg, "-o", log_path, "--sim", "--duration", "3", "--json"});
   ASSERT_EQ(res.exit_code, 0) << res.err;
   const auto j = nlohmann::json::parse(res.out);
   ASSERT_EQ(j["cameras"].size(), 1u);
@@ -58,16 +59,19 @@ TEST(RecordCameras, SimulatedRigRecordsTheRenderedTargetBesideTheImu) {
   // The frames show the board (the mean grey level differs between frames as the rig moves) and
   // lie on the IMU's clock, inside its span.
   std::vector<double> means;
-  ASSERT_TRUE((*reader)->for_each_frame(*cam_id, log::kTimeMin, log::kTimeMax, [&](const CameraFrame& f) {
-                         EXPECT_GE(f.t_ns, imu->front().t_ns - 1'000'000'000);
-                         EXPECT_LE(f.t_ns, imu->back().t_ns + 100'000'000);
-                         auto img = log::decode_image(f.data, log::ReadMode::kGray8);
-                         EXPECT_TRUE(img.ok());
-                         double sum = 0;
-                         for (auto v : img->data) sum += v;
-                         means.push_back(sum / static_cast<double>(img->data.size()));
-                         return true;
-                       }).ok());
+  ASSERT_TRUE((*reader)
+                  ->for_each_frame(*cam_id, log::kTimeMin, log::kTimeMax,
+                                   [&](const CameraFrame& f) {
+                                     EXPECT_GE(f.t_ns, imu->front().t_ns - 1'000'000'000);
+                                     EXPECT_LE(f.t_ns, imu->back().t_ns + 100'000'000);
+                                     auto img = log::decode_image(f.data, log::ReadMode::kGray8);
+                                     EXPECT_TRUE(img.ok());
+                                     double sum = 0;
+                                     for (auto v : img->data) sum += v;
+                                     means.push_back(sum / static_cast<double>(img->data.size()));
+                                     return true;
+                                   })
+                  .ok());
   ASSERT_GE(means.size(), 2u);
   EXPECT_NE(means.front(), means.back());
 }
@@ -76,8 +80,8 @@ TEST(RecordCameras, RealTimeTestPatternKeepsEveryFrameAndSample) {
   const std::string dir = test::scratch_dir();
   const std::string cfg = write_config(dir, kSimCamera, 1000);
   const std::string log_path = dir + "/rt.imulog";
-  const auto res = test::run_cli({"record", "--config", cfg, "-o", log_path, "--sim", "--realtime", "--sim-camera",
-                                  "pattern", "--duration", "2", "--json"});
+  const auto res = test::run_cli({"record", "--config", cfg, "-o", log_path, "--sim", "--realtime",
+                                  "--sim-camera", "pattern", "--duration", "2", "--json"});
   ASSERT_EQ(res.exit_code, 0) << res.err;
   const auto j = nlohmann::json::parse(res.out);
   EXPECT_EQ(j["samples_lost"], 0);
@@ -96,17 +100,19 @@ TEST(RecordCameras, CameraConfigurationErrorsStopBeforeAnythingIsWritten) {
   EXPECT_NE(res.err.find("checkerboard"), std::string::npos) << res.err;
   EXPECT_FALSE(std::filesystem::exists(log_path));
 
-  const std::string bad = write_config(dir,
-                                       "cameras:\n  - name: cam0\n    backend: sim\n    width: 320\n    height: 240\n"
-                                       "    rate_hz: 15\n    pixel_format: YUYV\n");
+  const std::string bad =
+      write_config(dir,
+                   "cameras:\n  - name: cam0\n    backend: sim\n    width: 320\n    height: 240\n"
+                   "    rate_hz: 15\n    pixel_format: YUYV\n");
   res = test::run_cli({"record", "--config", bad, "-o", log_path, "--sim", "--duration", "1"});
   EXPECT_EQ(res.exit_code, 2);
   EXPECT_NE(res.err.find("GREY"), std::string::npos) << res.err;
   EXPECT_FALSE(std::filesystem::exists(log_path));
 
-  const std::string v4l2 = write_config(dir,
-                                        "cameras:\n  - name: cam0\n    backend: v4l2\n    device: /dev/video97\n"
-                                        "    width: 320\n    height: 240\n    rate_hz: 15\n    pixel_format: GREY\n");
+  const std::string v4l2 =
+      write_config(dir,
+                   "cameras:\n  - name: cam0\n    backend: v4l2\n    device: /dev/video97\n"
+                   "    width: 320\n    height: 240\n    rate_hz: 15\n    pixel_format: GREY\n");
   res = test::run_cli({"record", "--config", v4l2, "-o", log_path, "--sim", "--duration", "1"});
   EXPECT_EQ(res.exit_code, 2);
   EXPECT_NE(res.err.find("simulated cameras only"), std::string::npos) << res.err;
