@@ -51,7 +51,7 @@ struct GrayView {
 
 /// OpenCV's two checkerboard detectors (docs/targets.md compares them).
 enum class CheckerboardMethod {
-  kClassic,      // findChessboardCorners (FAST_CHECK) + cornerSubPix: the default, measured faster
+  kClassic,      // findChessboardCorners + cornerSubPix: the default, measured faster
   kSectorBased,  // findChessboardCornersSB (ACCURACY), no further refinement
 };
 
