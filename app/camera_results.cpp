@@ -91,6 +91,7 @@ std::string detection_key(const TargetDescription& target, const calib::Detectio
       "|partial=" + std::to_string(options.partial) + "|min_tags=" + std::to_string(options.min_tags) +
       "|checkerboard_method=" + std::to_string(static_cast<int>(options.checkerboard_method)) +
       "|aprilgrid_decimate=" + std::to_string(options.aprilgrid_decimate) + "|imucal=" + kVersion +
+      "|detector=" + std::to_string(calib::kTargetDetectorRevision) +
       "|format=" + std::to_string(kDetectionFormat);
   char text[40];
   std::snprintf(text, sizeof text, "v%d-%016llx", kDetectionFormat,

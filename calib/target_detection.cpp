@@ -187,12 +187,22 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
       return obs;
     }
   } else {
-    // No CALIB_CB_FAST_CHECK: its quick pre-test rejected half the frames of the simulated
-    // fixture that show the whole board (motion blur, a small and strongly distorted board:
-    // 636 of 1169 found with it, 1160 without; docs/targets.md). It saved time only on frames
-    // without the whole board, which now get the full search (docs/targets.md has the cost).
+    // The quad search with CALIB_CB_FAST_CHECK finds most boards in about a millisecond and
+    // rejects empty frames as fast. Its quick pre-test also rejects boards that are small, blurred
+    // or strongly distorted (half the frames of the simulated fixture that show the whole board),
+    // but without it the quad search can take seconds on a frame full of texture and no board
+    // (6 s of CPU on a noise frame at 752x480). So a frame the first search misses is shown to the
+    // sector-based detector, whose cost is bounded (tens of ms); only when that finds the board
+    // does the quad search run again without the pre-test, and its corners (in the ordering the
+    // id resolution below expects) are used. docs/targets.md has the rates and costs.
     const int flags = cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE;
-    if (!cv::findChessboardCorners(image, pattern, px, flags)) return obs;
+    if (!cv::findChessboardCorners(image, pattern, px, flags | cv::CALIB_CB_FAST_CHECK)) {
+      std::vector<cv::Point2f> sector_based_corners;
+      if (!cv::findChessboardCornersSB(image, pattern, sector_based_corners, cv::CALIB_CB_NORMALIZE_IMAGE) ||
+          !cv::findChessboardCorners(image, pattern, px, flags)) {
+        return obs;
+      }
+    }
   }
   if (px.size() != static_cast<std::size_t>(target_.cols * target_.rows)) return obs;
   // OpenCV returns the rows with x -> y turning clockwise in the image (the board's z axis

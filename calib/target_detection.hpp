@@ -31,6 +31,11 @@
 
 namespace imucal::calib {
 
+/// Raised whenever a change to the detectors changes what they find, so that detections stored in
+/// a log by an earlier detector (app/camera_results.hpp detection_key) are not reused.
+/// 2: the checkerboard search falls back to the sector-based detector.
+inline constexpr int kTargetDetectorRevision = 2;
+
 /// The target points one image shows.
 struct TargetObservation {
   TimeNs t_ns = 0;  // the frame's time (stamped by the caller)
