@@ -72,7 +72,9 @@ Result<std::unique_ptr<CameraStream>> CameraStream::create(const cam::FrameForma
   if (options.queue_frames < 1 || options.queue_frames > 4096) {
     return make_error(Errc::kInvalidArgument, "camera stream: queue_frames must be 1..4096");
   }
-  return std::unique_ptr<CameraStream>(new CameraStream(format, meaning, std::move(options)));
+  auto stream = std::unique_ptr<CameraStream>(new CameraStream(format, meaning, std::move(options)));
+  stream->layout_ = static_cast<int>(*layout);
+  return stream;
 }
 
 CameraStream::CameraStream(const cam::FrameFormat& format, cam::TimestampMeaning meaning,
@@ -83,10 +85,8 @@ CameraStream::CameraStream(const cam::FrameFormat& format, cam::TimestampMeaning
       slots_(options_.queue_frames),
       free_(options_.queue_frames),
       filled_(options_.queue_frames) {
-  const std::size_t bytes =
-      static_cast<std::size_t>(format_.width) * static_cast<std::size_t>(format_.height);
   for (std::size_t i = 0; i < slots_.size(); ++i) {
-    slots_[i].pixels.resize(bytes);
+    slots_[i].image = log::Image::zeros(format_.width, format_.height);
     (void)free_.try_push(static_cast<int>(i));
   }
 }
@@ -131,7 +131,7 @@ bool CameraStream::publish(cam::Frame& frame) {
     std::this_thread::sleep_for(std::chrono::microseconds(200));
   }
   Slot& s = slots_[static_cast<std::size_t>(slot)];
-  if (!copy_luma(frame, *layout_of(format_.pixel_format), s.pixels.data())) {
+  if (!copy_luma(frame, static_cast<Layout>(layout_), s.image.data.data())) {
     wrong_size_.fetch_add(1, std::memory_order_relaxed);
     drop_pending_ = true;
     (void)free_.try_push(slot);
@@ -155,12 +155,7 @@ bool CameraStream::publish(cam::Frame& frame) {
 }
 
 Status CameraStream::write_slot(Slot& slot) {
-  log::Image image;
-  image.width = format_.width;
-  image.height = format_.height;
-  image.channels = 1;
-  image.depth = 8;
-  image.data = slot.pixels;  // the encoders take an Image; the copy keeps the slot reusable early
+  const log::Image& image = slot.image;
   auto encoded = options_.encoding == "webp" ? log::encode_webp_lossless(image)
                                              : log::encode_png(image, options_.png_level);
   if (!encoded.ok()) return encoded.error().context("encoding frame " + std::to_string(slot.sequence));

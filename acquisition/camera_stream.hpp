@@ -25,6 +25,7 @@
 #include "core/result.hpp"
 #include "core/time.hpp"
 #include "drivers/camera/camera.hpp"
+#include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
 
 namespace imucal::acq {
@@ -92,7 +93,7 @@ class CameraStream {
 
  private:
   struct Slot {
-    std::vector<std::uint8_t> pixels;
+    log::Image image;  // 8-bit grey, handed to the encoder as it is
     TimeNs t_ns = 0;
     TimeNs exposure_ns = 0;
     std::uint32_t sequence = 0;
@@ -107,6 +108,7 @@ class CameraStream {
 
   drivers::camera::FrameFormat format_;
   drivers::camera::TimestampMeaning meaning_;
+  int layout_ = 0;  // how publish() takes the luma (camera_stream.cpp Layout), from the pixel format
   CameraStreamOptions options_;
   std::vector<Slot> slots_;
   SpscRingBuffer<int> free_;    // encoder -> producer

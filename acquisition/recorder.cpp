@@ -256,6 +256,42 @@ class CameraSet {
   std::vector<std::unique_ptr<boost::asio::posix::stream_descriptor>> descriptors_;
 };
 
+/// Creates the log with the options' metadata, the mounting and the IMU stream.
+Result<std::unique_ptr<log::SessionLogWriter>> create_session_log(const RecordOptions& options,
+                                                                  const ImuAcquisition& acquisition,
+                                                                  int* stream_id) {
+  log::SessionLogWriterOptions wo;
+  wo.overwrite = options.overwrite;
+  auto writer = log::SessionLogWriter::create(options.log_path, wo);
+  if (!writer.ok()) return writer.error().context("creating the session log " + options.log_path);
+  for (const auto& [key, value] : options.metadata) IMUCAL_TRY((*writer)->set_metadata(key, value));
+  IMUCAL_TRY((*writer)->set_metadata("imu.mounting", mounting_metadata_json(acquisition.mounting())));
+  auto id = (*writer)->add_imu_stream(options.stream_info);
+  if (!id.ok()) return id.error().context("declaring the IMU stream");
+  *stream_id = *id;
+  return writer;
+}
+
+/// Fills the summary from every stage's counters and stores them in the log; this happens even
+/// when recording stopped early.
+void summarize(ImuAcquisition& acquisition, const mpu::Mpu6000& driver, const SessionSamples& session,
+               const ImuStream& stream, const CameraSet& cameras, log::SessionLogWriter& writer,
+               RecordSummary& summary) {
+  summary.samples = session.count();
+  summary.timing = acquisition.timestamper().stats();
+  summary.acquisition = acquisition.stats();
+  summary.stream = stream.stats();
+  summary.duration_s = session.span_s();
+  summary.rate_hz = summary.samples > 1 && summary.duration_s > 0
+                        ? static_cast<double>(summary.samples - 1) / summary.duration_s
+                        : 0.0;
+  summary.period_error_ppm = acquisition.timestamper().period_error_ppm();
+  (void)writer.set_metadata("imu.timing", timing_metadata_json(summary, acquisition.timestamper().options()));
+  (void)writer.set_metadata("imu.stream", stream_json(summary.stream));
+  (void)writer.set_metadata("imu.driver", driver_metadata_json(driver));
+  cameras.summarize(summary, writer);
+}
+
 }  // namespace
 
 Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu::Mpu6000& driver,
@@ -275,21 +311,15 @@ Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu:
     signals->add(SIGQUIT);
   }
 
-  log::SessionLogWriterOptions wo;
-  wo.overwrite = options.overwrite;
-  auto writer_r = log::SessionLogWriter::create(options.log_path, wo);
-  if (!writer_r.ok()) return writer_r.error().context("creating the session log " + options.log_path);
+  int stream_id = -1;
+  auto writer_r = create_session_log(options, acquisition, &stream_id);
+  if (!writer_r.ok()) return writer_r.error();
   auto writer = std::move(writer_r).value();
-
-  for (const auto& [key, value] : options.metadata) IMUCAL_TRY(writer->set_metadata(key, value));
-  IMUCAL_TRY(writer->set_metadata("imu.mounting", mounting_metadata_json(acquisition.mounting())));
-  auto stream_id = writer->add_imu_stream(options.stream_info);
-  if (!stream_id.ok()) return stream_id.error().context("declaring the IMU stream");
 
   // The IMU stream's writer thread and each camera's encoder share the log.
   auto shared_writer = log::synchronized_writer(*writer);
   ImuStream stream(options.stream);
-  IMUCAL_TRY(stream.start_log(*shared_writer, *stream_id));
+  IMUCAL_TRY(stream.start_log(*shared_writer, stream_id));
   CameraSet cameras;
   if (auto st = cameras.open(options, *shared_writer, stream); !st.ok()) {
     (void)cameras.close();
@@ -335,22 +365,7 @@ Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu:
   auto camera_status = cameras.close();
   auto stop_status = stream.stop();
 
-  summary.samples = session.count();
-  summary.timing = acquisition.timestamper().stats();
-  summary.acquisition = acquisition.stats();
-  summary.stream = stream.stats();
-  summary.duration_s = session.span_s();
-  summary.rate_hz = summary.samples > 1 && summary.duration_s > 0
-                        ? static_cast<double>(summary.samples - 1) / summary.duration_s
-                        : 0.0;
-  summary.period_error_ppm = acquisition.timestamper().period_error_ppm();
-
-  // Counters go into the log even when recording stopped early.
-  (void)writer->set_metadata("imu.timing",
-                             timing_metadata_json(summary, acquisition.timestamper().options()));
-  (void)writer->set_metadata("imu.stream", stream_json(summary.stream));
-  (void)writer->set_metadata("imu.driver", driver_metadata_json(driver));
-  cameras.summarize(summary, *writer);
+  summarize(acquisition, driver, session, stream, cameras, *writer, summary);
   if (!stop_status.ok()) return stop_status.error();
   if (!camera_status.ok()) {
     (void)writer->close();
