@@ -1,0 +1,121 @@
+#pragma once
+// The record of a continuous-time camera-IMU calibration (Krebs 2012, the lineage of Furgale and
+// Rehder's Kalibr): every camera's extrinsics and time offset, the IMU's intrinsics in the Krebs
+// form and in the canonical form, the gravity, each with its standard deviation, and the quality
+// figures. It lives in core, with Eigen only, beside the static record (core/imu_calibration.hpp),
+// so that storage, reports and the service can read and write it without linking the estimator;
+// calib/camimu_calibration.hpp produces it.
+//
+// Conventions (docs/conventions.md): T_cam_imu maps points from the IMU body frame (the
+// accelerometer frame of the Krebs model: x along the accelerometer x axis, y in its x-y plane)
+// into the camera frame; t_imu = t_cam + timeshift_cam_imu (Kalibr's sign).
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <string>
+#include <vector>
+
+#include "core/camera_model.hpp"
+#include "core/imu_model.hpp"
+#include "core/time.hpp"
+
+namespace imucal {
+
+/// Which IMU model the camera-IMU problem estimates.
+enum class CamImuModelKind {
+  kBasic,     // biases only: S = I, M = I, C_bg = I, B_g = 0 (Kalibr's "calibrated" IMU)
+  kExtended,  // Krebs 2012, ch. 3: S_g, M_g, C_bg, B_g, S_a, M_a and the biases
+};
+inline const char* camimu_model_name(CamImuModelKind kind) {
+  return kind == CamImuModelKind::kBasic ? "basic" : "extended";
+}
+
+/// One camera of the rig as calibrated against the IMU.
+struct CamImuCameraResult {
+  std::string name = "cam0";
+  std::string stream;  // the camera stream of the log
+  CameraModel camera;  // intrinsics used (fixed in the problem)
+  Eigen::Isometry3d T_cam_imu = Eigen::Isometry3d::Identity();
+  /// Standard deviations: rotation as a small-angle vector about the camera axes (rad), i.e.
+  /// of delta in R_cam_imu = exp(delta) R_est, and translation (m), camera frame.
+  Eigen::Vector3d rotation_sigma_rad = Eigen::Vector3d::Zero();
+  Eigen::Vector3d translation_sigma_m = Eigen::Vector3d::Zero();
+  double timeshift_cam_imu_s = 0.0;
+  double timeshift_sigma_s = 0.0;
+  int frames = 0;          // frames with the target that entered the problem
+  int corners = 0;         // corner observations that entered the problem
+  int outlier_corners = 0;  // down-weighted by the robust loss (residual above its scale)
+  double reprojection_rms_px = 0.0;
+  double corner_sigma_px = 0.0;  // the corner noise the problem assumed
+};
+
+/// Standard deviations of the Krebs-form IMU parameters (0 for a fixed block).
+struct KrebsImuSigma {
+  Eigen::Vector3d S_a = Eigen::Vector3d::Zero();
+  Eigen::Vector3d M_a = Eigen::Vector3d::Zero();
+  Eigen::Vector3d b_a = Eigen::Vector3d::Zero();
+  Eigen::Vector3d S_g = Eigen::Vector3d::Zero();
+  Eigen::Vector3d M_g = Eigen::Vector3d::Zero();
+  Eigen::Vector3d C_bg = Eigen::Vector3d::Zero();  // small-angle vector of C_bg, rad
+  Eigen::Matrix3d B_g = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b_g = Eigen::Vector3d::Zero();
+};
+
+/// The biases along the recording (the bias splines sampled), for reports.
+struct BiasSample {
+  TimeNs t_ns = 0;
+  Eigen::Vector3d b_a = Eigen::Vector3d::Zero();
+  Eigen::Vector3d b_g = Eigen::Vector3d::Zero();
+};
+
+struct CamImuQuality {
+  /// RMS of the IMU residuals after the solve, per axis (m/s^2, rad/s), and the white-noise
+  /// standard deviation per sample the problem assumed.
+  Eigen::Vector3d accel_residual_rms = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_residual_rms = Eigen::Vector3d::Zero();
+  double accel_sigma = 0.0;
+  double gyro_sigma = 0.0;
+  /// Excitation: RMS of the angular rate and of the specific force without its mean (gravity),
+  /// per body axis (rad/s, m/s^2).
+  Eigen::Vector3d rotation_excitation_radps = Eigen::Vector3d::Zero();
+  Eigen::Vector3d accel_excitation_mps2 = Eigen::Vector3d::Zero();
+  /// Time-offset initialisation: the cross-correlation of angular speeds (lag s, value) and the
+  /// lag it peaked at, per camera.
+  std::vector<std::vector<std::pair<double, double>>> xcorr;
+  std::vector<double> xcorr_peak_s;
+  int iterations = 0;
+  double initial_cost = 0.0;
+  double final_cost = 0.0;
+  double solve_s = 0.0;       // wall time of the full solve (without the initialisation)
+  double init_s = 0.0;        // wall time of the initialisation
+  double covariance_s = 0.0;  // wall time of the covariance
+  double jacobian_s = 0.0;    // of the solve: residual and Jacobian evaluation
+  double linear_solver_s = 0.0;
+  int parameters = 0;  // estimated, in the tangent space
+  int residuals = 0;
+  int spline_knots = 0;
+};
+
+struct CamImuCalibrationResult {
+  CamImuModelKind model = CamImuModelKind::kExtended;
+  std::vector<CamImuCameraResult> cameras;
+  /// The IMU in the Krebs form (biases at the start of the recording; S, M, C_bg, B_g constant)
+  /// and in the canonical form (output frame = the Krebs body frame), both on the nominal SI
+  /// values of the stream (raw counts already converted with the stream's nominal scale).
+  KrebsImuModel imu;
+  KrebsImuSigma imu_sigma;
+  CanonicalImuModel canonical;
+  /// Which blocks were held fixed ("S_a", "M_a", "S_g", "M_g", "C_bg", "B_g", "T_cam_imu",
+  /// "timeshift"), as given or implied by the model.
+  std::vector<std::string> fixed;
+  /// Gravity in the world (target) frame, m/s^2; its direction's sigma (rad, two tangent axes).
+  Eigen::Vector3d gravity_w = Eigen::Vector3d(0, 0, -kStandardGravityMps2);
+  Eigen::Vector2d gravity_sigma_rad = Eigen::Vector2d::Zero();
+  std::vector<BiasSample> biases;
+  CamImuQuality quality;
+  std::vector<std::string> warnings;  // observability, residuals, outliers
+
+  static constexpr double kStandardGravityMps2 = 9.80665;
+};
+
+}  // namespace imucal
