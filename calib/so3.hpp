@@ -26,7 +26,8 @@ inline Eigen::Matrix3d exp(const Eigen::Vector3d& phi) {
   const Eigen::Matrix3d K = hat(phi);
   if (theta2 < kSmallAngle * kSmallAngle) return Eigen::Matrix3d::Identity() + K + 0.5 * K * K;
   const double theta = std::sqrt(theta2);
-  return Eigen::Matrix3d::Identity() + (std::sin(theta) / theta) * K + ((1.0 - std::cos(theta)) / theta2) * K * K;
+  return Eigen::Matrix3d::Identity() + (std::sin(theta) / theta) * K +
+         ((1.0 - std::cos(theta)) / theta2) * K * K;
 }
 
 inline Eigen::Vector3d log(const Eigen::Matrix3d& R) {
@@ -59,6 +60,8 @@ inline Eigen::Matrix3d right_jacobian_inverse(const Eigen::Vector3d& phi) {
          (1.0 / theta2 - (1.0 + std::cos(theta)) / (2.0 * theta * std::sin(theta))) * K * K;
 }
 
-inline Eigen::Matrix3d left_jacobian_inverse(const Eigen::Vector3d& phi) { return right_jacobian_inverse(-phi); }
+inline Eigen::Matrix3d left_jacobian_inverse(const Eigen::Vector3d& phi) {
+  return right_jacobian_inverse(-phi);
+}
 
 }  // namespace imucal::calib::so3

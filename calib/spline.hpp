@@ -165,8 +165,8 @@ template <int N>
 class So3Segment {
  public:
   /// `knots` points to N rotations (knot first_knot .. first_knot + N - 1).
-  static void evaluate(const Eigen::Matrix3d* const* knots, double u, double dt_s, So3Derivs level, bool jacobians,
-                       So3SegmentEval<N>* out) {
+  static void evaluate(const Eigen::Matrix3d* const* knots, double u, double dt_s, So3Derivs level,
+                       bool jacobians, So3SegmentEval<N>* out) {
     const SplineWeights<N> sw = spline_weights<N>(u, true);
     const Eigen::Matrix<double, N, 1> lam = sw.w, dlam = sw.dw / dt_s, ddlam = sw.ddw / (dt_s * dt_s);
     // Forward pass (j = 1 .. N-1): d_j, A_j = Exp(lambda_j d_j), omega and alpha after step j.
@@ -183,7 +183,8 @@ class So3Segment {
       if (level == So3Derivs::kValue) continue;
       const Eigen::Vector3d dd = dlam(j) * d[j];
       w[j] = A[j].transpose() * w[j - 1] + dd;
-      if (level == So3Derivs::kAcceleration) a[j] = A[j].transpose() * a[j - 1] + ddlam(j) * d[j] + w[j].cross(dd);
+      if (level == So3Derivs::kAcceleration)
+        a[j] = A[j].transpose() * a[j - 1] + ddlam(j) * d[j] + w[j].cross(dd);
     }
     out->R = R;
     out->omega = level == So3Derivs::kValue ? Eigen::Vector3d::Zero() : w[N - 1];
@@ -197,12 +198,13 @@ class So3Segment {
 
   // The derivatives with respect to each d_j by a backward pass over the steps, then the chain
   // to the knots: d_j depends on knot j (Jr^-1(d_j)) and knot j-1 (-Jl^-1(d_j)).
-  static void jacobians_backward(const std::array<Eigen::Vector3d, N>& d, const std::array<Eigen::Matrix3d, N>& A,
-                                 const std::array<Eigen::Vector3d, N>& w, const std::array<Eigen::Vector3d, N>& a,
-                                 const Lam& lam, const Lam& dlam, const Lam& ddlam, So3Derivs level,
-                                 So3SegmentEval<N>* out) {
+  static void jacobians_backward(const std::array<Eigen::Vector3d, N>& d,
+                                 const std::array<Eigen::Matrix3d, N>& A,
+                                 const std::array<Eigen::Vector3d, N>& w,
+                                 const std::array<Eigen::Vector3d, N>& a, const Lam& lam, const Lam& dlam,
+                                 const Lam& ddlam, So3Derivs level, So3SegmentEval<N>* out) {
     std::array<Eigen::Matrix3d, N> dR_dd, dw_dd, da_dd;
-    Eigen::Matrix3d S = Eigen::Matrix3d::Identity();  // prod_{i>j} A_i, as R-perturbation map: S^T
+    Eigen::Matrix3d S = Eigen::Matrix3d::Identity();   // prod_{i>j} A_i, as R-perturbation map: S^T
     Eigen::Matrix3d Hw = Eigen::Matrix3d::Identity();  // d omega_N / d omega_j
     Eigen::Matrix3d Ga = Eigen::Matrix3d::Identity();  // d alpha_N / d alpha_j
     Eigen::Matrix3d Gw = Eigen::Matrix3d::Zero();      // d alpha_N / d omega_j
@@ -216,8 +218,9 @@ class So3Segment {
       const Eigen::Matrix3d W = so3::hat(At * w[j - 1]) * Jr * lam(j) + dlam(j) * Eigen::Matrix3d::Identity();
       dw_dd[j] = Hw * W;
       if (level == So3Derivs::kAcceleration) {
-        const Eigen::Matrix3d dadd = so3::hat(At * a[j - 1]) * Jr * lam(j) + ddlam(j) * Eigen::Matrix3d::Identity() -
-                                     so3::hat(dd) * W + so3::hat(w[j]) * dlam(j);
+        const Eigen::Matrix3d dadd = so3::hat(At * a[j - 1]) * Jr * lam(j) +
+                                     ddlam(j) * Eigen::Matrix3d::Identity() - so3::hat(dd) * W +
+                                     so3::hat(w[j]) * dlam(j);
         da_dd[j] = Ga * dadd + Gw * W;
         Gw = Ga * (-so3::hat(dd) * At) + Gw * At;
         Ga = Ga * At;

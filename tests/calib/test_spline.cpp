@@ -1,11 +1,11 @@
 // Uniform B-splines (calib/spline.hpp): basis properties, time derivatives against finite
 // differences of the value, and every analytic Jacobian against a numeric one.
 
-#include "calib/spline.hpp"
-
 #include <gtest/gtest.h>
 
 #include <random>
+
+#include "calib/spline.hpp"
 
 namespace imucal::calib {
 namespace {
@@ -110,8 +110,10 @@ void check_so3_jacobians(std::uint32_t seed) {
         da.col(c) = (p.alpha - m.alpha) / (2 * h);
       }
       EXPECT_LT((e.dR_dknot[i] - dR).norm(), 1e-7) << "N " << N << " t " << t << " knot " << i;
-      EXPECT_LT((e.domega_dknot[i] - dw).norm(), 1e-6 * (1 + dw.norm())) << "N " << N << " t " << t << " knot " << i;
-      EXPECT_LT((e.dalpha_dknot[i] - da).norm(), 1e-5 * (1 + da.norm())) << "N " << N << " t " << t << " knot " << i;
+      EXPECT_LT((e.domega_dknot[i] - dw).norm(), 1e-6 * (1 + dw.norm()))
+          << "N " << N << " t " << t << " knot " << i;
+      EXPECT_LT((e.dalpha_dknot[i] - da).norm(), 1e-5 * (1 + da.norm()))
+          << "N " << N << " t " << t << " knot " << i;
     }
   }
 }
@@ -137,8 +139,9 @@ TEST(Spline, So3HelpersAreConsistentNearZeroAndPi) {
   for (const Eigen::Vector3d& phi : {Eigen::Vector3d(1e-9, -2e-9, 0.0), Eigen::Vector3d(0.2, -0.1, 0.4),
                                      Eigen::Vector3d(0.0, 0.0, 3.1415)}) {
     EXPECT_LT((so3::log(so3::exp(phi)) - phi).norm(), 1e-9) << phi.transpose();
-    EXPECT_LT((so3::right_jacobian(phi) * so3::right_jacobian_inverse(phi) - Eigen::Matrix3d::Identity()).norm(),
-              1e-6)
+    EXPECT_LT(
+        (so3::right_jacobian(phi) * so3::right_jacobian_inverse(phi) - Eigen::Matrix3d::Identity()).norm(),
+        1e-6)
         << phi.transpose();
   }
 }
