@@ -20,8 +20,10 @@ struct CamImuSynth {
   std::vector<calib::CamImuCameraInput> cameras;
   TargetDescription target;
   sim::ImuModelParams truth;
-  Eigen::Isometry3d T_cam_imu = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d T_cam_imu = Eigen::Isometry3d::Identity();  // of cam0
   double timeshift_s = 0.0;
+  std::vector<Eigen::Isometry3d> T_cams_imu;  // every camera
+  std::vector<double> timeshifts_s;
   Eigen::Isometry3d T_world_target = Eigen::Isometry3d::Identity();
 };
 
@@ -32,8 +34,12 @@ struct CamImuSynthOptions {
   double camera_rate_hz = 20.0;
   double corner_sigma_px = 0.3;
   double timeshift_s = 0.0042;
-  bool noise = true;           // IMU white noise and bias random walk
-  bool imu_errors = true;      // scale, misalignment, C_bg, g-sensitivity drawn from the seed
+  bool noise = true;       // IMU white noise and bias random walk
+  bool imu_errors = true;  // scale, misalignment, C_bg, g-sensitivity drawn from the seed
+  /// A second camera (cam1) beside the first: 12 cm along the IMU x axis, turned 10 deg about
+  /// y, with its own time offset.
+  bool second_camera = false;
+  double second_timeshift_s = -0.0123;
 };
 
 inline CamImuSynth make_camimu_synth(const CamImuSynthOptions& o) {
@@ -61,33 +67,46 @@ inline CamImuSynth make_camimu_synth(const CamImuSynthOptions& o) {
     const sim::ImuSimDetail d = imu.sample_si(t, motion->at(t), dt);
     out.imu.push_back({t, d.accel_si, d.gyro_si});
   }
-  calib::CamImuCameraInput cam;
-  cam.camera = CamImuSimOptions::default_sim_camera();
+  out.T_cams_imu.push_back(out.T_cam_imu);
+  out.timeshifts_s.push_back(o.timeshift_s);
+  if (o.second_camera) {
+    Eigen::Isometry3d T_c1_c0 = Eigen::Isometry3d::Identity();
+    T_c1_c0.linear() = Eigen::AngleAxisd(10.0 * M_PI / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix();
+    T_c1_c0.translation() = Eigen::Vector3d(-0.12, 0.005, 0.01);
+    out.T_cams_imu.push_back(T_c1_c0 * out.T_cam_imu);
+    out.timeshifts_s.push_back(o.second_timeshift_s);
+  }
   std::mt19937_64 rng(o.seed * 7919 + 1);
   std::normal_distribution<double> noise(0.0, o.corner_sigma_px);
   const auto points = out.target.points();
   const TimeNs frame_ns = static_cast<TimeNs>(1e9 / o.camera_rate_hz);
-  const TimeNs shift_ns = static_cast<TimeNs>(o.timeshift_s * 1e9);
-  for (TimeNs tc = frame_ns; tc + shift_ns < motion->end_ns(); tc += frame_ns) {
-    // A frame stamped tc shows the scene of IMU time tc + shift.
-    const sim::RigState s = motion->at(tc + shift_ns);
-    Eigen::Isometry3d T_world_body = Eigen::Isometry3d::Identity();
-    T_world_body.linear() = s.q_world_body.toRotationMatrix();
-    T_world_body.translation() = s.p_world_body;
-    const Eigen::Isometry3d T_cam_target = out.T_cam_imu * T_world_body.inverse() * out.T_world_target;
-    calib::TargetObservation obs;
-    obs.t_ns = tc;
-    obs.width = cam.camera.width;
-    obs.height = cam.camera.height;
-    for (std::size_t k = 0; k < points.size(); ++k) {
-      const auto pr = cam.camera.project(T_cam_target * points[k]);
-      if (!pr.valid()) continue;
-      obs.ids.push_back(static_cast<int>(k));
-      obs.px.push_back(pr.px + Eigen::Vector2d(noise(rng), noise(rng)));
+  for (std::size_t c = 0; c < out.T_cams_imu.size(); ++c) {
+    calib::CamImuCameraInput cam;
+    cam.name = "cam" + std::to_string(c);
+    cam.camera = CamImuSimOptions::default_sim_camera();
+    const TimeNs shift_ns = static_cast<TimeNs>(out.timeshifts_s[c] * 1e9);
+    for (TimeNs tc = frame_ns - std::min<TimeNs>(0, shift_ns); tc + shift_ns < motion->end_ns();
+         tc += frame_ns) {
+      // A frame stamped tc shows the scene of IMU time tc + shift.
+      const sim::RigState s = motion->at(tc + shift_ns);
+      Eigen::Isometry3d T_world_body = Eigen::Isometry3d::Identity();
+      T_world_body.linear() = s.q_world_body.toRotationMatrix();
+      T_world_body.translation() = s.p_world_body;
+      const Eigen::Isometry3d T_cam_target = out.T_cams_imu[c] * T_world_body.inverse() * out.T_world_target;
+      calib::TargetObservation obs;
+      obs.t_ns = tc;
+      obs.width = cam.camera.width;
+      obs.height = cam.camera.height;
+      for (std::size_t k = 0; k < points.size(); ++k) {
+        const auto pr = cam.camera.project(T_cam_target * points[k]);
+        if (!pr.valid()) continue;
+        obs.ids.push_back(static_cast<int>(k));
+        obs.px.push_back(pr.px + Eigen::Vector2d(noise(rng), noise(rng)));
+      }
+      if (!obs.ids.empty()) cam.observations.push_back(std::move(obs));
     }
-    if (!obs.ids.empty()) cam.observations.push_back(std::move(obs));
+    out.cameras.push_back(std::move(cam));
   }
-  out.cameras.push_back(std::move(cam));
   return out;
 }
 

@@ -2,13 +2,12 @@
 // recordings from the simulator's motion and IMU model: convergence without a prior, accuracy
 // against the truth in units of the reported sigma, the basic model's bias, and refusals.
 
-#include "calib/camimu_calibration.hpp"
-
 #include <gtest/gtest.h>
 
 #include <cstdio>
 #include <iostream>
 
+#include "calib/camimu_calibration.hpp"
 #include "calib/so3.hpp"
 #include "tests/calib/camimu_synth.hpp"
 
@@ -44,7 +43,8 @@ double worst_imu_ratio(const CamImuCalibrationResult& r, const sim::ImuModelPara
   const KrebsImuModel& m = r.imu;
   const KrebsImuSigma& s = r.imu_sigma;
   double worst = 0.0;
-  const auto take = [&](const Eigen::Vector3d& est, const Eigen::Vector3d& truth, const Eigen::Vector3d& sigma) {
+  const auto take = [&](const Eigen::Vector3d& est, const Eigen::Vector3d& truth,
+                        const Eigen::Vector3d& sigma) {
     for (int i = 0; i < 3; ++i) worst = std::max(worst, std::abs(est(i) - truth(i)) / sigma(i));
   };
   take(m.S_a, t.accel_scale, s.S_a);
@@ -66,11 +66,12 @@ TEST(CamImuCalibration, ConvergesFromNoPriorAndMatchesTheTruthWithinItsSigmas) {
   ASSERT_TRUE(result.ok()) << result.error().message;
   const CamImuCalibrationResult& r = *result;
   const Errors e = extrinsic_errors(r, synth);
-  std::printf("rot %.5f rad (sigma %.5f), trans %.2f mm (sigma %.2f), shift %.3f ms (sigma %.3f), %d iterations, "
-              "solve %.1f s, reprojection %.3f px, worst IMU error %.2f sigma\n",
-              e.rot_rad, e.rot_sigma.norm(), e.trans_m * 1e3, e.trans_sigma.norm() * 1e3, e.shift_s * 1e3,
-              e.shift_sigma * 1e3, r.quality.iterations, r.quality.solve_s, r.cameras[0].reprojection_rms_px,
-              worst_imu_ratio(r, synth.truth));
+  std::printf(
+      "rot %.5f rad (sigma %.5f), trans %.2f mm (sigma %.2f), shift %.3f ms (sigma %.3f), %d iterations, "
+      "solve %.1f s, reprojection %.3f px, worst IMU error %.2f sigma\n",
+      e.rot_rad, e.rot_sigma.norm(), e.trans_m * 1e3, e.trans_sigma.norm() * 1e3, e.shift_s * 1e3,
+      e.shift_sigma * 1e3, r.quality.iterations, r.quality.solve_s, r.cameras[0].reprojection_rms_px,
+      worst_imu_ratio(r, synth.truth));
   // Started from identity extrinsics and no offset: the initialisation found both.
   EXPECT_LT(e.rot_rad, 4 * e.rot_sigma.norm());
   EXPECT_LT(e.trans_m, 4 * e.trans_sigma.norm());
@@ -103,6 +104,36 @@ TEST(CamImuCalibration, FindsATimeOffsetOf100Ms) {
   ASSERT_TRUE(result.ok()) << result.error().message;
   EXPECT_NEAR(result->cameras[0].timeshift_cam_imu_s, -0.1, 0.002);
   EXPECT_LT(extrinsic_errors(*result, synth).rot_rad, 0.01);
+}
+
+TEST(CamImuCalibration, CalibratesTwoCamerasOnOneImuEachWithItsOwnExtrinsicsAndOffset) {
+  test::CamImuSynthOptions so;
+  so.seed = 8;
+  so.duration_s = 25.0;
+  so.second_camera = true;
+  const auto synth = test::make_camimu_synth(so);
+  CamImuOptions o = fast_options();
+  o.model = CamImuModelKind::kBasic;
+  o.imu_init = KrebsImuModel{};  // the basic model's IMU is ideal: give the truth's intrinsics
+  o.imu_init->S_a = synth.truth.accel_scale;
+  o.imu_init->M_a = krebs_entries(synth.truth.accel_misalignment);
+  o.imu_init->S_g = synth.truth.gyro_scale;
+  o.imu_init->M_g = krebs_entries(synth.truth.gyro_misalignment);
+  o.imu_init->C_bg = synth.truth.q_body_gyro.toRotationMatrix();
+  o.imu_init->B_g = synth.truth.g_sensitivity;
+  auto result = calibrate_camimu(synth.imu, synth.cameras, synth.target, o);
+  ASSERT_TRUE(result.ok()) << result.error().message;
+  ASSERT_EQ(result->cameras.size(), 2u);
+  for (std::size_t c = 0; c < 2; ++c) {
+    const auto& cr = result->cameras[c];
+    EXPECT_EQ(cr.name, "cam" + std::to_string(c));
+    const double rot = so3::log(cr.T_cam_imu.linear() * synth.T_cams_imu[c].linear().transpose()).norm();
+    const double trans = (cr.T_cam_imu.translation() - synth.T_cams_imu[c].translation()).norm();
+    const double shift = cr.timeshift_cam_imu_s - synth.timeshifts_s[c];
+    EXPECT_LT(rot, 4 * cr.rotation_sigma_rad.norm()) << c;
+    EXPECT_LT(trans, 4 * cr.translation_sigma_m.norm()) << c;
+    EXPECT_LT(std::abs(shift), 4 * cr.timeshift_sigma_s) << c;
+  }
 }
 
 TEST(CamImuCalibration, RefusesARecordingWithoutEnoughViewsOrRotation) {

@@ -1,0 +1,146 @@
+// The camera-IMU residuals' analytic Jacobians (calib/camimu_residuals.hpp) against central
+// differences: quaternion blocks through the manifold's right perturbation (tangent columns in
+// the first three ambient ones), every other block in its ambient coordinates.
+
+#include "calib/camimu_residuals.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "sim/camimu.hpp"
+
+namespace imucal::calib::camimu {
+namespace {
+
+using Block = std::vector<double>;
+
+Block random_quat(std::mt19937& rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  Eigen::Quaterniond q(n(rng), n(rng), n(rng), n(rng));
+  q.normalize();
+  return {q.x(), q.y(), q.z(), q.w()};
+}
+
+Block random_vec(std::mt19937& rng, int size, double mean, double sd) {
+  std::normal_distribution<double> n(mean, sd);
+  Block b(static_cast<std::size_t>(size));
+  for (auto& v : b) v = n(rng);
+  return b;
+}
+
+// Compares every Jacobian block of `cost` at `blocks` with central differences.
+void check_jacobians(const ceres::CostFunction& cost, std::vector<Block> blocks, double tol) {
+  const int m = cost.num_residuals();
+  const auto& sizes = cost.parameter_block_sizes();
+  std::vector<double*> ptr;
+  for (auto& b : blocks) ptr.push_back(b.data());
+  std::vector<Block> jac(blocks.size());
+  std::vector<double*> jptr;
+  for (std::size_t i = 0; i < blocks.size(); ++i) {
+    jac[i].assign(static_cast<std::size_t>(m * sizes[i]), 0.0);
+    jptr.push_back(jac[i].data());
+  }
+  Eigen::VectorXd r(m), rp(m), rm(m);
+  ASSERT_TRUE(cost.Evaluate(ptr.data(), r.data(), jptr.data()));
+  RightQuaternionManifold manifold;
+  const double h = 1e-6;
+  for (std::size_t i = 0; i < blocks.size(); ++i) {
+    const bool quat = sizes[i] == 4;
+    const int dims = quat ? 3 : sizes[i];
+    for (int c = 0; c < dims; ++c) {
+      const Block saved = blocks[i];
+      for (double sign : {1.0, -1.0}) {
+        if (quat) {
+          double delta[3] = {0, 0, 0};
+          delta[c] = sign * h;
+          manifold.Plus(saved.data(), delta, blocks[i].data());
+        } else {
+          blocks[i][static_cast<std::size_t>(c)] += sign * h;
+        }
+        ASSERT_TRUE(cost.Evaluate(ptr.data(), (sign > 0 ? rp : rm).data(), nullptr));
+        blocks[i] = saved;
+      }
+      const Eigen::VectorXd numeric = (rp - rm) / (2 * h);
+      for (int row = 0; row < m; ++row) {
+        const double analytic = jac[i][static_cast<std::size_t>(row * sizes[i] + c)];
+        EXPECT_NEAR(analytic, numeric(row), tol * (1.0 + std::abs(numeric(row))))
+            << "block " << i << " column " << c << " row " << row;
+      }
+    }
+  }
+}
+
+std::vector<Block> knot_blocks(std::mt19937& rng, int n) {
+  std::vector<Block> blocks;
+  Eigen::Quaterniond q = Eigen::Quaterniond::UnitRandom();
+  for (int i = 0; i < n; ++i) {
+    const Block d = random_vec(rng, 3, 0.0, 0.3);
+    q = q * Eigen::Quaterniond(so3::exp(Eigen::Vector3d(d[0], d[1], d[2])));
+    blocks.push_back({q.x(), q.y(), q.z(), q.w()});
+  }
+  return blocks;
+}
+
+TEST(CamImuResiduals, ImuResidualJacobiansMatchNumericOnes) {
+  std::mt19937 rng(4);
+  constexpr int N = 4;
+  ImuResidual<N>::Sample s{0.37, 0.81, 0.05, 1.0, Eigen::Vector3d(0.3, -9.5, 1.2), Eigen::Vector3d(0.2, -0.1, 0.4)};
+  const ImuResidual<N> cost(s, 0.05, 0.002);
+  std::vector<Block> blocks = knot_blocks(rng, N);
+  for (int i = 0; i < 3 * N; ++i) blocks.push_back(random_vec(rng, 3, 0.0, 0.5));
+  blocks.push_back({0.3, -0.2, -9.8});                 // gravity
+  blocks.push_back(random_vec(rng, 3, 1.0, 0.02));     // S_a
+  blocks.push_back(random_vec(rng, 3, 0.0, 0.02));     // M_a
+  blocks.push_back(random_vec(rng, 3, 1.0, 0.02));     // S_g
+  blocks.push_back(random_vec(rng, 3, 0.0, 0.02));     // M_g
+  blocks.push_back(random_quat(rng));                  // C_bg
+  blocks.push_back(random_vec(rng, 9, 0.0, 1e-3));     // B_g
+  check_jacobians(cost, blocks, 2e-5);
+}
+
+TEST(CamImuResiduals, FrameResidualJacobiansMatchNumericOnesIncludingTheTimeshiftAndTheRobustLoss) {
+  std::mt19937 rng(9);
+  constexpr int N = 5;
+  const CameraModel camera = sim::CamImuSimOptions::default_sim_camera();
+  const SplineTiming<N> timing{0.0, 0.05, 20};
+  // Knots near a pose that looks at points 1 m in front of the camera.
+  std::vector<Block> blocks;
+  for (int i = 0; i < N + 2; ++i) {
+    const Eigen::Quaterniond q(so3::exp(Eigen::Vector3d(0.02 * i, -0.01 * i, 0.015 * i)));
+    blocks.push_back({q.x(), q.y(), q.z(), q.w()});
+  }
+  for (int i = 0; i < N + 2; ++i) blocks.push_back({0.01 * i, -0.02 * i, 0.005 * i * i});
+  blocks.push_back({0, 0, 0, 1});           // R_cam_imu
+  blocks.push_back({0.02, -0.01, 0.03});    // t_cam_imu
+  blocks.push_back({0.004});                // timeshift
+  std::vector<Eigen::Vector3d> pts;
+  std::vector<Eigen::Vector2d> px;
+  for (int k = 0; k < 6; ++k) {
+    pts.emplace_back(-0.1 + 0.05 * k, 0.04 * (k % 3) - 0.04, 1.0 + 0.02 * k);
+    // Observed pixels: some near the prediction, two far away (in the robust loss's tail).
+    px.emplace_back(150.0 + 9.0 * k + (k == 2 ? 6.0 : 0.0), 110.0 + (k == 4 ? -4.0 : 0.5));
+  }
+  const int first = 3;
+  const FrameResidual<N> cost(camera, pts, px, 0.2, first, timing, 0.3, 0.9);
+  check_jacobians(cost, blocks, 2e-5);
+}
+
+TEST(CamImuResiduals, BiasWalkResidualIsTheWeightedBiasDerivative) {
+  constexpr int N = 4;
+  const BiasWalkResidual<N> cost(0.3, 2.0, 5.0);
+  std::mt19937 rng(2);
+  std::vector<Block> blocks;
+  for (int i = 0; i < N; ++i) blocks.push_back(random_vec(rng, 3, 0.0, 1.0));
+  check_jacobians(cost, blocks, 1e-6);
+  // Constant knots: no derivative, no cost.
+  std::vector<Block> flat(N, Block{0.1, 0.2, 0.3});
+  std::vector<const double*> ptr;
+  for (auto& b : flat) ptr.push_back(b.data());
+  Eigen::Vector3d r;
+  ASSERT_TRUE(cost.Evaluate(ptr.data(), r.data(), nullptr));
+  EXPECT_LT(r.norm(), 1e-12);
+}
+
+}  // namespace
+}  // namespace imucal::calib::camimu
