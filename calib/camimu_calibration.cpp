@@ -29,7 +29,8 @@ Status CamImuOptions::validate() const {
     return make_error(Errc::kInvalidArgument, "gravity must be within 9.7-9.9 m/s^2");
   if (!(max_timeshift_s > 0.0 && max_timeshift_s <= 1.0))
     return make_error(Errc::kInvalidArgument, "the largest time offset searched must be within (0, 1] s");
-  if (max_iterations < 1) return make_error(Errc::kInvalidArgument, "at least one solver iteration is needed");
+  if (max_iterations < 1)
+    return make_error(Errc::kInvalidArgument, "at least one solver iteration is needed");
   return {};
 }
 
@@ -126,9 +127,9 @@ Status Estimator<N>::initialise_camera(std::size_t c, const GyroLookup& gyro) {
   CameraState& cs = st_.cams[c];
   cs.poses = pnp_poses(cam.camera, cam.observations, points_, t0_ns_, 6, 10.0 * opt_.corner_sigma_px + 2.0);
   if (cs.poses.size() < 20)
-    return make_error(Errc::kInsufficientData, cam.name + ": the target's pose was found in " +
-                                              std::to_string(cs.poses.size()) +
-                                              " frames; at least 20 are needed (move the rig in front of the target)");
+    return make_error(Errc::kInsufficientData,
+                      cam.name + ": the target's pose was found in " + std::to_string(cs.poses.size()) +
+                          " frames; at least 20 are needed (move the rig in front of the target)");
   std::vector<double> dts;
   for (std::size_t i = 1; i < cs.poses.size(); ++i) dts.push_back(cs.poses[i].t_s - cs.poses[i - 1].t_s);
   std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
@@ -140,7 +141,8 @@ Status Estimator<N>::initialise_camera(std::size_t c, const GyroLookup& gyro) {
   } else {
     cs.xcorr = correlate_timeshift(rates, gyro, half, opt_.max_timeshift_s);
     if (cs.xcorr.curve.empty())
-      return make_error(Errc::kInsufficientData, cam.name + ": the frames and the IMU samples do not overlap in time");
+      return make_error(Errc::kInsufficientData,
+                        cam.name + ": the frames and the IMU samples do not overlap in time");
     cs.shift = cs.xcorr.shift_s;
   }
   if (c < opt_.T_cam_imu_init.size() && opt_.T_cam_imu_init[c]) {
@@ -153,8 +155,9 @@ Status Estimator<N>::initialise_camera(std::size_t c, const GyroLookup& gyro) {
   for (const auto& r : rates) speed += r.w.squaredNorm();
   speed = std::sqrt(speed / std::max<std::size_t>(1, rates.size()));
   if (rot.pairs < 20 || speed < 0.05)
-    return make_error(Errc::kInsufficientData, cam.name + ": too little rotation to align camera and IMU (RMS " +
-                                              std::to_string(speed) + " rad/s); rotate the rig about all axes");
+    return make_error(Errc::kInsufficientData,
+                      cam.name + ": too little rotation to align camera and IMU (RMS " +
+                          std::to_string(speed) + " rad/s); rotate the rig about all axes");
   cs.q_ci = to_quat(rot.R_cam_imu);
   cs.gyro_bias = rot.gyro_bias;
   return {};
@@ -162,7 +165,8 @@ Status Estimator<N>::initialise_camera(std::size_t c, const GyroLookup& gyro) {
 
 template <int N>
 Status Estimator<N>::initialise() {
-  if (imu_.size() < 100) return make_error(Errc::kInsufficientData, "fewer than 100 IMU samples in the recording");
+  if (imu_.size() < 100)
+    return make_error(Errc::kInsufficientData, "fewer than 100 IMU samples in the recording");
   t0_ns_ = imu_.front().t_ns;
   std::vector<double> ts;
   std::vector<Eigen::Vector3d> ws;
@@ -189,7 +193,8 @@ Status Estimator<N>::initialise() {
   initialise_spline(ref);
   if (st_.pose.knots < N + 2)
     return make_error(Errc::kInsufficientData, "the frames and the IMU overlap for too short a time (" +
-                                              std::to_string((st_.pose.end_s() - st_.pose.t0_s)) + " s)");
+                                                   std::to_string((st_.pose.end_s() - st_.pose.t0_s)) +
+                                                   " s)");
   return {};
 }
 
@@ -230,7 +235,8 @@ void Estimator<N>::initialise_spline(std::size_t ref) {
   Eigen::Vector3d mean_rf = Eigen::Vector3d::Zero();
   int n = 0;
   So3Spline<N> rot(st_.pose.t0_s, dt, st_.pose.knots);
-  for (int i = 0; i < st_.pose.knots; ++i) rot.knots()[static_cast<std::size_t>(i)] = quat_matrix(st_.q[i].data());
+  for (int i = 0; i < st_.pose.knots; ++i)
+    rot.knots()[static_cast<std::size_t>(i)] = quat_matrix(st_.q[i].data());
   for (const auto& s : imu_) {
     const double t = t_s(s.t_ns);
     if (!st_.pose.covers(t)) continue;
@@ -321,8 +327,9 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended) {
       const int first = std::clamp(st_.pose.segment(t).first_knot - 1, 0, st_.pose.knots - N - 2);
       std::vector<Eigen::Vector3d> pts;
       for (int id : obs.ids) pts.push_back(points_[static_cast<std::size_t>(id)]);
-      auto* cost = new FrameResidual<N>(cameras_[c].camera, std::move(pts), obs.px, t_s(obs.t_ns), first, st_.pose,
-                                        opt_.corner_sigma_px, opt_.reprojection_loss_sigmas * opt_.corner_sigma_px);
+      auto* cost =
+          new FrameResidual<N>(cameras_[c].camera, std::move(pts), obs.px, t_s(obs.t_ns), first, st_.pose,
+                               opt_.corner_sigma_px, opt_.reprojection_loss_sigmas * opt_.corner_sigma_px);
       std::vector<double*> blocks;
       for (int i = 0; i < FrameResidual<N>::kWindow; ++i) blocks.push_back(st_.q[first + i].data());
       for (int i = 0; i < FrameResidual<N>::kWindow; ++i) blocks.push_back(st_.p[first + i].data());
@@ -342,9 +349,10 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended) {
   }
   const bool basic = !extended || opt_.model == CamImuModelKind::kBasic;
   const CamImuFixed& f = opt_.fixed;
-  for (auto [block, fixed] : {std::pair{st_.Sa.data(), basic || f.S_a}, std::pair{st_.Ma.data(), basic || f.M_a},
-                              std::pair{st_.Sg.data(), basic || f.S_g}, std::pair{st_.Mg.data(), basic || f.M_g},
-                              std::pair{st_.C.data(), basic || f.C_bg}, std::pair{st_.B.data(), basic || f.B_g}}) {
+  for (auto [block, fixed] :
+       {std::pair{st_.Sa.data(), basic || f.S_a}, std::pair{st_.Ma.data(), basic || f.M_a},
+        std::pair{st_.Sg.data(), basic || f.S_g}, std::pair{st_.Mg.data(), basic || f.M_g},
+        std::pair{st_.C.data(), basic || f.C_bg}, std::pair{st_.B.data(), basic || f.B_g}}) {
     if (fixed) problem->SetParameterBlockConstant(block);
   }
 }
@@ -360,7 +368,8 @@ template <int N>
 Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary) {
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-  so.num_threads = opt_.threads > 0 ? opt_.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  so.num_threads =
+      opt_.threads > 0 ? opt_.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   so.max_num_iterations = opt_.max_iterations;
   so.function_tolerance = 1e-9;
   so.parameter_tolerance = 1e-10;
@@ -374,7 +383,8 @@ Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solve
     build(problem_.get(), extended);
     ceres::Solve(so, problem_.get(), summary);
     if (!summary->IsSolutionUsable())
-      return make_error(Errc::kSolverFailed, "the camera-IMU solve failed (" + stage + "): " + summary->message);
+      return make_error(Errc::kSolverFailed,
+                        "the camera-IMU solve failed (" + stage + "): " + summary->message);
     quality_.iterations += static_cast<int>(summary->iterations.size());
     quality_.jacobian_s += summary->jacobian_evaluation_time_in_seconds;
     quality_.linear_solver_s += summary->linear_solver_time_in_seconds;
@@ -383,7 +393,9 @@ Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solve
   return make_error(Errc::kSolverFailed, "the time offset did not settle (" + stage + ")");
 }
 
-Eigen::Vector3d sqrt_diag(const Eigen::MatrixXd& C) { return C.diagonal().head<3>().cwiseMax(0.0).cwiseSqrt(); }
+Eigen::Vector3d sqrt_diag(const Eigen::MatrixXd& C) {
+  return C.diagonal().head<3>().cwiseMax(0.0).cwiseSqrt();
+}
 
 template <int N>
 void Estimator<N>::covariance(CamImuCalibrationResult* out) {
@@ -393,8 +405,8 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
   const auto want = [&](const double* b) {
     if (!problem.IsParameterBlockConstant(b)) blocks.push_back(b);
   };
-  for (const double* b : {st_.Sa.data(), st_.Ma.data(), st_.Sg.data(), st_.Mg.data(), st_.C.data(), st_.B.data(),
-                          st_.g.data()})
+  for (const double* b :
+       {st_.Sa.data(), st_.Ma.data(), st_.Sg.data(), st_.Mg.data(), st_.C.data(), st_.B.data(), st_.g.data()})
     want(b);
   for (auto& cs : st_.cams) {
     want(cs.q_ci.data());
@@ -405,15 +417,19 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
   for (const double* b : blocks) pairs.emplace_back(b, b);
   for (int i = 0; i < N; ++i)
     for (int j = i; j < N; ++j) {
-      pairs.emplace_back(st_.ba[static_cast<std::size_t>(i)].data(), st_.ba[static_cast<std::size_t>(j)].data());
-      pairs.emplace_back(st_.bg[static_cast<std::size_t>(i)].data(), st_.bg[static_cast<std::size_t>(j)].data());
+      pairs.emplace_back(st_.ba[static_cast<std::size_t>(i)].data(),
+                         st_.ba[static_cast<std::size_t>(j)].data());
+      pairs.emplace_back(st_.bg[static_cast<std::size_t>(i)].data(),
+                         st_.bg[static_cast<std::size_t>(j)].data());
     }
   ceres::Covariance::Options co;
-  co.num_threads = opt_.threads > 0 ? opt_.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  co.num_threads =
+      opt_.threads > 0 ? opt_.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   co.algorithm_type = ceres::SPARSE_QR;
   ceres::Covariance cov(co);
   if (!cov.Compute(pairs, &problem)) {
-    warnings_.push_back("the covariance could not be computed (a parameter is not observable): sigmas are not given");
+    warnings_.push_back(
+        "the covariance could not be computed (a parameter is not observable): sigmas are not given");
     return;
   }
   const auto block = [&](const double* a, const double* b) {
@@ -456,13 +472,12 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
     if (!problem.IsParameterBlockConstant(cs.q_ci.data())) {
       // Right perturbation -> about the camera axes: R Exp(d) = Exp(R d) R.
       const Eigen::Matrix3d R = quat_matrix(cs.q_ci.data());
-      cr.rotation_sigma_rad = (R * block(cs.q_ci.data(), cs.q_ci.data()) * R.transpose())
-                                  .diagonal()
-                                  .cwiseMax(0.0)
-                                  .cwiseSqrt();
+      cr.rotation_sigma_rad =
+          (R * block(cs.q_ci.data(), cs.q_ci.data()) * R.transpose()).diagonal().cwiseMax(0.0).cwiseSqrt();
       cr.translation_sigma_m = sigma3(cs.t_ci.data());
     }
-    if (!problem.IsParameterBlockConstant(&cs.shift)) cr.timeshift_sigma_s = std::sqrt(block(&cs.shift, &cs.shift)(0, 0));
+    if (!problem.IsParameterBlockConstant(&cs.shift))
+      cr.timeshift_sigma_s = std::sqrt(block(&cs.shift, &cs.shift)(0, 0));
   }
   quality_.covariance_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
@@ -485,7 +500,8 @@ void Estimator<N>::fill_result(CamImuCalibrationResult* out) {
   m.b_a = ba.evaluate(st_.bias.t0_s);
   m.b_g = bg.evaluate(st_.bias.t0_s);
   for (double t = st_.pose.t0_s; t < st_.pose.end_s(); t += 0.5)
-    out->biases.push_back({t0_ns_ + static_cast<TimeNs>(std::llround(t * 1e9)), ba.evaluate(t), bg.evaluate(t)});
+    out->biases.push_back(
+        {t0_ns_ + static_cast<TimeNs>(std::llround(t * 1e9)), ba.evaluate(t), bg.evaluate(t)});
   if (auto canonical = canonical_from_krebs(m); canonical.ok()) out->canonical = *canonical;
   out->gravity_w = vec(st_.g);
   const bool basic = opt_.model == CamImuModelKind::kBasic;
@@ -540,7 +556,8 @@ void Estimator<N>::fill_result(CamImuCalibrationResult* out) {
 /// Excitation per body axis and the observability warnings it implies.
 void excitation(const std::vector<CamImuSample>& imu, const Eigen::Vector3d& b_g, CamImuQuality* q,
                 std::vector<std::string>* warnings) {
-  Eigen::Vector3d mean_a = Eigen::Vector3d::Zero(), sw = Eigen::Vector3d::Zero(), sa = Eigen::Vector3d::Zero();
+  Eigen::Vector3d mean_a = Eigen::Vector3d::Zero(), sw = Eigen::Vector3d::Zero(),
+                  sa = Eigen::Vector3d::Zero();
   for (const auto& s : imu) mean_a += s.accel / static_cast<double>(imu.size());
   for (const auto& s : imu) {
     sw += (s.gyro - b_g).cwiseAbs2();
@@ -551,9 +568,10 @@ void excitation(const std::vector<CamImuSample>& imu, const Eigen::Vector3d& b_g
   const char* axis[3] = {"x", "y", "z"};
   for (int i = 0; i < 3; ++i) {
     if (q->rotation_excitation_radps(i) < 0.1)
-      warnings->push_back(std::string("little rotation about the IMU ") + axis[i] + " axis (RMS " +
-                          std::to_string(q->rotation_excitation_radps(i)) +
-                          " rad/s): its gyro scale, misalignment and the camera rotation are weakly observed");
+      warnings->push_back(
+          std::string("little rotation about the IMU ") + axis[i] + " axis (RMS " +
+          std::to_string(q->rotation_excitation_radps(i)) +
+          " rad/s): its gyro scale, misalignment and the camera rotation are weakly observed");
     if (q->accel_excitation_mps2(i) < 0.5)
       warnings->push_back(std::string("little acceleration along the IMU ") + axis[i] + " axis (RMS " +
                           std::to_string(q->accel_excitation_mps2(i)) +
@@ -590,8 +608,9 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   excitation(imu_, out.imu.b_g, &quality_, &warnings_);
   if (quality_.gyro_residual_rms.maxCoeff() > 3.0 * quality_.gyro_sigma ||
       quality_.accel_residual_rms.maxCoeff() > 3.0 * quality_.accel_sigma)
-    warnings_.push_back("IMU residuals exceed three times the assumed noise: the noise figures (imu.yaml) or the "
-                        "model do not fit this IMU, and the sigmas are too small");
+    warnings_.push_back(
+        "IMU residuals exceed three times the assumed noise: the noise figures (imu.yaml) or the "
+        "model do not fit this IMU, and the sigmas are too small");
   out.quality = quality_;
   out.warnings = warnings_;
   return out;
@@ -601,7 +620,8 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
 
 Result<CamImuCalibrationResult> calibrate_camimu(const std::vector<CamImuSample>& imu,
                                                  const std::vector<CamImuCameraInput>& cameras,
-                                                 const TargetDescription& target, const CamImuOptions& options,
+                                                 const TargetDescription& target,
+                                                 const CamImuOptions& options,
                                                  const CamImuProgressFn& progress) {
   if (Status s = options.validate(); !s.ok()) return s.error();
   if (cameras.empty()) return make_error(Errc::kInvalidArgument, "no camera to calibrate against the IMU");

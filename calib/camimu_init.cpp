@@ -10,9 +10,10 @@
 
 namespace imucal::calib::camimu {
 
-std::vector<FramePose> pnp_poses(const CameraModel& camera, const std::vector<TargetObservation>& observations,
-                                 const std::vector<Eigen::Vector3d>& target_points, TimeNs t0_ns, int min_corners,
-                                 double max_rms_px) {
+std::vector<FramePose> pnp_poses(const CameraModel& camera,
+                                 const std::vector<TargetObservation>& observations,
+                                 const std::vector<Eigen::Vector3d>& target_points, TimeNs t0_ns,
+                                 int min_corners, double max_rms_px) {
   std::vector<FramePose> poses;
   for (const auto& obs : observations) {
     if (static_cast<int>(obs.ids.size()) < min_corners) continue;
@@ -119,7 +120,8 @@ TimeshiftEstimate correlate_timeshift(const std::vector<RateSample>& camera, con
     double v = 0.0;
     if (!correlation_at(camera, gyro, half_window_s, i * step, &v)) continue;
     out.curve.emplace_back(i * step, v);
-    if (best < 0 || v > out.curve[static_cast<std::size_t>(best)].second) best = static_cast<int>(out.curve.size()) - 1;
+    if (best < 0 || v > out.curve[static_cast<std::size_t>(best)].second)
+      best = static_cast<int>(out.curve.size()) - 1;
   }
   if (best < 0) return out;
   const auto b = static_cast<std::size_t>(best);

@@ -27,9 +27,10 @@ struct FramePose {
 /// PnP on each observation with at least `min_corners` corners (on undistorted rays, so any
 /// camera model works). Observations whose pose is not found or reprojects worse than
 /// `max_rms_px` are left out. `t0_ns` is the problem's time origin.
-std::vector<FramePose> pnp_poses(const CameraModel& camera, const std::vector<TargetObservation>& observations,
-                                 const std::vector<Eigen::Vector3d>& target_points, TimeNs t0_ns, int min_corners,
-                                 double max_rms_px);
+std::vector<FramePose> pnp_poses(const CameraModel& camera,
+                                 const std::vector<TargetObservation>& observations,
+                                 const std::vector<Eigen::Vector3d>& target_points, TimeNs t0_ns,
+                                 int min_corners, double max_rms_px);
 
 /// Angular velocity of the camera in its own frame between consecutive poses no further apart
 /// than `max_gap_s`, stamped at the midpoint.
@@ -43,7 +44,8 @@ std::vector<RateSample> camera_rates(const std::vector<FramePose>& poses, double
 /// correlation and the alignment. `gyro_t_s` ascending.
 class GyroLookup {
  public:
-  GyroLookup(std::vector<double> t_s, std::vector<Eigen::Vector3d> w) : t_(std::move(t_s)), w_(std::move(w)) {}
+  GyroLookup(std::vector<double> t_s, std::vector<Eigen::Vector3d> w)
+      : t_(std::move(t_s)), w_(std::move(w)) {}
   /// False when t_s is outside the samples.
   bool at(double t_s, double half_window_s, Eigen::Vector3d* w) const;
 
@@ -53,8 +55,8 @@ class GyroLookup {
 };
 
 struct TimeshiftEstimate {
-  double shift_s = 0.0;  // t_imu = t_cam + shift
-  double peak = 0.0;     // normalised correlation at the peak
+  double shift_s = 0.0;                          // t_imu = t_cam + shift
+  double peak = 0.0;                             // normalised correlation at the peak
   std::vector<std::pair<double, double>> curve;  // (lag s, normalised correlation)
 };
 /// Lags from -max_shift_s to +max_shift_s in 1 ms steps, refined by a parabola through the peak.

@@ -99,7 +99,8 @@ class ImuResidual final : public ceres::CostFunction {
     double dt_s = 0.0, bias_dt_s = 0.0;
     Eigen::Vector3d accel, gyro;
   };
-  ImuResidual(const Sample& sample, double sigma_a, double sigma_g) : s_(sample), wa_(1 / sigma_a), wg_(1 / sigma_g) {
+  ImuResidual(const Sample& sample, double sigma_a, double sigma_g)
+      : s_(sample), wa_(1 / sigma_a), wg_(1 / sigma_g) {
     set_num_residuals(6);
     auto* sizes = mutable_parameter_block_sizes();
     for (int i = 0; i < N; ++i) sizes->push_back(4);
@@ -206,7 +207,8 @@ bool ImuResidual<N>::Evaluate(double const* const* p, double* residuals, double*
     // C^T -> Exp(-delta) C^T: d(C^T v)/d delta = [C^T v]x.
     Eigen::Map<Eigen::Matrix<double, 6, 4, Eigen::RowMajor>> J(jac[kC]);
     J.setZero();
-    J.template block<3, 3>(3, 0) = wg_ * (Sg.asDiagonal() * m_matrix(p[kMg]) * so3::hat(cw) + B * so3::hat(cf));
+    J.template block<3, 3>(3, 0) =
+        wg_ * (Sg.asDiagonal() * m_matrix(p[kMg]) * so3::hat(cw) + B * so3::hat(cf));
   }
   if (jac[kB]) {
     Eigen::Map<Eigen::Matrix<double, 6, 9, Eigen::RowMajor>> J(jac[kB]);
@@ -253,9 +255,9 @@ template <int N>
 class FrameResidual final : public ceres::CostFunction {
  public:
   static constexpr int kWindow = N + 2;
-  FrameResidual(const CameraModel& camera, std::vector<Eigen::Vector3d> points_w, std::vector<Eigen::Vector2d> px,
-                double t_cam_s, int first_window_knot, const SplineTiming<N>& timing, double sigma_px,
-                double loss_scale_px)
+  FrameResidual(const CameraModel& camera, std::vector<Eigen::Vector3d> points_w,
+                std::vector<Eigen::Vector2d> px, double t_cam_s, int first_window_knot,
+                const SplineTiming<N>& timing, double sigma_px, double loss_scale_px)
       : camera_(camera),
         camera_jet_(camera.cast<ceres::Jet<double, 3>>()),
         points_(std::move(points_w)),

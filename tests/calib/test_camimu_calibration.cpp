@@ -120,7 +120,8 @@ TEST(CamImuCalibration, CalibratesTwoCamerasOnOneImuEachWithItsOwnExtrinsicsAndO
   o.imu_init->S_g = synth.truth.gyro_scale;
   o.imu_init->M_g = krebs_entries(synth.truth.gyro_misalignment);
   o.imu_init->C_bg = synth.truth.q_body_gyro.toRotationMatrix();
-  o.imu_init->B_g = synth.truth.g_sensitivity;
+  // The simulator adds g_sensitivity f_body; the Krebs form has B_g C_bg^T f_body.
+  o.imu_init->B_g = synth.truth.g_sensitivity * o.imu_init->C_bg;
   auto result = calibrate_camimu(synth.imu, synth.cameras, synth.target, o);
   ASSERT_TRUE(result.ok()) << result.error().message;
   ASSERT_EQ(result->cameras.size(), 2u);
