@@ -42,10 +42,10 @@ struct CamImuCameraInput {
 
 /// IMU noise in Kalibr's continuous-time units (imu.yaml; `imucal allan` measures them).
 struct CamImuNoise {
-  double accel_noise_density = 0.0039;   // m/s^2/sqrt(Hz), MPU-6000 datasheet (400 ug/sqrt(Hz))
-  double accel_random_walk = 1e-4;       // m/s^3/sqrt(Hz)
-  double gyro_noise_density = 8.73e-5;   // rad/s/sqrt(Hz), MPU-6000 datasheet (0.005 dps/sqrt(Hz))
-  double gyro_random_walk = 2e-5;        // rad/s^2/sqrt(Hz)
+  double accel_noise_density = 0.0039;  // m/s^2/sqrt(Hz), MPU-6000 datasheet (400 ug/sqrt(Hz))
+  double accel_random_walk = 1e-4;      // m/s^3/sqrt(Hz)
+  double gyro_noise_density = 8.73e-5;  // rad/s/sqrt(Hz), MPU-6000 datasheet (0.005 dps/sqrt(Hz))
+  double gyro_random_walk = 2e-5;       // rad/s^2/sqrt(Hz)
 };
 
 /// Blocks that may be held fixed at their initial value.

@@ -42,8 +42,8 @@ struct CamImuCameraResult {
   Eigen::Vector3d translation_sigma_m = Eigen::Vector3d::Zero();
   double timeshift_cam_imu_s = 0.0;
   double timeshift_sigma_s = 0.0;
-  int frames = 0;          // frames with the target that entered the problem
-  int corners = 0;         // corner observations that entered the problem
+  int frames = 0;           // frames with the target that entered the problem
+  int corners = 0;          // corner observations that entered the problem
   int outlier_corners = 0;  // down-weighted by the robust loss (residual above its scale)
   double reprojection_rms_px = 0.0;
   double corner_sigma_px = 0.0;  // the corner noise the problem assumed

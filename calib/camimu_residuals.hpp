@@ -1,0 +1,402 @@
+#pragma once
+// The residuals of the camera-IMU problem (calib/camimu_calibration.cpp), with analytic
+// Jacobians built on the spline Jacobians of calib/spline.hpp. Internal to the estimator.
+//
+// Parameter blocks:
+//   rotation knots and R_cam_imu, C_bg: unit quaternions (Eigen order x, y, z, w) on the
+//     RightQuaternionManifold below, whose tangent is a right perturbation q <- q Exp(delta); the
+//     cost functions write the 3 tangent columns into the first 3 of the 4 ambient ones;
+//   position, bias knots: R^3;  gravity: R^3 on a sphere;  S_a, M_a, S_g, M_g: R^3;
+//   B_g: R^9 row-major;  t_cam_imu: R^3;  timeshift: R^1 (s).
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <array>
+#include <vector>
+
+#include "calib/so3.hpp"
+#include "calib/spline.hpp"
+#include "core/camera_model.hpp"
+
+namespace imucal::calib::camimu {
+
+/// q <- q Exp(delta); the Jacobian trick of PlusJacobian = [I; 0] lets cost functions return
+/// tangent-space Jacobians directly in the first three ambient columns.
+class RightQuaternionManifold final : public ceres::Manifold {
+ public:
+  int AmbientSize() const override { return 4; }
+  int TangentSize() const override { return 3; }
+  bool Plus(const double* x, const double* delta, double* x_plus_delta) const override {
+    const Eigen::Map<const Eigen::Quaterniond> q(x);
+    const Eigen::Quaterniond dq(so3::exp(Eigen::Map<const Eigen::Vector3d>(delta)));
+    Eigen::Map<Eigen::Quaterniond> out(x_plus_delta);
+    out = (q * dq).normalized();
+    return true;
+  }
+  bool PlusJacobian(const double*, double* jacobian) const override {
+    Eigen::Map<Eigen::Matrix<double, 4, 3, Eigen::RowMajor>> J(jacobian);
+    J.setZero();
+    J.topRows<3>().setIdentity();
+    return true;
+  }
+  bool Minus(const double* y, const double* x, double* y_minus_x) const override {
+    const Eigen::Map<const Eigen::Quaterniond> qy(y), qx(x);
+    Eigen::Map<Eigen::Vector3d> out(y_minus_x);
+    out = so3::log((qx.conjugate() * qy).toRotationMatrix());
+    return true;
+  }
+  bool MinusJacobian(const double*, double* jacobian) const override {
+    Eigen::Map<Eigen::Matrix<double, 3, 4, Eigen::RowMajor>> J(jacobian);
+    J.setZero();
+    J.leftCols<3>().setIdentity();
+    return true;
+  }
+};
+
+inline Eigen::Matrix3d quat_matrix(const double* q) {
+  return Eigen::Map<const Eigen::Quaterniond>(q).normalized().toRotationMatrix();
+}
+
+/// Writes a rows x 3 tangent Jacobian into a rows x ambient (row-major) block.
+template <int Rows>
+inline void put(double* jac, int ambient, int row0, int rows_total, const Eigen::Matrix<double, Rows, 3>& J,
+                int col0 = 0) {
+  (void)rows_total;
+  for (int r = 0; r < Rows; ++r)
+    for (int c = 0; c < 3; ++c) jac[(row0 + r) * ambient + col0 + c] = J(r, c);
+}
+
+/// The lower unit-triangular M of the Krebs model applied to v, and its Jacobian in [m0 m1 m2].
+inline Eigen::Vector3d apply_m(const double* m, const Eigen::Vector3d& v) {
+  return {v.x(), m[0] * v.x() + v.y(), m[1] * v.x() + m[2] * v.y() + v.z()};
+}
+inline Eigen::Matrix3d m_matrix(const double* m) {
+  Eigen::Matrix3d M = Eigen::Matrix3d::Identity();
+  M(1, 0) = m[0];
+  M(2, 0) = m[1];
+  M(2, 1) = m[2];
+  return M;
+}
+inline Eigen::Matrix3d dm_jacobian(const Eigen::Vector3d& s, const Eigen::Vector3d& v) {
+  Eigen::Matrix3d J = Eigen::Matrix3d::Zero();  // d (s .* (M v)) / d [m0 m1 m2]
+  J(1, 0) = s.y() * v.x();
+  J(2, 1) = s.z() * v.x();
+  J(2, 2) = s.z() * v.y();
+  return J;
+}
+
+/// One IMU sample: gyroscope and accelerometer residuals of the Krebs model, whitened.
+/// Blocks: N rotation knots, N position knots, N accel-bias knots, N gyro-bias knots, gravity,
+/// S_a, M_a, S_g, M_g, C_bg, B_g.
+template <int N>
+class ImuResidual final : public ceres::CostFunction {
+ public:
+  struct Sample {
+    double u = 0.0;       // in the pose segment
+    double u_bias = 0.0;  // in the bias segment
+    double dt_s = 0.0, bias_dt_s = 0.0;
+    Eigen::Vector3d accel, gyro;
+  };
+  ImuResidual(const Sample& sample, double sigma_a, double sigma_g) : s_(sample), wa_(1 / sigma_a), wg_(1 / sigma_g) {
+    set_num_residuals(6);
+    auto* sizes = mutable_parameter_block_sizes();
+    for (int i = 0; i < N; ++i) sizes->push_back(4);
+    for (int i = 0; i < 3 * N; ++i) sizes->push_back(3);
+    for (int s : {3, 3, 3, 3, 3, 4, 9}) sizes->push_back(s);
+  }
+  static constexpr int kGravity = 4 * N, kSa = kGravity + 1, kMa = kSa + 1, kSg = kMa + 1, kMg = kSg + 1,
+                       kC = kMg + 1, kB = kC + 1;
+
+  /// The prediction (accel, gyro) without noise, for residual figures.
+  bool Evaluate(double const* const* p, double* residuals, double** jac) const override;
+
+ private:
+  Sample s_;
+  double wa_, wg_;
+};
+
+template <int N>
+bool ImuResidual<N>::Evaluate(double const* const* p, double* residuals, double** jac) const {
+  std::array<Eigen::Matrix3d, N> Rk;
+  std::array<const Eigen::Matrix3d*, N> ptr;
+  for (int i = 0; i < N; ++i) {
+    Rk[i] = quat_matrix(p[i]);
+    ptr[i] = &Rk[i];
+  }
+  So3SegmentEval<N> e;
+  So3Segment<N>::evaluate(ptr.data(), s_.u, s_.dt_s, So3Derivs::kVelocity, jac != nullptr, &e);
+  const auto w2 = RdSpline<N>::weights_at(s_.u, 2, s_.dt_s);
+  const auto wb = RdSpline<N>::weights_at(s_.u_bias, 0, s_.bias_dt_s);
+  Eigen::Vector3d pdd = Eigen::Vector3d::Zero(), ba = Eigen::Vector3d::Zero(), bg = Eigen::Vector3d::Zero();
+  for (int i = 0; i < N; ++i) {
+    pdd += w2(i) * Eigen::Map<const Eigen::Vector3d>(p[N + i]);
+    ba += wb(i) * Eigen::Map<const Eigen::Vector3d>(p[2 * N + i]);
+    bg += wb(i) * Eigen::Map<const Eigen::Vector3d>(p[3 * N + i]);
+  }
+  const Eigen::Map<const Eigen::Vector3d> g(p[kGravity]), Sa(p[kSa]), Sg(p[kSg]);
+  const Eigen::Matrix3d Ct = quat_matrix(p[kC]).transpose();
+  const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> B(p[kB]);
+  const Eigen::Matrix3d Rt = e.R.transpose();
+  const Eigen::Vector3d f = Rt * (pdd - g);  // specific force, body
+  const Eigen::Vector3d Mf = apply_m(p[kMa], f);
+  const Eigen::Vector3d cw = Ct * e.omega, cf = Ct * f;
+  const Eigen::Vector3d Mw = apply_m(p[kMg], cw);
+  const Eigen::Vector3d a_pred = Sa.cwiseProduct(Mf) + ba;
+  const Eigen::Vector3d g_pred = Sg.cwiseProduct(Mw) + B * cf + bg;
+  Eigen::Map<Eigen::Matrix<double, 6, 1>> r(residuals);
+  r.head<3>() = wa_ * (a_pred - s_.accel);
+  r.tail<3>() = wg_ * (g_pred - s_.gyro);
+  if (!jac) return true;
+
+  const Eigen::Matrix3d dA_df = wa_ * Sa.asDiagonal() * m_matrix(p[kMa]);
+  const Eigen::Matrix3d dG_dw = wg_ * Sg.asDiagonal() * m_matrix(p[kMg]) * Ct;
+  const Eigen::Matrix3d dG_df = wg_ * B * Ct;
+  const Eigen::Matrix3d df_deps = so3::hat(f);
+  for (int i = 0; i < N; ++i) {
+    if (jac[i]) {
+      Eigen::Map<Eigen::Matrix<double, 6, 4, Eigen::RowMajor>> J(jac[i]);
+      J.setZero();
+      J.template block<3, 3>(0, 0) = dA_df * df_deps * e.dR_dknot[i];
+      J.template block<3, 3>(3, 0) = dG_dw * e.domega_dknot[i] + dG_df * df_deps * e.dR_dknot[i];
+    }
+    if (jac[N + i]) {
+      Eigen::Map<Eigen::Matrix<double, 6, 3, Eigen::RowMajor>> J(jac[N + i]);
+      J.template topRows<3>() = dA_df * Rt * w2(i);
+      J.template bottomRows<3>() = dG_df * Rt * w2(i);
+    }
+    if (jac[2 * N + i]) {
+      Eigen::Map<Eigen::Matrix<double, 6, 3, Eigen::RowMajor>> J(jac[2 * N + i]);
+      J.setZero();
+      J.template topRows<3>() = wa_ * wb(i) * Eigen::Matrix3d::Identity();
+    }
+    if (jac[3 * N + i]) {
+      Eigen::Map<Eigen::Matrix<double, 6, 3, Eigen::RowMajor>> J(jac[3 * N + i]);
+      J.setZero();
+      J.template bottomRows<3>() = wg_ * wb(i) * Eigen::Matrix3d::Identity();
+    }
+  }
+  if (jac[kGravity]) {
+    Eigen::Map<Eigen::Matrix<double, 6, 3, Eigen::RowMajor>> J(jac[kGravity]);
+    J.template topRows<3>() = -dA_df * Rt;
+    J.template bottomRows<3>() = -dG_df * Rt;
+  }
+  if (jac[kSa]) {
+    Eigen::Map<Eigen::Matrix<double, 6, 3, Eigen::RowMajor>> J(jac[kSa]);
+    J.setZero();
+    J.template topRows<3>() = wa_ * Mf.asDiagonal();
+  }
+  if (jac[kMa]) {
+    Eigen::Map<Eigen::Matrix<double, 6, 3, Eigen::RowMajor>> J(jac[kMa]);
+    J.setZero();
+    J.template topRows<3>() = wa_ * dm_jacobian(Sa, f);
+  }
+  if (jac[kSg]) {
+    Eigen::Map<Eigen::Matrix<double, 6, 3, Eigen::RowMajor>> J(jac[kSg]);
+    J.setZero();
+    J.template bottomRows<3>() = wg_ * Mw.asDiagonal();
+  }
+  if (jac[kMg]) {
+    Eigen::Map<Eigen::Matrix<double, 6, 3, Eigen::RowMajor>> J(jac[kMg]);
+    J.setZero();
+    J.template bottomRows<3>() = wg_ * dm_jacobian(Sg, cw);
+  }
+  if (jac[kC]) {
+    // C^T -> Exp(-delta) C^T: d(C^T v)/d delta = [C^T v]x.
+    Eigen::Map<Eigen::Matrix<double, 6, 4, Eigen::RowMajor>> J(jac[kC]);
+    J.setZero();
+    J.template block<3, 3>(3, 0) = wg_ * (Sg.asDiagonal() * m_matrix(p[kMg]) * so3::hat(cw) + B * so3::hat(cf));
+  }
+  if (jac[kB]) {
+    Eigen::Map<Eigen::Matrix<double, 6, 9, Eigen::RowMajor>> J(jac[kB]);
+    J.setZero();
+    for (int row = 0; row < 3; ++row)
+      for (int c = 0; c < 3; ++c) J(3 + row, 3 * row + c) = wg_ * cf(c);
+  }
+  return true;
+}
+
+/// The bias random walk: the bias derivative at Gauss-Legendre points of one bias segment,
+/// weighted so that the sum of squares is the integral of |db/dt|^2 / sigma_rw^2.
+/// Blocks: the segment's N bias knots.
+template <int N>
+class BiasWalkResidual final : public ceres::CostFunction {
+ public:
+  /// `weight` = sqrt(quadrature weight * segment length) / sigma_rw.
+  BiasWalkResidual(double u, double dt_s, double weight) : w1_(weight * RdSpline<N>::weights_at(u, 1, dt_s)) {
+    set_num_residuals(3);
+    for (int i = 0; i < N; ++i) mutable_parameter_block_sizes()->push_back(3);
+  }
+  bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
+    Eigen::Map<Eigen::Vector3d> r(residuals);
+    r.setZero();
+    for (int i = 0; i < N; ++i) {
+      r += w1_(i) * Eigen::Map<const Eigen::Vector3d>(p[i]);
+      if (jac && jac[i]) {
+        Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> J(jac[i]);
+        J = w1_(i) * Eigen::Matrix3d::Identity();
+      }
+    }
+    return true;
+  }
+
+ private:
+  Eigen::Matrix<double, N, 1> w1_;
+};
+
+/// All target corners of one frame: reprojection at t_cam + timeshift with a Cauchy loss per
+/// corner applied inside (so the pose is evaluated once per frame). Blocks: N + 2 rotation knots,
+/// N + 2 position knots (the window the timeshift may move the frame in), R_cam_imu, t_cam_imu,
+/// timeshift.
+template <int N>
+class FrameResidual final : public ceres::CostFunction {
+ public:
+  static constexpr int kWindow = N + 2;
+  FrameResidual(const CameraModel& camera, std::vector<Eigen::Vector3d> points_w, std::vector<Eigen::Vector2d> px,
+                double t_cam_s, int first_window_knot, const SplineTiming<N>& timing, double sigma_px,
+                double loss_scale_px)
+      : camera_(camera),
+        camera_jet_(camera.cast<ceres::Jet<double, 3>>()),
+        points_(std::move(points_w)),
+        px_(std::move(px)),
+        t_cam_s_(t_cam_s),
+        first_(first_window_knot),
+        timing_(timing),
+        w_(1.0 / sigma_px),
+        c2_((loss_scale_px / sigma_px) * (loss_scale_px / sigma_px)) {
+    set_num_residuals(2 * static_cast<int>(points_.size()));
+    auto* sizes = mutable_parameter_block_sizes();
+    for (int i = 0; i < kWindow; ++i) sizes->push_back(4);
+    for (int i = 0; i < kWindow; ++i) sizes->push_back(3);
+    for (int s : {4, 3, 1}) sizes->push_back(s);
+  }
+  static constexpr int kRci = 2 * kWindow, kTci = kRci + 1, kShift = kTci + 1;
+
+  /// The segment's first knot for a timeshift, relative to the window; false when the shift has
+  /// moved the frame out of the window (the problem is then rebuilt).
+  bool in_window(double shift_s) const {
+    const int k = timing_.segment(t_cam_s_ + shift_s).first_knot - first_;
+    return k >= 0 && k <= 2;
+  }
+  /// Unweighted pixel residuals (predicted - measured) at the given parameters.
+  bool Evaluate(double const* const* p, double* residuals, double** jac) const override;
+  /// The same without the robust loss, in pixels.
+  void pixel_residuals(double const* const* p, std::vector<Eigen::Vector2d>* out) const;
+  std::size_t corners() const { return points_.size(); }
+
+ private:
+  struct Pose {
+    So3SegmentEval<N> e;
+    int k0 = 0;  // first knot of the segment in the window
+    Eigen::Vector3d pos, vel;
+    Eigen::Matrix<double, N, 1> w0;
+  };
+  Pose pose(double const* const* p, bool jacobians) const;
+  /// Projection and its Jacobian in p_cam.
+  Eigen::Vector2d project(const Eigen::Vector3d& pc, Eigen::Matrix<double, 2, 3>* J) const;
+
+  CameraModel camera_;
+  CameraModelT<ceres::Jet<double, 3>> camera_jet_;
+  std::vector<Eigen::Vector3d> points_;
+  std::vector<Eigen::Vector2d> px_;
+  double t_cam_s_;
+  int first_;
+  SplineTiming<N> timing_;
+  double w_;
+  double c2_;
+};
+
+template <int N>
+typename FrameResidual<N>::Pose FrameResidual<N>::pose(double const* const* p, bool jacobians) const {
+  Pose out;
+  const double t = t_cam_s_ + p[kShift][0];
+  SplineSegment seg = timing_.segment(t);
+  out.k0 = std::max(0, std::min(2, seg.first_knot - first_));
+  const double u = (t - timing_.t0_s) / timing_.dt_s - (first_ + out.k0);
+  std::array<Eigen::Matrix3d, N> Rk;
+  std::array<const Eigen::Matrix3d*, N> ptr;
+  for (int i = 0; i < N; ++i) {
+    Rk[i] = quat_matrix(p[out.k0 + i]);
+    ptr[i] = &Rk[i];
+  }
+  So3Segment<N>::evaluate(ptr.data(), u, timing_.dt_s, So3Derivs::kVelocity, jacobians, &out.e);
+  out.w0 = RdSpline<N>::weights_at(u, 0, timing_.dt_s);
+  const auto w1 = RdSpline<N>::weights_at(u, 1, timing_.dt_s);
+  out.pos.setZero();
+  out.vel.setZero();
+  for (int i = 0; i < N; ++i) {
+    const Eigen::Map<const Eigen::Vector3d> P(p[kWindow + out.k0 + i]);
+    out.pos += out.w0(i) * P;
+    out.vel += w1(i) * P;
+  }
+  return out;
+}
+
+template <int N>
+Eigen::Vector2d FrameResidual<N>::project(const Eigen::Vector3d& pc, Eigen::Matrix<double, 2, 3>* J) const {
+  if (!J) return camera_.project(pc).px;
+  using Jet = ceres::Jet<double, 3>;
+  Eigen::Matrix<Jet, 3, 1> x;
+  for (int i = 0; i < 3; ++i) x(i) = Jet(pc(i), i);
+  const auto pr = camera_jet_.project(x);
+  for (int r = 0; r < 2; ++r) J->row(r) = pr.px(r).v.transpose();
+  return {pr.px(0).a, pr.px(1).a};
+}
+
+template <int N>
+void FrameResidual<N>::pixel_residuals(double const* const* p, std::vector<Eigen::Vector2d>* out) const {
+  const Pose ps = pose(p, false);
+  const Eigen::Matrix3d Rt = ps.e.R.transpose(), Rci = quat_matrix(p[kRci]);
+  const Eigen::Map<const Eigen::Vector3d> tci(p[kTci]);
+  out->clear();
+  for (std::size_t k = 0; k < points_.size(); ++k)
+    out->push_back(project(Rci * (Rt * (points_[k] - ps.pos)) + tci, nullptr) - px_[k]);
+}
+
+template <int N>
+bool FrameResidual<N>::Evaluate(double const* const* p, double* residuals, double** jac) const {
+  const Pose ps = pose(p, jac != nullptr);
+  const Eigen::Matrix3d Rt = ps.e.R.transpose(), Rci = quat_matrix(p[kRci]);
+  const Eigen::Map<const Eigen::Vector3d> tci(p[kTci]);
+  const int rows = num_residuals();
+  if (jac) {
+    for (int b = 0; b < 2 * kWindow + 3; ++b)
+      if (jac[b]) std::fill(jac[b], jac[b] + rows * parameter_block_sizes()[b], 0.0);
+  }
+  for (std::size_t k = 0; k < points_.size(); ++k) {
+    const Eigen::Vector3d pb = Rt * (points_[k] - ps.pos);
+    const Eigen::Vector3d pc = Rci * pb + tci;
+    Eigen::Matrix<double, 2, 3> Jp;
+    const Eigen::Vector2d e = w_ * (project(pc, jac ? &Jp : nullptr) - px_[k]);
+    // Cauchy loss rho(s) = c2 log(1 + s / c2) folded into the residual: r' = g(s) e with
+    // g = sqrt(rho(s) / s), so that |r'|^2 = rho(s); its exact Jacobian is g J + e g'(s) 2 e^T J.
+    const double s = e.squaredNorm();
+    double g = 1.0, dg = -0.25 / c2_;  // limits at s -> 0
+    if (s > 1e-12 * c2_) {
+      const double rho = c2_ * std::log1p(s / c2_), rho1 = 1.0 / (1.0 + s / c2_);
+      g = std::sqrt(rho / s);
+      dg = (rho1 * s - rho) / (2.0 * s * s * g);
+    }
+    Eigen::Map<Eigen::Vector2d>(residuals + 2 * k) = g * e;
+    if (!jac) continue;
+    const Eigen::Matrix2d L = g * Eigen::Matrix2d::Identity() + 2.0 * dg * e * e.transpose();
+    const Eigen::Matrix<double, 2, 3> Jc = L * w_ * Jp;  // d r / d p_cam
+    const Eigen::Matrix<double, 2, 3> Jb = Jc * Rci;     // d r / d p_body
+    const int row = 2 * static_cast<int>(k);
+    for (int i = 0; i < N; ++i) {
+      if (jac[ps.k0 + i]) put<2>(jac[ps.k0 + i], 4, row, rows, Jb * so3::hat(pb) * ps.e.dR_dknot[i]);
+      if (jac[kWindow + ps.k0 + i]) put<2>(jac[kWindow + ps.k0 + i], 3, row, rows, -Jb * Rt * ps.w0(i));
+    }
+    if (jac[kRci]) put<2>(jac[kRci], 4, row, rows, -Jc * Rci * so3::hat(pb));
+    if (jac[kTci]) put<2>(jac[kTci], 3, row, rows, Jc);
+    if (jac[kShift]) {
+      const Eigen::Vector2d d = Jb * (so3::hat(pb) * ps.e.omega - Rt * ps.vel);
+      jac[kShift][row] = d(0);
+      jac[kShift][row + 1] = d(1);
+    }
+  }
+  return true;
+}
+
+}  // namespace imucal::calib::camimu
