@@ -121,7 +121,8 @@ Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& q) {
   auto loaded = load_imu_stream(q.log_path, q.imu_stream,
                                 q.allow_damaged ? DamagePolicy::kAllow : DamagePolicy::kRefuse);
   if (!loaded.ok()) return loaded.error();
-  if (loaded->damaged()) report.warnings.push_back(loaded->damage_warning() + ": calibrated from its readable part only");
+  if (loaded->damaged())
+    report.warnings.push_back(loaded->damage_warning() + ": calibrated from its readable part only");
   const auto& reader = *loaded->reader;
   report.imu_stream = loaded->info;
   report.imu_rostopic = q.imu_rostopic.empty() ? "/" + loaded->info.name : q.imu_rostopic;

@@ -107,10 +107,11 @@ Result<std::vector<int>> match_camera_streams(const std::vector<CamchainCamera>&
     if (!id) id = stream_named(stream_of_topic(cam.rostopic), streams);
     if (!id && cameras.size() == 1 && streams.size() == 1) id = streams.begin()->first;
     if (!id) {
-      return make_error(Errc::kNotFound,
-                        cam.source + " " + cam.name + " (camera_stream '" + cam.camera_stream + "', rostopic '" +
-                            cam.rostopic + "') names no camera stream of the log; its camera streams: " +
-                            stream_list(streams) + " (set the camera's rostopic to /STREAM/image_raw)");
+      return make_error(Errc::kNotFound, cam.source + " " + cam.name + " (camera_stream '" +
+                                             cam.camera_stream + "', rostopic '" + cam.rostopic +
+                                             "') names no camera stream of the log; its camera streams: " +
+                                             stream_list(streams) +
+                                             " (set the camera's rostopic to /STREAM/image_raw)");
     }
     if (!used.insert(*id).second) {
       return make_error(Errc::kInvalidArgument, cam.source + " " + cam.name + ": camera stream '" +
@@ -126,7 +127,8 @@ Result<calib::CamImuNoise> read_kalibr_imu_noise(const std::string& path) {
   if (!root.ok()) return root.error();
   YAML::Node node = *root;
   if (node.IsMap() && !node["accelerometer_noise_density"] && node["imu0"]) node = node["imu0"];
-  if (!node.IsMap()) return make_error(Errc::kCorrupt, path + ": not a Kalibr imu.yaml (a map of noise figures)");
+  if (!node.IsMap())
+    return make_error(Errc::kCorrupt, path + ": not a Kalibr imu.yaml (a map of noise figures)");
   calib::CamImuNoise noise;
   const std::array<std::pair<const char*, double*>, 4> keys{{
       {"accelerometer_noise_density", &noise.accel_noise_density},
@@ -207,8 +209,9 @@ Result<ImuPrior> imu_prior(const std::optional<NamedCalibration>& intrinsics,
       if (!k.ok()) return k.error().context(gsens->path);
       G_body = k->R_canonical_body.transpose() * gsens->G * k->R_canonical_body;
     } else {
-      out.notes.push_back(gsens->path +
-                          " gives G without its calibration: taken as expressed in the accelerometer (body) frame");
+      out.notes.push_back(
+          gsens->path +
+          " gives G without its calibration: taken as expressed in the accelerometer (body) frame");
     }
     if (!intrinsics) {
       out.notes.push_back(
@@ -222,8 +225,8 @@ Result<ImuPrior> imu_prior(const std::optional<NamedCalibration>& intrinsics,
   return out;
 }
 
-std::vector<calib::CamImuSample> camimu_samples(const std::vector<ImuSample>& samples, const ImuStreamInfo& info,
-                                                std::size_t* saturated) {
+std::vector<calib::CamImuSample> camimu_samples(const std::vector<ImuSample>& samples,
+                                                const ImuStreamInfo& info, std::size_t* saturated) {
   std::vector<calib::CamImuSample> out;
   out.reserve(samples.size());
   *saturated = 0;
@@ -238,15 +241,20 @@ std::vector<calib::CamImuSample> camimu_samples(const std::vector<ImuSample>& sa
 }
 
 Status set_fixed_block(const std::string& name, calib::CamImuFixed* f) {
-  const std::map<std::string, bool*> blocks = {{"S_a", &f->S_a},   {"M_a", &f->M_a},
-                                               {"S_g", &f->S_g},   {"M_g", &f->M_g},
-                                               {"C_bg", &f->C_bg}, {"B_g", &f->B_g},
-                                               {"T_cam_imu", &f->T_cam_imu}, {"timeshift", &f->timeshift}};
+  const std::map<std::string, bool*> blocks = {{"S_a", &f->S_a},
+                                               {"M_a", &f->M_a},
+                                               {"S_g", &f->S_g},
+                                               {"M_g", &f->M_g},
+                                               {"C_bg", &f->C_bg},
+                                               {"B_g", &f->B_g},
+                                               {"T_cam_imu", &f->T_cam_imu},
+                                               {"timeshift", &f->timeshift}};
   const auto it = blocks.find(name);
   if (it == blocks.end()) {
     return make_error(Errc::kInvalidArgument,
-                      "'" + name + "' is not a block that can be fixed: S_a, M_a, S_g, M_g, C_bg, B_g, T_cam_imu, "
-                                   "timeshift");
+                      "'" + name +
+                          "' is not a block that can be fixed: S_a, M_a, S_g, M_g, C_bg, B_g, T_cam_imu, "
+                          "timeshift");
   }
   *it->second = true;
   return {};
@@ -255,13 +263,13 @@ Status set_fixed_block(const std::string& name, calib::CamImuFixed* f) {
 std::vector<std::string> fixed_block_names(const calib::CamImuFixed& f) {
   std::vector<std::string> out;
   const std::array<std::pair<const char*, bool>, 8> blocks{{{"S_a", f.S_a},
-                                                             {"M_a", f.M_a},
-                                                             {"S_g", f.S_g},
-                                                             {"M_g", f.M_g},
-                                                             {"C_bg", f.C_bg},
-                                                             {"B_g", f.B_g},
-                                                             {"T_cam_imu", f.T_cam_imu},
-                                                             {"timeshift", f.timeshift}}};
+                                                            {"M_a", f.M_a},
+                                                            {"S_g", f.S_g},
+                                                            {"M_g", f.M_g},
+                                                            {"C_bg", f.C_bg},
+                                                            {"B_g", f.B_g},
+                                                            {"T_cam_imu", f.T_cam_imu},
+                                                            {"timeshift", f.timeshift}}};
   for (const auto& [name, fixed] : blocks) {
     if (fixed) out.emplace_back(name);
   }

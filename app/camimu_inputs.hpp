@@ -87,8 +87,8 @@ struct ImuPrior {
 
 /// The IMU samples on the stream's nominal SI (ImuStreamInfo::accel/gyro to_si), as the
 /// estimator takes them; samples flagged saturated are left out and counted in `*saturated`.
-std::vector<calib::CamImuSample> camimu_samples(const std::vector<ImuSample>& samples, const ImuStreamInfo& info,
-                                                std::size_t* saturated);
+std::vector<calib::CamImuSample> camimu_samples(const std::vector<ImuSample>& samples,
+                                                const ImuStreamInfo& info, std::size_t* saturated);
 
 /// The block names of --fix: S_a, M_a, S_g, M_g, C_bg, B_g, T_cam_imu, timeshift.
 [[nodiscard]] Status set_fixed_block(const std::string& name, calib::CamImuFixed* fixed);

@@ -107,14 +107,14 @@ json canonical_json(const CanonicalImuModel& c) {
 }
 
 json krebs_json(const KrebsImuModel& k) {
-  return {{"S_a", vec_json(k.S_a)}, {"M_a", vec_json(k.M_a)},   {"b_a", vec_json(k.b_a)},
-          {"S_g", vec_json(k.S_g)}, {"M_g", vec_json(k.M_g)},   {"C_bg", mat_json(k.C_bg)},
+  return {{"S_a", vec_json(k.S_a)}, {"M_a", vec_json(k.M_a)}, {"b_a", vec_json(k.b_a)},
+          {"S_g", vec_json(k.S_g)}, {"M_g", vec_json(k.M_g)}, {"C_bg", mat_json(k.C_bg)},
           {"B_g", mat_json(k.B_g)}, {"b_g", vec_json(k.b_g)}};
 }
 
 json krebs_sigma_json(const KrebsImuSigma& s) {
-  return {{"S_a", vec_json(s.S_a)}, {"M_a", vec_json(s.M_a)},         {"b_a", vec_json(s.b_a)},
-          {"S_g", vec_json(s.S_g)}, {"M_g", vec_json(s.M_g)},         {"C_bg_rad", vec_json(s.C_bg)},
+  return {{"S_a", vec_json(s.S_a)}, {"M_a", vec_json(s.M_a)}, {"b_a", vec_json(s.b_a)},
+          {"S_g", vec_json(s.S_g)}, {"M_g", vec_json(s.M_g)}, {"C_bg_rad", vec_json(s.C_bg)},
           {"B_g", mat_json(s.B_g)}, {"b_g", vec_json(s.b_g)}};
 }
 
@@ -295,7 +295,8 @@ CamImuCameraResult read_camera(const json& j, const std::string& path) {
   c.rotation_sigma_rad = read_vec<3>(j.at("rotation_sigma_rad"));
   c.translation_sigma_m = read_vec<3>(j.at("translation_sigma_m"));
   c.timeshift_cam_imu_s = j.at("timeshift_cam_imu_s").get<double>();
-  c.timeshift_sigma_s = j.at("timeshift_sigma_s").is_null() ? std::nan("") : j.at("timeshift_sigma_s").get<double>();
+  c.timeshift_sigma_s =
+      j.at("timeshift_sigma_s").is_null() ? std::nan("") : j.at("timeshift_sigma_s").get<double>();
   c.frames = j.at("frames").get<int>();
   c.corners = j.at("corners").get<int>();
   c.outlier_corners = j.at("outlier_corners").get<int>();
@@ -393,7 +394,8 @@ std::string camimu_camchain_yaml(const CamImuReport& r) {
     q["camera_stream"] = c.stream;
     if (in != nullptr) q["intrinsics_from"] = in->source;
     q["log"] = r.log_path;
-    q["convention"] = "T_cam_imu maps IMU body points into the camera frame; t_imu = t_cam + timeshift_cam_imu";
+    q["convention"] =
+        "T_cam_imu maps IMU body points into the camera frame; t_imu = t_cam + timeshift_cam_imu";
     cam["imucal"] = q;
     root["cam" + std::to_string(i)] = cam;
   }
@@ -438,9 +440,10 @@ std::string camimu_imu_yaml(const CamImuReport& r) {
   imu["imucal"] = q;
   YAML::Node root(YAML::NodeType::Map);
   root["imu0"] = imu;
-  return emit(root,
-              "# IMU of the camera-IMU calibration (imucal calibrate camimu); Kalibr's IMU result format, on the "
-              "stream's\n# nominal SI values; imucal's figures under imu0.imucal (docs/camimu-calibration.md)\n");
+  return emit(
+      root,
+      "# IMU of the camera-IMU calibration (imucal calibrate camimu); Kalibr's IMU result format, on the "
+      "stream's\n# nominal SI values; imucal's figures under imu0.imucal (docs/camimu-calibration.md)\n");
 }
 
 std::string camimu_calibration_yaml(const CamImuReport& r) {
@@ -473,9 +476,10 @@ std::string camimu_calibration_yaml(const CamImuReport& r) {
   root["log"] = r.log_path;
   root["software_version"] = kVersion;
   root["warnings"] = string_list(r.warnings);
-  return emit(root,
-              "# Camera-IMU calibration (imucal calibrate camimu): the canonical record for the stream's input "
-              "values\n# (docs/camimu-calibration.md)\n");
+  return emit(
+      root,
+      "# Camera-IMU calibration (imucal calibrate camimu): the canonical record for the stream's input "
+      "values\n# (docs/camimu-calibration.md)\n");
 }
 
 std::string camimu_result_json(const CamImuReport& r) {
@@ -487,8 +491,10 @@ std::string camimu_result_json(const CamImuReport& r) {
   json biases = json::array();
   const TimeNs t0 = res.biases.empty() ? 0 : res.biases.front().t_ns;
   for (const auto& b : res.biases) {
-    biases.push_back(
-        {{"t_s", ns_to_s(b.t_ns - t0)}, {"t_ns", b.t_ns}, {"b_a", vec_json(b.b_a)}, {"b_g", vec_json(b.b_g)}});
+    biases.push_back({{"t_s", ns_to_s(b.t_ns - t0)},
+                      {"t_ns", b.t_ns},
+                      {"b_a", vec_json(b.b_a)},
+                      {"b_g", vec_json(b.b_g)}});
   }
   json j;
   j["method"] = "continuous-time camera-IMU (Krebs 2012)";
@@ -504,7 +510,8 @@ std::string camimu_result_json(const CamImuReport& r) {
               {"input_units", imu_units_name(r.imu_stream.units)},
               {"kalibr",
                {{"accelerometers", {{"M", mat_json(k.M_accel)}}},
-                {"gyroscopes", {{"M", mat_json(k.M_gyro)}, {"A", mat_json(k.A)}, {"C_gyro_i", mat_json(k.C_gyro_i)}}}}}};
+                {"gyroscopes",
+                 {{"M", mat_json(k.M_gyro)}, {"A", mat_json(k.A)}, {"C_gyro_i", mat_json(k.C_gyro_i)}}}}}};
   j["gravity_w_mps2"] = vec_json(res.gravity_w);
   j["gravity_sigma_rad"] = vec_json(res.gravity_sigma_rad);
   j["biases"] = biases;
@@ -523,7 +530,8 @@ Result<CamImuCalibrationResult> read_camimu_result(const std::string& path) {
   try {
     return read_result_json(json::parse(text.str()), path);
   } catch (const std::exception& e) {
-    return make_error(Errc::kCorrupt, path + ": not a camera-IMU result.json (" + std::string(e.what()) + ")");
+    return make_error(Errc::kCorrupt,
+                      path + ": not a camera-IMU result.json (" + std::string(e.what()) + ")");
   }
 }
 

@@ -18,7 +18,9 @@
 namespace imucal::app {
 namespace {
 
-Eigen::Matrix3d rotation(const Eigen::Vector3d& v) { return Eigen::AngleAxisd(v.norm(), v.normalized()).matrix(); }
+Eigen::Matrix3d rotation(const Eigen::Vector3d& v) {
+  return Eigen::AngleAxisd(v.norm(), v.normalized()).matrix();
+}
 
 /// An IMU far enough from the identity that a transposed or swapped matrix shows.
 KrebsImuModel krebs_truth() {
@@ -128,7 +130,9 @@ Eigen::Matrix3d matrix(const YAML::Node& rows) {
   return m;
 }
 
-Eigen::Vector3d vector(const YAML::Node& v) { return {v[0].as<double>(), v[1].as<double>(), v[2].as<double>()}; }
+Eigen::Vector3d vector(const YAML::Node& v) {
+  return {v[0].as<double>(), v[1].as<double>(), v[2].as<double>()};
+}
 
 TEST(CamImuResults, CamchainHasKalibrKeysAndRoundTripsExtrinsicsAndTimeshift) {
   const CamImuReport r = report();
@@ -136,8 +140,8 @@ TEST(CamImuResults, CamchainHasKalibrKeysAndRoundTripsExtrinsicsAndTimeshift) {
   for (int i = 0; i < 2; ++i) {
     const YAML::Node cam = root["cam" + std::to_string(i)];
     ASSERT_TRUE(cam) << i;
-    for (const char* key : {"camera_model", "intrinsics", "distortion_model", "distortion_coeffs", "resolution",
-                            "rostopic", "T_cam_imu", "timeshift_cam_imu"})
+    for (const char* key : {"camera_model", "intrinsics", "distortion_model", "distortion_coeffs",
+                            "resolution", "rostopic", "T_cam_imu", "timeshift_cam_imu"})
       EXPECT_TRUE(cam[key]) << key;
     const auto& c = r.result.cameras[i];
     ASSERT_EQ(cam["T_cam_imu"].size(), 4u);
@@ -224,8 +228,9 @@ TEST(CamImuResults, CalibrationYamlIsReadByTheStaticResultReaders) {
   EXPECT_LT((si.b_g - r.result.canonical.b_g).cwiseAbs().maxCoeff(), 1e-12);
   // A raw sample corrects to the same SI value either way.
   const Eigen::Vector3d raw(1200.0, -8000.0, 3000.0);
-  EXPECT_LT((c->model.correct_accel(raw) - r.result.canonical.correct_accel(r.imu_stream.accel.to_si(raw))).norm(),
-            1e-12);
+  EXPECT_LT(
+      (c->model.correct_accel(raw) - r.result.canonical.correct_accel(r.imu_stream.accel.to_si(raw))).norm(),
+      1e-12);
   auto G = read_gsens_matrix(path);
   ASSERT_TRUE(G.ok()) << G.error().message;
   EXPECT_LT((*G - r.result.canonical.G).cwiseAbs().maxCoeff(), 1e-15);
@@ -307,7 +312,8 @@ TEST(CamImuInputs, StaticResultOnRawCountsBecomesTheKrebsStartAndFixesTheIntrins
   EXPECT_LT((prior->init->C_bg - truth.C_bg).cwiseAbs().maxCoeff(), 1e-12);
   EXPECT_LT((prior->init->B_g - truth.B_g).cwiseAbs().maxCoeff(), 1e-12);
   EXPECT_LT((prior->init->b_a - truth.b_a).cwiseAbs().maxCoeff(), 1e-12);
-  EXPECT_EQ(fixed_block_names(prior->fixed), (std::vector<std::string>{"S_a", "M_a", "S_g", "M_g", "C_bg", "B_g"}));
+  EXPECT_EQ(fixed_block_names(prior->fixed),
+            (std::vector<std::string>{"S_a", "M_a", "S_g", "M_g", "C_bg", "B_g"}));
 
   // --gsens with the same file: G is rotated into the body frame, the same B_g.
   GsensInput gsens{"static.yaml", file.model.G, file};
@@ -387,10 +393,11 @@ TEST(CamImuInputs, FixedBlocksAndNoiseFile) {
   EXPECT_NE(bad.error().message.find("S_a, M_a"), std::string::npos);
 
   // imucal allan's flat imu.yaml.
-  auto noise = read_kalibr_imu_noise(write("allan.yaml",
-                                           "accelerometer_noise_density: 0.002\naccelerometer_random_walk: 3e-4\n"
-                                           "gyroscope_noise_density: 1.6e-4\ngyroscope_random_walk: 2e-6\n"
-                                           "rostopic: /imu0\nupdate_rate: 200\n"));
+  auto noise =
+      read_kalibr_imu_noise(write("allan.yaml",
+                                  "accelerometer_noise_density: 0.002\naccelerometer_random_walk: 3e-4\n"
+                                  "gyroscope_noise_density: 1.6e-4\ngyroscope_random_walk: 2e-6\n"
+                                  "rostopic: /imu0\nupdate_rate: 200\n"));
   ASSERT_TRUE(noise.ok()) << noise.error().message;
   EXPECT_EQ(noise->accel_noise_density, 0.002);
   EXPECT_EQ(noise->gyro_random_walk, 2e-6);
