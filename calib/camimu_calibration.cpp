@@ -10,6 +10,7 @@
 
 #include "calib/camimu_init.hpp"
 #include "calib/camimu_residuals.hpp"
+#include "calib/marginal_covariance.hpp"
 
 namespace imucal::calib {
 
@@ -413,31 +414,19 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
     want(cs.t_ci.data());
     want(&cs.shift);
   }
-  std::vector<std::pair<const double*, const double*>> pairs;
-  for (const double* b : blocks) pairs.emplace_back(b, b);
-  for (int i = 0; i < N; ++i)
-    for (int j = i; j < N; ++j) {
-      pairs.emplace_back(st_.ba[static_cast<std::size_t>(i)].data(),
-                         st_.ba[static_cast<std::size_t>(j)].data());
-      pairs.emplace_back(st_.bg[static_cast<std::size_t>(i)].data(),
-                         st_.bg[static_cast<std::size_t>(j)].data());
-    }
-  ceres::Covariance::Options co;
-  co.num_threads =
+  for (int i = 0; i < N; ++i) {
+    want(st_.ba[static_cast<std::size_t>(i)].data());
+    want(st_.bg[static_cast<std::size_t>(i)].data());
+  }
+  MarginalCovariance cov;
+  const int threads =
       opt_.threads > 0 ? opt_.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  co.algorithm_type = ceres::SPARSE_QR;
-  ceres::Covariance cov(co);
-  if (!cov.Compute(pairs, &problem)) {
+  if (!cov.compute(problem, blocks, threads)) {
     warnings_.push_back(
         "the covariance could not be computed (a parameter is not observable): sigmas are not given");
     return;
   }
-  const auto block = [&](const double* a, const double* b) {
-    const int na = problem.ParameterBlockTangentSize(a), nb = problem.ParameterBlockTangentSize(b);
-    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> C(na, nb);
-    cov.GetCovarianceBlockInTangentSpace(a, b, C.data());
-    return Eigen::MatrixXd(C);
-  };
+  const auto block = [&](const double* a, const double* b) { return cov.block(a, b); };
   const auto sigma3 = [&](const double* b) {
     return problem.IsParameterBlockConstant(b) ? Eigen::Vector3d::Zero() : sqrt_diag(block(b, b));
   };

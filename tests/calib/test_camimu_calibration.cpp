@@ -68,10 +68,10 @@ TEST(CamImuCalibration, ConvergesFromNoPriorAndMatchesTheTruthWithinItsSigmas) {
   const Errors e = extrinsic_errors(r, synth);
   std::printf(
       "rot %.5f rad (sigma %.5f), trans %.2f mm (sigma %.2f), shift %.3f ms (sigma %.3f), %d iterations, "
-      "solve %.1f s, reprojection %.3f px, worst IMU error %.2f sigma\n",
+      "solve %.1f s, covariance %.2f s, reprojection %.3f px, worst IMU error %.2f sigma\n",
       e.rot_rad, e.rot_sigma.norm(), e.trans_m * 1e3, e.trans_sigma.norm() * 1e3, e.shift_s * 1e3,
-      e.shift_sigma * 1e3, r.quality.iterations, r.quality.solve_s, r.cameras[0].reprojection_rms_px,
-      worst_imu_ratio(r, synth.truth));
+      e.shift_sigma * 1e3, r.quality.iterations, r.quality.solve_s, r.quality.covariance_s,
+      r.cameras[0].reprojection_rms_px, worst_imu_ratio(r, synth.truth));
   // Started from identity extrinsics and no offset: the initialisation found both.
   EXPECT_LT(e.rot_rad, 4 * e.rot_sigma.norm());
   EXPECT_LT(e.trans_m, 4 * e.trans_sigma.norm());

@@ -2,12 +2,11 @@
 // differences: quaternion blocks through the manifold's right perturbation (tangent columns in
 // the first three ambient ones), every other block in its ambient coordinates.
 
-#include "calib/camimu_residuals.hpp"
-
 #include <gtest/gtest.h>
 
 #include <random>
 
+#include "calib/camimu_residuals.hpp"
 #include "sim/camimu.hpp"
 
 namespace imucal::calib::camimu {
@@ -85,17 +84,18 @@ std::vector<Block> knot_blocks(std::mt19937& rng, int n) {
 TEST(CamImuResiduals, ImuResidualJacobiansMatchNumericOnes) {
   std::mt19937 rng(4);
   constexpr int N = 4;
-  ImuResidual<N>::Sample s{0.37, 0.81, 0.05, 1.0, Eigen::Vector3d(0.3, -9.5, 1.2), Eigen::Vector3d(0.2, -0.1, 0.4)};
+  ImuResidual<N>::Sample s{
+      0.37, 0.81, 0.05, 1.0, Eigen::Vector3d(0.3, -9.5, 1.2), Eigen::Vector3d(0.2, -0.1, 0.4)};
   const ImuResidual<N> cost(s, 0.05, 0.002);
   std::vector<Block> blocks = knot_blocks(rng, N);
   for (int i = 0; i < 3 * N; ++i) blocks.push_back(random_vec(rng, 3, 0.0, 0.5));
-  blocks.push_back({0.3, -0.2, -9.8});                 // gravity
-  blocks.push_back(random_vec(rng, 3, 1.0, 0.02));     // S_a
-  blocks.push_back(random_vec(rng, 3, 0.0, 0.02));     // M_a
-  blocks.push_back(random_vec(rng, 3, 1.0, 0.02));     // S_g
-  blocks.push_back(random_vec(rng, 3, 0.0, 0.02));     // M_g
-  blocks.push_back(random_quat(rng));                  // C_bg
-  blocks.push_back(random_vec(rng, 9, 0.0, 1e-3));     // B_g
+  blocks.push_back({0.3, -0.2, -9.8});              // gravity
+  blocks.push_back(random_vec(rng, 3, 1.0, 0.02));  // S_a
+  blocks.push_back(random_vec(rng, 3, 0.0, 0.02));  // M_a
+  blocks.push_back(random_vec(rng, 3, 1.0, 0.02));  // S_g
+  blocks.push_back(random_vec(rng, 3, 0.0, 0.02));  // M_g
+  blocks.push_back(random_quat(rng));               // C_bg
+  blocks.push_back(random_vec(rng, 9, 0.0, 1e-3));  // B_g
   check_jacobians(cost, blocks, 2e-5);
 }
 
@@ -111,9 +111,9 @@ TEST(CamImuResiduals, FrameResidualJacobiansMatchNumericOnesIncludingTheTimeshif
     blocks.push_back({q.x(), q.y(), q.z(), q.w()});
   }
   for (int i = 0; i < N + 2; ++i) blocks.push_back({0.01 * i, -0.02 * i, 0.005 * i * i});
-  blocks.push_back({0, 0, 0, 1});           // R_cam_imu
-  blocks.push_back({0.02, -0.01, 0.03});    // t_cam_imu
-  blocks.push_back({0.004});                // timeshift
+  blocks.push_back({0, 0, 0, 1});         // R_cam_imu
+  blocks.push_back({0.02, -0.01, 0.03});  // t_cam_imu
+  blocks.push_back({0.004});              // timeshift
   std::vector<Eigen::Vector3d> pts;
   std::vector<Eigen::Vector2d> px;
   for (int k = 0; k < 6; ++k) {
