@@ -246,7 +246,9 @@ void Estimator<N>::initialise_spline(std::size_t ref) {
   }
   st_.g = to_arr(-opt_.gravity_mps2 * mean_rf.normalized());
   const Eigen::Vector3d ba0 = opt_.imu_init ? opt_.imu_init->b_a : Eigen::Vector3d::Zero();
-  const Eigen::Vector3d bg0 = opt_.imu_init ? opt_.imu_init->b_g : cs.gyro_bias;
+  // The gyro bias starts from this recording's rate alignment even with a prior model: a bias
+  // changes from one power-up to the next, and a prior given only for B_g carries none.
+  const Eigen::Vector3d bg0 = cs.gyro_bias;
   st_.ba.assign(static_cast<std::size_t>(st_.bias.knots), to_arr(ba0));
   st_.bg.assign(static_cast<std::size_t>(st_.bias.knots), to_arr(bg0));
   // Other cameras: the translation from their poses against the body trajectory.
