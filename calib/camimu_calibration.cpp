@@ -146,12 +146,13 @@ Status Estimator<N>::initialise_camera(std::size_t c, const GyroLookup& gyro) {
                         cam.name + ": the frames and the IMU samples do not overlap in time");
     cs.shift = cs.xcorr.shift_s;
   }
+  const RotationEstimate rot = align_rotation(rates, gyro, cs.shift, half);
+  cs.gyro_bias = rot.gyro_bias;
   if (c < opt_.T_cam_imu_init.size() && opt_.T_cam_imu_init[c]) {
     cs.q_ci = to_quat(opt_.T_cam_imu_init[c]->linear());
     cs.t_ci = to_arr(opt_.T_cam_imu_init[c]->translation());
     return {};
   }
-  const RotationEstimate rot = align_rotation(rates, gyro, cs.shift, half);
   double speed = 0.0;
   for (const auto& r : rates) speed += r.w.squaredNorm();
   speed = std::sqrt(speed / std::max<std::size_t>(1, rates.size()));
@@ -160,7 +161,6 @@ Status Estimator<N>::initialise_camera(std::size_t c, const GyroLookup& gyro) {
                       cam.name + ": too little rotation to align camera and IMU (RMS " +
                           std::to_string(speed) + " rad/s); rotate the rig about all axes");
   cs.q_ci = to_quat(rot.R_cam_imu);
-  cs.gyro_bias = rot.gyro_bias;
   return {};
 }
 
