@@ -21,7 +21,7 @@ void run(const app::report::ReportOptions& options) {
     fail(summary.error(), "report of " + options.result_path);
   }
   std::cout << "report (" << app::report::report_kind_name(summary->kind) << "): " << options.html_path
-            << " (" << summary->figures << " figures)\n";
+            << " (" << summary->figures << (summary->figures == 1 ? " figure)\n" : " figures)\n");
   if (!summary->png_files.empty())
     std::cout << "  " << summary->png_files.size() << " PNG figures in " << options.png_dir << "\n";
   for (const auto& note : summary->notes) std::cout << "  note: " << note << "\n";
