@@ -22,6 +22,7 @@ struct BuildContext {
 [[nodiscard]] Result<Document> static_document(const nlohmann::json& result, BuildContext& ctx);
 [[nodiscard]] Result<Document> allan_document(const nlohmann::json& result, BuildContext& ctx);
 [[nodiscard]] Result<Document> camera_document(const nlohmann::json& result, BuildContext& ctx);
+[[nodiscard]] Result<Document> camimu_document(const nlohmann::json& result, BuildContext& ctx);
 
 /// The session log's summary (rig, recording, streams, health) as a section; errors name the log.
 [[nodiscard]] Result<Section> session_section(const std::string& log_path);

@@ -85,7 +85,7 @@ Figure views_figure(const nlohmann::json& r) {
   f.script =
       datablock("u", used) + datablock("x", rejected) +
       "set grid\nset xlabel 'view'\nset ylabel 'RMS reprojection error (px)'\nset key outside right top\n"
-      "set yrange [0:*]\nplot $u using 1:2 with impulses lw 2 lc rgb '#0072b2' title 'used', "
+      "set yrange [0:*]\nplot $u using 1:2 with points pt 7 ps 0.5 lc rgb '#0072b2' title 'used', "
       "$x using 1:2 with points pt 2 lc rgb '#d55e00' title 'rejected'\n";
   return f;
 }

@@ -80,7 +80,7 @@ Result<Document> build_document(ReportKind kind, const nlohmann::json& result, B
       case ReportKind::kCamera:
         return camera_document(result, ctx);
       case ReportKind::kCamImu:
-        return make_error(Errc::kUnsupported, ctx.result_path + ": camera-IMU reports are not built yet");
+        return camimu_document(result, ctx);
     }
   } catch (const JsonError& e) {
     return make_error(Errc::kCorrupt, ctx.result_path + ": " + e.message);
@@ -147,7 +147,7 @@ Result<ReportKind> detect_report_kind(const nlohmann::json& r, const std::string
       return ReportKind::kStatic;
     if (r.contains("accelerometer") && r.contains("gyroscope") && r.contains("kalibr"))
       return ReportKind::kAllan;
-    if (r.contains("cameras") && r.contains("imu")) return ReportKind::kCamImu;
+    if (r.contains("cameras") && r.contains("imu") && r.contains("biases")) return ReportKind::kCamImu;
     if (r.contains("intrinsics") && r.contains("views") && r.contains("coverage_grid"))
       return ReportKind::kCamera;
   }
