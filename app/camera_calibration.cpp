@@ -135,7 +135,7 @@ Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_i
 }
 
 /// Stored detections for the key, when the log holds a set for this many frames.
-std::optional<std::vector<calib::TargetObservation>> stored_detections(const CameraCalibrationRequest& q,
+std::optional<std::vector<calib::TargetObservation>> stored_detections(const StreamDetectionRequest& q,
                                                                        int stream_id, const std::string& key,
                                                                        std::int64_t frames,
                                                                        std::vector<std::string>* warnings) {
@@ -158,7 +158,7 @@ std::optional<std::vector<calib::TargetObservation>> stored_detections(const Cam
 }
 
 /// Stores the detections in the log when it is safe to write there; a warning says why not.
-bool store_detections(const CameraCalibrationRequest& q, const log::SessionLogReader& reader, int stream_id,
+bool store_detections(const StreamDetectionRequest& q, const log::SessionLogReader& reader, int stream_id,
                       const std::string& key, std::int64_t frames,
                       const std::vector<calib::TargetObservation>& obs, std::vector<std::string>* warnings) {
   if (reader.health().damaged) {
@@ -212,6 +212,45 @@ Result<std::unique_ptr<log::SessionLogReader>> open_log(const CameraCalibrationR
 
 }  // namespace
 
+Result<StreamDetections> detect_target_in_stream(const log::SessionLogReader& reader, int stream_id,
+                                                 const StreamDetectionRequest& q) {
+  const auto& stream = reader.camera_streams().at(stream_id);
+  StreamDetections out;
+  auto count = reader.frame_count(stream_id);
+  if (!count.ok()) return count.error();
+  out.frames = *count;
+  if (out.frames == 0) {
+    return make_error(Errc::kInsufficientData,
+                      "camera stream '" + stream.name + "' of " + q.log_path + " holds no frames");
+  }
+  out.key = detection_key(q.target, q.detection);
+  std::optional<std::vector<calib::TargetObservation>> obs;
+  if (q.reuse_detections) obs = stored_detections(q, stream_id, out.key, out.frames, &out.warnings);
+  out.reused = obs.has_value();
+  if (!obs) {
+    auto detector = calib::TargetDetector::create(q.target, q.detection);
+    if (!detector.ok()) return detector.error();
+    out.threads =
+        q.threads > 0 ? q.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+    const auto start = std::chrono::steady_clock::now();
+    auto found = detect_frames(reader, stream_id, **detector, out.threads, q.progress);
+    if (!found.ok()) return found.error();
+    out.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    out.frames_failed = found->failed;
+    if (found->failed > 0) {
+      out.warnings.push_back(std::to_string(found->failed) + " frames of camera stream '" + stream.name +
+                             "' could not be searched (first: " + found->first_failure + ")");
+    }
+    obs = std::move(found->observations);
+    if (q.store_detections)
+      out.stored = store_detections(q, reader, stream_id, out.key, out.frames, *obs, &out.warnings);
+  }
+  out.frames_with_target =
+      static_cast<int>(std::count_if(obs->begin(), obs->end(), [](const auto& o) { return !o.empty(); }));
+  out.observations = std::move(*obs);
+  return out;
+}
+
 Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequest& q) {
   IMUCAL_TRY(q.intrinsics.validate());
   IMUCAL_TRY(q.target.validate());
@@ -221,42 +260,27 @@ Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequ
   report.target_source = q.target_source;
   auto reader = open_log(q, &report);
   if (!reader.ok()) return reader.error();
-  auto count = (*reader)->frame_count(report.stream_id);
-  if (!count.ok()) return count.error();
-  report.frames = *count;
-  if (report.frames == 0) {
-    return make_error(Errc::kInsufficientData,
-                      "camera stream '" + report.stream.name + "' of " + q.log_path + " holds no frames");
-  }
-  report.detection_key = detection_key(q.target, q.detection);
-  std::optional<std::vector<calib::TargetObservation>> obs;
-  if (q.reuse_detections)
-    obs = stored_detections(q, report.stream_id, report.detection_key, report.frames, &report.warnings);
-  report.detections_reused = obs.has_value();
-  if (!obs) {
-    auto detector = calib::TargetDetector::create(q.target, q.detection);
-    if (!detector.ok()) return detector.error();
-    report.detection_threads =
-        q.threads > 0 ? q.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-    const auto start = std::chrono::steady_clock::now();
-    auto found =
-        detect_frames(**reader, report.stream_id, **detector, report.detection_threads, q.detection_progress);
-    if (!found.ok()) return found.error();
-    report.detection_wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    report.frames_failed = found->failed;
-    if (found->failed > 0) {
-      report.warnings.push_back(std::to_string(found->failed) +
-                                " frames could not be searched (first: " + found->first_failure + ")");
-    }
-    obs = std::move(found->observations);
-    if (q.store_detections) {
-      report.detections_stored = store_detections(q, **reader, report.stream_id, report.detection_key,
-                                                  report.frames, *obs, &report.warnings);
-    }
-  }
-  report.frames_with_target =
-      static_cast<int>(std::count_if(obs->begin(), obs->end(), [](const auto& o) { return !o.empty(); }));
-  auto result = calib::calibrate_camera_intrinsics(q.target, *obs, q.intrinsics, q.solve_progress);
+  StreamDetectionRequest dq;
+  dq.log_path = q.log_path;
+  dq.target = q.target;
+  dq.detection = q.detection;
+  dq.threads = q.threads;
+  dq.reuse_detections = q.reuse_detections;
+  dq.store_detections = q.store_detections;
+  dq.progress = q.detection_progress;
+  auto found = detect_target_in_stream(**reader, report.stream_id, dq);
+  if (!found.ok()) return found.error();
+  report.frames = found->frames;
+  report.frames_with_target = found->frames_with_target;
+  report.frames_failed = found->frames_failed;
+  report.detection_key = found->key;
+  report.detections_reused = found->reused;
+  report.detections_stored = found->stored;
+  report.detection_wall_s = found->wall_s;
+  report.detection_threads = found->threads;
+  report.warnings.insert(report.warnings.end(), found->warnings.begin(), found->warnings.end());
+  auto result =
+      calib::calibrate_camera_intrinsics(q.target, found->observations, q.intrinsics, q.solve_progress);
   if (!result.ok()) return result.error().context("camera '" + report.stream.name + "' of " + q.log_path);
   report.intrinsics = std::move(*result);
   report.warnings.insert(report.warnings.end(), report.intrinsics.warnings.begin(),

@@ -6,6 +6,8 @@
 // calibrate_camera_log needs OpenCV, libapriltag and Ceres: it is compiled into the camera module
 // libimucal_camera.so (app/camera_module.hpp); programs call it through app::calibrate_camera
 // (app/solvers.hpp), which loads the module. The result writers are in app/camera_results.hpp.
+// detect_target_in_stream is the target search alone, shared with the camera-IMU calibration
+// (app/camimu_calibration.hpp).
 
 #include <cstdint>
 #include <string>
@@ -17,8 +19,43 @@
 #include "core/progress.hpp"
 #include "core/result.hpp"
 #include "core/target.hpp"
+#include "log/session_log.hpp"
 
 namespace imucal::app {
+
+/// What the target search over one camera stream of a log depends on.
+struct StreamDetectionRequest {
+  std::string log_path;  // the log `reader` reads: stored detections are read from and written to it
+  TargetDescription target;
+  calib::DetectionOptions detection;
+  int threads = 0;  // detection workers; 0 = all cores
+  /// Use detections stored in the log for the same target and detector, and store new ones.
+  bool reuse_detections = true;
+  bool store_detections = true;
+  ProgressFn progress;
+};
+
+/// The target found in one camera stream: observations in time order (the frames searched, with
+/// empty observations where the target was not found; reused sets hold the frames with the target).
+struct StreamDetections {
+  std::int64_t frames = 0;  // frames read (or searched by the run whose detections were reused)
+  int frames_with_target = 0;
+  int frames_failed = 0;  // frames that could not be decoded or searched
+  std::string key;        // detection_key of the target and options
+  bool reused = false;
+  bool stored = false;
+  double wall_s = 0.0;  // 0 when reused
+  int threads = 0;
+  std::vector<calib::TargetObservation> observations;
+  std::vector<std::string> warnings;
+};
+
+/// Searches every frame of camera stream `stream_id` on worker threads, or reuses the detections
+/// the log holds for the same key; stores new ones when the log is complete and undamaged.
+/// Errors: kInsufficientData (the stream holds no frames), the detector's and the log's.
+[[nodiscard]] Result<StreamDetections> detect_target_in_stream(const log::SessionLogReader& reader,
+                                                               int stream_id,
+                                                               const StreamDetectionRequest& request);
 
 struct CameraCalibrationRequest {
   std::string log_path;

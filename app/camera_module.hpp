@@ -1,10 +1,11 @@
 #pragma once
 // The camera module, libimucal_camera.so: target detection over a log's frames (OpenCV,
-// libapriltag) and the camera intrinsics solve (Ceres), loaded by the programs only for the
-// camera calibration (app/module_loader.hpp, app::calibrate_camera in app/solvers.hpp). Tests
-// link imucal_app_camera directly.
+// libapriltag), the camera intrinsics solve and the camera-IMU calibration (Ceres), loaded by the
+// programs only for these calibrations (app/module_loader.hpp, app::calibrate_camera and
+// app::calibrate_camimu in app/solvers.hpp). Tests link imucal_app_camera directly.
 
 #include "app/camera_calibration.hpp"
+#include "app/camimu_calibration.hpp"
 #include "core/module.hpp"
 
 namespace imucal::app {
@@ -15,6 +16,7 @@ inline constexpr const char* kCameraModuleEntry = "imucal_camera_module";
 struct CameraModuleApi {
   ModuleHeader header;
   decltype(&calibrate_camera_log) calibrate_camera;
+  decltype(&calibrate_camimu_log) calibrate_camimu;
 };
 
 }  // namespace imucal::app

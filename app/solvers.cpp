@@ -19,4 +19,10 @@ Result<CameraCalibrationReport> calibrate_camera(const CameraCalibrationRequest&
   return (*api)->calibrate_camera(request);
 }
 
+Result<CamImuReport> calibrate_camimu(const CamImuRequest& request) {
+  auto api = load_module<CameraModuleApi>(kCameraModule, kCameraModuleEntry);
+  if (!api.ok()) return api.error();
+  return (*api)->calibrate_camimu(request);
+}
+
 }  // namespace imucal::app

@@ -6,6 +6,7 @@
 #include <span>
 
 #include "app/camera_calibration.hpp"
+#include "app/camimu_calibration.hpp"
 #include "calib/static_calibration.hpp"
 #include "core/imu.hpp"
 #include "core/result.hpp"
@@ -19,5 +20,9 @@ namespace imucal::app {
 /// app::calibrate_camera_log through the camera module libimucal_camera.so (detection and the
 /// intrinsics solve); fails with the loader's error when the module cannot be loaded.
 [[nodiscard]] Result<CameraCalibrationReport> calibrate_camera(const CameraCalibrationRequest& request);
+
+/// app::calibrate_camimu_log through the camera module libimucal_camera.so (detection and the
+/// camera-IMU estimator); fails with the loader's error when the module cannot be loaded.
+[[nodiscard]] Result<CamImuReport> calibrate_camimu(const CamImuRequest& request);
 
 }  // namespace imucal::app

@@ -1,0 +1,156 @@
+// Camera-IMU calibration of a log (app/camimu_calibration.hpp): the streams, the detections
+// through detect_target_in_stream (shared with the camera calibration), the estimator. Compiled
+// into the camera module libimucal_camera.so.
+
+#include "app/camimu_calibration.hpp"
+
+#include "app/camera_calibration.hpp"
+#include "app/streams.hpp"
+
+namespace imucal::app {
+namespace {
+
+/// The cameras of every camchain file, renumbered cam0..camN in the order given.
+Result<std::vector<CamchainCamera>> read_cameras(const std::vector<std::string>& paths) {
+  if (paths.empty()) {
+    return make_error(Errc::kInvalidArgument,
+                      "no camera given: the camera-IMU calibration needs each camera's intrinsics (the YAML "
+                      "of imucal calibrate camera, or a Kalibr camchain)")
+        .with_remedy("camera");
+  }
+  std::vector<CamchainCamera> out;
+  for (const auto& path : paths) {
+    auto cams = read_camchain(path);
+    if (!cams.ok()) return cams.error();
+    for (auto& cam : *cams) {
+      cam.source = path + " " + cam.name;
+      cam.name = "cam" + std::to_string(out.size());
+      out.push_back(std::move(cam));
+    }
+  }
+  return out;
+}
+
+/// The target in one camera's frames, as the estimator's input and the report's figures.
+Result<calib::CamImuCameraInput> detect_camera(const CamImuRequest& q, const log::SessionLogReader& reader,
+                                               int index, const CamchainCamera& cam, int stream_id,
+                                               CamImuReport* report) {
+  const CameraStreamInfo& stream = reader.camera_streams().at(stream_id);
+  if (stream.width > 0 && stream.height > 0 &&
+      (stream.width != cam.camera.width || stream.height != cam.camera.height)) {
+    return make_error(Errc::kInvalidArgument,
+                      cam.source + " is a " + std::to_string(cam.camera.width) + " x " +
+                          std::to_string(cam.camera.height) + " camera, but camera stream '" + stream.name +
+                          "' holds " + std::to_string(stream.width) + " x " + std::to_string(stream.height) +
+                          " frames: give the intrinsics of this camera");
+  }
+  StreamDetectionRequest dq;
+  dq.log_path = q.log_path;
+  dq.target = q.target;
+  dq.detection = q.detection;
+  dq.threads = q.threads;
+  dq.reuse_detections = q.reuse_detections;
+  dq.store_detections = q.store_detections;
+  if (q.detection_progress) dq.progress = [&q, index](double f) { q.detection_progress(index, f); };
+  auto found = detect_target_in_stream(reader, stream_id, dq);
+  if (!found.ok()) return found.error().context(cam.name + " (" + cam.source + ")");
+  report->warnings.insert(report->warnings.end(), found->warnings.begin(), found->warnings.end());
+
+  CamImuCameraReport cr;
+  cr.name = cam.name;
+  cr.source = cam.source;
+  cr.rostopic = cam.rostopic.empty() ? "/" + stream.name + "/image_raw" : cam.rostopic;
+  cr.stream = stream;
+  cr.stream_id = stream_id;
+  cr.frames = found->frames;
+  cr.frames_with_target = found->frames_with_target;
+  cr.detection_key = found->key;
+  cr.detections_reused = found->reused;
+  cr.detections_stored = found->stored;
+  cr.detection_wall_s = found->wall_s;
+  report->cameras.push_back(cr);
+
+  calib::CamImuCameraInput in;
+  in.name = cam.name;
+  in.stream = stream.name;
+  in.camera = cam.camera;
+  for (auto& o : found->observations) {
+    if (!o.empty()) in.observations.push_back(std::move(o));
+  }
+  return in;
+}
+
+/// The IMU noise, the priors and the fixed blocks on top of the request's options.
+Status prepare_options(const CamImuRequest& q, CamImuReport* report) {
+  report->options = q.options;
+  if (!q.imu_noise_path.empty()) {
+    auto noise = read_kalibr_imu_noise(q.imu_noise_path);
+    if (!noise.ok()) return noise.error();
+    report->options.noise = *noise;
+    report->noise_source = q.imu_noise_path;
+  } else {
+    report->options.noise = calib::CamImuNoise{};
+    report->noise_source = "defaults (MPU-6000 datasheet)";
+    report->notes.push_back(
+        "no IMU noise given: the MPU-6000 datasheet figures weight the IMU residuals (measure yours with "
+        "imucal allan and pass --imu)");
+  }
+  auto prior = imu_prior(q.imu_intrinsics, q.gsens, report->imu_stream);
+  if (!prior.ok()) return prior.error();
+  if (prior->init) report->options.imu_init = prior->init;
+  report->options.fixed = merge_fixed(q.options.fixed, prior->fixed);
+  report->notes.insert(report->notes.end(), prior->notes.begin(), prior->notes.end());
+  if (q.imu_intrinsics) report->imu_intrinsics_source = q.imu_intrinsics->path;
+  if (q.gsens) report->gsens_source = q.gsens->path;
+  if (report->options.threads == 0) report->options.threads = q.threads;
+  return {};
+}
+
+}  // namespace
+
+Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& q) {
+  IMUCAL_TRY(q.target.validate());
+  CamImuReport report;
+  report.log_path = q.log_path;
+  report.target = q.target;
+  report.target_source = q.target_source;
+  report.gravity_source = q.gravity_source;
+  auto cams = read_cameras(q.camera_paths);
+  if (!cams.ok()) return cams.error();
+
+  auto loaded = load_imu_stream(q.log_path, q.imu_stream,
+                                q.allow_damaged ? DamagePolicy::kAllow : DamagePolicy::kRefuse);
+  if (!loaded.ok()) return loaded.error();
+  if (loaded->damaged())
+    report.warnings.push_back(loaded->damage_warning() + ": calibrated from its readable part only");
+  const auto& reader = *loaded->reader;
+  report.imu_stream = loaded->info;
+  report.imu_rostopic = q.imu_rostopic.empty() ? "/" + loaded->info.name : q.imu_rostopic;
+  if (auto it = reader.metadata().find("software_version"); it != reader.metadata().end())
+    report.log_software_version = it->second;
+  IMUCAL_TRY(prepare_options(q, &report));
+
+  auto ids = match_camera_streams(*cams, reader.camera_streams());
+  if (!ids.ok()) return ids.error().with_remedy("camera");
+  std::vector<calib::CamImuCameraInput> inputs;
+  for (std::size_t i = 0; i < cams->size(); ++i) {
+    auto in = detect_camera(q, reader, static_cast<int>(i), (*cams)[i], (*ids)[i], &report);
+    if (!in.ok()) return in.error();
+    inputs.push_back(std::move(*in));
+  }
+
+  std::size_t saturated = 0;
+  const auto samples = camimu_samples(loaded->samples, loaded->info, &saturated);
+  report.imu_samples = samples.size();
+  if (saturated > 0) {
+    report.warnings.push_back(std::to_string(saturated) +
+                              " saturated IMU samples left out: the motion exceeded the sensor's range");
+  }
+  auto result = calib::calibrate_camimu(samples, inputs, q.target, report.options, q.solve_progress);
+  if (!result.ok()) return result.error().context("camera-IMU calibration of " + q.log_path);
+  report.result = std::move(*result);
+  report.warnings.insert(report.warnings.end(), report.result.warnings.begin(), report.result.warnings.end());
+  return report;
+}
+
+}  // namespace imucal::app

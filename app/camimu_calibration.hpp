@@ -1,0 +1,95 @@
+#pragma once
+// Camera-IMU calibration of a session log: the IMU stream converted to nominal SI, the cameras of
+// camchain YAMLs matched to the log's camera streams, the target found in their frames (or the
+// detections stored by an earlier run reused, as `calibrate camera` does), then
+// calib::calibrate_camimu. Inputs and outputs: docs/camimu-calibration.md.
+//
+// calibrate_camimu_log needs OpenCV, libapriltag and Ceres: it is compiled into the camera module
+// libimucal_camera.so (app/camera_module.hpp); programs call it through app::calibrate_camimu
+// (app/solvers.hpp). The inputs that need no solver are in app/camimu_inputs.hpp, the result
+// writers in app/camimu_results.hpp.
+
+#include <cstddef>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "app/calibration_check.hpp"
+#include "app/camimu_inputs.hpp"
+#include "calib/camimu_calibration.hpp"
+#include "calib/target_detection.hpp"
+#include "core/camimu_calibration.hpp"
+#include "core/frame.hpp"
+#include "core/imu.hpp"
+#include "core/progress.hpp"
+#include "core/result.hpp"
+#include "core/target.hpp"
+
+namespace imucal::app {
+
+struct CamImuRequest {
+  std::string log_path;
+  std::string imu_stream;                 // IMU stream name; empty = the first
+  std::vector<std::string> camera_paths;  // camchain YAMLs; their cameras are cam0..camN in order
+  TargetDescription target;
+  std::string target_source;  // for the outputs: the file, or where in the log it came from
+  calib::DetectionOptions detection;
+  /// The IMU noise (options.noise) comes from this Kalibr imu.yaml; empty: CamImuNoise's defaults.
+  std::string imu_noise_path;
+  std::string imu_rostopic;  // for imu.yaml; empty: /STREAM
+  /// A prior static calibration (--imu-intrinsics) and a g-sensitivity (--gsens): initial values
+  /// and fixed blocks (app::imu_prior).
+  std::optional<NamedCalibration> imu_intrinsics;
+  std::optional<GsensInput> gsens;
+  /// Model, spline, noise weights, fixed blocks (merged with those the priors fix), threads.
+  calib::CamImuOptions options;
+  std::string gravity_source;
+  int threads = 0;  // detection workers; 0 = all cores
+  bool allow_damaged = false;
+  bool reuse_detections = true;
+  bool store_detections = true;
+  /// Detection progress per camera (index into camera_paths' cameras), then the solver's.
+  std::function<void(int camera, double fraction)> detection_progress;
+  calib::CamImuProgressFn solve_progress;
+};
+
+/// One camera as it entered the problem.
+struct CamImuCameraReport {
+  std::string name;         // cam0, ...
+  std::string source;       // the camchain YAML and its key
+  std::string rostopic;     // as given, else /STREAM/image_raw
+  CameraStreamInfo stream;  // the log's stream
+  int stream_id = 0;
+  std::int64_t frames = 0;
+  int frames_with_target = 0;
+  std::string detection_key;
+  bool detections_reused = false;
+  bool detections_stored = false;
+  double detection_wall_s = 0.0;
+};
+
+struct CamImuReport {
+  std::string log_path;
+  std::string log_software_version;  // of the imucal that wrote the log
+  ImuStreamInfo imu_stream;
+  std::size_t imu_samples = 0;
+  std::string imu_rostopic = "/imu0";
+  TargetDescription target;
+  std::string target_source;
+  std::string noise_source;  // the imu.yaml, or "defaults (MPU-6000 datasheet)"
+  std::string imu_intrinsics_source;
+  std::string gsens_source;
+  std::string gravity_source;
+  calib::CamImuOptions options;  // as solved (noise, fixed blocks, initial model)
+  std::vector<CamImuCameraReport> cameras;
+  CamImuCalibrationResult result;
+  std::vector<std::string> notes;     // what was assumed (defaults, frames of the priors)
+  std::vector<std::string> warnings;  // of the log, the detection and the estimator
+};
+
+/// Runs the whole calibration. Errors: the inputs' (kNotFound, kCorrupt), the log's (kCorrupt
+/// for a damaged log without allow_damaged), kInsufficientData (no frames, no target), the
+/// estimator's (kInvalidArgument, kInsufficientData, kSolverFailed).
+[[nodiscard]] Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& request);
+
+}  // namespace imucal::app

@@ -1,0 +1,292 @@
+#include "app/camimu_inputs.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <array>
+#include <cmath>
+#include <set>
+
+#include "app/result_writers.hpp"
+
+namespace imucal::app {
+namespace {
+
+Result<YAML::Node> load_yaml(const std::string& path) {
+  try {
+    return YAML::LoadFile(path);
+  } catch (const YAML::BadFile&) {
+    return make_error(Errc::kNotFound, path + ": cannot be read");
+  } catch (const YAML::Exception& e) {
+    return make_error(Errc::kCorrupt, path + ": not valid YAML (" + e.msg + ", line " +
+                                          std::to_string(e.mark.line + 1) + ")");
+  }
+}
+
+/// The stream name a Kalibr topic stands for: /cam0/image_raw -> cam0.
+std::string stream_of_topic(std::string topic) {
+  while (!topic.empty() && topic.front() == '/') topic.erase(topic.begin());
+  for (const char* tail : {"/image_raw", "/image"}) {
+    const std::string t = tail;
+    if (topic.size() > t.size() && topic.compare(topic.size() - t.size(), t.size(), t) == 0) {
+      topic.resize(topic.size() - t.size());
+      break;
+    }
+  }
+  return topic;
+}
+
+std::optional<int> stream_named(const std::string& name, const std::map<int, CameraStreamInfo>& streams) {
+  if (name.empty()) return std::nullopt;
+  for (const auto& [id, info] : streams) {
+    if (info.name == name) return id;
+  }
+  return std::nullopt;
+}
+
+std::string stream_list(const std::map<int, CameraStreamInfo>& streams) {
+  std::string names;
+  for (const auto& [id, info] : streams) names += (names.empty() ? "" : ", ") + info.name;
+  return names.empty() ? "none" : names;
+}
+
+/// A static result on the stream's nominal SI values; its units must be the stream's.
+Result<CanonicalImuModel> model_on_nominal_si(const NamedCalibration& c, const ImuStreamInfo& info,
+                                              std::vector<std::string>* notes) {
+  if (c.input_units && *c.input_units != info.units) {
+    return make_error(Errc::kInvalidArgument,
+                      c.path + " is a calibration for " + imu_units_name(*c.input_units) +
+                          " values, but IMU stream '" + info.name + "' holds " + imu_units_name(info.units) +
+                          " values: give a calibration of this stream");
+  }
+  if (!c.input_units) {
+    notes->push_back(c.path + " does not say its input units: taken as the stream's (" +
+                     imu_units_name(info.units) + ")");
+  }
+  return canonical_on_nominal_si(c.model, info);
+}
+
+}  // namespace
+
+Result<std::vector<CamchainCamera>> read_camchain(const std::string& path) {
+  auto root = load_yaml(path);
+  if (!root.ok()) return root.error();
+  if (!root->IsMap() || !(*root)["cam0"]) {
+    return make_error(Errc::kCorrupt, path +
+                                          ": no cam0 (expected a camchain YAML as imucal calibrate camera or "
+                                          "Kalibr write it)");
+  }
+  std::vector<CamchainCamera> out;
+  for (int i = 0;; ++i) {
+    const std::string name = "cam" + std::to_string(i);
+    const YAML::Node node = (*root)[name];
+    if (!node) break;
+    CamchainCamera cam;
+    cam.name = name;
+    cam.source = path;
+    auto model = camera_from_yaml(node, path + " " + name);
+    if (!model.ok()) return make_error(Errc::kCorrupt, model.error().message);
+    cam.camera = *model;
+    try {
+      if (node["rostopic"]) cam.rostopic = node["rostopic"].as<std::string>();
+      if (node["imucal"] && node["imucal"]["camera_stream"])
+        cam.camera_stream = node["imucal"]["camera_stream"].as<std::string>();
+    } catch (const YAML::Exception&) {
+      return make_error(Errc::kCorrupt, path + " " + name + ": rostopic and camera_stream must be text");
+    }
+    out.push_back(std::move(cam));
+  }
+  return out;
+}
+
+Result<std::vector<int>> match_camera_streams(const std::vector<CamchainCamera>& cameras,
+                                              const std::map<int, CameraStreamInfo>& streams) {
+  std::vector<int> ids;
+  std::set<int> used;
+  for (const auto& cam : cameras) {
+    std::optional<int> id = stream_named(cam.camera_stream, streams);
+    if (!id) id = stream_named(stream_of_topic(cam.rostopic), streams);
+    if (!id && cameras.size() == 1 && streams.size() == 1) id = streams.begin()->first;
+    if (!id) {
+      return make_error(Errc::kNotFound, cam.source + " " + cam.name + " (camera_stream '" +
+                                             cam.camera_stream + "', rostopic '" + cam.rostopic +
+                                             "') names no camera stream of the log; its camera streams: " +
+                                             stream_list(streams) +
+                                             " (set the camera's rostopic to /STREAM/image_raw)");
+    }
+    if (!used.insert(*id).second) {
+      return make_error(Errc::kInvalidArgument, cam.source + " " + cam.name + ": camera stream '" +
+                                                    streams.at(*id).name + "' is given to two cameras");
+    }
+    ids.push_back(*id);
+  }
+  return ids;
+}
+
+Result<calib::CamImuNoise> read_kalibr_imu_noise(const std::string& path) {
+  auto root = load_yaml(path);
+  if (!root.ok()) return root.error();
+  YAML::Node node = *root;
+  if (node.IsMap() && !node["accelerometer_noise_density"] && node["imu0"]) node = node["imu0"];
+  if (!node.IsMap())
+    return make_error(Errc::kCorrupt, path + ": not a Kalibr imu.yaml (a map of noise figures)");
+  calib::CamImuNoise noise;
+  const std::array<std::pair<const char*, double*>, 4> keys{{
+      {"accelerometer_noise_density", &noise.accel_noise_density},
+      {"accelerometer_random_walk", &noise.accel_random_walk},
+      {"gyroscope_noise_density", &noise.gyro_noise_density},
+      {"gyroscope_random_walk", &noise.gyro_random_walk},
+  }};
+  for (const auto& [key, value] : keys) {
+    if (!node[key]) return make_error(Errc::kCorrupt, path + ": " + key + " is missing (Kalibr imu.yaml)");
+    try {
+      *value = node[key].as<double>();
+    } catch (const YAML::Exception&) {
+      return make_error(Errc::kCorrupt, path + ": " + key + " is not a number");
+    }
+    if (!std::isfinite(*value) || *value <= 0.0)
+      return make_error(Errc::kCorrupt, path + ": " + key + " must be a positive number");
+  }
+  return noise;
+}
+
+CanonicalImuModel canonical_on_nominal_si(const CanonicalImuModel& m, const ImuStreamInfo& info) {
+  CanonicalImuModel out = m;
+  out.A_a = m.A_a * info.accel.scale.cwiseInverse().asDiagonal();
+  out.b_a = info.accel.scale.cwiseProduct(m.b_a - info.accel.offset);
+  out.A_g = m.A_g * info.gyro.scale.cwiseInverse().asDiagonal();
+  out.b_g = info.gyro.scale.cwiseProduct(m.b_g - info.gyro.offset);
+  return out;
+}
+
+CanonicalImuModel canonical_on_input_units(const CanonicalImuModel& m, const ImuStreamInfo& info) {
+  CanonicalImuModel out = m;
+  out.A_a = m.A_a * info.accel.scale.asDiagonal();
+  out.b_a = m.b_a.cwiseQuotient(info.accel.scale) + info.accel.offset;
+  out.A_g = m.A_g * info.gyro.scale.asDiagonal();
+  out.b_g = m.b_g.cwiseQuotient(info.gyro.scale) + info.gyro.offset;
+  return out;
+}
+
+Eigen::Matrix3d krebs_gsens_from_canonical(const Eigen::Matrix3d& G_body, const KrebsImuModel& k) {
+  const Eigen::Matrix3d SMg = k.S_g.asDiagonal() * krebs_misalignment(k.M_g);
+  return SMg * k.C_bg.transpose() * G_body * k.C_bg;
+}
+
+Result<GsensInput> read_gsens_input(const std::string& path) {
+  auto G = read_gsens_matrix(path);
+  if (!G.ok()) return G.error();
+  GsensInput out;
+  out.path = path;
+  out.G = *G;
+  // A full static result also says which frame its G is in; a bare G: file does not.
+  if (auto full = read_imucal_calibration(path); full.ok()) out.frame = std::move(*full);
+  return out;
+}
+
+Result<ImuPrior> imu_prior(const std::optional<NamedCalibration>& intrinsics,
+                           const std::optional<GsensInput>& gsens, const ImuStreamInfo& info) {
+  ImuPrior out;
+  KrebsImuModel model;
+  if (intrinsics) {
+    auto si = model_on_nominal_si(*intrinsics, info, &out.notes);
+    if (!si.ok()) return si.error();
+    auto k = krebs_from_canonical(*si);
+    if (!k.ok()) return k.error().context(intrinsics->path);
+    model = k->model;
+    out.fixed.S_a = out.fixed.M_a = out.fixed.S_g = out.fixed.M_g = out.fixed.C_bg = true;
+    if (!si->G.isZero(0.0) || gsens) {
+      out.fixed.B_g = true;
+    } else {
+      out.notes.push_back(intrinsics->path + " holds no g-sensitivity (G = 0): B_g is estimated");
+    }
+  }
+  if (gsens) {
+    Eigen::Matrix3d G_body = gsens->G;
+    if (gsens->frame) {
+      auto si = model_on_nominal_si(*gsens->frame, info, &out.notes);
+      if (!si.ok()) return si.error();
+      auto k = krebs_from_canonical(*si);
+      if (!k.ok()) return k.error().context(gsens->path);
+      G_body = k->R_canonical_body.transpose() * gsens->G * k->R_canonical_body;
+    } else {
+      out.notes.push_back(
+          gsens->path +
+          " gives G without its calibration: taken as expressed in the accelerometer (body) frame");
+    }
+    if (!intrinsics) {
+      out.notes.push_back(
+          "--gsens without --imu-intrinsics: B_g is fixed for S_g = 1, M_g = 0, C_bg = I; the estimated gyro "
+          "intrinsics change the canonical G by their own small relative amount");
+    }
+    model.B_g = krebs_gsens_from_canonical(G_body, model);
+    out.fixed.B_g = true;
+  }
+  if (intrinsics || gsens) out.init = model;
+  return out;
+}
+
+std::vector<calib::CamImuSample> camimu_samples(const std::vector<ImuSample>& samples,
+                                                const ImuStreamInfo& info, std::size_t* saturated) {
+  std::vector<calib::CamImuSample> out;
+  out.reserve(samples.size());
+  *saturated = 0;
+  for (const auto& s : samples) {
+    if ((s.flags & (kImuFlagAccelSaturated | kImuFlagGyroSaturated)) != 0) {
+      ++*saturated;
+      continue;
+    }
+    out.push_back({s.t_ns, info.accel.to_si(s.accel), info.gyro.to_si(s.gyro)});
+  }
+  return out;
+}
+
+Status set_fixed_block(const std::string& name, calib::CamImuFixed* f) {
+  const std::map<std::string, bool*> blocks = {{"S_a", &f->S_a},
+                                               {"M_a", &f->M_a},
+                                               {"S_g", &f->S_g},
+                                               {"M_g", &f->M_g},
+                                               {"C_bg", &f->C_bg},
+                                               {"B_g", &f->B_g},
+                                               {"T_cam_imu", &f->T_cam_imu},
+                                               {"timeshift", &f->timeshift}};
+  const auto it = blocks.find(name);
+  if (it == blocks.end()) {
+    return make_error(Errc::kInvalidArgument,
+                      "'" + name +
+                          "' is not a block that can be fixed: S_a, M_a, S_g, M_g, C_bg, B_g, T_cam_imu, "
+                          "timeshift");
+  }
+  *it->second = true;
+  return {};
+}
+
+std::vector<std::string> fixed_block_names(const calib::CamImuFixed& f) {
+  std::vector<std::string> out;
+  const std::array<std::pair<const char*, bool>, 8> blocks{{{"S_a", f.S_a},
+                                                            {"M_a", f.M_a},
+                                                            {"S_g", f.S_g},
+                                                            {"M_g", f.M_g},
+                                                            {"C_bg", f.C_bg},
+                                                            {"B_g", f.B_g},
+                                                            {"T_cam_imu", f.T_cam_imu},
+                                                            {"timeshift", f.timeshift}}};
+  for (const auto& [name, fixed] : blocks) {
+    if (fixed) out.emplace_back(name);
+  }
+  return out;
+}
+
+calib::CamImuFixed merge_fixed(const calib::CamImuFixed& a, const calib::CamImuFixed& b) {
+  calib::CamImuFixed f;
+  f.S_a = a.S_a || b.S_a;
+  f.M_a = a.M_a || b.M_a;
+  f.S_g = a.S_g || b.S_g;
+  f.M_g = a.M_g || b.M_g;
+  f.C_bg = a.C_bg || b.C_bg;
+  f.B_g = a.B_g || b.B_g;
+  f.T_cam_imu = a.T_cam_imu || b.T_cam_imu;
+  f.timeshift = a.timeshift || b.timeshift;
+  return f;
+}
+
+}  // namespace imucal::app

@@ -1,0 +1,100 @@
+#pragma once
+// The inputs of the camera-IMU calibration that need no solver, so the program can read and check
+// them before it loads the camera module: the cameras of a camchain YAML and the log streams
+// they belong to, the IMU noise of a Kalibr imu.yaml, a prior IMU calibration (imucal's static
+// result) and a g-sensitivity as the Krebs model's initial and fixed values, the names of the
+// blocks to fix. Formats and conversions: docs/camimu-calibration.md, "Inputs".
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "app/calibration_check.hpp"
+#include "calib/camimu_calibration.hpp"
+#include "core/camera_model.hpp"
+#include "core/frame.hpp"
+#include "core/imu.hpp"
+#include "core/imu_model.hpp"
+#include "core/result.hpp"
+
+namespace imucal::app {
+
+/// One camera of a camchain YAML (`cam0:` ... `camN:` as `imucal calibrate camera` or Kalibr
+/// write them).
+struct CamchainCamera {
+  std::string name;    // the key in the file: cam0, cam1, ...
+  std::string source;  // the file
+  CameraModel camera;
+  std::string camera_stream;  // `imucal: camera_stream:` (written by imucal calibrate camera)
+  std::string rostopic;       // Kalibr's topic, e.g. /cam0/image_raw
+};
+
+/// The cameras of a camchain YAML in the order cam0, cam1, ... Errors: kNotFound (unreadable
+/// file), kCorrupt (not YAML, no cam0, a malformed camera).
+[[nodiscard]] Result<std::vector<CamchainCamera>> read_camchain(const std::string& path);
+
+/// The log's camera stream of each camchain camera: the one named by its `camera_stream`, else by
+/// its rostopic (/NAME/image_raw, /NAME/image or NAME), else, with one camera in the file and one
+/// stream in the log, that stream. Two cameras on one stream are refused. kNotFound names the
+/// streams the log holds.
+[[nodiscard]] Result<std::vector<int>> match_camera_streams(const std::vector<CamchainCamera>& cameras,
+                                                            const std::map<int, CameraStreamInfo>& streams);
+
+/// The four noise figures of a Kalibr imu.yaml (flat, as Kalibr reads it and `imucal allan`
+/// writes it, or under `imu0:` as kalibr_calibrate_imu_camera and `calibrate camimu` write it).
+/// Errors: kNotFound, kCorrupt (a figure missing, not a positive number).
+[[nodiscard]] Result<calib::CamImuNoise> read_kalibr_imu_noise(const std::string& path);
+
+/// A canonical model for the stream's input values re-expressed for its nominal SI values
+/// (si = scale .* (raw - offset), ImuStreamInfo::accel/gyro): A' = A diag(scale)^-1,
+/// b' = scale .* (b - offset), G unchanged. The identity for an SI stream.
+CanonicalImuModel canonical_on_nominal_si(const CanonicalImuModel& model, const ImuStreamInfo& info);
+/// The inverse: a model on nominal SI values for the stream's input values.
+CanonicalImuModel canonical_on_input_units(const CanonicalImuModel& model_si, const ImuStreamInfo& info);
+
+/// The Krebs g-sensitivity B_g (raw rad/s per m/s^2 of the acceleration in the gyro frame) that
+/// gives the canonical g-sensitivity `G_body` (rad/s per m/s^2, in the Krebs body frame) with
+/// the model's S_g, M_g and C_bg: from w_raw = S_g M_g C_bg^T w + B_g C_bg^T a + b_g,
+/// G = A_g B_g C_bg^T with A_g = C_bg (S_g M_g)^-1, so B_g = S_g M_g C_bg^T G C_bg.
+Eigen::Matrix3d krebs_gsens_from_canonical(const Eigen::Matrix3d& G_body, const KrebsImuModel& model);
+
+/// A g-sensitivity read with `--gsens FILE` (app::read_gsens_matrix) and, when the file is a
+/// full static result, its model: its frame is the one G is expressed in.
+struct GsensInput {
+  std::string path;
+  Eigen::Matrix3d G = Eigen::Matrix3d::Zero();
+  std::optional<NamedCalibration> frame;
+};
+[[nodiscard]] Result<GsensInput> read_gsens_input(const std::string& path);
+
+/// What prior calibrations make of the IMU model: the initial Krebs model and the blocks they fix.
+struct ImuPrior {
+  std::optional<KrebsImuModel> init;
+  calib::CamImuFixed fixed;  // S_a, M_a, S_g, M_g, C_bg from the intrinsics; B_g from a G
+  std::vector<std::string> notes;
+};
+
+/// The Krebs model of a static result (`--imu-intrinsics`, converted to the stream's nominal SI)
+/// and of a g-sensitivity (`--gsens`), on the stream `info`. The intrinsics fix S_a, M_a, S_g,
+/// M_g, C_bg and, when they hold a g-sensitivity (G not zero), B_g; a --gsens G replaces theirs,
+/// rotated from its file's frame into the Krebs body frame, and fixes B_g. Errors:
+/// kInvalidArgument (units of the file not those of the stream, a singular model).
+[[nodiscard]] Result<ImuPrior> imu_prior(const std::optional<NamedCalibration>& intrinsics,
+                                         const std::optional<GsensInput>& gsens, const ImuStreamInfo& info);
+
+/// The IMU samples on the stream's nominal SI (ImuStreamInfo::accel/gyro to_si), as the
+/// estimator takes them; samples flagged saturated are left out and counted in `*saturated`.
+std::vector<calib::CamImuSample> camimu_samples(const std::vector<ImuSample>& samples,
+                                                const ImuStreamInfo& info, std::size_t* saturated);
+
+/// The block names of --fix: S_a, M_a, S_g, M_g, C_bg, B_g, T_cam_imu, timeshift.
+[[nodiscard]] Status set_fixed_block(const std::string& name, calib::CamImuFixed* fixed);
+/// The names of the fixed blocks, in the order above.
+std::vector<std::string> fixed_block_names(const calib::CamImuFixed& fixed);
+/// Both sets of fixed blocks.
+calib::CamImuFixed merge_fixed(const calib::CamImuFixed& a, const calib::CamImuFixed& b);
+
+}  // namespace imucal::app

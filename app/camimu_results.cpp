@@ -1,0 +1,538 @@
+#include "app/camimu_results.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "app/camimu_inputs.hpp"
+#include "core/version.hpp"
+
+namespace imucal::app {
+namespace {
+
+using nlohmann::json;
+
+// ---- YAML pieces -------------------------------------------------------------------------------
+
+YAML::Node flow_vec(const Eigen::VectorXd& v) {
+  YAML::Node n(YAML::NodeType::Sequence);
+  for (Eigen::Index i = 0; i < v.size(); ++i) n.push_back(v[i]);
+  n.SetStyle(YAML::EmitterStyle::Flow);
+  return n;
+}
+
+/// A matrix as rows in flow style (Kalibr's layout for T_cam_imu, M, A, C_gyro_i).
+YAML::Node rows(const Eigen::MatrixXd& m) {
+  YAML::Node n(YAML::NodeType::Sequence);
+  for (Eigen::Index r = 0; r < m.rows(); ++r) n.push_back(flow_vec(m.row(r).transpose()));
+  return n;
+}
+
+std::string emit(const YAML::Node& root, const std::string& header) {
+  YAML::Emitter out;
+  out.SetDoublePrecision(17);
+  out << root;
+  return header + std::string(out.c_str()) + "\n";
+}
+
+YAML::Node string_list(const std::vector<std::string>& items) {
+  YAML::Node n(YAML::NodeType::Sequence);
+  for (const auto& s : items) n.push_back(s);
+  return n;
+}
+
+YAML::Node canonical_node(const CanonicalImuModel& c) {
+  YAML::Node n(YAML::NodeType::Map);
+  n["form"] = "a = A_a (a_raw - b_a); w = A_g (w_raw - b_g) - G a";
+  n["A_a"] = rows(c.A_a);
+  n["b_a"] = flow_vec(c.b_a);
+  n["A_g"] = rows(c.A_g);
+  n["b_g"] = flow_vec(c.b_g);
+  n["G"] = rows(c.G);
+  return n;
+}
+
+YAML::Node krebs_node(const KrebsImuModel& k, const KrebsImuSigma& s) {
+  YAML::Node n(YAML::NodeType::Map);
+  n["form"] = "a_raw = S_a M_a a + b_a; w_raw = S_g M_g C_bg^T w + B_g C_bg^T a + b_g";
+  n["S_a"] = flow_vec(k.S_a);
+  n["M_a"] = flow_vec(k.M_a);
+  n["b_a"] = flow_vec(k.b_a);
+  n["S_g"] = flow_vec(k.S_g);
+  n["M_g"] = flow_vec(k.M_g);
+  n["C_bg"] = rows(k.C_bg);
+  n["B_g"] = rows(k.B_g);
+  n["b_g"] = flow_vec(k.b_g);
+  YAML::Node sigma(YAML::NodeType::Map);
+  sigma["S_a"] = flow_vec(s.S_a);
+  sigma["M_a"] = flow_vec(s.M_a);
+  sigma["b_a"] = flow_vec(s.b_a);
+  sigma["S_g"] = flow_vec(s.S_g);
+  sigma["M_g"] = flow_vec(s.M_g);
+  sigma["C_bg_rad"] = flow_vec(s.C_bg);
+  sigma["B_g"] = rows(s.B_g);
+  sigma["b_g"] = flow_vec(s.b_g);
+  n["sigma"] = sigma;
+  return n;
+}
+
+Eigen::Matrix4d matrix_of(const Eigen::Isometry3d& T) { return T.matrix(); }
+
+// ---- JSON pieces -------------------------------------------------------------------------------
+
+/// A figure for JSON: not finite (undetermined) as null.
+json num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+json vec_json(const Eigen::VectorXd& v) {
+  json j = json::array();
+  for (Eigen::Index i = 0; i < v.size(); ++i) j.push_back(num(v[i]));
+  return j;
+}
+
+json mat_json(const Eigen::MatrixXd& m) {
+  json j = json::array();
+  for (Eigen::Index r = 0; r < m.rows(); ++r) j.push_back(vec_json(m.row(r).transpose()));
+  return j;
+}
+
+json canonical_json(const CanonicalImuModel& c) {
+  return {{"A_a", mat_json(c.A_a)},
+          {"b_a", vec_json(c.b_a)},
+          {"A_g", mat_json(c.A_g)},
+          {"b_g", vec_json(c.b_g)},
+          {"G", mat_json(c.G)}};
+}
+
+json krebs_json(const KrebsImuModel& k) {
+  return {{"S_a", vec_json(k.S_a)}, {"M_a", vec_json(k.M_a)}, {"b_a", vec_json(k.b_a)},
+          {"S_g", vec_json(k.S_g)}, {"M_g", vec_json(k.M_g)}, {"C_bg", mat_json(k.C_bg)},
+          {"B_g", mat_json(k.B_g)}, {"b_g", vec_json(k.b_g)}};
+}
+
+json krebs_sigma_json(const KrebsImuSigma& s) {
+  return {{"S_a", vec_json(s.S_a)}, {"M_a", vec_json(s.M_a)}, {"b_a", vec_json(s.b_a)},
+          {"S_g", vec_json(s.S_g)}, {"M_g", vec_json(s.M_g)}, {"C_bg_rad", vec_json(s.C_bg)},
+          {"B_g", mat_json(s.B_g)}, {"b_g", vec_json(s.b_g)}};
+}
+
+json camera_model_json(const CameraModel& c) {
+  return {{"camera_model", "pinhole"},
+          {"intrinsics", vec_json(c.intrinsics)},
+          {"distortion_model", distortion_model_name(c.distortion_model)},
+          {"distortion_coeffs", vec_json(c.distortion_coeffs)},
+          {"resolution", {c.width, c.height}}};
+}
+
+/// The rotation angle of a rotation matrix, rad.
+double angle_of(const Eigen::Matrix3d& R) { return Eigen::AngleAxisd(R).angle(); }
+
+json quality_json(const CamImuQuality& q) {
+  json xcorr = json::array();
+  for (const auto& curve : q.xcorr) {
+    json lags = json::array(), values = json::array();
+    for (const auto& [lag, value] : curve) {
+      lags.push_back(lag);
+      values.push_back(value);
+    }
+    xcorr.push_back({{"lag_s", lags}, {"value", values}});
+  }
+  return {{"accel_residual_rms_mps2", vec_json(q.accel_residual_rms)},
+          {"gyro_residual_rms_radps", vec_json(q.gyro_residual_rms)},
+          {"accel_sigma_mps2", q.accel_sigma},
+          {"gyro_sigma_radps", q.gyro_sigma},
+          {"rotation_excitation_radps", vec_json(q.rotation_excitation_radps)},
+          {"accel_excitation_mps2", vec_json(q.accel_excitation_mps2)},
+          {"xcorr", xcorr},
+          {"xcorr_peak_s", q.xcorr_peak_s},
+          {"iterations", q.iterations},
+          {"initial_cost", q.initial_cost},
+          {"final_cost", q.final_cost},
+          {"parameters", q.parameters},
+          {"residuals", q.residuals},
+          {"spline_knots", q.spline_knots},
+          {"timings_s",
+           {{"init", q.init_s},
+            {"solve", q.solve_s},
+            {"jacobian", q.jacobian_s},
+            {"linear_solver", q.linear_solver_s},
+            {"covariance", q.covariance_s}}}};
+}
+
+json camera_json(const CamImuCameraResult& c, const CamImuCameraReport* in) {
+  const Eigen::Quaterniond q(c.T_cam_imu.rotation());
+  json j = {{"name", c.name},
+            {"stream", c.stream},
+            {"camera", camera_model_json(c.camera)},
+            {"T_cam_imu", mat_json(matrix_of(c.T_cam_imu))},
+            {"q_cam_imu_wxyz", {q.w(), q.x(), q.y(), q.z()}},
+            {"t_cam_imu_m", vec_json(c.T_cam_imu.translation())},
+            {"rotation_sigma_rad", vec_json(c.rotation_sigma_rad)},
+            {"translation_sigma_m", vec_json(c.translation_sigma_m)},
+            {"timeshift_cam_imu_s", c.timeshift_cam_imu_s},
+            {"timeshift_sigma_s", num(c.timeshift_sigma_s)},
+            {"frames", c.frames},
+            {"corners", c.corners},
+            {"outlier_corners", c.outlier_corners},
+            {"reprojection_rms_px", c.reprojection_rms_px},
+            {"corner_sigma_px", c.corner_sigma_px}};
+  if (in != nullptr) {
+    j["rostopic"] = in->rostopic;
+    j["source"] = in->source;
+    j["detections"] = {{"key", in->detection_key},
+                       {"frames", in->frames},
+                       {"frames_with_target", in->frames_with_target},
+                       {"reused", in->detections_reused},
+                       {"stored", in->detections_stored},
+                       {"wall_s", in->detection_wall_s}};
+  }
+  return j;
+}
+
+json inputs_json(const CamImuReport& r) {
+  const auto& o = r.options;
+  json cameras = json::array();
+  for (const auto& c : r.cameras) cameras.push_back(c.source);
+  return {{"log", r.log_path},
+          {"log_software_version", r.log_software_version},
+          {"imu_stream",
+           {{"name", r.imu_stream.name},
+            {"input_units", imu_units_name(r.imu_stream.units)},
+            {"rate_hz", r.imu_stream.rate_hz},
+            {"samples", r.imu_samples},
+            {"rostopic", r.imu_rostopic}}},
+          {"cameras", cameras},
+          {"target_yaml", target_to_yaml(r.target)},
+          {"target_source", r.target_source},
+          {"noise_source", r.noise_source},
+          {"noise",
+           {{"accelerometer_noise_density", o.noise.accel_noise_density},
+            {"accelerometer_random_walk", o.noise.accel_random_walk},
+            {"gyroscope_noise_density", o.noise.gyro_noise_density},
+            {"gyroscope_random_walk", o.noise.gyro_random_walk}}},
+          {"imu_intrinsics", r.imu_intrinsics_source},
+          {"gsens", r.gsens_source},
+          {"gravity_mps2", o.gravity_mps2},
+          {"gravity_source", r.gravity_source},
+          {"options",
+           {{"model", camimu_model_name(o.model)},
+            {"spline_order", o.spline_order},
+            {"knot_spacing_s", o.knot_spacing_s},
+            {"bias_knot_spacing_s", o.bias_knot_spacing_s},
+            {"corner_sigma_px", o.corner_sigma_px},
+            {"reprojection_loss_sigmas", o.reprojection_loss_sigmas},
+            {"max_timeshift_s", o.max_timeshift_s},
+            {"max_iterations", o.max_iterations},
+            {"threads", o.threads},
+            {"covariance", o.covariance}}}};
+}
+
+// ---- reading result.json -----------------------------------------------------------------------
+
+template <int N>
+Eigen::Matrix<double, N, 1> read_vec(const json& j) {
+  if (!j.is_array() || j.size() != N) throw std::runtime_error("expected " + std::to_string(N) + " numbers");
+  Eigen::Matrix<double, N, 1> v;
+  for (int i = 0; i < N; ++i) v[i] = j[i].is_null() ? std::nan("") : j[i].get<double>();
+  return v;
+}
+
+template <int R, int C>
+Eigen::Matrix<double, R, C> read_mat(const json& j) {
+  if (!j.is_array() || j.size() != R) throw std::runtime_error("expected " + std::to_string(R) + " rows");
+  Eigen::Matrix<double, R, C> m;
+  for (int r = 0; r < R; ++r) m.row(r) = read_vec<C>(j[r]).transpose();
+  return m;
+}
+
+KrebsImuModel read_krebs(const json& j) {
+  KrebsImuModel k;
+  k.S_a = read_vec<3>(j.at("S_a"));
+  k.M_a = read_vec<3>(j.at("M_a"));
+  k.b_a = read_vec<3>(j.at("b_a"));
+  k.S_g = read_vec<3>(j.at("S_g"));
+  k.M_g = read_vec<3>(j.at("M_g"));
+  k.C_bg = read_mat<3, 3>(j.at("C_bg"));
+  k.B_g = read_mat<3, 3>(j.at("B_g"));
+  k.b_g = read_vec<3>(j.at("b_g"));
+  return k;
+}
+
+KrebsImuSigma read_krebs_sigma(const json& j) {
+  KrebsImuSigma s;
+  s.S_a = read_vec<3>(j.at("S_a"));
+  s.M_a = read_vec<3>(j.at("M_a"));
+  s.b_a = read_vec<3>(j.at("b_a"));
+  s.S_g = read_vec<3>(j.at("S_g"));
+  s.M_g = read_vec<3>(j.at("M_g"));
+  s.C_bg = read_vec<3>(j.at("C_bg_rad"));
+  s.B_g = read_mat<3, 3>(j.at("B_g"));
+  s.b_g = read_vec<3>(j.at("b_g"));
+  return s;
+}
+
+CanonicalImuModel read_canonical(const json& j) {
+  CanonicalImuModel c;
+  c.A_a = read_mat<3, 3>(j.at("A_a"));
+  c.b_a = read_vec<3>(j.at("b_a"));
+  c.A_g = read_mat<3, 3>(j.at("A_g"));
+  c.b_g = read_vec<3>(j.at("b_g"));
+  c.G = read_mat<3, 3>(j.at("G"));
+  return c;
+}
+
+CamImuCameraResult read_camera(const json& j, const std::string& path) {
+  CamImuCameraResult c;
+  c.name = j.at("name").get<std::string>();
+  c.stream = j.at("stream").get<std::string>();
+  // JSON is YAML: the camera map reads with the camchain reader.
+  auto camera = camera_from_yaml(YAML::Load(j.at("camera").dump()), path + " " + c.name);
+  if (!camera.ok()) throw std::runtime_error(camera.error().message);
+  c.camera = *camera;
+  c.T_cam_imu.matrix() = read_mat<4, 4>(j.at("T_cam_imu"));
+  c.rotation_sigma_rad = read_vec<3>(j.at("rotation_sigma_rad"));
+  c.translation_sigma_m = read_vec<3>(j.at("translation_sigma_m"));
+  c.timeshift_cam_imu_s = j.at("timeshift_cam_imu_s").get<double>();
+  c.timeshift_sigma_s =
+      j.at("timeshift_sigma_s").is_null() ? std::nan("") : j.at("timeshift_sigma_s").get<double>();
+  c.frames = j.at("frames").get<int>();
+  c.corners = j.at("corners").get<int>();
+  c.outlier_corners = j.at("outlier_corners").get<int>();
+  c.reprojection_rms_px = j.at("reprojection_rms_px").get<double>();
+  c.corner_sigma_px = j.at("corner_sigma_px").get<double>();
+  return c;
+}
+
+CamImuQuality read_quality(const json& j) {
+  CamImuQuality q;
+  q.accel_residual_rms = read_vec<3>(j.at("accel_residual_rms_mps2"));
+  q.gyro_residual_rms = read_vec<3>(j.at("gyro_residual_rms_radps"));
+  q.accel_sigma = j.at("accel_sigma_mps2").get<double>();
+  q.gyro_sigma = j.at("gyro_sigma_radps").get<double>();
+  q.rotation_excitation_radps = read_vec<3>(j.at("rotation_excitation_radps"));
+  q.accel_excitation_mps2 = read_vec<3>(j.at("accel_excitation_mps2"));
+  for (const auto& curve : j.at("xcorr")) {
+    const auto lags = curve.at("lag_s").get<std::vector<double>>();
+    const auto values = curve.at("value").get<std::vector<double>>();
+    if (lags.size() != values.size()) throw std::runtime_error("xcorr lag_s and value differ in length");
+    std::vector<std::pair<double, double>> c;
+    for (std::size_t i = 0; i < lags.size(); ++i) c.emplace_back(lags[i], values[i]);
+    q.xcorr.push_back(std::move(c));
+  }
+  q.xcorr_peak_s = j.at("xcorr_peak_s").get<std::vector<double>>();
+  q.iterations = j.at("iterations").get<int>();
+  q.initial_cost = j.at("initial_cost").get<double>();
+  q.final_cost = j.at("final_cost").get<double>();
+  q.parameters = j.at("parameters").get<int>();
+  q.residuals = j.at("residuals").get<int>();
+  q.spline_knots = j.at("spline_knots").get<int>();
+  const json& t = j.at("timings_s");
+  q.init_s = t.at("init").get<double>();
+  q.solve_s = t.at("solve").get<double>();
+  q.jacobian_s = t.at("jacobian").get<double>();
+  q.linear_solver_s = t.at("linear_solver").get<double>();
+  q.covariance_s = t.at("covariance").get<double>();
+  return q;
+}
+
+CamImuCalibrationResult read_result_json(const json& j, const std::string& path) {
+  CamImuCalibrationResult r;
+  const std::string model = j.at("model").get<std::string>();
+  if (model != "basic" && model != "extended") throw std::runtime_error("model '" + model + "' is unknown");
+  r.model = model == "basic" ? CamImuModelKind::kBasic : CamImuModelKind::kExtended;
+  for (const auto& c : j.at("cameras")) r.cameras.push_back(read_camera(c, path));
+  const json& imu = j.at("imu");
+  r.imu = read_krebs(imu.at("krebs"));
+  r.imu_sigma = read_krebs_sigma(imu.at("krebs_sigma"));
+  r.canonical = read_canonical(imu.at("canonical_nominal_si"));
+  r.fixed = j.at("fixed").get<std::vector<std::string>>();
+  r.gravity_w = read_vec<3>(j.at("gravity_w_mps2"));
+  r.gravity_sigma_rad = read_vec<2>(j.at("gravity_sigma_rad"));
+  for (const auto& b : j.at("biases")) {
+    r.biases.push_back({b.at("t_ns").get<TimeNs>(), read_vec<3>(b.at("b_a")), read_vec<3>(b.at("b_g"))});
+  }
+  r.quality = read_quality(j.at("quality"));
+  r.warnings = j.at("warnings").get<std::vector<std::string>>();
+  return r;
+}
+
+}  // namespace
+
+KalibrImuIntrinsics kalibr_from_krebs(const KrebsImuModel& k) {
+  KalibrImuIntrinsics out;
+  out.M_accel = k.S_a.asDiagonal() * krebs_misalignment(k.M_a);
+  out.M_gyro = k.S_g.asDiagonal() * krebs_misalignment(k.M_g);
+  out.C_gyro_i = k.C_bg.transpose();
+  out.A = k.B_g;
+  return out;
+}
+
+std::string camimu_camchain_yaml(const CamImuReport& r) {
+  YAML::Node root(YAML::NodeType::Map);
+  const auto& cams = r.result.cameras;
+  for (std::size_t i = 0; i < cams.size(); ++i) {
+    const CamImuCameraResult& c = cams[i];
+    const CamImuCameraReport* in = i < r.cameras.size() ? &r.cameras[i] : nullptr;
+    YAML::Node cam(YAML::NodeType::Map);
+    camera_to_yaml(c.camera, cam);
+    cam["rostopic"] = in != nullptr ? in->rostopic : "/" + c.stream + "/image_raw";
+    cam["T_cam_imu"] = rows(matrix_of(c.T_cam_imu));
+    cam["timeshift_cam_imu"] = c.timeshift_cam_imu_s;
+    // Kalibr's chain: each camera from the one before it.
+    if (i > 0) cam["T_cn_cnm1"] = rows(matrix_of(c.T_cam_imu * cams[i - 1].T_cam_imu.inverse()));
+    YAML::Node q(YAML::NodeType::Map);
+    q["rotation_sigma_rad"] = flow_vec(c.rotation_sigma_rad);
+    q["translation_sigma_m"] = flow_vec(c.translation_sigma_m);
+    q["timeshift_sigma_s"] = c.timeshift_sigma_s;
+    q["reprojection_rms_px"] = c.reprojection_rms_px;
+    q["corner_sigma_px"] = c.corner_sigma_px;
+    q["frames"] = c.frames;
+    q["corners"] = c.corners;
+    q["outlier_corners"] = c.outlier_corners;
+    q["camera_stream"] = c.stream;
+    if (in != nullptr) q["intrinsics_from"] = in->source;
+    q["log"] = r.log_path;
+    q["convention"] =
+        "T_cam_imu maps IMU body points into the camera frame; t_imu = t_cam + timeshift_cam_imu";
+    cam["imucal"] = q;
+    root["cam" + std::to_string(i)] = cam;
+  }
+  return emit(root,
+              "# Camera-IMU calibration (imucal calibrate camimu); Kalibr camchain-imucam format, imucal's "
+              "figures under camN.imucal\n# (docs/camimu-calibration.md)\n");
+}
+
+std::string camimu_imu_yaml(const CamImuReport& r) {
+  const auto& res = r.result;
+  const auto& n = r.options.noise;
+  YAML::Node imu(YAML::NodeType::Map);
+  imu["T_i_b"] = rows(Eigen::Matrix4d::Identity());
+  imu["accelerometer_noise_density"] = n.accel_noise_density;
+  imu["accelerometer_random_walk"] = n.accel_random_walk;
+  imu["gyroscope_noise_density"] = n.gyro_noise_density;
+  imu["gyroscope_random_walk"] = n.gyro_random_walk;
+  imu["model"] = res.model == CamImuModelKind::kBasic ? "calibrated" : "scale-misalignment";
+  imu["rostopic"] = r.imu_rostopic;
+  imu["time_offset"] = 0.0;
+  imu["update_rate"] = r.imu_stream.rate_hz;
+  if (res.model == CamImuModelKind::kExtended) {
+    const KalibrImuIntrinsics k = kalibr_from_krebs(res.imu);
+    YAML::Node accel(YAML::NodeType::Map), gyro(YAML::NodeType::Map);
+    accel["M"] = rows(k.M_accel);
+    gyro["M"] = rows(k.M_gyro);
+    gyro["A"] = rows(k.A);
+    gyro["C_gyro_i"] = rows(k.C_gyro_i);
+    imu["accelerometers"] = accel;
+    imu["gyroscopes"] = gyro;
+  }
+  YAML::Node q(YAML::NodeType::Map);
+  q["form"] = "a_raw = M_accel a + b_a; w_raw = M_gyro C_gyro_i w + A C_gyro_i a + b_g (nominal SI)";
+  q["b_a"] = flow_vec(res.imu.b_a);
+  q["b_g"] = flow_vec(res.imu.b_g);
+  q["biases_at"] = "start of the recording (result.json holds them over time)";
+  q["krebs"] = krebs_node(res.imu, res.imu_sigma);
+  q["stream"] = r.imu_stream.name;
+  q["input_units"] = imu_units_name(r.imu_stream.units);
+  q["noise_source"] = r.noise_source;
+  q["fixed"] = string_list(res.fixed);
+  imu["imucal"] = q;
+  YAML::Node root(YAML::NodeType::Map);
+  root["imu0"] = imu;
+  return emit(
+      root,
+      "# IMU of the camera-IMU calibration (imucal calibrate camimu); Kalibr's IMU result format, on the "
+      "stream's\n# nominal SI values; imucal's figures under imu0.imucal (docs/camimu-calibration.md)\n");
+}
+
+std::string camimu_calibration_yaml(const CamImuReport& r) {
+  const auto& res = r.result;
+  YAML::Node root(YAML::NodeType::Map);
+  root["method"] = "continuous-time camera-IMU (Krebs 2012)";
+  root["model"] = camimu_model_name(res.model);
+  root["stream"] = r.imu_stream.name;
+  root["input_units"] = imu_units_name(r.imu_stream.units);
+  root["canonical"] = canonical_node(canonical_on_input_units(res.canonical, r.imu_stream));
+  root["canonical_nominal_si"] = canonical_node(res.canonical);
+  root["krebs"] = krebs_node(res.imu, res.imu_sigma);
+  root["gravity"] = r.options.gravity_mps2;
+  root["gravity_w"] = flow_vec(res.gravity_w);
+  root["gravity_sigma_rad"] = flow_vec(res.gravity_sigma_rad);
+  root["fixed"] = string_list(res.fixed);
+  YAML::Node cams(YAML::NodeType::Map);
+  for (std::size_t i = 0; i < res.cameras.size(); ++i) {
+    const auto& c = res.cameras[i];
+    YAML::Node cam(YAML::NodeType::Map);
+    cam["stream"] = c.stream;
+    cam["T_cam_imu"] = rows(matrix_of(c.T_cam_imu));
+    cam["rotation_sigma_rad"] = flow_vec(c.rotation_sigma_rad);
+    cam["translation_sigma_m"] = flow_vec(c.translation_sigma_m);
+    cam["timeshift_cam_imu"] = c.timeshift_cam_imu_s;
+    cam["timeshift_sigma_s"] = c.timeshift_sigma_s;
+    cams["cam" + std::to_string(i)] = cam;
+  }
+  root["cameras"] = cams;
+  root["log"] = r.log_path;
+  root["software_version"] = kVersion;
+  root["warnings"] = string_list(r.warnings);
+  return emit(
+      root,
+      "# Camera-IMU calibration (imucal calibrate camimu): the canonical record for the stream's input "
+      "values\n# (docs/camimu-calibration.md)\n");
+}
+
+std::string camimu_result_json(const CamImuReport& r) {
+  const auto& res = r.result;
+  json cameras = json::array();
+  for (std::size_t i = 0; i < res.cameras.size(); ++i)
+    cameras.push_back(camera_json(res.cameras[i], i < r.cameras.size() ? &r.cameras[i] : nullptr));
+  const KalibrImuIntrinsics k = kalibr_from_krebs(res.imu);
+  json biases = json::array();
+  const TimeNs t0 = res.biases.empty() ? 0 : res.biases.front().t_ns;
+  for (const auto& b : res.biases) {
+    biases.push_back({{"t_s", ns_to_s(b.t_ns - t0)},
+                      {"t_ns", b.t_ns},
+                      {"b_a", vec_json(b.b_a)},
+                      {"b_g", vec_json(b.b_g)}});
+  }
+  json j;
+  j["method"] = "continuous-time camera-IMU (Krebs 2012)";
+  j["software_version"] = kVersion;
+  j["model"] = camimu_model_name(res.model);
+  j["fixed"] = res.fixed;
+  j["cameras"] = cameras;
+  j["imu"] = {{"krebs", krebs_json(res.imu)},
+              {"krebs_sigma", krebs_sigma_json(res.imu_sigma)},
+              {"C_bg_angle_rad", angle_of(res.imu.C_bg)},
+              {"canonical_nominal_si", canonical_json(res.canonical)},
+              {"canonical", canonical_json(canonical_on_input_units(res.canonical, r.imu_stream))},
+              {"input_units", imu_units_name(r.imu_stream.units)},
+              {"kalibr",
+               {{"accelerometers", {{"M", mat_json(k.M_accel)}}},
+                {"gyroscopes",
+                 {{"M", mat_json(k.M_gyro)}, {"A", mat_json(k.A)}, {"C_gyro_i", mat_json(k.C_gyro_i)}}}}}};
+  j["gravity_w_mps2"] = vec_json(res.gravity_w);
+  j["gravity_sigma_rad"] = vec_json(res.gravity_sigma_rad);
+  j["biases"] = biases;
+  j["quality"] = quality_json(res.quality);
+  j["inputs"] = inputs_json(r);
+  j["notes"] = r.notes;
+  j["warnings"] = r.warnings;
+  return j.dump(2) + "\n";
+}
+
+Result<CamImuCalibrationResult> read_camimu_result(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return make_error(Errc::kNotFound, path + ": cannot be read");
+  std::stringstream text;
+  text << in.rdbuf();
+  try {
+    return read_result_json(json::parse(text.str()), path);
+  } catch (const std::exception& e) {
+    return make_error(Errc::kCorrupt,
+                      path + ": not a camera-IMU result.json (" + std::string(e.what()) + ")");
+  }
+}
+
+}  // namespace imucal::app

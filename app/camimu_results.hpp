@@ -1,0 +1,58 @@
+#pragma once
+// The outputs of the camera-IMU calibration, with no solver dependency, for the CLI, the service
+// and reports: Kalibr's camchain-imucam.yaml and imu.yaml, the canonical record
+// calibration.yaml (the static result's `canonical:` schema) and result.json with every
+// parameter, its sigma and the quality figures; result.json read back. Schemas and conversions:
+// docs/camimu-calibration.md, "Outputs".
+
+#include <Eigen/Core>
+#include <string>
+
+#include "app/camimu_calibration.hpp"
+#include "core/camimu_calibration.hpp"
+#include "core/imu_model.hpp"
+#include "core/result.hpp"
+
+namespace imucal::app {
+
+/// The file names the command writes into its output folder.
+inline constexpr const char* kCamchainImucamFile = "camchain-imucam.yaml";
+inline constexpr const char* kCamImuImuFile = "imu.yaml";
+inline constexpr const char* kCamImuCalibrationFile = "calibration.yaml";
+inline constexpr const char* kCamImuJsonFile = "result.json";
+
+/// Kalibr's scale-misalignment IMU (kalibr_calibrate_imu_camera --imu-models scale-misalignment):
+///   a_raw = M_accel a + b_a
+///   w_raw = M_gyro C_gyro_i w + A C_gyro_i a + b_g
+/// with M lower triangular. From the Krebs form: M_accel = S_a M_a, M_gyro = S_g M_g,
+/// C_gyro_i = C_bg^T, A = B_g (same body frame, same g-sensitivity frame).
+struct KalibrImuIntrinsics {
+  Eigen::Matrix3d M_accel = Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d M_gyro = Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d C_gyro_i = Eigen::Matrix3d::Identity();
+};
+KalibrImuIntrinsics kalibr_from_krebs(const KrebsImuModel& model);
+
+/// camchain-imucam.yaml: per camN Kalibr's keys (camera_model, intrinsics, distortion_model,
+/// distortion_coeffs, resolution, rostopic, T_cam_imu as 4 rows, timeshift_cam_imu, T_cn_cnm1
+/// from cam1 on) and imucal's sigmas and figures under `camN: imucal:`.
+std::string camimu_camchain_yaml(const CamImuReport& report);
+/// imu.yaml: Kalibr's IMU result (`imu0:` with the noise figures used, rostopic, update_rate,
+/// model, T_i_b, time_offset and, for the extended model, accelerometers.M, gyroscopes.M, A,
+/// C_gyro_i), imucal's biases and sigmas under `imu0: imucal:`.
+std::string camimu_imu_yaml(const CamImuReport& report);
+/// calibration.yaml: the canonical record for the stream's input values (`canonical:` A_a, b_a,
+/// A_g, b_g, G and `input_units`, the schema of the static result, so read_imucal_calibration,
+/// read_gsens_matrix and `calibrate check` read it), the same on nominal SI, the Krebs form with
+/// its sigmas, gravity, the cameras' extrinsics and time offsets.
+std::string camimu_calibration_yaml(const CamImuReport& report);
+/// result.json (indented, ending in a newline): every parameter with its sigma, quality,
+/// warnings, fixed blocks, cameras, biases over time, cross-correlation, inputs, versions.
+std::string camimu_result_json(const CamImuReport& report);
+
+/// The result record of a result.json written by camimu_result_json. Errors: kNotFound,
+/// kCorrupt (not JSON, a key missing or of the wrong type), naming the file.
+[[nodiscard]] Result<CamImuCalibrationResult> read_camimu_result(const std::string& path);
+
+}  // namespace imucal::app

@@ -1,0 +1,307 @@
+// imucal calibrate camimu LOG: camera-IMU extrinsics, time offsets and the IMU's intrinsics from
+// the target seen by the cameras while the rig moves, see docs/camimu-calibration.md.
+
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "app/camera_results.hpp"
+#include "app/camimu_inputs.hpp"
+#include "app/camimu_results.hpp"
+#include "app/result_writers.hpp"
+#include "app/solvers.hpp"
+#include "daemon/cli/calibrate_group.hpp"
+#include "daemon/cli/command.hpp"
+#include "log/session_log.hpp"
+
+namespace imucal::cli {
+namespace {
+
+struct CamImuCliOptions {
+  std::string log_path;
+  std::vector<std::string> camera_paths;
+  std::string target_path;
+  std::string imu_path;
+  std::string imu_intrinsics_path;
+  std::string gsens_path;
+  std::string imu_stream;
+  std::string model = "extended";
+  std::vector<std::string> fix;
+  calib::CamImuOptions defaults;
+  GravityArgs grav;
+  int threads = 0;
+  bool allow_damaged = false;
+  bool no_reuse = false;
+  bool force = false;
+  bool json = false;
+  std::string out_dir;
+};
+
+constexpr double kDeg = 180.0 / M_PI;
+
+/// The target: --target, else the one the log names.
+app::TargetChoice resolve_target(const CamImuCliOptions& o) {
+  if (!o.target_path.empty()) {
+    auto t = load_target_yaml(o.target_path);
+    if (!t.ok()) throw CliExit{kExitInput, "--target: " + t.error().message};
+    return {*t, o.target_path};
+  }
+  auto reader = log::SessionLogReader::open(o.log_path);
+  if (!reader.ok()) fail(reader.error());
+  auto t = app::target_from_log_metadata((*reader)->metadata());
+  if (!t.ok()) {
+    if (t.error().code == Errc::kNotFound) {
+      throw CliExit{kExitUsage, o.log_path +
+                                    " names no calibration target (neither its rig configuration nor its "
+                                    "metadata has one): pass --target TARGET.yaml (Kalibr target YAML)"};
+    }
+    fail(t.error(), o.log_path);
+  }
+  return *t;
+}
+
+/// The result files in OUT_DIR, checked before the work: never an input, never an existing file
+/// without --force.
+std::vector<std::string> check_outputs(const CamImuCliOptions& o, const app::OutputPolicy& policy) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::exists(o.out_dir, ec) && !fs::is_directory(o.out_dir, ec))
+    throw CliExit{kExitUsage, o.out_dir + " is a file: -o takes the folder to write the results into"};
+  std::vector<std::string> paths;
+  for (const char* name :
+       {app::kCamchainImucamFile, app::kCamImuImuFile, app::kCamImuCalibrationFile, app::kCamImuJsonFile}) {
+    paths.push_back((fs::path(o.out_dir) / name).string());
+    if (auto s = app::check_output(paths.back(), policy); !s.ok()) fail(s.error());
+  }
+  return paths;
+}
+
+/// The method's options from the command line, checked before the log is read.
+app::CamImuRequest build_request(const CamImuCliOptions& o) {
+  app::CamImuRequest q;
+  q.log_path = o.log_path;
+  q.imu_stream = o.imu_stream;
+  q.camera_paths = o.camera_paths;
+  for (const auto& path : o.camera_paths) {
+    if (auto cams = app::read_camchain(path); !cams.ok()) fail(cams.error(), "--camera");
+  }
+  q.imu_noise_path = o.imu_path;
+  if (!o.imu_path.empty()) {
+    if (auto noise = app::read_kalibr_imu_noise(o.imu_path); !noise.ok()) fail(noise.error(), "--imu");
+  }
+  if (!o.imu_intrinsics_path.empty()) {
+    auto c = app::read_imucal_calibration(o.imu_intrinsics_path);
+    if (!c.ok()) fail(c.error(), "--imu-intrinsics");
+    q.imu_intrinsics = *c;
+  }
+  if (!o.gsens_path.empty()) {
+    auto g = app::read_gsens_input(o.gsens_path);
+    if (!g.ok()) fail(g.error(), "--gsens");
+    q.gsens = *g;
+  }
+  q.options = o.defaults;
+  q.options.model = o.model == "basic" ? CamImuModelKind::kBasic : CamImuModelKind::kExtended;
+  for (const auto& name : o.fix) {
+    if (auto s = app::set_fixed_block(name, &q.options.fixed); !s.ok()) fail(s.error(), "--fix");
+  }
+  const app::GravityChoice gravity = resolve_gravity(o.grav);
+  q.options.gravity_mps2 = gravity.mps2;
+  q.gravity_source = gravity.source;
+  q.options.threads = o.threads;
+  q.threads = o.threads;
+  q.allow_damaged = o.allow_damaged;
+  q.reuse_detections = !o.no_reuse;
+  return q;
+}
+
+void print_camera(const CamImuCameraResult& c, const app::CamImuCameraReport& in) {
+  const Eigen::AngleAxisd aa(c.T_cam_imu.rotation());
+  const Eigen::Vector3d rv = aa.angle() * aa.axis() * kDeg;
+  const Eigen::Vector3d rs = c.rotation_sigma_rad * kDeg;
+  const Eigen::Vector3d t = c.T_cam_imu.translation() * 1e3;
+  const Eigen::Vector3d ts = c.translation_sigma_m * 1e3;
+  std::printf("  %s (stream %s, %d frames with the target of %lld; detections %s)\n", c.name.c_str(),
+              c.stream.c_str(), in.frames_with_target, static_cast<long long>(in.frames),
+              in.detections_reused ? "reused from the log"
+                                   : (in.detections_stored ? "stored in the log" : "not stored"));
+  std::printf("    R_cam_imu rotation vector [%.4f %.4f %.4f] deg, sigma [%.4f %.4f %.4f] deg\n", rv[0],
+              rv[1], rv[2], rs[0], rs[1], rs[2]);
+  std::printf("    t_cam_imu [%.2f %.2f %.2f] mm, sigma [%.2f %.2f %.2f] mm\n", t[0], t[1], t[2], ts[0],
+              ts[1], ts[2]);
+  std::printf("    timeshift_cam_imu %.4f ms +- %.4f ms (t_imu = t_cam + shift)\n",
+              c.timeshift_cam_imu_s * 1e3, c.timeshift_sigma_s * 1e3);
+  std::printf("    reprojection RMS %.4f px over %d corners, %d down-weighted as outliers\n",
+              c.reprojection_rms_px, c.corners, c.outlier_corners);
+}
+
+void print_vec(const char* name, const Eigen::Vector3d& v, const Eigen::Vector3d& s, double k = 1.0) {
+  std::printf("    %-4s [%.6f %.6f %.6f] +- [%.6f %.6f %.6f]\n", name, v[0] * k, v[1] * k, v[2] * k, s[0] * k,
+              s[1] * k, s[2] * k);
+}
+
+void print_summary(const app::CamImuReport& r, const std::string& out_dir) {
+  const auto& res = r.result;
+  std::printf("camera-IMU calibration of %s (%s, %zu samples, %s; model %s; %d iterations)\n",
+              r.log_path.c_str(), r.imu_stream.name.c_str(), r.imu_samples,
+              imu_units_name(r.imu_stream.units), camimu_model_name(res.model), res.quality.iterations);
+  for (std::size_t i = 0; i < res.cameras.size() && i < r.cameras.size(); ++i)
+    print_camera(res.cameras[i], r.cameras[i]);
+  const auto& k = res.imu;
+  const auto& s = res.imu_sigma;
+  std::printf("  IMU (Krebs form on nominal SI; fixed: %s)\n",
+              res.fixed.empty() ? "none" : [&] {
+                std::string f;
+                for (const auto& n : res.fixed) f += (f.empty() ? "" : ",") + n;
+                return f;
+              }().c_str());
+  print_vec("S_a", k.S_a, s.S_a);
+  print_vec("M_a", k.M_a, s.M_a);
+  print_vec("S_g", k.S_g, s.S_g);
+  print_vec("M_g", k.M_g, s.M_g);
+  std::printf("    C_bg %.4f deg (sigma [%.4f %.4f %.4f] deg)\n", Eigen::AngleAxisd(k.C_bg).angle() * kDeg,
+              s.C_bg[0] * kDeg, s.C_bg[1] * kDeg, s.C_bg[2] * kDeg);
+  std::printf("    B_g (deg/s per g):");
+  const double g = r.options.gravity_mps2 * kDeg;
+  for (int row = 0; row < 3; ++row) {
+    std::printf(row ? "; " : " [");
+    for (int col = 0; col < 3; ++col) std::printf(col ? " %.4f" : "%.4f", k.B_g(row, col) * g);
+  }
+  std::printf("]\n");
+  std::printf("  noise from %s; wrote %s, %s, %s, %s in %s\n", r.noise_source.c_str(),
+              app::kCamchainImucamFile, app::kCamImuImuFile, app::kCamImuCalibrationFile,
+              app::kCamImuJsonFile, out_dir.c_str());
+  if (r.warnings.empty()) std::printf("  no warnings\n");
+}
+
+void run(const CamImuCliOptions& o) {
+  app::OutputPolicy outputs{o.force, {o.log_path}};
+  for (const auto* input : {&o.target_path, &o.imu_path, &o.imu_intrinsics_path, &o.gsens_path}) {
+    if (!input->empty()) outputs.inputs.push_back(*input);
+  }
+  outputs.inputs.insert(outputs.inputs.end(), o.camera_paths.begin(), o.camera_paths.end());
+  const std::vector<std::string> paths = check_outputs(o, outputs);
+  app::CamImuRequest q = build_request(o);
+  const app::TargetChoice target = resolve_target(o);
+  q.target = target.target;
+  q.target_source = target.source;
+
+  std::map<int, std::unique_ptr<Progress>> detecting;
+  q.detection_progress = [&detecting](int camera, double f) {
+    auto& p = detecting[camera];
+    if (!p) p = std::make_unique<Progress>("detecting the target (cam" + std::to_string(camera) + ")", 1.0);
+    p->update(f);
+    if (f >= 1.0) p->finish();
+  };
+  q.solve_progress = [](const calib::CamImuIteration& it) {
+    std::fprintf(stderr, "%s: iteration %3d  cost %.6e  |gradient| %.3e\n", it.stage.c_str(), it.iteration,
+                 it.cost, it.gradient_max_norm);
+  };
+
+  auto report = app::calibrate_camimu(q);
+  if (!report.ok()) fail(report.error(), "calibrate camimu");
+  // What was assumed (default noise, the frame of a given G) is said whatever the log level.
+  for (const auto& n : report->notes) std::fprintf(stderr, "note: %s\n", n.c_str());
+  for (const auto& w : report->warnings) spdlog::warn("{}", w);
+  std::error_code ec;
+  std::filesystem::create_directories(o.out_dir, ec);
+  if (ec) throw CliExit{kExitIo, "could not create " + o.out_dir + ": " + ec.message()};
+  const std::string texts[] = {app::camimu_camchain_yaml(*report), app::camimu_imu_yaml(*report),
+                               app::camimu_calibration_yaml(*report), app::camimu_result_json(*report)};
+  for (std::size_t i = 0; i < paths.size(); ++i) {
+    if (auto s = app::write_text_file(paths[i], texts[i], outputs); !s.ok()) fail(s.error());
+  }
+  if (o.json) {
+    std::cout << texts[3];
+  } else {
+    print_summary(*report, o.out_dir);
+  }
+}
+
+void add_options(CLI::App* cmd, CamImuCliOptions* o) {
+  cmd->add_option("LOG", o->log_path, "Session log (.imulog) with the IMU and camera streams")
+      ->required()
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--camera", o->camera_paths,
+                  "Camera intrinsics: the YAML of imucal calibrate camera or a Kalibr camchain (cam0..camN); "
+                  "repeat for more files")
+      ->required()
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--target", o->target_path,
+                  "Calibration target, Kalibr target YAML (default: the target the log names)")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--imu", o->imu_path,
+                  "IMU noise, Kalibr imu.yaml (imucal allan writes one; default: MPU-6000 datasheet figures)")
+      ->check(CLI::ExistingFile);
+  cmd->add_option(
+         "--imu-intrinsics", o->imu_intrinsics_path,
+         "A static result YAML (calibrate static -o): start from its model and fix S_a, M_a, S_g, M_g, "
+         "C_bg (and B_g when it has a g-sensitivity)")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--gsens", o->gsens_path,
+                  "Fix B_g to a g-sensitivity G (a result YAML's canonical.G, or a file with G: 3 rows of 3, "
+                  "rad/s per m/s^2)")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--imu-stream", o->imu_stream, "IMU stream name (default: the first)");
+  cmd->add_option("--model", o->model,
+                  "IMU model: extended (Krebs: S, M, C_bg, B_g; default) or basic (biases)")
+      ->check(CLI::IsMember({"basic", "extended"}));
+  cmd->add_option("--fix", o->fix,
+                  "Blocks held at their initial value: S_a,M_a,S_g,M_g,C_bg,B_g,T_cam_imu,timeshift")
+      ->delimiter(',');
+}
+
+void add_solver_options(CLI::App* cmd, CamImuCliOptions* o) {
+  auto& d = o->defaults;
+  cmd->add_option("--knot-spacing", d.knot_spacing_s, "Pose spline knot spacing, s")
+      ->capture_default_str()
+      ->check(CLI::Range(0.005, 1.0));
+  cmd->add_option("--spline-order", d.spline_order, "Pose spline order (degree + 1)")
+      ->capture_default_str()
+      ->check(CLI::Range(3, 8));
+  cmd->add_option("--bias-knot-spacing", d.bias_knot_spacing_s, "Bias spline knot spacing, s")
+      ->capture_default_str()
+      ->check(CLI::Range(0.05, 100.0));
+  cmd->add_option("--corner-sigma", d.corner_sigma_px, "Corner noise, px (standard deviation)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 10.0));
+  cmd->add_option("--max-iterations", d.max_iterations, "Solver iterations at most")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 10000));
+  cmd->add_option("--threads", o->threads,
+                  "Worker threads for the detection and the solver (default: all cores)")
+      ->check(CLI::Range(0, 256));
+  add_gravity_options(cmd, &o->grav);
+  cmd->add_flag("--no-reuse", o->no_reuse,
+                "Search the frames again even when the log holds detections for this target");
+  cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");
+  cmd->add_option("-o,--output", o->out_dir,
+                  "Folder for camchain-imucam.yaml, imu.yaml, calibration.yaml and result.json (created)")
+      ->required();
+  cmd->add_flag("--force", o->force, "Replace result files that exist in the folder (never an input)");
+  cmd->add_flag("--json", o->json, "Print result.json on stdout instead of the summary");
+}
+
+void setup(CLI::App& root) {
+  CLI::App* cmd =
+      calibrate_group(root)->add_subcommand("camimu",
+                                            "Camera-IMU calibration (continuous time, Krebs 2012): "
+                                            "extrinsics and time offset of each camera and the "
+                                            "IMU's intrinsics; writes Kalibr camchain-imucam.yaml and "
+                                            "imu.yaml, the canonical record and result.json");
+  auto o = std::make_shared<CamImuCliOptions>();
+  add_options(cmd, o.get());
+  add_solver_options(cmd, o.get());
+  cmd->callback([o] { run(*o); });
+}
+
+const CommandRegistrar registrar(33, setup);
+
+}  // namespace
+}  // namespace imucal::cli

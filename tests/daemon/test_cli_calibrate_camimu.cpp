@@ -1,0 +1,179 @@
+// imucal calibrate camimu: argument and output-file errors before any work, and the committed
+// camera-IMU fixture calibrated against the simulator's truth (extrinsics, time offset, IMU
+// intrinsics) within a few of the reported sigmas.
+
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Geometry>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "core/imu_model.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal {
+namespace {
+
+using nlohmann::json;
+using test::read_file;
+using test::run_cli;
+using test::scratch_dir;
+using test::source_path;
+
+YAML::Node truth() { return YAML::LoadFile(source_path("fixtures/camimu.truth.yaml")); }
+
+/// The truth's camera as the camchain YAML `calibrate camera` would write for it.
+std::string camera_yaml(const std::string& dir) {
+  YAML::Node cam = truth()["camera"]["cam0"];
+  YAML::Node out;
+  for (const char* key :
+       {"camera_model", "intrinsics", "distortion_model", "distortion_coeffs", "resolution"})
+    out["cam0"][key] = cam[key];
+  out["cam0"]["rostopic"] = "/cam0/image_raw";
+  const std::string path = dir + "/camera.yaml";
+  YAML::Emitter e;
+  e.SetDoublePrecision(17);
+  e << out;
+  std::ofstream(path) << e.c_str() << "\n";
+  return path;
+}
+
+/// A copy of the fixture: the command stores its detections in the log it reads.
+std::string fixture_copy(const std::string& dir) {
+  const std::string path = dir + "/camimu.imulog";
+  std::filesystem::copy_file(source_path("fixtures/camimu.imulog"), path);
+  return path;
+}
+
+TEST(CliCalibrateCamimu, ArgumentErrorsComeBeforeAnyWork) {
+  const std::string dir = scratch_dir();
+  const std::string log = source_path("fixtures/camimu.imulog");
+  const std::string cam = camera_yaml(dir);
+  auto r = run_cli({"calibrate", "camimu", log, "--camera", dir + "/missing.yaml", "-o", dir + "/out"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("missing.yaml"), std::string::npos) << r.err;
+
+  r = run_cli({"calibrate", "camimu", log, "--camera", cam, "--fix", "S_a,Bg", "-o", dir + "/out"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("'Bg' is not a block"), std::string::npos) << r.err;
+
+  r = run_cli({"calibrate", "camimu", log, "--camera", cam, "--model", "full", "-o", dir + "/out"});
+  EXPECT_EQ(r.exit_code, 2);
+
+  // A camera file that is not a camchain: exit 3, named.
+  { std::ofstream(dir + "/notcam.yaml") << "foo: 1\n"; }
+  r = run_cli({"calibrate", "camimu", log, "--camera", dir + "/notcam.yaml", "-o", dir + "/out"});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("no cam0"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/out"));
+
+  // A result in the folder is not replaced without --force; the log is never an output.
+  std::filesystem::create_directories(dir + "/out");
+  { std::ofstream(dir + "/out/result.json") << "keep me\n"; }
+  r = run_cli({"calibrate", "camimu", log, "--camera", cam, "-o", dir + "/out"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("pass --force"), std::string::npos) << r.err;
+  EXPECT_EQ(read_file(dir + "/out/result.json"), "keep me\n");
+  r = run_cli({"calibrate", "camimu", log, "--camera", cam, "-o", log});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("is a file"), std::string::npos) << r.err;
+}
+
+/// The estimate of a rotation against the truth as a small-angle vector (rad).
+Eigen::Vector3d rotation_error(const Eigen::Matrix3d& est, const Eigen::Matrix3d& truth) {
+  const Eigen::AngleAxisd aa(est * truth.transpose());
+  return aa.angle() * aa.axis();
+}
+
+Eigen::Matrix4d matrix4(const YAML::Node& rows) {
+  Eigen::Matrix4d m;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) m(r, c) = rows[r][c].as<double>();
+  return m;
+}
+
+Eigen::Vector3d vec(const json& j) { return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()}; }
+
+/// |est - truth| <= k sigma for every entry, with the values in the message.
+void expect_within(const char* what, const Eigen::Vector3d& err, const Eigen::Vector3d& sigma, double k) {
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_GT(sigma[i], 0.0) << what << "[" << i << "]";
+    EXPECT_LE(std::abs(err[i]), k * sigma[i])
+        << what << "[" << i << "] error " << err[i] << " sigma " << sigma[i];
+  }
+}
+
+/// The truth's IMU in the Krebs form on nominal SI (its body frame is the Krebs body frame).
+KrebsImuModel truth_krebs() {
+  const YAML::Node c = truth()["canonical"]["si"];
+  CanonicalImuModel m;
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 3; ++k) {
+      m.A_a(r, k) = c["A_a"][r][k].as<double>();
+      m.A_g(r, k) = c["A_g"][r][k].as<double>();
+      m.G(r, k) = c["G"][r][k].as<double>();
+    }
+  }
+  auto k = krebs_from_canonical(m);
+  EXPECT_TRUE(k.ok());
+  EXPECT_LT((k->R_canonical_body - Eigen::Matrix3d::Identity()).norm(), 1e-9);
+  return k->model;
+}
+
+TEST(CliCalibrateCamimu, FixtureWithinFewSigmasOfTruth) {
+  const std::string dir = scratch_dir();
+  const std::string log = fixture_copy(dir);
+  const std::string out = dir + "/out";
+  auto r = run_cli({"calibrate", "camimu", log, "--camera", camera_yaml(dir), "-o", out, "--threads", "2"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("timeshift_cam_imu"), std::string::npos) << r.out;
+  EXPECT_NE(r.err.find("iteration"), std::string::npos) << r.err;  // the solver's progress
+  const YAML::Node tcam = truth()["camera"]["cam0"];
+
+  const YAML::Node cam0 = YAML::LoadFile(out + "/camchain-imucam.yaml")["cam0"];
+  ASSERT_TRUE(cam0["T_cam_imu"]);
+  const Eigen::Matrix4d T = matrix4(cam0["T_cam_imu"]);
+  const Eigen::Matrix4d T_truth = matrix4(tcam["T_cam_imu"]);
+  const json j = json::parse(read_file(out + "/result.json"));
+  const json& c = j["cameras"][0];
+  constexpr double k = 4.0;
+  expect_within("rotation", rotation_error(T.topLeftCorner<3, 3>(), T_truth.topLeftCorner<3, 3>()),
+                vec(c["rotation_sigma_rad"]), k);
+  expect_within("translation", T.topRightCorner<3, 1>() - T_truth.topRightCorner<3, 1>(),
+                vec(c["translation_sigma_m"]), k);
+  const double shift = cam0["timeshift_cam_imu"].as<double>();
+  const double shift_sigma = c["timeshift_sigma_s"].get<double>();
+  EXPECT_GT(shift_sigma, 0.0);
+  EXPECT_LE(std::abs(shift - tcam["timeshift_cam_imu"].as<double>()), k * shift_sigma)
+      << "timeshift " << shift << " truth " << tcam["timeshift_cam_imu"].as<double>() << " sigma "
+      << shift_sigma;
+
+  const KrebsImuModel t = truth_krebs();
+  const json& est = j["imu"]["krebs"];
+  const json& sig = j["imu"]["krebs_sigma"];
+  expect_within("S_a", vec(est["S_a"]) - t.S_a, vec(sig["S_a"]), k);
+  expect_within("M_a", vec(est["M_a"]) - t.M_a, vec(sig["M_a"]), k);
+  expect_within("S_g", vec(est["S_g"]) - t.S_g, vec(sig["S_g"]), k);
+  expect_within("M_g", vec(est["M_g"]) - t.M_g, vec(sig["M_g"]), k);
+  Eigen::Matrix3d C;
+  for (int row = 0; row < 3; ++row)
+    for (int col = 0; col < 3; ++col) C(row, col) = est["C_bg"][row][col].get<double>();
+  expect_within("C_bg", rotation_error(C, t.C_bg), vec(sig["C_bg_rad"]), k);
+  for (int row = 0; row < 3; ++row) {
+    Eigen::Vector3d e, s;
+    for (int col = 0; col < 3; ++col) {
+      e[col] = est["B_g"][row][col].get<double>() - t.B_g(row, col);
+      s[col] = sig["B_g"][row][col].get<double>();
+    }
+    expect_within("B_g row", e, s, k);
+  }
+  // The canonical record is read by `calibrate check` and the static readers.
+  EXPECT_EQ(YAML::LoadFile(out + "/calibration.yaml")["input_units"].as<std::string>(), "raw");
+  EXPECT_EQ(YAML::LoadFile(out + "/imu.yaml")["imu0"]["model"].as<std::string>(), "scale-misalignment");
+}
+
+}  // namespace
+}  // namespace imucal
