@@ -1,7 +1,8 @@
 #pragma once
 // `imucal report`: one self-contained HTML page (figures embedded as SVG data URIs, no network)
-// of a calibration result, with its figures drawn by gnuplot; optionally the same figures as PNG
-// files. The kind of result is read from the file's content. docs/report.md describes each kind.
+// of a calibration result (static, Allan, camera, camera-IMU), with its figures drawn by gnuplot;
+// optionally the same figures as PNG files. The kind of result is read from the file's content.
+// docs/report.md describes each kind.
 
 #include <nlohmann/json_fwd.hpp>
 #include <string>

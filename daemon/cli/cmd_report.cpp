@@ -29,11 +29,13 @@ void run(const app::report::ReportOptions& options) {
 
 void setup(CLI::App& root) {
   CLI::App* cmd = root.add_subcommand(
-      "report", "HTML report of a calibration result (static, Allan, camera), figures drawn by gnuplot");
+      "report",
+      "HTML report of a calibration result (static, Allan, camera, camera-IMU), figures drawn by gnuplot");
   auto o = std::make_shared<app::report::ReportOptions>();
   o->generator = std::string("imucal ") + kVersion + " report";
   cmd->add_option("RESULT", o->result_path,
-                  "Result JSON (calibrate static --json, allan --json, calibrate camera --json)")
+                  "Result JSON (calibrate static --json, allan --json, calibrate camera --json) or calibrate "
+                  "camimu's output folder")
       ->required();
   cmd->add_option("--log", o->log_path, "The session log the result came from (signals, per-pose figures)")
       ->check(CLI::ExistingFile);
