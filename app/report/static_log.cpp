@@ -280,7 +280,7 @@ Figure sphere_figure(const StaticLogData& d) {
   }
   f.script = datablock("dirs", rows) +
              "set parametric\nset urange [0:2*pi]\nset vrange [-pi/2:pi/2]\nset isosamples 25,13\n"
-             "set view 60,35\nset view equal xyz\nset xyplane relative 0\n"
+             "set view 60,35,1.2\nset view equal xyz\nset xyplane relative 0\n"
              "set xlabel 'x'\nset ylabel 'y'\nset zlabel 'z'\nset xrange [-1.1:1.1]\nset yrange [-1.1:1.1]\n"
              "set zrange [-1.1:1.1]\nset xtics 1\nset ytics 1\nset ztics 1\nset key top right\n"
              "splot cos(u)*cos(v), sin(u)*cos(v), sin(v) with lines lc rgb '#dddddd' notitle, "
