@@ -11,11 +11,13 @@ build_pkgs=(
   libboost-dev libgpiod-dev libpng-dev libwebp-dev libsqlite3-dev sqlite3 libyaml-cpp-dev nlohmann-json3-dev
   libspdlog-dev libcli11-dev
   libaravis-dev libusb-1.0-0-dev libcamera-dev libapriltag-dev
+  gnuplot-nox
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 test_pkgs=(
   clang-format
   qemu-system-x86 busybox-static cpio kmod
+  chromium
 )
 
 want=("${build_pkgs[@]}")

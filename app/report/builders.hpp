@@ -1,0 +1,43 @@
+#pragma once
+// The documents of each kind of report (internal to app/report): what they show and the gnuplot
+// scripts of their figures. report.cpp reads the inputs, picks one, draws and writes.
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "app/report/html.hpp"
+#include "core/result.hpp"
+
+namespace imucal::app::report {
+
+/// Where the document's inputs are, and what was left out of it (shown on stdout).
+struct BuildContext {
+  std::string result_path;
+  std::string log_path;  // empty: no log given
+  std::vector<std::string> notes;
+};
+
+[[nodiscard]] Result<Document> static_document(const nlohmann::json& result, BuildContext& ctx);
+[[nodiscard]] Result<Document> allan_document(const nlohmann::json& result, BuildContext& ctx);
+[[nodiscard]] Result<Document> camera_document(const nlohmann::json& result, BuildContext& ctx);
+[[nodiscard]] Result<Document> camimu_document(const nlohmann::json& result, BuildContext& ctx);
+
+/// The session log's summary (rig, recording, streams, health) as a section; errors name the log.
+[[nodiscard]] Result<Section> session_section(const std::string& log_path);
+
+// Reading result JSON: errors (kCorrupt) name the key, thrown as JsonError and caught by the
+// document builders, which turn them into Result errors naming the file.
+struct JsonError {
+  std::string message;
+};
+const nlohmann::json& at(const nlohmann::json& j, const char* key);
+double number(const nlohmann::json& j, const char* key);
+Eigen::Vector3d vec3(const nlohmann::json& j);
+Eigen::Matrix3d mat3(const nlohmann::json& j);
+
+/// Gnuplot's line colours used across the report for x, y, z (colour-blind safe).
+inline constexpr const char* kAxisColour[3] = {"#0072b2", "#d55e00", "#009e73"};
+
+}  // namespace imucal::app::report

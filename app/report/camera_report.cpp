@@ -1,0 +1,111 @@
+// The report of a camera intrinsics calibration (imucal calibrate camera --json): intrinsics and
+// distortion with their sigmas, the target's coverage of the image and the reprojection error of
+// each view. The JSON has the coverage grid and per-view RMS, not per-corner residuals, so there
+// is no reprojection scatter.
+
+#include <string>
+
+#include "app/report/builders.hpp"
+
+namespace imucal::app::report {
+namespace {
+
+std::string parameters_html(const nlohmann::json& r) {
+  const auto& k = at(r, "intrinsics");
+  const auto& ks = at(r, "intrinsics_sigma");
+  const auto& d = at(r, "distortion_coeffs");
+  const auto& ds = at(r, "distortion_coeffs_sigma");
+  auto value = [](const nlohmann::json& v) { return v.is_null() ? std::nan("") : v.get<double>(); };
+  Table t{{"parameter", "value (px)"}, {}};
+  const char* names[] = {"fx", "fy", "cx", "cy"};
+  for (std::size_t i = 0; i < 4 && i < k.size(); ++i)
+    t.rows.push_back({names[i], with_sigma(value(k[i]), value(ks[i]))});
+  for (std::size_t i = 0; i < d.size(); ++i)
+    t.rows.push_back(
+        {"k" + std::to_string(i + 1), with_sigma(value(d[i]), i < ds.size() ? value(ds[i]) : std::nan(""))});
+  const auto& res = at(r, "resolution");
+  Table q{{"", ""}, {}};
+  q.rows.push_back(
+      {"model",
+       escape(at(r, "camera_model").get<std::string>() + "-" + at(r, "distortion_model").get<std::string>()) +
+           ", " + std::to_string(res[0].get<int>()) + " x " + std::to_string(res[1].get<int>())});
+  q.rows.push_back({"reprojection RMS", num(number(r, "reprojection_rms_px"), 4) + " px"});
+  q.rows.push_back({"views", std::to_string(at(r, "views_used").get<int>()) + " used of " +
+                                 std::to_string(at(r, "views_total").get<int>())});
+  q.rows.push_back({"coverage", num(number(r, "coverage") * 100.0, 3) + " % of the image grid"});
+  q.rows.push_back({"focal length well determined", r.value("focal_well_determined", false) ? "yes" : "no"});
+  return q.to_html() + t.to_html() + "<p class=\"note\">Distortion coefficients are unitless.</p>\n";
+}
+
+Figure coverage_figure(const nlohmann::json& r) {
+  const auto& g = at(r, "coverage_grid");
+  const int cols = at(g, "cols").get<int>(), rows = at(g, "rows").get<int>();
+  const auto& counts = at(g, "counts");
+  const auto& res = at(r, "resolution");
+  const double w = res[0].get<double>(), h = res[1].get<double>();
+  Figure f;
+  f.id = "camera-coverage";
+  f.title = "Target coverage of the image";
+  f.caption = "Target corners of the used views in each cell of a " + std::to_string(cols) + " x " +
+              std::to_string(rows) + " grid over the image (pixel coordinates, origin top left).";
+  f.height_px = static_cast<int>(960.0 * h / w) + 60;
+  std::vector<std::vector<double>> data;
+  for (int y = 0; y < rows; ++y) {
+    for (int x = 0; x < cols; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y * cols + x);
+      data.push_back(
+          {(x + 0.5) * w / cols, (y + 0.5) * h / rows, i < counts.size() ? counts[i].get<double>() : 0.0});
+    }
+  }
+  f.script = datablock("c", data) + "set xrange [0:" + num(w, 8) + "]\nset yrange [" + num(h, 8) +
+             ":0]\nset size ratio -1\nset xlabel 'u (px)'\nset ylabel 'v (px)'\nset cblabel 'corners'\n"
+             "set palette defined (0 '#ffffff', 1 '#9ecae1', 2 '#08519c')\n"
+             "plot $c using 1:2:(" +
+             num(w / cols / 2, 8) + "):(" + num(h / rows / 2, 8) +
+             "):3 with boxxyerror fillstyle solid 1.0 noborder lc palette notitle\n";
+  return f;
+}
+
+Figure views_figure(const nlohmann::json& r) {
+  Figure f;
+  f.id = "camera-view-rms";
+  f.title = "Reprojection error per view";
+  f.caption =
+      "RMS reprojection error of each view with the target, in frame order: used views and rejected "
+      "ones (as an outlier or for too few corners).";
+  f.height_px = 360;
+  std::vector<std::vector<double>> used, rejected;
+  int i = 0;
+  for (const auto& v : at(r, "views")) {
+    const double rms = v.value("rms_px", std::nan(""));
+    (v.value("used", false) ? used : rejected).push_back({static_cast<double>(++i), rms});
+  }
+  if (used.empty()) used.push_back({0.0, std::nan("")});
+  if (rejected.empty()) rejected.push_back({0.0, std::nan("")});
+  f.script =
+      datablock("u", used) + datablock("x", rejected) +
+      "set grid\nset xlabel 'view'\nset ylabel 'RMS reprojection error (px)'\nset key outside right top\n"
+      "set yrange [0:*]\nplot $u using 1:2 with points pt 7 ps 0.5 lc rgb '#0072b2' title 'used', "
+      "$x using 1:2 with points pt 2 lc rgb '#d55e00' title 'rejected'\n";
+  return f;
+}
+
+}  // namespace
+
+Result<Document> camera_document(const nlohmann::json& r, BuildContext& ctx) {
+  Document doc;
+  doc.title = "Camera intrinsics calibration";
+  doc.subtitle =
+      "Report of " + ctx.result_path + " (camera stream " + r.value("camera_stream", std::string("-")) + ")";
+  for (const auto& w : at(r, "warnings")) doc.warnings.push_back(w.get<std::string>());
+  if (!ctx.log_path.empty()) {
+    auto session = session_section(ctx.log_path);
+    if (!session.ok()) return session.error();
+    doc.sections.push_back(std::move(*session));
+  }
+  doc.sections.push_back({"Parameters", parameters_html(r), {}});
+  doc.sections.push_back({"Views", "", {coverage_figure(r), views_figure(r)}});
+  return doc;
+}
+
+}  // namespace imucal::app::report

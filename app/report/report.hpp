@@ -1,0 +1,50 @@
+#pragma once
+// `imucal report`: one self-contained HTML page (figures embedded as SVG data URIs, no network)
+// of a calibration result (static, Allan, camera, camera-IMU), with its figures drawn by gnuplot;
+// optionally the same figures as PNG files. The kind of result is read from the file's content.
+// docs/report.md describes each kind.
+
+#include <nlohmann/json_fwd.hpp>
+#include <string>
+#include <vector>
+
+#include "core/result.hpp"
+
+namespace imucal::app::report {
+
+/// The results a report is made of.
+enum class ReportKind {
+  kStatic,  // imucal calibrate static --json
+  kAllan,   // imucal allan --json
+  kCamImu,  // imucal calibrate camimu: OUT_DIR/result.json
+  kCamera,  // imucal calibrate camera --json
+};
+const char* report_kind_name(ReportKind kind);
+
+/// The kind of a parsed result, from the keys it has. Errc::kCorrupt naming `origin` when the
+/// content is no result imucal writes.
+[[nodiscard]] Result<ReportKind> detect_report_kind(const nlohmann::json& result, const std::string& origin);
+
+struct ReportOptions {
+  std::string result_path;  // a result JSON, or a folder holding result.json (camimu)
+  std::string log_path;     // the session log the result came from; empty: figures from it are left out
+  std::string html_path;    // the report
+  std::string png_dir;      // empty: no PNG files
+  bool overwrite = false;   // replace an existing report and PNG files
+  std::string generator;    // shown at the foot of the page ("imucal 0.3.0")
+};
+
+struct ReportSummary {
+  ReportKind kind = ReportKind::kStatic;
+  int figures = 0;
+  std::vector<std::string> png_files;
+  std::vector<std::string> notes;  // what was left out and why (no --log, ...)
+};
+
+/// Reads the result (and the log), draws the figures and writes the page (and the PNGs).
+/// Errors: kNotFound / kCorrupt for the inputs, kInvalidArgument / kAlreadyExists for outputs
+/// that may not be written, kUnsupported when gnuplot is missing, kInternal with gnuplot's
+/// stderr when it fails, kIo when an output cannot be written.
+[[nodiscard]] Result<ReportSummary> write_report(const ReportOptions& options);
+
+}  // namespace imucal::app::report

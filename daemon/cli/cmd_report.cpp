@@ -1,0 +1,51 @@
+// imucal report RESULT: one self-contained HTML page of a calibration result with its figures
+// drawn by gnuplot, optionally the figures as PNG files (docs/report.md).
+
+#include <iostream>
+#include <memory>
+#include <string>
+
+#include "app/report/report.hpp"
+#include "core/version.hpp"
+#include "daemon/cli/command.hpp"
+
+namespace imucal::cli {
+namespace {
+
+void run(const app::report::ReportOptions& options) {
+  auto summary = app::report::write_report(options);
+  if (!summary.ok()) {
+    // An existing output is refused in the CLI's own words.
+    if (summary.error().code == Errc::kAlreadyExists)
+      throw CliExit{kExitUsage, summary.error().message + ": pass --force to replace it"};
+    fail(summary.error(), "report of " + options.result_path);
+  }
+  std::cout << "report (" << app::report::report_kind_name(summary->kind) << "): " << options.html_path
+            << " (" << summary->figures << (summary->figures == 1 ? " figure)\n" : " figures)\n");
+  if (!summary->png_files.empty())
+    std::cout << "  " << summary->png_files.size() << " PNG figures in " << options.png_dir << "\n";
+  for (const auto& note : summary->notes) std::cout << "  note: " << note << "\n";
+}
+
+void setup(CLI::App& root) {
+  CLI::App* cmd = root.add_subcommand(
+      "report",
+      "HTML report of a calibration result (static, Allan, camera, camera-IMU), figures drawn by gnuplot");
+  auto o = std::make_shared<app::report::ReportOptions>();
+  o->generator = std::string("imucal ") + kVersion + " report";
+  cmd->add_option("RESULT", o->result_path,
+                  "Result JSON (calibrate static --json, allan --json, calibrate camera --json) or calibrate "
+                  "camimu's output folder")
+      ->required();
+  cmd->add_option("--log", o->log_path, "The session log the result came from (signals, per-pose figures)")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("-o,--output", o->html_path, "The HTML report to write")->required();
+  cmd->add_option("--png-dir", o->png_dir, "Also write every figure as a PNG file into this folder");
+  cmd->add_flag("--force", o->overwrite, "Replace a report and PNG files that exist");
+  cmd->callback([o] { run(*o); });
+}
+
+const CommandRegistrar registrar(80, setup);
+
+}  // namespace
+}  // namespace imucal::cli

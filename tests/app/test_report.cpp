@@ -1,0 +1,182 @@
+// The report's pieces without the CLI: kind detection, number formatting, base64, and the
+// camera-IMU and camera reports of results written by their own writers (app/camimu_results,
+// app/camera_results), so that a change of those schemas shows here. Drawing needs gnuplot; those
+// tests skip, saying so, without it.
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "app/camera_results.hpp"
+#include "app/camimu_results.hpp"
+#include "app/report/html.hpp"
+#include "app/report/report.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal::app::report {
+namespace {
+
+namespace fs = std::filesystem;
+
+bool gnuplot_on_path() {
+  const char* path = std::getenv("PATH");
+  std::stringstream ss(path ? path : "");
+  std::string dir;
+  while (std::getline(ss, dir, ':')) {
+    if (!dir.empty() && ::access((fs::path(dir) / "gnuplot").c_str(), X_OK) == 0) return true;
+  }
+  return false;
+}
+
+std::size_t count(const std::string& text, const std::string& what) {
+  std::size_t n = 0;
+  for (auto p = text.find(what); p != std::string::npos; p = text.find(what, p + 1)) ++n;
+  return n;
+}
+
+TEST(Report, DetectsTheKindFromTheContent) {
+  using nlohmann::json;
+  EXPECT_EQ(*detect_report_kind(json{{"static_intervals", json::array()}, {"accel", 1}, {"gyro", 1}}, "r"),
+            ReportKind::kStatic);
+  EXPECT_EQ(*detect_report_kind(json{{"accelerometer", 1}, {"gyroscope", 1}, {"kalibr", 1}}, "r"),
+            ReportKind::kAllan);
+  EXPECT_EQ(*detect_report_kind(json{{"cameras", 1}, {"imu", 1}, {"biases", 1}}, "r"), ReportKind::kCamImu);
+  EXPECT_EQ(*detect_report_kind(json{{"intrinsics", 1}, {"views", 1}, {"coverage_grid", 1}}, "r"),
+            ReportKind::kCamera);
+  const auto unknown = detect_report_kind(json{{"accel", 1}}, "x.json");
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_EQ(unknown.error().code, Errc::kCorrupt);
+  EXPECT_NE(unknown.error().message.find("x.json"), std::string::npos);
+  EXPECT_FALSE(detect_report_kind(json::array(), "r").ok());
+}
+
+TEST(Report, FormatsValuesWithTheirSigmas) {
+  EXPECT_EQ(with_sigma(1.0012345, 0.00023), "1.00123 &plusmn; 0.00023");
+  EXPECT_EQ(with_sigma(32768.123, 1.5), "32768.1 &plusmn; 1.5");
+  EXPECT_EQ(with_sigma(1.234e-5, 1.1e-6), "(1.23 &plusmn; 0.11)e-05");
+  EXPECT_EQ(with_sigma(0.5, 0.0), "0.5 (fixed)");
+  EXPECT_EQ(with_sigma(0.5, std::nan("")), "0.5 (&sigma; undetermined)");
+  EXPECT_EQ(num(std::nan("")), "undetermined");
+  EXPECT_EQ(escape("<a href=\"x\">&'"), "&lt;a href=&quot;x&quot;&gt;&amp;&#39;");
+}
+
+TEST(Report, Base64OfRfc4648) {
+  EXPECT_EQ(base64(""), "");
+  EXPECT_EQ(base64("f"), "Zg==");
+  EXPECT_EQ(base64("fo"), "Zm8=");
+  EXPECT_EQ(base64("foo"), "Zm9v");
+  EXPECT_EQ(base64("foobar"), "Zm9vYmFy");
+  EXPECT_EQ(base64(std::string("\xff\x00\x80", 3)), "/wCA");
+}
+
+/// A camera-IMU result with two cameras, a bias spline and cross-correlation curves.
+CamImuReport camimu_report() {
+  CamImuReport r;
+  r.log_path = "/data/rig.imulog";
+  r.imu_stream.name = "imu0";
+  r.imu_stream.units = ImuUnits::kSi;
+  auto& res = r.result;
+  res.model = CamImuModelKind::kExtended;
+  res.imu.S_a = {0.99, 1.01, 1.0};
+  res.imu.b_a = {0.38, 0.03, -0.72};
+  res.imu.b_g = {0.036, 0.057, 0.066};
+  res.imu_sigma.S_a = {1e-4, 2e-4, 3e-4};
+  res.canonical = *canonical_from_krebs(res.imu);
+  res.gravity_w = {0.01, -0.02, -9.80665};
+  res.gravity_sigma_rad = {1e-4, 2e-4};
+  for (int i = 0; i < 2; ++i) {
+    CamImuCameraResult c;
+    c.name = "cam" + std::to_string(i);
+    c.stream = c.name;
+    c.T_cam_imu.translation() = Eigen::Vector3d(0.031, -0.018, -0.013 + 0.1 * i);
+    c.rotation_sigma_rad = {1e-3, 2e-3, 3e-3};
+    c.translation_sigma_m = {1e-3, 2e-3, 4e-3};
+    c.timeshift_cam_imu_s = i == 0 ? 0.0042 : -0.0031;
+    c.timeshift_sigma_s = 1.4e-4;
+    c.frames = 1169;
+    c.corners = 49000;
+    c.reprojection_rms_px = 0.12;
+    res.cameras.push_back(c);
+  }
+  for (int k = 0; k < 20; ++k) {
+    const double t = 0.5 * k;
+    res.biases.push_back(
+        {static_cast<TimeNs>(t * 1e9), res.imu.b_a * (1 + 1e-3 * t), res.imu.b_g * (1 - 1e-3 * t)});
+  }
+  res.quality.xcorr = {{{-0.01, 0.5}, {0.0, 0.9}, {0.01, 0.6}}, {{-0.01, 0.7}, {0.0, 1.0}, {0.01, 0.4}}};
+  res.quality.xcorr_peak_s = {0.0042, -0.0031};
+  res.quality.accel_residual_rms = {0.03, 0.04, 0.05};
+  res.quality.gyro_residual_rms = {0.001, 0.0012, 0.0011};
+  res.quality.accel_sigma = 0.045;
+  res.quality.gyro_sigma = 0.0011;
+  r.warnings = {"z rotation barely excited"};
+  return r;
+}
+
+TEST(Report, CamImuResultFolderFromItsWriter) {
+  if (!gnuplot_on_path()) GTEST_SKIP() << "gnuplot is not installed (Debian package gnuplot-nox)";
+  const std::string dir = test::scratch_dir();
+  fs::create_directories(dir + "/out");
+  std::ofstream(dir + "/out/result.json") << camimu_result_json(camimu_report());
+  ReportOptions o;
+  o.result_path = dir + "/out";  // the command's output folder
+  o.html_path = dir + "/camimu.html";
+  o.png_dir = dir + "/png";
+  auto s = write_report(o);
+  ASSERT_TRUE(s.ok()) << s.error().message;
+  EXPECT_EQ(s->kind, ReportKind::kCamImu);
+  EXPECT_EQ(s->figures, 3);
+  EXPECT_EQ(s->png_files.size(), 3u);
+  const std::string html = test::read_file(o.html_path);
+  EXPECT_EQ(count(html, "src=\"data:image/svg+xml;base64,"), 3u);
+  EXPECT_EQ(html.find("http://"), std::string::npos);
+  for (const char* id : {"camimu-imu-residuals", "camimu-xcorr", "camimu-biases"})
+    EXPECT_NE(html.find(std::string("data-plot=\"") + id + "\""), std::string::npos) << id;
+  EXPECT_NE(html.find("z rotation barely excited"), std::string::npos);
+  EXPECT_NE(html.find("4.20 &plusmn; 0.14"), std::string::npos);   // cam0's time shift, ms
+  EXPECT_NE(html.find("-3.10 &plusmn; 0.14"), std::string::npos);  // cam1's
+  // Written once: a second run refuses without overwrite.
+  EXPECT_EQ(write_report(o).error().code, Errc::kAlreadyExists);
+}
+
+TEST(Report, CameraResultFromItsWriter) {
+  if (!gnuplot_on_path()) GTEST_SKIP() << "gnuplot is not installed (Debian package gnuplot-nox)";
+  CameraCalibrationReport r;
+  r.stream.name = "cam0";
+  auto& res = r.intrinsics;
+  res.camera.width = 376;
+  res.camera.height = 240;
+  res.camera.intrinsics = {200.25, 199.75, 188.5, 117.125};
+  res.camera.distortion_coeffs = {-0.28, 0.07, 0.0002, -0.0003};
+  res.intrinsics_sigma = {0.1, 0.1, 0.05, 0.05};
+  res.distortion_sigma = {0.001, 0.002, 1e-5, 1e-5};
+  res.views_total = 3;
+  res.views_used = 2;
+  res.views.resize(3);
+  res.views[0].rejected_because = "too few points (3)";
+  res.views[1].used = res.views[2].used = true;
+  res.views[1].rms_px = 0.2;
+  res.views[2].rms_px = 0.3;
+  res.coverage_cols = 10;
+  res.coverage_rows = 6;
+  res.coverage_counts.assign(60, 4);
+  const std::string dir = test::scratch_dir();
+  std::ofstream(dir + "/camera.json") << camera_result_json(r);
+  ReportOptions o;
+  o.result_path = dir + "/camera.json";
+  o.html_path = dir + "/camera.html";
+  auto s = write_report(o);
+  ASSERT_TRUE(s.ok()) << s.error().message;
+  EXPECT_EQ(s->kind, ReportKind::kCamera);
+  EXPECT_EQ(s->figures, 2);
+  const std::string html = test::read_file(o.html_path);
+  EXPECT_NE(html.find("200.25 &plusmn; 0.10"), std::string::npos);
+  EXPECT_EQ(count(html, "<figure class=\"plot\""), 2u);
+}
+
+}  // namespace
+}  // namespace imucal::app::report
