@@ -139,8 +139,7 @@ Status check_faces(const std::vector<Hold>& holds, const GSensitivityOptions& op
                                           fmt("%.0f", opt.max_face_angle_deg) + " deg from every face"
                                     : std::string()) +
                         "). Record again: hold the rig still for about 30 s with each of the six faces up in "
-                        "turn (face +x up: the accelerometer's x axis reads +g)")
-      .with_remedy("min_hold_s");
+                        "turn (face +x up: the accelerometer's x axis reads +g)");
 }
 
 /// White noise density and bias random walk of each gyro axis from the Allan deviation pooled over
@@ -265,7 +264,8 @@ void fit_holds(const std::vector<Hold>& holds, const GSensitivityOptions& opt, G
       opt.accel_offset_sigma_mps2 * opt.accel_offset_sigma_mps2 * H * H.transpose();
   for (int e = 0; e < 9; ++e) res->G_sigma(e / 3, e % 3) = std::sqrt(res->covariance(e, e));
   for (int i = 0; i < 3; ++i) res->b_g_sigma[i] = std::sqrt(res->covariance(9 + i, 9 + i));
-  res->b_g_t_ns = static_cast<TimeNs>(std::llround(t_ref * 1e9));  // from the first sample; made absolute below
+  res->b_g_t_ns =
+      static_cast<TimeNs>(std::llround(t_ref * 1e9));  // from the first sample; made absolute below
   // Residuals: what the model leaves of each hold, in rad/s.
   double sum_sq = 0.0;
   for (Eigen::Index k = 0; k < n; ++k) {
@@ -298,26 +298,27 @@ void warn_about_holds(const GSensitivityOptions& opt, GSensitivityResult* res) {
     const auto& h = res->holds[k];
     if (h.rotation_deg > res->holds[worst].rotation_deg) worst = k;
     if (h.tilt_deg > opt.max_rotation_deg) {
-      res->warnings.push_back(name(k) + " is rotating: its gravity direction turns " + fmt("%.2f", h.tilt_deg) +
-                              " deg (limit " + fmt("%.1f", opt.max_rotation_deg) +
+      res->warnings.push_back(name(k) + " is rotating: its gravity direction turns " +
+                              fmt("%.2f", h.tilt_deg) + " deg (limit " + fmt("%.1f", opt.max_rotation_deg) +
                               " deg), and G absorbs the gyro's reading of the turn. Clamp the rig or hold it "
                               "still, and record again");
     }
   }
   const auto& w = res->holds[worst];
   if (w.rotation_deg > opt.max_rotation_deg) {
-    res->warnings.push_back("the gyro means do not fit b_g + H a: " + name(worst) + " is " +
-                            fmt("%.2g", w.residual_radps.norm()) + " rad/s off the fit, " +
-                            fmt("%.2f", w.rotation_deg) + " deg over the hold (limit " +
-                            fmt("%.1f", opt.max_rotation_deg) +
-                            " deg): a hold turned (about the vertical, which the accelerometer cannot see), or "
-                            "the bias jumped. Clamp the rig or hold it still, and record again");
+    res->warnings.push_back(
+        "the gyro means do not fit b_g + H a: " + name(worst) + " is " +
+        fmt("%.2g", w.residual_radps.norm()) + " rad/s off the fit, " + fmt("%.2f", w.rotation_deg) +
+        " deg over the hold (limit " + fmt("%.1f", opt.max_rotation_deg) +
+        " deg): a hold turned (about the vertical, which the accelerometer cannot see), or "
+        "the bias jumped. Clamp the rig or hold it still, and record again");
   }
   if (res->chi2_per_dof > 4.0) {
-    res->warnings.push_back("the holds' gyro means scatter about the fit " + fmt("%.1f", std::sqrt(res->chi2_per_dof)) +
-                            " times more than their noise (white noise and bias random walk) explains: a hold "
-                            "turned, the bias drifted with temperature, or the response is not linear in a; the "
-                            "sigmas were widened by that factor");
+    res->warnings.push_back(
+        "the holds' gyro means scatter about the fit " + fmt("%.1f", std::sqrt(res->chi2_per_dof)) +
+        " times more than their noise (white noise and bias random walk) explains: a hold "
+        "turned, the bias drifted with temperature, or the response is not linear in a; the "
+        "sigmas were widened by that factor");
   }
 }
 
@@ -328,7 +329,8 @@ Status GSensitivityOptions::validate() const {
   if (!(gravity_mps2 > 9.7 && gravity_mps2 < 9.9)) {
     return fail("gravity " + fmt("%g", gravity_mps2) + " m/s^2 is not a terrestrial value (9.7..9.9)");
   }
-  if (latitude_deg && !(std::abs(*latitude_deg) <= 90.0)) return fail("the latitude must be in [-90, 90] deg");
+  if (latitude_deg && !(std::abs(*latitude_deg) <= 90.0))
+    return fail("the latitude must be in [-90, 90] deg");
   if (!A_a.allFinite() || !b_a.allFinite() || !A_g.allFinite() || !(std::abs(A_a.determinant()) > 0.0) ||
       !(std::abs(A_g.determinant()) > 0.0)) {
     return fail("the accelerometer or gyro model is singular or not finite");
@@ -367,7 +369,9 @@ Eigen::MatrixXd random_walk_mean_covariance(const std::vector<double>& t0, const
   for (const auto& p : pieces) {
     for (const auto& q : pieces) {
       if (p.side != q.side) continue;
-      const double c = &p == &q ? p.u + (p.v - p.u) / 3.0 : p.v <= q.u ? 0.5 * (p.u + p.v) : 0.5 * (q.u + q.v);
+      const double c = &p == &q     ? p.u + (p.v - p.u) / 3.0
+                       : p.v <= q.u ? 0.5 * (p.u + p.v)
+                                    : 0.5 * (q.u + q.v);
       const double w = (p.v - p.u) * (q.v - q.u) / ((t1[p.span] - t0[p.span]) * (t1[q.span] - t0[q.span]));
       C(static_cast<Eigen::Index>(p.span), static_cast<Eigen::Index>(q.span)) += w * c;
     }
@@ -375,7 +379,8 @@ Eigen::MatrixXd random_walk_mean_covariance(const std::vector<double>& t0, const
   return C;
 }
 
-Result<GSensitivityResult> calibrate_gsens(std::span<const ImuSample> samples, const GSensitivityOptions& opt) {
+Result<GSensitivityResult> calibrate_gsens(std::span<const ImuSample> samples,
+                                           const GSensitivityOptions& opt) {
   IMUCAL_TRY(opt.validate());
   GSensitivityResult res;
   res.gravity_mps2 = opt.gravity_mps2;

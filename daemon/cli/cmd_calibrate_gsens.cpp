@@ -159,11 +159,13 @@ void setup(CLI::App& root) {
                   "Accelerometer and gyro calibration of the same stream (result YAML of calibrate static); "
                   "default: the log's nominal conversion")
       ->check(CLI::ExistingFile);
-  cmd->add_option("--min-hold", o->min_hold_s, "Shortest hold used, s (after trimming one window at each end)")
+  cmd->add_option("--min-hold", o->min_hold_s,
+                  "Shortest hold used, s (after trimming one window at each end)")
       ->check(CLI::Range(1.0, 3600.0));
   cmd->add_option("--window", o->window_s, "Static detector window t_w, s")->check(CLI::Range(0.05, 10.0));
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");
-  cmd->add_option("-o,--output", o->yaml_path, "Write the result as YAML (readable by calibrate static --gsens fix)");
+  cmd->add_option("-o,--output", o->yaml_path,
+                  "Write the result as YAML (readable by calibrate static --gsens fix)");
   cmd->add_option("--json", o->json_path, "Write the result as JSON");
   cmd->add_flag("--force", o->force, "Replace result files that exist (never the log)");
   cmd->callback([o] { run(*o); });

@@ -68,7 +68,8 @@ Synth make_holds(const SynthConfig& cfg) {
     const Eigen::Vector3d axis = u.unitOrthogonal();
     for (int i = 0; i < hold_n; ++i) {
       const double angle = turning ? cfg.turn_rate * i * dt : 0.0;
-      emit(Eigen::AngleAxisd(angle, axis) * u, turning ? Eigen::Vector3d(cfg.turn_rate * axis) : Eigen::Vector3d::Zero());
+      emit(Eigen::AngleAxisd(angle, axis) * u,
+           turning ? Eigen::Vector3d(cfg.turn_rate * axis) : Eigen::Vector3d::Zero());
     }
     if (f + 1 == cfg.faces.size()) break;
     const Eigen::Vector3d start = turning ? Eigen::AngleAxisd(cfg.turn_rate * hold_n * dt, axis) * u : u;
@@ -180,7 +181,8 @@ TEST(GSensCalibration, WarnsAboutARotatingHold) {
   auto res = calibrate_gsens(make_holds(cfg).samples, si_options());
   ASSERT_TRUE(res.ok()) << res.error().message;
   bool named = false;
-  for (const auto& w : res->warnings) named = named || w.find("hold 3 (+y up) is rotating: its gravity direction turns") == 0;
+  for (const auto& w : res->warnings)
+    named = named || w.find("hold 3 (+y up) is rotating: its gravity direction turns") == 0;
   EXPECT_TRUE(named) << (res->warnings.empty() ? "no warnings" : res->warnings.front());
   EXPECT_GT(res->holds[2].tilt_deg, 4.0);
 }
