@@ -1,13 +1,15 @@
 #pragma once
 // The output schemas of the calibration results, in one place for the CLI and the rig service:
-// the static calibration (YAML and JSON, docs/static-calibration.md) and the noise figures of
-// the Allan deviation (Kalibr imu.yaml and JSON with the curves).
+// the static calibration (YAML and JSON, docs/static-calibration.md), the six-orientation
+// g-sensitivity experiment (YAML and JSON, docs/gsens.md) and the noise figures of the Allan
+// deviation (Kalibr imu.yaml and JSON with the curves).
 
 #include <map>
 #include <string>
 #include <vector>
 
 #include "calib/allan.hpp"
+#include "calib/gsens_calibration.hpp"
 #include "calib/static_calibration.hpp"
 #include "core/imu.hpp"
 #include "core/result.hpp"
@@ -56,6 +58,21 @@ struct AllanReport {
 std::string allan_kalibr_yaml(const AllanReport& report);
 /// The report as JSON with the curves and fitted lines (indented, ending in a newline).
 std::string allan_json(const AllanReport& report);
+
+/// Where a g-sensitivity result's inputs come from, written with it.
+struct GSensProvenance {
+  std::string models;          // "nominal conversion" or the --imu-intrinsics file
+  std::string gravity_source;  // app::GravityChoice::source
+};
+
+/// The six-orientation g-sensitivity result as YAML: a top-level `G:` (3 rows of 3, rad/s per
+/// m/s^2, what read_gsens_matrix and `calibrate static --gsens fix` read), G_sigma, b_g and its
+/// sigma, the models used, the noise, residual figures and the holds.
+std::string gsens_result_yaml(const GSensitivityResult& result, const ImuStreamInfo& info,
+                              const GSensProvenance& provenance);
+/// The same as JSON (indented, ending in a newline), with the full covariance and the warnings.
+std::string gsens_result_json(const GSensitivityResult& result, const ImuStreamInfo& info,
+                              const GSensProvenance& provenance);
 
 /// How a result file may be written.
 struct OutputPolicy {

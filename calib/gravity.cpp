@@ -20,4 +20,8 @@ double wgs84_gravity(double latitude_deg, double height_m) {
   return gamma0 * (1.0 - 2.0 / kA * (1.0 + kF + kM - 2.0 * kF * s2) * h + 3.0 / (kA * kA) * h * h);
 }
 
+double earth_rate_gsens(double latitude_deg, double gravity_mps2) {
+  return kEarthRateRadps * std::sin(latitude_deg * M_PI / 180.0) / gravity_mps2;
+}
+
 }  // namespace imucal::calib

@@ -14,6 +14,7 @@
 
 #include "calib/allan.hpp"
 #include "calib/ellipsoid.hpp"
+#include "calib/gravity.hpp"
 #include "calib/rk4.hpp"
 #include "calib/static_detector.hpp"
 #include "calib/static_steps.hpp"
@@ -343,29 +344,6 @@ std::vector<PoseDirections> pose_directions(const std::vector<StaticInterval>& i
 }  // namespace
 
 // ---- steps of calibrate_static, in the order it runs them ------------------------------------
-
-StaticDetection detect_variance(const ScannedRecording& scan, double window_s) {
-  StaticDetection d;
-  d.window = std::max<std::size_t>(3, static_cast<std::size_t>(std::lround(window_s * scan.rate_hz)));
-  d.half = d.window / 2;
-  d.sigma_sq = variance_magnitude_sq(scan.accel, d.window);
-  d.gyro_sigma_sq = variance_magnitude_sq(scan.gyro, d.window);
-  std::vector<double> usable_sigma, usable_gyro;
-  usable_sigma.reserve(d.sigma_sq.size());
-  usable_gyro.reserve(d.sigma_sq.size());
-  for (std::size_t i = 0; i < d.sigma_sq.size(); ++i) {
-    if (scan.accel_ok[i]) usable_sigma.push_back(d.sigma_sq[i]);
-    if (scan.gyro_ok[i]) usable_gyro.push_back(d.gyro_sigma_sq[i]);
-  }
-  d.floor_sq = std::max(percentile(usable_sigma, 0.1), 1e-300);
-  d.gyro_floor_sq = std::max(percentile(usable_gyro, 0.1), 1e-300);
-  return d;
-}
-
-bool StaticDetection::moving(std::size_t i) const {
-  const double ra = sigma_sq[i] / floor_sq, rg = gyro_sigma_sq[i] / gyro_floor_sq;
-  return (ra > kStillRatio && rg > kStillRatio) || ra > kStrongRatio || rg > kStrongRatio;
-}
 
 namespace {
 
@@ -1202,8 +1180,7 @@ void set_gsens_result(const GyroStaticFit& f, const StaticCalibrationOptions& op
     }
   }
   if (opt.latitude_deg) {
-    constexpr double kEarthRate = 7.2921150e-5;  // rad/s (WGS-84)
-    res->earth_rate_removed = kEarthRate * std::sin(*opt.latitude_deg * M_PI / 180.0) / opt.gravity_mps2;
+    res->earth_rate_removed = earth_rate_gsens(*opt.latitude_deg, opt.gravity_mps2);
     res->canonical.G -= res->earth_rate_removed * Eigen::Matrix3d::Identity();
   }
   const Eigen::Vector3d s0 = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();

@@ -1,11 +1,14 @@
-// The scan of a recording before a static method: time base, breaks and invalid samples
-// (calib/static_scan.hpp).
+// The scan of a recording before a static method: time base, breaks and invalid samples, and the
+// variance static detector over it (calib/static_scan.hpp).
 
 #include "calib/static_scan.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <string>
 #include <vector>
 
+#include "calib/static_detector.hpp"
 #include "core/time.hpp"
 
 namespace imucal::calib {
@@ -76,6 +79,29 @@ Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
     if (!s.accel_ok[i]) s.accel[i] = i > 0 ? s.accel[i - 1] : Eigen::Vector3d::Zero();
   }
   return s;
+}
+
+StaticDetection detect_variance(const ScannedRecording& scan, double window_s) {
+  StaticDetection d;
+  d.window = std::max<std::size_t>(3, static_cast<std::size_t>(std::lround(window_s * scan.rate_hz)));
+  d.half = d.window / 2;
+  d.sigma_sq = variance_magnitude_sq(scan.accel, d.window);
+  d.gyro_sigma_sq = variance_magnitude_sq(scan.gyro, d.window);
+  std::vector<double> usable_sigma, usable_gyro;
+  usable_sigma.reserve(d.sigma_sq.size());
+  usable_gyro.reserve(d.sigma_sq.size());
+  for (std::size_t i = 0; i < d.sigma_sq.size(); ++i) {
+    if (scan.accel_ok[i]) usable_sigma.push_back(d.sigma_sq[i]);
+    if (scan.gyro_ok[i]) usable_gyro.push_back(d.gyro_sigma_sq[i]);
+  }
+  d.floor_sq = std::max(percentile(usable_sigma, 0.1), 1e-300);
+  d.gyro_floor_sq = std::max(percentile(usable_gyro, 0.1), 1e-300);
+  return d;
+}
+
+bool StaticDetection::moving(std::size_t i) const {
+  const double ra = sigma_sq[i] / floor_sq, rg = gyro_sigma_sq[i] / gyro_floor_sq;
+  return (ra > kStillRatio && rg > kStillRatio) || ra > kStrongRatio || rg > kStrongRatio;
 }
 
 }  // namespace imucal::calib

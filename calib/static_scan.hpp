@@ -1,9 +1,11 @@
 #pragma once
 // The scan of a recording that the static methods share (the calibration, calib/static_steps.hpp,
-// and the check of a calibration, app/calibration_check.hpp): time base, breaks and invalid
-// samples. No solver library.
+// the six-orientation g-sensitivity experiment, calib/gsens_calibration.hpp, and the check of a
+// calibration, app/calibration_check.hpp): time base, breaks and invalid samples, and the variance
+// static detector over the whole recording. No solver library.
 
 #include <Eigen/Core>
+#include <cstddef>
 #include <span>
 #include <string>
 #include <vector>
@@ -33,5 +35,29 @@ struct ScannedRecording {
 /// too short for their method themselves.
 [[nodiscard]] Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
                                                       std::vector<std::string>* warnings);
+
+/// The variance static detector (eq. 3.9) over the whole recording, for the accelerometer (which
+/// selects the static poses) and the gyroscope (which, with it, tells a still start from motion).
+struct StaticDetection {
+  std::size_t window = 0;             // samples
+  std::size_t half = 0;               // window / 2
+  std::vector<double> sigma_sq;       // accelerometer
+  std::vector<double> gyro_sigma_sq;  // the same statistic of the gyroscope
+  /// 10th percentile of sigma_sq (gyro_sigma_sq) over the valid samples: the noise floor of a
+  /// still rig.
+  double floor_sq = 0.0;
+  double gyro_floor_sq = 0.0;
+
+  /// Ratios to the floors (on varsigma^2, the squared variance) for the still start: a sample is
+  /// moving when both sensors exceed kStillRatio (variance 3.2 times the floor), or either
+  /// exceeds kStrongRatio (variance 1000 times). One sensor alone being noisier than in the later
+  /// poses (an accelerometer that settles after power-up; a gyro on a rig held by hand, 40 times
+  /// the floor's variance in a real recording) is not motion: turning the rig raises both, by
+  /// far more.
+  static constexpr double kStillRatio = 10.0;
+  static constexpr double kStrongRatio = 1e6;
+  bool moving(std::size_t i) const;
+};
+StaticDetection detect_variance(const ScannedRecording& scan, double window_s);
 
 }  // namespace imucal::calib

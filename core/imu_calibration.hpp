@@ -3,7 +3,7 @@
 // the estimated model with its uncertainty, the static intervals it used, quality figures and
 // warnings. It lives in core, with Eigen only, so that storage and the service can read and write
 // calibrations without linking the estimator (calib/ and Ceres); calib/static_calibration.hpp
-// produces it.
+// produces it. The six-orientation g-sensitivity record (calib/gsens_calibration.hpp) is here too.
 
 #include <Eigen/Core>
 #include <cstddef>
@@ -129,6 +129,62 @@ struct StaticCalibrationResult {
   int gyro_iterations = 0;
   StaticQuality quality;
   StaticTimings timings;
+  std::vector<std::string> warnings;
+};
+
+/// One still hold of the six-orientation g-sensitivity experiment (Krebs 2012, section 5.2.3).
+struct GSensitivityHold {
+  TimeNs t0_ns = 0;
+  TimeNs t1_ns = 0;  // last sample
+  std::size_t samples = 0;
+  /// The body axis pointing up ("+x" ... "-z": the accelerometer reads +g along it), empty when
+  /// the hold is tilted from every face by more than the method's limit; and that tilt, deg.
+  std::string face;
+  double face_angle_deg = 0.0;
+  Eigen::Vector3d accel_mps2 = Eigen::Vector3d::Zero();     // calibrated accelerometer mean a_k
+  Eigen::Vector3d gyro_mean_raw = Eigen::Vector3d::Zero();  // input units
+  /// A_g (gyro mean - b_g(t) - H a_k): what the fitted model leaves of this hold, rad/s.
+  Eigen::Vector3d residual_radps = Eigen::Vector3d::Zero();
+  /// Rotation inside the hold: the turn of the gravity direction between its first and last
+  /// second (accelerometer), and the residual rate times the hold's length (gyro), deg.
+  double tilt_deg = 0.0;
+  double rotation_deg = 0.0;
+};
+
+/// The static six-orientation g-sensitivity experiment: the canonical G of core/imu_model.hpp
+/// (w = A_g (w_raw - b_g) - G a) and the gyro bias, fitted to the gyro means of still holds.
+struct GSensitivityResult {
+  Eigen::Matrix3d G = Eigen::Matrix3d::Zero();        // rad/s per m/s^2, output frame of A_g
+  Eigen::Matrix3d G_sigma = Eigen::Matrix3d::Zero();  // standard deviations of G's entries
+  /// The gyro bias (input units, canonical sign) at the middle of the holds' span, with sigma.
+  Eigen::Vector3d b_g = Eigen::Vector3d::Zero();
+  Eigen::Vector3d b_g_sigma = Eigen::Vector3d::Zero();
+  TimeNs b_g_t_ns = 0;  // the time b_g refers to
+  /// Covariance of [G row by row (9), b_g (3)], including the models' share (model_sigma).
+  Eigen::Matrix<double, 12, 12> covariance = Eigen::Matrix<double, 12, 12>::Zero();
+  /// The models the holds were read through: a = A_a (a_raw - b_a), w = A_g (w_raw - b_g) - G a,
+  /// and the uncertainty assumed for them (0: calibrated): relative, of A_a's and A_g's entries
+  /// (carried into G), and of b_a (carried into b_g).
+  Eigen::Matrix3d A_a = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d b_a = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d A_g = Eigen::Matrix3d::Identity();
+  double accel_model_rel_sigma = 0.0;
+  double gyro_model_rel_sigma = 0.0;
+  double accel_offset_sigma_mps2 = 0.0;  // of b_a, each axis
+  /// Earth rate removed from G (Omega sin(latitude) / g on the diagonal); 0 when the latitude is
+  /// not known (then G holds it).
+  double earth_rate_removed = 0.0;
+  /// The noise of one hold's gyro mean, per axis in input units: white noise density (/sqrt(Hz))
+  /// and bias random walk (*sqrt(Hz)) from the pooled Allan deviation of the holds, or given.
+  Eigen::Vector3d gyro_noise_density = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_random_walk = Eigen::Vector3d::Zero();
+  /// Chi-square of the residuals per degree of freedom against that noise (pooled over axes);
+  /// the covariance is scaled by it when it exceeds 1.
+  double chi2_per_dof = 0.0;
+  double residual_rms_radps = 0.0;  // of the holds' residuals, all axes
+  FitDof dof;                       // all three axes: 3 residuals per hold, 12 parameters
+  double gravity_mps2 = 0.0;
+  std::vector<GSensitivityHold> holds;
   std::vector<std::string> warnings;
 };
 
