@@ -447,8 +447,9 @@ int run_compare(const Args& a) {
   }
   print_header(a, "basic against extended model on the same recordings (Krebs 2012, 5.1.3)");
   std::printf(
-      "errors = estimate - truth of the extrinsics and the offset; a bias shows as a mean error many times "
-      "spread/sqrt(n)\n");
+      "errors = estimate - truth of the extrinsics and the offset. Each seed draws its own IMU (S, M, C_bg, "
+      "B_g), so a model error biases each run its own way: it shows as RMS err/sigma well above 1 "
+      "(R_cam_gyro: against R_cam_imu C_bg, with the sigma of R_cam_imu)\n");
   print_model_rows("basic", c_basic, r_basic);
   print_model_rows("extended", c_ext, r_ext);
   return 0;
