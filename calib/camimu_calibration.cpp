@@ -21,8 +21,9 @@ Status CamImuOptions::validate() const {
     return make_error(Errc::kInvalidArgument, "knot spacing must be within 0.005-0.5 s");
   if (!(bias_knot_spacing_s >= knot_spacing_s && bias_knot_spacing_s <= 60.0))
     return make_error(Errc::kInvalidArgument, "bias knot spacing must be between the knot spacing and 60 s");
-  if (!(corner_sigma_px > 0.0) || !(reprojection_loss_sigmas > 0.0))
-    return make_error(Errc::kInvalidArgument, "corner sigma and loss scale must be positive");
+  if (!(corner_sigma_px >= 0.0 && corner_sigma_px <= 50.0) || !(reprojection_loss_sigmas > 0.0))
+    return make_error(Errc::kInvalidArgument,
+                      "the corner sigma must be within 0-50 px (0: estimated) and the loss scale positive");
   if (!(noise.accel_noise_density > 0 && noise.gyro_noise_density > 0 && noise.accel_random_walk > 0 &&
         noise.gyro_random_walk > 0))
     return make_error(Errc::kInvalidArgument, "every IMU noise figure must be positive (imu.yaml)");
@@ -39,6 +40,9 @@ namespace {
 
 using namespace camimu;
 using Arr3 = std::array<double, 3>;
+/// Below this the corner noise is not believed (quantisation of the stored corners, model error).
+constexpr double kMinCornerSigmaPx = 0.005;
+constexpr int kPreliminaryIterations = 12;
 using Arr4 = std::array<double, 4>;
 
 Arr4 to_quat(const Eigen::Matrix3d& R) {
@@ -57,6 +61,7 @@ struct CameraState {
   std::vector<FramePose> poses;
   TimeshiftEstimate xcorr;
   Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();  // of the rotation alignment
+  double sigma_px = 0.3;                                // corner noise, per coordinate
 };
 
 /// Everything the solver moves, at stable addresses.
@@ -101,6 +106,8 @@ class Estimator {
   void build(ceres::Problem* problem, bool extended);
   Status solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary);
   bool frames_in_window() const;
+  /// The corner noise of each camera from the current residuals (1.4826 x median |component|).
+  void reestimate_corner_sigma();
   void covariance(CamImuCalibrationResult* out);
   void fill_result(CamImuCalibrationResult* out);
   double t_s(TimeNs t) const { return static_cast<double>(t - t0_ns_) * 1e-9; }
@@ -126,11 +133,21 @@ template <int N>
 Status Estimator<N>::initialise_camera(std::size_t c, const GyroLookup& gyro) {
   const auto& cam = cameras_[c];
   CameraState& cs = st_.cams[c];
-  cs.poses = pnp_poses(cam.camera, cam.observations, points_, t0_ns_, 6, 10.0 * opt_.corner_sigma_px + 2.0);
+  const double max_rms_px = opt_.corner_sigma_px > 0 ? 10.0 * opt_.corner_sigma_px + 2.0 : 5.0;
+  cs.poses = pnp_poses(cam.camera, cam.observations, points_, t0_ns_, 6, max_rms_px);
   if (cs.poses.size() < 20)
     return make_error(Errc::kInsufficientData,
                       cam.name + ": the target's pose was found in " + std::to_string(cs.poses.size()) +
                           " frames; at least 20 are needed (move the rig in front of the target)");
+  if (opt_.corner_sigma_px > 0) {
+    cs.sigma_px = opt_.corner_sigma_px;
+  } else {
+    // Per-coordinate sigma from the PnP residuals: rms^2 = 2 sigma^2 (2n - 6) / (2n) for n corners.
+    std::vector<double> rms;
+    for (const auto& p : cs.poses) rms.push_back(p.rms_px);
+    std::nth_element(rms.begin(), rms.begin() + static_cast<long>(rms.size() / 2), rms.end());
+    cs.sigma_px = std::max(kMinCornerSigmaPx, rms[rms.size() / 2] / std::sqrt(2.0) * 1.04);
+  }
   std::vector<double> dts;
   for (std::size_t i = 1; i < cs.poses.size(); ++i) dts.push_back(cs.poses[i].t_s - cs.poses[i - 1].t_s);
   std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
@@ -330,9 +347,8 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended) {
       const int first = std::clamp(st_.pose.segment(t).first_knot - 1, 0, st_.pose.knots - N - 2);
       std::vector<Eigen::Vector3d> pts;
       for (int id : obs.ids) pts.push_back(points_[static_cast<std::size_t>(id)]);
-      auto* cost =
-          new FrameResidual<N>(cameras_[c].camera, std::move(pts), obs.px, t_s(obs.t_ns), first, st_.pose,
-                               opt_.corner_sigma_px, opt_.reprojection_loss_sigmas * opt_.corner_sigma_px);
+      auto* cost = new FrameResidual<N>(cameras_[c].camera, std::move(pts), obs.px, t_s(obs.t_ns), first,
+                                        st_.pose, cs.sigma_px, opt_.reprojection_loss_sigmas * cs.sigma_px);
       std::vector<double*> blocks;
       for (int i = 0; i < FrameResidual<N>::kWindow; ++i) blocks.push_back(st_.q[first + i].data());
       for (int i = 0; i < FrameResidual<N>::kWindow; ++i) blocks.push_back(st_.p[first + i].data());
@@ -368,14 +384,38 @@ bool Estimator<N>::frames_in_window() const {
 }
 
 template <int N>
+void Estimator<N>::reestimate_corner_sigma() {
+  if (opt_.corner_sigma_px > 0) return;
+  std::vector<std::vector<double>> comps(st_.cams.size());
+  std::vector<Eigen::Vector2d> e;
+  for (std::size_t k = 0; k < frames_.size(); ++k) {
+    frames_[k]->pixel_residuals(frame_blocks_[k].data(), &e);
+    for (const auto& v : e) {
+      comps[frame_camera_[k]].push_back(std::abs(v.x()));
+      comps[frame_camera_[k]].push_back(std::abs(v.y()));
+    }
+  }
+  for (std::size_t c = 0; c < comps.size(); ++c) {
+    auto& v = comps[c];
+    if (v.size() < 20) continue;
+    std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+    st_.cams[c].sigma_px = std::max(kMinCornerSigmaPx, 1.4826 * v[v.size() / 2]);
+  }
+}
+
+template <int N>
 Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary) {
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
   so.num_threads =
       opt_.threads > 0 ? opt_.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  so.max_num_iterations = opt_.max_iterations;
-  so.function_tolerance = 1e-9;
-  so.parameter_tolerance = 1e-10;
+  // The first stage only brings the trajectory, biases and extrinsics near the solution for the
+  // stage that follows it; a few iterations do (docs/camimu-calibration.md, "Speed").
+  const bool preliminary = !extended && opt_.model == CamImuModelKind::kExtended;
+  so.max_num_iterations =
+      preliminary ? std::min(opt_.max_iterations, kPreliminaryIterations) : opt_.max_iterations;
+  so.function_tolerance = 1e-8;
+  so.parameter_tolerance = 1e-9;
   ProgressCallback cb(progress_, stage);
   so.callbacks.push_back(&cb);
   // A timeshift that moves frames out of the knot window they were built with: rebuild.
@@ -513,12 +553,12 @@ void Estimator<N>::fill_result(CamImuCalibrationResult* out) {
     cr.T_cam_imu.linear() = quat_matrix(st_.cams[c].q_ci.data());
     cr.T_cam_imu.translation() = vec(st_.cams[c].t_ci);
     cr.timeshift_cam_imu_s = st_.cams[c].shift;
-    cr.corner_sigma_px = opt_.corner_sigma_px;
+    cr.corner_sigma_px = st_.cams[c].sigma_px;
   }
   std::vector<Eigen::Vector2d> e;
-  const double outlier_px = opt_.reprojection_loss_sigmas * opt_.corner_sigma_px;
   for (std::size_t k = 0; k < frames_.size(); ++k) {
     CamImuCameraResult& cr = out->cameras[frame_camera_[k]];
+    const double outlier_px = opt_.reprojection_loss_sigmas * st_.cams[frame_camera_[k]].sigma_px;
     frames_[k]->pixel_residuals(frame_blocks_[k].data(), &e);
     cr.frames += 1;
     for (const auto& v : e) {
@@ -581,8 +621,12 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   // extrinsics settle), then everything the model estimates.
   if (Status s = solve(false, "basic", &summary); !s.ok()) return s.error();
   quality_.initial_cost = summary.initial_cost;
+  // The second stage weighs the corners by the noise they showed in the first.
+  reestimate_corner_sigma();
   if (opt_.model == CamImuModelKind::kExtended) {
     if (Status s = solve(true, "extended", &summary); !s.ok()) return s.error();
+  } else if (opt_.corner_sigma_px <= 0) {
+    if (Status s = solve(false, "basic", &summary); !s.ok()) return s.error();
   }
   quality_.final_cost = summary.final_cost;
   quality_.solve_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - init_done).count();

@@ -62,8 +62,11 @@ struct CamImuOptions {
   double knot_spacing_s = 0.05;
   double bias_knot_spacing_s = 1.0;
   CamImuNoise noise;
-  /// Corner noise (pixels, standard deviation) and the Cauchy loss scale in sigmas.
-  double corner_sigma_px = 0.3;
+  /// Corner noise (pixels, standard deviation per coordinate); 0 = estimated per camera from
+  /// the reprojection residuals (from the PnP poses to start, then after the first stage), so
+  /// the weights and the sigmas follow what the detector really delivers. The Cauchy loss
+  /// scale is given in these sigmas.
+  double corner_sigma_px = 0.0;
   double reprojection_loss_sigmas = 3.0;
   double gravity_mps2 = 9.80665;
   /// Initial values and priors. An IMU model given here is the starting point (and the fixed

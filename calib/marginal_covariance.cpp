@@ -9,7 +9,8 @@
 
 namespace imucal::calib {
 
-bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<const double*>& blocks, int threads) {
+bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<const double*>& blocks,
+                                 int threads) {
   offset_.clear();
   std::set<const double*> wanted;
   std::vector<double*> order;  // the rest first, the wanted blocks last
@@ -36,9 +37,9 @@ bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<cons
   eo.num_threads = threads;
   ceres::CRSMatrix crs;
   if (!problem.Evaluate(eo, nullptr, nullptr, nullptr, &crs)) return false;
-  Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor>> J(crs.num_rows, crs.num_cols,
-                                                                   static_cast<Eigen::Index>(crs.values.size()),
-                                                                   crs.rows.data(), crs.cols.data(), crs.values.data());
+  Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor>> J(
+      crs.num_rows, crs.num_cols, static_cast<Eigen::Index>(crs.values.size()), crs.rows.data(),
+      crs.cols.data(), crs.values.data());
   const Eigen::SparseMatrix<double> H = Eigen::SparseMatrix<double>(J.transpose()) * J;
   const Eigen::SparseMatrix<double> H_ll = H.topLeftCorner(nl, nl);
   const Eigen::MatrixXd H_lg = Eigen::MatrixXd(H.topRightCorner(nl, ng));

@@ -268,9 +268,11 @@ void add_solver_options(CLI::App* cmd, CamImuCliOptions* o) {
   cmd->add_option("--bias-knot-spacing", d.bias_knot_spacing_s, "Bias spline knot spacing, s")
       ->capture_default_str()
       ->check(CLI::Range(0.05, 100.0));
-  cmd->add_option("--corner-sigma", d.corner_sigma_px, "Corner noise, px (standard deviation)")
+  cmd->add_option("--corner-sigma", d.corner_sigma_px,
+                  "Corner noise, px (standard deviation per coordinate); 0: estimated per camera from the "
+                  "reprojection residuals")
       ->capture_default_str()
-      ->check(CLI::Range(0.01, 10.0));
+      ->check(CLI::Range(0.0, 10.0));
   cmd->add_option("--max-iterations", d.max_iterations, "Solver iterations at most")
       ->capture_default_str()
       ->check(CLI::Range(1, 10000));

@@ -43,6 +43,10 @@ struct Args {
   int threads = 2;
   double timeshift_s = 0.0042;
   bool compare = false;
+  // What the estimator is told: 0 = it estimates the corner noise (the product's default).
+  double assumed_corner_sigma_px = 0.0;
+  double knot_spacing_s = calib::CamImuOptions{}.knot_spacing_s;
+  int spline_order = calib::CamImuOptions{}.spline_order;
 };
 
 /// Errors (estimate - truth) and reported sigmas of one variable's entries over the seeds.
@@ -186,13 +190,15 @@ double process_cpu_s() {
   return sec(ru.ru_utime) + sec(ru.ru_stime);
 }
 
-/// One calibration from no prior; the problem assumes the corner noise the recording has.
+/// One calibration from no prior, with the product's defaults unless the arguments say otherwise.
 Result<CamImuCalibrationResult> calibrate(const Args& a, const test::CamImuSynth& s, CamImuModelKind kind,
                                           RunFigures* fig) {
   calib::CamImuOptions o;
   o.model = kind;
   o.threads = a.threads;
-  o.corner_sigma_px = a.corner_sigma_px;
+  o.corner_sigma_px = a.assumed_corner_sigma_px;
+  o.knot_spacing_s = a.knot_spacing_s;
+  o.spline_order = a.spline_order;
   const auto t0 = std::chrono::steady_clock::now();
   const double cpu0 = process_cpu_s();
   auto r = calib::calibrate_camimu(s.imu, s.cameras, s.target, o);
@@ -230,9 +236,12 @@ void progress_line(const char* model, int seed, int k, int n, const RunFigures& 
 void print_header(const Args& a, const char* what) {
   std::printf(
       "%s: seeds %d..%d, %.0f s, IMU %.0f Hz, camera %.0f Hz, corner noise %.3f px per coordinate, "
-      "time offset %.1f ms, %d threads\n",
+      "time offset %.1f ms, %d threads\n"
+      "estimator: spline order %d, knots every %.3f s, corner noise %s\n",
       what, a.first_seed, a.first_seed + a.seeds - 1, a.duration_s, a.imu_rate_hz, a.camera_rate_hz,
-      a.corner_sigma_px, 1e3 * a.timeshift_s, a.threads);
+      a.corner_sigma_px, 1e3 * a.timeshift_s, a.threads, a.spline_order, a.knot_spacing_s,
+      a.assumed_corner_sigma_px > 0 ? (std::to_string(a.assumed_corner_sigma_px) + " px given").c_str()
+                                    : "estimated");
 }
 
 struct Verdict {
@@ -474,6 +483,12 @@ int main(int argc, char** argv) {
   app.add_option("--threads", a.threads, "solver threads")->check(CLI::Range(1, 64));
   app.add_option("--timeshift", a.timeshift_s, "true time offset t_imu - t_cam, s")
       ->check(CLI::Range(-0.2, 0.2));
+  app.add_option("--assumed-corner-sigma", a.assumed_corner_sigma_px,
+                 "corner noise the estimator is given, px; 0: it estimates it (default)")
+      ->check(CLI::Range(0.0, 10.0));
+  app.add_option("--knot-spacing", a.knot_spacing_s, "pose spline knot spacing, s")
+      ->check(CLI::Range(0.005, 0.5));
+  app.add_option("--spline-order", a.spline_order, "pose spline order")->check(CLI::Range(4, 6));
   app.add_flag("--compare-models", a.compare, "run the basic and the extended model on the same seeds");
   CLI11_PARSE(app, argc, argv);
   return a.compare ? imucal::run_compare(a) : imucal::run_study(a);
