@@ -106,8 +106,9 @@ class Estimator {
   void build(ceres::Problem* problem, bool extended);
   Status solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary);
   bool frames_in_window() const;
-  /// The corner noise of each camera from the current residuals (1.4826 x median |component|).
-  void reestimate_corner_sigma();
+  /// The corner noise of each camera from the current residuals (1.4826 x median |component|);
+  /// true when it moved by more than 10 % for any camera.
+  bool reestimate_corner_sigma();
   void covariance(CamImuCalibrationResult* out);
   void fill_result(CamImuCalibrationResult* out);
   double t_s(TimeNs t) const { return static_cast<double>(t - t0_ns_) * 1e-9; }
@@ -384,10 +385,11 @@ bool Estimator<N>::frames_in_window() const {
 }
 
 template <int N>
-void Estimator<N>::reestimate_corner_sigma() {
-  if (opt_.corner_sigma_px > 0) return;
+bool Estimator<N>::reestimate_corner_sigma() {
+  if (opt_.corner_sigma_px > 0) return false;
   std::vector<std::vector<double>> comps(st_.cams.size());
   std::vector<Eigen::Vector2d> e;
+  bool changed = false;
   for (std::size_t k = 0; k < frames_.size(); ++k) {
     frames_[k]->pixel_residuals(frame_blocks_[k].data(), &e);
     for (const auto& v : e) {
@@ -399,8 +401,11 @@ void Estimator<N>::reestimate_corner_sigma() {
     auto& v = comps[c];
     if (v.size() < 20) continue;
     std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
-    st_.cams[c].sigma_px = std::max(kMinCornerSigmaPx, 1.4826 * v[v.size() / 2]);
+    const double sigma = std::max(kMinCornerSigmaPx, 1.4826 * v[v.size() / 2]);
+    changed = changed || std::abs(sigma / st_.cams[c].sigma_px - 1.0) > 0.1;
+    st_.cams[c].sigma_px = sigma;
   }
+  return changed;
 }
 
 template <int N>
@@ -621,12 +626,15 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   // extrinsics settle), then everything the model estimates.
   if (Status s = solve(false, "basic", &summary); !s.ok()) return s.error();
   quality_.initial_cost = summary.initial_cost;
-  // The second stage weighs the corners by the noise they showed in the first.
-  reestimate_corner_sigma();
-  if (opt_.model == CamImuModelKind::kExtended) {
-    if (Status s = solve(true, "extended", &summary); !s.ok()) return s.error();
-  } else if (opt_.corner_sigma_px <= 0) {
-    if (Status s = solve(false, "basic", &summary); !s.ok()) return s.error();
+  // The next stage weighs the corners by the noise they showed in the one before. The first
+  // stage stops early with the IMU intrinsics at their start, so its residuals overstate the
+  // noise: the final stage is repeated until the estimate holds (within 10 %).
+  const bool extended = opt_.model == CamImuModelKind::kExtended;
+  for (int round = 0; round < 3; ++round) {
+    const bool changed = reestimate_corner_sigma();
+    if (round > 0 && !changed) break;
+    if (!extended && opt_.corner_sigma_px > 0) break;
+    if (Status s = solve(extended, extended ? "extended" : "basic", &summary); !s.ok()) return s.error();
   }
   quality_.final_cost = summary.final_cost;
   quality_.solve_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - init_done).count();
