@@ -48,13 +48,16 @@ std::size_t count(const std::string& text, const std::string& what) {
 class CliReport : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = (fs::path(IMUCAL_TEST_TMP) / "CliReport.shared").string();
+    // One folder per process: ctest runs each test in its own process, several at once, and a
+    // shared folder removed by one while another reads it made tests skip at random.
+    dir_ = (fs::path(IMUCAL_TEST_TMP) / ("CliReport.shared." + std::to_string(::getpid()))).string();
     fs::remove_all(dir_);
     fs::create_directories(dir_);
     const auto r = run_cli({"calibrate", "static", test::source_path("fixtures/static.imulog"), "-o",
                             dir_ + "/static.yaml", "--json", dir_ + "/static.json"});
     ASSERT_EQ(r.exit_code, 0) << r.err;
   }
+  static void TearDownTestSuite() { fs::remove_all(dir_); }
   static std::string log() { return test::source_path("fixtures/static.imulog"); }
   static std::string result() { return dir_ + "/static.json"; }
   static std::string dir_;
