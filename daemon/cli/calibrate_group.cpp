@@ -2,6 +2,10 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/target.hpp"
+#include "daemon/cli/command.hpp"
+#include "log/session_log.hpp"
+
 namespace imucal::cli {
 
 CLI::App* calibrate_group(CLI::App& root) {
@@ -31,6 +35,26 @@ app::GravityChoice resolve_gravity(const GravityArgs& args) {
     spdlog::warn("no --gravity or --latitude given: using standard gravity 9.80665 m/s^2 (up to 0.3% off)");
   }
   return gravity;
+}
+
+app::TargetChoice resolve_target(const std::string& target_path, const std::string& log_path) {
+  if (!target_path.empty()) {
+    auto t = load_target_yaml(target_path);
+    if (!t.ok()) throw CliExit{kExitInput, "--target: " + t.error().message};
+    return {*t, target_path};
+  }
+  auto reader = log::SessionLogReader::open(log_path);
+  if (!reader.ok()) fail(reader.error());
+  auto t = app::target_from_log_metadata((*reader)->metadata());
+  if (!t.ok()) {
+    if (t.error().code == Errc::kNotFound) {
+      throw CliExit{kExitUsage, log_path +
+                                    " names no calibration target (neither its rig configuration nor its "
+                                    "metadata has one): pass --target TARGET.yaml (Kalibr target YAML)"};
+    }
+    fail(t.error(), log_path);
+  }
+  return *t;
 }
 
 }  // namespace imucal::cli

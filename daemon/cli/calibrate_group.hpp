@@ -6,6 +6,7 @@
 #include <CLI/CLI.hpp>
 #include <optional>
 
+#include "app/camera_results.hpp"
 #include "app/initial_guess.hpp"
 
 namespace imucal::cli {
@@ -22,5 +23,9 @@ struct GravityArgs {
 void add_gravity_options(CLI::App* cmd, GravityArgs* args);
 /// The gravity the arguments give; warns on stderr when standard gravity is assumed.
 app::GravityChoice resolve_gravity(const GravityArgs& args);
+
+/// The calibration target of the camera commands: `--target` when given, else the one the log
+/// names. Ends the command (CliExit) when the file is bad or the log names none.
+app::TargetChoice resolve_target(const std::string& target_path, const std::string& log_path);
 
 }  // namespace imucal::cli

@@ -34,25 +34,6 @@ struct CameraCliOptions {
 };
 
 /// The target: --target, else the one the log names.
-app::TargetChoice resolve_target(const CameraCliOptions& o) {
-  if (!o.target_path.empty()) {
-    auto t = load_target_yaml(o.target_path);
-    if (!t.ok()) throw CliExit{kExitInput, "--target: " + t.error().message};
-    return {*t, o.target_path};
-  }
-  auto reader = log::SessionLogReader::open(o.log_path);
-  if (!reader.ok()) fail(reader.error());
-  auto t = app::target_from_log_metadata((*reader)->metadata());
-  if (!t.ok()) {
-    if (t.error().code == Errc::kNotFound) {
-      throw CliExit{kExitUsage, o.log_path +
-                                    " names no calibration target (neither its rig configuration nor its "
-                                    "metadata has one): pass --target TARGET.yaml (Kalibr target YAML)"};
-    }
-    fail(t.error(), o.log_path);
-  }
-  return *t;
-}
 
 void print_summary(const app::CameraCalibrationReport& r, const std::string& yaml_path) {
   const auto& res = r.intrinsics;
@@ -96,7 +77,7 @@ void run(const CameraCliOptions& o) {
   q.intrinsics.model = *model;
   q.intrinsics.threads = o.threads;
   if (auto valid = q.intrinsics.validate(); !valid.ok()) throw CliExit{kExitUsage, valid.error().message};
-  const app::TargetChoice target = resolve_target(o);
+  const app::TargetChoice target = resolve_target(o.target_path, o.log_path);
   q.log_path = o.log_path;
   q.camera = o.camera;
   q.target = target.target;

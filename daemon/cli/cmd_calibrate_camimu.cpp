@@ -47,25 +47,6 @@ struct CamImuCliOptions {
 constexpr double kDeg = 180.0 / M_PI;
 
 /// The target: --target, else the one the log names.
-app::TargetChoice resolve_target(const CamImuCliOptions& o) {
-  if (!o.target_path.empty()) {
-    auto t = load_target_yaml(o.target_path);
-    if (!t.ok()) throw CliExit{kExitInput, "--target: " + t.error().message};
-    return {*t, o.target_path};
-  }
-  auto reader = log::SessionLogReader::open(o.log_path);
-  if (!reader.ok()) fail(reader.error());
-  auto t = app::target_from_log_metadata((*reader)->metadata());
-  if (!t.ok()) {
-    if (t.error().code == Errc::kNotFound) {
-      throw CliExit{kExitUsage, o.log_path +
-                                    " names no calibration target (neither its rig configuration nor its "
-                                    "metadata has one): pass --target TARGET.yaml (Kalibr target YAML)"};
-    }
-    fail(t.error(), o.log_path);
-  }
-  return *t;
-}
 
 /// The result files in OUT_DIR, checked before the work: never an input, never an existing file
 /// without --force.
@@ -188,7 +169,7 @@ void run(const CamImuCliOptions& o) {
   outputs.inputs.insert(outputs.inputs.end(), o.camera_paths.begin(), o.camera_paths.end());
   const std::vector<std::string> paths = check_outputs(o, outputs);
   app::CamImuRequest q = build_request(o);
-  const app::TargetChoice target = resolve_target(o);
+  const app::TargetChoice target = resolve_target(o.target_path, o.log_path);
   q.target = target.target;
   q.target_source = target.source;
 
