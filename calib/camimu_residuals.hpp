@@ -110,7 +110,7 @@ class ImuResidual final : public ceres::CostFunction {
   static constexpr int kGravity = 4 * N, kSa = kGravity + 1, kMa = kSa + 1, kSg = kMa + 1, kMg = kSg + 1,
                        kC = kMg + 1, kB = kC + 1;
 
-  /// The prediction (accel, gyro) without noise, for residual figures.
+  /// Residuals: (predicted - measured) / sigma, accel then gyro.
   bool Evaluate(double const* const* p, double* residuals, double** jac) const override;
 
  private:
