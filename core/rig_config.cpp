@@ -56,6 +56,30 @@ const char* storage_backend_name(StorageBackend backend) {
 
 namespace {
 
+/// The session's numeric settings: key, member, accepted range. One table serves the parser and
+/// both writers.
+struct SessionNumber {
+  const char* key;
+  double SessionConfig::*member;
+  double min, max;
+};
+constexpr SessionNumber kSessionNumbers[] = {
+    {"warmup_rate_c_per_min", &SessionConfig::warmup_rate_c_per_min, 0.001, 10.0},
+    {"warmup_window_s", &SessionConfig::warmup_window_s, 2.0, 600.0},
+    {"warmup_timeout_s", &SessionConfig::warmup_timeout_s, 1.0, 7200.0},
+    {"still_s", &SessionConfig::still_s, 1.0, 600.0},
+    {"hold_s", &SessionConfig::hold_s, 0.5, 60.0},
+    {"still_gyro_dps", &SessionConfig::still_gyro_dps, 0.01, 90.0},
+    {"still_accel_mps2", &SessionConfig::still_accel_mps2, 0.001, 10.0},
+    {"pose_min_angle_deg", &SessionConfig::pose_min_angle_deg, 1.0, 90.0},
+    {"pose_sigma_target", &SessionConfig::pose_sigma_target, 1e-6, 1.0},
+    {"gsens_hold_s", &SessionConfig::gsens_hold_s, 1.0, 600.0},
+    {"motion_s", &SessionConfig::motion_s, 5.0, 1800.0},
+    {"gate_gravity_rms_mps2", &SessionConfig::gate_gravity_rms_mps2, 1e-6, 10.0},
+    {"gate_scale_sigma", &SessionConfig::gate_scale_sigma, 1e-7, 1.0},
+    {"gate_reprojection_px", &SessionConfig::gate_reprojection_px, 0.01, 100.0},
+};
+
 constexpr double kRotationTolerance = 1e-4;
 
 /// Shortest text that reads back to the same double (so 0.06 stays "0.06").
@@ -118,6 +142,7 @@ class ConfigParser {
   Status parse_camera(const YAML::Node& node, const std::string& path, CameraConfig& cam) const;
   Status parse_target(const YAML::Node& node, RigConfig& config) const;
   Status parse_storage(const YAML::Node& node, StorageConfig& storage) const;
+  Status parse_session(const YAML::Node& node, SessionConfig& session) const;
 
   std::string source_;
   std::string base_dir_;
@@ -508,6 +533,56 @@ Status ConfigParser::parse_storage(const YAML::Node& node, StorageConfig& storag
   return {};
 }
 
+Status ConfigParser::parse_session(const YAML::Node& node, SessionConfig& session) const {
+  std::vector<std::string> allowed = {"steps", "poses", "poses_min", "auto_write"};
+  for (const auto& n : kSessionNumbers) allowed.emplace_back(n.key);
+  IMUCAL_TRY(check_map(node, "session", allowed));
+  for (const auto& entry : kSessionNumbers) {
+    const YAML::Node n = node[entry.key];
+    if (!n) continue;
+    const std::string path = std::string("session.") + entry.key;
+    auto v = get_double(n, path);
+    if (!v.ok()) return v.error();
+    if (*v < entry.min || *v > entry.max) {
+      std::ostringstream range;
+      range << entry.min << " to " << entry.max;
+      return error(n, path, n.Scalar() + " is not in range " + range.str());
+    }
+    session.*entry.member = *v;
+  }
+  IMUCAL_CFG_INT(node, "poses", "session.poses", session.poses, x >= 9 && x <= 200,
+                 "9..200; the static method needs at least 9 attitudes");
+  IMUCAL_CFG_INT(node, "poses_min", "session.poses_min", session.poses_min, x >= 9 && x <= 200, "9..200");
+  if (session.poses_min > session.poses)
+    return error(node["poses_min"], "session.poses_min", "is above session.poses");
+  if (const YAML::Node n = node["auto_write"]) {
+    if (!n.IsScalar() || (n.Scalar() != "true" && n.Scalar() != "false"))
+      return error(n, "session.auto_write", "expected true or false");
+    session.auto_write = n.Scalar() == "true";
+  }
+  if (const YAML::Node n = node["steps"]) {
+    if (!n.IsSequence()) return error(n, "session.steps", "expected a list of step names");
+    const auto& names = session_step_names();
+    std::size_t last = 0;
+    for (std::size_t i = 0; i < n.size(); ++i) {
+      auto name = get_string(n[i], "session.steps");
+      if (!name.ok()) return name.error();
+      const auto it = std::find(names.begin(), names.end(), *name);
+      if (it == names.end()) {
+        std::string all;
+        for (const auto& s : names) all += (all.empty() ? "" : ", ") + s;
+        return error(n[i], "session.steps", "'" + *name + "' is not a step (" + all + ")");
+      }
+      const auto index = static_cast<std::size_t>(it - names.begin()) + 1;
+      if (index <= last)
+        return error(n[i], "session.steps", "'" + *name + "' is repeated or out of protocol order");
+      last = index;
+      session.steps.push_back(*name);
+    }
+  }
+  return {};
+}
+
 Result<RigConfig> ConfigParser::parse(const std::string& text) {
   YAML::Node root;
   try {
@@ -523,8 +598,8 @@ Result<RigConfig> ConfigParser::parse(const std::string& text) {
                       source_ + ":" + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg);
   }
   if (!root.IsMap())
-    return error(root, "", "expected a mapping with keys name, imu, cameras, target, storage");
-  IMUCAL_TRY(check_map(root, "", {"name", "imu", "cameras", "target", "storage"}));
+    return error(root, "", "expected a mapping with keys name, imu, cameras, target, storage, session");
+  IMUCAL_TRY(check_map(root, "", {"name", "imu", "cameras", "target", "storage", "session"}));
   RigConfig config;
   if (const YAML::Node n = root["name"]) {
     auto name = get_string(n, "name");
@@ -558,12 +633,19 @@ Result<RigConfig> ConfigParser::parse(const std::string& text) {
                  "(a Kalibr target mapping or a path to a target YAML)");
   }
   if (const YAML::Node n = root["storage"]) IMUCAL_TRY(parse_storage(n, config.storage));
+  if (const YAML::Node n = root["session"]) IMUCAL_TRY(parse_session(n, config.session));
   return config;
 }
 
 #undef IMUCAL_CFG_INT
 
 }  // namespace
+
+const std::vector<std::string>& session_step_names() {
+  static const std::vector<std::string> names = {"preflight", "warmup", "still",  "poses", "gsens",
+                                                 "motion",    "solve",  "review", "write"};
+  return names;
+}
 
 Status validate_rig_config(const RigConfig& config) {
   // Round-trip through the normalized YAML, so code-built configurations obey the same rules.
@@ -673,6 +755,13 @@ std::string rig_config_to_yaml(const RigConfig& c) {
   out << YAML::Key << "size_bytes" << YAML::Value << c.storage.size_bytes;
   out << YAML::Key << "offset_bytes" << YAML::Value << c.storage.offset_bytes;
   out << YAML::EndMap;
+  out << YAML::Key << "session" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "steps" << YAML::Value << YAML::Flow << c.session.steps;
+  for (const auto& n : kSessionNumbers) out << YAML::Key << n.key << YAML::Value << num(c.session.*n.member);
+  out << YAML::Key << "poses" << YAML::Value << c.session.poses;
+  out << YAML::Key << "poses_min" << YAML::Value << c.session.poses_min;
+  out << YAML::Key << "auto_write" << YAML::Value << c.session.auto_write;
+  out << YAML::EndMap;
   out << YAML::EndMap;
   return std::string(out.c_str()) + "\n";
 }
@@ -715,7 +804,12 @@ std::string rig_config_to_json(const RigConfig& c) {
   } else {
     storage["path"] = c.storage.path;
   }
-  json root = {{"name", c.name}, {"imu", imu}, {"cameras", cams}, {"storage", storage}};
+  json session = {{"steps", c.session.steps},
+                  {"poses", c.session.poses},
+                  {"poses_min", c.session.poses_min},
+                  {"auto_write", c.session.auto_write}};
+  for (const auto& n : kSessionNumbers) session[n.key] = c.session.*n.member;
+  json root = {{"name", c.name}, {"imu", imu}, {"cameras", cams}, {"storage", storage}, {"session", session}};
   if (c.target) {
     const auto& t = *c.target;
     if (t.type == TargetDescription::Type::kCheckerboard) {

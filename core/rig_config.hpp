@@ -70,12 +70,41 @@ struct StorageConfig {
   int offset_bytes = 0;                                  // where imucal's region starts inside the device
 };
 
+/// The service's guided session (imucald, docs/service-session.md): which steps run and their
+/// thresholds. Every field is optional in the file; these defaults apply.
+struct SessionConfig {
+  /// Steps in protocol order; empty: every step that applies (gsens is opt-in, motion needs
+  /// cameras). Names: preflight, warmup, still, poses, gsens, motion, solve, review, write.
+  std::vector<std::string> steps;
+  double warmup_rate_c_per_min = 0.3;   // warm when the die temperature changes slower than this
+  double warmup_window_s = 15.0;        // over this window
+  double warmup_timeout_s = 900.0;      // then the step fails (or is skipped by the operator)
+  double still_s = 10.0;                // initial still period (the gyro bias, T_init)
+  double hold_s = 2.0;                  // a pose is captured after this long still
+  double still_gyro_dps = 2.0;          // still: gyro mean (bias removed) below this, deg/s
+  double still_accel_mps2 = 0.2;        // still: accelerometer std over 0.5 s below this, m/s^2
+  double pose_min_angle_deg = 20.0;     // a pose this close to an earlier one is refused
+  int poses = 18;                       // the step ends at this count once the sigma target is met
+  int poses_min = 12;                   // the operator may end the step from here
+  double pose_sigma_target = 1.5e-3;    // largest scale-factor sigma (relative) to end the step
+  double gsens_hold_s = 8.0;            // each six-face hold
+  double motion_s = 60.0;               // checkerboard motion
+  double gate_gravity_rms_mps2 = 0.05;  // review gate: gravity-magnitude residual RMS
+  double gate_scale_sigma = 3e-3;       // review gate: largest scale-factor sigma
+  double gate_reprojection_px = 1.0;    // review gate: camera-IMU reprojection RMS
+  bool auto_write = false;              // write without the operator's accept when every gate passes
+};
+
+/// Names of the session's steps in protocol order.
+const std::vector<std::string>& session_step_names();
+
 struct RigConfig {
   std::string name = "rig";
   ImuConfig imu;
   std::vector<CameraConfig> cameras;
   std::optional<TargetDescription> target;  // required when cameras are configured
   StorageConfig storage;
+  SessionConfig session;
 };
 
 /// MPU-6000 DLPF bandwidths (gyro, Hz) indexed by DLPF_CFG 0..6.

@@ -91,11 +91,13 @@ class Mutator {
   }
 
  private:
-  std::size_t pick(std::size_t n) { return n == 0 ? 0 : std::uniform_int_distribution<std::size_t>(0, n - 1)(rng_); }
+  std::size_t pick(std::size_t n) {
+    return n == 0 ? 0 : std::uniform_int_distribution<std::size_t>(0, n - 1)(rng_);
+  }
 
   void mutate_once(Bytes& data, const std::vector<Bytes>& seeds) {
-    static constexpr std::array<std::uint8_t, 12> kInteresting = {0x00, 0x01, 0x7f, 0x80, 0xff, '"', '{',
-                                                                  '}',  '\n', '\\', ':',  0xc3};
+    static constexpr std::array<std::uint8_t, 12> kInteresting = {0x00, 0x01, 0x7f, 0x80, 0xff, '"',
+                                                                  '{',  '}',  '\n', '\\', ':',  0xc3};
     const std::size_t op = pick(8);
     if (data.empty() && op != 2 && op != 7) {
       data.push_back(kInteresting[pick(kInteresting.size())]);
@@ -117,13 +119,16 @@ class Mutator {
       }
       case 3: {  // delete a range
         const std::size_t at = pick(data.size()), n = 1 + pick(std::min<std::size_t>(data.size() - at, 64));
-        data.erase(data.begin() + static_cast<std::ptrdiff_t>(at), data.begin() + static_cast<std::ptrdiff_t>(at + n));
+        data.erase(data.begin() + static_cast<std::ptrdiff_t>(at),
+                   data.begin() + static_cast<std::ptrdiff_t>(at + n));
         break;
       }
       case 4: {  // duplicate a range
         const std::size_t at = pick(data.size()), n = 1 + pick(std::min<std::size_t>(data.size() - at, 64));
-        const Bytes copy(data.begin() + static_cast<std::ptrdiff_t>(at), data.begin() + static_cast<std::ptrdiff_t>(at + n));
-        data.insert(data.begin() + static_cast<std::ptrdiff_t>(pick(data.size() + 1)), copy.begin(), copy.end());
+        const Bytes copy(data.begin() + static_cast<std::ptrdiff_t>(at),
+                         data.begin() + static_cast<std::ptrdiff_t>(at + n));
+        data.insert(data.begin() + static_cast<std::ptrdiff_t>(pick(data.size() + 1)), copy.begin(),
+                    copy.end());
         break;
       }
       case 5:  // truncate
@@ -131,7 +136,8 @@ class Mutator {
         break;
       case 6: {  // overwrite with a random 32-bit value
         const std::size_t at = pick(data.size());
-        for (std::size_t i = at; i < std::min(data.size(), at + 4); ++i) data[i] = static_cast<std::uint8_t>(pick(256));
+        for (std::size_t i = at; i < std::min(data.size(), at + 4); ++i)
+          data[i] = static_cast<std::uint8_t>(pick(256));
         break;
       }
       default: {  // splice: head of this input, tail of another seed

@@ -1,0 +1,231 @@
+#pragma once
+// The guided calibration session (docs/service-session.md): a state machine over the protocol's
+// steps (preflight, warm-up, still start, static poses, six-face holds, checkerboard motion,
+// solve, review, write) that turns IMU samples, frame detections and operator keys into prompts,
+// live figures and results.
+//
+// The engine is deterministic and runs on sample time only: every decision is taken while a
+// sample is processed or when a key, a fault or a solve result is applied between two samples,
+// and each of those is emitted as a message (and so stored in the session log). Replaying the
+// samples of a session log with its keys, faults and solve applications at their recorded times
+// therefore takes the same decisions and reaches the same results (`imucal replay`).
+//
+// It owns no device, thread or file. Its host (the service imucald, or replay) feeds it, shows and
+// logs what it emits, runs the solves and the write it asks for and hands their outcome back.
+#include <Eigen/Core>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+#include "app/camimu_calibration.hpp"
+#include "calib/static_calibration.hpp"
+#include "core/imu.hpp"
+#include "core/result.hpp"
+#include "core/rig_config.hpp"
+#include "core/time.hpp"
+
+namespace imucal::app::session {
+
+enum class StepId { kPreflight, kWarmup, kStill, kPoses, kGsens, kMotion, kSolve, kReview, kWrite };
+enum class StepState { kPending, kActive, kDone, kSkipped, kFailed };
+enum class SessionState { kIdle, kRunning, kReview, kDone, kAborted, kFailed };
+
+const char* step_name(StepId step);
+const char* step_state_name(StepState state);
+const char* session_state_name(SessionState state);
+[[nodiscard]] Result<StepId> parse_step(const std::string& name);
+
+/// The steps a configuration runs: session.steps, or every step that applies (gsens only when
+/// listed, motion only with cameras).
+std::vector<StepId> configured_steps(const RigConfig& config);
+
+/// What the host found when it probed the rig (step 1).
+struct PreflightReport {
+  struct Device {
+    std::string name;    // "imu", "cam0", "storage"
+    bool ok = false;
+    std::string detail;  // "MPU-6000 on /dev/spidev0.0, WHO_AM_I 0x68, self-test passed" or the error
+  };
+  std::vector<Device> devices;
+  std::string rig;                          // the configuration's name
+  std::optional<nlohmann::json> stored;     // the calibration on the rig's storage (its summary)
+  bool ok() const;
+  nlohmann::json to_json() const;
+  static PreflightReport from_json(const nlohmann::json& j);
+};
+
+/// A solve the engine asks for. Quick: the static method over the samples so far (live sigmas
+/// while poses are captured). Final: the static method and, after a motion step, the camera-IMU
+/// calibration of the session log.
+struct SolveJob {
+  int id = 0;
+  bool final = false;
+  /// The samples from the start of the still step on, as recorded (raw counts or SI).
+  std::shared_ptr<const std::vector<ImuSample>> samples;
+  calib::StaticCalibrationOptions static_options;
+  bool camimu = false;
+  TimeNs t_end_ns = 0;  // last sample in the job
+};
+
+/// What a solve produced. The host fills what it ran.
+struct SolveOutcome {
+  std::optional<StaticCalibrationResult> imu;
+  std::optional<CamImuReport> camimu;
+  /// The record to store (app/stored_calibration.hpp), built by the host from the result files
+  /// it wrote; empty for a quick solve.
+  nlohmann::json payload;
+  std::vector<std::string> result_files;
+  std::string error;  // empty: success
+};
+
+/// The engine's view of its host.
+class EngineHost {
+ public:
+  virtual ~EngineHost() = default;
+  /// A message for the operator and the session log ({"type": ...}, docs/service.md).
+  virtual void emit(const nlohmann::json& message) = 0;
+  /// Probes the devices and reads the stored calibration (step 1, and again on redo).
+  virtual PreflightReport preflight() = 0;
+  /// Runs a solve off the engine's thread; the host calls SessionEngine::solve_finished() later.
+  virtual void solve(const SolveJob& job) = 0;
+  /// Writes the record, syncs and reads it back; the host calls write_finished() later.
+  virtual void write(const nlohmann::json& payload) = 0;
+  /// After a fault: reopens what failed. Ok when the step can be redone.
+  virtual Status recover() = 0;
+  /// The recording ends here (the solve starts): no more samples will be stored.
+  virtual void recording_finished() {}
+};
+
+class SessionEngine {
+ public:
+  /// `info` describes the samples (raw or SI); `has_cameras`: the motion step can run.
+  SessionEngine(const RigConfig& config, const ImuStreamInfo& info, EngineHost& host);
+  ~SessionEngine();
+  SessionEngine(const SessionEngine&) = delete;
+  SessionEngine& operator=(const SessionEngine&) = delete;
+
+  /// Starts a session with these steps (empty: configured_steps()). Fails while one runs.
+  [[nodiscard]] Status start(const std::vector<std::string>& steps);
+  /// One IMU sample, in time order.
+  void on_sample(const ImuSample& sample);
+  /// A camera frame at `t_ns`; `target_seen` when the target was detected in it.
+  void on_frame(TimeNs t_ns, bool target_seen);
+  /// An operator key: continue, redo, abort, accept, reject, skip. Errors say why it does not
+  /// apply now.
+  [[nodiscard]] Status key(const std::string& key);
+  /// A device or storage fault from the host: the step stops and the operator is told how to go on.
+  void fault(const std::string& source, const std::string& text);
+  void solve_progress(double fraction, const std::string& text);
+  void solve_finished(int id, SolveOutcome outcome);
+  void write_finished(const Status& status);
+
+  SessionState state() const { return state_; }
+  bool running() const { return state_ == SessionState::kRunning || state_ == SessionState::kReview; }
+  /// Sample time of the engine: the last sample's.
+  TimeNs now_ns() const { return now_ns_; }
+  /// {"type":"status", ...}
+  nlohmann::json status() const;
+  /// Messages that bring a new observer up to date (status, the last prompt and live figures).
+  std::vector<nlohmann::json> snapshot() const;
+  /// The final solve's outcome once it is in.
+  const std::optional<SolveOutcome>& result() const { return final_; }
+  /// The review's quality gates (after the final solve).
+  struct Gate {
+    std::string name;
+    double value = 0.0;
+    double limit = 0.0;
+    bool pass = false;
+  };
+  const std::vector<Gate>& gates() const { return gates_; }
+  /// Poses captured so far (gravity directions in the IMU frame).
+  const std::vector<Eigen::Vector3d>& poses() const { return poses_; }
+
+ private:
+  struct Window;  // stillness over the last 0.5 s
+  struct Step {
+    StepId id;
+    StepState state = StepState::kPending;
+  };
+
+  void reset();
+  void evaluate_gates();
+  nlohmann::json result_message() const;
+  void emit(nlohmann::json message);
+  void prompt(const std::string& text, std::vector<std::string> keys);
+  void live(std::vector<std::string> lines, double progress, nlohmann::json figures = {});
+  void message(const std::string& level, const std::string& text);
+  void enter(std::size_t index);
+  void advance();
+  void finish(SessionState state, const std::string& outcome, const std::string& text);
+  void begin_step();
+  bool step_skippable(StepId id) const;
+
+  void run_preflight();
+  void sample_warmup(const ImuSample& si);
+  void sample_still(const ImuSample& si, bool still);
+  void sample_poses(const ImuSample& si, bool still);
+  void sample_gsens(const ImuSample& si, bool still);
+  void sample_motion(const ImuSample& si);
+  void capture_pose();
+  void request_quick_solve();
+  void request_final_solve();
+  void review();
+  nlohmann::json coverage() const;
+  calib::StaticCalibrationOptions static_options() const;
+  ImuSample to_si(const ImuSample& raw) const;
+  bool live_due();
+
+  RigConfig config_;
+  ImuStreamInfo info_;
+  EngineHost& host_;
+  SessionState state_ = SessionState::kIdle;
+  std::vector<Step> steps_;
+  std::size_t current_ = 0;
+  bool waiting_ = false;  // the step waits for the operator (prompt with keys)
+  bool failed_step_ = false;
+  TimeNs now_ns_ = 0;
+  TimeNs step_start_ns_ = -1;
+  TimeNs session_start_ns_ = -1;
+  TimeNs last_live_ns_ = 0;
+  nlohmann::json last_prompt_, last_live_;
+  std::deque<nlohmann::json> last_messages_;
+
+  std::unique_ptr<Window> window_;
+  std::shared_ptr<std::vector<ImuSample>> samples_;  // from the still step on
+  bool recording_ = true;
+
+  // warm-up
+  std::deque<std::pair<double, double>> temps_;  // (t s, deg C), one per 0.5 s
+  TimeNs last_temp_ns_ = 0;
+  // still start
+  TimeNs still_since_ns_ = -1;
+  Eigen::Vector3d gyro_bias_ = Eigen::Vector3d::Zero();
+  bool bias_known_ = false;
+  Eigen::Vector3d still_gyro_sum_ = Eigen::Vector3d::Zero();
+  long still_count_ = 0;
+  // poses and faces
+  std::vector<Eigen::Vector3d> poses_;
+  bool need_motion_ = false;  // after a capture or a refusal the rig must move first
+  int face_ = 0;              // six-face: the face prompted
+  int next_solve_id_ = 1;
+  int quick_in_flight_ = 0;   // id, 0 = none
+  std::size_t quick_poses_ = 0;
+  std::optional<StaticCalibrationResult> quick_;
+  // motion
+  Eigen::Vector3d gyro_sq_ = Eigen::Vector3d::Zero(), accel_sum_ = Eigen::Vector3d::Zero(),
+                  accel_sq_ = Eigen::Vector3d::Zero();
+  long motion_count_ = 0;
+  long frames_ = 0, frames_seen_ = 0;
+  TimeNs last_seen_ns_ = -1;
+  long saturated_ = 0;
+  // solve and review
+  int final_id_ = 0;
+  std::optional<SolveOutcome> final_;
+  std::vector<Gate> gates_;
+  bool gates_pass_ = false;
+};
+
+}  // namespace imucal::app::session

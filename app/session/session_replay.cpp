@@ -1,0 +1,207 @@
+#include "app/session/session_replay.hpp"
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+
+#include "app/session/session_runner.hpp"
+#include "log/session_log.hpp"
+
+namespace imucal::app::session {
+
+using nlohmann::json;
+
+namespace {
+
+/// An input the live session applied to its engine, at the engine's sample time.
+struct Input {
+  TimeNs t_ns = 0;
+  json message;
+};
+
+/// The engine's host during a replay: the logged preflight, solves run at once and held until
+/// the log says they were applied, no storage.
+class ReplayHost final : public EngineHost {
+ public:
+  ReplayHost(const ImuStreamInfo& info, std::string dir, PreflightReport preflight)
+      : info_(info), dir_(std::move(dir)), preflight_(std::move(preflight)) {}
+
+  void emit(const json& message) override {
+    if (message.value("type", "") == "result") result_ = message;
+    if (message.value("type", "") == "done") outcome_ = message.value("outcome", "");
+  }
+  PreflightReport preflight() override { return preflight_; }
+  void solve(const SolveJob& job) override {
+    SolveOutcome out = run_solve(job, info_, dir_, nullptr);
+    // The record the live session stored is not in the log; the files stand for it.
+    if (job.final && out.error.empty()) out.payload = json{{"replay", true}, {"files", out.result_files}};
+    outcomes_[job.id] = std::move(out);
+  }
+  void write(const json&) override {}
+  Status recover() override { return {}; }
+
+  std::map<int, SolveOutcome> outcomes_;
+  json result_;
+  std::string outcome_;
+
+ private:
+  ImuStreamInfo info_;
+  std::string dir_;
+  PreflightReport preflight_;
+};
+
+struct LoggedSession {
+  std::vector<std::string> steps;
+  PreflightReport preflight;
+  std::vector<Input> inputs;
+  json result;
+  std::string outcome;
+};
+
+Result<LoggedSession> read_session_events(const log::SessionLogReader& reader) {
+  auto events = reader.events();
+  if (!events.ok()) return events.error();
+  LoggedSession s;
+  bool started = false;
+  for (const auto& e : *events) {
+    if (e.kind != "session") continue;
+    json m = json::parse(e.message, nullptr, false);
+    if (m.is_discarded() || !m.is_object()) continue;
+    const std::string type = m.value("type", "");
+    if (type == "session" && m.value("event", "") == "start") {
+      if (started) break;  // one session per log; a second start is not ours to replay
+      started = true;
+      for (const auto& n : m.value("steps", json::array()))
+        if (n.is_string()) s.steps.push_back(n.get<std::string>());
+    } else if (type == "preflight") {
+      s.preflight = PreflightReport::from_json(m.value("report", json::object()));
+    } else if (type == "key" || type == "applied" || type == "fault" || type == "written") {
+      s.inputs.push_back({e.t_ns, m});
+    } else if (type == "result") {
+      s.result = m;
+    } else if (type == "done") {
+      s.outcome = m.value("outcome", "");
+    }
+  }
+  if (!started)
+    return make_error(Errc::kInvalidArgument,
+                      "the log holds no service session (no session start event); record one with imucald");
+  return s;
+}
+
+double max_difference(const json& a, const json& b) {
+  if (a.is_number() && b.is_number()) return std::abs(a.get<double>() - b.get<double>());
+  if (a.is_array() && b.is_array() && a.size() == b.size()) {
+    double m = 0.0;
+    for (std::size_t i = 0; i < a.size(); ++i) m = std::max(m, max_difference(a[i], b[i]));
+    return m;
+  }
+  if (a.is_object() && b.is_object()) {
+    double m = 0.0;
+    for (auto it = a.begin(); it != a.end(); ++it)
+      m = std::max(m, b.contains(it.key()) ? max_difference(it.value(), b[it.key()]) : INFINITY);
+    return m;
+  }
+  return a == b ? 0.0 : INFINITY;
+}
+
+/// Applies one logged input to the engine. False when the replay diverged.
+bool apply(SessionEngine& engine, ReplayHost& host, const json& m, ReplaySummary& summary, std::string* why) {
+  const std::string type = m.value("type", "");
+  if (type == "key") {
+    ++summary.keys;
+    (void)engine.key(m.value("key", ""));
+  } else if (type == "fault") {
+    ++summary.faults;
+    engine.fault(m.value("source", ""), m.value("text", ""));
+  } else if (type == "written") {
+    const bool ok = m.value("ok", false);
+    engine.write_finished(ok ? Status{} : Status(make_error(Errc::kIo, m.value("error", ""))));
+  } else if (type == "applied") {
+    const int id = m.value("id", 0);
+    auto it = host.outcomes_.find(id);
+    if (it == host.outcomes_.end()) {
+      *why = "the log applied solve " + std::to_string(id) + ", which the replay never requested";
+      return false;
+    }
+    ++summary.solves;
+    engine.solve_finished(id, std::move(it->second));
+    host.outcomes_.erase(it);
+  }
+  return true;
+}
+
+}  // namespace
+
+Result<ReplaySummary> replay_session(const ReplayOptions& options) {
+  auto reader = log::SessionLogReader::open(options.log_path);
+  if (!reader.ok()) return reader.error();
+  const auto& meta = (*reader)->metadata();
+  const auto cfg = meta.find("rig_config");
+  if (cfg == meta.end())
+    return make_error(Errc::kInvalidArgument, options.log_path + ": no rig_config in the log's metadata");
+  auto config = parse_rig_config(cfg->second, options.log_path + " (rig_config)");
+  if (!config.ok()) return config.error();
+  auto stream = (*reader)->find_imu_stream();
+  if (!stream.ok()) return stream.error();
+  const ImuStreamInfo info = (*reader)->imu_streams().at(*stream);
+  auto logged = read_session_events(**reader);
+  if (!logged.ok()) return logged.error();
+
+  std::string dir = options.out_dir;
+  if (dir.empty()) {
+    std::string tmpl = (std::filesystem::temp_directory_path() / "imucal-replay-XXXXXX").string();
+    if (!mkdtemp(tmpl.data())) return make_error(Errc::kIo, "cannot create a temporary folder for the replay");
+    dir = tmpl;
+  }
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) return make_error(Errc::kIo, "cannot create " + dir + ": " + ec.message());
+
+  ReplayHost host(info, dir, logged->preflight);
+  SessionEngine engine(*config, info, host);
+  if (auto s = engine.start(logged->steps); !s.ok()) return s.error().context("starting the replayed session");
+
+  ReplaySummary summary;
+  std::size_t next = 0;
+  std::string why;
+  auto apply_until = [&](TimeNs t_ns) {
+    while (next < logged->inputs.size() && logged->inputs[next].t_ns < t_ns) {
+      if (!apply(engine, host, logged->inputs[next].message, summary, &why)) return false;
+      ++next;
+    }
+    return true;
+  };
+  bool diverged = false;
+  IMUCAL_TRY((*reader)->for_each_imu(*stream, log::kTimeMin, log::kTimeMax, [&](const ImuSample& s) {
+    if (!apply_until(s.t_ns)) {
+      diverged = true;
+      return false;
+    }
+    engine.on_sample(s);
+    ++summary.samples;
+    return true;
+  }));
+  if (!diverged && !apply_until(log::kTimeMax)) diverged = true;
+  if (diverged) return make_error(Errc::kInternal, "the replay diverged from " + options.log_path + ": " + why);
+
+  summary.state = engine.state();
+  summary.outcome = host.outcome_;
+  summary.live_outcome = logged->outcome;
+  if (engine.result() && engine.result()->imu) {
+    summary.imu = engine.result()->imu;
+    summary.result_files = engine.result()->result_files;
+  }
+  if (!logged->result.is_null() && !host.result_.is_null()) {
+    summary.live_result = true;
+    summary.max_difference = max_difference(logged->result.value("imu", json()), host.result_.value("imu", json()));
+  } else if (!logged->result.is_null()) {
+    summary.notes.push_back("the live session logged a result but the replay produced none");
+    summary.live_result = true;
+    summary.max_difference = INFINITY;
+  }
+  return summary;
+}
+
+}  // namespace imucal::app::session

@@ -1,0 +1,121 @@
+#pragma once
+// The host of a session engine for the service and for replay: it records the session into its
+// own folder (<state_dir>/sessions/<rig>-<UTC time>/: session.imulog with every sample, frame and
+// message, the result files and report.html), runs the solves on a worker thread and hands
+// results back on the engine's thread, and writes the accepted record through the storage
+// function it is given. Devices stay with the caller: it feeds samples and frames in.
+#include <condition_variable>
+#include <deque>
+#include <functional>
+#include <mutex>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <span>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "app/session/session_engine.hpp"
+#include "core/frame.hpp"
+#include "core/imu.hpp"
+#include "core/result.hpp"
+#include "core/rig_config.hpp"
+
+namespace imucal::log {
+class SessionLogWriter;
+}
+
+namespace imucal::app::session {
+
+struct RunnerOptions {
+  /// Session folders are made under <state_dir>/sessions/.
+  std::string state_dir = "/var/lib/imucal";
+  /// Runs a function on the engine's thread later (the service: boost::asio::post). Empty:
+  /// solves and writes run inline, on the caller's thread (replay, tests).
+  std::function<void(std::function<void()>)> post;
+  /// Every message the engine emits, for observers (the control socket).
+  std::function<void(const nlohmann::json&)> broadcast;
+  /// Probes the devices and reads the stored calibration (preflight step).
+  std::function<PreflightReport()> preflight;
+  /// Reopens the devices after a fault.
+  std::function<Status()> recover;
+  /// Builds the record to store from the result files of the final solve.
+  std::function<Result<nlohmann::json>(const std::vector<std::string>& result_files)> make_payload;
+  /// Writes the record to the rig's storage, syncs and reads it back. Runs on the worker thread.
+  std::function<Status(const nlohmann::json& payload)> write_storage;
+  /// Problems that concern the service's operator log, not the session (a report not drawn,
+  /// a session log event that could not be stored). Default: stderr.
+  std::function<void(const std::string&)> warn;
+  /// Log metadata added to every session log (rig_config, source, device settings).
+  std::vector<std::pair<std::string, std::string>> metadata;
+  /// Write the HTML report of the final solve into the session folder.
+  bool report = true;
+  /// Replay: no log is written (the session folder still receives the results).
+  bool write_log = true;
+  /// Replay: the session folder to use instead of a new one.
+  std::string session_dir;
+};
+
+/// The static result files of a final solve: the canonical YAML and the JSON the report reads.
+struct SolveFiles {
+  std::string static_yaml, static_json;
+};
+
+/// Runs a solve job (the static calibration and, with job.camimu, nothing else yet) and writes
+/// the final one's result files into `dir`. Shared by the service and replay.
+SolveOutcome run_solve(const SolveJob& job, const ImuStreamInfo& info, const std::string& dir,
+                       const std::function<void(double, const std::string&)>& progress);
+
+class SessionRunner final : public EngineHost {
+ public:
+  SessionRunner(const RigConfig& config, const ImuStreamInfo& info, RunnerOptions options);
+  ~SessionRunner() override;
+  SessionRunner(const SessionRunner&) = delete;
+  SessionRunner& operator=(const SessionRunner&) = delete;
+
+  SessionEngine& engine() { return engine_; }
+  /// Creates the session folder and log, then starts the engine. Fails when a session runs or
+  /// the folder or log cannot be created (nothing started then).
+  [[nodiscard]] Status start(const std::vector<std::string>& steps);
+  /// Samples in time order: stored while the session records, then given to the engine.
+  void on_samples(std::span<const ImuSample> samples);
+  /// An IMU or camera fault (`source` "imu", "cam0", "storage"): stored and given to the engine.
+  void fault(const std::string& source, const std::string& text);
+  const std::string& session_dir() const { return dir_; }
+  std::string log_path() const { return dir_.empty() ? std::string() : dir_ + "/session.imulog"; }
+  /// Waits until the worker has run every job queued so far (tests, shutdown). Their results
+  /// are posted to the engine's thread as usual.
+  void drain();
+
+  // EngineHost
+  void emit(const nlohmann::json& message) override;
+  PreflightReport preflight() override;
+  void solve(const SolveJob& job) override;
+  void write(const nlohmann::json& payload) override;
+  Status recover() override;
+  void recording_finished() override;
+
+ private:
+  void run_on_worker(std::function<void()> work);
+  void worker_loop();
+  void close_log();
+  void warn(const std::string& text) const;
+
+  RigConfig config_;
+  ImuStreamInfo info_;
+  RunnerOptions options_;
+  SessionEngine engine_;
+  std::string dir_;
+  std::unique_ptr<log::SessionLogWriter> log_;
+  int stream_id_ = -1;
+  bool recording_ = false;
+  // One worker runs solves and writes in order.
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::deque<std::function<void()>> jobs_;
+  bool running_job_ = false;
+  bool stop_ = false;
+  std::thread worker_;
+};
+
+}  // namespace imucal::app::session

@@ -1,0 +1,381 @@
+// The session's recording steps, sample by sample: warm-up, still start, static poses, six-face
+// holds, checkerboard motion; and the review's gates.
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <sstream>
+
+#include "app/session/session_engine.hpp"
+#include "app/session/session_window.hpp"
+
+namespace imucal::app::session {
+
+using nlohmann::json;
+
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+constexpr TimeNs kLiveIntervalNs = 250'000'000;  // live figures 4 times a second of sample time
+
+std::string fixed(double v, int digits) {
+  std::ostringstream s;
+  s.setf(std::ios::fixed);
+  s.precision(digits);
+  s << v;
+  return s.str();
+}
+
+double seconds(TimeNs ns) { return static_cast<double>(ns) * 1e-9; }
+
+/// The six faces of the six-face holds and the coverage display: the IMU axis that points up.
+const Eigen::Vector3d kFaces[6] = {Eigen::Vector3d::UnitX(),  -Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(),
+                                   -Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ(),  -Eigen::Vector3d::UnitZ()};
+const char* kFaceNames[6] = {"+X", "-X", "+Y", "-Y", "+Z", "-Z"};
+
+double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  return std::atan2(a.cross(b).norm(), a.dot(b)) / kDeg;
+}
+
+}  // namespace
+
+ImuSample SessionEngine::to_si(const ImuSample& raw) const {
+  if (info_.units == ImuUnits::kSi) return raw;
+  ImuSample s = raw;
+  s.accel = info_.accel.to_si(raw.accel);
+  s.gyro = info_.gyro.to_si(raw.gyro);
+  s.temperature = info_.temperature_scale * raw.temperature + info_.temperature_offset;
+  return s;
+}
+
+bool SessionEngine::live_due() {
+  if (now_ns_ - last_live_ns_ < kLiveIntervalNs) return false;
+  last_live_ns_ = now_ns_;
+  return true;
+}
+
+void SessionEngine::on_sample(const ImuSample& sample) {
+  now_ns_ = sample.t_ns;
+  if (state_ != SessionState::kRunning || current_ >= steps_.size()) return;
+  const StepId id = steps_[current_].id;
+  const ImuSample si = to_si(sample);
+  window_->add(si.accel, si.gyro);
+  if (recording_ && id >= StepId::kStill && id <= StepId::kMotion) samples_->push_back(sample);
+  if (failed_step_ || id > StepId::kMotion) return;
+  // Still: the accelerometer and gyro barely vary over the window, and once the gyro bias is
+  // known the gyro mean (bias removed) is small: a slow steady turn varies little but is no pose.
+  const double gyro_limit = config_.session.still_gyro_dps * kDeg;
+  bool still = window_->full() && window_->accel_std() < config_.session.still_accel_mps2 &&
+               window_->gyro_std() < 0.5 * gyro_limit;
+  if (still && bias_known_) still = (window_->gyro_mean() - gyro_bias_).norm() < gyro_limit;
+  switch (id) {
+    case StepId::kWarmup:
+      sample_warmup(si);
+      break;
+    case StepId::kStill:
+      sample_still(si, still);
+      break;
+    case StepId::kPoses:
+      sample_poses(si, still);
+      break;
+    case StepId::kGsens:
+      sample_gsens(si, still);
+      break;
+    case StepId::kMotion:
+      sample_motion(si);
+      break;
+    default:
+      break;
+  }
+}
+
+void SessionEngine::on_frame(TimeNs t_ns, bool target_seen) {
+  if (state_ != SessionState::kRunning || current_ >= steps_.size() || steps_[current_].id != StepId::kMotion) return;
+  ++frames_;
+  if (target_seen) {
+    ++frames_seen_;
+    last_seen_ns_ = t_ns;
+  }
+}
+
+void SessionEngine::sample_warmup(const ImuSample& si) {
+  if (!std::isfinite(si.temperature)) {
+    message("warning", "The IMU reports no temperature: warm-up skipped");
+    advance();
+    return;
+  }
+  if (temps_.empty() || si.t_ns - last_temp_ns_ >= 500'000'000) {
+    temps_.emplace_back(seconds(si.t_ns), si.temperature);
+    last_temp_ns_ = si.t_ns;
+    // Keep the shortest tail that still spans the window.
+    while (temps_.size() > 2 && temps_.back().first - temps_[1].first >= config_.session.warmup_window_s)
+      temps_.pop_front();
+  }
+  const double span = temps_.back().first - temps_.front().first;
+  // Rate: least-squares slope over the window, deg C per minute.
+  double rate = 0.0;
+  if (temps_.size() >= 3) {
+    double mt = 0, mc = 0;
+    for (const auto& [t, c] : temps_) mt += t, mc += c;
+    mt /= static_cast<double>(temps_.size());
+    mc /= static_cast<double>(temps_.size());
+    double num = 0, den = 0;
+    for (const auto& [t, c] : temps_) num += (t - mt) * (c - mc), den += (t - mt) * (t - mt);
+    rate = den > 0 ? 60.0 * num / den : 0.0;
+  }
+  const double elapsed = seconds(si.t_ns - step_start_ns_);
+  if (live_due()) {
+    live({"Temperature " + fixed(si.temperature, 2) + " C, changing " + fixed(rate, 2) + " C/min (warm below " +
+              fixed(config_.session.warmup_rate_c_per_min, 2) + ")",
+          "Elapsed " + fixed(elapsed, 0) + " s of at most " + fixed(config_.session.warmup_timeout_s, 0) + " s"},
+         std::min(1.0, span / config_.session.warmup_window_s),
+         {{"temperature_c", si.temperature}, {"rate_c_per_min", rate}});
+  }
+  if (span >= config_.session.warmup_window_s && std::abs(rate) < config_.session.warmup_rate_c_per_min) {
+    message("info", "Warm: " + fixed(si.temperature, 2) + " C, changing " + fixed(rate, 2) + " C/min");
+    advance();
+  } else if (elapsed > config_.session.warmup_timeout_s) {
+    fault("imu", "the temperature did not settle within " + fixed(config_.session.warmup_timeout_s, 0) +
+                     " s (still " + fixed(rate, 2) + " C/min)");
+  }
+}
+
+void SessionEngine::sample_still(const ImuSample& si, bool still) {
+  if (!still) {
+    if (still_since_ns_ >= 0 || samples_->size() > window_->size) {
+      if (still_since_ns_ >= 0) message("warning", "Motion detected: keep the rig still; the countdown restarts");
+      still_since_ns_ = -1;
+      samples_->clear();  // the still period the calibration uses must be still from its start
+    }
+    return;
+  }
+  if (still_since_ns_ < 0) {
+    still_since_ns_ = si.t_ns;
+    still_gyro_sum_.setZero();
+    still_count_ = 0;
+  }
+  still_gyro_sum_ += si.gyro;
+  ++still_count_;
+  const double held = seconds(si.t_ns - still_since_ns_);
+  if (live_due()) {
+    live({"Still: " + fixed(held, 1) + " of " + fixed(config_.session.still_s, 0) + " s"},
+         std::min(1.0, held / config_.session.still_s));
+  }
+  if (held >= config_.session.still_s) {
+    gyro_bias_ = still_gyro_sum_ / static_cast<double>(still_count_);
+    bias_known_ = true;
+    message("info", "Still start done: gyro bias " + fixed(gyro_bias_.norm() / kDeg, 3) + " deg/s");
+    advance();
+  }
+}
+
+json SessionEngine::coverage() const {
+  json missing = json::array();
+  for (int f = 0; f < 6; ++f) {
+    const bool near = std::any_of(poses_.begin(), poses_.end(),
+                                  [&](const Eigen::Vector3d& p) { return angle_deg(p, kFaces[f]) < 50.0; });
+    if (!near) missing.push_back(kFaceNames[f]);
+  }
+  return missing;
+}
+
+void SessionEngine::capture_pose() {
+  const Eigen::Vector3d up = window_->accel_mean().normalized();
+  for (std::size_t i = 0; i < poses_.size(); ++i) {
+    const double a = angle_deg(up, poses_[i]);
+    if (a < config_.session.pose_min_angle_deg) {
+      message("warning", "Too close to pose " + std::to_string(i + 1) + " (" + fixed(a, 0) + " deg apart): turn at least " +
+                             fixed(config_.session.pose_min_angle_deg, 0) + " deg further");
+      need_motion_ = true;
+      return;
+    }
+  }
+  poses_.push_back(up);
+  need_motion_ = true;
+  emit({{"type", "pose"}, {"index", poses_.size()}, {"up", {up.x(), up.y(), up.z()}}});
+  std::string text = "Pose " + std::to_string(poses_.size()) + " captured";
+  const json missing = coverage();
+  if (!missing.empty()) {
+    text += "; no pose yet near";
+    for (const auto& m : missing) text += " " + m.get<std::string>();
+    text += " up";
+  }
+  message("info", text);
+  request_quick_solve();
+}
+
+void SessionEngine::sample_poses(const ImuSample& si, bool still) {
+  if (!still) {
+    still_since_ns_ = -1;
+    need_motion_ = false;
+  } else if (!need_motion_) {
+    if (still_since_ns_ < 0) still_since_ns_ = si.t_ns;
+    if (seconds(si.t_ns - still_since_ns_) >= config_.session.hold_s) capture_pose();
+  }
+  const int target = config_.session.poses;
+  double scale_sigma = NAN;
+  if (quick_) {
+    scale_sigma = std::max(quick_->accel_sigma.scale.cwiseQuotient(quick_->model.accel.scale.cwiseAbs()).maxCoeff(),
+                           quick_->gyro_sigma.scale.cwiseQuotient(quick_->model.gyro.scale.cwiseAbs()).maxCoeff());
+  }
+  if (live_due()) {
+    const double held = still_since_ns_ < 0 || need_motion_ ? 0.0 : seconds(si.t_ns - still_since_ns_);
+    std::string missing;
+    for (const auto& m : coverage()) missing += " " + m.get<std::string>();
+    live({std::string(need_motion_ ? "Captured: turn to a new orientation"
+                                   : (still ? "Still: " + fixed(held, 1) + " of " + fixed(config_.session.hold_s, 1) + " s"
+                                            : "Moving")),
+          "Poses: " + std::to_string(poses_.size()) + " of " + std::to_string(target) +
+              (missing.empty() ? "; every direction covered" : "; missing" + missing),
+          std::isnan(scale_sigma) ? std::string("Scale sigma: after 9 poses")
+                                  : "Scale sigma: " + fixed(scale_sigma * 1e3, 2) + "e-3 (target " +
+                                        fixed(config_.session.pose_sigma_target * 1e3, 2) + "e-3)"},
+         std::min(1.0, static_cast<double>(poses_.size()) / target),
+         {{"poses", poses_.size()}, {"still", still}, {"missing", coverage()}, {"scale_sigma", scale_sigma}});
+  }
+  // Done: enough poses and the last quick solve, over all of them, meets the sigma target.
+  if (static_cast<int>(poses_.size()) >= target && quick_ && quick_poses_ == poses_.size() &&
+      scale_sigma <= config_.session.pose_sigma_target) {
+    message("info", std::to_string(poses_.size()) + " poses, scale sigma " + fixed(scale_sigma * 1e3, 2) + "e-3");
+    advance();
+  }
+}
+
+void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
+  if (face_ >= 6) return;
+  if (!still) {
+    still_since_ns_ = -1;
+    need_motion_ = false;
+    return;
+  }
+  if (need_motion_) return;
+  const Eigen::Vector3d up = window_->accel_mean().normalized();
+  const double off = angle_deg(up, kFaces[face_]);
+  if (off > 15.0) {
+    if (still_since_ns_ < 0 || seconds(si.t_ns - still_since_ns_) > 1.0) {
+      int nearest = 0;
+      for (int f = 1; f < 6; ++f)
+        if (angle_deg(up, kFaces[f]) < angle_deg(up, kFaces[nearest])) nearest = f;
+      message("warning", std::string("This is ") + kFaceNames[nearest] + " up (" + fixed(off, 0) + " deg off); put " +
+                             kFaceNames[face_] + " up");
+      need_motion_ = true;
+    }
+    return;
+  }
+  if (still_since_ns_ < 0) still_since_ns_ = si.t_ns;
+  const double held = seconds(si.t_ns - still_since_ns_);
+  if (live_due())
+    live({std::string("Face ") + kFaceNames[face_] + " up: " + fixed(held, 1) + " of " +
+              fixed(config_.session.gsens_hold_s, 0) + " s",
+          "Faces done: " + std::to_string(face_) + " of 6"},
+         (face_ + std::min(1.0, held / config_.session.gsens_hold_s)) / 6.0);
+  if (held < config_.session.gsens_hold_s) return;
+  emit({{"type", "face"}, {"face", kFaceNames[face_]}, {"up", {up.x(), up.y(), up.z()}}});
+  ++face_;
+  need_motion_ = true;
+  still_since_ns_ = -1;
+  if (face_ >= 6) {
+    message("info", "All six faces held");
+    advance();
+    return;
+  }
+  prompt(std::string("Put the rig with ") + kFaceNames[face_] + " up and hold it still", {"redo", "skip", "abort"});
+}
+
+void SessionEngine::sample_motion(const ImuSample& si) {
+  const Eigen::Vector3d w = si.gyro - gyro_bias_;
+  gyro_sq_ += w.cwiseProduct(w);
+  accel_sum_ += si.accel;
+  accel_sq_ += si.accel.cwiseProduct(si.accel);
+  ++motion_count_;
+  const double accel_fs = info_.accel_full_scale_g * kStandardGravity;
+  const double gyro_fs = info_.gyro_full_scale_dps * kDeg;
+  if ((accel_fs > 0 && si.accel.cwiseAbs().maxCoeff() > 0.98 * accel_fs) ||
+      (gyro_fs > 0 && si.gyro.cwiseAbs().maxCoeff() > 0.98 * gyro_fs)) {
+    if (saturated_++ % 200 == 0) message("warning", "Too fast: the IMU saturates; move more gently");
+  }
+  const double elapsed = seconds(si.t_ns - step_start_ns_);
+  if (live_due()) {
+    const double n = static_cast<double>(motion_count_);
+    const Eigen::Vector3d gyro_rms = (gyro_sq_ / n).cwiseSqrt();
+    const Eigen::Vector3d accel_std = (accel_sq_ / n - (accel_sum_ / n).cwiseProduct(accel_sum_ / n)).cwiseMax(0).cwiseSqrt();
+    std::vector<std::string> lines = {
+        "Rotation RMS deg/s  x " + fixed(gyro_rms.x() / kDeg, 0) + "  y " + fixed(gyro_rms.y() / kDeg, 0) + "  z " +
+            fixed(gyro_rms.z() / kDeg, 0),
+        "Acceleration std m/s^2  x " + fixed(accel_std.x(), 1) + "  y " + fixed(accel_std.y(), 1) + "  z " +
+            fixed(accel_std.z(), 1),
+        "Target seen in " + std::to_string(frames_seen_) + " of " + std::to_string(frames_) + " frames",
+        "Time left " + fixed(std::max(0.0, config_.session.motion_s - elapsed), 0) + " s"};
+    for (int a = 0; a < 3; ++a) {
+      if (elapsed > 10.0 && gyro_rms[a] < 20.0 * kDeg)
+        lines.push_back(std::string("Rotate more about ") + "xyz"[a]);
+    }
+    if (frames_ > 0 && last_seen_ns_ >= 0 && si.t_ns - last_seen_ns_ > 1'000'000'000)
+      lines.push_back("Target lost: bring it back into view");
+    live(lines, std::min(1.0, elapsed / config_.session.motion_s),
+         {{"gyro_rms_dps", {gyro_rms.x() / kDeg, gyro_rms.y() / kDeg, gyro_rms.z() / kDeg}},
+          {"frames", frames_},
+          {"frames_seen", frames_seen_}});
+  }
+  if (elapsed >= config_.session.motion_s) advance();
+}
+
+void SessionEngine::evaluate_gates() {
+  gates_.clear();
+  const auto& s = config_.session;
+  if (final_->imu) {
+    const auto& r = *final_->imu;
+    const double scale_sigma = std::max(r.accel_sigma.scale.cwiseQuotient(r.model.accel.scale.cwiseAbs()).maxCoeff(),
+                                        r.gyro_sigma.scale.cwiseQuotient(r.model.gyro.scale.cwiseAbs()).maxCoeff());
+    gates_.push_back({"gravity residual RMS (m/s^2)", r.quality.accel_after.mean_mps2, s.gate_gravity_rms_mps2,
+                      r.quality.accel_after.mean_mps2 <= s.gate_gravity_rms_mps2});
+    gates_.push_back({"largest scale sigma", scale_sigma, s.gate_scale_sigma,
+                      std::isfinite(scale_sigma) && scale_sigma <= s.gate_scale_sigma});
+    gates_.push_back({"distinct attitudes", static_cast<double>(r.distinct_attitudes), 9.0, r.distinct_attitudes >= 9});
+  }
+  if (final_->camimu) {
+    for (const auto& cam : final_->camimu->result.cameras) {
+      gates_.push_back({cam.name + " reprojection RMS (px)", cam.reprojection_rms_px, s.gate_reprojection_px,
+                        cam.reprojection_rms_px <= s.gate_reprojection_px});
+    }
+  }
+  gates_pass_ = std::all_of(gates_.begin(), gates_.end(), [](const Gate& g) { return g.pass; });
+}
+
+void SessionEngine::review() {
+  state_ = SessionState::kReview;
+  json gates = json::array();
+  for (const auto& g : gates_)
+    gates.push_back({{"name", g.name}, {"value", g.value}, {"limit", g.limit}, {"pass", g.pass}});
+  std::vector<std::string> lines;
+  if (final_->imu) {
+    const auto& r = *final_->imu;
+    const auto& m = r.canonical;
+    auto vec = [](const Eigen::Vector3d& v, double k, int d) {
+      return fixed(v.x() * k, d) + " " + fixed(v.y() * k, d) + " " + fixed(v.z() * k, d);
+    };
+    lines.push_back("Accel bias m/s^2: " + vec(m.b_a, 1.0, 4));
+    lines.push_back("Gyro bias deg/s: " + vec(m.b_g, 1.0 / kDeg, 4));
+    lines.push_back("Accel scale sigma (rel): " + vec(r.accel_sigma.scale.cwiseQuotient(r.model.accel.scale.cwiseAbs()), 1e3, 3) + " e-3");
+    lines.push_back("Gyro scale sigma (rel): " + vec(r.gyro_sigma.scale.cwiseQuotient(r.model.gyro.scale.cwiseAbs()), 1e3, 3) + " e-3");
+    lines.push_back("Static intervals " + std::to_string(r.intervals.size()) + ", attitudes " +
+                    std::to_string(r.distinct_attitudes));
+  }
+  if (final_->camimu) {
+    for (const auto& cam : final_->camimu->result.cameras) {
+      lines.push_back(cam.name + ": reprojection RMS " + fixed(cam.reprojection_rms_px, 3) + " px, time offset " +
+                      fixed(cam.timeshift_cam_imu_s * 1e3, 3) + " ms");
+    }
+  }
+  emit({{"type", "review"}, {"pass", gates_pass_}, {"gates", gates}, {"lines", lines}, {"files", final_->result_files}});
+  if (gates_pass_ && config_.session.auto_write) {
+    message("info", "Every gate passed; writing (session.auto_write)");
+    state_ = SessionState::kRunning;
+    advance();
+    return;
+  }
+  prompt(gates_pass_ ? "Every gate passed. Press y to accept and write, n to reject"
+                     : "A gate failed. Press y to write anyway, n to reject",
+         {"accept", "reject", "abort"});
+}
+
+}  // namespace imucal::app::session

@@ -1,0 +1,150 @@
+#include "sim/session_operator.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "sim/motion.hpp"
+
+namespace imucal::sim {
+
+namespace {
+
+/// A bump 64 tau^3 (1 - tau)^3 over [0, 1] (peak 1 at the middle) and its derivatives: zero value,
+/// rate and acceleration at both ends, so a lift joins the rests without a step in acceleration.
+void lift_bump(double tau, double* b, double* db, double* ddb) {
+  tau = std::clamp(tau, 0.0, 1.0);
+  const double u = 1.0 - tau;
+  *b = 64.0 * tau * tau * tau * u * u * u;
+  *db = 64.0 * 3.0 * tau * tau * u * u * (1.0 - 2.0 * tau);
+  *ddb = 64.0 * 6.0 * tau * u * ((1.0 - 2.0 * tau) * (1.0 - 2.0 * tau) - tau * u);
+}
+
+/// `n` directions spread evenly over the sphere (a Fibonacci lattice), in a shuffled order so that
+/// consecutive poses differ.
+std::vector<Eigen::Vector3d> spread_directions(int n, std::mt19937_64& rng) {
+  std::vector<Eigen::Vector3d> out;
+  const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
+  for (int i = 0; i < n; ++i) {
+    const double z = 1.0 - 2.0 * (i + 0.5) / n;
+    const double r = std::sqrt(1.0 - z * z);
+    out.emplace_back(r * std::cos(golden * i), r * std::sin(golden * i), z);
+  }
+  std::shuffle(out.begin(), out.end(), rng);
+  return out;
+}
+
+}  // namespace
+
+OperatorTrajectory::OperatorTrajectory(const Eigen::Quaterniond& q_world_body) : q_start_(q_world_body) {}
+
+TimeNs OperatorTrajectory::end_ns() const {
+  std::lock_guard lock(mutex_);
+  return pieces_.empty() ? 0 : pieces_.back().t1_ns;
+}
+
+Eigen::Quaterniond OperatorTrajectory::final_orientation() const {
+  std::lock_guard lock(mutex_);
+  if (pieces_.empty()) return q_start_;
+  const Piece& p = pieces_.back();
+  return Eigen::Quaterniond(p.q0.toRotationMatrix() * so3_exp(p.rotvec_body)).normalized();
+}
+
+void OperatorTrajectory::turn(TimeNs t0_ns, double duration_s, const Eigen::Quaterniond& q_target, double lift_m) {
+  const Eigen::Quaterniond q0 = final_orientation();
+  const Eigen::AngleAxisd delta(q0.conjugate() * q_target);
+  std::lock_guard lock(mutex_);
+  Piece p;
+  p.t0_ns = pieces_.empty() ? t0_ns : std::max(t0_ns, pieces_.back().t1_ns);
+  p.t1_ns = p.t0_ns + static_cast<TimeNs>(duration_s * 1e9);
+  p.q0 = q0;
+  p.rotvec_body = delta.angle() * delta.axis();
+  p.lift_m = lift_m;
+  pieces_.push_back(p);
+  segments_.push_back({p.t0_ns, p.t1_ns, "move"});
+}
+
+RigState OperatorTrajectory::at(TimeNs t_ns) const {
+  std::lock_guard lock(mutex_);
+  RigState st;
+  st.q_world_body = q_start_;
+  if (pieces_.empty() || t_ns < pieces_.front().t0_ns) return st;
+  auto it = std::upper_bound(pieces_.begin(), pieces_.end(), t_ns, [](TimeNs t, const Piece& p) { return t < p.t0_ns; });
+  const Piece& pc = *(it - 1);
+  const double T = ns_to_s(pc.t1_ns - pc.t0_ns);
+  const double tau = std::clamp(ns_to_s(t_ns - pc.t0_ns) / T, 0.0, 1.0);
+  double s = 0, ds = 0, dds = 0, b = 0, db = 0, ddb = 0;
+  min_jerk(tau, &s, &ds, &dds);
+  lift_bump(tau, &b, &db, &ddb);
+  if (tau >= 1.0) ds = dds = db = ddb = 0.0;
+  st.q_world_body = Eigen::Quaterniond(pc.q0.toRotationMatrix() * so3_exp(s * pc.rotvec_body)).normalized();
+  st.omega_body = ds / T * pc.rotvec_body;
+  const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
+  st.p_world_body = pc.lift_m * b * up;
+  st.v_world = pc.lift_m * db / T * up;
+  st.a_world = pc.lift_m * ddb / (T * T) * up;
+  return st;
+}
+
+ScriptedOperator::ScriptedOperator(OperatorTrajectory& trajectory, const ScriptedOperatorOptions& options,
+                                   std::function<void(const std::string& key)> press)
+    : trajectory_(trajectory), options_(options), press_(std::move(press)), rng_(options.seed) {
+  ups_ = spread_directions(26, rng_);
+}
+
+void ScriptedOperator::press_at(const std::string& key, TimeNs t_ns) {
+  keys_.emplace_back(t_ns, key);
+  std::stable_sort(keys_.begin(), keys_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+}
+
+void ScriptedOperator::on_time(TimeNs now_ns) {
+  while (!keys_.empty() && keys_.front().first <= now_ns) {
+    const std::string key = keys_.front().second;
+    keys_.erase(keys_.begin());
+    press_(key);
+  }
+}
+
+void ScriptedOperator::turn_to_up(const Eigen::Vector3d& up_body, TimeNs now_ns) {
+  std::uniform_real_distribution<double> yaw(-std::numbers::pi / 2, std::numbers::pi / 2);
+  const Eigen::Quaterniond q = Eigen::AngleAxisd(yaw(rng_), Eigen::Vector3d::UnitZ()) *
+                               Eigen::Quaterniond::FromTwoVectors(up_body.normalized(), Eigen::Vector3d::UnitZ());
+  const TimeNs t0 = std::max(now_ns + static_cast<TimeNs>(options_.reaction_s * 1e9), busy_until_ns_);
+  trajectory_.turn(t0, options_.move_s, q);
+  busy_until_ns_ = t0 + static_cast<TimeNs>(options_.move_s * 1e9);
+  ++turns_;
+}
+
+void ScriptedOperator::on_message(const nlohmann::json& m, TimeNs now_ns) {
+  const std::string type = m.value("type", ""), step = m.value("step", ""), text = m.value("text", "");
+  const TimeNs react = now_ns + static_cast<TimeNs>(options_.reaction_s * 1e9);
+  auto has_key = [&](const char* key) {
+    const auto keys = m.value("keys", nlohmann::json::array());
+    return std::find(keys.begin(), keys.end(), key) != keys.end();
+  };
+  if (type == "prompt") {
+    if (step == "preflight" && has_key("continue")) press_at("continue", react);
+    if (step == "poses" && !has_key("redo")) return;
+    if (step == "poses") turn_to_up(ups_[next_up_++ % ups_.size()], now_ns);
+    if (step == "motion") press_at("skip", react);  // this operator has no target to wave at
+    if (step == "review" && has_key("accept")) press_at(options_.accept ? "accept" : "reject", react);
+    if (step == "gsens") {
+      static const char* kNames[6] = {"+X", "-X", "+Y", "-Y", "+Z", "-Z"};
+      for (int f = 0; f < 6; ++f) {
+        if (text.find(std::string(kNames[f]) + " up") == std::string::npos) continue;
+        Eigen::Vector3d up = Eigen::Vector3d::Zero();
+        up[f / 2] = f % 2 == 0 ? 1.0 : -1.0;
+        turn_to_up(up, now_ns);
+        break;
+      }
+    }
+    return;
+  }
+  if (type == "message") {
+    const bool captured = text.rfind("Pose ", 0) == 0 && text.find("captured") != std::string::npos;
+    const bool too_close = text.rfind("Too close", 0) == 0;
+    if (captured || too_close) turn_to_up(ups_[next_up_++ % ups_.size()], now_ns);
+  }
+}
+
+}  // namespace imucal::sim

@@ -1,0 +1,85 @@
+#pragma once
+// The virtual rig's operator for guided sessions (imucald --sim, `make demo`, the service's
+// tests): a trajectory that is extended while it runs, and a scripted operator that reads the
+// session's messages and moves the rig or presses keys as a person at the console would, at a
+// human pace (a reaction time, 1-2 s per pose change).
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <functional>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "core/time.hpp"
+#include "sim/trajectory.hpp"
+
+namespace imucal::sim {
+
+/// A trajectory made of rests and minimum-jerk turns (rotations about a body-fixed axis), appended
+/// as the session goes on. Before the first turn and after the last one the rig rests. Safe to
+/// read from another thread than the one that appends (the real-time rig's ticker).
+class OperatorTrajectory final : public Trajectory {
+ public:
+  explicit OperatorTrajectory(const Eigen::Quaterniond& q_world_body = Eigen::Quaterniond::Identity());
+  RigState at(TimeNs t_ns) const override;
+  TimeNs start_ns() const override { return 0; }
+  TimeNs end_ns() const override;
+  const std::vector<Segment>& segments() const override { return segments_; }
+
+  /// Turns from wherever the rig is at `t0_ns` to `q_target` over `duration_s`, with a lift of
+  /// `lift_m` in the middle (a hand moves the rig while it turns it). t0 must not precede the
+  /// end of the previous turn.
+  void turn(TimeNs t0_ns, double duration_s, const Eigen::Quaterniond& q_target, double lift_m = 0.05);
+  /// The orientation the rig rests in after every turn so far.
+  Eigen::Quaterniond final_orientation() const;
+
+ private:
+  struct Piece {
+    TimeNs t0_ns = 0, t1_ns = 0;
+    Eigen::Quaterniond q0;
+    Eigen::Vector3d rotvec_body = Eigen::Vector3d::Zero();
+    double lift_m = 0.0;
+  };
+  mutable std::mutex mutex_;
+  Eigen::Quaterniond q_start_;
+  std::vector<Piece> pieces_;
+  std::vector<Segment> segments_;
+};
+
+struct ScriptedOperatorOptions {
+  double reaction_s = 0.8;  // from a prompt or a capture to the start of the operator's move
+  double move_s = 1.5;      // one pose change
+  bool accept = true;       // the review's answer: accept (y) or reject (n)
+  std::uint64_t seed = 1;
+};
+
+/// Reads the session's messages (app/session/session_engine.hpp, docs/service.md) and acts on
+/// the trajectory or presses keys. Call on_message() for each message and on_time() as sample
+/// time passes; keys go to `press` at their time.
+class ScriptedOperator {
+ public:
+  ScriptedOperator(OperatorTrajectory& trajectory, const ScriptedOperatorOptions& options,
+                   std::function<void(const std::string& key)> press);
+  void on_message(const nlohmann::json& message, TimeNs now_ns);
+  void on_time(TimeNs now_ns);
+  int turns() const { return turns_; }
+
+ private:
+  void turn_to_up(const Eigen::Vector3d& up_body, TimeNs now_ns);
+  void press_at(const std::string& key, TimeNs t_ns);
+
+  OperatorTrajectory& trajectory_;
+  ScriptedOperatorOptions options_;
+  std::function<void(const std::string&)> press_;
+  std::mt19937_64 rng_;
+  std::vector<Eigen::Vector3d> ups_;  // pose directions, well spread over the sphere
+  std::size_t next_up_ = 0;
+  std::vector<std::pair<TimeNs, std::string>> keys_;  // pending, in time order
+  int turns_ = 0;
+  TimeNs busy_until_ns_ = 0;
+};
+
+}  // namespace imucal::sim

@@ -1,0 +1,306 @@
+// The guided session end to end on the virtual rig: the engine and its runner (app/session), the
+// emulated MPU-6000 behind the real driver and acquisition (sim/session_rig.hpp) moved by the
+// scripted operator, the static solve through the solver module, the session log, and replay.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <nlohmann/json.hpp>
+
+#include "app/rig.hpp"
+#include "app/session/session_replay.hpp"
+#include "app/session/session_runner.hpp"
+#include "core/rig_config.hpp"
+#include "log/session_log.hpp"
+#include "sim/session_rig.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal {
+namespace {
+
+using app::session::SessionRunner;
+using nlohmann::json;
+
+class ModuleDir {
+ public:
+  ModuleDir() { setenv("IMUCAL_MODULE_DIR", IMUCAL_MODULE_BUILD_DIR, 1); }
+  ~ModuleDir() { unsetenv("IMUCAL_MODULE_DIR"); }
+};
+
+RigConfig session_config(const std::vector<std::string>& steps) {
+  auto config = load_rig_config(test::source_path("config/rig.yaml"));
+  EXPECT_TRUE(config.ok());
+  RigConfig c = *config;
+  c.session.steps = steps;
+  return c;
+}
+
+/// A service session on the virtual rig, run the way imucald runs it: samples in 20 ms batches,
+/// solves and writes on the runner's worker, their results posted back between batches.
+class SimSession {
+ public:
+  explicit SimSession(RigConfig config, std::uint64_t seed = 3) : config_(std::move(config)), dir_(test::scratch_dir()) {
+    auto settings = app::driver_settings(config_.imu);
+    EXPECT_TRUE(settings.ok());
+    sim::SessionRigOptions ro;
+    ro.settings = *settings;
+    ro.seed = seed;
+    auto rig = sim::SessionRig::create(ro);
+    EXPECT_TRUE(rig.ok()) << rig.error().message;
+    rig_ = std::move(*rig);
+    app::session::RunnerOptions o;
+    o.state_dir = dir_;
+    o.post = [this](std::function<void()> f) {
+      std::lock_guard lock(mutex_);
+      posted_.push_back(std::move(f));
+    };
+    o.broadcast = [this](const json& m) {
+      messages_.push_back(m);
+      if (m.value("type", "") == "prompt" && first_prompt_ns_ < 0) first_prompt_ns_ = rig_->now_ns();
+      if (m.value("type", "") == "review") review_ns_ = rig_->now_ns();
+      if (m.value("type", "") == "fault" && redo_faults_) keys_.emplace_back(rig_->now_ns() + 2'000'000'000, "redo");
+      if (scripted_) op_->on_message(m, rig_->now_ns());
+      if (!scripted_ && m.value("type", "") == "prompt" && m.value("step", "") == "preflight")
+        keys_.emplace_back(rig_->now_ns() + 500'000'000, "continue");
+    };
+    o.preflight = [] {
+      app::session::PreflightReport r;
+      r.devices.push_back({"imu", true, "MPU-6000 emulator, WHO_AM_I 0x68"});
+      r.devices.push_back({"storage", true, "file"});
+      return r;
+    };
+    o.recover = [this] {
+      ++recoveries_;
+      return Status{};
+    };
+    o.make_payload = [](const std::vector<std::string>& files) -> Result<json> {
+      return json{{"files", files}};
+    };
+    o.write_storage = [this](const json& payload) -> Status {
+      ++write_calls_;
+      if (fail_writes_ > 0) {
+        --fail_writes_;
+        return make_error(Errc::kIo, "EEPROM did not acknowledge");
+      }
+      written_ = payload;
+      return {};
+    };
+    o.metadata = {{"rig_config", rig_config_to_json(config_)}};
+    runner_ = std::make_unique<SessionRunner>(config_, rig_->stream_info(), o);
+    op_ = std::make_unique<sim::ScriptedOperator>(rig_->trajectory(), sim::ScriptedOperatorOptions{},
+                                                  [this](const std::string& key) { press(key); });
+  }
+
+  void press(const std::string& key) { (void)runner_->engine().key(key); }
+
+  /// Runs until the session ends or `max_s` of rig time passed.
+  void run(double max_s, const std::function<void(SimSession&)>& each_batch = nullptr) {
+    const TimeNs end = rig_->now_ns() + static_cast<TimeNs>(max_s * 1e9);
+    std::vector<ImuSample> batch;
+    while (rig_->now_ns() < end && (runner_->engine().running() || !started_)) {
+      started_ = true;
+      batch.clear();
+      ASSERT_TRUE(rig_->advance(20'000'000, batch).ok());
+      runner_->on_samples(batch);
+      runner_->drain();
+      std::vector<std::function<void()>> posted;
+      {
+        std::lock_guard lock(mutex_);
+        posted.swap(posted_);
+      }
+      for (auto& f : posted) f();
+      op_->on_time(rig_->now_ns());
+      while (!keys_.empty() && keys_.front().first <= rig_->now_ns()) {
+        press(keys_.front().second);
+        keys_.erase(keys_.begin());
+      }
+      if (each_batch) each_batch(*this);
+    }
+    std::printf("run ended at rig time %.2f s, session %s\n", ns_to_s(rig_->now_ns()),
+                runner_->engine().status().value("state", "").c_str());
+  }
+
+  std::vector<json> of_type(const std::string& type) const {
+    std::vector<json> out;
+    for (const auto& m : messages_)
+      if (m.value("type", "") == type) out.push_back(m);
+    return out;
+  }
+  bool said(const std::string& fragment) const {
+    for (const auto& m : messages_)
+      if (m.value("text", "").find(fragment) != std::string::npos) return true;
+    return false;
+  }
+  std::string outcome() const {
+    const auto done = of_type("done");
+    return done.empty() ? "" : done.back().value("outcome", "");
+  }
+
+  RigConfig config_;
+  std::string dir_;
+  std::unique_ptr<sim::SessionRig> rig_;
+  std::unique_ptr<SessionRunner> runner_;
+  std::unique_ptr<sim::ScriptedOperator> op_;
+  std::mutex mutex_;
+  std::vector<std::function<void()>> posted_;
+  std::vector<json> messages_;
+  std::vector<std::pair<TimeNs, std::string>> keys_;
+  TimeNs first_prompt_ns_ = -1, review_ns_ = -1;
+  bool started_ = false, redo_faults_ = true, scripted_ = true;
+  int recoveries_ = 0, write_calls_ = 0, fail_writes_ = 0;
+  json written_;
+};
+
+const std::vector<std::string> kImuSteps = {"preflight", "warmup", "still", "poses", "solve", "review", "write"};
+
+TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult) {
+  ModuleDir modules;
+  SimSession s(session_config(kImuSteps));
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  s.run(400.0);
+  if (s.outcome() != "written")
+    for (const auto& m : s.messages_) std::printf("%s\n", m.dump().c_str());
+  ASSERT_EQ(s.outcome(), "written");
+  EXPECT_EQ(s.write_calls_, 1);
+  ASSERT_TRUE(s.written_.contains("files"));
+  EXPECT_GE(s.runner_->engine().poses().size(), 18u);
+  const auto review = s.of_type("review");
+  ASSERT_EQ(review.size(), 1u);
+  EXPECT_TRUE(review[0].value("pass", false)) << review[0].dump();
+  // Rig time from the first prompt to the review: the protocol's budget is 3 minutes.
+  const double rig_s = static_cast<double>(s.review_ns_ - s.first_prompt_ns_) * 1e-9;
+  std::printf("rig time first prompt -> review: %.1f s, %zu poses\n", rig_s, s.runner_->engine().poses().size());
+  EXPECT_LT(rig_s, 180.0);
+  EXPECT_TRUE(std::filesystem::exists(s.runner_->session_dir() + "/imu-static.yaml"));
+  EXPECT_TRUE(std::filesystem::exists(s.runner_->session_dir() + "/report.html"));
+
+  // The log is complete and holds the operator's keys.
+  auto reader = log::SessionLogReader::open(s.runner_->log_path());
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_TRUE((*reader)->health().complete);
+  auto events = (*reader)->events();
+  ASSERT_TRUE(events.ok());
+  int keys = 0;
+  for (const auto& e : *events) keys += e.message.find("\"type\":\"key\"") != std::string::npos;
+  EXPECT_GE(keys, 2);  // continue at preflight, accept at review
+
+  // Replay reaches the same result, bit for bit.
+  app::session::ReplayOptions ro;
+  ro.log_path = s.runner_->log_path();
+  ro.out_dir = s.dir_ + "/replay";
+  auto replay = app::session::replay_session(ro);
+  ASSERT_TRUE(replay.ok()) << replay.error().message;
+  EXPECT_EQ(replay->outcome, "written");
+  EXPECT_TRUE(replay->live_result);
+  EXPECT_EQ(replay->max_difference, 0.0);
+  EXPECT_GE(replay->keys, 2);
+}
+
+TEST(Session, AnImuFaultStopsTheStepAndRedoContinuesWithTheRecordedPoses) {
+  ModuleDir modules;
+  SimSession s(session_config(kImuSteps));
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  bool injected = false;
+  std::size_t poses_at_fault = 0;
+  s.run(500.0, [&](SimSession& ss) {
+    if (!injected && ss.runner_->engine().poses().size() == 5) {
+      injected = true;
+      poses_at_fault = 5;
+      ss.runner_->fault("imu", "FIFO read failed: bus error");
+    }
+  });
+  ASSERT_TRUE(injected);
+  EXPECT_EQ(s.recoveries_, 1);
+  EXPECT_TRUE(s.said("Redoing step poses"));
+  EXPECT_GE(s.runner_->engine().poses().size(), poses_at_fault + 13);
+  EXPECT_EQ(s.outcome(), "written");
+  ASSERT_EQ(s.of_type("fault").size(), 1u);
+  EXPECT_NE(s.of_type("fault")[0].value("advice", "").find("recorded is kept"), std::string::npos);
+}
+
+TEST(Session, AStorageErrorLeavesTheStoredRecordAloneAndRedoWritesAgain) {
+  ModuleDir modules;
+  SimSession s(session_config(kImuSteps));
+  s.fail_writes_ = 1;
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  s.run(500.0);
+  EXPECT_EQ(s.write_calls_, 2);
+  EXPECT_EQ(s.outcome(), "written");
+  const auto faults = s.of_type("fault");
+  ASSERT_EQ(faults.size(), 1u);
+  EXPECT_EQ(faults[0].value("source", ""), "storage");
+}
+
+TEST(Session, AbortKeepsTheRecordingAndWritesNothing) {
+  ModuleDir modules;
+  SimSession s(session_config(kImuSteps));
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  s.run(500.0, [](SimSession& ss) {
+    if (ss.runner_->engine().poses().size() == 3) ss.press("abort");
+  });
+  EXPECT_EQ(s.outcome(), "aborted");
+  EXPECT_EQ(s.write_calls_, 0);
+  auto reader = log::SessionLogReader::open(s.runner_->log_path());
+  ASSERT_TRUE(reader.ok());
+  EXPECT_TRUE((*reader)->health().complete);
+  auto id = (*reader)->find_imu_stream();
+  ASSERT_TRUE(id.ok());
+  auto n = (*reader)->imu_count(*id);
+  ASSERT_TRUE(n.ok());
+  EXPECT_GT(*n, 200 * 20);  // warm-up, still start and three poses at 200 Hz
+}
+
+TEST(Session, MotionDuringTheStillStartRestartsTheCountdown) {
+  ModuleDir modules;
+  SimSession s(session_config({"preflight", "still", "poses"}));
+  s.config_.session.poses = 9;
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  bool bumped = false;
+  s.run(60.0, [&](SimSession& ss) {
+    const auto st = ss.runner_->engine().status();
+    if (!bumped && st.value("step", "") == "still" &&
+        ss.of_type("live").size() > 0 && ss.of_type("live").back().value("progress", 0.0) > 0.5) {
+      bumped = true;
+      ss.rig_->trajectory().turn(ss.rig_->now_ns(), 1.0, Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX())));
+    }
+    if (st.value("step", "") == "poses") ss.press("abort");
+  });
+  ASSERT_TRUE(bumped);
+  EXPECT_TRUE(s.said("Motion detected"));
+}
+
+TEST(Session, APoseTooCloseToAnEarlierOneIsRefused) {
+  ModuleDir modules;
+  SimSession s(session_config({"preflight", "still", "poses"}));
+  s.scripted_ = false;
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  // The first pose is the rest attitude; turning by 5 deg and holding must be refused.
+  bool turned = false;
+  s.run(120.0, [&](SimSession& ss) {
+    if (!turned && ss.runner_->engine().poses().size() == 1) {
+      turned = true;
+      const Eigen::Quaterniond q = ss.rig_->trajectory().final_orientation() *
+                                   Eigen::Quaterniond(Eigen::AngleAxisd(5.0 * M_PI / 180.0, Eigen::Vector3d::UnitY()));
+      ss.rig_->trajectory().turn(ss.rig_->now_ns() + 100'000'000, 1.0, q);
+    }
+    if (ss.said("Too close")) ss.press("abort");
+  });
+  EXPECT_TRUE(s.said("Too close to pose"));
+}
+
+TEST(Session, StartRefusesStepsOutOfOrderOrWithoutTheirInputs) {
+  SimSession s(session_config(kImuSteps));
+  EXPECT_FALSE(s.runner_->engine().start({"poses", "still"}).ok());
+  EXPECT_FALSE(s.runner_->engine().start({"preflight", "review"}).ok());
+  EXPECT_FALSE(s.runner_->engine().start({"solve"}).ok());
+  EXPECT_FALSE(s.runner_->engine().start({"nonsense"}).ok());
+  RigConfig no_cam = session_config({});
+  no_cam.cameras.clear();
+  SimSession t(no_cam);
+  EXPECT_FALSE(t.runner_->engine().start({"motion"}).ok());
+}
+
+}  // namespace
+}  // namespace imucal
