@@ -38,11 +38,6 @@ std::vector<Eigen::Vector3d> spread_directions(int n, std::mt19937_64& rng) {
 
 OperatorTrajectory::OperatorTrajectory(const Eigen::Quaterniond& q_world_body) : q_start_(q_world_body) {}
 
-TimeNs OperatorTrajectory::end_ns() const {
-  std::lock_guard lock(mutex_);
-  return pieces_.empty() ? 0 : pieces_.back().t1_ns;
-}
-
 Eigen::Quaterniond OperatorTrajectory::final_orientation() const {
   std::lock_guard lock(mutex_);
   if (pieces_.empty()) return q_start_;
@@ -50,7 +45,8 @@ Eigen::Quaterniond OperatorTrajectory::final_orientation() const {
   return Eigen::Quaterniond(p.q0.toRotationMatrix() * so3_exp(p.rotvec_body)).normalized();
 }
 
-void OperatorTrajectory::turn(TimeNs t0_ns, double duration_s, const Eigen::Quaterniond& q_target, double lift_m) {
+void OperatorTrajectory::turn(TimeNs t0_ns, double duration_s, const Eigen::Quaterniond& q_target,
+                              double lift_m) {
   const Eigen::Quaterniond q0 = final_orientation();
   const Eigen::AngleAxisd delta(q0.conjugate() * q_target);
   std::lock_guard lock(mutex_);
@@ -69,7 +65,8 @@ RigState OperatorTrajectory::at(TimeNs t_ns) const {
   RigState st;
   st.q_world_body = q_start_;
   if (pieces_.empty() || t_ns < pieces_.front().t0_ns) return st;
-  auto it = std::upper_bound(pieces_.begin(), pieces_.end(), t_ns, [](TimeNs t, const Piece& p) { return t < p.t0_ns; });
+  auto it = std::upper_bound(pieces_.begin(), pieces_.end(), t_ns,
+                             [](TimeNs t, const Piece& p) { return t < p.t0_ns; });
   const Piece& pc = *(it - 1);
   const double T = ns_to_s(pc.t1_ns - pc.t0_ns);
   const double tau = std::clamp(ns_to_s(t_ns - pc.t0_ns) / T, 0.0, 1.0);
@@ -94,7 +91,8 @@ ScriptedOperator::ScriptedOperator(OperatorTrajectory& trajectory, const Scripte
 
 void ScriptedOperator::press_at(const std::string& key, TimeNs t_ns) {
   keys_.emplace_back(t_ns, key);
-  std::stable_sort(keys_.begin(), keys_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::stable_sort(keys_.begin(), keys_.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
 }
 
 void ScriptedOperator::on_time(TimeNs now_ns) {
@@ -107,8 +105,9 @@ void ScriptedOperator::on_time(TimeNs now_ns) {
 
 void ScriptedOperator::turn_to_up(const Eigen::Vector3d& up_body, TimeNs now_ns) {
   std::uniform_real_distribution<double> yaw(-std::numbers::pi / 2, std::numbers::pi / 2);
-  const Eigen::Quaterniond q = Eigen::AngleAxisd(yaw(rng_), Eigen::Vector3d::UnitZ()) *
-                               Eigen::Quaterniond::FromTwoVectors(up_body.normalized(), Eigen::Vector3d::UnitZ());
+  const Eigen::Quaterniond q =
+      Eigen::AngleAxisd(yaw(rng_), Eigen::Vector3d::UnitZ()) *
+      Eigen::Quaterniond::FromTwoVectors(up_body.normalized(), Eigen::Vector3d::UnitZ());
   const TimeNs t0 = std::max(now_ns + static_cast<TimeNs>(options_.reaction_s * 1e9), busy_until_ns_);
   trajectory_.turn(t0, options_.move_s, q);
   busy_until_ns_ = t0 + static_cast<TimeNs>(options_.move_s * 1e9);

@@ -26,7 +26,10 @@ class OperatorTrajectory final : public Trajectory {
   explicit OperatorTrajectory(const Eigen::Quaterniond& q_world_body = Eigen::Quaterniond::Identity());
   RigState at(TimeNs t_ns) const override;
   TimeNs start_ns() const override { return 0; }
-  TimeNs end_ns() const override;
+  /// Open-ended: the rig rests after the last turn for as long as the session runs (the sensor
+  /// clamps time to the trajectory, which would freeze the bias walk and the temperature).
+  TimeNs end_ns() const override { return kOpenEndNs; }
+  static constexpr TimeNs kOpenEndNs = TimeNs{1} << 60;
   const std::vector<Segment>& segments() const override { return segments_; }
 
   /// Turns from wherever the rig is at `t0_ns` to `q_target` over `duration_s`, with a lift of

@@ -16,8 +16,9 @@ using nlohmann::json;
 
 namespace {
 
-constexpr StepId kAllSteps[] = {StepId::kPreflight, StepId::kWarmup, StepId::kStill,  StepId::kPoses, StepId::kGsens,
-                                StepId::kMotion,    StepId::kSolve,  StepId::kReview, StepId::kWrite};
+constexpr StepId kAllSteps[] = {StepId::kPreflight, StepId::kWarmup, StepId::kStill,
+                                StepId::kPoses,     StepId::kGsens,  StepId::kMotion,
+                                StepId::kSolve,     StepId::kReview, StepId::kWrite};
 
 std::string fixed(double v, int digits) {
   std::ostringstream s;
@@ -230,14 +231,16 @@ void SessionEngine::message(const std::string& level, const std::string& text) {
 
 json SessionEngine::status() const {
   json steps = json::array();
-  for (const auto& s : steps_) steps.push_back({{"name", step_name(s.id)}, {"state", step_state_name(s.state)}});
-  json j = {{"type", "status"},
-            {"state", session_state_name(state_)},
-            {"rig", config_.name},
-            {"steps", steps},
-            {"step", current_ < steps_.size() && running() ? step_name(steps_[current_].id) : ""},
-            {"poses", poses_.size()},
-            {"elapsed_s", session_start_ns_ < 0 ? 0.0 : static_cast<double>(now_ns_ - session_start_ns_) * 1e-9}};
+  for (const auto& s : steps_)
+    steps.push_back({{"name", step_name(s.id)}, {"state", step_state_name(s.state)}});
+  json j = {
+      {"type", "status"},
+      {"state", session_state_name(state_)},
+      {"rig", config_.name},
+      {"steps", steps},
+      {"step", current_ < steps_.size() && running() ? step_name(steps_[current_].id) : ""},
+      {"poses", poses_.size()},
+      {"elapsed_s", session_start_ns_ < 0 ? 0.0 : static_cast<double>(now_ns_ - session_start_ns_) * 1e-9}};
   return j;
 }
 
@@ -334,8 +337,8 @@ void SessionEngine::begin_step() {
       review();
       break;
     case StepId::kWrite:
-      if (!gates_pass_ && std::none_of(steps_.begin(), steps_.end(),
-                                       [](const Step& s) { return s.id == StepId::kReview; })) {
+      if (!gates_pass_ &&
+          std::none_of(steps_.begin(), steps_.end(), [](const Step& s) { return s.id == StepId::kReview; })) {
         steps_[current_].state = StepState::kFailed;
         finish(SessionState::kFailed, "failed",
                "Not written: a quality gate failed and there is no review step to accept it.");
@@ -356,9 +359,11 @@ void SessionEngine::run_preflight() {
   const PreflightReport report = host_.preflight();
   emit({{"type", "preflight"}, {"report", report.to_json()}});
   std::vector<std::string> lines;
-  for (const auto& d : report.devices) lines.push_back((d.ok ? "ok    " : "FAIL  ") + d.name + ": " + d.detail);
-  lines.push_back(report.stored ? "stored calibration: " + report.stored->value("summary", std::string("present"))
-                                : "stored calibration: none");
+  for (const auto& d : report.devices)
+    lines.push_back((d.ok ? "ok    " : "FAIL  ") + d.name + ": " + d.detail);
+  lines.push_back(report.stored
+                      ? "stored calibration: " + report.stored->value("summary", std::string("present"))
+                      : "stored calibration: none");
   live(lines, 1.0, report.to_json());
   if (!report.ok()) {
     steps_[current_].state = StepState::kFailed;
@@ -373,7 +378,8 @@ void SessionEngine::run_preflight() {
 Status SessionEngine::key(const std::string& key) {
   static const std::vector<std::string> kKeys = {"continue", "redo", "abort", "accept", "reject", "skip"};
   if (std::find(kKeys.begin(), kKeys.end(), key) == kKeys.end())
-    return make_error(Errc::kInvalidArgument, "'" + key + "' is not a key (continue, redo, abort, accept, reject, skip)");
+    return make_error(Errc::kInvalidArgument,
+                      "'" + key + "' is not a key (continue, redo, abort, accept, reject, skip)");
   if (!running()) return make_error(Errc::kInvalidArgument, "no session is running (start one first)");
   emit({{"type", "key"}, {"key", key}});
   const StepId id = steps_[current_].id;
@@ -397,8 +403,8 @@ Status SessionEngine::key(const std::string& key) {
     }
     if (id == StepId::kPoses && !poses_.empty()) {
       poses_.pop_back();
-      message("info", "Dropped pose " + std::to_string(poses_.size() + 1) + "; " + std::to_string(poses_.size()) +
-                          " remain");
+      message("info", "Dropped pose " + std::to_string(poses_.size() + 1) + "; " +
+                          std::to_string(poses_.size()) + " remain");
       return {};
     }
     if (id == StepId::kGsens) {
@@ -410,7 +416,8 @@ Status SessionEngine::key(const std::string& key) {
     return make_error(Errc::kInvalidArgument, std::string("nothing to redo in step ") + step_name(id));
   }
   if (key == "skip") {
-    if (!step_skippable(id)) return make_error(Errc::kInvalidArgument, std::string("step ") + step_name(id) + " cannot be skipped");
+    if (!step_skippable(id))
+      return make_error(Errc::kInvalidArgument, std::string("step ") + step_name(id) + " cannot be skipped");
     steps_[current_].state = StepState::kSkipped;
     message("info", std::string("Skipped step ") + step_name(id));
     enter(current_ + 1);
@@ -434,7 +441,8 @@ Status SessionEngine::key(const std::string& key) {
     return make_error(Errc::kInvalidArgument, std::string("step ") + step_name(id) + " goes on by itself");
   }
   // accept / reject: the review.
-  if (id != StepId::kReview) return make_error(Errc::kInvalidArgument, "there is nothing to accept or reject yet");
+  if (id != StepId::kReview)
+    return make_error(Errc::kInvalidArgument, "there is nothing to accept or reject yet");
   if (key == "reject") {
     finish(SessionState::kDone, "rejected",
            "Rejected: the results are kept in the session folder; the stored calibration is unchanged.");
@@ -452,10 +460,12 @@ void SessionEngine::fault(const std::string& source, const std::string& text) {
         {"source", source},
         {"step", step_name(steps_[current_].id)},
         {"text", text},
-        {"advice", "What was recorded is kept. Fix the " + source + " and press r to redo the step, or a to abort"}});
+        {"advice",
+         "What was recorded is kept. Fix the " + source + " and press r to redo the step, or a to abort"}});
   steps_[current_].state = StepState::kFailed;
   failed_step_ = true;
-  prompt(source + " fault: " + text + ". Press r to redo the step once fixed, or a to abort", {"redo", "abort"});
+  prompt(source + " fault: " + text + ". Press r to redo the step once fixed, or a to abort",
+         {"redo", "abort"});
 }
 
 calib::StaticCalibrationOptions SessionEngine::static_options() const {
@@ -491,12 +501,18 @@ void SessionEngine::request_final_solve() {
   job.final = true;
   job.samples = std::make_shared<const std::vector<ImuSample>>(*samples_);
   job.static_options = static_options();
-  job.camimu = std::any_of(steps_.begin(), steps_.end(),
-                           [](const Step& s) { return s.id == StepId::kMotion && s.state == StepState::kDone; });
+  job.camimu = std::any_of(steps_.begin(), steps_.end(), [](const Step& s) {
+    return s.id == StepId::kMotion && s.state == StepState::kDone;
+  });
   job.t_end_ns = now_ns_;
   final_id_ = job.id;
-  emit({{"type", "solve"}, {"id", job.id}, {"final", true}, {"samples", job.samples->size()}, {"camimu", job.camimu}});
-  prompt("Solving: " + std::to_string(job.samples->size()) + " samples" + (job.camimu ? " and the camera frames" : ""),
+  emit({{"type", "solve"},
+        {"id", job.id},
+        {"final", true},
+        {"samples", job.samples->size()},
+        {"camimu", job.camimu}});
+  prompt("Solving: " + std::to_string(job.samples->size()) + " samples" +
+             (job.camimu ? " and the camera frames" : ""),
          {"abort"});
   host_.solve(job);
 }
@@ -512,7 +528,8 @@ void SessionEngine::solve_finished(int id, SolveOutcome outcome) {
   if (id == quick_in_flight_) {
     quick_in_flight_ = 0;
     if (!outcome.error.empty() || !outcome.imu) {
-      message("warning", "Quick solve after " + std::to_string(quick_poses_) + " poses failed: " + outcome.error);
+      message("warning",
+              "Quick solve after " + std::to_string(quick_poses_) + " poses failed: " + outcome.error);
       return;
     }
     quick_ = std::move(outcome.imu);
@@ -546,12 +563,14 @@ void SessionEngine::solve_finished(int id, SolveOutcome outcome) {
 json SessionEngine::result_message() const {
   json m = {{"type", "result"}, {"files", final_->result_files}};
   auto mat = [](const Eigen::Matrix3d& M) {
-    return json::array({{M(0, 0), M(0, 1), M(0, 2)}, {M(1, 0), M(1, 1), M(1, 2)}, {M(2, 0), M(2, 1), M(2, 2)}});
+    return json::array(
+        {{M(0, 0), M(0, 1), M(0, 2)}, {M(1, 0), M(1, 1), M(1, 2)}, {M(2, 0), M(2, 1), M(2, 2)}});
   };
   auto vec = [](const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); };
   if (final_->imu) {
     const auto& c = final_->imu->canonical;
-    m["imu"] = {{"A_a", mat(c.A_a)}, {"b_a", vec(c.b_a)}, {"A_g", mat(c.A_g)}, {"b_g", vec(c.b_g)}, {"G", mat(c.G)}};
+    m["imu"] = {
+        {"A_a", mat(c.A_a)}, {"b_a", vec(c.b_a)}, {"A_g", mat(c.A_g)}, {"b_g", vec(c.b_g)}, {"G", mat(c.G)}};
   }
   return m;
 }

@@ -20,6 +20,7 @@
 #include <optional>
 #include <string>
 #include <vector>
+
 #include "app/camimu_calibration.hpp"
 #include "calib/static_calibration.hpp"
 #include "core/imu.hpp"
@@ -45,13 +46,13 @@ std::vector<StepId> configured_steps(const RigConfig& config);
 /// What the host found when it probed the rig (step 1).
 struct PreflightReport {
   struct Device {
-    std::string name;    // "imu", "cam0", "storage"
+    std::string name;  // "imu", "cam0", "storage"
     bool ok = false;
     std::string detail;  // "MPU-6000 on /dev/spidev0.0, WHO_AM_I 0x68, self-test passed" or the error
   };
   std::vector<Device> devices;
-  std::string rig;                          // the configuration's name
-  std::optional<nlohmann::json> stored;     // the calibration on the rig's storage (its summary)
+  std::string rig;                       // the configuration's name
+  std::optional<nlohmann::json> stored;  // the calibration on the rig's storage (its summary)
   bool ok() const;
   nlohmann::json to_json() const;
   static PreflightReport from_json(const nlohmann::json& j);
@@ -211,7 +212,7 @@ class SessionEngine {
   bool need_motion_ = false;  // after a capture or a refusal the rig must move first
   int face_ = 0;              // six-face: the face prompted
   int next_solve_id_ = 1;
-  int quick_in_flight_ = 0;   // id, 0 = none
+  int quick_in_flight_ = 0;  // id, 0 = none
   std::size_t quick_poses_ = 0;
   std::optional<StaticCalibrationResult> quick_;
   // motion

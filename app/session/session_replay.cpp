@@ -152,7 +152,8 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   std::string dir = options.out_dir;
   if (dir.empty()) {
     std::string tmpl = (std::filesystem::temp_directory_path() / "imucal-replay-XXXXXX").string();
-    if (!mkdtemp(tmpl.data())) return make_error(Errc::kIo, "cannot create a temporary folder for the replay");
+    if (!mkdtemp(tmpl.data()))
+      return make_error(Errc::kIo, "cannot create a temporary folder for the replay");
     dir = tmpl;
   }
   std::error_code ec;
@@ -161,7 +162,8 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
 
   ReplayHost host(info, dir, logged->preflight);
   SessionEngine engine(*config, info, host);
-  if (auto s = engine.start(logged->steps); !s.ok()) return s.error().context("starting the replayed session");
+  if (auto s = engine.start(logged->steps); !s.ok())
+    return s.error().context("starting the replayed session");
 
   ReplaySummary summary;
   std::size_t next = 0;
@@ -184,7 +186,8 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
     return true;
   }));
   if (!diverged && !apply_until(log::kTimeMax)) diverged = true;
-  if (diverged) return make_error(Errc::kInternal, "the replay diverged from " + options.log_path + ": " + why);
+  if (diverged)
+    return make_error(Errc::kInternal, "the replay diverged from " + options.log_path + ": " + why);
 
   summary.state = engine.state();
   summary.outcome = host.outcome_;
@@ -195,7 +198,8 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   }
   if (!logged->result.is_null() && !host.result_.is_null()) {
     summary.live_result = true;
-    summary.max_difference = max_difference(logged->result.value("imu", json()), host.result_.value("imu", json()));
+    summary.max_difference =
+        max_difference(logged->result.value("imu", json()), host.result_.value("imu", json()));
   } else if (!logged->result.is_null()) {
     summary.notes.push_back("the live session logged a result but the replay produced none");
     summary.live_result = true;

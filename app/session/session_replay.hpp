@@ -22,13 +22,13 @@ struct ReplayOptions {
 
 struct ReplaySummary {
   SessionState state = SessionState::kIdle;
-  std::string outcome;         // of the replayed session (written, rejected, aborted, ...)
-  std::string live_outcome;    // as logged
+  std::string outcome;       // of the replayed session (written, rejected, aborted, ...)
+  std::string live_outcome;  // as logged
   std::size_t samples = 0;
   int keys = 0, faults = 0, solves = 0;
   std::optional<StaticCalibrationResult> imu;
-  bool live_result = false;    // the log holds the live session's result
-  double max_difference = 0.0; // largest |replayed - live| over the canonical model's entries
+  bool live_result = false;     // the log holds the live session's result
+  double max_difference = 0.0;  // largest |replayed - live| over the canonical model's entries
   std::vector<std::string> result_files;
   std::vector<std::string> notes;
 };

@@ -38,7 +38,8 @@ Result<std::string> make_session_dir(const std::string& state_dir, const std::st
     if (std::filesystem::create_directory(dir, ec)) return dir.string();
     if (ec) return make_error(Errc::kIo, "cannot create " + dir.string() + ": " + ec.message());
   }
-  return make_error(Errc::kAlreadyExists, "too many sessions named " + rig + "-" + stamp + " in " + base.string());
+  return make_error(Errc::kAlreadyExists,
+                    "too many sessions named " + rig + "-" + stamp + " in " + base.string());
 }
 
 }  // namespace
@@ -55,8 +56,9 @@ SolveOutcome run_solve(const SolveJob& job, const ImuStreamInfo& info, const std
   out.imu = std::move(*result);
   if (!job.final) return out;
   if (job.camimu) {
-    out.error = "the camera-IMU solve is not run by the service; calibrate the session log with "
-                "`imucal calibrate camimu`";
+    out.error =
+        "the camera-IMU solve is not run by the service; calibrate the session log with "
+        "`imucal calibrate camimu`";
     return out;
   }
   if (progress) progress(0.9, "Writing the results");
@@ -201,7 +203,8 @@ void SessionRunner::solve(const SolveJob& job) {
         engine_.solve_progress(f, text);
       }
     };
-    SolveOutcome out = run_solve(job, info, dir, job.final ? std::function<void(double, const std::string&)>(progress) : nullptr);
+    SolveOutcome out = run_solve(
+        job, info, dir, job.final ? std::function<void(double, const std::string&)>(progress) : nullptr);
     if (job.final && out.error.empty()) {
       if (make_payload) {
         auto payload = make_payload(out.result_files);
@@ -225,7 +228,9 @@ void SessionRunner::solve(const SolveJob& job) {
         }
       }
     }
-    auto apply = [this, id = job.id, out = std::move(out)]() mutable { engine_.solve_finished(id, std::move(out)); };
+    auto apply = [this, id = job.id, out = std::move(out)]() mutable {
+      engine_.solve_finished(id, std::move(out));
+    };
     if (options_.post) {
       options_.post(std::move(apply));
     } else {

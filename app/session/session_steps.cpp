@@ -28,8 +28,9 @@ std::string fixed(double v, int digits) {
 double seconds(TimeNs ns) { return static_cast<double>(ns) * 1e-9; }
 
 /// The six faces of the six-face holds and the coverage display: the IMU axis that points up.
-const Eigen::Vector3d kFaces[6] = {Eigen::Vector3d::UnitX(),  -Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(),
-                                   -Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ(),  -Eigen::Vector3d::UnitZ()};
+const Eigen::Vector3d kFaces[6] = {Eigen::Vector3d::UnitX(), -Eigen::Vector3d::UnitX(),
+                                   Eigen::Vector3d::UnitY(), -Eigen::Vector3d::UnitY(),
+                                   Eigen::Vector3d::UnitZ(), -Eigen::Vector3d::UnitZ()};
 const char* kFaceNames[6] = {"+X", "-X", "+Y", "-Y", "+Z", "-Z"};
 
 double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
@@ -89,7 +90,8 @@ void SessionEngine::on_sample(const ImuSample& sample) {
 }
 
 void SessionEngine::on_frame(TimeNs t_ns, bool target_seen) {
-  if (state_ != SessionState::kRunning || current_ >= steps_.size() || steps_[current_].id != StepId::kMotion) return;
+  if (state_ != SessionState::kRunning || current_ >= steps_.size() || steps_[current_].id != StepId::kMotion)
+    return;
   ++frames_;
   if (target_seen) {
     ++frames_seen_;
@@ -124,9 +126,10 @@ void SessionEngine::sample_warmup(const ImuSample& si) {
   }
   const double elapsed = seconds(si.t_ns - step_start_ns_);
   if (live_due()) {
-    live({"Temperature " + fixed(si.temperature, 2) + " C, changing " + fixed(rate, 2) + " C/min (warm below " +
-              fixed(config_.session.warmup_rate_c_per_min, 2) + ")",
-          "Elapsed " + fixed(elapsed, 0) + " s of at most " + fixed(config_.session.warmup_timeout_s, 0) + " s"},
+    live({"Temperature " + fixed(si.temperature, 2) + " C, changing " + fixed(rate, 2) +
+              " C/min (warm below " + fixed(config_.session.warmup_rate_c_per_min, 2) + ")",
+          "Elapsed " + fixed(elapsed, 0) + " s of at most " + fixed(config_.session.warmup_timeout_s, 0) +
+              " s"},
          std::min(1.0, span / config_.session.warmup_window_s),
          {{"temperature_c", si.temperature}, {"rate_c_per_min", rate}});
   }
@@ -142,7 +145,8 @@ void SessionEngine::sample_warmup(const ImuSample& si) {
 void SessionEngine::sample_still(const ImuSample& si, bool still) {
   if (!still) {
     if (still_since_ns_ >= 0 || samples_->size() > window_->size) {
-      if (still_since_ns_ >= 0) message("warning", "Motion detected: keep the rig still; the countdown restarts");
+      if (still_since_ns_ >= 0)
+        message("warning", "Motion detected: keep the rig still; the countdown restarts");
       still_since_ns_ = -1;
       samples_->clear();  // the still period the calibration uses must be still from its start
     }
@@ -183,8 +187,9 @@ void SessionEngine::capture_pose() {
   for (std::size_t i = 0; i < poses_.size(); ++i) {
     const double a = angle_deg(up, poses_[i]);
     if (a < config_.session.pose_min_angle_deg) {
-      message("warning", "Too close to pose " + std::to_string(i + 1) + " (" + fixed(a, 0) + " deg apart): turn at least " +
-                             fixed(config_.session.pose_min_angle_deg, 0) + " deg further");
+      message("warning", "Too close to pose " + std::to_string(i + 1) + " (" + fixed(a, 0) +
+                             " deg apart): turn at least " + fixed(config_.session.pose_min_angle_deg, 0) +
+                             " deg further");
       need_motion_ = true;
       return;
     }
@@ -214,15 +219,17 @@ void SessionEngine::sample_poses(const ImuSample& si, bool still) {
   const int target = config_.session.poses;
   double scale_sigma = NAN;
   if (quick_) {
-    scale_sigma = std::max(quick_->accel_sigma.scale.cwiseQuotient(quick_->model.accel.scale.cwiseAbs()).maxCoeff(),
-                           quick_->gyro_sigma.scale.cwiseQuotient(quick_->model.gyro.scale.cwiseAbs()).maxCoeff());
+    scale_sigma =
+        std::max(quick_->accel_sigma.scale.cwiseQuotient(quick_->model.accel.scale.cwiseAbs()).maxCoeff(),
+                 quick_->gyro_sigma.scale.cwiseQuotient(quick_->model.gyro.scale.cwiseAbs()).maxCoeff());
   }
   if (live_due()) {
     const double held = still_since_ns_ < 0 || need_motion_ ? 0.0 : seconds(si.t_ns - still_since_ns_);
     std::string missing;
     for (const auto& m : coverage()) missing += " " + m.get<std::string>();
     live({std::string(need_motion_ ? "Captured: turn to a new orientation"
-                                   : (still ? "Still: " + fixed(held, 1) + " of " + fixed(config_.session.hold_s, 1) + " s"
+                                   : (still ? "Still: " + fixed(held, 1) + " of " +
+                                                  fixed(config_.session.hold_s, 1) + " s"
                                             : "Moving")),
           "Poses: " + std::to_string(poses_.size()) + " of " + std::to_string(target) +
               (missing.empty() ? "; every direction covered" : "; missing" + missing),
@@ -235,7 +242,8 @@ void SessionEngine::sample_poses(const ImuSample& si, bool still) {
   // Done: enough poses and the last quick solve, over all of them, meets the sigma target.
   if (static_cast<int>(poses_.size()) >= target && quick_ && quick_poses_ == poses_.size() &&
       scale_sigma <= config_.session.pose_sigma_target) {
-    message("info", std::to_string(poses_.size()) + " poses, scale sigma " + fixed(scale_sigma * 1e3, 2) + "e-3");
+    message("info",
+            std::to_string(poses_.size()) + " poses, scale sigma " + fixed(scale_sigma * 1e3, 2) + "e-3");
     advance();
   }
 }
@@ -255,8 +263,8 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
       int nearest = 0;
       for (int f = 1; f < 6; ++f)
         if (angle_deg(up, kFaces[f]) < angle_deg(up, kFaces[nearest])) nearest = f;
-      message("warning", std::string("This is ") + kFaceNames[nearest] + " up (" + fixed(off, 0) + " deg off); put " +
-                             kFaceNames[face_] + " up");
+      message("warning", std::string("This is ") + kFaceNames[nearest] + " up (" + fixed(off, 0) +
+                             " deg off); put " + kFaceNames[face_] + " up");
       need_motion_ = true;
     }
     return;
@@ -278,7 +286,8 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
     advance();
     return;
   }
-  prompt(std::string("Put the rig with ") + kFaceNames[face_] + " up and hold it still", {"redo", "skip", "abort"});
+  prompt(std::string("Put the rig with ") + kFaceNames[face_] + " up and hold it still",
+         {"redo", "skip", "abort"});
 }
 
 void SessionEngine::sample_motion(const ImuSample& si) {
@@ -297,10 +306,11 @@ void SessionEngine::sample_motion(const ImuSample& si) {
   if (live_due()) {
     const double n = static_cast<double>(motion_count_);
     const Eigen::Vector3d gyro_rms = (gyro_sq_ / n).cwiseSqrt();
-    const Eigen::Vector3d accel_std = (accel_sq_ / n - (accel_sum_ / n).cwiseProduct(accel_sum_ / n)).cwiseMax(0).cwiseSqrt();
+    const Eigen::Vector3d accel_std =
+        (accel_sq_ / n - (accel_sum_ / n).cwiseProduct(accel_sum_ / n)).cwiseMax(0).cwiseSqrt();
     std::vector<std::string> lines = {
-        "Rotation RMS deg/s  x " + fixed(gyro_rms.x() / kDeg, 0) + "  y " + fixed(gyro_rms.y() / kDeg, 0) + "  z " +
-            fixed(gyro_rms.z() / kDeg, 0),
+        "Rotation RMS deg/s  x " + fixed(gyro_rms.x() / kDeg, 0) + "  y " + fixed(gyro_rms.y() / kDeg, 0) +
+            "  z " + fixed(gyro_rms.z() / kDeg, 0),
         "Acceleration std m/s^2  x " + fixed(accel_std.x(), 1) + "  y " + fixed(accel_std.y(), 1) + "  z " +
             fixed(accel_std.z(), 1),
         "Target seen in " + std::to_string(frames_seen_) + " of " + std::to_string(frames_) + " frames",
@@ -324,13 +334,15 @@ void SessionEngine::evaluate_gates() {
   const auto& s = config_.session;
   if (final_->imu) {
     const auto& r = *final_->imu;
-    const double scale_sigma = std::max(r.accel_sigma.scale.cwiseQuotient(r.model.accel.scale.cwiseAbs()).maxCoeff(),
-                                        r.gyro_sigma.scale.cwiseQuotient(r.model.gyro.scale.cwiseAbs()).maxCoeff());
-    gates_.push_back({"gravity residual RMS (m/s^2)", r.quality.accel_after.mean_mps2, s.gate_gravity_rms_mps2,
-                      r.quality.accel_after.mean_mps2 <= s.gate_gravity_rms_mps2});
+    const double scale_sigma =
+        std::max(r.accel_sigma.scale.cwiseQuotient(r.model.accel.scale.cwiseAbs()).maxCoeff(),
+                 r.gyro_sigma.scale.cwiseQuotient(r.model.gyro.scale.cwiseAbs()).maxCoeff());
+    gates_.push_back({"gravity residual RMS (m/s^2)", r.quality.accel_after.mean_mps2,
+                      s.gate_gravity_rms_mps2, r.quality.accel_after.mean_mps2 <= s.gate_gravity_rms_mps2});
     gates_.push_back({"largest scale sigma", scale_sigma, s.gate_scale_sigma,
                       std::isfinite(scale_sigma) && scale_sigma <= s.gate_scale_sigma});
-    gates_.push_back({"distinct attitudes", static_cast<double>(r.distinct_attitudes), 9.0, r.distinct_attitudes >= 9});
+    gates_.push_back(
+        {"distinct attitudes", static_cast<double>(r.distinct_attitudes), 9.0, r.distinct_attitudes >= 9});
   }
   if (final_->camimu) {
     for (const auto& cam : final_->camimu->result.cameras) {
@@ -355,18 +367,24 @@ void SessionEngine::review() {
     };
     lines.push_back("Accel bias m/s^2: " + vec(m.b_a, 1.0, 4));
     lines.push_back("Gyro bias deg/s: " + vec(m.b_g, 1.0 / kDeg, 4));
-    lines.push_back("Accel scale sigma (rel): " + vec(r.accel_sigma.scale.cwiseQuotient(r.model.accel.scale.cwiseAbs()), 1e3, 3) + " e-3");
-    lines.push_back("Gyro scale sigma (rel): " + vec(r.gyro_sigma.scale.cwiseQuotient(r.model.gyro.scale.cwiseAbs()), 1e3, 3) + " e-3");
+    lines.push_back("Accel scale sigma (rel): " +
+                    vec(r.accel_sigma.scale.cwiseQuotient(r.model.accel.scale.cwiseAbs()), 1e3, 3) + " e-3");
+    lines.push_back("Gyro scale sigma (rel): " +
+                    vec(r.gyro_sigma.scale.cwiseQuotient(r.model.gyro.scale.cwiseAbs()), 1e3, 3) + " e-3");
     lines.push_back("Static intervals " + std::to_string(r.intervals.size()) + ", attitudes " +
                     std::to_string(r.distinct_attitudes));
   }
   if (final_->camimu) {
     for (const auto& cam : final_->camimu->result.cameras) {
-      lines.push_back(cam.name + ": reprojection RMS " + fixed(cam.reprojection_rms_px, 3) + " px, time offset " +
-                      fixed(cam.timeshift_cam_imu_s * 1e3, 3) + " ms");
+      lines.push_back(cam.name + ": reprojection RMS " + fixed(cam.reprojection_rms_px, 3) +
+                      " px, time offset " + fixed(cam.timeshift_cam_imu_s * 1e3, 3) + " ms");
     }
   }
-  emit({{"type", "review"}, {"pass", gates_pass_}, {"gates", gates}, {"lines", lines}, {"files", final_->result_files}});
+  emit({{"type", "review"},
+        {"pass", gates_pass_},
+        {"gates", gates},
+        {"lines", lines},
+        {"files", final_->result_files}});
   if (gates_pass_ && config_.session.auto_write) {
     message("info", "Every gate passed; writing (session.auto_write)");
     state_ = SessionState::kRunning;

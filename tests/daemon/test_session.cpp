@@ -41,7 +41,8 @@ RigConfig session_config(const std::vector<std::string>& steps) {
 /// solves and writes on the runner's worker, their results posted back between batches.
 class SimSession {
  public:
-  explicit SimSession(RigConfig config, std::uint64_t seed = 3) : config_(std::move(config)), dir_(test::scratch_dir()) {
+  explicit SimSession(RigConfig config, std::uint64_t seed = 3)
+      : config_(std::move(config)), dir_(test::scratch_dir()) {
     auto settings = app::driver_settings(config_.imu);
     EXPECT_TRUE(settings.ok());
     sim::SessionRigOptions ro;
@@ -60,7 +61,8 @@ class SimSession {
       messages_.push_back(m);
       if (m.value("type", "") == "prompt" && first_prompt_ns_ < 0) first_prompt_ns_ = rig_->now_ns();
       if (m.value("type", "") == "review") review_ns_ = rig_->now_ns();
-      if (m.value("type", "") == "fault" && redo_faults_) keys_.emplace_back(rig_->now_ns() + 2'000'000'000, "redo");
+      if (m.value("type", "") == "fault" && redo_faults_)
+        keys_.emplace_back(rig_->now_ns() + 2'000'000'000, "redo");
       if (scripted_) op_->on_message(m, rig_->now_ns());
       if (!scripted_ && m.value("type", "") == "prompt" && m.value("step", "") == "preflight")
         keys_.emplace_back(rig_->now_ns() + 500'000'000, "continue");
@@ -153,7 +155,8 @@ class SimSession {
   json written_;
 };
 
-const std::vector<std::string> kImuSteps = {"preflight", "warmup", "still", "poses", "solve", "review", "write"};
+const std::vector<std::string> kImuSteps = {"preflight", "warmup", "still", "poses",
+                                            "solve",     "review", "write"};
 
 TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult) {
   ModuleDir modules;
@@ -171,8 +174,17 @@ TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult
   EXPECT_TRUE(review[0].value("pass", false)) << review[0].dump();
   // Rig time from the first prompt to the review: the protocol's budget is 3 minutes.
   const double rig_s = static_cast<double>(s.review_ns_ - s.first_prompt_ns_) * 1e-9;
-  std::printf("rig time first prompt -> review: %.1f s, %zu poses\n", rig_s, s.runner_->engine().poses().size());
+  std::printf("rig time first prompt -> review: %.1f s, %zu poses\n", rig_s,
+              s.runner_->engine().poses().size());
   EXPECT_LT(rig_s, 180.0);
+  // The warm-up showed the die temperature, which rises on the virtual rig (a slowly settling
+  // first-order warm-up) but slower than the step's threshold.
+  std::vector<double> temps;
+  for (const auto& m : s.of_type("live"))
+    if (m.value("step", "") == "warmup") temps.push_back(m["figures"].value("temperature_c", 0.0));
+  ASSERT_GE(temps.size(), 10u);
+  std::printf("warm-up temperature %.3f -> %.3f C\n", temps.front(), temps.back());
+  EXPECT_GT(temps.back(), temps.front());
   EXPECT_TRUE(std::filesystem::exists(s.runner_->session_dir() + "/imu-static.yaml"));
   EXPECT_TRUE(std::filesystem::exists(s.runner_->session_dir() + "/report.html"));
 
@@ -260,10 +272,11 @@ TEST(Session, MotionDuringTheStillStartRestartsTheCountdown) {
   bool bumped = false;
   s.run(60.0, [&](SimSession& ss) {
     const auto st = ss.runner_->engine().status();
-    if (!bumped && st.value("step", "") == "still" &&
-        ss.of_type("live").size() > 0 && ss.of_type("live").back().value("progress", 0.0) > 0.5) {
+    if (!bumped && st.value("step", "") == "still" && ss.of_type("live").size() > 0 &&
+        ss.of_type("live").back().value("progress", 0.0) > 0.5) {
       bumped = true;
-      ss.rig_->trajectory().turn(ss.rig_->now_ns(), 1.0, Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX())));
+      ss.rig_->trajectory().turn(ss.rig_->now_ns(), 1.0,
+                                 Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX())));
     }
     if (st.value("step", "") == "poses") ss.press("abort");
   });
@@ -281,8 +294,9 @@ TEST(Session, APoseTooCloseToAnEarlierOneIsRefused) {
   s.run(120.0, [&](SimSession& ss) {
     if (!turned && ss.runner_->engine().poses().size() == 1) {
       turned = true;
-      const Eigen::Quaterniond q = ss.rig_->trajectory().final_orientation() *
-                                   Eigen::Quaterniond(Eigen::AngleAxisd(5.0 * M_PI / 180.0, Eigen::Vector3d::UnitY()));
+      const Eigen::Quaterniond q =
+          ss.rig_->trajectory().final_orientation() *
+          Eigen::Quaterniond(Eigen::AngleAxisd(5.0 * M_PI / 180.0, Eigen::Vector3d::UnitY()));
       ss.rig_->trajectory().turn(ss.rig_->now_ns() + 100'000'000, 1.0, q);
     }
     if (ss.said("Too close")) ss.press("abort");
