@@ -85,8 +85,9 @@ Result<LoggedSession> read_session_events(const log::SessionLogReader& reader) {
     }
   }
   if (!started)
-    return make_error(Errc::kInvalidArgument,
-                      "the log holds no service session (no session start event); record one with imucald");
+    return make_error(Errc::kInsufficientData,
+                      "the log holds no service session (no session start event): only logs that imucald "
+                      "wrote (sessions/*/session.imulog) can be replayed");
   return s;
 }
 
@@ -137,17 +138,17 @@ bool apply(SessionEngine& engine, ReplayHost& host, const json& m, ReplaySummary
 Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   auto reader = log::SessionLogReader::open(options.log_path);
   if (!reader.ok()) return reader.error();
+  auto logged = read_session_events(**reader);
+  if (!logged.ok()) return logged.error();
   const auto& meta = (*reader)->metadata();
   const auto cfg = meta.find("rig_config");
   if (cfg == meta.end())
-    return make_error(Errc::kInvalidArgument, options.log_path + ": no rig_config in the log's metadata");
+    return make_error(Errc::kCorrupt, options.log_path + ": no rig_config in the log's metadata");
   auto config = parse_rig_config(cfg->second, options.log_path + " (rig_config)");
   if (!config.ok()) return config.error();
   auto stream = (*reader)->find_imu_stream();
   if (!stream.ok()) return stream.error();
   const ImuStreamInfo info = (*reader)->imu_streams().at(*stream);
-  auto logged = read_session_events(**reader);
-  if (!logged.ok()) return logged.error();
 
   std::string dir = options.out_dir;
   if (dir.empty()) {

@@ -33,7 +33,7 @@ struct ReplaySummary {
   std::vector<std::string> notes;
 };
 
-/// Errors: the log's (kNotFound, kCorrupt), kInvalidArgument for a log that is not a service
+/// Errors: the log's (kNotFound, kCorrupt), kInsufficientData for a log that is not a service
 /// session (no session events), kInternal when the replay diverges from the log (a solve the
 /// log applied was never requested).
 [[nodiscard]] Result<ReplaySummary> replay_session(const ReplayOptions& options);
