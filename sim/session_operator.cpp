@@ -90,6 +90,7 @@ ScriptedOperator::ScriptedOperator(OperatorTrajectory& trajectory, const Scripte
 }
 
 void ScriptedOperator::press_at(const std::string& key, TimeNs t_ns) {
+  if (!options_.press_keys) return;
   keys_.emplace_back(t_ns, key);
   std::stable_sort(keys_.begin(), keys_.end(),
                    [](const auto& a, const auto& b) { return a.first < b.first; });

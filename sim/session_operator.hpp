@@ -56,6 +56,7 @@ struct ScriptedOperatorOptions {
   double reaction_s = 0.8;  // from a prompt or a capture to the start of the operator's move
   double move_s = 1.5;      // one pose change
   bool accept = true;       // the review's answer: accept (y) or reject (n)
+  bool press_keys = true;   // false: only move the rig, a person at the console presses the keys
   std::uint64_t seed = 1;
 };
 

@@ -468,6 +468,14 @@ void SessionEngine::fault(const std::string& source, const std::string& text) {
          {"redo", "abort"});
 }
 
+void SessionEngine::terminate(const std::string& reason) {
+  if (!running()) return;
+  emit({{"type", "stop"}, {"reason", reason}});
+  steps_[current_].state = StepState::kFailed;
+  finish(SessionState::kAborted, "aborted",
+         "Stopped: " + reason + ". What was recorded is kept; the stored calibration is unchanged.");
+}
+
 calib::StaticCalibrationOptions SessionEngine::static_options() const {
   calib::StaticCalibrationOptions o;
   o.init_still_s = std::max(config_.session.still_s, o.min_init_still_s);

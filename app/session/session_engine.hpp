@@ -119,6 +119,8 @@ class SessionEngine {
   [[nodiscard]] Status key(const std::string& key);
   /// A device or storage fault from the host: the step stops and the operator is told how to go on.
   void fault(const std::string& source, const std::string& text);
+  /// Ends a running session from outside (the service stops: SIGTERM): like abort, with the reason.
+  void terminate(const std::string& reason);
   void solve_progress(double fraction, const std::string& text);
   void solve_finished(int id, SolveOutcome outcome);
   void write_finished(const Status& status);

@@ -76,7 +76,7 @@ Result<LoggedSession> read_session_events(const log::SessionLogReader& reader) {
         if (n.is_string()) s.steps.push_back(n.get<std::string>());
     } else if (type == "preflight") {
       s.preflight = PreflightReport::from_json(m.value("report", json::object()));
-    } else if (type == "key" || type == "applied" || type == "fault" || type == "written") {
+    } else if (type == "key" || type == "applied" || type == "fault" || type == "written" || type == "stop") {
       s.inputs.push_back({e.t_ns, m});
     } else if (type == "result") {
       s.result = m;
@@ -116,6 +116,8 @@ bool apply(SessionEngine& engine, ReplayHost& host, const json& m, ReplaySummary
   } else if (type == "fault") {
     ++summary.faults;
     engine.fault(m.value("source", ""), m.value("text", ""));
+  } else if (type == "stop") {
+    engine.terminate(m.value("reason", ""));
   } else if (type == "written") {
     const bool ok = m.value("ok", false);
     engine.write_finished(ok ? Status{} : Status(make_error(Errc::kIo, m.value("error", ""))));

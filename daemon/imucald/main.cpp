@@ -1,0 +1,74 @@
+// imucald: the on-rig calibration service (docs/service.md). Idle until a session is started
+// (imucalctl start, or --start); a session runs the guided protocol of app/session.
+
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <sstream>
+
+#include "core/version.hpp"
+#include "daemon/imucald/service_app.hpp"
+
+int main(int argc, char** argv) {
+  using imucal::imucald::Service;
+  using imucal::imucald::ServiceOptions;
+  // The journal adds the time; a level prefix is enough.
+  spdlog::set_default_logger(spdlog::stderr_color_mt("imucald"));
+  spdlog::set_pattern("%^%l%$: %v");
+  spdlog::set_level(spdlog::level::info);
+
+  ServiceOptions o;
+  CLI::App app{
+      "imucald: the on-rig calibration service. It opens the rig's IMU and storage, listens on a Unix socket\n"
+      "and runs guided calibration sessions that imucalctl starts and drives (docs/service.md)."};
+  app.set_version_flag("--version", std::string("imucald ") + imucal::kVersion);
+  app.add_option("--config", o.config_path, "The rig configuration")->capture_default_str();
+  app.add_option("--socket", o.socket_path, "The control socket (JSON lines)")->capture_default_str();
+  std::string mode = "0660";
+  app.add_option("--socket-mode", mode, "Permissions of the control socket (octal)")->capture_default_str();
+  app.add_option("--state-dir", o.state_dir, "Session folders go to STATE_DIR/sessions/")->capture_default_str();
+  app.add_flag("--sim", o.sim, "Use the virtual rig (also when the configuration says imu.bus: sim)");
+  app.add_option("--time-scale", o.time_scale,
+                 "Virtual rig: rig seconds per wall-clock second (0: as fast as it computes)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--sim-operator", o.sim_operator,
+                 "Virtual rig: 'motion' moves the rig as the prompts ask, 'full' also presses the keys "
+                 "(a scripted operator); default: nobody moves it")
+      ->check(CLI::IsMember({"motion", "full"}));
+  app.add_option("--seed", o.seed, "Virtual rig: seed of its IMU errors and of the operator")->capture_default_str();
+  std::string start;
+  auto* start_opt = app.add_option("--start", start,
+                                   "Start a session at launch: 'default' for the configured steps, or a "
+                                   "comma-separated list of steps");
+  app.add_flag("--exit-after-session", o.exit_after_session,
+               "Stop when the session ends (exit 0 when it wrote or completed, 1 otherwise)");
+  bool quiet = false;
+  app.add_flag("-q,--quiet", quiet, "Log warnings and errors only");
+  CLI11_PARSE(app, argc, argv);
+  if (quiet) spdlog::set_level(spdlog::level::warn);
+  try {
+    o.socket_mode = static_cast<unsigned>(std::stoul(mode, nullptr, 8));
+  } catch (const std::exception&) {
+    std::fprintf(stderr, "imucald: --socket-mode '%s' is not an octal mode like 0660\n", mode.c_str());
+    return 2;
+  }
+  if (start_opt->count() > 0) {
+    std::vector<std::string> steps;
+    if (start != "default") {
+      std::stringstream ss(start);
+      for (std::string s; std::getline(ss, s, ',');)
+        if (!s.empty()) steps.push_back(s);
+    }
+    o.start = steps;
+  }
+
+  Service service(o);
+  if (auto s = service.init(); !s.ok()) {
+    spdlog::error("{}", s.error().message);
+    return s.error().code == imucal::Errc::kInvalidArgument ? 2 : 1;
+  }
+  return service.run();
+}

@@ -1,0 +1,367 @@
+#include "daemon/imucald/service_app.hpp"
+
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <boost/asio/post.hpp>
+#include <csignal>
+#include <algorithm>
+#include <filesystem>
+#include <sstream>
+#include <fstream>
+
+#include "app/stored_calibration.hpp"
+#include "core/version.hpp"
+#include "sim/truth.hpp"
+
+namespace imucal::imucald {
+
+using nlohmann::json;
+
+namespace {
+
+constexpr TimeNs kSimTickNs = 20'000'000;  // the virtual rig is advanced 20 ms of rig time per tick
+
+std::string storage_name(const StorageConfig& s) {
+  return std::string(storage_backend_name(s.backend)) + " " +
+         (s.backend == StorageBackend::kI2cEeprom ? s.i2c_device : s.path);
+}
+
+/// The session's result beside the virtual rig's truth (the correction that inverts its error
+/// model, in the frame the static method reports in), one line per quantity.
+std::string truth_comparison(const json& imu, const CanonicalImuModel& truth, bool counts) {
+  auto vec = [](const json& j) { return Eigen::Vector3d(j[0].get<double>(), j[1].get<double>(), j[2].get<double>()); };
+  auto mat = [&](const json& j) {
+    Eigen::Matrix3d m;
+    for (int r = 0; r < 3; ++r) m.row(r) = vec(j[r]).transpose();
+    return m;
+  };
+  std::ostringstream out;
+  out.setf(std::ios::scientific);
+  out.precision(5);
+  auto row = [&](const std::string& name, const Eigen::Vector3d& est, const Eigen::Vector3d& tru) {
+    out << "  " << name << "\n    estimated " << est.transpose() << "\n    true      " << tru.transpose()
+        << "\n    error     " << (est - tru).transpose() << "\n";
+  };
+  const char* unit = counts ? " (counts)" : "";
+  row(std::string("accel scale diag(A_a)"), mat(imu["A_a"]).diagonal(), truth.A_a.diagonal());
+  row(std::string("accel bias b_a") + unit, vec(imu["b_a"]), truth.b_a);
+  row(std::string("gyro scale diag(A_g)"), mat(imu["A_g"]).diagonal(), truth.A_g.diagonal());
+  row(std::string("gyro bias b_g") + unit, vec(imu["b_g"]), truth.b_g);
+  const Eigen::Matrix3d dA_a = mat(imu["A_a"]) - truth.A_a, dA_g = mat(imu["A_g"]) - truth.A_g;
+  const Eigen::Matrix3d dG = mat(imu["G"]) - truth.G;
+  out << "  largest error: A_a " << dA_a.cwiseAbs().maxCoeff() << ", A_g " << dA_g.cwiseAbs().maxCoeff()
+      << ", G " << dG.cwiseAbs().maxCoeff() << " (rad/s per m/s^2; true G max " << truth.G.cwiseAbs().maxCoeff()
+      << ")\n";
+  return out.str();
+}
+
+}  // namespace
+
+Service::Service(ServiceOptions options)
+    : options_(std::move(options)), signals_(io_, SIGINT, SIGTERM, SIGHUP), sim_timer_(io_), watchdog_timer_(io_) {}
+
+Service::~Service() {
+  runner_.reset();  // joins the worker before the devices go
+  close_imu();
+}
+
+Status Service::init() {
+  auto config = load_rig_config(options_.config_path);
+  if (!config.ok()) return config.error();
+  config_ = *config;
+  if (config_.imu.bus == ImuBus::kSim) options_.sim = true;
+  IMUCAL_TRY(open_imu());
+
+  app::session::RunnerOptions ro;
+  ro.state_dir = options_.state_dir;
+  ro.post = [this](std::function<void()> f) { boost::asio::post(io_, std::move(f)); };
+  ro.broadcast = [this](const json& m) { on_message(m); };
+  ro.preflight = [this] { return preflight(); };
+  ro.recover = [this]() -> Status {
+    if (imu_state_ == "open") return {};
+    return open_imu();
+  };
+  ro.make_payload = [](const std::vector<std::string>& files) -> Result<json> {
+    std::vector<std::string> results;
+    for (const auto& f : files)
+      if (f.ends_with(".yaml")) results.push_back(f);
+    return app::calibration_payload_from_files(results);
+  };
+  ro.write_storage = [this](const json& payload) { return write_storage(payload); };
+  ro.warn = [](const std::string& text) { spdlog::warn("{}", text); };
+  ro.metadata = {{"rig_config", rig_config_to_json(config_)},
+                 {"source", options_.sim ? "sim" : "hardware"},
+                 {"service", json{{"version", kVersion}, {"config", options_.config_path}}.dump()}};
+  runner_ = std::make_unique<app::session::SessionRunner>(config_, stream_info_, ro);
+
+  service::ControlServerOptions so;
+  so.path = options_.socket_path;
+  so.mode = options_.socket_mode;
+  auto server = service::ControlServer::create(io_, so, *this);
+  if (!server.ok()) return server.error().context("control socket " + options_.socket_path);
+  server_ = std::move(*server);
+  return {};
+}
+
+Status Service::open_imu() {
+  close_imu();
+  if (options_.sim) {
+    auto settings = app::driver_settings(config_.imu);
+    if (!settings.ok()) return settings.error();
+    auto mounting = app::imu_mounting(config_.imu);
+    if (!mounting.ok()) return mounting.error();
+    sim::SessionRigOptions so;
+    so.settings = *settings;
+    so.mounting = *mounting;
+    so.seed = options_.seed;
+    auto rig = sim::SessionRig::create(so);
+    if (!rig.ok()) return rig.error();
+    sim_rig_ = std::move(*rig);
+    stream_info_ = sim_rig_->stream_info();
+    if (!options_.sim_operator.empty()) {
+      sim::ScriptedOperatorOptions oo;
+      oo.seed = options_.seed;
+      oo.press_keys = options_.sim_operator == "full";
+      operator_ = std::make_unique<sim::ScriptedOperator>(sim_rig_->trajectory(), oo, [this](const std::string& k) {
+        if (auto s = runner_->engine().key(k); !s.ok()) spdlog::warn("scripted operator: key {}: {}", k, s.error().message);
+      });
+    }
+    sim_wall_start_ = std::chrono::steady_clock::now();
+    sim_rig_start_ns_ = sim_rig_->now_ns();
+    imu_state_ = "open";
+    boost::asio::post(io_, [this] { sim_tick(); });
+    return {};
+  }
+  auto rig = app::open_imu_rig(config_);
+  if (!rig.ok()) {
+    imu_state_ = "failed";
+    imu_error_ = rig.error().message;
+    return rig.error();
+  }
+  rig_ = std::move(*rig);
+  stream_info_ = rig_->stream_info();
+  acquisition_ = std::make_unique<acq::AsioAcquisition>(io_, rig_->acquisition(), [this](std::span<const ImuSample> s) {
+    on_samples(s);
+    return !quit_;
+  });
+  imu_state_ = "open";
+  io_.stop();  // run() restarts the loop with the acquisition on it
+  return {};
+}
+
+void Service::close_imu() {
+  sim_timer_.cancel();
+  acquisition_.reset();
+  rig_.reset();
+  operator_.reset();
+  sim_rig_.reset();
+  if (imu_state_ == "open") imu_state_ = "closed";
+}
+
+void Service::sim_tick() {
+  if (!sim_rig_ || quit_) return;
+  std::vector<ImuSample> batch;
+  if (Status s = sim_rig_->advance(kSimTickNs, batch); !s.ok()) {
+    imu_failed(s.error());
+    return;
+  }
+  on_samples(batch);
+  if (operator_) operator_->on_time(sim_rig_->now_ns());
+  if (options_.time_scale <= 0.0) {
+    boost::asio::post(io_, [this] { sim_tick(); });
+    return;
+  }
+  // Rig time runs time_scale times as fast as wall time.
+  const double rig_s = static_cast<double>(sim_rig_->now_ns() - sim_rig_start_ns_) * 1e-9;
+  sim_timer_.expires_at(sim_wall_start_ + std::chrono::nanoseconds(static_cast<std::int64_t>(rig_s / options_.time_scale * 1e9)));
+  sim_timer_.async_wait([this](const boost::system::error_code& ec) {
+    if (!ec) sim_tick();
+  });
+}
+
+void Service::on_samples(std::span<const ImuSample> samples) {
+  samples_ += samples.size();
+  runner_->on_samples(samples);
+}
+
+void Service::imu_failed(const Error& error) {
+  ++imu_faults_;
+  imu_state_ = "failed";
+  imu_error_ = error.message;
+  spdlog::error("IMU: {}", error.message);
+  close_imu();
+  imu_state_ = "failed";
+  runner_->fault("imu", error.message);
+}
+
+void Service::on_message(const json& m) {
+  server_->broadcast(m);
+  if (operator_ && sim_rig_) operator_->on_message(m, sim_rig_->now_ns());
+  const std::string type = m.value("type", "");
+  if (type == "prompt") {
+    spdlog::info("[{}] {}", m.value("step", ""), m.value("text", ""));
+    notifier_.status(m.value("step", "") + ": " + m.value("text", ""));
+  } else if (type == "message" || type == "fault") {
+    const std::string text = m.value("text", "");
+    if (m.value("level", "") == "warning" || type == "fault") {
+      spdlog::warn("{}", text);
+    } else {
+      spdlog::info("{}", text);
+    }
+  } else if (type == "result" && sim_rig_ && m.contains("imu")) {
+    const bool counts = stream_info_.units == ImuUnits::kRaw;
+    const std::string table =
+        truth_comparison(m["imu"], sim::canonical_in_tedaldi_frame(sim_rig_->params(), counts), counts);
+    const std::string path = runner_->session_dir() + "/sim-truth.txt";
+    std::ofstream(path) << "The session's result beside the virtual rig's truth\n" << table;
+    spdlog::info("result beside the virtual rig's truth ({}):\n{}", path, table);
+  } else if (type == "done") {
+    spdlog::info("session {}: {}", m.value("outcome", ""), m.value("text", ""));
+    notifier_.status("idle: last session " + m.value("outcome", ""));
+    if (options_.exit_after_session) {
+      exit_code_ = m.value("outcome", "") == "written" || m.value("outcome", "") == "completed" ? 0 : 1;
+      boost::asio::post(io_, [this] { shutdown("the session ended"); });
+    }
+  }
+}
+
+app::session::PreflightReport Service::preflight() {
+  app::session::PreflightReport r;
+  r.devices.push_back({"imu", imu_state_ == "open",
+                       imu_state_ == "open" ? std::string(options_.sim ? "virtual MPU-6000 (register emulator)"
+                                                                       : "MPU-6000 on " + rig_->bus_name()) +
+                                                  ", WHO_AM_I answered, " + std::to_string(samples_) + " samples so far"
+                                            : "not open: " + imu_error_});
+  auto stored = app::read_stored_calibration(config_);
+  if (!stored.ok()) {
+    r.devices.push_back({"storage", false, storage_name(config_.storage) + ": " + stored.error().message});
+  } else {
+    r.devices.push_back({"storage", true, storage_name(config_.storage) + ": readable"});
+    if (stored->payload) {
+      json s = *stored->payload;
+      s["summary"] = "sequence " + std::to_string(stored->sequence) + " in slot " + std::to_string(stored->slot) +
+                     (s.contains("created_utc") ? ", written " + s.value("created_utc", std::string()) : "");
+      r.stored = s;
+    }
+  }
+  if (!config_.cameras.empty()) {
+    r.devices.push_back({"cameras", true,
+                         std::to_string(config_.cameras.size()) +
+                             " configured; the service records the IMU only (camera-IMU: imucal record and "
+                             "calibrate camimu)"});
+  }
+  return r;
+}
+
+Status Service::write_storage(const json& payload) {
+  auto written = app::write_stored_calibration(config_, payload);
+  if (!written.ok()) return written.error();
+  spdlog::info("calibration written to {} (slot {}, sequence {}), read back and verified",
+               storage_name(config_.storage), written->slot, written->sequence);
+  return {};
+}
+
+json Service::status() {
+  json s = runner_->engine().status();
+  s["devices"] = {{"imu",
+                   {{"state", imu_state_},
+                    {"sim", options_.sim},
+                    {"samples", samples_},
+                    {"faults", imu_faults_},
+                    {"rate_hz", stream_info_.rate_hz},
+                    {"error", imu_error_}}},
+                  {"storage", storage_name(config_.storage)}};
+  s["session_dir"] = runner_->session_dir();
+  s["version"] = kVersion;
+  return s;
+}
+
+std::vector<json> Service::snapshot() {
+  auto s = runner_->engine().snapshot();
+  if (!s.empty()) s[0] = status();
+  return s;
+}
+
+Status Service::start(const std::vector<std::string>& steps) {
+  if (imu_state_ != "open") {
+    return make_error(Errc::kDevice, "the IMU is not open (" + imu_error_ + "); check it and restart imucald");
+  }
+  // The service records the IMU only: the camera-IMU calibration runs offline on a recording
+  // (imucal record, imucal calibrate camimu), so the motion step is not offered here.
+  std::vector<std::string> run = steps;
+  if (run.empty()) {
+    for (auto id : app::session::configured_steps(config_))
+      if (id != app::session::StepId::kMotion) run.emplace_back(app::session::step_name(id));
+  }
+  if (std::find(run.begin(), run.end(), "motion") != run.end()) {
+    return make_error(Errc::kUnsupported,
+                      "the service does not record cameras: leave out the motion step and calibrate cameras "
+                      "offline (imucal record, imucal calibrate camimu)");
+  }
+  IMUCAL_TRY(runner_->start(run));
+  spdlog::info("session started in {}", runner_->session_dir());
+  return {};
+}
+
+Status Service::key(const std::string& key) { return runner_->engine().key(key); }
+
+void Service::arm_watchdog() {
+  const auto interval = notifier_.watchdog_interval();
+  if (!interval) return;
+  watchdog_timer_.expires_after(*interval / 2);
+  watchdog_timer_.async_wait([this](const boost::system::error_code& ec) {
+    if (ec) return;
+    notifier_.watchdog();
+    arm_watchdog();
+  });
+}
+
+void Service::shutdown(const std::string& why) {
+  if (quit_) return;
+  spdlog::info("stopping: {}", why);
+  notifier_.stopping();
+  if (runner_->engine().running()) runner_->engine().terminate("the service is stopping (" + why + ")");
+  quit_ = true;
+  if (acquisition_) acquisition_->stop();
+  io_.stop();
+}
+
+int Service::run() {
+  signals_.async_wait([this](const boost::system::error_code& ec, int sig) {
+    if (ec) return;
+    shutdown(sig == SIGTERM ? "SIGTERM" : sig == SIGHUP ? "SIGHUP" : "SIGINT");
+  });
+  arm_watchdog();
+  if (options_.start) {
+    boost::asio::post(io_, [this] {
+      if (auto s = start(*options_.start); !s.ok()) {
+        spdlog::error("starting the session: {}", s.error().message);
+        exit_code_ = 1;
+        shutdown("the session could not start");
+      }
+    });
+  }
+  notifier_.ready();
+  notifier_.status("idle");
+  spdlog::info("imucald {} ready: rig '{}', socket {}", kVersion, config_.name, options_.socket_path);
+  while (!quit_) {
+    io_.restart();
+    if (acquisition_) {
+      // Runs once: returns on shutdown or on the IMU's error (then imu_failed() closes it and a
+      // redo reopens it).
+      const Status s = acquisition_->run();
+      if (!s.ok() && !quit_) imu_failed(s.error());
+    } else {
+      io_.run();
+    }
+  }
+  // Let the worker finish a solve or a write that is under way, then close the log.
+  runner_->drain();
+  io_.restart();
+  io_.poll();
+  server_->close();
+  return exit_code_;
+}
+
+}  // namespace imucal::imucald

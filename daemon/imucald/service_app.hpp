@@ -1,0 +1,90 @@
+#pragma once
+// imucald's parts: the IMU source (the rig's hardware on the Boost.Asio event loop, or the
+// virtual rig on accelerated time), the session runner (app/session), the control socket
+// (daemon/service) and systemd's notifications, on one io_context. docs/service.md.
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/signal_set.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <chrono>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "acquisition/asio_acquisition.hpp"
+#include "app/rig.hpp"
+#include "app/session/session_runner.hpp"
+#include "core/rig_config.hpp"
+#include "daemon/service/control_server.hpp"
+#include "daemon/service/notify.hpp"
+#include "daemon/service/session_host.hpp"
+#include "sim/session_operator.hpp"
+#include "sim/session_rig.hpp"
+
+namespace imucal::imucald {
+
+struct ServiceOptions {
+  std::string config_path = "/etc/imucal/rig.yaml";
+  std::string socket_path = "/run/imucal/imucald.sock";
+  unsigned socket_mode = 0660;
+  std::string state_dir = "/var/lib/imucal";
+  bool sim = false;             // the virtual rig (also when imu.bus is sim)
+  double time_scale = 1.0;      // virtual rig: rig seconds per wall second; 0 = as fast as it computes
+  std::string sim_operator;     // virtual rig: "" (nobody moves it), "motion" (moves it), "full" (moves it and presses keys)
+  std::uint64_t seed = 1;
+  std::optional<std::vector<std::string>> start;  // start a session at launch with these steps
+  bool exit_after_session = false;
+};
+
+class Service final : public service::SessionHost {
+ public:
+  explicit Service(ServiceOptions options);
+  ~Service() override;
+  /// Loads the configuration, opens the IMU and the socket; errors say what to fix.
+  [[nodiscard]] Status init();
+  /// Runs the event loop until SIGTERM/SIGINT (or the session's end with exit_after_session).
+  /// Returns the process exit code.
+  int run();
+
+  // service::SessionHost
+  nlohmann::json status() override;
+  std::vector<nlohmann::json> snapshot() override;
+  Status start(const std::vector<std::string>& steps) override;
+  Status key(const std::string& key) override;
+
+ private:
+  Status open_imu();
+  void close_imu();
+  void sim_tick();
+  void on_message(const nlohmann::json& message);
+  void on_samples(std::span<const ImuSample> samples);
+  void imu_failed(const Error& error);
+  app::session::PreflightReport preflight();
+  Status write_storage(const nlohmann::json& payload);
+  void arm_watchdog();
+  void shutdown(const std::string& why);
+
+  ServiceOptions options_;
+  RigConfig config_;
+  boost::asio::io_context io_;
+  boost::asio::signal_set signals_;
+  boost::asio::steady_timer sim_timer_, watchdog_timer_;
+  service::Notifier notifier_;
+  std::unique_ptr<service::ControlServer> server_;
+  std::unique_ptr<app::session::SessionRunner> runner_;
+  ImuStreamInfo stream_info_;
+  // The IMU: hardware or virtual.
+  std::unique_ptr<app::ImuRig> rig_;
+  std::unique_ptr<acq::AsioAcquisition> acquisition_;
+  std::unique_ptr<sim::SessionRig> sim_rig_;
+  std::unique_ptr<sim::ScriptedOperator> operator_;
+  std::chrono::steady_clock::time_point sim_wall_start_;
+  TimeNs sim_rig_start_ns_ = 0;
+  std::string imu_state_ = "closed";
+  std::string imu_error_;
+  std::uint64_t samples_ = 0, imu_faults_ = 0;
+  bool quit_ = false;
+  int exit_code_ = 0;
+};
+
+}  // namespace imucal::imucald
