@@ -274,3 +274,51 @@ TEST(RigConfig, TargetPathIsRelativeToConfigFile) {
 
 }  // namespace
 }  // namespace imucal
+
+namespace imucal {
+namespace {
+
+TEST(RigConfig, SessionSectionParsesAndRoundTrips) {
+  auto c = parse_rig_config(
+      "imu: {bus: sim}\n"
+      "session:\n"
+      "  steps: [preflight, still, poses, solve]\n"
+      "  still_s: 20\n"
+      "  poses: 24\n"
+      "  poses_min: 10\n"
+      "  auto_write: true\n");
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_EQ(c->session.steps, (std::vector<std::string>{"preflight", "still", "poses", "solve"}));
+  EXPECT_DOUBLE_EQ(c->session.still_s, 20.0);
+  EXPECT_EQ(c->session.poses, 24);
+  EXPECT_EQ(c->session.poses_min, 10);
+  EXPECT_TRUE(c->session.auto_write);
+  auto again = parse_rig_config(rig_config_to_yaml(*c));
+  ASSERT_TRUE(again.ok()) << again.error().message;
+  EXPECT_EQ(again->session.steps, c->session.steps);
+  EXPECT_DOUBLE_EQ(again->session.still_s, 20.0);
+  EXPECT_TRUE(again->session.auto_write);
+  auto from_json = parse_rig_config(rig_config_to_json(*c));
+  ASSERT_TRUE(from_json.ok()) << from_json.error().message;
+  EXPECT_EQ(from_json->session.poses, 24);
+}
+
+TEST(RigConfig, SessionSectionRefusesWhatCannotRun) {
+  const char* bad[][2] = {
+      {"session: {steps: [poses, still]}", "out of protocol order"},
+      {"session: {steps: [calibrate]}", "is not a step"},
+      {"session: {still_s: 0}", "session.still_s"},
+      {"session: {poses: 5}", "at least 9"},
+      {"session: {poses: 12, poses_min: 15}", "above session.poses"},
+      {"session: {auto_write: yes please}", "true or false"},
+      {"session: {hold: 2}", "unknown key"},
+  };
+  for (const auto& [yaml, fragment] : bad) {
+    auto c = parse_rig_config(std::string("imu: {bus: sim}\n") + yaml + "\n");
+    ASSERT_FALSE(c.ok()) << yaml;
+    EXPECT_NE(c.error().message.find(fragment), std::string::npos) << yaml << " -> " << c.error().message;
+  }
+}
+
+}  // namespace
+}  // namespace imucal
