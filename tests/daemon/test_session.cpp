@@ -318,3 +318,46 @@ TEST(Session, StartRefusesStepsOutOfOrderOrWithoutTheirInputs) {
 
 }  // namespace
 }  // namespace imucal
+
+namespace imucal {
+namespace {
+
+TEST(Session, MotionStepShowsExcitationDetectionAndSaturation) {
+  ModuleDir modules;
+  RigConfig config = session_config({"preflight", "motion"});
+  config.session.motion_s = 12.0;
+  SimSession s(config);
+  s.scripted_ = false;
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  bool turned = false;
+  s.run(60.0, [&](SimSession& ss) {
+    auto& engine = ss.runner_->engine();
+    if (engine.status().value("step", "") != "motion") return;
+    const TimeNs t = ss.rig_->now_ns();
+    // The target is seen for the first 4 s, then lost.
+    const bool seen = !ss.of_type("prompt").empty() && t - static_cast<TimeNs>(ss.of_type("prompt").back().value("t", 0.0) * 1e9) < 4'000'000'000;
+    engine.on_frame(t, seen);
+    if (!turned) {
+      turned = true;
+      // Half a turn in 0.2 s: about 1700 deg/s at its peak, far beyond the +-500 deg/s range.
+      ss.rig_->trajectory().turn(t + 200'000'000, 0.2,
+                                 ss.rig_->trajectory().final_orientation() *
+                                     Eigen::Quaterniond(Eigen::AngleAxisd(M_PI * 0.999, Eigen::Vector3d::UnitX())));
+    }
+  });
+  EXPECT_EQ(s.outcome(), "recorded");
+  EXPECT_TRUE(s.said("Too fast: the IMU saturates"));
+  bool lost = false, counted = false;
+  for (const auto& m : s.of_type("live")) {
+    for (const auto& line : m.value("lines", json::array())) {
+      const std::string l = line.get<std::string>();
+      lost = lost || l.find("Target lost") != std::string::npos;
+      counted = counted || l.find("Target seen in") != std::string::npos;
+    }
+  }
+  EXPECT_TRUE(lost);
+  EXPECT_TRUE(counted);
+}
+
+}  // namespace
+}  // namespace imucal
