@@ -58,12 +58,9 @@ std::string utc_now() {
 }
 
 json new_payload() {
-  return {{"format", kCalibrationFormat},
-          {"version", kCalibrationPayloadVersion},
-          {"created_utc", utc_now()},
-          {"software_version", kVersion},
-          {"cameras", json::array()},
-          {"source", {{"files", json::array()}, {"notes", json::array()}}}};
+  return {{"format", kCalibrationFormat}, {"version", kCalibrationPayloadVersion},
+          {"created_utc", utc_now()},     {"software_version", kVersion},
+          {"cameras", json::array()},     {"source", {{"files", json::array()}, {"notes", json::array()}}}};
 }
 
 // The canonical block (A_a, b_a, A_g, b_g, G, form) of a result, with its stream and units.
@@ -96,7 +93,8 @@ json camimu_payload(const json& r, const std::string& path) {
     json cam = {{"name", name}};
     for (const char* key : {"stream", "T_cam_imu", "rotation_sigma_rad", "translation_sigma_m",
                             "timeshift_cam_imu", "timeshift_sigma_s"}) {
-      if (c.contains(key)) cam[std::string(key) == "timeshift_cam_imu" ? "timeshift_cam_imu_s" : key] = c[key];
+      if (c.contains(key))
+        cam[std::string(key) == "timeshift_cam_imu" ? "timeshift_cam_imu_s" : key] = c[key];
     }
     p["cameras"].push_back(cam);
   }
@@ -128,8 +126,11 @@ Result<json> load_document(const std::string& path) {
 
 Status check_matrix(const json& j, std::size_t rows, std::size_t cols, const std::string& what) {
   auto bad = [&] {
-    return make_error(Errc::kCorrupt, what + " must be " + std::to_string(rows) + " rows of " + std::to_string(cols) +
-                                          " finite numbers");
+    return make_error(
+        Errc::kCorrupt,
+        what + " must be " +
+            (cols == 0 ? std::to_string(rows) : std::to_string(rows) + " rows of " + std::to_string(cols)) +
+            " finite numbers");
   };
   if (!j.is_array() || j.size() != rows) return bad();
   for (const auto& row : j) {
@@ -159,8 +160,9 @@ Result<json> merge(json stat, const json& cam) {
   const auto fixed = cam_file.value("fixed", json::array());
   const bool own_intrinsics = std::find(fixed.begin(), fixed.end(), "S_a") == fixed.end();
   if (own_intrinsics) {
-    note += "; the camimu solve estimated its own IMU intrinsics (run calibrate camimu --imu-intrinsics with the "
-            "static result for extrinsics consistent with the stored IMU)";
+    note +=
+        "; the camimu solve estimated its own IMU intrinsics (run calibrate camimu --imu-intrinsics with the "
+        "static result for extrinsics consistent with the stored IMU)";
   }
   stat["source"]["notes"].push_back(note);
   return stat;
@@ -185,8 +187,10 @@ Result<StoredCalibration> decode_latest(const drivers::LatestRecord& latest, con
                             std::to_string(latest.record->sequence) + ")";
   json payload = json::from_cbor(latest.record->payload, true, false);
   if (payload.is_discarded()) {
-    return make_error(Errc::kCorrupt, where + " holds an intact record whose payload is not CBOR: it was not written "
-                                              "by imucal; write a new calibration");
+    return make_error(Errc::kCorrupt,
+                      where +
+                          " holds an intact record whose payload is not CBOR: it was not written "
+                          "by imucal; write a new calibration");
   }
   if (auto st = validate_calibration_payload(payload); !st.ok()) return st.error().context(where);
   out.payload = std::move(payload);
@@ -205,24 +209,30 @@ Status validate_calibration_payload(const json& p) {
   }
   if (p.value("version", json()) != kCalibrationPayloadVersion) {
     return make_error(Errc::kCorrupt, "calibration payload version " + p.value("version", json()).dump() +
-                                          ", this imucal reads version " + std::to_string(kCalibrationPayloadVersion));
+                                          ", this imucal reads version " +
+                                          std::to_string(kCalibrationPayloadVersion));
   }
-  if (!p.contains("imu") || !p["imu"].is_object()) return make_error(Errc::kCorrupt, "the calibration has no imu");
+  if (!p.contains("imu") || !p["imu"].is_object())
+    return make_error(Errc::kCorrupt, "the calibration has no imu");
   const json& imu = p["imu"];
-  for (const char* m : {"A_a", "A_g", "G"}) IMUCAL_TRY(check_matrix(imu.value(m, json()), 3, 3, std::string("imu.") + m));
-  for (const char* v : {"b_a", "b_g"}) IMUCAL_TRY(check_matrix(imu.value(v, json()), 3, 0, std::string("imu.") + v));
+  for (const char* m : {"A_a", "A_g", "G"})
+    IMUCAL_TRY(check_matrix(imu.value(m, json()), 3, 3, std::string("imu.") + m));
+  for (const char* v : {"b_a", "b_g"})
+    IMUCAL_TRY(check_matrix(imu.value(v, json()), 3, 0, std::string("imu.") + v));
   if (!p.contains("cameras") || !p["cameras"].is_array()) {
     return make_error(Errc::kCorrupt, "the calibration's cameras must be a list");
   }
   for (const auto& c : p["cameras"]) {
     if (!c.is_object()) return make_error(Errc::kCorrupt, "a camera entry is not a mapping");
-    IMUCAL_TRY(check_matrix(c.value("T_cam_imu", json()), 4, 4, "camera " + c.value("name", "?") + " T_cam_imu"));
+    IMUCAL_TRY(
+        check_matrix(c.value("T_cam_imu", json()), 4, 4, "camera " + c.value("name", "?") + " T_cam_imu"));
   }
   return {};
 }
 
 bool same_calibration(const json& a, const json& b) {
-  return a.value("imu", json()) == b.value("imu", json()) && a.value("cameras", json()) == b.value("cameras", json());
+  return a.value("imu", json()) == b.value("imu", json()) &&
+         a.value("cameras", json()) == b.value("cameras", json());
 }
 
 Result<json> calibration_payload_from_file(const std::string& result_path) {
@@ -274,12 +284,13 @@ Result<json> calibration_payload_from_files(const std::vector<std::string>& path
     const std::string kind = p->at("imu").value("source", "");
     std::optional<json>& slot = kind == "static" ? stat : cam;
     if (exported) {
-      return make_error(Errc::kInvalidArgument,
-                        path + ": an exported stored calibration cannot be merged with other results; give it alone");
+      return make_error(
+          Errc::kInvalidArgument,
+          path + ": an exported stored calibration cannot be merged with other results; give it alone");
     }
     if (slot) {
-      return make_error(Errc::kInvalidArgument,
-                        path + ": a second " + kind + " result; give at most one static and one camimu result");
+      return make_error(Errc::kInvalidArgument, path + ": a second " + kind +
+                                                    " result; give at most one static and one camimu result");
     }
     slot = std::move(*p);
   }
@@ -298,8 +309,9 @@ Result<StoredCalibration> read_stored_calibration(const RigConfig& config) {
     }
     return device.error();
   }
-  auto store = drivers::CalibrationStore::open(**device, static_cast<std::uint64_t>(config.storage.offset_bytes),
-                                               static_cast<std::uint64_t>(config.storage.size_bytes));
+  auto store =
+      drivers::CalibrationStore::open(**device, static_cast<std::uint64_t>(config.storage.offset_bytes),
+                                      static_cast<std::uint64_t>(config.storage.size_bytes));
   if (!store.ok()) return store.error();
   auto latest = store->read_latest();
   if (!latest.ok()) return latest.error();
@@ -313,8 +325,9 @@ Result<StoredCalibration> write_stored_calibration(const RigConfig& config, cons
   const std::vector<std::uint8_t> cbor = json::to_cbor(p);
   auto device = drivers::open_storage_device(config.storage, drivers::StorageAccess::kWrite);
   if (!device.ok()) return device.error();
-  auto store = drivers::CalibrationStore::open(**device, static_cast<std::uint64_t>(config.storage.offset_bytes),
-                                               static_cast<std::uint64_t>(config.storage.size_bytes));
+  auto store =
+      drivers::CalibrationStore::open(**device, static_cast<std::uint64_t>(config.storage.offset_bytes),
+                                      static_cast<std::uint64_t>(config.storage.size_bytes));
   if (!store.ok()) return store.error();
   auto written = store->write(cbor);
   if (!written.ok()) return written.error();
@@ -322,7 +335,8 @@ Result<StoredCalibration> write_stored_calibration(const RigConfig& config, cons
   if (!latest.ok()) return latest.error();
   auto out = decode_latest(*latest, (*device)->name());
   if (!out.ok()) return out.error();
-  if (out->slot != written->slot || out->sequence != written->sequence || !out->payload || *out->payload != p) {
+  if (out->slot != written->slot || out->sequence != written->sequence || !out->payload ||
+      *out->payload != p) {
     return make_error(Errc::kDevice, (*device)->name() + ": after writing sequence " +
                                          std::to_string(written->sequence) + " to slot " +
                                          drivers::slot_name(written->slot) +

@@ -49,7 +49,8 @@ struct StoredCalibration {
 
 /// One payload from several results: at most one static and one camimu result (merged as the
 /// header comment says), or a single exported payload.
-[[nodiscard]] Result<nlohmann::json> calibration_payload_from_files(const std::vector<std::string>& result_paths);
+[[nodiscard]] Result<nlohmann::json> calibration_payload_from_files(
+    const std::vector<std::string>& result_paths);
 
 /// Checks that `payload` is a version-1 calibration: format, version, the IMU's matrices and
 /// vectors finite and of their sizes, every camera's T_cam_imu 4 rows of 4. kCorrupt otherwise.

@@ -28,7 +28,8 @@ RigConfig load_config(const std::string& path) {
 }
 
 std::string slot_line(const drivers::SlotReport& s) {
-  std::string line = std::string("slot ") + drivers::slot_name(s.slot) + " (byte " + std::to_string(s.offset) + "): ";
+  std::string line =
+      std::string("slot ") + drivers::slot_name(s.slot) + " (byte " + std::to_string(s.offset) + "): ";
   if (s.valid) {
     return line + "valid, sequence " + std::to_string(s.sequence) + ", " + std::to_string(s.payload_bytes) +
            " payload bytes";
@@ -69,7 +70,8 @@ app::StoredCalibration read_or_fail(const RigConfig& config) {
   if (!stored.ok()) fail(stored.error(), "reading the stored calibration");
   if (!stored->payload) {
     print_state(std::cerr, *stored, "");
-    throw CliExit{kExitInput, "no calibration is stored on " + stored->device + " (write one with imucal store write)"};
+    throw CliExit{kExitInput,
+                  "no calibration is stored on " + stored->device + " (write one with imucal store write)"};
   }
   return std::move(stored).value();
 }
@@ -77,8 +79,9 @@ app::StoredCalibration read_or_fail(const RigConfig& config) {
 void run_read(const StoreOptions& o) {
   const app::StoredCalibration s = read_or_fail(load_config(o.config_path));
   if (o.json) {
-    json j = {{"device", s.device},        {"slot", drivers::slot_name(s.slot)}, {"sequence", s.sequence},
-              {"payload_bytes", s.payload_bytes}, {"slots", slots_json(s)},           {"calibration", *s.payload}};
+    json j = {{"device", s.device},     {"slot", drivers::slot_name(s.slot)},
+              {"sequence", s.sequence}, {"payload_bytes", s.payload_bytes},
+              {"slots", slots_json(s)}, {"calibration", *s.payload}};
     std::cout << j.dump(2) << "\n";
     return;
   }
@@ -126,20 +129,23 @@ void run_verify(const StoreOptions& o) {
 
 void setup(CLI::App& root) {
   CLI::App* store = root.add_subcommand(
-      "store", "The calibration record on the rig's storage (A/B slots; file, nvmem or I2C EEPROM; docs/storage.md)");
+      "store",
+      "The calibration record on the rig's storage (A/B slots; file, nvmem or I2C EEPROM; docs/storage.md)");
   store->require_subcommand(1);
   auto o = std::make_shared<StoreOptions>();
   auto add_config = [&](CLI::App* c) {
     c->add_option("--config", o->config_path, "Rig configuration YAML (its storage: section)")->required();
   };
-  CLI::App* read = store->add_subcommand("read", "Print the stored calibration and which slot and sequence hold it");
+  CLI::App* read =
+      store->add_subcommand("read", "Print the stored calibration and which slot and sequence hold it");
   add_config(read);
   read->add_flag("--json", o->json, "Print JSON (the state of both slots and the calibration)");
   read->callback([o] { run_read(*o); });
 
   CLI::App* write = store->add_subcommand(
-      "write", "Write results (calibrate static -o YAML, calibrate camimu's folder or calibration.yaml, or an "
-               "exported calibration) as the next record; synced, read back and verified");
+      "write",
+      "Write results (calibrate static -o YAML, calibrate camimu's folder or calibration.yaml, or an "
+      "exported calibration) as the next record; synced, read back and verified");
   add_config(write);
   write->add_option("RESULT", o->results, "Result files: at most one static and one camimu")->required();
   write->callback([o] { run_write(*o); });

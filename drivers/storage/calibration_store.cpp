@@ -7,12 +7,14 @@ namespace imucal::drivers {
 
 const char* slot_name(int slot) { return slot == 0 ? "A" : "B"; }
 
-Result<CalibrationStore> CalibrationStore::open(StorageDevice& device, std::uint64_t offset, std::uint64_t size) {
+Result<CalibrationStore> CalibrationStore::open(StorageDevice& device, std::uint64_t offset,
+                                                std::uint64_t size) {
   IMUCAL_TRY(check_range(device.name(), device.size(), offset, size));
   const std::uint64_t slot = size / 2;
   if (slot < kRecordHeaderBytes + 1) {
-    return make_error(Errc::kInvalidArgument, device.name() + ": a region of " + std::to_string(size) +
-                                                  " bytes leaves no room for two records; raise storage.size_bytes");
+    return make_error(Errc::kInvalidArgument,
+                      device.name() + ": a region of " + std::to_string(size) +
+                          " bytes leaves no room for two records; raise storage.size_bytes");
   }
   return CalibrationStore(device, offset, slot);
 }
@@ -21,11 +23,14 @@ Result<DecodedRecord> CalibrationStore::read_slot(int slot) {
   const std::uint64_t at = slot_offset(slot);
   // The header first, then only the bytes the header says the record spans: an EEPROM on a
   // 100 kHz bus reads about 10 kB/s, so a small record in a large slot is read quickly.
-  std::vector<std::uint8_t> bytes(static_cast<std::size_t>(std::min<std::uint64_t>(slot_bytes_, kRecordMaxHeaderBytes)));
-  if (auto st = device_->read(at, bytes); !st.ok()) return st.error().context(std::string("slot ") + slot_name(slot));
+  std::vector<std::uint8_t> bytes(
+      static_cast<std::size_t>(std::min<std::uint64_t>(slot_bytes_, kRecordMaxHeaderBytes)));
+  if (auto st = device_->read(at, bytes); !st.ok())
+    return st.error().context(std::string("slot ") + slot_name(slot));
   if (const auto extent = record_extent(bytes); extent && *extent > bytes.size()) {
     bytes.resize(static_cast<std::size_t>(std::min<std::uint64_t>(*extent, slot_bytes_)));
-    if (auto st = device_->read(at, bytes); !st.ok()) return st.error().context(std::string("slot ") + slot_name(slot));
+    if (auto st = device_->read(at, bytes); !st.ok())
+      return st.error().context(std::string("slot ") + slot_name(slot));
   }
   return decode_record(bytes);
 }
@@ -75,11 +80,12 @@ Result<LatestRecord> CalibrationStore::read_latest() {
 
 Result<WriteReport> CalibrationStore::write(std::span<const std::uint8_t> payload) {
   if (payload.size() > max_payload_bytes()) {
-    return make_error(Errc::kInvalidArgument,
-                      "the calibration record needs " + std::to_string(payload.size() + kRecordHeaderBytes) +
-                          " bytes, a slot of " + device_->name() + " holds " + std::to_string(slot_bytes_) +
-                          " (half of storage.size_bytes); nothing was written. Raise storage.size_bytes or store "
-                          "fewer results");
+    return make_error(
+        Errc::kInvalidArgument,
+        "the calibration record needs " + std::to_string(payload.size() + kRecordHeaderBytes) +
+            " bytes, a slot of " + device_->name() + " holds " + std::to_string(slot_bytes_) +
+            " (half of storage.size_bytes); nothing was written. Raise storage.size_bytes or store "
+            "fewer results");
   }
   auto latest = read_latest();
   if (!latest.ok()) return latest.error();
@@ -104,11 +110,12 @@ Result<WriteReport> CalibrationStore::write(std::span<const std::uint8_t> payloa
   if (back != bytes) {
     const auto diff = std::mismatch(bytes.begin(), bytes.end(), back.begin());
     const auto first = static_cast<std::size_t>(diff.first - bytes.begin());
-    return make_error(Errc::kDevice,
-                      where + ": the read-back differs from what was written at byte " + std::to_string(first) + " of " +
-                          std::to_string(bytes.size()) +
-                          ", so the write failed; the previous record is untouched in the other slot. Check the "
-                          "device (write protection, wear, wiring) and write again");
+    return make_error(
+        Errc::kDevice,
+        where + ": the read-back differs from what was written at byte " + std::to_string(first) + " of " +
+            std::to_string(bytes.size()) +
+            ", so the write failed; the previous record is untouched in the other slot. Check the "
+            "device (write protection, wear, wiring) and write again");
   }
   return WriteReport{target, sequence, bytes.size()};
 }

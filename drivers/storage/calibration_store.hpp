@@ -24,11 +24,11 @@
 namespace imucal::drivers {
 
 struct SlotReport {
-  int slot = 0;  // 0 = A, 1 = B
+  int slot = 0;              // 0 = A, 1 = B
   std::uint64_t offset = 0;  // on the device
   bool valid = false;
-  std::uint32_t sequence = 0;      // when valid
-  std::size_t payload_bytes = 0;   // when valid
+  std::uint32_t sequence = 0;     // when valid
+  std::size_t payload_bytes = 0;  // when valid
   RecordDefect defect = RecordDefect::kNone;
   std::string reason;  // why not valid
 };
@@ -67,7 +67,9 @@ class CalibrationStore {
   /// Bytes one slot holds, and the longest payload that fits.
   std::uint64_t slot_bytes() const { return slot_bytes_; }
   std::uint64_t max_payload_bytes() const { return slot_bytes_ - kRecordHeaderBytes; }
-  std::uint64_t slot_offset(int slot) const { return offset_ + static_cast<std::uint64_t>(slot) * slot_bytes_; }
+  std::uint64_t slot_offset(int slot) const {
+    return offset_ + static_cast<std::uint64_t>(slot) * slot_bytes_;
+  }
   const StorageDevice& device() const { return *device_; }
 
  private:

@@ -15,12 +15,16 @@ namespace {
 
 // A chip busy with its write cycle does not acknowledge its address: the adapter reports one of
 // these (i2c-designware ENXIO/EREMOTEIO, others EIO or EAGAIN).
-bool is_nack(int err) { return err == ENXIO || err == EREMOTEIO || err == EIO || err == EAGAIN || err == ETIMEDOUT; }
+bool is_nack(int err) {
+  return err == ENXIO || err == EREMOTEIO || err == EIO || err == EAGAIN || err == ETIMEDOUT;
+}
 
 class I2cEepromStorage final : public StorageDevice {
  public:
   I2cEepromStorage(const std::string& device, const I2cEepromOptions& o, std::unique_ptr<DeviceIo> io)
-      : file_(device, std::move(io)), o_(o), name_("i2c-eeprom " + file_.path() + "@" + format_hex(o.address, 2)) {}
+      : file_(device, std::move(io)),
+        o_(o),
+        name_("i2c-eeprom " + file_.path() + "@" + format_hex(o.address, 2)) {}
 
   Status open() {
     if (int err = file_.open(); err < 0) return open_error(-err);
@@ -34,7 +38,8 @@ class I2cEepromStorage final : public StorageDevice {
     const unsigned long smbus_needed = I2C_FUNC_SMBUS_READ_I2C_BLOCK | I2C_FUNC_SMBUS_WRITE_I2C_BLOCK;
     if (!rdwr_ && (o_.address_bytes != 1 || (funcs & smbus_needed) != smbus_needed)) {
       return make_error(Errc::kUnsupported,
-                        name_ + ": the adapter can only do SMBus transfers (functionality " + format_hex(funcs, 8) +
+                        name_ + ": the adapter can only do SMBus transfers (functionality " +
+                            format_hex(funcs, 8) +
                             "), which serve 1-byte-addressed EEPROMs (24c01..24c16) with I2C-block reads and "
                             "writes; this configuration needs " +
                             (o_.address_bytes != 1 ? std::string("2-byte addressing")
@@ -97,8 +102,9 @@ class I2cEepromStorage final : public StorageDevice {
   Error open_error(int err) const {
     std::string msg = "cannot open " + file_.path() + ": " + std::strerror(err);
     if (err == ENOENT || err == ENODEV || err == ENXIO) {
-      msg += ". Check that i2c-dev is loaded (`modprobe i2c-dev`), that the bus exists (`i2cdetect -l`) and "
-             "storage.i2c_device";
+      msg +=
+          ". Check that i2c-dev is loaded (`modprobe i2c-dev`), that the bus exists (`i2cdetect -l`) and "
+          "storage.i2c_device";
     } else if (err == EACCES || err == EPERM) {
       msg += ". Run as a user that may open it (usually the group i2c, see `ls -l " + file_.path() + "`)";
     }
@@ -106,8 +112,10 @@ class I2cEepromStorage final : public StorageDevice {
   }
 
   Error transfer_error(const char* what, std::uint64_t at, int err) const {
-    std::string msg = name_ + ": " + what + " at byte " + std::to_string(at) + " failed: " + std::strerror(err);
-    if (is_nack(err)) msg += " (no acknowledge: check the EEPROM's wiring, power, address pins and storage.i2c_address)";
+    std::string msg =
+        name_ + ": " + what + " at byte " + std::to_string(at) + " failed: " + std::strerror(err);
+    if (is_nack(err))
+      msg += " (no acknowledge: check the EEPROM's wiring, power, address pins and storage.i2c_address)";
     return make_error(err == ETIMEDOUT ? Errc::kTimeout : Errc::kDevice, msg);
   }
 
@@ -116,9 +124,10 @@ class I2cEepromStorage final : public StorageDevice {
     if (int r = file_.ioctl(I2C_SLAVE, reinterpret_cast<void*>(static_cast<unsigned long>(address))); r < 0) {
       std::string msg = name_ + ": cannot use address " + format_hex(address, 2) + ": " + std::strerror(-r);
       if (-r == EBUSY) {
-        msg += ". A kernel driver (at24) is bound to it: use storage.backend nvmem with its "
-               "/sys/bus/nvmem/devices/*/nvmem file, or unbind it (echo " +
-               format_hex(address, 2) + " > /sys/bus/i2c/devices/i2c-N/delete_device)";
+        msg +=
+            ". A kernel driver (at24) is bound to it: use storage.backend nvmem with its "
+            "/sys/bus/nvmem/devices/*/nvmem file, or unbind it (echo " +
+            format_hex(address, 2) + " > /sys/bus/i2c/devices/i2c-N/delete_device)";
       }
       return make_error(Errc::kDevice, msg);
     }
@@ -170,8 +179,9 @@ class I2cEepromStorage final : public StorageDevice {
     if (int r = smbus(I2C_SMBUS_READ, static_cast<std::uint8_t>(at), I2C_SMBUS_I2C_BLOCK_DATA, &block); r < 0)
       return transfer_error("SMBus block read", at, -r);
     if (block.block[0] != out.size()) {
-      return make_error(Errc::kDevice, name_ + ": short SMBus block read at byte " + std::to_string(at) + ": " +
-                                           std::to_string(block.block[0]) + " of " + std::to_string(out.size()));
+      return make_error(Errc::kDevice, name_ + ": short SMBus block read at byte " + std::to_string(at) +
+                                           ": " + std::to_string(block.block[0]) + " of " +
+                                           std::to_string(out.size()));
     }
     std::copy_n(block.block + 1, out.size(), out.begin());
     return {};
@@ -182,7 +192,8 @@ class I2cEepromStorage final : public StorageDevice {
     i2c_smbus_data block{};
     block.block[0] = static_cast<std::uint8_t>(bytes.size());
     std::copy(bytes.begin(), bytes.end(), block.block + 1);
-    if (int r = smbus(I2C_SMBUS_WRITE, static_cast<std::uint8_t>(at), I2C_SMBUS_I2C_BLOCK_DATA, &block); r < 0)
+    if (int r = smbus(I2C_SMBUS_WRITE, static_cast<std::uint8_t>(at), I2C_SMBUS_I2C_BLOCK_DATA, &block);
+        r < 0)
       return transfer_error("SMBus block write", at, -r);
     return {};
   }
@@ -194,7 +205,8 @@ class I2cEepromStorage final : public StorageDevice {
       std::uint8_t addr[2];
       i2c_msg msg{};
       msg.addr = address;
-      msg.len = static_cast<std::uint16_t>(word_address(static_cast<std::uint64_t>(address - o_.address) << 8, addr));
+      msg.len = static_cast<std::uint16_t>(
+          word_address(static_cast<std::uint64_t>(address - o_.address) << 8, addr));
       msg.buf = addr;
       i2c_rdwr_ioctl_data data{&msg, 1};
       return file_.ioctl(I2C_RDWR, &data);
@@ -216,10 +228,10 @@ class I2cEepromStorage final : public StorageDevice {
       if (r >= 0) return {};
       if (!is_nack(-r)) return transfer_error("write-cycle poll", 0, -r);
       if (std::chrono::steady_clock::now() > deadline) {
-        return make_error(Errc::kTimeout, name_ + ": the EEPROM did not finish its write cycle within " +
-                                              std::to_string(o_.write_timeout.count()) + " ms (" +
-                                              std::to_string(polls) +
-                                              " polls): check its write-protect pin, power and storage.page_bytes");
+        return make_error(Errc::kTimeout,
+                          name_ + ": the EEPROM did not finish its write cycle within " +
+                              std::to_string(o_.write_timeout.count()) + " ms (" + std::to_string(polls) +
+                              " polls): check its write-protect pin, power and storage.page_bytes");
       }
       std::this_thread::sleep_for(std::chrono::microseconds(200));
     }
@@ -239,7 +251,8 @@ Result<std::unique_ptr<StorageDevice>> open_i2c_eeprom_storage(const std::string
                                                                const I2cEepromOptions& o,
                                                                std::unique_ptr<DeviceIo> io) {
   if (device.empty()) {
-    return make_error(Errc::kInvalidArgument, "no I2C device given; set storage.i2c_device (e.g. /dev/i2c-1)");
+    return make_error(Errc::kInvalidArgument,
+                      "no I2C device given; set storage.i2c_device (e.g. /dev/i2c-1)");
   }
   if (o.address < 0x50 || o.address > 0x57) {
     return make_error(Errc::kInvalidArgument, "I2C address " + format_hex(o.address, 2) +
@@ -247,7 +260,8 @@ Result<std::unique_ptr<StorageDevice>> open_i2c_eeprom_storage(const std::string
                                                   "storage.i2c_address");
   }
   if (o.page_bytes == 0 || o.page_bytes > 256 || (o.page_bytes & (o.page_bytes - 1)) != 0) {
-    return make_error(Errc::kInvalidArgument, "storage.page_bytes must be a power of two 1..256 (see the datasheet)");
+    return make_error(Errc::kInvalidArgument,
+                      "storage.page_bytes must be a power of two 1..256 (see the datasheet)");
   }
   if (o.address_bytes != 1 && o.address_bytes != 2) {
     return make_error(Errc::kInvalidArgument, "storage.address_bytes must be 1 or 2");
@@ -256,8 +270,8 @@ Result<std::unique_ptr<StorageDevice>> open_i2c_eeprom_storage(const std::string
   if (o.size_bytes == 0 || o.size_bytes > addressable) {
     return make_error(Errc::kInvalidArgument,
                       "the storage region ends at byte " + std::to_string(o.size_bytes) + ", but " +
-                          std::to_string(o.address_bytes) + "-byte addressing from " + format_hex(o.address, 2) +
-                          " reaches " + std::to_string(addressable) +
+                          std::to_string(o.address_bytes) + "-byte addressing from " +
+                          format_hex(o.address, 2) + " reaches " + std::to_string(addressable) +
                           " bytes: fix storage.address_bytes, size_bytes or offset_bytes");
   }
   auto dev = std::make_unique<I2cEepromStorage>(device, o, std::move(io));

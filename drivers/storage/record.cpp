@@ -55,13 +55,14 @@ RecordDefect check_header(std::span<const std::uint8_t> b, std::size_t& header_l
   }
   header_len = get_u16(b, 6);
   if (header_len < kRecordHeaderBytes || header_len > kRecordMaxHeaderBytes) {
-    reason = "header length " + std::to_string(header_len) + " is outside " + std::to_string(kRecordHeaderBytes) +
-             ".." + std::to_string(kRecordMaxHeaderBytes) + " (damaged header)";
+    reason = "header length " + std::to_string(header_len) + " is outside " +
+             std::to_string(kRecordHeaderBytes) + ".." + std::to_string(kRecordMaxHeaderBytes) +
+             " (damaged header)";
     return RecordDefect::kBadHeaderLength;
   }
   if (header_len > b.size()) {
-    reason = "the header declares " + std::to_string(header_len) + " bytes, only " + std::to_string(b.size()) +
-             " are present";
+    reason = "the header declares " + std::to_string(header_len) + " bytes, only " +
+             std::to_string(b.size()) + " are present";
     return RecordDefect::kTruncated;
   }
   const std::uint32_t stored = get_u32(b, header_len - 4);
@@ -144,7 +145,8 @@ DecodedRecord decode_record(std::span<const std::uint8_t> b) {
   if (const std::uint16_t version = get_u16(b, 4); version != kRecordVersion) {
     return defect(RecordDefect::kUnsupportedVersion,
                   "format version " + std::to_string(version) + ", this imucal reads version " +
-                      std::to_string(kRecordVersion) + ": use the imucal that wrote it, or write a new record");
+                      std::to_string(kRecordVersion) +
+                      ": use the imucal that wrote it, or write a new record");
   }
   if (header_len != kRecordHeaderBytes) {
     return defect(RecordDefect::kBadHeaderLength, "header length " + std::to_string(header_len) +
@@ -153,16 +155,17 @@ DecodedRecord decode_record(std::span<const std::uint8_t> b) {
   }
   const std::uint32_t payload_len = get_u32(b, 12);
   if (payload_len > b.size() - header_len) {
-    return defect(RecordDefect::kPayloadTooLong, "payload length " + std::to_string(payload_len) + " runs past the " +
-                                                     std::to_string(b.size() - header_len) +
-                                                     " bytes after the header");
+    return defect(RecordDefect::kPayloadTooLong,
+                  "payload length " + std::to_string(payload_len) + " runs past the " +
+                      std::to_string(b.size() - header_len) + " bytes after the header");
   }
   const auto payload = b.subspan(header_len, payload_len);
   const std::uint32_t stored = get_u32(b, 16);
   if (const std::uint32_t computed = crc32(payload); stored != computed) {
-    return defect(RecordDefect::kBadPayloadCrc, "payload CRC32 " + hex32(stored) + " does not match its " +
-                                                    std::to_string(payload_len) + " bytes (" + hex32(computed) +
-                                                    "): the payload is damaged or was torn by an interrupted write");
+    return defect(RecordDefect::kBadPayloadCrc,
+                  "payload CRC32 " + hex32(stored) + " does not match its " + std::to_string(payload_len) +
+                      " bytes (" + hex32(computed) +
+                      "): the payload is damaged or was torn by an interrupted write");
   }
   Record r;
   r.sequence = get_u32(b, 8);

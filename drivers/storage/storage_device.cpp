@@ -39,7 +39,8 @@ class FdStorage final : public StorageDevice {
       if (r < 0) return io_error("read", offset + done, errno);
       if (r == 0) {
         return make_error(Errc::kCorrupt, name_ + ": ends at byte " + std::to_string(offset + done) +
-                                              ", before the " + std::to_string(size_) + " bytes it had when opened");
+                                              ", before the " + std::to_string(size_) +
+                                              " bytes it had when opened");
       }
       done += static_cast<std::size_t>(r);
     }
@@ -54,7 +55,9 @@ class FdStorage final : public StorageDevice {
                                  static_cast<off_t>(offset + done));
       if (r < 0 && errno == EINTR) continue;
       if (r < 0) return io_error("write", offset + done, errno);
-      if (r == 0) return make_error(Errc::kIo, name_ + ": the device took no bytes at " + std::to_string(offset + done));
+      if (r == 0)
+        return make_error(Errc::kIo,
+                          name_ + ": the device took no bytes at " + std::to_string(offset + done));
       done += static_cast<std::size_t>(r);
     }
     return {};
@@ -97,7 +100,8 @@ Error open_error(const std::string& what, const std::string& path, int err, bool
 
 Status fsync_dir(const std::filesystem::path& dir) {
   const int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (fd < 0) return make_error(Errc::kIo, "cannot open folder " + dir.string() + " to sync it: " + errno_text(errno));
+  if (fd < 0)
+    return make_error(Errc::kIo, "cannot open folder " + dir.string() + " to sync it: " + errno_text(errno));
   const int r = ::fsync(fd);
   const int err = errno;
   ::close(fd);
@@ -113,14 +117,16 @@ Status create_file(const std::string& path, std::uint64_t size) {
   if (fd < 0) {
     if (errno == EEXIST) return {};
     if (errno == ENOENT) {
-      return make_error(Errc::kNotFound, "cannot create " + path + ": the folder " + p.parent_path().string() +
+      return make_error(Errc::kNotFound, "cannot create " + path + ": the folder " +
+                                             p.parent_path().string() +
                                              " does not exist; create it or set storage.path");
     }
     return open_error("calibration file", path, errno, false);
   }
   Status st;
   if (::ftruncate(fd, static_cast<off_t>(size)) != 0 || ::fsync(fd) != 0) {
-    st = make_error(Errc::kIo, "cannot create " + path + " at " + std::to_string(size) + " bytes: " + errno_text(errno));
+    st = make_error(Errc::kIo,
+                    "cannot create " + path + " at " + std::to_string(size) + " bytes: " + errno_text(errno));
   }
   ::close(fd);
   if (!st.ok()) {
@@ -148,24 +154,26 @@ Result<std::unique_ptr<StorageDevice>> open_file_storage(const std::string& path
   const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
   if (fd < 0) {
     if (errno == ENOENT) {
-      return make_error(Errc::kNotFound,
-                        "no calibration file at " + path + ": nothing was stored yet (imucal store write creates it)");
+      return make_error(Errc::kNotFound, "no calibration file at " + path +
+                                             ": nothing was stored yet (imucal store write creates it)");
     }
     return open_error("calibration file", path, errno, false);
   }
   struct stat st {};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
     ::close(fd);
-    return make_error(Errc::kInvalidArgument, path + " is not a regular file; storage.backend file needs one");
+    return make_error(Errc::kInvalidArgument,
+                      path + " is not a regular file; storage.backend file needs one");
   }
   const auto size = static_cast<std::uint64_t>(st.st_size);
   if (size < min_size) {
     ::close(fd);
-    return make_error(Errc::kInvalidArgument,
-                      path + " is " + std::to_string(size) + " bytes, the configured region needs " +
-                          std::to_string(min_size) +
-                          " (storage.offset_bytes + storage.size_bytes): fix those keys, or move the file away "
-                          "so that a new one is created");
+    return make_error(
+        Errc::kInvalidArgument,
+        path + " is " + std::to_string(size) + " bytes, the configured region needs " +
+            std::to_string(min_size) +
+            " (storage.offset_bytes + storage.size_bytes): fix those keys, or move the file away "
+            "so that a new one is created");
   }
   return std::unique_ptr<StorageDevice>(new FdStorage(fd, size, "file " + path, 1 << 20, false));
 }
@@ -179,10 +187,11 @@ Result<std::unique_ptr<StorageDevice>> open_nvmem_storage(const std::string& pat
   const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
   if (fd < 0) {
     if (errno == ENOENT || errno == ENODEV || errno == ENXIO) {
-      return make_error(Errc::kDevice, "no nvmem file " + path + ": " + errno_text(errno) +
-                                           ". Check that the EEPROM is bound to at24 (device tree, or `echo 24c32 "
-                                           "0x50 > /sys/bus/i2c/devices/i2c-1/new_device`) and see `ls "
-                                           "/sys/bus/nvmem/devices`");
+      return make_error(Errc::kDevice,
+                        "no nvmem file " + path + ": " + errno_text(errno) +
+                            ". Check that the EEPROM is bound to at24 (device tree, or `echo 24c32 "
+                            "0x50 > /sys/bus/i2c/devices/i2c-1/new_device`) and see `ls "
+                            "/sys/bus/nvmem/devices`");
     }
     return open_error("nvmem file", path, errno, true);
   }
@@ -195,11 +204,12 @@ Result<std::unique_ptr<StorageDevice>> open_nvmem_storage(const std::string& pat
   const auto size = static_cast<std::uint64_t>(st.st_size);
   if (size < min_size) {
     ::close(fd);
-    return make_error(Errc::kInvalidArgument,
-                      path + " holds " + std::to_string(size) + " bytes, the configured region needs " +
-                          std::to_string(min_size) +
-                          " (storage.offset_bytes + storage.size_bytes): is it the right EEPROM? Lower those keys "
-                          "to fit it");
+    return make_error(
+        Errc::kInvalidArgument,
+        path + " holds " + std::to_string(size) + " bytes, the configured region needs " +
+            std::to_string(min_size) +
+            " (storage.offset_bytes + storage.size_bytes): is it the right EEPROM? Lower those keys "
+            "to fit it");
   }
   return std::unique_ptr<StorageDevice>(
       new FdStorage(fd, size, "nvmem " + path, std::max<std::size_t>(chunk_bytes, 1), true));
@@ -207,7 +217,8 @@ Result<std::unique_ptr<StorageDevice>> open_nvmem_storage(const std::string& pat
 
 Result<std::unique_ptr<StorageDevice>> open_storage_device(const StorageConfig& c, StorageAccess access) {
   if (c.size_bytes <= 0 || c.offset_bytes < 0) {
-    return make_error(Errc::kInvalidArgument, "storage.size_bytes must be positive and storage.offset_bytes not negative");
+    return make_error(Errc::kInvalidArgument,
+                      "storage.size_bytes must be positive and storage.offset_bytes not negative");
   }
   const auto end = static_cast<std::uint64_t>(c.offset_bytes) + static_cast<std::uint64_t>(c.size_bytes);
   switch (c.backend) {

@@ -54,7 +54,7 @@ class StorageDevice {
                                                                         std::size_t chunk_bytes = 4096);
 
 struct I2cEepromOptions {
-  std::uint8_t address = 0x50;  // 0x50..0x57
+  std::uint8_t address = 0x50;   // 0x50..0x57
   std::uint64_t size_bytes = 0;  // bytes used on the chip (from the start of its memory)
   std::size_t page_bytes = 32;   // write page: a write never crosses a page boundary
   int address_bytes = 2;         // word address width: 1 (24c01..24c16) or 2 (24c32 and larger)
@@ -69,9 +69,8 @@ struct I2cEepromOptions {
 /// After each page write the chip is polled (it does not acknowledge while it programs) until
 /// it answers or `write_timeout` passes. An address owned by a kernel driver (at24) is refused
 /// with EBUSY: use the nvmem backend then, or unbind at24. `io` as in I2cDevBus.
-[[nodiscard]] Result<std::unique_ptr<StorageDevice>> open_i2c_eeprom_storage(const std::string& device,
-                                                                             const I2cEepromOptions& options,
-                                                                             std::unique_ptr<DeviceIo> io = nullptr);
+[[nodiscard]] Result<std::unique_ptr<StorageDevice>> open_i2c_eeprom_storage(
+    const std::string& device, const I2cEepromOptions& options, std::unique_ptr<DeviceIo> io = nullptr);
 
 enum class StorageAccess { kRead, kWrite };
 

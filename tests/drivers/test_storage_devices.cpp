@@ -4,12 +4,11 @@
 // wrap-around, busy (no acknowledge) during the write cycle, an address owned by at24.
 
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <linux/i2c-dev.h>
 #include <linux/i2c.h>
 #include <sys/stat.h>
 #include <unistd.h>
-
-#include <gtest/gtest.h>
 
 #include <cerrno>
 #include <filesystem>
@@ -198,8 +197,9 @@ class FakeEepromIo final : public DeviceIo {
     std::span<i2c_msg> msgs(d.msgs, d.nmsgs);
     const i2c_msg& w = msgs[0];
     if (w.flags & I2C_M_RD || w.len < chip_.address_bytes) return -EINVAL;
-    chip_.pointer = block_of(w.addr) +
-                    (chip_.address_bytes == 1 ? w.buf[0] : static_cast<std::size_t>(w.buf[0] << 8 | w.buf[1]));
+    chip_.pointer =
+        block_of(w.addr) +
+        (chip_.address_bytes == 1 ? w.buf[0] : static_cast<std::size_t>(w.buf[0] << 8 | w.buf[1]));
     if (w.len > chip_.address_bytes) {
       store({w.buf + chip_.address_bytes, static_cast<std::size_t>(w.len - chip_.address_bytes)});
     }

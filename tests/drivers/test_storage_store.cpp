@@ -69,8 +69,8 @@ TEST(StorageStore, WritesAlternateBetweenSlotsWithRisingSequence) {
 TEST(StorageStore, WritesGoToTheInvalidSlotAndKeepTheValidOne) {
   MemoryStorage dev(512);
   auto store = open_store(dev, 0, 512);
-  ASSERT_TRUE(store.write(payload(1, 30)).ok());  // A, seq 1
-  ASSERT_TRUE(store.write(payload(2, 30)).ok());  // B, seq 2
+  ASSERT_TRUE(store.write(payload(1, 30)).ok());   // A, seq 1
+  ASSERT_TRUE(store.write(payload(2, 30)).ok());   // B, seq 2
   dev.bytes()[store.slot_offset(1) + 30] ^= 0x01;  // B's payload damaged
   auto latest = store.read_latest();
   ASSERT_TRUE(latest.ok() && latest->record);
