@@ -484,7 +484,8 @@ Status ConfigParser::parse_target(const YAML::Node& node, RigConfig& config) con
 
 Status ConfigParser::parse_storage(const YAML::Node& node, StorageConfig& storage) const {
   IMUCAL_TRY(check_map(node, "storage",
-                       {"backend", "path", "i2c_device", "i2c_address", "size_bytes", "offset_bytes"}));
+                       {"backend", "path", "i2c_device", "i2c_address", "page_bytes", "address_bytes",
+                        "size_bytes", "offset_bytes"}));
   if (!node["backend"]) return error(node, "storage.backend", "missing (file, nvmem or i2c-eeprom)");
   auto backend = get_string(node["backend"], "storage.backend");
   if (!backend.ok()) return backend.error();
@@ -499,7 +500,7 @@ Status ConfigParser::parse_storage(const YAML::Node& node, StorageConfig& storag
                  "'" + *backend + "' is not allowed (file, nvmem or i2c-eeprom)");
   }
   const bool i2c = storage.backend == StorageBackend::kI2cEeprom;
-  for (const char* key : {"i2c_device", "i2c_address"}) {
+  for (const char* key : {"i2c_device", "i2c_address", "page_bytes", "address_bytes"}) {
     if (node[key] && !i2c)
       return error(node[key], std::string("storage.") + key, "applies only to backend: i2c-eeprom");
   }
@@ -525,6 +526,11 @@ Status ConfigParser::parse_storage(const YAML::Node& node, StorageConfig& storag
     storage.i2c_device = *d;
     IMUCAL_CFG_INT(node, "i2c_address", "storage.i2c_address", storage.i2c_address, x >= 0x50 && x <= 0x57,
                    "an EEPROM address 0x50..0x57");
+    IMUCAL_CFG_INT(node, "page_bytes", "storage.page_bytes", storage.page_bytes,
+                   x >= 1 && x <= 256 && (x & (x - 1)) == 0,
+                   "the EEPROM's write page, a power of two 1..256 (24c02: 8, 24c32: 32; see its datasheet)");
+    IMUCAL_CFG_INT(node, "address_bytes", "storage.address_bytes", storage.address_bytes, x == 1 || x == 2,
+                   "1 (24c01..24c16) or 2 (24c32 and larger)");
   }
   IMUCAL_CFG_INT(node, "size_bytes", "storage.size_bytes", storage.size_bytes, x >= 256 && x <= (1 << 24),
                  "256..16777216 bytes; two A/B slots must fit");
@@ -749,6 +755,8 @@ std::string rig_config_to_yaml(const RigConfig& c) {
   if (c.storage.backend == StorageBackend::kI2cEeprom) {
     out << YAML::Key << "i2c_device" << YAML::Value << c.storage.i2c_device;
     out << YAML::Key << "i2c_address" << YAML::Value << hex(c.storage.i2c_address);
+    out << YAML::Key << "page_bytes" << YAML::Value << c.storage.page_bytes;
+    out << YAML::Key << "address_bytes" << YAML::Value << c.storage.address_bytes;
   } else {
     out << YAML::Key << "path" << YAML::Value << c.storage.path;
   }
@@ -801,6 +809,8 @@ std::string rig_config_to_json(const RigConfig& c) {
   if (c.storage.backend == StorageBackend::kI2cEeprom) {
     storage["i2c_device"] = c.storage.i2c_device;
     storage["i2c_address"] = c.storage.i2c_address;
+    storage["page_bytes"] = c.storage.page_bytes;
+    storage["address_bytes"] = c.storage.address_bytes;
   } else {
     storage["path"] = c.storage.path;
   }

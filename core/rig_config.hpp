@@ -66,8 +66,10 @@ struct StorageConfig {
   std::string path = "/var/lib/imucal/calibration.bin";  // file / nvmem: the file to use
   std::string i2c_device;                                // i2c-eeprom: the i2c-dev node
   int i2c_address = 0x50;                                // i2c-eeprom: 0x50..0x57
-  int size_bytes = 4096;                                 // bytes available to imucal (both A/B slots)
-  int offset_bytes = 0;                                  // where imucal's region starts inside the device
+  int page_bytes = 32;    // i2c-eeprom: the chip's write page (24c01/02: 8, 24c04..16: 16, 24c32/64: 32)
+  int address_bytes = 2;  // i2c-eeprom: word address width, 1 (24c01..24c16) or 2 (24c32 and larger)
+  int size_bytes = 4096;  // bytes available to imucal (both A/B slots)
+  int offset_bytes = 0;   // where imucal's region starts inside the device
 };
 
 /// The service's guided session (imucald, docs/service-session.md): which steps run and their

@@ -1,0 +1,389 @@
+#include "app/stored_calibration.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <chrono>
+#include <cmath>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "core/version.hpp"
+#include "drivers/storage/storage_device.hpp"
+
+namespace imucal::app {
+namespace {
+
+using nlohmann::json;
+
+constexpr const char* kStaticMethod = "static multi-position (Tedaldi 2013)";
+constexpr const char* kCamImuMethod = "continuous-time camera-IMU (Krebs 2012)";
+
+// YAML scalars as JSON: integers, then floating point, then booleans, else strings.
+json yaml_to_json(const YAML::Node& n) {
+  switch (n.Type()) {
+    case YAML::NodeType::Sequence: {
+      json a = json::array();
+      for (const auto& item : n) a.push_back(yaml_to_json(item));
+      return a;
+    }
+    case YAML::NodeType::Map: {
+      json o = json::object();
+      for (const auto& kv : n) o[kv.first.as<std::string>()] = yaml_to_json(kv.second);
+      return o;
+    }
+    case YAML::NodeType::Scalar: {
+      const std::string s = n.Scalar();
+      std::int64_t i = 0;
+      double d = 0;
+      bool b = false;
+      if (n.Tag() != "!" && YAML::convert<std::int64_t>::decode(n, i)) return i;
+      if (n.Tag() != "!" && YAML::convert<double>::decode(n, d)) return d;
+      if (n.Tag() != "!" && YAML::convert<bool>::decode(n, b)) return b;
+      return s;
+    }
+    default:
+      return nullptr;
+  }
+}
+
+std::string utc_now() {
+  const std::time_t t = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+json new_payload() {
+  return {{"format", kCalibrationFormat}, {"version", kCalibrationPayloadVersion},
+          {"created_utc", utc_now()},     {"software_version", kVersion},
+          {"cameras", json::array()},     {"source", {{"files", json::array()}, {"notes", json::array()}}}};
+}
+
+// The canonical block (A_a, b_a, A_g, b_g, G, form) of a result, with its stream and units.
+json imu_block(const json& root, const json& canonical, const std::string& source) {
+  json imu = {{"stream", root.value("stream", "")}, {"input_units", root.value("input_units", "")}};
+  for (const char* key : {"form", "A_a", "b_a", "A_g", "b_g", "G"}) imu[key] = canonical.at(key);
+  imu["source"] = source;
+  return imu;
+}
+
+json static_payload(const json& r, const std::string& path) {
+  json p = new_payload();
+  p["imu"] = imu_block(r, r.at("canonical"), "static");
+  json sigma = {{"model", "tedaldi: corrected = misalignment * diag(scale) * (raw - bias)"}};
+  for (const char* triad : {"accel", "gyro"}) sigma[triad] = r.at(triad).at("sigma");
+  if (r.contains("gsens") && r["gsens"].contains("G_sigma")) sigma["G"] = r["gsens"]["G_sigma"];
+  p["imu"]["sigma"] = sigma;
+  if (r.contains("gravity")) p["gravity_mps2"] = r["gravity"];
+  p["source"]["files"].push_back({{"path", path}, {"kind", "static"}, {"method", kStaticMethod}});
+  return p;
+}
+
+json camimu_payload(const json& r, const std::string& path) {
+  json p = new_payload();
+  p["imu"] = imu_block(r, r.at("canonical"), "camimu");
+  json sigma = r.at("krebs").value("sigma", json::object());
+  sigma["model"] = "krebs: " + r.at("krebs").value("form", "");
+  p["imu"]["sigma"] = sigma;
+  for (const auto& [name, c] : r.at("cameras").items()) {
+    json cam = {{"name", name}};
+    for (const char* key : {"stream", "T_cam_imu", "rotation_sigma_rad", "translation_sigma_m",
+                            "timeshift_cam_imu", "timeshift_sigma_s"}) {
+      if (c.contains(key))
+        cam[std::string(key) == "timeshift_cam_imu" ? "timeshift_cam_imu_s" : key] = c[key];
+    }
+    p["cameras"].push_back(cam);
+  }
+  if (r.contains("gravity")) p["gravity_mps2"] = r["gravity"];
+  json file = {{"path", path}, {"kind", "camimu"}, {"method", kCamImuMethod}};
+  if (r.contains("fixed")) file["fixed"] = r["fixed"];
+  p["source"]["files"].push_back(file);
+  return p;
+}
+
+Result<json> load_document(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return make_error(Errc::kNotFound, path + ": cannot be read");
+  std::stringstream text;
+  text << in.rdbuf();
+  const std::string s = text.str();
+  const auto first = s.find_first_not_of(" \t\r\n");
+  if (first != std::string::npos && s[first] == '{') {
+    json j = json::parse(s, nullptr, false);
+    if (j.is_discarded()) return make_error(Errc::kCorrupt, path + ": not valid JSON");
+    return j;
+  }
+  try {
+    return yaml_to_json(YAML::Load(s));
+  } catch (const YAML::Exception& e) {
+    return make_error(Errc::kCorrupt, path + ": not valid YAML (" + std::string(e.what()) + ")");
+  }
+}
+
+Status check_matrix(const json& j, std::size_t rows, std::size_t cols, const std::string& what) {
+  auto bad = [&] {
+    return make_error(
+        Errc::kCorrupt,
+        what + " must be " +
+            (cols == 0 ? std::to_string(rows) : std::to_string(rows) + " rows of " + std::to_string(cols)) +
+            " finite numbers");
+  };
+  if (!j.is_array() || j.size() != rows) return bad();
+  for (const auto& row : j) {
+    const json r = cols == 0 ? json::array({row}) : row;
+    if (!r.is_array() || (cols != 0 && r.size() != cols)) return bad();
+    for (const auto& x : r) {
+      if (!x.is_number() || !std::isfinite(x.get<double>())) return bad();
+    }
+  }
+  return {};
+}
+
+// Merges a camimu payload's cameras into a static payload (rules in the header).
+Result<json> merge(json stat, const json& cam) {
+  for (const char* key : {"stream", "input_units"}) {
+    if (stat["imu"][key] != cam["imu"][key]) {
+      return make_error(Errc::kInvalidArgument,
+                        std::string("the static and camimu results are of different IMU data (") + key + " " +
+                            stat["imu"][key].dump() + " and " + cam["imu"][key].dump() +
+                            "): give results of one stream");
+    }
+  }
+  stat["cameras"] = cam["cameras"];
+  const json& cam_file = cam["source"]["files"][0];
+  stat["source"]["files"].push_back(cam_file);
+  std::string note = "imu from the static result; cameras from the camimu result";
+  const auto fixed = cam_file.value("fixed", json::array());
+  const bool own_intrinsics = std::find(fixed.begin(), fixed.end(), "S_a") == fixed.end();
+  if (own_intrinsics) {
+    note +=
+        "; the camimu solve estimated its own IMU intrinsics (run calibrate camimu --imu-intrinsics with the "
+        "static result for extrinsics consistent with the stored IMU)";
+  }
+  stat["source"]["notes"].push_back(note);
+  return stat;
+}
+
+StoredCalibration from_latest(const drivers::LatestRecord& latest, const std::string& device) {
+  StoredCalibration out;
+  out.device = device;
+  out.slots.assign(latest.slots.begin(), latest.slots.end());
+  if (latest.record) {
+    out.sequence = latest.record->sequence;
+    out.slot = latest.slot;
+    out.payload_bytes = latest.record->payload.size();
+  }
+  return out;
+}
+
+Result<StoredCalibration> decode_latest(const drivers::LatestRecord& latest, const std::string& device) {
+  StoredCalibration out = from_latest(latest, device);
+  if (!latest.record) return out;
+  const std::string where = device + " slot " + drivers::slot_name(latest.slot) + " (sequence " +
+                            std::to_string(latest.record->sequence) + ")";
+  json payload = json::from_cbor(latest.record->payload, true, false);
+  if (payload.is_discarded()) {
+    return make_error(Errc::kCorrupt,
+                      where +
+                          " holds an intact record whose payload is not CBOR: it was not written "
+                          "by imucal; write a new calibration");
+  }
+  if (auto st = validate_calibration_payload(payload); !st.ok()) return st.error().context(where);
+  out.payload = std::move(payload);
+  return out;
+}
+
+}  // namespace
+
+// A payload from one file; `exported` tells a stored payload from a result converted here.
+static Result<json> load_payload(const std::string& result_path, bool& exported);
+
+Status validate_calibration_payload(const json& p) {
+  if (!p.is_object() || p.value("format", json()) != kCalibrationFormat) {
+    return make_error(Errc::kCorrupt, std::string("not an imucal calibration (its \"format\" is not \"") +
+                                          kCalibrationFormat + "\")");
+  }
+  if (p.value("version", json()) != kCalibrationPayloadVersion) {
+    return make_error(Errc::kCorrupt, "calibration payload version " + p.value("version", json()).dump() +
+                                          ", this imucal reads version " +
+                                          std::to_string(kCalibrationPayloadVersion));
+  }
+  if (!p.contains("imu") || !p["imu"].is_object())
+    return make_error(Errc::kCorrupt, "the calibration has no imu");
+  const json& imu = p["imu"];
+  for (const char* m : {"A_a", "A_g", "G"})
+    IMUCAL_TRY(check_matrix(imu.value(m, json()), 3, 3, std::string("imu.") + m));
+  for (const char* v : {"b_a", "b_g"})
+    IMUCAL_TRY(check_matrix(imu.value(v, json()), 3, 0, std::string("imu.") + v));
+  if (!p.contains("cameras") || !p["cameras"].is_array()) {
+    return make_error(Errc::kCorrupt, "the calibration's cameras must be a list");
+  }
+  for (const auto& c : p["cameras"]) {
+    if (!c.is_object()) return make_error(Errc::kCorrupt, "a camera entry is not a mapping");
+    IMUCAL_TRY(
+        check_matrix(c.value("T_cam_imu", json()), 4, 4, "camera " + c.value("name", "?") + " T_cam_imu"));
+  }
+  return {};
+}
+
+bool same_calibration(const json& a, const json& b) {
+  return a.value("imu", json()) == b.value("imu", json()) &&
+         a.value("cameras", json()) == b.value("cameras", json());
+}
+
+Result<json> calibration_payload_from_file(const std::string& result_path) {
+  bool exported = false;
+  return load_payload(result_path, exported);
+}
+
+static Result<json> load_payload(const std::string& result_path, bool& exported) {
+  std::string path = result_path;
+  if (std::filesystem::is_directory(path)) path = (std::filesystem::path(path) / "calibration.yaml").string();
+  auto doc = load_document(path);
+  if (!doc.ok()) return doc.error();
+  // `store read --json` wraps the calibration with the state of the slots.
+  const json& r = doc->is_object() && doc->contains("calibration") ? (*doc)["calibration"] : *doc;
+  if (!r.is_object()) return make_error(Errc::kCorrupt, path + ": not a calibration result (not a mapping)");
+  try {
+    if (r.value("format", json()) == kCalibrationFormat) {
+      exported = true;
+      if (auto st = validate_calibration_payload(r); !st.ok()) return st.error().context(path);
+      return r;
+    }
+    const std::string method = r.value("method", "");
+    json p;
+    if (method == kStaticMethod) {
+      p = static_payload(r, path);
+    } else if (method == kCamImuMethod) {
+      p = camimu_payload(r, path);
+    } else {
+      return make_error(Errc::kCorrupt, path +
+                                            ": neither a static result (calibrate static -o), a camimu "
+                                            "calibration.yaml nor an exported stored calibration");
+    }
+    if (auto st = validate_calibration_payload(p); !st.ok()) return st.error().context(path);
+    return p;
+  } catch (const json::exception& e) {
+    return make_error(Errc::kCorrupt, path + ": a key the calibration needs is missing or malformed (" +
+                                          std::string(e.what()) + ")");
+  }
+}
+
+Result<json> calibration_payload_from_files(const std::vector<std::string>& paths) {
+  if (paths.empty()) return make_error(Errc::kInvalidArgument, "no result file given");
+  std::optional<json> stat, cam;
+  for (const auto& path : paths) {
+    bool exported = false;
+    auto p = load_payload(path, exported);
+    if (!p.ok()) return p.error();
+    if (paths.size() == 1) return p;
+    const std::string kind = p->at("imu").value("source", "");
+    std::optional<json>& slot = kind == "static" ? stat : cam;
+    if (exported) {
+      return make_error(
+          Errc::kInvalidArgument,
+          path + ": an exported stored calibration cannot be merged with other results; give it alone");
+    }
+    if (slot) {
+      return make_error(Errc::kInvalidArgument, path + ": a second " + kind +
+                                                    " result; give at most one static and one camimu result");
+    }
+    slot = std::move(*p);
+  }
+  if (stat && cam) return merge(std::move(*stat), *cam);
+  return stat ? *stat : *cam;
+}
+
+Result<StoredCalibration> read_stored_calibration(const RigConfig& config) {
+  auto device = drivers::open_storage_device(config.storage, drivers::StorageAccess::kRead);
+  if (!device.ok()) {
+    if (device.error().code == Errc::kNotFound && config.storage.backend == StorageBackend::kFile) {
+      StoredCalibration none;
+      none.device = "file " + config.storage.path;
+      none.note = device.error().message;
+      return none;
+    }
+    return device.error();
+  }
+  auto store =
+      drivers::CalibrationStore::open(**device, static_cast<std::uint64_t>(config.storage.offset_bytes),
+                                      static_cast<std::uint64_t>(config.storage.size_bytes));
+  if (!store.ok()) return store.error();
+  auto latest = store->read_latest();
+  if (!latest.ok()) return latest.error();
+  return decode_latest(*latest, (*device)->name());
+}
+
+Result<StoredCalibration> write_stored_calibration(const RigConfig& config, const json& payload) {
+  IMUCAL_TRY(validate_calibration_payload(payload));
+  json p = payload;
+  if (!p.contains("rig")) p["rig"] = config.name;
+  const std::vector<std::uint8_t> cbor = json::to_cbor(p);
+  auto device = drivers::open_storage_device(config.storage, drivers::StorageAccess::kWrite);
+  if (!device.ok()) return device.error();
+  auto store =
+      drivers::CalibrationStore::open(**device, static_cast<std::uint64_t>(config.storage.offset_bytes),
+                                      static_cast<std::uint64_t>(config.storage.size_bytes));
+  if (!store.ok()) return store.error();
+  auto written = store->write(cbor);
+  if (!written.ok()) return written.error();
+  auto latest = store->read_latest();
+  if (!latest.ok()) return latest.error();
+  auto out = decode_latest(*latest, (*device)->name());
+  if (!out.ok()) return out.error();
+  if (out->slot != written->slot || out->sequence != written->sequence || !out->payload ||
+      *out->payload != p) {
+    return make_error(Errc::kDevice, (*device)->name() + ": after writing sequence " +
+                                         std::to_string(written->sequence) + " to slot " +
+                                         drivers::slot_name(written->slot) +
+                                         ", the newest readable record is another one; check the device");
+  }
+  return out;
+}
+
+namespace {
+
+bool is_number_list(const json& j) {
+  return j.is_array() && std::all_of(j.begin(), j.end(), [](const json& x) { return x.is_number(); });
+}
+
+void emit(YAML::Emitter& y, const json& j) {
+  if (j.is_object()) {
+    y << YAML::BeginMap;
+    for (const auto& [k, v] : j.items()) {
+      y << YAML::Key << k << YAML::Value;
+      emit(y, v);
+    }
+    y << YAML::EndMap;
+  } else if (j.is_array()) {
+    y << (is_number_list(j) ? YAML::Flow : YAML::Block) << YAML::BeginSeq;
+    for (const auto& v : j) emit(y, v);
+    y << YAML::EndSeq;
+  } else if (j.is_number_integer()) {
+    y << j.get<std::int64_t>();
+  } else if (j.is_number()) {
+    // JSON's shortest text that reads back to the same double, so that an exported calibration
+    // compares equal to the stored one (store verify).
+    y << j.dump();
+  } else if (j.is_boolean()) {
+    y << j.get<bool>();
+  } else if (j.is_string()) {
+    y << j.get<std::string>();
+  } else {
+    y << YAML::Null;
+  }
+}
+
+}  // namespace
+
+std::string stored_calibration_yaml(const json& payload) {
+  YAML::Emitter y;
+  emit(y, payload);
+  return std::string(y.c_str()) + "\n";
+}
+
+}  // namespace imucal::app

@@ -1,0 +1,163 @@
+// imucal store read|write|verify --config RIG.yaml [RESULT...]: the calibration record on the
+// rig's storage (A/B slots, docs/storage.md): print it, write results into it, check it.
+
+#include <iostream>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "app/stored_calibration.hpp"
+#include "core/rig_config.hpp"
+#include "daemon/cli/command.hpp"
+
+namespace imucal::cli {
+namespace {
+
+using nlohmann::json;
+
+struct StoreOptions {
+  std::string config_path;
+  std::vector<std::string> results;
+  bool json = false;
+};
+
+RigConfig load_config(const std::string& path) {
+  auto cfg = load_rig_config(path);
+  if (!cfg.ok()) throw CliExit{kExitInput, "reading the rig configuration: " + cfg.error().message};
+  return std::move(cfg).value();
+}
+
+std::string slot_line(const drivers::SlotReport& s) {
+  std::string line =
+      std::string("slot ") + drivers::slot_name(s.slot) + " (byte " + std::to_string(s.offset) + "): ";
+  if (s.valid) {
+    return line + "valid, sequence " + std::to_string(s.sequence) + ", " + std::to_string(s.payload_bytes) +
+           " payload bytes";
+  }
+  return line + record_defect_name(s.defect) + " - " + s.reason;
+}
+
+json slots_json(const app::StoredCalibration& s) {
+  json out = json::array();
+  for (const auto& r : s.slots) {
+    json j = {{"slot", drivers::slot_name(r.slot)}, {"offset", r.offset}, {"valid", r.valid}};
+    if (r.valid) {
+      j["sequence"] = r.sequence;
+      j["payload_bytes"] = r.payload_bytes;
+    } else {
+      j["defect"] = record_defect_name(r.defect);
+      j["reason"] = r.reason;
+    }
+    out.push_back(j);
+  }
+  return out;
+}
+
+// Prints where the record is and the state of both slots (stdout for read's YAML as comments).
+void print_state(std::ostream& out, const app::StoredCalibration& s, const char* prefix) {
+  out << prefix << s.device;
+  if (s.payload) {
+    out << ": slot " << drivers::slot_name(s.slot) << ", sequence " << s.sequence << ", " << s.payload_bytes
+        << " payload bytes";
+  }
+  out << "\n";
+  for (const auto& r : s.slots) out << prefix << "  " << slot_line(r) << "\n";
+  if (!s.note.empty()) out << prefix << "  " << s.note << "\n";
+}
+
+app::StoredCalibration read_or_fail(const RigConfig& config) {
+  auto stored = app::read_stored_calibration(config);
+  if (!stored.ok()) fail(stored.error(), "reading the stored calibration");
+  if (!stored->payload) {
+    print_state(std::cerr, *stored, "");
+    throw CliExit{kExitInput,
+                  "no calibration is stored on " + stored->device + " (write one with imucal store write)"};
+  }
+  return std::move(stored).value();
+}
+
+void run_read(const StoreOptions& o) {
+  const app::StoredCalibration s = read_or_fail(load_config(o.config_path));
+  if (o.json) {
+    json j = {{"device", s.device},     {"slot", drivers::slot_name(s.slot)},
+              {"sequence", s.sequence}, {"payload_bytes", s.payload_bytes},
+              {"slots", slots_json(s)}, {"calibration", *s.payload}};
+    std::cout << j.dump(2) << "\n";
+    return;
+  }
+  print_state(std::cout, s, "# ");
+  std::cout << app::stored_calibration_yaml(*s.payload);
+}
+
+json payload_of(const std::vector<std::string>& results) {
+  auto payload = app::calibration_payload_from_files(results);
+  if (!payload.ok()) {
+    const int code = payload.error().code == Errc::kInvalidArgument ? kExitUsage : kExitInput;
+    throw CliExit{code, payload.error().message};
+  }
+  return std::move(payload).value();
+}
+
+void run_write(const StoreOptions& o) {
+  const RigConfig config = load_config(o.config_path);
+  const json payload = payload_of(o.results);
+  auto written = app::write_stored_calibration(config, payload);
+  if (!written.ok()) fail(written.error(), "writing the calibration");
+  std::cout << "written and verified: " << written->device << " slot " << drivers::slot_name(written->slot)
+            << ", sequence " << written->sequence << ", " << written->payload_bytes << " payload bytes\n";
+  for (const auto& r : written->slots) std::cout << "  " << slot_line(r) << "\n";
+}
+
+void run_verify(const StoreOptions& o) {
+  const RigConfig config = load_config(o.config_path);
+  std::optional<json> expected;
+  if (!o.results.empty()) expected = payload_of(o.results);
+  const app::StoredCalibration s = read_or_fail(config);
+  print_state(std::cout, s, "");
+  for (const auto& r : s.slots) {
+    if (!r.valid && r.defect != drivers::RecordDefect::kErased) {
+      std::cout << "  note: slot " << drivers::slot_name(r.slot)
+                << " is not valid (an interrupted or failed write); the next write goes there\n";
+    }
+  }
+  if (expected && !app::same_calibration(*s.payload, *expected)) {
+    throw CliExit{kExitData, "the stored calibration (sequence " + std::to_string(s.sequence) +
+                                 ") differs from the given result's imu or cameras"};
+  }
+  std::cout << (expected ? "ok: the stored calibration equals the given result\n" : "ok\n");
+}
+
+void setup(CLI::App& root) {
+  CLI::App* store = root.add_subcommand(
+      "store",
+      "The calibration record on the rig's storage (A/B slots; file, nvmem or I2C EEPROM; docs/storage.md)");
+  store->require_subcommand(1);
+  auto o = std::make_shared<StoreOptions>();
+  auto add_config = [&](CLI::App* c) {
+    c->add_option("--config", o->config_path, "Rig configuration YAML (its storage: section)")->required();
+  };
+  CLI::App* read =
+      store->add_subcommand("read", "Print the stored calibration and which slot and sequence hold it");
+  add_config(read);
+  read->add_flag("--json", o->json, "Print JSON (the state of both slots and the calibration)");
+  read->callback([o] { run_read(*o); });
+
+  CLI::App* write = store->add_subcommand(
+      "write",
+      "Write results (calibrate static -o YAML, calibrate camimu's folder or calibration.yaml, or an "
+      "exported calibration) as the next record; synced, read back and verified");
+  add_config(write);
+  write->add_option("RESULT", o->results, "Result files: at most one static and one camimu")->required();
+  write->callback([o] { run_write(*o); });
+
+  CLI::App* verify = store->add_subcommand(
+      "verify", "Check both slots; with RESULT, also that the stored calibration equals it");
+  add_config(verify);
+  verify->add_option("RESULT", o->results, "Result files to compare with (as for write)");
+  verify->callback([o] { run_verify(*o); });
+}
+
+const CommandRegistrar registrar(85, setup);
+
+}  // namespace
+}  // namespace imucal::cli

@@ -1,0 +1,129 @@
+// imucal store read|write|verify against a file-backed storage region in the test's scratch
+// folder, with a static result computed from the fixture log by the CLI itself.
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "daemon/cli/command.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal {
+namespace {
+
+using ::testing::HasSubstr;
+
+struct Rig {
+  std::string dir, config, storage, result;
+};
+
+Rig make_rig(int size_bytes = 4096) {
+  Rig r;
+  r.dir = test::scratch_dir();
+  r.config = r.dir + "/rig.yaml";
+  r.storage = r.dir + "/calibration.bin";
+  std::ofstream(r.config) << "name: cli-rig\nimu:\n  bus: sim\nstorage:\n  backend: file\n  path: "
+                          << r.storage << "\n  size_bytes: " << size_bytes << "\n  offset_bytes: 128\n";
+  r.result = r.dir + "/static.yaml";
+  auto c =
+      test::run_cli({"calibrate", "static", test::source_path("fixtures/static.imulog"), "-o", r.result});
+  EXPECT_EQ(c.exit_code, 0) << c.err;
+  return r;
+}
+
+TEST(CliStore, WriteReadVerifyRoundTrip) {
+  const Rig rig = make_rig();
+  auto empty = test::run_cli({"store", "read", "--config", rig.config});
+  EXPECT_EQ(empty.exit_code, cli::kExitInput) << empty.err;
+  EXPECT_THAT(empty.err, HasSubstr("no calibration is stored"));
+  EXPECT_FALSE(std::filesystem::exists(rig.storage));  // reading creates nothing
+
+  auto w1 = test::run_cli({"store", "write", "--config", rig.config, rig.result});
+  ASSERT_EQ(w1.exit_code, 0) << w1.err;
+  EXPECT_THAT(w1.out, HasSubstr("slot A, sequence 1"));
+  auto w2 = test::run_cli({"store", "write", "--config", rig.config, rig.result});
+  ASSERT_EQ(w2.exit_code, 0) << w2.err;
+  EXPECT_THAT(w2.out, HasSubstr("slot B, sequence 2"));
+
+  auto read = test::run_cli({"store", "read", "--config", rig.config});
+  ASSERT_EQ(read.exit_code, 0) << read.err;
+  EXPECT_THAT(read.out, HasSubstr("# file " + rig.storage + ": slot B, sequence 2"));
+  EXPECT_THAT(read.out, HasSubstr("format: imucal.calibration"));
+  EXPECT_THAT(read.out, HasSubstr("rig: cli-rig"));
+
+  auto json_read = test::run_cli({"store", "read", "--json", "--config", rig.config});
+  ASSERT_EQ(json_read.exit_code, 0) << json_read.err;
+  const auto j = nlohmann::json::parse(json_read.out);
+  EXPECT_EQ(j["slot"], "B");
+  EXPECT_EQ(j["sequence"], 2);
+  EXPECT_EQ(j["slots"][0]["sequence"], 1);
+  EXPECT_EQ(j["calibration"]["imu"]["source"], "static");
+
+  auto verify = test::run_cli({"store", "verify", "--config", rig.config, rig.result});
+  ASSERT_EQ(verify.exit_code, 0) << verify.err;
+  EXPECT_THAT(verify.out, HasSubstr("equals the given result"));
+  // Exports (YAML and JSON) verify against what is stored.
+  for (const auto& [name, text] :
+       {std::pair{"export.yaml", read.out}, std::pair{"export.json", json_read.out}}) {
+    std::ofstream(rig.dir + "/" + name) << text;
+    auto v = test::run_cli({"store", "verify", "--config", rig.config, rig.dir + "/" + name});
+    EXPECT_EQ(v.exit_code, 0) << name << ": " << v.err;
+  }
+}
+
+TEST(CliStore, VerifyReportsADifferentCalibrationAndADamagedSlot) {
+  const Rig rig = make_rig();
+  ASSERT_EQ(test::run_cli({"store", "write", "--config", rig.config, rig.result}).exit_code, 0);
+  ASSERT_EQ(test::run_cli({"store", "write", "--config", rig.config, rig.result}).exit_code, 0);
+  // A different result: one bias changed.
+  std::ifstream in(rig.result);
+  std::stringstream text;
+  text << in.rdbuf();
+  std::string changed = text.str();
+  const auto at = changed.find("b_a: [");
+  ASSERT_NE(at, std::string::npos);
+  changed.insert(changed.find_first_of("0123456789", at + 6), "1");  // a digit more in front
+  std::ofstream(rig.dir + "/other.yaml") << changed;
+  auto v = test::run_cli({"store", "verify", "--config", rig.config, rig.dir + "/other.yaml"});
+  EXPECT_EQ(v.exit_code, cli::kExitData) << v.err;
+  EXPECT_THAT(v.err, HasSubstr("differs"));
+
+  // Damage slot B's payload (region at 128, slot of 2048 bytes, payload after a 24-byte header).
+  {
+    std::fstream f(rig.storage, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(128 + 2048 + 24 + 10);
+    f.put('\x5a');
+  }
+  auto after = test::run_cli({"store", "verify", "--config", rig.config, rig.result});
+  EXPECT_EQ(after.exit_code, 0) << after.err;  // slot A still holds the calibration
+  EXPECT_THAT(after.out, HasSubstr("slot A, sequence 1"));
+  EXPECT_THAT(after.out, HasSubstr("bad payload CRC"));
+  EXPECT_THAT(after.out, HasSubstr("the next write goes there"));
+  auto w = test::run_cli({"store", "write", "--config", rig.config, rig.result});
+  EXPECT_EQ(w.exit_code, 0) << w.err;
+  EXPECT_THAT(w.out, HasSubstr("slot B, sequence 2"));
+}
+
+TEST(CliStore, ErrorsHaveTheirExitCodes) {
+  const Rig rig = make_rig(256);
+  auto too_big = test::run_cli({"store", "write", "--config", rig.config, rig.result});
+  EXPECT_EQ(too_big.exit_code, cli::kExitUsage) << too_big.err;
+  EXPECT_THAT(too_big.err, HasSubstr("storage.size_bytes"));
+  auto missing = test::run_cli({"store", "write", "--config", rig.config, rig.dir + "/none.yaml"});
+  EXPECT_EQ(missing.exit_code, cli::kExitInput) << missing.err;
+  auto no_config = test::run_cli({"store", "read", "--config", rig.dir + "/none-rig.yaml"});
+  EXPECT_EQ(no_config.exit_code, cli::kExitInput) << no_config.err;
+  auto no_result = test::run_cli({"store", "write", "--config", rig.config});
+  EXPECT_EQ(no_result.exit_code, cli::kExitUsage) << no_result.err;
+  // A file of the wrong size is a device configuration problem, named with its keys.
+  std::ofstream(rig.storage) << "short";
+  auto short_file = test::run_cli({"store", "read", "--config", rig.config});
+  EXPECT_EQ(short_file.exit_code, cli::kExitUsage) << short_file.err;
+  EXPECT_THAT(short_file.err, HasSubstr("storage.offset_bytes"));
+}
+
+}  // namespace
+}  // namespace imucal
