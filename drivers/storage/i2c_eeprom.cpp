@@ -37,7 +37,7 @@ class I2cEepromStorage final : public StorageDevice {
     quick_ = (funcs & I2C_FUNC_SMBUS_QUICK) != 0;
     const unsigned long smbus_needed = I2C_FUNC_SMBUS_READ_I2C_BLOCK | I2C_FUNC_SMBUS_WRITE_I2C_BLOCK;
     if (!rdwr_ && (o_.address_bytes != 1 || (funcs & smbus_needed) != smbus_needed)) {
-      return make_error(Errc::kUnsupported,
+      return make_error(Errc::kDevice,
                         name_ + ": the adapter can only do SMBus transfers (functionality " +
                             format_hex(funcs, 8) +
                             "), which serve 1-byte-addressed EEPROMs (24c01..24c16) with I2C-block reads and "

@@ -148,10 +148,11 @@ Status check_range(const std::string& name, std::uint64_t size, std::uint64_t of
 }
 
 Result<std::unique_ptr<StorageDevice>> open_file_storage(const std::string& path, std::uint64_t min_size,
-                                                         bool create) {
+                                                         StorageAccess access) {
   if (path.empty()) return make_error(Errc::kInvalidArgument, "no storage file given; set storage.path");
-  if (create) IMUCAL_TRY(create_file(path, min_size));
-  const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
+  const bool write = access == StorageAccess::kWrite;
+  if (write) IMUCAL_TRY(create_file(path, min_size));
+  const int fd = ::open(path.c_str(), (write ? O_RDWR : O_RDONLY) | O_CLOEXEC);
   if (fd < 0) {
     if (errno == ENOENT) {
       return make_error(Errc::kNotFound, "no calibration file at " + path +
@@ -179,12 +180,12 @@ Result<std::unique_ptr<StorageDevice>> open_file_storage(const std::string& path
 }
 
 Result<std::unique_ptr<StorageDevice>> open_nvmem_storage(const std::string& path, std::uint64_t min_size,
-                                                          std::size_t chunk_bytes) {
+                                                          StorageAccess access, std::size_t chunk_bytes) {
   if (path.empty()) {
     return make_error(Errc::kInvalidArgument,
                       "no nvmem file given; set storage.path (e.g. /sys/bus/nvmem/devices/1-00500/nvmem)");
   }
-  const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
+  const int fd = ::open(path.c_str(), (access == StorageAccess::kWrite ? O_RDWR : O_RDONLY) | O_CLOEXEC);
   if (fd < 0) {
     if (errno == ENOENT || errno == ENODEV || errno == ENXIO) {
       return make_error(Errc::kDevice,
@@ -223,9 +224,9 @@ Result<std::unique_ptr<StorageDevice>> open_storage_device(const StorageConfig& 
   const auto end = static_cast<std::uint64_t>(c.offset_bytes) + static_cast<std::uint64_t>(c.size_bytes);
   switch (c.backend) {
     case StorageBackend::kFile:
-      return open_file_storage(c.path, end, access == StorageAccess::kWrite);
+      return open_file_storage(c.path, end, access);
     case StorageBackend::kNvmem:
-      return open_nvmem_storage(c.path, end);
+      return open_nvmem_storage(c.path, end, access);
     case StorageBackend::kI2cEeprom: {
       I2cEepromOptions o;
       o.address = static_cast<std::uint8_t>(c.i2c_address);

@@ -34,16 +34,21 @@ class StorageDevice {
   virtual std::string name() const = 0;
 };
 
+/// kRead opens read-only and never creates anything; kWrite opens read-write (and lets the file
+/// backend create its file).
+enum class StorageAccess { kRead, kWrite };
+
 /// Checks that [offset, offset + n) lies inside a device of `size` bytes (for backends).
 [[nodiscard]] Status check_range(const std::string& name, std::uint64_t size, std::uint64_t offset,
                                  std::uint64_t n);
 
-/// A plain file. With `create`, a missing file is created (mode 0644) at `min_size` bytes of
-/// zeros, fsynced, and its folder fsynced so that the new name survives a power cut; without,
-/// a missing file is an error (kNotFound). A file shorter than `min_size` is an error that says
-/// what to change: it is never grown behind the user's back.
+/// A plain file. With kWrite, a missing file is created (mode 0644) at `min_size` bytes of
+/// zeros, fsynced, and its folder fsynced so that the new name survives a power cut; with kRead,
+/// a missing file is an error (kNotFound) and the file is opened read-only. A file shorter than `min_size` is
+/// an error that says what to change: it is never grown behind the user's back.
 [[nodiscard]] Result<std::unique_ptr<StorageDevice>> open_file_storage(const std::string& path,
-                                                                       std::uint64_t min_size, bool create);
+                                                                       std::uint64_t min_size,
+                                                                       StorageAccess access);
 
 /// An nvmem sysfs file (/sys/bus/nvmem/devices/NAME/nvmem): its size is the EEPROM's, from
 /// stat(2); it is never created or truncated. Writes go in pieces of at most `chunk_bytes`
@@ -51,6 +56,7 @@ class StorageDevice {
 /// write cycle before its write returns, so sync() has nothing to flush.
 [[nodiscard]] Result<std::unique_ptr<StorageDevice>> open_nvmem_storage(const std::string& path,
                                                                         std::uint64_t min_size,
+                                                                        StorageAccess access,
                                                                         std::size_t chunk_bytes = 4096);
 
 struct I2cEepromOptions {
@@ -72,10 +78,7 @@ struct I2cEepromOptions {
 [[nodiscard]] Result<std::unique_ptr<StorageDevice>> open_i2c_eeprom_storage(
     const std::string& device, const I2cEepromOptions& options, std::unique_ptr<DeviceIo> io = nullptr);
 
-enum class StorageAccess { kRead, kWrite };
-
 /// The backend the configuration names, sized to hold [offset_bytes, offset_bytes + size_bytes).
-/// kWrite lets the file backend create its file; kRead never creates anything.
 [[nodiscard]] Result<std::unique_ptr<StorageDevice>> open_storage_device(const StorageConfig& config,
                                                                          StorageAccess access);
 

@@ -33,7 +33,7 @@ Bytes pattern(std::size_t n, std::uint8_t start) {
 
 TEST(StorageFile, CreatesTheFileAtItsSizeAndRoundTrips) {
   const std::string path = test::scratch_dir() + "/calibration.bin";
-  auto dev = open_file_storage(path, 1024, true);
+  auto dev = open_file_storage(path, 1024, StorageAccess::kWrite);
   ASSERT_TRUE(dev.ok()) << dev.error().message;
   EXPECT_EQ(std::filesystem::file_size(path), 1024u);
   EXPECT_EQ((*dev)->size(), 1024u);
@@ -45,7 +45,7 @@ TEST(StorageFile, CreatesTheFileAtItsSizeAndRoundTrips) {
   }
   dev->reset();
   // A new process sees what was written.
-  auto again = open_file_storage(path, 1024, false);
+  auto again = open_file_storage(path, 1024, StorageAccess::kRead);
   ASSERT_TRUE(again.ok()) << again.error().message;
   auto store = CalibrationStore::open(**again, 0, 1024);
   ASSERT_TRUE(store.ok());
@@ -58,7 +58,7 @@ TEST(StorageFile, CreatesTheFileAtItsSizeAndRoundTrips) {
 
 TEST(StorageFile, ReadingNeverCreatesAndMissingIsNotFound) {
   const std::string path = test::scratch_dir() + "/none.bin";
-  auto dev = open_file_storage(path, 512, false);
+  auto dev = open_file_storage(path, 512, StorageAccess::kRead);
   ASSERT_FALSE(dev.ok());
   EXPECT_EQ(dev.error().code, Errc::kNotFound);
   EXPECT_NE(dev.error().message.find("store write"), std::string::npos) << dev.error().message;
@@ -68,7 +68,7 @@ TEST(StorageFile, ReadingNeverCreatesAndMissingIsNotFound) {
 TEST(StorageFile, AShortFileIsRefusedNotGrown) {
   const std::string path = test::scratch_dir() + "/short.bin";
   std::ofstream(path) << std::string(100, 'x');
-  auto dev = open_file_storage(path, 512, true);
+  auto dev = open_file_storage(path, 512, StorageAccess::kWrite);
   ASSERT_FALSE(dev.ok());
   EXPECT_EQ(dev.error().code, Errc::kInvalidArgument);
   EXPECT_NE(dev.error().message.find("100 bytes"), std::string::npos) << dev.error().message;
@@ -76,18 +76,22 @@ TEST(StorageFile, AShortFileIsRefusedNotGrown) {
 }
 
 TEST(StorageFile, AMissingFolderSaysSo) {
-  auto dev = open_file_storage(test::scratch_dir() + "/no/such/dir/c.bin", 512, true);
+  auto dev = open_file_storage(test::scratch_dir() + "/no/such/dir/c.bin", 512, StorageAccess::kWrite);
   ASSERT_FALSE(dev.ok());
   EXPECT_EQ(dev.error().code, Errc::kNotFound);
   EXPECT_NE(dev.error().message.find("does not exist"), std::string::npos) << dev.error().message;
 }
 
-TEST(StorageFile, AReadOnlyFileIsAPermissionError) {
-  if (::geteuid() == 0) GTEST_SKIP() << "running as root: file permissions do not apply";
+TEST(StorageFile, AReadOnlyFileCanBeReadButNotOpenedForWriting) {
   const std::string path = test::scratch_dir() + "/ro.bin";
   std::ofstream(path) << std::string(512, '\0');
   ::chmod(path.c_str(), 0444);
-  auto dev = open_file_storage(path, 512, false);
+  auto reader = open_file_storage(path, 512, StorageAccess::kRead);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  Bytes head(24);
+  EXPECT_TRUE((*reader)->read(0, head).ok());
+  if (::geteuid() == 0) GTEST_SKIP() << "running as root: file permissions do not refuse writing";
+  auto dev = open_file_storage(path, 512, StorageAccess::kWrite);
   ASSERT_FALSE(dev.ok());
   EXPECT_NE(dev.error().message.find("may write"), std::string::npos) << dev.error().message;
 }
@@ -114,8 +118,9 @@ TEST(StorageFile, TheConfigurationPicksTheBackend) {
 TEST(StorageNvmem, WritesInChunksAndRefusesASmallDevice) {
   const std::string path = test::scratch_dir() + "/nvmem";
   std::ofstream(path, std::ios::binary) << std::string(256, '\xff');
-  EXPECT_EQ(open_nvmem_storage(path, 512).error().code, Errc::kInvalidArgument);
-  auto dev = open_nvmem_storage(path, 256, 7);  // odd chunks: every piece boundary lands mid-record
+  EXPECT_EQ(open_nvmem_storage(path, 512, StorageAccess::kRead).error().code, Errc::kInvalidArgument);
+  auto dev = open_nvmem_storage(path, 256, StorageAccess::kWrite,
+                                7);  // odd chunks: every piece boundary lands mid-record
   ASSERT_TRUE(dev.ok()) << dev.error().message;
   const Bytes data = pattern(200, 3);
   ASSERT_TRUE((*dev)->write(20, data).ok());
@@ -281,7 +286,7 @@ TEST(StorageI2cEeprom, TwoByteAddressingOnAnSmbusAdapterIsUnsupported) {
   chip.memory.assign(4096, 0xFF);
   auto dev = open_fake(chip, 4096);
   ASSERT_FALSE(dev.ok());
-  EXPECT_EQ(dev.error().code, Errc::kUnsupported);
+  EXPECT_EQ(dev.error().code, Errc::kDevice);
   EXPECT_NE(dev.error().message.find("nvmem"), std::string::npos) << dev.error().message;
 }
 
@@ -327,6 +332,33 @@ TEST(StorageI2cEeprom, OptionsAreChecked) {
   o.address = 0x68;
   EXPECT_EQ(open_i2c_eeprom_storage("/dev/i2c-9", o, std::make_unique<FakeEepromIo>(chip)).error().code,
             Errc::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace imucal::drivers
+
+namespace imucal::drivers {
+namespace {
+
+TEST(StorageConfigKeys, EepromGeometryIsParsedCheckedAndUsed) {
+  const std::string base =
+      "name: r\nimu:\n  bus: sim\nstorage:\n  backend: i2c-eeprom\n  i2c_device: /dev/i2c-99\n";
+  auto ok = parse_rig_config(base + "  page_bytes: 8\n  address_bytes: 1\n  size_bytes: 256\n");
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  EXPECT_EQ(ok->storage.page_bytes, 8);
+  EXPECT_EQ(ok->storage.address_bytes, 1);
+  EXPECT_NE(rig_config_to_yaml(*ok).find("page_bytes: 8"), std::string::npos);
+  auto again = parse_rig_config(rig_config_to_yaml(*ok));
+  ASSERT_TRUE(again.ok()) << again.error().message;
+  EXPECT_EQ(again->storage.address_bytes, 1);
+  auto dev = open_storage_device(ok->storage, StorageAccess::kRead);
+  ASSERT_FALSE(dev.ok());
+  EXPECT_EQ(dev.error().code, Errc::kDevice);
+  EXPECT_NE(dev.error().message.find("i2c-dev"), std::string::npos) << dev.error().message;
+
+  EXPECT_FALSE(parse_rig_config(base + "  page_bytes: 12\n").ok());
+  EXPECT_FALSE(parse_rig_config(base + "  address_bytes: 3\n").ok());
+  EXPECT_FALSE(parse_rig_config("imu:\n  bus: sim\nstorage:\n  backend: file\n  page_bytes: 8\n").ok());
 }
 
 }  // namespace
