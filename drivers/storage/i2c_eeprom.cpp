@@ -211,7 +211,7 @@ class I2cEepromStorage final : public StorageDevice {
       i2c_rdwr_ioctl_data data{&msg, 1};
       return file_.ioctl(I2C_RDWR, &data);
     }
-    if (select(address).ok() == false) return -EBUSY;
+    if (!select(address).ok()) return -EBUSY;
     if (quick_) return smbus(I2C_SMBUS_WRITE, 0, I2C_SMBUS_QUICK, nullptr);
     i2c_smbus_data byte{};
     return smbus(I2C_SMBUS_READ, 0, I2C_SMBUS_BYTE, &byte);

@@ -226,12 +226,15 @@ class FakeEepromIo final : public DeviceIo {
   FakeEeprom& chip_;
 };
 
-Result<std::unique_ptr<StorageDevice>> open_fake(FakeEeprom& chip, std::uint64_t size) {
+// The fake counts busy polls, not time: a generous timeout keeps a loaded machine (a sleep that
+// overshoots) from turning a busy chip into a timeout; the timeout test passes a short one.
+Result<std::unique_ptr<StorageDevice>> open_fake(
+    FakeEeprom& chip, std::uint64_t size, std::chrono::milliseconds timeout = std::chrono::seconds(10)) {
   I2cEepromOptions o;
   o.size_bytes = size;
   o.page_bytes = chip.page;
   o.address_bytes = chip.address_bytes;
-  o.write_timeout = std::chrono::milliseconds(5);
+  o.write_timeout = timeout;
   return open_i2c_eeprom_storage("/dev/i2c-9", o, std::make_unique<FakeEepromIo>(chip));
 }
 
@@ -303,7 +306,7 @@ TEST(StorageI2cEeprom, AnAddressOwnedByAt24IsRefusedWithTheWayOut) {
 TEST(StorageI2cEeprom, AChipThatNeverFinishesItsWriteCycleTimesOut) {
   FakeEeprom chip;
   chip.memory.assign(256, 0xFF);
-  auto dev = open_fake(chip, 256);
+  auto dev = open_fake(chip, 256, std::chrono::milliseconds(5));
   ASSERT_TRUE(dev.ok());
   chip.busy_polls = 0;
   ASSERT_TRUE((*dev)->write(0, pattern(4, 0)).ok());
