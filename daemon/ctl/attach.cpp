@@ -114,7 +114,7 @@ class Console {
   }
 
   void show(const json& message) {
-    apply(state_, message);
+    update(state_, message);
     if (tty_) {
       dirty_ = true;
     } else if (auto line = plain_line(message)) {

@@ -194,7 +194,7 @@ void add_section(std::vector<std::string>& lines, const ConsoleState& state, int
 
 }  // namespace
 
-void apply(ConsoleState& state, const json& message) {
+void update(ConsoleState& state, const json& message) {
   const std::string type = str(message, "type");
   if (type == "status") {
     if (str(message, "step") != str(state.status, "step")) {

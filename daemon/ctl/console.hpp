@@ -1,6 +1,6 @@
 #pragma once
 // The operator console's model and renderer, free of terminals and sockets so tests check them
-// as text: apply() folds a service message into the state, render() draws the screen,
+// as text: update() folds a service message into the state, render() draws the screen,
 // on_key() turns a key press into a request. imucalctl attach drives them (attach.hpp).
 
 #include <deque>
@@ -24,7 +24,7 @@ struct ConsoleState {
 };
 
 /// Folds one service message into the state; unknown types and malformed fields are ignored.
-void apply(ConsoleState& state, const nlohmann::json& message);
+void update(ConsoleState& state, const nlohmann::json& message);
 
 struct RenderOptions {
   int width = 80;  // terminal columns; lines are cut to fit

@@ -1,18 +1,17 @@
 // The control socket against a test host: roles, broadcasts, hostile input, slow peers, the
 // socket file's mode and life cycle; and the request parser.
 #include <grp.h>
+#include <gtest/gtest.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstring>
-#include <algorithm>
 #include <fstream>
 #include <sstream>
-
-#include <gtest/gtest.h>
 
 #include "daemon/ctl/client.hpp"
 #include "daemon/service/protocol.hpp"
@@ -83,10 +82,11 @@ TEST(ControlRequest, ParsesEveryCommand) {
 }
 
 TEST(ControlRequest, RefusesMalformedRequestsWithAReason) {
-  for (const char* line : {"", "not json", "[1,2]", "42", R"({"cmd":5})", R"({"cmd":"nope"})",
-                           R"({"cmd":"key"})", R"({"cmd":"key","key":"explode"})", R"({"cmd":"start","steps":"poses"})",
-                           R"({"cmd":"start","steps":[1]})", R"({"cmd":"hello","role":"admin"})",
-                           "{\"cmd\":\"status\"", "{\"cmd\":\"st\xff\"}"}) {
+  for (const char* line :
+       {"", "not json", "[1,2]", "42", R"({"cmd":5})", R"({"cmd":"nope"})", R"({"cmd":"key"})",
+        R"({"cmd":"key","key":"explode"})", R"({"cmd":"start","steps":"poses"})",
+        R"({"cmd":"start","steps":[1]})", R"({"cmd":"hello","role":"admin"})", "{\"cmd\":\"status\"",
+        "{\"cmd\":\"st\xff\"}"}) {
     auto request = parse_request(line);
     ASSERT_FALSE(request.ok()) << line;
     EXPECT_EQ(request.error().code, Errc::kInvalidArgument);
@@ -192,7 +192,9 @@ TEST(ControlServer, MalformedLinesGetAnErrorAndTheConnectionStays) {
   ASSERT_TRUE(service.ok()) << service.error;
   const int fd = raw_connect(options.path);
   const std::string lines =
-      "not json\n[1,2]\n{\"cmd\":5}\n{\"cmd\":\"nope\"}\n{\"cmd\":\"key\",\"key\":7}\n\n\r\n{\"cmd\":\"st\xc3\"}\n";
+      "not "
+      "json\n[1,2]\n{\"cmd\":5}\n{\"cmd\":\"nope\"}\n{\"cmd\":\"key\",\"key\":7}\n\n\r\n{\"cmd\":\"st\xc3\"}"
+      "\n";
   ASSERT_EQ(::write(fd, lines.data(), lines.size()), static_cast<ssize_t>(lines.size()));
   Connection client = connect(options.path);  // a second, well-behaved client
   std::string received;

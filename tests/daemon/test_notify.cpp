@@ -1,12 +1,11 @@
 // Notifier against a real AF_UNIX datagram socket given as NOTIFY_SOCKET, as systemd does.
+#include <gtest/gtest.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <unistd.h>
 
 #include <cstdlib>
 #include <cstring>
-
-#include <gtest/gtest.h>
 
 #include "daemon/service/notify.hpp"
 #include "tests/daemon/service_test_host.hpp"
