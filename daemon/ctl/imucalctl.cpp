@@ -21,7 +21,7 @@ using imucal::ctl::ConnectFailure;
 using imucal::ctl::Connection;
 using nlohmann::json;
 
-constexpr int kRefused = 1;
+constexpr int kRefused = 1;  // also: the service went away
 constexpr int kNoService = 3;
 constexpr int kPermission = 4;
 
@@ -104,7 +104,12 @@ int main(int argc, char** argv) {
   auto* attach = app.add_subcommand("attach", "the operator console: prompts, live figures, keys");
   attach->add_flag("--observe", observe, "watch only; another console may control");
 
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // --help is a parse "error" with code 0; everything else is a bad command line.
+    return app.exit(e) == 0 ? 0 : 2;
+  }
 
   std::optional<Connection> connection;
   if (const int code = connect(socket_path, connection); code != 0) {
