@@ -8,8 +8,10 @@
 
 #include <array>
 #include <boost/asio/local/stream_protocol.hpp>
+#include <boost/asio/steady_timer.hpp>
 #include <boost/asio/write.hpp>
 #include <cerrno>
+#include <chrono>
 #include <cstring>
 #include <deque>
 #include <set>
@@ -124,7 +126,7 @@ class ControlServer::Impl : public std::enable_shared_from_this<ControlServer::I
 class Client : public std::enable_shared_from_this<Client> {
  public:
   Client(Protocol::socket socket, std::weak_ptr<ControlServer::Impl> server)
-      : socket_(std::move(socket)), server_(std::move(server)) {}
+      : socket_(std::move(socket)), server_(std::move(server)), linger_(socket_.get_executor()) {}
 
   void read() {
     socket_.async_read_some(asio::buffer(buffer_),
@@ -153,11 +155,20 @@ class Client : public std::enable_shared_from_this<Client> {
     closing_ = true;
     if (queue_.empty()) {
       server.drop(*this, "done");
+      return;
     }
+    linger_.expires_after(server.options().close_timeout);
+    linger_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
+      auto server = self->server_.lock();
+      if (!ec && server && !self->closed_) {
+        server->drop(*self, "it did not read its last replies");
+      }
+    });
   }
 
   void shut() {
     closed_ = true;
+    linger_.cancel();
     boost::system::error_code ignored;
     socket_.shutdown(Protocol::socket::shutdown_both, ignored);
     socket_.close(ignored);
@@ -251,6 +262,7 @@ class Client : public std::enable_shared_from_this<Client> {
 
   Protocol::socket socket_;
   std::weak_ptr<ControlServer::Impl> server_;
+  asio::steady_timer linger_;
   std::array<char, 4096> buffer_{};
   std::string pending_;
   std::deque<Line> queue_;
@@ -284,21 +296,30 @@ Status ControlServer::Impl::listen() {
 }
 
 void ControlServer::Impl::accept() {
-  acceptor_.async_accept(
-      [weak = weak_from_this()](const boost::system::error_code& ec, Protocol::socket socket) {
-        auto self = weak.lock();
-        if (!self || self->closed_) {
-          return;
-        }
-        if (!ec) {
-          auto client = std::make_shared<Client>(std::move(socket), weak);
-          self->clients_.insert(client);
-          client->read();
-        } else {
-          self->log("control socket: accept failed: " + ec.message());
-        }
-        self->accept();
-      });
+  acceptor_.async_accept([weak = weak_from_this()](const boost::system::error_code& ec,
+                                                   Protocol::socket socket) {
+    auto self = weak.lock();
+    if (!self || self->closed_) {
+      return;
+    }
+    if (!ec) {
+      auto client = std::make_shared<Client>(std::move(socket), weak);
+      self->clients_.insert(client);
+      if (self->clients_.size() > self->options_.max_clients) {
+        // Refused with a reason rather than left unanswered in the backlog.
+        const Status refused =
+            make_error(Errc::kUnsupported, "too many clients (" + std::to_string(self->options_.max_clients) +
+                                               "); close another imucalctl and retry");
+        client->send(std::make_shared<const std::string>(to_line(make_reply("", refused))));
+        client->close_after_sending(*self);
+      } else {
+        client->read();
+      }
+    } else {
+      self->log("control socket: accept failed: " + ec.message());
+    }
+    self->accept();
+  });
 }
 
 void ControlServer::Impl::on_line(Client& client, std::string_view line) {
@@ -433,6 +454,9 @@ Status ControlServerOptions::validate() const {
   if (mode > 07777) {
     return make_error(Errc::kInvalidArgument,
                       "the control socket mode must be an octal permission, e.g. 0660");
+  }
+  if (max_clients == 0) {
+    return make_error(Errc::kInvalidArgument, "max_clients must be at least 1");
   }
   if (max_line_bytes == 0 || max_queued_bytes < max_line_bytes) {
     return make_error(Errc::kInvalidArgument,

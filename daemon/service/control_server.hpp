@@ -6,6 +6,7 @@
 // max_queued_bytes is dropped.
 
 #include <boost/asio/io_context.hpp>
+#include <chrono>
 #include <cstddef>
 #include <functional>
 #include <memory>
@@ -21,8 +22,12 @@ struct ControlServerOptions {
   std::string path;      // e.g. /run/imucal/imucald.sock; a stale socket file is replaced, a live one refused
   unsigned mode = 0660;  // chmod after bind
   std::string group;     // optional chown group
-  std::size_t max_line_bytes = 64 * 1024;       // a longer request line closes the connection
-  std::size_t max_queued_bytes = 4 << 20;       // per client; a peer that never reads is dropped
+  std::size_t max_line_bytes = 64 * 1024;  // a longer request line closes the connection
+  std::size_t max_queued_bytes = 4 << 20;  // per client; a peer that never reads is dropped
+  // A connection being closed (after an error or the end of its input) may take this long to
+  // read its last lines: a peer that never reads must not hold its descriptor forever.
+  std::chrono::milliseconds close_timeout{5000};
+  std::size_t max_clients = 32;                 // more connections get an error reply and are closed
   std::function<void(const std::string&)> log;  // optional: why a connection was dropped
 
   Status validate() const;

@@ -35,4 +35,33 @@ std::optional<std::chrono::microseconds> Notifier::watchdog_interval() const {
   return std::nullopt;
 }
 
+WatchdogPinger::WatchdogPinger(boost::asio::io_context& io, Notifier& notifier, std::function<bool()> healthy)
+    : notifier_(notifier), healthy_(std::move(healthy)), timer_(io) {}
+
+bool WatchdogPinger::start() {
+  const auto interval = notifier_.watchdog_interval();
+  if (!interval) {
+    return false;
+  }
+  period_ = *interval / 2;
+  notifier_.watchdog();
+  schedule();
+  return true;
+}
+
+void WatchdogPinger::stop() { timer_.cancel(); }
+
+void WatchdogPinger::schedule() {
+  timer_.expires_after(period_);
+  timer_.async_wait([this](const boost::system::error_code& ec) {
+    if (ec) {
+      return;  // stopped or destroyed: `this` may be gone
+    }
+    if (!healthy_ || healthy_()) {
+      notifier_.watchdog();
+    }
+    schedule();
+  });
+}
+
 }  // namespace imucal::service

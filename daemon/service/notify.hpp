@@ -3,7 +3,10 @@
 // WatchdogSec=. Every call is a no-op when the service was not started by systemd
 // (NOTIFY_SOCKET unset), so the same binary runs by hand.
 
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/steady_timer.hpp>
 #include <chrono>
+#include <functional>
 #include <optional>
 #include <string>
 
@@ -29,6 +32,28 @@ class Notifier {
  private:
   void notify(const std::string& state);
   unsigned sent_ = 0;
+};
+
+/// Pings the watchdog from the service's event loop at half the period systemd expects, while
+/// `healthy` (when given) says the service works. A stuck loop or an unhealthy service stops
+/// the pings, and systemd restarts it (WatchdogSec=, Restart=on-failure).
+class WatchdogPinger {
+ public:
+  WatchdogPinger(boost::asio::io_context& io, Notifier& notifier, std::function<bool()> healthy = {});
+  ~WatchdogPinger() { stop(); }
+  WatchdogPinger(const WatchdogPinger&) = delete;
+  WatchdogPinger& operator=(const WatchdogPinger&) = delete;
+
+  /// Starts pinging; false (and nothing scheduled) when systemd set no watchdog.
+  bool start();
+  void stop();
+
+ private:
+  void schedule();
+  Notifier& notifier_;
+  std::function<bool()> healthy_;
+  boost::asio::steady_timer timer_;
+  std::chrono::microseconds period_{0};
 };
 
 }  // namespace imucal::service

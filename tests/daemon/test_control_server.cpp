@@ -287,6 +287,45 @@ TEST(ControlServer, APeerThatNeverReadsIsDroppedAndOthersKeepUp) {
   ::close(stuck);
 }
 
+TEST(ControlServer, AClosingPeerThatNeverReadsIsDroppedAfterTheTimeout) {
+  const test::SocketDir dir;
+  auto options = options_in(dir);
+  options.max_line_bytes = 1024;
+  options.close_timeout = std::chrono::milliseconds(200);
+  TestService service(options);
+  ASSERT_TRUE(service.ok()) << service.error;
+  const int stuck = raw_connect(options.path);
+  const std::string subscribe = "{\"cmd\":\"subscribe\"}\n";
+  ASSERT_EQ(::write(stuck, subscribe.data(), subscribe.size()), static_cast<ssize_t>(subscribe.size()));
+  ASSERT_TRUE(TestService::wait_for([&] { return service.clients() == 1; }));
+  // 1 MiB for it: more than the socket buffer holds, less than its queue limit.
+  for (int i = 0; i < 256; ++i) {
+    service.broadcast({{"type", "live"}, {"lines", {std::string(4096, 'x')}}});
+  }
+  EXPECT_EQ(service.clients(), 1u);
+  const std::string too_long(2000, 'y');  // closes the connection, after its unread output
+  ASSERT_EQ(::write(stuck, too_long.data(), too_long.size()), static_cast<ssize_t>(too_long.size()));
+  EXPECT_TRUE(TestService::wait_for([&] { return service.clients() == 0; }));
+  ::close(stuck);
+}
+
+TEST(ControlServer, ClientsBeyondTheLimitAreToldWhy) {
+  const test::SocketDir dir;
+  auto options = options_in(dir);
+  options.max_clients = 2;
+  TestService service(options);
+  ASSERT_TRUE(service.ok()) << service.error;
+  Connection first = connect(options.path);
+  Connection second = connect(options.path);
+  ASSERT_TRUE(TestService::wait_for([&] { return service.clients() == 2; }));
+  Connection third = connect(options.path);
+  const json refused = receive(third);
+  EXPECT_EQ(refused["ok"], false);
+  EXPECT_NE(refused["error"].get<std::string>().find("too many clients (2)"), std::string::npos) << refused;
+  EXPECT_EQ(third.receive(std::chrono::seconds(10)).error().code, Errc::kNotFound);
+  EXPECT_TRUE(first.request({{"cmd", "status"}}).ok());
+}
+
 TEST(ControlServer, SocketHasTheModeAndGroupAsked) {
   const test::SocketDir dir;
   auto options = options_in(dir);
@@ -351,6 +390,10 @@ TEST(ControlServer, OptionsAreValidated) {
   options.path = "/tmp/x.sock";
   EXPECT_TRUE(options.validate().ok());
   options.max_queued_bytes = 10;
+  EXPECT_FALSE(options.validate().ok());
+  options = ControlServerOptions{};
+  options.path = "/tmp/x.sock";
+  options.max_clients = 0;
   EXPECT_FALSE(options.validate().ok());
 }
 

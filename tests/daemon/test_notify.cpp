@@ -73,6 +73,35 @@ TEST(Notifier, WatchdogIntervalComesFromTheEnvironmentForThisProcess) {
   EXPECT_FALSE(notifier.watchdog_interval().has_value());
 }
 
+TEST(WatchdogPinger, PingsFromTheLoopWhileHealthy) {
+  NotifySocket socket;
+  ::setenv("WATCHDOG_USEC", "100000", 1);  // pings every 50 ms
+  ::setenv("WATCHDOG_PID", std::to_string(::getpid()).c_str(), 1);
+  boost::asio::io_context io;
+  Notifier notifier;
+  int checks = 0;
+  WatchdogPinger pinger(io, notifier, [&] { return ++checks < 3; });  // healthy twice, then not
+  ASSERT_TRUE(pinger.start());
+  EXPECT_EQ(socket.next(), "WATCHDOG=1");  // at once on start
+  while (checks < 4 && io.run_one_for(std::chrono::seconds(5)) > 0) {
+  }
+  ::unsetenv("WATCHDOG_USEC");
+  ::unsetenv("WATCHDOG_PID");
+  EXPECT_EQ(checks, 4);
+  EXPECT_EQ(notifier.sent(), 3u) << "one ping at start, then one per healthy check only";
+  EXPECT_EQ(socket.next(), "WATCHDOG=1");
+  EXPECT_EQ(socket.next(), "WATCHDOG=1");
+}
+
+TEST(WatchdogPinger, DoesNotStartWithoutAWatchdog) {
+  ::unsetenv("WATCHDOG_USEC");
+  boost::asio::io_context io;
+  Notifier notifier;
+  WatchdogPinger pinger(io, notifier);
+  EXPECT_FALSE(pinger.start());
+  EXPECT_EQ(io.run_for(std::chrono::milliseconds(10)), 0u) << "nothing scheduled";
+}
+
 TEST(Notifier, DoesNothingWithoutNotifySocket) {
   ::unsetenv("NOTIFY_SOCKET");
   Notifier notifier;
