@@ -97,6 +97,7 @@ class ControlServer::Impl : public std::enable_shared_from_this<ControlServer::I
   Status listen();
   void accept();
   void on_line(Client& client, std::string_view line);
+  // Closes a connection; `why` (empty for an orderly close) goes to the log.
   void drop(Client& client, const std::string& why);
   void broadcast(const json& message);
   void close();
@@ -154,7 +155,7 @@ class Client : public std::enable_shared_from_this<Client> {
   void close_after_sending(ControlServer::Impl& server) {
     closing_ = true;
     if (queue_.empty()) {
-      server.drop(*this, "done");
+      server.drop(*this, "");
       return;
     }
     linger_.expires_after(server.options().close_timeout);
@@ -256,7 +257,7 @@ class Client : public std::enable_shared_from_this<Client> {
     if (!queue_.empty()) {
       write_next();
     } else if (closing_) {
-      server->drop(*this, "done");
+      server->drop(*this, "");
     }
   }
 
@@ -398,7 +399,7 @@ void ControlServer::Impl::drop(Client& client, const std::string& why) {
     controller_ = nullptr;
   }
   client.shut();
-  if (why != "done") {
+  if (!why.empty()) {
     log("control socket: closed the connection of " + (client.name.empty() ? "a client" : client.name) +
         ": " + why);
   }
