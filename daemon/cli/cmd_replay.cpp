@@ -42,13 +42,13 @@ void run(const ReplayArgs& a) {
                         {"same", same_outcome && same_result}};
     std::cout << j.dump(2) << "\n";
   } else {
-    std::printf("replayed %s: %zu samples, %d keys, %d faults, %d solves applied\n", a.options.log_path.c_str(),
-                s.samples, s.keys, s.faults, s.solves);
+    std::printf("replayed %s: %zu samples, %d keys, %d faults, %d solves applied\n",
+                a.options.log_path.c_str(), s.samples, s.keys, s.faults, s.solves);
     std::printf("outcome: %s (live session: %s)\n", s.outcome.empty() ? "none" : s.outcome.c_str(),
                 s.live_outcome.empty() ? "none logged" : s.live_outcome.c_str());
     if (s.live_result) {
-      std::printf("result: largest difference to the live session's %.3g (tolerance %.3g)\n", s.max_difference,
-                  a.tolerance);
+      std::printf("result: largest difference to the live session's %.3g (tolerance %.3g)\n",
+                  s.max_difference, a.tolerance);
     } else {
       std::printf("result: the live session logged none to compare with\n");
     }
@@ -56,8 +56,8 @@ void run(const ReplayArgs& a) {
     for (const auto& n : s.notes) std::printf("  note: %s\n", n.c_str());
   }
   if (!same_outcome || !same_result) {
-    throw CliExit{kExitSolver, "replay: the replayed session differs from the live one (outcome " + s.outcome +
-                                   " vs " + s.live_outcome + ")"};
+    throw CliExit{kExitSolver, "replay: the replayed session differs from the live one (outcome " +
+                                   s.outcome + " vs " + s.live_outcome + ")"};
   }
 }
 

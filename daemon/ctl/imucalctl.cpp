@@ -1,0 +1,131 @@
+// imucalctl: talks to the imucald service over its control socket (docs/service.md).
+//
+//   imucalctl [--socket PATH] status [--json] | start [--steps a,b,c] | abort | accept |
+//             attach [--observe]
+//
+// Exit codes: 0 done; 1 the service refused the request or went away; 2 bad command line;
+// 3 the service is not running (no socket, nobody listening); 4 permission denied on the socket.
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "daemon/ctl/attach.hpp"
+#include "daemon/ctl/client.hpp"
+#include "daemon/ctl/console.hpp"
+
+namespace {
+
+using imucal::ctl::ConnectFailure;
+using imucal::ctl::Connection;
+using nlohmann::json;
+
+constexpr int kRefused = 1;  // also: the service went away
+constexpr int kNoService = 3;
+constexpr int kPermission = 4;
+
+std::string default_socket() {
+  const char* env = std::getenv("IMUCAL_SOCKET");
+  return env != nullptr && *env != '\0' ? env : "/run/imucal/imucald.sock";
+}
+
+int fail(const std::string& message, int code) {
+  std::fprintf(stderr, "imucalctl: %s\n", message.c_str());
+  return code;
+}
+
+// Connects or says why not; the exit code tells scripts which of the two common causes it was.
+int connect(const std::string& path, std::optional<Connection>& connection) {
+  ConnectFailure failure = ConnectFailure::kNone;
+  auto opened = Connection::open(path, &failure);
+  if (!opened) {
+    const int code = failure == ConnectFailure::kNoService    ? kNoService
+                     : failure == ConnectFailure::kPermission ? kPermission
+                                                              : kRefused;
+    return fail(opened.error().message, code);
+  }
+  connection.emplace(std::move(*opened));
+  return 0;
+}
+
+int run_status(Connection& connection, bool as_json) {
+  std::vector<json> messages;
+  if (auto reply = connection.request({{"cmd", "status"}}, &messages); !reply) {
+    return fail(reply.error().message, kRefused);
+  }
+  // The status message follows its reply.
+  auto status = connection.receive(std::chrono::seconds(10));
+  if (!status) {
+    return fail(status.error().message, kRefused);
+  }
+  if (as_json) {
+    std::printf("%s\n", status->dump(2, ' ', false, json::error_handler_t::replace).c_str());
+  } else {
+    std::fputs(imucal::ctl::status_text(*status).c_str(), stdout);
+  }
+  return 0;
+}
+
+// A control request: claims the controller role for this connection, then sends it.
+int run_control(Connection& connection, const json& request) {
+  const json hello{{"cmd", "hello"}, {"client", "imucalctl"}, {"role", "controller"}};
+  if (auto reply = connection.request(hello); !reply) {
+    return fail(reply.error().message, kRefused);
+  }
+  if (auto reply = connection.request(request); !reply) {
+    return fail(reply.error().message, kRefused);
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"imucalctl: control and watch the imucald calibration service"};
+  app.require_subcommand(1);
+  std::string socket_path = default_socket();
+  app.add_option("--socket", socket_path, "the service's control socket (env IMUCAL_SOCKET)")
+      ->capture_default_str();
+
+  bool as_json = false;
+  auto* status = app.add_subcommand("status", "print the session's state");
+  status->add_flag("--json", as_json, "print the status message as JSON");
+
+  std::vector<std::string> steps;
+  auto* start = app.add_subcommand("start", "start a calibration session");
+  start->add_option("--steps", steps, "the steps to run, comma separated (default: the configured ones)")
+      ->delimiter(',');
+
+  auto* abort = app.add_subcommand("abort", "abort the running session");
+  auto* accept = app.add_subcommand("accept", "accept the result under review (it is written to the rig)");
+
+  bool observe = false;
+  auto* attach = app.add_subcommand("attach", "the operator console: prompts, live figures, keys");
+  attach->add_flag("--observe", observe, "watch only; another console may control");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // --help is a parse "error" with code 0; everything else is a bad command line.
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+
+  std::optional<Connection> connection;
+  if (const int code = connect(socket_path, connection); code != 0) {
+    return code;
+  }
+  if (status->parsed()) {
+    return run_status(*connection, as_json);
+  }
+  if (start->parsed()) {
+    return run_control(*connection, {{"cmd", "start"}, {"steps", steps}});
+  }
+  if (abort->parsed()) {
+    return run_control(*connection, {{"cmd", "abort"}});
+  }
+  if (accept->parsed()) {
+    return run_control(*connection, {{"cmd", "accept"}});
+  }
+  return imucal::ctl::attach(*connection, {observe});
+}

@@ -1,0 +1,174 @@
+#include "daemon/service/protocol.hpp"
+
+#include <algorithm>
+#include <array>
+
+namespace imucal::service {
+namespace {
+
+using nlohmann::json;
+
+struct CommandInfo {
+  std::string_view name;
+  Command command;
+};
+
+constexpr std::array<CommandInfo, 7> kCommands{{
+    {"hello", Command::kHello},
+    {"status", Command::kStatus},
+    {"subscribe", Command::kSubscribe},
+    {"start", Command::kStart},
+    {"key", Command::kKey},
+    {"abort", Command::kAbort},
+    {"accept", Command::kAccept},
+}};
+
+Error invalid(std::string message) { return make_error(Errc::kInvalidArgument, std::move(message)); }
+
+std::string known_commands() {
+  std::string names;
+  for (const auto& info : kCommands) {
+    names += names.empty() ? "" : ", ";
+    names += info.name;
+  }
+  return names;
+}
+
+Status parse_hello(const json& object, Request& request) {
+  if (const auto it = object.find("client"); it != object.end()) {
+    if (!it->is_string()) {
+      return invalid("hello: \"client\" must be a string (the client's name)");
+    }
+    request.client = it->get<std::string>();
+  }
+  if (const auto it = object.find("role"); it != object.end()) {
+    if (!it->is_string() || (*it != "observer" && *it != "controller")) {
+      return invalid("hello: \"role\" must be \"observer\" or \"controller\"");
+    }
+    request.role = *it == "controller" ? Role::kController : Role::kObserver;
+  }
+  return {};
+}
+
+Status parse_start(const json& object, Request& request) {
+  const auto it = object.find("steps");
+  if (it == object.end() || it->is_null()) {
+    return {};
+  }
+  if (!it->is_array()) {
+    return invalid("start: \"steps\" must be an array of step names, e.g. [\"poses\",\"solve\"]");
+  }
+  for (const auto& step : *it) {
+    if (!step.is_string() || step.get_ref<const std::string&>().empty()) {
+      return invalid("start: every entry of \"steps\" must be a non-empty string");
+    }
+    request.steps.push_back(step.get<std::string>());
+  }
+  return {};
+}
+
+Status parse_key(const json& object, Request& request) {
+  const auto it = object.find("key");
+  if (it == object.end() || !it->is_string()) {
+    return invalid("key: \"key\" must be a string, one of continue, redo, abort, accept, reject, skip");
+  }
+  const auto& keys = operator_keys();
+  if (std::find(keys.begin(), keys.end(), it->get_ref<const std::string&>()) == keys.end()) {
+    return invalid("key: unknown key \"" + it->get<std::string>() +
+                   "\"; use one of continue, redo, abort, accept, reject, skip");
+  }
+  request.key = it->get<std::string>();
+  return {};
+}
+
+}  // namespace
+
+const std::vector<std::string>& operator_keys() {
+  static const std::vector<std::string> keys{"continue", "redo", "abort", "accept", "reject", "skip"};
+  return keys;
+}
+
+const char* command_name(Command command) {
+  for (const auto& info : kCommands) {
+    if (info.command == command) {
+      return info.name.data();
+    }
+  }
+  return "";
+}
+
+bool is_control(Command command) {
+  return command == Command::kStart || command == Command::kKey || command == Command::kAbort ||
+         command == Command::kAccept;
+}
+
+Result<Request> parse_request(std::string_view line) {
+  const json object = json::parse(line.begin(), line.end(), nullptr, /*allow_exceptions=*/false);
+  if (object.is_discarded()) {
+    return invalid("the request is not valid JSON; send one JSON object per line, e.g. {\"cmd\":\"status\"}");
+  }
+  if (!object.is_object()) {
+    return invalid("the request must be a JSON object with a \"cmd\" field, e.g. {\"cmd\":\"status\"}");
+  }
+  const auto cmd = object.find("cmd");
+  if (cmd == object.end() || !cmd->is_string()) {
+    return invalid("the request has no \"cmd\" string; known commands: " + known_commands());
+  }
+  const auto& name = cmd->get_ref<const std::string&>();
+  const auto info =
+      std::find_if(kCommands.begin(), kCommands.end(), [&](const auto& i) { return i.name == name; });
+  if (info == kCommands.end()) {
+    return invalid("unknown command \"" + name + "\"; known commands: " + known_commands());
+  }
+  Request request;
+  request.command = info->command;
+  switch (request.command) {
+    case Command::kHello:
+      IMUCAL_TRY(parse_hello(object, request));
+      break;
+    case Command::kStart:
+      IMUCAL_TRY(parse_start(object, request));
+      break;
+    case Command::kKey:
+      IMUCAL_TRY(parse_key(object, request));
+      break;
+    case Command::kAbort:
+      request.key = "abort";
+      break;
+    case Command::kAccept:
+      request.key = "accept";
+      break;
+    case Command::kStatus:
+    case Command::kSubscribe:
+      break;
+  }
+  return request;
+}
+
+std::string command_of(std::string_view line) {
+  const json object = json::parse(line.begin(), line.end(), nullptr, /*allow_exceptions=*/false);
+  if (object.is_object()) {
+    const auto cmd = object.find("cmd");
+    if (cmd != object.end() && cmd->is_string()) {
+      return cmd->get<std::string>();
+    }
+  }
+  return {};
+}
+
+json make_reply(std::string_view cmd, const Status& status) {
+  json reply{{"type", "reply"}, {"cmd", std::string(cmd)}, {"ok", status.ok()}};
+  if (!status.ok()) {
+    reply["error"] = status.error().message;
+  }
+  return reply;
+}
+
+std::string to_line(const json& message) {
+  // Replace, not throw: a host's text may carry bytes from a device name or a file.
+  std::string line = message.dump(-1, ' ', false, json::error_handler_t::replace);
+  line += '\n';
+  return line;
+}
+
+}  // namespace imucal::service

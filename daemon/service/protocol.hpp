@@ -1,0 +1,45 @@
+#pragma once
+// The control protocol's requests: one JSON object per line from a client (docs/service.md).
+// parse_request is a pure function over untrusted bytes (fuzzed by fuzz_control_request).
+
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/result.hpp"
+
+namespace imucal::service {
+
+enum class Command { kHello, kStatus, kSubscribe, kStart, kKey, kAbort, kAccept };
+enum class Role { kObserver, kController };
+
+struct Request {
+  Command command = Command::kStatus;
+  std::string client;              // hello: the client's name, for the log
+  Role role = Role::kObserver;     // hello
+  std::vector<std::string> steps;  // start: empty = the configured steps
+  std::string key;                 // key (abort and accept set it too)
+};
+
+/// The keys an operator can send, in the form the session takes them.
+const std::vector<std::string>& operator_keys();
+
+const char* command_name(Command command);
+bool is_control(Command command);  // start, key, abort, accept: controller only
+
+/// One request line (without its newline). Extra fields are ignored, so newer clients can add
+/// some; a missing or mistyped required field is an error that names it.
+Result<Request> parse_request(std::string_view line);
+
+/// The "cmd" of a line that may not parse as a request, for its error reply ("" when none).
+std::string command_of(std::string_view line);
+
+/// {"type":"reply","cmd":cmd,"ok":true} or with ok:false and "error".
+nlohmann::json make_reply(std::string_view cmd, const Status& status);
+
+/// One JSON line, newline included; invalid UTF-8 is replaced rather than thrown on.
+std::string to_line(const nlohmann::json& message);
+
+}  // namespace imucal::service

@@ -1,0 +1,170 @@
+#pragma once
+// A SessionHost for tests and a ControlServer running on its own thread, so tests talk to it
+// through real sockets (the in-process client, imucalctl processes, a tmux pane).
+
+#include <stdlib.h>
+
+#include <boost/asio/executor_work_guard.hpp>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/post.hpp>
+#include <chrono>
+#include <filesystem>
+#include <future>
+#include <mutex>
+#include <thread>
+
+#include "daemon/service/control_server.hpp"
+
+namespace imucal::test {
+
+/// A fresh folder under /tmp, removed at the end of its scope. Short on purpose: a Unix socket
+/// path holds at most 107 bytes, less than the build tree's scratch folders may need.
+class SocketDir {
+ public:
+  SocketDir() {
+    char name[] = "/tmp/imucal-svc-XXXXXX";
+    if (::mkdtemp(name) != nullptr) {
+      path = name;
+    }
+  }
+  ~SocketDir() {
+    std::error_code ignored;
+    std::filesystem::remove_all(path, ignored);
+  }
+  SocketDir(const SocketDir&) = delete;
+  SocketDir& operator=(const SocketDir&) = delete;
+  std::string socket() const { return path + "/imucald.sock"; }
+  std::string path;
+};
+
+class TestHost : public service::SessionHost {
+ public:
+  nlohmann::json status() override {
+    std::lock_guard lock(mutex_);
+    return status_;
+  }
+  std::vector<nlohmann::json> snapshot() override {
+    std::lock_guard lock(mutex_);
+    std::vector<nlohmann::json> messages{status_};
+    messages.insert(messages.end(), extra_snapshot_.begin(), extra_snapshot_.end());
+    return messages;
+  }
+  Status start(const std::vector<std::string>& steps) override {
+    std::lock_guard lock(mutex_);
+    starts_.push_back(steps);
+    return {};
+  }
+  Status key(const std::string& key) override {
+    std::lock_guard lock(mutex_);
+    keys_.push_back(key);
+    if (key == "skip") {
+      return make_error(Errc::kInvalidArgument, "the step 'preflight' cannot be skipped");
+    }
+    return {};
+  }
+
+  void set_snapshot_extra(std::vector<nlohmann::json> messages) {
+    std::lock_guard lock(mutex_);
+    extra_snapshot_ = std::move(messages);
+  }
+  std::vector<std::string> keys() {
+    std::lock_guard lock(mutex_);
+    return keys_;
+  }
+  std::vector<std::vector<std::string>> starts() {
+    std::lock_guard lock(mutex_);
+    return starts_;
+  }
+
+ private:
+  std::mutex mutex_;
+  nlohmann::json status_{{"type", "status"},
+                         {"state", "running"},
+                         {"rig", "sim"},
+                         {"step", "poses"},
+                         {"steps",
+                          {{{"name", "preflight"}, {"state", "done"}},
+                           {{"name", "still"}, {"state", "done"}},
+                           {{"name", "poses"}, {"state", "active"}},
+                           {{"name", "solve"}, {"state", "pending"}}}},
+                         {"devices", {{"imu", "ok"}}},
+                         {"elapsed_s", 12.3}};
+  std::vector<nlohmann::json> extra_snapshot_;
+  std::vector<std::string> keys_;
+  std::vector<std::vector<std::string>> starts_;
+};
+
+/// A ControlServer on a thread of its own; call() runs a function on that thread and waits.
+class TestService {
+ public:
+  explicit TestService(service::ControlServerOptions options) : work_(io_.get_executor()) {
+    auto created = service::ControlServer::create(io_, options, host);
+    if (created) {
+      server_ = std::move(*created);
+    } else {
+      error = created.error().message;
+    }
+    thread_ = std::thread([this] { io_.run(); });
+  }
+  /// Runs f on the server's thread and returns its result.
+  template <class F>
+  auto call(F&& f) {
+    std::packaged_task<decltype(f())()> task(std::forward<F>(f));
+    auto future = task.get_future();
+    boost::asio::post(io_, [&task] { task(); });
+    return future.get();
+  }
+
+  ~TestService() {
+    call([this] { server_.reset(); });
+    work_.reset();
+    io_.stop();
+    thread_.join();
+  }
+  TestService(const TestService&) = delete;
+  TestService& operator=(const TestService&) = delete;
+
+  bool ok() const { return error.empty(); }
+
+  void broadcast(const nlohmann::json& message) {
+    call([&] {
+      if (server_) {
+        server_->broadcast(message);
+      }
+    });
+  }
+  std::size_t clients() {
+    return call([&] { return server_ ? server_->clients() : std::size_t{0}; });
+  }
+  void close() {
+    call([&] {
+      if (server_) {
+        server_->close();
+      }
+    });
+  }
+
+  /// Waits (up to `limit`) until `condition` holds; for effects that cross processes.
+  template <class F>
+  static bool wait_for(F condition, std::chrono::milliseconds limit = std::chrono::seconds(20)) {
+    const auto end = std::chrono::steady_clock::now() + limit;
+    while (!condition()) {
+      if (std::chrono::steady_clock::now() > end) {
+        return false;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return true;
+  }
+
+  TestHost host;
+  std::string error;
+
+ private:
+  boost::asio::io_context io_;
+  boost::asio::executor_work_guard<boost::asio::io_context::executor_type> work_;
+  std::unique_ptr<service::ControlServer> server_;
+  std::thread thread_;
+};
+
+}  // namespace imucal::test
