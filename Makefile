@@ -25,7 +25,7 @@ build: deps $(RELEASE_DIR)/build.ninja
 
 # Runs the main job on the built-in simulated rig (see scripts/demo.sh).
 demo: build
-	scripts/demo.sh $(RELEASE_DIR)/daemon/imucal
+	scripts/demo.sh $(RELEASE_DIR)
 
 $(TEST_DIR)/build.ninja:
 	cmake -S . -B $(TEST_DIR) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=RelWithDebInfo \

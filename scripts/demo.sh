@@ -1,32 +1,41 @@
 #!/usr/bin/env bash
-# The main job on the built-in simulated rig, offline: record a static multi-position session on
-# the virtual rig, summarise the log, calibrate the IMU, and characterise its noise from a still
-# recording. The guided on-rig session (imucald) will replace the recording step.
-# Usage: scripts/demo.sh [IMUCAL_BINARY] [OUTPUT_DIR]
+# The main job on the built-in simulated rig: the service imucald runs a whole guided session on
+# the virtual rig (the MPU-6000 emulator behind the real driver and acquisition), with a scripted
+# operator who turns the rig as the prompts ask (1.5 s per pose change) and presses the keys, on
+# accelerated time. The calibration is written to a file-backed EEPROM image, read back with
+# `imucal store read`, and shown beside the simulator's truth. Then the session is replayed from
+# its log, with no devices, to the same result.
+# Usage: scripts/demo.sh [BUILD_DIR] [OUTPUT_DIR]
 set -euo pipefail
-IMUCAL=${1:-build/release/daemon/imucal}
-OUT=${2:-build/demo}
-mkdir -p "$OUT"
+BUILD=${1:-build/release}
+OUT=$(realpath -m "${2:-build/demo}")
+IMUCAL="$BUILD/daemon/imucal"
+IMUCALD="$BUILD/daemon/imucald"
+rm -rf "$OUT"
+mkdir -p "$OUT/state"
 step() { printf '\n==> %s\n' "$*"; }
 
-echo "imucal demo on the simulated rig (offline flow: sim -> info -> calibrate static -> allan)."
+# The shipped virtual rig, with its calibration storage in a file-backed EEPROM image here.
+sed -e "s|path: /var/lib/imucal/calibration.bin|path: $OUT/eeprom.bin|" config/rig.yaml >"$OUT/rig.yaml"
+cp config/checkerboard-7x6.yaml "$OUT/"
+
+echo "imucal demo: a guided calibration session of the service on the virtual rig."
 echo "Outputs go to $OUT/."
 
-step "Recording a static multi-position session on the virtual rig (50 s still, 40 poses, 100 Hz)"
-"$IMUCAL" sim static --seed 7 --force -o "$OUT/static.imulog"
+step "imucald: guided session (preflight, warm-up, still start, poses, solve, review, write) on accelerated time"
+"$IMUCALD" --config "$OUT/rig.yaml" --socket "$OUT/imucald.sock" --state-dir "$OUT/state" \
+  --sim --sim-operator full --time-scale 0 --start default --exit-after-session
+SESSION=$(ls -d "$OUT"/state/sessions/*/ | head -1)
 
-step "What the log holds"
-"$IMUCAL" info "$OUT/static.imulog"
+step "The record on the rig's storage, read back"
+"$IMUCAL" store read --config "$OUT/rig.yaml"
 
-step "Calibrating accelerometer and gyroscope (Tedaldi multi-position method)"
-"$IMUCAL" calibrate static "$OUT/static.imulog" --force -o "$OUT/static-result.yaml" --json "$OUT/static-result.json"
+step "The result beside the virtual rig's truth"
+cat "$SESSION/sim-truth.txt"
 
-step "Recording 10 minutes of a still rig for the noise model"
-"$IMUCAL" sim still --seed 7 --duration 600 --force -o "$OUT/still.imulog"
-
-step "Allan deviation: noise densities and random walks (Kalibr imu.yaml)"
-"$IMUCAL" allan "$OUT/still.imulog" --force -o "$OUT/imu.yaml"
+step "Replay: the same session from its log, with no devices"
+"$IMUCAL" replay "$SESSION/session.imulog" -o "$OUT/replay"
 
 step "Done"
-echo "Calibration: $OUT/static-result.yaml (ground truth of the simulated IMU: $OUT/static.truth.yaml)"
-echo "Noise model: $OUT/imu.yaml"
+echo "Session folder: $SESSION (session.imulog, imu-static.yaml, report.html)"
+echo "Storage image:  $OUT/eeprom.bin"

@@ -122,6 +122,10 @@ void ScriptedOperator::on_message(const nlohmann::json& m, TimeNs now_ns) {
     const auto keys = m.value("keys", nlohmann::json::array());
     return std::find(keys.begin(), keys.end(), key) != keys.end();
   };
+  if (type == "fault") {
+    if (options_.abort_on_fault) press_at("abort", react);
+    return;
+  }
   if (type == "prompt") {
     if (step == "preflight" && has_key("continue")) press_at("continue", react);
     if (step == "poses" && !has_key("redo")) return;

@@ -53,10 +53,11 @@ class OperatorTrajectory final : public Trajectory {
 };
 
 struct ScriptedOperatorOptions {
-  double reaction_s = 0.8;  // from a prompt or a capture to the start of the operator's move
-  double move_s = 1.5;      // one pose change
-  bool accept = true;       // the review's answer: accept (y) or reject (n)
-  bool press_keys = true;   // false: only move the rig, a person at the console presses the keys
+  double reaction_s = 0.8;     // from a prompt or a capture to the start of the operator's move
+  double move_s = 1.5;         // one pose change
+  bool accept = true;          // the review's answer: accept (y) or reject (n)
+  bool abort_on_fault = true;  // a script cannot fix a device: abort instead of waiting for ever
+  bool press_keys = true;      // false: only move the rig, a person at the console presses the keys
   std::uint64_t seed = 1;
 };
 

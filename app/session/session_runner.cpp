@@ -126,6 +126,11 @@ void SessionRunner::drain() {
   cv_.wait(lock, [this] { return jobs_.empty() && !running_job_; });
 }
 
+bool SessionRunner::busy() {
+  std::lock_guard lock(mutex_);
+  return running_job_ || !jobs_.empty();
+}
+
 Status SessionRunner::start(const std::vector<std::string>& steps) {
   if (engine_.running()) return make_error(Errc::kAlreadyExists, "a session is running; abort it first");
   close_log();

@@ -86,6 +86,8 @@ class SessionRunner final : public EngineHost {
   /// Waits until the worker has run every job queued so far (tests, shutdown). Their results
   /// are posted to the engine's thread as usual.
   void drain();
+  /// True while the worker has a solve or a write queued or running.
+  bool busy();
 
   // EngineHost
   void emit(const nlohmann::json& message) override;

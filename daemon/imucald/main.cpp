@@ -21,14 +21,16 @@ int main(int argc, char** argv) {
 
   ServiceOptions o;
   CLI::App app{
-      "imucald: the on-rig calibration service. It opens the rig's IMU and storage, listens on a Unix socket\n"
+      "imucald: the on-rig calibration service. It opens the rig's IMU and storage, listens on a Unix "
+      "socket\n"
       "and runs guided calibration sessions that imucalctl starts and drives (docs/service.md)."};
   app.set_version_flag("--version", std::string("imucald ") + imucal::kVersion);
   app.add_option("--config", o.config_path, "The rig configuration")->capture_default_str();
   app.add_option("--socket", o.socket_path, "The control socket (JSON lines)")->capture_default_str();
   std::string mode = "0660";
   app.add_option("--socket-mode", mode, "Permissions of the control socket (octal)")->capture_default_str();
-  app.add_option("--state-dir", o.state_dir, "Session folders go to STATE_DIR/sessions/")->capture_default_str();
+  app.add_option("--state-dir", o.state_dir, "Session folders go to STATE_DIR/sessions/")
+      ->capture_default_str();
   app.add_flag("--sim", o.sim, "Use the virtual rig (also when the configuration says imu.bus: sim)");
   app.add_option("--time-scale", o.time_scale,
                  "Virtual rig: rig seconds per wall-clock second (0: as fast as it computes)")
@@ -38,7 +40,8 @@ int main(int argc, char** argv) {
                  "Virtual rig: 'motion' moves the rig as the prompts ask, 'full' also presses the keys "
                  "(a scripted operator); default: nobody moves it")
       ->check(CLI::IsMember({"motion", "full"}));
-  app.add_option("--seed", o.seed, "Virtual rig: seed of its IMU errors and of the operator")->capture_default_str();
+  app.add_option("--seed", o.seed, "Virtual rig: seed of its IMU errors and of the operator")
+      ->capture_default_str();
   std::string start;
   auto* start_opt = app.add_option("--start", start,
                                    "Start a session at launch: 'default' for the configured steps, or a "

@@ -3,12 +3,12 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <boost/asio/post.hpp>
 #include <csignal>
-#include <algorithm>
 #include <filesystem>
-#include <sstream>
 #include <fstream>
+#include <sstream>
 
 #include "app/stored_calibration.hpp"
 #include "core/version.hpp"
@@ -30,7 +30,9 @@ std::string storage_name(const StorageConfig& s) {
 /// The session's result beside the virtual rig's truth (the correction that inverts its error
 /// model, in the frame the static method reports in), one line per quantity.
 std::string truth_comparison(const json& imu, const CanonicalImuModel& truth, bool counts) {
-  auto vec = [](const json& j) { return Eigen::Vector3d(j[0].get<double>(), j[1].get<double>(), j[2].get<double>()); };
+  auto vec = [](const json& j) {
+    return Eigen::Vector3d(j[0].get<double>(), j[1].get<double>(), j[2].get<double>());
+  };
   auto mat = [&](const json& j) {
     Eigen::Matrix3d m;
     for (int r = 0; r < 3; ++r) m.row(r) = vec(j[r]).transpose();
@@ -51,15 +53,18 @@ std::string truth_comparison(const json& imu, const CanonicalImuModel& truth, bo
   const Eigen::Matrix3d dA_a = mat(imu["A_a"]) - truth.A_a, dA_g = mat(imu["A_g"]) - truth.A_g;
   const Eigen::Matrix3d dG = mat(imu["G"]) - truth.G;
   out << "  largest error: A_a " << dA_a.cwiseAbs().maxCoeff() << ", A_g " << dA_g.cwiseAbs().maxCoeff()
-      << ", G " << dG.cwiseAbs().maxCoeff() << " (rad/s per m/s^2; true G max " << truth.G.cwiseAbs().maxCoeff()
-      << ")\n";
+      << ", G " << dG.cwiseAbs().maxCoeff() << " (rad/s per m/s^2; true G max "
+      << truth.G.cwiseAbs().maxCoeff() << ")\n";
   return out.str();
 }
 
 }  // namespace
 
 Service::Service(ServiceOptions options)
-    : options_(std::move(options)), signals_(io_, SIGINT, SIGTERM, SIGHUP), sim_timer_(io_), watchdog_timer_(io_) {}
+    : options_(std::move(options)),
+      signals_(io_, SIGINT, SIGTERM, SIGHUP),
+      sim_timer_(io_),
+      watchdog_timer_(io_) {}
 
 Service::~Service() {
   runner_.reset();  // joins the worker before the devices go
@@ -123,9 +128,11 @@ Status Service::open_imu() {
       sim::ScriptedOperatorOptions oo;
       oo.seed = options_.seed;
       oo.press_keys = options_.sim_operator == "full";
-      operator_ = std::make_unique<sim::ScriptedOperator>(sim_rig_->trajectory(), oo, [this](const std::string& k) {
-        if (auto s = runner_->engine().key(k); !s.ok()) spdlog::warn("scripted operator: key {}: {}", k, s.error().message);
-      });
+      operator_ =
+          std::make_unique<sim::ScriptedOperator>(sim_rig_->trajectory(), oo, [this](const std::string& k) {
+            if (auto s = runner_->engine().key(k); !s.ok())
+              spdlog::warn("scripted operator: key {}: {}", k, s.error().message);
+          });
     }
     sim_wall_start_ = std::chrono::steady_clock::now();
     sim_rig_start_ns_ = sim_rig_->now_ns();
@@ -141,10 +148,11 @@ Status Service::open_imu() {
   }
   rig_ = std::move(*rig);
   stream_info_ = rig_->stream_info();
-  acquisition_ = std::make_unique<acq::AsioAcquisition>(io_, rig_->acquisition(), [this](std::span<const ImuSample> s) {
-    on_samples(s);
-    return !quit_;
-  });
+  acquisition_ =
+      std::make_unique<acq::AsioAcquisition>(io_, rig_->acquisition(), [this](std::span<const ImuSample> s) {
+        on_samples(s);
+        return !quit_;
+      });
   imu_state_ = "open";
   io_.stop();  // run() restarts the loop with the acquisition on it
   return {};
@@ -161,6 +169,26 @@ void Service::close_imu() {
 
 void Service::sim_tick() {
   if (!sim_rig_ || quit_) return;
+  // On accelerated time the virtual rig waits while a solve or a write runs: at hundreds of times
+  // real time it would otherwise move on by minutes during a quick solve that a rig's operator
+  // does not even notice. At real time (scale 1) it runs on, as a rig does.
+  if (options_.time_scale != 1.0 && runner_->busy()) {
+    sim_timer_.expires_after(std::chrono::milliseconds(2));
+    sim_timer_.async_wait([this](const boost::system::error_code& ec) {
+      if (!ec) sim_tick();
+    });
+    paused_ = true;
+    return;
+  }
+  if (paused_) {
+    // Wall time spent waiting does not count as rig time.
+    paused_ = false;
+    const double rig_s = static_cast<double>(sim_rig_->now_ns() - sim_rig_start_ns_) * 1e-9;
+    if (options_.time_scale > 0.0)
+      sim_wall_start_ =
+          std::chrono::steady_clock::now() -
+          std::chrono::nanoseconds(static_cast<std::int64_t>(rig_s / options_.time_scale * 1e9));
+  }
   std::vector<ImuSample> batch;
   if (Status s = sim_rig_->advance(kSimTickNs, batch); !s.ok()) {
     imu_failed(s.error());
@@ -174,7 +202,8 @@ void Service::sim_tick() {
   }
   // Rig time runs time_scale times as fast as wall time.
   const double rig_s = static_cast<double>(sim_rig_->now_ns() - sim_rig_start_ns_) * 1e-9;
-  sim_timer_.expires_at(sim_wall_start_ + std::chrono::nanoseconds(static_cast<std::int64_t>(rig_s / options_.time_scale * 1e9)));
+  sim_timer_.expires_at(sim_wall_start_ + std::chrono::nanoseconds(
+                                              static_cast<std::int64_t>(rig_s / options_.time_scale * 1e9)));
   sim_timer_.async_wait([this](const boost::system::error_code& ec) {
     if (!ec) sim_tick();
   });
@@ -229,10 +258,11 @@ void Service::on_message(const json& m) {
 app::session::PreflightReport Service::preflight() {
   app::session::PreflightReport r;
   r.devices.push_back({"imu", imu_state_ == "open",
-                       imu_state_ == "open" ? std::string(options_.sim ? "virtual MPU-6000 (register emulator)"
-                                                                       : "MPU-6000 on " + rig_->bus_name()) +
-                                                  ", WHO_AM_I answered, " + std::to_string(samples_) + " samples so far"
-                                            : "not open: " + imu_error_});
+                       imu_state_ == "open"
+                           ? std::string(options_.sim ? "virtual MPU-6000 (register emulator)"
+                                                      : "MPU-6000 on " + rig_->bus_name()) +
+                                 ", WHO_AM_I answered, " + std::to_string(samples_) + " samples so far"
+                           : "not open: " + imu_error_});
   auto stored = app::read_stored_calibration(config_);
   if (!stored.ok()) {
     r.devices.push_back({"storage", false, storage_name(config_.storage) + ": " + stored.error().message});
@@ -240,7 +270,8 @@ app::session::PreflightReport Service::preflight() {
     r.devices.push_back({"storage", true, storage_name(config_.storage) + ": readable"});
     if (stored->payload) {
       json s = *stored->payload;
-      s["summary"] = "sequence " + std::to_string(stored->sequence) + " in slot " + std::to_string(stored->slot) +
+      s["summary"] = "sequence " + std::to_string(stored->sequence) + " in slot " +
+                     std::to_string(stored->slot) +
                      (s.contains("created_utc") ? ", written " + s.value("created_utc", std::string()) : "");
       r.stored = s;
     }
@@ -285,7 +316,8 @@ std::vector<json> Service::snapshot() {
 
 Status Service::start(const std::vector<std::string>& steps) {
   if (imu_state_ != "open") {
-    return make_error(Errc::kDevice, "the IMU is not open (" + imu_error_ + "); check it and restart imucald");
+    return make_error(Errc::kDevice,
+                      "the IMU is not open (" + imu_error_ + "); check it and restart imucald");
   }
   // The service records the IMU only: the camera-IMU calibration runs offline on a recording
   // (imucal record, imucal calibrate camimu), so the motion step is not offered here.

@@ -28,9 +28,10 @@ struct ServiceOptions {
   std::string socket_path = "/run/imucal/imucald.sock";
   unsigned socket_mode = 0660;
   std::string state_dir = "/var/lib/imucal";
-  bool sim = false;             // the virtual rig (also when imu.bus is sim)
-  double time_scale = 1.0;      // virtual rig: rig seconds per wall second; 0 = as fast as it computes
-  std::string sim_operator;     // virtual rig: "" (nobody moves it), "motion" (moves it), "full" (moves it and presses keys)
+  bool sim = false;          // the virtual rig (also when imu.bus is sim)
+  double time_scale = 1.0;   // virtual rig: rig seconds per wall second; 0 = as fast as it computes
+  std::string sim_operator;  // virtual rig: "" (nobody moves it), "motion" (moves it), "full" (moves it and
+                             // presses keys)
   std::uint64_t seed = 1;
   std::optional<std::vector<std::string>> start;  // start a session at launch with these steps
   bool exit_after_session = false;
@@ -83,6 +84,7 @@ class Service final : public service::SessionHost {
   std::string imu_state_ = "closed";
   std::string imu_error_;
   std::uint64_t samples_ = 0, imu_faults_ = 0;
+  bool paused_ = false;  // the virtual rig waits for the worker
   bool quit_ = false;
   int exit_code_ = 0;
 };

@@ -91,7 +91,9 @@ class SimSession {
     };
     o.metadata = {{"rig_config", rig_config_to_json(config_)}};
     runner_ = std::make_unique<SessionRunner>(config_, rig_->stream_info(), o);
-    op_ = std::make_unique<sim::ScriptedOperator>(rig_->trajectory(), sim::ScriptedOperatorOptions{},
+    sim::ScriptedOperatorOptions oo;
+    oo.abort_on_fault = false;  // the tests press redo themselves
+    op_ = std::make_unique<sim::ScriptedOperator>(rig_->trajectory(), oo,
                                                   [this](const std::string& key) { press(key); });
   }
 
@@ -335,14 +337,17 @@ TEST(Session, MotionStepShowsExcitationDetectionAndSaturation) {
     if (engine.status().value("step", "") != "motion") return;
     const TimeNs t = ss.rig_->now_ns();
     // The target is seen for the first 4 s, then lost.
-    const bool seen = !ss.of_type("prompt").empty() && t - static_cast<TimeNs>(ss.of_type("prompt").back().value("t", 0.0) * 1e9) < 4'000'000'000;
+    const bool seen =
+        !ss.of_type("prompt").empty() &&
+        t - static_cast<TimeNs>(ss.of_type("prompt").back().value("t", 0.0) * 1e9) < 4'000'000'000;
     engine.on_frame(t, seen);
     if (!turned) {
       turned = true;
       // Half a turn in 0.2 s: about 1700 deg/s at its peak, far beyond the +-500 deg/s range.
-      ss.rig_->trajectory().turn(t + 200'000'000, 0.2,
-                                 ss.rig_->trajectory().final_orientation() *
-                                     Eigen::Quaterniond(Eigen::AngleAxisd(M_PI * 0.999, Eigen::Vector3d::UnitX())));
+      ss.rig_->trajectory().turn(
+          t + 200'000'000, 0.2,
+          ss.rig_->trajectory().final_orientation() *
+              Eigen::Quaterniond(Eigen::AngleAxisd(M_PI * 0.999, Eigen::Vector3d::UnitX())));
     }
   });
   EXPECT_EQ(s.outcome(), "recorded");

@@ -18,7 +18,7 @@ void SimDataReadyLine::raise(TimeNs true_t_ns) {
   // The kernel timestamps events in the order it services them.
   if (t_ns <= last_edge_t_ns_) t_ns = last_edge_t_ns_ + 1;
   last_edge_t_ns_ = t_ns;
-  latencies_ns_.push_back(t_ns - true_t_ns);
+  if (latencies_ns_.size() < kMaxLatencies) latencies_ns_.push_back(t_ns - true_t_ns);
   if (drop_remaining_ > 0) {
     --drop_remaining_;
     ++dropped_;

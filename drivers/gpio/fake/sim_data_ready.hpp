@@ -53,8 +53,10 @@ class SimDataReadyLine : public drivers::DataReadyLine {
 
   std::uint64_t raised() const { return raised_; }
   std::uint64_t dropped() const { return dropped_; }
-  /// Latency (edge timestamp minus true time) of every edge raised, for tests.
+  /// Latency (edge timestamp minus true time) of the first kMaxLatencies edges raised, for tests.
+  /// Bounded: a virtual rig that runs for days (the service's) must not grow with it.
   const std::vector<TimeNs>& latencies_ns() const { return latencies_ns_; }
+  static constexpr std::size_t kMaxLatencies = 100'000;
 
  private:
   SimTimeSource& time_;
