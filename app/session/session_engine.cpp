@@ -190,6 +190,8 @@ void SessionEngine::reset() {
   still_count_ = 0;
   poses_.clear();
   need_motion_ = false;
+  quick_pending_ = false;
+  last_still_ns_ = 0;
   face_ = 0;
   quick_in_flight_ = 0;
   quick_poses_ = 0;
@@ -311,7 +313,9 @@ void SessionEngine::begin_step() {
       prompt("Keep the rig still for " + fixed(config_.session.still_s, 0) + " s", {"abort"});
       break;
     case StepId::kPoses:
-      need_motion_ = !poses_.empty();
+      // The attitude of the still start is not a pose (the static method counts it apart): the
+      // first pose comes after the first turn.
+      need_motion_ = true;
       prompt("Turn the rig to a new orientation and hold it still (" + fixed(config_.session.hold_s, 1) +
                  " s); " + std::to_string(config_.session.poses) + " poses, all directions",
              {"continue", "redo", "abort"});
@@ -536,8 +540,11 @@ void SessionEngine::solve_finished(int id, SolveOutcome outcome) {
   if (id == quick_in_flight_) {
     quick_in_flight_ = 0;
     if (!outcome.error.empty() || !outcome.imu) {
-      message("warning",
-              "Quick solve after " + std::to_string(quick_poses_) + " poses failed: " + outcome.error);
+      // Feedback only: the final solve decides. The method's advice for a whole recording does
+      // not apply mid-session, so only its finding is shown.
+      const std::string finding = outcome.error.substr(0, outcome.error.find(';'));
+      message("info", "No quick solve yet after " + std::to_string(quick_poses_) + " poses (" + finding +
+                          "); go on with the poses");
       return;
     }
     quick_ = std::move(outcome.imu);
@@ -546,11 +553,14 @@ void SessionEngine::solve_finished(int id, SolveOutcome outcome) {
     };
     const double sa = rel(quick_->accel_sigma.scale, quick_->model.accel.scale);
     const double sg = rel(quick_->gyro_sigma.scale, quick_->model.gyro.scale);
+    auto sigma = [](double v) {
+      return std::isfinite(v) ? fixed(v * 1e3, 2) + "e-3" : std::string("undetermined");
+    };
     message("info", "Quick solve (" + std::to_string(quick_poses_) + " poses): scale sigma accel " +
-                        fixed(sa * 1e3, 2) + "e-3, gyro " + fixed(sg * 1e3, 2) + "e-3 (target " +
+                        sigma(sa) + ", gyro " + sigma(sg) + " (target " +
                         fixed(config_.session.pose_sigma_target * 1e3, 2) + "e-3)");
     // New poses came while it ran: solve again with them.
-    if (poses_.size() > quick_poses_) request_quick_solve();
+    if (poses_.size() > quick_poses_ && !quick_pending_) request_quick_solve();
     return;
   }
   if (id != final_id_) return;

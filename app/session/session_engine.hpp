@@ -211,8 +211,10 @@ class SessionEngine {
   long still_count_ = 0;
   // poses and faces
   std::vector<Eigen::Vector3d> poses_;
-  bool need_motion_ = false;  // after a capture or a refusal the rig must move first
-  int face_ = 0;              // six-face: the face prompted
+  bool need_motion_ = false;    // after a capture or a refusal the rig must move first
+  bool quick_pending_ = false;  // a pose was captured: solve once the rig has moved for 0.5 s
+  TimeNs last_still_ns_ = 0;
+  int face_ = 0;  // six-face: the face prompted
   int next_solve_id_ = 1;
   int quick_in_flight_ = 0;  // id, 0 = none
   std::size_t quick_poses_ = 0;

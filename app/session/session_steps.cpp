@@ -205,13 +205,20 @@ void SessionEngine::capture_pose() {
     text += " up";
   }
   message("info", text);
-  request_quick_solve();
+  // The quick solve waits for the rig to move on: the static detector needs the end of the hold
+  // (its variance window reaches past it) to count it as an attitude.
+  quick_pending_ = true;
 }
 
 void SessionEngine::sample_poses(const ImuSample& si, bool still) {
+  if (still) last_still_ns_ = si.t_ns;
   if (!still) {
     still_since_ns_ = -1;
     need_motion_ = false;
+    if (quick_pending_ && seconds(si.t_ns - last_still_ns_) >= 0.5) {
+      quick_pending_ = false;
+      request_quick_solve();
+    }
   } else if (!need_motion_) {
     if (still_since_ns_ < 0) still_since_ns_ = si.t_ns;
     if (seconds(si.t_ns - still_since_ns_) >= config_.session.hold_s) capture_pose();

@@ -291,19 +291,28 @@ TEST(Session, APoseTooCloseToAnEarlierOneIsRefused) {
   SimSession s(session_config({"preflight", "still", "poses"}));
   s.scripted_ = false;
   ASSERT_TRUE(s.runner_->start({}).ok());
-  // The first pose is the rest attitude; turning by 5 deg and holding must be refused.
-  bool turned = false;
+  // A first pose 60 deg from the rest attitude, then a turn of 5 deg and a hold: refused.
+  bool first = false, second = false;
+  auto turn = [](SimSession& ss, double deg) {
+    const Eigen::Quaterniond q =
+        ss.rig_->trajectory().final_orientation() *
+        Eigen::Quaterniond(Eigen::AngleAxisd(deg * M_PI / 180.0, Eigen::Vector3d::UnitY()));
+    ss.rig_->trajectory().turn(ss.rig_->now_ns() + 100'000'000, 1.0, q);
+  };
   s.run(120.0, [&](SimSession& ss) {
-    if (!turned && ss.runner_->engine().poses().size() == 1) {
-      turned = true;
-      const Eigen::Quaterniond q =
-          ss.rig_->trajectory().final_orientation() *
-          Eigen::Quaterniond(Eigen::AngleAxisd(5.0 * M_PI / 180.0, Eigen::Vector3d::UnitY()));
-      ss.rig_->trajectory().turn(ss.rig_->now_ns() + 100'000'000, 1.0, q);
+    const auto step = ss.runner_->engine().status().value("step", "");
+    if (!first && step == "poses") {
+      first = true;
+      turn(ss, 60.0);
+    }
+    if (!second && ss.runner_->engine().poses().size() == 1) {
+      second = true;
+      turn(ss, 5.0);
     }
     if (ss.said("Too close")) ss.press("abort");
   });
-  EXPECT_TRUE(s.said("Too close to pose"));
+  EXPECT_TRUE(s.said("Too close to pose 1"));
+  EXPECT_EQ(s.runner_->engine().poses().size(), 1u);
 }
 
 TEST(Session, StartRefusesStepsOutOfOrderOrWithoutTheirInputs) {

@@ -1,0 +1,229 @@
+// imucald as a process on the virtual rig: an operator at imucalctl's console in a terminal (a
+// tmux pane) through a whole session, SIGTERM and SIGKILL in the middle of one, and replay of the
+// committed fixture session.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <regex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "log/session_log.hpp"
+#include "tests/support/test_support.hpp"
+
+namespace imucal {
+namespace {
+
+bool has(const std::string& text, const std::string& fragment) { return text.find(fragment) != std::string::npos; }
+
+bool wait_for(const std::function<bool()>& done, double seconds = 120.0) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (std::chrono::steady_clock::now() < end) {
+    if (done()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  return done();
+}
+
+/// A rig configuration in `dir` with its storage there too; `extra` is appended (a session section).
+std::string write_config(const std::string& dir, const std::string& extra = "") {
+  std::ifstream in(test::source_path("config/rig.yaml"));
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  text = std::regex_replace(text, std::regex("path: /var/lib/imucal/calibration.bin"), "path: " + dir + "/eeprom.bin");
+  text = std::regex_replace(text, std::regex("target: checkerboard-7x6.yaml"),
+                            "target: " + test::source_path("config/checkerboard-7x6.yaml"));
+  const std::string path = dir + "/rig.yaml";
+  std::ofstream(path) << text << extra;
+  return path;
+}
+
+/// A socket path short enough for sun_path (107 bytes): the scratch folders are deeper.
+std::string short_socket_path() {
+  char tmpl[] = "/tmp/imucald-test-XXXXXX";
+  if (!::mkdtemp(tmpl)) return "/tmp/imucald-test.sock";
+  return std::string(tmpl) + "/s.sock";
+}
+
+/// imucald started with fork/exec; killed (SIGKILL) if still running at the end.
+class Daemon {
+ public:
+  Daemon(const std::string& dir, const std::vector<std::string>& extra) : socket_(short_socket_path()) {
+    std::vector<std::string> args = {IMUCALD_PATH, "--config",    write_config(dir), "--socket", socket_,
+                                      "--state-dir",  dir + "/state", "--sim",          "-q"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    pid_ = ::fork();
+    if (pid_ == 0) {
+      const std::string log = dir + "/imucald.log";
+      (void)!std::freopen(log.c_str(), "w", stderr);
+      std::vector<char*> argv;
+      for (auto& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      ::execv(argv[0], argv.data());
+      std::_Exit(127);
+    }
+  }
+  ~Daemon() {
+    if (pid_ > 0 && !exited_) {
+      ::kill(pid_, SIGKILL);
+      (void)wait();
+    }
+  }
+  const std::string& socket() const { return socket_; }
+  pid_t pid() const { return pid_; }
+  bool ready() const { return std::filesystem::exists(socket_); }
+  /// Waits for the process; its exit status, or 128 + signal.
+  int wait() {
+    int status = 0;
+    ::waitpid(pid_, &status, 0);
+    exited_ = true;
+    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  }
+
+ private:
+  std::string socket_;
+  pid_t pid_ = -1;
+  bool exited_ = false;
+};
+
+std::string session_log(const std::string& dir) {
+  const auto sessions = std::filesystem::path(dir) / "state" / "sessions";
+  if (!std::filesystem::exists(sessions)) return "";
+  for (const auto& e : std::filesystem::directory_iterator(sessions)) return (e.path() / "session.imulog").string();
+  return "";
+}
+
+std::string all_events(const std::string& log) {
+  auto reader = log::SessionLogReader::open(log);
+  if (!reader.ok()) return "";
+  auto events = (*reader)->events();
+  std::string out;
+  if (events.ok())
+    for (const auto& e : *events) out += e.message + "\n";
+  return out;
+}
+
+class Tmux {
+ public:
+  explicit Tmux(std::string server) : server_(std::move(server)) {}
+  ~Tmux() { (void)run("kill-server"); }
+  int run(const std::string& args) const {
+    return std::system(("tmux -L " + server_ + " -f /dev/null " + args + " >/dev/null 2>&1").c_str());
+  }
+  std::string capture(const std::string& file) const {
+    (void)std::system(("tmux -L " + server_ + " capture-pane -p -t op > " + file + " 2>/dev/null").c_str());
+    return test::read_file(file);
+  }
+
+ private:
+  std::string server_;
+};
+
+TEST(Imucald, AnOperatorAtTheConsoleRunsAWholeSessionAndTheRecordIsWritten) {
+  if (std::system("tmux -V >/dev/null 2>&1") != 0)
+    GTEST_SKIP() << "tmux is not installed (apt-get install tmux): the console is not tested in a terminal";
+  const std::string dir = test::scratch_dir();
+  // The virtual rig is moved by the scripted operator; the keys come from the person at the console.
+  Daemon daemon(dir, {"--sim-operator", "motion", "--time-scale", "0"});
+  ASSERT_TRUE(wait_for([&] { return daemon.ready(); }, 30)) << test::read_file(dir + "/imucald.log");
+  const std::string ctl = std::string(IMUCALCTL_PATH) + " --socket " + daemon.socket();
+  ASSERT_EQ(std::system((ctl + " start --steps preflight,still,poses,solve,review,write >/dev/null").c_str()), 0);
+
+  Tmux tmux("imucald-test-" + std::to_string(::getpid()));
+  const std::string pane = dir + "/pane.txt";
+  ASSERT_EQ(tmux.run("new-session -d -s op -x 110 -y 40 '" + ctl + " attach; echo $? > " + dir + "/exit_code'"), 0);
+  auto screen = [&] { return tmux.capture(pane); };
+  ASSERT_TRUE(wait_for([&] { return has(screen(), "Press c to begin"); })) << screen();
+  EXPECT_TRUE(has(screen(), "preflight")) << screen();
+  ASSERT_EQ(tmux.run("send-keys -t op c"), 0);
+  // The operator sees the poses come in, then the review with its gates.
+  ASSERT_TRUE(wait_for([&] { return has(screen(), "Press y to accept"); }, 300)) << screen();
+  const std::string review = screen();
+  EXPECT_TRUE(has(review, "gravity residual")) << review;
+  ASSERT_EQ(tmux.run("send-keys -t op y"), 0);
+  ASSERT_TRUE(wait_for([&] { return has(screen(), "written, read back and verified"); }, 60)) << screen();
+  ASSERT_EQ(tmux.run("send-keys -t op q"), 0);
+  ASSERT_TRUE(wait_for([&] { return !test::read_file(dir + "/exit_code").empty(); }, 10));
+  EXPECT_EQ(test::read_file(dir + "/exit_code"), "0\n");
+
+  // The record is on the storage and reads back.
+  const auto stored = test::run_cli({"store", "read", "--config", dir + "/rig.yaml"});
+  EXPECT_EQ(stored.exit_code, 0) << stored.err;
+  EXPECT_TRUE(has(stored.out, "static")) << stored.out;
+  // The keys pressed in the terminal are in the session log.
+  const std::string events = all_events(session_log(dir));
+  EXPECT_TRUE(has(events, R"("key":"continue")")) << "continue from the console";
+  EXPECT_TRUE(has(events, R"("key":"accept")")) << "accept from the console";
+  ::kill(daemon.pid(), SIGTERM);
+  EXPECT_EQ(daemon.wait(), 0);
+}
+
+TEST(Imucald, SigtermEndsTheSessionCleanlyAndLeavesTheStoredRecordAlone) {
+  const std::string dir = test::scratch_dir();
+  // At 20x real time the session is in its warm-up or still start a few seconds in.
+  Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "20", "--start", "default"});
+  ASSERT_TRUE(wait_for([&] { return !session_log(dir).empty(); }, 30)) << test::read_file(dir + "/imucald.log");
+  std::this_thread::sleep_for(std::chrono::seconds(2));
+  ::kill(daemon.pid(), SIGTERM);
+  EXPECT_EQ(daemon.wait(), 0) << test::read_file(dir + "/imucald.log");
+  auto reader = log::SessionLogReader::open(session_log(dir));
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_TRUE((*reader)->health().complete);
+  const std::string events = all_events(session_log(dir));
+  EXPECT_TRUE(has(events, R"("type":"stop")")) << events.substr(0, 2000);
+  EXPECT_TRUE(has(events, R"("outcome":"aborted")"));
+  EXPECT_FALSE(std::filesystem::exists(dir + "/eeprom.bin")) << "nothing was written to the storage";
+}
+
+TEST(Imucald, SigkillDuringTheRecordingLeavesAReadableLog) {
+  const std::string dir = test::scratch_dir();
+  Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "20", "--start", "default"});
+  ASSERT_TRUE(wait_for([&] { return !session_log(dir).empty(); }, 30)) << test::read_file(dir + "/imucald.log");
+  std::this_thread::sleep_for(std::chrono::seconds(3));
+  ::kill(daemon.pid(), SIGKILL);
+  EXPECT_EQ(daemon.wait(), 128 + SIGKILL);
+  auto reader = log::SessionLogReader::open(session_log(dir));
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_FALSE((*reader)->health().complete);
+  auto id = (*reader)->find_imu_stream();
+  ASSERT_TRUE(id.ok());
+  auto n = (*reader)->imu_count(*id);
+  ASSERT_TRUE(n.ok());
+  // 3 s at 20x real time and 200 Hz is about 12000 samples; the last commit interval may be lost.
+  EXPECT_GT(*n, 2000);
+  EXPECT_TRUE(has(all_events(session_log(dir)), R"("type":"prompt")"));
+}
+
+TEST(Imucald, ReplayOfTheFixtureSessionReachesItsLoggedResult) {
+  const auto r = test::run_cli({"replay", test::source_path("fixtures/service-session.imulog"), "-o",
+                                test::scratch_dir() + "/replay", "--json"});
+  ASSERT_EQ(r.exit_code, 0) << r.err << r.out;
+  EXPECT_TRUE(has(r.out, R"("same": true)")) << r.out;
+  EXPECT_TRUE(has(r.out, R"("max_difference": 0.0)")) << r.out;
+  EXPECT_TRUE(has(r.out, R"("outcome": "written")")) << r.out;
+}
+
+TEST(Imucald, ReplayRefusesALogThatIsNoServiceSession) {
+  const auto r = test::run_cli({"replay", test::source_path("fixtures/static.imulog")});
+  EXPECT_EQ(r.exit_code, 4) << r.err;
+  EXPECT_TRUE(has(r.err, "no service session")) << r.err;
+}
+
+TEST(Imucald, AMissingConfigurationIsAClearError) {
+  const std::string dir = test::scratch_dir();
+  const std::string cmd = std::string(IMUCALD_PATH) + " --config " + dir + "/none.yaml --socket " + dir +
+                          "/s.sock --state-dir " + dir + " 2>" + dir + "/err";
+  const int rc = std::system(cmd.c_str());
+  EXPECT_NE(WEXITSTATUS(rc), 0);
+  EXPECT_TRUE(has(test::read_file(dir + "/err"), "cannot open the rig configuration")) << test::read_file(dir + "/err");
+}
+
+}  // namespace
+}  // namespace imucal
