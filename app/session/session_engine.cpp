@@ -535,7 +535,7 @@ void SessionEngine::solve_progress(double fraction, const std::string& text) {
 }
 
 void SessionEngine::solve_finished(int id, SolveOutcome outcome) {
-  emit({{"type", "applied"}, {"id", id}, {"error", outcome.error}});
+  emit({{"type", "applied"}, {"id", id}, {"error", outcome.error}, {"wall_s", outcome.wall_s}});
   if (!running()) return;
   if (id == quick_in_flight_) {
     quick_in_flight_ = 0;

@@ -80,6 +80,7 @@ struct SolveOutcome {
   nlohmann::json payload;
   std::vector<std::string> result_files;
   std::string error;  // empty: success
+  double wall_s = 0.0;  // wall-clock time the solve took (the host measures it)
 };
 
 /// The engine's view of its host.

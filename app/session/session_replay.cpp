@@ -57,6 +57,10 @@ struct LoggedSession {
   std::vector<Input> inputs;
   json result;
   std::string outcome;
+  std::vector<std::pair<double, std::string>> step_starts;  // rig time (s), step
+  int final_id = 0;
+  double final_wall_s = 0.0;
+  double end_s = 0.0;
 };
 
 Result<LoggedSession> read_session_events(const log::SessionLogReader& reader) {
@@ -69,6 +73,14 @@ Result<LoggedSession> read_session_events(const log::SessionLogReader& reader) {
     json m = json::parse(e.message, nullptr, false);
     if (m.is_discarded() || !m.is_object()) continue;
     const std::string type = m.value("type", "");
+    const double t_s = static_cast<double>(e.t_ns) * 1e-9;
+    if (type == "status" && m.value("state", "") == "running" && !m.value("step", "").empty() &&
+        (s.step_starts.empty() || s.step_starts.back().second != m.value("step", ""))) {
+      s.step_starts.emplace_back(t_s, m.value("step", ""));
+    }
+    if (type == "solve" && m.value("final", false)) s.final_id = m.value("id", 0);
+    if (type == "applied" && m.value("id", -1) == s.final_id) s.final_wall_s = m.value("wall_s", 0.0);
+    s.end_s = t_s;
     if (type == "session" && m.value("event", "") == "start") {
       if (started) break;  // one session per log; a second start is not ours to replay
       started = true;
@@ -192,6 +204,11 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   if (diverged)
     return make_error(Errc::kInternal, "the replay diverged from " + options.log_path + ": " + why);
 
+  for (std::size_t i = 0; i < logged->step_starts.size(); ++i) {
+    const double end = i + 1 < logged->step_starts.size() ? logged->step_starts[i + 1].first : logged->end_s;
+    summary.step_times.push_back({logged->step_starts[i].second, end - logged->step_starts[i].first});
+  }
+  summary.live_final_solve_wall_s = logged->final_wall_s;
   summary.state = engine.state();
   summary.outcome = host.outcome_;
   summary.live_outcome = logged->outcome;

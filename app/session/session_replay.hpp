@@ -30,6 +30,13 @@ struct ReplaySummary {
   bool live_result = false;     // the log holds the live session's result
   double max_difference = 0.0;  // largest |replayed - live| over the canonical model's entries
   std::vector<std::string> result_files;
+  /// The live session's steps as logged: rig (sample) time from each step's start to the next's.
+  struct StepTime {
+    std::string step;
+    double rig_s = 0.0;
+  };
+  std::vector<StepTime> step_times;
+  double live_final_solve_wall_s = 0.0;  // wall time of the live session's final solve, as logged
   std::vector<std::string> notes;
 };
 

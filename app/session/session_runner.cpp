@@ -44,8 +44,19 @@ Result<std::string> make_session_dir(const std::string& state_dir, const std::st
 
 }  // namespace
 
+static SolveOutcome run_solve_timed(const SolveJob& job, const ImuStreamInfo& info, const std::string& dir,
+                             const std::function<void(double, const std::string&)>& progress);
+
 SolveOutcome run_solve(const SolveJob& job, const ImuStreamInfo& info, const std::string& dir,
                        const std::function<void(double, const std::string&)>& progress) {
+  const auto t0 = std::chrono::steady_clock::now();
+  SolveOutcome out = run_solve_timed(job, info, dir, progress);
+  out.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return out;
+}
+
+static SolveOutcome run_solve_timed(const SolveJob& job, const ImuStreamInfo& info, const std::string& dir,
+                             const std::function<void(double, const std::string&)>& progress) {
   SolveOutcome out;
   if (progress) progress(0.0, "Static calibration of " + std::to_string(job.samples->size()) + " samples");
   auto result = app::calibrate_static(*job.samples, job.static_options);

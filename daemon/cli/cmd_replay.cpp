@@ -39,7 +39,11 @@ void run(const ReplayArgs& a) {
                                                                            : nlohmann::json("inf")},
                         {"result_files", s.result_files},
                         {"notes", s.notes},
-                        {"same", same_outcome && same_result}};
+                        {"same", same_outcome && same_result},
+                        {"live_final_solve_wall_s", s.live_final_solve_wall_s}};
+    nlohmann::json steps = nlohmann::json::array();
+    for (const auto& st : s.step_times) steps.push_back({{"step", st.step}, {"rig_s", st.rig_s}});
+    j["live_step_times"] = steps;
     std::cout << j.dump(2) << "\n";
   } else {
     std::printf("replayed %s: %zu samples, %d keys, %d faults, %d solves applied\n",
@@ -51,6 +55,11 @@ void run(const ReplayArgs& a) {
                   s.max_difference, a.tolerance);
     } else {
       std::printf("result: the live session logged none to compare with\n");
+    }
+    if (!s.step_times.empty()) {
+      std::printf("live session, rig time per step:");
+      for (const auto& st : s.step_times) std::printf(" %s %.1f s", st.step.c_str(), st.rig_s);
+      std::printf("; final solve %.2f s of wall time\n", s.live_final_solve_wall_s);
     }
     for (const auto& f : s.result_files) std::printf("  wrote %s\n", f.c_str());
     for (const auto& n : s.notes) std::printf("  note: %s\n", n.c_str());

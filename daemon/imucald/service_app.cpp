@@ -212,6 +212,16 @@ void Service::sim_tick() {
 void Service::on_samples(std::span<const ImuSample> samples) {
   samples_ += samples.size();
   runner_->on_samples(samples);
+  if (start_pending_ && samples_ > 0) {
+    start_pending_ = false;
+    boost::asio::post(io_, [this] {
+      if (auto s = start(*options_.start); !s.ok()) {
+        spdlog::error("starting the session: {}", s.error().message);
+        exit_code_ = 1;
+        shutdown("the session could not start");
+      }
+    });
+  }
 }
 
 void Service::imu_failed(const Error& error) {
@@ -365,15 +375,9 @@ int Service::run() {
     shutdown(sig == SIGTERM ? "SIGTERM" : sig == SIGHUP ? "SIGHUP" : "SIGINT");
   });
   arm_watchdog();
-  if (options_.start) {
-    boost::asio::post(io_, [this] {
-      if (auto s = start(*options_.start); !s.ok()) {
-        spdlog::error("starting the session: {}", s.error().message);
-        exit_code_ = 1;
-        shutdown("the session could not start");
-      }
-    });
-  }
+  // --start: once samples flow, so that the session starts on the rig's clock like one that
+  // imucalctl starts.
+  start_pending_ = options_.start.has_value();
   notifier_.ready();
   notifier_.status("idle");
   spdlog::info("imucald {} ready: rig '{}', socket {}", kVersion, config_.name, options_.socket_path);
