@@ -79,7 +79,7 @@ struct SolveOutcome {
   /// it wrote; empty for a quick solve.
   nlohmann::json payload;
   std::vector<std::string> result_files;
-  std::string error;  // empty: success
+  std::string error;    // empty: success
   double wall_s = 0.0;  // wall-clock time the solve took (the host measures it)
 };
 

@@ -45,7 +45,7 @@ Result<std::string> make_session_dir(const std::string& state_dir, const std::st
 }  // namespace
 
 static SolveOutcome run_solve_timed(const SolveJob& job, const ImuStreamInfo& info, const std::string& dir,
-                             const std::function<void(double, const std::string&)>& progress);
+                                    const std::function<void(double, const std::string&)>& progress);
 
 SolveOutcome run_solve(const SolveJob& job, const ImuStreamInfo& info, const std::string& dir,
                        const std::function<void(double, const std::string&)>& progress) {
@@ -56,7 +56,7 @@ SolveOutcome run_solve(const SolveJob& job, const ImuStreamInfo& info, const std
 }
 
 static SolveOutcome run_solve_timed(const SolveJob& job, const ImuStreamInfo& info, const std::string& dir,
-                             const std::function<void(double, const std::string&)>& progress) {
+                                    const std::function<void(double, const std::string&)>& progress) {
   SolveOutcome out;
   if (progress) progress(0.0, "Static calibration of " + std::to_string(job.samples->size()) + " samples");
   auto result = app::calibrate_static(*job.samples, job.static_options);

@@ -85,7 +85,7 @@ class Service final : public service::SessionHost {
   std::string imu_error_;
   std::uint64_t samples_ = 0, imu_faults_ = 0;
   bool start_pending_ = false;  // --start waits for the first samples
-  bool paused_ = false;  // the virtual rig waits for the worker
+  bool paused_ = false;         // the virtual rig waits for the worker
   bool quit_ = false;
   int exit_code_ = 0;
 };

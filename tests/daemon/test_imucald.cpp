@@ -22,7 +22,9 @@
 namespace imucal {
 namespace {
 
-bool has(const std::string& text, const std::string& fragment) { return text.find(fragment) != std::string::npos; }
+bool has(const std::string& text, const std::string& fragment) {
+  return text.find(fragment) != std::string::npos;
+}
 
 bool wait_for(const std::function<bool()>& done, double seconds = 120.0) {
   const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
@@ -37,7 +39,8 @@ bool wait_for(const std::function<bool()>& done, double seconds = 120.0) {
 std::string write_config(const std::string& dir, const std::string& extra = "") {
   std::ifstream in(test::source_path("config/rig.yaml"));
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  text = std::regex_replace(text, std::regex("path: /var/lib/imucal/calibration.bin"), "path: " + dir + "/eeprom.bin");
+  text = std::regex_replace(text, std::regex("path: /var/lib/imucal/calibration.bin"),
+                            "path: " + dir + "/eeprom.bin");
   text = std::regex_replace(text, std::regex("target: checkerboard-7x6.yaml"),
                             "target: " + test::source_path("config/checkerboard-7x6.yaml"));
   const std::string path = dir + "/rig.yaml";
@@ -56,8 +59,8 @@ std::string short_socket_path() {
 class Daemon {
  public:
   Daemon(const std::string& dir, const std::vector<std::string>& extra) : socket_(short_socket_path()) {
-    std::vector<std::string> args = {IMUCALD_PATH, "--config",    write_config(dir), "--socket", socket_,
-                                      "--state-dir",  dir + "/state", "--sim",          "-q"};
+    std::vector<std::string> args = {IMUCALD_PATH,  "--config",     write_config(dir), "--socket", socket_,
+                                     "--state-dir", dir + "/state", "--sim",           "-q"};
     args.insert(args.end(), extra.begin(), extra.end());
     pid_ = ::fork();
     if (pid_ == 0) {
@@ -96,7 +99,8 @@ class Daemon {
 std::string session_log(const std::string& dir) {
   const auto sessions = std::filesystem::path(dir) / "state" / "sessions";
   if (!std::filesystem::exists(sessions)) return "";
-  for (const auto& e : std::filesystem::directory_iterator(sessions)) return (e.path() / "session.imulog").string();
+  for (const auto& e : std::filesystem::directory_iterator(sessions))
+    return (e.path() / "session.imulog").string();
   return "";
 }
 
@@ -134,11 +138,13 @@ TEST(Imucald, AnOperatorAtTheConsoleRunsAWholeSessionAndTheRecordIsWritten) {
   Daemon daemon(dir, {"--sim-operator", "motion", "--time-scale", "0"});
   ASSERT_TRUE(wait_for([&] { return daemon.ready(); }, 30)) << test::read_file(dir + "/imucald.log");
   const std::string ctl = std::string(IMUCALCTL_PATH) + " --socket " + daemon.socket();
-  ASSERT_EQ(std::system((ctl + " start --steps preflight,still,poses,solve,review,write >/dev/null").c_str()), 0);
+  ASSERT_EQ(std::system((ctl + " start --steps preflight,still,poses,solve,review,write >/dev/null").c_str()),
+            0);
 
   Tmux tmux("imucald-test-" + std::to_string(::getpid()));
   const std::string pane = dir + "/pane.txt";
-  ASSERT_EQ(tmux.run("new-session -d -s op -x 110 -y 40 '" + ctl + " attach; echo $? > " + dir + "/exit_code'"), 0);
+  ASSERT_EQ(
+      tmux.run("new-session -d -s op -x 110 -y 40 '" + ctl + " attach; echo $? > " + dir + "/exit_code'"), 0);
   auto screen = [&] { return tmux.capture(pane); };
   ASSERT_TRUE(wait_for([&] { return has(screen(), "Press c to begin"); })) << screen();
   EXPECT_TRUE(has(screen(), "preflight")) << screen();
@@ -169,7 +175,8 @@ TEST(Imucald, SigtermEndsTheSessionCleanlyAndLeavesTheStoredRecordAlone) {
   const std::string dir = test::scratch_dir();
   // At 20x real time the session is in its warm-up or still start a few seconds in.
   Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "20", "--start", "default"});
-  ASSERT_TRUE(wait_for([&] { return !session_log(dir).empty(); }, 30)) << test::read_file(dir + "/imucald.log");
+  ASSERT_TRUE(wait_for([&] { return !session_log(dir).empty(); }, 30))
+      << test::read_file(dir + "/imucald.log");
   std::this_thread::sleep_for(std::chrono::seconds(2));
   ::kill(daemon.pid(), SIGTERM);
   EXPECT_EQ(daemon.wait(), 0) << test::read_file(dir + "/imucald.log");
@@ -185,7 +192,8 @@ TEST(Imucald, SigtermEndsTheSessionCleanlyAndLeavesTheStoredRecordAlone) {
 TEST(Imucald, SigkillDuringTheRecordingLeavesAReadableLog) {
   const std::string dir = test::scratch_dir();
   Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "20", "--start", "default"});
-  ASSERT_TRUE(wait_for([&] { return !session_log(dir).empty(); }, 30)) << test::read_file(dir + "/imucald.log");
+  ASSERT_TRUE(wait_for([&] { return !session_log(dir).empty(); }, 30))
+      << test::read_file(dir + "/imucald.log");
   std::this_thread::sleep_for(std::chrono::seconds(3));
   ::kill(daemon.pid(), SIGKILL);
   EXPECT_EQ(daemon.wait(), 128 + SIGKILL);
@@ -222,7 +230,8 @@ TEST(Imucald, AMissingConfigurationIsAClearError) {
                           "/s.sock --state-dir " + dir + " 2>" + dir + "/err";
   const int rc = std::system(cmd.c_str());
   EXPECT_NE(WEXITSTATUS(rc), 0);
-  EXPECT_TRUE(has(test::read_file(dir + "/err"), "cannot open the rig configuration")) << test::read_file(dir + "/err");
+  EXPECT_TRUE(has(test::read_file(dir + "/err"), "cannot open the rig configuration"))
+      << test::read_file(dir + "/err");
 }
 
 }  // namespace
