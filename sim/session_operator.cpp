@@ -148,6 +148,16 @@ void ScriptedOperator::on_message(const nlohmann::json& m, TimeNs now_ns) {
     const bool captured = text.rfind("Pose ", 0) == 0 && text.find("captured") != std::string::npos;
     const bool too_close = text.rfind("Too close", 0) == 0;
     if (captured || too_close) turn_to_up(ups_[next_up_++ % ups_.size()], now_ns);
+    // "This is +Y up (...); put -X up": the wrong face is up, turn to the one asked for.
+    if (const auto put = text.find("; put "); text.rfind("This is ", 0) == 0 && put != std::string::npos) {
+      const std::string face = text.substr(put + 6, 2);
+      const int axis = face[1] - 'X';
+      if (axis >= 0 && axis < 3) {
+        Eigen::Vector3d up = Eigen::Vector3d::Zero();
+        up[axis] = face[0] == '-' ? -1.0 : 1.0;
+        turn_to_up(up, now_ns);
+      }
+    }
   }
 }
 

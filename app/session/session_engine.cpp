@@ -361,6 +361,7 @@ void SessionEngine::begin_step() {
 
 void SessionEngine::run_preflight() {
   const PreflightReport report = host_.preflight();
+  stored_ = report.stored ? *report.stored : json();
   emit({{"type", "preflight"}, {"report", report.to_json()}});
   std::vector<std::string> lines;
   for (const auto& d : report.devices)

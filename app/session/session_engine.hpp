@@ -177,6 +177,7 @@ class SessionEngine {
   void request_quick_solve();
   void request_final_solve();
   void review();
+  std::vector<std::string> difference_to_stored(nlohmann::json* diff) const;
   nlohmann::json coverage() const;
   calib::StaticCalibrationOptions static_options() const;
   ImuSample to_si(const ImuSample& raw) const;
@@ -231,6 +232,7 @@ class SessionEngine {
   int final_id_ = 0;
   std::optional<SolveOutcome> final_;
   std::vector<Gate> gates_;
+  nlohmann::json stored_;  // the calibration on the storage at preflight (null: none)
   bool gates_pass_ = false;
 };
 

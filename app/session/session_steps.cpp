@@ -360,6 +360,44 @@ void SessionEngine::evaluate_gates() {
   gates_pass_ = std::all_of(gates_.begin(), gates_.end(), [](const Gate& g) { return g.pass; });
 }
 
+std::vector<std::string> SessionEngine::difference_to_stored(json* diff) const {
+  if (!final_->imu) return {};
+  if (stored_.is_null() || !stored_.contains("imu")) return {"Stored calibration: none; this is the first"};
+  const json& imu = stored_["imu"];
+  const std::string units = info_.units == ImuUnits::kRaw ? "raw" : "si";
+  if (imu.value("input_units", units) != units)
+    return {"Stored calibration: for " + imu.value("input_units", std::string("?")) +
+            " input, not comparable"};
+  auto vec = [](const json& j) {
+    return Eigen::Vector3d(j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>());
+  };
+  auto mat = [&](const json& j) {
+    Eigen::Matrix3d m;
+    for (int r = 0; r < 3; ++r) m.row(r) = vec(j.at(r)).transpose();
+    return m;
+  };
+  try {
+    const auto& c = final_->imu->canonical;
+    const Eigen::Vector3d db_a = c.b_a - vec(imu.at("b_a")), db_g = c.b_g - vec(imu.at("b_g"));
+    // Scale changes as relative changes of the correction's diagonal.
+    const Eigen::Vector3d ds_a = c.A_a.diagonal().cwiseQuotient(mat(imu.at("A_a")).diagonal()).array() - 1.0;
+    const Eigen::Vector3d ds_g = c.A_g.diagonal().cwiseQuotient(mat(imu.at("A_g")).diagonal()).array() - 1.0;
+    auto v3 = [](const Eigen::Vector3d& v, double k, int d) {
+      return fixed(v.x() * k, d) + " " + fixed(v.y() * k, d) + " " + fixed(v.z() * k, d);
+    };
+    *diff = {{"b_a", {db_a.x(), db_a.y(), db_a.z()}},
+             {"b_g", {db_g.x(), db_g.y(), db_g.z()}},
+             {"scale_a", {ds_a.x(), ds_a.y(), ds_a.z()}},
+             {"scale_g", {ds_g.x(), ds_g.y(), ds_g.z()}}};
+    const std::string unit = info_.units == ImuUnits::kRaw ? " counts" : "";
+    return {"Change to the stored calibration (" + stored_.value("summary", std::string("stored")) + "):",
+            "  accel bias " + v3(db_a, 1.0, 3) + unit + ", scale " + v3(ds_a, 1e3, 3) + " e-3",
+            "  gyro bias " + v3(db_g, 1.0, 3) + unit + ", scale " + v3(ds_g, 1e3, 3) + " e-3"};
+  } catch (const json::exception&) {
+    return {"Stored calibration: present but not comparable (its IMU fields are incomplete)"};
+  }
+}
+
 void SessionEngine::review() {
   state_ = SessionState::kReview;
   json gates = json::array();
@@ -387,10 +425,13 @@ void SessionEngine::review() {
                       " px, time offset " + fixed(cam.timeshift_cam_imu_s * 1e3, 3) + " ms");
     }
   }
+  json diff;
+  for (auto& line : difference_to_stored(&diff)) lines.push_back(std::move(line));
   emit({{"type", "review"},
         {"pass", gates_pass_},
         {"gates", gates},
         {"lines", lines},
+        {"difference_to_stored", diff},
         {"files", final_->result_files}});
   if (gates_pass_ && config_.session.auto_write) {
     message("info", "Every gate passed; writing (session.auto_write)");

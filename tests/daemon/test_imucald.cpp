@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -232,6 +233,33 @@ TEST(Imucald, AMissingConfigurationIsAClearError) {
   EXPECT_NE(WEXITSTATUS(rc), 0);
   EXPECT_TRUE(has(test::read_file(dir + "/err"), "cannot open the rig configuration"))
       << test::read_file(dir + "/err");
+}
+
+}  // namespace
+}  // namespace imucal
+
+namespace imucal {
+namespace {
+
+TEST(Imucald, TheReviewShowsTheChangeToTheStoredCalibration) {
+  const std::string dir = test::scratch_dir();
+  for (int run = 0; run < 2; ++run) {
+    Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start", "default",
+                        "--exit-after-session", "--seed", std::to_string(21 + run)});
+    ASSERT_EQ(daemon.wait(), 0) << test::read_file(dir + "/imucald.log");
+  }
+  std::vector<std::string> logs;
+  for (const auto& e : std::filesystem::directory_iterator(std::filesystem::path(dir) / "state" / "sessions"))
+    logs.push_back((e.path() / "session.imulog").string());
+  std::sort(logs.begin(), logs.end());
+  ASSERT_EQ(logs.size(), 2u);
+  EXPECT_TRUE(has(all_events(logs[0]), "Stored calibration: none; this is the first"));
+  const std::string second = all_events(logs[1]);
+  EXPECT_TRUE(has(second, "Change to the stored calibration (sequence 1 in slot")) << second.substr(0, 3000);
+  EXPECT_TRUE(has(second, R"("difference_to_stored":{"b_a")"));
+  // And the second write went to the other slot.
+  const auto stored = test::run_cli({"store", "read", "--config", dir + "/rig.yaml"});
+  EXPECT_TRUE(has(stored.out, "sequence 2")) << stored.out;
 }
 
 }  // namespace

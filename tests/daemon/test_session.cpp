@@ -375,3 +375,32 @@ TEST(Session, MotionStepShowsExcitationDetectionAndSaturation) {
 
 }  // namespace
 }  // namespace imucal
+
+namespace imucal {
+namespace {
+
+TEST(Session, SixFaceHoldsArePromptedAndChecked) {
+  ModuleDir modules;
+  SimSession s(session_config({"preflight", "still", "gsens"}));
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  bool wrong = false;
+  s.run(300.0, [&](SimSession& ss) {
+    // Once, the operator puts the wrong face up for the second face: the engine names it.
+    if (!wrong && ss.of_type("face").size() == 1) {
+      wrong = true;
+      ss.rig_->trajectory().turn(
+          ss.rig_->now_ns() + 500'000'000, 1.5,
+          Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()));
+    }
+  });
+  EXPECT_EQ(s.outcome(), "recorded");
+  const auto faces = s.of_type("face");
+  ASSERT_EQ(faces.size(), 6u);
+  const char* names[] = {"+X", "-X", "+Y", "-Y", "+Z", "-Z"};
+  for (int f = 0; f < 6; ++f) EXPECT_EQ(faces[f].value("face", ""), names[f]);
+  EXPECT_TRUE(s.said("This is +Y up"));
+  EXPECT_TRUE(s.said("All six faces held"));
+}
+
+}  // namespace
+}  // namespace imucal
