@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <thread>
 
 #include "app/stored_calibration.hpp"
 #include "core/version.hpp"
@@ -265,13 +266,32 @@ void Service::on_message(const json& m) {
   }
 }
 
+std::string Service::self_test() {
+  drivers::mpu6000::Mpu6000* driver = sim_rig_ ? &sim_rig_->rig().driver() : rig_ ? &rig_->driver() : nullptr;
+  if (!driver) return "not open";
+  // The chip's self-test runs outside streaming; the driver reconfigures and streams again after it.
+  auto result = driver->self_test([this](TimeNs d) {
+    if (sim_rig_) {
+      sim_rig_->rig().stall_until(sim_rig_->now_ns() + d);
+    } else {
+      std::this_thread::sleep_for(std::chrono::nanoseconds(d));
+    }
+  });
+  if (!result.ok()) return "self-test could not run: " + result.error().message;
+  return std::string(result->pass() ? "self-test passed" : "SELF-TEST FAILED") + " (" + result->summary() +
+         ")";
+}
+
 app::session::PreflightReport Service::preflight() {
   app::session::PreflightReport r;
-  r.devices.push_back({"imu", imu_state_ == "open",
+  const std::string test = imu_state_ == "open" ? self_test() : "";
+  const bool test_ok = test.rfind("self-test passed", 0) == 0;
+  r.devices.push_back({"imu", imu_state_ == "open" && test_ok,
                        imu_state_ == "open"
                            ? std::string(options_.sim ? "virtual MPU-6000 (register emulator)"
                                                       : "MPU-6000 on " + rig_->bus_name()) +
-                                 ", WHO_AM_I answered, " + std::to_string(samples_) + " samples so far"
+                                 ", WHO_AM_I answered, " + test + ", " + std::to_string(samples_) +
+                                 " samples so far"
                            : "not open: " + imu_error_});
   auto stored = app::read_stored_calibration(config_);
   if (!stored.ok()) {

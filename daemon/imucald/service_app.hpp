@@ -61,6 +61,7 @@ class Service final : public service::SessionHost {
   void on_samples(std::span<const ImuSample> samples);
   void imu_failed(const Error& error);
   app::session::PreflightReport preflight();
+  std::string self_test();
   Status write_storage(const nlohmann::json& payload);
   void arm_watchdog();
   void shutdown(const std::string& why);
