@@ -6,6 +6,7 @@
 
 #include "app/camera_calibration.hpp"
 #include "app/camimu_calibration.hpp"
+#include "calib/target_detection.hpp"
 #include "core/module.hpp"
 
 namespace imucal::app {
@@ -17,6 +18,7 @@ struct CameraModuleApi {
   ModuleHeader header;
   decltype(&calibrate_camera_log) calibrate_camera;
   decltype(&calibrate_camimu_log) calibrate_camimu;
+  decltype(&calib::TargetDetector::create) target_detector;
 };
 
 }  // namespace imucal::app

@@ -25,4 +25,11 @@ Result<CamImuReport> calibrate_camimu(const CamImuRequest& request) {
   return (*api)->calibrate_camimu(request);
 }
 
+Result<std::unique_ptr<calib::TargetDetector>> make_target_detector(const TargetDescription& target,
+                                                                    const calib::DetectionOptions& options) {
+  auto api = load_module<CameraModuleApi>(kCameraModule, kCameraModuleEntry);
+  if (!api.ok()) return api.error();
+  return (*api)->target_detector(target, options);
+}
+
 }  // namespace imucal::app

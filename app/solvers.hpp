@@ -3,11 +3,13 @@
 // (app/module_loader.hpp), so that programs load Ceres and its BLAS/LAPACK/SuiteSparse chain only
 // when they solve.
 
+#include <memory>
 #include <span>
 
 #include "app/camera_calibration.hpp"
 #include "app/camimu_calibration.hpp"
 #include "calib/static_calibration.hpp"
+#include "calib/target_detection.hpp"
 #include "core/imu.hpp"
 #include "core/result.hpp"
 
@@ -24,5 +26,9 @@ namespace imucal::app {
 /// app::calibrate_camimu_log through the camera module libimucal_camera.so (detection and the
 /// camera-IMU estimator); fails with the loader's error when the module cannot be loaded.
 [[nodiscard]] Result<CamImuReport> calibrate_camimu(const CamImuRequest& request);
+/// A target detector (calib::TargetDetector::create) from the camera module, for live detection
+/// (the service's motion step); fails with the loader's error when the module cannot be loaded.
+[[nodiscard]] Result<std::unique_ptr<calib::TargetDetector>> make_target_detector(
+    const TargetDescription& target, const calib::DetectionOptions& options = {});
 
 }  // namespace imucal::app

@@ -20,35 +20,42 @@ Eigen::Isometry3d pose_of(const RigState& s) {
 
 }  // namespace
 
-SceneFrameSource::SceneFrameSource(const SimCameraScene& scene, const CheckerboardMotion& motion)
-    : scene_(scene), motion_(motion), noise_(Rng::substream(scene.seed, kNoiseSubstream)) {}
+SceneFrameSource::SceneFrameSource(const SimCameraScene& scene, const Trajectory& trajectory)
+    : scene_(scene), trajectory_(trajectory), noise_(Rng::substream(scene.seed, kNoiseSubstream)) {}
 
 Result<std::unique_ptr<SceneFrameSource>> SceneFrameSource::create(const SimCameraScene& scene,
                                                                    const CheckerboardMotion& motion) {
+  return create(scene, motion, motion.T_world_board(scene.target));
+}
+
+Result<std::unique_ptr<SceneFrameSource>> SceneFrameSource::create(const SimCameraScene& scene,
+                                                                   const Trajectory& trajectory,
+                                                                   const Eigen::Isometry3d& T_world_board) {
   auto renderer = TargetRenderer::create(scene.camera, scene.target, scene.render);
   if (!renderer.ok()) return renderer.error();
-  std::unique_ptr<SceneFrameSource> source(new SceneFrameSource(scene, motion));
+  std::unique_ptr<SceneFrameSource> source(new SceneFrameSource(scene, trajectory));
   source->renderer_ = std::move(*renderer);
-  source->T_world_board_ = motion.T_world_board(scene.target);
+  source->T_world_board_ = T_world_board;
   return source;
 }
 
 SceneFrameSource::~SceneFrameSource() = default;
 
-Result<drivers::camera::fake::FrameRenderer> make_scene_renderer(
-    const SimCameraScene& scene, std::shared_ptr<const CheckerboardMotion> motion) {
-  if (!motion) return make_error(Errc::kInvalidArgument, "simulated camera: no motion");
-  auto source = SceneFrameSource::create(scene, *motion);
+Result<drivers::camera::fake::FrameRenderer> make_scene_renderer(const SimCameraScene& scene,
+                                                                 std::shared_ptr<const Trajectory> trajectory,
+                                                                 const Eigen::Isometry3d& T_world_board) {
+  if (!trajectory) return make_error(Errc::kInvalidArgument, "simulated camera: no motion");
+  auto source = SceneFrameSource::create(scene, *trajectory, T_world_board);
   if (!source.ok()) return source.error();
   std::shared_ptr<SceneFrameSource> shared(std::move(*source));
   return drivers::camera::fake::FrameRenderer(
-      [shared, motion](TimeNs t_mid, std::uint32_t, std::span<std::uint8_t> px) {
+      [shared, trajectory](TimeNs t_mid, std::uint32_t, std::span<std::uint8_t> px) {
         return shared->render(t_mid, px);
       });
 }
 
 Eigen::Isometry3d SceneFrameSource::T_cam_board_at(TimeNs t_imu_ns) const {
-  return scene_.T_cam_imu * pose_of(motion_.at(t_imu_ns)).inverse() * T_world_board_;
+  return scene_.T_cam_imu * pose_of(trajectory_.at(t_imu_ns)).inverse() * T_world_board_;
 }
 
 Status SceneFrameSource::render(TimeNs t_mid_host_ns, std::span<std::uint8_t> pixels) {

@@ -50,9 +50,13 @@ struct SceneFrameStats {
 
 class SceneFrameSource {
  public:
-  /// The motion is borrowed and must outlive the source.
+  /// The motion is borrowed and must outlive the source; the board stands where the motion
+  /// places it (CheckerboardMotion::T_world_board).
   [[nodiscard]] static Result<std::unique_ptr<SceneFrameSource>> create(const SimCameraScene& scene,
                                                                         const CheckerboardMotion& motion);
+  /// Any trajectory (the guided session's operator), with the board at T_world_board.
+  [[nodiscard]] static Result<std::unique_ptr<SceneFrameSource>> create(
+      const SimCameraScene& scene, const Trajectory& trajectory, const Eigen::Isometry3d& T_world_board);
   ~SceneFrameSource();
 
   /// Renders the frame whose mid-exposure is at host time t_mid_host_ns into `pixels`
@@ -67,11 +71,11 @@ class SceneFrameSource {
   const Eigen::Isometry3d& T_world_target() const { return T_world_board_; }
 
  private:
-  SceneFrameSource(const SimCameraScene& scene, const CheckerboardMotion& motion);
+  SceneFrameSource(const SimCameraScene& scene, const Trajectory& trajectory);
   Eigen::Isometry3d T_cam_board_at(TimeNs t_imu_ns) const;
 
   SimCameraScene scene_;
-  const CheckerboardMotion& motion_;
+  const Trajectory& trajectory_;
   std::unique_ptr<TargetRenderer> renderer_;
   Eigen::Isometry3d T_world_board_ = Eigen::Isometry3d::Identity();
   Rng noise_;
@@ -79,10 +83,12 @@ class SceneFrameSource {
   SceneFrameStats stats_;
 };
 
-/// The virtual camera's renderer for `scene` along `motion` (kept alive by the renderer). The
-/// render module's entry for `imucal record --sim` with cameras.
+/// The virtual camera's renderer for `scene` along `trajectory` (kept alive by the renderer),
+/// the board at T_world_board. The render module's entry for `imucal record --sim` with cameras
+/// and for the service's virtual rig.
 [[nodiscard]] Result<drivers::camera::fake::FrameRenderer> make_scene_renderer(
-    const SimCameraScene& scene, std::shared_ptr<const CheckerboardMotion> motion);
+    const SimCameraScene& scene, std::shared_ptr<const Trajectory> trajectory,
+    const Eigen::Isometry3d& T_world_board);
 
 /// The simulated camera at another resolution: the default camera's lens (its field of view
 /// across the width, its distortion) on a sensor of width x height, principal point centred.

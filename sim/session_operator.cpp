@@ -42,7 +42,40 @@ Eigen::Quaterniond OperatorTrajectory::final_orientation() const {
   std::lock_guard lock(mutex_);
   if (pieces_.empty()) return q_start_;
   const Piece& p = pieces_.back();
+  if (p.motion) return follow_state(p, p.t1_ns).q_world_body;
   return Eigen::Quaterniond(p.q0.toRotationMatrix() * so3_exp(p.rotvec_body)).normalized();
+}
+
+TimeNs OperatorTrajectory::busy_until_ns() const {
+  std::lock_guard lock(mutex_);
+  return pieces_.empty() ? 0 : pieces_.back().t1_ns;
+}
+
+RigState OperatorTrajectory::follow_state(const Piece& p, TimeNs t_ns) {
+  const TimeNs t = std::clamp(t_ns, p.t0_ns, p.t1_ns) - p.t0_ns + p.motion->start_ns();
+  RigState m = p.motion->at(t);
+  const Eigen::Matrix3d R = p.T_op_motion.linear();
+  RigState st;
+  st.q_world_body = Eigen::Quaterniond(R * m.q_world_body.toRotationMatrix()).normalized();
+  st.p_world_body = p.T_op_motion * m.p_world_body;
+  if (t_ns >= p.t0_ns && t_ns <= p.t1_ns) {
+    st.v_world = R * m.v_world;
+    st.a_world = R * m.a_world;
+    st.omega_body = m.omega_body;
+  }
+  return st;
+}
+
+void OperatorTrajectory::follow(TimeNs t0_ns, std::shared_ptr<const Trajectory> motion,
+                                const Eigen::Isometry3d& T_op_motion) {
+  std::lock_guard lock(mutex_);
+  Piece p;
+  p.t0_ns = pieces_.empty() ? t0_ns : std::max(t0_ns, pieces_.back().t1_ns);
+  p.t1_ns = p.t0_ns + (motion->end_ns() - motion->start_ns());
+  p.motion = std::move(motion);
+  p.T_op_motion = T_op_motion;
+  pieces_.push_back(p);
+  segments_.push_back({p.t0_ns, p.t1_ns, "move"});
 }
 
 void OperatorTrajectory::turn(TimeNs t0_ns, double duration_s, const Eigen::Quaterniond& q_target,
@@ -68,6 +101,7 @@ RigState OperatorTrajectory::at(TimeNs t_ns) const {
   auto it = std::upper_bound(pieces_.begin(), pieces_.end(), t_ns,
                              [](TimeNs t, const Piece& p) { return t < p.t0_ns; });
   const Piece& pc = *(it - 1);
+  if (pc.motion) return follow_state(pc, t_ns);
   const double T = ns_to_s(pc.t1_ns - pc.t0_ns);
   const double tau = std::clamp(ns_to_s(t_ns - pc.t0_ns) / T, 0.0, 1.0);
   double s = 0, ds = 0, dds = 0, b = 0, db = 0, ddb = 0;
@@ -115,6 +149,25 @@ void ScriptedOperator::turn_to_up(const Eigen::Vector3d& up_body, TimeNs now_ns)
   ++turns_;
 }
 
+Eigen::Isometry3d follow_transform(const CheckerboardMotion& motion, double yaw_rad) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.translation() = -(T.linear() * motion.p_world_body_nominal());
+  return T;
+}
+
+void ScriptedOperator::wave(TimeNs now_ns) {
+  // Face the board (the motion's rest attitude, carried into this trajectory), then follow it.
+  const Eigen::Quaterniond q_face(options_.wave_T_op_motion.linear() *
+                                  options_.wave->q_world_body_nominal().toRotationMatrix());
+  const TimeNs t0 = std::max(now_ns + static_cast<TimeNs>(options_.reaction_s * 1e9), busy_until_ns_);
+  trajectory_.turn(t0, options_.move_s, q_face);
+  trajectory_.follow(t0 + static_cast<TimeNs>(options_.move_s * 1e9), options_.wave,
+                     options_.wave_T_op_motion);
+  busy_until_ns_ = trajectory_.busy_until_ns();
+  ++turns_;
+}
+
 void ScriptedOperator::on_message(const nlohmann::json& m, TimeNs now_ns) {
   const std::string type = m.value("type", ""), step = m.value("step", ""), text = m.value("text", "");
   const TimeNs react = now_ns + static_cast<TimeNs>(options_.reaction_s * 1e9);
@@ -130,7 +183,13 @@ void ScriptedOperator::on_message(const nlohmann::json& m, TimeNs now_ns) {
     if (step == "preflight" && has_key("continue")) press_at("continue", react);
     if (step == "poses" && !has_key("redo")) return;
     if (step == "poses") turn_to_up(ups_[next_up_++ % ups_.size()], now_ns);
-    if (step == "motion") press_at("skip", react);  // this operator has no target to wave at
+    if (step == "motion") {
+      if (options_.wave) {
+        wave(now_ns);
+      } else {
+        press_at("skip", react);  // no target to wave at
+      }
+    }
     if (step == "review" && has_key("accept")) press_at(options_.accept ? "accept" : "reject", react);
     if (step == "gsens") {
       static const char* kNames[6] = {"+X", "-X", "+Y", "-Y", "+Z", "-Z"};

@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <random>
@@ -17,6 +18,8 @@
 #include "sim/trajectory.hpp"
 
 namespace imucal::sim {
+
+class CheckerboardMotion;
 
 /// A trajectory made of rests and minimum-jerk turns (rotations about a body-fixed axis), appended
 /// as the session goes on. Before the first turn and after the last one the rig rests. Safe to
@@ -36,21 +39,35 @@ class OperatorTrajectory final : public Trajectory {
   /// `lift_m` in the middle (a hand moves the rig while it turns it). t0 must not precede the
   /// end of the previous turn.
   void turn(TimeNs t0_ns, double duration_s, const Eigen::Quaterniond& q_target, double lift_m = 0.05);
+  /// Moves the rig along `motion` from `t0_ns` on (its time 0 at t0), carried by T_op_motion
+  /// (the motion's world into this trajectory's). The motion must start and end at rest at the
+  /// rig's position then (CheckerboardMotion does, at its nominal pose); the caller turns the rig
+  /// to the motion's start attitude first (wave_start()).
+  void follow(TimeNs t0_ns, std::shared_ptr<const Trajectory> motion, const Eigen::Isometry3d& T_op_motion);
+  /// When the last piece ends (the rig rests from then on).
+  TimeNs busy_until_ns() const;
   /// The orientation the rig rests in after every turn so far.
   Eigen::Quaterniond final_orientation() const;
 
  private:
   struct Piece {
     TimeNs t0_ns = 0, t1_ns = 0;
-    Eigen::Quaterniond q0;
+    Eigen::Quaterniond q0 = Eigen::Quaterniond::Identity();
     Eigen::Vector3d rotvec_body = Eigen::Vector3d::Zero();
     double lift_m = 0.0;
+    std::shared_ptr<const Trajectory> motion;  // a followed motion instead of a turn
+    Eigen::Isometry3d T_op_motion = Eigen::Isometry3d::Identity();
   };
+  static RigState follow_state(const Piece& p, TimeNs t_ns);
   mutable std::mutex mutex_;
   Eigen::Quaterniond q_start_;
   std::vector<Piece> pieces_;
   std::vector<Segment> segments_;
 };
+
+/// Where a CheckerboardMotion goes in an OperatorTrajectory: turned by `yaw_rad` about the
+/// vertical and shifted so that its rest pose is at the origin, where the operator's rig rests.
+Eigen::Isometry3d follow_transform(const CheckerboardMotion& motion, double yaw_rad = 0.0);
 
 struct ScriptedOperatorOptions {
   double reaction_s = 0.8;     // from a prompt or a capture to the start of the operator's move
@@ -58,6 +75,10 @@ struct ScriptedOperatorOptions {
   bool accept = true;          // the review's answer: accept (y) or reject (n)
   bool abort_on_fault = true;  // a script cannot fix a device: abort instead of waiting for ever
   bool press_keys = true;      // false: only move the rig, a person at the console presses the keys
+  /// The motion step: the rig is moved along this motion in front of the target (the board where
+  /// wave_T_op_motion puts the motion's board); empty: the operator skips the step.
+  std::shared_ptr<const CheckerboardMotion> wave;
+  Eigen::Isometry3d wave_T_op_motion = Eigen::Isometry3d::Identity();
   std::uint64_t seed = 1;
 };
 
@@ -74,6 +95,7 @@ class ScriptedOperator {
 
  private:
   void turn_to_up(const Eigen::Vector3d& up_body, TimeNs now_ns);
+  void wave(TimeNs now_ns);
   void press_at(const std::string& key, TimeNs t_ns);
 
   OperatorTrajectory& trajectory_;

@@ -591,6 +591,18 @@ json SessionEngine::result_message() const {
     m["imu"] = {
         {"A_a", mat(c.A_a)}, {"b_a", vec(c.b_a)}, {"A_g", mat(c.A_g)}, {"b_g", vec(c.b_g)}, {"G", mat(c.G)}};
   }
+  if (final_->camimu) {
+    json cams = json::array();
+    for (const auto& cam : final_->camimu->result.cameras) {
+      const Eigen::Quaterniond q(cam.T_cam_imu.rotation());
+      cams.push_back({{"name", cam.name},
+                      {"t_cam_imu_m", vec(cam.T_cam_imu.translation())},
+                      {"q_cam_imu_wxyz", {q.w(), q.x(), q.y(), q.z()}},
+                      {"timeshift_cam_imu_s", cam.timeshift_cam_imu_s},
+                      {"reprojection_rms_px", cam.reprojection_rms_px}});
+    }
+    m["cameras"] = cams;
+  }
   return m;
 }
 

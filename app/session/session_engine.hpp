@@ -127,7 +127,14 @@ class SessionEngine {
   void write_finished(const Status& status);
 
   SessionState state() const { return state_; }
+  /// The step under way while a session runs and the step has not failed; empty otherwise.
+  std::optional<StepId> current_step() const {
+    if (state_ != SessionState::kRunning || current_ >= steps_.size() || failed_step_) return std::nullopt;
+    return steps_[current_].id;
+  }
   bool running() const { return state_ == SessionState::kRunning || state_ == SessionState::kReview; }
+  /// When the step under way started (sample time); a redo starts it again.
+  TimeNs step_start_ns() const { return step_start_ns_; }
   /// Sample time of the engine: the last sample's.
   TimeNs now_ns() const { return now_ns_; }
   /// {"type":"status", ...}

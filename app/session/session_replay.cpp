@@ -24,8 +24,13 @@ struct Input {
 /// the log says they were applied, no storage.
 class ReplayHost final : public EngineHost {
  public:
-  ReplayHost(const ImuStreamInfo& info, std::string dir, PreflightReport preflight)
-      : info_(info), dir_(std::move(dir)), preflight_(std::move(preflight)) {}
+  ReplayHost(const RigConfig& config, const ImuStreamInfo& info, std::string dir, PreflightReport preflight,
+             std::string motion_log)
+      : config_(config),
+        info_(info),
+        dir_(std::move(dir)),
+        preflight_(std::move(preflight)),
+        motion_log_(std::move(motion_log)) {}
 
   void emit(const json& message) override {
     if (message.value("type", "") == "result") result_ = message;
@@ -33,7 +38,7 @@ class ReplayHost final : public EngineHost {
   }
   PreflightReport preflight() override { return preflight_; }
   void solve(const SolveJob& job) override {
-    SolveOutcome out = run_solve(job, info_, dir_, nullptr);
+    SolveOutcome out = run_solve(job, config_, info_, dir_, nullptr, {motion_log_, false});
     // The record the live session stored is not in the log; the files stand for it.
     if (job.final && out.error.empty()) out.payload = json{{"replay", true}, {"files", out.result_files}};
     outcomes_[job.id] = std::move(out);
@@ -46,9 +51,11 @@ class ReplayHost final : public EngineHost {
   std::string outcome_;
 
  private:
+  RigConfig config_;
   ImuStreamInfo info_;
   std::string dir_;
   PreflightReport preflight_;
+  std::string motion_log_;
 };
 
 struct LoggedSession {
@@ -69,6 +76,15 @@ Result<LoggedSession> read_session_events(const log::SessionLogReader& reader) {
   LoggedSession s;
   bool started = false;
   for (const auto& e : *events) {
+    if (e.kind == "frame") {
+      // What the engine saw of a camera frame in the motion step (the runner's frame event).
+      json m = json::parse(e.message, nullptr, false);
+      if (m.is_object()) {
+        m["type"] = "frame";
+        s.inputs.push_back({e.t_ns, m});
+      }
+      continue;
+    }
     if (e.kind != "session") continue;
     json m = json::parse(e.message, nullptr, false);
     if (m.is_discarded() || !m.is_object()) continue;
@@ -122,7 +138,9 @@ double max_difference(const json& a, const json& b) {
 /// Applies one logged input to the engine. False when the replay diverged.
 bool apply(SessionEngine& engine, ReplayHost& host, const json& m, ReplaySummary& summary, std::string* why) {
   const std::string type = m.value("type", "");
-  if (type == "key") {
+  if (type == "frame") {
+    engine.on_frame(m.value("t_ns", TimeNs{0}), m.value("seen", false));
+  } else if (type == "key") {
     ++summary.keys;
     (void)engine.key(m.value("key", ""));
   } else if (type == "fault") {
@@ -175,7 +193,9 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   std::filesystem::create_directories(dir, ec);
   if (ec) return make_error(Errc::kIo, "cannot create " + dir + ": " + ec.message());
 
-  ReplayHost host(info, dir, logged->preflight);
+  const std::string motion_log =
+      (std::filesystem::path(options.log_path).parent_path() / kMotionLogFile).string();
+  ReplayHost host(*config, info, dir, logged->preflight, motion_log);
   SessionEngine engine(*config, info, host);
   if (auto s = engine.start(logged->steps); !s.ok())
     return s.error().context("starting the replayed session");
@@ -218,8 +238,9 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   }
   if (!logged->result.is_null() && !host.result_.is_null()) {
     summary.live_result = true;
-    summary.max_difference =
-        max_difference(logged->result.value("imu", json()), host.result_.value("imu", json()));
+    summary.max_difference = std::max(
+        max_difference(logged->result.value("imu", json()), host.result_.value("imu", json())),
+        max_difference(logged->result.value("cameras", json()), host.result_.value("cameras", json())));
   } else if (!logged->result.is_null()) {
     summary.notes.push_back("the live session logged a result but the replay produced none");
     summary.live_result = true;

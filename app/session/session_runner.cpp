@@ -6,10 +6,15 @@
 #include <filesystem>
 #include <map>
 
+#include "app/calibration_check.hpp"
+#include "app/camera_results.hpp"
+#include "app/camimu_results.hpp"
 #include "app/report/report.hpp"
 #include "app/result_writers.hpp"
 #include "app/solvers.hpp"
+#include "calib/target_detection.hpp"
 #include "core/version.hpp"
+#include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
 
 namespace imucal::app::session {
@@ -44,19 +49,88 @@ Result<std::string> make_session_dir(const std::string& state_dir, const std::st
 
 }  // namespace
 
-static SolveOutcome run_solve_timed(const SolveJob& job, const ImuStreamInfo& info, const std::string& dir,
-                                    const std::function<void(double, const std::string&)>& progress);
+static SolveOutcome run_solve_timed(const SolveJob& job, const RigConfig& config, const ImuStreamInfo& info,
+                                    const std::string& dir,
+                                    const std::function<void(double, const std::string&)>& progress,
+                                    const MotionLogSource& motion_log);
 
-SolveOutcome run_solve(const SolveJob& job, const ImuStreamInfo& info, const std::string& dir,
-                       const std::function<void(double, const std::string&)>& progress) {
+SolveOutcome run_solve(const SolveJob& job, const RigConfig& config, const ImuStreamInfo& info,
+                       const std::string& dir,
+                       const std::function<void(double, const std::string&)>& progress,
+                       const MotionLogSource& motion_log) {
   const auto t0 = std::chrono::steady_clock::now();
-  SolveOutcome out = run_solve_timed(job, info, dir, progress);
+  SolveOutcome out = run_solve_timed(job, config, info, dir, progress, motion_log);
   out.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }
 
-static SolveOutcome run_solve_timed(const SolveJob& job, const ImuStreamInfo& info, const std::string& dir,
-                                    const std::function<void(double, const std::string&)>& progress) {
+/// The camera-IMU part of a final solve: each camera's intrinsics from the motion log's frames,
+/// then the camera-IMU calibration with the static result (`static_yaml`) as the IMU's prior.
+/// Returns the result files (camera-<name>.yaml, camimu/...), the canonical one last.
+static Result<std::vector<std::string>> solve_camimu(
+    const RigConfig& config, const std::string& dir, const std::string& static_yaml,
+    const MotionLogSource& source, SolveOutcome& out,
+    const std::function<void(double, const std::string&)>& progress) {
+  const std::string log = source.path.empty() ? dir + "/" + kMotionLogFile : source.path;
+  if (!config.target) return make_error(Errc::kInvalidArgument, "the configuration names no target");
+  std::vector<std::string> files;
+  CamImuRequest q;
+  q.log_path = log;
+  q.target = *config.target;
+  q.target_source = "the rig configuration";
+  q.store_detections = source.store_detections;
+  for (std::size_t i = 0; i < config.cameras.size(); ++i) {
+    const std::string& name = config.cameras[i].name;
+    if (progress)
+      progress(0.2 + 0.2 * static_cast<double>(i) / static_cast<double>(config.cameras.size()),
+               "Camera intrinsics of " + name);
+    CameraCalibrationRequest cq;
+    cq.log_path = log;
+    cq.camera = name;
+    cq.target = *config.target;
+    cq.target_source = q.target_source;
+    cq.threads = 2;
+    cq.store_detections = source.store_detections;
+    auto cam = calibrate_camera(cq);
+    if (!cam.ok()) return cam.error().context(name + " intrinsics");
+    const std::string path = dir + "/camera-" + name + ".yaml";
+    IMUCAL_TRY(write_text_file(path, camera_result_yaml(*cam)));
+    files.push_back(path);
+    q.camera_paths.push_back(path);
+  }
+  auto prior = read_imucal_calibration(static_yaml);
+  if (!prior.ok()) return prior.error().context("the static result as the IMU's prior");
+  q.imu_intrinsics = *prior;
+  q.gravity_source = "standard gravity";
+  q.threads = 2;
+  q.options.threads = 2;
+  q.solve_progress = [&progress](const calib::CamImuIteration& it) {
+    if (progress) progress(0.5, "Camera-IMU " + it.stage + ": iteration " + std::to_string(it.iteration));
+  };
+  if (progress) progress(0.45, "Camera-IMU calibration");
+  auto report = calibrate_camimu(q);
+  if (!report.ok()) return report.error().context("camera-IMU calibration");
+  const std::string out_dir = dir + "/camimu";
+  std::error_code ec;
+  std::filesystem::create_directories(out_dir, ec);
+  if (ec) return make_error(Errc::kIo, "cannot create " + out_dir + ": " + ec.message());
+  const std::pair<const char*, std::string> texts[] = {
+      {kCamchainImucamFile, camimu_camchain_yaml(*report)},
+      {kCamImuImuFile, camimu_imu_yaml(*report)},
+      {kCamImuJsonFile, camimu_result_json(*report)},
+      {kCamImuCalibrationFile, camimu_calibration_yaml(*report)}};
+  for (const auto& [name, text] : texts) {
+    files.push_back(out_dir + "/" + name);
+    IMUCAL_TRY(write_text_file(files.back(), text));
+  }
+  out.camimu = std::move(*report);
+  return files;
+}
+
+static SolveOutcome run_solve_timed(const SolveJob& job, const RigConfig& config, const ImuStreamInfo& info,
+                                    const std::string& dir,
+                                    const std::function<void(double, const std::string&)>& progress,
+                                    const MotionLogSource& motion_log) {
   SolveOutcome out;
   if (progress) progress(0.0, "Static calibration of " + std::to_string(job.samples->size()) + " samples");
   auto result = app::calibrate_static(*job.samples, job.static_options);
@@ -66,13 +140,7 @@ static SolveOutcome run_solve_timed(const SolveJob& job, const ImuStreamInfo& in
   }
   out.imu = std::move(*result);
   if (!job.final) return out;
-  if (job.camimu) {
-    out.error =
-        "the camera-IMU solve is not run by the service; calibrate the session log with "
-        "`imucal calibrate camimu`";
-    return out;
-  }
-  if (progress) progress(0.9, "Writing the results");
+  if (progress) progress(job.camimu ? 0.15 : 0.9, "Writing the static results");
   const std::string yaml_path = dir + "/imu-static.yaml", json_path = dir + "/imu-static.json";
   const std::map<std::string, std::string> meta = {{"software_version", kVersion}};
   Status s = write_text_file(yaml_path, static_result_yaml(*out.imu, info));
@@ -82,6 +150,14 @@ static SolveOutcome run_solve_timed(const SolveJob& job, const ImuStreamInfo& in
     return out;
   }
   out.result_files = {yaml_path, json_path};
+  if (job.camimu) {
+    auto files = solve_camimu(config, dir, yaml_path, motion_log, out, progress);
+    if (!files.ok()) {
+      out.error = files.error().message;
+      return out;
+    }
+    out.result_files.insert(out.result_files.end(), files->begin(), files->end());
+  }
   return out;
 }
 
@@ -97,6 +173,7 @@ SessionRunner::~SessionRunner() {
   }
   cv_.notify_all();
   worker_.join();
+  close_motion_log();
   close_log();
 }
 
@@ -145,6 +222,7 @@ bool SessionRunner::busy() {
 Status SessionRunner::start(const std::vector<std::string>& steps) {
   if (engine_.running()) return make_error(Errc::kAlreadyExists, "a session is running; abort it first");
   close_log();
+  motion_step_start_ns_ = -1;
   if (!options_.session_dir.empty()) {
     dir_ = options_.session_dir;
   } else {
@@ -180,7 +258,122 @@ void SessionRunner::on_samples(std::span<const ImuSample> samples) {
       }
     }
     engine_.on_sample(s);
+    sync_motion_log();
+    if (motion_log_) {
+      if (auto st = motion_log_->append_imu(motion_imu_id_, s); !st.ok()) motion_log_error(st.error());
+    }
   }
+}
+
+bool SessionRunner::wants_frames() const {
+  return engine_.current_step() == StepId::kMotion && !config_.cameras.empty();
+}
+
+void SessionRunner::sync_motion_log() {
+  if (!options_.write_log) return;
+  const bool want = wants_frames();
+  if (want && engine_.step_start_ns() != motion_step_start_ns_) {
+    // The step began (or began again after a redo): a new log. After an error, none until then.
+    close_motion_log();
+    motion_step_start_ns_ = engine_.step_start_ns();
+    if (auto s = open_motion_log(); !s.ok()) motion_log_error(s.error());
+  } else if (!want && motion_log_) {
+    close_motion_log();
+  }
+}
+
+void SessionRunner::motion_log_error(const Error& error) {
+  // Without its log the motion step cannot be solved: the step stops, as for a device fault,
+  // and a redo starts the step again with a new log.
+  close_motion_log();
+  engine_.fault("log", "the motion log " + dir_ + "/" + kMotionLogFile + ": " + error.message);
+}
+
+Status SessionRunner::open_motion_log() {
+  const std::string path = dir_ + "/" + kMotionLogFile;
+  std::error_code ec;
+  std::filesystem::remove(path, ec);  // a redo of the step records it again
+  auto writer = log::SessionLogWriter::create(path);
+  if (!writer.ok()) return writer.error();
+  motion_log_ = std::move(*writer);
+  for (const auto& [k, v] : options_.metadata) IMUCAL_TRY(motion_log_->set_metadata(k, v));
+  if (config_.target) IMUCAL_TRY(motion_log_->set_metadata("target", target_to_yaml(*config_.target)));
+  auto id = motion_log_->add_imu_stream(info_);
+  if (!id.ok()) return id.error();
+  motion_imu_id_ = *id;
+  motion_camera_ids_.clear();
+  for (const auto& c : config_.cameras) {
+    CameraStreamInfo ci;
+    ci.name = c.name;
+    ci.width = c.width;
+    ci.height = c.height;
+    ci.rate_hz = c.rate_hz;
+    ci.backend = camera_backend_name(c.backend);
+    ci.device = c.device;
+    ci.timestamp_source = "mid-exposure";
+    auto cid = motion_log_->add_camera_stream(ci);
+    if (!cid.ok()) return cid.error();
+    motion_camera_ids_.push_back(*cid);
+  }
+  return {};
+}
+
+void SessionRunner::close_motion_log() {
+  if (!motion_log_) return;
+  if (auto s = motion_log_->close(); !s.ok()) warn("closing the motion log: " + s.error().message);
+  motion_log_.reset();
+}
+
+void SessionRunner::on_frame(std::size_t camera, const CameraFrame& frame) {
+  sync_motion_log();
+  if (!wants_frames() || camera >= config_.cameras.size()) return;
+  bool seen = false;
+  if (!detector_ && config_.target) {
+    auto detector = make_target_detector(*config_.target);
+    if (!detector.ok()) {
+      engine_.fault(config_.cameras[camera].name, "target detection: " + detector.error().message);
+      return;
+    }
+    detector_ = std::move(*detector);
+  }
+  if (frame.encoding != "gray8" ||
+      frame.data.size() != static_cast<std::size_t>(frame.width) * static_cast<std::size_t>(frame.height)) {
+    engine_.fault(config_.cameras[camera].name,
+                  "the camera delivers " + frame.encoding +
+                      " frames; the service takes 8-bit grey (pixel_format GREY)");
+    return;
+  }
+  if (detector_) {
+    calib::GrayView view{frame.data.data(), frame.width, frame.height, 0};
+    auto obs = detector_->detect(view);
+    seen = obs.ok() && !obs->empty();
+  }
+  if (motion_log_) {
+    log::Image image;
+    image.width = frame.width;
+    image.height = frame.height;
+    image.data = frame.data;
+    auto png = log::encode_png(image);
+    if (!png.ok()) {
+      motion_log_error(png.error());
+      return;
+    }
+    CameraFrame stored = frame;
+    stored.encoding = "png";
+    stored.data = std::move(*png);
+    if (auto s = motion_log_->append_frame(motion_camera_ids_[camera], stored); !s.ok()) {
+      motion_log_error(s.error());
+      return;
+    }
+  }
+  // Replay reads what the engine saw from this event (docs/service-session.md).
+  if (log_) {
+    // At the engine's time, as replay applies inputs (after the sample of that time).
+    const json e = {{"camera", camera}, {"t_ns", frame.t_ns}, {"seen", seen}};
+    if (auto s = log_->append_event({engine_.now_ns(), "frame", e.dump()}); !s.ok())
+      warn("session log: " + s.error().message);
+  }
+  engine_.on_frame(frame.t_ns, seen);
 }
 
 void SessionRunner::fault(const std::string& source, const std::string& text) { engine_.fault(source, text); }
@@ -219,8 +412,9 @@ void SessionRunner::solve(const SolveJob& job) {
         engine_.solve_progress(f, text);
       }
     };
-    SolveOutcome out = run_solve(
-        job, info, dir, job.final ? std::function<void(double, const std::string&)>(progress) : nullptr);
+    SolveOutcome out =
+        run_solve(job, config_, info, dir,
+                  job.final ? std::function<void(double, const std::string&)>(progress) : nullptr);
     if (job.final && out.error.empty()) {
       if (make_payload) {
         auto payload = make_payload(out.result_files);
@@ -241,6 +435,16 @@ void SessionRunner::solve(const SolveJob& job) {
           out.result_files.push_back(ro.html_path);
         } else {
           warn("the session report was not written: " + r.error().message);
+        }
+        if (out.camimu) {
+          ro.result_path = dir + "/camimu/result.json";
+          ro.log_path = options_.write_log ? dir + "/" + kMotionLogFile : std::string();
+          ro.html_path = dir + "/report-camimu.html";
+          if (auto r = report::write_report(ro); r.ok()) {
+            out.result_files.push_back(ro.html_path);
+          } else {
+            warn("the camera-IMU report was not written: " + r.error().message);
+          }
         }
       }
     }
@@ -281,6 +485,7 @@ Status SessionRunner::recover() { return options_.recover ? options_.recover() :
 
 void SessionRunner::recording_finished() {
   recording_ = false;
+  close_motion_log();
   if (log_) (void)log_->flush();
 }
 

@@ -24,6 +24,9 @@
 namespace imucal::log {
 class SessionLogWriter;
 }
+namespace imucal::calib {
+class TargetDetector;
+}
 
 namespace imucal::app::session {
 
@@ -56,15 +59,24 @@ struct RunnerOptions {
   std::string session_dir;
 };
 
-/// The static result files of a final solve: the canonical YAML and the JSON the report reads.
-struct SolveFiles {
-  std::string static_yaml, static_json;
-};
+/// The motion step's own log in a session folder: the IMU and the cameras from the step's start
+/// to its end, what the camera-IMU calibration reads (`imucal calibrate camimu` reads it too).
+inline constexpr const char* kMotionLogFile = "motion.imulog";
 
-/// Runs a solve job (the static calibration and, with job.camimu, nothing else yet) and writes
-/// the final one's result files into `dir`. Shared by the service and replay.
-SolveOutcome run_solve(const SolveJob& job, const ImuStreamInfo& info, const std::string& dir,
-                       const std::function<void(double, const std::string&)>& progress);
+/// Runs a solve job and writes the final one's result files into `dir`: the static calibration
+/// and, with job.camimu, the camera intrinsics (camera.yaml) and the camera-IMU calibration
+/// (camimu/) of the motion log with the static result as the IMU's prior. Shared by the
+/// service and replay.
+/// `motion_log`: where the motion log is (empty: `dir`/motion.imulog); replay reads the live
+/// session's and leaves it as it is (store_detections false).
+struct MotionLogSource {
+  std::string path;
+  bool store_detections = true;
+};
+SolveOutcome run_solve(const SolveJob& job, const RigConfig& config, const ImuStreamInfo& info,
+                       const std::string& dir,
+                       const std::function<void(double, const std::string&)>& progress,
+                       const MotionLogSource& motion_log = {});
 
 class SessionRunner final : public EngineHost {
  public:
@@ -79,6 +91,13 @@ class SessionRunner final : public EngineHost {
   [[nodiscard]] Status start(const std::vector<std::string>& steps);
   /// Samples in time order: stored while the session records, then given to the engine.
   void on_samples(std::span<const ImuSample> samples);
+  /// True while the motion step runs: the host streams its cameras then and hands the frames to
+  /// on_frame().
+  bool wants_frames() const;
+  /// A camera frame of the configured camera `camera` (index into cameras[]), 8-bit grey
+  /// (encoding "gray8"): stored in the motion log, searched for the target, and counted by the
+  /// engine (target seen or not). A frame outside the motion step is ignored.
+  void on_frame(std::size_t camera, const CameraFrame& frame);
   /// An IMU or camera fault (`source` "imu", "cam0", "storage"): stored and given to the engine.
   void fault(const std::string& source, const std::string& text);
   const std::string& session_dir() const { return dir_; }
@@ -101,6 +120,10 @@ class SessionRunner final : public EngineHost {
   void run_on_worker(std::function<void()> work);
   void worker_loop();
   void close_log();
+  Status open_motion_log();
+  void close_motion_log();
+  void sync_motion_log();
+  void motion_log_error(const Error& error);
   void warn(const std::string& text) const;
 
   RigConfig config_;
@@ -111,6 +134,12 @@ class SessionRunner final : public EngineHost {
   std::unique_ptr<log::SessionLogWriter> log_;
   int stream_id_ = -1;
   bool recording_ = false;
+  // The motion step's log and the live target detection.
+  std::unique_ptr<log::SessionLogWriter> motion_log_;
+  int motion_imu_id_ = -1;
+  std::vector<int> motion_camera_ids_;
+  std::unique_ptr<calib::TargetDetector> detector_;
+  TimeNs motion_step_start_ns_ = -1;  // the motion step the log was opened for
   // One worker runs solves and writes in order.
   std::mutex mutex_;
   std::condition_variable cv_;

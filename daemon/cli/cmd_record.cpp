@@ -178,7 +178,8 @@ std::vector<std::unique_ptr<drivers::camera::Camera>> make_sim_cameras(
     scene.seed = a.seed + cameras.size();
     scene.host_offset_ns = start_ns;
     auto renderer = render != nullptr
-                        ? take(render->scene_renderer(scene, motion), "simulated camera " + cc.name)
+                        ? take(render->scene_renderer(scene, motion, motion->T_world_board(scene.target)),
+                               "simulated camera " + cc.name)
                         : drivers::camera::fake::test_pattern_renderer(cc.width, cc.height, scene.seed);
     drivers::camera::fake::VirtualCameraOptions vo;
     vo.id = cc.name;

@@ -42,6 +42,11 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"motion", "full"}));
   app.add_option("--seed", o.seed, "Virtual rig: seed of its IMU errors and of the operator")
       ->capture_default_str();
+  app.add_option(
+         "--sim-unplug-camera", o.sim_unplug_camera_after,
+         "Virtual rig: its cameras vanish (a yanked cable) after this many frames of the first motion "
+         "step; for trying the fault path")
+      ->check(CLI::PositiveNumber);
   std::string start;
   auto* start_opt = app.add_option("--start", start,
                                    "Start a session at launch: 'default' for the configured steps, or a "

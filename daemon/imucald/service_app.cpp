@@ -8,11 +8,18 @@
 #include <csignal>
 #include <filesystem>
 #include <fstream>
+#include <numbers>
 #include <sstream>
 #include <thread>
 
+#include "app/cameras.hpp"
+#include "app/module_loader.hpp"
 #include "app/stored_calibration.hpp"
 #include "core/version.hpp"
+#include "sim/camera_scene.hpp"
+#include "sim/camimu.hpp"
+#include "sim/motion.hpp"
+#include "sim/render_module.hpp"
 #include "sim/truth.hpp"
 
 namespace imucal::imucald {
@@ -59,6 +66,71 @@ std::string truth_comparison(const json& imu, const CanonicalImuModel& truth, bo
   return out.str();
 }
 
+/// The camera-IMU results beside the virtual cameras' truth (every virtual camera is mounted
+/// at CamImuSimOptions::default_T_cam_imu and stamps with no offset).
+std::string camera_truth_comparison(const json& cameras) {
+  const Eigen::Isometry3d T = sim::CamImuSimOptions::default_T_cam_imu();
+  const Eigen::Quaterniond q_true(T.rotation());
+  std::ostringstream out;
+  out.setf(std::ios::fixed);
+  for (const auto& c : cameras) {
+    const auto& t = c.at("t_cam_imu_m");
+    const auto& qj = c.at("q_cam_imu_wxyz");
+    const Eigen::Vector3d est(t[0].get<double>(), t[1].get<double>(), t[2].get<double>());
+    const Eigen::Quaterniond q(qj[0].get<double>(), qj[1].get<double>(), qj[2].get<double>(),
+                               qj[3].get<double>());
+    out.precision(2);
+    out << "  " << c.value("name", "cam") << " t_cam_imu (mm)\n    estimated " << (est * 1e3).transpose()
+        << "\n    true      " << (T.translation() * 1e3).transpose() << "\n    error     "
+        << ((est - T.translation()) * 1e3).transpose() << "\n";
+    out.precision(4);
+    out << "  " << c.value("name", "cam") << " rotation error "
+        << q.angularDistance(q_true) * 180.0 / std::numbers::pi << " deg, time offset "
+        << c.value("timeshift_cam_imu_s", 0.0) * 1e3 << " ms (true 0), reprojection RMS "
+        << c.value("reprojection_rms_px", 0.0) << " px\n";
+  }
+  return out.str();
+}
+
+/// A camera's frame as the session takes it: 8-bit grey rows without padding, stamped at
+/// mid-exposure where the camera says where in the exposure its stamp is (an end-of-frame stamp
+/// stays as it is: the camera-IMU calibration's time offset takes up its constant delay).
+Result<CameraFrame> grey_frame(const drivers::camera::Frame& f, drivers::camera::TimestampMeaning meaning) {
+  const std::string& pf = f.pixel_format;
+  int step = 0, offset = 0;  // luma: byte offset + step * x in each row
+  if (pf == "GREY" || pf == "Y8" || pf == "Mono8" || pf == "R8") {
+    step = 1;
+  } else if (pf == "YUYV" || pf == "YUY2" || pf == "YUV422_YUYV_Packed") {
+    step = 2;
+  } else if (pf == "UYVY" || pf == "YUV422Packed" || pf == "YUV422_8_UYVY") {
+    step = 2;
+    offset = 1;
+  } else {
+    return make_error(
+        Errc::kUnsupported,
+        "pixel format " + pf + " is not one the service reads; set pixel_format GREY, YUYV or UYVY");
+  }
+  const std::size_t w = static_cast<std::size_t>(f.width), h = static_cast<std::size_t>(f.height);
+  const std::size_t stride = f.stride ? f.stride : w * static_cast<std::size_t>(step);
+  if (f.data.size() < stride * (h - 1) + w * static_cast<std::size_t>(step))
+    return make_error(Errc::kDevice, "a frame shorter than its size says");
+  CameraFrame out;
+  out.t_ns = f.t_ns;
+  if (meaning == drivers::camera::TimestampMeaning::kStartOfExposure) out.t_ns += f.exposure_ns / 2;
+  out.width = f.width;
+  out.height = f.height;
+  out.encoding = "gray8";
+  out.exposure_ns = f.exposure_ns;
+  out.sequence = f.sequence;
+  out.data.resize(w * h);
+  for (std::size_t r = 0; r < h; ++r) {
+    const std::uint8_t* src = f.data.data() + r * stride + offset;
+    std::uint8_t* dst = out.data.data() + r * w;
+    for (std::size_t x = 0; x < w; ++x) dst[x] = src[x * static_cast<std::size_t>(step)];
+  }
+  return out;
+}
+
 }  // namespace
 
 Service::Service(ServiceOptions options)
@@ -89,9 +161,11 @@ Status Service::init() {
     return open_imu();
   };
   ro.make_payload = [](const std::vector<std::string>& files) -> Result<json> {
+    // The static result and the camera-IMU calibration (imucal's canonical records); the
+    // camchains beside them are for Kalibr's tools.
     std::vector<std::string> results;
     for (const auto& f : files)
-      if (f.ends_with(".yaml")) results.push_back(f);
+      if (f.ends_with("/imu-static.yaml") || f.ends_with("/camimu/calibration.yaml")) results.push_back(f);
     return app::calibration_payload_from_files(results);
   };
   ro.write_storage = [this](const json& payload) { return write_storage(payload); };
@@ -125,10 +199,13 @@ Status Service::open_imu() {
     if (!rig.ok()) return rig.error();
     sim_rig_ = std::move(*rig);
     stream_info_ = sim_rig_->stream_info();
+    IMUCAL_TRY(prepare_sim_cameras());
     if (!options_.sim_operator.empty()) {
       sim::ScriptedOperatorOptions oo;
       oo.seed = options_.seed;
       oo.press_keys = options_.sim_operator == "full";
+      oo.wave = sim_motion_;
+      if (sim_motion_) oo.wave_T_op_motion = sim::follow_transform(*sim_motion_);
       operator_ =
           std::make_unique<sim::ScriptedOperator>(sim_rig_->trajectory(), oo, [this](const std::string& k) {
             if (auto s = runner_->engine().key(k); !s.ok())
@@ -160,6 +237,7 @@ Status Service::open_imu() {
 }
 
 void Service::close_imu() {
+  stop_cameras();
   sim_timer_.cancel();
   acquisition_.reset();
   rig_.reset();
@@ -197,6 +275,7 @@ void Service::sim_tick() {
   }
   on_samples(batch);
   if (operator_) operator_->on_time(sim_rig_->now_ns());
+  for (std::size_t i = 0; cameras_streaming_ && i < cameras_.size(); ++i) read_camera(i);
   if (options_.time_scale <= 0.0) {
     boost::asio::post(io_, [this] { sim_tick(); });
     return;
@@ -213,6 +292,7 @@ void Service::sim_tick() {
 void Service::on_samples(std::span<const ImuSample> samples) {
   samples_ += samples.size();
   runner_->on_samples(samples);
+  sync_cameras();
   if (start_pending_ && samples_ > 0) {
     start_pending_ = false;
     boost::asio::post(io_, [this] {
@@ -253,9 +333,11 @@ void Service::on_message(const json& m) {
     const bool counts = stream_info_.units == ImuUnits::kRaw;
     const std::string table =
         truth_comparison(m["imu"], sim::canonical_in_tedaldi_frame(sim_rig_->params(), counts), counts);
+    std::string cameras;
+    if (m.contains("cameras")) cameras = camera_truth_comparison(m["cameras"]);
     const std::string path = runner_->session_dir() + "/sim-truth.txt";
-    std::ofstream(path) << "The session's result beside the virtual rig's truth\n" << table;
-    spdlog::info("result beside the virtual rig's truth ({}):\n{}", path, table);
+    std::ofstream(path) << "The session's result beside the virtual rig's truth\n" << table << cameras;
+    spdlog::info("result beside the virtual rig's truth ({}):\n{}{}", path, table, cameras);
   } else if (type == "done") {
     spdlog::info("session {}: {}", m.value("outcome", ""), m.value("text", ""));
     notifier_.status("idle: last session " + m.value("outcome", ""));
@@ -306,11 +388,21 @@ app::session::PreflightReport Service::preflight() {
       r.stored = s;
     }
   }
-  if (!config_.cameras.empty()) {
-    r.devices.push_back({"cameras", true,
-                         std::to_string(config_.cameras.size()) +
-                             " configured; the service records the IMU only (camera-IMU: imucal record and "
-                             "calibrate camimu)"});
+  for (const CameraConfig& cc : config_.cameras) {
+    // Opened and closed here; the motion step streams it.
+    if (options_.sim) {
+      r.devices.push_back({cc.name, !sim_renderers_.empty(),
+                           "virtual camera " + std::to_string(cc.width) + "x" + std::to_string(cc.height) +
+                               " at " + std::to_string(static_cast<int>(cc.rate_hz)) +
+                               " Hz, rendering the target"});
+      continue;
+    }
+    auto camera = app::open_camera(cc);
+    r.devices.push_back({cc.name, camera.ok(),
+                         camera.ok() ? std::string((*camera)->backend()) + " " + cc.device + " opened, " +
+                                           std::to_string(cc.width) + "x" + std::to_string(cc.height) + " " +
+                                           cc.pixel_format
+                                     : camera.error().message});
   }
   return r;
 }
@@ -323,6 +415,152 @@ Status Service::write_storage(const json& payload) {
   return {};
 }
 
+Status Service::prepare_sim_cameras() {
+  sim_renderers_.clear();
+  sim_motion_.reset();
+  if (config_.cameras.empty()) return {};
+  if (!config_.target)
+    return make_error(Errc::kInvalidArgument,
+                      "the virtual rig's cameras need the target (target: in the configuration)");
+  // The operator's motion in front of the board: long enough to cover the step from the first
+  // move on, then at rest.
+  sim::CheckerboardMotionOptions mo = sim::CamImuSimOptions::default_motion();
+  mo.duration_s = config_.session.motion_s + 8.0;
+  auto motion = sim::CheckerboardMotion::create(mo, options_.seed);
+  if (!motion.ok()) return motion.error().context("the virtual rig's motion");
+  sim_motion_ = std::move(*motion);
+  auto render = app::load_module<sim::RenderModuleApi>(sim::kRenderModule, sim::kRenderModuleEntry);
+  if (!render.ok()) return render.error().context("the virtual rig's cameras");
+  const Eigen::Isometry3d T_op = sim::follow_transform(*sim_motion_);
+  // The trajectory belongs to the rig, which outlives the cameras (close_imu stops them first).
+  std::shared_ptr<const sim::Trajectory> trajectory(&sim_rig_->trajectory(), [](const sim::Trajectory*) {});
+  for (std::size_t i = 0; i < config_.cameras.size(); ++i) {
+    const CameraConfig& cc = config_.cameras[i];
+    sim::SimCameraScene scene;
+    scene.camera = sim::sim_camera_for(cc.width, cc.height);
+    scene.target = *config_.target;
+    scene.T_cam_imu = sim::CamImuSimOptions::default_T_cam_imu();
+    scene.timeshift_cam_imu_s = 0.0;  // the virtual camera stamps on the rig's clock exactly
+    scene.exposure_ns = 4'000'000;
+    scene.seed = options_.seed + i;
+    auto renderer =
+        (*render)->scene_renderer(scene, trajectory, T_op * sim_motion_->T_world_board(scene.target));
+    if (!renderer.ok()) return renderer.error().context("camera " + cc.name);
+    sim_renderers_.push_back(std::move(*renderer));
+  }
+  return {};
+}
+
+void Service::sync_cameras() {
+  const bool want = runner_ && runner_->wants_frames();
+  if (want && !cameras_streaming_) {
+    if (auto s = start_cameras(); !s.ok()) {
+      stop_cameras();
+      runner_->fault("camera", s.error().message);
+    }
+  } else if (!want && cameras_streaming_) {
+    stop_cameras();
+  }
+}
+
+Status Service::start_cameras() {
+  cameras_.clear();
+  cameras_.resize(config_.cameras.size());
+  cameras_streaming_ = true;
+  for (std::size_t i = 0; i < config_.cameras.size(); ++i) {
+    const CameraConfig& cc = config_.cameras[i];
+    CameraSlot& slot = cameras_[i];
+    if (options_.sim) {
+      drivers::camera::fake::VirtualCameraOptions vo;
+      vo.id = cc.name;
+      vo.width = cc.width;
+      vo.height = cc.height;
+      vo.rate_hz = cc.rate_hz;
+      vo.exposure_ns = 4'000'000;
+      vo.first_frame_ns = sim_rig_->now_ns() + static_cast<TimeNs>(1e9 / cc.rate_hz);
+      vo.clock = [this] { return sim_rig_->now_ns(); };
+      if (options_.sim_unplug_camera_after > 0 && camera_starts_ == 0)
+        vo.disconnect_after = options_.sim_unplug_camera_after;
+      auto camera = drivers::camera::fake::VirtualCamera::create(vo, sim_renderers_.at(i));
+      if (!camera.ok()) return camera.error().context("camera " + cc.name);
+      slot.camera = std::move(*camera);
+    } else {
+      auto camera = app::open_camera(cc);
+      if (!camera.ok()) return camera.error();
+      slot.camera = std::move(*camera);
+    }
+    if (auto s = slot.camera->start(); !s.ok()) return s.error().context("camera " + cc.name + ": starting");
+    slot.state = "streaming";
+    if (!options_.sim) {
+      const int fd = ::dup(slot.camera->fd());
+      if (fd < 0) return make_error(Errc::kIo, "camera " + cc.name + ": cannot wait on its descriptor");
+      slot.wait = std::make_unique<boost::asio::posix::stream_descriptor>(io_, fd);
+      wait_camera(i);
+    }
+  }
+  ++camera_starts_;
+  spdlog::info("cameras streaming for the motion step");
+  return {};
+}
+
+void Service::stop_cameras() {
+  if (!cameras_streaming_) return;
+  cameras_streaming_ = false;
+  for (auto& slot : cameras_) {
+    if (slot.wait) {
+      boost::system::error_code ec;
+      slot.wait->cancel(ec);
+      slot.wait->close(ec);
+      slot.wait.reset();
+    }
+    if (slot.camera) (void)slot.camera->stop();
+    slot.camera.reset();
+    if (slot.state == "streaming") slot.state = "closed";
+  }
+}
+
+void Service::wait_camera(std::size_t index) {
+  cameras_[index].wait->async_wait(boost::asio::posix::stream_descriptor::wait_read,
+                                   [this, index](const boost::system::error_code& ec) {
+                                     if (ec || !cameras_streaming_ || index >= cameras_.size()) return;
+                                     read_camera(index);
+                                     if (cameras_streaming_ && cameras_[index].wait) wait_camera(index);
+                                   });
+}
+
+void Service::read_camera(std::size_t index) {
+  CameraSlot& slot = cameras_[index];
+  if (!slot.camera) return;
+  for (;;) {
+    auto frame = slot.camera->dequeue();
+    if (!frame.ok()) {
+      camera_failed(index, frame.error());
+      return;
+    }
+    if (!frame->valid()) return;
+    auto grey = grey_frame(*frame, slot.camera->timestamp_meaning());
+    frame->release();
+    if (!grey.ok()) {
+      camera_failed(index, grey.error());
+      return;
+    }
+    ++slot.frames;
+    runner_->on_frame(index, *grey);
+    if (!cameras_streaming_) return;  // the step ended on this frame
+  }
+}
+
+void Service::camera_failed(std::size_t index, const Error& error) {
+  const std::string name = config_.cameras.at(index).name;
+  spdlog::error("camera {}: {}", name, error.message);
+  stop_cameras();
+  CameraSlot& slot = cameras_[index];
+  ++slot.faults;
+  slot.state = "failed";
+  slot.error = error.message;
+  runner_->fault(name, error.message);
+}
+
 json Service::status() {
   json s = runner_->engine().status();
   s["devices"] = {{"imu",
@@ -333,6 +571,16 @@ json Service::status() {
                     {"rate_hz", stream_info_.rate_hz},
                     {"error", imu_error_}}},
                   {"storage", storage_name(config_.storage)}};
+  json cams = json::array();
+  for (std::size_t i = 0; i < config_.cameras.size(); ++i) {
+    const CameraSlot* slot = i < cameras_.size() ? &cameras_[i] : nullptr;
+    cams.push_back({{"name", config_.cameras[i].name},
+                    {"state", slot ? slot->state : "closed"},
+                    {"frames", slot ? slot->frames : 0},
+                    {"faults", slot ? slot->faults : 0},
+                    {"error", slot ? slot->error : ""}});
+  }
+  s["devices"]["cameras"] = cams;
   s["session_dir"] = runner_->session_dir();
   s["version"] = kVersion;
   return s;
@@ -349,17 +597,9 @@ Status Service::start(const std::vector<std::string>& steps) {
     return make_error(Errc::kDevice,
                       "the IMU is not open (" + imu_error_ + "); check it and restart imucald");
   }
-  // The service records the IMU only: the camera-IMU calibration runs offline on a recording
-  // (imucal record, imucal calibrate camimu), so the motion step is not offered here.
   std::vector<std::string> run = steps;
   if (run.empty()) {
-    for (auto id : app::session::configured_steps(config_))
-      if (id != app::session::StepId::kMotion) run.emplace_back(app::session::step_name(id));
-  }
-  if (std::find(run.begin(), run.end(), "motion") != run.end()) {
-    return make_error(Errc::kUnsupported,
-                      "the service does not record cameras: leave out the motion step and calibrate cameras "
-                      "offline (imucal record, imucal calibrate camimu)");
+    for (auto id : app::session::configured_steps(config_)) run.emplace_back(app::session::step_name(id));
   }
   IMUCAL_TRY(runner_->start(run));
   spdlog::info("session started in {}", runner_->session_dir());

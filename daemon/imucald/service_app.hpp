@@ -3,6 +3,7 @@
 // virtual rig on accelerated time), the session runner (app/session), the control socket
 // (daemon/service) and systemd's notifications, on one io_context. docs/service.md.
 #include <boost/asio/io_context.hpp>
+#include <boost/asio/posix/stream_descriptor.hpp>
 #include <boost/asio/signal_set.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <chrono>
@@ -18,6 +19,8 @@
 #include "daemon/service/control_server.hpp"
 #include "daemon/service/notify.hpp"
 #include "daemon/service/session_host.hpp"
+#include "drivers/camera/camera.hpp"
+#include "drivers/camera/fake/virtual_camera.hpp"
 #include "sim/session_operator.hpp"
 #include "sim/session_rig.hpp"
 
@@ -33,6 +36,7 @@ struct ServiceOptions {
   std::string sim_operator;  // virtual rig: "" (nobody moves it), "motion" (moves it), "full" (moves it and
                              // presses keys)
   std::uint64_t seed = 1;
+  std::uint32_t sim_unplug_camera_after = 0;      // virtual rig: cameras vanish after this many frames (once)
   std::optional<std::vector<std::string>> start;  // start a session at launch with these steps
   bool exit_after_session = false;
 };
@@ -56,6 +60,14 @@ class Service final : public service::SessionHost {
  private:
   Status open_imu();
   void close_imu();
+  Status prepare_sim_cameras();
+  /// Streams the cameras while the session's motion step runs, and only then.
+  void sync_cameras();
+  Status start_cameras();
+  void stop_cameras();
+  void wait_camera(std::size_t index);
+  void read_camera(std::size_t index);
+  void camera_failed(std::size_t index, const Error& error);
   void sim_tick();
   void on_message(const nlohmann::json& message);
   void on_samples(std::span<const ImuSample> samples);
@@ -82,6 +94,20 @@ class Service final : public service::SessionHost {
   std::unique_ptr<sim::ScriptedOperator> operator_;
   std::chrono::steady_clock::time_point sim_wall_start_;
   TimeNs sim_rig_start_ns_ = 0;
+  // The cameras: built when the motion step starts, closed when it ends.
+  struct CameraSlot {
+    std::unique_ptr<drivers::camera::Camera> camera;
+    std::unique_ptr<boost::asio::posix::stream_descriptor> wait;  // hardware: the camera's fd
+    std::uint64_t frames = 0, faults = 0;
+    std::string state = "closed", error;
+  };
+  std::vector<CameraSlot> cameras_;
+  bool cameras_streaming_ = false;
+  int camera_starts_ = 0;
+  // Virtual rig: what its cameras see (one renderer per camera, the board where the scripted
+  // operator's motion puts it).
+  std::vector<drivers::camera::fake::FrameRenderer> sim_renderers_;
+  std::shared_ptr<const sim::CheckerboardMotion> sim_motion_;
   std::string imu_state_ = "closed";
   std::string imu_error_;
   std::uint64_t samples_ = 0, imu_faults_ = 0;

@@ -8,11 +8,13 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <regex>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -36,10 +38,14 @@ bool wait_for(const std::function<bool()>& done, double seconds = 120.0) {
   return done();
 }
 
-/// A rig configuration in `dir` with its storage there too; `extra` is appended (a session section).
-std::string write_config(const std::string& dir, const std::string& extra = "") {
+/// A rig configuration in `dir` with its storage there too; `extra` is appended (a session
+/// section); `camera` replaces the camera's size and rate.
+std::string write_config(const std::string& dir, const std::string& extra = "",
+                         const std::string& camera = "") {
   std::ifstream in(test::source_path("config/rig.yaml"));
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (!camera.empty())
+    text = std::regex_replace(text, std::regex("    width: 640\n    height: 480\n    rate_hz: 20\n"), camera);
   text = std::regex_replace(text, std::regex("path: /var/lib/imucal/calibration.bin"),
                             "path: " + dir + "/eeprom.bin");
   text = std::regex_replace(text, std::regex("target: checkerboard-7x6.yaml"),
@@ -59,9 +65,11 @@ std::string short_socket_path() {
 /// imucald started with fork/exec; killed (SIGKILL) if still running at the end.
 class Daemon {
  public:
-  Daemon(const std::string& dir, const std::vector<std::string>& extra) : socket_(short_socket_path()) {
-    std::vector<std::string> args = {IMUCALD_PATH,  "--config",     write_config(dir), "--socket", socket_,
-                                     "--state-dir", dir + "/state", "--sim",           "-q"};
+  Daemon(const std::string& dir, const std::vector<std::string>& extra, const std::string& config = "")
+      : socket_(short_socket_path()) {
+    std::vector<std::string> args = {IMUCALD_PATH,   "--config", config.empty() ? write_config(dir) : config,
+                                     "--socket",     socket_,    "--state-dir",
+                                     dir + "/state", "--sim",    "-q"};
     args.insert(args.end(), extra.begin(), extra.end());
     pid_ = ::fork();
     if (pid_ == 0) {
@@ -244,8 +252,9 @@ namespace {
 TEST(Imucald, TheReviewShowsTheChangeToTheStoredCalibration) {
   const std::string dir = test::scratch_dir();
   for (int run = 0; run < 2; ++run) {
-    Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start", "default",
-                        "--exit-after-session", "--seed", std::to_string(21 + run)});
+    Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start",
+                        "preflight,warmup,still,poses,solve,review,write", "--exit-after-session", "--seed",
+                        std::to_string(21 + run)});
     ASSERT_EQ(daemon.wait(), 0) << test::read_file(dir + "/imucald.log");
   }
   std::vector<std::string> logs;
@@ -260,6 +269,97 @@ TEST(Imucald, TheReviewShowsTheChangeToTheStoredCalibration) {
   // And the second write went to the other slot.
   const auto stored = test::run_cli({"store", "read", "--config", dir + "/rig.yaml"});
   EXPECT_TRUE(has(stored.out, "sequence 2")) << stored.out;
+}
+
+}  // namespace
+}  // namespace imucal
+
+namespace imucal {
+namespace {
+
+/// A number on the line of sim-truth.txt that starts with `label`, `index` numbers after it.
+double truth_figure(const std::string& text, const std::string& label, int index) {
+  const auto at = text.find(label);
+  if (at == std::string::npos) return NAN;
+  std::istringstream in(text.substr(at + label.size()));
+  double v = NAN;
+  for (int i = 0; i <= index; ++i) in >> v;
+  return v;
+}
+
+TEST(Imucald, TheMotionStepRecordsTheCameraAndTheRecordHoldsTheCameraImuCalibration) {
+  const std::string dir = test::scratch_dir();
+  // A small camera at 10 Hz and a 30 s motion step keep the test short; the protocol is the
+  // shipped one otherwise.
+  const std::string config = write_config(dir, "session:\n  poses: 12\n  motion_s: 30\n",
+                                          "    width: 320\n    height: 240\n    rate_hz: 10\n");
+  Daemon daemon(dir,
+                {"--sim-operator", "full", "--time-scale", "0", "--start", "default", "--exit-after-session"},
+                config);
+  ASSERT_EQ(daemon.wait(), 0) << test::read_file(dir + "/imucald.log");
+  const std::string log = session_log(dir);
+  const std::string session = std::filesystem::path(log).parent_path().string();
+
+  // The motion step's own log: the IMU and the camera's frames, the camera streaming only then.
+  auto motion = log::SessionLogReader::open(session + "/motion.imulog");
+  ASSERT_TRUE(motion.ok()) << motion.error().message;
+  EXPECT_TRUE((*motion)->health().complete);
+  auto cam = (*motion)->find_camera_stream("cam0");
+  ASSERT_TRUE(cam.ok()) << cam.error().message;
+  auto frames = (*motion)->frame_count(*cam);
+  ASSERT_TRUE(frames.ok());
+  EXPECT_GE(*frames, 290);  // 30 s at 10 Hz
+  EXPECT_LE(*frames, 320);
+  const std::string events = all_events(log);
+  EXPECT_TRUE(has(events, R"("step":"motion")")) << "the motion step ran";
+  EXPECT_TRUE(has(events, "Target seen in")) << "live detection figures";
+
+  // The record on the storage holds the camera, T_cam_imu near the virtual camera's mounting.
+  const auto stored = test::run_cli({"store", "read", "--config", config, "--json"});
+  ASSERT_EQ(stored.exit_code, 0) << stored.err;
+  EXPECT_TRUE(has(stored.out, R"("T_cam_imu")")) << stored.out.substr(0, 2000);
+  const std::string truth = test::read_file(session + "/sim-truth.txt");
+  const auto cam_at = truth.find("cam0 t_cam_imu");
+  ASSERT_NE(cam_at, std::string::npos) << truth;
+  for (int axis = 0; axis < 3; ++axis)  // mm
+    EXPECT_LT(std::abs(truth_figure(truth.substr(cam_at), "error", axis)), 5.0) << truth;
+  EXPECT_LT(truth_figure(truth, "rotation error", 0), 0.1) << truth;         // degrees
+  EXPECT_LT(std::abs(truth_figure(truth, "time offset", 0)), 0.5) << truth;  // ms
+
+  // Replay reaches the same camera-IMU result from the two logs.
+  const auto r = test::run_cli({"replay", log, "-o", dir + "/replay", "--json"});
+  ASSERT_EQ(r.exit_code, 0) << r.err << r.out;
+  EXPECT_TRUE(has(r.out, R"("same": true)")) << r.out;
+  EXPECT_TRUE(std::filesystem::exists(dir + "/replay/camimu/calibration.yaml"));
+}
+
+TEST(Imucald, ACameraLostInTheMotionStepStopsItAndKeepsWhatWasRecorded) {
+  const std::string dir = test::scratch_dir();
+  const std::string config = write_config(dir, "session:\n  poses: 12\n  motion_s: 30\n",
+                                          "    width: 320\n    height: 240\n    rate_hz: 10\n");
+  // The scripted operator aborts on a fault (a script cannot plug a cable back in).
+  Daemon daemon(dir,
+                {"--sim-operator", "full", "--time-scale", "0", "--start", "default", "--exit-after-session",
+                 "--sim-unplug-camera", "50"},
+                config);
+  EXPECT_EQ(daemon.wait(), 1) << test::read_file(dir + "/imucald.log");
+  const std::string log = session_log(dir);
+  const std::string events = all_events(log);
+  EXPECT_TRUE(has(events, R"("source":"cam0")")) << events.substr(0, 3000);
+  EXPECT_TRUE(has(events, "disconnected"));
+  EXPECT_TRUE(has(events, "press r to redo the step")) << "the way to continue";
+  EXPECT_TRUE(has(events, R"("outcome":"aborted")"));
+  EXPECT_FALSE(std::filesystem::exists(dir + "/eeprom.bin")) << "the storage is untouched";
+  // Every frame the camera gave before it vanished is in the motion log, which is complete.
+  auto motion =
+      log::SessionLogReader::open(std::filesystem::path(log).parent_path().string() + "/motion.imulog");
+  ASSERT_TRUE(motion.ok()) << motion.error().message;
+  EXPECT_TRUE((*motion)->health().complete);
+  auto cam = (*motion)->find_camera_stream("cam0");
+  ASSERT_TRUE(cam.ok());
+  auto frames = (*motion)->frame_count(*cam);
+  ASSERT_TRUE(frames.ok());
+  EXPECT_EQ(*frames, 50);
 }
 
 }  // namespace
