@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <boost/asio/post.hpp>
+#include <cerrno>
 #include <csignal>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
@@ -16,6 +18,7 @@
 #include "app/module_loader.hpp"
 #include "app/stored_calibration.hpp"
 #include "core/version.hpp"
+#include "drivers/storage/storage_device.hpp"
 #include "sim/camera_scene.hpp"
 #include "sim/camimu.hpp"
 #include "sim/motion.hpp"
@@ -64,6 +67,20 @@ std::string truth_comparison(const json& imu, const CanonicalImuModel& truth, bo
       << ", G " << dG.cwiseAbs().maxCoeff() << " (rad/s per m/s^2; true G max "
       << truth.G.cwiseAbs().maxCoeff() << ")\n";
   return out.str();
+}
+
+/// Whether the service may write the storage, without writing it: an existing device or file is
+/// opened for writing (and closed); a file not yet made needs a folder the service may write.
+/// Empty when writable, else why not.
+std::string storage_unwritable(const StorageConfig& config) {
+  if (config.backend == StorageBackend::kFile && !std::filesystem::exists(config.path)) {
+    const std::filesystem::path dir = std::filesystem::path(config.path).parent_path();
+    if (::access(dir.empty() ? "." : dir.c_str(), W_OK | X_OK) != 0)
+      return "cannot create " + config.path + ": " + std::strerror(errno);
+    return {};
+  }
+  auto device = drivers::open_storage_device(config, drivers::StorageAccess::kWrite);
+  return device.ok() ? std::string() : device.error().message;
 }
 
 /// The camera-IMU results beside the virtual cameras' truth (every virtual camera is mounted
@@ -379,7 +396,11 @@ app::session::PreflightReport Service::preflight() {
   if (!stored.ok()) {
     r.devices.push_back({"storage", false, storage_name(config_.storage) + ": " + stored.error().message});
   } else {
-    r.devices.push_back({"storage", true, storage_name(config_.storage) + ": readable"});
+    const std::string unwritable = storage_unwritable(config_.storage);
+    r.devices.push_back(
+        {"storage", unwritable.empty(),
+         storage_name(config_.storage) +
+             (unwritable.empty() ? ": readable and writable" : ": readable, not writable: " + unwritable)});
     if (stored->payload) {
       json s = *stored->payload;
       s["summary"] = "sequence " + std::to_string(stored->sequence) + " in slot " +

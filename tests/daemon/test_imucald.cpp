@@ -362,5 +362,25 @@ TEST(Imucald, ACameraLostInTheMotionStepStopsItAndKeepsWhatWasRecorded) {
   EXPECT_EQ(*frames, 50);
 }
 
+TEST(Imucald, PreflightFailsAStorageTheServiceCannotWrite) {
+  const std::string dir = test::scratch_dir();
+  // A folder that does not exist: not writable even for root, which the tests may run as.
+  std::string config = write_config(dir);
+  {
+    std::string text = test::read_file(config);
+    text = std::regex_replace(text, std::regex("path: " + dir + "/eeprom.bin"),
+                              "path: " + dir + "/none/eeprom.bin");
+    std::ofstream(config) << text;
+  }
+  Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start", "default"}, config);
+  ASSERT_TRUE(wait_for([&] { return has(all_events(session_log(dir)), "not writable"); }, 60))
+      << test::read_file(dir + "/imucald.log") << all_events(session_log(dir)).substr(0, 3000);
+  const std::string events = all_events(session_log(dir));
+  EXPECT_TRUE(has(events, "cannot create " + dir + "/none/eeprom.bin")) << events.substr(0, 3000);
+  EXPECT_FALSE(has(events, R"("step":"warmup")")) << "the session does not go on past a failed preflight";
+  ::kill(daemon.pid(), SIGTERM);
+  EXPECT_EQ(daemon.wait(), 0);
+}
+
 }  // namespace
 }  // namespace imucal

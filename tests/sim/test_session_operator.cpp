@@ -68,7 +68,8 @@ TEST(SessionOperator, TheScriptedOperatorFacesTheBoardAndTheCameraSeesIt) {
   oo.wave_T_op_motion = follow_transform(*motion);
   std::vector<std::string> keys;
   ScriptedOperator op(traj, oo, [&](const std::string& k) { keys.push_back(k); });
-  op.on_message({{"type", "prompt"}, {"step", "motion"}, {"text", "Move the rig"}, {"keys", {"skip"}}}, 2 * kS);
+  op.on_message({{"type", "prompt"}, {"step", "motion"}, {"text", "Move the rig"}, {"keys", {"skip"}}},
+                2 * kS);
   op.on_time(40 * kS);
   EXPECT_TRUE(keys.empty()) << "the operator moves instead of skipping";
   EXPECT_GT(traj.busy_until_ns(), 30 * kS);
@@ -78,7 +79,8 @@ TEST(SessionOperator, TheScriptedOperatorFacesTheBoardAndTheCameraSeesIt) {
   scene.target = CamImuSimOptions::default_sim_target();
   scene.T_cam_imu = CamImuSimOptions::default_T_cam_imu();
   scene.motion_blur = false;
-  auto source = SceneFrameSource::create(scene, traj, oo.wave_T_op_motion * motion->T_world_board(scene.target));
+  auto source =
+      SceneFrameSource::create(scene, traj, oo.wave_T_op_motion * motion->T_world_board(scene.target));
   ASSERT_TRUE(source.ok()) << source.error().message;
   std::vector<std::uint8_t> pixels(320 * 240);
   // Before the operator moves, the rig faces away; through the motion the board is in view.
