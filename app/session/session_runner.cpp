@@ -16,6 +16,7 @@
 #include "core/version.hpp"
 #include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
+#include "log/target_detections.hpp"
 
 namespace imucal::app::session {
 
@@ -302,6 +303,7 @@ Status SessionRunner::open_motion_log() {
   if (!id.ok()) return id.error();
   motion_imu_id_ = *id;
   motion_camera_ids_.clear();
+  live_.assign(config_.cameras.size(), {});
   for (const auto& c : config_.cameras) {
     CameraStreamInfo ci;
     ci.name = c.name;
@@ -320,8 +322,27 @@ Status SessionRunner::open_motion_log() {
 
 void SessionRunner::close_motion_log() {
   if (!motion_log_) return;
-  if (auto s = motion_log_->close(); !s.ok()) warn("closing the motion log: " + s.error().message);
+  const Status closed = motion_log_->close();
   motion_log_.reset();
+  if (!closed.ok()) {
+    warn("closing the motion log: " + closed.error().message);
+    return;
+  }
+  // Every frame was searched as it came, with the detector `calibrate camera` uses by default:
+  // stored under its key, the solve (and `imucal calibrate camera` offline) reuse them.
+  if (!detector_ || !config_.target) return;
+  for (std::size_t i = 0; i < live_.size() && i < motion_camera_ids_.size(); ++i) {
+    log::DetectionSet set;
+    set.target_key = detection_key(*config_.target, calib::DetectionOptions{});
+    set.description = target_to_yaml(*config_.target);
+    set.frames = live_[i].frames;
+    for (auto& [t, data] : live_[i].found) set.detections.push_back({t, std::move(data)});
+    if (auto s = log::write_target_detections(dir_ + "/" + kMotionLogFile, motion_camera_ids_[i], set);
+        !s.ok())
+      warn("the live detections were not stored in the motion log (the solve searches again): " +
+           s.error().message);
+  }
+  live_.clear();
 }
 
 void SessionRunner::on_frame(std::size_t camera, const CameraFrame& frame) {
@@ -347,6 +368,15 @@ void SessionRunner::on_frame(std::size_t camera, const CameraFrame& frame) {
     calib::GrayView view{frame.data.data(), frame.width, frame.height, 0};
     auto obs = detector_->detect(view);
     seen = obs.ok() && !obs->empty();
+    if (camera < live_.size()) {
+      ++live_[camera].frames;
+      if (seen) {
+        obs->t_ns = frame.t_ns;
+        obs->width = frame.width;
+        obs->height = frame.height;
+        live_[camera].found.emplace_back(frame.t_ns, encode_detection(*obs));
+      }
+    }
   }
   if (motion_log_) {
     log::Image image;

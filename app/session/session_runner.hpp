@@ -138,6 +138,13 @@ class SessionRunner final : public EngineHost {
   std::unique_ptr<log::SessionLogWriter> motion_log_;
   int motion_imu_id_ = -1;
   std::vector<int> motion_camera_ids_;
+  // Each camera's live detections, stored in the motion log when it closes so that the final
+  // solve's intrinsics reuse them instead of searching every frame again.
+  struct LiveDetections {
+    std::int64_t frames = 0;
+    std::vector<std::pair<TimeNs, std::string>> found;  // (frame time, encoded observation)
+  };
+  std::vector<LiveDetections> live_;
   std::unique_ptr<calib::TargetDetector> detector_;
   TimeNs motion_step_start_ns_ = -1;  // the motion step the log was opened for
   // One worker runs solves and writes in order.
