@@ -485,7 +485,7 @@ Status ConfigParser::parse_target(const YAML::Node& node, RigConfig& config) con
 Status ConfigParser::parse_storage(const YAML::Node& node, StorageConfig& storage) const {
   IMUCAL_TRY(check_map(node, "storage",
                        {"backend", "path", "i2c_device", "i2c_address", "page_bytes", "address_bytes",
-                        "size_bytes", "offset_bytes"}));
+                        "size_bytes", "offset_bytes", "program_gyro_offsets"}));
   if (!node["backend"]) return error(node, "storage.backend", "missing (file, nvmem or i2c-eeprom)");
   auto backend = get_string(node["backend"], "storage.backend");
   if (!backend.ok()) return backend.error();
@@ -536,6 +536,11 @@ Status ConfigParser::parse_storage(const YAML::Node& node, StorageConfig& storag
                  "256..16777216 bytes; two A/B slots must fit");
   IMUCAL_CFG_INT(node, "offset_bytes", "storage.offset_bytes", storage.offset_bytes, x >= 0 && x <= (1 << 24),
                  "0..16777216 bytes");
+  if (const YAML::Node n = node["program_gyro_offsets"]) {
+    if (!n.IsScalar() || (n.Scalar() != "true" && n.Scalar() != "false"))
+      return error(n, "storage.program_gyro_offsets", "expected true or false");
+    storage.program_gyro_offsets = n.Scalar() == "true";
+  }
   return {};
 }
 
@@ -762,6 +767,7 @@ std::string rig_config_to_yaml(const RigConfig& c) {
   }
   out << YAML::Key << "size_bytes" << YAML::Value << c.storage.size_bytes;
   out << YAML::Key << "offset_bytes" << YAML::Value << c.storage.offset_bytes;
+  out << YAML::Key << "program_gyro_offsets" << YAML::Value << c.storage.program_gyro_offsets;
   out << YAML::EndMap;
   out << YAML::Key << "session" << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "steps" << YAML::Value << YAML::Flow << c.session.steps;
@@ -805,7 +811,8 @@ std::string rig_config_to_json(const RigConfig& c) {
   }
   json storage = {{"backend", storage_backend_name(c.storage.backend)},
                   {"size_bytes", c.storage.size_bytes},
-                  {"offset_bytes", c.storage.offset_bytes}};
+                  {"offset_bytes", c.storage.offset_bytes},
+                  {"program_gyro_offsets", c.storage.program_gyro_offsets}};
   if (c.storage.backend == StorageBackend::kI2cEeprom) {
     storage["i2c_device"] = c.storage.i2c_device;
     storage["i2c_address"] = c.storage.i2c_address;

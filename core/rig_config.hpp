@@ -70,6 +70,9 @@ struct StorageConfig {
   int address_bytes = 2;  // i2c-eeprom: word address width, 1 (24c01..24c16) or 2 (24c32 and larger)
   int size_bytes = 4096;  // bytes available to imucal (both A/B slots)
   int offset_bytes = 0;   // where imucal's region starts inside the device
+  /// imucald puts the stored gyro bias into the MPU-6000's gyro offset registers (cleared while a
+  /// session records the chip as it powers up); docs/storage.md.
+  bool program_gyro_offsets = false;
 };
 
 /// The service's guided session (imucald, docs/service-session.md): which steps run and their

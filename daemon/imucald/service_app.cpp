@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <boost/asio/post.hpp>
 #include <cerrno>
 #include <csignal>
@@ -232,6 +233,7 @@ Status Service::open_imu() {
     sim_wall_start_ = std::chrono::steady_clock::now();
     sim_rig_start_ns_ = sim_rig_->now_ns();
     imu_state_ = "open";
+    if (!runner_ || !runner_->engine().running()) set_gyro_offsets(true);
     boost::asio::post(io_, [this] { sim_tick(); });
     return {};
   }
@@ -249,6 +251,7 @@ Status Service::open_imu() {
         return !quit_;
       });
   imu_state_ = "open";
+  if (!runner_ || !runner_->engine().running()) set_gyro_offsets(true);
   io_.stop();  // run() restarts the loop with the acquisition on it
   return {};
 }
@@ -357,6 +360,7 @@ void Service::on_message(const json& m) {
     spdlog::info("result beside the virtual rig's truth ({}):\n{}{}", path, table, cameras);
   } else if (type == "done") {
     spdlog::info("session {}: {}", m.value("outcome", ""), m.value("text", ""));
+    set_gyro_offsets(true);  // the record on the storage now, new or not
     notifier_.status("idle: last session " + m.value("outcome", ""));
     if (options_.exit_after_session) {
       exit_code_ = m.value("outcome", "") == "written" || m.value("outcome", "") == "completed" ? 0 : 1;
@@ -365,8 +369,54 @@ void Service::on_message(const json& m) {
   }
 }
 
+drivers::mpu6000::Mpu6000* Service::driver() {
+  return sim_rig_ ? &sim_rig_->rig().driver() : rig_ ? &rig_->driver() : nullptr;
+}
+
+void Service::set_gyro_offsets(bool from_record) {
+  if (!config_.storage.program_gyro_offsets || imu_state_ != "open" || !driver()) return;
+  std::array<double, 3> bias{0.0, 0.0, 0.0};
+  std::string source = "cleared (power-up zero) while a session records";
+  if (from_record) {
+    auto stored = app::read_stored_calibration(config_);
+    if (!stored.ok() || !stored->payload) {
+      source = "cleared: no stored calibration";
+    } else {
+      const json imu = stored->payload->value("imu", json::object());
+      if (imu.value("input_units", "") != "raw" || !imu.contains("b_g")) {
+        source = "cleared: the stored gyro bias is not in counts";
+      } else {
+        for (int i = 0; i < 3; ++i) bias[i] = imu["b_g"][i].get<double>();
+        source = "the stored gyro bias (sequence " + std::to_string(stored->sequence) + ")";
+      }
+    }
+  }
+  // The registers count 1/32.8 deg/s whatever the range: 4 output counts at +-250 deg/s, 2 at
+  // +-500, 1 at +-1000, 1/2 at +-2000. The stored bias is in counts of the configured range.
+  int fs = 0;
+  for (int r = config_.imu.gyro_range_dps; r > 250; r /= 2) ++fs;
+  auto current = driver()->read_offsets();
+  if (!current.ok()) {
+    gyro_offsets_ = "not set: " + current.error().message;
+    spdlog::error("gyro offset registers: {}", current.error().message);
+    return;
+  }
+  drivers::mpu6000::OffsetRegisters regs = *current;  // the accelerometer's factory trims stay
+  for (int i = 0; i < 3; ++i)
+    regs.gyro[i] =
+        static_cast<std::int16_t>(std::clamp(std::lround(-bias[i] * (1 << fs) / 4.0), -32768L, 32767L));
+  if (auto st = driver()->write_offsets(regs); !st.ok()) {
+    gyro_offsets_ = "not set: " + st.error().message;
+    spdlog::error("gyro offset registers: {}", st.error().message);
+    return;
+  }
+  gyro_offsets_ = "[" + std::to_string(regs.gyro[0]) + " " + std::to_string(regs.gyro[1]) + " " +
+                  std::to_string(regs.gyro[2]) + "] from " + source;
+  spdlog::info("gyro offset registers: {}", gyro_offsets_);
+}
+
 std::string Service::self_test() {
-  drivers::mpu6000::Mpu6000* driver = sim_rig_ ? &sim_rig_->rig().driver() : rig_ ? &rig_->driver() : nullptr;
+  drivers::mpu6000::Mpu6000* driver = this->driver();
   if (!driver) return "not open";
   // The chip's self-test runs outside streaming; the driver reconfigures and streams again after it.
   auto result = driver->self_test([this](TimeNs d) {
@@ -385,13 +435,15 @@ app::session::PreflightReport Service::preflight() {
   app::session::PreflightReport r;
   const std::string test = imu_state_ == "open" ? self_test() : "";
   const bool test_ok = test.rfind("self-test passed", 0) == 0;
-  r.devices.push_back({"imu", imu_state_ == "open" && test_ok,
-                       imu_state_ == "open"
-                           ? std::string(options_.sim ? "virtual MPU-6000 (register emulator)"
-                                                      : "MPU-6000 on " + rig_->bus_name()) +
-                                 ", WHO_AM_I answered, " + test + ", " + std::to_string(samples_) +
-                                 " samples so far"
-                           : "not open: " + imu_error_});
+  r.devices.push_back(
+      {"imu", imu_state_ == "open" && test_ok,
+       imu_state_ == "open"
+           ? std::string(options_.sim ? "virtual MPU-6000 (register emulator)"
+                                      : "MPU-6000 on " + rig_->bus_name()) +
+                 ", WHO_AM_I answered, " + test + ", " + std::to_string(samples_) + " samples so far" +
+                 (config_.storage.program_gyro_offsets ? ", gyro offset registers " + gyro_offsets_
+                                                       : std::string())
+           : "not open: " + imu_error_});
   auto stored = app::read_stored_calibration(config_);
   if (!stored.ok()) {
     r.devices.push_back({"storage", false, storage_name(config_.storage) + ": " + stored.error().message});
@@ -590,6 +642,7 @@ json Service::status() {
                     {"samples", samples_},
                     {"faults", imu_faults_},
                     {"rate_hz", stream_info_.rate_hz},
+                    {"gyro_offsets", gyro_offsets_},
                     {"error", imu_error_}}},
                   {"storage", storage_name(config_.storage)}};
   json cams = json::array();
@@ -622,7 +675,12 @@ Status Service::start(const std::vector<std::string>& steps) {
   if (run.empty()) {
     for (auto id : app::session::configured_steps(config_)) run.emplace_back(app::session::step_name(id));
   }
-  IMUCAL_TRY(runner_->start(run));
+  // The session calibrates the chip as it powers up: no bias removed inside it.
+  set_gyro_offsets(false);
+  if (auto s = runner_->start(run); !s.ok()) {
+    set_gyro_offsets(true);
+    return s;
+  }
   spdlog::info("session started in {}", runner_->session_dir());
   return {};
 }

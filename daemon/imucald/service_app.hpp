@@ -75,6 +75,10 @@ class Service final : public service::SessionHost {
   app::session::PreflightReport preflight();
   std::string self_test();
   Status write_storage(const nlohmann::json& payload);
+  /// storage.program_gyro_offsets: the stored gyro bias into the chip's gyro offset registers
+  /// (`from_record`), or the registers back to their power-up zero (before a session records).
+  void set_gyro_offsets(bool from_record);
+  drivers::mpu6000::Mpu6000* driver();
   void arm_watchdog();
   void shutdown(const std::string& why);
 
@@ -108,6 +112,7 @@ class Service final : public service::SessionHost {
   // operator's motion puts it).
   std::vector<drivers::camera::fake::FrameRenderer> sim_renderers_;
   std::shared_ptr<const sim::CheckerboardMotion> sim_motion_;
+  std::string gyro_offsets_ = "off";  // what the gyro offset registers hold, for status and preflight
   std::string imu_state_ = "closed";
   std::string imu_error_;
   std::uint64_t samples_ = 0, imu_faults_ = 0;

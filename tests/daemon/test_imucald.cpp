@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <regex>
 #include <sstream>
 #include <string>
@@ -380,6 +381,70 @@ TEST(Imucald, PreflightFailsAStorageTheServiceCannotWrite) {
   EXPECT_FALSE(has(events, R"("step":"warmup")")) << "the session does not go on past a failed preflight";
   ::kill(daemon.pid(), SIGTERM);
   EXPECT_EQ(daemon.wait(), 0);
+}
+
+/// The stored record's gyro bias (counts), from `imucal store read --json`.
+std::vector<double> stored_gyro_bias(const std::string& config) {
+  const auto r = test::run_cli({"store", "read", "--config", config, "--json"});
+  const auto doc = nlohmann::json::parse(r.out, nullptr, false);
+  if (doc.is_discarded() || !doc.contains("calibration")) return {};
+  return doc["calibration"]["imu"]["b_g"].get<std::vector<double>>();
+}
+
+TEST(Imucald, TheStoredGyroBiasGoesIntoTheOffsetRegistersAndSessionsSeeTheChipWithout) {
+  const std::string dir = test::scratch_dir();
+  std::string config = write_config(dir);
+  {
+    std::string text = test::read_file(config);
+    text = std::regex_replace(text, std::regex("(path: " + dir + "/eeprom.bin)"),
+                              "$1\n  program_gyro_offsets: true");
+    std::ofstream(config) << text;
+  }
+  const std::vector<std::string> session = {"--sim-operator",
+                                            "full",
+                                            "--time-scale",
+                                            "0",
+                                            "--start",
+                                            "preflight,warmup,still,poses,solve,review,write",
+                                            "--exit-after-session",
+                                            "--seed",
+                                            "5"};
+  {
+    Daemon first(dir, session, config);
+    ASSERT_EQ(first.wait(), 0) << test::read_file(dir + "/imucald.log");
+  }
+  const std::vector<double> b1 = stored_gyro_bias(config);
+  ASSERT_EQ(b1.size(), 3u);
+
+  // At start the service programs the stored bias: at +-500 deg/s one register count is two
+  // output counts, against the bias.
+  {
+    Daemon idle(dir, {"--seed", "5"}, config);
+    ASSERT_TRUE(wait_for([&] { return idle.ready(); }, 30)) << test::read_file(dir + "/imucald.log");
+    const std::string status = dir + "/status.json";
+    ASSERT_EQ(std::system(
+                  (std::string(IMUCALCTL_PATH) + " --socket " + idle.socket() + " status --json > " + status)
+                      .c_str()),
+              0);
+    const std::string expected =
+        "[" + std::to_string(std::lround(-b1[0] / 2)) + " " + std::to_string(std::lround(-b1[1] / 2)) + " " +
+        std::to_string(std::lround(-b1[2] / 2)) + "] from the stored gyro bias (sequence 1)";
+    EXPECT_TRUE(has(test::read_file(status), expected))
+        << test::read_file(status) << "\nexpected " << expected;
+    ::kill(idle.pid(), SIGTERM);
+    EXPECT_EQ(idle.wait(), 0);
+  }
+
+  // A session clears them first: it calibrates the chip as it powers up, and finds the same bias.
+  for (const auto& e : std::filesystem::directory_iterator(std::filesystem::path(dir) / "state" / "sessions"))
+    std::filesystem::rename(e.path(), dir + "/first-session");
+  Daemon second(dir, session, config);
+  ASSERT_EQ(second.wait(), 0) << test::read_file(dir + "/imucald.log");
+  EXPECT_TRUE(
+      has(all_events(session_log(dir)), "gyro offset registers [0 0 0] from cleared (power-up zero)"));
+  const std::vector<double> b2 = stored_gyro_bias(config);
+  ASSERT_EQ(b2.size(), 3u);
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(b2[i], b1[i], 0.05) << "axis " << i;
 }
 
 }  // namespace
