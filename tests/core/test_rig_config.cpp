@@ -320,5 +320,26 @@ TEST(RigConfig, SessionSectionRefusesWhatCannotRun) {
   }
 }
 
+TEST(RigConfig, ProgramGyroOffsetsIsABooleanOfTheStorage) {
+  auto c = parse_rig_config(
+      "imu: {bus: sim}\nstorage: {backend: file, path: /tmp/x.bin, program_gyro_offsets: true}\n");
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_TRUE(c->storage.program_gyro_offsets);
+  auto again = parse_rig_config(rig_config_to_yaml(*c));
+  ASSERT_TRUE(again.ok()) << again.error().message;
+  EXPECT_TRUE(again->storage.program_gyro_offsets);
+  auto from_json = parse_rig_config(rig_config_to_json(*c));
+  ASSERT_TRUE(from_json.ok()) << from_json.error().message;
+  EXPECT_TRUE(from_json->storage.program_gyro_offsets);
+  auto off = parse_rig_config("imu: {bus: sim}\nstorage: {backend: file, path: /tmp/x.bin}\n");
+  ASSERT_TRUE(off.ok());
+  EXPECT_FALSE(off->storage.program_gyro_offsets);
+  auto bad = parse_rig_config(
+      "imu: {bus: sim}\nstorage: {backend: file, path: /tmp/x.bin, program_gyro_offsets: 1}\n");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message.find("storage.program_gyro_offsets"), std::string::npos)
+      << bad.error().message;
+}
+
 }  // namespace
 }  // namespace imucal
