@@ -47,6 +47,11 @@ int main(int argc, char** argv) {
          "Virtual rig: its cameras vanish (a yanked cable) after this many frames of the first motion "
          "step; for trying the fault path")
       ->check(CLI::PositiveNumber);
+  app.add_option("--sim-unplug-imu", o.sim_unplug_imu_after_s,
+                 "Virtual rig: its IMU stops answering (a yanked cable) this many seconds of rig time after "
+                 "a session "
+                 "starts; for trying the fault path")
+      ->check(CLI::PositiveNumber);
   std::string start;
   auto* start_opt = app.add_option("--start", start,
                                    "Start a session at launch: 'default' for the configured steps, or a "

@@ -288,6 +288,10 @@ void Service::sim_tick() {
           std::chrono::steady_clock::now() -
           std::chrono::nanoseconds(static_cast<std::int64_t>(rig_s / options_.time_scale * 1e9));
   }
+  if (sim_unplug_imu_at_ns_ >= 0 && sim_rig_->now_ns() >= sim_unplug_imu_at_ns_) {
+    sim_unplug_imu_at_ns_ = -1;
+    sim_rig_->rig().emulator().fail_next_transfers(1 << 30);  // every transfer from now on
+  }
   std::vector<ImuSample> batch;
   if (Status s = sim_rig_->advance(kSimTickNs, batch); !s.ok()) {
     imu_failed(s.error());
@@ -330,9 +334,18 @@ void Service::imu_failed(const Error& error) {
   imu_state_ = "failed";
   imu_error_ = error.message;
   spdlog::error("IMU: {}", error.message);
+  const bool scripted = options_.sim && options_.sim_operator == "full";
   close_imu();
   imu_state_ = "failed";
   runner_->fault("imu", error.message);
+  // The virtual rig's clock stopped with its IMU, and the scripted operator with it: it does
+  // what it does on any fault (a script cannot plug the IMU back in), at once.
+  if (scripted) {
+    boost::asio::post(io_, [this] {
+      if (auto s = runner_->engine().key("abort"); !s.ok())
+        spdlog::warn("scripted operator: abort: {}", s.error().message);
+    });
+  }
 }
 
 void Service::on_message(const json& m) {
@@ -674,6 +687,10 @@ Status Service::start(const std::vector<std::string>& steps) {
   std::vector<std::string> run = steps;
   if (run.empty()) {
     for (auto id : app::session::configured_steps(config_)) run.emplace_back(app::session::step_name(id));
+  }
+  if (sim_rig_ && options_.sim_unplug_imu_after_s > 0.0) {
+    sim_unplug_imu_at_ns_ = sim_rig_->now_ns() + static_cast<TimeNs>(options_.sim_unplug_imu_after_s * 1e9);
+    options_.sim_unplug_imu_after_s = 0.0;  // once
   }
   // The session calibrates the chip as it powers up: no bias removed inside it.
   set_gyro_offsets(false);

@@ -36,7 +36,10 @@ struct ServiceOptions {
   std::string sim_operator;  // virtual rig: "" (nobody moves it), "motion" (moves it), "full" (moves it and
                              // presses keys)
   std::uint64_t seed = 1;
-  std::uint32_t sim_unplug_camera_after = 0;      // virtual rig: cameras vanish after this many frames (once)
+  std::uint32_t sim_unplug_camera_after = 0;
+  double sim_unplug_imu_after_s =
+      0.0;  // virtual rig: the IMU stops answering this long into a session (once)      // virtual rig:
+            // cameras vanish after this many frames (once)
   std::optional<std::vector<std::string>> start;  // start a session at launch with these steps
   bool exit_after_session = false;
 };
@@ -108,6 +111,7 @@ class Service final : public service::SessionHost {
   std::vector<CameraSlot> cameras_;
   bool cameras_streaming_ = false;
   int camera_starts_ = 0;
+  TimeNs sim_unplug_imu_at_ns_ = -1;  // --sim-unplug-imu: when, on the rig's clock
   // Virtual rig: what its cameras see (one renderer per camera, the board where the scripted
   // operator's motion puts it).
   std::vector<drivers::camera::fake::FrameRenderer> sim_renderers_;

@@ -447,5 +447,30 @@ TEST(Imucald, TheStoredGyroBiasGoesIntoTheOffsetRegistersAndSessionsSeeTheChipWi
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(b2[i], b1[i], 0.05) << "axis " << i;
 }
 
+TEST(Imucald, AnImuLostMidSessionStopsTheStepAndKeepsWhatWasRecorded) {
+  const std::string dir = test::scratch_dir();
+  // 40 s into the session: in the poses step. The scripted operator aborts on a fault.
+  Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start",
+                      "preflight,warmup,still,poses,solve,review,write", "--exit-after-session",
+                      "--sim-unplug-imu", "40"});
+  EXPECT_EQ(daemon.wait(), 1) << test::read_file(dir + "/imucald.log");
+  const std::string log = session_log(dir);
+  const std::string events = all_events(log);
+  EXPECT_TRUE(has(events, R"("type":"fault")")) << events.substr(0, 3000);
+  EXPECT_TRUE(has(events, R"("source":"imu")"));
+  EXPECT_TRUE(has(events, "press r to redo the step"));
+  EXPECT_TRUE(has(events, R"("outcome":"aborted")"));
+  EXPECT_FALSE(std::filesystem::exists(dir + "/eeprom.bin")) << "the storage is untouched";
+  auto reader = log::SessionLogReader::open(log);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_TRUE((*reader)->health().complete);
+  auto id = (*reader)->find_imu_stream();
+  ASSERT_TRUE(id.ok());
+  auto n = (*reader)->imu_count(*id);
+  ASSERT_TRUE(n.ok());
+  EXPECT_GT(*n, 7000) << "the samples before the loss (40 s at 197 Hz) are kept";
+  EXPECT_LT(*n, 8200);
+}
+
 }  // namespace
 }  // namespace imucal
