@@ -178,6 +178,13 @@ json camera_json(const CamImuCameraResult& c, const CamImuCameraReport* in) {
             {"outlier_corners", c.outlier_corners},
             {"reprojection_rms_px", c.reprojection_rms_px},
             {"corner_sigma_px", c.corner_sigma_px}};
+  // Residuals as a flat [dx0, dy0, dx1, ...] list, to 1e-4 px (far below any corner's noise).
+  json px = json::array();
+  for (const auto& v : c.residuals_px) {
+    px.push_back(std::round(v.x() * 1e4) / 1e4);
+    px.push_back(std::round(v.y() * 1e4) / 1e4);
+  }
+  j["residuals"] = {{"px", std::move(px)}, {"outlier_px", c.outlier_px}, {"of_corners", c.corners}};
   if (in != nullptr) {
     j["rostopic"] = in->rostopic;
     j["source"] = in->source;
@@ -302,6 +309,13 @@ CamImuCameraResult read_camera(const json& j, const std::string& path) {
   c.outlier_corners = j.at("outlier_corners").get<int>();
   c.reprojection_rms_px = j.at("reprojection_rms_px").get<double>();
   c.corner_sigma_px = j.at("corner_sigma_px").get<double>();
+  // Results written before the residuals were stored have none.
+  if (j.contains("residuals")) {
+    const json& px = j["residuals"].at("px");
+    for (std::size_t i = 0; i + 1 < px.size(); i += 2)
+      c.residuals_px.emplace_back(px[i].get<float>(), px[i + 1].get<float>());
+    c.outlier_px = j["residuals"].value("outlier_px", 0.0);
+  }
   return c;
 }
 

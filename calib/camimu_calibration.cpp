@@ -561,16 +561,26 @@ void Estimator<N>::fill_result(CamImuCalibrationResult* out) {
     cr.corner_sigma_px = st_.cams[c].sigma_px;
   }
   std::vector<Eigen::Vector2d> e;
+  std::vector<std::vector<Eigen::Vector2f>> all(cameras_.size());
   for (std::size_t k = 0; k < frames_.size(); ++k) {
     CamImuCameraResult& cr = out->cameras[frame_camera_[k]];
     const double outlier_px = opt_.reprojection_loss_sigmas * st_.cams[frame_camera_[k]].sigma_px;
+    cr.outlier_px = outlier_px;
     frames_[k]->pixel_residuals(frame_blocks_[k].data(), &e);
     cr.frames += 1;
     for (const auto& v : e) {
       cr.corners += 1;
       sq[frame_camera_[k]] += v.squaredNorm();
       if (v.norm() > outlier_px) cr.outlier_corners += 1;
+      all[frame_camera_[k]].push_back(v.cast<float>());
     }
+  }
+  // Every k-th corner when there are more than the result keeps.
+  for (std::size_t c = 0; c < cameras_.size(); ++c) {
+    const std::size_t n = all[c].size(), cap = CamImuCameraResult::kMaxStoredResiduals;
+    const std::size_t step = (n + cap - 1) / cap;
+    for (std::size_t i = 0; i < n; i += std::max<std::size_t>(step, 1))
+      out->cameras[c].residuals_px.push_back(all[c][i]);
   }
   for (std::size_t c = 0; c < cameras_.size(); ++c) {
     auto& cr = out->cameras[c];

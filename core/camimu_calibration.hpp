@@ -47,6 +47,12 @@ struct CamImuCameraResult {
   int outlier_corners = 0;  // down-weighted by the robust loss (residual above its scale)
   double reprojection_rms_px = 0.0;
   double corner_sigma_px = 0.0;  // the corner noise the problem assumed
+  /// The reprojection residual (projected - detected, px) of every corner, or of every k-th
+  /// corner in time order when there are more than kMaxStoredResiduals, for the report's scatter
+  /// and histogram; outlier_px is the robust loss's scale (a residual above it was down-weighted).
+  static constexpr int kMaxStoredResiduals = 20000;
+  std::vector<Eigen::Vector2f> residuals_px;
+  double outlier_px = 0.0;
 };
 
 /// Standard deviations of the Krebs-form IMU parameters (0 for a fixed block).

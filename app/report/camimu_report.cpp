@@ -4,10 +4,12 @@
 // cross-correlation that started the time offset. result.json carries each camera's RMS
 // reprojection error, not the residual of each corner, so there is no histogram of them.
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
 #include "app/report/builders.hpp"
+#include "core/camimu_calibration.hpp"
 
 namespace imucal::app::report {
 namespace {
@@ -164,6 +166,79 @@ Figure xcorr_figure(const nlohmann::json& r) {
   return f;
 }
 
+/// The reprojection residual of every stored corner: a scatter of (dx, dy) with the robust loss's
+/// scale as a circle, and a histogram of |e|, one colour per camera. Empty when the result holds
+/// no residuals (written before they were stored).
+Figure reprojection_figure(const nlohmann::json& r) {
+  Figure f;
+  f.id = "camimu-reprojection";
+  f.title = "Reprojection errors";
+  f.height_px = 460;
+  std::string s, scatter, hist, circles;
+  std::size_t stored = 0, total = 0;
+  std::vector<double> lengths;
+  int i = 0;
+  for (const auto& cam : at(r, "cameras")) {
+    if (!cam.contains("residuals")) continue;
+    const auto& res = cam["residuals"];
+    const auto& px = at(res, "px");
+    std::vector<std::vector<double>> rows;
+    for (std::size_t k = 0; k + 1 < px.size(); k += 2) {
+      const double dx = px[k].get<double>(), dy = px[k + 1].get<double>();
+      rows.push_back({dx, dy, std::hypot(dx, dy)});
+      lengths.push_back(rows.back()[2]);
+    }
+    if (rows.empty()) continue;
+    stored += rows.size();
+    total += static_cast<std::size_t>(res.value("of_corners", 0));
+    const std::string n = std::to_string(i), colour = kAxisColour[i % 3];
+    const std::string name = gp_quote(cam.value("name", "cam" + n));
+    s += datablock("e" + n, rows);
+    scatter += std::string(scatter.empty() ? "plot " : ", ") + "$e" + n +
+               " using 1:2 with points pt 7 ps 0.25 lc rgb '" + colour + "' title " + name;
+    const double loss = res.value("outlier_px", 0.0);
+    if (loss > 0)
+      circles += "set object circle at 0,0 size " + num(loss, 8) + " fs empty border lc rgb '" + colour +
+                 "' dashtype 2\n";
+    hist += std::string(hist.empty() ? "plot " : ", ") + "$e" + n +
+            " using (bin($3)):(1) smooth frequency with boxes lc rgb '" + colour + "' title " + name;
+    ++i;
+  }
+  if (scatter.empty()) return {};
+  // The axes cover the bulk (the 99.5th percentile, or the loss's scale if larger) so that a few
+  // far outliers do not squeeze it into a dot; the caption counts what lies beyond.
+  std::sort(lengths.begin(), lengths.end());
+  double extent = lengths[std::min(lengths.size() - 1, static_cast<std::size_t>(0.995 * lengths.size()))];
+  for (const auto& cam : at(r, "cameras"))
+    if (cam.contains("residuals")) extent = std::max(extent, cam["residuals"].value("outlier_px", 0.0));
+  extent = std::max(extent * 1.25, 1e-3);
+  const auto beyond =
+      static_cast<std::size_t>(lengths.end() - std::upper_bound(lengths.begin(), lengths.end(), extent));
+  const double width = extent / 40.0;
+  f.caption =
+      "Projected minus detected corner position (px) after the final stage: left, every stored corner, "
+      "with the robust loss's scale dashed (corners outside it were down-weighted as outliers); right, "
+      "the histogram of their lengths. " +
+      std::to_string(stored) + " of " + std::to_string(total) +
+      " corners stored (every k-th in time order when there are more than " +
+      std::to_string(CamImuCameraResult::kMaxStoredResiduals) + "); " + std::to_string(beyond) +
+      " lie beyond the axes (" + num(extent, 3) + " px).";
+  const std::string range = "[" + num(-extent, 8) + ":" + num(extent, 8) + "]";
+  f.script = s + "bin(x) = " + num(width, 8) + " * (floor(x / " + num(width, 8) + ") + 0.5)\n" +
+             "set multiplot layout 1,2\nset grid\nset key top right\nset size ratio -1\n"
+             "set xrange " +
+             range + "\nset yrange " + range +
+             "\n"
+             "set xlabel 'dx (px)'\nset ylabel 'dy (px)'\n" +
+             circles + scatter +
+             "\nunset object\nset size noratio\nset style fill solid 0.5 noborder\n"
+             "set boxwidth " +
+             num(width, 8) +
+             "\nset xlabel '|e| (px)'\nset ylabel 'corners'\nset xrange [0:" + num(extent, 8) +
+             "]\nset yrange [0:*]\n" + hist + "\nunset multiplot\n";
+  return f;
+}
+
 Figure residuals_figure(const nlohmann::json& r) {
   const auto& q = at(r, "quality");
   Figure f;
@@ -238,10 +313,16 @@ Result<Document> camimu_document(const nlohmann::json& r, BuildContext& ctx) {
   doc.sections.push_back(overview_section(r));
   doc.sections.push_back(cameras_section(r));
   doc.sections.push_back(imu_section(r));
-  Section quality{"Quality",
-                  "<p class=\"note\">result.json holds each camera's RMS reprojection error (above), not "
-                  "the residual of each corner: there is no histogram of them.</p>\n",
-                  {}};
+  Figure reprojection = reprojection_figure(r);
+  Section quality{
+      "Quality",
+      reprojection.id.empty()
+          ? "<p class=\"note\">This result.json holds each camera's RMS reprojection error (above), "
+            "not the residual of each corner (it was written before they were stored): there is no "
+            "scatter or histogram of them.</p>\n"
+          : "",
+      {}};
+  if (!reprojection.id.empty()) quality.figures.push_back(std::move(reprojection));
   quality.figures.push_back(residuals_figure(r));
   if (Figure x = xcorr_figure(r); !x.id.empty()) quality.figures.push_back(std::move(x));
   quality.figures.push_back(biases_figure(r));

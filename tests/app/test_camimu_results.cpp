@@ -90,6 +90,8 @@ CamImuReport report() {
     c.corners = 49000;
     c.reprojection_rms_px = 0.12;
     c.corner_sigma_px = 0.3;
+    c.residuals_px = {{0.01234F, -0.5F}, {1.25F, 0.0F}};
+    c.outlier_px = 0.9;
     res.cameras.push_back(c);
     CamImuCameraReport in;
     in.name = c.name;
@@ -258,6 +260,11 @@ TEST(CamImuResults, ResultJsonReadsBack) {
     EXPECT_EQ(a.rotation_sigma_rad, b.rotation_sigma_rad);
     EXPECT_EQ(a.camera.intrinsics, b.camera.intrinsics);
     EXPECT_EQ(a.frames, b.frames);
+    // The residuals to 1e-4 px.
+    ASSERT_EQ(a.residuals_px.size(), 2u);
+    EXPECT_NEAR(a.residuals_px[0].x(), 0.0123, 1e-6);
+    EXPECT_EQ(a.residuals_px[1], b.residuals_px[1]);
+    EXPECT_EQ(a.outlier_px, 0.9);
   }
   EXPECT_EQ(back->imu.B_g, res.imu.B_g);
   EXPECT_EQ(back->imu.C_bg, res.imu.C_bg);

@@ -100,6 +100,15 @@ CamImuReport camimu_report() {
     c.frames = 1169;
     c.corners = 49000;
     c.reprojection_rms_px = 0.12;
+    // Residuals spread over a disc, a few beyond the loss's scale; cam1 has none stored (a
+    // result from before they were), which the figure leaves out.
+    if (i == 0) {
+      for (int k = 0; k < 500; ++k)
+        c.residuals_px.emplace_back(0.1F * std::cos(0.7F * k) * (k % 7) / 7.0F,
+                                    0.1F * std::sin(0.7F * k) * (k % 5) / 5.0F);
+      c.residuals_px.emplace_back(2.5F, -1.0F);
+      c.outlier_px = 0.3;
+    }
     res.cameras.push_back(c);
   }
   for (int k = 0; k < 20; ++k) {
@@ -129,12 +138,15 @@ TEST(Report, CamImuResultFolderFromItsWriter) {
   auto s = write_report(o);
   ASSERT_TRUE(s.ok()) << s.error().message;
   EXPECT_EQ(s->kind, ReportKind::kCamImu);
-  EXPECT_EQ(s->figures, 3);
-  EXPECT_EQ(s->png_files.size(), 3u);
+  EXPECT_EQ(s->figures, 4);
+  EXPECT_EQ(s->png_files.size(), 4u);
   const std::string html = test::read_file(o.html_path);
-  EXPECT_EQ(count(html, "src=\"data:image/svg+xml;base64,"), 3u);
+  EXPECT_EQ(count(html, "src=\"data:image/svg+xml;base64,"), 4u);
   EXPECT_EQ(html.find("http://"), std::string::npos);
-  for (const char* id : {"camimu-imu-residuals", "camimu-xcorr", "camimu-biases"})
+  // 501 of cam0's 49000 corners stored (cam1 stored none), one beyond the axes.
+  EXPECT_NE(html.find("501 of 49000 corners stored"), std::string::npos);
+  EXPECT_NE(html.find("; 1 lie beyond the axes"), std::string::npos);
+  for (const char* id : {"camimu-reprojection", "camimu-imu-residuals", "camimu-xcorr", "camimu-biases"})
     EXPECT_NE(html.find(std::string("data-plot=\"") + id + "\""), std::string::npos) << id;
   EXPECT_NE(html.find("z rotation barely excited"), std::string::npos);
   EXPECT_NE(html.find("4.20 &plusmn; 0.14"), std::string::npos);   // cam0's time shift, ms
