@@ -1,5 +1,6 @@
 #include "app/session/session_replay.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -195,6 +196,12 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
 
   const std::string motion_log =
       (std::filesystem::path(options.log_path).parent_path() / kMotionLogFile).string();
+  if (std::find(logged->steps.begin(), logged->steps.end(), "motion") != logged->steps.end() &&
+      !std::filesystem::exists(motion_log)) {
+    return make_error(Errc::kNotFound, "the session ran the motion step, but its motion log " + motion_log +
+                                           " is missing: replay reads it beside the session log (copy the "
+                                           "whole session folder)");
+  }
   ReplayHost host(*config, info, dir, logged->preflight, motion_log);
   SessionEngine engine(*config, info, host);
   if (auto s = engine.start(logged->steps); !s.ok())
