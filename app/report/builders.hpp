@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "app/report/gnuplot.hpp"
 #include "app/report/html.hpp"
 #include "core/result.hpp"
 
@@ -36,6 +37,18 @@ const nlohmann::json& at(const nlohmann::json& j, const char* key);
 double number(const nlohmann::json& j, const char* key);
 Eigen::Vector3d vec3(const nlohmann::json& j);
 Eigen::Matrix3d mat3(const nlohmann::json& j);
+
+/// Reprojection residuals of one camera (or one class of corners), a flat dx, dy list in px.
+struct ResidualSeries {
+  std::string name;
+  std::vector<double> px;
+  double loss_px = 0.0;  // the robust loss's scale, drawn as a dashed circle; 0: none
+  std::string colour;
+};
+/// A scatter of the residuals and a histogram of their lengths; `what` (how many corners the
+/// series are of) starts the caption's counts. Empty when no series has a residual.
+Figure reprojection_figure(const std::string& id, const std::vector<ResidualSeries>& series,
+                           const std::string& what);
 
 /// Gnuplot's line colours used across the report for x, y, z (colour-blind safe).
 inline constexpr const char* kAxisColour[3] = {"#0072b2", "#d55e00", "#009e73"};

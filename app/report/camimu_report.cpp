@@ -166,77 +166,28 @@ Figure xcorr_figure(const nlohmann::json& r) {
   return f;
 }
 
-/// The reprojection residual of every stored corner: a scatter of (dx, dy) with the robust loss's
-/// scale as a circle, and a histogram of |e|, one colour per camera. Empty when the result holds
-/// no residuals (written before they were stored).
-Figure reprojection_figure(const nlohmann::json& r) {
-  Figure f;
-  f.id = "camimu-reprojection";
-  f.title = "Reprojection errors";
-  f.height_px = 460;
-  std::string s, scatter, hist, circles;
+/// The reprojection residual of every stored corner, one colour per camera. Empty when the
+/// result holds none (written before they were stored).
+Figure camimu_reprojection_figure(const nlohmann::json& r) {
+  std::vector<ResidualSeries> series;
   std::size_t stored = 0, total = 0;
-  std::vector<double> lengths;
-  int i = 0;
   for (const auto& cam : at(r, "cameras")) {
     if (!cam.contains("residuals")) continue;
     const auto& res = cam["residuals"];
-    const auto& px = at(res, "px");
-    std::vector<std::vector<double>> rows;
-    for (std::size_t k = 0; k + 1 < px.size(); k += 2) {
-      const double dx = px[k].get<double>(), dy = px[k + 1].get<double>();
-      rows.push_back({dx, dy, std::hypot(dx, dy)});
-      lengths.push_back(rows.back()[2]);
-    }
-    if (rows.empty()) continue;
-    stored += rows.size();
+    ResidualSeries rs;
+    rs.name = cam.value("name", "cam" + std::to_string(series.size()));
+    rs.px = at(res, "px").get<std::vector<double>>();
+    rs.loss_px = res.value("outlier_px", 0.0);
+    rs.colour = kAxisColour[series.size() % 3];
+    stored += rs.px.size() / 2;
     total += static_cast<std::size_t>(res.value("of_corners", 0));
-    const std::string n = std::to_string(i), colour = kAxisColour[i % 3];
-    const std::string name = gp_quote(cam.value("name", "cam" + n));
-    s += datablock("e" + n, rows);
-    scatter += std::string(scatter.empty() ? "plot " : ", ") + "$e" + n +
-               " using 1:2 with points pt 7 ps 0.25 lc rgb '" + colour + "' title " + name;
-    const double loss = res.value("outlier_px", 0.0);
-    if (loss > 0)
-      circles += "set object circle at 0,0 size " + num(loss, 8) + " fs empty border lc rgb '" + colour +
-                 "' dashtype 2\n";
-    hist += std::string(hist.empty() ? "plot " : ", ") + "$e" + n +
-            " using (bin($3)):(1) smooth frequency with boxes lc rgb '" + colour + "' title " + name;
-    ++i;
+    series.push_back(std::move(rs));
   }
-  if (scatter.empty()) return {};
-  // The axes cover the bulk (the 99.5th percentile, or the loss's scale if larger) so that a few
-  // far outliers do not squeeze it into a dot; the caption counts what lies beyond.
-  std::sort(lengths.begin(), lengths.end());
-  double extent = lengths[std::min(lengths.size() - 1, static_cast<std::size_t>(0.995 * lengths.size()))];
-  for (const auto& cam : at(r, "cameras"))
-    if (cam.contains("residuals")) extent = std::max(extent, cam["residuals"].value("outlier_px", 0.0));
-  extent = std::max(extent * 1.25, 1e-3);
-  const auto beyond =
-      static_cast<std::size_t>(lengths.end() - std::upper_bound(lengths.begin(), lengths.end(), extent));
-  const double width = extent / 40.0;
-  f.caption =
-      "Projected minus detected corner position (px) after the final stage: left, every stored corner, "
-      "with the robust loss's scale dashed (corners outside it were down-weighted as outliers); right, "
-      "the histogram of their lengths. " +
-      std::to_string(stored) + " of " + std::to_string(total) +
-      " corners stored (every k-th in time order when there are more than " +
-      std::to_string(CamImuCameraResult::kMaxStoredResiduals) + "); " + std::to_string(beyond) +
-      " lie beyond the axes (" + num(extent, 3) + " px).";
-  const std::string range = "[" + num(-extent, 8) + ":" + num(extent, 8) + "]";
-  f.script = s + "bin(x) = " + num(width, 8) + " * (floor(x / " + num(width, 8) + ") + 0.5)\n" +
-             "set multiplot layout 1,2\nset grid\nset key top right\nset size ratio -1\n"
-             "set xrange " +
-             range + "\nset yrange " + range +
-             "\n"
-             "set xlabel 'dx (px)'\nset ylabel 'dy (px)'\n" +
-             circles + scatter +
-             "\nunset object\nset size noratio\nset style fill solid 0.5 noborder\n"
-             "set boxwidth " +
-             num(width, 8) +
-             "\nset xlabel '|e| (px)'\nset ylabel 'corners'\nset xrange [0:" + num(extent, 8) +
-             "]\nset yrange [0:*]\n" + hist + "\nunset multiplot\n";
-  return f;
+  return reprojection_figure("camimu-reprojection", series,
+                             "After the final stage; " + std::to_string(stored) + " of " +
+                                 std::to_string(total) +
+                                 " corners stored (every k-th in time order when there are more than " +
+                                 std::to_string(CamImuCameraResult::kMaxStoredResiduals) + ");");
 }
 
 Figure residuals_figure(const nlohmann::json& r) {
@@ -313,7 +264,7 @@ Result<Document> camimu_document(const nlohmann::json& r, BuildContext& ctx) {
   doc.sections.push_back(overview_section(r));
   doc.sections.push_back(cameras_section(r));
   doc.sections.push_back(imu_section(r));
-  Figure reprojection = reprojection_figure(r);
+  Figure reprojection = camimu_reprojection_figure(r);
   Section quality{
       "Quality",
       reprojection.id.empty()

@@ -143,8 +143,8 @@ TEST(Report, CamImuResultFolderFromItsWriter) {
   const std::string html = test::read_file(o.html_path);
   EXPECT_EQ(count(html, "src=\"data:image/svg+xml;base64,"), 4u);
   EXPECT_EQ(html.find("http://"), std::string::npos);
-  // 501 of cam0's 49000 corners stored (cam1 stored none), one beyond the axes.
-  EXPECT_NE(html.find("501 of 49000 corners stored"), std::string::npos);
+  // 501 of the two cameras' 98000 corners stored (cam1's list is empty), one beyond the axes.
+  EXPECT_NE(html.find("501 of 98000 corners stored"), std::string::npos);
   EXPECT_NE(html.find("; 1 lie beyond the axes"), std::string::npos);
   for (const char* id : {"camimu-reprojection", "camimu-imu-residuals", "camimu-xcorr", "camimu-biases"})
     EXPECT_NE(html.find(std::string("data-plot=\"") + id + "\""), std::string::npos) << id;
