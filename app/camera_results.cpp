@@ -53,6 +53,20 @@ json sigma_vec(const Eigen::Vector4d& v) {
       {finite_or_null(v[0]), finite_or_null(v[1]), finite_or_null(v[2]), finite_or_null(v[3])});
 }
 
+/// Each used view's corner residuals as a flat dx, dy list (px, to 1e-4) and which the corner
+/// test rejected, for the report's scatter.
+json residuals_json(const calib::CameraIntrinsicsResult& res) {
+  json px = json::array(), rejected = json::array();
+  for (std::size_t i = 0; i < res.residuals_px.size(); ++i) {
+    px.push_back(std::round(res.residuals_px[i].x() * 1e4) / 1e4);
+    px.push_back(std::round(res.residuals_px[i].y() * 1e4) / 1e4);
+    rejected.push_back(i < res.residual_rejected.size() ? res.residual_rejected[i] : 0);
+  }
+  return {{"px", std::move(px)},
+          {"rejected", std::move(rejected)},
+          {"of_corners", res.points_used + res.corners_rejected}};
+}
+
 int views_rejected(const CameraCalibrationReport& r) {
   return r.intrinsics.views_total - r.intrinsics.views_used;
 }
@@ -212,6 +226,7 @@ std::string camera_result_json(const CameraCalibrationReport& r) {
       {"views_rejected", views_rejected(r)},
       {"corners_used", res.points_used},
       {"corners_rejected", res.corners_rejected},
+      {"residuals", residuals_json(res)},
       {"views", views},
       {"log", r.log_path},
       {"log_software_version", r.software_version},

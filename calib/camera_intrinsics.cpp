@@ -510,6 +510,8 @@ void fill_figures(const CameraModel& camera, const std::vector<View>& views,
   result->coverage_counts.assign(static_cast<std::size_t>(result->coverage_cols * result->coverage_rows), 0);
   double sum = 0.0;
   int n = 0;
+  std::vector<Eigen::Vector2f> all;
+  std::vector<std::uint8_t> rejected;
   for (const View& v : views) {
     CameraViewReport& report = result->views[v.report];
     if (!v.active) continue;
@@ -519,6 +521,8 @@ void fill_figures(const CameraModel& camera, const std::vector<View>& views,
     report.q_cam_target = Eigen::Quaterniond(v.pose[0], v.pose[1], v.pose[2], v.pose[3]).normalized();
     report.t_cam_target = Eigen::Vector3d(v.pose[4], v.pose[5], v.pose[6]);
     for (std::size_t i = 0; i < v.px.size(); ++i) {
+      all.push_back(residual_of(camera, v, i).cast<float>());
+      rejected.push_back(v.keep[i] ? 0 : 1);
       if (!v.keep[i]) continue;
       sum += residual_of(camera, v, i).squaredNorm();
       ++n;
@@ -528,6 +532,12 @@ void fill_figures(const CameraModel& camera, const std::vector<View>& views,
                                 0, result->coverage_rows - 1);
       ++result->coverage_counts[static_cast<std::size_t>(cy * result->coverage_cols + cx)];
     }
+  }
+  const std::size_t cap = CameraIntrinsicsResult::kMaxStoredResiduals;
+  const std::size_t step = std::max<std::size_t>(1, (all.size() + cap - 1) / cap);
+  for (std::size_t i = 0; i < all.size(); i += step) {
+    result->residuals_px.push_back(all[i]);
+    result->residual_rejected.push_back(rejected[i]);
   }
   result->views_used = active_count(views);
   result->points_used = n;

@@ -7,6 +7,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <cstdint>
 #include <span>
 #include <string>
 #include <vector>
@@ -88,6 +89,12 @@ struct CameraIntrinsicsResult {
   int coverage_cols = 0;
   int coverage_rows = 0;
   std::vector<int> coverage_counts;
+  /// The reprojection residual (projected - detected, px) of each corner of the used views, or
+  /// of every k-th in view order above kMaxStoredResiduals, and whether the corner test rejected
+  /// it (1) or it was used (0), for the report's scatter and histogram.
+  static constexpr int kMaxStoredResiduals = 20000;
+  std::vector<Eigen::Vector2f> residuals_px;
+  std::vector<std::uint8_t> residual_rejected;
 
   /// The focal lengths are determined (relative sigma below the option's limit, covariance of
   /// full rank). False for degenerate sets such as fronto-parallel views at one distance.

@@ -90,6 +90,24 @@ Figure views_figure(const nlohmann::json& r) {
   return f;
 }
 
+/// Each used view's corner residuals: the corners used and those the corner test rejected.
+Figure camera_reprojection_figure(const nlohmann::json& r) {
+  if (!r.contains("residuals")) return {};
+  const auto& res = r["residuals"];
+  const auto px = at(res, "px").get<std::vector<double>>();
+  const auto rejected = at(res, "rejected").get<std::vector<int>>();
+  ResidualSeries used{"used", {}, 0.0, kAxisColour[0]}, dropped{"rejected", {}, 0.0, kAxisColour[1]};
+  for (std::size_t i = 0; 2 * i + 1 < px.size(); ++i) {
+    auto& to = i < rejected.size() && rejected[i] ? dropped : used;
+    to.px.push_back(px[2 * i]);
+    to.px.push_back(px[2 * i + 1]);
+  }
+  return reprojection_figure("camera-reprojection", {used, dropped},
+                             "The corners of the used views at the solution; " +
+                                 std::to_string(px.size() / 2) + " of " +
+                                 std::to_string(res.value("of_corners", 0)) + " stored;");
+}
+
 }  // namespace
 
 Result<Document> camera_document(const nlohmann::json& r, BuildContext& ctx) {
@@ -104,7 +122,15 @@ Result<Document> camera_document(const nlohmann::json& r, BuildContext& ctx) {
     doc.sections.push_back(std::move(*session));
   }
   doc.sections.push_back({"Parameters", parameters_html(r), {}});
-  doc.sections.push_back({"Views", "", {coverage_figure(r), views_figure(r)}});
+  Section views{"Views", "", {coverage_figure(r), views_figure(r)}};
+  if (Figure e = camera_reprojection_figure(r); !e.id.empty()) {
+    views.figures.push_back(std::move(e));
+  } else {
+    views.html =
+        "<p class=\"note\">This result holds the RMS of each view, not each corner's residual (it was "
+        "written before they were stored): there is no scatter of them.</p>\n";
+  }
+  doc.sections.push_back(std::move(views));
   return doc;
 }
 

@@ -177,6 +177,20 @@ TEST(Report, CameraResultFromItsWriter) {
   res.coverage_rows = 6;
   res.coverage_counts.assign(60, 4);
   const std::string dir = test::scratch_dir();
+  // Without corner residuals (a result from before they were stored): no scatter, a note.
+  std::ofstream(dir + "/old.json") << camera_result_json(r);
+  ReportOptions old;
+  old.result_path = dir + "/old.json";
+  old.html_path = dir + "/old.html";
+  auto before = write_report(old);
+  ASSERT_TRUE(before.ok()) << before.error().message;
+  EXPECT_EQ(before->figures, 2);
+  EXPECT_NE(test::read_file(old.html_path).find("there is no scatter of them"), std::string::npos);
+  // With them: the used corners and the one the corner test rejected.
+  res.points_used = 3;
+  res.corners_rejected = 1;
+  res.residuals_px = {{0.1F, -0.05F}, {-0.02F, 0.03F}, {0.0F, 0.08F}, {0.9F, 0.7F}};
+  res.residual_rejected = {0, 0, 0, 1};
   std::ofstream(dir + "/camera.json") << camera_result_json(r);
   ReportOptions o;
   o.result_path = dir + "/camera.json";
@@ -184,10 +198,12 @@ TEST(Report, CameraResultFromItsWriter) {
   auto s = write_report(o);
   ASSERT_TRUE(s.ok()) << s.error().message;
   EXPECT_EQ(s->kind, ReportKind::kCamera);
-  EXPECT_EQ(s->figures, 2);
+  EXPECT_EQ(s->figures, 3);
   const std::string html = test::read_file(o.html_path);
   EXPECT_NE(html.find("200.25 &plusmn; 0.10"), std::string::npos);
-  EXPECT_EQ(count(html, "<figure class=\"plot\""), 2u);
+  EXPECT_EQ(count(html, "<figure class=\"plot\""), 3u);
+  EXPECT_NE(html.find("data-plot=\"camera-reprojection\""), std::string::npos);
+  EXPECT_NE(html.find("4 of 4 stored"), std::string::npos);
 }
 
 }  // namespace
