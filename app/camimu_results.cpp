@@ -351,6 +351,61 @@ CamImuQuality read_quality(const json& j) {
   return q;
 }
 
+/// One row per stored sample: t_s (from the first bias sample), then measured and predicted
+/// accel and gyro, rounded far below the sensor's noise (1e-6 m/s^2, 1e-7 rad/s).
+constexpr const char* kSignalColumns[] = {"t_s",          "accel_meas_x", "accel_meas_y", "accel_meas_z",
+                                          "accel_pred_x", "accel_pred_y", "accel_pred_z", "gyro_meas_x",
+                                          "gyro_meas_y",  "gyro_meas_z",  "gyro_pred_x",  "gyro_pred_y",
+                                          "gyro_pred_z"};
+
+json signals_json(const std::vector<ImuSignalFit>& fits, TimeNs t0) {
+  json out = json::array();
+  auto round_to = [](double v, double q) { return std::round(v / q) * q; };
+  for (const auto& f : fits) {
+    json rows = json::array();
+    for (std::size_t i = 0; i < f.t_ns.size(); ++i) {
+      json row = {round_to(ns_to_s(f.t_ns[i] - t0), 1e-6)};
+      for (const auto* v : {&f.accel_measured[i], &f.accel_predicted[i]})
+        for (int a = 0; a < 3; ++a) row.push_back(round_to((*v)[a], 1e-6));
+      for (const auto* v : {&f.gyro_measured[i], &f.gyro_predicted[i]})
+        for (int a = 0; a < 3; ++a) row.push_back(round_to((*v)[a], 1e-7));
+      rows.push_back(std::move(row));
+    }
+    out.push_back({{"model", f.model},
+                   {"accel_residual_rms_mps2", vec_json(f.accel_residual_rms)},
+                   {"gyro_residual_rms_radps", vec_json(f.gyro_residual_rms)},
+                   {"t0_ns", t0},
+                   {"columns", kSignalColumns},
+                   {"rows", std::move(rows)}});
+  }
+  return out;
+}
+
+std::vector<ImuSignalFit> read_signals(const json& j) {
+  std::vector<ImuSignalFit> fits;
+  for (const auto& s : j) {
+    ImuSignalFit f;
+    f.model = s.at("model").get<std::string>();
+    f.accel_residual_rms = read_vec<3>(s.at("accel_residual_rms_mps2"));
+    f.gyro_residual_rms = read_vec<3>(s.at("gyro_residual_rms_radps"));
+    const TimeNs t0 = s.at("t0_ns").get<TimeNs>();
+    for (const auto& row : s.at("rows")) {
+      if (row.size() != std::size(kSignalColumns))
+        throw std::runtime_error("imu_signals: a row is not 13 numbers");
+      auto v3 = [&](std::size_t i) {
+        return Eigen::Vector3f(row[i].get<float>(), row[i + 1].get<float>(), row[i + 2].get<float>());
+      };
+      f.t_ns.push_back(t0 + static_cast<TimeNs>(std::llround(row[0].get<double>() * 1e9)));
+      f.accel_measured.push_back(v3(1));
+      f.accel_predicted.push_back(v3(4));
+      f.gyro_measured.push_back(v3(7));
+      f.gyro_predicted.push_back(v3(10));
+    }
+    fits.push_back(std::move(f));
+  }
+  return fits;
+}
+
 CamImuCalibrationResult read_result_json(const json& j, const std::string& path) {
   CamImuCalibrationResult r;
   const std::string model = j.at("model").get<std::string>();
@@ -367,6 +422,8 @@ CamImuCalibrationResult read_result_json(const json& j, const std::string& path)
   for (const auto& b : j.at("biases")) {
     r.biases.push_back({b.at("t_ns").get<TimeNs>(), read_vec<3>(b.at("b_a")), read_vec<3>(b.at("b_g"))});
   }
+  // Results written before the signals were stored have none.
+  if (j.contains("imu_signals")) r.signal_fits = read_signals(j["imu_signals"]);
   r.quality = read_quality(j.at("quality"));
   r.warnings = j.at("warnings").get<std::vector<std::string>>();
   return r;
@@ -529,6 +586,7 @@ std::string camimu_result_json(const CamImuReport& r) {
   j["gravity_w_mps2"] = vec_json(res.gravity_w);
   j["gravity_sigma_rad"] = vec_json(res.gravity_sigma_rad);
   j["biases"] = biases;
+  j["imu_signals"] = signals_json(res.signal_fits, t0);
   j["quality"] = quality_json(res.quality);
   j["inputs"] = inputs_json(r);
   j["notes"] = r.notes;

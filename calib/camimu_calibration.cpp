@@ -111,6 +111,8 @@ class Estimator {
   bool reestimate_corner_sigma();
   void covariance(CamImuCalibrationResult* out);
   void fill_result(CamImuCalibrationResult* out);
+  /// Measured and predicted IMU signals of the problem as it stands.
+  ImuSignalFit signal_fit(const std::string& model) const;
   double t_s(TimeNs t) const { return static_cast<double>(t - t0_ns_) * 1e-9; }
 
   const std::vector<CamImuSample>& imu_;
@@ -125,6 +127,7 @@ class Estimator {
   std::vector<std::vector<double*>> frame_blocks_;
   std::vector<const ImuResidual<N>*> imu_residuals_;
   std::vector<std::vector<double*>> imu_blocks_;
+  std::vector<std::size_t> imu_index_;  // imu_ sample of each IMU residual
   CamImuQuality quality_;
   std::vector<std::string> warnings_;
   std::unique_ptr<ceres::Problem> problem_;
@@ -256,7 +259,8 @@ void Estimator<N>::initialise_spline(std::size_t ref) {
   So3Spline<N> rot(st_.pose.t0_s, dt, st_.pose.knots);
   for (int i = 0; i < st_.pose.knots; ++i)
     rot.knots()[static_cast<std::size_t>(i)] = quat_matrix(st_.q[i].data());
-  for (const auto& s : imu_) {
+  for (std::size_t k = 0; k < imu_.size(); ++k) {
+    const CamImuSample& s = imu_[k];
     const double t = t_s(s.t_ns);
     if (!st_.pose.covers(t)) continue;
     mean_rf += rot.evaluate(t, So3Derivs::kValue).R * s.accel;
@@ -301,13 +305,15 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended) {
   frame_blocks_.clear();
   imu_residuals_.clear();
   imu_blocks_.clear();
+  imu_index_.clear();
   std::vector<double> dts;
   for (std::size_t i = 1; i < imu_.size(); ++i) dts.push_back(t_s(imu_[i].t_ns) - t_s(imu_[i - 1].t_ns));
   std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
   const double rate = 1.0 / dts[dts.size() / 2];
   quality_.accel_sigma = opt_.noise.accel_noise_density * std::sqrt(rate);
   quality_.gyro_sigma = opt_.noise.gyro_noise_density * std::sqrt(rate);
-  for (const auto& s : imu_) {
+  for (std::size_t k = 0; k < imu_.size(); ++k) {
+    const CamImuSample& s = imu_[k];
     const double t = t_s(s.t_ns);
     if (!st_.pose.covers(t)) continue;
     const SplineSegment seg = st_.pose.segment(t), bseg = st_.bias.segment(t);
@@ -324,6 +330,7 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended) {
     problem->AddResidualBlock(cost, nullptr, blocks);
     imu_residuals_.push_back(cost);
     imu_blocks_.push_back(std::move(blocks));
+    imu_index_.push_back(k);
   }
   // Bias random walk: three-point Gauss-Legendre quadrature of |db/dt|^2 per bias segment.
   const double gl_u[3] = {0.5 - 0.5 * std::sqrt(0.6), 0.5, 0.5 + 0.5 * std::sqrt(0.6)};
@@ -586,17 +593,34 @@ void Estimator<N>::fill_result(CamImuCalibrationResult* out) {
     auto& cr = out->cameras[c];
     cr.reprojection_rms_px = cr.corners > 0 ? std::sqrt(sq[c] / cr.corners) : 0.0;
   }
-  // IMU residual RMS per axis, in SI.
+}
+
+template <int N>
+ImuSignalFit Estimator<N>::signal_fit(const std::string& model) const {
+  ImuSignalFit fit;
+  fit.model = model;
+  const std::size_t n = imu_residuals_.size(), cap = ImuSignalFit::kMaxSamples;
+  const std::size_t step = std::max<std::size_t>(1, (n + cap - 1) / cap);
   Eigen::Vector3d sa = Eigen::Vector3d::Zero(), sg = Eigen::Vector3d::Zero();
-  for (std::size_t k = 0; k < imu_residuals_.size(); ++k) {
+  for (std::size_t k = 0; k < n; ++k) {
     Eigen::Matrix<double, 6, 1> r;
     imu_residuals_[k]->Evaluate(imu_blocks_[k].data(), r.data(), nullptr);
-    sa += (r.head<3>() * quality_.accel_sigma).cwiseAbs2();
-    sg += (r.tail<3>() * quality_.gyro_sigma).cwiseAbs2();
+    // r = (predicted - measured) / sigma.
+    const Eigen::Vector3d da = r.head<3>() * quality_.accel_sigma, dg = r.tail<3>() * quality_.gyro_sigma;
+    sa += da.cwiseAbs2();
+    sg += dg.cwiseAbs2();
+    if (k % step != 0) continue;
+    const CamImuSample& s = imu_[imu_index_[k]];
+    fit.t_ns.push_back(s.t_ns);
+    fit.accel_measured.push_back(s.accel.cast<float>());
+    fit.accel_predicted.push_back((s.accel + da).cast<float>());
+    fit.gyro_measured.push_back(s.gyro.cast<float>());
+    fit.gyro_predicted.push_back((s.gyro + dg).cast<float>());
   }
-  const double n = std::max<double>(1.0, static_cast<double>(imu_residuals_.size()));
-  quality_.accel_residual_rms = (sa / n).cwiseSqrt();
-  quality_.gyro_residual_rms = (sg / n).cwiseSqrt();
+  const double count = std::max<double>(1.0, static_cast<double>(n));
+  fit.accel_residual_rms = (sa / count).cwiseSqrt();
+  fit.gyro_residual_rms = (sg / count).cwiseSqrt();
+  return fit;
 }
 
 /// Excitation per body axis and the observability warnings it implies.
@@ -636,10 +660,12 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   // extrinsics settle), then everything the model estimates.
   if (Status s = solve(false, "basic", &summary); !s.ok()) return s.error();
   quality_.initial_cost = summary.initial_cost;
+  const bool extended = opt_.model == CamImuModelKind::kExtended;
+  std::vector<ImuSignalFit> fits;
+  if (extended) fits.push_back(signal_fit("basic"));
   // The next stage weighs the corners by the noise they showed in the one before. The first
   // stage stops early with the IMU intrinsics at their start, so its residuals overstate the
   // noise: the final stage is repeated until the estimate holds (within 10 %).
-  const bool extended = opt_.model == CamImuModelKind::kExtended;
   for (int round = 0; round < 3; ++round) {
     const bool changed = reestimate_corner_sigma();
     if (round > 0 && !changed) break;
@@ -651,7 +677,11 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   quality_.parameters = problem_->NumParameters();
   quality_.residuals = problem_->NumResiduals();
   quality_.spline_knots = st_.pose.knots;
+  fits.push_back(signal_fit(extended ? "extended" : "basic"));
+  quality_.accel_residual_rms = fits.back().accel_residual_rms;  // per axis, SI
+  quality_.gyro_residual_rms = fits.back().gyro_residual_rms;
   CamImuCalibrationResult out;
+  out.signal_fits = std::move(fits);
   fill_result(&out);
   if (opt_.covariance) covariance(&out);
   for (const auto& cs : st_.cams) {

@@ -74,6 +74,22 @@ struct BiasSample {
   Eigen::Vector3d b_g = Eigen::Vector3d::Zero();
 };
 
+/// The IMU signals as measured and as one model predicts them from the solved trajectory,
+/// biases and gravity (Krebs 2012, figures 5.6 and 5.7), for the report: every k-th sample in
+/// time order when there are more than kMaxSamples. The RMS of measured - predicted is over every
+/// sample of the problem.
+struct ImuSignalFit {
+  /// "basic": the first stage, IMU intrinsics (S, M, C_bg, B_g) held at their start;
+  /// "extended": after the final stage, intrinsics as estimated (absent for the basic model).
+  std::string model;
+  static constexpr std::size_t kMaxSamples = 2000;
+  std::vector<TimeNs> t_ns;
+  std::vector<Eigen::Vector3f> accel_measured, accel_predicted;  // m/s^2
+  std::vector<Eigen::Vector3f> gyro_measured, gyro_predicted;    // rad/s
+  Eigen::Vector3d accel_residual_rms = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_residual_rms = Eigen::Vector3d::Zero();
+};
+
 struct CamImuQuality {
   /// RMS of the IMU residuals after the solve, per axis (m/s^2, rad/s), and the white-noise
   /// standard deviation per sample the problem assumed.
@@ -118,6 +134,7 @@ struct CamImuCalibrationResult {
   Eigen::Vector3d gravity_w = Eigen::Vector3d(0, 0, -kStandardGravityMps2);
   Eigen::Vector2d gravity_sigma_rad = Eigen::Vector2d::Zero();
   std::vector<BiasSample> biases;
+  std::vector<ImuSignalFit> signal_fits;  // "basic" then "extended" (extended model), or "basic"
   CamImuQuality quality;
   std::vector<std::string> warnings;  // observability, residuals, outliers
 

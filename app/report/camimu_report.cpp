@@ -1,8 +1,8 @@
 // The report of a camera-IMU calibration (imucal calibrate camimu, OUT_DIR/result.json): the
 // cameras' extrinsics and time offsets, the IMU's Krebs model, all with sigmas; the IMU residuals
 // against the noise the solve assumed; the biases over time and the angular-speed
-// cross-correlation that started the time offset. result.json carries each camera's RMS
-// reprojection error, not the residual of each corner, so there is no histogram of them.
+// cross-correlation that started the time offset; the reprojection residuals of the corners; the
+// IMU signals measured and predicted by the basic and the extended model.
 
 #include <algorithm>
 #include <cmath>
@@ -217,6 +217,120 @@ Figure residuals_figure(const nlohmann::json& r) {
   return f;
 }
 
+/// The stored measured and predicted signals of each model, as rows of 13 numbers (t_s, accel
+/// measured xyz, predicted xyz, gyro measured xyz, predicted xyz); absent in results written
+/// before they were stored.
+struct SignalFit {
+  std::string model;
+  Eigen::Vector3d accel_rms, gyro_rms;
+  std::vector<std::vector<double>> rows;
+};
+
+std::vector<SignalFit> signal_fits(const nlohmann::json& r) {
+  std::vector<SignalFit> out;
+  if (!r.contains("imu_signals")) return out;
+  for (const auto& s : r["imu_signals"]) {
+    SignalFit f{at(s, "model").get<std::string>(),
+                vec3(at(s, "accel_residual_rms_mps2")),
+                vec3(at(s, "gyro_residual_rms_radps")),
+                {}};
+    for (const auto& row : at(s, "rows")) {
+      if (row.size() != 13) throw JsonError{"imu_signals: a row is not 13 numbers"};
+      f.rows.push_back(row.get<std::vector<double>>());
+    }
+    out.push_back(std::move(f));
+  }
+  return out;
+}
+
+/// Measured (grey) and predicted (colour) gyro (left, deg/s) and accel (right, m/s^2) per axis.
+Figure signal_fit_figure(const SignalFit& fit) {
+  Figure f;
+  f.id = "camimu-imu-fit-" + fit.model;
+  f.title = "Measured and predicted IMU signals, " + fit.model + " model";
+  f.caption =
+      fit.model == "basic"
+          ? "The IMU samples (grey) and what the basic model predicts from the solved trajectory, "
+            "biases and gravity with the IMU intrinsics (scale, misalignment, gyro-accel rotation, "
+            "g-sensitivity) held at their start, identity or the IMU calibration given (colour), per axis; "
+          : "The IMU samples (grey) and what the extended model predicts with its estimated "
+            "intrinsics (colour), per axis; ";
+  f.caption += std::to_string(fit.rows.size()) + " samples shown (every k-th above " +
+               std::to_string(ImuSignalFit::kMaxSamples) + ").";
+  f.height_px = 820;
+  std::vector<std::vector<double>> rows = fit.rows;
+  for (auto& row : rows)
+    for (int c = 7; c < 13; ++c) row[c] *= kDeg;
+  if (rows.empty()) rows.push_back(std::vector<double>(13, NAN));
+  std::string s = datablock("s", rows) + "set multiplot layout 3,2\nset grid\nset key top right\n";
+  for (int a = 0; a < 3; ++a) {
+    const std::string axis(1, "xyz"[a]);
+    if (a == 2) s += "set xlabel 'time (s)'\n";
+    s += "set ylabel 'gyro " + axis + " (deg/s)'\nplot $s using 1:" + std::to_string(8 + a) +
+         " with lines lw 3 lc rgb '#b0b0b0' title 'measured', $s using 1:" + std::to_string(11 + a) +
+         " with lines lw 1 lc rgb '" + kAxisColour[a] + "' title 'predicted'\n";
+    s += "set ylabel 'accel " + axis + " (m/s^2)'\nplot $s using 1:" + std::to_string(2 + a) +
+         " with lines lw 3 lc rgb '#b0b0b0' title 'measured', $s using 1:" + std::to_string(5 + a) +
+         " with lines lw 1 lc rgb '" + kAxisColour[a] + "' title 'predicted'\n";
+  }
+  f.script = s + "unset multiplot\n";
+  return f;
+}
+
+/// Measured - predicted over time, every model in one panel per axis and sensor.
+Figure signal_residual_figure(const std::vector<SignalFit>& fits) {
+  Figure f;
+  f.id = "camimu-imu-fit-residuals";
+  f.title = "IMU residuals over time, per model";
+  f.caption =
+      "Measured minus predicted gyro (left) and accel (right) per axis for each model; what the basic "
+      "model leaves here and the extended model removes is the scale, misalignment, axis rotation and "
+      "g-sensitivity of the IMU.";
+  f.height_px = 820;
+  const char* colour[2] = {"#d55e00", "#0072b2"};
+  std::string s = "set multiplot layout 3,2\nset grid\nset key top right\n";
+  for (std::size_t m = 0; m < fits.size(); ++m) {
+    std::vector<std::vector<double>> rows;
+    for (const auto& row : fits[m].rows) {
+      std::vector<double> d{row[0]};
+      for (int a = 0; a < 3; ++a) d.push_back((row[7 + a] - row[10 + a]) * kDeg);
+      for (int a = 0; a < 3; ++a) d.push_back(row[1 + a] - row[4 + a]);
+      rows.push_back(std::move(d));
+    }
+    if (rows.empty()) rows.push_back(std::vector<double>(7, NAN));
+    s = datablock("r" + std::to_string(m), rows) + s;
+  }
+  for (int a = 0; a < 3; ++a) {
+    const std::string axis(1, "xyz"[a]);
+    if (a == 2) s += "set xlabel 'time (s)'\n";
+    for (int sensor = 0; sensor < 2; ++sensor) {
+      s += std::string("set ylabel '") + (sensor == 0 ? "gyro " : "accel ") + axis +
+           (sensor == 0 ? " (deg/s)'\nplot " : " (m/s^2)'\nplot ");
+      for (std::size_t m = 0; m < fits.size(); ++m)
+        s += std::string(m ? ", " : "") + "$r" + std::to_string(m) +
+             " using 1:" + std::to_string(2 + a + 3 * sensor) + " with lines lw 1 lc rgb '" + colour[m % 2] +
+             "' title " + gp_quote(fits[m].model);
+      s += "\n";
+    }
+  }
+  f.script = s + "unset multiplot\n";
+  return f;
+}
+
+/// RMS of measured - predicted per axis for each model.
+std::string signal_fit_table(const std::vector<SignalFit>& fits) {
+  Table t{{"model", "gyro residual RMS x, y, z (deg/s)", "accel residual RMS x, y, z (m/s<sup>2</sup>)"}, {}};
+  for (const auto& f : fits) {
+    std::string g, a;
+    for (int i = 0; i < 3; ++i) {
+      g += (i ? ", " : "") + num(f.gyro_rms[i] * kDeg, 4);
+      a += (i ? ", " : "") + num(f.accel_rms[i], 4);
+    }
+    t.rows.push_back({escape(f.model), g, a});
+  }
+  return t.to_html();
+}
+
 Section overview_section(const nlohmann::json& r) {
   const auto& q = at(r, "quality");
   Table t{{"", ""}, {}};
@@ -275,6 +389,16 @@ Result<Document> camimu_document(const nlohmann::json& r, BuildContext& ctx) {
       {}};
   if (!reprojection.id.empty()) quality.figures.push_back(std::move(reprojection));
   quality.figures.push_back(residuals_figure(r));
+  const std::vector<SignalFit> fits = signal_fits(r);
+  if (fits.empty()) {
+    quality.html +=
+        "<p class=\"note\">This result.json holds no measured and predicted IMU signals (it was written "
+        "before they were stored).</p>\n";
+  } else {
+    quality.html += signal_fit_table(fits);
+    for (const auto& fit : fits) quality.figures.push_back(signal_fit_figure(fit));
+    quality.figures.push_back(signal_residual_figure(fits));
+  }
   if (Figure x = xcorr_figure(r); !x.id.empty()) quality.figures.push_back(std::move(x));
   quality.figures.push_back(biases_figure(r));
   doc.sections.push_back(std::move(quality));

@@ -103,6 +103,15 @@ CamImuReport report() {
     r.cameras.push_back(in);
   }
   res.biases = {{1000, res.imu.b_a, res.imu.b_g}, {2000001000, res.imu.b_a * 1.01, res.imu.b_g * 0.99}};
+  ImuSignalFit fit;
+  fit.model = "extended";
+  fit.t_ns = {1000, 5001000};
+  fit.accel_measured = {{0.1F, 0.2F, 9.8F}, {0.0F, 0.0F, 9.81F}};
+  fit.accel_predicted = {{0.1F, 0.2F, 9.79F}, {0.0F, 0.0F, 9.8123456F}};
+  fit.gyro_measured = {{0.0123457F, 0.0F, 0.0F}, {0.0F, 0.5F, 0.0F}};
+  fit.gyro_predicted = {{0.0123F, 0.0F, 0.0F}, {0.0F, 0.5F, 0.0F}};
+  fit.gyro_residual_rms = {1e-3, 2e-3, 3e-3};
+  res.signal_fits.push_back(fit);
   res.quality.xcorr = {{{-0.01, 0.5}, {0.0, 0.9}, {0.01, 0.6}}, {{0.0, 1.0}}};
   res.quality.xcorr_peak_s = {0.0042, -0.0031};
   res.quality.iterations = 17;
@@ -273,6 +282,15 @@ TEST(CamImuResults, ResultJsonReadsBack) {
   EXPECT_EQ(back->gravity_w, res.gravity_w);
   EXPECT_EQ(back->biases.size(), 2u);
   EXPECT_EQ(back->biases[1].b_g, res.biases[1].b_g);
+  // The measured and predicted signals: times to 1 us, values to 1e-6 m/s^2 and 1e-7 rad/s.
+  ASSERT_EQ(back->signal_fits.size(), 1u);
+  const ImuSignalFit& f = back->signal_fits[0];
+  EXPECT_EQ(f.model, "extended");
+  ASSERT_EQ(f.t_ns.size(), 2u);
+  EXPECT_EQ(f.t_ns[1], res.signal_fits[0].t_ns[1]);
+  EXPECT_NEAR(f.accel_predicted[1].z(), 9.8123456, 1e-5);
+  EXPECT_NEAR(f.gyro_measured[0].x(), 0.0123457, 1e-8);
+  EXPECT_EQ(f.gyro_residual_rms, res.signal_fits[0].gyro_residual_rms);
   EXPECT_EQ(back->quality.xcorr.size(), 2u);
   EXPECT_EQ(back->quality.xcorr[0][1].second, 0.9);
   EXPECT_EQ(back->quality.iterations, 17);

@@ -116,6 +116,25 @@ CamImuReport camimu_report() {
     res.biases.push_back(
         {static_cast<TimeNs>(t * 1e9), res.imu.b_a * (1 + 1e-3 * t), res.imu.b_g * (1 - 1e-3 * t)});
   }
+  // Measured and predicted signals of both models: the basic one off by a scale error.
+  for (const char* model : {"basic", "extended"}) {
+    ImuSignalFit fit;
+    fit.model = model;
+    const float scale = fit.model == "basic" ? 1.02F : 1.0F;
+    for (int k = 0; k < 300; ++k) {
+      const float t = 0.01F * static_cast<float>(k);
+      const Eigen::Vector3f w(std::sin(t), std::cos(2 * t), 0.5F * std::sin(3 * t));
+      const Eigen::Vector3f a(0.3F * std::cos(t), 0.2F * std::sin(t), 9.81F);
+      fit.t_ns.push_back(static_cast<TimeNs>(k) * 10'000'000);
+      fit.gyro_measured.push_back(w);
+      fit.gyro_predicted.push_back(w / scale);
+      fit.accel_measured.push_back(a);
+      fit.accel_predicted.push_back(a / scale);
+    }
+    fit.gyro_residual_rms = Eigen::Vector3d::Constant(fit.model == "basic" ? 0.0123 : 0.0011);
+    fit.accel_residual_rms = Eigen::Vector3d::Constant(fit.model == "basic" ? 0.117 : 0.04);
+    res.signal_fits.push_back(fit);
+  }
   res.quality.xcorr = {{{-0.01, 0.5}, {0.0, 0.9}, {0.01, 0.6}}, {{-0.01, 0.7}, {0.0, 1.0}, {0.01, 0.4}}};
   res.quality.xcorr_peak_s = {0.0042, -0.0031};
   res.quality.accel_residual_rms = {0.03, 0.04, 0.05};
@@ -138,15 +157,20 @@ TEST(Report, CamImuResultFolderFromItsWriter) {
   auto s = write_report(o);
   ASSERT_TRUE(s.ok()) << s.error().message;
   EXPECT_EQ(s->kind, ReportKind::kCamImu);
-  EXPECT_EQ(s->figures, 4);
-  EXPECT_EQ(s->png_files.size(), 4u);
+  EXPECT_EQ(s->figures, 7);
+  EXPECT_EQ(s->png_files.size(), 7u);
   const std::string html = test::read_file(o.html_path);
-  EXPECT_EQ(count(html, "src=\"data:image/svg+xml;base64,"), 4u);
+  EXPECT_EQ(count(html, "src=\"data:image/svg+xml;base64,"), 7u);
   EXPECT_EQ(html.find("http://"), std::string::npos);
   // 501 of the two cameras' 98000 corners stored (cam1's list is empty), one beyond the axes.
   EXPECT_NE(html.find("501 of 98000 corners stored"), std::string::npos);
   EXPECT_NE(html.find("; 1 lie beyond the axes"), std::string::npos);
-  for (const char* id : {"camimu-reprojection", "camimu-imu-residuals", "camimu-xcorr", "camimu-biases"})
+  // The residual RMS of each model, deg/s and m/s^2.
+  EXPECT_NE(html.find("<td>basic</td><td>0.7047, 0.7047, 0.7047</td><td>0.117, 0.117, 0.117</td>"),
+            std::string::npos);
+  EXPECT_NE(html.find("300 samples shown"), std::string::npos);
+  for (const char* id : {"camimu-reprojection", "camimu-imu-residuals", "camimu-xcorr", "camimu-biases",
+                         "camimu-imu-fit-basic", "camimu-imu-fit-extended", "camimu-imu-fit-residuals"})
     EXPECT_NE(html.find(std::string("data-plot=\"") + id + "\""), std::string::npos) << id;
   EXPECT_NE(html.find("z rotation barely excited"), std::string::npos);
   EXPECT_NE(html.find("4.20 &plusmn; 0.14"), std::string::npos);   // cam0's time shift, ms
