@@ -262,6 +262,9 @@ Result<std::unique_ptr<log::SessionLogWriter>> create_session_log(const RecordOp
                                                                   int* stream_id) {
   log::SessionLogWriterOptions wo;
   wo.overwrite = options.overwrite;
+  // On simulated time the samples come faster than the wall clock: bound each commit by sample
+  // time as well, so a failure (a full disk) loses at most half a second of the recording.
+  wo.commit_data_interval_ns = wo.commit_interval_ns;
   auto writer = log::SessionLogWriter::create(options.log_path, wo);
   if (!writer.ok()) return writer.error().context("creating the session log " + options.log_path);
   for (const auto& [key, value] : options.metadata) IMUCAL_TRY((*writer)->set_metadata(key, value));

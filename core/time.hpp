@@ -15,6 +15,12 @@ using TimeNs = std::int64_t;
 
 inline constexpr TimeNs kNsPerSecond = 1'000'000'000;
 
+/// Timestamps are accepted within +-2^62 ns (146 years either side of the clock's zero), so the
+/// difference of any two fits an int64. Inputs outside it are refused where they enter (dataset
+/// parsers, the session log writer and reader).
+inline constexpr TimeNs kTimeLimitNs = TimeNs{1} << 62;
+constexpr bool time_in_range(TimeNs t_ns) { return t_ns >= -kTimeLimitNs && t_ns <= kTimeLimitNs; }
+
 constexpr double ns_to_s(TimeNs t_ns) { return static_cast<double>(t_ns) * 1e-9; }
 
 /// Seconds to nanoseconds, rounded to the nearest nanosecond.

@@ -34,6 +34,10 @@ struct Event {
 struct SessionLogWriterOptions {
   /// Longest time between commits; a power cut loses at most this much.
   TimeNs commit_interval_ns = 500'000'000;
+  /// Also commit when the IMU samples of the open transaction span this much sample time (0:
+  /// off). A writer fed faster than real time (a simulation, an import) bounds what a failure
+  /// such as a full disk can take with it by data, not by the wall clock.
+  TimeNs commit_data_interval_ns = 0;
   /// Replace an existing file at the path instead of failing.
   bool overwrite = false;
 };

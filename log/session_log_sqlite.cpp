@@ -3,7 +3,11 @@
 
 #include "log/session_log_sqlite.hpp"
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
+#include <sys/sysmacros.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -13,9 +17,12 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <set>
+#include <sstream>
 #include <system_error>
+#include <utility>
 
 #include "core/version.hpp"
 #include "log/session_log.hpp"
@@ -80,10 +87,98 @@ ImuSample read_sample_columns(sqlite3_stmt* stmt, int first) {
 // ------------------------------------------------------------------------------------------
 // Writer
 
+/// The writer's exclusive flock(2) on the log file, held from before the file has content until
+/// after SQLite closed it. flock locks are apart from the POSIX record locks SQLite takes, but
+/// closing any descriptor of the file drops the process's POSIX locks: the descriptor is closed
+/// only after SQLite has closed its own.
+class WriterLock {
+ public:
+  WriterLock() = default;
+  explicit WriterLock(int fd) : fd_(fd) {}
+  WriterLock(WriterLock&& o) noexcept : fd_(std::exchange(o.fd_, -1)) {}
+  WriterLock& operator=(WriterLock&& o) noexcept {
+    std::swap(fd_, o.fd_);
+    return *this;
+  }
+  ~WriterLock() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+
+ private:
+  int fd_ = -1;
+};
+
+/// The process that holds a flock on the file with this device and inode (from /proc/locks), or
+/// 0 when none is listed. Read without opening the file: closing a descriptor of a file drops
+/// every POSIX lock this process holds on it, SQLite's included.
+long flock_holder(dev_t dev, ino_t ino) {
+  char want[64];
+  std::snprintf(want, sizeof want, "%02x:%02x:%llu", major(dev), minor(dev),
+                static_cast<unsigned long long>(ino));
+  std::ifstream locks("/proc/locks");
+  std::string line;
+  while (std::getline(locks, line)) {
+    // "1: FLOCK  ADVISORY  WRITE 12345 08:01:654321 0 EOF"
+    std::istringstream in(line);
+    std::string n, type, mode, access, dev_ino;
+    long pid = 0;
+    if (in >> n >> type >> mode >> access >> pid >> dev_ino && type == "FLOCK" && dev_ino == want) return pid;
+  }
+  return 0;
+}
+
+long flock_holder(int fd) {
+  struct stat st {};
+  return ::fstat(fd, &st) == 0 ? flock_holder(st.st_dev, st.st_ino) : 0;
+}
+
+std::string held_by(int fd) {
+  const long pid = flock_holder(fd);
+  if (pid <= 0) return "another process";
+  std::string comm;
+  std::ifstream(std::string("/proc/") + std::to_string(pid) + "/comm") >> comm;
+  return "process " + std::to_string(pid) + (comm.empty() ? "" : " (" + comm + ")");
+}
+
+/// Takes the writer's lock on the file at `path`: created here (O_EXCL) unless `overwrite`; an
+/// existing file is replaced only when no other writer holds it.
+Result<WriterLock> lock_for_writing(const std::string& path, bool overwrite) {
+  if (overwrite) {
+    const int old = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
+    if (old >= 0) {
+      WriterLock guard(old);
+      if (::flock(old, LOCK_EX | LOCK_NB) != 0 && errno == EWOULDBLOCK) {
+        return make_error(Errc::kIo, "session log " + path + " is being written by " + held_by(old) +
+                                         "; stop that recording first, or write to another file");
+      }
+    }
+    for (const char* suffix : {"", "-wal", "-shm", "-journal"}) {
+      const std::string victim = path + suffix;
+      if (std::remove(victim.c_str()) != 0 && errno != ENOENT) {
+        return make_error(Errc::kIo, "cannot replace " + victim + ": " + std::strerror(errno));
+      }
+    }
+  }
+  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd < 0) {
+    if (errno == EEXIST) return make_error(Errc::kAlreadyExists, "session log " + path + " already exists");
+    return make_error(Errc::kIo, "cannot create session log " + path + ": " + std::strerror(errno) +
+                                     " (check that the directory exists and is writable)");
+  }
+  WriterLock lock(fd);
+  // Nobody else can hold a lock on a file this call created; a failure here is the filesystem's.
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    const int err = errno;
+    std::remove(path.c_str());
+    return make_error(Errc::kIo, "cannot lock session log " + path + ": " + std::strerror(err));
+  }
+  return lock;
+}
+
 class SqliteSessionLogWriter final : public SessionLogWriter {
  public:
-  SqliteSessionLogWriter(std::string path, SessionLogWriterOptions options, sqlite::Db db)
-      : path_(std::move(path)), options_(options), db_(std::move(db)) {}
+  SqliteSessionLogWriter(std::string path, SessionLogWriterOptions options, sqlite::Db db, WriterLock lock)
+      : path_(std::move(path)), options_(options), db_(std::move(db)), lock_(std::move(lock)) {}
 
   ~SqliteSessionLogWriter() override {
     if (closed_) return;
@@ -198,6 +293,7 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
                         "append_imu: no IMU stream with id " + std::to_string(stream_id) + " in this log");
     }
     const bool raw = it->second == ImuUnits::kRaw;
+    for (const ImuSample& sample : samples) IMUCAL_TRY(check_time("append_imu", sample.t_ns));
     IMUCAL_TRY(begin_if_needed());
     sqlite3_stmt* s = insert_imu_.get();
     for (const ImuSample& sample : samples) {
@@ -211,6 +307,7 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
       sqlite3_reset(s);
       if (rc != SQLITE_DONE) return fail_with("append IMU samples");
     }
+    if (!samples.empty()) note_data_time(samples.front().t_ns, samples.back().t_ns);
     return maybe_commit();
   }
 
@@ -223,6 +320,7 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
     if (frame.data.size() > static_cast<std::size_t>(std::numeric_limits<int>::max())) {
       return make_error(Errc::kInvalidArgument, "append_frame: frame data larger than 2 GiB");
     }
+    IMUCAL_TRY(check_time("append_frame", frame.t_ns));
     IMUCAL_TRY(begin_if_needed());
     sqlite3_stmt* s = insert_frame_.get();
     sqlite3_bind_int(s, 1, stream_id);
@@ -247,6 +345,7 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
 
   Status append_event(const Event& event) override {
     IMUCAL_TRY(check_usable());
+    IMUCAL_TRY(check_time("append_event", event.t_ns));
     IMUCAL_TRY(begin_if_needed());
     sqlite3_stmt* s = insert_event_.get();
     sqlite3_bind_int64(s, 1, event.t_ns);
@@ -271,11 +370,13 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
     // Move everything into the main file. Switching back to a rollback journal leaves a
     // single self-contained file that opens read-only even where no -shm can be created; it
     // fails harmlessly (the log stays in WAL mode) while another process has the log open.
-    if (sqlite3_wal_checkpoint_v2(db_.get(), nullptr, SQLITE_CHECKPOINT_TRUNCATE, nullptr, nullptr) !=
-        SQLITE_OK) {
-      return fail_with("checkpoint");
-    }
-    (void)sqlite::exec(db_.get(), "PRAGMA journal_mode=DELETE");
+    // A reader in a read transaction keeps the checkpoint from finishing (SQLITE_BUSY): every
+    // commit is durable in the -wal already and the next opener moves it in, so the log is
+    // complete and closed as it is.
+    const int ckpt =
+        sqlite3_wal_checkpoint_v2(db_.get(), nullptr, SQLITE_CHECKPOINT_TRUNCATE, nullptr, nullptr);
+    if (ckpt != SQLITE_OK && ckpt != SQLITE_BUSY && ckpt != SQLITE_LOCKED) return fail_with("checkpoint");
+    if (ckpt == SQLITE_OK) (void)sqlite::exec(db_.get(), "PRAGMA journal_mode=DELETE");
     closed_ = true;
     return release();
   }
@@ -330,14 +431,35 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
     return {};
   }
 
+  static Status check_time(const char* what, TimeNs t_ns) {
+    if (time_in_range(t_ns)) return {};
+    return make_error(Errc::kInvalidArgument, std::string(what) + ": t_ns=" + std::to_string(t_ns) +
+                                                  " is beyond 146 years from the clock's zero (2^62 ns)");
+  }
+
+  // The span of sample time the open transaction holds (for commit_data_interval_ns).
+  void note_data_time(TimeNs first, TimeNs last) {
+    if (!txn_has_data_) {
+      txn_data_start_ns_ = first;
+      txn_has_data_ = true;
+    }
+    txn_data_end_ns_ = std::max(txn_data_end_ns_, last);
+  }
+
   Status maybe_commit() {
-    if (in_txn_ && monotonic_now_ns() - txn_start_ns_ >= options_.commit_interval_ns) return commit();
+    if (!in_txn_) return {};
+    if (monotonic_now_ns() - txn_start_ns_ >= options_.commit_interval_ns) return commit();
+    if (options_.commit_data_interval_ns > 0 && txn_has_data_ &&
+        txn_data_end_ns_ - txn_data_start_ns_ >= options_.commit_data_interval_ns)
+      return commit();
     return {};
   }
 
   Status commit() {
     if (sqlite::exec(db_.get(), "COMMIT") != SQLITE_OK) return fail_with("commit");
     in_txn_ = false;
+    txn_has_data_ = false;
+    txn_data_end_ns_ = kTimeMin;
     return {};
   }
 
@@ -365,14 +487,17 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
     if (sqlite3_close(db) != SQLITE_OK) {
       const std::string message = sqlite::errmsg(db);
       sqlite3_close_v2(db);
+      lock_ = WriterLock{};
       return make_error(Errc::kIo, "session log " + path_ + ": close failed: " + message);
     }
+    lock_ = WriterLock{};  // SQLite has closed the file: another writer may have it now
     return {};
   }
 
   std::string path_;
   SessionLogWriterOptions options_;
   sqlite::Db db_;
+  WriterLock lock_;  // declared after db_: released after SQLite closed the file
   Stmt insert_imu_, insert_frame_, insert_event_, set_metadata_;
   std::map<int, ImuUnits> imu_units_;
   std::set<int> camera_ids_;
@@ -380,6 +505,8 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
   int next_stream_id_ = 1;
   bool in_txn_ = false;
   TimeNs txn_start_ns_ = 0;
+  bool txn_has_data_ = false;
+  TimeNs txn_data_start_ns_ = 0, txn_data_end_ns_ = kTimeMin;
   bool closed_ = false;
   std::optional<Error> failed_;
 };
@@ -403,14 +530,8 @@ Result<std::unique_ptr<SessionLogWriter>> SessionLogWriter::create(const std::st
       return make_error(Errc::kInvalidArgument, "session log path " + path + " is a directory");
     }
   }
-  if (options.overwrite) {
-    for (const char* suffix : {"", "-wal", "-shm", "-journal"}) {
-      const std::string victim = path + suffix;
-      if (std::remove(victim.c_str()) != 0 && errno != ENOENT) {
-        return make_error(Errc::kIo, "cannot replace " + victim + ": " + std::strerror(errno));
-      }
-    }
-  }
+  auto lock = lock_for_writing(path, options.overwrite);
+  if (!lock.ok()) return lock.error();
   sqlite3* raw = nullptr;
   const int rc = sqlite3_open_v2(path.c_str(), &raw, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, nullptr);
   sqlite::Db db(raw);
@@ -418,7 +539,7 @@ Result<std::unique_ptr<SessionLogWriter>> SessionLogWriter::create(const std::st
     return make_error(Errc::kIo, "cannot create session log " + path + ": " + sqlite::errmsg(raw) +
                                      " (check that the directory exists and is writable)");
   }
-  auto writer = std::make_unique<SqliteSessionLogWriter>(path, options, std::move(db));
+  auto writer = std::make_unique<SqliteSessionLogWriter>(path, options, std::move(db), std::move(*lock));
   if (auto init = writer->init(); !init.ok()) {
     writer.reset();
     for (const char* suffix : {"", "-wal", "-shm"}) std::remove((path + suffix).c_str());
@@ -495,6 +616,21 @@ class SqliteSessionLogReader final : public SessionLogReader {
   // (rowids are assigned in insertion order), so rows behind a damaged leaf page are still
   // found when the pages above it are intact. Returns the number of damaged stretches skipped.
   int scan_skipping_damage(const char* sql, const char* table, const std::function<void(sqlite3_stmt*)>& row);
+  // Per stream: the rows and a sum of a hash of each row's (rowid, stream, t_ns). The table's in
+  // storage order (no index), false with SQLite's message at an unreadable page; the time
+  // index's alone (a covering scan), false when unreadable or out of order. Equal digests mean
+  // the index holds exactly the table's rows and times, so reads through it miss none.
+  struct StreamDigest {
+    std::int64_t count = 0;
+    std::uint64_t sum = 0;
+    bool operator==(const StreamDigest&) const = default;
+  };
+  using Digests = std::map<int, StreamDigest>;
+  bool digest_table(const char* table, Digests* out, std::string* error) const;
+  bool digest_index(const char* table, const char* index, Digests* out) const;
+  // The time index agrees with its table; the counts per stream when it does.
+  bool index_agrees(const char* table, const char* index, std::map<int, std::int64_t>* counts, bool* table_ok,
+                    std::string* table_error) const;
 
   std::string path_;
   sqlite::Db db_;
@@ -604,9 +740,130 @@ std::string truncation_of(const std::string& path) {
          " bytes present, the rest is lost";
 }
 
+/// What the write-ahead log beside a log says about commits SQLite will not replay. SQLite
+/// replays the -wal up to its first frame that fails the checksum chain and silently ignores
+/// the rest; frames of the same generation (same salts) after that point that end a transaction
+/// were committed and are lost. Only called when no writer holds the log (a live -wal grows).
+struct WalCheck {
+  bool present = false;
+  std::string damage;      // committed frames that will not be replayed; empty when none
+  bool torn_tail = false;  // the file ends inside a frame, or in frames no commit ends
+};
+
+WalCheck check_wal(const std::string& path) {
+  WalCheck out;
+  std::ifstream in(path + "-wal", std::ios::binary);
+  if (!in) return out;
+  out.present = true;
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (bytes.empty()) return out;
+  const auto* b = reinterpret_cast<const unsigned char*>(bytes.data());
+  const auto be32 = [&](std::size_t at) {
+    return (std::uint32_t{b[at]} << 24) | (std::uint32_t{b[at + 1]} << 16) | (std::uint32_t{b[at + 2]} << 8) |
+           b[at + 3];
+  };
+  if (bytes.size() < 32) {
+    out.torn_tail = true;
+    return out;
+  }
+  const std::uint32_t magic = be32(0);
+  const std::uint32_t page_size = be32(8);
+  if ((magic != 0x377f0682 && magic != 0x377f0683) || page_size < 512 || page_size > 65536 ||
+      (page_size & (page_size - 1)) != 0) {
+    if (bytes.size() > 32)
+      out.damage = "its write-ahead log " + path + "-wal has a damaged header: SQLite ignores all " +
+                   std::to_string(bytes.size()) + " bytes of it, with every commit since the last checkpoint";
+    return out;
+  }
+  const bool big_endian = (magic & 1) != 0;
+  const auto word = [&](std::size_t at) {
+    return big_endian ? be32(at)
+                      : (std::uint32_t{b[at + 3]} << 24) | (std::uint32_t{b[at + 2]} << 16) |
+                            (std::uint32_t{b[at + 1]} << 8) | b[at];
+  };
+  std::uint32_t s0 = 0, s1 = 0;
+  const auto sum = [&](std::size_t at, std::size_t n) {
+    for (std::size_t i = at; i + 8 <= at + n; i += 8) {
+      s0 += word(i) + s1;
+      s1 += word(i + 4) + s0;
+    }
+  };
+  sum(0, 24);
+  if (s0 != be32(24) || s1 != be32(28)) {
+    if (bytes.size() > 32)
+      out.damage = "its write-ahead log " + path + "-wal has a damaged header: SQLite ignores all " +
+                   std::to_string(bytes.size()) + " bytes of it, with every commit since the last checkpoint";
+    return out;
+  }
+  const std::uint32_t salt1 = be32(16), salt2 = be32(20);
+  const std::size_t frame = 24 + page_size;
+  const std::size_t frames = (bytes.size() - 32) / frame;
+  std::size_t valid = 0, last_commit = 0;  // frames in the intact chain; 1 + the last commit among them
+  bool chain = true;
+  std::size_t lost_commits = 0, lost_pages = 0;
+  for (std::size_t k = 0; k < frames; ++k) {
+    const std::size_t at = 32 + k * frame;
+    const bool same_generation = be32(at + 8) == salt1 && be32(at + 12) == salt2;
+    const bool commit = be32(at + 4) != 0;
+    if (chain) {
+      sum(at, 8);
+      sum(at + 24, page_size);
+      if (same_generation && s0 == be32(at + 16) && s1 == be32(at + 20)) {
+        valid = k + 1;
+        if (commit) last_commit = k + 1;
+        continue;
+      }
+      chain = false;
+    }
+    if (same_generation) {
+      ++lost_pages;
+      if (commit) ++lost_commits;
+    }
+  }
+  if (lost_commits > 0) {
+    out.damage = "its write-ahead log " + path + "-wal is damaged at frame " + std::to_string(valid + 1) +
+                 " of " + std::to_string(frames) + ": " + std::to_string(lost_commits) +
+                 " later commit(s) of up to " + std::to_string(lost_pages) +
+                 " pages are lost (the log reads as it was at the last intact commit)";
+  }
+  // SQLite writes whole frames: a file that ends inside one was cut (a truncated copy, a disk
+  // that filled, or a power loss while writing).
+  const std::size_t partial = (bytes.size() - 32) % frame;
+  if (partial != 0 && out.damage.empty()) {
+    out.damage = "its write-ahead log " + path + "-wal ends inside a frame (" + std::to_string(partial) +
+                 " bytes past its last whole frame): it was truncated, and the commit being written there is "
+                 "lost (the log reads as it was at the last intact commit)";
+  }
+  out.torn_tail = partial != 0 || valid > last_commit || !chain;
+  return out;
+}
+
+/// A log in WAL mode (header bytes 18 and 19 are 2) keeps what its writer committed since the
+/// last checkpoint in LOG-wal: without it (or with an empty one), an unclosed log may hold no
+/// tables at all.
+bool wal_mode_without_wal(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  unsigned char h[20] = {};
+  in.read(reinterpret_cast<char*>(h), sizeof h);
+  std::error_code ec;
+  // Empty counts as missing: opening such a log creates an empty one.
+  const auto wal_size = std::filesystem::file_size(path + "-wal", ec);
+  return in.gcount() == sizeof h && h[18] == 2 && (ec || wal_size == 0);
+}
+
+/// True when a writer holds the log (its flock, see lock_for_writing).
+bool being_written(const std::string& path) {
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 && flock_holder(st.st_dev, st.st_ino) != 0;
+}
+
 Status SqliteSessionLogReader::open() {
   IMUCAL_TRY(precheck_file(path_));
   if (const std::string truncated = truncation_of(path_); !truncated.empty()) note_damage(truncated);
+  const bool live = being_written(path_);
+  const WalCheck wal = live ? WalCheck{} : check_wal(path_);
+  if (!wal.damage.empty()) note_damage(wal.damage);
+  const bool wal_missing = wal_mode_without_wal(path_);
   sqlite3* raw = nullptr;
   const int rc = sqlite3_open_v2(path_.c_str(), &raw, SQLITE_OPEN_READONLY, sqlite::strict_vfs_name());
   db_.reset(raw);
@@ -619,7 +876,13 @@ Status SqliteSessionLogReader::open() {
   // One read transaction for all checks, so that a log still being written is seen as one
   // consistent snapshot (the table and index counts must agree).
   (void)sqlite::exec(db_.get(), "BEGIN");
-  IMUCAL_TRY(read_schema());
+  if (Status schema = read_schema(); !schema.ok()) {
+    if (!wal_missing) return schema;
+    return make_error(Errc::kCorrupt,
+                      path_ + " holds no session tables, and its write-ahead log " + path_ +
+                          "-wal is missing: a log that was not closed keeps its data there; "
+                          "copy that file next to the log (it was lost or not copied with it)");
+  }
   IMUCAL_TRY(read_metadata());
   read_streams();
   scan_imu();
@@ -629,6 +892,11 @@ Status SqliteSessionLogReader::open() {
   if (health_.damaged) apply_salvage();
   const auto complete = metadata_.find(kKeyComplete);
   health_.complete = complete != metadata_.end() && complete->second == "1";
+  // A closed log's writer checkpointed its -wal; a torn one beside it came from elsewhere.
+  if (health_.complete && wal.torn_tail && wal.damage.empty())
+    note_damage("its write-ahead log " + path_ +
+                "-wal ends in frames no commit completes, which the writer of "
+                "a closed log never leaves: it was truncated or damaged, and what it held is lost");
   return {};
 }
 
@@ -690,13 +958,14 @@ Status SqliteSessionLogReader::read_metadata() {
                                           "' is not a number)");
   }
   if (schema > kSessionLogSchemaVersion) {
+    // An input this build cannot read, like a malformed one (exit 3 in every command).
     const auto writer = metadata_.find(kKeySoftwareVersion);
-    return make_error(Errc::kUnsupported,
-                      "session log " + path_ + " has schema version " + std::to_string(schema) +
-                          " (written by imucal " +
-                          (writer == metadata_.end() ? std::string("?") : writer->second) +
-                          "); this imucal " + kVersion + " reads up to version " +
-                          std::to_string(kSessionLogSchemaVersion) + ": update imucal to read it");
+    return make_error(Errc::kCorrupt, "session log " + path_ + " has schema version " +
+                                          std::to_string(schema) + " (written by imucal " +
+                                          (writer == metadata_.end() ? std::string("?") : writer->second) +
+                                          "); this imucal " + kVersion + " reads up to version " +
+                                          std::to_string(kSessionLogSchemaVersion) +
+                                          ": update imucal to read it");
   }
   for (const char* table : {"imu_streams", "camera_streams", "imu_samples", "frames", "events"}) {
     if (!tables_.contains(table)) {
@@ -799,47 +1068,100 @@ int SqliteSessionLogReader::scan_skipping_damage(const char* sql, const char* ta
   }
 }
 
+namespace {
+
+std::uint64_t row_hash(std::int64_t rowid, int stream, std::int64_t t_ns) {
+  // splitmix64 of the three, so a changed value anywhere changes the sum.
+  std::uint64_t x = static_cast<std::uint64_t>(rowid) * 0x9e3779b97f4a7c15ULL ^
+                    static_cast<std::uint64_t>(t_ns) ^ (static_cast<std::uint64_t>(stream) << 48);
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
+}  // namespace
+
+bool SqliteSessionLogReader::digest_table(const char* table, Digests* out, std::string* error) const {
+  int rc = 0;
+  const std::string sql = std::string("SELECT rowid, stream_id, t_ns FROM ") + table + " NOT INDEXED";
+  Stmt stmt = sqlite::prepare(db_.get(), sql.c_str(), &rc);
+  while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+    const int stream = sqlite3_column_int(stmt.get(), 1);
+    const std::int64_t t = sqlite3_column_int64(stmt.get(), 2);
+    // A time no writer stores (beyond 2^62 ns) makes the table disagree with any index, so
+    // the rows are loaded one by one and such rows left out.
+    if (!time_in_range(t)) (*out)[std::numeric_limits<int>::min()].count += 1;
+    StreamDigest& d = (*out)[stream];
+    d.count += 1;
+    d.sum += row_hash(sqlite3_column_int64(stmt.get(), 0), stream, t);
+  }
+  if (rc == SQLITE_DONE) return true;
+  *error = sqlite::errmsg(db_.get());
+  return false;
+}
+
+bool SqliteSessionLogReader::digest_index(const char* table, const char* index, Digests* out) const {
+  int rc = 0;
+  const std::string sql = std::string("SELECT rowid, stream_id, t_ns FROM ") + table + " INDEXED BY " +
+                          index + " ORDER BY stream_id, t_ns";
+  Stmt stmt = sqlite::prepare(db_.get(), sql.c_str(), &rc);
+  int prev_stream = std::numeric_limits<int>::min();
+  std::int64_t prev_t = std::numeric_limits<std::int64_t>::min();
+  while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+    const int stream = sqlite3_column_int(stmt.get(), 1);
+    const std::int64_t t = sqlite3_column_int64(stmt.get(), 2);
+    // The index's own order: a changed key puts an entry out of it, and a search through the
+    // index would then miss entries.
+    if (stream < prev_stream || (stream == prev_stream && t < prev_t)) return false;
+    prev_stream = stream;
+    prev_t = t;
+    StreamDigest& d = (*out)[stream];
+    d.count += 1;
+    d.sum += row_hash(sqlite3_column_int64(stmt.get(), 0), stream, t);
+  }
+  return rc == SQLITE_DONE;
+}
+
+bool SqliteSessionLogReader::index_agrees(const char* table, const char* index,
+                                          std::map<int, std::int64_t>* counts, bool* table_ok,
+                                          std::string* table_error) const {
+  Digests from_table, from_index;
+  *table_ok = digest_table(table, &from_table, table_error);
+  if (!*table_ok || !digest_index(table, index, &from_index) || from_index != from_table) return false;
+  counts->clear();
+  for (const auto& [stream, d] : from_table) (*counts)[stream] = d.count;
+  return true;
+}
+
 // Walks the IMU table in storage order (which needs no index) and checks the time index
 // against it. Any error switches to serving samples from memory.
 void SqliteSessionLogReader::scan_imu() {
   if (!tables_.contains("imu_samples")) return;
-  int rc = 0;
-  std::map<int, std::int64_t> counts;
-  {
-    Stmt stmt = sqlite::prepare(db_.get(), "SELECT stream_id FROM imu_samples NOT INDEXED", &rc);
-    while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW)
-      ++counts[sqlite3_column_int(stmt.get(), 0)];
-  }
-  bool table_ok = rc == SQLITE_DONE;
-  std::string table_error = table_ok ? "" : sqlite::errmsg(db_.get());
-  bool index_ok = false;
-  if (table_ok) {
-    std::map<int, std::int64_t> index_counts;
-    Stmt stmt = sqlite::prepare(
-        db_.get(),
-        "SELECT stream_id, count(*) FROM imu_samples INDEXED BY imu_samples_by_time GROUP BY stream_id", &rc);
-    while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
-      index_counts[sqlite3_column_int(stmt.get(), 0)] = sqlite3_column_int64(stmt.get(), 1);
-    }
-    index_ok = rc == SQLITE_DONE && index_counts == counts;
-    if (index_ok) {
-      imu_counts_ = std::move(counts);
-      return;
-    }
-  }
+  bool table_ok = false;
+  std::string table_error;
+  if (index_agrees("imu_samples", "imu_samples_by_time", &imu_counts_, &table_ok, &table_error)) return;
   // Load what the table yields, in storage order, and sort.
   imu_in_memory_ = true;
-  std::int64_t loaded = 0;
+  std::int64_t loaded = 0, impossible = 0;
   const int skipped = scan_skipping_damage(
       "SELECT rowid, stream_id, t_ns, ax, ay, az, gx, gy, gz, temperature, flags FROM imu_samples "
       "WHERE rowid >= ?1 ORDER BY rowid",
       "imu_samples", [&](sqlite3_stmt* s) {
+        if (!time_in_range(sqlite3_column_int64(s, 2))) {
+          ++impossible;
+          return;
+        }
         imu_memory_[sqlite3_column_int(s, 1)].push_back(read_sample_columns(s, 2));
         ++loaded;
       });
+  if (impossible > 0) {
+    note_damage(std::to_string(impossible) +
+                " IMU samples have timestamps beyond 2^62 ns, which no writer stores; they were left out");
+  }
   if (table_ok) {
-    note_damage("the IMU time index is damaged (all " + std::to_string(loaded) +
-                " samples were read from the table instead)");
+    if (impossible == 0)
+      note_damage("the IMU time index is damaged (all " + std::to_string(loaded) +
+                  " samples were read from the table instead)");
   } else {
     note_damage("IMU sample table damaged (" + table_error + "): " + std::to_string(loaded) +
                 " samples readable, samples lost in " + std::to_string(std::max(skipped, 1)) +
@@ -849,34 +1171,19 @@ void SqliteSessionLogReader::scan_imu() {
 
 void SqliteSessionLogReader::scan_frames() {
   if (!tables_.contains("frames")) return;
-  int rc = 0;
-  std::map<int, std::int64_t> counts;
-  {
-    Stmt stmt = sqlite::prepare(db_.get(), "SELECT stream_id FROM frames NOT INDEXED", &rc);
-    while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW)
-      ++counts[sqlite3_column_int(stmt.get(), 0)];
-  }
-  const bool table_ok = rc == SQLITE_DONE;
-  const std::string table_error = table_ok ? "" : sqlite::errmsg(db_.get());
-  if (table_ok) {
-    std::map<int, std::int64_t> index_counts;
-    Stmt stmt = sqlite::prepare(
-        db_.get(), "SELECT stream_id, count(*) FROM frames INDEXED BY frames_by_time GROUP BY stream_id",
-        &rc);
-    while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
-      index_counts[sqlite3_column_int(stmt.get(), 0)] = sqlite3_column_int64(stmt.get(), 1);
-    }
-    if (rc == SQLITE_DONE && index_counts == counts) {
-      frame_counts_ = std::move(counts);
-      return;
-    }
-  }
+  bool table_ok = false;
+  std::string table_error;
+  if (index_agrees("frames", "frames_by_time", &frame_counts_, &table_ok, &table_error)) return;
   frames_in_memory_ = true;
-  std::int64_t loaded = 0;
+  std::int64_t loaded = 0, impossible = 0;
   const int skipped = scan_skipping_damage(
       "SELECT rowid, stream_id, t_ns, width, height, encoding, exposure_ns, sequence, flags FROM frames "
       "WHERE rowid >= ?1 ORDER BY rowid",
       "frames", [&](sqlite3_stmt* s) {
+        if (!time_in_range(sqlite3_column_int64(s, 2))) {
+          ++impossible;
+          return;
+        }
         FrameRef ref;
         ref.rowid = sqlite3_column_int64(s, 0);
         ref.frame.t_ns = sqlite3_column_int64(s, 2);
@@ -889,9 +1196,14 @@ void SqliteSessionLogReader::scan_frames() {
         frame_memory_[sqlite3_column_int(s, 1)].push_back(std::move(ref));
         ++loaded;
       });
+  if (impossible > 0) {
+    note_damage(std::to_string(impossible) +
+                " frames have timestamps beyond 2^62 ns, which no writer stores; they were left out");
+  }
   if (table_ok) {
-    note_damage("the frame time index is damaged (all " + std::to_string(loaded) +
-                " frames were read from the table instead)");
+    if (impossible == 0)
+      note_damage("the frame time index is damaged (all " + std::to_string(loaded) +
+                  " frames were read from the table instead)");
   } else {
     note_damage("frame table damaged (" + table_error + "): " + std::to_string(loaded) +
                 " frames readable, frames lost in " + std::to_string(std::max(skipped, 1)) + " place(s)");

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 #include <sqlite3.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
@@ -323,6 +324,63 @@ TEST(SessionLog, WriterRejectsMisuse) {
   EXPECT_FALSE(w.append_imu(id, ImuSample{}).ok());
   EXPECT_FALSE(w.close().ok());
   EXPECT_FALSE(SessionLogWriter::create(scratch_dir() + "/no/such/dir/x.imulog").ok());
+}
+
+// One writer per log: while a writer has it, a second one is refused (replacing it or not) with
+// the holder named, and the first's data stays; once closed, --force may replace it.
+TEST(SessionLog, ASecondWriterIsRefusedWhileTheFirstWrites) {
+  const std::string path = scratch_dir() + "/busy.imulog";
+  auto first = SessionLogWriter::create(path);
+  ASSERT_TRUE(first.ok()) << first.error().message;
+  const int id = *(*first)->add_imu_stream(test_raw_imu_info());
+  ASSERT_TRUE((*first)->append_imu(id, make_raw_samples(50, 0)).ok());
+
+  EXPECT_EQ(SessionLogWriter::create(path).error().code, Errc::kAlreadyExists);
+  SessionLogWriterOptions force;
+  force.overwrite = true;
+  auto second = SessionLogWriter::create(path, force);
+  ASSERT_FALSE(second.ok());
+  EXPECT_EQ(second.error().code, Errc::kIo);
+  const std::string pid = std::to_string(::getpid());
+  EXPECT_NE(second.error().message.find("is being written by process " + pid), std::string::npos)
+      << second.error().message;
+
+  ASSERT_TRUE((*first)->append_imu(id, make_raw_samples(50, 50'000'000, 50)).ok());
+  ASSERT_TRUE((*first)->close().ok());
+  {
+    auto reader = SessionLogReader::open(path);
+    ASSERT_TRUE(reader.ok()) << reader.error().message;
+    EXPECT_TRUE((*reader)->health().complete);
+    EXPECT_EQ(*(*reader)->imu_count(id), 100);
+  }
+  auto replaced = SessionLogWriter::create(path, force);
+  ASSERT_TRUE(replaced.ok()) << replaced.error().message;
+  ASSERT_TRUE((*replaced)->close().ok());
+}
+
+// A reader inside a read transaction when the writer closes keeps the final checkpoint from
+// finishing: the log is complete all the same (its commits are in the -wal), and close() says so.
+TEST(SessionLog, CloseSucceedsWhileAReaderHoldsAReadTransaction) {
+  const std::string path = scratch_dir() + "/read-at-close.imulog";
+  auto writer = SessionLogWriter::create(path);
+  ASSERT_TRUE(writer.ok()) << writer.error().message;
+  const int id = *(*writer)->add_imu_stream(test_raw_imu_info());
+  ASSERT_TRUE((*writer)->append_imu(id, make_raw_samples(200, 0)).ok());
+  ASSERT_TRUE((*writer)->flush().ok());
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "BEGIN", nullptr, nullptr, nullptr), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "SELECT count(*) FROM imu_samples", nullptr, nullptr, nullptr), SQLITE_OK);
+  ASSERT_TRUE((*writer)->append_imu(id, make_raw_samples(100, 200'000'000, 200)).ok());
+  const Status closed = (*writer)->close();
+  EXPECT_TRUE(closed.ok()) << closed.error().message;
+  sqlite3_exec(db, "COMMIT", nullptr, nullptr, nullptr);
+  sqlite3_close(db);
+  auto reader = SessionLogReader::open(path);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_TRUE((*reader)->health().complete);
+  EXPECT_FALSE((*reader)->health().damaged) << (*reader)->health().damage_message;
+  EXPECT_EQ(*(*reader)->imu_count(id), 300);
 }
 
 // Without close(), the destructor keeps what was appended but the log stays incomplete.
