@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/imu_model.hpp"
+#include "log/dataset_io.hpp"
 
 namespace imucal::app {
 namespace {
@@ -473,7 +474,12 @@ Status write_text_file(const std::string& path, const std::string& text, const O
   }
   if (err == 0 && ::fsync(fd) != 0) err = errno;
   if (::close(fd) != 0 && err == 0) err = errno;
-  if (err == 0 && ::rename(temp.c_str(), path.c_str()) != 0) err = errno;
+  if (err == 0) {
+    if (Status moved = log::rename_into_place(temp, path, policy.overwrite); !moved.ok()) {
+      ::unlink(temp.c_str());
+      return moved.error();
+    }
+  }
   if (err != 0) {
     ::unlink(temp.c_str());
     return make_error(Errc::kIo, "could not write " + path + ": " + std::strerror(err) +

@@ -19,6 +19,7 @@
 #include "core/imu.hpp"
 #include "core/progress.hpp"
 #include "core/result.hpp"
+#include "core/text_file.hpp"
 #include "core/time.hpp"
 
 namespace imucal::log {
@@ -63,8 +64,13 @@ class PendingOutput {
   bool done_ = false;
 };
 
-/// Reads a whole file; the error names the path.
-[[nodiscard]] Result<std::string> read_text_file(const std::string& path);
+/// Renames `from` to `to`; unless `replace`, fails with kAlreadyExists when `to` exists, atomically
+/// (renameat2 RENAME_NOREPLACE, or link + unlink where the filesystem lacks it), so of two
+/// processes writing one output the second is refused instead of replacing the first's.
+[[nodiscard]] Status rename_into_place(const std::string& from, const std::string& to, bool replace);
+
+/// Reads a whole file; the error names the path (core/text_file.hpp).
+using imucal::read_text_file;
 
 // ---------------------------------------------------------------------------------------------
 // Text primitives (exposed for tests and other readers).

@@ -4,7 +4,9 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -76,7 +78,9 @@ Result<PendingOutput> PendingOutput::begin(const std::string& final_path, Kind k
   }
   std::string temp = final_path;
   while (!temp.empty() && temp.back() == '/') temp.pop_back();
-  temp += ".partial-" + std::to_string(::getpid());
+  // Unique per process and output, so two outputs to one path never share a temporary.
+  static std::atomic<unsigned> serial{0};
+  temp += ".partial-" + std::to_string(::getpid()) + "-" + std::to_string(serial++);
   PendingOutput out(final_path, temp, kind, force);
   // A leftover from an earlier crash of a process with the same id.
   if (kind == Kind::kDirectory) {
@@ -102,9 +106,7 @@ Status PendingOutput::commit() {
       // A stale -wal next to the replaced log would be replayed into the new one.
       for (const char* suffix : {"-wal", "-shm", "-journal"}) fs::remove(final_path + suffix, ec);
     }
-    fs::rename(temp_path_, final_path, ec);
-    if (ec)
-      return make_error(Errc::kIo, "cannot move " + temp_path_ + " to " + final_path + ": " + ec.message());
+    IMUCAL_TRY(rename_into_place(temp_path_, final_path, force_));
     done_ = true;
     return {};
   }
@@ -132,40 +134,20 @@ Status PendingOutput::commit() {
   return {};
 }
 
-Result<std::string> read_text_file(const std::string& path) {
-  // One read of the known size into one buffer: no stream growing and copying, and a read error
-  // is an error, not an early end of the file.
-  // O_NONBLOCK: opening a FIFO without a writer returns at once (and is refused below) instead
-  // of blocking; it does not change reads of a regular file.
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
-  if (fd < 0) {
-    return make_error(Errc::kNotFound,
-                      "cannot open " + path + ": " + std::strerror(errno) + " (check the path)");
+Status rename_into_place(const std::string& from, const std::string& to, bool replace) {
+  int rc = replace ? ::rename(from.c_str(), to.c_str())
+                   : ::renameat2(AT_FDCWD, from.c_str(), AT_FDCWD, to.c_str(), RENAME_NOREPLACE);
+  if (rc != 0 && !replace && errno == EINVAL) {  // a filesystem without RENAME_NOREPLACE
+    rc = ::link(from.c_str(), to.c_str());
+    if (rc == 0) ::unlink(from.c_str());
   }
-  struct stat st {};
-  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
-    const bool dir = S_ISDIR(st.st_mode);
-    ::close(fd);
-    return make_error(Errc::kNotFound,
-                      path + (dir ? " is a folder, expected a file" : " is not a regular file"));
-  }
-  std::string text(static_cast<std::size_t>(st.st_size), '\0');
-  std::size_t got = 0;
-  while (got < text.size()) {
-    const ssize_t r = ::read(fd, text.data() + got, text.size() - got);
-    if (r < 0 && errno == EINTR) continue;
-    if (r < 0) {
-      const int err = errno;
-      ::close(fd);
-      return make_error(Errc::kIo, "cannot read " + path + " (after " + std::to_string(got) +
-                                       " bytes): " + std::strerror(err));
-    }
-    if (r == 0) break;  // the file shrank while being read
-    got += static_cast<std::size_t>(r);
-  }
-  ::close(fd);
-  text.resize(got);
-  return text;
+  if (rc == 0) return {};
+  if (errno == EEXIST)
+    return make_error(Errc::kAlreadyExists, "output " + to +
+                                                " appeared while it was being written (another "
+                                                "process wrote it); " +
+                                                from + " was not moved there");
+  return make_error(Errc::kIo, "cannot move " + from + " to " + to + ": " + std::strerror(errno));
 }
 
 }  // namespace imucal::log

@@ -211,6 +211,25 @@ TEST(DatasetOutput, PendingOutputRemovesUncommittedAndRefusesExisting) {
   ASSERT_FALSE(again.ok());
   EXPECT_EQ(again.error().code, Errc::kAlreadyExists);
   EXPECT_THAT(again.error().message, HasSubstr("already exists"));
+  // Two writers of one new output: both start, the first to finish wins and the second is refused
+  // at its commit instead of replacing the first's file.
+  {
+    auto a = PendingOutput::begin((dir / "race.imulog").string(), PendingOutput::Kind::kFile, false);
+    auto b = PendingOutput::begin((dir / "race.imulog").string(), PendingOutput::Kind::kFile, false);
+    ASSERT_TRUE(a.ok() && b.ok());
+    ASSERT_NE(a->temp_path(), b->temp_path());
+    write(a->temp_path(), "first");
+    write(b->temp_path(), "second");
+    ASSERT_TRUE(a->commit().ok());
+    const Status late = b->commit();
+    ASSERT_FALSE(late.ok());
+    EXPECT_EQ(late.error().code, Errc::kAlreadyExists);
+    EXPECT_THAT(late.error().message, HasSubstr("appeared while it was being written"));
+  }
+  EXPECT_EQ(test::read_file((dir / "race.imulog").string()), "first");
+  for (const auto& entry : fs::directory_iterator(dir))  // the loser's temporary is gone
+    EXPECT_EQ(entry.path().filename().string().find("race.imulog.partial"), std::string::npos)
+        << entry.path();
   auto no_dir = PendingOutput::begin((dir / "nope/o.imulog").string(), PendingOutput::Kind::kFile, false);
   ASSERT_FALSE(no_dir.ok());
   EXPECT_THAT(no_dir.error().message, HasSubstr("does not exist"));
@@ -240,6 +259,12 @@ TEST(ReadTextFile, ReadsWholeFilesAndRefusesWhatIsNotARegularFile) {
   auto piped = read_text_file(fifo);
   ASSERT_FALSE(piped.ok());
   EXPECT_NE(piped.error().message.find("not a regular file"), std::string::npos) << piped.error().message;
+  // A limit refuses what is far larger than the file can be, without reading it.
+  auto limited = read_text_file(path, 1000);
+  ASSERT_FALSE(limited.ok());
+  EXPECT_EQ(limited.error().code, Errc::kInvalidArgument);
+  EXPECT_NE(limited.error().message.find("3000004 bytes"), std::string::npos) << limited.error().message;
+  EXPECT_FALSE(read_text_file("/dev/zero").ok());  // never ends: not a regular file
   auto missing = read_text_file(dir + "/none.txt");
   ASSERT_FALSE(missing.ok());
   EXPECT_EQ(missing.error().code, Errc::kNotFound);

@@ -1,0 +1,121 @@
+#include "core/text_file.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <algorithm>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+
+namespace imucal {
+
+Result<std::string> read_text_file(const std::string& path, std::size_t max_bytes) {
+  // One read of the known size into one buffer: no stream growing and copying, and a read error
+  // is an error, not an early end of the file.
+  // O_NONBLOCK: opening a FIFO without a writer returns at once (and is refused below) instead
+  // of blocking; it does not change reads of a regular file.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  if (fd < 0) {
+    return make_error(Errc::kNotFound,
+                      "cannot open " + path + ": " + std::strerror(errno) + " (check the path)");
+  }
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    const bool dir = S_ISDIR(st.st_mode);
+    ::close(fd);
+    return make_error(Errc::kNotFound,
+                      path + (dir ? " is a folder, expected a file" : " is not a regular file"));
+  }
+  if (static_cast<std::size_t>(st.st_size) > max_bytes) {
+    ::close(fd);
+    return make_error(Errc::kInvalidArgument, path + " is " + std::to_string(st.st_size) +
+                                                  " bytes, more than such a file can be (" +
+                                                  std::to_string(max_bytes) + "); check the path");
+  }
+  std::string text(static_cast<std::size_t>(st.st_size), '\0');
+  std::size_t got = 0;
+  while (got < text.size()) {
+    const ssize_t r = ::read(fd, text.data() + got, text.size() - got);
+    if (r < 0 && errno == EINTR) continue;
+    if (r < 0) {
+      const int err = errno;
+      ::close(fd);
+      return make_error(Errc::kIo, "cannot read " + path + " (after " + std::to_string(got) +
+                                       " bytes): " + std::strerror(err));
+    }
+    if (r == 0) break;  // the file shrank while being read
+    got += static_cast<std::size_t>(r);
+  }
+  ::close(fd);
+  text.resize(got);
+  return text;
+}
+
+namespace {
+
+/// Length of the UTF-8 sequence at text[i], or 0 when it is not well-formed.
+std::size_t utf8_length(std::string_view text, std::size_t i) {
+  const auto byte = [&](std::size_t k) { return static_cast<unsigned char>(text[k]); };
+  const unsigned char c = byte(i);
+  if (c < 0x80) return 1;
+  std::size_t n = 0;
+  std::uint32_t cp = 0;
+  if ((c & 0xe0) == 0xc0) {
+    n = 2;
+    cp = c & 0x1f;
+  } else if ((c & 0xf0) == 0xe0) {
+    n = 3;
+    cp = c & 0x0f;
+  } else if ((c & 0xf8) == 0xf0) {
+    n = 4;
+    cp = c & 0x07;
+  } else {
+    return 0;
+  }
+  if (i + n > text.size()) return 0;
+  for (std::size_t k = 1; k < n; ++k) {
+    if ((byte(i + k) & 0xc0) != 0x80) return 0;
+    cp = (cp << 6) | (byte(i + k) & 0x3f);
+  }
+  static constexpr std::uint32_t kMin[5] = {0, 0, 0x80, 0x800, 0x10000};
+  if (cp < kMin[n] || cp > 0x10ffff || (cp >= 0xd800 && cp <= 0xdfff)) return 0;
+  return n;
+}
+
+}  // namespace
+
+bool valid_utf8(std::string_view text) {
+  for (std::size_t i = 0; i < text.size();) {
+    const std::size_t n = utf8_length(text, i);
+    if (n == 0) return false;
+    i += n;
+  }
+  return true;
+}
+
+std::string printable(std::string_view text, std::size_t max_chars) {
+  std::string out;
+  std::size_t chars = 0;
+  for (std::size_t i = 0; i < text.size(); ++chars) {
+    if (chars == max_chars) return out + "...";
+    const std::size_t n = utf8_length(text, i);
+    const bool bom = n == 3 && text.substr(i, 3) == "\xef\xbb\xbf";
+    if (n == 0 || bom || (n == 1 && (static_cast<unsigned char>(text[i]) < 0x20 || text[i] == 0x7f))) {
+      for (std::size_t k = 0; k < std::max<std::size_t>(n, 1); ++k) {
+        char hex[8];
+        std::snprintf(hex, sizeof hex, "\\x%02X", static_cast<unsigned char>(text[i + k]));
+        out += hex;
+      }
+      i += std::max<std::size_t>(n, 1);
+    } else {
+      out.append(text.substr(i, n));
+      i += n;
+    }
+  }
+  return out;
+}
+
+}  // namespace imucal
