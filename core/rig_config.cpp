@@ -1,5 +1,7 @@
 #include "core/rig_config.hpp"
 
+#include <yaml-cpp/depthguard.h>
+#include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
 #include <Eigen/Geometry>
@@ -11,8 +13,11 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 #include <sstream>
+
+#include "core/text_file.hpp"
 
 namespace imucal {
 
@@ -127,7 +132,8 @@ class ConfigParser {
   Error error(const YAML::Node& node, const std::string& path, const std::string& what) const {
     std::string where = source_;
     if (node.IsDefined() && !node.Mark().is_null()) where += ":" + std::to_string(node.Mark().line + 1);
-    return make_error(Errc::kInvalidArgument, where + ": " + (path.empty() ? "" : path + ": ") + what);
+    return make_error(Errc::kInvalidArgument,
+                      where + ": " + (path.empty() ? "" : printable(path, 120) + ": ") + what);
   }
 
   Status check_map(const YAML::Node& node, const std::string& path,
@@ -188,7 +194,7 @@ Result<long long> ConfigParser::get_int(const YAML::Node& node, const std::strin
   }
   auto [ptr, ec] = std::from_chars(first, last, v, base);
   if (ec != std::errc() || ptr != last || first == last) {
-    return error(node, path, "'" + s + "' is not an integer (decimal, or hex with 0x)");
+    return error(node, path, "'" + printable(s) + "' is not an integer (decimal, or hex with 0x)");
   }
   return v;
 }
@@ -200,13 +206,15 @@ Result<double> ConfigParser::get_double(const YAML::Node& node, const std::strin
   const char* first = s.data() + (!s.empty() && s[0] == '+' ? 1 : 0);
   auto [ptr, ec] = std::from_chars(first, s.data() + s.size(), v);
   if (ec != std::errc() || ptr != s.data() + s.size() || s.empty() || !std::isfinite(v)) {
-    return error(node, path, "'" + s + "' is not a finite number");
+    return error(node, path, "'" + printable(s) + "' is not a finite number");
   }
   return v;
 }
 
 Result<std::string> ConfigParser::get_string(const YAML::Node& node, const std::string& path) const {
   if (!node.IsScalar()) return error(node, path, "expected a string");
+  if (!valid_utf8(node.Scalar()))
+    return error(node, path, "'" + printable(node.Scalar()) + "' is not UTF-8 text (save the file as UTF-8)");
   return node.Scalar();
 }
 
@@ -223,13 +231,13 @@ Result<std::vector<double>> ConfigParser::get_doubles(const YAML::Node& node, co
 
 // Reads `key` of `map` into `out` when present, checking it with `cond` (an expression in x); `allowed`
 // describes the accepted values for the message.
-#define IMUCAL_CFG_INT(map, key, path, out, cond, allowed)                                                 \
-  if (const YAML::Node n_ = (map)[key]; n_) {                                                              \
-    auto v_ = get_int(n_, path);                                                                           \
-    if (!v_.ok()) return v_.error();                                                                       \
-    const long long x = *v_;                                                                               \
-    if (!(cond)) return error(n_, path, std::string(n_.Scalar()) + " is not allowed (" + (allowed) + ")"); \
-    (out) = static_cast<int>(x);                                                                           \
+#define IMUCAL_CFG_INT(map, key, path, out, cond, allowed)                                               \
+  if (const YAML::Node n_ = (map)[key]; n_) {                                                            \
+    auto v_ = get_int(n_, path);                                                                         \
+    if (!v_.ok()) return v_.error();                                                                     \
+    const long long x = *v_;                                                                             \
+    if (!(cond)) return error(n_, path, printable(n_.Scalar()) + " is not allowed (" + (allowed) + ")"); \
+    (out) = static_cast<int>(x);                                                                         \
   }
 
 Status ConfigParser::parse_imu(const YAML::Node& node, ImuConfig& imu) const {
@@ -455,11 +463,9 @@ Status ConfigParser::parse_target(const YAML::Node& node, RigConfig& config) con
   if (node.IsScalar()) {
     std::filesystem::path p(node.Scalar());
     if (p.is_relative()) p = std::filesystem::path(base_dir_) / p;
-    std::ifstream in(p);
-    if (!in) return error(node, "target", "cannot open target file " + p.string());
-    std::stringstream ss;
-    ss << in.rdbuf();
-    auto t = parse_target_yaml(ss.str(), p.string());
+    auto text = read_text_file(p.string(), kMaxConfigFileBytes);
+    if (!text.ok()) return error(node, "target", "target file: " + text.error().message);
+    auto t = parse_target_yaml(*text, p.string());
     if (!t.ok()) return error(node, "target", t.error().message);
     config.target = *t;
     return {};
@@ -557,7 +563,7 @@ Status ConfigParser::parse_session(const YAML::Node& node, SessionConfig& sessio
     if (*v < entry.min || *v > entry.max) {
       std::ostringstream range;
       range << entry.min << " to " << entry.max;
-      return error(n, path, n.Scalar() + " is not in range " + range.str());
+      return error(n, path, printable(n.Scalar()) + " is not in range " + range.str());
     }
     session.*entry.member = *v;
   }
@@ -594,16 +600,72 @@ Status ConfigParser::parse_session(const YAML::Node& node, SessionConfig& sessio
   return {};
 }
 
+namespace {
+
+/// Counts the documents of a YAML stream and notes where the second starts.
+class DocumentCounter final : public YAML::EventHandler {
+ public:
+  int documents = 0;
+  int second_line = 0;  // 1-based; 0 while there is no second document
+  void OnDocumentStart(const YAML::Mark& mark) override {
+    if (++documents == 2) second_line = mark.line + 1;
+  }
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark& mark, YAML::anchor_t) override { note(mark); }
+  void OnAlias(const YAML::Mark& mark, YAML::anchor_t) override { note(mark); }
+  void OnScalar(const YAML::Mark& mark, const std::string&, YAML::anchor_t, const std::string&) override {
+    note(mark);
+  }
+  void OnSequenceStart(const YAML::Mark& mark, const std::string&, YAML::anchor_t,
+                       YAML::EmitterStyle::value) override {
+    note(mark);
+  }
+  void OnSequenceEnd() override {}
+  void OnMapStart(const YAML::Mark& mark, const std::string&, YAML::anchor_t,
+                  YAML::EmitterStyle::value) override {
+    note(mark);
+  }
+  void OnMapEnd() override {}
+
+ private:
+  // The document start mark of a document after an unreadable token is not always set.
+  void note(const YAML::Mark& mark) {
+    if (documents == 2 && second_line <= 0) second_line = mark.line + 1;
+  }
+};
+
+/// The line of the second document of `text`, if it has more than one. Throws what the parser
+/// throws on malformed text.
+std::optional<int> second_document_line(const std::string& text) {
+  std::istringstream in(text);
+  YAML::Parser parser(in);
+  DocumentCounter counter;
+  for (int k = 0; k < 2 && parser.HandleNextDocument(counter); ++k) {
+  }
+  if (counter.documents < 2) return std::nullopt;
+  return std::max(counter.second_line, 1);
+}
+
+}  // namespace
+
 Result<RigConfig> ConfigParser::parse(const std::string& text) {
   YAML::Node root;
   try {
-    const std::vector<YAML::Node> docs = YAML::LoadAll(text);
-    if (docs.size() > 1) {
-      return make_error(Errc::kInvalidArgument,
-                        source_ + ":" + std::to_string(docs[1].Mark().line + 1) +
-                            ": a second YAML document ('---'); a rig configuration is one document");
+    // YAML::LoadAll of yaml-cpp 0.7 never returns on some malformed text (", x" grows its list
+    // of documents without bound, jbeder/yaml-cpp#1319): the documents are counted here with a
+    // bound, and the first is loaded on its own.
+    if (const auto second = second_document_line(text)) {
+      return make_error(
+          Errc::kInvalidArgument,
+          source_ + ":" + std::to_string(*second) +
+              ": a second YAML document ('---'), or text after the first that YAML cannot read; "
+              "a rig configuration is one document");
     }
-    if (!docs.empty()) root = docs.front();
+    root = YAML::Load(text);
+  } catch (const YAML::DeepRecursion& e) {
+    return make_error(Errc::kInvalidArgument, source_ + ":" + std::to_string(e.mark.line + 1) +
+                                                  ": nested more than " + std::to_string(e.depth()) +
+                                                  " levels deep: not a rig configuration");
   } catch (const YAML::ParserException& e) {
     return make_error(Errc::kInvalidArgument,
                       source_ + ":" + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg);
@@ -618,7 +680,7 @@ Result<RigConfig> ConfigParser::parse(const std::string& text) {
     if (name->empty() || !std::all_of(name->begin(), name->end(), [](char c) {
           return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
         })) {
-      return error(n, "name", "'" + *name + "' is not allowed (letters, digits, '_', '-', '.')");
+      return error(n, "name", "'" + printable(*name) + "' is not allowed (letters, digits, '_', '-', '.')");
     }
     config.name = *name;
   }
@@ -672,16 +734,13 @@ Result<RigConfig> parse_rig_config(const std::string& text, const std::string& s
 }
 
 Result<RigConfig> load_rig_config(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) {
-    return make_error(Errc::kNotFound, path +
-                                           ": cannot open the rig configuration (check the path; "
-                                           "the default one is config/rig.yaml)");
+  auto text = read_text_file(path, kMaxConfigFileBytes);
+  if (!text.ok()) {
+    return make_error(text.error().code,
+                      text.error().message + " (the rig configuration; the default one is config/rig.yaml)");
   }
-  std::stringstream ss;
-  ss << in.rdbuf();
   const std::string dir = std::filesystem::path(path).parent_path().string();
-  return parse_rig_config(ss.str(), path, dir.empty() ? "." : dir);
+  return parse_rig_config(*text, path, dir.empty() ? "." : dir);
 }
 
 namespace {

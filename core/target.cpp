@@ -1,9 +1,11 @@
 #include "core/target.hpp"
 
+#include <yaml-cpp/depthguard.h>
 #include <yaml-cpp/yaml.h>
 
-#include <fstream>
 #include <sstream>
+
+#include "core/text_file.hpp"
 
 namespace imucal {
 
@@ -85,6 +87,10 @@ Result<TargetDescription> parse_target_yaml(const std::string& text, const std::
   YAML::Node root;
   try {
     root = YAML::Load(text);
+  } catch (const YAML::DeepRecursion& e) {
+    return make_error(Errc::kInvalidArgument, source + ":" + std::to_string(e.mark.line + 1) +
+                                                  ": nested more than " + std::to_string(e.depth()) +
+                                                  " levels deep: not a target description");
   } catch (const YAML::Exception& e) {
     return make_error(Errc::kInvalidArgument, source + ": not valid YAML: " + e.what());
   }
@@ -130,11 +136,9 @@ Result<TargetDescription> parse_target_yaml(const std::string& text, const std::
 }
 
 Result<TargetDescription> load_target_yaml(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return make_error(Errc::kNotFound, path + ": cannot open target file");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return parse_target_yaml(ss.str(), path);
+  auto text = read_text_file(path, kMaxConfigFileBytes);
+  if (!text.ok()) return make_error(text.error().code, text.error().message + " (a target file)");
+  return parse_target_yaml(*text, path);
 }
 
 std::string target_to_yaml(const TargetDescription& t) {

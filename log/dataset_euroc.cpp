@@ -8,6 +8,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <charconv>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -73,40 +74,50 @@ Result<SensorYaml> read_sensor_yaml(const fs::path& folder) {
   return s;
 }
 
-/// Sensor folders named <prefix><number>, sorted by number.
-std::vector<std::pair<int, fs::path>> sensor_folders(const fs::path& root, const std::string& prefix) {
+/// Sensor folders named <prefix><number>, sorted by number. A number too large for an index
+/// is an error: such a folder would otherwise be left out without a word.
+Result<std::vector<std::pair<int, fs::path>>> sensor_folders(const fs::path& root,
+                                                             const std::string& prefix) {
   std::vector<std::pair<int, fs::path>> out;
   const std::regex pattern(prefix + "([0-9]+)");
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(root, ec)) {
     std::smatch m;
     const std::string name = entry.path().filename().string();
-    if (entry.is_directory(ec) && std::regex_match(name, m, pattern))
-      out.emplace_back(std::stoi(m[1]), entry.path());
+    if (!entry.is_directory(ec) || !std::regex_match(name, m, pattern)) continue;
+    const std::string digits = m[1].str();
+    int index = 0;
+    const auto [ptr, err] = std::from_chars(digits.data(), digits.data() + digits.size(), index);
+    if (err != std::errc() || ptr != digits.data() + digits.size()) {
+      return make_error(Errc::kCorrupt, (root / name).string() + ": the sensor number " + printable(digits) +
+                                            " is too large for a EuRoC sensor folder (rename it, e.g. " +
+                                            prefix + "1)");
+    }
+    out.emplace_back(index, entry.path());
   }
   std::sort(out.begin(), out.end());
   return out;
 }
 
+/// The size of a PNG from its header (log/frame_codec.hpp), false when it is not a PNG.
 bool png_size(const std::vector<std::uint8_t>& data, int& width, int& height) {
-  static constexpr std::uint8_t kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-  if (data.size() < 24 || !std::equal(kSignature, kSignature + 8, data.begin())) return false;
-  if (data[12] != 'I' || data[13] != 'H' || data[14] != 'D' || data[15] != 'R') return false;
-  const auto be32 = [&](std::size_t i) {
-    return static_cast<int>((std::uint32_t{data[i]} << 24) | (std::uint32_t{data[i + 1]} << 16) |
-                            (std::uint32_t{data[i + 2]} << 8) | std::uint32_t{data[i + 3]});
-  };
-  width = be32(16);
-  height = be32(20);
-  return width > 0 && height > 0;
+  auto size = png_dimensions(data);
+  if (!size.ok()) return false;
+  width = size->width;
+  height = size->height;
+  return true;
 }
 
+/// The largest image file read (a 16-bit 8192 x 8192 PNG is 128 MiB uncompressed).
+constexpr std::size_t kMaxImageBytes = std::size_t{256} << 20;
+/// The largest image side accepted: no camera comes near it, and decoding it would not fit.
+constexpr int kMaxImageSide = 32768;
+
 Result<std::vector<std::uint8_t>> read_binary(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return make_error(Errc::kNotFound, "cannot open " + path.string());
-  std::vector<std::uint8_t> data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad()) return make_error(Errc::kIo, "cannot read " + path.string());
-  return data;
+  // Regular files only (a folder or a FIFO is refused), read errors reported, size bounded.
+  auto text = read_text_file(path.string(), kMaxImageBytes);
+  if (!text.ok()) return text.error();
+  return std::vector<std::uint8_t>(text->begin(), text->end());
 }
 
 /// PNG bytes of a stored frame: PNG as is, other encodings decoded and encoded losslessly.
@@ -160,7 +171,11 @@ Result<fs::path> euroc_root(const std::string& dir) {
                       dir + " is not a folder (expected an EuRoC dataset folder or its mav0/)");
   }
   if (fs::is_directory(p / "mav0", ec)) return p / "mav0";
-  if (!sensor_folders(p, "imu").empty() || !sensor_folders(p, "cam").empty()) return p;
+  auto imus = sensor_folders(p, "imu");
+  if (!imus.ok()) return imus.error();
+  auto cams = sensor_folders(p, "cam");
+  if (!cams.ok()) return cams.error();
+  if (!imus->empty() || !cams->empty()) return p;
   return make_error(Errc::kNotFound, dir +
                                          " is not an EuRoC dataset: it has neither mav0/ nor imuN/ or camN/ "
                                          "folders (give the dataset folder or its mav0/)");
@@ -179,7 +194,9 @@ namespace {
 /// malformed file fails fast.
 Result<std::vector<ImuFolder>> read_imu_folders(const fs::path& root) {
   std::vector<ImuFolder> imus;
-  for (const auto& [index, folder] : sensor_folders(root, "imu")) {
+  auto folders = sensor_folders(root, "imu");
+  if (!folders.ok()) return folders.error();
+  for (const auto& [index, folder] : *folders) {
     ImuFolder f;
     f.name = folder.filename().string();
     const std::string csv = (folder / "data.csv").string();
@@ -200,7 +217,9 @@ Result<std::vector<ImuFolder>> read_imu_folders(const fs::path& root) {
 /// Every camN/ folder's image list and sensor.yaml (the images are read while writing).
 Result<std::vector<CameraFolder>> read_camera_folders(const fs::path& root) {
   std::vector<CameraFolder> cams;
-  for (const auto& [index, folder] : sensor_folders(root, "cam")) {
+  auto folders = sensor_folders(root, "cam");
+  if (!folders.ok()) return folders.error();
+  for (const auto& [index, folder] : *folders) {
     CameraFolder f;
     f.name = folder.filename().string();
     f.data_dir = folder / "data";
@@ -274,15 +293,19 @@ Result<CameraFrame> image_frame(const CameraFolder& f, const EurocImageRow& row,
   const fs::path image_path = f.data_dir / row.filename;
   const std::string where = (f.data_dir.parent_path() / "data.csv").string() + ":" + std::to_string(row.line);
   auto data = read_binary(image_path);
-  if (!data.ok()) {
-    return make_error(Errc::kNotFound,
-                      where + ": image " + image_path.string() + " is missing or unreadable");
-  }
+  if (!data.ok())
+    return make_error(data.error().code, where + ": image missing or unreadable: " + data.error().message);
   CameraFrame frame;
   frame.t_ns = row.t_ns;
   frame.encoding = "png";
   *converted = false;
   if (png_size(*data, frame.width, frame.height)) {
+    if (frame.width > kMaxImageSide || frame.height > kMaxImageSide) {
+      return make_error(Errc::kCorrupt,
+                        where + ": " + image_path.string() + " claims " + std::to_string(frame.width) + "x" +
+                            std::to_string(frame.height) + " pixels, more than any camera (" +
+                            std::to_string(kMaxImageSide) + " a side): a damaged or foreign file");
+    }
     frame.data = std::move(*data);
     return frame;
   }
@@ -605,7 +628,8 @@ Result<ExportSummary> export_euroc(const std::string& log_path, const std::strin
   if (!r.health().complete) {
     summary.notes.push_back(log_path + " was not closed cleanly; exported what it holds");
   }
-  if (r.health().damaged) summary.notes.push_back("log damaged: " + r.health().damage_message);
+  const bool damaged_at_open = r.health().damaged;
+  if (damaged_at_open) summary.notes.push_back("log damaged: " + r.health().damage_message);
 
   WorkProgress progress(export_work(r), options.progress);
   const auto imu_names = folder_names(r.imu_streams(), "imu");
@@ -618,6 +642,16 @@ Result<ExportSummary> export_euroc(const std::string& log_path, const std::strin
   }
   IMUCAL_TRY(
       write_text(mav0 / "body.yaml", "comment: 'Body frame: identity with every sensor (unknown here)'\n"));
+  // Damage the open did not see shows while reading (a frame's image failing its CRC is
+  // skipped): the export would hold less than the log lists.
+  if (r.health().damaged && !damaged_at_open) {
+    if (!allow_damaged) {
+      return make_error(Errc::kCorrupt, log_path + " is damaged (" + r.health().damage_message +
+                                            "); nothing was exported, as the export would miss what is lost")
+          .with_remedy("allow_damaged");
+    }
+    summary.notes.push_back("log damaged: " + r.health().damage_message);
+  }
   IMUCAL_TRY(out->commit());
   return summary;
 }

@@ -123,11 +123,12 @@ const char* time_unit_name(TimeUnit unit) {
 
 namespace {
 
-/// 'text' followed by `rest`. Built by appending: "'" + std::string(...) makes GCC 12 at -O3
-/// report a false -Wrestrict inside libstdc++.
+/// 'text' followed by `rest`, the text with non-printable bytes shown as \xNN and at most 80
+/// characters. Built by appending: "'" + std::string(...) makes GCC 12 at -O3 report a false
+/// -Wrestrict inside libstdc++.
 std::string quoted(std::string_view text, std::string_view rest) {
   std::string msg(1, '\'');
-  msg.append(text).append(1, '\'').append(rest);
+  msg.append(printable(text)).append(1, '\'').append(rest);
   return msg;
 }
 
@@ -195,8 +196,8 @@ Result<TimeNs> parse_time_ns(std::string_view text, TimeUnit unit) {
     if (ec != std::errc()) return bad(" (too large for int64 nanoseconds)");
   }
   if (round_up) ++value;
-  if (value > static_cast<std::uint64_t>(std::numeric_limits<TimeNs>::max())) {
-    return bad(" (too large for int64 nanoseconds)");
+  if (value > static_cast<std::uint64_t>(kTimeLimitNs)) {
+    return bad(" (beyond 146 years from the clock's zero, 2^62 ns: check the time unit)");
   }
   const auto signed_value = static_cast<TimeNs>(value);
   return negative ? -signed_value : signed_value;
@@ -377,7 +378,7 @@ Result<CsvColumns> parse_csv_columns(const std::string& spec) {
     const std::size_t eq = item.find('=');
     if (eq == std::string_view::npos) {
       return make_error(Errc::kInvalidArgument,
-                        "column map: '" + std::string(item) + "' is not name=index" + usage)
+                        "column map: '" + printable(item) + "' is not name=index" + usage)
           .with_remedy("columns");
     }
     const std::string name(trim(item.substr(0, eq)));
@@ -385,7 +386,7 @@ Result<CsvColumns> parse_csv_columns(const std::string& spec) {
     int index = -1;
     auto [ptr, ec] = std::from_chars(index_text.data(), index_text.data() + index_text.size(), index);
     if (ec != std::errc() || ptr != index_text.data() + index_text.size() || index < 0 || index > 1000) {
-      return make_error(Errc::kInvalidArgument, "column map: index '" + std::string(index_text) + "' of " +
+      return make_error(Errc::kInvalidArgument, "column map: index '" + printable(index_text) + "' of " +
                                                     name + " is not 0..1000" + usage)
           .with_remedy("columns");
     }
@@ -561,7 +562,12 @@ Result<std::vector<ImuSample>> parse_euroc_imu_csv(std::string_view text, const 
     if (fields[0].empty() || ec != std::errc() || ptr != fields[0].data() + fields[0].size()) {
       return at(
           source, lines.number(),
-          "column 1 (timestamp [ns]): '" + std::string(fields[0]) + "' is not an integer nanosecond time");
+          "column 1 (timestamp [ns]): '" + printable(fields[0]) + "' is not an integer nanosecond time");
+    }
+    if (!time_in_range(s.t_ns)) {
+      return at(source, lines.number(),
+                "column 1 (timestamp [ns]): '" + printable(fields[0]) +
+                    "' is beyond 146 years from the clock's zero (2^62 ns)");
     }
     for (int k = 0; k < 6; ++k) {
       auto v = parse_double(fields[static_cast<std::size_t>(k + 1)]);
@@ -605,13 +611,19 @@ Result<std::vector<EurocImageRow>> parse_euroc_camera_csv(std::string_view text,
     if (fields[0].empty() || ec != std::errc() || ptr != fields[0].data() + fields[0].size()) {
       return at(
           source, lines.number(),
-          "column 1 (timestamp [ns]): '" + std::string(fields[0]) + "' is not an integer nanosecond time");
+          "column 1 (timestamp [ns]): '" + printable(fields[0]) + "' is not an integer nanosecond time");
+    }
+    if (!time_in_range(row.t_ns)) {
+      return at(source, lines.number(),
+                "column 1 (timestamp [ns]): '" + printable(fields[0]) +
+                    "' is beyond 146 years from the clock's zero (2^62 ns)");
     }
     row.filename = std::string(fields[1]);
     if (row.filename.empty() || row.filename.find('/') != std::string::npos || row.filename == "." ||
         row.filename == "..") {
-      return at(source, lines.number(),
-                "column 2 (filename): '" + row.filename + "' must be a plain file name inside data/");
+      return at(
+          source, lines.number(),
+          "column 2 (filename): '" + printable(row.filename) + "' must be a plain file name inside data/");
     }
     if (!rows.empty()) {
       if (auto e = check_increasing(source, rows.back().t_ns, rows.back().line, row.t_ns, row.line))

@@ -194,7 +194,7 @@ void setup(CLI::App& root) {
   add_gravity_options(cmd, &o->grav);
   cmd->add_option("--init-still", o->init_still_s,
                   "Length of the initial still period, s (default: found, then chosen by Allan deviation)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNonNegative);
   cmd->add_option("--accel-scale-init", o->accel_scale_init,
                   "Nominal accel scale, m/s^2 per input unit: one value or 'x,y,z'");
   cmd->add_option("--accel-offset-init", o->accel_offset_init,

@@ -23,7 +23,7 @@ struct RawOptions {
 };
 
 void add_common(CLI::App* cmd, CommonOptions& o) {
-  cmd->add_option("-o,--output", o.out_path, "Session log to write (.imulog)")->required();
+  cmd->add_option("-o,--output", o.out_path, "Session log to write (.imulog)")->required()->check(kNonEmpty);
   cmd->add_flag("--force", o.force, "Replace the output if it exists");
 }
 
@@ -32,13 +32,17 @@ void add_raw(CLI::App* cmd, RawOptions& o) {
       ->required()
       ->check(CLI::IsMember({"raw", "si"}));
   cmd->add_option("--rate", o.rate_hz, "Nominal sample rate in Hz (default: estimated from the timestamps)")
-      ->check(CLI::PositiveNumber);
+      ->check(kPositive);
   cmd->add_option("--accel-scale", o.accel_scale,
-                  "Raw only: m/s^2 per count, S or Sx,Sy,Sz (default 9.80665/16384, MPU-6000 at +-2 g)");
-  cmd->add_option("--accel-offset", o.accel_offset, "Raw only: counts at zero, O or Ox,Oy,Oz (default 0)");
+                  "Raw only: m/s^2 per count, S or Sx,Sy,Sz (default 9.80665/16384, MPU-6000 at +-2 g)")
+      ->check(kNonEmpty);
+  cmd->add_option("--accel-offset", o.accel_offset, "Raw only: counts at zero, O or Ox,Oy,Oz (default 0)")
+      ->check(kNonEmpty);
   cmd->add_option("--gyro-scale", o.gyro_scale,
-                  "Raw only: rad/s per count, S or Sx,Sy,Sz (default pi/180/131, MPU-6000 at +-250 deg/s)");
-  cmd->add_option("--gyro-offset", o.gyro_offset, "Raw only: counts at zero rate, O or Ox,Oy,Oz (default 0)");
+                  "Raw only: rad/s per count, S or Sx,Sy,Sz (default pi/180/131, MPU-6000 at +-250 deg/s)")
+      ->check(kNonEmpty);
+  cmd->add_option("--gyro-offset", o.gyro_offset, "Raw only: counts at zero rate, O or Ox,Oy,Oz (default 0)")
+      ->check(kNonEmpty);
   cmd->add_flag("--no-unit-check", o.no_unit_check,
                 "Skip the check that the values look like the units given with --units");
 }
@@ -154,19 +158,23 @@ void setup(CLI::App& root) {
     cmd->add_option("FILE", in->path, "CSV file")->required();
     cmd->add_option("--columns", *columns,
                     "Column of each quantity, counting from 0: t=0,ax=1,ay=2,az=3,gx=4,gy=5,gz=6[,temp=7]")
-        ->required();
+        ->required()
+        ->check(kNonEmpty);
     cmd->add_option("--time-unit", *time_unit, "Unit of the time column: s, ms, us or ns (default s)")
         ->check(CLI::IsMember({"s", "ms", "us", "ns"}));
     cmd->add_option("--delimiter", *delimiter,
-                    "Field separator: one character, or 'tab', or 'space' (any run of blanks); default ','");
+                    "Field separator: one character, or 'tab', or 'space' (any run of blanks); default ','")
+        ->check(kNonEmpty);
     cmd->add_option("--skip-header", in->format.skip_header, "Lines to skip at the top (default 0)")
-        ->check(CLI::NonNegativeNumber);
+        ->check(kNonNegative);
     auto* ts =
         cmd->add_option("--temp-scale", *temp_scale,
                         "Temperature: deg C = scale * value + offset (default 1, or 1/340 for raw, the "
-                        "MPU-6000's)");
+                        "MPU-6000's)")
+            ->check(kFinite);
     auto* to = cmd->add_option("--temp-offset", *temp_offset,
-                               "Temperature offset in deg C (default 0, or 36.53 for raw, the MPU-6000's)");
+                               "Temperature offset in deg C (default 0, or 36.53 for raw, the MPU-6000's)")
+                   ->check(kFinite);
     add_raw(cmd, *raw);
     add_common(cmd, *common);
     cmd->callback([=] {

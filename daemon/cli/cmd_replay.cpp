@@ -81,7 +81,7 @@ void setup(CLI::App& root) {
                   "Folder for the replay's result files (default: a new temporary folder)");
   cmd->add_option("--tolerance", a->tolerance,
                   "Largest difference to the live result accepted, per canonical model entry (default 1e-9)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNonNegative);
   cmd->add_flag("--json", a->json, "Print the summary as JSON");
   cmd->callback([a] { run(*a); });
 }

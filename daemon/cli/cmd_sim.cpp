@@ -209,8 +209,8 @@ void add_static(CLI::App* sim) {
       ->check(CLI::Range(9, 100));
   cmd->add_option("--still", so->initial_still_s, "Initial still period in s (default 50)")
       ->check(CLI::Range(1.0, 3600.0));
-  cmd->add_option("--hold-min", so->hold_min_s, "Shortest hold in s (default 1)")->check(CLI::PositiveNumber);
-  cmd->add_option("--hold-max", so->hold_max_s, "Longest hold in s (default 4)")->check(CLI::PositiveNumber);
+  cmd->add_option("--hold-min", so->hold_min_s, "Shortest hold in s (default 1)")->check(kPositive);
+  cmd->add_option("--hold-max", so->hold_max_s, "Longest hold in s (default 4)")->check(kPositive);
   cmd->add_option("--excitation", so->excitation,
                   "Speed of the moves: 1 is a calm hand; 3 exceeds +-2 g and +-250 deg/s (default 1)")
       ->check(CLI::Range(0.1, 10.0));

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "core/result.hpp"
+#include "daemon/cli/number_check.hpp"
 
 namespace imucal::cli {
 
@@ -42,6 +43,13 @@ class CommandRegistrar {
   /// `order` sorts the subcommands in --help.
   CommandRegistrar(int order, Setup setup);
 };
+
+/// Option checks with short messages (daemon/cli/number_check.hpp): a finite number above zero,
+/// at zero or above, or any finite number; a value that is not empty.
+extern const CLI::Validator kPositive;
+extern const CLI::Validator kNonNegative;
+extern const CLI::Validator kFinite;
+extern const CLI::Validator kNonEmpty;
 
 /// True when stderr is a terminal (progress bars are shown only then).
 bool stderr_is_tty();

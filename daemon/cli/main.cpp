@@ -5,7 +5,9 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <iostream>
 #include <map>
 #include <utility>
@@ -82,6 +84,11 @@ void fail(const Error& error, const std::string& what) {
   throw CliExit{exit_code_for(error.code), with_flag_hints(error, what)};
 }
 
+const CLI::Validator kPositive = finite_number(NumberSign::kPositive);
+const CLI::Validator kNonNegative = finite_number(NumberSign::kNonNegative);
+const CLI::Validator kFinite = finite_number(NumberSign::kAny);
+const CLI::Validator kNonEmpty = non_empty();
+
 bool stderr_is_tty() { return isatty(STDERR_FILENO) == 1; }
 
 Progress::Progress(std::string label, double total)
@@ -106,6 +113,23 @@ void Progress::finish() {
 
 }  // namespace imucal::cli
 
+namespace {
+
+/// What was printed on stdout must have arrived: a full disk or a closed pipe behind it turns a
+/// success into exit 7 (an output could not be written).
+int checked_stdout(int code) {
+  std::cout.flush();
+  errno = 0;
+  const bool failed = !std::cout.good() || std::fflush(stdout) != 0 || std::ferror(stdout) != 0;
+  if (!failed) return code;
+  const int err = errno;
+  std::cerr << "imucal: could not write the output to standard output"
+            << (err != 0 ? std::string(": ") + std::strerror(err) : std::string()) << "\n";
+  return code == imucal::cli::kExitOk ? imucal::cli::kExitIo : code;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   using namespace imucal::cli;
   // Results go to stdout, diagnostics (warnings, progress, logs) to stderr.
@@ -129,17 +153,18 @@ int main(int argc, char** argv) {
                    [](const auto& a, const auto& b) { return a.first < b.first; });
   for (auto& [order, setup] : commands) setup(app);
 
+  int code = kExitOk;
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     const int rc = app.exit(e);
-    return rc == 0 ? kExitOk : kExitUsage;
+    code = rc == 0 ? kExitOk : kExitUsage;
   } catch (const CliExit& e) {
     if (!e.message.empty()) std::cerr << "imucal: " << e.message << "\n";
-    return e.code;
+    code = e.code;
   } catch (const std::exception& e) {
     std::cerr << "imucal: unexpected error: " << e.what() << "\n";
-    return kExitFailure;
+    code = kExitFailure;
   }
-  return kExitOk;
+  return checked_stdout(code);
 }

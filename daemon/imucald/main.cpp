@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/version.hpp"
+#include "daemon/cli/number_check.hpp"
 #include "daemon/imucald/service_app.hpp"
 
 int main(int argc, char** argv) {
@@ -35,7 +36,7 @@ int main(int argc, char** argv) {
   app.add_option("--time-scale", o.time_scale,
                  "Virtual rig: rig seconds per wall-clock second (0: as fast as it computes)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(imucal::cli::finite_number(imucal::cli::NumberSign::kNonNegative));
   app.add_option("--sim-operator", o.sim_operator,
                  "Virtual rig: 'motion' moves the rig as the prompts ask, 'full' also presses the keys "
                  "(a scripted operator); default: nobody moves it")
@@ -46,12 +47,12 @@ int main(int argc, char** argv) {
          "--sim-unplug-camera", o.sim_unplug_camera_after,
          "Virtual rig: its cameras vanish (a yanked cable) after this many frames of the first motion "
          "step; for trying the fault path")
-      ->check(CLI::PositiveNumber);
+      ->check(imucal::cli::finite_number(imucal::cli::NumberSign::kPositive));
   app.add_option("--sim-unplug-imu", o.sim_unplug_imu_after_s,
                  "Virtual rig: its IMU stops answering (a yanked cable) this many seconds of rig time after "
                  "a session "
                  "starts; for trying the fault path")
-      ->check(CLI::PositiveNumber);
+      ->check(imucal::cli::finite_number(imucal::cli::NumberSign::kPositive));
   std::string start;
   auto* start_opt = app.add_option("--start", start,
                                    "Start a session at launch: 'default' for the configured steps, or a "

@@ -1,5 +1,6 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <Eigen/LU>
 #include <cmath>
@@ -7,6 +8,7 @@
 #include <fstream>
 
 #include "core/rig_config.hpp"
+#include "core/target.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal {
@@ -148,10 +150,23 @@ struct InvalidCase {
 
 class RigConfigInvalid : public ::testing::TestWithParam<InvalidCase> {};
 
+// yaml-cpp 0.7's LoadAll never returns on this (it grows a list of null documents until memory
+// runs out); found by the rig_config fuzz target.
+TEST(RigConfig, TextAfterTheDocumentThatYamlCannotReadIsRefused) {
+  auto cfg = parse_rig_config(", one simulated\n", "comma.yaml");
+  ASSERT_FALSE(cfg.ok());
+  EXPECT_THAT(cfg.error().message,
+              HasSubstr("comma.yaml:1: a second YAML document ('---'), or text after the "
+                        "first that YAML cannot read"));
+  auto after_map = parse_rig_config("imu: {bus: sim}\n, one simulated\n", "comma.yaml");
+  ASSERT_FALSE(after_map.ok());
+  EXPECT_THAT(after_map.error().message, HasSubstr("comma.yaml:2: not valid YAML"));
+}
+
 TEST(RigConfig, ASecondYamlDocumentIsRefused) {
   auto cfg = parse_rig_config("imu: {bus: sim}\n---\nimu: {bus: spi}\n", "two.yaml");
   ASSERT_FALSE(cfg.ok());
-  EXPECT_THAT(cfg.error().message, HasSubstr("two.yaml:3: a second YAML document")) << cfg.error().message;
+  EXPECT_THAT(cfg.error().message, HasSubstr("two.yaml:2: a second YAML document")) << cfg.error().message;
 }
 
 TEST_P(RigConfigInvalid, NamesFileLineKeyAndWhatIsAllowed) {
@@ -229,7 +244,8 @@ INSTANTIATE_TEST_SUITE_P(
             "target", 3, "2x2 inner corners"},
         InvalidCase{"imu: {bus: sim}\ntarget: {target_type: checkerboard, targetCol: 7}\n",
                     "target.targetCol", 2, "did you mean 'targetCols'"},
-        InvalidCase{"imu: {bus: sim}\ntarget: no-such-target.yaml\n", "target", 2, "cannot open target file"},
+        InvalidCase{"imu: {bus: sim}\ntarget: no-such-target.yaml\n", "target", 2,
+                    "target file: cannot open"},
         InvalidCase{"imu: {bus: sim}\nstorage:\n  backend: flash\n", "storage.backend", 3,
                     "file, nvmem or i2c-eeprom"},
         InvalidCase{"imu: {bus: sim}\nstorage:\n  backend: nvmem\n", "storage.path", 3, "missing"},
@@ -249,6 +265,44 @@ TEST(RigConfig, YamlSyntaxErrorNamesLine) {
   ASSERT_FALSE(cfg.ok());
   EXPECT_THAT(cfg.error().message, HasSubstr("broken.yaml:"));
   EXPECT_THAT(cfg.error().message, HasSubstr("not valid YAML"));
+}
+
+// A target path that is no file a person writes: never read (a FIFO would block, /dev/zero
+// never ends), refused with the reason.
+TEST(RigConfig, ATargetThatIsNotARegularFileIsRefusedAtOnce) {
+  const std::string dir = test::scratch_dir();
+  ASSERT_EQ(mkfifo((dir + "/fifo.yaml").c_str(), 0600), 0);
+  for (const std::string& target : {std::string("/dev/zero"), dir + "/fifo.yaml"}) {
+    auto cfg = parse_rig_config("imu: {bus: sim}\ntarget: " + target + "\n", "rig.yaml");
+    ASSERT_FALSE(cfg.ok()) << target;
+    EXPECT_THAT(cfg.error().message, HasSubstr("is not a regular file")) << cfg.error().message;
+  }
+  std::ofstream(dir + "/huge.yaml") << std::string(2 << 20, '#');
+  auto huge = load_target_yaml(dir + "/huge.yaml");
+  ASSERT_FALSE(huge.ok());
+  EXPECT_THAT(huge.error().message, HasSubstr("more than such a file can be")) << huge.error().message;
+  auto fifo_config = load_rig_config(dir + "/fifo.yaml");
+  ASSERT_FALSE(fifo_config.ok());
+  EXPECT_THAT(fifo_config.error().message, HasSubstr("is not a regular file"));
+}
+
+// Strings that JSON output and the control socket could not carry are refused where they are
+// read, and messages show invisible or invalid bytes instead of passing them on.
+TEST(RigConfig, TextThatIsNotUtf8OrNestedTooDeeplyIsRefusedReadably) {
+  auto bad = parse_rig_config("imu: {bus: spi, device: \"/dev/spi\xff\"}\n", "u.yaml");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_THAT(bad.error().message, HasSubstr("u.yaml:1: imu.device: '/dev/spi\\xFF' is not UTF-8 text"));
+  auto bom = parse_rig_config("name: \"rig\xef\xbb\xbf\"\nimu: {bus: sim}\n", "b.yaml");
+  ASSERT_FALSE(bom.ok());
+  EXPECT_THAT(bom.error().message, HasSubstr("'rig\\xEF\\xBB\\xBF' is not allowed")) << bom.error().message;
+  auto deep =
+      parse_rig_config("imu: " + std::string(100000, '[') + std::string(100000, ']') + "\n", "d.yaml");
+  ASSERT_FALSE(deep.ok());
+  EXPECT_THAT(deep.error().message, HasSubstr("levels deep: not a rig configuration"));
+  auto long_number =
+      parse_rig_config("imu:\n  bus: sim\n  rate_hz: " + std::string(5000, '9') + "x\n", "n.yaml");
+  ASSERT_FALSE(long_number.ok());
+  EXPECT_LT(long_number.error().message.size(), 200u) << long_number.error().message;
 }
 
 TEST(RigConfig, MissingFileIsNotFound) {

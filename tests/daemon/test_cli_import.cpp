@@ -156,5 +156,54 @@ TEST(CliImport, UsageErrors) {
   EXPECT_THAT(cols.err, HasSubstr("--columns"));
 }
 
+// Hostile inputs end in a message and the documented exit code, never "unexpected error".
+TEST(CliImport, HostileInputsAreRefusedWithAMessage) {
+  const fs::path dir = test::scratch_dir();
+  write_ascii(dir, false);
+  const std::string acc = (dir / "acc.txt").string(), gyr = (dir / "gyr.txt").string();
+  const std::string out = (dir / "x.imulog").string();
+  // An empty option value is a mistake, not "the default".
+  auto empty = test::run_cli(
+      {"import", "ascii", "--accel", acc, "--gyro", gyr, "--units", "raw", "--accel-scale", "", "-o", out});
+  EXPECT_EQ(empty.exit_code, cli::kExitUsage) << empty.err;
+  EXPECT_THAT(empty.err, HasSubstr("empty value"));
+  // Numbers that are not finite, with a short message.
+  auto nan = test::run_cli({"import", "csv", acc, "--columns", "t=0,ax=1,ay=2,az=3,gx=1,gy=2,gz=3,temp=1",
+                            "--delimiter", "space", "--units", "raw", "--temp-scale", "nan", "-o", out});
+  EXPECT_EQ(nan.exit_code, cli::kExitUsage) << nan.err;
+  EXPECT_THAT(nan.err, HasSubstr("'nan' is not a finite number"));
+  auto huge_rate = test::run_cli(
+      {"import", "ascii", "--accel", acc, "--gyro", gyr, "--units", "raw", "--rate", "1e309", "-o", out});
+  EXPECT_EQ(huge_rate.exit_code, cli::kExitUsage);
+  EXPECT_LT(huge_rate.err.size(), 200u) << huge_rate.err;
+  // A 1 MB token in a row: named, not echoed whole.
+  write(dir / "long.txt", "0 " + std::string(1 << 20, 'x') + " 0 9.8\n");
+  auto token = test::run_cli({"import", "ascii", "--accel", (dir / "long.txt").string(), "--gyro", gyr,
+                              "--units", "raw", "-o", out});
+  EXPECT_EQ(token.exit_code, cli::kExitInput);
+  EXPECT_THAT(token.err, HasSubstr("long.txt:1"));
+  EXPECT_LT(token.err.size(), 400u);
+  // EuRoC: a sensor folder number no index holds, and an image that is a folder.
+  const std::string imu_csv = "#t\n1000,0,0,0,0,0,9.8\n2000,0,0,0,0,0,9.8\n";
+  write(dir / "big/mav0/imu0/data.csv", imu_csv);
+  write(dir / "big/mav0/cam99999999999999999999/data.csv", "#t,f\n");
+  auto big = test::run_cli({"import", "euroc", (dir / "big").string(), "-o", out});
+  EXPECT_EQ(big.exit_code, cli::kExitInput) << big.err;
+  EXPECT_THAT(big.err, HasSubstr("too large for a EuRoC sensor folder"));
+  write(dir / "dirimg/mav0/imu0/data.csv", imu_csv);
+  write(dir / "dirimg/mav0/cam0/data.csv", "#t,f\n1000,x.png\n");
+  fs::create_directories(dir / "dirimg/mav0/cam0/data/x.png");
+  auto dirimg = test::run_cli({"import", "euroc", (dir / "dirimg").string(), "-o", out});
+  EXPECT_EQ(dirimg.exit_code, cli::kExitInput) << dirimg.err;
+  EXPECT_THAT(dirimg.err, HasSubstr("is a folder, expected a file"));
+  // Timestamps beyond 2^62 ns (where differences of two could overflow) are refused.
+  write(dir / "far.txt", "9223372036.8 0 0 9.8\n9223372036.9 0 0 9.8\n");
+  auto far = test::run_cli({"import", "ascii", "--accel", (dir / "far.txt").string(), "--gyro",
+                            (dir / "far.txt").string(), "--units", "si", "-o", out});
+  EXPECT_EQ(far.exit_code, cli::kExitInput);
+  EXPECT_THAT(far.err, HasSubstr("beyond 146 years"));
+  EXPECT_FALSE(fs::exists(out));
+}
+
 }  // namespace
 }  // namespace imucal
