@@ -64,6 +64,15 @@ CameraStreamStats camera_stats(const log::SessionLogReader& log, int id, const C
   auto times = log.frame_times(id);
   st.timing = timing_of(times.ok() ? *times : std::vector<TimeNs>{});
   if (!times.ok()) st.read_error = times.error().message;
+  // Every frame's image is read once and checked against its CRC (the reader skips and notes a
+  // frame that fails it), so a frame listed here is a frame that can be used.
+  std::int64_t intact = 0;
+  const Status read = log.for_each_frame(id, log::kTimeMin, log::kTimeMax, [&](const CameraFrame&) {
+    ++intact;
+    return true;
+  });
+  if (!read.ok() && st.read_error.empty()) st.read_error = read.error().message;
+  st.unusable_frames = std::max<std::int64_t>(0, st.timing.count - intact);
   return st;
 }
 
@@ -79,7 +88,6 @@ void extend(LogSummary& s, const StreamTiming& t) {
 LogSummary summarize_log(const log::SessionLogReader& reader) {
   LogSummary s;
   s.metadata = reader.metadata();
-  s.health = reader.health();
   for (const auto& [id, info] : reader.imu_streams()) {
     s.imu.push_back(imu_stats(reader, id, info));
     extend(s, s.imu.back().timing);
@@ -92,6 +100,7 @@ LogSummary summarize_log(const log::SessionLogReader& reader) {
     for (const auto& e : *events) ++s.events_by_kind[e.kind];
     s.event_count = static_cast<std::int64_t>(events->size());
   }
+  s.health = reader.health();  // after the reads, which note damage they find
   return s;
 }
 

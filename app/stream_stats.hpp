@@ -51,6 +51,8 @@ struct CameraStreamStats {
   int id = 0;
   CameraStreamInfo info;
   StreamTiming timing;
+  /// Frames listed whose image is unreadable or fails its CRC (timing counts them).
+  std::int64_t unusable_frames = 0;
   std::string read_error;
 };
 

@@ -103,6 +103,7 @@ json camera_stream_json(const app::CameraStreamStats& st) {
             {"backend", info.backend},
             {"device", info.device},
             {"timestamp_source", info.timestamp_source},
+            {"unusable_frames", st.unusable_frames},
             {"read_error", st.read_error}};
   j.update(timing_json(st.timing, info.rate_hz));
   return j;
@@ -115,6 +116,8 @@ std::string camera_stream_text(const app::CameraStreamStats& st) {
        << (info.backend.empty() ? "?" : info.backend) << " " << info.device << ", "
        << (info.timestamp_source.empty() ? "unknown" : info.timestamp_source) << " timestamps)\n"
        << timing_text(st.timing, info.rate_hz, "frames");
+  if (st.unusable_frames > 0)
+    text << "    UNUSABLE: " << st.unusable_frames << " frames whose image is unreadable or fails its CRC\n";
   if (!st.read_error.empty()) text << "    ERROR: " << st.read_error << "\n";
   return text.str();
 }

@@ -3,7 +3,10 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <sqlite3.h>
+#include <sys/wait.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -145,6 +148,72 @@ TEST(CliInfo, DamagedLogPrintsWhatWasReadAndWarns) {
   const auto j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["damaged"], true);
   EXPECT_THAT(j["damage_message"].get<std::string>(), HasSubstr("truncated"));
+}
+
+// What is printed must arrive: stdout on a full device is an output error, not a success.
+TEST(CliInfo, AFullStdoutIsAnOutputError) {
+  const std::string dir = test::scratch_dir();
+  const std::string log = write_log(dir + "/session.imulog");
+  for (const char* json : {"", " --json"}) {
+    const std::string cmd =
+        std::string(IMUCAL_CLI_PATH) + " info" + json + " " + log + " > /dev/full 2> " + dir + "/err.txt";
+    const int status = std::system(cmd.c_str());
+    ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 7) << json;
+    EXPECT_THAT(test::read_file(dir + "/err.txt"),
+                HasSubstr("could not write the output to standard output"));
+  }
+}
+
+// Each frame's image is checked against its CRC: a corrupt one is counted and the log damaged.
+TEST(CliInfo, AFrameFailingItsCrcIsReported) {
+  const std::string dir = test::scratch_dir();
+  const std::string log = write_log(dir + "/session.imulog");
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open(log.c_str(), &db), SQLITE_OK);
+    ASSERT_EQ(
+        sqlite3_exec(db, "UPDATE frames SET data = zeroblob(64) WHERE rowid = 3", nullptr, nullptr, nullptr),
+        SQLITE_OK);
+    sqlite3_close(db);
+  }
+  auto r = test::run_cli({"info", "--json", log});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["damaged"], true);
+  EXPECT_EQ(j["camera_streams"][0]["unusable_frames"], 1);
+  EXPECT_THAT(j["damage_message"].get<std::string>(), HasSubstr("CRC mismatch"));
+  // export refuses, as its folder would miss the frame; with --allow-damaged it says so.
+  auto e = test::run_cli({"export", "euroc", log, dir + "/out"});
+  EXPECT_EQ(e.exit_code, 3) << e.err;
+  EXPECT_THAT(e.err, HasSubstr("CRC mismatch"));
+  EXPECT_FALSE(fs::exists(dir + "/out"));
+  auto salvaged = test::run_cli({"export", "euroc", log, dir + "/out", "--allow-damaged"});
+  EXPECT_EQ(salvaged.exit_code, 0) << salvaged.err;
+  EXPECT_THAT(salvaged.out + salvaged.err, HasSubstr("CRC mismatch"));
+}
+
+// A log written by a newer imucal is an input this one cannot read: exit 3 everywhere.
+TEST(CliInfo, ANewerSchemaIsAnInputErrorInEveryCommand) {
+  const std::string dir = test::scratch_dir();
+  const std::string log = write_log(dir + "/session.imulog");
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open(log.c_str(), &db), SQLITE_OK);
+    ASSERT_EQ(
+        sqlite3_exec(db, "PRAGMA user_version=2; UPDATE metadata SET value='2' WHERE key='schema_version'",
+                     nullptr, nullptr, nullptr),
+        SQLITE_OK);
+    sqlite3_close(db);
+  }
+  for (const std::vector<std::string>& args : {std::vector<std::string>{"info", log},
+                                               {"calibrate", "static", log, "-o", dir + "/r.yaml"},
+                                               {"export", "euroc", log, dir + "/out"},
+                                               {"allan", log, "-o", dir + "/a.yaml"}}) {
+    auto r = test::run_cli(args);
+    EXPECT_EQ(r.exit_code, 3) << args[0] << ": " << r.err;
+    EXPECT_THAT(r.err, HasSubstr("update imucal")) << args[0];
+  }
 }
 
 TEST(CliInfo, NotALogIsAnInputError) {
