@@ -6,7 +6,10 @@
 // run number. The same target sources link against libFuzzer for open-ended fuzzing
 // (docs/fuzzing.md).
 //
-//   fuzz_<name> [--runs N] [--seed S] [--max-len BYTES] [--save-failing DIR] SEED_FILE_OR_DIR...
+//   fuzz_<name> [--runs N] [--seed S] [--max-len BYTES] [--last-input FILE] SEED_FILE_OR_DIR...
+//
+// --last-input writes each input to FILE before it runs: after a crash, a hang or a kill, FILE
+// holds the input that did it.
 #include <algorithm>
 #include <array>
 #include <cstdint>
@@ -30,6 +33,7 @@ struct Options {
   long runs = 20000;
   std::uint64_t seed = 1;
   std::size_t max_len = 1 << 16;
+  std::string last_input;
   std::vector<std::string> inputs;
 };
 
@@ -41,10 +45,14 @@ bool parse_args(int argc, char** argv, Options& options) {
       options.runs = std::strtol(argv[++i], nullptr, 10);
     } else if (arg == "--seed" && has_value) {
       options.seed = std::strtoull(argv[++i], nullptr, 10);
+    } else if (arg == "--last-input" && has_value) {
+      options.last_input = argv[++i];
     } else if (arg == "--max-len" && has_value) {
       options.max_len = std::strtoull(argv[++i], nullptr, 10);
     } else if (arg == "-h" || arg == "--help") {
-      std::printf("usage: %s [--runs N] [--seed S] [--max-len BYTES] SEED_FILE_OR_DIR...\n", argv[0]);
+      std::printf(
+          "usage: %s [--runs N] [--seed S] [--max-len BYTES] [--last-input FILE] SEED_FILE_OR_DIR...\n",
+          argv[0]);
       std::exit(0);
     } else if (!arg.empty() && arg[0] == '-') {
       std::fprintf(stderr, "fuzz driver: unknown option '%s' (see --help)\n", arg.c_str());
@@ -160,12 +168,16 @@ int main(int argc, char** argv) {
   Options options;
   if (!parse_args(argc, argv, options)) return 2;
   const std::vector<Bytes> seeds = load_seeds(options.inputs);
-  for (const auto& seed : seeds) LLVMFuzzerTestOneInput(seed.data(), seed.size());
-  Mutator mutator(options.seed, options.max_len);
-  for (long run = 0; run < options.runs; ++run) {
-    const Bytes input = mutator.mutate(seeds);
+  const auto run_one = [&](const Bytes& input) {
+    if (!options.last_input.empty()) {
+      std::ofstream(options.last_input, std::ios::binary | std::ios::trunc)
+          .write(reinterpret_cast<const char*>(input.data()), static_cast<std::streamsize>(input.size()));
+    }
     LLVMFuzzerTestOneInput(input.data(), input.size());
-  }
+  };
+  for (const auto& seed : seeds) run_one(seed);
+  Mutator mutator(options.seed, options.max_len);
+  for (long run = 0; run < options.runs; ++run) run_one(mutator.mutate(seeds));
   std::printf("fuzz driver: %zu seeds and %ld mutated inputs ran (seed %llu)\n", seeds.size(), options.runs,
               static_cast<unsigned long long>(options.seed));
   return 0;
