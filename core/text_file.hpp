@@ -14,8 +14,8 @@ namespace imucal {
 
 /// Reads the file at `path`. Errors name the path: kNotFound (missing, a folder, not a regular
 /// file), kInvalidArgument (larger than `max_bytes`), kIo (a read error, with how far it got).
-[[nodiscard]] Result<std::string> read_text_file(const std::string& path,
-                                                 std::size_t max_bytes = std::numeric_limits<std::size_t>::max());
+[[nodiscard]] Result<std::string> read_text_file(
+    const std::string& path, std::size_t max_bytes = std::numeric_limits<std::size_t>::max());
 
 /// True when `text` is well-formed UTF-8 (no overlong forms, surrogates or code points above
 /// U+10FFFF): what JSON output and the control socket can carry.

@@ -746,8 +746,9 @@ std::string truncation_of(const std::string& path) {
 /// were committed and are lost. Only called when no writer holds the log (a live -wal grows).
 struct WalCheck {
   bool present = false;
-  std::string damage;      // committed frames that will not be replayed; empty when none
-  bool torn_tail = false;  // the file ends inside a frame, or in frames no commit ends
+  std::string damage;             // committed frames that will not be replayed; empty when none
+  bool torn_tail = false;         // the file ends inside a frame, or in frames no commit ends
+  bool commits_replayed = false;  // SQLite reads pages of at least one commit from it
 };
 
 WalCheck check_wal(const std::string& path) {
@@ -826,14 +827,11 @@ WalCheck check_wal(const std::string& path) {
                  " later commit(s) of up to " + std::to_string(lost_pages) +
                  " pages are lost (the log reads as it was at the last intact commit)";
   }
-  // SQLite writes whole frames: a file that ends inside one was cut (a truncated copy, a disk
-  // that filled, or a power loss while writing).
+  // A file that ends inside a frame, or in frames no commit completes, is what a writer leaves
+  // when it stops while committing (killed, a full disk, a power loss): the log reads as it was
+  // at its last commit and is incomplete. Only a closed log with such a tail is damaged.
   const std::size_t partial = (bytes.size() - 32) % frame;
-  if (partial != 0 && out.damage.empty()) {
-    out.damage = "its write-ahead log " + path + "-wal ends inside a frame (" + std::to_string(partial) +
-                 " bytes past its last whole frame): it was truncated, and the commit being written there is "
-                 "lost (the log reads as it was at the last intact commit)";
-  }
+  out.commits_replayed = last_commit > 0;
   out.torn_tail = partial != 0 || valid > last_commit || !chain;
   return out;
 }
@@ -859,10 +857,15 @@ bool being_written(const std::string& path) {
 
 Status SqliteSessionLogReader::open() {
   IMUCAL_TRY(precheck_file(path_));
-  if (const std::string truncated = truncation_of(path_); !truncated.empty()) note_damage(truncated);
   const bool live = being_written(path_);
   const WalCheck wal = live ? WalCheck{} : check_wal(path_);
   if (!wal.damage.empty()) note_damage(wal.damage);
+  // The header's page count may have been written by a checkpoint that could not extend the
+  // file (a full disk): pages the -wal holds are read from there, and a page missing from both
+  // fails its read (the strict VFS), which the table scans report.
+  if (!wal.commits_replayed && !live) {
+    if (const std::string truncated = truncation_of(path_); !truncated.empty()) note_damage(truncated);
+  }
   const bool wal_missing = wal_mode_without_wal(path_);
   sqlite3* raw = nullptr;
   const int rc = sqlite3_open_v2(path_.c_str(), &raw, SQLITE_OPEN_READONLY, sqlite::strict_vfs_name());

@@ -2,6 +2,7 @@
 // (docs/simulator.md, docs/simulator-camera.md).
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -12,6 +13,7 @@
 
 #include "app/module_loader.hpp"
 #include "daemon/cli/command.hpp"
+#include "log/session_log.hpp"
 #include "sim/camimu.hpp"
 #include "sim/imu_error_model.hpp"
 #include "sim/motion.hpp"
@@ -22,6 +24,21 @@
 
 namespace imucal::cli {
 namespace {
+
+/// What a log that stopped early (a write failed) still holds, for the error message.
+std::string kept_in(const std::string& log_path) {
+  auto reader = log::SessionLogReader::open(log_path);
+  if (!reader.ok() || (*reader)->imu_streams().empty()) return "; nothing was kept";
+  const int id = (*reader)->imu_streams().begin()->first;
+  auto samples = (*reader)->read_imu(id);
+  if (!samples.ok() || samples->empty()) return "; nothing was kept";
+  const double span = ns_to_s(samples->back().t_ns - samples->front().t_ns);
+  char text[160];
+  std::snprintf(text, sizeof text,
+                "; stopped, %zu samples (%.1f s) kept in %s, readable and marked incomplete", samples->size(),
+                span, log_path.c_str());
+  return text;
+}
 
 struct SimCommon {
   std::uint64_t seed = 1;
@@ -166,6 +183,7 @@ void run(const SimCommon& o, const CLI::App* cmd, const std::string& kind, const
     const Error& e = truth.error();
     // A refused overwrite or an unwritable path is an output problem, not a usage one.
     if (e.code == Errc::kAlreadyExists) throw CliExit{kExitIo, e.message + "; pass --force to replace it"};
+    if (e.code == Errc::kIo) throw CliExit{kExitIo, "sim " + kind + ": " + e.message + kept_in(o.out_path)};
     fail(e, "sim " + kind);
   }
   std::ostringstream msg;

@@ -25,7 +25,9 @@ inline CLI::Validator finite_number(NumberSign sign) {
         if (sign == NumberSign::kNonNegative && v < 0.0) return "'" + shown + "' must be zero or more";
         return {};
       },
-      sign == NumberSign::kPositive ? "NUMBER>0" : sign == NumberSign::kNonNegative ? "NUMBER>=0" : "NUMBER");
+      sign == NumberSign::kPositive      ? "NUMBER>0"
+      : sign == NumberSign::kNonNegative ? "NUMBER>=0"
+                                         : "NUMBER");
 }
 
 /// A value that is not empty (an empty value is a mistake, never "the default").

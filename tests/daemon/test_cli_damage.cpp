@@ -103,15 +103,17 @@ TEST(CliDamage, NoCommandLosesSamplesWithoutSayingSo) {
     // With --allow-damaged a damaged log is calibrated from what is readable, and said to be.
     if (damaged && readable > 0) {
       fs::remove(dir + "/r.yaml");
-      const auto salvage = test::run_cli({"calibrate", "static", bad, "--allow-damaged", "-o", dir + "/r.yaml"});
+      const auto salvage =
+          test::run_cli({"calibrate", "static", bad, "--allow-damaged", "-o", dir + "/r.yaml"});
       if (salvage.exit_code == 0) {
         ++salvaged;
         EXPECT_NE(salvage.err.find("damaged"), std::string::npos) << salvage.err;
       }
     }
   }
-  std::printf("damage matrix (CLI): %d variants, %d refused by every command, %d salvaged by --allow-damaged\n",
-              variants, refused_everywhere, salvaged);
+  std::printf(
+      "damage matrix (CLI): %d variants, %d refused by every command, %d salvaged by --allow-damaged\n",
+      variants, refused_everywhere, salvaged);
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 
@@ -108,6 +109,39 @@ TEST(CliSim, ARateTheBusCannotCarryIsRecordedWithItsLossesExplained) {
   const YAML::Node truth = YAML::LoadFile((dir / "i2c.truth.yaml").string());
   EXPECT_GT(truth["recording"]["dropped_samples"].as<int>(), 8000);
   EXPECT_EQ(truth["recording"]["samples"].as<std::int64_t>(), sample_count(log));
+}
+
+// A filesystem that fills up while a session is simulated into it: the command says it stopped
+// and how much it kept (exit 7), and the log holds every committed sample, readable and not
+// called damaged; a result that does not fit leaves nothing behind. Needs a tmpfs mount (root).
+TEST(CliSim, AFullDiskStopsWithWhatWasKept) {
+  const std::string dir = test::scratch_dir();
+  const std::string mnt = dir + "/full";
+  fs::create_directories(mnt);
+  if (std::system(("mount -t tmpfs -o size=600k tmpfs " + mnt + " 2>/dev/null").c_str()) != 0)
+    GTEST_SKIP() << "cannot mount a small tmpfs here (needs root): the full-disk test is skipped";
+  struct Unmount {
+    std::string path;
+    ~Unmount() { (void)std::system(("umount " + path).c_str()); }
+  } unmount{mnt};
+  const std::string log = mnt + "/x.imulog";
+  auto r = test::run_cli({"sim", "static", "--seed", "1", "-o", log});
+  EXPECT_EQ(r.exit_code, 7) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("disk is full"));
+  EXPECT_THAT(r.err, HasSubstr("readable and marked incomplete"));
+  auto reader = log::SessionLogReader::open(log);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_FALSE((*reader)->health().complete);
+  EXPECT_FALSE((*reader)->health().damaged) << (*reader)->health().damage_message;
+  const auto kept = *(*reader)->imu_count(*(*reader)->find_imu_stream());
+  EXPECT_GT(kept, 500);  // commits every 5 s of samples: more than the last one survives
+  EXPECT_THAT(r.err, HasSubstr("stopped, " + std::to_string(kept) + " samples"));
+  // The disk is still full: a result written there is refused whole.
+  const auto cal = test::run_cli({"calibrate", "static", log, "--allow-damaged", "-o", mnt + "/r.yaml"});
+  if (cal.exit_code == 7) {
+    for (const auto& e : fs::directory_iterator(mnt))
+      EXPECT_EQ(e.path().filename().string().find("r.yaml"), std::string::npos) << e.path();
+  }
 }
 
 }  // namespace
