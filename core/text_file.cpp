@@ -43,8 +43,9 @@ Result<std::string> read_text_file(const std::string& path, std::size_t max_byte
     if (r < 0) {
       const int err = errno;
       ::close(fd);
-      return make_error(Errc::kIo, "cannot read " + path + " (after " + std::to_string(got) +
-                                       " bytes): " + std::strerror(err));
+      // An input that cannot be read is an input problem (exit 3), like a damaged one.
+      return make_error(Errc::kCorrupt, "cannot read " + path + " (after " + std::to_string(got) +
+                                            " bytes): " + std::strerror(err));
     }
     if (r == 0) break;  // the file shrank while being read
     got += static_cast<std::size_t>(r);

@@ -13,7 +13,8 @@
 namespace imucal {
 
 /// Reads the file at `path`. Errors name the path: kNotFound (missing, a folder, not a regular
-/// file), kInvalidArgument (larger than `max_bytes`), kIo (a read error, with how far it got).
+/// file), kInvalidArgument (larger than `max_bytes`), kCorrupt (a read error, with how far it got:
+/// an unreadable input, exit 3 in the CLI).
 [[nodiscard]] Result<std::string> read_text_file(
     const std::string& path, std::size_t max_bytes = std::numeric_limits<std::size_t>::max());
 

@@ -1042,27 +1042,36 @@ int SqliteSessionLogReader::scan_skipping_damage(const char* sql, const char* ta
   if (rc != SQLITE_OK) return 1;
   int skipped = 0;
   sqlite3_int64 last = 0;  // rowids start at 1
+  bool any = false;
   sqlite3_int64 from = std::numeric_limits<sqlite3_int64>::min();
+  // Every row is taken once, in increasing rowid: a damaged page can hand back rows out of order
+  // or again after a resume, and each resume must move past the one before, so the scan ends.
   for (;;) {
     sqlite3_reset(stmt.get());
     sqlite3_bind_int64(stmt.get(), 1, from);
     while ((rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
-      last = sqlite3_column_int64(stmt.get(), 0);
+      const sqlite3_int64 rowid = sqlite3_column_int64(stmt.get(), 0);
+      if (any && rowid <= last) continue;
+      any = true;
+      last = rowid;
       row(stmt.get());
     }
     if (rc == SQLITE_DONE) return skipped;
-    ++skipped;
-    // Find the next readable row after `last`: probe last+1, +2, +4, ... and take the first
-    // probe that yields a row.
+    if (++skipped > 100000) return skipped;
+    // Find the next readable row after what was read (or after the last resume, when nothing
+    // was read since): probe base+1, +2, +4, ... and take the first probe that yields a row.
+    // base only grows, so every resume moves on and the scan ends.
+    const sqlite3_int64 base = std::max(last, from);
+    if (base > std::numeric_limits<sqlite3_int64>::max() - (sqlite3_int64{1} << 42)) return skipped;
     bool resumed = false;
-    const sqlite3_int64 limit = max_known ? max_rowid : last + (sqlite3_int64{1} << 40);
-    for (sqlite3_int64 step = 1; last + step <= limit && step < (sqlite3_int64{1} << 41); step *= 2) {
+    const sqlite3_int64 limit = max_known ? max_rowid : base + (sqlite3_int64{1} << 40);
+    for (sqlite3_int64 step = 1; base + step <= limit && step < (sqlite3_int64{1} << 41); step *= 2) {
       sqlite3_reset(stmt.get());
-      sqlite3_bind_int64(stmt.get(), 1, last + step);
+      sqlite3_bind_int64(stmt.get(), 1, base + step);
       rc = sqlite3_step(stmt.get());
       if (rc == SQLITE_DONE) return skipped;
       if (rc == SQLITE_ROW) {
-        from = last + step;
+        from = base + step;
         resumed = true;
         break;
       }

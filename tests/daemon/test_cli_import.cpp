@@ -1,6 +1,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 
@@ -203,6 +205,31 @@ TEST(CliImport, HostileInputsAreRefusedWithAMessage) {
   EXPECT_EQ(far.exit_code, cli::kExitInput);
   EXPECT_THAT(far.err, HasSubstr("beyond 146 years"));
   EXPECT_FALSE(fs::exists(out));
+}
+
+// A read error in the middle of an input (a failing disk, here an LD_PRELOAD shim returning EIO
+// after 3000 bytes) fails the import instead of ending it early as if the file ended there.
+TEST(CliImport, AReadErrorInTheMiddleOfAnInputFailsTheImport) {
+  const fs::path dir = test::scratch_dir();
+  write_ascii(dir, true);
+  ASSERT_GT(fs::file_size(dir / "acc.txt"), 6000u);
+  const std::string out = (dir / "x.imulog").string();
+  const std::string cmd = std::string("IMUCAL_EIO_PATH=/acc.txt IMUCAL_EIO_AFTER=3000 ") +
+                          "ASAN_OPTIONS=verify_asan_link_order=0 LD_PRELOAD=" + IMUCAL_EIO_SHIM + " " +
+                          IMUCAL_CLI_PATH + " import ascii --units si --accel " + (dir / "acc.txt").string() +
+                          " --gyro " + (dir / "gyr.txt").string() + " -o " + out + " 2> " +
+                          (dir / "err.txt").string();
+  const int status = std::system(cmd.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  const std::string err = test::read_file((dir / "err.txt").string());
+  EXPECT_EQ(WEXITSTATUS(status), cli::kExitInput) << err;
+  EXPECT_THAT(err, HasSubstr("Input/output error"));
+  EXPECT_THAT(err, HasSubstr("after 3000 bytes"));
+  EXPECT_FALSE(fs::exists(out));
+  // The same command without the fault imports every row.
+  auto ok = test::run_cli({"import", "ascii", "--units", "si", "--accel", (dir / "acc.txt").string(),
+                           "--gyro", (dir / "gyr.txt").string(), "-o", out});
+  EXPECT_EQ(ok.exit_code, 0) << ok.err;
 }
 
 }  // namespace

@@ -4,9 +4,12 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <thread>
 
 #include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
@@ -117,6 +120,39 @@ TEST(RecordCameras, CameraConfigurationErrorsStopBeforeAnythingIsWritten) {
   EXPECT_EQ(res.exit_code, 2);
   EXPECT_NE(res.err.find("simulated cameras only"), std::string::npos) << res.err;
   EXPECT_FALSE(std::filesystem::exists(log_path));
+}
+
+// One writer per log: while a recorder writes, a second one on the same path is refused, with
+// --force too (naming the holder), and the first one's log comes out complete.
+TEST(RecordCameras, ASecondRecorderOnTheSameLogIsRefused) {
+  const std::string dir = test::scratch_dir();
+  const std::string cfg = write_config(dir, "");
+  const std::string log_path = dir + "/busy.imulog";
+  const std::string first = std::string(IMUCAL_CLI_PATH) + " record --config " + cfg + " -o " + log_path +
+                            " --sim --realtime --duration 3 > " + dir + "/first.txt 2>&1 &";
+  ASSERT_EQ(std::system(first.c_str()), 0);
+  // Wait for the first recorder to have created its log.
+  for (int i = 0; i < 500 && !std::filesystem::exists(log_path); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  auto forced = test::run_cli(
+      {"record", "--config", cfg, "-o", log_path, "--sim", "--realtime", "--duration", "1", "--force"});
+  EXPECT_EQ(forced.exit_code, 7) << forced.err;
+  EXPECT_NE(forced.err.find("is being written by process"), std::string::npos) << forced.err;
+  auto plain =
+      test::run_cli({"record", "--config", cfg, "-o", log_path, "--sim", "--realtime", "--duration", "1"});
+  EXPECT_EQ(plain.exit_code, 2) << plain.err;
+  EXPECT_NE(plain.err.find("already exists"), std::string::npos) << plain.err;
+  // The first recorder finishes undisturbed.
+  for (int i = 0; i < 300; ++i) {
+    if (test::read_file(dir + "/first.txt").find("recorded ") != std::string::npos) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  auto reader = log::SessionLogReader::open(log_path);
+  ASSERT_TRUE(reader.ok()) << reader.error().message << "\n" << test::read_file(dir + "/first.txt");
+  EXPECT_TRUE((*reader)->health().complete) << test::read_file(dir + "/first.txt");
+  EXPECT_GT(*(*reader)->imu_count(*(*reader)->find_imu_stream()), 400);
 }
 
 }  // namespace
