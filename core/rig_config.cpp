@@ -736,8 +736,8 @@ Result<RigConfig> parse_rig_config(const std::string& text, const std::string& s
 Result<RigConfig> load_rig_config(const std::string& path) {
   auto text = read_text_file(path, kMaxConfigFileBytes);
   if (!text.ok()) {
-    return make_error(text.error().code,
-                      text.error().message + " (the rig configuration; the default one is config/rig.yaml)");
+    return make_error(text.error().code, "cannot open the rig configuration: " + text.error().message +
+                                             " (the default one is config/rig.yaml)");
   }
   const std::string dir = std::filesystem::path(path).parent_path().string();
   return parse_rig_config(*text, path, dir.empty() ? "." : dir);

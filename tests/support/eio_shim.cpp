@@ -4,11 +4,12 @@
 #include <dlfcn.h>
 #include <errno.h>
 #include <fcntl.h>
+#include <sys/types.h>
+#include <unistd.h>
+
 #include <cstdarg>
 #include <cstdlib>
 #include <cstring>
-#include <sys/types.h>
-#include <unistd.h>
 
 extern "C" {
 
@@ -25,27 +26,28 @@ static void watch(const char* path, int fd) {
   }
 }
 
-#define OPEN_SHIM(name, ...)                                                     \
-  int name(const char* path, int flags, ...) {                                   \
-    static int (*real)(const char*, int, ...) = nullptr;                            \
+#define OPEN_SHIM(name, ...)                                                                               \
+  int name(const char* path, int flags, ...) {                                                             \
+    static int (*real)(const char*, int, ...) = nullptr;                                                   \
     if (real == nullptr) real = reinterpret_cast<int (*)(const char*, int, ...)>(dlsym(RTLD_NEXT, #name)); \
-    mode_t mode = 0;                                                             \
-    if (flags & (O_CREAT | O_TMPFILE)) {                                         \
-      va_list ap;                                                                \
-      va_start(ap, flags);                                                       \
-      mode = static_cast<mode_t>(va_arg(ap, int));                                            \
-      va_end(ap);                                                                \
-    }                                                                            \
-    const int fd = real(path, flags, mode);                                      \
-    watch(path, fd);                                                             \
-    return fd;                                                                   \
+    mode_t mode = 0;                                                                                       \
+    if (flags & (O_CREAT | O_TMPFILE)) {                                                                   \
+      va_list ap;                                                                                          \
+      va_start(ap, flags);                                                                                 \
+      mode = static_cast<mode_t>(va_arg(ap, int));                                                         \
+      va_end(ap);                                                                                          \
+    }                                                                                                      \
+    const int fd = real(path, flags, mode);                                                                \
+    watch(path, fd);                                                                                       \
+    return fd;                                                                                             \
   }
 OPEN_SHIM(open)
 OPEN_SHIM(open64)
 
 int openat(int dir, const char* path, int flags, ...) {
   static int (*real)(int, const char*, int, ...) = nullptr;
-  if (real == nullptr) real = reinterpret_cast<int (*)(int, const char*, int, ...)>(dlsym(RTLD_NEXT, "openat"));
+  if (real == nullptr)
+    real = reinterpret_cast<int (*)(int, const char*, int, ...)>(dlsym(RTLD_NEXT, "openat"));
   mode_t mode = 0;
   if (flags & (O_CREAT | O_TMPFILE)) {
     va_list ap;
@@ -66,7 +68,8 @@ ssize_t read(int fd, void* buf, size_t count) {
     const long long limit = after ? std::atoll(after) : 0;
     if (g_done + static_cast<long long>(count) > limit) {
       /* Hand out what lies before the failing spot first, as a disk would. */
-      if (g_done < limit) count = static_cast<size_t>(limit - g_done);
+      if (g_done < limit)
+        count = static_cast<size_t>(limit - g_done);
       else {
         errno = EIO;
         return -1;
