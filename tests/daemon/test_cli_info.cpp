@@ -165,18 +165,20 @@ TEST(CliInfo, AFullStdoutIsAnOutputError) {
   }
 }
 
+/// Changes a log behind the reader's back, as damage or a newer writer would.
+bool edit_log(const std::string& path, const char* sql) {
+  sqlite3* db = nullptr;
+  const bool ok = sqlite3_open(path.c_str(), &db) == SQLITE_OK &&
+                  sqlite3_exec(db, sql, nullptr, nullptr, nullptr) == SQLITE_OK;
+  sqlite3_close(db);
+  return ok;
+}
+
 // Each frame's image is checked against its CRC: a corrupt one is counted and the log damaged.
 TEST(CliInfo, AFrameFailingItsCrcIsReported) {
   const std::string dir = test::scratch_dir();
   const std::string log = write_log(dir + "/session.imulog");
-  {
-    sqlite3* db = nullptr;
-    ASSERT_EQ(sqlite3_open(log.c_str(), &db), SQLITE_OK);
-    ASSERT_EQ(
-        sqlite3_exec(db, "UPDATE frames SET data = zeroblob(64) WHERE rowid = 3", nullptr, nullptr, nullptr),
-        SQLITE_OK);
-    sqlite3_close(db);
-  }
+  ASSERT_TRUE(edit_log(log, "UPDATE frames SET data = zeroblob(64) WHERE rowid = 3"));
   auto r = test::run_cli({"info", "--json", log});
   EXPECT_EQ(r.exit_code, 3) << r.err;
   const auto j = nlohmann::json::parse(r.out);
@@ -197,15 +199,8 @@ TEST(CliInfo, AFrameFailingItsCrcIsReported) {
 TEST(CliInfo, ANewerSchemaIsAnInputErrorInEveryCommand) {
   const std::string dir = test::scratch_dir();
   const std::string log = write_log(dir + "/session.imulog");
-  {
-    sqlite3* db = nullptr;
-    ASSERT_EQ(sqlite3_open(log.c_str(), &db), SQLITE_OK);
-    ASSERT_EQ(
-        sqlite3_exec(db, "PRAGMA user_version=2; UPDATE metadata SET value='2' WHERE key='schema_version'",
-                     nullptr, nullptr, nullptr),
-        SQLITE_OK);
-    sqlite3_close(db);
-  }
+  ASSERT_TRUE(
+      edit_log(log, "PRAGMA user_version=2; UPDATE metadata SET value='2' WHERE key='schema_version'"));
   for (const std::vector<std::string>& args : {std::vector<std::string>{"info", log},
                                                {"calibrate", "static", log, "-o", dir + "/r.yaml"},
                                                {"export", "euroc", log, dir + "/out"},

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <random>
 
@@ -298,29 +299,40 @@ TEST(SessionLogDamage, RejectsNewerSchemaWithAClearMessage) {
   EXPECT_NE(reader.error().message.find("update imucal"), std::string::npos) << reader.error().message;
 }
 
-// A writer process dies (no close, no destructor) after committing one batch and buffering a
-// second: the first batch is readable, the second is lost, nothing is damaged.
-TEST(SessionLogDamage, WriterCrashKeepsWhatWasCommitted) {
-  const std::string path = scratch_dir() + "/crash.imulog";
+// In a child process: a writer on `path` (commits only when asked) with one raw IMU stream, then
+// `body`, then death without closing or destroying anything (a crash). Returns the child's exit
+// code: body's, or 10 when the log could not be created.
+int write_then_crash(const std::string& path, const std::function<int(SessionLogWriter&, int)>& body) {
   const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
+  if (pid < 0) return -1;
   if (pid == 0) {
     SessionLogWriterOptions options;
     options.commit_interval_ns = 3600 * kNsPerSecond;
     auto writer = SessionLogWriter::create(path, options);
     if (!writer.ok()) _exit(10);
     const int id = *(*writer)->add_imu_stream(test_raw_imu_info());
-    if (!(*writer)->set_metadata("rig", "bench").ok()) _exit(11);
-    if (!(*writer)->append_imu(id, make_raw_samples(3000, 0)).ok()) _exit(12);
-    if (!(*writer)->append_event({0, "note", "committed"}).ok()) _exit(13);
-    if (!(*writer)->flush().ok()) _exit(14);
-    if (!(*writer)->append_imu(id, make_raw_samples(500, 3'000'000'000, 3000)).ok()) _exit(15);
-    _exit(0);  // a crash: nothing is closed, nothing is destroyed
+    _exit(body(**writer, id));
   }
   int status = 0;
-  ASSERT_EQ(waitpid(pid, &status, 0), pid);
-  ASSERT_TRUE(WIFEXITED(status));
-  ASSERT_EQ(WEXITSTATUS(status), 0);
+  if (waitpid(pid, &status, 0) != pid || !WIFEXITED(status)) return -1;
+  return WEXITSTATUS(status);
+}
+
+// A writer process dies (no close, no destructor) after committing one batch and buffering a
+// second: the first batch is readable, the second is lost, nothing is damaged.
+TEST(SessionLogDamage, WriterCrashKeepsWhatWasCommitted) {
+  const std::string path = scratch_dir() + "/crash.imulog";
+  ASSERT_EQ(write_then_crash(path,
+                             [](SessionLogWriter& w, int id) {
+                               if (!w.set_metadata("rig", "bench").ok()) return 11;
+                               if (!w.append_imu(id, make_raw_samples(3000, 0)).ok()) return 12;
+                               if (!w.append_event({0, "note", "committed"}).ok()) return 13;
+                               if (!w.flush().ok()) return 14;
+                               if (!w.append_imu(id, make_raw_samples(500, 3'000'000'000, 3000)).ok())
+                                 return 15;
+                               return 0;
+                             }),
+            0);
   EXPECT_TRUE(fs::exists(path + "-wal"));
 
   auto reader = SessionLogReader::open(path);
@@ -341,22 +353,17 @@ TEST(SessionLogDamage, WriterCrashKeepsWhatWasCommitted) {
 
 // A log whose writer died after five commits of 1000 samples each: its data is in its -wal.
 std::string crashed_log_with_wal(const std::string& path) {
-  const pid_t pid = fork();
-  if (pid == 0) {
-    SessionLogWriterOptions options;
-    options.commit_interval_ns = 3600 * kNsPerSecond;
-    auto writer = SessionLogWriter::create(path, options);
-    if (!writer.ok()) _exit(10);
-    const int id = *(*writer)->add_imu_stream(test_raw_imu_info());
-    for (int k = 0; k < 5; ++k) {
-      if (!(*writer)->append_imu(id, make_raw_samples(1000, k * 1'000'000'000LL, k * 1000)).ok()) _exit(11);
-      if (!(*writer)->flush().ok()) _exit(12);
-    }
-    _exit(0);
-  }
-  int status = 0;
-  waitpid(pid, &status, 0);
-  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+  EXPECT_EQ(
+      write_then_crash(path,
+                       [](SessionLogWriter& w, int id) {
+                         for (int k = 0; k < 5; ++k) {
+                           if (!w.append_imu(id, make_raw_samples(1000, k * 1'000'000'000LL, k * 1000)).ok())
+                             return 11;
+                           if (!w.flush().ok()) return 12;
+                         }
+                         return 0;
+                       }),
+      0);
   return path + "-wal";
 }
 
