@@ -38,7 +38,7 @@ std::string timing_metadata_json(const RecordSummary& s, const TimestamperOption
   j["samples_lost"] = s.timing.samples_lost;
   j["monotonic_clamps"] = s.timing.monotonic_clamps;
   j["batches_without_edge"] = s.acquisition.batches_without_edge;
-  return j.dump();
+  return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 namespace {
@@ -53,7 +53,7 @@ std::string stream_json(const ImuStreamStats& s) {
   j["events_dropped"] = s.events_dropped;
   for (const auto& c : s.consumers)
     j["consumers"][c.name] = {{"delivered", c.delivered}, {"dropped", c.dropped}};
-  return j.dump();
+  return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 }  // namespace
@@ -80,7 +80,7 @@ std::string driver_metadata_json(const mpu::Mpu6000& d) {
                    {"no_data_timeouts", c.no_data_timeouts},
                    {"samples", c.samples},
                    {"frames_discarded", c.frames_discarded}};
-  return j.dump();
+  return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string camera_metadata_json(const CameraAcquisitionStats& s) {
@@ -100,7 +100,7 @@ std::string camera_metadata_json(const CameraAcquisitionStats& s) {
   j["stalls"] = s.stalls;
   j["failed"] = s.failed;
   if (s.failed) j["failure"] = s.failure;
-  return j.dump();
+  return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string mounting_metadata_json(const MountingMap& m) {
@@ -111,7 +111,7 @@ std::string mounting_metadata_json(const MountingMap& m) {
   nlohmann::json rows = nlohmann::json::array();
   for (int r = 0; r < 3; ++r) rows.push_back({m.R_rig_imu()(r, 0), m.R_rig_imu()(r, 1), m.R_rig_imu()(r, 2)});
   j["R_rig_imu"] = rows;
-  return j.dump();
+  return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 namespace {

@@ -460,7 +460,7 @@ std::string calibration_check_json(const std::string& log_path, const ImuStreamI
                     {"direction_per_transfer_rad", figures[i].direction_per_transfer_rad}});
   }
   j["calibrations"] = cals;
-  return j.dump(2) + "\n";
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 }  // namespace imucal::app

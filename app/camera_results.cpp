@@ -119,7 +119,8 @@ std::string encode_detection(const calib::TargetObservation& o) {
     px.push_back(p.x());
     px.push_back(p.y());
   }
-  return json{{"width", o.width}, {"height", o.height}, {"ids", o.ids}, {"px", px}}.dump();
+  return json{{"width", o.width}, {"height", o.height}, {"ids", o.ids}, {"px", px}}.dump(
+      -1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 Result<calib::TargetObservation> decode_detection(const std::string& text, TimeNs t_ns) {
@@ -243,7 +244,7 @@ std::string camera_result_json(const CameraCalibrationReport& r) {
       {"warnings", r.warnings},
       {"software_version", kVersion},
   };
-  return j.dump(2) + "\n";
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 }  // namespace imucal::app

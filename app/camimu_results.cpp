@@ -295,7 +295,9 @@ CamImuCameraResult read_camera(const json& j, const std::string& path) {
   c.name = j.at("name").get<std::string>();
   c.stream = j.at("stream").get<std::string>();
   // JSON is YAML: the camera map reads with the camchain reader.
-  auto camera = camera_from_yaml(YAML::Load(j.at("camera").dump()), path + " " + c.name);
+  auto camera = camera_from_yaml(
+      YAML::Load(j.at("camera").dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)),
+      path + " " + c.name);
   if (!camera.ok()) throw std::runtime_error(camera.error().message);
   c.camera = *camera;
   c.T_cam_imu.matrix() = read_mat<4, 4>(j.at("T_cam_imu"));
@@ -591,7 +593,7 @@ std::string camimu_result_json(const CamImuReport& r) {
   j["inputs"] = inputs_json(r);
   j["notes"] = r.notes;
   j["warnings"] = r.warnings;
-  return j.dump(2) + "\n";
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 Result<CamImuCalibrationResult> read_camimu_result(const std::string& path) {

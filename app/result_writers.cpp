@@ -262,7 +262,7 @@ std::string static_result_json(const calib::StaticCalibrationResult& r, const Im
                     {"gyro", r.timings.gyro_s}};
   auto it = log_metadata.find("software_version");
   if (it != log_metadata.end()) j["log_software_version"] = it->second;
-  return j.dump(2) + "\n";
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 double AllanReport::accel_noise_density() const {
@@ -327,7 +327,7 @@ std::string allan_json(const AllanReport& r) {
                  {"rostopic", r.rostopic},
                  {"update_rate", r.rate_hz}};
   j["random_walk_is_upper_bound"] = r.random_walk_is_upper_bound();
-  return j.dump(2) + "\n";
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 namespace {
@@ -435,7 +435,7 @@ std::string gsens_result_json(const GSensitivityResult& r, const ImuStreamInfo& 
   for (const auto& h : r.holds) holds.push_back(gsens_hold_json(h, r.holds.front().t0_ns));
   j["holds"] = holds;
   j["warnings"] = r.warnings;
-  return j.dump(2) + "\n";
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 Status check_output(const std::string& path, const OutputPolicy& policy) {

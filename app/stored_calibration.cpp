@@ -149,7 +149,9 @@ Result<json> merge(json stat, const json& cam) {
     if (stat["imu"][key] != cam["imu"][key]) {
       return make_error(Errc::kInvalidArgument,
                         std::string("the static and camimu results are of different IMU data (") + key + " " +
-                            stat["imu"][key].dump() + " and " + cam["imu"][key].dump() +
+                            stat["imu"][key].dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
+                            " and " +
+                            cam["imu"][key].dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
                             "): give results of one stream");
     }
   }
@@ -208,9 +210,11 @@ Status validate_calibration_payload(const json& p) {
                                           kCalibrationFormat + "\")");
   }
   if (p.value("version", json()) != kCalibrationPayloadVersion) {
-    return make_error(Errc::kCorrupt, "calibration payload version " + p.value("version", json()).dump() +
-                                          ", this imucal reads version " +
-                                          std::to_string(kCalibrationPayloadVersion));
+    return make_error(
+        Errc::kCorrupt,
+        "calibration payload version " +
+            p.value("version", json()).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
+            ", this imucal reads version " + std::to_string(kCalibrationPayloadVersion));
   }
   if (!p.contains("imu") || !p["imu"].is_object())
     return make_error(Errc::kCorrupt, "the calibration has no imu");
@@ -368,7 +372,7 @@ void emit(YAML::Emitter& y, const json& j) {
   } else if (j.is_number()) {
     // JSON's shortest text that reads back to the same double, so that an exported calibration
     // compares equal to the stored one (store verify).
-    y << j.dump();
+    y << j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   } else if (j.is_boolean()) {
     y << j.get<bool>();
   } else if (j.is_string()) {

@@ -902,7 +902,7 @@ std::string rig_config_to_json(const RigConfig& c) {
                         {"tagSpacing", t.tag_spacing}};
     }
   }
-  return root.dump(2) + "\n";
+  return root.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 }  // namespace imucal

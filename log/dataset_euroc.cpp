@@ -393,7 +393,8 @@ Result<ImportSummary> import_euroc(const std::string& dir, const std::string& ou
     if (!writer.ok()) return writer.error().context("cannot create the session log");
     SessionLogWriter& w = **writer;
     nlohmann::json source = {{"format", "euroc"}, {"path", fs::absolute(*root).string()}};
-    IMUCAL_TRY(w.set_metadata("import", source.dump()));
+    IMUCAL_TRY(
+        w.set_metadata("import", source.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)));
     for (const auto& f : *imus) IMUCAL_TRY(write_imu_folder(w, f, summary, progress));
     for (const auto& f : *cams) IMUCAL_TRY(write_camera_folder(w, f, summary, progress));
     IMUCAL_TRY(w.close());

@@ -38,7 +38,7 @@ Status write_imu_log(PendingOutput& out, const ImuStreamInfo& info, const std::v
   auto writer = SessionLogWriter::create(out.temp_path());
   if (!writer.ok()) return writer.error().context("cannot create the session log");
   SessionLogWriter& w = **writer;
-  IMUCAL_TRY(w.set_metadata("import", source.dump()));
+  IMUCAL_TRY(w.set_metadata("import", source.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)));
   auto id = w.add_imu_stream(info);
   if (!id.ok()) return id.error();
   constexpr std::size_t kBatch = 8192;

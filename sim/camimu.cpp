@@ -99,7 +99,7 @@ SimImuSessionOptions session_options(const CamImuSimOptions& options, const Fram
       {"exposure_ns", options.exposure_ns},
       {"encoding", options.image_encoding},
       {"timestamp_source",
-       "mid-exposure"}}.dump();
+       "mid-exposure"}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   o.metadata.emplace_back("target", target_to_yaml(options.target));
   SimSessionCamera cam;
   cam.info.name = "cam0";

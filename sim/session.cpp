@@ -103,8 +103,9 @@ Status write_session_metadata(log::SessionLogWriter& writer, const SimImuSession
     drops.push_back({{"start_s", d.start_s}, {"duration_s", d.duration_s}});
   simj["host_stalls"] = drops;
   if (!options.rig_camera_json.empty()) rig_json["camera"] = nlohmann::json::parse(options.rig_camera_json);
-  IMUCAL_TRY(writer.set_metadata("rig_config", rig_json.dump()));
-  IMUCAL_TRY(writer.set_metadata("sim", simj.dump()));
+  IMUCAL_TRY(writer.set_metadata("rig_config",
+                                 rig_json.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)));
+  IMUCAL_TRY(writer.set_metadata("sim", simj.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)));
   for (const auto& [key, value] : options.metadata) IMUCAL_TRY(writer.set_metadata(key, value));
   return writer.set_metadata("device", "sim");
 }
@@ -124,8 +125,9 @@ Status write_segment_events(log::SessionLogWriter& writer, const sim::Trajectory
       }
       ++pose;
     }
-    events.push_back({seg.t0_ns, ev.begin, msg.dump()});
-    events.push_back({seg.t1_ns, ev.end, msg.dump()});
+    events.push_back(
+        {seg.t0_ns, ev.begin, msg.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)});
+    events.push_back({seg.t1_ns, ev.end, msg.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)});
   }
   std::stable_sort(events.begin(), events.end(),
                    [](const log::Event& a, const log::Event& b) { return a.t_ns < b.t_ns; });

@@ -236,7 +236,8 @@ Status SessionRunner::start(const std::vector<std::string>& steps) {
     if (!writer.ok()) return writer.error().context("creating the session log");
     log_ = std::move(*writer);
     for (const auto& [k, v] : options_.metadata) IMUCAL_TRY(log_->set_metadata(k, v));
-    IMUCAL_TRY(log_->set_metadata("session", json{{"steps", steps}}.dump()));
+    IMUCAL_TRY(log_->set_metadata(
+        "session", json{{"steps", steps}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)));
     auto id = log_->add_imu_stream(info_);
     if (!id.ok()) return id.error().context("declaring the IMU stream");
     stream_id_ = *id;
@@ -400,7 +401,9 @@ void SessionRunner::on_frame(std::size_t camera, const CameraFrame& frame) {
   if (log_) {
     // At the engine's time, as replay applies inputs (after the sample of that time).
     const json e = {{"camera", camera}, {"t_ns", frame.t_ns}, {"seen", seen}};
-    if (auto s = log_->append_event({engine_.now_ns(), "frame", e.dump()}); !s.ok())
+    if (auto s = log_->append_event(
+            {engine_.now_ns(), "frame", e.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)});
+        !s.ok())
       warn("session log: " + s.error().message);
   }
   engine_.on_frame(frame.t_ns, seen);
@@ -410,7 +413,9 @@ void SessionRunner::fault(const std::string& source, const std::string& text) { 
 
 void SessionRunner::emit(const json& message) {
   if (log_) {
-    if (auto s = log_->append_event({engine_.now_ns(), "session", message.dump()}); !s.ok())
+    if (auto s = log_->append_event({engine_.now_ns(), "session",
+                                     message.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)});
+        !s.ok())
       warn("session log: " + s.error().message);
   }
   if (options_.broadcast) options_.broadcast(message);

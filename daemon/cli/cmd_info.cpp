@@ -183,7 +183,11 @@ int run_info(const std::string& path, bool as_json) {
   auto summary = app::summarize_log(path);
   // Anything that prevents reading the log is an input problem, including a newer schema.
   if (!summary.ok()) throw CliExit{kExitInput, summary.error().message};
-  std::cout << (as_json ? summary_json(path, *summary).dump(2) + "\n" : summary_text(path, *summary));
+  std::cout
+      << (as_json
+              ? summary_json(path, *summary).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) +
+                    "\n"
+              : summary_text(path, *summary));
   std::cout.flush();
   if (summary->health.damaged) {
     std::cerr

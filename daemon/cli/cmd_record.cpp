@@ -82,7 +82,7 @@ void print_summary(const RecordArgs& a, const acq::RecordSummary& s, const std::
       j["cameras"].push_back(nlohmann::json::parse(acq::camera_metadata_json(c.stats)));
       j["cameras"].back()["name"] = c.name;
     }
-    std::cout << j.dump(2) << "\n";
+    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
     return;
   }
   std::printf(
@@ -150,8 +150,8 @@ std::string describe_sim_record(const RecordArgs& a, const mpu::Settings& settin
                          {"edge_jitter_ns", dt.sigma_ns},
                          {"script", a.sim_motion}};
   if (a.realtime) meta["realtime"] = true;
-  ro.metadata.emplace_back("sim", meta.dump());
-  return meta.dump();
+  ro.metadata.emplace_back("sim", meta.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+  return meta.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 /// The configured cameras of the simulated rig: virtual cameras (drivers/camera/fake) rendering

@@ -44,7 +44,7 @@ void run(const ReplayArgs& a) {
     nlohmann::json steps = nlohmann::json::array();
     for (const auto& st : s.step_times) steps.push_back({{"step", st.step}, {"rig_s", st.rig_s}});
     j["live_step_times"] = steps;
-    std::cout << j.dump(2) << "\n";
+    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {
     std::printf("replayed %s: %zu samples, %d keys, %d faults, %d solves applied\n",
                 a.options.log_path.c_str(), s.samples, s.keys, s.faults, s.solves);

@@ -82,7 +82,7 @@ void run_read(const StoreOptions& o) {
     json j = {{"device", s.device},     {"slot", drivers::slot_name(s.slot)},
               {"sequence", s.sequence}, {"payload_bytes", s.payload_bytes},
               {"slots", slots_json(s)}, {"calibration", *s.payload}};
-    std::cout << j.dump(2) << "\n";
+    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
     return;
   }
   print_state(std::cout, s, "# ");

@@ -83,7 +83,7 @@ Connection::~Connection() {
 }
 
 Status Connection::send(const json& request) {
-  const std::string line = request.dump() + '\n';
+  const std::string line = request.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + '\n';
   std::size_t written = 0;
   while (written < line.size()) {
     // MSG_NOSIGNAL: a service that went away is an error here, not a SIGPIPE.

@@ -190,7 +190,8 @@ Status Service::init() {
   ro.warn = [](const std::string& text) { spdlog::warn("{}", text); };
   ro.metadata = {{"rig_config", rig_config_to_json(config_)},
                  {"source", options_.sim ? "sim" : "hardware"},
-                 {"service", json{{"version", kVersion}, {"config", options_.config_path}}.dump()}};
+                 {"service", json{{"version", kVersion}, {"config", options_.config_path}}.dump(
+                                 -1, ' ', false, nlohmann::json::error_handler_t::replace)}};
   runner_ = std::make_unique<app::session::SessionRunner>(config_, stream_info_, ro);
 
   service::ControlServerOptions so;

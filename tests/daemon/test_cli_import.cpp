@@ -198,6 +198,16 @@ TEST(CliImport, HostileInputsAreRefusedWithAMessage) {
   auto dirimg = test::run_cli({"import", "euroc", (dir / "dirimg").string(), "-o", out});
   EXPECT_EQ(dirimg.exit_code, cli::kExitInput) << dirimg.err;
   EXPECT_THAT(dirimg.err, HasSubstr("is a folder, expected a file"));
+  // Text that is not UTF-8 (a Latin-1 sensor.yaml) is kept as it is in the log; JSON output
+  // shows it with U+FFFD instead of failing.
+  write(dir / "latin1/mav0/imu0/data.csv", imu_csv);
+  write(dir / "latin1/mav0/imu0/sensor.yaml", "sensor_type: imu\ncomment: \"caf\xe9\"\nrate_hz: 200\n");
+  const std::string latin1_log = (dir / "latin1.imulog").string();
+  auto latin1 = test::run_cli({"import", "euroc", (dir / "latin1").string(), "-o", latin1_log});
+  ASSERT_EQ(latin1.exit_code, 0) << latin1.err;
+  auto json_info = test::run_cli({"info", "--json", latin1_log});
+  EXPECT_EQ(json_info.exit_code, 0) << json_info.err;
+  EXPECT_THAT(json_info.out, HasSubstr("caf\xef\xbf\xbd"));
   // Timestamps beyond 2^62 ns (where differences of two could overflow) are refused.
   write(dir / "far.txt", "9223372036.8 0 0 9.8\n9223372036.9 0 0 9.8\n");
   auto far = test::run_cli({"import", "ascii", "--accel", (dir / "far.txt").string(), "--gyro",
