@@ -127,13 +127,9 @@ long flock_holder(dev_t dev, ino_t ino) {
   return 0;
 }
 
-long flock_holder(int fd) {
-  struct stat st {};
-  return ::fstat(fd, &st) == 0 ? flock_holder(st.st_dev, st.st_ino) : 0;
-}
-
 std::string held_by(int fd) {
-  const long pid = flock_holder(fd);
+  struct stat st {};
+  const long pid = ::fstat(fd, &st) == 0 ? flock_holder(st.st_dev, st.st_ino) : 0;
   if (pid <= 0) return "another process";
   std::string comm;
   std::ifstream(std::string("/proc/") + std::to_string(pid) + "/comm") >> comm;
@@ -759,6 +755,13 @@ WalCheck check_wal(const std::string& path) {
   const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (bytes.empty()) return out;
   const auto* b = reinterpret_cast<const unsigned char*>(bytes.data());
+  // SQLite ignores a -wal whose header is bad, with every commit in it.
+  const auto damaged_header = [&] {
+    if (bytes.size() > 32)
+      out.damage = "its write-ahead log " + path + "-wal has a damaged header: SQLite ignores all " +
+                   std::to_string(bytes.size()) + " bytes of it, with every commit since the last checkpoint";
+    return out;
+  };
   const auto be32 = [&](std::size_t at) {
     return (std::uint32_t{b[at]} << 24) | (std::uint32_t{b[at + 1]} << 16) | (std::uint32_t{b[at + 2]} << 8) |
            b[at + 3];
@@ -771,10 +774,7 @@ WalCheck check_wal(const std::string& path) {
   const std::uint32_t page_size = be32(8);
   if ((magic != 0x377f0682 && magic != 0x377f0683) || page_size < 512 || page_size > 65536 ||
       (page_size & (page_size - 1)) != 0) {
-    if (bytes.size() > 32)
-      out.damage = "its write-ahead log " + path + "-wal has a damaged header: SQLite ignores all " +
-                   std::to_string(bytes.size()) + " bytes of it, with every commit since the last checkpoint";
-    return out;
+    return damaged_header();
   }
   const bool big_endian = (magic & 1) != 0;
   const auto word = [&](std::size_t at) {
@@ -791,10 +791,7 @@ WalCheck check_wal(const std::string& path) {
   };
   sum(0, 24);
   if (s0 != be32(24) || s1 != be32(28)) {
-    if (bytes.size() > 32)
-      out.damage = "its write-ahead log " + path + "-wal has a damaged header: SQLite ignores all " +
-                   std::to_string(bytes.size()) + " bytes of it, with every commit since the last checkpoint";
-    return out;
+    return damaged_header();
   }
   const std::uint32_t salt1 = be32(16), salt2 = be32(20);
   const std::size_t frame = 24 + page_size;

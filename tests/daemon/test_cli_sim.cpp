@@ -113,7 +113,7 @@ TEST(CliSim, ARateTheBusCannotCarryIsRecordedWithItsLossesExplained) {
 
 // A filesystem that fills up while a session is simulated into it: the command says it stopped
 // and how much it kept (exit 7), and the log holds every committed sample, readable and not
-// called damaged; a result that does not fit leaves nothing behind. Needs a tmpfs mount (root).
+// called damaged. Needs a tmpfs mount (root).
 TEST(CliSim, AFullDiskStopsWithWhatWasKept) {
   const std::string dir = test::scratch_dir();
   const std::string mnt = dir + "/full";
@@ -136,12 +136,6 @@ TEST(CliSim, AFullDiskStopsWithWhatWasKept) {
   const auto kept = *(*reader)->imu_count(*(*reader)->find_imu_stream());
   EXPECT_GT(kept, 500);  // commits every 5 s of samples: more than the last one survives
   EXPECT_THAT(r.err, HasSubstr("stopped, " + std::to_string(kept) + " samples"));
-  // The disk is still full: a result written there is refused whole.
-  const auto cal = test::run_cli({"calibrate", "static", log, "--allow-damaged", "-o", mnt + "/r.yaml"});
-  if (cal.exit_code == 7) {
-    for (const auto& e : fs::directory_iterator(mnt))
-      EXPECT_EQ(e.path().filename().string().find("r.yaml"), std::string::npos) << e.path();
-  }
 }
 
 }  // namespace
