@@ -14,6 +14,7 @@
 #include "calib/rk4.hpp"
 #include "calib/static_detector.hpp"
 #include "calib/static_scan.hpp"
+#include "core/text_file.hpp"
 
 namespace imucal::app {
 namespace {
@@ -48,18 +49,6 @@ class FigureSum {
   int n_ = 0;
   double sum_ = 0.0, sum_sq_ = 0.0, max_ = 0.0;
 };
-
-Result<std::string> read_whole_file(const std::string& path) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) {
-    return make_error(Errc::kNotFound, path + ": no such file");
-  }
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (!in && !in.eof()) return make_error(Errc::kIo, path + ": could not be read");
-  return text.str();
-}
 
 std::string file_name(const std::string& path) { return std::filesystem::path(path).filename().string(); }
 
@@ -335,7 +324,7 @@ Result<NamedCalibration> parse_imucal_calibration(const std::string& yaml_text, 
 }
 
 Result<NamedCalibration> read_imucal_calibration(const std::string& path) {
-  auto text = read_whole_file(path);
+  auto text = read_text_file(path);
   if (!text.ok()) return text.error();
   return parse_imucal_calibration(*text, path);
 }
@@ -375,9 +364,9 @@ Result<ImuTkTriad> parse_imu_tk_triad(const std::string& text, const std::string
 
 Result<NamedCalibration> read_imu_tk_calibration(const std::string& accel_path,
                                                  const std::string& gyro_path) {
-  auto acc_text = read_whole_file(accel_path);
+  auto acc_text = read_text_file(accel_path);
   if (!acc_text.ok()) return acc_text.error();
-  auto gyro_text = read_whole_file(gyro_path);
+  auto gyro_text = read_text_file(gyro_path);
   if (!gyro_text.ok()) return gyro_text.error();
   auto acc = parse_imu_tk_triad(*acc_text, accel_path);
   if (!acc.ok()) return acc.error();

@@ -7,15 +7,16 @@
 #include <set>
 
 #include "app/result_writers.hpp"
+#include "core/text_file.hpp"
 
 namespace imucal::app {
 namespace {
 
 Result<YAML::Node> load_yaml(const std::string& path) {
+  auto text = read_text_file(path, kMaxResultFileBytes);
+  if (!text.ok()) return text.error();
   try {
-    return YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    return make_error(Errc::kNotFound, path + ": cannot be read");
+    return YAML::Load(*text);
   } catch (const YAML::Exception& e) {
     return make_error(Errc::kCorrupt, path + ": not valid YAML (" + e.msg + ", line " +
                                           std::to_string(e.mark.line + 1) + ")");

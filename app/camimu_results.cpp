@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "app/camimu_inputs.hpp"
+#include "core/text_file.hpp"
 #include "core/version.hpp"
 
 namespace imucal::app {
@@ -597,12 +598,10 @@ std::string camimu_result_json(const CamImuReport& r) {
 }
 
 Result<CamImuCalibrationResult> read_camimu_result(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return make_error(Errc::kNotFound, path + ": cannot be read");
-  std::stringstream text;
-  text << in.rdbuf();
+  auto text = read_text_file(path, kMaxResultFileBytes);
+  if (!text.ok()) return text.error();
   try {
-    return read_result_json(json::parse(text.str()), path);
+    return read_result_json(json::parse(*text), path);
   } catch (const std::exception& e) {
     return make_error(Errc::kCorrupt,
                       path + ": not a camera-IMU result.json (" + std::string(e.what()) + ")");

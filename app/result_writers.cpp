@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/imu_model.hpp"
+#include "core/text_file.hpp"
 #include "log/dataset_io.hpp"
 
 namespace imucal::app {
@@ -123,11 +124,11 @@ json sensor_json(const calib::AllanCurve& curve, const std::vector<calib::AllanN
 }  // namespace
 
 Result<Eigen::Matrix3d> read_gsens_matrix(const std::string& path) {
+  auto text = read_text_file(path, kMaxResultFileBytes);
+  if (!text.ok()) return text.error();
   YAML::Node root;
   try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    return make_error(Errc::kNotFound, path + ": cannot be read");
+    root = YAML::Load(*text);
   } catch (const YAML::Exception& e) {
     return make_error(Errc::kCorrupt, path + ": not valid YAML (" + std::string(e.what()) + ")");
   }

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "core/text_file.hpp"
 #include "core/version.hpp"
 #include "drivers/storage/storage_device.hpp"
 
@@ -106,11 +107,9 @@ json camimu_payload(const json& r, const std::string& path) {
 }
 
 Result<json> load_document(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return make_error(Errc::kNotFound, path + ": cannot be read");
-  std::stringstream text;
-  text << in.rdbuf();
-  const std::string s = text.str();
+  auto text = read_text_file(path, kMaxResultFileBytes);
+  if (!text.ok()) return text.error();
+  const std::string& s = *text;
   const auto first = s.find_first_not_of(" \t\r\n");
   if (first != std::string::npos && s[first] == '{') {
     json j = json::parse(s, nullptr, false);

@@ -29,4 +29,8 @@ std::string printable(std::string_view text, std::size_t max_chars = 80);
 /// The limit for configuration and target files (they are a few kilobytes).
 inline constexpr std::size_t kMaxConfigFileBytes = 1 << 20;
 
+/// The limit for result files that commands read back (calibrations, camchains, imu.yaml):
+/// far above the largest imucal writes, far below what would exhaust memory.
+inline constexpr std::size_t kMaxResultFileBytes = 64 << 20;
+
 }  // namespace imucal

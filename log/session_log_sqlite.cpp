@@ -684,6 +684,10 @@ Status precheck_file(const std::string& path) {
   if (S_ISDIR(st.st_mode)) {
     return make_error(Errc::kNotFound, path + " is a directory, not a session log (.imulog file)");
   }
+  if (!S_ISREG(st.st_mode)) {
+    // A FIFO or a device would block the open below or read without end.
+    return make_error(Errc::kNotFound, path + " is not a regular file, not a session log (.imulog file)");
+  }
   std::ifstream in(path, std::ios::binary);
   if (!in)
     return make_error(Errc::kNotFound, "cannot read session log " + path + ": " + std::strerror(errno));

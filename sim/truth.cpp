@@ -5,6 +5,7 @@
 #include <numbers>
 #include <sstream>
 
+#include "core/text_file.hpp"
 #include "core/version.hpp"
 
 namespace imucal::sim {
@@ -241,11 +242,11 @@ Result<ImuModelParams> imu_params_from_yaml(const YAML::Node& node, const std::s
 }
 
 Result<ImuModelParams> load_imu_params(const std::string& path) {
+  auto text = read_text_file(path, kMaxResultFileBytes);
+  if (!text.ok()) return text.error().context("cannot read the truth file");
   YAML::Node doc;
   try {
-    doc = YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    return make_error(Errc::kNotFound, path + ": cannot open the truth file");
+    doc = YAML::Load(*text);
   } catch (const YAML::Exception& e) {
     return make_error(Errc::kCorrupt, path + ": not valid YAML (" + e.msg + ", line " +
                                           std::to_string(e.mark.line + 1) + ")");

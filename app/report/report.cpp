@@ -11,6 +11,7 @@
 #include "app/report/gnuplot.hpp"
 #include "app/report/html.hpp"
 #include "app/result_writers.hpp"
+#include "core/text_file.hpp"
 
 namespace imucal::app::report {
 namespace {
@@ -54,12 +55,10 @@ Result<std::string> result_file(const std::string& path) {
 }
 
 Result<nlohmann::json> read_result(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return make_error(Errc::kNotFound, path + " cannot be read");
-  std::stringstream ss;
-  ss << in.rdbuf();
+  auto text = read_text_file(path, kMaxResultFileBytes);
+  if (!text.ok()) return text.error();
   try {
-    return nlohmann::json::parse(ss.str());
+    return nlohmann::json::parse(*text);
   } catch (const nlohmann::json::exception&) {
     return make_error(Errc::kCorrupt,
                       path +

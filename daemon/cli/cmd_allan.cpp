@@ -124,9 +124,7 @@ void setup(CLI::App& root) {
   CLI::App* cmd =
       root.add_subcommand("allan", "Noise figures of a still recording (Allan deviation), Kalibr imu.yaml");
   auto o = std::make_shared<AllanCliOptions>();
-  cmd->add_option("LOG", o->log_path, "Session log (.imulog) of the rig at rest")
-      ->required()
-      ->check(CLI::ExistingFile);
+  cmd->add_option("LOG", o->log_path, "Session log (.imulog) of the rig at rest")->required();
   cmd->add_option("--stream", o->stream, "IMU stream name (default: the first)");
   cmd->add_option("--rostopic", o->rostopic, "rostopic written to imu.yaml");
   cmd->add_flag("--allow-motion", o->allow_motion, "Do not refuse a recording in which the rig moves");

@@ -187,9 +187,7 @@ void setup(CLI::App& root) {
       "static",
       "Static multi-position IMU calibration (Tedaldi et al.): accel and gyro scale, misalignment, bias");
   auto o = std::make_shared<StaticCliOptions>();
-  cmd->add_option("LOG", o->log_path, "Session log (.imulog) of the static protocol")
-      ->required()
-      ->check(CLI::ExistingFile);
+  cmd->add_option("LOG", o->log_path, "Session log (.imulog) of the static protocol")->required();
   cmd->add_option("--stream", o->stream, "IMU stream name (default: the first)");
   add_gravity_options(cmd, &o->grav);
   cmd->add_option("--init-still", o->init_still_s,

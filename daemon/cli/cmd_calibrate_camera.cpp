@@ -113,15 +113,12 @@ void setup(CLI::App& root) {
       "Camera intrinsics (pinhole with radtan or equidistant distortion) from the calibration target in a "
       "camera stream's frames; writes a Kalibr camchain YAML with sigmas and quality figures");
   auto o = std::make_shared<CameraCliOptions>();
-  cmd->add_option("LOG", o->log_path, "Session log (.imulog) with the camera stream")
-      ->required()
-      ->check(CLI::ExistingFile);
+  cmd->add_option("LOG", o->log_path, "Session log (.imulog) with the camera stream")->required();
   cmd->add_option("--camera", o->camera, "Camera stream name (default: the first)");
   cmd->add_option(
-         "--target", o->target_path,
-         "Calibration target, Kalibr target YAML (default: the target in the log's rig configuration or "
-         "metadata)")
-      ->check(CLI::ExistingFile);
+      "--target", o->target_path,
+      "Calibration target, Kalibr target YAML (default: the target in the log's rig configuration or "
+      "metadata)");
   cmd->add_option("--model", o->model, "Camera model: pinhole-radtan (default) or pinhole-equi (fisheye)")
       ->check(CLI::IsMember({"pinhole-radtan", "pinhole-equi"}));
   cmd->add_option("--threads", o->threads,

@@ -206,29 +206,23 @@ void run(const CamImuCliOptions& o) {
 }
 
 void add_options(CLI::App* cmd, CamImuCliOptions* o) {
-  cmd->add_option("LOG", o->log_path, "Session log (.imulog) with the IMU and camera streams")
-      ->required()
-      ->check(CLI::ExistingFile);
+  cmd->add_option("LOG", o->log_path, "Session log (.imulog) with the IMU and camera streams")->required();
   cmd->add_option("--camera", o->camera_paths,
                   "Camera intrinsics: the YAML of imucal calibrate camera or a Kalibr camchain (cam0..camN); "
                   "repeat for more files")
-      ->required()
-      ->check(CLI::ExistingFile);
+      ->required();
   cmd->add_option("--target", o->target_path,
-                  "Calibration target, Kalibr target YAML (default: the target the log names)")
-      ->check(CLI::ExistingFile);
-  cmd->add_option("--imu", o->imu_path,
-                  "IMU noise, Kalibr imu.yaml (imucal allan writes one; default: MPU-6000 datasheet figures)")
-      ->check(CLI::ExistingFile);
+                  "Calibration target, Kalibr target YAML (default: the target the log names)");
   cmd->add_option(
-         "--imu-intrinsics", o->imu_intrinsics_path,
-         "A static result YAML (calibrate static -o): start from its model and fix S_a, M_a, S_g, M_g, "
-         "C_bg (and B_g when it has a g-sensitivity)")
-      ->check(CLI::ExistingFile);
+      "--imu", o->imu_path,
+      "IMU noise, Kalibr imu.yaml (imucal allan writes one; default: MPU-6000 datasheet figures)");
+  cmd->add_option(
+      "--imu-intrinsics", o->imu_intrinsics_path,
+      "A static result YAML (calibrate static -o): start from its model and fix S_a, M_a, S_g, M_g, "
+      "C_bg (and B_g when it has a g-sensitivity)");
   cmd->add_option("--gsens", o->gsens_path,
                   "Fix B_g to a g-sensitivity G (a result YAML's canonical.G, or a file with G: 3 rows of 3, "
-                  "rad/s per m/s^2)")
-      ->check(CLI::ExistingFile);
+                  "rad/s per m/s^2)");
   cmd->add_option("--imu-stream", o->imu_stream, "IMU stream name (default: the first)");
   cmd->add_option("--model", o->model,
                   "IMU model: extended (Krebs: S, M, C_bg, B_g; default) or basic (biases)")

@@ -191,9 +191,7 @@ void setup(CLI::App& root) {
       "Example: imucal calibrate check rec.imulog --calibration imucal.yaml --imu-tk acc.calib,gyro.calib "
       "--gravity 9.81");
   auto o = std::make_shared<CheckCliOptions>();
-  cmd->add_option("LOG", o->log_path, "Session log (.imulog) of static poses")
-      ->required()
-      ->check(CLI::ExistingFile);
+  cmd->add_option("LOG", o->log_path, "Session log (.imulog) of static poses")->required();
   cmd->add_option("--stream", o->stream, "IMU stream name (default: the first)");
   cmd->add_option("--calibration", o->yaml_paths,
                   "imucal result YAML (calibrate static -o) to check; repeat for several")

@@ -150,15 +150,12 @@ void setup(CLI::App& root) {
   CLI::App* cmd = calibrate_group(root)->add_subcommand(
       "gsens", "Gyro g-sensitivity from still holds with each of the six faces up (Krebs 2012, 5.2.3)");
   auto o = std::make_shared<GsensCliOptions>();
-  cmd->add_option("LOG", o->log_path, "Session log (.imulog) of the six-face holds")
-      ->required()
-      ->check(CLI::ExistingFile);
+  cmd->add_option("LOG", o->log_path, "Session log (.imulog) of the six-face holds")->required();
   cmd->add_option("--stream", o->stream, "IMU stream name (default: the first)");
   add_gravity_options(cmd, &o->grav);
   cmd->add_option("--imu-intrinsics", o->intrinsics_path,
                   "Accelerometer and gyro calibration of the same stream (result YAML of calibrate static); "
-                  "default: the log's nominal conversion")
-      ->check(CLI::ExistingFile);
+                  "default: the log's nominal conversion");
   cmd->add_option("--min-hold", o->min_hold_s,
                   "Shortest hold used, s (after trimming one window at each end)")
       ->check(CLI::Range(1.0, 3600.0));

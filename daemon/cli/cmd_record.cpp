@@ -341,9 +341,7 @@ const CommandRegistrar kRegistrar(20, [](CLI::App& root) {
       "reconstructed per sample from the data-ready interrupt, gaps flagged; frames stamped by their camera "
       "on CLOCK_MONOTONIC and stored losslessly. --sim records the virtual rig (and its virtual cameras) "
       "through the same driver and acquisition code.");
-  cmd->add_option("--config", args->config_path, "Rig configuration (YAML, docs/config.md)")
-      ->required()
-      ->check(CLI::ExistingFile);
+  cmd->add_option("--config", args->config_path, "Rig configuration (YAML, docs/config.md)")->required();
   cmd->add_option("-o,--output", args->out_path, "Session log to write (.imulog)")->required();
   cmd->add_option("--duration", args->duration_s, "Seconds of samples to record (default 10)");
   cmd->add_flag("--sim", args->sim,

@@ -75,8 +75,7 @@ void setup(CLI::App& root) {
       "replay", "Run a recorded service session again from its log, with no devices, and compare the result");
   auto a = std::make_shared<ReplayArgs>();
   cmd->add_option("LOG", a->options.log_path, "A session log written by imucald (sessions/*/session.imulog)")
-      ->required()
-      ->check(CLI::ExistingFile);
+      ->required();
   cmd->add_option("-o,--output", a->options.out_dir,
                   "Folder for the replay's result files (default: a new temporary folder)");
   cmd->add_option("--tolerance", a->tolerance,

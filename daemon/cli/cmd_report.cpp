@@ -37,8 +37,7 @@ void setup(CLI::App& root) {
                   "Result JSON (calibrate static --json, allan --json, calibrate camera --json) or calibrate "
                   "camimu's output folder")
       ->required();
-  cmd->add_option("--log", o->log_path, "The session log the result came from (signals, per-pose figures)")
-      ->check(CLI::ExistingFile);
+  cmd->add_option("--log", o->log_path, "The session log the result came from (signals, per-pose figures)");
   cmd->add_option("-o,--output", o->html_path, "The HTML report to write")->required();
   cmd->add_option("--png-dir", o->png_dir, "Also write every figure as a PNG file into this folder");
   cmd->add_flag("--force", o->overwrite, "Replace a report and PNG files that exist");

@@ -89,8 +89,7 @@ void add_common(CLI::App* cmd, SimCommon& o, bool drops = true) {
       ->check(CLI::IsMember({250, 500, 1000, 2000}));
   cmd->add_option("--truth", o.truth_in,
                   "Take the IMU parameters from this truth file (its imu: section) instead of drawing them "
-                  "from the seed; --accel-range/--gyro-range still apply when given")
-      ->check(CLI::ExistingFile);
+                  "from the seed; --accel-range/--gyro-range still apply when given");
   cmd->add_flag("--tremor", o.tremor, "Add a small hand tremor to the whole script");
   cmd->add_flag("--no-noise", o.no_noise, "Switch off white noise and bias random walks (for tests)");
   if (drops) {
@@ -157,7 +156,7 @@ void refuse_overwrite(const SimCommon& o, const std::string& truth_path) {
   if (o.force) return;
   std::error_code ec;
   for (const std::string& p : {o.out_path, truth_path}) {
-    if (std::filesystem::exists(p, ec)) throw CliExit{kExitIo, p + " exists; pass --force to replace it"};
+    if (std::filesystem::exists(p, ec)) throw CliExit{kExitUsage, p + " exists; pass --force to replace it"};
   }
 }
 
@@ -181,8 +180,8 @@ void run(const SimCommon& o, const CLI::App* cmd, const std::string& kind, const
   progress.finish();
   if (!truth.ok()) {
     const Error& e = truth.error();
-    // A refused overwrite or an unwritable path is an output problem, not a usage one.
-    if (e.code == Errc::kAlreadyExists) throw CliExit{kExitIo, e.message + "; pass --force to replace it"};
+    // A refused overwrite is answered as in every command (exit 2), an unwritable path is exit 7.
+    if (e.code == Errc::kAlreadyExists) throw CliExit{kExitUsage, e.message + "; pass --force to replace it"};
     if (e.code == Errc::kIo) throw CliExit{kExitIo, "sim " + kind + ": " + e.message + kept_in(o.out_path)};
     fail(e, "sim " + kind);
   }
@@ -272,10 +271,9 @@ void add_camimu(CLI::App* sim) {
       ->check(CLI::Range(0.1, 10.0));
   auto target_path = std::make_shared<std::string>();
   cmd->add_option(
-         "--target", *target_path,
-         "Kalibr target YAML to render: checkerboard or aprilgrid (default: checkerboard, 7 x 6 inner "
-         "corners, 5 cm; e.g. config/aprilgrid-6x6.yaml)")
-      ->check(CLI::ExistingFile);
+      "--target", *target_path,
+      "Kalibr target YAML to render: checkerboard or aprilgrid (default: checkerboard, 7 x 6 inner "
+      "corners, 5 cm; e.g. config/aprilgrid-6x6.yaml)");
   cmd->callback([o, co, cmd, target_path]() {
     if (!target_path->empty()) {
       auto target = load_target_yaml(*target_path);
@@ -301,7 +299,7 @@ void add_camimu(CLI::App* sim) {
     progress.finish();
     if (!status.ok()) {
       if (status.error().code == Errc::kAlreadyExists) {
-        throw CliExit{kExitIo, status.error().message + "; pass --force to replace it"};
+        throw CliExit{kExitUsage, status.error().message + "; pass --force to replace it"};
       }
       fail(status.error(), "sim camimu");
     }

@@ -44,7 +44,7 @@ TEST(CliSim, StillWritesLogAndTruthAndRefusesToOverwrite) {
   EXPECT_DOUBLE_EQ(truth["trajectory"]["duration_s"].as<double>(), 5.0);
 
   auto again = test::run_cli({"sim", "still", "--seed", "3", "--duration", "5", "-o", log});
-  EXPECT_EQ(again.exit_code, 7);
+  EXPECT_EQ(again.exit_code, 2);
   EXPECT_THAT(again.err, HasSubstr("--force"));
   auto forced = test::run_cli({"sim", "still", "--seed", "3", "--duration", "2", "-o", log, "--force"});
   EXPECT_EQ(forced.exit_code, 0) << forced.err;

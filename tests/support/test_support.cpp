@@ -33,7 +33,7 @@ std::string read_file(const std::string& path) {
   return ss.str();
 }
 
-CommandResult run_cli(const std::vector<std::string>& args) {
+CommandResult run_cli(const std::vector<std::string>& args, unsigned limit_s) {
   CommandResult result;
   const std::string dir = std::filesystem::temp_directory_path() / ("imucal-cli-" + std::to_string(getpid()));
   std::filesystem::create_directories(dir);
@@ -48,6 +48,7 @@ CommandResult run_cli(const std::vector<std::string>& args) {
     std::vector<std::string> copy = args;
     for (auto& a : copy) argv.push_back(a.data());
     argv.push_back(nullptr);
+    if (limit_s > 0) alarm(limit_s);  // a pending alarm survives execv
     execv(bin.c_str(), argv.data());
     _exit(127);
   }

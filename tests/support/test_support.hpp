@@ -18,8 +18,9 @@ struct CommandResult {
   std::string err;  // stderr
 };
 
-/// Runs the imucal CLI with `args` (no shell), capturing stdout and stderr.
-CommandResult run_cli(const std::vector<std::string>& args);
+/// Runs the imucal CLI with `args` (no shell), capturing stdout and stderr. With `limit_s`, a run
+/// that has not ended after that many seconds is ended by SIGALRM (exit code 128 + 14).
+CommandResult run_cli(const std::vector<std::string>& args, unsigned limit_s = 0);
 
 /// Reads a whole file; empty when missing.
 std::string read_file(const std::string& path);

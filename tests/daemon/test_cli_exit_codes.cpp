@@ -1,0 +1,180 @@
+// The exit codes of docs/cli.md, checked across commands for the same situation: an input that is
+// missing, a folder, a FIFO, not a session log or empty exits 3 in every command that reads it (and
+// never blocks); an output that exists is refused with exit 2 and left as it was; an output in a
+// folder that does not exist exits 7. Nothing is written when a command refuses.
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "tests/support/test_support.hpp"
+
+namespace imucal {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+// A command that reads a FIFO without checking blocks for ever; this ends it as a failure.
+constexpr unsigned kRunLimitS = 120;
+
+using Args = std::vector<std::string>;
+
+std::string joined(const Args& args) {
+  std::string s;
+  for (const auto& a : args) s += (s.empty() ? "" : " ") + a;
+  return s;
+}
+
+/// `args` with every "@" replaced by `value`.
+Args with(Args args, const std::string& value) {
+  for (auto& a : args) {
+    if (a == "@") a = value;
+  }
+  return args;
+}
+
+class CliExitCodes : public ::testing::Test {
+ protected:
+  // One calibration result of the static fixture, as YAML and as JSON, for the commands that read one.
+  static void SetUpTestSuite() {
+    dir_ = new std::string(test::scratch_dir());
+    log_ = *dir_ + "/static.imulog";
+    fs::copy_file(test::source_path("fixtures/static.imulog"), log_);
+    still_ = *dir_ + "/still.imulog";
+    fs::copy_file(test::source_path("fixtures/still.imulog"), still_);
+    calibration_ = *dir_ + "/calibration.yaml";
+    result_ = *dir_ + "/result.json";
+    auto r = test::run_cli({"calibrate", "static", log_, "-o", calibration_, "--json", result_});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+  }
+  static void TearDownTestSuite() { delete dir_; }
+
+  void SetUp() override {
+    if (HasFatalFailure()) GTEST_SKIP() << "the static fixture did not calibrate";
+    work_ = test::scratch_dir();
+    missing_ = work_ + "/missing.imulog";
+    folder_ = work_ + "/a-folder";
+    fs::create_directory(folder_);
+    fifo_ = work_ + "/a-fifo";
+    ASSERT_EQ(::mkfifo(fifo_.c_str(), 0600), 0);
+    text_ = work_ + "/notes.txt";
+    std::ofstream(text_) << "hello\n";
+    empty_ = work_ + "/empty.imulog";
+    std::ofstream{empty_};
+    csv_ = work_ + "/imu.csv";
+    std::ofstream csv(csv_);
+    for (int i = 0; i < 20; ++i) csv << 0.01 * i << ",0,0,9.81,0,0,0\n";
+  }
+
+  /// Runs `args` and checks the exit code and that the message names `path`.
+  void expect_exit(const Args& args, int code, const std::string& named) {
+    auto r = test::run_cli(args, kRunLimitS);
+    EXPECT_EQ(r.exit_code, code) << joined(args) << "\n" << r.err;
+    EXPECT_THAT(r.err, HasSubstr(fs::path(named).filename().string())) << joined(args);
+    EXPECT_THAT(r.err, ::testing::Not(HasSubstr("unexpected error"))) << joined(args);
+  }
+
+  /// The files of the scratch folder other than the inputs made by SetUp.
+  std::vector<std::string> outputs() const {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(work_)) {
+      const std::string name = e.path().filename().string();
+      if (name != "a-folder" && name != "a-fifo" && name != "notes.txt" && name != "empty.imulog" &&
+          name != "imu.csv")
+        names.push_back(name);
+    }
+    return names;
+  }
+
+  static std::string* dir_;
+  static std::string log_, still_, calibration_, result_;
+  std::string work_, missing_, folder_, fifo_, text_, empty_, csv_;
+};
+
+std::string* CliExitCodes::dir_ = nullptr;
+std::string CliExitCodes::log_, CliExitCodes::still_, CliExitCodes::calibration_, CliExitCodes::result_;
+
+TEST_F(CliExitCodes, AnUnusableSessionLogIsExit3InEveryCommand) {
+  const std::string target = test::source_path("config/checkerboard-7x6.yaml");
+  const std::vector<Args> commands = {
+      {"info", "@"},
+      {"calibrate", "static", "@", "-o", work_ + "/static.yaml"},
+      {"calibrate", "gsens", "@", "-o", work_ + "/gsens.yaml"},
+      {"calibrate", "camera", "@", "--target", target, "-o", work_ + "/camera.yaml"},
+      {"calibrate", "check", "@", "--calibration", calibration_},
+      {"allan", "@", "-o", work_ + "/allan.yaml"},
+      {"export", "euroc", "@", work_ + "/export"},
+      {"replay", "@", "-o", work_ + "/replay"},
+      {"report", result_, "--log", "@", "-o", work_ + "/report.html"},
+  };
+  for (const std::string& input : {missing_, folder_, fifo_, text_, empty_}) {
+    for (const Args& command : commands) expect_exit(with(command, input), 3, input);
+  }
+  EXPECT_THAT(outputs(), ::testing::IsEmpty());
+}
+
+TEST_F(CliExitCodes, AnUnusableInputFileIsExit3InEveryCommand) {
+  const std::string target = test::source_path("config/checkerboard-7x6.yaml");
+  const std::vector<Args> commands = {
+      {"calibrate", "camimu", log_, "--camera", "@", "-o", work_ + "/camimu"},
+      {"calibrate", "camera", log_, "--target", "@", "-o", work_ + "/camera.yaml"},
+      {"calibrate", "check", log_, "--calibration", "@"},
+      {"calibrate", "static", log_, "--gsens", "fix", "@", "-o", work_ + "/static.yaml"},
+      {"calibrate", "gsens", log_, "--imu-intrinsics", "@", "-o", work_ + "/gsens.yaml"},
+      {"import", "csv", "@", "--columns", "t=0,ax=1,ay=2,az=3,gx=4,gy=5,gz=6", "--units", "si", "-o",
+       work_ + "/csv.imulog"},
+      {"import", "ascii", "--accel", "@", "--gyro", text_, "--units", "si", "-o", work_ + "/ascii.imulog"},
+      {"import", "euroc", "@", "-o", work_ + "/euroc.imulog"},
+      {"report", "@", "-o", work_ + "/report.html"},
+      {"sim", "static", "--seed", "1", "--truth", "@", "-o", work_ + "/sim.imulog"},
+      {"sim", "camimu", "--seed", "1", "--target", "@", "-o", work_ + "/sim.imulog"},
+      {"record", "--sim", "--config", "@", "-o", work_ + "/record.imulog"},
+      {"config", "check", "@"},
+  };
+  for (const std::string& input : {missing_, folder_, fifo_}) {
+    for (const Args& command : commands) expect_exit(with(command, input), 3, input);
+  }
+  EXPECT_THAT(outputs(), ::testing::IsEmpty());
+}
+
+TEST_F(CliExitCodes, AnOutputThatExistsIsExit2AndKept) {
+  const std::string existing = work_ + "/existing";
+  const std::vector<Args> commands = {
+      {"calibrate", "static", log_, "-o", "@"},
+      {"calibrate", "gsens", log_, "-o", "@"},
+      {"allan", still_, "-o", "@"},
+      {"import", "csv", csv_, "--columns", "t=0,ax=1,ay=2,az=3,gx=4,gy=5,gz=6", "--units", "si", "-o", "@"},
+      {"export", "euroc", log_, "@"},
+      {"report", result_, "-o", "@"},
+      {"sim", "still", "--seed", "1", "--duration", "2", "-o", "@"},
+      {"record", "--sim", "--config", test::source_path("config/rig.yaml"), "--duration", "1", "-o", "@"},
+  };
+  for (const Args& command : commands) {
+    std::ofstream(existing) << "keep me\n";
+    auto r = test::run_cli(with(command, existing), kRunLimitS);
+    EXPECT_EQ(r.exit_code, 2) << joined(command) << "\n" << r.err;
+    EXPECT_EQ(test::read_file(existing), "keep me\n") << joined(command);
+  }
+}
+
+TEST_F(CliExitCodes, AnOutputInAFolderThatDoesNotExistIsExit7) {
+  const std::string nowhere = work_ + "/no-such-folder/out";
+  const std::vector<Args> commands = {
+      {"calibrate", "static", log_, "-o", "@"},
+      {"allan", still_, "-o", "@"},
+      {"import", "csv", csv_, "--columns", "t=0,ax=1,ay=2,az=3,gx=4,gy=5,gz=6", "--units", "si", "-o", "@"},
+      {"export", "euroc", log_, "@"},
+      {"sim", "still", "--seed", "1", "--duration", "2", "-o", "@"},
+  };
+  for (const Args& command : commands) expect_exit(with(command, nowhere), 7, nowhere);
+  EXPECT_FALSE(fs::exists(work_ + "/no-such-folder"));
+}
+
+}  // namespace
+}  // namespace imucal
