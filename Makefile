@@ -29,7 +29,8 @@ demo: build
 
 $(TEST_DIR)/build.ninja:
 	cmake -S . -B $(TEST_DIR) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-	  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DIMUCAL_SANITIZE=ON -DIMUCAL_WERROR=ON
+	  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DIMUCAL_SANITIZE=ON -DIMUCAL_WERROR=ON \
+	  -DIMUCAL_UNITY_TESTS=ON
 
 # Builds with AddressSanitizer + UndefinedBehaviorSanitizer and runs every test through ctest.
 test: test-deps format-check $(TEST_DIR)/build.ninja

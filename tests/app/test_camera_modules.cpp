@@ -12,6 +12,7 @@
 #include "core/version.hpp"
 #include "drivers/camera/aravis/aravis_module.hpp"
 #include "drivers/camera/libcamera/libcamera_module.hpp"
+#include "tests/support/test_support.hpp"
 
 namespace imucal {
 namespace {
@@ -19,14 +20,8 @@ namespace {
 using drivers::camera::AravisModuleApi;
 using drivers::camera::LibcameraModuleApi;
 
-class ModuleDir {
- public:
-  explicit ModuleDir(const std::string& dir) { setenv("IMUCAL_MODULE_DIR", dir.c_str(), 1); }
-  ~ModuleDir() { unsetenv("IMUCAL_MODULE_DIR"); }
-};
-
 TEST(CameraModules, TheAravisModuleOpensAndStreamsTheFakeCamera) {
-  ModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
+  test::ScopedModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
   auto api =
       app::load_module<AravisModuleApi>(drivers::camera::kAravisModule, drivers::camera::kAravisModuleEntry);
   ASSERT_TRUE(api.ok()) << api.error().message;
@@ -65,7 +60,7 @@ TEST(CameraModules, TheAravisModuleOpensAndStreamsTheFakeCamera) {
 }
 
 TEST(CameraModules, TheLibcameraModuleStartsLibcamera) {
-  ModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
+  test::ScopedModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
   auto api = app::load_module<LibcameraModuleApi>(drivers::camera::kLibcameraModule,
                                                   drivers::camera::kLibcameraModuleEntry);
   ASSERT_TRUE(api.ok()) << api.error().message;

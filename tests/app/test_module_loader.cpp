@@ -16,14 +16,8 @@ namespace imucal {
 namespace {
 
 /// Sets IMUCAL_MODULE_DIR for the scope of one test.
-class ModuleDir {
- public:
-  explicit ModuleDir(const std::string& dir) { setenv("IMUCAL_MODULE_DIR", dir.c_str(), 1); }
-  ~ModuleDir() { unsetenv("IMUCAL_MODULE_DIR"); }
-};
-
 TEST(ModuleLoader, LoadsTheSolverModuleAndCallsThroughIt) {
-  ModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
+  test::ScopedModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
   auto api = app::load_module<calib::SolveModuleApi>(calib::kSolveModule, calib::kSolveModuleEntry);
   ASSERT_TRUE(api.ok()) << api.error().message;
   EXPECT_STREQ((*api)->header.version, kVersion);
@@ -40,7 +34,7 @@ TEST(ModuleLoader, LoadsTheSolverModuleAndCallsThroughIt) {
 }
 
 TEST(ModuleLoader, LoadsTheRendererModule) {
-  ModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
+  test::ScopedModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
   auto api = app::load_module<sim::RenderModuleApi>(sim::kRenderModule, sim::kRenderModuleEntry);
   ASSERT_TRUE(api.ok()) << api.error().message;
   EXPECT_NE((*api)->camimu_session, nullptr);
@@ -48,7 +42,7 @@ TEST(ModuleLoader, LoadsTheRendererModule) {
 
 TEST(ModuleLoader, MissingModuleNamesWhereItLookedAndWhatToDo) {
   const std::string empty = test::scratch_dir();
-  ModuleDir dir(empty);
+  test::ScopedModuleDir dir(empty);
   auto api = app::load_module_api("imucal_nosuch", "imucal_nosuch_module");
   ASSERT_FALSE(api.ok());
   EXPECT_EQ(api.error().code, Errc::kUnsupported);
@@ -60,7 +54,7 @@ TEST(ModuleLoader, MissingModuleNamesWhereItLookedAndWhatToDo) {
 TEST(ModuleLoader, ABrokenFileIsRefusedWithTheLoadersReason) {
   const std::string scratch = test::scratch_dir();
   std::ofstream(scratch + "/libimucal_junk.so") << "not an ELF file\n";
-  ModuleDir dir(scratch);
+  test::ScopedModuleDir dir(scratch);
   auto api = app::load_module_api("imucal_junk", "imucal_junk_module");
   ASSERT_FALSE(api.ok());
   EXPECT_EQ(api.error().code, Errc::kUnsupported);
@@ -68,7 +62,7 @@ TEST(ModuleLoader, ABrokenFileIsRefusedWithTheLoadersReason) {
 }
 
 TEST(ModuleLoader, AModuleWithoutTheEntryIsRefused) {
-  ModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
+  test::ScopedModuleDir dir(IMUCAL_MODULE_BUILD_DIR);
   // The renderer module asked for the solver's entry point.
   auto api = app::load_module_api(sim::kRenderModule, calib::kSolveModuleEntry);
   ASSERT_FALSE(api.ok());

@@ -10,12 +10,14 @@
 #include "core/imu_model.hpp"
 #include "log/session_log.hpp"
 #include "tests/calib/test_static_synth.hpp"
+#include "tests/support/test_helpers.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal {
 namespace {
 
 using test::run_cli;
+using test::vec3;
 
 /// Writes a synthetic static recording (raw counts centred at 32768) as a session log.
 std::string write_log(const std::string& dir, const test::SynthConfig& cfg,
@@ -40,10 +42,6 @@ std::string write_log(const std::string& dir, const test::SynthConfig& cfg,
   return path;
 }
 
-Eigen::Vector3d vec(const nlohmann::json& j) {
-  return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()};
-}
-
 TEST(CliCalibrateStatic, RawLogToYamlAndJson) {
   const std::string dir = test::scratch_dir();
   test::SynthConfig cfg;
@@ -65,10 +63,10 @@ TEST(CliCalibrateStatic, RawLogToYamlAndJson) {
       Eigen::Vector3d::Constant(cfg.accel_offset) - cfg.truth.accel.bias / cfg.accel_lsb;
   const Eigen::Vector3d gyro_scale = cfg.truth.gyro.scale * cfg.gyro_lsb;
   for (int i = 0; i < 3; ++i) {
-    EXPECT_NEAR(vec(j["accel"]["scale"])[i], accel_scale[i], 4.5 * vec(j["accel"]["sigma"]["scale"])[i]);
-    EXPECT_NEAR(vec(j["accel"]["bias"])[i], accel_bias[i], 4.5 * vec(j["accel"]["sigma"]["bias"])[i]);
-    EXPECT_NEAR(vec(j["gyro"]["scale"])[i], gyro_scale[i], 4.5 * vec(j["gyro"]["sigma"]["scale"])[i]);
-    EXPECT_GT(vec(j["accel"]["bias"])[i], 32000.0);  // raw counts centred at 32768
+    EXPECT_NEAR(vec3(j["accel"]["scale"])[i], accel_scale[i], 4.5 * vec3(j["accel"]["sigma"]["scale"])[i]);
+    EXPECT_NEAR(vec3(j["accel"]["bias"])[i], accel_bias[i], 4.5 * vec3(j["accel"]["sigma"]["bias"])[i]);
+    EXPECT_NEAR(vec3(j["gyro"]["scale"])[i], gyro_scale[i], 4.5 * vec3(j["gyro"]["sigma"]["scale"])[i]);
+    EXPECT_GT(vec3(j["accel"]["bias"])[i], 32000.0);  // raw counts centred at 32768
   }
   ASSERT_EQ(j["accel"]["misalignment"].size(), 3u);
   EXPECT_DOUBLE_EQ(j["accel"]["misalignment"][1][0].get<double>(), 0.0);  // upper triangular
@@ -85,7 +83,7 @@ TEST(CliCalibrateStatic, RawLogToYamlAndJson) {
   ASSERT_TRUE(y["canonical"]["A_a"]);
   EXPECT_EQ(y["canonical"]["A_a"].size(), 3u);
   EXPECT_NEAR(y["canonical"]["b_a"][0].as<double>(), accel_bias[0],
-              5.0 * vec(j["accel"]["sigma"]["bias"])[0]);
+              5.0 * vec3(j["accel"]["sigma"]["bias"])[0]);
   // The synthetic gyro has no g-sensitivity: the estimate is zero within its sigmas, which are
   // small but not zero.
   for (int r = 0; r < 3; ++r) {
@@ -151,18 +149,18 @@ TEST(CliCalibrateStatic, FixtureRecoversTruth) {
   const YAML::Node t = YAML::LoadFile(truth_path)["tedaldi"]["counts"];
   ASSERT_TRUE(t) << "truth file has no tedaldi.counts section";
   for (int i = 0; i < 3; ++i) {
-    EXPECT_NEAR(vec(j["accel"]["scale"])[i], t["K_a"][i].as<double>(),
-                4.0 * vec(j["accel"]["sigma"]["scale"])[i])
+    EXPECT_NEAR(vec3(j["accel"]["scale"])[i], t["K_a"][i].as<double>(),
+                4.0 * vec3(j["accel"]["sigma"]["scale"])[i])
         << "accel scale " << i;
     // The simulated bias wanders (random walk): compare with its mean over the recording.
     const YAML::Node si = YAML::LoadFile(truth_path)["tedaldi"]["si"];
     const double lsb = si["b_a"][i].as<double>() / t["b_a"][i].as<double>();
     const double bias_mean =
         YAML::LoadFile(truth_path)["recording"]["accel_bias_mean_mps2"][i].as<double>() / lsb;
-    EXPECT_NEAR(vec(j["accel"]["bias"])[i], bias_mean, 4.0 * vec(j["accel"]["sigma"]["bias"])[i])
+    EXPECT_NEAR(vec3(j["accel"]["bias"])[i], bias_mean, 4.0 * vec3(j["accel"]["sigma"]["bias"])[i])
         << "accel bias " << i;
-    EXPECT_NEAR(vec(j["gyro"]["scale"])[i], t["K_g"][i].as<double>(),
-                4.0 * vec(j["gyro"]["sigma"]["scale"])[i])
+    EXPECT_NEAR(vec3(j["gyro"]["scale"])[i], t["K_g"][i].as<double>(),
+                4.0 * vec3(j["gyro"]["sigma"]["scale"])[i])
         << "gyro scale " << i;
     for (int k = 0; k < 3; ++k) {
       if (i == k) continue;

@@ -12,26 +12,24 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "tests/support/test_helpers.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal {
 namespace {
 
 using test::run_cli;
+using test::vec3;
 
-Eigen::Vector3d vec(const nlohmann::json& j) {
-  return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()};
-}
-
-struct Fixture {
+struct BrokenFixture {
   std::string log, truth;
 };
 
 /// The committed fixture pair; empty paths when it is missing (the caller fails: fixtures are
 /// part of the repository, scripts/make-fixtures.sh regenerates them).
-Fixture fixture(const std::string& name) {
-  Fixture f{test::source_path("fixtures/" + name + ".imulog"),
-            test::source_path("fixtures/" + name + ".truth.yaml")};
+BrokenFixture broken_fixture(const std::string& name) {
+  BrokenFixture f{test::source_path("fixtures/" + name + ".imulog"),
+                  test::source_path("fixtures/" + name + ".truth.yaml")};
   if (!std::filesystem::exists(f.log) || !std::filesystem::exists(f.truth)) return {};
   return f;
 }
@@ -44,14 +42,15 @@ void expect_matches_truth(const nlohmann::json& j, const std::string& truth_path
   const YAML::Node si = truth["tedaldi"]["si"];
   ASSERT_TRUE(t && si) << "truth file has no tedaldi section";
   for (int i = 0; i < 3; ++i) {
-    EXPECT_NEAR(vec(j["accel"]["scale"])[i], t["K_a"][i].as<double>(),
-                k * vec(j["accel"]["sigma"]["scale"])[i])
+    EXPECT_NEAR(vec3(j["accel"]["scale"])[i], t["K_a"][i].as<double>(),
+                k * vec3(j["accel"]["sigma"]["scale"])[i])
         << "accel scale " << i;
     const double lsb = si["b_a"][i].as<double>() / t["b_a"][i].as<double>();
     const double bias_mean = truth["recording"]["accel_bias_mean_mps2"][i].as<double>() / lsb;
-    EXPECT_NEAR(vec(j["accel"]["bias"])[i], bias_mean, k * vec(j["accel"]["sigma"]["bias"])[i])
+    EXPECT_NEAR(vec3(j["accel"]["bias"])[i], bias_mean, k * vec3(j["accel"]["sigma"]["bias"])[i])
         << "accel bias " << i;
-    EXPECT_NEAR(vec(j["gyro"]["scale"])[i], t["K_g"][i].as<double>(), k * vec(j["gyro"]["sigma"]["scale"])[i])
+    EXPECT_NEAR(vec3(j["gyro"]["scale"])[i], t["K_g"][i].as<double>(),
+                k * vec3(j["gyro"]["sigma"]["scale"])[i])
         << "gyro scale " << i;
     for (int c = 0; c < 3; ++c) {
       if (i == c) continue;
@@ -77,7 +76,7 @@ bool any_warning_contains(const nlohmann::json& j, const std::string& what) {
 /// Samples missing in the middle: the result holds, the gaps are reported, and no motion that
 /// contains a gap is integrated.
 TEST(CliCalibrateBroken, GapIsWarnedAndNotIntegratedAcross) {
-  const Fixture f = fixture("broken-gap");
+  const BrokenFixture f = broken_fixture("broken-gap");
   ASSERT_FALSE(f.log.empty()) << "fixtures/broken-gap.imulog is missing: run scripts/make-fixtures.sh";
   const std::string dir = test::scratch_dir();
   const auto r = run_cli({"calibrate", "static", f.log, "--gravity", "9.80665", "--json", dir + "/r.json"});
@@ -92,7 +91,7 @@ TEST(CliCalibrateBroken, GapIsWarnedAndNotIntegratedAcross) {
 
 /// Motion beyond the full-scale ranges: the flagged samples are excluded and reported.
 TEST(CliCalibrateBroken, SaturatedSamplesAreExcludedAndWarned) {
-  const Fixture f = fixture("broken-saturated");
+  const BrokenFixture f = broken_fixture("broken-saturated");
   ASSERT_FALSE(f.log.empty()) << "fixtures/broken-saturated.imulog is missing: run scripts/make-fixtures.sh";
   const std::string dir = test::scratch_dir();
   const auto r = run_cli({"calibrate", "static", f.log, "--gravity", "9.80665", "--json", dir + "/r.json"});
@@ -107,7 +106,7 @@ TEST(CliCalibrateBroken, SaturatedSamplesAreExcludedAndWarned) {
 /// --allow-damaged the readable part is used, and it either calibrates correctly with a warning
 /// or fails as unsuitable data (exit 4).
 TEST(CliCalibrateBroken, TruncatedIsRefusedUnlessAllowed) {
-  const Fixture f = fixture("broken-truncated");
+  const BrokenFixture f = broken_fixture("broken-truncated");
   ASSERT_FALSE(f.log.empty()) << "fixtures/broken-truncated.imulog is missing: run scripts/make-fixtures.sh";
   const std::string dir = test::scratch_dir();
   // Work on a copy: opening a damaged log must not be allowed to touch the fixture.

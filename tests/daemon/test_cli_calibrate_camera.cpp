@@ -22,12 +22,6 @@ using test::scratch_dir;
 using test::source_path;
 
 /// A copy of the fixture: the command stores its detections in the log it reads.
-std::string fixture_copy(const std::string& dir) {
-  const std::string path = dir + "/camimu.imulog";
-  std::filesystem::copy_file(source_path("fixtures/camimu.imulog"), path);
-  return path;
-}
-
 CameraModel truth_camera() {
   const YAML::Node truth = YAML::LoadFile(source_path("fixtures/camimu.truth.yaml"));
   auto camera = camera_from_yaml(truth["camera"]["cam0"], "camimu.truth.yaml");
@@ -63,7 +57,7 @@ void expect_truth_within_three_sigmas(const std::string& yaml_path) {
 
 TEST(CliCalibrateCamera, FixtureWithinThreeSigmasOfTruthAndDetectionsReused) {
   const std::string dir = scratch_dir();
-  const std::string log = fixture_copy(dir);
+  const std::string log = test::copy_fixture("camimu.imulog", dir);
   auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("detections stored in the log"), std::string::npos) << r.out;
@@ -85,7 +79,7 @@ TEST(CliCalibrateCamera, FixtureWithinThreeSigmasOfTruthAndDetectionsReused) {
 
 TEST(CliCalibrateCamera, OutputRules) {
   const std::string dir = scratch_dir();
-  const std::string log = fixture_copy(dir);
+  const std::string log = test::copy_fixture("camimu.imulog", dir);
   const std::string out = dir + "/cam.yaml";
   { std::ofstream(out) << "keep me\n"; }
   // Refusals come before any work: the log is not searched (no detections are stored).
@@ -116,7 +110,7 @@ TEST(CliCalibrateCamera, OutputRules) {
 // exactly as it was (no detections are written into it).
 TEST(CliCalibrateCamera, DamagedLogIsNeverWritten) {
   const std::string dir = scratch_dir();
-  const std::string log = fixture_copy(dir);
+  const std::string log = test::copy_fixture("camimu.imulog", dir);
   std::filesystem::resize_file(log, std::filesystem::file_size(log) * 7 / 10);
   const std::string before = read_file(log);
   auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml"});

@@ -12,6 +12,7 @@
 #include <string>
 
 #include "core/imu_model.hpp"
+#include "tests/support/test_helpers.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal {
@@ -22,6 +23,7 @@ using test::read_file;
 using test::run_cli;
 using test::scratch_dir;
 using test::source_path;
+using test::vec3;
 
 YAML::Node truth() { return YAML::LoadFile(source_path("fixtures/camimu.truth.yaml")); }
 
@@ -42,18 +44,12 @@ std::string camera_yaml(const std::string& dir) {
 }
 
 /// A copy of the fixture: the command stores its detections in the log it reads.
-std::string fixture_copy(const std::string& dir) {
-  const std::string path = dir + "/camimu.imulog";
-  std::filesystem::copy_file(source_path("fixtures/camimu.imulog"), path);
-  return path;
-}
-
 TEST(CliCalibrateCamimu, ArgumentErrorsComeBeforeAnyWork) {
   const std::string dir = scratch_dir();
   const std::string log = source_path("fixtures/camimu.imulog");
   const std::string cam = camera_yaml(dir);
   auto r = run_cli({"calibrate", "camimu", log, "--camera", dir + "/missing.yaml", "-o", dir + "/out"});
-  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.exit_code, 3);  // a missing input, as in every command
   EXPECT_NE(r.err.find("missing.yaml"), std::string::npos) << r.err;
 
   r = run_cli({"calibrate", "camimu", log, "--camera", cam, "--fix", "S_a,Bg", "-o", dir + "/out"});
@@ -95,8 +91,6 @@ Eigen::Matrix4d matrix4(const YAML::Node& rows) {
   return m;
 }
 
-Eigen::Vector3d vec(const json& j) { return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()}; }
-
 /// |est - truth| <= k sigma for every entry, with the values in the message.
 void expect_within(const char* what, const Eigen::Vector3d& err, const Eigen::Vector3d& sigma, double k) {
   for (int i = 0; i < 3; ++i) {
@@ -125,7 +119,7 @@ KrebsImuModel truth_krebs() {
 
 TEST(CliCalibrateCamimu, FixtureWithinFewSigmasOfTruth) {
   const std::string dir = scratch_dir();
-  const std::string log = fixture_copy(dir);
+  const std::string log = test::copy_fixture("camimu.imulog", dir);
   const std::string out = dir + "/out";
   auto r = run_cli({"calibrate", "camimu", log, "--camera", camera_yaml(dir), "-o", out, "--threads", "2"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -141,9 +135,9 @@ TEST(CliCalibrateCamimu, FixtureWithinFewSigmasOfTruth) {
   const json& c = j["cameras"][0];
   constexpr double k = 4.0;
   expect_within("rotation", rotation_error(T.topLeftCorner<3, 3>(), T_truth.topLeftCorner<3, 3>()),
-                vec(c["rotation_sigma_rad"]), k);
+                vec3(c["rotation_sigma_rad"]), k);
   expect_within("translation", T.topRightCorner<3, 1>() - T_truth.topRightCorner<3, 1>(),
-                vec(c["translation_sigma_m"]), k);
+                vec3(c["translation_sigma_m"]), k);
   const double shift = cam0["timeshift_cam_imu"].as<double>();
   const double shift_sigma = c["timeshift_sigma_s"].get<double>();
   EXPECT_GT(shift_sigma, 0.0);
@@ -154,14 +148,14 @@ TEST(CliCalibrateCamimu, FixtureWithinFewSigmasOfTruth) {
   const KrebsImuModel t = truth_krebs();
   const json& est = j["imu"]["krebs"];
   const json& sig = j["imu"]["krebs_sigma"];
-  expect_within("S_a", vec(est["S_a"]) - t.S_a, vec(sig["S_a"]), k);
-  expect_within("M_a", vec(est["M_a"]) - t.M_a, vec(sig["M_a"]), k);
-  expect_within("S_g", vec(est["S_g"]) - t.S_g, vec(sig["S_g"]), k);
-  expect_within("M_g", vec(est["M_g"]) - t.M_g, vec(sig["M_g"]), k);
+  expect_within("S_a", vec3(est["S_a"]) - t.S_a, vec3(sig["S_a"]), k);
+  expect_within("M_a", vec3(est["M_a"]) - t.M_a, vec3(sig["M_a"]), k);
+  expect_within("S_g", vec3(est["S_g"]) - t.S_g, vec3(sig["S_g"]), k);
+  expect_within("M_g", vec3(est["M_g"]) - t.M_g, vec3(sig["M_g"]), k);
   Eigen::Matrix3d C;
   for (int row = 0; row < 3; ++row)
     for (int col = 0; col < 3; ++col) C(row, col) = est["C_bg"][row][col].get<double>();
-  expect_within("C_bg", rotation_error(C, t.C_bg), vec(sig["C_bg_rad"]), k);
+  expect_within("C_bg", rotation_error(C, t.C_bg), vec3(sig["C_bg_rad"]), k);
   for (int row = 0; row < 3; ++row) {
     Eigen::Vector3d e, s;
     for (int col = 0; col < 3; ++col) {

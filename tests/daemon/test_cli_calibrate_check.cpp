@@ -18,11 +18,11 @@ namespace {
 
 using test::run_cli;
 
-struct Paths {
+struct CheckPaths {
   std::string log, truth;
 };
 
-Paths fixture() {
+CheckPaths check_fixture() {
   return {test::source_path("fixtures/static.imulog"), test::source_path("fixtures/static.truth.yaml")};
 }
 
@@ -57,7 +57,7 @@ const nlohmann::json& entry(const nlohmann::json& j, const std::string& name) {
 }
 
 TEST(CliCalibrateCheck, TruthScoresBetterThanAPerturbedCalibration) {
-  const Paths f = fixture();
+  const CheckPaths f = check_fixture();
   ASSERT_TRUE(std::filesystem::exists(f.log) && std::filesystem::exists(f.truth))
       << "fixtures/static.imulog or its truth file is missing: run scripts/make-fixtures.sh";
   const YAML::Node counts = YAML::LoadFile(f.truth)["canonical"]["counts"];
@@ -104,7 +104,7 @@ TEST(CliCalibrateCheck, TruthScoresBetterThanAPerturbedCalibration) {
 }
 
 TEST(CliCalibrateCheck, NeedsACalibration) {
-  const auto r = run_cli({"calibrate", "check", fixture().log, "--gravity", "9.81"});
+  const auto r = run_cli({"calibrate", "check", check_fixture().log, "--gravity", "9.81"});
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(r.err.find("at least one calibration"), std::string::npos) << r.err;
 }
@@ -113,16 +113,16 @@ TEST(CliCalibrateCheck, BadCalibrationFilesAreNamed) {
   const std::string dir = test::scratch_dir();
   std::ofstream(dir + "/acc.calib") << "1 0 0 0 1 0 0 0 1\n1 0 0 0 1 0 0 0 1\n0 0\n";
   std::ofstream(dir + "/gyro.calib") << "1 0 0 0 1 0 0 0 1\n1 0 0 0 1 0 0 0 1\n0 0 0\n";
-  auto r =
-      run_cli({"calibrate", "check", fixture().log, "--imu-tk", dir + "/acc.calib," + dir + "/gyro.calib"});
+  auto r = run_cli(
+      {"calibrate", "check", check_fixture().log, "--imu-tk", dir + "/acc.calib," + dir + "/gyro.calib"});
   EXPECT_EQ(r.exit_code, 3) << r.err;
   EXPECT_NE(r.err.find(dir + "/acc.calib: 20 numbers found, 21 expected"), std::string::npos) << r.err;
 
-  r = run_cli({"calibrate", "check", fixture().log, "--imu-tk", dir + "/acc.calib"});
+  r = run_cli({"calibrate", "check", check_fixture().log, "--imu-tk", dir + "/acc.calib"});
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(r.err.find("two files separated by a comma"), std::string::npos) << r.err;
 
-  r = run_cli({"calibrate", "check", fixture().log, "--calibration", dir + "/missing.yaml"});
+  r = run_cli({"calibrate", "check", check_fixture().log, "--calibration", dir + "/missing.yaml"});
   EXPECT_EQ(r.exit_code, 3) << r.err;
   EXPECT_NE(r.err.find(dir + "/missing.yaml"), std::string::npos) << r.err;
 
@@ -130,7 +130,7 @@ TEST(CliCalibrateCheck, BadCalibrationFilesAreNamed) {
   std::ofstream(dir + "/si.yaml") << "input_units: si\ncanonical:\n  A_a: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n"
                                      "  b_a: [0, 0, 0]\n  A_g: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n"
                                      "  b_g: [0, 0, 0]\n  G: [[0, 0, 0], [0, 0, 0], [0, 0, 0]]\n";
-  r = run_cli({"calibrate", "check", fixture().log, "--calibration", dir + "/si.yaml"});
+  r = run_cli({"calibrate", "check", check_fixture().log, "--calibration", dir + "/si.yaml"});
   EXPECT_EQ(r.exit_code, 4) << r.err;
   EXPECT_NE(r.err.find("si units"), std::string::npos) << r.err;
 }

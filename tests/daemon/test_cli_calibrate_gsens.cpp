@@ -34,12 +34,12 @@ Eigen::Matrix3d json_matrix(const nlohmann::json& j) {
   return m;
 }
 
-struct Fixture {
+struct GsensFixture {
   std::string log, truth;
 };
 
-Fixture fixture() {
-  Fixture f{test::source_path("fixtures/gsens.imulog"), test::source_path("fixtures/gsens.truth.yaml")};
+GsensFixture gsens_fixture() {
+  GsensFixture f{test::source_path("fixtures/gsens.imulog"), test::source_path("fixtures/gsens.truth.yaml")};
   EXPECT_TRUE(std::filesystem::exists(f.log) && std::filesystem::exists(f.truth))
       << "fixtures/gsens.imulog or its truth file is missing: run scripts/make-fixtures.sh";
   return f;
@@ -58,7 +58,7 @@ void expect_within_sigmas(const nlohmann::json& j, const Eigen::Matrix3d& truth)
 }
 
 TEST(CliCalibrateGsens, FixtureRecoversTruthWithinSigmas) {
-  const Fixture f = fixture();
+  const GsensFixture f = gsens_fixture();
   const std::string dir = test::scratch_dir();
   const auto r = run_cli({"calibrate", "gsens", f.log, "--gravity", "9.80665", "-o", dir + "/g.yaml",
                           "--json", dir + "/g.json"});
@@ -92,7 +92,7 @@ TEST(CliCalibrateGsens, FixtureRecoversTruthWithinSigmas) {
 }
 
 TEST(CliCalibrateGsens, StaticCalibrationAcceptsTheResult) {
-  const Fixture f = fixture();
+  const GsensFixture f = gsens_fixture();
   const std::string dir = test::scratch_dir();
   auto r = run_cli({"calibrate", "gsens", f.log, "--gravity", "9.80665", "-o", dir + "/g.yaml"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -108,7 +108,7 @@ TEST(CliCalibrateGsens, StaticCalibrationAcceptsTheResult) {
 TEST(CliCalibrateGsens, PriorIntrinsicsNarrowTheSigmas) {
   // The truth's canonical model as a prior calibration (the schema of calibrate static -o): no
   // share of the nominal scales' uncertainty is left in the sigmas, and G still agrees.
-  const Fixture f = fixture();
+  const GsensFixture f = gsens_fixture();
   const std::string dir = test::scratch_dir();
   const YAML::Node c = YAML::LoadFile(f.truth)["canonical"]["counts"];
   {
@@ -150,7 +150,7 @@ TEST(CliCalibrateGsens, RefusesALogWithoutSixFaceHoldsAndKeepsOutputs) {
       << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir + "/g.yaml"));
 
-  const Fixture f = fixture();
+  const GsensFixture f = gsens_fixture();
   std::ofstream(dir + "/exists.yaml") << "x: 1\n";
   r = run_cli({"calibrate", "gsens", f.log, "-o", dir + "/exists.yaml"});
   EXPECT_EQ(r.exit_code, 2) << r.err;

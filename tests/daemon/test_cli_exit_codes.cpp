@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -41,23 +42,10 @@ Args with(Args args, const std::string& value) {
 
 class CliExitCodes : public ::testing::Test {
  protected:
-  // One calibration result of the static fixture, as YAML and as JSON, for the commands that read one.
-  static void SetUpTestSuite() {
-    dir_ = new std::string(test::scratch_dir());
-    log_ = *dir_ + "/static.imulog";
-    fs::copy_file(test::source_path("fixtures/static.imulog"), log_);
-    still_ = *dir_ + "/still.imulog";
-    fs::copy_file(test::source_path("fixtures/still.imulog"), still_);
-    calibration_ = *dir_ + "/calibration.yaml";
-    result_ = *dir_ + "/result.json";
-    auto r = test::run_cli({"calibrate", "static", log_, "-o", calibration_, "--json", result_});
-    ASSERT_EQ(r.exit_code, 0) << r.err;
-  }
-  static void TearDownTestSuite() { delete dir_; }
-
   void SetUp() override {
-    if (HasFatalFailure()) GTEST_SKIP() << "the static fixture did not calibrate";
     work_ = test::scratch_dir();
+    log_ = test::copy_fixture("static.imulog", work_);
+    still_ = test::copy_fixture("still.imulog", work_);
     missing_ = work_ + "/missing.imulog";
     folder_ = work_ + "/a-folder";
     fs::create_directory(folder_);
@@ -70,6 +58,16 @@ class CliExitCodes : public ::testing::Test {
     csv_ = work_ + "/imu.csv";
     std::ofstream csv(csv_);
     for (int i = 0; i < 20; ++i) csv << 0.01 * i << ",0,0,9.81,0,0,0\n";
+    inputs_ = {"static.imulog", "still.imulog", "a-folder", "a-fifo", "notes.txt", "empty.imulog", "imu.csv"};
+  }
+
+  /// A calibration of the static fixture, as YAML and as JSON, for the commands that read one.
+  void calibrate() {
+    calibration_ = work_ + "/calibration.yaml";
+    result_ = work_ + "/result.json";
+    auto r = test::run_cli({"calibrate", "static", log_, "-o", calibration_, "--json", result_});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    inputs_.insert(inputs_.end(), {"calibration.yaml", "result.json"});
   }
 
   /// Runs `args` and checks the exit code and that the message names `path`.
@@ -80,27 +78,22 @@ class CliExitCodes : public ::testing::Test {
     EXPECT_THAT(r.err, ::testing::Not(HasSubstr("unexpected error"))) << joined(args);
   }
 
-  /// The files of the scratch folder other than the inputs made by SetUp.
+  /// The files of the scratch folder other than the inputs.
   std::vector<std::string> outputs() const {
     std::vector<std::string> names;
     for (const auto& e : fs::directory_iterator(work_)) {
       const std::string name = e.path().filename().string();
-      if (name != "a-folder" && name != "a-fifo" && name != "notes.txt" && name != "empty.imulog" &&
-          name != "imu.csv")
-        names.push_back(name);
+      if (std::find(inputs_.begin(), inputs_.end(), name) == inputs_.end()) names.push_back(name);
     }
     return names;
   }
 
-  static std::string* dir_;
-  static std::string log_, still_, calibration_, result_;
-  std::string work_, missing_, folder_, fifo_, text_, empty_, csv_;
+  std::string work_, log_, still_, missing_, folder_, fifo_, text_, empty_, csv_, calibration_, result_;
+  std::vector<std::string> inputs_;
 };
 
-std::string* CliExitCodes::dir_ = nullptr;
-std::string CliExitCodes::log_, CliExitCodes::still_, CliExitCodes::calibration_, CliExitCodes::result_;
-
 TEST_F(CliExitCodes, AnUnusableSessionLogIsExit3InEveryCommand) {
+  ASSERT_NO_FATAL_FAILURE(calibrate());
   const std::string target = test::source_path("config/checkerboard-7x6.yaml");
   const std::vector<Args> commands = {
       {"info", "@"},
@@ -144,6 +137,7 @@ TEST_F(CliExitCodes, AnUnusableInputFileIsExit3InEveryCommand) {
 }
 
 TEST_F(CliExitCodes, AnOutputThatExistsIsExit2AndKept) {
+  ASSERT_NO_FATAL_FAILURE(calibrate());
   const std::string existing = work_ + "/existing";
   const std::vector<Args> commands = {
       {"calibrate", "static", log_, "-o", "@"},

@@ -29,11 +29,6 @@ bool same_sample(const ImuSample& a, const ImuSample& b) {
   return true;
 }
 
-void write(const fs::path& path, const std::string& text) {
-  fs::create_directories(path.parent_path());
-  std::ofstream(path, std::ios::binary) << text;
-}
-
 std::vector<std::uint8_t> tiny_png(int depth) {
   cv::Mat image(6, 8, depth == 16 ? CV_16UC1 : CV_8UC1);
   cv::randu(image, cv::Scalar(0), cv::Scalar(depth == 16 ? 65535 : 255));
@@ -73,13 +68,13 @@ SyntheticDataset write_dataset(const fs::path& dir) {
     csv += row + "\n";
     d.imu.push_back(s);
   }
-  write(dir / "mav0/imu0/data.csv", csv);
+  test::write_file(dir / "mav0/imu0/data.csv", csv);
   d.imu_sensor_yaml =
       "#Default imu sensor yaml file\nsensor_type: imu\ncomment: VI-Sensor IMU (ADIS16448)\nT_BS:\n  cols: "
       "4\n"
       "  rows: 4\n  data: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]\n"
       "rate_hz: 200\n\ngyroscope_noise_density: 1.6968e-04\n";
-  write(dir / "mav0/imu0/sensor.yaml", d.imu_sensor_yaml);
+  test::write_file(dir / "mav0/imu0/sensor.yaml", d.imu_sensor_yaml);
   for (const std::string cam : {"cam0", "cam1"}) {
     std::string rows = "#timestamp [ns],filename\n";
     const int depth = cam == "cam0" ? 8 : 16;
@@ -94,11 +89,12 @@ SyntheticDataset write_dataset(const fs::path& dir) {
       d.png[cam].push_back(png);
       d.frame_t[cam].push_back(t);
     }
-    write(dir / "mav0" / cam / "data.csv", rows);
+    test::write_file(dir / "mav0" / cam / "data.csv", rows);
   }
-  write(dir / "mav0/cam0/sensor.yaml",
-        "sensor_type: camera\ncomment: tiny\nrate_hz: 20\nresolution: [8, 6]\ncamera_model: pinhole\n"
-        "intrinsics: [458.654, 457.296, 367.215, 248.375]\n");
+  test::write_file(
+      dir / "mav0/cam0/sensor.yaml",
+      "sensor_type: camera\ncomment: tiny\nrate_hz: 20\nresolution: [8, 6]\ncamera_model: pinhole\n"
+      "intrinsics: [458.654, 457.296, 367.215, 248.375]\n");
   return d;
 }
 
@@ -109,7 +105,7 @@ struct LogContents {
   std::map<std::string, std::vector<CameraFrame>> frames;
 };
 
-LogContents read_log(const std::string& path) {
+LogContents read_contents(const std::string& path) {
   LogContents c;
   auto reader = SessionLogReader::open(path);
   EXPECT_TRUE(reader.ok()) << reader.error().message;
@@ -152,7 +148,7 @@ TEST(DatasetEurocRoundTrip, ExportImportReproducesEveryValueBitForBit) {
   EXPECT_EQ(first->frames, 6);
   EXPECT_EQ(first->camera_streams, 2);
 
-  const LogContents a = read_log((dir / "a.imulog").string());
+  const LogContents a = read_contents((dir / "a.imulog").string());
   ASSERT_EQ(a.imu.at("imu0").size(), d.imu.size());
   for (std::size_t i = 0; i < d.imu.size(); ++i) {
     ASSERT_TRUE(same_sample(a.imu.at("imu0")[i], d.imu[i])) << "sample " << i;
@@ -191,7 +187,7 @@ TEST(DatasetEurocRoundTrip, ExportImportReproducesEveryValueBitForBit) {
 
   auto second = import_euroc((dir / "out/mav0").string(), (dir / "b.imulog").string(), {});  // accepts mav0/
   ASSERT_TRUE(second.ok()) << second.error().message;
-  const LogContents b = read_log((dir / "b.imulog").string());
+  const LogContents b = read_contents((dir / "b.imulog").string());
   ASSERT_EQ(b.imu.at("imu0").size(), a.imu.at("imu0").size());
   for (std::size_t i = 0; i < a.imu.at("imu0").size(); ++i) {
     ASSERT_TRUE(same_sample(a.imu.at("imu0")[i], b.imu.at("imu0")[i])) << "sample " << i;
@@ -232,7 +228,7 @@ TEST(DatasetEuroc, MalformedCsvNamesFileAndLine) {
   write_dataset(dir / "in");
   std::string csv = test::read_file((dir / "in/mav0/imu0/data.csv").string());
   csv += "1403636580758555392,0.1,0.2,oops,1,2,3\n";
-  write(dir / "in/mav0/imu0/data.csv", csv);
+  test::write_file(dir / "in/mav0/imu0/data.csv", csv);
   auto r = import_euroc((dir / "in").string(), (dir / "x.imulog").string(), {});
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.error().message, HasSubstr("imu0/data.csv:202: column 4 (w_RS_S_z): 'oops' is not a number"));
@@ -245,7 +241,7 @@ TEST(DatasetEuroc, MalformedCsvNamesFileAndLine) {
 TEST(DatasetEuroc, RefusesToOverwriteUnlessForced) {
   const fs::path dir = test::scratch_dir();
   write_dataset(dir / "in");
-  write(dir / "x.imulog", "precious");
+  test::write_file(dir / "x.imulog", "precious");
   auto r = import_euroc((dir / "in").string(), (dir / "x.imulog").string(), {});
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().code, Errc::kAlreadyExists) << r.error().message;
@@ -253,17 +249,17 @@ TEST(DatasetEuroc, RefusesToOverwriteUnlessForced) {
   OutputOptions force;
   force.force = true;
   ASSERT_TRUE(import_euroc((dir / "in").string(), (dir / "x.imulog").string(), force).ok());
-  EXPECT_EQ(read_log((dir / "x.imulog").string()).imu.at("imu0").size(), 200u);
+  EXPECT_EQ(read_contents((dir / "x.imulog").string()).imu.at("imu0").size(), 200u);
 
   // Export: an existing dataset folder is replaced only with force; any other folder never.
   fs::create_directories(dir / "other");
-  write(dir / "other/notes.txt", "keep me");
+  test::write_file(dir / "other/notes.txt", "keep me");
   auto into_other = export_euroc((dir / "x.imulog").string(), (dir / "other").string(), force);
   ASSERT_FALSE(into_other.ok());
   EXPECT_THAT(into_other.error().message, HasSubstr("is not an EuRoC export"));
   EXPECT_EQ(test::read_file((dir / "other/notes.txt").string()), "keep me");
   // A plain file named mav0 does not make a folder an export, nor does mav0/ beside other files.
-  write(dir / "other/mav0", "not a folder");
+  test::write_file(dir / "other/mav0", "not a folder");
   auto plain_mav0 = export_euroc((dir / "x.imulog").string(), (dir / "other").string(), force);
   ASSERT_FALSE(plain_mav0.ok());
   EXPECT_EQ(test::read_file((dir / "other/notes.txt").string()), "keep me");

@@ -8,32 +8,26 @@
 
 #include "log/dataset_io.hpp"
 #include "log/session_log.hpp"
+#include "tests/support/test_helpers.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::log {
 namespace {
 
 /// True when `error` names the remedy `option` (with `value`, when given).
-bool has_remedy(const Error& error, const std::string& option, const std::string& value = "") {
-  for (const auto& r : error.remedies) {
-    if (r.option == option && (value.empty() || r.value == value)) return true;
-  }
-  return false;
-}
+using test::has_remedy;
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
-void write(const fs::path& path, const std::string& text) { std::ofstream(path, std::ios::binary) << text; }
-
-struct Log {
+struct ImportedLog {
   ImuStreamInfo info;
   std::vector<ImuSample> samples;
   std::map<std::string, std::string> metadata;
 };
 
-Log read_log(const std::string& path) {
-  Log log;
+ImportedLog read_imported(const std::string& path) {
+  ImportedLog log;
   auto reader = SessionLogReader::open(path);
   EXPECT_TRUE(reader.ok()) << reader.error().message;
   if (!reader.ok()) return log;
@@ -58,8 +52,8 @@ void write_raw_pair(const fs::path& dir, int rows, double gyro_time_jitter_s = 0
                   3);
     gyr += buf;
   }
-  write(dir / "acc.txt", acc);
-  write(dir / "gyr.txt", gyr);
+  test::write_file(dir / "acc.txt", acc);
+  test::write_file(dir / "gyr.txt", gyr);
 }
 
 TEST(DatasetAscii, RawCountsKeepCountsAndNominalConversion) {
@@ -83,7 +77,7 @@ TEST(DatasetAscii, RawCountsKeepCountsAndNominalConversion) {
   EXPECT_DOUBLE_EQ(fractions.back(), 1.0);
   EXPECT_EQ(r->imu_samples, 300);
   EXPECT_NEAR(r->rate_hz, 100.0, 1e-9);
-  const Log log = read_log((dir / "raw.imulog").string());
+  const ImportedLog log = read_imported((dir / "raw.imulog").string());
   EXPECT_EQ(log.info.units, ImuUnits::kRaw);
   EXPECT_EQ(log.info.accel.scale, in.accel.scale);
   EXPECT_EQ(log.info.accel.offset, in.accel.offset);
@@ -98,9 +92,9 @@ TEST(DatasetAscii, RawCountsKeepCountsAndNominalConversion) {
 
 TEST(DatasetAscii, SiValuesExactAndNearestPairing) {
   const fs::path dir = test::scratch_dir();
-  write(dir / "acc.txt", "0.000 0.1 0.2 9.7\n0.005 0.15 0.25 9.75\n0.010 0.125 0.2 9.8\n");
+  test::write_file(dir / "acc.txt", "0.000 0.1 0.2 9.7\n0.005 0.15 0.25 9.75\n0.010 0.125 0.2 9.8\n");
   // Gyroscope stamped 0.4 ms later: within half a 5 ms period, so paired.
-  write(dir / "gyr.txt", "0.0004 0.01 0.02 0.03\n0.0054 0.04 0.05 0.06\n0.0104 0.07 0.08 0.09\n");
+  test::write_file(dir / "gyr.txt", "0.0004 0.01 0.02 0.03\n0.0054 0.04 0.05 0.06\n0.0104 0.07 0.08 0.09\n");
   AsciiImport in;
   in.accel_path = (dir / "acc.txt").string();
   in.gyro_path = (dir / "gyr.txt").string();
@@ -109,7 +103,7 @@ TEST(DatasetAscii, SiValuesExactAndNearestPairing) {
   ASSERT_TRUE(r.ok()) << r.error().message;
   ASSERT_FALSE(r->notes.empty());
   EXPECT_THAT(r->notes[0], HasSubstr("nearest"));
-  const Log log = read_log((dir / "si.imulog").string());
+  const ImportedLog log = read_imported((dir / "si.imulog").string());
   EXPECT_EQ(log.info.units, ImuUnits::kSi);
   ASSERT_EQ(log.samples.size(), 3u);
   EXPECT_EQ(log.samples[1].t_ns, 5'000'000);
@@ -148,7 +142,7 @@ TEST(DatasetAscii, UnpairableFilesAndMalformedRows) {
   EXPECT_THAT(r.error().message, HasSubstr("half"));
   EXPECT_FALSE(fs::exists(dir / "x.imulog"));
 
-  write(dir / "acc.txt", "0 1 2 3\n0.01 1 2 3\n0.02 1 2\n");
+  test::write_file(dir / "acc.txt", "0 1 2 3\n0.01 1 2 3\n0.02 1 2\n");
   auto bad = import_ascii(in, (dir / "x.imulog").string(), {});
   ASSERT_FALSE(bad.ok());
   EXPECT_THAT(bad.error().message, HasSubstr("acc.txt:3: expected 4"));
@@ -162,7 +156,7 @@ TEST(DatasetCsvImport, ColumnMappingTimeUnitAndTemperature) {
     csv += std::to_string(1000000 + 2500 * i) + ",100,-200," + std::to_string(8192 + i) + ",1,2,3," +
            std::to_string(-521 + i) + "\n";
   }
-  write(dir / "d.csv", csv);
+  test::write_file(dir / "d.csv", csv);
   CsvImport in;
   in.path = (dir / "d.csv").string();
   in.format.columns = *parse_csv_columns("t=0,ax=1,ay=2,az=3,gx=4,gy=5,gz=6,temp=7");
@@ -174,7 +168,7 @@ TEST(DatasetCsvImport, ColumnMappingTimeUnitAndTemperature) {
   auto r = import_csv(in, (dir / "d.imulog").string(), {});
   ASSERT_TRUE(r.ok()) << r.error().message;
   EXPECT_NEAR(r->rate_hz, 400.0, 1e-9);
-  const Log log = read_log((dir / "d.imulog").string());
+  const ImportedLog log = read_imported((dir / "d.imulog").string());
   ASSERT_EQ(log.samples.size(), 20u);
   EXPECT_EQ(log.samples[3].t_ns, 1'007'500'000);
   EXPECT_EQ(log.samples[3].accel, Eigen::Vector3d(100, -200, 8195));
@@ -196,14 +190,14 @@ TEST(DatasetOutput, PendingOutputRemovesUncommittedAndRefusesExisting) {
   {
     auto out = PendingOutput::begin((dir / "o.imulog").string(), PendingOutput::Kind::kFile, false);
     ASSERT_TRUE(out.ok());
-    write(out->temp_path(), "half written");
-    write(out->temp_path() + "-wal", "wal");
+    test::write_file(out->temp_path(), "half written");
+    test::write_file(out->temp_path() + "-wal", "wal");
   }
   EXPECT_TRUE(fs::is_empty(dir));
   {
     auto out = PendingOutput::begin((dir / "o.imulog").string(), PendingOutput::Kind::kFile, false);
     ASSERT_TRUE(out.ok());
-    write(out->temp_path(), "complete");
+    test::write_file(out->temp_path(), "complete");
     ASSERT_TRUE(out->commit().ok());
   }
   EXPECT_EQ(test::read_file((dir / "o.imulog").string()), "complete");
@@ -218,8 +212,8 @@ TEST(DatasetOutput, PendingOutputRemovesUncommittedAndRefusesExisting) {
     auto b = PendingOutput::begin((dir / "race.imulog").string(), PendingOutput::Kind::kFile, false);
     ASSERT_TRUE(a.ok() && b.ok());
     ASSERT_NE(a->temp_path(), b->temp_path());
-    write(a->temp_path(), "first");
-    write(b->temp_path(), "second");
+    test::write_file(a->temp_path(), "first");
+    test::write_file(b->temp_path(), "second");
     ASSERT_TRUE(a->commit().ok());
     const Status late = b->commit();
     ASSERT_FALSE(late.ok());

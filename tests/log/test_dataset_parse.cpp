@@ -7,17 +7,13 @@
 #include <random>
 
 #include "log/dataset_io.hpp"
+#include "tests/support/test_helpers.hpp"
 
 namespace imucal::log {
 namespace {
 
 /// True when `error` names the remedy `option` (with `value`, when given).
-bool has_remedy(const Error& error, const std::string& option, const std::string& value = "") {
-  for (const auto& r : error.remedies) {
-    if (r.option == option && (value.empty() || r.value == value)) return true;
-  }
-  return false;
-}
+using test::has_remedy;
 
 using ::testing::HasSubstr;
 

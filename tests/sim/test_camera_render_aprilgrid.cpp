@@ -24,29 +24,13 @@
 #include <vector>
 
 #include "sim/camera_render.hpp"
+#include "tests/support/test_helpers.hpp"
 
 namespace imucal::sim {
 namespace {
 
-CameraModel radtan_camera() {
-  CameraModel c;
-  c.distortion_model = DistortionModel::kRadtan;
-  c.intrinsics << 285.0, 286.5, 190.3, 118.6;
-  c.distortion_coeffs << -0.21, 0.045, 4e-4, -2e-4;
-  c.width = 376;
-  c.height = 240;
-  return c;
-}
-
-CameraModel equi_camera() {
-  CameraModel c;
-  c.distortion_model = DistortionModel::kEquidistant;
-  c.intrinsics << 230.0, 229.2, 187.1, 121.4;
-  c.distortion_coeffs << 0.012, -0.004, 0.0021, -4e-4;
-  c.width = 376;
-  c.height = 240;
-  return c;
-}
+using test::equi_camera;
+using test::radtan_camera;
 
 /// 4 x 3 tags of 5 cm: big enough in a 376x240 image at half a metre to decode.
 TargetDescription grid() {

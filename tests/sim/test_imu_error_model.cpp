@@ -10,11 +10,12 @@
 #include "sim/imu_error_model.hpp"
 #include "sim/motion.hpp"
 #include "sim/truth.hpp"
+#include "tests/support/test_helpers.hpp"
 
 namespace imucal::sim {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using test::kDeg;
 
 ImuModelParams noise_free(std::uint64_t seed) {
   ImuModelParams p = ImuModelParams::draw(seed);

@@ -9,11 +9,12 @@
 
 #include "core/target.hpp"
 #include "sim/motion.hpp"
+#include "tests/support/test_helpers.hpp"
 
 namespace imucal::sim {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using test::kDeg;
 
 Eigen::Vector3d so3_log(const Eigen::Matrix3d& R) {
   const Eigen::AngleAxisd aa(R);

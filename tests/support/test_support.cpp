@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -32,6 +33,21 @@ std::string read_file(const std::string& path) {
   ss << in.rdbuf();
   return ss.str();
 }
+
+void write_file(const std::filesystem::path& path, const std::string& text) {
+  const std::filesystem::path parent = path.parent_path();
+  if (!parent.empty()) std::filesystem::create_directories(parent);
+  std::ofstream(path, std::ios::binary) << text;
+}
+
+std::string copy_fixture(const std::string& name, const std::string& dir) {
+  const std::string path = (std::filesystem::path(dir) / std::filesystem::path(name).filename()).string();
+  std::filesystem::copy_file(source_path("fixtures/" + name), path);
+  return path;
+}
+
+ScopedModuleDir::ScopedModuleDir(const std::string& dir) { setenv("IMUCAL_MODULE_DIR", dir.c_str(), 1); }
+ScopedModuleDir::~ScopedModuleDir() { unsetenv("IMUCAL_MODULE_DIR"); }
 
 CommandResult run_cli(const std::vector<std::string>& args, unsigned limit_s) {
   CommandResult result;

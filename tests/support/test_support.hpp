@@ -1,6 +1,7 @@
 #pragma once
 // Helpers shared by the test executables.
 
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -24,5 +25,20 @@ CommandResult run_cli(const std::vector<std::string>& args, unsigned limit_s = 0
 
 /// Reads a whole file; empty when missing.
 std::string read_file(const std::string& path);
+
+/// Writes `text` to `path`, creating its folder.
+void write_file(const std::filesystem::path& path, const std::string& text);
+
+/// Copies fixtures/`name` into `dir` and returns the copy's path (for tests that write to a log).
+std::string copy_fixture(const std::string& name, const std::string& dir);
+
+/// Points the module loader at `dir` (IMUCAL_MODULE_DIR) while it lives.
+class ScopedModuleDir {
+ public:
+  explicit ScopedModuleDir(const std::string& dir);
+  ~ScopedModuleDir();
+  ScopedModuleDir(const ScopedModuleDir&) = delete;
+  ScopedModuleDir& operator=(const ScopedModuleDir&) = delete;
+};
 
 }  // namespace imucal::test
