@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <utility>
 
 namespace imucal {
 
@@ -53,6 +54,81 @@ Result<std::string> read_text_file(const std::string& path, std::size_t max_byte
   ::close(fd);
   text.resize(got);
   return text;
+}
+
+Result<std::unique_ptr<TextLineReader>> TextLineReader::open(const std::string& path,
+                                                             std::size_t chunk_bytes) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);  // as in read_text_file
+  if (fd < 0) {
+    return make_error(Errc::kNotFound,
+                      "cannot open " + path + ": " + std::strerror(errno) + " (check the path)");
+  }
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    const bool dir = S_ISDIR(st.st_mode);
+    ::close(fd);
+    return make_error(Errc::kNotFound,
+                      path + (dir ? " is a folder, expected a file" : " is not a regular file"));
+  }
+  return std::unique_ptr<TextLineReader>(new TextLineReader(fd, path, static_cast<std::uint64_t>(st.st_size),
+                                                            std::max<std::size_t>(chunk_bytes, 1)));
+}
+
+TextLineReader::TextLineReader(int fd, std::string path, std::uint64_t size, std::size_t chunk_bytes)
+    : fd_(fd), path_(std::move(path)), size_(size), chunk_bytes_(chunk_bytes) {}
+
+TextLineReader::~TextLineReader() { ::close(fd_); }
+
+bool TextLineReader::fill() {
+  if (eof_ || error_) return false;
+  buffer_.erase(0, pos_);  // keep only the unread part (a line begun in the last chunk)
+  pos_ = 0;
+  const std::size_t old_size = buffer_.size();
+  buffer_.resize(old_size + chunk_bytes_);
+  ssize_t r = 0;
+  do {
+    r = ::read(fd_, buffer_.data() + old_size, chunk_bytes_);
+  } while (r < 0 && errno == EINTR);
+  if (r < 0) {
+    const int err = errno;
+    buffer_.resize(old_size);
+    // An input that cannot be read is an input problem (exit 3), like a damaged one.
+    error_ = make_error(Errc::kCorrupt, "cannot read " + path_ + " (after " +
+                                            std::to_string(consumed_ + old_size) +
+                                            " bytes): " + std::strerror(err));
+    return false;
+  }
+  buffer_.resize(old_size + static_cast<std::size_t>(r));
+  if (r == 0) eof_ = true;
+  return r > 0;
+}
+
+bool TextLineReader::next(std::string_view& line) {
+  std::size_t searched = pos_;
+  while (true) {
+    const std::size_t end = buffer_.find('\n', searched);
+    if (end != std::string::npos) {
+      line = std::string_view(buffer_).substr(pos_, end - pos_);
+      consumed_ += end + 1 - pos_;
+      pos_ = end + 1;
+      return true;
+    }
+    if (buffer_.size() - pos_ > kMaxLineBytes) {
+      error_ = make_error(Errc::kCorrupt, path_ + ": a line at byte " + std::to_string(consumed_) +
+                                              " is longer than " + std::to_string(kMaxLineBytes) +
+                                              " bytes: not a text dataset");
+      return false;
+    }
+    searched = buffer_.size() - pos_;  // relative to pos_, which fill() moves to 0
+    if (!fill()) {
+      if (error_) return false;
+      if (pos_ >= buffer_.size()) return false;       // the end, after the last '\n'
+      line = std::string_view(buffer_).substr(pos_);  // a last line without '\n'
+      consumed_ += buffer_.size() - pos_;
+      pos_ = buffer_.size();
+      return true;
+    }
+  }
 }
 
 namespace {

@@ -200,9 +200,7 @@ Result<std::vector<ImuFolder>> read_imu_folders(const fs::path& root) {
     ImuFolder f;
     f.name = folder.filename().string();
     const std::string csv = (folder / "data.csv").string();
-    auto text = read_text_file(csv);
-    if (!text.ok()) return text.error();
-    auto samples = parse_euroc_imu_csv(*text, csv);
+    auto samples = parse_euroc_imu_csv_file(csv);
     if (!samples.ok()) return samples.error();
     if (samples->empty()) return make_error(Errc::kInsufficientData, csv + ": no data rows");
     f.samples = std::move(*samples);

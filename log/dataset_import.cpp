@@ -76,16 +76,10 @@ Result<ImportSummary> import_ascii(const AsciiImport& in, const std::string& out
                                    const OutputOptions& options) {
   auto out = PendingOutput::begin(out_path, PendingOutput::Kind::kFile, options.force);
   if (!out.ok()) return out.error();
-  auto accel_text = read_text_file(in.accel_path);
-  if (!accel_text.ok()) return accel_text.error();
-  auto accel = parse_triad_text(*accel_text, in.accel_path, phase(options.progress, 0.0, 0.3));
+  auto accel = parse_triad_file(in.accel_path, phase(options.progress, 0.0, 0.3));
   if (!accel.ok()) return accel.error();
-  accel_text->clear();
-  auto gyro_text = read_text_file(in.gyro_path);
-  if (!gyro_text.ok()) return gyro_text.error();
-  auto gyro = parse_triad_text(*gyro_text, in.gyro_path, phase(options.progress, 0.3, 0.3));
+  auto gyro = parse_triad_file(in.gyro_path, phase(options.progress, 0.3, 0.3));
   if (!gyro.ok()) return gyro.error();
-  gyro_text->clear();
 
   auto period =
       sample_period_ns(accel->t_ns, in.rate_hz, in.accel_path, "that the time column is in seconds");
@@ -139,11 +133,8 @@ Result<ImportSummary> import_csv(const CsvImport& in, const std::string& out_pat
                                  const OutputOptions& options) {
   auto out = PendingOutput::begin(out_path, PendingOutput::Kind::kFile, options.force);
   if (!out.ok()) return out.error();
-  auto text = read_text_file(in.path);
-  if (!text.ok()) return text.error();
-  auto samples = parse_imu_csv(*text, in.path, in.format, phase(options.progress, 0.0, 0.5));
+  auto samples = parse_imu_csv_file(in.path, in.format, phase(options.progress, 0.0, 0.5));
   if (!samples.ok()) return samples.error();
-  text->clear();
   if (samples->size() < 2) {
     return make_error(Errc::kInsufficientData, in.path + ": fewer than 2 samples; nothing to import");
   }

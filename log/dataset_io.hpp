@@ -105,6 +105,8 @@ struct TriadSeries {
 /// skipped. Timestamps must increase strictly.
 [[nodiscard]] Result<TriadSeries> parse_triad_text(std::string_view text, const std::string& source,
                                                    const ProgressFn& progress = {});
+/// The same, reading the file at `path` line by line (never whole; read errors are errors).
+[[nodiscard]] Result<TriadSeries> parse_triad_file(const std::string& path, const ProgressFn& progress = {});
 
 /// Sample period used to pair accelerometer and gyroscope rows: from rate_hz if > 0, else the
 /// median interval of `t_ns`. Fails when the median interval is not plausible: the message says
@@ -143,6 +145,10 @@ struct CsvFormat {
 [[nodiscard]] Result<std::vector<ImuSample>> parse_imu_csv(std::string_view text, const std::string& source,
                                                            const CsvFormat& format,
                                                            const ProgressFn& progress = {});
+/// The same, reading the file at `path` line by line.
+[[nodiscard]] Result<std::vector<ImuSample>> parse_imu_csv_file(const std::string& path,
+                                                                const CsvFormat& format,
+                                                                const ProgressFn& progress = {});
 
 /// Unit sanity check: SI data whose accelerometer magnitude is far above 100 look like raw
 /// counts; raw data with a magnitude near 9.8 and non-integral values look like SI. The error
@@ -219,6 +225,7 @@ struct EurocImageRow {
 };
 [[nodiscard]] Result<std::vector<ImuSample>> parse_euroc_imu_csv(std::string_view text,
                                                                  const std::string& source);
+[[nodiscard]] Result<std::vector<ImuSample>> parse_euroc_imu_csv_file(const std::string& path);
 [[nodiscard]] Result<std::vector<EurocImageRow>> parse_euroc_camera_csv(std::string_view text,
                                                                         const std::string& source);
 

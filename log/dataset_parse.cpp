@@ -10,6 +10,7 @@
 #include <set>
 #include <sstream>
 
+#include "core/text_file.hpp"
 #include "log/dataset_io.hpp"
 
 namespace imucal::log {
@@ -21,27 +22,49 @@ std::string_view trim(std::string_view s) {
   return s;
 }
 
-/// Iterates the lines of a text, counting from 1.
+/// Iterates the lines of a text in memory or of a file read in chunks (TextLineReader), counting
+/// from 1, without the line ends.
 class Lines {
  public:
-  explicit Lines(std::string_view text) : text_(text) {}
+  explicit Lines(std::string_view text) : text_(text), total_(text.size()) {}
+  explicit Lines(TextLineReader& reader) : reader_(&reader), total_(reader.size()) {}
   bool next(std::string_view& line) {
-    if (pos_ >= text_.size()) return false;
-    const std::size_t end = text_.find('\n', pos_);
-    const std::size_t stop = end == std::string_view::npos ? text_.size() : end;
-    line = text_.substr(pos_, stop - pos_);
+    if (number_ == std::numeric_limits<int>::max()) {
+      too_many_ = true;
+      return false;
+    }
+    if (reader_ != nullptr) {
+      if (!reader_->next(line)) return false;
+    } else {
+      if (pos_ >= text_.size()) return false;
+      const std::size_t end = text_.find('\n', pos_);
+      const std::size_t stop = end == std::string_view::npos ? text_.size() : end;
+      line = text_.substr(pos_, stop - pos_);
+      pos_ = stop + 1;
+    }
     if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
-    pos_ = stop + 1;
     ++number_;
     return true;
   }
   int number() const { return number_; }
-  std::size_t offset() const { return std::min(pos_, text_.size()); }
+  double offset() const {
+    return static_cast<double>(reader_ != nullptr ? reader_->offset() : std::min(pos_, text_.size()));
+  }
+  double total() const { return static_cast<double>(total_); }
+  /// Why next() returned false before the end: a read error, an overlong line, too many lines.
+  std::optional<Error> error(const std::string& source) const {
+    if (reader_ != nullptr && reader_->error()) return *reader_->error();
+    if (too_many_) return make_error(Errc::kCorrupt, source + ": more than 2^31 lines; split the file");
+    return std::nullopt;
+  }
 
  private:
   std::string_view text_;
+  TextLineReader* reader_ = nullptr;
+  std::uint64_t total_ = 0;
   std::size_t pos_ = 0;
   int number_ = 0;
+  bool too_many_ = false;
 };
 
 void split_whitespace(std::string_view s, std::vector<std::string_view>& out) {
@@ -229,17 +252,16 @@ std::string format_double(double value) {
   return std::string(buf, ptr);
 }
 
-Result<TriadSeries> parse_triad_text(std::string_view text, const std::string& source,
-                                     const ProgressFn& progress) {
+namespace {
+
+Result<TriadSeries> parse_triad(Lines& lines, const std::string& source, const ProgressFn& progress) {
   TriadSeries series;
   series.source = source;
-  Lines lines(text);
   std::string_view line;
   std::vector<std::string_view> fields;
   static constexpr const char* kNames[] = {"t", "x", "y", "z"};
   while (lines.next(line)) {
-    if (progress && (lines.number() & 0xffff) == 0)
-      report_progress(progress, static_cast<double>(lines.offset()), static_cast<double>(text.size()));
+    if (progress && (lines.number() & 0xffff) == 0) report_progress(progress, lines.offset(), lines.total());
     const std::size_t hash = line.find('#');
     if (hash != std::string_view::npos) line = line.substr(0, hash);
     split_whitespace(line, fields);
@@ -271,11 +293,27 @@ Result<TriadSeries> parse_triad_text(std::string_view text, const std::string& s
     series.xyz.push_back(v);
     series.line.push_back(lines.number());
   }
+  if (auto e = lines.error(source)) return *e;
   report_progress(progress, 1.0, 1.0);
   if (series.t_ns.empty()) {
     return make_error(Errc::kInsufficientData, source + ": no data rows (expected 't x y z' lines)");
   }
   return series;
+}
+
+}  // namespace
+
+Result<TriadSeries> parse_triad_text(std::string_view text, const std::string& source,
+                                     const ProgressFn& progress) {
+  Lines lines(text);
+  return parse_triad(lines, source, progress);
+}
+
+Result<TriadSeries> parse_triad_file(const std::string& path, const ProgressFn& progress) {
+  auto reader = TextLineReader::open(path);
+  if (!reader.ok()) return reader.error();
+  Lines lines(**reader);
+  return parse_triad(lines, path, progress);
 }
 
 Result<TimeNs> sample_period_ns(const std::vector<TimeNs>& t_ns, double rate_hz, const std::string& source,
@@ -416,21 +454,21 @@ Result<CsvColumns> parse_csv_columns(const std::string& spec) {
   return c;
 }
 
-Result<std::vector<ImuSample>> parse_imu_csv(std::string_view text, const std::string& source,
-                                             const CsvFormat& format, const ProgressFn& progress) {
+namespace {
+
+Result<std::vector<ImuSample>> parse_csv(Lines& lines, const std::string& source, const CsvFormat& format,
+                                         const ProgressFn& progress) {
   const CsvColumns& c = format.columns;
   const std::pair<const char*, int> mapped[] = {{"t", c.t},   {"ax", c.ax}, {"ay", c.ay}, {"az", c.az},
                                                 {"gx", c.gx}, {"gy", c.gy}, {"gz", c.gz}, {"temp", c.temp}};
   int max_column = 0;
   for (const auto& [name, index] : mapped) max_column = std::max(max_column, index);
   std::vector<ImuSample> samples;
-  Lines lines(text);
   std::string_view line;
   std::vector<std::string_view> fields;
   int prev_line = 0;
   while (lines.next(line)) {
-    if (progress && (lines.number() & 0xffff) == 0)
-      report_progress(progress, static_cast<double>(lines.offset()), static_cast<double>(text.size()));
+    if (progress && (lines.number() & 0xffff) == 0) report_progress(progress, lines.offset(), lines.total());
     if (lines.number() <= format.skip_header) continue;
     const std::string_view content = trim(line);
     if (content.empty() || content.front() == '#') continue;
@@ -483,9 +521,26 @@ Result<std::vector<ImuSample>> parse_imu_csv(std::string_view text, const std::s
     prev_line = lines.number();
     samples.push_back(s);
   }
+  if (auto e = lines.error(source)) return *e;
   report_progress(progress, 1.0, 1.0);
   if (samples.empty()) return make_error(Errc::kInsufficientData, source + ": no data rows");
   return samples;
+}
+
+}  // namespace
+
+Result<std::vector<ImuSample>> parse_imu_csv(std::string_view text, const std::string& source,
+                                             const CsvFormat& format, const ProgressFn& progress) {
+  Lines lines(text);
+  return parse_csv(lines, source, format, progress);
+}
+
+Result<std::vector<ImuSample>> parse_imu_csv_file(const std::string& path, const CsvFormat& format,
+                                                  const ProgressFn& progress) {
+  auto reader = TextLineReader::open(path);
+  if (!reader.ok()) return reader.error();
+  Lines lines(**reader);
+  return parse_csv(lines, path, format, progress);
 }
 
 Status check_units(const std::vector<ImuSample>& samples, ImuUnits units, const std::string& source) {
@@ -539,9 +594,10 @@ Status check_units(const std::vector<ImuSample>& samples, ImuUnits units, const 
   return {};
 }
 
-Result<std::vector<ImuSample>> parse_euroc_imu_csv(std::string_view text, const std::string& source) {
+namespace {
+
+Result<std::vector<ImuSample>> parse_euroc_imu(Lines& lines, const std::string& source) {
   std::vector<ImuSample> samples;
-  Lines lines(text);
   std::string_view line;
   std::vector<std::string_view> fields;
   static constexpr const char* kNames[] = {"timestamp [ns]", "w_RS_S_x", "w_RS_S_y", "w_RS_S_z",
@@ -588,7 +644,22 @@ Result<std::vector<ImuSample>> parse_euroc_imu_csv(std::string_view text, const 
     prev_line = lines.number();
     samples.push_back(s);
   }
+  if (auto e = lines.error(source)) return *e;
   return samples;
+}
+
+}  // namespace
+
+Result<std::vector<ImuSample>> parse_euroc_imu_csv(std::string_view text, const std::string& source) {
+  Lines lines(text);
+  return parse_euroc_imu(lines, source);
+}
+
+Result<std::vector<ImuSample>> parse_euroc_imu_csv_file(const std::string& path) {
+  auto reader = TextLineReader::open(path);
+  if (!reader.ok()) return reader.error();
+  Lines lines(**reader);
+  return parse_euroc_imu(lines, path);
 }
 
 Result<std::vector<EurocImageRow>> parse_euroc_camera_csv(std::string_view text, const std::string& source) {

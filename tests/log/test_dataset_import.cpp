@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "core/text_file.hpp"
 #include "log/dataset_io.hpp"
 #include "log/session_log.hpp"
 #include "tests/support/test_helpers.hpp"
@@ -262,6 +263,72 @@ TEST(ReadTextFile, ReadsWholeFilesAndRefusesWhatIsNotARegularFile) {
   auto missing = read_text_file(dir + "/none.txt");
   ASSERT_FALSE(missing.ok());
   EXPECT_EQ(missing.error().code, Errc::kNotFound);
+}
+
+// The importers read their files line by line in chunks: lines that cross chunk boundaries, CRLF
+// ends and a last line without '\n' come out as from the text whole, at any chunk size.
+TEST(TextLineReader, LinesAreTheSameAtEveryChunkSize) {
+  const std::string dir = test::scratch_dir();
+  const std::string path = dir + "/lines.txt";
+  const std::string text = "t x y z\r\n0.0 1 2 3\n\n" + std::string(5000, '7') + "\n# comment\r\nlast line";
+  std::ofstream(path, std::ios::binary) << text;
+  std::vector<std::string> expected;
+  for (std::size_t pos = 0; pos <= text.size();) {
+    const std::size_t end = std::min(text.find('\n', pos), text.size());
+    expected.push_back(text.substr(pos, end - pos));
+    pos = end + 1;
+  }
+  for (const std::size_t chunk : {1u, 2u, 3u, 7u, 64u, 4096u, 1u << 20}) {
+    auto reader = TextLineReader::open(path, chunk);
+    ASSERT_TRUE(reader.ok()) << reader.error().message;
+    std::vector<std::string> got;
+    std::string_view line;
+    while ((*reader)->next(line)) got.emplace_back(line);
+    EXPECT_FALSE((*reader)->error().has_value()) << chunk;
+    EXPECT_EQ(got, expected) << "chunk " << chunk;
+    EXPECT_EQ((*reader)->offset(), text.size()) << chunk;
+  }
+  // The importers' parsers give the same rows from the file as from the text.
+  const std::string triads = dir + "/acc.txt";
+  std::string rows;
+  for (int i = 0; i < 5000; ++i) rows += std::to_string(i * 0.01) + " 0.1 -0.2 9.81\r\n";
+  std::ofstream(triads, std::ios::binary) << rows;
+  auto from_file = parse_triad_file(triads);
+  auto from_text = parse_triad_text(rows, triads);
+  ASSERT_TRUE(from_file.ok()) << from_file.error().message;
+  ASSERT_TRUE(from_text.ok()) << from_text.error().message;
+  EXPECT_EQ(from_file->t_ns, from_text->t_ns);
+  EXPECT_EQ(from_file->line, from_text->line);
+  EXPECT_EQ(from_file->t_ns.size(), 5000u);
+}
+
+TEST(TextLineReader, RefusesWhatIsNotATextFile) {
+  const std::string dir = test::scratch_dir();
+  // A line longer than any dataset line (a binary file, or one without line ends) is an error,
+  // found after reading about one line's limit, not the whole file.
+  const std::string binary = dir + "/one-line.bin";
+  std::ofstream(binary, std::ios::binary) << std::string(3 * TextLineReader::kMaxLineBytes, 'x');
+  auto reader = TextLineReader::open(binary);
+  ASSERT_TRUE(reader.ok());
+  std::string_view line;
+  EXPECT_FALSE((*reader)->next(line));
+  ASSERT_TRUE((*reader)->error().has_value());
+  EXPECT_EQ((*reader)->error()->code, Errc::kCorrupt);
+  EXPECT_THAT((*reader)->error()->message, ::testing::HasSubstr("longer than"));
+  EXPECT_LT((*reader)->offset(), 2 * TextLineReader::kMaxLineBytes);
+  auto csv = parse_imu_csv_file(binary, CsvFormat{});
+  ASSERT_FALSE(csv.ok());
+  EXPECT_THAT(csv.error().message, ::testing::HasSubstr("longer than"));
+  // A folder and a FIFO are refused at open, as by read_text_file.
+  auto folder = TextLineReader::open(dir);
+  ASSERT_FALSE(folder.ok());
+  EXPECT_THAT(folder.error().message, ::testing::HasSubstr("is a folder"));
+  const std::string fifo = dir + "/fifo";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  auto piped = TextLineReader::open(fifo);
+  ASSERT_FALSE(piped.ok());
+  EXPECT_THAT(piped.error().message, ::testing::HasSubstr("not a regular file"));
+  EXPECT_FALSE(TextLineReader::open(dir + "/none.txt").ok());
 }
 
 }  // namespace
