@@ -13,9 +13,10 @@
 
 namespace imucal {
 
-Result<std::string> read_text_file(const std::string& path, std::size_t max_bytes) {
-  // One read of the known size into one buffer: no stream growing and copying, and a read error
-  // is an error, not an early end of the file.
+namespace {
+
+/// Opens `path` for reading when it is a regular file; `st` receives its status.
+Result<int> open_regular_file(const std::string& path, struct stat& st) {
   // O_NONBLOCK: opening a FIFO without a writer returns at once (and is refused below) instead
   // of blocking; it does not change reads of a regular file.
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
@@ -23,13 +24,24 @@ Result<std::string> read_text_file(const std::string& path, std::size_t max_byte
     return make_error(Errc::kNotFound,
                       "cannot open " + path + ": " + std::strerror(errno) + " (check the path)");
   }
-  struct stat st {};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
     const bool dir = S_ISDIR(st.st_mode);
     ::close(fd);
     return make_error(Errc::kNotFound,
                       path + (dir ? " is a folder, expected a file" : " is not a regular file"));
   }
+  return fd;
+}
+
+}  // namespace
+
+Result<std::string> read_text_file(const std::string& path, std::size_t max_bytes) {
+  // One read of the known size into one buffer: no stream growing and copying, and a read error
+  // is an error, not an early end of the file.
+  struct stat st {};
+  auto opened = open_regular_file(path, st);
+  if (!opened.ok()) return opened.error();
+  const int fd = *opened;
   if (static_cast<std::size_t>(st.st_size) > max_bytes) {
     ::close(fd);
     return make_error(Errc::kInvalidArgument, path + " is " + std::to_string(st.st_size) +
@@ -58,19 +70,10 @@ Result<std::string> read_text_file(const std::string& path, std::size_t max_byte
 
 Result<std::unique_ptr<TextLineReader>> TextLineReader::open(const std::string& path,
                                                              std::size_t chunk_bytes) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);  // as in read_text_file
-  if (fd < 0) {
-    return make_error(Errc::kNotFound,
-                      "cannot open " + path + ": " + std::strerror(errno) + " (check the path)");
-  }
   struct stat st {};
-  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
-    const bool dir = S_ISDIR(st.st_mode);
-    ::close(fd);
-    return make_error(Errc::kNotFound,
-                      path + (dir ? " is a folder, expected a file" : " is not a regular file"));
-  }
-  return std::unique_ptr<TextLineReader>(new TextLineReader(fd, path, static_cast<std::uint64_t>(st.st_size),
+  auto fd = open_regular_file(path, st);
+  if (!fd.ok()) return fd.error();
+  return std::unique_ptr<TextLineReader>(new TextLineReader(*fd, path, static_cast<std::uint64_t>(st.st_size),
                                                             std::max<std::size_t>(chunk_bytes, 1)));
 }
 

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/camera_model.hpp"
+#include "tests/support/test_helpers.hpp"
 
 namespace imucal {
 namespace {
@@ -72,12 +73,7 @@ TEST(CameraModelOpenCv, EquidistantMatchesFisheyeProjectPoints) {
 }
 
 TEST(CameraModelOpenCv, RadtanUnprojectMatchesUndistortPoints) {
-  CameraModel c;
-  c.distortion_model = DistortionModel::kRadtan;
-  c.intrinsics << 285.0, 286.5, 190.3, 118.6;
-  c.distortion_coeffs << -0.21, 0.045, 4e-4, -2e-4;
-  c.width = 376;
-  c.height = 240;
+  const CameraModel c = test::radtan_camera();
   std::vector<cv::Point2d> px;
   for (int v = 0; v < c.height; v += 17) {
     for (int u = 0; u < c.width; u += 13) px.emplace_back(u, v);
