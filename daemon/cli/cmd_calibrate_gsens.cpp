@@ -3,7 +3,6 @@
 
 #include <spdlog/spdlog.h>
 
-#include <cstdio>
 #include <iostream>
 #include <memory>
 #include <string>
@@ -13,6 +12,7 @@
 #include "app/result_writers.hpp"
 #include "app/streams.hpp"
 #include "calib/gsens_calibration.hpp"
+#include "core/format.hpp"
 #include "daemon/cli/calibrate_group.hpp"
 #include "daemon/cli/command.hpp"
 
@@ -65,11 +65,7 @@ std::string set_models(const GsensCliOptions& o, const ImuStreamInfo& info, cali
   return "nominal conversion";
 }
 
-std::string sci(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof(buf), "%10.3e", v);
-  return buf;
-}
+std::string sci(double v) { return format_printf("%10.3e", v); }
 
 void print_summary(const std::string& log_path, const ImuStreamInfo& info, std::size_t samples,
                    const std::string& models, const GSensitivityResult& r) {
@@ -77,9 +73,8 @@ void print_summary(const std::string& log_path, const ImuStreamInfo& info, std::
             << imu_units_name(info.units) << "): " << r.holds.size() << " holds (";
   for (std::size_t k = 0; k < r.holds.size(); ++k) {
     const auto& h = r.holds[k];
-    char len[32];
-    std::snprintf(len, sizeof(len), "%.1f s", ns_to_s(h.t1_ns - h.t0_ns));
-    std::cout << (k ? ", " : "") << (h.face.empty() ? "tilted" : h.face) << " " << len;
+    std::cout << (k ? ", " : "") << (h.face.empty() ? "tilted" : h.face) << " "
+              << format_printf("%.1f s", ns_to_s(h.t1_ns - h.t0_ns));
   }
   std::cout << ")\n  models: " << models;
   if (r.gyro_model_rel_sigma > 0.0)

@@ -2,7 +2,6 @@
 // (docs/simulator.md, docs/simulator-camera.md).
 
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -12,6 +11,7 @@
 #include <vector>
 
 #include "app/module_loader.hpp"
+#include "core/format.hpp"
 #include "daemon/cli/command.hpp"
 #include "log/session_log.hpp"
 #include "sim/camimu.hpp"
@@ -33,11 +33,8 @@ std::string kept_in(const std::string& log_path) {
   auto samples = (*reader)->read_imu(id);
   if (!samples.ok() || samples->empty()) return "; nothing was kept";
   const double span = ns_to_s(samples->back().t_ns - samples->front().t_ns);
-  char text[160];
-  std::snprintf(text, sizeof text,
-                "; stopped, %zu samples (%.1f s) kept in %s, readable and marked incomplete", samples->size(),
-                span, log_path.c_str());
-  return text;
+  return format_printf("; stopped, %zu samples (%.1f s) kept in %s, readable and marked incomplete",
+                       samples->size(), span, log_path.c_str());
 }
 
 struct SimCommon {

@@ -116,7 +116,8 @@ TEST(CliSim, ARateTheBusCannotCarryIsRecordedWithItsLossesExplained) {
 // called damaged. Needs a tmpfs mount (root).
 TEST(CliSim, AFullDiskStopsWithWhatWasKept) {
   const std::string dir = test::scratch_dir();
-  const std::string mnt = dir + "/full";
+  // A long folder name: the message names the log, and must carry it whole.
+  const std::string mnt = dir + "/full-" + std::string(120, 'x');
   fs::create_directories(mnt);
   if (std::system(("mount -t tmpfs -o size=600k tmpfs " + mnt + " 2>/dev/null").c_str()) != 0)
     GTEST_SKIP() << "cannot mount a small tmpfs here (needs root): the full-disk test is skipped";
