@@ -387,7 +387,9 @@ Result<ImportSummary> import_euroc(const std::string& dir, const std::string& ou
   ImportSummary summary;
   WorkProgress progress(import_work(*imus, *cams), options.progress);
   {
-    auto writer = SessionLogWriter::create(out->temp_path());
+    SessionLogWriterOptions staged;
+    staged.staged = true;
+    auto writer = SessionLogWriter::create(out->temp_path(), staged);
     if (!writer.ok()) return writer.error().context("cannot create the session log");
     SessionLogWriter& w = **writer;
     nlohmann::json source = {{"format", "euroc"}, {"path", fs::absolute(*root).string()}};

@@ -35,7 +35,9 @@ std::string describe(const AxisConversion& c) {
 /// Writes one IMU stream to `out` (a PendingOutput file) and renames it into place.
 Status write_imu_log(PendingOutput& out, const ImuStreamInfo& info, const std::vector<ImuSample>& samples,
                      const nlohmann::json& source, const ProgressFn& progress) {
-  auto writer = SessionLogWriter::create(out.temp_path());
+  SessionLogWriterOptions staged;
+  staged.staged = true;
+  auto writer = SessionLogWriter::create(out.temp_path(), staged);
   if (!writer.ok()) return writer.error().context("cannot create the session log");
   SessionLogWriter& w = **writer;
   IMUCAL_TRY(w.set_metadata("import", source.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)));

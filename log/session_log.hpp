@@ -40,6 +40,11 @@ struct SessionLogWriterOptions {
   TimeNs commit_data_interval_ns = 0;
   /// Replace an existing file at the path instead of failing.
   bool overwrite = false;
+  /// The path is a temporary file that is renamed into place only once closed (an import): a
+  /// failure part way leaves nothing worth keeping, so commits are not synced and the samples'
+  /// time index is built once, at close(), which syncs the whole file. The closed log is the
+  /// same as one written otherwise. Several times faster for bulk writes; never for recording.
+  bool staged = false;
 };
 
 /// Writes one session log. Not thread-safe: one writer thread owns it.
