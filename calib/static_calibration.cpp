@@ -8,9 +8,11 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <future>
 #include <limits>
 #include <memory>
 #include <string>
+#include <thread>
 
 #include "calib/allan.hpp"
 #include "calib/ellipsoid.hpp"
@@ -259,12 +261,67 @@ class GyroTransferCost : public ceres::CostFunction {
  private:
   const Transfer* tr_;
   const Eigen::Vector3d* fixed_bias_;
-  // Scratch, reused between evaluations (the solver runs on one thread).
+  // Scratch, reused between evaluations (one thread at a time evaluates a transfer).
   mutable std::vector<Eigen::Vector3d> w_;
   mutable std::vector<Quat4> q_buf_;
   mutable Rk4nGradient grad_;
   mutable Eigen::Matrix<double, 12, 1> cache_key_ = Eigen::Matrix<double, 12, 1>::Zero();
   mutable bool cache_valid_ = false;
+};
+
+/// Every transfer's residuals as one block, evaluated on up to `threads` threads, each over a
+/// fixed run of consecutive transfers and writing only their rows. The residuals, Jacobian and
+/// so the whole solve are the same whatever the number of threads or their timing (the solver's
+/// own parallel evaluation sums the cost in the order the threads finish).
+class GyroTransfersCost : public ceres::CostFunction {
+ public:
+  GyroTransfersCost(const std::vector<Transfer>& transfers, const Eigen::Vector3d* fixed_bias, int threads)
+      : with_bias_(fixed_bias == nullptr) {
+    std::size_t total = 0;
+    for (const auto& tr : transfers) {
+      parts_.push_back(std::make_unique<GyroTransferCost>(&tr, fixed_bias));
+      total += tr.gyro_raw.size();
+    }
+    set_num_residuals(3 * static_cast<int>(transfers.size()));
+    mutable_parameter_block_sizes()->push_back(9);
+    if (with_bias_) mutable_parameter_block_sizes()->push_back(3);
+    // Runs of about equal sample counts: the work is one integration step per sample.
+    const std::size_t runs = std::clamp<std::size_t>(static_cast<std::size_t>(std::max(threads, 1)), 1,
+                                                     std::max<std::size_t>(transfers.size(), 1));
+    std::size_t done = 0;
+    run_begin_.push_back(0);
+    for (std::size_t t = 0; t < transfers.size(); ++t) {
+      done += transfers[t].gyro_raw.size();
+      if (run_begin_.size() < runs && done * runs >= total * run_begin_.size()) run_begin_.push_back(t + 1);
+    }
+    run_begin_.push_back(transfers.size());
+  }
+
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    auto run = [&](std::size_t r) {
+      bool ok = true;
+      for (std::size_t t = run_begin_[r]; t < run_begin_[r + 1]; ++t) {
+        double* jac[2] = {nullptr, nullptr};
+        if (jacobians) {
+          if (jacobians[0]) jac[0] = jacobians[0] + 27 * t;
+          if (with_bias_ && jacobians[1]) jac[1] = jacobians[1] + 9 * t;
+        }
+        ok = parts_[t]->Evaluate(parameters, residuals + 3 * t, jacobians ? jac : nullptr) && ok;
+      }
+      return ok;
+    };
+    const std::size_t runs = run_begin_.size() - 1;
+    std::vector<std::future<bool>> others;
+    for (std::size_t r = 1; r < runs; ++r) others.push_back(std::async(std::launch::async, run, r));
+    bool ok = run(0);
+    for (auto& f : others) ok = f.get() && ok;
+    return ok;
+  }
+
+ private:
+  bool with_bias_;
+  std::vector<std::unique_ptr<GyroTransferCost>> parts_;
+  std::vector<std::size_t> run_begin_;  // run r covers transfers [run_begin_[r], run_begin_[r + 1])
 };
 
 // ---- helpers ---------------------------------------------------------------------------------
@@ -956,15 +1013,15 @@ Result<std::vector<Transfer>> collect_transfers(const std::vector<StaticInterval
 /// transfers and at this object's fixed bias, so it is built in place and never moved.
 class GyroFit {
  public:
-  GyroFit(const std::vector<Transfer>& transfers, const TedaldiTriad& gyro0, bool estimate_bias)
+  GyroFit(const std::vector<Transfer>& transfers, const TedaldiTriad& gyro0, bool estimate_bias, int threads)
       : gyro0_(gyro0), estimate_bias_(estimate_bias), gb_(gyro0.bias) {
     gp_ << gyro_angles(gyro0_.T), gyro0_.scale;
-    for (const auto& tr : transfers) {
-      if (estimate_bias_) {
-        problem_.AddResidualBlock(new GyroTransferCost(&tr, nullptr), nullptr, gp_.data(), gb_.data());
-      } else {
-        problem_.AddResidualBlock(new GyroTransferCost(&tr, &gyro0_.bias), nullptr, gp_.data());
-      }
+    if (transfers.empty()) return;
+    if (estimate_bias_) {
+      problem_.AddResidualBlock(new GyroTransfersCost(transfers, nullptr, threads), nullptr, gp_.data(),
+                                gb_.data());
+    } else {
+      problem_.AddResidualBlock(new GyroTransfersCost(transfers, &gyro0_.bias, threads), nullptr, gp_.data());
     }
   }
   GyroFit(const GyroFit&) = delete;
@@ -1098,7 +1155,9 @@ Status solve_gyroscope(std::vector<Transfer>* transfers, const Candidate& best, 
                        std::span<const ImuSample> samples, const GyroStaticFit& gfit,
                        const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
   const TedaldiTriad gyro0 = initial_gyro(gfit.bias, opt);
-  GyroFit fit(*transfers, gyro0, opt.estimate_gyro_bias);
+  const int threads =
+      opt.threads > 0 ? opt.threads : static_cast<int>(std::max(1U, std::thread::hardware_concurrency()));
+  GyroFit fit(*transfers, gyro0, opt.estimate_gyro_bias, threads);
   // Two passes: the directions at the ends of the static intervals depend (weakly) on the gyro
   // model through the rotation inside the intervals; the second pass uses the first estimate.
   TedaldiTriad gyro_current = gyro0;

@@ -69,6 +69,8 @@ struct StaticCalibrationOptions {
   /// sees as Omega sin(latitude) along gravity, indistinguishable from g-sensitivity) is removed
   /// from the estimated G.
   std::optional<double> latitude_deg;
+  /// Threads for the gyroscope solve (0: one per core). The result does not depend on it.
+  int threads = 0;
 
   /// Checks ranges; the error says what is wrong.
   [[nodiscard]] Status validate() const;

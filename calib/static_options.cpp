@@ -21,6 +21,7 @@ Status StaticCalibrationOptions::validate() const {
   if (!(window_s > 0.0 && window_s <= 10.0)) return fail("the detector window must be in (0, 10] s");
   if (!(min_init_still_s >= 1.0)) return fail("the shortest still start must be at least 1 s");
   if (min_poses_for_gsens < 5) return fail("the g-sensitivity needs at least 5 poses to be estimated");
+  if (threads < 0) return fail("threads must be 0 (one per core) or more");
   if (!(min_interval_s > 0.0)) return fail("the minimum static interval must be positive");
   if (multiplier_min < 1 || multiplier_max < multiplier_min)
     return fail("threshold multipliers must satisfy 1 <= min <= max");

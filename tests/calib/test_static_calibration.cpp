@@ -150,6 +150,35 @@ TEST(StaticCalibration, EstimatedGyroBiasAgreesWithStillBias) {
   expect_within(res->model.gyro, res->gyro_sigma, cfg.truth.gyro, 4.5, "gyro");
 }
 
+// The gyro solve runs on several threads, each over a fixed run of transfers: the result is the
+// same to the last bit whatever their number, with the bias fixed or estimated.
+TEST(StaticCalibration, TheResultDoesNotDependOnTheNumberOfThreads) {
+  SynthConfig cfg;
+  cfg.seed = 8;
+  cfg.truth = test::random_truth(8);
+  const auto rec = make_static_recording(cfg);
+  for (const bool estimate_bias : {false, true}) {
+    StaticCalibrationOptions opt = options_for(cfg);
+    opt.estimate_gyro_bias = estimate_bias;
+    opt.threads = 1;
+    auto one = calibrate_static(rec.samples, opt);
+    ASSERT_TRUE(one.ok()) << one.error().message;
+    for (const int threads : {2, 3, 7}) {
+      opt.threads = threads;
+      auto many = calibrate_static(rec.samples, opt);
+      ASSERT_TRUE(many.ok()) << many.error().message;
+      EXPECT_EQ(many->model.gyro.T, one->model.gyro.T) << threads << " threads";
+      EXPECT_EQ(many->model.gyro.scale, one->model.gyro.scale) << threads << " threads";
+      EXPECT_EQ(many->model.gyro.bias, one->model.gyro.bias) << threads << " threads";
+      EXPECT_EQ(many->gyro_covariance, one->gyro_covariance) << threads << " threads";
+      EXPECT_EQ(many->gyro_residual_rms, one->gyro_residual_rms) << threads << " threads";
+    }
+  }
+  StaticCalibrationOptions bad = options_for(cfg);
+  bad.threads = -1;
+  EXPECT_FALSE(bad.validate().ok());
+}
+
 TEST(StaticCalibration, TooFewPosesSaysWhatToRecord) {
   SynthConfig cfg;
   cfg.poses = 5;
