@@ -55,35 +55,14 @@ inline Eigen::Vector3d omega_mul_dw(const Quat4& x, const Quat4& ybar) {
           -ybar[0] * x[3] + ybar[1] * x[2] - ybar[2] * x[1] + ybar[3] * x[0]};
 }
 
-/// The 4x4 matrix Omega(w) of eq. 3.11: omega_mul(q, w) == omega_mat(w) * q.
-inline Eigen::Matrix4d omega_mat(const Eigen::Vector3d& w) {
-  Eigen::Matrix4d m;
-  m << 0, -w[0], -w[1], -w[2],  //
-      w[0], 0, w[2], -w[1],     //
-      w[1], -w[2], 0, w[0],     //
-      w[2], w[1], -w[0], 0;
-  return m;
-}
-
-/// The 4x3 matrix M(x) with omega_mul(x, w) == M(x) * w, so omega_mul_dw(x, y) == M(x)^T y.
-inline Eigen::Matrix<double, 4, 3> omega_jac(const Quat4& x) {
-  Eigen::Matrix<double, 4, 3> m;
-  m << -x[1], -x[2], -x[3],  //
-      x[0], -x[3], x[2],     //
-      x[3], x[0], -x[1],     //
-      -x[2], x[1], x[0];
-  return m;
-}
-
 }  // namespace detail
 
 template <class DfDq>
 void integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d> w, std::span<const double> t_s,
                                   const DfDq& df_dq_end, std::vector<Quat4>& q, Rk4nGradient& out,
                                   bool q_precomputed) {
-  using detail::omega_jac;
-  using detail::omega_mat;
   using detail::omega_mul;
+  using detail::omega_mul_dw;
   using Adj = Eigen::Matrix<double, 4, 3>;  // column r: d f_r / d q (the three adjoint rows at once)
   const std::size_t n = w.size();
   if (!q_precomputed || q.size() != (n == 0 ? 1 : n)) {
@@ -115,25 +94,33 @@ void integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d> w, std::span<
     const Quat4& q_next = q[i + 1];
     // Normalisation (eq. 3.16).
     const Adj pbar = (qbar - q_next * (q_next.transpose() * qbar)) * (1.0 / p.norm());
-    // Omega is skew-symmetric, so the adjoint through x is -Omega(w) ybar = Omega(w)^T ybar.
-    const Eigen::Matrix4d O0t = omega_mat(w0).transpose();
-    const Eigen::Matrix4d Omt = omega_mat(wm).transpose();
-    const Eigen::Matrix4d O1t = omega_mat(w1).transpose();
+    // Omega is skew-symmetric, so the adjoint through x is Omega(w)^T ybar = Omega(-w) ybar,
+    // taken column by column (no 4x4 matrix is formed); the adjoint through w is M(x)^T ybar.
+    const auto omega_t = [](const Eigen::Vector3d& rate, const Adj& ybar) {
+      Adj out;
+      for (int c = 0; c < 3; ++c) out.col(c) = omega_mul(Quat4(ybar.col(c)), -rate);
+      return out;
+    };
+    const auto rate_adjoint = [](const Quat4& x, const Adj& ybar) {
+      Eigen::Matrix3d out;
+      for (int c = 0; c < 3; ++c) out.col(c) = omega_mul_dw(x, Quat4(ybar.col(c)));
+      return out;
+    };
     const Adj k4bar = (h / 6.0) * pbar;
-    Adj xbar = 0.5 * (O1t * k4bar);
-    Eigen::Matrix3d w1bar = 0.5 * (omega_jac(x4).transpose() * k4bar);
+    Adj xbar = 0.5 * omega_t(w1, k4bar);
+    Eigen::Matrix3d w1bar = 0.5 * rate_adjoint(x4, k4bar);
     Adj x1bar = pbar + xbar;
     const Adj k3bar = (h / 3.0) * pbar + h * xbar;
-    xbar = 0.5 * (Omt * k3bar);
-    Eigen::Matrix3d wmbar = 0.5 * (omega_jac(x3).transpose() * k3bar);
+    xbar = 0.5 * omega_t(wm, k3bar);
+    Eigen::Matrix3d wmbar = 0.5 * rate_adjoint(x3, k3bar);
     x1bar += xbar;
     const Adj k2bar = (h / 3.0) * pbar + (0.5 * h) * xbar;
-    xbar = 0.5 * (Omt * k2bar);
-    wmbar += 0.5 * (omega_jac(x2).transpose() * k2bar);
+    xbar = 0.5 * omega_t(wm, k2bar);
+    wmbar += 0.5 * rate_adjoint(x2, k2bar);
     x1bar += xbar;
     const Adj k1bar = (h / 6.0) * pbar + (0.5 * h) * xbar;
-    x1bar += 0.5 * (O0t * k1bar);
-    Eigen::Matrix3d w0bar = 0.5 * (omega_jac(x1).transpose() * k1bar);
+    x1bar += 0.5 * omega_t(w0, k1bar);
+    Eigen::Matrix3d w0bar = 0.5 * rate_adjoint(x1, k1bar);
     w0bar += 0.5 * wmbar;
     w1bar += 0.5 * wmbar;
     out.df_dw[i] = w0bar.transpose();
