@@ -19,6 +19,7 @@
 #include <fstream>
 #include <iterator>
 #include <limits>
+#include <mutex>
 #include <set>
 #include <sstream>
 #include <system_error>
@@ -87,6 +88,58 @@ ImuSample read_sample_columns(sqlite3_stmt* stmt, int first) {
 // ------------------------------------------------------------------------------------------
 // Writer
 
+/// Registers a session log file (device, inode) as open in this process through SQLite while it
+/// lives. Closing any descriptor of such a file drops the POSIX locks SQLite holds on it, so a
+/// file open here must never be opened and closed by other code (being_written reads
+/// /proc/locks for it instead).
+class OpenHere {
+ public:
+  OpenHere() = default;
+  explicit OpenHere(const struct stat& st) : key_(st.st_dev, st.st_ino), registered_(true) {
+    const std::lock_guard guard(mutex());
+    ++files()[key_];
+  }
+  OpenHere(OpenHere&& o) noexcept : key_(o.key_), registered_(std::exchange(o.registered_, false)) {}
+  OpenHere& operator=(OpenHere&& o) noexcept {
+    std::swap(key_, o.key_);
+    std::swap(registered_, o.registered_);
+    return *this;
+  }
+  ~OpenHere() {
+    if (!registered_) return;
+    const std::lock_guard guard(mutex());
+    if (--files()[key_] == 0) files().erase(key_);
+  }
+
+  static bool contains(const struct stat& st) {
+    const std::lock_guard guard(mutex());
+    return files().contains({st.st_dev, st.st_ino});
+  }
+
+ private:
+  using Key = std::pair<dev_t, ino_t>;
+  static std::mutex& mutex() {
+    static std::mutex m;
+    return m;
+  }
+  static std::map<Key, int>& files() {
+    static std::map<Key, int> f;
+    return f;
+  }
+  Key key_{};
+  bool registered_ = false;
+};
+
+/// flock(LOCK_EX | LOCK_NB), tried for up to about 20 ms: a reader that tests for a writer holds
+/// a shared lock for an instant (being_written). -1 with errno set when it cannot be had.
+int lock_exclusive(int fd) {
+  for (int attempt = 0;; ++attempt) {
+    if (::flock(fd, LOCK_EX | LOCK_NB) == 0) return 0;
+    if (errno != EWOULDBLOCK || attempt == 20) return -1;
+    ::usleep(1000);
+  }
+}
+
 /// The writer's exclusive flock(2) on the log file, held from before the file has content until
 /// after SQLite closed it. flock locks are apart from the POSIX record locks SQLite takes, but
 /// closing any descriptor of the file drops the process's POSIX locks: the descriptor is closed
@@ -94,10 +147,14 @@ ImuSample read_sample_columns(sqlite3_stmt* stmt, int first) {
 class WriterLock {
  public:
   WriterLock() = default;
-  explicit WriterLock(int fd) : fd_(fd) {}
-  WriterLock(WriterLock&& o) noexcept : fd_(std::exchange(o.fd_, -1)) {}
+  explicit WriterLock(int fd) : fd_(fd) {
+    struct stat st {};
+    if (::fstat(fd, &st) == 0) open_here_ = OpenHere(st);
+  }
+  WriterLock(WriterLock&& o) noexcept : fd_(std::exchange(o.fd_, -1)), open_here_(std::move(o.open_here_)) {}
   WriterLock& operator=(WriterLock&& o) noexcept {
     std::swap(fd_, o.fd_);
+    std::swap(open_here_, o.open_here_);
     return *this;
   }
   ~WriterLock() {
@@ -106,6 +163,7 @@ class WriterLock {
 
  private:
   int fd_ = -1;
+  OpenHere open_here_;
 };
 
 /// The process that holds a flock on the file with this device and inode (from /proc/locks), or
@@ -143,7 +201,7 @@ Result<WriterLock> lock_for_writing(const std::string& path, bool overwrite) {
     const int old = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
     if (old >= 0) {
       WriterLock guard(old);
-      if (::flock(old, LOCK_EX | LOCK_NB) != 0 && errno == EWOULDBLOCK) {
+      if (lock_exclusive(old) != 0 && errno == EWOULDBLOCK) {
         return make_error(Errc::kIo, "session log " + path + " is being written by " + held_by(old) +
                                          "; stop that recording first, or write to another file");
       }
@@ -163,7 +221,7 @@ Result<WriterLock> lock_for_writing(const std::string& path, bool overwrite) {
   }
   WriterLock lock(fd);
   // Nobody else can hold a lock on a file this call created; a failure here is the filesystem's.
-  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+  if (lock_exclusive(fd) != 0) {
     const int err = errno;
     std::remove(path.c_str());
     return make_error(Errc::kIo, "cannot lock session log " + path + ": " + std::strerror(err));
@@ -654,6 +712,7 @@ class SqliteSessionLogReader final : public SessionLogReader {
                     std::set<int>* in_time_order, bool* table_ok, std::string* table_error) const;
 
   std::string path_;
+  OpenHere open_here_;  // declared before db_: registered until SQLite has closed the file
   sqlite::Db db_;
   mutable SessionLogHealth health_;
   std::map<std::string, std::string> metadata_;
@@ -878,15 +937,33 @@ bool wal_mode_without_wal(const std::string& path) {
   return in.gcount() == sizeof h && h[18] == 2 && (ec || wal_size == 0);
 }
 
-/// True when a writer holds the log (its flock, see lock_for_writing).
-bool being_written(const std::string& path) {
-  struct stat st {};
-  return ::stat(path.c_str(), &st) == 0 && flock_holder(st.st_dev, st.st_ino) != 0;
+/// True when a writer holds the log `st` describes (its flock, see lock_for_writing). A file
+/// that this process does not have open is tested with a shared flock, held for an instant
+/// (writers retry theirs); one open here is looked up in /proc/locks, whose first read costs a
+/// process 5-30 ms on some kernels.
+bool being_written(const std::string& path, const struct stat& st) {
+  if (OpenHere::contains(st)) return flock_holder(st.st_dev, st.st_ino) != 0;
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
+  if (fd < 0) return flock_holder(st.st_dev, st.st_ino) != 0;
+  struct stat opened {};
+  bool held = false;
+  if (::fstat(fd, &opened) != 0 || opened.st_dev != st.st_dev || opened.st_ino != st.st_ino) {
+    held = flock_holder(st.st_dev, st.st_ino) != 0;  // replaced meanwhile
+  } else if (::flock(fd, LOCK_SH | LOCK_NB) != 0) {
+    held = errno == EWOULDBLOCK;
+  }
+  ::close(fd);  // drops the shared lock
+  return held;
 }
 
 Status SqliteSessionLogReader::open() {
   IMUCAL_TRY(precheck_file(path_));
-  const bool live = being_written(path_);
+  struct stat st {};
+  bool live = false;
+  if (::stat(path_.c_str(), &st) == 0) {
+    live = being_written(path_, st);
+    open_here_ = OpenHere(st);  // from here on SQLite may hold locks on the file
+  }
   const WalCheck wal = live ? WalCheck{} : check_wal(path_);
   if (!wal.damage.empty()) note_damage(wal.damage);
   // The header's page count may have been written by a checkpoint that could not extend the

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <nlohmann/json.hpp>
 
 #include "log/session_log.hpp"
 #include "tests/support/session_log_util.hpp"
@@ -421,6 +422,37 @@ TEST(SessionLog, ASecondWriterIsRefusedWhileTheFirstWrites) {
   auto replaced = SessionLogWriter::create(path, force);
   ASSERT_TRUE(replaced.ok()) << replaced.error().message;
   ASSERT_TRUE((*replaced)->close().ok());
+}
+
+// Readers of a log being written, in another process (which tests the writer's lock with a
+// shared one for an instant) and in this one (which must not open and close the file beside
+// SQLite), see every commit so far and leave the writer undisturbed.
+TEST(SessionLog, ReadersOfALiveLogLeaveItsWriterUndisturbed) {
+  const std::string path = scratch_dir() + "/live.imulog";
+  auto writer = SessionLogWriter::create(path);
+  ASSERT_TRUE(writer.ok()) << writer.error().message;
+  const int id = *(*writer)->add_imu_stream(test_raw_imu_info());
+  for (int round = 0; round < 4; ++round) {
+    ASSERT_TRUE((*writer)->append_imu(id, make_raw_samples(100, round * 100'000'000, round * 100)).ok());
+    ASSERT_TRUE((*writer)->flush().ok());
+    const auto info = test::run_cli({"info", path, "--json"}, 60);
+    ASSERT_EQ(info.exit_code, 0) << info.err;
+    const auto json = nlohmann::json::parse(info.out);
+    EXPECT_FALSE(json["complete"].get<bool>());
+    EXPECT_FALSE(json["damaged"].get<bool>()) << json["damage_message"];
+    EXPECT_EQ(json["imu_streams"][0]["count"].get<std::int64_t>(), 100 * (round + 1));
+    auto here = SessionLogReader::open(path);
+    ASSERT_TRUE(here.ok()) << here.error().message;
+    EXPECT_EQ(*(*here)->imu_count(id), 100 * (round + 1));
+  }
+  // Still the only writer: a second one is refused, and this one closes a complete log.
+  EXPECT_EQ(SessionLogWriter::create(path).error().code, Errc::kAlreadyExists);
+  ASSERT_TRUE((*writer)->close().ok());
+  auto reader = SessionLogReader::open(path);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_TRUE((*reader)->health().complete);
+  EXPECT_FALSE((*reader)->health().damaged) << (*reader)->health().damage_message;
+  EXPECT_EQ(*(*reader)->imu_count(id), 400);
 }
 
 // A reader inside a read transaction when the writer closes keeps the final checkpoint from
