@@ -22,18 +22,24 @@ trap 'rm -rf "$tmp"' EXIT
 median() { sort -n | awk '{ v[NR] = $1 } END { print v[int((NR + 1) / 2)] }'; }
 
 : > "$tmp/import" ; : > "$tmp/calib"; : > "$tmp/total"
+# Wall time from bash's microsecond clock (/usr/bin/time rounds it to 10 ms); peak RSS from
+# /usr/bin/time.
+now() { echo "${EPOCHREALTIME/,/.}"; }
 for _ in $(seq "$RUNS"); do
   rm -f "$tmp/x.imulog"
-  /usr/bin/time -f "%e %M" -o "$tmp/ti" "$IMUCAL" import ascii --accel "$DATA/xsens_acc.txt" \
+  t0=$(now)
+  /usr/bin/time -f "%M" -o "$tmp/mi" "$IMUCAL" import ascii --accel "$DATA/xsens_acc.txt" \
     --gyro "$DATA/xsens_gyro.txt" --units raw --accel-offset 32768 --accel-scale 0.00241 \
     --gyro-offset 32768 --gyro-scale 0.0001598 -o "$tmp/x.imulog" > /dev/null 2> "$tmp/err" ||
     { echo "bench-static-e2e: import failed:" >&2; cat "$tmp/err" >&2; exit 1; }
-  /usr/bin/time -f "%e %M" -o "$tmp/tc" "$IMUCAL" calibrate static "$tmp/x.imulog" --gravity 9.81744 \
+  t1=$(now)
+  /usr/bin/time -f "%M" -o "$tmp/mc" "$IMUCAL" calibrate static "$tmp/x.imulog" --gravity 9.81744 \
     --force -o "$tmp/r.yaml" > /dev/null 2> "$tmp/err" ||
     { echo "bench-static-e2e: calibrate failed:" >&2; cat "$tmp/err" >&2; exit 1; }
-  cat "$tmp/ti" >> "$tmp/import"
-  cat "$tmp/tc" >> "$tmp/calib"
-  paste "$tmp/ti" "$tmp/tc" | awk '{ print $1 + $3 }' >> "$tmp/total"
+  t2=$(now)
+  echo "$(awk -v a="$t0" -v b="$t1" 'BEGIN { print b - a }') $(cat "$tmp/mi")" >> "$tmp/import"
+  echo "$(awk -v a="$t1" -v b="$t2" 'BEGIN { print b - a }') $(cat "$tmp/mc")" >> "$tmp/calib"
+  awk -v a="$t0" -v b="$t2" 'BEGIN { print b - a }' >> "$tmp/total"
 done
 echo "imucal: $IMUCAL, $RUNS runs, Xsens MTi pair (51175 samples)"
 printf '  import ascii       median %.3f s  peak RSS %.1f MB\n' "$(cut -d' ' -f1 "$tmp/import" | median)" \
@@ -44,7 +50,10 @@ printf '  both               median %.3f s\n' "$(median < "$tmp/total")"
 if [ -n "${IMUTK:-}" ]; then
   : > "$tmp/peer"
   (cd "$tmp" && for _ in $(seq "$RUNS"); do
-    /usr/bin/time -f "%e %M" -a -o "$tmp/peer" "$IMUTK" > /dev/null 2>&1
+    t0=$(now)
+    /usr/bin/time -f "%M" -o "$tmp/mp" "$IMUTK" > /dev/null 2>&1
+    t1=$(now)
+    echo "$(awk -v a="$t0" -v b="$t1" 'BEGIN { print b - a }') $(cat "$tmp/mp")" >> "$tmp/peer"
   done)
   printf '  imu_tk (%s)  median %.3f s  peak RSS %.1f MB\n' "$IMUTK" "$(cut -d' ' -f1 "$tmp/peer" | median)" \
     "$(cut -d' ' -f2 "$tmp/peer" | median | awk '{ print $1 / 1024 }')"
