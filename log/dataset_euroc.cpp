@@ -152,7 +152,11 @@ Result<std::vector<std::uint8_t>> frame_png(const CameraFrame& frame) {
 
 struct ImuFolder {
   std::string name;
-  std::vector<ImuSample> samples;
+  std::string csv;  // imuN/data.csv
+  std::int64_t count = 0;
+  TimeNs first_ns = 0, last_ns = 0;
+  double median_rate_hz = 0.0;
+  std::optional<std::vector<ImuSample>> samples;  // held when the inputs are small
   SensorYaml sensor;
 };
 
@@ -190,20 +194,36 @@ double median_rate_hz(const std::vector<TimeNs>& t) {
 
 namespace {
 
-/// Every imuN/ folder's samples and sensor.yaml, parsed before anything is written so that a
-/// malformed file fails fast.
-Result<std::vector<ImuFolder>> read_imu_folders(const fs::path& root) {
+/// Every imuN/ folder's data.csv and sensor.yaml, read and checked before anything is written so
+/// that a malformed file fails fast. The samples are held when all the data.csv files together
+/// are at most `in_memory_bytes`; else they are read again while written.
+Result<std::vector<ImuFolder>> read_imu_folders(const fs::path& root, std::uint64_t in_memory_bytes) {
   std::vector<ImuFolder> imus;
   auto folders = sensor_folders(root, "imu");
   if (!folders.ok()) return folders.error();
+  std::uint64_t bytes = 0;
+  for (const auto& [index, folder] : *folders) {
+    std::error_code ec;
+    const auto size = fs::file_size(folder / "data.csv", ec);
+    if (!ec) bytes += size;
+  }
+  const bool hold = bytes <= in_memory_bytes;
   for (const auto& [index, folder] : *folders) {
     ImuFolder f;
     f.name = folder.filename().string();
-    const std::string csv = (folder / "data.csv").string();
-    auto samples = parse_euroc_imu_csv_file(csv);
-    if (!samples.ok()) return samples.error();
-    if (samples->empty()) return make_error(Errc::kInsufficientData, csv + ": no data rows");
-    f.samples = std::move(*samples);
+    f.csv = (folder / "data.csv").string();
+    if (hold) f.samples.emplace();
+    IntervalMedian intervals;
+    IMUCAL_TRY(for_each_euroc_imu_sample(f.csv, [&](const ImuSample& s) {
+      if (f.count++ == 0) f.first_ns = s.t_ns;
+      f.last_ns = s.t_ns;
+      intervals.add(s.t_ns);
+      if (f.samples) f.samples->push_back(s);
+      return Status{};
+    }));
+    if (f.count == 0) return make_error(Errc::kInsufficientData, f.csv + ": no data rows");
+    const TimeNs period_ns = intervals.median();
+    f.median_rate_hz = period_ns > 0 ? 1e9 / static_cast<double>(period_ns) : 0.0;
     auto sensor = read_sensor_yaml(folder);
     if (!sensor.ok()) return sensor.error();
     f.sensor = std::move(*sensor);
@@ -253,7 +273,7 @@ class WorkProgress {
 
 double import_work(const std::vector<ImuFolder>& imus, const std::vector<CameraFolder>& cams) {
   double total = 0.0;
-  for (const auto& f : imus) total += static_cast<double>(f.samples.size());
+  for (const auto& f : imus) total += static_cast<double>(f.count);
   for (const auto& f : cams) total += WorkProgress::kPerImage * static_cast<double>(f.rows.size());
   return total;
 }
@@ -263,24 +283,42 @@ Status write_imu_folder(SessionLogWriter& w, const ImuFolder& f, ImportSummary& 
   ImuStreamInfo info;
   info.name = f.name;
   info.units = ImuUnits::kSi;
-  std::vector<TimeNs> t(f.samples.size());
-  for (std::size_t i = 0; i < t.size(); ++i) t[i] = f.samples[i].t_ns;
-  info.rate_hz = f.sensor.rate_hz > 0 ? f.sensor.rate_hz : median_rate_hz(t);
+  info.rate_hz = f.sensor.rate_hz > 0 ? f.sensor.rate_hz : f.median_rate_hz;
   info.device = "euroc:" + f.name;
   if (!f.sensor.text.empty()) IMUCAL_TRY(w.set_metadata(sensor_yaml_key(f.name), f.sensor.text));
   auto id = w.add_imu_stream(info);
   if (!id.ok()) return id.error();
   constexpr std::size_t kBatch = 8192;
-  for (std::size_t i = 0; i < f.samples.size(); i += kBatch) {
-    const std::size_t n = std::min(kBatch, f.samples.size() - i);
-    IMUCAL_TRY(w.append_imu(*id, std::span<const ImuSample>(f.samples.data() + i, n)));
-    progress.advance(static_cast<double>(n));
+  std::vector<ImuSample> batch;
+  batch.reserve(kBatch);
+  std::int64_t written = 0;
+  const auto flush = [&]() -> Status {
+    if (batch.empty()) return {};
+    IMUCAL_TRY(w.append_imu(*id, batch));
+    progress.advance(static_cast<double>(batch.size()));
+    written += static_cast<std::int64_t>(batch.size());
+    batch.clear();
+    return {};
+  };
+  const auto add = [&](const ImuSample& s) -> Status {
+    batch.push_back(s);
+    return batch.size() == kBatch ? flush() : Status{};
+  };
+  if (f.samples) {
+    for (const auto& s : *f.samples) IMUCAL_TRY(add(s));
+  } else {
+    IMUCAL_TRY(for_each_euroc_imu_sample(f.csv, add));
   }
-  summary.imu_samples += static_cast<std::int64_t>(f.samples.size());
+  IMUCAL_TRY(flush());
+  if (written != f.count) {
+    return make_error(Errc::kCorrupt, f.csv + " changed while it was imported (" + std::to_string(f.count) +
+                                          " samples, then " + std::to_string(written) + "): import it again");
+  }
+  summary.imu_samples += f.count;
   if (summary.imu_streams++ == 0) {
     summary.rate_hz = info.rate_hz;
-    summary.t_first_ns = f.samples.front().t_ns;
-    summary.t_last_ns = f.samples.back().t_ns;
+    summary.t_first_ns = f.first_ns;
+    summary.t_last_ns = f.last_ns;
   }
   return {};
 }
@@ -376,7 +414,7 @@ Result<ImportSummary> import_euroc(const std::string& dir, const std::string& ou
   if (!out.ok()) return out.error();
   auto root = euroc_root(dir);
   if (!root.ok()) return root.error();
-  auto imus = read_imu_folders(*root);
+  auto imus = read_imu_folders(*root, options.in_memory_bytes);
   if (!imus.ok()) return imus.error();
   auto cams = read_camera_folders(*root);
   if (!cams.ok()) return cams.error();

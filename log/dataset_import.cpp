@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <future>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 
 #include "log/dataset_io.hpp"
@@ -33,44 +35,144 @@ std::string describe(const AxisConversion& c) {
   return s.str();
 }
 
-/// Writes one IMU stream to `out` (a PendingOutput file) and renames it into place.
-Status write_imu_log(PendingOutput& out, const ImuStreamInfo& info, const std::vector<ImuSample>& samples,
-                     const nlohmann::json& source, const ProgressFn& progress) {
-  SessionLogWriterOptions staged;
-  staged.staged = true;
-  auto writer = SessionLogWriter::create(out.temp_path(), staged);
-  if (!writer.ok()) return writer.error().context("cannot create the session log");
-  SessionLogWriter& w = **writer;
-  IMUCAL_TRY(w.set_metadata("import", source.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)));
-  auto id = w.add_imu_stream(info);
-  if (!id.ok()) return id.error();
-  constexpr std::size_t kBatch = 8192;
-  for (std::size_t i = 0; i < samples.size(); i += kBatch) {
-    const std::size_t n = std::min(kBatch, samples.size() - i);
-    IMUCAL_TRY(w.append_imu(*id, std::span<const ImuSample>(samples.data() + i, n)));
-    report_progress(progress, static_cast<double>(i + n), static_cast<double>(samples.size()));
+/// Whether the inputs are small enough to be parsed once and held (OutputOptions::in_memory_bytes).
+bool hold_in_memory(std::initializer_list<std::string> paths, const OutputOptions& options) {
+  std::uint64_t total = 0;
+  for (const auto& path : paths) {
+    std::error_code ec;
+    const auto size = std::filesystem::file_size(path, ec);
+    if (!ec) total += size;
   }
-  IMUCAL_TRY(w.close());
-  writer->reset();
-  return out.commit();
+  return total <= options.in_memory_bytes;
 }
 
-ImportSummary summarize(const ImuStreamInfo& info, const std::vector<ImuSample>& samples) {
-  ImportSummary s;
-  s.imu_samples = static_cast<std::int64_t>(samples.size());
-  s.imu_streams = 1;
-  s.rate_hz = info.rate_hz;
-  if (!samples.empty()) {
-    s.t_first_ns = samples.front().t_ns;
-    s.t_last_ns = samples.back().t_ns;
+/// One IMU stream written to a staged session log at `out`'s temporary path, in batches, as the
+/// samples come.
+class ImuLogSink {
+ public:
+  static Result<std::unique_ptr<ImuLogSink>> create(const PendingOutput& out, const ImuStreamInfo& info,
+                                                    const nlohmann::json& source, double expected,
+                                                    ProgressFn progress) {
+    SessionLogWriterOptions staged;
+    staged.staged = true;
+    auto writer = SessionLogWriter::create(out.temp_path(), staged);
+    if (!writer.ok()) return writer.error().context("cannot create the session log");
+    IMUCAL_TRY((*writer)->set_metadata(
+        "import", source.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)));
+    auto id = (*writer)->add_imu_stream(info);
+    if (!id.ok()) return id.error();
+    auto sink =
+        std::unique_ptr<ImuLogSink>(new ImuLogSink(std::move(*writer), *id, expected, std::move(progress)));
+    sink->batch_.reserve(kBatch);
+    return sink;
   }
-  return s;
-}
 
-/// Progress over the three phases of an import: parse, check, write.
+  Status add(const ImuSample& sample) {
+    if (count_++ == 0) first_ns_ = sample.t_ns;
+    last_ns_ = sample.t_ns;
+    batch_.push_back(sample);
+    return batch_.size() == kBatch ? flush() : Status{};
+  }
+
+  /// Writes what is left and closes the log (not yet renamed into place).
+  Status close() {
+    IMUCAL_TRY(flush());
+    IMUCAL_TRY(writer_->close());
+    writer_.reset();
+    report_progress(progress_, 1.0, 1.0);
+    return {};
+  }
+
+  std::int64_t count() const { return count_; }
+  TimeNs first_ns() const { return first_ns_; }
+  TimeNs last_ns() const { return last_ns_; }
+
+ private:
+  static constexpr std::size_t kBatch = 8192;
+  ImuLogSink(std::unique_ptr<SessionLogWriter> writer, int id, double expected, ProgressFn progress)
+      : writer_(std::move(writer)), id_(id), expected_(expected), progress_(std::move(progress)) {}
+
+  Status flush() {
+    if (batch_.empty()) return {};
+    IMUCAL_TRY(writer_->append_imu(id_, batch_));
+    batch_.clear();
+    report_progress(progress_, static_cast<double>(count_), std::max(expected_, static_cast<double>(count_)));
+    return {};
+  }
+
+  std::unique_ptr<SessionLogWriter> writer_;
+  int id_;
+  double expected_;
+  ProgressFn progress_;
+  std::vector<ImuSample> batch_;
+  std::int64_t count_ = 0;
+  TimeNs first_ns_ = 0, last_ns_ = 0;
+};
+
+/// Progress over the phases of an import: parse (and check), then write.
 ProgressFn phase(const ProgressFn& progress, double start, double share) {
   if (!progress) return {};
   return [progress, start, share](double fraction) { progress(start + share * fraction); };
+}
+
+/// What a first reading of a "t x y z" file found: how many rows and their span, the intervals,
+/// the unit check and, when the inputs are small, the rows themselves.
+struct TriadScan {
+  TriadSpan span;
+  IntervalMedian intervals;
+  UnitCheck units;
+  std::optional<TriadSeries> rows;
+};
+
+Result<TriadScan> scan_triad_file(const std::string& path, bool hold, const ProgressFn& progress) {
+  auto reader = TriadRowReader::open(path, progress);
+  if (!reader.ok()) return reader.error();
+  TriadScan scan;
+  scan.span.source = path;
+  if (hold) {
+    scan.rows.emplace();
+    scan.rows->source = path;
+  }
+  TriadRow row;
+  while (true) {
+    auto more = (*reader)->next(row);
+    if (!more.ok()) return more.error();
+    if (!*more) break;
+    if (scan.span.rows++ == 0) scan.span.first_ns = row.t_ns;
+    scan.span.last_ns = row.t_ns;
+    scan.intervals.add(row.t_ns);
+    scan.units.add(row.xyz);
+    if (hold) {
+      scan.rows->t_ns.push_back(row.t_ns);
+      scan.rows->xyz.push_back(row.xyz);
+      scan.rows->line.push_back(row.line);
+    }
+  }
+  return scan;
+}
+
+/// The rows of a scanned file for the second reading: from memory, or the file read again.
+Result<std::unique_ptr<TriadSource>> reread(const TriadScan& scan) {
+  if (scan.rows) return std::unique_ptr<TriadSource>(std::make_unique<TriadSeriesSource>(*scan.rows));
+  auto reader = TriadRowReader::open(scan.span.source);
+  if (!reader.ok()) return reader.error();
+  return std::unique_ptr<TriadSource>(std::move(*reader));
+}
+
+void add_raw_note(const ImuStreamInfo& info, ImportSummary* summary) {
+  if (info.units != ImuUnits::kRaw) return;
+  summary->notes.push_back("raw counts kept; nominal accelerometer conversion " + describe(info.accel) +
+                           ", gyroscope " + describe(info.gyro));
+}
+
+ImportSummary summarize(const ImuStreamInfo& info, const ImuLogSink& sink) {
+  ImportSummary s;
+  s.imu_samples = sink.count();
+  s.imu_streams = 1;
+  s.rate_hz = info.rate_hz;
+  s.t_first_ns = sink.first_ns();
+  s.t_last_ns = sink.last_ns();
+  return s;
 }
 
 }  // namespace
@@ -79,25 +181,20 @@ Result<ImportSummary> import_ascii(const AsciiImport& in, const std::string& out
                                    const OutputOptions& options) {
   auto out = PendingOutput::begin(out_path, PendingOutput::Kind::kFile, options.force);
   if (!out.ok()) return out.error();
-  // The files are independent: the gyroscope's is parsed on a second thread meanwhile (the
-  // accelerometer's progress stands for both).
-  auto gyro_parse = std::async(std::launch::async, [&in] { return parse_triad_file(in.gyro_path, {}); });
-  auto accel = parse_triad_file(in.accel_path, phase(options.progress, 0.0, 0.6));
-  auto gyro = gyro_parse.get();
+  const bool hold = hold_in_memory({in.accel_path, in.gyro_path}, options);
+  // First reading, which checks every line: the files are independent, so the gyroscope's is read
+  // on a second thread meanwhile (the accelerometer's progress stands for both).
+  auto gyro_scan =
+      std::async(std::launch::async, [&in, hold] { return scan_triad_file(in.gyro_path, hold, {}); });
+  auto accel = scan_triad_file(in.accel_path, hold, phase(options.progress, 0.0, hold ? 0.6 : 0.5));
+  auto gyro = gyro_scan.get();
   if (!accel.ok()) return accel.error();
   if (!gyro.ok()) return gyro.error();
 
   auto period =
-      sample_period_ns(accel->t_ns, in.rate_hz, in.accel_path, "that the time column is in seconds");
+      sample_period_ns(accel->intervals, in.rate_hz, in.accel_path, "that the time column is in seconds");
   if (!period.ok()) return period.error();
-  PairingStats stats;
-  auto samples = pair_accel_gyro(*accel, *gyro, *period, &stats);
-  if (!samples.ok()) return samples.error();
-  if (samples->size() < 2) {
-    return make_error(Errc::kInsufficientData, in.accel_path + " and " + in.gyro_path +
-                                                   ": fewer than 2 paired samples; nothing to import");
-  }
-  if (in.unit_check) IMUCAL_TRY(check_units(*samples, in.units, in.accel_path));
+  if (in.unit_check) IMUCAL_TRY(accel->units.check(in.units, in.accel_path));
 
   ImuStreamInfo info;
   info.name = "imu0";
@@ -109,14 +206,36 @@ Result<ImportSummary> import_ascii(const AsciiImport& in, const std::string& out
     info.gyro = in.gyro;
   }
   info.device = "ascii:" + in.accel_path;
-
   nlohmann::json source = {{"format", "ascii"},
                            {"accel", in.accel_path},
                            {"gyro", in.gyro_path},
                            {"units", imu_units_name(in.units)}};
-  IMUCAL_TRY(write_imu_log(*out, info, *samples, source, phase(options.progress, 0.6, 0.4)));
 
-  ImportSummary summary = summarize(info, *samples);
+  // Second reading: pair the rows and write the samples as they are paired.
+  auto accel_rows = reread(*accel);
+  if (!accel_rows.ok()) return accel_rows.error();
+  auto gyro_rows = reread(*gyro);
+  if (!gyro_rows.ok()) return gyro_rows.error();
+  TriadPairer pairer(**accel_rows, accel->span, **gyro_rows, gyro->span, *period);
+  auto sink = ImuLogSink::create(*out, info, source, static_cast<double>(accel->span.rows),
+                                 phase(options.progress, hold ? 0.6 : 0.5, hold ? 0.4 : 0.5));
+  if (!sink.ok()) return sink.error();
+  ImuSample sample;
+  while (true) {
+    auto more = pairer.next(sample);
+    if (!more.ok()) return more.error();
+    if (!*more) break;
+    IMUCAL_TRY((*sink)->add(sample));
+  }
+  if ((*sink)->count() < 2) {
+    return make_error(Errc::kInsufficientData, in.accel_path + " and " + in.gyro_path +
+                                                   ": fewer than 2 paired samples; nothing to import");
+  }
+  IMUCAL_TRY((*sink)->close());
+  IMUCAL_TRY(out->commit());
+
+  ImportSummary summary = summarize(info, **sink);
+  const PairingStats& stats = pairer.stats();
   if (stats.nearest > 0) {
     summary.notes.push_back(
         std::to_string(stats.nearest) +
@@ -128,10 +247,7 @@ Result<ImportSummary> import_ascii(const AsciiImport& in, const std::string& out
                             std::to_string(stats.dropped_gyro) +
                             " gyroscope rows outside the time span both files cover");
   }
-  if (in.units == ImuUnits::kRaw) {
-    summary.notes.push_back("raw counts kept; nominal accelerometer conversion " + describe(in.accel) +
-                            ", gyroscope " + describe(in.gyro));
-  }
+  add_raw_note(info, &summary);
   return summary;
 }
 
@@ -139,19 +255,30 @@ Result<ImportSummary> import_csv(const CsvImport& in, const std::string& out_pat
                                  const OutputOptions& options) {
   auto out = PendingOutput::begin(out_path, PendingOutput::Kind::kFile, options.force);
   if (!out.ok()) return out.error();
-  auto samples = parse_imu_csv_file(in.path, in.format, phase(options.progress, 0.0, 0.5));
-  if (!samples.ok()) return samples.error();
-  if (samples->size() < 2) {
+  const bool hold = hold_in_memory({in.path}, options);
+  // First reading: every line checked; the intervals and the unit check gathered.
+  std::vector<ImuSample> held;
+  IntervalMedian intervals;
+  UnitCheck units;
+  IMUCAL_TRY(for_each_csv_sample(
+      in.path, in.format,
+      [&](const ImuSample& s) {
+        intervals.add(s.t_ns);
+        units.add(s.accel);
+        if (hold) held.push_back(s);
+        return Status{};
+      },
+      phase(options.progress, 0.0, 0.5)));
+  if (intervals.times() < 2) {
     return make_error(Errc::kInsufficientData, in.path + ": fewer than 2 samples; nothing to import");
   }
-  std::vector<TimeNs> t(samples->size());
-  for (std::size_t i = 0; i < t.size(); ++i) t[i] = (*samples)[i].t_ns;
-  auto period = sample_period_ns(
-      t, in.rate_hz, in.path, std::string("the time unit (now ") + time_unit_name(in.format.time_unit) + ")");
+  auto period =
+      sample_period_ns(intervals, in.rate_hz, in.path,
+                       std::string("the time unit (now ") + time_unit_name(in.format.time_unit) + ")");
   if (!period.ok()) {
     return period.error().code == Errc::kCorrupt ? period.error().with_remedy("time_unit") : period.error();
   }
-  if (in.unit_check) IMUCAL_TRY(check_units(*samples, in.units, in.path));
+  if (in.unit_check) IMUCAL_TRY(units.check(in.units, in.path));
 
   ImuStreamInfo info;
   info.name = "imu0";
@@ -168,12 +295,25 @@ Result<ImportSummary> import_csv(const CsvImport& in, const std::string& out_pat
                            {"path", in.path},
                            {"time_unit", time_unit_name(in.format.time_unit)},
                            {"units", imu_units_name(in.units)}};
-  IMUCAL_TRY(write_imu_log(*out, info, *samples, source, phase(options.progress, 0.5, 0.5)));
-  ImportSummary summary = summarize(info, *samples);
-  if (in.units == ImuUnits::kRaw) {
-    summary.notes.push_back("raw counts kept; nominal accelerometer conversion " + describe(in.accel) +
-                            ", gyroscope " + describe(in.gyro));
+  // Second reading (or the held samples): written as they come.
+  auto sink = ImuLogSink::create(*out, info, source, static_cast<double>(intervals.times()),
+                                 phase(options.progress, 0.5, 0.5));
+  if (!sink.ok()) return sink.error();
+  if (hold) {
+    for (const auto& s : held) IMUCAL_TRY((*sink)->add(s));
+  } else {
+    IMUCAL_TRY(
+        for_each_csv_sample(in.path, in.format, [&sink](const ImuSample& s) { return (*sink)->add(s); }));
   }
+  if ((*sink)->count() != intervals.times()) {
+    return make_error(Errc::kCorrupt, in.path + " changed while it was imported (" +
+                                          std::to_string(intervals.times()) + " samples, then " +
+                                          std::to_string((*sink)->count()) + "): import it again");
+  }
+  IMUCAL_TRY((*sink)->close());
+  IMUCAL_TRY(out->commit());
+  ImportSummary summary = summarize(info, **sink);
+  add_raw_note(info, &summary);
   return summary;
 }
 

@@ -11,7 +11,11 @@
 // `force`. Parse errors name the file, the line (and column) and what is wrong.
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <functional>
+#include <map>
+#include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -27,6 +31,10 @@ namespace imucal::log {
 struct OutputOptions {
   bool force = false;   // replace an existing output
   ProgressFn progress;  // may be empty
+  /// Imports whose input files together are at most this large are parsed once and held in
+  /// memory; larger ones are read twice (checked, then written as they are read again), so that
+  /// memory does not grow with the input. The log written is the same either way.
+  std::uint64_t in_memory_bytes = std::uint64_t{64} << 20;
 };
 
 /// An output file or folder written under a temporary name next to its final path
@@ -108,10 +116,74 @@ struct TriadSeries {
 /// The same, reading the file at `path` line by line (never whole; read errors are errors).
 [[nodiscard]] Result<TriadSeries> parse_triad_file(const std::string& path, const ProgressFn& progress = {});
 
+/// One "t x y z" row and the line it came from.
+struct TriadRow {
+  TimeNs t_ns = 0;
+  Eigen::Vector3d xyz = Eigen::Vector3d::Zero();
+  int line = 0;
+};
+
+/// Rows in time order, one at a time.
+class TriadSource {
+ public:
+  virtual ~TriadSource() = default;
+  /// The next row (true) or the end (false); an error when the rows cannot be read.
+  [[nodiscard]] virtual Result<bool> next(TriadRow& row) = 0;
+};
+
+/// The rows of a "t x y z" file (or text), read line by line with the checks of
+/// parse_triad_text: a malformed line, times that do not increase, a read error, or no row at
+/// all are errors.
+class TriadRowReader final : public TriadSource {
+ public:
+  [[nodiscard]] static Result<std::unique_ptr<TriadRowReader>> open(const std::string& path,
+                                                                    const ProgressFn& progress = {});
+  TriadRowReader(std::string_view text, const std::string& source, const ProgressFn& progress = {});
+  ~TriadRowReader() override;
+  TriadRowReader(const TriadRowReader&) = delete;
+  TriadRowReader& operator=(const TriadRowReader&) = delete;
+  [[nodiscard]] Result<bool> next(TriadRow& row) override;
+
+ private:
+  struct State;
+  explicit TriadRowReader(std::unique_ptr<State> state);
+  std::unique_ptr<State> state_;
+};
+
+/// The rows of a TriadSeries held in memory.
+class TriadSeriesSource final : public TriadSource {
+ public:
+  explicit TriadSeriesSource(const TriadSeries& series) : series_(series) {}
+  [[nodiscard]] Result<bool> next(TriadRow& row) override;
+
+ private:
+  const TriadSeries& series_;
+  std::size_t next_ = 0;
+};
+
+/// The exact median interval between consecutive times (median_interval_ns), fed one time at a
+/// time. Memory: one counter per distinct interval, few for a sampled signal.
+class IntervalMedian {
+ public:
+  void add(TimeNs t_ns);
+  /// Times added.
+  std::int64_t times() const { return times_; }
+  /// The upper median interval; 0 with fewer than two times.
+  TimeNs median() const;
+
+ private:
+  std::map<TimeNs, std::int64_t> counts_;
+  TimeNs last_ = 0;
+  std::int64_t times_ = 0;
+};
+
 /// Sample period used to pair accelerometer and gyroscope rows: from rate_hz if > 0, else the
 /// median interval of `t_ns`. Fails when the median interval is not plausible: the message says
 /// to check `time_hint` (e.g. "the time unit (now ms)").
 [[nodiscard]] Result<TimeNs> sample_period_ns(const std::vector<TimeNs>& t_ns, double rate_hz,
+                                              const std::string& source, const std::string& time_hint);
+/// The same from intervals counted as the times were read.
+[[nodiscard]] Result<TimeNs> sample_period_ns(const IntervalMedian& intervals, double rate_hz,
                                               const std::string& source, const std::string& time_hint);
 
 struct PairingStats {
@@ -127,6 +199,40 @@ struct PairingStats {
 [[nodiscard]] Result<std::vector<ImuSample>> pair_accel_gyro(const TriadSeries& accel,
                                                              const TriadSeries& gyro, TimeNs period_ns,
                                                              PairingStats* stats = nullptr);
+
+/// How many rows a file has and the times of its first and last (from a first reading).
+struct TriadSpan {
+  std::string source;
+  std::int64_t rows = 0;
+  TimeNs first_ns = 0;
+  TimeNs last_ns = 0;
+};
+
+/// pair_accel_gyro one sample at a time, from rows as they are read: the same samples, stats and
+/// errors, without holding the rows. The spans are those of the whole files.
+class TriadPairer {
+ public:
+  TriadPairer(TriadSource& accel, TriadSpan accel_span, TriadSource& gyro, TriadSpan gyro_span,
+              TimeNs period_ns);
+  /// The next sample (true) or the end (false); pairing errors as pair_accel_gyro's.
+  [[nodiscard]] Result<bool> next(ImuSample& sample);
+  /// Complete once next() returned false.
+  const PairingStats& stats() const { return stats_; }
+
+ private:
+  Result<bool> next_kept(TriadSource& source, const TriadSpan& other, std::int64_t* kept, TriadRow& row);
+  Error no_overlap() const;
+
+  TriadSource& accel_;
+  TriadSource& gyro_;
+  TriadSpan accel_span_, gyro_span_;
+  TimeNs half_ = 0;
+  std::int64_t accel_kept_ = 0, gyro_kept_ = 0;
+  std::optional<TriadRow> gyro_row_;  // the next kept gyroscope row, read ahead
+  bool gyro_done_ = false;
+  bool done_ = false;
+  PairingStats stats_;
+};
 
 /// Column indexes (0-based) of a generic CSV; -1 = absent.
 struct CsvColumns {
@@ -150,11 +256,30 @@ struct CsvFormat {
                                                                 const CsvFormat& format,
                                                                 const ProgressFn& progress = {});
 
+/// Reads the CSV at `path` line by line and gives each sample to `visit` (the checks of
+/// parse_imu_csv_file); an error from `visit` ends the reading with it.
+[[nodiscard]] Status for_each_csv_sample(const std::string& path, const CsvFormat& format,
+                                         const std::function<Status(const ImuSample&)>& visit,
+                                         const ProgressFn& progress = {});
+
 /// Unit sanity check: SI data whose accelerometer magnitude is far above 100 look like raw
 /// counts; raw data with a magnitude near 9.8 and non-integral values look like SI. The error
 /// names the flag to use.
 [[nodiscard]] Status check_units(const std::vector<ImuSample>& samples, ImuUnits units,
                                  const std::string& source);
+
+/// check_units fed one accelerometer sample at a time: it keeps an evenly spaced subset of
+/// 20000 to 40000 of them (every 2^k-th).
+class UnitCheck {
+ public:
+  void add(const Eigen::Vector3d& accel);
+  [[nodiscard]] Status check(ImuUnits units, const std::string& source) const;
+
+ private:
+  std::vector<Eigen::Vector3d> kept_;
+  std::int64_t stride_ = 1;
+  std::int64_t seen_ = 0;
+};
 
 // ---------------------------------------------------------------------------------------------
 // Imports and exports.
@@ -226,6 +351,10 @@ struct EurocImageRow {
 [[nodiscard]] Result<std::vector<ImuSample>> parse_euroc_imu_csv(std::string_view text,
                                                                  const std::string& source);
 [[nodiscard]] Result<std::vector<ImuSample>> parse_euroc_imu_csv_file(const std::string& path);
+/// Reads an EuRoC imuN/data.csv line by line and gives each sample to `visit` (the checks of
+/// parse_euroc_imu_csv_file); an error from `visit` ends the reading with it.
+[[nodiscard]] Status for_each_euroc_imu_sample(const std::string& path,
+                                               const std::function<Status(const ImuSample&)>& visit);
 [[nodiscard]] Result<std::vector<EurocImageRow>> parse_euroc_camera_csv(std::string_view text,
                                                                         const std::string& source);
 

@@ -252,51 +252,115 @@ std::string format_double(double value) {
   return std::string(buf, ptr);
 }
 
-namespace {
+struct TriadRowReader::State {
+  State(std::unique_ptr<TextLineReader> reader, std::string source_name, ProgressFn report)
+      : file(std::move(reader)), lines(*file), source(std::move(source_name)), progress(std::move(report)) {}
+  State(std::string_view text, std::string source_name, ProgressFn report)
+      : lines(text), source(std::move(source_name)), progress(std::move(report)) {}
 
-Result<TriadSeries> parse_triad(Lines& lines, const std::string& source, const ProgressFn& progress) {
-  TriadSeries series;
-  series.source = source;
-  std::string_view line;
+  std::unique_ptr<TextLineReader> file;  // before `lines`, which reads through it
+  Lines lines;
+  std::string source;
+  ProgressFn progress;
   std::vector<std::string_view> fields;
+  TimeNs prev_t = 0;
+  int prev_line = 0;
+  std::int64_t rows = 0;
+  bool ended = false;
+  std::optional<Error> failed;
+};
+
+TriadRowReader::TriadRowReader(std::unique_ptr<State> state) : state_(std::move(state)) {}
+
+TriadRowReader::TriadRowReader(std::string_view text, const std::string& source, const ProgressFn& progress)
+    : state_(std::make_unique<State>(text, source, progress)) {}
+
+TriadRowReader::~TriadRowReader() = default;
+
+Result<std::unique_ptr<TriadRowReader>> TriadRowReader::open(const std::string& path,
+                                                             const ProgressFn& progress) {
+  auto reader = TextLineReader::open(path);
+  if (!reader.ok()) return reader.error();
+  return std::unique_ptr<TriadRowReader>(
+      new TriadRowReader(std::make_unique<State>(std::move(*reader), path, progress)));
+}
+
+Result<bool> TriadRowReader::next(TriadRow& row) {
+  State& s = *state_;
+  if (s.failed) return *s.failed;
+  if (s.ended) return false;
+  const auto fail = [&s](Error e) -> Result<bool> {
+    s.failed = e;
+    return e;
+  };
   static constexpr const char* kNames[] = {"t", "x", "y", "z"};
-  while (lines.next(line)) {
-    if (progress && (lines.number() & 0xffff) == 0) report_progress(progress, lines.offset(), lines.total());
+  std::string_view line;
+  while (s.lines.next(line)) {
+    if (s.progress && (s.lines.number() & 0xffff) == 0)
+      report_progress(s.progress, s.lines.offset(), s.lines.total());
     const std::size_t hash = line.find('#');
     if (hash != std::string_view::npos) line = line.substr(0, hash);
-    split_whitespace(line, fields);
-    if (fields.empty()) continue;
-    if (fields.size() != 4) {
+    split_whitespace(line, s.fields);
+    if (s.fields.empty()) continue;
+    if (s.fields.size() != 4) {
       std::string msg =
-          "expected 4 whitespace-separated fields (t x y z), found " + std::to_string(fields.size());
-      if (fields.size() == 1 && line.find(',') != std::string_view::npos) {
+          "expected 4 whitespace-separated fields (t x y z), found " + std::to_string(s.fields.size());
+      if (s.fields.size() == 1 && line.find(',') != std::string_view::npos) {
         msg += "; for comma-separated files use 'imucal import csv'";
       }
-      return at(source, lines.number(), msg);
+      return fail(at(s.source, s.lines.number(), msg));
     }
-    auto t = parse_time_ns(fields[0], TimeUnit::kS);
-    if (!t.ok()) return at(source, lines.number(), "field 1 (t, seconds): " + t.error().message);
+    auto t = parse_time_ns(s.fields[0], TimeUnit::kS);
+    if (!t.ok()) return fail(at(s.source, s.lines.number(), "field 1 (t, seconds): " + t.error().message));
     Eigen::Vector3d v;
     for (int k = 0; k < 3; ++k) {
-      auto x = parse_double(fields[static_cast<std::size_t>(k + 1)]);
+      auto x = parse_double(s.fields[static_cast<std::size_t>(k + 1)]);
       if (!x.ok()) {
-        return at(source, lines.number(),
-                  "field " + std::to_string(k + 2) + " (" + kNames[k + 1] + "): " + x.error().message);
+        return fail(at(s.source, s.lines.number(),
+                       "field " + std::to_string(k + 2) + " (" + kNames[k + 1] + "): " + x.error().message));
       }
       v[k] = *x;
     }
-    if (!series.t_ns.empty()) {
-      if (auto e = check_increasing(source, series.t_ns.back(), series.line.back(), *t, lines.number()))
-        return *e;
-    }
-    series.t_ns.push_back(*t);
-    series.xyz.push_back(v);
-    series.line.push_back(lines.number());
+    if (auto e = check_increasing(s.source, s.prev_t, s.prev_line, *t, s.lines.number())) return fail(*e);
+    s.prev_t = *t;
+    s.prev_line = s.lines.number();
+    ++s.rows;
+    row.t_ns = *t;
+    row.xyz = v;
+    row.line = s.lines.number();
+    return true;
   }
-  if (auto e = lines.error(source)) return *e;
-  report_progress(progress, 1.0, 1.0);
-  if (series.t_ns.empty()) {
-    return make_error(Errc::kInsufficientData, source + ": no data rows (expected 't x y z' lines)");
+  if (auto e = s.lines.error(s.source)) return fail(*e);
+  s.ended = true;
+  report_progress(s.progress, 1.0, 1.0);
+  if (s.rows == 0) {
+    return fail(make_error(Errc::kInsufficientData, s.source + ": no data rows (expected 't x y z' lines)"));
+  }
+  return false;
+}
+
+Result<bool> TriadSeriesSource::next(TriadRow& row) {
+  if (next_ >= series_.t_ns.size()) return false;
+  row.t_ns = series_.t_ns[next_];
+  row.xyz = series_.xyz[next_];
+  row.line = series_.line[next_];
+  ++next_;
+  return true;
+}
+
+namespace {
+
+Result<TriadSeries> collect_rows(TriadRowReader& reader, const std::string& source) {
+  TriadSeries series;
+  series.source = source;
+  TriadRow row;
+  while (true) {
+    auto more = reader.next(row);
+    if (!more.ok()) return more.error();
+    if (!*more) break;
+    series.t_ns.push_back(row.t_ns);
+    series.xyz.push_back(row.xyz);
+    series.line.push_back(row.line);
   }
   return series;
 }
@@ -305,19 +369,36 @@ Result<TriadSeries> parse_triad(Lines& lines, const std::string& source, const P
 
 Result<TriadSeries> parse_triad_text(std::string_view text, const std::string& source,
                                      const ProgressFn& progress) {
-  Lines lines(text);
-  return parse_triad(lines, source, progress);
+  TriadRowReader reader(text, source, progress);
+  return collect_rows(reader, source);
 }
 
 Result<TriadSeries> parse_triad_file(const std::string& path, const ProgressFn& progress) {
-  auto reader = TextLineReader::open(path);
+  auto reader = TriadRowReader::open(path, progress);
   if (!reader.ok()) return reader.error();
-  Lines lines(**reader);
-  return parse_triad(lines, path, progress);
+  return collect_rows(**reader, path);
 }
 
-Result<TimeNs> sample_period_ns(const std::vector<TimeNs>& t_ns, double rate_hz, const std::string& source,
-                                const std::string& time_hint) {
+void IntervalMedian::add(TimeNs t_ns) {
+  if (times_++ > 0) ++counts_[t_ns - last_];
+  last_ = t_ns;
+}
+
+TimeNs IntervalMedian::median() const {
+  if (times_ < 2) return 0;
+  const std::int64_t upper_middle = (times_ - 1) / 2;  // 0-based, of times_ - 1 intervals
+  std::int64_t seen = 0;
+  for (const auto& [interval, count] : counts_) {
+    seen += count;
+    if (seen > upper_middle) return interval;
+  }
+  return counts_.rbegin()->first;
+}
+
+namespace {
+
+Result<TimeNs> period_from(std::int64_t times, const std::function<TimeNs()>& median_of, double rate_hz,
+                           const std::string& source, const std::string& time_hint) {
   if (rate_hz > 0.0) {
     if (!(rate_hz <= 100'000.0)) {
       return make_error(Errc::kInvalidArgument,
@@ -326,12 +407,12 @@ Result<TimeNs> sample_period_ns(const std::vector<TimeNs>& t_ns, double rate_hz,
     }
     return static_cast<TimeNs>(std::llround(1e9 / rate_hz));
   }
-  if (t_ns.size() < 2) {
+  if (times < 2) {
     return make_error(Errc::kInsufficientData,
                       source + ": fewer than 2 samples, cannot estimate the sample rate; give it")
         .with_remedy("rate_hz");
   }
-  const TimeNs median = median_interval_ns(t_ns);
+  const TimeNs median = median_of();
   if (median < 10'000 || median > 2 * kNsPerSecond) {
     return make_error(Errc::kCorrupt,
                       source + ": the median interval between samples is " + seconds_text(median) +
@@ -340,64 +421,143 @@ Result<TimeNs> sample_period_ns(const std::vector<TimeNs>& t_ns, double rate_hz,
   return median;
 }
 
-Result<std::vector<ImuSample>> pair_accel_gyro(const TriadSeries& accel, const TriadSeries& gyro,
-                                               TimeNs period_ns, PairingStats* stats) {
-  PairingStats local;
-  PairingStats& st = stats ? *stats : local;
-  st = {};
-  std::vector<ImuSample> samples;
-  if (accel.t_ns.empty() || gyro.t_ns.empty()) return samples;
-  const TimeNs half = period_ns / 2;
-  // Common span: rows further than half a period outside the other file's span are dropped.
-  std::size_t a0 = 0, a1 = accel.t_ns.size(), g0 = 0, g1 = gyro.t_ns.size();
-  while (a0 < a1 && accel.t_ns[a0] <= gyro.t_ns.front() - half) ++a0;
-  while (a1 > a0 && accel.t_ns[a1 - 1] >= gyro.t_ns.back() + half) --a1;
-  while (g0 < g1 && gyro.t_ns[g0] <= accel.t_ns.front() - half) ++g0;
-  while (g1 > g0 && gyro.t_ns[g1 - 1] >= accel.t_ns.back() + half) --g1;
-  st.dropped_accel = static_cast<int>(accel.t_ns.size() - (a1 - a0));
-  st.dropped_gyro = static_cast<int>(gyro.t_ns.size() - (g1 - g0));
-  if (a0 == a1 || g0 == g1) {
-    return make_error(Errc::kInsufficientData,
-                      accel.source + " (" + seconds_text(accel.t_ns.front()) + " .. " +
-                          seconds_text(accel.t_ns.back()) + ") and " + gyro.source + " (" +
-                          seconds_text(gyro.t_ns.front()) + " .. " + seconds_text(gyro.t_ns.back()) +
-                          ") do not overlap in time: are they from the same recording?");
+}  // namespace
+
+Result<TimeNs> sample_period_ns(const IntervalMedian& intervals, double rate_hz, const std::string& source,
+                                const std::string& time_hint) {
+  return period_from(
+      intervals.times(), [&intervals] { return intervals.median(); }, rate_hz, source, time_hint);
+}
+
+Result<TimeNs> sample_period_ns(const std::vector<TimeNs>& t_ns, double rate_hz, const std::string& source,
+                                const std::string& time_hint) {
+  return period_from(
+      static_cast<std::int64_t>(t_ns.size()), [&t_ns] { return median_interval_ns(t_ns); }, rate_hz, source,
+      time_hint);
+}
+
+namespace {
+
+std::string where(const std::string& source, const TriadRow& row) {
+  return source + ":" + std::to_string(row.line) + " (t = " + seconds_text(row.t_ns) + ")";
+}
+
+}  // namespace
+
+TriadPairer::TriadPairer(TriadSource& accel, TriadSpan accel_span, TriadSource& gyro, TriadSpan gyro_span,
+                         TimeNs period_ns)
+    : accel_(accel),
+      gyro_(gyro),
+      accel_span_(std::move(accel_span)),
+      gyro_span_(std::move(gyro_span)),
+      half_(period_ns / 2) {}
+
+// Rows further than half a period outside the other file's span are dropped: the first row of
+// `source` inside it, or false at the end of the file.
+Result<bool> TriadPairer::next_kept(TriadSource& source, const TriadSpan& other, std::int64_t* kept,
+                                    TriadRow& row) {
+  while (true) {
+    auto more = source.next(row);
+    if (!more.ok()) return more.error();
+    if (!*more) return false;
+    if (row.t_ns <= other.first_ns - half_ || row.t_ns >= other.last_ns + half_) continue;
+    ++*kept;
+    return true;
   }
-  const auto where = [](const TriadSeries& s, std::size_t i) {
-    return s.source + ":" + std::to_string(s.line[i]) + " (t = " + seconds_text(s.t_ns[i]) + ")";
-  };
+}
+
+Error TriadPairer::no_overlap() const {
+  return make_error(Errc::kInsufficientData,
+                    accel_span_.source + " (" + seconds_text(accel_span_.first_ns) + " .. " +
+                        seconds_text(accel_span_.last_ns) + ") and " + gyro_span_.source + " (" +
+                        seconds_text(gyro_span_.first_ns) + " .. " + seconds_text(gyro_span_.last_ns) +
+                        ") do not overlap in time: are they from the same recording?");
+}
+
+Result<bool> TriadPairer::next(ImuSample& sample) {
+  if (done_) return false;
+  if (accel_span_.rows == 0 || gyro_span_.rows == 0) {
+    done_ = true;
+    return false;
+  }
   const std::string advice =
       "; accelerometer and gyroscope rows must come from the same sampling instants (pairing tolerance is "
-      "half "
-      "the sample period, " +
-      seconds_text(half) + "): resample one file, or give the sample rate if the estimated one is wrong";
-  samples.reserve(a1 - a0);
-  std::size_t j = g0;
-  for (std::size_t i = a0; i < a1; ++i) {
-    const TimeNs t = accel.t_ns[i];
-    if (j < g1 && gyro.t_ns[j] <= t - half) {
-      return make_error(Errc::kCorrupt, "no accelerometer row pairs with " + where(gyro, j) +
-                                            "; nearest is " + where(accel, i) + advice);
-    }
-    if (j >= g1 || std::llabs(gyro.t_ns[j] - t) >= half) {
-      std::string nearest = j < g1 ? "; nearest gyroscope row is " + where(gyro, j) : "";
-      return make_error(Errc::kCorrupt, "no gyroscope row pairs with " + where(accel, i) + nearest + advice);
-    }
-    if (gyro.t_ns[j] == t) {
-      ++st.exact;
+      "half the sample period, " +
+      seconds_text(half_) + "): resample one file, or give the sample rate if the estimated one is wrong";
+  TriadRow a;
+  auto more = next_kept(accel_, gyro_span_, &accel_kept_, a);
+  if (!more.ok()) return more.error();
+  if (!gyro_row_ && !gyro_done_) {
+    TriadRow g;
+    auto gyro_more = next_kept(gyro_, accel_span_, &gyro_kept_, g);
+    if (!gyro_more.ok()) return gyro_more.error();
+    if (*gyro_more) {
+      gyro_row_ = g;
     } else {
-      ++st.nearest;
+      gyro_done_ = true;
     }
-    ImuSample s;
-    s.t_ns = t;
-    s.accel = accel.xyz[i];
-    s.gyro = gyro.xyz[j];
+  }
+  if (!*more) {
+    done_ = true;
+    if (accel_kept_ == 0 || (gyro_done_ && gyro_kept_ == 0)) return no_overlap();
+    if (gyro_row_) {
+      return make_error(Errc::kCorrupt,
+                        "no accelerometer row pairs with " + where(gyro_span_.source, *gyro_row_) + advice);
+    }
+    stats_.dropped_accel = static_cast<int>(accel_span_.rows - accel_kept_);
+    stats_.dropped_gyro = static_cast<int>(gyro_span_.rows - gyro_kept_);
+    return false;
+  }
+  if (gyro_done_ && gyro_kept_ == 0) return no_overlap();
+  const TimeNs t = a.t_ns;
+  if (gyro_row_ && gyro_row_->t_ns <= t - half_) {
+    return make_error(Errc::kCorrupt, "no accelerometer row pairs with " +
+                                          where(gyro_span_.source, *gyro_row_) + "; nearest is " +
+                                          where(accel_span_.source, a) + advice);
+  }
+  if (!gyro_row_ || std::llabs(gyro_row_->t_ns - t) >= half_) {
+    const std::string nearest =
+        gyro_row_ ? "; nearest gyroscope row is " + where(gyro_span_.source, *gyro_row_) : "";
+    return make_error(Errc::kCorrupt,
+                      "no gyroscope row pairs with " + where(accel_span_.source, a) + nearest + advice);
+  }
+  if (gyro_row_->t_ns == t) {
+    ++stats_.exact;
+  } else {
+    ++stats_.nearest;
+  }
+  sample = ImuSample{};
+  sample.t_ns = t;
+  sample.accel = a.xyz;
+  sample.gyro = gyro_row_->xyz;
+  gyro_row_.reset();
+  return true;
+}
+
+Result<std::vector<ImuSample>> pair_accel_gyro(const TriadSeries& accel, const TriadSeries& gyro,
+                                               TimeNs period_ns, PairingStats* stats) {
+  const auto span = [](const TriadSeries& s) {
+    TriadSpan out;
+    out.source = s.source;
+    out.rows = static_cast<std::int64_t>(s.t_ns.size());
+    if (!s.t_ns.empty()) {
+      out.first_ns = s.t_ns.front();
+      out.last_ns = s.t_ns.back();
+    }
+    return out;
+  };
+  TriadSeriesSource accel_rows(accel), gyro_rows(gyro);
+  TriadPairer pairer(accel_rows, span(accel), gyro_rows, span(gyro), period_ns);
+  std::vector<ImuSample> samples;
+  samples.reserve(accel.t_ns.size());
+  ImuSample s;
+  while (true) {
+    auto more = pairer.next(s);
+    if (!more.ok()) return more.error();
+    if (!*more) break;
     samples.push_back(s);
-    ++j;
   }
-  if (j < g1) {
-    return make_error(Errc::kCorrupt, "no accelerometer row pairs with " + where(gyro, j) + advice);
-  }
+  if (stats) *stats = pairer.stats();
   return samples;
 }
 
@@ -456,14 +616,15 @@ Result<CsvColumns> parse_csv_columns(const std::string& spec) {
 
 namespace {
 
-Result<std::vector<ImuSample>> parse_csv(Lines& lines, const std::string& source, const CsvFormat& format,
-                                         const ProgressFn& progress) {
+Status csv_rows(Lines& lines, const std::string& source, const CsvFormat& format, const ProgressFn& progress,
+                const std::function<Status(const ImuSample&)>& visit) {
   const CsvColumns& c = format.columns;
   const std::pair<const char*, int> mapped[] = {{"t", c.t},   {"ax", c.ax}, {"ay", c.ay}, {"az", c.az},
                                                 {"gx", c.gx}, {"gy", c.gy}, {"gz", c.gz}, {"temp", c.temp}};
   int max_column = 0;
   for (const auto& [name, index] : mapped) max_column = std::max(max_column, index);
-  std::vector<ImuSample> samples;
+  std::int64_t rows = 0;
+  TimeNs prev_t = 0;
   std::string_view line;
   std::vector<std::string_view> fields;
   int prev_line = 0;
@@ -473,7 +634,7 @@ Result<std::vector<ImuSample>> parse_csv(Lines& lines, const std::string& source
     const std::string_view content = trim(line);
     if (content.empty() || content.front() == '#') continue;
     split_delimited(content, format.delimiter, fields);
-    const bool first_row = samples.empty();
+    const bool first_row = rows == 0;
     const bool maybe_header = first_row && format.skip_header == 0;
     const std::string header_hint = maybe_header ? " (if this line is a header, skip it)" : "";
     if (static_cast<int>(fields.size()) <= max_column) {
@@ -514,16 +675,25 @@ Result<std::vector<ImuSample>> parse_csv(Lines& lines, const std::string& source
       if (n == "gz") s.gyro.z() = *v;
       if (n == "temp") s.temperature = *v;
     }
-    if (!samples.empty()) {
-      if (auto e = check_increasing(source, samples.back().t_ns, prev_line, s.t_ns, lines.number()))
-        return *e;
-    }
+    if (auto e = check_increasing(source, prev_t, prev_line, s.t_ns, lines.number())) return *e;
+    prev_t = s.t_ns;
     prev_line = lines.number();
-    samples.push_back(s);
+    ++rows;
+    IMUCAL_TRY(visit(s));
   }
   if (auto e = lines.error(source)) return *e;
   report_progress(progress, 1.0, 1.0);
-  if (samples.empty()) return make_error(Errc::kInsufficientData, source + ": no data rows");
+  if (rows == 0) return make_error(Errc::kInsufficientData, source + ": no data rows");
+  return {};
+}
+
+Result<std::vector<ImuSample>> parse_csv(Lines& lines, const std::string& source, const CsvFormat& format,
+                                         const ProgressFn& progress) {
+  std::vector<ImuSample> samples;
+  IMUCAL_TRY(csv_rows(lines, source, format, progress, [&samples](const ImuSample& s) {
+    samples.push_back(s);
+    return Status{};
+  }));
   return samples;
 }
 
@@ -543,14 +713,38 @@ Result<std::vector<ImuSample>> parse_imu_csv_file(const std::string& path, const
   return parse_csv(lines, path, format, progress);
 }
 
+Status for_each_csv_sample(const std::string& path, const CsvFormat& format,
+                           const std::function<Status(const ImuSample&)>& visit, const ProgressFn& progress) {
+  auto reader = TextLineReader::open(path);
+  if (!reader.ok()) return reader.error();
+  Lines lines(**reader);
+  return csv_rows(lines, path, format, progress, visit);
+}
+
+void UnitCheck::add(const Eigen::Vector3d& accel) {
+  if (seen_++ % stride_ != 0) return;
+  kept_.push_back(accel);
+  // At most 40000: every other one goes, and from now on every (2 stride)-th is kept.
+  if (kept_.size() == 40000) {
+    for (std::size_t i = 0; i < 20000; ++i) kept_[i] = kept_[2 * i];
+    kept_.resize(20000);
+    stride_ *= 2;
+  }
+}
+
 Status check_units(const std::vector<ImuSample>& samples, ImuUnits units, const std::string& source) {
-  if (samples.empty()) return {};
-  // At most ~20000 evenly spaced samples: the median is robust and this stays cheap.
-  const std::size_t step = std::max<std::size_t>(1, samples.size() / 20000);
+  UnitCheck check;
+  for (const auto& s : samples) check.add(s.accel);
+  return check.check(units, source);
+}
+
+Status UnitCheck::check(ImuUnits units, const std::string& source) const {
+  if (kept_.empty()) return {};
+  // An evenly spaced subset: the median is robust and this stays cheap.
   std::vector<double> norms;
+  norms.reserve(kept_.size());
   std::size_t components = 0, non_integral = 0;
-  for (std::size_t i = 0; i < samples.size(); i += step) {
-    const Eigen::Vector3d& a = samples[i].accel;
+  for (const Eigen::Vector3d& a : kept_) {
     norms.push_back(a.norm());
     for (int k = 0; k < 3; ++k) {
       ++components;
@@ -596,8 +790,9 @@ Status check_units(const std::vector<ImuSample>& samples, ImuUnits units, const 
 
 namespace {
 
-Result<std::vector<ImuSample>> parse_euroc_imu(Lines& lines, const std::string& source) {
-  std::vector<ImuSample> samples;
+Status euroc_imu_rows(Lines& lines, const std::string& source,
+                      const std::function<Status(const ImuSample&)>& visit) {
+  TimeNs prev_t = 0;
   std::string_view line;
   std::vector<std::string_view> fields;
   static constexpr const char* kNames[] = {"timestamp [ns]", "w_RS_S_x", "w_RS_S_y", "w_RS_S_z",
@@ -637,14 +832,21 @@ Result<std::vector<ImuSample>> parse_euroc_imu(Lines& lines, const std::string& 
         s.accel[k - 3] = *v;
       }
     }
-    if (!samples.empty()) {
-      if (auto e = check_increasing(source, samples.back().t_ns, prev_line, s.t_ns, lines.number()))
-        return *e;
-    }
+    if (auto e = check_increasing(source, prev_t, prev_line, s.t_ns, lines.number())) return *e;
+    prev_t = s.t_ns;
     prev_line = lines.number();
-    samples.push_back(s);
+    IMUCAL_TRY(visit(s));
   }
   if (auto e = lines.error(source)) return *e;
+  return {};
+}
+
+Result<std::vector<ImuSample>> parse_euroc_imu(Lines& lines, const std::string& source) {
+  std::vector<ImuSample> samples;
+  IMUCAL_TRY(euroc_imu_rows(lines, source, [&samples](const ImuSample& s) {
+    samples.push_back(s);
+    return Status{};
+  }));
   return samples;
 }
 
@@ -660,6 +862,14 @@ Result<std::vector<ImuSample>> parse_euroc_imu_csv_file(const std::string& path)
   if (!reader.ok()) return reader.error();
   Lines lines(**reader);
   return parse_euroc_imu(lines, path);
+}
+
+Status for_each_euroc_imu_sample(const std::string& path,
+                                 const std::function<Status(const ImuSample&)>& visit) {
+  auto reader = TextLineReader::open(path);
+  if (!reader.ok()) return reader.error();
+  Lines lines(**reader);
+  return euroc_imu_rows(lines, path, visit);
 }
 
 Result<std::vector<EurocImageRow>> parse_euroc_camera_csv(std::string_view text, const std::string& source) {

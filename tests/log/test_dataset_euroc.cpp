@@ -223,6 +223,28 @@ TEST(DatasetEuroc, MissingImageFailsWithLineAndLeavesNothing) {
   EXPECT_TRUE(partial_files(dir).empty());
 }
 
+// Above OutputOptions::in_memory_bytes the IMU files are read twice (checked, then written as
+// they are read again): the same log as when they are held.
+TEST(DatasetEuroc, ReadTwiceInsteadOfHeldTheSameLog) {
+  const fs::path dir = test::scratch_dir();
+  const SyntheticDataset d = write_dataset(dir / "in");
+  auto held = import_euroc((dir / "in").string(), (dir / "held.imulog").string(), {});
+  ASSERT_TRUE(held.ok()) << held.error().message;
+  OutputOptions streamed;
+  streamed.in_memory_bytes = 0;
+  auto twice = import_euroc((dir / "in").string(), (dir / "twice.imulog").string(), streamed);
+  ASSERT_TRUE(twice.ok()) << twice.error().message;
+  EXPECT_EQ(twice->imu_samples, held->imu_samples);
+  EXPECT_EQ(twice->t_first_ns, held->t_first_ns);
+  EXPECT_EQ(twice->t_last_ns, held->t_last_ns);
+  const LogContents a = read_contents((dir / "held.imulog").string());
+  const LogContents b = read_contents((dir / "twice.imulog").string());
+  ASSERT_EQ(b.imu.at("imu0").size(), d.imu.size());
+  for (std::size_t i = 0; i < d.imu.size(); ++i) EXPECT_TRUE(same_sample(b.imu.at("imu0")[i], d.imu[i])) << i;
+  EXPECT_EQ(a.imu_info.at("imu0").rate_hz, b.imu_info.at("imu0").rate_hz);
+  EXPECT_EQ(a.frames.at("cam0").size(), b.frames.at("cam0").size());
+}
+
 TEST(DatasetEuroc, MalformedCsvNamesFileAndLine) {
   const fs::path dir = test::scratch_dir();
   write_dataset(dir / "in");

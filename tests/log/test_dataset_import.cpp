@@ -150,6 +150,109 @@ TEST(DatasetAscii, UnpairableFilesAndMalformedRows) {
   EXPECT_FALSE(fs::exists(dir / "x.imulog"));
 }
 
+/// Imports read twice instead of held (OutputOptions::in_memory_bytes = 0).
+OutputOptions streamed() {
+  OutputOptions o;
+  o.in_memory_bytes = 0;
+  return o;
+}
+
+void expect_same_log(const std::string& held, const std::string& streamed_log) {
+  const ImportedLog a = read_imported(held), b = read_imported(streamed_log);
+  EXPECT_EQ(a.info.rate_hz, b.info.rate_hz);
+  EXPECT_EQ(a.info.units, b.info.units);
+  ASSERT_EQ(a.samples.size(), b.samples.size());
+  for (std::size_t i = 0; i < a.samples.size(); ++i) {
+    EXPECT_EQ(a.samples[i].t_ns, b.samples[i].t_ns) << i;
+    EXPECT_EQ(a.samples[i].accel, b.samples[i].accel) << i;
+    EXPECT_EQ(a.samples[i].gyro, b.samples[i].gyro) << i;
+    if (a.samples[i].t_ns != b.samples[i].t_ns) break;
+  }
+}
+
+// Inputs above OutputOptions::in_memory_bytes are read twice (checked, then paired and written as
+// they are read again), so memory does not grow with them: the log, the summary and every
+// refusal are the same as when the rows are held.
+TEST(DatasetAscii, ReadTwiceInsteadOfHeldTheSameLogAndTheSameRefusals) {
+  const fs::path dir = test::scratch_dir();
+  // Jittered gyro times (nearest pairing), and rows outside the common span at both ends.
+  write_raw_pair(dir, 20000, 0.004);
+  std::string acc = test::read_file((dir / "acc.txt").string());
+  test::write_file(dir / "acc.txt", "9.95 1 2 3\n" + acc + "210.5 1 2 3\n");
+  AsciiImport in;
+  in.accel_path = (dir / "acc.txt").string();
+  in.gyro_path = (dir / "gyr.txt").string();
+  in.units = ImuUnits::kRaw;
+  auto held = import_ascii(in, (dir / "held.imulog").string(), {});
+  ASSERT_TRUE(held.ok()) << held.error().message;
+  std::vector<double> fractions;
+  OutputOptions options = streamed();
+  options.progress = [&fractions](double f) { fractions.push_back(f); };
+  auto twice = import_ascii(in, (dir / "twice.imulog").string(), options);
+  ASSERT_TRUE(twice.ok()) << twice.error().message;
+  EXPECT_EQ(twice->imu_samples, 20000);
+  EXPECT_EQ(twice->imu_samples, held->imu_samples);
+  EXPECT_EQ(twice->t_first_ns, held->t_first_ns);
+  EXPECT_EQ(twice->t_last_ns, held->t_last_ns);
+  EXPECT_EQ(twice->notes, held->notes);
+  EXPECT_THAT(twice->notes[0], HasSubstr("10000 rows paired with the nearest"));
+  EXPECT_THAT(twice->notes[1], HasSubstr("dropped 2 accelerometer and 0 gyroscope rows"));
+  expect_same_log((dir / "held.imulog").string(), (dir / "twice.imulog").string());
+  ASSERT_FALSE(fractions.empty());
+  EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
+  EXPECT_DOUBLE_EQ(fractions.back(), 1.0);
+
+  // The refusals: a row without a partner, a malformed row, raw counts called SI.
+  const auto same_refusal = [&](const AsciiImport& bad, const std::string& what) {
+    auto a = import_ascii(bad, (dir / "x.imulog").string(), {});
+    auto b = import_ascii(bad, (dir / "x.imulog").string(), streamed());
+    ASSERT_FALSE(a.ok()) << what;
+    ASSERT_FALSE(b.ok()) << what;
+    EXPECT_EQ(a.error().message, b.error().message) << what;
+    EXPECT_EQ(a.error().code, b.error().code) << what;
+    EXPECT_FALSE(fs::exists(dir / "x.imulog")) << what;
+  };
+  write_raw_pair(dir, 3000, 0.006);
+  same_refusal(in, "unpairable");
+  write_raw_pair(dir, 3000);
+  test::write_file(dir / "gyr.txt", test::read_file((dir / "gyr.txt").string()) + "40.0 1 2\n");
+  same_refusal(in, "malformed");
+  write_raw_pair(dir, 3000);
+  AsciiImport si = in;
+  si.units = ImuUnits::kSi;
+  same_refusal(si, "units");
+  test::write_file(dir / "gyr.txt", "500 1 2 3\n501 1 2 3\n");
+  same_refusal(in, "no overlap");
+}
+
+TEST(DatasetCsvImport, ReadTwiceInsteadOfHeldTheSameLog) {
+  const fs::path dir = test::scratch_dir();
+  std::string csv = "t_ns,ax,ay,az,gx,gy,gz\n";
+  for (int i = 0; i < 30000; ++i) {
+    csv += std::to_string(1'000'000'000 + 2'500'000LL * i + (i % 3) * 1000) + ",0.1,-0.2," +
+           std::to_string(9.8 + 0.001 * (i % 11)) + ",0.01,0.02,0.03\n";
+  }
+  test::write_file(dir / "d.csv", csv);
+  CsvImport in;
+  in.path = (dir / "d.csv").string();
+  in.format.columns = *parse_csv_columns("t=0,ax=1,ay=2,az=3,gx=4,gy=5,gz=6");
+  in.format.time_unit = TimeUnit::kNs;
+  in.format.skip_header = 1;
+  auto held = import_csv(in, (dir / "held.imulog").string(), {});
+  ASSERT_TRUE(held.ok()) << held.error().message;
+  auto twice = import_csv(in, (dir / "twice.imulog").string(), streamed());
+  ASSERT_TRUE(twice.ok()) << twice.error().message;
+  EXPECT_EQ(twice->imu_samples, 30000);
+  EXPECT_EQ(twice->rate_hz, held->rate_hz);
+  EXPECT_EQ(twice->rate_hz, 1e9 / 2'501'000.0);  // the median interval, jitter included
+  expect_same_log((dir / "held.imulog").string(), (dir / "twice.imulog").string());
+  in.format.time_unit = TimeUnit::kMs;  // nanoseconds read as milliseconds: 2500 s apart
+  auto wrong = import_csv(in, (dir / "w.imulog").string(), streamed());
+  ASSERT_FALSE(wrong.ok());
+  EXPECT_TRUE(has_remedy(wrong.error(), "time_unit")) << wrong.error().message;
+  EXPECT_FALSE(fs::exists(dir / "w.imulog"));
+}
+
 TEST(DatasetCsvImport, ColumnMappingTimeUnitAndTemperature) {
   const fs::path dir = test::scratch_dir();
   std::string csv = "time_us,ax,ay,az,gx,gy,gz,temp_raw\n";

@@ -228,6 +228,50 @@ std::vector<ImuSample> at_rest(const Eigen::Vector3d& a, bool integral) {
   return s;
 }
 
+// The median interval counted one time at a time equals the one of the whole series (the upper
+// median for an even count), for regular, jittered and gapped times.
+TEST(DatasetPairing, IntervalMedianFedOneTimeAtATimeIsTheSeriesMedian) {
+  std::mt19937_64 rng(7);
+  for (int trial = 0; trial < 50; ++trial) {
+    std::uniform_int_distribution<int> length(0, 400), jitter(-3, 3), gap(0, 30);
+    std::vector<TimeNs> t;
+    TimeNs now = 1'000;
+    for (int i = length(rng); i > 0; --i) {
+      now += 100 + jitter(rng) + (gap(rng) == 0 ? 5000 : 0);
+      t.push_back(now);
+    }
+    IntervalMedian m;
+    for (const TimeNs x : t) m.add(x);
+    EXPECT_EQ(m.times(), static_cast<std::int64_t>(t.size()));
+    EXPECT_EQ(m.median(), median_interval_ns(t)) << trial;
+    auto from_vector = sample_period_ns(t, 0.0, "a.txt", "the time unit");
+    auto from_counts = sample_period_ns(m, 0.0, "a.txt", "the time unit");
+    ASSERT_EQ(from_vector.ok(), from_counts.ok()) << trial;
+    if (from_vector.ok()) {
+      EXPECT_EQ(*from_vector, *from_counts);
+    } else {
+      EXPECT_EQ(from_vector.error().message, from_counts.error().message);
+    }
+  }
+}
+
+// The unit check fed one sample at a time keeps an evenly spaced subset (every 2^k-th) of
+// 20000 to 40000: a long recording of raw counts called SI is still refused, a few odd samples
+// do not move its median.
+TEST(DatasetUnits, TheStreamedCheckKeepsAnEvenlySpacedSubset) {
+  UnitCheck counts, si;
+  for (int i = 0; i < 250'000; ++i) {
+    counts.add(i % 1000 == 0 ? Eigen::Vector3d(0.1, 0.2, 9.8) : Eigen::Vector3d(10, -20, 16384 + i % 7));
+    si.add(i % 1000 == 0 ? Eigen::Vector3d(0, 0, 16384) : Eigen::Vector3d(0.1, 0.2, 9.79 + 1e-6 * (i % 5)));
+  }
+  EXPECT_TRUE(counts.check(ImuUnits::kRaw, "f").ok());
+  auto wrong = counts.check(ImuUnits::kSi, "f");
+  ASSERT_FALSE(wrong.ok());
+  EXPECT_TRUE(has_remedy(wrong.error(), "units", "raw"));
+  EXPECT_TRUE(si.check(ImuUnits::kSi, "f").ok());
+  EXPECT_FALSE(si.check(ImuUnits::kRaw, "f").ok());
+}
+
 TEST(DatasetUnits, DetectsRawCountsImportedAsSiAndViceVersa) {
   auto raw = at_rest({0, 0, 16384}, true);
   auto si = at_rest({0.1, 0.2, 9.79}, false);
