@@ -172,7 +172,11 @@ class IntervalMedian {
   TimeNs median() const;
 
  private:
+  // Equal intervals in a row are counted here before they go into the map (most of a sampled
+  // signal's are equal).
   std::map<TimeNs, std::int64_t> counts_;
+  TimeNs run_interval_ = 0;
+  std::int64_t run_length_ = 0;
   TimeNs last_ = 0;
   std::int64_t times_ = 0;
 };

@@ -380,19 +380,29 @@ Result<TriadSeries> parse_triad_file(const std::string& path, const ProgressFn& 
 }
 
 void IntervalMedian::add(TimeNs t_ns) {
-  if (times_++ > 0) ++counts_[t_ns - last_];
+  if (times_++ > 0) {
+    const TimeNs interval = t_ns - last_;
+    if (run_length_ > 0 && interval != run_interval_) {
+      counts_[run_interval_] += run_length_;
+      run_length_ = 0;
+    }
+    run_interval_ = interval;
+    ++run_length_;
+  }
   last_ = t_ns;
 }
 
 TimeNs IntervalMedian::median() const {
   if (times_ < 2) return 0;
+  std::map<TimeNs, std::int64_t> counts = counts_;  // few entries
+  if (run_length_ > 0) counts[run_interval_] += run_length_;
   const std::int64_t upper_middle = (times_ - 1) / 2;  // 0-based, of times_ - 1 intervals
   std::int64_t seen = 0;
-  for (const auto& [interval, count] : counts_) {
+  for (const auto& [interval, count] : counts) {
     seen += count;
     if (seen > upper_middle) return interval;
   }
-  return counts_.rbegin()->first;
+  return counts.rbegin()->first;
 }
 
 namespace {
@@ -480,10 +490,13 @@ Result<bool> TriadPairer::next(ImuSample& sample) {
     done_ = true;
     return false;
   }
-  const std::string advice =
-      "; accelerometer and gyroscope rows must come from the same sampling instants (pairing tolerance is "
-      "half the sample period, " +
-      seconds_text(half_) + "): resample one file, or give the sample rate if the estimated one is wrong";
+  // Built only for an error: this runs once per sample.
+  const auto advice = [this] {
+    return "; accelerometer and gyroscope rows must come from the same sampling instants (pairing tolerance "
+           "is half the sample period, " +
+           seconds_text(half_) +
+           "): resample one file, or give the sample rate if the estimated one is wrong";
+  };
   TriadRow a;
   auto more = next_kept(accel_, gyro_span_, &accel_kept_, a);
   if (!more.ok()) return more.error();
@@ -502,7 +515,7 @@ Result<bool> TriadPairer::next(ImuSample& sample) {
     if (accel_kept_ == 0 || (gyro_done_ && gyro_kept_ == 0)) return no_overlap();
     if (gyro_row_) {
       return make_error(Errc::kCorrupt,
-                        "no accelerometer row pairs with " + where(gyro_span_.source, *gyro_row_) + advice);
+                        "no accelerometer row pairs with " + where(gyro_span_.source, *gyro_row_) + advice());
     }
     stats_.dropped_accel = static_cast<int>(accel_span_.rows - accel_kept_);
     stats_.dropped_gyro = static_cast<int>(gyro_span_.rows - gyro_kept_);
@@ -513,13 +526,13 @@ Result<bool> TriadPairer::next(ImuSample& sample) {
   if (gyro_row_ && gyro_row_->t_ns <= t - half_) {
     return make_error(Errc::kCorrupt, "no accelerometer row pairs with " +
                                           where(gyro_span_.source, *gyro_row_) + "; nearest is " +
-                                          where(accel_span_.source, a) + advice);
+                                          where(accel_span_.source, a) + advice());
   }
   if (!gyro_row_ || std::llabs(gyro_row_->t_ns - t) >= half_) {
     const std::string nearest =
         gyro_row_ ? "; nearest gyroscope row is " + where(gyro_span_.source, *gyro_row_) : "";
     return make_error(Errc::kCorrupt,
-                      "no gyroscope row pairs with " + where(accel_span_.source, a) + nearest + advice);
+                      "no gyroscope row pairs with " + where(accel_span_.source, a) + nearest + advice());
   }
   if (gyro_row_->t_ns == t) {
     ++stats_.exact;
