@@ -159,6 +159,35 @@ Result<std::unique_ptr<TriadSource>> reread(const TriadScan& scan) {
   return std::unique_ptr<TriadSource>(std::move(*reader));
 }
 
+/// Passes rows on and counts them; finish() reads what is left, so that a file that changed
+/// between the two readings is found.
+class CountingSource final : public TriadSource {
+ public:
+  explicit CountingSource(TriadSource& inner) : inner_(inner) {}
+  Result<bool> next(TriadRow& row) override {
+    auto more = inner_.next(row);
+    if (more.ok() && *more) ++rows_;
+    return more;
+  }
+  /// Reads the rest of the rows; an error when there are not as many as the first reading found.
+  Status finish(const TriadSpan& span) {
+    TriadRow row;
+    while (true) {
+      auto more = next(row);
+      if (!more.ok()) return more.error();
+      if (!*more) break;
+    }
+    if (rows_ == span.rows) return {};
+    return make_error(Errc::kCorrupt, span.source + " changed while it was imported (" +
+                                          std::to_string(span.rows) + " rows, then " + std::to_string(rows_) +
+                                          "): import it again");
+  }
+
+ private:
+  TriadSource& inner_;
+  std::int64_t rows_ = 0;
+};
+
 void add_raw_note(const ImuStreamInfo& info, ImportSummary* summary) {
   if (info.units != ImuUnits::kRaw) return;
   summary->notes.push_back("raw counts kept; nominal accelerometer conversion " + describe(info.accel) +
@@ -216,7 +245,8 @@ Result<ImportSummary> import_ascii(const AsciiImport& in, const std::string& out
   if (!accel_rows.ok()) return accel_rows.error();
   auto gyro_rows = reread(*gyro);
   if (!gyro_rows.ok()) return gyro_rows.error();
-  TriadPairer pairer(**accel_rows, accel->span, **gyro_rows, gyro->span, *period);
+  CountingSource accel_counted(**accel_rows), gyro_counted(**gyro_rows);
+  TriadPairer pairer(accel_counted, accel->span, gyro_counted, gyro->span, *period);
   auto sink = ImuLogSink::create(*out, info, source, static_cast<double>(accel->span.rows),
                                  phase(options.progress, hold ? 0.6 : 0.5, hold ? 0.4 : 0.5));
   if (!sink.ok()) return sink.error();
@@ -227,6 +257,8 @@ Result<ImportSummary> import_ascii(const AsciiImport& in, const std::string& out
     if (!*more) break;
     IMUCAL_TRY((*sink)->add(sample));
   }
+  IMUCAL_TRY(accel_counted.finish(accel->span));
+  IMUCAL_TRY(gyro_counted.finish(gyro->span));
   if ((*sink)->count() < 2) {
     return make_error(Errc::kInsufficientData, in.accel_path + " and " + in.gyro_path +
                                                    ": fewer than 2 paired samples; nothing to import");

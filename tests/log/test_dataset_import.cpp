@@ -223,6 +223,22 @@ TEST(DatasetAscii, ReadTwiceInsteadOfHeldTheSameLogAndTheSameRefusals) {
   same_refusal(si, "units");
   test::write_file(dir / "gyr.txt", "500 1 2 3\n501 1 2 3\n");
   same_refusal(in, "no overlap");
+
+  // Rows appended to a file between the two readings (when the first has ended): refused.
+  write_raw_pair(dir, 3000);
+  OutputOptions growing = streamed();
+  bool appended = false;
+  growing.progress = [&](double f) {
+    if (f < 0.5 || appended) return;
+    appended = true;
+    std::ofstream(dir / "acc.txt", std::ios::app) << "500 1 2 3\n501 1 2 3\n";
+  };
+  auto changed = import_ascii(in, (dir / "x.imulog").string(), growing);
+  ASSERT_TRUE(appended);
+  ASSERT_FALSE(changed.ok());
+  EXPECT_THAT(changed.error().message,
+              HasSubstr("acc.txt changed while it was imported (3000 rows, then 3002)"));
+  EXPECT_FALSE(fs::exists(dir / "x.imulog"));
 }
 
 TEST(DatasetCsvImport, ReadTwiceInsteadOfHeldTheSameLog) {
@@ -246,6 +262,21 @@ TEST(DatasetCsvImport, ReadTwiceInsteadOfHeldTheSameLog) {
   EXPECT_EQ(twice->rate_hz, held->rate_hz);
   EXPECT_EQ(twice->rate_hz, 1e9 / 2'501'000.0);  // the median interval, jitter included
   expect_same_log((dir / "held.imulog").string(), (dir / "twice.imulog").string());
+  // Rows appended between the two readings: refused.
+  OutputOptions growing = streamed();
+  bool appended = false;
+  growing.progress = [&](double f) {
+    if (f < 0.5 || appended) return;
+    appended = true;
+    std::ofstream(dir / "d.csv", std::ios::app) << "900000000000,0.1,-0.2,9.8,0.01,0.02,0.03\n";
+  };
+  auto changed = import_csv(in, (dir / "x.imulog").string(), growing);
+  ASSERT_TRUE(appended);
+  ASSERT_FALSE(changed.ok());
+  EXPECT_THAT(changed.error().message,
+              HasSubstr("changed while it was imported (30000 samples, then 30001)"));
+  EXPECT_FALSE(fs::exists(dir / "x.imulog"));
+
   in.format.time_unit = TimeUnit::kMs;  // nanoseconds read as milliseconds: 2500 s apart
   auto wrong = import_csv(in, (dir / "w.imulog").string(), streamed());
   ASSERT_FALSE(wrong.ok());
