@@ -201,13 +201,9 @@ Result<std::vector<ImuFolder>> read_imu_folders(const fs::path& root, std::uint6
   std::vector<ImuFolder> imus;
   auto folders = sensor_folders(root, "imu");
   if (!folders.ok()) return folders.error();
-  std::uint64_t bytes = 0;
-  for (const auto& [index, folder] : *folders) {
-    std::error_code ec;
-    const auto size = fs::file_size(folder / "data.csv", ec);
-    if (!ec) bytes += size;
-  }
-  const bool hold = bytes <= in_memory_bytes;
+  std::vector<std::string> files;
+  for (const auto& [index, folder] : *folders) files.push_back((folder / "data.csv").string());
+  const bool hold = inputs_fit_in_memory(files, in_memory_bytes);
   for (const auto& [index, folder] : *folders) {
     ImuFolder f;
     f.name = folder.filename().string();
@@ -288,32 +284,14 @@ Status write_imu_folder(SessionLogWriter& w, const ImuFolder& f, ImportSummary& 
   if (!f.sensor.text.empty()) IMUCAL_TRY(w.set_metadata(sensor_yaml_key(f.name), f.sensor.text));
   auto id = w.add_imu_stream(info);
   if (!id.ok()) return id.error();
-  constexpr std::size_t kBatch = 8192;
-  std::vector<ImuSample> batch;
-  batch.reserve(kBatch);
-  std::int64_t written = 0;
-  const auto flush = [&]() -> Status {
-    if (batch.empty()) return {};
-    IMUCAL_TRY(w.append_imu(*id, batch));
-    progress.advance(static_cast<double>(batch.size()));
-    written += static_cast<std::int64_t>(batch.size());
-    batch.clear();
-    return {};
-  };
-  const auto add = [&](const ImuSample& s) -> Status {
-    batch.push_back(s);
-    return batch.size() == kBatch ? flush() : Status{};
-  };
+  ImuBatchWriter batches(w, *id, [&progress](std::size_t n) { progress.advance(static_cast<double>(n)); });
   if (f.samples) {
-    for (const auto& s : *f.samples) IMUCAL_TRY(add(s));
+    for (const auto& s : *f.samples) IMUCAL_TRY(batches.add(s));
   } else {
-    IMUCAL_TRY(for_each_euroc_imu_sample(f.csv, add));
+    IMUCAL_TRY(for_each_euroc_imu_sample(f.csv, [&batches](const ImuSample& s) { return batches.add(s); }));
   }
-  IMUCAL_TRY(flush());
-  if (written != f.count) {
-    return make_error(Errc::kCorrupt, f.csv + " changed while it was imported (" + std::to_string(f.count) +
-                                          " samples, then " + std::to_string(written) + "): import it again");
-  }
+  IMUCAL_TRY(batches.flush());
+  if (batches.count() != f.count) return changed_while_imported(f.csv, f.count, batches.count());
   summary.imu_samples += f.count;
   if (summary.imu_streams++ == 0) {
     summary.rate_hz = info.rate_hz;

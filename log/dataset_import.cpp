@@ -35,19 +35,7 @@ std::string describe(const AxisConversion& c) {
   return s.str();
 }
 
-/// Whether the inputs are small enough to be parsed once and held (OutputOptions::in_memory_bytes).
-bool hold_in_memory(std::initializer_list<std::string> paths, const OutputOptions& options) {
-  std::uint64_t total = 0;
-  for (const auto& path : paths) {
-    std::error_code ec;
-    const auto size = std::filesystem::file_size(path, ec);
-    if (!ec) total += size;
-  }
-  return total <= options.in_memory_bytes;
-}
-
-/// One IMU stream written to a staged session log at `out`'s temporary path, in batches, as the
-/// samples come.
+/// One IMU stream written to a staged session log at `out`'s temporary path as the samples come.
 class ImuLogSink {
  public:
   static Result<std::unique_ptr<ImuLogSink>> create(const PendingOutput& out, const ImuStreamInfo& info,
@@ -61,52 +49,35 @@ class ImuLogSink {
         "import", source.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)));
     auto id = (*writer)->add_imu_stream(info);
     if (!id.ok()) return id.error();
-    auto sink =
-        std::unique_ptr<ImuLogSink>(new ImuLogSink(std::move(*writer), *id, expected, std::move(progress)));
-    sink->batch_.reserve(kBatch);
-    return sink;
+    return std::unique_ptr<ImuLogSink>(
+        new ImuLogSink(std::move(*writer), *id, expected, std::move(progress)));
   }
 
-  Status add(const ImuSample& sample) {
-    if (count_++ == 0) first_ns_ = sample.t_ns;
-    last_ns_ = sample.t_ns;
-    batch_.push_back(sample);
-    return batch_.size() == kBatch ? flush() : Status{};
-  }
+  Status add(const ImuSample& sample) { return batches_.add(sample); }
 
   /// Writes what is left and closes the log (not yet renamed into place).
   Status close() {
-    IMUCAL_TRY(flush());
+    IMUCAL_TRY(batches_.flush());
     IMUCAL_TRY(writer_->close());
     writer_.reset();
     report_progress(progress_, 1.0, 1.0);
     return {};
   }
 
-  std::int64_t count() const { return count_; }
-  TimeNs first_ns() const { return first_ns_; }
-  TimeNs last_ns() const { return last_ns_; }
+  const ImuBatchWriter& samples() const { return batches_; }
 
  private:
-  static constexpr std::size_t kBatch = 8192;
   ImuLogSink(std::unique_ptr<SessionLogWriter> writer, int id, double expected, ProgressFn progress)
-      : writer_(std::move(writer)), id_(id), expected_(expected), progress_(std::move(progress)) {}
-
-  Status flush() {
-    if (batch_.empty()) return {};
-    IMUCAL_TRY(writer_->append_imu(id_, batch_));
-    batch_.clear();
-    report_progress(progress_, static_cast<double>(count_), std::max(expected_, static_cast<double>(count_)));
-    return {};
-  }
+      : writer_(std::move(writer)),
+        progress_(std::move(progress)),
+        batches_(*writer_, id, [this, expected](std::size_t) {
+          const auto done = static_cast<double>(batches_.count());
+          report_progress(progress_, done, std::max(expected, done));
+        }) {}
 
   std::unique_ptr<SessionLogWriter> writer_;
-  int id_;
-  double expected_;
   ProgressFn progress_;
-  std::vector<ImuSample> batch_;
-  std::int64_t count_ = 0;
-  TimeNs first_ns_ = 0, last_ns_ = 0;
+  ImuBatchWriter batches_;
 };
 
 /// Progress over the phases of an import: parse (and check), then write.
@@ -115,8 +86,8 @@ ProgressFn phase(const ProgressFn& progress, double start, double share) {
   return [progress, start, share](double fraction) { progress(start + share * fraction); };
 }
 
-/// What a first reading of a "t x y z" file found: how many rows and their span, the intervals,
-/// the unit check and, when the inputs are small, the rows themselves.
+/// What a first reading of a "t x y z" file found: how many rows and their span, the intervals
+/// and the unit check (of the accelerometer's file) and, when the inputs are small, the rows.
 struct TriadScan {
   TriadSpan span;
   IntervalMedian intervals;
@@ -124,7 +95,8 @@ struct TriadScan {
   std::optional<TriadSeries> rows;
 };
 
-Result<TriadScan> scan_triad_file(const std::string& path, bool hold, const ProgressFn& progress) {
+Result<TriadScan> scan_triad_file(const std::string& path, bool hold, bool checks,
+                                  const ProgressFn& progress) {
   auto reader = TriadRowReader::open(path, progress);
   if (!reader.ok()) return reader.error();
   TriadScan scan;
@@ -140,8 +112,10 @@ Result<TriadScan> scan_triad_file(const std::string& path, bool hold, const Prog
     if (!*more) break;
     if (scan.span.rows++ == 0) scan.span.first_ns = row.t_ns;
     scan.span.last_ns = row.t_ns;
-    scan.intervals.add(row.t_ns);
-    scan.units.add(row.xyz);
+    if (checks) {
+      scan.intervals.add(row.t_ns);
+      scan.units.add(row.xyz);
+    }
     if (hold) {
       scan.rows->t_ns.push_back(row.t_ns);
       scan.rows->xyz.push_back(row.xyz);
@@ -178,9 +152,7 @@ class CountingSource final : public TriadSource {
       if (!*more) break;
     }
     if (rows_ == span.rows) return {};
-    return make_error(Errc::kCorrupt, span.source + " changed while it was imported (" +
-                                          std::to_string(span.rows) + " rows, then " + std::to_string(rows_) +
-                                          "): import it again");
+    return changed_while_imported(span.source, span.rows, rows_);
   }
 
  private:
@@ -196,26 +168,63 @@ void add_raw_note(const ImuStreamInfo& info, ImportSummary* summary) {
 
 ImportSummary summarize(const ImuStreamInfo& info, const ImuLogSink& sink) {
   ImportSummary s;
-  s.imu_samples = sink.count();
+  s.imu_samples = sink.samples().count();
   s.imu_streams = 1;
   s.rate_hz = info.rate_hz;
-  s.t_first_ns = sink.first_ns();
-  s.t_last_ns = sink.last_ns();
+  s.t_first_ns = sink.samples().first_ns();
+  s.t_last_ns = sink.samples().last_ns();
   return s;
 }
 
 }  // namespace
 
+bool inputs_fit_in_memory(const std::vector<std::string>& paths, std::uint64_t in_memory_bytes) {
+  std::uint64_t total = 0;
+  for (const auto& path : paths) {
+    std::error_code ec;
+    const auto size = std::filesystem::file_size(path, ec);
+    if (!ec) total += size;
+  }
+  return total <= in_memory_bytes;
+}
+
+Error changed_while_imported(const std::string& source, std::int64_t first, std::int64_t then) {
+  return make_error(Errc::kCorrupt, source + " changed while it was imported (" + std::to_string(first) +
+                                        " rows, then " + std::to_string(then) + "): import it again");
+}
+
+ImuBatchWriter::ImuBatchWriter(SessionLogWriter& writer, int stream_id,
+                               std::function<void(std::size_t)> on_flush)
+    : writer_(writer), stream_id_(stream_id), on_flush_(std::move(on_flush)) {
+  batch_.reserve(kBatch);
+}
+
+Status ImuBatchWriter::add(const ImuSample& sample) {
+  if (count_++ == 0) first_ns_ = sample.t_ns;
+  last_ns_ = sample.t_ns;
+  batch_.push_back(sample);
+  return batch_.size() == kBatch ? flush() : Status{};
+}
+
+Status ImuBatchWriter::flush() {
+  if (batch_.empty()) return {};
+  IMUCAL_TRY(writer_.append_imu(stream_id_, batch_));
+  const std::size_t n = batch_.size();
+  batch_.clear();
+  if (on_flush_) on_flush_(n);
+  return {};
+}
+
 Result<ImportSummary> import_ascii(const AsciiImport& in, const std::string& out_path,
                                    const OutputOptions& options) {
   auto out = PendingOutput::begin(out_path, PendingOutput::Kind::kFile, options.force);
   if (!out.ok()) return out.error();
-  const bool hold = hold_in_memory({in.accel_path, in.gyro_path}, options);
+  const bool hold = inputs_fit_in_memory({in.accel_path, in.gyro_path}, options.in_memory_bytes);
   // First reading, which checks every line: the files are independent, so the gyroscope's is read
   // on a second thread meanwhile (the accelerometer's progress stands for both).
   auto gyro_scan =
-      std::async(std::launch::async, [&in, hold] { return scan_triad_file(in.gyro_path, hold, {}); });
-  auto accel = scan_triad_file(in.accel_path, hold, phase(options.progress, 0.0, hold ? 0.6 : 0.5));
+      std::async(std::launch::async, [&in, hold] { return scan_triad_file(in.gyro_path, hold, false, {}); });
+  auto accel = scan_triad_file(in.accel_path, hold, true, phase(options.progress, 0.0, hold ? 0.6 : 0.5));
   auto gyro = gyro_scan.get();
   if (!accel.ok()) return accel.error();
   if (!gyro.ok()) return gyro.error();
@@ -259,7 +268,7 @@ Result<ImportSummary> import_ascii(const AsciiImport& in, const std::string& out
   }
   IMUCAL_TRY(accel_counted.finish(accel->span));
   IMUCAL_TRY(gyro_counted.finish(gyro->span));
-  if ((*sink)->count() < 2) {
+  if ((*sink)->samples().count() < 2) {
     return make_error(Errc::kInsufficientData, in.accel_path + " and " + in.gyro_path +
                                                    ": fewer than 2 paired samples; nothing to import");
   }
@@ -287,7 +296,7 @@ Result<ImportSummary> import_csv(const CsvImport& in, const std::string& out_pat
                                  const OutputOptions& options) {
   auto out = PendingOutput::begin(out_path, PendingOutput::Kind::kFile, options.force);
   if (!out.ok()) return out.error();
-  const bool hold = hold_in_memory({in.path}, options);
+  const bool hold = inputs_fit_in_memory({in.path}, options.in_memory_bytes);
   // First reading: every line checked; the intervals and the unit check gathered.
   std::vector<ImuSample> held;
   IntervalMedian intervals;
@@ -337,10 +346,8 @@ Result<ImportSummary> import_csv(const CsvImport& in, const std::string& out_pat
     IMUCAL_TRY(
         for_each_csv_sample(in.path, in.format, [&sink](const ImuSample& s) { return (*sink)->add(s); }));
   }
-  if ((*sink)->count() != intervals.times()) {
-    return make_error(Errc::kCorrupt, in.path + " changed while it was imported (" +
-                                          std::to_string(intervals.times()) + " samples, then " +
-                                          std::to_string((*sink)->count()) + "): import it again");
+  if ((*sink)->samples().count() != intervals.times()) {
+    return changed_while_imported(in.path, intervals.times(), (*sink)->samples().count());
   }
   IMUCAL_TRY((*sink)->close());
   IMUCAL_TRY(out->commit());

@@ -113,8 +113,6 @@ struct TriadSeries {
 /// skipped. Timestamps must increase strictly.
 [[nodiscard]] Result<TriadSeries> parse_triad_text(std::string_view text, const std::string& source,
                                                    const ProgressFn& progress = {});
-/// The same, reading the file at `path` line by line (never whole; read errors are errors).
-[[nodiscard]] Result<TriadSeries> parse_triad_file(const std::string& path, const ProgressFn& progress = {});
 
 /// One "t x y z" row and the line it came from.
 struct TriadRow {
@@ -255,13 +253,8 @@ struct CsvFormat {
 [[nodiscard]] Result<std::vector<ImuSample>> parse_imu_csv(std::string_view text, const std::string& source,
                                                            const CsvFormat& format,
                                                            const ProgressFn& progress = {});
-/// The same, reading the file at `path` line by line.
-[[nodiscard]] Result<std::vector<ImuSample>> parse_imu_csv_file(const std::string& path,
-                                                                const CsvFormat& format,
-                                                                const ProgressFn& progress = {});
-
-/// Reads the CSV at `path` line by line and gives each sample to `visit` (the checks of
-/// parse_imu_csv_file); an error from `visit` ends the reading with it.
+/// Reads the CSV at `path` line by line (never whole; read errors are errors) and gives each
+/// sample to `visit` (the checks of parse_imu_csv); an error from `visit` ends the reading with it.
 [[nodiscard]] Status for_each_csv_sample(const std::string& path, const CsvFormat& format,
                                          const std::function<Status(const ImuSample&)>& visit,
                                          const ProgressFn& progress = {});
@@ -287,6 +280,38 @@ class UnitCheck {
 
 // ---------------------------------------------------------------------------------------------
 // Imports and exports.
+
+/// Whether input files of these sizes together are at most `in_memory_bytes`
+/// (OutputOptions::in_memory_bytes): then they are parsed once and held.
+[[nodiscard]] bool inputs_fit_in_memory(const std::vector<std::string>& paths, std::uint64_t in_memory_bytes);
+
+/// The refusal of an input whose second reading found `then` rows (or samples) where the first
+/// found `first`.
+[[nodiscard]] Error changed_while_imported(const std::string& source, std::int64_t first, std::int64_t then);
+
+class SessionLogWriter;
+
+/// Appends one IMU stream's samples to a session log in batches of 8192 as they come, counting
+/// them and their time span; `on_flush(n)` follows every batch written.
+class ImuBatchWriter {
+ public:
+  ImuBatchWriter(SessionLogWriter& writer, int stream_id, std::function<void(std::size_t)> on_flush = {});
+  [[nodiscard]] Status add(const ImuSample& sample);
+  /// Writes what is left of the last batch.
+  [[nodiscard]] Status flush();
+  std::int64_t count() const { return count_; }
+  TimeNs first_ns() const { return first_ns_; }
+  TimeNs last_ns() const { return last_ns_; }
+
+ private:
+  static constexpr std::size_t kBatch = 8192;
+  SessionLogWriter& writer_;
+  int stream_id_;
+  std::function<void(std::size_t)> on_flush_;
+  std::vector<ImuSample> batch_;
+  std::int64_t count_ = 0;
+  TimeNs first_ns_ = 0, last_ns_ = 0;
+};
 
 struct ImportSummary {
   std::int64_t imu_samples = 0;
@@ -354,9 +379,8 @@ struct EurocImageRow {
 };
 [[nodiscard]] Result<std::vector<ImuSample>> parse_euroc_imu_csv(std::string_view text,
                                                                  const std::string& source);
-[[nodiscard]] Result<std::vector<ImuSample>> parse_euroc_imu_csv_file(const std::string& path);
 /// Reads an EuRoC imuN/data.csv line by line and gives each sample to `visit` (the checks of
-/// parse_euroc_imu_csv_file); an error from `visit` ends the reading with it.
+/// parse_euroc_imu_csv); an error from `visit` ends the reading with it.
 [[nodiscard]] Status for_each_euroc_imu_sample(const std::string& path,
                                                const std::function<Status(const ImuSample&)>& visit);
 [[nodiscard]] Result<std::vector<EurocImageRow>> parse_euroc_camera_csv(std::string_view text,

@@ -373,12 +373,6 @@ Result<TriadSeries> parse_triad_text(std::string_view text, const std::string& s
   return collect_rows(reader, source);
 }
 
-Result<TriadSeries> parse_triad_file(const std::string& path, const ProgressFn& progress) {
-  auto reader = TriadRowReader::open(path, progress);
-  if (!reader.ok()) return reader.error();
-  return collect_rows(**reader, path);
-}
-
 void IntervalMedian::add(TimeNs t_ns) {
   if (times_++ > 0) {
     const TimeNs interval = t_ns - last_;
@@ -718,14 +712,6 @@ Result<std::vector<ImuSample>> parse_imu_csv(std::string_view text, const std::s
   return parse_csv(lines, source, format, progress);
 }
 
-Result<std::vector<ImuSample>> parse_imu_csv_file(const std::string& path, const CsvFormat& format,
-                                                  const ProgressFn& progress) {
-  auto reader = TextLineReader::open(path);
-  if (!reader.ok()) return reader.error();
-  Lines lines(**reader);
-  return parse_csv(lines, path, format, progress);
-}
-
 Status for_each_csv_sample(const std::string& path, const CsvFormat& format,
                            const std::function<Status(const ImuSample&)>& visit, const ProgressFn& progress) {
   auto reader = TextLineReader::open(path);
@@ -868,13 +854,6 @@ Result<std::vector<ImuSample>> parse_euroc_imu(Lines& lines, const std::string& 
 Result<std::vector<ImuSample>> parse_euroc_imu_csv(std::string_view text, const std::string& source) {
   Lines lines(text);
   return parse_euroc_imu(lines, source);
-}
-
-Result<std::vector<ImuSample>> parse_euroc_imu_csv_file(const std::string& path) {
-  auto reader = TextLineReader::open(path);
-  if (!reader.ok()) return reader.error();
-  Lines lines(**reader);
-  return parse_euroc_imu(lines, path);
 }
 
 Status for_each_euroc_imu_sample(const std::string& path,

@@ -157,6 +157,19 @@ OutputOptions streamed() {
   return o;
 }
 
+/// Streamed options that append `rows` to `file` once the first reading has ended (progress 0.5);
+/// `*appended` says whether it happened.
+OutputOptions appending_between_readings(const fs::path& file, std::string rows, bool* appended) {
+  OutputOptions o = streamed();
+  *appended = false;
+  o.progress = [file, rows = std::move(rows), appended](double f) {
+    if (f < 0.5 || *appended) return;
+    *appended = true;
+    std::ofstream(file, std::ios::app) << rows;
+  };
+  return o;
+}
+
 void expect_same_log(const std::string& held, const std::string& streamed_log) {
   const ImportedLog a = read_imported(held), b = read_imported(streamed_log);
   EXPECT_EQ(a.info.rate_hz, b.info.rate_hz);
@@ -226,14 +239,10 @@ TEST(DatasetAscii, ReadTwiceInsteadOfHeldTheSameLogAndTheSameRefusals) {
 
   // Rows appended to a file between the two readings (when the first has ended): refused.
   write_raw_pair(dir, 3000);
-  OutputOptions growing = streamed();
   bool appended = false;
-  growing.progress = [&](double f) {
-    if (f < 0.5 || appended) return;
-    appended = true;
-    std::ofstream(dir / "acc.txt", std::ios::app) << "500 1 2 3\n501 1 2 3\n";
-  };
-  auto changed = import_ascii(in, (dir / "x.imulog").string(), growing);
+  auto changed =
+      import_ascii(in, (dir / "x.imulog").string(),
+                   appending_between_readings(dir / "acc.txt", "500 1 2 3\n501 1 2 3\n", &appended));
   ASSERT_TRUE(appended);
   ASSERT_FALSE(changed.ok());
   EXPECT_THAT(changed.error().message,
@@ -263,18 +272,13 @@ TEST(DatasetCsvImport, ReadTwiceInsteadOfHeldTheSameLog) {
   EXPECT_EQ(twice->rate_hz, 1e9 / 2'501'000.0);  // the median interval, jitter included
   expect_same_log((dir / "held.imulog").string(), (dir / "twice.imulog").string());
   // Rows appended between the two readings: refused.
-  OutputOptions growing = streamed();
   bool appended = false;
-  growing.progress = [&](double f) {
-    if (f < 0.5 || appended) return;
-    appended = true;
-    std::ofstream(dir / "d.csv", std::ios::app) << "900000000000,0.1,-0.2,9.8,0.01,0.02,0.03\n";
-  };
-  auto changed = import_csv(in, (dir / "x.imulog").string(), growing);
+  auto changed = import_csv(
+      in, (dir / "x.imulog").string(),
+      appending_between_readings(dir / "d.csv", "900000000000,0.1,-0.2,9.8,0.01,0.02,0.03\n", &appended));
   ASSERT_TRUE(appended);
   ASSERT_FALSE(changed.ok());
-  EXPECT_THAT(changed.error().message,
-              HasSubstr("changed while it was imported (30000 samples, then 30001)"));
+  EXPECT_THAT(changed.error().message, HasSubstr("changed while it was imported (30000 rows, then 30001)"));
   EXPECT_FALSE(fs::exists(dir / "x.imulog"));
 
   in.format.time_unit = TimeUnit::kMs;  // nanoseconds read as milliseconds: 2500 s apart
@@ -427,13 +431,20 @@ TEST(TextLineReader, LinesAreTheSameAtEveryChunkSize) {
   std::string rows;
   for (int i = 0; i < 5000; ++i) rows += std::to_string(i * 0.01) + " 0.1 -0.2 9.81\r\n";
   std::ofstream(triads, std::ios::binary) << rows;
-  auto from_file = parse_triad_file(triads);
+  auto file = TriadRowReader::open(triads);
+  ASSERT_TRUE(file.ok()) << file.error().message;
+  std::vector<TimeNs> t_ns;
+  std::vector<int> lines;
+  TriadRow row;
+  for (auto more = (*file)->next(row); more.ok() && *more; more = (*file)->next(row)) {
+    t_ns.push_back(row.t_ns);
+    lines.push_back(row.line);
+  }
   auto from_text = parse_triad_text(rows, triads);
-  ASSERT_TRUE(from_file.ok()) << from_file.error().message;
   ASSERT_TRUE(from_text.ok()) << from_text.error().message;
-  EXPECT_EQ(from_file->t_ns, from_text->t_ns);
-  EXPECT_EQ(from_file->line, from_text->line);
-  EXPECT_EQ(from_file->t_ns.size(), 5000u);
+  EXPECT_EQ(t_ns, from_text->t_ns);
+  EXPECT_EQ(lines, from_text->line);
+  EXPECT_EQ(t_ns.size(), 5000u);
 }
 
 TEST(TextLineReader, RefusesWhatIsNotATextFile) {
@@ -449,7 +460,7 @@ TEST(TextLineReader, RefusesWhatIsNotATextFile) {
   EXPECT_EQ((*reader)->error()->code, Errc::kCorrupt);
   EXPECT_THAT((*reader)->error()->message, ::testing::HasSubstr("longer than"));
   EXPECT_EQ((*reader)->offset(), 0u);  // no line was taken from it
-  auto csv = parse_imu_csv_file(binary, CsvFormat{});
+  const Status csv = for_each_csv_sample(binary, CsvFormat{}, [](const ImuSample&) { return Status{}; });
   ASSERT_FALSE(csv.ok());
   EXPECT_THAT(csv.error().message, ::testing::HasSubstr("longer than"));
   // A folder and a FIFO are refused at open, as by read_text_file.
