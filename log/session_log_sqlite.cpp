@@ -972,7 +972,8 @@ Status SqliteSessionLogReader::open() {
   if (!wal.commits_replayed && !live) {
     if (const std::string truncated = truncation_of(path_); !truncated.empty()) note_damage(truncated);
   }
-  const bool wal_missing = wal_mode_without_wal(path_);
+  // A live log's writer has its -wal; and its file must not be opened and closed here (OpenHere).
+  const bool wal_missing = !live && wal_mode_without_wal(path_);
   sqlite3* raw = nullptr;
   const int rc = sqlite3_open_v2(path_.c_str(), &raw, SQLITE_OPEN_READONLY | SQLITE_OPEN_NOMUTEX,
                                  sqlite::strict_vfs_name());
