@@ -2,6 +2,7 @@
 // calib files) on one fixed set of static intervals and motions of a recording, with two figures
 // that need no ground truth; see docs/static-calibration.md, "Checking a calibration".
 
+#include <fmt/printf.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -17,7 +18,6 @@
 #include "app/initial_guess.hpp"
 #include "app/result_writers.hpp"
 #include "app/streams.hpp"
-#include "core/format.hpp"
 #include "daemon/cli/calibrate_group.hpp"
 #include "daemon/cli/command.hpp"
 
@@ -61,9 +61,9 @@ std::vector<app::NamedCalibration> load_calibrations(const CheckCliOptions& o) {
 void print_set(const app::CheckSet& set) {
   auto rel = [&set](TimeNs t) { return ns_to_s(t - set.t_first_ns); };
   std::cout << "  fixed set: " << set.intervals.size() << " static intervals (at least "
-            << format_printf("%.2f", set.options.min_interval_s) << " s, varsigma below "
-            << format_printf("%g", set.options.multiplier) << " x the quiet floor "
-            << format_printf("%.4g", std::sqrt(set.floor_sq)) << "), " << set.transfers.size()
+            << fmt::sprintf("%.2f", set.options.min_interval_s) << " s, varsigma below "
+            << fmt::sprintf("%g", set.options.multiplier) << " x the quiet floor "
+            << fmt::sprintf("%.4g", std::sqrt(set.floor_sq)) << "), " << set.transfers.size()
             << " transfers of " << set.motions << " motions";
   if (set.motions_with_gap + set.motions_with_saturation > 0) {
     std::cout << " (not used: " << set.motions_with_gap << " with a gap or reset, "
@@ -72,13 +72,13 @@ void print_set(const app::CheckSet& set) {
   std::cout << "\n  static intervals (s from the start of the recording: first-last sample, samples):\n";
   for (std::size_t k = 0; k < set.intervals.size(); ++k) {
     const auto& iv = set.intervals[k];
-    std::cout << format_printf("    %3zu  %9.3f-%9.3f  %6zu\n", k, rel(iv.t0_ns), rel(iv.t1_ns), iv.size());
+    std::cout << fmt::sprintf("    %3zu  %9.3f-%9.3f  %6zu\n", k, rel(iv.t0_ns), rel(iv.t1_ns), iv.size());
   }
   std::cout << "  transfers (interval -> next, s, samples):\n";
   for (const auto& tr : set.transfers) {
-    std::cout << format_printf("    %3zu -> %3zu  %9.3f-%9.3f  %6zu\n", tr.from, tr.from + 1,
-                               rel(set.intervals[tr.from].t1_ns), rel(set.intervals[tr.from + 1].t0_ns),
-                               tr.t_s.size());
+    std::cout << fmt::sprintf("    %3zu -> %3zu  %9.3f-%9.3f  %6zu\n", tr.from, tr.from + 1,
+                              rel(set.intervals[tr.from].t1_ns), rel(set.intervals[tr.from + 1].t0_ns),
+                              tr.t_s.size());
   }
 }
 
@@ -87,15 +87,15 @@ void print_table(const std::vector<app::NamedCalibration>& cals,
   std::size_t width = std::string("calibration").size();
   for (const auto& c : cals) width = std::max(width, c.name.size());
   const int w = static_cast<int>(width);
-  std::cout << format_printf("  %-*s  %-27s  %-27s\n", w, "", "gravity magnitude (m/s^2)",
-                             "gravity direction (mrad)");
-  std::cout << format_printf("  %-*s  %8s %8s %9s  %8s %8s %9s\n", w, "calibration", "mean", "rms", "max",
-                             "mean", "rms", "max");
+  std::cout << fmt::sprintf("  %-*s  %-27s  %-27s\n", w, "", "gravity magnitude (m/s^2)",
+                            "gravity direction (mrad)");
+  std::cout << fmt::sprintf("  %-*s  %8s %8s %9s  %8s %8s %9s\n", w, "calibration", "mean", "rms", "max",
+                            "mean", "rms", "max");
   for (std::size_t i = 0; i < cals.size(); ++i) {
     const auto& m = figs[i].gravity_magnitude_mps2;
     const auto& d = figs[i].gravity_direction_rad;
-    std::cout << format_printf("  %-*s  %8.5f %8.5f %9.5f  %8.3f %8.3f %9.3f\n", w, cals[i].name.c_str(),
-                               m.mean, m.rms, m.max, 1e3 * d.mean, 1e3 * d.rms, 1e3 * d.max);
+    std::cout << fmt::sprintf("  %-*s  %8.5f %8.5f %9.5f  %8.3f %8.3f %9.3f\n", w, cals[i].name.c_str(),
+                              m.mean, m.rms, m.max, 1e3 * d.mean, 1e3 * d.rms, 1e3 * d.max);
   }
 }
 
@@ -164,8 +164,8 @@ void run(const CheckCliOptions& o) {
   }
 
   std::cout << "calibration check on " << o.log_path << " (" << info.name << ", " << loaded->samples.size()
-            << " samples, " << imu_units_name(info.units) << ", " << format_printf("%.1f", set->rate_hz)
-            << " Hz), gravity " << format_printf("%.5f", gravity.mps2) << " m/s^2 (" << gravity.source
+            << " samples, " << imu_units_name(info.units) << ", " << fmt::sprintf("%.1f", set->rate_hz)
+            << " Hz), gravity " << fmt::sprintf("%.5f", gravity.mps2) << " m/s^2 (" << gravity.source
             << ")\n";
   print_set(*set);
   print_table(cals, figs);

@@ -1,6 +1,7 @@
 // imucal calibrate gsens LOG: the static six-orientation g-sensitivity experiment (Krebs 2012,
 // section 5.2.3), see docs/gsens.md.
 
+#include <fmt/printf.h>
 #include <spdlog/spdlog.h>
 
 #include <iostream>
@@ -12,7 +13,6 @@
 #include "app/result_writers.hpp"
 #include "app/streams.hpp"
 #include "calib/gsens_calibration.hpp"
-#include "core/format.hpp"
 #include "daemon/cli/calibrate_group.hpp"
 #include "daemon/cli/command.hpp"
 
@@ -65,7 +65,7 @@ std::string set_models(const GsensCliOptions& o, const ImuStreamInfo& info, cali
   return "nominal conversion";
 }
 
-std::string sci(double v) { return format_printf("%10.3e", v); }
+std::string sci(double v) { return fmt::sprintf("%10.3e", v); }
 
 void print_summary(const std::string& log_path, const ImuStreamInfo& info, std::size_t samples,
                    const std::string& models, const GSensitivityResult& r) {
@@ -74,7 +74,7 @@ void print_summary(const std::string& log_path, const ImuStreamInfo& info, std::
   for (std::size_t k = 0; k < r.holds.size(); ++k) {
     const auto& h = r.holds[k];
     std::cout << (k ? ", " : "") << (h.face.empty() ? "tilted" : h.face) << " "
-              << format_printf("%.1f s", ns_to_s(h.t1_ns - h.t0_ns));
+              << fmt::sprintf("%.1f s", ns_to_s(h.t1_ns - h.t0_ns));
   }
   std::cout << ")\n  models: " << models;
   if (r.gyro_model_rel_sigma > 0.0)

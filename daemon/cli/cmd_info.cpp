@@ -1,6 +1,8 @@
 // imucal info [--json] LOG: what a session log holds and whether it is healthy.
 // The output fields are documented in docs/session-log.md.
 
+#include <fmt/printf.h>
+
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -8,7 +10,6 @@
 #include <vector>
 
 #include "app/stream_stats.hpp"
-#include "core/format.hpp"
 #include "daemon/cli/command.hpp"
 
 namespace imucal::cli {
@@ -34,14 +35,14 @@ json timing_json(const StreamTiming& t, double nominal_rate_hz) {
 
 std::string timing_text(const StreamTiming& t, double nominal_rate_hz, const char* what) {
   std::ostringstream out;
-  out << "    " << what << ": " << t.count << ", nominal " << format_printf("%.6g", nominal_rate_hz)
-      << " Hz, measured " << format_printf("%.6g", t.measured_rate_hz) << " Hz over "
-      << format_printf("%.3f", ns_to_s(t.t_last_ns - t.t_first_ns)) << " s\n";
-  out << "    intervals: median " << format_printf("%.6g", t.median_period_ns * 1e-6) << " ms, "
+  out << "    " << what << ": " << t.count << ", nominal " << fmt::sprintf("%.6g", nominal_rate_hz)
+      << " Hz, measured " << fmt::sprintf("%.6g", t.measured_rate_hz) << " Hz over "
+      << fmt::sprintf("%.3f", ns_to_s(t.t_last_ns - t.t_first_ns)) << " s\n";
+  out << "    intervals: median " << fmt::sprintf("%.6g", t.median_period_ns * 1e-6) << " ms, "
       << t.gap_intervals << " longer than 1.5x median, longest "
-      << format_printf("%.6g", t.longest_interval_ns * 1e-6) << " ms";
+      << fmt::sprintf("%.6g", t.longest_interval_ns * 1e-6) << " ms";
   if (t.longest_interval_ns > 0)
-    out << " (ending at t=" << format_printf("%.6f", ns_to_s(t.longest_interval_at_ns)) << " s)";
+    out << " (ending at t=" << fmt::sprintf("%.6f", ns_to_s(t.longest_interval_at_ns)) << " s)";
   out << "\n";
   if (t.non_increasing > 0) out << "    WARNING: " << t.non_increasing << " non-increasing timestamps\n";
   return out.str();
@@ -149,10 +150,10 @@ std::string summary_text(const std::string& path, const app::LogSummary& s) {
        << (s.health.complete ? "complete"
                              : "INCOMPLETE (the writer did not close it; the recording was interrupted)")
        << (s.health.damaged ? ", DAMAGED" : "") << "\n";
-  text << "  duration: " << format_printf("%.3f", ns_to_s(s.t_end_ns - s.t_start_ns)) << " s";
+  text << "  duration: " << fmt::sprintf("%.3f", ns_to_s(s.t_end_ns - s.t_start_ns)) << " s";
   if (s.any_time) {
-    text << " (t=" << format_printf("%.6f", ns_to_s(s.t_start_ns)) << " s to "
-         << format_printf("%.6f", ns_to_s(s.t_end_ns)) << " s)";
+    text << " (t=" << fmt::sprintf("%.6f", ns_to_s(s.t_start_ns)) << " s to "
+         << fmt::sprintf("%.6f", ns_to_s(s.t_end_ns)) << " s)";
   }
   text << "\n";
   text << "IMU streams: " << s.imu.size() << "\n";

@@ -1,6 +1,8 @@
 // imucal sim static|gsens|still|camimu: simulated MPU-6000 recordings with their ground truth
 // (docs/simulator.md, docs/simulator-camera.md).
 
+#include <fmt/printf.h>
+
 #include <cmath>
 #include <filesystem>
 #include <iostream>
@@ -11,7 +13,6 @@
 #include <vector>
 
 #include "app/module_loader.hpp"
-#include "core/format.hpp"
 #include "daemon/cli/command.hpp"
 #include "log/session_log.hpp"
 #include "sim/camimu.hpp"
@@ -33,8 +34,8 @@ std::string kept_in(const std::string& log_path) {
   auto samples = (*reader)->read_imu(id);
   if (!samples.ok() || samples->empty()) return "; nothing was kept";
   const double span = ns_to_s(samples->back().t_ns - samples->front().t_ns);
-  return format_printf("; stopped, %zu samples (%.1f s) kept in %s, readable and marked incomplete",
-                       samples->size(), span, log_path.c_str());
+  return fmt::sprintf("; stopped, %zu samples (%.1f s) kept in %s, readable and marked incomplete",
+                      samples->size(), span, log_path.c_str());
 }
 
 struct SimCommon {
