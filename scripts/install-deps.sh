@@ -9,7 +9,7 @@ build_pkgs=(
   libeigen3-dev libceres-dev
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev libopencv-calib3d-dev
   libboost-dev libgpiod-dev libpng-dev libwebp-dev libsqlite3-dev sqlite3 zlib1g-dev libyaml-cpp-dev nlohmann-json3-dev
-  libspdlog-dev libcli11-dev libsystemd-dev
+  libspdlog-dev libfmt-dev libcli11-dev libsystemd-dev
   libaravis-dev libusb-1.0-0-dev libcamera-dev libapriltag-dev
   gnuplot-nox
   libgtest-dev libgmock-dev libbenchmark-dev
