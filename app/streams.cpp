@@ -11,7 +11,9 @@ std::string LoadedStream::damage_warning() const {
 
 Result<LoadedStream> load_imu_stream(const std::string& path, const std::string& stream_name,
                                      DamagePolicy policy) {
-  auto opened = log::SessionLogReader::open(path);
+  log::SessionLogReaderOptions options;
+  options.preload_imu = true;  // the whole stream is read: once, by the reader's own check
+  auto opened = log::SessionLogReader::open(path, options);
   if (!opened.ok()) return opened.error().context("cannot read " + path);
   LoadedStream loaded;
   loaded.reader = std::move(*opened);
@@ -25,7 +27,7 @@ Result<LoadedStream> load_imu_stream(const std::string& path, const std::string&
   if (!id.ok()) return id.error().context("no IMU stream in " + path);
   loaded.stream_id = *id;
   loaded.info = reader.imu_streams().at(*id);
-  auto samples = reader.read_imu(*id);
+  auto samples = loaded.reader->take_imu(*id);
   if (!samples.ok()) return samples.error().context("cannot read the IMU samples of " + path);
   loaded.samples = std::move(*samples);
   return loaded;

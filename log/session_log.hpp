@@ -90,6 +90,14 @@ struct SessionLogHealth {
   std::string damage_message;  // what, and what was still readable
 };
 
+/// How a reader is opened.
+struct SessionLogReaderOptions {
+  /// Keep every IMU sample read by the check of the sample table that opening makes anyway, so
+  /// that take_imu() hands them over without reading the file a second time. For a caller that
+  /// wants whole streams (a calibration); the samples of every IMU stream are held meanwhile.
+  bool preload_imu = false;
+};
+
 /// Reads one session log.
 class SessionLogReader {
  public:
@@ -97,7 +105,8 @@ class SessionLogReader {
 
   /// Opens read-only. A file that is not a session log, or whose schema is newer than this
   /// build understands, is an error; a damaged one opens and reports it in health().
-  [[nodiscard]] static Result<std::unique_ptr<SessionLogReader>> open(const std::string& path);
+  [[nodiscard]] static Result<std::unique_ptr<SessionLogReader>> open(
+      const std::string& path, const SessionLogReaderOptions& options = {});
 
   virtual const SessionLogHealth& health() const = 0;
   virtual const std::map<std::string, std::string>& metadata() const = 0;
@@ -115,6 +124,9 @@ class SessionLogReader {
                                             const std::function<bool(const ImuSample&)>& visit) const = 0;
   /// All samples of a stream.
   [[nodiscard]] Result<std::vector<ImuSample>> read_imu(int stream_id) const;
+  /// All samples of a stream, like read_imu; a reader opened with preload_imu hands over the ones
+  /// it holds (later reads of the stream read the file again).
+  [[nodiscard]] virtual Result<std::vector<ImuSample>> take_imu(int stream_id) { return read_imu(stream_id); }
 
   [[nodiscard]] virtual Status for_each_frame(int stream_id, TimeNs t0_ns, TimeNs t1_ns,
                                               const std::function<bool(const CameraFrame&)>& visit) const = 0;

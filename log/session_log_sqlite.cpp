@@ -17,12 +17,15 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <iterator>
 #include <limits>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <system_error>
+#include <thread>
 #include <utility>
 
 #include "core/version.hpp"
@@ -361,17 +364,27 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
     const bool raw = it->second == ImuUnits::kRaw;
     for (const ImuSample& sample : samples) IMUCAL_TRY(check_time("append_imu", sample.t_ns));
     IMUCAL_TRY(begin_if_needed());
-    sqlite3_stmt* s = insert_imu_.get();
-    for (const ImuSample& sample : samples) {
-      sqlite3_bind_int(s, 1, stream_id);
-      sqlite3_bind_int64(s, 2, sample.t_ns);
-      for (int i = 0; i < 3; ++i) bind_value(s, 3 + i, sample.accel[i], raw);
-      for (int i = 0; i < 3; ++i) bind_value(s, 6 + i, sample.gyro[i], raw);
-      bind_value(s, 9, sample.temperature, raw);
-      sqlite3_bind_int64(s, 10, sample.flags);
+    // Whole runs of kImuRowsPerInsert samples go in one statement (one execution of the insert
+    // program instead of one per sample), the rest one by one.
+    std::size_t done = 0;
+    while (done < samples.size()) {
+      const bool many = samples.size() - done >= kImuRowsPerInsert;
+      sqlite3_stmt* s = many ? insert_imu_many_.get() : insert_imu_.get();
+      const std::size_t rows = many ? kImuRowsPerInsert : 1;
+      for (std::size_t r = 0; r < rows; ++r) {
+        const ImuSample& sample = samples[done + r];
+        const int p = static_cast<int>(10 * r);
+        sqlite3_bind_int(s, p + 1, stream_id);
+        sqlite3_bind_int64(s, p + 2, sample.t_ns);
+        for (int i = 0; i < 3; ++i) bind_value(s, p + 3 + i, sample.accel[i], raw);
+        for (int i = 0; i < 3; ++i) bind_value(s, p + 6 + i, sample.gyro[i], raw);
+        bind_value(s, p + 9, sample.temperature, raw);
+        sqlite3_bind_int64(s, p + 10, sample.flags);
+      }
       const int rc = sqlite3_step(s);
       sqlite3_reset(s);
       if (rc != SQLITE_DONE) return fail_with("append IMU samples");
+      done += rows;
     }
     if (!samples.empty()) note_data_time(samples.front().t_ns, samples.back().t_ns);
     return maybe_commit();
@@ -459,6 +472,10 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
     int rc = 0;
     insert_imu_ =
         sqlite::prepare(db_.get(), "INSERT INTO imu_samples VALUES(?1,?2,?3,?4,?5,?6,?7,?8,?9,?10)", &rc);
+    if (rc != SQLITE_OK) return sql_error("prepare");
+    std::string many = "INSERT INTO imu_samples VALUES(?,?,?,?,?,?,?,?,?,?)";
+    for (std::size_t r = 1; r < kImuRowsPerInsert; ++r) many += ",(?,?,?,?,?,?,?,?,?,?)";
+    insert_imu_many_ = sqlite::prepare(db_.get(), many.c_str(), &rc);
     if (rc != SQLITE_OK) return sql_error("prepare");
     insert_frame_ =
         sqlite::prepare(db_.get(), "INSERT INTO frames VALUES(?1,?2,?3,?4,?5,?6,?7,?8,?9,?10)", &rc);
@@ -553,6 +570,7 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
 
   Status release() {
     insert_imu_.reset();
+    insert_imu_many_.reset();
     insert_frame_.reset();
     insert_event_.reset();
     set_metadata_.reset();
@@ -571,7 +589,8 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
   SessionLogWriterOptions options_;
   sqlite::Db db_;
   WriterLock lock_;  // declared after db_: released after SQLite closed the file
-  Stmt insert_imu_, insert_frame_, insert_event_, set_metadata_;
+  static constexpr std::size_t kImuRowsPerInsert = 32;
+  Stmt insert_imu_, insert_imu_many_, insert_frame_, insert_event_, set_metadata_;
   std::map<int, ImuUnits> imu_units_;
   std::set<int> camera_ids_;
   std::set<std::string> imu_names_, camera_names_;
@@ -629,7 +648,8 @@ namespace {
 
 class SqliteSessionLogReader final : public SessionLogReader {
  public:
-  explicit SqliteSessionLogReader(std::string path) : path_(std::move(path)) {}
+  SqliteSessionLogReader(std::string path, const SessionLogReaderOptions& options)
+      : path_(std::move(path)), options_(options) {}
 
   Status open();
 
@@ -653,6 +673,7 @@ class SqliteSessionLogReader final : public SessionLogReader {
   Result<std::vector<Event>> events() const override { return events_; }
   Result<std::int64_t> imu_count(int stream_id) const override;
   Result<std::int64_t> frame_count(int stream_id) const override;
+  Result<std::vector<ImuSample>> take_imu(int stream_id) override;
 
  private:
   template <class Info>
@@ -704,14 +725,22 @@ class SqliteSessionLogReader final : public SessionLogReader {
     bool operator==(const StreamDigest& o) const { return count == o.count && sum == o.sum; }
   };
   using Digests = std::map<int, StreamDigest>;
-  bool digest_table(const char* table, Digests* out, std::string* error) const;
-  bool digest_index(const char* table, const char* index, Digests* out) const;
+  using ImuRows = std::map<int, std::vector<ImuSample>>;
+  // The table's digest in storage order on `db`; with `rows`, the IMU table's samples are read
+  // by the same walk and kept per stream.
+  static bool digest_table(sqlite3* db, const char* table, Digests* out, std::string* error, ImuRows* rows);
   // The time index agrees with its table; the counts per stream when it does, and the streams
-  // whose rows the table holds in time order.
+  // whose rows the table holds in time order. The index is walked on a second connection
+  // meanwhile when the file is known not to change between the two walks (walk_index_aside_).
   bool index_agrees(const char* table, const char* index, std::map<int, std::int64_t>* counts,
-                    std::set<int>* in_time_order, bool* table_ok, std::string* table_error) const;
+                    std::set<int>* in_time_order, bool* table_ok, std::string* table_error,
+                    ImuRows* rows = nullptr) const;
 
   std::string path_;
+  SessionLogReaderOptions options_;
+  // No writer holds the log and nothing was found damaged before the table checks: the index
+  // can be walked on a connection of its own, in parallel, and see the same rows.
+  bool walk_index_aside_ = false;
   OpenHere open_here_;  // declared before db_: registered until SQLite has closed the file
   sqlite::Db db_;
   mutable SessionLogHealth health_;
@@ -728,7 +757,9 @@ class SqliteSessionLogReader final : public SessionLogReader {
   // When the IMU table or its time index cannot be trusted, the readable samples are held
   // here per stream, sorted by time, and reads are served from memory.
   bool imu_in_memory_ = false;
-  std::map<int, std::vector<ImuSample>> imu_memory_;
+  ImuRows imu_memory_;
+  // Streams read whole while opening (preload_imu) and not yet taken, sorted by time.
+  ImuRows imu_preloaded_;
   // Likewise for frames; `data` of these is loaded on demand by rowid (or held, when it came
   // from the salvage scanner).
   struct FrameRef {
@@ -996,6 +1027,7 @@ Status SqliteSessionLogReader::open() {
   }
   IMUCAL_TRY(read_metadata());
   read_streams();
+  walk_index_aside_ = !live && !health_.damaged;
   scan_imu();
   scan_frames();
   read_events();
@@ -1201,10 +1233,13 @@ std::uint64_t row_hash(std::int64_t rowid, int stream, std::int64_t t_ns) {
 
 }  // namespace
 
-bool SqliteSessionLogReader::digest_table(const char* table, Digests* out, std::string* error) const {
+bool SqliteSessionLogReader::digest_table(sqlite3* db, const char* table, Digests* out, std::string* error,
+                                          ImuRows* rows) {
   int rc = 0;
-  const std::string sql = std::string("SELECT rowid, stream_id, t_ns FROM ") + table + " NOT INDEXED";
-  Stmt stmt = sqlite::prepare(db_.get(), sql.c_str(), &rc);
+  const std::string sql = std::string("SELECT rowid, stream_id, t_ns") +
+                          (rows ? ", ax, ay, az, gx, gy, gz, temperature, flags" : "") + " FROM " + table +
+                          " NOT INDEXED";
+  Stmt stmt = sqlite::prepare(db, sql.c_str(), &rc);
   while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
     const int stream = sqlite3_column_int(stmt.get(), 1);
     const std::int64_t t = sqlite3_column_int64(stmt.get(), 2);
@@ -1216,17 +1251,23 @@ bool SqliteSessionLogReader::digest_table(const char* table, Digests* out, std::
     d.sum += row_hash(sqlite3_column_int64(stmt.get(), 0), stream, t);
     if (t < d.last_t) d.in_time_order = false;
     d.last_t = t;
+    if (rows) (*rows)[stream].push_back(read_sample_columns(stmt.get(), 2));
   }
   if (rc == SQLITE_DONE) return true;
-  *error = sqlite::errmsg(db_.get());
+  *error = sqlite::errmsg(db);
   return false;
 }
 
-bool SqliteSessionLogReader::digest_index(const char* table, const char* index, Digests* out) const {
+namespace {
+
+/// The digest of a time index alone (a covering scan) on `db`; false when unreadable or out of
+/// order.
+template <class Digests>
+bool digest_index(sqlite3* db, const char* table, const char* index, Digests* out) {
   int rc = 0;
   const std::string sql = std::string("SELECT rowid, stream_id, t_ns FROM ") + table + " INDEXED BY " +
                           index + " ORDER BY stream_id, t_ns";
-  Stmt stmt = sqlite::prepare(db_.get(), sql.c_str(), &rc);
+  Stmt stmt = sqlite::prepare(db, sql.c_str(), &rc);
   int prev_stream = std::numeric_limits<int>::min();
   std::int64_t prev_t = std::numeric_limits<std::int64_t>::min();
   while ((rc == SQLITE_OK || rc == SQLITE_ROW) && (rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
@@ -1237,24 +1278,77 @@ bool SqliteSessionLogReader::digest_index(const char* table, const char* index, 
     if (stream < prev_stream || (stream == prev_stream && t < prev_t)) return false;
     prev_stream = stream;
     prev_t = t;
-    StreamDigest& d = (*out)[stream];
+    auto& d = (*out)[stream];
     d.count += 1;
     d.sum += row_hash(sqlite3_column_int64(stmt.get(), 0), stream, t);
   }
   return rc == SQLITE_DONE;
 }
 
+/// A second read-only connection to a log, set up like the reader's own; null when it cannot be
+/// opened.
+sqlite::Db open_aside(const std::string& path) {
+  sqlite3* raw = nullptr;
+  const int rc = sqlite3_open_v2(path.c_str(), &raw, SQLITE_OPEN_READONLY | SQLITE_OPEN_NOMUTEX,
+                                 sqlite::strict_vfs_name());
+  sqlite::Db db(raw);
+  if (rc != SQLITE_OK ||
+      sqlite::exec(db.get(), "PRAGMA mmap_size=0; PRAGMA cell_size_check=ON; BEGIN") != SQLITE_OK)
+    return sqlite::Db();
+  return db;
+}
+
+}  // namespace
+
 bool SqliteSessionLogReader::index_agrees(const char* table, const char* index,
                                           std::map<int, std::int64_t>* counts, std::set<int>* in_time_order,
-                                          bool* table_ok, std::string* table_error) const {
+                                          bool* table_ok, std::string* table_error, ImuRows* rows) const {
   Digests from_table, from_index;
-  *table_ok = digest_table(table, &from_table, table_error);
-  if (!*table_ok || !digest_index(table, index, &from_index) || from_index != from_table) return false;
+  // The two walks are independent reads of one unchanging file: the index's runs on a second
+  // core when there is one.
+  struct Aside {
+    bool opened = false, ok = false;
+    Digests digests;
+  };
+  std::future<Aside> aside;
+  if (walk_index_aside_ && std::thread::hardware_concurrency() > 1) {
+    aside = std::async(std::launch::async, [this, table, index] {
+      Aside a;
+      const sqlite::Db db = open_aside(path_);
+      if (!db) return a;
+      a.opened = true;
+      a.ok = digest_index(db.get(), table, index, &a.digests);
+      return a;
+    });
+  }
+  *table_ok = digest_table(db_.get(), table, &from_table, table_error, rows);
+  std::optional<Aside> a;
+  if (aside.valid()) a = aside.get();
+  bool index_ok = false;
+  if (a && a->opened) {
+    index_ok = a->ok;
+    from_index = std::move(a->digests);
+  } else {
+    index_ok = *table_ok && digest_index(db_.get(), table, index, &from_index);
+  }
+  if (!*table_ok || !index_ok || from_index != from_table) {
+    if (rows) rows->clear();
+    return false;
+  }
   counts->clear();
   in_time_order->clear();
   for (const auto& [stream, d] : from_table) {
     (*counts)[stream] = d.count;
     if (d.in_time_order) in_time_order->insert(stream);
+  }
+  if (rows) {
+    // Rows are in storage (rowid) order: a stable sort by time puts equal times in rowid order,
+    // as the index does.
+    for (auto& [stream, samples] : *rows) {
+      if (in_time_order->contains(stream)) continue;
+      std::stable_sort(samples.begin(), samples.end(),
+                       [](const ImuSample& a, const ImuSample& b) { return a.t_ns < b.t_ns; });
+    }
   }
   return true;
 }
@@ -1266,7 +1360,7 @@ void SqliteSessionLogReader::scan_imu() {
   bool table_ok = false;
   std::string table_error;
   if (index_agrees("imu_samples", "imu_samples_by_time", &imu_counts_, &imu_table_in_time_order_, &table_ok,
-                   &table_error))
+                   &table_error, options_.preload_imu ? &imu_preloaded_ : nullptr))
     return;
   // Load what the table yields, in storage order, and sort.
   imu_in_memory_ = true;
@@ -1383,9 +1477,9 @@ Status SqliteSessionLogReader::for_each_imu(int stream_id, TimeNs t0_ns, TimeNs 
                       "session log " + path_ + " has no IMU stream with id " + std::to_string(stream_id));
   }
   if (t0_ns >= t1_ns) return {};
-  if (imu_in_memory_) {
-    const auto it = imu_memory_.find(stream_id);
-    if (it == imu_memory_.end()) return {};
+  const ImuRows& held = imu_in_memory_ ? imu_memory_ : imu_preloaded_;
+  if (const auto it = held.find(stream_id); imu_in_memory_ || it != held.end()) {
+    if (it == held.end()) return {};
     const auto& samples = it->second;
     auto first = std::lower_bound(samples.begin(), samples.end(), t0_ns,
                                   [](const ImuSample& s, TimeNs t) { return s.t_ns < t; });
@@ -1521,10 +1615,19 @@ Result<std::int64_t> SqliteSessionLogReader::frame_count(int stream_id) const {
   return it == frame_counts_.end() ? std::int64_t{0} : it->second;
 }
 
+Result<std::vector<ImuSample>> SqliteSessionLogReader::take_imu(int stream_id) {
+  const auto it = imu_preloaded_.find(stream_id);
+  if (it == imu_preloaded_.end()) return read_imu(stream_id);
+  std::vector<ImuSample> samples = std::move(it->second);
+  imu_preloaded_.erase(it);
+  return samples;
+}
+
 }  // namespace
 
-Result<std::unique_ptr<SessionLogReader>> SessionLogReader::open(const std::string& path) {
-  auto reader = std::make_unique<SqliteSessionLogReader>(path);
+Result<std::unique_ptr<SessionLogReader>> SessionLogReader::open(const std::string& path,
+                                                                 const SessionLogReaderOptions& options) {
+  auto reader = std::make_unique<SqliteSessionLogReader>(path, options);
   IMUCAL_TRY(reader->open());
   return std::unique_ptr<SessionLogReader>(std::move(reader));
 }

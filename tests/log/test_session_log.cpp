@@ -336,6 +336,40 @@ TEST(SessionLog, WholeStreamReadsAreInTimeOrderWhateverTheStorageOrder) {
         << (staged ? "staged" : "direct");
     EXPECT_EQ(whole_stream(**reader, shuffled), (std::vector<Row>{{300, 7}, {400, 8}, {500, 3}, {600, 4}}))
         << (staged ? "staged" : "direct");
+    // A reader that keeps the samples of its table check serves the same reads from them, hands
+    // them over once, and then reads the file again.
+    SessionLogReaderOptions preload;
+    preload.preload_imu = true;
+    auto held = SessionLogReader::open(path, preload);
+    ASSERT_TRUE(held.ok()) << held.error().message;
+    EXPECT_FALSE((*held)->health().damaged) << (*held)->health().damage_message;
+    for (const int id : {in_order, shuffled}) {
+      SCOPED_TRACE(std::string(staged ? "staged" : "direct") + ", stream " + std::to_string(id));
+      const auto want = (*reader)->read_imu(id);
+      ASSERT_TRUE(want.ok()) << want.error().message;
+      EXPECT_EQ(whole_stream(**held, id), whole_stream(**reader, id));
+      std::vector<TimeNs> range, range_want;
+      ASSERT_TRUE((*held)
+                      ->for_each_imu(id, 100, 500,
+                                     [&](const ImuSample& s) {
+                                       range.push_back(s.t_ns);
+                                       return true;
+                                     })
+                      .ok());
+      ASSERT_TRUE((*reader)
+                      ->for_each_imu(id, 100, 500,
+                                     [&](const ImuSample& s) {
+                                       range_want.push_back(s.t_ns);
+                                       return true;
+                                     })
+                      .ok());
+      EXPECT_EQ(range, range_want);
+      for (int take = 0; take < 2; ++take) {
+        const auto taken = (*held)->take_imu(id);
+        ASSERT_TRUE(taken.ok()) << taken.error().message;
+        expect_same_samples(*taken, *want);
+      }
+    }
     // The time index exists in both, and is what a time-range read uses.
     sqlite3* db = nullptr;
     ASSERT_EQ(sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr), SQLITE_OK);
