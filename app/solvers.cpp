@@ -6,6 +6,12 @@
 
 namespace imucal::app {
 
+std::future<void> load_static_solver_meanwhile() {
+  return std::async(std::launch::async, [] {
+    (void)load_module<calib::SolveModuleApi>(calib::kSolveModule, calib::kSolveModuleEntry);
+  });
+}
+
 Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samples,
                                                  const calib::StaticCalibrationOptions& options) {
   auto api = load_module<calib::SolveModuleApi>(calib::kSolveModule, calib::kSolveModuleEntry);

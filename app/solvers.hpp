@@ -3,6 +3,7 @@
 // (app/module_loader.hpp), so that programs load Ceres and its BLAS/LAPACK/SuiteSparse chain only
 // when they solve.
 
+#include <future>
 #include <memory>
 #include <span>
 
@@ -14,6 +15,11 @@
 #include "core/result.hpp"
 
 namespace imucal::app {
+
+/// Starts loading the solver module on another thread (about 10 ms of the dynamic loader's work),
+/// for a caller with other work to do first, such as reading the log. The result is only waited
+/// for: a load that failed is tried again, and reported, by calibrate_static.
+[[nodiscard]] std::future<void> load_static_solver_meanwhile();
 
 /// calib::calibrate_static; fails with the loader's error when the module cannot be loaded.
 [[nodiscard]] Result<StaticCalibrationResult> calibrate_static(

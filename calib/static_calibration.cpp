@@ -373,15 +373,21 @@ struct PoseDirections {
   Eigen::Vector3d u_start, u_end;
 };
 
+/// The worker threads a solve step uses: opt.threads, or one per core when it is 0.
+int step_threads(const StaticCalibrationOptions& opt) {
+  return opt.threads > 0 ? opt.threads : static_cast<int>(std::max(1U, std::thread::hardware_concurrency()));
+}
+
 std::vector<PoseDirections> pose_directions(const std::vector<StaticInterval>& intervals,
                                             const std::vector<Eigen::Vector3d>& accel,
                                             const std::vector<Eigen::Vector3d>& gyro,
                                             std::span<const ImuSample> samples,
-                                            const TedaldiTriad& accel_model, const TedaldiTriad& gyro_model) {
-  std::vector<PoseDirections> out;
-  out.reserve(intervals.size());
+                                            const TedaldiTriad& accel_model, const TedaldiTriad& gyro_model,
+                                            int threads) {
+  std::vector<PoseDirections> out(intervals.size());
   const Eigen::Matrix3d Aa = accel_model.TK(), Ag = gyro_model.TK();
-  for (const auto& iv : intervals) {
+  const auto one = [&](std::size_t k) {
+    const StaticInterval& iv = intervals[k];
     Quat4 q(1, 0, 0, 0);
     Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
     Eigen::Vector3d sum = Aa * (accel[iv.begin] + accel_model.bias);
@@ -393,8 +399,28 @@ std::vector<PoseDirections> pose_directions(const std::vector<StaticInterval>& i
       R = quat_to_matrix(q);
       sum += R * (Aa * (accel[j] + accel_model.bias));
     }
-    out.push_back({sum.normalized(), (R.transpose() * sum).normalized()});
+    out[k] = {sum.normalized(), (R.transpose() * sum).normalized()};
+  };
+  // Each interval is independent of the others: runs of them of about equal sample counts on
+  // the threads give the same directions as one thread.
+  std::size_t total = 0;
+  for (const auto& iv : intervals) total += iv.size();
+  const std::size_t runs = std::clamp<std::size_t>(static_cast<std::size_t>(std::max(threads, 1)), 1,
+                                                   std::max<std::size_t>(intervals.size(), 1));
+  std::vector<std::size_t> begin{0};
+  std::size_t done = 0;
+  for (std::size_t k = 0; k < intervals.size(); ++k) {
+    done += intervals[k].size();
+    if (begin.size() < runs && done * runs >= total * begin.size()) begin.push_back(k + 1);
   }
+  begin.push_back(intervals.size());
+  const auto run = [&](std::size_t r) {
+    for (std::size_t k = begin[r]; k < begin[r + 1]; ++k) one(k);
+  };
+  std::vector<std::future<void>> others;
+  for (std::size_t r = 1; r + 1 < begin.size(); ++r) others.push_back(std::async(std::launch::async, run, r));
+  run(0);
+  for (auto& f : others) f.get();
   return out;
 }
 
@@ -1084,8 +1110,8 @@ class GyroFit {
 /// the next) from the given accelerometer and gyro models.
 void set_transfer_directions(std::vector<Transfer>* transfers, const std::vector<StaticInterval>& intervals,
                              const ScannedRecording& scan, std::span<const ImuSample> samples,
-                             const TedaldiTriad& accel, const TedaldiTriad& gyro) {
-  const auto dirs = pose_directions(intervals, scan.accel, scan.gyro, samples, accel, gyro);
+                             const TedaldiTriad& accel, const TedaldiTriad& gyro, int threads) {
+  const auto dirs = pose_directions(intervals, scan.accel, scan.gyro, samples, accel, gyro, threads);
   for (auto& tr : *transfers) {
     tr.u0 = dirs[tr.pose0].u_end;
     tr.u1 = dirs[tr.pose0 + 1].u_start;
@@ -1155,14 +1181,14 @@ Status solve_gyroscope(std::vector<Transfer>* transfers, const Candidate& best, 
                        std::span<const ImuSample> samples, const GyroStaticFit& gfit,
                        const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
   const TedaldiTriad gyro0 = initial_gyro(gfit.bias, opt);
-  const int threads =
-      opt.threads > 0 ? opt.threads : static_cast<int>(std::max(1U, std::thread::hardware_concurrency()));
+  const int threads = step_threads(opt);
   GyroFit fit(*transfers, gyro0, opt.estimate_gyro_bias, threads);
   // Two passes: the directions at the ends of the static intervals depend (weakly) on the gyro
   // model through the rotation inside the intervals; the second pass uses the first estimate.
   TedaldiTriad gyro_current = gyro0;
   for (int pass = 0; pass < 2; ++pass) {
-    set_transfer_directions(transfers, best.intervals, scan, samples, res->model.accel, gyro_current);
+    set_transfer_directions(transfers, best.intervals, scan, samples, res->model.accel, gyro_current,
+                            threads);
     IMUCAL_TRY(fit.solve(&res->gyro_iterations));
     gyro_current = fit.triad();
   }
@@ -1267,7 +1293,7 @@ StaticQuality quality_figures(const std::vector<Transfer>& transfers, const Cand
   // Gravity directions from the nominal accelerometer, rates from the nominal gyro.
   std::vector<GravityTransfer> nominal = checks;
   const auto dirs = pose_directions(best.intervals, scan.accel, scan.gyro, samples, accel_nominal,
-                                    initial_gyro(still.gyro_bias_raw, opt));
+                                    initial_gyro(still.gyro_bias_raw, opt), step_threads(opt));
   for (std::size_t k = 0; k < nominal.size(); ++k) {
     nominal[k].u0 = dirs[transfers[k].pose0].u_end;
     nominal[k].u1 = dirs[transfers[k].pose0 + 1].u_start;

@@ -104,6 +104,16 @@ Result<TriadScan> scan_triad_file(const std::string& path, bool hold, bool check
   if (hold) {
     scan.rows.emplace();
     scan.rows->source = path;
+    // Room for the rows of lines of 32 bytes or more (a "t x y z" line is longer): the vectors
+    // are filled without being moved as they grow, and what is not filled is never touched.
+    std::error_code ec;
+    const auto bytes = std::filesystem::file_size(path, ec);
+    if (!ec) {
+      const auto rows = static_cast<std::size_t>(bytes / 32);
+      scan.rows->t_ns.reserve(rows);
+      scan.rows->xyz.reserve(rows);
+      scan.rows->line.reserve(rows);
+    }
   }
   TriadRow row;
   while (true) {

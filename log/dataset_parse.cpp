@@ -2,6 +2,7 @@
 // files, generic CSV, accelerometer/gyroscope pairing and the unit sanity check.
 
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -80,6 +81,24 @@ void split_whitespace(std::string_view s, std::vector<std::string_view>& out) {
   }
 }
 
+/// The first N whitespace-separated fields of `s` into `out`; returns how many fields `s` has (more
+/// than N are counted, not stored).
+template <std::size_t N>
+std::size_t split_whitespace_first(std::string_view s, std::array<std::string_view, N>& out) {
+  std::size_t count = 0;
+  const char* p = s.data();
+  const char* const end = p + s.size();
+  while (true) {
+    while (p != end && (*p == ' ' || *p == '\t')) ++p;
+    if (p == end) return count;
+    const char* q = p;
+    while (q != end && *q != ' ' && *q != '\t') ++q;
+    if (count < N) out[count] = std::string_view(p, static_cast<std::size_t>(q - p));
+    ++count;
+    p = q;
+  }
+}
+
 void split_delimited(std::string_view s, char delimiter, std::vector<std::string_view>& out) {
   if (delimiter == ' ') {
     split_whitespace(s, out);
@@ -155,10 +174,92 @@ std::string quoted(std::string_view text, std::string_view rest) {
   return msg;
 }
 
+constexpr std::uint64_t kPow10[19] = {1ULL,
+                                      10ULL,
+                                      100ULL,
+                                      1000ULL,
+                                      10000ULL,
+                                      100000ULL,
+                                      1000000ULL,
+                                      10000000ULL,
+                                      100000000ULL,
+                                      1000000000ULL,
+                                      10000000000ULL,
+                                      100000000000ULL,
+                                      1000000000000ULL,
+                                      10000000000000ULL,
+                                      100000000000000ULL,
+                                      1000000000000000ULL,
+                                      10000000000000000ULL,
+                                      100000000000000000ULL,
+                                      1000000000000000000ULL};
+
+/// parse_time_ns for the common form, at most 18 significant digits with an optional dot and an
+/// exponent of at most 3 digits, in integer arithmetic (the same rounding: half up on the first
+/// dropped digit). Empty for anything else, which the general parser handles with its messages.
+std::optional<TimeNs> parse_time_ns_fast(std::string_view s, long long unit_exp) {
+  std::size_t i = 0;
+  bool negative = false;
+  if (i < s.size() && (s[i] == '+' || s[i] == '-')) negative = s[i++] == '-';
+  std::uint64_t mantissa = 0;
+  int significant = 0;
+  long long frac_digits = 0;
+  bool seen_dot = false, any_digit = false;
+  for (; i < s.size(); ++i) {
+    const char c = s[i];
+    if (c >= '0' && c <= '9') {
+      any_digit = true;
+      if (seen_dot) ++frac_digits;
+      if (mantissa == 0 && c == '0') continue;
+      if (++significant > 18) return std::nullopt;
+      mantissa = mantissa * 10 + static_cast<std::uint64_t>(c - '0');
+    } else if (c == '.' && !seen_dot) {
+      seen_dot = true;
+    } else {
+      break;
+    }
+  }
+  if (!any_digit) return std::nullopt;
+  long long exponent = 0;
+  if (i < s.size()) {
+    if (s[i] != 'e' && s[i] != 'E') return std::nullopt;
+    ++i;
+    bool exp_negative = false;
+    if (i < s.size() && (s[i] == '+' || s[i] == '-')) exp_negative = s[i++] == '-';
+    if (i == s.size() || s.size() - i > 3) return std::nullopt;
+    for (; i < s.size(); ++i) {
+      if (s[i] < '0' || s[i] > '9') return std::nullopt;
+      exponent = exponent * 10 + (s[i] - '0');
+    }
+    if (exp_negative) exponent = -exponent;
+    if (exponent > 400 || exponent < -400) return std::nullopt;  // refused by the general parser
+  }
+  if (mantissa == 0) return TimeNs{0};
+  const long long exp10 = exponent - frac_digits + unit_exp;
+  std::uint64_t value = 0;
+  if (exp10 >= 0) {
+    if (significant + exp10 > 18) return std::nullopt;
+    value = mantissa * kPow10[exp10];
+  } else {
+    const long long drop = -exp10;
+    if (drop > significant) return TimeNs{0};
+    value = mantissa / kPow10[drop];
+    if ((mantissa / kPow10[drop - 1]) % 10 >= 5) ++value;
+  }
+  if (value > static_cast<std::uint64_t>(kTimeLimitNs)) return std::nullopt;
+  const auto signed_value = static_cast<TimeNs>(value);
+  return negative ? -signed_value : signed_value;
+}
+
 }  // namespace
 
 Result<TimeNs> parse_time_ns(std::string_view text, TimeUnit unit) {
   const std::string_view s = trim(text);
+  const long long unit_exp = unit == TimeUnit::kS    ? 9
+                             : unit == TimeUnit::kMs ? 6
+                             : unit == TimeUnit::kUs ? 3
+                                                     : 0;
+  if (auto fast = parse_time_ns_fast(s, unit_exp)) return *fast;
   const auto bad = [&](const std::string& why) {
     return make_error(Errc::kCorrupt, quoted(s, " is not a time value" + why));
   };
@@ -193,10 +294,6 @@ Result<TimeNs> parse_time_ns(std::string_view text, TimeUnit unit) {
     }
   }
   if (digits.empty()) return bad("");
-  const long long unit_exp = unit == TimeUnit::kS    ? 9
-                             : unit == TimeUnit::kMs ? 6
-                             : unit == TimeUnit::kUs ? 3
-                                                     : 0;
   const long long exp10 = exponent - frac_digits + unit_exp;
   const std::size_t nz = digits.find_first_not_of('0');
   if (nz == std::string::npos) return TimeNs{0};
@@ -262,7 +359,6 @@ struct TriadRowReader::State {
   Lines lines;
   std::string source;
   ProgressFn progress;
-  std::vector<std::string_view> fields;
   TimeNs prev_t = 0;
   int prev_line = 0;
   std::int64_t rows = 0;
@@ -300,21 +396,21 @@ Result<bool> TriadRowReader::next(TriadRow& row) {
       report_progress(s.progress, s.lines.offset(), s.lines.total());
     const std::size_t hash = line.find('#');
     if (hash != std::string_view::npos) line = line.substr(0, hash);
-    split_whitespace(line, s.fields);
-    if (s.fields.empty()) continue;
-    if (s.fields.size() != 4) {
-      std::string msg =
-          "expected 4 whitespace-separated fields (t x y z), found " + std::to_string(s.fields.size());
-      if (s.fields.size() == 1 && line.find(',') != std::string_view::npos) {
+    std::array<std::string_view, 4> fields;
+    const std::size_t count = split_whitespace_first(line, fields);
+    if (count == 0) continue;
+    if (count != 4) {
+      std::string msg = "expected 4 whitespace-separated fields (t x y z), found " + std::to_string(count);
+      if (count == 1 && line.find(',') != std::string_view::npos) {
         msg += "; for comma-separated files use 'imucal import csv'";
       }
       return fail(at(s.source, s.lines.number(), msg));
     }
-    auto t = parse_time_ns(s.fields[0], TimeUnit::kS);
+    auto t = parse_time_ns(fields[0], TimeUnit::kS);
     if (!t.ok()) return fail(at(s.source, s.lines.number(), "field 1 (t, seconds): " + t.error().message));
     Eigen::Vector3d v;
     for (int k = 0; k < 3; ++k) {
-      auto x = parse_double(s.fields[static_cast<std::size_t>(k + 1)]);
+      auto x = parse_double(fields[static_cast<std::size_t>(k + 1)]);
       if (!x.ok()) {
         return fail(at(s.source, s.lines.number(),
                        "field " + std::to_string(k + 2) + " (" + kNames[k + 1] + "): " + x.error().message));

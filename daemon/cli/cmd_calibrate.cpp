@@ -134,6 +134,7 @@ void run(const StaticCliOptions& o) {
     clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
     return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
   };
+  std::future<void> solver = app::load_static_solver_meanwhile();
   const double t0 = cpu_now();
   auto loaded = app::load_imu_stream(
       o.log_path, o.stream, o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse);

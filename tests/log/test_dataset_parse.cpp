@@ -32,6 +32,41 @@ TEST(DatasetTime, ParsesDecimalSecondsExactly) {
   EXPECT_EQ(*parse_time_ns("000.000", TimeUnit::kS), 0);
 }
 
+// The common short form is parsed in integer arithmetic, anything longer by the general parser:
+// the same number written with 20 more zeros after its last decimal (which only the general parser
+// takes) must give the same time, or the same refusal.
+TEST(DatasetTime, TheShortFormAndTheGeneralParserAgree) {
+  std::mt19937 rng(11);
+  const auto pick = [&](int n) { return static_cast<int>(rng() % static_cast<unsigned>(n)); };
+  const auto digits = [&](int n) {
+    std::string d;
+    for (int k = 0; k < n; ++k) d.push_back(static_cast<char>('0' + pick(pick(3) == 0 ? 2 : 10)));
+    return d;
+  };
+  const TimeUnit units[] = {TimeUnit::kS, TimeUnit::kMs, TimeUnit::kUs, TimeUnit::kNs};
+  const char* const signs[] = {"", "+", "-"};
+  int accepted = 0;
+  for (int k = 0; k < 20000; ++k) {
+    const std::string sign = signs[pick(3)];
+    std::string whole = digits(pick(13)), frac = digits(pick(13));
+    if (whole.empty() && frac.empty()) whole = "7";
+    std::string exponent;
+    if (pick(2) == 0) exponent = std::string(pick(2) ? "e" : "E") + signs[pick(3)] + digits(1 + pick(3));
+    const bool dot = !frac.empty() || pick(2) == 0;
+    const std::string text = sign + whole + (dot ? "." : "") + frac + exponent;
+    const std::string longer = sign + whole + "." + frac + std::string(20, '0') + exponent;
+    const TimeUnit unit = units[pick(4)];
+    const auto a = parse_time_ns(text, unit);
+    const auto b = parse_time_ns(longer, unit);
+    ASSERT_EQ(a.ok(), b.ok()) << text << " / " << longer;
+    if (a.ok()) {
+      EXPECT_EQ(*a, *b) << text << " / " << longer;
+      ++accepted;
+    }
+  }
+  EXPECT_GT(accepted, 10000);  // most of them are times, so the comparison has teeth
+}
+
 TEST(DatasetTime, RejectsGarbageAndOverflow) {
   for (const char* bad :
        {"", "abc", "1.2.3", "1e", "--1", "+-1", "1e+-5", "1e++5", "1,5", "nan", "inf", "0x10"}) {
