@@ -209,6 +209,10 @@ class GyroTransferCost : public ceres::CostFunction {
     // Jacobian at the same point: keep the forward quaternions of the last evaluation.
     Eigen::Matrix<double, 12, 1> key;
     key << Eigen::Map<const Eigen::Matrix<double, 9, 1>>(p), b;
+    // The covariance asks again for the Jacobian the solver's last accepted step evaluated.
+    Eigen::Matrix<double, 18, 1> jac_key;
+    jac_key << key, tr_->u0, tr_->u1;
+    if (want_jacobian && jac_valid_ && jac_key == jac_key_) return write_saved(residuals, jacobians);
     const bool cached = cache_valid_ && key == cache_key_;
     if (!cached) {
       q_buf_.resize(n == 0 ? 1 : n);
@@ -239,26 +243,38 @@ class GyroTransferCost : public ceres::CostFunction {
       for (int a = 0; a < 3; ++a) J_A.middleCols<3>(3 * a) -= G.col(a) * v.transpose();
       sum_G -= G;
     }
+    Eigen::Matrix<double, 3, 9>& J = J_saved_;
+    J.col(0) = -s[1] * J_A.col(1);  // T(0,1) = -gamma_yz
+    J.col(1) = s[2] * J_A.col(2);   // T(0,2) =  gamma_zy
+    J.col(2) = s[0] * J_A.col(3);   // T(1,0) =  gamma_xz
+    J.col(3) = -s[2] * J_A.col(5);  // T(1,2) = -gamma_zx
+    J.col(4) = -s[0] * J_A.col(6);  // T(2,0) = -gamma_xy
+    J.col(5) = s[1] * J_A.col(7);   // T(2,1) =  gamma_yx
+    for (int c = 0; c < 3; ++c) {
+      J.col(6 + c) = Tg(0, c) * J_A.col(c) + Tg(1, c) * J_A.col(3 + c) + Tg(2, c) * J_A.col(6 + c);
+    }
+    Jb_saved_ = sum_G * A;
+    r_saved_ = r;
+    jac_key_ = jac_key;
+    jac_valid_ = true;
+    return write_saved(residuals, jacobians);
+  }
+
+ private:
+  bool write_saved(double* residuals, double** jacobians) const {
+    Eigen::Map<Eigen::Vector3d> r(residuals);
+    r = r_saved_;
     if (jacobians[0]) {
       Eigen::Map<Eigen::Matrix<double, 3, 9, Eigen::RowMajor>> J(jacobians[0]);
-      J.col(0) = -s[1] * J_A.col(1);  // T(0,1) = -gamma_yz
-      J.col(1) = s[2] * J_A.col(2);   // T(0,2) =  gamma_zy
-      J.col(2) = s[0] * J_A.col(3);   // T(1,0) =  gamma_xz
-      J.col(3) = -s[2] * J_A.col(5);  // T(1,2) = -gamma_zx
-      J.col(4) = -s[0] * J_A.col(6);  // T(2,0) = -gamma_xy
-      J.col(5) = s[1] * J_A.col(7);   // T(2,1) =  gamma_yx
-      for (int c = 0; c < 3; ++c) {
-        J.col(6 + c) = Tg(0, c) * J_A.col(c) + Tg(1, c) * J_A.col(3 + c) + Tg(2, c) * J_A.col(6 + c);
-      }
+      J = J_saved_;
     }
     if (!fixed_bias_ && jacobians[1]) {
       Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> Jb(jacobians[1]);
-      Jb = sum_G * A;
+      Jb = Jb_saved_;
     }
     return true;
   }
 
- private:
   const Transfer* tr_;
   const Eigen::Vector3d* fixed_bias_;
   // Scratch, reused between evaluations (one thread at a time evaluates a transfer).
@@ -267,6 +283,12 @@ class GyroTransferCost : public ceres::CostFunction {
   mutable Rk4nGradient grad_;
   mutable Eigen::Matrix<double, 12, 1> cache_key_ = Eigen::Matrix<double, 12, 1>::Zero();
   mutable bool cache_valid_ = false;
+  // The last Jacobian, its residual and its point (parameters and the two directions).
+  mutable Eigen::Matrix<double, 18, 1> jac_key_ = Eigen::Matrix<double, 18, 1>::Zero();
+  mutable bool jac_valid_ = false;
+  mutable Eigen::Vector3d r_saved_ = Eigen::Vector3d::Zero();
+  mutable Eigen::Matrix<double, 3, 9> J_saved_ = Eigen::Matrix<double, 3, 9>::Zero();
+  mutable Eigen::Matrix3d Jb_saved_ = Eigen::Matrix3d::Zero();
 };
 
 /// Every transfer's residuals as one block, evaluated on up to `threads` threads, each over a

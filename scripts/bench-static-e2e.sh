@@ -21,9 +21,11 @@ trap 'rm -rf "$tmp"' EXIT
 
 median() { sort -n | awk '{ v[NR] = $1 } END { print v[int((NR + 1) / 2)] }'; }
 
-: > "$tmp/import" ; : > "$tmp/calib"; : > "$tmp/total"
+: > "$tmp/import" ; : > "$tmp/calib"; : > "$tmp/total"; : > "$tmp/peer"; : > "$tmp/ratio"
 # Wall time from bash's microsecond clock (/usr/bin/time rounds it to 10 ms); peak RSS from
-# /usr/bin/time.
+# /usr/bin/time. With IMUTK, each run of imucal's two commands is followed by one of imu_tk, and
+# the ratio of the two is taken per run: on a shared host whose speed drifts, runs side by side
+# compare the tools under the same conditions.
 now() { echo "${EPOCHREALTIME/,/.}"; }
 for _ in $(seq "$RUNS"); do
   rm -f "$tmp/x.imulog"
@@ -40,6 +42,14 @@ for _ in $(seq "$RUNS"); do
   echo "$(awk -v a="$t0" -v b="$t1" 'BEGIN { print b - a }') $(cat "$tmp/mi")" >> "$tmp/import"
   echo "$(awk -v a="$t1" -v b="$t2" 'BEGIN { print b - a }') $(cat "$tmp/mc")" >> "$tmp/calib"
   awk -v a="$t0" -v b="$t2" 'BEGIN { print b - a }' >> "$tmp/total"
+  if [ -n "${IMUTK:-}" ]; then
+    # imu_tk writes its result files into the working directory: run it in $tmp.
+    t3=$(now)
+    (cd "$tmp" && /usr/bin/time -f "%M" -o "$tmp/mp" "$IMUTK" > /dev/null 2>&1)
+    t4=$(now)
+    echo "$(awk -v a="$t3" -v b="$t4" 'BEGIN { print b - a }') $(cat "$tmp/mp")" >> "$tmp/peer"
+    awk -v a="$t0" -v b="$t2" -v c="$t3" -v d="$t4" 'BEGIN { print (b - a) / (d - c) }' >> "$tmp/ratio"
+  fi
 done
 echo "imucal: $IMUCAL, $RUNS runs, Xsens MTi pair (51175 samples)"
 printf '  import ascii       median %.3f s  peak RSS %.1f MB\n' "$(cut -d' ' -f1 "$tmp/import" | median)" \
@@ -48,13 +58,8 @@ printf '  calibrate static   median %.3f s  peak RSS %.1f MB\n' "$(cut -d' ' -f1
   "$(cut -d' ' -f2 "$tmp/calib" | median | awk '{ print $1 / 1024 }')"
 printf '  both               median %.3f s\n' "$(median < "$tmp/total")"
 if [ -n "${IMUTK:-}" ]; then
-  : > "$tmp/peer"
-  (cd "$tmp" && for _ in $(seq "$RUNS"); do
-    t0=$(now)
-    /usr/bin/time -f "%M" -o "$tmp/mp" "$IMUTK" > /dev/null 2>&1
-    t1=$(now)
-    echo "$(awk -v a="$t0" -v b="$t1" 'BEGIN { print b - a }') $(cat "$tmp/mp")" >> "$tmp/peer"
-  done)
   printf '  imu_tk (%s)  median %.3f s  peak RSS %.1f MB\n' "$IMUTK" "$(cut -d' ' -f1 "$tmp/peer" | median)" \
     "$(cut -d' ' -f2 "$tmp/peer" | median | awk '{ print $1 / 1024 }')"
+  printf '  imucal / imu_tk    median of the per-run ratios %.3f (range %.3f-%.3f)\n' "$(median < "$tmp/ratio")" \
+    "$(sort -n "$tmp/ratio" | head -1)" "$(sort -n "$tmp/ratio" | tail -1)"
 fi
