@@ -19,6 +19,22 @@ Quat4 integrate_rk4n(std::span<const Eigen::Vector3d> w, std::span<const double>
   return q;
 }
 
+void rate_gradient_first_order(std::span<const Quat4> q, std::span<const double> t_s,
+                               const Eigen::Vector3d& u0, std::vector<Eigen::Matrix3d>& df_dw) {
+  const std::size_t n = q.size();
+  df_dw.assign(n, Eigen::Matrix3d::Zero());
+  if (n < 2) return;
+  Eigen::Matrix3d skew_u0;
+  skew_u0 << 0, -u0.z(), u0.y(), u0.z(), 0, -u0.x(), -u0.y(), u0.x(), 0;
+  const Eigen::Matrix3d C = quat_to_matrix(q[n - 1]).transpose() * skew_u0;
+  for (std::size_t k = 0; k + 1 < n; ++k) {
+    const Eigen::Matrix3d half =
+        (0.5 * (t_s[k + 1] - t_s[k])) * (C * quat_to_matrix((q[k] + q[k + 1]).normalized()));
+    df_dw[k] += half;
+    df_dw[k + 1] += half;
+  }
+}
+
 Eigen::Matrix3d quat_to_matrix(const Quat4& q) {
   const double a = q[0], b = q[1], c = q[2], d = q[3];
   Eigen::Matrix3d R;
