@@ -45,6 +45,23 @@ TEST(Rk4n, VaryingAxisFourthOrder) {
   EXPECT_LT(e2, 2e-4);
 }
 
+// The Jacobian of f(q) = R(q)^T u by central differences (of the polynomial of eq. 2.13, not
+// renormalised), as the callback of integrate_rk4n_with_gradient wants it.
+auto finite_difference_df_dq(const Eigen::Vector3d& u) {
+  return [u](const Quat4& q) {
+    const auto f = [&u](const Quat4& p) { return Eigen::Vector3d(quat_to_matrix(p).transpose() * u); };
+    Eigen::Matrix<double, 3, 4> J;
+    const double h = 1e-7;
+    for (int k = 0; k < 4; ++k) {
+      Quat4 qp = q, qm = q;
+      qp[k] += h;
+      qm[k] -= h;
+      J.col(k) = (f(qp) - f(qm)) / (2 * h);
+    }
+    return J;
+  };
+}
+
 TEST(Rk4n, ReverseGradientMatchesFiniteDifferences) {
   const int n = 60;
   std::vector<Eigen::Vector3d> w(n);
@@ -54,19 +71,8 @@ TEST(Rk4n, ReverseGradientMatchesFiniteDifferences) {
     w[i] = Eigen::Vector3d(1.5 * std::sin(0.1 * i), 2.0 * std::cos(0.07 * i), -1.0 + 0.03 * i);
   }
   const Eigen::Vector3d u(0.2, -0.3, 0.93);
-  // f(q) = R(q)^T u, differentiated analytically for the callback.
   auto f = [&](const Quat4& q) { return Eigen::Vector3d(quat_to_matrix(q).transpose() * u); };
-  auto df_dq = [&](const Quat4& q) {
-    Eigen::Matrix<double, 3, 4> J;
-    const double h = 1e-7;
-    for (int k = 0; k < 4; ++k) {
-      Quat4 qp = q, qm = q;
-      qp[k] += h;
-      qm[k] -= h;
-      J.col(k) = (f(qp) - f(qm)) / (2 * h);  // the polynomial of eq. 2.13, not renormalised
-    }
-    return J;
-  };
+  const auto df_dq = finite_difference_df_dq(u);
   std::vector<Quat4> buf;
   Rk4nGradient g;
   integrate_rk4n_with_gradient(std::span<const Eigen::Vector3d>(w), t, df_dq, buf, g);
@@ -90,18 +96,7 @@ TEST(Rk4n, ReverseGradientMatchesFiniteDifferences) {
 // 1 kHz over the same motion.
 TEST(Rk4n, FirstOrderGradientIsCloseToTheExactOne) {
   const Eigen::Vector3d u(0.2, -0.3, 0.93);
-  const auto f = [&](const Quat4& q) { return Eigen::Vector3d(quat_to_matrix(q).transpose() * u); };
-  const auto df_dq = [&](const Quat4& q) {
-    Eigen::Matrix<double, 3, 4> J;
-    const double h = 1e-7;
-    for (int k = 0; k < 4; ++k) {
-      Quat4 qp = q, qm = q;
-      qp[k] += h;
-      qm[k] -= h;
-      J.col(k) = (f(qp) - f(qm)) / (2 * h);
-    }
-    return J;
-  };
+  const auto df_dq = finite_difference_df_dq(u);
   double worst[2] = {0.0, 0.0};
   for (int k = 0; k < 2; ++k) {
     const double rate_hz = k == 0 ? 100.0 : 1000.0;

@@ -286,6 +286,17 @@ TEST(SessionLog, TimeRangeReadsAreHalfOpenAndOrdered) {
 }
 
 /// Every sample of a stream, as read_imu returns them: (time, accel x) pairs.
+// The times of a stream's samples in [t0, t1).
+std::vector<TimeNs> range_times(const SessionLogReader& reader, int id, TimeNs t0, TimeNs t1) {
+  std::vector<TimeNs> times;
+  const Status status = reader.for_each_imu(id, t0, t1, [&](const ImuSample& s) {
+    times.push_back(s.t_ns);
+    return true;
+  });
+  EXPECT_TRUE(status.ok()) << status.error().message;
+  return times;
+}
+
 std::vector<std::pair<TimeNs, double>> whole_stream(const SessionLogReader& reader, int id) {
   auto samples = reader.read_imu(id);
   EXPECT_TRUE(samples.ok()) << samples.error().message;
@@ -348,22 +359,7 @@ TEST(SessionLog, WholeStreamReadsAreInTimeOrderWhateverTheStorageOrder) {
       const auto want = (*reader)->read_imu(id);
       ASSERT_TRUE(want.ok()) << want.error().message;
       EXPECT_EQ(whole_stream(**held, id), whole_stream(**reader, id));
-      std::vector<TimeNs> range, range_want;
-      ASSERT_TRUE((*held)
-                      ->for_each_imu(id, 100, 500,
-                                     [&](const ImuSample& s) {
-                                       range.push_back(s.t_ns);
-                                       return true;
-                                     })
-                      .ok());
-      ASSERT_TRUE((*reader)
-                      ->for_each_imu(id, 100, 500,
-                                     [&](const ImuSample& s) {
-                                       range_want.push_back(s.t_ns);
-                                       return true;
-                                     })
-                      .ok());
-      EXPECT_EQ(range, range_want);
+      EXPECT_EQ(range_times(**held, id, 100, 500), range_times(**reader, id, 100, 500));
       for (int take = 0; take < 2; ++take) {
         const auto taken = (*held)->take_imu(id);
         ASSERT_TRUE(taken.ok()) << taken.error().message;
