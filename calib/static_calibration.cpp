@@ -302,6 +302,40 @@ class GyroTransferCost : public ceres::CostFunction {
   mutable Eigen::Matrix3d Jb_saved_ = Eigen::Matrix3d::Zero();
 };
 
+/// Consecutive runs of items of about equal total work for up to `threads` threads: run r covers
+/// items [begin[r], begin[r + 1]). The split depends on the work and the thread count only, so
+/// what each item computes does not depend on the threads' timing.
+std::vector<std::size_t> equal_work_runs(const std::vector<std::size_t>& work, int threads) {
+  std::size_t total = 0;
+  for (const std::size_t w : work) total += w;
+  const std::size_t runs = std::clamp<std::size_t>(static_cast<std::size_t>(std::max(threads, 1)), 1,
+                                                   std::max<std::size_t>(work.size(), 1));
+  std::vector<std::size_t> begin{0};
+  std::size_t done = 0;
+  for (std::size_t k = 0; k < work.size(); ++k) {
+    done += work[k];
+    if (begin.size() < runs && done * runs >= total * begin.size()) begin.push_back(k + 1);
+  }
+  begin.push_back(work.size());
+  return begin;
+}
+
+/// Calls each(k) for every item of the runs, the first run on the calling thread and each other
+/// on a thread of its own; false when any call returned false.
+template <class Each>
+bool for_each_in_runs(const std::vector<std::size_t>& begin, const Each& each) {
+  const auto run = [&](std::size_t r) {
+    bool ok = true;
+    for (std::size_t k = begin[r]; k < begin[r + 1]; ++k) ok = each(k) && ok;
+    return ok;
+  };
+  std::vector<std::future<bool>> others;
+  for (std::size_t r = 1; r + 1 < begin.size(); ++r) others.push_back(std::async(std::launch::async, run, r));
+  bool ok = run(0);
+  for (auto& f : others) ok = f.get() && ok;
+  return ok;
+}
+
 /// Every transfer's residuals as one block, evaluated on up to `threads` threads, each over a
 /// fixed run of consecutive transfers and writing only their rows. The residuals, Jacobian and
 /// so the whole solve are the same whatever the number of threads or their timing (the solver's
@@ -310,24 +344,15 @@ class GyroTransfersCost : public ceres::CostFunction {
  public:
   GyroTransfersCost(const std::vector<Transfer>& transfers, const Eigen::Vector3d* fixed_bias, int threads)
       : with_bias_(fixed_bias == nullptr) {
-    std::size_t total = 0;
+    std::vector<std::size_t> samples;  // the work: one integration step per sample
     for (const auto& tr : transfers) {
       parts_.push_back(std::make_unique<GyroTransferCost>(&tr, fixed_bias));
-      total += tr.gyro_raw.size();
+      samples.push_back(tr.gyro_raw.size());
     }
     set_num_residuals(3 * static_cast<int>(transfers.size()));
     mutable_parameter_block_sizes()->push_back(9);
     if (with_bias_) mutable_parameter_block_sizes()->push_back(3);
-    // Runs of about equal sample counts: the work is one integration step per sample.
-    const std::size_t runs = std::clamp<std::size_t>(static_cast<std::size_t>(std::max(threads, 1)), 1,
-                                                     std::max<std::size_t>(transfers.size(), 1));
-    std::size_t done = 0;
-    run_begin_.push_back(0);
-    for (std::size_t t = 0; t < transfers.size(); ++t) {
-      done += transfers[t].gyro_raw.size();
-      if (run_begin_.size() < runs && done * runs >= total * run_begin_.size()) run_begin_.push_back(t + 1);
-    }
-    run_begin_.push_back(transfers.size());
+    run_begin_ = equal_work_runs(samples, threads);
   }
 
   void set_first_order(bool on) {
@@ -335,24 +360,14 @@ class GyroTransfersCost : public ceres::CostFunction {
   }
 
   bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
-    auto run = [&](std::size_t r) {
-      bool ok = true;
-      for (std::size_t t = run_begin_[r]; t < run_begin_[r + 1]; ++t) {
-        double* jac[2] = {nullptr, nullptr};
-        if (jacobians) {
-          if (jacobians[0]) jac[0] = jacobians[0] + 27 * t;
-          if (with_bias_ && jacobians[1]) jac[1] = jacobians[1] + 9 * t;
-        }
-        ok = parts_[t]->Evaluate(parameters, residuals + 3 * t, jacobians ? jac : nullptr) && ok;
+    return for_each_in_runs(run_begin_, [&](std::size_t t) {
+      double* jac[2] = {nullptr, nullptr};
+      if (jacobians) {
+        if (jacobians[0]) jac[0] = jacobians[0] + 27 * t;
+        if (with_bias_ && jacobians[1]) jac[1] = jacobians[1] + 9 * t;
       }
-      return ok;
-    };
-    const std::size_t runs = run_begin_.size() - 1;
-    std::vector<std::future<bool>> others;
-    for (std::size_t r = 1; r < runs; ++r) others.push_back(std::async(std::launch::async, run, r));
-    bool ok = run(0);
-    for (auto& f : others) ok = f.get() && ok;
-    return ok;
+      return parts_[t]->Evaluate(parameters, residuals + 3 * t, jacobians ? jac : nullptr);
+    });
   }
 
  private:
@@ -423,7 +438,11 @@ std::vector<PoseDirections> pose_directions(const std::vector<StaticInterval>& i
                                             int threads) {
   std::vector<PoseDirections> out(intervals.size());
   const Eigen::Matrix3d Aa = accel_model.TK(), Ag = gyro_model.TK();
-  const auto one = [&](std::size_t k) {
+  // Each interval is independent of the others: runs of them of about equal sample counts on
+  // the threads give the same directions as one thread.
+  std::vector<std::size_t> work;
+  for (const auto& iv : intervals) work.push_back(iv.size());
+  for_each_in_runs(equal_work_runs(work, threads), [&](std::size_t k) {
     const StaticInterval& iv = intervals[k];
     Quat4 q(1, 0, 0, 0);
     Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
@@ -437,27 +456,8 @@ std::vector<PoseDirections> pose_directions(const std::vector<StaticInterval>& i
       sum += R * (Aa * (accel[j] + accel_model.bias));
     }
     out[k] = {sum.normalized(), (R.transpose() * sum).normalized()};
-  };
-  // Each interval is independent of the others: runs of them of about equal sample counts on
-  // the threads give the same directions as one thread.
-  std::size_t total = 0;
-  for (const auto& iv : intervals) total += iv.size();
-  const std::size_t runs = std::clamp<std::size_t>(static_cast<std::size_t>(std::max(threads, 1)), 1,
-                                                   std::max<std::size_t>(intervals.size(), 1));
-  std::vector<std::size_t> begin{0};
-  std::size_t done = 0;
-  for (std::size_t k = 0; k < intervals.size(); ++k) {
-    done += intervals[k].size();
-    if (begin.size() < runs && done * runs >= total * begin.size()) begin.push_back(k + 1);
-  }
-  begin.push_back(intervals.size());
-  const auto run = [&](std::size_t r) {
-    for (std::size_t k = begin[r]; k < begin[r + 1]; ++k) one(k);
-  };
-  std::vector<std::future<void>> others;
-  for (std::size_t r = 1; r + 1 < begin.size(); ++r) others.push_back(std::async(std::launch::async, run, r));
-  run(0);
-  for (auto& f : others) f.get();
+    return true;
+  });
   return out;
 }
 

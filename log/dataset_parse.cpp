@@ -68,17 +68,24 @@ class Lines {
   bool too_many_ = false;
 };
 
+/// Calls field(f) for each whitespace-separated field f of `s`, in order.
+template <class Field>
+void for_each_whitespace_field(std::string_view s, const Field& field) {
+  const char* p = s.data();
+  const char* const end = p + s.size();
+  while (true) {
+    while (p != end && (*p == ' ' || *p == '\t')) ++p;
+    if (p == end) return;
+    const char* q = p;
+    while (q != end && *q != ' ' && *q != '\t') ++q;
+    field(std::string_view(p, static_cast<std::size_t>(q - p)));
+    p = q;
+  }
+}
+
 void split_whitespace(std::string_view s, std::vector<std::string_view>& out) {
   out.clear();
-  std::size_t i = 0;
-  while (i < s.size()) {
-    while (i < s.size() && (s[i] == ' ' || s[i] == '\t')) ++i;
-    if (i >= s.size()) break;
-    std::size_t j = i;
-    while (j < s.size() && s[j] != ' ' && s[j] != '\t') ++j;
-    out.push_back(s.substr(i, j - i));
-    i = j;
-  }
+  for_each_whitespace_field(s, [&out](std::string_view f) { out.push_back(f); });
 }
 
 /// The first N whitespace-separated fields of `s` into `out`; returns how many fields `s` has (more
@@ -86,17 +93,11 @@ void split_whitespace(std::string_view s, std::vector<std::string_view>& out) {
 template <std::size_t N>
 std::size_t split_whitespace_first(std::string_view s, std::array<std::string_view, N>& out) {
   std::size_t count = 0;
-  const char* p = s.data();
-  const char* const end = p + s.size();
-  while (true) {
-    while (p != end && (*p == ' ' || *p == '\t')) ++p;
-    if (p == end) return count;
-    const char* q = p;
-    while (q != end && *q != ' ' && *q != '\t') ++q;
-    if (count < N) out[count] = std::string_view(p, static_cast<std::size_t>(q - p));
+  for_each_whitespace_field(s, [&](std::string_view f) {
+    if (count < N) out[count] = f;
     ++count;
-    p = q;
-  }
+  });
+  return count;
 }
 
 void split_delimited(std::string_view s, char delimiter, std::vector<std::string_view>& out) {

@@ -726,9 +726,9 @@ class SqliteSessionLogReader final : public SessionLogReader {
   };
   using Digests = std::map<int, StreamDigest>;
   using ImuRows = std::map<int, std::vector<ImuSample>>;
-  // The table's digest in storage order on `db`; with `rows`, the IMU table's samples are read
-  // by the same walk and kept per stream.
-  static bool digest_table(sqlite3* db, const char* table, Digests* out, std::string* error, ImuRows* rows);
+  // The table's digest in storage order; with `rows`, the IMU table's samples are read by the
+  // same walk and kept per stream.
+  bool digest_table(const char* table, Digests* out, std::string* error, ImuRows* rows) const;
   // The time index agrees with its table; the counts per stream when it does, and the streams
   // whose rows the table holds in time order. The index is walked on a second connection
   // meanwhile when the file is known not to change between the two walks (walk_index_aside_).
@@ -1233,8 +1233,9 @@ std::uint64_t row_hash(std::int64_t rowid, int stream, std::int64_t t_ns) {
 
 }  // namespace
 
-bool SqliteSessionLogReader::digest_table(sqlite3* db, const char* table, Digests* out, std::string* error,
-                                          ImuRows* rows) {
+bool SqliteSessionLogReader::digest_table(const char* table, Digests* out, std::string* error,
+                                          ImuRows* rows) const {
+  sqlite3* db = db_.get();
   int rc = 0;
   const std::string sql = std::string("SELECT rowid, stream_id, t_ns") +
                           (rows ? ", ax, ay, az, gx, gy, gz, temperature, flags" : "") + " FROM " + table +
@@ -1321,7 +1322,7 @@ bool SqliteSessionLogReader::index_agrees(const char* table, const char* index,
       return a;
     });
   }
-  *table_ok = digest_table(db_.get(), table, &from_table, table_error, rows);
+  *table_ok = digest_table(table, &from_table, table_error, rows);
   std::optional<Aside> a;
   if (aside.valid()) a = aside.get();
   bool index_ok = false;

@@ -2,8 +2,9 @@
 # End-to-end time of a static calibration from text files, as a user runs it: `imucal import
 # ascii` of the Xsens MTi example pair (512 s, 100 Hz, raw counts; ../shared/data/xsens_mti) plus
 # `imucal calibrate static` of the log, median wall time and peak RSS of RUNS runs of each.
-# With IMUTK set to an imu_tk driver (docs/static-calibration.md, "Against imu_tk"), the same
-# is measured for it.
+# With IMUTK set to an imu_tk driver (docs/static-calibration.md, "Against imu_tk"), imu_tk runs
+# after each imucal run, and the median and range of the per-run ratios imucal / imu_tk are
+# printed too.
 # Usage: scripts/bench-static-e2e.sh [IMUCAL] [RUNS]   (default build/release/daemon/imucal, 9)
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
