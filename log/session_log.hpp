@@ -41,9 +41,9 @@ struct SessionLogWriterOptions {
   /// Replace an existing file at the path instead of failing.
   bool overwrite = false;
   /// The path is a temporary file that is renamed into place only once closed (an import): a
-  /// failure part way leaves nothing worth keeping, so commits are not synced and the samples'
-  /// time index is built once, at close(), which syncs the whole file. The closed log is the
-  /// same as one written otherwise. Several times faster for bulk writes; never for recording.
+  /// failure part way leaves nothing worth keeping, so there is no journal and commits are not
+  /// synced until close(), which syncs the whole file. The closed log is the same as one written
+  /// otherwise. Several times faster for bulk writes; never for recording.
   bool staged = false;
 };
 
