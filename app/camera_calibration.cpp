@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "app/camera_results.hpp"
+#include "core/threads.hpp"
 #include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
 #include "log/target_detections.hpp"
@@ -230,8 +231,7 @@ Result<StreamDetections> detect_target_in_stream(const log::SessionLogReader& re
   if (!obs) {
     auto detector = calib::TargetDetector::create(q.target, q.detection);
     if (!detector.ok()) return detector.error();
-    out.threads =
-        q.threads > 0 ? q.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+    out.threads = threads_or_cores(q.threads);
     const auto start = std::chrono::steady_clock::now();
     auto found = detect_frames(reader, stream_id, **detector, out.threads, q.progress);
     if (!found.ok()) return found.error();

@@ -28,7 +28,8 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <optional>
-#include <thread>
+
+#include "core/threads.hpp"
 
 namespace imucal::calib {
 namespace {
@@ -612,9 +613,7 @@ Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(const TargetDescripti
   if (active_count(views) < options.min_views) return too_few_views(views, result, options);
   const int width = result.camera.width;
   const int height = result.camera.height;
-  const int threads = options.threads > 0
-                          ? options.threads
-                          : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const int threads = threads_or_cores(options.threads);
 
   // Start.
   std::vector<View> usable;

@@ -6,11 +6,11 @@
 #include <chrono>
 #include <cmath>
 #include <memory>
-#include <thread>
 
 #include "calib/camimu_init.hpp"
 #include "calib/camimu_residuals.hpp"
 #include "calib/marginal_covariance.hpp"
+#include "core/threads.hpp"
 
 namespace imucal::calib {
 
@@ -419,8 +419,7 @@ template <int N>
 Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary) {
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-  so.num_threads =
-      opt_.threads > 0 ? opt_.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  so.num_threads = threads_or_cores(opt_.threads);
   // The first stage only brings the trajectory, biases and extrinsics near the solution for the
   // stage that follows it; a few iterations do (docs/camimu-calibration.md, "Speed").
   const bool preliminary = !extended && opt_.model == CamImuModelKind::kExtended;
@@ -473,8 +472,7 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
     want(st_.bg[static_cast<std::size_t>(i)].data());
   }
   MarginalCovariance cov;
-  const int threads =
-      opt_.threads > 0 ? opt_.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const int threads = threads_or_cores(opt_.threads);
   if (!cov.compute(problem, blocks, threads)) {
     warnings_.push_back(
         "the covariance could not be computed (a parameter is not observable): sigmas are not given");

@@ -12,7 +12,6 @@
 #include <limits>
 #include <memory>
 #include <string>
-#include <thread>
 
 #include "calib/allan.hpp"
 #include "calib/ellipsoid.hpp"
@@ -20,6 +19,7 @@
 #include "calib/rk4.hpp"
 #include "calib/static_detector.hpp"
 #include "calib/static_steps.hpp"
+#include "core/threads.hpp"
 
 namespace imucal::calib {
 namespace {
@@ -426,9 +426,7 @@ struct PoseDirections {
 };
 
 /// The worker threads a solve step uses: opt.threads, or one per core when it is 0.
-int step_threads(const StaticCalibrationOptions& opt) {
-  return opt.threads > 0 ? opt.threads : static_cast<int>(std::max(1U, std::thread::hardware_concurrency()));
-}
+int step_threads(const StaticCalibrationOptions& opt) { return threads_or_cores(opt.threads); }
 
 std::vector<PoseDirections> pose_directions(const std::vector<StaticInterval>& intervals,
                                             const std::vector<Eigen::Vector3d>& accel,
