@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -386,6 +387,41 @@ Result<NamedCalibration> read_imu_tk_calibration(const std::string& accel_path,
 
 // ---- report --------------------------------------------------------------------------------
 
+RmsDifference paired_rms_difference(std::span<const double> a, std::span<const double> b) {
+  RmsDifference r;
+  const std::size_t n = std::min(a.size(), b.size());
+  r.count = static_cast<int>(n);
+  if (n == 0) {
+    r.sigma = std::numeric_limits<double>::quiet_NaN();
+    return r;
+  }
+  double sum_a = 0.0, sum_b = 0.0;
+  std::vector<double> d(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    sum_a += a[i] * a[i];
+    sum_b += b[i] * b[i];
+    d[i] = b[i] * b[i] - a[i] * a[i];
+  }
+  const double rms_a = std::sqrt(sum_a / static_cast<double>(n));
+  const double rms_b = std::sqrt(sum_b / static_cast<double>(n));
+  r.difference = rms_b - rms_a;
+  if (n < 2) {
+    r.sigma = std::numeric_limits<double>::quiet_NaN();
+    return r;
+  }
+  const double mean_d = (sum_b - sum_a) / static_cast<double>(n);
+  double ss = 0.0;
+  for (const double x : d) ss += (x - mean_d) * (x - mean_d);
+  const double se_mean_d = std::sqrt(ss / static_cast<double>(n - 1)) / std::sqrt(static_cast<double>(n));
+  r.sigma = rms_a + rms_b > 0.0 ? se_mean_d / (rms_a + rms_b) : 0.0;
+  return r;
+}
+
+CheckComparison compare_checks(const CheckFiguresPair& a, const CheckFiguresPair& b) {
+  return {paired_rms_difference(a.magnitude_per_interval_mps2, b.magnitude_per_interval_mps2),
+          paired_rms_difference(a.direction_per_transfer_rad, b.direction_per_transfer_rad)};
+}
+
 std::string calibration_check_json(const std::string& log_path, const ImuStreamInfo& info,
                                    const CheckSet& set, double gravity, const std::string& gravity_source,
                                    const std::vector<NamedCalibration>& calibrations,
@@ -447,6 +483,15 @@ std::string calibration_check_json(const std::string& log_path, const ImuStreamI
                     {"gravity_direction_rad", fig(figures[i].gravity_direction_rad)},
                     {"magnitude_per_interval_mps2", figures[i].magnitude_per_interval_mps2},
                     {"direction_per_transfer_rad", figures[i].direction_per_transfer_rad}});
+    if (i > 0) {
+      // Against the first calibration, paired over the same intervals and transfers.
+      const CheckComparison c = compare_checks(figures[0], figures[i]);
+      const auto diff = [](const RmsDifference& r) {
+        return json{{"count", r.count}, {"rms_difference", r.difference}, {"sigma", r.sigma}};
+      };
+      cals.back()["against_first"] = {{"gravity_magnitude_mps2", diff(c.gravity_magnitude_mps2)},
+                                      {"gravity_direction_rad", diff(c.gravity_direction_rad)}};
+    }
   }
   j["calibrations"] = cals;
   return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";

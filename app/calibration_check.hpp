@@ -103,6 +103,27 @@ struct CheckFiguresPair {
 /// lets into an interval then biases neither direction.
 CheckFiguresPair check_calibration(const CheckSet& set, const CanonicalImuModel& model, double gravity);
 
+/// How much the RMS of one figure differs between two calibrations checked on the same items
+/// (intervals or transfers), and whether that is more than chance: `sigma` is the standard error
+/// of the difference, from the spread of the per-item differences of the squared errors (a
+/// paired comparison: d_i = b_i^2 - a_i^2, RMS_b^2 - RMS_a^2 = mean(d), standard error
+/// sd(d) / sqrt(n), divided by RMS_a + RMS_b). Items are treated as independent; consecutive
+/// transfers share a pose, so sigma is if anything an underestimate.
+struct RmsDifference {
+  int count = 0;
+  double difference = 0.0;  // RMS of b minus RMS of a
+  double sigma = 0.0;       // NaN with fewer than two items
+};
+/// `a` and `b` per item, in the same order and of the same length.
+RmsDifference paired_rms_difference(std::span<const double> a, std::span<const double> b);
+
+/// Both figures of `b` against `a` (CheckFiguresPair of one check set).
+struct CheckComparison {
+  RmsDifference gravity_magnitude_mps2;
+  RmsDifference gravity_direction_rad;
+};
+CheckComparison compare_checks(const CheckFiguresPair& a, const CheckFiguresPair& b);
+
 /// A calibration read from a file, with the name it is reported under.
 struct NamedCalibration {
   std::string name;    // the file name (imu_tk: "ACC + GYRO")

@@ -97,6 +97,26 @@ void print_table(const std::vector<app::NamedCalibration>& cals,
     std::cout << fmt::sprintf("  %-*s  %8.5f %8.5f %9.5f  %8.3f %8.3f %9.3f\n", w, cals[i].name.c_str(),
                               m.mean, m.rms, m.max, 1e3 * d.mean, 1e3 * d.rms, 1e3 * d.max);
   }
+  if (cals.size() < 2) return;
+  // Each against the first, paired over the same intervals and transfers: is the difference of
+  // the RMS more than the spread of the per-item differences makes likely by chance?
+  const auto verdict = [](const app::RmsDifference& r) {
+    if (!(r.sigma > 0.0)) return r.difference == 0.0 ? "the same" : "undetermined";
+    if (std::abs(r.difference) <= 2.0 * r.sigma) return "no clear difference";
+    return r.difference < 0.0 ? "better" : "worse";
+  };
+  std::cout << "  RMS against " << cals[0].name
+            << " (paired over the same intervals and transfers, +- one standard "
+            << "error; beyond 2 standard errors is a clear difference):\n";
+  for (std::size_t i = 1; i < cals.size(); ++i) {
+    const app::CheckComparison c = app::compare_checks(figs[0], figs[i]);
+    const auto& m = c.gravity_magnitude_mps2;
+    const auto& d = c.gravity_direction_rad;
+    std::cout << fmt::sprintf(
+        "  %-*s  magnitude %+.5f +- %.5f m/s^2 (%s), direction %+.3f +- %.3f mrad (%s)\n", w,
+        cals[i].name.c_str(), m.difference, m.sigma, verdict(m), 1e3 * d.difference, 1e3 * d.sigma,
+        verdict(d));
+  }
 }
 
 void run(const CheckCliOptions& o) {
@@ -184,7 +204,9 @@ void setup(CLI::App& root) {
       "--min-interval s, none across a gap, reset or saturated sample. Figures per calibration, mean, RMS\n"
       "and max: | |a| - g | of the interval means (m/s^2), and the angle (mrad) between the gravity\n"
       "direction measured at the start of each interval and the one the corrected gyro carries there\n"
-      "through the motion from the end of the interval before.\n"
+      "through the motion from the end of the interval before. With several calibrations, each later one is\n"
+      "compared with the first over the same intervals and transfers: the difference of the RMS and its\n"
+      "standard error from the per-item differences (beyond 2 standard errors: a clear difference).\n"
       "Example: imucal calibrate check rec.imulog --calibration imucal.yaml --imu-tk acc.calib,gyro.calib "
       "--gravity 9.81");
   auto o = std::make_shared<CheckCliOptions>();

@@ -226,6 +226,40 @@ const char* kImuTkAcc =
     "32364.4\n"
     "\n";
 
+// The paired comparison of two calibrations' RMS: the difference and its standard error by
+// hand on four items, and the standard error's meaning: over many pairs of calibrations whose
+// per-transfer errors come from one distribution, the difference lies within two standard
+// errors about 95 % of the time.
+TEST(CalibrationCheck, PairedRmsDifferenceAndItsStandardError) {
+  const std::vector<double> a = {1, 2, 3, 4}, b = {2, 2, 3, 4};
+  const RmsDifference r = paired_rms_difference(a, b);
+  EXPECT_EQ(r.count, 4);
+  // RMS 7.5^0.5 and 8.25^0.5; squares differ by (3, 0, 0, 0): mean 0.75, sd 1.5, error 0.75.
+  EXPECT_NEAR(r.difference, std::sqrt(8.25) - std::sqrt(7.5), 1e-15);
+  EXPECT_NEAR(r.sigma, 0.75 / (std::sqrt(8.25) + std::sqrt(7.5)), 1e-15);
+  const RmsDifference same = paired_rms_difference(a, a);
+  EXPECT_EQ(same.difference, 0.0);
+  EXPECT_EQ(same.sigma, 0.0);
+  EXPECT_TRUE(std::isnan(paired_rms_difference(std::vector<double>{1.0}, std::vector<double>{2.0}).sigma));
+
+  std::mt19937 rng(7);
+  std::normal_distribution<double> n01;
+  int within = 0;
+  constexpr int kTrials = 2000;
+  for (int trial = 0; trial < kTrials; ++trial) {
+    std::vector<double> x(38), y(38);
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      // A shared part (the motion's own difficulty) and each calibration's own error.
+      const double shared = 10.0 * std::abs(n01(rng));
+      x[i] = shared + 2.0 * std::abs(n01(rng));
+      y[i] = shared + 2.0 * std::abs(n01(rng));
+    }
+    const RmsDifference d = paired_rms_difference(x, y);
+    if (std::abs(d.difference) <= 2.0 * d.sigma) ++within;
+  }
+  EXPECT_NEAR(static_cast<double>(within) / kTrials, 0.95, 0.02);  // 1905 of 2000
+}
+
 TEST(CalibrationCheckFormats, ImuTkTriadIsTKTimesRawMinusB) {
   auto t = parse_imu_tk_triad(kImuTkAcc, "acc.calib");
   ASSERT_TRUE(t.ok()) << t.error().message;

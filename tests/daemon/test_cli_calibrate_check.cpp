@@ -101,6 +101,19 @@ TEST(CliCalibrateCheck, TruthScoresBetterThanAPerturbedCalibration) {
   EXPECT_LT(truth_mag, 0.02) << r.out;
   EXPECT_NEAR(scale["gravity_magnitude_mps2"]["rms"].get<double>(), truth_mag, 1e-12);
   EXPECT_NEAR(no_g["gravity_magnitude_mps2"]["rms"].get<double>(), truth_mag, 1e-9);
+  // Each later calibration against the first, paired over the same transfers: the +1 % gyro
+  // scale is clearly worse, by the difference of the two RMS.
+  EXPECT_FALSE(truth.contains("against_first"));
+  const auto& paired = scale["against_first"]["gravity_direction_rad"];
+  EXPECT_NEAR(paired["rms_difference"].get<double>(),
+              scale["gravity_direction_rad"]["rms"].get<double>() - truth_dir, 1e-12);
+  EXPECT_GT(paired["sigma"].get<double>(), 0.0);
+  EXPECT_GT(paired["rms_difference"].get<double>(), 2.0 * paired["sigma"].get<double>()) << r.out;
+  EXPECT_EQ(scale["against_first"]["gravity_magnitude_mps2"]["rms_difference"].get<double>(), 0.0);
+  EXPECT_NE(r.out.find("RMS against truth.yaml"), std::string::npos) << r.out;
+  const auto line = r.out.substr(r.out.find("RMS against truth.yaml"));
+  const auto scale_line = line.substr(line.find("gyro_scale.yaml"));
+  EXPECT_NE(scale_line.substr(0, scale_line.find('\n')).find("mrad (worse)"), std::string::npos) << r.out;
 }
 
 TEST(CliCalibrateCheck, NeedsACalibration) {
