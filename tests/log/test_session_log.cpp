@@ -8,6 +8,9 @@
 #include <filesystem>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <tuple>
+#include <utility>
 
 #include "log/session_log.hpp"
 #include "tests/support/session_log_util.hpp"
@@ -297,6 +300,18 @@ std::vector<TimeNs> range_times(const SessionLogReader& reader, int id, TimeNs t
   return times;
 }
 
+/// Adds two raw IMU streams named `first` and `second`; their ids (-1 when refused).
+std::pair<int, int> add_two_streams(SessionLogWriter& writer, const std::string& first,
+                                    const std::string& second) {
+  ImuStreamInfo a = test_raw_imu_info(), b = test_raw_imu_info();
+  a.name = first;
+  b.name = second;
+  const auto id_a = writer.add_imu_stream(a);
+  const auto id_b = writer.add_imu_stream(b);
+  EXPECT_TRUE(id_a.ok() && id_b.ok());
+  return {id_a.ok() ? *id_a : -1, id_b.ok() ? *id_b : -1};
+}
+
 std::vector<std::pair<TimeNs, double>> whole_stream(const SessionLogReader& reader, int id) {
   auto samples = reader.read_imu(id);
   EXPECT_TRUE(samples.ok()) << samples.error().message;
@@ -318,11 +333,7 @@ TEST(SessionLog, WholeStreamReadsAreInTimeOrderWhateverTheStorageOrder) {
       options.staged = staged;
       auto writer = SessionLogWriter::create(path, options);
       ASSERT_TRUE(writer.ok()) << writer.error().message;
-      ImuStreamInfo a = test_raw_imu_info(), b = test_raw_imu_info();
-      a.name = "a";
-      b.name = "b";
-      in_order = *(*writer)->add_imu_stream(a);
-      shuffled = *(*writer)->add_imu_stream(b);
+      std::tie(in_order, shuffled) = add_two_streams(**writer, "a", "b");
       // Interleaved batches; stream a has equal times, b a late batch.
       const std::vector<std::pair<int, std::vector<TimeNs>>> batches = {
           {in_order, {0, 100, 100}}, {shuffled, {500, 600}}, {in_order, {100, 200}}, {shuffled, {300, 400}}};
@@ -389,11 +400,7 @@ TEST(SessionLog, ATableWalkedInTwoPartsIsOneWalk) {
   {
     auto writer = SessionLogWriter::create(path);
     ASSERT_TRUE(writer.ok()) << writer.error().message;
-    ImuStreamInfo a = test_raw_imu_info(), b = test_raw_imu_info();
-    a.name = "x";
-    b.name = "y";
-    x = *(*writer)->add_imu_stream(a);
-    y = *(*writer)->add_imu_stream(b);
+    std::tie(x, y) = add_two_streams(**writer, "x", "y");
     // 6000 rows of x late in time, 6000 of y, then 10 of x early: the table's first half holds
     // x in order, its second half too, and x steps back only between them.
     const auto append = [&](int id, TimeNs from, int count) {
