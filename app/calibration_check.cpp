@@ -404,6 +404,7 @@ RmsDifference paired_rms_difference(std::span<const double> a, std::span<const d
   }
   const double rms_a = std::sqrt(sum_a / static_cast<double>(n));
   const double rms_b = std::sqrt(sum_b / static_cast<double>(n));
+  r.reference = rms_a;
   r.difference = rms_b - rms_a;
   if (n < 2) {
     r.sigma = std::numeric_limits<double>::quiet_NaN();

@@ -111,6 +111,7 @@ CheckFiguresPair check_calibration(const CheckSet& set, const CanonicalImuModel&
 /// transfers share a pose, so sigma is if anything an underestimate.
 struct RmsDifference {
   int count = 0;
+  double reference = 0.0;   // RMS of a
   double difference = 0.0;  // RMS of b minus RMS of a
   double sigma = 0.0;       // NaN with fewer than two items
 };

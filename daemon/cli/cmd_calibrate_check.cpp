@@ -101,7 +101,9 @@ void print_table(const std::vector<app::NamedCalibration>& cals,
   // Each against the first, paired over the same intervals and transfers: is the difference of
   // the RMS more than the spread of the per-item differences makes likely by chance?
   const auto verdict = [](const app::RmsDifference& r) {
-    if (!(r.sigma > 0.0)) return r.difference == 0.0 ? "the same" : "undetermined";
+    // Equal to rounding (the same accelerometer in two files, say).
+    if (std::abs(r.difference) <= 1e-9 * r.reference) return "the same";
+    if (!(r.sigma > 0.0)) return "undetermined";
     if (std::abs(r.difference) <= 2.0 * r.sigma) return "no clear difference";
     return r.difference < 0.0 ? "better" : "worse";
   };
