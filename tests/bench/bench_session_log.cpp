@@ -171,6 +171,32 @@ void BM_OpenReader(benchmark::State& state) {
 }
 BENCHMARK(BM_OpenReader)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// As the calibrations open a log: the samples read by the open's own check are kept and handed
+// over (SessionLogReaderOptions::preload_imu, take_imu), so the open and the read are one pass.
+void BM_OpenReaderAndTakeSamples(benchmark::State& state) {
+  if (read_fixture().empty()) {
+    state.SkipWithError("could not write the fixture log");
+    return;
+  }
+  log::SessionLogReaderOptions options;
+  options.preload_imu = true;
+  for (auto _ : state) {
+    auto reader = log::SessionLogReader::open(read_fixture(), options);
+    if (!reader.ok()) {
+      state.SkipWithError(reader.error().message.c_str());
+      break;
+    }
+    auto samples = (*reader)->take_imu(*(*reader)->find_imu_stream());
+    if (!samples.ok() || samples->size() != 1'000'000) {
+      state.SkipWithError("the samples were not all read");
+      break;
+    }
+    benchmark::DoNotOptimize(samples->data());
+  }
+  state.SetItemsProcessed(state.iterations() * 1'000'000);
+}
+BENCHMARK(BM_OpenReaderAndTakeSamples)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 }  // namespace
 
 BENCHMARK_MAIN();

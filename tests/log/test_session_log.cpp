@@ -391,9 +391,10 @@ TEST(SessionLog, WholeStreamReadsAreInTimeOrderWhateverTheStorageOrder) {
   }
 }
 
-// A reader walks a large table in two parts at once (the second with the index, on a connection
-// of its own) and joins them: a stream whose only step back in time falls between the parts is
-// still found out of order, and every read gives time order.
+// A reader that keeps the samples walks a large table in two parts at once (the second after the
+// index, on a connection of its own) and joins them: a stream whose only step back in time falls
+// between the parts is still found out of order, and every read gives time order, with or
+// without the samples kept.
 TEST(SessionLog, ATableWalkedInTwoPartsIsOneWalk) {
   const std::string path = scratch_dir() + "/two-parts.imulog";
   int x = 0, y = 0;
