@@ -425,9 +425,6 @@ struct PoseDirections {
   Eigen::Vector3d u_start, u_end;
 };
 
-/// The worker threads a solve step uses: opt.threads, or one per core when it is 0.
-int step_threads(const StaticCalibrationOptions& opt) { return threads_or_cores(opt.threads); }
-
 std::vector<PoseDirections> pose_directions(const std::vector<StaticInterval>& intervals,
                                             const std::vector<Eigen::Vector3d>& accel,
                                             const std::vector<Eigen::Vector3d>& gyro,
@@ -1219,7 +1216,7 @@ Status solve_gyroscope(std::vector<Transfer>* transfers, const Candidate& best, 
                        std::span<const ImuSample> samples, const GyroStaticFit& gfit,
                        const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
   const TedaldiTriad gyro0 = initial_gyro(gfit.bias, opt);
-  const int threads = step_threads(opt);
+  const int threads = threads_or_cores(opt.threads);
   GyroFit fit(*transfers, gyro0, opt.estimate_gyro_bias, threads);
   // Two passes: the directions at the ends of the static intervals depend (weakly) on the gyro
   // model through the rotation inside the intervals; the second pass uses the first estimate.
@@ -1333,7 +1330,7 @@ StaticQuality quality_figures(const std::vector<Transfer>& transfers, const Cand
   // Gravity directions from the nominal accelerometer, rates from the nominal gyro.
   std::vector<GravityTransfer> nominal = checks;
   const auto dirs = pose_directions(best.intervals, scan.accel, scan.gyro, samples, accel_nominal,
-                                    initial_gyro(still.gyro_bias_raw, opt), step_threads(opt));
+                                    initial_gyro(still.gyro_bias_raw, opt), threads_or_cores(opt.threads));
   for (std::size_t k = 0; k < nominal.size(); ++k) {
     nominal[k].u0 = dirs[transfers[k].pose0].u_end;
     nominal[k].u1 = dirs[transfers[k].pose0 + 1].u_start;

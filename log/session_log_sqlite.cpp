@@ -749,8 +749,9 @@ class SqliteSessionLogReader final : public SessionLogReader {
 
   std::string path_;
   SessionLogReaderOptions options_;
-  // No writer holds the log and nothing was found damaged before the table checks: the index
-  // can be walked on a connection of its own, in parallel, and see the same rows.
+  // No writer holds the log and nothing was found damaged before the table checks: a
+  // connection of its own can walk the index (and part of the table) in parallel and see the
+  // same rows (index_agrees).
   bool walk_index_aside_ = false;
   OpenHere open_here_;  // declared before db_: registered until SQLite has closed the file
   sqlite::Db db_;
@@ -1342,7 +1343,8 @@ bool SqliteSessionLogReader::index_agrees(const char* table, const char* index,
                                           std::map<int, std::int64_t>* counts, std::set<int>* in_time_order,
                                           bool* table_ok, std::string* table_error, ImuRows* rows) const {
   Digests from_table, from_index;
-  const sqlite3_int64 last_rowid = max_rowid(table);
+  // Only a walk that keeps the samples needs the row count: for their room, and to split.
+  const sqlite3_int64 last_rowid = rows ? max_rowid(table) : 0;
   // Room for every row, bounded by what the file can hold (16 bytes a row at the least): a
   // damaged or edited file can claim any rowid.
   std::size_t room = 0;
@@ -1368,7 +1370,7 @@ bool SqliteSessionLogReader::index_agrees(const char* table, const char* index,
   };
   std::future<Aside> aside;
   if (walk_index_aside_ && std::thread::hardware_concurrency() > 1) {
-    if (rows && last_rowid > kSplitRows) {
+    if (last_rowid > kSplitRows) {
       theirs = {last_rowid - last_rowid / 20 * 9, std::numeric_limits<sqlite3_int64>::max()};  // 45 %
       mine.upto = theirs.after;
     }
