@@ -17,9 +17,12 @@ namespace imucal::calib {
 
 /// The recording as the method sees it: time base, breaks and invalid samples.
 struct ScannedRecording {
-  double period_s = 0.0;  // median sample interval
+  /// The mean step between samples over the steps that are not gaps: with timestamps from a
+  /// coarse or jittery clock (steps of 0.5, 1 and 1.5 periods) the median step is not the rate.
+  double period_s = 0.0;
   double rate_hz = 0.0;
-  /// A gap (flagged, or an interval over 1.5 periods) or a device reset before sample i.
+  /// A gap (flagged, or a step over 1.5 periods that no neighbouring step makes up for) or a
+  /// device reset before sample i.
   std::vector<bool> break_before;
   std::vector<bool> reset_before;  // a device reset before sample i
   std::vector<bool> accel_ok, gyro_ok;

@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -517,6 +518,41 @@ TEST(StaticSteps, ScanFindsBreaksAndInvalidSamplesAndWarns) {
   auto short_run = calibrate_static(still_samples(999), StaticCalibrationOptions{});
   ASSERT_FALSE(short_run.ok());
   EXPECT_EQ(short_run.error().code, Errc::kInsufficientData);
+}
+
+TEST(StaticSteps, ACoarseClockIsNotAGapButALostSampleIs) {
+  // 100 Hz samples received with up to 4 ms of delay and stamped by a clock that ticks every
+  // 5.12 ms (as a host's receive time can be): steps of 5.12, 10.24 and 15.36 ms, the long ones
+  // made up for by a short one next to them.
+  std::vector<ImuSample> v = still_samples(3000);
+  constexpr TimeNs kTick = 5'120'000;
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<TimeNs> delay(0, 4'000'000);
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    v[i].t_ns = ((static_cast<TimeNs>(i) * 10'000'000 + delay(rng)) / kTick) * kTick;
+  }
+  std::vector<std::string> warnings;
+  auto scan = scan_recording(v, &warnings);
+  ASSERT_TRUE(scan.ok()) << scan.error().message;
+  int long_steps = 0;
+  for (std::size_t i = 1; i < v.size(); ++i) long_steps += v[i].t_ns - v[i - 1].t_ns > 15'000'000 ? 1 : 0;
+  ASSERT_GT(long_steps, 100);  // the clock does step by 1.5 periods of the median step
+  EXPECT_EQ(scan->gaps, 0);
+  EXPECT_TRUE(warnings.empty()) << warnings.front();
+  // The rate is the samples' (the median step, 10.24 ms, would say 97.7 Hz).
+  EXPECT_NEAR(scan->rate_hz, 100.0, 0.01);
+
+  // A late sample (1.6 and 0.4 periods) loses nothing; a lost sample (2 periods) is a gap.
+  v = still_samples(1000);
+  v[300].t_ns += 6'000'000;
+  for (std::size_t i = 600; i < v.size(); ++i) v[i].t_ns += 10'000'000;
+  scan = scan_recording(v, &warnings);
+  ASSERT_TRUE(scan.ok()) << scan.error().message;
+  EXPECT_EQ(scan->gaps, 1);
+  EXPECT_FALSE(scan->break_before[300]);
+  EXPECT_FALSE(scan->break_before[301]);
+  EXPECT_TRUE(scan->break_before[600]);
+  EXPECT_NEAR(scan->rate_hz, 100.0, 1e-9);  // the gap's step is not part of the rate
 }
 
 TEST(StaticSteps, StillStartGivenOrFromAllanDeviation) {
