@@ -277,6 +277,20 @@ CheckFiguresPair check_calibration(const CheckSet& set, const CanonicalImuModel&
 
 // ---- reading calibrations ---------------------------------------------------------------------
 
+std::vector<NamedCalibration> gyro_with_first_accelerometer(
+    const std::vector<NamedCalibration>& calibrations) {
+  std::vector<NamedCalibration> out;
+  for (std::size_t i = 1; i < calibrations.size(); ++i) {
+    NamedCalibration c = calibrations[i];
+    c.name = "[gyro] " + calibrations[i].name;
+    c.model.A_a = calibrations[0].model.A_a;
+    c.model.b_a = calibrations[0].model.b_a;
+    c.accelerometer_of = calibrations[0].name;
+    out.push_back(std::move(c));
+  }
+  return out;
+}
+
 Result<NamedCalibration> parse_imucal_calibration(const std::string& yaml_text, const std::string& origin) {
   YAML::Node root;
   try {
@@ -484,6 +498,7 @@ std::string calibration_check_json(const std::string& log_path, const ImuStreamI
                     {"gravity_direction_rad", fig(figures[i].gravity_direction_rad)},
                     {"magnitude_per_interval_mps2", figures[i].magnitude_per_interval_mps2},
                     {"direction_per_transfer_rad", figures[i].direction_per_transfer_rad}});
+    if (!c.accelerometer_of.empty()) cals.back()["accelerometer_of"] = c.accelerometer_of;
     if (i > 0) {
       // Against the first calibration, paired over the same intervals and transfers.
       const CheckComparison c = compare_checks(figures[0], figures[i]);

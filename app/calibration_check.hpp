@@ -132,7 +132,16 @@ struct NamedCalibration {
   std::string path;    // the file (imu_tk: "ACC,GYRO")
   CanonicalImuModel model;
   std::optional<ImuUnits> input_units;  // when the file says
+  std::string accelerometer_of;         // crossed: the calibration whose accelerometer it has
 };
+
+/// For each calibration after the first, that calibration's gyroscope (A_g, b_g and G) with the
+/// first one's accelerometer (A_a, b_a), named "[gyro] NAME". The direction figure depends on
+/// both sensors' calibrations (the accelerometer measures the directions, the gyroscope carries
+/// them); with the accelerometer in common, the difference to the first is the gyroscopes' alone.
+/// Empty with fewer than two calibrations.
+std::vector<NamedCalibration> gyro_with_first_accelerometer(
+    const std::vector<NamedCalibration>& calibrations);
 
 /// imucal's static result YAML (`imucal calibrate static -o`): its `canonical:` section (A_a,
 /// b_a, A_g, b_g, G) and `input_units`. `origin` names the text in errors.

@@ -33,6 +33,7 @@ struct CheckCliOptions {
   double multiplier = 6.0;
   double min_interval_s = 1.0;
   bool allow_damaged = false;
+  bool cross = false;
   bool force = false;
   std::string json_path;
 };
@@ -97,6 +98,12 @@ void print_table(const std::vector<app::NamedCalibration>& cals,
     std::cout << fmt::sprintf("  %-*s  %8.5f %8.5f %9.5f  %8.3f %8.3f %9.3f\n", w, cals[i].name.c_str(),
                               m.mean, m.rms, m.max, 1e3 * d.mean, 1e3 * d.rms, 1e3 * d.max);
   }
+  const auto crossed = std::find_if(
+      cals.begin(), cals.end(), [](const app::NamedCalibration& c) { return !c.accelerometer_of.empty(); });
+  if (crossed != cals.end()) {
+    std::cout << "  [gyro] NAME: the gyroscope (and G) of NAME with the accelerometer of "
+              << crossed->accelerometer_of << "\n";
+  }
   if (cals.size() < 2) return;
   // Each against the first, paired over the same intervals and transfers: is the difference of
   // the RMS more than the spread of the per-item differences makes likely by chance?
@@ -142,7 +149,15 @@ void run(const CheckCliOptions& o) {
   set_opt.min_interval_s = o.min_interval_s;
   if (auto valid = set_opt.validate(); !valid.ok()) fail(valid.error());
   // Read the calibrations first: a wrong file is found before the log is loaded.
-  const std::vector<app::NamedCalibration> cals = load_calibrations(o);
+  std::vector<app::NamedCalibration> cals = load_calibrations(o);
+  if (o.cross) {
+    if (cals.size() < 2) {
+      throw CliExit{kExitUsage,
+                    "--cross needs at least two calibrations: it checks each later one's gyroscope with the "
+                    "first one's accelerometer"};
+    }
+    for (auto& c : app::gyro_with_first_accelerometer(cals)) cals.push_back(std::move(c));
+  }
 
   auto loaded = app::load_imu_stream(
       o.log_path, o.stream, o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse);
@@ -209,6 +224,9 @@ void setup(CLI::App& root) {
       "through the motion from the end of the interval before. With several calibrations, each later one is\n"
       "compared with the first over the same intervals and transfers: the difference of the RMS and its\n"
       "standard error from the per-item differences (beyond 2 standard errors: a clear difference).\n"
+      "The direction figure depends on both sensors' calibrations; --cross adds, for each later\n"
+      "calibration, its gyroscope with the first one's accelerometer ('[gyro] NAME'), whose difference\n"
+      "to the first is then the gyroscopes' alone.\n"
       "Example: imucal calibrate check rec.imulog --calibration imucal.yaml --imu-tk acc.calib,gyro.calib "
       "--gravity 9.81");
   auto o = std::make_shared<CheckCliOptions>();
@@ -231,6 +249,9 @@ void setup(CLI::App& root) {
   cmd->add_option("--min-interval", o->min_interval_s, "Shortest static interval, s")
       ->capture_default_str()
       ->check(CLI::Range(0.05, 60.0));
+  cmd->add_flag("--cross", o->cross,
+                "Also check each later calibration's gyroscope with the first one's accelerometer, to tell "
+                "the gyroscopes apart");
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Check on what is readable in a damaged log");
   cmd->add_option("--json", o->json_path, "Write the fixed set and the figures as JSON");
   cmd->add_flag("--force", o->force, "Replace the JSON file if it exists (never an input)");

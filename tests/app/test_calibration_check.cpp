@@ -372,12 +372,53 @@ TEST(CalibrationCheckFormats, MalformedImucalYamlIsRefusedNamingTheFileAndTheKey
   EXPECT_NE(yaml.error().message.find("broken.yaml: not valid YAML"), std::string::npos);
 }
 
+TEST(CalibrationCheck, CrossingGivesEachGyroscopeTheFirstAccelerometer) {
+  const Synth s = synthetic(16);
+  auto set = build_check_set(s.rec.samples);
+  ASSERT_TRUE(set.ok()) << set.error().message;
+  NamedCalibration truth{"truth.yaml", "imucal", "/x/truth.yaml", s.truth, ImuUnits::kSi, ""};
+  NamedCalibration accel_off = truth;  // +0.5 % on the accelerometer's z axis, the truth's gyro
+  accel_off.name = "accel_off.yaml";
+  accel_off.model.A_a = Eigen::Vector3d(1.0, 1.0, 1.005).asDiagonal() * s.truth.A_a;
+  accel_off.model.b_a += Eigen::Vector3d(0.01, 0.0, 0.0);
+  NamedCalibration gyro_off = truth;  // +1 % on the gyro's x axis and another G, the truth's accelerometer
+  gyro_off.name = "gyro_off.yaml";
+  gyro_off.model.A_g = Eigen::Vector3d(1.01, 1.0, 1.0).asDiagonal() * s.truth.A_g;
+  gyro_off.model.G(0, 0) += 1e-4;
+
+  EXPECT_TRUE(gyro_with_first_accelerometer({truth}).empty());
+  const auto crossed = gyro_with_first_accelerometer({truth, accel_off, gyro_off});
+  ASSERT_EQ(crossed.size(), 2u);
+  EXPECT_EQ(crossed[0].name, "[gyro] accel_off.yaml");
+  EXPECT_EQ(crossed[0].accelerometer_of, "truth.yaml");
+  EXPECT_EQ(crossed[1].name, "[gyro] gyro_off.yaml");
+  EXPECT_EQ(crossed[1].model.A_a, truth.model.A_a);
+  EXPECT_EQ(crossed[1].model.b_a, truth.model.b_a);
+  EXPECT_EQ(crossed[1].model.A_g, gyro_off.model.A_g);
+  EXPECT_EQ(crossed[1].model.b_g, gyro_off.model.b_g);
+  EXPECT_EQ(crossed[1].model.G, gyro_off.model.G);
+
+  // The accelerometer moves the direction figure too; with the first's accelerometer, a
+  // calibration whose gyroscope is the first's scores exactly as the first.
+  const double g = s.cfg.gravity;
+  const CheckFiguresPair f_truth = check_calibration(*set, truth.model, g);
+  const CheckFiguresPair f_accel = check_calibration(*set, accel_off.model, g);
+  const CheckFiguresPair f_cross = check_calibration(*set, crossed[0].model, g);
+  EXPECT_NE(f_accel.gravity_direction_rad.rms, f_truth.gravity_direction_rad.rms);
+  EXPECT_EQ(f_cross.direction_per_transfer_rad, f_truth.direction_per_transfer_rad);
+  EXPECT_EQ(f_cross.magnitude_per_interval_mps2, f_truth.magnitude_per_interval_mps2);
+  // And the crossed gyro_off differs from the first by its gyroscope alone: the same as gyro_off.
+  EXPECT_EQ(check_calibration(*set, crossed[1].model, g).direction_per_transfer_rad,
+            check_calibration(*set, gyro_off.model, g).direction_per_transfer_rad);
+}
+
 TEST(CalibrationCheckFormats, JsonReportHoldsTheSetAndOneEntryPerCalibration) {
   const Synth s = synthetic(15);
   auto set = build_check_set(s.rec.samples);
   ASSERT_TRUE(set.ok());
-  NamedCalibration truth{"truth.yaml", "imucal", "/x/truth.yaml", s.truth, ImuUnits::kSi};
-  NamedCalibration ident{"a.calib + g.calib", "imu_tk", "a.calib,g.calib", CanonicalImuModel{}, std::nullopt};
+  NamedCalibration truth{"truth.yaml", "imucal", "/x/truth.yaml", s.truth, ImuUnits::kSi, ""};
+  NamedCalibration ident{"a.calib + g.calib", "imu_tk",     "a.calib,g.calib",
+                         CanonicalImuModel{}, std::nullopt, ""};
   const std::vector<CheckFiguresPair> figs = {check_calibration(*set, truth.model, 9.80665),
                                               check_calibration(*set, ident.model, 9.80665)};
   const auto j = nlohmann::json::parse(
@@ -391,6 +432,16 @@ TEST(CalibrationCheckFormats, JsonReportHoldsTheSetAndOneEntryPerCalibration) {
                    figs[0].gravity_direction_rad.rms);
   EXPECT_EQ(j["calibrations"][0]["magnitude_per_interval_mps2"].size(), set->intervals.size());
   EXPECT_EQ(j["calibrations"][0]["direction_per_transfer_rad"].size(), set->transfers.size());
+  EXPECT_FALSE(j["calibrations"][1].contains("accelerometer_of"));
+
+  // A crossed calibration names the one whose accelerometer it has.
+  const auto crossed = gyro_with_first_accelerometer({truth, ident});
+  const auto jc = nlohmann::json::parse(calibration_check_json(
+      "rec.imulog", ImuStreamInfo{}, *set, 9.80665, "given", {truth, ident, crossed[0]},
+      {figs[0], figs[1], check_calibration(*set, crossed[0].model, 9.80665)}));
+  ASSERT_EQ(jc["calibrations"].size(), 3u);
+  EXPECT_EQ(jc["calibrations"][2]["name"], "[gyro] a.calib + g.calib");
+  EXPECT_EQ(jc["calibrations"][2]["accelerometer_of"], "truth.yaml");
 }
 
 }  // namespace

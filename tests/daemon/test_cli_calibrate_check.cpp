@@ -121,6 +121,41 @@ TEST(CliCalibrateCheck, TruthScoresBetterThanAPerturbedCalibration) {
   EXPECT_NE(no_g_line.substr(0, no_g_line.find('\n')).find("m/s^2 (the same)"), std::string::npos) << r.out;
 }
 
+TEST(CliCalibrateCheck, CrossTellsTheGyroscopesApart) {
+  const CheckPaths f = check_fixture();
+  const YAML::Node counts = YAML::LoadFile(f.truth)["canonical"]["counts"];
+  ASSERT_TRUE(counts && counts["A_a"]) << "truth file has no canonical.counts section";
+  const std::string dir = test::scratch_dir();
+  write_result(dir + "/truth.yaml", counts);
+  YAML::Node accel = YAML::Clone(counts);  // +0.5 % on the accelerometer's z output, the truth's gyro
+  for (int c = 0; c < 3; ++c) accel["A_a"][2][c] = 1.005 * accel["A_a"][2][c].as<double>();
+  write_result(dir + "/accel_scale.yaml", accel);
+
+  auto r =
+      run_cli({"calibrate", "check", f.log, "--calibration", dir + "/truth.yaml", "--calibration",
+               dir + "/accel_scale.yaml", "--cross", "--gravity", "9.80665", "--json", dir + "/check.json"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("[gyro] NAME: the gyroscope (and G) of NAME with the accelerometer of truth.yaml"),
+            std::string::npos)
+      << r.out;
+  const auto j = nlohmann::json::parse(test::read_file(dir + "/check.json"));
+  ASSERT_EQ(j["calibrations"].size(), 3u);
+  const auto& truth = entry(j, "truth.yaml");
+  const auto& own = entry(j, "accel_scale.yaml");
+  const auto& crossed = entry(j, "[gyro] accel_scale.yaml");
+  EXPECT_EQ(crossed["accelerometer_of"], "truth.yaml");
+  // Its own accelerometer moves its direction figure; with the truth's, its gyroscope (the
+  // truth's) scores as the truth, and the paired line says so.
+  EXPECT_NE(own["gravity_direction_rad"]["rms"], truth["gravity_direction_rad"]["rms"]);
+  EXPECT_EQ(crossed["direction_per_transfer_rad"], truth["direction_per_transfer_rad"]);
+  const auto line = r.out.substr(r.out.rfind("[gyro] accel_scale.yaml"));
+  EXPECT_NE(line.substr(0, line.find('\n')).find("mrad (the same)"), std::string::npos) << r.out;
+
+  r = run_cli({"calibrate", "check", f.log, "--calibration", dir + "/truth.yaml", "--cross"});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("--cross needs at least two calibrations"), std::string::npos) << r.err;
+}
+
 TEST(CliCalibrateCheck, NeedsACalibration) {
   const auto r = run_cli({"calibrate", "check", check_fixture().log, "--gravity", "9.81"});
   EXPECT_EQ(r.exit_code, 2) << r.err;
