@@ -1,6 +1,7 @@
 #include "app/stream_stats.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 #include "calib/static_detector.hpp"
 
@@ -115,16 +116,14 @@ Result<CleanRun> longest_clean_run(const std::vector<ImuSample>& s) {
   CleanRun run;
   std::vector<TimeNs> times(s.size());
   for (std::size_t i = 0; i < s.size(); ++i) times[i] = s[i].t_ns;
-  run.period_ns = median_interval_ns(times);
-  if (run.period_ns <= 0) return make_error(Errc::kCorrupt, "the timestamps do not increase");
-  run.rate_hz = 1e9 / static_cast<double>(run.period_ns);
+  const TimeNs median_ns = median_interval_ns(times);
+  if (median_ns <= 0) return make_error(Errc::kCorrupt, "the timestamps do not increase");
   constexpr std::uint32_t kSaturated = kImuFlagAccelSaturated | kImuFlagGyroSaturated;
   constexpr std::uint32_t kBreak = kImuFlagGapBefore | kImuFlagDeviceReset | kSaturated;
   std::size_t run0 = 0;
   for (std::size_t i = 0; i <= s.size(); ++i) {
-    const bool brk =
-        i == s.size() || (s[i].flags & kBreak) ||
-        (i > 0 && (s[i].t_ns - s[i - 1].t_ns > run.period_ns * 3 / 2 || s[i].t_ns <= s[i - 1].t_ns));
+    const bool brk = i == s.size() || (s[i].flags & kBreak) ||
+                     (i > 0 && (s[i].t_ns <= s[i - 1].t_ns || step_lost_samples(times, i - 1, median_ns)));
     if (!brk) continue;
     if (i < s.size()) ++run.breaks;
     if (i - run0 > run.end - run.begin) {
@@ -134,6 +133,12 @@ Result<CleanRun> longest_clean_run(const std::vector<ImuSample>& s) {
     // A saturated sample itself is left out; after a gap or reset the sample starts the next run.
     run0 = (i < s.size() && (s[i].flags & kSaturated)) ? i + 1 : i;
   }
+  // The run's mean interval: on a coarse or jittery clock the median interval is not the rate.
+  const double period_ns = run.size() >= 2 ? static_cast<double>(times[run.end - 1] - times[run.begin]) /
+                                                 static_cast<double>(run.size() - 1)
+                                           : static_cast<double>(median_ns);
+  run.period_ns = static_cast<TimeNs>(std::llround(period_ns));
+  run.rate_hz = 1e9 / period_ns;
   return run;
 }
 

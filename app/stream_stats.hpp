@@ -84,7 +84,7 @@ struct CleanRun {
   std::size_t begin = 0;  // [begin, end) into the samples
   std::size_t end = 0;
   int breaks = 0;        // how many places the stream is broken
-  TimeNs period_ns = 0;  // median sample interval
+  TimeNs period_ns = 0;  // mean sample interval over the run
   double rate_hz = 0.0;  // 1 / period
 
   std::size_t size() const { return end - begin; }

@@ -13,21 +13,6 @@
 
 namespace imucal::calib {
 
-namespace {
-
-/// Whether step k (from sample k to k + 1) lost samples: longer than 1.5 periods, and not made up
-/// for by a neighbouring step. Timestamps taken on a coarse or jittery clock step by 1.5 and 0.5
-/// periods in turn with no time lost; two such steps together stay under 2.5 periods, while a
-/// lost sample makes them 3.
-bool step_lost_samples(const std::vector<double>& dt_s, std::size_t k, double period_s) {
-  if (!(dt_s[k] > 1.5 * period_s)) return false;
-  const bool made_up_before = k > 0 && dt_s[k - 1] + dt_s[k] < 2.5 * period_s;
-  const bool made_up_after = k + 1 < dt_s.size() && dt_s[k] + dt_s[k + 1] < 2.5 * period_s;
-  return !made_up_before && !made_up_after;
-}
-
-}  // namespace
-
 Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
                                         std::vector<std::string>* warnings) {
   const std::size_t n = samples.size();
@@ -48,7 +33,7 @@ Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
     dt_s[i - 1] = ns_to_s(d);
   }
   ScannedRecording s;
-  const double median_period_s = ns_to_s(median_interval_ns(t_ns));
+  const TimeNs median_ns = median_interval_ns(t_ns);
   s.break_before.assign(n, false);
   s.reset_before.assign(n, false);
   s.accel_ok.assign(n, true);
@@ -59,8 +44,8 @@ Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
   std::size_t run_steps = 0;
   for (std::size_t i = 0; i < n; ++i) {
     const auto f = samples[i].flags;
-    if (i > 0 && ((f & (kImuFlagGapBefore | kImuFlagDeviceReset)) ||
-                  step_lost_samples(dt_s, i - 1, median_period_s))) {
+    if (i > 0 &&
+        ((f & (kImuFlagGapBefore | kImuFlagDeviceReset)) || step_lost_samples(t_ns, i - 1, median_ns))) {
       s.break_before[i] = true;
       s.reset_before[i] = (f & kImuFlagDeviceReset) != 0;
       ++s.gaps;
@@ -77,7 +62,7 @@ Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
       ++s.gyro_saturated;
     }
   }
-  s.period_s = run_steps > 0 ? run_time_s / static_cast<double>(run_steps) : median_period_s;
+  s.period_s = run_steps > 0 ? run_time_s / static_cast<double>(run_steps) : ns_to_s(median_ns);
   s.rate_hz = 1.0 / s.period_s;
   if (s.accel_saturated + s.gyro_saturated > 0) {
     warnings->push_back(std::to_string(s.accel_saturated) + " accelerometer and " +

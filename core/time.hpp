@@ -43,4 +43,16 @@ inline TimeNs median_interval_ns(std::span<const TimeNs> t_ns) {
   return *mid;
 }
 
+/// Whether the step from t_ns[k] to t_ns[k + 1] lost samples, in a stream whose median interval
+/// is `median_ns`: it is longer than 1.5 of them and no neighbouring step makes up for it.
+/// Timestamps taken on a coarse or jittery clock (a host's receive time) step by 1.5 and 0.5
+/// periods in turn with no time lost: two such steps together stay under 2.5 periods, while a
+/// lost sample makes them 3.
+inline bool step_lost_samples(std::span<const TimeNs> t_ns, std::size_t k, TimeNs median_ns) {
+  if (2 * (t_ns[k + 1] - t_ns[k]) <= 3 * median_ns) return false;
+  const bool made_up_before = k > 0 && 2 * (t_ns[k + 1] - t_ns[k - 1]) < 5 * median_ns;
+  const bool made_up_after = k + 2 < t_ns.size() && 2 * (t_ns[k + 2] - t_ns[k]) < 5 * median_ns;
+  return !made_up_before && !made_up_after;
+}
+
 }  // namespace imucal

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <random>
+
 #include "app/stream_stats.hpp"
 #include "app/streams.hpp"
 #include "tests/support/test_support.hpp"
@@ -60,6 +62,23 @@ TEST(CleanRun, LongestRunBetweenGaps) {
   for (std::size_t i = run->begin + 1; i < run->end; ++i) {
     ASSERT_EQ(loaded->samples[i].flags & kImuFlagGapBefore, 0u);
   }
+}
+
+TEST(CleanRun, ACoarseClockDoesNotBreakTheRun) {
+  // 100 Hz samples received with up to 4 ms of delay and stamped by a 5.12 ms clock: steps of
+  // 5.12, 10.24 and 15.36 ms, no sample lost. One run, at the samples' rate (the median step
+  // would say 97.7 Hz).
+  std::vector<ImuSample> s(5000);
+  std::mt19937 rng(3);
+  std::uniform_int_distribution<TimeNs> delay(0, 4'000'000);
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    s[i].t_ns = ((static_cast<TimeNs>(i) * 10'000'000 + delay(rng)) / 5'120'000) * 5'120'000;
+  }
+  auto run = longest_clean_run(s);
+  ASSERT_TRUE(run.ok());
+  EXPECT_EQ(run->breaks, 0);
+  EXPECT_EQ(run->size(), s.size());
+  EXPECT_NEAR(run->rate_hz, 100.0, 0.01);
 }
 
 TEST(CleanRun, RefusesTimestampsThatDoNotIncrease) {
