@@ -3,10 +3,9 @@
 
 #include <gtest/gtest.h>
 
-#include <random>
-
 #include "app/stream_stats.hpp"
 #include "app/streams.hpp"
+#include "tests/support/test_helpers.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::app {
@@ -65,15 +64,11 @@ TEST(CleanRun, LongestRunBetweenGaps) {
 }
 
 TEST(CleanRun, ACoarseClockDoesNotBreakTheRun) {
-  // 100 Hz samples received with up to 4 ms of delay and stamped by a 5.12 ms clock: steps of
-  // 5.12, 10.24 and 15.36 ms, no sample lost. One run, at the samples' rate (the median step
-  // would say 97.7 Hz).
+  // 100 Hz samples stamped by a host on a coarse clock, no sample lost: one run, at the samples'
+  // rate (the median step would say 97.7 Hz).
   std::vector<ImuSample> s(5000);
-  std::mt19937 rng(3);
-  std::uniform_int_distribution<TimeNs> delay(0, 4'000'000);
-  for (std::size_t i = 0; i < s.size(); ++i) {
-    s[i].t_ns = ((static_cast<TimeNs>(i) * 10'000'000 + delay(rng)) / 5'120'000) * 5'120'000;
-  }
+  const std::vector<TimeNs> t = test::coarse_clock_times_100hz(s.size(), 3);
+  for (std::size_t i = 0; i < s.size(); ++i) s[i].t_ns = t[i];
   auto run = longest_clean_run(s);
   ASSERT_TRUE(run.ok());
   EXPECT_EQ(run->breaks, 0);

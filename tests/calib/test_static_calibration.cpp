@@ -1,7 +1,6 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <random>
 #include <string>
 #include <vector>
 
@@ -9,6 +8,7 @@
 #include "calib/static_detector.hpp"
 #include "calib/static_steps.hpp"
 #include "tests/calib/test_static_synth.hpp"
+#include "tests/support/test_helpers.hpp"
 
 namespace imucal::calib {
 namespace {
@@ -521,16 +521,11 @@ TEST(StaticSteps, ScanFindsBreaksAndInvalidSamplesAndWarns) {
 }
 
 TEST(StaticSteps, ACoarseClockIsNotAGapButALostSampleIs) {
-  // 100 Hz samples received with up to 4 ms of delay and stamped by a clock that ticks every
-  // 5.12 ms (as a host's receive time can be): steps of 5.12, 10.24 and 15.36 ms, the long ones
-  // made up for by a short one next to them.
+  // 100 Hz samples stamped by a host on a coarse clock: steps of 5.12, 10.24 and 15.36 ms, the
+  // long ones made up for by a short one next to them.
   std::vector<ImuSample> v = still_samples(3000);
-  constexpr TimeNs kTick = 5'120'000;
-  std::mt19937 rng(7);
-  std::uniform_int_distribution<TimeNs> delay(0, 4'000'000);
-  for (std::size_t i = 0; i < v.size(); ++i) {
-    v[i].t_ns = ((static_cast<TimeNs>(i) * 10'000'000 + delay(rng)) / kTick) * kTick;
-  }
+  const std::vector<TimeNs> t = test::coarse_clock_times_100hz(v.size(), 7);
+  for (std::size_t i = 0; i < v.size(); ++i) v[i].t_ns = t[i];
   std::vector<std::string> warnings;
   auto scan = scan_recording(v, &warnings);
   ASSERT_TRUE(scan.ok()) << scan.error().message;

@@ -4,16 +4,33 @@
 // two files need lives here once instead of in each file's anonymous namespace.
 
 #include <Eigen/Core>
+#include <cstddef>
 #include <nlohmann/json.hpp>
 #include <numbers>
+#include <random>
 #include <string>
+#include <vector>
 
 #include "core/camera_model.hpp"
 #include "core/result.hpp"
+#include "core/time.hpp"
 
 namespace imucal::test {
 
 inline constexpr double kDeg = std::numbers::pi / 180.0;
+
+/// Times of `n` samples at 100 Hz as a host stamps them on receipt: each up to 4 ms late, on a
+/// clock that ticks every 5.12 ms. The steps are 5.12, 10.24 and 15.36 ms, a long one always next
+/// to a short one; no sample is lost. Deterministic under `seed`.
+inline std::vector<TimeNs> coarse_clock_times_100hz(std::size_t n, unsigned seed) {
+  constexpr TimeNs kTick = 5'120'000;
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<TimeNs> delay(0, 4'000'000);
+  std::vector<TimeNs> t(n);
+  for (std::size_t i = 0; i < n; ++i)
+    t[i] = ((static_cast<TimeNs>(i) * 10'000'000 + delay(rng)) / kTick) * kTick;
+  return t;
+}
 
 /// A JSON array of three numbers as a vector.
 inline Eigen::Vector3d vec3(const nlohmann::json& j) {
