@@ -22,7 +22,7 @@ StreamTiming timing_of(const std::vector<TimeNs>& times) {
   for (std::size_t i = 0; i < periods.size(); ++i) {
     const TimeNs p = periods[i];
     if (p <= 0) ++t.non_increasing;
-    if (t.median_period_ns > 0 && 2 * p > 3 * t.median_period_ns) ++t.gap_intervals;
+    if (t.median_period_ns > 0 && step_lost_samples(times, i, t.median_period_ns)) ++t.gap_intervals;
     if (p > t.longest_interval_ns) {
       t.longest_interval_ns = p;
       t.longest_interval_at_ns = times[i + 1];

@@ -25,7 +25,7 @@ struct StreamTiming {
   TimeNs t_last_ns = 0;
   TimeNs median_period_ns = 0;
   double measured_rate_hz = 0.0;   // (count - 1) over the span
-  std::int64_t gap_intervals = 0;  // intervals longer than 1.5x the median period
+  std::int64_t gap_intervals = 0;  // intervals that lost samples (step_lost_samples, core/time.hpp)
   TimeNs longest_interval_ns = 0;
   TimeNs longest_interval_at_ns = 0;  // timestamp of the sample that ends the longest interval
   std::int64_t non_increasing = 0;    // intervals <= 0 (duplicate or backwards timestamps)

@@ -21,16 +21,12 @@ Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
                       "the recording has " + std::to_string(n) + " samples: too few for a time base");
   }
   std::vector<TimeNs> t_ns(n);
-  std::vector<double> dt_s(n - 1);
   for (std::size_t i = 0; i < n; ++i) {
     t_ns[i] = samples[i].t_ns;
-    if (i == 0) continue;
-    const TimeNs d = t_ns[i] - t_ns[i - 1];
-    if (d <= 0) {
+    if (i > 0 && t_ns[i] <= t_ns[i - 1]) {
       return make_error(Errc::kCorrupt, "timestamps do not increase at sample " + std::to_string(i) +
                                             ": the log is damaged or its samples are out of order");
     }
-    dt_s[i - 1] = ns_to_s(d);
   }
   ScannedRecording s;
   const TimeNs median_ns = median_interval_ns(t_ns);
@@ -40,7 +36,7 @@ Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
   s.gyro_ok.assign(n, true);
   s.t_s.resize(n);
   for (std::size_t i = 0; i < n; ++i) s.t_s[i] = ns_to_s(samples[i].t_ns - samples[0].t_ns);
-  double run_time_s = 0.0;
+  TimeNs run_time_ns = 0;
   std::size_t run_steps = 0;
   for (std::size_t i = 0; i < n; ++i) {
     const auto f = samples[i].flags;
@@ -50,7 +46,7 @@ Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
       s.reset_before[i] = (f & kImuFlagDeviceReset) != 0;
       ++s.gaps;
     } else if (i > 0) {
-      run_time_s += dt_s[i - 1];
+      run_time_ns += t_ns[i] - t_ns[i - 1];
       ++run_steps;
     }
     if ((f & kImuFlagAccelSaturated) || !samples[i].accel.allFinite()) {
@@ -62,7 +58,7 @@ Result<ScannedRecording> scan_recording(std::span<const ImuSample> samples,
       ++s.gyro_saturated;
     }
   }
-  s.period_s = run_steps > 0 ? run_time_s / static_cast<double>(run_steps) : ns_to_s(median_ns);
+  s.period_s = run_steps > 0 ? ns_to_s(run_time_ns) / static_cast<double>(run_steps) : ns_to_s(median_ns);
   s.rate_hz = 1.0 / s.period_s;
   if (s.accel_saturated + s.gyro_saturated > 0) {
     warnings->push_back(std::to_string(s.accel_saturated) + " accelerometer and " +

@@ -39,7 +39,7 @@ std::string timing_text(const StreamTiming& t, double nominal_rate_hz, const cha
       << " Hz, measured " << fmt::sprintf("%.6g", t.measured_rate_hz) << " Hz over "
       << fmt::sprintf("%.3f", ns_to_s(t.t_last_ns - t.t_first_ns)) << " s\n";
   out << "    intervals: median " << fmt::sprintf("%.6g", t.median_period_ns * 1e-6) << " ms, "
-      << t.gap_intervals << " longer than 1.5x median, longest "
+      << t.gap_intervals << " with samples lost, longest "
       << fmt::sprintf("%.6g", t.longest_interval_ns * 1e-6) << " ms";
   if (t.longest_interval_ns > 0)
     out << " (ending at t=" << fmt::sprintf("%.6f", ns_to_s(t.longest_interval_at_ns)) << " s)";

@@ -80,7 +80,7 @@ TEST(CliInfo, TextSummaryOfARealLog) {
   EXPECT_THAT(r.out, HasSubstr("status: complete"));
   EXPECT_THAT(r.out, HasSubstr("imu0 (id 1, raw counts, device mpu6000@spi0.0, accel +-4 g, gyro +-500 dps"));
   EXPECT_THAT(r.out, HasSubstr("samples: 2000, nominal 1000 Hz"));
-  EXPECT_THAT(r.out, HasSubstr("1 longer than 1.5x median, longest 10 ms"));
+  EXPECT_THAT(r.out, HasSubstr("1 with samples lost, longest 10 ms"));
   EXPECT_THAT(r.out, HasSubstr("flagged: 1 after a gap"));
   EXPECT_THAT(r.out, HasSubstr("frames: 20, nominal 20 Hz, measured 20 Hz"));
   EXPECT_THAT(r.out, HasSubstr("events: 3 (pose_begin 1, pose_end 1, prompt 1)"));
