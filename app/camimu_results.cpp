@@ -144,6 +144,10 @@ json quality_json(const CamImuQuality& q) {
           {"gyro_residual_rms_radps", vec_json(q.gyro_residual_rms)},
           {"accel_sigma_mps2", q.accel_sigma},
           {"gyro_sigma_radps", q.gyro_sigma},
+          {"accel_sigma_given_mps2", q.accel_sigma_given},
+          {"gyro_sigma_given_radps", q.gyro_sigma_given},
+          {"accel_noise_from_residuals", q.accel_noise_from_residuals},
+          {"gyro_noise_from_residuals", q.gyro_noise_from_residuals},
           {"rotation_excitation_radps", vec_json(q.rotation_excitation_radps)},
           {"accel_excitation_mps2", vec_json(q.accel_excitation_mps2)},
           {"xcorr", xcorr},
@@ -154,6 +158,8 @@ json quality_json(const CamImuQuality& q) {
           {"parameters", q.parameters},
           {"residuals", q.residuals},
           {"spline_knots", q.spline_knots},
+          {"imu_samples_per_residual", q.imu_samples_per_residual},
+          {"imu_residuals", q.imu_residuals},
           {"timings_s",
            {{"init", q.init_s},
             {"solve", q.solve_s},
@@ -233,6 +239,9 @@ json inputs_json(const CamImuReport& r) {
             {"reprojection_loss_sigmas", o.reprojection_loss_sigmas},
             {"max_timeshift_s", o.max_timeshift_s},
             {"max_iterations", o.max_iterations},
+            {"imu_max_rate_hz", o.imu_max_rate_hz},
+            {"imu_noise_from_residuals", o.imu_noise_from_residuals},
+            {"prior", o.prior.enabled ? json(o.prior.source) : json(nullptr)},
             {"threads", o.threads},
             {"covariance", o.covariance}}}};
 }
@@ -328,6 +337,11 @@ CamImuQuality read_quality(const json& j) {
   q.gyro_residual_rms = read_vec<3>(j.at("gyro_residual_rms_radps"));
   q.accel_sigma = j.at("accel_sigma_mps2").get<double>();
   q.gyro_sigma = j.at("gyro_sigma_radps").get<double>();
+  // Results written before the noise check hold only the sigmas used.
+  q.accel_sigma_given = j.value("accel_sigma_given_mps2", q.accel_sigma);
+  q.gyro_sigma_given = j.value("gyro_sigma_given_radps", q.gyro_sigma);
+  q.accel_noise_from_residuals = j.value("accel_noise_from_residuals", false);
+  q.gyro_noise_from_residuals = j.value("gyro_noise_from_residuals", false);
   q.rotation_excitation_radps = read_vec<3>(j.at("rotation_excitation_radps"));
   q.accel_excitation_mps2 = read_vec<3>(j.at("accel_excitation_mps2"));
   for (const auto& curve : j.at("xcorr")) {
@@ -345,6 +359,8 @@ CamImuQuality read_quality(const json& j) {
   q.parameters = j.at("parameters").get<int>();
   q.residuals = j.at("residuals").get<int>();
   q.spline_knots = j.at("spline_knots").get<int>();
+  q.imu_samples_per_residual = j.value("imu_samples_per_residual", 1);
+  q.imu_residuals = j.value("imu_residuals", 0);
   const json& t = j.at("timings_s");
   q.init_s = t.at("init").get<double>();
   q.solve_s = t.at("solve").get<double>();
@@ -429,6 +445,14 @@ CamImuCalibrationResult read_result_json(const json& j, const std::string& path)
   if (j.contains("imu_signals")) r.signal_fits = read_signals(j["imu_signals"]);
   r.quality = read_quality(j.at("quality"));
   r.warnings = j.at("warnings").get<std::vector<std::string>>();
+  r.model_choice = j.value("model_choice", std::string());
+  r.undetermined = j.value("undetermined", std::vector<std::string>());
+  if (j.contains("prior") && j["prior"].is_object()) {
+    const json& p = j["prior"];
+    r.prior_source = p.value("source", std::string());
+    if (p.contains("sigma")) r.prior_sigma = read_krebs_sigma(p["sigma"]);
+    r.prior_dominated = p.value("dominated", std::vector<std::string>());
+  }
   return r;
 }
 
@@ -525,6 +549,7 @@ std::string camimu_calibration_yaml(const CamImuReport& r) {
   YAML::Node root(YAML::NodeType::Map);
   root["method"] = "continuous-time camera-IMU (Krebs 2012)";
   root["model"] = camimu_model_name(res.model);
+  root["model_choice"] = res.model_choice;
   root["stream"] = r.imu_stream.name;
   root["input_units"] = imu_units_name(r.imu_stream.units);
   root["canonical"] = canonical_node(canonical_on_input_units(res.canonical, r.imu_stream));
@@ -534,6 +559,8 @@ std::string camimu_calibration_yaml(const CamImuReport& r) {
   root["gravity_w"] = flow_vec(res.gravity_w);
   root["gravity_sigma_rad"] = flow_vec(res.gravity_sigma_rad);
   root["fixed"] = string_list(res.fixed);
+  root["undetermined"] = string_list(res.undetermined);
+  if (!res.prior_source.empty()) root["prior_source"] = res.prior_source;
   YAML::Node cams(YAML::NodeType::Map);
   for (std::size_t i = 0; i < res.cameras.size(); ++i) {
     const auto& c = res.cameras[i];
@@ -574,7 +601,16 @@ std::string camimu_result_json(const CamImuReport& r) {
   j["method"] = "continuous-time camera-IMU (Krebs 2012)";
   j["software_version"] = kVersion;
   j["model"] = camimu_model_name(res.model);
+  j["model_choice"] = res.model_choice;
   j["fixed"] = res.fixed;
+  j["undetermined"] = res.undetermined;
+  j["prior"] =
+      res.prior_source.empty()
+          ? json(nullptr)
+          : json{{"source", res.prior_source},
+                 {"centre", "the starting model (S = 1, M = 0, C_bg = I, B_g = 0 without a prior file)"},
+                 {"sigma", krebs_sigma_json(res.prior_sigma)},
+                 {"dominated", res.prior_dominated}};
   j["cameras"] = cameras;
   j["imu"] = {{"krebs", krebs_json(res.imu)},
               {"krebs_sigma", krebs_sigma_json(res.imu_sigma)},

@@ -21,7 +21,7 @@ using nlohmann::json;
 constexpr const char* kStaticMethod = "static multi-position (Tedaldi 2013)";
 constexpr const char* kCamImuMethod = "continuous-time camera-IMU (Krebs 2012)";
 
-// YAML scalars as JSON: integers, then floating point, then booleans, else strings.
+// YAML scalars as JSON: integers, then floating point (NaN as null), then booleans, else strings.
 json yaml_to_json(const YAML::Node& n) {
   switch (n.Type()) {
     case YAML::NodeType::Sequence: {
@@ -40,7 +40,10 @@ json yaml_to_json(const YAML::Node& n) {
       double d = 0;
       bool b = false;
       if (n.Tag() != "!" && YAML::convert<std::int64_t>::decode(n, i)) return i;
-      if (n.Tag() != "!" && YAML::convert<double>::decode(n, d)) return d;
+      // A figure that could not be determined (.nan: a sigma) is null, as in result.json: the
+      // record then compares equal to itself after a write, which NaN never does.
+      if (n.Tag() != "!" && YAML::convert<double>::decode(n, d))
+        return std::isnan(d) ? json(nullptr) : json(d);
       if (n.Tag() != "!" && YAML::convert<bool>::decode(n, b)) return b;
       return s;
     }

@@ -33,6 +33,9 @@ Status CamImuOptions::validate() const {
     return make_error(Errc::kInvalidArgument, "the largest time offset searched must be within (0, 1] s");
   if (max_iterations < 1)
     return make_error(Errc::kInvalidArgument, "at least one solver iteration is needed");
+  if (!(imu_max_rate_hz == 0.0 || imu_max_rate_hz >= 20.0))
+    return make_error(Errc::kInvalidArgument,
+                      "the IMU's largest rate must be 0 (one residual per sample) or at least 20 Hz");
   return {};
 }
 
@@ -105,7 +108,23 @@ class Estimator {
   void initialise_spline(std::size_t ref);
   void build(ceres::Problem* problem, bool extended);
   Status solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary);
+  /// The problem built again at the current values, without solving (after a state is restored).
+  void rebuild(bool extended);
   bool frames_in_window() const;
+  /// Basic or extended by the evidence (kAuto): the drop of the data cost that freeing the
+  /// intrinsics buys against the parameters it costs (BIC). Leaves the chosen model solved.
+  Status choose_model(ceres::Solver::Summary* summary);
+  /// The IMU's per-sample sigmas from the residuals when they disagree with the given figures
+  /// by more than a factor two (else the given ones); true when a sigma moved by more than 10 %.
+  bool reestimate_imu_noise();
+  /// The cost of the prior terms of the last build (0 without).
+  double prior_cost() const;
+  /// Warnings for intrinsics far from their prior or outside physical bounds, and the names of
+  /// those the prior mostly set.
+  void check_against_prior(CamImuCalibrationResult* out);
+  /// The name of one tangent coordinate of an estimated block, for undetermined directions.
+  std::string coordinate_name(const double* block, int index) const;
+  std::string describe(const MarginalCovariance::Direction& dir) const;
   /// The corner noise of each camera from the current residuals (1.4826 x median |component|);
   /// true when it moved by more than 10 % for any camera.
   bool reestimate_corner_sigma();
@@ -128,6 +147,14 @@ class Estimator {
   std::vector<const ImuResidual<N>*> imu_residuals_;
   std::vector<std::vector<double*>> imu_blocks_;
   std::vector<std::size_t> imu_index_;  // imu_ sample of each IMU residual
+  struct Prior {
+    const ceres::CostFunction* cost;
+    double* block;
+  };
+  std::vector<Prior> priors_;                           // of the last build
+  KrebsImuModel prior0_;                                // the prior's centre (the starting model)
+  CamImuModelKind model_ = CamImuModelKind::kExtended;  // the model solved (kAuto resolved)
+  std::string model_choice_;
   CamImuQuality quality_;
   std::vector<std::string> warnings_;
   std::unique_ptr<ceres::Problem> problem_;
@@ -202,6 +229,18 @@ Status Estimator<N>::initialise() {
   for (std::size_t c = 0; c < cameras_.size(); ++c) {
     if (Status s = initialise_camera(c, gyro); !s.ok()) return s;
     if (st_.cams[c].poses.size() > st_.cams[ref].poses.size()) ref = c;
+  }
+  model_ = opt_.model;
+  if (opt_.imu_init) prior0_ = *opt_.imu_init;
+  {
+    std::vector<double> dts;
+    for (std::size_t i = 1; i < imu_.size(); ++i) dts.push_back(t_s(imu_[i].t_ns) - t_s(imu_[i - 1].t_ns));
+    std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
+    const double rate = 1.0 / dts[dts.size() / 2];
+    quality_.accel_sigma_given = opt_.noise.accel_noise_density * std::sqrt(rate);
+    quality_.gyro_sigma_given = opt_.noise.gyro_noise_density * std::sqrt(rate);
+    quality_.accel_sigma = quality_.accel_sigma_given;
+    quality_.gyro_sigma = quality_.gyro_sigma_given;
   }
   if (opt_.imu_init) {
     const KrebsImuModel& m = *opt_.imu_init;
@@ -306,12 +345,7 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended) {
   imu_residuals_.clear();
   imu_blocks_.clear();
   imu_index_.clear();
-  std::vector<double> dts;
-  for (std::size_t i = 1; i < imu_.size(); ++i) dts.push_back(t_s(imu_[i].t_ns) - t_s(imu_[i - 1].t_ns));
-  std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
-  const double rate = 1.0 / dts[dts.size() / 2];
-  quality_.accel_sigma = opt_.noise.accel_noise_density * std::sqrt(rate);
-  quality_.gyro_sigma = opt_.noise.gyro_noise_density * std::sqrt(rate);
+  priors_.clear();
   for (std::size_t k = 0; k < imu_.size(); ++k) {
     const CamImuSample& s = imu_[k];
     const double t = t_s(s.t_ns);
@@ -374,7 +408,7 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended) {
     }
     if (opt_.fixed.timeshift) problem->SetParameterBlockConstant(&cs.shift);
   }
-  const bool basic = !extended || opt_.model == CamImuModelKind::kBasic;
+  const bool basic = !extended || model_ == CamImuModelKind::kBasic;
   const CamImuFixed& f = opt_.fixed;
   for (auto [block, fixed] :
        {std::pair{st_.Sa.data(), basic || f.S_a}, std::pair{st_.Ma.data(), basic || f.M_a},
@@ -382,6 +416,48 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended) {
         std::pair{st_.C.data(), basic || f.C_bg}, std::pair{st_.B.data(), basic || f.B_g}}) {
     if (fixed) problem->SetParameterBlockConstant(block);
   }
+  if (basic || !opt_.prior.enabled) return;
+  const CamImuIntrinsicsPrior& pr = opt_.prior;
+  const auto add_vector = [&](double* block, const Eigen::VectorXd& x0, const Eigen::VectorXd& sigma) {
+    if (problem->IsParameterBlockConstant(block)) return;
+    auto* cost = new VectorPrior(x0, sigma);
+    problem->AddResidualBlock(cost, nullptr, block);
+    priors_.push_back({cost, block});
+  };
+  add_vector(st_.Sa.data(), prior0_.S_a, pr.scale * prior0_.S_a.cwiseAbs());
+  add_vector(st_.Sg.data(), prior0_.S_g, pr.scale * prior0_.S_g.cwiseAbs());
+  add_vector(st_.Ma.data(), prior0_.M_a, Eigen::Vector3d::Constant(pr.misalignment));
+  add_vector(st_.Mg.data(), prior0_.M_g, Eigen::Vector3d::Constant(pr.misalignment));
+  Eigen::Matrix<double, 9, 1> b0;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) b0(3 * r + c) = prior0_.B_g(r, c);
+  add_vector(st_.B.data(), b0, Eigen::Matrix<double, 9, 1>::Constant(pr.gsens));
+  if (!problem->IsParameterBlockConstant(st_.C.data())) {
+    auto* cost = new RotationPrior(prior0_.C_bg, pr.gyro_axes);
+    problem->AddResidualBlock(cost, nullptr, st_.C.data());
+    priors_.push_back({cost, st_.C.data()});
+  }
+}
+
+template <int N>
+double Estimator<N>::prior_cost() const {
+  double cost = 0.0;
+  std::vector<double> r;
+  for (const Prior& p : priors_) {
+    r.resize(static_cast<std::size_t>(p.cost->num_residuals()));
+    const double* params[] = {p.block};
+    p.cost->Evaluate(params, r.data(), nullptr);
+    for (double v : r) cost += 0.5 * v * v;
+  }
+  return cost;
+}
+
+template <int N>
+void Estimator<N>::rebuild(bool extended) {
+  ceres::Problem::Options po;
+  po.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_ = std::make_unique<ceres::Problem>(po);
+  build(problem_.get(), extended);
 }
 
 template <int N>
@@ -416,25 +492,158 @@ bool Estimator<N>::reestimate_corner_sigma() {
 }
 
 template <int N>
+bool Estimator<N>::reestimate_imu_noise() {
+  if (!opt_.imu_noise_from_residuals || imu_residuals_.empty()) return false;
+  double sa = 0.0, sg = 0.0;
+  Eigen::Matrix<double, 6, 1> r;
+  for (std::size_t k = 0; k < imu_residuals_.size(); ++k) {
+    imu_residuals_[k]->Evaluate(imu_blocks_[k].data(), r.data(), nullptr);
+    sa += (r.head<3>() * quality_.accel_sigma).squaredNorm();
+    sg += (r.tail<3>() * quality_.gyro_sigma).squaredNorm();
+  }
+  const double n = 3.0 * static_cast<double>(imu_residuals_.size());
+  bool changed = false;
+  for (auto [rms, sigma, given, flag] :
+       {std::tuple{std::sqrt(sa / n), &quality_.accel_sigma, quality_.accel_sigma_given,
+                   &quality_.accel_noise_from_residuals},
+        std::tuple{std::sqrt(sg / n), &quality_.gyro_sigma, quality_.gyro_sigma_given,
+                   &quality_.gyro_noise_from_residuals}}) {
+    // The residuals were whitened with *sigma: it changes only with a rebuild (a new solve).
+    const bool disagree = rms > 2.0 * given || rms < 0.5 * given;
+    const double next = disagree ? rms : given;
+    if (std::abs(next / *sigma - 1.0) <= 0.1) continue;
+    changed = true;
+    *sigma = next;
+    *flag = disagree;
+  }
+  return changed;
+}
+
+template <int N>
+Status Estimator<N>::choose_model(ceres::Solver::Summary* summary) {
+  // The extended model is solved from the first stage. Its intrinsics are then tested against the
+  // basic model's values (their start) by the Wald statistic with the data's information alone
+  // (the prior's taken out): W = d^T (Cov^-1 - P) d, a chi-square with k degrees of freedom under
+  // the basic model; for a linear model it is the drop of the chi-square that freeing them buys.
+  // The Bayesian information criterion keeps the extended model when W exceeds k ln(n) (n: IMU
+  // residuals): a real scale or misalignment error of an excited axis passes it by orders of
+  // magnitude, noise does not. Where the covariance leaves a direction undetermined, both models
+  // are solved and their costs compared instead (the likelihood ratio).
+  const State<N> first_stage = st_;
+  model_ = CamImuModelKind::kExtended;
+  if (Status s = solve(true, "extended", summary); !s.ok()) return s;
+  // Weighted by the noise the best-fitting model's residuals show (the first stage's overstate it).
+  for (int round = 0; round < 3; ++round) {
+    bool changed = reestimate_corner_sigma();
+    changed = reestimate_imu_noise() || changed;
+    if (!changed) break;
+    if (Status s = solve(true, "extended", summary); !s.ok()) return s;
+  }
+  const CamImuIntrinsicsPrior& pr = opt_.prior;
+  std::vector<const double*> blocks;
+  std::vector<double> d, prior_info;
+  const auto add = [&](const double* b, const Eigen::VectorXd& offset, const Eigen::VectorXd& prior_sigma) {
+    if (problem_->IsParameterBlockConstant(b)) return;
+    blocks.push_back(b);
+    for (Eigen::Index i = 0; i < offset.size(); ++i) {
+      d.push_back(offset(i));
+      prior_info.push_back(pr.enabled ? 1.0 / (prior_sigma(i) * prior_sigma(i)) : 0.0);
+    }
+  };
+  add(st_.Sa.data(), vec(st_.Sa) - prior0_.S_a, pr.scale * prior0_.S_a.cwiseAbs());
+  add(st_.Ma.data(), vec(st_.Ma) - prior0_.M_a, Eigen::Vector3d::Constant(pr.misalignment));
+  add(st_.Sg.data(), vec(st_.Sg) - prior0_.S_g, pr.scale * prior0_.S_g.cwiseAbs());
+  add(st_.Mg.data(), vec(st_.Mg) - prior0_.M_g, Eigen::Vector3d::Constant(pr.misalignment));
+  add(st_.C.data(), so3::log(prior0_.C_bg.transpose() * quat_matrix(st_.C.data())),
+      Eigen::Vector3d::Constant(pr.gyro_axes));
+  Eigen::Matrix<double, 9, 1> dB;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c)
+      dB(3 * r + c) = st_.B[static_cast<std::size_t>(3 * r + c)] - prior0_.B_g(r, c);
+  add(st_.B.data(), dB, Eigen::Matrix<double, 9, 1>::Constant(pr.gsens));
+  const int k = static_cast<int>(d.size());
+  const double n = static_cast<double>(std::max<std::size_t>(imu_residuals_.size(), 2));
+  const double threshold = k * std::log(n);
+  double W = std::nan("");
+  if (k > 0) {
+    MarginalCovariance cov;
+    if (cov.compute(*problem_, blocks, threads_or_cores(opt_.threads)) && cov.undetermined().empty()) {
+      Eigen::MatrixXd C(k, k);
+      int row = 0;
+      for (const double* a : blocks) {
+        int col = 0;
+        const int na = problem_->ParameterBlockTangentSize(a);
+        for (const double* b : blocks) {
+          const int nb = problem_->ParameterBlockTangentSize(b);
+          C.block(row, col, na, nb) = cov.block(a, b);
+          col += nb;
+        }
+        row += na;
+      }
+      const Eigen::Map<const Eigen::VectorXd> dv(d.data(), k);
+      const Eigen::LDLT<Eigen::MatrixXd> ldlt(C);
+      if (C.allFinite() && ldlt.info() == Eigen::Success) {
+        const Eigen::VectorXd info_d = ldlt.solve(dv);
+        W = dv.dot(info_d);
+        for (int i = 0; i < k; ++i) W -= prior_info[static_cast<std::size_t>(i)] * dv(i) * dv(i);
+      }
+    }
+  }
+  char text[400];
+  if (!std::isfinite(W)) {
+    // The likelihood ratio: the basic model solved to convergence from the first stage too.
+    const double extended_cost = summary->final_cost - prior_cost();
+    const State<N> extended_state = st_;
+    st_ = first_stage;
+    model_ = CamImuModelKind::kBasic;
+    if (Status s = solve(false, "basic", summary); !s.ok()) return s;
+    W = 2.0 * (summary->final_cost - extended_cost);
+    if (k > 0 && W > threshold) {
+      st_ = extended_state;
+      model_ = CamImuModelKind::kExtended;
+      rebuild(true);
+    }
+  } else if (!(k > 0 && W > threshold)) {
+    st_ = first_stage;
+    model_ = CamImuModelKind::kBasic;
+    if (Status s = solve(false, "basic", summary); !s.ok()) return s;
+  }
+  if (model_ == CamImuModelKind::kExtended) {
+    std::snprintf(
+        text, sizeof text,
+        "extended, chosen by the evidence: freeing its %d intrinsics lowers the chi-square by %.1f, "
+        "more than the %.1f they cost (BIC: k ln n, n = %.0f IMU residuals)",
+        k, W, threshold, n);
+  } else {
+    std::snprintf(
+        text, sizeof text,
+        "basic, chosen by the evidence: freeing the extended model's %d intrinsics lowers the "
+        "chi-square by only %.1f, less than the %.1f they cost (BIC: k ln n, n = %.0f IMU residuals); "
+        "--model extended estimates them anyway",
+        k, W, threshold, n);
+  }
+  model_choice_ = text;
+  return {};
+}
+
+template <int N>
 Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary) {
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
   so.num_threads = threads_or_cores(opt_.threads);
   // The first stage only brings the trajectory, biases and extrinsics near the solution for the
   // stage that follows it; a few iterations do (docs/camimu-calibration.md, "Speed").
-  const bool preliminary = !extended && opt_.model == CamImuModelKind::kExtended;
+  const bool preliminary = !extended && model_ == CamImuModelKind::kExtended;
   so.max_num_iterations =
       preliminary ? std::min(opt_.max_iterations, kPreliminaryIterations) : opt_.max_iterations;
   so.function_tolerance = 1e-8;
   so.parameter_tolerance = 1e-9;
   ProgressCallback cb(progress_, stage);
   so.callbacks.push_back(&cb);
-  // A timeshift that moves frames out of the knot window they were built with: rebuild.
+  // A timeshift that moves frames out of the knot window they were built with: rebuild (a final
+  // stage only).
   for (int attempt = 0; attempt < 4; ++attempt) {
-    ceres::Problem::Options po;
-    po.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-    problem_ = std::make_unique<ceres::Problem>(po);
-    build(problem_.get(), extended);
+    rebuild(extended);
     ceres::Solve(so, problem_.get(), summary);
     if (!summary->IsSolutionUsable())
       return make_error(Errc::kSolverFailed,
@@ -442,13 +651,64 @@ Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solve
     quality_.iterations += static_cast<int>(summary->iterations.size());
     quality_.jacobian_s += summary->jacobian_evaluation_time_in_seconds;
     quality_.linear_solver_s += summary->linear_solver_time_in_seconds;
-    if (frames_in_window()) return {};
+    // The next stage builds the problem again at the new offset: the first stage need not.
+    if (preliminary || frames_in_window()) return {};
   }
   return make_error(Errc::kSolverFailed, "the time offset did not settle (" + stage + ")");
 }
 
-Eigen::Vector3d sqrt_diag(const Eigen::MatrixXd& C) {
-  return C.diagonal().head<3>().cwiseMax(0.0).cwiseSqrt();
+template <int N>
+std::string Estimator<N>::coordinate_name(const double* b, int i) const {
+  static const char* xyz[3] = {"x", "y", "z"};
+  static const char* m_entries[3] = {"yz", "zy", "zx"};  // Krebs' names of M(1,0), M(2,0), M(2,1)
+  const std::string ax = xyz[std::clamp(i, 0, 2)];
+  if (b == st_.Sa.data()) return "accelerometer " + ax + " scale (S_a)";
+  if (b == st_.Sg.data()) return "gyroscope " + ax + " scale (S_g)";
+  if (b == st_.Ma.data())
+    return std::string("accelerometer misalignment M_a ") + m_entries[std::clamp(i, 0, 2)];
+  if (b == st_.Mg.data()) return std::string("gyroscope misalignment M_g ") + m_entries[std::clamp(i, 0, 2)];
+  if (b == st_.C.data()) return "gyroscope-accelerometer rotation C_bg about " + ax;
+  if (b == st_.B.data())
+    return std::string("g-sensitivity B_g ") + xyz[std::clamp(i / 3, 0, 2)] + xyz[std::clamp(i % 3, 0, 2)];
+  if (b == st_.g.data()) return "gravity direction";
+  for (std::size_t c = 0; c < st_.cams.size(); ++c) {
+    const CameraState& cs = st_.cams[c];
+    const std::string name = cameras_[c].name;
+    if (b == cs.q_ci.data()) return name + " rotation about the IMU " + ax + " axis";
+    if (b == cs.t_ci.data()) return name + " translation " + ax + " (camera frame)";
+    if (b == &cs.shift) return name + " time offset";
+  }
+  for (const auto* knots : {&st_.ba, &st_.bg})
+    for (const auto& k : *knots)
+      if (b == k.data()) return std::string(knots == &st_.ba ? "accelerometer" : "gyroscope") + " bias " + ax;
+  return "a parameter";
+}
+
+template <int N>
+std::string Estimator<N>::describe(const MarginalCovariance::Direction& dir) const {
+  if (dir.parts.empty()) return "the trajectory itself: nothing about the calibration can be said";
+  std::vector<std::string> names;
+  for (const auto& [coord, weight] : dir.parts) {
+    std::string n = coordinate_name(coord.block, coord.index);
+    if (std::find(names.begin(), names.end(), n) == names.end()) names.push_back(std::move(n));
+    if (names.size() == 4) break;
+  }
+  std::string text;
+  for (std::size_t i = 0; i < names.size(); ++i)
+    text += (i == 0 ? "" : (i + 1 == names.size() ? " and " : ", ")) + names[i];
+  if (dir.parts.size() > names.size()) text += " (and others)";
+  // The likely cause: an axis the rig hardly moved along or about.
+  std::string why;
+  const char* xyz[3] = {"x", "y", "z"};
+  for (int a = 0; a < 3; ++a) {
+    if (quality_.accel_excitation_mps2(a) < 0.5)
+      why += std::string(why.empty() ? "" : "; ") + "the rig barely accelerated along IMU " + xyz[a] +
+             " (RMS " + std::to_string(quality_.accel_excitation_mps2(a)).substr(0, 5) + " m/s^2)";
+    if (quality_.rotation_excitation_radps(a) < 0.1)
+      why += std::string(why.empty() ? "" : "; ") + "the rig barely rotated about IMU " + xyz[a] + " (RMS " +
+             std::to_string(quality_.rotation_excitation_radps(a)).substr(0, 5) + " rad/s)";
+  }
+  return text + ": " + (why.empty() ? "the recording does not tell them apart" : why);
 }
 
 template <int N>
@@ -474,13 +734,25 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
   MarginalCovariance cov;
   const int threads = threads_or_cores(opt_.threads);
   if (!cov.compute(problem, blocks, threads)) {
-    warnings_.push_back(
-        "the covariance could not be computed (a parameter is not observable): sigmas are not given");
+    out->undetermined.push_back("every parameter: the problem could not be evaluated at the solution");
+    warnings_.push_back("the covariance could not be computed: every sigma is not determined");
     return;
   }
+  if (cov.nuisance_regularised())
+    warnings_.push_back(
+        "parts of the trajectory or the bias splines are not determined by the data (no frame or IMU "
+        "sample constrains them); the sigmas are conditioned on a weak prior there");
+  for (const auto& dir : cov.undetermined()) out->undetermined.push_back(describe(dir));
+  if (!out->undetermined.empty()) {
+    std::string text = "the recording does not determine every parameter; not determined (sigma NaN): ";
+    for (std::size_t i = 0; i < out->undetermined.size(); ++i)
+      text += (i ? " | " : "") + out->undetermined[i];
+    warnings_.push_back(text);
+  }
   const auto block = [&](const double* a, const double* b) { return cov.block(a, b); };
-  const auto sigma3 = [&](const double* b) {
-    return problem.IsParameterBlockConstant(b) ? Eigen::Vector3d::Zero() : sqrt_diag(block(b, b));
+  const auto sigma3 = [&](const double* b) -> Eigen::Vector3d {
+    return cov.has(b) ? Eigen::Vector3d(sigma_of(block(b, b)).head(3))
+                      : Eigen::Vector3d::Constant(kNotDetermined);
   };
   KrebsImuSigma& s = out->imu_sigma;
   s.S_a = sigma3(st_.Sa.data());
@@ -488,16 +760,20 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
   s.S_g = sigma3(st_.Sg.data());
   s.M_g = sigma3(st_.Mg.data());
   s.C_bg = sigma3(st_.C.data());
-  if (!problem.IsParameterBlockConstant(st_.B.data())) {
-    const Eigen::VectorXd d = block(st_.B.data(), st_.B.data()).diagonal().cwiseMax(0.0).cwiseSqrt();
+  if (cov.has(st_.B.data())) {
+    const Eigen::VectorXd d = sigma_of(block(st_.B.data(), st_.B.data()));
     for (int r = 0; r < 3; ++r)
       for (int c = 0; c < 3; ++c) s.B_g(r, c) = d(3 * r + c);
   }
-  const Eigen::MatrixXd Cg = block(st_.g.data(), st_.g.data());
-  out->gravity_sigma_rad = Cg.diagonal().head<2>().cwiseMax(0.0).cwiseSqrt() / opt_.gravity_mps2;
+  if (cov.has(st_.g.data()))
+    out->gravity_sigma_rad =
+        Eigen::Vector2d(sigma_of(block(st_.g.data(), st_.g.data())).head(2)) / opt_.gravity_mps2;
   // The biases at the start: b(t0) = sum_i w_i knot_i.
   const auto w = RdSpline<N>::weights_at(st_.bias.segment(st_.bias.t0_s).u, 0, st_.bias.dt_s);
   for (auto [knots, sig] : {std::pair{&st_.ba, &s.b_a}, std::pair{&st_.bg, &s.b_g}}) {
+    bool all = true;
+    for (int i = 0; i < N; ++i) all = all && cov.has((*knots)[static_cast<std::size_t>(i)].data());
+    if (!all) continue;
     Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
     for (int i = 0; i < N; ++i)
       for (int j = i; j < N; ++j) {
@@ -505,27 +781,91 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
             block((*knots)[static_cast<std::size_t>(i)].data(), (*knots)[static_cast<std::size_t>(j)].data());
         C += w(i) * w(j) * (i == j ? Cij : Eigen::Matrix3d(Cij + Cij.transpose()));
       }
-    *sig = C.diagonal().cwiseMax(0.0).cwiseSqrt();
+    *sig = sigma_of(C);
   }
   for (std::size_t c = 0; c < st_.cams.size(); ++c) {
     CamImuCameraResult& cr = out->cameras[c];
     const CameraState& cs = st_.cams[c];
-    if (!problem.IsParameterBlockConstant(cs.q_ci.data())) {
+    if (cov.has(cs.q_ci.data())) {
       // Right perturbation -> about the camera axes: R Exp(d) = Exp(R d) R.
       const Eigen::Matrix3d R = quat_matrix(cs.q_ci.data());
-      cr.rotation_sigma_rad =
-          (R * block(cs.q_ci.data(), cs.q_ci.data()) * R.transpose()).diagonal().cwiseMax(0.0).cwiseSqrt();
+      const Eigen::Matrix3d C = block(cs.q_ci.data(), cs.q_ci.data());
+      cr.rotation_sigma_rad = C.allFinite() ? Eigen::Vector3d(sigma_of(R * C * R.transpose()))
+                                            : Eigen::Vector3d::Constant(kNotDetermined);
       cr.translation_sigma_m = sigma3(cs.t_ci.data());
     }
-    if (!problem.IsParameterBlockConstant(&cs.shift))
-      cr.timeshift_sigma_s = std::sqrt(block(&cs.shift, &cs.shift)(0, 0));
+    if (cov.has(&cs.shift)) cr.timeshift_sigma_s = sigma_of(block(&cs.shift, &cs.shift))(0);
   }
   quality_.covariance_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 template <int N>
+void Estimator<N>::check_against_prior(CamImuCalibrationResult* out) {
+  if (priors_.empty()) return;
+  const CamImuIntrinsicsPrior& pr = opt_.prior;
+  out->prior_source = pr.source;
+  KrebsImuSigma& ps = out->prior_sigma;
+  const KrebsImuModel& m = out->imu;
+  const KrebsImuSigma& s = out->imu_sigma;
+  const auto is_free = [&](const double* b) { return !problem_->IsParameterBlockConstant(b); };
+  if (is_free(st_.Sa.data())) ps.S_a = pr.scale * prior0_.S_a.cwiseAbs();
+  if (is_free(st_.Sg.data())) ps.S_g = pr.scale * prior0_.S_g.cwiseAbs();
+  if (is_free(st_.Ma.data())) ps.M_a.setConstant(pr.misalignment);
+  if (is_free(st_.Mg.data())) ps.M_g.setConstant(pr.misalignment);
+  if (is_free(st_.C.data())) ps.C_bg.setConstant(pr.gyro_axes);
+  if (is_free(st_.B.data())) ps.B_g.setConstant(pr.gsens);
+  const Eigen::Vector3d dC = so3::log(prior0_.C_bg.transpose() * m.C_bg);
+  struct Entry {
+    const char* name;
+    Eigen::VectorXd value, centre, prior_sigma, sigma;
+    double bound;  // physical bound on |value - centre|
+  };
+  const auto flat = [](const Eigen::Matrix3d& M) {
+    return Eigen::VectorXd(
+        Eigen::Map<const Eigen::Matrix<double, 9, 1>>(Eigen::Matrix3d(M.transpose()).data()));
+  };
+  const Entry entries[] = {
+      {"S_a", m.S_a, prior0_.S_a, ps.S_a, s.S_a, 0.1},
+      {"S_g", m.S_g, prior0_.S_g, ps.S_g, s.S_g, 0.1},
+      {"M_a", m.M_a, prior0_.M_a, ps.M_a, s.M_a, 0.1},
+      {"M_g", m.M_g, prior0_.M_g, ps.M_g, s.M_g, 0.1},
+      {"C_bg", dC, Eigen::Vector3d::Zero(), ps.C_bg, s.C_bg, 0.1},
+      {"B_g", flat(m.B_g), flat(prior0_.B_g), flat(ps.B_g), flat(s.B_g), 2e-3},
+  };
+  const char* xyz[3] = {"x", "y", "z"};
+  for (const Entry& e : entries) {
+    for (Eigen::Index i = 0; i < e.value.size(); ++i) {
+      if (!std::isfinite(e.prior_sigma(i))) continue;
+      const bool m = e.name[0] == 'M';
+      const char* m_names[3] = {"yz", "zy", "zx"};
+      const std::string label =
+          std::string(e.name) + " " +
+          (e.value.size() == 9 ? std::string(xyz[i / 3]) + xyz[i % 3] : std::string(m ? m_names[i] : xyz[i]));
+      const double off = e.value(i) - e.centre(i);
+      const double n = std::abs(off) / e.prior_sigma(i);
+      if (n > 3.0 || std::abs(off) > e.bound) {
+        char text[320];
+        std::snprintf(
+            text, sizeof text,
+            "%s = %.6g is %.1f prior sigmas from its prior %.6g +- %.3g (%s)%s: check the IMU's units "
+            "and noise figures, or give a static calibration (--imu-intrinsics)",
+            label.c_str(), e.value(i), n, e.centre(i), e.prior_sigma(i), pr.source.c_str(),
+            std::abs(off) > e.bound ? ", beyond what a working sensor shows" : "");
+        warnings_.emplace_back(text);
+      }
+      if (!(e.sigma(i) < 0.5 * e.prior_sigma(i))) out->prior_dominated.push_back(label);
+    }
+  }
+  if (!out->prior_dominated.empty()) {
+    std::string text = "set mostly by the prior (" + pr.source + "; the recording hardly determines them):";
+    for (const auto& n : out->prior_dominated) text += " " + n;
+    warnings_.push_back(text);
+  }
+}
+
+template <int N>
 void Estimator<N>::fill_result(CamImuCalibrationResult* out) {
-  out->model = opt_.model;
+  out->model = model_;
   KrebsImuModel& m = out->imu;
   m.S_a = vec(st_.Sa);
   m.M_a = vec(st_.Ma);
@@ -545,7 +885,7 @@ void Estimator<N>::fill_result(CamImuCalibrationResult* out) {
         {t0_ns_ + static_cast<TimeNs>(std::llround(t * 1e9)), ba.evaluate(t), bg.evaluate(t)});
   if (auto canonical = canonical_from_krebs(m); canonical.ok()) out->canonical = *canonical;
   out->gravity_w = vec(st_.g);
-  const bool basic = opt_.model == CamImuModelKind::kBasic;
+  const bool basic = model_ == CamImuModelKind::kBasic;
   const CamImuFixed& f = opt_.fixed;
   for (auto [name, fixed] : {std::pair{"S_a", basic || f.S_a}, std::pair{"M_a", basic || f.M_a},
                              std::pair{"S_g", basic || f.S_g}, std::pair{"M_g", basic || f.M_g},
@@ -656,18 +996,31 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   ceres::Solver::Summary summary;
   // First with the IMU intrinsics at their initial values (the trajectory, biases, gravity and
   // extrinsics settle), then everything the model estimates.
+  const bool automatic = model_ == CamImuModelKind::kAuto;
+  if (automatic) model_ = CamImuModelKind::kExtended;  // the first stage stops early, as for extended
   if (Status s = solve(false, "basic", &summary); !s.ok()) return s.error();
   quality_.initial_cost = summary.initial_cost;
-  const bool extended = opt_.model == CamImuModelKind::kExtended;
   std::vector<ImuSignalFit> fits;
-  if (extended) fits.push_back(signal_fit("basic"));
-  // The next stage weighs the corners by the noise they showed in the one before. The first
-  // stage stops early with the IMU intrinsics at their start, so its residuals overstate the
-  // noise: the final stage is repeated until the estimate holds (within 10 %).
-  for (int round = 0; round < 3; ++round) {
-    const bool changed = reestimate_corner_sigma();
+  fits.push_back(signal_fit("basic"));
+  if (automatic) {
+    // Both models weighted alike, by the noise the first stage's residuals show.
+    reestimate_corner_sigma();
+    reestimate_imu_noise();
+    if (Status s = choose_model(&summary); !s.ok()) return s.error();
+  } else {
+    model_choice_ = std::string(camimu_model_name(model_)) + ", as requested (--model)";
+  }
+  const bool extended = model_ == CamImuModelKind::kExtended;
+  if (!extended) fits.clear();
+  // The next stage weighs the corners by the noise they showed in the one before, and the IMU by
+  // its residuals where they disagree with the given noise. The first stage stops early with the
+  // IMU intrinsics at their start, so its residuals overstate the noise: the final stage is
+  // repeated until the estimates hold (within 10 %).
+  for (int round = automatic ? 1 : 0; round < 4; ++round) {
+    bool changed = reestimate_corner_sigma();
+    if (round > 0 || !extended) changed = reestimate_imu_noise() || changed;
     if (round > 0 && !changed) break;
-    if (!extended && opt_.corner_sigma_px > 0) break;
+    if (round == 0 && !extended && opt_.corner_sigma_px > 0 && !changed) break;
     if (Status s = solve(extended, extended ? "extended" : "basic", &summary); !s.ok()) return s.error();
   }
   quality_.final_cost = summary.final_cost;
@@ -680,20 +1033,80 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   quality_.gyro_residual_rms = fits.back().gyro_residual_rms;
   CamImuCalibrationResult out;
   out.signal_fits = std::move(fits);
+  out.model_choice = model_choice_;
   fill_result(&out);
-  if (opt_.covariance) covariance(&out);
+  excitation(imu_, out.imu.b_g, &quality_, &warnings_);
+  if (opt_.covariance) {
+    covariance(&out);
+    check_against_prior(&out);
+  }
   for (const auto& cs : st_.cams) {
     quality_.xcorr.push_back(cs.xcorr.curve);
     quality_.xcorr_peak_s.push_back(cs.xcorr.shift_s);
   }
-  excitation(imu_, out.imu.b_g, &quality_, &warnings_);
-  if (quality_.gyro_residual_rms.maxCoeff() > 3.0 * quality_.gyro_sigma ||
-      quality_.accel_residual_rms.maxCoeff() > 3.0 * quality_.accel_sigma)
-    warnings_.push_back(
-        "IMU residuals exceed three times the assumed noise: the noise figures (imu.yaml) or the "
-        "model do not fit this IMU, and the sigmas are too small");
+  for (auto [rms, given, used, from_residuals, what] :
+       {std::tuple{quality_.accel_residual_rms.norm() / std::sqrt(3.0), quality_.accel_sigma_given,
+                   quality_.accel_sigma, quality_.accel_noise_from_residuals, "accelerometer"},
+        std::tuple{quality_.gyro_residual_rms.norm() / std::sqrt(3.0), quality_.gyro_sigma_given,
+                   quality_.gyro_sigma, quality_.gyro_noise_from_residuals, "gyroscope"}}) {
+    char text[400];
+    if (from_residuals) {
+      std::snprintf(
+          text, sizeof text,
+          "the %s residuals (RMS %.4g per sample) are %.1f times the noise the given figures imply "
+          "(%.4g): the problem was weighted with the residuals' own RMS instead, so that the sigmas "
+          "account for it (--keep-noise keeps the given figures)",
+          what, rms, rms / given, given);
+      warnings_.emplace_back(text);
+    } else if (rms > 3.0 * used || rms < used / 3.0) {
+      std::snprintf(
+          text, sizeof text,
+          "the %s residuals (RMS %.4g per sample) are %.1f times the assumed noise (%.4g): the noise "
+          "figures (imu.yaml) or the model do not fit this IMU, and the sigmas are %s",
+          what, rms, rms / used, used, rms > used ? "too small" : "too large");
+      warnings_.emplace_back(text);
+    }
+  }
   out.quality = quality_;
   out.warnings = warnings_;
+  return out;
+}
+
+/// Groups of k consecutive samples averaged (k = floor(rate / max_rate)); a group that a gap
+/// interrupts is left out. k = 1 (a copy) at or below max_rate, or with max_rate 0.
+std::vector<CamImuSample> average_imu(const std::vector<CamImuSample>& imu, double max_rate_hz, int* k_out) {
+  *k_out = 1;
+  if (imu.size() < 3 || max_rate_hz <= 0.0) return imu;
+  std::vector<TimeNs> dts;
+  for (std::size_t i = 1; i < imu.size(); ++i) dts.push_back(imu[i].t_ns - imu[i - 1].t_ns);
+  std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
+  const TimeNs dt = std::max<TimeNs>(dts[dts.size() / 2], 1);
+  const int k = static_cast<int>(std::floor(1e9 / static_cast<double>(dt) / max_rate_hz + 1e-9));
+  if (k < 2) return imu;
+  *k_out = k;
+  const TimeNs max_span = (k - 1) * dt + dt / 2;
+  std::vector<CamImuSample> out;
+  out.reserve(imu.size() / static_cast<std::size_t>(k) + 1);
+  std::size_t i = 0;
+  while (i + static_cast<std::size_t>(k) <= imu.size()) {
+    const std::size_t last = i + static_cast<std::size_t>(k) - 1;
+    if (imu[last].t_ns - imu[i].t_ns > max_span) {
+      ++i;  // a gap inside: slide past it
+      continue;
+    }
+    CamImuSample g;
+    TimeNs offsets = 0;
+    for (std::size_t j = i; j <= last; ++j) {
+      offsets += imu[j].t_ns - imu[i].t_ns;
+      g.accel += imu[j].accel;
+      g.gyro += imu[j].gyro;
+    }
+    g.t_ns = imu[i].t_ns + offsets / k;
+    g.accel /= k;
+    g.gyro /= k;
+    out.push_back(g);
+    i = last + 1;
+  }
   return out;
 }
 
@@ -706,14 +1119,23 @@ Result<CamImuCalibrationResult> calibrate_camimu(const std::vector<CamImuSample>
                                                  const CamImuProgressFn& progress) {
   if (Status s = options.validate(); !s.ok()) return s.error();
   if (cameras.empty()) return make_error(Errc::kInvalidArgument, "no camera to calibrate against the IMU");
-  switch (options.spline_order) {
-    case 4:
-      return Estimator<4>(imu, cameras, target, options, progress).run();
-    case 5:
-      return Estimator<5>(imu, cameras, target, options, progress).run();
-    default:
-      return Estimator<6>(imu, cameras, target, options, progress).run();
+  int k = 1;
+  const std::vector<CamImuSample> averaged = average_imu(imu, options.imu_max_rate_hz, &k);
+  Result<CamImuCalibrationResult> out = [&]() -> Result<CamImuCalibrationResult> {
+    switch (options.spline_order) {
+      case 4:
+        return Estimator<4>(averaged, cameras, target, options, progress).run();
+      case 5:
+        return Estimator<5>(averaged, cameras, target, options, progress).run();
+      default:
+        return Estimator<6>(averaged, cameras, target, options, progress).run();
+    }
+  }();
+  if (out.ok()) {
+    out->quality.imu_samples_per_residual = k;
+    out->quality.imu_residuals = static_cast<int>(averaged.size());
   }
+  return out;
 }
 
 }  // namespace imucal::calib

@@ -55,8 +55,34 @@ struct CamImuFixed {
   bool timeshift = false;
 };
 
+/// A Gaussian prior on the extended model's IMU intrinsics, about the starting model (imu_init,
+/// else S = 1, M = 0, C_bg = I, B_g = 0), as standard deviations per entry. It bounds what a weakly
+/// excited recording cannot determine, and is negligible where the data are strong. The default
+/// is an MPU-6000's datasheet tolerances taken as one standard deviation (docs/camimu-calibration.md,
+/// "Priors"). A block held fixed has no prior.
+struct CamImuIntrinsicsPrior {
+  bool enabled = true;
+  double scale = 0.03;         // S_a, S_g: relative (datasheet: sensitivity tolerance +-3 %)
+  double misalignment = 0.02;  // M_a, M_g entries, rad (datasheet: cross-axis sensitivity +-2 %)
+  double gyro_axes = 0.02;     // C_bg, rad about each axis (the two triads of one die)
+  double gsens = 1.75e-4;      // B_g entries, rad/s per m/s^2 (datasheet: 0.1 deg/s per g)
+  std::string source = "MPU-6000 datasheet tolerances";
+};
+
 struct CamImuOptions {
-  CamImuModelKind model = CamImuModelKind::kExtended;
+  /// kAuto: basic or extended by the evidence of the IMU residuals (docs/camimu-calibration.md,
+  /// "Model choice"); the result says which and why.
+  CamImuModelKind model = CamImuModelKind::kAuto;
+  CamImuIntrinsicsPrior prior;
+  /// IMU samples above this rate are averaged in groups of k = floor(rate / imu_max_rate_hz)
+  /// consecutive samples, one residual per group at its mean time: the spline (knots every
+  /// 0.05 s) cannot follow what the average removes, the group's white noise is that of a
+  /// sensor with the same noise density at rate / k, and a 1 kHz IMU costs no more than a
+  /// 200 Hz one (docs/camimu-calibration.md, "Speed"). 0 = one residual per sample.
+  double imu_max_rate_hz = 200.0;
+  /// Weight the IMU residuals with their own RMS when it differs from the sigma the noise figures
+  /// imply by more than a factor two (false: keep the given figures and only warn).
+  bool imu_noise_from_residuals = true;
   /// Pose spline: order (degree + 1) and knot spacing; bias splines: their own spacing.
   int spline_order = 4;
   double knot_spacing_s = 0.05;

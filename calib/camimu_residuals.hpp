@@ -401,4 +401,49 @@ bool FrameResidual<N>::Evaluate(double const* const* p, double* residuals, doubl
   return true;
 }
 
+/// A Gaussian prior on an R^n block: (x - x0) ./ sigma. Blocks: the one block.
+class VectorPrior final : public ceres::CostFunction {
+ public:
+  VectorPrior(Eigen::VectorXd x0, Eigen::VectorXd sigma) : x0_(std::move(x0)), sigma_(std::move(sigma)) {
+    set_num_residuals(static_cast<int>(x0_.size()));
+    mutable_parameter_block_sizes()->push_back(static_cast<int>(x0_.size()));
+  }
+  bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
+    const auto n = x0_.size();
+    for (Eigen::Index i = 0; i < n; ++i) residuals[i] = (p[0][i] - x0_[i]) / sigma_[i];
+    if (jac && jac[0]) {
+      Eigen::Map<Eigen::MatrixXd>(jac[0], n, n) = sigma_.cwiseInverse().asDiagonal();
+    }
+    return true;
+  }
+
+ private:
+  Eigen::VectorXd x0_, sigma_;
+};
+
+/// A Gaussian prior on a rotation block (RightQuaternionManifold): Log(R0^T R) / sigma, with the
+/// tangent Jacobian Jr^-1(Log(R0^T R)) / sigma. Blocks: the quaternion.
+class RotationPrior final : public ceres::CostFunction {
+ public:
+  RotationPrior(const Eigen::Matrix3d& R0, double sigma) : R0t_(R0.transpose()), sigma_(sigma) {
+    set_num_residuals(3);
+    mutable_parameter_block_sizes()->push_back(4);
+  }
+  bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
+    const Eigen::Vector3d phi = so3::log(R0t_ * quat_matrix(p[0]));
+    Eigen::Map<Eigen::Vector3d> r(residuals);
+    r = phi / sigma_;
+    if (jac && jac[0]) {
+      Eigen::Map<Eigen::Matrix<double, 3, 4, Eigen::RowMajor>> J(jac[0]);
+      J.setZero();
+      J.leftCols<3>() = so3::right_jacobian_inverse(phi) / sigma_;
+    }
+    return true;
+  }
+
+ private:
+  Eigen::Matrix3d R0t_;
+  double sigma_;
+};
+
 }  // namespace imucal::calib::camimu

@@ -3,15 +3,56 @@
 #include <ceres/crs_matrix.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
+#include <algorithm>
+#include <cmath>
 #include <set>
 
 namespace imucal::calib {
 
+namespace {
+
+/// H_ll^-1 H_lg by a sparse LDLT of H_ll scaled to unit diagonal (the knots mix metres, radians
+/// and biases with weights over ten decades apart); when it is still singular (a nuisance
+/// direction with no data), again with a ridge of 1e-9 of the scaled diagonal. False when even
+/// that fails.
+bool solve_nuisance(const Eigen::SparseMatrix<double>& H_ll, const Eigen::MatrixXd& H_lg, Eigen::MatrixXd* X,
+                    bool* regularised) {
+  const auto ok = [](const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>& f) {
+    return f.info() == Eigen::Success && (f.vectorD().array() > 0.0).all();
+  };
+  const Eigen::Index n = H_ll.rows();
+  Eigen::VectorXd d(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const double h = H_ll.coeff(i, i);
+    d(i) = h > 0.0 ? 1.0 / std::sqrt(h) : 1.0;
+  }
+  Eigen::SparseMatrix<double> S = d.asDiagonal() * H_ll * d.asDiagonal();
+  // A parameter no residual touches (a knot past the last sample) has a zero row and column: it
+  // is coupled to nothing, so it is taken out with a unit diagonal and no note.
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (!(H_ll.coeff(i, i) > 0.0)) S.coeffRef(i, i) = 1.0;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(S);
+  if (!ok(ldlt)) {
+    for (Eigen::Index i = 0; i < n; ++i) S.coeffRef(i, i) += 1e-9;
+    ldlt.compute(S);
+    if (!ok(ldlt)) return false;
+    *regularised = true;
+  }
+  // H^-1 = D (D H D)^-1 D.
+  *X = d.asDiagonal() * ldlt.solve(d.asDiagonal() * H_lg);
+  return true;
+}
+
+}  // namespace
+
 bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<const double*>& blocks,
                                  int threads) {
   offset_.clear();
+  undetermined_.clear();
+  nuisance_regularised_ = false;
   std::set<const double*> wanted;
   std::vector<double*> order;  // the rest first, the wanted blocks last
   for (const double* b : blocks)
@@ -25,10 +66,12 @@ bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<cons
     nl += problem.ParameterBlockTangentSize(b);
   }
   int ng = 0;
+  std::vector<Coordinate> coords;
   for (const double* b : blocks) {
     if (!wanted.count(b) || offset_.count(b)) continue;
     const int size = problem.ParameterBlockTangentSize(b);
     offset_[b] = {ng, size};
+    for (int i = 0; i < size; ++i) coords.push_back({b, i});
     ng += size;
     order.push_back(const_cast<double*>(b));
   }
@@ -41,25 +84,65 @@ bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<cons
       crs.num_rows, crs.num_cols, static_cast<Eigen::Index>(crs.values.size()), crs.rows.data(),
       crs.cols.data(), crs.values.data());
   const Eigen::SparseMatrix<double> H = Eigen::SparseMatrix<double>(J.transpose()) * J;
-  const Eigen::SparseMatrix<double> H_ll = H.topLeftCorner(nl, nl);
-  const Eigen::MatrixXd H_lg = Eigen::MatrixXd(H.topRightCorner(nl, ng));
   Eigen::MatrixXd S = Eigen::MatrixXd(H.bottomRightCorner(ng, ng));
   if (nl > 0) {
-    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(H_ll);
-    if (ldlt.info() != Eigen::Success || (ldlt.vectorD().array() <= 0.0).any()) return false;
-    S -= H_lg.transpose() * ldlt.solve(H_lg);
+    const Eigen::MatrixXd H_lg = Eigen::MatrixXd(H.topRightCorner(nl, ng));
+    Eigen::MatrixXd X;
+    if (!solve_nuisance(H.topLeftCorner(nl, nl), H_lg, &X, &nuisance_regularised_)) {
+      cov_ = Eigen::MatrixXd::Constant(ng, ng, std::nan(""));
+      undetermined_.push_back({});  // nothing about the wanted blocks can be said
+      return true;
+    }
+    S -= H_lg.transpose() * X;
   }
-  const Eigen::LDLT<Eigen::MatrixXd> s_ldlt(S);
-  if (s_ldlt.info() != Eigen::Success || !s_ldlt.isPositive() || (s_ldlt.vectorD().array() <= 0.0).any())
-    return false;
-  cov_ = s_ldlt.solve(Eigen::MatrixXd::Identity(ng, ng));
-  return cov_.allFinite();
+  S = 0.5 * (S + S.transpose());
+  // Scale every coordinate to unit information, then split determined from undetermined.
+  Eigen::VectorXd d(ng);
+  for (int i = 0; i < ng; ++i) d(i) = S(i, i) > 0.0 ? 1.0 / std::sqrt(S(i, i)) : 1.0;
+  const Eigen::MatrixXd Ss = d.asDiagonal() * S * d.asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(Ss);
+  const Eigen::VectorXd& lambda = eig.eigenvalues();  // ascending
+  const Eigen::MatrixXd& V = eig.eigenvectors();
+  const double largest = ng > 0 ? std::max(lambda(ng - 1), 0.0) : 0.0;
+  Eigen::MatrixXd inv = Eigen::MatrixXd::Zero(ng, ng);
+  Eigen::VectorXd null_weight = Eigen::VectorXd::Zero(ng);
+  for (int k = 0; k < ng; ++k) {
+    if (lambda(k) > kRankTolerance * largest && largest > 0.0) {
+      inv += V.col(k) * V.col(k).transpose() / lambda(k);
+      continue;
+    }
+    null_weight += V.col(k).cwiseAbs2();
+    Direction dir;
+    const double top = V.col(k).cwiseAbs().maxCoeff();
+    std::vector<int> idx;
+    for (int i = 0; i < ng; ++i)
+      if (std::abs(V(i, k)) >= 0.1 * top) idx.push_back(i);
+    std::sort(idx.begin(), idx.end(), [&](int a, int b) { return std::abs(V(a, k)) > std::abs(V(b, k)); });
+    for (int i : idx) dir.parts.push_back({coords[static_cast<std::size_t>(i)], V(i, k)});
+    undetermined_.push_back(std::move(dir));
+  }
+  cov_ = d.asDiagonal() * inv * d.asDiagonal();
+  for (int i = 0; i < ng; ++i) {
+    if (null_weight(i) <= kNullComponent && std::isfinite(cov_(i, i))) continue;
+    cov_.row(i).setConstant(std::nan(""));
+    cov_.col(i).setConstant(std::nan(""));
+  }
+  return true;
 }
 
 Eigen::MatrixXd MarginalCovariance::block(const double* a, const double* b) const {
   const auto& [oa, na] = offset_.at(a);
   const auto& [ob, nb] = offset_.at(b);
   return cov_.block(oa, ob, na, nb);
+}
+
+Eigen::VectorXd sigma_of(const Eigen::MatrixXd& cov) {
+  Eigen::VectorXd s(cov.rows());
+  for (Eigen::Index i = 0; i < cov.rows(); ++i) {
+    const double v = cov(i, i);
+    s(i) = std::isnan(v) ? v : std::sqrt(std::max(v, 0.0));
+  }
+  return s;
 }
 
 }  // namespace imucal::calib

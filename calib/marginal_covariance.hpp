@@ -5,6 +5,13 @@
 // factorised once by a sparse Cholesky (Eigen's SimplicialLDLT) and solved for the few columns
 // of H_lg. ceres::Covariance computes the same blocks through a sparse QR of the whole Jacobian,
 // which on a 90 s camera-IMU problem took as long as the solve (docs/camimu-calibration.md).
+//
+// A problem whose data do not determine every wanted parameter still gets a covariance: the
+// Schur complement S is scaled by its diagonal (S' = D S D, D = diag(S)^-1/2, so every parameter
+// weighs alike whatever its unit) and decomposed into eigenvectors. Directions whose eigenvalue
+// is below kRankTolerance of the largest are the undetermined ones; the covariance is the
+// pseudo-inverse on the rest, and every coordinate with a component along an undetermined
+// direction gets a NaN row and column ("not determined"), never a number that looks like one.
 
 #include <ceres/problem.h>
 
@@ -16,18 +23,49 @@ namespace imucal::calib {
 
 class MarginalCovariance {
  public:
+  /// Relative eigenvalue (of the diagonally scaled Schur complement) below which a direction is
+  /// taken as undetermined: its standard deviation would be over 1e5 times what the parameters'
+  /// own information gives them.
+  static constexpr double kRankTolerance = 1e-10;
+  /// A coordinate whose squared component along an undetermined direction exceeds this has no
+  /// finite variance.
+  static constexpr double kNullComponent = 1e-6;
+
+  /// One coordinate of a wanted block (tangent space).
+  struct Coordinate {
+    const double* block = nullptr;
+    int index = 0;
+  };
+  /// An undetermined direction: the coordinates it moves, largest first, with their weights in
+  /// the scaled coordinates (unit vector; only those of at least 0.1 of the largest).
+  struct Direction {
+    std::vector<std::pair<Coordinate, double>> parts;
+  };
+
   /// Computes the covariance of `blocks` (tangent space, loss functions applied) at the
-  /// problem's current values. Blocks held constant are left out (their covariance is zero).
-  /// False when H is not positive definite (a parameter is not observable).
+  /// problem's current values. Blocks held constant are left out (has() is false for them).
+  /// False only when the problem cannot be evaluated there.
   bool compute(ceres::Problem& problem, const std::vector<const double*>& blocks, int threads);
 
-  /// The covariance block of two blocks passed to compute(), tangent space.
+  /// The covariance block of two blocks passed to compute(), tangent space; NaN where a
+  /// coordinate is not determined.
   Eigen::MatrixXd block(const double* a, const double* b) const;
   bool has(const double* b) const { return offset_.count(b) != 0; }
+
+  /// The directions the data do not determine (empty when the wanted blocks are all determined).
+  const std::vector<Direction>& undetermined() const { return undetermined_; }
+  /// True when the other parameters (H_ll) were singular and had to be regularised: the
+  /// covariance is then conditioned on a weak prior on them.
+  bool nuisance_regularised() const { return nuisance_regularised_; }
 
  private:
   Eigen::MatrixXd cov_;
   std::map<const double*, std::pair<int, int>> offset_;  // offset, tangent size
+  std::vector<Direction> undetermined_;
+  bool nuisance_regularised_ = false;
 };
+
+/// The square roots of a covariance's diagonal, NaN kept (a negative variance from rounding is 0).
+Eigen::VectorXd sigma_of(const Eigen::MatrixXd& cov);
 
 }  // namespace imucal::calib

@@ -12,6 +12,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -21,13 +22,25 @@
 
 namespace imucal {
 
+/// A standard deviation that could not be determined (written as null in JSON, "not determined"
+/// on screens): never 0, which would claim a perfectly known value.
+inline constexpr double kNotDetermined = std::numeric_limits<double>::quiet_NaN();
+
 /// Which IMU model the camera-IMU problem estimates.
 enum class CamImuModelKind {
   kBasic,     // biases only: S = I, M = I, C_bg = I, B_g = 0 (Kalibr's "calibrated" IMU)
   kExtended,  // Krebs 2012, ch. 3: S_g, M_g, C_bg, B_g, S_a, M_a and the biases
+  kAuto,      // a request only: basic or extended, whichever the data support (the result says)
 };
 inline const char* camimu_model_name(CamImuModelKind kind) {
-  return kind == CamImuModelKind::kBasic ? "basic" : "extended";
+  switch (kind) {
+    case CamImuModelKind::kBasic:
+      return "basic";
+    case CamImuModelKind::kExtended:
+      return "extended";
+    default:
+      return "auto";
+  }
 }
 
 /// One camera of the rig as calibrated against the IMU.
@@ -37,11 +50,12 @@ struct CamImuCameraResult {
   CameraModel camera;  // intrinsics used (fixed in the problem)
   Eigen::Isometry3d T_cam_imu = Eigen::Isometry3d::Identity();
   /// Standard deviations: rotation as a small-angle vector about the camera axes (rad), i.e.
-  /// of delta in R_cam_imu = exp(delta) R_est, and translation (m), camera frame.
-  Eigen::Vector3d rotation_sigma_rad = Eigen::Vector3d::Zero();
-  Eigen::Vector3d translation_sigma_m = Eigen::Vector3d::Zero();
+  /// of delta in R_cam_imu = exp(delta) R_est, and translation (m), camera frame. NaN: not
+  /// determined (held fixed, or the recording does not determine it; never 0).
+  Eigen::Vector3d rotation_sigma_rad = Eigen::Vector3d::Constant(kNotDetermined);
+  Eigen::Vector3d translation_sigma_m = Eigen::Vector3d::Constant(kNotDetermined);
   double timeshift_cam_imu_s = 0.0;
-  double timeshift_sigma_s = 0.0;
+  double timeshift_sigma_s = kNotDetermined;
   int frames = 0;           // frames with the target that entered the problem
   int corners = 0;          // corner observations that entered the problem
   int outlier_corners = 0;  // down-weighted by the robust loss (residual above its scale)
@@ -55,16 +69,17 @@ struct CamImuCameraResult {
   double outlier_px = 0.0;
 };
 
-/// Standard deviations of the Krebs-form IMU parameters (0 for a fixed block).
+/// Standard deviations of the Krebs-form IMU parameters; NaN where not determined (a fixed block,
+/// or a direction the recording does not determine), never 0.
 struct KrebsImuSigma {
-  Eigen::Vector3d S_a = Eigen::Vector3d::Zero();
-  Eigen::Vector3d M_a = Eigen::Vector3d::Zero();
-  Eigen::Vector3d b_a = Eigen::Vector3d::Zero();
-  Eigen::Vector3d S_g = Eigen::Vector3d::Zero();
-  Eigen::Vector3d M_g = Eigen::Vector3d::Zero();
-  Eigen::Vector3d C_bg = Eigen::Vector3d::Zero();  // small-angle vector of C_bg, rad
-  Eigen::Matrix3d B_g = Eigen::Matrix3d::Zero();
-  Eigen::Vector3d b_g = Eigen::Vector3d::Zero();
+  Eigen::Vector3d S_a = Eigen::Vector3d::Constant(kNotDetermined);
+  Eigen::Vector3d M_a = Eigen::Vector3d::Constant(kNotDetermined);
+  Eigen::Vector3d b_a = Eigen::Vector3d::Constant(kNotDetermined);
+  Eigen::Vector3d S_g = Eigen::Vector3d::Constant(kNotDetermined);
+  Eigen::Vector3d M_g = Eigen::Vector3d::Constant(kNotDetermined);
+  Eigen::Vector3d C_bg = Eigen::Vector3d::Constant(kNotDetermined);  // small-angle vector of C_bg, rad
+  Eigen::Matrix3d B_g = Eigen::Matrix3d::Constant(kNotDetermined);
+  Eigen::Vector3d b_g = Eigen::Vector3d::Constant(kNotDetermined);
 };
 
 /// The biases along the recording (the bias splines sampled), for reports.
@@ -97,6 +112,13 @@ struct CamImuQuality {
   Eigen::Vector3d gyro_residual_rms = Eigen::Vector3d::Zero();
   double accel_sigma = 0.0;
   double gyro_sigma = 0.0;
+  /// The per-sample sigmas the given noise figures imply (imu.yaml or the datasheet); they differ
+  /// from accel_sigma / gyro_sigma when the residuals disagreed with them by more than a factor
+  /// two and the problem was weighted with the residuals' own RMS instead (noise_from_residuals).
+  double accel_sigma_given = 0.0;
+  double gyro_sigma_given = 0.0;
+  bool accel_noise_from_residuals = false;
+  bool gyro_noise_from_residuals = false;
   /// Excitation: RMS of the angular rate and of the specific force without its mean (gravity),
   /// per body axis (rad/s, m/s^2).
   Eigen::Vector3d rotation_excitation_radps = Eigen::Vector3d::Zero();
@@ -113,6 +135,10 @@ struct CamImuQuality {
   double covariance_s = 0.0;  // wall time of the covariance
   double jacobian_s = 0.0;    // of the solve: residual and Jacobian evaluation
   double linear_solver_s = 0.0;
+  /// IMU samples averaged into one residual (1: every sample its own), and the residuals: above
+  /// CamImuOptions::imu_max_rate_hz the per-sample figures above are those of the averages.
+  int imu_samples_per_residual = 1;
+  int imu_residuals = 0;
   int parameters = 0;  // estimated, in the tangent space
   int residuals = 0;
   int spline_knots = 0;
@@ -132,10 +158,21 @@ struct CamImuCalibrationResult {
   std::vector<std::string> fixed;
   /// Gravity in the world (target) frame, m/s^2; its direction's sigma (rad, two tangent axes).
   Eigen::Vector3d gravity_w = Eigen::Vector3d(0, 0, -kStandardGravityMps2);
-  Eigen::Vector2d gravity_sigma_rad = Eigen::Vector2d::Zero();
+  Eigen::Vector2d gravity_sigma_rad = Eigen::Vector2d::Constant(kNotDetermined);
   std::vector<BiasSample> biases;
   std::vector<ImuSignalFit> signal_fits;  // "basic" then "extended" (extended model), or "basic"
   CamImuQuality quality;
+  /// Why the model is the one it is: forced by the request, or chosen by the evidence (the
+  /// criterion's figures, docs/camimu-calibration.md "Model choice").
+  std::string model_choice;
+  /// The prior on the extended model's intrinsics (about the starting model), its source, and
+  /// the parameters it mostly set (their sigma above half the prior's: the data hardly moved
+  /// them). Sigmas NaN where a block had no prior (fixed, or the basic model).
+  std::string prior_source;
+  KrebsImuSigma prior_sigma;
+  std::vector<std::string> prior_dominated;
+  /// The directions the recording does not determine, in words (their sigmas are NaN).
+  std::vector<std::string> undetermined;
   std::vector<std::string> warnings;  // observability, residuals, outliers
 
   static constexpr double kStandardGravityMps2 = 9.80665;

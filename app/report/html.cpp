@@ -68,7 +68,7 @@ std::string num(double value, int digits) {
 
 std::string with_sigma(double value, double sigma) {
   if (!std::isfinite(value)) return num(value);
-  if (std::isnan(sigma)) return num(value) + " (&sigma; undetermined)";
+  if (std::isnan(sigma)) return num(value) + " (&sigma; not determined)";
   if (sigma <= 0.0) return num(value) + " (fixed)";
   char buf[96];
   const int e = static_cast<int>(std::floor(std::log10(sigma)));

@@ -352,9 +352,21 @@ void SessionEngine::evaluate_gates() {
         {"distinct attitudes", static_cast<double>(r.distinct_attitudes), 9.0, r.distinct_attitudes >= 9});
   }
   if (final_->camimu) {
-    for (const auto& cam : final_->camimu->result.cameras) {
+    const auto& res = final_->camimu->result;
+    const auto fixed = [&](const char* name) {
+      return std::find(res.fixed.begin(), res.fixed.end(), name) != res.fixed.end();
+    };
+    for (const auto& cam : res.cameras) {
       gates_.push_back({cam.name + " reprojection RMS (px)", cam.reprojection_rms_px, s.gate_reprojection_px,
                         cam.reprojection_rms_px <= s.gate_reprojection_px});
+      // Every estimated extrinsic and time offset carries a sigma before it goes to storage.
+      int missing = 0;
+      if (!fixed("T_cam_imu"))
+        missing += static_cast<int>((!cam.rotation_sigma_rad.array().isFinite()).count() +
+                                    (!cam.translation_sigma_m.array().isFinite()).count());
+      if (!fixed("timeshift")) missing += std::isfinite(cam.timeshift_sigma_s) ? 0 : 1;
+      gates_.push_back(
+          {cam.name + " extrinsics without a sigma", static_cast<double>(missing), 0.0, missing == 0});
     }
   }
   gates_pass_ = std::all_of(gates_.begin(), gates_.end(), [](const Gate& g) { return g.pass; });

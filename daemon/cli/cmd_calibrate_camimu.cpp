@@ -1,8 +1,10 @@
 // imucal calibrate camimu LOG: camera-IMU extrinsics, time offsets and the IMU's intrinsics from
 // the target seen by the cameras while the rig moves, see docs/camimu-calibration.md.
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -32,7 +34,9 @@ struct CamImuCliOptions {
   std::string imu_intrinsics_path;
   std::string gsens_path;
   std::string imu_stream;
-  std::string model = "extended";
+  std::string model = "auto";
+  bool keep_noise = false;
+  bool no_prior = false;
   std::vector<std::string> fix;
   calib::CamImuOptions defaults;
   GravityArgs grav;
@@ -88,7 +92,11 @@ app::CamImuRequest build_request(const CamImuCliOptions& o) {
     q.gsens = *g;
   }
   q.options = o.defaults;
-  q.options.model = o.model == "basic" ? CamImuModelKind::kBasic : CamImuModelKind::kExtended;
+  q.options.model = o.model == "basic"      ? CamImuModelKind::kBasic
+                    : o.model == "extended" ? CamImuModelKind::kExtended
+                                            : CamImuModelKind::kAuto;
+  q.options.imu_noise_from_residuals = !o.keep_noise;
+  q.options.prior.enabled = !o.no_prior;
   for (const auto& name : o.fix) {
     if (auto s = app::set_fixed_block(name, &q.options.fixed); !s.ok()) fail(s.error(), "--fix");
   }
@@ -102,29 +110,45 @@ app::CamImuRequest build_request(const CamImuCliOptions& o) {
   return q;
 }
 
-void print_camera(const CamImuCameraResult& c, const app::CamImuCameraReport& in) {
+/// "0.1234" with `digits` decimals, or the words for a sigma that has none.
+std::string sig(double v, int digits, bool fixed = false) {
+  if (fixed) return "fixed";
+  if (!std::isfinite(v)) return "not determined";
+  return fmt::format("{:.{}f}", v, digits);
+}
+
+std::string sig3(const Eigen::Vector3d& s, double k, int digits, bool fixed = false) {
+  if (fixed) return "fixed";
+  if (!s.allFinite() && !s.array().isFinite().any()) return "not determined";
+  return "[" + sig(s[0] * k, digits) + " " + sig(s[1] * k, digits) + " " + sig(s[2] * k, digits) + "]";
+}
+
+bool is_fixed(const CamImuCalibrationResult& res, const char* name) {
+  return std::find(res.fixed.begin(), res.fixed.end(), name) != res.fixed.end();
+}
+
+void print_camera(const CamImuCalibrationResult& res, const CamImuCameraResult& c,
+                  const app::CamImuCameraReport& in) {
   const Eigen::AngleAxisd aa(c.T_cam_imu.rotation());
   const Eigen::Vector3d rv = aa.angle() * aa.axis() * kDeg;
-  const Eigen::Vector3d rs = c.rotation_sigma_rad * kDeg;
   const Eigen::Vector3d t = c.T_cam_imu.translation() * 1e3;
-  const Eigen::Vector3d ts = c.translation_sigma_m * 1e3;
+  const bool fixed_T = is_fixed(res, "T_cam_imu"), fixed_shift = is_fixed(res, "timeshift");
   std::printf("  %s (stream %s, %d frames with the target of %lld; detections %s)\n", c.name.c_str(),
               c.stream.c_str(), in.frames_with_target, static_cast<long long>(in.frames),
               in.detections_reused ? "reused from the log"
                                    : (in.detections_stored ? "stored in the log" : "not stored"));
-  std::printf("    R_cam_imu rotation vector [%.4f %.4f %.4f] deg, sigma [%.4f %.4f %.4f] deg\n", rv[0],
-              rv[1], rv[2], rs[0], rs[1], rs[2]);
-  std::printf("    t_cam_imu [%.2f %.2f %.2f] mm, sigma [%.2f %.2f %.2f] mm\n", t[0], t[1], t[2], ts[0],
-              ts[1], ts[2]);
-  std::printf("    timeshift_cam_imu %.4f ms +- %.4f ms (t_imu = t_cam + shift)\n",
-              c.timeshift_cam_imu_s * 1e3, c.timeshift_sigma_s * 1e3);
+  std::printf("    R_cam_imu rotation vector [%.4f %.4f %.4f] deg, sigma %s deg\n", rv[0], rv[1], rv[2],
+              sig3(c.rotation_sigma_rad, kDeg, 4, fixed_T).c_str());
+  std::printf("    t_cam_imu [%.2f %.2f %.2f] mm, sigma %s mm\n", t[0], t[1], t[2],
+              sig3(c.translation_sigma_m, 1e3, 2, fixed_T).c_str());
+  std::printf("    timeshift_cam_imu %.4f ms +- %s ms (t_imu = t_cam + shift)\n", c.timeshift_cam_imu_s * 1e3,
+              sig(c.timeshift_sigma_s * 1e3, 4, fixed_shift).c_str());
   std::printf("    reprojection RMS %.4f px over %d corners, %d down-weighted as outliers\n",
               c.reprojection_rms_px, c.corners, c.outlier_corners);
 }
 
-void print_vec(const char* name, const Eigen::Vector3d& v, const Eigen::Vector3d& s, double k = 1.0) {
-  std::printf("    %-4s [%.6f %.6f %.6f] +- [%.6f %.6f %.6f]\n", name, v[0] * k, v[1] * k, v[2] * k, s[0] * k,
-              s[1] * k, s[2] * k);
+void print_vec(const char* name, const Eigen::Vector3d& v, const Eigen::Vector3d& s, bool fixed) {
+  std::printf("    %-4s [%.6f %.6f %.6f] +- %s\n", name, v[0], v[1], v[2], sig3(s, 1.0, 6, fixed).c_str());
 }
 
 void print_summary(const app::CamImuReport& r, const std::string& out_dir) {
@@ -132,29 +156,38 @@ void print_summary(const app::CamImuReport& r, const std::string& out_dir) {
   std::printf("camera-IMU calibration of %s (%s, %zu samples, %s; model %s; %d iterations)\n",
               r.log_path.c_str(), r.imu_stream.name.c_str(), r.imu_samples,
               imu_units_name(r.imu_stream.units), camimu_model_name(res.model), res.quality.iterations);
+  if (!res.model_choice.empty()) std::printf("  model: %s\n", res.model_choice.c_str());
   for (std::size_t i = 0; i < res.cameras.size() && i < r.cameras.size(); ++i)
-    print_camera(res.cameras[i], r.cameras[i]);
+    print_camera(res, res.cameras[i], r.cameras[i]);
   const auto& k = res.imu;
   const auto& s = res.imu_sigma;
-  std::printf("  IMU (Krebs form on nominal SI; fixed: %s)\n",
+  std::printf("  IMU (Krebs form on nominal SI; fixed: %s%s)\n",
               res.fixed.empty() ? "none" : [&] {
                 std::string f;
                 for (const auto& n : res.fixed) f += (f.empty() ? "" : ",") + n;
                 return f;
-              }().c_str());
-  print_vec("S_a", k.S_a, s.S_a);
-  print_vec("M_a", k.M_a, s.M_a);
-  print_vec("S_g", k.S_g, s.S_g);
-  print_vec("M_g", k.M_g, s.M_g);
-  std::printf("    C_bg %.4f deg (sigma [%.4f %.4f %.4f] deg)\n", Eigen::AngleAxisd(k.C_bg).angle() * kDeg,
-              s.C_bg[0] * kDeg, s.C_bg[1] * kDeg, s.C_bg[2] * kDeg);
+              }().c_str(),
+              res.prior_source.empty() ? "" : ("; prior: " + res.prior_source).c_str());
+  print_vec("S_a", k.S_a, s.S_a, is_fixed(res, "S_a"));
+  print_vec("M_a", k.M_a, s.M_a, is_fixed(res, "M_a"));
+  print_vec("S_g", k.S_g, s.S_g, is_fixed(res, "S_g"));
+  print_vec("M_g", k.M_g, s.M_g, is_fixed(res, "M_g"));
+  std::printf("    C_bg %.4f deg (sigma %s deg)\n", Eigen::AngleAxisd(k.C_bg).angle() * kDeg,
+              sig3(s.C_bg, kDeg, 4, is_fixed(res, "C_bg")).c_str());
   std::printf("    B_g (deg/s per g):");
   const double g = r.options.gravity_mps2 * kDeg;
   for (int row = 0; row < 3; ++row) {
     std::printf(row ? "; " : " [");
     for (int col = 0; col < 3; ++col) std::printf(col ? " %.4f" : "%.4f", k.B_g(row, col) * g);
   }
-  std::printf("]\n");
+  const bool fixed_B = is_fixed(res, "B_g");
+  const double sB = s.B_g.allFinite() ? s.B_g.maxCoeff() * g : std::nan("");
+  std::printf("], sigma up to %s\n", sig(sB, 4, fixed_B).c_str());
+  const auto& q = res.quality;
+  std::printf("  IMU noise per sample: accelerometer %.4g m/s^2%s, gyroscope %.4g rad/s%s\n", q.accel_sigma,
+              q.accel_noise_from_residuals ? " (from the residuals)" : "", q.gyro_sigma,
+              q.gyro_noise_from_residuals ? " (from the residuals)" : "");
+  for (const auto& u : res.undetermined) std::printf("  not determined: %s\n", u.c_str());
   std::printf("  noise from %s; wrote %s, %s, %s, %s in %s\n", r.noise_source.c_str(),
               app::kCamchainImucamFile, app::kCamImuImuFile, app::kCamImuCalibrationFile,
               app::kCamImuJsonFile, out_dir.c_str());
@@ -225,8 +258,16 @@ void add_options(CLI::App* cmd, CamImuCliOptions* o) {
                   "rad/s per m/s^2)");
   cmd->add_option("--imu-stream", o->imu_stream, "IMU stream name (default: the first)");
   cmd->add_option("--model", o->model,
-                  "IMU model: extended (Krebs: S, M, C_bg, B_g; default) or basic (biases)")
-      ->check(CLI::IsMember({"basic", "extended"}));
+                  "IMU model: auto (basic or extended, whichever the data support; the summary says why), "
+                  "extended (Krebs: S, M, C_bg, B_g) or basic (biases)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "basic", "extended"}));
+  cmd->add_flag("--no-prior", o->no_prior,
+                "No prior on the extended model's intrinsics (default: the MPU-6000 datasheet tolerances, "
+                "docs/camimu-calibration.md)");
+  cmd->add_flag("--keep-noise", o->keep_noise,
+                "Weight the IMU with the given noise figures even when the residuals disagree with them by "
+                "more than a factor two (default: re-weight with the residuals and say so)");
   cmd->add_option("--fix", o->fix,
                   "Blocks held at their initial value: S_a,M_a,S_g,M_g,C_bg,B_g,T_cam_imu,timeshift")
       ->delimiter(',');
@@ -248,6 +289,11 @@ void add_solver_options(CLI::App* cmd, CamImuCliOptions* o) {
                   "reprojection residuals")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 10.0));
+  cmd->add_option("--imu-max-rate", d.imu_max_rate_hz,
+                  "IMU samples above this rate are averaged in groups into one residual each, Hz (0: every "
+                  "sample its own residual)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 100000.0));
   cmd->add_option("--max-iterations", d.max_iterations, "Solver iterations at most")
       ->capture_default_str()
       ->check(CLI::Range(1, 10000));

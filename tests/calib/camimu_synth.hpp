@@ -34,8 +34,9 @@ struct CamImuSynthOptions {
   double camera_rate_hz = 20.0;
   double corner_sigma_px = 0.3;
   double timeshift_s = 0.0042;
-  bool noise = true;       // IMU white noise and bias random walk
-  bool imu_errors = true;  // scale, misalignment, C_bg, g-sensitivity drawn from the seed
+  bool noise = true;        // IMU white noise and bias random walk
+  bool imu_errors = true;   // scale, misalignment, C_bg, g-sensitivity drawn from the seed
+  double excitation = 1.0;  // multiplies the motion's mean acceleration and rate (Krebs' targets)
   /// A second camera (cam1) beside the first: 12 cm along the IMU x axis, turned 10 deg about
   /// y, with its own time offset.
   bool second_camera = false;
@@ -47,6 +48,7 @@ inline CamImuSynth make_camimu_synth(const CamImuSynthOptions& o) {
   CamImuSynth out;
   sim::CheckerboardMotionOptions mo = CamImuSimOptions::default_motion();
   mo.duration_s = o.duration_s;
+  mo.excitation = o.excitation;
   auto motion = sim::CheckerboardMotion::create(mo, o.seed).value();
   out.truth = o.imu_errors ? sim::ImuModelParams::draw(o.seed) : sim::ImuModelParams{};
   if (!o.noise) {

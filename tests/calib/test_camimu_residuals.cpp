@@ -4,9 +4,11 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 
 #include "calib/camimu_residuals.hpp"
+#include "calib/marginal_covariance.hpp"
 #include "sim/camimu.hpp"
 
 namespace imucal::calib::camimu {
@@ -140,6 +142,73 @@ TEST(CamImuResiduals, BiasWalkResidualIsTheWeightedBiasDerivative) {
   Eigen::Vector3d r;
   ASSERT_TRUE(cost.Evaluate(ptr.data(), r.data(), nullptr));
   EXPECT_LT(r.norm(), 1e-12);
+}
+
+TEST(CamImuResiduals, PriorJacobiansMatchNumericOnes) {
+  std::mt19937 rng(7);
+  Eigen::VectorXd x0(9), sigma(9);
+  for (int i = 0; i < 9; ++i) {
+    x0(i) = 0.1 * i - 0.3;
+    sigma(i) = 0.01 * (i + 1);
+  }
+  check_jacobians(VectorPrior(x0, sigma), {random_vec(rng, 9, 0.0, 0.2)}, 1e-6);
+  const Eigen::Matrix3d R0 = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  check_jacobians(RotationPrior(R0, 0.02), {random_quat(rng)}, 1e-5);
+  // At the prior's centre the rotation prior is zero.
+  const Eigen::Quaterniond q0(R0);
+  const double centre[4] = {q0.x(), q0.y(), q0.z(), q0.w()};
+  const double* p[] = {centre};
+  Eigen::Vector3d r;
+  RotationPrior(R0, 0.02).Evaluate(p, r.data(), nullptr);
+  EXPECT_LT(r.norm(), 1e-12);
+}
+
+/// r = [x + y, z] / 0.1: x - y has no data.
+class SumAndZ final : public ceres::SizedCostFunction<2, 1, 1, 1> {
+ public:
+  bool Evaluate(double const* const* p, double* r, double** jac) const override {
+    r[0] = (p[0][0] + p[1][0] - 1.0) / 0.1;
+    r[1] = (p[2][0] - 2.0) / 0.1;
+    if (jac) {
+      for (int b = 0; b < 3; ++b) {
+        if (!jac[b]) continue;
+        jac[b][0] = b < 2 ? 10.0 : 0.0;
+        jac[b][1] = b == 2 ? 10.0 : 0.0;
+      }
+    }
+    return true;
+  }
+};
+
+TEST(MarginalCovariance, AnUndeterminedDirectionGivesNanForItsCoordinatesAndNamesThem) {
+  double x = 0.4, y = 0.6, z = 2.0, w = 5.0;
+  ceres::Problem problem;
+  problem.AddResidualBlock(new SumAndZ, nullptr, &x, &y, &z);
+  // w: a nuisance parameter observed on its own, marginalised out.
+  problem.AddResidualBlock(
+      new VectorPrior(Eigen::VectorXd::Constant(1, 4.0), Eigen::VectorXd::Constant(1, 0.2)), nullptr, &w);
+  MarginalCovariance cov;
+  ASSERT_TRUE(cov.compute(problem, {&x, &y, &z}, 1));
+  EXPECT_TRUE(std::isnan(cov.block(&x, &x)(0, 0)));
+  EXPECT_TRUE(std::isnan(cov.block(&y, &y)(0, 0)));
+  EXPECT_TRUE(std::isnan(cov.block(&x, &z)(0, 0)));
+  EXPECT_NEAR(cov.block(&z, &z)(0, 0), 0.01, 1e-12);  // sigma 0.1
+  ASSERT_EQ(cov.undetermined().size(), 1u);
+  const auto& parts = cov.undetermined()[0].parts;
+  ASSERT_EQ(parts.size(), 2u);
+  EXPECT_NEAR(std::abs(parts[0].second), std::sqrt(0.5), 1e-9);
+  EXPECT_TRUE((parts[0].first.block == &x && parts[1].first.block == &y) ||
+              (parts[0].first.block == &y && parts[1].first.block == &x));
+  EXPECT_TRUE(std::isnan(sigma_of(cov.block(&x, &x))(0)));
+  // Observed on its own as well, x and y are determined again.
+  problem.AddResidualBlock(
+      new VectorPrior(Eigen::VectorXd::Constant(1, 10.0), Eigen::VectorXd::Constant(1, 0.4)), nullptr, &x);
+  ASSERT_TRUE(cov.compute(problem, {&x, &y, &z}, 1));
+  EXPECT_TRUE(cov.undetermined().empty());
+  // H = [106.25 100; 100 100] (x + y with sigma 0.1, x with 0.4): H^-1 = [0.16 -0.16; -0.16 0.17].
+  EXPECT_NEAR(cov.block(&x, &x)(0, 0), 0.16, 1e-9);
+  EXPECT_NEAR(cov.block(&y, &y)(0, 0), 0.17, 1e-9);
+  EXPECT_NEAR(cov.block(&x, &y)(0, 0), -0.16, 1e-9);
 }
 
 }  // namespace

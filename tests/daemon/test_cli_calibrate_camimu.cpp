@@ -169,5 +169,80 @@ TEST(CliCalibrateCamimu, FixtureWithinFewSigmasOfTruth) {
   EXPECT_EQ(YAML::LoadFile(out + "/imu.yaml")["imu0"]["model"].as<std::string>(), "scale-misalignment");
 }
 
+/// Every sigma in a JSON tree is null (not determined) or positive: never 0.
+void expect_no_zero_sigma(const json& j, const std::string& where) {
+  if (j.is_object()) {
+    for (const auto& [key, value] : j.items()) {
+      const bool sigma = key.find("sigma") != std::string::npos && key != "corner_sigma_px" &&
+                         key.find("_sigma_given") == std::string::npos && key != "accel_sigma_mps2" &&
+                         key != "gyro_sigma_radps";
+      if (sigma) {
+        const auto walk = [&](const json& v, const auto& self) -> void {
+          if (v.is_array() || v.is_object()) {
+            for (const auto& x : v) self(x, self);
+          } else if (v.is_number()) {
+            EXPECT_GT(v.get<double>(), 0.0) << where << "." << key << " holds a zero sigma";
+          } else {
+            EXPECT_TRUE(v.is_null() || v.is_string()) << where << "." << key;
+          }
+        };
+        walk(value, walk);
+      } else {
+        expect_no_zero_sigma(value, where + "." + key);
+      }
+    }
+  } else if (j.is_array()) {
+    for (const auto& x : j) expect_no_zero_sigma(x, where);
+  }
+}
+
+TEST(CliCalibrateCamimu, AWeaklyExcitedRecordingGivesSigmasNeverZerosAndNamesWhatThePriorSet) {
+  const std::string dir = scratch_dir();
+  const std::string log = dir + "/weak.imulog";
+  auto sim = run_cli({"sim", "camimu", "--seed", "4", "--duration", "20", "--excitation", "0.2", "-o", log});
+  ASSERT_EQ(sim.exit_code, 0) << sim.err;
+  YAML::Node cam;
+  cam["cam0"] = YAML::LoadFile(dir + "/weak.truth.yaml")["camera"]["cam0"];
+  for (const char* key : {"T_cam_imu", "timeshift_cam_imu", "rate_hz", "exposure_ns", "timestamp"})
+    cam["cam0"].remove(key);
+  YAML::Emitter e;
+  e.SetDoublePrecision(17);
+  e << cam;
+  std::ofstream(dir + "/camera.yaml") << e.c_str() << "\n";
+  const std::string out = dir + "/out";
+  auto r = run_cli({"calibrate", "camimu", log, "--camera", dir + "/camera.yaml", "--model", "extended", "-o",
+                    out, "--threads", "2"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  // The prior held what the recording could not tell, and the command says which.
+  EXPECT_NE(r.err.find("set mostly by the prior"), std::string::npos) << r.err;
+  EXPECT_NE(r.out.find("prior: MPU-6000 datasheet tolerances"), std::string::npos) << r.out;
+  // No sigma on the screen is a zero: a number above 0, "not determined" or "fixed".
+  for (const char* zero :
+       {"+- [0.000000 ", " 0.000000]", "sigma [0.0000 ", " 0.0000] deg", " 0.00] mm", "+- 0.0000 ms"})
+    EXPECT_EQ(r.out.find(zero), std::string::npos) << zero << " in\n" << r.out;
+  const json j = json::parse(read_file(out + "/result.json"));
+  expect_no_zero_sigma(j, "result.json");
+  ASSERT_FALSE(j["prior"].is_null());
+  EXPECT_FALSE(j["prior"]["dominated"].empty());
+  for (int i = 0; i < 3; ++i) EXPECT_LT(std::abs(j["imu"]["krebs"]["S_a"][i].get<double>() - 1.0), 0.1);
+  // The camera's extrinsics are determined: finite sigmas.
+  for (const char* key : {"rotation_sigma_rad", "translation_sigma_m"})
+    for (const auto& v : j["cameras"][0][key]) EXPECT_TRUE(v.is_number()) << key;
+  EXPECT_TRUE(j["cameras"][0]["timeshift_sigma_s"].is_number());
+
+  // Stored on a rig's storage, the record keeps the sigmas, and none is a zero.
+  const std::string rig = dir + "/rig.yaml";
+  std::ofstream(rig) << "name: weak-rig\nimu:\n  bus: sim\nstorage:\n  backend: file\n  path: " << dir
+                     << "/calibration.bin\n  size_bytes: 16384\n  offset_bytes: 0\n";
+  auto w = run_cli({"store", "write", "--config", rig, out});
+  ASSERT_EQ(w.exit_code, 0) << w.err;
+  auto rd = run_cli({"store", "read", "--config", rig, "--json"});
+  ASSERT_EQ(rd.exit_code, 0) << rd.err;
+  const json stored = json::parse(rd.out);
+  expect_no_zero_sigma(stored["calibration"], "stored");
+  ASSERT_FALSE(stored["calibration"]["cameras"].empty());
+  EXPECT_TRUE(stored["calibration"]["cameras"][0].contains("rotation_sigma_rad"));
+}
+
 }  // namespace
 }  // namespace imucal
