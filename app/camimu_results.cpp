@@ -159,6 +159,11 @@ json quality_json(const CamImuQuality& q) {
           {"residuals", q.residuals},
           {"spline_knots", q.spline_knots},
           {"imu_samples_per_residual", q.imu_samples_per_residual},
+          {"knot_spacing_s", q.knot_spacing_s},
+          {"knot_spacing_chosen", q.knot_spacing_chosen},
+          {"gyro_fit_sigma_radps",
+           vec_json(Eigen::Map<const Eigen::VectorXd>(
+               q.gyro_fit_sigma_radps.data(), static_cast<Eigen::Index>(q.gyro_fit_sigma_radps.size())))},
           {"imu_residuals", q.imu_residuals},
           {"timings_s",
            {{"init", q.init_s},
@@ -360,6 +365,8 @@ CamImuQuality read_quality(const json& j) {
   q.residuals = j.at("residuals").get<int>();
   q.spline_knots = j.at("spline_knots").get<int>();
   q.imu_samples_per_residual = j.value("imu_samples_per_residual", 1);
+  q.knot_spacing_s = j.value("knot_spacing_s", 0.0);
+  q.knot_spacing_chosen = j.value("knot_spacing_chosen", false);
   q.imu_residuals = j.value("imu_residuals", 0);
   const json& t = j.at("timings_s");
   q.init_s = t.at("init").get<double>();

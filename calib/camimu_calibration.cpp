@@ -2,6 +2,8 @@
 
 #include <ceres/ceres.h>
 
+#include <Eigen/SparseCholesky>
+#include <Eigen/SparseCore>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -10,6 +12,7 @@
 #include "calib/camimu_init.hpp"
 #include "calib/camimu_residuals.hpp"
 #include "calib/marginal_covariance.hpp"
+#include "calib/spline.hpp"
 #include "core/threads.hpp"
 
 namespace imucal::calib {
@@ -17,9 +20,10 @@ namespace imucal::calib {
 Status CamImuOptions::validate() const {
   if (spline_order < 4 || spline_order > 6)
     return make_error(Errc::kInvalidArgument, "spline order must be 4, 5 or 6 (cubic to quintic)");
-  if (!(knot_spacing_s >= 0.005 && knot_spacing_s <= 0.5))
-    return make_error(Errc::kInvalidArgument, "knot spacing must be within 0.005-0.5 s");
-  if (!(bias_knot_spacing_s >= knot_spacing_s && bias_knot_spacing_s <= 60.0))
+  if (!(knot_spacing_s == 0.0 || (knot_spacing_s >= 0.005 && knot_spacing_s <= 0.5)))
+    return make_error(Errc::kInvalidArgument,
+                      "knot spacing must be 0 (chosen from the motion) or within 0.005-0.5 s");
+  if (!(bias_knot_spacing_s >= std::max(knot_spacing_s, 0.05) && bias_knot_spacing_s <= 60.0))
     return make_error(Errc::kInvalidArgument, "bias knot spacing must be between the knot spacing and 60 s");
   if (!(corner_sigma_px >= 0.0 && corner_sigma_px <= 50.0) || !(reprojection_loss_sigmas > 0.0))
     return make_error(Errc::kInvalidArgument,
@@ -1110,7 +1114,68 @@ std::vector<CamImuSample> average_imu(const std::vector<CamImuSample>& imu, doub
   return out;
 }
 
+/// The unbiased residual sigma of a least-squares B-spline of order M with knots every dt fitted
+/// to the gyro samples (three axes, one shared normal matrix); NaN with too few samples.
+template <int M>
+double gyro_fit_sigma(const std::vector<CamImuSample>& imu, double dt) {
+  const double t0 = 1e-9 * static_cast<double>(imu.front().t_ns);
+  const double T = 1e-9 * static_cast<double>(imu.back().t_ns - imu.front().t_ns);
+  const int knots = static_cast<int>(std::ceil(T / dt)) + M;
+  const SplineTiming<M> timing{0.0, dt, knots};
+  const auto n = static_cast<double>(imu.size());
+  if (n < 1.5 * knots) return std::nan("");
+  std::vector<Eigen::Triplet<double>> trip;
+  Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(knots, 3);
+  std::vector<std::pair<int, Eigen::Matrix<double, M, 1>>> rows;
+  rows.reserve(imu.size());
+  for (const auto& s : imu) {
+    const SplineSegment seg = timing.segment(1e-9 * static_cast<double>(s.t_ns) - t0);
+    const Eigen::Matrix<double, M, 1> w = RdSpline<M>::weights_at(seg.u, 0, dt);
+    rows.push_back({seg.first_knot, w});
+    for (int i = 0; i < M; ++i) {
+      rhs.row(seg.first_knot + i) += w(i) * s.gyro.transpose();
+      for (int j = 0; j < M; ++j) trip.emplace_back(seg.first_knot + i, seg.first_knot + j, w(i) * w(j));
+    }
+  }
+  Eigen::SparseMatrix<double> A(knots, knots);
+  A.setFromTriplets(trip.begin(), trip.end());
+  for (int i = 0; i < knots; ++i) A.coeffRef(i, i) += 1e-9;  // a knot past the last sample
+  const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(A);
+  if (ldlt.info() != Eigen::Success) return std::nan("");
+  const Eigen::MatrixXd x = ldlt.solve(rhs);
+  double ssr = 0.0;
+  for (std::size_t k = 0; k < imu.size(); ++k) {
+    Eigen::Vector3d v = Eigen::Vector3d::Zero();
+    for (int i = 0; i < M; ++i) v += rows[k].second(i) * x.row(rows[k].first + i).transpose();
+    ssr += (v - imu[k].gyro).squaredNorm();
+  }
+  return std::sqrt(ssr / (3.0 * (n - knots)));
+}
+
 }  // namespace
+
+double choose_knot_spacing(const std::vector<CamImuSample>& imu, int spline_order, double gyro_sigma,
+                           std::vector<double>* fit_sigma) {
+  std::vector<double> sig;
+  for (double dt : kKnotSpacingCandidates) {
+    if (imu.size() < 10) {
+      sig.push_back(std::nan(""));
+      continue;
+    }
+    // The angular velocity of an order-N rotation spline is of order N - 1.
+    sig.push_back(spline_order <= 4   ? gyro_fit_sigma<3>(imu, dt)
+                  : spline_order == 5 ? gyro_fit_sigma<4>(imu, dt)
+                                      : gyro_fit_sigma<5>(imu, dt));
+  }
+  if (fit_sigma) *fit_sigma = sig;
+  double finest = std::nan("");
+  for (double v : sig)
+    if (std::isfinite(v)) finest = v;  // the last finite one: the finest the data allow
+  const double limit = std::max(3.0 * finest, 1.5 * gyro_sigma);
+  for (std::size_t i = 0; i < sig.size(); ++i)
+    if (std::isfinite(sig[i]) && sig[i] <= limit) return kKnotSpacingCandidates[i];
+  return kKnotSpacingCandidates[0];
+}
 
 Result<CamImuCalibrationResult> calibrate_camimu(const std::vector<CamImuSample>& imu,
                                                  const std::vector<CamImuCameraInput>& cameras,
@@ -1121,17 +1186,29 @@ Result<CamImuCalibrationResult> calibrate_camimu(const std::vector<CamImuSample>
   if (cameras.empty()) return make_error(Errc::kInvalidArgument, "no camera to calibrate against the IMU");
   int k = 1;
   const std::vector<CamImuSample> averaged = average_imu(imu, options.imu_max_rate_hz, &k);
+  CamImuOptions opt = options;
+  std::vector<double> fit_sigma;
+  if (opt.knot_spacing_s == 0.0 && averaged.size() >= 2) {
+    const double rate =
+        1e9 * static_cast<double>(averaged.size() - 1) /
+        static_cast<double>(std::max<TimeNs>(averaged.back().t_ns - averaged.front().t_ns, 1));
+    opt.knot_spacing_s = choose_knot_spacing(averaged, opt.spline_order,
+                                             opt.noise.gyro_noise_density * std::sqrt(rate), &fit_sigma);
+  }
   Result<CamImuCalibrationResult> out = [&]() -> Result<CamImuCalibrationResult> {
     switch (options.spline_order) {
       case 4:
-        return Estimator<4>(averaged, cameras, target, options, progress).run();
+        return Estimator<4>(averaged, cameras, target, opt, progress).run();
       case 5:
-        return Estimator<5>(averaged, cameras, target, options, progress).run();
+        return Estimator<5>(averaged, cameras, target, opt, progress).run();
       default:
-        return Estimator<6>(averaged, cameras, target, options, progress).run();
+        return Estimator<6>(averaged, cameras, target, opt, progress).run();
     }
   }();
   if (out.ok()) {
+    out->quality.knot_spacing_s = opt.knot_spacing_s;
+    out->quality.knot_spacing_chosen = options.knot_spacing_s == 0.0;
+    out->quality.gyro_fit_sigma_radps = fit_sigma;
     out->quality.imu_samples_per_residual = k;
     out->quality.imu_residuals = static_cast<int>(averaged.size());
   }

@@ -138,6 +138,11 @@ struct CamImuQuality {
   /// IMU samples averaged into one residual (1: every sample its own), and the residuals: above
   /// CamImuOptions::imu_max_rate_hz the per-sample figures above are those of the averages.
   int imu_samples_per_residual = 1;
+  /// The pose spline's knot spacing (s), whether it was chosen from the motion, and the gyro-fit
+  /// residual sigma of each candidate spacing it was chosen by (rad/s; empty when given).
+  double knot_spacing_s = 0.0;
+  bool knot_spacing_chosen = false;
+  std::vector<double> gyro_fit_sigma_radps;
   int imu_residuals = 0;
   int parameters = 0;  // estimated, in the tangent space
   int residuals = 0;

@@ -187,6 +187,8 @@ void print_summary(const app::CamImuReport& r, const std::string& out_dir) {
   std::printf("  IMU noise per sample: accelerometer %.4g m/s^2%s, gyroscope %.4g rad/s%s\n", q.accel_sigma,
               q.accel_noise_from_residuals ? " (from the residuals)" : "", q.gyro_sigma,
               q.gyro_noise_from_residuals ? " (from the residuals)" : "");
+  std::printf("  pose spline: knots every %.3f s (%s), %d IMU samples per residual\n", q.knot_spacing_s,
+              q.knot_spacing_chosen ? "chosen from the motion" : "as given", q.imu_samples_per_residual);
   for (const auto& u : res.undetermined) std::printf("  not determined: %s\n", u.c_str());
   std::printf("  noise from %s; wrote %s, %s, %s, %s in %s\n", r.noise_source.c_str(),
               app::kCamchainImucamFile, app::kCamImuImuFile, app::kCamImuCalibrationFile,
@@ -275,9 +277,11 @@ void add_options(CLI::App* cmd, CamImuCliOptions* o) {
 
 void add_solver_options(CLI::App* cmd, CamImuCliOptions* o) {
   auto& d = o->defaults;
-  cmd->add_option("--knot-spacing", d.knot_spacing_s, "Pose spline knot spacing, s")
+  cmd->add_option(
+         "--knot-spacing", d.knot_spacing_s,
+         "Pose spline knot spacing, s (0: chosen from the motion, 0.01-0.05 s; the summary says which)")
       ->capture_default_str()
-      ->check(CLI::Range(0.005, 1.0));
+      ->check(CLI::Range(0.0, 1.0));
   cmd->add_option("--spline-order", d.spline_order, "Pose spline order (degree + 1)")
       ->capture_default_str()
       ->check(CLI::Range(3, 8));

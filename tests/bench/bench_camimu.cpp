@@ -237,9 +237,11 @@ void print_header(const Args& a, const char* what) {
   std::printf(
       "%s: seeds %d..%d, %.0f s, IMU %.0f Hz, camera %.0f Hz, corner noise %.3f px per coordinate, "
       "time offset %.1f ms, %d threads\n"
-      "estimator: spline order %d, knots every %.3f s, corner noise %s\n",
+      "estimator: spline order %d, knots %s, corner noise %s\n",
       what, a.first_seed, a.first_seed + a.seeds - 1, a.duration_s, a.imu_rate_hz, a.camera_rate_hz,
-      a.corner_sigma_px, 1e3 * a.timeshift_s, a.threads, a.spline_order, a.knot_spacing_s,
+      a.corner_sigma_px, 1e3 * a.timeshift_s, a.threads, a.spline_order,
+      a.knot_spacing_s > 0 ? ("every " + std::to_string(a.knot_spacing_s) + " s").c_str()
+                           : "chosen from the motion",
       a.assumed_corner_sigma_px > 0 ? (std::to_string(a.assumed_corner_sigma_px) + " px given").c_str()
                                     : "estimated");
 }
@@ -486,7 +488,8 @@ int main(int argc, char** argv) {
   app.add_option("--assumed-corner-sigma", a.assumed_corner_sigma_px,
                  "corner noise the estimator is given, px; 0: it estimates it (default)")
       ->check(CLI::Range(0.0, 10.0));
-  app.add_option("--knot-spacing", a.knot_spacing_s, "pose spline knot spacing, s")
+  app.add_option("--knot-spacing", a.knot_spacing_s,
+                 "pose spline knot spacing, s (0: chosen from the motion)")
       ->check(CLI::Range(0.005, 0.5));
   app.add_option("--spline-order", a.spline_order, "pose spline order")->check(CLI::Range(4, 6));
   app.add_flag("--compare-models", a.compare, "run the basic and the extended model on the same seeds");
