@@ -319,6 +319,21 @@ TEST(Imucald, TheMotionStepRecordsTheCameraAndTheRecordHoldsTheCameraImuCalibrat
   const auto stored = test::run_cli({"store", "read", "--config", config, "--json"});
   ASSERT_EQ(stored.exit_code, 0) << stored.err;
   EXPECT_TRUE(has(stored.out, R"("T_cam_imu")")) << stored.out.substr(0, 2000);
+  // Every camera-IMU parameter the session estimated is stored with a sigma, none a zero.
+  const auto record = nlohmann::json::parse(stored.out, nullptr, false);
+  ASSERT_FALSE(record.is_discarded());
+  ASSERT_FALSE(record["calibration"]["cameras"].empty());
+  for (const auto& c : record["calibration"]["cameras"]) {
+    for (const char* key : {"rotation_sigma_rad", "translation_sigma_m"}) {
+      ASSERT_EQ(c[key].size(), 3u) << key;
+      for (const auto& v : c[key]) {
+        ASSERT_TRUE(v.is_number()) << key << " " << c.dump();
+        EXPECT_GT(v.get<double>(), 0.0) << key;
+      }
+    }
+    ASSERT_TRUE(c["timeshift_sigma_s"].is_number()) << c.dump();
+    EXPECT_GT(c["timeshift_sigma_s"].get<double>(), 0.0);
+  }
   const std::string truth = test::read_file(session + "/sim-truth.txt");
   const auto cam_at = truth.find("cam0 t_cam_imu");
   ASSERT_NE(cam_at, std::string::npos) << truth;
