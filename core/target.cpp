@@ -45,11 +45,26 @@ std::array<int, 4> TargetDescription::tag_point_ids(int tag) const {
   return {base, base + 1, base + cols + 1, base + cols};
 }
 
+namespace {
+// Larger targets fit no camera image: 256 inner corners a side need over 2,500 px at the
+// detector's 10 px a square, and Kalibr's AprilGrid numbers its tags from the tag36h11 family,
+// which has 587 codes.
+constexpr int kMaxCheckerboardCorners = 256;
+constexpr long long kMaxAprilgridTags = 587;
+}  // namespace
+
 Status TargetDescription::validate() const {
   if (type == Type::kCheckerboard) {
     if (cols < 2 || rows < 2) {
       return make_error(Errc::kInvalidArgument,
                         "checkerboard needs at least 2x2 inner corners (targetCols, targetRows)");
+    }
+    if (cols > kMaxCheckerboardCorners || rows > kMaxCheckerboardCorners) {
+      return make_error(Errc::kInvalidArgument,
+                        "a checkerboard of " + std::to_string(cols) + " x " + std::to_string(rows) +
+                            " inner corners fits no camera image (the detector needs about 10 px a square): "
+                            "targetCols and targetRows count inner corners, at most " +
+                            std::to_string(kMaxCheckerboardCorners) + " each");
     }
     if (!(col_spacing_m > 0.0) || !(row_spacing_m > 0.0) || col_spacing_m > 10.0 || row_spacing_m > 10.0) {
       return make_error(
@@ -59,6 +74,12 @@ Status TargetDescription::validate() const {
   } else {
     if (tag_cols < 1 || tag_rows < 1)
       return make_error(Errc::kInvalidArgument, "aprilgrid needs tagCols, tagRows >= 1");
+    if (static_cast<long long>(tag_cols) * tag_rows > kMaxAprilgridTags) {
+      return make_error(Errc::kInvalidArgument,
+                        "an aprilgrid of " + std::to_string(tag_cols) + " x " + std::to_string(tag_rows) +
+                            " tags needs more ids than the tag36h11 family has (" +
+                            std::to_string(kMaxAprilgridTags) + "): check tagCols and tagRows");
+    }
     if (!(tag_size_m > 0.0) || tag_size_m > 10.0) {
       return make_error(Errc::kInvalidArgument, "aprilgrid tagSize must be in metres, > 0 and < 10");
     }

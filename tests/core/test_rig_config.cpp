@@ -397,3 +397,32 @@ TEST(RigConfig, ProgramGyroOffsetsIsABooleanOfTheStorage) {
 
 }  // namespace
 }  // namespace imucal
+
+namespace imucal {
+namespace {
+
+TEST(Target, SizesNoImageCanHoldAreRefusedWithTheReason) {
+  auto huge = parse_target_yaml(
+      "target_type: checkerboard\ntargetCols: 100000\ntargetRows: 100000\nrowSpacingMeters: 0.01\n"
+      "colSpacingMeters: 0.01\n",
+      "huge.yaml");
+  ASSERT_FALSE(huge.ok());
+  EXPECT_NE(huge.error().message.find("100000 x 100000"), std::string::npos) << huge.error().message;
+  EXPECT_NE(huge.error().message.find("at most 256"), std::string::npos) << huge.error().message;
+  auto grid = parse_target_yaml(
+      "target_type: aprilgrid\ntagCols: 30\ntagRows: 20\ntagSize: 0.02\ntagSpacing: 0.3\n", "grid.yaml");
+  ASSERT_FALSE(grid.ok());
+  EXPECT_NE(grid.error().message.find("tag36h11"), std::string::npos) << grid.error().message;
+  // The largest that can exist still pass.
+  EXPECT_TRUE(parse_target_yaml("target_type: checkerboard\ntargetCols: 256\ntargetRows: 256\n"
+                                "rowSpacingMeters: 0.01\ncolSpacingMeters: 0.01\n",
+                                "big.yaml")
+                  .ok());
+  EXPECT_TRUE(
+      parse_target_yaml("target_type: aprilgrid\ntagCols: 29\ntagRows: 20\ntagSize: 0.02\ntagSpacing: 0.3\n",
+                        "grid.yaml")
+          .ok());
+}
+
+}  // namespace
+}  // namespace imucal
