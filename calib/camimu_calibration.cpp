@@ -1000,8 +1000,15 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   ceres::Solver::Summary summary;
   // First with the IMU intrinsics at their initial values (the trajectory, biases, gravity and
   // extrinsics settle), then everything the model estimates.
-  const bool automatic = model_ == CamImuModelKind::kAuto;
-  if (automatic) model_ = CamImuModelKind::kExtended;  // the first stage stops early, as for extended
+  const CamImuFixed& f = opt_.fixed;
+  const bool all_fixed = f.S_a && f.M_a && f.S_g && f.M_g && f.C_bg && f.B_g;
+  const bool automatic = model_ == CamImuModelKind::kAuto && !all_fixed;
+  if (model_ == CamImuModelKind::kAuto) model_ = CamImuModelKind::kExtended;  // the first stage stops early
+  if (all_fixed && opt_.model == CamImuModelKind::kAuto)
+    model_choice_ =
+        "extended with every intrinsic held at its given value (--imu-intrinsics, --gsens or --fix): nothing "
+        "to "
+        "choose";
   if (Status s = solve(false, "basic", &summary); !s.ok()) return s.error();
   quality_.initial_cost = summary.initial_cost;
   std::vector<ImuSignalFit> fits;
@@ -1011,7 +1018,7 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
     reestimate_corner_sigma();
     reestimate_imu_noise();
     if (Status s = choose_model(&summary); !s.ok()) return s.error();
-  } else {
+  } else if (model_choice_.empty()) {
     model_choice_ = std::string(camimu_model_name(model_)) + ", as requested (--model)";
   }
   const bool extended = model_ == CamImuModelKind::kExtended;

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -216,6 +217,19 @@ TEST(CamImuCalibration, AutoModelPicksBasicForAnIdealImuAndExtendedForAMiscalibr
   EXPECT_NE(r->model_choice.find("basic, chosen by the evidence"), std::string::npos) << r->model_choice;
   expect_no_zero_sigma(*r);
   EXPECT_TRUE(std::isnan(r->imu_sigma.S_a(0)));  // held at 1: fixed, not "known to 0"
+  // With every intrinsic held (a static calibration given) there is nothing to choose: the
+  // extended model with them fixed, solved once.
+  CamImuOptions held = o;
+  held.imu_init = KrebsImuModel{};
+  held.fixed.S_a = held.fixed.M_a = held.fixed.S_g = held.fixed.M_g = held.fixed.C_bg = held.fixed.B_g = true;
+  held.covariance = false;
+  std::vector<std::string> stages;
+  r = calibrate_camimu(ideal.imu, ideal.cameras, ideal.target, held,
+                       [&](const CamImuIteration& it) { stages.push_back(it.stage); });
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_EQ(r->model, CamImuModelKind::kExtended);
+  EXPECT_NE(r->model_choice.find("nothing to choose"), std::string::npos) << r->model_choice;
+  EXPECT_LE(std::count(stages.begin(), stages.end(), "basic"), 13);  // the first stage alone
   so.imu_errors = true;
   const auto real = test::make_camimu_synth(so);
   r = calibrate_camimu(real.imu, real.cameras, real.target, o);
