@@ -2,17 +2,15 @@
 
 #include <ceres/ceres.h>
 
-#include <Eigen/SparseCholesky>
-#include <Eigen/SparseCore>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <memory>
 
+#include "calib/camimu_imu_prep.hpp"
 #include "calib/camimu_init.hpp"
 #include "calib/camimu_residuals.hpp"
 #include "calib/marginal_covariance.hpp"
-#include "calib/spline.hpp"
 #include "core/threads.hpp"
 
 namespace imucal::calib {
@@ -58,6 +56,10 @@ Arr4 to_quat(const Eigen::Matrix3d& R) {
   return {q.x(), q.y(), q.z(), q.w()};
 }
 Arr3 to_arr(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+/// A 3x3 matrix's entries row by row (the layout of the B_g block).
+Eigen::Matrix<double, 9, 1> row_major(const Eigen::Matrix3d& M) {
+  return Eigen::Map<const Eigen::Matrix<double, 9, 1>>(Eigen::Matrix3d(M.transpose()).data());
+}
 Eigen::Map<Eigen::Vector3d> vec(Arr3& a) { return Eigen::Map<Eigen::Vector3d>(a.data()); }
 Eigen::Map<const Eigen::Vector3d> vec(const Arr3& a) { return Eigen::Map<const Eigen::Vector3d>(a.data()); }
 
@@ -121,8 +123,17 @@ class Estimator {
   /// The IMU's per-sample sigmas from the residuals when they disagree with the given figures
   /// by more than a factor two (else the given ones); true when a sigma moved by more than 10 %.
   bool reestimate_imu_noise();
+  /// The prior's standard deviation of every intrinsic (CamImuIntrinsicsPrior about prior0_),
+  /// whether the block is free or not.
+  KrebsImuSigma prior_sigmas() const;
+  /// The prior terms of the free intrinsic blocks (extended model, prior enabled).
+  void add_priors(ceres::Problem* problem);
   /// The cost of the prior terms of the last build (0 without).
   double prior_cost() const;
+  /// The Wald statistic of the free intrinsics against their start with the data's information
+  /// alone (see choose_model); NaN when the covariance leaves a direction undetermined. `*k`
+  /// receives their count.
+  double wald_statistic(int* k);
   /// Warnings for intrinsics far from their prior or outside physical bounds, and the names of
   /// those the prior mostly set.
   void check_against_prior(CamImuCalibrationResult* out);
@@ -237,10 +248,7 @@ Status Estimator<N>::initialise() {
   model_ = opt_.model;
   if (opt_.imu_init) prior0_ = *opt_.imu_init;
   {
-    std::vector<double> dts;
-    for (std::size_t i = 1; i < imu_.size(); ++i) dts.push_back(t_s(imu_[i].t_ns) - t_s(imu_[i - 1].t_ns));
-    std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
-    const double rate = 1.0 / dts[dts.size() / 2];
+    const double rate = 1e9 / static_cast<double>(std::max<TimeNs>(imu_median_interval_ns(imu_), 1));
     quality_.accel_sigma_given = opt_.noise.accel_noise_density * std::sqrt(rate);
     quality_.gyro_sigma_given = opt_.noise.gyro_noise_density * std::sqrt(rate);
     quality_.accel_sigma = quality_.accel_sigma_given;
@@ -420,27 +428,39 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended) {
         std::pair{st_.C.data(), basic || f.C_bg}, std::pair{st_.B.data(), basic || f.B_g}}) {
     if (fixed) problem->SetParameterBlockConstant(block);
   }
-  if (basic || !opt_.prior.enabled) return;
+  if (!basic && opt_.prior.enabled) add_priors(problem);
+}
+
+template <int N>
+KrebsImuSigma Estimator<N>::prior_sigmas() const {
   const CamImuIntrinsicsPrior& pr = opt_.prior;
-  const auto add_vector = [&](double* block, const Eigen::VectorXd& x0, const Eigen::VectorXd& sigma) {
-    if (problem->IsParameterBlockConstant(block)) return;
-    auto* cost = new VectorPrior(x0, sigma);
+  KrebsImuSigma s;
+  s.S_a = pr.scale * prior0_.S_a.cwiseAbs();
+  s.S_g = pr.scale * prior0_.S_g.cwiseAbs();
+  s.M_a.setConstant(pr.misalignment);
+  s.M_g.setConstant(pr.misalignment);
+  s.C_bg.setConstant(pr.gyro_axes);
+  s.B_g.setConstant(pr.gsens);
+  return s;
+}
+
+template <int N>
+void Estimator<N>::add_priors(ceres::Problem* problem) {
+  const KrebsImuSigma ps = prior_sigmas();
+  const auto add = [&](double* block, ceres::CostFunction* cost) {
+    if (problem->IsParameterBlockConstant(block)) {
+      delete cost;
+      return;
+    }
     problem->AddResidualBlock(cost, nullptr, block);
     priors_.push_back({cost, block});
   };
-  add_vector(st_.Sa.data(), prior0_.S_a, pr.scale * prior0_.S_a.cwiseAbs());
-  add_vector(st_.Sg.data(), prior0_.S_g, pr.scale * prior0_.S_g.cwiseAbs());
-  add_vector(st_.Ma.data(), prior0_.M_a, Eigen::Vector3d::Constant(pr.misalignment));
-  add_vector(st_.Mg.data(), prior0_.M_g, Eigen::Vector3d::Constant(pr.misalignment));
-  Eigen::Matrix<double, 9, 1> b0;
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) b0(3 * r + c) = prior0_.B_g(r, c);
-  add_vector(st_.B.data(), b0, Eigen::Matrix<double, 9, 1>::Constant(pr.gsens));
-  if (!problem->IsParameterBlockConstant(st_.C.data())) {
-    auto* cost = new RotationPrior(prior0_.C_bg, pr.gyro_axes);
-    problem->AddResidualBlock(cost, nullptr, st_.C.data());
-    priors_.push_back({cost, st_.C.data()});
-  }
+  add(st_.Sa.data(), new VectorPrior(prior0_.S_a, ps.S_a));
+  add(st_.Sg.data(), new VectorPrior(prior0_.S_g, ps.S_g));
+  add(st_.Ma.data(), new VectorPrior(prior0_.M_a, ps.M_a));
+  add(st_.Mg.data(), new VectorPrior(prior0_.M_g, ps.M_g));
+  add(st_.B.data(), new VectorPrior(row_major(prior0_.B_g), row_major(ps.B_g)));
+  add(st_.C.data(), new RotationPrior(prior0_.C_bg, opt_.prior.gyro_axes));
 }
 
 template <int N>
@@ -524,6 +544,52 @@ bool Estimator<N>::reestimate_imu_noise() {
 }
 
 template <int N>
+double Estimator<N>::wald_statistic(int* k_out) {
+  const KrebsImuSigma ps = prior_sigmas();
+  std::vector<const double*> blocks;
+  std::vector<double> d, prior_info;
+  const auto add = [&](const double* b, const Eigen::VectorXd& offset, const Eigen::VectorXd& prior_sigma) {
+    if (problem_->IsParameterBlockConstant(b)) return;
+    blocks.push_back(b);
+    for (Eigen::Index i = 0; i < offset.size(); ++i) {
+      d.push_back(offset(i));
+      prior_info.push_back(opt_.prior.enabled ? 1.0 / (prior_sigma(i) * prior_sigma(i)) : 0.0);
+    }
+  };
+  add(st_.Sa.data(), vec(st_.Sa) - prior0_.S_a, ps.S_a);
+  add(st_.Ma.data(), vec(st_.Ma) - prior0_.M_a, ps.M_a);
+  add(st_.Sg.data(), vec(st_.Sg) - prior0_.S_g, ps.S_g);
+  add(st_.Mg.data(), vec(st_.Mg) - prior0_.M_g, ps.M_g);
+  add(st_.C.data(), so3::log(prior0_.C_bg.transpose() * quat_matrix(st_.C.data())), ps.C_bg);
+  add(st_.B.data(), Eigen::Map<const Eigen::Matrix<double, 9, 1>>(st_.B.data()) - row_major(prior0_.B_g),
+      row_major(ps.B_g));
+  const int k = static_cast<int>(d.size());
+  *k_out = k;
+  MarginalCovariance cov;
+  if (k == 0 || !cov.compute(*problem_, blocks, threads_or_cores(opt_.threads)) ||
+      !cov.undetermined().empty())
+    return std::nan("");
+  Eigen::MatrixXd C(k, k);
+  int row = 0;
+  for (const double* a : blocks) {
+    int col = 0;
+    const int na = problem_->ParameterBlockTangentSize(a);
+    for (const double* b : blocks) {
+      const int nb = problem_->ParameterBlockTangentSize(b);
+      C.block(row, col, na, nb) = cov.block(a, b);
+      col += nb;
+    }
+    row += na;
+  }
+  const Eigen::Map<const Eigen::VectorXd> dv(d.data(), k);
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(C);
+  if (!C.allFinite() || ldlt.info() != Eigen::Success) return std::nan("");
+  double W = dv.dot(ldlt.solve(dv));
+  for (int i = 0; i < k; ++i) W -= prior_info[static_cast<std::size_t>(i)] * dv(i) * dv(i);
+  return W;
+}
+
+template <int N>
 Status Estimator<N>::choose_model(ceres::Solver::Summary* summary) {
   // The extended model is solved from the first stage. Its intrinsics are then tested against the
   // basic model's values (their start) by the Wald statistic with the data's information alone
@@ -543,56 +609,10 @@ Status Estimator<N>::choose_model(ceres::Solver::Summary* summary) {
     if (!changed) break;
     if (Status s = solve(true, "extended", summary); !s.ok()) return s;
   }
-  const CamImuIntrinsicsPrior& pr = opt_.prior;
-  std::vector<const double*> blocks;
-  std::vector<double> d, prior_info;
-  const auto add = [&](const double* b, const Eigen::VectorXd& offset, const Eigen::VectorXd& prior_sigma) {
-    if (problem_->IsParameterBlockConstant(b)) return;
-    blocks.push_back(b);
-    for (Eigen::Index i = 0; i < offset.size(); ++i) {
-      d.push_back(offset(i));
-      prior_info.push_back(pr.enabled ? 1.0 / (prior_sigma(i) * prior_sigma(i)) : 0.0);
-    }
-  };
-  add(st_.Sa.data(), vec(st_.Sa) - prior0_.S_a, pr.scale * prior0_.S_a.cwiseAbs());
-  add(st_.Ma.data(), vec(st_.Ma) - prior0_.M_a, Eigen::Vector3d::Constant(pr.misalignment));
-  add(st_.Sg.data(), vec(st_.Sg) - prior0_.S_g, pr.scale * prior0_.S_g.cwiseAbs());
-  add(st_.Mg.data(), vec(st_.Mg) - prior0_.M_g, Eigen::Vector3d::Constant(pr.misalignment));
-  add(st_.C.data(), so3::log(prior0_.C_bg.transpose() * quat_matrix(st_.C.data())),
-      Eigen::Vector3d::Constant(pr.gyro_axes));
-  Eigen::Matrix<double, 9, 1> dB;
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c)
-      dB(3 * r + c) = st_.B[static_cast<std::size_t>(3 * r + c)] - prior0_.B_g(r, c);
-  add(st_.B.data(), dB, Eigen::Matrix<double, 9, 1>::Constant(pr.gsens));
-  const int k = static_cast<int>(d.size());
+  int k = 0;
+  double W = wald_statistic(&k);
   const double n = static_cast<double>(std::max<std::size_t>(imu_residuals_.size(), 2));
   const double threshold = k * std::log(n);
-  double W = std::nan("");
-  if (k > 0) {
-    MarginalCovariance cov;
-    if (cov.compute(*problem_, blocks, threads_or_cores(opt_.threads)) && cov.undetermined().empty()) {
-      Eigen::MatrixXd C(k, k);
-      int row = 0;
-      for (const double* a : blocks) {
-        int col = 0;
-        const int na = problem_->ParameterBlockTangentSize(a);
-        for (const double* b : blocks) {
-          const int nb = problem_->ParameterBlockTangentSize(b);
-          C.block(row, col, na, nb) = cov.block(a, b);
-          col += nb;
-        }
-        row += na;
-      }
-      const Eigen::Map<const Eigen::VectorXd> dv(d.data(), k);
-      const Eigen::LDLT<Eigen::MatrixXd> ldlt(C);
-      if (C.allFinite() && ldlt.info() == Eigen::Success) {
-        const Eigen::VectorXd info_d = ldlt.solve(dv);
-        W = dv.dot(info_d);
-        for (int i = 0; i < k; ++i) W -= prior_info[static_cast<std::size_t>(i)] * dv(i) * dv(i);
-      }
-    }
-  }
   char text[400];
   if (!std::isfinite(W)) {
     // The likelihood ratio: the basic model solved to convergence from the first stage too.
@@ -808,25 +828,22 @@ void Estimator<N>::check_against_prior(CamImuCalibrationResult* out) {
   if (priors_.empty()) return;
   const CamImuIntrinsicsPrior& pr = opt_.prior;
   out->prior_source = pr.source;
-  KrebsImuSigma& ps = out->prior_sigma;
+  KrebsImuSigma& ps = out->prior_sigma;  // NaN where a block has no prior (held fixed)
+  const KrebsImuSigma all = prior_sigmas();
   const KrebsImuModel& m = out->imu;
   const KrebsImuSigma& s = out->imu_sigma;
   const auto is_free = [&](const double* b) { return !problem_->IsParameterBlockConstant(b); };
-  if (is_free(st_.Sa.data())) ps.S_a = pr.scale * prior0_.S_a.cwiseAbs();
-  if (is_free(st_.Sg.data())) ps.S_g = pr.scale * prior0_.S_g.cwiseAbs();
-  if (is_free(st_.Ma.data())) ps.M_a.setConstant(pr.misalignment);
-  if (is_free(st_.Mg.data())) ps.M_g.setConstant(pr.misalignment);
-  if (is_free(st_.C.data())) ps.C_bg.setConstant(pr.gyro_axes);
-  if (is_free(st_.B.data())) ps.B_g.setConstant(pr.gsens);
+  if (is_free(st_.Sa.data())) ps.S_a = all.S_a;
+  if (is_free(st_.Sg.data())) ps.S_g = all.S_g;
+  if (is_free(st_.Ma.data())) ps.M_a = all.M_a;
+  if (is_free(st_.Mg.data())) ps.M_g = all.M_g;
+  if (is_free(st_.C.data())) ps.C_bg = all.C_bg;
+  if (is_free(st_.B.data())) ps.B_g = all.B_g;
   const Eigen::Vector3d dC = so3::log(prior0_.C_bg.transpose() * m.C_bg);
   struct Entry {
     const char* name;
     Eigen::VectorXd value, centre, prior_sigma, sigma;
     double bound;  // physical bound on |value - centre|
-  };
-  const auto flat = [](const Eigen::Matrix3d& M) {
-    return Eigen::VectorXd(
-        Eigen::Map<const Eigen::Matrix<double, 9, 1>>(Eigen::Matrix3d(M.transpose()).data()));
   };
   const Entry entries[] = {
       {"S_a", m.S_a, prior0_.S_a, ps.S_a, s.S_a, 0.1},
@@ -834,17 +851,17 @@ void Estimator<N>::check_against_prior(CamImuCalibrationResult* out) {
       {"M_a", m.M_a, prior0_.M_a, ps.M_a, s.M_a, 0.1},
       {"M_g", m.M_g, prior0_.M_g, ps.M_g, s.M_g, 0.1},
       {"C_bg", dC, Eigen::Vector3d::Zero(), ps.C_bg, s.C_bg, 0.1},
-      {"B_g", flat(m.B_g), flat(prior0_.B_g), flat(ps.B_g), flat(s.B_g), 2e-3},
+      {"B_g", row_major(m.B_g), row_major(prior0_.B_g), row_major(ps.B_g), row_major(s.B_g), 2e-3},
   };
   const char* xyz[3] = {"x", "y", "z"};
   for (const Entry& e : entries) {
     for (Eigen::Index i = 0; i < e.value.size(); ++i) {
       if (!std::isfinite(e.prior_sigma(i))) continue;
-      const bool m = e.name[0] == 'M';
-      const char* m_names[3] = {"yz", "zy", "zx"};
-      const std::string label =
-          std::string(e.name) + " " +
-          (e.value.size() == 9 ? std::string(xyz[i / 3]) + xyz[i % 3] : std::string(m ? m_names[i] : xyz[i]));
+      const bool misalignment = e.name[0] == 'M';
+      const char* m_names[3] = {"yz", "zy", "zx"};  // Krebs' names of M(1,0), M(2,0), M(2,1)
+      const std::string label = std::string(e.name) + " " +
+                                (e.value.size() == 9 ? std::string(xyz[i / 3]) + xyz[i % 3]
+                                                     : std::string(misalignment ? m_names[i] : xyz[i]));
       const double off = e.value(i) - e.centre(i);
       const double n = std::abs(off) / e.prior_sigma(i);
       if (n > 3.0 || std::abs(off) > e.bound) {
@@ -1006,9 +1023,8 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   if (model_ == CamImuModelKind::kAuto) model_ = CamImuModelKind::kExtended;  // the first stage stops early
   if (all_fixed && opt_.model == CamImuModelKind::kAuto)
     model_choice_ =
-        "extended with every intrinsic held at its given value (--imu-intrinsics, --gsens or --fix): nothing "
-        "to "
-        "choose";
+        "extended with every intrinsic held at its given value (--imu-intrinsics, --gsens or "
+        "--fix): nothing to choose";
   if (Status s = solve(false, "basic", &summary); !s.ok()) return s.error();
   quality_.initial_cost = summary.initial_cost;
   std::vector<ImuSignalFit> fits;
@@ -1083,106 +1099,7 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   return out;
 }
 
-/// Groups of k consecutive samples averaged (k = floor(rate / max_rate)); a group that a gap
-/// interrupts is left out. k = 1 (a copy) at or below max_rate, or with max_rate 0.
-std::vector<CamImuSample> average_imu(const std::vector<CamImuSample>& imu, double max_rate_hz, int* k_out) {
-  *k_out = 1;
-  if (imu.size() < 3 || max_rate_hz <= 0.0) return imu;
-  std::vector<TimeNs> dts;
-  for (std::size_t i = 1; i < imu.size(); ++i) dts.push_back(imu[i].t_ns - imu[i - 1].t_ns);
-  std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
-  const TimeNs dt = std::max<TimeNs>(dts[dts.size() / 2], 1);
-  const int k = static_cast<int>(std::floor(1e9 / static_cast<double>(dt) / max_rate_hz + 1e-9));
-  if (k < 2) return imu;
-  *k_out = k;
-  const TimeNs max_span = (k - 1) * dt + dt / 2;
-  std::vector<CamImuSample> out;
-  out.reserve(imu.size() / static_cast<std::size_t>(k) + 1);
-  std::size_t i = 0;
-  while (i + static_cast<std::size_t>(k) <= imu.size()) {
-    const std::size_t last = i + static_cast<std::size_t>(k) - 1;
-    if (imu[last].t_ns - imu[i].t_ns > max_span) {
-      ++i;  // a gap inside: slide past it
-      continue;
-    }
-    CamImuSample g;
-    TimeNs offsets = 0;
-    for (std::size_t j = i; j <= last; ++j) {
-      offsets += imu[j].t_ns - imu[i].t_ns;
-      g.accel += imu[j].accel;
-      g.gyro += imu[j].gyro;
-    }
-    g.t_ns = imu[i].t_ns + offsets / k;
-    g.accel /= k;
-    g.gyro /= k;
-    out.push_back(g);
-    i = last + 1;
-  }
-  return out;
-}
-
-/// The unbiased residual sigma of a least-squares B-spline of order M with knots every dt fitted
-/// to the gyro samples (three axes, one shared normal matrix); NaN with too few samples.
-template <int M>
-double gyro_fit_sigma(const std::vector<CamImuSample>& imu, double dt) {
-  const double t0 = 1e-9 * static_cast<double>(imu.front().t_ns);
-  const double T = 1e-9 * static_cast<double>(imu.back().t_ns - imu.front().t_ns);
-  const int knots = static_cast<int>(std::ceil(T / dt)) + M;
-  const SplineTiming<M> timing{0.0, dt, knots};
-  const auto n = static_cast<double>(imu.size());
-  if (n < 1.5 * knots) return std::nan("");
-  std::vector<Eigen::Triplet<double>> trip;
-  Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(knots, 3);
-  std::vector<std::pair<int, Eigen::Matrix<double, M, 1>>> rows;
-  rows.reserve(imu.size());
-  for (const auto& s : imu) {
-    const SplineSegment seg = timing.segment(1e-9 * static_cast<double>(s.t_ns) - t0);
-    const Eigen::Matrix<double, M, 1> w = RdSpline<M>::weights_at(seg.u, 0, dt);
-    rows.push_back({seg.first_knot, w});
-    for (int i = 0; i < M; ++i) {
-      rhs.row(seg.first_knot + i) += w(i) * s.gyro.transpose();
-      for (int j = 0; j < M; ++j) trip.emplace_back(seg.first_knot + i, seg.first_knot + j, w(i) * w(j));
-    }
-  }
-  Eigen::SparseMatrix<double> A(knots, knots);
-  A.setFromTriplets(trip.begin(), trip.end());
-  for (int i = 0; i < knots; ++i) A.coeffRef(i, i) += 1e-9;  // a knot past the last sample
-  const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(A);
-  if (ldlt.info() != Eigen::Success) return std::nan("");
-  const Eigen::MatrixXd x = ldlt.solve(rhs);
-  double ssr = 0.0;
-  for (std::size_t k = 0; k < imu.size(); ++k) {
-    Eigen::Vector3d v = Eigen::Vector3d::Zero();
-    for (int i = 0; i < M; ++i) v += rows[k].second(i) * x.row(rows[k].first + i).transpose();
-    ssr += (v - imu[k].gyro).squaredNorm();
-  }
-  return std::sqrt(ssr / (3.0 * (n - knots)));
-}
-
 }  // namespace
-
-double choose_knot_spacing(const std::vector<CamImuSample>& imu, int spline_order, double gyro_sigma,
-                           std::vector<double>* fit_sigma) {
-  std::vector<double> sig;
-  for (double dt : kKnotSpacingCandidates) {
-    if (imu.size() < 10) {
-      sig.push_back(std::nan(""));
-      continue;
-    }
-    // The angular velocity of an order-N rotation spline is of order N - 1.
-    sig.push_back(spline_order <= 4   ? gyro_fit_sigma<3>(imu, dt)
-                  : spline_order == 5 ? gyro_fit_sigma<4>(imu, dt)
-                                      : gyro_fit_sigma<5>(imu, dt));
-  }
-  if (fit_sigma) *fit_sigma = sig;
-  double finest = std::nan("");
-  for (double v : sig)
-    if (std::isfinite(v)) finest = v;  // the last finite one: the finest the data allow
-  const double limit = std::max(3.0 * finest, 1.5 * gyro_sigma);
-  for (std::size_t i = 0; i < sig.size(); ++i)
-    if (std::isfinite(sig[i]) && sig[i] <= limit) return kKnotSpacingCandidates[i];
-  return kKnotSpacingCandidates[0];
-}
 
 Result<CamImuCalibrationResult> calibrate_camimu(const std::vector<CamImuSample>& imu,
                                                  const std::vector<CamImuCameraInput>& cameras,
@@ -1196,9 +1113,7 @@ Result<CamImuCalibrationResult> calibrate_camimu(const std::vector<CamImuSample>
   CamImuOptions opt = options;
   std::vector<double> fit_sigma;
   if (opt.knot_spacing_s == 0.0 && averaged.size() >= 2) {
-    const double rate =
-        1e9 * static_cast<double>(averaged.size() - 1) /
-        static_cast<double>(std::max<TimeNs>(averaged.back().t_ns - averaged.front().t_ns, 1));
+    const double rate = 1e9 / static_cast<double>(std::max<TimeNs>(imu_median_interval_ns(averaged), 1));
     opt.knot_spacing_s = choose_knot_spacing(averaged, opt.spline_order,
                                              opt.noise.gyro_noise_density * std::sqrt(rate), &fit_sigma);
   }

@@ -85,7 +85,7 @@ struct CamImuOptions {
   bool imu_noise_from_residuals = true;
   /// Pose spline: order (degree + 1) and knot spacing; bias splines: their own spacing.
   int spline_order = 4;
-  /// 0: chosen from the motion (choose_knot_spacing below), else the spacing in s.
+  /// 0: chosen from the motion (calib/camimu_imu_prep.hpp choose_knot_spacing), else the spacing in s.
   double knot_spacing_s = 0.0;
   double bias_knot_spacing_s = 1.0;
   CamImuNoise noise;
@@ -123,18 +123,6 @@ struct CamImuIteration {
   double gradient_max_norm = 0.0;
 };
 using CamImuProgressFn = std::function<void(const CamImuIteration&)>;
-
-/// The pose spline's knot spacing the motion needs: the largest of kKnotSpacingCandidates at
-/// which a B-spline of one order lower (the angular velocity's function space) fitted to the
-/// gyroscope samples alone leaves a residual sigma (unbiased: sum of squares over samples less
-/// knots) within 3 times that of the finest candidate, or within 1.5 times the gyro's white
-/// noise per sample. A smooth motion gets 0.05 s; a hand-held, jerky one a denser spline, whose
-/// IMU residuals are then near the noise rather than at the spline's lag. The factor 3 trades
-/// the last of the lag for time (docs/camimu-calibration.md, "Trajectory"). `fit_sigma`, when given,
-/// receives the residual sigma of each candidate (docs/camimu-calibration.md, "Trajectory").
-inline constexpr double kKnotSpacingCandidates[] = {0.05, 0.04, 0.03, 0.025, 0.02, 0.015, 0.01};
-double choose_knot_spacing(const std::vector<CamImuSample>& imu, int spline_order, double gyro_sigma,
-                           std::vector<double>* fit_sigma = nullptr);
 
 /// Runs the initialisation and the full problem. Errors: kInvalidArgument (options),
 /// kInsufficientData (too few frames with the target, IMU not covering the frames, too little

@@ -11,6 +11,7 @@
 #include <random>
 
 #include "calib/camimu_calibration.hpp"
+#include "calib/camimu_imu_prep.hpp"
 #include "calib/so3.hpp"
 #include "tests/calib/camimu_synth.hpp"
 
