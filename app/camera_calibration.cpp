@@ -8,10 +8,13 @@
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
+#include <cstdio>
 #include <deque>
+#include <map>
 #include <mutex>
 #include <optional>
 #include <thread>
+#include <utility>
 
 #include "app/camera_results.hpp"
 #include "core/threads.hpp"
@@ -78,15 +81,78 @@ Result<log::Image> gray_of(const CameraFrame& frame) {
   return make_error(Errc::kUnsupported, "frames encoded as '" + frame.encoding + "' cannot be decoded here");
 }
 
+/// Stops a search whose target file does not match the board in the frames. Of the first
+/// kEarlyFrames frames, while none shows the target, every other one without it is shown to
+/// TargetDetector::describe_other_target (at most kProbes); when kAgreeing of them, and more than
+/// half of those asked, describe the same other target, the search stops and says so. A board the
+/// description matches, or one found by the search, ends the check.
+class WrongTargetCheck {
+ public:
+  static constexpr std::size_t kEarlyFrames = 40;
+  static constexpr int kProbes = 8;
+  static constexpr int kAgreeing = 4;
+
+  /// Called after a frame's search: whether to describe it.
+  bool wants_description(std::size_t index, bool found) {
+    const std::lock_guard lock(mutex_);
+    if (found && index < kEarlyFrames) done_ = true;
+    if (done_ || found || index >= kEarlyFrames || index % 2 != 0 || asked_ >= kProbes) return false;
+    ++asked_;
+    return true;
+  }
+
+  /// What a described frame shows (empty: nothing, or the target itself); true when the
+  /// search should stop.
+  bool add_description(const std::string& what) {
+    const std::lock_guard lock(mutex_);
+    if (done_) return false;
+    ++answered_;
+    if (what.empty()) return false;
+    const int agreeing = ++seen_[what];
+    if (agreeing >= kAgreeing && 2 * agreeing > answered_) {
+      verdict_ = what;
+      done_ = true;
+      return true;
+    }
+    return false;
+  }
+
+  std::optional<std::pair<std::string, int>> verdict() const {
+    const std::lock_guard lock(mutex_);
+    if (verdict_.empty()) return std::nullopt;
+    return std::make_pair(verdict_, answered_);
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  bool done_ = false;
+  int asked_ = 0;
+  int answered_ = 0;
+  std::map<std::string, int> seen_;
+  std::string verdict_;
+};
+
+std::string target_in_words(const TargetDescription& t) {
+  if (t.type == TargetDescription::Type::kCheckerboard) {
+    return "a checkerboard of " + std::to_string(std::max(t.cols, t.rows)) + " x " +
+           std::to_string(std::min(t.cols, t.rows)) + " inner corners";
+  }
+  return "an AprilGrid of " + std::to_string(t.tag_cols) + " x " + std::to_string(t.tag_rows) +
+         " tags (ids 0 to " + std::to_string(t.tag_cols * t.tag_rows - 1) + ")";
+}
+
 struct Detected {
   std::vector<calib::TargetObservation> observations;  // one per frame, in time order
+  std::int64_t unreadable = 0;  // frames the reader skipped (data failing its checksum)
+  TimeNs first_unreadable_t_ns = 0;
   int failed = 0;
   std::string first_failure;
 };
 
 /// Searches every frame of the stream on `threads` workers; frames are decoded in the workers.
+/// Without `allow_damaged` the search stops at the first frame the reader skips.
 Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_id,
-                               const calib::TargetDetector& detector, int threads,
+                               const calib::TargetDetector& detector, int threads, bool allow_damaged,
                                const ProgressFn& progress) {
   auto times = reader.frame_times(stream_id);
   if (!times.ok()) return times.error();
@@ -96,13 +162,20 @@ Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_i
   std::mutex failure_mutex;
   std::atomic<std::size_t> done{0};
   FrameQueue queue(static_cast<std::size_t>(2 * threads));
+  WrongTargetCheck wrong_target;
+  std::atomic<bool> stop{false};
   auto work = [&] {
     while (auto item = queue.pop()) {
       auto& [index, frame] = *item;
       Result<calib::TargetObservation> found = make_error(Errc::kInternal, "");
       auto gray = gray_of(frame);
       if (gray.ok()) {
-        found = detector.detect({gray->data.data(), gray->width, gray->height, 0});
+        const calib::GrayView view{gray->data.data(), gray->width, gray->height, 0};
+        found = detector.detect(view);
+        if (found.ok() && wrong_target.wants_description(index, !found->empty()) &&
+            wrong_target.add_description(detector.describe_other_target(view))) {
+          stop = true;
+        }
       } else {
         found = gray.error();
       }
@@ -120,10 +193,17 @@ Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_i
   std::vector<std::thread> workers;
   for (int i = 0; i < threads; ++i) workers.emplace_back(work);
   std::size_t next = 0;
+  bool ended_early = false;
   auto status = reader.for_each_frame(stream_id, log::kTimeMin, log::kTimeMax, [&](const CameraFrame& frame) {
     // Frames whose data failed its check are skipped by the reader: their slots stay empty.
-    while (next < total && (*times)[next] < frame.t_ns) ++next;
-    if (next >= total) return false;
+    while (next < total && (*times)[next] < frame.t_ns) {
+      if (out.unreadable++ == 0) out.first_unreadable_t_ns = (*times)[next];
+      ++next;
+    }
+    if (next >= total || stop || (out.unreadable > 0 && !allow_damaged)) {
+      ended_early = true;
+      return false;
+    }
     queue.push(next++, frame);
     report_progress(progress, static_cast<double>(done.load()), static_cast<double>(total));
     return true;
@@ -131,16 +211,27 @@ Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_i
   queue.close();
   for (auto& w : workers) w.join();
   if (!status.ok()) return status.error();
-  report_progress(progress, 1.0, 1.0);
+  if (auto verdict = wrong_target.verdict()) {
+    return make_error(Errc::kInvalidArgument, "the target was not found in the first frames, which show " +
+                                                  verdict->first + " (" + std::to_string(verdict->second) +
+                                                  " frames looked at); the target file says " +
+                                                  target_in_words(detector.target()) +
+                                                  ": give the target file of the board that was recorded")
+        .with_remedy("target");
+  }
+  // Frames skipped after the last one read (the loop above sees only those before a frame).
+  if (!ended_early && next < total) {
+    if (out.unreadable == 0) out.first_unreadable_t_ns = (*times)[next];
+    out.unreadable += static_cast<std::int64_t>(total - next);
+  }
+  if (!ended_early) report_progress(progress, 1.0, 1.0);
   return out;
 }
 
-/// Stored detections for the key, when the log holds a set for this many frames.
-std::optional<std::vector<calib::TargetObservation>> stored_detections(const StreamDetectionRequest& q,
-                                                                       int stream_id, const std::string& key,
-                                                                       std::int64_t frames,
-                                                                       std::vector<std::string>* warnings) {
-  auto set = log::read_target_detections(q.log_path, stream_id, key);
+/// The observations of a stored set, when it is one for this many frames.
+std::optional<std::vector<calib::TargetObservation>> decode_set(
+    const Result<std::optional<log::DetectionSet>>& set, std::int64_t frames,
+    std::vector<std::string>* warnings) {
   if (!set.ok()) {
     warnings->push_back("stored detections not used: " + set.error().message);
     return std::nullopt;
@@ -158,10 +249,21 @@ std::optional<std::vector<calib::TargetObservation>> stored_detections(const Str
   return obs;
 }
 
+log::DetectionSet make_set(const StreamDetectionRequest& q, const std::string& key, std::int64_t frames,
+                           const std::vector<calib::TargetObservation>& obs) {
+  log::DetectionSet set;
+  set.target_key = key;
+  set.description = target_to_yaml(q.target);
+  set.frames = frames;
+  for (const auto& o : obs) {
+    if (!o.empty()) set.detections.push_back({o.t_ns, encode_detection(o)});
+  }
+  return set;
+}
+
 /// Stores the detections in the log when it is safe to write there; a warning says why not.
-bool store_detections(const StreamDetectionRequest& q, const log::SessionLogReader& reader, int stream_id,
-                      const std::string& key, std::int64_t frames,
-                      const std::vector<calib::TargetObservation>& obs, std::vector<std::string>* warnings) {
+bool store_in_log(const StreamDetectionRequest& q, const log::SessionLogReader& reader, int stream_id,
+                  const log::DetectionSet& set, std::vector<std::string>* warnings) {
   if (reader.health().damaged) {
     warnings->push_back("detections not stored in the log: it is damaged, and writing could lose more of it");
     return false;
@@ -172,19 +274,19 @@ bool store_detections(const StreamDetectionRequest& q, const log::SessionLogRead
         "its writer stopped without closing it)");
     return false;
   }
-  log::DetectionSet set;
-  set.target_key = key;
-  set.description = target_to_yaml(q.target);
-  set.frames = frames;
-  for (const auto& o : obs) {
-    if (!o.empty()) set.detections.push_back({o.t_ns, encode_detection(o)});
-  }
   if (auto s = log::write_target_detections(q.log_path, stream_id, set); !s.ok()) {
     warnings->push_back("detections not stored in the log (the next run searches the frames again): " +
                         s.error().message);
     return false;
   }
   return true;
+}
+
+/// The cache file of a stream's content: the folder, then the fingerprint in hex.
+std::string cache_path(const std::string& dir, std::uint64_t fingerprint) {
+  char name[40];
+  std::snprintf(name, sizeof name, "%016llx.sqlite", static_cast<unsigned long long>(fingerprint));
+  return dir + "/" + name;
 }
 
 /// Opens the log, picks the stream and applies the damage policy.
@@ -225,25 +327,64 @@ Result<StreamDetections> detect_target_in_stream(const log::SessionLogReader& re
                       "camera stream '" + stream.name + "' of " + q.log_path + " holds no frames");
   }
   out.key = detection_key(q.target, q.detection);
+  // The cache is keyed by the stream's content; a damaged log's readable part is not cached.
+  std::string cache;
+  if (!q.cache_dir.empty() && !reader.health().damaged) {
+    auto fingerprint = reader.frame_fingerprint(stream_id);
+    if (fingerprint.ok()) {
+      cache = cache_path(q.cache_dir, *fingerprint);
+    } else {
+      out.warnings.push_back("detection cache not used: " + fingerprint.error().message);
+    }
+  }
   std::optional<std::vector<calib::TargetObservation>> obs;
-  if (q.reuse_detections) obs = stored_detections(q, stream_id, out.key, out.frames, &out.warnings);
-  out.reused = obs.has_value();
+  if (q.reuse_detections) {
+    obs = decode_set(log::read_target_detections(q.log_path, stream_id, out.key), out.frames, &out.warnings);
+    if (obs) out.reused_from = "the log";
+    if (!obs && !cache.empty()) {
+      obs = decode_set(log::read_detection_cache(cache, out.key), out.frames, &out.warnings);
+      if (obs) out.reused_from = cache;
+    }
+  }
   if (!obs) {
     auto detector = calib::TargetDetector::create(q.target, q.detection);
     if (!detector.ok()) return detector.error();
     out.threads = threads_or_cores(q.threads);
     const auto start = std::chrono::steady_clock::now();
-    auto found = detect_frames(reader, stream_id, **detector, out.threads, q.progress);
+    auto found = detect_frames(reader, stream_id, **detector, out.threads, q.allow_damaged, q.progress);
     if (!found.ok()) return found.error();
     out.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     out.frames_failed = found->failed;
+    if (found->unreadable > 0) {
+      if (!q.allow_damaged) {
+        return make_error(Errc::kCorrupt, "camera stream '" + stream.name + "' of " + q.log_path +
+                                              " has damaged frames (the data of the frame at t_ns " +
+                                              std::to_string(found->first_unreadable_t_ns) +
+                                              " fails its checksum); only the readable frames can be used")
+            .with_remedy("allow_damaged");
+      }
+      out.warnings.push_back(std::to_string(found->unreadable) + " of the " + std::to_string(out.frames) +
+                             " frames of camera stream '" + stream.name + "' in " + q.log_path +
+                             " are damaged (their data fails its checksum): calibrated from the readable "
+                             "frames only");
+      out.frames_failed += static_cast<int>(found->unreadable);
+    }
     if (found->failed > 0) {
       out.warnings.push_back(std::to_string(found->failed) + " frames of camera stream '" + stream.name +
                              "' could not be searched (first: " + found->first_failure + ")");
     }
     obs = std::move(found->observations);
-    if (q.store_detections)
-      out.stored = store_detections(q, reader, stream_id, out.key, out.frames, *obs, &out.warnings);
+    const log::DetectionSet set = make_set(q, out.key, out.frames, *obs);
+    if (q.store_detections) {
+      if (store_in_log(q, reader, stream_id, set, &out.warnings)) out.stored_in = "the log";
+    } else if (!cache.empty() && found->unreadable == 0) {
+      if (auto s = log::write_detection_cache(cache, set); s.ok()) {
+        out.stored_in = cache;
+      } else {
+        out.warnings.push_back("detections not cached (the next run searches the frames again): " +
+                               s.error().message);
+      }
+    }
   }
   out.frames_with_target =
       static_cast<int>(std::count_if(obs->begin(), obs->end(), [](const auto& o) { return !o.empty(); }));
@@ -267,6 +408,8 @@ Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequ
   dq.threads = q.threads;
   dq.reuse_detections = q.reuse_detections;
   dq.store_detections = q.store_detections;
+  dq.cache_dir = q.cache_dir;
+  dq.allow_damaged = q.allow_damaged;
   dq.progress = q.detection_progress;
   auto found = detect_target_in_stream(**reader, report.stream_id, dq);
   if (!found.ok()) return found.error();
@@ -274,8 +417,8 @@ Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequ
   report.frames_with_target = found->frames_with_target;
   report.frames_failed = found->frames_failed;
   report.detection_key = found->key;
-  report.detections_reused = found->reused;
-  report.detections_stored = found->stored;
+  report.detections_reused_from = found->reused_from;
+  report.detections_stored_in = found->stored_in;
   report.detection_wall_s = found->wall_s;
   report.detection_threads = found->threads;
   report.warnings.insert(report.warnings.end(), found->warnings.begin(), found->warnings.end());

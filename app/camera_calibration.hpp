@@ -25,13 +25,21 @@ namespace imucal::app {
 
 /// What the target search over one camera stream of a log depends on.
 struct StreamDetectionRequest {
-  std::string log_path;  // the log `reader` reads: stored detections are read from and written to it
+  std::string log_path;  // the log `reader` reads
   TargetDescription target;
   calib::DetectionOptions detection;
   int threads = 0;  // detection workers; 0 = all cores
-  /// Use detections stored in the log for the same target and detector, and store new ones.
+  /// Use detections stored for the same frames, target and detector (in the log, else in the
+  /// cache), instead of searching the frames again.
   bool reuse_detections = true;
-  bool store_detections = true;
+  /// Store new detections in the log itself (the service, in the logs it writes). The log is
+  /// otherwise never written.
+  bool store_detections = false;
+  /// Else store them in a cache file in this folder, named after the stream's content
+  /// (log::SessionLogReader::frame_fingerprint); empty = no cache.
+  std::string cache_dir;
+  /// Use the readable frames of a stream with damaged frames (else that is an error).
+  bool allow_damaged = false;
   ProgressFn progress;
 };
 
@@ -40,11 +48,11 @@ struct StreamDetectionRequest {
 struct StreamDetections {
   std::int64_t frames = 0;  // frames read (or searched by the run whose detections were reused)
   int frames_with_target = 0;
-  int frames_failed = 0;  // frames that could not be decoded or searched
-  std::string key;        // detection_key of the target and options
-  bool reused = false;
-  bool stored = false;
-  double wall_s = 0.0;  // 0 when reused
+  int frames_failed = 0;    // frames that could not be decoded or searched
+  std::string key;          // detection_key of the target and options
+  std::string reused_from;  // "the log" or the cache file, when the detections were reused
+  std::string stored_in;    // "the log" or the cache file, when new detections were stored
+  double wall_s = 0.0;      // 0 when reused
   int threads = 0;
   std::vector<calib::TargetObservation> observations;
   std::vector<std::string> warnings;
@@ -67,9 +75,11 @@ struct CameraCalibrationRequest {
   int threads = 0;  // detection workers; 0 = all cores
   /// Calibrate from the readable part of a damaged log (else a damaged log is refused).
   bool allow_damaged = false;
-  /// Use detections stored in the log for the same target and detector, and store new ones.
+  /// As StreamDetectionRequest: reuse stored detections; store new ones in the log (else in
+  /// the cache folder, when given).
   bool reuse_detections = true;
-  bool store_detections = true;
+  bool store_detections = false;
+  std::string cache_dir;
   ProgressFn detection_progress;
   ProgressFn solve_progress;
 };
@@ -85,9 +95,9 @@ struct CameraCalibrationReport {
   int frames_with_target = 0;
   int frames_failed = 0;  // frames that could not be decoded or searched
   std::string detection_key;
-  bool detections_reused = false;
-  bool detections_stored = false;
-  double detection_wall_s = 0.0;  // 0 when reused
+  std::string detections_reused_from;  // StreamDetections::reused_from
+  std::string detections_stored_in;    // StreamDetections::stored_in
+  double detection_wall_s = 0.0;       // 0 when reused
   int detection_threads = 0;
   calib::CameraIntrinsicsResult intrinsics;
   std::vector<std::string> warnings;  // of the detection, the log and the solve

@@ -51,6 +51,8 @@ Result<calib::CamImuCameraInput> detect_camera(const CamImuRequest& q, const log
   dq.threads = q.threads;
   dq.reuse_detections = q.reuse_detections;
   dq.store_detections = q.store_detections;
+  dq.cache_dir = q.cache_dir;
+  dq.allow_damaged = q.allow_damaged;
   if (q.detection_progress) dq.progress = [&q, index](double f) { q.detection_progress(index, f); };
   auto found = detect_target_in_stream(reader, stream_id, dq);
   if (!found.ok()) return found.error().context(cam.name + " (" + cam.source + ")");
@@ -65,8 +67,8 @@ Result<calib::CamImuCameraInput> detect_camera(const CamImuRequest& q, const log
   cr.frames = found->frames;
   cr.frames_with_target = found->frames_with_target;
   cr.detection_key = found->key;
-  cr.detections_reused = found->reused;
-  cr.detections_stored = found->stored;
+  cr.detections_reused_from = found->reused_from;
+  cr.detections_stored_in = found->stored_in;
   cr.detection_wall_s = found->wall_s;
   report->cameras.push_back(cr);
 

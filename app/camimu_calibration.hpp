@@ -47,7 +47,8 @@ struct CamImuRequest {
   int threads = 0;  // detection workers; 0 = all cores
   bool allow_damaged = false;
   bool reuse_detections = true;
-  bool store_detections = true;
+  bool store_detections = false;  // in the log; else in cache_dir when given (StreamDetectionRequest)
+  std::string cache_dir;
   /// Detection progress per camera (index into camera_paths' cameras), then the solver's.
   std::function<void(int camera, double fraction)> detection_progress;
   calib::CamImuProgressFn solve_progress;
@@ -63,8 +64,8 @@ struct CamImuCameraReport {
   std::int64_t frames = 0;
   int frames_with_target = 0;
   std::string detection_key;
-  bool detections_reused = false;
-  bool detections_stored = false;
+  std::string detections_reused_from;  // StreamDetections::reused_from
+  std::string detections_stored_in;    // StreamDetections::stored_in
   double detection_wall_s = 0.0;
 };
 

@@ -203,8 +203,10 @@ json camera_json(const CamImuCameraResult& c, const CamImuCameraReport* in) {
     j["detections"] = {{"key", in->detection_key},
                        {"frames", in->frames},
                        {"frames_with_target", in->frames_with_target},
-                       {"reused", in->detections_reused},
-                       {"stored", in->detections_stored},
+                       {"reused", !in->detections_reused_from.empty()},
+                       {"reused_from", in->detections_reused_from},
+                       {"stored", !in->detections_stored_in.empty()},
+                       {"stored_in", in->detections_stored_in},
                        {"wall_s", in->detection_wall_s}};
   }
   return j;

@@ -78,6 +78,7 @@ class CheckerboardDetector final : public TargetDetector {
     return guarded([&] { return detect_impl(image); });
   }
   const TargetDescription& target() const override { return target_; }
+  std::string describe_other_target(const GrayView& image) const override;
 
  private:
   Result<TargetObservation> detect_impl(const GrayView& image) const;
@@ -234,6 +235,41 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
   return obs;
 }
 
+std::string CheckerboardDetector::describe_other_target(const GrayView& view) const {
+  if (!check_image(view).ok()) return {};
+  try {
+    // The sector-based detector with CALIB_CB_LARGER finds a board of any size from the smallest
+    // pattern up and says in `meta` how many corners it has (rows x columns).
+    std::vector<cv::Point2f> px;
+    cv::Mat meta;
+    if (!cv::findChessboardCornersSB(as_mat(view), cv::Size(3, 3), px,
+                                     cv::CALIB_CB_LARGER | cv::CALIB_CB_NORMALIZE_IMAGE, meta)) {
+      return {};
+    }
+    const int cols = meta.cols;
+    const int rows = meta.rows;
+    if (cols <= 0 || rows <= 0 || px.size() != static_cast<std::size_t>(cols * rows)) return {};
+    // A board cut by the image border shows fewer corners than it has: only a board clear of
+    // the border by one and a half squares counts.
+    double spacing = 0.0;
+    for (int r = 0; r < rows; ++r) {
+      for (int c = 0; c + 1 < cols; ++c) spacing += cv::norm(px[r * cols + c + 1] - px[r * cols + c]);
+    }
+    spacing /= std::max(1, rows * (cols - 1));
+    for (const cv::Point2f& p : px) {
+      const double margin = std::min({static_cast<double>(p.x), static_cast<double>(p.y),
+                                      view.width - 1.0 - p.x, view.height - 1.0 - p.y});
+      if (margin < 1.5 * spacing) return {};
+    }
+    if ((cols == target_.cols && rows == target_.rows) || (cols == target_.rows && rows == target_.cols))
+      return {};
+    return "a checkerboard of " + std::to_string(std::max(cols, rows)) + " x " +
+           std::to_string(std::min(cols, rows)) + " inner corners";
+  } catch (const cv::Exception&) {
+    return {};
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 // AprilGrid
 
@@ -309,9 +345,12 @@ class AprilGridDetector final : public TargetDetector {
     return guarded([&] { return detect_impl(image); });
   }
   const TargetDescription& target() const override { return target_; }
+  std::string describe_other_target(const GrayView& image) const override;
 
  private:
   Result<TargetObservation> detect_impl(const GrayView& image) const;
+  // The tags libapriltag decodes, ids not checked against the grid.
+  std::vector<TagCorners> decode_tags(const GrayView& view) const;
   std::vector<TagCorners> find_tags(const GrayView& view) const;
   void refine(const cv::Mat& image, std::vector<TagCorners>* tags) const;
   int subpix_half_window(const TagCorners& tag) const;
@@ -345,18 +384,16 @@ void AprilGridDetector::give_back(std::unique_ptr<AprilTagContext> ctx) const {
   pool_.push_back(std::move(ctx));
 }
 
-std::vector<TagCorners> AprilGridDetector::find_tags(const GrayView& view) const {
+std::vector<TagCorners> AprilGridDetector::decode_tags(const GrayView& view) const {
   cv::Mat separated;
   cv::LUT(as_mat(view), curve_, separated);
   std::unique_ptr<AprilTagContext> ctx = borrow();
   image_u8_t im{separated.cols, separated.rows, static_cast<std::int32_t>(separated.step[0]), separated.data};
   zarray_t* found = apriltag_detector_detect(ctx->detector.get(), &im);
-  const int tag_count = target_.tag_rows * target_.tag_cols;
   std::vector<TagCorners> tags;
   for (int i = 0; i < zarray_size(found); ++i) {
     apriltag_detection_t* det = nullptr;
     zarray_get(found, i, &det);
-    if (det->id < 0 || det->id >= tag_count) continue;  // not on this grid
     TagCorners tag;
     tag.id = det->id;
     // libapriltag's corners are p[0] = tag (-1, 1), p[1] = (1, 1), p[2] = (1, -1),
@@ -371,6 +408,30 @@ std::vector<TagCorners> AprilGridDetector::find_tags(const GrayView& view) const
   }
   apriltag_detections_destroy(found);
   give_back(std::move(ctx));
+  return tags;
+}
+
+std::string AprilGridDetector::describe_other_target(const GrayView& view) const {
+  if (!check_image(view).ok()) return {};
+  const std::vector<TagCorners> tags = decode_tags(view);
+  const int tag_count = target_.tag_rows * target_.tag_cols;
+  int outside = 0;
+  int largest = -1;
+  for (const TagCorners& tag : tags) {
+    outside += tag.id >= tag_count ? 1 : 0;
+    largest = std::max(largest, tag.id);
+  }
+  // Most of the tags in view are not on this grid: a larger grid (or another one).
+  if (tags.size() < 4 || 2 * outside <= static_cast<int>(tags.size())) return {};
+  return "an AprilGrid with tag ids up to " + std::to_string(largest) + " (at least " +
+         std::to_string(largest + 1) + " tags)";
+}
+
+std::vector<TagCorners> AprilGridDetector::find_tags(const GrayView& view) const {
+  const int tag_count = target_.tag_rows * target_.tag_cols;
+  std::vector<TagCorners> tags = decode_tags(view);
+  // Tags not on this grid are left out.
+  std::erase_if(tags, [tag_count](const TagCorners& tag) { return tag.id < 0 || tag.id >= tag_count; });
   // A tag id seen twice means a stray tag in view: neither copy can be trusted.
   std::sort(tags.begin(), tags.end(), [](const TagCorners& a, const TagCorners& b) { return a.id < b.id; });
   std::vector<TagCorners> unique;

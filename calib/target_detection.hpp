@@ -23,6 +23,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "core/result.hpp"
@@ -86,6 +87,12 @@ class TargetDetector {
   /// Finds the target; an image without it gives an empty observation, not an error.
   [[nodiscard]] virtual Result<TargetObservation> detect(const GrayView& image) const = 0;
   virtual const TargetDescription& target() const = 0;
+  /// For an image in which detect() found nothing: what target of the same kind it seems to show
+  /// instead, in words ("a checkerboard of 7 x 6 inner corners"), when that differs from the
+  /// description; empty when it shows none or this one. Costs about one sector-based search (tens
+  /// to a few hundred milliseconds): meant for a few frames at the start of a recording, to stop
+  /// early on a target file that does not match the board.
+  [[nodiscard]] virtual std::string describe_other_target(const GrayView& image) const = 0;
 };
 
 }  // namespace imucal::calib

@@ -132,6 +132,11 @@ class SessionLogReader {
                                               const std::function<bool(const CameraFrame&)>& visit) const = 0;
   /// Frame timestamps only (no image data), cheap.
   [[nodiscard]] virtual Result<std::vector<TimeNs>> frame_times(int stream_id) const = 0;
+  /// The identity of a camera stream's content: a 64-bit hash (FNV-1a) of every frame's time,
+  /// size, encoding and stored data checksum, in time order. Equal for two copies of a log, and
+  /// different once a frame is added, removed or changed. Reads no image data, but the file's
+  /// pages that hold it (about the cost of copying the log).
+  [[nodiscard]] virtual Result<std::uint64_t> frame_fingerprint(int stream_id) const = 0;
 
   [[nodiscard]] virtual Result<std::vector<Event>> events() const = 0;
 

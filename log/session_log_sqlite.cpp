@@ -661,6 +661,7 @@ class SqliteSessionLogReader final : public SessionLogReader {
   Status for_each_frame(int stream_id, TimeNs t0_ns, TimeNs t1_ns,
                         const std::function<bool(const CameraFrame&)>& visit) const override;
   Result<std::vector<TimeNs>> frame_times(int stream_id) const override;
+  Result<std::uint64_t> frame_fingerprint(int stream_id) const override;
   Result<std::vector<Event>> events() const override { return events_; }
   Result<std::int64_t> imu_count(int stream_id) const override;
   Result<std::int64_t> frame_count(int stream_id) const override;
@@ -1675,6 +1676,34 @@ Result<std::vector<TimeNs>> SqliteSessionLogReader::frame_times(int stream_id) c
   while ((rc = sqlite3_step(stmt.get())) == SQLITE_ROW) times.push_back(sqlite3_column_int64(stmt.get(), 0));
   if (rc != SQLITE_DONE) return sql_error("frame times damaged");
   return times;
+}
+
+Result<std::uint64_t> SqliteSessionLogReader::frame_fingerprint(int stream_id) const {
+  if (!camera_streams_.contains(stream_id)) {
+    return make_error(Errc::kNotFound,
+                      "session log " + path_ + " has no camera stream with id " + std::to_string(stream_id));
+  }
+  int rc = 0;
+  Stmt stmt = sqlite::prepare(
+      db_.get(),
+      "SELECT t_ns, width, height, encoding, data_crc32 FROM frames WHERE stream_id=?1 ORDER BY t_ns", &rc);
+  if (rc != SQLITE_OK) return sql_error("cannot query frames");
+  sqlite3_bind_int(stmt.get(), 1, stream_id);
+  std::uint64_t hash = 14695981039346656037ull;  // FNV-1a 64
+  auto mix = [&hash](const void* data, std::size_t size) {
+    const auto* bytes = static_cast<const std::uint8_t*>(data);
+    for (std::size_t i = 0; i < size; ++i) hash = (hash ^ bytes[i]) * 1099511628211ull;
+  };
+  while ((rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+    sqlite3_stmt* s = stmt.get();
+    const std::int64_t fields[4] = {sqlite3_column_int64(s, 0), sqlite3_column_int64(s, 1),
+                                    sqlite3_column_int64(s, 2), sqlite3_column_int64(s, 4)};
+    mix(fields, sizeof fields);
+    const std::string encoding = column_text(s, 3);
+    mix(encoding.data(), encoding.size() + 1);
+  }
+  if (rc != SQLITE_DONE) return sql_error("frames damaged");
+  return hash;
 }
 
 Result<std::int64_t> SqliteSessionLogReader::imu_count(int stream_id) const {

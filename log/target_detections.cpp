@@ -3,6 +3,7 @@
 #include "log/target_detections.hpp"
 
 #include <ctime>
+#include <filesystem>
 
 #include "log/session_log_sqlite.hpp"
 
@@ -48,27 +49,53 @@ void bind_text(sqlite3_stmt* stmt, int index, const std::string& text) {
   sqlite3_bind_text(stmt, index, text.data(), static_cast<int>(text.size()), SQLITE_TRANSIENT);
 }
 
-/// Opens the log; a file that is not a session log (application id) is refused.
-Result<sqlite::Db> open_log(const std::string& path, bool write) {
+/// What a file holds: a session log, or a detection cache.
+enum class FileKind { kLog, kCache };
+
+const char* kind_name(FileKind kind) { return kind == FileKind::kLog ? "session log" : "detection cache"; }
+
+/// Opens a log or a cache; a file of another kind (application id) is refused. A cache opened
+/// for writing is created when missing.
+Result<sqlite::Db> open_file(const std::string& path, bool write, FileKind kind) {
   sqlite3* raw = nullptr;
-  const int flags = write ? SQLITE_OPEN_READWRITE : SQLITE_OPEN_READONLY;
+  int flags = write ? SQLITE_OPEN_READWRITE : SQLITE_OPEN_READONLY;
+  if (write && kind == FileKind::kCache) flags |= SQLITE_OPEN_CREATE;
   const int rc = sqlite3_open_v2(path.c_str(), &raw, flags, nullptr);
   sqlite::Db db(raw);
   if (rc != SQLITE_OK) {
-    return make_error(rc == SQLITE_CANTOPEN ? Errc::kNotFound : Errc::kIo,
-                      "cannot open session log " + path + ": " + sqlite::errmsg(raw));
+    return make_error(
+        rc == SQLITE_CANTOPEN ? Errc::kNotFound : Errc::kIo,
+        std::string("cannot open ") + kind_name(kind) + " " + path + ": " + sqlite::errmsg(raw));
   }
-  // A writer that holds the log (a recording in progress) gets a moment, then we give up.
+  // A writer that holds the file (a recording in progress) gets a moment, then we give up.
   sqlite3_busy_timeout(db.get(), 2000);
   int prc = 0;
   Stmt stmt = sqlite::prepare(db.get(), "PRAGMA application_id", &prc);
   if (prc != SQLITE_OK || sqlite3_step(stmt.get()) != SQLITE_ROW) {
-    return make_error(Errc::kCorrupt, "cannot read session log " + path + ": " + sqlite::errmsg(db.get()));
+    return make_error(Errc::kCorrupt, std::string("cannot read ") + kind_name(kind) + " " + path + ": " +
+                                          sqlite::errmsg(db.get()));
   }
-  if (sqlite3_column_int(stmt.get(), 0) != sqlite::kApplicationId) {
-    return make_error(Errc::kCorrupt, path + " is not a session log (wrong application id)");
+  const int id = sqlite3_column_int(stmt.get(), 0);
+  const int expected = kind == FileKind::kLog ? sqlite::kApplicationId : kDetectionCacheApplicationId;
+  if (id == 0 && kind == FileKind::kCache && write) {
+    // A new (empty) cache file: mark it as one.
+    stmt.reset();
+    Stmt count = sqlite::prepare(db.get(), "SELECT count(*) FROM sqlite_schema", &prc);
+    if (prc == SQLITE_OK && sqlite3_step(count.get()) == SQLITE_ROW &&
+        sqlite3_column_int(count.get(), 0) == 0) {
+      count.reset();
+      if (sqlite::exec(db.get(), ("PRAGMA application_id=" + std::to_string(expected)).c_str()) == SQLITE_OK)
+        return db;
+    }
+  }
+  if (id != expected) {
+    return make_error(Errc::kCorrupt, path + " is not a " + kind_name(kind) + " (wrong application id)");
   }
   return db;
+}
+
+Result<sqlite::Db> open_log(const std::string& path, bool write) {
+  return open_file(path, write, FileKind::kLog);
 }
 
 bool has_table(sqlite3* db, const char* name) {
@@ -84,8 +111,7 @@ Status read_rows(sqlite3* db, const std::string& path, int stream_id, DetectionS
   Stmt stmt = sqlite::prepare(
       db, "SELECT t_ns, data FROM target_detections WHERE stream_id=?1 AND target_key=?2 ORDER BY t_ns", &rc);
   if (rc != SQLITE_OK) {
-    return make_error(Errc::kCorrupt,
-                      "session log " + path + ": stored detections unreadable: " + sqlite::errmsg(db));
+    return make_error(Errc::kCorrupt, path + ": stored detections unreadable: " + sqlite::errmsg(db));
   }
   sqlite3_bind_int(stmt.get(), 1, stream_id);
   bind_text(stmt.get(), 2, set->target_key);
@@ -93,8 +119,7 @@ Status read_rows(sqlite3* db, const std::string& path, int stream_id, DetectionS
     set->detections.push_back({sqlite3_column_int64(stmt.get(), 0), column_text(stmt.get(), 1)});
   }
   if (rc != SQLITE_DONE) {
-    return make_error(Errc::kCorrupt,
-                      "session log " + path + ": stored detections unreadable: " + sqlite::errmsg(db));
+    return make_error(Errc::kCorrupt, path + ": stored detections unreadable: " + sqlite::errmsg(db));
   }
   return {};
 }
@@ -129,11 +154,9 @@ Status insert_set(sqlite3* db, int stream_id, const DetectionSet& set, const std
   return {};
 }
 
-}  // namespace
-
-Result<std::optional<DetectionSet>> read_target_detections(const std::string& log_path, int stream_id,
-                                                           const std::string& target_key) {
-  auto db = open_log(log_path, false);
+Result<std::optional<DetectionSet>> read_set(const std::string& log_path, FileKind kind, int stream_id,
+                                             const std::string& target_key) {
+  auto db = open_file(log_path, false, kind);
   if (!db.ok()) return db.error();
   if (!has_table(db->get(), "target_detection_sets")) return std::optional<DetectionSet>{};
   // One read transaction: the set row and its detections are one snapshot.
@@ -144,16 +167,16 @@ Result<std::optional<DetectionSet>> read_target_detections(const std::string& lo
                               "WHERE stream_id=?1 AND target_key=?2",
                               &rc);
   if (rc != SQLITE_OK) {
-    return make_error(Errc::kCorrupt, "session log " + log_path +
-                                          ": stored detections unreadable: " + sqlite::errmsg(db->get()));
+    return make_error(Errc::kCorrupt,
+                      log_path + ": stored detections unreadable: " + sqlite::errmsg(db->get()));
   }
   sqlite3_bind_int(stmt.get(), 1, stream_id);
   bind_text(stmt.get(), 2, target_key);
   rc = sqlite3_step(stmt.get());
   if (rc == SQLITE_DONE) return std::optional<DetectionSet>{};
   if (rc != SQLITE_ROW) {
-    return make_error(Errc::kCorrupt, "session log " + log_path +
-                                          ": stored detections unreadable: " + sqlite::errmsg(db->get()));
+    return make_error(Errc::kCorrupt,
+                      log_path + ": stored detections unreadable: " + sqlite::errmsg(db->get()));
   }
   DetectionSet set;
   set.target_key = target_key;
@@ -165,21 +188,23 @@ Result<std::optional<DetectionSet>> read_target_detections(const std::string& lo
   return std::optional<DetectionSet>(std::move(set));
 }
 
-Status write_target_detections(const std::string& log_path, int stream_id, const DetectionSet& set) {
+Status write_set(const std::string& log_path, FileKind kind, int stream_id, const DetectionSet& set) {
   if (set.target_key.empty()) return make_error(Errc::kInvalidArgument, "a detection set needs a target key");
-  auto db = open_log(log_path, true);
+  auto db = open_file(log_path, true, kind);
   if (!db.ok()) return db.error();
   sqlite3* h = db->get();
   if (sqlite3_db_readonly(h, "main") == 1) {
-    return make_error(Errc::kIo, "session log " + log_path + " is read-only: detections not stored");
+    return make_error(Errc::kIo,
+                      std::string(kind_name(kind)) + " " + log_path + " is read-only: detections not stored");
   }
   auto failed = [&](const std::string& why) -> Status {
     const int code = sqlite3_extended_errcode(h);
     (void)sqlite::exec(h, "ROLLBACK");
-    std::string message = "session log " + log_path + ": storing detections failed: " + why;
+    std::string message =
+        std::string(kind_name(kind)) + " " + log_path + ": storing detections failed: " + why;
     if (code == SQLITE_READONLY_DIRECTORY || (code & 0xff) == SQLITE_CANTOPEN)
       message += " (its folder must be writable for the journal)";
-    return make_error(Errc::kIo, message + "; the log is unchanged");
+    return make_error(Errc::kIo, message + "; the file is unchanged");
   };
   // The journal mode the log has (DELETE once closed, WAL while recording) is kept; FULL sync
   // makes the commit durable.
@@ -189,6 +214,35 @@ Status write_target_detections(const std::string& log_path, int stream_id, const
   if (auto s = insert_set(h, stream_id, set, utc_now_iso8601()); !s.ok()) return failed(s.error().message);
   if (sqlite::exec(h, "COMMIT") != SQLITE_OK) return failed(sqlite::errmsg(h));
   return {};
+}
+
+}  // namespace
+
+Result<std::optional<DetectionSet>> read_target_detections(const std::string& log_path, int stream_id,
+                                                           const std::string& target_key) {
+  return read_set(log_path, FileKind::kLog, stream_id, target_key);
+}
+
+Status write_target_detections(const std::string& log_path, int stream_id, const DetectionSet& set) {
+  return write_set(log_path, FileKind::kLog, stream_id, set);
+}
+
+Result<std::optional<DetectionSet>> read_detection_cache(const std::string& cache_path,
+                                                         const std::string& target_key) {
+  std::error_code ec;
+  if (!std::filesystem::exists(cache_path, ec)) return std::optional<DetectionSet>{};
+  return read_set(cache_path, FileKind::kCache, 0, target_key);
+}
+
+Status write_detection_cache(const std::string& cache_path, const DetectionSet& set) {
+  const std::filesystem::path parent = std::filesystem::path(cache_path).parent_path();
+  std::error_code ec;
+  if (!parent.empty()) std::filesystem::create_directories(parent, ec);
+  if (ec) {
+    return make_error(Errc::kIo,
+                      "cannot create the detection cache folder " + parent.string() + ": " + ec.message());
+  }
+  return write_set(cache_path, FileKind::kCache, 0, set);
 }
 
 }  // namespace imucal::log

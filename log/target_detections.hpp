@@ -49,4 +49,20 @@ struct DetectionSet {
 [[nodiscard]] Status write_target_detections(const std::string& log_path, int stream_id,
                                              const DetectionSet& set);
 
+/// A detection cache: a SQLite file of its own (application id kDetectionCacheApplicationId)
+/// holding the sets of one camera stream's content, so that a log that must not be written (a
+/// dataset, a fixture, someone else's recording) is still searched once. The caller names the
+/// file after the stream's content (SessionLogReader::frame_fingerprint); the tables are the
+/// log's, with stream_id 0. docs/session-log.md ("Detection cache").
+inline constexpr int kDetectionCacheApplicationId = 0x494D4443;  // "IMDC"
+
+/// The set stored in the cache file for `target_key`, or nullopt when there is none (or no file).
+/// Errc::kCorrupt when the file is not a detection cache or is unreadable.
+[[nodiscard]] Result<std::optional<DetectionSet>> read_detection_cache(const std::string& cache_path,
+                                                                       const std::string& target_key);
+
+/// Stores `set` in the cache file (created with its folder when missing), replacing a set with
+/// the same key, in one transaction.
+[[nodiscard]] Status write_detection_cache(const std::string& cache_path, const DetectionSet& set);
+
 }  // namespace imucal::log

@@ -2,6 +2,9 @@
 
 #include <spdlog/spdlog.h>
 
+#include <cstdlib>
+#include <string>
+
 #include "core/target.hpp"
 #include "daemon/cli/command.hpp"
 #include "log/session_log.hpp"
@@ -55,6 +58,38 @@ app::TargetChoice resolve_target(const std::string& target_path, const std::stri
     fail(t.error(), log_path);
   }
   return *t;
+}
+
+void add_detection_store_options(CLI::App* cmd, DetectionStoreArgs* args) {
+  cmd->add_flag(
+      "--no-reuse", args->no_reuse,
+      "Search the frames again even when detections for these frames and this target are stored (the "
+      "new ones replace them)");
+  cmd->add_flag(
+      "--store-detections", args->store_in_log,
+      "Store the detections in the log itself (it is otherwise never written; the default keeps them "
+      "in the detection cache)");
+  cmd->add_flag("--no-cache", args->no_cache,
+                "Neither read nor write the detection cache ($IMUCAL_CACHE_DIR, $XDG_CACHE_HOME/imucal or "
+                "~/.cache/imucal)");
+}
+
+std::string detection_cache_dir(const DetectionStoreArgs& args) {
+  if (args.no_cache) return {};
+  auto env = [](const char* name) {
+    const char* v = std::getenv(name);
+    return v != nullptr ? std::string(v) : std::string();
+  };
+  std::string base = env("IMUCAL_CACHE_DIR");
+  if (base.empty() && !env("XDG_CACHE_HOME").empty()) base = env("XDG_CACHE_HOME") + "/imucal";
+  if (base.empty() && !env("HOME").empty()) base = env("HOME") + "/.cache/imucal";
+  return base.empty() ? std::string() : base + "/detections";
+}
+
+std::string detections_in_words(const std::string& reused_from, const std::string& stored_in) {
+  if (!reused_from.empty()) return "reused from " + reused_from;
+  if (!stored_in.empty()) return "stored in " + stored_in;
+  return "not stored";
 }
 
 }  // namespace imucal::cli

@@ -28,4 +28,18 @@ app::GravityChoice resolve_gravity(const GravityArgs& args);
 /// names. Ends the command (CliExit) when the file is bad or the log names none.
 app::TargetChoice resolve_target(const std::string& target_path, const std::string& log_path);
 
+/// Where the camera commands keep the target detections of a log's frames: never in the log
+/// unless asked (--store-detections), else in the user's cache (docs/cli.md, "Stored detections").
+struct DetectionStoreArgs {
+  bool no_reuse = false;
+  bool store_in_log = false;
+  bool no_cache = false;
+};
+void add_detection_store_options(CLI::App* cmd, DetectionStoreArgs* args);
+/// The detection cache folder: $IMUCAL_CACHE_DIR, else $XDG_CACHE_HOME/imucal, else
+/// $HOME/.cache/imucal, with "/detections" appended; empty with --no-cache or when none is set.
+std::string detection_cache_dir(const DetectionStoreArgs& args);
+/// "reused from the log", "stored in FILE", "not stored" for the summaries.
+std::string detections_in_words(const std::string& reused_from, const std::string& stored_in);
+
 }  // namespace imucal::cli

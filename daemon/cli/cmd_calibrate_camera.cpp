@@ -27,7 +27,7 @@ struct CameraCliOptions {
   std::string model = "pinhole-radtan";
   int threads = 0;
   bool allow_damaged = false;
-  bool no_reuse = false;
+  DetectionStoreArgs detections;
   bool force = false;
   bool json = false;
   std::string yaml_path;
@@ -41,8 +41,7 @@ void print_summary(const app::CameraCalibrationReport& r, const std::string& yam
   std::printf("camera calibration of %s (%s, %lld frames, %d with the target; detections %s)\n",
               r.log_path.c_str(), r.stream.name.c_str(), static_cast<long long>(r.frames),
               r.frames_with_target,
-              r.detections_reused ? "reused from the log"
-                                  : (r.detections_stored ? "stored in the log" : "not stored"));
+              detections_in_words(r.detections_reused_from, r.detections_stored_in).c_str());
   std::printf("  model %s, %d x %d, target from %s\n", calib::camera_model_option_name(c.distortion_model),
               c.width, c.height, r.target_source.c_str());
   static const char* kIntrinsics[] = {"fu", "fv", "pu", "pv"};
@@ -84,7 +83,9 @@ void run(const CameraCliOptions& o) {
   q.target_source = target.source;
   q.threads = o.threads;
   q.allow_damaged = o.allow_damaged;
-  q.reuse_detections = !o.no_reuse;
+  q.reuse_detections = !o.detections.no_reuse;
+  q.store_detections = o.detections.store_in_log;
+  q.cache_dir = detection_cache_dir(o.detections);
   Progress detecting("detecting the target", 1.0);
   Progress solving("solving", 1.0);
   q.detection_progress = [&detecting](double f) { detecting.update(f); };
@@ -124,9 +125,7 @@ void setup(CLI::App& root) {
   cmd->add_option("--threads", o->threads,
                   "Worker threads for the detection and the solver (default: all cores)")
       ->check(CLI::Range(0, 256));
-  cmd->add_flag("--no-reuse", o->no_reuse,
-                "Search the frames again even when the log holds detections for this target (the new ones "
-                "replace them)");
+  add_detection_store_options(cmd, &o->detections);
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");
   cmd->add_option("-o,--output", o->yaml_path,
                   "Write the camera as Kalibr camchain YAML (cam0) with imucal's figures")

@@ -42,7 +42,7 @@ struct CamImuCliOptions {
   GravityArgs grav;
   int threads = 0;
   bool allow_damaged = false;
-  bool no_reuse = false;
+  DetectionStoreArgs detections;
   bool force = false;
   bool json = false;
   std::string out_dir;
@@ -106,7 +106,9 @@ app::CamImuRequest build_request(const CamImuCliOptions& o) {
   q.options.threads = o.threads;
   q.threads = o.threads;
   q.allow_damaged = o.allow_damaged;
-  q.reuse_detections = !o.no_reuse;
+  q.reuse_detections = !o.detections.no_reuse;
+  q.store_detections = o.detections.store_in_log;
+  q.cache_dir = detection_cache_dir(o.detections);
   return q;
 }
 
@@ -135,8 +137,7 @@ void print_camera(const CamImuCalibrationResult& res, const CamImuCameraResult& 
   const bool fixed_T = is_fixed(res, "T_cam_imu"), fixed_shift = is_fixed(res, "timeshift");
   std::printf("  %s (stream %s, %d frames with the target of %lld; detections %s)\n", c.name.c_str(),
               c.stream.c_str(), in.frames_with_target, static_cast<long long>(in.frames),
-              in.detections_reused ? "reused from the log"
-                                   : (in.detections_stored ? "stored in the log" : "not stored"));
+              detections_in_words(in.detections_reused_from, in.detections_stored_in).c_str());
   std::printf("    R_cam_imu rotation vector [%.4f %.4f %.4f] deg, sigma %s deg\n", rv[0], rv[1], rv[2],
               sig3(c.rotation_sigma_rad, kDeg, 4, fixed_T).c_str());
   std::printf("    t_cam_imu [%.2f %.2f %.2f] mm, sigma %s mm\n", t[0], t[1], t[2],
@@ -305,8 +306,7 @@ void add_solver_options(CLI::App* cmd, CamImuCliOptions* o) {
                   "Worker threads for the detection and the solver (default: all cores)")
       ->check(CLI::Range(0, 256));
   add_gravity_options(cmd, &o->grav);
-  cmd->add_flag("--no-reuse", o->no_reuse,
-                "Search the frames again even when the log holds detections for this target");
+  add_detection_store_options(cmd, &o->detections);
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");
   cmd->add_option("-o,--output", o->out_dir,
                   "Folder for camchain-imucam.yaml, imu.yaml, calibration.yaml and result.json (created)")

@@ -6,10 +6,13 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <iostream>
 #include <map>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -91,24 +94,92 @@ const CLI::Validator kNonEmpty = non_empty();
 
 bool stderr_is_tty() { return isatty(STDERR_FILENO) == 1; }
 
+namespace {
+
+double progress_interval_from_env() {
+  const char* text = std::getenv("IMUCAL_PROGRESS_INTERVAL");
+  if (text == nullptr || *text == '\0') return Progress::kLogIntervalS;
+  char* end = nullptr;
+  const double v = std::strtod(text, &end);
+  return end != text && *end == '\0' && std::isfinite(v) && v >= 0.0 ? v : Progress::kLogIntervalS;
+}
+
+std::string seconds_text(double s) {
+  char text[32];
+  if (s < 10.0) {
+    std::snprintf(text, sizeof text, "%.1f s", s);
+  } else if (s < 600.0) {
+    std::snprintf(text, sizeof text, "%.0f s", s);
+  } else {
+    std::snprintf(text, sizeof text, "%.0f min", s / 60.0);
+  }
+  return text;
+}
+
+}  // namespace
+
 Progress::Progress(std::string label, double total)
-    : label_(std::move(label)), total_(total), enabled_(stderr_is_tty()) {}
+    : Progress(std::move(label), total, stderr, stderr_is_tty(), progress_interval_from_env()) {}
+
+Progress::Progress(std::string label, double total, std::FILE* out, bool terminal, double interval_s)
+    : label_(std::move(label)),
+      total_(total),
+      out_(out),
+      terminal_(terminal),
+      interval_s_(interval_s),
+      start_(std::chrono::steady_clock::now()) {}
 
 Progress::~Progress() { finish(); }
 
+double Progress::elapsed_s() const {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+}
+
 void Progress::update(double done) {
-  if (!enabled_ || finished_ || total_ <= 0) return;
-  const int permille = static_cast<int>(std::clamp(done / total_, 0.0, 1.0) * 1000.0);
-  if (permille == last_permille_) return;
-  last_permille_ = permille;
-  std::fprintf(stderr, "\r%s %5.1f%%", label_.c_str(), permille / 10.0);
-  std::fflush(stderr);
+  if (finished_ || total_ <= 0) return;
+  const double fraction = std::clamp(done / total_, 0.0, 1.0);
+  updated_ = true;
+  last_fraction_ = fraction;
+  if (terminal_) {
+    const int permille = static_cast<int>(fraction * 1000.0);
+    if (permille == last_permille_) return;
+    last_permille_ = permille;
+    std::fprintf(out_, "\r%s %5.1f%%", label_.c_str(), permille / 10.0);
+    std::fflush(out_);
+    return;
+  }
+  const double now = elapsed_s();
+  if (now - last_line_s_ < interval_s_) return;
+  last_line_s_ = now;
+  char head[64];
+  std::snprintf(head, sizeof head, ": %.1f %% after ", 100.0 * fraction);
+  std::string line = label_ + head + seconds_text(now);
+  if (fraction > 0.0 && now > 0.0) {
+    char rate[48];
+    std::snprintf(rate, sizeof rate, " (%.1f %%/s, about ", 100.0 * fraction / now);
+    line += rate + seconds_text(now * (1.0 - fraction) / fraction) + " left)";
+  }
+  std::fprintf(out_, "%s\n", line.c_str());
+  std::fflush(out_);
 }
 
 void Progress::finish() {
-  if (!enabled_ || finished_) return;
+  if (finished_) return;
   finished_ = true;
-  if (last_permille_ >= 0) std::fprintf(stderr, "\r%s done  \n", label_.c_str());
+  if (!updated_) return;
+  if (terminal_) {
+    if (last_permille_ >= 0) std::fprintf(out_, "\r%s done  \n", label_.c_str());
+    return;
+  }
+  // The last line says how far the work got: 100 % when it ran to the end, less when it stopped.
+  char how_far[48];
+  if (last_fraction_ >= 1.0) {
+    std::snprintf(how_far, sizeof how_far, "done");
+  } else {
+    std::snprintf(how_far, sizeof how_far, "stopped at %.1f %%", 100.0 * last_fraction_);
+  }
+  std::fprintf(out_, "%s: %s after %s\n", label_.c_str(), how_far, seconds_text(elapsed_s()).c_str());
+  std::fflush(out_);
 }
 
 }  // namespace imucal::cli

@@ -233,6 +233,19 @@ TEST(CheckerboardDetection, NoBoardGivesAnEmptyObservation) {
   auto obs = det->detect(view_of(other.image));
   ASSERT_TRUE(obs.ok());
   EXPECT_TRUE(obs->empty());
+  // ... and the detector says what that board is; frames without a board, or with this board,
+  // describe nothing.
+  EXPECT_EQ(det->describe_other_target(view_of(other.image)), "a checkerboard of 6 x 5 inner corners");
+  EXPECT_EQ(det->describe_other_target(view_of(grey)), "");
+  EXPECT_EQ(det->describe_other_target(view_of(noise)), "");
+  auto same = make_renderer(radtan_camera(), t);
+  ASSERT_TRUE(same);
+  const Frame own = render(*same, board_pose(t, 0.0, Eigen::Vector3d::Zero(), 0.5));
+  EXPECT_EQ(det->describe_other_target(view_of(own.image)), "");
+  // A larger board is named as well: the target file may be the smaller one.
+  auto small = make_detector(checkerboard(4, 3));
+  ASSERT_TRUE(small);
+  EXPECT_EQ(small->describe_other_target(view_of(own.image)), "a checkerboard of 7 x 6 inner corners");
 }
 
 // OpenCV's detector needs every inner corner: a board cut by the image edge gives nothing
@@ -248,6 +261,8 @@ TEST(CheckerboardDetection, BoardPartlyOutOfViewGivesNothing) {
   auto obs = det->detect(view_of(f.image));
   ASSERT_TRUE(obs.ok());
   EXPECT_TRUE(obs->empty());
+  // The part in view is not taken for a smaller board.
+  EXPECT_EQ(det->describe_other_target(view_of(f.image)), "");
 }
 
 TEST(CheckerboardDetection, NoisyFrames) {
@@ -488,6 +503,22 @@ TEST(AprilGridDetection, TagsNotOnTheGridAreIgnored) {
   }
   EXPECT_GE(static_cast<int>(g.obs.ids.size()), 4 * 28) << "the other tags must still be found";
   EXPECT_LT(g.err.max_px, 0.5);
+  // One tag of another grid among 35 of this one: this grid, nothing else to say.
+  EXPECT_EQ(det->describe_other_target(view_of(img.image)), "");
+}
+
+// A grid whose tags mostly have ids beyond the target file's grid is named.
+TEST(AprilGridDetection, ALargerGridIsDescribed) {
+  TargetDescription small = aprilgrid();
+  small.tag_cols = 3;
+  small.tag_rows = 3;
+  auto det = make_detector(small);
+  ASSERT_TRUE(det);
+  const TargetDescription t = aprilgrid();
+  const test::AprilGridImage img =
+      test::render_aprilgrid(t, grid_homography(t, 0.0, Eigen::Vector3d(0.1, 0.1, 0), 0.95), {});
+  EXPECT_EQ(det->describe_other_target(view_of(img.image)),
+            "an AprilGrid with tag ids up to 35 (at least 36 tags)");
 }
 
 TEST(AprilGridDetection, FewerTagsThanTheMinimumGiveNothing) {

@@ -3,6 +3,7 @@
 // target's sources, and a log imported from a EuRoC folder (PNG frames).
 
 #include <gtest/gtest.h>
+#include <sqlite3.h>
 #include <yaml-cpp/yaml.h>
 
 #include <filesystem>
@@ -21,7 +22,6 @@ using test::run_cli;
 using test::scratch_dir;
 using test::source_path;
 
-/// A copy of the fixture: the command stores its detections in the log it reads.
 CameraModel truth_camera() {
   const YAML::Node truth = YAML::LoadFile(source_path("fixtures/camimu.truth.yaml"));
   auto camera = camera_from_yaml(truth["camera"]["cam0"], "camimu.truth.yaml");
@@ -55,26 +55,104 @@ void expect_truth_within_three_sigmas(const std::string& yaml_path) {
   EXPECT_LT(cam0["imucal"]["reprojection_rms_px"].as<double>(), 0.2);
 }
 
+// The input log is never written: the detections go to the cache, keyed by the frames' content,
+// and the next run reuses them from there (from any copy of the log).
 TEST(CliCalibrateCamera, FixtureWithinThreeSigmasOfTruthAndDetectionsReused) {
   const std::string dir = scratch_dir();
+  const test::ScopedCacheDir cache(dir + "/cache");
   const std::string log = test::copy_fixture("camimu.imulog", dir);
+  const std::string before = read_file(log);
   auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_NE(r.out.find("detections stored in the log"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("detections stored in " + dir + "/cache/detections/"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("target from target metadata"), std::string::npos) << r.out;
   expect_truth_within_three_sigmas(dir + "/cam.yaml");
+  EXPECT_TRUE(read_file(log) == before) << "the input log was modified";
+  // Progress reaches a file too: standard error is not a terminal here.
+  EXPECT_NE(r.err.find("detecting the target: done after"), std::string::npos) << r.err;
 
-  // The second run reads the stored detections and finds the same camera.
-  r = run_cli({"calibrate", "camera", log, "-o", dir + "/again.yaml", "--json"});
+  // The second run, on another copy, reads the cached detections and finds the same camera.
+  std::filesystem::create_directories(dir + "/copy");
+  const std::string copy = test::copy_fixture("camimu.imulog", dir + "/copy");
+  r = run_cli({"calibrate", "camera", copy, "-o", dir + "/again.yaml", "--json"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
   EXPECT_TRUE(j["detections"]["reused"].get<bool>());
+  EXPECT_NE(j["detections"]["reused_from"].get<std::string>().find(dir + "/cache/detections/"),
+            std::string::npos);
+  EXPECT_TRUE(read_file(log) == before) << "the input log was modified";
   const YAML::Node first = YAML::LoadFile(dir + "/cam.yaml")["cam0"];
   for (int i = 0; i < 4; ++i) {
     EXPECT_NEAR(j["intrinsics"][i].get<double>(), first["intrinsics"][i].as<double>(), 1e-9);
     EXPECT_NEAR(j["distortion_coeffs"][i].get<double>(), first["distortion_coeffs"][i].as<double>(), 1e-12);
   }
   EXPECT_EQ(j["views_used"].get<int>(), first["imucal"]["views_used"].as<int>());
+}
+
+bool run_sql(const std::string& path, const char* sql) {
+  sqlite3* db = nullptr;
+  const bool ok = sqlite3_open(path.c_str(), &db) == SQLITE_OK &&
+                  sqlite3_exec(db, sql, nullptr, nullptr, nullptr) == SQLITE_OK;
+  sqlite3_close(db);
+  return ok;
+}
+
+// --store-detections keeps the old way: the detections go into the log (when it is complete and
+// undamaged) and the next run reuses them from there, with no cache at all.
+TEST(CliCalibrateCamera, StoreDetectionsInTheLogWhenAsked) {
+  const std::string dir = scratch_dir();
+  const std::string log = test::copy_fixture("camimu.imulog", dir);
+  auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml", "--store-detections", "--no-cache"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("detections stored in the log"), std::string::npos) << r.out;
+  r = run_cli({"calibrate", "camera", log, "-o", dir + "/again.yaml", "--json", "--no-cache"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["detections"]["reused_from"].get<std::string>(), "the log");
+}
+
+// A target file that does not match the board stops within the first frames and says what the
+// frames show, instead of searching every frame for a board that is not there.
+TEST(CliCalibrateCamera, WrongTargetStopsEarlyNamingTheBoardSeen) {
+  const std::string dir = scratch_dir();
+  const std::string log = test::copy_fixture("camimu.imulog", dir);
+  const std::string target = dir + "/small.yaml";
+  {
+    std::ofstream(target) << "target_type: checkerboard\ntargetCols: 5\ntargetRows: 4\n"
+                             "rowSpacingMeters: 0.05\ncolSpacingMeters: 0.05\n";
+  }
+  auto r = run_cli({"calibrate", "camera", log, "--target", target, "-o", dir + "/cam.yaml"});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("a checkerboard of 7 x 6 inner corners"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("the target file says a checkerboard of 5 x 4 inner corners"), std::string::npos)
+      << r.err;
+  // It stopped early: the progress never got near the end of the 1200 frames.
+  EXPECT_EQ(r.err.find("detecting the target: done"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("detecting the target: stopped at"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/cam.yaml"));
+}
+
+// Frames whose data fail their checksum are damage: refused without --allow-damaged (exit 3),
+// and with it counted as not searched, never as frames without the target.
+TEST(CliCalibrateCamera, FramesFailingTheirChecksumAreDamage) {
+  const std::string dir = scratch_dir();
+  const std::string log = test::copy_fixture("camimu.imulog", dir);
+  ASSERT_TRUE(run_sql(log,
+                      "UPDATE frames SET data_crc32 = (data_crc32 + 1) % 4294967296 WHERE rowid IN "
+                      "(SELECT rowid FROM frames ORDER BY t_ns LIMIT 3 OFFSET 100)"));
+  auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml"});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("has damaged frames"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--allow-damaged"), std::string::npos) << r.err;
+  // It stopped at the first damaged frame.
+  EXPECT_NE(r.err.find("detecting the target: stopped at"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/cam.yaml"));
+  r = run_cli({"calibrate", "camera", log, "--allow-damaged", "-o", dir + "/cam.yaml", "--json"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("3 of the 1200 frames of camera stream 'cam0'"), std::string::npos) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["frames_failed"].get<int>(), 3);
+  EXPECT_FALSE(j["detections"]["stored"].get<bool>());
 }
 
 TEST(CliCalibrateCamera, OutputRules) {
@@ -116,7 +194,8 @@ TEST(CliCalibrateCamera, DamagedLogIsNeverWritten) {
   auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml"});
   EXPECT_EQ(r.exit_code, 3);
   EXPECT_NE(r.err.find("--allow-damaged"), std::string::npos) << r.err;
-  r = run_cli({"calibrate", "camera", log, "--allow-damaged", "-o", dir + "/cam.yaml", "--json"});
+  r = run_cli({"calibrate", "camera", log, "--allow-damaged", "--store-detections", "-o", dir + "/cam.yaml",
+               "--json"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.err.find("detections not stored in the log: it is damaged"), std::string::npos) << r.err;
   const auto j = nlohmann::json::parse(r.out);

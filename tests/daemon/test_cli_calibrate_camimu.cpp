@@ -43,7 +43,6 @@ std::string camera_yaml(const std::string& dir) {
   return path;
 }
 
-/// A copy of the fixture: the command stores its detections in the log it reads.
 TEST(CliCalibrateCamimu, ArgumentErrorsComeBeforeAnyWork) {
   const std::string dir = scratch_dir();
   const std::string log = source_path("fixtures/camimu.imulog");

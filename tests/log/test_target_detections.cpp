@@ -183,5 +183,61 @@ TEST(TargetDetections, RefusesFilesThatAreNotLogs) {
   EXPECT_FALSE(write_target_detections(make_log(dir), 2, sample_set("")).ok());
 }
 
+// The cache file: created with its folder on the first write, read back exactly, a missing one
+// reads as "none"; a log is not taken for a cache nor a cache for a log.
+TEST(DetectionCache, RoundTripAndFileKinds) {
+  const std::string dir = scratch_dir();
+  const std::string cache = dir + "/cache/detections/0123456789abcdef.sqlite";
+  auto none = read_detection_cache(cache, "k1");
+  ASSERT_TRUE(none.ok()) << none.error().message;
+  EXPECT_FALSE(none->has_value());
+  EXPECT_FALSE(std::filesystem::exists(cache));
+  ASSERT_TRUE(write_detection_cache(cache, sample_set("k1")).ok());
+  auto back = read_detection_cache(cache, "k1");
+  ASSERT_TRUE(back.ok() && back->has_value());
+  EXPECT_EQ((*back)->frames, 3);
+  ASSERT_EQ((*back)->detections.size(), 2u);
+  EXPECT_EQ((*back)->detections[1].data, sample_set("k1").detections[1].data);
+  EXPECT_FALSE(read_detection_cache(cache, "k2")->has_value());
+
+  const std::string log = make_log(dir);
+  const std::string before = file_bytes(log);
+  const Status s = write_detection_cache(log, sample_set("k1"));
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().code, Errc::kCorrupt);
+  EXPECT_EQ(file_bytes(log), before);
+  EXPECT_FALSE(read_detection_cache(log, "k1").ok());
+  const Status t = write_target_detections(cache, 0, sample_set("k3"));
+  ASSERT_FALSE(t.ok());
+  EXPECT_EQ(t.error().code, Errc::kCorrupt);
+}
+
+// The stream's fingerprint names its content: equal for a copy, different once a frame changes.
+TEST(DetectionCache, FrameFingerprintFollowsTheContent) {
+  const std::string dir = scratch_dir();
+  const std::string log = make_log(dir);
+  const std::string copy = dir + "/copy.imulog";
+  std::filesystem::copy_file(log, copy);
+  auto fingerprint = [](const std::string& path) {
+    auto r = SessionLogReader::open(path);
+    EXPECT_TRUE(r.ok());
+    auto f = (*r)->frame_fingerprint(2);
+    EXPECT_TRUE(f.ok());
+    return f.ok() ? *f : 0;
+  };
+  const std::uint64_t a = fingerprint(log);
+  EXPECT_EQ(fingerprint(copy), a);
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(copy.c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "UPDATE frames SET data_crc32 = data_crc32 + 1 WHERE t_ns = 50000000", nullptr,
+                         nullptr, nullptr),
+            SQLITE_OK);
+  sqlite3_close(db);
+  EXPECT_NE(fingerprint(copy), a);
+  auto r = SessionLogReader::open(log);
+  ASSERT_TRUE(r.ok());
+  EXPECT_FALSE((*r)->frame_fingerprint(7).ok());
+}
+
 }  // namespace
 }  // namespace imucal::log

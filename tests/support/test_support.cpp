@@ -46,6 +46,9 @@ std::string copy_fixture(const std::string& name, const std::string& dir) {
   return path;
 }
 
+ScopedCacheDir::ScopedCacheDir(const std::string& dir) { setenv("IMUCAL_CACHE_DIR", dir.c_str(), 1); }
+ScopedCacheDir::~ScopedCacheDir() { unsetenv("IMUCAL_CACHE_DIR"); }
+
 ScopedModuleDir::ScopedModuleDir(const std::string& dir) { setenv("IMUCAL_MODULE_DIR", dir.c_str(), 1); }
 ScopedModuleDir::~ScopedModuleDir() { unsetenv("IMUCAL_MODULE_DIR"); }
 
@@ -58,6 +61,7 @@ CommandResult run_cli(const std::vector<std::string>& args, unsigned limit_s) {
   const pid_t pid = fork();
   if (pid == 0) {
     if (!freopen(out_path.c_str(), "w", stdout) || !freopen(err_path.c_str(), "w", stderr)) _exit(127);
+    if (std::getenv("IMUCAL_CACHE_DIR") == nullptr) setenv("IMUCAL_CACHE_DIR", (dir + "/cache").c_str(), 1);
     std::vector<char*> argv;
     std::string bin = IMUCAL_CLI_PATH;
     argv.push_back(bin.data());

@@ -32,6 +32,17 @@ void write_file(const std::filesystem::path& path, const std::string& text);
 /// Copies fixtures/`name` into `dir` and returns the copy's path (for tests that write to a log).
 std::string copy_fixture(const std::string& name, const std::string& dir);
 
+/// Points the CLI's detection cache at `dir` (IMUCAL_CACHE_DIR) while it lives. Without it each
+/// run_cli call gets a cache of its own, removed after the call, so that no test reuses what
+/// another one found and nothing is written into the user's home.
+class ScopedCacheDir {
+ public:
+  explicit ScopedCacheDir(const std::string& dir);
+  ~ScopedCacheDir();
+  ScopedCacheDir(const ScopedCacheDir&) = delete;
+  ScopedCacheDir& operator=(const ScopedCacheDir&) = delete;
+};
+
 /// Points the module loader at `dir` (IMUCAL_MODULE_DIR) while it lives.
 class ScopedModuleDir {
  public:
