@@ -25,28 +25,37 @@
 namespace imucal::app {
 namespace {
 
-/// A queue of encoded frames with a fixed capacity: the reader waits while the workers are
-/// behind, so memory stays bounded whatever the length of the log.
-class FrameQueue {
- public:
-  explicit FrameQueue(std::size_t capacity) : capacity_(capacity) {}
+/// Consecutive frames of a stream with their indices: a worker searches them in order, so that
+/// each frame's search can track the board from the frames before it.
+using FrameBatch = std::vector<std::pair<std::size_t, CameraFrame>>;
 
-  void push(std::size_t index, CameraFrame frame) {
+/// Frames per batch: the first frame of a batch is searched without a history, the others are
+/// tracked while the board stays in view. Fixed, so that what is found does not depend on the
+/// number of workers.
+constexpr std::size_t kFramesPerBatch = 16;
+
+/// A queue of batches with a fixed capacity: the reader waits while the workers are behind, so
+/// memory stays bounded whatever the length of the log.
+class BatchQueue {
+ public:
+  explicit BatchQueue(std::size_t capacity) : capacity_(capacity) {}
+
+  void push(FrameBatch batch) {
     std::unique_lock lock(mutex_);
     not_full_.wait(lock, [&] { return items_.size() < capacity_; });
-    items_.emplace_back(index, std::move(frame));
+    items_.push_back(std::move(batch));
     not_empty_.notify_one();
   }
 
-  /// The next frame, or nullopt once the queue is closed and empty.
-  std::optional<std::pair<std::size_t, CameraFrame>> pop() {
+  /// The next batch, or nullopt once the queue is closed and empty.
+  std::optional<FrameBatch> pop() {
     std::unique_lock lock(mutex_);
     not_empty_.wait(lock, [&] { return !items_.empty() || closed_; });
     if (items_.empty()) return std::nullopt;
-    auto item = std::move(items_.front());
+    FrameBatch batch = std::move(items_.front());
     items_.pop_front();
     not_full_.notify_one();
-    return item;
+    return batch;
   }
 
   void close() {
@@ -59,7 +68,7 @@ class FrameQueue {
   std::size_t capacity_;
   std::mutex mutex_;
   std::condition_variable not_full_, not_empty_;
-  std::deque<std::pair<std::size_t, CameraFrame>> items_;
+  std::deque<FrameBatch> items_;
   bool closed_ = false;
 };
 
@@ -161,39 +170,56 @@ Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_i
   out.observations.resize(total);
   std::mutex failure_mutex;
   std::atomic<std::size_t> done{0};
-  FrameQueue queue(static_cast<std::size_t>(2 * threads));
+  BatchQueue queue(static_cast<std::size_t>(threads));
   WrongTargetCheck wrong_target;
   std::atomic<bool> stop{false};
+  auto search = [&](std::size_t index, const CameraFrame& frame, calib::DetectionHistory history) {
+    Result<calib::TargetObservation> found = make_error(Errc::kInternal, "");
+    auto gray = gray_of(frame);
+    if (gray.ok()) {
+      const calib::GrayView view{gray->data.data(), gray->width, gray->height, 0};
+      history.t_ns = frame.t_ns;
+      found = detector.detect(view, history);
+      if (found.ok() && wrong_target.wants_description(index, !found->empty()) &&
+          wrong_target.add_description(detector.describe_other_target(view))) {
+        stop = true;
+      }
+    } else {
+      found = gray.error();
+    }
+    if (found.ok()) {
+      found->t_ns = frame.t_ns;
+      out.observations[index] = std::move(*found);
+      return true;
+    }
+    const std::lock_guard lock(failure_mutex);
+    if (out.failed++ == 0)
+      out.first_failure = "t_ns " + std::to_string(frame.t_ns) + ": " + found.error().message;
+    return false;
+  };
   auto work = [&] {
-    while (auto item = queue.pop()) {
-      auto& [index, frame] = *item;
-      Result<calib::TargetObservation> found = make_error(Errc::kInternal, "");
-      auto gray = gray_of(frame);
-      if (gray.ok()) {
-        const calib::GrayView view{gray->data.data(), gray->width, gray->height, 0};
-        found = detector.detect(view);
-        if (found.ok() && wrong_target.wants_description(index, !found->empty()) &&
-            wrong_target.add_description(detector.describe_other_target(view))) {
-          stop = true;
-        }
-      } else {
-        found = gray.error();
+    while (auto batch = queue.pop()) {
+      // The history: the detections of the one or two frames just before, in this batch.
+      const calib::TargetObservation* last = nullptr;
+      const calib::TargetObservation* before_last = nullptr;
+      std::size_t last_index = 0;
+      for (auto& [index, frame] : *batch) {
+        if (last != nullptr && index != last_index + 1) last = before_last = nullptr;
+        const bool ok = search(index, frame, {0, last, before_last});
+        const calib::TargetObservation* now =
+            ok && !out.observations[index].empty() ? &out.observations[index] : nullptr;
+        before_last = now != nullptr ? last : nullptr;
+        last = now;
+        last_index = index;
+        done.fetch_add(1);
       }
-      if (found.ok()) {
-        found->t_ns = frame.t_ns;
-        out.observations[index] = std::move(*found);
-      } else {
-        const std::lock_guard lock(failure_mutex);
-        if (out.failed++ == 0)
-          out.first_failure = "t_ns " + std::to_string(frame.t_ns) + ": " + found.error().message;
-      }
-      done.fetch_add(1);
     }
   };
   std::vector<std::thread> workers;
   for (int i = 0; i < threads; ++i) workers.emplace_back(work);
   std::size_t next = 0;
   bool ended_early = false;
+  FrameBatch batch;
   auto status = reader.for_each_frame(stream_id, log::kTimeMin, log::kTimeMax, [&](const CameraFrame& frame) {
     // Frames whose data failed its check are skipped by the reader: their slots stay empty.
     while (next < total && (*times)[next] < frame.t_ns) {
@@ -204,10 +230,16 @@ Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_i
       ended_early = true;
       return false;
     }
-    queue.push(next++, frame);
+    // Batches start at fixed indices (multiples of kFramesPerBatch).
+    if (!batch.empty() && next / kFramesPerBatch != batch.front().first / kFramesPerBatch) {
+      queue.push(std::move(batch));
+      batch.clear();
+    }
+    batch.emplace_back(next++, frame);
     report_progress(progress, static_cast<double>(done.load()), static_cast<double>(total));
     return true;
   });
+  if (!batch.empty() && !ended_early) queue.push(std::move(batch));
   queue.close();
   for (auto& w : workers) w.join();
   if (!status.ok()) return status.error();

@@ -10,6 +10,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -74,14 +75,23 @@ class CheckerboardDetector final : public TargetDetector {
   CheckerboardDetector(TargetDescription target, DetectionOptions options)
       : target_(std::move(target)), options_(options) {}
 
-  Result<TargetObservation> detect(const GrayView& image) const override {
-    return guarded([&] { return detect_impl(image); });
+  using TargetDetector::detect;
+  Result<TargetObservation> detect(const GrayView& image, const DetectionHistory& history) const override {
+    return guarded([&] { return detect_impl(image, history); });
   }
   const TargetDescription& target() const override { return target_; }
   std::string describe_other_target(const GrayView& image) const override;
 
  private:
-  Result<TargetObservation> detect_impl(const GrayView& image) const;
+  Result<TargetObservation> detect_impl(const GrayView& image, const DetectionHistory& history) const;
+  // The corners of the previous frames carried to this one (in id order), or nothing.
+  std::optional<std::vector<cv::Point2f>> track(const cv::Mat& image, const DetectionHistory& history) const;
+  // Whether corners in detected order look like this board: a smooth grid whose squares
+  // alternate dark and bright.
+  bool plausible(const cv::Mat& image, const std::vector<cv::Point2f>& px) const;
+  double max_second_difference(const std::vector<cv::Point2f>& px) const;
+  bool squares_alternate(const cv::Mat& image, const std::vector<cv::Point2f>& px) const;
+  double smallest_side(const std::vector<cv::Point2f>& px) const;
   // Detected index of target corner (r, c) under candidate ordering `turn` (quarter turns of
   // the index grid; 1 and 3 only for square boards).
   int index(int turn, int r, int c) const;
@@ -133,7 +143,8 @@ int CheckerboardDetector::outer_square_black(const cv::Mat& image, const std::ve
 }
 
 int CheckerboardDetector::resolve_turn(const cv::Mat& image, const std::vector<cv::Point2f>& px) const {
-  const int turns = target_.rows == target_.cols ? 4 : 2;
+  // Quarter turns 0..3 for a square board, half turns (0 and 2) otherwise.
+  const int turns = 4;
   const int step = target_.rows == target_.cols ? 1 : 2;
   // Orderings the printed pattern allows: the square outside corner 0 is black. When none
   // qualifies (lighting, glare), every ordering stays a candidate.
@@ -159,9 +170,7 @@ int CheckerboardDetector::resolve_turn(const cv::Mat& image, const std::vector<c
   return best;
 }
 
-int CheckerboardDetector::subpix_half_window(const std::vector<cv::Point2f>& px) const {
-  // Half the window stays below half the smallest square seen, so that no window reaches a
-  // neighbouring corner; capped at 5 (an 11 x 11 window), where the accuracy levels off.
+double CheckerboardDetector::smallest_side(const std::vector<cv::Point2f>& px) const {
   double side = 1e9;
   for (int r = 0; r + 1 < target_.rows; ++r) {
     for (int c = 0; c + 1 < target_.cols; ++c) {
@@ -172,66 +181,210 @@ int CheckerboardDetector::subpix_half_window(const std::vector<cv::Point2f>& px)
           {side, static_cast<double>(std::hypot(a.x, a.y)), static_cast<double>(std::hypot(b.x, b.y))});
     }
   }
-  return std::clamp(static_cast<int>(side * 0.45), 2, 5);
+  return side;
 }
 
-Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view) const {
+int CheckerboardDetector::subpix_half_window(const std::vector<cv::Point2f>& px) const {
+  // Half the window stays below half the smallest square seen, so that no window reaches a
+  // neighbouring corner; capped at 5 (an 11 x 11 window), where the accuracy levels off.
+  return std::clamp(static_cast<int>(smallest_side(px) * 0.45), 2, 5);
+}
+
+double CheckerboardDetector::max_second_difference(const std::vector<cv::Point2f>& px) const {
+  // Along rows and columns, relative to the local side: a corner that slid along an edge or
+  // jumped to a neighbour breaks the smoothness of the grid (lens distortion bends it far less:
+  // at most 0.14 of a side on strongly distorted frames, docs/targets.md).
+  const int cols = target_.cols;
+  double worst = 0.0;
+  auto second = [&](cv::Point2f a, cv::Point2f p, cv::Point2f b) {
+    const double side = 0.5 * (cv::norm(a - p) + cv::norm(b - p));
+    worst = std::max(worst, side > 0.0 ? cv::norm(a + b - 2.0f * p) / side : 1e9);
+  };
+  for (int r = 0; r < target_.rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      const cv::Point2f p = px[r * cols + c];
+      if (c > 0 && c + 1 < cols) second(px[r * cols + c - 1], p, px[r * cols + c + 1]);
+      if (r > 0 && r + 1 < target_.rows) second(px[(r - 1) * cols + c], p, px[(r + 1) * cols + c]);
+    }
+  }
+  return worst;
+}
+
+bool CheckerboardDetector::squares_alternate(const cv::Mat& image, const std::vector<cv::Point2f>& px) const {
+  // The grey level at the centre of every inner square; side by side squares must differ with
+  // the checkerboard's alternating sign, each pair by at least max(10 DN, a tenth of the
+  // median difference) (local contrast, so uneven lighting does not matter).
+  const int cols = target_.cols;
+  const int half = std::max(1, static_cast<int>(0.15 * smallest_side(px)));
+  const int sq_cols = cols - 1;
+  const int sq_rows = target_.rows - 1;
+  std::vector<double> level(static_cast<std::size_t>(sq_cols * sq_rows));
+  for (int r = 0; r < sq_rows; ++r) {
+    for (int c = 0; c < sq_cols; ++c) {
+      const cv::Point2f centre = 0.25f * (px[r * cols + c] + px[r * cols + c + 1] + px[(r + 1) * cols + c] +
+                                          px[(r + 1) * cols + c + 1]);
+      const double v = mean_around(image, centre, half);
+      if (v < 0) return false;
+      level[r * sq_cols + c] = v;
+    }
+  }
+  std::vector<double> d;
+  for (int r = 0; r < sq_rows; ++r) {
+    for (int c = 0; c < sq_cols; ++c) {
+      const double sign = (r + c) % 2 == 0 ? 1.0 : -1.0;
+      const double a = level[r * sq_cols + c];
+      if (c + 1 < sq_cols) d.push_back(sign * (a - level[r * sq_cols + c + 1]));
+      if (r + 1 < sq_rows) d.push_back(sign * (a - level[(r + 1) * sq_cols + c]));
+    }
+  }
+  if (d.empty()) return false;
+  std::vector<double> magnitude(d.size());
+  for (std::size_t k = 0; k < d.size(); ++k) magnitude[k] = std::abs(d[k]);
+  std::nth_element(magnitude.begin(), magnitude.begin() + magnitude.size() / 2, magnitude.end());
+  const double need = std::max(10.0, 0.1 * magnitude[magnitude.size() / 2]);
+  const double sign = d[0] < 0 ? -1.0 : 1.0;
+  return std::all_of(d.begin(), d.end(), [&](double v) { return sign * v >= need; });
+}
+
+bool CheckerboardDetector::plausible(const cv::Mat& image, const std::vector<cv::Point2f>& px) const {
+  constexpr double kMaxSecondDifference = 0.3;
+  return px.size() == static_cast<std::size_t>(target_.cols * target_.rows) &&
+         max_second_difference(px) <= kMaxSecondDifference && squares_alternate(image, px);
+}
+
+std::optional<std::vector<cv::Point2f>> CheckerboardDetector::track(const cv::Mat& image,
+                                                                    const DetectionHistory& history) const {
+  const std::size_t n = static_cast<std::size_t>(target_.cols * target_.rows);
+  const TargetObservation* last = history.last;
+  if (last == nullptr || last->ids.size() != n || last->width != image.cols || last->height != image.rows) {
+    return std::nullopt;
+  }
+  // Constant velocity from the two frames before, scaled by their spacing when the times are
+  // known (at most twice the last step: beyond that the prediction is a guess).
+  std::vector<cv::Point2f> predicted(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    predicted[k] = cv::Point2f(static_cast<float>(last->px[k].x()), static_cast<float>(last->px[k].y()));
+  }
+  const TargetObservation* before = history.before_last;
+  if (before != nullptr && before->ids.size() == n) {
+    double scale = 1.0;
+    if (history.t_ns > last->t_ns && last->t_ns > before->t_ns) {
+      scale = std::min(2.0, static_cast<double>(history.t_ns - last->t_ns) /
+                                static_cast<double>(last->t_ns - before->t_ns));
+    }
+    for (std::size_t k = 0; k < n; ++k) {
+      const Eigen::Vector2d p = last->px[k] + scale * (last->px[k] - before->px[k]);
+      predicted[k] = cv::Point2f(static_cast<float>(p.x()), static_cast<float>(p.y()));
+    }
+  }
+  // A wide window pulls each predicted corner onto the corner near it, the usual one refines it.
+  const double side = smallest_side(predicted);
+  const int wide = std::clamp(static_cast<int>(0.45 * side), 3, 12);
+  // The ring of squares around the corners must stay in view (a square's side from the edge):
+  // with part of it out, a grid slid by whole squares can pass the checks below.
+  const double margin = std::max(static_cast<double>(wide + 1), side);
+  for (const cv::Point2f& p : predicted) {
+    if (p.x < margin || p.y < margin || p.x > image.cols - 1 - margin || p.y > image.rows - 1 - margin) {
+      return std::nullopt;  // near or beyond the edge: the board may be leaving the view
+    }
+  }
+  std::vector<cv::Point2f> px = predicted;
+  cv::cornerSubPix(image, px, cv::Size(wide, wide), cv::Size(-1, -1), kSubpixCriteria);
+  const int half = subpix_half_window(px);
+  cv::cornerSubPix(image, px, cv::Size(half, half), cv::Size(-1, -1), kSubpixCriteria);
+  // Checks: no corner went far from its prediction or left the image, the grid kept its shape
+  // and size, its squares alternate, and the square outside corner 0 is still black (a grid
+  // slid by one square fails one of these).
+  const double max_move = std::max(2.0, 0.6 * side);
+  for (std::size_t k = 0; k < n; ++k) {
+    if (cv::norm(px[k] - predicted[k]) > max_move || px[k].x < 0 || px[k].y < 0 || px[k].x > image.cols - 1 ||
+        px[k].y > image.rows - 1) {
+      return std::nullopt;
+    }
+  }
+  // A tracked grid is held to a smoother shape than a found one (0.15 of a side; lens distortion
+  // bends the grid by at most 0.14 on the strongly distorted frames of docs/benchmarks.md): a
+  // corner the refinement dragged onto something else is a search, not a track.
+  constexpr double kMaxTrackedSecondDifference = 0.15;
+  if (smallest_side(px) < 0.5 * side || max_second_difference(px) > kMaxTrackedSecondDifference ||
+      !plausible(image, px) || outer_square_black(image, px, 0) == 0) {
+    return std::nullopt;
+  }
+  return px;
+}
+
+Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view,
+                                                            const DetectionHistory& history) const {
   IMUCAL_TRY(check_image(view));
   TargetObservation obs = empty_observation(view);
   const cv::Mat image = as_mat(view);
   const cv::Size pattern(target_.cols, target_.rows);
-  std::vector<cv::Point2f> px;
-  const bool sector_based = options_.checkerboard_method == CheckerboardMethod::kSectorBased;
-  if (sector_based) {
-    if (!cv::findChessboardCornersSB(image, pattern, px,
-                                     cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_ACCURACY)) {
-      return obs;
-    }
-  } else {
-    // The quad search with CALIB_CB_FAST_CHECK finds most boards in about a millisecond and
-    // rejects empty frames as fast. Its quick pre-test also rejects boards that are small, blurred
-    // or strongly distorted (half the frames of the simulated fixture that show the whole board),
-    // but without it the quad search can take seconds on a frame full of texture and no board
-    // (6 s of CPU on a noise frame at 752x480). So a frame the first search misses is shown to the
-    // sector-based detector, whose cost is bounded (tens of ms); only when that finds the board
-    // does the quad search run again without the pre-test, and its corners (in the ordering the
-    // id resolution below expects) are used. docs/targets.md has the rates and costs.
-    const int flags = cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE;
-    if (!cv::findChessboardCorners(image, pattern, px, flags | cv::CALIB_CB_FAST_CHECK)) {
-      std::vector<cv::Point2f> sector_based_corners;
-      if (!cv::findChessboardCornersSB(image, pattern, sector_based_corners, cv::CALIB_CB_NORMALIZE_IMAGE) ||
-          !cv::findChessboardCorners(image, pattern, px, flags)) {
-        return obs;
+  const std::size_t n = static_cast<std::size_t>(target_.cols * target_.rows);
+  auto fill = [&](const std::vector<cv::Point2f>& px, int turn) {
+    obs.ids.resize(n);
+    obs.px.resize(n);
+    for (int r = 0; r < target_.rows; ++r) {
+      for (int c = 0; c < target_.cols; ++c) {
+        const int id = r * target_.cols + c;
+        const cv::Point2f& p = px[index(turn, r, c)];
+        obs.ids[id] = id;
+        obs.px[id] = Eigen::Vector2d(p.x, p.y);
       }
     }
+  };
+  const bool sector_based = options_.checkerboard_method == CheckerboardMethod::kSectorBased;
+  if (!sector_based) {
+    // The board of the frames before, carried over: the ids stay those of the first detection.
+    if (auto tracked = track(image, history)) {
+      fill(*tracked, 0);
+      return obs;
+    }
   }
-  if (px.size() != static_cast<std::size_t>(target_.cols * target_.rows)) return obs;
   // OpenCV returns the rows with x -> y turning clockwise in the image (the board's z axis
   // away from the camera), the convention kept here; a mirrored result is turned back.
-  const std::size_t n = px.size();
-  const cv::Point2f quad[4] = {px[0], px[target_.cols - 1], px[n - 1], px[n - target_.cols]};
-  double area = 0.0;
-  for (int i = 0; i < 4; ++i) area += quad[i].x * quad[(i + 1) % 4].y - quad[(i + 1) % 4].x * quad[i].y;
-  if (area < 0) {
-    for (int r = 0; r < target_.rows; ++r) {
-      std::reverse(px.begin() + r * target_.cols, px.begin() + (r + 1) * target_.cols);
+  auto unmirror = [&](std::vector<cv::Point2f>* px) {
+    const cv::Point2f quad[4] = {(*px)[0], (*px)[target_.cols - 1], (*px)[n - 1], (*px)[n - target_.cols]};
+    double area = 0.0;
+    for (int i = 0; i < 4; ++i) area += quad[i].x * quad[(i + 1) % 4].y - quad[(i + 1) % 4].x * quad[i].y;
+    if (area < 0) {
+      for (int r = 0; r < target_.rows; ++r) {
+        std::reverse(px->begin() + r * target_.cols, px->begin() + (r + 1) * target_.cols);
+      }
     }
-  }
-  if (options_.subpixel && !sector_based) {
-    const int half = subpix_half_window(px);
-    cv::cornerSubPix(image, px, cv::Size(half, half), cv::Size(-1, -1), kSubpixCriteria);
-  }
-  const int turn = resolve_turn(image, px);
-  obs.ids.resize(n);
-  obs.px.resize(n);
-  for (int r = 0; r < target_.rows; ++r) {
-    for (int c = 0; c < target_.cols; ++c) {
-      const int id = r * target_.cols + c;
-      const cv::Point2f& p = px[index(turn, r, c)];
-      obs.ids[id] = id;
-      obs.px[id] = Eigen::Vector2d(p.x, p.y);
+  };
+  std::vector<cv::Point2f> px;
+  if (sector_based) {
+    if (!cv::findChessboardCornersSB(image, pattern, px,
+                                     cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_ACCURACY) ||
+        px.size() != n) {
+      return obs;
     }
+    unmirror(&px);
+  } else {
+    // The search, each step only for what the one before missed, every result checked:
+    //  1. the quad search on OpenCV's histogram threshold, without its pre-test (which rejects
+    //     boards the search finds, and costs more than it saves): a few ms;
+    //  2. the sector-based detector: tens to a few hundred ms, bounded, and it finds the boards
+    //     the pre-test rejects (small, blurred, strongly distorted).
+    // The quad search's adaptive-threshold passes are not used: on textured, noisy frames they
+    // cost up to seconds a frame and found no board the two steps miss (docs/targets.md).
+    auto refined = [&](std::vector<cv::Point2f>* corners) {
+      if (corners->size() != n) return false;
+      unmirror(corners);
+      if (options_.subpixel) {
+        const int half = subpix_half_window(*corners);
+        cv::cornerSubPix(image, *corners, cv::Size(half, half), cv::Size(-1, -1), kSubpixCriteria);
+      }
+      return plausible(image, *corners);
+    };
+    bool found = cv::findChessboardCorners(image, pattern, px, 0) && refined(&px);
+    if (!found) {
+      px.clear();
+      found = cv::findChessboardCornersSB(image, pattern, px, cv::CALIB_CB_NORMALIZE_IMAGE) && refined(&px);
+    }
+    if (!found) return obs;
   }
+  fill(px, resolve_turn(image, px));
   return obs;
 }
 
@@ -341,7 +494,10 @@ class AprilGridDetector final : public TargetDetector {
   AprilGridDetector(TargetDescription target, DetectionOptions options)
       : target_(std::move(target)), options_(options), curve_(separation_curve()) {}
 
-  Result<TargetObservation> detect(const GrayView& image) const override {
+  using TargetDetector::detect;
+  // Tags are found anew in every frame (a few ms): the history is not needed.
+  Result<TargetObservation> detect(const GrayView& image,
+                                   const DetectionHistory& /*history*/) const override {
     return guarded([&] { return detect_impl(image); });
   }
   const TargetDescription& target() const override { return target_; }

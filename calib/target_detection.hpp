@@ -35,7 +35,9 @@ namespace imucal::calib {
 /// Raised whenever a change to the detectors changes what they find, so that detections stored in
 /// a log by an earlier detector (app/camera_results.hpp detection_key) are not reused.
 /// 2: the checkerboard search falls back to the sector-based detector.
-inline constexpr int kTargetDetectorRevision = 2;
+/// 3: the checkerboard is tracked from the previous frames, searched without the adaptive
+///    threshold, and every board is checked (grid shape, alternating squares).
+inline constexpr int kTargetDetectorRevision = 3;
 
 /// The target points one image shows.
 struct TargetObservation {
@@ -45,6 +47,16 @@ struct TargetObservation {
   std::vector<int> ids;             // indices into TargetDescription::points(), ascending
   std::vector<Eigen::Vector2d> px;  // the corners, pixels (integer = pixel centre, OpenCV)
   bool empty() const { return ids.empty(); }
+};
+
+/// What the caller knows from the frames just before this one (same camera, in time order). The
+/// checkerboard detector first tracks the board from there (a constant-velocity prediction of
+/// every corner, refined and checked), which costs well under a millisecond, and searches the
+/// whole image only when that fails. Empty: search.
+struct DetectionHistory {
+  TimeNs t_ns = 0;                                 // this frame's time (0: frames evenly spaced)
+  const TargetObservation* last = nullptr;         // the previous frame's detection, or null
+  const TargetObservation* before_last = nullptr;  // the one before it, or null
 };
 
 /// A grey image borrowed for one call.
@@ -57,8 +69,8 @@ struct GrayView {
 
 /// OpenCV's two checkerboard detectors (docs/targets.md compares them).
 enum class CheckerboardMethod {
-  kClassic,      // findChessboardCorners + cornerSubPix: the default, measured faster
-  kSectorBased,  // findChessboardCornersSB (ACCURACY), no further refinement
+  kClassic,      // tracking, findChessboardCorners, then findChessboardCornersSB; cornerSubPix
+  kSectorBased,  // findChessboardCornersSB (ACCURACY) alone, no further refinement
 };
 
 struct DetectionOptions {
@@ -85,7 +97,10 @@ class TargetDetector {
   [[nodiscard]] static Result<std::unique_ptr<TargetDetector>> create(const TargetDescription& target,
                                                                       const DetectionOptions& options = {});
   /// Finds the target; an image without it gives an empty observation, not an error.
-  [[nodiscard]] virtual Result<TargetObservation> detect(const GrayView& image) const = 0;
+  [[nodiscard]] Result<TargetObservation> detect(const GrayView& image) const { return detect(image, {}); }
+  /// The same, tracking from the frames before when `history` has them.
+  [[nodiscard]] virtual Result<TargetObservation> detect(const GrayView& image,
+                                                         const DetectionHistory& history) const = 0;
   virtual const TargetDescription& target() const = 0;
   /// For an image in which detect() found nothing: what target of the same kind it seems to show
   /// instead, in words ("a checkerboard of 7 x 6 inner corners"), when that differs from the

@@ -94,10 +94,6 @@ Result<sqlite::Db> open_file(const std::string& path, bool write, FileKind kind)
   return db;
 }
 
-Result<sqlite::Db> open_log(const std::string& path, bool write) {
-  return open_file(path, write, FileKind::kLog);
-}
-
 bool has_table(sqlite3* db, const char* name) {
   int rc = 0;
   Stmt stmt = sqlite::prepare(db, "SELECT 1 FROM sqlite_schema WHERE type='table' AND name=?1", &rc);

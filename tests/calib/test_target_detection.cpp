@@ -301,6 +301,10 @@ TEST(CheckerboardDetection, FindsTheBoardInTheFixtureFrames) {
   int frames = 0, whole_board = 0, found = 0, matched = 0;
   double err_sum = 0.0;
   std::size_t err_n = 0;
+  // Each frame twice: searched, and tracked from the two frames before (as calibrate camera
+  // does within its batches); both must find the board with the truth's ids and corners.
+  TargetObservation last, before_last;
+  int tracked_found = 0, tracked_matched = 0;
   auto visited = (*reader)->for_each_frame(*cam_id, log::kTimeMin, log::kTimeMax, [&](const CameraFrame& f) {
     auto image = log::decode_image(f.data, log::ReadMode::kGray8);
     EXPECT_TRUE(image.ok()) << image.error().message;
@@ -326,8 +330,30 @@ TEST(CheckerboardDetection, FindsTheBoardInTheFixtureFrames) {
       EXPECT_LT(worst, 0.5) << "frame " << frames << ": a corner is off or the ids are mis-ordered";
       matched += worst < 0.5 ? 1 : 0;
     }
+    DetectionHistory history;
+    history.t_ns = f.t_ns;
+    history.last = last.empty() ? nullptr : &last;
+    history.before_last = before_last.empty() || last.empty() ? nullptr : &before_last;
+    auto tracked =
+        det->detect(GrayView{image->data.data(), image->width, image->height, image->row_bytes()}, history);
+    EXPECT_TRUE(tracked.ok());
+    if (tracked.ok() && !tracked->empty()) {
+      ++tracked_found;
+      double worst = 0.0;
+      for (std::size_t i = 0; i < tracked->ids.size(); ++i)
+        worst = std::max(worst, (tracked->px[i] - truth.px[tracked->ids[i]]).norm());
+      EXPECT_LT(worst, 0.5) << "frame " << frames << " tracked: a corner is off or the ids are mis-ordered";
+      tracked_matched += worst < 0.5 ? 1 : 0;
+      tracked->t_ns = f.t_ns;
+      before_last = last;
+      last = *tracked;
+    } else {
+      last = before_last = TargetObservation{};
+    }
     return ++frames < kFrames;
   });
+  EXPECT_EQ(tracked_found, kFrames);
+  EXPECT_EQ(tracked_matched, tracked_found);
   ASSERT_TRUE(visited.ok()) << visited.error().message;
   ASSERT_EQ(frames, kFrames);
   EXPECT_EQ(whole_board, kFrames);
@@ -335,6 +361,38 @@ TEST(CheckerboardDetection, FindsTheBoardInTheFixtureFrames) {
   EXPECT_EQ(matched, found);
   ASSERT_GT(err_n, 0u);
   EXPECT_LT(err_sum / static_cast<double>(err_n), 0.1);
+}
+
+// A history that is wrong (the board one square off, or somewhere else) is not followed: the
+// frame is searched and the board reported with its own ids.
+TEST(CheckerboardDetection, AWrongHistoryIsNotFollowed) {
+  const TargetDescription t = checkerboard(7, 6);
+  auto r = make_renderer(radtan_camera(), t);
+  auto det = make_detector(t);
+  ASSERT_TRUE(r && det);
+  const Frame f = render(*r, board_pose(t, 0.2, Eigen::Vector3d(0.05, 0.02, 0.0), 0.5));
+  auto truth = det->detect(view_of(f.image));
+  ASSERT_TRUE(truth.ok() && !truth->empty());
+  // One square along the board's x axis: every corner lands on a neighbour.
+  TargetObservation shifted = *truth;
+  for (int r0 = 0; r0 < t.rows; ++r0) {
+    for (int c = 0; c + 1 < t.cols; ++c) shifted.px[r0 * t.cols + c] = truth->px[r0 * t.cols + c + 1];
+    const int e = r0 * t.cols + t.cols - 1;
+    shifted.px[e] = 2.0 * truth->px[e] - truth->px[e - 1];
+  }
+  TargetObservation elsewhere = *truth;
+  for (auto& p : elsewhere.px) p += Eigen::Vector2d(23.0, -17.0);
+  for (const TargetObservation* wrong : {&shifted, &elsewhere}) {
+    DetectionHistory h;
+    h.last = wrong;
+    auto obs = det->detect(view_of(f.image), h);
+    ASSERT_TRUE(obs.ok());
+    ASSERT_EQ(obs->ids, truth->ids);
+    double worst = 0.0;
+    for (std::size_t i = 0; i < obs->px.size(); ++i)
+      worst = std::max(worst, (obs->px[i] - truth->px[i]).norm());
+    EXPECT_LT(worst, 0.05);
+  }
 }
 
 TEST(TargetDetection, RefusesBadInput) {
