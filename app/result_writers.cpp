@@ -450,6 +450,7 @@ Status check_output(const std::string& path, const OutputPolicy& policy) {
   }
   if (fs::is_directory(path, ec))
     return make_error(Errc::kInvalidArgument, path + " is a folder, not a file");
+  IMUCAL_TRY(log::check_replaceable(path));
   if (!policy.overwrite && fs::exists(path, ec)) return make_error(Errc::kAlreadyExists, path + " exists");
   return {};
 }

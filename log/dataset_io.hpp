@@ -72,6 +72,12 @@ class PendingOutput {
   bool done_ = false;
 };
 
+/// Refuses an output path that exists and is not a regular file (a device, a FIFO, a socket, a
+/// folder; a symbolic link is judged by what it points to): such a path is never replaced, with
+/// --force or not (kInvalidArgument). A log another process is writing (a recording: its writer
+/// holds a flock on it) is refused too (kIo, naming the process). A missing path is fine.
+[[nodiscard]] Status check_replaceable(const std::string& path);
+
 /// Renames `from` to `to`; unless `replace`, fails with kAlreadyExists when `to` exists, atomically
 /// (renameat2 RENAME_NOREPLACE, or link + unlink where the filesystem lacks it), so of two
 /// processes writing one output the second is refused instead of replacing the first's.

@@ -1,6 +1,7 @@
 // Outputs that appear only when complete: write under a temporary name, rename on success.
 
 #include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -14,6 +15,7 @@
 #include <system_error>
 
 #include "log/dataset_io.hpp"
+#include "log/session_log_sqlite.hpp"
 
 namespace imucal::log {
 namespace fs = std::filesystem;
@@ -75,6 +77,7 @@ Result<PendingOutput> PendingOutput::begin(const std::string& final_path, Kind k
     if (!force && !empty_dir) {
       return make_error(Errc::kAlreadyExists, "output " + final_path + " already exists");
     }
+    if (kind == Kind::kFile) IMUCAL_TRY(check_replaceable(final_path));
   }
   std::string temp = final_path;
   while (!temp.empty() && temp.back() == '/') temp.pop_back();
@@ -134,7 +137,31 @@ Status PendingOutput::commit() {
   return {};
 }
 
+Status check_replaceable(const std::string& path) {
+  std::error_code ec;
+  const auto status = fs::status(path, ec);
+  if (!fs::exists(status)) return {};
+  if (!fs::is_regular_file(status)) {
+    return make_error(Errc::kInvalidArgument,
+                      path +
+                          " exists and is not a regular file (a device, FIFO, socket or folder); it is never "
+                          "replaced, --force or not: write the output to a file");
+  }
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  if (fd < 0) return {};
+  Status result;
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0 && errno == EWOULDBLOCK) {
+    result = make_error(Errc::kIo, path + " is being written by " + sqlite::lock_holder(fd) +
+                                       " (a recording in progress); stop it first, or write to another file");
+  } else {
+    ::flock(fd, LOCK_UN);
+  }
+  ::close(fd);
+  return result;
+}
+
 Status rename_into_place(const std::string& from, const std::string& to, bool replace) {
+  if (replace) IMUCAL_TRY(check_replaceable(to));
   int rc = replace ? ::rename(from.c_str(), to.c_str())
                    : ::renameat2(AT_FDCWD, from.c_str(), AT_FDCWD, to.c_str(), RENAME_NOREPLACE);
   if (rc != 0 && !replace && errno == EINVAL) {  // a filesystem without RENAME_NOREPLACE

@@ -29,6 +29,7 @@
 #include <utility>
 
 #include "core/version.hpp"
+#include "log/dataset_io.hpp"
 #include "log/session_log.hpp"
 
 namespace imucal::log {
@@ -596,6 +597,8 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
 
 }  // namespace
 
+std::string sqlite::lock_holder(int fd) { return held_by(fd); }
+
 Result<std::unique_ptr<SessionLogWriter>> SessionLogWriter::create(const std::string& path,
                                                                    const SessionLogWriterOptions& options) {
   namespace fs = std::filesystem;
@@ -612,6 +615,7 @@ Result<std::unique_ptr<SessionLogWriter>> SessionLogWriter::create(const std::st
     if (fs::is_directory(status)) {
       return make_error(Errc::kInvalidArgument, "session log path " + path + " is a directory");
     }
+    IMUCAL_TRY(check_replaceable(path));
   }
   auto lock = lock_for_writing(path, options.overwrite);
   if (!lock.ok()) return lock.error();

@@ -111,4 +111,8 @@ inline bool is_corruption(int rc) {
          primary == SQLITE_FORMAT || primary == SQLITE_RANGE;
 }
 
+/// Who holds the writer's flock on the file open as `fd`: "process 123 (imucal)", or "another
+/// process" when /proc/locks does not say.
+std::string lock_holder(int fd);
+
 }  // namespace imucal::log::sqlite

@@ -1,7 +1,12 @@
+#include <fcntl.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <sys/file.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
+#include <csignal>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -70,6 +75,61 @@ TEST(CliImport, AsciiRawAndSi) {
   EXPECT_EQ(wrong.exit_code, cli::kExitInput);
   EXPECT_THAT(wrong.err, HasSubstr("--units si"));
   EXPECT_FALSE(fs::exists(dir / "w.imulog"));
+}
+
+// An output path that is not a regular file (here a FIFO; a device node the same) is never
+// replaced, --force or not, by any command that writes; and a log that a recorder is writing
+// (its writer's lock held) is not replaced by an import.
+TEST(CliImport, OutputsThatAreNotFilesOrAreLiveLogsAreRefused) {
+  const fs::path dir = test::scratch_dir();
+  write_ascii(dir / "si", true);
+  const std::string fifo = (dir / "fifo").string();
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  const std::vector<std::string> ascii = {
+      "import",  "ascii", "--accel", (dir / "si/acc.txt").string(), "--gyro", (dir / "si/gyr.txt").string(),
+      "--units", "si"};
+  auto with = [](std::vector<std::string> args, std::initializer_list<std::string> more) {
+    args.insert(args.end(), more);
+    return args;
+  };
+  for (const auto& args :
+       {with(ascii, {"-o", fifo, "--force"}),
+        std::vector<std::string>{"sim", "still", "--seed", "3", "--duration", "1", "-o", fifo, "--force"}}) {
+    const auto r = test::run_cli(args);
+    EXPECT_EQ(r.exit_code, cli::kExitUsage) << args[0] << " " << args[1] << ": " << r.err;
+    EXPECT_THAT(r.err, HasSubstr("not a regular file"));
+    struct stat st {};
+    ASSERT_EQ(::stat(fifo.c_str(), &st), 0);
+    EXPECT_TRUE(S_ISFIFO(st.st_mode)) << "the FIFO was replaced by " << args[0] << " " << args[1];
+  }
+  // A result file (calibrate static's -o goes through the same check as every result writer).
+  const std::string log = (dir / "a.imulog").string();
+  ASSERT_EQ(test::run_cli(with(ascii, {"-o", log})).exit_code, 0);
+  auto r = test::run_cli({"calibrate", "static", log, "-o", fifo, "--force"});
+  EXPECT_EQ(r.exit_code, cli::kExitUsage) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("not a regular file"));
+
+  // A live log: a child holds the writer's lock (as `record` does) while import is asked to
+  // replace it with --force.
+  const std::string before = test::read_file(log);
+  int ready[2];
+  ASSERT_EQ(::pipe(ready), 0);
+  const pid_t child = ::fork();
+  if (child == 0) {
+    const int fd = ::open(log.c_str(), O_RDONLY);
+    if (fd < 0 || ::flock(fd, LOCK_EX) != 0) _exit(1);
+    (void)!::write(ready[1], "x", 1);
+    ::sleep(30);
+    _exit(0);
+  }
+  char c = 0;
+  ASSERT_EQ(::read(ready[0], &c, 1), 1);
+  r = test::run_cli(with(ascii, {"-o", log, "--force"}));
+  ::kill(child, SIGKILL);
+  ::waitpid(child, nullptr, 0);
+  EXPECT_EQ(r.exit_code, cli::kExitIo) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("is being written by process"));
+  EXPECT_EQ(test::read_file(log), before) << "the live log was replaced";
 }
 
 TEST(CliImport, CsvAndOverwriteRefusal) {
