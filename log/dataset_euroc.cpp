@@ -481,6 +481,9 @@ std::map<int, std::string> folder_names(const std::map<int, Info>& streams, cons
 
 namespace {
 
+/// The file an export writes beside mav0/, by which --force knows a folder it may replace.
+constexpr const char* kExportMarker = "imucal-export.txt";
+
 /// Refuses what must not be exported or replaced, before anything is written.
 Status check_export(const SessionLogReader& r, const std::string& log_path, const std::string& dir,
                     const OutputOptions& options, bool allow_damaged) {
@@ -500,20 +503,14 @@ Status check_export(const SessionLogReader& r, const std::string& log_path, cons
     }
     if (p == p.root_path()) break;
   }
-  // Replacing is allowed only for what an export writes: a folder holding mav0/ and nothing else.
-  if (options.force && fs::is_directory(dir, ec) && !fs::is_empty(dir, ec)) {
-    std::string other;
-    for (const auto& e : fs::directory_iterator(dir, ec)) {
-      if (e.path().filename() == "mav0" && e.is_directory(ec)) continue;
-      other = e.path().filename().string();
-      break;
-    }
-    if (!other.empty() || !fs::is_directory(fs::path(dir) / "mav0", ec)) {
-      return make_error(Errc::kInvalidArgument,
-                        dir + " exists and is not an EuRoC export (" +
-                            (other.empty() ? std::string("no mav0/ folder") : "it holds " + other) +
-                            "); refusing to replace it even when replacing is allowed");
-    }
+  // --force replaces only an earlier export (it carries kExportMarker): a folder from anywhere
+  // else (a downloaded dataset with its ground truth, whatever its layout) is never deleted.
+  if (options.force && fs::is_directory(dir, ec) && !fs::is_empty(dir, ec) &&
+      !fs::exists(fs::path(dir) / kExportMarker, ec)) {
+    return make_error(
+        Errc::kInvalidArgument,
+        dir + " is not an earlier imucal export (it has no " + std::string(kExportMarker) +
+            "); it is not replaced, --force or not: delete it yourself or export to another folder");
   }
   if (r.imu_streams().empty() && r.camera_streams().empty()) {
     return make_error(Errc::kInsufficientData, log_path + " has no IMU or camera streams to export");
@@ -659,6 +656,9 @@ Result<ExportSummary> export_euroc(const std::string& log_path, const std::strin
   }
   IMUCAL_TRY(
       write_text(mav0 / "body.yaml", "comment: 'Body frame: identity with every sensor (unknown here)'\n"));
+  IMUCAL_TRY(write_text(fs::path(out->temp_path()) / kExportMarker,
+                        "Written by imucal export euroc from " + log_path +
+                            ". imucal export --force replaces a folder only when it holds this file.\n"));
   // Damage the open did not see shows while reading (a frame's image failing its CRC is
   // skipped): the export would hold less than the log lists.
   if (r.health().damaged && !damaged_at_open) {

@@ -198,6 +198,17 @@ TEST(CliImport, EurocRoundTripThroughTheCli) {
   auto exp2 = test::run_cli({"export", "euroc", (dir / "a.imulog").string(), (dir / "out").string()});
   EXPECT_EQ(exp2.exit_code, cli::kExitUsage);
   EXPECT_THAT(exp2.err, HasSubstr("--force"));
+  // --force replaces an earlier export, never a dataset from elsewhere (here the input folder
+  // with a ground-truth folder beside the IMU's).
+  exp2 = test::run_cli({"export", "euroc", (dir / "a.imulog").string(), (dir / "out").string(), "--force"});
+  EXPECT_EQ(exp2.exit_code, 0) << exp2.err;
+  write(dir / "in/mav0/state_groundtruth_estimate0/data.csv", "#timestamp\n1\n");
+  auto downloaded =
+      test::run_cli({"export", "euroc", (dir / "a.imulog").string(), (dir / "in").string(), "--force"});
+  EXPECT_EQ(downloaded.exit_code, cli::kExitUsage) << downloaded.err;
+  EXPECT_THAT(downloaded.err, HasSubstr("not an earlier imucal export"));
+  EXPECT_TRUE(fs::exists(dir / "in/mav0/state_groundtruth_estimate0/data.csv"));
+  EXPECT_TRUE(fs::exists(dir / "in/mav0/imu0/data.csv"));
   auto missing =
       test::run_cli({"import", "euroc", (dir / "nope").string(), "-o", (dir / "n.imulog").string()});
   EXPECT_EQ(missing.exit_code, cli::kExitInput);

@@ -273,12 +273,12 @@ TEST(DatasetEuroc, RefusesToOverwriteUnlessForced) {
   ASSERT_TRUE(import_euroc((dir / "in").string(), (dir / "x.imulog").string(), force).ok());
   EXPECT_EQ(read_contents((dir / "x.imulog").string()).imu.at("imu0").size(), 200u);
 
-  // Export: an existing dataset folder is replaced only with force; any other folder never.
+  // Export: an earlier export is replaced only with force; any other folder never.
   fs::create_directories(dir / "other");
   test::write_file(dir / "other/notes.txt", "keep me");
   auto into_other = export_euroc((dir / "x.imulog").string(), (dir / "other").string(), force);
   ASSERT_FALSE(into_other.ok());
-  EXPECT_THAT(into_other.error().message, HasSubstr("is not an EuRoC export"));
+  EXPECT_THAT(into_other.error().message, HasSubstr("is not an earlier imucal export"));
   EXPECT_EQ(test::read_file((dir / "other/notes.txt").string()), "keep me");
   // A plain file named mav0 does not make a folder an export, nor does mav0/ beside other files.
   test::write_file(dir / "other/mav0", "not a folder");
@@ -289,8 +289,15 @@ TEST(DatasetEuroc, RefusesToOverwriteUnlessForced) {
   fs::create_directories(dir / "other/mav0");
   auto mixed = export_euroc((dir / "x.imulog").string(), (dir / "other").string(), force);
   ASSERT_FALSE(mixed.ok());
-  EXPECT_THAT(mixed.error().message, HasSubstr("it holds notes.txt"));
+  EXPECT_THAT(mixed.error().message, HasSubstr("is not an earlier imucal export"));
   EXPECT_EQ(test::read_file((dir / "other/notes.txt").string()), "keep me");
+  // A downloaded dataset whose only top-level folder is mav0/ (with its ground truth) is not an
+  // export either.
+  test::write_file(dir / "downloaded/mav0/state_groundtruth_estimate0/data.csv", "#t\n");
+  test::write_file(dir / "downloaded/mav0/imu0/data.csv", "#t\n");
+  auto downloaded = export_euroc((dir / "x.imulog").string(), (dir / "downloaded").string(), force);
+  ASSERT_FALSE(downloaded.ok());
+  EXPECT_TRUE(fs::exists(dir / "downloaded/mav0/state_groundtruth_estimate0/data.csv"));
   // Never into the folder that holds the log, even when it looks like an export.
   fs::create_directories(dir / "logdir/mav0");
   fs::copy_file(dir / "x.imulog", dir / "logdir/x.imulog");
