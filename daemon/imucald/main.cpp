@@ -63,12 +63,19 @@ int main(int argc, char** argv) {
   app.add_flag("-q,--quiet", quiet, "Log warnings and errors only");
   CLI11_PARSE(app, argc, argv);
   if (quiet) spdlog::set_level(spdlog::level::warn);
-  try {
-    o.socket_mode = static_cast<unsigned>(std::stoul(mode, nullptr, 8));
-  } catch (const std::exception&) {
-    std::fprintf(stderr, "imucald: --socket-mode '%s' is not an octal mode like 0660\n", mode.c_str());
+  // Octal digits only, permission bits only (no setuid, setgid or sticky bit), and read and
+  // write for the owner: a socket its owner cannot use is a service nobody can reach.
+  const bool octal =
+      !mode.empty() && mode.size() <= 4 && mode.find_first_not_of("01234567") == std::string::npos;
+  const unsigned value = octal ? static_cast<unsigned>(std::stoul(mode, nullptr, 8)) : 0u;
+  if (!octal || value > 0777u || (value & 0600u) != 0600u) {
+    std::fprintf(stderr,
+                 "imucald: --socket-mode '%s' is not a socket mode: give octal permission bits like 0660 "
+                 "(at most 0777, with read and write for the owner)\n",
+                 mode.c_str());
     return 2;
   }
+  o.socket_mode = value;
   if (start_opt->count() > 0) {
     std::vector<std::string> steps;
     if (start != "default") {

@@ -234,6 +234,20 @@ TEST(Imucald, ReplayRefusesALogThatIsNoServiceSession) {
   EXPECT_TRUE(has(r.err, "no service session")) << r.err;
 }
 
+// A socket mode that is not octal permission bits with read and write for the owner is refused
+// before anything starts (a socket nobody can use, setuid bits, trailing garbage).
+TEST(Imucald, SocketModesThatAreNotPermissionBitsAreRefused) {
+  const std::string dir = test::scratch_dir();
+  for (const char* mode : {"0999", "7777", "0666x", "", "0066", "12345"}) {
+    const std::string cmd = std::string(IMUCALD_PATH) + " --config " + dir + "/none.yaml --socket " + dir +
+                            "/s.sock --state-dir " + dir + " --socket-mode '" + mode + "' 2>" + dir + "/err";
+    const int rc = std::system(cmd.c_str());
+    EXPECT_EQ(WEXITSTATUS(rc), 2) << mode;
+    EXPECT_TRUE(has(test::read_file(dir + "/err"), "is not a socket mode"))
+        << mode << ": " << test::read_file(dir + "/err");
+  }
+}
+
 TEST(Imucald, AMissingConfigurationIsAClearError) {
   const std::string dir = test::scratch_dir();
   const std::string cmd = std::string(IMUCALD_PATH) + " --config " + dir + "/none.yaml --socket " + dir +
