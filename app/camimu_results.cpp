@@ -188,6 +188,7 @@ json camera_json(const CamImuCameraResult& c, const CamImuCameraReport* in) {
             {"frames", c.frames},
             {"corners", c.corners},
             {"outlier_corners", c.outlier_corners},
+            {"rejected_frames_t_ns", c.rejected_frames},
             {"reprojection_rms_px", c.reprojection_rms_px},
             {"corner_sigma_px", c.corner_sigma_px}};
   // Residuals as a flat [dx0, dy0, dx1, ...] list, to 1e-4 px (far below any corner's noise).
@@ -326,6 +327,9 @@ CamImuCameraResult read_camera(const json& j, const std::string& path) {
   c.frames = j.at("frames").get<int>();
   c.corners = j.at("corners").get<int>();
   c.outlier_corners = j.at("outlier_corners").get<int>();
+  // Results written before frames were checked against the gyro have none.
+  if (j.contains("rejected_frames_t_ns"))
+    c.rejected_frames = j.at("rejected_frames_t_ns").get<std::vector<TimeNs>>();
   c.reprojection_rms_px = j.at("reprojection_rms_px").get<double>();
   c.corner_sigma_px = j.at("corner_sigma_px").get<double>();
   // Results written before the residuals were stored have none.
@@ -498,6 +502,7 @@ std::string camimu_camchain_yaml(const CamImuReport& r) {
     q["frames"] = c.frames;
     q["corners"] = c.corners;
     q["outlier_corners"] = c.outlier_corners;
+    q["rejected_frames"] = static_cast<int>(c.rejected_frames.size());
     q["camera_stream"] = c.stream;
     if (in != nullptr) q["intrinsics_from"] = in->source;
     q["log"] = r.log_path;

@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <iomanip>
 #include <memory>
+#include <sstream>
 
 #include "calib/camimu_imu_prep.hpp"
 #include "calib/camimu_init.hpp"
@@ -47,6 +49,8 @@ using namespace camimu;
 using Arr3 = std::array<double, 3>;
 /// Below this the corner noise is not believed (quantisation of the stored corners, model error).
 constexpr double kMinCornerSigmaPx = 0.005;
+// Frames whose pose is checked against the gyro are compared with the others this close (s).
+constexpr double kPoseCheckWindowS = 0.5;
 constexpr int kPreliminaryIterations = 12;
 using Arr4 = std::array<double, 4>;
 
@@ -68,6 +72,7 @@ struct CameraState {
   Arr3 t_ci{0, 0, 0};
   double shift = 0.0;
   std::vector<FramePose> poses;
+  std::vector<TimeNs> rejected;  // frames whose pose contradicts the gyro, ascending
   TimeshiftEstimate xcorr;
   Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();  // of the rotation alignment
   double sigma_px = 0.3;                                // corner noise, per coordinate
@@ -198,17 +203,37 @@ Status Estimator<N>::initialise_camera(std::size_t c, const GyroLookup& gyro) {
   for (std::size_t i = 1; i < cs.poses.size(); ++i) dts.push_back(cs.poses[i].t_s - cs.poses[i - 1].t_s);
   std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
   const double frame_dt = dts[dts.size() / 2];
-  const auto rates = camera_rates(cs.poses, 2.5 * frame_dt);
   const double half = 0.5 * frame_dt;
-  if (c < opt_.timeshift_init_s.size() && opt_.timeshift_init_s[c]) {
+  // Frames whose pose contradicts the gyro (a detection in the wrong order) would dominate the
+  // rate alignment and start the spline on a wrong attitude: left out of the whole problem.
+  // First against any time offset within reach, then, once it is known, more tightly.
+  auto drop_against_gyro = [&](double shift, double uncertainty) {
+    const auto bad = poses_against_gyro(cs.poses, gyro, shift, uncertainty, kPoseCheckWindowS);
+    for (auto k = bad.rbegin(); k != bad.rend(); ++k) {
+      cs.rejected.push_back(cs.poses[*k].t_ns);
+      cs.poses.erase(cs.poses.begin() + static_cast<long>(*k));
+    }
+  };
+  const bool shift_given = c < opt_.timeshift_init_s.size() && opt_.timeshift_init_s[c];
+  if (shift_given) {
     cs.shift = *opt_.timeshift_init_s[c];
   } else {
-    cs.xcorr = correlate_timeshift(rates, gyro, half, opt_.max_timeshift_s);
+    drop_against_gyro(0.0, opt_.max_timeshift_s);
+    cs.xcorr = correlate_timeshift(camera_rates(cs.poses, 2.5 * frame_dt), gyro, half, opt_.max_timeshift_s);
     if (cs.xcorr.curve.empty())
       return make_error(Errc::kInsufficientData,
                         cam.name + ": the frames and the IMU samples do not overlap in time");
     cs.shift = cs.xcorr.shift_s;
   }
+  drop_against_gyro(cs.shift, std::max(0.01, half));
+  std::sort(cs.rejected.begin(), cs.rejected.end());
+  if (cs.poses.size() < 20)
+    return make_error(
+        Errc::kInsufficientData,
+        cam.name + ": the target's pose agrees with the gyro in " + std::to_string(cs.poses.size()) +
+            " frames (" + std::to_string(cs.rejected.size()) +
+            " contradict it); at least 20 are needed: check the target file and the IMU stream");
+  const auto rates = camera_rates(cs.poses, 2.5 * frame_dt);
   const RotationEstimate rot = align_rotation(rates, gyro, cs.shift, half);
   cs.gyro_bias = rot.gyro_bias;
   if (c < opt_.T_cam_imu_init.size() && opt_.T_cam_imu_init[c]) {
@@ -398,6 +423,7 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended) {
     for (const auto& obs : cameras_[c].observations) {
       const double t = t_s(obs.t_ns) + cs.shift;
       if (obs.ids.size() < 4 || !st_.pose.covers(t)) continue;
+      if (std::binary_search(cs.rejected.begin(), cs.rejected.end(), obs.t_ns)) continue;
       const int first = std::clamp(st_.pose.segment(t).first_knot - 1, 0, st_.pose.knots - N - 2);
       std::vector<Eigen::Vector3d> pts;
       for (int id : obs.ids) pts.push_back(points_[static_cast<std::size_t>(id)]);
@@ -925,6 +951,7 @@ void Estimator<N>::fill_result(CamImuCalibrationResult* out) {
     cr.T_cam_imu.translation() = vec(st_.cams[c].t_ci);
     cr.timeshift_cam_imu_s = st_.cams[c].shift;
     cr.corner_sigma_px = st_.cams[c].sigma_px;
+    cr.rejected_frames = st_.cams[c].rejected;
   }
   std::vector<Eigen::Vector2d> e;
   std::vector<std::vector<Eigen::Vector2f>> all(cameras_.size());
@@ -1012,6 +1039,20 @@ template <int N>
 Result<CamImuCalibrationResult> Estimator<N>::run() {
   const auto start = std::chrono::steady_clock::now();
   if (Status s = initialise(); !s.ok()) return s.error();
+  for (std::size_t c = 0; c < cameras_.size(); ++c) {
+    const auto& rejected = st_.cams[c].rejected;
+    if (rejected.empty()) continue;
+    std::ostringstream text;
+    text << cameras_[c].name << ": " << rejected.size() << (rejected.size() == 1 ? " frame" : " frames")
+         << " left out: the target's pose contradicts the gyro (corners detected in the wrong order, "
+            "or a mirrored pose of a distant board), at"
+         << std::fixed << std::setprecision(3);
+    for (std::size_t k = 0; k < std::min<std::size_t>(rejected.size(), 8); ++k)
+      text << " " << t_s(rejected[k]);
+    if (rejected.size() > 8) text << " ...";
+    text << " s";
+    warnings_.push_back(text.str());
+  }
   const auto init_done = std::chrono::steady_clock::now();
   quality_.init_s = std::chrono::duration<double>(init_done - start).count();
   ceres::Solver::Summary summary;

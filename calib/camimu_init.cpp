@@ -48,6 +48,7 @@ std::vector<FramePose> pnp_poses(const CameraModel& camera,
     }
     if (n < min_corners) continue;
     FramePose pose;
+    pose.t_ns = obs.t_ns;
     pose.t_s = static_cast<double>(obs.t_ns - t0_ns) * 1e-9;
     pose.R_wc = R_ct.transpose();
     pose.p_wc = -pose.R_wc * t_ct;
@@ -66,6 +67,69 @@ std::vector<RateSample> camera_rates(const std::vector<FramePose>& poses, double
                      so3::log(poses[i - 1].R_wc.transpose() * poses[i].R_wc) / dt});
   }
   return rates;
+}
+
+GyroLookup::GyroLookup(std::vector<double> t_s, std::vector<Eigen::Vector3d> w)
+    : t_(std::move(t_s)), w_(std::move(w)) {
+  q_.reserve(t_.size());
+  Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
+  for (std::size_t k = 0; k < t_.size(); ++k) {
+    q_.push_back(q);
+    if (k + 1 < t_.size()) {
+      q = (q * Eigen::Quaterniond(so3::exp(w_[k] * (t_[k + 1] - t_[k])))).normalized();
+    }
+  }
+}
+
+std::size_t GyroLookup::nearest(double t_s) const {
+  const auto it = std::lower_bound(t_.begin(), t_.end(), t_s);
+  if (it == t_.begin()) return 0;
+  if (it == t_.end()) return t_.size() - 1;
+  const auto k = static_cast<std::size_t>(it - t_.begin());
+  return t_[k] - t_s < t_s - t_[k - 1] ? k : k - 1;
+}
+
+bool GyroLookup::turn_angle(double t0_s, double t1_s, double* angle) const {
+  if (t_.empty() || std::min(t0_s, t1_s) < t_.front() || std::max(t0_s, t1_s) > t_.back()) return false;
+  *angle = q_[nearest(t0_s)].angularDistance(q_[nearest(t1_s)]);
+  return true;
+}
+
+double GyroLookup::max_speed(double t0_s, double t1_s) const {
+  double best = 0.0;
+  const auto lo = std::lower_bound(t_.begin(), t_.end(), t0_s);
+  const auto hi = std::upper_bound(t_.begin(), t_.end(), t1_s);
+  for (auto it = lo; it < hi; ++it)
+    best = std::max(best, w_[static_cast<std::size_t>(it - t_.begin())].norm());
+  return best;
+}
+
+std::vector<std::size_t> poses_against_gyro(const std::vector<FramePose>& poses, const GyroLookup& gyro,
+                                            double shift_s, double shift_uncertainty_s, double window_s) {
+  constexpr double kAngleTolerance = 0.35;  // rad: bias and scale errors over window_s stay far below
+  std::vector<std::size_t> bad;
+  std::size_t lo = 0;
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    const double ti = poses[i].t_s;
+    while (poses[lo].t_s < ti - window_s) ++lo;
+    const double margin = window_s + shift_uncertainty_s;
+    const double tolerance =
+        kAngleTolerance +
+        2.0 * shift_uncertainty_s * gyro.max_speed(ti + shift_s - margin, ti + shift_s + margin);
+    int compared = 0;
+    int disagree = 0;
+    for (std::size_t j = lo; j < poses.size() && poses[j].t_s <= ti + window_s; ++j) {
+      if (j == i) continue;
+      double gyro_angle = 0.0;
+      if (!gyro.turn_angle(ti + shift_s, poses[j].t_s + shift_s, &gyro_angle)) continue;
+      const double camera_angle =
+          Eigen::Quaterniond(poses[i].R_wc).angularDistance(Eigen::Quaterniond(poses[j].R_wc));
+      ++compared;
+      if (std::abs(camera_angle - gyro_angle) > tolerance) ++disagree;
+    }
+    if (compared >= 2 && 2 * disagree > compared) bad.push_back(i);
+  }
+  return bad;
 }
 
 bool GyroLookup::at(double t_s, double half_window_s, Eigen::Vector3d* w) const {

@@ -18,6 +18,7 @@ namespace imucal::calib::camimu {
 
 /// A camera pose from one frame: world (= target) from camera.
 struct FramePose {
+  TimeNs t_ns = 0;   // camera stamp
   double t_s = 0.0;  // camera stamp, s from the problem's origin
   Eigen::Matrix3d R_wc = Eigen::Matrix3d::Identity();
   Eigen::Vector3d p_wc = Eigen::Vector3d::Zero();
@@ -44,15 +45,33 @@ std::vector<RateSample> camera_rates(const std::vector<FramePose>& poses, double
 /// correlation and the alignment. `gyro_t_s` ascending.
 class GyroLookup {
  public:
-  GyroLookup(std::vector<double> t_s, std::vector<Eigen::Vector3d> w)
-      : t_(std::move(t_s)), w_(std::move(w)) {}
+  GyroLookup(std::vector<double> t_s, std::vector<Eigen::Vector3d> w);
   /// False when t_s is outside the samples.
   bool at(double t_s, double half_window_s, Eigen::Vector3d* w) const;
+  /// The angle (rad) the gyro turned through from t0_s to t1_s (the raw rates integrated,
+  /// times rounded to the nearest sample); false when either is outside the samples.
+  bool turn_angle(double t0_s, double t1_s, double* angle) const;
+  /// The largest angular speed (rad/s) of the samples within [t0_s, t1_s] (0 when none).
+  double max_speed(double t0_s, double t1_s) const;
 
  private:
+  std::size_t nearest(double t_s) const;
+
   std::vector<double> t_;
   std::vector<Eigen::Vector3d> w_;
+  std::vector<Eigen::Quaterniond> q_;  // the rates integrated from the first sample
 };
+
+/// Frames whose target pose contradicts the gyro: the angle between the orientations of two
+/// frames does not depend on the unknown camera-IMU rotation, so it must match the angle the
+/// gyro turned through between their stamps (at `shift_s`, t_imu = t_cam + shift). Every frame
+/// is compared with the others within `window_s`; a pair disagrees when the angles differ by
+/// more than 0.35 rad + 2 shift_uncertainty_s x (the fastest gyro rate around it). A frame that
+/// disagrees with most of at least two others is a wrong detection (corners found in the wrong
+/// order, or the mirror solution of a planar pose). Returns their indices into `poses`,
+/// ascending.
+std::vector<std::size_t> poses_against_gyro(const std::vector<FramePose>& poses, const GyroLookup& gyro,
+                                            double shift_s, double shift_uncertainty_s, double window_s);
 
 struct TimeshiftEstimate {
   double shift_s = 0.0;                          // t_imu = t_cam + shift

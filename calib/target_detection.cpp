@@ -146,20 +146,23 @@ int CheckerboardDetector::resolve_turn(const cv::Mat& image, const std::vector<c
   // Quarter turns 0..3 for a square board, half turns (0 and 2) otherwise.
   const int turns = 4;
   const int step = target_.rows == target_.cols ? 1 : 2;
-  // Orderings the printed pattern allows: the square outside corner 0 is black. When none
-  // qualifies (lighting, glare), every ordering stays a candidate.
-  std::array<bool, 4> allowed{};
-  int count = 0;
+  // Orderings the printed pattern allows: the square outside corner 0 is black. An ordering
+  // whose outer square is seen black beats one whose outer square is out of view or without
+  // contrast (undecided), which beats one whose outer square is seen white: a board cut by the
+  // image edge must not turn half round because its corner-0 square fell outside.
+  std::array<int, 4> rank{};
+  int top = -1;
   for (int turn = 0; turn < turns; turn += step) {
-    allowed[turn] = outer_square_black(image, px, turn) != 0;
-    count += allowed[turn] ? 1 : 0;
+    const int black = outer_square_black(image, px, turn);
+    rank[turn] = black == 1 ? 2 : (black < 0 ? 1 : 0);
+    top = std::max(top, rank[turn]);
   }
   // Among what the pattern cannot tell apart (boards with 180-degree symmetry), the one whose
   // x axis points most to the right in the image.
   int best = 0;
   double best_right = -2.0;
   for (int turn = 0; turn < turns; turn += step) {
-    if (count > 0 && !allowed[turn]) continue;
+    if (rank[turn] != top) continue;
     const cv::Point2f x_axis = px[index(turn, 0, target_.cols - 1)] - px[index(turn, 0, 0)];
     const double right = x_axis.x / std::max(1e-9, static_cast<double>(std::hypot(x_axis.x, x_axis.y)));
     if (right > best_right) {
@@ -288,10 +291,21 @@ std::optional<std::vector<cv::Point2f>> CheckerboardDetector::track(const cv::Ma
       return std::nullopt;  // near or beyond the edge: the board may be leaving the view
     }
   }
+  // cornerSubPix puts a corner that wandered further than its window back exactly where it
+  // started: a corner left bit for bit where it was is one the refinement did not find (on a
+  // small board that moved more than the window, every corner, and the stale grid passes the
+  // shape checks below). Such a track is no track; a still board is found again by the search.
+  auto refine = [&](std::vector<cv::Point2f>* corners, int window) {
+    const std::vector<cv::Point2f> start = *corners;
+    cv::cornerSubPix(image, *corners, cv::Size(window, window), cv::Size(-1, -1), kSubpixCriteria);
+    for (std::size_t k = 0; k < n; ++k) {
+      if ((*corners)[k] == start[k]) return false;
+    }
+    return true;
+  };
   std::vector<cv::Point2f> px = predicted;
-  cv::cornerSubPix(image, px, cv::Size(wide, wide), cv::Size(-1, -1), kSubpixCriteria);
-  const int half = subpix_half_window(px);
-  cv::cornerSubPix(image, px, cv::Size(half, half), cv::Size(-1, -1), kSubpixCriteria);
+  if (!refine(&px, wide)) return std::nullopt;
+  if (!refine(&px, subpix_half_window(px))) return std::nullopt;
   // Checks: no corner went far from its prediction or left the image, the grid kept its shape
   // and size, its squares alternate, and the square outside corner 0 is still black (a grid
   // slid by one square fails one of these).

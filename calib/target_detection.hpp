@@ -37,7 +37,9 @@ namespace imucal::calib {
 /// 2: the checkerboard search falls back to the sector-based detector.
 /// 3: the checkerboard is tracked from the previous frames, searched without the adaptive
 ///    threshold, and every board is checked (grid shape, alternating squares).
-inline constexpr int kTargetDetectorRevision = 3;
+/// 4: a board whose corner-0 square is out of view no longer turns half round (resolve_turn);
+///    a track whose corners the refinement left where they were is searched instead.
+inline constexpr int kTargetDetectorRevision = 4;
 
 /// The target points one image shows.
 struct TargetObservation {

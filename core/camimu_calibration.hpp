@@ -59,6 +59,9 @@ struct CamImuCameraResult {
   int frames = 0;           // frames with the target that entered the problem
   int corners = 0;          // corner observations that entered the problem
   int outlier_corners = 0;  // down-weighted by the robust loss (residual above its scale)
+  /// Stamps of the frames left out because their target pose contradicts the gyro (a detection
+  /// in the wrong order or a mirrored planar pose), ascending.
+  std::vector<TimeNs> rejected_frames;
   double reprojection_rms_px = 0.0;
   double corner_sigma_px = 0.0;  // the corner noise the problem assumed
   /// The reprojection residual (projected - detected, px) of every corner, or of every k-th
