@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <map>
+#include <optional>
 
 #include "app/session/session_runner.hpp"
 #include "log/session_log.hpp"
@@ -14,6 +15,10 @@ namespace imucal::app::session {
 using nlohmann::json;
 
 namespace {
+
+/// How far after the last IMU sample a logged input may be stamped (the engine stamps with the
+/// sample time it has reached; a write may end a little after the samples stop).
+constexpr TimeNs kMaxInputAfterLastSampleNs = 10'000'000'000;
 
 /// An input the live session applied to its engine, at the engine's sample time.
 struct Input {
@@ -71,24 +76,109 @@ struct LoggedSession {
   double end_s = 0.0;
 };
 
-Result<LoggedSession> read_session_events(const log::SessionLogReader& reader) {
+/// A field the replay reads from a logged event, the JSON kind it must have, and whether the
+/// event means nothing without it.
+struct Field {
+  const char* name;
+  json::value_t kind;  // number_integer stands for any integer, number_float for any number
+  bool required;
+};
+
+bool has_kind(const json& v, json::value_t kind) {
+  switch (kind) {
+    case json::value_t::number_integer:
+      return v.is_number_integer();
+    case json::value_t::number_float:
+      return v.is_number();
+    default:
+      return v.type() == kind;
+  }
+}
+
+const char* kind_name(json::value_t kind) {
+  switch (kind) {
+    case json::value_t::string:
+      return "a string";
+    case json::value_t::boolean:
+      return "true or false";
+    case json::value_t::number_integer:
+      return "an integer";
+    case json::value_t::number_float:
+      return "a number";
+    case json::value_t::array:
+      return "an array";
+    default:
+      return "an object";
+  }
+}
+
+/// The fields of each event type the replay reads (docs/service-session.md, "Session log").
+const std::map<std::string, std::vector<Field>>& replay_fields() {
+  using V = json::value_t;
+  static const std::map<std::string, std::vector<Field>> fields = {
+      {"frame", {{"t_ns", V::number_integer, true}, {"seen", V::boolean, true}}},
+      {"key", {{"key", V::string, true}}},
+      {"fault", {{"source", V::string, false}, {"text", V::string, false}}},
+      {"stop", {{"reason", V::string, false}}},
+      {"written", {{"ok", V::boolean, true}, {"error", V::string, false}}},
+      {"applied", {{"id", V::number_integer, true}, {"wall_s", V::number_float, false}}},
+      {"status", {{"state", V::string, false}, {"step", V::string, false}}},
+      {"solve", {{"id", V::number_integer, false}, {"final", V::boolean, false}}},
+      {"session", {{"event", V::string, false}, {"steps", V::array, false}}},
+      {"preflight", {{"report", V::object, false}}},
+      {"result", {}},
+      {"done", {{"outcome", V::string, true}}},
+  };
+  return fields;
+}
+
+/// Why a logged event cannot be replayed as it stands, or empty.
+std::string event_defect(const json& m, TimeNs t_ns) {
+  const std::string where = "the session event at t_ns " + std::to_string(t_ns);
+  if (m.is_discarded() || !m.is_object()) return where + " is not a JSON object";
+  const auto type_it = m.find("type");
+  if (type_it == m.end() || !type_it->is_string()) return where + " has no type (a string)";
+  const auto fields = replay_fields().find(type_it->get<std::string>());
+  if (fields == replay_fields().end()) return {};
+  for (const Field& f : fields->second) {
+    const auto it = m.find(f.name);
+    if (it == m.end()) {
+      if (f.required) return where + " (" + fields->first + ") has no \"" + f.name + "\"";
+      continue;
+    }
+    if (!has_kind(*it, f.kind))
+      return where + " (" + fields->first + "): \"" + f.name + "\" is " + it->type_name() + ", not " +
+             kind_name(f.kind);
+    if (fields->first == "session" && std::string(f.name) == "steps") {
+      for (const auto& step : *it)
+        if (!step.is_string()) return where + " (session): a step that is not a string";
+    }
+  }
+  return {};
+}
+
+Result<LoggedSession> read_session_events(const log::SessionLogReader& reader, const std::string& path) {
   auto events = reader.events();
   if (!events.ok()) return events.error();
   LoggedSession s;
   bool started = false;
+  // An event altered or cut short makes the replay a different session: refused, as damage.
+  auto damaged = [&](const std::string& defect) {
+    return make_error(Errc::kCorrupt, path + ": " + defect +
+                                          ": the log was altered or is damaged, and cannot be replayed "
+                                          "(imucal info shows what it holds)");
+  };
   for (const auto& e : *events) {
+    if (e.kind != "frame" && e.kind != "session") continue;
+    json m = json::parse(e.message, nullptr, false);
     if (e.kind == "frame") {
       // What the engine saw of a camera frame in the motion step (the runner's frame event).
-      json m = json::parse(e.message, nullptr, false);
-      if (m.is_object()) {
-        m["type"] = "frame";
-        s.inputs.push_back({e.t_ns, m});
-      }
+      if (m.is_object()) m["type"] = "frame";
+      if (const std::string defect = event_defect(m, e.t_ns); !defect.empty()) return damaged(defect);
+      s.inputs.push_back({e.t_ns, m});
       continue;
     }
-    if (e.kind != "session") continue;
-    json m = json::parse(e.message, nullptr, false);
-    if (m.is_discarded() || !m.is_object()) continue;
+    if (const std::string defect = event_defect(m, e.t_ns); !defect.empty()) return damaged(defect);
     const std::string type = m.value("type", "");
     const double t_s = static_cast<double>(e.t_ns) * 1e-9;
     if (type == "status" && m.value("state", "") == "running" && !m.value("step", "").empty() &&
@@ -171,7 +261,12 @@ bool apply(SessionEngine& engine, ReplayHost& host, const json& m, ReplaySummary
 Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   auto reader = log::SessionLogReader::open(options.log_path);
   if (!reader.ok()) return reader.error();
-  auto logged = read_session_events(**reader);
+  if ((*reader)->health().damaged) {
+    return make_error(Errc::kCorrupt,
+                      options.log_path + " is damaged (" + (*reader)->health().damage_message +
+                          "): a replay needs the whole session, and would not be the same one");
+  }
+  auto logged = read_session_events(**reader, options.log_path);
   if (!logged.ok()) return logged.error();
   const auto& meta = (*reader)->metadata();
   const auto cfg = meta.find("rig_config");
@@ -184,13 +279,18 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   const ImuStreamInfo info = (*reader)->imu_streams().at(*stream);
 
   std::string dir = options.out_dir;
+  std::error_code ec;
+  if (!dir.empty() && std::filesystem::exists(dir, ec) && !std::filesystem::is_directory(dir, ec)) {
+    return make_error(Errc::kInvalidArgument, dir +
+                                                  " exists and is not a folder: give a folder for the "
+                                                  "replay's result files (-o)");
+  }
   if (dir.empty()) {
     std::string tmpl = (std::filesystem::temp_directory_path() / "imucal-replay-XXXXXX").string();
     if (!mkdtemp(tmpl.data()))
       return make_error(Errc::kIo, "cannot create a temporary folder for the replay");
     dir = tmpl;
   }
-  std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) return make_error(Errc::kIo, "cannot create " + dir + ": " + ec.message());
 
@@ -210,26 +310,43 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   ReplaySummary summary;
   std::size_t next = 0;
   std::string why;
-  auto apply_until = [&](TimeNs t_ns) {
-    while (next < logged->inputs.size() && logged->inputs[next].t_ns < t_ns) {
+  // Inputs logged before a sample go in before it; those after the last sample (up to
+  // t = INT64_MAX), after it.
+  auto apply_until = [&](std::optional<TimeNs> t_ns) {
+    while (next < logged->inputs.size() && (!t_ns || logged->inputs[next].t_ns < *t_ns)) {
       if (!apply(engine, host, logged->inputs[next].message, summary, &why)) return false;
       ++next;
     }
     return true;
   };
   bool diverged = false;
+  TimeNs last_sample_ns = log::kTimeMin;
   IMUCAL_TRY((*reader)->for_each_imu(*stream, log::kTimeMin, log::kTimeMax, [&](const ImuSample& s) {
     if (!apply_until(s.t_ns)) {
       diverged = true;
       return false;
     }
     engine.on_sample(s);
+    last_sample_ns = s.t_ns;
     ++summary.samples;
     return true;
   }));
-  if (!diverged && !apply_until(log::kTimeMax)) diverged = true;
-  if (diverged)
-    return make_error(Errc::kInternal, "the replay diverged from " + options.log_path + ": " + why);
+  // The engine stamps what it logs with the sample time it has reached: an input far after the
+  // last sample was not written by it.
+  if (!diverged && next < logged->inputs.size() && summary.samples > 0 &&
+      logged->inputs.back().t_ns - last_sample_ns > kMaxInputAfterLastSampleNs) {
+    return make_error(
+        Errc::kCorrupt,
+        options.log_path + ": a session event is stamped " +
+            std::to_string(static_cast<double>(logged->inputs.back().t_ns - last_sample_ns) * 1e-9) +
+            " s after the recording's last sample: the log was altered or is damaged, and "
+            "cannot be replayed");
+  }
+  if (!diverged && !apply_until(std::nullopt)) diverged = true;
+  if (diverged) {
+    return make_error(Errc::kSolverFailed,
+                      "the replay diverged from the live session of " + options.log_path + ": " + why);
+  }
 
   for (std::size_t i = 0; i < logged->step_starts.size(); ++i) {
     const double end = i + 1 < logged->step_starts.size() ? logged->step_starts[i + 1].first : logged->end_s;
@@ -250,6 +367,12 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
         max_difference(logged->result.value("cameras", json()), host.result_.value("cameras", json())));
   } else if (!logged->result.is_null()) {
     summary.notes.push_back("the live session logged a result but the replay produced none");
+    summary.live_result = true;
+    summary.max_difference = INFINITY;
+  } else if (!host.result_.is_null()) {
+    summary.notes.push_back(
+        "the replay produced a result but the live session logged none (its result event is "
+        "missing)");
     summary.live_result = true;
     summary.max_difference = INFINITY;
   }

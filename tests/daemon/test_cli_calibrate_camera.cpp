@@ -3,7 +3,6 @@
 // target's sources, and a log imported from a EuRoC folder (PNG frames).
 
 #include <gtest/gtest.h>
-#include <sqlite3.h>
 #include <yaml-cpp/yaml.h>
 
 #include <filesystem>
@@ -89,14 +88,6 @@ TEST(CliCalibrateCamera, FixtureWithinThreeSigmasOfTruthAndDetectionsReused) {
   EXPECT_EQ(j["views_used"].get<int>(), first["imucal"]["views_used"].as<int>());
 }
 
-bool run_sql(const std::string& path, const char* sql) {
-  sqlite3* db = nullptr;
-  const bool ok = sqlite3_open(path.c_str(), &db) == SQLITE_OK &&
-                  sqlite3_exec(db, sql, nullptr, nullptr, nullptr) == SQLITE_OK;
-  sqlite3_close(db);
-  return ok;
-}
-
 // --store-detections keeps the old way: the detections go into the log (when it is complete and
 // undamaged) and the next run reuses them from there, with no cache at all.
 TEST(CliCalibrateCamera, StoreDetectionsInTheLogWhenAsked) {
@@ -137,9 +128,9 @@ TEST(CliCalibrateCamera, WrongTargetStopsEarlyNamingTheBoardSeen) {
 TEST(CliCalibrateCamera, FramesFailingTheirChecksumAreDamage) {
   const std::string dir = scratch_dir();
   const std::string log = test::copy_fixture("camimu.imulog", dir);
-  ASSERT_TRUE(run_sql(log,
-                      "UPDATE frames SET data_crc32 = (data_crc32 + 1) % 4294967296 WHERE rowid IN "
-                      "(SELECT rowid FROM frames ORDER BY t_ns LIMIT 3 OFFSET 100)"));
+  ASSERT_TRUE(test::run_sql(log,
+                            "UPDATE frames SET data_crc32 = (data_crc32 + 1) % 4294967296 WHERE rowid IN "
+                            "(SELECT rowid FROM frames ORDER BY t_ns LIMIT 3 OFFSET 100)"));
   auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml"});
   EXPECT_EQ(r.exit_code, 3) << r.err;
   EXPECT_NE(r.err.find("has damaged frames"), std::string::npos) << r.err;

@@ -3,7 +3,6 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-#include <sqlite3.h>
 #include <sys/wait.h>
 
 #include <cstdlib>
@@ -165,20 +164,11 @@ TEST(CliInfo, AFullStdoutIsAnOutputError) {
   }
 }
 
-/// Changes a log behind the reader's back, as damage or a newer writer would.
-bool edit_log(const std::string& path, const char* sql) {
-  sqlite3* db = nullptr;
-  const bool ok = sqlite3_open(path.c_str(), &db) == SQLITE_OK &&
-                  sqlite3_exec(db, sql, nullptr, nullptr, nullptr) == SQLITE_OK;
-  sqlite3_close(db);
-  return ok;
-}
-
 // Each frame's image is checked against its CRC: a corrupt one is counted and the log damaged.
 TEST(CliInfo, AFrameFailingItsCrcIsReported) {
   const std::string dir = test::scratch_dir();
   const std::string log = write_log(dir + "/session.imulog");
-  ASSERT_TRUE(edit_log(log, "UPDATE frames SET data = zeroblob(64) WHERE rowid = 3"));
+  ASSERT_TRUE(test::run_sql(log, "UPDATE frames SET data = zeroblob(64) WHERE rowid = 3"));
   auto r = test::run_cli({"info", "--json", log});
   EXPECT_EQ(r.exit_code, 3) << r.err;
   const auto j = nlohmann::json::parse(r.out);
@@ -200,7 +190,7 @@ TEST(CliInfo, ANewerSchemaIsAnInputErrorInEveryCommand) {
   const std::string dir = test::scratch_dir();
   const std::string log = write_log(dir + "/session.imulog");
   ASSERT_TRUE(
-      edit_log(log, "PRAGMA user_version=2; UPDATE metadata SET value='2' WHERE key='schema_version'"));
+      test::run_sql(log, "PRAGMA user_version=2; UPDATE metadata SET value='2' WHERE key='schema_version'"));
   for (const std::vector<std::string>& args : {std::vector<std::string>{"info", log},
                                                {"calibrate", "static", log, "-o", dir + "/r.yaml"},
                                                {"export", "euroc", log, dir + "/out"},

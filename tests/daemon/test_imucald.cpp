@@ -228,6 +228,74 @@ TEST(Imucald, ReplayOfTheFixtureSessionReachesItsLoggedResult) {
   EXPECT_TRUE(has(r.out, R"("outcome": "written")")) << r.out;
 }
 
+// A session log altered or cut short is not replayed as if it were whole: a field of the wrong
+// type, an event that is not JSON, an input stamped long after the last sample or a truncated
+// file is damage (exit 3, naming the event), a missing or changed result is a difference
+// (exit 5), and an output that is a file is a command-line error (exit 2).
+TEST(Imucald, ReplayOfAnAlteredLogSaysSoInItsExitCode) {
+  const std::string dir = test::scratch_dir();
+  struct Case {
+    const char* what;
+    std::string sql;
+    int exit_code;
+    const char* message;
+  };
+  const std::vector<Case> cases = {
+      {"a key that is a number",
+       "update events set message=json_set(message,'$.key',5) where json_extract(message,'$.type')='key'", 3,
+       "\"key\" is number, not a string"},
+      {"an applied solve whose id is text",
+       "update events set message=json_set(message,'$.id','x') where "
+       "json_extract(message,'$.type')='applied'",
+       3, "\"id\" is string, not an integer"},
+      {"a written event whose ok is text",
+       "update events set message=json_set(message,'$.ok','yes') where "
+       "json_extract(message,'$.type')='written'",
+       3, "\"ok\" is string"},
+      {"a type that is a number",
+       "update events set message=json_set(message,'$.type',7) where rowid=(select min(rowid) from events "
+       "where "
+       "kind='session' and json_extract(message,'$.type')='status')",
+       3, "has no type"},
+      {"an event that is not JSON",
+       "update events set message='{oops' where rowid=(select max(rowid) from events where kind='session')",
+       3, "is not a JSON object"},
+      {"the result event missing", "delete from events where json_extract(message,'$.type')='result'", 5,
+       "differs from the live one"},
+      {"the result replaced",
+       "update events set message=json_set(message,'$.imu','none') where "
+       "json_extract(message,'$.type')='result'",
+       5, "differs from the live one"},
+      {"the write's outcome stamped at the end of time",
+       "update events set t_ns=9223372036854775807 where json_extract(message,'$.type')='written'", 3,
+       "after the recording's last sample"},
+  };
+  for (const Case& c : cases) {
+    const std::string case_dir = dir + "/" + std::to_string(&c - cases.data());
+    std::filesystem::create_directories(case_dir);
+    const std::string log = test::copy_fixture("service-session.imulog", case_dir);
+    ASSERT_TRUE(test::run_sql(log, c.sql)) << c.what;
+    const auto r = test::run_cli({"replay", log, "-o", case_dir + "/replay"});
+    EXPECT_EQ(r.exit_code, c.exit_code) << c.what << ": " << r.err << r.out;
+    EXPECT_TRUE(has(r.err, c.message)) << c.what << ": " << r.err;
+    EXPECT_FALSE(has(r.err, "unexpected")) << c.what << ": " << r.err;
+  }
+  // Cut short: the reader finds the damage that info reports.
+  const std::string cut_dir = dir + "/cut";
+  std::filesystem::create_directories(cut_dir);
+  const std::string cut = test::copy_fixture("service-session.imulog", cut_dir);
+  std::filesystem::resize_file(cut, std::filesystem::file_size(cut) * 2 / 3);
+  auto r = test::run_cli({"replay", cut, "-o", cut_dir + "/replay"});
+  EXPECT_EQ(r.exit_code, 3) << r.err << r.out;
+  EXPECT_TRUE(has(r.err, "is damaged")) << r.err;
+  // -o naming a file.
+  test::write_file(dir + "/a-file", "x");
+  r = test::run_cli({"replay", test::source_path("fixtures/service-session.imulog"), "-o", dir + "/a-file"});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_TRUE(has(r.err, "is not a folder")) << r.err;
+  EXPECT_EQ(test::read_file(dir + "/a-file"), "x");
+}
+
 TEST(Imucald, ReplayRefusesALogThatIsNoServiceSession) {
   const auto r = test::run_cli({"replay", test::source_path("fixtures/static.imulog")});
   EXPECT_EQ(r.exit_code, 4) << r.err;

@@ -1,6 +1,7 @@
 #include "tests/support/test_support.hpp"
 
 #include <gtest/gtest.h>
+#include <sqlite3.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -44,6 +45,14 @@ std::string copy_fixture(const std::string& name, const std::string& dir) {
   const std::string path = (std::filesystem::path(dir) / std::filesystem::path(name).filename()).string();
   std::filesystem::copy_file(source_path("fixtures/" + name), path);
   return path;
+}
+
+bool run_sql(const std::string& path, const std::string& sql) {
+  sqlite3* db = nullptr;
+  const bool ok = sqlite3_open(path.c_str(), &db) == SQLITE_OK &&
+                  sqlite3_exec(db, sql.c_str(), nullptr, nullptr, nullptr) == SQLITE_OK;
+  sqlite3_close(db);
+  return ok;
 }
 
 ScopedCacheDir::ScopedCacheDir(const std::string& dir) { setenv("IMUCAL_CACHE_DIR", dir.c_str(), 1); }

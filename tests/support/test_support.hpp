@@ -32,6 +32,10 @@ void write_file(const std::filesystem::path& path, const std::string& text);
 /// Copies fixtures/`name` into `dir` and returns the copy's path (for tests that write to a log).
 std::string copy_fixture(const std::string& name, const std::string& dir);
 
+/// Runs `sql` on the SQLite file `path` (a session log changed behind the reader's back, as
+/// damage or a newer writer would); false when it fails.
+bool run_sql(const std::string& path, const std::string& sql);
+
 /// Points the CLI's detection cache at `dir` (IMUCAL_CACHE_DIR) while it lives. Without it each
 /// run_cli call gets a cache of its own, removed after the call, so that no test reuses what
 /// another one found and nothing is written into the user's home.
