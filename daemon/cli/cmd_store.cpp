@@ -76,12 +76,40 @@ app::StoredCalibration read_or_fail(const RigConfig& config) {
   return std::move(stored).value();
 }
 
+/// The slots that hold a damaged record (not merely erased): a write that was interrupted, or a
+/// record corrupted since. The record served may then be older than the last one written.
+std::vector<const drivers::SlotReport*> damaged_slots(const app::StoredCalibration& s) {
+  std::vector<const drivers::SlotReport*> out;
+  for (const auto& r : s.slots)
+    if (!r.valid && r.defect != drivers::RecordDefect::kErased) out.push_back(&r);
+  return out;
+}
+
+/// Says on stderr that the record served may be older than the last one written.
+void warn_damaged(const app::StoredCalibration& s) {
+  for (const drivers::SlotReport* r : damaged_slots(s)) {
+    std::cerr << "warning: slot " << drivers::slot_name(r->slot) << " is damaged ("
+              << record_defect_name(r->defect) << " - " << r->reason << "): the record served (slot "
+              << drivers::slot_name(s.slot) << ", sequence " << s.sequence
+              << ") may be older than the last one written; check it, and write the calibration again "
+                 "(imucal store write) to hold two good copies\n";
+  }
+}
+
 void run_read(const StoreOptions& o) {
   const app::StoredCalibration s = read_or_fail(load_config(o.config_path));
+  warn_damaged(s);
   if (o.json) {
-    json j = {{"device", s.device},     {"slot", drivers::slot_name(s.slot)},
-              {"sequence", s.sequence}, {"payload_bytes", s.payload_bytes},
-              {"slots", slots_json(s)}, {"calibration", *s.payload}};
+    json damaged = json::array();
+    for (const drivers::SlotReport* r : damaged_slots(s)) damaged.push_back(drivers::slot_name(r->slot));
+    json j = {{"device", s.device},
+              {"slot", drivers::slot_name(s.slot)},
+              {"sequence", s.sequence},
+              {"payload_bytes", s.payload_bytes},
+              {"slots", slots_json(s)},
+              {"damaged_slots", damaged},
+              {"may_be_older_than_last_write", !damaged.empty()},
+              {"calibration", *s.payload}};
     std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
     return;
   }
@@ -113,6 +141,7 @@ void run_verify(const StoreOptions& o) {
   std::optional<json> expected;
   if (!o.results.empty()) expected = payload_of(o.results);
   const app::StoredCalibration s = read_or_fail(config);
+  warn_damaged(s);
   print_state(std::cout, s, "");
   for (const auto& r : s.slots) {
     if (!r.valid && r.defect != drivers::RecordDefect::kErased) {

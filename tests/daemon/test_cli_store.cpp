@@ -102,9 +102,26 @@ TEST(CliStore, VerifyReportsADifferentCalibrationAndADamagedSlot) {
   EXPECT_THAT(after.out, HasSubstr("slot A, sequence 1"));
   EXPECT_THAT(after.out, HasSubstr("bad payload CRC"));
   EXPECT_THAT(after.out, HasSubstr("the next write goes there"));
+  EXPECT_THAT(after.err, HasSubstr("warning: slot B is damaged"));
+  // read serves the older record and says so where a script sees it: stderr and the JSON.
+  auto read = test::run_cli({"store", "read", "--config", rig.config});
+  EXPECT_EQ(read.exit_code, 0) << read.err;
+  EXPECT_THAT(read.err, HasSubstr("warning: slot B is damaged (bad payload CRC"));
+  EXPECT_THAT(read.err, HasSubstr("may be older than the last one written"));
+  auto json_read = test::run_cli({"store", "read", "--json", "--config", rig.config});
+  ASSERT_EQ(json_read.exit_code, 0) << json_read.err;
+  const auto j = nlohmann::json::parse(json_read.out);
+  EXPECT_EQ(j["slot"], "A");
+  EXPECT_EQ(j["damaged_slots"], nlohmann::json::array({"B"}));
+  EXPECT_EQ(j["may_be_older_than_last_write"], true);
   auto w = test::run_cli({"store", "write", "--config", rig.config, rig.result});
   EXPECT_EQ(w.exit_code, 0) << w.err;
   EXPECT_THAT(w.out, HasSubstr("slot B, sequence 2"));
+  // Two good copies again: no warning, nothing damaged.
+  auto healed = test::run_cli({"store", "read", "--json", "--config", rig.config});
+  ASSERT_EQ(healed.exit_code, 0) << healed.err;
+  EXPECT_THAT(healed.err, ::testing::Not(HasSubstr("warning")));
+  EXPECT_EQ(nlohmann::json::parse(healed.out)["may_be_older_than_last_write"], false);
 }
 
 TEST(CliStore, ErrorsHaveTheirExitCodes) {
