@@ -41,6 +41,9 @@ struct SensorYaml {
   int height = 0;
 };
 
+/// The highest rate a sensor.yaml may give (above it, no IMU or camera: a damaged or foreign file).
+constexpr double kMaxSensorRateHz = 100'000.0;
+
 Result<SensorYaml> read_sensor_yaml(const fs::path& folder) {
   SensorYaml s;
   const fs::path path = folder / "sensor.yaml";
@@ -70,6 +73,13 @@ Result<SensorYaml> read_sensor_yaml(const fs::path& folder) {
   }
   if (!(s.rate_hz >= 0.0) || s.width < 0 || s.height < 0) {
     return make_error(Errc::kCorrupt, path.string() + ": rate_hz and resolution must not be negative");
+  }
+  if (s.rate_hz > kMaxSensorRateHz) {
+    return make_error(
+        Errc::kCorrupt,
+        path.string() + ": rate_hz " + format_double(s.rate_hz) +
+            " Hz is above 100 kHz, the rate of no IMU or camera: fix or remove rate_hz (the rate "
+            "is then taken from the timestamps)");
   }
   return s;
 }
@@ -217,7 +227,7 @@ Result<std::vector<ImuFolder>> read_imu_folders(const fs::path& root, std::uint6
       if (f.samples) f.samples->push_back(s);
       return Status{};
     }));
-    if (f.count == 0) return make_error(Errc::kInsufficientData, f.csv + ": no data rows");
+    if (f.count == 0) return make_error(Errc::kCorrupt, f.csv + ": no data rows");
     const TimeNs period_ns = intervals.median();
     f.median_rate_hz = period_ns > 0 ? 1e9 / static_cast<double>(period_ns) : 0.0;
     auto sensor = read_sensor_yaml(folder);
@@ -319,6 +329,12 @@ Result<CameraFrame> image_frame(const CameraFolder& f, const EurocImageRow& row,
                         where + ": " + image_path.string() + " claims " + std::to_string(frame.width) + "x" +
                             std::to_string(frame.height) + " pixels, more than any camera (" +
                             std::to_string(kMaxImageSide) + " a side): a damaged or foreign file");
+    }
+    // Stored as it is, so decoded once here: a PNG cut short or damaged would otherwise enter
+    // the log with a checksum of its damaged bytes, and every later reader take it as sound.
+    if (auto decoded = decode_png(*data); !decoded.ok()) {
+      return make_error(Errc::kCorrupt, where + ": " + image_path.string() + " is a damaged PNG (" +
+                                            decoded.error().message + ")");
     }
     frame.data = std::move(*data);
     return frame;

@@ -431,7 +431,7 @@ Result<bool> TriadRowReader::next(TriadRow& row) {
   s.ended = true;
   report_progress(s.progress, 1.0, 1.0);
   if (s.rows == 0) {
-    return fail(make_error(Errc::kInsufficientData, s.source + ": no data rows (expected 't x y z' lines)"));
+    return fail(make_error(Errc::kCorrupt, s.source + ": no data rows (expected 't x y z' lines)"));
   }
   return false;
 }
@@ -787,7 +787,7 @@ Status csv_rows(Lines& lines, const std::string& source, const CsvFormat& format
   }
   if (auto e = lines.error(source)) return *e;
   report_progress(progress, 1.0, 1.0);
-  if (rows == 0) return make_error(Errc::kInsufficientData, source + ": no data rows");
+  if (rows == 0) return make_error(Errc::kCorrupt, source + ": no data rows");
   return {};
 }
 

@@ -12,6 +12,7 @@
 #include <fstream>
 
 #include "daemon/cli/command.hpp"
+#include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
 #include "tests/support/test_support.hpp"
 
@@ -286,6 +287,47 @@ TEST(CliImport, HostileInputsAreRefusedWithAMessage) {
   EXPECT_EQ(far.exit_code, cli::kExitInput);
   EXPECT_THAT(far.err, HasSubstr("beyond 146 years"));
   EXPECT_FALSE(fs::exists(out));
+}
+
+// What a EuRoC folder says is checked before it enters a log: a PNG cut short (its header
+// intact) would be stored with a checksum of its damaged bytes and pass every later check; a
+// rate of 1e308 Hz is no sensor's; a data.csv without rows is an empty input (exit 3, as
+// docs/cli.md's table says).
+TEST(CliImport, EurocDamageIsRefusedBeforeItEntersTheLog) {
+  const fs::path dir = test::scratch_dir();
+  const std::string imu_csv = "#t\n1000,0,0,0,0,0,9.8\n2000,0,0,0,0,0,9.8\n3000,0,0,0,0,0,9.8\n";
+  log::Image image{64, 48, 1, 8, std::vector<std::uint8_t>(64 * 48)};
+  std::uint32_t state = 12345;  // noise, so that the PNG is far longer than its header
+  for (auto& v : image.data) v = static_cast<std::uint8_t>((state = state * 1664525u + 1013904223u) >> 24);
+  auto png = log::encode_png(image);
+  ASSERT_TRUE(png.ok());
+  const std::string whole(png->begin(), png->end());
+  ASSERT_GT(whole.size(), 200u);
+  auto make = [&](const std::string& name, const std::string& image_bytes, const std::string& sensor_yaml,
+                  const std::string& csv) {
+    write(dir / name / "mav0/imu0/data.csv", csv);
+    if (!sensor_yaml.empty()) write(dir / name / "mav0/imu0/sensor.yaml", sensor_yaml);
+    write(dir / name / "mav0/cam0/data.csv", "#t,f\n1000,a.png\n2000,b.png\n");
+    write(dir / name / "mav0/cam0/data/a.png", whole);
+    write(dir / name / "mav0/cam0/data/b.png", image_bytes);
+    return (dir / name).string();
+  };
+  const std::string out = (dir / "x.imulog").string();
+  const std::string sound = make("sound", whole, "rate_hz: 200\n", imu_csv);
+  auto ok = test::run_cli({"import", "euroc", sound, "-o", out});
+  ASSERT_EQ(ok.exit_code, 0) << ok.err;
+  fs::remove(out);
+  struct Case {
+    std::string folder, message;
+  };
+  for (const Case& c : {Case{make("cut", whole.substr(0, 100), "", imu_csv), "b.png is a damaged PNG"},
+                        Case{make("fast", whole, "rate_hz: 1e308\n", imu_csv), "is above 100 kHz"},
+                        Case{make("empty", whole, "", "#t,wx,wy,wz,ax,ay,az\n"), "no data rows"}}) {
+    auto r = test::run_cli({"import", "euroc", c.folder, "-o", out});
+    EXPECT_EQ(r.exit_code, cli::kExitInput) << c.folder << ": " << r.err;
+    EXPECT_THAT(r.err, HasSubstr(c.message)) << c.folder;
+    EXPECT_FALSE(fs::exists(out)) << c.folder;
+  }
 }
 
 // A read error in the middle of an input (a failing disk, here an LD_PRELOAD shim returning EIO
