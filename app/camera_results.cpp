@@ -84,7 +84,7 @@ Result<TargetChoice> target_from_log_metadata(const std::map<std::string, std::s
     }
     if (root.IsMap() && root["target"]) {
       auto t = parse_target_node(root["target"], "the log's rig_config metadata");
-      if (!t.ok()) return t.error();
+      if (!t.ok()) return make_error(Errc::kCorrupt, t.error().message);
       return TargetChoice{*t, "rig_config metadata"};
     }
   }

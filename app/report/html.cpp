@@ -113,6 +113,13 @@ std::string figure_html(const Figure& figure, const std::string& svg) {
          "\">\n<figcaption>" + escape(figure.caption) + "</figcaption>\n</figure>\n";
 }
 
+std::string missing_figure_html(const Figure& figure, const std::string& why) {
+  return "<figure class=\"plot missing\" id=\"fig-" + escape(figure.id) + "\">\n<h3>" + escape(figure.title) +
+         "</h3>\n<p class=\"note\">Not drawn: the result holds nothing gnuplot could plot for this figure "
+         "(its values are missing or out of range). gnuplot said: " +
+         escape(why) + "</p>\n</figure>\n";
+}
+
 namespace {
 
 constexpr const char* kStyle = R"(
@@ -144,9 +151,13 @@ function plotLoaded(img) {
 
 std::string page_html(const Document& doc, const std::vector<std::string>& figures_html,
                       const std::string& generator) {
+  // Figures that could not be drawn hold a note and no image: the page waits for the others.
+  const auto drawn = std::count_if(figures_html.begin(), figures_html.end(), [](const std::string& f) {
+    return f.find("plot missing") == std::string::npos;
+  });
   std::string out = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>" +
                     escape(doc.title) + "</title>\n<style>" + kStyle + "</style>\n<script>" + kScript +
-                    "</script>\n</head>\n<body data-plots=\"" + std::to_string(figures_html.size()) +
+                    "</script>\n</head>\n<body data-plots=\"" + std::to_string(drawn) +
                     "\" data-plots-rendered=\"0\">\n<h1>" + escape(doc.title) +
                     "</h1>\n<p class=\"subtitle\">" + escape(doc.subtitle) + "</p>\n";
   if (!doc.warnings.empty()) {

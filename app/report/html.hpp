@@ -48,6 +48,9 @@ struct Document {
 /// loaded, the page marks the figure with data-rendered="1" (checked by the browser test).
 std::string figure_html(const Figure& figure, const std::string& svg);
 
+/// A figure's place in the page when gnuplot could not draw it (`why`: gnuplot's message).
+std::string missing_figure_html(const Figure& figure, const std::string& why);
+
 /// The whole page: inline CSS, the warnings, the sections with the figures' HTML in order.
 std::string page_html(const Document& doc, const std::vector<std::string>& figures_html,
                       const std::string& generator);

@@ -103,6 +103,33 @@ Status check_outputs(const ReportOptions& o, const std::string& result_path) {
   return {};
 }
 
+/// The last line of gnuplot's message that says something, shortened.
+std::string last_line_of(const std::string& text) {
+  std::string last;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t end = std::min(text.find('\n', start), text.size());
+    std::string line = text.substr(start, end - start);
+    while (!line.empty() && (line.back() == ' ' || line.back() == '\r')) line.pop_back();
+    // gnuplot names its script and line ("/tmp/.../x.svg.gp" line 13: ...): only the message counts.
+    if (const std::size_t at = line.find(".gp\" line "); at != std::string::npos) {
+      const std::size_t colon = line.find(": ", at);
+      if (colon != std::string::npos) line = line.substr(colon + 2);
+    }
+    if (line.find_first_not_of(" ^") != std::string::npos) last = line;
+    start = end + 1;
+  }
+  return last.size() > 200 ? last.substr(0, 200) + "..." : last;
+}
+
+/// Whether gnuplot's complaint is about the data (nothing plottable: empty series, values such
+/// as 1e308) rather than about gnuplot itself (a broken installation, a terminal missing).
+bool about_the_data(const std::string& message) {
+  for (const char* what : {"range is invalid", "no valid points", "all points", "undefined value"})
+    if (message.find(what) != std::string::npos) return true;
+  return false;
+}
+
 /// Draws every figure as SVG for the page and, with a PNG folder, as PNG files.
 Result<std::vector<std::string>> draw(const Document& doc, const ReportOptions& o, const std::string& work,
                                       ReportSummary& summary) {
@@ -111,7 +138,18 @@ Result<std::vector<std::string>> draw(const Document& doc, const ReportOptions& 
   for (const auto& section : doc.sections) {
     for (const auto& fig : section.figures) {
       auto svg = render_figure(fig, FigureFormat::kSvg, work);
+      if (!svg.ok() && svg.error().code == Errc::kInternal && about_the_data(svg.error().message)) {
+        // gnuplot ran but drew nothing: the result's data for this figure (empty arrays, values
+        // such as 1e308) are not plottable. The figure gives way to a note; the rest stands.
+        const std::string why = last_line_of(svg.error().message);
+        summary.warnings.push_back("figure '" + fig.title +
+                                   "' not drawn: the result holds nothing gnuplot could plot for it (" + why +
+                                   ")");
+        html.push_back(missing_figure_html(fig, why));
+        continue;
+      }
       if (!svg.ok()) return svg.error();
+      ++summary.figures;
       html.push_back(figure_html(fig, *svg));
       if (o.png_dir.empty()) continue;
       auto png = render_figure(fig, FigureFormat::kPng, work);
@@ -176,7 +214,6 @@ Result<ReportSummary> write_report(const ReportOptions& o) {
   if (!doc.ok()) return doc.error();
   auto figures = draw(*doc, o, work->path(), summary);
   if (!figures.ok()) return figures.error();
-  summary.figures = static_cast<int>(figures->size());
   summary.notes = std::move(ctx.notes);
   IMUCAL_TRY(write_text_file(o.html_path, page_html(*doc, *figures, o.generator), {o.overwrite, {}}));
   return summary;

@@ -39,12 +39,15 @@ struct ReportSummary {
   int figures = 0;
   std::vector<std::string> png_files;
   std::vector<std::string> notes;  // what was left out and why (no --log, ...)
+  /// Figures gnuplot could not draw from the result's data (empty or out-of-range values): the
+  /// page holds a note in their place, and the rest of the report is complete.
+  std::vector<std::string> warnings;
 };
 
 /// Reads the result (and the log), draws the figures and writes the page (and the PNGs).
 /// Errors: kNotFound / kCorrupt for the inputs, kInvalidArgument / kAlreadyExists for outputs
-/// that may not be written, kUnsupported when gnuplot is missing, kInternal with gnuplot's
-/// stderr when it fails, kIo when an output cannot be written.
+/// that may not be written, kUnsupported when gnuplot is missing, kIo when an output cannot be
+/// written. A figure gnuplot fails to draw is a warning (ReportSummary::warnings), not an error.
 [[nodiscard]] Result<ReportSummary> write_report(const ReportOptions& options);
 
 }  // namespace imucal::app::report

@@ -273,7 +273,8 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   if (cfg == meta.end())
     return make_error(Errc::kCorrupt, options.log_path + ": no rig_config in the log's metadata");
   auto config = parse_rig_config(cfg->second, options.log_path + " (rig_config)");
-  if (!config.ok()) return config.error();
+  // The configuration is part of the log here, not of the command line: damage, not usage.
+  if (!config.ok()) return make_error(Errc::kCorrupt, config.error().message);
   auto stream = (*reader)->find_imu_stream();
   if (!stream.ok()) return stream.error();
   const ImuStreamInfo info = (*reader)->imu_streams().at(*stream);

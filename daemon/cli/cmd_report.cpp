@@ -25,6 +25,7 @@ void run(const app::report::ReportOptions& options) {
   if (!summary->png_files.empty())
     std::cout << "  " << summary->png_files.size() << " PNG figures in " << options.png_dir << "\n";
   for (const auto& note : summary->notes) std::cout << "  note: " << note << "\n";
+  for (const auto& warning : summary->warnings) std::cerr << "warning: " << warning << "\n";
 }
 
 void setup(CLI::App& root) {

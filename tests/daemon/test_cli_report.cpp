@@ -198,6 +198,34 @@ TEST_F(CliReport, ShowsWhatGnuplotSaidWhenItFails) {
   EXPECT_FALSE(fs::exists(out + "/r.html"));
 }
 
+// A result whose data for a figure are empty or absurd (1e308) still gets its report: the
+// figure gives way to a note, a warning names it, and the exit code is 0, not 1.
+TEST_F(CliReport, AFigureWithNothingToPlotIsANoteNotAFailure) {
+  REQUIRE_GNUPLOT();
+  const std::string out = test::scratch_dir();
+  auto j = nlohmann::json::parse(test::read_file(result()));
+  ASSERT_TRUE(j.contains("threshold_search"));
+  auto huge = j;
+  for (auto& row : huge["threshold_search"])
+    for (auto& [key, value] : row.items())
+      if (value.is_number()) value = 1e308;
+  auto empty = j;
+  empty["threshold_search"] = nlohmann::json::array();
+  for (const auto& [name, doc] : {std::pair{"huge", huge}, std::pair{"empty", empty}}) {
+    const std::string in = out + "/" + name + ".json";
+    test::write_file(in, doc.dump());
+    const auto r = run_cli({"report", in, "-o", out + "/" + name + ".html"});
+    EXPECT_EQ(r.exit_code, 0) << name << ": " << r.err;
+    EXPECT_NE(r.err.find("warning: figure 'Static detector threshold search' not drawn"), std::string::npos)
+        << name << ": " << r.err;
+    EXPECT_EQ(r.err.find(".gp"), std::string::npos) << "gnuplot's script is no message: " << r.err;
+    const std::string html = test::read_file(out + "/" + name + ".html");
+    EXPECT_NE(html.find("<figure class=\"plot missing\" id=\"fig-static-threshold-search\">"),
+              std::string::npos)
+        << name;
+  }
+}
+
 /// The browser: every figure decodes (the page marks each one), and the screenshot shows them.
 TEST_F(CliReport, RendersInAHeadlessBrowser) {
   REQUIRE_GNUPLOT();

@@ -280,6 +280,22 @@ TEST(Imucald, ReplayOfAnAlteredLogSaysSoInItsExitCode) {
     EXPECT_TRUE(has(r.err, c.message)) << c.what << ": " << r.err;
     EXPECT_FALSE(has(r.err, "unexpected")) << c.what << ": " << r.err;
   }
+  // An invalid rig configuration inside the log is damage of the log, not a command-line error.
+  {
+    const std::string case_dir = dir + "/config";
+    std::filesystem::create_directories(case_dir);
+    const std::string log = test::copy_fixture("service-session.imulog", case_dir);
+    ASSERT_TRUE(test::run_sql(log, "update metadata set value='{\"imu\": 5}' where key='rig_config'"));
+    const auto r = test::run_cli({"replay", log, "-o", case_dir + "/replay"});
+    EXPECT_EQ(r.exit_code, 3) << r.err;
+    EXPECT_TRUE(has(r.err, "rig_config")) << r.err;
+    ASSERT_TRUE(test::run_sql(
+        log,
+        "update metadata set value='{\"target\": {\"target_type\": \"dartboard\"}}' where key='rig_config'"));
+    const auto camera = test::run_cli({"calibrate", "camera", log, "-o", case_dir + "/camera.yaml"});
+    EXPECT_EQ(camera.exit_code, 3) << camera.err;
+    EXPECT_TRUE(has(camera.err, "rig_config")) << camera.err;
+  }
   // Cut short: the reader finds the damage that info reports.
   const std::string cut_dir = dir + "/cut";
   std::filesystem::create_directories(cut_dir);
