@@ -5,6 +5,8 @@
 //
 // Exit codes: 0 done; 1 the service refused the request or went away; 2 bad command line;
 // 3 the service is not running (no socket, nobody listening); 4 permission denied on the socket.
+#include <sys/un.h>
+
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <cstdlib>
@@ -24,6 +26,17 @@ using nlohmann::json;
 constexpr int kRefused = 1;  // also: the service went away
 constexpr int kNoService = 3;
 constexpr int kPermission = 4;
+
+/// Why `path` cannot name a Unix socket (empty, or longer than sockaddr_un holds), or empty.
+std::string socket_path_problem(const std::string& path) {
+  constexpr std::size_t kMax = sizeof(sockaddr_un::sun_path) - 1;
+  if (path.empty()) return "the socket path is empty";
+  if (path.size() > kMax) {
+    return "the socket path is " + std::to_string(path.size()) + " bytes; a Unix socket takes at most " +
+           std::to_string(kMax);
+  }
+  return {};
+}
 
 std::string default_socket() {
   const char* env = std::getenv("IMUCAL_SOCKET");
@@ -86,7 +99,8 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   std::string socket_path = default_socket();
   app.add_option("--socket", socket_path, "the service's control socket (env IMUCAL_SOCKET)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(socket_path_problem);
 
   bool as_json = false;
   auto* status = app.add_subcommand("status", "print the session's state");
@@ -111,6 +125,11 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? 0 : 2;
   }
 
+  // The path from IMUCAL_SOCKET is checked as the option is: either way a command-line matter.
+  if (const std::string problem = socket_path_problem(socket_path); !problem.empty()) {
+    std::fprintf(stderr, "imucalctl: %s (IMUCAL_SOCKET)\n", problem.c_str());
+    return 2;
+  }
   std::optional<Connection> connection;
   if (const int code = connect(socket_path, connection); code != 0) {
     return code;

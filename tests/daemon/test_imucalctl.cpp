@@ -155,6 +155,17 @@ TEST_F(Imucalctl, PermissionDeniedNamesTheGroup) {
 TEST_F(Imucalctl, BadCommandLineIsExitCode2) {
   EXPECT_EQ(imucalctl({"--socket", dir.socket(), "frobnicate"}).exit_code, 2);
   EXPECT_EQ(imucalctl({}).exit_code, 2);
+  // A socket path no Unix socket can have (sun_path holds 107 bytes), given or from the
+  // environment, is a command-line error that says why.
+  const std::string long_path = "/tmp/" + std::string(200, 'x');
+  const Outcome given = imucalctl({"--socket", long_path, "status"});
+  EXPECT_EQ(given.exit_code, 2) << given.err;
+  EXPECT_TRUE(has(given.err, "a Unix socket takes at most 107")) << given.err;
+  ::setenv("IMUCAL_SOCKET", long_path.c_str(), 1);
+  const Outcome from_env = imucalctl({"status"});
+  ::unsetenv("IMUCAL_SOCKET");
+  EXPECT_EQ(from_env.exit_code, 2) << from_env.err;
+  EXPECT_TRUE(has(from_env.err, "(IMUCAL_SOCKET)")) << from_env.err;
 }
 
 TEST_F(Imucalctl, AttachOnAPipePrintsOneLinePerMessage) {
