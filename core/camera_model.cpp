@@ -2,6 +2,8 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
+#include <cstdio>
 #include <vector>
 
 namespace imucal {
@@ -25,6 +27,18 @@ Status validate_camera(const CameraModel& c) {
   if (!c.intrinsics.allFinite() || !(c.intrinsics[0] > 0.0) || !(c.intrinsics[1] > 0.0)) {
     return make_error(Errc::kInvalidArgument,
                       "camera intrinsics must be [fu, fv, pu, pv] in pixels with fu, fv > 0");
+  }
+  // A focal length a thousand times the image's size (a field of view below 0.06 deg) is no
+  // lens: a unit mix-up or a damaged file, which would otherwise project every target point onto
+  // the principal point and end in "the target is not in view".
+  const double max_focal_px = 1000.0 * std::max(c.width, c.height);
+  if (c.intrinsics[0] > max_focal_px || c.intrinsics[1] > max_focal_px) {
+    char text[160];
+    std::snprintf(text, sizeof text, "camera focal length (fu, fv) = (%.6g, %.6g) px is more than 1000 times",
+                  c.intrinsics[0], c.intrinsics[1]);
+    return make_error(Errc::kInvalidArgument, std::string(text) +
+                                                  " the image's size: check that intrinsics are "
+                                                  "[fu, fv, pu, pv] in pixels");
   }
   if (c.intrinsics[2] < -0.5 || c.intrinsics[3] < -0.5 || c.intrinsics[2] > c.width - 0.5 ||
       c.intrinsics[3] > c.height - 0.5) {

@@ -182,6 +182,26 @@ TEST(CameraModel, BadYamlSaysWhatIsWrong) {
   ASSERT_FALSE(pp.ok());
   EXPECT_NE(pp.error().message.find("principal point"), std::string::npos);
 
+  // A focal length no lens has (1e308 px; a thousand times the image): refused, not taken as a
+  // camera that sees nothing.
+  auto far = parse_camera_yaml(
+      "camera_model: pinhole\ndistortion_model: radtan\nintrinsics: [1e308, 450, 188, 120]\n"
+      "distortion_coeffs: [0,0,0,0]\nresolution: [376, 240]\n",
+      "cam.yaml");
+  ASSERT_FALSE(far.ok());
+  EXPECT_NE(far.error().message.find("focal length (fu, fv) = (1e+308, 450) px"), std::string::npos)
+      << far.error().message;
+  auto long_lens = parse_camera_yaml(
+      "camera_model: pinhole\ndistortion_model: radtan\nintrinsics: [376001, 376001, 188, 120]\n"
+      "distortion_coeffs: [0,0,0,0]\nresolution: [376, 240]\n",
+      "cam.yaml");
+  EXPECT_FALSE(long_lens.ok());
+  auto longest_lens = parse_camera_yaml(
+      "camera_model: pinhole\ndistortion_model: radtan\nintrinsics: [376000, 376000, 188, 120]\n"
+      "distortion_coeffs: [0,0,0,0]\nresolution: [376, 240]\n",
+      "cam.yaml");
+  EXPECT_TRUE(longest_lens.ok());
+
   auto short_coeffs = parse_camera_yaml(
       "camera_model: pinhole\ndistortion_model: radtan\nintrinsics: [450, 450, 100, 100]\n"
       "distortion_coeffs: [0,0,0]\nresolution: [376, 240]\n",
