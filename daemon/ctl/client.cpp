@@ -92,9 +92,35 @@ Status Connection::send(const json& request) {
       if (errno == EINTR) {
         continue;
       }
-      return make_error(Errc::kIo, std::string("cannot send to imucald: ") + std::strerror(errno));
+      const int err = errno;
+      // The service may have refused the connection and closed it (too many clients): its
+      // reason is waiting to be read, and says more than "Broken pipe".
+      if (auto reason = refusal(); !reason.empty()) return make_error(Errc::kInvalidArgument, reason);
+      return make_error(Errc::kIo, std::string("cannot send to imucald: ") + std::strerror(err));
     }
     written += static_cast<std::size_t>(n);
+  }
+  return {};
+}
+
+namespace {
+
+/// A reply whose ok is false.
+bool is_refusal(const json& message) {
+  const auto ok = message.find("ok");
+  return text_field(message, "type") == "reply" && ok != message.end() && ok->is_boolean() &&
+         !ok->get<bool>();
+}
+
+}  // namespace
+
+std::string Connection::refusal() {
+  pollfd pfd{fd_, POLLIN, 0};
+  if (::poll(&pfd, 1, 200) > 0) (void)read_some();
+  while (auto message = buffered()) {
+    if (is_refusal(*message)) {
+      return text_field(*message, "error");
+    }
   }
   return {};
 }
@@ -155,7 +181,10 @@ Result<json> Connection::request(const json& request, std::vector<json>* others,
     if (!message) {
       return message.error();
     }
-    if (text_field(*message, "type") == "reply" && text_field(*message, "cmd") == cmd) {
+    // A reply to no command is the service refusing the connection itself (too many clients,
+    // nothing received in time): the answer to this request as well.
+    const bool refused = is_refusal(*message) && text_field(*message, "cmd").empty();
+    if (refused || (text_field(*message, "type") == "reply" && text_field(*message, "cmd") == cmd)) {
       const auto ok = message->find("ok");
       if (ok == message->end() || *ok != true) {
         const std::string error = text_field(*message, "error");

@@ -35,6 +35,9 @@ class Connection {
   std::optional<nlohmann::json> buffered();
   /// One read of whatever is available (for a poll loop); kNotFound at end of stream.
   Status read_some();
+  /// After a failed send: the reason of a refusal the service sent before closing (an error
+  /// reply), read within 200 ms, or empty.
+  std::string refusal();
   /// Sends a request and waits for its reply; messages that came before it go to `others`.
   /// The error of a refused request is the service's message.
   Result<nlohmann::json> request(const nlohmann::json& request, std::vector<nlohmann::json>* others = nullptr,

@@ -12,6 +12,7 @@
 #include <boost/asio/write.hpp>
 #include <cerrno>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <deque>
 #include <set>
@@ -127,7 +128,28 @@ class ControlServer::Impl : public std::enable_shared_from_this<ControlServer::I
 class Client : public std::enable_shared_from_this<Client> {
  public:
   Client(Protocol::socket socket, std::weak_ptr<ControlServer::Impl> server)
-      : socket_(std::move(socket)), server_(std::move(server)), linger_(socket_.get_executor()) {}
+      : socket_(std::move(socket)),
+        server_(std::move(server)),
+        linger_(socket_.get_executor()),
+        silent_(socket_.get_executor()) {}
+
+  /// Starts reading, and closes the connection if it sends nothing within `timeout`.
+  void start(std::chrono::milliseconds timeout) {
+    silent_.expires_after(timeout);
+    silent_.async_wait([self = shared_from_this(), timeout](const boost::system::error_code& ec) {
+      auto server = self->server_.lock();
+      if (ec || !server || self->closed() || self->heard_) return;
+      char text[160];
+      std::snprintf(text, sizeof text,
+                    "nothing received within %g s of connecting; the connection is closed (send a request, "
+                    "or hello)",
+                    static_cast<double>(timeout.count()) / 1000.0);
+      const Status error = make_error(Errc::kTimeout, text);
+      self->send(std::make_shared<const std::string>(to_line(make_reply("", error))));
+      self->close_after_sending(*server);
+    });
+    read();
+  }
 
   void read() {
     socket_.async_read_some(asio::buffer(buffer_),
@@ -170,6 +192,7 @@ class Client : public std::enable_shared_from_this<Client> {
   void shut() {
     closed_ = true;
     linger_.cancel();
+    silent_.cancel();
     boost::system::error_code ignored;
     socket_.shutdown(Protocol::socket::shutdown_both, ignored);
     socket_.close(ignored);
@@ -216,6 +239,8 @@ class Client : public std::enable_shared_from_this<Client> {
         line.remove_suffix(1);
       }
       if (!line.empty()) {
+        heard_ = true;
+        silent_.cancel();
         server.on_line(*this, line);
       }
       if (closed()) {
@@ -264,6 +289,8 @@ class Client : public std::enable_shared_from_this<Client> {
   Protocol::socket socket_;
   std::weak_ptr<ControlServer::Impl> server_;
   asio::steady_timer linger_;
+  asio::steady_timer silent_;
+  bool heard_ = false;  // a line arrived
   std::array<char, 4096> buffer_{};
   std::string pending_;
   std::deque<Line> queue_;
@@ -306,7 +333,8 @@ void ControlServer::Impl::accept() {
     if (!ec) {
       auto client = std::make_shared<Client>(std::move(socket), weak);
       self->clients_.insert(client);
-      if (self->clients_.size() > self->options_.max_clients) {
+      // One place beyond max_clients is the operator's (see hello()).
+      if (self->clients_.size() > self->options_.max_clients + 1) {
         // Refused with a reason rather than left unanswered in the backlog.
         const Status refused =
             make_error(Errc::kUnsupported, "too many clients (" + std::to_string(self->options_.max_clients) +
@@ -314,7 +342,7 @@ void ControlServer::Impl::accept() {
         client->send(std::make_shared<const std::string>(to_line(make_reply("", refused))));
         client->close_after_sending(*self);
       } else {
-        client->read();
+        client->start(self->options_.silent_timeout);
       }
     } else {
       self->log("control socket: accept failed: " + ec.message());
@@ -359,6 +387,14 @@ void ControlServer::Impl::hello(Client& client, const Request& request) {
     status =
         make_error(Errc::kAlreadyExists, "another controller is attached (" + controller_->name +
                                              "); attach as an observer, or detach the other console first");
+  } else if (request.role == Role::kObserver && clients_.size() > options_.max_clients) {
+    // The place beyond max_clients is kept for the operator's console.
+    status = make_error(Errc::kUnsupported, "too many clients (" + std::to_string(options_.max_clients) +
+                                                "): the last place is kept for the operator's console; "
+                                                "close another observer and retry");
+    client.send(std::make_shared<const std::string>(to_line(make_reply("hello", status))));
+    client.close_after_sending(*this);
+    return;
   } else {
     client.name = request.client.empty() ? "unnamed client" : request.client;
     client.role = request.role;

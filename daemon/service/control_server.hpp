@@ -27,7 +27,12 @@ struct ControlServerOptions {
   // A connection being closed (after an error or the end of its input) may take this long to
   // read its last lines: a peer that never reads must not hold its descriptor forever.
   std::chrono::milliseconds close_timeout{5000};
-  std::size_t max_clients = 32;                 // more connections get an error reply and are closed
+  // More connections get an error reply and are closed. One place beyond it is kept for the
+  // operator's console: a connection there may control (or ask once), not observe.
+  std::size_t max_clients = 32;
+  // A connection that sends nothing this long after connecting is closed with a reply saying
+  // so: idle connections must not take the places the operator needs.
+  std::chrono::milliseconds silent_timeout{10000};
   std::function<void(const std::string&)> log;  // optional: why a connection was dropped
 
   Status validate() const;

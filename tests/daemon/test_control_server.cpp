@@ -12,6 +12,7 @@
 #include <cstring>
 #include <fstream>
 #include <sstream>
+#include <thread>
 
 #include "daemon/ctl/client.hpp"
 #include "daemon/service/protocol.hpp"
@@ -309,21 +310,63 @@ TEST(ControlServer, AClosingPeerThatNeverReadsIsDroppedAfterTheTimeout) {
   ::close(stuck);
 }
 
-TEST(ControlServer, ClientsBeyondTheLimitAreToldWhy) {
+// Beyond max_clients one place is kept for the operator's console: observers are refused it,
+// a controller gets it, and a connection beyond that is told why before it is closed.
+TEST(ControlServer, ClientsBeyondTheLimitAreToldWhyAndTheOperatorStillGetsIn) {
   const test::SocketDir dir;
   auto options = options_in(dir);
   options.max_clients = 2;
   TestService service(options);
   ASSERT_TRUE(service.ok()) << service.error;
+  const json observe{{"cmd", "hello"}, {"client", "watcher"}, {"role", "observer"}};
   Connection first = connect(options.path);
   Connection second = connect(options.path);
-  ASSERT_TRUE(TestService::wait_for([&] { return service.clients() == 2; }));
+  ASSERT_TRUE(first.request(observe).ok());
+  ASSERT_TRUE(second.request(observe).ok());
   Connection third = connect(options.path);
-  const json refused = receive(third);
+  auto third_hello = third.request(observe);
+  ASSERT_FALSE(third_hello.ok());
+  EXPECT_NE(third_hello.error().message.find("the last place is kept for the operator's console"),
+            std::string::npos)
+      << third_hello.error().message;
+  ASSERT_TRUE(TestService::wait_for([&] { return service.clients() == 2; }));
+  Connection console = connect(options.path);
+  EXPECT_TRUE(console.request({{"cmd", "hello"}, {"client", "console"}, {"role", "controller"}}).ok());
+  ASSERT_TRUE(TestService::wait_for([&] { return service.clients() == 3; }));
+  Connection fourth = connect(options.path);
+  const json refused = receive(fourth);
   EXPECT_EQ(refused["ok"], false);
   EXPECT_NE(refused["error"].get<std::string>().find("too many clients (2)"), std::string::npos) << refused;
-  EXPECT_EQ(third.receive(std::chrono::seconds(10)).error().code, Errc::kNotFound);
+  EXPECT_EQ(fourth.receive(std::chrono::seconds(10)).error().code, Errc::kNotFound);
+  // A request on a refused connection gets the refusal as its answer, in words.
+  Connection fifth = connect(options.path);
+  auto status = fifth.request({{"cmd", "status"}});
+  ASSERT_FALSE(status.ok());
+  EXPECT_NE(status.error().message.find("too many clients (2)"), std::string::npos) << status.error().message;
   EXPECT_TRUE(first.request({{"cmd", "status"}}).ok());
+}
+
+// A connection that says nothing is closed after silent_timeout, with a reply saying so, so
+// that idle connections cannot fill the places; one that spoke stays.
+TEST(ControlServer, ASilentConnectionIsClosedAndTakesNoPlace) {
+  const test::SocketDir dir;
+  auto options = options_in(dir);
+  options.silent_timeout = std::chrono::milliseconds(300);
+  TestService service(options);
+  ASSERT_TRUE(service.ok()) << service.error;
+  Connection talker = connect(options.path);
+  ASSERT_TRUE(talker.request({{"cmd", "status"}}).ok());
+  Connection silent = connect(options.path);
+  const json closed = receive(silent);
+  EXPECT_EQ(closed["ok"], false);
+  EXPECT_NE(closed["error"].get<std::string>().find("nothing received within 0.3 s of connecting"),
+            std::string::npos)
+      << closed;
+  EXPECT_EQ(silent.receive(std::chrono::seconds(10)).error().code, Errc::kNotFound);
+  EXPECT_TRUE(TestService::wait_for([&] { return service.clients() == 1; }));
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));
+  EXPECT_EQ(service.clients(), 1u);
+  EXPECT_TRUE(talker.request({{"cmd", "status"}}).ok());
 }
 
 TEST(ControlServer, SocketHasTheModeAndGroupAsked) {
