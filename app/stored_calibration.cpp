@@ -279,6 +279,21 @@ static Result<json> load_payload(const std::string& result_path, bool& exported)
   }
 }
 
+std::string keep_stored_cameras(json& payload, const StoredCalibration& stored) {
+  const auto cameras = payload.find("cameras");
+  if (cameras != payload.end() && cameras->is_array() && !cameras->empty()) return {};
+  if (!stored.payload || !stored.payload->contains("cameras")) return {};
+  const json& kept = stored.payload->at("cameras");
+  if (!kept.is_array() || kept.empty()) return {};
+  payload["cameras"] = kept;
+  const std::string note = "cameras kept from the stored record (sequence " +
+                           std::to_string(stored.sequence) + "): this session did not calibrate them";
+  if (!payload["source"].is_object()) payload["source"] = json::object();
+  if (!payload["source"]["notes"].is_array()) payload["source"]["notes"] = json::array();
+  payload["source"]["notes"].push_back(note);
+  return note;
+}
+
 Result<json> calibration_payload_from_files(const std::vector<std::string>& paths) {
   if (paths.empty()) return make_error(Errc::kInvalidArgument, "no result file given");
   std::optional<json> stat, cam;

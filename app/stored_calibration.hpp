@@ -52,6 +52,11 @@ struct StoredCalibration {
 [[nodiscard]] Result<nlohmann::json> calibration_payload_from_files(
     const std::vector<std::string>& result_paths);
 
+/// A session that calibrated only the IMU must not drop the cameras the rig's record holds:
+/// when `payload` has no cameras and `stored` has some, they are carried over, with a note in
+/// `source.notes`; returns what was done in words (empty when nothing was carried).
+std::string keep_stored_cameras(nlohmann::json& payload, const StoredCalibration& stored);
+
 /// Checks that `payload` is a version-1 calibration: format, version, the IMU's matrices and
 /// vectors finite and of their sizes, every camera's T_cam_imu 4 rows of 4. kCorrupt otherwise.
 [[nodiscard]] Status validate_calibration_payload(const nlohmann::json& payload);

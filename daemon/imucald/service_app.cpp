@@ -178,13 +178,23 @@ Status Service::init() {
     if (imu_state_ == "open") return {};
     return open_imu();
   };
-  ro.make_payload = [](const std::vector<std::string>& files) -> Result<json> {
+  ro.make_payload = [config = config_](const std::vector<std::string>& files) -> Result<json> {
     // The static result and the camera-IMU calibration (imucal's canonical records); the
     // camchains beside them are for Kalibr's tools.
     std::vector<std::string> results;
     for (const auto& f : files)
       if (f.ends_with("/imu-static.yaml") || f.ends_with("/camimu/calibration.yaml")) results.push_back(f);
-    return app::calibration_payload_from_files(results);
+    auto payload = app::calibration_payload_from_files(results);
+    if (!payload.ok()) return payload;
+    // A session without the motion step keeps the cameras the rig's record holds.
+    auto stored = app::read_stored_calibration(config);
+    if (!stored.ok()) {
+      return make_error(stored.error().code,
+                        "reading the stored record, to keep its cameras: " + stored.error().message);
+    }
+    const std::string kept = app::keep_stored_cameras(*payload, *stored);
+    if (!kept.empty()) spdlog::info("{}", kept);
+    return payload;
   };
   ro.write_storage = [this](const json& payload) { return write_storage(payload); };
   ro.warn = [](const std::string& text) { spdlog::warn("{}", text); };

@@ -445,6 +445,24 @@ TEST(Imucald, TheMotionStepRecordsTheCameraAndTheRecordHoldsTheCameraImuCalibrat
   ASSERT_EQ(r.exit_code, 0) << r.err << r.out;
   EXPECT_TRUE(has(r.out, R"("same": true)")) << r.out;
   EXPECT_TRUE(std::filesystem::exists(dir + "/replay/camimu/calibration.yaml"));
+
+  // A later session of the IMU only keeps the stored cameras, and its review says so.
+  Daemon imu_only(dir,
+                  {"--sim-operator", "full", "--time-scale", "0", "--start",
+                   "preflight,warmup,still,poses,solve,review,write", "--exit-after-session", "--seed", "5"},
+                  config);
+  ASSERT_EQ(imu_only.wait(), 0) << test::read_file(dir + "/imucald.log");
+  const auto after = test::run_cli({"store", "read", "--config", config, "--json"});
+  ASSERT_EQ(after.exit_code, 0) << after.err;
+  const auto kept = nlohmann::json::parse(after.out, nullptr, false);
+  ASSERT_FALSE(kept.is_discarded());
+  EXPECT_EQ(kept["sequence"], record["sequence"].get<int>() + 1);
+  EXPECT_EQ(kept["calibration"]["cameras"], record["calibration"]["cameras"]);
+  EXPECT_TRUE(has(after.out, "cameras kept from the stored record (sequence")) << after.out.substr(0, 3000);
+  std::string review_events;
+  for (const auto& e : std::filesystem::directory_iterator(std::filesystem::path(dir) / "state" / "sessions"))
+    review_events += all_events((e.path() / "session.imulog").string());
+  EXPECT_TRUE(has(review_events, "Cameras: cameras kept from the stored record"));
 }
 
 TEST(Imucald, ACameraLostInTheMotionStepStopsItAndKeepsWhatWasRecorded) {
