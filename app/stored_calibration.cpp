@@ -407,4 +407,43 @@ std::string stored_calibration_yaml(const json& payload) {
   return std::string(y.c_str()) + "\n";
 }
 
+Result<Rollback> rollback_stored_calibration(const RigConfig& config) {
+  json previous;
+  Rollback out;
+  {
+    auto device = drivers::open_storage_device(config.storage, drivers::StorageAccess::kRead);
+    if (!device.ok()) return device.error();
+    auto store =
+        drivers::CalibrationStore::open(**device, static_cast<std::uint64_t>(config.storage.offset_bytes),
+                                        static_cast<std::uint64_t>(config.storage.size_bytes));
+    if (!store.ok()) return store.error();
+    auto latest = store->read_latest();
+    if (!latest.ok()) return latest.error();
+    if (!latest->record) {
+      return make_error(Errc::kNotFound,
+                        "no calibration is stored on " + (*device)->name() + ": nothing to roll back");
+    }
+    const int other = 1 - latest->slot;
+    auto older = store->read_record(other);
+    if (!older.ok()) return older.error();
+    if (!older->record) {
+      return make_error(Errc::kNotFound, std::string("no previous record to roll back to: slot ") +
+                                             drivers::slot_name(other) + " holds none (" + older->reason +
+                                             ")");
+    }
+    previous = json::from_cbor(older->record->payload, true, false);
+    if (previous.is_discarded()) {
+      return make_error(Errc::kCorrupt,
+                        std::string("slot ") + drivers::slot_name(other) +
+                            " holds a record whose payload is not CBOR: it cannot be restored");
+    }
+    out.restored_sequence = older->record->sequence;
+    out.replaced_sequence = latest->record->sequence;
+  }
+  auto written = write_stored_calibration(config, previous);
+  if (!written.ok()) return written.error();
+  out.written = std::move(*written);
+  return out;
+}
+
 }  // namespace imucal::app

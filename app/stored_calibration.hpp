@@ -70,6 +70,19 @@ bool same_calibration(const nlohmann::json& a, const nlohmann::json& b);
 /// calibration is kCorrupt; device errors are errors.
 [[nodiscard]] Result<StoredCalibration> read_stored_calibration(const RigConfig& config);
 
+/// What a rollback did: the record restored and the one it replaced as the newest.
+struct Rollback {
+  StoredCalibration written;            // the restored calibration as now stored (sequence advanced)
+  std::uint32_t restored_sequence = 0;  // the sequence it had before
+  std::uint32_t replaced_sequence = 0;  // the newest record before the rollback, kept in its slot
+};
+
+/// Writes the previous record (the valid one in the slot the newest is not in) again as the
+/// next record, so that it becomes the newest with its sequence advanced; the record it replaces
+/// stays in its slot until the next write. kNotFound when no valid record is stored, or no
+/// previous one (the other slot erased or damaged: its reason in the message).
+[[nodiscard]] Result<Rollback> rollback_stored_calibration(const RigConfig& config);
+
 /// Writes `payload` (validated; "rig" set from the configuration when absent) as the next record:
 /// to the older slot, synced, read back byte for byte by the store and decoded again here.
 [[nodiscard]] Result<StoredCalibration> write_stored_calibration(const RigConfig& config,

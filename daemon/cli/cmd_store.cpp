@@ -136,6 +136,18 @@ void run_write(const StoreOptions& o) {
   for (const auto& r : written->slots) std::cout << "  " << slot_line(r) << "\n";
 }
 
+void run_rollback(const StoreOptions& o) {
+  const RigConfig config = load_config(o.config_path);
+  auto done = app::rollback_stored_calibration(config);
+  if (!done.ok()) fail(done.error(), "rolling back the stored calibration");
+  const app::StoredCalibration& w = done->written;
+  std::cout << "rolled back: the record of sequence " << done->restored_sequence << " is now sequence "
+            << w.sequence << " in slot " << drivers::slot_name(w.slot) << " (" << w.device
+            << "), written and verified; the replaced record (sequence " << done->replaced_sequence
+            << ") stays in the other slot until the next write\n";
+  for (const auto& r : w.slots) std::cout << "  " << slot_line(r) << "\n";
+}
+
 void run_verify(const StoreOptions& o) {
   const RigConfig config = load_config(o.config_path);
   std::optional<json> expected;
@@ -178,6 +190,13 @@ void setup(CLI::App& root) {
   add_config(write);
   write->add_option("RESULT", o->results, "Result files: at most one static and one camimu")->required();
   write->callback([o] { run_write(*o); });
+
+  CLI::App* rollback = store->add_subcommand(
+      "rollback",
+      "Make the previous record (the other slot's) the newest again: it is written as the next record, its "
+      "sequence advanced; the record it replaces stays in its slot until the next write");
+  add_config(rollback);
+  rollback->callback([o] { run_rollback(*o); });
 
   CLI::App* verify = store->add_subcommand(
       "verify", "Check both slots; with RESULT, also that the stored calibration equals it");

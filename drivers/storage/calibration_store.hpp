@@ -64,6 +64,10 @@ class CalibrationStore {
   /// from what was written is a failed write (kDevice).
   [[nodiscard]] Result<WriteReport> write(std::span<const std::uint8_t> payload);
 
+  /// The record one slot holds (0 = A, 1 = B), decoded, or why it holds none; device errors
+  /// are errors.
+  [[nodiscard]] Result<DecodedRecord> read_record(int slot) { return read_slot(slot); }
+
   /// Bytes one slot holds, and the longest payload that fits.
   std::uint64_t slot_bytes() const { return slot_bytes_; }
   std::uint64_t max_payload_bytes() const { return slot_bytes_ - kRecordHeaderBytes; }

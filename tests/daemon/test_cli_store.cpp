@@ -124,6 +124,38 @@ TEST(CliStore, VerifyReportsADifferentCalibrationAndADamagedSlot) {
   EXPECT_EQ(nlohmann::json::parse(healed.out)["may_be_older_than_last_write"], false);
 }
 
+// store rollback makes the previous record the newest again, its sequence advanced; the one
+// it replaced stays, so a second rollback restores it.
+TEST(CliStore, RollbackRestoresThePreviousRecordAndKeepsTheReplacedOne) {
+  const Rig rig = make_rig();
+  auto none = test::run_cli({"store", "rollback", "--config", rig.config});
+  EXPECT_EQ(none.exit_code, cli::kExitInput) << none.err;
+  EXPECT_THAT(none.err, HasSubstr("nothing was stored yet"));
+  ASSERT_EQ(test::run_cli({"store", "write", "--config", rig.config, rig.result}).exit_code, 0);
+  auto single = test::run_cli({"store", "rollback", "--config", rig.config});
+  EXPECT_EQ(single.exit_code, cli::kExitInput) << single.err;
+  EXPECT_THAT(single.err, HasSubstr("no previous record to roll back to: slot B"));
+  // A second, different calibration (one bias changed) as sequence 2.
+  std::string changed = test::read_file(rig.result);
+  const auto at = changed.find("b_a: [");
+  ASSERT_NE(at, std::string::npos);
+  changed.insert(changed.find_first_of("0123456789", at + 6), "1");
+  const std::string other = rig.dir + "/other.yaml";
+  test::write_file(other, changed);
+  ASSERT_EQ(test::run_cli({"store", "write", "--config", rig.config, other}).exit_code, 0);
+  ASSERT_EQ(test::run_cli({"store", "verify", "--config", rig.config, other}).exit_code, 0);
+
+  auto back = test::run_cli({"store", "rollback", "--config", rig.config});
+  ASSERT_EQ(back.exit_code, 0) << back.err;
+  EXPECT_THAT(back.out, HasSubstr("the record of sequence 1 is now sequence 3 in slot A"));
+  EXPECT_EQ(test::run_cli({"store", "verify", "--config", rig.config, rig.result}).exit_code, 0);
+  // And forth again: the replaced record was kept.
+  auto forth = test::run_cli({"store", "rollback", "--config", rig.config});
+  ASSERT_EQ(forth.exit_code, 0) << forth.err;
+  EXPECT_THAT(forth.out, HasSubstr("the record of sequence 2 is now sequence 4 in slot B"));
+  EXPECT_EQ(test::run_cli({"store", "verify", "--config", rig.config, other}).exit_code, 0);
+}
+
 TEST(CliStore, ErrorsHaveTheirExitCodes) {
   const Rig rig = make_rig(256);
   auto too_big = test::run_cli({"store", "write", "--config", rig.config, rig.result});
