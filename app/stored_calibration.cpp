@@ -184,6 +184,12 @@ StoredCalibration from_latest(const drivers::LatestRecord& latest, const std::st
   return out;
 }
 
+/// The A/B store in the configured region of an opened device.
+Result<drivers::CalibrationStore> open_store(drivers::StorageDevice& device, const RigConfig& config) {
+  return drivers::CalibrationStore::open(device, static_cast<std::uint64_t>(config.storage.offset_bytes),
+                                         static_cast<std::uint64_t>(config.storage.size_bytes));
+}
+
 Result<StoredCalibration> decode_latest(const drivers::LatestRecord& latest, const std::string& device) {
   StoredCalibration out = from_latest(latest, device);
   if (!latest.record) return out;
@@ -330,9 +336,7 @@ Result<StoredCalibration> read_stored_calibration(const RigConfig& config) {
     }
     return device.error();
   }
-  auto store =
-      drivers::CalibrationStore::open(**device, static_cast<std::uint64_t>(config.storage.offset_bytes),
-                                      static_cast<std::uint64_t>(config.storage.size_bytes));
+  auto store = open_store(**device, config);
   if (!store.ok()) return store.error();
   auto latest = store->read_latest();
   if (!latest.ok()) return latest.error();
@@ -346,9 +350,7 @@ Result<StoredCalibration> write_stored_calibration(const RigConfig& config, cons
   const std::vector<std::uint8_t> cbor = json::to_cbor(p);
   auto device = drivers::open_storage_device(config.storage, drivers::StorageAccess::kWrite);
   if (!device.ok()) return device.error();
-  auto store =
-      drivers::CalibrationStore::open(**device, static_cast<std::uint64_t>(config.storage.offset_bytes),
-                                      static_cast<std::uint64_t>(config.storage.size_bytes));
+  auto store = open_store(**device, config);
   if (!store.ok()) return store.error();
   auto written = store->write(cbor);
   if (!written.ok()) return written.error();
@@ -413,9 +415,7 @@ Result<Rollback> rollback_stored_calibration(const RigConfig& config) {
   {
     auto device = drivers::open_storage_device(config.storage, drivers::StorageAccess::kRead);
     if (!device.ok()) return device.error();
-    auto store =
-        drivers::CalibrationStore::open(**device, static_cast<std::uint64_t>(config.storage.offset_bytes),
-                                        static_cast<std::uint64_t>(config.storage.size_bytes));
+    auto store = open_store(**device, config);
     if (!store.ok()) return store.error();
     auto latest = store->read_latest();
     if (!latest.ok()) return latest.error();
