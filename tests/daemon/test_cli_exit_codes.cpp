@@ -8,8 +8,10 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -168,6 +170,69 @@ TEST_F(CliExitCodes, AnOutputInAFolderThatDoesNotExistIsExit7) {
   };
   for (const Args& command : commands) expect_exit(with(command, nowhere), 7, nowhere);
   EXPECT_FALSE(fs::exists(work_ + "/no-such-folder"));
+}
+
+}  // namespace
+}  // namespace imucal
+
+namespace imucal {
+namespace {
+
+/// The codes of the exit code table in docs/cli.md ("| code | meaning |").
+std::vector<int> documented_codes() {
+  const std::string doc = test::read_file(test::source_path("docs/cli.md"));
+  std::vector<int> codes;
+  const auto table = doc.find("| code | meaning |");
+  if (table == std::string::npos) return codes;
+  std::istringstream lines(doc.substr(table));
+  std::string line;
+  std::getline(lines, line);  // header
+  std::getline(lines, line);  // |---|---|
+  while (std::getline(lines, line) && line.rfind("| ", 0) == 0) codes.push_back(std::stoi(line.substr(2)));
+  return codes;
+}
+
+// The table of docs/cli.md walked: every documented code is produced by at least one case, each
+// case by the code the table gives it, and no case but the documented incomplete installation
+// exits 1 ("unexpected").
+TEST_F(CliExitCodes, EveryDocumentedCodeIsProducedByACase) {
+  const std::vector<int> codes = documented_codes();
+  ASSERT_EQ(codes, (std::vector<int>{0, 1, 2, 3, 4, 5, 6, 7})) << "docs/cli.md's exit code table changed";
+  const std::string no_modules = work_ + "/no-modules";
+  fs::create_directories(no_modules);
+  // A replay whose live session logged no result: the replay differs.
+  const std::string session = test::copy_fixture("service-session.imulog", work_);
+  ASSERT_TRUE(test::run_sql(session, "delete from events where json_extract(message,'$.type')='result'"));
+  struct Case {
+    int code;
+    Args args;
+    const char* module_dir = nullptr;  // IMUCAL_MODULE_DIR for the run
+  };
+  const std::vector<Case> cases = {
+      {0, {"info", log_}},
+      {1, {"calibrate", "static", log_, "-o", work_ + "/m.yaml"}, no_modules.c_str()},
+      {2, {"info"}},
+      {2, {"info", log_, "--no-such-option"}},
+      {3, {"info", missing_}},
+      {4, {"calibrate", "static", still_, "-o", work_ + "/still.yaml"}},
+      {5, {"replay", session, "-o", work_ + "/replay"}},
+      {6,
+       {"record", "--config", test::source_path("config/rig-spi-example.yaml"), "-o", work_ + "/r.imulog",
+        "--duration", "1"}},
+      {7, {"calibrate", "static", log_, "-o", work_ + "/no/such/folder/x.yaml"}},
+  };
+  std::vector<int> produced;
+  for (const Case& c : cases) {
+    if (c.module_dir) ::setenv("IMUCAL_MODULE_DIR", c.module_dir, 1);
+    const auto r = test::run_cli(c.args, kRunLimitS);
+    if (c.module_dir) ::unsetenv("IMUCAL_MODULE_DIR");
+    EXPECT_EQ(r.exit_code, c.code) << joined(c.args) << "\n" << r.err;
+    EXPECT_THAT(r.err, ::testing::Not(HasSubstr("unexpected error"))) << joined(c.args);
+    if (c.code == 1) EXPECT_THAT(r.err, HasSubstr("libimucal_solve.so")) << r.err;
+    produced.push_back(r.exit_code);
+  }
+  for (int code : codes)
+    EXPECT_NE(std::find(produced.begin(), produced.end(), code), produced.end()) << "no case exits " << code;
 }
 
 }  // namespace
