@@ -228,7 +228,9 @@ TEST_F(CliExitCodes, EveryDocumentedCodeIsProducedByACase) {
     if (c.module_dir) ::unsetenv("IMUCAL_MODULE_DIR");
     EXPECT_EQ(r.exit_code, c.code) << joined(c.args) << "\n" << r.err;
     EXPECT_THAT(r.err, ::testing::Not(HasSubstr("unexpected error"))) << joined(c.args);
-    if (c.code == 1) EXPECT_THAT(r.err, HasSubstr("libimucal_solve.so")) << r.err;
+    if (c.code == 1) {
+      EXPECT_THAT(r.err, HasSubstr("libimucal_solve.so")) << r.err;
+    }
     produced.push_back(r.exit_code);
   }
   for (int code : codes)
