@@ -116,6 +116,8 @@ class Estimator {
  private:
   Status initialise();
   Status initialise_camera(std::size_t c, const GyroLookup& gyro);
+  /// A warning per camera naming the frames left out for contradicting the gyro.
+  void warn_rejected_frames();
   void initialise_spline(std::size_t ref);
   void build(ceres::Problem* problem, bool extended);
   Status solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary);
@@ -1036,9 +1038,7 @@ void excitation(const std::vector<CamImuSample>& imu, const Eigen::Vector3d& b_g
 }
 
 template <int N>
-Result<CamImuCalibrationResult> Estimator<N>::run() {
-  const auto start = std::chrono::steady_clock::now();
-  if (Status s = initialise(); !s.ok()) return s.error();
+void Estimator<N>::warn_rejected_frames() {
   for (std::size_t c = 0; c < cameras_.size(); ++c) {
     const auto& rejected = st_.cams[c].rejected;
     if (rejected.empty()) continue;
@@ -1053,6 +1053,13 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
     text << " s";
     warnings_.push_back(text.str());
   }
+}
+
+template <int N>
+Result<CamImuCalibrationResult> Estimator<N>::run() {
+  const auto start = std::chrono::steady_clock::now();
+  if (Status s = initialise(); !s.ok()) return s.error();
+  warn_rejected_frames();
   const auto init_done = std::chrono::steady_clock::now();
   quality_.init_s = std::chrono::duration<double>(init_done - start).count();
   ceres::Solver::Summary summary;

@@ -256,6 +256,44 @@ bool apply(SessionEngine& engine, ReplayHost& host, const json& m, ReplaySummary
   return true;
 }
 
+/// The folder for the replay's result files: `out_dir` (created; a file there is a usage
+/// error), or a new temporary folder.
+Result<std::string> output_folder(const std::string& out_dir) {
+  std::string dir = out_dir;
+  std::error_code ec;
+  if (!dir.empty() && std::filesystem::exists(dir, ec) && !std::filesystem::is_directory(dir, ec)) {
+    return make_error(Errc::kInvalidArgument,
+                      dir + " exists and is not a folder: give a folder for the replay's result files (-o)");
+  }
+  if (dir.empty()) {
+    std::string tmpl = (std::filesystem::temp_directory_path() / "imucal-replay-XXXXXX").string();
+    if (!mkdtemp(tmpl.data()))
+      return make_error(Errc::kIo, "cannot create a temporary folder for the replay");
+    dir = tmpl;
+  }
+  std::filesystem::create_directories(dir, ec);
+  if (ec) return make_error(Errc::kIo, "cannot create " + dir + ": " + ec.message());
+  return dir;
+}
+
+/// The live session's logged result against the replay's: the largest difference of the
+/// canonical model's and the cameras' entries, or infinity when only one of them has a result.
+void compare_results(const json& live, const json& replayed, ReplaySummary* summary) {
+  if (live.is_null() && replayed.is_null()) return;
+  summary->live_result = true;
+  if (!live.is_null() && !replayed.is_null()) {
+    summary->max_difference =
+        std::max(max_difference(live.value("imu", json()), replayed.value("imu", json())),
+                 max_difference(live.value("cameras", json()), replayed.value("cameras", json())));
+    return;
+  }
+  summary->max_difference = INFINITY;
+  summary->notes.push_back(live.is_null()
+                               ? "the replay produced a result but the live session logged none (its "
+                                 "result event is missing)"
+                               : "the live session logged a result but the replay produced none");
+}
+
 }  // namespace
 
 Result<ReplaySummary> replay_session(const ReplayOptions& options) {
@@ -279,21 +317,8 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   if (!stream.ok()) return stream.error();
   const ImuStreamInfo info = (*reader)->imu_streams().at(*stream);
 
-  std::string dir = options.out_dir;
-  std::error_code ec;
-  if (!dir.empty() && std::filesystem::exists(dir, ec) && !std::filesystem::is_directory(dir, ec)) {
-    return make_error(Errc::kInvalidArgument, dir +
-                                                  " exists and is not a folder: give a folder for the "
-                                                  "replay's result files (-o)");
-  }
-  if (dir.empty()) {
-    std::string tmpl = (std::filesystem::temp_directory_path() / "imucal-replay-XXXXXX").string();
-    if (!mkdtemp(tmpl.data()))
-      return make_error(Errc::kIo, "cannot create a temporary folder for the replay");
-    dir = tmpl;
-  }
-  std::filesystem::create_directories(dir, ec);
-  if (ec) return make_error(Errc::kIo, "cannot create " + dir + ": " + ec.message());
+  auto dir = output_folder(options.out_dir);
+  if (!dir.ok()) return dir.error();
 
   const std::string motion_log =
       (std::filesystem::path(options.log_path).parent_path() / kMotionLogFile).string();
@@ -303,7 +328,7 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
                                            " is missing: replay reads it beside the session log (copy the "
                                            "whole session folder)");
   }
-  ReplayHost host(*config, info, dir, logged->preflight, motion_log);
+  ReplayHost host(*config, info, *dir, logged->preflight, motion_log);
   SessionEngine engine(*config, info, host);
   if (auto s = engine.start(logged->steps); !s.ok())
     return s.error().context("starting the replayed session");
@@ -361,22 +386,7 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
     summary.imu = engine.result()->imu;
     summary.result_files = engine.result()->result_files;
   }
-  if (!logged->result.is_null() && !host.result_.is_null()) {
-    summary.live_result = true;
-    summary.max_difference = std::max(
-        max_difference(logged->result.value("imu", json()), host.result_.value("imu", json())),
-        max_difference(logged->result.value("cameras", json()), host.result_.value("cameras", json())));
-  } else if (!logged->result.is_null()) {
-    summary.notes.push_back("the live session logged a result but the replay produced none");
-    summary.live_result = true;
-    summary.max_difference = INFINITY;
-  } else if (!host.result_.is_null()) {
-    summary.notes.push_back(
-        "the replay produced a result but the live session logged none (its result event is "
-        "missing)");
-    summary.live_result = true;
-    summary.max_difference = INFINITY;
-  }
+  compare_results(logged->result, host.result_, &summary);
   return summary;
 }
 
