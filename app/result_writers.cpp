@@ -178,6 +178,12 @@ std::string static_result_yaml(const calib::StaticCalibrationResult& r, const Im
   y << YAML::Key << "convention" << YAML::Value << "corrected = misalignment * diag(scale) * (raw - bias)";
   emit_triad(y, "accel", r.model.accel, r.accel_sigma);
   emit_triad(y, "gyro", r.model.gyro, r.gyro_sigma);
+  // What the recording determined: the accelerometer form used and why, and the parameters held
+  // at nominal instead of fitted (their sigmas are .nan).
+  y << YAML::Key << "accel_model" << YAML::Value << static_accel_model_name(r.accel_model);
+  y << YAML::Key << "accel_model_reason" << YAML::Value << r.accel_model_reason;
+  y << YAML::Key << "accel_fixed" << YAML::Value << YAML::Flow << r.accel_fixed;
+  y << YAML::Key << "gyro_fixed" << YAML::Value << YAML::Flow << r.gyro_fixed;
   y << YAML::Key << "gravity" << YAML::Value << r.gravity_mps2;
   y << YAML::Key << "init_still_s" << YAML::Value << r.init_still_s;
   y << YAML::Key << "threshold_multiplier" << YAML::Value << r.threshold_multiplier;
@@ -211,6 +217,14 @@ std::string static_result_json(const calib::StaticCalibrationResult& r, const Im
   j["gyro"]["tedaldi_angles"] = {{"gamma_yz", g[0]}, {"gamma_zy", g[1]}, {"gamma_xz", g[2]},
                                  {"gamma_zx", g[3]}, {"gamma_xy", g[4]}, {"gamma_yx", g[5]}};
   j["gyro"]["residual_rms"] = r.gyro_residual_rms;
+  j["accel_model"] = {{"form", static_accel_model_name(r.accel_model)}, {"reason", r.accel_model_reason}};
+  if (r.accel_model == StaticAccelModel::kFaces) {
+    j["accel_model"]["faces_direction_rms_rad"] = r.faces_direction_rms_rad;
+    j["accel_model"]["faces_rotation_rad"] = r.faces_rotation_rad;
+    j["accel_model"]["poses_off_faces"] = r.poses_off_faces;
+  }
+  j["accel_fixed"] = r.accel_fixed;
+  j["gyro_fixed"] = r.gyro_fixed;
   // The gyro covariance has 12 parameters only when the bias was estimated in the gyro solve.
   j["gyro"]["bias_source"] = r.gyro_covariance.rows() == 12           ? "estimated in the gyro solve"
                              : r.gsens_mode == GSensitivityMode::kOff ? "initial still period mean"
@@ -219,6 +233,7 @@ std::string static_result_json(const calib::StaticCalibrationResult& r, const Im
                 {"G", mat_json(r.canonical.G)},
                 {"G_sigma", mat_json(r.gsens_sigma)},
                 {"earth_rate_removed", r.earth_rate_removed},
+                {"wald_statistic", std::isfinite(r.gsens_wald) ? json(r.gsens_wald) : json(nullptr)},
                 {"pose_residual_rms_radps", r.gsens_residual_rms}};
   auto dof_json = [](const FitDof& d) {
     return json{{"residuals", d.residuals}, {"parameters", d.parameters}, {"dof", d.dof()}};

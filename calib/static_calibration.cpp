@@ -16,8 +16,10 @@
 #include "calib/allan.hpp"
 #include "calib/ellipsoid.hpp"
 #include "calib/gravity.hpp"
+#include "calib/gsens_calibration.hpp"
 #include "calib/rk4.hpp"
 #include "calib/static_detector.hpp"
+#include "calib/static_faces.hpp"
 #include "calib/static_steps.hpp"
 #include "core/threads.hpp"
 
@@ -110,8 +112,10 @@ struct AccelSolve {
   bool ok = false;
 };
 
+/// Magnitude form (eq. 3.4) from `init`; with fix_misalignment the three angles stay as given
+/// (the scale-bias form: 6 parameters).
 AccelSolve solve_accel(std::span<const Eigen::Vector3d> means, double g, const TedaldiTriad& init,
-                       Eigen::MatrixXd* covariance) {
+                       Eigen::MatrixXd* covariance, bool fix_misalignment = false) {
   AccelSolve out;
   Vec9 c;
   for (int i = 0; i < 3; ++i) {
@@ -124,6 +128,8 @@ AccelSolve solve_accel(std::span<const Eigen::Vector3d> means, double g, const T
   ceres::Problem problem;
   for (const auto& m : means)
     problem.AddResidualBlock(AccelMagnitudeCost::Create(m, g, c), nullptr, pn.data());
+  if (fix_misalignment) problem.SetManifold(pn.data(), new ceres::SubsetManifold(9, {0, 1, 2}));
+  const double fitted = fix_misalignment ? 6.0 : 9.0;
   ceres::Solver::Summary summary;
   ceres::Solve(solver_options(200), &problem, &summary);
   out.p = pn.cwiseProduct(c);
@@ -142,7 +148,8 @@ AccelSolve solve_accel(std::span<const Eigen::Vector3d> means, double g, const T
     Eigen::Matrix<double, 9, 9, Eigen::RowMajor> cn;
     if (cov.Compute(blocks, &problem) && cov.GetCovarianceBlock(pn.data(), pn.data(), cn.data())) {
       // With no degrees of freedom left the residual variance, and so every sigma, is unknown.
-      const double scale = n > 9.0 ? 2.0 * out.cost / (n - 9.0) : std::numeric_limits<double>::quiet_NaN();
+      const double scale =
+          n > fitted ? 2.0 * out.cost / (n - fitted) : std::numeric_limits<double>::quiet_NaN();
       *covariance = c.asDiagonal() * Eigen::Matrix<double, 9, 9>(cn) * c.asDiagonal() * scale;
     } else {
       out.ok = false;
@@ -778,13 +785,17 @@ struct Candidate {
   AccelSolve solve;
   GyroStaticFit gyro;  // with the still start as its first pose
   int distinct = 0;
+  std::vector<int> faces;           // the face each pose lies on (-1: none)
   int rotated = 0;                  // intervals dropped for rotation inside them
   double worst_rotation_deg = 0.0;  // of the dropped ones
 };
 
-/// Distinct attitudes among the static means: their directions through the nominal conversion,
-/// else about the centre of the means' bounding box.
-int distinct_attitudes(const std::vector<Eigen::Vector3d>& means, const StaticCalibrationOptions& opt) {
+using AccelModel = StaticCalibrationOptions::AccelModel;
+
+/// The static means' directions: through the nominal conversion, else about the centre of the
+/// means' bounding box.
+std::vector<Eigen::Vector3d> attitude_directions(const std::vector<Eigen::Vector3d>& means,
+                                                 const StaticCalibrationOptions& opt) {
   std::vector<Eigen::Vector3d> dirs;
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
   for (const auto& m : means) {
@@ -796,20 +807,66 @@ int distinct_attitudes(const std::vector<Eigen::Vector3d>& means, const StaticCa
         opt.accel_init ? opt.accel_init->to_si(m) : Eigen::Vector3d(m - 0.5 * (lo + hi));
     dirs.push_back(d.normalized());
   }
-  return count_distinct(dirs, opt.distinct_attitude_deg * M_PI / 180.0);
+  return dirs;
 }
 
-/// Accelerometer fit (no covariance) from the nominal guess, or from the ellipsoid fit when there
-/// is no guess or it fits poorly.
-AccelSolve first_accel_solve(const std::vector<Eigen::Vector3d>& means, const StaticCalibrationOptions& opt) {
+/// Sets the candidate's distinct attitudes and faces; true when there are enough for `model`.
+bool enough_attitudes(Candidate* c, AccelModel model, const StaticCalibrationOptions& opt) {
+  const auto dirs = attitude_directions(c->means, opt);
+  c->distinct = count_distinct(dirs, opt.distinct_attitude_deg * M_PI / 180.0);
+  c->faces = assign_faces(dirs, opt.face_max_angle_deg * M_PI / 180.0);
+  switch (model) {
+    case AccelModel::kFaces:
+      return missing_faces_in_words(face_counts(c->faces)).empty();
+    case AccelModel::kScaleBias:
+      return c->distinct >= opt.min_attitudes_scale_bias;
+    default:
+      return c->distinct >= opt.min_attitudes;
+  }
+}
+
+/// Known-orientation form: the scales and biases are fitted again to the gravity magnitude (with
+/// the faces' misalignment held) when the poses leave that fit at least 3 degrees of freedom; with
+/// one pose per face the faces' fit is the whole result.
+bool magnitude_after_faces(std::size_t poses) { return poses >= 9; }
+
+/// Accelerometer fit (no covariance) of `model`. The magnitude forms start from the nominal
+/// guess, or from the ellipsoid fit when there is no guess or it fits poorly; the known-orientation
+/// form is linear. The rms is always that of eq. 3.4, so that multipliers compare alike.
+AccelSolve first_accel_solve(const Candidate& c, AccelModel model, const StaticCalibrationOptions& opt) {
+  const auto& means = c.means;
+  if (model == AccelModel::kFaces) {
+    // The faces give the misalignment, which the magnitude cannot see with so few attitudes; the
+    // scales and biases come from the magnitude, which does not depend on how flat the faces lay.
+    const KnownOrientationFit fit = fit_known_orientation(means, c.faces, opt.gravity_mps2);
+    if (!fit.ok) return {};
+    if (magnitude_after_faces(means.size()))
+      return solve_accel(means, opt.gravity_mps2, fit.triad, nullptr, true);
+    AccelSolve solve;  // one pose per face: the faces alone
+    solve.p = accel_params(fit.triad);
+    double ss = 0.0;
+    for (const auto& m : means) {
+      const double r = opt.gravity_mps2 * opt.gravity_mps2 - fit.triad.apply(m).squaredNorm();
+      ss += r * r;
+    }
+    solve.cost = 0.5 * ss;
+    solve.rms = std::sqrt(ss / static_cast<double>(means.size()));
+    solve.ok = std::isfinite(solve.rms);
+    return solve;
+  }
+  const bool fix = model == AccelModel::kScaleBias;
+  const auto level = [fix](TedaldiTriad t) {
+    if (fix) t.T.setIdentity();
+    return t;
+  };
   AccelSolve solve;
   std::optional<TedaldiTriad> init;
   if (opt.accel_init) init = triad_from_conversion(*opt.accel_init);
-  if (init) solve = solve_accel(means, opt.gravity_mps2, *init, nullptr);
+  if (init) solve = solve_accel(means, opt.gravity_mps2, level(*init), nullptr, fix);
   if (!init || !solve.ok || solve.rms > 0.02 * opt.gravity_mps2 * opt.gravity_mps2) {
     auto ell = fit_ellipsoid(means, opt.gravity_mps2);
     if (ell.ok()) {
-      AccelSolve s2 = solve_accel(means, opt.gravity_mps2, *ell, nullptr);
+      AccelSolve s2 = solve_accel(means, opt.gravity_mps2, level(*ell), nullptr, fix);
       if (s2.ok && (!solve.ok || s2.rms < solve.rms)) solve = s2;
     }
   }
@@ -826,11 +883,17 @@ struct SearchInput {
   double max_rot_rad = 0.0;
   Eigen::Vector3d gyro_scale0 = Eigen::Vector3d::Ones();
   Eigen::Matrix3d H_fixed = Eigen::Matrix3d::Zero();  // input units per m/s^2, when G is given
+  AccelModel model = AccelModel::kFull;
 };
 
 /// The g-sensitivity treatment used with `poses` static poses: an estimate needs enough of them.
-GSensitivityMode effective_gsens(const StaticCalibrationOptions& opt, std::size_t poses) {
-  if (opt.gsens == GSensitivityMode::kEstimate && poses < static_cast<std::size_t>(opt.min_poses_for_gsens)) {
+GSensitivityMode effective_gsens(const StaticCalibrationOptions& opt, const Candidate& c) {
+  const std::size_t poses = c.means.size();
+  // Poses on all six faces determine G with few of them (the six-face experiment of Krebs
+  // 5.2.3): each axis is seen at +g and -g.
+  const bool six_faces = missing_faces_in_words(face_counts(c.faces)).empty();
+  if (opt.gsens == GSensitivityMode::kEstimate && poses < static_cast<std::size_t>(opt.min_poses_for_gsens) &&
+      !six_faces) {
     return GSensitivityMode::kOff;
   }
   return opt.gsens;
@@ -854,7 +917,7 @@ PoseMeans pose_means(const Candidate& c, const StillStart& still, const TedaldiT
 /// The gyro's static model fitted to a candidate's poses (through its accelerometer solve).
 void fit_candidate_gyro(Candidate* c, const SearchInput& in, const StaticCalibrationOptions& opt) {
   c->gyro = fit_gyro_static(pose_means(*c, in.still, accel_triad(c->solve.p), in.scan), in.still,
-                            effective_gsens(opt, c->means.size()), in.H_fixed);
+                            effective_gsens(opt, *c), in.H_fixed);
 }
 
 /// The static intervals at threshold (k varsigma_init)^2 with their means and attitude count, the
@@ -873,9 +936,8 @@ Candidate evaluate_multiplier(int k, const SearchInput& in, const StaticCalibrat
     c.means.push_back((in.sums.accel[iv.end] - in.sums.accel[iv.begin]) / m + in.sums.accel_center);
     c.gyro_means.push_back((in.sums.gyro[iv.end] - in.sums.gyro[iv.begin]) / m + in.still.gyro_bias_raw);
   }
-  c.distinct = distinct_attitudes(c.means, opt);
-  if (c.distinct < opt.min_attitudes) return c;
-  c.solve = first_accel_solve(c.means, opt);
+  if (!enough_attitudes(&c, in.model, opt)) return c;
+  c.solve = first_accel_solve(c, in.model, opt);
   if (!c.solve.ok) return c;
   fit_candidate_gyro(&c, in, opt);
   // Drop the interval whose gyro shows the most rotation beyond the static model, one at a time
@@ -902,21 +964,97 @@ Candidate evaluate_multiplier(int k, const SearchInput& in, const StaticCalibrat
     c.means.erase(c.means.begin() + at);
     c.gyro_means.erase(c.gyro_means.begin() + at);
     dropped = true;
-    c.distinct = distinct_attitudes(c.means, opt);
-    if (c.distinct < opt.min_attitudes) return c;
+    if (!enough_attitudes(&c, in.model, opt)) {
+      c.solve.ok = false;  // too few attitudes left for this model
+      return c;
+    }
     fit_candidate_gyro(&c, in, opt);  // with the accelerometer of all the poses: close enough here
   }
   if (dropped) {
-    c.solve = first_accel_solve(c.means, opt);
+    c.solve = first_accel_solve(c, in.model, opt);
     if (c.solve.ok) fit_candidate_gyro(&c, in, opt);
   }
   return c;
 }
 
-/// Algorithm 1: the multiplier whose static poses give the lowest accelerometer residual.
+/// The candidates of every multiplier that have enough attitudes for in.model, and the most
+/// attitudes and faces any multiplier found (for the refusal).
+struct SearchPass {
+  std::vector<Candidate> valid;
+  int best_distinct = 0;
+  std::size_t best_intervals = 0;
+  std::array<int, kFaceCount> best_faces{};
+};
+
+SearchPass search_pass(const SearchInput& in, const StaticCalibrationOptions& opt) {
+  SearchPass pass;
+  int best_covered = -1;
+  for (int k = opt.multiplier_min; k <= opt.multiplier_max; ++k) {
+    Candidate c = evaluate_multiplier(k, in, opt);
+    if (c.distinct > pass.best_distinct) {
+      pass.best_distinct = c.distinct;
+      pass.best_intervals = c.intervals.size();
+    }
+    const auto counts = face_counts(c.faces);
+    const int covered =
+        static_cast<int>(std::count_if(counts.begin(), counts.end(), [](int n) { return n > 0; }));
+    if (covered > best_covered) {
+      best_covered = covered;
+      pass.best_faces = counts;
+    }
+    if (c.solve.ok) pass.valid.push_back(std::move(c));
+  }
+  return pass;
+}
+
+/// The models tried, in order: auto falls back from the full model to the known-orientation form
+/// (six faces) and then to scales and biases alone.
+std::vector<AccelModel> models_to_try(AccelModel m) {
+  if (m == AccelModel::kAuto) return {AccelModel::kFull, AccelModel::kFaces, AccelModel::kScaleBias};
+  return {m};
+}
+
+std::string refusal(const SearchPass& pass, const StaticCalibrationOptions& opt) {
+  const std::string missing = missing_faces_in_words(pass.best_faces);
+  std::string msg = "found at most " + std::to_string(pass.best_distinct) + " distinct static attitudes (" +
+                    std::to_string(pass.best_intervals) + " static intervals of at least " +
+                    fmt("%.1f", opt.min_interval_s) + " s) with any threshold multiplier in [" +
+                    std::to_string(opt.multiplier_min) + ", " + std::to_string(opt.multiplier_max) + "]; ";
+  switch (opt.accel_model) {
+    case AccelModel::kFull:
+      msg += "the full accelerometer model needs " + std::to_string(opt.min_attitudes);
+      break;
+    case AccelModel::kFaces:
+      msg += "the known-orientation form needs a pose on each of the six faces";
+      break;
+    case AccelModel::kScaleBias:
+      msg += "scales and biases alone need " + std::to_string(opt.min_attitudes_scale_bias);
+      break;
+    case AccelModel::kAuto:
+      msg += "the full accelerometer model needs " + std::to_string(opt.min_attitudes) +
+             ", scales and biases alone " + std::to_string(opt.min_attitudes_scale_bias) +
+             " or a pose on each of the six faces";
+      break;
+  }
+  if (std::all_of(pass.best_faces.begin(), pass.best_faces.end(), [](int n) { return n == 0; })) {
+    msg += ". None of the poses lies within " + fmt("%.0f", opt.face_max_angle_deg) +
+           " deg of a face (gravity along one axis), so the six-face form cannot be used either";
+  } else if (!missing.empty()) {
+    msg += ". No pose was held with " + missing + ": hold the rig that way too";
+  }
+  msg += ". " + std::to_string(pass.best_distinct) +
+         " attitudes would determine at most the three biases with the scales taken as nominal, which is no "
+         "calibration. Record again: after the still start, hold the rig still for 1-4 s on each of its six "
+         "faces, better in 36-50 different attitudes (" +
+         std::to_string(opt.recommended_attitudes) + " or more distinct), turning it between holds";
+  return msg;
+}
+
+/// Algorithm 1: the multiplier whose static poses give the lowest accelerometer residual, for
+/// the first model that some multiplier has enough attitudes for.
 Result<Candidate> search_threshold(const ScannedRecording& scan, const StaticDetection& detection,
                                    const StillStart& still, const StaticCalibrationOptions& opt,
-                                   std::vector<ThresholdCandidate>* scored,
+                                   std::vector<ThresholdCandidate>* scored, AccelModel* model,
                                    std::vector<std::string>* warnings) {
   const PrefixSums sums = prefix_sums(scan, still.gyro_bias_raw);
   SearchInput in{scan, detection, still, sums};
@@ -926,17 +1064,16 @@ Result<Candidate> search_threshold(const ScannedRecording& scan, const StaticDet
   in.min_samples =
       std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(opt.min_interval_s * scan.rate_hz)));
   in.max_rot_rad = opt.max_rotation_in_static_deg * M_PI / 180.0;
-  std::vector<Candidate> valid;
-  int best_distinct_seen = 0;
-  std::size_t best_intervals_seen = 0;
-  for (int k = opt.multiplier_min; k <= opt.multiplier_max; ++k) {
-    Candidate c = evaluate_multiplier(k, in, opt);
-    if (c.distinct > best_distinct_seen) {
-      best_distinct_seen = c.distinct;
-      best_intervals_seen = c.intervals.size();
+  SearchPass pass;
+  for (AccelModel m : models_to_try(opt.accel_model)) {
+    in.model = m;
+    pass = search_pass(in, opt);
+    if (!pass.valid.empty()) {
+      *model = m;
+      break;
     }
-    if (c.distinct >= opt.min_attitudes && c.solve.ok) valid.push_back(std::move(c));
   }
+  std::vector<Candidate>& valid = pass.valid;
   // Score: the accelerometer residual (eq. 3.4, Algorithm 1) and the gyro's residual about its
   // static model (motion let into the intervals shows there first), each relative to its best
   // over the multipliers, summed. A threshold whose intervals had to be dropped for rotation
@@ -956,18 +1093,8 @@ Result<Candidate> search_threshold(const ScannedRecording& scan, const StaticDet
                        c.gyro.rms, key(c).second});
     if (!best || key(c) < key(*best)) best = std::move(c);
   }
-  if (!best) {
-    return make_error(Errc::kInsufficientData,
-                      "found at most " + std::to_string(best_distinct_seen) + " distinct static attitudes (" +
-                          std::to_string(best_intervals_seen) + " static intervals of at least " +
-                          fmt("%.1f", opt.min_interval_s) + " s) with any threshold multiplier in [" +
-                          std::to_string(opt.multiplier_min) + ", " + std::to_string(opt.multiplier_max) +
-                          "]; at least " + std::to_string(opt.min_attitudes) + " are needed (" +
-                          std::to_string(opt.recommended_attitudes) +
-                          " or more recommended). Record again: after the still start, hold the rig still "
-                          "for 1-4 s in 36-50 different attitudes, turning it between holds");
-  }
-  if (best->distinct < opt.recommended_attitudes) {
+  if (!best) return make_error(Errc::kInsufficientData, refusal(pass, opt));
+  if (*model == AccelModel::kFull && best->distinct < opt.recommended_attitudes) {
     warnings->push_back("only " + std::to_string(best->distinct) + " distinct attitudes were found (" +
                         std::to_string(opt.recommended_attitudes) +
                         " or more recommended, 36-50 ideal): the result is less certain, see the sigmas");
@@ -985,25 +1112,127 @@ Result<Candidate> search_threshold(const ScannedRecording& scan, const StaticDet
 
 // ---- accelerometer: final solve with covariance ----------------------------------------------
 
-Status solve_accelerometer(const Candidate& best, std::span<const ImuSample> samples,
+/// Held misalignment angles (at zero in the scale-bias form, at the faces' values in the
+/// known-orientation form) are really uncertain by `priors`; the scales and biases they move (to
+/// second order on faces, to first order on tilted poses) are widened by the shift a held angle
+/// moved by +-prior gives, and the held angles carry the prior's variance so that the gyro's
+/// covariance (which takes the accelerometer's) includes it.
+void widen_for_held_misalignment(const Candidate& best, const StaticCalibrationOptions& opt, const Vec9& p,
+                                 const Eigen::Vector3d& priors, Eigen::MatrixXd* cov) {
+  for (int j = 0; j < 3; ++j) {
+    const double prior = priors[j];
+    Vec9 shift[2];
+    for (int side = 0; side < 2; ++side) {
+      Vec9 q = p;
+      q[j] += side == 0 ? prior : -prior;
+      const AccelSolve s = solve_accel(best.means, opt.gravity_mps2, accel_triad(q), nullptr, true);
+      shift[side] = s.ok ? Vec9(s.p - q) : Vec9::Zero();
+      shift[side][j] = 0.0;
+    }
+    const Vec9 linear = 0.5 * (shift[0] - shift[1]);
+    *cov += 0.5 * (shift[0] * shift[0].transpose() + shift[1] * shift[1].transpose());
+    // The held angle and what it moves, correlated through the linear part.
+    for (int i = 0; i < 9; ++i) {
+      (*cov)(i, j) += linear[i] * prior;
+      (*cov)(j, i) += linear[i] * prior;
+    }
+    (*cov)(j, j) = prior * prior;
+  }
+}
+
+Status solve_accelerometer(const Candidate& best, AccelModel model, std::span<const ImuSample> samples,
                            const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
-  const AccelSolve final =
-      solve_accel(best.means, opt.gravity_mps2, accel_triad(best.solve.p), &res->accel_covariance);
-  if (!final.ok) {
-    return make_error(Errc::kSolverFailed,
-                      "the accelerometer covariance could not be computed: the static attitudes do not "
-                      "constrain all 9 parameters; record poses covering more directions");
+  AccelSolve final;
+  if (model == AccelModel::kFaces) {
+    const KnownOrientationFit fit = fit_known_orientation(best.means, best.faces, opt.gravity_mps2);
+    if (!fit.ok)
+      return make_error(Errc::kSolverFailed, "the known-orientation accelerometer fit failed: " + fit.error);
+    if (magnitude_after_faces(best.means.size())) {
+      // Misalignment from the faces, scales and biases from the magnitude with it held.
+      final = solve_accel(best.means, opt.gravity_mps2, fit.triad, &res->accel_covariance, true);
+      if (!final.ok) return make_error(Errc::kSolverFailed, "the accelerometer's scale and bias fit failed");
+      const Eigen::Vector3d angle_sigma = fit.covariance.diagonal().head<3>().cwiseMax(0.0).cwiseSqrt();
+      widen_for_held_misalignment(best, opt, final.p, angle_sigma, &res->accel_covariance);
+      res->accel_covariance.topLeftCorner<3, 3>() = fit.covariance.topLeftCorner<3, 3>();
+      res->accel_dof = {static_cast<int>(best.means.size()), 6};
+    } else {
+      final = first_accel_solve(best, model, opt);
+      res->accel_covariance = fit.covariance;
+      res->accel_dof = {fit.residuals, fit.parameters};
+    }
+    res->faces_direction_rms_rad = fit.direction_rms_rad;
+    res->faces_rotation_rad = fit.q_angle_rad;
+    res->poses_off_faces = static_cast<int>(std::count(best.faces.begin(), best.faces.end(), -1));
+    res->accel_model = StaticAccelModel::kFaces;
+    res->accel_model_reason =
+        std::to_string(best.distinct) + " distinct attitudes, fewer than the " +
+        std::to_string(opt.min_attitudes) +
+        " the magnitude form needs, on all six faces: the misalignment from the poses taken as lying flat on "
+        "their faces with gravity along their axes (the form PX4 and ArduPilot use), scales and biases " +
+        (magnitude_after_faces(best.means.size()) ? std::string("from the gravity magnitude")
+                                                  : std::string("too (one pose per face)"));
+    if (opt.accel_model == AccelModel::kFaces) res->accel_model_reason = "chosen with --accel-model faces";
+    if (res->poses_off_faces > 0) {
+      res->warnings.push_back(
+          std::to_string(res->poses_off_faces) + " static pose(s) lie on no face (more than " +
+          fmt("%.0f", opt.face_max_angle_deg) +
+          " deg from every axis): left out of the accelerometer fit, used for the gyroscope");
+    }
+    if (fit.direction_rms_rad > 1.0 * M_PI / 180.0) {
+      res->warnings.push_back(
+          "the poses lie " + fmt("%.2f", fit.direction_rms_rad * 180.0 / M_PI) +
+          " deg RMS from their faces' axes: they were not flat on level faces, and the "
+          "misalignment is only as good as that (--accel-model scale-bias fits scales and "
+          "biases without assuming the faces)");
+    }
+  } else {
+    const bool fix = model == AccelModel::kScaleBias;
+    final = solve_accel(best.means, opt.gravity_mps2, accel_triad(best.solve.p), &res->accel_covariance, fix);
+    if (!final.ok) {
+      return make_error(Errc::kSolverFailed,
+                        "the accelerometer covariance could not be computed: the static attitudes do not "
+                        "constrain all " +
+                            std::string(fix ? "6" : "9") +
+                            " parameters; record poses covering more directions");
+    }
+    res->accel_dof = {static_cast<int>(best.means.size()), fix ? 6 : 9};
+    if (fix) {
+      widen_for_held_misalignment(best, opt, final.p, Eigen::Vector3d::Constant(opt.misalignment_prior_rad),
+                                  &res->accel_covariance);
+      res->accel_model = StaticAccelModel::kScaleBias;
+      res->accel_fixed = {"misalignment alpha_yz", "misalignment alpha_zy", "misalignment alpha_zx"};
+      res->accel_model_reason =
+          opt.accel_model == AccelModel::kScaleBias
+              ? "chosen with --accel-model scale-bias"
+              : std::to_string(best.distinct) + " distinct attitudes, fewer than the " +
+                    std::to_string(opt.min_attitudes) +
+                    " the full model needs, not on all six faces (missing: " +
+                    missing_faces_in_words(face_counts(best.faces)) +
+                    "): scales and biases from the gravity magnitude, misalignment held at zero";
+      res->warnings.push_back("the accelerometer misalignment was not determined (held at zero; " +
+                              res->accel_model_reason +
+                              "); the scale and bias sigmas include a misalignment of " +
+                              fmt("%.3f", opt.misalignment_prior_rad) + " rad");
+    } else {
+      res->accel_model = StaticAccelModel::kFull;
+      res->accel_model_reason = std::to_string(best.distinct) + " distinct attitudes (" +
+                                std::to_string(opt.min_attitudes) + " needed): Tedaldi's magnitude form";
+    }
   }
   res->model.accel = accel_triad(final.p);
-  res->accel_dof = {static_cast<int>(best.means.size()), 9};
   if (!res->accel_dof.determined()) {
-    res->warnings.push_back("the accelerometer fit is exact: " + std::to_string(best.means.size()) +
-                            " static means for its 9 parameters leave nothing to check it against, and its "
-                            "sigmas are undetermined. Record more poses (36-50)");
+    res->warnings.push_back("the accelerometer fit is exact: " + std::to_string(res->accel_dof.residuals) +
+                            " residuals for its " + std::to_string(res->accel_dof.parameters) +
+                            " parameters leave nothing to check it against, and its sigmas are undetermined. "
+                            "Record more poses (36-50)");
   }
   res->accel_residual_rms = final.rms;
   res->accel_iterations = best.solve.iterations + final.iterations;
   res->accel_sigma = accel_sigma(res->accel_covariance);
+  if (model == AccelModel::kScaleBias) {
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    res->accel_sigma.T(0, 1) = res->accel_sigma.T(0, 2) = res->accel_sigma.T(1, 2) = nan;
+  }
   for (std::size_t k = 0; k < best.intervals.size(); ++k) {
     const auto& iv = best.intervals[k];
     res->intervals.push_back({samples[iv.begin].t_ns, samples[iv.end - 1].t_ns, iv.size(), best.means[k]});
@@ -1051,7 +1280,9 @@ Result<std::vector<Transfer>> collect_transfers(const std::vector<StaticInterval
         std::to_string(dropped_sat) + " contain saturated gyro samples");
   }
   res->gyro_transfers = static_cast<int>(transfers.size());
-  const int min_transfers = opt.min_attitudes - 1;
+  // Each motion gives two independent equations (a direction): more than the gyro's 9 parameters
+  // (12 with its bias) take 5 (7). Six faces in turn give exactly 5.
+  const int min_transfers = opt.estimate_gyro_bias ? 7 : 5;
   if (res->gyro_transfers < min_transfers) {
     return make_error(Errc::kInsufficientData,
                       "only " + std::to_string(res->gyro_transfers) + " of " +
@@ -1071,8 +1302,10 @@ Result<std::vector<Transfer>> collect_transfers(const std::vector<StaticInterval
 /// transfers and at this object's fixed bias, so it is built in place and never moved.
 class GyroFit {
  public:
-  GyroFit(const std::vector<Transfer>& transfers, const TedaldiTriad& gyro0, bool estimate_bias, int threads)
-      : gyro0_(gyro0), estimate_bias_(estimate_bias), gb_(gyro0.bias) {
+  /// `held`: indices into [6 angles, 3 scales] kept at gyro0's values instead of fitted.
+  GyroFit(const std::vector<Transfer>& transfers, const TedaldiTriad& gyro0, bool estimate_bias, int threads,
+          std::vector<int> held = {})
+      : gyro0_(gyro0), estimate_bias_(estimate_bias), held_(std::move(held)), gb_(gyro0.bias) {
     gp_ << gyro_angles(gyro0_.T), gyro0_.scale;
     if (transfers.empty()) return;
     cost_ = new GyroTransfersCost(transfers, estimate_bias_ ? nullptr : &gyro0_.bias, threads);
@@ -1081,6 +1314,7 @@ class GyroFit {
     } else {
       problem_.AddResidualBlock(cost_, nullptr, gp_.data());
     }
+    if (!held_.empty()) problem_.SetManifold(gp_.data(), new ceres::SubsetManifold(9, held_));
   }
   GyroFit(const GyroFit&) = delete;
   GyroFit& operator=(const GyroFit&) = delete;
@@ -1110,10 +1344,29 @@ class GyroFit {
     return t;
   }
   int parameters() const { return estimate_bias_ ? 12 : 9; }
+  /// The parameters fitted (not held).
+  int fitted() const { return parameters() - static_cast<int>(held_.size()); }
   double final_cost() const { return final_cost_; }
 
-  /// The Jacobian of all residuals at the current parameters, dense.
+  /// The Jacobian of all residuals at the current parameters, dense, with a zero column for each
+  /// held parameter.
   Result<Eigen::MatrixXd> jacobian() {
+    if (!held_.empty()) {
+      // The cost function's own Jacobian: every column, whatever the manifold holds.
+      const int rows = cost_ ? cost_->num_residuals() : 0;
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> j9(rows, 9), j3(rows, 3);
+      Eigen::VectorXd r(rows);
+      const double* params[2] = {gp_.data(), gb_.data()};
+      double* jac[2] = {j9.data(), j3.data()};
+      if (!cost_ || !cost_->Evaluate(params, r.data(), jac)) {
+        return make_error(Errc::kSolverFailed, "the gyroscope Jacobian could not be evaluated");
+      }
+      Eigen::MatrixXd J = Eigen::MatrixXd::Zero(rows, parameters());
+      J.leftCols(9) = j9;
+      if (estimate_bias_) J.rightCols(3) = j3;
+      for (int i : held_) J.col(i).setZero();
+      return J;
+    }
     ceres::Problem::EvaluateOptions eo;
     eo.parameter_blocks = {gp_.data()};
     if (estimate_bias_) eo.parameter_blocks.push_back(gb_.data());
@@ -1134,6 +1387,7 @@ class GyroFit {
  private:
   const TedaldiTriad gyro0_;
   const bool estimate_bias_;
+  const std::vector<int> held_;
   Eigen::Matrix<double, 9, 1> gp_;
   Eigen::Vector3d gb_;
   ceres::Problem problem_;
@@ -1184,7 +1438,7 @@ Eigen::MatrixXd accel_uncertainty_in_gyro(const Eigen::MatrixXd& Jg, const std::
     const Eigen::Matrix3d R = quat_to_matrix(integrate_rk4n(w, tr.t_s));
     Ja.middleRows(3 * t, 3) = du[tr.pose0 + 1] - R.transpose() * du[tr.pose0];
   }
-  const Eigen::MatrixXd D = -(Jg.transpose() * Jg).ldlt().solve(Jg.transpose() * Ja);
+  const Eigen::MatrixXd D = -normal_pseudo_inverse(Jg) * (Jg.transpose() * Ja);
   return D * res.accel_covariance * D.transpose();
 }
 
@@ -1211,17 +1465,122 @@ TedaldiTriad initial_gyro(const Eigen::Vector3d& bias_raw, const StaticCalibrati
   return gyro0;
 }
 
-/// Eqs. 3.5-3.16: the gyro solve, then its covariance with the accelerometer's share.
-Status solve_gyroscope(std::vector<Transfer>* transfers, const Candidate& best, const ScannedRecording& scan,
-                       std::span<const ImuSample> samples, const GyroStaticFit& gfit,
-                       const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
+/// Names of the gyro parameters in the solve's order (eq. 3.6).
+const char* gyro_parameter_name(int i) {
+  static const char* names[] = {"misalignment gamma_yz",
+                                "misalignment gamma_zy",
+                                "misalignment gamma_xz",
+                                "misalignment gamma_zx",
+                                "misalignment gamma_xy",
+                                "misalignment gamma_yx",
+                                "scale x",
+                                "scale y",
+                                "scale z"};
+  return names[i];
+}
+
+/// Prior sigma of a held gyro parameter (index into [6 angles, 3 scales]): the chip's cross-axis
+/// sensitivity for an angle, its sensitivity tolerance for a scale.
+double held_prior_sigma(int i, const Eigen::Vector3d& scale, const StaticCalibrationOptions& opt) {
+  return i < 6 ? opt.misalignment_prior_rad : opt.scale_prior_rel * std::abs(scale[i - 6]);
+}
+
+/// Covariance of the gyro parameters with `held` ones at nominal: the fitted ones' from the
+/// residual variance s2 (the plain inverse on the fitted columns, each scaled to unit length, so
+/// that a direction the motions do not see gets the size it has and not the truncated
+/// pseudo-inverse's zero), plus what the held ones' prior uncertainty moves them by (D P D^T,
+/// D = -(Jf'Jf)^-1 Jf'Jh), the held ones carrying their prior. n x n, n = J's columns.
+Eigen::MatrixXd held_covariance(const Eigen::MatrixXd& J, const std::vector<int>& held, double s2,
+                                const Eigen::Vector3d& scale, const StaticCalibrationOptions& opt) {
+  const Eigen::Index n = J.cols();
+  std::vector<Eigen::Index> F, H;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (std::find(held.begin(), held.end(), static_cast<int>(i)) == held.end())
+      F.push_back(i);
+    else
+      H.push_back(i);
+  }
+  const auto nf = static_cast<Eigen::Index>(F.size()), nh = static_cast<Eigen::Index>(H.size());
+  Eigen::MatrixXd Jf(J.rows(), nf), Jh(J.rows(), nh);
+  Eigen::VectorXd norm(nf);
+  for (Eigen::Index c = 0; c < nf; ++c) {
+    norm[c] = std::max(J.col(F[static_cast<std::size_t>(c)]).norm(), 1e-300);
+    Jf.col(c) = J.col(F[static_cast<std::size_t>(c)]) / norm[c];
+  }
+  for (Eigen::Index c = 0; c < nh; ++c) Jh.col(c) = J.col(H[static_cast<std::size_t>(c)]);
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Jf, Eigen::ComputeThinV);
+  const Eigen::VectorXd inv_sq = svd.singularValues().unaryExpr([](double v) { return 1.0 / (v * v); });
+  const Eigen::MatrixXd Ninv = norm.cwiseInverse().asDiagonal();
+  const Eigen::MatrixXd JtJ_inv =
+      Ninv * svd.matrixV() * inv_sq.asDiagonal() * svd.matrixV().transpose() * Ninv;
+  Eigen::MatrixXd cov_f = s2 * JtJ_inv;
+  Eigen::VectorXd prior(nh);
+  for (Eigen::Index c = 0; c < nh; ++c)
+    prior[c] = held_prior_sigma(static_cast<int>(H[static_cast<std::size_t>(c)]), scale, opt);
+  const Eigen::MatrixXd P = prior.cwiseAbs2().asDiagonal();
+  // Unscaled fitted columns against the held ones: D = -(Jf'Jf)^-1 Jf'Jh.
+  const Eigen::MatrixXd D = -JtJ_inv * (Ninv.inverse() * Jf.transpose() * Jh);
+  cov_f += D * P * D.transpose();
+  Eigen::MatrixXd cov = Eigen::MatrixXd::Zero(n, n);
+  for (Eigen::Index r = 0; r < nf; ++r)
+    for (Eigen::Index c = 0; c < nf; ++c)
+      cov(F[static_cast<std::size_t>(r)], F[static_cast<std::size_t>(c)]) = cov_f(r, c);
+  const Eigen::MatrixXd DP = D * P;
+  for (Eigen::Index r = 0; r < nf; ++r)
+    for (Eigen::Index c = 0; c < nh; ++c) {
+      cov(F[static_cast<std::size_t>(r)], H[static_cast<std::size_t>(c)]) = DP(r, c);
+      cov(H[static_cast<std::size_t>(c)], F[static_cast<std::size_t>(r)]) = DP(r, c);
+    }
+  for (Eigen::Index c = 0; c < nh; ++c)
+    cov(H[static_cast<std::size_t>(c)], H[static_cast<std::size_t>(c)]) = P(c, c);
+  return cov;
+}
+
+/// The fitted gyro parameters the motions leave undetermined: a misalignment angle whose sigma
+/// (held_covariance: with the share of the parameters already held) exceeds the limit, or a scale
+/// whose relative sigma does. One at a time, the parameter furthest beyond its limit is set
+/// aside and the others are looked at again with it held, so that a parameter made uncertain
+/// only by its correlation with a worse one is kept unless holding that one moves it as much.
+std::vector<int> undetermined_gyro_parameters(const Eigen::MatrixXd& J, const std::vector<int>& held,
+                                              double s2, const Eigen::Vector3d& scale,
+                                              const StaticCalibrationOptions& opt) {
+  std::vector<int> all_held = held, weak;
+  for (;;) {
+    const Eigen::MatrixXd cov = held_covariance(J, all_held, s2, scale, opt);
+    int worst = -1;
+    double worst_ratio = 1.0;
+    for (int i = 0; i < 9; ++i) {  // biases (with --estimate-gyro-bias) are never held
+      if (std::find(all_held.begin(), all_held.end(), i) != all_held.end()) continue;
+      const double sd = std::sqrt(std::max(cov(i, i), 0.0));
+      const double limit =
+          i < 6 ? opt.gyro_max_misalignment_sigma_rad : opt.gyro_max_scale_rel_sigma * std::abs(scale[i - 6]);
+      const double ratio = std::isfinite(sd) ? sd / limit : std::numeric_limits<double>::infinity();
+      if (ratio > worst_ratio || (!(ratio <= 1.0) && worst < 0)) {
+        worst_ratio = ratio;
+        worst = i;
+      }
+    }
+    if (worst < 0) break;
+    weak.push_back(worst);
+    all_held.push_back(worst);
+    if (all_held.size() >= 9) break;
+  }
+  return weak;
+}
+
+/// One gyro solve with `held` parameters at their nominal values: two passes (the directions at
+/// the ends of the static intervals depend weakly on the gyro model through the rotation inside
+/// the intervals; the first pass, from the nominal model, is steered by the first-order Jacobian,
+/// the second, which decides the solution, by the exact one), then the covariance with the
+/// accelerometer's share. `weak` receives the fitted parameters the motions leave undetermined:
+/// a misalignment angle whose sigma exceeds the limit, or a scale whose relative sigma does.
+Status gyro_solve(std::vector<Transfer>* transfers, const Candidate& best, const ScannedRecording& scan,
+                  std::span<const ImuSample> samples, const GyroStaticFit& gfit,
+                  const StaticCalibrationOptions& opt, const std::vector<int>& held,
+                  StaticCalibrationResult* res, std::vector<int>* weak) {
   const TedaldiTriad gyro0 = initial_gyro(gfit.bias, opt);
   const int threads = threads_or_cores(opt.threads);
-  GyroFit fit(*transfers, gyro0, opt.estimate_gyro_bias, threads);
-  // Two passes: the directions at the ends of the static intervals depend (weakly) on the gyro
-  // model through the rotation inside the intervals; the second pass uses the first estimate.
-  // The first, from the nominal model, is steered by the first-order Jacobian; the second, which
-  // decides the solution, by the exact one.
+  GyroFit fit(*transfers, gyro0, opt.estimate_gyro_bias, threads, held);
   TedaldiTriad gyro_current = gyro0;
   for (int pass = 0; pass < 2; ++pass) {
     set_transfer_directions(transfers, best.intervals, scan, samples, res->model.accel, gyro_current,
@@ -1236,28 +1595,130 @@ Status solve_gyroscope(std::vector<Transfer>* transfers, const Candidate& best, 
   // the accelerometer uncertainty.
   Result<Eigen::MatrixXd> Jg = fit.jacobian();
   if (!Jg.ok()) return Jg.error();
-  res->gyro_dof = {static_cast<int>(m_res), fit.parameters()};
-  res->gyro_covariance = normal_pseudo_inverse(*Jg);
-  res->gyro_covariance *= res->gyro_dof.determined() ? 2.0 * fit.final_cost() / res->gyro_dof.dof()
-                                                     : std::numeric_limits<double>::quiet_NaN();
+  res->gyro_dof = {static_cast<int>(m_res), fit.fitted()};
+  const double s2 = res->gyro_dof.determined() ? 2.0 * fit.final_cost() / res->gyro_dof.dof()
+                                               : std::numeric_limits<double>::quiet_NaN();
+  if (held.empty()) {
+    res->gyro_covariance = normal_pseudo_inverse(*Jg) * s2;
+  } else {
+    res->gyro_covariance = held_covariance(*Jg, held, s2, res->model.gyro.scale, opt);
+  }
   res->gyro_covariance += accel_uncertainty_in_gyro(*Jg, *transfers, best.means, *res);
   res->gyro_sigma = gyro_sigma(res->gyro_covariance, opt.estimate_gyro_bias, gfit.bias_sigma);
+  if (weak) *weak = undetermined_gyro_parameters(*Jg, held, s2, res->model.gyro.scale, opt);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  static const int row[] = {0, 0, 1, 1, 2, 2}, col[] = {1, 2, 0, 2, 0, 1};
+  for (int i : held) {
+    if (i < 6)
+      res->gyro_sigma.T(row[i], col[i]) = nan;
+    else
+      res->gyro_sigma.scale[i - 6] = nan;
+  }
+  return {};
+}
+
+/// The gyro at its nominal scale without misalignment, the bias from the static poses: what is
+/// left when the motions determine none of its scales and misalignments.
+void nominal_gyro(const std::vector<Transfer>& transfers, const GyroStaticFit& gfit,
+                  const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  res->model.gyro = initial_gyro(gfit.bias, opt);
+  const int n = opt.estimate_gyro_bias ? 12 : 9;
+  res->gyro_dof = {3 * static_cast<int>(transfers.size()), 0};
+  res->gyro_covariance = Eigen::MatrixXd::Zero(n, n);
+  res->gyro_sigma = gyro_sigma(res->gyro_covariance, false, gfit.bias_sigma);
+  res->gyro_sigma.T.setConstant(nan);
+  res->gyro_sigma.T.diagonal().setZero();
+  res->gyro_sigma.scale.setConstant(nan);
+}
+
+/// Eqs. 3.5-3.16: the gyro solve. Parameters the motions leave undetermined (a few motions about
+/// one or two axes, as six faces turned in sequence give) are held at their nominal values (no
+/// misalignment, the nominal scale), named, and the rest solved again.
+Status solve_gyroscope(std::vector<Transfer>* transfers, const Candidate& best, const ScannedRecording& scan,
+                       std::span<const ImuSample> samples, const GyroStaticFit& gfit,
+                       const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
+  std::vector<int> held;
+  for (int round = 0; round < 3; ++round) {
+    std::vector<int> weak;
+    IMUCAL_TRY(gyro_solve(transfers, best, scan, samples, gfit, opt, held, res, &weak));
+    if (weak.empty()) break;
+    held.insert(held.end(), weak.begin(), weak.end());
+    std::sort(held.begin(), held.end());
+    if (held.size() == 9) {
+      nominal_gyro(*transfers, gfit, opt, res);
+      break;
+    }
+  }
+  res->gyro_fixed.clear();
+  for (int i : held) res->gyro_fixed.emplace_back(gyro_parameter_name(i));
+  if (!held.empty()) {
+    std::string names;
+    for (const auto& n : res->gyro_fixed) names += (names.empty() ? "" : ", ") + n;
+    res->warnings.push_back(
+        "the " + std::to_string(transfers->size()) +
+        " motions between the static poses do not determine the gyroscope's " + names + " (sigma above " +
+        fmt("%.3f", opt.gyro_max_misalignment_sigma_rad) + " rad or " +
+        fmt("%.1f", 100.0 * opt.gyro_max_scale_rel_sigma) +
+        " %): held at nominal (no misalignment, the nominal scale). Turn the rig about each "
+        "of its three axes between holds, both ways");
+  }
   return {};
 }
 
 // ---- g-sensitivity ---------------------------------------------------------------------------
 
+/// The 95 % point of the chi-square distribution with 9 degrees of freedom.
+constexpr double kChi2_9_95 = 16.919;
+
+/// Few poses on all six faces: the fit over the poses has too few degrees of freedom for its
+/// residual covariance to mean much, so G and the bias come from the six-face experiment
+/// (calib/gsens_calibration.hpp: generalised least squares weighted by the holds' white noise and
+/// bias walk) through the final accelerometer; the pose fit stays when that cannot be had (holds
+/// shorter than its minimum), with a warning.
+void six_face_gsens(std::span<const ImuSample> samples, const StaticCalibrationOptions& opt,
+                    const Eigen::Vector3d& s0, StaticCalibrationResult* res, GyroStaticFit* f) {
+  GSensitivityOptions g;
+  g.gravity_mps2 = opt.gravity_mps2;
+  const CanonicalImuModel c = canonical_from_tedaldi(res->model);
+  g.A_a = c.A_a;
+  g.b_a = c.b_a;
+  g.A_g = s0.asDiagonal();
+  g.window_s = opt.window_s;
+  g.max_face_angle_deg = std::max(opt.face_max_angle_deg, 30.0);
+  const Result<GSensitivityResult> r = calibrate_gsens(samples, g);
+  if (!r.ok()) {
+    res->warnings.push_back("the g-sensitivity comes from the " + std::to_string(f->dof.residuals) +
+                            " pose means with " + std::to_string(f->dof.dof()) +
+                            " degrees of freedom per axis, too few for trustworthy sigmas; the six-face "
+                            "experiment could not be used: " +
+                            r.error().message);
+    return;
+  }
+  const Eigen::Vector3d inv = s0.cwiseInverse();
+  f->H = inv.asDiagonal() * r->G;
+  f->bias = r->b_g;
+  f->drift.setZero();
+  f->drift_offset.setZero();
+  for (int i = 0; i < 3; ++i) {
+    f->H_sigma.row(i) = r->G_sigma.row(i) * inv[i];
+    f->bias_sigma[i] = r->b_g_sigma[i];
+  }
+  f->dof = {r->dof.residuals / 3, r->dof.parameters / 3};
+  for (const auto& w : r->warnings) res->warnings.push_back("g-sensitivity (six-face holds): " + w);
+}
+
 /// The gyro's static model with the final accelerometer calibration.
 GyroStaticFit final_gyro_static_fit(const Candidate& best, const ScannedRecording& scan,
-                                    const StillStart& still, const StaticCalibrationOptions& opt,
-                                    StaticCalibrationResult* res) {
-  res->gsens_mode = effective_gsens(opt, best.means.size());
+                                    std::span<const ImuSample> samples, const StillStart& still,
+                                    const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
+  res->gsens_mode = effective_gsens(opt, best);
   if (res->gsens_mode != opt.gsens) {
-    res->warnings.push_back("the gyro g-sensitivity was not estimated: " + std::to_string(best.means.size()) +
-                            " static poses are too few to fit it (" +
-                            std::to_string(opt.min_poses_for_gsens) +
-                            " needed); it is neglected (Tedaldi's model), which costs gyro accuracy on MEMS "
-                            "gyros. Record more poses, or give a known G");
+    res->warnings.push_back(
+        "the gyro g-sensitivity was not estimated: " + std::to_string(best.means.size()) +
+        " static poses are too few to fit it (" + std::to_string(opt.min_poses_for_gsens) +
+        " needed, or a pose on each of the six faces); it is neglected (Tedaldi's model), which "
+        "costs gyro accuracy on MEMS gyros. Record more poses, or give a known G");
   }
   // A given G in input units through the nominal gyro scale (the solved scale differs from it by
   // far less than G's own uncertainty).
@@ -1265,6 +1726,25 @@ GyroStaticFit final_gyro_static_fit(const Candidate& best, const ScannedRecordin
   const Eigen::Matrix3d H_fixed = s0.cwiseInverse().asDiagonal() * opt.gsens_fixed;
   GyroStaticFit f =
       fit_gyro_static(pose_means(best, still, res->model.accel, scan), still, res->gsens_mode, H_fixed);
+  if (res->gsens_mode == GSensitivityMode::kEstimate &&
+      best.means.size() < static_cast<std::size_t>(opt.min_poses_for_gsens)) {
+    six_face_gsens(samples, opt, s0, res, &f);
+  }
+  if (res->gsens_mode == GSensitivityMode::kEstimate) {
+    // Is G distinguishable from zero at all? The Wald statistic of its nine entries (their
+    // correlations neglected) against the chi-square 95 % point; below it, estimating G only
+    // adds its noise to every gyro sample (on the real recordings of docs/static-calibration.md
+    // whose G this test rejects, neglecting it carried gravity better on every one).
+    double w = 0.0;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) w += (f.H(i, j) / f.H_sigma(i, j)) * (f.H(i, j) / f.H_sigma(i, j));
+    res->gsens_wald = w;
+    if (std::isfinite(w) && w < kChi2_9_95) {
+      // Not a warning: there is nothing to do about it. The summary and the JSON say so.
+      res->gsens_mode = GSensitivityMode::kOff;
+      f = fit_gyro_static(pose_means(best, still, res->model.accel, scan), still, res->gsens_mode, H_fixed);
+    }
+  }
   res->gsens_dof = f.dof;
   return f;
 }
@@ -1365,8 +1845,9 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   res.timings.detector_s = seconds_since(t0);
 
   t0 = Clock::now();
+  AccelModel model = AccelModel::kFull;
   Result<Candidate> best =
-      search_threshold(*scan, detection, *still, opt, &res.threshold_candidates, &res.warnings);
+      search_threshold(*scan, detection, *still, opt, &res.threshold_candidates, &model, &res.warnings);
   res.timings.threshold_search_s = seconds_since(t0);
   if (!best.ok()) return best.error();
   res.threshold_multiplier = best->multiplier;
@@ -1374,11 +1855,11 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   res.distinct_attitudes = best->distinct;
 
   t0 = Clock::now();
-  IMUCAL_TRY(solve_accelerometer(*best, samples, opt, &res));
+  IMUCAL_TRY(solve_accelerometer(*best, model, samples, opt, &res));
   res.timings.accel_s = seconds_since(t0);
 
   t0 = Clock::now();
-  const GyroStaticFit gfit = final_gyro_static_fit(*best, *scan, *still, opt, &res);
+  const GyroStaticFit gfit = final_gyro_static_fit(*best, *scan, samples, *still, opt, &res);
   const ScannedRecording corrected = without_gsens(*scan, gfit, res.model.accel);
   Result<std::vector<Transfer>> transfers = collect_transfers(best->intervals, corrected, samples, opt, &res);
   if (!transfers.ok()) return transfers.error();

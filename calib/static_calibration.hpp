@@ -42,9 +42,22 @@ struct StaticCalibrationOptions {
   /// which for the same k is far stricter).
   int multiplier_min = 2;
   int multiplier_max = 10;
-  /// Distinct attitudes: at least min_attitudes (observability, section 3.5), a warning below
-  /// recommended_attitudes. Two static means closer than distinct_attitude_deg are one attitude.
+  /// Distinct attitudes: at least min_attitudes for the full model (observability, section
+  /// 3.5), a warning below recommended_attitudes. Two static means closer than
+  /// distinct_attitude_deg are one attitude.
   int min_attitudes = 9;
+  /// The accelerometer model. Auto: the full model when some threshold finds min_attitudes;
+  /// otherwise the known-orientation form when the poses cover the six faces, else scales and
+  /// biases alone (misalignment held at zero) from min_attitudes_scale_bias attitudes.
+  enum class AccelModel { kAuto, kFull, kFaces, kScaleBias };
+  AccelModel accel_model = AccelModel::kAuto;
+  int min_attitudes_scale_bias = 6;
+  /// A pose lies on a face when its gravity reaction is within this angle of the face's axis.
+  double face_max_angle_deg = 15.0;
+  /// Scale-bias form: the misalignment held at zero is really up to about this (1 sigma, rad;
+  /// the MPU-6000's cross-axis sensitivity is +-2 %); the scales and biases it shifts are
+  /// widened by that shift.
+  double misalignment_prior_rad = 0.02;
   int recommended_attitudes = 18;
   double distinct_attitude_deg = 8.0;
   /// Static intervals in which the gyro shows more rotation than this are dropped, deg.
@@ -69,6 +82,14 @@ struct StaticCalibrationOptions {
   /// sees as Omega sin(latitude) along gravity, indistinguishable from g-sensitivity) is removed
   /// from the estimated G.
   std::optional<double> latitude_deg;
+  /// Gyro parameters the motions determine worse than this (1 sigma: misalignment angle, rad;
+  /// scale, relative) are held at nominal and named instead of fitted.
+  double gyro_max_misalignment_sigma_rad = 0.01;
+  double gyro_max_scale_rel_sigma = 0.01;
+  /// A held gyro scale is really within this of nominal (1 sigma, relative: the MPU-6000's
+  /// sensitivity tolerance is +-3 %); a held angle within misalignment_prior_rad. What they move
+  /// the fitted parameters by is added to those's covariance.
+  double scale_prior_rel = 0.03;
   /// Threads for the gyroscope solve (0: one per core). The result does not depend on it.
   int threads = 0;
 

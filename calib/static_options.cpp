@@ -27,6 +27,12 @@ Status StaticCalibrationOptions::validate() const {
     return fail("threshold multipliers must satisfy 1 <= min <= max");
   if (min_attitudes < 9)
     return fail("at least 9 distinct attitudes are needed for observability (Tedaldi 3.5)");
+  if (min_attitudes_scale_bias < 6 || min_attitudes_scale_bias > min_attitudes)
+    return fail("scales and biases need at least 6 distinct attitudes, and no more than the full model");
+  if (!(face_max_angle_deg > 0.0 && face_max_angle_deg < 45.0))
+    return fail("the angle within which a pose lies on a face must be in (0, 45) deg");
+  if (!(misalignment_prior_rad >= 0.0 && misalignment_prior_rad < 0.5))
+    return fail("the misalignment prior must be in [0, 0.5) rad");
   if (!(distinct_attitude_deg > 0.0)) return fail("the distinct-attitude angle must be positive");
   if (!(max_rotation_in_static_deg > 0.0))
     return fail("the rotation limit inside a static interval must be positive");

@@ -7,6 +7,7 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -72,6 +73,24 @@ inline const char* gsens_mode_name(GSensitivityMode mode) {
   return "off";
 }
 
+/// Which accelerometer model the static calibration fitted (StaticCalibrationOptions::accel_model).
+enum class StaticAccelModel {
+  kFull,       // Tedaldi's magnitude form: 3 misalignment angles, 3 scales, 3 biases (9 attitudes)
+  kFaces,      // known orientation: each pose on one of the six faces, full 3x3 matrix and offset
+  kScaleBias,  // magnitude form with the misalignment held at zero: scales and biases (6 attitudes)
+};
+inline const char* static_accel_model_name(StaticAccelModel m) {
+  switch (m) {
+    case StaticAccelModel::kFull:
+      return "full";
+    case StaticAccelModel::kFaces:
+      return "faces";
+    case StaticAccelModel::kScaleBias:
+      return "scale-bias";
+  }
+  return "full";
+}
+
 /// Degrees of freedom of a least-squares fit (residuals minus parameters). With none left the
 /// residual variance is unknown and the parameters' sigmas are undetermined (NaN).
 struct FitDof {
@@ -109,7 +128,23 @@ struct StaticCalibrationResult {
   double earth_rate_removed = 0.0;
   /// Residual RMS of the per-pose gyro means about b_g + H a (rad/s, with the nominal gyro scale).
   double gsens_residual_rms = 0.0;
+  /// Wald statistic of the estimated G's nine entries against zero (NaN when G was not
+  /// estimated); below the chi-square 95 % point G is neglected.
+  double gsens_wald = std::numeric_limits<double>::quiet_NaN();
   FitDof accel_dof, gyro_dof, gsens_dof;
+  /// The accelerometer model fitted, why that one, and the parameters it held instead of fitting
+  /// (their sigmas are NaN: not determined by the recording).
+  StaticAccelModel accel_model = StaticAccelModel::kFull;
+  std::string accel_model_reason;
+  std::vector<std::string> accel_fixed;
+  /// Gyro parameters the motions did not determine, held at nominal (sigma NaN).
+  std::vector<std::string> gyro_fixed;
+  /// Known-orientation form only: how far the poses' calibrated gravity lay from their faces'
+  /// axes (RMS, rad), the rotation between the faces and the accelerometer's frame (rad), and the
+  /// poses left out of the accelerometer fit because they lie on no face.
+  double faces_direction_rms_rad = 0.0;
+  double faces_rotation_rad = 0.0;
+  int poses_off_faces = 0;
 
   double gravity_mps2 = 0.0;
   double init_still_s = 0.0;

@@ -138,6 +138,14 @@ Status SixFaceOptions::validate() const {
   if (!(hold_s >= 1.0 && hold_s <= 3600.0) || !(move_s >= 0.5 && move_s <= 60.0)) {
     return make_error(Errc::kInvalidArgument, "six-face script: hold must be 1..3600 s and moves 0.5..60 s");
   }
+  for (int f : faces) {
+    if (f < 0 || f > 5)
+      return make_error(Errc::kInvalidArgument, "six-face script: a face index is not 0..5");
+  }
+  if (revisits < 0 || revisits > 1000 || !(revisit_hold_s >= 1.0 && revisit_hold_s <= 3600.0)) {
+    return make_error(Errc::kInvalidArgument,
+                      "six-face script: revisits must be 0..1000 and their holds 1..3600 s");
+  }
   return check_tremor(tremor);
 }
 
@@ -320,15 +328,31 @@ Result<std::unique_ptr<PoseScript>> make_six_face(const SixFaceOptions& options,
   const Eigen::Vector3d p(0.0, 0.0, 1.0);
   // Faces are reached through 90 deg turns where possible; -z up from -y up is a 90 deg turn
   // about x, and so on, so the fixture looks like a cube turned on a table.
-  Eigen::Quaterniond q = attitude(ups[0], 0.0);
+  std::vector<int> faces = options.faces;
+  if (faces.empty()) faces = {0, 1, 2, 3, 4, 5};
+  Eigen::Quaterniond q = attitude(ups[static_cast<std::size_t>(faces[0])], 0.0);
   add_hold(&pieces, &segments, &t, q, p, options.hold_s, "face");
-  for (std::size_t i = 1; i < ups.size(); ++i) {
-    const Eigen::Quaterniond q1 = attitude(ups[i], 0.0);
+  for (std::size_t i = 1; i < faces.size(); ++i) {
+    const Eigen::Quaterniond q1 = attitude(ups[static_cast<std::size_t>(faces[i])], 0.0);
     add_move(&pieces, &segments, &t, q, p, q1, p, options.move_s, 0.02);
     add_hold(&pieces, &segments, &t, q1, p, options.hold_s, "face");
     q = q1;
   }
-  return std::make_unique<PoseScript>(std::move(pieces), std::move(segments), options.tremor, seed, 6);
+  Rng rng(Rng::substream(seed, kSaltMotion));
+  int face = faces.back();
+  double yaw = 0.0;
+  for (int r = 0; r < options.revisits; ++r) {
+    int next = face;
+    while (next == face) next = static_cast<int>(rng.uniform(0.0, 6.0)) % 6;
+    face = next;
+    yaw += rng.signed_magnitude(20.0 * kDeg, 60.0 * kDeg);
+    const Eigen::Quaterniond q1 = attitude(ups[static_cast<std::size_t>(face)], yaw);
+    add_move(&pieces, &segments, &t, q, p, q1, p, options.move_s, 0.02);
+    add_hold(&pieces, &segments, &t, q1, p, options.revisit_hold_s, "hold");
+    q = q1;
+  }
+  return std::make_unique<PoseScript>(std::move(pieces), std::move(segments), options.tremor, seed,
+                                      static_cast<int>(faces.size()) + options.revisits);
 }
 
 Result<std::unique_ptr<PoseScript>> make_still(const StillOptions& options, std::uint64_t seed) {

@@ -50,6 +50,12 @@ struct StaticProtocolOptions {
 struct SixFaceOptions {
   double hold_s = 30.0;  // per face
   double move_s = 3.0;   // per reorientation
+  /// The faces held, as indices into six_face_names(), in that order (empty: all six in turn).
+  std::vector<int> faces;
+  /// Holds after those, each on a face other than the last one and turned about the vertical by
+  /// 20-60 deg as well (as a hand puts a box down again), of revisit_hold_s each.
+  int revisits = 0;
+  double revisit_hold_s = 3.0;
   TremorOptions tremor;
 
   [[nodiscard]] Status validate() const;

@@ -31,6 +31,22 @@ Section overview_section(const nlohmann::json& r) {
                         std::to_string(at(r, "distinct_attitudes").get<int>()) + " distinct attitudes, " +
                         std::to_string(at(r, "gyro_transfers").get<int>()) + " gyro transfers"});
   t.rows.push_back({"gyro bias", escape(at(at(r, "gyro"), "bias_source").get<std::string>())});
+  // What the recording determined (results of older versions lack these keys: the full model).
+  if (r.contains("accel_model")) {
+    const auto& m = r["accel_model"];
+    t.rows.push_back({"accelerometer model", escape(m.value("form", std::string("full"))) + ": " +
+                                                 escape(m.value("reason", std::string()))});
+  }
+  const auto held = [&](const char* key) {
+    std::string out;
+    if (r.contains(key))
+      for (const auto& n : r[key]) out += (out.empty() ? "" : ", ") + n.get<std::string>();
+    return out.empty() ? std::string("none") : out;
+  };
+  if (r.contains("accel_fixed") || r.contains("gyro_fixed")) {
+    t.rows.push_back({"not determined, held at nominal", "accelerometer: " + escape(held("accel_fixed")) +
+                                                             "; gyroscope: " + escape(held("gyro_fixed"))});
+  }
   if (r.contains("log_software_version"))
     t.rows.push_back({"recorded by", escape(r["log_software_version"].get<std::string>())});
   return {"Result", t.to_html(), {}};
@@ -59,7 +75,9 @@ Section parameters_section(const nlohmann::json& r) {
   Section sec{"Parameters", "", {}};
   sec.html =
       "<p class=\"note\">Every value with its standard deviation from the solver covariance, scaled by "
-      "the observed residual variance; \"fixed\" entries are not estimated.</p>\n<h3>Accelerometer</h3>\n" +
+      "the observed residual variance; entries fixed by the form of the model are marked \"fixed\", those "
+      "the recording did not determine are held at nominal and marked \"&sigma; not "
+      "determined\".</p>\n<h3>Accelerometer</h3>\n" +
       triad_html(at(r, "accel"), raw ? "m/s<sup>2</sup> per count" : "", raw ? "counts" : "m/s<sup>2</sup>") +
       "<p>Residual RMS " + num(number(at(r, "accel"), "residual_rms_m2ps4"), 4) +
       " m<sup>2</sup>/s<sup>4</sup>.</p>\n<h3>Gyroscope</h3>\n" +
@@ -69,7 +87,13 @@ Section parameters_section(const nlohmann::json& r) {
   const std::string mode = at(gs, "mode").get<std::string>();
   sec.html += "<h3>Gyroscope g-sensitivity (" + escape(mode) + ")</h3>\n";
   if (mode == "off") {
-    sec.html += "<p>Neglected (Tedaldi's model, G = 0).</p>\n";
+    sec.html += "<p>Neglected (Tedaldi's model, G = 0)";
+    if (gs.contains("wald_statistic") && gs["wald_statistic"].is_number()) {
+      sec.html += ": not distinguishable from zero on this recording (Wald statistic " +
+                  num(gs["wald_statistic"].get<double>(), 3) +
+                  " of its 9 entries, below the chi-square 95 % point 16.9)";
+    }
+    sec.html += ".</p>\n";
     return sec;
   }
   // deg/s per g reads better than rad/s per m/s^2 for MEMS gyros.

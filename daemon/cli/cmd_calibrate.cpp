@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <optional>
 #include <sstream>
@@ -31,6 +32,7 @@ struct StaticCliOptions {
   std::string accel_scale_init, accel_offset_init, gyro_scale_init;
   bool estimate_gyro_bias = false;
   std::vector<std::string> gsens{"estimate"};
+  std::string accel_model = "auto";
   double window_s = 1.0;
   double min_interval_s = 0.5;
   bool allow_damaged = false;
@@ -78,6 +80,12 @@ calib::StaticCalibrationOptions method_options(const StaticCliOptions& o, double
   } else {
     throw CliExit{kExitUsage, "--gsens takes 'estimate', 'off' or 'fix FILE'"};
   }
+  using Model = calib::StaticCalibrationOptions::AccelModel;
+  static const std::map<std::string, Model> models = {{"auto", Model::kAuto},
+                                                      {"full", Model::kFull},
+                                                      {"faces", Model::kFaces},
+                                                      {"scale-bias", Model::kScaleBias}};
+  opt.accel_model = models.at(o.accel_model);
   opt.window_s = o.window_s;
   opt.min_interval_s = o.min_interval_s;
 
@@ -102,6 +110,19 @@ void print_summary(const std::string& log_path, const ImuStreamInfo& info, std::
             << q.gyro_after.max_rad << " rad";
   if (q.before_available) std::cout << " (before: mean " << q.gyro_before.mean_rad << ")";
   std::cout << "\n";
+  std::cout << "  accelerometer: " << static_accel_model_name(res->accel_model) << " form ("
+            << res->accel_model_reason << ")\n";
+  const auto list = [](const std::vector<std::string>& v) {
+    std::string out;
+    for (const auto& s : v) out += (out.empty() ? "" : ", ") + s;
+    return out.empty() ? std::string("none") : out;
+  };
+  std::cout << "  not determined, held at nominal: accelerometer " << list(res->accel_fixed) << "; gyroscope "
+            << list(res->gyro_fixed) << "\n";
+  if (res->gsens_mode == GSensitivityMode::kOff && std::isfinite(res->gsens_wald)) {
+    std::cout << "  gyro g-sensitivity: not distinguishable from zero (Wald statistic " << res->gsens_wald
+              << " of its 9 entries, below the chi-square 95 % point 16.9), neglected\n";
+  }
   if (res->gsens_mode != GSensitivityMode::kOff) {
     const Eigen::Matrix3d& G = res->canonical.G;
     std::cout << "  gyro g-sensitivity (" << gsens_mode_name(res->gsens_mode) << ", deg/s per g): ";
@@ -209,6 +230,12 @@ void setup(CLI::App& root) {
                   "canonical.G or a file with G: 3 rows of 3, rad/s per m/s^2)")
       ->expected(1, 2)
       ->type_name("MODE [FILE]");
+  cmd->add_option("--accel-model", o->accel_model,
+                  "Accelerometer model: auto (the full model with 9 or more distinct attitudes, else the "
+                  "known-orientation form when the poses lie on all six faces, else scales and biases alone "
+                  "from 6), full, faces (each pose taken as lying flat on one of the six faces, as PX4 and "
+                  "ArduPilot do), scale-bias (misalignment held at zero) (default auto)")
+      ->check(CLI::IsMember({"auto", "full", "faces", "scale-bias"}));
   cmd->add_option("--window", o->window_s, "Static detector window t_w, s")->check(CLI::Range(0.05, 10.0));
   cmd->add_option("--min-interval", o->min_interval_s, "Shortest static interval used, s")
       ->check(CLI::Range(0.05, 60.0));

@@ -3,6 +3,7 @@
 
 #include <fmt/printf.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <iostream>
@@ -244,8 +245,26 @@ void add_gsens(CLI::App* sim) {
       sim->add_subcommand("gsens", "Six-face holds for the gyroscope g-sensitivity experiment (Krebs 5.2.3)");
   add_common(cmd, *o);
   cmd->add_option("--hold", fo->hold_s, "Hold per face in s (default 30)")->check(CLI::Range(1.0, 3600.0));
-  cmd->callback([o, fo, cmd]() {
+  auto faces = std::make_shared<std::vector<std::string>>();
+  cmd->add_option("--faces", *faces,
+                  "The faces held, in order, as a comma-separated list of +z,-y,-z,+y,+x,-x (the axis that "
+                  "points up; default all six in that order)")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"+z", "-y", "-z", "+y", "+x", "-x"}));
+  cmd->add_option("--revisits", fo->revisits,
+                  "Further holds after the faces, each on another face than the last, turned about the "
+                  "vertical by 20-60 deg as well (default 0)")
+      ->check(CLI::Range(0, 1000));
+  cmd->add_option("--revisit-hold", fo->revisit_hold_s, "Hold per revisit in s (default 3)")
+      ->check(CLI::Range(1.0, 3600.0));
+  cmd->callback([o, fo, faces, cmd]() {
     fo->tremor.enabled = o->tremor;
+    fo->faces.clear();
+    for (const auto& f : *faces) {
+      const auto& names = sim::six_face_names();
+      const auto at = std::find(names.begin(), names.end(), f + " up");
+      fo->faces.push_back(static_cast<int>(at - names.begin()));
+    }
     auto traj = take(sim::make_six_face(*fo, o->seed), "sim gsens");
     run(*o, cmd, "gsens", "six-face", *traj, traj->poses());
   });
