@@ -226,7 +226,9 @@ std::string static_result_json(const calib::StaticCalibrationResult& r, const Im
   j["accel_fixed"] = r.accel_fixed;
   j["gyro_fixed"] = r.gyro_fixed;
   // The gyro covariance has 12 parameters only when the bias was estimated in the gyro solve.
-  j["gyro"]["bias_source"] = r.gyro_covariance.rows() == 12           ? "estimated in the gyro solve"
+  j["gyro"]["bias_source"] = r.gyro_covariance.rows() == 12 ? "estimated in the gyro solve"
+                             : r.gyro_bias_from_poses && r.gsens_mode == GSensitivityMode::kOff
+                                 ? "still poses, with its drift (G neglected: not distinguishable from zero)"
                              : r.gsens_mode == GSensitivityMode::kOff ? "initial still period mean"
                                                                       : "still poses, with the g-sensitivity";
   j["gsens"] = {{"mode", gsens_mode_name(r.gsens_mode)},

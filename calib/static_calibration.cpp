@@ -251,7 +251,7 @@ std::vector<Eigen::MatrixXd> newey_west_covariances(const Eigen::MatrixXd& X, co
 }
 
 GyroStaticFit fit_gyro_static(const PoseMeans& m, const StillStart& still, GSensitivityMode mode,
-                              const Eigen::Matrix3d& H_fixed) {
+                              const Eigen::Matrix3d& H_fixed, bool fit_gsens = true) {
   GyroStaticFit f;
   const auto& gyro_means = m.gyro;
   const auto& accel_si = m.accel_si;
@@ -260,8 +260,11 @@ GyroStaticFit fit_gyro_static(const PoseMeans& m, const StillStart& still, GSens
   if (mode == GSensitivityMode::kEstimate) {
     // Regressors [1, a, tau, tau^2]: the bias wanders over a session (random walk, warm-up) by as
     // much as the g-sensitivity moves the pose means, so a smooth drift is fitted with them.
+    // Without G (fit_gsens false: G not distinguishable from zero) the bias and its drift are
+    // still fitted to the poses: a short or disturbed still start says less about them.
+    const int na = fit_gsens ? 3 : 0;
     const int nd = drift_terms(n);
-    const int p = 4 + nd;
+    const int p = 1 + na + nd;
     const auto [t_lo, t_hi] = std::minmax_element(m.t_s.begin(), m.t_s.end());
     f.t_mid_s = 0.5 * (*t_lo + *t_hi);
     f.t_half_s = std::max(0.5 * (*t_hi - *t_lo), 1e-9);
@@ -269,15 +272,15 @@ GyroStaticFit fit_gyro_static(const PoseMeans& m, const StillStart& still, GSens
     for (std::size_t k = 0; k < n; ++k) {
       const double tau = (m.t_s[k] - f.t_mid_s) / f.t_half_s;
       X(k, 0) = 1.0;
-      X.row(k).segment<3>(1) = accel_si[k].transpose();
-      for (int d = 0; d < nd; ++d) X(k, 4 + d) = std::pow(tau, d + 1);
+      if (fit_gsens) X.row(k).segment<3>(1) = accel_si[k].transpose();
+      for (int d = 0; d < nd; ++d) X(k, 1 + na + d) = std::pow(tau, d + 1);
       Y.row(k) = gyro_means[k].transpose();
     }
     const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(X);
     const Eigen::MatrixXd beta = qr.solve(Y);  // p x 3: [b; H^T; drift]
     f.bias = beta.row(0).transpose();
-    f.H = beta.middleRows(1, 3).transpose();
-    for (int d = 0; d < nd; ++d) f.drift.col(d) = beta.row(4 + d).transpose();
+    if (fit_gsens) f.H = beta.middleRows(1, 3).transpose();
+    for (int d = 0; d < nd; ++d) f.drift.col(d) = beta.row(1 + na + d).transpose();
     // Report the bias averaged over the span (see the sigma below) and keep the drift about it.
     if (nd == 2) {
       f.bias += f.drift.col(1) / 3.0;
@@ -301,14 +304,14 @@ GyroStaticFit fit_gyro_static(const PoseMeans& m, const StillStart& still, GSens
       // mean tau 0, mean tau^2 1/3), the bias a user of the whole recording saw.
       Eigen::VectorXd l = Eigen::VectorXd::Zero(p);
       l[0] = 1.0;
-      if (nd == 2) l[5] = 1.0 / 3.0;
+      if (nd == 2) l[2 + na] = 1.0 / 3.0;
       f.bias_sigma[axis] = std::sqrt(std::max(l.dot(V * l), 0.0));
       if (!f.dof.determined()) {
         f.bias_sigma[axis] = nan;
         f.H_sigma.row(axis).setConstant(nan);
         continue;
       }
-      f.H_sigma.row(axis) = sd.segment<3>(1).transpose();
+      if (fit_gsens) f.H_sigma.row(axis) = sd.segment<3>(1).transpose();
     }
     if (!full_rank) f.H_sigma.setConstant(nan);
   } else {
@@ -846,10 +849,13 @@ void six_face_gsens(std::span<const ImuSample> samples, const StaticCalibrationO
   for (const auto& w : r->warnings) res->warnings.push_back("g-sensitivity (six-face holds): " + w);
 }
 
-/// The gyro's static model with the final accelerometer calibration.
-GyroStaticFit final_gyro_static_fit(const Candidate& best, const ScannedRecording& scan,
-                                    std::span<const ImuSample> samples, const StillStart& still,
-                                    const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
+/// The gyro's static model with the final accelerometer calibration. When G is neglected for
+/// being indistinguishable from zero, two: the bias and its drift fitted to the poses, and the
+/// still start's mean (Tedaldi's); the caller keeps the one whose gyro carries gravity better.
+std::vector<GyroStaticFit> final_gyro_static_fits(const Candidate& best, const ScannedRecording& scan,
+                                                  std::span<const ImuSample> samples, const StillStart& still,
+                                                  const StaticCalibrationOptions& opt,
+                                                  StaticCalibrationResult* res) {
   res->gsens_mode = effective_gsens(opt, best);
   if (res->gsens_mode != opt.gsens) {
     res->warnings.push_back(
@@ -880,11 +886,16 @@ GyroStaticFit final_gyro_static_fit(const Candidate& best, const ScannedRecordin
     if (std::isfinite(w) && w < kChi2_9_95) {
       // Not a warning: there is nothing to do about it. The summary and the JSON say so.
       res->gsens_mode = GSensitivityMode::kOff;
-      f = fit_gyro_static(pose_means(best, still, res->model.accel, scan), still, res->gsens_mode, H_fixed);
+      const PoseMeans m = pose_means(best, still, res->model.accel, scan);
+      std::vector<GyroStaticFit> two = {
+          fit_gyro_static(m, still, GSensitivityMode::kEstimate, H_fixed, false),
+          fit_gyro_static(m, still, GSensitivityMode::kOff, H_fixed)};
+      res->gsens_dof = two[0].dof;
+      return two;
     }
   }
   res->gsens_dof = f.dof;
-  return f;
+  return {f};
 }
 
 /// The recording with every gyro sample's g-sensitivity removed (w_raw - H a(t), a(t) the
@@ -997,17 +1008,32 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   res.timings.accel_s = seconds_since(t0);
 
   t0 = Clock::now();
-  const GyroStaticFit gfit = final_gyro_static_fit(*best, *scan, samples, *still, opt, &res);
-  const ScannedRecording corrected = without_gsens(*scan, gfit, res.model.accel);
-  Result<std::vector<Transfer>> transfers = collect_transfers(best->intervals, corrected, samples, opt, &res);
-  if (!transfers.ok()) return transfers.error();
-  const GyroSolveInput gyro_input{best->intervals, best->means, gfit.bias, gfit.bias_sigma};
-  IMUCAL_TRY(solve_gyroscope(&*transfers, gyro_input, corrected, samples, opt, &res));
+  const std::vector<GyroStaticFit> gfits = final_gyro_static_fits(*best, *scan, samples, *still, opt, &res);
+  // One gyro solve per static model; with two (G neglected: the bias from the poses or from the
+  // still start), the one with the smaller residual of eq. 3.8 is kept, warnings and all.
+  std::optional<StaticCalibrationResult> chosen;
+  std::vector<Transfer> chosen_transfers;
+  std::size_t chosen_fit = 0;
+  for (std::size_t k = 0; k < gfits.size(); ++k) {
+    StaticCalibrationResult r = res;
+    r.gyro_bias_from_poses = gfits.size() == 2 && k == 0;
+    const ScannedRecording corrected = without_gsens(*scan, gfits[k], r.model.accel);
+    Result<std::vector<Transfer>> transfers = collect_transfers(best->intervals, corrected, samples, opt, &r);
+    if (!transfers.ok()) return transfers.error();
+    const GyroSolveInput gyro_input{best->intervals, best->means, gfits[k].bias, gfits[k].bias_sigma};
+    IMUCAL_TRY(solve_gyroscope(&*transfers, gyro_input, corrected, samples, opt, &r));
+    if (!chosen || r.gyro_residual_rms < chosen->gyro_residual_rms) {
+      chosen = std::move(r);
+      chosen_transfers = std::move(*transfers);
+      chosen_fit = k;
+    }
+  }
+  res = std::move(*chosen);
   res.timings.gyro_s = seconds_since(t0);
 
-  res.quality = quality_figures(*transfers, *best, *scan, samples, *still, opt, res.model);
+  res.quality = quality_figures(chosen_transfers, *best, *scan, samples, *still, opt, res.model);
   res.canonical = canonical_from_tedaldi(res.model);
-  set_gsens_result(gfit, opt, &res);
+  set_gsens_result(gfits[chosen_fit], opt, &res);
   return res;
 }
 

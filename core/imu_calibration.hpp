@@ -131,6 +131,9 @@ struct StaticCalibrationResult {
   /// Wald statistic of the estimated G's nine entries against zero (NaN when G was not
   /// estimated); below the chi-square 95 % point G is neglected.
   double gsens_wald = std::numeric_limits<double>::quiet_NaN();
+  /// The gyro bias was fitted to the still poses (with its drift), also when G is neglected for
+  /// being indistinguishable from zero; false: the still start's mean (gsens off).
+  bool gyro_bias_from_poses = false;
   FitDof accel_dof, gyro_dof, gsens_dof;
   /// The accelerometer model fitted, why that one, and the parameters it held instead of fitting
   /// (their sigmas are NaN: not determined by the recording).
