@@ -102,7 +102,33 @@ AccelSolve solve_accel(std::span<const Eigen::Vector3d> means, double g, const T
   out.iterations = static_cast<int>(summary.iterations.size());
   const double n = static_cast<double>(means.size());
   out.rms = std::sqrt(2.0 * out.cost / n);
-  if (covariance && out.ok) {
+  if (covariance && out.ok && fix_misalignment) {
+    // The covariance of the fitted columns from the Jacobian at the solution (a problem without
+    // the manifold gives every column), truncated like ceres::Covariance's DENSE_SVD below, the
+    // held angles' rows zero. ceres::Covariance itself is not used with the manifold: in the
+    // sanitized build its tangent-space path frees memory it did not allocate.
+    ceres::Problem plain;
+    for (const auto& m : means)
+      plain.AddResidualBlock(AccelMagnitudeCost::Create(m, g, c), nullptr, pn.data());
+    ceres::Problem::EvaluateOptions eo;
+    eo.num_threads = 1;
+    ceres::CRSMatrix crs;
+    if (!plain.Evaluate(eo, nullptr, nullptr, nullptr, &crs) || crs.num_cols != 9) {
+      out.ok = false;
+      return out;
+    }
+    Eigen::MatrixXd Jf = Eigen::MatrixXd::Zero(crs.num_rows, 6);
+    for (int r = 0; r < crs.num_rows; ++r) {
+      for (int idx = crs.rows[r]; idx < crs.rows[r + 1]; ++idx) {
+        if (crs.cols[idx] >= 3) Jf(r, crs.cols[idx] - 3) = crs.values[idx];
+      }
+    }
+    Eigen::Matrix<double, 9, 9> cn = Eigen::Matrix<double, 9, 9>::Zero();
+    cn.bottomRightCorner<6, 6>() = normal_pseudo_inverse(Jf);
+    const double scale =
+        n > fitted ? 2.0 * out.cost / (n - fitted) : std::numeric_limits<double>::quiet_NaN();
+    *covariance = c.asDiagonal() * cn * c.asDiagonal() * scale;
+  } else if (covariance && out.ok) {
     ceres::Covariance::Options copt;
     copt.algorithm_type = ceres::DENSE_SVD;
     copt.null_space_rank = -1;
