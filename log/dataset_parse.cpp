@@ -131,9 +131,11 @@ std::optional<Error> check_increasing(const std::string& source, TimeNs prev_t, 
                                       int line) {
   if (prev_line <= 0 || t > prev_t) return std::nullopt;
   if (t == prev_t) {
-    return at(
-        source, line,
-        "duplicate timestamp (same as line " + std::to_string(prev_line) + "); timestamps must increase");
+    return at(source, line,
+              "duplicate timestamp (same as line " + std::to_string(prev_line) +
+                  "); timestamps must increase. If the file's times are printed too coarsely for its rate "
+                  "(many rows "
+                  "share one), rebuild them from the row index and the rate (t = i / rate) before importing");
   }
   return at(source, line,
             "timestamp goes backwards (" + seconds_text(t) + " after " + seconds_text(prev_t) + " on line " +

@@ -135,6 +135,7 @@ TEST(DatasetTriads, MalformedRowsNameFileLineAndField) {
            Case{"0,1,2,3\n", "use 'imucal import csv'"},
            Case{"zero 1 2 3\n", "acc.txt:1: field 1 (t, seconds)"},
            Case{"0 1 2 3\n0.01 1 2 3\n0.01 1 2 3\n", "acc.txt:3: duplicate timestamp (same as line 2)"},
+           Case{"0 1 2 3\n0.01 1 2 3\n0.01 1 2 3\n", "rebuild them from the row index and the rate"},
            Case{"0 1 2 3\n0.02 1 2 3\n0.01 1 2 3\n", "acc.txt:3: timestamp goes backwards"},
        }) {
     auto s = parse_triad_text(c.text, "acc.txt");
