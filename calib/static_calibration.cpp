@@ -102,11 +102,12 @@ AccelSolve solve_accel(std::span<const Eigen::Vector3d> means, double g, const T
   out.iterations = static_cast<int>(summary.iterations.size());
   const double n = static_cast<double>(means.size());
   out.rms = std::sqrt(2.0 * out.cost / n);
-  if (covariance && out.ok && fix_misalignment) {
-    // The covariance of the fitted columns from the Jacobian at the solution (a problem without
-    // the manifold gives every column), truncated like ceres::Covariance's DENSE_SVD below, the
-    // held angles' rows zero. ceres::Covariance itself is not used with the manifold: in the
-    // sanitized build its tangent-space path frees memory it did not allocate.
+  if (covariance && out.ok) {
+    // Covariance of the fitted columns, (J^T J)^+ from the Jacobian at the solution with the
+    // truncation of ceres::Covariance's DENSE_SVD (normal_pseudo_inverse); a problem without the
+    // manifold gives every column, and the held angles' rows stay zero. (ceres::Covariance itself
+    // is not used: with a manifold its tangent-space path frees memory it did not allocate in the
+    // sanitized build.)
     ceres::Problem plain;
     for (const auto& m : means)
       plain.AddResidualBlock(AccelMagnitudeCost::Create(m, g, c), nullptr, pn.data());
@@ -117,33 +118,19 @@ AccelSolve solve_accel(std::span<const Eigen::Vector3d> means, double g, const T
       out.ok = false;
       return out;
     }
-    Eigen::MatrixXd Jf = Eigen::MatrixXd::Zero(crs.num_rows, 6);
+    const int first = fix_misalignment ? 3 : 0;
+    Eigen::MatrixXd Jf = Eigen::MatrixXd::Zero(crs.num_rows, 9 - first);
     for (int r = 0; r < crs.num_rows; ++r) {
       for (int idx = crs.rows[r]; idx < crs.rows[r + 1]; ++idx) {
-        if (crs.cols[idx] >= 3) Jf(r, crs.cols[idx] - 3) = crs.values[idx];
+        if (crs.cols[idx] >= first) Jf(r, crs.cols[idx] - first) = crs.values[idx];
       }
     }
     Eigen::Matrix<double, 9, 9> cn = Eigen::Matrix<double, 9, 9>::Zero();
-    cn.bottomRightCorner<6, 6>() = normal_pseudo_inverse(Jf);
+    cn.bottomRightCorner(9 - first, 9 - first) = normal_pseudo_inverse(Jf);
+    // With no degrees of freedom left the residual variance, and so every sigma, is unknown.
     const double scale =
         n > fitted ? 2.0 * out.cost / (n - fitted) : std::numeric_limits<double>::quiet_NaN();
     *covariance = c.asDiagonal() * cn * c.asDiagonal() * scale;
-  } else if (covariance && out.ok) {
-    ceres::Covariance::Options copt;
-    copt.algorithm_type = ceres::DENSE_SVD;
-    copt.null_space_rank = -1;
-    copt.num_threads = 1;
-    ceres::Covariance cov(copt);
-    std::vector<std::pair<const double*, const double*>> blocks = {{pn.data(), pn.data()}};
-    Eigen::Matrix<double, 9, 9, Eigen::RowMajor> cn;
-    if (cov.Compute(blocks, &problem) && cov.GetCovarianceBlock(pn.data(), pn.data(), cn.data())) {
-      // With no degrees of freedom left the residual variance, and so every sigma, is unknown.
-      const double scale =
-          n > fitted ? 2.0 * out.cost / (n - fitted) : std::numeric_limits<double>::quiet_NaN();
-      *covariance = c.asDiagonal() * Eigen::Matrix<double, 9, 9>(cn) * c.asDiagonal() * scale;
-    } else {
-      out.ok = false;
-    }
   }
   return out;
 }
@@ -763,7 +750,7 @@ Status solve_accelerometer(const Candidate& best, AccelModel model, std::span<co
         " the magnitude form needs, on all six faces: the misalignment from the poses taken as lying flat on "
         "their faces with gravity along their axes (the form PX4 and ArduPilot use), scales and biases " +
         (magnitude_after_faces(best.means.size()) ? std::string("from the gravity magnitude")
-                                                  : std::string("too (one pose per face)"));
+                                                  : std::string("from the faces too (fewer than 9 poses)"));
     if (opt.accel_model == AccelModel::kFaces) res->accel_model_reason = "chosen with --accel-model faces";
     if (res->poses_off_faces > 0) {
       res->warnings.push_back(
@@ -834,9 +821,6 @@ Status solve_accelerometer(const Candidate& best, AccelModel model, std::span<co
 }
 
 // ---- g-sensitivity ---------------------------------------------------------------------------
-
-/// The 95 % point of the chi-square distribution with 9 degrees of freedom.
-constexpr double kChi2_9_95 = 16.919;
 
 /// Few poses on all six faces: the fit over the poses has too few degrees of freedom for its
 /// residual covariance to mean much, so G and the bias come from the six-face experiment
@@ -909,7 +893,7 @@ std::vector<GyroStaticFit> final_gyro_static_fits(const Candidate& best, const S
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) w += (f.H(i, j) / f.H_sigma(i, j)) * (f.H(i, j) / f.H_sigma(i, j));
     res->gsens_wald = w;
-    if (std::isfinite(w) && w < kChi2_9_95) {
+    if (std::isfinite(w) && w < kGsensWaldLimit) {
       // Not a warning: there is nothing to do about it. The summary and the JSON say so.
       res->gsens_mode = GSensitivityMode::kOff;
       const PoseMeans m = pose_means(best, still, res->model.accel, scan);

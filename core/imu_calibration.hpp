@@ -73,6 +73,10 @@ inline const char* gsens_mode_name(GSensitivityMode mode) {
   return "off";
 }
 
+/// Below this Wald statistic of its nine entries (the chi-square 95 % point with 9 degrees of
+/// freedom) the static calibration takes G as not distinguishable from zero and neglects it.
+inline constexpr double kGsensWaldLimit = 16.919;
+
 /// Which accelerometer model the static calibration fitted (StaticCalibrationOptions::accel_model).
 enum class StaticAccelModel {
   kFull,       // Tedaldi's magnitude form: 3 misalignment angles, 3 scales, 3 biases (9 attitudes)

@@ -218,14 +218,15 @@ namespace {
 
 /// Appends a hold at (q, p) and a segment of `kind`.
 void add_hold(std::vector<PoseScript::Piece>* pieces, std::vector<Segment>* segments, TimeNs* t,
-              const Eigen::Quaterniond& q, const Eigen::Vector3d& p, double hold_s, const std::string& kind) {
+              const Eigen::Quaterniond& q, const Eigen::Vector3d& p, double hold_s, const std::string& kind,
+              const std::string& label = {}) {
   PoseScript::Piece pc;
   pc.t0_ns = *t;
   pc.t1_ns = *t + duration_ns(hold_s);
   pc.q0 = q;
   pc.p0 = p;
   pieces->push_back(pc);
-  segments->push_back({pc.t0_ns, pc.t1_ns, kind});
+  segments->push_back({pc.t0_ns, pc.t1_ns, kind, label});
   *t = pc.t1_ns;
 }
 
@@ -331,11 +332,13 @@ Result<std::unique_ptr<PoseScript>> make_six_face(const SixFaceOptions& options,
   std::vector<int> faces = options.faces;
   if (faces.empty()) faces = {0, 1, 2, 3, 4, 5};
   Eigen::Quaterniond q = attitude(ups[static_cast<std::size_t>(faces[0])], 0.0);
-  add_hold(&pieces, &segments, &t, q, p, options.hold_s, "face");
+  const auto& names = six_face_names();
+  add_hold(&pieces, &segments, &t, q, p, options.hold_s, "face", names[static_cast<std::size_t>(faces[0])]);
   for (std::size_t i = 1; i < faces.size(); ++i) {
     const Eigen::Quaterniond q1 = attitude(ups[static_cast<std::size_t>(faces[i])], 0.0);
     add_move(&pieces, &segments, &t, q, p, q1, p, options.move_s, 0.02);
-    add_hold(&pieces, &segments, &t, q1, p, options.hold_s, "face");
+    add_hold(&pieces, &segments, &t, q1, p, options.hold_s, "face",
+             names[static_cast<std::size_t>(faces[i])]);
     q = q1;
   }
   Rng rng(Rng::substream(seed, kSaltMotion));
@@ -348,7 +351,8 @@ Result<std::unique_ptr<PoseScript>> make_six_face(const SixFaceOptions& options,
     yaw += rng.signed_magnitude(20.0 * kDeg, 60.0 * kDeg);
     const Eigen::Quaterniond q1 = attitude(ups[static_cast<std::size_t>(face)], yaw);
     add_move(&pieces, &segments, &t, q, p, q1, p, options.move_s, 0.02);
-    add_hold(&pieces, &segments, &t, q1, p, options.revisit_hold_s, "hold");
+    add_hold(&pieces, &segments, &t, q1, p, options.revisit_hold_s, "hold",
+             names[static_cast<std::size_t>(face)]);
     q = q1;
   }
   return std::make_unique<PoseScript>(std::move(pieces), std::move(segments), options.tremor, seed,

@@ -120,9 +120,7 @@ Status write_segment_events(log::SessionLogWriter& writer, const sim::Trajectory
     nlohmann::json msg = {{"segment", seg.kind}, {"t0_ns", seg.t0_ns}, {"t1_ns", seg.t1_ns}};
     if (ev.begin == "pose_begin") {
       msg["pose"] = pose;
-      if (seg.kind == "face" && pose < static_cast<int>(sim::six_face_names().size())) {
-        msg["face"] = sim::six_face_names()[static_cast<std::size_t>(pose)];
-      }
+      if (!seg.label.empty()) msg["face"] = seg.label;
       ++pose;
     }
     events.push_back(

@@ -26,7 +26,8 @@ struct RigState {
 struct Segment {
   TimeNs t0_ns = 0;
   TimeNs t1_ns = 0;
-  std::string kind;  // "still", "hold", "move", "face"
+  std::string kind;   // "still", "hold", "move", "face"
+  std::string label;  // the face held ("+z up"), for the six-face script's holds; else empty
 };
 
 class Trajectory {

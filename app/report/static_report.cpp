@@ -7,6 +7,7 @@
 
 #include "app/report/builders.hpp"
 #include "app/report/static_log.hpp"
+#include "core/imu_calibration.hpp"
 
 namespace imucal::app::report {
 namespace {
@@ -91,7 +92,7 @@ Section parameters_section(const nlohmann::json& r) {
     if (gs.contains("wald_statistic") && gs["wald_statistic"].is_number()) {
       sec.html += ": not distinguishable from zero on this recording (Wald statistic " +
                   num(gs["wald_statistic"].get<double>(), 3) +
-                  " of its 9 entries, below the chi-square 95 % point 16.9)";
+                  " of its 9 entries, below the chi-square 95 % point " + num(kGsensWaldLimit, 4) + ")";
     }
     sec.html += ".</p>\n";
     return sec;

@@ -121,7 +121,7 @@ void print_summary(const std::string& log_path, const ImuStreamInfo& info, std::
             << list(res->gyro_fixed) << "\n";
   if (res->gsens_mode == GSensitivityMode::kOff && std::isfinite(res->gsens_wald)) {
     std::cout << "  gyro g-sensitivity: not distinguishable from zero (Wald statistic " << res->gsens_wald
-              << " of its 9 entries, below the chi-square 95 % point 16.9), neglected\n";
+              << " of its 9 entries, below the chi-square 95 % point " << kGsensWaldLimit << "), neglected\n";
   }
   if (res->gsens_mode != GSensitivityMode::kOff) {
     const Eigen::Matrix3d& G = res->canonical.G;

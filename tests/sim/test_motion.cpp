@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
 #include <memory>
 #include <numbers>
 
@@ -172,6 +173,35 @@ TEST(Motion, SixFacesPutEachAxisUp) {
     ++face;
   }
   EXPECT_EQ(face, 6u);
+}
+
+TEST(Motion, ChosenFacesAndRevisitsAreLabelledWithTheFaceUp) {
+  // Each hold's label names the axis the rig really has up, for the chosen faces and for the
+  // revisits alike.
+  SixFaceOptions f;
+  f.hold_s = 5.0;
+  f.faces = {0, 4, 5};  // +z, +x, -x
+  f.revisits = 8;
+  auto traj = make_six_face(f, 3);
+  ASSERT_TRUE(traj.ok());
+  const std::map<std::string, Eigen::Vector3d> axis = {
+      {"+z up", Eigen::Vector3d::UnitZ()},  {"-y up", -Eigen::Vector3d::UnitY()},
+      {"-z up", -Eigen::Vector3d::UnitZ()}, {"+y up", Eigen::Vector3d::UnitY()},
+      {"+x up", Eigen::Vector3d::UnitX()},  {"-x up", -Eigen::Vector3d::UnitX()}};
+  std::vector<std::string> labels;
+  for (const Segment& s : (*traj)->segments()) {
+    if (s.kind != "face" && s.kind != "hold") continue;
+    ASSERT_EQ(axis.count(s.label), 1u) << "'" << s.label << "'";
+    const RigState st = (*traj)->at((s.t0_ns + s.t1_ns) / 2);
+    const Eigen::Vector3d up = st.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+    EXPECT_LT((up - axis.at(s.label)).norm(), 1e-9) << s.label;
+    labels.push_back(s.label);
+  }
+  ASSERT_EQ(labels.size(), 11u);
+  EXPECT_EQ(labels[0], "+z up");
+  EXPECT_EQ(labels[1], "+x up");
+  EXPECT_EQ(labels[2], "-x up");
+  for (std::size_t k = 3; k < labels.size(); ++k) EXPECT_NE(labels[k], labels[k - 1]) << "revisit " << k;
 }
 
 TEST(Motion, SameSeedSameMotionOtherSeedOtherMotion) {
