@@ -247,7 +247,7 @@ void add_move(std::vector<PoseScript::Piece>* pieces, std::vector<Segment>* segm
   pc.dp = p1 - p0;
   pc.lift_m = lift_m;
   pieces->push_back(pc);
-  segments->push_back({pc.t0_ns, pc.t1_ns, "move"});
+  segments->push_back({pc.t0_ns, pc.t1_ns, "move", ""});
   *t = pc.t1_ns;
 }
 
@@ -527,9 +527,9 @@ Result<std::unique_ptr<CheckerboardMotion>> CheckerboardMotion::create(
   }
 
   const TimeNs still_ns = duration_ns(options.still_s);
-  if (still_ns > 0) m->segments_.push_back({0, still_ns, "still"});
-  m->segments_.push_back({still_ns, m->end_ns_ - still_ns, "move"});
-  if (still_ns > 0) m->segments_.push_back({m->end_ns_ - still_ns, m->end_ns_, "still"});
+  if (still_ns > 0) m->segments_.push_back({0, still_ns, "still", ""});
+  m->segments_.push_back({still_ns, m->end_ns_ - still_ns, "move", ""});
+  if (still_ns > 0) m->segments_.push_back({m->end_ns_ - still_ns, m->end_ns_, "still", ""});
   return m;
 }
 

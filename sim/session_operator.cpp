@@ -75,7 +75,7 @@ void OperatorTrajectory::follow(TimeNs t0_ns, std::shared_ptr<const Trajectory> 
   p.motion = std::move(motion);
   p.T_op_motion = T_op_motion;
   pieces_.push_back(p);
-  segments_.push_back({p.t0_ns, p.t1_ns, "move"});
+  segments_.push_back({p.t0_ns, p.t1_ns, "move", ""});
 }
 
 void OperatorTrajectory::turn(TimeNs t0_ns, double duration_s, const Eigen::Quaterniond& q_target,
@@ -90,7 +90,7 @@ void OperatorTrajectory::turn(TimeNs t0_ns, double duration_s, const Eigen::Quat
   p.rotvec_body = delta.angle() * delta.axis();
   p.lift_m = lift_m;
   pieces_.push_back(p);
-  segments_.push_back({p.t0_ns, p.t1_ns, "move"});
+  segments_.push_back({p.t0_ns, p.t1_ns, "move", ""});
 }
 
 RigState OperatorTrajectory::at(TimeNs t_ns) const {
