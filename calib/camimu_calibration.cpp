@@ -52,6 +52,16 @@ constexpr double kMinCornerSigmaPx = 0.005;
 // Frames whose pose is checked against the gyro are compared with the others this close (s).
 constexpr double kPoseCheckWindowS = 0.5;
 constexpr int kPreliminaryIterations = 12;
+// How far each stage is converged (docs/camimu-calibration.md, "Speed"): relative decrease of the
+// cost in an iteration below which it stops. The first stage only brings the trajectory near (1 %);
+// a stage whose weights are re-estimated afterwards stops at 1e-4; the stage whose result is
+// reported at 1e-8 (about 1e-3 of the cost, a change of the parameters far below their sigmas).
+constexpr double kPreliminaryTolerance = 1e-2;
+constexpr double kIntermediateTolerance = 1e-4;
+constexpr double kFinalTolerance = 1e-7;
+// The first stage takes IMU samples at this rate at most (every k-th sample): it only brings the
+// trajectory near, and the IMU residuals set its cost.
+constexpr double kPreliminaryImuRateHz = 100.0;
 using Arr4 = std::array<double, 4>;
 
 Arr4 to_quat(const Eigen::Matrix3d& R) {
@@ -120,7 +130,13 @@ class Estimator {
   void warn_rejected_frames();
   void initialise_spline(std::size_t ref);
   void build(ceres::Problem* problem, bool extended);
-  Status solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary);
+  /// One stage to the relative cost tolerance `tolerance` (kPreliminaryTolerance, ...).
+  Status solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary,
+               double tolerance = kFinalTolerance);
+  /// The marginal covariance of the calibration's blocks at the current solution, computed once
+  /// per solution (the Wald statistic and the reported sigmas share it); nullptr when the problem
+  /// cannot be evaluated there.
+  const MarginalCovariance* solution_covariance();
   /// The problem built again at the current values, without solving (after a state is restored).
   void rebuild(bool extended);
   bool frames_in_window() const;
@@ -180,6 +196,10 @@ class Estimator {
   CamImuQuality quality_;
   std::vector<std::string> warnings_;
   std::unique_ptr<ceres::Problem> problem_;
+  std::unique_ptr<MarginalCovariance> covariance_;  // of the current solution; reset by a solve
+  int imu_stride_ = 1;  // build() takes every imu_stride_-th IMU sample (the first stage only)
+  bool covariance_failed_ = false;
+  double covariance_compute_s_ = 0.0;  // wall time of the last computation of covariance_
 };
 
 template <int N>
@@ -385,7 +405,7 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended) {
   imu_blocks_.clear();
   imu_index_.clear();
   priors_.clear();
-  for (std::size_t k = 0; k < imu_.size(); ++k) {
+  for (std::size_t k = 0; k < imu_.size(); k += static_cast<std::size_t>(imu_stride_)) {
     const CamImuSample& s = imu_[k];
     const double t = t_s(s.t_ns);
     if (!st_.pose.covers(t)) continue;
@@ -509,7 +529,40 @@ void Estimator<N>::rebuild(bool extended) {
   ceres::Problem::Options po;
   po.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   problem_ = std::make_unique<ceres::Problem>(po);
+  covariance_.reset();
+  covariance_failed_ = false;
   build(problem_.get(), extended);
+}
+
+template <int N>
+const MarginalCovariance* Estimator<N>::solution_covariance() {
+  if (covariance_ || covariance_failed_) return covariance_.get();
+  std::vector<const double*> blocks;
+  const auto want = [&](const double* b) {
+    if (!problem_->IsParameterBlockConstant(b)) blocks.push_back(b);
+  };
+  for (const double* b :
+       {st_.Sa.data(), st_.Ma.data(), st_.Sg.data(), st_.Mg.data(), st_.C.data(), st_.B.data(), st_.g.data()})
+    want(b);
+  for (auto& cs : st_.cams) {
+    want(cs.q_ci.data());
+    want(cs.t_ci.data());
+    want(&cs.shift);
+  }
+  for (int i = 0; i < N; ++i) {
+    want(st_.ba[static_cast<std::size_t>(i)].data());
+    want(st_.bg[static_cast<std::size_t>(i)].data());
+  }
+  const auto start = std::chrono::steady_clock::now();
+  auto cov = std::make_unique<MarginalCovariance>();
+  const bool ok = cov->compute(*problem_, blocks, threads_or_cores(opt_.threads));
+  covariance_compute_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (!ok) {
+    covariance_failed_ = true;
+    return nullptr;
+  }
+  covariance_ = std::move(cov);
+  return covariance_.get();
 }
 
 template <int N>
@@ -593,10 +646,9 @@ double Estimator<N>::wald_statistic(int* k_out) {
       row_major(ps.B_g));
   const int k = static_cast<int>(d.size());
   *k_out = k;
-  MarginalCovariance cov;
-  if (k == 0 || !cov.compute(*problem_, blocks, threads_or_cores(opt_.threads)) ||
-      !cov.undetermined().empty())
-    return std::nan("");
+  if (k == 0) return std::nan("");
+  const MarginalCovariance* cov = solution_covariance();
+  if (cov == nullptr) return std::nan("");
   Eigen::MatrixXd C(k, k);
   int row = 0;
   for (const double* a : blocks) {
@@ -604,14 +656,16 @@ double Estimator<N>::wald_statistic(int* k_out) {
     const int na = problem_->ParameterBlockTangentSize(a);
     for (const double* b : blocks) {
       const int nb = problem_->ParameterBlockTangentSize(b);
-      C.block(row, col, na, nb) = cov.block(a, b);
+      C.block(row, col, na, nb) = cov->block(a, b);
       col += nb;
     }
     row += na;
   }
   const Eigen::Map<const Eigen::VectorXd> dv(d.data(), k);
+  // An undetermined coordinate among them (NaN) leaves the test to the likelihood ratio.
+  if (!C.allFinite()) return std::nan("");
   const Eigen::LDLT<Eigen::MatrixXd> ldlt(C);
-  if (!C.allFinite() || ldlt.info() != Eigen::Success) return std::nan("");
+  if (ldlt.info() != Eigen::Success) return std::nan("");
   double W = dv.dot(ldlt.solve(dv));
   for (int i = 0; i < k; ++i) W -= prior_info[static_cast<std::size_t>(i)] * dv(i) * dv(i);
   return W;
@@ -629,13 +683,15 @@ Status Estimator<N>::choose_model(ceres::Solver::Summary* summary) {
   // are solved and their costs compared instead (the likelihood ratio).
   const State<N> first_stage = st_;
   model_ = CamImuModelKind::kExtended;
-  if (Status s = solve(true, "extended", summary); !s.ok()) return s;
+  if (Status s = solve(true, "extended", summary, kIntermediateTolerance); !s.ok()) return s;
   // Weighted by the noise the best-fitting model's residuals show (the first stage's overstate it).
+  // The last stage converges fully whether or not the weights moved.
   for (int round = 0; round < 3; ++round) {
     bool changed = reestimate_corner_sigma();
     changed = reestimate_imu_noise() || changed;
-    if (!changed) break;
+    if (!changed && round > 0) break;
     if (Status s = solve(true, "extended", summary); !s.ok()) return s;
+    if (!changed) break;
   }
   int k = 0;
   double W = wald_statistic(&k);
@@ -679,23 +735,32 @@ Status Estimator<N>::choose_model(ceres::Solver::Summary* summary) {
 }
 
 template <int N>
-Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary) {
+Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary,
+                           double tolerance) {
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  // Dogleg: half the iterations of Levenberg-Marquardt on these problems at the same solution
+  // (docs/camimu-calibration.md, "Speed").
+  so.trust_region_strategy_type = ceres::DOGLEG;
   so.num_threads = threads_or_cores(opt_.threads);
   // The first stage only brings the trajectory, biases and extrinsics near the solution for the
   // stage that follows it; a few iterations do (docs/camimu-calibration.md, "Speed").
   const bool preliminary = !extended && model_ == CamImuModelKind::kExtended;
   so.max_num_iterations =
       preliminary ? std::min(opt_.max_iterations, kPreliminaryIterations) : opt_.max_iterations;
-  so.function_tolerance = 1e-8;
+  so.function_tolerance = tolerance;
   so.parameter_tolerance = 1e-9;
   ProgressCallback cb(progress_, stage);
   so.callbacks.push_back(&cb);
   // A timeshift that moves frames out of the knot window they were built with: rebuild (a final
   // stage only).
+  if (preliminary && imu_.size() >= 2) {
+    const double rate = 1e9 / static_cast<double>(std::max<TimeNs>(imu_median_interval_ns(imu_), 1));
+    imu_stride_ = std::max(1, static_cast<int>(std::lround(rate / kPreliminaryImuRateHz)));
+  }
   for (int attempt = 0; attempt < 4; ++attempt) {
     rebuild(extended);
+    imu_stride_ = 1;
     ceres::Solve(so, problem_.get(), summary);
     if (!summary->IsSolutionUsable())
       return make_error(Errc::kSolverFailed,
@@ -765,31 +830,16 @@ std::string Estimator<N>::describe(const MarginalCovariance::Direction& dir) con
 
 template <int N>
 void Estimator<N>::covariance(CamImuCalibrationResult* out) {
+  // The computation is counted once, where it ran (often during the model choice).
   const auto start = std::chrono::steady_clock::now();
-  ceres::Problem& problem = *problem_;
-  std::vector<const double*> blocks;
-  const auto want = [&](const double* b) {
-    if (!problem.IsParameterBlockConstant(b)) blocks.push_back(b);
-  };
-  for (const double* b :
-       {st_.Sa.data(), st_.Ma.data(), st_.Sg.data(), st_.Mg.data(), st_.C.data(), st_.B.data(), st_.g.data()})
-    want(b);
-  for (auto& cs : st_.cams) {
-    want(cs.q_ci.data());
-    want(cs.t_ci.data());
-    want(&cs.shift);
-  }
-  for (int i = 0; i < N; ++i) {
-    want(st_.ba[static_cast<std::size_t>(i)].data());
-    want(st_.bg[static_cast<std::size_t>(i)].data());
-  }
-  MarginalCovariance cov;
-  const int threads = threads_or_cores(opt_.threads);
-  if (!cov.compute(problem, blocks, threads)) {
+  const bool reused = covariance_ != nullptr || covariance_failed_;
+  const MarginalCovariance* computed = solution_covariance();
+  if (computed == nullptr) {
     out->undetermined.push_back("every parameter: the problem could not be evaluated at the solution");
     warnings_.push_back("the covariance could not be computed: every sigma is not determined");
     return;
   }
+  const MarginalCovariance& cov = *computed;
   if (cov.nuisance_regularised())
     warnings_.push_back(
         "parts of the trajectory or the bias splines are not determined by the data (no frame or IMU "
@@ -848,7 +898,8 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
     }
     if (cov.has(&cs.shift)) cr.timeshift_sigma_s = sigma_of(block(&cs.shift, &cs.shift))(0);
   }
-  quality_.covariance_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  quality_.covariance_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() +
+                          (reused ? covariance_compute_s_ : 0.0);
 }
 
 template <int N>
@@ -1073,8 +1124,18 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
     model_choice_ =
         "extended with every intrinsic held at its given value (--imu-intrinsics, --gsens or "
         "--fix): nothing to choose";
-  if (Status s = solve(false, "basic", &summary); !s.ok()) return s.error();
-  quality_.initial_cost = summary.initial_cost;
+  // The first stage is preliminary unless the basic model was asked for (then it is that model's).
+  // A preliminary stage runs on fewer IMU samples: the cost at the start is that of all of them.
+  const bool preliminary = model_ == CamImuModelKind::kExtended;
+  double start_cost = 0.0;
+  if (preliminary) {
+    rebuild(false);
+    problem_->Evaluate(ceres::Problem::EvaluateOptions(), &start_cost, nullptr, nullptr, nullptr);
+  }
+  if (Status s = solve(false, "basic", &summary, preliminary ? kPreliminaryTolerance : kFinalTolerance);
+      !s.ok())
+    return s.error();
+  quality_.initial_cost = preliminary ? start_cost : summary.initial_cost;
   std::vector<ImuSignalFit> fits;
   fits.push_back(signal_fit("basic"));
   if (automatic) {
@@ -1091,17 +1152,31 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   // its residuals where they disagree with the given noise. The first stage stops early with the
   // IMU intrinsics at their start, so its residuals overstate the noise: the final stage is
   // repeated until the estimates hold (within 10 %).
+  // A stage followed by new weights stops at kIntermediateTolerance; the last one runs to
+  // kFinalTolerance (continuing from the one before when the weights held).
+  bool converged = automatic || !preliminary;  // the last solve ran to kFinalTolerance
   for (int round = automatic ? 1 : 0; round < 4; ++round) {
     bool changed = reestimate_corner_sigma();
     if (round > 0 || !extended) changed = reestimate_imu_noise() || changed;
-    if (round > 0 && !changed) break;
-    if (round == 0 && !extended && opt_.corner_sigma_px > 0 && !changed) break;
-    if (Status s = solve(extended, extended ? "extended" : "basic", &summary); !s.ok()) return s.error();
+    const bool may_stop = round > 0 || (!extended && opt_.corner_sigma_px > 0);
+    if (may_stop && !changed && converged) break;
+    const bool last = round == 3 || (may_stop && !changed);
+    if (Status s = solve(extended, extended ? "extended" : "basic", &summary,
+                         last ? kFinalTolerance : kIntermediateTolerance);
+        !s.ok())
+      return s.error();
+    converged = last;
+    if (last) break;
   }
   quality_.final_cost = summary.final_cost;
-  quality_.solve_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - init_done).count();
+  // A covariance the model choice computed at this solution is counted as the covariance's.
+  quality_.solve_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - init_done).count() -
+                     (covariance_ || covariance_failed_ ? covariance_compute_s_ : 0.0);
   quality_.parameters = problem_->NumParameters();
+  // Counted as measurements: two per corner, not the compressed rows the solver sees.
   quality_.residuals = problem_->NumResiduals();
+  for (const auto* f : frames_)
+    quality_.residuals += 2 * static_cast<int>(f->corners()) - FrameResidual<N>::kCompressedRows;
   quality_.spline_knots = st_.pose.knots;
   fits.push_back(signal_fit(extended ? "extended" : "basic"));
   quality_.accel_residual_rms = fits.back().accel_residual_rms;  // per axis, SI

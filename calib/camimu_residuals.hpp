@@ -12,8 +12,11 @@
 #include <ceres/ceres.h>
 
 #include <Eigen/Core>
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <vector>
 
 #include "calib/so3.hpp"
@@ -251,13 +254,22 @@ class BiasWalkResidual final : public ceres::CostFunction {
 /// corner applied inside (so the pose is evaluated once per frame). Blocks: N + 2 rotation knots,
 /// N + 2 position knots (the window the timeshift may move the frame in), R_cam_imu, t_cam_imu,
 /// timeshift.
+///
+/// Compressed (the default): every parameter moves the corners only through the camera's pose,
+/// dp_cam = -[p_cam]x w + v for a rigid motion (w, v) of the camera frame, so the 2n corner rows
+/// r = F G dx (F: 2n x 6, G: 6 x parameters) are replaced by 7 rows with the same cost, gradient
+/// and Gauss-Newton matrix: R G with R^T R = F^T F, the residual R^-T F^T r, and a seventh
+/// residual that carries the rest of |r|^2 (zero Jacobian; its gradient is already in the first
+/// six). The solver then forms J^T J from 7 rows a frame instead of 2n (docs/camimu-calibration.md,
+/// "Speed"). Uncompressed, the 2n weighted corner residuals themselves.
 template <int N>
 class FrameResidual final : public ceres::CostFunction {
  public:
   static constexpr int kWindow = N + 2;
+  static constexpr int kCompressedRows = 7;
   FrameResidual(const CameraModel& camera, std::vector<Eigen::Vector3d> points_w,
                 std::vector<Eigen::Vector2d> px, double t_cam_s, int first_window_knot,
-                const SplineTiming<N>& timing, double sigma_px, double loss_scale_px)
+                const SplineTiming<N>& timing, double sigma_px, double loss_scale_px, bool compressed = true)
       : camera_(camera),
         camera_jet_(camera.cast<ceres::Jet<double, 3>>()),
         points_(std::move(points_w)),
@@ -266,8 +278,9 @@ class FrameResidual final : public ceres::CostFunction {
         first_(first_window_knot),
         timing_(timing),
         w_(1.0 / sigma_px),
-        c2_((loss_scale_px / sigma_px) * (loss_scale_px / sigma_px)) {
-    set_num_residuals(2 * static_cast<int>(points_.size()));
+        c2_((loss_scale_px / sigma_px) * (loss_scale_px / sigma_px)),
+        compressed_(compressed) {
+    set_num_residuals(compressed_ ? kCompressedRows : 2 * static_cast<int>(points_.size()));
     auto* sizes = mutable_parameter_block_sizes();
     for (int i = 0; i < kWindow; ++i) sizes->push_back(4);
     for (int i = 0; i < kWindow; ++i) sizes->push_back(3);
@@ -281,8 +294,10 @@ class FrameResidual final : public ceres::CostFunction {
     const int k = timing_.segment(t_cam_s_ + shift_s).first_knot - first_;
     return k >= 0 && k <= 2;
   }
-  /// Unweighted pixel residuals (predicted - measured) at the given parameters.
-  bool Evaluate(double const* const* p, double* residuals, double** jac) const override;
+  /// Weighted residuals with the loss folded in (compressed or per corner, see above).
+  bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
+    return compressed_ ? evaluate_compressed(p, residuals, jac) : evaluate_corners(p, residuals, jac);
+  }
   /// The same without the robust loss, in pixels.
   void pixel_residuals(double const* const* p, std::vector<Eigen::Vector2d>* out) const;
   std::size_t corners() const { return points_.size(); }
@@ -295,6 +310,11 @@ class FrameResidual final : public ceres::CostFunction {
     Eigen::Matrix<double, N, 1> w0;
   };
   Pose pose(double const* const* p, bool jacobians) const;
+  bool evaluate_corners(double const* const* p, double* residuals, double** jac) const;
+  bool evaluate_compressed(double const* const* p, double* residuals, double** jac) const;
+  /// The weighted residual of one corner with the Cauchy loss folded in (r' = g e, |r'|^2 =
+  /// rho(|e|^2)), and with `L` its derivative in e.
+  void fold(const Eigen::Vector2d& e, Eigen::Vector2d* r, Eigen::Matrix2d* L) const;
   /// Projection and its Jacobian in p_cam.
   Eigen::Vector2d project(const Eigen::Vector3d& pc, Eigen::Matrix<double, 2, 3>* J) const;
 
@@ -307,7 +327,23 @@ class FrameResidual final : public ceres::CostFunction {
   SplineTiming<N> timing_;
   double w_;
   double c2_;
+  bool compressed_;
 };
+
+template <int N>
+void FrameResidual<N>::fold(const Eigen::Vector2d& e, Eigen::Vector2d* r, Eigen::Matrix2d* L) const {
+  // Cauchy loss rho(s) = c2 log(1 + s / c2) folded into the residual: r' = g(s) e with
+  // g = sqrt(rho(s) / s), so that |r'|^2 = rho(s); its exact Jacobian is g J + e g'(s) 2 e^T J.
+  const double s = e.squaredNorm();
+  double g = 1.0, dg = -0.25 / c2_;  // limits at s -> 0
+  if (s > 1e-12 * c2_) {
+    const double rho = c2_ * std::log1p(s / c2_), rho1 = 1.0 / (1.0 + s / c2_);
+    g = std::sqrt(rho / s);
+    dg = (rho1 * s - rho) / (2.0 * s * s * g);
+  }
+  *r = g * e;
+  if (L) *L = g * Eigen::Matrix2d::Identity() + 2.0 * dg * e * e.transpose();
+}
 
 template <int N>
 typename FrameResidual<N>::Pose FrameResidual<N>::pose(double const* const* p, bool jacobians) const {
@@ -357,7 +393,7 @@ void FrameResidual<N>::pixel_residuals(double const* const* p, std::vector<Eigen
 }
 
 template <int N>
-bool FrameResidual<N>::Evaluate(double const* const* p, double* residuals, double** jac) const {
+bool FrameResidual<N>::evaluate_corners(double const* const* p, double* residuals, double** jac) const {
   const Pose ps = pose(p, jac != nullptr);
   const Eigen::Matrix3d Rt = ps.e.R.transpose(), Rci = quat_matrix(p[kRci]);
   const Eigen::Map<const Eigen::Vector3d> tci(p[kTci]);
@@ -371,18 +407,11 @@ bool FrameResidual<N>::Evaluate(double const* const* p, double* residuals, doubl
     const Eigen::Vector3d pc = Rci * pb + tci;
     Eigen::Matrix<double, 2, 3> Jp;
     const Eigen::Vector2d e = w_ * (project(pc, jac ? &Jp : nullptr) - px_[k]);
-    // Cauchy loss rho(s) = c2 log(1 + s / c2) folded into the residual: r' = g(s) e with
-    // g = sqrt(rho(s) / s), so that |r'|^2 = rho(s); its exact Jacobian is g J + e g'(s) 2 e^T J.
-    const double s = e.squaredNorm();
-    double g = 1.0, dg = -0.25 / c2_;  // limits at s -> 0
-    if (s > 1e-12 * c2_) {
-      const double rho = c2_ * std::log1p(s / c2_), rho1 = 1.0 / (1.0 + s / c2_);
-      g = std::sqrt(rho / s);
-      dg = (rho1 * s - rho) / (2.0 * s * s * g);
-    }
-    Eigen::Map<Eigen::Vector2d>(residuals + 2 * k) = g * e;
+    Eigen::Vector2d r;
+    Eigen::Matrix2d L;
+    fold(e, &r, jac ? &L : nullptr);
+    Eigen::Map<Eigen::Vector2d>(residuals + 2 * k) = r;
     if (!jac) continue;
-    const Eigen::Matrix2d L = g * Eigen::Matrix2d::Identity() + 2.0 * dg * e * e.transpose();
     const Eigen::Matrix<double, 2, 3> Jc = L * w_ * Jp;  // d r / d p_cam
     const Eigen::Matrix<double, 2, 3> Jb = Jc * Rci;     // d r / d p_body
     const int row = 2 * static_cast<int>(k);
@@ -397,6 +426,96 @@ bool FrameResidual<N>::Evaluate(double const* const* p, double* residuals, doubl
       jac[kShift][row] = d(0);
       jac[kShift][row + 1] = d(1);
     }
+  }
+  return true;
+}
+
+template <int N>
+bool FrameResidual<N>::evaluate_compressed(double const* const* p, double* residuals, double** jac) const {
+  const Pose ps = pose(p, jac != nullptr);
+  const Eigen::Matrix3d Rt = ps.e.R.transpose(), Rci = quat_matrix(p[kRci]);
+  const Eigen::Map<const Eigen::Vector3d> tci(p[kTci]);
+  Eigen::Map<Eigen::Matrix<double, kCompressedRows, 1>> out(residuals);
+  double sum = 0.0;  // |r|^2 over the corners
+  Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
+  for (std::size_t k = 0; k < points_.size(); ++k) {
+    const Eigen::Vector3d pc = Rci * (Rt * (points_[k] - ps.pos)) + tci;
+    Eigen::Matrix<double, 2, 3> Jp;
+    const Eigen::Vector2d e = w_ * (project(pc, jac ? &Jp : nullptr) - px_[k]);
+    Eigen::Vector2d r;
+    Eigen::Matrix2d L;
+    fold(e, &r, jac ? &L : nullptr);
+    sum += r.squaredNorm();
+    if (!jac) continue;
+    const Eigen::Matrix<double, 2, 3> Jc = L * w_ * Jp;
+    Eigen::Matrix<double, 2, 6> F;  // d r / d (w, v) of the camera frame
+    F.leftCols<3>() = -Jc * so3::hat(pc);
+    F.rightCols<3>() = Jc;
+    A.noalias() += F.transpose() * F;
+    b.noalias() += F.transpose() * r;
+  }
+  if (!jac) {
+    // Only the cost is asked for: the same norm, all of it in the last row.
+    out.setZero();
+    out(kCompressedRows - 1) = std::sqrt(sum);
+    return true;
+  }
+  // A = V diag(l) V^T; R = diag(sqrt l) V^T; R^-T b = diag(1 / sqrt l) V^T b (b lies in A's range;
+  // directions of A below 1e-12 of its largest eigenvalue are taken as empty).
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(A);
+  const Eigen::Matrix<double, 6, 1> l = es.eigenvalues();
+  const double floor = 1e-12 * std::max(l.maxCoeff(), 0.0);
+  Eigen::Matrix<double, 6, 6> R;
+  const Eigen::Matrix<double, 6, 1> Vb = es.eigenvectors().transpose() * b;
+  for (int i = 0; i < 6; ++i) {
+    const bool empty = !(l(i) > floor);
+    const double sq = empty ? 0.0 : std::sqrt(l(i));
+    R.row(i) = sq * es.eigenvectors().col(i).transpose();
+    out(i) = empty ? 0.0 : Vb(i) / sq;
+  }
+  out(kCompressedRows - 1) = std::sqrt(std::max(0.0, sum - out.head<6>().squaredNorm()));
+  const int rows = kCompressedRows;
+  for (int blk = 0; blk < 2 * kWindow + 3; ++blk)
+    if (jac[blk]) std::fill(jac[blk], jac[blk] + rows * parameter_block_sizes()[blk], 0.0);
+  // G: d (w, v) / d block, 6 x 3 (tangent) for each block; written as R G into the first 6 rows.
+  const Eigen::Matrix3d tx = so3::hat(tci);
+  const auto write = [&](double* J, int ambient, const Eigen::Matrix<double, 6, 3>& G) {
+    const Eigen::Matrix<double, 6, 3> RG = R * G;
+    for (int r = 0; r < 6; ++r)
+      for (int c = 0; c < 3; ++c) J[r * ambient + c] = RG(r, c);
+  };
+  Eigen::Matrix<double, 6, 3> G;
+  for (int i = 0; i < N; ++i) {
+    if (double* J = jac[ps.k0 + i]) {
+      const Eigen::Matrix3d RD = Rci * ps.e.dR_dknot[i];
+      G.topRows<3>() = -RD;
+      G.bottomRows<3>() = -tx * RD;
+      write(J, 4, G);
+    }
+    if (double* J = jac[kWindow + ps.k0 + i]) {
+      G.topRows<3>().setZero();
+      G.bottomRows<3>() = -ps.w0(i) * Rci * Rt;
+      write(J, 3, G);
+    }
+  }
+  if (double* J = jac[kRci]) {
+    G.topRows<3>() = Rci;
+    G.bottomRows<3>() = tx * Rci;
+    write(J, 4, G);
+  }
+  if (double* J = jac[kTci]) {
+    G.topRows<3>().setZero();
+    G.bottomRows<3>().setIdentity();
+    write(J, 3, G);
+  }
+  if (double* J = jac[kShift]) {
+    const Eigen::Vector3d w = Rci * ps.e.omega;
+    Eigen::Matrix<double, 6, 1> g;
+    g.head<3>() = -w;
+    g.tail<3>() = -tx * w - Rci * (Rt * ps.vel);
+    const Eigen::Matrix<double, 6, 1> Rg = R * g;
+    for (int r = 0; r < 6; ++r) J[r] = Rg(r);
   }
   return true;
 }

@@ -124,8 +124,78 @@ TEST(CamImuResiduals, FrameResidualJacobiansMatchNumericOnesIncludingTheTimeshif
     px.emplace_back(150.0 + 9.0 * k + (k == 2 ? 6.0 : 0.0), 110.0 + (k == 4 ? -4.0 : 0.5));
   }
   const int first = 3;
-  const FrameResidual<N> cost(camera, pts, px, 0.2, first, timing, 0.3, 0.9);
+  const FrameResidual<N> cost(camera, pts, px, 0.2, first, timing, 0.3, 0.9, /*compressed=*/false);
   check_jacobians(cost, blocks, 2e-5);
+}
+
+// The solver's form of a frame (7 rows) against the corners' own rows: the same cost, gradient
+// J^T r and Gauss-Newton matrix J^T J over all blocks, with corners in the robust loss's tail.
+TEST(CamImuResiduals, CompressedFrameResidualHasTheCornersCostGradientAndNormalMatrix) {
+  constexpr int N = 4;
+  const CameraModel camera = sim::CamImuSimOptions::default_sim_camera();
+  const SplineTiming<N> timing{0.0, 0.05, 20};
+  std::vector<Block> blocks;
+  for (int i = 0; i < N + 2; ++i) {
+    const Eigen::Quaterniond q(so3::exp(Eigen::Vector3d(0.03 * i, -0.02 * i, 0.01 * i)));
+    blocks.push_back({q.x(), q.y(), q.z(), q.w()});
+  }
+  for (int i = 0; i < N + 2; ++i) blocks.push_back({0.02 * i, -0.01 * i, 0.004 * i * i});
+  const Eigen::Quaterniond qci(so3::exp(Eigen::Vector3d(0.1, -0.2, 3.0)));
+  blocks.push_back({qci.x(), qci.y(), qci.z(), qci.w()});  // R_cam_imu
+  blocks.push_back({0.03, -0.02, 0.01});                   // t_cam_imu
+  blocks.push_back({0.006});                               // timeshift
+  std::vector<Eigen::Vector3d> pts;
+  std::vector<Eigen::Vector2d> px;
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0.0, 0.4);
+  for (int k = 0; k < 12; ++k) {
+    pts.emplace_back(-0.15 + 0.03 * k, 0.05 * (k % 4) - 0.07, 1.1 + 0.01 * k);
+    px.emplace_back(120.0 + 11.0 * k + noise(rng) + (k == 3 ? 8.0 : 0.0), 100.0 + 6.0 * (k % 4) + noise(rng));
+  }
+  const FrameResidual<N> full(camera, pts, px, 0.21, 1, timing, 0.3, 0.9, false);
+  const FrameResidual<N> compact(camera, pts, px, 0.21, 1, timing, 0.3, 0.9, true);
+  ASSERT_EQ(compact.num_residuals(), 7);
+  ASSERT_EQ(full.num_residuals(), 24);
+  // Both Jacobians in tangent coordinates, stacked over the blocks.
+  const auto stacked = [&](const FrameResidual<N>& cost, Eigen::VectorXd* r) {
+    const int m = cost.num_residuals();
+    const auto& sizes = cost.parameter_block_sizes();
+    std::vector<double*> ptr;
+    for (auto& b : blocks) ptr.push_back(b.data());
+    std::vector<Block> jac(blocks.size());
+    std::vector<double*> jptr;
+    int cols = 0;
+    for (std::size_t i = 0; i < blocks.size(); ++i) {
+      jac[i].assign(static_cast<std::size_t>(m * sizes[i]), 0.0);
+      jptr.push_back(jac[i].data());
+      cols += sizes[i] == 4 ? 3 : sizes[i];
+    }
+    r->resize(m);
+    EXPECT_TRUE(cost.Evaluate(ptr.data(), r->data(), jptr.data()));
+    Eigen::MatrixXd J(m, cols);
+    int c0 = 0;
+    for (std::size_t i = 0; i < blocks.size(); ++i) {
+      const int dims = sizes[i] == 4 ? 3 : sizes[i];
+      for (int row = 0; row < m; ++row)
+        for (int c = 0; c < dims; ++c) J(row, c0 + c) = jac[i][static_cast<std::size_t>(row * sizes[i] + c)];
+      c0 += dims;
+    }
+    return J;
+  };
+  Eigen::VectorXd rf, rc;
+  const Eigen::MatrixXd Jf = stacked(full, &rf), Jc = stacked(compact, &rc);
+  EXPECT_NEAR(rc.squaredNorm(), rf.squaredNorm(), 1e-9 * rf.squaredNorm());
+  const Eigen::VectorXd gf = Jf.transpose() * rf, gc = Jc.transpose() * rc;
+  EXPECT_LT((gc - gf).norm(), 1e-7 * gf.norm()) << gf.transpose() << "\n" << gc.transpose();
+  const Eigen::MatrixXd Hf = Jf.transpose() * Jf, Hc = Jc.transpose() * Jc;
+  EXPECT_LT((Hc - Hf).norm(), 1e-8 * Hf.norm());
+  EXPECT_GT(gf.norm(), 1.0);  // the frame is off its prediction: the comparison is not of zeros
+  // The cost alone (no Jacobians) has the same norm.
+  Eigen::VectorXd r_only(7);
+  std::vector<double*> ptr;
+  for (auto& b : blocks) ptr.push_back(b.data());
+  ASSERT_TRUE(compact.Evaluate(ptr.data(), r_only.data(), nullptr));
+  EXPECT_NEAR(r_only.squaredNorm(), rf.squaredNorm(), 1e-9 * rf.squaredNorm());
 }
 
 TEST(CamImuResiduals, BiasWalkResidualIsTheWeightedBiasDerivative) {
