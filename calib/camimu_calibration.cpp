@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <iomanip>
 #include <memory>
 #include <sstream>
@@ -112,6 +113,18 @@ class ProgressCallback final : public ceres::IterationCallback {
  private:
   const CamImuProgressFn& fn_;
   std::string stage_;
+};
+
+/// Ends a solve (successfully) as soon as `stop()` holds for the current iterate.
+class StopWhen final : public ceres::IterationCallback {
+ public:
+  explicit StopWhen(std::function<bool()> stop) : stop_(std::move(stop)) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& s) override {
+    return s.step_is_successful && stop_() ? ceres::SOLVER_TERMINATE_SUCCESSFULLY : ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  std::function<bool()> stop_;
 };
 
 template <int N>
@@ -752,13 +765,22 @@ Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solve
   so.parameter_tolerance = 1e-9;
   ProgressCallback cb(progress_, stage);
   so.callbacks.push_back(&cb);
-  // A timeshift that moves frames out of the knot window they were built with: rebuild (a final
-  // stage only).
+  // A timeshift that moves frames out of the knot window they were built with: the attempt ends
+  // there and the problem is built again at the new offset (a final stage only; the last attempt
+  // runs to convergence and fails if the offset still moves).
+  constexpr int kAttempts = 8;
+  bool window_check = !preliminary;
+  StopWhen window_left([&] { return window_check && !frames_in_window(); });
+  if (!preliminary) {
+    so.update_state_every_iteration = true;
+    so.callbacks.push_back(&window_left);
+  }
   if (preliminary && imu_.size() >= 2) {
     const double rate = 1e9 / static_cast<double>(std::max<TimeNs>(imu_median_interval_ns(imu_), 1));
     imu_stride_ = std::max(1, static_cast<int>(std::lround(rate / kPreliminaryImuRateHz)));
   }
-  for (int attempt = 0; attempt < 4; ++attempt) {
+  for (int attempt = 0; attempt < kAttempts; ++attempt) {
+    window_check = attempt + 1 < kAttempts;
     rebuild(extended);
     imu_stride_ = 1;
     ceres::Solve(so, problem_.get(), summary);
@@ -769,7 +791,7 @@ Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solve
     quality_.jacobian_s += summary->jacobian_evaluation_time_in_seconds;
     quality_.linear_solver_s += summary->linear_solver_time_in_seconds;
     // The next stage builds the problem again at the new offset: the first stage need not.
-    if (preliminary || frames_in_window()) return {};
+    if (preliminary || (frames_in_window() && summary->termination_type != ceres::USER_SUCCESS)) return {};
   }
   return make_error(Errc::kSolverFailed, "the time offset did not settle (" + stage + ")");
 }
@@ -1132,7 +1154,9 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
     rebuild(false);
     problem_->Evaluate(ceres::Problem::EvaluateOptions(), &start_cost, nullptr, nullptr, nullptr);
   }
-  if (Status s = solve(false, "basic", &summary, preliminary ? kPreliminaryTolerance : kFinalTolerance);
+  // The weights are estimated again after it, so it need not converge fully either.
+  if (Status s =
+          solve(false, "basic", &summary, preliminary ? kPreliminaryTolerance : kIntermediateTolerance);
       !s.ok())
     return s.error();
   quality_.initial_cost = preliminary ? start_cost : summary.initial_cost;
@@ -1154,7 +1178,7 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   // repeated until the estimates hold (within 10 %).
   // A stage followed by new weights stops at kIntermediateTolerance; the last one runs to
   // kFinalTolerance (continuing from the one before when the weights held).
-  bool converged = automatic || !preliminary;  // the last solve ran to kFinalTolerance
+  bool converged = automatic;  // the last solve ran to kFinalTolerance
   for (int round = automatic ? 1 : 0; round < 4; ++round) {
     bool changed = reestimate_corner_sigma();
     if (round > 0 || !extended) changed = reestimate_imu_noise() || changed;
