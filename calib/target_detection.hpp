@@ -39,7 +39,9 @@ namespace imucal::calib {
 ///    threshold, and every board is checked (grid shape, alternating squares).
 /// 4: a board whose corner-0 square is out of view no longer turns half round (resolve_turn);
 ///    a track whose corners the refinement left where they were is searched instead.
-inline constexpr int kTargetDetectorRevision = 4;
+/// 5: AprilGrid quads are searched at half resolution when the frame before showed tags of
+///    28 px or more (kCoarseTagEdgePx).
+inline constexpr int kTargetDetectorRevision = 5;
 
 /// The target points one image shows.
 struct TargetObservation {

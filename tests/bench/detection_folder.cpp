@@ -6,6 +6,8 @@
 // each frame tracking the board from the ones before it in its batch.
 //
 //   detection_folder DIR --cols C --rows R [--no-history]
+//   detection_folder DIR --aprilgrid TAG_COLS TAG_ROWS SPACING [--decimate D]
+//   ... [--per-frame FILE]   (a CSV line per frame: file, points, CPU ms, median edge in px)
 //
 // docs/benchmarks.md ("Target detection on frames from elsewhere") has the figures.
 
@@ -62,9 +64,22 @@ int main(int argc, char** argv) {
   int cols = 0;
   int rows = 0;
   bool history = true;
+  int tag_cols = 0;
+  int tag_rows = 0;
+  double tag_spacing = 0.0;
+  imucal::calib::DetectionOptions options;
+  std::string per_frame_path;  // --per-frame FILE: file, points, CPU ms, median edge (px) per frame
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--cols" && i + 1 < argc) {
+    if (a == "--aprilgrid" && i + 3 < argc) {
+      tag_cols = std::atoi(argv[++i]);
+      tag_rows = std::atoi(argv[++i]);
+      tag_spacing = std::atof(argv[++i]);
+    } else if (a == "--per-frame" && i + 1 < argc) {
+      per_frame_path = argv[++i];
+    } else if (a == "--decimate" && i + 1 < argc) {
+      options.aprilgrid_decimate = std::atof(argv[++i]);
+    } else if (a == "--cols" && i + 1 < argc) {
       cols = std::atoi(argv[++i]);
     } else if (a == "--rows" && i + 1 < argc) {
       rows = std::atoi(argv[++i]);
@@ -77,20 +92,31 @@ int main(int argc, char** argv) {
       dir = a;
     }
   }
-  if (dir.empty() || cols < 3 || rows < 3) {
+  const bool aprilgrid = tag_cols > 0;
+  if (dir.empty() || (!aprilgrid && (cols < 3 || rows < 3)) ||
+      (aprilgrid && (tag_rows < 1 || tag_spacing <= 0))) {
     std::fprintf(stderr,
                  "usage: detection_folder DIR --cols C --rows R [--no-history]\n"
+                 "       detection_folder DIR --aprilgrid TAG_COLS TAG_ROWS SPACING [--decimate D]\n"
                  "  DIR holds .png/.jpg frames (file-name order) and optionally truth.csv "
                  "(frame,corner_id,u,v,...)\n");
     return 2;
   }
   cv::setNumThreads(1);
   imucal::TargetDescription target;
-  target.type = imucal::TargetDescription::Type::kCheckerboard;
-  target.cols = cols;
-  target.rows = rows;
-  target.row_spacing_m = target.col_spacing_m = 0.04;
-  auto detector = imucal::calib::TargetDetector::create(target);
+  if (aprilgrid) {
+    target.type = imucal::TargetDescription::Type::kAprilgrid;
+    target.tag_cols = tag_cols;
+    target.tag_rows = tag_rows;
+    target.tag_size_m = 0.03;
+    target.tag_spacing = tag_spacing;
+  } else {
+    target.type = imucal::TargetDescription::Type::kCheckerboard;
+    target.cols = cols;
+    target.rows = rows;
+    target.row_spacing_m = target.col_spacing_m = 0.04;
+  }
+  auto detector = imucal::calib::TargetDetector::create(target, options);
   if (!detector.ok()) {
     std::fprintf(stderr, "%s\n", detector.error().message.c_str());
     return 2;
@@ -103,9 +129,12 @@ int main(int argc, char** argv) {
   std::sort(files.begin(), files.end());
   const auto truth = read_truth(dir + "/truth.csv");
 
+  std::FILE* per_frame = per_frame_path.empty() ? nullptr : std::fopen(per_frame_path.c_str(), "w");
+  if (per_frame) std::fprintf(per_frame, "file,points,cpu_ms,median_edge_px\n");
   std::vector<double> ms;
   std::vector<double> errors;
   int found = 0;
+  std::size_t points = 0;
   std::vector<imucal::calib::TargetObservation> obs(files.size());
   for (std::size_t i = 0; i < files.size(); ++i) {
     const cv::Mat image = cv::imread(files[i], cv::IMREAD_GRAYSCALE);
@@ -118,9 +147,22 @@ int main(int argc, char** argv) {
     const double t0 = thread_cpu_ms();
     auto r = (*detector)->detect({image.data, image.cols, image.rows, image.step[0]}, h);
     ms.push_back(thread_cpu_ms() - t0);
+    if (per_frame) {
+      // Edges between neighbouring points of the grid (ids one apart in a row, next to each other).
+      std::vector<double> edges;
+      if (r.ok())
+        for (std::size_t k = 0; k + 1 < r->ids.size(); ++k)
+          if (r->ids[k + 1] == r->ids[k] + 1 &&
+              (aprilgrid ? r->ids[k] % 2 == 0 : r->ids[k] % cols != cols - 1))
+            edges.push_back((r->px[k + 1] - r->px[k]).norm());
+      std::fprintf(per_frame, "%s,%zu,%.3f,%.2f\n", std::filesystem::path(files[i]).filename().c_str(),
+                   r.ok() ? r->px.size() : 0, ms.back(), percentile(edges, 0.5));
+    }
     if (!r.ok() || r->empty()) continue;
     obs[i] = *r;
     ++found;
+    points += r->px.size();
+    if (truth.empty()) continue;
     // truth.csv names frames by their file name (000.png is frame 0), else by their order.
     const std::string stem = std::filesystem::path(files[i]).stem().string();
     const bool numbered =
@@ -140,10 +182,10 @@ int main(int argc, char** argv) {
   for (double e : errors) rms += e * e;
   rms = errors.empty() ? 0.0 : std::sqrt(rms / static_cast<double>(errors.size()));
   std::printf(
-      "%s: %zu frames, found %d; CPU per frame median %.2f ms, p90 %.2f ms, max %.2f ms, mean %.2f ms "
-      "(%.0f frames/s a core)",
-      dir.c_str(), ms.size(), found, percentile(ms, 0.5), percentile(ms, 0.9), percentile(ms, 1.0), mean,
-      mean > 0 ? 1e3 / mean : 0.0);
+      "%s: %zu frames, found %d (%zu points); CPU per frame median %.2f ms, p90 %.2f ms, max %.2f ms, "
+      "mean %.2f ms (%.0f frames/s a core)",
+      dir.c_str(), ms.size(), found, points, percentile(ms, 0.5), percentile(ms, 0.9), percentile(ms, 1.0),
+      mean, mean > 0 ? 1e3 / mean : 0.0);
   if (!errors.empty())
     std::printf("; corners against truth: RMS %.3f px, max %.3f px", rms, percentile(errors, 1.0));
   std::printf("\n");
