@@ -101,21 +101,32 @@ TEST(CamImuResiduals, ImuResidualJacobiansMatchNumericOnes) {
   check_jacobians(cost, blocks, 2e-5);
 }
 
+/// The blocks of a frame residual: `window` rotation knots turning by `turn` per knot, as many
+/// position knots moving by `step` (and a quadratic z), R_cam_imu as the rotation vector
+/// `r_ci`, t_cam_imu and the timeshift.
+std::vector<Block> frame_blocks(int window, const Eigen::Vector3d& turn, const Eigen::Vector3d& step,
+                                const Eigen::Vector3d& r_ci, const Block& t_ci, double shift) {
+  std::vector<Block> blocks;
+  for (int i = 0; i < window; ++i) {
+    const Eigen::Quaterniond q(so3::exp(turn * i));
+    blocks.push_back({q.x(), q.y(), q.z(), q.w()});
+  }
+  for (int i = 0; i < window; ++i) blocks.push_back({step.x() * i, step.y() * i, step.z() * i * i});
+  const Eigen::Quaterniond qci(so3::exp(r_ci));
+  blocks.push_back({qci.x(), qci.y(), qci.z(), qci.w()});
+  blocks.push_back(t_ci);
+  blocks.push_back({shift});
+  return blocks;
+}
+
 TEST(CamImuResiduals, FrameResidualJacobiansMatchNumericOnesIncludingTheTimeshiftAndTheRobustLoss) {
-  std::mt19937 rng(9);
   constexpr int N = 5;
   const CameraModel camera = sim::CamImuSimOptions::default_sim_camera();
   const SplineTiming<N> timing{0.0, 0.05, 20};
   // Knots near a pose that looks at points 1 m in front of the camera.
-  std::vector<Block> blocks;
-  for (int i = 0; i < N + 2; ++i) {
-    const Eigen::Quaterniond q(so3::exp(Eigen::Vector3d(0.02 * i, -0.01 * i, 0.015 * i)));
-    blocks.push_back({q.x(), q.y(), q.z(), q.w()});
-  }
-  for (int i = 0; i < N + 2; ++i) blocks.push_back({0.01 * i, -0.02 * i, 0.005 * i * i});
-  blocks.push_back({0, 0, 0, 1});         // R_cam_imu
-  blocks.push_back({0.02, -0.01, 0.03});  // t_cam_imu
-  blocks.push_back({0.004});              // timeshift
+  std::vector<Block> blocks =
+      frame_blocks(N + 2, Eigen::Vector3d(0.02, -0.01, 0.015), Eigen::Vector3d(0.01, -0.02, 0.005),
+                   Eigen::Vector3d::Zero(), {0.02, -0.01, 0.03}, 0.004);
   std::vector<Eigen::Vector3d> pts;
   std::vector<Eigen::Vector2d> px;
   for (int k = 0; k < 6; ++k) {
@@ -134,16 +145,9 @@ TEST(CamImuResiduals, CompressedFrameResidualHasTheCornersCostGradientAndNormalM
   constexpr int N = 4;
   const CameraModel camera = sim::CamImuSimOptions::default_sim_camera();
   const SplineTiming<N> timing{0.0, 0.05, 20};
-  std::vector<Block> blocks;
-  for (int i = 0; i < N + 2; ++i) {
-    const Eigen::Quaterniond q(so3::exp(Eigen::Vector3d(0.03 * i, -0.02 * i, 0.01 * i)));
-    blocks.push_back({q.x(), q.y(), q.z(), q.w()});
-  }
-  for (int i = 0; i < N + 2; ++i) blocks.push_back({0.02 * i, -0.01 * i, 0.004 * i * i});
-  const Eigen::Quaterniond qci(so3::exp(Eigen::Vector3d(0.1, -0.2, 3.0)));
-  blocks.push_back({qci.x(), qci.y(), qci.z(), qci.w()});  // R_cam_imu
-  blocks.push_back({0.03, -0.02, 0.01});                   // t_cam_imu
-  blocks.push_back({0.006});                               // timeshift
+  std::vector<Block> blocks =
+      frame_blocks(N + 2, Eigen::Vector3d(0.03, -0.02, 0.01), Eigen::Vector3d(0.02, -0.01, 0.004),
+                   Eigen::Vector3d(0.1, -0.2, 3.0), {0.03, -0.02, 0.01}, 0.006);
   std::vector<Eigen::Vector3d> pts;
   std::vector<Eigen::Vector2d> px;
   std::mt19937 rng(5);
