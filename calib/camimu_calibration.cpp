@@ -56,7 +56,8 @@ constexpr int kPreliminaryIterations = 12;
 // How far each stage is converged (docs/camimu-calibration.md, "Speed"): relative decrease of the
 // cost in an iteration below which it stops. The first stage only brings the trajectory near (1 %);
 // a stage whose weights are re-estimated afterwards stops at 1e-4; the stage whose result is
-// reported at 1e-8 (about 1e-3 of the cost, a change of the parameters far below their sigmas).
+// reported at 1e-7 (about 0.01 of a cost near 1e5, a change of the parameters far below their
+// sigmas).
 constexpr double kPreliminaryTolerance = 1e-2;
 constexpr double kIntermediateTolerance = 1e-4;
 constexpr double kFinalTolerance = 1e-7;
@@ -142,7 +143,9 @@ class Estimator {
   /// A warning per camera naming the frames left out for contradicting the gyro.
   void warn_rejected_frames();
   void initialise_spline(std::size_t ref);
-  void build(ceres::Problem* problem, bool extended);
+  /// The problem at the current values; every `imu_stride`-th IMU sample (the first stage
+  /// takes fewer).
+  void build(ceres::Problem* problem, bool extended, int imu_stride = 1);
   /// One stage to the relative cost tolerance `tolerance` (kPreliminaryTolerance, ...).
   Status solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary,
                double tolerance = kFinalTolerance);
@@ -151,7 +154,10 @@ class Estimator {
   /// cannot be evaluated there.
   const MarginalCovariance* solution_covariance();
   /// The problem built again at the current values, without solving (after a state is restored).
-  void rebuild(bool extended);
+  void rebuild(bool extended, int imu_stride = 1);
+  /// The stages after the first (and the model choice): weighted anew by the noise the residuals
+  /// show until the weights hold, the last to kFinalTolerance.
+  Status reweighted_stages(bool automatic, ceres::Solver::Summary* summary);
   bool frames_in_window() const;
   /// Basic or extended by the evidence (kAuto): the drop of the data cost that freeing the
   /// intrinsics buys against the parameters it costs (BIC). Leaves the chosen model solved.
@@ -210,7 +216,6 @@ class Estimator {
   std::vector<std::string> warnings_;
   std::unique_ptr<ceres::Problem> problem_;
   std::unique_ptr<MarginalCovariance> covariance_;  // of the current solution; reset by a solve
-  int imu_stride_ = 1;  // build() takes every imu_stride_-th IMU sample (the first stage only)
   bool covariance_failed_ = false;
   double covariance_compute_s_ = 0.0;  // wall time of the last computation of covariance_
 };
@@ -405,7 +410,7 @@ void Estimator<N>::initialise_spline(std::size_t ref) {
 }
 
 template <int N>
-void Estimator<N>::build(ceres::Problem* problem, bool extended) {
+void Estimator<N>::build(ceres::Problem* problem, bool extended, int imu_stride) {
   static RightQuaternionManifold quat_manifold;
   static ceres::SphereManifold<3> sphere;
   for (auto& q : st_.q) problem->AddParameterBlock(q.data(), 4, &quat_manifold);
@@ -418,7 +423,7 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended) {
   imu_blocks_.clear();
   imu_index_.clear();
   priors_.clear();
-  for (std::size_t k = 0; k < imu_.size(); k += static_cast<std::size_t>(imu_stride_)) {
+  for (std::size_t k = 0; k < imu_.size(); k += static_cast<std::size_t>(imu_stride)) {
     const CamImuSample& s = imu_[k];
     const double t = t_s(s.t_ns);
     if (!st_.pose.covers(t)) continue;
@@ -538,13 +543,13 @@ double Estimator<N>::prior_cost() const {
 }
 
 template <int N>
-void Estimator<N>::rebuild(bool extended) {
+void Estimator<N>::rebuild(bool extended, int imu_stride) {
   ceres::Problem::Options po;
   po.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   problem_ = std::make_unique<ceres::Problem>(po);
   covariance_.reset();
   covariance_failed_ = false;
-  build(problem_.get(), extended);
+  build(problem_.get(), extended, imu_stride);
 }
 
 template <int N>
@@ -752,8 +757,8 @@ Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solve
                            double tolerance) {
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-  // Dogleg: half the iterations of Levenberg-Marquardt on these problems at the same solution
-  // (docs/camimu-calibration.md, "Speed").
+  // Dogleg: a third to two thirds of Levenberg-Marquardt's iterations on these problems, at the
+  // same solution (docs/camimu-calibration.md, "Speed").
   so.trust_region_strategy_type = ceres::DOGLEG;
   so.num_threads = threads_or_cores(opt_.threads);
   // The first stage only brings the trajectory, biases and extrinsics near the solution for the
@@ -775,14 +780,14 @@ Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solve
     so.update_state_every_iteration = true;
     so.callbacks.push_back(&window_left);
   }
+  int imu_stride = 1;
   if (preliminary && imu_.size() >= 2) {
     const double rate = 1e9 / static_cast<double>(std::max<TimeNs>(imu_median_interval_ns(imu_), 1));
-    imu_stride_ = std::max(1, static_cast<int>(std::lround(rate / kPreliminaryImuRateHz)));
+    imu_stride = std::max(1, static_cast<int>(std::lround(rate / kPreliminaryImuRateHz)));
   }
   for (int attempt = 0; attempt < kAttempts; ++attempt) {
     window_check = attempt + 1 < kAttempts;
-    rebuild(extended);
-    imu_stride_ = 1;
+    rebuild(extended, imu_stride);
     ceres::Solve(so, problem_.get(), summary);
     if (!summary->IsSolutionUsable())
       return make_error(Errc::kSolverFailed,
@@ -1129,6 +1134,38 @@ void Estimator<N>::warn_rejected_frames() {
 }
 
 template <int N>
+Status Estimator<N>::reweighted_stages(bool automatic, ceres::Solver::Summary* summary) {
+  if (automatic) {
+    // Both models weighted alike, by the noise the first stage's residuals show.
+    reestimate_corner_sigma();
+    reestimate_imu_noise();
+    if (Status s = choose_model(summary); !s.ok()) return s;
+  }
+  const bool extended = model_ == CamImuModelKind::kExtended;
+  // The next stage weighs the corners by the noise they showed in the one before, and the IMU by
+  // its residuals where they disagree with the given noise. The first stage stops early with the
+  // IMU intrinsics at their start, so its residuals overstate the noise: the final stage is
+  // repeated until the estimates hold (within 10 %).
+  // A stage followed by new weights stops at kIntermediateTolerance; the last one runs to
+  // kFinalTolerance (continuing from the one before when the weights held).
+  bool converged = automatic;  // the last solve ran to kFinalTolerance
+  for (int round = automatic ? 1 : 0; round < 4; ++round) {
+    bool changed = reestimate_corner_sigma();
+    if (round > 0 || !extended) changed = reestimate_imu_noise() || changed;
+    const bool may_stop = round > 0 || (!extended && opt_.corner_sigma_px > 0);
+    if (may_stop && !changed && converged) break;
+    const bool last = round == 3 || (may_stop && !changed);
+    if (Status s = solve(extended, extended ? "extended" : "basic", summary,
+                         last ? kFinalTolerance : kIntermediateTolerance);
+        !s.ok())
+      return s;
+    converged = last;
+    if (last) break;
+  }
+  return {};
+}
+
+template <int N>
 Result<CamImuCalibrationResult> Estimator<N>::run() {
   const auto start = std::chrono::steady_clock::now();
   if (Status s = initialise(); !s.ok()) return s.error();
@@ -1162,36 +1199,11 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   quality_.initial_cost = preliminary ? start_cost : summary.initial_cost;
   std::vector<ImuSignalFit> fits;
   fits.push_back(signal_fit("basic"));
-  if (automatic) {
-    // Both models weighted alike, by the noise the first stage's residuals show.
-    reestimate_corner_sigma();
-    reestimate_imu_noise();
-    if (Status s = choose_model(&summary); !s.ok()) return s.error();
-  } else if (model_choice_.empty()) {
+  if (!automatic && model_choice_.empty())
     model_choice_ = std::string(camimu_model_name(model_)) + ", as requested (--model)";
-  }
+  if (Status s = reweighted_stages(automatic, &summary); !s.ok()) return s.error();
   const bool extended = model_ == CamImuModelKind::kExtended;
   if (!extended) fits.clear();
-  // The next stage weighs the corners by the noise they showed in the one before, and the IMU by
-  // its residuals where they disagree with the given noise. The first stage stops early with the
-  // IMU intrinsics at their start, so its residuals overstate the noise: the final stage is
-  // repeated until the estimates hold (within 10 %).
-  // A stage followed by new weights stops at kIntermediateTolerance; the last one runs to
-  // kFinalTolerance (continuing from the one before when the weights held).
-  bool converged = automatic;  // the last solve ran to kFinalTolerance
-  for (int round = automatic ? 1 : 0; round < 4; ++round) {
-    bool changed = reestimate_corner_sigma();
-    if (round > 0 || !extended) changed = reestimate_imu_noise() || changed;
-    const bool may_stop = round > 0 || (!extended && opt_.corner_sigma_px > 0);
-    if (may_stop && !changed && converged) break;
-    const bool last = round == 3 || (may_stop && !changed);
-    if (Status s = solve(extended, extended ? "extended" : "basic", &summary,
-                         last ? kFinalTolerance : kIntermediateTolerance);
-        !s.ok())
-      return s.error();
-    converged = last;
-    if (last) break;
-  }
   quality_.final_cost = summary.final_cost;
   // A covariance the model choice computed at this solution is counted as the covariance's.
   quality_.solve_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - init_done).count() -
