@@ -14,6 +14,8 @@
 #include <string>
 #include <utility>
 
+#include "calib/checkerboard_grid.hpp"
+
 namespace imucal::calib {
 namespace {
 
@@ -376,9 +378,12 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
     unmirror(&px);
   } else {
     // The search, each step only for what the one before missed, every result checked:
-    //  1. the quad search on OpenCV's histogram threshold, without its pre-test (which rejects
+    //  1. the grid of X junctions (checkerboard_grid.hpp): a few ms, and it also says when the
+    //     steps below cannot find the board: no board at all, only part of it in view, or a
+    //     whole board of another size;
+    //  2. the quad search on OpenCV's histogram threshold, without its pre-test (which rejects
     //     boards the search finds, and costs more than it saves): a few ms;
-    //  2. the sector-based detector: tens to a few hundred ms, bounded, and it finds the boards
+    //  3. the sector-based detector: tens to a few hundred ms, bounded, and it finds the boards
     //     the pre-test rejects (small, blurred, strongly distorted).
     // The quad search's adaptive-threshold passes are not used: on textured, noisy frames they
     // cost up to seconds a frame and found no board the two steps miss (docs/targets.md).
@@ -391,7 +396,30 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
       }
       return plausible(image, *corners);
     };
-    bool found = cv::findChessboardCorners(image, pattern, px, 0) && refined(&px);
+    CheckerboardGrid grid = find_checkerboard_grid(image, target_.cols, target_.rows);
+    bool found = false;
+    switch (grid.outcome) {
+      case CheckerboardGrid::Outcome::kFound:
+        // A grid the checks reject is not searched again: the searches below see the same
+        // junctions (on the frames of docs/benchmarks.md they never found such a board).
+        px = std::move(grid.corners);
+        if (!refined(&px)) return obs;
+        found = true;
+        break;
+      case CheckerboardGrid::Outcome::kNone:
+      case CheckerboardGrid::Outcome::kCut:
+      case CheckerboardGrid::Outcome::kOther:
+        return obs;
+      case CheckerboardGrid::Outcome::kUndecided:
+        // Only a grid of at least half the board is worth the slow searches (a board with a
+        // few junctions lost to glare or blur); small grids are where lines cross in clutter.
+        if (2 * grid.grid_cols * grid.grid_rows < static_cast<int>(n)) return obs;
+        break;
+    }
+    if (!found) {
+      px.clear();
+      found = cv::findChessboardCorners(image, pattern, px, 0) && refined(&px);
+    }
     if (!found) {
       px.clear();
       found = cv::findChessboardCornersSB(image, pattern, px, cv::CALIB_CB_NORMALIZE_IMAGE) && refined(&px);
@@ -405,6 +433,14 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
 std::string CheckerboardDetector::describe_other_target(const GrayView& view) const {
   if (!check_image(view).ok()) return {};
   try {
+    auto words = [](int cols, int rows) {
+      return "a checkerboard of " + std::to_string(std::max(cols, rows)) + " x " +
+             std::to_string(std::min(cols, rows)) + " inner corners";
+    };
+    // A whole board in the junction grid first (a few ms).
+    const CheckerboardGrid grid = find_checkerboard_grid(as_mat(view), target_.cols, target_.rows);
+    if (grid.outcome == CheckerboardGrid::Outcome::kOther) return words(grid.grid_cols, grid.grid_rows);
+    if (grid.outcome == CheckerboardGrid::Outcome::kFound) return {};
     // The sector-based detector with CALIB_CB_LARGER finds a board of any size from the smallest
     // pattern up and says in `meta` how many corners it has (rows x columns).
     std::vector<cv::Point2f> px;
@@ -430,8 +466,7 @@ std::string CheckerboardDetector::describe_other_target(const GrayView& view) co
     }
     if ((cols == target_.cols && rows == target_.rows) || (cols == target_.rows && rows == target_.cols))
       return {};
-    return "a checkerboard of " + std::to_string(std::max(cols, rows)) + " x " +
-           std::to_string(std::min(cols, rows)) + " inner corners";
+    return words(cols, rows);
   } catch (const cv::Exception&) {
     return {};
   }

@@ -41,7 +41,8 @@ namespace imucal::calib {
 ///    a track whose corners the refinement left where they were is searched instead.
 /// 5: AprilGrid quads are searched at half resolution when the frame before showed tags of
 ///    28 px or more (kCoarseTagEdgePx).
-inline constexpr int kTargetDetectorRevision = 5;
+/// 6: the checkerboard is first searched as a grid of X junctions (checkerboard_grid.hpp).
+inline constexpr int kTargetDetectorRevision = 6;
 
 /// The target points one image shows.
 struct TargetObservation {
@@ -73,7 +74,7 @@ struct GrayView {
 
 /// OpenCV's two checkerboard detectors (docs/targets.md compares them).
 enum class CheckerboardMethod {
-  kClassic,      // tracking, findChessboardCorners, then findChessboardCornersSB; cornerSubPix
+  kClassic,      // tracking, the junction grid, findChessboardCorners, findChessboardCornersSB; cornerSubPix
   kSectorBased,  // findChessboardCornersSB (ACCURACY) alone, no further refinement
 };
 

@@ -17,6 +17,7 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -68,7 +69,8 @@ int main(int argc, char** argv) {
   int tag_rows = 0;
   double tag_spacing = 0.0;
   imucal::calib::DetectionOptions options;
-  std::string per_frame_path;  // --per-frame FILE: file, points, CPU ms, median edge (px) per frame
+  std::string per_frame_path;  // --per-frame FILE: file, points, CPU ms, median edge (px), worst corner error
+                               // (px) per frame
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--aprilgrid" && i + 3 < argc) {
@@ -130,7 +132,7 @@ int main(int argc, char** argv) {
   const auto truth = read_truth(dir + "/truth.csv");
 
   std::FILE* per_frame = per_frame_path.empty() ? nullptr : std::fopen(per_frame_path.c_str(), "w");
-  if (per_frame) std::fprintf(per_frame, "file,points,cpu_ms,median_edge_px\n");
+  if (per_frame) std::fprintf(per_frame, "file,points,cpu_ms,median_edge_px,max_error_px\n");
   std::vector<double> ms;
   std::vector<double> errors;
   int found = 0;
@@ -147,6 +149,23 @@ int main(int argc, char** argv) {
     const double t0 = thread_cpu_ms();
     auto r = (*detector)->detect({image.data, image.cols, image.rows, image.step[0]}, h);
     ms.push_back(thread_cpu_ms() - t0);
+    // truth.csv names frames by their file name (000.png is frame 0), else by their order.
+    double worst = std::numeric_limits<double>::quiet_NaN();
+    if (r.ok() && !r->empty() && !truth.empty()) {
+      const std::string stem = std::filesystem::path(files[i]).stem().string();
+      const bool numbered =
+          !stem.empty() && std::all_of(stem.begin(), stem.end(), [](char c) { return c >= '0' && c <= '9'; });
+      const auto t = truth.find(numbered ? std::stoi(stem) : static_cast<int>(i));
+      if (t != truth.end()) {
+        worst = 0.0;
+        for (const Eigen::Vector2d& p : r->px) {
+          double best = 1e9;
+          for (const cv::Point2d& q : t->second) best = std::min(best, std::hypot(p.x() - q.x, p.y() - q.y));
+          errors.push_back(best);
+          worst = std::max(worst, best);
+        }
+      }
+    }
     if (per_frame) {
       // Edges between neighbouring points of the grid (ids one apart in a row, next to each other).
       std::vector<double> edges;
@@ -155,25 +174,13 @@ int main(int argc, char** argv) {
           if (r->ids[k + 1] == r->ids[k] + 1 &&
               (aprilgrid ? r->ids[k] % 2 == 0 : r->ids[k] % cols != cols - 1))
             edges.push_back((r->px[k + 1] - r->px[k]).norm());
-      std::fprintf(per_frame, "%s,%zu,%.3f,%.2f\n", std::filesystem::path(files[i]).filename().c_str(),
-                   r.ok() ? r->px.size() : 0, ms.back(), percentile(edges, 0.5));
+      std::fprintf(per_frame, "%s,%zu,%.3f,%.2f,%.3f\n", std::filesystem::path(files[i]).filename().c_str(),
+                   r.ok() ? r->px.size() : 0, ms.back(), percentile(edges, 0.5), worst);
     }
     if (!r.ok() || r->empty()) continue;
     obs[i] = *r;
     ++found;
     points += r->px.size();
-    if (truth.empty()) continue;
-    // truth.csv names frames by their file name (000.png is frame 0), else by their order.
-    const std::string stem = std::filesystem::path(files[i]).stem().string();
-    const bool numbered =
-        !stem.empty() && std::all_of(stem.begin(), stem.end(), [](char c) { return c >= '0' && c <= '9'; });
-    const auto t = truth.find(numbered ? std::stoi(stem) : static_cast<int>(i));
-    if (t == truth.end()) continue;
-    for (const Eigen::Vector2d& p : r->px) {
-      double best = 1e9;
-      for (const cv::Point2d& q : t->second) best = std::min(best, std::hypot(p.x() - q.x, p.y() - q.y));
-      errors.push_back(best);
-    }
   }
   double mean = 0.0;
   for (double v : ms) mean += v;

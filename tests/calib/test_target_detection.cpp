@@ -5,11 +5,14 @@
 #include <cstdio>
 #include <filesystem>
 #include <numbers>
+#include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "calib/checkerboard_grid.hpp"
 #include "calib/target_detection.hpp"
 #include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
@@ -457,6 +460,98 @@ TEST(CheckerboardDetection, AWrongHistoryIsNotFollowed) {
     for (std::size_t i = 0; i < obs->px.size(); ++i)
       worst = std::max(worst, (obs->px[i] - truth->px[i]).norm());
     EXPECT_LT(worst, 0.05);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The junction grid (calib/checkerboard_grid.hpp), the checkerboard's first search
+
+// Boards small, far and steeply tilted, where OpenCV's quad search (without its adaptive
+// threshold, as the chain calls it) finds nothing and the old chain went on to the sector-based
+// detector at about 100 ms a frame: every board that detector finds, the grid finds, and the
+// detector's corners match the truth.
+TEST(CheckerboardGrid, FindsTheBoardsTheQuadSearchMisses) {
+  const TargetDescription t = checkerboard(7, 6);
+  auto r = make_renderer(radtan_camera(), t, 1.0);
+  auto det = make_detector(t);
+  ASSERT_TRUE(r && det);
+  sim::Rng rng(3);
+  int missed_by_quads = 0;
+  int found_by_sectors = 0;
+  int found_by_grid = 0;
+  const cv::Size pattern(t.cols, t.rows);
+  for (double distance : {0.9, 1.3, 1.7}) {
+    for (double tilt : {0.7, 0.9, 1.05}) {
+      for (double roll : {0.3, 1.1}) {
+        const Frame f = render(
+            *r, board_pose(t, roll, Eigen::Vector3d(tilt, 0.4 * tilt, 0.0), distance, 0.05, 0.02), &rng);
+        if (f.truth.visible_count != t.point_count()) continue;
+        std::vector<cv::Point2f> px;
+        if (cv::findChessboardCorners(f.image, pattern, px, 0)) continue;
+        ++missed_by_quads;
+        SCOPED_TRACE("distance " + std::to_string(distance) + " tilt " + std::to_string(tilt) + " roll " +
+                     std::to_string(roll));
+        const bool sectors = cv::findChessboardCornersSB(f.image, pattern, px, cv::CALIB_CB_NORMALIZE_IMAGE);
+        const bool grid =
+            find_checkerboard_grid(f.image, t.cols, t.rows).outcome == CheckerboardGrid::Outcome::kFound;
+        found_by_sectors += sectors ? 1 : 0;
+        found_by_grid += grid ? 1 : 0;
+        if (sectors) EXPECT_TRUE(grid) << "the sector-based detector finds this board, the grid does not";
+        if (grid) expect_full_board(*det, f, 0.5, "a board the quad search misses");
+      }
+    }
+  }
+  std::printf("boards the quad search misses: %d; the sector-based detector finds %d, the grid %d\n",
+              missed_by_quads, found_by_sectors, found_by_grid);
+  EXPECT_GE(found_by_sectors, 3) << "the poses no longer make the case this test is for";
+}
+
+// The grid says when the slower searches cannot find the board, so that they are not run.
+TEST(CheckerboardGrid, SaysWhyThereIsNoBoardToSearchFor) {
+  using Outcome = CheckerboardGrid::Outcome;
+  const TargetDescription t = checkerboard(7, 6);
+  cv::Mat grey(480, 752, CV_8U, cv::Scalar(105));
+  EXPECT_EQ(find_checkerboard_grid(grey, 7, 6).outcome, Outcome::kNone);
+  cv::Mat noise(480, 752, CV_8U);
+  cv::randu(noise, 0, 256);
+  EXPECT_NE(find_checkerboard_grid(noise, 7, 6).outcome, Outcome::kFound);
+  // Crossing black and white bars: many junctions, some in line, no board.
+  cv::Mat bars(480, 752, CV_8U, cv::Scalar(128));
+  cv::RNG bar_rng(5);
+  for (int i = 0; i < 60; ++i) {
+    const cv::Point a(bar_rng.uniform(0, 752), bar_rng.uniform(0, 480));
+    const cv::Point b(bar_rng.uniform(0, 752), bar_rng.uniform(0, 480));
+    cv::line(bars, a, b, cv::Scalar(i % 2 == 0 ? 20 : 235), bar_rng.uniform(2, 12), cv::LINE_AA);
+  }
+  const CheckerboardGrid crossing = find_checkerboard_grid(bars, 7, 6);
+  EXPECT_NE(crossing.outcome, Outcome::kFound);
+  EXPECT_LT(2 * crossing.grid_cols * crossing.grid_rows, t.point_count())
+      << "would send bars to the slow search";
+  // A board cut by the image's border.
+  auto equi = make_renderer(equi_camera(), t);
+  ASSERT_TRUE(equi);
+  const Frame cut = render(*equi, board_pose(t, 0.0, Eigen::Vector3d::Zero(), 0.45, 0.45, 0.0));
+  ASSERT_LT(cut.truth.visible_count, t.point_count());
+  EXPECT_EQ(find_checkerboard_grid(cut.image, 7, 6).outcome, Outcome::kCut);
+  // A whole board of another size, either way round.
+  auto other = make_renderer(radtan_camera(), checkerboard(6, 5));
+  ASSERT_TRUE(other);
+  const Frame six = render(*other, board_pose(checkerboard(6, 5), 0.4, Eigen::Vector3d(0.2, 0.1, 0.0), 0.5));
+  const CheckerboardGrid g = find_checkerboard_grid(six.image, 7, 6);
+  EXPECT_EQ(g.outcome, Outcome::kOther);
+  EXPECT_EQ(std::max(g.grid_cols, g.grid_rows), 6);
+  EXPECT_EQ(std::min(g.grid_cols, g.grid_rows), 5);
+  // The board itself: its corners, each near a true corner.
+  auto own = make_renderer(radtan_camera(), t);
+  ASSERT_TRUE(own);
+  const Frame f = render(*own, board_pose(t, 2.5, Eigen::Vector3d(-0.3, 0.3, 0.0), 0.6));
+  const CheckerboardGrid found = find_checkerboard_grid(f.image, 7, 6);
+  ASSERT_EQ(found.outcome, Outcome::kFound);
+  ASSERT_EQ(found.corners.size(), 42u);
+  for (const cv::Point2f& p : found.corners) {
+    double best = 1e9;
+    for (const Eigen::Vector2d& q : f.truth.px) best = std::min(best, std::hypot(p.x - q.x(), p.y - q.y()));
+    EXPECT_LT(best, 0.5);
   }
 }
 

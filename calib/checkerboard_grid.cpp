@@ -1,0 +1,593 @@
+#include "calib/checkerboard_grid.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <numbers>
+#include <opencv2/imgproc.hpp>
+
+namespace imucal::calib {
+namespace {
+
+/// Smoothing before the second derivatives: enough to take the pixel noise off, small enough
+/// that the junctions of squares 5 px wide stay apart.
+constexpr double kBlurSigma = 1.2;
+/// The weakest junction kept: that of an ideal corner between squares this many grey levels
+/// apart, behind 0.7 px of lens blur. Boards in use differ by 50-200 levels.
+constexpr double kMinContrast = 16.0;
+/// At most this many junctions, the strongest (a cap on the cost in busy scenes).
+constexpr std::size_t kMaxJunctions = 1500;
+/// Junctions nearer the border than this are not found (the derivatives' reach).
+constexpr int kBorder = 3;
+/// A junction answers an extrapolated point within this fraction of the local grid step.
+constexpr float kMatchFraction = 0.3f;
+/// Saddle axes of neighbours along a row or column are a quarter turn apart, of diagonal
+/// neighbours alike (exactly so under any affine view); the tolerances on both.
+constexpr float kQuarterTolerance = 40.0f * std::numbers::pi_v<float> / 180.0f;
+/// The 3 x 3 patch's two steps: at least this far apart in angle (sine) and this close in length.
+constexpr float kMinSine = 0.5f;
+constexpr float kMaxStepRatio = 2.5f;
+/// Neighbours of a seed considered for its patch.
+constexpr int kSeedNeighbours = 4;
+/// A junction joins a grid only if at least this fraction as strong as the one it continues.
+/// The L-shaped corners where the board's outer squares meet its margin line up with the grid
+/// and alternate like its junctions, but at the corner the cross derivative of an L is half
+/// that of an X of the same contrast, so its strength (the derivative squared) a quarter.
+constexpr float kMinStrengthRatio = 0.45f;
+/// Side by side squares of a grid differ by at least this many grey levels.
+constexpr float kMinSquareContrast = 8.0f;
+
+struct Junction {
+  cv::Point2f p;
+  float strength = 0.0f;
+  float axis = 0.0f;  // direction of the saddle's rising curvature, [0, pi)
+};
+
+// Saddle strength 16 (dxy^2 - dxx * dyy) of the smoothed image, in integers (0 at the border
+// rows and columns). Central differences: dxx = I(x+1) + I(x-1) - 2 I(x), dxy the four diagonal
+// neighbours' difference over 4.
+cv::Mat saddle_strength(const cv::Mat& smooth) {
+  cv::Mat out(smooth.size(), CV_32S, cv::Scalar(0));
+  const int w = smooth.cols;
+  for (int y = 1; y + 1 < smooth.rows; ++y) {
+    const std::uint8_t* __restrict up = smooth.ptr<std::uint8_t>(y - 1);
+    const std::uint8_t* __restrict mid = smooth.ptr<std::uint8_t>(y);
+    const std::uint8_t* __restrict down = smooth.ptr<std::uint8_t>(y + 1);
+    std::int32_t* __restrict o = out.ptr<std::int32_t>(y);
+    for (int x = 1; x + 1 < w; ++x) {
+      const std::int32_t c2 = 2 * static_cast<std::int32_t>(mid[x]);
+      const std::int32_t dxx = static_cast<std::int32_t>(mid[x + 1]) + mid[x - 1] - c2;
+      const std::int32_t dyy = static_cast<std::int32_t>(down[x]) + up[x] - c2;
+      const std::int32_t dxy4 = static_cast<std::int32_t>(down[x + 1]) - down[x - 1] - up[x + 1] + up[x - 1];
+      o[x] = dxy4 * dxy4 - 16 * dxx * dyy;
+    }
+  }
+  return out;
+}
+
+// The grey image smoothed (8 bits: OpenCV's fixed-point filter, several times faster than
+// floats; the rounding adds a third of a level of noise, far below the weakest junction kept).
+cv::Mat smoothed(const cv::Mat& gray) {
+  cv::Mat out;
+  cv::GaussianBlur(gray, out, cv::Size(0, 0), kBlurSigma, kBlurSigma, cv::BORDER_REPLICATE);
+  return out;
+}
+
+// The strength of the weakest junction kept: an ideal corner of kMinContrast levels drawn with
+// 8 x 8 supersampling and 0.7 px of blur, through the same filters.
+std::int32_t strength_floor() {
+  static const std::int32_t floor = [] {
+    constexpr int kSize = 25;
+    constexpr int kSs = 8;
+    cv::Mat fine(kSize * kSs, kSize * kSs, CV_32F);
+    const double centre = 0.5 * kSize * kSs;  // the junction at a pixel corner
+    for (int y = 0; y < fine.rows; ++y) {
+      for (int x = 0; x < fine.cols; ++x) {
+        const bool dark = ((x + 0.5 - centre) < 0) != ((y + 0.5 - centre) < 0);
+        fine.at<float>(y, x) = static_cast<float>(128.0 + (dark ? -0.5 : 0.5) * kMinContrast);
+      }
+    }
+    cv::Mat coarse;
+    cv::resize(fine, coarse, cv::Size(kSize, kSize), 0, 0, cv::INTER_AREA);
+    cv::GaussianBlur(coarse, coarse, cv::Size(0, 0), 0.7);
+    cv::Mat eight;
+    coarse.convertTo(eight, CV_8U);
+    double best = 0.0;
+    cv::minMaxLoc(saddle_strength(smoothed(eight)), nullptr, &best);
+    return static_cast<std::int32_t>(best);
+  }();
+  return floor;
+}
+
+float axis_at(const cv::Mat& smooth, int x, int y) {
+  // The strength's derivatives (the 3 x 3 around (x, y): wider ones reach the next junction on
+  // squares of 4 px).
+  auto at = [&](int dx, int dy) { return static_cast<float>(smooth.at<std::uint8_t>(y + dy, x + dx)); };
+  const float dxx = at(1, 0) + at(-1, 0) - 2.0f * at(0, 0);
+  const float dyy = at(0, 1) + at(0, -1) - 2.0f * at(0, 0);
+  const float dxy = 0.25f * (at(1, 1) - at(-1, 1) - at(1, -1) + at(-1, -1));
+  float a = 0.5f * std::atan2(2.0f * dxy, dxx - dyy);
+  if (a < 0.0f) a += std::numbers::pi_v<float>;
+  return a;
+}
+
+// Local maxima of the strength above the floor, to a fraction of a pixel (a parabola through
+// each maximum and its neighbours along x and along y).
+std::vector<Junction> find_junctions(const cv::Mat& gray, cv::Mat* smooth_out) {
+  *smooth_out = smoothed(gray);
+  const cv::Mat& smooth = *smooth_out;
+  const cv::Mat s = saddle_strength(smooth);
+  const std::int32_t floor = strength_floor();
+  std::vector<Junction> out;
+  for (int y = kBorder; y < s.rows - kBorder; ++y) {
+    const std::int32_t* up = s.ptr<std::int32_t>(y - 1);
+    const std::int32_t* mid = s.ptr<std::int32_t>(y);
+    const std::int32_t* down = s.ptr<std::int32_t>(y + 1);
+    for (int x = kBorder; x < s.cols - kBorder; ++x) {
+      const std::int32_t v = mid[x];
+      if (v <= floor) continue;
+      // Ties go to the first in reading order.
+      if (v < mid[x - 1] || v <= mid[x + 1] || v < up[x - 1] || v < up[x] || v < up[x + 1] ||
+          v <= down[x - 1] || v <= down[x] || v <= down[x + 1]) {
+        continue;
+      }
+      auto offset = [](std::int32_t a, std::int32_t b, std::int32_t c) {
+        const float den = static_cast<float>(a - 2 * b + c);
+        return den < 0.0f ? std::clamp(0.5f * static_cast<float>(a - c) / den, -0.5f, 0.5f) : 0.0f;
+      };
+      Junction j;
+      j.p = cv::Point2f(static_cast<float>(x) + offset(mid[x - 1], v, mid[x + 1]),
+                        static_cast<float>(y) + offset(up[x], v, down[x]));
+      j.strength = static_cast<float>(v);
+      j.axis = axis_at(smooth, x, y);
+      out.push_back(j);
+    }
+  }
+  if (out.size() > kMaxJunctions) {
+    std::nth_element(out.begin(), out.begin() + kMaxJunctions, out.end(),
+                     [](const Junction& a, const Junction& b) { return a.strength > b.strength; });
+    out.resize(kMaxJunctions);
+  }
+  return out;
+}
+
+// Angle between two saddle axes, [0, pi/2].
+float axis_gap(float a, float b) {
+  float d = std::abs(a - b);
+  if (d > 0.5f * std::numbers::pi_v<float>) d = std::numbers::pi_v<float> - d;
+  return d;
+}
+bool quarter_apart(const Junction& a, const Junction& b) {
+  return axis_gap(a.axis, b.axis) >= 0.5f * std::numbers::pi_v<float> - kQuarterTolerance;
+}
+bool alike(const Junction& a, const Junction& b) { return axis_gap(a.axis, b.axis) <= kQuarterTolerance; }
+bool as_strong(const Junction& a, const Junction& b) {
+  return a.strength >= kMinStrengthRatio * b.strength && b.strength >= kMinStrengthRatio * a.strength;
+}
+
+float length(cv::Point2f v) { return std::sqrt(v.x * v.x + v.y * v.y); }
+
+// The junctions in square cells for nearest-point queries.
+class JunctionIndex {
+ public:
+  JunctionIndex(const std::vector<Junction>& junctions, cv::Size image, int cell)
+      : junctions_(junctions), cell_(cell), nx_(image.width / cell + 1), ny_(image.height / cell + 1) {
+    std::vector<int> count(static_cast<std::size_t>(nx_ * ny_) + 1, 0);
+    for (const Junction& j : junctions_) ++count[cell_of(j.p) + 1];
+    for (std::size_t k = 1; k < count.size(); ++k) count[k] += count[k - 1];
+    start_ = count;
+    order_.resize(junctions_.size());
+    for (std::size_t i = 0; i < junctions_.size(); ++i)
+      order_[count[cell_of(junctions_[i].p)]++] = static_cast<int>(i);
+  }
+
+  /// The nearest junction within `radius` of `p` that `accept` takes, or -1.
+  template <class Accept>
+  int nearest(cv::Point2f p, float radius, Accept&& accept) const {
+    int best = -1;
+    float best_d = radius;
+    visit(p, radius, [&](int i) {
+      const float d = length(junctions_[i].p - p);
+      if (d <= best_d && accept(i)) {
+        best_d = d;
+        best = i;
+      }
+    });
+    return best;
+  }
+
+  /// Up to `k` junctions nearest to junction `i` within `radius` that `accept` takes, nearest
+  /// first.
+  template <class Accept>
+  std::vector<int> neighbours(int i, int k, float radius, Accept&& accept) const {
+    const cv::Point2f p = junctions_[i].p;
+    std::vector<std::pair<float, int>> found;
+    // Rings of cells outwards until k are known to be the nearest.
+    const int cx = std::clamp(static_cast<int>(p.x) / cell_, 0, nx_ - 1);
+    const int cy = std::clamp(static_cast<int>(p.y) / cell_, 0, ny_ - 1);
+    const int rings = static_cast<int>(radius / static_cast<float>(cell_)) + 1;
+    for (int ring = 0; ring <= rings; ++ring) {
+      for (int y = cy - ring; y <= cy + ring; ++y) {
+        if (y < 0 || y >= ny_) continue;
+        const bool edge_row = y == cy - ring || y == cy + ring;
+        for (int x = cx - ring; x <= cx + ring; x += (edge_row || ring == 0) ? 1 : 2 * ring) {
+          if (x < 0 || x >= nx_) continue;
+          for (int s = start_[y * nx_ + x]; s < start_[y * nx_ + x + 1]; ++s) {
+            const int j = order_[s];
+            if (j == i) continue;
+            const float d = length(junctions_[j].p - p);
+            if (d <= radius && accept(j)) found.emplace_back(d, j);
+          }
+        }
+      }
+      if (static_cast<int>(found.size()) >= k) {
+        std::partial_sort(found.begin(), found.begin() + k, found.end());
+        if (found[k - 1].first <= static_cast<float>(ring * cell_)) break;
+      }
+    }
+    std::sort(found.begin(), found.end());
+    if (static_cast<int>(found.size()) > k) found.resize(k);
+    std::vector<int> out;
+    for (const auto& f : found) out.push_back(f.second);
+    return out;
+  }
+
+ private:
+  int cell_of(cv::Point2f p) const {
+    const int x = std::clamp(static_cast<int>(p.x) / cell_, 0, nx_ - 1);
+    const int y = std::clamp(static_cast<int>(p.y) / cell_, 0, ny_ - 1);
+    return y * nx_ + x;
+  }
+  template <class F>
+  void visit(cv::Point2f p, float radius, F&& f) const {
+    const int x0 = std::max(0, static_cast<int>((p.x - radius) / static_cast<float>(cell_)));
+    const int x1 = std::min(nx_ - 1, static_cast<int>((p.x + radius) / static_cast<float>(cell_)));
+    const int y0 = std::max(0, static_cast<int>((p.y - radius) / static_cast<float>(cell_)));
+    const int y1 = std::min(ny_ - 1, static_cast<int>((p.y + radius) / static_cast<float>(cell_)));
+    for (int y = y0; y <= y1; ++y) {
+      for (int x = x0; x <= x1; ++x) {
+        for (int s = start_[y * nx_ + x]; s < start_[y * nx_ + x + 1]; ++s) f(order_[s]);
+      }
+    }
+  }
+
+  const std::vector<Junction>& junctions_;
+  int cell_;
+  int nx_;
+  int ny_;
+  std::vector<int> start_;
+  std::vector<int> order_;
+};
+
+// How the growth of a grid's side ended.
+enum class SideEnd {
+  kOpen,     // not tried yet
+  kEdge,     // extrapolated points inside the image, (almost) none met a junction: an edge
+  kPartial,  // some met junctions, not all: a junction missing, the side undecided
+  kCut,      // extrapolated points outside the image
+};
+
+class Grid {
+ public:
+  Grid(const std::vector<Junction>& junctions, const JunctionIndex& index, std::vector<int>* owner, int id,
+       const cv::Mat& smooth)
+      : junctions_(junctions),
+        index_(index),
+        owner_(*owner),
+        id_(id),
+        smooth_(smooth),
+        image_(smooth.size()) {}
+
+  /// A 3 x 3 patch around `seed`, or false.
+  bool start(int seed, float max_step) {
+    const Junction& c = junctions_[seed];
+    // Along a row or column: a quarter turn apart and as strong.
+    const std::vector<int> near = index_.neighbours(seed, kSeedNeighbours, max_step, [&](int i) {
+      return owner_[i] < 0 && quarter_apart(c, junctions_[i]) && as_strong(c, junctions_[i]);
+    });
+    for (std::size_t ia = 0; ia < near.size(); ++ia) {
+      const int a = near[ia];
+      const cv::Point2f u = junctions_[a].p - c.p;
+      const float lu = length(u);
+      for (std::size_t ib = ia + 1; ib < near.size(); ++ib) {
+        const int b = near[ib];
+        const cv::Point2f v = junctions_[b].p - c.p;
+        const float lv = length(v);
+        if (std::abs(u.x * v.y - u.y * v.x) < kMinSine * lu * lv) continue;
+        if (std::max(lu, lv) > kMaxStepRatio * std::min(lu, lv)) continue;
+        if (try_patch(seed, a, b, u, v, std::min(lu, lv))) return true;
+      }
+    }
+    return false;
+  }
+
+  /// Grows the grid side by side while whole rows or columns meet junctions; at most
+  /// `max_side` junctions a side.
+  void grow(int max_side) {
+    bool grew = true;
+    while (grew) {
+      grew = false;
+      for (int side = 0; side < 4; ++side) {
+        if (end_[side] != SideEnd::kOpen) continue;
+        if ((side < 2 ? cols_ : rows_) >= max_side) {
+          end_[side] = SideEnd::kPartial;  // outgrew any board: let a slower search decide
+          continue;
+        }
+        if (extend(side)) {
+          grew = true;
+        }
+      }
+    }
+  }
+
+  int rows() const { return rows_; }
+  int cols() const { return cols_; }
+  SideEnd end(int side) const { return end_[side]; }  // 0 right, 1 left, 2 bottom, 3 top
+  cv::Point2f at(int r, int c) const { return junctions_[cells_[r * cols_ + c]].p; }
+
+ private:
+  bool try_patch(int seed, int a, int b, cv::Point2f u, cv::Point2f v, float step) {
+    const float radius = kMatchFraction * step;
+    std::array<int, 9> patch{};
+    patch.fill(-1);
+    patch[4] = seed;
+    patch[5] = a;  // (row 1, col 2): +u
+    patch[7] = b;  // (row 2, col 1): +v
+    const cv::Point2f c = junctions_[seed].p;
+    for (int r = 0; r < 3; ++r) {
+      for (int k = 0; k < 3; ++k) {
+        const int slot = r * 3 + k;
+        if (patch[slot] >= 0) continue;
+        const cv::Point2f q = c + static_cast<float>(k - 1) * u + static_cast<float>(r - 1) * v;
+        const bool diagonal = (r + k) % 2 == 0;
+        const int j = index_.nearest(q, radius, [&](int i) {
+          if (owner_[i] >= 0 || std::find(patch.begin(), patch.end(), i) != patch.end()) return false;
+          const Junction& s = junctions_[seed];
+          return as_strong(s, junctions_[i]) &&
+                 (diagonal ? alike(s, junctions_[i]) : quarter_apart(s, junctions_[i]));
+        });
+        if (j < 0) return false;
+        patch[slot] = j;
+      }
+    }
+    // Its four squares alternate dark and bright.
+    const std::vector<int> cells(patch.begin(), patch.end());
+    const float l00 = square_level(cells, 3, 0, 0);
+    const float l01 = square_level(cells, 3, 0, 1);
+    const float l10 = square_level(cells, 3, 1, 0);
+    const float l11 = square_level(cells, 3, 1, 1);
+    const bool dark00 = l00 < l01;
+    if (!differ(l00, dark00, l01) || !differ(l00, dark00, l10) || !differ(l11, dark00, l01) ||
+        !differ(l11, dark00, l10)) {
+      return false;
+    }
+    dark00_ = dark00;
+    rows_ = 3;
+    cols_ = 3;
+    cells_ = cells;
+    for (int i : cells_) owner_[i] = id_;
+    return true;
+  }
+
+  // One more column (side 0 right, 1 left) or row (2 bottom, 3 top), or the side's end.
+  bool extend(int side) {
+    const bool column = side < 2;
+    const int lines = column ? rows_ : cols_;  // points in the new column or row
+    const int depth = column ? cols_ : rows_;  // points along each line towards the side
+    auto point = [&](int line, int k) {        // k-th point from the side inwards
+      const int along = (side == 0 || side == 2) ? depth - 1 - k : k;
+      return column ? at(line, along) : at(along, line);
+    };
+    auto junction = [&](int line, int k) {
+      const int along = (side == 0 || side == 2) ? depth - 1 - k : k;
+      return column ? cells_[line * cols_ + along] : cells_[along * cols_ + line];
+    };
+    std::vector<int> added(static_cast<std::size_t>(lines), -1);
+    int inside = 0;
+    int matched = 0;
+    for (int line = 0; line < lines; ++line) {
+      const cv::Point2f p1 = point(line, 0);
+      const cv::Point2f p2 = point(line, 1);
+      const float step = length(p1 - p2);
+      // A quadratic through three points follows the lens's bend; on small squares the
+      // junctions' own error, tripled by it, would exceed the tolerance: a straight line.
+      cv::Point2f q = 2.0f * p1 - p2;
+      if (depth >= 3 && step >= 10.0f) q = 3.0f * p1 - 3.0f * p2 + point(line, 2);
+      if (q.x < kBorder || q.y < kBorder || q.x > static_cast<float>(image_.width - 1 - kBorder) ||
+          q.y > static_cast<float>(image_.height - 1 - kBorder)) {
+        continue;
+      }
+      ++inside;
+      const Junction& last = junctions_[junction(line, 0)];
+      const int j = index_.nearest(q, std::max(1.5f, kMatchFraction * step), [&](int i) {
+        return owner_[i] < 0 && quarter_apart(last, junctions_[i]) && as_strong(last, junctions_[i]) &&
+               std::find(added.begin(), added.end(), i) == added.end();
+      });
+      if (j >= 0) {
+        added[static_cast<std::size_t>(line)] = j;
+        ++matched;
+      }
+    }
+    if (inside < lines) {
+      end_[side] = SideEnd::kCut;
+      return false;
+    }
+    if (matched < lines) {
+      end_[side] = matched >= std::max(2, lines / 2) ? SideEnd::kPartial : SideEnd::kEdge;
+      return false;
+    }
+    std::vector<int> cells;
+    if (column) {
+      cells.reserve(static_cast<std::size_t>(rows_ * (cols_ + 1)));
+      for (int r = 0; r < rows_; ++r) {
+        if (side == 1) cells.push_back(added[static_cast<std::size_t>(r)]);
+        cells.insert(cells.end(), cells_.begin() + r * cols_, cells_.begin() + (r + 1) * cols_);
+        if (side == 0) cells.push_back(added[static_cast<std::size_t>(r)]);
+      }
+    } else {
+      if (side == 3) cells = added;
+      cells.insert(cells.end(), cells_.begin(), cells_.end());
+      if (side == 2) cells.insert(cells.end(), added.begin(), added.end());
+    }
+    // A row or column added before the first turns the squares' parity.
+    const bool dark00 = (side == 1 || side == 3) ? !dark00_ : dark00_;
+    const int rows = column ? rows_ : rows_ + 1;
+    const int cols = column ? cols_ + 1 : cols_;
+    if (!border_squares_alternate(cells, rows, cols, dark00, side)) {
+      end_[side] = SideEnd::kEdge;  // junctions in line, but no squares of the board between them
+      return false;
+    }
+    for (int j : added) owner_[j] = id_;
+    rows_ = rows;
+    cols_ = cols;
+    dark00_ = dark00;
+    cells_ = std::move(cells);
+    return true;
+  }
+
+  // The smoothed grey level at the centre of the square between corners (r, c) and (r+1, c+1)
+  // of a grid of `cols` columns.
+  float square_level(const std::vector<int>& cells, int cols, int r, int c) const {
+    const cv::Point2f centre =
+        0.25f * (junctions_[cells[r * cols + c]].p + junctions_[cells[r * cols + c + 1]].p +
+                 junctions_[cells[(r + 1) * cols + c]].p + junctions_[cells[(r + 1) * cols + c + 1]].p);
+    const int x = std::clamp(static_cast<int>(std::lround(centre.x)), 0, smooth_.cols - 1);
+    const int y = std::clamp(static_cast<int>(std::lround(centre.y)), 0, smooth_.rows - 1);
+    return smooth_.at<std::uint8_t>(y, x);
+  }
+  // Whether square (r, c) is dark with `dark00` saying whether square (0, 0) is.
+  static bool dark(bool dark00, int r, int c) { return ((r + c) % 2 == 0) == dark00; }
+  // Whether two neighbouring squares differ as the checkerboard says, by kMinSquareContrast.
+  static bool differ(float level, bool is_dark, float other) {
+    return is_dark ? other - level >= kMinSquareContrast : level - other >= kMinSquareContrast;
+  }
+  // Whether the squares of a grid's outermost row or column on `side` alternate with the row
+  // or column next to them.
+  bool border_squares_alternate(const std::vector<int>& cells, int rows, int cols, bool dark00,
+                                int side) const {
+    if (side < 2) {
+      const int c = side == 0 ? cols - 2 : 0;
+      const int inner = side == 0 ? c - 1 : 1;
+      for (int r = 0; r + 1 < rows; ++r) {
+        if (!differ(square_level(cells, cols, r, c), dark(dark00, r, c),
+                    square_level(cells, cols, r, inner))) {
+          return false;
+        }
+      }
+    } else {
+      const int r = side == 2 ? rows - 2 : 0;
+      const int inner = side == 2 ? r - 1 : 1;
+      for (int c = 0; c + 1 < cols; ++c) {
+        if (!differ(square_level(cells, cols, r, c), dark(dark00, r, c),
+                    square_level(cells, cols, inner, c))) {
+          return false;
+        }
+      }
+    }
+    return true;
+  }
+
+  const std::vector<Junction>& junctions_;
+  const JunctionIndex& index_;
+  std::vector<int>& owner_;
+  int id_;
+  const cv::Mat& smooth_;
+  cv::Size image_;
+  bool dark00_ = false;  // whether the square between corners (0, 0) and (1, 1) is dark
+  int rows_ = 0;
+  int cols_ = 0;
+  std::vector<int> cells_;  // row-major junction indices
+  std::array<SideEnd, 4> end_{SideEnd::kOpen, SideEnd::kOpen, SideEnd::kOpen, SideEnd::kOpen};
+};
+
+// Whether the grid, read with its rows as the board's rows (or, `transposed`, its columns),
+// could be the part of the board that is in view: every dimension short of the board's ends on
+// at least one side at the image border, and on none at a missing junction.
+bool cut_board(const Grid& g, int cols, int rows, bool transposed) {
+  const int gr = transposed ? g.cols() : g.rows();
+  const int gc = transposed ? g.rows() : g.cols();
+  if (gr > rows || gc > cols) return false;
+  auto dimension_ok = [&](int have, int need, SideEnd a, SideEnd b) {
+    if (have == need) return true;
+    if (a == SideEnd::kPartial || b == SideEnd::kPartial) return false;
+    return a == SideEnd::kCut || b == SideEnd::kCut;
+  };
+  // Grid sides 0/1 end its rows (columns added), 2/3 its columns.
+  const bool along_rows_ok = dimension_ok(g.cols(), transposed ? rows : cols, g.end(0), g.end(1));
+  const bool along_cols_ok = dimension_ok(g.rows(), transposed ? cols : rows, g.end(2), g.end(3));
+  return along_rows_ok && along_cols_ok;
+}
+
+// Whether the grid ends on every side at the board's edge: a whole board.
+bool whole(const Grid& g) {
+  for (int side = 0; side < 4; ++side) {
+    if (g.end(side) != SideEnd::kEdge) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+CheckerboardGrid find_checkerboard_grid(const cv::Mat& gray, int cols, int rows) {
+  CheckerboardGrid out;
+  if (gray.empty() || gray.type() != CV_8UC1 || cols < 2 || rows < 2) {
+    out.outcome = CheckerboardGrid::Outcome::kUndecided;
+    return out;
+  }
+  cv::Mat smooth;
+  std::vector<Junction> junctions = find_junctions(gray, &smooth);
+  std::sort(junctions.begin(), junctions.end(),
+            [](const Junction& a, const Junction& b) { return a.strength > b.strength; });
+  // The widest step a board in view can have: the whole image across its shorter side.
+  const float max_step =
+      static_cast<float>(std::max(gray.cols, gray.rows)) / static_cast<float>(std::min(cols, rows) + 1);
+  const JunctionIndex index(junctions, gray.size(), 16);
+  std::vector<int> owner(junctions.size(), -1);
+  const int max_side = 4 * std::max(cols, rows) + 4;  // bounds the growth; no board this size
+  bool undecided = false;
+  bool cut = false;
+  bool other = false;
+  int grids = 0;
+  for (std::size_t seed = 0; seed < junctions.size(); ++seed) {
+    if (owner[seed] >= 0) continue;
+    Grid grid(junctions, index, &owner, grids, smooth);
+    if (!grid.start(static_cast<int>(seed), max_step)) continue;
+    ++grids;
+    grid.grow(max_side);
+    const bool as_is = grid.rows() == rows && grid.cols() == cols;
+    const bool turned = grid.rows() == cols && grid.cols() == rows;
+    if (as_is || turned) {
+      out.outcome = CheckerboardGrid::Outcome::kFound;
+      out.grid_rows = rows;
+      out.grid_cols = cols;
+      out.corners.resize(static_cast<std::size_t>(cols * rows));
+      for (int r = 0; r < rows; ++r) {
+        for (int c = 0; c < cols; ++c) out.corners[r * cols + c] = as_is ? grid.at(r, c) : grid.at(c, r);
+      }
+      return out;
+    }
+    if (cut_board(grid, cols, rows, false) || cut_board(grid, cols, rows, true)) {
+      cut = true;
+    } else if (whole(grid)) {
+      if (!other && !undecided) {
+        out.grid_rows = grid.rows();
+        out.grid_cols = grid.cols();
+      }
+      other = true;
+    } else {
+      if (!undecided || grid.rows() * grid.cols() > out.grid_rows * out.grid_cols) {
+        out.grid_rows = grid.rows();
+        out.grid_cols = grid.cols();
+      }
+      undecided = true;
+    }
+  }
+  out.outcome = undecided ? CheckerboardGrid::Outcome::kUndecided
+                : other   ? CheckerboardGrid::Outcome::kOther
+                : cut     ? CheckerboardGrid::Outcome::kCut
+                          : CheckerboardGrid::Outcome::kNone;
+  return out;
+}
+
+}  // namespace imucal::calib
