@@ -496,7 +496,9 @@ TEST(CheckerboardGrid, FindsTheBoardsTheQuadSearchMisses) {
             find_checkerboard_grid(f.image, t.cols, t.rows).outcome == CheckerboardGrid::Outcome::kFound;
         found_by_sectors += sectors ? 1 : 0;
         found_by_grid += grid ? 1 : 0;
-        if (sectors) EXPECT_TRUE(grid) << "the sector-based detector finds this board, the grid does not";
+        if (sectors) {
+          EXPECT_TRUE(grid) << "the sector-based detector finds this board, the grid does not";
+        }
         if (grid) expect_full_board(*det, f, 0.5, "a board the quad search misses");
       }
     }
