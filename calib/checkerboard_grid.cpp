@@ -31,13 +31,23 @@ constexpr float kMinSine = 0.5f;
 constexpr float kMaxStepRatio = 2.5f;
 /// Neighbours of a seed considered for its patch.
 constexpr int kSeedNeighbours = 4;
-/// A junction joins a grid only if at least this fraction as strong as the one it continues.
-/// The L-shaped corners where the board's outer squares meet its margin line up with the grid
-/// and alternate like its junctions, but at the corner the cross derivative of an L is half
-/// that of an X of the same contrast, so its strength (the derivative squared) a quarter.
-constexpr float kMinStrengthRatio = 0.45f;
+/// A junction joins a grid only if at least this fraction as strong as the one it continues
+/// (the edges of squares carry weak saddles, most in JPEG images; the junctions at a fisheye
+/// board's rim are down to 0.4 of their neighbours').
+constexpr float kMinStrengthRatio = 0.2f;
+/// The same within a seed's 3 x 3 patch, where neighbours are alike and the edges' saddles
+/// would crowd out the junctions among the nearest.
+constexpr float kMinSeedStrengthRatio = 0.45f;
 /// Side by side squares of a grid differ by at least this many grey levels.
 constexpr float kMinSquareContrast = 8.0f;
+/// The squares around a junction are probed this fraction of the grid's diagonal steps away,
+/// and the two on a diagonal may differ by at most this fraction of the two diagonals'
+/// difference (0 at an X junction; 2 at the L-shaped corners where the board's outer squares
+/// meet its margin, which line up with the grid and alternate like its junctions).
+constexpr float kSquareProbe = 0.3f;
+constexpr float kMaxWithinDiagonal = 0.5f;
+/// Images at least this large a side are also searched at half resolution.
+constexpr int kMinHalfSide = 64;
 
 struct Junction {
   cv::Point2f p;
@@ -157,8 +167,8 @@ std::vector<Junction> find_junctions(const cv::Mat& gray, cv::Mat* smooth_out) {
     const std::int32_t* mid = s.ptr<std::int32_t>(k.y);
     Junction j;
     j.p = cv::Point2f(static_cast<float>(k.x) + offset(mid[k.x - 1], k.v, mid[k.x + 1]),
-                      static_cast<float>(k.y) + offset(s.at<std::int32_t>(k.y - 1, k.x), k.v,
-                                                       s.at<std::int32_t>(k.y + 1, k.x)));
+                      static_cast<float>(k.y) +
+                          offset(s.at<std::int32_t>(k.y - 1, k.x), k.v, s.at<std::int32_t>(k.y + 1, k.x)));
     j.strength = static_cast<float>(k.v);
     j.axis = axis_at(smooth, k.x, k.y);
     out.push_back(j);
@@ -176,8 +186,8 @@ bool quarter_apart(const Junction& a, const Junction& b) {
   return axis_gap(a.axis, b.axis) >= 0.5f * std::numbers::pi_v<float> - kQuarterTolerance;
 }
 bool alike(const Junction& a, const Junction& b) { return axis_gap(a.axis, b.axis) <= kQuarterTolerance; }
-bool as_strong(const Junction& a, const Junction& b) {
-  return a.strength >= kMinStrengthRatio * b.strength && b.strength >= kMinStrengthRatio * a.strength;
+bool as_strong(const Junction& a, const Junction& b, float ratio = kMinStrengthRatio) {
+  return a.strength >= ratio * b.strength && b.strength >= ratio * a.strength;
 }
 
 float length(cv::Point2f v) { return std::sqrt(v.x * v.x + v.y * v.y); }
@@ -196,15 +206,15 @@ class JunctionIndex {
       order_[count[cell_of(junctions_[i].p)]++] = static_cast<int>(i);
   }
 
-  /// The nearest junction within `radius` of `p` that `accept` takes, or -1.
+  /// The strongest junction within `radius` of `p` that `accept` takes, or -1 (the edges of a
+  /// junction's squares carry weaker saddles, sometimes nearer the prediction).
   template <class Accept>
-  int nearest(cv::Point2f p, float radius, Accept&& accept) const {
+  int strongest(cv::Point2f p, float radius, Accept&& accept) const {
     int best = -1;
-    float best_d = radius;
+    float best_strength = 0.0f;
     visit(p, radius, [&](int i) {
-      const float d = length(junctions_[i].p - p);
-      if (d <= best_d && accept(i)) {
-        best_d = d;
+      if (length(junctions_[i].p - p) <= radius && junctions_[i].strength > best_strength && accept(i)) {
+        best_strength = junctions_[i].strength;
         best = i;
       }
     });
@@ -304,7 +314,8 @@ class Grid {
     const Junction& c = junctions_[seed];
     // Along a row or column: a quarter turn apart and as strong.
     const std::vector<int> near = index_.neighbours(seed, kSeedNeighbours, max_step, [&](int i) {
-      return owner_[i] < 0 && quarter_apart(c, junctions_[i]) && as_strong(c, junctions_[i]);
+      return owner_[i] < 0 && quarter_apart(c, junctions_[i]) &&
+             as_strong(c, junctions_[i], kMinSeedStrengthRatio);
     });
     for (std::size_t ia = 0; ia < near.size(); ++ia) {
       const int a = near[ia];
@@ -361,17 +372,21 @@ class Grid {
         if (patch[slot] >= 0) continue;
         const cv::Point2f q = c + static_cast<float>(k - 1) * u + static_cast<float>(r - 1) * v;
         const bool diagonal = (r + k) % 2 == 0;
-        const int j = index_.nearest(q, radius, [&](int i) {
+        const int j = index_.strongest(q, radius, [&](int i) {
           if (owner_[i] >= 0 || std::find(patch.begin(), patch.end(), i) != patch.end()) return false;
           const Junction& s = junctions_[seed];
-          return as_strong(s, junctions_[i]) &&
+          return as_strong(s, junctions_[i], kMinSeedStrengthRatio) &&
                  (diagonal ? alike(s, junctions_[i]) : quarter_apart(s, junctions_[i]));
         });
         if (j < 0) return false;
         patch[slot] = j;
       }
     }
-    // Its four squares alternate dark and bright.
+    // Every point an X junction (an L-shaped corner at the board's rim passes the tests above),
+    // and its four squares alternate dark and bright.
+    for (int i : patch) {
+      if (!x_shaped(junctions_[i].p, u, v)) return false;
+    }
     const std::vector<int> cells(patch.begin(), patch.end());
     const float l00 = square_level(cells, 3, 0, 0);
     const float l01 = square_level(cells, 3, 0, 1);
@@ -420,9 +435,12 @@ class Grid {
       }
       ++inside;
       const Junction& last = junctions_[junction(line, 0)];
-      const int j = index_.nearest(q, std::max(1.5f, kMatchFraction * step), [&](int i) {
+      // The step to the next line, for the squares around the new junction.
+      const cv::Point2f across = line + 1 < lines ? point(line + 1, 0) - p1 : p1 - point(line - 1, 0);
+      const int j = index_.strongest(q, std::max(1.5f, kMatchFraction * step), [&](int i) {
         return owner_[i] < 0 && quarter_apart(last, junctions_[i]) && as_strong(last, junctions_[i]) &&
-               std::find(added.begin(), added.end(), i) == added.end();
+               std::find(added.begin(), added.end(), i) == added.end() &&
+               x_shaped(junctions_[i].p, junctions_[i].p - p1, across);
       });
       if (j >= 0) {
         added[static_cast<std::size_t>(line)] = j;
@@ -475,6 +493,25 @@ class Grid {
     const int x = std::clamp(static_cast<int>(std::lround(centre.x)), 0, smooth_.cols - 1);
     const int y = std::clamp(static_cast<int>(std::lround(centre.y)), 0, smooth_.rows - 1);
     return smooth_.at<std::uint8_t>(y, x);
+  }
+  // Whether the four squares around a junction at `q` (grid steps `u` and `v`) are dark and
+  // bright in turn, alike across each diagonal, as at an X junction; at the L-shaped corners
+  // where the outer squares meet the board's margin three of the four are alike.
+  bool x_shaped(cv::Point2f q, cv::Point2f u, cv::Point2f v) const {
+    auto level = [&](cv::Point2f p) {
+      const int x = std::clamp(static_cast<int>(std::lround(p.x)), 0, smooth_.cols - 1);
+      const int y = std::clamp(static_cast<int>(std::lround(p.y)), 0, smooth_.rows - 1);
+      return static_cast<float>(smooth_.at<std::uint8_t>(y, x));
+    };
+    const cv::Point2f d1 = kSquareProbe * (u + v);
+    const cv::Point2f d2 = kSquareProbe * (u - v);
+    const float a = level(q + d1);
+    const float c = level(q - d1);
+    const float b = level(q + d2);
+    const float d = level(q - d2);
+    const float between = std::abs(0.5f * (a + c) - 0.5f * (b + d));
+    const float within = std::max(std::abs(a - c), std::abs(b - d));
+    return between >= kMinSquareContrast && within <= kMaxWithinDiagonal * between;
   }
   // Whether square (r, c) is dark with `dark00` saying whether square (0, 0) is.
   static bool dark(bool dark00, int r, int c) { return ((r + c) % 2 == 0) == dark00; }
@@ -547,14 +584,9 @@ bool whole(const Grid& g) {
   return true;
 }
 
-}  // namespace
-
-CheckerboardGrid find_checkerboard_grid(const cv::Mat& gray, int cols, int rows) {
+// The search at one scale.
+CheckerboardGrid search(const cv::Mat& gray, int cols, int rows) {
   CheckerboardGrid out;
-  if (gray.empty() || gray.type() != CV_8UC1 || cols < 2 || rows < 2) {
-    out.outcome = CheckerboardGrid::Outcome::kUndecided;
-    return out;
-  }
   cv::Mat smooth;
   std::vector<Junction> junctions = find_junctions(gray, &smooth);
   std::sort(junctions.begin(), junctions.end(),
@@ -608,6 +640,53 @@ CheckerboardGrid find_checkerboard_grid(const cv::Mat& gray, int cols, int rows)
                 : cut     ? CheckerboardGrid::Outcome::kCut
                           : CheckerboardGrid::Outcome::kNone;
   return out;
+}
+
+// How much an outcome says, for choosing between the two scales' (a grid found says most).
+int weight(CheckerboardGrid::Outcome o) {
+  switch (o) {
+    case CheckerboardGrid::Outcome::kFound:
+      return 4;
+    case CheckerboardGrid::Outcome::kUndecided:
+      return 3;
+    case CheckerboardGrid::Outcome::kOther:
+      return 2;
+    case CheckerboardGrid::Outcome::kCut:
+      return 1;
+    case CheckerboardGrid::Outcome::kNone:
+      return 0;
+  }
+  return 0;
+}
+
+}  // namespace
+
+CheckerboardGrid find_checkerboard_grid(const cv::Mat& gray, int cols, int rows) {
+  if (gray.empty() || gray.type() != CV_8UC1 || cols < 2 || rows < 2) {
+    CheckerboardGrid out;
+    out.outcome = CheckerboardGrid::Outcome::kUndecided;
+    return out;
+  }
+  CheckerboardGrid fine = search(gray, cols, rows);
+  using Outcome = CheckerboardGrid::Outcome;
+  if (fine.outcome != Outcome::kUndecided) return fine;
+  // A grid that stopped short: the same at half resolution, where the smoothing reaches twice as
+  // far. Soft or JPEG images of large squares break the junctions into clusters of weak saddles
+  // along the edges at full resolution (the real fisheye frames of docs/benchmarks.md).
+  if (std::min(gray.cols, gray.rows) < kMinHalfSide) return fine;
+  cv::Mat half;
+  cv::pyrDown(gray, half);
+  CheckerboardGrid coarse = search(half, cols, rows);
+  if (coarse.outcome == Outcome::kFound) {
+    for (cv::Point2f& p : coarse.corners) p *= 2.0f;  // pyrDown's pixel i is centred on pixel 2i
+    return coarse;
+  }
+  if (weight(coarse.outcome) > weight(fine.outcome) ||
+      (coarse.outcome == fine.outcome &&
+       coarse.grid_cols * coarse.grid_rows > fine.grid_cols * fine.grid_rows)) {
+    return coarse;
+  }
+  return fine;
 }
 
 }  // namespace imucal::calib

@@ -72,6 +72,16 @@ Result<TargetObservation> guarded(F&& f) {
   }
 }
 
+/// The largest second difference along a found board's rows and columns, as a fraction of the
+/// side: a corner OpenCV's searches put on the wrong junction, or 3-20 px off, breaks it.
+constexpr double kMaxBend = 0.3;
+/// The same for a board the junction grid found, whose every corner met its extrapolation
+/// within 0.3 of a step and which the refinement moved by at most kMaxGridMove of a side:
+/// fisheye boards bend by up to 0.4 (the real fisheye frames of docs/benchmarks.md, half of
+/// which 0.3 rejected; their refinement moved corners by at most 0.044 of a side).
+constexpr double kMaxGridBend = 0.6;
+constexpr double kMaxGridMove = 0.1;
+
 class CheckerboardDetector final : public TargetDetector {
  public:
   CheckerboardDetector(TargetDescription target, DetectionOptions options)
@@ -88,9 +98,10 @@ class CheckerboardDetector final : public TargetDetector {
   Result<TargetObservation> detect_impl(const GrayView& image, const DetectionHistory& history) const;
   // The corners of the previous frames carried to this one (in id order), or nothing.
   std::optional<std::vector<cv::Point2f>> track(const cv::Mat& image, const DetectionHistory& history) const;
-  // Whether corners in detected order look like this board: a smooth grid whose squares
-  // alternate dark and bright.
-  bool plausible(const cv::Mat& image, const std::vector<cv::Point2f>& px) const;
+  // Whether corners in detected order look like this board: a smooth grid (second differences
+  // along rows and columns at most `max_bend` of a side) whose squares alternate dark and
+  // bright.
+  bool plausible(const cv::Mat& image, const std::vector<cv::Point2f>& px, double max_bend = kMaxBend) const;
   double max_second_difference(const std::vector<cv::Point2f>& px) const;
   bool squares_alternate(const cv::Mat& image, const std::vector<cv::Point2f>& px) const;
   double smallest_side(const std::vector<cv::Point2f>& px) const;
@@ -251,10 +262,10 @@ bool CheckerboardDetector::squares_alternate(const cv::Mat& image, const std::ve
   return std::all_of(d.begin(), d.end(), [&](double v) { return sign * v >= need; });
 }
 
-bool CheckerboardDetector::plausible(const cv::Mat& image, const std::vector<cv::Point2f>& px) const {
-  constexpr double kMaxSecondDifference = 0.3;
+bool CheckerboardDetector::plausible(const cv::Mat& image, const std::vector<cv::Point2f>& px,
+                                     double max_bend) const {
   return px.size() == static_cast<std::size_t>(target_.cols * target_.rows) &&
-         max_second_difference(px) <= kMaxSecondDifference && squares_alternate(image, px);
+         max_second_difference(px) <= max_bend && squares_alternate(image, px);
 }
 
 std::optional<std::vector<cv::Point2f>> CheckerboardDetector::track(const cv::Mat& image,
@@ -387,14 +398,26 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
     //     the pre-test rejects (small, blurred, strongly distorted).
     // The quad search's adaptive-threshold passes are not used: on textured, noisy frames they
     // cost up to seconds a frame and found no board the two steps miss (docs/targets.md).
-    auto refined = [&](std::vector<cv::Point2f>* corners) {
+    // `from_grid`: the junction grid's corners, held to kMaxGridBend when the refinement moved
+    // none of them by more than kMaxGridMove of the smallest side (a grid assembled across rows
+    // of a steeply foreshortened board sits off the junctions and bends less than a fisheye
+    // board; the refinement then drags it by 0.2-0.4 of a side).
+    auto refined = [&](std::vector<cv::Point2f>* corners, bool from_grid) {
       if (corners->size() != n) return false;
       unmirror(corners);
+      const std::vector<cv::Point2f> start = *corners;
       if (options_.subpixel) {
         const int half = subpix_half_window(*corners);
         cv::cornerSubPix(image, *corners, cv::Size(half, half), cv::Size(-1, -1), kSubpixCriteria);
       }
-      return plausible(image, *corners);
+      double max_bend = kMaxBend;
+      if (from_grid) {
+        double moved = 0.0;
+        for (std::size_t k = 0; k < n; ++k)
+          moved = std::max(moved, static_cast<double>(cv::norm((*corners)[k] - start[k])));
+        if (moved <= kMaxGridMove * smallest_side(*corners)) max_bend = kMaxGridBend;
+      }
+      return plausible(image, *corners, max_bend);
     };
     CheckerboardGrid grid = find_checkerboard_grid(image, target_.cols, target_.rows);
     bool found = false;
@@ -403,7 +426,7 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
         // A grid the checks reject is not searched again: the searches below see the same
         // junctions (on the frames of docs/benchmarks.md they never found such a board).
         px = std::move(grid.corners);
-        if (!refined(&px)) return obs;
+        if (!refined(&px, true)) return obs;
         found = true;
         break;
       case CheckerboardGrid::Outcome::kNone:
@@ -418,11 +441,12 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
     }
     if (!found) {
       px.clear();
-      found = cv::findChessboardCorners(image, pattern, px, 0) && refined(&px);
+      found = cv::findChessboardCorners(image, pattern, px, 0) && refined(&px, false);
     }
     if (!found) {
       px.clear();
-      found = cv::findChessboardCornersSB(image, pattern, px, cv::CALIB_CB_NORMALIZE_IMAGE) && refined(&px);
+      found = cv::findChessboardCornersSB(image, pattern, px, cv::CALIB_CB_NORMALIZE_IMAGE) &&
+              refined(&px, false);
     }
     if (!found) return obs;
   }
