@@ -46,6 +46,8 @@ constexpr float kMinSquareContrast = 8.0f;
 /// meet its margin, which line up with the grid and alternate like its junctions).
 constexpr float kSquareProbe = 0.3f;
 constexpr float kMaxWithinDiagonal = 0.5f;
+/// A seed's squares hold no junction within this fraction of a step of their centres.
+constexpr float kEmptySquare = 0.4f;
 /// Images at least this large a side are also searched at half resolution.
 constexpr int kMinHalfSide = 64;
 
@@ -386,6 +388,20 @@ class Grid {
     // and its four squares alternate dark and bright.
     for (int i : patch) {
       if (!x_shaped(junctions_[i].p, u, v)) return false;
+    }
+    // No junction as strong inside a square: a lattice of knight's moves (two squares along,
+    // one across) passes every other test, and holds junctions about 0.3 of its step from the
+    // centres of its cells (a board's squares hold none nearer than 0.7 of a step).
+    for (int r = 0; r < 2; ++r) {
+      for (int k = 0; k < 2; ++k) {
+        const cv::Point2f centre =
+            0.25f * (junctions_[patch[r * 3 + k]].p + junctions_[patch[r * 3 + k + 1]].p +
+                     junctions_[patch[(r + 1) * 3 + k]].p + junctions_[patch[(r + 1) * 3 + k + 1]].p);
+        const int inside = index_.strongest(centre, kEmptySquare * step, [&](int i) {
+          return as_strong(junctions_[seed], junctions_[i], kMinSeedStrengthRatio);
+        });
+        if (inside >= 0) return false;
+      }
     }
     const std::vector<int> cells(patch.begin(), patch.end());
     const float l00 = square_level(cells, 3, 0, 0);
