@@ -562,6 +562,12 @@ cv::Mat separation_curve() {
 constexpr double kCoarseTagEdgePx = 28.0;
 // The coarse search stands when it decodes at least this share of the frame before's tags.
 constexpr double kCoarseKeep = 0.9;
+/// With a frame before, only the region around its points is searched (a margin of this many
+/// of its median tag edges, plus the motion between the two frames before) when that region is
+/// at most kMaxRegionShare of the image; the whole image when it decodes fewer than
+/// kCoarseKeep of the tags the frame before had.
+constexpr double kRegionMarginTags = 1.5;
+constexpr double kMaxRegionShare = 0.7;
 
 struct TagCorners {
   int id = 0;
@@ -571,10 +577,26 @@ struct TagCorners {
 class AprilGridDetector final : public TargetDetector {
  public:
   AprilGridDetector(TargetDescription target, DetectionOptions options)
-      : target_(std::move(target)), options_(options), curve_(separation_curve()) {}
+      : target_(std::move(target)),
+        options_(options),
+        curve_(separation_curve()),
+        board_points_(target_.points()) {
+    // The four outer corners of the grid's tags, on the board.
+    Eigen::Vector2d lo = Eigen::Vector2d::Constant(1e9);
+    Eigen::Vector2d hi = Eigen::Vector2d::Constant(-1e9);
+    for (const Eigen::Vector3d& p : board_points_) {
+      lo = lo.cwiseMin(p.head<2>());
+      hi = hi.cwiseMax(p.head<2>());
+    }
+    board_outline_ = {cv::Point2f(static_cast<float>(lo.x()), static_cast<float>(lo.y())),
+                      cv::Point2f(static_cast<float>(hi.x()), static_cast<float>(lo.y())),
+                      cv::Point2f(static_cast<float>(hi.x()), static_cast<float>(hi.y())),
+                      cv::Point2f(static_cast<float>(lo.x()), static_cast<float>(hi.y()))};
+  }
 
   using TargetDetector::detect;
-  // Tags are found anew in every frame; the history only chooses the scale of the quad search.
+  // Tags are found anew in every frame; the history only chooses the scale and the region of
+  // the quad search.
   Result<TargetObservation> detect(const GrayView& image, const DetectionHistory& history) const override {
     return guarded([&] { return detect_impl(image, history); });
   }
@@ -586,7 +608,11 @@ class AprilGridDetector final : public TargetDetector {
   // The tags libapriltag decodes with quads searched at 1 / decimate of the resolution, ids not
   // checked against the grid.
   std::vector<TagCorners> decode_tags(const GrayView& view, double decimate) const;
-  std::vector<TagCorners> find_tags(const GrayView& view, double decimate) const;
+  /// The grid's tags in `region` of the image (the whole image when empty), each id once.
+  std::vector<TagCorners> find_tags(const GrayView& view, double decimate, cv::Rect region = {}) const;
+  /// The part of the image the frame before says the grid is in, or an empty rectangle when
+  /// the whole image is to be searched.
+  cv::Rect search_region(const GrayView& view, const DetectionHistory& history) const;
   /// The tags of a frame, refined, searched at half resolution when the frame before showed
   /// large tags (see kCoarseTagEdgePx), else at options_.aprilgrid_decimate.
   std::vector<TagCorners> refined_tags(const GrayView& view, const DetectionHistory& history) const;
@@ -602,7 +628,9 @@ class AprilGridDetector final : public TargetDetector {
 
   TargetDescription target_;
   DetectionOptions options_;
-  cv::Mat curve_;  // separation_curve(), read-only
+  cv::Mat curve_;                              // separation_curve(), read-only
+  std::vector<Eigen::Vector3d> board_points_;  // by point id
+  std::vector<cv::Point2f> board_outline_;     // the grid's outer corners on the board
   mutable std::mutex pool_mutex_;
   mutable std::vector<std::unique_ptr<AprilTagContext>> pool_;
 };
@@ -668,6 +696,63 @@ std::string AprilGridDetector::describe_other_target(const GrayView& view) const
          std::to_string(largest + 1) + " tags)";
 }
 
+cv::Rect AprilGridDetector::search_region(const GrayView& view, const DetectionHistory& history) const {
+  const TargetObservation* last = history.last;
+  if (last == nullptr || last->ids.size() < 4 || last->width != view.width || last->height != view.height)
+    return {};
+  auto box = [](const TargetObservation& obs) {
+    Eigen::Vector2d lo = obs.px.front();
+    Eigen::Vector2d hi = obs.px.front();
+    for (const Eigen::Vector2d& p : obs.px) {
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    return std::pair{lo, hi};
+  };
+  auto [lo, hi] = box(*last);
+  // The whole grid where the frame before's tags put it (a homography from the board's plane,
+  // fitted to all its points): tags it missed are searched for too.
+  if (board_points_.size() >= 4) {
+    std::vector<cv::Point2f> on_board;
+    std::vector<cv::Point2f> in_image;
+    for (std::size_t k = 0; k < last->ids.size(); ++k) {
+      const Eigen::Vector3d& b = board_points_[static_cast<std::size_t>(last->ids[k])];
+      on_board.emplace_back(static_cast<float>(b.x()), static_cast<float>(b.y()));
+      in_image.emplace_back(static_cast<float>(last->px[k].x()), static_cast<float>(last->px[k].y()));
+    }
+    const cv::Mat H = cv::findHomography(on_board, in_image, 0);
+    if (!H.empty()) {
+      std::vector<cv::Point2f> outline;
+      cv::perspectiveTransform(board_outline_, outline, H);
+      for (const cv::Point2f& q : outline) {
+        if (!std::isfinite(q.x) || !std::isfinite(q.y)) continue;
+        lo = lo.cwiseMin(Eigen::Vector2d(q.x, q.y));
+        hi = hi.cwiseMax(Eigen::Vector2d(q.x, q.y));
+      }
+    }
+  }
+  // The motion between the two frames before, as a shift of the box's centre, widens it both ways.
+  Eigen::Vector2d motion = Eigen::Vector2d::Zero();
+  if (history.before_last != nullptr && history.before_last->ids.size() >= 4) {
+    const auto [lo0, hi0] = box(*history.before_last);
+    motion = (0.5 * (lo + hi) - 0.5 * (lo0 + hi0)).cwiseAbs();
+  }
+  const double margin = kRegionMarginTags * median_tag_edge_px(*last);
+  if (!(margin > 0.0)) return {};
+  const Eigen::Vector2d grow = Eigen::Vector2d::Constant(margin) + motion;
+  lo -= grow;
+  hi += grow;
+  // The corner on a multiple of 4 pixels: the decimated quad search then samples the same pixels
+  // as on the whole image (with another phase it finds other tags at the edge of detection).
+  auto down4 = [](double v) { return 4 * static_cast<int>(std::floor(v / 4.0)); };
+  const cv::Rect region =
+      cv::Rect(cv::Point(down4(lo.x()), down4(lo.y())),
+               cv::Point(static_cast<int>(std::ceil(hi.x())) + 1, static_cast<int>(std::ceil(hi.y())) + 1)) &
+      cv::Rect(0, 0, view.width, view.height);
+  if (static_cast<double>(region.area()) > kMaxRegionShare * view.width * view.height) return {};
+  return region;
+}
+
 double AprilGridDetector::median_tag_edge_px(const TargetObservation& obs) const {
   // Points r * 2 tag_cols + c: a tag's lower edge joins an even column c to c + 1.
   const int row = 2 * target_.tag_cols;
@@ -689,12 +774,16 @@ std::vector<TagCorners> AprilGridDetector::refined_tags(const GrayView& view,
   // searched again at full resolution and the search with more tags kept. An explicit
   // decimation (not 1) is used as given. Measured on two real recordings: as many points as the
   // full search or more, at 2.0x the speed where the tags are large (docs/benchmarks.md).
+  // Likewise only the region around the frame before's points is searched while it holds
+  // as many tags (kRegionMarginTags).
   const double fine = options_.aprilgrid_decimate;
   const bool coarse =
       fine == 1.0 && history.last != nullptr && median_tag_edge_px(*history.last) >= kCoarseTagEdgePx;
-  std::vector<TagCorners> tags = find_tags(view, coarse ? 2.0 : fine);
-  const double last_tags = coarse ? static_cast<double>(history.last->ids.size()) / 4.0 : 0.0;
-  if (coarse && static_cast<double>(tags.size()) < kCoarseKeep * last_tags) {
+  const cv::Rect region = search_region(view, history);
+  std::vector<TagCorners> tags = find_tags(view, coarse ? 2.0 : fine, region);
+  const double last_tags =
+      history.last != nullptr ? static_cast<double>(history.last->ids.size()) / 4.0 : 0.0;
+  if ((coarse || region.area() > 0) && static_cast<double>(tags.size()) < kCoarseKeep * last_tags) {
     std::vector<TagCorners> full = find_tags(view, fine);
     if (full.size() > tags.size()) tags = std::move(full);
   }
@@ -702,9 +791,23 @@ std::vector<TagCorners> AprilGridDetector::refined_tags(const GrayView& view,
   return tags;
 }
 
-std::vector<TagCorners> AprilGridDetector::find_tags(const GrayView& view, double decimate) const {
+std::vector<TagCorners> AprilGridDetector::find_tags(const GrayView& view, double decimate,
+                                                     cv::Rect region) const {
   const int tag_count = target_.tag_rows * target_.tag_cols;
-  std::vector<TagCorners> tags = decode_tags(view, decimate);
+  std::vector<TagCorners> tags;
+  if (region.area() > 0) {
+    const std::size_t stride = view.stride == 0 ? static_cast<std::size_t>(view.width) : view.stride;
+    const GrayView part{
+        view.data + static_cast<std::size_t>(region.y) * stride + static_cast<std::size_t>(region.x),
+        region.width, region.height, stride};
+    tags = decode_tags(part, decimate);
+    const cv::Point2f origin(static_cast<float>(region.x), static_cast<float>(region.y));
+    for (TagCorners& tag : tags) {
+      for (cv::Point2f& p : tag.px) p += origin;
+    }
+  } else {
+    tags = decode_tags(view, decimate);
+  }
   // Tags not on this grid are left out.
   std::erase_if(tags, [tag_count](const TagCorners& tag) { return tag.id < 0 || tag.id >= tag_count; });
   // A tag id seen twice means a stray tag in view: neither copy can be trusted.

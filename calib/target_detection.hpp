@@ -41,7 +41,8 @@ namespace imucal::calib {
 ///    a track whose corners the refinement left where they were is searched instead.
 /// 5: AprilGrid quads are searched at half resolution when the frame before showed tags of
 ///    28 px or more (kCoarseTagEdgePx).
-/// 6: the checkerboard is first searched as a grid of X junctions (checkerboard_grid.hpp).
+/// 6: the checkerboard is first searched as a grid of X junctions (checkerboard_grid.hpp);
+///    AprilGrid quads only in the region where the frame before puts the grid.
 inline constexpr int kTargetDetectorRevision = 6;
 
 /// The target points one image shows.

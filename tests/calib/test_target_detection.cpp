@@ -742,6 +742,39 @@ TEST(AprilGridDetection, LargeTagsAreSearchedAtHalfResolutionWithTheSameCornersA
   EXPECT_EQ(compared, 4);
 }
 
+// With a frame before, only the region where it puts the grid is searched: the same tags and
+// corners as the whole image's search; a grid that moved out of that region is found by the
+// whole image's search after all.
+TEST(AprilGridDetection, TheRegionOfTheFrameBeforeGivesTheSameTagsAndAGridThatMovedIsStillFound) {
+  const TargetDescription t = aprilgrid();
+  auto det = make_detector(t);
+  ASSERT_TRUE(det);
+  // Far enough that the grid covers under half the image and its tags stay under 28 px (the
+  // half-resolution search is not chosen, so only the region differs).
+  const test::AprilGridImage left =
+      test::render_aprilgrid(t, grid_homography(t, 0.1, {0.1, -0.2, 0.0}, 2.2, -0.35));
+  const test::AprilGridImage right =
+      test::render_aprilgrid(t, grid_homography(t, -0.1, {0.0, 0.2, 0.0}, 2.2, 0.35));
+  const auto full = det->detect(view_of(left.image));
+  const auto moved_full = det->detect(view_of(right.image));
+  ASSERT_TRUE(full.ok() && moved_full.ok());
+  ASSERT_GE(full->ids.size(), 100u);
+  ASSERT_GE(moved_full->ids.size(), 100u);
+  DetectionHistory h;
+  h.last = &*full;
+  const auto again = det->detect(view_of(left.image), h);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->ids, full->ids);
+  for (std::size_t i = 0; i < again->px.size() && i < full->px.size(); ++i) {
+    EXPECT_LT((again->px[i] - full->px[i]).norm(), 1e-3) << "point " << again->ids[i];
+  }
+  // The grid jumped to the other side of the image: the region finds no tag, the image all.
+  const auto jumped = det->detect(view_of(right.image), h);
+  ASSERT_TRUE(jumped.ok());
+  EXPECT_EQ(jumped->ids, moved_full->ids);
+  EXPECT_LT(errors(*jumped, right.px).max_px, 0.5);
+}
+
 // libapriltag's corners without refinement: the right ids, and pixel centres moved to OpenCV's
 // convention (integer = centre). A half-pixel slip would show as a mean offset of (0.5, 0.5).
 TEST(AprilGridDetection, RawCornersInOpenCvPixelConvention) {
