@@ -75,10 +75,10 @@ Result<TargetObservation> guarded(F&& f) {
 /// The largest second difference along a found board's rows and columns, as a fraction of the
 /// side: a corner OpenCV's searches put on the wrong junction, or 3-20 px off, breaks it.
 constexpr double kMaxBend = 0.3;
-/// The same for a board the junction grid found, whose every corner met its extrapolation
-/// within 0.3 of a step and which the refinement moved by at most kMaxGridMove of a side:
-/// fisheye boards bend by up to 0.4 (the real fisheye frames of docs/benchmarks.md, half of
-/// which 0.3 rejected; their refinement moved corners by at most 0.044 of a side).
+/// The same for a board that the refinement moved by at most kMaxGridMove of its smallest
+/// side (its corners were on junctions already): fisheye boards bend by up to 0.44 (the real
+/// fisheye frames of docs/benchmarks.md, half of which 0.3 rejected; their refinement moved
+/// corners by at most 0.044 of a side). A corner on the wrong junction bends the grid by 1-2.
 constexpr double kMaxGridBend = 0.6;
 constexpr double kMaxGridMove = 0.1;
 
@@ -398,11 +398,11 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
     //     the pre-test rejects (small, blurred, strongly distorted).
     // The quad search's adaptive-threshold passes are not used: on textured, noisy frames they
     // cost up to seconds a frame and found no board the two steps miss (docs/targets.md).
-    // `from_grid`: the junction grid's corners, held to kMaxGridBend when the refinement moved
-    // none of them by more than kMaxGridMove of the smallest side (a grid assembled across rows
-    // of a steeply foreshortened board sits off the junctions and bends less than a fisheye
-    // board; the refinement then drags it by 0.2-0.4 of a side).
-    auto refined = [&](std::vector<cv::Point2f>* corners, bool from_grid) {
+    // Held to kMaxGridBend instead of kMaxBend when the refinement moved no corner by more than
+    // kMaxGridMove of the smallest side: a fisheye board bends further than OpenCV's wrong
+    // results do, and a grid put on the wrong junctions (across the rows of a steeply
+    // foreshortened board) is dragged by the refinement by 0.2-0.4 of a side.
+    auto refined = [&](std::vector<cv::Point2f>* corners) {
       if (corners->size() != n) return false;
       unmirror(corners);
       const std::vector<cv::Point2f> start = *corners;
@@ -410,13 +410,11 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
         const int half = subpix_half_window(*corners);
         cv::cornerSubPix(image, *corners, cv::Size(half, half), cv::Size(-1, -1), kSubpixCriteria);
       }
-      double max_bend = kMaxBend;
-      if (from_grid) {
-        double moved = 0.0;
-        for (std::size_t k = 0; k < n; ++k)
-          moved = std::max(moved, static_cast<double>(cv::norm((*corners)[k] - start[k])));
-        if (moved <= kMaxGridMove * smallest_side(*corners)) max_bend = kMaxGridBend;
+      double moved = 0.0;
+      for (std::size_t k = 0; k < n; ++k) {
+        moved = std::max(moved, static_cast<double>(cv::norm((*corners)[k] - start[k])));
       }
+      const double max_bend = moved <= kMaxGridMove * smallest_side(*corners) ? kMaxGridBend : kMaxBend;
       return plausible(image, *corners, max_bend);
     };
     CheckerboardGrid grid = find_checkerboard_grid(image, target_.cols, target_.rows);
@@ -426,7 +424,7 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
         // A grid the checks reject is not searched again: the searches below see the same
         // junctions (on the frames of docs/benchmarks.md they never found such a board).
         px = std::move(grid.corners);
-        if (!refined(&px, true)) return obs;
+        if (!refined(&px)) return obs;
         found = true;
         break;
       case CheckerboardGrid::Outcome::kNone:
@@ -441,12 +439,11 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
     }
     if (!found) {
       px.clear();
-      found = cv::findChessboardCorners(image, pattern, px, 0) && refined(&px, false);
+      found = cv::findChessboardCorners(image, pattern, px, 0) && refined(&px);
     }
     if (!found) {
       px.clear();
-      found = cv::findChessboardCornersSB(image, pattern, px, cv::CALIB_CB_NORMALIZE_IMAGE) &&
-              refined(&px, false);
+      found = cv::findChessboardCornersSB(image, pattern, px, cv::CALIB_CB_NORMALIZE_IMAGE) && refined(&px);
     }
     if (!found) return obs;
   }
