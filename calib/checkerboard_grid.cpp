@@ -559,24 +559,14 @@ class Grid {
   // or column next to them.
   bool border_squares_alternate(const std::vector<int>& cells, int rows, int cols, bool dark00,
                                 int side) const {
-    if (side < 2) {
-      const int c = side == 0 ? cols - 2 : 0;
-      const int inner = side == 0 ? c - 1 : 1;
-      for (int r = 0; r + 1 < rows; ++r) {
-        if (!differ(square_level(cells, cols, r, c), dark(dark00, r, c),
-                    square_level(cells, cols, r, inner))) {
-          return false;
-        }
-      }
-    } else {
-      const int r = side == 2 ? rows - 2 : 0;
-      const int inner = side == 2 ? r - 1 : 1;
-      for (int c = 0; c + 1 < cols; ++c) {
-        if (!differ(square_level(cells, cols, r, c), dark(dark00, r, c),
-                    square_level(cells, cols, inner, c))) {
-          return false;
-        }
-      }
+    const bool column = side < 2;
+    const int outer = side == 0 ? cols - 2 : side == 2 ? rows - 2 : 0;
+    const int inner = (side == 0 || side == 2) ? outer - 1 : 1;
+    for (int k = 0; k + 1 < (column ? rows : cols); ++k) {
+      const int r = column ? k : outer;
+      const int c = column ? outer : k;
+      const float next = column ? square_level(cells, cols, k, inner) : square_level(cells, cols, inner, k);
+      if (!differ(square_level(cells, cols, r, c), dark(dark00, r, c), next)) return false;
     }
     return true;
   }

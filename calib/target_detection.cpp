@@ -75,12 +75,12 @@ Result<TargetObservation> guarded(F&& f) {
 /// The largest second difference along a found board's rows and columns, as a fraction of the
 /// side: a corner OpenCV's searches put on the wrong junction, or 3-20 px off, breaks it.
 constexpr double kMaxBend = 0.3;
-/// The same for a board that the refinement moved by at most kMaxGridMove of its smallest
+/// The same for a board that the refinement moved by at most kMaxInPlaceMove of its smallest
 /// side (its corners were on junctions already): fisheye boards bend by up to 0.44 (the real
 /// fisheye frames of docs/benchmarks.md, half of which 0.3 rejected; their refinement moved
 /// corners by at most 0.044 of a side). A corner on the wrong junction bends the grid by 1-2.
-constexpr double kMaxGridBend = 0.6;
-constexpr double kMaxGridMove = 0.1;
+constexpr double kMaxBendInPlace = 0.6;
+constexpr double kMaxInPlaceMove = 0.1;
 
 class CheckerboardDetector final : public TargetDetector {
  public:
@@ -96,6 +96,14 @@ class CheckerboardDetector final : public TargetDetector {
 
  private:
   Result<TargetObservation> detect_impl(const GrayView& image, const DetectionHistory& history) const;
+  // The board searched for in the whole image (detected order, unmirrored, refined and
+  // checked), or nothing.
+  std::optional<std::vector<cv::Point2f>> search(const cv::Mat& image) const;
+  // Puts OpenCV's mirrored orderings right (see unmirror), refines the corners and checks them.
+  bool refine_and_check(const cv::Mat& image, std::vector<cv::Point2f>* corners) const;
+  // OpenCV's rows have x -> y turning clockwise in the image (the board's z axis away from the
+  // camera), the convention kept here; a mirrored ordering is turned back.
+  void unmirror(std::vector<cv::Point2f>* px) const;
   // The corners of the previous frames carried to this one (in id order), or nothing.
   std::optional<std::vector<cv::Point2f>> track(const cv::Mat& image, const DetectionHistory& history) const;
   // Whether corners in detected order look like this board: a smooth grid (second differences
@@ -367,18 +375,6 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
       return obs;
     }
   }
-  // OpenCV returns the rows with x -> y turning clockwise in the image (the board's z axis
-  // away from the camera), the convention kept here; a mirrored result is turned back.
-  auto unmirror = [&](std::vector<cv::Point2f>* px) {
-    const cv::Point2f quad[4] = {(*px)[0], (*px)[target_.cols - 1], (*px)[n - 1], (*px)[n - target_.cols]};
-    double area = 0.0;
-    for (int i = 0; i < 4; ++i) area += quad[i].x * quad[(i + 1) % 4].y - quad[(i + 1) % 4].x * quad[i].y;
-    if (area < 0) {
-      for (int r = 0; r < target_.rows; ++r) {
-        std::reverse(px->begin() + r * target_.cols, px->begin() + (r + 1) * target_.cols);
-      }
-    }
-  };
   std::vector<cv::Point2f> px;
   if (sector_based) {
     if (!cv::findChessboardCornersSB(image, pattern, px,
@@ -388,67 +384,85 @@ Result<TargetObservation> CheckerboardDetector::detect_impl(const GrayView& view
     }
     unmirror(&px);
   } else {
-    // The search, each step only for what the one before missed, every result checked:
-    //  1. the grid of X junctions (checkerboard_grid.hpp): a few ms, and it also says when the
-    //     steps below cannot find the board: no board at all, only part of it in view, or a
-    //     whole board of another size;
-    //  2. the quad search on OpenCV's histogram threshold, without its pre-test (which rejects
-    //     boards the search finds, and costs more than it saves): a few ms;
-    //  3. the sector-based detector: tens to a few hundred ms, bounded, and it finds the boards
-    //     the pre-test rejects (small, blurred, strongly distorted).
-    // The quad search's adaptive-threshold passes are not used: on textured, noisy frames they
-    // cost up to seconds a frame and found no board the two steps miss (docs/targets.md).
-    // Held to kMaxGridBend instead of kMaxBend when the refinement moved no corner by more than
-    // kMaxGridMove of the smallest side: a fisheye board bends further than OpenCV's wrong
-    // results do, and a grid put on the wrong junctions (across the rows of a steeply
-    // foreshortened board) is dragged by the refinement by 0.2-0.4 of a side.
-    auto refined = [&](std::vector<cv::Point2f>* corners) {
-      if (corners->size() != n) return false;
-      unmirror(corners);
-      const std::vector<cv::Point2f> start = *corners;
-      if (options_.subpixel) {
-        const int half = subpix_half_window(*corners);
-        cv::cornerSubPix(image, *corners, cv::Size(half, half), cv::Size(-1, -1), kSubpixCriteria);
-      }
-      double moved = 0.0;
-      for (std::size_t k = 0; k < n; ++k) {
-        moved = std::max(moved, static_cast<double>(cv::norm((*corners)[k] - start[k])));
-      }
-      const double max_bend = moved <= kMaxGridMove * smallest_side(*corners) ? kMaxGridBend : kMaxBend;
-      return plausible(image, *corners, max_bend);
-    };
-    CheckerboardGrid grid = find_checkerboard_grid(image, target_.cols, target_.rows);
-    bool found = false;
-    switch (grid.outcome) {
-      case CheckerboardGrid::Outcome::kFound:
-        // A grid the checks reject is not searched again: the searches below see the same
-        // junctions (on the frames of docs/benchmarks.md they never found such a board).
-        px = std::move(grid.corners);
-        if (!refined(&px)) return obs;
-        found = true;
-        break;
-      case CheckerboardGrid::Outcome::kNone:
-      case CheckerboardGrid::Outcome::kCut:
-      case CheckerboardGrid::Outcome::kOther:
-        return obs;
-      case CheckerboardGrid::Outcome::kUndecided:
-        // Only a grid of at least half the board is worth the slow searches (a board with a
-        // few junctions lost to glare or blur); small grids are where lines cross in clutter.
-        if (2 * grid.grid_cols * grid.grid_rows < static_cast<int>(n)) return obs;
-        break;
-    }
-    if (!found) {
-      px.clear();
-      found = cv::findChessboardCorners(image, pattern, px, 0) && refined(&px);
-    }
-    if (!found) {
-      px.clear();
-      found = cv::findChessboardCornersSB(image, pattern, px, cv::CALIB_CB_NORMALIZE_IMAGE) && refined(&px);
-    }
-    if (!found) return obs;
+    std::optional<std::vector<cv::Point2f>> searched = search(image);
+    if (!searched) return obs;
+    px = std::move(*searched);
   }
   fill(px, resolve_turn(image, px));
   return obs;
+}
+
+void CheckerboardDetector::unmirror(std::vector<cv::Point2f>* px) const {
+  // OpenCV returns the rows with x -> y turning clockwise in the image (the board's z axis
+  // away from the camera), the convention kept here; a mirrored result is turned back.
+  const std::size_t n = px->size();
+  const cv::Point2f quad[4] = {(*px)[0], (*px)[target_.cols - 1], (*px)[n - 1], (*px)[n - target_.cols]};
+  double area = 0.0;
+  for (int i = 0; i < 4; ++i) area += quad[i].x * quad[(i + 1) % 4].y - quad[(i + 1) % 4].x * quad[i].y;
+  if (area < 0) {
+    for (int r = 0; r < target_.rows; ++r) {
+      std::reverse(px->begin() + r * target_.cols, px->begin() + (r + 1) * target_.cols);
+    }
+  }
+}
+
+bool CheckerboardDetector::refine_and_check(const cv::Mat& image, std::vector<cv::Point2f>* corners) const {
+  if (corners->size() != static_cast<std::size_t>(target_.cols * target_.rows)) return false;
+  unmirror(corners);
+  const std::vector<cv::Point2f> start = *corners;
+  if (options_.subpixel) {
+    const int half = subpix_half_window(*corners);
+    cv::cornerSubPix(image, *corners, cv::Size(half, half), cv::Size(-1, -1), kSubpixCriteria);
+  }
+  // Held to kMaxBendInPlace instead of kMaxBend when the refinement moved no corner by more
+  // than kMaxInPlaceMove of the smallest side: a fisheye board bends further than OpenCV's
+  // wrong results do, and a grid put on the wrong junctions (across the rows of a steeply
+  // foreshortened board) is dragged by the refinement by 0.2-0.4 of a side.
+  double moved = 0.0;
+  for (std::size_t k = 0; k < start.size(); ++k) {
+    moved = std::max(moved, static_cast<double>(cv::norm((*corners)[k] - start[k])));
+  }
+  return plausible(image, *corners,
+                   moved <= kMaxInPlaceMove * smallest_side(*corners) ? kMaxBendInPlace : kMaxBend);
+}
+
+std::optional<std::vector<cv::Point2f>> CheckerboardDetector::search(const cv::Mat& image) const {
+  // Each step only for what the one before missed, every result checked:
+  //  1. the grid of X junctions (checkerboard_grid.hpp): a few ms, and it also says when the
+  //     steps below cannot find the board: no board at all, only part of it in view, or a
+  //     whole board of another size;
+  //  2. the quad search on OpenCV's histogram threshold, without its pre-test (which rejects
+  //     boards the search finds, and costs more than it saves): a few ms;
+  //  3. the sector-based detector: tens to a few hundred ms, bounded, and it finds the boards
+  //     the pre-test rejects (small, blurred, strongly distorted).
+  // The quad search's adaptive-threshold passes are not used: on textured, noisy frames they
+  // cost up to seconds a frame and found no board the two steps miss (docs/targets.md).
+  CheckerboardGrid grid = find_checkerboard_grid(image, target_.cols, target_.rows);
+  switch (grid.outcome) {
+    case CheckerboardGrid::Outcome::kFound:
+      // A grid the checks reject is not searched again: the searches below see the same
+      // junctions (on the frames of docs/benchmarks.md they never found such a board).
+      if (!refine_and_check(image, &grid.corners)) return std::nullopt;
+      return std::move(grid.corners);
+    case CheckerboardGrid::Outcome::kNone:
+    case CheckerboardGrid::Outcome::kCut:
+    case CheckerboardGrid::Outcome::kOther:
+      return std::nullopt;
+    case CheckerboardGrid::Outcome::kUndecided:
+      // Only a grid of at least half the board is worth the slow searches (a board with a
+      // few junctions lost to glare or blur); small grids are where lines cross in clutter.
+      if (2 * grid.grid_cols * grid.grid_rows < target_.cols * target_.rows) return std::nullopt;
+      break;
+  }
+  const cv::Size pattern(target_.cols, target_.rows);
+  std::vector<cv::Point2f> px;
+  if (cv::findChessboardCorners(image, pattern, px, 0) && refine_and_check(image, &px)) return px;
+  px.clear();
+  if (cv::findChessboardCornersSB(image, pattern, px, cv::CALIB_CB_NORMALIZE_IMAGE) &&
+      refine_and_check(image, &px)) {
+    return px;
+  }
+  return std::nullopt;
 }
 
 std::string CheckerboardDetector::describe_other_target(const GrayView& view) const {
@@ -707,6 +721,13 @@ cv::Rect AprilGridDetector::search_region(const GrayView& view, const DetectionH
     return std::pair{lo, hi};
   };
   auto [lo, hi] = box(*last);
+  // The motion between the two frames before, as the shift of their points' box centres,
+  // widens the region both ways.
+  Eigen::Vector2d motion = Eigen::Vector2d::Zero();
+  if (history.before_last != nullptr && history.before_last->ids.size() >= 4) {
+    const auto [lo0, hi0] = box(*history.before_last);
+    motion = (0.5 * (lo + hi) - 0.5 * (lo0 + hi0)).cwiseAbs();
+  }
   // The whole grid where the frame before's tags put it (a homography from the board's plane,
   // fitted to all its points): tags it missed are searched for too.
   if (board_points_.size() >= 4) {
@@ -727,12 +748,6 @@ cv::Rect AprilGridDetector::search_region(const GrayView& view, const DetectionH
         hi = hi.cwiseMax(Eigen::Vector2d(q.x, q.y));
       }
     }
-  }
-  // The motion between the two frames before, as a shift of the box's centre, widens it both ways.
-  Eigen::Vector2d motion = Eigen::Vector2d::Zero();
-  if (history.before_last != nullptr && history.before_last->ids.size() >= 4) {
-    const auto [lo0, hi0] = box(*history.before_last);
-    motion = (0.5 * (lo + hi) - 0.5 * (lo0 + hi0)).cwiseAbs();
   }
   const double margin = kRegionMarginTags * median_tag_edge_px(*last);
   if (!(margin > 0.0)) return {};
