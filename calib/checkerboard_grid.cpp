@@ -66,8 +66,10 @@ struct Junction {
 // rows and columns). Central differences: dxx = I(x+1) + I(x-1) - 2 I(x), dxy the four diagonal
 // neighbours' difference over 4.
 cv::Mat saddle_strength(const cv::Mat& smooth) {
-  cv::Mat out(smooth.size(), CV_32S, cv::Scalar(0));
+  cv::Mat out(smooth.size(), CV_32S);
   const int w = smooth.cols;
+  out.row(0).setTo(0);
+  out.row(out.rows - 1).setTo(0);
   for (int y = 1; y + 1 < smooth.rows; ++y) {
     const std::uint8_t* __restrict up = smooth.ptr<std::uint8_t>(y - 1);
     const std::uint8_t* __restrict mid = smooth.ptr<std::uint8_t>(y);
@@ -80,15 +82,19 @@ cv::Mat saddle_strength(const cv::Mat& smooth) {
       const std::int32_t dxy4 = static_cast<std::int32_t>(down[x + 1]) - down[x - 1] - up[x + 1] + up[x - 1];
       o[x] = dxy4 * dxy4 - 16 * dxx * dyy;
     }
+    o[0] = 0;
+    o[w - 1] = 0;
   }
   return out;
 }
 
-// The grey image smoothed (8 bits: OpenCV's fixed-point filter, several times faster than
-// floats; the rounding adds a third of a level of noise, far below the weakest junction kept).
+// The grey image smoothed, 8 bits (the rounding adds a third of a level of noise, far below the
+// weakest junction kept). sepFilter2D with a float kernel: half the time of GaussianBlur's
+// bit-exact fixed-point filter on 8-bit images (0.31 against 0.70 ms at 752 x 480).
 cv::Mat smoothed(const cv::Mat& gray) {
+  static const cv::Mat kernel = cv::getGaussianKernel(kBlurSize, kBlurSigma, CV_32F);
   cv::Mat out;
-  cv::GaussianBlur(gray, out, cv::Size(kBlurSize, kBlurSize), kBlurSigma, kBlurSigma, cv::BORDER_REPLICATE);
+  cv::sepFilter2D(gray, out, CV_8U, kernel, kernel, cv::Point(-1, -1), 0.0, cv::BORDER_REPLICATE);
   return out;
 }
 
@@ -130,6 +136,14 @@ float axis_at(const cv::Mat& smooth, int x, int y) {
   return a;
 }
 
+constexpr int kBlock = 16;
+// Whether any of the kBlock values from `p` exceeds `floor` (vectorised by the compiler).
+[[gnu::noinline]] bool any_above(const std::int32_t* p, std::int32_t floor) {
+  int over = 0;
+  for (int k = 0; k < kBlock; ++k) over |= static_cast<int>(p[k] > floor);
+  return over != 0;
+}
+
 // Local maxima of the strength above the floor, to a fraction of a pixel (a parabola through
 // each maximum and its neighbours along x and along y).
 std::vector<Junction> find_junctions(const cv::Mat& gray, cv::Mat* smooth_out) {
@@ -140,12 +154,13 @@ std::vector<Junction> find_junctions(const cv::Mat& gray, cv::Mat* smooth_out) {
   // kBusyPixels of the pixels exceed (estimated from every 4th pixel of every 4th row): the
   // maxima search then looks at no more, and the strongest kMaxJunctions maxima are among them.
   std::int32_t floor = strength_floor();
-  std::vector<std::int32_t> sample;
-  sample.reserve(static_cast<std::size_t>((s.rows / 4 + 1) * (s.cols / 4 + 1)));
+  std::vector<std::int32_t> sample(static_cast<std::size_t>((s.rows / 4 + 1) * (s.cols / 4 + 1)));
+  std::size_t n = 0;
   for (int y = kBorder; y < s.rows - kBorder; y += 4) {
     const std::int32_t* row = s.ptr<std::int32_t>(y);
-    for (int x = kBorder; x < s.cols - kBorder; x += 4) sample.push_back(row[x]);
+    for (int x = kBorder; x < s.cols - kBorder; x += 4) sample[n++] = row[x];
   }
+  sample.resize(n);
   const std::size_t keep = kBusyPixels / 16;
   if (sample.size() > keep) {
     std::nth_element(sample.begin(), sample.begin() + static_cast<std::ptrdiff_t>(keep), sample.end(),
@@ -159,20 +174,29 @@ std::vector<Junction> find_junctions(const cv::Mat& gray, cv::Mat* smooth_out) {
     int y;
   };
   std::vector<Peak> peaks;
+  peaks.reserve(4 * kMaxJunctions);
   for (int y = kBorder; y < s.rows - kBorder; ++y) {
     const std::int32_t* up = s.ptr<std::int32_t>(y - 1);
     const std::int32_t* mid = s.ptr<std::int32_t>(y);
     const std::int32_t* down = s.ptr<std::int32_t>(y + 1);
-    for (int x = kBorder; x < s.cols - kBorder; ++x) {
+    auto try_peak = [&](int x) {
       const std::int32_t v = mid[x];
-      if (v <= floor) continue;
+      if (v <= floor) return;
       // Ties go to the first in reading order.
       if (v <= mid[x + 1] || v < mid[x - 1] || v <= down[x] || v < up[x] || v < up[x - 1] || v < up[x + 1] ||
           v <= down[x - 1] || v <= down[x + 1]) {
-        continue;
+        return;
       }
       peaks.push_back({v, x, y});
+    };
+    // Most pixels are below the floor: whole blocks of them are passed over at once.
+    const int end = s.cols - kBorder;
+    int x = kBorder;
+    for (; x + kBlock <= end; x += kBlock) {
+      if (!any_above(mid + x, floor)) continue;
+      for (int k = x; k < x + kBlock; ++k) try_peak(k);
     }
+    for (; x < end; ++x) try_peak(x);
   }
   if (peaks.size() > kMaxJunctions) {
     std::nth_element(peaks.begin(), peaks.begin() + kMaxJunctions, peaks.end(),
@@ -212,7 +236,8 @@ bool as_strong(const Junction& a, const Junction& b, float ratio = kMinStrengthR
   return a.strength >= ratio * b.strength && b.strength >= ratio * a.strength;
 }
 
-float length(cv::Point2f v) { return std::sqrt(v.x * v.x + v.y * v.y); }
+float length2(cv::Point2f v) { return v.x * v.x + v.y * v.y; }
+float length(cv::Point2f v) { return std::sqrt(length2(v)); }
 
 // The junctions in square cells for nearest-point queries.
 class JunctionIndex {
@@ -234,8 +259,9 @@ class JunctionIndex {
   int strongest(cv::Point2f p, float radius, Accept&& accept) const {
     int best = -1;
     float best_strength = 0.0f;
+    const float radius2 = radius * radius;
     visit(p, radius, [&](int i) {
-      if (length(junctions_[i].p - p) <= radius && junctions_[i].strength > best_strength && accept(i)) {
+      if (length2(junctions_[i].p - p) <= radius2 && junctions_[i].strength > best_strength && accept(i)) {
         best_strength = junctions_[i].strength;
         best = i;
       }
@@ -244,16 +270,18 @@ class JunctionIndex {
   }
 
   /// Up to `k` junctions nearest to junction `i` within `radius` that `accept` takes, nearest
-  /// first.
+  /// first (valid until the next call).
   template <class Accept>
-  std::vector<int> neighbours(int i, int k, float radius, Accept&& accept) const {
+  const std::vector<int>& neighbours(int i, int k, float radius, Accept&& accept) const {
     const cv::Point2f p = junctions_[i].p;
-    std::vector<std::pair<float, int>> found;
+    std::vector<std::pair<float, int>>& found = found_;
+    found.clear();
     // Rings of cells outwards until k are known to be the nearest, or until the ring is
     // further than kMaxStepRatio times the nearest found (a patch's steps are no further apart).
     const int cx = std::clamp(static_cast<int>(p.x) / cell_, 0, nx_ - 1);
     const int cy = std::clamp(static_cast<int>(p.y) / cell_, 0, ny_ - 1);
     const int rings = static_cast<int>(radius / static_cast<float>(cell_)) + 1;
+    const float radius2 = radius * radius;
     float nearest = radius;
     for (int ring = 0; ring <= rings; ++ring) {
       if (static_cast<float>((ring - 1) * cell_) > kMaxStepRatio * nearest) break;
@@ -265,8 +293,9 @@ class JunctionIndex {
           for (int s = start_[y * nx_ + x]; s < start_[y * nx_ + x + 1]; ++s) {
             const int j = order_[s];
             if (j == i) continue;
-            const float d = length(junctions_[j].p - p);
-            if (d <= radius && accept(j)) {
+            const float d2 = length2(junctions_[j].p - p);
+            if (d2 <= radius2 && accept(j)) {
+              const float d = std::sqrt(d2);
               found.emplace_back(d, j);
               nearest = std::min(nearest, d);
             }
@@ -280,9 +309,9 @@ class JunctionIndex {
     }
     std::sort(found.begin(), found.end());
     if (static_cast<int>(found.size()) > k) found.resize(k);
-    std::vector<int> out;
-    for (const auto& f : found) out.push_back(f.second);
-    return out;
+    near_.clear();
+    for (const auto& f : found) near_.push_back(f.second);
+    return near_;
   }
 
  private:
@@ -310,6 +339,9 @@ class JunctionIndex {
   int ny_;
   std::vector<int> start_;
   std::vector<int> order_;
+  // Scratch for neighbours(), kept between calls (one a seed).
+  mutable std::vector<std::pair<float, int>> found_;
+  mutable std::vector<int> near_;
 };
 
 // How the growth of a grid's side ended.
@@ -335,7 +367,7 @@ class Grid {
   bool start(int seed, float max_step) {
     const Junction& c = junctions_[seed];
     // Along a row or column: a quarter turn apart and as strong.
-    const std::vector<int> near = index_.neighbours(seed, kSeedNeighbours, max_step, [&](int i) {
+    const std::vector<int>& near = index_.neighbours(seed, kSeedNeighbours, max_step, [&](int i) {
       return owner_[i] < 0 && quarter_apart(c, junctions_[i]) &&
              as_strong(c, junctions_[i], kMinSeedStrengthRatio);
     });
