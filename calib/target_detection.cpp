@@ -578,6 +578,9 @@ constexpr double kCoarseKeep = 0.9;
 /// at most kMaxRegionShare of the image; the whole image when it decodes fewer than
 /// kCoarseKeep of the tags the frame before had.
 constexpr double kRegionMarginTags = 1.5;
+/// A tag corner's gaps are brighter than the tag's border and the corner square by at least
+/// this many grey levels (printed grids differ by 100-200).
+constexpr float kMinTagCornerContrast = 8.0f;
 constexpr double kMaxRegionShare = 0.7;
 
 struct TagCorners {
@@ -630,6 +633,8 @@ class AprilGridDetector final : public TargetDetector {
   /// The median edge of the tags of an observation of this grid, in pixels (0 without one).
   double median_tag_edge_px(const TargetObservation& obs) const;
   void refine(const cv::Mat& image, std::vector<TagCorners>* tags) const;
+  /// Whether refined tag corner k of `corners` (one tag's four) sits on an X junction.
+  bool tag_corner_shaped(const cv::Mat& image, const std::vector<cv::Point2f>& corners, int k) const;
   int subpix_half_window(const TagCorners& tag) const;
   // A pool of libapriltag detectors: detect() borrows one (creating it when all are busy), so
   // calls on several threads never share one, and none lives beyond this object (no global or
@@ -845,6 +850,34 @@ int AprilGridDetector::subpix_half_window(const TagCorners& tag) const {
   return std::clamp(static_cast<int>(0.75 * clean), 2, 8);
 }
 
+bool AprilGridDetector::tag_corner_shaped(const cv::Mat& image, const std::vector<cv::Point2f>& corners,
+                                          int k) const {
+  // A tag corner is an X junction: dark towards the tag (its 2-bit border) and away from it
+  // (the grid's corner square), bright across (the gaps between tags); probed a tenth of the
+  // tag's sides out (half the narrower of the border and the gap), at least a pixel. A quad that libapriltag
+  // fitted a few pixels off (seen at half resolution on a steep, distorted view of the second
+  // generator's frames, docs/benchmarks.md) leaves cornerSubPix where it started, inside a
+  // border or a corner square: 4 px from the corner, the move check passes it.
+  const cv::Point2f p = corners[static_cast<std::size_t>(k)];
+  const cv::Point2f e1 = corners[static_cast<std::size_t>((k + 1) % 4)] - p;
+  const cv::Point2f e2 = corners[static_cast<std::size_t>((k + 3) % 4)] - p;
+  const float f = 0.5f * static_cast<float>(std::min(0.2, target_.tag_spacing));  // within border and gap
+  auto level = [&](cv::Point2f d) {
+    const float len = std::hypot(d.x, d.y);
+    if (len < 1.0f) d *= 1.0f / std::max(len, 1e-3f);  // at least a pixel out
+    cv::Mat patch;
+    cv::getRectSubPix(image, cv::Size(1, 1), p + d, patch, CV_32F);
+    return patch.at<float>(0, 0);
+  };
+  const float tag = level(f * (e1 + e2));
+  const float square = level(-f * (e1 + e2));
+  const float gap1 = level(f * (e1 - e2));
+  const float gap2 = level(f * (e2 - e1));
+  // Each gap brighter than both dark sides (the two gaps, and the border and the square, may
+  // differ: on event frames one side of an edge is often twice the other).
+  return std::min(gap1, gap2) - std::max(tag, square) >= kMinTagCornerContrast;
+}
+
 void AprilGridDetector::refine(const cv::Mat& image, std::vector<TagCorners>* tags) const {
   // As Kalibr: cornerSubPix on every tag corner (each an X junction with the grid's small
   // corner squares), and tags whose corners moved more than Kalibr's limit (squared 1.5 px^2)
@@ -864,7 +897,7 @@ void AprilGridDetector::refine(const cv::Mat& image, std::vector<TagCorners>* ta
     cv::cornerSubPix(image, corners, cv::Size(half, half), cv::Size(-1, -1), kSubpixCriteria);
     for (int k = 0; k < 4; ++k) {
       const cv::Point2f d = corners[k] - tag.px[k];
-      ok = ok && d.dot(d) <= kMaxMove2;
+      ok = ok && d.dot(d) <= kMaxMove2 && tag_corner_shaped(image, corners, k);
     }
     if (!ok) continue;
     std::copy(corners.begin(), corners.end(), tag.px.begin());

@@ -43,7 +43,9 @@ namespace imucal::calib {
 ///    28 px or more (kCoarseTagEdgePx).
 /// 6: the checkerboard is first searched as a grid of X junctions (checkerboard_grid.hpp);
 ///    AprilGrid quads only in the region where the frame before puts the grid.
-inline constexpr int kTargetDetectorRevision = 6;
+/// 7: the junction grid smooths through sepFilter2D (its junctions move by hundredths of a
+///    pixel); an AprilGrid tag is kept only with its corners on X junctions.
+inline constexpr int kTargetDetectorRevision = 7;
 
 /// The target points one image shows.
 struct TargetObservation {

@@ -2,7 +2,8 @@
 // written apart from the virtual camera (sim/camera_render.*) to measure the detector on frames
 // it was not made with (docs/benchmarks.md, "Target detection on frames from elsewhere").
 //
-// Self-contained (OpenCV 4 only): none of imucal's projection or rendering code. Renders a planar
+// Self-contained (OpenCV 4, and libapriltag for the AprilGrid's tag codes): none of imucal's
+// projection or rendering code. Renders a planar
 // checkerboard seen by a pinhole camera with radial-tangential ("radtan", OpenCV plumb-bob k1 k2 p1 p2)
 // distortion, EuRoC-like by default.
 //
@@ -37,14 +38,29 @@
 //   DIR/motion/000.png ...    smooth pose sequence (20 Hz); truth.csv, poses.csv as above
 //   DIR/camera.yml            K, D, image size, board geometry
 //
+// AprilGrid (--aprilgrid SPACING): the page is Kalibr's AprilGrid instead, drawn from the
+// definition (kalibr_create_target_pdf's layout) rather than from imucal's test renderer:
+// --pattern C R tags of --square metres (the black square), SPACING x square apart, tag t at
+// column t % C and row t / C counted from the page's bottom, upright; its black square is 10
+// bits, a 2-bit black border around libapriltag's 6 x 6 tag36h11 data bits (its codes and bit
+// positions, which sit inside a 1-bit border); a black square of SPACING x square at every
+// crossing of the gaps, touching the tags' corners; white for half a tag beyond. Truth: the four
+// corners of every tag, in no particular order (detection_folder matches nearest points).
+//
 // Run: build/dev/tests/checkerboard_frames --out DIR --seed 1
 
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+extern "C" {
+#include <apriltag/apriltag.h>
+#include <apriltag/tag36h11.h>
+}
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -71,8 +87,9 @@ struct Options {
   double fx = 458.0, fy = 458.0, cx = 367.0, cy = 248.0;
   double k1 = -0.28, k2 = 0.07, p1 = 0.0002, p2 = 0.00002;
   // board
-  int cols = 8, rows = 6;  // inner corners
-  double square = 0.04;
+  int cols = 8, rows = 6;  // inner corners (AprilGrid: tags)
+  double square = 0.04;    // AprilGrid: the tags' black squares
+  double spacing = 0.0;    // > 0: an AprilGrid with gaps of spacing x square
   double dmin = 0.4, dmax = 1.5, max_tilt_deg = 50.0;
 };
 
@@ -98,6 +115,9 @@ Usage: checkerboard_frames [options]
   --square M         square side in metres (default 0.04)
   --dist MIN MAX     board distance range, m (default 0.4 1.5)
   --tilt DEG         max tilt of the board normal from the optical axis (default 50)
+  --aprilgrid SPACING  draw Kalibr's AprilGrid instead: --pattern gives its tags (columns,
+                     rows), --square the tags' size, SPACING the gaps as a fraction of it
+                     (Kalibr's tagSpacing, e.g. 0.3); truth holds the tags' four corners
   --help             this text
 Writes DIR/{board,noboard,motion}/NNN.png, truth.csv (frame,corner_id,u,v,fully_in_view),
 poses.csv, and DIR/camera.yml. Pixel convention: OpenCV's (integer = pixel centre).
@@ -173,6 +193,13 @@ bool parse(int argc, char** argv, Options& o) {
       need(i, 2);
       o.dmin = std::stod(argv[++i]);
       o.dmax = std::stod(argv[++i]);
+    } else if (a == "--aprilgrid") {
+      need(i, 1);
+      o.spacing = std::stod(argv[++i]);
+      if (o.spacing <= 0) {
+        std::cerr << "--aprilgrid needs a spacing above 0\n";
+        return false;
+      }
     } else if (a == "--tilt") {
       need(i, 1);
       o.max_tilt_deg = std::stod(argv[++i]);
@@ -325,13 +352,94 @@ cv::Mat noboard_frame(int kind, cv::Size size, int ss, std::mt19937& rng) {
   return img;
 }
 
+// The page on the board plane: its extent (background beyond) and its reflectance.
+class Page {
+ public:
+  explicit Page(const Options& o) : o_(o) {
+    const double s = o.square;
+    if (o.spacing <= 0) {
+      x0_ = -2 * s, x1_ = (o.cols + 1) * s, y0_ = -2 * s, y1_ = (o.rows + 1) * s;
+      return;
+    }
+    pitch_ = s * (1 + o.spacing);
+    const double gap = o.spacing * s;
+    x0_ = -gap - 0.5 * s, x1_ = o.cols * pitch_ + 0.5 * s, y0_ = -gap - 0.5 * s,
+    y1_ = o.rows * pitch_ + 0.5 * s;
+    apriltag_family_t* family = tag36h11_create();
+    // As apriltag_to_image draws a tag (that function's image cannot be freed through the
+    // library's exported symbols): code bit i, from the most significant, white when set, at
+    // (bit_x[i] + 1, bit_y[i] + 1) of the 10 x 10 square (bit_x, bit_y count from the 8-bit
+    // black square, whose border is 1 bit there and 2 bits here: both put the data at 2-7).
+    for (int t = 0; t < o.cols * o.rows; ++t) {
+      std::array<std::array<bool, 10>, 10> black{};
+      for (auto& row : black) row.fill(true);
+      const std::uint64_t code = family->codes[t];
+      for (std::uint32_t i = 0; i < family->nbits; ++i) {
+        if (code & (std::uint64_t{1} << (family->nbits - i - 1)))
+          black[family->bit_y[i] + 1][family->bit_x[i] + 1] = false;
+      }
+      bits_.push_back(black);
+    }
+    tag36h11_destroy(family);
+  }
+  double x0() const { return x0_; }
+  double x1() const { return x1_; }
+  double y0() const { return y0_; }
+  double y1() const { return y1_; }
+  /// The middle of the pattern (where a pose puts the board's centre).
+  cv::Vec3d centre() const {
+    if (o_.spacing <= 0) return {(o_.cols - 1) * o_.square / 2, (o_.rows - 1) * o_.square / 2, 0};
+    return {((o_.cols - 1) * pitch_ + o_.square) / 2, ((o_.rows - 1) * pitch_ + o_.square) / 2, 0};
+  }
+  /// Reflectance at (x, y) on the page.
+  double value(double x, double y) const {
+    const double s = o_.square;
+    if (o_.spacing <= 0) {
+      if (x < -s || x >= o_.cols * s || y < -s || y >= o_.rows * s) return kMarginWhite;
+      const long i = static_cast<long>(std::floor(x / s)), j = static_cast<long>(std::floor(y / s));
+      return ((i + j) % 2 == 0) ? kBlack : kWhite;
+    }
+    // Which column and row of tags or gaps: gap k runs from k * pitch - gap to k * pitch.
+    const double gap = o_.spacing * s;
+    const long i = static_cast<long>(std::floor((x + gap) / pitch_));
+    const long j = static_cast<long>(std::floor((y + gap) / pitch_));
+    if (i < 0 || j < 0 || i > o_.cols || j > o_.rows) return kMarginWhite;
+    const double u = x - i * pitch_, v = y - j * pitch_;  // in [-gap, s) inside the cell
+    const bool in_gap_x = u < 0, in_gap_y = v < 0;
+    if (in_gap_x && in_gap_y) return kBlack;  // the square at a crossing of the gaps
+    if (in_gap_x || in_gap_y || i == o_.cols || j == o_.rows) return kMarginWhite;
+    const int tag =
+        (o_.rows - 1 - static_cast<int>(j)) * o_.cols + static_cast<int>(i);  // rows from the bottom
+    const int bx = std::min(9, static_cast<int>(u / s * 10)), by = std::min(9, static_cast<int>(v / s * 10));
+    return bits_[static_cast<std::size_t>(tag)][by][bx] ? kBlack : kWhite;
+  }
+  /// The points whose truth is written: inner corners, or the four corners of every tag.
+  std::vector<cv::Point3d> points() const {
+    std::vector<cv::Point3d> p;
+    if (o_.spacing <= 0) {
+      for (int r = 0; r < o_.rows; ++r)
+        for (int c = 0; c < o_.cols; ++c) p.emplace_back(c * o_.square, r * o_.square, 0.0);
+      return p;
+    }
+    for (int r = 0; r < o_.rows; ++r)
+      for (int c = 0; c < o_.cols; ++c)
+        for (int k = 0; k < 4; ++k)
+          p.emplace_back(c * pitch_ + (k % 2) * o_.square, r * pitch_ + (k / 2) * o_.square, 0.0);
+    return p;
+  }
+
+ private:
+  const Options& o_;
+  double x0_ = 0, x1_ = 0, y0_ = 0, y1_ = 0;
+  double pitch_ = 0;
+  std::vector<std::array<std::array<bool, 10>, 10>> bits_;  // per tag, row by column, from the top
+};
+
 // Board rendered over `background` (supersampled, CV_32F) from pose `P`.
-void render_board(const cv::Mat& rays, const Pose& P, const Options& o, const cv::Mat& gain, cv::Mat& img) {
+void render_board(const cv::Mat& rays, const Pose& P, const Page& page, const cv::Mat& gain, cv::Mat& img) {
   const cv::Vec3d n(P.R(0, 2), P.R(1, 2), P.R(2, 2));  // board normal in the camera frame
   const double nt = n.dot(P.t);
   const cv::Matx33d Rt = P.R.t();
-  const double s = o.square;
-  const double x0 = -2 * s, x1 = (o.cols + 1) * s, y0 = -2 * s, y1 = (o.rows + 1) * s;
   for (int I = 0; I < rays.rows; ++I) {
     const cv::Vec2f* r = rays.ptr<cv::Vec2f>(I);
     float* out = img.ptr<float>(I);
@@ -343,15 +451,8 @@ void render_board(const cv::Mat& rays, const Pose& P, const Options& o, const cv
       const double lambda = nt / nd;
       if (lambda <= 0) continue;
       const cv::Vec3d X = Rt * (lambda * d - P.t);
-      if (X[0] < x0 || X[0] >= x1 || X[1] < y0 || X[1] >= y1) continue;
-      double v;
-      if (X[0] < -s || X[0] >= o.cols * s || X[1] < -s || X[1] >= o.rows * s) {
-        v = kMarginWhite;
-      } else {
-        const long i = static_cast<long>(std::floor(X[0] / s)), j = static_cast<long>(std::floor(X[1] / s));
-        v = ((i + j) % 2 == 0) ? kBlack : kWhite;
-      }
-      out[J] = static_cast<float>(v * g[J]);
+      if (X[0] < page.x0() || X[0] >= page.x1() || X[1] < page.y0() || X[1] >= page.y1()) continue;
+      out[J] = static_cast<float>(page.value(X[0], X[1]) * g[J]);
     }
   }
 }
@@ -371,17 +472,9 @@ cv::Mat finish(const cv::Mat& big, const Options& o, std::mt19937& rng) {
   return out;
 }
 
-std::vector<cv::Point3d> inner_corners(const Options& o) {
-  std::vector<cv::Point3d> p;
-  for (int r = 0; r < o.rows; ++r)
-    for (int c = 0; c < o.cols; ++c) p.emplace_back(c * o.square, r * o.square, 0.0);
-  return p;
-}
-
-// Points along the outline of the board including its margin (to test full visibility).
-std::vector<cv::Point3d> outline(const Options& o) {
-  const double s = o.square;
-  const double x0 = -2 * s, x1 = (o.cols + 1) * s, y0 = -2 * s, y1 = (o.rows + 1) * s;
+// Points along the outline of the page (to test full visibility).
+std::vector<cv::Point3d> outline(const Page& page) {
+  const double x0 = page.x0(), x1 = page.x1(), y0 = page.y0(), y1 = page.y1();
   std::vector<cv::Point3d> p;
   const int n = 40;
   for (int k = 0; k <= n; ++k) {
@@ -426,13 +519,12 @@ cv::Matx33d rot(const cv::Vec3d& axis_angle) {
 
 // Pose: board centre on the ray through normalised point (nx, ny) at depth d; the board's
 // normal tilted by `tilt` about an in-plane axis at angle `az`; rolled by `roll` about its normal.
-Pose make_pose(const Options& o, double nx, double ny, double d, double tilt, double az, double roll) {
+Pose make_pose(const Page& page, double nx, double ny, double d, double tilt, double az, double roll) {
   const cv::Matx33d Rroll = rot(cv::Vec3d(0, 0, roll));
   const cv::Matx33d Rtilt = rot(cv::Vec3d(std::cos(az), std::sin(az), 0) * tilt);
   Pose P;
   P.R = Rtilt * Rroll;
-  const cv::Vec3d centre((o.cols - 1) * o.square / 2, (o.rows - 1) * o.square / 2, 0);
-  P.t = cv::Vec3d(nx * d, ny * d, d) - P.R * centre;
+  P.t = cv::Vec3d(nx * d, ny * d, d) - P.R * page.centre();
   return P;
 }
 
@@ -487,11 +579,12 @@ int main(int argc, char** argv) {
   {
     cv::FileStorage fsw((root / "camera.yml").string(), cv::FileStorage::WRITE);
     fsw << "K" << cv::Mat(cam.K) << "D" << cv::Mat(cam.D) << "width" << o.width << "height" << o.height;
-    fsw << "cols" << o.cols << "rows" << o.rows << "square" << o.square << "seed" << static_cast<int>(o.seed)
-        << "ss" << o.ss << "blur" << o.blur_sigma << "noise" << o.noise_sigma;
+    fsw << "cols" << o.cols << "rows" << o.rows << "square" << o.square << "spacing" << o.spacing << "seed"
+        << static_cast<int>(o.seed) << "ss" << o.ss << "blur" << o.blur_sigma << "noise" << o.noise_sigma;
   }
-  const std::vector<cv::Point3d> corners = inner_corners(o);
-  const std::vector<cv::Point3d> edge = outline(o);
+  const Page page(o);
+  const std::vector<cv::Point3d> corners = page.points();
+  const std::vector<cv::Point3d> edge = outline(page);
   const cv::Size big(o.width * o.ss, o.height * o.ss);
   std::uniform_real_distribution<double> u(0, 1);
 
@@ -517,7 +610,7 @@ int main(int argc, char** argv) {
         const double az = 2 * CV_PI * u(rng), roll = 2 * CV_PI * u(rng);
         const double nx = nimg[0].x + (nimg[1].x - nimg[0].x) * u(rng);
         const double ny = nimg[0].y + (nimg[1].y - nimg[0].y) * u(rng);
-        P = make_pose(o, nx, ny, d, tilt, az, roll);
+        P = make_pose(page, nx, ny, d, tilt, az, roll);
         if (!in_front(edge, P) && want_full) continue;
         if (!in_front(corners, P)) continue;
         const auto out = project(edge, P, cam);
@@ -535,7 +628,7 @@ int main(int argc, char** argv) {
         }
       }
       cv::Mat img = plain_background(big, rng);
-      render_board(rays, P, o, make_gain(big, rng), img);
+      render_board(rays, P, page, make_gain(big, rng), img);
       cv::imwrite(frame_name(root / "board", f), finish(img, o, rng));
       write_truth(truth, poses, f, P, px, want_full);
       n_full += want_full ? 1 : 0;
@@ -581,13 +674,13 @@ int main(int argc, char** argv) {
       const double tilt = std::min(std::hypot(ax, ay), o.max_tilt_deg * CV_PI / 180);
       const double az = std::atan2(ay, ax);
       const double roll = 0.5 * wr(t);
-      const Pose P = make_pose(o, nx, ny, d, tilt, az, roll);
+      const Pose P = make_pose(page, nx, ny, d, tilt, az, roll);
       const auto px = project(corners, P, cam);
       const auto out = project(edge, P, cam);
       bool full = in_front(edge, P);
       for (const auto& p : out) full = full && inside(p, cam, 1.0);
       cv::Mat img = bg.clone();
-      render_board(rays, P, o, gain, img);
+      render_board(rays, P, page, gain, img);
       cv::imwrite(frame_name(root / "motion", f), finish(img, o, rng));
       write_truth(truth, poses, f, P, px, full);
       n_full += full ? 1 : 0;
