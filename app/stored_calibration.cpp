@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "core/text_file.hpp"
+#include "core/text_format.hpp"
 #include "core/version.hpp"
 #include "drivers/storage/storage_device.hpp"
 
@@ -52,19 +53,11 @@ json yaml_to_json(const YAML::Node& n) {
   }
 }
 
-std::string utc_now() {
-  const std::time_t t = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
-
 json new_payload() {
-  return {{"format", kCalibrationFormat}, {"version", kCalibrationPayloadVersion},
-          {"created_utc", utc_now()},     {"software_version", kVersion},
-          {"cameras", json::array()},     {"source", {{"files", json::array()}, {"notes", json::array()}}}};
+  return {
+      {"format", kCalibrationFormat},     {"version", kCalibrationPayloadVersion},
+      {"created_utc", utc_now_iso8601()}, {"software_version", kVersion},
+      {"cameras", json::array()},         {"source", {{"files", json::array()}, {"notes", json::array()}}}};
 }
 
 // The canonical block (A_a, b_a, A_g, b_g, G, form) of a result, with its stream and units.

@@ -29,6 +29,7 @@
 #include <opencv2/core.hpp>
 #include <optional>
 
+#include "core/text_format.hpp"
 #include "core/threads.hpp"
 
 namespace imucal::calib {
@@ -36,12 +37,6 @@ namespace {
 
 using Vec2 = Eigen::Vector2d;
 using Pose = std::array<double, 7>;  // qw qx qy qz (Ceres order), tx ty tz: p_cam = R p_target + t
-
-std::string fmt(const char* format, double value) {
-  char text[64];
-  std::snprintf(text, sizeof text, format, value);
-  return text;
-}
 
 double cpu_now_s() {
   timespec ts{};
@@ -442,8 +437,9 @@ void reject_views(const CameraModel& camera, std::vector<View>& views, const Cam
     result->views[views[i].report].rms_px = rms[i];
     if (!(rms[i] <= limit)) {
       reject_view(views[i], result,
-                  "reprojection RMS " + fmt("%.3g", rms[i]) + " px, above " + fmt("%.3g", limit) + " px (" +
-                      fmt("%g", options.view_rms_factor) + " x the median " + fmt("%.3g", med) + " px)");
+                  "reprojection RMS " + format_number("%.3g", rms[i]) + " px, above " +
+                      format_number("%.3g", limit) + " px (" + format_number("%g", options.view_rms_factor) +
+                      " x the median " + format_number("%.3g", med) + " px)");
     }
   }
 }
@@ -476,7 +472,7 @@ int reject_corners(const CameraModel& camera, std::vector<View>& views,
     if (v.kept() < options.min_points_per_view) {
       reject_view(v, result,
                   "too few points (" + std::to_string(v.kept()) + ") after rejecting corners beyond " +
-                      fmt("%.3g", limit) + " px");
+                      format_number("%.3g", limit) + " px");
     }
   }
   return dropped;
@@ -574,7 +570,7 @@ void fill_uncertainty(IntrinsicsProblem& problem, double cost, const CameraIntri
   if (!result->focal_well_determined) {
     result->warnings.push_back(
         std::string("the focal length is not determined by these views (") +
-        (result->covariance_ok ? "relative sigma " + fmt("%.2g", rel)
+        (result->covariance_ok ? "relative sigma " + format_number("%.2g", rel)
                                : std::string("rank-deficient covariance")) +
         "): views all facing the camera cannot tell the focal length from the distance; record the target "
         "tilted by 30-45 degrees in several directions and at several distances");
@@ -583,7 +579,7 @@ void fill_uncertainty(IntrinsicsProblem& problem, double cost, const CameraIntri
 
 void add_quality_warnings(CameraIntrinsicsResult* result) {
   if (result->coverage < 0.5) {
-    result->warnings.push_back("the corners cover only " + fmt("%.0f", 100.0 * result->coverage) +
+    result->warnings.push_back("the corners cover only " + format_number("%.0f", 100.0 * result->coverage) +
                                " % of the image (" + std::to_string(result->coverage_cols) + " x " +
                                std::to_string(result->coverage_rows) +
                                " cells): the distortion is extrapolated elsewhere; show the target near the "

@@ -15,15 +15,10 @@
 #include "calib/gravity.hpp"
 #include "calib/static_detector.hpp"
 #include "calib/static_scan.hpp"
+#include "core/text_format.hpp"
 
 namespace imucal::calib {
 namespace {
-
-std::string fmt(const char* format, double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), format, v);
-  return buf;
-}
 
 double rad_to_deg(double rad) { return rad * 180.0 / M_PI; }
 
@@ -104,8 +99,9 @@ std::vector<Hold> find_holds(const ScannedRecording& scan, const GSensitivityOpt
   }
   if (short_runs > 0) {
     warnings->push_back(std::to_string(short_runs) + " still period(s) shorter than " +
-                        fmt("%.0f", opt.min_hold_s) + " s (after trimming " + fmt("%.1f", opt.window_s) +
-                        " s at each end; the longest " + fmt("%.1f", longest_short_s) +
+                        format_number("%.0f", opt.min_hold_s) + " s (after trimming " +
+                        format_number("%.1f", opt.window_s) + " s at each end; the longest " +
+                        format_number("%.1f", longest_short_s) +
                         " s) were not used: hold each face still for about 30 s");
   }
   return holds;
@@ -127,19 +123,21 @@ Status check_faces(const std::vector<Hold>& holds, const GSensitivityOptions& op
     if (seconds[f] == 0.0) {
       missing += std::string(missing.empty() ? "" : ", ") + kFaceNames[f];
     } else {
-      found += std::string(found.empty() ? "" : ", ") + kFaceNames[f] + " " + fmt("%.0f", seconds[f]) + " s";
+      found += std::string(found.empty() ? "" : ", ") + kFaceNames[f] + " " +
+               format_number("%.0f", seconds[f]) + " s";
     }
   }
   if (missing.empty()) return {};
-  return make_error(Errc::kInsufficientData,
-                    "the six-orientation experiment needs a still hold of at least " +
-                        fmt("%.0f", opt.min_hold_s) + " s with each face up; none was found with " + missing +
-                        " up (found: " + (found.empty() ? "none" : found) +
-                        (tilted > 0 ? "; " + std::to_string(tilted) + " hold(s) more than " +
-                                          fmt("%.0f", opt.max_face_angle_deg) + " deg from every face"
-                                    : std::string()) +
-                        "). Record again: hold the rig still for about 30 s with each of the six faces up in "
-                        "turn (face +x up: the accelerometer's x axis reads +g)");
+  return make_error(
+      Errc::kInsufficientData,
+      "the six-orientation experiment needs a still hold of at least " +
+          format_number("%.0f", opt.min_hold_s) + " s with each face up; none was found with " + missing +
+          " up (found: " + (found.empty() ? "none" : found) +
+          (tilted > 0 ? "; " + std::to_string(tilted) + " hold(s) more than " +
+                            format_number("%.0f", opt.max_face_angle_deg) + " deg from every face"
+                      : std::string()) +
+          "). Record again: hold the rig still for about 30 s with each of the six faces up in "
+          "turn (face +x up: the accelerometer's x axis reads +g)");
 }
 
 /// White noise density and bias random walk of each gyro axis from the Allan deviation pooled over
@@ -299,7 +297,8 @@ void warn_about_holds(const GSensitivityOptions& opt, GSensitivityResult* res) {
     if (h.rotation_deg > res->holds[worst].rotation_deg) worst = k;
     if (h.tilt_deg > opt.max_rotation_deg) {
       res->warnings.push_back(name(k) + " is rotating: its gravity direction turns " +
-                              fmt("%.2f", h.tilt_deg) + " deg (limit " + fmt("%.1f", opt.max_rotation_deg) +
+                              format_number("%.2f", h.tilt_deg) + " deg (limit " +
+                              format_number("%.1f", opt.max_rotation_deg) +
                               " deg), and G absorbs the gyro's reading of the turn. Clamp the rig or hold it "
                               "still, and record again");
     }
@@ -308,14 +307,15 @@ void warn_about_holds(const GSensitivityOptions& opt, GSensitivityResult* res) {
   if (w.rotation_deg > opt.max_rotation_deg) {
     res->warnings.push_back(
         "the gyro means do not fit b_g + H a: " + name(worst) + " is " +
-        fmt("%.2g", w.residual_radps.norm()) + " rad/s off the fit, " + fmt("%.2f", w.rotation_deg) +
-        " deg over the hold (limit " + fmt("%.1f", opt.max_rotation_deg) +
+        format_number("%.2g", w.residual_radps.norm()) + " rad/s off the fit, " +
+        format_number("%.2f", w.rotation_deg) + " deg over the hold (limit " +
+        format_number("%.1f", opt.max_rotation_deg) +
         " deg): a hold turned (about the vertical, which the accelerometer cannot see), or "
         "the bias jumped. Clamp the rig or hold it still, and record again");
   }
   if (res->chi2_per_dof > 4.0) {
     res->warnings.push_back(
-        "the holds' gyro means scatter about the fit " + fmt("%.1f", std::sqrt(res->chi2_per_dof)) +
+        "the holds' gyro means scatter about the fit " + format_number("%.1f", std::sqrt(res->chi2_per_dof)) +
         " times more than their noise (white noise and bias random walk) explains: a hold "
         "turned, the bias drifted with temperature, or the response is not linear in a; the "
         "sigmas were widened by that factor");
@@ -327,7 +327,8 @@ void warn_about_holds(const GSensitivityOptions& opt, GSensitivityResult* res) {
 Status GSensitivityOptions::validate() const {
   auto fail = [](const std::string& msg) -> Status { return make_error(Errc::kInvalidArgument, msg); };
   if (!(gravity_mps2 > 9.7 && gravity_mps2 < 9.9)) {
-    return fail("gravity " + fmt("%g", gravity_mps2) + " m/s^2 is not a terrestrial value (9.7..9.9)");
+    return fail("gravity " + format_number("%g", gravity_mps2) +
+                " m/s^2 is not a terrestrial value (9.7..9.9)");
   }
   if (latitude_deg && !(std::abs(*latitude_deg) <= 90.0))
     return fail("the latitude must be in [-90, 90] deg");

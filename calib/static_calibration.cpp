@@ -598,7 +598,7 @@ std::string refusal(const SearchPass& pass, const StaticCalibrationOptions& opt)
   const std::string missing = missing_faces_in_words(pass.best_faces);
   std::string msg = "found at most " + std::to_string(pass.best_distinct) + " distinct static attitudes (" +
                     std::to_string(pass.best_intervals) + " static intervals of at least " +
-                    fmt("%.1f", opt.min_interval_s) + " s) with any threshold multiplier in [" +
+                    format_number("%.1f", opt.min_interval_s) + " s) with any threshold multiplier in [" +
                     std::to_string(opt.multiplier_min) + ", " + std::to_string(opt.multiplier_max) + "]; ";
   switch (opt.accel_model) {
     case AccelModel::kFull:
@@ -617,7 +617,7 @@ std::string refusal(const SearchPass& pass, const StaticCalibrationOptions& opt)
       break;
   }
   if (std::all_of(pass.best_faces.begin(), pass.best_faces.end(), [](int n) { return n == 0; })) {
-    msg += ". None of the poses lies within " + fmt("%.0f", opt.face_max_angle_deg) +
+    msg += ". None of the poses lies within " + format_number("%.0f", opt.face_max_angle_deg) +
            " deg of a face (gravity along one axis), so the six-face form cannot be used either";
   } else if (!missing.empty()) {
     msg += ". No pose was held with " + missing + ": hold the rig that way too";
@@ -683,9 +683,9 @@ Result<Candidate> search_threshold(const ScannedRecording& scan, const StaticDet
     warnings->push_back(
         std::to_string(best->rotated) +
         " static interval(s) were dropped because the rig turned inside them: " + "the gyro shows up to " +
-        fmt("%.1f", best->worst_rotation_deg) + " deg beyond its bias" +
+        format_number("%.1f", best->worst_rotation_deg) + " deg beyond its bias" +
         (opt.gsens == GSensitivityMode::kOff ? "" : " and g-sensitivity") + " (more than " +
-        fmt("%.1f", opt.max_rotation_in_static_deg) + " deg): hold the poses steadier");
+        format_number("%.1f", opt.max_rotation_in_static_deg) + " deg): hold the poses steadier");
   }
   return std::move(*best);
 }
@@ -755,12 +755,12 @@ Status solve_accelerometer(const Candidate& best, AccelModel model, std::span<co
     if (res->poses_off_faces > 0) {
       res->warnings.push_back(
           std::to_string(res->poses_off_faces) + " static pose(s) lie on no face (more than " +
-          fmt("%.0f", opt.face_max_angle_deg) +
+          format_number("%.0f", opt.face_max_angle_deg) +
           " deg from every axis): left out of the accelerometer fit, used for the gyroscope");
     }
     if (fit.direction_rms_rad > 1.0 * M_PI / 180.0) {
       res->warnings.push_back(
-          "the poses lie " + fmt("%.2f", fit.direction_rms_rad * 180.0 / M_PI) +
+          "the poses lie " + format_number("%.2f", fit.direction_rms_rad * 180.0 / M_PI) +
           " deg RMS from their faces' axes: they were not flat on level faces, and the "
           "misalignment is only as good as that (--accel-model scale-bias fits scales and "
           "biases without assuming the faces)");
@@ -792,7 +792,7 @@ Status solve_accelerometer(const Candidate& best, AccelModel model, std::span<co
       res->warnings.push_back("the accelerometer misalignment was not determined (held at zero; " +
                               res->accel_model_reason +
                               "); the scale and bias sigmas include a misalignment of " +
-                              fmt("%.3f", opt.misalignment_prior_rad) + " rad");
+                              format_number("%.3f", opt.misalignment_prior_rad) + " rad");
     } else {
       res->accel_model = StaticAccelModel::kFull;
       res->accel_model_reason = std::to_string(best.distinct) + " distinct attitudes (" +

@@ -714,8 +714,8 @@ Status solve_gyroscope(std::vector<Transfer>* transfers, const GyroSolveInput& b
     res->warnings.push_back(
         "the " + std::to_string(transfers->size()) +
         " motions between the static poses do not determine the gyroscope's " + names + " (sigma above " +
-        fmt("%.3f", opt.gyro_max_misalignment_sigma_rad) + " rad or " +
-        fmt("%.1f", 100.0 * opt.gyro_max_scale_rel_sigma) +
+        format_number("%.3f", opt.gyro_max_misalignment_sigma_rad) + " rad or " +
+        format_number("%.1f", 100.0 * opt.gyro_max_scale_rel_sigma) +
         " %): held at nominal (no misalignment, the nominal scale). Turn the rig about each "
         "of its three axes between holds, both ways");
   }

@@ -17,16 +17,11 @@
 #include "calib/static_calibration.hpp"
 #include "calib/static_detector.hpp"
 #include "calib/static_scan.hpp"
+#include "core/text_format.hpp"
 
 namespace imucal::calib {
 
 using Vec9 = Eigen::Matrix<double, 9, 1>;
-
-inline std::string fmt(const char* format, double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), format, v);
-  return buf;
-}
 
 /// Square roots of a covariance's diagonal; NaN (undetermined) stays NaN.
 inline Eigen::VectorXd sigmas_of(const Eigen::MatrixXd& cov) {

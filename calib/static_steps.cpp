@@ -30,17 +30,18 @@ Result<std::size_t> given_still_start(std::span<const ImuSample> samples, const 
   const std::size_t n = samples.size();
   if (init_still_s < min_init_still_s) {
     return make_error(Errc::kInvalidArgument,
-                      "the initial still period " + fmt("%.1f", init_still_s) + " s is too short: at least " +
-                          fmt("%.0f", min_init_still_s) +
+                      "the initial still period " + format_number("%.1f", init_still_s) +
+                          " s is too short: at least " + format_number("%.0f", min_init_still_s) +
                           " s are needed for the bias and the noise level (the protocol asks for about 50 s)")
         .with_remedy("init_still_s");
   }
   std::size_t n_init = 0;
   while (n_init < n && seconds_from_start(samples, n_init) < init_still_s) ++n_init;
   if (n_init >= n) {
-    return make_error(Errc::kInvalidArgument, "the initial still period " + fmt("%.1f", init_still_s) +
-                                                  " s is longer than the recording (" +
-                                                  fmt("%.1f", seconds_from_start(samples, n - 1)) + " s)");
+    return make_error(Errc::kInvalidArgument,
+                      "the initial still period " + format_number("%.1f", init_still_s) +
+                          " s is longer than the recording (" +
+                          format_number("%.1f", seconds_from_start(samples, n - 1)) + " s)");
   }
   for (std::size_t i = 0; i < n_init; ++i) {
     const bool interior = i >= det.half && i + det.half < n_init;
@@ -49,7 +50,7 @@ Result<std::size_t> given_still_start(std::span<const ImuSample> samples, const 
       return make_error(Errc::kInsufficientData,
                         "the given initial still period is not still: the rig moves (or the log has a "
                         "device reset or saturation) at t = " +
-                            fmt("%.2f", seconds_from_start(samples, i)) +
+                            format_number("%.2f", seconds_from_start(samples, i)) +
                             " s. Give an initial still period (init_still_s) no longer than that, or "
                             "record again starting with the rig at rest for about 50 s")
           .with_remedy("init_still_s");
@@ -73,8 +74,9 @@ Result<std::size_t> automatic_still_start(std::span<const ImuSample> samples, co
   if (still_s < min_init_still_s) {
     return make_error(Errc::kInsufficientData,
                       "no still period at the start of the recording: the rig is still for only " +
-                          fmt("%.1f", still_s) + " s (at least " + fmt("%.0f", min_init_still_s) +
-                          " s needed; it moves at t = " + fmt("%.2f", still_s) +
+                          format_number("%.1f", still_s) + " s (at least " +
+                          format_number("%.0f", min_init_still_s) +
+                          " s needed; it moves at t = " + format_number("%.2f", still_s) +
                           " s, where both sensors' variance exceeds 10 times their quietest level). "
                           "Record again starting with the rig at rest for about 50 s")
         .with_remedy("init_still_s");
@@ -109,7 +111,7 @@ Result<StillStart> find_still_start(std::span<const ImuSample> samples, const Sc
   still.samples = n_init;
   still.length_s = seconds_from_start(samples, n_init - 1) + scan.period_s;
   if (still.length_s < 10.0) {
-    warnings->push_back("the still start is only " + fmt("%.1f", still.length_s) +
+    warnings->push_back("the still start is only " + format_number("%.1f", still.length_s) +
                         " s: the noise level that sets the static threshold and the Allan check of the "
                         "bias rest on few samples; record about 50 s of rest before the first pose");
   }

@@ -18,6 +18,7 @@
 #include <sstream>
 
 #include "core/text_file.hpp"
+#include "core/text_format.hpp"
 
 namespace imucal {
 
@@ -93,12 +94,6 @@ std::string num(double v) {
   auto [ptr, ec] = std::to_chars(buf, buf + sizeof buf, v);
   (void)ec;  // 64 bytes always hold the shortest form of a double
   return std::string(buf, ptr);
-}
-
-std::string hex(int v) {
-  char buf[16];
-  std::snprintf(buf, sizeof buf, "0x%02x", v);
-  return buf;
 }
 
 std::size_t edit_distance(const std::string& a, const std::string& b) {
@@ -772,7 +767,9 @@ std::string rig_config_to_yaml(const RigConfig& c) {
   out << YAML::Key << "imu" << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "bus" << YAML::Value << imu_bus_name(c.imu.bus);
   out << YAML::Key << "device" << YAML::Value << c.imu.device;
-  if (c.imu.bus == ImuBus::kI2c) out << YAML::Key << "i2c_address" << YAML::Value << hex(c.imu.i2c_address);
+  if (c.imu.bus == ImuBus::kI2c)
+    out << YAML::Key << "i2c_address" << YAML::Value
+        << format_hex(static_cast<unsigned long>(c.imu.i2c_address), 2);
   if (c.imu.bus == ImuBus::kSpi) {
     out << YAML::Key << "spi_config_speed_hz" << YAML::Value << c.imu.spi_config_speed_hz;
     out << YAML::Key << "spi_data_speed_hz" << YAML::Value << c.imu.spi_data_speed_hz;
@@ -818,7 +815,8 @@ std::string rig_config_to_yaml(const RigConfig& c) {
   out << YAML::Key << "backend" << YAML::Value << storage_backend_name(c.storage.backend);
   if (c.storage.backend == StorageBackend::kI2cEeprom) {
     out << YAML::Key << "i2c_device" << YAML::Value << c.storage.i2c_device;
-    out << YAML::Key << "i2c_address" << YAML::Value << hex(c.storage.i2c_address);
+    out << YAML::Key << "i2c_address" << YAML::Value
+        << format_hex(static_cast<unsigned long>(c.storage.i2c_address), 2);
     out << YAML::Key << "page_bytes" << YAML::Value << c.storage.page_bytes;
     out << YAML::Key << "address_bytes" << YAML::Value << c.storage.address_bytes;
   } else {

@@ -28,6 +28,7 @@
 #include <thread>
 #include <utility>
 
+#include "core/text_format.hpp"
 #include "core/version.hpp"
 #include "log/dataset_io.hpp"
 #include "log/session_log.hpp"
@@ -42,15 +43,6 @@ constexpr const char* kKeySchemaVersion = "schema_version";
 constexpr const char* kKeySoftwareVersion = "software_version";
 constexpr const char* kKeyCreatedUtc = "created_utc";
 constexpr const char* kKeyComplete = "complete";
-
-std::string utc_now_iso8601() {
-  const std::time_t now = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&now, &tm);
-  char text[32];
-  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return text;
-}
 
 // Binds one sample value: NaN as NULL; in raw streams an integral value as INTEGER (exact up
 // to 2^53); everything else as REAL (an exact double round trip).

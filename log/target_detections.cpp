@@ -5,6 +5,7 @@
 #include <ctime>
 #include <filesystem>
 
+#include "core/text_format.hpp"
 #include "log/session_log_sqlite.hpp"
 
 namespace imucal::log {
@@ -28,15 +29,6 @@ CREATE TABLE IF NOT EXISTS target_detections(
   data TEXT NOT NULL,
   PRIMARY KEY(stream_id, target_key, t_ns));
 )sql";
-
-std::string utc_now_iso8601() {
-  const std::time_t now = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&now, &tm);
-  char text[32];
-  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return text;
-}
 
 std::string column_text(sqlite3_stmt* stmt, int index) {
   const auto* text = sqlite3_column_text(stmt, index);

@@ -9,6 +9,7 @@
 
 #include "app/initial_guess.hpp"
 #include "app/session/session_window.hpp"
+#include "core/text_format.hpp"
 
 namespace imucal::app::session {
 
@@ -19,14 +20,6 @@ namespace {
 constexpr StepId kAllSteps[] = {StepId::kPreflight, StepId::kWarmup, StepId::kStill,
                                 StepId::kPoses,     StepId::kGsens,  StepId::kMotion,
                                 StepId::kSolve,     StepId::kReview, StepId::kWrite};
-
-std::string fixed(double v, int digits) {
-  std::ostringstream s;
-  s.setf(std::ios::fixed);
-  s.precision(digits);
-  s << v;
-  return s.str();
-}
 
 }  // namespace
 

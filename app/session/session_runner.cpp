@@ -13,6 +13,7 @@
 #include "app/result_writers.hpp"
 #include "app/solvers.hpp"
 #include "calib/target_detection.hpp"
+#include "core/text_format.hpp"
 #include "core/version.hpp"
 #include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
@@ -26,11 +27,7 @@ namespace {
 
 /// <rig>-YYYYmmddTHHMMSSZ, with -2, -3, ... when it exists already.
 Result<std::string> make_session_dir(const std::string& state_dir, const std::string& rig) {
-  const std::time_t now = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&now, &tm);
-  char stamp[32];
-  std::strftime(stamp, sizeof stamp, "%Y%m%dT%H%M%SZ", &tm);
+  const std::string stamp = utc_now("%Y%m%dT%H%M%SZ");
   const std::filesystem::path base = std::filesystem::path(state_dir) / "sessions";
   std::error_code ec;
   std::filesystem::create_directories(base, ec);

@@ -7,6 +7,7 @@
 
 #include "app/session/session_engine.hpp"
 #include "app/session/session_window.hpp"
+#include "core/text_format.hpp"
 
 namespace imucal::app::session {
 
@@ -16,14 +17,6 @@ namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 constexpr TimeNs kLiveIntervalNs = 250'000'000;  // live figures 4 times a second of sample time
-
-std::string fixed(double v, int digits) {
-  std::ostringstream s;
-  s.setf(std::ios::fixed);
-  s.precision(digits);
-  s << v;
-  return s.str();
-}
 
 double seconds(TimeNs ns) { return static_cast<double>(ns) * 1e-9; }
 

@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <sstream>
 
+#include "core/text_format.hpp"
+
 namespace imucal::ctl {
 namespace {
 
@@ -50,12 +52,6 @@ const json& array(const json& j, const char* key) {
     }
   }
   return empty;
-}
-
-std::string fixed(double value, int digits) {
-  char buffer[64];
-  std::snprintf(buffer, sizeof(buffer), "%.*f", digits, value);
-  return buffer;
 }
 
 std::string mark(const std::string& state) {

@@ -53,10 +53,4 @@ std::string DeviceFile::node_name() const {
   return slash == std::string::npos ? path_ : path_.substr(slash + 1);
 }
 
-std::string format_hex(unsigned long value, int digits) {
-  char buf[24];
-  std::snprintf(buf, sizeof buf, "0x%0*lX", digits, value);
-  return buf;
-}
-
 }  // namespace imucal::drivers

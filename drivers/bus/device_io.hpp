@@ -6,6 +6,8 @@
 #include <memory>
 #include <string>
 
+#include "core/text_format.hpp"
+
 namespace imucal::drivers {
 
 /// The system calls a bus makes on its device node. The default forwards to the kernel; tests
@@ -49,8 +51,5 @@ class DeviceFile {
   std::unique_ptr<DeviceIo> io_;
   int fd_ = -1;
 };
-
-/// `value` as "0x" and `digits` upper-case hex digits (at least): format_hex(0x68, 2) is "0x68".
-std::string format_hex(unsigned long value, int digits);
 
 }  // namespace imucal::drivers

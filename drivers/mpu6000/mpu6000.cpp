@@ -8,6 +8,8 @@
 #include <numbers>
 #include <sstream>
 
+#include "core/text_format.hpp"
+
 namespace imucal::drivers::mpu6000 {
 
 namespace {
@@ -32,12 +34,6 @@ constexpr double kMinTempC = -40.0;
 constexpr double kMaxTempC = 85.0;
 
 constexpr std::uint8_t u8(Register r) { return static_cast<std::uint8_t>(r); }
-
-std::string hex2(unsigned v) {
-  char buf[8];
-  std::snprintf(buf, sizeof buf, "0x%02X", v & 0xFFu);
-  return buf;
-}
 
 std::int16_t temp_raw(double t_c) {
   return static_cast<std::int16_t>(std::lround((t_c - kTempOffsetDegC) * kTempLsbPerDegC));
@@ -190,8 +186,8 @@ Status Mpu6000::probe() {
   if (!who.ok()) return who.error().context("MPU-6000 on " + bus_.name() + ": reading WHO_AM_I failed");
   if (*who != WHOAMI) {
     return make_error(Errc::kDevice,
-                      "MPU-6000 on " + bus_.name() + ": WHO_AM_I reads " + hex2(*who) + ", expected " +
-                          hex2(WHOAMI) +
+                      "MPU-6000 on " + bus_.name() + ": WHO_AM_I reads " + format_hex(*who, 2) +
+                          ", expected " + format_hex(WHOAMI, 2) +
                           "; check the bus, chip select and wiring, or whether this is another chip");
   }
   return {};
@@ -295,17 +291,17 @@ Result<PollResult> Mpu6000::poll_wait_for_reset(TimeNs now_ns) {
     if (*who != WHOAMI) {
       if (++who_mismatches_ >= kMaxWhoAmIMismatches) {
         return make_error(Errc::kDevice,
-                          "MPU-6000 on " + bus_.name() + ": WHO_AM_I reads " + hex2(*who) + ", expected " +
-                              hex2(WHOAMI) +
+                          "MPU-6000 on " + bus_.name() + ": WHO_AM_I reads " + format_hex(*who, 2) +
+                              ", expected " + format_hex(WHOAMI, 2) +
                               "; check the bus, chip select and wiring, or whether this is another chip");
       }
-      return retry("WHO_AM_I reads " + hex2(*who));
+      return retry("WHO_AM_I reads " + format_hex(*who, 2));
     }
     who_mismatches_ = 0;
     auto pwr = read_reg(Register::PWR_MGMT_1);
     if (!pwr.ok()) return retry("reading PWR_MGMT_1 failed: " + pwr.error().message);
     if (*pwr != kPwrMgmt1ResetValue)
-      return retry("PWR_MGMT_1 reads " + hex2(*pwr) + " after reset, expected 0x40");
+      return retry("PWR_MGMT_1 reads " + format_hex(*pwr, 2) + " after reset, expected 0x40");
     if (!write_reg(Register::SIGNAL_PATH_RESET, GYRO_RESET | ACCEL_RESET | TEMP_RESET).ok()) {
       return retry("writing SIGNAL_PATH_RESET failed");
     }
@@ -339,7 +335,7 @@ Result<PollResult> Mpu6000::poll_configure(TimeNs now_ns) {
       if (!good.ok() || !*good) {
         ok = false;
         if (good.ok()) ++counters_.config_mismatches;
-        last_problem_ = "register " + hex2(u8(row.reg)) + " did not read back as configured";
+        last_problem_ = "register " + format_hex(u8(row.reg), 2) + " did not read back as configured";
         break;
       }
     }
@@ -452,7 +448,7 @@ Mpu6000::StreamStep Mpu6000::check_next_config_row(TimeNs now_ns, PollResult& re
   }
   if (lost) {
     ++counters_.config_mismatches;
-    last_problem_ = "register " + hex2(u8(row.reg)) + " lost its configuration";
+    last_problem_ = "register " + format_hex(u8(row.reg), 2) + " lost its configuration";
     request_reset(now_ns);
     result.batch->flags |= kImuFlagGapBefore | kImuFlagDeviceReset;
     result.next_poll_ns = now_ns;

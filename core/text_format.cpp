@@ -1,0 +1,37 @@
+#include "core/text_format.hpp"
+
+#include <cstdio>
+#include <ctime>
+
+namespace imucal {
+
+std::string fixed(double value, int digits) {
+  char text[64];
+  std::snprintf(text, sizeof text, "%.*f", digits, value);
+  return text;
+}
+
+std::string format_number(const char* format, double value) {
+  char text[64];
+  std::snprintf(text, sizeof text, format, value);
+  return text;
+}
+
+std::string format_hex(unsigned long value, int digits) {
+  char text[24];
+  std::snprintf(text, sizeof text, "0x%0*lX", digits, value);
+  return text;
+}
+
+std::string utc_now(const char* format) {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char text[64];
+  std::strftime(text, sizeof text, format, &tm);
+  return text;
+}
+
+std::string utc_now_iso8601() { return utc_now("%Y-%m-%dT%H:%M:%SZ"); }
+
+}  // namespace imucal

@@ -1,0 +1,22 @@
+#pragma once
+// Small text helpers every layer uses for messages, reports and file stamps (one home each).
+
+#include <string>
+
+namespace imucal {
+
+/// `value` with `digits` digits after the point ("%.*f"): fixed(1.23456, 2) is "1.23".
+std::string fixed(double value, int digits);
+
+/// `value` through one printf conversion for a double (`format` such as "%.3f" or "%+.2e").
+std::string format_number(const char* format, double value);
+
+/// `value` as "0x" and `digits` upper-case hex digits (at least): format_hex(0x68, 2) is "0x68".
+std::string format_hex(unsigned long value, int digits);
+
+/// The current UTC time through strftime's `format`; utc_now_iso8601() is
+/// "YYYY-mm-ddTHH:MM:SSZ".
+std::string utc_now(const char* format);
+std::string utc_now_iso8601();
+
+}  // namespace imucal
