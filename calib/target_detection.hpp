@@ -45,7 +45,8 @@ namespace imucal::calib {
 ///    AprilGrid quads only in the region where the frame before puts the grid.
 /// 7: the junction grid smooths through sepFilter2D (its junctions move by hundredths of a
 ///    pixel); an AprilGrid tag is kept only with its corners on X junctions.
-inline constexpr int kTargetDetectorRevision = 7;
+/// 8: libapriltag's threshold needs 12 grey levels between a tile's brightest and darkest (5).
+inline constexpr int kTargetDetectorRevision = 8;
 
 /// The target points one image shows.
 struct TargetObservation {

@@ -877,6 +877,46 @@ TEST(AprilGridDetection, TagCornersOffTheGridsJunctionsAreLeftOut) {
   EXPECT_LT(g.err.max_px, 0.5);
 }
 
+// A dim grid of little contrast (a dark room: black 35 grey levels, white 60 or 48, lens blur
+// and noise) is found as with libapriltag's own threshold setting: the detector raises the
+// difference between a tile's brightest and darkest that libapriltag needs (to skip textured
+// backgrounds, docs/targets.md, settings): at 12 it finds what the default 5 finds, at 20 the
+// grid 13 grey levels apart gives 8 and 16 points instead of 44 and 52.
+TEST(AprilGridDetection, ADimGridLosesNoTagToTheRaisedThreshold) {
+  const TargetDescription t = aprilgrid();
+  auto det = make_detector(t);
+  ASSERT_TRUE(det);
+  struct Case {
+    double white_dn;
+    double distance_m;
+    int at_least;  // points: what libapriltag's default threshold (5) gives
+  };
+  for (const Case& c :
+       {Case{60.0, 0.8, 128}, Case{60.0, 1.4, 132}, Case{48.0, 0.8, 44}, Case{48.0, 1.4, 52}}) {
+    test::AprilGridImageOptions dim;
+    dim.white_dn = c.white_dn;
+    dim.black_dn = 35.0;
+    dim.background_dn = 30.0;
+    dim.blur_sigma_px = 0.8;
+    test::AprilGridImage img =
+        test::render_aprilgrid(t, grid_homography(t, 0.1, Eigen::Vector3d(0.2, 0.15, 0), c.distance_m), dim);
+    cv::Mat noise(img.image.size(), CV_16S);
+    cv::RNG rng(7);
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.5);
+    cv::Mat noisy;
+    img.image.convertTo(noisy, CV_16S);
+    noisy += noise;
+    noisy.convertTo(img.image, CV_8U);
+    const GridResult g = detect_grid(*det, img);
+    EXPECT_GE(static_cast<int>(g.obs.ids.size()), c.at_least)
+        << "white " << c.white_dn << " at " << c.distance_m << " m";
+    EXPECT_LT(g.err.max_px, c.white_dn > 50.0 ? 0.5 : 1.0)
+        << "white " << c.white_dn << " at " << c.distance_m << " m";
+    std::printf("dim aprilgrid, white %.0f at %.1f m: %zu points, worst corner %.2f px\n", c.white_dn,
+                c.distance_m, g.obs.ids.size(), g.err.max_px);
+  }
+}
+
 TEST(AprilGridDetection, PartialViewGivesTheTagsInView) {
   const TargetDescription t = aprilgrid();
   auto det = make_detector(t);
