@@ -12,6 +12,7 @@
 #include <string>
 
 #include "daemon/ctl/console.hpp"
+#include "daemon/service/protocol.hpp"
 
 namespace imucal::ctl {
 namespace {
@@ -214,11 +215,13 @@ int attach(Connection& connection, const AttachOptions& options) {
   const bool tty = ::isatty(STDOUT_FILENO) != 0;
   Console console(connection, options.observe, tty);
   std::vector<json> early;
-  const json hello{
-      {"cmd", "hello"}, {"client", "imucalctl"}, {"role", options.observe ? "observer" : "controller"}};
-  auto replied = connection.request(hello, &early);
+  service::Request hello;
+  hello.command = service::Command::kHello;
+  hello.client = "imucalctl";
+  hello.role = options.observe ? service::Role::kObserver : service::Role::kController;
+  auto replied = connection.request(service::to_json(hello), &early);
   if (replied) {
-    replied = connection.request({{"cmd", "subscribe"}}, &early);
+    replied = connection.request(service::to_json({.command = service::Command::kSubscribe}), &early);
   }
   if (!replied) {
     std::fprintf(stderr, "imucalctl: %s\n", replied.error().message.c_str());

@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "core/text_format.hpp"
+#include "daemon/service/protocol.hpp"
 
 namespace imucal::ctl {
 namespace {
@@ -224,8 +225,10 @@ void update(ConsoleState& state, const json& message) {
   } else if (type == "reply") {
     if (!flag(message, "ok", true)) {
       state.notice = str(message, "cmd") + " refused: " + str(message, "error");
-    } else if (str(message, "cmd") == "key" || str(message, "cmd") == "abort" ||
-               str(message, "cmd") == "accept") {
+    } else if (const std::string cmd = str(message, "cmd");
+               cmd == service::command_name(service::Command::kKey) ||
+               cmd == service::command_name(service::Command::kAbort) ||
+               cmd == service::command_name(service::Command::kAccept)) {
       state.notice.clear();
     }
   }
@@ -339,14 +342,16 @@ KeyAction on_key(ConsoleState& state, char key) {
   if (state.confirm_abort) {
     state.confirm_abort = false;
     if (key == 'y') {
-      return {json{{"cmd", "abort"}}, false};
+      return {service::to_json({.command = service::Command::kAbort}), false};
     }
     return {};
   }
   if (state.observe) {
     return {};
   }
-  auto send_key = [](const char* name) { return KeyAction{json{{"cmd", "key"}, {"key", name}}, false}; };
+  auto send_key = [](const char* name) {
+    return KeyAction{service::to_json({.command = service::Command::kKey, .key = name}), false};
+  };
   switch (key) {
     case 'c':
     case ' ':

@@ -16,12 +16,14 @@
 #include "daemon/ctl/attach.hpp"
 #include "daemon/ctl/client.hpp"
 #include "daemon/ctl/console.hpp"
+#include "daemon/service/protocol.hpp"
 
 namespace {
 
 using imucal::ctl::ConnectFailure;
 using imucal::ctl::Connection;
 using nlohmann::json;
+namespace service = imucal::service;
 
 constexpr int kRefused = 1;  // also: the service went away
 constexpr int kNoService = 3;
@@ -64,7 +66,8 @@ int connect(const std::string& path, std::optional<Connection>& connection) {
 
 int run_status(Connection& connection, bool as_json) {
   std::vector<json> messages;
-  if (auto reply = connection.request({{"cmd", "status"}}, &messages); !reply) {
+  if (auto reply = connection.request(service::to_json({.command = service::Command::kStatus}), &messages);
+      !reply) {
     return fail(reply.error().message, kRefused);
   }
   // The status message follows its reply.
@@ -82,8 +85,9 @@ int run_status(Connection& connection, bool as_json) {
 
 // A control request: claims the controller role for this connection, then sends it.
 int run_control(Connection& connection, const json& request) {
-  const json hello{{"cmd", "hello"}, {"client", "imucalctl"}, {"role", "controller"}};
-  if (auto reply = connection.request(hello); !reply) {
+  const service::Request hello{
+      .command = service::Command::kHello, .client = "imucalctl", .role = service::Role::kController};
+  if (auto reply = connection.request(service::to_json(hello)); !reply) {
     return fail(reply.error().message, kRefused);
   }
   if (auto reply = connection.request(request); !reply) {
@@ -138,13 +142,13 @@ int main(int argc, char** argv) {
     return run_status(*connection, as_json);
   }
   if (start->parsed()) {
-    return run_control(*connection, {{"cmd", "start"}, {"steps", steps}});
+    return run_control(*connection, service::to_json({.command = service::Command::kStart, .steps = steps}));
   }
   if (abort->parsed()) {
-    return run_control(*connection, {{"cmd", "abort"}});
+    return run_control(*connection, service::to_json({.command = service::Command::kAbort}));
   }
   if (accept->parsed()) {
-    return run_control(*connection, {{"cmd", "accept"}});
+    return run_control(*connection, service::to_json({.command = service::Command::kAccept}));
   }
   return imucal::ctl::attach(*connection, {observe});
 }

@@ -145,6 +145,28 @@ Result<Request> parse_request(std::string_view line) {
   return request;
 }
 
+json to_json(const Request& request) {
+  json object{{"cmd", command_name(request.command)}};
+  switch (request.command) {
+    case Command::kHello:
+      if (!request.client.empty()) object["client"] = request.client;
+      object["role"] = request.role == Role::kController ? "controller" : "observer";
+      break;
+    case Command::kStart:
+      if (!request.steps.empty()) object["steps"] = request.steps;
+      break;
+    case Command::kKey:
+      object["key"] = request.key;
+      break;
+    case Command::kStatus:
+    case Command::kSubscribe:
+    case Command::kAbort:
+    case Command::kAccept:
+      break;
+  }
+  return object;
+}
+
 std::string command_of(std::string_view line) {
   const json object = json::parse(line.begin(), line.end(), nullptr, /*allow_exceptions=*/false);
   if (object.is_object()) {

@@ -33,6 +33,10 @@ bool is_control(Command command);  // start, key, abort, accept: controller only
 /// some; a missing or mistyped required field is an error that names it.
 Result<Request> parse_request(std::string_view line);
 
+/// The request as its line's JSON object (parse_request's inverse): clients build their
+/// requests here, so both ends share the protocol's words.
+nlohmann::json to_json(const Request& request);
+
 /// The "cmd" of a line that may not parse as a request, for its error reply ("" when none).
 std::string command_of(std::string_view line);
 

@@ -82,6 +82,31 @@ TEST(ControlRequest, ParsesEveryCommand) {
   EXPECT_FALSE(is_control(Command::kSubscribe));
 }
 
+// Clients build their requests with to_json (imucalctl does): every one parses back to itself,
+// so the client and the service cannot drift apart in the protocol's words.
+TEST(ControlRequest, EveryRequestAClientBuildsParsesBackToItself) {
+  std::vector<Request> requests{
+      {.command = Command::kHello, .client = "imucalctl", .role = Role::kController},
+      {.command = Command::kHello, .client = "observer-x", .role = Role::kObserver},
+      {.command = Command::kStatus},
+      {.command = Command::kSubscribe},
+      {.command = Command::kStart},
+      {.command = Command::kStart, .steps = {"poses", "solve"}},
+      {.command = Command::kAbort, .key = "abort"},
+      {.command = Command::kAccept, .key = "accept"}};
+  for (const std::string& key : operator_keys()) requests.push_back({.command = Command::kKey, .key = key});
+  for (const Request& sent : requests) {
+    const std::string line = to_line(to_json(sent));
+    auto got = parse_request(std::string_view(line).substr(0, line.size() - 1));
+    ASSERT_TRUE(got.ok()) << line << ": " << got.error().message;
+    EXPECT_EQ(got->command, sent.command) << line;
+    EXPECT_EQ(got->client, sent.client) << line;
+    EXPECT_EQ(got->role, sent.role) << line;
+    EXPECT_EQ(got->steps, sent.steps) << line;
+    EXPECT_EQ(got->key, sent.key) << line;
+  }
+}
+
 TEST(ControlRequest, RefusesMalformedRequestsWithAReason) {
   for (const char* line :
        {"", "not json", "[1,2]", "42", R"({"cmd":5})", R"({"cmd":"nope"})", R"({"cmd":"key"})",
