@@ -8,7 +8,13 @@
 #   calib         core
 #   sim           everything below app (it drives the fakes through drivers and acquisition)
 #   app           core, drivers (no fakes), log, acquisition, calib: it is on the rig's path
-#   daemon        everything
+#   daemon/common core (what the programs share: option checks)
+#   daemon/service core (the control socket and the protocol's words; no session logic)
+#   daemon/ctl    core, the protocol's words (daemon/service/protocol.hpp) and nothing else of
+#                 the service: the client is a separate program
+#   daemon/imucald core, drivers, acquisition, app, sim (the virtual rig, whose cameras are
+#                 drivers/camera/fake), daemon/service, daemon/common
+#   daemon/cli    everything but the other programs (daemon/imucald, daemon/ctl, daemon/service)
 set -u
 root=${1:?usage: check_layering.sh SOURCE_DIR}
 cd "$root" || exit 2
@@ -40,5 +46,18 @@ check "drivers (real backends)" "drivers/[a-z0-9_]+/fake/" $real_drivers
 check acquisition "calib/|sim/|drivers/[a-z0-9_]+/fake/|$others"
 check sim "$others"
 check app "sim/|daemon/|drivers/[a-z0-9_]+/fake/"
+programs='daemon/cli/|daemon/ctl/|daemon/imucald/|daemon/service/'
+check daemon/common "drivers/|log/|acquisition/|calib/|sim/|app/|$programs"
+check daemon/service "drivers/|log/|acquisition/|calib/|sim/|app/|daemon/cli/|daemon/ctl/|daemon/imucald/|daemon/common/"
+ctl_service=$(grep -rnE '#include [<"]daemon/service/' daemon/ctl --include='*.hpp' --include='*.cpp' 2>/dev/null |
+  grep -v 'daemon/service/protocol.hpp')
+if [ -n "$ctl_service" ]; then
+  echo "layering violation: daemon/ctl may use only daemon/service/protocol.hpp of the service:"
+  echo "$ctl_service"
+  bad=1
+fi
+check daemon/ctl "drivers/|log/|acquisition/|calib/|sim/|app/|daemon/cli/|daemon/imucald/|daemon/common/"
+check daemon/imucald "log/|calib/|daemon/cli/|daemon/ctl/"
+check daemon/cli "daemon/imucald/|daemon/ctl/|daemon/service/"
 [ "$bad" = 0 ] && echo "layering OK"
 exit $bad

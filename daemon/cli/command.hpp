@@ -10,7 +10,7 @@
 #include <string>
 
 #include "core/result.hpp"
-#include "daemon/cli/number_check.hpp"
+#include "daemon/common/number_check.hpp"
 
 namespace imucal::cli {
 
@@ -46,7 +46,7 @@ class CommandRegistrar {
   CommandRegistrar(int order, Setup setup);
 };
 
-/// Option checks with short messages (daemon/cli/number_check.hpp): a finite number above zero,
+/// Option checks with short messages (daemon/common/number_check.hpp): a finite number above zero,
 /// at zero or above, or any finite number; a value that is not empty.
 extern const CLI::Validator kPositive;
 extern const CLI::Validator kNonNegative;

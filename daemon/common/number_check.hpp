@@ -1,6 +1,7 @@
 #pragma once
 // CLI11 checks for option values that say what is wanted in a short message, unlike CLI11's
-// PositiveNumber, whose range names the largest double in 310 digits. Used by imucal and imucald.
+// PositiveNumber, whose range names the largest double in 310 digits. Used by imucal and imucald
+// (daemon/common/: what the programs share, header-only).
 
 #include <CLI/CLI.hpp>
 #include <charconv>

@@ -9,7 +9,7 @@
 #include <sstream>
 
 #include "core/version.hpp"
-#include "daemon/cli/number_check.hpp"
+#include "daemon/common/number_check.hpp"
 #include "daemon/imucald/service_app.hpp"
 
 int main(int argc, char** argv) {
