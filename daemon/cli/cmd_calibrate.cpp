@@ -41,25 +41,6 @@ struct StaticCliOptions {
   std::string json_path;
 };
 
-/// "v" -> (v, v, v); "a,b,c" -> (a, b, c).
-Eigen::Vector3d parse_triple(const std::string& text, const std::string& option) {
-  std::vector<double> v;
-  std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    try {
-      std::size_t used = 0;
-      v.push_back(std::stod(item, &used));
-      if (used != item.size() || !std::isfinite(v.back())) throw std::invalid_argument(item);
-    } catch (const std::exception&) {
-      throw CliExit{kExitUsage, option + ": '" + item + "' is not a number"};
-    }
-  }
-  if (v.size() == 1) return Eigen::Vector3d::Constant(v[0]);
-  if (v.size() == 3) return {v[0], v[1], v[2]};
-  throw CliExit{kExitUsage, option + " takes one value for all three axes or three comma-separated values"};
-}
-
 /// The method's options from the command line (without the nominal guesses, which need the log).
 calib::StaticCalibrationOptions method_options(const StaticCliOptions& o, double gravity_mps2) {
   calib::StaticCalibrationOptions opt;

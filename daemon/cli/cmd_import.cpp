@@ -47,27 +47,6 @@ void add_raw(CLI::App* cmd, RawOptions& o) {
                 "Skip the check that the values look like the units given with --units");
 }
 
-/// "S" or "Sx,Sy,Sz" into `out`; `flag` names the option in errors.
-void parse_triple(const std::string& text, const std::string& flag, Eigen::Vector3d& out) {
-  if (text.empty()) return;
-  std::vector<double> values;
-  std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    auto v = log::parse_double(item);
-    if (!v.ok()) throw CliExit{kExitUsage, flag + ": " + v.error().message + " (give S or Sx,Sy,Sz)"};
-    values.push_back(*v);
-  }
-  if (values.size() == 1) {
-    out = Eigen::Vector3d::Constant(values[0]);
-  } else if (values.size() == 3) {
-    out = Eigen::Vector3d(values[0], values[1], values[2]);
-  } else {
-    throw CliExit{kExitUsage,
-                  flag + ": expected one value or three comma-separated values, got '" + text + "'"};
-  }
-}
-
 void apply_raw(const RawOptions& o, ImuUnits& units, AxisConversion& accel, AxisConversion& gyro) {
   units = o.units == "raw" ? ImuUnits::kRaw : ImuUnits::kSi;
   const bool any =
@@ -76,10 +55,10 @@ void apply_raw(const RawOptions& o, ImuUnits& units, AxisConversion& accel, Axis
     throw CliExit{kExitUsage,
                   "--accel-scale/--accel-offset/--gyro-scale/--gyro-offset apply to --units raw only"};
   }
-  parse_triple(o.accel_scale, "--accel-scale", accel.scale);
-  parse_triple(o.accel_offset, "--accel-offset", accel.offset);
-  parse_triple(o.gyro_scale, "--gyro-scale", gyro.scale);
-  parse_triple(o.gyro_offset, "--gyro-offset", gyro.offset);
+  if (!o.accel_scale.empty()) accel.scale = parse_triple(o.accel_scale, "--accel-scale");
+  if (!o.accel_offset.empty()) accel.offset = parse_triple(o.accel_offset, "--accel-offset");
+  if (!o.gyro_scale.empty()) gyro.scale = parse_triple(o.gyro_scale, "--gyro-scale");
+  if (!o.gyro_offset.empty()) gyro.offset = parse_triple(o.gyro_offset, "--gyro-offset");
   if ((accel.scale.array() == 0).any() || (gyro.scale.array() == 0).any()) {
     throw CliExit{kExitUsage, "a scale of 0 would erase the signal; give the unit per count"};
   }

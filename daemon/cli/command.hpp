@@ -4,6 +4,7 @@
 // subcommand's callback throws CliExit to end with a given exit code and message.
 
 #include <CLI/CLI.hpp>
+#include <Eigen/Core>
 #include <chrono>
 #include <cstdio>
 #include <functional>
@@ -52,6 +53,11 @@ extern const CLI::Validator kPositive;
 extern const CLI::Validator kNonNegative;
 extern const CLI::Validator kFinite;
 extern const CLI::Validator kNonEmpty;
+
+/// An option's value for the three axes: "V" -> (V, V, V), "Vx,Vy,Vz" -> the three, each a
+/// finite number (log::parse_double's rules); anything else ends the program with a usage error
+/// that names `option`.
+Eigen::Vector3d parse_triple(const std::string& text, const std::string& option);
 
 /// True when stderr is a terminal.
 bool stderr_is_tty();

@@ -12,12 +12,14 @@
 #include <cstring>
 #include <iostream>
 #include <map>
+#include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "core/version.hpp"
 #include "daemon/cli/command.hpp"
+#include "log/dataset_io.hpp"
 
 namespace imucal::cli {
 namespace {
@@ -81,6 +83,22 @@ std::string with_flag_hints(const Error& error, const std::string& what) {
     message += (i == 0 ? "; options: " : ", ") + remedy_flag(error.remedies[i]);
   }
   return message;
+}
+
+Eigen::Vector3d parse_triple(const std::string& text, const std::string& option) {
+  std::vector<double> values;
+  std::stringstream items(text);
+  std::string item;
+  while (std::getline(items, item, ',')) {
+    auto v = log::parse_double(item);
+    if (!v.ok()) throw CliExit{kExitUsage, option + ": " + v.error().message + " (give V or Vx,Vy,Vz)"};
+    values.push_back(*v);
+  }
+  if (values.size() == 1) return Eigen::Vector3d::Constant(values[0]);
+  if (values.size() == 3) return {values[0], values[1], values[2]};
+  throw CliExit{
+      kExitUsage,
+      option + ": expected one value for all three axes or three comma-separated values, got '" + text + "'"};
 }
 
 void fail(const Error& error, const std::string& what) {
