@@ -215,13 +215,12 @@ int attach(Connection& connection, const AttachOptions& options) {
   const bool tty = ::isatty(STDOUT_FILENO) != 0;
   Console console(connection, options.observe, tty);
   std::vector<json> early;
-  service::Request hello;
-  hello.command = service::Command::kHello;
-  hello.client = "imucalctl";
-  hello.role = options.observe ? service::Role::kObserver : service::Role::kController;
+  const service::Request hello = service::hello_request(
+      "imucalctl", options.observe ? service::Role::kObserver : service::Role::kController);
   auto replied = connection.request(service::to_json(hello), &early);
   if (replied) {
-    replied = connection.request(service::to_json({.command = service::Command::kSubscribe}), &early);
+    replied =
+        connection.request(service::to_json(service::plain_request(service::Command::kSubscribe)), &early);
   }
   if (!replied) {
     std::fprintf(stderr, "imucalctl: %s\n", replied.error().message.c_str());

@@ -342,7 +342,7 @@ KeyAction on_key(ConsoleState& state, char key) {
   if (state.confirm_abort) {
     state.confirm_abort = false;
     if (key == 'y') {
-      return {service::to_json({.command = service::Command::kAbort}), false};
+      return {service::to_json(service::plain_request(service::Command::kAbort)), false};
     }
     return {};
   }
@@ -350,7 +350,7 @@ KeyAction on_key(ConsoleState& state, char key) {
     return {};
   }
   auto send_key = [](const char* name) {
-    return KeyAction{service::to_json({.command = service::Command::kKey, .key = name}), false};
+    return KeyAction{service::to_json(service::key_request(name)), false};
   };
   switch (key) {
     case 'c':

@@ -66,7 +66,8 @@ int connect(const std::string& path, std::optional<Connection>& connection) {
 
 int run_status(Connection& connection, bool as_json) {
   std::vector<json> messages;
-  if (auto reply = connection.request(service::to_json({.command = service::Command::kStatus}), &messages);
+  if (auto reply =
+          connection.request(service::to_json(service::plain_request(service::Command::kStatus)), &messages);
       !reply) {
     return fail(reply.error().message, kRefused);
   }
@@ -85,8 +86,7 @@ int run_status(Connection& connection, bool as_json) {
 
 // A control request: claims the controller role for this connection, then sends it.
 int run_control(Connection& connection, const json& request) {
-  const service::Request hello{
-      .command = service::Command::kHello, .client = "imucalctl", .role = service::Role::kController};
+  const service::Request hello = service::hello_request("imucalctl", service::Role::kController);
   if (auto reply = connection.request(service::to_json(hello)); !reply) {
     return fail(reply.error().message, kRefused);
   }
@@ -142,13 +142,13 @@ int main(int argc, char** argv) {
     return run_status(*connection, as_json);
   }
   if (start->parsed()) {
-    return run_control(*connection, service::to_json({.command = service::Command::kStart, .steps = steps}));
+    return run_control(*connection, service::to_json(service::start_request(steps)));
   }
   if (abort->parsed()) {
-    return run_control(*connection, service::to_json({.command = service::Command::kAbort}));
+    return run_control(*connection, service::to_json(service::plain_request(service::Command::kAbort)));
   }
   if (accept->parsed()) {
-    return run_control(*connection, service::to_json({.command = service::Command::kAccept}));
+    return run_control(*connection, service::to_json(service::plain_request(service::Command::kAccept)));
   }
   return imucal::ctl::attach(*connection, {observe});
 }

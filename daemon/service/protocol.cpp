@@ -167,6 +167,36 @@ json to_json(const Request& request) {
   return object;
 }
 
+Request hello_request(std::string client, Role role) {
+  Request r;
+  r.command = Command::kHello;
+  r.client = std::move(client);
+  r.role = role;
+  return r;
+}
+
+Request start_request(std::vector<std::string> steps) {
+  Request r;
+  r.command = Command::kStart;
+  r.steps = std::move(steps);
+  return r;
+}
+
+Request key_request(std::string key) {
+  Request r;
+  r.command = Command::kKey;
+  r.key = std::move(key);
+  return r;
+}
+
+Request plain_request(Command command) {
+  Request r;
+  r.command = command;
+  if (command == Command::kAbort) r.key = "abort";
+  if (command == Command::kAccept) r.key = "accept";
+  return r;
+}
+
 std::string command_of(std::string_view line) {
   const json object = json::parse(line.begin(), line.end(), nullptr, /*allow_exceptions=*/false);
   if (object.is_object()) {

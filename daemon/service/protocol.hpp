@@ -37,6 +37,13 @@ Result<Request> parse_request(std::string_view line);
 /// requests here, so both ends share the protocol's words.
 nlohmann::json to_json(const Request& request);
 
+/// Requests as a client sends them: hello with its name and role, start with its steps (empty:
+/// the configured ones), key with an operator key, and the commands without fields.
+Request hello_request(std::string client, Role role);
+Request start_request(std::vector<std::string> steps);
+Request key_request(std::string key);
+Request plain_request(Command command);
+
 /// The "cmd" of a line that may not parse as a request, for its error reply ("" when none).
 std::string command_of(std::string_view line);
 

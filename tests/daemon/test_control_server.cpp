@@ -85,16 +85,15 @@ TEST(ControlRequest, ParsesEveryCommand) {
 // Clients build their requests with to_json (imucalctl does): every one parses back to itself,
 // so the client and the service cannot drift apart in the protocol's words.
 TEST(ControlRequest, EveryRequestAClientBuildsParsesBackToItself) {
-  std::vector<Request> requests{
-      {.command = Command::kHello, .client = "imucalctl", .role = Role::kController},
-      {.command = Command::kHello, .client = "observer-x", .role = Role::kObserver},
-      {.command = Command::kStatus},
-      {.command = Command::kSubscribe},
-      {.command = Command::kStart},
-      {.command = Command::kStart, .steps = {"poses", "solve"}},
-      {.command = Command::kAbort, .key = "abort"},
-      {.command = Command::kAccept, .key = "accept"}};
-  for (const std::string& key : operator_keys()) requests.push_back({.command = Command::kKey, .key = key});
+  std::vector<Request> requests{hello_request("imucalctl", Role::kController),
+                                hello_request("observer-x", Role::kObserver),
+                                plain_request(Command::kStatus),
+                                plain_request(Command::kSubscribe),
+                                start_request({}),
+                                start_request({"poses", "solve"}),
+                                plain_request(Command::kAbort),
+                                plain_request(Command::kAccept)};
+  for (const std::string& key : operator_keys()) requests.push_back(key_request(key));
   for (const Request& sent : requests) {
     const std::string line = to_line(to_json(sent));
     auto got = parse_request(std::string_view(line).substr(0, line.size() - 1));
