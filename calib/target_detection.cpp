@@ -873,9 +873,17 @@ bool AprilGridDetector::tag_corner_shaped(const cv::Mat& image, const std::vecto
   auto level = [&](cv::Point2f d) {
     const float len = std::hypot(d.x, d.y);
     if (len < 1.0f) d *= 1.0f / std::max(len, 1e-3f);  // at least a pixel out
-    cv::Mat patch;
-    cv::getRectSubPix(image, cv::Size(1, 1), p + d, patch, CV_32F);
-    return patch.at<float>(0, 0);
+    // Bilinear, clamped to the image (a probe near the border reads the border's pixels).
+    const cv::Point2f q = p + d;
+    const float x = std::clamp(q.x, 0.0f, static_cast<float>(image.cols - 1));
+    const float y = std::clamp(q.y, 0.0f, static_cast<float>(image.rows - 1));
+    const int x0 = std::min(static_cast<int>(x), image.cols - 2);
+    const int y0 = std::min(static_cast<int>(y), image.rows - 2);
+    const float fx = x - static_cast<float>(x0);
+    const float fy = y - static_cast<float>(y0);
+    const std::uint8_t* r0 = image.ptr<std::uint8_t>(y0) + x0;
+    const std::uint8_t* r1 = image.ptr<std::uint8_t>(y0 + 1) + x0;
+    return (1.0f - fy) * ((1.0f - fx) * r0[0] + fx * r0[1]) + fy * ((1.0f - fx) * r1[0] + fx * r1[1]);
   };
   const float tag = level(f * (e1 + e2));
   const float square = level(-f * (e1 + e2));

@@ -5,32 +5,15 @@
 #include <fcntl.h>
 #include <sys/file.h>
 #include <sys/stat.h>
-#include <sys/sysmacros.h>
 #include <unistd.h>
 
-#include <algorithm>
 #include <cerrno>
-#include <cmath>
-#include <cstdio>
 #include <cstring>
-#include <ctime>
 #include <filesystem>
 #include <fstream>
-#include <future>
 #include <iterator>
-#include <limits>
-#include <mutex>
-#include <optional>
-#include <set>
-#include <sstream>
 #include <system_error>
-#include <thread>
-#include <utility>
 
-#include "core/text_format.hpp"
-#include "core/version.hpp"
-#include "log/dataset_io.hpp"
-#include "log/session_log.hpp"
 #include "log/session_log_sqlite.hpp"
 
 namespace imucal::log::sqlite {
