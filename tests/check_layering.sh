@@ -12,8 +12,9 @@
 #   daemon/service core (the control socket and the protocol's words; no session logic)
 #   daemon/ctl    core, the protocol's words (daemon/service/protocol.hpp) and nothing else of
 #                 the service: the client is a separate program
-#   daemon/imucald core, drivers, acquisition, app, sim (the virtual rig, whose cameras are
-#                 drivers/camera/fake), daemon/service, daemon/common
+#   daemon/imucald core, drivers (no fakes), acquisition, app, daemon/service, daemon/common, and
+#                 of sim/ only the virtual rig module's interface (sim/service_rig.hpp): the
+#                 rig's service loads the virtual rig, it does not link it
 #   daemon/cli    everything but the other programs (daemon/imucald, daemon/ctl, daemon/service)
 set -u
 root=${1:?usage: check_layering.sh SOURCE_DIR}
@@ -57,7 +58,14 @@ if [ -n "$ctl_service" ]; then
   bad=1
 fi
 check daemon/ctl "drivers/|log/|acquisition/|calib/|sim/|app/|daemon/cli/|daemon/imucald/|daemon/common/"
-check daemon/imucald "log/|calib/|daemon/cli/|daemon/ctl/"
+imucald_sim=$(grep -rnE '#include [<"]sim/' daemon/imucald --include='*.hpp' --include='*.cpp' 2>/dev/null |
+  grep -v 'sim/service_rig.hpp')
+if [ -n "$imucald_sim" ]; then
+  echo "layering violation: daemon/imucald may use only sim/service_rig.hpp of the simulator:"
+  echo "$imucald_sim"
+  bad=1
+fi
+check daemon/imucald "log/|calib/|drivers/[a-z0-9_]+/fake/|daemon/cli/|daemon/ctl/"
 check daemon/cli "daemon/imucald/|daemon/ctl/|daemon/service/"
 [ "$bad" = 0 ] && echo "layering OK"
 exit $bad

@@ -24,12 +24,12 @@
 #include "daemon/cli/command.hpp"
 #include "drivers/camera/fake/virtual_camera.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
-#include "sim/camimu.hpp"
 #include "sim/imu_error_model.hpp"
 #include "sim/motion.hpp"
 #include "sim/realtime.hpp"
 #include "sim/render_module.hpp"
 #include "sim/rig.hpp"
+#include "sim/virtual_cameras.hpp"
 
 namespace imucal::cli {
 namespace {
@@ -169,28 +169,16 @@ std::vector<std::unique_ptr<drivers::camera::Camera>> make_sim_cameras(
     render = *module;
   }
   for (const CameraConfig& cc : config.cameras) {
-    sim::SimCameraScene scene;
-    scene.camera = sim::sim_camera_for(cc.width, cc.height);
-    scene.target = *config.target;
-    scene.T_cam_imu = sim::CamImuSimOptions::default_T_cam_imu();
-    scene.timeshift_cam_imu_s = 0.0;  // the virtual camera stamps on the host clock exactly
-    scene.exposure_ns = 4'000'000;
-    scene.seed = a.seed + cameras.size();
-    scene.host_offset_ns = start_ns;
+    const sim::SimCameraScene scene =
+        sim::virtual_camera_scene(cc, *config.target, a.seed, cameras.size(), start_ns);
     auto renderer = render != nullptr
                         ? take(render->scene_renderer(scene, motion, motion->T_world_board(scene.target)),
                                "simulated camera " + cc.name)
                         : drivers::camera::fake::test_pattern_renderer(cc.width, cc.height, scene.seed);
-    drivers::camera::fake::VirtualCameraOptions vo;
-    vo.id = cc.name;
-    vo.width = cc.width;
-    vo.height = cc.height;
-    vo.rate_hz = cc.rate_hz;
-    vo.exposure_ns = scene.exposure_ns;
-    vo.first_frame_ns = start_ns + kNsPerSecond;
-    vo.clock = clock;
-    auto camera = take(drivers::camera::fake::VirtualCamera::create(vo, std::move(renderer)),
-                       "simulated camera " + cc.name);
+    sim::VirtualCameraTiming timing;
+    timing.first_frame_ns = start_ns + kNsPerSecond;
+    timing.clock = clock;
+    auto camera = take(sim::make_virtual_camera(cc, std::move(renderer), timing), "simulated camera");
     auto st = camera->set_format({cc.width, cc.height, cc.pixel_format, cc.rate_hz});
     if (!st.ok())
       throw CliExit{kExitUsage, "camera " + cc.name + " in " + a.config_path + ": " + st.error().message};

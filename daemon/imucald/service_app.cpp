@@ -11,7 +11,6 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <numbers>
 #include <sstream>
 #include <thread>
 
@@ -20,11 +19,6 @@
 #include "app/stored_calibration.hpp"
 #include "core/version.hpp"
 #include "drivers/storage/storage_device.hpp"
-#include "sim/camera_scene.hpp"
-#include "sim/camimu.hpp"
-#include "sim/motion.hpp"
-#include "sim/render_module.hpp"
-#include "sim/truth.hpp"
 
 namespace imucal::imucald {
 
@@ -32,42 +26,9 @@ using nlohmann::json;
 
 namespace {
 
-constexpr TimeNs kSimTickNs = 20'000'000;  // the virtual rig is advanced 20 ms of rig time per tick
-
 std::string storage_name(const StorageConfig& s) {
   return std::string(storage_backend_name(s.backend)) + " " +
          (s.backend == StorageBackend::kI2cEeprom ? s.i2c_device : s.path);
-}
-
-/// The session's result beside the virtual rig's truth (the correction that inverts its error
-/// model, in the frame the static method reports in), one line per quantity.
-std::string truth_comparison(const json& imu, const CanonicalImuModel& truth, bool counts) {
-  auto vec = [](const json& j) {
-    return Eigen::Vector3d(j[0].get<double>(), j[1].get<double>(), j[2].get<double>());
-  };
-  auto mat = [&](const json& j) {
-    Eigen::Matrix3d m;
-    for (int r = 0; r < 3; ++r) m.row(r) = vec(j[r]).transpose();
-    return m;
-  };
-  std::ostringstream out;
-  out.setf(std::ios::scientific);
-  out.precision(5);
-  auto row = [&](const std::string& name, const Eigen::Vector3d& est, const Eigen::Vector3d& tru) {
-    out << "  " << name << "\n    estimated " << est.transpose() << "\n    true      " << tru.transpose()
-        << "\n    error     " << (est - tru).transpose() << "\n";
-  };
-  const char* unit = counts ? " (counts)" : "";
-  row(std::string("accel scale diag(A_a)"), mat(imu["A_a"]).diagonal(), truth.A_a.diagonal());
-  row(std::string("accel bias b_a") + unit, vec(imu["b_a"]), truth.b_a);
-  row(std::string("gyro scale diag(A_g)"), mat(imu["A_g"]).diagonal(), truth.A_g.diagonal());
-  row(std::string("gyro bias b_g") + unit, vec(imu["b_g"]), truth.b_g);
-  const Eigen::Matrix3d dA_a = mat(imu["A_a"]) - truth.A_a, dA_g = mat(imu["A_g"]) - truth.A_g;
-  const Eigen::Matrix3d dG = mat(imu["G"]) - truth.G;
-  out << "  largest error: A_a " << dA_a.cwiseAbs().maxCoeff() << ", A_g " << dA_g.cwiseAbs().maxCoeff()
-      << ", G " << dG.cwiseAbs().maxCoeff() << " (rad/s per m/s^2; true G max "
-      << truth.G.cwiseAbs().maxCoeff() << ")\n";
-  return out.str();
 }
 
 /// Whether the service may write the storage, without writing it: an existing device or file is
@@ -82,32 +43,6 @@ std::string storage_unwritable(const StorageConfig& config) {
   }
   auto device = drivers::open_storage_device(config, drivers::StorageAccess::kWrite);
   return device.ok() ? std::string() : device.error().message;
-}
-
-/// The camera-IMU results beside the virtual cameras' truth (every virtual camera is mounted
-/// at CamImuSimOptions::default_T_cam_imu and stamps with no offset).
-std::string camera_truth_comparison(const json& cameras) {
-  const Eigen::Isometry3d T = sim::CamImuSimOptions::default_T_cam_imu();
-  const Eigen::Quaterniond q_true(T.rotation());
-  std::ostringstream out;
-  out.setf(std::ios::fixed);
-  for (const auto& c : cameras) {
-    const auto& t = c.at("t_cam_imu_m");
-    const auto& qj = c.at("q_cam_imu_wxyz");
-    const Eigen::Vector3d est(t[0].get<double>(), t[1].get<double>(), t[2].get<double>());
-    const Eigen::Quaterniond q(qj[0].get<double>(), qj[1].get<double>(), qj[2].get<double>(),
-                               qj[3].get<double>());
-    out.precision(2);
-    out << "  " << c.value("name", "cam") << " t_cam_imu (mm)\n    estimated " << (est * 1e3).transpose()
-        << "\n    true      " << (T.translation() * 1e3).transpose() << "\n    error     "
-        << ((est - T.translation()) * 1e3).transpose() << "\n";
-    out.precision(4);
-    out << "  " << c.value("name", "cam") << " rotation error "
-        << q.angularDistance(q_true) * 180.0 / std::numbers::pi << " deg, time offset "
-        << c.value("timeshift_cam_imu_s", 0.0) * 1e3 << " ms (true 0), reprojection RMS "
-        << c.value("reprojection_rms_px", 0.0) << " px\n";
-  }
-  return out.str();
 }
 
 /// A camera's frame as the session takes it: 8-bit grey rows without padding, stamped at
@@ -216,33 +151,8 @@ Status Service::init() {
 Status Service::open_imu() {
   close_imu();
   if (options_.sim) {
-    auto settings = app::driver_settings(config_.imu);
-    if (!settings.ok()) return settings.error();
-    auto mounting = app::imu_mounting(config_.imu);
-    if (!mounting.ok()) return mounting.error();
-    sim::SessionRigOptions so;
-    so.settings = *settings;
-    so.mounting = *mounting;
-    so.seed = options_.seed;
-    auto rig = sim::SessionRig::create(so);
-    if (!rig.ok()) return rig.error();
-    sim_rig_ = std::move(*rig);
+    IMUCAL_TRY(open_virtual_rig());
     stream_info_ = sim_rig_->stream_info();
-    IMUCAL_TRY(prepare_sim_cameras());
-    if (!options_.sim_operator.empty()) {
-      sim::ScriptedOperatorOptions oo;
-      oo.seed = options_.seed;
-      oo.press_keys = options_.sim_operator == "full";
-      oo.wave = sim_motion_;
-      if (sim_motion_) oo.wave_T_op_motion = sim::follow_transform(*sim_motion_);
-      operator_ =
-          std::make_unique<sim::ScriptedOperator>(sim_rig_->trajectory(), oo, [this](const std::string& k) {
-            if (auto s = runner_->engine().key(k); !s.ok())
-              spdlog::warn("scripted operator: key {}: {}", k, s.error().message);
-          });
-    }
-    sim_wall_start_ = std::chrono::steady_clock::now();
-    sim_rig_start_ns_ = sim_rig_->now_ns();
     imu_state_ = "open";
     if (!runner_ || !runner_->engine().running()) set_gyro_offsets(true);
     boost::asio::post(io_, [this] { sim_tick(); });
@@ -272,53 +182,53 @@ void Service::close_imu() {
   sim_timer_.cancel();
   acquisition_.reset();
   rig_.reset();
-  operator_.reset();
   sim_rig_.reset();
   if (imu_state_ == "open") imu_state_ = "closed";
 }
 
+Status Service::open_virtual_rig() {
+  auto module =
+      app::load_module<sim::VirtualRigModuleApi>(sim::kVirtualRigModule, sim::kVirtualRigModuleEntry);
+  if (!module.ok()) return module.error().context("the virtual rig");
+  auto settings = app::driver_settings(config_.imu);
+  if (!settings.ok()) return settings.error();
+  auto mounting = app::imu_mounting(config_.imu);
+  if (!mounting.ok()) return mounting.error();
+  sim::ServiceRigOptions so;
+  so.settings = *settings;
+  so.mounting = *mounting;
+  so.cameras = config_.cameras;
+  so.target = config_.target;
+  so.motion_s = config_.session.motion_s;
+  so.seed = options_.seed;
+  so.time_scale = options_.time_scale;
+  so.operator_mode = options_.sim_operator;
+  so.press_key = [this](const std::string& k) {
+    if (auto s = runner_->engine().key(k); !s.ok())
+      spdlog::warn("scripted operator: key {}: {}", k, s.error().message);
+  };
+  auto rig = (*module)->create(so);
+  if (!rig.ok()) return rig.error();
+  sim_rig_ = std::move(*rig);
+  return {};
+}
+
 void Service::sim_tick() {
   if (!sim_rig_ || quit_) return;
-  // On accelerated time the virtual rig waits while a solve or a write runs: at hundreds of times
-  // real time it would otherwise move on by minutes during a quick solve that a rig's operator
-  // does not even notice. At real time (scale 1) it runs on, as a rig does.
-  if (options_.time_scale != 1.0 && runner_->busy()) {
-    sim_timer_.expires_after(std::chrono::milliseconds(2));
-    sim_timer_.async_wait([this](const boost::system::error_code& ec) {
-      if (!ec) sim_tick();
-    });
-    paused_ = true;
+  auto tick =
+      sim_rig_->tick(runner_->busy(), [this](std::span<const ImuSample> batch) { on_samples(batch); });
+  if (!tick.ok()) {
+    imu_failed(tick.error());
     return;
   }
-  if (paused_) {
-    // Wall time spent waiting does not count as rig time.
-    paused_ = false;
-    const double rig_s = static_cast<double>(sim_rig_->now_ns() - sim_rig_start_ns_) * 1e-9;
-    if (options_.time_scale > 0.0)
-      sim_wall_start_ =
-          std::chrono::steady_clock::now() -
-          std::chrono::nanoseconds(static_cast<std::int64_t>(rig_s / options_.time_scale * 1e9));
+  if (tick->advanced) {
+    for (std::size_t i = 0; cameras_streaming_ && i < cameras_.size(); ++i) read_camera(i);
   }
-  if (sim_unplug_imu_at_ns_ >= 0 && sim_rig_->now_ns() >= sim_unplug_imu_at_ns_) {
-    sim_unplug_imu_at_ns_ = -1;
-    sim_rig_->rig().emulator().fail_next_transfers(1 << 30);  // every transfer from now on
-  }
-  std::vector<ImuSample> batch;
-  if (Status s = sim_rig_->advance(kSimTickNs, batch); !s.ok()) {
-    imu_failed(s.error());
-    return;
-  }
-  on_samples(batch);
-  if (operator_) operator_->on_time(sim_rig_->now_ns());
-  for (std::size_t i = 0; cameras_streaming_ && i < cameras_.size(); ++i) read_camera(i);
-  if (options_.time_scale <= 0.0) {
+  if (!tick->next) {
     boost::asio::post(io_, [this] { sim_tick(); });
     return;
   }
-  // Rig time runs time_scale times as fast as wall time.
-  const double rig_s = static_cast<double>(sim_rig_->now_ns() - sim_rig_start_ns_) * 1e-9;
-  sim_timer_.expires_at(sim_wall_start_ + std::chrono::nanoseconds(
-                                              static_cast<std::int64_t>(rig_s / options_.time_scale * 1e9)));
+  sim_timer_.expires_at(*tick->next);
   sim_timer_.async_wait([this](const boost::system::error_code& ec) {
     if (!ec) sim_tick();
   });
@@ -345,7 +255,7 @@ void Service::imu_failed(const Error& error) {
   imu_state_ = "failed";
   imu_error_ = error.message;
   spdlog::error("IMU: {}", error.message);
-  const bool scripted = options_.sim && options_.sim_operator == "full";
+  const bool scripted = sim_rig_ && sim_rig_->operator_presses_keys();
   close_imu();
   imu_state_ = "failed";
   runner_->fault("imu", error.message);
@@ -361,7 +271,7 @@ void Service::imu_failed(const Error& error) {
 
 void Service::on_message(const json& m) {
   server_->broadcast(m);
-  if (operator_ && sim_rig_) operator_->on_message(m, sim_rig_->now_ns());
+  if (sim_rig_) sim_rig_->on_message(m);
   const std::string type = m.value("type", "");
   if (type == "prompt") {
     spdlog::info("[{}] {}", m.value("step", ""), m.value("text", ""));
@@ -374,14 +284,10 @@ void Service::on_message(const json& m) {
       spdlog::info("{}", text);
     }
   } else if (type == "result" && sim_rig_ && m.contains("imu")) {
-    const bool counts = stream_info_.units == ImuUnits::kRaw;
-    const std::string table =
-        truth_comparison(m["imu"], sim::canonical_in_tedaldi_frame(sim_rig_->params(), counts), counts);
-    std::string cameras;
-    if (m.contains("cameras")) cameras = camera_truth_comparison(m["cameras"]);
+    const std::string table = sim_rig_->truth_report(m);
     const std::string path = runner_->session_dir() + "/sim-truth.txt";
-    std::ofstream(path) << "The session's result beside the virtual rig's truth\n" << table << cameras;
-    spdlog::info("result beside the virtual rig's truth ({}):\n{}{}", path, table, cameras);
+    std::ofstream(path) << "The session's result beside the virtual rig's truth\n" << table;
+    spdlog::info("result beside the virtual rig's truth ({}):\n{}", path, table);
   } else if (type == "done") {
     spdlog::info("session {}: {}", m.value("outcome", ""), m.value("text", ""));
     set_gyro_offsets(true);  // the record on the storage now, new or not
@@ -394,7 +300,7 @@ void Service::on_message(const json& m) {
 }
 
 drivers::mpu6000::Mpu6000* Service::driver() {
-  return sim_rig_ ? &sim_rig_->rig().driver() : rig_ ? &rig_->driver() : nullptr;
+  return sim_rig_ ? &sim_rig_->driver() : rig_ ? &rig_->driver() : nullptr;
 }
 
 void Service::set_gyro_offsets(bool from_record) {
@@ -445,7 +351,7 @@ std::string Service::self_test() {
   // The chip's self-test runs outside streaming; the driver reconfigures and streams again after it.
   auto result = driver->self_test([this](TimeNs d) {
     if (sim_rig_) {
-      sim_rig_->rig().stall_until(sim_rig_->now_ns() + d);
+      sim_rig_->stall(d);
     } else {
       std::this_thread::sleep_for(std::chrono::nanoseconds(d));
     }
@@ -488,7 +394,7 @@ app::session::PreflightReport Service::preflight() {
   for (const CameraConfig& cc : config_.cameras) {
     // Opened and closed here; the motion step streams it.
     if (options_.sim) {
-      r.devices.push_back({cc.name, !sim_renderers_.empty(),
+      r.devices.push_back({cc.name, sim_rig_ && sim_rig_->cameras_ready(),
                            "virtual camera " + std::to_string(cc.width) + "x" + std::to_string(cc.height) +
                                " at " + std::to_string(static_cast<int>(cc.rate_hz)) +
                                " Hz, rendering the target"});
@@ -512,42 +418,6 @@ Status Service::write_storage(const json& payload) {
   return {};
 }
 
-Status Service::prepare_sim_cameras() {
-  sim_renderers_.clear();
-  sim_motion_.reset();
-  if (config_.cameras.empty()) return {};
-  if (!config_.target)
-    return make_error(Errc::kInvalidArgument,
-                      "the virtual rig's cameras need the target (target: in the configuration)");
-  // The operator's motion in front of the board: long enough to cover the step from the first
-  // move on, then at rest.
-  sim::CheckerboardMotionOptions mo = sim::CamImuSimOptions::default_motion();
-  mo.duration_s = config_.session.motion_s + 8.0;
-  auto motion = sim::CheckerboardMotion::create(mo, options_.seed);
-  if (!motion.ok()) return motion.error().context("the virtual rig's motion");
-  sim_motion_ = std::move(*motion);
-  auto render = app::load_module<sim::RenderModuleApi>(sim::kRenderModule, sim::kRenderModuleEntry);
-  if (!render.ok()) return render.error().context("the virtual rig's cameras");
-  const Eigen::Isometry3d T_op = sim::follow_transform(*sim_motion_);
-  // The trajectory belongs to the rig, which outlives the cameras (close_imu stops them first).
-  std::shared_ptr<const sim::Trajectory> trajectory(&sim_rig_->trajectory(), [](const sim::Trajectory*) {});
-  for (std::size_t i = 0; i < config_.cameras.size(); ++i) {
-    const CameraConfig& cc = config_.cameras[i];
-    sim::SimCameraScene scene;
-    scene.camera = sim::sim_camera_for(cc.width, cc.height);
-    scene.target = *config_.target;
-    scene.T_cam_imu = sim::CamImuSimOptions::default_T_cam_imu();
-    scene.timeshift_cam_imu_s = 0.0;  // the virtual camera stamps on the rig's clock exactly
-    scene.exposure_ns = 4'000'000;
-    scene.seed = options_.seed + i;
-    auto renderer =
-        (*render)->scene_renderer(scene, trajectory, T_op * sim_motion_->T_world_board(scene.target));
-    if (!renderer.ok()) return renderer.error().context("camera " + cc.name);
-    sim_renderers_.push_back(std::move(*renderer));
-  }
-  return {};
-}
-
 void Service::sync_cameras() {
   const bool want = runner_ && runner_->wants_frames();
   if (want && !cameras_streaming_) {
@@ -567,19 +437,9 @@ Status Service::start_cameras() {
   for (std::size_t i = 0; i < config_.cameras.size(); ++i) {
     const CameraConfig& cc = config_.cameras[i];
     CameraSlot& slot = cameras_[i];
-    if (options_.sim) {
-      drivers::camera::fake::VirtualCameraOptions vo;
-      vo.id = cc.name;
-      vo.width = cc.width;
-      vo.height = cc.height;
-      vo.rate_hz = cc.rate_hz;
-      vo.exposure_ns = 4'000'000;
-      vo.first_frame_ns = sim_rig_->now_ns() + static_cast<TimeNs>(1e9 / cc.rate_hz);
-      vo.clock = [this] { return sim_rig_->now_ns(); };
-      if (options_.sim_unplug_camera_after > 0 && camera_starts_ == 0)
-        vo.disconnect_after = options_.sim_unplug_camera_after;
-      auto camera = drivers::camera::fake::VirtualCamera::create(vo, sim_renderers_.at(i));
-      if (!camera.ok()) return camera.error().context("camera " + cc.name);
+    if (sim_rig_) {
+      auto camera = sim_rig_->open_camera(i, camera_starts_ == 0 ? options_.sim_unplug_camera_after : 0);
+      if (!camera.ok()) return camera.error();
       slot.camera = std::move(*camera);
     } else {
       auto camera = app::open_camera(cc);
@@ -700,7 +560,7 @@ Status Service::start(const std::vector<std::string>& steps) {
     for (auto id : app::session::configured_steps(config_)) run.emplace_back(app::session::step_name(id));
   }
   if (sim_rig_ && options_.sim_unplug_imu_after_s > 0.0) {
-    sim_unplug_imu_at_ns_ = sim_rig_->now_ns() + static_cast<TimeNs>(options_.sim_unplug_imu_after_s * 1e9);
+    sim_rig_->unplug_imu_after(options_.sim_unplug_imu_after_s);
     options_.sim_unplug_imu_after_s = 0.0;  // once
   }
   // The session calibrates the chip as it powers up: no bias removed inside it.

@@ -20,9 +20,7 @@
 #include "daemon/service/notify.hpp"
 #include "daemon/service/session_host.hpp"
 #include "drivers/camera/camera.hpp"
-#include "drivers/camera/fake/virtual_camera.hpp"
-#include "sim/session_operator.hpp"
-#include "sim/session_rig.hpp"
+#include "sim/service_rig.hpp"
 
 namespace imucal::imucald {
 
@@ -31,15 +29,14 @@ struct ServiceOptions {
   std::string socket_path = "/run/imucal/imucald.sock";
   unsigned socket_mode = 0660;
   std::string state_dir = "/var/lib/imucal";
-  bool sim = false;          // the virtual rig (also when imu.bus is sim)
-  double time_scale = 1.0;   // virtual rig: rig seconds per wall second; 0 = as fast as it computes
-  std::string sim_operator;  // virtual rig: "" (nobody moves it), "motion" (moves it), "full" (moves it and
-                             // presses keys)
+  bool sim = false;         // the virtual rig (also when imu.bus is sim)
+  double time_scale = 1.0;  // virtual rig: rig seconds per wall second; 0 = as fast as it computes
+  // virtual rig: "" (nobody moves it), "motion" (moves it), "full" (moves it and presses keys)
+  std::string sim_operator;
   std::uint64_t seed = 1;
-  std::uint32_t sim_unplug_camera_after = 0;
+  std::uint32_t sim_unplug_camera_after = 0;  // virtual rig: its cameras vanish after this many frames (once)
   double sim_unplug_imu_after_s =
-      0.0;  // virtual rig: the IMU stops answering this long into a session (once)      // virtual rig:
-            // cameras vanish after this many frames (once)
+      0.0;  // virtual rig: the IMU stops answering this long into a session (once)
   std::optional<std::vector<std::string>> start;  // start a session at launch with these steps
   bool exit_after_session = false;
 };
@@ -63,7 +60,8 @@ class Service final : public service::SessionHost {
  private:
   Status open_imu();
   void close_imu();
-  Status prepare_sim_cameras();
+  /// The virtual rig, from its module.
+  Status open_virtual_rig();
   /// Streams the cameras while the session's motion step runs, and only then.
   void sync_cameras();
   Status start_cameras();
@@ -97,10 +95,7 @@ class Service final : public service::SessionHost {
   // The IMU: hardware or virtual.
   std::unique_ptr<app::ImuRig> rig_;
   std::unique_ptr<acq::AsioAcquisition> acquisition_;
-  std::unique_ptr<sim::SessionRig> sim_rig_;
-  std::unique_ptr<sim::ScriptedOperator> operator_;
-  std::chrono::steady_clock::time_point sim_wall_start_;
-  TimeNs sim_rig_start_ns_ = 0;
+  std::unique_ptr<sim::ServiceRig> sim_rig_;
   // The cameras: built when the motion step starts, closed when it ends.
   struct CameraSlot {
     std::unique_ptr<drivers::camera::Camera> camera;
@@ -111,17 +106,11 @@ class Service final : public service::SessionHost {
   std::vector<CameraSlot> cameras_;
   bool cameras_streaming_ = false;
   int camera_starts_ = 0;
-  TimeNs sim_unplug_imu_at_ns_ = -1;  // --sim-unplug-imu: when, on the rig's clock
-  // Virtual rig: what its cameras see (one renderer per camera, the board where the scripted
-  // operator's motion puts it).
-  std::vector<drivers::camera::fake::FrameRenderer> sim_renderers_;
-  std::shared_ptr<const sim::CheckerboardMotion> sim_motion_;
   std::string gyro_offsets_ = "off";  // what the gyro offset registers hold, for status and preflight
   std::string imu_state_ = "closed";
   std::string imu_error_;
   std::uint64_t samples_ = 0, imu_faults_ = 0;
   bool start_pending_ = false;  // --start waits for the first samples
-  bool paused_ = false;         // the virtual rig waits for the worker
   bool quit_ = false;
   int exit_code_ = 0;
 };

@@ -1,0 +1,46 @@
+#pragma once
+// The virtual rig's cameras, assembled in one place for `imucal record --sim` and the service's
+// virtual rig (sim/service_rig.hpp): each configured camera becomes a virtual camera
+// (drivers/camera/fake) of the configured size and rate whose renderer draws the configured target
+// through the simulated lens at that size, mounted at CamImuSimOptions::default_T_cam_imu and
+// stamping on the rig's clock with no offset.
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+
+#include "core/result.hpp"
+#include "core/rig_config.hpp"
+#include "core/target.hpp"
+#include "core/time.hpp"
+#include "drivers/camera/fake/virtual_camera.hpp"
+#include "sim/camera_scene.hpp"
+
+namespace imucal::sim {
+
+/// How long each virtual frame is exposed.
+inline constexpr TimeNs kVirtualExposureNs = 4'000'000;
+
+/// What the rig's camera number `index` sees: the simulated lens at the configured size, the
+/// target, the default mounting, no time offset, its own noise (seed + index). Host time is
+/// trajectory time + host_offset_ns.
+SimCameraScene virtual_camera_scene(const CameraConfig& camera, const TargetDescription& target,
+                                    std::uint64_t seed, std::size_t index, TimeNs host_offset_ns = 0);
+
+struct VirtualCameraTiming {
+  /// Host time of frame 0's mid-exposure.
+  TimeNs first_frame_ns = 0;
+  /// The rig's simulated clock; empty: real time.
+  std::function<TimeNs()> clock;
+  /// After this many frames the camera is gone (a yanked cable); 0: never.
+  std::uint32_t disconnect_after = 0;
+};
+
+/// The virtual camera of `camera` delivering what `renderer` draws. Its format is its own size in
+/// GREY at the configured rate; the caller sets the configured format where it must be checked.
+[[nodiscard]] Result<std::unique_ptr<drivers::camera::fake::VirtualCamera>> make_virtual_camera(
+    const CameraConfig& camera, drivers::camera::fake::FrameRenderer renderer,
+    const VirtualCameraTiming& timing);
+
+}  // namespace imucal::sim
