@@ -106,7 +106,7 @@ Status CameraStream::start_log(log::SessionLogWriter& writer, int stream_id) {
   return {};
 }
 
-bool CameraStream::publish(cam::Frame& frame) {
+bool CameraStream::publish(cam::Frame& frame, const std::function<void(const PublishedFrame&)>& inspect) {
   published_.fetch_add(1, std::memory_order_relaxed);
   if (have_sequence_ && frame.sequence > last_sequence_ + 1) {
     device_dropped_.fetch_add(frame.sequence - last_sequence_ - 1, std::memory_order_relaxed);
@@ -146,6 +146,10 @@ bool CameraStream::publish(cam::Frame& frame) {
   s.flags = drop_pending_ ? 1u : 0u;
   drop_pending_ = false;
   frame.release();
+  if (inspect) {
+    // The slot is the producer's until it is pushed to the encoder.
+    inspect(PublishedFrame{s.image.data, format_.width, format_.height, s.t_ns, s.exposure_ns, s.sequence});
+  }
   (void)filled_.try_push(slot);  // never full: it has as many places as there are slots
   const std::size_t waiting = filled_.size_approx();
   std::size_t hw = high_water_.load(std::memory_order_relaxed);

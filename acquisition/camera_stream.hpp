@@ -15,7 +15,9 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <mutex>
+#include <span>
 #include <string>
 #include <thread>
 #include <vector>
@@ -55,6 +57,18 @@ struct CameraStreamStats {
   std::size_t queue_high_water = 0;  // most frames waiting at once
 };
 
+/// A frame as publish() recorded it, for a caller that also looks at it (the service searches it
+/// for the target): 8-bit grey rows without padding and the stamp the log holds. Valid only
+/// during the call.
+struct PublishedFrame {
+  std::span<const std::uint8_t> grey;
+  int width = 0;
+  int height = 0;
+  TimeNs t_ns = 0;
+  TimeNs exposure_ns = 0;
+  std::uint32_t sequence = 0;
+};
+
 /// The pixel formats publish() can record.
 const std::vector<std::string>& supported_pixel_formats();
 
@@ -79,8 +93,9 @@ class CameraStream {
   [[nodiscard]] Status start_log(log::SessionLogWriter& writer, int stream_id);
 
   /// Producer: copies the frame into a free slot and releases it. False when it was not recorded
-  /// (dropped, wrong size, or the log failed).
-  bool publish(drivers::camera::Frame& frame);
+  /// (dropped, wrong size, or the log failed). `inspect`, when given, sees the recorded frame on
+  /// this thread before the encoder does.
+  bool publish(drivers::camera::Frame& frame, const std::function<void(const PublishedFrame&)>& inspect = {});
 
   TimeNs time_offset_ns() const { return options_.time_offset_ns; }
   bool log_failed() const { return log_failed_.load(std::memory_order_acquire); }

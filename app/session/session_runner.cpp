@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <map>
 
+#include "acquisition/camera_stream.hpp"
 #include "app/calibration_check.hpp"
 #include "app/camera_results.hpp"
 #include "app/camimu_results.hpp"
@@ -15,7 +16,6 @@
 #include "calib/target_detection.hpp"
 #include "core/text_format.hpp"
 #include "core/version.hpp"
-#include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
 #include "log/target_detections.hpp"
 
@@ -258,8 +258,8 @@ void SessionRunner::on_samples(std::span<const ImuSample> samples) {
     }
     engine_.on_sample(s);
     sync_motion_log();
-    if (motion_log_) {
-      if (auto st = motion_log_->append_imu(motion_imu_id_, s); !st.ok()) motion_log_error(st.error());
+    if (motion_shared_) {
+      if (auto st = motion_shared_->append_imu(motion_imu_id_, s); !st.ok()) motion_log_error(st.error());
     }
   }
 }
@@ -300,26 +300,58 @@ Status SessionRunner::open_motion_log() {
   auto id = motion_log_->add_imu_stream(info_);
   if (!id.ok()) return id.error();
   motion_imu_id_ = *id;
-  motion_camera_ids_.clear();
+  motion_camera_ids_.assign(config_.cameras.size(), -1);
+  camera_streams_.clear();
+  camera_streams_.resize(config_.cameras.size());
   live_.assign(config_.cameras.size(), {});
-  for (const auto& c : config_.cameras) {
-    CameraStreamInfo ci;
-    ci.name = c.name;
-    ci.width = c.width;
-    ci.height = c.height;
-    ci.rate_hz = c.rate_hz;
-    ci.backend = camera_backend_name(c.backend);
-    ci.device = c.device;
-    ci.timestamp_source = "mid-exposure";
-    auto cid = motion_log_->add_camera_stream(ci);
-    if (!cid.ok()) return cid.error();
-    motion_camera_ids_.push_back(*cid);
-  }
+  motion_shared_ = log::synchronized_writer(*motion_log_);
   return {};
+}
+
+Result<acq::CameraStream*> SessionRunner::camera_stream(std::size_t camera,
+                                                        const drivers::camera::Frame& frame,
+                                                        drivers::camera::TimestampMeaning meaning) {
+  if (camera_streams_[camera]) return camera_streams_[camera].get();
+  const CameraConfig& c = config_.cameras[camera];
+  acq::CameraStreamOptions so;
+  so.block_when_full = options_.frames_wait_for_encoder;
+  auto stream =
+      acq::CameraStream::create({frame.width, frame.height, frame.pixel_format, c.rate_hz}, meaning, so);
+  if (!stream.ok()) return stream.error();
+  CameraStreamInfo ci;
+  ci.name = c.name;
+  ci.width = frame.width;
+  ci.height = frame.height;
+  ci.rate_hz = c.rate_hz;
+  ci.backend = camera_backend_name(c.backend);
+  ci.device = c.device;
+  ci.timestamp_source = (*stream)->timestamp_source();
+  auto id = motion_shared_->add_camera_stream(ci);
+  if (!id.ok()) return id.error();
+  IMUCAL_TRY((*stream)->start_log(*motion_shared_, *id));
+  motion_camera_ids_[camera] = *id;
+  camera_streams_[camera] = std::move(*stream);
+  return camera_streams_[camera].get();
 }
 
 void SessionRunner::close_motion_log() {
   if (!motion_log_) return;
+  // Every queued frame is encoded and written before the log closes.
+  for (std::size_t i = 0; i < camera_streams_.size(); ++i) {
+    if (!camera_streams_[i]) continue;
+    const Status stopped = camera_streams_[i]->stop();
+    const acq::CameraStreamStats st = camera_streams_[i]->stats();
+    const std::string& name = config_.cameras[i].name;
+    if (!stopped.ok())
+      warn("camera " + name + ": frames not written to the motion log: " + stopped.error().message);
+    if (st.queue_dropped > 0 || st.wrong_size > 0)
+      warn("camera " + name + ": " + std::to_string(st.queue_dropped) +
+           " frames dropped for want of a free buffer (the encoder or the disk too slow), " +
+           std::to_string(st.wrong_size) + " of another size than the first; " + std::to_string(st.written) +
+           " written");
+  }
+  camera_streams_.clear();
+  motion_shared_.reset();
   const Status closed = motion_log_->close();
   motion_log_.reset();
   if (!closed.ok()) {
@@ -330,6 +362,7 @@ void SessionRunner::close_motion_log() {
   // stored under its key, the solve (and `imucal calibrate camera` offline) reuse them.
   if (!detector_ || !config_.target) return;
   for (std::size_t i = 0; i < live_.size() && i < motion_camera_ids_.size(); ++i) {
+    if (motion_camera_ids_[i] < 0) continue;  // no frame came
     log::DetectionSet set;
     set.target_key = detection_key(*config_.target, calib::DetectionOptions{});
     set.description = target_to_yaml(*config_.target);
@@ -343,67 +376,65 @@ void SessionRunner::close_motion_log() {
   live_.clear();
 }
 
-void SessionRunner::on_frame(std::size_t camera, const CameraFrame& frame) {
+void SessionRunner::on_frame(std::size_t camera, drivers::camera::Frame& frame,
+                             drivers::camera::TimestampMeaning meaning) {
   sync_motion_log();
-  if (!wants_frames() || camera >= config_.cameras.size()) return;
-  bool seen = false;
+  if (!wants_frames() || camera >= config_.cameras.size() || !motion_log_) {
+    frame.release();
+    return;
+  }
+  const std::string& name = config_.cameras[camera].name;
   if (!detector_ && config_.target) {
     auto detector = make_target_detector(*config_.target);
     if (!detector.ok()) {
-      engine_.fault(config_.cameras[camera].name, "target detection: " + detector.error().message);
+      frame.release();
+      engine_.fault(name, "target detection: " + detector.error().message);
       return;
     }
     detector_ = std::move(*detector);
   }
-  if (frame.encoding != "gray8" ||
-      frame.data.size() != static_cast<std::size_t>(frame.width) * static_cast<std::size_t>(frame.height)) {
-    engine_.fault(config_.cameras[camera].name,
-                  "the camera delivers " + frame.encoding +
-                      " frames; the service takes 8-bit grey (pixel_format GREY)");
+  auto stream = camera_stream(camera, frame, meaning);
+  if (!stream.ok()) {
+    frame.release();
+    if (stream.error().code == Errc::kUnsupported || stream.error().code == Errc::kInvalidArgument) {
+      engine_.fault(name, stream.error().message);
+    } else {
+      motion_log_error(stream.error());
+    }
     return;
   }
-  if (detector_) {
-    calib::GrayView view{frame.data.data(), frame.width, frame.height, 0};
-    auto obs = detector_->detect(view);
+  if ((*stream)->log_failed()) {
+    frame.release();
+    const Status st = (*stream)->stop();
+    motion_log_error(st.ok() ? make_error(Errc::kIo, "writing " + name + "'s frames failed") : st.error());
+    return;
+  }
+  bool seen = false;
+  TimeNs t_ns = 0;
+  const bool recorded = (*stream)->publish(frame, [&](const acq::PublishedFrame& f) {
+    t_ns = f.t_ns;
+    if (!detector_) return;
+    auto obs = detector_->detect(calib::GrayView{f.grey.data(), f.width, f.height, 0});
     seen = obs.ok() && !obs->empty();
-    if (camera < live_.size()) {
-      ++live_[camera].frames;
-      if (seen) {
-        obs->t_ns = frame.t_ns;
-        obs->width = frame.width;
-        obs->height = frame.height;
-        live_[camera].found.emplace_back(frame.t_ns, encode_detection(*obs));
-      }
+    ++live_[camera].frames;
+    if (seen) {
+      obs->t_ns = f.t_ns;
+      obs->width = f.width;
+      obs->height = f.height;
+      live_[camera].found.emplace_back(f.t_ns, encode_detection(*obs));
     }
-  }
-  if (motion_log_) {
-    log::Image image;
-    image.width = frame.width;
-    image.height = frame.height;
-    image.data = frame.data;
-    auto png = log::encode_png(image);
-    if (!png.ok()) {
-      motion_log_error(png.error());
-      return;
-    }
-    CameraFrame stored = frame;
-    stored.encoding = "png";
-    stored.data = std::move(*png);
-    if (auto s = motion_log_->append_frame(motion_camera_ids_[camera], stored); !s.ok()) {
-      motion_log_error(s.error());
-      return;
-    }
-  }
+  });
+  if (!recorded) return;  // dropped: counted by the stream, reported when the log closes
   // Replay reads what the engine saw from this event (docs/service-session.md).
   if (log_) {
     // At the engine's time, as replay applies inputs (after the sample of that time).
-    const json e = {{"camera", camera}, {"t_ns", frame.t_ns}, {"seen", seen}};
+    const json e = {{"camera", camera}, {"t_ns", t_ns}, {"seen", seen}};
     if (auto s = log_->append_event(
             {engine_.now_ns(), "frame", e.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)});
         !s.ok())
       warn("session log: " + s.error().message);
   }
-  engine_.on_frame(frame.t_ns, seen);
+  engine_.on_frame(t_ns, seen);
 }
 
 void SessionRunner::fault(const std::string& source, const std::string& text) { engine_.fault(source, text); }

@@ -16,16 +16,19 @@
 #include <vector>
 
 #include "app/session/session_engine.hpp"
-#include "core/frame.hpp"
 #include "core/imu.hpp"
 #include "core/result.hpp"
 #include "core/rig_config.hpp"
+#include "drivers/camera/camera.hpp"
 
 namespace imucal::log {
 class SessionLogWriter;
 }
 namespace imucal::calib {
 class TargetDetector;
+}
+namespace imucal::acq {
+class CameraStream;
 }
 
 namespace imucal::app::session {
@@ -57,6 +60,10 @@ struct RunnerOptions {
   bool write_log = true;
   /// Replay: the session folder to use instead of a new one.
   std::string session_dir;
+  /// A camera frame waits for a free place in its stream's pool instead of being dropped when
+  /// the encoder falls behind: for the virtual rig, whose frames come as fast as it computes
+  /// (acq::CameraStreamOptions::block_when_full).
+  bool frames_wait_for_encoder = false;
 };
 
 /// The motion step's own log in a session folder: the IMU and the cameras from the step's start
@@ -94,10 +101,14 @@ class SessionRunner final : public EngineHost {
   /// True while the motion step runs: the host streams its cameras then and hands the frames to
   /// on_frame().
   bool wants_frames() const;
-  /// A camera frame of the configured camera `camera` (index into cameras[]), 8-bit grey
-  /// (encoding "gray8"): stored in the motion log, searched for the target, and counted by the
-  /// engine (target seen or not). A frame outside the motion step is ignored.
-  void on_frame(std::size_t camera, const CameraFrame& frame);
+  /// A frame of the configured camera `camera` (index into cameras[]) as the device delivered it,
+  /// its stamp marking `meaning`. It goes through acquisition's camera stream
+  /// (acquisition/camera_stream.hpp: the luma of its pixel format, the stamp moved to
+  /// mid-exposure, a slot of a fixed pool, encoded and appended to the motion log on the stream's
+  /// own thread), is searched for the target here, and is counted by the engine (target seen or
+  /// not). The device buffer is released before this returns. A frame outside the motion step, or
+  /// one the stream dropped (counted, and reported when the step's log closes), is not counted.
+  void on_frame(std::size_t camera, drivers::camera::Frame& frame, drivers::camera::TimestampMeaning meaning);
   /// An IMU or camera fault (`source` "imu", "cam0", "storage"): stored and given to the engine.
   void fault(const std::string& source, const std::string& text);
   const std::string& session_dir() const { return dir_; }
@@ -121,6 +132,10 @@ class SessionRunner final : public EngineHost {
   void worker_loop();
   void close_log();
   Status open_motion_log();
+  /// The camera's stream in the motion log, made at its first frame (its format and the meaning
+  /// of its stamps are the device's).
+  Result<acq::CameraStream*> camera_stream(std::size_t camera, const drivers::camera::Frame& frame,
+                                           drivers::camera::TimestampMeaning meaning);
   void close_motion_log();
   void sync_motion_log();
   void motion_log_error(const Error& error);
@@ -136,8 +151,11 @@ class SessionRunner final : public EngineHost {
   bool recording_ = false;
   // The motion step's log and the live target detection.
   std::unique_ptr<log::SessionLogWriter> motion_log_;
+  // The motion log shared by this thread (samples) and the cameras' encoder threads (frames).
+  std::unique_ptr<log::SessionLogWriter> motion_shared_;
   int motion_imu_id_ = -1;
-  std::vector<int> motion_camera_ids_;
+  std::vector<int> motion_camera_ids_;  // -1 until the camera's first frame declares its stream
+  std::vector<std::unique_ptr<acq::CameraStream>> camera_streams_;
   // Each camera's live detections, stored in the motion log when it closes so that the final
   // solve's intrinsics reuse them instead of searching every frame again.
   struct LiveDetections {

@@ -45,45 +45,6 @@ std::string storage_unwritable(const StorageConfig& config) {
   return device.ok() ? std::string() : device.error().message;
 }
 
-/// A camera's frame as the session takes it: 8-bit grey rows without padding, stamped at
-/// mid-exposure where the camera says where in the exposure its stamp is (an end-of-frame stamp
-/// stays as it is: the camera-IMU calibration's time offset takes up its constant delay).
-Result<CameraFrame> grey_frame(const drivers::camera::Frame& f, drivers::camera::TimestampMeaning meaning) {
-  const std::string& pf = f.pixel_format;
-  int step = 0, offset = 0;  // luma: byte offset + step * x in each row
-  if (pf == "GREY" || pf == "Y8" || pf == "Mono8" || pf == "R8") {
-    step = 1;
-  } else if (pf == "YUYV" || pf == "YUY2" || pf == "YUV422_YUYV_Packed") {
-    step = 2;
-  } else if (pf == "UYVY" || pf == "YUV422Packed" || pf == "YUV422_8_UYVY") {
-    step = 2;
-    offset = 1;
-  } else {
-    return make_error(
-        Errc::kUnsupported,
-        "pixel format " + pf + " is not one the service reads; set pixel_format GREY, YUYV or UYVY");
-  }
-  const std::size_t w = static_cast<std::size_t>(f.width), h = static_cast<std::size_t>(f.height);
-  const std::size_t stride = f.stride ? f.stride : w * static_cast<std::size_t>(step);
-  if (f.data.size() < stride * (h - 1) + w * static_cast<std::size_t>(step))
-    return make_error(Errc::kDevice, "a frame shorter than its size says");
-  CameraFrame out;
-  out.t_ns = f.t_ns;
-  if (meaning == drivers::camera::TimestampMeaning::kStartOfExposure) out.t_ns += f.exposure_ns / 2;
-  out.width = f.width;
-  out.height = f.height;
-  out.encoding = "gray8";
-  out.exposure_ns = f.exposure_ns;
-  out.sequence = f.sequence;
-  out.data.resize(w * h);
-  for (std::size_t r = 0; r < h; ++r) {
-    const std::uint8_t* src = f.data.data() + r * stride + offset;
-    std::uint8_t* dst = out.data.data() + r * w;
-    for (std::size_t x = 0; x < w; ++x) dst[x] = src[x * static_cast<std::size_t>(step)];
-  }
-  return out;
-}
-
 }  // namespace
 
 Service::Service(ServiceOptions options)
@@ -133,6 +94,8 @@ Status Service::init() {
   };
   ro.write_storage = [this](const json& payload) { return write_storage(payload); };
   ro.warn = [](const std::string& text) { spdlog::warn("{}", text); };
+  // The virtual rig's frames come as fast as it computes: they wait for the encoder.
+  ro.frames_wait_for_encoder = options_.sim;
   ro.metadata = {{"rig_config", rig_config_to_json(config_)},
                  {"source", options_.sim ? "sim" : "hardware"},
                  {"service", json{{"version", kVersion}, {"config", options_.config_path}}.dump(
@@ -495,15 +458,9 @@ void Service::read_camera(std::size_t index) {
       return;
     }
     if (!frame->valid()) return;
-    auto grey = grey_frame(*frame, slot.camera->timestamp_meaning());
-    frame->release();
-    if (!grey.ok()) {
-      camera_failed(index, grey.error());
-      return;
-    }
     ++slot.frames;
-    runner_->on_frame(index, *grey);
-    if (!cameras_streaming_) return;  // the step ended on this frame
+    runner_->on_frame(index, *frame, slot.camera->timestamp_meaning());  // releases the buffer
+    if (!cameras_streaming_) return;                                     // the step ended on this frame
   }
 }
 

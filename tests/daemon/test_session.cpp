@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <mutex>
 #include <nlohmann/json.hpp>
 
@@ -13,6 +14,7 @@
 #include "app/session/session_replay.hpp"
 #include "app/session/session_runner.hpp"
 #include "core/rig_config.hpp"
+#include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
 #include "sim/session_rig.hpp"
 #include "tests/support/test_support.hpp"
@@ -90,6 +92,7 @@ class SimSession {
       return {};
     };
     o.metadata = {{"rig_config", rig_config_to_json(config_)}};
+    o.frames_wait_for_encoder = true;  // frames come as fast as the loop runs, as in imucald --sim
     runner_ = std::make_unique<SessionRunner>(config_, rig_->stream_info(), o);
     sim::ScriptedOperatorOptions oo;
     oo.abort_on_fault = false;  // the tests press redo themselves
@@ -400,6 +403,130 @@ TEST(Session, SixFaceHoldsArePromptedAndChecked) {
   for (int f = 0; f < 6; ++f) EXPECT_EQ(faces[f].value("face", ""), names[f]);
   EXPECT_TRUE(s.said("This is +Y up"));
   EXPECT_TRUE(s.said("All six faces held"));
+}
+
+}  // namespace
+}  // namespace imucal
+
+namespace imucal {
+namespace {
+
+/// A YUYV frame of the camera, stamped at the start of its exposure as some V4L2 drivers do; its
+/// luma is a pattern of the frame number. Counts the releases of its buffer.
+struct YuyvFrame {
+  std::vector<std::uint8_t> bytes;
+  int released = 0;
+
+  static std::uint8_t luma(int x, int y, std::uint32_t n) {
+    return static_cast<std::uint8_t>(x + 3 * y + 7 * n);
+  }
+
+  drivers::camera::Frame make(int width, int height, std::uint32_t n, TimeNs t_ns) {
+    const std::size_t stride = static_cast<std::size_t>(width) * 2 + 16;  // padded rows
+    bytes.assign(stride * static_cast<std::size_t>(height), 128);
+    for (int y = 0; y < height; ++y)
+      for (int x = 0; x < width; ++x) bytes[static_cast<std::size_t>(y) * stride + 2 * x] = luma(x, y, n);
+    drivers::camera::Frame f;
+    f.t_ns = t_ns;
+    f.exposure_ns = 4'000'000;
+    f.sequence = n;
+    f.width = width;
+    f.height = height;
+    f.pixel_format = "YUYV";
+    f.stride = stride;
+    f.data = bytes;
+    f.set_release([this] { ++released; });
+    return f;
+  }
+};
+
+TEST(Session, TheServicesFramesGoThroughTheCameraStreamIntoTheMotionLog) {
+  ModuleDir modules;
+  RigConfig config = session_config({"preflight", "motion"});
+  config.session.motion_s = 3.0;
+  SimSession s(config);
+  s.scripted_ = false;
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  const int w = config.cameras[0].width, h = config.cameras[0].height;
+  YuyvFrame source;
+  std::uint32_t fed = 0;
+  std::vector<TimeNs> stamps;
+  s.run(30.0, [&](SimSession& ss) {
+    if (!ss.runner_->wants_frames()) return;
+    const TimeNs t = ss.rig_->now_ns() - 10'000'000;
+    auto frame = source.make(w, h, fed, t);
+    ss.runner_->on_frame(0, frame, drivers::camera::TimestampMeaning::kStartOfExposure);
+    EXPECT_EQ(source.released, static_cast<int>(fed) + 1) << "the device buffer is given back at once";
+    stamps.push_back(t + 2'000'000);  // mid-exposure
+    ++fed;
+  });
+  ASSERT_EQ(s.outcome(), "recorded");
+  ASSERT_GT(fed, 100u);  // 3 s of 20 ms batches
+
+  auto reader = log::SessionLogReader::open(s.runner_->session_dir() + "/" + app::session::kMotionLogFile);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_TRUE((*reader)->health().complete);
+  auto id = (*reader)->find_camera_stream("cam0");
+  ASSERT_TRUE(id.ok());
+  const CameraStreamInfo& info = (*reader)->camera_streams().at(*id);
+  EXPECT_EQ(info.timestamp_source, "mid-exposure");
+  EXPECT_EQ(info.width, w);
+  // Every frame, in order, stamped at mid-exposure, its luma exactly.
+  std::uint32_t n = 0;
+  ASSERT_TRUE(
+      (*reader)
+          ->for_each_frame(
+              *id, 0, std::numeric_limits<TimeNs>::max(),
+              [&](const CameraFrame& f) {
+                EXPECT_EQ(f.t_ns, stamps.at(n));
+                EXPECT_EQ(f.sequence, n);
+                auto image = log::decode_image(f.data);
+                EXPECT_TRUE(image.ok());
+                if (!image.ok()) return false;
+                EXPECT_EQ(image->channels, 1);
+                for (int y = 0; y < h; y += 37)
+                  for (int x = 0; x < w; x += 41)
+                    EXPECT_EQ(image->data[static_cast<std::size_t>(y * w + x)], YuyvFrame::luma(x, y, n))
+                        << "frame " << n << " at " << x << "," << y;
+                ++n;
+                return true;
+              })
+          .ok());
+  EXPECT_EQ(n, fed);
+  // The engine counted each one, and the session log says so for replay.
+  auto session = log::SessionLogReader::open(s.runner_->log_path());
+  ASSERT_TRUE(session.ok());
+  auto events = (*session)->events();
+  ASSERT_TRUE(events.ok());
+  std::uint32_t frame_events = 0;
+  for (const auto& e : *events) frame_events += e.kind == "frame" ? 1u : 0u;
+  EXPECT_EQ(frame_events, fed);
+}
+
+TEST(Session, ACameraInAFormatTheStreamCannotRecordIsAFaultThatSaysWhichToSet) {
+  ModuleDir modules;
+  RigConfig config = session_config({"preflight", "motion"});
+  config.session.motion_s = 3.0;
+  SimSession s(config);
+  s.scripted_ = false;
+  s.redo_faults_ = false;
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  YuyvFrame source;
+  bool fed = false;
+  s.run(10.0, [&](SimSession& ss) {
+    if (fed || !ss.runner_->wants_frames()) return;
+    fed = true;
+    auto frame = source.make(64, 48, 0, ss.rig_->now_ns());
+    frame.pixel_format = "MJPG";
+    ss.runner_->on_frame(0, frame, drivers::camera::TimestampMeaning::kMidExposure);
+    EXPECT_EQ(source.released, 1);
+    ss.press("abort");
+  });
+  ASSERT_TRUE(fed);
+  const auto faults = s.of_type("fault");
+  ASSERT_FALSE(faults.empty());
+  EXPECT_NE(faults[0].value("text", "").find("MJPG"), std::string::npos) << faults[0].dump();
+  EXPECT_NE(faults[0].value("text", "").find("GREY"), std::string::npos) << faults[0].dump();
 }
 
 }  // namespace
