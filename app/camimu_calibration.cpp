@@ -11,26 +11,6 @@ namespace imucal::app {
 namespace {
 
 /// The cameras of every camchain file, renumbered cam0..camN in the order given.
-Result<std::vector<CamchainCamera>> read_cameras(const std::vector<std::string>& paths) {
-  if (paths.empty()) {
-    return make_error(Errc::kInvalidArgument,
-                      "no camera given: the camera-IMU calibration needs each camera's intrinsics (the YAML "
-                      "of imucal calibrate camera, or a Kalibr camchain)")
-        .with_remedy("camera");
-  }
-  std::vector<CamchainCamera> out;
-  for (const auto& path : paths) {
-    auto cams = read_camchain(path);
-    if (!cams.ok()) return cams.error();
-    for (auto& cam : *cams) {
-      cam.source = path + " " + cam.name;
-      cam.name = "cam" + std::to_string(out.size());
-      out.push_back(std::move(cam));
-    }
-  }
-  return out;
-}
-
 /// The target in one camera's frames, as the estimator's input and the report's figures.
 Result<calib::CamImuCameraInput> detect_camera(const CamImuRequest& q, const log::SessionLogReader& reader,
                                                int index, const CamchainCamera& cam, int stream_id,
@@ -85,11 +65,9 @@ Result<calib::CamImuCameraInput> detect_camera(const CamImuRequest& q, const log
 /// The IMU noise, the priors and the fixed blocks on top of the request's options.
 Status prepare_options(const CamImuRequest& q, CamImuReport* report) {
   report->options = q.options;
-  if (!q.imu_noise_path.empty()) {
-    auto noise = read_kalibr_imu_noise(q.imu_noise_path);
-    if (!noise.ok()) return noise.error();
-    report->options.noise = *noise;
-    report->noise_source = q.imu_noise_path;
+  if (q.imu_noise) {
+    report->options.noise = *q.imu_noise;
+    report->noise_source = q.imu_noise_source;
   } else {
     report->options.noise = calib::CamImuNoise{};
     report->noise_source = "defaults (MPU-6000 datasheet)";
@@ -117,8 +95,13 @@ Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& q) {
   report.target = q.target;
   report.target_source = q.target_source;
   report.gravity_source = q.gravity_source;
-  auto cams = read_cameras(q.camera_paths);
-  if (!cams.ok()) return cams.error();
+  if (q.cameras.empty()) {
+    return make_error(Errc::kInvalidArgument,
+                      "no camera given: the camera-IMU calibration needs each camera's intrinsics (the YAML "
+                      "of imucal calibrate camera, or a Kalibr camchain)")
+        .with_remedy("camera");
+  }
+  const std::vector<CamchainCamera>* cams = &q.cameras;
 
   auto loaded = load_imu_stream(q.log_path, q.imu_stream,
                                 q.allow_damaged ? DamagePolicy::kAllow : DamagePolicy::kRefuse);

@@ -29,13 +29,17 @@ namespace imucal::app {
 
 struct CamImuRequest {
   std::string log_path;
-  std::string imu_stream;                 // IMU stream name; empty = the first
-  std::vector<std::string> camera_paths;  // camchain YAMLs; their cameras are cam0..camN in order
+  std::string imu_stream;  // IMU stream name; empty = the first
+  /// The cameras' intrinsics, cam0..camN in order (the CLI reads them from camchain YAMLs,
+  /// read_camchain_files; the service takes its own intrinsics solve's).
+  std::vector<CamchainCamera> cameras;
   TargetDescription target;
   std::string target_source;  // for the outputs: the file, or where in the log it came from
   calib::DetectionOptions detection;
-  /// The IMU noise (options.noise) comes from this Kalibr imu.yaml; empty: CamImuNoise's defaults.
-  std::string imu_noise_path;
+  /// The IMU noise (options.noise) and where it is from (the CLI reads a Kalibr imu.yaml,
+  /// read_kalibr_imu_noise); empty: CamImuNoise's defaults, the MPU-6000 datasheet's.
+  std::optional<calib::CamImuNoise> imu_noise;
+  std::string imu_noise_source;
   std::string imu_rostopic;  // for imu.yaml; empty: /STREAM
   /// A prior static calibration (--imu-intrinsics) and a g-sensitivity (--gsens): initial values
   /// and fixed blocks (app::imu_prior).
@@ -49,7 +53,7 @@ struct CamImuRequest {
   bool reuse_detections = true;
   bool store_detections = false;  // in the log; else in cache_dir when given (StreamDetectionRequest)
   std::string cache_dir;
-  /// Detection progress per camera (index into camera_paths' cameras), then the solver's.
+  /// Detection progress per camera (index into cameras), then the solver's.
   std::function<void(int camera, double fraction)> detection_progress;
   calib::CamImuProgressFn solve_progress;
 };

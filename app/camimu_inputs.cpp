@@ -99,6 +99,26 @@ Result<std::vector<CamchainCamera>> read_camchain(const std::string& path) {
   return out;
 }
 
+Result<std::vector<CamchainCamera>> read_camchain_files(const std::vector<std::string>& paths) {
+  if (paths.empty()) {
+    return make_error(Errc::kInvalidArgument,
+                      "no camera given: the camera-IMU calibration needs each camera's intrinsics (the YAML "
+                      "of imucal calibrate camera, or a Kalibr camchain)")
+        .with_remedy("camera");
+  }
+  std::vector<CamchainCamera> out;
+  for (const auto& path : paths) {
+    auto cams = read_camchain(path);
+    if (!cams.ok()) return cams.error();
+    for (auto& cam : *cams) {
+      cam.source = path + " " + cam.name;
+      cam.name = "cam" + std::to_string(out.size());
+      out.push_back(std::move(cam));
+    }
+  }
+  return out;
+}
+
 Result<std::vector<int>> match_camera_streams(const std::vector<CamchainCamera>& cameras,
                                               const std::map<int, CameraStreamInfo>& streams) {
   std::vector<int> ids;

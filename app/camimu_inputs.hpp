@@ -36,6 +36,10 @@ struct CamchainCamera {
 /// file), kCorrupt (not YAML, no cam0, a malformed camera).
 [[nodiscard]] Result<std::vector<CamchainCamera>> read_camchain(const std::string& path);
 
+/// The cameras of several camchain YAMLs, renamed cam0, cam1, ... in order, each with its file
+/// and key as its source. kInvalidArgument (with the remedy "camera") when none is given.
+[[nodiscard]] Result<std::vector<CamchainCamera>> read_camchain_files(const std::vector<std::string>& paths);
+
 /// The log's camera stream of each camchain camera: the one named by its `camera_stream`, else by
 /// its rostopic (/NAME/image_raw, /NAME/image or NAME), else, with one camera in the file and one
 /// stream in the log, that stream. Two cameras on one stream are refused. kNotFound names the

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "app/camimu_inputs.hpp"
 #include "core/text_file.hpp"
 #include "core/text_format.hpp"
 #include "core/version.hpp"
@@ -55,10 +56,20 @@ json yaml_to_json(const YAML::Node& n) {
 
 json new_payload() {
   return {
-      {"format", kCalibrationFormat},     {"version", kCalibrationPayloadVersion},
+      {"format", kCalibrationFormat},     {"version", kCalibrationRecordVersion},
       {"created_utc", utc_now_iso8601()}, {"software_version", kVersion},
       {"cameras", json::array()},         {"source", {{"files", json::array()}, {"notes", json::array()}}}};
 }
+
+CalibrationRecord new_record() {
+  CalibrationRecord r;
+  r.created_utc = utc_now_iso8601();
+  r.software_version = kVersion;
+  return r;
+}
+
+constexpr const char* kTedaldiSigmaModel = "tedaldi: corrected = misalignment * diag(scale) * (raw - bias)";
+constexpr const char* kKrebsForm = "a_raw = S_a M_a a + b_a; w_raw = S_g M_g C_bg^T w + B_g C_bg^T a + b_g";
 
 // The canonical block (A_a, b_a, A_g, b_g, G, form) of a result, with its stream and units.
 json imu_block(const json& root, const json& canonical, const std::string& source) {
@@ -73,7 +84,14 @@ json static_payload(const json& r, const std::string& path) {
   p["imu"] = imu_block(r, r.at("canonical"), "static");
   json sigma = {{"model", "tedaldi: corrected = misalignment * diag(scale) * (raw - bias)"}};
   for (const char* triad : {"accel", "gyro"}) sigma[triad] = r.at(triad).at("sigma");
-  if (r.contains("gsens") && r["gsens"].contains("G_sigma")) sigma["G"] = r["gsens"]["G_sigma"];
+  if (r.contains("gsens") && r["gsens"].contains("G_sigma")) {
+    // G's sigma is a figure only where G was estimated (the file writes zeros otherwise).
+    sigma["G"] =
+        r["gsens"].value("mode", json()) == json("estimate")  // "off" reads as a YAML boolean
+            ? r["gsens"]["G_sigma"]
+            : json::array({json::array({nullptr, nullptr, nullptr}), json::array({nullptr, nullptr, nullptr}),
+                           json::array({nullptr, nullptr, nullptr})});
+  }
   p["imu"]["sigma"] = sigma;
   if (r.contains("gravity")) p["gravity_mps2"] = r["gravity"];
   p["source"]["files"].push_back({{"path", path}, {"kind", "static"}, {"method", kStaticMethod}});
@@ -84,7 +102,7 @@ json camimu_payload(const json& r, const std::string& path) {
   json p = new_payload();
   p["imu"] = imu_block(r, r.at("canonical"), "camimu");
   json sigma = r.at("krebs").value("sigma", json::object());
-  sigma["model"] = "krebs: " + r.at("krebs").value("form", "");
+  sigma["model"] = "krebs: " + r.at("krebs").value("form", std::string(kKrebsForm));
   p["imu"]["sigma"] = sigma;
   for (const auto& [name, c] : r.at("cameras").items()) {
     json cam = {{"name", name}};
@@ -119,52 +137,6 @@ Result<json> load_document(const std::string& path) {
   }
 }
 
-Status check_matrix(const json& j, std::size_t rows, std::size_t cols, const std::string& what) {
-  auto bad = [&] {
-    return make_error(
-        Errc::kCorrupt,
-        what + " must be " +
-            (cols == 0 ? std::to_string(rows) : std::to_string(rows) + " rows of " + std::to_string(cols)) +
-            " finite numbers");
-  };
-  if (!j.is_array() || j.size() != rows) return bad();
-  for (const auto& row : j) {
-    const json r = cols == 0 ? json::array({row}) : row;
-    if (!r.is_array() || (cols != 0 && r.size() != cols)) return bad();
-    for (const auto& x : r) {
-      if (!x.is_number() || !std::isfinite(x.get<double>())) return bad();
-    }
-  }
-  return {};
-}
-
-// Merges a camimu payload's cameras into a static payload (rules in the header).
-Result<json> merge(json stat, const json& cam) {
-  for (const char* key : {"stream", "input_units"}) {
-    if (stat["imu"][key] != cam["imu"][key]) {
-      return make_error(Errc::kInvalidArgument,
-                        std::string("the static and camimu results are of different IMU data (") + key + " " +
-                            stat["imu"][key].dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
-                            " and " +
-                            cam["imu"][key].dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
-                            "): give results of one stream");
-    }
-  }
-  stat["cameras"] = cam["cameras"];
-  const json& cam_file = cam["source"]["files"][0];
-  stat["source"]["files"].push_back(cam_file);
-  std::string note = "imu from the static result; cameras from the camimu result";
-  const auto fixed = cam_file.value("fixed", json::array());
-  const bool own_intrinsics = std::find(fixed.begin(), fixed.end(), "S_a") == fixed.end();
-  if (own_intrinsics) {
-    note +=
-        "; the camimu solve estimated its own IMU intrinsics (run calibrate camimu --imu-intrinsics with the "
-        "static result for extrinsics consistent with the stored IMU)";
-  }
-  stat["source"]["notes"].push_back(note);
-  return stat;
-}
-
 StoredCalibration from_latest(const drivers::LatestRecord& latest, const std::string& device) {
   StoredCalibration out;
   out.device = device;
@@ -188,64 +160,101 @@ Result<StoredCalibration> decode_latest(const drivers::LatestRecord& latest, con
   if (!latest.record) return out;
   const std::string where = device + " slot " + drivers::slot_name(latest.slot) + " (sequence " +
                             std::to_string(latest.record->sequence) + ")";
-  json payload = json::from_cbor(latest.record->payload, true, false);
+  const json payload = json::from_cbor(latest.record->payload, true, false);
   if (payload.is_discarded()) {
     return make_error(Errc::kCorrupt,
                       where +
                           " holds an intact record whose payload is not CBOR: it was not written "
                           "by imucal; write a new calibration");
   }
-  if (auto st = validate_calibration_payload(payload); !st.ok()) return st.error().context(where);
-  out.payload = std::move(payload);
+  auto record = calibration_record_from_json(payload);
+  if (!record.ok()) return record.error().context(where);
+  out.record = std::move(*record);
   return out;
 }
 
 }  // namespace
 
-// A payload from one file; `exported` tells a stored payload from a result converted here.
-static Result<json> load_payload(const std::string& result_path, bool& exported);
-
-Status validate_calibration_payload(const json& p) {
-  if (!p.is_object() || p.value("format", json()) != kCalibrationFormat) {
-    return make_error(Errc::kCorrupt, std::string("not an imucal calibration (its \"format\" is not \"") +
-                                          kCalibrationFormat + "\")");
-  }
-  if (p.value("version", json()) != kCalibrationPayloadVersion) {
-    return make_error(
-        Errc::kCorrupt,
-        "calibration payload version " +
-            p.value("version", json()).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
-            ", this imucal reads version " + std::to_string(kCalibrationPayloadVersion));
-  }
-  if (!p.contains("imu") || !p["imu"].is_object())
-    return make_error(Errc::kCorrupt, "the calibration has no imu");
-  const json& imu = p["imu"];
-  for (const char* m : {"A_a", "A_g", "G"})
-    IMUCAL_TRY(check_matrix(imu.value(m, json()), 3, 3, std::string("imu.") + m));
-  for (const char* v : {"b_a", "b_g"})
-    IMUCAL_TRY(check_matrix(imu.value(v, json()), 3, 0, std::string("imu.") + v));
-  if (!p.contains("cameras") || !p["cameras"].is_array()) {
-    return make_error(Errc::kCorrupt, "the calibration's cameras must be a list");
-  }
-  for (const auto& c : p["cameras"]) {
-    if (!c.is_object()) return make_error(Errc::kCorrupt, "a camera entry is not a mapping");
-    IMUCAL_TRY(
-        check_matrix(c.value("T_cam_imu", json()), 4, 4, "camera " + c.value("name", "?") + " T_cam_imu"));
-  }
-  return {};
+CalibrationRecord calibration_record_from_static(const StaticCalibrationResult& r, const ImuStreamInfo& info,
+                                                 const std::string& path) {
+  CalibrationRecord rec = new_record();
+  rec.imu.stream = info.name;
+  rec.imu.input_units = imu_units_name(info.units);
+  rec.imu.model = r.canonical;
+  rec.imu.source = "static";
+  rec.imu.sigma.model = kTedaldiSigmaModel;
+  rec.imu.sigma.accel = r.accel_sigma;
+  rec.imu.sigma.gyro = r.gyro_sigma;
+  rec.imu.sigma.G = r.gsens_mode == GSensitivityMode::kEstimate
+                        ? r.gsens_sigma
+                        : Eigen::Matrix3d(Eigen::Matrix3d::Constant(kNotDetermined));
+  rec.gravity_mps2 = r.gravity_mps2;
+  rec.files.push_back({path, "static", kStaticMethod, std::nullopt});
+  return rec;
 }
 
-bool same_calibration(const json& a, const json& b) {
-  return a.value("imu", json()) == b.value("imu", json()) &&
-         a.value("cameras", json()) == b.value("cameras", json());
+CalibrationRecord calibration_record_from_camimu(const CamImuReport& report, const std::string& path) {
+  const CamImuCalibrationResult& res = report.result;
+  CalibrationRecord rec = new_record();
+  rec.imu.stream = report.imu_stream.name;
+  rec.imu.input_units = imu_units_name(report.imu_stream.units);
+  rec.imu.model = canonical_on_input_units(res.canonical, report.imu_stream);
+  rec.imu.source = "camimu";
+  rec.imu.sigma.model = std::string("krebs: ") + kKrebsForm;
+  rec.imu.sigma.krebs = res.imu_sigma;
+  for (std::size_t i = 0; i < res.cameras.size(); ++i) {
+    const CamImuCameraResult& c = res.cameras[i];
+    CameraRecord cam;
+    cam.name = "cam" + std::to_string(i);
+    cam.stream = c.stream;
+    cam.T_cam_imu = c.T_cam_imu.matrix();
+    cam.rotation_sigma_rad = c.rotation_sigma_rad;
+    cam.translation_sigma_m = c.translation_sigma_m;
+    cam.timeshift_cam_imu_s = c.timeshift_cam_imu_s;
+    cam.timeshift_sigma_s = c.timeshift_sigma_s;
+    rec.cameras.push_back(cam);
+  }
+  rec.gravity_mps2 = report.options.gravity_mps2;
+  rec.files.push_back({path, "camimu", kCamImuMethod, res.fixed});
+  return rec;
 }
 
-Result<json> calibration_payload_from_file(const std::string& result_path) {
+Result<CalibrationRecord> merge_calibration_records(CalibrationRecord stat, const CalibrationRecord& cam) {
+  const std::pair<const char*, std::pair<std::string, std::string>> keys[] = {
+      {"stream", {stat.imu.stream, cam.imu.stream}},
+      {"input_units", {stat.imu.input_units, cam.imu.input_units}}};
+  for (const auto& [key, values] : keys) {
+    if (values.first != values.second) {
+      return make_error(Errc::kInvalidArgument,
+                        std::string("the static and camimu results are of different IMU data (") + key +
+                            " \"" + values.first + "\" and \"" + values.second +
+                            "\"): give results of one stream");
+    }
+  }
+  stat.cameras = cam.cameras;
+  if (!cam.files.empty()) stat.files.push_back(cam.files.front());
+  std::string note = "imu from the static result; cameras from the camimu result";
+  const std::vector<std::string> fixed = cam.files.empty()
+                                             ? std::vector<std::string>()
+                                             : cam.files.front().fixed.value_or(std::vector<std::string>());
+  if (std::find(fixed.begin(), fixed.end(), "S_a") == fixed.end()) {
+    note +=
+        "; the camimu solve estimated its own IMU intrinsics (run calibrate camimu --imu-intrinsics with the "
+        "static result for extrinsics consistent with the stored IMU)";
+  }
+  stat.notes.push_back(note);
+  return stat;
+}
+
+// A record from one file; `exported` tells a stored record from a result converted here.
+static Result<CalibrationRecord> load_record(const std::string& result_path, bool& exported);
+
+Result<CalibrationRecord> calibration_record_from_file(const std::string& result_path) {
   bool exported = false;
-  return load_payload(result_path, exported);
+  return load_record(result_path, exported);
 }
 
-static Result<json> load_payload(const std::string& result_path, bool& exported) {
+static Result<CalibrationRecord> load_record(const std::string& result_path, bool& exported) {
   std::string path = result_path;
   if (std::filesystem::is_directory(path)) path = (std::filesystem::path(path) / "calibration.yaml").string();
   auto doc = load_document(path);
@@ -254,55 +263,50 @@ static Result<json> load_payload(const std::string& result_path, bool& exported)
   const json& r = doc->is_object() && doc->contains("calibration") ? (*doc)["calibration"] : *doc;
   if (!r.is_object()) return make_error(Errc::kCorrupt, path + ": not a calibration result (not a mapping)");
   try {
+    json p;
     if (r.value("format", json()) == kCalibrationFormat) {
       exported = true;
-      if (auto st = validate_calibration_payload(r); !st.ok()) return st.error().context(path);
-      return r;
-    }
-    const std::string method = r.value("method", "");
-    json p;
-    if (method == kStaticMethod) {
-      p = static_payload(r, path);
-    } else if (method == kCamImuMethod) {
-      p = camimu_payload(r, path);
+      p = r;
     } else {
-      return make_error(Errc::kCorrupt, path +
-                                            ": neither a static result (calibrate static -o), a camimu "
-                                            "calibration.yaml nor an exported stored calibration");
+      const std::string method = r.value("method", "");
+      if (method == kStaticMethod) {
+        p = static_payload(r, path);
+      } else if (method == kCamImuMethod) {
+        p = camimu_payload(r, path);
+      } else {
+        return make_error(Errc::kCorrupt, path +
+                                              ": neither a static result (calibrate static -o), a camimu "
+                                              "calibration.yaml nor an exported stored calibration");
+      }
     }
-    if (auto st = validate_calibration_payload(p); !st.ok()) return st.error().context(path);
-    return p;
+    auto record = calibration_record_from_json(p);
+    if (!record.ok()) return record.error().context(path);
+    return record;
   } catch (const json::exception& e) {
     return make_error(Errc::kCorrupt, path + ": a key the calibration needs is missing or malformed (" +
                                           std::string(e.what()) + ")");
   }
 }
 
-std::string keep_stored_cameras(json& payload, const StoredCalibration& stored) {
-  const auto cameras = payload.find("cameras");
-  if (cameras != payload.end() && cameras->is_array() && !cameras->empty()) return {};
-  if (!stored.payload || !stored.payload->contains("cameras")) return {};
-  const json& kept = stored.payload->at("cameras");
-  if (!kept.is_array() || kept.empty()) return {};
-  payload["cameras"] = kept;
+std::string keep_stored_cameras(CalibrationRecord& record, const StoredCalibration& stored) {
+  if (!record.cameras.empty() || !stored.record || stored.record->cameras.empty()) return {};
+  record.cameras = stored.record->cameras;
   const std::string note = "cameras kept from the stored record (sequence " +
                            std::to_string(stored.sequence) + "): this session did not calibrate them";
-  if (!payload["source"].is_object()) payload["source"] = json::object();
-  if (!payload["source"]["notes"].is_array()) payload["source"]["notes"] = json::array();
-  payload["source"]["notes"].push_back(note);
+  record.notes.push_back(note);
   return note;
 }
 
-Result<json> calibration_payload_from_files(const std::vector<std::string>& paths) {
+Result<CalibrationRecord> calibration_record_from_files(const std::vector<std::string>& paths) {
   if (paths.empty()) return make_error(Errc::kInvalidArgument, "no result file given");
-  std::optional<json> stat, cam;
+  std::optional<CalibrationRecord> stat, cam;
   for (const auto& path : paths) {
     bool exported = false;
-    auto p = load_payload(path, exported);
+    auto p = load_record(path, exported);
     if (!p.ok()) return p.error();
     if (paths.size() == 1) return p;
-    const std::string kind = p->at("imu").value("source", "");
-    std::optional<json>& slot = kind == "static" ? stat : cam;
+    const std::string kind = p->imu.source;
+    std::optional<CalibrationRecord>& slot = kind == "static" ? stat : cam;
     if (exported) {
       return make_error(
           Errc::kInvalidArgument,
@@ -314,7 +318,7 @@ Result<json> calibration_payload_from_files(const std::vector<std::string>& path
     }
     slot = std::move(*p);
   }
-  if (stat && cam) return merge(std::move(*stat), *cam);
+  if (stat && cam) return merge_calibration_records(std::move(*stat), *cam);
   return stat ? *stat : *cam;
 }
 
@@ -336,10 +340,12 @@ Result<StoredCalibration> read_stored_calibration(const RigConfig& config) {
   return decode_latest(*latest, (*device)->name());
 }
 
-Result<StoredCalibration> write_stored_calibration(const RigConfig& config, const json& payload) {
-  IMUCAL_TRY(validate_calibration_payload(payload));
-  json p = payload;
-  if (!p.contains("rig")) p["rig"] = config.name;
+Result<StoredCalibration> write_stored_calibration(const RigConfig& config, const CalibrationRecord& record) {
+  CalibrationRecord rec = record;
+  if (rec.rig.empty()) rec.rig = config.name;
+  const json p = calibration_record_json(rec);
+  // What is stored must read back as what was meant: the JSON form is checked as a reader sees it.
+  IMUCAL_TRY(calibration_record_from_json(p));
   const std::vector<std::uint8_t> cbor = json::to_cbor(p);
   auto device = drivers::open_storage_device(config.storage, drivers::StorageAccess::kWrite);
   if (!device.ok()) return device.error();
@@ -351,8 +357,8 @@ Result<StoredCalibration> write_stored_calibration(const RigConfig& config, cons
   if (!latest.ok()) return latest.error();
   auto out = decode_latest(*latest, (*device)->name());
   if (!out.ok()) return out.error();
-  if (out->slot != written->slot || out->sequence != written->sequence || !out->payload ||
-      *out->payload != p) {
+  if (out->slot != written->slot || out->sequence != written->sequence || !out->record ||
+      calibration_record_json(*out->record) != p) {
     return make_error(Errc::kDevice, (*device)->name() + ": after writing sequence " +
                                          std::to_string(written->sequence) + " to slot " +
                                          drivers::slot_name(written->slot) +
@@ -396,14 +402,14 @@ void emit(YAML::Emitter& y, const json& j) {
 
 }  // namespace
 
-std::string stored_calibration_yaml(const json& payload) {
+std::string stored_calibration_yaml(const CalibrationRecord& record) {
   YAML::Emitter y;
-  emit(y, payload);
+  emit(y, calibration_record_json(record));
   return std::string(y.c_str()) + "\n";
 }
 
 Result<Rollback> rollback_stored_calibration(const RigConfig& config) {
-  json previous;
+  CalibrationRecord previous;
   Rollback out;
   {
     auto device = drivers::open_storage_device(config.storage, drivers::StorageAccess::kRead);
@@ -424,12 +430,18 @@ Result<Rollback> rollback_stored_calibration(const RigConfig& config) {
                                              drivers::slot_name(other) + " holds none (" + older->reason +
                                              ")");
     }
-    previous = json::from_cbor(older->record->payload, true, false);
-    if (previous.is_discarded()) {
+    const json payload = json::from_cbor(older->record->payload, true, false);
+    if (payload.is_discarded()) {
       return make_error(Errc::kCorrupt,
                         std::string("slot ") + drivers::slot_name(other) +
                             " holds a record whose payload is not CBOR: it cannot be restored");
     }
+    auto record = calibration_record_from_json(payload);
+    if (!record.ok()) {
+      return record.error().context(std::string("slot ") + drivers::slot_name(other) +
+                                    " holds a record that cannot be restored");
+    }
+    previous = std::move(*record);
     out.restored_sequence = older->record->sequence;
     out.replaced_sequence = latest->record->sequence;
   }

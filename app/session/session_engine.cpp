@@ -341,13 +341,13 @@ void SessionEngine::begin_step() {
                "Not written: a quality gate failed and there is no review step to accept it.");
         return;
       }
-      if (!final_ || final_->payload.is_null()) {
+      if (!final_ || !final_->record) {
         steps_[current_].state = StepState::kFailed;
         finish(SessionState::kFailed, "failed", "Nothing to write: the solve produced no record.");
         return;
       }
       prompt("Writing the calibration to the rig's storage", {});
-      host_.write(final_->payload);
+      host_.write(*final_->record);
       break;
   }
 }

@@ -23,6 +23,7 @@
 
 #include "app/camimu_calibration.hpp"
 #include "calib/static_calibration.hpp"
+#include "core/calibration_record.hpp"
 #include "core/imu.hpp"
 #include "core/result.hpp"
 #include "core/rig_config.hpp"
@@ -75,9 +76,9 @@ struct SolveJob {
 struct SolveOutcome {
   std::optional<StaticCalibrationResult> imu;
   std::optional<CamImuReport> camimu;
-  /// The record to store (app/stored_calibration.hpp), built by the host from the result files
-  /// it wrote; empty for a quick solve.
-  nlohmann::json payload;
+  /// The record to store (core/calibration_record.hpp), built from the typed results above by
+  /// run_solve and completed by the host (RunnerOptions::complete_record); empty for a quick solve.
+  std::optional<CalibrationRecord> record;
   std::vector<std::string> result_files;
   std::string error;    // empty: success
   double wall_s = 0.0;  // wall-clock time the solve took (the host measures it)
@@ -94,7 +95,7 @@ class EngineHost {
   /// Runs a solve off the engine's thread; the host calls SessionEngine::solve_finished() later.
   virtual void solve(const SolveJob& job) = 0;
   /// Writes the record, syncs and reads it back; the host calls write_finished() later.
-  virtual void write(const nlohmann::json& payload) = 0;
+  virtual void write(const CalibrationRecord& record) = 0;
   /// After a fault: reopens what failed. Ok when the step can be redone.
   virtual Status recover() = 0;
   /// The recording ends here (the solve starts): no more samples will be stored.

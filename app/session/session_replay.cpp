@@ -45,11 +45,9 @@ class ReplayHost final : public EngineHost {
   PreflightReport preflight() override { return preflight_; }
   void solve(const SolveJob& job) override {
     SolveOutcome out = run_solve(job, config_, info_, dir_, nullptr, {motion_log_, false});
-    // The record the live session stored is not in the log; the files stand for it.
-    if (job.final && out.error.empty()) out.payload = json{{"replay", true}, {"files", out.result_files}};
     outcomes_[job.id] = std::move(out);
   }
-  void write(const json&) override {}
+  void write(const CalibrationRecord&) override {}
   Status recover() override { return {}; }
 
   std::map<int, SolveOutcome> outcomes_;

@@ -13,6 +13,7 @@
 #include "app/report/report.hpp"
 #include "app/result_writers.hpp"
 #include "app/solvers.hpp"
+#include "app/stored_calibration.hpp"
 #include "calib/target_detection.hpp"
 #include "core/text_format.hpp"
 #include "core/version.hpp"
@@ -63,11 +64,12 @@ SolveOutcome run_solve(const SolveJob& job, const RigConfig& config, const ImuSt
 }
 
 /// The camera-IMU part of a final solve: each camera's intrinsics from the motion log's frames,
-/// then the camera-IMU calibration with the static result (`static_yaml`) as the IMU's prior.
-/// Returns the result files (camera-<name>.yaml, camimu/...), the canonical one last.
+/// then the camera-IMU calibration with the static result (out.imu, written to `static_yaml`)
+/// as the IMU's prior. Returns the result files (camera-<name>.yaml, camimu/...), the canonical
+/// one last.
 static Result<std::vector<std::string>> solve_camimu(
     const RigConfig& config, const std::string& dir, const std::string& static_yaml,
-    const MotionLogSource& source, SolveOutcome& out,
+    const ImuStreamInfo& info, const MotionLogSource& source, SolveOutcome& out,
     const std::function<void(double, const std::string&)>& progress) {
   const std::string log = source.path.empty() ? dir + "/" + kMotionLogFile : source.path;
   if (!config.target) return make_error(Errc::kInvalidArgument, "the configuration names no target");
@@ -94,11 +96,22 @@ static Result<std::vector<std::string>> solve_camimu(
     const std::string path = dir + "/camera-" + name + ".yaml";
     IMUCAL_TRY(write_text_file(path, camera_result_yaml(*cam)));
     files.push_back(path);
-    q.camera_paths.push_back(path);
+    CamchainCamera intrinsics;
+    intrinsics.name = "cam" + std::to_string(q.cameras.size());
+    intrinsics.source = path + " cam0";
+    intrinsics.camera = cam->intrinsics.camera;
+    intrinsics.camera_stream = cam->stream.name;
+    intrinsics.rostopic = "/" + cam->stream.name + "/image_raw";
+    q.cameras.push_back(std::move(intrinsics));
   }
-  auto prior = read_imucal_calibration(static_yaml);
-  if (!prior.ok()) return prior.error().context("the static result as the IMU's prior");
-  q.imu_intrinsics = *prior;
+  // The static result as the IMU's prior, as solved (its file names it in the report).
+  NamedCalibration prior;
+  prior.name = std::filesystem::path(static_yaml).filename().string();
+  prior.format = "imucal";
+  prior.path = static_yaml;
+  prior.model = out.imu->canonical;
+  prior.input_units = info.units;
+  q.imu_intrinsics = std::move(prior);
   q.gravity_source = "standard gravity";
   q.threads = 2;
   q.options.threads = 2;
@@ -148,14 +161,24 @@ static SolveOutcome run_solve_timed(const SolveJob& job, const RigConfig& config
     return out;
   }
   out.result_files = {yaml_path, json_path};
+  // The record to store, from the typed results (the files above are for people and tools).
+  CalibrationRecord record = calibration_record_from_static(*out.imu, info, yaml_path);
   if (job.camimu) {
-    auto files = solve_camimu(config, dir, yaml_path, motion_log, out, progress);
+    auto files = solve_camimu(config, dir, yaml_path, info, motion_log, out, progress);
     if (!files.ok()) {
       out.error = files.error().message;
       return out;
     }
     out.result_files.insert(out.result_files.end(), files->begin(), files->end());
+    auto merged = merge_calibration_records(std::move(record),
+                                            calibration_record_from_camimu(*out.camimu, files->back()));
+    if (!merged.ok()) {
+      out.error = "building the record: " + merged.error().message;
+      return out;
+    }
+    record = std::move(*merged);
   }
+  out.record = std::move(record);
   return out;
 }
 
@@ -465,9 +488,9 @@ void SessionRunner::solve(const SolveJob& job) {
   const std::string dir = dir_;
   const ImuStreamInfo info = info_;
   const bool report = options_.report;
-  auto make_payload = options_.make_payload;
+  auto complete_record = options_.complete_record;
   const std::string log = log_path();
-  run_on_worker([this, job, dir, info, report, make_payload, log] {
+  run_on_worker([this, job, dir, info, report, complete_record, log] {
     auto progress = [this](double f, const std::string& text) {
       if (options_.post) {
         options_.post([this, f, text] { engine_.solve_progress(f, text); });
@@ -479,13 +502,9 @@ void SessionRunner::solve(const SolveJob& job) {
         run_solve(job, config_, info, dir,
                   job.final ? std::function<void(double, const std::string&)>(progress) : nullptr);
     if (job.final && out.error.empty()) {
-      if (make_payload) {
-        auto payload = make_payload(out.result_files);
-        if (payload.ok()) {
-          out.payload = std::move(*payload);
-        } else {
-          out.error = "building the record: " + payload.error().message;
-        }
+      if (complete_record && out.record) {
+        if (Status s = complete_record(*out.record); !s.ok())
+          out.error = "building the record: " + s.error().message;
       }
       if (report && out.error.empty()) {
         report::ReportOptions ro;
@@ -522,10 +541,10 @@ void SessionRunner::solve(const SolveJob& job) {
   });
 }
 
-void SessionRunner::write(const json& payload) {
+void SessionRunner::write(const CalibrationRecord& record) {
   auto writer = options_.write_storage;
-  run_on_worker([this, payload, writer] {
-    Status status = writer ? writer(payload)
+  run_on_worker([this, record, writer] {
+    Status status = writer ? writer(record)
                            : Status(make_error(Errc::kUnsupported, "this host has no storage to write to"));
     auto apply = [this, status] { engine_.write_finished(status); };
     if (options_.post) {

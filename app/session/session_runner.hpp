@@ -45,10 +45,11 @@ struct RunnerOptions {
   std::function<PreflightReport()> preflight;
   /// Reopens the devices after a fault.
   std::function<Status()> recover;
-  /// Builds the record to store from the result files of the final solve.
-  std::function<Result<nlohmann::json>(const std::vector<std::string>& result_files)> make_payload;
+  /// Completes the record the final solve built before it is reviewed (the service keeps the
+  /// cameras of the stored record when the session calibrated none). Runs on the worker thread.
+  std::function<Status(CalibrationRecord& record)> complete_record;
   /// Writes the record to the rig's storage, syncs and reads it back. Runs on the worker thread.
-  std::function<Status(const nlohmann::json& payload)> write_storage;
+  std::function<Status(const CalibrationRecord& record)> write_storage;
   /// Problems that concern the service's operator log, not the session (a report not drawn,
   /// a session log event that could not be stored). Default: stderr.
   std::function<void(const std::string&)> warn;
@@ -123,7 +124,7 @@ class SessionRunner final : public EngineHost {
   void emit(const nlohmann::json& message) override;
   PreflightReport preflight() override;
   void solve(const SolveJob& job) override;
-  void write(const nlohmann::json& payload) override;
+  void write(const CalibrationRecord& record) override;
   Status recover() override;
   void recording_finished() override;
 

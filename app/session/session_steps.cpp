@@ -429,16 +429,11 @@ void SessionEngine::review() {
       lines.push_back(cam.name + ": reprojection RMS " + fixed(cam.reprojection_rms_px, 3) +
                       " px, time offset " + fixed(cam.timeshift_cam_imu_s * 1e3, 3) + " ms");
     }
-  } else if (final_->payload.is_object()) {
+  } else if (final_->record) {
     // Cameras the record will keep from the stored one (app::keep_stored_cameras): said, so
     // that the operator accepts knowing what is written.
-    const auto source = final_->payload.find("source");
-    if (source != final_->payload.end() && source->is_object() && source->contains("notes") &&
-        source->at("notes").is_array()) {
-      for (const auto& note : source->at("notes"))
-        if (note.is_string() && note.get<std::string>().starts_with("cameras kept"))
-          lines.push_back("Cameras: " + note.get<std::string>());
-    }
+    for (const std::string& note : final_->record->notes)
+      if (note.starts_with("cameras kept")) lines.push_back("Cameras: " + note);
   }
   json diff;
   for (auto& line : difference_to_stored(&diff)) lines.push_back(std::move(line));

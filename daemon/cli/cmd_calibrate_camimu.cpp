@@ -73,13 +73,16 @@ app::CamImuRequest build_request(const CamImuCliOptions& o) {
   app::CamImuRequest q;
   q.log_path = o.log_path;
   q.imu_stream = o.imu_stream;
-  q.camera_paths = o.camera_paths;
-  for (const auto& path : o.camera_paths) {
-    if (auto cams = app::read_camchain(path); !cams.ok()) fail(cams.error(), "--camera");
+  if (!o.camera_paths.empty()) {
+    auto cams = app::read_camchain_files(o.camera_paths);
+    if (!cams.ok()) fail(cams.error(), "--camera");
+    q.cameras = std::move(*cams);
   }
-  q.imu_noise_path = o.imu_path;
   if (!o.imu_path.empty()) {
-    if (auto noise = app::read_kalibr_imu_noise(o.imu_path); !noise.ok()) fail(noise.error(), "--imu");
+    auto noise = app::read_kalibr_imu_noise(o.imu_path);
+    if (!noise.ok()) fail(noise.error(), "--imu");
+    q.imu_noise = *noise;
+    q.imu_noise_source = o.imu_path;
   }
   if (!o.imu_intrinsics_path.empty()) {
     auto c = app::read_imucal_calibration(o.imu_intrinsics_path);

@@ -56,7 +56,7 @@ json slots_json(const app::StoredCalibration& s) {
 // Prints where the record is and the state of both slots (stdout for read's YAML as comments).
 void print_state(std::ostream& out, const app::StoredCalibration& s, const char* prefix) {
   out << prefix << s.device;
-  if (s.payload) {
+  if (s.record) {
     out << ": slot " << drivers::slot_name(s.slot) << ", sequence " << s.sequence << ", " << s.payload_bytes
         << " payload bytes";
   }
@@ -68,7 +68,7 @@ void print_state(std::ostream& out, const app::StoredCalibration& s, const char*
 app::StoredCalibration read_or_fail(const RigConfig& config) {
   auto stored = app::read_stored_calibration(config);
   if (!stored.ok()) fail(stored.error(), "reading the stored calibration");
-  if (!stored->payload) {
+  if (!stored->record) {
     print_state(std::cerr, *stored, "");
     throw CliExit{kExitInput,
                   "no calibration is stored on " + stored->device + " (write one with imucal store write)"};
@@ -109,27 +109,27 @@ void run_read(const StoreOptions& o) {
               {"slots", slots_json(s)},
               {"damaged_slots", damaged},
               {"may_be_older_than_last_write", !damaged.empty()},
-              {"calibration", *s.payload}};
+              {"calibration", calibration_record_json(*s.record)}};
     std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
     return;
   }
   print_state(std::cout, s, "# ");
-  std::cout << app::stored_calibration_yaml(*s.payload);
+  std::cout << app::stored_calibration_yaml(*s.record);
 }
 
-json payload_of(const std::vector<std::string>& results) {
-  auto payload = app::calibration_payload_from_files(results);
-  if (!payload.ok()) {
-    const int code = payload.error().code == Errc::kInvalidArgument ? kExitUsage : kExitInput;
-    throw CliExit{code, payload.error().message};
+CalibrationRecord record_of(const std::vector<std::string>& results) {
+  auto record = app::calibration_record_from_files(results);
+  if (!record.ok()) {
+    const int code = record.error().code == Errc::kInvalidArgument ? kExitUsage : kExitInput;
+    throw CliExit{code, record.error().message};
   }
-  return std::move(payload).value();
+  return std::move(record).value();
 }
 
 void run_write(const StoreOptions& o) {
   const RigConfig config = load_config(o.config_path);
-  const json payload = payload_of(o.results);
-  auto written = app::write_stored_calibration(config, payload);
+  const CalibrationRecord record = record_of(o.results);
+  auto written = app::write_stored_calibration(config, record);
   if (!written.ok()) fail(written.error(), "writing the calibration");
   std::cout << "written and verified: " << written->device << " slot " << drivers::slot_name(written->slot)
             << ", sequence " << written->sequence << ", " << written->payload_bytes << " payload bytes\n";
@@ -150,8 +150,8 @@ void run_rollback(const StoreOptions& o) {
 
 void run_verify(const StoreOptions& o) {
   const RigConfig config = load_config(o.config_path);
-  std::optional<json> expected;
-  if (!o.results.empty()) expected = payload_of(o.results);
+  std::optional<CalibrationRecord> expected;
+  if (!o.results.empty()) expected = record_of(o.results);
   const app::StoredCalibration s = read_or_fail(config);
   warn_damaged(s);
   print_state(std::cout, s, "");
@@ -161,7 +161,7 @@ void run_verify(const StoreOptions& o) {
                 << " is not valid (an interrupted or failed write); the next write goes there\n";
     }
   }
-  if (expected && !app::same_calibration(*s.payload, *expected)) {
+  if (expected && !same_calibration(*s.record, *expected)) {
     throw CliExit{kExitData, "the stored calibration (sequence " + std::to_string(s.sequence) +
                                  ") differs from the given result's imu or cameras"};
   }

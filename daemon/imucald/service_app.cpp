@@ -74,25 +74,18 @@ Status Service::init() {
     if (imu_state_ == "open") return {};
     return open_imu();
   };
-  ro.make_payload = [config = config_](const std::vector<std::string>& files) -> Result<json> {
-    // The static result and the camera-IMU calibration (imucal's canonical records); the
-    // camchains beside them are for Kalibr's tools.
-    std::vector<std::string> results;
-    for (const auto& f : files)
-      if (f.ends_with("/imu-static.yaml") || f.ends_with("/camimu/calibration.yaml")) results.push_back(f);
-    auto payload = app::calibration_payload_from_files(results);
-    if (!payload.ok()) return payload;
+  ro.complete_record = [config = config_](CalibrationRecord& record) -> Status {
     // A session without the motion step keeps the cameras the rig's record holds.
     auto stored = app::read_stored_calibration(config);
     if (!stored.ok()) {
       return make_error(stored.error().code,
                         "reading the stored record, to keep its cameras: " + stored.error().message);
     }
-    const std::string kept = app::keep_stored_cameras(*payload, *stored);
+    const std::string kept = app::keep_stored_cameras(record, *stored);
     if (!kept.empty()) spdlog::info("{}", kept);
-    return payload;
+    return {};
   };
-  ro.write_storage = [this](const json& payload) { return write_storage(payload); };
+  ro.write_storage = [this](const CalibrationRecord& record) { return write_storage(record); };
   ro.warn = [](const std::string& text) { spdlog::warn("{}", text); };
   // The virtual rig's frames come as fast as it computes: they wait for the encoder.
   ro.frames_wait_for_encoder = options_.sim;
@@ -272,14 +265,14 @@ void Service::set_gyro_offsets(bool from_record) {
   std::string source = "cleared (power-up zero) while a session records";
   if (from_record) {
     auto stored = app::read_stored_calibration(config_);
-    if (!stored.ok() || !stored->payload) {
+    if (!stored.ok() || !stored->record) {
       source = "cleared: no stored calibration";
     } else {
-      const json imu = stored->payload->value("imu", json::object());
-      if (imu.value("input_units", "") != "raw" || !imu.contains("b_g")) {
+      const ImuRecord& imu = stored->record->imu;
+      if (imu.input_units != "raw") {
         source = "cleared: the stored gyro bias is not in counts";
       } else {
-        for (int i = 0; i < 3; ++i) bias[i] = imu["b_g"][i].get<double>();
+        for (int i = 0; i < 3; ++i) bias[i] = imu.model.b_g[i];
         source = "the stored gyro bias (sequence " + std::to_string(stored->sequence) + ")";
       }
     }
@@ -346,11 +339,11 @@ app::session::PreflightReport Service::preflight() {
         {"storage", unwritable.empty(),
          storage_name(config_.storage) +
              (unwritable.empty() ? ": readable and writable" : ": readable, not writable: " + unwritable)});
-    if (stored->payload) {
-      json s = *stored->payload;
+    if (stored->record) {
+      json s = calibration_record_json(*stored->record);
       s["summary"] = "sequence " + std::to_string(stored->sequence) + " in slot " +
                      std::to_string(stored->slot) +
-                     (s.contains("created_utc") ? ", written " + s.value("created_utc", std::string()) : "");
+                     (stored->record->created_utc.empty() ? "" : ", written " + stored->record->created_utc);
       r.stored = s;
     }
   }
@@ -373,8 +366,8 @@ app::session::PreflightReport Service::preflight() {
   return r;
 }
 
-Status Service::write_storage(const json& payload) {
-  auto written = app::write_stored_calibration(config_, payload);
+Status Service::write_storage(const CalibrationRecord& record) {
+  auto written = app::write_stored_calibration(config_, record);
   if (!written.ok()) return written.error();
   spdlog::info("calibration written to {} (slot {}, sequence {}), read back and verified",
                storage_name(config_.storage), written->slot, written->sequence);

@@ -75,7 +75,7 @@ class Service final : public service::SessionHost {
   void imu_failed(const Error& error);
   app::session::PreflightReport preflight();
   std::string self_test();
-  Status write_storage(const nlohmann::json& payload);
+  Status write_storage(const CalibrationRecord& record);
   /// storage.program_gyro_offsets: the stored gyro bias into the chip's gyro offset registers
   /// (`from_record`), or the registers back to their power-up zero (before a session records).
   void set_gyro_offsets(bool from_record);

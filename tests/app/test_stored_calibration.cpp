@@ -1,8 +1,10 @@
-// The stored calibration (app/stored_calibration.hpp): payloads from the static and camimu result
-// files and their merge, validation, and the round trip through a file-backed storage region.
+// The stored calibration (app/stored_calibration.hpp): records from the static and camimu results
+// (typed, and through their files) and their merge, the cameras an IMU-only session keeps, and the
+// round trip (write, read, export, rollback) through a file-backed storage region.
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 
@@ -18,15 +20,10 @@ namespace {
 
 using nlohmann::json;
 
+calib::StaticCalibrationResult static_result();
+
 std::string write_static(const std::string& dir, const std::string& stream = "imu0") {
-  calib::StaticCalibrationResult r;
-  r.canonical.A_a << 5.9e-4, -5.8e-6, -1.9e-5, 0, 5.9e-4, -1.4e-5, 0, 0, 5.8e-4;
-  r.canonical.b_a = Eigen::Vector3d(324.2, 805.4, -850.44);
-  r.canonical.A_g << 1.3e-4, -8.3e-7, -4.2e-6, -2.3e-6, 1.35e-4, -1.0e-6, 2.5e-6, -3.4e-6, 1.3e-4;
-  r.canonical.b_g = Eigen::Vector3d(7.4, -16.5, 49.75);
-  r.canonical.G << 1e-4, 2e-5, -3e-4, 0, 0, 1e-5, 0, 0, 0;
-  r.accel_sigma.bias = Eigen::Vector3d(1.5, 1.3, 1.2);
-  r.gravity_mps2 = 9.81;
+  const calib::StaticCalibrationResult r = static_result();
   ImuStreamInfo info;
   info.name = stream;
   info.units = ImuUnits::kRaw;
@@ -35,7 +32,7 @@ std::string write_static(const std::string& dir, const std::string& stream = "im
   return path;
 }
 
-std::string write_camimu(const std::string& dir, bool fixed_intrinsics) {
+CamImuReport camimu_report(bool fixed_intrinsics) {
   CamImuReport r;
   r.imu_stream.name = "imu0";
   r.imu_stream.units = ImuUnits::kRaw;
@@ -44,7 +41,7 @@ std::string write_camimu(const std::string& dir, bool fixed_intrinsics) {
   auto& res = r.result;
   res.imu.S_a = {0.99, 1.01, 1.02};
   res.imu.b_g = {0.03, 0.05, 0.06};
-  res.imu_sigma.S_a = {1e-4, 2e-4, 3e-4};
+  res.imu_sigma.S_a = {1e-4, 2e-4, 3e-4};  // the rest not determined
   res.canonical = *canonical_from_krebs(res.imu);
   if (fixed_intrinsics) res.fixed = {"S_a", "M_a", "S_g", "M_g", "C_bg"};
   CamImuCameraResult c;
@@ -53,6 +50,11 @@ std::string write_camimu(const std::string& dir, bool fixed_intrinsics) {
   c.timeshift_cam_imu_s = 0.0042;
   c.timeshift_sigma_s = 1.4e-4;
   res.cameras.push_back(c);
+  return r;
+}
+
+std::string write_camimu(const std::string& dir, bool fixed_intrinsics) {
+  const CamImuReport r = camimu_report(fixed_intrinsics);
   const std::string out = dir + "/camimu";
   std::filesystem::create_directories(out);
   EXPECT_TRUE(
@@ -70,45 +72,102 @@ RigConfig file_config(const std::string& dir, int size_bytes = 4096) {
   return c;
 }
 
+calib::StaticCalibrationResult static_result() {
+  calib::StaticCalibrationResult r;
+  r.canonical.A_a << 5.9e-4, -5.8e-6, -1.9e-5, 0, 5.9e-4, -1.4e-5, 0, 0, 5.8e-4;
+  r.canonical.b_a = Eigen::Vector3d(324.2, 805.4, -850.44);
+  r.canonical.A_g << 1.3e-4, -8.3e-7, -4.2e-6, -2.3e-6, 1.35e-4, -1.0e-6, 2.5e-6, -3.4e-6, 1.3e-4;
+  r.canonical.b_g = Eigen::Vector3d(7.4, -16.5, 49.75);
+  r.canonical.G << 1e-4, 2e-5, -3e-4, 0, 0, 1e-5, 0, 0, 0;
+  r.accel_sigma.bias = Eigen::Vector3d(1.5, 1.3, 1.2);
+  r.gravity_mps2 = 9.81;
+  return r;
+}
+
 TEST(StoredCalibration, StaticResultGivesTheCanonicalImu) {
   const std::string dir = test::scratch_dir();
-  auto p = calibration_payload_from_file(write_static(dir));
+  auto p = calibration_record_from_file(write_static(dir));
   ASSERT_TRUE(p.ok()) << p.error().message;
-  EXPECT_EQ((*p)["format"], kCalibrationFormat);
-  EXPECT_EQ((*p)["imu"]["source"], "static");
-  EXPECT_EQ((*p)["imu"]["input_units"], "raw");
-  EXPECT_DOUBLE_EQ((*p)["imu"]["b_a"][2].get<double>(), -850.44);
-  EXPECT_DOUBLE_EQ((*p)["imu"]["A_g"][1][1].get<double>(), 1.35e-4);
-  EXPECT_DOUBLE_EQ((*p)["imu"]["sigma"]["accel"]["bias"][0].get<double>(), 1.5);
-  EXPECT_TRUE((*p)["cameras"].empty());
+  EXPECT_EQ(p->imu.source, "static");
+  EXPECT_EQ(p->imu.input_units, "raw");
+  EXPECT_DOUBLE_EQ(p->imu.model.b_a[2], -850.44);
+  EXPECT_DOUBLE_EQ(p->imu.model.A_g(1, 1), 1.35e-4);
+  ASSERT_TRUE(p->imu.sigma.accel);
+  EXPECT_DOUBLE_EQ(p->imu.sigma.accel->bias[0], 1.5);
+  // The g-sensitivity was not estimated: its sigma is not determined, not the file's zeros.
+  ASSERT_TRUE(p->imu.sigma.G);
+  EXPECT_TRUE(p->imu.sigma.G->array().isNaN().all());
+  EXPECT_TRUE(p->cameras.empty());
+}
+
+TEST(StoredCalibration, TheTypedResultsGiveTheRecordTheirFilesGive) {
+  // The service builds the record from the solve's results, `store write` from their files:
+  // the same calibration either way.
+  const std::string dir = test::scratch_dir();
+  ImuStreamInfo info;
+  info.name = "imu0";
+  info.units = ImuUnits::kRaw;
+  const CalibrationRecord typed = calibration_record_from_static(static_result(), info, "imu-static.yaml");
+  auto from_file = calibration_record_from_file(write_static(dir));
+  ASSERT_TRUE(from_file.ok()) << from_file.error().message;
+  EXPECT_TRUE(same_calibration(typed, *from_file)) << calibration_record_json(typed).dump(1) << "\n"
+                                                   << calibration_record_json(*from_file).dump(1);
+  ASSERT_EQ(typed.files.size(), 1u);
+  EXPECT_EQ(typed.files[0].kind, "static");
+  ASSERT_TRUE(typed.gravity_mps2);
+  EXPECT_DOUBLE_EQ(*typed.gravity_mps2, 9.81);
+  // With G estimated its sigma is the solve's.
+  calib::StaticCalibrationResult r = static_result();
+  r.gsens_mode = GSensitivityMode::kEstimate;
+  r.gsens_sigma = Eigen::Matrix3d::Constant(2e-6);
+  EXPECT_DOUBLE_EQ((*calibration_record_from_static(r, info, "x").imu.sigma.G)(2, 1), 2e-6);
 }
 
 TEST(StoredCalibration, CamimuResultGivesImuAndCameras) {
   const std::string dir = test::scratch_dir();
-  auto p = calibration_payload_from_file(write_camimu(dir, false));  // the folder
+  auto p = calibration_record_from_file(write_camimu(dir, false));  // the folder
   ASSERT_TRUE(p.ok()) << p.error().message;
-  EXPECT_EQ((*p)["imu"]["source"], "camimu");
-  ASSERT_EQ((*p)["cameras"].size(), 1u);
-  const json& cam = (*p)["cameras"][0];
-  EXPECT_EQ(cam["name"], "cam0");
-  EXPECT_DOUBLE_EQ(cam["T_cam_imu"][0][3].get<double>(), 0.03);
-  EXPECT_DOUBLE_EQ(cam["timeshift_cam_imu_s"].get<double>(), 0.0042);
+  EXPECT_EQ(p->imu.source, "camimu");
+  ASSERT_TRUE(p->imu.sigma.krebs);
+  EXPECT_DOUBLE_EQ(p->imu.sigma.krebs->S_a[1], 2e-4);
+  EXPECT_TRUE(std::isnan(p->imu.sigma.krebs->M_g[0]));  // not determined
+  ASSERT_EQ(p->cameras.size(), 1u);
+  const CameraRecord& cam = p->cameras[0];
+  EXPECT_EQ(cam.name, "cam0");
+  EXPECT_DOUBLE_EQ(cam.T_cam_imu(0, 3), 0.03);
+  EXPECT_DOUBLE_EQ(cam.timeshift_cam_imu_s, 0.0042);
+  EXPECT_TRUE(std::isnan(cam.rotation_sigma_rad[0]));
+}
+
+TEST(StoredCalibration, TheTypedCamimuReportGivesTheRecordItsFileGives) {
+  const std::string dir = test::scratch_dir();
+  for (bool fixed : {false, true}) {
+    const CalibrationRecord typed = calibration_record_from_camimu(camimu_report(fixed), "calibration.yaml");
+    auto from_file = calibration_record_from_file(write_camimu(dir, fixed));
+    ASSERT_TRUE(from_file.ok()) << from_file.error().message;
+    EXPECT_TRUE(same_calibration(typed, *from_file)) << calibration_record_json(typed).dump(1) << "\n"
+                                                     << calibration_record_json(*from_file).dump(1);
+    ASSERT_EQ(typed.files.size(), 1u);
+    ASSERT_TRUE(typed.files[0].fixed);
+    EXPECT_EQ(typed.files[0].fixed->size(), fixed ? 5u : 0u);
+  }
 }
 
 TEST(StoredCalibration, MergeTakesTheImuFromStaticAndTheCamerasFromCamimu) {
   const std::string dir = test::scratch_dir();
   const std::string stat = write_static(dir);
   for (bool fixed : {false, true}) {
-    auto p = calibration_payload_from_files({write_camimu(dir, fixed), stat});
+    auto p = calibration_record_from_files({write_camimu(dir, fixed), stat});
     ASSERT_TRUE(p.ok()) << p.error().message;
-    EXPECT_EQ((*p)["imu"]["source"], "static");
-    EXPECT_EQ((*p)["cameras"].size(), 1u);
-    EXPECT_EQ((*p)["source"]["files"].size(), 2u);
-    const std::string note = (*p)["source"]["notes"][0];
-    EXPECT_EQ(note.find("estimated its own IMU intrinsics") != std::string::npos, !fixed) << note;
+    EXPECT_EQ(p->imu.source, "static");
+    EXPECT_EQ(p->cameras.size(), 1u);
+    EXPECT_EQ(p->files.size(), 2u);
+    ASSERT_EQ(p->notes.size(), 1u);
+    EXPECT_EQ(p->notes[0].find("estimated its own IMU intrinsics") != std::string::npos, !fixed)
+        << p->notes[0];
   }
-  EXPECT_EQ(calibration_payload_from_files({stat, stat}).error().code, Errc::kInvalidArgument);
-  auto other = calibration_payload_from_files({write_static(dir, "imu1"), write_camimu(dir, true)});
+  EXPECT_EQ(calibration_record_from_files({stat, stat}).error().code, Errc::kInvalidArgument);
+  auto other = calibration_record_from_files({write_static(dir, "imu1"), write_camimu(dir, true)});
   ASSERT_FALSE(other.ok());
   EXPECT_NE(other.error().message.find("different IMU"), std::string::npos) << other.error().message;
 }
@@ -116,25 +175,28 @@ TEST(StoredCalibration, MergeTakesTheImuFromStaticAndTheCamerasFromCamimu) {
 TEST(StoredCalibration, OtherFilesAreRefusedWithTheReason) {
   const std::string dir = test::scratch_dir();
   std::ofstream(dir + "/x.yaml") << "method: something else\n";
-  EXPECT_EQ(calibration_payload_from_file(dir + "/x.yaml").error().code, Errc::kCorrupt);
-  EXPECT_EQ(calibration_payload_from_file(dir + "/none.yaml").error().code, Errc::kNotFound);
+  EXPECT_EQ(calibration_record_from_file(dir + "/x.yaml").error().code, Errc::kCorrupt);
+  EXPECT_EQ(calibration_record_from_file(dir + "/none.yaml").error().code, Errc::kNotFound);
   std::ofstream(dir + "/bad.yaml") << "method: static multi-position (Tedaldi 2013)\ncanonical: {A_a: 3}\n";
-  EXPECT_EQ(calibration_payload_from_file(dir + "/bad.yaml").error().code, Errc::kCorrupt);
+  EXPECT_EQ(calibration_record_from_file(dir + "/bad.yaml").error().code, Errc::kCorrupt);
 }
 
-TEST(StoredCalibration, ValidationChecksShapes) {
+TEST(StoredCalibration, AnIMUOnlySessionKeepsTheStoredCameras) {
   const std::string dir = test::scratch_dir();
-  json p = *calibration_payload_from_file(write_static(dir));
-  EXPECT_TRUE(validate_calibration_payload(p).ok());
-  json bad = p;
-  bad["imu"]["A_a"][1] = json::array({1, 2});
-  EXPECT_FALSE(validate_calibration_payload(bad).ok());
-  bad = p;
-  bad["version"] = 2;
-  EXPECT_FALSE(validate_calibration_payload(bad).ok());
-  bad = p;
-  bad["cameras"] = json::array({json{{"name", "cam0"}, {"T_cam_imu", json::array({1, 2, 3})}}});
-  EXPECT_FALSE(validate_calibration_payload(bad).ok());
+  StoredCalibration stored;
+  stored.sequence = 7;
+  stored.record = *calibration_record_from_files({write_static(dir), write_camimu(dir, true)});
+  CalibrationRecord fresh = *calibration_record_from_file(write_static(dir));
+  const std::string said = keep_stored_cameras(fresh, stored);
+  ASSERT_EQ(fresh.cameras.size(), 1u);
+  EXPECT_NE(said.find("sequence 7"), std::string::npos) << said;
+  ASSERT_FALSE(fresh.notes.empty());
+  EXPECT_EQ(fresh.notes.back(), said);
+  // A record with cameras keeps its own.
+  CalibrationRecord with = *stored.record;
+  with.cameras[0].name = "mine";
+  EXPECT_EQ(keep_stored_cameras(with, stored), "");
+  EXPECT_EQ(with.cameras[0].name, "mine");
 }
 
 TEST(StoredCalibration, WritesReadsAndExportsThroughAFile) {
@@ -142,10 +204,10 @@ TEST(StoredCalibration, WritesReadsAndExportsThroughAFile) {
   const RigConfig config = file_config(dir);
   auto empty = read_stored_calibration(config);
   ASSERT_TRUE(empty.ok()) << empty.error().message;
-  EXPECT_FALSE(empty->payload);
+  EXPECT_FALSE(empty->record);
   EXPECT_FALSE(empty->note.empty());
 
-  const json p = *calibration_payload_from_files({write_static(dir), write_camimu(dir, true)});
+  const CalibrationRecord p = *calibration_record_from_files({write_static(dir), write_camimu(dir, true)});
   for (int i = 0; i < 3; ++i) {
     auto w = write_stored_calibration(config, p);
     ASSERT_TRUE(w.ok()) << w.error().message;
@@ -153,28 +215,34 @@ TEST(StoredCalibration, WritesReadsAndExportsThroughAFile) {
     EXPECT_EQ(w->sequence, static_cast<std::uint32_t>(i + 1));
   }
   auto r = read_stored_calibration(config);
-  ASSERT_TRUE(r.ok() && r->payload);
-  EXPECT_EQ((*r->payload)["rig"], "bench-rig");
-  EXPECT_TRUE(same_calibration(*r->payload, p));
+  ASSERT_TRUE(r.ok() && r->record);
+  EXPECT_EQ(r->record->rig, "bench-rig");
+  EXPECT_TRUE(same_calibration(*r->record, p));
   EXPECT_EQ(r->slots.size(), 2u);
   // The YAML export reads back as the same calibration (store verify EXPORT.yaml).
-  std::ofstream(dir + "/export.yaml") << stored_calibration_yaml(*r->payload);
-  auto back = calibration_payload_from_file(dir + "/export.yaml");
+  std::ofstream(dir + "/export.yaml") << stored_calibration_yaml(*r->record);
+  auto back = calibration_record_from_file(dir + "/export.yaml");
   ASSERT_TRUE(back.ok()) << back.error().message;
   EXPECT_TRUE(same_calibration(*back, p));
-  EXPECT_EQ(*back, *r->payload);
+  EXPECT_EQ(calibration_record_json(*back), calibration_record_json(*r->record));
+  // A rollback restores the previous record (sequence 2) as sequence 4.
+  auto rolled = rollback_stored_calibration(config);
+  ASSERT_TRUE(rolled.ok()) << rolled.error().message;
+  EXPECT_EQ(rolled->restored_sequence, 2u);
+  EXPECT_EQ(rolled->written.sequence, 4u);
+  EXPECT_TRUE(same_calibration(*rolled->written.record, p));
 }
 
 TEST(StoredCalibration, APayloadTooLargeForTheRegionIsRefusedAndNothingWritten) {
   const std::string dir = test::scratch_dir();
   const RigConfig config = file_config(dir, 256);
-  const json p = *calibration_payload_from_file(write_static(dir));
+  const CalibrationRecord p = *calibration_record_from_file(write_static(dir));
   auto w = write_stored_calibration(config, p);
   ASSERT_FALSE(w.ok());
   EXPECT_EQ(w.error().code, Errc::kInvalidArgument);
   auto r = read_stored_calibration(config);
   ASSERT_TRUE(r.ok());
-  EXPECT_FALSE(r->payload);
+  EXPECT_FALSE(r->record);
 }
 
 TEST(StoredCalibration, AnIntactRecordWithAForeignPayloadIsCorrupt) {

@@ -79,10 +79,12 @@ class SimSession {
       ++recoveries_;
       return Status{};
     };
-    o.make_payload = [](const std::vector<std::string>& files) -> Result<json> {
-      return json{{"files", files}};
+    o.complete_record = [this](CalibrationRecord& record) -> Status {
+      ++completions_;
+      record.notes.push_back("completed by the host");
+      return {};
     };
-    o.write_storage = [this](const json& payload) -> Status {
+    o.write_storage = [this](const CalibrationRecord& payload) -> Status {
       ++write_calls_;
       if (fail_writes_ > 0) {
         --fail_writes_;
@@ -157,7 +159,8 @@ class SimSession {
   TimeNs first_prompt_ns_ = -1, review_ns_ = -1;
   bool started_ = false, redo_faults_ = true, scripted_ = true;
   int recoveries_ = 0, write_calls_ = 0, fail_writes_ = 0;
-  json written_;
+  std::optional<CalibrationRecord> written_;
+  int completions_ = 0;
 };
 
 const std::vector<std::string> kImuSteps = {"preflight", "warmup", "still", "poses",
@@ -172,7 +175,16 @@ TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult
     for (const auto& m : s.messages_) std::printf("%s\n", m.dump().c_str());
   ASSERT_EQ(s.outcome(), "written");
   EXPECT_EQ(s.write_calls_, 1);
-  ASSERT_TRUE(s.written_.contains("files"));
+  // The record written is the solve's static result, as the host completed it.
+  ASSERT_TRUE(s.written_);
+  EXPECT_EQ(s.completions_, 1);
+  EXPECT_EQ(s.written_->imu.source, "static");
+  EXPECT_EQ(s.written_->imu.stream, s.rig_->stream_info().name);
+  EXPECT_EQ(s.written_->imu.input_units, "raw");
+  ASSERT_EQ(s.written_->notes.size(), 1u);
+  EXPECT_EQ(s.written_->notes[0], "completed by the host");
+  ASSERT_EQ(s.written_->files.size(), 1u);
+  EXPECT_EQ(s.written_->files[0].path, s.runner_->session_dir() + "/imu-static.yaml");
   EXPECT_GE(s.runner_->engine().poses().size(), 18u);
   const auto review = s.of_type("review");
   ASSERT_EQ(review.size(), 1u);

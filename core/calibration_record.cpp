@@ -1,0 +1,314 @@
+#include "core/calibration_record.hpp"
+
+#include <cmath>
+
+namespace imucal {
+namespace {
+
+using nlohmann::json;
+
+/// A figure: not finite (not determined) as null.
+json num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+template <typename Derived>
+json vec_json(const Eigen::MatrixBase<Derived>& v) {
+  json j = json::array();
+  for (Eigen::Index i = 0; i < v.size(); ++i) j.push_back(num(v(i)));
+  return j;
+}
+
+template <typename Derived>
+json mat_json(const Eigen::MatrixBase<Derived>& m) {
+  json j = json::array();
+  for (Eigen::Index r = 0; r < m.rows(); ++r) j.push_back(vec_json(m.row(r)));
+  return j;
+}
+
+json sigma_json(const ImuSigmaRecord& s) {
+  json j = json::object();
+  j["model"] = s.model;
+  for (const auto& [key, triad] : {std::pair{"accel", &s.accel}, std::pair{"gyro", &s.gyro}}) {
+    if (*triad)
+      j[key] = {{"misalignment", mat_json((*triad)->T)},
+                {"scale", vec_json((*triad)->scale)},
+                {"bias", vec_json((*triad)->bias)}};
+  }
+  if (s.G) j["G"] = mat_json(*s.G);
+  if (s.krebs) {
+    const KrebsImuSigma& k = *s.krebs;
+    j["S_a"] = vec_json(k.S_a);
+    j["M_a"] = vec_json(k.M_a);
+    j["b_a"] = vec_json(k.b_a);
+    j["S_g"] = vec_json(k.S_g);
+    j["M_g"] = vec_json(k.M_g);
+    j["C_bg_rad"] = vec_json(k.C_bg);
+    j["B_g"] = mat_json(k.B_g);
+    j["b_g"] = vec_json(k.b_g);
+  }
+  return j;
+}
+
+/// Reading the JSON form: every problem names the key.
+class Reader {
+ public:
+  /// A matrix of rows x cols numbers (cols 0: a vector of rows); `finite` refuses null.
+  template <typename M>
+  Status matrix(const json& parent, const std::string& key, const std::string& where, M& out,
+                bool finite) const {
+    const std::string what = where + key;
+    const auto it = parent.find(key);
+    const Eigen::Index rows = out.rows(), cols = out.cols();
+    const bool vector = cols == 1;
+    auto bad = [&] {
+      return make_error(
+          Errc::kCorrupt,
+          what + " must be " +
+              (vector ? std::to_string(rows) : std::to_string(rows) + " rows of " + std::to_string(cols)) +
+              (finite ? " finite numbers" : " numbers (null where not determined)"));
+    };
+    if (it == parent.end() || !it->is_array() || static_cast<Eigen::Index>(it->size()) != rows) return bad();
+    for (Eigen::Index r = 0; r < rows; ++r) {
+      const json& row = (*it)[static_cast<std::size_t>(r)];
+      for (Eigen::Index c = 0; c < cols; ++c) {
+        const json* x = &row;
+        if (!vector) {
+          if (!row.is_array() || static_cast<Eigen::Index>(row.size()) != cols) return bad();
+          x = &row[static_cast<std::size_t>(c)];
+        }
+        if (x->is_null() && !finite) {
+          out(r, c) = kNotDetermined;
+        } else if (x->is_number() && std::isfinite(x->get<double>())) {
+          out(r, c) = x->get<double>();
+        } else {
+          return bad();
+        }
+      }
+    }
+    return {};
+  }
+
+  Status text(const json& parent, const std::string& key, const std::string& where, std::string& out) const {
+    const auto it = parent.find(key);
+    if (it == parent.end() || it->is_null()) return {};
+    if (!it->is_string()) return make_error(Errc::kCorrupt, where + key + " must be text");
+    out = it->get<std::string>();
+    return {};
+  }
+
+  Status texts(const json& parent, const std::string& key, const std::string& where,
+               std::vector<std::string>& out) const {
+    const auto it = parent.find(key);
+    if (it == parent.end() || it->is_null()) return {};
+    if (!it->is_array()) return make_error(Errc::kCorrupt, where + key + " must be a list of text");
+    for (const auto& x : *it) {
+      if (!x.is_string()) return make_error(Errc::kCorrupt, where + key + " must be a list of text");
+      out.push_back(x.get<std::string>());
+    }
+    return {};
+  }
+
+  /// A figure that may be null (not determined).
+  Status figure(const json& parent, const std::string& key, const std::string& where, double& out) const {
+    const auto it = parent.find(key);
+    if (it == parent.end() || it->is_null()) {
+      out = kNotDetermined;
+      return {};
+    }
+    if (!it->is_number()) return make_error(Errc::kCorrupt, where + key + " must be a number or null");
+    out = it->get<double>();
+    return {};
+  }
+};
+
+Status read_sigma(const json& j, ImuSigmaRecord& s) {
+  const Reader r;
+  if (!j.is_object()) return make_error(Errc::kCorrupt, "imu.sigma must be a mapping");
+  IMUCAL_TRY(r.text(j, "model", "imu.sigma.", s.model));
+  for (const auto& [key, triad] : {std::pair{"accel", &s.accel}, std::pair{"gyro", &s.gyro}}) {
+    if (!j.contains(key)) continue;
+    const json& t = j[key];
+    const std::string where = std::string("imu.sigma.") + key + ".";
+    if (!t.is_object()) return make_error(Errc::kCorrupt, where + " must be a mapping");
+    TriadSigma out;
+    IMUCAL_TRY(r.matrix(t, "misalignment", where, out.T, false));
+    IMUCAL_TRY(r.matrix(t, "scale", where, out.scale, false));
+    IMUCAL_TRY(r.matrix(t, "bias", where, out.bias, false));
+    *triad = out;
+  }
+  if (j.contains("G")) {
+    Eigen::Matrix3d G;
+    IMUCAL_TRY(r.matrix(j, "G", "imu.sigma.", G, false));
+    s.G = G;
+  }
+  if (j.contains("S_a")) {
+    KrebsImuSigma k;
+    IMUCAL_TRY(r.matrix(j, "S_a", "imu.sigma.", k.S_a, false));
+    IMUCAL_TRY(r.matrix(j, "M_a", "imu.sigma.", k.M_a, false));
+    IMUCAL_TRY(r.matrix(j, "b_a", "imu.sigma.", k.b_a, false));
+    IMUCAL_TRY(r.matrix(j, "S_g", "imu.sigma.", k.S_g, false));
+    IMUCAL_TRY(r.matrix(j, "M_g", "imu.sigma.", k.M_g, false));
+    IMUCAL_TRY(r.matrix(j, "C_bg_rad", "imu.sigma.", k.C_bg, false));
+    IMUCAL_TRY(r.matrix(j, "B_g", "imu.sigma.", k.B_g, false));
+    IMUCAL_TRY(r.matrix(j, "b_g", "imu.sigma.", k.b_g, false));
+    s.krebs = k;
+  }
+  return {};
+}
+
+/// Equal, with NaN equal to NaN.
+template <typename M>
+bool same(const M& a, const M& b) {
+  for (Eigen::Index i = 0; i < a.size(); ++i) {
+    const double x = a.data()[i], y = b.data()[i];
+    if (!(x == y || (std::isnan(x) && std::isnan(y)))) return false;
+  }
+  return true;
+}
+
+bool same_sigma(const ImuSigmaRecord& a, const ImuSigmaRecord& b) {
+  auto triad = [](const std::optional<TriadSigma>& x, const std::optional<TriadSigma>& y) {
+    return x.has_value() == y.has_value() &&
+           (!x || (same(x->T, y->T) && same(x->scale, y->scale) && same(x->bias, y->bias)));
+  };
+  if (a.model != b.model || !triad(a.accel, b.accel) || !triad(a.gyro, b.gyro)) return false;
+  if (a.G.has_value() != b.G.has_value() || (a.G && !same(*a.G, *b.G))) return false;
+  if (a.krebs.has_value() != b.krebs.has_value()) return false;
+  if (!a.krebs) return true;
+  const KrebsImuSigma &x = *a.krebs, &y = *b.krebs;
+  return same(x.S_a, y.S_a) && same(x.M_a, y.M_a) && same(x.b_a, y.b_a) && same(x.S_g, y.S_g) &&
+         same(x.M_g, y.M_g) && same(x.C_bg, y.C_bg) && same(x.B_g, y.B_g) && same(x.b_g, y.b_g);
+}
+
+}  // namespace
+
+json calibration_record_json(const CalibrationRecord& rec) {
+  const ImuRecord& i = rec.imu;
+  json imu = {{"stream", i.stream},           {"input_units", i.input_units}, {"form", i.form},
+              {"A_a", mat_json(i.model.A_a)}, {"b_a", vec_json(i.model.b_a)}, {"A_g", mat_json(i.model.A_g)},
+              {"b_g", vec_json(i.model.b_g)}, {"G", mat_json(i.model.G)},     {"source", i.source}};
+  if (!i.sigma.model.empty() || i.sigma.accel || i.sigma.krebs) imu["sigma"] = sigma_json(i.sigma);
+  json cameras = json::array();
+  for (const CameraRecord& c : rec.cameras) {
+    cameras.push_back({{"name", c.name},
+                       {"stream", c.stream},
+                       {"T_cam_imu", mat_json(c.T_cam_imu)},
+                       {"rotation_sigma_rad", vec_json(c.rotation_sigma_rad)},
+                       {"translation_sigma_m", vec_json(c.translation_sigma_m)},
+                       {"timeshift_cam_imu_s", num(c.timeshift_cam_imu_s)},
+                       {"timeshift_sigma_s", num(c.timeshift_sigma_s)}});
+  }
+  json files = json::array();
+  for (const RecordSourceFile& f : rec.files) {
+    json file = {{"path", f.path}, {"kind", f.kind}, {"method", f.method}};
+    if (f.fixed) file["fixed"] = *f.fixed;
+    files.push_back(file);
+  }
+  json j = {{"format", kCalibrationFormat},
+            {"version", kCalibrationRecordVersion},
+            {"created_utc", rec.created_utc},
+            {"software_version", rec.software_version},
+            {"imu", imu},
+            {"cameras", cameras},
+            {"source", {{"files", files}, {"notes", rec.notes}}}};
+  if (!rec.rig.empty()) j["rig"] = rec.rig;
+  if (rec.gravity_mps2) j["gravity_mps2"] = num(*rec.gravity_mps2);
+  return j;
+}
+
+Result<CalibrationRecord> calibration_record_from_json(const json& j) {
+  if (!j.is_object() || j.value("format", json()) != kCalibrationFormat) {
+    return make_error(Errc::kCorrupt, std::string("not an imucal calibration (its \"format\" is not \"") +
+                                          kCalibrationFormat + "\")");
+  }
+  if (j.value("version", json()) != kCalibrationRecordVersion) {
+    return make_error(
+        Errc::kCorrupt,
+        "calibration record version " +
+            j.value("version", json()).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
+            ", this imucal reads version " + std::to_string(kCalibrationRecordVersion));
+  }
+  const Reader r;
+  CalibrationRecord rec;
+  IMUCAL_TRY(r.text(j, "created_utc", "", rec.created_utc));
+  IMUCAL_TRY(r.text(j, "software_version", "", rec.software_version));
+  IMUCAL_TRY(r.text(j, "rig", "", rec.rig));
+  if (!j.contains("imu") || !j["imu"].is_object())
+    return make_error(Errc::kCorrupt, "the calibration has no imu");
+  const json& imu = j["imu"];
+  ImuRecord& i = rec.imu;
+  IMUCAL_TRY(r.text(imu, "stream", "imu.", i.stream));
+  IMUCAL_TRY(r.text(imu, "input_units", "imu.", i.input_units));
+  IMUCAL_TRY(r.text(imu, "form", "imu.", i.form));
+  IMUCAL_TRY(r.text(imu, "source", "imu.", i.source));
+  IMUCAL_TRY(r.matrix(imu, "A_a", "imu.", i.model.A_a, true));
+  IMUCAL_TRY(r.matrix(imu, "b_a", "imu.", i.model.b_a, true));
+  IMUCAL_TRY(r.matrix(imu, "A_g", "imu.", i.model.A_g, true));
+  IMUCAL_TRY(r.matrix(imu, "b_g", "imu.", i.model.b_g, true));
+  IMUCAL_TRY(r.matrix(imu, "G", "imu.", i.model.G, true));
+  if (imu.contains("sigma")) IMUCAL_TRY(read_sigma(imu["sigma"], i.sigma));
+  if (!j.contains("cameras") || !j["cameras"].is_array())
+    return make_error(Errc::kCorrupt, "the calibration's cameras must be a list");
+  for (const json& c : j["cameras"]) {
+    if (!c.is_object()) return make_error(Errc::kCorrupt, "a camera entry is not a mapping");
+    CameraRecord cam;
+    IMUCAL_TRY(r.text(c, "name", "camera.", cam.name));
+    const std::string where = "camera " + (cam.name.empty() ? std::string("?") : cam.name) + " ";
+    IMUCAL_TRY(r.text(c, "stream", where, cam.stream));
+    IMUCAL_TRY(r.matrix(c, "T_cam_imu", where, cam.T_cam_imu, true));
+    if (c.contains("rotation_sigma_rad"))
+      IMUCAL_TRY(r.matrix(c, "rotation_sigma_rad", where, cam.rotation_sigma_rad, false));
+    if (c.contains("translation_sigma_m"))
+      IMUCAL_TRY(r.matrix(c, "translation_sigma_m", where, cam.translation_sigma_m, false));
+    IMUCAL_TRY(r.figure(c, "timeshift_cam_imu_s", where, cam.timeshift_cam_imu_s));
+    if (std::isnan(cam.timeshift_cam_imu_s)) cam.timeshift_cam_imu_s = 0.0;
+    IMUCAL_TRY(r.figure(c, "timeshift_sigma_s", where, cam.timeshift_sigma_s));
+    rec.cameras.push_back(cam);
+  }
+  if (j.contains("gravity_mps2") && !j["gravity_mps2"].is_null()) {
+    double g = 0.0;
+    IMUCAL_TRY(r.figure(j, "gravity_mps2", "", g));
+    rec.gravity_mps2 = g;
+  }
+  if (j.contains("source")) {
+    const json& src = j["source"];
+    if (!src.is_object()) return make_error(Errc::kCorrupt, "source must be a mapping");
+    IMUCAL_TRY(r.texts(src, "notes", "source.", rec.notes));
+    if (src.contains("files")) {
+      if (!src["files"].is_array()) return make_error(Errc::kCorrupt, "source.files must be a list");
+      for (const json& f : src["files"]) {
+        if (!f.is_object()) return make_error(Errc::kCorrupt, "a source.files entry is not a mapping");
+        RecordSourceFile file;
+        IMUCAL_TRY(r.text(f, "path", "source.files.", file.path));
+        IMUCAL_TRY(r.text(f, "kind", "source.files.", file.kind));
+        IMUCAL_TRY(r.text(f, "method", "source.files.", file.method));
+        if (f.contains("fixed")) {
+          file.fixed.emplace();
+          IMUCAL_TRY(r.texts(f, "fixed", "source.files.", *file.fixed));
+        }
+        rec.files.push_back(std::move(file));
+      }
+    }
+  }
+  return rec;
+}
+
+bool same_calibration(const CalibrationRecord& a, const CalibrationRecord& b) {
+  const ImuRecord &x = a.imu, &y = b.imu;
+  if (x.stream != y.stream || x.input_units != y.input_units || x.form != y.form || x.source != y.source ||
+      !same(x.model.A_a, y.model.A_a) || !same(x.model.b_a, y.model.b_a) || !same(x.model.A_g, y.model.A_g) ||
+      !same(x.model.b_g, y.model.b_g) || !same(x.model.G, y.model.G) || !same_sigma(x.sigma, y.sigma))
+    return false;
+  if (a.cameras.size() != b.cameras.size()) return false;
+  for (std::size_t k = 0; k < a.cameras.size(); ++k) {
+    const CameraRecord &c = a.cameras[k], &d = b.cameras[k];
+    if (c.name != d.name || c.stream != d.stream || !same(c.T_cam_imu, d.T_cam_imu) ||
+        !same(c.rotation_sigma_rad, d.rotation_sigma_rad) ||
+        !same(c.translation_sigma_m, d.translation_sigma_m) ||
+        !same(Eigen::Vector2d(c.timeshift_cam_imu_s, c.timeshift_sigma_s),
+              Eigen::Vector2d(d.timeshift_cam_imu_s, d.timeshift_sigma_s)))
+      return false;
+  }
+  return true;
+}
+
+}  // namespace imucal

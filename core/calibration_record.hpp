@@ -1,0 +1,99 @@
+#pragma once
+// The calibration as the rig stores it (docs/storage.md): one typed record, and its JSON form in
+// one place (calibration_record.cpp). The storage holds that JSON encoded as CBOR; `store read`
+// prints it as YAML or JSON. The record is built from the solves' typed results
+// (app/stored_calibration.hpp); adding a field touches this type, its two functions below and
+// their test (tests/core/test_calibration_record.cpp).
+//
+// JSON form (version 1):
+//   {"format": "imucal.calibration", "version": 1, "created_utc", "software_version", "rig",
+//    "imu": {"stream", "input_units", "form", "A_a", "b_a", "A_g", "b_g", "G",   (canonical form)
+//            "source": "static"|"camimu",
+//            "sigma": {"model", static: "accel"/"gyro" {"misalignment", "scale", "bias"}, "G";
+//                      camimu: "S_a", "M_a", "b_a", "S_g", "M_g", "C_bg_rad", "B_g", "b_g"}},
+//    "cameras": [{"name", "stream", "T_cam_imu" (4 rows), "rotation_sigma_rad",
+//                 "translation_sigma_m", "timeshift_cam_imu_s", "timeshift_sigma_s"}],
+//    "gravity_mps2", "source": {"files": [{"path", "kind", "method", "fixed"}], "notes": [...]}}
+// A figure that was not determined (NaN) is null.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/camimu_calibration.hpp"
+#include "core/imu_calibration.hpp"
+#include "core/imu_model.hpp"
+#include "core/result.hpp"
+
+namespace imucal {
+
+inline constexpr const char* kCalibrationFormat = "imucal.calibration";
+inline constexpr int kCalibrationRecordVersion = 1;
+/// The canonical form's equations, as the record states them.
+inline constexpr const char* kCanonicalForm = "a = A_a (a_raw - b_a); w = A_g (w_raw - b_g) - G a";
+
+/// The sigmas of the method that estimated the IMU, in that method's own parameters.
+struct ImuSigmaRecord {
+  /// "tedaldi: ..." or "krebs: ...": which parameters these are; empty: no sigmas stored.
+  std::string model;
+  /// The static method's (Tedaldi's form, per triad), and of G with the g-sensitivity.
+  std::optional<TriadSigma> accel, gyro;
+  std::optional<Eigen::Matrix3d> G;
+  /// The camera-IMU method's (Krebs's form).
+  std::optional<KrebsImuSigma> krebs;
+};
+
+struct ImuRecord {
+  std::string stream;       // the IMU stream calibrated
+  std::string input_units;  // "raw" or "si": what the model corrects
+  std::string form = kCanonicalForm;
+  CanonicalImuModel model;
+  std::string source;  // "static" or "camimu": the method the IMU comes from
+  ImuSigmaRecord sigma;
+};
+
+struct CameraRecord {
+  std::string name;    // cam0, ...
+  std::string stream;  // the camera stream of the log
+  Eigen::Matrix4d T_cam_imu = Eigen::Matrix4d::Identity();
+  Eigen::Vector3d rotation_sigma_rad = Eigen::Vector3d::Constant(kNotDetermined);
+  Eigen::Vector3d translation_sigma_m = Eigen::Vector3d::Constant(kNotDetermined);
+  double timeshift_cam_imu_s = 0.0;
+  double timeshift_sigma_s = kNotDetermined;
+};
+
+/// A result the record was built from.
+struct RecordSourceFile {
+  std::string path;
+  std::string kind;    // "static" or "camimu"
+  std::string method;  // the method's name
+  /// camimu: the blocks the solve held fixed (empty for a static result).
+  std::optional<std::vector<std::string>> fixed;
+};
+
+struct CalibrationRecord {
+  std::string created_utc;
+  std::string software_version;
+  std::string rig;  // the rig's name, set from the configuration when written
+  ImuRecord imu;
+  std::vector<CameraRecord> cameras;
+  std::optional<double> gravity_mps2;
+  std::vector<RecordSourceFile> files;
+  std::vector<std::string> notes;
+};
+
+/// The record's JSON form (above).
+nlohmann::json calibration_record_json(const CalibrationRecord& record);
+
+/// A record from its JSON form. kCorrupt, with the key, for another format or version, a missing
+/// or malformed key, a matrix of the wrong size or a model figure that is not finite.
+[[nodiscard]] Result<CalibrationRecord> calibration_record_from_json(const nlohmann::json& json);
+
+/// True when both hold the same calibration: their IMU and cameras (the creation time, software
+/// version, rig name and sources may differ). Undetermined figures compare equal.
+bool same_calibration(const CalibrationRecord& a, const CalibrationRecord& b);
+
+}  // namespace imucal

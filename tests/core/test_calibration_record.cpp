@@ -1,0 +1,135 @@
+// The calibration record (core/calibration_record.hpp): its JSON form in both directions, a record
+// as an earlier build stored it, undetermined figures, and the checks of a malformed record.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/calibration_record.hpp"
+
+namespace imucal {
+namespace {
+
+using nlohmann::json;
+
+// The record `make demo` stored with the build before the record was typed (read back with
+// `imucal store read --json`): the storage of rigs calibrated then holds records like it.
+constexpr const char* kStoredByAnEarlierBuild =
+    R"json({"cameras": [{"T_cam_imu": [[-0.9994694294606155, 0.029483445653512474, 0.013841459679841621, 0.03101344097264715], [-0.029160265550715967, -0.9993101688041897, 0.022997074543385097, -0.01819928720587483], [0.014509944406648583, 0.02258125233326663, 0.9996397093735209, -0.013997470094002682], [0, 0, 0, 1]], "name": "cam0", "rotation_sigma_rad": [4.843253987650967e-05, 5.909809406232593e-05, 9.237118193877512e-05], "stream": "cam0", "timeshift_cam_imu_s": -1.1909327537913869e-05, "timeshift_sigma_s": 1.6104854448790493e-05, "translation_sigma_m": [0.0009152678702851214, 0.0006685207613580963, 0.0010802447793139078]}], "created_utc": "2026-11-28T06:02:45Z", "format": "imucal.calibration", "gravity_mps2": 9.80665, "imu": {"A_a": [[0.00116967421393, -3.50289727457e-05, 3.87040325196e-05], [0, 0.0012307367081, 2.52854663433e-05], [0, 0, 0.00117778870867]], "A_g": [[0.000269229499916, -9.59870817319e-06, 8.74910094785e-06], [1.8043760557e-05, 0.000261087318508, 5.51893877463e-06], [-9.30192856473e-07, -7.42424401812e-06, 0.000271741821973]], "G": [[0.000123680797678, -1.22928958523e-06, -0.000177346384082], [0.000154806296482, -1.39327295285e-05, 9.70671675044e-05], [-0.000115283911482, 0.000127837094992, 8.42497031023e-05]], "b_a": [-359.021175523, 84.8016285529, -86.046915683], "b_g": [-5.03734672308, 143.729422446, -123.30860189], "form": "a = A_a (a_raw - b_a); w = A_g (w_raw - b_g) - G a", "input_units": "raw", "sigma": {"G": [[3.19329533951e-06, 3.30538340387e-06, 4.40592576967e-06], [3.16280476724e-06, 2.5206790329e-06, 2.51142161321e-06], [2.64898039535e-06, 5.15608119335e-06, 6.10078020665e-06]], "accel": {"bias": [0.941921436958, 0.788047375267, 1.40939239008], "misalignment": [[0, 0.00019760948498, 0.000284962776912], [0, 0, 0.000250435907312], [0, 0, 0]], "scale": [1.55806780704e-07, 1.5092183594e-07, 2.58780916915e-07]}, "gyro": {"bias": [0.0840335216775, 0.058104510149, 0.129671075654], "misalignment": [[0, 0.000102808363783, 0.000253052268034], [0.000140506115669, 0, 0.000186597781965], [0.000188921499167, 0.000239147740741, 0]], "scale": [2.92407725714e-08, 2.74229333714e-08, 5.55693002691e-08]}, "model": "tedaldi: corrected = misalignment * diag(scale) * (raw - bias)"}, "source": "static", "stream": "imu0"}, "rig": "sim", "software_version": "0.1.0", "source": {"files": [{"kind": "static", "method": "static multi-position (Tedaldi 2013)", "path": "/tmp/demo-old/state/sessions/sim-20261128T055536Z/imu-static.yaml"}, {"fixed": ["S_a", "M_a", "S_g", "M_g", "C_bg", "B_g"], "kind": "camimu", "method": "continuous-time camera-IMU (Krebs 2012)", "path": "/tmp/demo-old/state/sessions/sim-20261128T055536Z/camimu/calibration.yaml"}], "notes": ["imu from the static result; cameras from the camimu result"]}, "version": 1})json";
+
+CalibrationRecord a_record() {
+  CalibrationRecord r;
+  r.created_utc = "2026-11-28T06:00:00Z";
+  r.software_version = "0.1.0";
+  r.rig = "bench";
+  r.imu.stream = "imu0";
+  r.imu.input_units = "raw";
+  r.imu.model.A_a = Eigen::Matrix3d::Identity() * 1.2e-3;
+  r.imu.model.b_a = Eigen::Vector3d(-359.02, 84.8, -86.05);
+  r.imu.model.G(0, 2) = 1.7e-4;
+  r.imu.source = "static";
+  r.imu.sigma.model = "tedaldi: corrected = misalignment * diag(scale) * (raw - bias)";
+  TriadSigma t;
+  t.bias = Eigen::Vector3d(0.9, 0.8, 1.4);
+  t.scale = Eigen::Vector3d(1.5e-7, kNotDetermined, 2.6e-7);
+  r.imu.sigma.accel = t;
+  r.imu.sigma.gyro = t;
+  r.imu.sigma.G = Eigen::Matrix3d::Constant(kNotDetermined);
+  CameraRecord c;
+  c.name = "cam0";
+  c.stream = "cam0";
+  c.T_cam_imu(0, 3) = 0.031;
+  c.rotation_sigma_rad = Eigen::Vector3d(4.8e-5, 5.9e-5, 9.2e-5);
+  c.timeshift_cam_imu_s = -1.2e-5;
+  r.cameras.push_back(c);  // translation and time-shift sigmas not determined
+  r.gravity_mps2 = 9.80665;
+  r.files.push_back({"imu-static.yaml", "static", "static multi-position (Tedaldi 2013)", std::nullopt});
+  r.files.push_back({"calibration.yaml", "camimu", "continuous-time camera-IMU (Krebs 2012)",
+                     std::vector<std::string>{"S_a", "M_a"}});
+  r.notes.push_back("imu from the static result; cameras from the camimu result");
+  return r;
+}
+
+TEST(CalibrationRecord, ItsJsonFormReadsBackAsTheSameRecordThroughCbor) {
+  const CalibrationRecord r = a_record();
+  const json j = calibration_record_json(r);
+  EXPECT_EQ(j["format"], kCalibrationFormat);
+  EXPECT_EQ(j["version"], kCalibrationRecordVersion);
+  // Figures that were not determined are null, never 0.
+  EXPECT_TRUE(j["imu"]["sigma"]["accel"]["scale"][1].is_null());
+  EXPECT_TRUE(j["cameras"][0]["translation_sigma_m"][0].is_null());
+  EXPECT_TRUE(j["cameras"][0]["timeshift_sigma_s"].is_null());
+  EXPECT_FALSE(j["source"]["files"][0].contains("fixed"));
+  EXPECT_EQ(j["source"]["files"][1]["fixed"].size(), 2u);
+  auto back = calibration_record_from_json(json::from_cbor(json::to_cbor(j)));
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_TRUE(same_calibration(*back, r));
+  EXPECT_EQ(calibration_record_json(*back), j);
+  EXPECT_EQ(back->rig, "bench");
+  EXPECT_EQ(back->notes, r.notes);
+  ASSERT_TRUE(back->files[1].fixed);
+  EXPECT_EQ(*back->files[1].fixed, (std::vector<std::string>{"S_a", "M_a"}));
+  EXPECT_TRUE(std::isnan(back->imu.sigma.accel->scale[1]));
+  EXPECT_TRUE(std::isnan(back->cameras[0].timeshift_sigma_s));
+}
+
+TEST(CalibrationRecord, ARecordAnEarlierBuildStoredStillReadsAndWritesBackUnchanged) {
+  const json stored = json::parse(kStoredByAnEarlierBuild);
+  auto r = calibration_record_from_json(stored);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_EQ(r->rig, "sim");
+  EXPECT_EQ(r->imu.source, "static");
+  EXPECT_EQ(r->imu.input_units, "raw");
+  EXPECT_DOUBLE_EQ(r->imu.model.b_a[0], -359.021175523);
+  EXPECT_DOUBLE_EQ(r->imu.model.A_g(2, 2), 0.000271741821973);
+  ASSERT_TRUE(r->imu.sigma.accel && r->imu.sigma.gyro && r->imu.sigma.G);
+  ASSERT_EQ(r->cameras.size(), 1u);
+  EXPECT_DOUBLE_EQ(r->cameras[0].T_cam_imu(0, 3), 0.03101344097264715);
+  ASSERT_EQ(r->files.size(), 2u);
+  EXPECT_TRUE(r->files[1].fixed);
+  // Written again (a rollback restores it this way), it is the same document: the same
+  // calibration for every reader, old or new.
+  EXPECT_EQ(calibration_record_json(*r), stored);
+}
+
+TEST(CalibrationRecord, AMalformedRecordIsRefusedNamingWhatIsWrong) {
+  const json good = calibration_record_json(a_record());
+  auto refused = [&](const std::function<void(json&)>& spoil, const std::string& says) {
+    json j = good;
+    spoil(j);
+    auto r = calibration_record_from_json(j);
+    ASSERT_FALSE(r.ok()) << "accepted a record whose " << says << " is wrong";
+    EXPECT_EQ(r.error().code, Errc::kCorrupt);
+    EXPECT_NE(r.error().message.find(says), std::string::npos) << r.error().message;
+  };
+  refused([](json& j) { j["format"] = "other"; }, "not an imucal calibration");
+  refused([](json& j) { j["version"] = 2; }, "version 2");
+  refused([](json& j) { j.erase("imu"); }, "no imu");
+  refused([](json& j) { j["imu"]["A_a"][1] = json::array({1, 2}); }, "imu.A_a");
+  refused([](json& j) { j["imu"]["b_g"][0] = nullptr; }, "imu.b_g");  // a model figure must be there
+  refused([](json& j) { j["imu"]["stream"] = 3; }, "imu.stream");
+  refused([](json& j) { j["cameras"] = json::object(); }, "cameras must be a list");
+  refused([](json& j) { j["cameras"][0]["T_cam_imu"] = json::array({1, 2, 3}); }, "cam0 T_cam_imu");
+  refused([](json& j) { j["imu"]["sigma"]["accel"]["bias"] = "big"; }, "imu.sigma.accel.bias");
+  refused([](json& j) { j["source"]["notes"] = json::array({1}); }, "source.notes");
+}
+
+TEST(CalibrationRecord, SameCalibrationLooksAtTheImuAndTheCamerasOnly) {
+  const CalibrationRecord a = a_record();
+  CalibrationRecord b = a;
+  b.created_utc = "later";
+  b.rig = "other";
+  b.notes.clear();
+  EXPECT_TRUE(same_calibration(a, b));
+  b.imu.model.b_g[1] += 1e-9;
+  EXPECT_FALSE(same_calibration(a, b));
+  b = a;
+  b.cameras[0].timeshift_sigma_s = 1e-5;  // determined now
+  EXPECT_FALSE(same_calibration(a, b));
+  b = a;
+  b.imu.sigma.krebs = KrebsImuSigma{};
+  EXPECT_FALSE(same_calibration(a, b));
+}
+
+}  // namespace
+}  // namespace imucal
