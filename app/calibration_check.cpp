@@ -16,6 +16,7 @@
 #include "calib/static_detector.hpp"
 #include "calib/static_scan.hpp"
 #include "core/text_file.hpp"
+#include "core/text_format.hpp"
 
 namespace imucal::app {
 namespace {
@@ -349,16 +350,14 @@ Result<ImuTkTriad> parse_imu_tk_triad(const std::string& text, const std::string
   std::vector<double> v;
   std::string token;
   while (in >> token) {
-    errno = 0;
-    char* end = nullptr;
-    const double x = std::strtod(token.c_str(), &end);
-    if (end != token.c_str() + token.size() || errno == ERANGE || !std::isfinite(x)) {
+    const std::optional<double> x = parse_finite_number(token);
+    if (!x) {
       return make_error(Errc::kCorrupt,
                         origin + ": '" + token + "' (value " + std::to_string(v.size() + 1) +
                             ") is not a finite number; an imu_tk calib file holds 21 numbers: "
                             "the 3x3 misalignment T, the 3x3 scale K and the bias B");
     }
-    v.push_back(x);
+    v.push_back(*x);
   }
   if (v.size() != 21) {
     return make_error(Errc::kCorrupt, origin + ": " + std::to_string(v.size()) +

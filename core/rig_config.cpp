@@ -197,13 +197,9 @@ Result<long long> ConfigParser::get_int(const YAML::Node& node, const std::strin
 Result<double> ConfigParser::get_double(const YAML::Node& node, const std::string& path) const {
   if (!node.IsScalar()) return error(node, path, "expected a number");
   const std::string& s = node.Scalar();
-  double v = 0;
-  const char* first = s.data() + (!s.empty() && s[0] == '+' ? 1 : 0);
-  auto [ptr, ec] = std::from_chars(first, s.data() + s.size(), v);
-  if (ec != std::errc() || ptr != s.data() + s.size() || s.empty() || !std::isfinite(v)) {
-    return error(node, path, "'" + printable(s) + "' is not a finite number");
-  }
-  return v;
+  const auto v = parse_finite_number(s);
+  if (!v) return error(node, path, "'" + printable(s) + "' is not a finite number");
+  return *v;
 }
 
 Result<std::string> ConfigParser::get_string(const YAML::Node& node, const std::string& path) const {

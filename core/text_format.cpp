@@ -1,5 +1,7 @@
 #include "core/text_format.hpp"
 
+#include <charconv>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 
@@ -33,5 +35,19 @@ std::string utc_now(const char* format) {
 }
 
 std::string utc_now_iso8601() { return utc_now("%Y-%m-%dT%H:%M:%SZ"); }
+
+std::optional<double> parse_finite_number(std::string_view text) {
+  std::string_view body = text;
+  if (!body.empty() && body[0] == '+') {
+    body.remove_prefix(1);
+    // One sign at most: "+-1" and "++1" are not numbers.
+    if (!body.empty() && (body[0] == '+' || body[0] == '-')) return std::nullopt;
+  }
+  double v = 0.0;
+  const auto [ptr, ec] = std::from_chars(body.data(), body.data() + body.size(), v);
+  if (body.empty() || ec != std::errc() || ptr != body.data() + body.size() || !std::isfinite(v))
+    return std::nullopt;
+  return v;
+}
 
 }  // namespace imucal

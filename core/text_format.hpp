@@ -1,7 +1,9 @@
 #pragma once
 // Small text helpers every layer uses for messages, reports and file stamps (one home each).
 
+#include <optional>
 #include <string>
+#include <string_view>
 
 namespace imucal {
 
@@ -18,5 +20,10 @@ std::string format_hex(unsigned long value, int digits);
 /// "YYYY-mm-ddTHH:MM:SSZ".
 std::string utc_now(const char* format);
 std::string utc_now_iso8601();
+
+/// The number `text` holds, when it holds exactly one finite decimal number: an optional single
+/// leading '+' or '-', then what std::from_chars reads (no spaces, no hex, no NaN or infinity).
+/// The one number parser of the programs: option values, configuration, datasets, calib files.
+std::optional<double> parse_finite_number(std::string_view text);
 
 }  // namespace imucal

@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "core/text_file.hpp"
+#include "core/text_format.hpp"
 #include "log/dataset_io.hpp"
 
 namespace imucal::log {
@@ -327,22 +328,15 @@ Result<TimeNs> parse_time_ns(std::string_view text, TimeUnit unit) {
 }
 
 Result<double> parse_double(std::string_view text) {
-  std::string_view s = trim(text);
-  std::string_view body = s;
-  if (!body.empty() && body[0] == '+') {
-    body.remove_prefix(1);
-    // One sign at most: "+-1" and "++1" are not numbers.
-    if (!body.empty() && (body[0] == '+' || body[0] == '-')) {
-      return make_error(Errc::kCorrupt, quoted(s, " is not a number"));
-    }
-  }
-  double v = 0.0;
-  auto [ptr, ec] = std::from_chars(body.data(), body.data() + body.size(), v);
-  if (body.empty() || ec != std::errc() || ptr != body.data() + body.size()) {
-    return make_error(Errc::kCorrupt, quoted(s, " is not a number"));
-  }
-  if (!std::isfinite(v)) return make_error(Errc::kCorrupt, quoted(s, " is not a finite number"));
-  return v;
+  const std::string_view s = trim(text);
+  if (auto v = parse_finite_number(s)) return *v;
+  // Say which: a number out of range or NaN, or no number at all.
+  double any = 0.0;
+  const std::string_view body = !s.empty() && s[0] == '+' ? s.substr(1) : s;
+  const auto [ptr, ec] = std::from_chars(body.data(), body.data() + body.size(), any);
+  const bool number = !body.empty() && ptr == body.data() + body.size() &&
+                      (ec == std::errc() || ec == std::errc::result_out_of_range);
+  return make_error(Errc::kCorrupt, quoted(s, number ? " is not a finite number" : " is not a number"));
 }
 
 std::string format_double(double value) {

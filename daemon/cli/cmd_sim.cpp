@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "app/module_loader.hpp"
+#include "core/text_format.hpp"
 #include "daemon/cli/command.hpp"
 #include "log/session_log.hpp"
 #include "sim/camimu.hpp"
@@ -107,18 +108,15 @@ std::vector<sim::SampleDrop> parse_drops(const std::vector<std::string>& specs) 
   for (const std::string& spec : specs) {
     const auto colon = spec.find(':');
     sim::SampleDrop d;
-    try {
-      if (colon == std::string::npos) throw std::invalid_argument("no colon");
-      std::size_t used = 0;
-      d.start_s = std::stod(spec.substr(0, colon), &used);
-      if (used != colon) throw std::invalid_argument("trailing text");
-      const std::string dur = spec.substr(colon + 1);
-      d.duration_s = std::stod(dur, &used);
-      if (used != dur.size()) throw std::invalid_argument("trailing text");
-    } catch (const std::exception&) {
+    const auto start = colon == std::string::npos ? std::nullopt : parse_finite_number(spec.substr(0, colon));
+    const auto duration =
+        colon == std::string::npos ? std::nullopt : parse_finite_number(spec.substr(colon + 1));
+    if (!start || !duration) {
       throw CliExit{kExitUsage,
                     "--drop: expected START:DURATION in seconds (e.g. 120:0.5), got '" + spec + "'"};
     }
+    d.start_s = *start;
+    d.duration_s = *duration;
     if (!(d.start_s >= 0.0 && d.duration_s > 0.0)) {
       throw CliExit{kExitUsage, "--drop: START must be >= 0 and DURATION > 0, got '" + spec + "'"};
     }

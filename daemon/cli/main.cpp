@@ -17,6 +17,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/text_format.hpp"
 #include "core/version.hpp"
 #include "daemon/cli/command.hpp"
 #include "log/dataset_io.hpp"
@@ -117,9 +118,8 @@ namespace {
 double progress_interval_from_env() {
   const char* text = std::getenv("IMUCAL_PROGRESS_INTERVAL");
   if (text == nullptr || *text == '\0') return Progress::kLogIntervalS;
-  char* end = nullptr;
-  const double v = std::strtod(text, &end);
-  return end != text && *end == '\0' && std::isfinite(v) && v >= 0.0 ? v : Progress::kLogIntervalS;
+  const std::optional<double> v = parse_finite_number(text);
+  return v && *v >= 0.0 ? *v : Progress::kLogIntervalS;
 }
 
 std::string seconds_text(double s) {

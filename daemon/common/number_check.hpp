@@ -4,9 +4,10 @@
 // (daemon/common/: what the programs share, header-only).
 
 #include <CLI/CLI.hpp>
-#include <charconv>
-#include <cmath>
+#include <optional>
 #include <string>
+
+#include "core/text_format.hpp"
 
 namespace imucal::cli {
 
@@ -16,12 +17,10 @@ enum class NumberSign { kAny, kPositive, kNonNegative };
 inline CLI::Validator finite_number(NumberSign sign) {
   return CLI::Validator(
       [sign](std::string& text) -> std::string {
-        double v = 0.0;
-        const char* end = text.data() + text.size();
-        const auto [ptr, ec] = std::from_chars(text.data(), end, v);
+        const std::optional<double> number = parse_finite_number(text);
         const std::string shown = text.size() > 40 ? text.substr(0, 40) + "..." : text;
-        if (text.empty() || ec != std::errc() || ptr != end || !std::isfinite(v))
-          return "'" + shown + "' is not a finite number";
+        if (!number) return "'" + shown + "' is not a finite number";
+        const double v = *number;
         if (sign == NumberSign::kPositive && v <= 0.0) return "'" + shown + "' must be more than zero";
         if (sign == NumberSign::kNonNegative && v < 0.0) return "'" + shown + "' must be zero or more";
         return {};

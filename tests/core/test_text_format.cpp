@@ -1,0 +1,34 @@
+// The text helpers every layer shares (core/text_format.hpp): the one number parser, and the
+// formatting of numbers, hex and UTC stamps.
+
+#include "core/text_format.hpp"
+
+#include <gtest/gtest.h>
+
+#include <regex>
+
+namespace imucal {
+namespace {
+
+TEST(TextFormat, ParseFiniteNumberTakesOneWholeFiniteNumber) {
+  EXPECT_EQ(parse_finite_number("1.5"), 1.5);
+  EXPECT_EQ(parse_finite_number("+2e-3"), 2e-3);
+  EXPECT_EQ(parse_finite_number("-0.25"), -0.25);
+  EXPECT_EQ(parse_finite_number("0"), 0.0);
+  for (const char* bad : {"", "+", "-", "+-1", "++1", "-+1", " 1", "1 ", "1.5s", "0x10", "nan", "inf", "-inf",
+                          "1e999", "1,5"})
+    EXPECT_FALSE(parse_finite_number(bad)) << "'" << bad << "' was taken as a number";
+}
+
+TEST(TextFormat, NumbersHexAndStamps) {
+  EXPECT_EQ(fixed(1.23456, 2), "1.23");
+  EXPECT_EQ(fixed(-0.5, 0), "-0");
+  EXPECT_EQ(format_number("%+.2e", 1234.5), "+1.23e+03");
+  EXPECT_EQ(format_hex(0x68, 2), "0x68");
+  EXPECT_EQ(format_hex(0xabc, 2), "0xABC");
+  EXPECT_TRUE(std::regex_match(utc_now_iso8601(), std::regex(R"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ)")))
+      << utc_now_iso8601();
+}
+
+}  // namespace
+}  // namespace imucal
