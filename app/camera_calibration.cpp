@@ -16,7 +16,7 @@
 #include <thread>
 #include <utility>
 
-#include "app/camera_results.hpp"
+#include "app/results/camera_results.hpp"
 #include "core/threads.hpp"
 #include "log/frame_codec.hpp"
 #include "log/session_log.hpp"

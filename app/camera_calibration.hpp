@@ -5,7 +5,7 @@
 //
 // calibrate_camera_log needs OpenCV, libapriltag and Ceres: it is compiled into the camera module
 // libimucal_camera.so (app/camera_module.hpp); programs call it through app::calibrate_camera
-// (app/solvers.hpp), which loads the module. The result writers are in app/camera_results.hpp.
+// (app/solvers.hpp), which loads the module. The result writers are in app/results/camera_results.hpp.
 // detect_target_in_stream is the target search alone, shared with the camera-IMU calibration
 // (app/camimu_calibration.hpp).
 

@@ -7,7 +7,7 @@
 // calibrate_camimu_log needs OpenCV, libapriltag and Ceres: it is compiled into the camera module
 // libimucal_camera.so (app/camera_module.hpp); programs call it through app::calibrate_camimu
 // (app/solvers.hpp). The inputs that need no solver are in app/camimu_inputs.hpp, the result
-// writers in app/camimu_results.hpp.
+// writers in app/results/camimu_results.hpp.
 
 #include <cstddef>
 #include <optional>

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <set>
 
-#include "app/result_writers.hpp"
+#include "app/results/static_results.hpp"
 #include "core/text_file.hpp"
 
 namespace imucal::app {

@@ -10,7 +10,7 @@
 #include "app/report/builders.hpp"
 #include "app/report/gnuplot.hpp"
 #include "app/report/html.hpp"
-#include "app/result_writers.hpp"
+#include "app/results/output.hpp"
 #include "core/text_file.hpp"
 
 namespace imucal::app::report {

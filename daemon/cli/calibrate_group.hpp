@@ -6,8 +6,8 @@
 #include <CLI/CLI.hpp>
 #include <optional>
 
-#include "app/camera_results.hpp"
 #include "app/initial_guess.hpp"
+#include "app/results/camera_results.hpp"
 
 namespace imucal::cli {
 

@@ -10,7 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "app/result_writers.hpp"
+#include "app/results/allan_results.hpp"
+#include "app/results/output.hpp"
 #include "app/stream_stats.hpp"
 #include "app/streams.hpp"
 #include "daemon/cli/command.hpp"

@@ -14,7 +14,8 @@
 #include <vector>
 
 #include "app/initial_guess.hpp"
-#include "app/result_writers.hpp"
+#include "app/results/output.hpp"
+#include "app/results/static_results.hpp"
 #include "app/solvers.hpp"
 #include "app/streams.hpp"
 #include "calib/static_calibration.hpp"

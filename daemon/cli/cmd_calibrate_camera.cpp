@@ -9,8 +9,8 @@
 #include <memory>
 #include <string>
 
-#include "app/camera_results.hpp"
-#include "app/result_writers.hpp"
+#include "app/results/camera_results.hpp"
+#include "app/results/output.hpp"
 #include "app/solvers.hpp"
 #include "calib/camera_intrinsics.hpp"
 #include "daemon/cli/calibrate_group.hpp"

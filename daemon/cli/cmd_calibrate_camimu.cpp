@@ -14,10 +14,10 @@
 #include <string>
 #include <vector>
 
-#include "app/camera_results.hpp"
 #include "app/camimu_inputs.hpp"
-#include "app/camimu_results.hpp"
-#include "app/result_writers.hpp"
+#include "app/results/camera_results.hpp"
+#include "app/results/camimu_results.hpp"
+#include "app/results/output.hpp"
 #include "app/solvers.hpp"
 #include "daemon/cli/calibrate_group.hpp"
 #include "daemon/cli/command.hpp"

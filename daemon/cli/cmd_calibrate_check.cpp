@@ -16,7 +16,7 @@
 
 #include "app/calibration_check.hpp"
 #include "app/initial_guess.hpp"
-#include "app/result_writers.hpp"
+#include "app/results/output.hpp"
 #include "app/streams.hpp"
 #include "daemon/cli/calibrate_group.hpp"
 #include "daemon/cli/command.hpp"

@@ -10,7 +10,8 @@
 
 #include "app/calibration_check.hpp"
 #include "app/initial_guess.hpp"
-#include "app/result_writers.hpp"
+#include "app/results/gsens_results.hpp"
+#include "app/results/output.hpp"
 #include "app/streams.hpp"
 #include "calib/gsens_calibration.hpp"
 #include "daemon/cli/calibrate_group.hpp"

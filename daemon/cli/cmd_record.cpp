@@ -17,9 +17,9 @@
 #include <string>
 
 #include "acquisition/recorder.hpp"
-#include "app/cameras.hpp"
 #include "app/module_loader.hpp"
-#include "app/rig.hpp"
+#include "app/rig/cameras.hpp"
+#include "app/rig/rig.hpp"
 #include "core/rig_config.hpp"
 #include "daemon/cli/command.hpp"
 #include "drivers/camera/fake/virtual_camera.hpp"

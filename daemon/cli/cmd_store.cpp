@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "app/stored_calibration.hpp"
+#include "app/rig/stored_calibration.hpp"
 #include "core/rig_config.hpp"
 #include "daemon/cli/command.hpp"
 

@@ -14,9 +14,9 @@
 #include <sstream>
 #include <thread>
 
-#include "app/cameras.hpp"
 #include "app/module_loader.hpp"
-#include "app/stored_calibration.hpp"
+#include "app/rig/cameras.hpp"
+#include "app/rig/stored_calibration.hpp"
 #include "core/version.hpp"
 #include "drivers/storage/storage_device.hpp"
 

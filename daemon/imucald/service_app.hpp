@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "acquisition/asio_acquisition.hpp"
-#include "app/rig.hpp"
+#include "app/rig/rig.hpp"
 #include "app/session/session_runner.hpp"
 #include "core/rig_config.hpp"
 #include "daemon/service/control_server.hpp"

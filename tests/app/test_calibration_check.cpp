@@ -12,7 +12,8 @@
 #include <string>
 
 #include "app/calibration_check.hpp"
-#include "app/result_writers.hpp"
+#include "app/results/output.hpp"
+#include "app/results/static_results.hpp"
 #include "tests/calib/test_static_synth.hpp"
 #include "tests/support/test_support.hpp"
 

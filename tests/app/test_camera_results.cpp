@@ -6,7 +6,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "app/camera_results.hpp"
+#include "app/results/camera_results.hpp"
 #include "core/rig_config.hpp"
 
 namespace imucal::app {

@@ -11,8 +11,8 @@
 #include <nlohmann/json.hpp>
 
 #include "app/camimu_inputs.hpp"
-#include "app/camimu_results.hpp"
-#include "app/result_writers.hpp"
+#include "app/results/camimu_results.hpp"
+#include "app/results/static_results.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::app {

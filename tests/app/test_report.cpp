@@ -11,10 +11,10 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "app/camera_results.hpp"
-#include "app/camimu_results.hpp"
 #include "app/report/html.hpp"
 #include "app/report/report.hpp"
+#include "app/results/camera_results.hpp"
+#include "app/results/camimu_results.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::app::report {

@@ -5,7 +5,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "app/rig.hpp"
+#include "app/rig/rig.hpp"
 
 namespace imucal::app {
 namespace {

@@ -8,9 +8,10 @@
 #include <filesystem>
 #include <fstream>
 
-#include "app/camimu_results.hpp"
-#include "app/result_writers.hpp"
-#include "app/stored_calibration.hpp"
+#include "app/results/camimu_results.hpp"
+#include "app/results/output.hpp"
+#include "app/results/static_results.hpp"
+#include "app/rig/stored_calibration.hpp"
 #include "drivers/storage/calibration_store.hpp"
 #include "drivers/storage/storage_device.hpp"
 #include "tests/support/test_support.hpp"

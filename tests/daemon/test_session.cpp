@@ -10,7 +10,7 @@
 #include <mutex>
 #include <nlohmann/json.hpp>
 
-#include "app/rig.hpp"
+#include "app/rig/rig.hpp"
 #include "app/session/session_replay.hpp"
 #include "app/session/session_runner.hpp"
 #include "core/rig_config.hpp"

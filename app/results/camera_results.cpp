@@ -1,4 +1,4 @@
-#include "app/camera_results.hpp"
+#include "app/results/camera_results.hpp"
 
 #include <yaml-cpp/yaml.h>
 

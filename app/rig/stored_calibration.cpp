@@ -1,4 +1,4 @@
-#include "app/stored_calibration.hpp"
+#include "app/rig/stored_calibration.hpp"
 
 #include <yaml-cpp/yaml.h>
 

@@ -6,7 +6,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "app/result_writers.hpp"
+#include "app/results/allan_results.hpp"
+#include "app/results/output.hpp"
+#include "app/results/static_results.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal::app {

@@ -1,4 +1,4 @@
-#include "app/cameras.hpp"
+#include "app/rig/cameras.hpp"
 
 #include "app/module_loader.hpp"
 #include "drivers/camera/aravis/aravis_module.hpp"

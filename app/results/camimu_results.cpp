@@ -1,4 +1,4 @@
-#include "app/camimu_results.hpp"
+#include "app/results/camimu_results.hpp"
 
 #include <yaml-cpp/yaml.h>
 

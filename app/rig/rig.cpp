@@ -1,4 +1,4 @@
-#include "app/rig.hpp"
+#include "app/rig/rig.hpp"
 
 #include "drivers/bus/i2cdev_bus.hpp"
 #include "drivers/bus/spidev_bus.hpp"

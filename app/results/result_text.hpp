@@ -1,0 +1,83 @@
+#pragma once
+// Pieces the result writers of app/results share (internal to them): matrices, vectors, triads,
+// error figures and static intervals as JSON and as YAML.
+
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "calib/static_calibration.hpp"
+#include "core/imu_model.hpp"
+
+namespace imucal::app::result_text {
+
+using nlohmann::json;
+
+inline json mat_json(const Eigen::Matrix3d& m) {
+  json j = json::array();
+  for (int r = 0; r < 3; ++r) j.push_back({m(r, 0), m(r, 1), m(r, 2)});
+  return j;
+}
+inline json vec_json(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
+
+inline json figures_json(const calib::ErrorFigures& f) {
+  return {{"count", f.count},
+          {"mean_mps2", f.mean_mps2},
+          {"max_mps2", f.max_mps2},
+          {"mean_rad", f.mean_rad},
+          {"max_rad", f.max_rad}};
+}
+
+/// One triad in the JSON convention corrected = misalignment * diag(scale) * (raw - bias).
+inline json triad_json(const TedaldiTriad& t, const calib::TriadSigma& s) {
+  return {
+      {"misalignment", mat_json(t.T)},
+      {"scale", vec_json(t.scale)},
+      {"bias", vec_json(-t.bias)},
+      {"sigma", {{"misalignment", mat_json(s.T)}, {"scale", vec_json(s.scale)}, {"bias", vec_json(s.bias)}}}};
+}
+
+inline json intervals_json(const calib::StaticCalibrationResult& r) {
+  json intervals = json::array();
+  for (const auto& iv : r.intervals) {
+    intervals.push_back({{"t0_s", ns_to_s(iv.t0_ns - r.intervals.front().t0_ns)},
+                         {"t1_s", ns_to_s(iv.t1_ns - r.intervals.front().t0_ns)},
+                         {"t0_ns", iv.t0_ns},
+                         {"t1_ns", iv.t1_ns},
+                         {"samples", iv.samples}});
+  }
+  return intervals;
+}
+
+inline void emit_matrix(YAML::Emitter& y, const std::string& key, const Eigen::Matrix3d& m) {
+  y << YAML::Key << key << YAML::Value << YAML::BeginSeq;
+  for (int r = 0; r < 3; ++r)
+    y << YAML::Flow << YAML::BeginSeq << m(r, 0) << m(r, 1) << m(r, 2) << YAML::EndSeq;
+  y << YAML::EndSeq;
+}
+inline void emit_vector(YAML::Emitter& y, const std::string& key, const Eigen::Vector3d& v) {
+  y << YAML::Key << key << YAML::Value << YAML::Flow << YAML::BeginSeq << v[0] << v[1] << v[2]
+    << YAML::EndSeq;
+}
+inline void emit_triad(YAML::Emitter& y, const std::string& key, const TedaldiTriad& t,
+                       const calib::TriadSigma& s) {
+  y << YAML::Key << key << YAML::Value << YAML::BeginMap;
+  emit_matrix(y, "misalignment", t.T);
+  emit_vector(y, "scale", t.scale);
+  emit_vector(y, "bias", -t.bias);
+  y << YAML::Key << "sigma" << YAML::Value << YAML::BeginMap;
+  emit_matrix(y, "misalignment", s.T);
+  emit_vector(y, "scale", s.scale);
+  emit_vector(y, "bias", s.bias);
+  y << YAML::EndMap << YAML::EndMap;
+}
+inline void emit_figures(YAML::Emitter& y, const std::string& key, const calib::ErrorFigures& f) {
+  y << YAML::Key << key << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "mean_mps2"
+    << YAML::Value << f.mean_mps2 << YAML::Key << "max_mps2" << YAML::Value << f.max_mps2 << YAML::Key
+    << "mean_rad" << YAML::Value << f.mean_rad << YAML::Key << "max_rad" << YAML::Value << f.max_rad
+    << YAML::EndMap;
+}
+
+}  // namespace imucal::app::result_text
