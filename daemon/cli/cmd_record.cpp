@@ -22,14 +22,9 @@
 #include "app/rig/rig.hpp"
 #include "core/rig_config.hpp"
 #include "daemon/cli/command.hpp"
-#include "drivers/camera/fake/virtual_camera.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
-#include "sim/imu_error_model.hpp"
-#include "sim/motion.hpp"
-#include "sim/realtime.hpp"
+#include "sim/recording_rig.hpp"
 #include "sim/render_module.hpp"
-#include "sim/rig.hpp"
-#include "sim/virtual_cameras.hpp"
 
 namespace imucal::cli {
 namespace {
@@ -118,162 +113,53 @@ void note_interrupted(const RecordArgs& a, const acq::RecordSummary& s) {
                s.duration_s, static_cast<unsigned long long>(s.samples), a.out_path.c_str());
 }
 
-/// The parts of a simulated rig's options that come from the command line (the real-time rig's
-/// options extend these).
-void fill_sim_rig(sim::SimRigOptions& o, const RecordArgs& a, const mpu::Settings& settings,
-                  const acq::MountingMap& mounting) {
+/// `record --sim`: the virtual rig (sim/recording_rig.hpp) and its cameras, on simulated time
+/// or, with --realtime, on CLOCK_MONOTONIC through the event loop and the eventfd data-ready line.
+void run_record_sim(const RecordArgs& a, const RigConfig& config, const mpu::Settings& settings,
+                    const acq::MountingMap& mounting, acq::RecordOptions& ro, Progress& progress) {
+  sim::RecordingRigOptions o;
   o.settings = settings;
-  o.clock_ppm = a.sim_clock_ppm;
-  o.data_ready.sigma_ns = static_cast<TimeNs>(a.sim_jitter_us * 1e3);
-  o.data_ready.seed = a.seed;
   o.mounting = mounting;
-}
-
-/// The sensor source of a simulated rig that rests from power-on: trajectory time 0 is the
-/// emulator's start.
-fake::SensorSource sim_source(const RecordArgs& a, const mpu::Settings& settings,
-                              const sim::ImuModelParams& params, const sim::Trajectory& trajectory,
-                              TimeNs start_ns) {
-  auto sensor = std::make_shared<sim::TrajectorySensor>(params, a.seed, trajectory, start_ns,
-                                                        sim::chip_sample_period_s(settings, a.sim_clock_ppm));
-  return sim::TrajectorySensor::source(std::move(sensor));
-}
-
-/// Stream description and "sim" metadata of a simulated recording; returns the metadata.
-std::string describe_sim_record(const RecordArgs& a, const mpu::Settings& settings,
-                                const fake::DataReadyTiming& dt, acq::RecordOptions& ro) {
-  ro.stream_info = mpu::make_stream_info(settings, "sim");
-  ro.stream_info.name = "imu0";
-  nlohmann::json meta = {{"seed", a.seed},
-                         {"clock_ppm", a.sim_clock_ppm},
-                         {"edge_latency_ns", dt.latency_ns},
-                         {"edge_jitter_ns", dt.sigma_ns},
-                         {"script", a.sim_motion}};
-  if (a.realtime) meta["realtime"] = true;
-  ro.metadata.emplace_back("sim", meta.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
-  return meta.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-}
-
-/// The configured cameras of the simulated rig: virtual cameras (drivers/camera/fake) rendering
-/// the configured target as the rig moves along `motion` (the render module), on the simulated
-/// clock `clock` or, when it is empty, in real time. Frames start a second after the rig powers up.
-std::vector<std::unique_ptr<drivers::camera::Camera>> make_sim_cameras(
-    const RigConfig& config, const RecordArgs& a, std::shared_ptr<const sim::CheckerboardMotion> motion,
-    TimeNs start_ns, const std::function<TimeNs()>& clock, acq::RecordOptions& ro) {
-  std::vector<std::unique_ptr<drivers::camera::Camera>> cameras;
-  if (config.cameras.empty()) return cameras;
-  const sim::RenderModuleApi* render = nullptr;
-  if (a.sim_camera == "render") {
+  o.cameras = config.cameras;
+  o.target = config.target;
+  o.seed = a.seed;
+  o.clock_ppm = a.sim_clock_ppm;
+  o.jitter_us = a.sim_jitter_us;
+  o.motion = a.sim_motion;
+  o.camera_content = a.sim_camera;
+  o.duration_s = a.duration_s;
+  o.realtime = a.realtime;
+  if (!config.cameras.empty() && a.sim_camera == "render") {
     auto module = app::load_module<sim::RenderModuleApi>(sim::kRenderModule, sim::kRenderModuleEntry);
     if (!module.ok()) fail(module.error(), "simulated cameras");
-    render = *module;
+    o.render = (*module)->scene_renderer;
   }
-  for (const CameraConfig& cc : config.cameras) {
-    const sim::SimCameraScene scene =
-        sim::virtual_camera_scene(cc, *config.target, a.seed, cameras.size(), start_ns);
-    auto renderer = render != nullptr
-                        ? take(render->scene_renderer(scene, motion, motion->T_world_board(scene.target)),
-                               "simulated camera " + cc.name)
-                        : drivers::camera::fake::test_pattern_renderer(cc.width, cc.height, scene.seed);
-    sim::VirtualCameraTiming timing;
-    timing.first_frame_ns = start_ns + kNsPerSecond;
-    timing.clock = clock;
-    auto camera = take(sim::make_virtual_camera(cc, std::move(renderer), timing), "simulated camera");
-    auto st = camera->set_format({cc.width, cc.height, cc.pixel_format, cc.rate_hz});
-    if (!st.ok())
-      throw CliExit{kExitUsage, "camera " + cc.name + " in " + a.config_path + ": " + st.error().message};
+  auto made = sim::RecordingRig::create(o);
+  if (!made.ok()) {
+    if (made.error().code == Errc::kInvalidArgument)
+      throw CliExit{kExitUsage, "--sim with " + a.config_path + ": " + made.error().message};
+    fail(made.error(), "simulated rig");
+  }
+  sim::RecordingRig& rig = **made;
+  for (std::size_t i = 0; i < rig.cameras().size(); ++i) {
     acq::RecordCamera rc;
-    rc.camera = camera.get();
-    rc.info.name = cc.name;
+    rc.camera = rig.cameras()[i].get();
+    rc.info.name = config.cameras[i].name;
     rc.info.backend = "sim";
     rc.info.device = "sim";
     ro.cameras.push_back(rc);
-    cameras.push_back(std::move(camera));
   }
-  return cameras;
-}
-
-/// `record --sim --realtime`: the emulated chip runs on CLOCK_MONOTONIC (a ticker thread) and
-/// is recorded through the event loop and the eventfd data-ready line, as a rig is.
-void run_record_realtime(const RecordArgs& a, const RigConfig& config, const mpu::Settings& settings,
-                         const acq::MountingMap& mounting, const sim::ImuModelParams& params,
-                         const sim::Trajectory& trajectory,
-                         std::shared_ptr<const sim::CheckerboardMotion> board, acq::RecordOptions& ro,
-                         Progress& progress) {
-  sim::RealtimeSimRigOptions rig_options;
-  fill_sim_rig(rig_options, a, settings, mounting);
-  rig_options.start_ns = monotonic_now_ns();
-  auto rig = take(sim::RealtimeSimRig::create(
-                      sim_source(a, settings, params, trajectory, rig_options.start_ns), rig_options),
-                  "simulated rig");
-  auto cameras = make_sim_cameras(config, a, board, rig_options.start_ns, {}, ro);
-  const std::string sim_meta = describe_sim_record(a, settings, rig_options.data_ready, ro);
-  ro.loop = acq::RecordLoop::kEventLoop;
-  ro.stop_on_signals = true;
-  const auto summary = take(acq::record_imu_session(rig->acquisition(), rig->driver(), ro), "recording");
-  rig->stop_ticker();
-  progress.finish();
-  print_summary(a, summary, sim_meta);
-  note_interrupted(a, summary);
-}
-
-/// The motion of the simulated rig: the script --sim-motion names, by default the checkerboard
-/// motion when cameras are configured (they look at the target) and rest otherwise.
-std::shared_ptr<const sim::Trajectory> sim_trajectory(RecordArgs& a, const RigConfig& config,
-                                                      std::shared_ptr<const sim::CheckerboardMotion>* board) {
-  if (a.sim_motion.empty()) a.sim_motion = config.cameras.empty() ? "still" : "checkerboard";
-  if (!config.cameras.empty() && a.sim_motion != "checkerboard") {
-    throw CliExit{kExitUsage,
-                  "the simulated cameras look at the target during --sim-motion checkerboard; "
-                  "use it, or remove the cameras from " +
-                      a.config_path};
-  }
-  if (a.sim_motion == "static") {
-    sim::StaticProtocolOptions so;
-    return take(sim::make_static_protocol(so, a.seed), "simulated rig");
-  }
-  if (a.sim_motion == "checkerboard") {
-    sim::CheckerboardMotionOptions mo;
-    mo.duration_s = std::max(10.0, a.duration_s + 5.0);
-    std::shared_ptr<const sim::CheckerboardMotion> motion =
-        take(sim::CheckerboardMotion::create(mo, a.seed), "simulated rig");
-    *board = motion;
-    return motion;
-  }
-  sim::StillOptions still;
-  still.duration_s = a.duration_s + 30.0;
-  return take(sim::make_still(still, a.seed), "simulated rig");
-}
-
-/// `record --sim`: the virtual rig (and its cameras) on simulated time, or in real time.
-void run_record_sim(RecordArgs a, const RigConfig& config, const mpu::Settings& settings,
-                    const acq::MountingMap& mounting, acq::RecordOptions& ro, Progress& progress) {
-  for (const CameraConfig& cc : config.cameras) {
-    if (cc.backend != CameraBackend::kSim) {
-      throw CliExit{kExitUsage, std::string("--sim records simulated cameras only; camera ") + cc.name +
-                                    " in " + a.config_path + " has backend " +
-                                    camera_backend_name(cc.backend)};
-    }
-  }
-  std::shared_ptr<const sim::CheckerboardMotion> board;
-  const auto trajectory = sim_trajectory(a, config, &board);
-  sim::ImuModelParams params = sim::ImuModelParams::draw(a.seed);
+  ro.stream_info = rig.stream_info();
+  ro.metadata.emplace_back("sim", rig.metadata());
   if (a.realtime) {
-    run_record_realtime(a, config, settings, mounting, params, *trajectory, board, ro, progress);
-    return;
+    ro.loop = acq::RecordLoop::kEventLoop;
+    ro.stop_on_signals = true;
   }
-  sim::SimRigOptions rig_options;
-  fill_sim_rig(rig_options, a, settings, mounting);
-  auto rig = take(
-      sim::SimImuRig::create(sim_source(a, settings, params, *trajectory, rig_options.start_ns), rig_options),
-      "simulated rig");
-  sim::SimImuRig* r = rig.get();
-  auto cameras = make_sim_cameras(
-      config, a, board, rig_options.start_ns, [r] { return r->clock().now_ns(); }, ro);
-  const std::string sim_meta = describe_sim_record(a, settings, rig_options.data_ready, ro);
-  const auto summary = take(acq::record_imu_session(rig->acquisition(), rig->driver(), ro), "recording");
+  const auto summary = take(acq::record_imu_session(rig.acquisition(), rig.driver(), ro), "recording");
+  rig.stop();
   progress.finish();
-  print_summary(a, summary, sim_meta);
+  print_summary(a, summary, rig.metadata());
+  if (a.realtime) note_interrupted(a, summary);
 }
 
 void run_record(const RecordArgs& a) {
