@@ -1,11 +1,11 @@
 // The text helpers every layer shares (core/text_format.hpp): the one number parser, and the
 // formatting of numbers, hex and UTC stamps.
 
-#include "core/text_format.hpp"
-
 #include <gtest/gtest.h>
 
 #include <regex>
+
+#include "core/text_format.hpp"
 
 namespace imucal {
 namespace {
@@ -15,8 +15,8 @@ TEST(TextFormat, ParseFiniteNumberTakesOneWholeFiniteNumber) {
   EXPECT_EQ(parse_finite_number("+2e-3"), 2e-3);
   EXPECT_EQ(parse_finite_number("-0.25"), -0.25);
   EXPECT_EQ(parse_finite_number("0"), 0.0);
-  for (const char* bad : {"", "+", "-", "+-1", "++1", "-+1", " 1", "1 ", "1.5s", "0x10", "nan", "inf", "-inf",
-                          "1e999", "1,5"})
+  for (const char* bad :
+       {"", "+", "-", "+-1", "++1", "-+1", " 1", "1 ", "1.5s", "0x10", "nan", "inf", "-inf", "1e999", "1,5"})
     EXPECT_FALSE(parse_finite_number(bad)) << "'" << bad << "' was taken as a number";
 }
 

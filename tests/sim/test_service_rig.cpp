@@ -116,7 +116,7 @@ TEST(ServiceRig, AnUnpluggedImuFailsTheTickAfterItsTime) {
     ++ok_ticks;
   }
   ASSERT_FALSE(failed.ok()) << "the IMU answered 10 s after it was unplugged";
-  EXPECT_GE(ok_ticks, 5);  // 0.1 s of rig time first
+  EXPECT_GE(ok_ticks, 5);    // 0.1 s of rig time first
   EXPECT_LE(ok_ticks, 100);  // then the driver's resets, and it gives up
   EXPECT_NE(failed.error().message.find("MPU-6000"), std::string::npos) << failed.error().message;
 }
