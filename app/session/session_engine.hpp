@@ -150,6 +150,7 @@ class SessionEngine {
     double value = 0.0;
     double limit = 0.0;
     bool pass = false;
+    int digits = 3;  // decimals the value and the limit are shown with
   };
   const std::vector<Gate>& gates() const { return gates_; }
   /// Poses captured so far (gravity directions in the IMU frame).

@@ -30,6 +30,17 @@ double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b)) / kDeg;
 }
 
+/// Three figures times `k` with `digits` decimals; one that could not be determined (not finite)
+/// reads "not determined", never a number.
+std::string figures(const Eigen::Vector3d& v, double k, int digits) {
+  std::string out;
+  for (int i = 0; i < 3; ++i) {
+    if (i > 0) out += " ";
+    out += std::isfinite(v[i]) ? fixed(v[i] * k, digits) : std::string("not determined");
+  }
+  return out;
+}
+
 }  // namespace
 
 ImuSample SessionEngine::to_si(const ImuSample& raw) const {
@@ -338,11 +349,13 @@ void SessionEngine::evaluate_gates() {
         std::max(r.accel_sigma.scale.cwiseQuotient(r.model.accel.scale.cwiseAbs()).maxCoeff(),
                  r.gyro_sigma.scale.cwiseQuotient(r.model.gyro.scale.cwiseAbs()).maxCoeff());
     gates_.push_back({"gravity residual RMS (m/s^2)", r.quality.accel_after.mean_mps2,
-                      s.gate_gravity_rms_mps2, r.quality.accel_after.mean_mps2 <= s.gate_gravity_rms_mps2});
-    gates_.push_back({"largest scale sigma", scale_sigma, s.gate_scale_sigma,
-                      std::isfinite(scale_sigma) && scale_sigma <= s.gate_scale_sigma});
+                      s.gate_gravity_rms_mps2, r.quality.accel_after.mean_mps2 <= s.gate_gravity_rms_mps2,
+                      4});
+    // Shown in units of 1e-3 (the figures are a few 1e-4), judged on the figure itself.
+    gates_.push_back({"largest scale sigma (relative, e-3)", scale_sigma * 1e3, s.gate_scale_sigma * 1e3,
+                      std::isfinite(scale_sigma) && scale_sigma <= s.gate_scale_sigma, 2});
     gates_.push_back(
-        {"distinct attitudes", static_cast<double>(r.distinct_attitudes), 9.0, r.distinct_attitudes >= 9});
+        {"distinct attitudes", static_cast<double>(r.distinct_attitudes), 9.0, r.distinct_attitudes >= 9, 0});
   }
   if (final_->camimu) {
     const auto& res = final_->camimu->result;
@@ -351,7 +364,7 @@ void SessionEngine::evaluate_gates() {
     };
     for (const auto& cam : res.cameras) {
       gates_.push_back({cam.name + " reprojection RMS (px)", cam.reprojection_rms_px, s.gate_reprojection_px,
-                        cam.reprojection_rms_px <= s.gate_reprojection_px});
+                        cam.reprojection_rms_px <= s.gate_reprojection_px, 3});
       // Every estimated extrinsic and time offset carries a sigma before it goes to storage.
       int missing = 0;
       if (!fixed("T_cam_imu"))
@@ -359,7 +372,7 @@ void SessionEngine::evaluate_gates() {
                                     (!cam.translation_sigma_m.array().isFinite()).count());
       if (!fixed("timeshift")) missing += std::isfinite(cam.timeshift_sigma_s) ? 0 : 1;
       gates_.push_back(
-          {cam.name + " extrinsics without a sigma", static_cast<double>(missing), 0.0, missing == 0});
+          {cam.name + " extrinsics without a sigma", static_cast<double>(missing), 0.0, missing == 0, 0});
     }
   }
   gates_pass_ = std::all_of(gates_.begin(), gates_.end(), [](const Gate& g) { return g.pass; });
@@ -407,20 +420,27 @@ void SessionEngine::review() {
   state_ = SessionState::kReview;
   json gates = json::array();
   for (const auto& g : gates_)
-    gates.push_back({{"name", g.name}, {"value", g.value}, {"limit", g.limit}, {"pass", g.pass}});
+    gates.push_back(
+        {{"name", g.name}, {"value", g.value}, {"limit", g.limit}, {"pass", g.pass}, {"digits", g.digits}});
   std::vector<std::string> lines;
   if (final_->imu) {
     const auto& r = *final_->imu;
     const auto& m = r.canonical;
-    auto vec = [](const Eigen::Vector3d& v, double k, int d) {
-      return fixed(v.x() * k, d) + " " + fixed(v.y() * k, d) + " " + fixed(v.z() * k, d);
-    };
-    lines.push_back("Accel bias m/s^2: " + vec(m.b_a, 1.0, 4));
-    lines.push_back("Gyro bias deg/s: " + vec(m.b_g, 1.0 / kDeg, 4));
-    lines.push_back("Accel scale sigma (rel): " +
-                    vec(r.accel_sigma.scale.cwiseQuotient(r.model.accel.scale.cwiseAbs()), 1e3, 3) + " e-3");
-    lines.push_back("Gyro scale sigma (rel): " +
-                    vec(r.gyro_sigma.scale.cwiseQuotient(r.model.gyro.scale.cwiseAbs()), 1e3, 3) + " e-3");
+    // The biases as the correction removes them, in the units it outputs: a = A_a (a_in - b_a)
+    // subtracts A_a b_a m/s^2, w = A_g (w_in - b_g) - G a subtracts A_g b_g rad/s. On raw input the
+    // model's own b_a and b_g are counts, shown beside.
+    const Eigen::Vector3d b_a = m.A_a * m.b_a, b_g = m.A_g * m.b_g;
+    const bool counts = info_.units == ImuUnits::kRaw;
+    lines.push_back("Accel bias: " + figures(b_a, 1.0, 4) + " m/s^2" +
+                    (counts ? " (" + figures(m.b_a, 1.0, 1) + " counts)" : std::string()));
+    lines.push_back("Gyro bias: " + figures(b_g, 1.0 / kDeg, 3) + " deg/s" +
+                    (counts ? " (" + figures(m.b_g, 1.0, 1) + " counts)" : std::string()));
+    lines.push_back("Accel scale sigma (relative): " +
+                    figures(r.accel_sigma.scale.cwiseQuotient(r.model.accel.scale.cwiseAbs()), 1e3, 3) +
+                    " e-3");
+    lines.push_back("Gyro scale sigma (relative): " +
+                    figures(r.gyro_sigma.scale.cwiseQuotient(r.model.gyro.scale.cwiseAbs()), 1e3, 3) +
+                    " e-3");
     lines.push_back("Static intervals " + std::to_string(r.intervals.size()) + ", attitudes " +
                     std::to_string(r.distinct_attitudes));
   }

@@ -111,11 +111,16 @@ std::string gate_line(const json& gate) {
   std::string line = "  " + std::string(flag(gate, "pass", false) ? "pass " : "FAIL ") + str(gate, "name");
   const auto value = num(gate, "value");
   const auto limit = num(gate, "limit");
+  // The decimals the service chose for the figure (a count has none); 3 from older services.
+  const auto digits = num(gate, "digits");
+  const int d = digits && *digits >= 0 && *digits <= 9 ? static_cast<int>(*digits) : 3;
   if (value) {
-    line += "  " + fixed(*value, 3);
+    line += "  " + fixed(*value, d);
+  } else if (gate.is_object() && gate.contains("value") && gate["value"].is_null()) {
+    line += "  not determined";  // a figure that could not be computed (NaN travels as null)
   }
   if (limit) {
-    line += "  (limit " + fixed(*limit, 3) + ")";
+    line += "  (limit " + fixed(*limit, d) + ")";
   }
   return line;
 }

@@ -95,6 +95,26 @@ TEST(Console, ReviewShowsGatesAndAcceptKeys) {
   EXPECT_TRUE(has(screen, "y accept  n reject  q detach")) << screen;
 }
 
+TEST(Console, GateFiguresKeepTheDecimalsTheServiceChose) {
+  const json review{
+      {"type", "review"},
+      {"pass", true},
+      {"gates",
+       {{{"name", "largest scale sigma (relative, e-3)"},
+         {"value", 0.3049},
+         {"limit", 3.0},
+         {"pass", true},
+         {"digits", 2}},
+        {{"name", "distinct attitudes"}, {"value", 20.0}, {"limit", 9.0}, {"pass", true}, {"digits", 0}},
+        {{"name", "cam0 reprojection RMS (px)"}, {"value", nullptr}, {"limit", 1.0}, {"pass", false}}}},
+      {"lines", json::array()}};
+  const std::string screen = screen_after({status_message("review", "solve"), review});
+  EXPECT_TRUE(has(screen, "  pass largest scale sigma (relative, e-3)  0.30  (limit 3.00)\n")) << screen;
+  EXPECT_TRUE(has(screen, "  pass distinct attitudes  20  (limit 9)\n")) << screen;
+  EXPECT_FALSE(has(screen, "20.000")) << screen;
+  EXPECT_TRUE(has(screen, "  FAIL cam0 reprojection RMS (px)  not determined  (limit 1.000)")) << screen;
+}
+
 TEST(Console, LiveFiguresOfAnotherStepAndDoneClearTheScreen) {
   ConsoleState state;
   update(state, status_message());

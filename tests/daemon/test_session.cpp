@@ -3,6 +3,8 @@
 // scripted operator, the static solve through the solver module, the session log, and replay.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +16,7 @@
 #include "app/session/session_replay.hpp"
 #include "app/session/session_runner.hpp"
 #include "core/rig_config.hpp"
+#include "core/text_format.hpp"
 #include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
 #include "sim/session_rig.hpp"
@@ -189,6 +192,38 @@ TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult
   const auto review = s.of_type("review");
   ASSERT_EQ(review.size(), 1u);
   EXPECT_TRUE(review[0].value("pass", false)) << review[0].dump();
+  {
+    // The review states every figure in its unit: the biases as the correction removes them
+    // (A b, in m/s^2 and deg/s), the model's counts beside; the gates with their own decimals.
+    const CanonicalImuModel& m = s.written_->imu.model;
+    auto three = [](const Eigen::Vector3d& v, double k, int d) {
+      return fixed(v.x() * k, d) + " " + fixed(v.y() * k, d) + " " + fixed(v.z() * k, d);
+    };
+    const Eigen::Vector3d b_a = m.A_a * m.b_a, b_g = m.A_g * m.b_g;
+    std::vector<std::string> lines;
+    for (const auto& l : review[0]["lines"]) lines.push_back(l.get<std::string>());
+    const auto has_line = [&](const std::string& want) {
+      return std::find(lines.begin(), lines.end(), want) != lines.end();
+    };
+    EXPECT_TRUE(
+        has_line("Accel bias: " + three(b_a, 1.0, 4) + " m/s^2 (" + three(m.b_a, 1.0, 1) + " counts)"))
+        << review[0].dump(1);
+    EXPECT_TRUE(has_line("Gyro bias: " + three(b_g, 180.0 / M_PI, 3) + " deg/s (" + three(m.b_g, 1.0, 1) +
+                         " counts)"))
+        << review[0].dump(1);
+    // An accelerometer bias of a few hundred counts is a fraction of a m/s^2 (the virtual rig's
+    // MPU-6000 at +-4 g: 1/8192 g a count), a gyro bias of a few counts a few deg/s at most.
+    EXPECT_LT(b_a.norm(), 1.0);
+    EXPECT_GT(m.b_a.norm(), 50.0);
+    EXPECT_LT(b_g.norm() * 180.0 / M_PI, 5.0);
+    for (const auto& g : review[0]["gates"]) {
+      if (g.value("name", "") == "distinct attitudes") EXPECT_EQ(g.value("digits", -1), 0) << g.dump();
+      if (g.value("name", "").starts_with("largest scale sigma")) {
+        EXPECT_EQ(g.value("digits", -1), 2) << g.dump();
+        EXPECT_GT(g.value("value", 0.0), 0.01) << "shown in units of 1e-3: " << g.dump();
+      }
+    }
+  }
   // Rig time from the first prompt to the review: the protocol's budget is 3 minutes.
   const double rig_s = static_cast<double>(s.review_ns_ - s.first_prompt_ns_) * 1e-9;
   std::printf("rig time first prompt -> review: %.1f s, %zu poses\n", rig_s,
