@@ -217,7 +217,9 @@ TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult
     EXPECT_GT(m.b_a.norm(), 50.0);
     EXPECT_LT(b_g.norm() * 180.0 / M_PI, 5.0);
     for (const auto& g : review[0]["gates"]) {
-      if (g.value("name", "") == "distinct attitudes") EXPECT_EQ(g.value("digits", -1), 0) << g.dump();
+      if (g.value("name", "") == "distinct attitudes") {
+        EXPECT_EQ(g.value("digits", -1), 0) << g.dump();
+      }
       if (g.value("name", "").starts_with("largest scale sigma")) {
         EXPECT_EQ(g.value("digits", -1), 2) << g.dump();
         EXPECT_GT(g.value("value", 0.0), 0.01) << "shown in units of 1e-3: " << g.dump();

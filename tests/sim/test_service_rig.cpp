@@ -144,7 +144,9 @@ TEST(ServiceRig, ItsCameraStampsOnTheRigsClockAndVanishesWhenAsked) {
       }
       if (!f->valid()) break;
       EXPECT_LE(f->t_ns, rig->now_ns());
-      if (frames > 0) EXPECT_EQ(f->t_ns - last, 50'000'000);  // 20 Hz on the rig's clock
+      if (frames > 0) {
+        EXPECT_EQ(f->t_ns - last, 50'000'000);  // 20 Hz on the rig's clock
+      }
       last = f->t_ns;
       EXPECT_EQ(f->width, 320);
       ++frames;
