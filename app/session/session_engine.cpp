@@ -287,7 +287,10 @@ void SessionEngine::finish(SessionState state, const std::string& outcome, const
   state_ = state;
   waiting_ = false;
   emit(status());
-  emit({{"type", "done"}, {"outcome", outcome}, {"text", text}});
+  json done = {{"type", "done"}, {"outcome", outcome}, {"text", text}};
+  // Where the record went (storage, slot, sequence), named on the end screen.
+  if (outcome == "written" && !written_to_.empty()) done["stored"] = written_to_;
+  emit(done);
 }
 
 void SessionEngine::begin_step() {
@@ -599,8 +602,12 @@ json SessionEngine::result_message() const {
   return m;
 }
 
-void SessionEngine::write_finished(const Status& status) {
-  emit({{"type", "written"}, {"ok", status.ok()}, {"error", status.ok() ? "" : status.error().message}});
+void SessionEngine::write_finished(const Status& status, const std::string& where) {
+  written_to_ = status.ok() ? where : std::string();
+  emit({{"type", "written"},
+        {"ok", status.ok()},
+        {"error", status.ok() ? "" : status.error().message},
+        {"where", written_to_}});
   if (!running() || steps_[current_].id != StepId::kWrite) return;
   if (!status.ok()) {
     fault("storage", status.error().message);

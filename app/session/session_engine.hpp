@@ -125,7 +125,8 @@ class SessionEngine {
   void terminate(const std::string& reason);
   void solve_progress(double fraction, const std::string& text);
   void solve_finished(int id, SolveOutcome outcome);
-  void write_finished(const Status& status);
+  /// `where`: the storage, slot and sequence the record went to (named at the end).
+  void write_finished(const Status& status, const std::string& where = {});
 
   SessionState state() const { return state_; }
   /// The step under way while a session runs and the step has not failed; empty otherwise.
@@ -243,6 +244,7 @@ class SessionEngine {
   std::vector<Gate> gates_;
   nlohmann::json stored_;  // the calibration on the storage at preflight (null: none)
   bool gates_pass_ = false;
+  std::string written_to_;  // where the last write put the record (storage, slot, sequence)
 };
 
 }  // namespace imucal::app::session

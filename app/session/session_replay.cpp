@@ -239,7 +239,8 @@ bool apply(SessionEngine& engine, ReplayHost& host, const json& m, ReplaySummary
     engine.terminate(m.value("reason", ""));
   } else if (type == "written") {
     const bool ok = m.value("ok", false);
-    engine.write_finished(ok ? Status{} : Status(make_error(Errc::kIo, m.value("error", ""))));
+    engine.write_finished(ok ? Status{} : Status(make_error(Errc::kIo, m.value("error", ""))),
+                          m.value("where", std::string()));
   } else if (type == "applied") {
     const int id = m.value("id", 0);
     auto it = host.outcomes_.find(id);

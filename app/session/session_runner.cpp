@@ -464,6 +464,14 @@ void SessionRunner::on_frame(std::size_t camera, drivers::camera::Frame& frame,
 void SessionRunner::fault(const std::string& source, const std::string& text) { engine_.fault(source, text); }
 
 void SessionRunner::emit(const json& message) {
+  const std::string type = message.value("type", "");
+  if (type == "done" && !dir_.empty() && !message.contains("session_dir")) {
+    // The end of a session names its folder (where the logs, results and reports are).
+    json done = message;
+    done["session_dir"] = dir_;
+    emit(done);
+    return;
+  }
   if (log_) {
     if (auto s = log_->append_event({engine_.now_ns(), "session",
                                      message.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)});
@@ -471,7 +479,6 @@ void SessionRunner::emit(const json& message) {
       warn("session log: " + s.error().message);
   }
   if (options_.broadcast) options_.broadcast(message);
-  const std::string type = message.value("type", "");
   if (type == "done") {
     if (log_) (void)log_->flush();
     close_log();
@@ -545,9 +552,12 @@ void SessionRunner::solve(const SolveJob& job) {
 void SessionRunner::write(const CalibrationRecord& record) {
   auto writer = options_.write_storage;
   run_on_worker([this, record, writer] {
-    Status status = writer ? writer(record)
-                           : Status(make_error(Errc::kUnsupported, "this host has no storage to write to"));
-    auto apply = [this, status] { engine_.write_finished(status); };
+    Result<std::string> where =
+        writer ? writer(record)
+               : Result<std::string>(make_error(Errc::kUnsupported, "this host has no storage to write to"));
+    const Status status = where.ok() ? Status{} : Status(where.error());
+    const std::string place = where.ok() ? *where : std::string();
+    auto apply = [this, status, place] { engine_.write_finished(status, place); };
     if (options_.post) {
       options_.post(apply);
     } else {

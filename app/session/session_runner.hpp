@@ -48,8 +48,10 @@ struct RunnerOptions {
   /// Completes the record the final solve built before it is reviewed (the service keeps the
   /// cameras of the stored record when the session calibrated none). Runs on the worker thread.
   std::function<Status(CalibrationRecord& record)> complete_record;
-  /// Writes the record to the rig's storage, syncs and reads it back. Runs on the worker thread.
-  std::function<Status(const CalibrationRecord& record)> write_storage;
+  /// Writes the record to the rig's storage, syncs and reads it back; returns where it went
+  /// ("slot B, sequence 4, file /var/lib/imucal/calibration.bin"), which the end of the session
+  /// names. Runs on the worker thread.
+  std::function<Result<std::string>(const CalibrationRecord& record)> write_storage;
   /// Problems that concern the service's operator log, not the session (a report not drawn,
   /// a session log event that could not be stored). Default: stderr.
   std::function<void(const std::string&)> warn;

@@ -191,6 +191,12 @@ void add_section(std::vector<std::string>& lines, const ConsoleState& state, int
   if (state.done.is_object()) {
     lines.emplace_back("");
     lines.push_back("Session " + str(state.done, "outcome") + ": " + str(state.done, "text"));
+    if (const std::string stored = str(state.done, "stored"); !stored.empty()) {
+      lines.push_back("Stored on: " + stored);
+    }
+    if (const std::string dir = str(state.done, "session_dir"); !dir.empty()) {
+      lines.push_back("Session folder: " + dir);
+    }
   }
 }
 
@@ -308,7 +314,10 @@ std::optional<std::string> plain_line(const json& message) {
     return line;
   }
   if (type == "done") {
-    return "done: " + str(message, "outcome") + ": " + str(message, "text");
+    const std::string stored = str(message, "stored"), dir = str(message, "session_dir");
+    return "done: " + str(message, "outcome") + ": " + str(message, "text") +
+           (stored.empty() ? std::string() : " (stored on " + stored + ")") +
+           (dir.empty() ? std::string() : " (session folder " + dir + ")");
   }
   if (type == "reply" && !flag(message, "ok", true)) {
     return "error: " + str(message, "cmd") + " refused: " + str(message, "error");

@@ -365,12 +365,14 @@ app::session::PreflightReport Service::preflight() {
   return r;
 }
 
-Status Service::write_storage(const CalibrationRecord& record) {
+Result<std::string> Service::write_storage(const CalibrationRecord& record) {
   auto written = app::write_stored_calibration(config_, record);
   if (!written.ok()) return written.error();
-  spdlog::info("calibration written to {} (slot {}, sequence {}), read back and verified",
-               storage_name(config_.storage), written->slot, written->sequence);
-  return {};
+  // Slot and sequence first: on a narrow console a long path is what gets cut.
+  const std::string where = "slot " + std::string(drivers::slot_name(written->slot)) + ", sequence " +
+                            std::to_string(written->sequence) + ", " + storage_name(config_.storage);
+  spdlog::info("calibration written to {}, read back and verified", where);
+  return where;
 }
 
 void Service::sync_cameras() {

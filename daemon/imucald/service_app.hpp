@@ -75,7 +75,8 @@ class Service final : public service::SessionHost {
   void imu_failed(const Error& error);
   app::session::PreflightReport preflight();
   std::string self_test();
-  Status write_storage(const CalibrationRecord& record);
+  /// Writes, syncs and verifies the record; returns where it went (storage, slot, sequence).
+  Result<std::string> write_storage(const CalibrationRecord& record);
   /// storage.program_gyro_offsets: the stored gyro bias into the chip's gyro offset registers
   /// (`from_record`), or the registers back to their power-up zero (before a session records).
   void set_gyro_offsets(bool from_record);

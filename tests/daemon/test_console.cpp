@@ -122,10 +122,18 @@ TEST(Console, LiveFiguresOfAnotherStepAndDoneClearTheScreen) {
   update(state, kLive);
   update(state, status_message("running", "solve"));
   EXPECT_FALSE(has(render(state), "Poses: 7 of 12"));
-  update(state, {{"type", "done"}, {"outcome", "written"}, {"text", "calibration written to slot B"}});
+  update(state, {{"type", "done"},
+                 {"outcome", "written"},
+                 {"text", "calibration written to slot B"},
+                 {"stored", "slot B, sequence 4, file /var/lib/imucal/calibration.bin"},
+                 {"session_dir", "/var/lib/imucal/sessions/rig-20261128T060000Z"}});
   const std::string screen = render(state);
   EXPECT_FALSE(has(screen, ">> Turn the rig"));
-  EXPECT_TRUE(has(screen, "Session written: calibration written to slot B")) << screen;
+  EXPECT_TRUE(has(screen,
+                  "Session written: calibration written to slot B\n"
+                  "Stored on: slot B, sequence 4, file /var/lib/imucal/calibration.bin\n"
+                  "Session folder: /var/lib/imucal/sessions/rig-20261128T060000Z"))
+      << screen;
 }
 
 TEST(Console, RefusalsAreShownAndMalformedMessagesIgnored) {
@@ -188,6 +196,10 @@ TEST(Console, PlainLinesForAPipe) {
   EXPECT_EQ(plain_line(kLive), "live [poses]: Still: yes  2.1 of 3.0 s; Poses: 7 of 12; 50%");
   EXPECT_EQ(plain_line({{"type", "done"}, {"outcome", "aborted"}, {"text", "by the operator"}}),
             "done: aborted: by the operator");
+  EXPECT_EQ(
+      plain_line(
+          {{"type", "done"}, {"outcome", "aborted"}, {"text", "by the operator"}, {"session_dir", "/s"}}),
+      "done: aborted: by the operator (session folder /s)");
   EXPECT_EQ(plain_line({{"type", "reply"}, {"cmd", "status"}, {"ok", true}}), std::nullopt);
   EXPECT_EQ(plain_line({{"type", "weather"}}), std::nullopt);
 }

@@ -165,6 +165,9 @@ TEST(Imucald, AnOperatorAtTheConsoleRunsAWholeSessionAndTheRecordIsWritten) {
   EXPECT_TRUE(has(review, "gravity residual")) << review;
   ASSERT_EQ(tmux.run("send-keys -t op y"), 0);
   ASSERT_TRUE(wait_for([&] { return has(screen(), "written, read back and verified"); }, 60)) << screen();
+  // The end screen names the slot and sequence the record went to, and the session's folder.
+  EXPECT_TRUE(has(screen(), "slot A, sequence 1")) << screen();
+  EXPECT_TRUE(has(screen(), "Session folder: ")) << screen();
   ASSERT_EQ(tmux.run("send-keys -t op q"), 0);
   ASSERT_TRUE(wait_for([&] { return !test::read_file(dir + "/exit_code").empty(); }, 10));
   EXPECT_EQ(test::read_file(dir + "/exit_code"), "0\n");

@@ -87,14 +87,14 @@ class SimSession {
       record.notes.push_back("completed by the host");
       return {};
     };
-    o.write_storage = [this](const CalibrationRecord& payload) -> Status {
+    o.write_storage = [this](const CalibrationRecord& payload) -> Result<std::string> {
       ++write_calls_;
       if (fail_writes_ > 0) {
         --fail_writes_;
         return make_error(Errc::kIo, "EEPROM did not acknowledge");
       }
       written_ = payload;
-      return {};
+      return std::string("test storage, slot A, sequence ") + std::to_string(write_calls_);
     };
     o.metadata = {{"rig_config", rig_config_to_json(config_)}};
     o.frames_wait_for_encoder = true;  // frames come as fast as the loop runs, as in imucald --sim
@@ -178,6 +178,11 @@ TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult
     for (const auto& m : s.messages_) std::printf("%s\n", m.dump().c_str());
   ASSERT_EQ(s.outcome(), "written");
   EXPECT_EQ(s.write_calls_, 1);
+  // The end names where the record went and the session's folder.
+  const json done = s.of_type("done").back();
+  EXPECT_EQ(done.value("text", ""), "The calibration was written, read back and verified.");
+  EXPECT_EQ(done.value("stored", ""), "test storage, slot A, sequence 1");
+  EXPECT_EQ(done.value("session_dir", ""), s.runner_->session_dir());
   // The record written is the solve's static result, as the host completed it.
   ASSERT_TRUE(s.written_);
   EXPECT_EQ(s.completions_, 1);
