@@ -36,6 +36,17 @@ check() {
     bad=1
   fi
 }
+# only_header WHAT MODULE HEADER: of MODULE's headers, the folder WHAT may include only HEADER.
+only_header() {
+  local what=$1 module=$2 header=$3 hits
+  hits=$(grep -rnE "#include [<\"]$module" "$what" --include='*.hpp' --include='*.cpp' 2>/dev/null |
+    grep -v "$header")
+  if [ -n "$hits" ]; then
+    echo "layering violation: $what may use only $header of $module:"
+    echo "$hits"
+    bad=1
+  fi
+}
 others='app/|daemon/'
 check core "drivers/|log/|acquisition/|calib/|sim/|$others"
 check log "drivers/|acquisition/|calib/|sim/|$others"
@@ -50,21 +61,9 @@ check app "sim/|daemon/|drivers/[a-z0-9_]+/fake/"
 programs='daemon/cli/|daemon/ctl/|daemon/imucald/|daemon/service/'
 check daemon/common "drivers/|log/|acquisition/|calib/|sim/|app/|$programs"
 check daemon/service "drivers/|log/|acquisition/|calib/|sim/|app/|daemon/cli/|daemon/ctl/|daemon/imucald/|daemon/common/"
-ctl_service=$(grep -rnE '#include [<"]daemon/service/' daemon/ctl --include='*.hpp' --include='*.cpp' 2>/dev/null |
-  grep -v 'daemon/service/protocol.hpp')
-if [ -n "$ctl_service" ]; then
-  echo "layering violation: daemon/ctl may use only daemon/service/protocol.hpp of the service:"
-  echo "$ctl_service"
-  bad=1
-fi
+only_header daemon/ctl daemon/service/ daemon/service/protocol.hpp
 check daemon/ctl "drivers/|log/|acquisition/|calib/|sim/|app/|daemon/cli/|daemon/imucald/|daemon/common/"
-imucald_sim=$(grep -rnE '#include [<"]sim/' daemon/imucald --include='*.hpp' --include='*.cpp' 2>/dev/null |
-  grep -v 'sim/service_rig.hpp')
-if [ -n "$imucald_sim" ]; then
-  echo "layering violation: daemon/imucald may use only sim/service_rig.hpp of the simulator:"
-  echo "$imucald_sim"
-  bad=1
-fi
+only_header daemon/imucald sim/ sim/service_rig.hpp
 check daemon/imucald "log/|calib/|drivers/[a-z0-9_]+/fake/|daemon/cli/|daemon/ctl/"
 check daemon/cli "daemon/imucald/|daemon/ctl/|daemon/service/"
 [ "$bad" = 0 ] && echo "layering OK"
