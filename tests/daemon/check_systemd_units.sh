@@ -28,7 +28,7 @@ tmpfiles=$(find "$tmp/dest" -path '*/lib/tmpfiles.d/imucal.conf')
 find "$tmp/dest" -path '*/bin/imucalctl' | grep -q . || { echo "FAIL: imucalctl not installed"; exit 1; }
 find "$tmp/dest" -path '*/etc/imucal/rig.yaml' | grep -q . || { echo "FAIL: no example /etc/imucal/rig.yaml"; exit 1; }
 
-grep -q '^ExecStart=/.*/bin/imucald --config /.*/imucal/rig.yaml' "$unit" || { echo "FAIL: unexpected ExecStart"; grep ExecStart "$unit"; exit 1; }
+grep -q '^ExecStart=/.*/bin/imucald --config /etc/imucal/rig.yaml ' "$unit" || { echo "FAIL: unexpected ExecStart"; grep ExecStart "$unit"; exit 1; }
 mkdir "$tmp/verify"
 sed "s|^ExecStart=[^ ]*|ExecStart=$executable|" "$unit" > "$tmp/verify/imucald.service"
 if ! out=$(systemd-analyze verify "$tmp/verify/imucald.service" 2>&1) || [ -n "$out" ]; then
@@ -47,7 +47,7 @@ if command -v systemd-sysusers >/dev/null 2>&1; then
   systemd-sysusers --root="$tmp/root" "$sysusers"
   grep -q '^imucal:x:[0-9]*:[0-9]*:imucal calibration service:/var/lib/imucal:' "$tmp/root/etc/passwd" ||
     { echo "FAIL: sysusers did not create user imucal"; cat "$tmp/root/etc/passwd"; exit 1; }
-  for g in spi i2c gpio video; do
+  for g in i2c video; do
     grep -q "^$g:x:[0-9]*:.*imucal" "$tmp/root/etc/group" || { echo "FAIL: imucal not in group $g"; exit 1; }
   done
   echo "sysusers: OK"
