@@ -1,13 +1,15 @@
 # imucal: the two commands of the quick start are `make demo` and `make test`.
-# Build trees: build/release (demo, benchmarks) and build/test (sanitizers, the test suite).
+# Build trees: build/release (demo, benchmarks), build/test (sanitizers, the test suite) and
+# build/package (the Debian package, make package).
 
 JOBS ?= $(shell nproc)
 CMAKE_GEN := -G Ninja
 RELEASE_DIR := build/release
 TEST_DIR := build/test
+PACKAGE_DIR := build/package
 FORMAT_FILES = $(shell git ls-files '*.cpp' '*.hpp' 2>/dev/null)
 
-.PHONY: all deps test-deps build demo test bench format format-check clean
+.PHONY: all deps test-deps build demo test bench package format format-check clean
 
 all: build
 
@@ -41,6 +43,20 @@ bench: deps
 	cmake -S . -B build/bench $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Release -DIMUCAL_BUILD_TESTS=ON
 	cmake --build build/bench -j $(JOBS)
 	scripts/bench.sh build/bench
+
+# Release, tests off, prefix /usr, with the hardening Debian builds with (fortified functions,
+# immediate binding), which lintian checks.
+$(PACKAGE_DIR)/build.ninja:
+	cmake -S . -B $(PACKAGE_DIR) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Release -DIMUCAL_BUILD_TESTS=OFF \
+	  -DIMUCAL_BUILD_BENCH=OFF -DCMAKE_INSTALL_PREFIX=/usr -DCMAKE_CXX_FLAGS=-D_FORTIFY_SOURCE=2 \
+	  -DCMAKE_EXE_LINKER_FLAGS=-Wl,-z,now -DCMAKE_MODULE_LINKER_FLAGS=-Wl,-z,now \
+	  -DCMAKE_SHARED_LINKER_FLAGS=-Wl,-z,now
+
+# The Debian package $(PACKAGE_DIR)/imucal_VERSION_ARCH.deb (CPack; docs/service.md).
+package: deps $(PACKAGE_DIR)/build.ninja
+	cmake --build $(PACKAGE_DIR) -j $(JOBS)
+	cmake --build $(PACKAGE_DIR) --target package
+	@ls -l $(PACKAGE_DIR)/imucal_*.deb
 
 format:
 	clang-format -i $(FORMAT_FILES)

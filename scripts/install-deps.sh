@@ -12,6 +12,7 @@ build_pkgs=(
   libspdlog-dev libfmt-dev libcli11-dev libsystemd-dev
   libaravis-dev libusb-1.0-0-dev libcamera-dev libapriltag-dev
   gnuplot-nox
+  dpkg-dev help2man
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 test_pkgs=(
@@ -19,6 +20,7 @@ test_pkgs=(
   qemu-system-x86 busybox-static cpio kmod
   chromium
   tmux systemd
+  lintian
 )
 
 want=("${build_pkgs[@]}")
