@@ -43,7 +43,7 @@ _imucal() {
             *:\{*\}*)
                 local choices=${type#*:\{}
                 choices=${choices%%\}*}
-                COMPREPLY=($(compgen -W "${choices//,/ }" -- "$cur"))
+                mapfile -t COMPREPLY < <(compgen -W "${choices//,/ }" -- "$cur")
                 return
                 ;;
             TEXT*)
@@ -56,13 +56,13 @@ _imucal() {
         esac
     fi
     if [[ $cur == -* ]]; then
-        COMPREPLY=($(compgen -W "$(_imucal_options "$help")" -- "$cur"))
+        mapfile -t COMPREPLY < <(compgen -W "$(_imucal_options "$help")" -- "$cur")
         return
     fi
     local subcommands
     subcommands=$(_imucal_subcommands "$help")
     if [[ -n $subcommands ]]; then
-        COMPREPLY=($(compgen -W "$subcommands" -- "$cur"))
+        mapfile -t COMPREPLY < <(compgen -W "$subcommands" -- "$cur")
     else
         _filedir
     fi
