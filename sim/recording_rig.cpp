@@ -138,6 +138,7 @@ Result<std::unique_ptr<RecordingRig>> RecordingRig::create(const RecordingRigOpt
                          {"edge_jitter_ns", data_ready.sigma_ns},
                          {"script", o.motion}};
   if (o.realtime) meta["realtime"] = true;
+  if (!o.cameras.empty()) meta["timeshift_cam_imu_s"] = kVirtualTimeshiftCamImuS;
   r->metadata_ = meta.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   return r;
 }

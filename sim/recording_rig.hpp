@@ -60,7 +60,8 @@ class RecordingRig {
   const ImuStreamInfo& stream_info() const { return info_; }
   /// The virtual cameras, in the configuration's order, their formats set as configured.
   std::vector<std::unique_ptr<drivers::camera::Camera>>& cameras() { return cameras_; }
-  /// The log's "sim" metadata: seed, clock error, edge timing, motion script (JSON text).
+  /// The log's "sim" metadata: seed, clock error, edge timing, motion script, the cameras' time
+  /// offset when there are cameras (JSON text).
   const std::string& metadata() const { return metadata_; }
   /// Real time: stops the ticker thread (after the recording).
   void stop();

@@ -10,7 +10,7 @@ SimCameraScene virtual_camera_scene(const CameraConfig& camera, const TargetDesc
   scene.camera = sim_camera_for(camera.width, camera.height);
   scene.target = target;
   scene.T_cam_imu = CamImuSimOptions::default_T_cam_imu();
-  scene.timeshift_cam_imu_s = 0.0;  // the virtual camera stamps on the rig's clock exactly
+  scene.timeshift_cam_imu_s = kVirtualTimeshiftCamImuS;
   scene.exposure_ns = kVirtualExposureNs;
   scene.seed = seed + index;
   scene.host_offset_ns = host_offset_ns;

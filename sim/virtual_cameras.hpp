@@ -3,7 +3,7 @@
 // virtual rig (sim/service_rig.hpp): each configured camera becomes a virtual camera
 // (drivers/camera/fake) of the configured size and rate whose renderer draws the configured target
 // through the simulated lens at that size, mounted at CamImuSimOptions::default_T_cam_imu and
-// stamping on the rig's clock with no offset.
+// stamping on the rig's clock kVirtualTimeshiftCamImuS late.
 
 #include <cstddef>
 #include <cstdint>
@@ -22,9 +22,14 @@ namespace imucal::sim {
 /// How long each virtual frame is exposed.
 inline constexpr TimeNs kVirtualExposureNs = 4'000'000;
 
+/// The virtual cameras' time offset, t_imu = t_cam + timeshift_cam_imu (docs/conventions.md): a
+/// frame stamped t_cam on the rig's clock shows the scene of 4 ms earlier, as with a camera whose
+/// driver stamps a frame after its exposure. The camera-IMU calibration finds it.
+inline constexpr double kVirtualTimeshiftCamImuS = -0.004;
+
 /// What the rig's camera number `index` sees: the simulated lens at the configured size, the
-/// target, the default mounting, no time offset, its own noise (seed + index). Host time is
-/// trajectory time + host_offset_ns.
+/// target, the default mounting, the time offset kVirtualTimeshiftCamImuS, its own noise (seed +
+/// index). Host time is trajectory time + host_offset_ns.
 SimCameraScene virtual_camera_scene(const CameraConfig& camera, const TargetDescription& target,
                                     std::uint64_t seed, std::size_t index, TimeNs host_offset_ns = 0);
 
