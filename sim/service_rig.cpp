@@ -2,9 +2,20 @@
 
 #include "sim/service_rig.hpp"
 
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <map>
 #include <numbers>
+#include <optional>
 #include <sstream>
 
+#include "core/camimu_calibration.hpp"
 #include "sim/camera_scene.hpp"
 #include "sim/camimu.hpp"
 #include "sim/motion.hpp"
@@ -21,61 +32,271 @@ using nlohmann::json;
 constexpr TimeNs kTickNs = 20'000'000;  // rig time per tick
 constexpr auto kBusyWait = std::chrono::milliseconds(2);
 
-/// The result beside the truth (the correction that inverts the error model, in the frame the
-/// static method reports in), one block per quantity.
-std::string imu_truth_comparison(const json& imu, const CanonicalImuModel& truth, bool counts) {
-  auto vec = [](const json& j) {
-    return Eigen::Vector3d(j[0].get<double>(), j[1].get<double>(), j[2].get<double>());
-  };
-  auto mat = [&](const json& j) {
-    Eigen::Matrix3d m;
-    for (int r = 0; r < 3; ++r) m.row(r) = vec(j[r]).transpose();
-    return m;
-  };
+/// One row of the final table: a quantity the session estimated beside the virtual rig's truth.
+struct TruthRow {
+  std::string name;
+  std::string unit;
+  double estimate = kNotDetermined;
+  double truth = kNotDetermined;
+  /// 1-sigma; NaN, 0 or negative: not determined.
+  double sigma = kNotDetermined;
+  /// The error when it is not estimate - truth (a rotation's error about one axis): the row then
+  /// shows no estimate, truth or relative error.
+  std::optional<double> error_only;
+};
+
+TruthRow compared(std::string name, std::string unit, double estimate, double truth, double sigma) {
+  TruthRow r;
+  r.name = std::move(name);
+  r.unit = std::move(unit);
+  r.estimate = estimate;
+  r.truth = truth;
+  r.sigma = sigma;
+  return r;
+}
+
+bool determined(double sigma) { return std::isfinite(sigma) && sigma > 0.0; }
+
+std::string number(double v, const char* format) {
+  if (!std::isfinite(v)) return "-";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, format, v);
+  return buf;
+}
+
+std::string table_text(const std::vector<TruthRow>& rows) {
   std::ostringstream out;
-  out.setf(std::ios::scientific);
-  out.precision(5);
-  auto row = [&](const std::string& name, const Eigen::Vector3d& est, const Eigen::Vector3d& tru) {
-    out << "  " << name << "\n    estimated " << est.transpose() << "\n    true      " << tru.transpose()
-        << "\n    error     " << (est - tru).transpose() << "\n";
+  auto line = [&](const std::string& name, const std::string& unit, const std::string& est,
+                  const std::string& tru, const std::string& err, const std::string& rel,
+                  const std::string& sig, const std::string& ratio) {
+    out << "  " << std::left << std::setw(26) << name << ' ' << std::setw(16) << unit << std::right
+        << std::setw(14) << est << std::setw(14) << tru << std::setw(12) << err << std::setw(11) << rel
+        << std::setw(16) << sig << std::setw(13) << ratio << '\n';
   };
-  const char* unit = counts ? " (counts)" : "";
-  row(std::string("accel scale diag(A_a)"), mat(imu["A_a"]).diagonal(), truth.A_a.diagonal());
-  row(std::string("accel bias b_a") + unit, vec(imu["b_a"]), truth.b_a);
-  row(std::string("gyro scale diag(A_g)"), mat(imu["A_g"]).diagonal(), truth.A_g.diagonal());
-  row(std::string("gyro bias b_g") + unit, vec(imu["b_g"]), truth.b_g);
-  const Eigen::Matrix3d dA_a = mat(imu["A_a"]) - truth.A_a, dA_g = mat(imu["A_g"]) - truth.A_g;
-  const Eigen::Matrix3d dG = mat(imu["G"]) - truth.G;
-  out << "  largest error: A_a " << dA_a.cwiseAbs().maxCoeff() << ", A_g " << dA_g.cwiseAbs().maxCoeff()
-      << ", G " << dG.cwiseAbs().maxCoeff() << " (rad/s per m/s^2; true G max "
-      << truth.G.cwiseAbs().maxCoeff() << ")\n";
+  line("quantity", "unit", "estimate", "truth", "error", "rel.error", "1-sigma", "error/sigma");
+  int with_sigma = 0, within[3] = {0, 0, 0};
+  double worst = 0.0;
+  std::string worst_name;
+  for (const TruthRow& r : rows) {
+    const double error = r.error_only ? *r.error_only : r.estimate - r.truth;
+    const bool sig = determined(r.sigma);
+    const double ratio = sig ? error / r.sigma : kNotDetermined;
+    if (sig && std::isfinite(ratio)) {
+      ++with_sigma;
+      for (int k = 0; k < 3; ++k) within[k] += std::abs(ratio) <= k + 1 ? 1 : 0;
+      if (std::abs(ratio) > worst) {
+        worst = std::abs(ratio);
+        worst_name = r.name;
+      }
+    }
+    const bool values = !r.error_only;
+    line(r.name, r.unit, values ? number(r.estimate, "%.7g") : "-", values ? number(r.truth, "%.7g") : "-",
+         number(error, "%.3g"),
+         values && r.truth != 0.0 ? number(error / std::abs(r.truth), "%.2e") : std::string("-"),
+         sig ? number(r.sigma, "%.3g") : std::string("not determined"), sig ? number(ratio, "%.2f") : "-");
+  }
+  out << "  " << rows.size() << " quantities, " << with_sigma
+      << " with a sigma: |error/sigma| <= 1: " << within[0] << ", <= 2: " << within[1]
+      << ", <= 3: " << within[2];
+  if (!worst_name.empty()) out << "; largest " << number(worst, "%.2f") << " (" << worst_name << ")";
+  out << "\n";
   return out.str();
 }
 
-/// The camera-IMU results beside the virtual cameras' truth (every virtual camera is mounted at
-/// CamImuSimOptions::default_T_cam_imu and stamps with no offset).
-std::string camera_truth_comparison(const json& cameras) {
-  const Eigen::Isometry3d T = CamImuSimOptions::default_T_cam_imu();
-  const Eigen::Quaterniond q_true(T.rotation());
-  std::ostringstream out;
-  out.setf(std::ios::fixed);
-  for (const auto& c : cameras) {
-    const auto& t = c.at("t_cam_imu_m");
-    const auto& qj = c.at("q_cam_imu_wxyz");
-    const Eigen::Vector3d est(t[0].get<double>(), t[1].get<double>(), t[2].get<double>());
-    const Eigen::Quaterniond q(qj[0].get<double>(), qj[1].get<double>(), qj[2].get<double>(),
-                               qj[3].get<double>());
-    out.precision(2);
-    out << "  " << c.value("name", "cam") << " t_cam_imu (mm)\n    estimated " << (est * 1e3).transpose()
-        << "\n    true      " << (T.translation() * 1e3).transpose() << "\n    error     "
-        << ((est - T.translation()) * 1e3).transpose() << "\n";
-    out.precision(4);
-    out << "  " << c.value("name", "cam") << " rotation error "
-        << q.angularDistance(q_true) * 180.0 / std::numbers::pi << " deg, time offset "
-        << c.value("timeshift_cam_imu_s", 0.0) * 1e3 << " ms (true 0), reprojection RMS "
-        << c.value("reprojection_rms_px", 0.0) << " px\n";
+Eigen::Vector3d vec3(const json& j) {
+  auto v = [&](int i) { return j.at(i).is_number() ? j.at(i).get<double>() : kNotDetermined; };
+  return Eigen::Vector3d(v(0), v(1), v(2));
+}
+
+Eigen::Matrix3d mat3(const json& j) {
+  Eigen::Matrix3d m;
+  for (int r = 0; r < 3; ++r) m.row(r) = vec3(j.at(r)).transpose();
+  return m;
+}
+
+/// j[a][b]... when every key is there, else null.
+json at_path(const json& j, std::initializer_list<const char*> keys) {
+  const json* at = &j;
+  for (const char* k : keys) {
+    if (!at->is_object() || !at->contains(k)) return nullptr;
+    at = &(*at)[k];
   }
-  return out.str();
+  return *at;
+}
+
+Eigen::Vector3d sigma3(const json& j) {
+  return j.is_array() && j.size() == 3 ? vec3(j) : Eigen::Vector3d::Constant(kNotDetermined);
+}
+
+Eigen::Matrix3d sigma33(const json& j) {
+  return j.is_array() && j.size() == 3 ? mat3(j) : Eigen::Matrix3d::Constant(kNotDetermined);
+}
+
+/// The JSON file at `path`; null when it cannot be read.
+json read_json(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return nullptr;
+  return json::parse(in, nullptr, false);
+}
+
+/// The result files the session names (the "files" of its result message) by role.
+struct ResultFiles {
+  json static_result;                        // imu-static.json
+  json camimu_result;                        // camimu/result.json
+  std::map<std::string, YAML::Node> camera;  // camera-NAME.yaml by camera name
+};
+
+ResultFiles read_result_files(const json& result) {
+  ResultFiles f;
+  if (!result.contains("files") || !result["files"].is_array()) return f;
+  for (const auto& entry : result["files"]) {
+    if (!entry.is_string()) continue;
+    const std::filesystem::path path(entry.get<std::string>());
+    const std::string file = path.filename().string();
+    if (file == "imu-static.json") {
+      f.static_result = read_json(path.string());
+    } else if (file == "result.json" && path.parent_path().filename() == "camimu") {
+      f.camimu_result = read_json(path.string());
+    } else if (file.starts_with("camera-") && file.ends_with(".yaml")) {
+      try {
+        f.camera[file.substr(7, file.size() - 12)] = YAML::LoadFile(path.string());
+      } catch (const std::exception&) {
+      }
+    }
+  }
+  if (f.static_result.is_discarded()) f.static_result = nullptr;
+  if (f.camimu_result.is_discarded()) f.camimu_result = nullptr;
+  return f;
+}
+
+const char* kAxis[3] = {"x", "y", "z"};
+
+/// The IMU's rows: the static result (the message's canonical model, the sigmas of its file)
+/// beside the truth in the frame that result is expressed in.
+void imu_rows(const json& imu, const json& static_result, const CanonicalImuModel& truth, bool counts,
+              double accel_si_per_unit, double gyro_si_per_unit, std::vector<TruthRow>& rows) {
+  const Eigen::Matrix3d A_a = mat3(imu.at("A_a")), A_g = mat3(imu.at("A_g")), G = mat3(imu.at("G"));
+  const Eigen::Vector3d b_a = vec3(imu.at("b_a")), b_g = vec3(imu.at("b_g"));
+  const std::string scale_unit_a = counts ? "(m/s^2)/count" : "1",
+                    scale_unit_g = counts ? "(rad/s)/count" : "1";
+  constexpr double kDeg = 180.0 / std::numbers::pi;
+  struct Triad {
+    const char* name;
+    const Eigen::Matrix3d& A;
+    const Eigen::Matrix3d& A_true;
+    const Eigen::Vector3d& b;
+    const Eigen::Vector3d& b_true;
+    const char* key;
+    std::string scale_unit;
+    const char* bias_unit;
+    double bias_to_unit;  // stream units -> the bias's unit in the table
+    bool full_misalignment;
+  };
+  const Triad triads[2] = {
+      {"accel", A_a, truth.A_a, b_a, truth.b_a, "accel", scale_unit_a, "m/s^2", accel_si_per_unit, false},
+      {"gyro", A_g, truth.A_g, b_g, truth.b_g, "gyro", scale_unit_g, "deg/s", gyro_si_per_unit * kDeg, true}};
+  for (const Triad& t : triads) {
+    // corrected = misalignment * diag(scale) * (raw - bias): the scales are the diagonal of A,
+    // the misalignments A's columns divided by them.
+    const Eigen::Vector3d s_sigma = sigma3(at_path(static_result, {t.key, "sigma", "scale"}));
+    const Eigen::Matrix3d m_sigma = sigma33(at_path(static_result, {t.key, "sigma", "misalignment"}));
+    const Eigen::Vector3d b_sigma = sigma3(at_path(static_result, {t.key, "sigma", "bias"}));
+    for (int i = 0; i < 3; ++i)
+      rows.push_back(compared(std::string(t.name) + " scale " + kAxis[i], t.scale_unit, t.A(i, i),
+                              t.A_true(i, i), s_sigma(i)));
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) {
+        // The accelerometer's frame has its misalignment upper-triangular (docs/static-calibration.md).
+        if (i == j || (!t.full_misalignment && i > j)) continue;
+        rows.push_back(compared(std::string(t.name) + " misalignment " + kAxis[i] + kAxis[j], "1",
+                                t.A(i, j) / t.A(j, j), t.A_true(i, j) / t.A_true(j, j), m_sigma(i, j)));
+      }
+    for (int i = 0; i < 3; ++i)
+      rows.push_back(compared(std::string(t.name) + " bias " + kAxis[i], t.bias_unit, t.b(i) * t.bias_to_unit,
+                              t.b_true(i) * t.bias_to_unit, b_sigma(i) * t.bias_to_unit));
+  }
+  // The g-sensitivity, when the static method estimated it.
+  const json mode = at_path(static_result, {"gsens", "mode"});
+  const bool gsens = mode.is_string() ? mode.get<std::string>() == "estimate" : !G.isZero(0.0);
+  if (!gsens) return;
+  const Eigen::Matrix3d G_sigma = sigma33(at_path(static_result, {"gsens", "G_sigma"}));
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      rows.push_back(compared(std::string("gyro g-sensitivity G_") + kAxis[i] + kAxis[j], "(rad/s)/(m/s^2)",
+                              G(i, j), truth.G(i, j), G_sigma(i, j)));
+}
+
+/// The rows of one camera: intrinsics (camera-NAME.yaml), rotation, translation and time offset
+/// (the result message, the sigmas of camimu/result.json), beside the virtual camera's truth.
+void camera_rows(const json& c, const ResultFiles& files, const CameraModel& truth_camera,
+                 const Eigen::Isometry3d& T_true, double timeshift_true_s, std::vector<TruthRow>& rows,
+                 std::ostringstream& notes) {
+  const std::string name = c.value("name", "cam");
+  json sig;
+  if (files.camimu_result.is_object() && files.camimu_result.contains("cameras"))
+    for (const auto& rc : files.camimu_result["cameras"])
+      if (rc.value("name", "") == name) sig = rc;
+  if (auto it = files.camera.find(name); it != files.camera.end()) {
+    try {
+      const YAML::Node cam = it->second[name] ? it->second[name] : it->second.begin()->second;
+      auto list = [&](const YAML::Node& n, int i) {
+        return n && n.IsSequence() && n.size() > static_cast<std::size_t>(i) ? n[i].as<double>()
+                                                                             : kNotDetermined;
+      };
+      const YAML::Node own = cam["imucal"];
+      auto own_list = [&](const char* key, int i) { return own ? list(own[key], i) : kNotDetermined; };
+      const char* kIntrinsics[4] = {"fx", "fy", "cx", "cy"};
+      for (int i = 0; i < 4; ++i)
+        rows.push_back(compared(name + " " + kIntrinsics[i], "px", list(cam["intrinsics"], i),
+                                truth_camera.intrinsics[i], own_list("intrinsics_sigma", i)));
+      const std::string model = cam["distortion_model"] ? cam["distortion_model"].as<std::string>() : "";
+      if (model == "radtan" && truth_camera.distortion_model == DistortionModel::kRadtan) {
+        const char* kCoeffs[4] = {"k1", "k2", "p1", "p2"};
+        for (int i = 0; i < 4; ++i)
+          rows.push_back(compared(name + " distortion " + kCoeffs[i], "1", list(cam["distortion_coeffs"], i),
+                                  truth_camera.distortion_coeffs[i], own_list("distortion_coeffs_sigma", i)));
+      } else {
+        notes << "  " << name << ": distortion model " << model
+              << " estimated; the virtual camera's is radtan: not compared\n";
+      }
+    } catch (const std::exception& e) {
+      notes << "  " << name << ": intrinsics not read (" << e.what() << ")\n";
+    }
+  } else {
+    notes << "  " << name << ": no intrinsics file in the result\n";
+  }
+  const auto& qj = c.at("q_cam_imu_wxyz");
+  const Eigen::Quaterniond q(qj[0].get<double>(), qj[1].get<double>(), qj[2].get<double>(),
+                             qj[3].get<double>());
+  const Eigen::Quaterniond q_true(T_true.rotation());
+  // The error as a rotation about the camera's axes, R_est = Exp(e) R_true, the axes of the
+  // rotation sigmas (calib/camimu_calibration.cpp).
+  const Eigen::AngleAxisd e_aa(q.normalized() * q_true.conjugate());
+  const Eigen::Vector3d e = e_aa.angle() * e_aa.axis();
+  constexpr double kDeg = 180.0 / std::numbers::pi;
+  const Eigen::Vector3d r_sigma = sigma3(sig.is_object() ? sig.value("rotation_sigma_rad", json()) : json());
+  for (int i = 0; i < 3; ++i) {
+    TruthRow r = compared(name + " rotation about " + kAxis[i], "deg", kNotDetermined, kNotDetermined,
+                          r_sigma(i) * kDeg);
+    r.error_only = e(i) * kDeg;
+    rows.push_back(r);
+  }
+  const Eigen::Vector3d t = vec3(c.at("t_cam_imu_m"));
+  const Eigen::Vector3d t_sigma = sigma3(sig.is_object() ? sig.value("translation_sigma_m", json()) : json());
+  for (int i = 0; i < 3; ++i)
+    rows.push_back(compared(name + " translation " + kAxis[i], "mm", t(i) * 1e3,
+                            T_true.translation()(i) * 1e3, t_sigma(i) * 1e3));
+  const json shift_sigma = sig.is_object() ? sig.value("timeshift_sigma_s", json()) : json();
+  rows.push_back(compared(name + " time offset", "ms", c.value("timeshift_cam_imu_s", kNotDetermined) * 1e3,
+                          timeshift_true_s * 1e3,
+                          shift_sigma.is_number() ? shift_sigma.get<double>() * 1e3 : kNotDetermined));
+  notes.setf(std::ios::fixed);
+  notes.precision(4);
+  notes << "  " << name << " rotation R_cam_imu: estimated q_wxyz (" << q.w() << ", " << q.x() << ", "
+        << q.y() << ", " << q.z() << "), true (" << q_true.w() << ", " << q_true.x() << ", " << q_true.y()
+        << ", " << q_true.z() << "), " << q.angularDistance(q_true) * kDeg << " deg apart; reprojection RMS "
+        << c.value("reprojection_rms_px", 0.0) << " px\n";
+  notes.unsetf(std::ios::fixed);
 }
 
 class VirtualServiceRig final : public ServiceRig {
@@ -139,6 +360,7 @@ class VirtualServiceRig final : public ServiceRig {
   }
 
   void on_message(const json& message) override {
+    if (message.value("type", "") == "prompt") mark_bias_window(message.value("step", ""));
     if (operator_) operator_->on_message(message, rig_->now_ns());
   }
 
@@ -161,15 +383,78 @@ class VirtualServiceRig final : public ServiceRig {
 
   std::string truth_report(const json& result) const override {
     if (!result.contains("imu")) return {};
+    const ResultFiles files = read_result_files(result);
     const bool counts = rig_->stream_info().units == ImuUnits::kRaw;
-    std::string text =
-        imu_truth_comparison(result["imu"], canonical_in_tedaldi_frame(rig_->params(), counts), counts);
-    if (result.contains("cameras")) text += camera_truth_comparison(result["cameras"]);
-    return text;
+    const ImuModelParams& p = rig_->params();
+    // The static method finds one bias per triad; the simulated one wanders (random walk), so its
+    // truth is the bias in effect averaged over the samples of the still and pose steps.
+    ImuModelParams at_session = p;
+    const std::string window = realised_biases(at_session.accel_bias, at_session.gyro_bias);
+    const double accel_si = counts ? p.accel_mps2_per_count() : 1.0,
+                 gyro_si = counts ? p.gyro_radps_per_count() : 1.0;
+    std::vector<TruthRow> rows;
+    std::ostringstream notes;
+    imu_rows(result["imu"], files.static_result, canonical_in_tedaldi_frame(at_session, counts), counts,
+             accel_si, gyro_si, rows);
+    if (result.contains("cameras")) {
+      for (const auto& c : result["cameras"]) {
+        const std::string name = c.value("name", "");
+        auto cc = std::find_if(options_.cameras.begin(), options_.cameras.end(),
+                               [&](const CameraConfig& k) { return k.name == name; });
+        if (cc == options_.cameras.end()) {
+          notes << "  " << name << ": no such virtual camera, not compared\n";
+          continue;
+        }
+        camera_rows(c, files, sim_camera_for(cc->width, cc->height), CamImuSimOptions::default_T_cam_imu(),
+                    kVirtualTimeshiftCamImuS, rows, notes);
+      }
+    }
+    std::ostringstream head;
+    head << "  Every estimated quantity: estimate, truth, error = estimate - truth, relative error = error / "
+            "|truth|, the result's 1-sigma and error / sigma.\n"
+         << "  IMU: the static result (the record's IMU), in the frame it reports in (z along the "
+            "accelerometer's "
+            "z axis)";
+    if (counts) {
+      head.setf(std::ios::scientific);
+      head.precision(4);
+      head << "; scales per count of the raw stream, biases at the nominal sensitivity (1 count = "
+           << accel_si << " m/s^2, " << gyro_si * 180.0 / std::numbers::pi << " deg/s)";
+      head.unsetf(std::ios::scientific);
+    }
+    head << "; true biases: " << window << ".\n"
+         << "  Cameras: intrinsics (camera-NAME.yaml), then the camera-IMU calibration (t_imu = t_cam + time "
+            "offset; "
+            "the rotation's error about the camera's axes, R_est = Exp(e) R_true).\n";
+    return head.str() + table_text(rows) + notes.str();
   }
 
  private:
   explicit VirtualServiceRig(ServiceRigOptions options) : options_(std::move(options)) {}
+
+  /// The window of the biases' truth: from the (last) start of the still step to the first step
+  /// after the poses.
+  void mark_bias_window(const std::string& step) {
+    if (bias_end_) return;
+    if (step == "still") {
+      bias_begin_ = rig_->sensor_stats();
+    } else if (bias_begin_ && step != "poses") {
+      bias_end_ = rig_->sensor_stats();
+    }
+  }
+
+  /// The mean biases in effect over the window (or over every sample so far, when the session
+  /// had no still step); what they are averaged over.
+  std::string realised_biases(Eigen::Vector3d& accel, Eigen::Vector3d& gyro) const {
+    const TrajectorySensorStats end = bias_end_ ? *bias_end_ : rig_->sensor_stats();
+    const TrajectorySensorStats begin = bias_begin_ ? *bias_begin_ : TrajectorySensorStats{};
+    const std::int64_t n = end.samples - begin.samples;
+    if (n <= 0) return "the turn-on biases (no samples)";
+    accel = (end.sum_accel_bias - begin.sum_accel_bias) / static_cast<double>(n);
+    gyro = (end.sum_gyro_bias - begin.sum_gyro_bias) / static_cast<double>(n);
+    return bias_begin_ ? "their mean over the still and pose steps (they wander)"
+                       : "their mean over the session (they wander)";
+  }
 
   std::chrono::nanoseconds wall_offset(double scale) const {
     const double rig_s = static_cast<double>(rig_->now_ns() - rig_start_ns_) * 1e-9;
@@ -212,6 +497,7 @@ class VirtualServiceRig final : public ServiceRig {
   TimeNs rig_start_ns_ = 0;
   TimeNs unplug_imu_at_ns_ = -1;
   bool paused_ = false;
+  std::optional<TrajectorySensorStats> bias_begin_, bias_end_;
 };
 
 }  // namespace

@@ -16,9 +16,9 @@ Result<std::unique_ptr<SessionRig>> SessionRig::create(const SessionRigOptions& 
   ro.mounting = options.mounting;
   ro.data_ready.seed = options.seed;
   // Trajectory time is host time (offset 0): the operator schedules turns on the rig's clock.
-  auto sensor = std::make_shared<TrajectorySensor>(r->params_, options.seed, *r->trajectory_, 0,
-                                                   chip_sample_period_s(options.settings, ro.clock_ppm));
-  auto rig = SimImuRig::create(TrajectorySensor::source(std::move(sensor)), ro);
+  r->sensor_ = std::make_shared<TrajectorySensor>(r->params_, options.seed, *r->trajectory_, 0,
+                                                  chip_sample_period_s(options.settings, ro.clock_ppm));
+  auto rig = SimImuRig::create(TrajectorySensor::source(r->sensor_), ro);
   if (!rig.ok()) return rig.error().context("virtual rig");
   r->rig_ = std::move(*rig);
   r->info_ = drivers::mpu6000::make_stream_info(options.settings, "sim");

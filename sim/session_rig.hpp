@@ -37,12 +37,15 @@ class SessionRig {
   OperatorTrajectory& trajectory() { return *trajectory_; }
   SimImuRig& rig() { return *rig_; }
   const ImuModelParams& params() const { return params_; }
+  /// What the sensing elements saw so far (the biases in effect, summed over the samples).
+  const TrajectorySensorStats& sensor_stats() const { return sensor_->stats(); }
 
  private:
   SessionRig() = default;
   ImuModelParams params_;
   ImuStreamInfo info_;
   std::unique_ptr<OperatorTrajectory> trajectory_;
+  std::shared_ptr<TrajectorySensor> sensor_;
   std::unique_ptr<SimImuRig> rig_;
 };
 

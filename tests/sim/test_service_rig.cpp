@@ -1,14 +1,22 @@
 // The service's virtual rig (sim/service_rig.hpp): its clock's pace against the wall clock, the
 // wait while the service's worker is busy, the injected IMU fault, its cameras on the rig's clock
-// and the result beside its truth.
+// and the final table of the result beside its truth.
 
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cstdlib>
+#include <numbers>
+#include <sstream>
 #include <thread>
 
 #include "drivers/mpu6000/output_settings.hpp"
+#include "sim/camera_scene.hpp"
+#include "sim/camimu.hpp"
 #include "sim/service_rig.hpp"
+#include "sim/truth.hpp"
+#include "sim/virtual_cameras.hpp"
+#include "tests/support/test_support.hpp"
 
 namespace imucal::sim {
 namespace {
@@ -158,7 +166,44 @@ TEST(ServiceRig, ItsCameraStampsOnTheRigsClockAndVanishesWhenAsked) {
   EXPECT_EQ(gone.error().code, Errc::kNotFound);
 }
 
-TEST(ServiceRig, TheTruthReportComparesAResultWithTheRigsErrors) {
+/// One row of the truth table, split into its columns.
+struct TableRow {
+  bool found = false;
+  std::string unit, estimate, truth, error, relative, sigma, ratio;
+};
+
+TableRow table_row(const std::string& text, const std::string& name) {
+  TableRow r;
+  const auto at = text.find("\n  " + name + "  ");
+  if (at == std::string::npos) return r;
+  std::istringstream in(text.substr(at + 3 + name.size(), text.find('\n', at + 1) - at - 3 - name.size()));
+  std::vector<std::string> t;
+  for (std::string w; in >> w;) t.push_back(w);
+  if (t.size() < 7) return r;
+  r.found = true;
+  r.unit = t[0];
+  r.estimate = t[1];
+  r.truth = t[2];
+  r.error = t[3];
+  r.relative = t[4];
+  if (t[5] == "not" && t.size() >= 8 && t[6] == "determined") {
+    r.sigma = "not determined";
+    r.ratio = t[7];
+  } else {
+    r.sigma = t[5];
+    r.ratio = t[6];
+  }
+  return r;
+}
+
+double num(const std::string& s) { return std::strtod(s.c_str(), nullptr); }
+
+nlohmann::json mat_json(const Eigen::Matrix3d& m) {
+  return {{m(0, 0), m(0, 1), m(0, 2)}, {m(1, 0), m(1, 1), m(1, 2)}, {m(2, 0), m(2, 1), m(2, 2)}};
+}
+nlohmann::json vec_json(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+
+TEST(ServiceRig, TheTruthReportWithoutResultFilesShowsEveryQuantityWithoutSigmas) {
   auto rig = make(options(0.0, false));
   ASSERT_TRUE(rig);
   EXPECT_EQ(rig->truth_report(nlohmann::json{{"type", "result"}}), "");
@@ -167,9 +212,159 @@ TEST(ServiceRig, TheTruthReportComparesAResultWithTheRigsErrors) {
   const nlohmann::json result = {
       {"imu", {{"A_a", I}, {"A_g", I}, {"G", {zero, zero, zero}}, {"b_a", zero}, {"b_g", zero}}}};
   const std::string text = rig->truth_report(result);
-  EXPECT_NE(text.find("accel scale diag(A_a)"), std::string::npos) << text;
-  EXPECT_NE(text.find("gyro bias b_g (counts)"), std::string::npos) << text;
-  EXPECT_NE(text.find("largest error"), std::string::npos) << text;
+  // Scales, misalignments and biases of both triads; no G (none estimated) and no camera.
+  EXPECT_NE(text.find("21 quantities, 0 with a sigma"), std::string::npos) << text;
+  const TableRow scale = table_row(text, "accel scale x");
+  ASSERT_TRUE(scale.found) << text;
+  EXPECT_EQ(scale.unit, "(m/s^2)/count");
+  EXPECT_EQ(scale.sigma, "not determined");
+  EXPECT_EQ(scale.ratio, "-");
+  const TableRow bias = table_row(text, "gyro bias z");
+  ASSERT_TRUE(bias.found) << text;
+  EXPECT_EQ(bias.unit, "deg/s");
+  EXPECT_EQ(bias.sigma, "not determined");
+  EXPECT_TRUE(table_row(text, "gyro misalignment zy").found) << text;
+  EXPECT_FALSE(table_row(text, "accel misalignment zy").found) << "accel misalignment is upper-triangular";
+  EXPECT_EQ(text.find("G_xx"), std::string::npos) << text;
+}
+
+TEST(ServiceRig, TheTruthTableShowsEveryEstimatedQuantityWithItsErrorAgainstTheTruthAndItsSigma) {
+  const std::string dir = test::scratch_dir();
+  ServiceRigOptions o = options(0.0, true);
+  auto rig = make(o);
+  ASSERT_TRUE(rig);
+  // The biases' truth is their mean over the still and pose steps.
+  auto none = [](std::span<const ImuSample>) {};
+  rig->on_message({{"type", "prompt"}, {"step", "still"}, {"text", "Keep still"}});
+  for (int i = 0; i < 50; ++i) ASSERT_TRUE(rig->tick(false, none).ok());
+  rig->on_message({{"type", "prompt"}, {"step", "poses"}, {"text", "Turn"}});
+  for (int i = 0; i < 50; ++i) ASSERT_TRUE(rig->tick(false, none).ok());
+  rig->on_message({{"type", "prompt"}, {"step", "motion"}, {"text", "Move"}});
+
+  // The truth of the rig drawn from the seed (scales, misalignments, G do not wander), in the
+  // frame of the static result, and the virtual camera's.
+  const ImuModelParams p = ImuModelParams::draw(o.seed);
+  const CanonicalImuModel truth = canonical_in_tedaldi_frame(p, true);
+  const CameraModel camera = sim_camera_for(320, 240);
+  const Eigen::Isometry3d T = CamImuSimOptions::default_T_cam_imu();
+
+  // The estimate: the truth, off by two sigmas in the accelerometer's x scale, three in fx, two
+  // in the translation's y, the time offset and the rotation about the camera's x axis.
+  CanonicalImuModel est = truth;
+  const double scale_x = truth.A_a(0, 0);
+  est.A_a.col(0) *= 1.001;  // the scale, not the misalignments of that column
+  est.b_a = truth.b_a + Eigen::Vector3d(2.0, 0.0, 0.0);
+  const Eigen::Quaterniond q_true(T.rotation());
+  const Eigen::Quaterniond q(Eigen::AngleAxisd(0.001, Eigen::Vector3d::UnitX()) * q_true);
+  const Eigen::Vector3d t = T.translation() + Eigen::Vector3d(0.0, 0.001, 0.0);
+  const double shift = kVirtualTimeshiftCamImuS + 1e-4;
+
+  Eigen::Matrix3d m_sigma = Eigen::Matrix3d::Constant(1e-4);
+  m_sigma(2, 1) = 0.0;  // a sigma the result could not compute: never shown as 0
+  const nlohmann::json sigmas = {{"scale", {scale_x * 5e-4, 1e-7, 1e-7}},
+                                 {"misalignment", mat_json(m_sigma)},
+                                 {"bias", {1.0, 1.0, 1.0}}};
+  nlohmann::json static_json = {
+      {"accel", {{"sigma", sigmas}}},
+      {"gyro", {{"sigma", sigmas}}},
+      {"gsens", {{"mode", "estimate"}, {"G_sigma", mat_json(Eigen::Matrix3d::Constant(1e-5))}}}};
+  test::write_file(dir + "/imu-static.json", static_json.dump());
+  std::ostringstream cam;
+  cam << "cam0:\n  camera_model: pinhole\n  intrinsics: [" << camera.intrinsics[0] + 0.3 << ", "
+      << camera.intrinsics[1] << ", " << camera.intrinsics[2] << ", " << camera.intrinsics[3]
+      << "]\n  distortion_model: radtan\n  distortion_coeffs: [" << camera.distortion_coeffs[0] << ", "
+      << camera.distortion_coeffs[1] << ", " << camera.distortion_coeffs[2] << ", "
+      << camera.distortion_coeffs[3]
+      << "]\n  imucal:\n    intrinsics_sigma: [0.1, 0.1, 0.1, 0.1]\n    distortion_coeffs_sigma: [1e-4, "
+         "1e-4, 1e-5, "
+         "1e-5]\n";
+  test::write_file(dir + "/camera-cam0.yaml", cam.str());
+  const nlohmann::json camimu = {{"cameras",
+                                  {{{"name", "cam0"},
+                                    {"rotation_sigma_rad", {0.0005, nullptr, 0.0005}},
+                                    {"translation_sigma_m", {0.0005, 0.0005, 0.0005}},
+                                    {"timeshift_sigma_s", 5e-5}}}}};
+  test::write_file(dir + "/camimu/result.json", camimu.dump());
+
+  const nlohmann::json result = {{"type", "result"},
+                                 {"files",
+                                  {dir + "/imu-static.json", dir + "/imu-static.yaml",
+                                   dir + "/camera-cam0.yaml", dir + "/camimu/result.json"}},
+                                 {"imu",
+                                  {{"A_a", mat_json(est.A_a)},
+                                   {"b_a", vec_json(est.b_a)},
+                                   {"A_g", mat_json(est.A_g)},
+                                   {"b_g", vec_json(est.b_g)},
+                                   {"G", mat_json(est.G)}}},
+                                 {"cameras",
+                                  {{{"name", "cam0"},
+                                    {"t_cam_imu_m", vec_json(t)},
+                                    {"q_cam_imu_wxyz", {q.w(), q.x(), q.y(), q.z()}},
+                                    {"timeshift_cam_imu_s", shift},
+                                    {"reprojection_rms_px", 0.05}}}}};
+  const std::string text = rig->truth_report(result);
+
+  // Every estimated quantity has its row: 9 accelerometer, 12 gyroscope, 9 G, 4 intrinsics, 4
+  // distortion, 3 rotation, 3 translation, the time offset.
+  EXPECT_NE(text.find("\n  45 quantities, 43 with a sigma"), std::string::npos) << text;
+  for (const char* name :
+       {"accel scale y", "accel misalignment xy", "accel misalignment yz", "accel bias z", "gyro scale z",
+        "gyro misalignment zx", "gyro bias y", "gyro g-sensitivity G_zy", "cam0 fy", "cam0 cx", "cam0 cy",
+        "cam0 distortion k1", "cam0 distortion p2", "cam0 rotation about z", "cam0 translation z"})
+    EXPECT_TRUE(table_row(text, name).found) << name << "\n" << text;
+
+  const TableRow scale = table_row(text, "accel scale x");
+  ASSERT_TRUE(scale.found) << text;
+  EXPECT_NEAR(num(scale.truth), scale_x, scale_x * 1e-6);
+  EXPECT_NEAR(num(scale.error), scale_x * 1e-3, scale_x * 1e-5);
+  EXPECT_EQ(scale.relative, "1.00e-03");
+  EXPECT_EQ(scale.ratio, "2.00");
+  EXPECT_EQ(table_row(text, "accel scale y").ratio, "0.00");
+  // The accelerometer's bias in m/s^2 at the nominal sensitivity, with a sigma of one count; its
+  // truth the mean over the still and pose steps, near the turn-on bias after 2 s.
+  const TableRow bias = table_row(text, "accel bias x");
+  const double lsb = p.accel_mps2_per_count();
+  EXPECT_EQ(bias.unit, "m/s^2");
+  EXPECT_NEAR(num(bias.estimate), est.b_a.x() * lsb, 1e-6);
+  EXPECT_NEAR(num(bias.truth), p.accel_bias.x(), 0.01);
+  // (The error and the sigma are printed to 3 digits.)
+  const double bias_error = num(bias.estimate) - num(bias.truth);
+  EXPECT_NEAR(num(bias.error), bias_error, 0.005 * std::abs(bias_error));
+  EXPECT_NEAR(num(bias.sigma), lsb, 0.005 * lsb);
+  EXPECT_NEAR(num(bias.ratio), bias_error / lsb, 0.01);
+  const TableRow gyro_bias = table_row(text, "gyro bias x");
+  EXPECT_EQ(gyro_bias.unit, "deg/s");
+  EXPECT_NEAR(num(gyro_bias.truth), p.gyro_bias.x() * 180.0 / std::numbers::pi, 0.01);
+  EXPECT_NEAR(num(gyro_bias.sigma), p.gyro_radps_per_count() * 180.0 / std::numbers::pi, 1e-4);
+  EXPECT_EQ(table_row(text, "gyro misalignment zy").sigma, "not determined");
+  EXPECT_EQ(table_row(text, "gyro misalignment zy").ratio, "-");
+  EXPECT_EQ(table_row(text, "gyro g-sensitivity G_xy").unit, "(rad/s)/(m/s^2)");
+
+  const TableRow fx = table_row(text, "cam0 fx");
+  EXPECT_EQ(fx.unit, "px");
+  EXPECT_NEAR(num(fx.truth), camera.intrinsics[0], 1e-4);
+  EXPECT_NEAR(num(fx.error), 0.3, 1e-6);
+  EXPECT_EQ(fx.ratio, "3.00");
+  EXPECT_EQ(table_row(text, "cam0 distortion k2").ratio, "0.00");
+
+  const TableRow rot_x = table_row(text, "cam0 rotation about x");
+  EXPECT_EQ(rot_x.unit, "deg");
+  EXPECT_NEAR(num(rot_x.error), 0.001 * 180.0 / std::numbers::pi, 1e-4);
+  EXPECT_EQ(rot_x.ratio, "2.00");
+  EXPECT_EQ(table_row(text, "cam0 rotation about y").sigma, "not determined");
+  const TableRow ty = table_row(text, "cam0 translation y");
+  EXPECT_EQ(ty.unit, "mm");
+  EXPECT_NEAR(num(ty.truth), T.translation().y() * 1e3, 1e-6);
+  EXPECT_NEAR(num(ty.error), 1.0, 1e-6);
+  EXPECT_EQ(ty.ratio, "2.00");
+
+  // The virtual camera stamps late: the truth of the time offset is not zero.
+  const TableRow offset = table_row(text, "cam0 time offset");
+  EXPECT_EQ(offset.unit, "ms");
+  EXPECT_NEAR(num(offset.truth), kVirtualTimeshiftCamImuS * 1e3, 1e-9);
+  EXPECT_NE(num(offset.truth), 0.0);
+  EXPECT_NEAR(num(offset.error), 0.1, 1e-6);
+  EXPECT_EQ(offset.ratio, "2.00");
 }
 
 }  // namespace
