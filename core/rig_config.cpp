@@ -144,6 +144,7 @@ class ConfigParser {
   Status parse_target(const YAML::Node& node, RigConfig& config) const;
   Status parse_storage(const YAML::Node& node, StorageConfig& storage) const;
   Status parse_session(const YAML::Node& node, SessionConfig& session) const;
+  Status parse_sides(const YAML::Node& node, RigSides& sides) const;
 
   std::string source_;
   std::string base_dir_;
@@ -318,6 +319,36 @@ Status ConfigParser::parse_imu(const YAML::Node& node, ImuConfig& imu) const {
     imu.data_ready = line;
   }
   if (const YAML::Node n = node["mounting"]) IMUCAL_TRY(parse_mounting(n, imu.R_rig_imu));
+  return {};
+}
+
+// sides: {front: +x, left: +y, top: +z}: each a signed rig axis; the three must be a
+// right-handed set, as a real rig's front, left and top are.
+Status ConfigParser::parse_sides(const YAML::Node& node, RigSides& sides) const {
+  IMUCAL_TRY(check_map(node, "sides", {"front", "left", "top"}));
+  const std::pair<const char*, Eigen::Vector3d*> keys[] = {
+      {"front", &sides.front}, {"left", &sides.left}, {"top", &sides.top}};
+  for (const auto& [key, axis] : keys) {
+    const std::string path = std::string("sides.") + key;
+    if (!node[key]) return error(node, path, "missing (give front, left and top, e.g. +x, +y, +z)");
+    auto text = get_string(node[key], path);
+    if (!text.ok()) return text.error();
+    std::string t = *text;
+    std::transform(t.begin(), t.end(), t.begin(), [](unsigned char c) { return std::tolower(c); });
+    if (t.size() != 2 || (t[0] != '+' && t[0] != '-') || t[1] < 'x' || t[1] > 'z') {
+      return error(node[key], path, "'" + printable(*text) + "' is not a rig axis (+x, -x, +y, -y, +z, -z)");
+    }
+    *axis = Eigen::Vector3d::Unit(t[1] - 'x') * (t[0] == '-' ? -1.0 : 1.0);
+  }
+  if (std::abs(sides.front.dot(sides.left)) > 0.5 || std::abs(sides.front.dot(sides.top)) > 0.5 ||
+      std::abs(sides.left.dot(sides.top)) > 0.5) {
+    return error(node, "sides", "front, left and top must be three different axes");
+  }
+  if (sides.front.cross(sides.left).dot(sides.top) < 0.5) {
+    return error(node, "sides",
+                 "front x left is not top: a rig's front, left and top sides form a right-handed set; "
+                 "check the signs (for example front +x, left +y, top +z)");
+  }
   return {};
 }
 
@@ -662,8 +693,9 @@ Result<RigConfig> ConfigParser::parse(const std::string& text) {
                       source_ + ":" + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg);
   }
   if (!root.IsMap())
-    return error(root, "", "expected a mapping with keys name, imu, cameras, target, storage, session");
-  IMUCAL_TRY(check_map(root, "", {"name", "imu", "cameras", "target", "storage", "session"}));
+    return error(root, "",
+                 "expected a mapping with keys name, imu, sides, cameras, target, storage, session");
+  IMUCAL_TRY(check_map(root, "", {"name", "imu", "sides", "cameras", "target", "storage", "session"}));
   RigConfig config;
   if (const YAML::Node n = root["name"]) {
     auto name = get_string(n, "name");
@@ -677,6 +709,10 @@ Result<RigConfig> ConfigParser::parse(const std::string& text) {
   }
   if (!root["imu"]) return error(root, "imu", "missing (the MPU-6000 settings, at least imu.bus)");
   IMUCAL_TRY(parse_imu(root["imu"], config.imu));
+  if (const YAML::Node n = root["sides"]) {
+    config.sides.emplace();
+    IMUCAL_TRY(parse_sides(n, *config.sides));
+  }
   if (const YAML::Node n = root["cameras"]) {
     if (!n.IsSequence()) return error(n, "cameras", "expected a list of cameras");
     std::set<std::string> names;
@@ -754,6 +790,13 @@ void emit_target(YAML::Emitter& out, const TargetDescription& t) {
   out << YAML::EndMap;
 }
 
+// "+x" for a signed unit axis (sides).
+std::string axis_text(const Eigen::Vector3d& v) {
+  Eigen::Index i = 0;
+  v.cwiseAbs().maxCoeff(&i);
+  return std::string(v[i] < 0 ? "-" : "+") + static_cast<char>('x' + i);
+}
+
 }  // namespace
 
 std::string rig_config_to_yaml(const RigConfig& c) {
@@ -789,6 +832,12 @@ std::string rig_config_to_yaml(const RigConfig& c) {
   }
   out << YAML::EndSeq << YAML::EndMap;
   out << YAML::EndMap;
+  if (c.sides) {
+    out << YAML::Key << "sides" << YAML::Value << YAML::Flow << YAML::BeginMap;
+    out << YAML::Key << "front" << YAML::Value << axis_text(c.sides->front);
+    out << YAML::Key << "left" << YAML::Value << axis_text(c.sides->left);
+    out << YAML::Key << "top" << YAML::Value << axis_text(c.sides->top) << YAML::EndMap;
+  }
 
   out << YAML::Key << "cameras" << YAML::Value << YAML::BeginSeq;
   for (const auto& cam : c.cameras) {
@@ -880,6 +929,11 @@ std::string rig_config_to_json(const RigConfig& c) {
                   {"auto_write", c.session.auto_write}};
   for (const auto& n : kSessionNumbers) session[n.key] = c.session.*n.member;
   json root = {{"name", c.name}, {"imu", imu}, {"cameras", cams}, {"storage", storage}, {"session", session}};
+  if (c.sides) {
+    root["sides"] = {{"front", axis_text(c.sides->front)},
+                     {"left", axis_text(c.sides->left)},
+                     {"top", axis_text(c.sides->top)}};
+  }
   if (c.target) {
     const auto& t = *c.target;
     if (t.type == TargetDescription::Type::kCheckerboard) {

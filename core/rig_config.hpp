@@ -103,9 +103,18 @@ struct SessionConfig {
 /// Names of the session's steps in protocol order.
 const std::vector<std::string>& session_step_names();
 
+/// The rig's named sides as signed axes of the rig frame (each a unit vector along x, y or z),
+/// for the operator's guidance ("put the rig on its left side"). front x left = top.
+struct RigSides {
+  Eigen::Vector3d front = Eigen::Vector3d::UnitX();
+  Eigen::Vector3d left = Eigen::Vector3d::UnitY();
+  Eigen::Vector3d top = Eigen::Vector3d::UnitZ();
+};
+
 struct RigConfig {
   std::string name = "rig";
   ImuConfig imu;
+  std::optional<RigSides> sides;  // absent: guidance names the IMU's axes
   std::vector<CameraConfig> cameras;
   std::optional<TargetDescription> target;  // required when cameras are configured
   StorageConfig storage;

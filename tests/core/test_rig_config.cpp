@@ -132,6 +132,38 @@ TEST(RigConfig, NormalizedYamlRoundTrips) {
   EXPECT_THAT(json, HasSubstr("\"targetCols\": 7"));
 }
 
+TEST(RigConfig, SidesNameTheRigsFrontLeftAndTop) {
+  const std::string base = "name: r\nimu: {bus: sim}\n";
+  auto c = parse_rig_config(base + "sides: {front: -y, left: +X, top: +z}\n");
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  ASSERT_TRUE(c->sides.has_value());
+  EXPECT_EQ(c->sides->front, -Eigen::Vector3d::UnitY());
+  EXPECT_EQ(c->sides->left, Eigen::Vector3d::UnitX());
+  EXPECT_EQ(c->sides->top, Eigen::Vector3d::UnitZ());
+  for (const std::string& text : {rig_config_to_yaml(*c), rig_config_to_json(*c)}) {
+    auto again = parse_rig_config(text);
+    ASSERT_TRUE(again.ok()) << again.error().message << "\n" << text;
+    ASSERT_TRUE(again->sides.has_value()) << text;
+    EXPECT_EQ(again->sides->front, c->sides->front);
+    EXPECT_EQ(again->sides->left, c->sides->left);
+  }
+  EXPECT_FALSE(parse_rig_config(base)->sides.has_value());
+  EXPECT_EQ(rig_config_to_yaml(*parse_rig_config(base)).find("sides"), std::string::npos);
+  // Mistakes are named.
+  auto mirrored = parse_rig_config(base + "sides: {front: +x, left: -y, top: +z}\n");
+  ASSERT_FALSE(mirrored.ok());
+  EXPECT_THAT(mirrored.error().message, HasSubstr("front x left is not top"));
+  auto same = parse_rig_config(base + "sides: {front: +x, left: -x, top: +z}\n");
+  ASSERT_FALSE(same.ok());
+  EXPECT_THAT(same.error().message, HasSubstr("three different axes"));
+  auto word = parse_rig_config(base + "sides: {front: forward, left: +y, top: +z}\n");
+  ASSERT_FALSE(word.ok());
+  EXPECT_THAT(word.error().message, HasSubstr("sides.front: 'forward' is not a rig axis"));
+  auto missing = parse_rig_config(base + "sides: {front: +x, left: +y}\n");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_THAT(missing.error().message, HasSubstr("sides.top: missing"));
+}
+
 TEST(RigConfig, ValidateCatchesCodeBuiltMistakes) {
   RigConfig cfg;
   EXPECT_TRUE(validate_rig_config(cfg).ok());
