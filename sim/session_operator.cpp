@@ -181,8 +181,13 @@ void ScriptedOperator::on_message(const nlohmann::json& m, TimeNs now_ns) {
   }
   if (type == "prompt") {
     if (step == "preflight" && has_key("continue")) press_at("continue", react);
+    // The poses step prompts again after each capture (naming the next side); the operator turns
+    // on its own after each capture, so only the step's start, or a redo after a fault, starts a turn.
+    const bool restart = last_prompt_step_ != step || last_prompt_failed_;
+    last_prompt_step_ = step;
+    last_prompt_failed_ = !has_key("continue") && !has_key("skip") && has_key("redo");
     if (step == "poses" && !has_key("redo")) return;
-    if (step == "poses") turn_to_up(ups_[next_up_++ % ups_.size()], now_ns);
+    if (step == "poses" && restart) turn_to_up(ups_[next_up_++ % ups_.size()], now_ns);
     if (step == "motion") {
       if (options_.wave) {
         wave(now_ns);
@@ -191,15 +196,11 @@ void ScriptedOperator::on_message(const nlohmann::json& m, TimeNs now_ns) {
       }
     }
     if (step == "review" && has_key("accept")) press_at(options_.accept ? "accept" : "reject", react);
-    if (step == "gsens") {
-      static const char* kNames[6] = {"+X", "-X", "+Y", "-Y", "+Z", "-Z"};
-      for (int f = 0; f < 6; ++f) {
-        if (text.find(std::string(kNames[f]) + " up") == std::string::npos) continue;
-        Eigen::Vector3d up = Eigen::Vector3d::Zero();
-        up[f / 2] = f % 2 == 0 ? 1.0 : -1.0;
-        turn_to_up(up, now_ns);
-        break;
-      }
+    // The face asked for, as the prompt gives it (the axis that goes up).
+    if (const auto& up = m.value("up", nlohmann::json());
+        step == "gsens" && up.is_array() && up.size() == 3) {
+      face_up_ = Eigen::Vector3d(up[0].get<double>(), up[1].get<double>(), up[2].get<double>());
+      turn_to_up(face_up_, now_ns);
     }
     return;
   }
@@ -207,16 +208,8 @@ void ScriptedOperator::on_message(const nlohmann::json& m, TimeNs now_ns) {
     const bool captured = text.rfind("Pose ", 0) == 0 && text.find("captured") != std::string::npos;
     const bool too_close = text.rfind("Too close", 0) == 0;
     if (captured || too_close) turn_to_up(ups_[next_up_++ % ups_.size()], now_ns);
-    // "This is +Y up (...); put -X up": the wrong face is up, turn to the one asked for.
-    if (const auto put = text.find("; put "); text.rfind("This is ", 0) == 0 && put != std::string::npos) {
-      const std::string face = text.substr(put + 6, 2);
-      const int axis = face[1] - 'X';
-      if (axis >= 0 && axis < 3) {
-        Eigen::Vector3d up = Eigen::Vector3d::Zero();
-        up[axis] = face[0] == '-' ? -1.0 : 1.0;
-        turn_to_up(up, now_ns);
-      }
-    }
+    // "This is +Y up (...); ...": the wrong face is up, turn to the one asked for.
+    if (text.rfind("This is ", 0) == 0) turn_to_up(face_up_, now_ns);
   }
 }
 

@@ -107,6 +107,9 @@ class ScriptedOperator {
   std::vector<std::pair<TimeNs, std::string>> keys_;  // pending, in time order
   int turns_ = 0;
   TimeNs busy_until_ns_ = 0;
+  std::string last_prompt_step_;     // the poses step's later prompts (the next side) are no new start
+  bool last_prompt_failed_ = false;  // ... unless the one before was a fault's (redo, abort)
+  Eigen::Vector3d face_up_ = Eigen::Vector3d::UnitX();  // the six-face step's face asked for
 };
 
 }  // namespace imucal::sim

@@ -110,7 +110,10 @@ bool PreflightReport::ok() const {
 
 json PreflightReport::to_json() const {
   json devs = json::array();
-  for (const auto& d : devices) devs.push_back({{"name", d.name}, {"ok", d.ok}, {"detail", d.detail}});
+  for (const auto& d : devices) {
+    devs.push_back({{"name", d.name}, {"ok", d.ok}, {"detail", d.detail}});
+    if (!d.advice.empty()) devs.back()["advice"] = d.advice;
+  }
   return {{"rig", rig}, {"devices", devs}, {"stored", stored ? *stored : json()}};
 }
 
@@ -118,13 +121,15 @@ PreflightReport PreflightReport::from_json(const json& j) {
   PreflightReport r;
   r.rig = j.value("rig", "");
   for (const auto& d : j.value("devices", json::array()))
-    r.devices.push_back({d.value("name", ""), d.value("ok", false), d.value("detail", "")});
+    r.devices.push_back(
+        {d.value("name", ""), d.value("ok", false), d.value("detail", ""), d.value("advice", "")});
   if (j.contains("stored") && !j["stored"].is_null()) r.stored = j["stored"];
   return r;
 }
 
 SessionEngine::SessionEngine(const RigConfig& config, const ImuStreamInfo& info, EngineHost& host)
     : config_(config),
+      guide_(config),
       info_(info),
       host_(host),
       window_(std::make_unique<Window>(info.rate_hz)),
@@ -132,7 +137,7 @@ SessionEngine::SessionEngine(const RigConfig& config, const ImuStreamInfo& info,
 
 SessionEngine::~SessionEngine() = default;
 
-Status SessionEngine::start(const std::vector<std::string>& names) {
+Result<std::vector<StepId>> SessionEngine::plan(const std::vector<std::string>& names) const {
   if (running()) return make_error(Errc::kAlreadyExists, "a session is running; abort it first");
   std::vector<StepId> ids;
   if (names.empty()) {
@@ -156,8 +161,14 @@ Status SessionEngine::start(const std::vector<std::string>& names) {
   }
   if (solves && std::find(ids.begin(), ids.end(), StepId::kPoses) == ids.end())
     return make_error(Errc::kInvalidArgument, "step 'solve' needs the 'poses' step (the static calibration)");
+  return ids;
+}
+
+Status SessionEngine::start(const std::vector<std::string>& names) {
+  auto ids = plan(names);
+  if (!ids.ok()) return ids.error();
   reset();
-  for (StepId id : ids) steps_.push_back({id});
+  for (StepId id : *ids) steps_.push_back({id});
   state_ = SessionState::kRunning;
   session_start_ns_ = now_ns_;
   emit({{"type", "session"}, {"event", "start"}, {"steps", names}});
@@ -206,11 +217,15 @@ void SessionEngine::emit(json message) {
   host_.emit(message);
 }
 
-void SessionEngine::prompt(const std::string& text, std::vector<std::string> keys) {
+void SessionEngine::prompt(const std::string& text, std::vector<std::string> keys,
+                           std::vector<std::string> art, const Eigen::Vector3d* up) {
   waiting_ = std::find(keys.begin(), keys.end(), "continue") != keys.end() ||
              std::find(keys.begin(), keys.end(), "accept") != keys.end();
   const char* step = current_ < steps_.size() ? step_name(steps_[current_].id) : "";
-  emit({{"type", "prompt"}, {"step", step}, {"text", text}, {"keys", std::move(keys)}});
+  json m = {{"type", "prompt"}, {"step", step}, {"text", text}, {"keys", std::move(keys)}};
+  if (!art.empty()) m["art"] = std::move(art);
+  if (up) m["up"] = {up->x(), up->y(), up->z()};
+  emit(std::move(m));
 }
 
 void SessionEngine::live(std::vector<std::string> lines, double progress, json figures) {
@@ -290,6 +305,13 @@ void SessionEngine::finish(SessionState state, const std::string& outcome, const
   json done = {{"type", "done"}, {"outcome", outcome}, {"text", text}};
   // Where the record went (storage, slot, sequence), named on the end screen.
   if (outcome == "written" && !written_to_.empty()) done["stored"] = written_to_;
+  // The reports to open, when the final solve drew them.
+  if (final_) {
+    json reports = json::array();
+    for (const auto& f : final_->result_files)
+      if (f.size() > 5 && f.compare(f.size() - 5, 5, ".html") == 0) reports.push_back(f);
+    if (!reports.empty()) done["reports"] = reports;
+  }
   emit(done);
 }
 
@@ -312,15 +334,13 @@ void SessionEngine::begin_step() {
       // The attitude of the still start is not a pose (the static method counts it apart): the
       // first pose comes after the first turn.
       need_motion_ = true;
-      prompt("Turn the rig to a new orientation and hold it still (" + fixed(config_.session.hold_s, 1) +
-                 " s); " + std::to_string(config_.session.poses) + " poses, all directions",
-             {"continue", "redo", "abort"});
+      poses_prompt();
       break;
     case StepId::kGsens:
       face_ = 0;
       need_motion_ = false;
       still_since_ns_ = -1;
-      prompt("Six-face holds: put the rig with +X up and hold it still", {"redo", "skip", "abort"});
+      face_prompt();
       break;
     case StepId::kMotion:
       gyro_sq_ = accel_sum_ = accel_sq_ = Eigen::Vector3d::Zero();
@@ -369,7 +389,14 @@ void SessionEngine::run_preflight() {
   if (!report.ok()) {
     steps_[current_].state = StepState::kFailed;
     failed_step_ = true;
-    prompt("A device failed its check (see above). Fix it and press r to check again, or a to abort",
+    emit(status());
+    // The device's own advice when it has one (a self-test spoilt by motion: hold the rig still).
+    std::string advice;
+    for (const auto& d : report.devices)
+      if (!d.ok && !d.advice.empty()) advice += (advice.empty() ? "" : "; ") + d.name + ": " + d.advice;
+    prompt(advice.empty()
+               ? "A device failed its check (see above). Fix it and press r to check again, or a to abort"
+               : "A device failed its check: " + advice + ". Then press r to check again, or a to abort",
            {"redo", "abort"});
     return;
   }
@@ -398,6 +425,7 @@ Status SessionEngine::key(const std::string& key) {
       }
       steps_[current_].state = StepState::kActive;
       failed_step_ = false;
+      emit(status());  // the step is no longer marked failed
       message("info", std::string("Redoing step ") + step_name(id));
       begin_step();
       return {};
@@ -406,12 +434,14 @@ Status SessionEngine::key(const std::string& key) {
       poses_.pop_back();
       message("info", "Dropped pose " + std::to_string(poses_.size() + 1) + "; " +
                           std::to_string(poses_.size()) + " remain");
+      poses_prompt();
       return {};
     }
     if (id == StepId::kGsens) {
       face_ = std::max(0, face_ - 1);
       still_since_ns_ = -1;
       message("info", "Redoing the last face");
+      face_prompt();
       return {};
     }
     return make_error(Errc::kInvalidArgument, std::string("nothing to redo in step ") + step_name(id));
@@ -465,6 +495,7 @@ void SessionEngine::fault(const std::string& source, const std::string& text) {
          "What was recorded is kept. Fix the " + source + " and press r to redo the step, or a to abort"}});
   steps_[current_].state = StepState::kFailed;
   failed_step_ = true;
+  emit(status());
   prompt(source + " fault: " + text + ". Press r to redo the step once fixed, or a to abort",
          {"redo", "abort"});
 }

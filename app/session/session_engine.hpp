@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "app/camimu_calibration.hpp"
+#include "app/session/pose_guide.hpp"
 #include "calib/static_calibration.hpp"
 #include "core/calibration_record.hpp"
 #include "core/imu.hpp"
@@ -50,6 +51,7 @@ struct PreflightReport {
     std::string name;  // "imu", "cam0", "storage"
     bool ok = false;
     std::string detail;  // "MPU-6000 on /dev/spidev0.0, WHO_AM_I 0x68, self-test passed" or the error
+    std::string advice;  // when it failed: what the operator can do ("hold the rig still ...")
   };
   std::vector<Device> devices;
   std::string rig;                       // the configuration's name
@@ -112,6 +114,8 @@ class SessionEngine {
 
   /// Starts a session with these steps (empty: configured_steps()). Fails while one runs.
   [[nodiscard]] Status start(const std::vector<std::string>& steps);
+  /// What start() would run, or why it would refuse, without starting anything.
+  [[nodiscard]] Result<std::vector<StepId>> plan(const std::vector<std::string>& steps) const;
   /// One IMU sample, in time order.
   void on_sample(const ImuSample& sample);
   /// A camera frame at `t_ns`; `target_seen` when the target was detected in it.
@@ -168,7 +172,12 @@ class SessionEngine {
   void evaluate_gates();
   nlohmann::json result_message() const;
   void emit(nlohmann::json message);
-  void prompt(const std::string& text, std::vector<std::string> keys);
+  /// `art`: lines of a drawing that go with the prompt (the rig's attitude), none when empty.
+  /// `up`: the axis the operator is asked to turn up (samples' frame), for a client to draw.
+  void prompt(const std::string& text, std::vector<std::string> keys, std::vector<std::string> art = {},
+              const Eigen::Vector3d* up = nullptr);
+  void poses_prompt();  // the poses step's prompt, with the next direction not yet covered
+  void face_prompt();   // the six-face step's prompt for face_
   void live(std::vector<std::string> lines, double progress, nlohmann::json figures = {});
   void message(const std::string& level, const std::string& text);
   void enter(std::size_t index);
@@ -189,11 +198,13 @@ class SessionEngine {
   void review();
   std::vector<std::string> difference_to_stored(nlohmann::json* diff) const;
   nlohmann::json coverage() const;
+  std::string missing_words() const;  // the directions not yet up, in the guide's words
   calib::StaticCalibrationOptions static_options() const;
   ImuSample to_si(const ImuSample& raw) const;
   bool live_due();
 
   RigConfig config_;
+  PoseGuide guide_;
   ImuStreamInfo info_;
   EngineHost& host_;
   SessionState state_ = SessionState::kIdle;

@@ -242,7 +242,8 @@ bool SessionRunner::busy() {
 }
 
 Status SessionRunner::start(const std::vector<std::string>& steps) {
-  if (engine_.running()) return make_error(Errc::kAlreadyExists, "a session is running; abort it first");
+  // A start that would be refused makes no session folder (status would point at an empty one).
+  if (auto plan = engine_.plan(steps); !plan.ok()) return plan.error();
   close_log();
   motion_step_start_ns_ = -1;
   if (!options_.session_dir.empty()) {
@@ -520,6 +521,7 @@ void SessionRunner::solve(const SolveJob& job) {
         ro.log_path = options_.write_log ? log : std::string();
         ro.html_path = dir + "/report.html";
         ro.overwrite = true;
+        ro.log_in_progress = true;  // the session goes on (review, write) while the report is drawn
         ro.generator = std::string("imucal ") + kVersion;
         if (auto r = report::write_report(ro); r.ok()) {
           out.result_files.push_back(ro.html_path);

@@ -176,6 +176,39 @@ void SessionEngine::sample_still(const ImuSample& si, bool still) {
   }
 }
 
+void SessionEngine::poses_prompt() {
+  std::string text = "Turn the rig to a new orientation and hold it still (" +
+                     fixed(config_.session.hold_s, 1) + " s); " + std::to_string(config_.session.poses) +
+                     " poses, all directions";
+  for (int f = 0; f < 6; ++f) {
+    const bool near = std::any_of(poses_.begin(), poses_.end(),
+                                  [&](const Eigen::Vector3d& p) { return angle_deg(p, kFaces[f]) < 50.0; });
+    if (!near) {
+      text += ". Next: " + guide_.instruction(kFaces[f]);
+      prompt(text, {"continue", "redo", "abort"}, guide_.drawing(kFaces[f]), &kFaces[f]);
+      return;
+    }
+  }
+  if (!poses_.empty()) text += ". Every side has been up: now tilt between them";
+  prompt(text, {"continue", "redo", "abort"});
+}
+
+void SessionEngine::face_prompt() {
+  prompt("Six-face holds, " + std::to_string(face_ + 1) + " of 6: " + guide_.instruction(kFaces[face_]) +
+             ", and hold it still",
+         {"redo", "skip", "abort"}, guide_.drawing(kFaces[face_]), &kFaces[face_]);
+}
+
+std::string SessionEngine::missing_words() const {
+  std::string words;
+  for (int f = 0; f < 6; ++f) {
+    const bool near = std::any_of(poses_.begin(), poses_.end(),
+                                  [&](const Eigen::Vector3d& p) { return angle_deg(p, kFaces[f]) < 50.0; });
+    if (!near) words += (words.empty() ? "" : ", ") + guide_.up_name(kFaces[f]);
+  }
+  return words;
+}
+
 json SessionEngine::coverage() const {
   json missing = json::array();
   for (int f = 0; f < 6; ++f) {
@@ -202,13 +235,10 @@ void SessionEngine::capture_pose() {
   need_motion_ = true;
   emit({{"type", "pose"}, {"index", poses_.size()}, {"up", {up.x(), up.y(), up.z()}}});
   std::string text = "Pose " + std::to_string(poses_.size()) + " captured";
-  const json missing = coverage();
-  if (!missing.empty()) {
-    text += "; no pose yet near";
-    for (const auto& m : missing) text += " " + m.get<std::string>();
-    text += " up";
-  }
+  const std::string missing = missing_words();
+  if (!missing.empty()) text += "; not yet up: " + missing;
   message("info", text);
+  poses_prompt();  // the next direction to cover
   // The quick solve waits for the rig to move on: the static detector needs the end of the hold
   // (its variance window reaches past it) to count it as an attitude.
   quick_pending_ = true;
@@ -236,14 +266,13 @@ void SessionEngine::sample_poses(const ImuSample& si, bool still) {
   }
   if (live_due()) {
     const double held = still_since_ns_ < 0 || need_motion_ ? 0.0 : seconds(si.t_ns - still_since_ns_);
-    std::string missing;
-    for (const auto& m : coverage()) missing += " " + m.get<std::string>();
+    const std::string missing = missing_words();
     live({std::string(need_motion_ ? "Captured: turn to a new orientation"
                                    : (still ? "Still: " + fixed(held, 1) + " of " +
                                                   fixed(config_.session.hold_s, 1) + " s"
                                             : "Moving")),
           "Poses: " + std::to_string(poses_.size()) + " of " + std::to_string(target) +
-              (missing.empty() ? "; every direction covered" : "; missing" + missing),
+              (missing.empty() ? "; every side has been up" : "; not yet up: " + missing),
           std::isnan(scale_sigma) ? std::string("Scale sigma: after 9 poses")
                                   : "Scale sigma: " + fixed(scale_sigma * 1e3, 2) + "e-3 (target " +
                                         fixed(config_.session.pose_sigma_target * 1e3, 2) + "e-3)"},
@@ -274,8 +303,8 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
       int nearest = 0;
       for (int f = 1; f < 6; ++f)
         if (angle_deg(up, kFaces[f]) < angle_deg(up, kFaces[nearest])) nearest = f;
-      message("warning", std::string("This is ") + kFaceNames[nearest] + " up (" + fixed(off, 0) +
-                             " deg off); put " + kFaceNames[face_] + " up");
+      message("warning", "This is " + guide_.up_name(kFaces[nearest]) + " (" + fixed(off, 0) + " deg off); " +
+                             guide_.instruction(kFaces[face_]));
       need_motion_ = true;
     }
     return;
@@ -283,7 +312,7 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
   if (still_since_ns_ < 0) still_since_ns_ = si.t_ns;
   const double held = seconds(si.t_ns - still_since_ns_);
   if (live_due())
-    live({std::string("Face ") + kFaceNames[face_] + " up: " + fixed(held, 1) + " of " +
+    live({"Holding " + guide_.up_name(kFaces[face_]) + ": " + fixed(held, 1) + " of " +
               fixed(config_.session.gsens_hold_s, 0) + " s",
           "Faces done: " + std::to_string(face_) + " of 6"},
          (face_ + std::min(1.0, held / config_.session.gsens_hold_s)) / 6.0);
@@ -297,8 +326,7 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
     advance();
     return;
   }
-  prompt(std::string("Put the rig with ") + kFaceNames[face_] + " up and hold it still",
-         {"redo", "skip", "abort"});
+  face_prompt();
 }
 
 void SessionEngine::sample_motion(const ImuSample& si) {

@@ -328,16 +328,24 @@ app::session::PreflightReport Service::preflight() {
                  ", WHO_AM_I answered, " + test + ", " + std::to_string(samples_) + " samples so far" +
                  (config_.storage.program_gyro_offsets ? ", gyro offset registers " + gyro_offsets_
                                                        : std::string())
-           : "not open: " + imu_error_});
+           : "not open: " + imu_error_,
+       // The chip's self-test compares outputs with and without its test force: motion during
+       // it spoils the comparison, the most common cause of a failure on a working chip.
+       imu_state_ == "open" && !test_ok && test.rfind("SELF-TEST FAILED", 0) == 0
+           ? "the self-test fails when the rig moves during it: hold the rig still on a steady surface"
+           : std::string()});
   auto stored = app::read_stored_calibration(config_);
   if (!stored.ok()) {
-    r.devices.push_back({"storage", false, storage_name(config_.storage) + ": " + stored.error().message});
+    r.devices.push_back(
+        {"storage", false, storage_name(config_.storage) + ": " + stored.error().message, {}});
   } else {
     const std::string unwritable = storage_unwritable(config_.storage);
     r.devices.push_back(
-        {"storage", unwritable.empty(),
+        {"storage",
+         unwritable.empty(),
          storage_name(config_.storage) +
-             (unwritable.empty() ? ": readable and writable" : ": readable, not writable: " + unwritable)});
+             (unwritable.empty() ? ": readable and writable" : ": readable, not writable: " + unwritable),
+         {}});
     if (stored->record) {
       json s = calibration_record_json(*stored->record);
       s["summary"] = "sequence " + std::to_string(stored->sequence) + " in slot " +
@@ -349,18 +357,22 @@ app::session::PreflightReport Service::preflight() {
   for (const CameraConfig& cc : config_.cameras) {
     // Opened and closed here; the motion step streams it.
     if (options_.sim) {
-      r.devices.push_back({cc.name, sim_rig_ && sim_rig_->cameras_ready(),
+      r.devices.push_back({cc.name,
+                           sim_rig_ && sim_rig_->cameras_ready(),
                            "virtual camera " + std::to_string(cc.width) + "x" + std::to_string(cc.height) +
                                " at " + std::to_string(static_cast<int>(cc.rate_hz)) +
-                               " Hz, rendering the target"});
+                               " Hz, rendering the target",
+                           {}});
       continue;
     }
     auto camera = app::open_camera(cc);
-    r.devices.push_back({cc.name, camera.ok(),
+    r.devices.push_back({cc.name,
+                         camera.ok(),
                          camera.ok() ? std::string((*camera)->backend()) + " " + cc.device + " opened, " +
                                            std::to_string(cc.width) + "x" + std::to_string(cc.height) + " " +
                                            cc.pixel_format
-                                     : camera.error().message});
+                                     : camera.error().message,
+                         {}});
   }
   return r;
 }

@@ -72,10 +72,16 @@ class SimSession {
       if (!scripted_ && m.value("type", "") == "prompt" && m.value("step", "") == "preflight")
         keys_.emplace_back(rig_->now_ns() + 500'000'000, "continue");
     };
-    o.preflight = [] {
+    o.preflight = [this] {
       app::session::PreflightReport r;
-      r.devices.push_back({"imu", true, "MPU-6000 emulator, WHO_AM_I 0x68"});
-      r.devices.push_back({"storage", true, "file"});
+      if (failing_self_tests_ > 0) {
+        --failing_self_tests_;
+        r.devices.push_back({"imu", false, "MPU-6000 emulator, SELF-TEST FAILED (accel x 31 %)",
+                             "the self-test fails when the rig moves during it: hold the rig still"});
+      } else {
+        r.devices.push_back({"imu", true, "MPU-6000 emulator, WHO_AM_I 0x68", {}});
+      }
+      r.devices.push_back({"storage", true, "file", {}});
       return r;
     };
     o.recover = [this] {
@@ -162,6 +168,7 @@ class SimSession {
   TimeNs first_prompt_ns_ = -1, review_ns_ = -1;
   bool started_ = false, redo_faults_ = true, scripted_ = true;
   int recoveries_ = 0, write_calls_ = 0, fail_writes_ = 0;
+  int failing_self_tests_ = 0;  // preflights that report a self-test spoilt by motion
   std::optional<CalibrationRecord> written_;
   int completions_ = 0;
 };
@@ -289,6 +296,18 @@ TEST(Session, AnImuFaultStopsTheStepAndRedoContinuesWithTheRecordedPoses) {
   EXPECT_EQ(s.outcome(), "written");
   ASSERT_EQ(s.of_type("fault").size(), 1u);
   EXPECT_NE(s.of_type("fault")[0].value("advice", "").find("recorded is kept"), std::string::npos);
+  // The step list follows: failed at the fault, active again after the redo (no stale mark).
+  auto poses_state = [](const json& status) {
+    for (const auto& step : status.value("steps", json::array()))
+      if (step.value("name", "") == "poses") return step.value("state", "");
+    return std::string();
+  };
+  std::vector<std::string> states;
+  for (const auto& status : s.of_type("status")) states.push_back(poses_state(status));
+  const auto failed = std::find(states.begin(), states.end(), "failed");
+  ASSERT_NE(failed, states.end()) << "a status after the fault marks the step failed";
+  ASSERT_NE(failed + 1, states.end());
+  EXPECT_EQ(*(failed + 1), "active") << "the redo's status clears the mark";
 }
 
 TEST(Session, AStorageErrorLeavesTheStoredRecordAloneAndRedoWritesAgain) {
@@ -382,6 +401,12 @@ TEST(Session, StartRefusesStepsOutOfOrderOrWithoutTheirInputs) {
   no_cam.cameras.clear();
   SimSession t(no_cam);
   EXPECT_FALSE(t.runner_->engine().start({"motion"}).ok());
+  // A refused start leaves no session folder behind for the status to point at.
+  EXPECT_FALSE(t.runner_->start({"nonsense"}).ok());
+  EXPECT_FALSE(t.runner_->start({"preflight", "review"}).ok());
+  EXPECT_FALSE(std::filesystem::exists(t.dir_ + "/sessions") &&
+               !std::filesystem::is_empty(t.dir_ + "/sessions"));
+  EXPECT_TRUE(t.runner_->session_dir().empty());
 }
 
 }  // namespace
@@ -457,6 +482,48 @@ TEST(Session, SixFaceHoldsArePromptedAndChecked) {
   for (int f = 0; f < 6; ++f) EXPECT_EQ(faces[f].value("face", ""), names[f]);
   EXPECT_TRUE(s.said("This is +Y up"));
   EXPECT_TRUE(s.said("All six faces held"));
+  // Without named sides the prompts name the IMU's axes, with a drawing of the rig.
+  const auto prompts = s.of_type("prompt");
+  ASSERT_FALSE(prompts.empty());
+  EXPECT_TRUE(s.said("Six-face holds, 2 of 6: Turn the rig so that the IMU's -X axis points up"));
+  EXPECT_TRUE(prompts.back().contains("art") || s.said("6 of 6"));
+}
+
+TEST(Session, AFailedSelfTestSaysToHoldTheRigStillAndRedoChecksAgain) {
+  SimSession s(session_config({"preflight", "still"}));
+  s.failing_self_tests_ = 1;
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  s.run(1.0);
+  const auto prompts = s.of_type("prompt");
+  ASSERT_FALSE(prompts.empty());
+  EXPECT_EQ(prompts.back().value("text", ""),
+            "A device failed its check: imu: the self-test fails when the rig moves during it: hold the rig "
+            "still. Then press r to check again, or a to abort");
+  ASSERT_TRUE(s.runner_->engine().key("redo").ok());
+  EXPECT_TRUE(s.said("every device answers"));
+}
+
+TEST(Session, PoseGuidanceNamesTheRigsSidesWhenTheConfigurationDoes) {
+  ModuleDir modules;
+  RigConfig config = session_config({"preflight", "still", "gsens"});
+  config.sides = RigSides{};  // front +x, left +y, top +z
+  SimSession s(config);
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  s.run(300.0);
+  EXPECT_EQ(s.outcome(), "recorded");
+  EXPECT_TRUE(s.said("Six-face holds, 1 of 6: Put the rig on its back side, front side up"));
+  EXPECT_TRUE(s.said("Six-face holds, 3 of 6: Put the rig on its right side, left side up"));
+  EXPECT_TRUE(s.said("Six-face holds, 5 of 6: Stand the rig upright (top side up)"));
+  EXPECT_TRUE(s.said("Six-face holds, 6 of 6: Turn the rig upside down (bottom side up)"));
+  bool drawn = false;
+  for (const auto& prompt : s.of_type("prompt")) {
+    if (prompt.value("text", "").find("left side up") == std::string::npos) continue;
+    const std::string art = prompt.value("art", json::array()).dump();
+    drawn = art.find("LEFT") != std::string::npos && art.find("FRONT") != std::string::npos &&
+            art.find("right: BOTTOM") != std::string::npos;
+  }
+  EXPECT_TRUE(drawn) << "the drawing for 'left side up' shows LEFT on top, FRONT to the operator, BOTTOM on "
+                        "the operator's right";
 }
 
 }  // namespace
