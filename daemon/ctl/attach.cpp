@@ -10,6 +10,7 @@
 #include <csignal>
 #include <cstdio>
 #include <string>
+#include <utility>
 
 #include "daemon/ctl/console.hpp"
 #include "daemon/service/protocol.hpp"
@@ -99,13 +100,17 @@ class SignalFd {
   int fd_ = -1;
 };
 
-int terminal_width() {
+// Columns and rows of the terminal (80 x 24 when it does not say).
+std::pair<int, int> terminal_size() {
   winsize ws{};
-  if (::ioctl(STDOUT_FILENO, TIOCGWINSZ, &ws) == 0 && ws.ws_col > 0) {
-    return ws.ws_col;
+  if (::ioctl(STDOUT_FILENO, TIOCGWINSZ, &ws) == 0 && ws.ws_col > 0 && ws.ws_row > 0) {
+    return {ws.ws_col, ws.ws_row};
   }
-  return 80;
+  return {80, 24};
 }
+
+// The elapsed time in the header moves on once a second while a session runs.
+constexpr auto kTick = std::chrono::seconds(1);
 
 class Console {
  public:
@@ -116,6 +121,8 @@ class Console {
 
   void show(const json& message) {
     update(state_, message);
+    last_message_ = Clock::now();
+    send_outbox();
     if (tty_) {
       dirty_ = true;
     } else if (auto line = plain_line(message)) {
@@ -130,38 +137,59 @@ class Console {
       return false;
     }
     if (action.request) {
-      if (auto sent = connection_.send(*action.request); !sent) {
-        state_.notice = sent.error().message;
-      }
+      send(*action.request);
     }
     dirty_ = true;
     return true;
+  }
+
+  // A request update() made (the start that follows a restart's abort).
+  void send_outbox() {
+    while (!state_.outbox.empty()) {
+      send(state_.outbox.front());
+      state_.outbox.pop_front();
+    }
   }
 
   void redraw_now() { dirty_ = true, last_draw_ = Clock::now() - kRedrawInterval; }
 
   // Draws when due; returns the poll timeout until the next draw (-1: nothing pending).
   int draw_if_due() {
-    if (!tty_ || !dirty_) {
-      return -1;
-    }
     const auto now = Clock::now();
+    if (tty_ && session_running(state_) && now - last_draw_ >= kTick) {
+      dirty_ = true;
+    }
+    if (!tty_ || !dirty_) {
+      return tty_ && session_running(state_)
+                 ? static_cast<int>(
+                       std::chrono::ceil<std::chrono::milliseconds>(kTick - (now - last_draw_)).count())
+                 : -1;
+    }
     if (now - last_draw_ < kRedrawInterval) {
       return static_cast<int>(
           std::chrono::ceil<std::chrono::milliseconds>(kRedrawInterval - (now - last_draw_)).count());
     }
-    write_all(STDOUT_FILENO, "\x1b[H\x1b[2J" + render(state_, {terminal_width()}));
+    const auto [width, height] = terminal_size();
+    const double idle = std::chrono::duration<double>(now - last_message_).count();
+    write_all(STDOUT_FILENO, "\x1b[H\x1b[2J" + render(state_, {width, height, idle}));
     last_draw_ = now;
     dirty_ = false;
-    return -1;
+    return session_running(state_) ? static_cast<int>(std::chrono::milliseconds(kTick).count()) : -1;
   }
 
  private:
+  void send(const json& request) {
+    if (auto sent = connection_.send(request); !sent) {
+      state_.notice = sent.error().message;
+    }
+  }
+
   Connection& connection_;
   ConsoleState state_;
   bool tty_;
   bool dirty_ = true;
   Clock::time_point last_draw_;
+  Clock::time_point last_message_ = Clock::now();
 };
 
 // The poll loop over the service, the keyboard and the signals.

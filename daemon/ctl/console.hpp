@@ -10,16 +10,29 @@
 
 namespace imucal::ctl {
 
+/// A key that throws work away (abort, reject, skip, ending a step early, restart) asks first.
+struct Confirm {
+  std::string question;     // "End the motion step now, at 30 % of its time?"
+  nlohmann::json request;   // sent on 'y'
+  bool then_start = false;  // restart: start a new session once this one has ended
+};
+
 struct ConsoleState {
-  nlohmann::json status;           // the last {"type":"status"} (null until one arrives)
-  nlohmann::json prompt;           // the prompt in force (null when none)
-  nlohmann::json live;             // the last live figures of the current step
-  nlohmann::json review;           // the review in force
-  nlohmann::json done;             // the session's outcome
-  std::deque<std::string> recent;  // the last messages and faults, oldest first
-  std::string notice;              // the last refusal from the service or local hint
-  bool observe = false;            // observer: keys other than q are not sent
-  bool confirm_abort = false;      // 'a' was pressed; waiting for y/n
+  nlohmann::json status;              // the last {"type":"status"} (null until one arrives)
+  nlohmann::json prompt;              // the prompt in force (null when none)
+  nlohmann::json live;                // the last live figures of the current step
+  nlohmann::json review;              // the review in force
+  nlohmann::json done;                // the session's outcome
+  std::deque<std::string> recent;     // the last messages and faults, oldest first
+  std::string notice;                 // the last refusal from the service or local hint
+  bool observe = false;               // observer: keys other than q are not sent
+  std::optional<Confirm> confirm;     // a destructive key was pressed; waiting for y (or anything else: no)
+  bool start_after_done = false;      // restart: the abort is sent, the start follows the end
+  std::deque<nlohmann::json> outbox;  // requests update() made (a restart's start); attach sends them
+  // The session clock (seconds, the messages' "t"): the latest seen, and the status's. The
+  // header's elapsed time runs on between status messages from these.
+  double clock_s = -1.0;
+  double status_clock_s = -1.0;
   std::size_t max_recent = 5;
 };
 
@@ -27,7 +40,10 @@ struct ConsoleState {
 void update(ConsoleState& state, const nlohmann::json& message);
 
 struct RenderOptions {
-  int width = 80;  // terminal columns; lines are cut to fit
+  int width = 80;       // terminal columns; long lines wrap
+  int height = 0;       // terminal rows; 0: no limit. The header and the keys always show; the
+                        // step list folds to one line, the drawing and older messages go first.
+  double idle_s = 0.0;  // wall time since the last message, added to a running session's elapsed
 };
 
 /// The whole screen as text (lines separated by '\n', no terminal control codes).
@@ -45,9 +61,13 @@ struct KeyAction {
   bool detach = false;
 };
 
-/// c, space, enter: continue; r: redo; a: abort (asks y/n first); y: accept; n: reject;
-/// s: skip; q, Ctrl-C, Ctrl-D: detach.
+/// While a session runs: c, space, enter: continue (asks first when it ends a step before its
+/// time); r: redo; y: accept; n: reject, s: skip, a: abort, R: restart (these ask y/n first).
+/// With no session running: c, space, enter or R start one. q, Ctrl-C, Ctrl-D: detach.
 KeyAction on_key(ConsoleState& state, char key);
+
+/// True while a session runs (state running or review).
+bool session_running(const ConsoleState& state);
 
 /// A bar of `width` cells for progress in [0, 1], e.g. "[######----]  60%".
 std::string progress_bar(double progress, int width);

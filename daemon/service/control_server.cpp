@@ -416,8 +416,10 @@ Status ControlServer::Impl::control(Client& client, const Request& request) {
         "this connection is an observer; say {\"cmd\":\"hello\",\"role\":\"controller\"} first");
   }
   if (controller_ != nullptr && controller_ != &client) {
-    return make_error(Errc::kAlreadyExists, "another controller is attached (" + controller_->name +
-                                                "); only one console may control the session");
+    return make_error(Errc::kAlreadyExists,
+                      "another controller is attached (" + controller_->name +
+                          "); only one console may control the session: use that console (c starts a "
+                          "session there, R restarts one), or detach it first");
   }
   if (!client.role) {
     client.role = Role::kController;

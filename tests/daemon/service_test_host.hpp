@@ -63,6 +63,10 @@ class TestHost : public service::SessionHost {
     return {};
   }
 
+  void set_status(nlohmann::json status) {
+    std::lock_guard lock(mutex_);
+    status_ = std::move(status);
+  }
   void set_snapshot_extra(std::vector<nlohmann::json> messages) {
     std::lock_guard lock(mutex_);
     extra_snapshot_ = std::move(messages);

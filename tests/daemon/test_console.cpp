@@ -1,6 +1,10 @@
 // The operator console's model, renderer and keys, as text: no terminal needed.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <tuple>
+#include <vector>
+
 #include "daemon/ctl/console.hpp"
 
 namespace imucal::ctl {
@@ -41,25 +45,124 @@ bool has(const std::string& text, const std::string& part) { return text.find(pa
 
 TEST(Console, RendersHeaderStepsPromptLiveAndKeys) {
   const std::string screen = screen_after({status_message(), kPrompt, kLive});
-  EXPECT_TRUE(has(screen, "imucal  rig sim  |  running  |  step 2 of 4: poses  |  12.3 s")) << screen;
+  EXPECT_TRUE(has(screen, "imucal  rig sim  |  running  |  step 2 of 4: poses  |  12 s")) << screen;
   EXPECT_TRUE(has(screen, " [x] preflight\n [>] poses\n [ ] solve\n [-] extra\n")) << screen;
   EXPECT_TRUE(has(screen, ">> Turn the rig to a new orientation and hold it still")) << screen;
   EXPECT_TRUE(has(screen, "   Still: yes  2.1 of 3.0 s\n   Poses: 7 of 12\n")) << screen;
   EXPECT_TRUE(has(screen, "####----") && has(screen, " 50%")) << screen;
-  EXPECT_TRUE(has(screen, "c continue  r redo  a abort  q detach")) << screen;
+  EXPECT_TRUE(has(screen, "c continue  r redo  a abort  R restart  q detach")) << screen;
   for (std::size_t start = 0, end; (end = screen.find('\n', start)) != std::string::npos; start = end + 1) {
     EXPECT_LE(end - start, 80u) << "every line fits the width";
   }
 }
 
-TEST(Console, LinesAreCutToTheWidth) {
+std::vector<std::string> lines_of(const std::string& screen) {
+  std::vector<std::string> lines;
+  for (std::size_t start = 0, end; (end = screen.find('\n', start)) != std::string::npos; start = end + 1) {
+    lines.push_back(screen.substr(start, end - start));
+  }
+  return lines;
+}
+
+TEST(Console, LongLinesWrapInsteadOfBeingCut) {
   ConsoleState state;
   update(state, status_message());
-  update(state, {{"type", "message"}, {"level", "info"}, {"text", std::string(300, 'x')}});
+  update(state, {{"type", "message"}, {"level", "info"}, {"text", std::string(70, 'x')}});
+  update(
+      state,
+      {{"type", "prompt"},
+       {"step", "poses"},
+       {"text", "imu fault: no data-ready edge for 2 s. Press r to redo the step once fixed, or a to abort"},
+       {"keys", {"redo", "abort"}}});
   const std::string screen = render(state, {30});
-  for (std::size_t start = 0, end; (end = screen.find('\n', start)) != std::string::npos; start = end + 1) {
-    EXPECT_LE(end - start, 30u) << screen;
+  for (const auto& line : lines_of(screen)) {
+    EXPECT_LE(line.size(), 30u) << screen;
   }
+  // Nothing is lost: every x of the message and every word of the prompt is on the screen.
+  std::string joined = screen;
+  joined.erase(std::remove_if(joined.begin(), joined.end(), [](char c) { return c == ' ' || c == '\n'; }),
+               joined.end());
+  EXPECT_TRUE(has(joined, "info:" + std::string(70, 'x') + "-")) << screen;
+  EXPECT_TRUE(has(joined, "Pressrtoredothesteponcefixed,orato" + std::string("abort"))) << screen;
+}
+
+// A screen as full as a session's: nine steps, a prompt with a drawing, live figures, messages.
+ConsoleState busy_console() {
+  ConsoleState state;
+  json steps = json::array();
+  for (const char* name :
+       {"preflight", "warmup", "still", "poses", "gsens", "motion", "solve", "review", "write"}) {
+    steps.push_back({{"name", name}, {"state", std::string(name) == "poses" ? "active" : "pending"}});
+  }
+  update(state, {{"type", "status"},
+                 {"state", "running"},
+                 {"rig", "bench-rig-07"},
+                 {"step", "poses"},
+                 {"steps", steps},
+                 {"elapsed_s", 100.0},
+                 {"t", 500.0}});
+  std::vector<std::string> art;
+  for (int i = 0; i < 8; ++i) art.push_back("drawing line " + std::to_string(i));
+  update(state, {{"type", "prompt"},
+                 {"step", "poses"},
+                 {"t", 501.0},
+                 {"text",
+                  "Turn the rig to a new orientation and hold it still (2.0 s); 18 poses, all directions. "
+                  "Next: put the rig on its right side, left side up"},
+                 {"keys", {"continue", "redo", "abort"}},
+                 {"art", art}});
+  for (int i = 0; i < 5; ++i) {
+    update(state, {{"type", "message"},
+                   {"level", "info"},
+                   {"t", 502.0 + i},
+                   {"text", "Pose " + std::to_string(i + 1) +
+                                " captured; not yet up: right side up, bottom side up"}});
+  }
+  update(state, {{"type", "live"},
+                 {"step", "poses"},
+                 {"t", 512.0},
+                 {"lines",
+                  {"Still: 1.2 of 2.0 s", "Poses: 5 of 18; not yet up: right side up, bottom side up",
+                   "Scale sigma: after 9 poses"}},
+                 {"progress", 0.28}});
+  return state;
+}
+
+TEST(Console, At80x24TheHeaderAndKeysStayAndNothingIsCut) {
+  const ConsoleState state = busy_console();
+  const auto lines = lines_of(render(state, {80, 24}));
+  ASSERT_LE(lines.size(), 24u);
+  EXPECT_EQ(lines.front().rfind("imucal  rig bench-rig-07  |  running  |  step 4 of 9: poses", 0), 0u)
+      << lines.front();
+  EXPECT_EQ(lines.back(), "c continue  r redo  a abort  R restart  q detach");
+  for (const auto& line : lines) EXPECT_LE(line.size(), 80u) << line;
+  const std::string screen = render(state, {80, 24});
+  // The step list folds onto one line; the prompt, live figures and the last message stay.
+  EXPECT_TRUE(has(screen, " [ ] preflight  [ ] warmup  [ ] still  [>] poses")) << screen;
+  EXPECT_TRUE(has(screen, "left side up")) << screen;
+  EXPECT_TRUE(has(screen, "Poses: 5 of 18")) << screen;
+  EXPECT_TRUE(has(screen, "Pose 5 captured")) << screen;
+  EXPECT_FALSE(has(screen, "more than fits")) << screen;
+}
+
+TEST(Console, At160x48EverythingShowsWithTheDrawing) {
+  const std::string screen = render(busy_console(), {160, 48});
+  EXPECT_LE(lines_of(screen).size(), 48u);
+  EXPECT_TRUE(has(screen, " [ ] preflight\n [ ] warmup\n")) << screen;
+  for (int i = 0; i < 8; ++i) EXPECT_TRUE(has(screen, "drawing line " + std::to_string(i))) << screen;
+  for (int i = 1; i <= 5; ++i) EXPECT_TRUE(has(screen, "Pose " + std::to_string(i) + " captured")) << screen;
+}
+
+TEST(Console, ElapsedTimeRunsOnBetweenStatusMessages) {
+  ConsoleState state = busy_console();  // status at t = 500 s with 100 s elapsed; live at 512 s
+  EXPECT_TRUE(has(render(state), "|  112 s")) << render(state);
+  // No message for 3 s of wall time: the clock still moves.
+  EXPECT_TRUE(has(render(state, {80, 0, 3.0}), "|  115 s")) << render(state, {80, 0, 3.0});
+  // A finished session's time stands.
+  update(
+      state,
+      {{"type", "status"}, {"state", "done"}, {"rig", "bench-rig-07"}, {"elapsed_s", 130.0}, {"t", 530.0}});
+  EXPECT_TRUE(has(render(state, {80, 0, 60.0}), "|  130 s")) << render(state, {80, 0, 60.0});
 }
 
 TEST(Console, FaultsAndMessagesKeepTheLastFew) {
@@ -92,7 +195,7 @@ TEST(Console, ReviewShowsGatesAndAcceptKeys) {
                   "Review: FAIL\n  pass gravity residual  1.200  (limit 2.000)\n"
                   "  FAIL pose coverage  0.400  (limit 0.600)\n  12 poses used"))
       << screen;
-  EXPECT_TRUE(has(screen, "y accept  n reject  q detach")) << screen;
+  EXPECT_TRUE(has(screen, "y accept  n reject  R restart  q detach")) << screen;
 }
 
 TEST(Console, GateFiguresKeepTheDecimalsTheServiceChose) {
@@ -155,29 +258,85 @@ TEST(Console, RefusalsAreShownAndMalformedMessagesIgnored) {
   EXPECT_TRUE(has(render(state), "ok line"));
 }
 
-TEST(Console, KeysMapToRequestsAndAbortAsksFirst) {
+std::string key_of(ConsoleState& state, char c) {
+  auto action = on_key(state, c);
+  return action.request ? (*action.request).value("key", (*action.request)["cmd"].get<std::string>()) : "";
+}
+
+TEST(Console, KeysMapToRequestsAndDestructiveOnesAskFirst) {
   ConsoleState state;
-  auto key_of = [&](char c) {
-    auto action = on_key(state, c);
-    return action.request ? (*action.request).value("key", (*action.request)["cmd"].get<std::string>()) : "";
-  };
-  EXPECT_EQ(key_of('c'), "continue");
-  EXPECT_EQ(key_of(' '), "continue");
-  EXPECT_EQ(key_of('\r'), "continue");
-  EXPECT_EQ(key_of('r'), "redo");
-  EXPECT_EQ(key_of('y'), "accept");
-  EXPECT_EQ(key_of('n'), "reject");
-  EXPECT_EQ(key_of('s'), "skip");
-  EXPECT_EQ(key_of('x'), "");
-  EXPECT_EQ(key_of('a'), "");  // asks
-  EXPECT_TRUE(state.confirm_abort);
-  EXPECT_TRUE(has(render(state), "Abort the session? y: yes"));
-  EXPECT_EQ(key_of('n'), "");  // not aborted, and 'n' is not sent as reject here
-  EXPECT_FALSE(state.confirm_abort);
-  EXPECT_EQ(key_of('a'), "");
-  EXPECT_EQ(key_of('y'), "abort");
+  update(state, status_message());
+  EXPECT_EQ(key_of(state, 'c'), "continue");  // no live figures: nothing would be cut short
+  EXPECT_EQ(key_of(state, ' '), "continue");
+  EXPECT_EQ(key_of(state, '\r'), "continue");
+  EXPECT_EQ(key_of(state, 'r'), "redo");
+  EXPECT_EQ(key_of(state, 'y'), "accept");
+  EXPECT_EQ(key_of(state, 'x'), "");
+  // Abort, reject and skip ask; y sends, anything else cancels.
+  for (const auto& [key, question, sent] :
+       std::vector<std::tuple<char, std::string, std::string>>{{'a', "Abort the session?", "abort"},
+                                                               {'n', "Reject this calibration?", "reject"},
+                                                               {'s', "Skip the poses step?", "skip"}}) {
+    EXPECT_EQ(key_of(state, key), "") << key;
+    ASSERT_TRUE(state.confirm.has_value()) << key;
+    EXPECT_TRUE(has(render(state), question + " ")) << render(state);
+    EXPECT_TRUE(has(render(state), "y: yes")) << render(state);
+    EXPECT_EQ(key_of(state, 'n'), "") << "n answers no, it is not sent as reject";
+    EXPECT_FALSE(state.confirm.has_value());
+    EXPECT_TRUE(has(render(state), "Not done: " + question)) << render(state);
+    EXPECT_EQ(key_of(state, key), "");
+    EXPECT_EQ(key_of(state, 'y'), sent);
+  }
   EXPECT_TRUE(on_key(state, 'q').detach);
   EXPECT_TRUE(on_key(state, 3).detach);  // Ctrl-C as a byte
+}
+
+TEST(Console, EndingAStepBeforeItsTimeAsksFirst) {
+  ConsoleState state;
+  update(state, status_message("running", "motion"));
+  update(state, {{"type", "prompt"},
+                 {"step", "motion"},
+                 {"text", "Move the rig"},
+                 {"keys", {"continue", "skip", "abort"}}});
+  update(state, {{"type", "live"}, {"step", "motion"}, {"lines", {"18 of 60 s"}}, {"progress", 0.3}});
+  EXPECT_EQ(key_of(state, 'c'), "");
+  EXPECT_TRUE(has(render(state), "End the motion step now, at 30 %?")) << render(state);
+  EXPECT_EQ(key_of(state, ' '), "");  // no
+  EXPECT_EQ(key_of(state, 'c'), "");
+  EXPECT_EQ(key_of(state, 'y'), "continue");
+  // Once the step's time is up, continue goes at once.
+  update(state, {{"type", "live"}, {"step", "motion"}, {"lines", {"60 of 60 s"}}, {"progress", 1.0}});
+  EXPECT_EQ(key_of(state, 'c'), "continue");
+}
+
+TEST(Console, AnIdleOrFinishedConsoleStartsTheNextSession) {
+  ConsoleState state;
+  update(
+      state,
+      {{"type", "status"}, {"state", "idle"}, {"rig", "sim"}, {"steps", json::array()}, {"elapsed_s", 0.0}});
+  EXPECT_TRUE(has(render(state), "c start a session  q detach")) << render(state);
+  EXPECT_EQ(key_of(state, 'c'), "start");
+  EXPECT_EQ(key_of(state, 'r'), "");
+  EXPECT_TRUE(has(render(state), "No session is running: press c to start one")) << render(state);
+  update(state, status_message("done", ""));
+  update(state,
+         {{"type", "done"}, {"outcome", "written"}, {"text", "written"}, {"reports", {"/s/report.html"}}});
+  EXPECT_TRUE(has(render(state), "Report: /s/report.html")) << render(state);
+  EXPECT_TRUE(has(render(state), "c start the next session  q detach")) << render(state);
+  EXPECT_EQ(key_of(state, '\r'), "start");
+}
+
+TEST(Console, RestartAbortsThenStartsWhenTheSessionHasEnded) {
+  ConsoleState state;
+  update(state, status_message());
+  EXPECT_EQ(key_of(state, 'R'), "");
+  EXPECT_TRUE(has(render(state), "Restart: abort this session and start a new one?")) << render(state);
+  EXPECT_EQ(key_of(state, 'y'), "abort");
+  EXPECT_TRUE(state.outbox.empty()) << "the start waits for the end of the session";
+  update(state, status_message("aborted", ""));
+  update(state, {{"type", "done"}, {"outcome", "aborted"}, {"text", "Aborted by the operator."}});
+  ASSERT_EQ(state.outbox.size(), 1u);
+  EXPECT_EQ(state.outbox.front().value("cmd", ""), "start");
 }
 
 TEST(Console, ObserversSendNothing) {
@@ -214,7 +373,7 @@ TEST(Console, ProgressBarClampsAndHandlesNonFinite) {
 TEST(Console, StatusTextForImucalctlStatus) {
   const std::string text = status_text(status_message());
   EXPECT_TRUE(has(text, "state:   running\nrig:     sim\nstep:    step 2 of 4: poses\n")) << text;
-  EXPECT_TRUE(has(text, "elapsed: 12.3 s")) << text;
+  EXPECT_TRUE(has(text, "elapsed: 12.3 s")) << text;  // imucalctl status keeps the decimal
 }
 
 }  // namespace

@@ -227,18 +227,23 @@ TEST_F(Imucalctl, AttachInATerminalShowsThePromptAndSendsKeys) {
   ASSERT_TRUE(TestService::wait_for([&] { return has(screen(), ">> Turn the rig and hold it still"); }))
       << screen();
   EXPECT_TRUE(has(screen(), "rig sim  |  running  |  step 3 of 4: poses")) << screen();
-  EXPECT_TRUE(has(screen(), "c continue  r redo  a abort  q detach")) << screen();
+  EXPECT_TRUE(has(screen(), "c continue  r redo  a abort  R restart  q detach")) << screen();
 
   service.broadcast(
       {{"type", "live"}, {"step", "poses"}, {"lines", {"Still: yes  2.1 of 3.0 s"}}, {"progress", 0.5}});
   ASSERT_TRUE(TestService::wait_for([&] { return has(screen(), "Still: yes  2.1 of 3.0 s"); })) << screen();
   EXPECT_TRUE(has(screen(), "50%")) << screen();
 
+  // Half-way through the step, c asks before it ends the step early.
   ASSERT_EQ(tmux.run("send-keys -t ctl c"), 0);
+  ASSERT_TRUE(TestService::wait_for([&] { return has(screen(), "End the poses step now, at 50 %?"); }))
+      << screen();
+  EXPECT_TRUE(service.host.keys().empty());
+  ASSERT_EQ(tmux.run("send-keys -t ctl y"), 0);
   ASSERT_TRUE(
       TestService::wait_for([&] { return service.host.keys() == std::vector<std::string>{"continue"}; }));
   ASSERT_EQ(tmux.run("send-keys -t ctl a"), 0);
-  ASSERT_TRUE(TestService::wait_for([&] { return has(screen(), "Abort the session? y: yes"); })) << screen();
+  ASSERT_TRUE(TestService::wait_for([&] { return has(screen(), "Abort the session?"); })) << screen();
   ASSERT_EQ(tmux.run("send-keys -t ctl y"), 0);
   ASSERT_TRUE(TestService::wait_for([&] { return service.host.keys().size() == 2; }));
   EXPECT_EQ(service.host.keys().back(), "abort");
@@ -248,6 +253,74 @@ TEST_F(Imucalctl, AttachInATerminalShowsThePromptAndSendsKeys) {
   EXPECT_EQ(test::read_file(scratch + "/exit_code"), "0\n");
   EXPECT_TRUE(TestService::wait_for([&] { return service.clients() == 0; }))
       << "detaching closes the connection";
+}
+
+// The console at 80x24 as an operator's terminal: the header and keys stay on screen with a
+// long prompt, its drawing and messages; at 160x48 the drawing shows; an idle service is
+// started from the console.
+TEST_F(Imucalctl, ConsoleAt80x24And160x48AndStartFromTheConsole) {
+  if (!have_tmux()) {
+    GTEST_SKIP() << "tmux is not installed (apt-get install tmux): the console is not tested in a terminal";
+  }
+  ASSERT_TRUE(service.ok()) << service.error;
+  const json art = {"       ___________",   "      /   LEFT    /|",
+                    "     /___________/ |", "     |           | |  right: BOTTOM",
+                    "     |   FRONT   | |", "     | (to you)  | /",
+                    "     |___________|/",  "   ===================  table"};
+  service.host.set_snapshot_extra(
+      {{{"type", "prompt"},
+        {"step", "poses"},
+        {"text",
+         "Turn the rig to a new orientation and hold it still (2.0 s); 18 poses, all directions. Next: put "
+         "the rig on its right side, left side up"},
+        {"keys", {"continue", "redo", "abort"}},
+        {"art", art}},
+       {{"type", "message"},
+        {"level", "info"},
+        {"text", "Pose 1 captured; not yet up: left side up, right side up"}},
+       {{"type", "message"},
+        {"level", "info"},
+        {"text", "Pose 2 captured; not yet up: left side up, right side up"}}});
+  const std::string scratch = test::scratch_dir();
+  const std::string capture = scratch + "/pane.txt";
+  for (const auto& [columns, rows] : std::vector<std::pair<int, int>>{{80, 24}, {160, 48}}) {
+    Tmux tmux("imucal-test-" + std::to_string(::getpid()) + "-" + std::to_string(columns));
+    const std::string command = std::string(IMUCALCTL_PATH) + " --socket " + dir.socket() + " attach";
+    ASSERT_EQ(tmux.run("new-session -d -s ctl -x " + std::to_string(columns) + " -y " + std::to_string(rows) +
+                       " '" + command + "'"),
+              0);
+    auto screen = [&] { return tmux.capture(capture); };
+    ASSERT_TRUE(TestService::wait_for([&] { return has(screen(), "left side up"); })) << screen();
+    const std::string text = screen();
+    std::vector<std::string> lines;
+    for (std::size_t start = 0, end; (end = text.find('\n', start)) != std::string::npos; start = end + 1) {
+      lines.push_back(text.substr(start, end - start));
+    }
+    ASSERT_FALSE(lines.empty());
+    EXPECT_TRUE(has(lines.front(), "imucal  rig sim  |  running  |  step 3 of 4: poses")) << text;
+    EXPECT_TRUE(has(text, "c continue  r redo  a abort  R restart  q detach")) << text;
+    EXPECT_TRUE(has(text, "Pose 2 captured")) << text;
+    if (columns == 160) {
+      EXPECT_TRUE(has(text, "/   LEFT    /|")) << text;
+      EXPECT_TRUE(has(text, "|   FRONT   | |")) << text;
+    }
+    ASSERT_EQ(tmux.run("send-keys -t ctl q"), 0);
+    ASSERT_TRUE(TestService::wait_for([&] { return service.clients() == 0; }));
+  }
+
+  // An idle service: the console offers the start, and c starts a session.
+  service.host.set_status(
+      {{"type", "status"}, {"state", "idle"}, {"rig", "sim"}, {"steps", json::array()}, {"elapsed_s", 0.0}});
+  service.host.set_snapshot_extra({});
+  Tmux tmux("imucal-test-" + std::to_string(::getpid()) + "-idle");
+  const std::string command = std::string(IMUCALCTL_PATH) + " --socket " + dir.socket() + " attach";
+  ASSERT_EQ(tmux.run("new-session -d -s ctl -x 80 -y 24 '" + command + "'"), 0);
+  auto screen = [&] { return tmux.capture(capture); };
+  ASSERT_TRUE(TestService::wait_for([&] { return has(screen(), "c start a session  q detach"); }))
+      << screen();
+  ASSERT_EQ(tmux.run("send-keys -t ctl c"), 0);
+  ASSERT_TRUE(TestService::wait_for([&] { return service.host.starts().size() == 1; })) << screen();
+  ASSERT_EQ(tmux.run("send-keys -t ctl q"), 0);
 }
 
 }  // namespace
