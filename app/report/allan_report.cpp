@@ -94,7 +94,7 @@ Result<Document> allan_document(const nlohmann::json& r, BuildContext& ctx) {
         "bounds from the longest averaging time (record for hours to measure them)");
   }
   if (!ctx.log_path.empty()) {
-    auto session = session_section(ctx.log_path);
+    auto session = session_section(ctx.log_path, ctx.log_in_progress);
     if (!session.ok()) return session.error();
     doc.sections.push_back(std::move(*session));
   }

@@ -18,6 +18,7 @@ struct BuildContext {
   std::string result_path;
   std::string log_path;  // empty: no log given
   std::vector<std::string> notes;
+  bool log_in_progress = false;  // ReportOptions::log_in_progress
 };
 
 [[nodiscard]] Result<Document> static_document(const nlohmann::json& result, BuildContext& ctx);
@@ -26,7 +27,8 @@ struct BuildContext {
 [[nodiscard]] Result<Document> camimu_document(const nlohmann::json& result, BuildContext& ctx);
 
 /// The session log's summary (rig, recording, streams, health) as a section; errors name the log.
-[[nodiscard]] Result<Section> session_section(const std::string& log_path);
+/// `in_progress`: the log is still being written, so an open end is expected.
+[[nodiscard]] Result<Section> session_section(const std::string& log_path, bool in_progress = false);
 
 // Reading result JSON: errors (kCorrupt) name the key, thrown as JsonError and caught by the
 // document builders, which turn them into Result errors naming the file.

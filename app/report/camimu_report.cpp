@@ -16,10 +16,17 @@ namespace {
 
 constexpr double kDeg = 180.0 / M_PI;
 
-std::string vec_sigma(const Eigen::Vector3d& v, const Eigen::Vector3d& s, double scale = 1.0) {
+// True when the solve held the parameter `name` (the result's "fixed" list: T_cam_imu, timeshift, ...).
+bool held(const nlohmann::json& r, const std::string& name) {
+  for (const auto& f : at(r, "fixed"))
+    if (f.is_string() && f.get<std::string>() == name) return true;
+  return false;
+}
+
+std::string vec_sigma(const Eigen::Vector3d& v, const Eigen::Vector3d& s, double scale, bool fixed) {
   std::string out;
   for (int a = 0; a < 3; ++a)
-    out += std::string(a ? "<br>" : "") + "xyz"[a] + ": " + with_sigma(v[a] * scale, s[a] * scale);
+    out += std::string(a ? "<br>" : "") + "xyz"[a] + ": " + with_sigma(v[a] * scale, s[a] * scale, fixed);
   return out;
 }
 
@@ -46,9 +53,11 @@ Section cameras_section(const nlohmann::json& r) {
     const std::string name =
         at(c, "name").get<std::string>() + " (" + at(c, "stream").get<std::string>() + ")";
     t.rows.push_back(
-        {escape(name), vec_sigma(vec3(at(c, "t_cam_imu_m")), vec3(at(c, "translation_sigma_m")), 1e3),
+        {escape(name),
+         vec_sigma(vec3(at(c, "t_cam_imu_m")), vec3(at(c, "translation_sigma_m")), 1e3, held(r, "T_cam_imu")),
          sigmas(vec3(at(c, "rotation_sigma_rad")), kDeg),
-         with_sigma(number(c, "timeshift_cam_imu_s") * 1e3, number(c, "timeshift_sigma_s") * 1e3),
+         with_sigma(number(c, "timeshift_cam_imu_s") * 1e3, number(c, "timeshift_sigma_s") * 1e3,
+                    held(r, "timeshift")),
          num(number(c, "reprojection_rms_px"), 4),
          std::to_string(at(c, "frames").get<int>()) + ", " + std::to_string(at(c, "corners").get<int>()) +
              " (" + std::to_string(at(c, "outlier_corners").get<int>()) + ")"});
@@ -72,7 +81,7 @@ Section imu_section(const nlohmann::json& r) {
   const auto& s = at(imu, "krebs_sigma");
   Table t{{"Krebs model", "value &plusmn; sigma"}, {}};
   auto row = [&](const char* key, const char* label, const char* sigma_key) {
-    t.rows.push_back({label, vec_sigma(vec3(at(k, key)), vec3(at(s, sigma_key)))});
+    t.rows.push_back({label, vec_sigma(vec3(at(k, key)), vec3(at(s, sigma_key)), 1.0, held(r, key))});
   };
   row("S_a", "accelerometer scale S_a", "S_a");
   row("M_a", "accelerometer misalignment M_a", "M_a");
@@ -371,7 +380,7 @@ Result<Document> camimu_document(const nlohmann::json& r, BuildContext& ctx) {
   doc.subtitle = "Report of " + ctx.result_path;
   for (const auto& w : at(r, "warnings")) doc.warnings.push_back(w.get<std::string>());
   if (!ctx.log_path.empty()) {
-    auto session = session_section(ctx.log_path);
+    auto session = session_section(ctx.log_path, ctx.log_in_progress);
     if (!session.ok()) return session.error();
     doc.sections.push_back(std::move(*session));
   }

@@ -66,6 +66,12 @@ std::string num(double value, int digits) {
   return buf;
 }
 
+std::string with_sigma(double value, double sigma, bool fixed) {
+  if (fixed) return num(value) + " (fixed)";
+  if (!(sigma > 0.0)) return with_sigma(value, std::nan(""));
+  return with_sigma(value, sigma);
+}
+
 std::string with_sigma(double value, double sigma) {
   if (!std::isfinite(value)) return num(value);
   if (std::isnan(sigma)) return num(value) + " (&sigma; not determined)";

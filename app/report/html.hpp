@@ -19,6 +19,9 @@ std::string base64(const std::string& bytes);
 std::string num(double value, int digits = 6);
 /// "value ± sigma" with the sigma's two leading digits deciding the precision.
 std::string with_sigma(double value, double sigma);
+/// The same for a parameter that is estimated unless `fixed`: a sigma of zero or NaN of an
+/// estimated parameter reads "sigma not determined", never "(fixed)".
+std::string with_sigma(double value, double sigma, bool fixed);
 
 /// A table: a header row and body rows of cell HTML (already escaped).
 struct Table {

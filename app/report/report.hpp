@@ -32,6 +32,9 @@ struct ReportOptions {
   std::string png_dir;      // empty: no PNG files
   bool overwrite = false;   // replace an existing report and PNG files
   std::string generator;    // shown at the foot of the page ("imucal 0.3.0")
+  /// The log is still being written (a session report drawn before the session ends): its
+  /// missing end is not reported as an interrupted recording.
+  bool log_in_progress = false;
 };
 
 struct ReportSummary {

@@ -88,7 +88,7 @@ Table camera_table(const LogSummary& s) {
 
 }  // namespace
 
-Result<Section> session_section(const std::string& log_path) {
+Result<Section> session_section(const std::string& log_path, bool in_progress) {
   auto summary = summarize_log(log_path);
   if (!summary.ok()) return summary.error().context("the log " + log_path);
   const LogSummary& s = *summary;
@@ -100,7 +100,9 @@ Result<Section> session_section(const std::string& log_path) {
              " camera stream(s), " + std::to_string(s.event_count) + " event(s); " +
              (s.health.damaged    ? "<strong>damaged</strong>: " + escape(s.health.damage_message)
               : s.health.complete ? "closed cleanly"
-                                  : "<strong>not closed cleanly</strong> (the recording was interrupted)") +
+              : in_progress ? "still being recorded when this report was drawn (the session went on to its "
+                              "review and write; the log holds them)"
+                            : "<strong>not closed cleanly</strong> (the recording was interrupted)") +
              ".</p>\n";
   sec.html += imu_table(s).to_html();
   if (!s.cameras.empty()) sec.html += camera_table(s).to_html();

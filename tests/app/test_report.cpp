@@ -60,6 +60,11 @@ TEST(Report, FormatsValuesWithTheirSigmas) {
   EXPECT_EQ(with_sigma(1.234e-5, 1.1e-6), "(1.23 &plusmn; 0.11)e-05");
   EXPECT_EQ(with_sigma(0.5, 0.0), "0.5 (fixed)");
   EXPECT_EQ(with_sigma(0.5, std::nan("")), "0.5 (&sigma; not determined)");
+  // An estimated parameter whose sigma could not be computed is never shown as fixed.
+  EXPECT_EQ(with_sigma(0.5, 0.0, false), "0.5 (&sigma; not determined)");
+  EXPECT_EQ(with_sigma(0.5, std::nan(""), false), "0.5 (&sigma; not determined)");
+  EXPECT_EQ(with_sigma(0.5, 0.0, true), "0.5 (fixed)");
+  EXPECT_EQ(with_sigma(0.5, 0.1, false), with_sigma(0.5, 0.1));
   EXPECT_EQ(num(std::nan("")), "undetermined");
   EXPECT_EQ(escape("<a href=\"x\">&'"), "&lt;a href=&quot;x&quot;&gt;&amp;&#39;");
 }
