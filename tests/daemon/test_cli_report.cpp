@@ -98,6 +98,7 @@ TEST_F(CliReport, StaticWithLogHasEveryFigureAndThePngs) {
   const auto j = nlohmann::json::parse(test::read_file(result()));
   EXPECT_NE(html.find(std::to_string(j["static_intervals"].size()) + " static intervals"), std::string::npos);
   EXPECT_NE(html.find("closed cleanly"), std::string::npos);
+  EXPECT_EQ(html.find("not closed cleanly"), std::string::npos);
 }
 
 TEST_F(CliReport, StaticWithoutLogHasTheResultsFiguresOnly) {
