@@ -59,6 +59,11 @@ int main(int argc, char** argv) {
                                    "comma-separated list of steps");
   app.add_flag("--exit-after-session", o.exit_after_session,
                "Stop when the session ends (exit 0 when it wrote or completed, 1 otherwise)");
+  bool check = false;
+  app.add_flag("--check", check,
+               "Read and validate the configuration, print what the service would use and load the "
+               "modules it needs, opening no device; exit 0 when usable, 78 when the configuration is "
+               "unusable, 1 when a module cannot be loaded");
   bool quiet = false;
   app.add_flag("-q,--quiet", quiet, "Log warnings and errors only");
   CLI11_PARSE(app, argc, argv);
@@ -76,6 +81,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   o.socket_mode = value;
+  if (check) return imucal::imucald::check_configuration(o);
   if (start_opt->count() > 0) {
     std::vector<std::string> steps;
     if (start != "default") {
@@ -89,6 +95,7 @@ int main(int argc, char** argv) {
   Service service(o);
   if (auto s = service.init(); !s.ok()) {
     spdlog::error("{}", s.error().message);
+    if (service.config_unusable()) return imucal::imucald::kExitConfigUnusable;
     return s.error().code == imucal::Errc::kInvalidArgument ? 2 : 1;
   }
   return service.run();

@@ -13,10 +13,13 @@
 #include <fstream>
 #include <thread>
 
+#include "app/camera_module.hpp"
 #include "app/module_loader.hpp"
 #include "app/rig/cameras.hpp"
 #include "app/rig/stored_calibration.hpp"
 #include "core/version.hpp"
+#include "drivers/camera/aravis/aravis_module.hpp"
+#include "drivers/camera/libcamera/libcamera_module.hpp"
 #include "drivers/storage/storage_device.hpp"
 
 namespace imucal::imucald {
@@ -44,7 +47,102 @@ std::string storage_unwritable(const StorageConfig& config) {
   return device.ok() ? std::string() : device.error().message;
 }
 
+/// "present", or why a device node or file is not there on this machine.
+std::string presence(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec)) return "present";
+  return "not found on this machine";
+}
+
+/// What the state folder allows the user running the check.
+std::string state_dir_note(const std::string& dir) {
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec))
+    return "does not exist yet (systemd-tmpfiles --create, or the unit's StateDirectory=, makes it)";
+  if (::access(dir.c_str(), W_OK | X_OK) == 0) return "exists, writable by this user";
+  return "exists, not writable by this user (the service writes it as user imucal)";
+}
+
 }  // namespace
+
+std::string config_unusable_message(const std::string& config_path, const Error& error) {
+  return "the rig configuration " + config_path + " cannot be used: " + error.message + "\nEdit " +
+         config_path + " (docs/config.md lists every key), check it with 'imucald --config " + config_path +
+         " --check', then start the service again (systemctl restart imucald)";
+}
+
+int check_configuration(const ServiceOptions& options) {
+  auto loaded = load_rig_config(options.config_path);
+  if (!loaded.ok()) {
+    std::fprintf(stderr, "imucald: %s\n",
+                 config_unusable_message(options.config_path, loaded.error()).c_str());
+    return kExitConfigUnusable;
+  }
+  const RigConfig& c = *loaded;
+  const bool sim = options.sim || c.imu.bus == ImuBus::kSim;
+  std::printf("configuration %s: valid\n", options.config_path.c_str());
+  std::printf("  rig       %s\n", c.name.c_str());
+  if (sim) {
+    std::printf("  imu       the virtual rig (no device)\n");
+  } else {
+    std::printf("  imu       %s %s, %g Hz (%s)\n", imu_bus_name(c.imu.bus), c.imu.device.c_str(),
+                c.imu.rate_hz, presence(c.imu.device).c_str());
+    if (c.imu.data_ready) {
+      const std::string chip = c.imu.data_ready->chip.rfind('/', 0) == 0 ? c.imu.data_ready->chip
+                                                                         : "/dev/" + c.imu.data_ready->chip;
+      std::printf("  ready     %s line %d (%s)\n", chip.c_str(), c.imu.data_ready->line,
+                  presence(chip).c_str());
+    } else {
+      std::printf("  ready     no data-ready line: the FIFO is polled\n");
+    }
+  }
+  for (const CameraConfig& cam : c.cameras) {
+    const bool node = cam.backend == CameraBackend::kV4l2;
+    std::printf("  camera    %s: %s %s, %dx%d at %g Hz%s\n", cam.name.c_str(),
+                camera_backend_name(cam.backend), cam.device.c_str(), cam.width, cam.height, cam.rate_hz,
+                node && !sim ? (" (" + presence(cam.device) + ")").c_str() : "");
+  }
+  if (c.cameras.empty()) std::printf("  cameras   none (no motion step)\n");
+  const StorageConfig& st = c.storage;
+  const std::string where = st.backend == StorageBackend::kI2cEeprom ? st.i2c_device : st.path;
+  std::printf("  storage   %s %s, %d bytes at offset %d (%s)\n", storage_backend_name(st.backend),
+              where.c_str(), st.size_bytes, st.offset_bytes,
+              st.backend == StorageBackend::kFile && !std::filesystem::exists(where)
+                  ? "not written yet"
+                  : presence(where).c_str());
+  std::printf("  state dir %s: %s\n", options.state_dir.c_str(), state_dir_note(options.state_dir).c_str());
+
+  // The modules a session of this configuration loads. The solver's names are those of
+  // calib/solve_module.hpp, which imucald does not include (tests/check_layering.sh).
+  struct Needed {
+    const char* name;
+    const char* entry;
+  };
+  std::vector<Needed> needed = {{"imucal_solve", "imucal_solve_module"}};
+  if (!c.cameras.empty()) needed.push_back({app::kCameraModule, app::kCameraModuleEntry});
+  for (const CameraConfig& cam : c.cameras) {
+    if (cam.backend == CameraBackend::kAravis && !sim)
+      needed.push_back({drivers::camera::kAravisModule, drivers::camera::kAravisModuleEntry});
+    if (cam.backend == CameraBackend::kLibcamera && !sim)
+      needed.push_back({drivers::camera::kLibcameraModule, drivers::camera::kLibcameraModuleEntry});
+  }
+  if (sim) needed.push_back({sim::kVirtualRigModule, sim::kVirtualRigModuleEntry});
+  std::string names;
+  for (const Needed& m : needed) {
+    if (names.find(m.name) != std::string::npos) continue;
+    auto api = app::load_module_api(m.name, m.entry);
+    if (!api.ok()) {
+      std::fprintf(stderr, "imucald: %s\n", api.error().message.c_str());
+      return 1;
+    }
+    names += (names.empty() ? "" : ", ") + std::string(m.name);
+  }
+  std::printf("  modules   %s: loaded\n", names.c_str());
+  std::printf(
+      "Devices are not opened by --check; a device not found here is reported when the service "
+      "starts.\n");
+  return 0;
+}
 
 Service::Service(ServiceOptions options)
     : options_(std::move(options)),
@@ -59,7 +157,10 @@ Service::~Service() {
 
 Status Service::init() {
   auto config = load_rig_config(options_.config_path);
-  if (!config.ok()) return config.error();
+  if (!config.ok()) {
+    config_unusable_ = true;
+    return make_error(config.error().code, config_unusable_message(options_.config_path, config.error()));
+  }
   config_ = *config;
   if (config_.imu.bus == ImuBus::kSim) options_.sim = true;
   IMUCAL_TRY(open_imu());

@@ -24,6 +24,11 @@
 
 namespace imucal::imucald {
 
+/// imucald's exit status when its configuration cannot be used (sysexits.h EX_CONFIG): the file is
+/// missing, unreadable or invalid. The unit lists it in RestartPreventExitStatus=, so systemd
+/// does not restart the service until the file is fixed.
+inline constexpr int kExitConfigUnusable = 78;
+
 struct ServiceOptions {
   std::string config_path = "/etc/imucal/rig.yaml";
   std::string socket_path = "/run/imucal/imucald.sock";
@@ -41,12 +46,23 @@ struct ServiceOptions {
   bool exit_after_session = false;
 };
 
+/// The error for a configuration that cannot be used: what is wrong and the file to edit.
+std::string config_unusable_message(const std::string& config_path, const Error& error);
+
+/// imucald --check, a dry run: reads and validates the configuration, prints what the service
+/// would use (IMU, cameras, storage, state folder; whether their device nodes exist on this
+/// machine) and loads the modules the configuration needs, opening no device. Returns the exit
+/// status: 0 usable, kExitConfigUnusable, 1 when a module cannot be loaded (a broken installation).
+int check_configuration(const ServiceOptions& options);
+
 class Service final : public service::SessionHost {
  public:
   explicit Service(ServiceOptions options);
   ~Service() override;
   /// Loads the configuration, opens the IMU and the socket; errors say what to fix.
   [[nodiscard]] Status init();
+  /// After a failed init(): whether it failed on the configuration (exit kExitConfigUnusable).
+  [[nodiscard]] bool config_unusable() const { return config_unusable_; }
   /// Runs the event loop until SIGTERM/SIGINT (or the session's end with exit_after_session).
   /// Returns the process exit code.
   int run();
@@ -113,6 +129,7 @@ class Service final : public service::SessionHost {
   std::uint64_t samples_ = 0, imu_faults_ = 0;
   bool start_pending_ = false;  // --start waits for the first samples
   bool quit_ = false;
+  bool config_unusable_ = false;
   int exit_code_ = 0;
 };
 
