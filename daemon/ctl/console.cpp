@@ -107,7 +107,7 @@ std::string header(const ConsoleState& state, double idle_s) {
   if (const auto position = step_position(status); !position.empty()) {
     line += "  |  " + position;
   }
-  if (auto elapsed = num(status, "elapsed_s")) {
+  if (auto elapsed = num(status, "elapsed_s"); elapsed && str(status, "state") != "idle") {
     // Status comes at step changes; the session's clock (every message's "t") and the wall
     // time since the last message carry the elapsed time between them.
     if (is_running(status)) {
