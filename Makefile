@@ -25,9 +25,15 @@ $(RELEASE_DIR)/build.ninja:
 build: deps $(RELEASE_DIR)/build.ninja
 	cmake --build $(RELEASE_DIR) -j $(JOBS)
 
-# Runs the main job on the built-in simulated rig (see scripts/demo.sh).
-demo: build
-	scripts/demo.sh $(RELEASE_DIR)
+# Runs the main job on the built-in simulated rig (see scripts/demo.sh). The installation of
+# missing packages and the build write their output to $(DEMO_LOG); a failure shows its end.
+DEMO_LOG := build/demo-build.log
+demo:
+	@mkdir -p build
+	@echo "make demo: installing what is missing and building $(RELEASE_DIR) (a first build takes about 15 min on 2 cores); output in $(DEMO_LOG)"
+	@$(MAKE) --no-print-directory build >$(DEMO_LOG) 2>&1 || { tail -n 30 $(DEMO_LOG); \
+	  echo "make demo: installing or building failed; the whole output is in $(DEMO_LOG)"; exit 1; }
+	@scripts/demo.sh $(RELEASE_DIR)
 
 $(TEST_DIR)/build.ninja:
 	cmake -S . -B $(TEST_DIR) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
