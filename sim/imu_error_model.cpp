@@ -1,5 +1,6 @@
 #include "sim/imu_error_model.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <string>
@@ -10,6 +11,7 @@ namespace {
 constexpr double kDeg = std::numbers::pi / 180.0;
 constexpr std::uint64_t kSaltParams = 21;
 constexpr std::uint64_t kSaltNoise = 22;
+constexpr std::uint64_t kSaltTemperature = 23;
 
 bool unit_lower_triangular(const Eigen::Matrix3d& m) {
   return m(0, 0) == 1.0 && m(1, 1) == 1.0 && m(2, 2) == 1.0 && m(0, 1) == 0.0 && m(0, 2) == 0.0 &&
@@ -84,7 +86,9 @@ Status ImuModelParams::validate() const {
     return make_error(Errc::kInvalidArgument, "q_body_gyro must be a unit quaternion");
   }
   if (!accel_bias.allFinite() || !gyro_bias.allFinite() || !g_sensitivity.allFinite() ||
-      !accel_bias_temp_coeff.allFinite() || !gyro_bias_temp_coeff.allFinite()) {
+      !accel_bias_temp_coeff.allFinite() || !gyro_bias_temp_coeff.allFinite() ||
+      !accel_bias_temp_coeff2.allFinite() || !gyro_bias_temp_coeff2.allFinite() ||
+      !accel_bias_temp_coeff3.allFinite() || !gyro_bias_temp_coeff3.allFinite()) {
     return make_error(Errc::kInvalidArgument, "biases, B_g and temperature coefficients must be finite");
   }
   if (accel_bias.cwiseAbs().maxCoeff() > 3.0) {
@@ -114,9 +118,56 @@ Status ImuModelParams::validate() const {
         Errc::kInvalidArgument,
         "die temperatures must be within the MPU-6000 range -40..85 deg C and the time constant > 0");
   }
+  if (!(temp_ramp_s > 0.0) || !(temp_step_time_s >= 0.0) || !std::isfinite(temp_ramp_s) ||
+      !std::isfinite(temp_step_time_s)) {
+    return make_error(Errc::kInvalidArgument,
+                      "the temperature ramp must last > 0 s and the step time must be >= 0 s");
+  }
   IMUCAL_TRY(accel_lsb_per_g(accel_full_scale_g));
   IMUCAL_TRY(gyro_lsb_per_dps(gyro_full_scale_dps));
   return {};
+}
+
+const char* temperature_profile_name(TemperatureProfile profile) {
+  switch (profile) {
+    case TemperatureProfile::kSoak:
+      return "soak";
+    case TemperatureProfile::kStep:
+      return "step";
+    case TemperatureProfile::kWarmUp:
+      break;
+  }
+  return "warmup";
+}
+
+Result<TemperatureProfile> parse_temperature_profile(const std::string& name) {
+  for (TemperatureProfile p :
+       {TemperatureProfile::kWarmUp, TemperatureProfile::kSoak, TemperatureProfile::kStep}) {
+    if (name == temperature_profile_name(p)) return p;
+  }
+  return make_error(Errc::kInvalidArgument,
+                    "temperature profile must be warmup, soak or step, got '" + name + "'");
+}
+
+void ImuModelParams::draw_temperature_coefficients(std::uint64_t seed, int order) {
+  Rng rng(Rng::substream(seed, kSaltTemperature));
+  const double mg = 1e-3 * kStandardGravity;
+  accel_bias_temp_coeff2.setZero();
+  accel_bias_temp_coeff3.setZero();
+  gyro_bias_temp_coeff2.setZero();
+  gyro_bias_temp_coeff3.setZero();
+  for (int i = 0; i < 3; ++i) {
+    accel_bias_temp_coeff[i] = rng.signed_magnitude(0.3, 1.5) * mg;
+    gyro_bias_temp_coeff[i] = rng.signed_magnitude(0.005, 0.03) * kDeg;
+    if (order >= 2) {
+      accel_bias_temp_coeff2[i] = rng.signed_magnitude(0.005, 0.02) * mg;
+      gyro_bias_temp_coeff2[i] = rng.signed_magnitude(2e-4, 6e-4) * kDeg;
+    }
+    if (order >= 3) {
+      accel_bias_temp_coeff3[i] = rng.signed_magnitude(1e-4, 4e-4) * mg;
+      gyro_bias_temp_coeff3[i] = rng.signed_magnitude(5e-6, 1.5e-5) * kDeg;
+    }
+  }
 }
 
 ImuModelParams ImuModelParams::draw(std::uint64_t seed) {
@@ -161,7 +212,45 @@ double ImuModelParams::gyro_radps_per_count() const {
 }
 
 double ImuModelParams::temperature_c(double t_s) const {
+  switch (temp_profile) {
+    case TemperatureProfile::kSoak:
+      return temp_start_c + (temp_final_c - temp_start_c) * std::clamp(t_s / temp_ramp_s, 0.0, 1.0);
+    case TemperatureProfile::kStep:
+      if (t_s <= temp_step_time_s) return temp_start_c;
+      return temp_final_c +
+             (temp_start_c - temp_final_c) * std::exp(-(t_s - temp_step_time_s) / temp_time_constant_s);
+    case TemperatureProfile::kWarmUp:
+      break;
+  }
   return temp_final_c + (temp_start_c - temp_final_c) * std::exp(-t_s / temp_time_constant_s);
+}
+
+namespace {
+
+Eigen::Vector3d cubic(double dT, const Eigen::Vector3d& c1, const Eigen::Vector3d& c2,
+                      const Eigen::Vector3d& c3) {
+  // Horner, so that zero higher terms give exactly c1 * dT.
+  return dT * (c1 + dT * (c2 + dT * c3));
+}
+
+}  // namespace
+
+Eigen::Vector3d ImuModelParams::accel_bias_temp(double temperature) const {
+  return cubic(temperature - temp_ref_c(), accel_bias_temp_coeff, accel_bias_temp_coeff2,
+               accel_bias_temp_coeff3);
+}
+
+Eigen::Vector3d ImuModelParams::gyro_bias_temp(double temperature) const {
+  return cubic(temperature - temp_ref_c(), gyro_bias_temp_coeff, gyro_bias_temp_coeff2,
+               gyro_bias_temp_coeff3);
+}
+
+Eigen::Vector4d ImuModelParams::accel_bias_temp_poly(int axis) const {
+  return {0.0, accel_bias_temp_coeff[axis], accel_bias_temp_coeff2[axis], accel_bias_temp_coeff3[axis]};
+}
+
+Eigen::Vector4d ImuModelParams::gyro_bias_temp_poly(int axis) const {
+  return {0.0, gyro_bias_temp_coeff[axis], gyro_bias_temp_coeff2[axis], gyro_bias_temp_coeff3[axis]};
 }
 
 Eigen::Vector3d specific_force_body(const RigState& state, double gravity_mps2) {
@@ -199,9 +288,8 @@ ImuSimDetail ImuSimulator::sample_si(TimeNs t_ns, const RigState& state, double 
   }
   t_last_ns_ = std::max(t_last_ns_, t_ns);
   d.temperature_c = p_.temperature_c(ns_to_s(t_ns - t_start_ns_));
-  const double dT = d.temperature_c - p_.temp_start_c;
-  d.accel_bias = p_.accel_bias + accel_walk_ + dT * p_.accel_bias_temp_coeff;
-  d.gyro_bias = p_.gyro_bias + gyro_walk_ + dT * p_.gyro_bias_temp_coeff;
+  d.accel_bias = p_.accel_bias + accel_walk_ + p_.accel_bias_temp(d.temperature_c);
+  d.gyro_bias = p_.gyro_bias + gyro_walk_ + p_.gyro_bias_temp(d.temperature_c);
   d.specific_force_body = specific_force_body(state, p_.gravity_mps2);
   d.rate_body = rate_body(state, p_);
   // White noise, discrete sigma = density / sqrt(dt).

@@ -11,11 +11,13 @@
 //   counts = clamp(round(raw / nominal_lsb), -32768, 32767)
 //
 // where M is unit lower-triangular, S diagonal, C_bg rotates gyroscope-frame vectors into B,
-// b(t) = turn-on bias + random walk + temperature coefficient * (T(t) - T(0)).
+// b(t) = turn-on bias + random walk + c1 dT + c2 dT^2 + c3 dT^3 with dT = T(t) - T(0), per axis
+// (the die temperature T follows the configured temperature profile).
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <string>
 
 #include "core/imu.hpp"
 #include "core/result.hpp"
@@ -35,6 +37,17 @@ inline constexpr double kEarthRateRadps = 7.292115e-5;
 /// 250/500/1000/2000 deg/s -> 131/65.5/32.8/16.4 LSB/(deg/s). Other values are an error.
 [[nodiscard]] Result<double> accel_lsb_per_g(int full_scale_g);
 [[nodiscard]] Result<double> gyro_lsb_per_dps(int full_scale_dps);
+
+/// How the die temperature moves over a recording (ImuModelParams::temperature_c).
+enum class TemperatureProfile {
+  kWarmUp,  // first-order warm-up from temp_start_c towards temp_final_c (a cold start)
+  kSoak,    // linear ramp from temp_start_c to temp_final_c over temp_ramp_s, then held (heat soak)
+  kStep,    // held at temp_start_c until temp_step_time_s, then a first-order approach to temp_final_c
+};
+
+/// "warmup", "soak", "step".
+const char* temperature_profile_name(TemperatureProfile profile);
+[[nodiscard]] Result<TemperatureProfile> parse_temperature_profile(const std::string& name);
 
 /// All parameters of the simulated IMU. SI units throughout; the defaults are an ideal sensor
 /// (unit scale, no misalignment, no bias) with the datasheet noise, so that tests can switch
@@ -65,12 +78,21 @@ struct ImuModelParams {
   bool earth_rotation = false;             // add the earth rate to the true body rate
   double latitude_deg = 47.37;             // for the earth rate; world x east, y north, z up
 
-  // Die temperature: first-order warm-up from temp_start_c towards temp_final_c.
+  // Die temperature: by default a first-order warm-up from temp_start_c towards temp_final_c.
+  TemperatureProfile temp_profile = TemperatureProfile::kWarmUp;
   double temp_start_c = 30.0;
   double temp_final_c = 36.0;
-  double temp_time_constant_s = 600.0;
-  Eigen::Vector3d accel_bias_temp_coeff = Eigen::Vector3d::Zero();  // (m/s^2)/K
-  Eigen::Vector3d gyro_bias_temp_coeff = Eigen::Vector3d::Zero();   // (rad/s)/K
+  double temp_time_constant_s = 600.0;  // kWarmUp and kStep
+  double temp_ramp_s = 600.0;           // kSoak: length of the ramp
+  double temp_step_time_s = 0.0;        // kStep: when the surroundings step to temp_final_c
+  // Bias against die temperature, per axis: c1 dT + c2 dT^2 + c3 dT^3, dT = T - temp_start_c
+  // (temp_ref_c()). The linear terms alone give the model of earlier versions.
+  Eigen::Vector3d accel_bias_temp_coeff = Eigen::Vector3d::Zero();   // c1, (m/s^2)/K
+  Eigen::Vector3d accel_bias_temp_coeff2 = Eigen::Vector3d::Zero();  // c2, (m/s^2)/K^2
+  Eigen::Vector3d accel_bias_temp_coeff3 = Eigen::Vector3d::Zero();  // c3, (m/s^2)/K^3
+  Eigen::Vector3d gyro_bias_temp_coeff = Eigen::Vector3d::Zero();    // c1, (rad/s)/K
+  Eigen::Vector3d gyro_bias_temp_coeff2 = Eigen::Vector3d::Zero();   // c2, (rad/s)/K^2
+  Eigen::Vector3d gyro_bias_temp_coeff3 = Eigen::Vector3d::Zero();   // c3, (rad/s)/K^3
 
   // Device settings.
   int accel_full_scale_g = 4;
@@ -84,6 +106,10 @@ struct ImuModelParams {
   /// C_bg within +-1 deg per axis, B_g entries ~ N(0, 1.8e-4), turn-on biases uniform within
   /// the datasheet tolerances (accel +-50 mg x/y, +-80 mg z; gyro +-5 deg/s of the +-20 deg/s).
   static ImuModelParams draw(std::uint64_t seed);
+  /// Bias temperature coefficients of an MPU-6000 drawn from `seed` (a stream apart from draw()'s)
+  /// up to `order` (1..3): per axis c1 within the datasheet's +-0.03 (deg/s)/K and +-1.5 mg/K,
+  /// c2 and c3 such that each bends the curve by a comparable amount over a 40 K span.
+  void draw_temperature_coefficients(std::uint64_t seed, int order);
 
   // Derived quantities.
   Eigen::Matrix3d accel_matrix() const;  // S_a M_a
@@ -93,6 +119,14 @@ struct ImuModelParams {
   double gyro_radps_per_count() const;
   /// Die temperature at time t since the start of the recording, deg C.
   double temperature_c(double t_s) const;
+  /// The temperature the bias polynomials are taken about: temp_start_c.
+  double temp_ref_c() const { return temp_start_c; }
+  /// The temperature parts of the biases at die temperature T (zero at temp_ref_c()).
+  Eigen::Vector3d accel_bias_temp(double temperature_c) const;
+  Eigen::Vector3d gyro_bias_temp(double temperature_c) const;
+  /// Polynomial coefficients of one axis's temperature part, c0 (= 0) to c3, about temp_ref_c().
+  Eigen::Vector4d accel_bias_temp_poly(int axis) const;
+  Eigen::Vector4d gyro_bias_temp_poly(int axis) const;
 };
 
 /// The error-free inputs and the unquantised outputs of one simulated sample (for tests and the
