@@ -1,0 +1,206 @@
+// The thermal calibration (calib/thermal_calibration.hpp) on simulated still warm-ups of the
+// virtual MPU-6000 with non-linear bias-temperature truths: coefficients within their sigmas, the
+// order the truth has chosen on most seeds, "not determined" for a flat temperature, refusals.
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Core>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "calib/thermal_calibration.hpp"
+#include "sim/imu_error_model.hpp"
+
+namespace imucal {
+namespace {
+
+struct WarmUp {
+  sim::ImuModelParams params;
+  std::vector<ImuSample> samples;
+  calib::ThermalOptions options;
+};
+
+/// A still rig (level, on a table) warming from 20 to 60 deg C with a time constant of 900 s, in
+/// raw counts as the chip gives them.
+WarmUp simulate_warm_up(std::uint64_t seed, int order, double duration_s = 3600.0, double rate_hz = 50.0,
+                        double start_c = 20.0, double final_c = 60.0) {
+  WarmUp w;
+  w.params = sim::ImuModelParams::draw(seed);
+  w.params.draw_temperature_coefficients(seed, order);
+  w.params.temp_start_c = start_c;
+  w.params.temp_final_c = final_c;
+  w.params.temp_time_constant_s = 900.0;
+  sim::ImuSimulator imu(w.params, seed);
+  const sim::RigState still;
+  const double dt = 1.0 / rate_hz;
+  const auto n = static_cast<std::size_t>(duration_s * rate_hz);
+  w.samples.reserve(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    w.samples.push_back(imu.sample(s_to_ns(static_cast<double>(k) * dt), still, dt));
+  }
+  w.options.accel.scale.setConstant(w.params.accel_mps2_per_count());
+  w.options.gyro.scale.setConstant(w.params.gyro_radps_per_count());
+  w.options.temperature_scale = 1.0 / sim::kMpu6000TempLsbPerDegC;
+  w.options.temperature_offset = sim::kMpu6000TempOffsetDegC;
+  return w;
+}
+
+/// The truth's polynomial (about `from`) written about `to`: sum d_k (T - to)^k.
+Eigen::Vector4d shift_poly(const Eigen::Vector4d& c, double from, double to) {
+  Eigen::Vector4d d = Eigen::Vector4d::Zero();
+  const double s = to - from;
+  const double binom[4][4] = {{1, 0, 0, 0}, {1, 1, 0, 0}, {1, 2, 1, 0}, {1, 3, 3, 1}};
+  for (int j = 0; j < 4; ++j) {
+    for (int k = 0; k <= j; ++k) d[k] += c[j] * binom[j][k] * std::pow(s, j - k);
+  }
+  return d;
+}
+
+/// error / sigma of every fitted coefficient c_1..c_order against the truth (higher truth terms
+/// than fitted are not compared); empty when the fit has a lower order than the truth.
+std::vector<double> normalised_errors(const calib::ThermalAxisFit& fit,
+                                      const Eigen::Vector4d& truth_about_ref, int truth_order) {
+  std::vector<double> z;
+  if (!fit.determined || fit.order < truth_order) return z;
+  for (int j = 1; j <= fit.order; ++j) {
+    z.push_back((fit.coeffs[j] - truth_about_ref[j]) / std::sqrt(fit.covariance(j, j)));
+  }
+  return z;
+}
+
+TEST(ThermalCalibration, CubicTruthWithinSigmasAndOrderChosenOnMostSeeds) {
+  int order_right = 0, axes = 0;
+  double sum_z2 = 0.0;
+  int nz = 0;
+  for (std::uint64_t seed = 1; seed <= 4; ++seed) {
+    const WarmUp w = simulate_warm_up(seed, 3);
+    auto r = calib::calibrate_thermal(w.samples, w.options);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    ASSERT_TRUE(r->determined) << r->reason;
+    EXPECT_NEAR(r->temp_min_c, 20.0, 1.0);
+    EXPECT_NEAR(r->temp_max_c, 58.9, 1.0);
+    EXPECT_DOUBLE_EQ(r->reference_c, 0.5 * (r->temp_min_c + r->temp_max_c));
+    EXPECT_TRUE(r->temperature_monotonic);
+    for (int a = 0; a < 3; ++a) {
+      for (const bool gyro : {true, false}) {
+        const calib::ThermalAxisFit& fit = gyro ? r->gyro[a] : r->accel[a];
+        const Eigen::Vector4d truth =
+            shift_poly(gyro ? w.params.gyro_bias_temp_poly(a) : w.params.accel_bias_temp_poly(a),
+                       w.params.temp_ref_c(), r->reference_c);
+        ASSERT_TRUE(fit.determined);
+        ++axes;
+        if (fit.order == 3) ++order_right;
+        for (double z : normalised_errors(fit, truth, 3)) {
+          EXPECT_LT(std::abs(z), 4.0) << "seed " << seed << (gyro ? " gyro " : " accel ") << a;
+          sum_z2 += z * z;
+          ++nz;
+        }
+        EXPECT_GT(fit.uncompensated_drift, 0.0);
+        EXPECT_GT(fit.model_sigma_rms, 0.0);
+        EXPECT_LT(fit.model_sigma_rms, 0.1 * fit.uncompensated_drift);
+      }
+    }
+  }
+  EXPECT_GE(order_right, axes * 2 / 3) << order_right << " of " << axes << " axes got order 3";
+  ASSERT_GT(nz, 0);
+  const double rms = std::sqrt(sum_z2 / nz);
+  EXPECT_GT(rms, 0.4);
+  EXPECT_LT(rms, 2.0);
+}
+
+TEST(ThermalCalibration, QuadraticTruthChosenOverCubicOnMostSeeds) {
+  int order_right = 0, axes = 0;
+  for (std::uint64_t seed = 11; seed <= 13; ++seed) {
+    const WarmUp w = simulate_warm_up(seed, 2);
+    auto r = calib::calibrate_thermal(w.samples, w.options);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    for (int a = 0; a < 3; ++a) {
+      for (const calib::ThermalAxisFit* fit : {&r->gyro[a], &r->accel[a]}) {
+        ++axes;
+        if (fit->order == 2) ++order_right;
+      }
+    }
+  }
+  EXPECT_GE(order_right, axes * 2 / 3) << order_right << " of " << axes << " axes got order 2";
+}
+
+TEST(ThermalCalibration, LinearDefaultIsTheEarlierModel) {
+  sim::ImuModelParams p;
+  p.gyro_bias_temp_coeff = Eigen::Vector3d(1e-3, -2e-3, 3e-4);
+  p.accel_bias_temp_coeff = Eigen::Vector3d(1e-2, 0.0, -5e-3);
+  for (double T : {-10.0, 30.0, 36.0, 71.3}) {
+    const double dT = T - p.temp_start_c;
+    EXPECT_EQ(p.gyro_bias_temp(T), Eigen::Vector3d(dT * p.gyro_bias_temp_coeff));
+    EXPECT_EQ(p.accel_bias_temp(T), Eigen::Vector3d(dT * p.accel_bias_temp_coeff));
+  }
+}
+
+TEST(ThermalCalibration, FlatTemperatureIsNotDetermined) {
+  const WarmUp w = simulate_warm_up(3, 2, 900.0, 50.0, 35.0, 35.5);
+  auto r = calib::calibrate_thermal(w.samples, w.options);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_FALSE(r->determined);
+  EXPECT_NE(r->reason.find("spans"), std::string::npos) << r->reason;
+  for (const calib::ThermalAxisFit& a : r->gyro) {
+    EXPECT_FALSE(a.determined);
+    EXPECT_EQ(a.coeffs.size(), 0);
+    EXPECT_FALSE(a.reason.empty());
+    EXPECT_TRUE(std::isnan(a.change(40.0, r->reference_c)));
+  }
+}
+
+TEST(ThermalCalibration, RefusesWithoutTemperatureOrWhenTheRigMoves) {
+  WarmUp w = simulate_warm_up(5, 1, 600.0, 50.0, 20.0, 40.0);
+  std::vector<ImuSample> no_temp = w.samples;
+  for (ImuSample& s : no_temp) s.temperature = std::numeric_limits<double>::quiet_NaN();
+  auto r = calib::calibrate_thermal(no_temp, w.options);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, Errc::kInsufficientData);
+  EXPECT_NE(r.error().message.find("temperature"), std::string::npos);
+
+  // Tilted for 20 s in the middle: about 0.3 g on x.
+  for (std::size_t k = 15000; k < 16000; ++k) w.samples[k].accel.x() += 0.3 * 8192.0;
+  r = calib::calibrate_thermal(w.samples, w.options);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, Errc::kInsufficientData);
+  EXPECT_NE(r.error().message.find("moved"), std::string::npos) << r.error().message;
+}
+
+TEST(ThermalCalibration, StepProfileHoldsThenWarms) {
+  sim::ImuModelParams p;
+  p.temp_profile = sim::TemperatureProfile::kStep;
+  p.temp_start_c = 20.0;
+  p.temp_final_c = 50.0;
+  p.temp_step_time_s = 100.0;
+  p.temp_time_constant_s = 300.0;
+  EXPECT_EQ(p.temperature_c(50.0), 20.0);
+  EXPECT_EQ(p.temperature_c(100.0), 20.0);
+  EXPECT_NEAR(p.temperature_c(400.0), 50.0 - 30.0 * std::exp(-1.0), 1e-12);
+  p.temp_profile = sim::TemperatureProfile::kSoak;
+  p.temp_ramp_s = 200.0;
+  EXPECT_NEAR(p.temperature_c(100.0), 35.0, 1e-12);
+  EXPECT_EQ(p.temperature_c(500.0), 50.0);
+  auto parsed = sim::parse_temperature_profile("soak");
+  ASSERT_TRUE(parsed.ok());
+  EXPECT_EQ(*parsed, sim::TemperatureProfile::kSoak);
+  EXPECT_FALSE(sim::parse_temperature_profile("ramp").ok());
+}
+
+TEST(ThermalCalibration, PlainPolynomialFitRecoversAnExactCubic) {
+  std::vector<double> T, y;
+  for (int k = 0; k <= 40; ++k) {
+    T.push_back(20.0 + k);
+    const double d = T.back() - 30.0;
+    y.push_back(1.0 + 0.5 * d - 0.01 * d * d + 2e-4 * d * d * d);
+  }
+  const Eigen::VectorXd c = calib::fit_polynomial_plain(T, y, 30.0, 3);
+  ASSERT_EQ(c.size(), 4);
+  EXPECT_NEAR(c[0], 1.0, 1e-9);
+  EXPECT_NEAR(c[1], 0.5, 1e-9);
+  EXPECT_NEAR(c[2], -0.01, 1e-9);
+  EXPECT_NEAR(c[3], 2e-4, 1e-9);
+}
+
+}  // namespace
+}  // namespace imucal
