@@ -54,6 +54,14 @@ struct SimCommon {
   std::string bus = "spi";
   double clock_ppm = sim::kDefaultClockPpm;
   double jitter_us = 30.0;
+  // Die temperature (sim still): profile and bias-temperature coefficients drawn from the seed.
+  std::string temp_profile;
+  double temp_start_c = 30.0;
+  double temp_final_c = 36.0;
+  double temp_tau_s = 600.0;
+  double temp_ramp_s = 600.0;
+  double temp_step_s = 0.0;
+  int temp_coeff_order = 0;
 
   sim::SimImuPath path() const {
     sim::SimImuPath p;
@@ -140,6 +148,17 @@ sim::ImuModelParams make_params(const SimCommon& o, const CLI::App* cmd, bool* f
     p.accel_full_scale_g = o.accel_range_g;
     p.gyro_full_scale_dps = o.gyro_range_dps;
   }
+  if (!o.temp_profile.empty()) {
+    auto profile = sim::parse_temperature_profile(o.temp_profile);
+    if (!profile.ok()) throw CliExit{kExitUsage, "--temp-profile: " + profile.error().message};
+    p.temp_profile = *profile;
+    p.temp_start_c = o.temp_start_c;
+    p.temp_final_c = o.temp_final_c;
+    p.temp_time_constant_s = o.temp_tau_s;
+    p.temp_ramp_s = o.temp_ramp_s;
+    p.temp_step_time_s = o.temp_step_s;
+  }
+  if (o.temp_coeff_order > 0) p.draw_temperature_coefficients(o.seed, o.temp_coeff_order);
   if (o.no_noise) {
     p.accel_noise_density = p.gyro_noise_density = 0.0;
     p.accel_bias_random_walk = p.gyro_bias_random_walk = 0.0;
@@ -340,6 +359,33 @@ void add_still(CLI::App* sim) {
   add_common(cmd, *o);
   cmd->add_option("--duration", so->duration_s, "Length in s (default 600)")
       ->check(CLI::Range(1.0, 172800.0));
+  auto* profile =
+      cmd->add_option("--temp-profile", o->temp_profile,
+                      "Die temperature over the recording: warmup (first-order from --temp-start "
+                      "towards --temp-final, time constant --temp-tau), soak (linear ramp over "
+                      "--temp-ramp, then held), step (held until --temp-step-at, then first-order); "
+                      "default: the model's own warm-up, 30 to 36 deg C over 600 s")
+          ->check(CLI::IsMember({"warmup", "soak", "step"}));
+  cmd->add_option("--temp-start", o->temp_start_c, "Die temperature at the start, deg C (default 30)")
+      ->check(CLI::Range(-40.0, 85.0))
+      ->needs(profile);
+  cmd->add_option("--temp-final", o->temp_final_c, "Die temperature approached, deg C (default 36)")
+      ->check(CLI::Range(-40.0, 85.0))
+      ->needs(profile);
+  cmd->add_option("--temp-tau", o->temp_tau_s, "Time constant of warmup and step, s (default 600)")
+      ->check(CLI::Range(1.0, 1e6))
+      ->needs(profile);
+  cmd->add_option("--temp-ramp", o->temp_ramp_s, "Length of the soak's ramp, s (default 600)")
+      ->check(CLI::Range(1.0, 1e6))
+      ->needs(profile);
+  cmd->add_option("--temp-step-at", o->temp_step_s, "Time of the step, s from the start (default 0)")
+      ->check(CLI::Range(0.0, 1e6))
+      ->needs(profile);
+  cmd->add_option(
+         "--temp-coeffs", o->temp_coeff_order,
+         "Draw the bias-temperature coefficients from the seed, a polynomial of this order (1..3) "
+         "per axis (ImuModelParams::draw_temperature_coefficients); default: those of --truth, or none")
+      ->check(CLI::Range(1, 3));
   cmd->callback([o, so, cmd]() {
     so->tremor.enabled = o->tremor;
     auto traj = take(sim::make_still(*so, o->seed), "sim still");

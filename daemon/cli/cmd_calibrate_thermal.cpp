@@ -1,0 +1,256 @@
+// imucal calibrate thermal LOG: bias against die temperature from a still recording over a
+// temperature range (docs/thermal.md).
+
+#include <fmt/printf.h>
+#include <spdlog/spdlog.h>
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "app/initial_guess.hpp"
+#include "app/results/output.hpp"
+#include "app/streams.hpp"
+#include "calib/thermal_calibration.hpp"
+#include "core/text_format.hpp"
+#include "daemon/cli/calibrate_group.hpp"
+#include "daemon/cli/command.hpp"
+
+namespace imucal::cli {
+namespace {
+
+constexpr const char* kThermalMethod =
+    "bias against die temperature: polynomial of (T - T_ref), order 0..3 by AIC, generalised least "
+    "squares on time-bin means with white noise and a bias random walk (docs/thermal.md)";
+
+struct ThermalCliOptions {
+  std::string log_path;
+  std::string stream;
+  std::string yaml_path;
+  double min_span_c = 3.0;
+  double bin_s = 20.0;
+  int max_order = 3;
+  std::optional<double> reference_c;
+  bool allow_damaged = false;
+  bool force = false;
+};
+
+void emit_axis(YAML::Emitter& y, const calib::ThermalAxisFit& a, const char* unit) {
+  y << YAML::BeginMap;
+  if (!a.determined) {
+    y << YAML::Key << "determined" << YAML::Value << false;
+    y << YAML::Key << "reason" << YAML::Value << a.reason;
+    y << YAML::EndMap;
+    return;
+  }
+  y << YAML::Key << "determined" << YAML::Value << true;
+  y << YAML::Key << "order" << YAML::Value << a.order;
+  y << YAML::Key << "coefficients" << YAML::Value << YAML::Flow << YAML::BeginSeq;
+  for (Eigen::Index j = 0; j < a.coeffs.size(); ++j) y << a.coeffs[j];
+  y << YAML::EndSeq;
+  y << YAML::Key << "sigmas" << YAML::Value << YAML::Flow << YAML::BeginSeq;
+  for (Eigen::Index j = 0; j < a.coeffs.size(); ++j) y << std::sqrt(a.covariance(j, j));
+  y << YAML::EndSeq;
+  y << YAML::Key << "covariance" << YAML::Value << YAML::BeginSeq;
+  for (Eigen::Index r = 0; r < a.covariance.rows(); ++r) {
+    y << YAML::Flow << YAML::BeginSeq;
+    for (Eigen::Index c = 0; c < a.covariance.cols(); ++c) y << a.covariance(r, c);
+    y << YAML::EndSeq;
+  }
+  y << YAML::EndSeq;
+  y << YAML::Key << "aic" << YAML::Value << YAML::Flow << YAML::BeginSeq;
+  for (double b : a.aic) {
+    if (std::isfinite(b)) {
+      y << b;
+    } else {
+      y << YAML::Null;
+    }
+  }
+  y << YAML::EndSeq;
+  y << YAML::Key << "uncompensated_drift" << YAML::Value << a.uncompensated_drift;
+  y << YAML::Key << "residual_rms" << YAML::Value << a.residual_rms;
+  y << YAML::Key << "model_sigma_rms" << YAML::Value << a.model_sigma_rms;
+  y << YAML::Key << "white_noise_density" << YAML::Value << a.white_noise_density;
+  y << YAML::Key << "bias_random_walk" << YAML::Value << a.random_walk;
+  y << YAML::Key << "unit" << YAML::Value << unit;
+  y << YAML::EndMap;
+}
+
+void emit_sensor(YAML::Emitter& y, const char* name, const std::array<calib::ThermalAxisFit, 3>& axes,
+                 const char* unit, const char* c0) {
+  y << YAML::Key << name << YAML::Value << YAML::BeginMap;
+  y << YAML::Key << "unit" << YAML::Value << unit;
+  y << YAML::Key << "c0" << YAML::Value << c0;
+  for (int a = 0; a < 3; ++a) {
+    y << YAML::Key << std::string(1, "xyz"[a]);
+    y << YAML::Value;
+    emit_axis(y, axes[a], unit);
+  }
+  y << YAML::EndMap;
+}
+
+std::string thermal_yaml(const calib::ThermalResult& r, const ImuStreamInfo& info,
+                         const std::string& log_path) {
+  YAML::Emitter y;
+  y.SetDoublePrecision(12);
+  y << YAML::BeginMap;
+  y << YAML::Key << "method" << YAML::Value << kThermalMethod;
+  y << YAML::Key << "log" << YAML::Value << log_path;
+  y << YAML::Key << "stream" << YAML::Value << info.name;
+  y << YAML::Key << "input_units" << YAML::Value << imu_units_name(info.units);
+  y << YAML::Key << "form" << YAML::Value
+    << "b(T) = c0 + c1 (T - T_ref) + c2 (T - T_ref)^2 + c3 (T - T_ref)^3 per axis, SI units per K^j, T in "
+       "deg C; correct a sample by subtracting b(T) - c0";
+  y << YAML::Key << "reference_temperature_c" << YAML::Value << r.reference_c;
+  y << YAML::Key << "reference_choice" << YAML::Value << "the middle of the range covered (or --reference)";
+  y << YAML::Key << "valid_range_c" << YAML::Value << YAML::Flow << YAML::BeginSeq << r.temp_min_c
+    << r.temp_max_c << YAML::EndSeq;
+  y << YAML::Key << "duration_s" << YAML::Value << r.duration_s;
+  y << YAML::Key << "samples" << YAML::Value << r.samples;
+  y << YAML::Key << "bins" << YAML::Value << r.bins;
+  y << YAML::Key << "bin_s" << YAML::Value << r.bin_s;
+  y << YAML::Key << "temperature_monotonic" << YAML::Value << r.temperature_monotonic;
+  y << YAML::Key << "order_criterion" << YAML::Value
+    << "least AIC = -2 ln L + 2 (order + 3), over orders 0..3 (the likelihood of the bin means under the "
+       "fitted noise)";
+  y << YAML::Key << "covariance_note" << YAML::Value
+    << "the coefficients' covariance under the fitted white noise and bias random walk of the bin means "
+       "(their ratio taken as known)";
+  emit_sensor(
+      y, "gyro", r.gyro, "rad/s",
+      "the rate at the reference temperature: bias plus the earth rate and the g-sensitivity's share");
+  emit_sensor(y, "accel", r.accel, "m/s^2",
+              "the value at the reference temperature, gravity's projection included: not a bias; only "
+              "c1..c3 describe the accelerometer's temperature dependence");
+  y << YAML::Key << "scale_against_temperature" << YAML::Value
+    << "not determined: a still recording in one attitude does not determine it";
+  y << YAML::Key << "warnings" << YAML::Value << YAML::BeginSeq;
+  for (const auto& w : r.warnings) y << w;
+  y << YAML::EndSeq;
+  y << YAML::EndMap;
+  return std::string(y.c_str()) + "\n";
+}
+
+void print_summary(const calib::ThermalResult& r, const std::string& log_path, const ImuStreamInfo& info) {
+  std::cout << "thermal model of " << log_path << " (" << info.name << ", " << r.samples << " samples, "
+            << fixed(r.duration_s, 0) << " s, " << r.bins << " bins of " << fixed(r.bin_s, 1) << " s)\n"
+            << "  die temperature " << fixed(r.temp_min_c, 2) << " to " << fixed(r.temp_max_c, 2)
+            << " deg C, reference " << fixed(r.reference_c, 2) << " deg C\n";
+  constexpr double kDegPerRad = 180.0 / 3.14159265358979323846;
+  for (int a = 0; a < 3; ++a) {
+    const auto& g = r.gyro[a];
+    std::cout << "  gyro "
+              << "xyz"[a] << ": order " << g.order << ", drift over the range "
+              << fmt::sprintf("%.4f", g.uncompensated_drift * kDegPerRad) << " deg/s, residual RMS "
+              << fmt::sprintf("%.4f", g.residual_rms * kDegPerRad) << " deg/s, model sigma "
+              << fmt::sprintf("%.4f", g.model_sigma_rms * kDegPerRad) << " deg/s\n";
+  }
+  for (int a = 0; a < 3; ++a) {
+    const auto& c = r.accel[a];
+    std::cout << "  accel "
+              << "xyz"[a] << ": order " << c.order << ", drift over the range "
+              << fmt::sprintf("%.2f", c.uncompensated_drift / kStandardGravity * 1e3) << " mg, residual RMS "
+              << fmt::sprintf("%.2f", c.residual_rms / kStandardGravity * 1e3) << " mg, model sigma "
+              << fmt::sprintf("%.2f", c.model_sigma_rms / kStandardGravity * 1e3) << " mg\n";
+  }
+}
+
+void run(const ThermalCliOptions& o) {
+  app::OutputPolicy outputs{o.force, {o.log_path}};
+  if (auto s = app::check_output(o.yaml_path, outputs); !s.ok()) fail(s.error());
+
+  Progress progress("thermal calibration", 2.0);
+  auto loaded = app::load_imu_stream(
+      o.log_path, o.stream, o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse);
+  if (!loaded.ok()) {
+    if (loaded.error().code == Errc::kCorrupt) {
+      throw CliExit{kExitInput, loaded.error().message + "; pass --allow-damaged to use what is readable"};
+    }
+    fail(loaded.error());
+  }
+  progress.update(1.0);
+  const ImuStreamInfo& info = loaded->info;
+
+  calib::ThermalOptions opt;
+  auto guess = app::nominal_guess(info, {});
+  // An SI stream needs no conversion; a raw one needs its full-scale ranges (the accelerometer's
+  // offset does not matter: c0 takes it).
+  const bool si = info.units == ImuUnits::kSi;
+  if (!si && (!guess.ok() || !guess->accel)) {
+    throw CliExit{kExitUsage,
+                  "stream " + info.name +
+                      " is in raw counts and the log gives no full-scale range to convert them to "
+                      "SI: record with the ranges in the log (imucal record writes them)"};
+  }
+  if (!si) {
+    opt.accel = *guess->accel;
+    opt.gyro = guess->gyro;
+  }
+  opt.temperature_scale = info.temperature_scale;
+  opt.temperature_offset = info.temperature_offset;
+  opt.min_span_c = o.min_span_c;
+  opt.bin_s = o.bin_s;
+  opt.max_order = o.max_order;
+  opt.reference_c = o.reference_c;
+  if (auto valid = opt.validate(); !valid.ok()) throw CliExit{kExitUsage, valid.error().message};
+
+  auto res = calib::calibrate_thermal(loaded->samples, opt);
+  progress.update(2.0);
+  progress.finish();
+  if (!res.ok()) fail(res.error(), "thermal calibration of " + o.log_path);
+  if (!res->determined) {
+    throw CliExit{kExitData, "thermal calibration of " + o.log_path + ": not determined: " + res->reason};
+  }
+  if (loaded->damaged()) {
+    res->warnings.insert(res->warnings.begin(),
+                         loaded->damage_warning() + ": calibrated from its readable part only");
+  }
+  for (const auto& w : res->warnings) spdlog::warn("{}", w);
+  if (auto s = app::write_text_file(o.yaml_path, thermal_yaml(*res, info, o.log_path), outputs); !s.ok()) {
+    fail(s.error());
+  }
+  print_summary(*res, o.log_path, info);
+  std::cout << "wrote " << o.yaml_path << "\n";
+}
+
+void setup(CLI::App& root) {
+  CLI::App* cmd = calibrate_group(root)->add_subcommand(
+      "thermal",
+      "Gyro and accelerometer bias against die temperature (polynomial, order 0..3 chosen by AIC) from a "
+      "still "
+      "recording over a temperature range: a warm-up from cold, a heat soak, holds at several temperatures");
+  auto o = std::make_shared<ThermalCliOptions>();
+  cmd->add_option(
+         "LOG", o->log_path,
+         "Session log (.imulog) of the rig standing still, untouched, while its die temperature moves")
+      ->required();
+  cmd->add_option("-o,--output", o->yaml_path, "Write the thermal model as YAML")->required();
+  cmd->add_option("--stream", o->stream, "IMU stream name (default: the first)");
+  cmd->add_option("--min-span", o->min_span_c,
+                  "Smallest span of die temperature (deg C) that determines a model (default 3)")
+      ->check(CLI::Range(0.5, 100.0));
+  cmd->add_option("--bin", o->bin_s,
+                  "Length of the time bins the samples are averaged in, s (default 20; longer for long "
+                  "recordings, at most 200 bins)")
+      ->check(CLI::Range(1.0, 3600.0));
+  cmd->add_option("--max-order", o->max_order, "Highest polynomial order tried, 0..3 (default 3)")
+      ->check(CLI::Range(0, 3));
+  cmd->add_option("--reference", o->reference_c,
+                  "Reference temperature, deg C (default: the middle of the range covered)")
+      ->check(CLI::Range(-60.0, 150.0));
+  cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");
+  cmd->add_flag("--force", o->force, "Replace the output if it exists (never the log)");
+  cmd->footer(
+      "The rig must not move: a step between 1 s means above 0.01 rad/s (gyro) or 0.1 m/s^2 (accelerometer) "
+      "is refused. Exit 4 when the log has no temperature, the rig moved, or the span is below --min-span. "
+      "Scale against temperature is not determined from one attitude.");
+  cmd->callback([o] { run(*o); });
+}
+
+const CommandRegistrar registrar(35, setup);
+
+}  // namespace
+}  // namespace imucal::cli
