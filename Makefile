@@ -30,7 +30,7 @@ build: deps $(RELEASE_DIR)/build.ninja
 DEMO_LOG := build/demo-build.log
 demo:
 	@mkdir -p build
-	@echo "make demo: installing what is missing and building $(RELEASE_DIR) (a first build takes about 15 min on 2 cores); output in $(DEMO_LOG)"
+	@echo "make demo: installing what is missing and building $(RELEASE_DIR) (a first build takes 15 min or more on 2 cores); output in $(DEMO_LOG)"
 	@$(MAKE) --no-print-directory build >$(DEMO_LOG) 2>&1 || { tail -n 30 $(DEMO_LOG); \
 	  echo "make demo: installing or building failed; the whole output is in $(DEMO_LOG)"; exit 1; }
 	@scripts/demo.sh $(RELEASE_DIR)
