@@ -15,20 +15,13 @@
 
 #include "calib/thermal_calibration.hpp"
 #include "sim/imu_error_model.hpp"
+#include "tests/support/polynomial.hpp"
 
 namespace {
 
 using namespace imucal;
 
-Eigen::Vector4d shift_poly(const Eigen::Vector4d& c, double from, double to) {
-  Eigen::Vector4d d = Eigen::Vector4d::Zero();
-  const double s = to - from;
-  const double binom[4][4] = {{1, 0, 0, 0}, {1, 1, 0, 0}, {1, 2, 1, 0}, {1, 3, 3, 1}};
-  for (int j = 0; j < 4; ++j) {
-    for (int k = 0; k <= j; ++k) d[k] += c[j] * binom[j][k] * std::pow(s, j - k);
-  }
-  return d;
-}
+using test::shift_poly;
 
 double poly_change(const Eigen::VectorXd& c, double dT) {
   double v = 0.0, p = 1.0;

@@ -11,6 +11,7 @@
 
 #include "calib/thermal_calibration.hpp"
 #include "sim/imu_error_model.hpp"
+#include "tests/support/polynomial.hpp"
 
 namespace imucal {
 namespace {
@@ -46,16 +47,7 @@ WarmUp simulate_warm_up(std::uint64_t seed, int order, double duration_s = 3600.
   return w;
 }
 
-/// The truth's polynomial (about `from`) written about `to`: sum d_k (T - to)^k.
-Eigen::Vector4d shift_poly(const Eigen::Vector4d& c, double from, double to) {
-  Eigen::Vector4d d = Eigen::Vector4d::Zero();
-  const double s = to - from;
-  const double binom[4][4] = {{1, 0, 0, 0}, {1, 1, 0, 0}, {1, 2, 1, 0}, {1, 3, 3, 1}};
-  for (int j = 0; j < 4; ++j) {
-    for (int k = 0; k <= j; ++k) d[k] += c[j] * binom[j][k] * std::pow(s, j - k);
-  }
-  return d;
-}
+using test::shift_poly;
 
 /// error / sigma of every fitted coefficient c_1..c_order against the truth (higher truth terms
 /// than fitted are not compared); empty when the fit has a lower order than the truth.
