@@ -169,6 +169,50 @@ double ThermalAxisFit::change_sigma(double temperature_c, double reference_c) co
   return std::sqrt(std::max(0.0, g.dot(covariance * g)));
 }
 
+// Every order 0..max_order of every axis at its most likely random-walk ratio lambda (a grid
+// search over lambda; the white variance and the coefficients are profiled out per lambda).
+static std::array<std::array<OrderFit, kColumns>, kAxes> fit_orders(const Eigen::MatrixXd& XY,
+                                                                    const Eigen::MatrixXd& K,
+                                                                    const Eigen::VectorXd& white,
+                                                                    int max_order, double duration) {
+  const int n = static_cast<int>(XY.rows());
+  std::array<std::array<OrderFit, kColumns>, kAxes> fits{};
+  std::vector<double> lambdas{0.0};
+  for (double x = -3.0; x <= 6.0 + 1e-9; x += 0.25) lambdas.push_back(std::pow(10.0, x) / duration);
+  for (double lambda : lambdas) {
+    Eigen::MatrixXd V = lambda * K;
+    V.diagonal() += white;
+    const Eigen::LLT<Eigen::MatrixXd> llt(V);
+    if (llt.info() != Eigen::Success) continue;
+    const Eigen::MatrixXd Z = llt.matrixL().solve(XY);
+    const double log_det = 2.0 * llt.matrixLLT().diagonal().array().log().sum();
+    for (int p = 0; p <= max_order; ++p) {
+      const Eigen::MatrixXd Xw = Z.leftCols(p + 1);
+      const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Xw);
+      if (qr.rank() < p + 1) continue;
+      for (int a = 0; a < kAxes; ++a) {
+        const Eigen::VectorXd yw = Z.col(kColumns + a);
+        const Eigen::VectorXd beta = qr.solve(yw);
+        const double rss = (yw - Xw * beta).squaredNorm();
+        if (!(rss > 0.0)) continue;
+        const double ll = -0.5 * n * (std::log(2.0 * std::numbers::pi * rss / n) + 1.0) - 0.5 * log_det;
+        OrderFit& f = fits[a][p];
+        if (ll > f.log_likelihood) {
+          f.ok = true;
+          f.log_likelihood = ll;
+          f.lambda = lambda;
+          f.rss = rss;
+          f.beta = beta;
+          f.information = Xw.transpose() * Xw;
+          f.residual = XY.col(kColumns + a) - XY.leftCols(p + 1) * beta;
+        }
+      }
+    }
+  }
+
+  return fits;
+}
+
 Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, const ThermalOptions& o) {
   IMUCAL_TRY(o.validate());
   std::vector<Point> pts;
@@ -271,40 +315,7 @@ Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, cons
   for (int k = 0; k < n; ++k) white[k] = mean_count / bins[k].count;
 
   const int max_order = std::min(o.max_order, n - 4);
-  std::array<std::array<OrderFit, kColumns>, kAxes> fits{};
-  const double duration = std::max(bins.back().t_s, 1.0);
-  std::vector<double> lambdas{0.0};
-  for (double x = -3.0; x <= 6.0 + 1e-9; x += 0.25) lambdas.push_back(std::pow(10.0, x) / duration);
-  for (double lambda : lambdas) {
-    Eigen::MatrixXd V = lambda * K;
-    V.diagonal() += white;
-    const Eigen::LLT<Eigen::MatrixXd> llt(V);
-    if (llt.info() != Eigen::Success) continue;
-    const Eigen::MatrixXd Z = llt.matrixL().solve(XY);
-    const double log_det = 2.0 * llt.matrixLLT().diagonal().array().log().sum();
-    for (int p = 0; p <= max_order; ++p) {
-      const Eigen::MatrixXd Xw = Z.leftCols(p + 1);
-      const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Xw);
-      if (qr.rank() < p + 1) continue;
-      for (int a = 0; a < kAxes; ++a) {
-        const Eigen::VectorXd yw = Z.col(kColumns + a);
-        const Eigen::VectorXd beta = qr.solve(yw);
-        const double rss = (yw - Xw * beta).squaredNorm();
-        if (!(rss > 0.0)) continue;
-        const double ll = -0.5 * n * (std::log(2.0 * std::numbers::pi * rss / n) + 1.0) - 0.5 * log_det;
-        OrderFit& f = fits[a][p];
-        if (ll > f.log_likelihood) {
-          f.ok = true;
-          f.log_likelihood = ll;
-          f.lambda = lambda;
-          f.rss = rss;
-          f.beta = beta;
-          f.information = Xw.transpose() * Xw;
-          f.residual = XY.col(kColumns + a) - XY.leftCols(p + 1) * beta;
-        }
-      }
-    }
-  }
+  const auto fits = fit_orders(XY, K, white, max_order, std::max(bins.back().t_s, 1.0));
 
   double dt_s = r.duration_s / std::max<double>(1.0, static_cast<double>(pts.size()) - 1.0);
   for (int a = 0; a < kAxes; ++a) {
