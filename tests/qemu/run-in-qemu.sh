@@ -6,15 +6,22 @@
 #
 #   run-in-qemu.sh [--module "NAME [PARAM=VALUE ...]"]... [--timeout SECONDS] [--cwd DIR] -- CMD [ARG...]
 #
+# A --module the kernel does not have but tests/qemu/build-kmod.sh has a recipe for (gpio-sim)
+# is built once per kernel version out of tree from Debian's linux-source against the kernel's
+# linux-headers, cached beside the kernel and installed into its module tree; configfs is
+# mounted at /sys/kernel/config in the guest whenever it is loaded.
+#
 # Exit status: the command's own exit status when it ran in the guest;
-#   77  the harness cannot run here (no QEMU, busybox-static, cpio or kmod; the kernel package
-#       cannot be fetched) -- reported as a skip by ctest (SKIP_RETURN_CODE 77);
+#   77  the harness cannot run here (no QEMU, busybox-static, cpio or kmod; the kernel package,
+#       or the packages an out-of-tree module is built from, cannot be fetched) -- reported as
+#       a skip by ctest (SKIP_RETURN_CODE 77);
 #   124 the guest did not finish within the timeout;
 #   125 the guest booted but the command's exit marker never appeared (a module failed to
 #       load, the 9p root could not be mounted, the kernel panicked: see the console log).
 #
 # Environment:
-#   IMUCAL_QEMU_CACHE    cache for the kernel package (default ~/.cache/imucal/qemu)
+#   IMUCAL_QEMU_CACHE    cache for the kernel package and the modules built for it
+#                        (default ~/.cache/imucal/qemu)
 #   IMUCAL_QEMU_KERNEL   kernel package name to use instead of the newest linux-image-6.1.0-*-amd64
 #   IMUCAL_QEMU_VERBOSE  1: show the whole console output, not only the command's output
 set -euo pipefail
@@ -32,7 +39,7 @@ while [ $# -gt 0 ]; do
     --timeout) timeout_s=$2; shift 2 ;;
     --cwd) cwd=$2; shift 2 ;;
     --) shift; break ;;
-    -h|--help) sed -n '2,22p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,28p' "$0"; exit 0 ;;
     *) die "unknown option '$1' (see --help)" ;;
   esac
 done
@@ -108,6 +115,48 @@ kver=$(ls "$tree/lib/modules" | head -n 1)
 vmlinuz="$tree/boot/vmlinuz-$kver"
 [ -f "$vmlinuz" ] || die "no kernel image at $vmlinuz (delete $tree and retry)"
 
+# --- modules the kernel lacks: built out of tree, once per kernel version ---------------------
+# Cached as $cache/kmod/<kernel version>/NAME.ko with the build script's checksum beside it (a
+# changed recipe builds again), and installed into the kernel's tree under extra/ so that
+# modprobe finds it and its dependencies like any other module.
+here=$(cd "$(dirname "$0")" && pwd)
+ensure_module() {  # ensure_module NAME; runs under the cache lock
+  local name=$1
+  "$here/build-kmod.sh" --knows "$name" || return 0  # the kernel's own: add_module finds it
+  local extra=$tree/lib/modules/$kver/extra/$name.ko
+  # A kernel that ships the module needs no build.
+  if [ ! -f "$extra" ] && modprobe -d "$tree" -S "$kver" --show-depends "$name" >/dev/null 2>&1; then
+    return 0
+  fi
+  local dir=$cache/kmod/$kver ko recipe
+  ko=$dir/$name.ko
+  recipe=$(sha256sum "$here/build-kmod.sh" | cut -d' ' -f1)
+  if [ ! -f "$ko" ] || [ "$(cat "$ko.recipe" 2>/dev/null)" != "$recipe" ]; then
+    mkdir -p "$dir"
+    local bwork status=0
+    bwork=$(mktemp -d "$cache/kmod-build.XXXXXX")
+    "$here/build-kmod.sh" "$name" "$kver" "$bwork" "$ko" || status=$?
+    rm -rf "$bwork"
+    [ "$status" = 0 ] || return "$status"
+    echo "$recipe" >"$ko.recipe"
+  fi
+  if ! cmp -s "$ko" "$extra"; then
+    mkdir -p "$(dirname "$extra")" && cp "$ko" "$extra" && depmod -b "$tree" "$kver" || return 1
+  fi
+}
+for spec in "${modules[@]}"; do
+  name=${spec%% *}
+  flock 9
+  status=0
+  ensure_module "$name" || status=$?
+  flock -u 9
+  case "$status" in
+    0) ;;
+    "$SKIP") skip "module $name cannot be built for kernel $kver (reason above)" ;;
+    *) die "building module $name for kernel $kver failed (log above)" ;;
+  esac
+done
+
 # --- initramfs --------------------------------------------------------------------------------
 work=$(mktemp -d "${TMPDIR:-/tmp}/imucal-qemu.XXXXXX")
 trap 'rm -rf "$work"' EXIT
@@ -174,6 +223,8 @@ done
   printf '%s\n' "${load_lines[@]}"
   echo 'mount -t 9p -o trans=virtio,version=9p2000.L,ro hostroot /mnt || fail "9p mount of the host root"'
   echo 'mount -t proc proc /mnt/proc && mount -t sysfs sysfs /mnt/sys && mount -t devtmpfs devtmpfs /mnt/dev || fail "proc/sys/dev mounts"'
+  # configfs (gpio-sim's chips are made there) when a module brought it in.
+  echo 'if [ -d /mnt/sys/kernel/config ]; then mount -t configfs configfs /mnt/sys/kernel/config || fail "configfs mount"; fi'
   # The host root is read-only; a guest tmpfs on /run (host /tmp stays visible) is the
   # command's writable scratch space, named by TMPDIR.
   echo 'mount -t tmpfs tmpfs /mnt/run && mkdir -p /mnt/run/tmp || fail "tmpfs on /run"'
