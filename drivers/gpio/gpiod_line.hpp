@@ -11,8 +11,9 @@
 // cannot be on CLOCK_MONOTONIC is reported as an error rather than passed on.
 //
 // The uAPI v1 has no event sequence numbers: `sequence` counts the edges this line has read,
-// so edges lost in the kernel's event queue (16 entries) do not show as gaps there; the time
-// reconstruction sees them as a missing period instead.
+// so edges lost in the kernel's event queue (16 entries) do not show as gaps there and nothing
+// counts them (docs/testing-devices.md: under QEMU the time reconstruction then ties later edges
+// to older samples).
 
 #include <memory>
 #include <string>
