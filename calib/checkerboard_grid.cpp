@@ -19,8 +19,10 @@ constexpr int kBlurSize = 7;  // 2.5 sigma each way (OpenCV's default, 9, costs 
 /// apart, behind 0.7 px of lens blur. Boards in use differ by 50-200 levels.
 constexpr double kMinContrast = 16.0;
 /// At most this many junctions, the strongest (a cap on the cost in busy scenes: each is tried
-/// as a seed; 1000 found every board that 1500 did on the frames of docs/benchmarks.md).
-constexpr std::size_t kMaxJunctions = 1000;
+/// as a seed; 1000 found every board that 1500 did on the frames of docs/benchmarks.md, and
+/// 700 and 500 every board that 1000 did, but 500 loses the dim board among crossing bars of
+/// test CheckerboardGrid.FindsABoardAmongCrossingBars).
+constexpr std::size_t kMaxJunctions = 700;
 /// The maxima search looks at about this many of a busy frame's strongest pixels (a maximum
 /// and its neighbours above the floor are about 8 pixels).
 constexpr std::size_t kBusyPixels = 16 * kMaxJunctions;
@@ -55,6 +57,10 @@ constexpr float kMaxWithinDiagonal = 0.5f;
 constexpr float kEmptySquare = 0.4f;
 /// Images at least this large a side are also searched at half resolution.
 constexpr int kMinHalfSide = 64;
+/// The region of the searches after an undecided grid reaches this many squares beyond the rows
+/// and columns the grid lacks: the board's outer squares and the white margin OpenCV's quad
+/// search needs around them, with room for a square growing in perspective.
+constexpr float kRegionMarginSquares = 2.0f;
 
 struct Junction {
   cv::Point2f p;
@@ -690,6 +696,10 @@ CheckerboardGrid search(const cv::Mat& gray, int cols, int rows) {
       if (!undecided || grid.rows() * grid.cols() > out.grid_rows * out.grid_cols) {
         out.grid_rows = grid.rows();
         out.grid_cols = grid.cols();
+        out.corners.resize(static_cast<std::size_t>(grid.rows() * grid.cols()));
+        for (int r = 0; r < grid.rows(); ++r) {
+          for (int c = 0; c < grid.cols(); ++c) out.corners[r * grid.cols() + c] = grid.at(r, c);
+        }
       }
       undecided = true;
     }
@@ -720,6 +730,43 @@ int weight(CheckerboardGrid::Outcome o) {
 
 }  // namespace
 
+cv::Rect fallback_region(const CheckerboardGrid& grid, int cols, int rows, cv::Size image) {
+  const cv::Rect whole(0, 0, image.width, image.height);
+  const int gc = grid.grid_cols;
+  const int gr = grid.grid_rows;
+  if (grid.outcome != CheckerboardGrid::Outcome::kUndecided || gc < 2 || gr < 2 ||
+      grid.corners.size() != static_cast<std::size_t>(gc * gr)) {
+    return whole;
+  }
+  // The rows or columns of the board the grid lacks, the most either way round that fits (the
+  // grid may be the board's rows or its columns; one that outgrew the board lacks none).
+  int missing = 0;
+  if (gc <= cols && gr <= rows) missing = std::max({missing, cols - gc, rows - gr});
+  if (gc <= rows && gr <= cols) missing = std::max({missing, rows - gc, cols - gr});
+  // The grid's longest step between neighbours stands for the squares beyond it.
+  float step = 0.0f;
+  float x0 = grid.corners[0].x;
+  float y0 = grid.corners[0].y;
+  float x1 = x0;
+  float y1 = y0;
+  for (int r = 0; r < gr; ++r) {
+    for (int c = 0; c < gc; ++c) {
+      const cv::Point2f p = grid.corners[r * gc + c];
+      x0 = std::min(x0, p.x);
+      y0 = std::min(y0, p.y);
+      x1 = std::max(x1, p.x);
+      y1 = std::max(y1, p.y);
+      if (c + 1 < gc) step = std::max(step, length(grid.corners[r * gc + c + 1] - p));
+      if (r + 1 < gr) step = std::max(step, length(grid.corners[(r + 1) * gc + c] - p));
+    }
+  }
+  const float margin = (static_cast<float>(missing) + kRegionMarginSquares) * step;
+  const cv::Point tl(static_cast<int>(std::floor(x0 - margin)), static_cast<int>(std::floor(y0 - margin)));
+  const cv::Point br(static_cast<int>(std::ceil(x1 + margin)) + 1,
+                     static_cast<int>(std::ceil(y1 + margin)) + 1);
+  return cv::Rect(tl, br) & whole;
+}
+
 CheckerboardGrid find_checkerboard_grid(const cv::Mat& gray, int cols, int rows) {
   if (gray.empty() || gray.type() != CV_8UC1 || cols < 2 || rows < 2) {
     CheckerboardGrid out;
@@ -736,10 +783,8 @@ CheckerboardGrid find_checkerboard_grid(const cv::Mat& gray, int cols, int rows)
   cv::Mat half;
   cv::pyrDown(gray, half);
   CheckerboardGrid coarse = search(half, cols, rows);
-  if (coarse.outcome == Outcome::kFound) {
-    for (cv::Point2f& p : coarse.corners) p *= 2.0f;  // pyrDown's pixel i is centred on pixel 2i
-    return coarse;
-  }
+  for (cv::Point2f& p : coarse.corners) p *= 2.0f;  // pyrDown's pixel i is centred on pixel 2i
+  if (coarse.outcome == Outcome::kFound) return coarse;
   if (weight(coarse.outcome) > weight(fine.outcome) ||
       (coarse.outcome == fine.outcome &&
        coarse.grid_cols * coarse.grid_rows > fine.grid_cols * fine.grid_rows)) {

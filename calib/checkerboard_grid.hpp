@@ -28,6 +28,7 @@ struct CheckerboardGrid {
   Outcome outcome = Outcome::kNone;
   /// kFound: cols * rows corners, row-major (rows of `cols`), from any corner of the board in
   /// either sense (the caller orders them); the junctions' positions to about 0.3 px.
+  /// kUndecided: the largest undecided grid's grid_cols * grid_rows junctions, row-major.
   std::vector<cv::Point2f> corners;
   /// kOther: the inner corners of the whole board seen (grid_cols along the image's grid rows,
   /// which are the board's rows or its columns); kUndecided: the largest undecided grid's;
@@ -38,5 +39,12 @@ struct CheckerboardGrid {
 
 /// Searches an 8-bit grey image for the grid of a board of `cols` x `rows` inner corners.
 [[nodiscard]] CheckerboardGrid find_checkerboard_grid(const cv::Mat& gray, int cols, int rows);
+
+/// Where OpenCV's quad search looks for the board after an undecided grid: only where the
+/// board can be, the box around the grid's junctions grown on every side by the rows and
+/// columns of the board the grid lacks plus two squares (its outer squares and the margin
+/// around them), at the grid's longest step, clipped to the image. The whole image for any
+/// other outcome.
+[[nodiscard]] cv::Rect fallback_region(const CheckerboardGrid& grid, int cols, int rows, cv::Size image);
 
 }  // namespace imucal::calib

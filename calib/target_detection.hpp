@@ -46,7 +46,9 @@ namespace imucal::calib {
 /// 7: the junction grid smooths through sepFilter2D (its junctions move by hundredths of a
 ///    pixel); an AprilGrid tag is kept only with its corners on X junctions.
 /// 8: libapriltag's threshold needs 12 grey levels between a tile's brightest and darkest (5).
-inline constexpr int kTargetDetectorRevision = 8;
+/// 9: after a junction grid that stopped short, only the quad search, only in the region
+///    around the grid (no sector-based search); at most 700 junctions (1000).
+inline constexpr int kTargetDetectorRevision = 9;
 
 /// The target points one image shows.
 struct TargetObservation {
@@ -78,7 +80,7 @@ struct GrayView {
 
 /// OpenCV's two checkerboard detectors (docs/targets.md compares them).
 enum class CheckerboardMethod {
-  kClassic,      // tracking, the junction grid, findChessboardCorners, findChessboardCornersSB; cornerSubPix
+  kClassic,      // tracking, the junction grid, findChessboardCorners around it; cornerSubPix
   kSectorBased,  // findChessboardCornersSB (ACCURACY) alone, no further refinement
 };
 

@@ -590,6 +590,59 @@ TEST(CheckerboardGrid, FindsABoardAmongCrossingBars) {
   expect_full_board(*det, f, 0.5, "a board among crossing bars");
 }
 
+// A grid that stops at a lost junction (glare on one corner) leaves the board to OpenCV's quad
+// search, which looks only in the region where the rest of the board can be: the grid's box
+// grown by the rows it lacks and two squares, not the whole image (on a 1280 x 720 photograph
+// the searches after such a grid cost 300 ms before they were bounded: docs/benchmarks.md).
+TEST(CheckerboardGrid, AGridStoppedAtALostJunctionIsSearchedOnlyAroundIt) {
+  const TargetDescription t = checkerboard(7, 6);
+  auto r = make_renderer(radtan_camera(), t, 1.0);
+  auto det = make_detector(t);
+  ASSERT_TRUE(r && det);
+  sim::Rng rng(5);
+  Frame f = render(*r, board_pose(t, 0.2, Eigen::Vector3d(0.2, -0.1, 0.0), 1.0, 0.1, 0.05), &rng);
+  ASSERT_EQ(f.truth.visible_count, t.point_count());
+  const CheckerboardGrid whole = find_checkerboard_grid(f.image, t.cols, t.rows);
+  ASSERT_EQ(whole.outcome, CheckerboardGrid::Outcome::kFound);
+  EXPECT_EQ(fallback_region(whole, t.cols, t.rows, f.image.size()),
+            cv::Rect(0, 0, f.image.cols, f.image.rows));
+  // Glare on one inner corner of the last row: its squares at a seventh of their contrast
+  // within half a square of it. Its saddle is then a fiftieth of its neighbours' and the grid
+  // stops short of it; OpenCV's threshold still splits its squares.
+  const double square = (f.truth.px[1] - f.truth.px[0]).norm();
+  const Eigen::Vector2d lost = f.truth.px[5 * t.cols + 3];
+  for (int y = 0; y < f.image.rows; ++y) {
+    for (int x = 0; x < f.image.cols; ++x) {
+      if (std::hypot(x - lost.x(), y - lost.y()) > 0.5 * square) continue;
+      auto& v = f.image.at<std::uint8_t>(y, x);
+      v = cv::saturate_cast<std::uint8_t>(128.0 + (v - 128.0) / 7.0);
+    }
+  }
+  const CheckerboardGrid grid = find_checkerboard_grid(f.image, t.cols, t.rows);
+  ASSERT_EQ(grid.outcome, CheckerboardGrid::Outcome::kUndecided);
+  ASSERT_GE(2 * grid.grid_cols * grid.grid_rows, t.point_count())
+      << "the case this test is for: a large grid";
+  ASSERT_EQ(grid.corners.size(), static_cast<std::size_t>(grid.grid_cols * grid.grid_rows));
+  for (const cv::Point2f& p : grid.corners) {
+    double best = 1e9;
+    for (const Eigen::Vector2d& q : f.truth.px) best = std::min(best, std::hypot(p.x - q.x(), p.y - q.y()));
+    EXPECT_LT(best, 0.5) << "the undecided grid's junctions are the board's";
+  }
+  const cv::Rect region = fallback_region(grid, t.cols, t.rows, f.image.size());
+  std::printf("undecided grid %d x %d; region %d x %d of %d x %d\n", grid.grid_cols, grid.grid_rows,
+              region.width, region.height, f.image.cols, f.image.rows);
+  EXPECT_LT(region.area(), f.image.cols * f.image.rows / 3) << "the search after the grid is not bounded";
+  // The whole board and its outer squares are inside.
+  for (const Eigen::Vector2d& q : f.truth.px) {
+    EXPECT_TRUE(
+        region.contains(cv::Point(static_cast<int>(q.x() - square), static_cast<int>(q.y() - square))));
+    EXPECT_TRUE(
+        region.contains(cv::Point(static_cast<int>(q.x() + square), static_cast<int>(q.y() + square))));
+  }
+  // The quad search in that region finds the board: every corner, refined at full size.
+  expect_full_board(*det, f, 0.5, "a board with a lost junction");
+}
+
 // The grid says when the slower searches cannot find the board, so that they are not run.
 TEST(CheckerboardGrid, SaysWhyThereIsNoBoardToSearchFor) {
   using Outcome = CheckerboardGrid::Outcome;
