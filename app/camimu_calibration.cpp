@@ -5,6 +5,7 @@
 #include "app/camimu_calibration.hpp"
 
 #include "app/camera_calibration.hpp"
+#include "app/results/thermal_results.hpp"
 #include "app/streams.hpp"
 
 namespace imucal::app {
@@ -124,8 +125,18 @@ Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& q) {
     inputs.push_back(std::move(*in));
   }
 
+  // With a thermal model the solve sees a copy corrected to its reference temperature.
+  std::vector<ImuSample> corrected;
+  if (!q.thermal_path.empty()) {
+    corrected = loaded->samples;
+    auto applied = apply_thermal_file(q.thermal_path, corrected, loaded->info);
+    if (!applied.ok()) return applied.error().with_remedy("thermal");
+    report.thermal = applied->model;
+    report.thermal_source = q.thermal_path;
+    report.warnings.insert(report.warnings.end(), applied->warnings.begin(), applied->warnings.end());
+  }
   std::size_t saturated = 0;
-  const auto samples = camimu_samples(loaded->samples, loaded->info, &saturated);
+  const auto samples = camimu_samples(report.thermal ? corrected : loaded->samples, loaded->info, &saturated);
   report.imu_samples = samples.size();
   if (saturated > 0) {
     report.warnings.push_back(std::to_string(saturated) +

@@ -24,6 +24,7 @@
 #include "core/progress.hpp"
 #include "core/result.hpp"
 #include "core/target.hpp"
+#include "core/thermal_model.hpp"
 
 namespace imucal::app {
 
@@ -45,6 +46,9 @@ struct CamImuRequest {
   /// and fixed blocks (app::imu_prior).
   std::optional<NamedCalibration> imu_intrinsics;
   std::optional<GsensInput> gsens;
+  /// A thermal model (calibrate thermal -o): the IMU samples are corrected to its reference
+  /// temperature before the solve; empty: none.
+  std::string thermal_path;
   /// Model, spline, noise weights, fixed blocks (merged with those the priors fix), threads.
   calib::CamImuOptions options;
   std::string gravity_source;
@@ -85,6 +89,9 @@ struct CamImuReport {
   std::string imu_intrinsics_source;
   std::string gsens_source;
   std::string gravity_source;
+  /// The thermal model the IMU samples were corrected with, on the stream's input units.
+  std::optional<ThermalModel> thermal;
+  std::string thermal_source;
   calib::CamImuOptions options;  // as solved (noise, fixed blocks, initial model)
   std::vector<CamImuCameraReport> cameras;
   CamImuCalibrationResult result;

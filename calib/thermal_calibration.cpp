@@ -81,23 +81,52 @@ double first_motion_s(const std::vector<Point>& pts, const ThermalOptions& o, in
   return first;
 }
 
-std::vector<Bin> make_bins(const std::vector<Point>& pts, double bin_s) {
+/// Samples further than this many robust sigmas (1.4826 MAD) from their bin's median on any
+/// axis are left out of the bin's mean: single-sample glitches (a bad bus read) would otherwise
+/// shift a mean by far more than its noise. White noise passes: 6 sigma is 2e-9 per sample.
+constexpr double kOutlierSigmas = 6.0;
+
+double median_of(std::vector<double>& v) {
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+std::vector<Bin> make_bins(const std::vector<Point>& pts, double bin_s, std::size_t* outliers) {
   std::vector<Bin> bins;
   const double t0 = pts.front().t_s;
   std::size_t i = 0;
+  std::vector<double> values;
   while (i < pts.size()) {
     const auto index = std::floor((pts[i].t_s - t0) / bin_s);
-    Bin b;
-    const double first_t = pts[i].t_s;
-    double last_t = first_t;
-    while (i < pts.size() && std::floor((pts[i].t_s - t0) / bin_s) == index) {
-      b.t_s += pts[i].t_s - t0;
-      b.temp_c += pts[i].temp_c;
-      b.v += pts[i].v;
-      b.count += 1.0;
-      last_t = pts[i].t_s;
-      ++i;
+    std::size_t end = i;
+    while (end < pts.size() && std::floor((pts[end].t_s - t0) / bin_s) == index) ++end;
+    // The bin's median and MAD per axis.
+    Eigen::Matrix<double, kAxes, 1> median, limit;
+    for (int a = 0; a < kAxes; ++a) {
+      values.clear();
+      for (std::size_t k = i; k < end; ++k) values.push_back(pts[k].v[a]);
+      median[a] = median_of(values);
+      for (double& x : values) x = std::abs(x - median[a]);
+      const double mad = median_of(values);
+      limit[a] = mad > 0.0 ? kOutlierSigmas * 1.4826 * mad : std::numeric_limits<double>::infinity();
     }
+    Bin b;
+    double first_t = -1.0, last_t = 0.0;
+    for (std::size_t k = i; k < end; ++k) {
+      if (((pts[k].v - median).cwiseAbs().array() > limit.array()).any()) {
+        ++*outliers;
+        continue;
+      }
+      if (first_t < 0.0) first_t = pts[k].t_s;
+      last_t = pts[k].t_s;
+      b.t_s += pts[k].t_s - t0;
+      b.temp_c += pts[k].temp_c;
+      b.v += pts[k].v;
+      b.count += 1.0;
+    }
+    i = end;
+    if (b.count == 0.0) continue;
     b.t_s /= b.count;
     b.temp_c /= b.count;
     b.v /= b.count;
@@ -215,21 +244,36 @@ static std::array<std::array<OrderFit, kColumns>, kAxes> fit_orders(const Eigen:
 
 Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, const ThermalOptions& o) {
   IMUCAL_TRY(o.validate());
+  // A sensor the recording does not have at all (a gyro-only device: every value NaN) is fitted
+  // as zeros, which no order fits, and reported as not determined; otherwise a sample with a
+  // value that is not finite is left out.
+  const auto has = [&](auto member) {
+    return std::any_of(samples.begin(), samples.end(),
+                       [&](const ImuSample& s) { return (s.*member).allFinite(); });
+  };
+  const bool has_gyro = has(&ImuSample::gyro), has_accel = has(&ImuSample::accel);
   std::vector<Point> pts;
   pts.reserve(samples.size());
-  std::size_t saturated = 0;
+  std::size_t saturated = 0, not_finite = 0;
   for (const ImuSample& s : samples) {
     if (!std::isfinite(s.temperature)) continue;
     if ((s.flags & (kImuFlagAccelSaturated | kImuFlagGyroSaturated)) != 0) {
       ++saturated;
       continue;
     }
+    if ((has_gyro && !s.gyro.allFinite()) || (has_accel && !s.accel.allFinite())) {
+      ++not_finite;
+      continue;
+    }
     Point p;
     p.t_s = ns_to_s(s.t_ns);
     p.temp_c = o.temperature_scale * s.temperature + o.temperature_offset;
-    p.v.head<3>() = o.gyro.to_si(s.gyro);
-    p.v.tail<3>() = o.accel.to_si(s.accel);
+    p.v.head<3>() = has_gyro ? o.gyro.to_si(s.gyro) : Eigen::Vector3d::Zero();
+    p.v.tail<3>() = has_accel ? o.accel.to_si(s.accel) : Eigen::Vector3d::Zero();
     pts.push_back(p);
+  }
+  if (!has_gyro && !has_accel) {
+    return make_error(Errc::kInsufficientData, "the recording holds no finite gyro or accelerometer value");
   }
   if (pts.empty()) {
     return make_error(Errc::kInsufficientData,
@@ -255,11 +299,19 @@ Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, cons
   r.samples = pts.size();
   r.bin_s = std::max(o.bin_s, r.duration_s / o.max_bins);
   if (saturated > 0) r.warnings.push_back(std::to_string(saturated) + " saturated samples left out");
-  const std::vector<Bin> bins = make_bins(pts, r.bin_s);
+  if (not_finite > 0)
+    r.warnings.push_back(std::to_string(not_finite) + " samples with a value that is not finite left out");
+  std::size_t outliers = 0;
+  const std::vector<Bin> bins = make_bins(pts, r.bin_s, &outliers);
+  if (outliers > 0) {
+    r.warnings.push_back(std::to_string(outliers) + " samples more than " + fixed(kOutlierSigmas, 0) +
+                         " robust sigmas from their bin's median (glitches) left out of the bin means");
+  }
   const int n = static_cast<int>(bins.size());
   r.bins = n;
   r.temp_min_c = r.temp_max_c = bins.front().temp_c;
   for (const Bin& b : bins) {
+    r.bin_means.push_back({b.t_s, b.temp_c, b.v.head<3>(), b.v.tail<3>(), static_cast<std::size_t>(b.count)});
     r.temp_min_c = std::min(r.temp_min_c, b.temp_c);
     r.temp_max_c = std::max(r.temp_max_c, b.temp_c);
   }
@@ -328,6 +380,10 @@ Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, cons
       out.aic[p] = -2.0 * fits[a][p].log_likelihood + 2.0 * (p + 3);
       if (best < 0 || out.aic[p] < out.aic[best]) best = p;
     }
+    if (!(a < 3 ? has_gyro : has_accel)) {
+      out.reason = a < 3 ? "the recording has no gyro values" : "the recording has no accelerometer values";
+      continue;
+    }
     if (best < 0) {
       out.reason = "no order could be fitted (the bin means are degenerate)";
       continue;
@@ -372,6 +428,24 @@ Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, cons
         "several temperatures, or a warm-up and a cool-down, separate them better");
   }
   return r;
+}
+
+ThermalModel thermal_model(const ThermalResult& r) {
+  ThermalModel m;
+  m.reference_c = r.reference_c;
+  m.min_c = r.temp_min_c;
+  m.max_c = r.temp_max_c;
+  for (int a = 0; a < 6; ++a) {
+    const ThermalAxisFit& f = a < 3 ? r.gyro[a] : r.accel[a - 3];
+    ThermalAxisModel& out = a < 3 ? m.gyro[a] : m.accel[a - 3];
+    out.determined = f.determined;
+    out.reason = f.reason;
+    if (!f.determined) continue;
+    // c_0 is the value at T_ref (for the accelerometer with gravity's projection): not a change.
+    out.coeffs = f.coeffs.tail(f.order);
+    out.sigma = f.covariance.diagonal().tail(f.order).cwiseSqrt();
+  }
+  return m;
 }
 
 Eigen::VectorXd fit_polynomial_plain(std::span<const double> temperature_c, std::span<const double> values,

@@ -24,6 +24,7 @@
 
 #include "core/imu.hpp"
 #include "core/result.hpp"
+#include "core/thermal_model.hpp"
 
 namespace imucal::calib {
 
@@ -82,6 +83,15 @@ struct ThermalAxisFit {
   double change_sigma(double temperature_c, double reference_c) const;
 };
 
+/// One time bin's means (SI), as fitted.
+struct ThermalBinMean {
+  double t_s = 0.0;  // mean time since the first sample
+  double temperature_c = 0.0;
+  Eigen::Vector3d gyro = Eigen::Vector3d::Zero();
+  Eigen::Vector3d accel = Eigen::Vector3d::Zero();
+  std::size_t samples = 0;
+};
+
 struct ThermalResult {
   bool determined = false;
   std::string reason;  // why not, when not determined
@@ -97,6 +107,7 @@ struct ThermalResult {
   bool temperature_monotonic = true;
   std::array<ThermalAxisFit, 3> gyro;   // rad/s
   std::array<ThermalAxisFit, 3> accel;  // m/s^2
+  std::vector<ThermalBinMean> bin_means;
   std::vector<std::string> warnings;
 };
 
@@ -105,6 +116,9 @@ struct ThermalResult {
 /// determined = false and the reason.
 [[nodiscard]] Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples,
                                                       const ThermalOptions& options);
+
+/// The model to apply and store (SI): c_1..c_p of each determined axis with their sigmas.
+ThermalModel thermal_model(const ThermalResult& result);
 
 /// Polynomial of order p in (T - reference) by least squares on the given points, no weights and
 /// no uncertainty: c_0..c_p (used to compare with PX4's thermal calibration).

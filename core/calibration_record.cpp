@@ -48,6 +48,18 @@ json sigma_json(const ImuSigmaRecord& s) {
   return j;
 }
 
+json thermal_axes_json(const std::array<ThermalAxisModel, 3>& axes) {
+  json a = json::array();
+  for (const ThermalAxisModel& m : axes) {
+    if (m.determined) {
+      a.push_back({{"order", m.coeffs.size()}, {"coeffs", vec_json(m.coeffs)}, {"sigma", vec_json(m.sigma)}});
+    } else {
+      a.push_back({{"order", nullptr}, {"reason", m.reason}});
+    }
+  }
+  return a;
+}
+
 /// Reading the JSON form: every problem names the key.
 class Reader {
  public:
@@ -155,12 +167,56 @@ Status read_sigma(const json& j, ImuSigmaRecord& s) {
   return {};
 }
 
+Status read_thermal_axes(const json& t, const char* key, std::array<ThermalAxisModel, 3>& out) {
+  const std::string where = std::string("thermal.") + key;
+  const auto it = t.find(key);
+  if (it == t.end() || !it->is_array() || it->size() != 3)
+    return make_error(Errc::kCorrupt, where + " must be a list of 3 axes");
+  const Reader r;
+  for (std::size_t i = 0; i < 3; ++i) {
+    const json& a = (*it)[i];
+    const std::string at = where + "[" + std::to_string(i) + "].";
+    if (!a.is_object()) return make_error(Errc::kCorrupt, at + " must be a mapping");
+    ThermalAxisModel& m = out[i];
+    const json order = a.value("order", json());
+    if (order.is_null()) {
+      m.determined = false;
+      IMUCAL_TRY(r.text(a, "reason", at, m.reason));
+      continue;
+    }
+    if (!order.is_number_integer() || order.get<int>() < 0 || order.get<int>() > 3)
+      return make_error(Errc::kCorrupt, at + "order must be 0..3 or null");
+    m.determined = true;
+    m.coeffs.resize(order.get<int>());
+    m.sigma.resize(order.get<int>());
+    IMUCAL_TRY(r.matrix(a, "coeffs", at, m.coeffs, true));
+    IMUCAL_TRY(r.matrix(a, "sigma", at, m.sigma, false));
+  }
+  return {};
+}
+
 /// Equal, with NaN equal to NaN.
 template <typename M>
 bool same(const M& a, const M& b) {
   for (Eigen::Index i = 0; i < a.size(); ++i) {
     const double x = a.data()[i], y = b.data()[i];
     if (!(x == y || (std::isnan(x) && std::isnan(y)))) return false;
+  }
+  return true;
+}
+
+bool same_thermal(const std::optional<ThermalModel>& a, const std::optional<ThermalModel>& b) {
+  if (a.has_value() != b.has_value()) return false;
+  if (!a) return true;
+  if (!same(Eigen::Vector3d(a->reference_c, a->min_c, a->max_c),
+            Eigen::Vector3d(b->reference_c, b->min_c, b->max_c)))
+    return false;
+  for (int i = 0; i < 6; ++i) {
+    const ThermalAxisModel& x = i < 3 ? a->gyro[i] : a->accel[i - 3];
+    const ThermalAxisModel& y = i < 3 ? b->gyro[i] : b->accel[i - 3];
+    if (x.determined != y.determined || x.coeffs.size() != y.coeffs.size() || !same(x.coeffs, y.coeffs) ||
+        !same(x.sigma, y.sigma))
+      return false;
   }
   return true;
 }
@@ -180,6 +236,32 @@ bool same_sigma(const ImuSigmaRecord& a, const ImuSigmaRecord& b) {
 }
 
 }  // namespace
+
+json thermal_model_json(const ThermalModel& t) {
+  return {{"form", kThermalForm},
+          {"reference_c", num(t.reference_c)},
+          {"valid_range_c", {num(t.min_c), num(t.max_c)}},
+          {"scale", t.scale},
+          {"gyro", thermal_axes_json(t.gyro)},
+          {"accel", thermal_axes_json(t.accel)}};
+}
+
+Result<ThermalModel> thermal_model_from_json(const json& t) {
+  if (!t.is_object()) return make_error(Errc::kCorrupt, "thermal must be a mapping");
+  const Reader r;
+  ThermalModel m;
+  IMUCAL_TRY(r.figure(t, "reference_c", "thermal.", m.reference_c));
+  Eigen::Vector2d range;
+  IMUCAL_TRY(r.matrix(t, "valid_range_c", "thermal.", range, true));
+  if (!std::isfinite(m.reference_c) || !(range[0] <= range[1]))
+    return make_error(Errc::kCorrupt, "thermal.reference_c must be a number and valid_range_c [min, max]");
+  m.min_c = range[0];
+  m.max_c = range[1];
+  IMUCAL_TRY(r.text(t, "scale", "thermal.", m.scale));
+  IMUCAL_TRY(read_thermal_axes(t, "gyro", m.gyro));
+  IMUCAL_TRY(read_thermal_axes(t, "accel", m.accel));
+  return m;
+}
 
 json calibration_record_json(const CalibrationRecord& rec) {
   const ImuRecord& i = rec.imu;
@@ -204,7 +286,9 @@ json calibration_record_json(const CalibrationRecord& rec) {
     files.push_back(file);
   }
   json j = {{"format", kCalibrationFormat},
-            {"version", kCalibrationRecordVersion},
+            // Version 2 only where it differs from 1: a record without a thermal model stays
+            // readable by every imucal that reads version 1.
+            {"version", rec.thermal ? kCalibrationRecordVersion : kOldestCalibrationRecordVersion},
             {"created_utc", rec.created_utc},
             {"software_version", rec.software_version},
             {"imu", imu},
@@ -212,6 +296,7 @@ json calibration_record_json(const CalibrationRecord& rec) {
             {"source", {{"files", files}, {"notes", rec.notes}}}};
   if (!rec.rig.empty()) j["rig"] = rec.rig;
   if (rec.gravity_mps2) j["gravity_mps2"] = num(*rec.gravity_mps2);
+  if (rec.thermal) j["thermal"] = thermal_model_json(*rec.thermal);
   return j;
 }
 
@@ -220,12 +305,15 @@ Result<CalibrationRecord> calibration_record_from_json(const json& j) {
     return make_error(Errc::kCorrupt, std::string("not an imucal calibration (its \"format\" is not \"") +
                                           kCalibrationFormat + "\")");
   }
-  if (j.value("version", json()) != kCalibrationRecordVersion) {
-    return make_error(
-        Errc::kCorrupt,
-        "calibration record version " +
-            j.value("version", json()).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
-            ", this imucal reads version " + std::to_string(kCalibrationRecordVersion));
+  const json version = j.value("version", json());
+  if (!version.is_number_integer() || version.get<int>() < kOldestCalibrationRecordVersion ||
+      version.get<int>() > kCalibrationRecordVersion) {
+    return make_error(Errc::kCorrupt,
+                      "calibration record version " +
+                          version.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
+                          ", this imucal reads versions " + std::to_string(kOldestCalibrationRecordVersion) +
+                          " to " + std::to_string(kCalibrationRecordVersion) +
+                          " (a newer imucal wrote it: update imucal)");
   }
   const Reader r;
   CalibrationRecord rec;
@@ -269,6 +357,11 @@ Result<CalibrationRecord> calibration_record_from_json(const json& j) {
     IMUCAL_TRY(r.figure(j, "gravity_mps2", "", g));
     rec.gravity_mps2 = g;
   }
+  if (j.contains("thermal") && !j["thermal"].is_null()) {
+    auto thermal = thermal_model_from_json(j["thermal"]);
+    if (!thermal.ok()) return thermal.error();
+    rec.thermal = std::move(*thermal);
+  }
   if (j.contains("source")) {
     const json& src = j["source"];
     if (!src.is_object()) return make_error(Errc::kCorrupt, "source must be a mapping");
@@ -296,7 +389,8 @@ bool same_calibration(const CalibrationRecord& a, const CalibrationRecord& b) {
   const ImuRecord &x = a.imu, &y = b.imu;
   if (x.stream != y.stream || x.input_units != y.input_units || x.form != y.form || x.source != y.source ||
       !same(x.model.A_a, y.model.A_a) || !same(x.model.b_a, y.model.b_a) || !same(x.model.A_g, y.model.A_g) ||
-      !same(x.model.b_g, y.model.b_g) || !same(x.model.G, y.model.G) || !same_sigma(x.sigma, y.sigma))
+      !same(x.model.b_g, y.model.b_g) || !same(x.model.G, y.model.G) || !same_sigma(x.sigma, y.sigma) ||
+      !same_thermal(a.thermal, b.thermal))
     return false;
   if (a.cameras.size() != b.cameras.size()) return false;
   for (std::size_t k = 0; k < a.cameras.size(); ++k) {

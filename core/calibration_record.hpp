@@ -5,7 +5,7 @@
 // (app/stored_calibration.hpp); adding a field touches this type, its two functions below and
 // their test (tests/core/test_calibration_record.cpp).
 //
-// JSON form (version 1):
+// JSON form (version 2 when it holds "thermal", else version 1, which every version reads):
 //   {"format": "imucal.calibration", "version": 1, "created_utc", "software_version", "rig",
 //    "imu": {"stream", "input_units", "form", "A_a", "b_a", "A_g", "b_g", "G",   (canonical form)
 //            "source": "static"|"camimu",
@@ -13,7 +13,10 @@
 //                      camimu: "S_a", "M_a", "b_a", "S_g", "M_g", "C_bg_rad", "B_g", "b_g"}},
 //    "cameras": [{"name", "stream", "T_cam_imu" (4 rows), "rotation_sigma_rad",
 //                 "translation_sigma_m", "timeshift_cam_imu_s", "timeshift_sigma_s"}],
-//    "gravity_mps2", "source": {"files": [{"path", "kind", "method", "fixed"}], "notes": [...]}}
+//    "gravity_mps2", "source": {"files": [{"path", "kind", "method", "fixed"}], "notes": [...]},
+//    "thermal" (optional): {"form", "reference_c", "valid_range_c": [min, max], "scale",
+//                           "gyro"/"accel": 3 x {"order", "coeffs" (c_1..c_order), "sigma"} or
+//                           {"order": null, "reason"}}}   (core/thermal_model.hpp, input units)
 // A figure that was not determined (NaN) is null.
 
 #include <Eigen/Core>
@@ -27,11 +30,14 @@
 #include "core/imu_calibration.hpp"
 #include "core/imu_model.hpp"
 #include "core/result.hpp"
+#include "core/thermal_model.hpp"
 
 namespace imucal {
 
 inline constexpr const char* kCalibrationFormat = "imucal.calibration";
-inline constexpr int kCalibrationRecordVersion = 1;
+inline constexpr int kCalibrationRecordVersion = 2;
+/// The oldest version still read (1: no thermal model).
+inline constexpr int kOldestCalibrationRecordVersion = 1;
 /// The canonical form's equations, as the record states them.
 inline constexpr const char* kCanonicalForm = "a = A_a (a_raw - b_a); w = A_g (w_raw - b_g) - G a";
 
@@ -83,14 +89,22 @@ struct CalibrationRecord {
   std::optional<double> gravity_mps2;
   std::vector<RecordSourceFile> files;
   std::vector<std::string> notes;
+  /// The bias against die temperature the IMU model was fitted with (its biases are those at the
+  /// model's reference temperature), in the IMU's input units; empty: none.
+  std::optional<ThermalModel> thermal;
 };
 
 /// The record's JSON form (above).
 nlohmann::json calibration_record_json(const CalibrationRecord& record);
 
-/// A record from its JSON form. kCorrupt, with the key, for another format or version, a missing
+/// A record from its JSON form (this version or an older one). kCorrupt, with the key, for
+/// another format, a newer version, a missing
 /// or malformed key, a matrix of the wrong size or a model figure that is not finite.
 [[nodiscard]] Result<CalibrationRecord> calibration_record_from_json(const nlohmann::json& json);
+
+/// The "thermal" block alone (the record's form above), as the result files embed it.
+nlohmann::json thermal_model_json(const ThermalModel& model);
+[[nodiscard]] Result<ThermalModel> thermal_model_from_json(const nlohmann::json& json);
 
 /// True when both hold the same calibration: their IMU and cameras (the creation time, software
 /// version, rig name and sources may differ). Undetermined figures compare equal.

@@ -8,10 +8,12 @@
 #include <Eigen/Core>
 #include <cstddef>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "core/imu_model.hpp"
+#include "core/thermal_model.hpp"
 #include "core/time.hpp"
 
 namespace imucal {
@@ -171,6 +173,9 @@ struct StaticCalibrationResult {
   int gyro_iterations = 0;
   StaticQuality quality;
   StaticTimings timings;
+  /// The thermal model the samples were corrected with before the fit (`--thermal`), on the
+  /// input units: the biases above are those at its reference temperature. Empty: none.
+  std::optional<ThermalModel> thermal;
   std::vector<std::string> warnings;
 };
 

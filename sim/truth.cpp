@@ -166,6 +166,8 @@ YAML::Node imu_params_to_yaml(const ImuModelParams& p) {
   a["noise_density"] = p.accel_noise_density;
   a["bias_random_walk"] = p.accel_bias_random_walk;
   a["bias_temp_coeff"] = vec(p.accel_bias_temp_coeff);
+  a["bias_temp_coeff2"] = vec(p.accel_bias_temp_coeff2);
+  a["bias_temp_coeff3"] = vec(p.accel_bias_temp_coeff3);
   a["full_scale_g"] = p.accel_full_scale_g;
   n["accel"] = a;
   YAML::Node g;
@@ -177,15 +179,22 @@ YAML::Node imu_params_to_yaml(const ImuModelParams& p) {
   g["noise_density"] = p.gyro_noise_density;
   g["bias_random_walk"] = p.gyro_bias_random_walk;
   g["bias_temp_coeff"] = vec(p.gyro_bias_temp_coeff);
+  g["bias_temp_coeff2"] = vec(p.gyro_bias_temp_coeff2);
+  g["bias_temp_coeff3"] = vec(p.gyro_bias_temp_coeff3);
   g["full_scale_dps"] = p.gyro_full_scale_dps;
   n["gyro"] = g;
   n["gravity_mps2"] = p.gravity_mps2;
   n["earth_rotation"] = p.earth_rotation;
   n["latitude_deg"] = p.latitude_deg;
   YAML::Node t;
+  t["profile"] = temperature_profile_name(p.temp_profile);
   t["start_c"] = p.temp_start_c;
   t["final_c"] = p.temp_final_c;
   t["time_constant_s"] = p.temp_time_constant_s;
+  t["ramp_s"] = p.temp_ramp_s;
+  t["step_time_s"] = p.temp_step_time_s;
+  // The bias_temp_coeff* above are of (T - reference_c)^j: the start temperature.
+  t["reference_c"] = p.temp_ref_c();
   n["temperature"] = t;
   return n;
 }
@@ -205,6 +214,8 @@ Result<ImuModelParams> imu_params_from_yaml(const YAML::Node& node, const std::s
             rd.opt_num(a, "noise_density", "imu.accel", &p.accel_noise_density) &&
             rd.opt_num(a, "bias_random_walk", "imu.accel", &p.accel_bias_random_walk) &&
             rd.opt_vec(a, "bias_temp_coeff", "imu.accel", &p.accel_bias_temp_coeff) &&
+            rd.opt_vec(a, "bias_temp_coeff2", "imu.accel", &p.accel_bias_temp_coeff2) &&
+            rd.opt_vec(a, "bias_temp_coeff3", "imu.accel", &p.accel_bias_temp_coeff3) &&
             rd.opt_int(a, "full_scale_g", "imu.accel", &p.accel_full_scale_g) &&
             rd.opt_vec(g, "scale", "imu.gyro", &p.gyro_scale) &&
             rd.opt_mat(g, "misalignment", "imu.gyro", &p.gyro_misalignment) &&
@@ -213,6 +224,8 @@ Result<ImuModelParams> imu_params_from_yaml(const YAML::Node& node, const std::s
             rd.opt_num(g, "noise_density", "imu.gyro", &p.gyro_noise_density) &&
             rd.opt_num(g, "bias_random_walk", "imu.gyro", &p.gyro_bias_random_walk) &&
             rd.opt_vec(g, "bias_temp_coeff", "imu.gyro", &p.gyro_bias_temp_coeff) &&
+            rd.opt_vec(g, "bias_temp_coeff2", "imu.gyro", &p.gyro_bias_temp_coeff2) &&
+            rd.opt_vec(g, "bias_temp_coeff3", "imu.gyro", &p.gyro_bias_temp_coeff3) &&
             rd.opt_int(g, "full_scale_dps", "imu.gyro", &p.gyro_full_scale_dps) &&
             rd.opt_num(node, "gravity_mps2", "imu", &p.gravity_mps2) &&
             rd.opt_bool(node, "earth_rotation", "imu", &p.earth_rotation) &&
@@ -228,7 +241,17 @@ Result<ImuModelParams> imu_params_from_yaml(const YAML::Node& node, const std::s
   if (ok && t) {
     ok = rd.opt_num(t, "start_c", "imu.temperature", &p.temp_start_c) &&
          rd.opt_num(t, "final_c", "imu.temperature", &p.temp_final_c) &&
-         rd.opt_num(t, "time_constant_s", "imu.temperature", &p.temp_time_constant_s);
+         rd.opt_num(t, "time_constant_s", "imu.temperature", &p.temp_time_constant_s) &&
+         rd.opt_num(t, "ramp_s", "imu.temperature", &p.temp_ramp_s) &&
+         rd.opt_num(t, "step_time_s", "imu.temperature", &p.temp_step_time_s);
+    if (ok && t["profile"]) {
+      auto profile = parse_temperature_profile(t["profile"].as<std::string>(""));
+      if (profile.ok()) {
+        p.temp_profile = *profile;
+      } else {
+        ok = rd.fail("imu.temperature.profile", profile.error().message);
+      }
+    }
   }
   if (!ok) return make_error(Errc::kCorrupt, rd.error);
   p.q_body_gyro = Eigen::Quaterniond(q[0], q[1], q[2], q[3]);

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "app/camimu_inputs.hpp"
+#include "core/calibration_record.hpp"
 #include "core/text_file.hpp"
 #include "core/version.hpp"
 
@@ -236,6 +237,7 @@ json inputs_json(const CamImuReport& r) {
             {"gyroscope_random_walk", o.noise.gyro_random_walk}}},
           {"imu_intrinsics", r.imu_intrinsics_source},
           {"gsens", r.gsens_source},
+          {"thermal", r.thermal_source},
           {"gravity_mps2", o.gravity_mps2},
           {"gravity_source", r.gravity_source},
           {"options",
@@ -575,6 +577,11 @@ std::string camimu_calibration_yaml(const CamImuReport& r) {
   root["fixed"] = string_list(res.fixed);
   root["undetermined"] = string_list(res.undetermined);
   if (!res.prior_source.empty()) root["prior_source"] = res.prior_source;
+  if (r.thermal) {
+    root["reference_temperature_c"] = r.thermal->reference_c;
+    root["thermal"] =
+        YAML::Load(thermal_model_json(*r.thermal).dump(-1, ' ', false, json::error_handler_t::replace));
+  }
   YAML::Node cams(YAML::NodeType::Map);
   for (std::size_t i = 0; i < res.cameras.size(); ++i) {
     const auto& c = res.cameras[i];
@@ -638,6 +645,10 @@ std::string camimu_result_json(const CamImuReport& r) {
                  {{"M", mat_json(k.M_gyro)}, {"A", mat_json(k.A)}, {"C_gyro_i", mat_json(k.C_gyro_i)}}}}}};
   j["gravity_w_mps2"] = vec_json(res.gravity_w);
   j["gravity_sigma_rad"] = vec_json(res.gravity_sigma_rad);
+  if (r.thermal) {
+    j["reference_temperature_c"] = r.thermal->reference_c;
+    j["thermal"] = thermal_model_json(*r.thermal);
+  }
   j["biases"] = biases;
   j["imu_signals"] = signals_json(res.signal_fits, t0);
   j["quality"] = quality_json(res.quality);

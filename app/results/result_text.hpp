@@ -6,10 +6,13 @@
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 
 #include "calib/static_calibration.hpp"
+#include "core/calibration_record.hpp"
 #include "core/imu_model.hpp"
+#include "core/thermal_model.hpp"
 
 namespace imucal::app::result_text {
 
@@ -49,6 +52,15 @@ inline json intervals_json(const calib::StaticCalibrationResult& r) {
                          {"samples", iv.samples}});
   }
   return intervals;
+}
+
+/// The thermal model the samples were corrected with (the record's "thermal" block) and its
+/// reference temperature, when there is one.
+inline void emit_thermal(YAML::Emitter& y, const std::optional<ThermalModel>& thermal) {
+  if (!thermal) return;
+  y << YAML::Key << "reference_temperature_c" << YAML::Value << thermal->reference_c;
+  y << YAML::Key << "thermal" << YAML::Value
+    << YAML::Load(thermal_model_json(*thermal).dump(-1, ' ', false, json::error_handler_t::replace));
 }
 
 inline void emit_matrix(YAML::Emitter& y, const std::string& key, const Eigen::Matrix3d& m) {

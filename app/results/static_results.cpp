@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/results/result_text.hpp"
+#include "core/calibration_record.hpp"
 #include "core/imu_model.hpp"
 #include "core/text_file.hpp"
 
@@ -85,6 +86,7 @@ std::string static_result_yaml(const calib::StaticCalibrationResult& r, const Im
   if (r.quality.before_available) emit_figures(y, "gyro_gravity_direction_before", r.quality.gyro_before);
   emit_figures(y, "gyro_gravity_direction_after", r.quality.gyro_after);
   y << YAML::EndMap;
+  emit_thermal(y, r.thermal);
   y << YAML::EndMap;
   return std::string(y.c_str()) + "\n";
 }
@@ -163,6 +165,10 @@ std::string static_result_json(const calib::StaticCalibrationResult& r, const Im
   j["quality"]["gyro_gravity_direction"] = {
       {"before", r.quality.before_available ? figures_json(r.quality.gyro_before) : json(nullptr)},
       {"after", figures_json(r.quality.gyro_after)}};
+  if (r.thermal) {
+    j["reference_temperature_c"] = r.thermal->reference_c;
+    j["thermal"] = thermal_model_json(*r.thermal);
+  }
   j["warnings"] = r.warnings;
   j["timings_s"] = {{"detector", r.timings.detector_s},
                     {"threshold_search", r.timings.threshold_search_s},

@@ -13,6 +13,7 @@
 #include "core/text_file.hpp"
 #include "core/text_format.hpp"
 #include "core/version.hpp"
+#include "core/yaml_json.hpp"
 #include "drivers/storage/storage_device.hpp"
 
 namespace imucal::app {
@@ -22,37 +23,6 @@ using nlohmann::json;
 
 constexpr const char* kStaticMethod = "static multi-position (Tedaldi 2013)";
 constexpr const char* kCamImuMethod = "continuous-time camera-IMU (Krebs 2012)";
-
-// YAML scalars as JSON: integers, then floating point (NaN as null), then booleans, else strings.
-json yaml_to_json(const YAML::Node& n) {
-  switch (n.Type()) {
-    case YAML::NodeType::Sequence: {
-      json a = json::array();
-      for (const auto& item : n) a.push_back(yaml_to_json(item));
-      return a;
-    }
-    case YAML::NodeType::Map: {
-      json o = json::object();
-      for (const auto& kv : n) o[kv.first.as<std::string>()] = yaml_to_json(kv.second);
-      return o;
-    }
-    case YAML::NodeType::Scalar: {
-      const std::string s = n.Scalar();
-      std::int64_t i = 0;
-      double d = 0;
-      bool b = false;
-      if (n.Tag() != "!" && YAML::convert<std::int64_t>::decode(n, i)) return i;
-      // A figure that could not be determined (.nan: a sigma) is null, as in result.json: the
-      // record then compares equal to itself after a write, which NaN never does.
-      if (n.Tag() != "!" && YAML::convert<double>::decode(n, d))
-        return std::isnan(d) ? json(nullptr) : json(d);
-      if (n.Tag() != "!" && YAML::convert<bool>::decode(n, b)) return b;
-      return s;
-    }
-    default:
-      return nullptr;
-  }
-}
 
 json new_payload() {
   return {
@@ -94,6 +64,7 @@ json static_payload(const json& r, const std::string& path) {
   }
   p["imu"]["sigma"] = sigma;
   if (r.contains("gravity")) p["gravity_mps2"] = r["gravity"];
+  if (r.contains("thermal")) p["thermal"] = r["thermal"];
   p["source"]["files"].push_back({{"path", path}, {"kind", "static"}, {"method", kStaticMethod}});
   return p;
 }
@@ -114,6 +85,7 @@ json camimu_payload(const json& r, const std::string& path) {
     p["cameras"].push_back(cam);
   }
   if (r.contains("gravity")) p["gravity_mps2"] = r["gravity"];
+  if (r.contains("thermal")) p["thermal"] = r["thermal"];
   json file = {{"path", path}, {"kind", "camimu"}, {"method", kCamImuMethod}};
   if (r.contains("fixed")) file["fixed"] = r["fixed"];
   p["source"]["files"].push_back(file);
@@ -189,6 +161,7 @@ CalibrationRecord calibration_record_from_static(const StaticCalibrationResult& 
                         ? r.gsens_sigma
                         : Eigen::Matrix3d(Eigen::Matrix3d::Constant(kNotDetermined));
   rec.gravity_mps2 = r.gravity_mps2;
+  rec.thermal = r.thermal;
   rec.files.push_back({path, "static", kStaticMethod, std::nullopt});
   return rec;
 }
@@ -215,6 +188,7 @@ CalibrationRecord calibration_record_from_camimu(const CamImuReport& report, con
     rec.cameras.push_back(cam);
   }
   rec.gravity_mps2 = report.options.gravity_mps2;
+  rec.thermal = report.thermal;
   rec.files.push_back({path, "camimu", kCamImuMethod, res.fixed});
   return rec;
 }
@@ -232,6 +206,12 @@ Result<CalibrationRecord> merge_calibration_records(CalibrationRecord stat, cons
     }
   }
   stat.cameras = cam.cameras;
+  if (cam.thermal && (!stat.thermal || stat.thermal->reference_c != cam.thermal->reference_c)) {
+    stat.notes.push_back(
+        "the camimu result's samples were corrected with a thermal model the static result's were not (or "
+        "with "
+        "another): the stored IMU keeps the static result's; run both with the same --thermal");
+  }
   if (!cam.files.empty()) stat.files.push_back(cam.files.front());
   std::string note = "imu from the static result; cameras from the camimu result";
   const std::vector<std::string> fixed = cam.files.empty()

@@ -16,6 +16,7 @@
 #include "app/initial_guess.hpp"
 #include "app/results/output.hpp"
 #include "app/results/static_results.hpp"
+#include "app/results/thermal_results.hpp"
 #include "app/solvers.hpp"
 #include "app/streams.hpp"
 #include "calib/static_calibration.hpp"
@@ -34,6 +35,7 @@ struct StaticCliOptions {
   bool estimate_gyro_bias = false;
   std::vector<std::string> gsens{"estimate"};
   std::string accel_model = "auto";
+  std::string thermal_path;
   double window_s = 1.0;
   double min_interval_s = 0.5;
   bool allow_damaged = false;
@@ -115,6 +117,10 @@ void print_summary(const std::string& log_path, const ImuStreamInfo& info, std::
     }
     std::cout << "]\n";
   }
+  if (res->thermal) {
+    std::cout << "  biases at " << res->thermal->reference_c
+              << " deg C: the samples were corrected to the thermal model's reference temperature\n";
+  }
   if (res->warnings.empty()) std::cout << "  no warnings\n";
 }
 
@@ -143,7 +149,16 @@ void run(const StaticCliOptions& o) {
       o.log_path, o.stream, o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse);
   if (!loaded.ok()) fail(loaded.error());
   const ImuStreamInfo& info = loaded->info;
-  const std::vector<ImuSample>& samples = loaded->samples;
+  // With --thermal the fit sees a copy corrected to the model's reference temperature.
+  std::vector<ImuSample> corrected;
+  std::optional<app::AppliedThermal> thermal;
+  if (!o.thermal_path.empty()) {
+    corrected = loaded->samples;
+    auto applied = app::apply_thermal_file(o.thermal_path, corrected, info);
+    if (!applied.ok()) fail(applied.error());
+    thermal = std::move(*applied);
+  }
+  const std::vector<ImuSample>& samples = thermal ? corrected : loaded->samples;
   const double import_s = cpu_now() - t0;
 
   app::NominalOverrides given;
@@ -166,6 +181,10 @@ void run(const StaticCliOptions& o) {
   if (loaded->damaged()) {
     res->warnings.insert(res->warnings.begin(),
                          loaded->damage_warning() + ": calibrated from its readable part only");
+  }
+  if (thermal) {
+    res->thermal = thermal->model;
+    res->warnings.insert(res->warnings.end(), thermal->warnings.begin(), thermal->warnings.end());
   }
   for (const auto& w : res->warnings) spdlog::warn("{}", w);
   spdlog::info(
@@ -221,6 +240,11 @@ void setup(CLI::App& root) {
   cmd->add_option("--window", o->window_s, "Static detector window t_w, s")->check(CLI::Range(0.05, 10.0));
   cmd->add_option("--min-interval", o->min_interval_s, "Shortest static interval used, s")
       ->check(CLI::Range(0.05, 60.0));
+  cmd->add_option("--thermal", o->thermal_path,
+                  "Correct the samples to the reference temperature of this thermal model (calibrate thermal "
+                  "-o) before fitting: the biases are then those at that temperature, and the result and a "
+                  "stored record carry the model")
+      ->check(CLI::ExistingFile);
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");
   cmd->add_option("-o,--output", o->yaml_path, "Write the result as YAML");
   cmd->add_option("--json", o->json_path, "Write the result as JSON");

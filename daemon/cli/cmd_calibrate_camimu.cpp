@@ -32,6 +32,7 @@ struct CamImuCliOptions {
   std::string target_path;
   std::string imu_path;
   std::string imu_intrinsics_path;
+  std::string thermal_path;
   std::string gsens_path;
   std::string imu_stream;
   std::string model = "auto";
@@ -89,6 +90,7 @@ app::CamImuRequest build_request(const CamImuCliOptions& o) {
     if (!c.ok()) fail(c.error(), "--imu-intrinsics");
     q.imu_intrinsics = *c;
   }
+  q.thermal_path = o.thermal_path;
   if (!o.gsens_path.empty()) {
     auto g = app::read_gsens_input(o.gsens_path);
     if (!g.ok()) fail(g.error(), "--gsens");
@@ -197,12 +199,17 @@ void print_summary(const app::CamImuReport& r, const std::string& out_dir) {
   std::printf("  noise from %s; wrote %s, %s, %s, %s in %s\n", r.noise_source.c_str(),
               app::kCamchainImucamFile, app::kCamImuImuFile, app::kCamImuCalibrationFile,
               app::kCamImuJsonFile, out_dir.c_str());
+  if (r.thermal) {
+    std::printf("  IMU biases at %.2f deg C: the samples were corrected with the thermal model %s\n",
+                r.thermal->reference_c, r.thermal_source.c_str());
+  }
   if (r.warnings.empty()) std::printf("  no warnings\n");
 }
 
 void run(const CamImuCliOptions& o) {
   app::OutputPolicy outputs{o.force, {o.log_path}};
-  for (const auto* input : {&o.target_path, &o.imu_path, &o.imu_intrinsics_path, &o.gsens_path}) {
+  for (const auto* input :
+       {&o.target_path, &o.imu_path, &o.imu_intrinsics_path, &o.gsens_path, &o.thermal_path}) {
     if (!input->empty()) outputs.inputs.push_back(*input);
   }
   outputs.inputs.insert(outputs.inputs.end(), o.camera_paths.begin(), o.camera_paths.end());
@@ -262,6 +269,9 @@ void add_options(CLI::App* cmd, CamImuCliOptions* o) {
   cmd->add_option("--gsens", o->gsens_path,
                   "Fix B_g to a g-sensitivity G (a result YAML's canonical.G, or a file with G: 3 rows of 3, "
                   "rad/s per m/s^2)");
+  cmd->add_option("--thermal", o->thermal_path,
+                  "A thermal model (calibrate thermal -o): correct the IMU samples to its reference "
+                  "temperature before the solve; the result and a stored record carry it");
   cmd->add_option("--imu-stream", o->imu_stream, "IMU stream name (default: the first)");
   cmd->add_option("--model", o->model,
                   "IMU model: auto (basic or extended, whichever the data support; the summary says why), "

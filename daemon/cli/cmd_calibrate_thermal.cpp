@@ -13,6 +13,7 @@
 
 #include "app/initial_guess.hpp"
 #include "app/results/output.hpp"
+#include "app/results/thermal_results.hpp"
 #include "app/streams.hpp"
 #include "calib/thermal_calibration.hpp"
 #include "core/text_format.hpp"
@@ -21,10 +22,6 @@
 
 namespace imucal::cli {
 namespace {
-
-constexpr const char* kThermalMethod =
-    "bias against die temperature: polynomial of (T - T_ref), order 0..3 by AIC, generalised least "
-    "squares on time-bin means with white noise and a bias random walk (docs/thermal.md)";
 
 struct ThermalCliOptions {
   std::string log_path;
@@ -37,102 +34,6 @@ struct ThermalCliOptions {
   bool allow_damaged = false;
   bool force = false;
 };
-
-void emit_axis(YAML::Emitter& y, const calib::ThermalAxisFit& a, const char* unit) {
-  y << YAML::BeginMap;
-  if (!a.determined) {
-    y << YAML::Key << "determined" << YAML::Value << false;
-    y << YAML::Key << "reason" << YAML::Value << a.reason;
-    y << YAML::EndMap;
-    return;
-  }
-  y << YAML::Key << "determined" << YAML::Value << true;
-  y << YAML::Key << "order" << YAML::Value << a.order;
-  y << YAML::Key << "coefficients" << YAML::Value << YAML::Flow << YAML::BeginSeq;
-  for (Eigen::Index j = 0; j < a.coeffs.size(); ++j) y << a.coeffs[j];
-  y << YAML::EndSeq;
-  y << YAML::Key << "sigmas" << YAML::Value << YAML::Flow << YAML::BeginSeq;
-  for (Eigen::Index j = 0; j < a.coeffs.size(); ++j) y << std::sqrt(a.covariance(j, j));
-  y << YAML::EndSeq;
-  y << YAML::Key << "covariance" << YAML::Value << YAML::BeginSeq;
-  for (Eigen::Index r = 0; r < a.covariance.rows(); ++r) {
-    y << YAML::Flow << YAML::BeginSeq;
-    for (Eigen::Index c = 0; c < a.covariance.cols(); ++c) y << a.covariance(r, c);
-    y << YAML::EndSeq;
-  }
-  y << YAML::EndSeq;
-  y << YAML::Key << "aic" << YAML::Value << YAML::Flow << YAML::BeginSeq;
-  for (double b : a.aic) {
-    if (std::isfinite(b)) {
-      y << b;
-    } else {
-      y << YAML::Null;
-    }
-  }
-  y << YAML::EndSeq;
-  y << YAML::Key << "uncompensated_drift" << YAML::Value << a.uncompensated_drift;
-  y << YAML::Key << "residual_rms" << YAML::Value << a.residual_rms;
-  y << YAML::Key << "model_sigma_rms" << YAML::Value << a.model_sigma_rms;
-  y << YAML::Key << "white_noise_density" << YAML::Value << a.white_noise_density;
-  y << YAML::Key << "bias_random_walk" << YAML::Value << a.random_walk;
-  y << YAML::Key << "unit" << YAML::Value << unit;
-  y << YAML::EndMap;
-}
-
-void emit_sensor(YAML::Emitter& y, const char* name, const std::array<calib::ThermalAxisFit, 3>& axes,
-                 const char* unit, const char* c0) {
-  y << YAML::Key << name << YAML::Value << YAML::BeginMap;
-  y << YAML::Key << "unit" << YAML::Value << unit;
-  y << YAML::Key << "c0" << YAML::Value << c0;
-  for (int a = 0; a < 3; ++a) {
-    y << YAML::Key << std::string(1, "xyz"[a]);
-    y << YAML::Value;
-    emit_axis(y, axes[a], unit);
-  }
-  y << YAML::EndMap;
-}
-
-std::string thermal_yaml(const calib::ThermalResult& r, const ImuStreamInfo& info,
-                         const std::string& log_path) {
-  YAML::Emitter y;
-  y.SetDoublePrecision(12);
-  y << YAML::BeginMap;
-  y << YAML::Key << "method" << YAML::Value << kThermalMethod;
-  y << YAML::Key << "log" << YAML::Value << log_path;
-  y << YAML::Key << "stream" << YAML::Value << info.name;
-  y << YAML::Key << "input_units" << YAML::Value << imu_units_name(info.units);
-  y << YAML::Key << "form" << YAML::Value
-    << "b(T) = c0 + c1 (T - T_ref) + c2 (T - T_ref)^2 + c3 (T - T_ref)^3 per axis, SI units per K^j, T in "
-       "deg C; correct a sample by subtracting b(T) - c0";
-  y << YAML::Key << "reference_temperature_c" << YAML::Value << r.reference_c;
-  y << YAML::Key << "reference_choice" << YAML::Value << "the middle of the range covered (or --reference)";
-  y << YAML::Key << "valid_range_c" << YAML::Value << YAML::Flow << YAML::BeginSeq << r.temp_min_c
-    << r.temp_max_c << YAML::EndSeq;
-  y << YAML::Key << "duration_s" << YAML::Value << r.duration_s;
-  y << YAML::Key << "samples" << YAML::Value << r.samples;
-  y << YAML::Key << "bins" << YAML::Value << r.bins;
-  y << YAML::Key << "bin_s" << YAML::Value << r.bin_s;
-  y << YAML::Key << "temperature_monotonic" << YAML::Value << r.temperature_monotonic;
-  y << YAML::Key << "order_criterion" << YAML::Value
-    << "least AIC = -2 ln L + 2 (order + 3), over orders 0..3 (the likelihood of the bin means under the "
-       "fitted noise)";
-  y << YAML::Key << "covariance_note" << YAML::Value
-    << "the coefficients' covariance under the fitted white noise and bias random walk of the bin means "
-       "(their ratio taken as known)";
-  emit_sensor(
-      y, "gyro", r.gyro, "rad/s",
-      "the rate at the reference temperature: bias plus the earth rate and the g-sensitivity's share");
-  emit_sensor(y, "accel", r.accel, "m/s^2",
-              "the value at the reference temperature, gravity's projection included: not a bias; only "
-              "c1..c3 describe the accelerometer's temperature dependence");
-  y << YAML::Key << "scale_against_temperature" << YAML::Value
-    << "not determined: a still recording in one attitude does not determine it";
-  y << YAML::Key << "warnings" << YAML::Value << YAML::BeginSeq;
-  for (const auto& w : r.warnings) y << w;
-  y << YAML::EndSeq;
-  y << YAML::EndMap;
-  return std::string(y.c_str()) + "\n";
-}
 
 void print_summary(const calib::ThermalResult& r, const std::string& log_path, const ImuStreamInfo& info) {
   std::cout << "thermal model of " << log_path << " (" << info.name << ", " << r.samples << " samples, "
@@ -209,7 +110,8 @@ void run(const ThermalCliOptions& o) {
                          loaded->damage_warning() + ": calibrated from its readable part only");
   }
   for (const auto& w : res->warnings) spdlog::warn("{}", w);
-  if (auto s = app::write_text_file(o.yaml_path, thermal_yaml(*res, info, o.log_path), outputs); !s.ok()) {
+  if (auto s = app::write_text_file(o.yaml_path, app::thermal_result_yaml(*res, info, o.log_path), outputs);
+      !s.ok()) {
     fail(s.error());
   }
   print_summary(*res, o.log_path, info);

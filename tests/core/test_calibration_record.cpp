@@ -54,7 +54,7 @@ TEST(CalibrationRecord, ItsJsonFormReadsBackAsTheSameRecordThroughCbor) {
   const CalibrationRecord r = a_record();
   const json j = calibration_record_json(r);
   EXPECT_EQ(j["format"], kCalibrationFormat);
-  EXPECT_EQ(j["version"], kCalibrationRecordVersion);
+  EXPECT_EQ(j["version"], 1);  // no thermal model: readable by the builds that read version 1
   // Figures that were not determined are null, never 0.
   EXPECT_TRUE(j["imu"]["sigma"]["accel"]["scale"][1].is_null());
   EXPECT_TRUE(j["cameras"][0]["translation_sigma_m"][0].is_null());
@@ -103,7 +103,8 @@ TEST(CalibrationRecord, AMalformedRecordIsRefusedNamingWhatIsWrong) {
     EXPECT_NE(r.error().message.find(says), std::string::npos) << r.error().message;
   };
   refused([](json& j) { j["format"] = "other"; }, "not an imucal calibration");
-  refused([](json& j) { j["version"] = 2; }, "version 2");
+  refused([](json& j) { j["version"] = 3; }, "version 3");
+  refused([](json& j) { j["version"] = "2"; }, "version \"2\"");
   refused([](json& j) { j.erase("imu"); }, "no imu");
   refused([](json& j) { j["imu"]["A_a"][1] = json::array({1, 2}); }, "imu.A_a");
   refused([](json& j) { j["imu"]["b_g"][0] = nullptr; }, "imu.b_g");  // a model figure must be there
@@ -112,6 +113,64 @@ TEST(CalibrationRecord, AMalformedRecordIsRefusedNamingWhatIsWrong) {
   refused([](json& j) { j["cameras"][0]["T_cam_imu"] = json::array({1, 2, 3}); }, "cam0 T_cam_imu");
   refused([](json& j) { j["imu"]["sigma"]["accel"]["bias"] = "big"; }, "imu.sigma.accel.bias");
   refused([](json& j) { j["source"]["notes"] = json::array({1}); }, "source.notes");
+}
+
+ThermalModel a_thermal_model() {
+  ThermalModel t;
+  t.reference_c = 40.0;
+  t.min_c = 21.5;
+  t.max_c = 58.25;
+  for (int i = 0; i < 3; ++i) {
+    t.gyro[i].determined = true;
+    t.gyro[i].coeffs = Eigen::Vector3d(0.02 + i, -3e-4, 1e-6);
+    t.gyro[i].sigma = Eigen::Vector3d(1e-3, 2e-5, kNotDetermined);
+    t.accel[i].determined = i != 2;
+    t.accel[i].coeffs = i == 0 ? Eigen::VectorXd(Eigen::Vector2d(1.5, -0.01)) : Eigen::VectorXd();
+    t.accel[i].sigma = i == 0 ? Eigen::VectorXd(Eigen::Vector2d(0.1, 0.001)) : Eigen::VectorXd();
+  }
+  t.accel[2].reason = "no order could be fitted";
+  return t;
+}
+
+TEST(CalibrationRecord, AThermalModelMakesItVersion2AndReadsBack) {
+  CalibrationRecord r = a_record();
+  r.thermal = a_thermal_model();
+  const json j = calibration_record_json(r);
+  EXPECT_EQ(j["version"], 2);
+  EXPECT_EQ(j["thermal"]["reference_c"], 40.0);
+  EXPECT_EQ(j["thermal"]["gyro"][1]["order"], 3);
+  EXPECT_EQ(j["thermal"]["accel"][1]["order"], 0);  // determined: no change with temperature
+  EXPECT_TRUE(j["thermal"]["accel"][2]["order"].is_null());
+  EXPECT_TRUE(j["thermal"]["gyro"][0]["sigma"][2].is_null());  // not determined, never 0
+  EXPECT_NE(j["thermal"]["form"].get<std::string>().find("T_ref"), std::string::npos);
+  auto back = calibration_record_from_json(json::from_cbor(json::to_cbor(j)));
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  ASSERT_TRUE(back->thermal);
+  EXPECT_TRUE(same_calibration(*back, r));
+  EXPECT_EQ(calibration_record_json(*back), j);
+  EXPECT_EQ(back->thermal->accel[2].reason, "no order could be fitted");
+  EXPECT_DOUBLE_EQ(back->thermal->gyro_change(50.0)[1], 1.02 * 10 - 3e-4 * 100 + 1e-6 * 1000);
+  // Clamped to the valid range.
+  EXPECT_DOUBLE_EQ(back->thermal->accel_change(80.0)[0], 1.5 * 18.25 - 0.01 * 18.25 * 18.25);
+  EXPECT_EQ(back->thermal->accel_change(80.0)[2], 0.0);
+
+  CalibrationRecord other = r;
+  other.thermal->gyro[2].coeffs[0] += 1e-9;
+  EXPECT_FALSE(same_calibration(other, r));
+  other.thermal.reset();
+  EXPECT_FALSE(same_calibration(other, r));
+
+  auto refused = [&](const std::function<void(json&)>& spoil, const std::string& says) {
+    json bad = j;
+    spoil(bad);
+    auto x = calibration_record_from_json(bad);
+    ASSERT_FALSE(x.ok()) << "accepted a thermal model whose " << says << " is wrong";
+    EXPECT_NE(x.error().message.find(says), std::string::npos) << x.error().message;
+  };
+  refused([](json& x) { x["thermal"]["gyro"][0]["order"] = 4; }, "thermal.gyro[0].order");
+  refused([](json& x) { x["thermal"]["gyro"][1]["coeffs"] = json::array({1, 2}); }, "thermal.gyro[1].coeffs");
+  refused([](json& x) { x["thermal"]["accel"].erase(2); }, "thermal.accel");
+  refused([](json& x) { x["thermal"]["valid_range_c"] = json::array({50, 20}); }, "valid_range_c");
 }
 
 TEST(CalibrationRecord, SameCalibrationLooksAtTheImuAndTheCamerasOnly) {

@@ -120,9 +120,24 @@ TEST(CliCalibrateCamimu, FixtureWithinFewSigmasOfTruth) {
   const std::string dir = scratch_dir();
   const std::string log = test::copy_fixture("camimu.imulog", dir);
   const std::string out = dir + "/out";
-  auto r = run_cli({"calibrate", "camimu", log, "--camera", camera_yaml(dir), "-o", out, "--threads", "2"});
+  // A thermal model of the same IMU (a warm-up recorded with the fixture's truth): the samples are
+  // corrected to its reference temperature, which the results state; the extrinsics and the
+  // intrinsics below do not depend on it.
+  const std::string warm = dir + "/warm.imulog", thermal = dir + "/thermal.yaml";
+  auto sim = run_cli({"sim", "still", "--seed", "5", "--truth", source_path("fixtures/camimu.truth.yaml"),
+                      "--duration", "1200", "--imu-rate", "10", "--temp-profile", "warmup", "--temp-start",
+                      "26", "--temp-final", "40", "-o", warm});
+  ASSERT_EQ(sim.exit_code, 0) << sim.err;
+  auto th = run_cli({"calibrate", "thermal", warm, "-o", thermal});
+  ASSERT_EQ(th.exit_code, 0) << th.err;
+  auto r = run_cli({"calibrate", "camimu", log, "--camera", camera_yaml(dir), "-o", out, "--threads", "2",
+                    "--thermal", thermal});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("timeshift_cam_imu"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("the samples were corrected with the thermal model"), std::string::npos) << r.out;
+  const double ref = YAML::LoadFile(thermal)["reference_temperature_c"].as<double>();
+  EXPECT_DOUBLE_EQ(YAML::LoadFile(out + "/calibration.yaml")["reference_temperature_c"].as<double>(), ref);
+  EXPECT_EQ(YAML::LoadFile(out + "/calibration.yaml")["thermal"]["gyro"].size(), 3u);
   EXPECT_NE(r.err.find("iteration"), std::string::npos) << r.err;  // the solver's progress
   const YAML::Node tcam = truth()["camera"]["cam0"];
 
@@ -131,6 +146,8 @@ TEST(CliCalibrateCamimu, FixtureWithinFewSigmasOfTruth) {
   const Eigen::Matrix4d T = matrix4(cam0["T_cam_imu"]);
   const Eigen::Matrix4d T_truth = matrix4(tcam["T_cam_imu"]);
   const json j = json::parse(read_file(out + "/result.json"));
+  EXPECT_DOUBLE_EQ(j["reference_temperature_c"].get<double>(), ref);
+  EXPECT_EQ(j["inputs"]["thermal"], thermal);
   const json& c = j["cameras"][0];
   constexpr double k = 4.0;
   expect_within("rotation", rotation_error(T.topLeftCorner<3, 3>(), T_truth.topLeftCorner<3, 3>()),

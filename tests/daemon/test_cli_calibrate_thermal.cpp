@@ -1,6 +1,8 @@
 // `imucal calibrate thermal` on a still warm-up recorded by `imucal sim still --temp-profile`:
 // the YAML's coefficients against the seed's truth within their sigmas, the reference and range,
-// and the refusal of a span too small.
+// and the refusal of a span too small. Then `calibrate static --thermal` on a static protocol
+// recorded while the same IMU warms: its biases are those at the model's reference temperature,
+// and the record `store write` keeps carries the model.
 
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
@@ -8,9 +10,13 @@
 #include <Eigen/Core>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "sim/imu_error_model.hpp"
+#include "sim/truth.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal {
@@ -84,6 +90,72 @@ TEST(CliCalibrateThermal, SpanTooSmallIsNotDetermined) {
   auto help = run_cli({"calibrate", "thermal", "--help"});
   EXPECT_EQ(help.exit_code, 0);
   EXPECT_NE(help.out.find("--min-span"), std::string::npos);
+}
+
+/// b_a, b_g (counts) of a canonical block of a result YAML.
+Eigen::Vector3d canonical_vec(const YAML::Node& y, const char* key) {
+  const YAML::Node v = y["canonical"][key];
+  return {v[0].as<double>(), v[1].as<double>(), v[2].as<double>()};
+}
+
+TEST(CliCalibrateThermal, StaticWithTheModelGivesTheBiasesAtItsReferenceAndTheStoredRecordCarriesIt) {
+  const std::string dir = test::scratch_dir();
+  const std::string warm = dir + "/warmup.imulog", thermal = dir + "/thermal.yaml";
+  auto sim = sim_warm_up(warm, "20", "60");
+  ASSERT_EQ(sim.exit_code, 0) << sim.err;
+  auto t = run_cli({"calibrate", "thermal", warm, "-o", thermal});
+  ASSERT_EQ(t.exit_code, 0) << t.err;
+  const double ref = YAML::LoadFile(thermal)["reference_temperature_c"].as<double>();
+
+  // The static protocol of the same IMU (its truth file: coefficients and warm-up from 20 deg C):
+  // the die warms by about 13 deg C while the poses are taken.
+  const std::string truth = sim::truth_path_for(warm), stat = dir + "/static.imulog";
+  auto st = run_cli({"sim", "static", "--seed", "7", "--truth", truth, "-o", stat});
+  ASSERT_EQ(st.exit_code, 0) << st.err;
+  const std::string plain = dir + "/plain.yaml", hot = dir + "/hot.yaml";
+  auto a = run_cli({"calibrate", "static", stat, "-o", plain});
+  ASSERT_EQ(a.exit_code, 0) << a.err;
+  auto b = run_cli({"calibrate", "static", stat, "--thermal", thermal, "-o", hot});
+  ASSERT_EQ(b.exit_code, 0) << b.err;
+  EXPECT_NE(b.out.find("the samples were corrected to the thermal model's reference temperature"),
+            std::string::npos)
+      << b.out;
+
+  // The truth at the reference temperature, in counts.
+  auto params = sim::load_imu_params(truth);
+  ASSERT_TRUE(params.ok()) << params.error().message;
+  sim::ImuModelParams at_ref = *params;
+  at_ref.gyro_bias += params->gyro_bias_temp(ref);
+  at_ref.accel_bias += params->accel_bias_temp(ref);
+  const CanonicalImuModel want = sim::canonical_correction(at_ref, true);
+
+  const YAML::Node yp = YAML::LoadFile(plain), yh = YAML::LoadFile(hot);
+  EXPECT_FALSE(yp["thermal"]);
+  ASSERT_TRUE(yh["thermal"]);
+  EXPECT_DOUBLE_EQ(yh["reference_temperature_c"].as<double>(), ref);
+  EXPECT_DOUBLE_EQ(yh["thermal"]["reference_c"].as<double>(), ref);
+  const Eigen::Vector3d plain_g = canonical_vec(yp, "b_g") - want.b_g,
+                        hot_g = canonical_vec(yh, "b_g") - want.b_g;
+  const Eigen::Vector3d plain_a = canonical_vec(yp, "b_a") - want.b_a,
+                        hot_a = canonical_vec(yh, "b_a") - want.b_a;
+  std::cout << "gyro bias error at " << ref << " deg C, counts: without the model " << plain_g.transpose()
+            << ", with it " << hot_g.transpose() << "\naccelerometer: without " << plain_a.transpose()
+            << ", with " << hot_a.transpose() << "\n";
+  EXPECT_LT(hot_g.norm(), 0.3 * plain_g.norm());
+  EXPECT_LT(hot_a.norm(), 0.5 * plain_a.norm());
+
+  // The stored record carries the model (version 2) and reads back.
+  const std::string config = dir + "/rig.yaml";
+  std::ofstream(config) << "name: warm-rig\nimu:\n  bus: sim\nstorage:\n  backend: file\n  path: " << dir
+                        << "/calibration.bin\n  size_bytes: 8192\n  offset_bytes: 0\n";
+  auto w = run_cli({"store", "write", "--config", config, hot});
+  ASSERT_EQ(w.exit_code, 0) << w.err;
+  auto r = run_cli({"store", "read", "--json", "--config", config});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["calibration"]["version"], 2);
+  EXPECT_DOUBLE_EQ(j["calibration"]["thermal"]["reference_c"].get<double>(), ref);
+  EXPECT_EQ(j["calibration"]["thermal"]["gyro"].size(), 3u);
 }
 
 }  // namespace

@@ -1,0 +1,75 @@
+#pragma once
+// The thermal calibration's result file (`calibrate thermal -o THERMAL.yaml`, docs/thermal.md):
+// written here, read back by `calibrate static --thermal`, `calibrate camimu --thermal` and the
+// report; and the correction of a stream's samples to the model's reference temperature.
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "calib/thermal_calibration.hpp"
+#include "core/imu.hpp"
+#include "core/result.hpp"
+#include "core/thermal_model.hpp"
+
+namespace imucal::app {
+
+inline constexpr const char* kThermalFormat = "imucal.thermal";
+
+/// The thermal model as YAML: the model per axis (c_0..c_p, sigmas, covariance, AIC, noise), the
+/// range, the warnings and the bin means it was fitted to (for the report's figure).
+std::string thermal_result_yaml(const calib::ThermalResult& result, const ImuStreamInfo& info,
+                                const std::string& log_path);
+
+/// A thermal result file read back.
+struct ThermalFile {
+  std::string path;
+  std::string log;          // the recording it was fitted from
+  std::string stream;       // its IMU stream
+  std::string input_units;  // "raw" or "si" (the model itself is in SI)
+  calib::ThermalResult result;
+  ThermalModel model;  // SI: rad/s and m/s^2 per K^j
+};
+
+/// Reads a file thermal_result_yaml wrote. kCorrupt, naming the file and the key, for anything
+/// else.
+[[nodiscard]] Result<ThermalFile> read_thermal_file(const std::string& path);
+
+/// The SI model on a stream's input units: for a raw stream every coefficient divided by the
+/// nominal conversion's scale of its axis (counts per K^j); unchanged for an SI stream.
+ThermalModel thermal_model_on_input_units(const ThermalModel& si_model, const ImuStreamInfo& info,
+                                          const AxisConversion& accel, const AxisConversion& gyro);
+
+/// What the correction did.
+struct ThermalCorrection {
+  std::size_t corrected = 0;
+  std::size_t clamped = 0;              // outside the model's range: corrected at its nearest end
+  std::size_t without_temperature = 0;  // left as they are
+  double min_c = 0.0, max_c = 0.0;      // the temperatures met
+  /// A warning for the result when some samples were clamped or had no temperature; empty if not.
+  std::string warning() const;
+};
+
+/// Subtracts b(T) - b(T_ref) from every sample with a die temperature (the stream's temperature
+/// scale and offset give deg C), `model` being on the stream's input units. The samples are the
+/// caller's copy: a log is never changed. kInsufficientData when no sample has a temperature.
+[[nodiscard]] Result<ThermalCorrection> correct_to_reference_temperature(std::vector<ImuSample>& samples,
+                                                                         const ImuStreamInfo& info,
+                                                                         const ThermalModel& model);
+
+/// A thermal file applied to a stream's samples.
+struct AppliedThermal {
+  std::string path;
+  ThermalModel model;  // on the stream's input units: what the result and the record state
+  ThermalCorrection correction;
+  std::vector<std::string> warnings;
+};
+
+/// Reads `path` and corrects `samples` (the caller's copy of `info`'s stream) to the model's
+/// reference temperature. A raw stream's model is converted with the log's nominal conversion,
+/// as `calibrate thermal` converted it. Errors name the file and say what to do.
+[[nodiscard]] Result<AppliedThermal> apply_thermal_file(const std::string& path,
+                                                        std::vector<ImuSample>& samples,
+                                                        const ImuStreamInfo& info);
+
+}  // namespace imucal::app

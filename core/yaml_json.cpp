@@ -1,0 +1,39 @@
+#include "core/yaml_json.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+
+namespace imucal {
+
+nlohmann::json yaml_to_json(const YAML::Node& n) {
+  using nlohmann::json;
+  switch (n.Type()) {
+    case YAML::NodeType::Sequence: {
+      json a = json::array();
+      for (const auto& item : n) a.push_back(yaml_to_json(item));
+      return a;
+    }
+    case YAML::NodeType::Map: {
+      json o = json::object();
+      for (const auto& kv : n) o[kv.first.as<std::string>()] = yaml_to_json(kv.second);
+      return o;
+    }
+    case YAML::NodeType::Scalar: {
+      std::int64_t i = 0;
+      double d = 0;
+      bool b = false;
+      if (n.Tag() != "!" && YAML::convert<std::int64_t>::decode(n, i)) return i;
+      // A figure that could not be determined (.nan: a sigma) is null, as in result.json: a
+      // record then compares equal to itself after a write, which NaN never does.
+      if (n.Tag() != "!" && YAML::convert<double>::decode(n, d))
+        return std::isnan(d) ? json(nullptr) : json(d);
+      if (n.Tag() != "!" && YAML::convert<bool>::decode(n, b)) return b;
+      return n.Scalar();
+    }
+    default:
+      return nullptr;
+  }
+}
+
+}  // namespace imucal
