@@ -25,6 +25,7 @@ struct BuildContext {
 [[nodiscard]] Result<Document> allan_document(const nlohmann::json& result, BuildContext& ctx);
 [[nodiscard]] Result<Document> camera_document(const nlohmann::json& result, BuildContext& ctx);
 [[nodiscard]] Result<Document> camimu_document(const nlohmann::json& result, BuildContext& ctx);
+[[nodiscard]] Result<Document> thermal_document(const nlohmann::json& result, BuildContext& ctx);
 
 /// The session log's summary (rig, recording, streams, health) as a section; errors name the log.
 /// `in_progress`: the log is still being written, so an open end is expected.

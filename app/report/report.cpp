@@ -1,6 +1,7 @@
 #include "app/report/report.hpp"
 
 #include <unistd.h>
+#include <yaml-cpp/yaml.h>
 
 #include <filesystem>
 #include <fstream>
@@ -11,7 +12,9 @@
 #include "app/report/gnuplot.hpp"
 #include "app/report/html.hpp"
 #include "app/results/output.hpp"
+#include "app/results/thermal_results.hpp"
 #include "core/text_file.hpp"
+#include "core/yaml_json.hpp"
 
 namespace imucal::app::report {
 namespace {
@@ -60,11 +63,18 @@ Result<nlohmann::json> read_result(const std::string& path) {
   try {
     return nlohmann::json::parse(*text);
   } catch (const nlohmann::json::exception&) {
-    return make_error(Errc::kCorrupt,
-                      path +
-                          " is not JSON: give the JSON of a result (calibrate static --json, "
-                          "allan --json, calibrate camera --json, or calibrate camimu's folder)");
   }
+  // The thermal model is a YAML file (calibrate thermal -o).
+  try {
+    const YAML::Node y = YAML::Load(*text);
+    if (y.IsMap() && y["format"] && y["format"].as<std::string>("") == kThermalFormat) return yaml_to_json(y);
+  } catch (const YAML::Exception&) {
+  }
+  return make_error(Errc::kCorrupt,
+                    path +
+                        " is not JSON: give the JSON of a result (calibrate static --json, allan --json, "
+                        "calibrate camera --json, calibrate camimu's folder) or a thermal model (calibrate "
+                        "thermal -o)");
 }
 
 Result<Document> build_document(ReportKind kind, const nlohmann::json& result, BuildContext& ctx) {
@@ -80,6 +90,8 @@ Result<Document> build_document(ReportKind kind, const nlohmann::json& result, B
         return camera_document(result, ctx);
       case ReportKind::kCamImu:
         return camimu_document(result, ctx);
+      case ReportKind::kThermal:
+        return thermal_document(result, ctx);
     }
   } catch (const JsonError& e) {
     return make_error(Errc::kCorrupt, ctx.result_path + ": " + e.message);
@@ -174,6 +186,8 @@ const char* report_kind_name(ReportKind kind) {
       return "camera-IMU calibration";
     case ReportKind::kCamera:
       return "camera calibration";
+    case ReportKind::kThermal:
+      return "thermal calibration";
   }
   return "unknown";
 }
@@ -187,6 +201,7 @@ Result<ReportKind> detect_report_kind(const nlohmann::json& r, const std::string
     if (r.contains("cameras") && r.contains("imu") && r.contains("biases")) return ReportKind::kCamImu;
     if (r.contains("intrinsics") && r.contains("views") && r.contains("coverage_grid"))
       return ReportKind::kCamera;
+    if (r.value("format", nlohmann::json()) == kThermalFormat) return ReportKind::kThermal;
   }
   return make_error(Errc::kCorrupt, origin +
                                         " is no result imucal writes: give the JSON of calibrate static "

@@ -126,6 +126,32 @@ TEST_F(CliReport, AllanCurvesWithFits) {
   EXPECT_GT(test::read_file(out + "/allan-accel.png").size(), 1000u);
 }
 
+TEST_F(CliReport, ThermalModelWithItsCurvesBandsAndWhatCompensationLeaves) {
+  REQUIRE_GNUPLOT();
+  const std::string out = test::scratch_dir();
+  const auto sim = run_cli({"sim", "still", "--seed", "3", "--duration", "1800", "--imu-rate", "10",
+                            "--temp-profile", "warmup", "--temp-start", "20", "--temp-final", "50",
+                            "--temp-coeffs", "2", "-o", out + "/warm.imulog"});
+  ASSERT_EQ(sim.exit_code, 0) << sim.err;
+  const auto t = run_cli({"calibrate", "thermal", out + "/warm.imulog", "-o", out + "/thermal.yaml"});
+  ASSERT_EQ(t.exit_code, 0) << t.err;
+  // The YAML itself is the report's input, and the log gives the session section.
+  const auto r = run_cli({"report", out + "/thermal.yaml", "--log", out + "/warm.imulog", "-o",
+                          out + "/thermal.html", "--png-dir", out + "/png"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("thermal calibration"), std::string::npos) << r.out;
+  const std::string html = test::read_file(out + "/thermal.html");
+  expect_page(html, 4);
+  for (const char* id : {"thermal-gyro", "thermal-gyro-after", "thermal-accel", "thermal-accel-after"}) {
+    EXPECT_NE(html.find(std::string("data-plot=\"") + id + "\""), std::string::npos) << id;
+    EXPECT_GT(test::read_file(out + "/png/" + id + ".png").size(), 1000u) << id;
+  }
+  EXPECT_NE(html.find("c<sub>1</sub> = "), std::string::npos);
+  EXPECT_NE(html.find("&plusmn;"), std::string::npos);
+  EXPECT_NE(html.find("before, "), std::string::npos);  // the RMS before and after compensation
+  EXPECT_NE(html.find("deg C (the model is valid over this range only)"), std::string::npos);
+}
+
 TEST_F(CliReport, RefusesMissingUnknownAndForeignInputs) {
   const std::string out = test::scratch_dir();
   auto r = run_cli({"report", out + "/none.json", "-o", out + "/r.html"});
