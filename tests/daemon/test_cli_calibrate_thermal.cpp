@@ -92,6 +92,17 @@ TEST(CliCalibrateThermal, SpanTooSmallIsNotDetermined) {
   EXPECT_NE(help.out.find("--min-span"), std::string::npos);
 }
 
+TEST(CliCalibrateThermal, AFileThatIsNoThermalModelIsRefusedAndNothingIsWritten) {
+  const std::string dir = test::scratch_dir();
+  const std::string out = dir + "/static.yaml";
+  auto r = run_cli({"calibrate", "static", test::source_path("fixtures/static.imulog"), "--thermal",
+                    test::source_path("fixtures/static.truth.yaml"), "-o", out});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("not a thermal model"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("calibrate thermal -o"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(out));
+}
+
 /// b_a, b_g (counts) of a canonical block of a result YAML.
 Eigen::Vector3d canonical_vec(const YAML::Node& y, const char* key) {
   const YAML::Node v = y["canonical"][key];
