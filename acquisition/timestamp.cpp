@@ -165,6 +165,7 @@ void SampleTimestamper::align(const FifoBatchTiming& batch, const Measurement& m
     count_lost_samples(batch, m, z, p);
   } else if (m.use_sequence) {
     p.edge_index = associate_edge(batch.edge_sequence, k, p);
+    p.by_sequence = true;
   }
 
   if (p.anchored) {
@@ -250,6 +251,13 @@ void SampleTimestamper::update_with_edge(double z, double r_var, Placement& p) {
   }
   ++stats_.edges_rejected;
   p.estimated = true;
+  // Edges of known samples stamped late together (an interrupt held off) arrive later than
+  // predicted by less and less, a period at a time, until they are on time again: no reason to
+  // start again from one of them.
+  const bool catching_up =
+      p.by_sequence && nu > 0.0 && consecutive_rejects_ > 0 && nu < last_rejected_nu_ - 0.5 * period_ns_;
+  last_rejected_nu_ = nu;
+  if (catching_up) return;
   if (++consecutive_rejects_ >= options_.max_consecutive_rejects) resync_after_rejects(z, nu, s, r_var, p);
 }
 

@@ -133,6 +133,7 @@ class SampleTimestamper {
     bool gap = false;              // samples were lost before the batch
     bool estimated = false;        // times extrapolated, not measured
     bool anchored = false;         // the measurement already re-anchored the state
+    bool by_sequence = false;      // the edge's sample is known from the line's edge numbers
   };
 
   Measurement measure(const FifoBatchTiming& batch) const;
@@ -181,6 +182,7 @@ class SampleTimestamper {
   double last_accepted_z_ = 0.0;
   std::int64_t last_accepted_index_ = 0;
   int consecutive_rejects_ = 0;
+  double last_rejected_nu_ = 0.0;  // the innovation of the last rejected edge
 
   // Edge-to-sample association: newest_index - edge_sequence per batch.
   bool have_sequence_ = false;

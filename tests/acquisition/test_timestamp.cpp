@@ -206,6 +206,35 @@ TEST(Timestamper, LateFirstEdgeIsRecovered) {
   EXPECT_TRUE(s.strictly_increasing);
 }
 
+// An interrupt held off for B periods: the edges of B samples are all stamped when the last of
+// them is. With a line that numbers its edges the first is a late stamp of a known sample, not
+// B - 1 lost samples (docs/acquisition.md).
+TEST(Timestamper, ABurstOfLateEdgeStampsIsNotTakenForLostSamples) {
+  for (int burst : {5, 10, 40}) {
+    SyntheticTimingOptions g;
+    g.duration_s = 12.0;
+    g.nominal_rate_hz = 200.0;
+    g.rate_offset_ppm = 0.0;
+    g.latency_mean_ns = 300'000;
+    g.latency_sigma_ns = 30'000;
+    auto timing = generate_synthetic_timing(g);
+    const std::size_t k0 = 1000;
+    const TimeNs release = timing.batches[k0 + burst - 1].timing.edge_t_ns;
+    for (int i = 0; i < burst; ++i)
+      timing.batches[k0 + i].timing.edge_t_ns = release - (burst - 1 - i) * 1000;
+    SampleTimestamper ts(options_for(g));
+    const auto s = evaluate_timestamper(ts, timing, 2.0);
+    EXPECT_EQ(ts.stats().samples_lost, 0u) << "burst of " << burst;
+    // The samples of the burst are extrapolated from the state before it; none is placed more
+    // than a period off, the rest as usual.
+    EXPECT_LT(s.max_abs_ns, 5'000'000.0) << "burst of " << burst;
+    EXPECT_LT(s.rms_ns, 300'000.0) << "burst of " << burst;
+    EXPECT_TRUE(s.strictly_increasing);
+    std::printf("  burst of %d: %llu re-anchors, rms %.1f us, max %.1f us\n", burst,
+                static_cast<unsigned long long>(ts.stats().reanchors), s.rms_ns / 1e3, s.max_abs_ns / 1e3);
+  }
+}
+
 TEST(Timestamper, EmptyFlaggedBatchFlagsTheNextSample) {
   SampleTimestamper ts({});
   std::vector<TimeNs> t(1);
