@@ -4,6 +4,8 @@
 #include <cstdint>
 #include <string>
 
+#include "core/text_file.hpp"
+
 namespace imucal {
 
 nlohmann::json yaml_to_json(const YAML::Node& n) {
@@ -33,6 +35,16 @@ nlohmann::json yaml_to_json(const YAML::Node& n) {
     }
     default:
       return nullptr;
+  }
+}
+
+Result<YAML::Node> read_yaml_file(const std::string& path) {
+  auto text = read_text_file(path, kMaxResultFileBytes);
+  if (!text.ok()) return text.error();
+  try {
+    return YAML::Load(*text);
+  } catch (const YAML::Exception& e) {
+    return make_error(Errc::kCorrupt, path + ": not valid YAML (" + std::string(e.what()) + ")");
   }
 }
 

@@ -8,6 +8,7 @@
 #include "core/calibration_record.hpp"
 #include "core/imu_model.hpp"
 #include "core/text_file.hpp"
+#include "core/yaml_json.hpp"
 
 namespace imucal::app {
 
@@ -15,14 +16,9 @@ using nlohmann::json;
 using namespace result_text;
 
 Result<Eigen::Matrix3d> read_gsens_matrix(const std::string& path) {
-  auto text = read_text_file(path, kMaxResultFileBytes);
-  if (!text.ok()) return text.error();
-  YAML::Node root;
-  try {
-    root = YAML::Load(*text);
-  } catch (const YAML::Exception& e) {
-    return make_error(Errc::kCorrupt, path + ": not valid YAML (" + std::string(e.what()) + ")");
-  }
+  auto loaded = read_yaml_file(path);
+  if (!loaded.ok()) return loaded.error();
+  const YAML::Node root = *loaded;
   YAML::Node g = root.IsMap() && root["canonical"] && root["canonical"]["G"] ? root["canonical"]["G"]
                  : root.IsMap() && root["G"]                                 ? root["G"]
                                                                              : YAML::Node();

@@ -7,6 +7,7 @@
 
 #include "app/initial_guess.hpp"
 #include "core/text_file.hpp"
+#include "core/yaml_json.hpp"
 #include "core/text_format.hpp"
 
 namespace imucal::app {
@@ -218,14 +219,9 @@ struct ThermalReader {
 }  // namespace
 
 Result<ThermalFile> read_thermal_file(const std::string& path) {
-  auto text = read_text_file(path, kMaxResultFileBytes);
-  if (!text.ok()) return text.error();
-  YAML::Node root;
-  try {
-    root = YAML::Load(*text);
-  } catch (const YAML::Exception& e) {
-    return make_error(Errc::kCorrupt, path + ": not valid YAML (" + std::string(e.what()) + ")");
-  }
+  auto loaded = read_yaml_file(path);
+  if (!loaded.ok()) return loaded.error();
+  const YAML::Node root = *loaded;
   if (!root.IsMap() || !root["format"] || root["format"].as<std::string>("") != kThermalFormat) {
     return make_error(Errc::kCorrupt, path + ": not a thermal model (no \"format: " + kThermalFormat +
                                           "\"): give the file `imucal calibrate thermal -o` wrote");
