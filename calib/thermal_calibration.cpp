@@ -242,8 +242,19 @@ static std::array<std::array<OrderFit, kColumns>, kAxes> fit_orders(const Eigen:
   return fits;
 }
 
-Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, const ThermalOptions& o) {
-  IMUCAL_TRY(o.validate());
+namespace {
+
+/// The samples with a temperature, in SI, sorted by time; a sensor the recording lacks
+/// entirely (a gyro-only device: every value NaN) is carried as zeros, which no order fits.
+struct Points {
+  std::vector<Point> pts;
+  bool has_gyro = true, has_accel = true;
+  std::size_t saturated = 0, not_finite = 0;
+};
+
+Result<Points> gather_points(std::span<const ImuSample> samples, const ThermalOptions& o) {
+  Points out;
+  std::vector<Point>& pts = out.pts;
   // A sensor the recording does not have at all (a gyro-only device: every value NaN) is fitted
   // as zeros, which no order fits, and reported as not determined; otherwise a sample with a
   // value that is not finite is left out.
@@ -252,9 +263,10 @@ Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, cons
                        [&](const ImuSample& s) { return (s.*member).allFinite(); });
   };
   const bool has_gyro = has(&ImuSample::gyro), has_accel = has(&ImuSample::accel);
-  std::vector<Point> pts;
+  out.has_gyro = has_gyro;
+  out.has_accel = has_accel;
   pts.reserve(samples.size());
-  std::size_t saturated = 0, not_finite = 0;
+  std::size_t &saturated = out.saturated, &not_finite = out.not_finite;
   for (const ImuSample& s : samples) {
     if (!std::isfinite(s.temperature)) continue;
     if ((s.flags & (kImuFlagAccelSaturated | kImuFlagGyroSaturated)) != 0) {
@@ -293,6 +305,90 @@ Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, cons
                           " s from the start): record the warm-up with the rig standing still on a "
                           "firm surface, untouched");
   }
+  return out;
+}
+
+/// One axis's result from its chosen order's fit (in u = (T - T_ref) / h): the coefficients and
+/// their covariance, the noise model, the drift and the model's sigma over the range.
+void set_axis_fit(ThermalAxisFit& out, const OrderFit& f, int best, int n, double h, double mean_count,
+                  double dt_s, const ThermalResult& r) {
+  // The scale of V from the whitened residuals, with the coefficients' degrees of freedom; the
+  // noise ratio lambda is taken as known in the covariance.
+  const double s2 = f.rss / std::max(1, n - best - 1);
+  Eigen::MatrixXd cov_u = s2 * f.information.inverse();
+  Eigen::VectorXd scale(best + 1);
+  for (int j = 0; j <= best; ++j) scale[j] = std::pow(h, -j);
+  out.coeffs = scale.cwiseProduct(f.beta);
+  out.covariance = scale.asDiagonal() * cov_u * scale.asDiagonal();
+  out.order = best;
+  out.determined = true;
+  out.residual_rms = std::sqrt(f.residual.squaredNorm() / n);
+  const double white_var = f.rss / n;  // of a bin mean of mean_count samples
+  out.white_noise_density = std::sqrt(white_var * mean_count * dt_s);
+  out.random_walk = std::sqrt(f.lambda * white_var);
+  double lo = 0.0, hi = 0.0, sum_var = 0.0;
+  for (int i = 0; i < kCurvePoints; ++i) {
+    const double T = r.temp_min_c + (r.temp_max_c - r.temp_min_c) * i / (kCurvePoints - 1);
+    const double c = out.change(T, r.reference_c);
+    const double s = out.change_sigma(T, r.reference_c);
+    lo = i == 0 ? c : std::min(lo, c);
+    hi = i == 0 ? c : std::max(hi, c);
+    sum_var += s * s / kCurvePoints;
+  }
+  out.uncompensated_drift = hi - lo;
+  out.model_sigma_rms = std::sqrt(sum_var);
+}
+
+/// The fit's inputs: the design [1, u, u^2, u^3 | bin means] in u = (T - T_ref) / h, and the
+/// covariance of the bin means in units of the white variance of a mean of mean_count samples,
+/// V = diag(white) + lambda K.
+struct Design {
+  double h = 1.0;
+  double mean_count = 0.0;
+  Eigen::MatrixXd XY, K;
+  Eigen::VectorXd white;
+};
+
+Design make_design(const std::vector<Bin>& bins, const ThermalResult& r) {
+  const int n = static_cast<int>(bins.size());
+  Design d;
+  // The design in u = (T - T_ref) / h, so that the columns are of similar size.
+  const double h = d.h =
+      std::max(std::abs(r.temp_max_c - r.reference_c), std::abs(r.temp_min_c - r.reference_c));
+  Eigen::MatrixXd& XY = d.XY;
+  XY.resize(n, kColumns + kAxes);
+  double& mean_count = d.mean_count;
+  for (int k = 0; k < n; ++k) {
+    const double u = (bins[k].temp_c - r.reference_c) / h;
+    double p = 1.0;
+    for (int j = 0; j < kColumns; ++j, p *= u) XY(k, j) = p;
+    XY.row(k).tail<kAxes>() = bins[k].v.transpose();
+    mean_count += bins[k].count / n;
+  }
+  // Covariance of the bin means, in units of the white variance of a mean of mean_count samples:
+  // V = diag(mean_count / count_k) + lambda K, K_ij = E[r_i r_j] / q of the random walk's bin
+  // means (time since the first sample: min(t_i, t_j), less span/6 on the diagonal).
+  Eigen::MatrixXd& K = d.K;
+  K.resize(n, n);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) K(i, j) = std::min(bins[i].t_s, bins[j].t_s);
+    K(i, i) = std::max(bins[i].t_s - bins[i].span_s / 6.0, 1e-9);
+  }
+  Eigen::VectorXd& white = d.white;
+  white.resize(n);
+  for (int k = 0; k < n; ++k) white[k] = mean_count / bins[k].count;
+  return d;
+}
+
+}  // namespace
+
+Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, const ThermalOptions& o) {
+  IMUCAL_TRY(o.validate());
+  auto gathered = gather_points(samples, o);
+  if (!gathered.ok()) return gathered.error();
+  const std::vector<Point>& pts = gathered->pts;
+  const bool has_gyro = gathered->has_gyro, has_accel = gathered->has_accel;
+  const std::size_t saturated = gathered->saturated, not_finite = gathered->not_finite;
 
   ThermalResult r;
   r.duration_s = pts.back().t_s - pts.front().t_s;
@@ -344,30 +440,10 @@ Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, cons
                           " s: record for longer (at least " + std::to_string(kMinBins) + " bins)");
   }
 
-  // The design in u = (T - T_ref) / h, so that the columns are of similar size.
-  const double h = std::max(std::abs(r.temp_max_c - r.reference_c), std::abs(r.temp_min_c - r.reference_c));
-  Eigen::MatrixXd XY(n, kColumns + kAxes);
-  double mean_count = 0.0;
-  for (int k = 0; k < n; ++k) {
-    const double u = (bins[k].temp_c - r.reference_c) / h;
-    double p = 1.0;
-    for (int j = 0; j < kColumns; ++j, p *= u) XY(k, j) = p;
-    XY.row(k).tail<kAxes>() = bins[k].v.transpose();
-    mean_count += bins[k].count / n;
-  }
-  // Covariance of the bin means, in units of the white variance of a mean of mean_count samples:
-  // V = diag(mean_count / count_k) + lambda K, K_ij = E[r_i r_j] / q of the random walk's bin
-  // means (time since the first sample: min(t_i, t_j), less span/6 on the diagonal).
-  Eigen::MatrixXd K(n, n);
-  for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) K(i, j) = std::min(bins[i].t_s, bins[j].t_s);
-    K(i, i) = std::max(bins[i].t_s - bins[i].span_s / 6.0, 1e-9);
-  }
-  Eigen::VectorXd white(n);
-  for (int k = 0; k < n; ++k) white[k] = mean_count / bins[k].count;
-
+  const Design design = make_design(bins, r);
+  const double h = design.h, mean_count = design.mean_count;
   const int max_order = std::min(o.max_order, n - 4);
-  const auto fits = fit_orders(XY, K, white, max_order, std::max(bins.back().t_s, 1.0));
+  const auto fits = fit_orders(design.XY, design.K, design.white, max_order, std::max(bins.back().t_s, 1.0));
 
   double dt_s = r.duration_s / std::max<double>(1.0, static_cast<double>(pts.size()) - 1.0);
   for (int a = 0; a < kAxes; ++a) {
@@ -388,32 +464,7 @@ Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, cons
       out.reason = "no order could be fitted (the bin means are degenerate)";
       continue;
     }
-    const OrderFit& f = fits[a][best];
-    // The scale of V from the whitened residuals, with the coefficients' degrees of freedom; the
-    // noise ratio lambda is taken as known in the covariance.
-    const double s2 = f.rss / std::max(1, n - best - 1);
-    Eigen::MatrixXd cov_u = s2 * f.information.inverse();
-    Eigen::VectorXd scale(best + 1);
-    for (int j = 0; j <= best; ++j) scale[j] = std::pow(h, -j);
-    out.coeffs = scale.cwiseProduct(f.beta);
-    out.covariance = scale.asDiagonal() * cov_u * scale.asDiagonal();
-    out.order = best;
-    out.determined = true;
-    out.residual_rms = std::sqrt(f.residual.squaredNorm() / n);
-    const double white_var = f.rss / n;  // of a bin mean of mean_count samples
-    out.white_noise_density = std::sqrt(white_var * mean_count * dt_s);
-    out.random_walk = std::sqrt(f.lambda * white_var);
-    double lo = 0.0, hi = 0.0, sum_var = 0.0;
-    for (int i = 0; i < kCurvePoints; ++i) {
-      const double T = r.temp_min_c + (r.temp_max_c - r.temp_min_c) * i / (kCurvePoints - 1);
-      const double c = out.change(T, r.reference_c);
-      const double s = out.change_sigma(T, r.reference_c);
-      lo = i == 0 ? c : std::min(lo, c);
-      hi = i == 0 ? c : std::max(hi, c);
-      sum_var += s * s / kCurvePoints;
-    }
-    out.uncompensated_drift = hi - lo;
-    out.model_sigma_rms = std::sqrt(sum_var);
+    set_axis_fit(out, fits[a][best], best, n, h, mean_count, dt_s, r);
     if (best == o.max_order && best > 0) {
       r.warnings.push_back(std::string(a < 3 ? "gyro " : "accelerometer ") + "xyz"[a % 3] +
                            ": the highest order tried (" + std::to_string(best) +
