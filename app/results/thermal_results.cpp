@@ -7,8 +7,8 @@
 
 #include "app/initial_guess.hpp"
 #include "core/text_file.hpp"
-#include "core/yaml_json.hpp"
 #include "core/text_format.hpp"
+#include "core/yaml_json.hpp"
 
 namespace imucal::app {
 namespace {
