@@ -484,6 +484,16 @@ void burst_checks(GpiodDataReadyLine& line, Pull& pull) {
           std::to_string(got.size()) + " read");
     const bool ok = next.ok() && next->has_value() && !got.empty();
     const std::uint64_t expected = last_seq + kBurst + 1;
+    if (ok && (*next)->sequence != expected && attempt < kAttempts) {
+      // Seen once in a full suite run on 2 loaded cores: the line's period, measured from the
+      // edges as the guest wrote them, was 2 % long and the count came out one short.
+      std::printf(
+          "  NOTE: the count after the burst was %lld, not %d, with pulses up to %s off their slots "
+          "(attempt %d of %d): made again\n",
+          static_cast<long long>((*next)->sequence - last_seq), kBurst + 1,
+          us(static_cast<double>(off_grid)).c_str(), attempt, kAttempts);
+      continue;
+    }
     check(ok && (*next)->sequence == expected && (*next)->t_ns >= w.before && (*next)->t_ns <= w.after,
           "the next edge is numbered " + std::to_string(kBurst + 1) +
               " after the burst: the line counts the " +
