@@ -481,11 +481,78 @@ Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, cons
   return r;
 }
 
+ThermalScaleFit fit_scale_against_temperature(std::vector<ThermalScalePoint> points, double reference_c,
+                                              double min_span_c) {
+  ThermalScaleFit fit;
+  fit.points = std::move(points);
+  const auto& pts = fit.points;
+  if (pts.size() < 2) {
+    fit.reason = "static calibrations at two or more die temperatures are needed, " +
+                 std::to_string(pts.size()) + " given";
+    return fit;
+  }
+  double lo = pts.front().temperature_c, hi = lo;
+  for (const auto& p : pts) lo = std::min(lo, p.temperature_c), hi = std::max(hi, p.temperature_c);
+  if (hi - lo < min_span_c) {
+    fit.reason = "the static calibrations span " + fixed(hi - lo, 2) +
+                 " deg C of die temperature, less than " + fixed(min_span_c, 2);
+    return fit;
+  }
+  fit.determined = true;
+  for (const auto& p : pts) fit.model.temperatures_c.push_back(p.temperature_c);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const auto axis = [&](const Eigen::Vector3d ThermalScalePoint::*value,
+                        const Eigen::Vector3d ThermalScalePoint::*sigma, int i, double* k, double* k_sigma,
+                        double* chi2_dof) {
+    *k = *k_sigma = *chi2_dof = nan;
+    double sw = 0, swx = 0, swxx = 0, swy = 0, swxy = 0;
+    for (const auto& p : pts) {
+      const double s = (p.*sigma)[i], y = (p.*value)[i];
+      if (!(std::isfinite(s) && s > 0.0 && std::isfinite(y))) return;  // an input sigma not determined
+      const double w = 1.0 / (s * s), x = p.temperature_c - reference_c;
+      sw += w, swx += w * x, swxx += w * x * x, swy += w * y, swxy += w * x * y;
+    }
+    const double det = sw * swxx - swx * swx;
+    if (!(det > 0.0)) return;
+    const double a = (swxx * swy - swx * swxy) / det, b = (sw * swxy - swx * swy) / det;
+    double var_a = swxx / det, var_b = sw / det, cov_ab = -swx / det;
+    if (pts.size() > 2) {
+      double chi2 = 0.0;
+      for (const auto& p : pts) {
+        const double r = ((p.*value)[i] - a - b * (p.temperature_c - reference_c)) / (p.*sigma)[i];
+        chi2 += r * r;
+      }
+      *chi2_dof = chi2 / static_cast<double>(pts.size() - 2);
+      const double inflate = std::max(1.0, *chi2_dof);
+      var_a *= inflate, var_b *= inflate, cov_ab *= inflate;
+    }
+    // The sensitivity is 1 / s: d ln(1 / s) / dT = -b / a at the reference.
+    *k = -b / a;
+    // First-order propagation of the covariance of (a, b).
+    const double dk_db = -1.0 / a, dk_da = b / (a * a);
+    *k_sigma = std::sqrt(
+        std::max(0.0, dk_db * dk_db * var_b + 2.0 * dk_db * dk_da * cov_ab + dk_da * dk_da * var_a));
+  };
+  for (int i = 0; i < 3; ++i) {
+    axis(&ThermalScalePoint::gyro, &ThermalScalePoint::gyro_sigma, i, &fit.model.gyro_k[i],
+         &fit.model.gyro_sigma[i], &fit.gyro_chi2_dof[i]);
+    axis(&ThermalScalePoint::accel, &ThermalScalePoint::accel_sigma, i, &fit.model.accel_k[i],
+         &fit.model.accel_sigma[i], &fit.accel_chi2_dof[i]);
+  }
+  return fit;
+}
+
 ThermalModel thermal_model(const ThermalResult& r) {
   ThermalModel m;
   m.reference_c = r.reference_c;
   m.min_c = r.temp_min_c;
   m.max_c = r.temp_max_c;
+  if (r.scale.determined) {
+    m.scale_model = r.scale.model;
+    m.scale = kThermalScaleForm;
+  } else {
+    m.scale = "not determined: " + r.scale.reason;
+  }
   for (int a = 0; a < 6; ++a) {
     const ThermalAxisFit& f = a < 3 ? r.gyro[a] : r.accel[a - 3];
     ThermalAxisModel& out = a < 3 ? m.gyro[a] : m.accel[a - 3];

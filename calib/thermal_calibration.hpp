@@ -17,6 +17,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <limits>
 #include <optional>
 #include <span>
 #include <string>
@@ -92,6 +93,34 @@ struct ThermalBinMean {
   std::size_t samples = 0;
 };
 
+/// The scale factors of one static calibration (calibrate_static) at one die temperature.
+struct ThermalScalePoint {
+  std::string source;               // the recording
+  double temperature_c = 0.0;       // mean die temperature of its samples
+  double temperature_span_c = 0.0;  // max - min over its samples
+  Eigen::Vector3d gyro = Eigen::Vector3d::Zero(), gyro_sigma = Eigen::Vector3d::Zero();
+  Eigen::Vector3d accel = Eigen::Vector3d::Zero(), accel_sigma = Eigen::Vector3d::Zero();
+};
+
+/// Scale against temperature from static calibrations at several die temperatures.
+struct ThermalScaleFit {
+  bool determined = false;
+  std::string reason;  // why not, when not determined
+  std::vector<ThermalScalePoint> points;
+  ThermalScaleModel model;  // k and its sigma per axis (NaN where an input sigma was not determined)
+  /// chi^2 / (points - 2) of the weighted fit per axis (NaN with two points: a line through two
+  /// points leaves nothing to judge it by). Above 1 the sigmas are inflated by its root.
+  Eigen::Vector3d gyro_chi2_dof = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+  Eigen::Vector3d accel_chi2_dof = gyro_chi2_dof;
+};
+
+/// s_i(T) = a_i + b_i (T - reference_c) per axis (s the model's scale, SI per count) by least
+/// squares weighted with the points' scale sigmas; the sensitivity is 1 / s, so its relative
+/// change per K at the reference is k_i = -b_i / a_i, its sigma propagated from the covariance of
+/// (a_i, b_i). Not determined with fewer than two points or a temperature span below min_span_c.
+ThermalScaleFit fit_scale_against_temperature(std::vector<ThermalScalePoint> points, double reference_c,
+                                              double min_span_c);
+
 struct ThermalResult {
   bool determined = false;
   std::string reason;  // why not, when not determined
@@ -109,6 +138,9 @@ struct ThermalResult {
   std::array<ThermalAxisFit, 3> accel;  // m/s^2
   std::vector<ThermalBinMean> bin_means;
   std::vector<std::string> warnings;
+  /// Scale against temperature: not determined by a still recording in one attitude; fitted
+  /// when static pose recordings at other temperatures are given (fit_scale_against_temperature).
+  ThermalScaleFit scale{false, "a still recording in one attitude does not determine it", {}, {}, {}, {}};
 };
 
 /// Fits the thermal model. Errors: no sample with a temperature, or the rig moved

@@ -218,7 +218,11 @@ bool same_thermal(const std::optional<ThermalModel>& a, const std::optional<Ther
         !same(x.sigma, y.sigma))
       return false;
   }
-  return true;
+  if (a->scale_model.has_value() != b->scale_model.has_value()) return false;
+  if (!a->scale_model) return true;
+  const ThermalScaleModel &x = *a->scale_model, &y = *b->scale_model;
+  return same(x.gyro_k, y.gyro_k) && same(x.gyro_sigma, y.gyro_sigma) && same(x.accel_k, y.accel_k) &&
+         same(x.accel_sigma, y.accel_sigma) && x.temperatures_c == y.temperatures_c;
 }
 
 bool same_sigma(const ImuSigmaRecord& a, const ImuSigmaRecord& b) {
@@ -238,10 +242,22 @@ bool same_sigma(const ImuSigmaRecord& a, const ImuSigmaRecord& b) {
 }  // namespace
 
 json thermal_model_json(const ThermalModel& t) {
+  json scale = t.scale;
+  if (t.scale_model) {
+    const ThermalScaleModel& s = *t.scale_model;
+    scale = {{"form", kThermalScaleForm},
+             {"gyro_k", vec_json(s.gyro_k)},
+             {"gyro_sigma", vec_json(s.gyro_sigma)},
+             {"accel_k", vec_json(s.accel_k)},
+             {"accel_sigma", vec_json(s.accel_sigma)},
+             {"temperatures_c",
+              vec_json(Eigen::Map<const Eigen::VectorXd>(
+                  s.temperatures_c.data(), static_cast<Eigen::Index>(s.temperatures_c.size())))}};
+  }
   return {{"form", kThermalForm},
           {"reference_c", num(t.reference_c)},
           {"valid_range_c", {num(t.min_c), num(t.max_c)}},
-          {"scale", t.scale},
+          {"scale", scale},
           {"gyro", thermal_axes_json(t.gyro)},
           {"accel", thermal_axes_json(t.accel)}};
 }
@@ -257,7 +273,25 @@ Result<ThermalModel> thermal_model_from_json(const json& t) {
     return make_error(Errc::kCorrupt, "thermal.reference_c must be a number and valid_range_c [min, max]");
   m.min_c = range[0];
   m.max_c = range[1];
-  IMUCAL_TRY(r.text(t, "scale", "thermal.", m.scale));
+  if (const auto it = t.find("scale"); it != t.end() && it->is_object()) {
+    // Scale against temperature fitted (record version 2 written by this version on).
+    ThermalScaleModel s;
+    IMUCAL_TRY(r.text(*it, "form", "thermal.scale.", m.scale));
+    IMUCAL_TRY(r.matrix(*it, "gyro_k", "thermal.scale.", s.gyro_k, false));
+    IMUCAL_TRY(r.matrix(*it, "gyro_sigma", "thermal.scale.", s.gyro_sigma, false));
+    IMUCAL_TRY(r.matrix(*it, "accel_k", "thermal.scale.", s.accel_k, false));
+    IMUCAL_TRY(r.matrix(*it, "accel_sigma", "thermal.scale.", s.accel_sigma, false));
+    const auto temps = it->find("temperatures_c");
+    if (temps == it->end() || !temps->is_array() || temps->size() < 2)
+      return make_error(Errc::kCorrupt, "thermal.scale.temperatures_c must list two or more temperatures");
+    for (const auto& x : *temps) {
+      if (!x.is_number()) return make_error(Errc::kCorrupt, "thermal.scale.temperatures_c must be numbers");
+      s.temperatures_c.push_back(x.get<double>());
+    }
+    m.scale_model = std::move(s);
+  } else {
+    IMUCAL_TRY(r.text(t, "scale", "thermal.", m.scale));
+  }
   IMUCAL_TRY(read_thermal_axes(t, "gyro", m.gyro));
   IMUCAL_TRY(read_thermal_axes(t, "accel", m.accel));
   return m;

@@ -11,7 +11,10 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <limits>
+#include <optional>
 #include <string>
+#include <vector>
 
 namespace imucal {
 
@@ -28,14 +31,29 @@ struct ThermalAxisModel {
   double change(double dt) const;
 };
 
+/// Scale against temperature, per axis: k, the relative change of the sensor's sensitivity
+/// (output per input, the datasheet's "sensitivity change vs. temperature") per K about the
+/// reference temperature; the model's scale (SI per count, the factor the correction multiplies
+/// by) is then scale(T) = scale(T_ref) / (1 + k (T - T_ref)) (kThermalScaleForm). Fitted to static
+/// calibrations at two or more die temperatures (`calibrate thermal --scale-from`). NaN: not
+/// determined.
+struct ThermalScaleModel {
+  Eigen::Vector3d gyro_k = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+  Eigen::Vector3d gyro_sigma = gyro_k;
+  Eigen::Vector3d accel_k = gyro_k;
+  Eigen::Vector3d accel_sigma = gyro_k;
+  std::vector<double> temperatures_c;  // of the static calibrations it was fitted to
+};
+
 struct ThermalModel {
   double reference_c = 0.0;
   double min_c = 0.0;  // the range the model is valid over; temperatures are clamped to it
   double max_c = 0.0;
   std::array<ThermalAxisModel, 3> gyro;
   std::array<ThermalAxisModel, 3> accel;
-  /// Scale against temperature: "not determined: ..." unless fitted.
+  /// Scale against temperature: the fit, or "not determined: ..." (the reason) without one.
   std::string scale = "not determined: a still recording in one attitude does not determine it";
+  std::optional<ThermalScaleModel> scale_model;
 
   double clamp(double temperature_c) const;
   /// b(T) - b(T_ref) per axis, T clamped.
@@ -50,5 +68,7 @@ struct ThermalModel {
 /// T the die temperature in deg C clamped to the valid range, the coefficients in the model's
 /// input units per K^j; a sample is corrected to T_ref by subtracting b(T) - b(T_ref).
 inline constexpr const char* kThermalForm = "b(T) = b(T_ref) + sum_j c_j (T - T_ref)^j";
+/// The scale's form (ThermalScaleModel).
+inline constexpr const char* kThermalScaleForm = "scale(T) = scale(T_ref) / (1 + k (T - T_ref))";
 
 }  // namespace imucal

@@ -91,6 +91,11 @@ Status ImuModelParams::validate() const {
       !accel_bias_temp_coeff3.allFinite() || !gyro_bias_temp_coeff3.allFinite()) {
     return make_error(Errc::kInvalidArgument, "biases, B_g and temperature coefficients must be finite");
   }
+  if (!(accel_scale_temp_coeff.cwiseAbs().maxCoeff() < 0.01) ||
+      !(gyro_scale_temp_coeff.cwiseAbs().maxCoeff() < 0.01)) {
+    return make_error(Errc::kInvalidArgument,
+                      "scale temperature coefficients must be finite and below 0.01 per K (1 %/K) in size");
+  }
   if (accel_bias.cwiseAbs().maxCoeff() > 3.0) {
     return make_error(
         Errc::kInvalidArgument,
@@ -288,8 +293,10 @@ ImuSimDetail ImuSimulator::sample_si(TimeNs t_ns, const RigState& state, double 
   }
   t_last_ns_ = std::max(t_last_ns_, t_ns);
   d.temperature_c = p_.temperature_c(ns_to_s(t_ns - t_start_ns_));
-  d.accel_bias = p_.accel_bias + accel_walk_ + p_.accel_bias_temp(d.temperature_c);
-  d.gyro_bias = p_.gyro_bias + gyro_walk_ + p_.gyro_bias_temp(d.temperature_c);
+  d.accel_bias_temp = p_.accel_bias_temp(d.temperature_c);
+  d.gyro_bias_temp = p_.gyro_bias_temp(d.temperature_c);
+  d.accel_bias = p_.accel_bias + accel_walk_ + d.accel_bias_temp;
+  d.gyro_bias = p_.gyro_bias + gyro_walk_ + d.gyro_bias_temp;
   d.specific_force_body = specific_force_body(state, p_.gravity_mps2);
   d.rate_body = rate_body(state, p_);
   // White noise, discrete sigma = density / sqrt(dt).
@@ -298,8 +305,12 @@ ImuSimDetail ImuSimulator::sample_si(TimeNs t_ns, const RigState& state, double 
   Eigen::Vector3d noise_a, noise_g;
   for (int i = 0; i < 3; ++i) noise_a[i] = na * rng_.normal();
   for (int i = 0; i < 3; ++i) noise_g[i] = ng * rng_.normal();
-  d.accel_si = accel_matrix_ * d.specific_force_body + d.accel_bias + noise_a;
-  d.gyro_si = gyro_matrix_ * d.rate_body + p_.g_sensitivity * d.specific_force_body + d.gyro_bias + noise_g;
+  const double dt_scale = d.temperature_c - ImuModelParams::kScaleTempRefC;
+  const Eigen::Vector3d accel_tc = Eigen::Vector3d::Ones() + p_.accel_scale_temp_coeff * dt_scale;
+  const Eigen::Vector3d gyro_tc = Eigen::Vector3d::Ones() + p_.gyro_scale_temp_coeff * dt_scale;
+  d.accel_si = accel_tc.cwiseProduct(accel_matrix_ * d.specific_force_body) + d.accel_bias + noise_a;
+  d.gyro_si = gyro_tc.cwiseProduct(gyro_matrix_ * d.rate_body) + p_.g_sensitivity * d.specific_force_body +
+              d.gyro_bias + noise_g;
   return d;
 }
 

@@ -93,6 +93,11 @@ struct ImuModelParams {
   Eigen::Vector3d gyro_bias_temp_coeff = Eigen::Vector3d::Zero();    // c1, (rad/s)/K
   Eigen::Vector3d gyro_bias_temp_coeff2 = Eigen::Vector3d::Zero();   // c2, (rad/s)/K^2
   Eigen::Vector3d gyro_bias_temp_coeff3 = Eigen::Vector3d::Zero();   // c3, (rad/s)/K^3
+  // Scale factor against die temperature, per output axis: the sensed part (before bias and
+  // noise) times 1 + k (T - kScaleTempRefC), k relative per K. Zero: the scale does not move.
+  static constexpr double kScaleTempRefC = 25.0;
+  Eigen::Vector3d accel_scale_temp_coeff = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_scale_temp_coeff = Eigen::Vector3d::Zero();
 
   // Device settings.
   int accel_full_scale_g = 4;
@@ -136,8 +141,10 @@ struct ImuSimDetail {
   Eigen::Vector3d rate_body = Eigen::Vector3d::Zero();            // w_B incl. earth rate, rad/s
   Eigen::Vector3d accel_bias = Eigen::Vector3d::Zero();           // b_a(t) in effect
   Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();            // b_g(t) in effect
-  Eigen::Vector3d accel_si = Eigen::Vector3d::Zero();             // a_raw before quantisation
-  Eigen::Vector3d gyro_si = Eigen::Vector3d::Zero();              // w_raw before quantisation
+  Eigen::Vector3d accel_bias_temp = Eigen::Vector3d::Zero();      // its die-temperature part
+  Eigen::Vector3d gyro_bias_temp = Eigen::Vector3d::Zero();
+  Eigen::Vector3d accel_si = Eigen::Vector3d::Zero();  // a_raw before quantisation
+  Eigen::Vector3d gyro_si = Eigen::Vector3d::Zero();   // w_raw before quantisation
   double temperature_c = 0.0;
 };
 

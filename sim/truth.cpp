@@ -168,6 +168,7 @@ YAML::Node imu_params_to_yaml(const ImuModelParams& p) {
   a["bias_temp_coeff"] = vec(p.accel_bias_temp_coeff);
   a["bias_temp_coeff2"] = vec(p.accel_bias_temp_coeff2);
   a["bias_temp_coeff3"] = vec(p.accel_bias_temp_coeff3);
+  a["scale_temp_coeff"] = vec(p.accel_scale_temp_coeff);
   a["full_scale_g"] = p.accel_full_scale_g;
   n["accel"] = a;
   YAML::Node g;
@@ -181,6 +182,7 @@ YAML::Node imu_params_to_yaml(const ImuModelParams& p) {
   g["bias_temp_coeff"] = vec(p.gyro_bias_temp_coeff);
   g["bias_temp_coeff2"] = vec(p.gyro_bias_temp_coeff2);
   g["bias_temp_coeff3"] = vec(p.gyro_bias_temp_coeff3);
+  g["scale_temp_coeff"] = vec(p.gyro_scale_temp_coeff);
   g["full_scale_dps"] = p.gyro_full_scale_dps;
   n["gyro"] = g;
   n["gravity_mps2"] = p.gravity_mps2;
@@ -195,6 +197,8 @@ YAML::Node imu_params_to_yaml(const ImuModelParams& p) {
   t["step_time_s"] = p.temp_step_time_s;
   // The bias_temp_coeff* above are of (T - reference_c)^j: the start temperature.
   t["reference_c"] = p.temp_ref_c();
+  // The scale_temp_coeff above: relative per K of (T - scale_reference_c).
+  t["scale_reference_c"] = ImuModelParams::kScaleTempRefC;
   n["temperature"] = t;
   return n;
 }
@@ -216,6 +220,7 @@ Result<ImuModelParams> imu_params_from_yaml(const YAML::Node& node, const std::s
             rd.opt_vec(a, "bias_temp_coeff", "imu.accel", &p.accel_bias_temp_coeff) &&
             rd.opt_vec(a, "bias_temp_coeff2", "imu.accel", &p.accel_bias_temp_coeff2) &&
             rd.opt_vec(a, "bias_temp_coeff3", "imu.accel", &p.accel_bias_temp_coeff3) &&
+            rd.opt_vec(a, "scale_temp_coeff", "imu.accel", &p.accel_scale_temp_coeff) &&
             rd.opt_int(a, "full_scale_g", "imu.accel", &p.accel_full_scale_g) &&
             rd.opt_vec(g, "scale", "imu.gyro", &p.gyro_scale) &&
             rd.opt_mat(g, "misalignment", "imu.gyro", &p.gyro_misalignment) &&
@@ -226,6 +231,7 @@ Result<ImuModelParams> imu_params_from_yaml(const YAML::Node& node, const std::s
             rd.opt_vec(g, "bias_temp_coeff", "imu.gyro", &p.gyro_bias_temp_coeff) &&
             rd.opt_vec(g, "bias_temp_coeff2", "imu.gyro", &p.gyro_bias_temp_coeff2) &&
             rd.opt_vec(g, "bias_temp_coeff3", "imu.gyro", &p.gyro_bias_temp_coeff3) &&
+            rd.opt_vec(g, "scale_temp_coeff", "imu.gyro", &p.gyro_scale_temp_coeff) &&
             rd.opt_int(g, "full_scale_dps", "imu.gyro", &p.gyro_full_scale_dps) &&
             rd.opt_num(node, "gravity_mps2", "imu", &p.gravity_mps2) &&
             rd.opt_bool(node, "earth_rotation", "imu", &p.earth_rotation) &&

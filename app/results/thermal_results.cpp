@@ -4,8 +4,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "app/initial_guess.hpp"
+#include "app/solvers.hpp"
+#include "app/streams.hpp"
 #include "core/text_file.hpp"
 #include "core/text_format.hpp"
 #include "core/yaml_json.hpp"
@@ -58,6 +61,54 @@ void emit_axis(YAML::Emitter& y, const calib::ThermalAxisFit& a, const char* uni
   y << YAML::EndMap;
 }
 
+/// Three numbers as a flow list; one not determined (not finite) is null.
+void emit_vec3(YAML::Emitter& y, const char* key, const Eigen::Vector3d& v) {
+  y << YAML::Key << key << YAML::Value << YAML::Flow << YAML::BeginSeq;
+  for (int i = 0; i < 3; ++i) {
+    if (std::isfinite(v[i])) {
+      y << v[i];
+    } else {
+      y << YAML::Null;
+    }
+  }
+  y << YAML::EndSeq;
+}
+
+/// scale_against_temperature: the reason it is not determined, or the fit and its points.
+void emit_scale(YAML::Emitter& y, const calib::ThermalScaleFit& s) {
+  y << YAML::Key << "scale_against_temperature" << YAML::Value;
+  if (!s.determined) {
+    y << "not determined: " + s.reason;
+    return;
+  }
+  y << YAML::BeginMap;
+  y << YAML::Key << "form" << YAML::Value
+    << std::string(kThermalScaleForm) +
+           " per axis: k the relative change of the sensitivity (output per input) per K, the model's scale "
+           "(SI per count) the inverse, fitted to the static calibrations below (null: an input sigma was "
+           "not determined)";
+  emit_vec3(y, "gyro_k", s.model.gyro_k);
+  emit_vec3(y, "gyro_sigma", s.model.gyro_sigma);
+  emit_vec3(y, "accel_k", s.model.accel_k);
+  emit_vec3(y, "accel_sigma", s.model.accel_sigma);
+  emit_vec3(y, "gyro_chi2_dof", s.gyro_chi2_dof);
+  emit_vec3(y, "accel_chi2_dof", s.accel_chi2_dof);
+  y << YAML::Key << "points" << YAML::Value << YAML::BeginSeq;
+  for (const auto& p : s.points) {
+    y << YAML::BeginMap;
+    y << YAML::Key << "source" << YAML::Value << p.source;
+    y << YAML::Key << "temperature_c" << YAML::Value << p.temperature_c;
+    y << YAML::Key << "temperature_span_c" << YAML::Value << p.temperature_span_c;
+    emit_vec3(y, "gyro_scale", p.gyro);
+    emit_vec3(y, "gyro_scale_sigma", p.gyro_sigma);
+    emit_vec3(y, "accel_scale", p.accel);
+    emit_vec3(y, "accel_scale_sigma", p.accel_sigma);
+    y << YAML::EndMap;
+  }
+  y << YAML::EndSeq;
+  y << YAML::EndMap;
+}
+
 void emit_sensor(YAML::Emitter& y, const char* name, const std::array<calib::ThermalAxisFit, 3>& axes,
                  const char* unit, const char* c0) {
   y << YAML::Key << name << YAML::Value << YAML::BeginMap;
@@ -107,7 +158,7 @@ std::string thermal_result_yaml(const calib::ThermalResult& r, const ImuStreamIn
   emit_sensor(y, "accel", r.accel, "m/s^2",
               "the value at the reference temperature, gravity's projection included: not a bias; only "
               "c1..c3 describe the accelerometer's temperature dependence");
-  y << YAML::Key << "scale_against_temperature" << YAML::Value << ThermalModel().scale;
+  emit_scale(y, r.scale);
   y << YAML::Key << "warnings" << YAML::Value << YAML::BeginSeq;
   for (const auto& w : r.warnings) y << w;
   y << YAML::EndSeq;
@@ -216,6 +267,53 @@ struct ThermalReader {
   }
 };
 
+Eigen::Vector3d vec3_of(const YAML::Node& parent, const std::string& key, const std::string& where) {
+  const YAML::Node n = parent[key];
+  if (!n) throw std::runtime_error(where + key + " is missing");
+  const auto v = ThermalReader::numbers_of(n, where + key, 3);
+  return {v[0], v[1], v[2]};
+}
+
+/// scale_against_temperature: a text (not determined: the reason) or the fit with its points.
+void read_scale(const ThermalReader& r, const YAML::Node& root, calib::ThermalScaleFit& out) {
+  const YAML::Node s = root["scale_against_temperature"];
+  if (!s || s.IsScalar()) {
+    const std::string text = s ? s.as<std::string>("") : std::string();
+    const std::string prefix = "not determined: ";
+    out.determined = false;
+    out.reason = text.starts_with(prefix) ? text.substr(prefix.size()) : text;
+    return;
+  }
+  const std::string at = "scale_against_temperature.";
+  if (!s.IsMap()) throw std::runtime_error(at + " must be a text or a map");
+  out.determined = true;
+  out.reason.clear();
+  out.model.gyro_k = vec3_of(s, "gyro_k", at);
+  out.model.gyro_sigma = vec3_of(s, "gyro_sigma", at);
+  out.model.accel_k = vec3_of(s, "accel_k", at);
+  out.model.accel_sigma = vec3_of(s, "accel_sigma", at);
+  if (s["gyro_chi2_dof"]) out.gyro_chi2_dof = vec3_of(s, "gyro_chi2_dof", at);
+  if (s["accel_chi2_dof"]) out.accel_chi2_dof = vec3_of(s, "accel_chi2_dof", at);
+  const YAML::Node points = r.need(s, "points", at);
+  if (!points.IsSequence() || points.size() < 2)
+    throw std::runtime_error(at + "points must list two or more");
+  out.points.clear();
+  out.model.temperatures_c.clear();
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    const std::string where = at + "points[" + std::to_string(k) + "].";
+    calib::ThermalScalePoint p;
+    p.source = points[k]["source"].as<std::string>("");
+    p.temperature_c = r.number(points[k], "temperature_c", where);
+    p.temperature_span_c = r.number(points[k], "temperature_span_c", where);
+    p.gyro = vec3_of(points[k], "gyro_scale", where);
+    p.gyro_sigma = vec3_of(points[k], "gyro_scale_sigma", where);
+    p.accel = vec3_of(points[k], "accel_scale", where);
+    p.accel_sigma = vec3_of(points[k], "accel_scale_sigma", where);
+    out.model.temperatures_c.push_back(p.temperature_c);
+    out.points.push_back(std::move(p));
+  }
+}
+
 }  // namespace
 
 Result<ThermalFile> read_thermal_file(const std::string& path) {
@@ -251,6 +349,7 @@ Result<ThermalFile> read_thermal_file(const std::string& path) {
       auto& axes = std::string(sensor) == "gyro" ? res.gyro : res.accel;
       for (int a = 0; a < 3; ++a) axes[a] = r.axis(s, std::string(1, "xyz"[a]), std::string(sensor) + ".");
     }
+    read_scale(r, root, res.scale);
     if (const YAML::Node w = root["warnings"]; w && w.IsSequence()) {
       for (const auto& x : w) res.warnings.push_back(x.as<std::string>(""));
     }
@@ -279,8 +378,9 @@ ThermalModel thermal_model_on_input_units(const ThermalModel& si_model, const Im
 std::string ThermalCorrection::warning() const {
   std::string w;
   if (clamped > 0) {
-    w = std::to_string(clamped) +
-        " samples outside the thermal model's range were corrected at its nearest end";
+    w = std::to_string(clamped) + " samples outside the thermal model's range (" + fixed(model_min_c, 2) + " .. " +
+        fixed(model_max_c, 2) + " deg C; the samples met " + fixed(min_c, 2) + " .. " + fixed(max_c, 2) +
+        ") were corrected at its nearest end: what the die's move beyond it does to the bias is left in them";
   }
   if (without_temperature > 0) {
     w += (w.empty() ? "" : "; ") + std::to_string(without_temperature) +
@@ -293,6 +393,8 @@ Result<ThermalCorrection> correct_to_reference_temperature(std::vector<ImuSample
                                                            const ImuStreamInfo& info,
                                                            const ThermalModel& model) {
   ThermalCorrection c;
+  c.model_min_c = model.min_c;
+  c.model_max_c = model.max_c;
   for (ImuSample& s : samples) {
     if (!std::isfinite(s.temperature)) {
       ++c.without_temperature;
@@ -341,6 +443,48 @@ Result<AppliedThermal> apply_thermal_file(const std::string& path, std::vector<I
   }
   if (auto w = corrected->warning(); !w.empty()) applied.warnings.push_back(w + " (" + path + ")");
   return applied;
+}
+
+Result<calib::ThermalScalePoint> scale_point_from_log(const std::string& path, const std::string& stream,
+                                                      std::vector<std::string>& warnings) {
+  auto loaded = load_imu_stream(path, stream, DamagePolicy::kRefuse);
+  if (!loaded.ok()) return loaded.error().context("--scale-from " + path);
+  const ImuStreamInfo& info = loaded->info;
+  calib::ThermalScalePoint p;
+  p.source = path;
+  double sum = 0.0, lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  std::size_t n = 0;
+  for (const ImuSample& s : loaded->samples) {
+    if (!std::isfinite(s.temperature)) continue;
+    const double t = info.temperature_scale * s.temperature + info.temperature_offset;
+    sum += t, lo = std::min(lo, t), hi = std::max(hi, t), ++n;
+  }
+  if (n == 0) {
+    return make_error(Errc::kInsufficientData,
+                      "--scale-from " + path +
+                          ": its samples carry no die temperature, so it cannot be placed on "
+                          "the temperature axis; record with the temperature (imucal record writes it)");
+  }
+  p.temperature_c = sum / static_cast<double>(n);
+  p.temperature_span_c = hi - lo;
+  if (p.temperature_span_c > 2.0)
+    warnings.push_back("--scale-from " + path + ": the die moved by " + fixed(p.temperature_span_c, 2) +
+                       " deg C over it; its scale is taken at its mean temperature " +
+                       fixed(p.temperature_c, 2) + " deg C");
+  calib::StaticCalibrationOptions options;
+  auto guess = nominal_guess(info, {});
+  if (!guess.ok()) return guess.error().context("--scale-from " + path);
+  options.accel_init = guess->accel;
+  options.gyro_init = guess->gyro;
+  auto result = app::calibrate_static(loaded->samples, options);
+  if (!result.ok())
+    return result.error().context("--scale-from " + path +
+                                  " (a recording of static poses, as calibrate static takes)");
+  p.gyro = result->model.gyro.scale;
+  p.gyro_sigma = result->gyro_sigma.scale;
+  p.accel = result->model.accel.scale;
+  p.accel_sigma = result->accel_sigma.scale;
+  return p;
 }
 
 }  // namespace imucal::app

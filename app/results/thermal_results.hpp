@@ -46,6 +46,7 @@ struct ThermalCorrection {
   std::size_t clamped = 0;              // outside the model's range: corrected at its nearest end
   std::size_t without_temperature = 0;  // left as they are
   double min_c = 0.0, max_c = 0.0;      // the temperatures met
+  double model_min_c = 0.0, model_max_c = 0.0;  // the model's valid range
   /// A warning for the result when some samples were clamped or had no temperature; empty if not.
   std::string warning() const;
 };
@@ -71,5 +72,13 @@ struct AppliedThermal {
 [[nodiscard]] Result<AppliedThermal> apply_thermal_file(const std::string& path,
                                                         std::vector<ImuSample>& samples,
                                                         const ImuStreamInfo& info);
+
+/// One point of scale against temperature: the static calibration (calibrate_static with the
+/// log's nominal conversion as the initial guess) of a recording of static poses, and the mean
+/// die temperature of its samples. The log is read as it is (damaged logs refused); errors name
+/// it and say what to do. `warnings` gets a note when the die moved by more than 2 deg C over it.
+[[nodiscard]] Result<calib::ThermalScalePoint> scale_point_from_log(const std::string& path,
+                                                                    const std::string& stream,
+                                                                    std::vector<std::string>& warnings);
 
 }  // namespace imucal::app

@@ -10,6 +10,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "app/initial_guess.hpp"
 #include "app/results/output.hpp"
@@ -31,6 +32,7 @@ struct ThermalCliOptions {
   double bin_s = 20.0;
   int max_order = 3;
   std::optional<double> reference_c;
+  std::vector<std::string> scale_from;  // static pose recordings at other die temperatures
   bool allow_damaged = false;
   bool force = false;
 };
@@ -57,13 +59,31 @@ void print_summary(const calib::ThermalResult& r, const std::string& log_path, c
               << fmt::sprintf("%.2f", c.residual_rms / kStandardGravity * 1e3) << " mg, model sigma "
               << fmt::sprintf("%.2f", c.model_sigma_rms / kStandardGravity * 1e3) << " mg\n";
   }
+  const auto& s = r.scale;
+  if (!s.determined) {
+    std::cout << "  scale against temperature: not determined: " << s.reason << "\n";
+    return;
+  }
+  std::cout << "  scale against temperature from " << s.points.size() << " static calibrations at";
+  for (const auto& p : s.points) std::cout << " " << fixed(p.temperature_c, 2);
+  std::cout << " deg C (k: relative change of the sensitivity per K, ppm/K):\n";
+  const auto ppm = [](double v) {
+    return std::isfinite(v) ? fmt::sprintf("%.1f", v * 1e6) : "not determined";
+  };
+  for (int a = 0; a < 3; ++a) {
+    std::cout << "  gyro "
+              << "xyz"[a] << ": k " << ppm(s.model.gyro_k[a]) << " +- " << ppm(s.model.gyro_sigma[a])
+              << "   accel "
+              << "xyz"[a] << ": k " << ppm(s.model.accel_k[a]) << " +- " << ppm(s.model.accel_sigma[a])
+              << "\n";
+  }
 }
 
 void run(const ThermalCliOptions& o) {
   app::OutputPolicy outputs{o.force, {o.log_path}};
   if (auto s = app::check_output(o.yaml_path, outputs); !s.ok()) fail(s.error());
 
-  Progress progress("thermal calibration", 2.0);
+  Progress progress("thermal calibration", 2.0 + static_cast<double>(o.scale_from.size()));
   auto loaded = app::load_imu_stream(
       o.log_path, o.stream, o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse);
   if (!loaded.ok()) {
@@ -100,11 +120,24 @@ void run(const ThermalCliOptions& o) {
 
   auto res = calib::calibrate_thermal(loaded->samples, opt);
   progress.update(2.0);
-  progress.finish();
   if (!res.ok()) fail(res.error(), "thermal calibration of " + o.log_path);
   if (!res->determined) {
     throw CliExit{kExitData, "thermal calibration of " + o.log_path + ": not determined: " + res->reason};
   }
+  if (o.scale_from.empty()) {
+    res->scale.reason += " (static pose recordings at two or more die temperatures do: --scale-from)";
+  } else {
+    // Scale against temperature: each recording of static poses calibrated on its own.
+    std::vector<calib::ThermalScalePoint> points;
+    for (std::size_t i = 0; i < o.scale_from.size(); ++i) {
+      auto p = app::scale_point_from_log(o.scale_from[i], o.stream, res->warnings);
+      if (!p.ok()) fail(p.error());
+      points.push_back(std::move(*p));
+      progress.update(2.0 + static_cast<double>(i + 1));
+    }
+    res->scale = calib::fit_scale_against_temperature(std::move(points), res->reference_c, o.min_span_c);
+  }
+  progress.finish();
   if (loaded->damaged()) {
     res->warnings.insert(res->warnings.begin(),
                          loaded->damage_warning() + ": calibrated from its readable part only");
@@ -143,12 +176,18 @@ void setup(CLI::App& root) {
   cmd->add_option("--reference", o->reference_c,
                   "Reference temperature, deg C (default: the middle of the range covered)")
       ->check(CLI::Range(-60.0, 150.0));
+  cmd->add_option("--scale-from", o->scale_from,
+                  "A recording of static poses (as calibrate static takes) at one die temperature; two or "
+                  "more at different temperatures give the scale factors against temperature (repeat the "
+                  "option)")
+      ->check(CLI::ExistingFile);
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");
   cmd->add_flag("--force", o->force, "Replace the output if it exists (never the log)");
   cmd->footer(
       "The rig must not move: a step between 1 s means above 0.01 rad/s (gyro) or 0.1 m/s^2 (accelerometer) "
       "is refused. Exit 4 when the log has no temperature, the rig moved, or the span is below --min-span. "
-      "Scale against temperature is not determined from one attitude.");
+      "Scale against temperature is not determined from one attitude: give --scale-from recordings of static "
+      "poses at two or more die temperatures (their span at least --min-span).");
   cmd->callback([o] { run(*o); });
 }
 

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -62,6 +63,9 @@ struct SimCommon {
   double temp_ramp_s = 600.0;
   double temp_step_s = 0.0;
   int temp_coeff_order = 0;
+  // Die temperature held (sim static) and scale against temperature (every command), ppm/K.
+  std::optional<double> temp_hold_c;
+  std::vector<double> accel_scale_tc_ppm, gyro_scale_tc_ppm;
 
   sim::SimImuPath path() const {
     sim::SimImuPath p;
@@ -99,6 +103,20 @@ void add_common(CLI::App* cmd, SimCommon& o, bool drops = true) {
                   "Take the IMU parameters from this truth file (its imu: section) instead of drawing them "
                   "from the seed; --accel-range/--gyro-range still apply when given");
   cmd->add_flag("--tremor", o.tremor, "Add a small hand tremor to the whole script");
+  cmd->add_option(
+         "--accel-scale-tc", o.accel_scale_tc_ppm,
+         "Accelerometer scale against die temperature, ppm/K about 25 deg C, per axis: X,Y,Z (default "
+         "those of --truth, or 0)")
+      ->delimiter(',')
+      ->expected(3)
+      ->check(CLI::Range(-9999.0, 9999.0));
+  cmd->add_option(
+         "--gyro-scale-tc", o.gyro_scale_tc_ppm,
+         "Gyro scale against die temperature, ppm/K about 25 deg C, per axis: X,Y,Z (default those of "
+         "--truth, or 0)")
+      ->delimiter(',')
+      ->expected(3)
+      ->check(CLI::Range(-9999.0, 9999.0));
   cmd->add_flag("--no-noise", o.no_noise, "Switch off white noise and bias random walks (for tests)");
   if (drops) {
     cmd->add_option(
@@ -159,6 +177,14 @@ sim::ImuModelParams make_params(const SimCommon& o, const CLI::App* cmd, bool* f
     p.temp_step_time_s = o.temp_step_s;
   }
   if (o.temp_coeff_order > 0) p.draw_temperature_coefficients(o.seed, o.temp_coeff_order);
+  if (o.temp_hold_c) {
+    p.temp_profile = sim::TemperatureProfile::kSoak;
+    p.temp_start_c = p.temp_final_c = *o.temp_hold_c;
+  }
+  if (o.accel_scale_tc_ppm.size() == 3)
+    p.accel_scale_temp_coeff = Eigen::Vector3d(o.accel_scale_tc_ppm.data()) * 1e-6;
+  if (o.gyro_scale_tc_ppm.size() == 3)
+    p.gyro_scale_temp_coeff = Eigen::Vector3d(o.gyro_scale_tc_ppm.data()) * 1e-6;
   if (o.no_noise) {
     p.accel_noise_density = p.gyro_noise_density = 0.0;
     p.accel_bias_random_walk = p.gyro_bias_random_walk = 0.0;
@@ -244,6 +270,10 @@ void add_static(CLI::App* sim) {
       ->check(CLI::Range(1.0, 3600.0));
   cmd->add_option("--hold-min", so->hold_min_s, "Shortest hold in s (default 1)")->check(kPositive);
   cmd->add_option("--hold-max", so->hold_max_s, "Longest hold in s (default 4)")->check(kPositive);
+  cmd->add_option("--temp-hold", o->temp_hold_c,
+                  "Die temperature held throughout, deg C (default: the model's own warm-up, 30 to 36 deg C "
+                  "over 600 s)")
+      ->check(CLI::Range(-40.0, 85.0));
   cmd->add_option("--excitation", so->excitation,
                   "Speed of the moves: 1 is a calm hand; 3 exceeds +-2 g and +-250 deg/s (default 1)")
       ->check(CLI::Range(0.1, 10.0));

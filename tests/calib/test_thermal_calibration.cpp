@@ -7,9 +7,11 @@
 #include <Eigen/Core>
 #include <cmath>
 #include <limits>
+#include <string>
 #include <vector>
 
 #include "calib/thermal_calibration.hpp"
+#include "core/calibration_record.hpp"
 #include "sim/imu_error_model.hpp"
 #include "tests/support/polynomial.hpp"
 
@@ -192,6 +194,59 @@ TEST(ThermalCalibration, PlainPolynomialFitRecoversAnExactCubic) {
   EXPECT_NEAR(c[1], 0.5, 1e-9);
   EXPECT_NEAR(c[2], -0.01, 1e-9);
   EXPECT_NEAR(c[3], 2e-4, 1e-9);
+}
+
+TEST(ThermalCalibration, ScaleAgainstTemperatureIsTheWeightedLineThroughTheStaticCalibrations) {
+  // Three static calibrations on the line s(T) = 1.01 (1 + 2e-4 (T - 40)) for every axis but the
+  // accelerometer's z, whose middle point has no sigma (not determined).
+  const auto point = [](double t, double sigma) {
+    calib::ThermalScalePoint p;
+    p.source = "poses at " + std::to_string(t);
+    p.temperature_c = t;
+    const double s = 1.01 * (1.0 + 2e-4 * (t - 40.0));
+    p.gyro = p.accel = Eigen::Vector3d::Constant(s);
+    p.gyro_sigma = p.accel_sigma = Eigen::Vector3d::Constant(sigma);
+    return p;
+  };
+  std::vector<calib::ThermalScalePoint> pts = {point(20.0, 1e-4), point(40.0, 2e-4), point(60.0, 1e-4)};
+  pts[1].accel_sigma.z() = std::numeric_limits<double>::quiet_NaN();
+  const auto fit = calib::fit_scale_against_temperature(pts, 40.0, 3.0);
+  ASSERT_TRUE(fit.determined) << fit.reason;
+  for (int a = 0; a < 3; ++a) {
+    // The model's scale rises by 2e-4 per K: the sensitivity (its inverse) falls by as much.
+    EXPECT_NEAR(fit.model.gyro_k[a], -2e-4, 1e-12);
+    // k = -b / a: sigma_b = sigma / (20 sqrt 2) with the middle point at x = 0; a's own sigma
+    // adds b^2 var_a / a^4, a share of 4e-8 of that.
+    EXPECT_NEAR(fit.model.gyro_sigma[a], 1e-4 / (20.0 * std::sqrt(2.0)) / 1.01, 1e-8);
+    EXPECT_NEAR(fit.gyro_chi2_dof[a], 0.0, 1e-12);  // the points lie on the line
+  }
+  EXPECT_TRUE(std::isnan(fit.model.accel_k.z()));
+  EXPECT_TRUE(std::isnan(fit.model.accel_sigma.z()));
+  EXPECT_NEAR(fit.model.accel_k.x(), -2e-4, 1e-12);
+  EXPECT_EQ(fit.model.temperatures_c, (std::vector<double>{20.0, 40.0, 60.0}));
+
+  // Too few points, or too close in temperature: not determined, with the reason.
+  const auto one = calib::fit_scale_against_temperature({point(20.0, 1e-4)}, 40.0, 3.0);
+  EXPECT_FALSE(one.determined);
+  EXPECT_NE(one.reason.find("two or more"), std::string::npos) << one.reason;
+  const auto close = calib::fit_scale_against_temperature({point(20.0, 1e-4), point(21.0, 1e-4)}, 40.0, 3.0);
+  EXPECT_FALSE(close.determined);
+  EXPECT_NE(close.reason.find("span 1.00 deg C"), std::string::npos) << close.reason;
+
+  // The model carries it; the record's JSON form keeps it.
+  calib::ThermalResult r;
+  r.determined = true;
+  r.reference_c = 40.0;
+  r.scale = fit;
+  const ThermalModel m = calib::thermal_model(r);
+  ASSERT_TRUE(m.scale_model);
+  auto back = thermal_model_from_json(thermal_model_json(m));
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  ASSERT_TRUE(back->scale_model);
+  EXPECT_DOUBLE_EQ(back->scale_model->gyro_k.y(), m.scale_model->gyro_k.y());
+  EXPECT_TRUE(std::isnan(back->scale_model->accel_k.z()));
+  r.scale = one;
+  EXPECT_EQ(calib::thermal_model(r).scale, "not determined: " + one.reason);
 }
 
 }  // namespace

@@ -14,6 +14,8 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "sim/imu_error_model.hpp"
 #include "sim/truth.hpp"
@@ -167,6 +169,78 @@ TEST(CliCalibrateThermal, StaticWithTheModelGivesTheBiasesAtItsReferenceAndTheSt
   EXPECT_EQ(j["calibration"]["version"], 2);
   EXPECT_DOUBLE_EQ(j["calibration"]["thermal"]["reference_c"].get<double>(), ref);
   EXPECT_EQ(j["calibration"]["thermal"]["gyro"].size(), 3u);
+}
+
+TEST(CliCalibrateThermal, StaticPosesAtTwoTemperaturesGiveTheScaleAgainstTemperature) {
+  const std::string dir = test::scratch_dir();
+  const std::string warm = dir + "/warmup.imulog", thermal = dir + "/thermal.yaml";
+  auto sim = sim_warm_up(warm, "20", "60");
+  ASSERT_EQ(sim.exit_code, 0) << sim.err;
+  // The same IMU (the warm-up's truth) in static poses held at 22 and at 52 deg C, its scale
+  // factors moving with temperature by these ppm/K.
+  const Eigen::Vector3d gyro_k(300e-6, -150e-6, 80e-6), accel_k(120e-6, -60e-6, 200e-6);
+  const std::string truth = sim::truth_path_for(warm);
+  std::vector<std::string> poses;
+  for (const auto& [seed, hold] : {std::pair{"8", "22"}, std::pair{"9", "52"}}) {
+    poses.push_back(dir + "/poses-" + std::string(hold) + ".imulog");
+    auto st =
+        run_cli({"sim", "static", "--seed", seed, "--truth", truth, "--temp-hold", hold, "--gyro-scale-tc",
+                 "300,-150,80", "--accel-scale-tc", "120,-60,200", "-o", poses.back()});
+    ASSERT_EQ(st.exit_code, 0) << st.err;
+  }
+  // Without them the scale is not determined, and the output says how it would be.
+  auto plain = run_cli({"calibrate", "thermal", warm, "-o", dir + "/plain.yaml"});
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  EXPECT_NE(plain.out.find("scale against temperature: not determined: a still recording in one attitude"),
+            std::string::npos)
+      << plain.out;
+  EXPECT_NE(
+      YAML::LoadFile(dir + "/plain.yaml")["scale_against_temperature"].as<std::string>().find("--scale-from"),
+      std::string::npos);
+
+  auto r = run_cli(
+      {"calibrate", "thermal", warm, "--scale-from", poses[0], "--scale-from", poses[1], "-o", thermal});
+  ASSERT_EQ(r.exit_code, 0) << r.err << r.out;
+  EXPECT_NE(r.out.find("scale against temperature from 2 static calibrations at"), std::string::npos)
+      << r.out;
+  const YAML::Node s = YAML::LoadFile(thermal)["scale_against_temperature"];
+  ASSERT_TRUE(s.IsMap()) << YAML::Dump(s);
+  ASSERT_EQ(s["points"].size(), 2u);
+  EXPECT_NEAR(s["points"][0]["temperature_c"].as<double>(), 22.0, 0.05);
+  EXPECT_NEAR(s["points"][1]["temperature_c"].as<double>(), 52.0, 0.05);
+  for (const auto& [sensor, truth_k] : {std::pair{"gyro", gyro_k}, std::pair{"accel", accel_k}}) {
+    for (int a = 0; a < 3; ++a) {
+      const double k = s[std::string(sensor) + "_k"][a].as<double>();
+      const double sigma = s[std::string(sensor) + "_sigma"][a].as<double>();
+      std::printf("%s %c: k %.1f +- %.1f ppm/K, truth %.1f\n", sensor, "xyz"[a], k * 1e6, sigma * 1e6,
+                  truth_k[a] * 1e6);
+      EXPECT_GT(sigma, 0.0);
+      EXPECT_LT(sigma, 60e-6) << sensor << a;  // 30 K apart: a few 1e-4 of scale sigma each
+      EXPECT_LT(std::abs(k - truth_k[a]), 4.0 * sigma) << sensor << " " << a << ": " << k << " +- " << sigma;
+    }
+  }
+  std::fflush(stdout);  // before the commands below fork
+  // Static recordings too close in temperature determine nothing: said, not zeros.
+  auto close = run_cli({"calibrate", "thermal", warm, "--scale-from", poses[0], "--scale-from", poses[0],
+                        "-o", dir + "/close.yaml"});
+  ASSERT_EQ(close.exit_code, 0) << close.err;
+  EXPECT_NE(YAML::LoadFile(dir + "/close.yaml")["scale_against_temperature"].as<std::string>().find(
+                "not determined: the static calibrations span 0.00 deg C"),
+            std::string::npos);
+  // The record keeps the scale model.
+  auto st = run_cli({"calibrate", "static", poses[1], "--thermal", thermal, "-o", dir + "/hot.yaml"});
+  ASSERT_EQ(st.exit_code, 0) << st.err;
+  const std::string config = dir + "/rig.yaml";
+  std::ofstream(config) << "name: warm-rig\nimu:\n  bus: sim\nstorage:\n  backend: file\n  path: " << dir
+                        << "/calibration.bin\n  size_bytes: 8192\n  offset_bytes: 0\n";
+  auto w = run_cli({"store", "write", "--config", config, dir + "/hot.yaml"});
+  ASSERT_EQ(w.exit_code, 0) << w.err;
+  auto rd = run_cli({"store", "read", "--json", "--config", config});
+  ASSERT_EQ(rd.exit_code, 0) << rd.err;
+  const auto j = nlohmann::json::parse(rd.out)["calibration"]["thermal"]["scale"];
+  ASSERT_TRUE(j.is_object()) << j.dump();
+  EXPECT_NEAR(j["gyro_k"][0].get<double>(), s["gyro_k"][0].as<double>(), 1e-12);
+  EXPECT_EQ(j["temperatures_c"].size(), 2u);
 }
 
 }  // namespace
