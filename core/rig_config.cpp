@@ -73,6 +73,8 @@ constexpr SessionNumber kSessionNumbers[] = {
     {"warmup_rate_c_per_min", &SessionConfig::warmup_rate_c_per_min, 0.001, 10.0},
     {"warmup_window_s", &SessionConfig::warmup_window_s, 2.0, 600.0},
     {"warmup_timeout_s", &SessionConfig::warmup_timeout_s, 1.0, 7200.0},
+    {"thermal_min_span_c", &SessionConfig::thermal_min_span_c, 0.5, 100.0},
+    {"thermal_timeout_s", &SessionConfig::thermal_timeout_s, 60.0, 28800.0},
     {"still_s", &SessionConfig::still_s, 1.0, 600.0},
     {"hold_s", &SessionConfig::hold_s, 0.5, 60.0},
     {"still_gyro_dps", &SessionConfig::still_gyro_dps, 0.01, 90.0},
@@ -742,8 +744,8 @@ Result<RigConfig> ConfigParser::parse(const std::string& text) {
 }  // namespace
 
 const std::vector<std::string>& session_step_names() {
-  static const std::vector<std::string> names = {"preflight", "warmup", "still",  "poses", "gsens",
-                                                 "motion",    "solve",  "review", "write"};
+  static const std::vector<std::string> names = {"preflight", "warmup", "thermal", "still",  "poses",
+                                                 "gsens",     "motion", "solve",   "review", "write"};
   return names;
 }
 

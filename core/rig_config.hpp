@@ -79,11 +79,14 @@ struct StorageConfig {
 /// thresholds. Every field is optional in the file; these defaults apply.
 struct SessionConfig {
   /// Steps in protocol order; empty: every step that applies (gsens is opt-in, motion needs
-  /// cameras). Names: preflight, warmup, still, poses, gsens, motion, solve, review, write.
+  /// cameras, thermal is opt-in). Names: preflight, warmup, thermal, still, poses, gsens, motion,
+  /// solve, review, write.
   std::vector<std::string> steps;
   double warmup_rate_c_per_min = 0.3;   // warm when the die temperature changes slower than this
   double warmup_window_s = 15.0;        // over this window
   double warmup_timeout_s = 900.0;      // then the step fails (or is skipped by the operator)
+  double thermal_min_span_c = 3.0;      // thermal: the die must move this much for a model
+  double thermal_timeout_s = 3600.0;    // thermal: the recording ends here at the latest
   double still_s = 10.0;                // initial still period (the gyro bias, T_init)
   double hold_s = 2.0;                  // a pose is captured after this long still
   double still_gyro_dps = 2.0;          // still: gyro mean (bias removed) below this, deg/s

@@ -87,6 +87,8 @@ fake::SensorReading TrajectorySensor::operator()(TimeNs host_t_ns) {
     stats_.max_rate_radps = std::max(stats_.max_rate_radps, w);
     stats_.sum_accel_bias += d.accel_bias;
     stats_.sum_gyro_bias += d.gyro_bias;
+    stats_.sum_accel_bias_temp += d.accel_bias_temp;
+    stats_.sum_gyro_bias_temp += d.gyro_bias_temp;
     stats_.accel_bias_end = d.accel_bias;
     stats_.gyro_bias_end = d.gyro_bias;
     stats_.temperature_end_c = d.temperature_c;

@@ -109,6 +109,8 @@ struct TrajectorySensorStats {
   double max_accel_mps2 = 0.0, max_rate_radps = 0.0;
   Eigen::Vector3d sum_accel_bias = Eigen::Vector3d::Zero();
   Eigen::Vector3d sum_gyro_bias = Eigen::Vector3d::Zero();
+  Eigen::Vector3d sum_accel_bias_temp = Eigen::Vector3d::Zero();  // their die-temperature parts
+  Eigen::Vector3d sum_gyro_bias_temp = Eigen::Vector3d::Zero();
   Eigen::Vector3d accel_bias_end = Eigen::Vector3d::Zero();
   Eigen::Vector3d gyro_bias_end = Eigen::Vector3d::Zero();
   double temperature_start_c = 0.0, temperature_end_c = 0.0;

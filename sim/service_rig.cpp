@@ -16,6 +16,7 @@
 #include <sstream>
 
 #include "core/camimu_calibration.hpp"
+#include "core/text_format.hpp"
 #include "sim/camera_scene.hpp"
 #include "sim/camimu.hpp"
 #include "sim/motion.hpp"
@@ -307,6 +308,14 @@ class VirtualServiceRig final : public ServiceRig {
     so.settings = options.settings;
     so.mounting = options.mounting;
     so.seed = options.seed;
+    if (options.cold_start_c) {
+      ImuModelParams p = ImuModelParams::draw(options.seed);
+      p.temp_start_c = *options.cold_start_c;
+      p.temp_final_c = 45.0;
+      p.temp_time_constant_s = 300.0;
+      p.draw_temperature_coefficients(options.seed, 2);
+      so.params = p;
+    }
     auto rig = SessionRig::create(so);
     if (!rig.ok()) return rig.error();
     r->rig_ = std::move(*rig);
@@ -389,7 +398,19 @@ class VirtualServiceRig final : public ServiceRig {
     // The static method finds one bias per triad; the simulated one wanders (random walk), so its
     // truth is the bias in effect averaged over the samples of the still and pose steps.
     ImuModelParams at_session = p;
-    const std::string window = realised_biases(at_session.accel_bias, at_session.gyro_bias);
+    std::string window = realised_biases(at_session.accel_bias, at_session.gyro_bias);
+    // A result corrected to a thermal model's reference temperature: the truth is the bias there,
+    // the simulator's temperature parts over the window replaced by its part at T_ref.
+    if (result.contains("thermal") && result["thermal"].value("determined", false)) {
+      const double ref = result["thermal"].value("reference_c", 0.0);
+      Eigen::Vector3d accel_temp, gyro_temp;
+      if (realised_temperature_parts(accel_temp, gyro_temp)) {
+        at_session.accel_bias += p.accel_bias_temp(ref) - accel_temp;
+        at_session.gyro_bias += p.gyro_bias_temp(ref) - gyro_temp;
+        window += ", their temperature parts replaced by those at the thermal model's reference " +
+                  fixed(ref, 2) + " deg C";
+      }
+    }
     const double accel_si = counts ? p.accel_mps2_per_count() : 1.0,
                  gyro_si = counts ? p.gyro_radps_per_count() : 1.0;
     std::vector<TruthRow> rows;
@@ -454,6 +475,17 @@ class VirtualServiceRig final : public ServiceRig {
     gyro = (end.sum_gyro_bias - begin.sum_gyro_bias) / static_cast<double>(n);
     return bias_begin_ ? "their mean over the still and pose steps (they wander)"
                        : "their mean over the session (they wander)";
+  }
+
+  /// The mean die-temperature parts of the biases over the same window; false without samples.
+  bool realised_temperature_parts(Eigen::Vector3d& accel, Eigen::Vector3d& gyro) const {
+    const TrajectorySensorStats end = bias_end_ ? *bias_end_ : rig_->sensor_stats();
+    const TrajectorySensorStats begin = bias_begin_ ? *bias_begin_ : TrajectorySensorStats{};
+    const std::int64_t n = end.samples - begin.samples;
+    if (n <= 0) return false;
+    accel = (end.sum_accel_bias_temp - begin.sum_accel_bias_temp) / static_cast<double>(n);
+    gyro = (end.sum_gyro_bias_temp - begin.sum_gyro_bias_temp) / static_cast<double>(n);
+    return true;
   }
 
   std::chrono::nanoseconds wall_offset(double scale) const {

@@ -42,6 +42,10 @@ struct ServiceRigOptions {
   double motion_s = 60.0;
   /// Seeds the IMU's errors, the cameras' noise and the operator.
   std::uint64_t seed = 1;
+  /// A cold start: the die starts at this temperature and warms towards 45 deg C (time constant
+  /// 300 s), its biases moving with a quadratic in temperature drawn from the seed (what the
+  /// session's thermal step fits). Empty: the die is already near its working temperature.
+  std::optional<double> cold_start_c;
   /// Rig seconds per wall-clock second; 0: as fast as the host computes.
   double time_scale = 1.0;
   /// The scripted operator: "" (nobody moves the rig), "motion" (moves it as the prompts ask),

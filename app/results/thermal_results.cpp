@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 
 #include "app/initial_guess.hpp"
 #include "app/solvers.hpp"
@@ -378,8 +379,9 @@ ThermalModel thermal_model_on_input_units(const ThermalModel& si_model, const Im
 std::string ThermalCorrection::warning() const {
   std::string w;
   if (clamped > 0) {
-    w = std::to_string(clamped) + " samples outside the thermal model's range (" + fixed(model_min_c, 2) + " .. " +
-        fixed(model_max_c, 2) + " deg C; the samples met " + fixed(min_c, 2) + " .. " + fixed(max_c, 2) +
+    w = std::to_string(clamped) + " samples outside the thermal model's range (" + fixed(model_min_c, 2) +
+        " .. " + fixed(model_max_c, 2) + " deg C; the samples met " + fixed(min_c, 2) + " .. " +
+        fixed(max_c, 2) +
         ") were corrected at its nearest end: what the die's move beyond it does to the bias is left in them";
   }
   if (without_temperature > 0) {
@@ -405,16 +407,35 @@ Result<ThermalCorrection> correct_to_reference_temperature(std::vector<ImuSample
     c.min_c = std::min(c.min_c, t);
     c.max_c = std::max(c.max_c, t);
     if (t < model.min_c || t > model.max_c) ++c.clamped;
+    c.mean_c += model.clamp(t);
     s.gyro -= model.gyro_change(t);
     s.accel -= model.accel_change(t);
     ++c.corrected;
   }
+  if (c.corrected > 0) c.mean_c /= static_cast<double>(c.corrected);
   if (c.corrected == 0) {
     return make_error(Errc::kInsufficientData,
                       "the log has no die temperature, so the thermal model cannot be applied: record with a "
                       "temperature (imucal record stores it) or leave out --thermal");
   }
   return c;
+}
+
+std::string thermal_uncertainty_warning(const calib::ThermalResult& r, double temperature_c) {
+  if (!r.determined) return {};
+  const double t = std::clamp(temperature_c, r.temp_min_c, r.temp_max_c);
+  const auto sigmas = [&](const std::array<calib::ThermalAxisFit, 3>& fits, double k, int digits) {
+    std::string out;
+    for (const auto& f : fits) {
+      const double s = f.change_sigma(t, r.reference_c) * k;
+      out += (out.empty() ? "" : " ") + (std::isfinite(s) ? fixed(s, digits) : std::string("not determined"));
+    }
+    return out;
+  };
+  return "the biases' sigmas leave out the thermal model's own uncertainty at the samples' mean "
+         "temperature " +
+         fixed(t, 2) + " deg C: gyro " + sigmas(r.gyro, 180.0 / std::numbers::pi, 4) + " deg/s, accel " +
+         sigmas(r.accel, 1e3 / kStandardGravity, 3) + " mg (add it in quadrature)";
 }
 
 Result<AppliedThermal> apply_thermal_file(const std::string& path, std::vector<ImuSample>& samples,
@@ -442,6 +463,8 @@ Result<AppliedThermal> apply_thermal_file(const std::string& path, std::vector<I
                                file->log + "), applied to stream " + info.name);
   }
   if (auto w = corrected->warning(); !w.empty()) applied.warnings.push_back(w + " (" + path + ")");
+  if (auto w = thermal_uncertainty_warning(file->result, corrected->mean_c); !w.empty())
+    applied.warnings.push_back(w + " (" + path + ")");
   return applied;
 }
 

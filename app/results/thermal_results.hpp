@@ -43,10 +43,11 @@ ThermalModel thermal_model_on_input_units(const ThermalModel& si_model, const Im
 /// What the correction did.
 struct ThermalCorrection {
   std::size_t corrected = 0;
-  std::size_t clamped = 0;              // outside the model's range: corrected at its nearest end
-  std::size_t without_temperature = 0;  // left as they are
-  double min_c = 0.0, max_c = 0.0;      // the temperatures met
+  std::size_t clamped = 0;                      // outside the model's range: corrected at its nearest end
+  std::size_t without_temperature = 0;          // left as they are
+  double min_c = 0.0, max_c = 0.0;              // the temperatures met
   double model_min_c = 0.0, model_max_c = 0.0;  // the model's valid range
+  double mean_c = 0.0;  // mean of the temperatures the samples were corrected at (clamped)
   /// A warning for the result when some samples were clamped or had no temperature; empty if not.
   std::string warning() const;
 };
@@ -57,6 +58,12 @@ struct ThermalCorrection {
 [[nodiscard]] Result<ThermalCorrection> correct_to_reference_temperature(std::vector<ImuSample>& samples,
                                                                          const ImuStreamInfo& info,
                                                                          const ThermalModel& model);
+
+/// What the correction adds to the biases' uncertainty: the model's own 1-sigma of the change
+/// f(T) - f(T_ref) at `temperature_c` (clamped to its range), per axis, as a warning for results
+/// whose bias sigmas do not carry it ("... gyro x y z deg/s, accel x y z mg; add it in
+/// quadrature"). Empty when the result is not determined.
+std::string thermal_uncertainty_warning(const calib::ThermalResult& result, double temperature_c);
 
 /// A thermal file applied to a stream's samples.
 struct AppliedThermal {

@@ -17,9 +17,9 @@ using nlohmann::json;
 
 namespace {
 
-constexpr StepId kAllSteps[] = {StepId::kPreflight, StepId::kWarmup, StepId::kStill,
-                                StepId::kPoses,     StepId::kGsens,  StepId::kMotion,
-                                StepId::kSolve,     StepId::kReview, StepId::kWrite};
+constexpr StepId kAllSteps[] = {StepId::kPreflight, StepId::kWarmup, StepId::kThermal, StepId::kStill,
+                                StepId::kPoses,     StepId::kGsens,  StepId::kMotion,  StepId::kSolve,
+                                StepId::kReview,    StepId::kWrite};
 
 }  // namespace
 
@@ -29,6 +29,8 @@ const char* step_name(StepId step) {
       return "preflight";
     case StepId::kWarmup:
       return "warmup";
+    case StepId::kThermal:
+      return "thermal";
     case StepId::kStill:
       return "still";
     case StepId::kPoses:
@@ -97,7 +99,7 @@ std::vector<StepId> configured_steps(const RigConfig& config) {
     return out;
   }
   for (StepId id : kAllSteps) {
-    if (id == StepId::kGsens) continue;
+    if (id == StepId::kGsens || id == StepId::kThermal) continue;
     if (id == StepId::kMotion && config.cameras.empty()) continue;
     out.push_back(id);
   }
@@ -133,7 +135,8 @@ SessionEngine::SessionEngine(const RigConfig& config, const ImuStreamInfo& info,
       info_(info),
       host_(host),
       window_(std::make_unique<Window>(info.rate_hz)),
-      samples_(std::make_shared<std::vector<ImuSample>>()) {}
+      samples_(std::make_shared<std::vector<ImuSample>>()),
+      thermal_(std::make_shared<std::vector<ImuSample>>()) {}
 
 SessionEngine::~SessionEngine() = default;
 
@@ -159,8 +162,18 @@ Result<std::vector<StepId>> SessionEngine::plan(const std::vector<std::string>& 
       return make_error(Errc::kInvalidArgument,
                         std::string("step '") + step_name(needs_solve) + "' needs the 'solve' step");
   }
-  if (solves && std::find(ids.begin(), ids.end(), StepId::kPoses) == ids.end())
-    return make_error(Errc::kInvalidArgument, "step 'solve' needs the 'poses' step (the static calibration)");
+  const bool poses = std::find(ids.begin(), ids.end(), StepId::kPoses) != ids.end();
+  const bool thermal = std::find(ids.begin(), ids.end(), StepId::kThermal) != ids.end();
+  if (solves && !poses && !thermal)
+    return make_error(Errc::kInvalidArgument,
+                      "step 'solve' needs the 'poses' step (the static calibration) or the 'thermal' step");
+  // A thermal model is stored with the IMU calibration whose biases it refers to its reference
+  // temperature: alone it has nothing to go with.
+  if (!poses && std::find(ids.begin(), ids.end(), StepId::kWrite) != ids.end())
+    return make_error(
+        Errc::kInvalidArgument,
+        "step 'write' needs the 'poses' step: a thermal model is stored with the IMU calibration "
+        "it corrects (a thermal recording alone leaves its model in the session folder)");
   return ids;
 }
 
@@ -188,6 +201,8 @@ void SessionEngine::reset() {
   samples_ = std::make_shared<std::vector<ImuSample>>();
   recording_ = true;
   temps_.clear();
+  thermal_ = std::make_shared<std::vector<ImuSample>>();
+  thermal_sum_ = {};
   still_since_ns_ = -1;
   bias_known_ = false;
   still_gyro_sum_.setZero();
@@ -263,7 +278,8 @@ std::vector<json> SessionEngine::snapshot() const {
 }
 
 bool SessionEngine::step_skippable(StepId id) const {
-  return id == StepId::kWarmup || id == StepId::kGsens || id == StepId::kMotion || id == StepId::kWrite;
+  return id == StepId::kWarmup || id == StepId::kThermal || id == StepId::kGsens || id == StepId::kMotion ||
+         id == StepId::kWrite;
 }
 
 void SessionEngine::enter(std::size_t index) {
@@ -323,7 +339,18 @@ void SessionEngine::begin_step() {
       break;
     case StepId::kWarmup:
       temps_.clear();
-      prompt("Warming up: leave the rig still until the IMU's temperature settles", {"skip", "abort"});
+      prompt(thermal_planned() ? "Warming up: leave the rig still until the IMU's temperature settles; the "
+                                 "warm-up is recorded for the thermal model"
+                               : "Warming up: leave the rig still until the IMU's temperature settles",
+             {"skip", "abort"});
+      break;
+    case StepId::kThermal:
+      // A warm-up just before goes on into this step: its recording is kept.
+      temps_.clear();
+      prompt(
+          "Thermal: leave the rig still while it warms up (or cools down); the bias is fitted against "
+          "the die temperature. c ends the recording",
+          {"continue", "skip", "abort"});
       break;
     case StepId::kStill:
       still_since_ns_ = -1;
@@ -451,6 +478,7 @@ Status SessionEngine::key(const std::string& key) {
       return make_error(Errc::kInvalidArgument, std::string("step ") + step_name(id) + " cannot be skipped");
     steps_[current_].state = StepState::kSkipped;
     message("info", std::string("Skipped step ") + step_name(id));
+    if (id == StepId::kThermal) thermal_->clear();  // skipped: no thermal model
     enter(current_ + 1);
     return {};
   }
@@ -458,6 +486,10 @@ Status SessionEngine::key(const std::string& key) {
     if (failed_step_) return make_error(Errc::kInvalidArgument, "the step failed: redo it (r) or abort (a)");
     if (id == StepId::kPreflight || id == StepId::kMotion) {
       advance();
+      return {};
+    }
+    if (id == StepId::kThermal) {
+      end_thermal("ended by the operator");
       return {};
     }
     if (id == StepId::kPoses) {
@@ -539,21 +571,28 @@ void SessionEngine::request_final_solve() {
   SolveJob job;
   job.id = next_solve_id_++;
   job.final = true;
-  job.samples = std::make_shared<const std::vector<ImuSample>>(*samples_);
+  const bool poses =
+      std::any_of(steps_.begin(), steps_.end(), [](const Step& s) { return s.id == StepId::kPoses; });
+  job.samples = std::make_shared<const std::vector<ImuSample>>(poses ? *samples_ : std::vector<ImuSample>());
+  if (!thermal_->empty()) job.thermal_samples = std::make_shared<const std::vector<ImuSample>>(*thermal_);
+  job.thermal_min_span_c = config_.session.thermal_min_span_c;
   job.static_options = static_options();
   job.camimu = std::any_of(steps_.begin(), steps_.end(), [](const Step& s) {
     return s.id == StepId::kMotion && s.state == StepState::kDone;
   });
   job.t_end_ns = now_ns_;
   final_id_ = job.id;
+  const std::size_t thermal_means = job.thermal_samples ? job.thermal_samples->size() : 0;
   emit({{"type", "solve"},
         {"id", job.id},
         {"final", true},
         {"samples", job.samples->size()},
+        {"thermal_means", thermal_means},
         {"camimu", job.camimu}});
-  prompt("Solving: " + std::to_string(job.samples->size()) + " samples" +
-             (job.camimu ? " and the camera frames" : ""),
-         {"abort"});
+  std::string what = poses ? std::to_string(job.samples->size()) + " samples" : std::string();
+  if (thermal_means > 0) what += (what.empty() ? "" : ", ") + std::string("the thermal recording");
+  if (job.camimu) what += " and the camera frames";
+  prompt("Solving: " + what, {"abort"});
   host_.solve(job);
 }
 
@@ -613,6 +652,16 @@ json SessionEngine::result_message() const {
         {{M(0, 0), M(0, 1), M(0, 2)}, {M(1, 0), M(1, 1), M(1, 2)}, {M(2, 0), M(2, 1), M(2, 2)}});
   };
   auto vec = [](const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); };
+  if (final_->thermal) {
+    const auto& t = *final_->thermal;
+    m["thermal"] = {{"determined", t.determined}};
+    if (t.determined) {
+      m["thermal"]["reference_c"] = t.reference_c;
+      m["thermal"]["valid_range_c"] = {t.temp_min_c, t.temp_max_c};
+    } else {
+      m["thermal"]["reason"] = t.reason;
+    }
+  }
   if (final_->imu) {
     const auto& c = final_->imu->canonical;
     m["imu"] = {

@@ -1,8 +1,8 @@
 #pragma once
 // The guided calibration session (docs/service-session.md): a state machine over the protocol's
-// steps (preflight, warm-up, still start, static poses, six-face holds, checkerboard motion,
-// solve, review, write) that turns IMU samples, frame detections and operator keys into prompts,
-// live figures and results.
+// steps (preflight, warm-up, thermal recording, still start, static poses, six-face holds, checkerboard
+// motion, solve, review, write) that turns IMU samples, frame detections and operator keys into prompts, live
+// figures and results.
 //
 // The engine is deterministic and runs on sample time only: every decision is taken while a
 // sample is processed or when a key, a fault or a solve result is applied between two samples,
@@ -24,6 +24,7 @@
 #include "app/camimu_calibration.hpp"
 #include "app/session/pose_guide.hpp"
 #include "calib/static_calibration.hpp"
+#include "calib/thermal_calibration.hpp"
 #include "core/calibration_record.hpp"
 #include "core/imu.hpp"
 #include "core/result.hpp"
@@ -32,7 +33,7 @@
 
 namespace imucal::app::session {
 
-enum class StepId { kPreflight, kWarmup, kStill, kPoses, kGsens, kMotion, kSolve, kReview, kWrite };
+enum class StepId { kPreflight, kWarmup, kThermal, kStill, kPoses, kGsens, kMotion, kSolve, kReview, kWrite };
 enum class StepState { kPending, kActive, kDone, kSkipped, kFailed };
 enum class SessionState { kIdle, kRunning, kReview, kDone, kAborted, kFailed };
 
@@ -41,8 +42,8 @@ const char* step_state_name(StepState state);
 const char* session_state_name(SessionState state);
 [[nodiscard]] Result<StepId> parse_step(const std::string& name);
 
-/// The steps a configuration runs: session.steps, or every step that applies (gsens only when
-/// listed, motion only with cameras).
+/// The steps a configuration runs: session.steps, or every step that applies (gsens and thermal
+/// only when listed, motion only with cameras).
 std::vector<StepId> configured_steps(const RigConfig& config);
 
 /// What the host found when it probed the rig (step 1).
@@ -62,13 +63,19 @@ struct PreflightReport {
 };
 
 /// A solve the engine asks for. Quick: the static method over the samples so far (live sigmas
-/// while poses are captured). Final: the static method and, after a motion step, the camera-IMU
+/// while poses are captured). Final: the thermal model (after a thermal step), the static method
+/// on samples corrected to its reference temperature and, after a motion step, the camera-IMU
 /// calibration of the session log.
 struct SolveJob {
   int id = 0;
   bool final = false;
-  /// The samples from the start of the still step on, as recorded (raw counts or SI).
+  /// The samples from the start of the still step on, as recorded (raw counts or SI); empty in a
+  /// session without the poses step (a thermal recording alone): no static calibration then.
   std::shared_ptr<const std::vector<ImuSample>> samples;
+  /// The thermal recording (warm-up and thermal steps of a session with the thermal step): means
+  /// over 0.1 s of the still rig's samples, in SI units and deg C. Empty: no thermal model.
+  std::shared_ptr<const std::vector<ImuSample>> thermal_samples;
+  double thermal_min_span_c = 3.0;
   calib::StaticCalibrationOptions static_options;
   bool camimu = false;
   TimeNs t_end_ns = 0;  // last sample in the job
@@ -76,6 +83,8 @@ struct SolveJob {
 
 /// What a solve produced. The host fills what it ran.
 struct SolveOutcome {
+  /// The thermal model's fit (determined or with the reason it is not), after a thermal step.
+  std::optional<calib::ThermalResult> thermal;
   std::optional<StaticCalibrationResult> imu;
   std::optional<CamImuReport> camimu;
   /// The record to store (core/calibration_record.hpp), built from the typed results above by
@@ -188,6 +197,14 @@ class SessionEngine {
 
   void run_preflight();
   void sample_warmup(const ImuSample& si);
+  void sample_thermal(const ImuSample& si);
+  /// The warm-up's and thermal step's temperature window: adds the sample's temperature and
+  /// returns the rate (deg C/min, least squares over the window); *span_s: the window's length.
+  double temperature_rate(const ImuSample& si, double* span_s);
+  /// The thermal recording: 0.1 s means of the still rig's samples; motion starts it again.
+  void record_thermal(const ImuSample& si, bool still);
+  void end_thermal(const std::string& why);
+  bool thermal_planned() const;
   void sample_still(const ImuSample& si, bool still);
   void sample_poses(const ImuSample& si, bool still);
   void sample_gsens(const ImuSample& si, bool still);
@@ -226,6 +243,14 @@ class SessionEngine {
   // warm-up
   std::deque<std::pair<double, double>> temps_;  // (t s, deg C), one per 0.5 s
   TimeNs last_temp_ns_ = 0;
+  // thermal recording
+  struct ThermalMean {  // the 0.1 s mean being summed
+    TimeNs first_ns = -1, last_ns = 0;
+    Eigen::Vector3d accel = Eigen::Vector3d::Zero(), gyro = Eigen::Vector3d::Zero();
+    double temperature = 0.0;
+    long count = 0;
+  } thermal_sum_;
+  std::shared_ptr<std::vector<ImuSample>> thermal_;  // the means so far (SI, deg C)
   // still start
   TimeNs still_since_ns_ = -1;
   Eigen::Vector3d gyro_bias_ = Eigen::Vector3d::Zero();

@@ -1,5 +1,6 @@
 #include "app/session/session_runner.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <ctime>
@@ -13,6 +14,7 @@
 #include "app/results/camimu_results.hpp"
 #include "app/results/output.hpp"
 #include "app/results/static_results.hpp"
+#include "app/results/thermal_results.hpp"
 #include "app/rig/stored_calibration.hpp"
 #include "app/solvers.hpp"
 #include "calib/target_detection.hpp"
@@ -70,8 +72,8 @@ SolveOutcome run_solve(const SolveJob& job, const RigConfig& config, const ImuSt
 /// one last.
 static Result<std::vector<std::string>> solve_camimu(
     const RigConfig& config, const std::string& dir, const std::string& static_yaml,
-    const ImuStreamInfo& info, const MotionLogSource& source, SolveOutcome& out,
-    const std::function<void(double, const std::string&)>& progress) {
+    const ImuStreamInfo& info, const MotionLogSource& source, const std::string& thermal_yaml,
+    SolveOutcome& out, const std::function<void(double, const std::string&)>& progress) {
   const std::string log = source.path.empty() ? dir + "/" + kMotionLogFile : source.path;
   if (!config.target) return make_error(Errc::kInvalidArgument, "the configuration names no target");
   std::vector<std::string> files;
@@ -80,6 +82,7 @@ static Result<std::vector<std::string>> solve_camimu(
   q.target = *config.target;
   q.target_source = "the rig configuration";
   q.store_detections = source.store_detections;
+  q.thermal_path = thermal_yaml;  // the session's model: the camimu samples corrected as the static ones
   for (std::size_t i = 0; i < config.cameras.size(); ++i) {
     const std::string& name = config.cameras[i].name;
     if (progress)
@@ -139,18 +142,81 @@ static Result<std::vector<std::string>> solve_camimu(
   return files;
 }
 
+/// The thermal model of a session's thermal recording (SolveJob::thermal_samples, SI means),
+/// into out.thermal; a fit that cannot be made (the rig moved, too small a span) is a result not
+/// determined, with the reason, and the session goes on without the correction. When determined
+/// it is written to <dir>/thermal.yaml (the `calibrate thermal` format), whose path is returned.
+static Result<std::string> solve_thermal(const SolveJob& job, const ImuStreamInfo& info,
+                                         const std::string& dir, SolveOutcome& out) {
+  calib::ThermalOptions options;  // the means are in SI units and deg C already
+  options.min_span_c = job.thermal_min_span_c;
+  // Bins of 20 s from 800 s of recording on; a shorter recording (the operator ended it) gets
+  // shorter bins, down to 2 s, so that it still has 40.
+  const auto& means = *job.thermal_samples;
+  const double duration_s = ns_to_s(means.back().t_ns - means.front().t_ns);
+  options.bin_s = std::clamp(duration_s / 40.0, 2.0, 20.0);
+  auto fit = calib::calibrate_thermal(*job.thermal_samples, options);
+  if (!fit.ok()) {
+    calib::ThermalResult failed;
+    failed.reason = fit.error().message;
+    out.thermal = std::move(failed);
+    return std::string();
+  }
+  out.thermal = std::move(*fit);
+  if (!out.thermal->determined) return std::string();
+  const std::string path = dir + "/thermal.yaml";
+  IMUCAL_TRY(write_text_file(path, thermal_result_yaml(*out.thermal, info, dir + "/session.imulog")));
+  out.result_files.push_back(path);
+  return path;
+}
+
 static SolveOutcome run_solve_timed(const SolveJob& job, const RigConfig& config, const ImuStreamInfo& info,
                                     const std::string& dir,
                                     const std::function<void(double, const std::string&)>& progress,
                                     const MotionLogSource& motion_log) {
   SolveOutcome out;
-  if (progress) progress(0.0, "Static calibration of " + std::to_string(job.samples->size()) + " samples");
-  auto result = app::calibrate_static(*job.samples, job.static_options);
+  std::string thermal_yaml;
+  std::optional<ThermalModel> thermal_model;  // on the stream's input units
+  std::vector<ImuSample> corrected;           // a copy of the samples at the model's T_ref
+  std::vector<std::string> thermal_warnings;  // what the correction left, for the static result
+  if (job.final && job.thermal_samples && !job.thermal_samples->empty()) {
+    if (progress)
+      progress(0.0, "Thermal model from " + std::to_string(job.thermal_samples->size()) + " means of 0.1 s");
+    auto path = solve_thermal(job, info, dir, out);
+    if (!path.ok()) {
+      out.error = "writing the thermal model: " + path.error().message;
+      return out;
+    }
+    thermal_yaml = *path;
+    if (out.thermal->determined && !job.samples->empty()) {
+      thermal_model =
+          thermal_model_on_input_units(calib::thermal_model(*out.thermal), info, info.accel, info.gyro);
+      corrected = *job.samples;
+      auto c = correct_to_reference_temperature(corrected, info, *thermal_model);
+      if (!c.ok()) {
+        out.error =
+            "correcting the samples to the thermal model's reference temperature: " + c.error().message;
+        return out;
+      }
+      for (const std::string& w : {c->warning(), thermal_uncertainty_warning(*out.thermal, c->mean_c)})
+        if (!w.empty()) thermal_warnings.push_back("thermal: " + w);
+    }
+  }
+  if (job.samples->empty()) {  // a thermal recording alone
+    if (!out.thermal)
+      out.error = "nothing to solve: the session has no poses and its thermal recording gave no model";
+    return out;
+  }
+  const std::vector<ImuSample>& samples = thermal_model ? corrected : *job.samples;
+  if (progress) progress(0.0, "Static calibration of " + std::to_string(samples.size()) + " samples");
+  auto result = app::calibrate_static(samples, job.static_options);
   if (!result.ok()) {
     out.error = result.error().message;
     return out;
   }
   out.imu = std::move(*result);
+  out.imu->thermal = thermal_model;
+  out.imu->warnings.insert(out.imu->warnings.end(), thermal_warnings.begin(), thermal_warnings.end());
   if (!job.final) return out;
   if (progress) progress(job.camimu ? 0.15 : 0.9, "Writing the static results");
   const std::string yaml_path = dir + "/imu-static.yaml", json_path = dir + "/imu-static.json";
@@ -161,11 +227,12 @@ static SolveOutcome run_solve_timed(const SolveJob& job, const RigConfig& config
     out.error = "writing the results: " + s.error().message;
     return out;
   }
-  out.result_files = {yaml_path, json_path};
+  out.result_files.push_back(yaml_path);
+  out.result_files.push_back(json_path);
   // The record to store, from the typed results (the files above are for people and tools).
   CalibrationRecord record = calibration_record_from_static(*out.imu, info, yaml_path);
   if (job.camimu) {
-    auto files = solve_camimu(config, dir, yaml_path, info, motion_log, out, progress);
+    auto files = solve_camimu(config, dir, yaml_path, info, motion_log, thermal_yaml, out, progress);
     if (!files.ok()) {
       out.error = files.error().message;
       return out;
@@ -523,10 +590,22 @@ void SessionRunner::solve(const SolveJob& job) {
         ro.overwrite = true;
         ro.log_in_progress = true;  // the session goes on (review, write) while the report is drawn
         ro.generator = std::string("imucal ") + kVersion;
-        if (auto r = report::write_report(ro); r.ok()) {
+        if (!out.imu) {
+          // A thermal recording alone: no static result to draw.
+        } else if (auto r = report::write_report(ro); r.ok()) {
           out.result_files.push_back(ro.html_path);
         } else {
           warn("the session report was not written: " + r.error().message);
+        }
+        if (out.thermal && out.thermal->determined) {
+          ro.result_path = dir + "/thermal.yaml";
+          ro.log_path.clear();
+          ro.html_path = dir + "/report-thermal.html";
+          if (auto r = report::write_report(ro); r.ok()) {
+            out.result_files.push_back(ro.html_path);
+          } else {
+            warn("the thermal report was not written: " + r.error().message);
+          }
         }
         if (out.camimu) {
           ro.result_path = dir + "/camimu/result.json";

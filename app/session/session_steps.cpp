@@ -1,7 +1,8 @@
-// The session's recording steps, sample by sample: warm-up, still start, static poses, six-face
-// holds, checkerboard motion; and the review's gates.
+// The session's recording steps, sample by sample: warm-up, thermal recording, still start,
+// static poses, six-face holds, checkerboard motion; and the review's gates.
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <sstream>
 
@@ -41,6 +42,36 @@ std::string figures(const Eigen::Vector3d& v, double k, int digits) {
   return out;
 }
 
+/// The review's lines for the thermal model: range, orders, drift without it and what is left.
+std::vector<std::string> thermal_lines(const calib::ThermalResult& t) {
+  if (!t.determined) return {"Thermal model: not determined: " + t.reason};
+  const auto axes = [](const std::array<calib::ThermalAxisFit, 3>& fits,
+                       double calib::ThermalAxisFit::*member) {
+    Eigen::Vector3d v;
+    for (int a = 0; a < 3; ++a)
+      v[a] = fits[a].determined ? fits[a].*member : std::numeric_limits<double>::quiet_NaN();
+    return v;
+  };
+  const auto orders = [](const std::array<calib::ThermalAxisFit, 3>& fits) {
+    std::string out;
+    for (const auto& f : fits)
+      out += (out.empty() ? "" : " ") + (f.determined ? std::to_string(f.order) : "-");
+    return out;
+  };
+  const double mg = 1e3 / kStandardGravity;
+  return {"Thermal model: reference " + fixed(t.reference_c, 2) + " C, valid " + fixed(t.temp_min_c, 2) +
+              " .. " + fixed(t.temp_max_c, 2) + " C, " + std::to_string(t.bins) + " bins; orders gyro " +
+              orders(t.gyro) + ", accel " + orders(t.accel),
+          "  gyro drift over the range " +
+              figures(axes(t.gyro, &calib::ThermalAxisFit::uncompensated_drift), 1.0 / kDeg, 4) +
+              " deg/s; left about the fit (RMS) " +
+              figures(axes(t.gyro, &calib::ThermalAxisFit::residual_rms), 1.0 / kDeg, 4) + " deg/s",
+          "  accel drift over the range " +
+              figures(axes(t.accel, &calib::ThermalAxisFit::uncompensated_drift), mg, 3) +
+              " mg; left about the fit (RMS) " +
+              figures(axes(t.accel, &calib::ThermalAxisFit::residual_rms), mg, 3) + " mg"};
+}
+
 }  // namespace
 
 ImuSample SessionEngine::to_si(const ImuSample& raw) const {
@@ -74,7 +105,12 @@ void SessionEngine::on_sample(const ImuSample& sample) {
   if (still && bias_known_) still = (window_->gyro_mean() - gyro_bias_).norm() < gyro_limit;
   switch (id) {
     case StepId::kWarmup:
+      if (thermal_planned()) record_thermal(sample, still);
       sample_warmup(si);
+      break;
+    case StepId::kThermal:
+      record_thermal(sample, still);
+      sample_thermal(si);
       break;
     case StepId::kStill:
       sample_still(si, still);
@@ -103,12 +139,7 @@ void SessionEngine::on_frame(TimeNs t_ns, bool target_seen) {
   }
 }
 
-void SessionEngine::sample_warmup(const ImuSample& si) {
-  if (!std::isfinite(si.temperature)) {
-    message("warning", "The IMU reports no temperature: warm-up skipped");
-    advance();
-    return;
-  }
+double SessionEngine::temperature_rate(const ImuSample& si, double* span_s) {
   if (temps_.empty() || si.t_ns - last_temp_ns_ >= 500'000'000) {
     temps_.emplace_back(seconds(si.t_ns), si.temperature);
     last_temp_ns_ = si.t_ns;
@@ -116,7 +147,7 @@ void SessionEngine::sample_warmup(const ImuSample& si) {
     while (temps_.size() > 2 && temps_.back().first - temps_[1].first >= config_.session.warmup_window_s)
       temps_.pop_front();
   }
-  const double span = temps_.back().first - temps_.front().first;
+  *span_s = temps_.back().first - temps_.front().first;
   // Rate: least-squares slope over the window, deg C per minute.
   double rate = 0.0;
   if (temps_.size() >= 3) {
@@ -128,6 +159,17 @@ void SessionEngine::sample_warmup(const ImuSample& si) {
     for (const auto& [t, c] : temps_) num += (t - mt) * (c - mc), den += (t - mt) * (t - mt);
     rate = den > 0 ? 60.0 * num / den : 0.0;
   }
+  return rate;
+}
+
+void SessionEngine::sample_warmup(const ImuSample& si) {
+  if (!std::isfinite(si.temperature)) {
+    message("warning", "The IMU reports no temperature: warm-up skipped");
+    advance();
+    return;
+  }
+  double span = 0.0;
+  const double rate = temperature_rate(si, &span);
   const double elapsed = seconds(si.t_ns - step_start_ns_);
   if (live_due()) {
     live({"Temperature " + fixed(si.temperature, 2) + " C, changing " + fixed(rate, 2) +
@@ -144,6 +186,130 @@ void SessionEngine::sample_warmup(const ImuSample& si) {
     fault("imu", "the temperature did not settle within " + fixed(config_.session.warmup_timeout_s, 0) +
                      " s (still " + fixed(rate, 2) + " C/min)");
   }
+}
+
+bool SessionEngine::thermal_planned() const {
+  return std::any_of(steps_.begin(), steps_.end(), [](const Step& s) { return s.id == StepId::kThermal; });
+}
+
+void SessionEngine::record_thermal(const ImuSample& sample, bool still) {
+  if (!still) {
+    // The model needs one attitude throughout (gravity's projection is in the accelerometer's
+    // bias): a recording the rig moved in starts again.
+    if (!thermal_->empty())
+      message("warning",
+              "Motion during the thermal recording: it starts again from here; keep the rig still");
+    thermal_->clear();
+    thermal_sum_ = {};
+    return;
+  }
+  const ImuSample si = to_si(sample);
+  if (!std::isfinite(si.temperature) || (si.flags & (kImuFlagAccelSaturated | kImuFlagGyroSaturated)) != 0)
+    return;
+  ThermalMean& m = thermal_sum_;
+  if (m.count > 0 && si.t_ns - m.first_ns >= 100'000'000) {
+    const double n = static_cast<double>(m.count);
+    ImuSample mean;
+    mean.t_ns = m.first_ns + (m.last_ns - m.first_ns) / 2;
+    mean.accel = m.accel / n;
+    mean.gyro = m.gyro / n;
+    mean.temperature = m.temperature / n;
+    thermal_->push_back(mean);
+    m = {};
+  }
+  if (m.count == 0) m.first_ns = si.t_ns;
+  m.last_ns = si.t_ns;
+  m.accel += si.accel;
+  m.gyro += si.gyro;
+  m.temperature += si.temperature;
+  ++m.count;
+}
+
+namespace {
+
+/// Least-squares slopes of gyro and accelerometer against temperature over the recording so
+/// far (the live figure: the model is fitted with the final solve). NaN below 0.2 deg C of span.
+std::pair<Eigen::Vector3d, Eigen::Vector3d> thermal_slopes(const std::vector<ImuSample>& means) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::pair<Eigen::Vector3d, Eigen::Vector3d> out{Eigen::Vector3d::Constant(nan),
+                                                  Eigen::Vector3d::Constant(nan)};
+  if (means.size() < 10) return out;
+  double mt = 0.0, lo = means.front().temperature, hi = lo;
+  Eigen::Vector3d mg = Eigen::Vector3d::Zero(), ma = Eigen::Vector3d::Zero();
+  for (const auto& s : means) {
+    mt += s.temperature, mg += s.gyro, ma += s.accel;
+    lo = std::min(lo, s.temperature), hi = std::max(hi, s.temperature);
+  }
+  if (hi - lo < 0.2) return out;
+  const double n = static_cast<double>(means.size());
+  mt /= n, mg /= n, ma /= n;
+  double den = 0.0;
+  Eigen::Vector3d ng = Eigen::Vector3d::Zero(), na = Eigen::Vector3d::Zero();
+  for (const auto& s : means) {
+    const double dt = s.temperature - mt;
+    den += dt * dt, ng += dt * (s.gyro - mg), na += dt * (s.accel - ma);
+  }
+  return {ng / den, na / den};
+}
+
+}  // namespace
+
+void SessionEngine::sample_thermal(const ImuSample& si) {
+  if (!std::isfinite(si.temperature)) {
+    message("warning", "The IMU reports no temperature: no thermal model");
+    thermal_->clear();
+    advance();
+    return;
+  }
+  double span = 0.0;
+  const double rate = temperature_rate(si, &span);
+  const double elapsed = seconds(si.t_ns - step_start_ns_);
+  if (live_due()) {
+    double lo = si.temperature, hi = si.temperature;
+    for (const auto& s : *thermal_) lo = std::min(lo, s.temperature), hi = std::max(hi, s.temperature);
+    const auto [gyro_slope, accel_slope] = thermal_slopes(*thermal_);
+    live({"Temperature " + fixed(si.temperature, 2) + " C, changing " + fixed(rate, 2) +
+              " C/min (the recording ends below " + fixed(config_.session.warmup_rate_c_per_min, 2) + ")",
+          "Recorded " + fixed(lo, 2) + " .. " + fixed(hi, 2) + " C: a span of " + fixed(hi - lo, 2) +
+              " C (at least " + fixed(config_.session.thermal_min_span_c, 1) + " C for a model)",
+          "Gyro bias change so far: " + figures(gyro_slope, 1.0 / kDeg, 4) + " (deg/s)/C",
+          "Accel change so far: " + figures(accel_slope, 1e3 / kStandardGravity, 3) + " mg/C",
+          "Elapsed " + fixed(elapsed, 0) + " s of at most " + fixed(config_.session.thermal_timeout_s, 0) +
+              " s; c ends the recording"},
+         std::min(1.0, (hi - lo) / config_.session.thermal_min_span_c),
+         {{"temperature_c", si.temperature},
+          {"rate_c_per_min", rate},
+          {"range_c", {lo, hi}},
+          {"gyro_slope_dps_per_c", {gyro_slope.x() / kDeg, gyro_slope.y() / kDeg, gyro_slope.z() / kDeg}},
+          {"accel_slope_mps2_per_c", {accel_slope.x(), accel_slope.y(), accel_slope.z()}}});
+  }
+  if (elapsed >= config_.session.warmup_window_s && span >= config_.session.warmup_window_s &&
+      std::abs(rate) < config_.session.warmup_rate_c_per_min) {
+    end_thermal("the temperature settled at " + fixed(si.temperature, 2) + " C");
+  } else if (elapsed > config_.session.thermal_timeout_s) {
+    end_thermal("session.thermal_timeout_s (" + fixed(config_.session.thermal_timeout_s, 0) + " s) reached");
+  }
+}
+
+void SessionEngine::end_thermal(const std::string& why) {
+  double lo = 0.0, hi = 0.0;
+  if (!thermal_->empty()) {
+    lo = hi = thermal_->front().temperature;
+    for (const auto& s : *thermal_) lo = std::min(lo, s.temperature), hi = std::max(hi, s.temperature);
+  }
+  const double minutes =
+      thermal_->empty() ? 0.0 : seconds(thermal_->back().t_ns - thermal_->front().t_ns) / 60.0;
+  if (hi - lo < config_.session.thermal_min_span_c) {
+    message("warning",
+            "Thermal recording " + why + ": the die moved " + fixed(hi - lo, 2) +
+                " C, less than session.thermal_min_span_c (" + fixed(config_.session.thermal_min_span_c, 1) +
+                " C): no thermal model. Start from a cold rig, or warm it (a heater), for a model");
+    thermal_->clear();
+  } else {
+    message("info", "Thermal recording " + why + ": " + fixed(lo, 2) + " .. " + fixed(hi, 2) + " C over " +
+                        fixed(minutes, 1) + " min; the model is fitted with the final solve");
+  }
+  advance();
 }
 
 void SessionEngine::sample_still(const ImuSample& si, bool still) {
@@ -471,6 +637,15 @@ void SessionEngine::review() {
                     " e-3");
     lines.push_back("Static intervals " + std::to_string(r.intervals.size()) + ", attitudes " +
                     std::to_string(r.distinct_attitudes));
+  }
+  if (final_->thermal) {
+    for (auto& line : thermal_lines(*final_->thermal)) lines.push_back(std::move(line));
+    if (final_->thermal->determined && final_->imu) {
+      lines.push_back("The biases above are those at " + fixed(final_->thermal->reference_c, 2) +
+                      " C: the samples were corrected to the thermal model's reference temperature");
+      for (const auto& w : final_->imu->warnings)
+        if (w.starts_with("thermal: ")) lines.push_back("  " + w.substr(9));
+    }
   }
   if (final_->camimu) {
     for (const auto& cam : final_->camimu->result.cameras) {

@@ -53,6 +53,11 @@ int main(int argc, char** argv) {
                  "a session "
                  "starts; for trying the fault path")
       ->check(imucal::cli::finite_number(imucal::cli::NumberSign::kPositive));
+  app.add_option(
+         "--sim-cold-start", o.sim_cold_start_c,
+         "Virtual rig: its die starts at this temperature, deg C, and warms towards 45 (time constant "
+         "300 s), the biases moving with it: for trying the session's thermal step")
+      ->check(CLI::Range(-40.0, 44.0));
   std::string start;
   auto* start_opt = app.add_option("--start", start,
                                    "Start a session at launch: 'default' for the configured steps, or a "

@@ -257,6 +257,7 @@ Status Service::open_virtual_rig() {
   so.target = config_.target;
   so.motion_s = config_.session.motion_s;
   so.seed = options_.seed;
+  so.cold_start_c = options_.sim_cold_start_c;
   so.time_scale = options_.time_scale;
   so.operator_mode = options_.sim_operator;
   so.press_key = [this](const std::string& k) {

@@ -42,6 +42,7 @@ struct ServiceOptions {
   std::uint32_t sim_unplug_camera_after = 0;  // virtual rig: its cameras vanish after this many frames (once)
   double sim_unplug_imu_after_s =
       0.0;  // virtual rig: the IMU stops answering this long into a session (once)
+  std::optional<double> sim_cold_start_c;         // virtual rig: its die starts here and warms (thermal step)
   std::optional<std::vector<std::string>> start;  // start a session at launch with these steps
   bool exit_after_session = false;
 };

@@ -133,6 +133,12 @@ TEST(CliCalibrateThermal, StaticWithTheModelGivesTheBiasesAtItsReferenceAndTheSt
   EXPECT_NE(b.out.find("the samples were corrected to the thermal model's reference temperature"),
             std::string::npos)
       << b.out;
+  // The biases' sigmas are the static fit's: what the model adds is said beside them.
+  EXPECT_NE(
+      b.err.find("the biases' sigmas leave out the thermal model's own uncertainty at the samples' mean "
+                 "temperature"),
+      std::string::npos)
+      << b.err;
 
   // The truth at the reference temperature, in counts.
   auto params = sim::load_imu_params(truth);

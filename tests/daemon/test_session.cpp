@@ -11,7 +11,10 @@
 #include <limits>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <optional>
+#include <sstream>
 
+#include "app/results/thermal_results.hpp"
 #include "app/rig/rig.hpp"
 #include "app/session/session_replay.hpp"
 #include "app/session/session_runner.hpp"
@@ -46,13 +49,15 @@ RigConfig session_config(const std::vector<std::string>& steps) {
 /// solves and writes on the runner's worker, their results posted back between batches.
 class SimSession {
  public:
-  explicit SimSession(RigConfig config, std::uint64_t seed = 3)
+  explicit SimSession(RigConfig config, std::uint64_t seed = 3,
+                      std::optional<sim::ImuModelParams> params = std::nullopt)
       : config_(std::move(config)), dir_(test::scratch_dir()) {
     auto settings = app::driver_settings(config_.imu);
     EXPECT_TRUE(settings.ok());
     sim::SessionRigOptions ro;
     ro.settings = *settings;
     ro.seed = seed;
+    ro.params = std::move(params);
     auto rig = sim::SessionRig::create(ro);
     EXPECT_TRUE(rig.ok()) << rig.error().message;
     rig_ = std::move(*rig);
@@ -391,12 +396,196 @@ TEST(Session, APoseTooCloseToAnEarlierOneIsRefused) {
   EXPECT_EQ(s.runner_->engine().poses().size(), 1u);
 }
 
+/// A rig switched on cold: the die warms from 20 C towards 45 C (time constant 200 s) and the
+/// biases follow a quadratic in temperature drawn from `seed`.
+sim::ImuModelParams cold_start(std::uint64_t seed) {
+  sim::ImuModelParams p = sim::ImuModelParams::draw(seed);
+  p.temp_start_c = 20.0;
+  p.temp_final_c = 45.0;
+  p.temp_time_constant_s = 200.0;
+  p.draw_temperature_coefficients(seed, 2);
+  return p;
+}
+
+/// Ends the thermal step with the operator's c once it has recorded `seconds`.
+std::function<void(SimSession&)> end_thermal_after(double seconds) {
+  return [seconds, pressed = false](SimSession& ss) mutable {
+    const auto& e = ss.runner_->engine();
+    if (!pressed && e.current_step() == app::session::StepId::kThermal &&
+        ns_to_s(e.now_ns() - e.step_start_ns()) > seconds) {
+      pressed = true;
+      ss.press("continue");
+    }
+  };
+}
+
+TEST(Session, AThermalRecordingAloneFitsTheBiasAgainstTemperatureOfAColdStart) {
+  ModuleDir modules;
+  const sim::ImuModelParams truth = cold_start(5);
+  SimSession s(session_config({"preflight", "thermal", "solve", "review"}), 5, truth);
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  s.run(600.0, end_thermal_after(240.0));
+  ASSERT_EQ(s.outcome(), "completed");
+  EXPECT_TRUE(s.said("Thermal recording ended by the operator: "));
+  // The live view showed the temperature rising and the gyro's change against it.
+  std::vector<double> temps;
+  json last;
+  for (const auto& m : s.of_type("live"))
+    if (m.value("step", "") == "thermal") temps.push_back(m["figures"].value("temperature_c", 0.0)), last = m;
+  ASSERT_GE(temps.size(), 100u);
+  std::printf("thermal step: die %.2f -> %.2f C\n", temps.front(), temps.back());
+  EXPECT_GT(temps.back() - temps.front(), 8.0);
+  ASSERT_TRUE(last["figures"].contains("gyro_slope_dps_per_c")) << last.dump();
+  // The model: written in the `calibrate thermal` format, drawn, shown in the review.
+  const std::string yaml = s.runner_->session_dir() + "/thermal.yaml";
+  auto file = app::read_thermal_file(yaml);
+  ASSERT_TRUE(file.ok()) << file.error().message;
+  EXPECT_TRUE(std::filesystem::exists(s.runner_->session_dir() + "/report-thermal.html"));
+  EXPECT_FALSE(std::filesystem::exists(s.runner_->session_dir() + "/imu-static.yaml"));
+  const auto& r = file->result;
+  // The bins' range: 20 s means of a die warming by up to 3 C a minute.
+  EXPECT_NEAR(r.temp_min_c, temps.front(), 1.5);
+  EXPECT_NEAR(r.temp_max_c, temps.back(), 1.5);
+  // The fitted change over the range against the truth. The fit is on the nominal conversion of
+  // the raw counts (the rig's scale errors are 1-3 %), so the truth is compared within its
+  // sigma and 5 % of the change.
+  // The bias random walk over the recording: where the truth's change is not larger, the data
+  // cannot tell it (order 0 may be chosen, honestly).
+  const double walk = truth.gyro_bias_random_walk * std::sqrt(r.duration_s);
+  double worst = 0.0;
+  int fitted = 0;
+  for (int a = 0; a < 3; ++a) {
+    const auto& fit = r.gyro[a];
+    ASSERT_TRUE(fit.determined) << fit.reason;
+    const double truth_change =
+        truth.gyro_bias_temp(r.temp_max_c)[a] - truth.gyro_bias_temp(r.reference_c)[a];
+    const double change = fit.change(r.temp_max_c, r.reference_c);
+    const double sigma = fit.change_sigma(r.temp_max_c, r.reference_c);
+    std::printf("gyro %c: change to %.1f C fitted %.3e, truth %.3e, sigma %.1e rad/s\n", "xyz"[a],
+                r.temp_max_c, change, truth_change, sigma);
+    if (std::abs(truth_change) < 3.0 * walk) {
+      EXPECT_LT(std::abs(change - truth_change), 4.0 * sigma + 0.05 * std::abs(truth_change) + walk)
+          << "axis " << a;
+      continue;
+    }
+    ++fitted;
+    EXPECT_GE(fit.order, 1) << "axis " << a;
+    EXPECT_LT(std::abs(change - truth_change), 4.0 * sigma + 0.05 * std::abs(truth_change)) << "axis " << a;
+    worst = std::max(worst, std::abs(change - truth_change) / std::abs(truth_change));
+  }
+  std::printf(
+      "random walk over the recording %.1e rad/s; worst relative error of the gyro's change "
+      "where the change is above 3 times that: %.3f (%d axes)\n",
+      walk, worst, fitted);
+  EXPECT_GE(fitted, 2);
+  const auto review = s.of_type("review");
+  ASSERT_EQ(review.size(), 1u);
+  EXPECT_NE(review[0]["lines"][0].get<std::string>().find("Thermal model: reference "), std::string::npos)
+      << review[0].dump(1);
+  const auto results = s.of_type("result");
+  ASSERT_EQ(results.size(), 1u);
+  EXPECT_TRUE(results[0]["thermal"].value("determined", false)) << results[0].dump();
+}
+
+TEST(Session, AThermalStepBeforeThePosesCorrectsTheSamplesAndTheRecordCarriesTheModel) {
+  ModuleDir modules;
+  SimSession s(session_config({"preflight", "thermal", "still", "poses", "solve", "review", "write"}), 5,
+               cold_start(5));
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  s.run(900.0, end_thermal_after(150.0));
+  ASSERT_EQ(s.outcome(), "written");
+  ASSERT_TRUE(s.written_);
+  ASSERT_EQ(s.of_type("review").size(), 1u);
+  ASSERT_TRUE(s.written_->thermal) << s.of_type("review")[0]["lines"].dump(1);
+  auto file = app::read_thermal_file(s.runner_->session_dir() + "/thermal.yaml");
+  ASSERT_TRUE(file.ok()) << file.error().message;
+  EXPECT_NEAR(s.written_->thermal->reference_c, file->result.reference_c, 1e-9);  // YAML keeps 12 digits
+  // The record's model is on the stream's raw counts: the SI model divided by the nominal scale.
+  const auto& info = s.rig_->stream_info();
+  for (int a = 0; a < 3; ++a) {
+    const auto& si = file->model.gyro[a];
+    const auto& counts = s.written_->thermal->gyro[a];
+    ASSERT_EQ(si.coeffs.size(), counts.coeffs.size());
+    if (si.coeffs.size() > 0) {
+      EXPECT_NEAR(counts.coeffs[0], si.coeffs[0] / info.gyro.scale[a],
+                  1e-9 * std::abs(counts.coeffs[0]) + 1e-15);
+    }
+  }
+  // The static result states the reference temperature its biases are at.
+  std::ifstream in(s.runner_->session_dir() + "/imu-static.yaml");
+  std::stringstream text;
+  text << in.rdbuf();
+  EXPECT_NE(text.str().find("reference_temperature_c"), std::string::npos);
+  EXPECT_TRUE(s.said("Thermal recording ended by the operator"));
+  bool stated = false, beyond = false, uncertainty = false;
+  const auto review = s.of_type("review");
+  for (const auto& l : review.at(0)["lines"]) {
+    stated = stated || l.get<std::string>().starts_with("The biases above are those at ");
+    // The die went on warming after the operator ended the recording: the poses are above the
+    // model's range, and the review says what that leaves.
+    beyond =
+        beyond || l.get<std::string>().find("samples outside the thermal model's range") != std::string::npos;
+    uncertainty = uncertainty || l.get<std::string>().find("leave out the thermal model's own uncertainty") !=
+                                     std::string::npos;
+  }
+  EXPECT_TRUE(stated) << review.at(0)["lines"].dump(1);
+  EXPECT_TRUE(beyond) << review.at(0)["lines"].dump(1);
+  EXPECT_TRUE(uncertainty) << review.at(0)["lines"].dump(1);
+
+  // Replay takes the same thermal recording from the log and reaches the same result.
+  app::session::ReplayOptions ro;
+  ro.log_path = s.runner_->log_path();
+  ro.out_dir = s.dir_ + "/replay";
+  auto replay = app::session::replay_session(ro);
+  ASSERT_TRUE(replay.ok()) << replay.error().message;
+  EXPECT_EQ(replay->outcome, "written");
+  EXPECT_EQ(replay->max_difference, 0.0);
+  auto replayed = app::read_thermal_file(ro.out_dir + "/thermal.yaml");
+  ASSERT_TRUE(replayed.ok()) << replayed.error().message;
+  EXPECT_EQ(replayed->result.reference_c, file->result.reference_c);
+}
+
+TEST(Session, MotionDuringTheThermalRecordingStartsItAgainAndASmallSpanGivesNoModel) {
+  ModuleDir modules;
+  // The virtual rig's usual die: 1.5 C below its working temperature, too little for a model.
+  SimSession s(session_config({"preflight", "thermal", "solve", "review"}), 3);
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  bool bumped = false;
+  s.run(400.0, [&](SimSession& ss) {
+    const auto& e = ss.runner_->engine();
+    if (!bumped && e.current_step() == app::session::StepId::kThermal &&
+        ns_to_s(e.now_ns() - e.step_start_ns()) > 5.0) {
+      bumped = true;
+      ss.rig_->trajectory().turn(ss.rig_->now_ns(), 1.0,
+                                 Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX())));
+    }
+  });
+  ASSERT_TRUE(bumped);
+  EXPECT_TRUE(s.said("Motion during the thermal recording: it starts again from here"));
+  EXPECT_TRUE(s.said("less than session.thermal_min_span_c (3.0 C): no thermal model"));
+  EXPECT_FALSE(std::filesystem::exists(s.runner_->session_dir() + "/thermal.yaml"));
+  // With no poses either, there is nothing to solve: said, and the recording is kept.
+  EXPECT_EQ(s.outcome(), "failed");
+  EXPECT_TRUE(s.said("nothing to solve: the session has no poses and its thermal recording gave no model"));
+  EXPECT_TRUE(std::filesystem::exists(s.runner_->log_path()));
+}
+
 TEST(Session, StartRefusesStepsOutOfOrderOrWithoutTheirInputs) {
   SimSession s(session_config(kImuSteps));
   EXPECT_FALSE(s.runner_->engine().start({"poses", "still"}).ok());
   EXPECT_FALSE(s.runner_->engine().start({"preflight", "review"}).ok());
   EXPECT_FALSE(s.runner_->engine().start({"solve"}).ok());
   EXPECT_FALSE(s.runner_->engine().start({"nonsense"}).ok());
+  // A thermal recording alone is solved and reviewed, but not written: its model goes to storage
+  // with the IMU calibration whose biases it refers to its reference temperature.
+  const auto alone = s.runner_->engine().plan({"preflight", "thermal", "solve", "review", "write"});
+  ASSERT_FALSE(alone.ok());
+  EXPECT_NE(alone.error().message.find("step 'write' needs the 'poses' step"), std::string::npos)
+      << alone.error().message;
+  EXPECT_TRUE(s.runner_->engine().plan({"preflight", "thermal", "solve", "review"}).ok());
+  // Thermal is opt-in: not among the steps run when the configuration lists none.
+  for (auto id : app::session::configured_steps(session_config({})))
+    EXPECT_NE(id, app::session::StepId::kThermal);
   RigConfig no_cam = session_config({});
   no_cam.cameras.clear();
   SimSession t(no_cam);
