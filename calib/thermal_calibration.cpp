@@ -21,6 +21,8 @@ constexpr int kAxes = 6;  // gyro x, y, z, accel x, y, z
 /// MPU-6000's temperature LSB is 1/340 deg C).
 constexpr double kMonotonicTolC = 0.05;
 constexpr int kMinBins = 8;
+/// The order criterion's penalty per parameter (AIC's is 2; docs/thermal.md, "Order").
+constexpr double kOrderPenalty = 1.0;
 constexpr int kCurvePoints = 101;
 
 struct Point {
@@ -450,11 +452,16 @@ Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, cons
     ThermalAxisFit& out = a < 3 ? r.gyro[a] : r.accel[a - 3];
     out.aic.fill(std::numeric_limits<double>::quiet_NaN());
     int best = -1;
+    double best_criterion = 0.0;
     for (int p = 0; p <= max_order; ++p) {
       if (!fits[a][p].ok) continue;
-      // Akaike's criterion; the parameters: p + 1 coefficients and the two variances.
+      // Akaike's criterion (reported); the parameters: p + 1 coefficients and the two variances.
       out.aic[p] = -2.0 * fits[a][p].log_likelihood + 2.0 * (p + 3);
-      if (best < 0 || out.aic[p] < out.aic[best]) best = p;
+      // The order: least -2 ln L + kOrderPenalty (p + 3), a term kept when it lowers -2 ln L by
+      // more than 1 (docs/thermal.md: a bend left out is a bias no sigma covers, a needless term
+      // costs only variance its sigma shows).
+      const double criterion = -2.0 * fits[a][p].log_likelihood + kOrderPenalty * (p + 3);
+      if (best < 0 || criterion < best_criterion) best = p, best_criterion = criterion;
     }
     if (!(a < 3 ? has_gyro : has_accel)) {
       out.reason = a < 3 ? "the recording has no gyro values" : "the recording has no accelerometer values";

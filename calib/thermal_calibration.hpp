@@ -10,7 +10,8 @@
 // with w_k the white noise of a bin mean and r(t) a random walk (the part of the slowly varying
 // bias that is not temperature). The bins are correlated through r; the polynomial is fitted by
 // generalised least squares under that covariance, whose two variances are estimated with the
-// coefficients by maximum likelihood. The order p (0..3) is the one of least AIC. On a still rig
+// coefficients by maximum likelihood. The order p (0..3) is the one of least -2 ln L + (p + 3)
+// (a term kept when it lowers -2 ln L by more than 1; docs/thermal.md says why). On a still rig
 // the accelerometer also sees gravity's projection, constant while the rig does not move: c_0
 // holds it, and only the change with temperature (c_1..c_p) is a temperature model. No solver
 // library: Eigen's Cholesky and QR decompositions.

@@ -18,7 +18,7 @@ namespace imucal::app {
 namespace {
 
 constexpr const char* kThermalMethod =
-    "bias against die temperature: polynomial of (T - T_ref), order 0..3 by AIC, generalised least "
+    "bias against die temperature: polynomial of (T - T_ref), order 0..3 by likelihood, generalised least "
     "squares on time-bin means with white noise and a bias random walk (docs/thermal.md)";
 
 void emit_axis(YAML::Emitter& y, const calib::ThermalAxisFit& a, const char* unit) {
@@ -148,8 +148,8 @@ std::string thermal_result_yaml(const calib::ThermalResult& r, const ImuStreamIn
   y << YAML::Key << "bin_s" << YAML::Value << r.bin_s;
   y << YAML::Key << "temperature_monotonic" << YAML::Value << r.temperature_monotonic;
   y << YAML::Key << "order_criterion" << YAML::Value
-    << "least AIC = -2 ln L + 2 (order + 3), over orders 0..3 (the likelihood of the bin means under the "
-       "fitted noise)";
+    << "least -2 ln L + (order + 3), over orders 0..3: a term kept when it lowers -2 ln L by more than 1 "
+       "(L the likelihood of the bin means under the fitted noise; aic below is -2 ln L + 2 (order + 3))";
   y << YAML::Key << "covariance_note" << YAML::Value
     << "the coefficients' covariance under the fitted white noise and bias random walk of the bin means "
        "(their ratio taken as known)";

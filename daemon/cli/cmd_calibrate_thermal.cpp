@@ -154,7 +154,8 @@ void run(const ThermalCliOptions& o) {
 void setup(CLI::App& root) {
   CLI::App* cmd = calibrate_group(root)->add_subcommand(
       "thermal",
-      "Gyro and accelerometer bias against die temperature (polynomial, order 0..3 chosen by AIC) from a "
+      "Gyro and accelerometer bias against die temperature (polynomial, order 0..3 chosen by the data) from "
+      "a "
       "still "
       "recording over a temperature range: a warm-up from cold, a heat soak, holds at several temperatures");
   auto o = std::make_shared<ThermalCliOptions>();
