@@ -198,9 +198,17 @@ class SessionEngine {
   void run_preflight();
   void sample_warmup(const ImuSample& si);
   void sample_thermal(const ImuSample& si);
-  /// The warm-up's and thermal step's temperature window: adds the sample's temperature and
-  /// returns the rate (deg C/min, least squares over the window); *span_s: the window's length.
-  double temperature_rate(const ImuSample& si, double* span_s);
+  /// The warm-up's and thermal step's view of the die: the sample's temperature added to the
+  /// window, the rate (deg C/min, least squares over the window), the step's elapsed time and
+  /// whether the die has settled (a full window below session.warmup_rate_c_per_min). Empty, with
+  /// `no_temperature` said as a warning, when the IMU gives no temperature.
+  struct TemperatureTrend {
+    double rate_c_per_min = 0.0;
+    double window_s = 0.0;  // the window's length so far
+    double elapsed_s = 0.0;
+    bool settled = false;
+  };
+  std::optional<TemperatureTrend> temperature_trend(const ImuSample& si, const std::string& no_temperature);
   /// The thermal recording: 0.1 s means of the still rig's samples; motion starts it again.
   void record_thermal(const ImuSample& si, bool still);
   void end_thermal(const std::string& why);

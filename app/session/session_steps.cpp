@@ -139,7 +139,12 @@ void SessionEngine::on_frame(TimeNs t_ns, bool target_seen) {
   }
 }
 
-double SessionEngine::temperature_rate(const ImuSample& si, double* span_s) {
+std::optional<SessionEngine::TemperatureTrend> SessionEngine::temperature_trend(
+    const ImuSample& si, const std::string& no_temperature) {
+  if (!std::isfinite(si.temperature)) {
+    message("warning", no_temperature);
+    return std::nullopt;
+  }
   if (temps_.empty() || si.t_ns - last_temp_ns_ >= 500'000'000) {
     temps_.emplace_back(seconds(si.t_ns), si.temperature);
     last_temp_ns_ = si.t_ns;
@@ -147,9 +152,8 @@ double SessionEngine::temperature_rate(const ImuSample& si, double* span_s) {
     while (temps_.size() > 2 && temps_.back().first - temps_[1].first >= config_.session.warmup_window_s)
       temps_.pop_front();
   }
-  *span_s = temps_.back().first - temps_.front().first;
+  TemperatureTrend trend;
   // Rate: least-squares slope over the window, deg C per minute.
-  double rate = 0.0;
   if (temps_.size() >= 3) {
     double mt = 0, mc = 0;
     for (const auto& [t, c] : temps_) mt += t, mc += c;
@@ -157,29 +161,32 @@ double SessionEngine::temperature_rate(const ImuSample& si, double* span_s) {
     mc /= static_cast<double>(temps_.size());
     double num = 0, den = 0;
     for (const auto& [t, c] : temps_) num += (t - mt) * (c - mc), den += (t - mt) * (t - mt);
-    rate = den > 0 ? 60.0 * num / den : 0.0;
+    trend.rate_c_per_min = den > 0 ? 60.0 * num / den : 0.0;
   }
-  return rate;
+  trend.window_s = temps_.back().first - temps_.front().first;
+  trend.elapsed_s = seconds(si.t_ns - step_start_ns_);
+  // The window starts with the step (temps_ is cleared there): a full one is as old as the step.
+  trend.settled = trend.window_s >= config_.session.warmup_window_s &&
+                  std::abs(trend.rate_c_per_min) < config_.session.warmup_rate_c_per_min;
+  return trend;
 }
 
 void SessionEngine::sample_warmup(const ImuSample& si) {
-  if (!std::isfinite(si.temperature)) {
-    message("warning", "The IMU reports no temperature: warm-up skipped");
+  const auto trend = temperature_trend(si, "The IMU reports no temperature: warm-up skipped");
+  if (!trend) {
     advance();
     return;
   }
-  double span = 0.0;
-  const double rate = temperature_rate(si, &span);
-  const double elapsed = seconds(si.t_ns - step_start_ns_);
+  const double rate = trend->rate_c_per_min, elapsed = trend->elapsed_s;
   if (live_due()) {
     live({"Temperature " + fixed(si.temperature, 2) + " C, changing " + fixed(rate, 2) +
               " C/min (warm below " + fixed(config_.session.warmup_rate_c_per_min, 2) + ")",
           "Elapsed " + fixed(elapsed, 0) + " s of at most " + fixed(config_.session.warmup_timeout_s, 0) +
               " s"},
-         std::min(1.0, span / config_.session.warmup_window_s),
+         std::min(1.0, trend->window_s / config_.session.warmup_window_s),
          {{"temperature_c", si.temperature}, {"rate_c_per_min", rate}});
   }
-  if (span >= config_.session.warmup_window_s && std::abs(rate) < config_.session.warmup_rate_c_per_min) {
+  if (trend->settled) {
     message("info", "Warm: " + fixed(si.temperature, 2) + " C, changing " + fixed(rate, 2) + " C/min");
     advance();
   } else if (elapsed > config_.session.warmup_timeout_s) {
@@ -255,15 +262,13 @@ std::pair<Eigen::Vector3d, Eigen::Vector3d> thermal_slopes(const std::vector<Imu
 }  // namespace
 
 void SessionEngine::sample_thermal(const ImuSample& si) {
-  if (!std::isfinite(si.temperature)) {
-    message("warning", "The IMU reports no temperature: no thermal model");
+  const auto trend = temperature_trend(si, "The IMU reports no temperature: no thermal model");
+  if (!trend) {
     thermal_->clear();
     advance();
     return;
   }
-  double span = 0.0;
-  const double rate = temperature_rate(si, &span);
-  const double elapsed = seconds(si.t_ns - step_start_ns_);
+  const double rate = trend->rate_c_per_min, elapsed = trend->elapsed_s;
   if (live_due()) {
     double lo = si.temperature, hi = si.temperature;
     for (const auto& s : *thermal_) lo = std::min(lo, s.temperature), hi = std::max(hi, s.temperature);
@@ -283,8 +288,7 @@ void SessionEngine::sample_thermal(const ImuSample& si) {
           {"gyro_slope_dps_per_c", {gyro_slope.x() / kDeg, gyro_slope.y() / kDeg, gyro_slope.z() / kDeg}},
           {"accel_slope_mps2_per_c", {accel_slope.x(), accel_slope.y(), accel_slope.z()}}});
   }
-  if (elapsed >= config_.session.warmup_window_s && span >= config_.session.warmup_window_s &&
-      std::abs(rate) < config_.session.warmup_rate_c_per_min) {
+  if (trend->settled) {
     end_thermal("the temperature settled at " + fixed(si.temperature, 2) + " C");
   } else if (elapsed > config_.session.thermal_timeout_s) {
     end_thermal("session.thermal_timeout_s (" + fixed(config_.session.thermal_timeout_s, 0) + " s) reached");

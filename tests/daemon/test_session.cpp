@@ -145,6 +145,14 @@ class SimSession {
                 runner_->engine().status().value("state", "").c_str());
   }
 
+  /// `imucal replay` of the session's log into <dir>/replay.
+  auto replay() const {
+    app::session::ReplayOptions ro;
+    ro.log_path = runner_->log_path();
+    ro.out_dir = dir_ + "/replay";
+    return app::session::replay_session(ro);
+  }
+
   std::vector<json> of_type(const std::string& type) const {
     std::vector<json> out;
     for (const auto& m : messages_)
@@ -270,10 +278,7 @@ TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult
   EXPECT_GE(keys, 2);  // continue at preflight, accept at review
 
   // Replay reaches the same result, bit for bit.
-  app::session::ReplayOptions ro;
-  ro.log_path = s.runner_->log_path();
-  ro.out_dir = s.dir_ + "/replay";
-  auto replay = app::session::replay_session(ro);
+  auto replay = s.replay();
   ASSERT_TRUE(replay.ok()) << replay.error().message;
   EXPECT_EQ(replay->outcome, "written");
   EXPECT_TRUE(replay->live_result);
@@ -533,14 +538,11 @@ TEST(Session, AThermalStepBeforeThePosesCorrectsTheSamplesAndTheRecordCarriesThe
   EXPECT_TRUE(uncertainty) << review.at(0)["lines"].dump(1);
 
   // Replay takes the same thermal recording from the log and reaches the same result.
-  app::session::ReplayOptions ro;
-  ro.log_path = s.runner_->log_path();
-  ro.out_dir = s.dir_ + "/replay";
-  auto replay = app::session::replay_session(ro);
+  auto replay = s.replay();
   ASSERT_TRUE(replay.ok()) << replay.error().message;
   EXPECT_EQ(replay->outcome, "written");
   EXPECT_EQ(replay->max_difference, 0.0);
-  auto replayed = app::read_thermal_file(ro.out_dir + "/thermal.yaml");
+  auto replayed = app::read_thermal_file(s.dir_ + "/replay/thermal.yaml");
   ASSERT_TRUE(replayed.ok()) << replayed.error().message;
   EXPECT_EQ(replayed->result.reference_c, file->result.reference_c);
 }
