@@ -244,6 +244,25 @@ static std::array<std::array<OrderFit, kColumns>, kAxes> fit_orders(const Eigen:
   return fits;
 }
 
+// One axis's order among its fits: the least -2 ln L + kOrderPenalty (p + 3), a term kept when it
+// lowers -2 ln L by more than 1 (docs/thermal.md: a bend left out is a bias no sigma covers, a
+// needless term costs only variance its sigma shows). Fills `aic` (AIC, reported; NaN where not
+// fitted); -1 when no order could be fitted.
+static int choose_order(const std::array<OrderFit, kColumns>& fits, int max_order,
+                        std::array<double, 4>& aic) {
+  aic.fill(std::numeric_limits<double>::quiet_NaN());
+  int best = -1;
+  double best_criterion = 0.0;
+  for (int p = 0; p <= max_order; ++p) {
+    if (!fits[p].ok) continue;
+    // The parameters: p + 1 coefficients and the two variances.
+    aic[p] = -2.0 * fits[p].log_likelihood + 2.0 * (p + 3);
+    const double criterion = -2.0 * fits[p].log_likelihood + kOrderPenalty * (p + 3);
+    if (best < 0 || criterion < best_criterion) best = p, best_criterion = criterion;
+  }
+  return best;
+}
+
 namespace {
 
 /// The samples with a temperature, in SI, sorted by time; a sensor the recording lacks
@@ -450,19 +469,7 @@ Result<ThermalResult> calibrate_thermal(std::span<const ImuSample> samples, cons
   double dt_s = r.duration_s / std::max<double>(1.0, static_cast<double>(pts.size()) - 1.0);
   for (int a = 0; a < kAxes; ++a) {
     ThermalAxisFit& out = a < 3 ? r.gyro[a] : r.accel[a - 3];
-    out.aic.fill(std::numeric_limits<double>::quiet_NaN());
-    int best = -1;
-    double best_criterion = 0.0;
-    for (int p = 0; p <= max_order; ++p) {
-      if (!fits[a][p].ok) continue;
-      // Akaike's criterion (reported); the parameters: p + 1 coefficients and the two variances.
-      out.aic[p] = -2.0 * fits[a][p].log_likelihood + 2.0 * (p + 3);
-      // The order: least -2 ln L + kOrderPenalty (p + 3), a term kept when it lowers -2 ln L by
-      // more than 1 (docs/thermal.md: a bend left out is a bias no sigma covers, a needless term
-      // costs only variance its sigma shows).
-      const double criterion = -2.0 * fits[a][p].log_likelihood + kOrderPenalty * (p + 3);
-      if (best < 0 || criterion < best_criterion) best = p, best_criterion = criterion;
-    }
+    const int best = choose_order(fits[a], max_order, out.aic);
     if (!(a < 3 ? has_gyro : has_accel)) {
       out.reason = a < 3 ? "the recording has no gyro values" : "the recording has no accelerometer values";
       continue;

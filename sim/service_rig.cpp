@@ -398,19 +398,12 @@ class VirtualServiceRig final : public ServiceRig {
     // The static method finds one bias per triad; the simulated one wanders (random walk), so its
     // truth is the bias in effect averaged over the samples of the still and pose steps.
     ImuModelParams at_session = p;
-    std::string window = realised_biases(at_session.accel_bias, at_session.gyro_bias);
     // A result corrected to a thermal model's reference temperature: the truth is the bias there,
     // the simulator's temperature parts over the window replaced by its part at T_ref.
-    if (result.contains("thermal") && result["thermal"].value("determined", false)) {
-      const double ref = result["thermal"].value("reference_c", 0.0);
-      Eigen::Vector3d accel_temp, gyro_temp;
-      if (realised_temperature_parts(accel_temp, gyro_temp)) {
-        at_session.accel_bias += p.accel_bias_temp(ref) - accel_temp;
-        at_session.gyro_bias += p.gyro_bias_temp(ref) - gyro_temp;
-        window += ", their temperature parts replaced by those at the thermal model's reference " +
-                  fixed(ref, 2) + " deg C";
-      }
-    }
+    std::optional<double> reference_c;
+    if (result.contains("thermal") && result["thermal"].value("determined", false))
+      reference_c = result["thermal"].value("reference_c", 0.0);
+    const std::string window = realised_biases(at_session.accel_bias, at_session.gyro_bias, reference_c);
     const double accel_si = counts ? p.accel_mps2_per_count() : 1.0,
                  gyro_si = counts ? p.gyro_radps_per_count() : 1.0;
     std::vector<TruthRow> rows;
@@ -465,27 +458,28 @@ class VirtualServiceRig final : public ServiceRig {
   }
 
   /// The mean biases in effect over the window (or over every sample so far, when the session
-  /// had no still step); what they are averaged over.
-  std::string realised_biases(Eigen::Vector3d& accel, Eigen::Vector3d& gyro) const {
+  /// had no still step); what they are averaged over. With `reference_c` (a result corrected to a
+  /// thermal model's reference temperature) their mean temperature parts are replaced by the
+  /// parts at that temperature.
+  std::string realised_biases(Eigen::Vector3d& accel, Eigen::Vector3d& gyro,
+                              std::optional<double> reference_c) const {
     const TrajectorySensorStats end = bias_end_ ? *bias_end_ : rig_->sensor_stats();
     const TrajectorySensorStats begin = bias_begin_ ? *bias_begin_ : TrajectorySensorStats{};
     const std::int64_t n = end.samples - begin.samples;
     if (n <= 0) return "the turn-on biases (no samples)";
-    accel = (end.sum_accel_bias - begin.sum_accel_bias) / static_cast<double>(n);
-    gyro = (end.sum_gyro_bias - begin.sum_gyro_bias) / static_cast<double>(n);
-    return bias_begin_ ? "their mean over the still and pose steps (they wander)"
-                       : "their mean over the session (they wander)";
-  }
-
-  /// The mean die-temperature parts of the biases over the same window; false without samples.
-  bool realised_temperature_parts(Eigen::Vector3d& accel, Eigen::Vector3d& gyro) const {
-    const TrajectorySensorStats end = bias_end_ ? *bias_end_ : rig_->sensor_stats();
-    const TrajectorySensorStats begin = bias_begin_ ? *bias_begin_ : TrajectorySensorStats{};
-    const std::int64_t n = end.samples - begin.samples;
-    if (n <= 0) return false;
-    accel = (end.sum_accel_bias_temp - begin.sum_accel_bias_temp) / static_cast<double>(n);
-    gyro = (end.sum_gyro_bias_temp - begin.sum_gyro_bias_temp) / static_cast<double>(n);
-    return true;
+    const double k = 1.0 / static_cast<double>(n);
+    accel = (end.sum_accel_bias - begin.sum_accel_bias) * k;
+    gyro = (end.sum_gyro_bias - begin.sum_gyro_bias) * k;
+    std::string what = bias_begin_ ? "their mean over the still and pose steps (they wander)"
+                                   : "their mean over the session (they wander)";
+    if (reference_c) {
+      const ImuModelParams& p = rig_->params();
+      accel += p.accel_bias_temp(*reference_c) - (end.sum_accel_bias_temp - begin.sum_accel_bias_temp) * k;
+      gyro += p.gyro_bias_temp(*reference_c) - (end.sum_gyro_bias_temp - begin.sum_gyro_bias_temp) * k;
+      what += ", their temperature parts replaced by those at the thermal model's reference " +
+              fixed(*reference_c, 2) + " deg C";
+    }
+    return what;
   }
 
   std::chrono::nanoseconds wall_offset(double scale) const {

@@ -438,33 +438,40 @@ std::string thermal_uncertainty_warning(const calib::ThermalResult& r, double te
          sigmas(r.accel, 1e3 / kStandardGravity, 3) + " mg (add it in quadrature)";
 }
 
-Result<AppliedThermal> apply_thermal_file(const std::string& path, std::vector<ImuSample>& samples,
-                                          const ImuStreamInfo& info) {
-  auto file = read_thermal_file(path);
-  if (!file.ok()) return file.error();
+Result<AppliedThermal> apply_thermal(const calib::ThermalResult& result, std::vector<ImuSample>& samples,
+                                     const ImuStreamInfo& info, const std::string& source) {
   AppliedThermal applied;
-  applied.path = path;
-  applied.model = file->model;
+  applied.path = source;
+  applied.model = calib::thermal_model(result);
   if (info.units != ImuUnits::kSi) {
     auto guess = nominal_guess(info, {});
     if (!guess.ok() || !guess->accel) {
       return make_error(Errc::kInvalidArgument,
                         "stream " + info.name +
                             " is in raw counts and its log gives no full-scale range: the thermal model of " +
-                            path + " (SI) cannot be converted to counts");
+                            source + " (SI) cannot be converted to counts");
     }
-    applied.model = thermal_model_on_input_units(file->model, info, *guess->accel, guess->gyro);
+    applied.model = thermal_model_on_input_units(applied.model, info, *guess->accel, guess->gyro);
   }
   auto corrected = correct_to_reference_temperature(samples, info, applied.model);
-  if (!corrected.ok()) return corrected.error().context("--thermal " + path);
+  if (!corrected.ok()) return corrected.error();
   applied.correction = *corrected;
+  for (const std::string& w : {corrected->warning(), thermal_uncertainty_warning(result, corrected->mean_c)})
+    if (!w.empty()) applied.warnings.push_back(w + " (" + source + ")");
+  return applied;
+}
+
+Result<AppliedThermal> apply_thermal_file(const std::string& path, std::vector<ImuSample>& samples,
+                                          const ImuStreamInfo& info) {
+  auto file = read_thermal_file(path);
+  if (!file.ok()) return file.error();
+  auto applied = apply_thermal(file->result, samples, info, path);
+  if (!applied.ok()) return applied.error().context("--thermal " + path);
   if (!file->stream.empty() && file->stream != info.name) {
-    applied.warnings.push_back("the thermal model " + path + " is of stream " + file->stream + " (" +
-                               file->log + "), applied to stream " + info.name);
+    applied->warnings.insert(applied->warnings.begin(), "the thermal model " + path + " is of stream " +
+                                                            file->stream + " (" + file->log +
+                                                            "), applied to stream " + info.name);
   }
-  if (auto w = corrected->warning(); !w.empty()) applied.warnings.push_back(w + " (" + path + ")");
-  if (auto w = thermal_uncertainty_warning(file->result, corrected->mean_c); !w.empty())
-    applied.warnings.push_back(w + " (" + path + ")");
   return applied;
 }
 

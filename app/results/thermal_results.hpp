@@ -65,13 +65,22 @@ struct ThermalCorrection {
 /// quadrature"). Empty when the result is not determined.
 std::string thermal_uncertainty_warning(const calib::ThermalResult& result, double temperature_c);
 
-/// A thermal file applied to a stream's samples.
+/// A thermal model applied to a stream's samples.
 struct AppliedThermal {
-  std::string path;
+  std::string path;    // where the model came from
   ThermalModel model;  // on the stream's input units: what the result and the record state
   ThermalCorrection correction;
   std::vector<std::string> warnings;
 };
+
+/// Corrects `samples` (the caller's copy of `info`'s stream) to the reference temperature of a
+/// fitted model (SI, as calibrate_thermal gives it). A raw stream's model is converted with the
+/// log's nominal conversion, as `calibrate thermal` converted it. The warnings (samples clamped or
+/// without a temperature, the model's own uncertainty at their temperature) end with
+/// " (source)". The session applies its own fit through this; apply_thermal_file a file's.
+[[nodiscard]] Result<AppliedThermal> apply_thermal(const calib::ThermalResult& result,
+                                                   std::vector<ImuSample>& samples, const ImuStreamInfo& info,
+                                                   const std::string& source);
 
 /// Reads `path` and corrects `samples` (the caller's copy of `info`'s stream) to the model's
 /// reference temperature. A raw stream's model is converted with the log's nominal conversion,

@@ -575,7 +575,6 @@ void SessionEngine::request_final_solve() {
       std::any_of(steps_.begin(), steps_.end(), [](const Step& s) { return s.id == StepId::kPoses; });
   job.samples = std::make_shared<const std::vector<ImuSample>>(poses ? *samples_ : std::vector<ImuSample>());
   if (!thermal_->empty()) job.thermal_samples = std::make_shared<const std::vector<ImuSample>>(*thermal_);
-  job.thermal_min_span_c = config_.session.thermal_min_span_c;
   job.static_options = static_options();
   job.camimu = std::any_of(steps_.begin(), steps_.end(), [](const Step& s) {
     return s.id == StepId::kMotion && s.state == StepState::kDone;

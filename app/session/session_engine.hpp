@@ -75,7 +75,6 @@ struct SolveJob {
   /// The thermal recording (warm-up and thermal steps of a session with the thermal step): means
   /// over 0.1 s of the still rig's samples, in SI units and deg C. Empty: no thermal model.
   std::shared_ptr<const std::vector<ImuSample>> thermal_samples;
-  double thermal_min_span_c = 3.0;
   calib::StaticCalibrationOptions static_options;
   bool camimu = false;
   TimeNs t_end_ns = 0;  // last sample in the job
@@ -209,7 +208,7 @@ class SessionEngine {
     bool settled = false;
   };
   std::optional<TemperatureTrend> temperature_trend(const ImuSample& si, const std::string& no_temperature);
-  /// The thermal recording: 0.1 s means of the still rig's samples; motion starts it again.
+  /// The thermal recording: 0.1 s means of the still rig's samples (SI); motion starts it again.
   void record_thermal(const ImuSample& si, bool still);
   void end_thermal(const std::string& why);
   bool thermal_planned() const;

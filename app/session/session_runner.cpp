@@ -146,16 +146,17 @@ static Result<std::vector<std::string>> solve_camimu(
 /// into out.thermal; a fit that cannot be made (the rig moved, too small a span) is a result not
 /// determined, with the reason, and the session goes on without the correction. When determined
 /// it is written to <dir>/thermal.yaml (the `calibrate thermal` format), whose path is returned.
-static Result<std::string> solve_thermal(const SolveJob& job, const ImuStreamInfo& info,
-                                         const std::string& dir, SolveOutcome& out) {
+static Result<std::string> solve_thermal(const SolveJob& job, const RigConfig& config,
+                                         const ImuStreamInfo& info, const std::string& dir,
+                                         SolveOutcome& out) {
   calib::ThermalOptions options;  // the means are in SI units and deg C already
-  options.min_span_c = job.thermal_min_span_c;
+  options.min_span_c = config.session.thermal_min_span_c;
   // Bins of 20 s from 800 s of recording on; a shorter recording (the operator ended it) gets
   // shorter bins, down to 2 s, so that it still has 40.
   const auto& means = *job.thermal_samples;
   const double duration_s = ns_to_s(means.back().t_ns - means.front().t_ns);
   options.bin_s = std::clamp(duration_s / 40.0, 2.0, 20.0);
-  auto fit = calib::calibrate_thermal(*job.thermal_samples, options);
+  auto fit = calib::calibrate_thermal(means, options);
   if (!fit.ok()) {
     calib::ThermalResult failed;
     failed.reason = fit.error().message;
@@ -176,30 +177,26 @@ static SolveOutcome run_solve_timed(const SolveJob& job, const RigConfig& config
                                     const MotionLogSource& motion_log) {
   SolveOutcome out;
   std::string thermal_yaml;
-  std::optional<ThermalModel> thermal_model;  // on the stream's input units
-  std::vector<ImuSample> corrected;           // a copy of the samples at the model's T_ref
-  std::vector<std::string> thermal_warnings;  // what the correction left, for the static result
+  std::optional<AppliedThermal> applied;  // the model on the stream's input units and what it left
+  std::vector<ImuSample> corrected;       // a copy of the samples at the model's T_ref
   if (job.final && job.thermal_samples && !job.thermal_samples->empty()) {
     if (progress)
       progress(0.0, "Thermal model from " + std::to_string(job.thermal_samples->size()) + " means of 0.1 s");
-    auto path = solve_thermal(job, info, dir, out);
+    auto path = solve_thermal(job, config, info, dir, out);
     if (!path.ok()) {
       out.error = "writing the thermal model: " + path.error().message;
       return out;
     }
     thermal_yaml = *path;
     if (out.thermal->determined && !job.samples->empty()) {
-      thermal_model =
-          thermal_model_on_input_units(calib::thermal_model(*out.thermal), info, info.accel, info.gyro);
       corrected = *job.samples;
-      auto c = correct_to_reference_temperature(corrected, info, *thermal_model);
-      if (!c.ok()) {
+      auto a = apply_thermal(*out.thermal, corrected, info, "thermal.yaml");
+      if (!a.ok()) {
         out.error =
-            "correcting the samples to the thermal model's reference temperature: " + c.error().message;
+            "correcting the samples to the thermal model's reference temperature: " + a.error().message;
         return out;
       }
-      for (const std::string& w : {c->warning(), thermal_uncertainty_warning(*out.thermal, c->mean_c)})
-        if (!w.empty()) thermal_warnings.push_back("thermal: " + w);
+      applied = std::move(*a);
     }
   }
   if (job.samples->empty()) {  // a thermal recording alone
@@ -207,7 +204,7 @@ static SolveOutcome run_solve_timed(const SolveJob& job, const RigConfig& config
       out.error = "nothing to solve: the session has no poses and its thermal recording gave no model";
     return out;
   }
-  const std::vector<ImuSample>& samples = thermal_model ? corrected : *job.samples;
+  const std::vector<ImuSample>& samples = applied ? corrected : *job.samples;
   if (progress) progress(0.0, "Static calibration of " + std::to_string(samples.size()) + " samples");
   auto result = app::calibrate_static(samples, job.static_options);
   if (!result.ok()) {
@@ -215,8 +212,10 @@ static SolveOutcome run_solve_timed(const SolveJob& job, const RigConfig& config
     return out;
   }
   out.imu = std::move(*result);
-  out.imu->thermal = thermal_model;
-  out.imu->warnings.insert(out.imu->warnings.end(), thermal_warnings.begin(), thermal_warnings.end());
+  if (applied) {
+    out.imu->thermal = applied->model;
+    for (const std::string& w : applied->warnings) out.imu->warnings.push_back("thermal: " + w);
+  }
   if (!job.final) return out;
   if (progress) progress(job.camimu ? 0.15 : 0.9, "Writing the static results");
   const std::string yaml_path = dir + "/imu-static.yaml", json_path = dir + "/imu-static.json";

@@ -105,11 +105,11 @@ void SessionEngine::on_sample(const ImuSample& sample) {
   if (still && bias_known_) still = (window_->gyro_mean() - gyro_bias_).norm() < gyro_limit;
   switch (id) {
     case StepId::kWarmup:
-      if (thermal_planned()) record_thermal(sample, still);
+      if (thermal_planned()) record_thermal(si, still);
       sample_warmup(si);
       break;
     case StepId::kThermal:
-      record_thermal(sample, still);
+      record_thermal(si, still);
       sample_thermal(si);
       break;
     case StepId::kStill:
@@ -199,7 +199,7 @@ bool SessionEngine::thermal_planned() const {
   return std::any_of(steps_.begin(), steps_.end(), [](const Step& s) { return s.id == StepId::kThermal; });
 }
 
-void SessionEngine::record_thermal(const ImuSample& sample, bool still) {
+void SessionEngine::record_thermal(const ImuSample& si, bool still) {
   if (!still) {
     // The model needs one attitude throughout (gravity's projection is in the accelerometer's
     // bias): a recording the rig moved in starts again.
@@ -210,7 +210,6 @@ void SessionEngine::record_thermal(const ImuSample& sample, bool still) {
     thermal_sum_ = {};
     return;
   }
-  const ImuSample si = to_si(sample);
   if (!std::isfinite(si.temperature) || (si.flags & (kImuFlagAccelSaturated | kImuFlagGyroSaturated)) != 0)
     return;
   ThermalMean& m = thermal_sum_;
@@ -234,20 +233,26 @@ void SessionEngine::record_thermal(const ImuSample& sample, bool still) {
 
 namespace {
 
+/// The lowest and highest temperature of the thermal recording's means ({0, 0} without any).
+std::pair<double, double> temperature_range(const std::vector<ImuSample>& means) {
+  if (means.empty()) return {0.0, 0.0};
+  const auto [lo, hi] = std::minmax_element(
+      means.begin(), means.end(),
+      [](const ImuSample& a, const ImuSample& b) { return a.temperature < b.temperature; });
+  return {lo->temperature, hi->temperature};
+}
+
 /// Least-squares slopes of gyro and accelerometer against temperature over the recording so
 /// far (the live figure: the model is fitted with the final solve). NaN below 0.2 deg C of span.
 std::pair<Eigen::Vector3d, Eigen::Vector3d> thermal_slopes(const std::vector<ImuSample>& means) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::pair<Eigen::Vector3d, Eigen::Vector3d> out{Eigen::Vector3d::Constant(nan),
                                                   Eigen::Vector3d::Constant(nan)};
-  if (means.size() < 10) return out;
-  double mt = 0.0, lo = means.front().temperature, hi = lo;
+  const auto [lo, hi] = temperature_range(means);
+  if (means.size() < 10 || hi - lo < 0.2) return out;
+  double mt = 0.0;
   Eigen::Vector3d mg = Eigen::Vector3d::Zero(), ma = Eigen::Vector3d::Zero();
-  for (const auto& s : means) {
-    mt += s.temperature, mg += s.gyro, ma += s.accel;
-    lo = std::min(lo, s.temperature), hi = std::max(hi, s.temperature);
-  }
-  if (hi - lo < 0.2) return out;
+  for (const auto& s : means) mt += s.temperature, mg += s.gyro, ma += s.accel;
   const double n = static_cast<double>(means.size());
   mt /= n, mg /= n, ma /= n;
   double den = 0.0;
@@ -270,8 +275,8 @@ void SessionEngine::sample_thermal(const ImuSample& si) {
   }
   const double rate = trend->rate_c_per_min, elapsed = trend->elapsed_s;
   if (live_due()) {
-    double lo = si.temperature, hi = si.temperature;
-    for (const auto& s : *thermal_) lo = std::min(lo, s.temperature), hi = std::max(hi, s.temperature);
+    auto [lo, hi] = temperature_range(*thermal_);
+    if (thermal_->empty()) lo = hi = si.temperature;
     const auto [gyro_slope, accel_slope] = thermal_slopes(*thermal_);
     live({"Temperature " + fixed(si.temperature, 2) + " C, changing " + fixed(rate, 2) +
               " C/min (the recording ends below " + fixed(config_.session.warmup_rate_c_per_min, 2) + ")",
@@ -296,11 +301,7 @@ void SessionEngine::sample_thermal(const ImuSample& si) {
 }
 
 void SessionEngine::end_thermal(const std::string& why) {
-  double lo = 0.0, hi = 0.0;
-  if (!thermal_->empty()) {
-    lo = hi = thermal_->front().temperature;
-    for (const auto& s : *thermal_) lo = std::min(lo, s.temperature), hi = std::max(hi, s.temperature);
-  }
+  const auto [lo, hi] = temperature_range(*thermal_);
   const double minutes =
       thermal_->empty() ? 0.0 : seconds(thermal_->back().t_ns - thermal_->front().t_ns) / 60.0;
   if (hi - lo < config_.session.thermal_min_span_c) {
