@@ -39,12 +39,16 @@ SampleTimestamper::SampleTimestamper(const TimestamperOptions& options)
   period_q_ = sd_per_s * sd_per_s / options.nominal_rate_hz;
 }
 
-void SampleTimestamper::anchor(double z_rel, std::int64_t edge_index, double var) {
+void SampleTimestamper::anchor(double z_rel, std::int64_t edge_index, double var, bool forget_period) {
   phi_ns_ = z_rel;
   n_ref_ = edge_index;
   c_pp_ = var;
   c_pt_ = 0.0;
-  if (!initialized_) {
+  if (!initialized_ || forget_period) {
+    // The period's prior: anywhere in the window around nominal. A re-anchor after rejected
+    // edges forgets what it knew of the period too: the estimate may be what made the edges
+    // disagree (late edges taken in bent it), and with its small variance kept every later
+    // edge would be rejected again.
     const double sd = options_.max_period_error * nominal_period_ns_ / 2.0;
     c_tt_ = sd * sd;
   }
@@ -298,7 +302,7 @@ void SampleTimestamper::resync_after_rejects(double z, double nu, double s, doub
     last_accepted_index_ = p.edge_index;
     consecutive_rejects_ = 0;
   } else {
-    anchor(z, p.edge_index, r_var);
+    anchor(z, p.edge_index, r_var, /*forget_period=*/true);
   }
   assoc_history_.clear();
   ++stats_.reanchors;

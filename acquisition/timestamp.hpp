@@ -151,7 +151,9 @@ class SampleTimestamper {
   void resync_after_rejects(double z, double nu, double s, double r_var, Placement& p);
   void assign_times(const Placement& p, std::span<TimeNs> t_ns, std::span<std::uint32_t> flags);
 
-  void anchor(double z_rel, std::int64_t edge_index, double var);
+  /// Restarts the phase at `edge_index`; the period keeps its estimate, and its variance unless
+  /// `forget_period` (or before the first anchor) sets it back to the prior.
+  void anchor(double z_rel, std::int64_t edge_index, double var, bool forget_period = false);
   void predict_to(std::int64_t index);
   void rebase();
   double time_of(std::int64_t index) const {
