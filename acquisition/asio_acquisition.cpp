@@ -18,18 +18,17 @@ constexpr int kMaxIdleLineWakeups = 100;
 
 }  // namespace
 
-AsioAcquisition::AsioAcquisition(boost::asio::io_context& io, ImuAcquisition& acquisition, SampleSink sink)
+AsioAcquisition::AsioAcquisition(boost::asio::io_context& io, ImuSource& acquisition, SampleSink sink)
     : io_(io), acquisition_(acquisition), sink_(std::move(sink)), timer_(io) {}
 
 Status AsioAcquisition::run() {
   if (started_) return make_error(Errc::kInternal, "AsioAcquisition::run() called twice");
   started_ = true;
   if (stopped_) return {};
-  drivers::DataReadyLine* line = acquisition_.line();
-  if (line != nullptr && line->fd() >= 0) {
-    const int fd = ::fcntl(line->fd(), F_DUPFD_CLOEXEC, 0);
+  if (acquisition_.wake_fd() >= 0) {
+    const int fd = ::fcntl(acquisition_.wake_fd(), F_DUPFD_CLOEXEC, 0);
     if (fd < 0) {
-      return make_error(Errc::kIo, "data-ready line " + line->name() +
+      return make_error(Errc::kIo, acquisition_.wake_name() +
                                        ": cannot duplicate its file descriptor: " + std::strerror(errno));
     }
     boost::system::error_code ec;
@@ -38,8 +37,8 @@ Status AsioAcquisition::run() {
     if (ec) {
       ::close(fd);
       line_fd_.reset();
-      return make_error(Errc::kIo, "data-ready line " + line->name() +
-                                       ": its file descriptor cannot be watched: " + ec.message());
+      return make_error(
+          Errc::kIo, acquisition_.wake_name() + ": its file descriptor cannot be watched: " + ec.message());
     }
     arm_line();
   }
@@ -79,20 +78,18 @@ void AsioAcquisition::arm_timer() {
 
 void AsioAcquisition::on_line_ready(const boost::system::error_code& ec) {
   if (stopped_) return;
-  drivers::DataReadyLine* line = acquisition_.line();
   if (ec) {
-    fail(make_error(Errc::kIo, "data-ready line " + line->name() +
-                                   ": waiting on its file descriptor failed: " + ec.message()));
+    fail(make_error(Errc::kIo,
+                    acquisition_.wake_name() + ": waiting on its file descriptor failed: " + ec.message()));
     return;
   }
   ++stats_.line_wakeups;
-  const std::uint64_t edges_before = acquisition_.stats().edges;
+  const std::uint64_t progress_before = acquisition_.wake_progress();
   if (!service()) return;
-  if (acquisition_.stats().edges == edges_before) {
+  if (acquisition_.wake_progress() == progress_before) {
     if (++idle_line_wakeups_ >= kMaxIdleLineWakeups) {
-      fail(make_error(Errc::kIo, "data-ready line " + line->name() +
-                                     ": its file descriptor stays readable (" +
-                                     std::to_string(idle_line_wakeups_) + " times) but gives no edge"));
+      fail(make_error(Errc::kIo, acquisition_.wake_name() + ": its file descriptor stays readable (" +
+                                     std::to_string(idle_line_wakeups_) + " times) but gives nothing"));
       return;
     }
   } else {

@@ -1,14 +1,14 @@
 #pragma once
 // The acquisition loop on a Boost.Asio event loop: the form a rig runs (real time).
 //
-// When the data-ready line has a file descriptor (libgpiod's line event fd, the real-time
-// simulated line's eventfd), a duplicate of it is watched with
+// When the source has a file descriptor (libgpiod's line event fd, the real-time simulated
+// line's eventfd, the kernel's IIO buffer), a duplicate of it is watched with
 // posix::stream_descriptor::async_wait(wait_read); each time it turns readable the loop calls
-// ImuAcquisition::service(), which takes the pending edges and reads the FIFO once enough have
-// come. A steady_timer armed at ImuAcquisition::next_poll_ns() calls service() when no edge
-// came in time; without a line (or one without a descriptor) it is the only wake-up, and the
-// FIFO is polled on the timer. Non-empty batches go to a sink. An error from the line, its
-// descriptor or the driver stops the loop and is returned by run().
+// ImuSource::service(), which takes the pending edges and reads the FIFO once enough have
+// come (or reads the IIO buffer). A steady_timer armed at ImuAcquisition::next_poll_ns() calls service() when
+// no edge came in time; without a line (or one without a descriptor) it is the only wake-up, and the FIFO is
+// polled on the timer. Non-empty batches go to a sink. An error from the line, its descriptor or the driver
+// stops the loop and is returned by run().
 //
 // Time: next_poll_ns() is CLOCK_MONOTONIC nanoseconds; the timer runs on
 // std::chrono::steady_clock, which libstdc++ implements with clock_gettime(CLOCK_MONOTONIC) on
@@ -25,7 +25,7 @@
 #include <span>
 #include <vector>
 
-#include "acquisition/imu_acquisition.hpp"
+#include "acquisition/imu_source.hpp"
 #include "core/imu.hpp"
 #include "core/result.hpp"
 #include "core/time.hpp"
@@ -55,7 +55,7 @@ class AsioAcquisition {
 
   /// `io` and `acquisition` are borrowed and must outlive this object. The acquisition's line
   /// (if any) is watched through a duplicate of its descriptor; the line keeps its own.
-  AsioAcquisition(boost::asio::io_context& io, ImuAcquisition& acquisition, SampleSink sink);
+  AsioAcquisition(boost::asio::io_context& io, ImuSource& acquisition, SampleSink sink);
   AsioAcquisition(const AsioAcquisition&) = delete;
   AsioAcquisition& operator=(const AsioAcquisition&) = delete;
 
@@ -83,7 +83,7 @@ class AsioAcquisition {
   void fail(const Error& error);
 
   boost::asio::io_context& io_;
-  ImuAcquisition& acquisition_;
+  ImuSource& acquisition_;
   SampleSink sink_;
   std::optional<boost::asio::posix::stream_descriptor> line_fd_;
   boost::asio::steady_timer timer_;

@@ -8,6 +8,8 @@
 #include <span>
 #include <sstream>
 
+#include "acquisition/recorder.hpp"
+
 namespace imucal::acq {
 
 namespace mpu = drivers::mpu6000;
@@ -53,6 +55,17 @@ ImuAcquisition::ImuAcquisition(mpu::Mpu6000& driver, drivers::DataReadyLine* lin
           : std::max(1, static_cast<int>(std::lround(options_.timestamps.nominal_rate_hz / 1000.0)));
   next_poll_ns_ = clock_.now_ns();
 }
+
+std::string ImuAcquisition::timing_metadata(double measured_rate_hz) const {
+  RecordSummary summary;
+  summary.rate_hz = measured_rate_hz;
+  summary.period_error_ppm = period_error_ppm();
+  summary.timing = timestamper_.stats();
+  summary.acquisition = stats_;
+  return timing_metadata_json(summary, timestamper_.options());
+}
+
+std::string ImuAcquisition::driver_metadata() const { return driver_metadata_json(driver_); }
 
 Status ImuAcquisition::discard_pending_edges() {
   if (line_ == nullptr) return {};

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "acquisition/imu_source.hpp"
 #include "acquisition/imu_stream.hpp"
 #include "acquisition/mounting.hpp"
 #include "acquisition/timestamp.hpp"
@@ -57,16 +58,7 @@ struct AcquisitionOptions {
   TimeNs edge_timeout_ns = 20'000'000;
 };
 
-struct AcquisitionStats {
-  std::uint64_t polls = 0;
-  std::uint64_t batches = 0;
-  std::uint64_t samples = 0;
-  std::uint64_t edge_timeouts = 0;  // waits (or service polls) that ended without enough edges
-  std::uint64_t edges = 0;          // data-ready edges taken from the line
-  std::uint64_t batches_without_edge = 0;
-};
-
-class ImuAcquisition {
+class ImuAcquisition final : public ImuSource {
  public:
   /// Everything is borrowed. `line` may be null (no data-ready interrupt: poll the FIFO).
   ImuAcquisition(drivers::mpu6000::Mpu6000& driver, drivers::DataReadyLine* line, AcquisitionClock& clock,
@@ -74,25 +66,37 @@ class ImuAcquisition {
 
   /// Waits for the next edge (or poll time), polls the driver and appends the samples of the
   /// batch, if any, to `out` (cleared first). Errors are the driver's unrecoverable ones.
-  [[nodiscard]] Status step(std::vector<ImuSample>& out);
+  [[nodiscard]] Status step(std::vector<ImuSample>& out) override;
 
   /// The event-loop form of step(); never blocks. Takes the edges already pending on the line
   /// (each older one is reported to the driver with on_edge()) and polls the driver when
   /// `edges_per_read` edges have come since the last poll or next_poll_ns() has come, appending
   /// the samples of the batch, if any, to `out` (cleared first). Call it when the line's fd()
   /// is readable and at next_poll_ns(). Use either step() or service() on one acquisition.
-  [[nodiscard]] Status service(std::vector<ImuSample>& out);
+  [[nodiscard]] Status service(std::vector<ImuSample>& out) override;
 
   /// When service() polls the driver at the latest (the clock's time base; CLOCK_MONOTONIC on
   /// a rig), unless edges come first.
-  TimeNs next_poll_ns() const { return next_poll_ns_; }
+  TimeNs next_poll_ns() const override { return next_poll_ns_; }
+
+  int wake_fd() const override { return line_ != nullptr ? line_->fd() : -1; }
+  std::string wake_name() const override {
+    return line_ != nullptr ? "data-ready line " + line_->name() : "";
+  }
+  std::uint64_t wake_progress() const override { return stats_.edges; }
+  TimestamperStats timing_stats() const override { return timestamper_.stats(); }
+  AcquisitionStats acquisition_stats() const override { return stats_; }
+  double period_error_ppm() const override { return timestamper_.period_error_ppm(); }
+  std::string timing_metadata(double measured_rate_hz) const override;
+  std::string driver_metadata() const override;
+  drivers::mpu6000::Mpu6000& driver() const { return driver_; }
 
   /// The data-ready line, or null (FIFO polling).
   drivers::DataReadyLine* line() const { return line_; }
 
   const SampleTimestamper& timestamper() const { return timestamper_; }
   const AcquisitionStats& stats() const { return stats_; }
-  const MountingMap& mounting() const { return mounting_; }
+  const MountingMap& mounting() const override { return mounting_; }
   /// True when samples are remapped to rig axes (exact mounting), false when they stay in the
   /// IMU's axes (general mounting: applied in SI after calibration).
   bool samples_in_rig_frame() const { return mounting_.exact_on_raw(); }

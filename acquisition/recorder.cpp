@@ -120,7 +120,7 @@ namespace {
 /// span of sample time, publishes, posts a fault event per new gap and reports progress.
 class SessionSamples {
  public:
-  SessionSamples(ImuAcquisition& acquisition, ImuStream& stream, const RecordOptions& options)
+  SessionSamples(const ImuSource& acquisition, ImuStream& stream, const RecordOptions& options)
       : acquisition_(acquisition),
         stream_(stream),
         options_(options),
@@ -138,7 +138,7 @@ class SessionSamples {
     stream_.publish(samples.first(keep));
     count_ += keep;
     if (keep > 0) last_t_ns_ = samples[keep - 1].t_ns;
-    const auto gaps = acquisition_.timestamper().stats().gaps;
+    const auto gaps = acquisition_.timing_stats().gaps;
     if (gaps != last_gaps_) {
       log::Event e;
       e.t_ns = samples.front().t_ns;
@@ -158,7 +158,7 @@ class SessionSamples {
   TimeNs last_t_ns() const { return last_t_ns_; }
 
  private:
-  ImuAcquisition& acquisition_;
+  const ImuSource& acquisition_;
   ImuStream& stream_;
   const RecordOptions& options_;
   TimeNs duration_ns_;
@@ -258,7 +258,7 @@ class CameraSet {
 
 /// Creates the log with the options' metadata, the mounting and the IMU stream.
 Result<std::unique_ptr<log::SessionLogWriter>> create_session_log(const RecordOptions& options,
-                                                                  const ImuAcquisition& acquisition,
+                                                                  const ImuSource& acquisition,
                                                                   int* stream_id) {
   log::SessionLogWriterOptions wo;
   wo.overwrite = options.overwrite;
@@ -277,28 +277,26 @@ Result<std::unique_ptr<log::SessionLogWriter>> create_session_log(const RecordOp
 
 /// Fills the summary from every stage's counters and stores them in the log; this happens even
 /// when recording stopped early.
-void summarize(ImuAcquisition& acquisition, const mpu::Mpu6000& driver, const SessionSamples& session,
-               const ImuStream& stream, const CameraSet& cameras, log::SessionLogWriter& writer,
-               RecordSummary& summary) {
+void summarize(const ImuSource& acquisition, const SessionSamples& session, const ImuStream& stream,
+               const CameraSet& cameras, log::SessionLogWriter& writer, RecordSummary& summary) {
   summary.samples = session.count();
-  summary.timing = acquisition.timestamper().stats();
-  summary.acquisition = acquisition.stats();
+  summary.timing = acquisition.timing_stats();
+  summary.acquisition = acquisition.acquisition_stats();
   summary.stream = stream.stats();
   summary.duration_s = session.span_s();
   summary.rate_hz = summary.samples > 1 && summary.duration_s > 0
                         ? static_cast<double>(summary.samples - 1) / summary.duration_s
                         : 0.0;
-  summary.period_error_ppm = acquisition.timestamper().period_error_ppm();
-  (void)writer.set_metadata("imu.timing", timing_metadata_json(summary, acquisition.timestamper().options()));
+  summary.period_error_ppm = acquisition.period_error_ppm();
+  (void)writer.set_metadata("imu.timing", acquisition.timing_metadata(summary.rate_hz));
   (void)writer.set_metadata("imu.stream", stream_json(summary.stream));
-  (void)writer.set_metadata("imu.driver", driver_metadata_json(driver));
+  (void)writer.set_metadata("imu.driver", acquisition.driver_metadata());
   cameras.summarize(summary, writer);
 }
 
 }  // namespace
 
-Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu::Mpu6000& driver,
-                                         const RecordOptions& options) {
+Result<RecordSummary> record_imu_session(ImuSource& acquisition, const RecordOptions& options) {
   if (!(options.duration_s > 0.0) || !std::isfinite(options.duration_s)) {
     return make_error(Errc::kInvalidArgument, "record: the duration must be a positive number of seconds");
   }
@@ -368,7 +366,7 @@ Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition, const mpu:
   auto camera_status = cameras.close();
   auto stop_status = stream.stop();
 
-  summarize(acquisition, driver, session, stream, cameras, *writer, summary);
+  summarize(acquisition, session, stream, cameras, *writer, summary);
   if (!stop_status.ok()) return stop_status.error();
   if (!camera_status.ok()) {
     (void)writer->close();

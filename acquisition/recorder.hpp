@@ -25,10 +25,10 @@ namespace imucal::acq {
 
 /// How record_imu_session() drives the acquisition.
 enum class RecordLoop {
-  /// ImuAcquisition::step() in a loop: for the simulated rig, whose clock advances only when
+  /// ImuSource::step() in a loop: for the simulated rig, whose clock advances only when
   /// the loop waits (deterministic, as fast as the host computes).
   kStep,
-  /// ImuAcquisition::service() on a Boost.Asio event loop (asio_acquisition.hpp): for a real
+  /// ImuSource::service() on a Boost.Asio event loop (asio_acquisition.hpp): for a real
   /// clock (a rig, or the real-time simulated rig). The line's fd and a poll timer wake it.
   kEventLoop,
 };
@@ -85,12 +85,10 @@ struct RecordSummary {
   std::vector<CameraRecordSummary> cameras;
 };
 
-/// Records `options.duration_s` of samples through `acquisition` into a new session log, in the
-/// loop `options.loop` names. Driver counters and the timing/stream counters are stored in the
-/// log's metadata.
-[[nodiscard]] Result<RecordSummary> record_imu_session(ImuAcquisition& acquisition,
-                                                       const drivers::mpu6000::Mpu6000& driver,
-                                                       const RecordOptions& options);
+/// Records `options.duration_s` of samples through `acquisition` (imucal's own driver or the
+/// kernel's, imu_source.hpp) into a new session log, in the loop `options.loop` names. Driver
+/// counters and the timing/stream counters are stored in the log's metadata.
+[[nodiscard]] Result<RecordSummary> record_imu_session(ImuSource& acquisition, const RecordOptions& options);
 
 /// Session-log metadata written by record_imu_session(), for other writers of IMU sessions:
 /// "imu.timing" (timestamper counters), "imu.driver" (settings and failure counters per

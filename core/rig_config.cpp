@@ -34,6 +34,18 @@ const char* imu_bus_name(ImuBus bus) {
   return "?";
 }
 
+const char* imu_driver_name(ImuDriver driver) {
+  switch (driver) {
+    case ImuDriver::kDirect:
+      return "direct";
+    case ImuDriver::kIio:
+      return "iio";
+    case ImuDriver::kAuto:
+      return "auto";
+  }
+  return "?";
+}
+
 const char* camera_backend_name(CameraBackend backend) {
   switch (backend) {
     case CameraBackend::kV4l2:
@@ -235,9 +247,10 @@ Result<std::vector<double>> ConfigParser::get_doubles(const YAML::Node& node, co
   }
 
 Status ConfigParser::parse_imu(const YAML::Node& node, ImuConfig& imu) const {
-  IMUCAL_TRY(check_map(node, "imu",
-                       {"bus", "device", "i2c_address", "spi_config_speed_hz", "spi_data_speed_hz",
-                        "accel_range_g", "gyro_range_dps", "rate_hz", "dlpf_hz", "data_ready", "mounting"}));
+  IMUCAL_TRY(check_map(
+      node, "imu",
+      {"bus", "device", "driver", "iio_device", "i2c_address", "spi_config_speed_hz", "spi_data_speed_hz",
+       "accel_range_g", "gyro_range_dps", "rate_hz", "dlpf_hz", "data_ready", "mounting"}));
   const YAML::Node bus = node["bus"];
   if (!bus) return error(node, "imu.bus", "missing (spi, i2c or sim)");
   auto bus_name = get_string(bus, "imu.bus");
@@ -265,6 +278,38 @@ Status ConfigParser::parse_imu(const YAML::Node& node, ImuConfig& imu) const {
       return error(n, "imu.device", "'" + *d + "' is not a device path (e.g. /dev/spidev0.0 or /dev/i2c-1)");
     }
     imu.device = *d;
+  }
+  if (const YAML::Node n = node["driver"]) {
+    auto d = get_string(n, "imu.driver");
+    if (!d.ok()) return d.error();
+    if (*d == "direct") {
+      imu.driver = ImuDriver::kDirect;
+    } else if (*d == "iio") {
+      imu.driver = ImuDriver::kIio;
+    } else if (*d == "auto") {
+      imu.driver = ImuDriver::kAuto;
+    } else {
+      return error(n, "imu.driver",
+                   "'" + *d +
+                       "' is not allowed (direct: imucal's own driver through spidev or i2c-dev; iio: the "
+                       "kernel's inv-mpu6050 driver; auto: the kernel's when it owns the chip)");
+    }
+    if (imu.bus == ImuBus::kSim && imu.driver == ImuDriver::kIio) {
+      return error(n, "imu.driver", "iio needs a hardware bus (spi or i2c), not bus: sim");
+    }
+  }
+  if (const YAML::Node n = node["iio_device"]) {
+    auto d = get_string(n, "imu.iio_device");
+    if (!d.ok()) return d.error();
+    if (d->rfind("iio:device", 0) != 0)
+      return error(n, "imu.iio_device", "'" + *d + "' is not an IIO device (e.g. iio:device0)");
+    if (imu.driver == ImuDriver::kDirect)
+      return error(n, "imu.iio_device", "applies only to driver: iio or auto");
+    imu.iio_device = *d;
+  }
+  if (node["data_ready"] && imu.driver == ImuDriver::kIio) {
+    return error(node["data_ready"], "imu.data_ready",
+                 "applies only to the direct driver: with driver: iio the kernel owns the chip's interrupt");
   }
   // Keys that belong to the other bus are mistakes, not options to ignore.
   for (const char* key : {"spi_config_speed_hz", "spi_data_speed_hz"}) {
@@ -463,8 +508,14 @@ Status ConfigParser::parse_camera(const YAML::Node& node, const std::string& pat
   if (!node["rate_hz"]) return error(node, path + ".rate_hz", "missing (frames per second)");
   auto rate = get_double(node["rate_hz"], path + ".rate_hz");
   if (!rate.ok()) return rate.error();
-  if (!(*rate > 0.0 && *rate <= 1000.0)) {
-    return error(node["rate_hz"], path + ".rate_hz", "must be > 0 and <= 1000 frames per second");
+  // 0: the camera's own rate, for a camera without a rate control (libcamera pipelines without
+  // FrameDurationLimits); the virtual camera needs a rate.
+  if (!(*rate >= 0.0 && *rate <= 1000.0) || (*rate == 0.0 && cam.backend == CameraBackend::kSim)) {
+    return error(
+        node["rate_hz"], path + ".rate_hz",
+        cam.backend == CameraBackend::kSim
+            ? "must be > 0 and <= 1000 frames per second"
+            : "must be 0 (the camera's own rate, when it has no rate control) to 1000 frames per second");
   }
   cam.rate_hz = *rate;
   if (const YAML::Node n = node["pixel_format"]) {
@@ -808,6 +859,8 @@ std::string rig_config_to_yaml(const RigConfig& c) {
   out << YAML::Key << "imu" << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "bus" << YAML::Value << imu_bus_name(c.imu.bus);
   out << YAML::Key << "device" << YAML::Value << c.imu.device;
+  out << YAML::Key << "driver" << YAML::Value << imu_driver_name(c.imu.driver);
+  if (!c.imu.iio_device.empty()) out << YAML::Key << "iio_device" << YAML::Value << c.imu.iio_device;
   if (c.imu.bus == ImuBus::kI2c)
     out << YAML::Key << "i2c_address" << YAML::Value
         << format_hex(static_cast<unsigned long>(c.imu.i2c_address), 2);
@@ -888,6 +941,7 @@ std::string rig_config_to_json(const RigConfig& c) {
   using nlohmann::json;
   json imu = {{"bus", imu_bus_name(c.imu.bus)},
               {"device", c.imu.device},
+              {"driver", imu_driver_name(c.imu.driver)},
               {"accel_range_g", c.imu.accel_range_g},
               {"gyro_range_dps", c.imu.gyro_range_dps},
               {"rate_hz", c.imu.rate_hz},

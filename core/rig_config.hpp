@@ -18,6 +18,11 @@ namespace imucal {
 enum class ImuBus { kSpi, kI2c, kSim };
 const char* imu_bus_name(ImuBus bus);
 
+/// Who reads the chip: imucal's own driver through spidev / i2c-dev ("direct"), the kernel's
+/// inv-mpu6050 IIO driver ("iio"), or the kernel's when it owns the configured chip ("auto").
+enum class ImuDriver { kDirect, kIio, kAuto };
+const char* imu_driver_name(ImuDriver driver);
+
 /// A GPIO line (libgpiod): chip name or path ("gpiochip0", "/dev/gpiochip0") and line offset.
 struct GpioLineConfig {
   std::string chip;
@@ -27,8 +32,12 @@ struct GpioLineConfig {
 /// MPU-6000 settings.
 struct ImuConfig {
   ImuBus bus = ImuBus::kSim;
-  /// spidev or i2c-dev node; "sim" for the simulated rig.
+  /// spidev or i2c-dev node; "sim" for the simulated rig. With the kernel's driver it names the
+  /// bus the chip hangs on (the IIO device bound to it is used).
   std::string device = "sim";
+  ImuDriver driver = ImuDriver::kAuto;
+  /// The IIO device to use ("iio:device0"); empty: the inv-mpu6050 device bound to `device`.
+  std::string iio_device;
   /// I2C only: 0x68 (AD0 low) or 0x69 (AD0 high).
   int i2c_address = 0x68;
   /// SPI only. The MPU-6000 accepts at most 1 MHz for register access and 20 MHz for reading

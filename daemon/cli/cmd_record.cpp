@@ -155,7 +155,7 @@ void run_record_sim(const RecordArgs& a, const RigConfig& config, const mpu::Set
     ro.loop = acq::RecordLoop::kEventLoop;
     ro.stop_on_signals = true;
   }
-  const auto summary = take(acq::record_imu_session(rig.acquisition(), rig.driver(), ro), "recording");
+  const auto summary = take(acq::record_imu_session(rig.acquisition(), ro), "recording");
   rig.stop();
   progress.finish();
   print_summary(a, summary, rig.metadata());
@@ -200,8 +200,7 @@ void run_record(const RecordArgs& a) {
   ro.stream_info = (*rig)->stream_info();
   ro.loop = acq::RecordLoop::kEventLoop;
   ro.stop_on_signals = true;
-  const auto summary =
-      take(acq::record_imu_session((*rig)->acquisition(), (*rig)->driver(), ro), "recording");
+  const auto summary = take(acq::record_imu_session((*rig)->source(), ro), "recording");
   progress.finish();
   print_summary(a, summary, "");
   note_interrupted(a, summary);
@@ -212,7 +211,8 @@ const CommandRegistrar kRegistrar(20, [](CLI::App& root) {
   auto* cmd = root.add_subcommand(
       "record",
       "Record the rig's IMU and every configured camera into one session log on one clock: IMU timestamps "
-      "reconstructed per sample from the data-ready interrupt, gaps flagged; frames stamped by their camera "
+      "reconstructed per sample from the data-ready interrupt (or the kernel's, when its inv-mpu6050 driver "
+      "owns the chip: imu.driver), gaps flagged; frames stamped by their camera "
       "on CLOCK_MONOTONIC and stored losslessly. --sim records the virtual rig (and its virtual cameras) "
       "through the same driver and acquisition code.");
   cmd->add_option("--config", args->config_path, "Rig configuration (YAML, docs/config.md)")->required();

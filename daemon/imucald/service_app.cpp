@@ -28,6 +28,10 @@ using nlohmann::json;
 
 namespace {
 
+/// The preflight's self-test line when the kernel's inv-mpu6050 driver reads the chip.
+constexpr const char* kNoSelfTestThroughIio =
+    "self-test not available (the kernel's inv-mpu6050 driver owns the chip and has none)";
+
 std::string storage_name(const StorageConfig& s) {
   return std::string(storage_backend_name(s.backend)) + " " +
          (s.backend == StorageBackend::kI2cEeprom ? s.i2c_device : s.path);
@@ -87,6 +91,11 @@ int check_configuration(const ServiceOptions& options) {
   } else {
     std::printf("  imu       %s %s, %g Hz (%s)\n", imu_bus_name(c.imu.bus), c.imu.device.c_str(),
                 c.imu.rate_hz, presence(c.imu.device).c_str());
+    const ImuDriver driver = app::resolve_imu_driver(c.imu);
+    std::printf("  driver    %s%s\n", imu_driver_name(c.imu.driver),
+                c.imu.driver != ImuDriver::kAuto ? ""
+                : driver == ImuDriver::kIio      ? ": the kernel's inv-mpu6050 driver owns the chip (iio)"
+                                                 : ": no inv-mpu6050 IIO device on this bus (direct)");
     if (c.imu.data_ready) {
       const std::string chip = c.imu.data_ready->chip.rfind('/', 0) == 0 ? c.imu.data_ready->chip
                                                                          : "/dev/" + c.imu.data_ready->chip;
@@ -223,7 +232,7 @@ Status Service::open_imu() {
   rig_ = std::move(*rig);
   stream_info_ = rig_->stream_info();
   acquisition_ =
-      std::make_unique<acq::AsioAcquisition>(io_, rig_->acquisition(), [this](std::span<const ImuSample> s) {
+      std::make_unique<acq::AsioAcquisition>(io_, rig_->source(), [this](std::span<const ImuSample> s) {
         on_samples(s);
         return !quit_;
       });
@@ -357,11 +366,21 @@ void Service::on_message(const json& m) {
 }
 
 drivers::mpu6000::Mpu6000* Service::driver() {
-  return sim_rig_ ? &sim_rig_->driver() : rig_ ? &rig_->driver() : nullptr;
+  return sim_rig_ ? &sim_rig_->driver() : rig_ ? rig_->driver() : nullptr;
+}
+
+Result<drivers::mpu6000::OffsetRegisters> Service::read_offsets() {
+  if (rig_) return rig_->read_offsets();
+  return driver()->read_offsets();
+}
+
+Status Service::write_offsets(const drivers::mpu6000::OffsetRegisters& regs) {
+  if (rig_) return rig_->write_offsets(regs);
+  return driver()->write_offsets(regs);
 }
 
 void Service::set_gyro_offsets(bool from_record) {
-  if (!config_.storage.program_gyro_offsets || imu_state_ != "open" || !driver()) return;
+  if (!config_.storage.program_gyro_offsets || imu_state_ != "open" || (!rig_ && !sim_rig_)) return;
   std::array<double, 3> bias{0.0, 0.0, 0.0};
   std::string source = "cleared (power-up zero) while a session records";
   if (from_record) {
@@ -382,7 +401,7 @@ void Service::set_gyro_offsets(bool from_record) {
   // +-500, 1 at +-1000, 1/2 at +-2000. The stored bias is in counts of the configured range.
   int fs = 0;
   for (int r = config_.imu.gyro_range_dps; r > 250; r /= 2) ++fs;
-  auto current = driver()->read_offsets();
+  auto current = read_offsets();
   if (!current.ok()) {
     gyro_offsets_ = "not set: " + current.error().message;
     spdlog::error("gyro offset registers: {}", current.error().message);
@@ -392,7 +411,7 @@ void Service::set_gyro_offsets(bool from_record) {
   for (int i = 0; i < 3; ++i)
     regs.gyro[i] =
         static_cast<std::int16_t>(std::clamp(std::lround(-bias[i] * (1 << fs) / 4.0), -32768L, 32767L));
-  if (auto st = driver()->write_offsets(regs); !st.ok()) {
+  if (auto st = write_offsets(regs); !st.ok()) {
     gyro_offsets_ = "not set: " + st.error().message;
     spdlog::error("gyro offset registers: {}", st.error().message);
     return;
@@ -403,6 +422,10 @@ void Service::set_gyro_offsets(bool from_record) {
 }
 
 std::string Service::self_test() {
+  if (rig_ && rig_->iio()) {
+    // The kernel's driver owns the chip's registers and offers no self-test.
+    return kNoSelfTestThroughIio;
+  }
   drivers::mpu6000::Mpu6000* driver = this->driver();
   if (!driver) return "not open";
   // The chip's self-test runs outside streaming; the driver reconfigures and streams again after it.
@@ -421,12 +444,11 @@ std::string Service::self_test() {
 app::session::PreflightReport Service::preflight() {
   app::session::PreflightReport r;
   const std::string test = imu_state_ == "open" ? self_test() : "";
-  const bool test_ok = test.rfind("self-test passed", 0) == 0;
+  const bool test_ok = test.rfind("self-test passed", 0) == 0 || test == kNoSelfTestThroughIio;
   r.devices.push_back(
       {"imu", imu_state_ == "open" && test_ok,
        imu_state_ == "open"
-           ? std::string(options_.sim ? "virtual MPU-6000 (register emulator)"
-                                      : "MPU-6000 on " + rig_->bus_name()) +
+           ? std::string(options_.sim ? "virtual MPU-6000 (register emulator)" : rig_->describe()) +
                  ", WHO_AM_I answered, " + test + ", " + std::to_string(samples_) + " samples so far" +
                  (config_.storage.program_gyro_offsets ? ", gyro offset registers " + gyro_offsets_
                                                        : std::string())

@@ -98,6 +98,9 @@ class Service final : public service::SessionHost {
   /// (`from_record`), or the registers back to their power-up zero (before a session records).
   void set_gyro_offsets(bool from_record);
   drivers::mpu6000::Mpu6000* driver();
+  /// The chip's offset registers, through whichever driver reads it.
+  [[nodiscard]] Result<drivers::mpu6000::OffsetRegisters> read_offsets();
+  [[nodiscard]] Status write_offsets(const drivers::mpu6000::OffsetRegisters& regs);
   void arm_watchdog();
   void shutdown(const std::string& why);
 

@@ -133,8 +133,8 @@ Status I2cDevBus::open_and_check() {
         file_.path() + ": cannot use address " + format_hex(options_.address, 2) + ": " + std::strerror(-r);
     if (-r == EBUSY) {
       msg +=
-          ". A kernel driver (likely inv-mpu6050) is bound to it; unbind it (see "
-          "/sys/bus/i2c/devices/*/driver) or blacklist the module.";
+          ". A kernel driver (likely inv-mpu6050) is bound to it: read the chip through it with "
+          "imu.driver: iio (or auto), or unbind it (see /sys/bus/i2c/devices/*/driver).";
     }
     return fail(Errc::kDevice, msg);
   }

@@ -290,7 +290,41 @@ INSTANTIATE_TEST_SUITE_P(
                     "256..16777216"},
         InvalidCase{"imu:\n  bus: sim\n  accel_range_g: [4]\n", "imu.accel_range_g", 3,
                     "expected an integer"},
-        InvalidCase{"imu:\n  bus: sim\n  accel_range_g: 010\n", "imu.accel_range_g", 3, "not allowed"}));
+        InvalidCase{"imu:\n  bus: sim\n  accel_range_g: 010\n", "imu.accel_range_g", 3, "not allowed"},
+        InvalidCase{"imu:\n  bus: i2c\n  driver: kernel\n", "imu.driver", 3,
+                    "iio: the kernel's inv-mpu6050 driver"},
+        InvalidCase{"imu:\n  bus: sim\n  driver: iio\n", "imu.driver", 3, "needs a hardware bus"},
+        InvalidCase{"imu:\n  bus: i2c\n  driver: direct\n  iio_device: iio:device0\n", "imu.iio_device", 4,
+                    "only to driver: iio or auto"},
+        InvalidCase{"imu:\n  bus: i2c\n  iio_device: mpu6050\n", "imu.iio_device", 3, "not an IIO device"},
+        InvalidCase{"imu:\n  bus: i2c\n  driver: iio\n  data_ready: {chip: gpiochip0, line: 3}\n",
+                    "imu.data_ready", 4, "kernel owns the chip's interrupt"},
+        InvalidCase{"imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: sim, width: 640, height: 480, "
+                    "rate_hz: 0}\n",
+                    "cameras[0].rate_hz", 3, "must be > 0"}));
+
+// imu.driver and imu.iio_device; a hardware camera's rate 0 (its own rate).
+TEST(RigConfig, TheKernelsDriverAndACamerasOwnRate) {
+  auto cfg = parse_rig_config(
+      "imu: {bus: i2c, device: /dev/i2c-1, driver: iio, iio_device: iio:device2}\n"
+      "cameras:\n  - {name: cam0, backend: libcamera, device: 'platform/vimc.0 Sensor B', width: 636, "
+      "height: 480, rate_hz: 0}\n"
+      "target: {target_type: checkerboard, targetCols: 7, targetRows: 6, rowSpacingMeters: 0.06, "
+      "colSpacingMeters: 0.06}\n",
+      "iio.yaml");
+  ASSERT_TRUE(cfg.ok()) << cfg.error().message;
+  EXPECT_EQ(cfg->imu.driver, ImuDriver::kIio);
+  EXPECT_EQ(cfg->imu.iio_device, "iio:device2");
+  EXPECT_EQ(cfg->cameras[0].rate_hz, 0.0);
+  auto again = parse_rig_config(rig_config_to_yaml(*cfg), "again.yaml");
+  ASSERT_TRUE(again.ok()) << again.error().message;
+  EXPECT_EQ(again->imu.driver, ImuDriver::kIio);
+  EXPECT_EQ(again->imu.iio_device, "iio:device2");
+  EXPECT_THAT(rig_config_to_json(*cfg), HasSubstr("\"driver\": \"iio\""));
+  auto defaults = parse_rig_config("imu: {bus: spi}\n", "d.yaml");
+  ASSERT_TRUE(defaults.ok());
+  EXPECT_EQ(defaults->imu.driver, ImuDriver::kAuto);
+}
 
 TEST(RigConfig, YamlSyntaxErrorNamesLine) {
   auto cfg = parse_rig_config("imu:\n  bus: sim\n  rate_hz: [200\n", "broken.yaml");

@@ -23,13 +23,21 @@
 #             (since Linux 5.11), so that call becomes generic_handle_irq(irq), which runs the
 #             same handler (irq_sim maps every interrupt with handle_simple_irq). Needs configfs
 #             (a module on Debian, found by modprobe through the module's depends).
+#   vimc      drivers/media/test-drivers/vimc/ (CONFIG_VIDEO_VIMC), the virtual media-controller
+#             camera (sensors -> debayers -> scaler -> capture: /dev/media0, /dev/video0..2,
+#             /dev/v4l-subdev0..7), built with its own Makefile's object list. All it needs is
+#             in Debian's kernel: CONFIG_MEDIA_CONTROLLER and CONFIG_VIDEO_V4L2_SUBDEV_API are
+#             on (built into the mc and videodev modules), videobuf2-vmalloc and v4l2-tpg are
+#             modules (vivid uses them too), find_font() of CONFIG_FONT_SUPPORT is built in;
+#             their symbols are in the headers' Module.symvers, so modprobe loads them through
+#             vimc's depends.
 set -euo pipefail
 
 SKIP=77
 skip() { echo "build-kmod: $*" >&2; exit $SKIP; }
 fail() { echo "build-kmod: $*" >&2; exit 1; }
 
-recipes="gpio-sim"
+recipes="gpio-sim vimc imucal-irq-i2c"
 if [ "${1:-}" = "--knows" ]; then
   for r in $recipes; do [ "$r" = "${2:-}" ] && exit 0; done
   exit 1
@@ -37,6 +45,10 @@ fi
 [ $# -eq 4 ] || fail "usage: build-kmod.sh NAME KVER WORKDIR OUT.ko (or --knows NAME)"
 name=$1 kver=$2 work=$3 out=$4
 case " $recipes " in *" $name "*) ;; *) fail "no recipe for '$name' (known: $recipes)" ;; esac
+here=$(cd "$(dirname "$0")" && pwd)
+# Recipes of this project's own modules need only the headers, not the kernel's source.
+needs_source=1
+[ "$name" = imucal-irq-i2c ] && needs_source=0
 
 export PATH="$PATH:/usr/sbin:/sbin"
 for tool in apt-get apt-cache dpkg tar xz make; do
@@ -65,7 +77,9 @@ kbuild=linux-kbuild-$series
 source=linux-source-$series
 [ -n "$common" ] || fail "cannot find the common headers package in the dependencies of $headers"
 source_spec="$source=$hver" sver=$hver
-if [ -z "$(apt-cache show "$source_spec" 2>/dev/null)" ]; then
+if [ "$needs_source" = 0 ]; then
+  source_spec="" sver="(not needed)"
+elif [ -z "$(apt-cache show "$source_spec" 2>/dev/null)" ]; then
   sver=$(version_of "$source")
   [ -n "$sver" ] || skip "$source is not available from apt"
   source_spec="$source=$sver"
@@ -73,8 +87,9 @@ if [ -z "$(apt-cache show "$source_spec" 2>/dev/null)" ]; then
 fi
 
 mkdir -p "$work/deb" "$work/root" "$work/src" "$work/build"
-echo "build-kmod: fetching $headers, $common, $kbuild and $source_spec to build $name for $kver (once)" >&2
-(cd "$work/deb" && apt-get download "$headers=$hver" "$common=$hver" "$kbuild" "$source_spec" >&2 2>&1) ||
+echo "build-kmod: fetching $headers, $common, $kbuild ${source_spec:+and $source_spec }to build $name for $kver (once)" >&2
+# shellcheck disable=SC2086 # an empty source_spec is no argument
+(cd "$work/deb" && apt-get download "$headers=$hver" "$common=$hver" "$kbuild" ${source_spec} >&2 2>&1) ||
   skip "apt-get download of $headers, $common, $kbuild, $source_spec failed (no network or no Debian bookworm apt sources?)"
 for deb in "$work"/deb/*.deb; do
   dpkg -x "$deb" "$work/root" || fail "dpkg -x $deb failed"
@@ -89,9 +104,9 @@ cc=$(sed -n 's/^CC = .*)\(gcc-[0-9]*\)$/\1/p' "$kdir/.kernelvariables" 2>/dev/nu
 cc=${cc:-gcc}
 command -v "$cc" >/dev/null 2>&1 ||
   skip "$cc not found: the kernel was built with it and modules must be too (install the Debian package '$cc')"
-tarball=$(ls "$work"/root/usr/src/linux-source-*.tar.xz 2>/dev/null | head -n 1)
-[ -n "$tarball" ] || fail "no kernel source tarball in $source"
-top=$(basename "$tarball" .tar.xz)
+tarball=$(ls "$work"/root/usr/src/linux-source-*.tar.xz 2>/dev/null | head -n 1 || true)
+[ -n "$tarball" ] || [ "$needs_source" = 0 ] || fail "no kernel source tarball in $source"
+top=$(basename "${tarball:-none}" .tar.xz)
 
 # --- recipe -----------------------------------------------------------------------------------
 b=$work/build
@@ -109,6 +124,20 @@ case "$name" in
       fail "kernel/irq/irq_sim.c of $top no longer has the irq_to_desc() call this recipe replaces"
     printf 'obj-m := gpio-sim.o\ngpio-sim-y := gpio-sim-main.o irq_sim.o\n' >"$b/Kbuild"
     ;;
+  vimc)
+    d=drivers/media/test-drivers/vimc
+    tar -xJf "$tarball" -C "$work/src" "$top/$d" || fail "vimc sources ($d) not found in $tarball"
+    cp "$work/src/$top/$d"/*.[ch] "$b/"
+    # The driver's Makefile lists its objects under obj-$(CONFIG_VIDEO_VIMC); build it as a module.
+    # shellcheck disable=SC2016  # a literal $(...) of make, not a shell expansion
+    sed 's/\$(CONFIG_VIDEO_VIMC)/m/' "$work/src/$top/$d/Makefile" >"$b/Kbuild"
+    grep -q '^obj-m += vimc.o' "$b/Kbuild" ||
+      fail "the vimc Makefile of $top no longer has obj-\$(CONFIG_VIDEO_VIMC) += vimc.o"
+    ;;
+  imucal-irq-i2c)
+    cp "$here/kmod/imucal_irq_i2c.c" "$b/" || fail "tests/qemu/kmod/imucal_irq_i2c.c not found"
+    printf 'obj-m := imucal-irq-i2c.o\nimucal-irq-i2c-y := imucal_irq_i2c.o\n' >"$b/Kbuild"
+    ;;
 esac
 
 if ! make -C "$kdir" M="$b" modules >"$work/build.log" 2>&1; then
@@ -117,4 +146,4 @@ if ! make -C "$kdir" M="$b" modules >"$work/build.log" 2>&1; then
 fi
 [ -f "$b/$name.ko" ] || fail "the build made no $name.ko"
 cp "$b/$name.ko" "$out.tmp" && mv "$out.tmp" "$out"
-echo "build-kmod: built $name for $kver ($headers $hver) from $source $sver" >&2
+echo "build-kmod: built $name for $kver ($headers $hver)${source_spec:+ from $source $sver}" >&2

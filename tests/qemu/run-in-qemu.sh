@@ -6,8 +6,9 @@
 #
 #   run-in-qemu.sh [--module "NAME [PARAM=VALUE ...]"]... [--timeout SECONDS] [--cwd DIR] -- CMD [ARG...]
 #
-# A --module the kernel does not have but tests/qemu/build-kmod.sh has a recipe for (gpio-sim)
-# is built once per kernel version out of tree from Debian's linux-source against the kernel's
+# A --module the kernel does not have but tests/qemu/build-kmod.sh has a recipe for (gpio-sim,
+# vimc, and this project's test module imucal-irq-i2c) is built once per kernel version out of
+# tree (from Debian's linux-source, or from tests/qemu/kmod/) against the kernel's
 # linux-headers, cached beside the kernel and installed into its module tree; configfs is
 # mounted at /sys/kernel/config in the guest whenever it is loaded.
 #
@@ -39,7 +40,7 @@ while [ $# -gt 0 ]; do
     --timeout) timeout_s=$2; shift 2 ;;
     --cwd) cwd=$2; shift 2 ;;
     --) shift; break ;;
-    -h|--help) sed -n '2,28p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,/^set -euo/{/^set -euo/!p}' "$0"; exit 0 ;;
     *) die "unknown option '$1' (see --help)" ;;
   esac
 done
@@ -130,7 +131,8 @@ ensure_module() {  # ensure_module NAME; runs under the cache lock
   fi
   local dir=$cache/kmod/$kver ko recipe
   ko=$dir/$name.ko
-  recipe=$(sha256sum "$here/build-kmod.sh" | cut -d' ' -f1)
+  # The recipe's key: the build script, and the project's own module source when there is one.
+  recipe=$(cat "$here/build-kmod.sh" "$here"/kmod/"${name//-/_}".c 2>/dev/null | sha256sum | cut -d' ' -f1)
   if [ ! -f "$ko" ] || [ "$(cat "$ko.recipe" 2>/dev/null)" != "$recipe" ]; then
     mkdir -p "$dir"
     local bwork status=0
