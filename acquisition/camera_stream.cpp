@@ -11,7 +11,10 @@ namespace {
 
 namespace cam = drivers::camera;
 
-enum class Layout { kGray8, kYuyv, kUyvy };
+// kRgb24 holds R, G, B in memory order, kBgr24 B, G, R. The names differ by library: V4L2's
+// fourccs name the memory order (RGB3), GenICam's too (RGB8), libcamera's follow DRM, which name
+// the bits of a little-endian word from the top (its BGR888 holds R, G, B in memory).
+enum class Layout { kGray8, kYuyv, kUyvy, kRgb24, kBgr24 };
 
 Result<Layout> layout_of(const std::string& pixel_format) {
   if (pixel_format == "GREY" || pixel_format == "Mono8" || pixel_format == "R8" || pixel_format == "Y8") {
@@ -23,6 +26,14 @@ Result<Layout> layout_of(const std::string& pixel_format) {
   if (pixel_format == "UYVY" || pixel_format == "YUV422Packed" || pixel_format == "YUV422_8_UYVY") {
     return Layout::kUyvy;
   }
+  if (pixel_format == "RGB3" || pixel_format == "RGB8" || pixel_format == "RGB8Packed" ||
+      pixel_format == "BGR888") {
+    return Layout::kRgb24;
+  }
+  if (pixel_format == "BGR3" || pixel_format == "BGR8" || pixel_format == "BGR8Packed" ||
+      pixel_format == "RGB888") {
+    return Layout::kBgr24;
+  }
   std::string list;
   for (const auto& f : supported_pixel_formats()) list += (list.empty() ? "" : ", ") + f;
   return make_error(Errc::kUnsupported, "pixel format '" + pixel_format +
@@ -32,9 +43,12 @@ Result<Layout> layout_of(const std::string& pixel_format) {
 
 /// Copies the luma of one frame into `out` (width * height bytes). False when the frame's
 /// buffer is shorter than its size says.
+/// Colour frames become the luma of ITU-R BT.601 (0.299 R + 0.587 G + 0.114 B, in 1/256).
 bool copy_luma(const cam::Frame& f, Layout layout, std::uint8_t* out) {
   const std::size_t w = static_cast<std::size_t>(f.width);
-  const std::size_t bytes_per_px = layout == Layout::kGray8 ? 1 : 2;
+  const std::size_t bytes_per_px = layout == Layout::kGray8                               ? 1
+                                   : layout == Layout::kRgb24 || layout == Layout::kBgr24 ? 3
+                                                                                          : 2;
   const std::size_t stride = f.stride != 0 ? f.stride : w * bytes_per_px;
   if (stride < w * bytes_per_px) return false;
   if (f.data.size() < stride * static_cast<std::size_t>(f.height - 1) + w * bytes_per_px) return false;
@@ -43,6 +57,12 @@ bool copy_luma(const cam::Frame& f, Layout layout, std::uint8_t* out) {
     std::uint8_t* dst = out + w * static_cast<std::size_t>(r);
     if (layout == Layout::kGray8) {
       std::memcpy(dst, src, w);
+    } else if (layout == Layout::kRgb24 || layout == Layout::kBgr24) {
+      const std::size_t r = layout == Layout::kRgb24 ? 0 : 2;
+      for (std::size_t c = 0; c < w; ++c) {
+        const std::uint8_t* p = src + 3 * c;
+        dst[c] = static_cast<std::uint8_t>((77u * p[r] + 150u * p[1] + 29u * p[2 - r] + 128u) >> 8);
+      }
     } else {
       const std::size_t y = layout == Layout::kYuyv ? 0 : 1;  // luma byte of each pixel pair half
       for (std::size_t c = 0; c < w; ++c) dst[c] = src[2 * c + y];
@@ -54,7 +74,8 @@ bool copy_luma(const cam::Frame& f, Layout layout, std::uint8_t* out) {
 }  // namespace
 
 const std::vector<std::string>& supported_pixel_formats() {
-  static const std::vector<std::string> formats = {"GREY", "Y8", "Mono8", "R8", "YUYV", "YUY2", "UYVY"};
+  static const std::vector<std::string> formats = {"GREY", "Y8",   "Mono8", "R8",   "YUYV",   "YUY2",  "UYVY",
+                                                   "RGB3", "BGR3", "RGB8",  "BGR8", "BGR888", "RGB888"};
   return formats;
 }
 

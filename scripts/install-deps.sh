@@ -18,6 +18,7 @@ build_pkgs=(
 test_pkgs=(
   clang-format
   qemu-system-x86 busybox-static cpio kmod
+  libcamera-ipa  # libcamera's vimc IPA module for qemu.libcamera
   chromium
   tmux systemd
   lintian

@@ -134,6 +134,64 @@ TEST(CameraStream, RecordsGreyAndTheLumaOfYuyvLosslesslyAndReleasesBuffersAtOnce
   }
 }
 
+// Colour cameras (libcamera's processed streams, V4L2 RGB3/BGR3, GenICam RGB8/BGR8) are recorded
+// as their BT.601 luma; each library's name for the byte order is honoured (libcamera's BGR888
+// holds R, G, B in memory, its RGB888 B, G, R).
+TEST(CameraStream, RecordsTheLumaOfColourFramesInEachLibrarysByteOrder) {
+  const std::string path = test::scratch_dir() + "/colour.imulog";
+  auto writer = new_log(path);
+  ASSERT_TRUE(writer);
+  const int w = 4, h = 2;
+  // Per pixel (R, G, B): white, pure red, pure green, pure blue; the second row 75 % grey.
+  const std::uint8_t px[8][3] = {{255, 255, 255}, {255, 0, 0},     {0, 255, 0},     {0, 0, 255},
+                                 {191, 191, 191}, {191, 191, 191}, {191, 191, 191}, {191, 191, 191}};
+  // (77 R + 150 G + 29 B + 128) / 256: BT.601's weights in 1/256.
+  const std::uint8_t want[8] = {255, 77, 149, 29, 191, 191, 191, 191};
+  const std::vector<std::pair<const char*, bool>> formats = {
+      {"BGR888", true}, {"RGB3", true}, {"RGB8", true}, {"RGB888", false}, {"BGR3", false}, {"BGR8", false}};
+  auto shared = log::synchronized_writer(*writer);
+  std::vector<std::unique_ptr<CameraStream>> streams;
+  std::vector<int> ids;
+  for (const auto& [fmt, rgb_in_memory] : formats) {
+    auto s = CameraStream::create({w, h, fmt, 30.0}, cam::TimestampMeaning::kEndOfFrame);
+    ASSERT_TRUE(s.ok()) << fmt << ": " << s.error().message;
+    CameraStreamInfo info;
+    info.name = fmt;
+    auto id = writer->add_camera_stream(info);
+    ASSERT_TRUE(id.ok());
+    ASSERT_TRUE((*s)->start_log(*shared, *id).ok());
+    FakeBuffer b{std::vector<std::uint8_t>(16 * h, 0)};  // stride 16 > 3 * width
+    for (int i = 0; i < w * h; ++i) {
+      std::uint8_t* dst = b.bytes.data() + 16 * (i / w) + 3 * (i % w);
+      for (int c = 0; c < 3; ++c) dst[c] = px[i][rgb_in_memory ? c : 2 - c];
+    }
+    auto f = frame_over(b, w, h, fmt, 0, 1'000'000, 0, 16);
+    EXPECT_TRUE((*s)->publish(f)) << fmt;
+    EXPECT_TRUE(b.released);
+    ASSERT_TRUE((*s)->stop().ok());
+    streams.push_back(std::move(*s));
+    ids.push_back(*id);
+  }
+  ASSERT_TRUE(writer->close().ok());
+  auto reader = log::SessionLogReader::open(path);
+  ASSERT_TRUE(reader.ok());
+  for (std::size_t k = 0; k < ids.size(); ++k) {
+    std::vector<CameraFrame> got;
+    ASSERT_TRUE((*reader)
+                    ->for_each_frame(ids[k], log::kTimeMin, log::kTimeMax,
+                                     [&](const CameraFrame& f) {
+                                       got.push_back(f);
+                                       return true;
+                                     })
+                    .ok());
+    ASSERT_EQ(got.size(), 1u) << formats[k].first;
+    auto img = log::decode_image(got[0].data, log::ReadMode::kGray8);
+    ASSERT_TRUE(img.ok());
+    for (int i = 0; i < w * h; ++i)
+      EXPECT_EQ(img->data[static_cast<std::size_t>(i)], want[i]) << formats[k].first << " pixel " << i;
+  }
+}
+
 TEST(CameraStream, RefusesFormatsItCannotRecordAndFramesOfAnotherSize) {
   auto bayer = CameraStream::create({8, 8, "BA81", 30.0}, cam::TimestampMeaning::kEndOfFrame);
   ASSERT_FALSE(bayer.ok());
@@ -318,8 +376,7 @@ TEST(RecordWithCamera, TheImuAndTheCameraGoIntoOneLogOnOneClock) {
   auto rig = make_sim_camera_rig({});
   ASSERT_TRUE(rig.rig && rig.camera);
   const std::string path = test::scratch_dir() + "/both.imulog";
-  auto summary = record_imu_session(rig.rig->acquisition(), rig.rig->driver(),
-                                    camera_record_options(path, *rig.camera, 5.0));
+  auto summary = record_imu_session(rig.rig->acquisition(), camera_record_options(path, *rig.camera, 5.0));
   ASSERT_TRUE(summary.ok()) << summary.error().message;
   ASSERT_EQ(summary->cameras.size(), 1u);
   const CameraStreamStats& cs = summary->cameras[0].stats.stream;
@@ -353,8 +410,7 @@ TEST(RecordWithCamera, AnUnpluggedCameraIsReportedAndTheImuGoesOn) {
   auto rig = make_sim_camera_rig(vo);
   ASSERT_TRUE(rig.rig && rig.camera);
   const std::string path = test::scratch_dir() + "/unplugged.imulog";
-  auto summary = record_imu_session(rig.rig->acquisition(), rig.rig->driver(),
-                                    camera_record_options(path, *rig.camera, 5.0));
+  auto summary = record_imu_session(rig.rig->acquisition(), camera_record_options(path, *rig.camera, 5.0));
   ASSERT_TRUE(summary.ok()) << summary.error().message;
   EXPECT_TRUE(summary->cameras[0].stats.failed);
   EXPECT_NE(summary->cameras[0].stats.failure.find("disconnected"), std::string::npos);
@@ -373,7 +429,7 @@ TEST(RecordWithCamera, ACameraThatStopsDeliveringIsReported) {
   const std::string path = test::scratch_dir() + "/stalled.imulog";
   auto ro = camera_record_options(path, *rig.camera, 5.0);
   ro.camera_stall_timeout_ns = kNsPerSecond;
-  auto summary = record_imu_session(rig.rig->acquisition(), rig.rig->driver(), ro);
+  auto summary = record_imu_session(rig.rig->acquisition(), ro);
   ASSERT_TRUE(summary.ok()) << summary.error().message;
   EXPECT_EQ(summary->cameras[0].stats.stalls, 1u);
   EXPECT_FALSE(summary->cameras[0].stats.failed);
