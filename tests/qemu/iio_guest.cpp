@@ -43,6 +43,7 @@
 #include "app/rig/rig.hpp"
 #include "core/time.hpp"
 #include "drivers/iio/iio_imu.hpp"
+#include "tests/qemu/guest_support.hpp"
 #include "tests/qemu/iio_stub_rig.hpp"
 
 namespace {
@@ -55,15 +56,9 @@ namespace iio = imucal::drivers::iio;
 namespace fs = std::filesystem;
 using namespace imucal::qemu;  // NOLINT: the rig's helpers
 
-int failures = 0;
-
-void check(bool ok, const std::string& what, const std::string& detail = "") {
-  std::printf("%s - %s%s%s\n", ok ? "ok" : "FAIL", what.c_str(), detail.empty() ? "" : ": ", detail.c_str());
-  std::fflush(stdout);
-  if (!ok) ++failures;
-}
-
-bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+using imucal::qemu::check;
+using imucal::qemu::contains;
+using imucal::qemu::failures;
 
 imucal::RigConfig rig_config(double rate_hz, imucal::ImuDriver driver) {
   imucal::RigConfig c;
@@ -223,6 +218,15 @@ void stream_checks(double rate_hz) {
             " beyond half a period");
 }
 
+// The kernel's device opened directly (not through the rig), at the rig configuration's ranges.
+iio::IioImuOptions iio_options(double rate_hz) {
+  iio::IioImuOptions o;
+  o.rate_hz = rate_hz;
+  o.accel_range = imucal::drivers::mpu6000::AccelRange::k4g;
+  o.gyro_range = imucal::drivers::mpu6000::GyroRange::k500dps;
+  return o;
+}
+
 // Collects every sample until the pulses have ended and nothing more comes.
 std::vector<imucal::ImuSample> drain(acq::ImuSource& source, const Pulses& pulses, std::string& error) {
   std::vector<imucal::ImuSample> all;
@@ -239,10 +243,7 @@ std::vector<imucal::ImuSample> drain(acq::ImuSource& source, const Pulses& pulse
 // the rest; the hole in the stamps counts them. One unbroken sequence of pulses, so that the
 // scans lost (pulses less samples delivered) are the truth.
 void buffer_loss_checks(double rate_hz) {
-  iio::IioImuOptions o;
-  o.rate_hz = rate_hz;
-  o.accel_range = imucal::drivers::mpu6000::AccelRange::k4g;
-  o.gyro_range = imucal::drivers::mpu6000::GyroRange::k500dps;
+  iio::IioImuOptions o = iio_options(rate_hz);
   o.buffer_scans = 32;
   o.watermark_scans = 1;
   auto imu = iio::IioImu::open(o);
@@ -272,10 +273,7 @@ void buffer_loss_checks(double rate_hz) {
 
 // The chip's FIFO overflowing: the kernel resets it and reads nothing for that interrupt.
 void fifo_overflow_checks(double rate_hz) {
-  iio::IioImuOptions o;
-  o.rate_hz = rate_hz;
-  o.accel_range = imucal::drivers::mpu6000::AccelRange::k4g;
-  o.gyro_range = imucal::drivers::mpu6000::GyroRange::k500dps;
+  iio::IioImuOptions o = iio_options(rate_hz);
   auto imu = iio::IioImu::open(o);
   if (!imu.ok()) {
     check(false, "opened for the FIFO overflow", imu.error().message);
@@ -309,10 +307,7 @@ void fifo_overflow_checks(double rate_hz) {
 
 // The driver unbound while streaming: the next read says the device went away.
 void unplug_checks(double rate_hz) {
-  iio::IioImuOptions o;
-  o.rate_hz = rate_hz;
-  o.accel_range = imucal::drivers::mpu6000::AccelRange::k4g;
-  o.gyro_range = imucal::drivers::mpu6000::GyroRange::k500dps;
+  iio::IioImuOptions o = iio_options(rate_hz);
   auto imu = iio::IioImu::open(o);
   if (!imu.ok()) {
     check(false, "opened for the unplug", imu.error().message);

@@ -28,6 +28,7 @@
 
 #include "core/time.hpp"
 #include "drivers/camera/libcamera/libcamera_camera.hpp"
+#include "tests/qemu/guest_support.hpp"
 #include "tests/qemu/iio_stub_rig.hpp"
 
 namespace {
@@ -37,15 +38,9 @@ using imucal::TimeNs;
 namespace cam = imucal::drivers::camera;
 namespace fs = std::filesystem;
 
-int lc_failures = 0;
-
-void lc_check(bool ok, const std::string& what, const std::string& detail = "") {
-  std::printf("%s - %s%s%s\n", ok ? "ok" : "FAIL", what.c_str(), detail.empty() ? "" : ": ", detail.c_str());
-  std::fflush(stdout);  // libcamera logs to stderr in between
-  if (!ok) ++lc_failures;
-}
-
-bool lc_contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+using imucal::qemu::check;
+using imucal::qemu::contains;
+using imucal::qemu::failures;
 
 // libcamera enumerates through libudev, which takes a device node without an entry in udev's
 // database (/run/udev/data/c<major>:<minor>) for one udevd has not processed yet and leaves it
@@ -101,64 +96,43 @@ std::vector<int> lc_bar_luma(const cam::Frame& frame, bool rgb_in_memory_order) 
   return bars;
 }
 
-struct LcStreamed {
-  std::vector<TimeNs> t_ns;
-  std::vector<TimeNs> dequeued_ns;
-  std::vector<std::uint32_t> sequence;
-  cam::Frame last;
-  std::string error;
+struct LcStreamed : imucal::qemu::StreamedFrames {
   bool frames_ok = true;    // size, format, stride and buffer length as configured
   bool pixels_vary = true;  // no frame of a single luma value
   int luma_min = 255;       // over all frames (a sampled grid)
   int luma_max = 0;
-  std::vector<int> bars;   // lc_bar_luma() of the last frame
-  double elapsed_s = 0.0;  // from the first wait to the last frame
+  std::vector<int> bars;  // lc_bar_luma() of the last frame
 };
 
-// Waits on fd() and dequeues `count` frames within `timeout_s`, releasing each but the last at
-// once (the camera keeps its buffers circulating).
+// Dequeues `count` frames within `timeout_s`, checking each one's shape and pixels (every frame
+// but the last is released at once: the camera keeps its buffers circulating).
 LcStreamed lc_stream(cam::Camera& camera, int count, double timeout_s) {
   LcStreamed out;
-  const TimeNs begin_ns = imucal::monotonic_now_ns();
-  const TimeNs deadline = begin_ns + imucal::s_to_ns(timeout_s);
   const cam::FrameFormat f = camera.format();
   const bool rgb_order = f.pixel_format == "BGR888";
-  while (static_cast<int>(out.t_ns.size()) < count && imucal::monotonic_now_ns() < deadline) {
-    pollfd p{camera.fd(), POLLIN, 0};
-    ::poll(&p, 1, 1000);
-    auto frame = camera.dequeue();
-    if (!frame.ok()) {
-      out.error = frame.error().message;
-      return out;
-    }
-    if (!frame->valid()) continue;
-    out.dequeued_ns.push_back(imucal::monotonic_now_ns());
-    out.t_ns.push_back(frame->t_ns);
-    out.sequence.push_back(frame->sequence);
-    const auto w = static_cast<std::size_t>(frame->width);
-    const auto h = static_cast<std::size_t>(frame->height);
-    const bool shape_ok = frame->width == f.width && frame->height == f.height &&
-                          frame->pixel_format == f.pixel_format && frame->stride >= 3 * w &&
-                          frame->data.size() >= frame->stride * (h - 1) + 3 * w;
+  imucal::qemu::StreamedFrames& frames = out;
+  frames = imucal::qemu::stream_frames(camera, count, timeout_s, [&](const cam::Frame& frame) {
+    const auto w = static_cast<std::size_t>(frame.width);
+    const auto h = static_cast<std::size_t>(frame.height);
+    const bool shape_ok = frame.width == f.width && frame.height == f.height &&
+                          frame.pixel_format == f.pixel_format && frame.stride >= 3 * w &&
+                          frame.data.size() >= frame.stride * (h - 1) + 3 * w;
     out.frames_ok = out.frames_ok && shape_ok;
-    if (shape_ok) {
-      int lo = 255;
-      int hi = 0;
-      for (std::size_t y = 0; y < h; y += 7) {
-        for (std::size_t x = 0; x < w; x += 5) {
-          const int l = lc_luma(frame->data.data() + y * frame->stride + 3 * x, rgb_order);
-          lo = std::min(lo, l);
-          hi = std::max(hi, l);
-        }
+    if (!shape_ok) return;
+    int lo = 255;
+    int hi = 0;
+    for (std::size_t y = 0; y < h; y += 7) {
+      for (std::size_t x = 0; x < w; x += 5) {
+        const int l = lc_luma(frame.data.data() + y * frame.stride + 3 * x, rgb_order);
+        lo = std::min(lo, l);
+        hi = std::max(hi, l);
       }
-      out.pixels_vary = out.pixels_vary && hi > lo;
-      out.luma_min = std::min(out.luma_min, lo);
-      out.luma_max = std::max(out.luma_max, hi);
-      out.bars = lc_bar_luma(*frame, rgb_order);
     }
-    out.last = std::move(*frame);
-  }
-  out.elapsed_s = imucal::ns_to_s(imucal::monotonic_now_ns() - begin_ns);
+    out.pixels_vary = out.pixels_vary && hi > lo;
+    out.luma_min = std::min(out.luma_min, lo);
+    out.luma_max = std::max(out.luma_max, hi);
+    out.bars = lc_bar_luma(frame, rgb_order);
+  });
   return out;
 }
 
@@ -172,23 +146,22 @@ TimeNs lc_median(std::vector<TimeNs> v) {
 // The checks every stream gets; `after_ns` is a stamp every frame must follow (the last one of
 // an earlier stream), 0 for none.
 void lc_check_stream(const LcStreamed& s, int count, const std::string& what, TimeNs after_ns) {
-  lc_check(s.error.empty() && static_cast<int>(s.t_ns.size()) == count,
-           what + ": " + std::to_string(count) + " frames",
-           s.error.empty()
-               ? std::to_string(s.t_ns.size()) + " frames in " + std::to_string(s.elapsed_s) + " s"
-               : s.error);
+  check(s.error.empty() && static_cast<int>(s.t_ns.size()) == count,
+        what + ": " + std::to_string(count) + " frames",
+        s.error.empty() ? std::to_string(s.t_ns.size()) + " frames in " + std::to_string(s.elapsed_s) + " s"
+                        : s.error);
   if (s.t_ns.empty()) return;
-  lc_check(s.frames_ok, what + ": every frame has the configured size and format and a full buffer");
-  lc_check(s.pixels_vary, what + ": the pixels are vimc's pattern, not one value",
-           "luma " + std::to_string(s.luma_min) + ".." + std::to_string(s.luma_max));
+  check(s.frames_ok, what + ": every frame has the configured size and format and a full buffer");
+  check(s.pixels_vary, what + ": the pixels are vimc's pattern, not one value",
+        "luma " + std::to_string(s.luma_min) + ".." + std::to_string(s.luma_max));
   std::string bar_text;
   bool falling = s.bars.size() == 8;
   for (std::size_t i = 0; i < s.bars.size(); ++i) {
     bar_text += (i == 0 ? "" : " ") + std::to_string(s.bars[i]);
     falling = falling && (i == 0 || s.bars[i] < s.bars[i - 1]);
   }
-  lc_check(falling, what + ": the colour bars' luma falls from left to right (channel order, stride)",
-           "bar luma " + bar_text);
+  check(falling, what + ": the colour bars' luma falls from left to right (channel order, stride)",
+        "bar luma " + bar_text);
   bool increasing = s.t_ns.front() > after_ns;
   bool consecutive = true;
   std::vector<TimeNs> lag_ns;
@@ -199,19 +172,17 @@ void lc_check_stream(const LcStreamed& s, int count, const std::string& what, Ti
     }
     lag_ns.push_back(s.dequeued_ns[i] - s.t_ns[i]);
   }
-  lc_check(increasing,
-           what + ": timestamps increase" + (after_ns > 0 ? ", after those before the stop" : ""));
-  lc_check(consecutive, what + ": sequence numbers consecutive",
-           std::to_string(s.sequence.front()) + ".." + std::to_string(s.sequence.back()));
+  check(increasing, what + ": timestamps increase" + (after_ns > 0 ? ", after those before the stop" : ""));
+  check(consecutive, what + ": sequence numbers consecutive",
+        std::to_string(s.sequence.front()) + ".." + std::to_string(s.sequence.back()));
   const TimeNs min_lag_ns = *std::min_element(lag_ns.begin(), lag_ns.end());
   const TimeNs max_lag_ns = *std::max_element(lag_ns.begin(), lag_ns.end());
   // vimc stamps a buffer as it copies the finished frame into it, so the stamp precedes its
   // dequeue; within 1 s shows the clock is CLOCK_MONOTONIC.
-  lc_check(min_lag_ns >= 0 && max_lag_ns < imucal::kNsPerSecond,
-           what + ": stamps on CLOCK_MONOTONIC, before their dequeue and within 1 s of it",
-           "stamp to dequeue " + std::to_string(min_lag_ns / 1000) + ".." +
-               std::to_string(max_lag_ns / 1000) + " us, median " + std::to_string(lc_median(lag_ns) / 1000) +
-               " us");
+  check(min_lag_ns >= 0 && max_lag_ns < imucal::kNsPerSecond,
+        what + ": stamps on CLOCK_MONOTONIC, before their dequeue and within 1 s of it",
+        "stamp to dequeue " + std::to_string(min_lag_ns / 1000) + ".." + std::to_string(max_lag_ns / 1000) +
+            " us, median " + std::to_string(lc_median(lag_ns) / 1000) + " us");
   const auto whole_us = std::count_if(s.t_ns.begin(), s.t_ns.end(), [](TimeNs t) { return t % 1000 == 0; });
   std::printf("  %s: %zd of %zu stamps are whole microseconds\n", what.c_str(),
               static_cast<std::ptrdiff_t>(whole_us), s.t_ns.size());
@@ -238,17 +209,17 @@ std::string lc_list_checks(const std::string& wanted) {
   if (ids.ok()) {
     for (const auto& id : *ids) {
       all += (all.empty() ? "'" : ", '") + id + "'";
-      if (wanted.empty() ? lc_contains(id, "vimc") : id == wanted) vimc = id;
+      if (wanted.empty() ? contains(id, "vimc") : id == wanted) vimc = id;
     }
   }
-  lc_check(ids.ok() && !vimc.empty(), "list_libcamera_cameras() finds the vimc camera",
-           ids.ok() ? (all.empty() ? "no cameras" : all) : ids.error().message);
+  check(ids.ok() && !vimc.empty(), "list_libcamera_cameras() finds the vimc camera",
+        ids.ok() ? (all.empty() ? "no cameras" : all) : ids.error().message);
   auto unknown = cam::open_libcamera_camera("platform/vimc.9 Sensor Z");
-  lc_check(!unknown.ok() && unknown.error().code == Errc::kNotFound &&
-               lc_contains(unknown.error().message, "platform/vimc.9 Sensor Z") &&
-               (vimc.empty() || lc_contains(unknown.error().message, vimc)),
-           "an unknown id is kNotFound, naming it and the cameras found",
-           unknown.ok() ? "opened" : unknown.error().message);
+  check(!unknown.ok() && unknown.error().code == Errc::kNotFound &&
+            contains(unknown.error().message, "platform/vimc.9 Sensor Z") &&
+            (vimc.empty() || contains(unknown.error().message, vimc)),
+        "an unknown id is kNotFound, naming it and the cameras found",
+        unknown.ok() ? "opened" : unknown.error().message);
   return vimc;
 }
 
@@ -258,13 +229,13 @@ bool lc_format_checks(cam::Camera& camera) {
   std::string pixel_formats;
   if (list.ok()) {
     for (const auto& f : *list) {
-      if (!lc_contains(pixel_formats, f.pixel_format))
+      if (!contains(pixel_formats, f.pixel_format))
         pixel_formats += (pixel_formats.empty() ? "" : " ") + f.pixel_format;
     }
   }
-  lc_check(list.ok() && !list->empty() && lc_contains(pixel_formats, "BGR888"), "formats() lists BGR888",
-           list.ok() ? std::to_string(list->size()) + " entries, pixel formats " + pixel_formats
-                     : list.error().message);
+  check(list.ok() && !list->empty() && contains(pixel_formats, "BGR888"), "formats() lists BGR888",
+        list.ok() ? std::to_string(list->size()) + " entries, pixel formats " + pixel_formats
+                  : list.error().message);
   if (!list.ok()) return false;
 
   // libcamera turns the pipeline's size range into the common sizes inside it
@@ -279,47 +250,44 @@ bool lc_format_checks(cam::Camera& camera) {
     const std::string size = std::to_string(f.width) + "x" + std::to_string(f.height);
     if (s.ok()) {
       ++taken;
-    } else if (s.error().code == Errc::kUnsupported && lc_contains(s.error().message, "adjusted")) {
+    } else if (s.error().code == Errc::kUnsupported && contains(s.error().message, "adjusted")) {
       ++refused;
-      if (!lc_contains(" " + adjusted + " ", " " + size + " "))
-        adjusted += (adjusted.empty() ? "" : " ") + size;
+      if (!contains(" " + adjusted + " ", " " + size + " ")) adjusted += (adjusted.empty() ? "" : " ") + size;
     } else {
       other += (other.empty() ? "" : "; ") + s.error().message;
     }
   }
-  lc_check(
-      other.empty(), "every listed format is set, or refused as adjusted",
-      std::to_string(taken) + " set" +
-          (adjusted.empty() ? ""
-                            : "; " + std::to_string(refused) + " refused as adjusted, sizes " + adjusted) +
-          (other.empty() ? "" : "; other errors: " + other));
+  check(other.empty(), "every listed format is set, or refused as adjusted",
+        std::to_string(taken) + " set" +
+            (adjusted.empty() ? ""
+                              : "; " + std::to_string(refused) + " refused as adjusted, sizes " + adjusted) +
+            (other.empty() ? "" : "; other errors: " + other));
 
   auto grey = camera.set_format({636, 480, "R8", 0.0});
-  lc_check(!grey.ok() && grey.error().code == Errc::kUnsupported &&
-               lc_contains(grey.error().message, "'R8'") && lc_contains(grey.error().message, "BGR888"),
-           "R8 refused, naming it and what the camera offers", grey.ok() ? "accepted" : grey.error().message);
+  check(!grey.ok() && grey.error().code == Errc::kUnsupported && contains(grey.error().message, "'R8'") &&
+            contains(grey.error().message, "BGR888"),
+        "R8 refused, naming it and what the camera offers", grey.ok() ? "accepted" : grey.error().message);
   auto odd = camera.set_format({640, 480, "BGR888", 0.0});
-  lc_check(!odd.ok() && odd.error().code == Errc::kUnsupported &&
-               lc_contains(odd.error().message, "640x480") && lc_contains(odd.error().message, "636x480"),
-           "BGR888 640x480 refused: vimc would adjust it to 636x480",
-           odd.ok() ? "accepted" : odd.error().message);
+  check(!odd.ok() && odd.error().code == Errc::kUnsupported && contains(odd.error().message, "640x480") &&
+            contains(odd.error().message, "636x480"),
+        "BGR888 640x480 refused: vimc would adjust it to 636x480",
+        odd.ok() ? "accepted" : odd.error().message);
   auto huge = camera.set_format({99999, 3, "BGR888", 0.0});
-  lc_check(
-      !huge.ok() && huge.error().code == Errc::kUnsupported && lc_contains(huge.error().message, "99999x3"),
-      "BGR888 99999x3 refused", huge.ok() ? "accepted" : huge.error().message);
+  check(!huge.ok() && huge.error().code == Errc::kUnsupported && contains(huge.error().message, "99999x3"),
+        "BGR888 99999x3 refused", huge.ok() ? "accepted" : huge.error().message);
   // vimc's pipeline has no FrameDurationLimits control: its rate cannot be set, only 0 is taken.
   auto rate = camera.set_format({636, 480, "BGR888", 15.0});
-  lc_check(!rate.ok() && rate.error().code == Errc::kUnsupported,
-           "BGR888 636x480 at 15 Hz refused (no frame rate control)",
-           rate.ok() ? "accepted" : rate.error().message);
+  check(!rate.ok() && rate.error().code == Errc::kUnsupported,
+        "BGR888 636x480 at 15 Hz refused (no frame rate control)",
+        rate.ok() ? "accepted" : rate.error().message);
 
   const cam::FrameFormat want{636, 480, "BGR888", 0.0};
   auto set = camera.set_format(want);
-  lc_check(set.ok(), "set_format BGR888 636x480 (rate 0)", set.ok() ? "" : set.error().message);
+  check(set.ok(), "set_format BGR888 636x480 (rate 0)", set.ok() ? "" : set.error().message);
   const cam::FrameFormat f = camera.format();
-  lc_check(f.width == want.width && f.height == want.height && f.pixel_format == want.pixel_format &&
-               f.rate_hz == 0.0,
-           "format() reads it back", lc_format_text(f));
+  check(f.width == want.width && f.height == want.height && f.pixel_format == want.pixel_format &&
+            f.rate_hz == 0.0,
+        "format() reads it back", lc_format_text(f));
   return set.ok();
 }
 
@@ -342,7 +310,7 @@ void lc_record_checks(const std::string& id, const std::string& cli) {
         "imucal-irq-i2c)\n");
     return;
   }
-  lc_check(q::prepare_stub() && q::attach(true), "the IMU rig: inv-mpu6050 on i2c-stub with an interrupt");
+  check(q::prepare_stub() && q::attach(true), "the IMU rig: inv-mpu6050 on i2c-stub with an interrupt");
   const std::string tmp = std::getenv("TMPDIR") ? std::getenv("TMPDIR") : "/tmp";
   const std::string config = tmp + "/libcamera-rig.yaml";
   const std::string log = tmp + "/libcamera.imulog";
@@ -363,7 +331,7 @@ void lc_record_checks(const std::string& id, const std::string& cli) {
   std::string out;
   const int rc = run("record --config " + config + " --duration 3 --output " + log + " --force", out);
   pulses.stop();
-  lc_check(rc == 0, "imucal record: the kernel's IMU driver and the libcamera camera into one log", out);
+  check(rc == 0, "imucal record: the kernel's IMU driver and the libcamera camera into one log", out);
   std::string info;
   const int irc = run("info --json " + log, info);
   std::int64_t samples = 0, frames = 0;
@@ -377,9 +345,9 @@ void lc_record_checks(const std::string& id, const std::string& cli) {
     cam_device = std::string("(") + e.what() + ")";
   }
   // vimc's frame rate under TCG falls to a few per second while imucal encodes (8 in 3 s seen).
-  lc_check(irc == 0 && samples >= 500 && frames >= 3 && cam_device == id,
-           "imucal info reads it: IMU samples and the camera's frames",
-           std::to_string(samples) + " samples, " + std::to_string(frames) + " frames from " + cam_device);
+  check(irc == 0 && samples >= 500 && frames >= 3 && cam_device == id,
+        "imucal info reads it: IMU samples and the camera's frames",
+        std::to_string(samples) + " samples, " + std::to_string(frames) + " frames from " + cam_device);
 }
 
 int main(int argc, char** argv) {
@@ -400,7 +368,7 @@ int main(int argc, char** argv) {
   lc_fake_udev_database();
   const std::string id = lc_list_checks(argc > 1 && std::string(argv[1]) != "auto" ? argv[1] : "");
   if (id.empty()) {
-    std::printf("FAIL: no vimc camera; %d failed check(s)\n", lc_failures);
+    std::printf("FAIL: no vimc camera; %d failed check(s)\n", failures);
     return 1;
   }
   auto opened = cam::open_libcamera_camera(id);
@@ -409,13 +377,13 @@ int main(int argc, char** argv) {
     return 1;
   }
   cam::Camera& camera = **opened;
-  lc_check(std::string(camera.backend()) == "libcamera" && camera.id() == id, "open '" + id + "'",
-           "default " + lc_format_text(camera.format()));
-  lc_check(camera.timestamp_meaning() == cam::TimestampMeaning::kStartOfExposure,
-           "timestamp_meaning() is start of exposure (libcamera's SensorTimestamp)");
+  check(std::string(camera.backend()) == "libcamera" && camera.id() == id, "open '" + id + "'",
+        "default " + lc_format_text(camera.format()));
+  check(camera.timestamp_meaning() == cam::TimestampMeaning::kStartOfExposure,
+        "timestamp_meaning() is start of exposure (libcamera's SensorTimestamp)");
   auto twice = cam::open_libcamera_camera(id);
-  lc_check(!twice.ok() && twice.error().code == Errc::kDevice,
-           "a second open of the acquired camera is kDevice", twice.ok() ? "opened" : twice.error().message);
+  check(!twice.ok() && twice.error().code == Errc::kDevice, "a second open of the acquired camera is kDevice",
+        twice.ok() ? "opened" : twice.error().message);
 
   std::vector<TimeNs> all_lag_ns;
   int all_frames = 0;
@@ -429,62 +397,61 @@ int main(int argc, char** argv) {
   if (lc_format_checks(camera)) {
     constexpr int kFrames = 20;
     auto s = camera.start();
-    lc_check(s.ok(), "start", s.ok() ? "" : s.error().message);
+    check(s.ok(), "start", s.ok() ? "" : s.error().message);
     LcStreamed first = lc_stream(camera, kFrames, 30.0);
     lc_check_stream(first, kFrames, "stream", 0);
     gather(first);
     const auto c = camera.counters();
-    lc_check(c.frames == kFrames && c.dropped == 0 && c.incomplete == 0 && c.errors == 0,
-             "counters: " + std::to_string(kFrames) + " frames, none dropped or incomplete, no errors",
-             std::to_string(c.frames) + " frames, " + std::to_string(c.dropped) + " dropped, " +
-                 std::to_string(c.incomplete) + " incomplete, " + std::to_string(c.errors) + " errors");
+    check(c.frames == kFrames && c.dropped == 0 && c.incomplete == 0 && c.errors == 0,
+          "counters: " + std::to_string(kFrames) + " frames, none dropped or incomplete, no errors",
+          std::to_string(c.frames) + " frames, " + std::to_string(c.dropped) + " dropped, " +
+              std::to_string(c.incomplete) + " incomplete, " + std::to_string(c.errors) + " errors");
 
     // camera.hpp: frames still held after stop() stay valid until released.
     cam::Frame held = std::move(first.last);
     const std::vector<std::uint8_t> copy(held.data.begin(), held.data.end());
     auto stopped = camera.stop();
-    lc_check(stopped.ok() && lc_same_pixels(held, copy), "stop() with a frame held; its pixels stay readable",
-             stopped.ok() ? std::to_string(copy.size()) + " bytes unchanged" : stopped.error().message);
-    lc_check(camera.stop().ok(), "stop() again (idempotent)");
+    check(stopped.ok() && lc_same_pixels(held, copy), "stop() with a frame held; its pixels stay readable",
+          stopped.ok() ? std::to_string(copy.size()) + " bytes unchanged" : stopped.error().message);
+    check(camera.stop().ok(), "stop() again (idempotent)");
     auto none = camera.dequeue();
-    lc_check(none.ok() && !none->valid(), "dequeue() after stop(): no frame, no error",
-             none.ok() ? "" : none.error().message);
+    check(none.ok() && !none->valid(), "dequeue() after stop(): no frame, no error",
+          none.ok() ? "" : none.error().message);
 
     s = camera.start();
-    lc_check(s.ok(), "restart with the old frame still held", s.ok() ? "" : s.error().message);
+    check(s.ok(), "restart with the old frame still held", s.ok() ? "" : s.error().message);
     LcStreamed again = lc_stream(camera, 10, 30.0);
     const TimeNs before_ns = first.t_ns.empty() ? 0 : first.t_ns.back();
     lc_check_stream(again, 10, "restart", before_ns);
     gather(again);
     if (!again.sequence.empty())
       std::printf("  restart: sequence starts again at %u\n", again.sequence.front());
-    lc_check(lc_same_pixels(held, copy),
-             "the frame held since before the stop is unchanged after the restart");
+    check(lc_same_pixels(held, copy), "the frame held since before the stop is unchanged after the restart");
     held.release();  // belongs to the stopped session: must not be queued into the new one
     again.last.release();
     LcStreamed more = lc_stream(camera, 5, 30.0);
-    lc_check(more.error.empty() && more.t_ns.size() == 5 && !again.sequence.empty() &&
-                 more.sequence.front() == again.sequence.back() + 1,
-             "releasing the old frame leaves the new stream going",
-             more.error.empty() ? std::to_string(more.t_ns.size()) + " more frames" : more.error);
+    check(more.error.empty() && more.t_ns.size() == 5 && !again.sequence.empty() &&
+              more.sequence.front() == again.sequence.back() + 1,
+          "releasing the old frame leaves the new stream going",
+          more.error.empty() ? std::to_string(more.t_ns.size()) + " more frames" : more.error);
     gather(more);
     const auto c2 = camera.counters();
-    lc_check(c2.dropped == 0 && c2.incomplete == 0 && c2.errors == 0, "counters after the restart: no loss",
-             std::to_string(c2.frames) + " frames, " + std::to_string(c2.dropped) + " dropped, " +
-                 std::to_string(c2.errors) + " errors");
+    check(c2.dropped == 0 && c2.incomplete == 0 && c2.errors == 0, "counters after the restart: no loss",
+          std::to_string(c2.frames) + " frames, " + std::to_string(c2.dropped) + " dropped, " +
+              std::to_string(c2.errors) + " errors");
     more.last.release();
-    lc_check(camera.stop().ok(), "stop");
+    check(camera.stop().ok(), "stop");
 
     // The other channel order: the bars must come out the same.
     auto rgb = camera.set_format({636, 480, "RGB888", 0.0});
-    lc_check(rgb.ok(), "set_format RGB888 636x480 after the stop", rgb.ok() ? "" : rgb.error().message);
+    check(rgb.ok(), "set_format RGB888 636x480 after the stop", rgb.ok() ? "" : rgb.error().message);
     if (rgb.ok()) {
       s = camera.start();
       LcStreamed other = lc_stream(camera, 3, 30.0);
       lc_check_stream(other, 3, "RGB888", 0);
       gather(other);
       other.last.release();
-      lc_check(s.ok() && camera.stop().ok(), "RGB888 start and stop", s.ok() ? "" : s.error().message);
+      check(s.ok() && camera.stop().ok(), "RGB888 start and stop", s.ok() ? "" : s.error().message);
     }
   }
 
@@ -500,6 +467,6 @@ int main(int argc, char** argv) {
         imucal::ns_to_s(*std::max_element(all_lag_ns.begin(), all_lag_ns.end())) * 1e3);
   }
   std::printf("  run took %.1f s\n", imucal::ns_to_s(imucal::monotonic_now_ns() - begin_ns));
-  std::printf("%s: %d failed check(s)\n", lc_failures == 0 ? "PASS" : "FAIL", lc_failures);
-  return lc_failures == 0 ? 0 : 1;
+  std::printf("%s: %d failed check(s)\n", failures == 0 ? "PASS" : "FAIL", failures);
+  return failures == 0 ? 0 : 1;
 }

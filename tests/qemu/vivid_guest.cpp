@@ -27,6 +27,7 @@
 
 #include "core/time.hpp"
 #include "drivers/camera/v4l2/v4l2_camera.hpp"
+#include "tests/qemu/guest_support.hpp"
 
 namespace {
 
@@ -34,14 +35,9 @@ using imucal::Errc;
 using imucal::TimeNs;
 namespace cam = imucal::drivers::camera;
 
-int failures = 0;
-
-void check(bool ok, const std::string& what, const std::string& detail = "") {
-  std::printf("%s - %s%s%s\n", ok ? "ok" : "FAIL", what.c_str(), detail.empty() ? "" : ": ", detail.c_str());
-  if (!ok) ++failures;
-}
-
-bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+using imucal::qemu::check;
+using imucal::qemu::contains;
+using imucal::qemu::failures;
 
 // Sets a control found by its name (vivid's own controls have no public ids) through a second
 // descriptor on the node, as another program would.
@@ -70,41 +66,22 @@ bool set_control(const std::string& device, const char* name, int value) {
   return done;
 }
 
-// Waits on fd() and dequeues up to `count` frames within `timeout_s`; the frames are returned
-// (still holding their buffers when `keep` is set, else released at once).
-struct Streamed {
-  std::vector<TimeNs> t_ns;
-  std::vector<TimeNs> dequeued_ns;
-  std::vector<std::uint32_t> sequence;
-  cam::Frame last;
-  std::string error;
-  imucal::Errc error_code = imucal::Errc::kInternal;
+// Up to `count` frames within `timeout_s` (stream_frames(): the last one still held), and
+// whether each had the configured size and format and a full buffer.
+struct Streamed : imucal::qemu::StreamedFrames {
   bool frames_ok = true;
 };
 
 Streamed stream(cam::Camera& camera, int count, double timeout_s) {
   Streamed out;
-  const TimeNs deadline = imucal::monotonic_now_ns() + imucal::s_to_ns(timeout_s);
   const cam::FrameFormat f = camera.format();
-  while (static_cast<int>(out.t_ns.size()) < count && imucal::monotonic_now_ns() < deadline) {
-    pollfd p{camera.fd(), POLLIN, 0};
-    ::poll(&p, 1, 1000);
-    auto frame = camera.dequeue();
-    if (!frame.ok()) {
-      out.error = frame.error().message;
-      out.error_code = frame.error().code;
-      return out;
-    }
-    if (!frame->valid()) continue;
-    out.dequeued_ns.push_back(imucal::monotonic_now_ns());
-    out.t_ns.push_back(frame->t_ns);
-    out.sequence.push_back(frame->sequence);
-    out.frames_ok = out.frames_ok && frame->width == f.width && frame->height == f.height &&
-                    frame->pixel_format == f.pixel_format &&
-                    frame->data.size() >= frame->stride * static_cast<std::size_t>(frame->height) &&
-                    frame->stride >= static_cast<std::size_t>(frame->width);
-    out.last = std::move(*frame);
-  }
+  imucal::qemu::StreamedFrames& frames = out;
+  frames = imucal::qemu::stream_frames(camera, count, timeout_s, [&](const cam::Frame& frame) {
+    out.frames_ok = out.frames_ok && frame.width == f.width && frame.height == f.height &&
+                    frame.pixel_format == f.pixel_format &&
+                    frame.data.size() >= frame.stride * static_cast<std::size_t>(frame.height) &&
+                    frame.stride >= static_cast<std::size_t>(frame.width);
+  });
   return out;
 }
 
