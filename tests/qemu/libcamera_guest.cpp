@@ -239,8 +239,8 @@ bool lc_format_checks(cam::Camera& camera) {
   if (!list.ok()) return false;
 
   // libcamera turns the pipeline's size range into the common sizes inside it
-  // (StreamFormats::sizes), which ignores vimc's multiples of 6: those it adjusts are refused.
-  // Each listed entry is either taken or refused as adjusted, never anything else.
+  // (StreamFormats::sizes), which ignores vimc's multiples of 6; formats() lists only those the
+  // pipeline takes as they are, so every listed entry is set.
   int taken = 0;
   int refused = 0;
   std::string adjusted;  // each size once (the pixel formats list the same sizes)
@@ -257,7 +257,8 @@ bool lc_format_checks(cam::Camera& camera) {
       other += (other.empty() ? "" : "; ") + s.error().message;
     }
   }
-  check(other.empty(), "every listed format is set, or refused as adjusted",
+  check(other.empty() && refused == 0 && taken == static_cast<int>(list->size()),
+        "every listed format is set (formats() leaves out the sizes vimc would adjust)",
         std::to_string(taken) + " set" +
             (adjusted.empty() ? ""
                               : "; " + std::to_string(refused) + " refused as adjusted, sizes " + adjusted) +

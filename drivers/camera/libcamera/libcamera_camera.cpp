@@ -122,7 +122,8 @@ Result<std::unique_ptr<LibcameraCamera>> open_libcamera_camera(const std::string
                            : "found: " + found));
   }
   if (camera->acquire() < 0) {
-    return make_error(Errc::kDevice, "libcamera: camera '" + id + "' is in use by another process");
+    return make_error(Errc::kDevice, "libcamera: camera '" + id +
+                                         "' is in use (by another process, or opened already by this one)");
   }
   auto cam = std::unique_ptr<LibcameraCamera>(new LibcameraCamera(id, *manager, camera, options));
   if (cam->event_fd_ < 0)
@@ -172,13 +173,33 @@ void LibcameraCamera::on_disconnected() {
 
 Result<std::vector<FrameFormat>> LibcameraCamera::formats() {
   std::vector<FrameFormat> out;
-  const lc::StreamFormats& formats = config_->at(0).formats();
+  lc::StreamConfiguration& cfg = config_->at(0);
+  const lc::StreamFormats formats = cfg.formats();
+  // For a size range libcamera lists the common sizes inside it, and the pipeline may adjust
+  // some of them (vimc takes multiples of 6 only); each is validated, and only what set_format()
+  // would take is listed. Not while streaming: the configuration is the running one then.
+  const lc::PixelFormat kept_format = cfg.pixelFormat;
+  const lc::Size kept_size = cfg.size;
+  const unsigned kept_buffers = cfg.bufferCount;
   for (const lc::PixelFormat& pf : formats.pixelformats()) {
     std::vector<lc::Size> sizes = formats.sizes(pf);
     if (sizes.empty()) sizes.push_back(formats.range(pf).max);
     for (const lc::Size& size : sizes) {
+      if (!session_) {
+        cfg.pixelFormat = pf;
+        cfg.size = size;
+        const bool taken = config_->validate() != lc::CameraConfiguration::Invalid && cfg.pixelFormat == pf &&
+                           cfg.size == size;
+        if (!taken) continue;
+      }
       out.push_back({static_cast<int>(size.width), static_cast<int>(size.height), pf.toString(), 0.0});
     }
+  }
+  if (!session_) {
+    cfg.pixelFormat = kept_format;
+    cfg.size = kept_size;
+    cfg.bufferCount = kept_buffers;
+    (void)config_->validate();
   }
   return out;
 }
