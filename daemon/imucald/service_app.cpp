@@ -449,7 +449,8 @@ app::session::PreflightReport Service::preflight() {
       {"imu", imu_state_ == "open" && test_ok,
        imu_state_ == "open"
            ? std::string(options_.sim ? "virtual MPU-6000 (register emulator)" : rig_->describe()) +
-                 ", WHO_AM_I answered, " + test + ", " + std::to_string(samples_) + " samples so far" +
+                 (rig_ && rig_->iio() ? ", " : ", WHO_AM_I answered, ") + test + ", " +
+                 std::to_string(samples_) + " samples so far" +
                  (config_.storage.program_gyro_offsets ? ", gyro offset registers " + gyro_offsets_
                                                        : std::string())
            : "not open: " + imu_error_,

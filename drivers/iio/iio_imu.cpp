@@ -439,15 +439,26 @@ Result<mpu::OffsetRegisters> IioImu::read_offsets() const {
   return r;
 }
 
-Status IioImu::write_offsets(const mpu::OffsetRegisters& offsets) const {
+Status IioImu::write_offsets(const mpu::OffsetRegisters& offsets) {
+  // The kernel's driver takes calibbias writes only outside buffered mode (write_raw claims
+  // direct mode: EBUSY while the buffer is on), so a running buffer pauses for them; the samples
+  // of the pause are a gap like any other (the stamps show it).
+  const bool was_on = enabled_;
+  if (was_on) IMUCAL_TRY(set_buffer(false));
   const char* axes = "xyz";
-  for (std::size_t i = 0; i < 3; ++i) {
-    IMUCAL_TRY(write_text(attr(std::string("in_accel_") + axes[i] + "_calibbias"),
-                          std::to_string(offsets.accel[i])));
-    IMUCAL_TRY(write_text(attr(std::string("in_anglvel_") + axes[i] + "_calibbias"),
-                          std::to_string(offsets.gyro[i])));
+  Status written;
+  for (std::size_t i = 0; i < 3 && written.ok(); ++i) {
+    written =
+        write_text(attr(std::string("in_accel_") + axes[i] + "_calibbias"), std::to_string(offsets.accel[i]));
+    if (written.ok())
+      written = write_text(attr(std::string("in_anglvel_") + axes[i] + "_calibbias"),
+                           std::to_string(offsets.gyro[i]));
   }
-  return {};
+  if (was_on) {
+    carry_ = 0;
+    IMUCAL_TRY(set_buffer(true));
+  }
+  return written;
 }
 
 std::string IioImu::describe() const {

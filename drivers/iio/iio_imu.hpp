@@ -139,9 +139,10 @@ class IioImu {
   const IioStats& stats() const { return stats_; }
 
   /// The chip's offset registers through the calibbias attributes (the same registers and
-  /// units the direct driver writes: accel 1/2048 g, gyro 1/32.8 deg/s).
+  /// units the direct driver writes: accel 1/2048 g, gyro 1/32.8 deg/s). Writing pauses a running
+  /// buffer: the kernel's driver refuses the attributes while it streams (EBUSY).
   [[nodiscard]] Result<mpu6000::OffsetRegisters> read_offsets() const;
-  [[nodiscard]] Status write_offsets(const mpu6000::OffsetRegisters& offsets) const;
+  [[nodiscard]] Status write_offsets(const mpu6000::OffsetRegisters& offsets);
 
   /// "iio:device0 (mpu6000 on 1-0068, /dev/iio:device0)".
   std::string describe() const;

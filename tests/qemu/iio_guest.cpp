@@ -2,7 +2,7 @@
 // driver, inv-mpu6050 (IIO), bound to an i2c-stub chip at 0x68 on /dev/i2c-0:
 //
 //   run-in-qemu.sh --module "i2c-stub chip_addr=0x68" --module i2c-dev --module inv-mpu6050-i2c
-//                  --module imucal-irq-i2c -- qemu_iio_guest [RATE_HZ [IMUCAL_CLI]]
+//                  --module imucal-irq-i2c -- qemu_iio_guest [RATE_HZ [IMUCAL_CLI [IMUCALD IMUCALCTL]]]
 //
 // i2c-stub only stores bytes, so the guest prepares the registers the driver reads: WHO_AM_I
 // 0x68, INT_STATUS with the data-ready bit, FIFO_COUNT 14 (one frame), and 14 bytes from
@@ -19,6 +19,7 @@
 #include <linux/i2c-dev.h>
 #include <linux/i2c.h>
 #include <sys/ioctl.h>
+#include <sys/types.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -27,6 +28,7 @@
 #include <cerrno>
 #include <climits>
 #include <cmath>
+#include <csignal>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -365,13 +367,71 @@ void cli_checks(double rate_hz, const std::string& cli) {
         device + ", " + std::to_string(samples) + " samples, driver " + driver);
 }
 
+// imucald on this rig: it opens the IMU through the kernel's driver, its preflight says so (no
+// self-test through it) and passes, and the gyro offset registers go through calibbias (cleared
+// while a session records; one axis set to 7 before). The
+// preflight's device lines are read through `imucalctl attach`, as an operator sees them.
+void service_checks(double rate_hz, const std::string& imucald, const std::string& imucalctl) {
+  const std::string tmp = std::getenv("TMPDIR") ? std::getenv("TMPDIR") : "/tmp";
+  const std::string config = tmp + "/iio-service.yaml";
+  const std::string socket = tmp + "/imucald.sock";
+  std::ofstream(config) << "name: qemu-iio\nimu: {bus: i2c, device: /dev/i2c-0, driver: auto, rate_hz: "
+                        << rate_hz
+                        << ", dlpf_hz: " << rig_config(rate_hz, imucal::ImuDriver::kAuto).imu.dlpf_hz
+                        << "}\nstorage: {backend: file, path: " << tmp
+                        << "/calibration.bin, program_gyro_offsets: true}\n";
+  const std::string dir = "/sys/bus/iio/devices/iio:device0";
+  write_text(dir + "/in_anglvel_y_calibbias", "7");  // cleared by the service: no stored bias
+  Pulses pulses(rate_hz);
+  pulses.start(static_cast<int>(20 * rate_hz));
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    const std::string out = tmp + "/imucald.out";
+    const int fd = ::open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    if (fd >= 0) {
+      ::dup2(fd, 1);
+      ::dup2(fd, 2);
+    }
+    ::execl(imucald.c_str(), imucald.c_str(), "--config", config.c_str(), "--socket", socket.c_str(),
+            "--state-dir", (tmp + "/state").c_str(), "--start", "preflight", "--exit-after-session",
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const bool up = wait_for(socket, true, 20000);
+  std::this_thread::sleep_for(std::chrono::seconds(2));  // samples come in
+  const std::string screen_path = tmp + "/attach.out";
+  (void)std::system(
+      ("timeout 5 " + imucalctl + " --socket " + socket + " attach </dev/null >" + screen_path + " 2>&1")
+          .c_str());
+  const std::string screen = read_text(screen_path);
+  const std::string offsets = read_text(dir + "/in_anglvel_y_calibbias");
+  (void)std::system((imucalctl + " --socket " + socket + " abort >/dev/null 2>&1").c_str());
+  int status = -1;
+  for (int i = 0; i < 200 && ::waitpid(pid, &status, WNOHANG) == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  if (::waitpid(pid, &status, WNOHANG) == 0) {
+    ::kill(pid, SIGKILL);
+    ::waitpid(pid, &status, 0);
+  }
+  pulses.stop();
+  const auto line = screen.find("imu:");
+  const std::string imu_line = line == std::string::npos ? screen.substr(0, 300) : screen.substr(line, 300);
+  check(up && contains(screen, "ok    imu: MPU-6000 through the kernel's inv-mpu6050 driver") &&
+            contains(screen, "self-test not available"),
+        "imucald opens the IMU through the kernel's driver; its preflight passes it without a self-test",
+        up ? imu_line : "no socket: " + read_text(tmp + "/imucald.out").substr(0, 300));
+  check(contains(screen, "gyro offset registers [0 0 0] from cleared") && offsets == "0",
+        "imucald clears the gyro offset registers through calibbias (a session records)",
+        "in_anglvel_y_calibbias " + offsets);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   const double rate_hz = argc > 1 ? std::atof(argv[1]) : 200.0;
   const std::string cli = argc > 2 ? argv[2] : "";
   if (!(rate_hz >= 4 && rate_hz <= 1000)) {
-    std::fprintf(stderr, "usage: qemu_iio_guest [RATE_HZ (4..1000) [IMUCAL_CLI]]\n");
+    std::fprintf(stderr, "usage: qemu_iio_guest [RATE_HZ (4..1000) [IMUCAL_CLI [IMUCALD IMUCALCTL]]]\n");
     return 2;
   }
   check(fs::exists(kParams), "imucal-irq-i2c is loaded", kParams);
@@ -386,6 +446,7 @@ int main(int argc, char** argv) {
   fifo_overflow_checks(rate_hz);
   unplug_checks(rate_hz);
   if (!cli.empty()) cli_checks(rate_hz, cli);
+  if (argc > 4) service_checks(rate_hz, argv[3], argv[4]);
   std::printf("%s: %d failed check(s)\n", failures == 0 ? "PASS" : "FAIL", failures);
   return failures == 0 ? 0 : 1;
 }
