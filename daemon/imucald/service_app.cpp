@@ -96,7 +96,10 @@ int check_configuration(const ServiceOptions& options) {
                 c.imu.driver != ImuDriver::kAuto ? ""
                 : driver == ImuDriver::kIio      ? ": the kernel's inv-mpu6050 driver owns the chip (iio)"
                                                  : ": no inv-mpu6050 IIO device on this bus (direct)");
-    if (c.imu.data_ready) {
+    if (driver == ImuDriver::kIio) {
+      std::printf("  ready     the kernel's driver takes the chip's interrupt%s\n",
+                  c.imu.data_ready ? " (imu.data_ready is not used)" : "");
+    } else if (c.imu.data_ready) {
       const std::string chip = c.imu.data_ready->chip.rfind('/', 0) == 0 ? c.imu.data_ready->chip
                                                                          : "/dev/" + c.imu.data_ready->chip;
       std::printf("  ready     %s line %d (%s)\n", chip.c_str(), c.imu.data_ready->line,
