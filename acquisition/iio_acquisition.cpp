@@ -59,7 +59,7 @@ Status IioAcquisition::service(std::vector<ImuSample>& out) {
   const TimeNs now_ns = clock_.now_ns();
   if (!scans_.empty()) {
     IMUCAL_TRY(check_clock(scans_.back().t_ns, now_ns));
-    convert(scans_, now_ns, out);
+    convert(scans_, out);
     last_data_ns_ = now_ns;
     restarts_in_a_row_ = 0;
   } else if (now_ns - last_data_ns_ >= silence_ns_) {
@@ -94,8 +94,7 @@ Status IioAcquisition::check_clock(TimeNs t_ns, TimeNs now_ns) const {
   return make_error(Errc::kDevice, os.str());
 }
 
-void IioAcquisition::convert(const std::vector<drivers::iio::IioScan>& scans, TimeNs /*now_ns*/,
-                             std::vector<ImuSample>& out) {
+void IioAcquisition::convert(const std::vector<drivers::iio::IioScan>& scans, std::vector<ImuSample>& out) {
   out.resize(scans.size());
   ++stats_.batches;
   ++timing_.batches;

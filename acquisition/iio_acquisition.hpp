@@ -64,7 +64,7 @@ class IioAcquisition final : public ImuSource {
   const IioAcquisitionStats& iio_stats() const { return iio_; }
 
  private:
-  void convert(const std::vector<drivers::iio::IioScan>& scans, TimeNs now_ns, std::vector<ImuSample>& out);
+  void convert(const std::vector<drivers::iio::IioScan>& scans, std::vector<ImuSample>& out);
   [[nodiscard]] Status check_clock(TimeNs t_ns, TimeNs now_ns) const;
 
   drivers::iio::IioImu& imu_;

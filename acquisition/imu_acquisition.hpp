@@ -89,7 +89,6 @@ class ImuAcquisition final : public ImuSource {
   double period_error_ppm() const override { return timestamper_.period_error_ppm(); }
   std::string timing_metadata(double measured_rate_hz) const override;
   std::string driver_metadata() const override;
-  drivers::mpu6000::Mpu6000& driver() const { return driver_; }
 
   /// The data-ready line, or null (FIFO polling).
   drivers::DataReadyLine* line() const { return line_; }

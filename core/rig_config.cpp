@@ -122,6 +122,8 @@ class ConfigParser {
   Result<std::vector<double>> get_doubles(const YAML::Node& node, const std::string& path) const;
 
   Status parse_imu(const YAML::Node& node, ImuConfig& imu) const;
+  Status parse_imu_driver(const YAML::Node& node, ImuConfig& imu) const;
+  Status parse_data_ready(const YAML::Node& node, ImuConfig& imu) const;
   Status parse_mounting(const YAML::Node& node, Eigen::Matrix3d& R_rig_imu) const;
   Status parse_camera(const YAML::Node& node, const std::string& path, CameraConfig& cam) const;
   Status parse_target(const YAML::Node& node, RigConfig& config) const;
@@ -248,38 +250,7 @@ Status ConfigParser::parse_imu(const YAML::Node& node, ImuConfig& imu) const {
     }
     imu.device = *d;
   }
-  if (const YAML::Node n = node["driver"]) {
-    auto d = get_string(n, "imu.driver");
-    if (!d.ok()) return d.error();
-    if (*d == "direct") {
-      imu.driver = ImuDriver::kDirect;
-    } else if (*d == "iio") {
-      imu.driver = ImuDriver::kIio;
-    } else if (*d == "auto") {
-      imu.driver = ImuDriver::kAuto;
-    } else {
-      return error(n, "imu.driver",
-                   "'" + *d +
-                       "' is not allowed (direct: imucal's own driver through spidev or i2c-dev; iio: the "
-                       "kernel's inv-mpu6050 driver; auto: the kernel's when it owns the chip)");
-    }
-    if (imu.bus == ImuBus::kSim && imu.driver == ImuDriver::kIio) {
-      return error(n, "imu.driver", "iio needs a hardware bus (spi or i2c), not bus: sim");
-    }
-  }
-  if (const YAML::Node n = node["iio_device"]) {
-    auto d = get_string(n, "imu.iio_device");
-    if (!d.ok()) return d.error();
-    if (d->rfind("iio:device", 0) != 0)
-      return error(n, "imu.iio_device", "'" + *d + "' is not an IIO device (e.g. iio:device0)");
-    if (imu.driver == ImuDriver::kDirect)
-      return error(n, "imu.iio_device", "applies only to driver: iio or auto");
-    imu.iio_device = *d;
-  }
-  if (node["data_ready"] && imu.driver == ImuDriver::kIio) {
-    return error(node["data_ready"], "imu.data_ready",
-                 "applies only to the direct driver: with driver: iio the kernel owns the chip's interrupt");
-  }
+  IMUCAL_TRY(parse_imu_driver(node, imu));
   // Keys that belong to the other bus are mistakes, not options to ignore.
   for (const char* key : {"spi_config_speed_hz", "spi_data_speed_hz"}) {
     if (node[key] && imu.bus != ImuBus::kSpi) {
@@ -322,18 +293,7 @@ Status ConfigParser::parse_imu(const YAML::Node& node, ImuConfig& imu) const {
     return error(n, "imu.rate_hz", msg.str());
   }
 
-  if (const YAML::Node n = node["data_ready"]) {
-    IMUCAL_TRY(check_map(n, "imu.data_ready", {"chip", "line"}));
-    GpioLineConfig line;
-    if (!n["chip"]) return error(n, "imu.data_ready.chip", "missing (e.g. gpiochip0)");
-    auto chip = get_string(n["chip"], "imu.data_ready.chip");
-    if (!chip.ok()) return chip.error();
-    if (chip->empty()) return error(n["chip"], "imu.data_ready.chip", "is empty (e.g. gpiochip0)");
-    line.chip = *chip;
-    if (!n["line"]) return error(n, "imu.data_ready.line", "missing (the line offset on the chip)");
-    IMUCAL_CFG_INT(n, "line", "imu.data_ready.line", line.line, x >= 0 && x < 4096, "a line offset 0..4095");
-    imu.data_ready = line;
-  }
+  if (const YAML::Node n = node["data_ready"]) IMUCAL_TRY(parse_data_ready(n, imu));
   if (const YAML::Node n = node["mounting"]) IMUCAL_TRY(parse_mounting(n, imu.R_rig_imu));
   return {};
 }
@@ -365,6 +325,58 @@ Status ConfigParser::parse_sides(const YAML::Node& node, RigSides& sides) const 
                  "front x left is not top: a rig's front, left and top sides form a right-handed set; "
                  "check the signs (for example front +x, left +y, top +z)");
   }
+  return {};
+}
+
+// driver and iio_device: who reads the chip, and what they exclude (sim, data_ready).
+Status ConfigParser::parse_imu_driver(const YAML::Node& node, ImuConfig& imu) const {
+  if (const YAML::Node n = node["driver"]) {
+    auto d = get_string(n, "imu.driver");
+    if (!d.ok()) return d.error();
+    if (*d == "direct") {
+      imu.driver = ImuDriver::kDirect;
+    } else if (*d == "iio") {
+      imu.driver = ImuDriver::kIio;
+    } else if (*d == "auto") {
+      imu.driver = ImuDriver::kAuto;
+    } else {
+      return error(n, "imu.driver",
+                   "'" + *d +
+                       "' is not allowed (direct: imucal's own driver through spidev or i2c-dev; iio: the "
+                       "kernel's inv-mpu6050 driver; auto: the kernel's when it owns the chip)");
+    }
+    if (imu.bus == ImuBus::kSim && imu.driver == ImuDriver::kIio) {
+      return error(n, "imu.driver", "iio needs a hardware bus (spi or i2c), not bus: sim");
+    }
+  }
+  if (const YAML::Node n = node["iio_device"]) {
+    auto d = get_string(n, "imu.iio_device");
+    if (!d.ok()) return d.error();
+    if (d->rfind("iio:device", 0) != 0)
+      return error(n, "imu.iio_device", "'" + *d + "' is not an IIO device (e.g. iio:device0)");
+    if (imu.driver == ImuDriver::kDirect)
+      return error(n, "imu.iio_device", "applies only to driver: iio or auto");
+    imu.iio_device = *d;
+  }
+  if (node["data_ready"] && imu.driver == ImuDriver::kIio) {
+    return error(node["data_ready"], "imu.data_ready",
+                 "applies only to the direct driver: with driver: iio the kernel owns the chip's interrupt");
+  }
+  return {};
+}
+
+// data_ready: {chip, line}, the INT pin's GPIO line.
+Status ConfigParser::parse_data_ready(const YAML::Node& n, ImuConfig& imu) const {
+  IMUCAL_TRY(check_map(n, "imu.data_ready", {"chip", "line"}));
+  GpioLineConfig line;
+  if (!n["chip"]) return error(n, "imu.data_ready.chip", "missing (e.g. gpiochip0)");
+  auto chip = get_string(n["chip"], "imu.data_ready.chip");
+  if (!chip.ok()) return chip.error();
+  if (chip->empty()) return error(n["chip"], "imu.data_ready.chip", "is empty (e.g. gpiochip0)");
+  line.chip = *chip;
+  if (!n["line"]) return error(n, "imu.data_ready.line", "missing (the line offset on the chip)");
+  IMUCAL_CFG_INT(n, "line", "imu.data_ready.line", line.line, x >= 0 && x < 4096, "a line offset 0..4095");
+  imu.data_ready = line;
   return {};
 }
 

@@ -107,8 +107,8 @@ Status open_iio(const ImuConfig& imu, const mpu::Settings& settings, const acq::
 }  // namespace
 
 ImuDriver resolve_imu_driver(const ImuConfig& imu, const IioPaths& paths) {
-  if (imu.driver != ImuDriver::kAuto || imu.bus == ImuBus::kSim)
-    return imu.driver == ImuDriver::kIio ? ImuDriver::kIio : ImuDriver::kDirect;
+  if (imu.bus == ImuBus::kSim) return ImuDriver::kDirect;  // the virtual rig is not a kernel's
+  if (imu.driver != ImuDriver::kAuto) return imu.driver;
   if (!imu.iio_device.empty()) return ImuDriver::kIio;
   const std::string parent = iio_parent(imu);
   for (const auto& d : drivers::iio::find_inv_mpu_devices(paths.sysfs_root))
@@ -145,7 +145,7 @@ Result<std::unique_ptr<ImuRig>> open_imu_rig(const RigConfig& config, const acq:
   if (!settings.ok()) return settings.error().context("imu settings");
 
   std::unique_ptr<ImuRig> rig(new ImuRig());
-  if (imu.bus != ImuBus::kSim && resolve_imu_driver(imu, paths) == ImuDriver::kIio) {
+  if (resolve_imu_driver(imu, paths) == ImuDriver::kIio) {
     if (auto st = open_iio(imu, *settings, *mounting, paths, rig->iio_, rig->iio_acquisition_, rig->clock_,
                            rig->stream_info_);
         !st.ok()) {

@@ -35,6 +35,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -229,6 +230,13 @@ iio::IioImuOptions iio_options(double rate_hz) {
   return o;
 }
 
+// The kernel's device opened directly, as one check line; null when it did not open.
+std::unique_ptr<iio::IioImu> open_device(const iio::IioImuOptions& o, const std::string& what) {
+  auto imu = iio::IioImu::open(o);
+  check(imu.ok(), what, imu.ok() ? (*imu)->describe() : imu.error().message);
+  return imu.ok() ? std::move(*imu) : nullptr;
+}
+
 // Collects every sample until the pulses have ended and nothing more comes.
 std::vector<imucal::ImuSample> drain(acq::ImuSource& source, const Pulses& pulses, std::string& error) {
   std::vector<imucal::ImuSample> all;
@@ -248,11 +256,10 @@ void buffer_loss_checks(double rate_hz) {
   iio::IioImuOptions o = iio_options(rate_hz);
   o.buffer_scans = 32;
   o.watermark_scans = 1;
-  auto imu = iio::IioImu::open(o);
-  check(imu.ok(), "opened with a 32-scan buffer", imu.ok() ? (*imu)->describe() : imu.error().message);
-  if (!imu.ok()) return;
+  auto imu = open_device(o, "opened with a 32-scan buffer");
+  if (!imu) return;
   acq::MonotonicClock clock;
-  acq::IioAcquisition acquisition(**imu, clock, acq::MountingMap());
+  acq::IioAcquisition acquisition(*imu, clock, acq::MountingMap());
   Pulses pulses(rate_hz);
   pulses.start(160);
   std::string error;
@@ -276,13 +283,10 @@ void buffer_loss_checks(double rate_hz) {
 // The chip's FIFO overflowing: the kernel resets it and reads nothing for that interrupt.
 void fifo_overflow_checks(double rate_hz) {
   iio::IioImuOptions o = iio_options(rate_hz);
-  auto imu = iio::IioImu::open(o);
-  if (!imu.ok()) {
-    check(false, "opened for the FIFO overflow", imu.error().message);
-    return;
-  }
+  auto imu = open_device(o, "opened for the FIFO overflow");
+  if (!imu) return;
   acq::MonotonicClock clock;
-  acq::IioAcquisition acquisition(**imu, clock, acq::MountingMap());
+  acq::IioAcquisition acquisition(*imu, clock, acq::MountingMap());
   constexpr int kFrom = 20;
   constexpr int kOverflowing = 7;
   bool pokes_ok = true;
@@ -310,18 +314,15 @@ void fifo_overflow_checks(double rate_hz) {
 // The driver unbound while streaming: the next read says the device went away.
 void unplug_checks(double rate_hz) {
   iio::IioImuOptions o = iio_options(rate_hz);
-  auto imu = iio::IioImu::open(o);
-  if (!imu.ok()) {
-    check(false, "opened for the unplug", imu.error().message);
-    return;
-  }
+  auto imu = open_device(o, "opened for the unplug");
+  if (!imu) return;
   const bool gone = attach(false);
   std::vector<iio::IioScan> scans;
-  const auto st = (*imu)->read(scans);
+  const auto st = imu->read(scans);
   check(gone && !st.ok() && st.error().code == Errc::kNotFound && contains(st.error().message, "went away"),
         "a read after the client is removed says the device went away",
         st.ok() ? "read ok" : st.error().message);
-  imu->reset();
+  imu.reset();
   check(attach(true), "the client comes back");
 }
 
