@@ -501,10 +501,13 @@ Error too_few_views(const std::vector<View>& views, const CameraIntrinsicsResult
 
 void fill_figures(const CameraModel& camera, const std::vector<View>& views,
                   const CameraIntrinsicsOptions& options, CameraIntrinsicsResult* result) {
-  result->coverage_cols = options.coverage_cols;
-  result->coverage_rows = std::max(
-      1, static_cast<int>(std::lround(options.coverage_cols * double(camera.height) / double(camera.width))));
-  result->coverage_counts.assign(static_cast<std::size_t>(result->coverage_cols * result->coverage_rows), 0);
+  std::vector<Vec2> used;
+  for (const View& v : views) {
+    if (!v.active) continue;
+    for (std::size_t i = 0; i < v.px.size(); ++i)
+      if (v.keep[i]) used.push_back(v.px[i]);
+  }
+  set_coverage(camera.width, camera.height, options.coverage_cols, used, result);
   double sum = 0.0;
   int n = 0;
   std::vector<Eigen::Vector2f> all;
@@ -523,11 +526,6 @@ void fill_figures(const CameraModel& camera, const std::vector<View>& views,
       if (!v.keep[i]) continue;
       sum += residual_of(camera, v, i).squaredNorm();
       ++n;
-      const int cx = std::clamp(static_cast<int>((v.px[i].x() + 0.5) / camera.width * result->coverage_cols),
-                                0, result->coverage_cols - 1);
-      const int cy = std::clamp(static_cast<int>((v.px[i].y() + 0.5) / camera.height * result->coverage_rows),
-                                0, result->coverage_rows - 1);
-      ++result->coverage_counts[static_cast<std::size_t>(cy * result->coverage_cols + cx)];
     }
   }
   const std::size_t cap = CameraIntrinsicsResult::kMaxStoredResiduals;
@@ -539,9 +537,6 @@ void fill_figures(const CameraModel& camera, const std::vector<View>& views,
   result->views_used = active_count(views);
   result->points_used = n;
   result->rms_px = n > 0 ? std::sqrt(sum / n) : 0.0;
-  const auto hit = std::count_if(result->coverage_counts.begin(), result->coverage_counts.end(),
-                                 [](int c) { return c > 0; });
-  result->coverage = static_cast<double>(hit) / static_cast<double>(result->coverage_counts.size());
 }
 
 /// Sigmas from the covariance, the degeneracy check and the warnings.
@@ -552,7 +547,7 @@ void fill_uncertainty(IntrinsicsProblem& problem, double cost, const CameraIntri
   const double dof = n - p;
   result->residual_sigma_px =
       dof > 0.0 ? std::sqrt(2.0 * cost / dof) : std::numeric_limits<double>::quiet_NaN();
-  const auto cov = problem.covariance(threads);
+  const auto cov = options.covariance ? problem.covariance(threads) : std::nullopt;
   const double inf = std::numeric_limits<double>::infinity();
   if (cov && dof > 0.0) {
     result->covariance = *cov * (result->residual_sigma_px * result->residual_sigma_px);
@@ -567,32 +562,53 @@ void fill_uncertainty(IntrinsicsProblem& problem, double cost, const CameraIntri
   const auto& k = result->camera.intrinsics;
   const double rel = std::max(result->intrinsics_sigma[0] / k[0], result->intrinsics_sigma[1] / k[1]);
   result->focal_well_determined = result->covariance_ok && rel <= options.max_focal_relative_sigma;
-  if (!result->focal_well_determined) {
-    result->warnings.push_back(
-        std::string("the focal length is not determined by these views (") +
-        (result->covariance_ok ? "relative sigma " + format_number("%.2g", rel)
-                               : std::string("rank-deficient covariance")) +
-        "): views all facing the camera cannot tell the focal length from the distance; record the target "
-        "tilted by 30-45 degrees in several directions and at several distances");
-  }
-}
-
-void add_quality_warnings(CameraIntrinsicsResult* result) {
-  if (result->coverage < 0.5) {
-    result->warnings.push_back("the corners cover only " + format_number("%.0f", 100.0 * result->coverage) +
-                               " % of the image (" + std::to_string(result->coverage_cols) + " x " +
-                               std::to_string(result->coverage_rows) +
-                               " cells): the distortion is extrapolated elsewhere; show the target near the "
-                               "edges and corners of the image too");
-  }
-  const int rejected = result->views_total - result->views_used;
-  if (rejected * 5 > result->views_total) {
-    result->warnings.push_back(std::to_string(rejected) + " of " + std::to_string(result->views_total) +
-                               " views were rejected (see the views' reasons): check the detections");
-  }
 }
 
 }  // namespace
+
+void set_coverage(int width, int height, int cols, std::span<const Eigen::Vector2d> px,
+                  CameraIntrinsicsResult* result) {
+  result->coverage_cols = cols;
+  result->coverage_rows = std::max(1, static_cast<int>(std::lround(cols * double(height) / double(width))));
+  result->coverage_counts.assign(static_cast<std::size_t>(result->coverage_cols * result->coverage_rows), 0);
+  for (const auto& p : px) {
+    const int cx = std::clamp(static_cast<int>((p.x() + 0.5) / width * result->coverage_cols), 0,
+                              result->coverage_cols - 1);
+    const int cy = std::clamp(static_cast<int>((p.y() + 0.5) / height * result->coverage_rows), 0,
+                              result->coverage_rows - 1);
+    ++result->coverage_counts[static_cast<std::size_t>(cy * result->coverage_cols + cx)];
+  }
+  const auto hit = std::count_if(result->coverage_counts.begin(), result->coverage_counts.end(),
+                                 [](int c) { return c > 0; });
+  result->coverage = static_cast<double>(hit) / static_cast<double>(result->coverage_counts.size());
+}
+
+std::vector<std::string> camera_quality_warnings(const CameraIntrinsicsResult& r,
+                                                 const CameraIntrinsicsOptions& options) {
+  std::vector<std::string> out;
+  const auto& k = r.camera.intrinsics;
+  const double rel = std::max(r.intrinsics_sigma[0] / k[0], r.intrinsics_sigma[1] / k[1]);
+  if (!(r.covariance_ok && rel <= options.max_focal_relative_sigma)) {
+    out.push_back(std::string("the focal length is not determined by these views (") +
+                  (r.covariance_ok ? "relative sigma " + format_number("%.2g", rel)
+                                   : std::string("rank-deficient covariance")) +
+                  "): views all facing the camera cannot tell the focal length from the distance; record the "
+                  "target tilted by 30-45 degrees in several directions and at several distances");
+  }
+  if (r.coverage < 0.5) {
+    out.push_back("the corners cover only " + format_number("%.0f", 100.0 * r.coverage) +
+                  " % of the image (" + std::to_string(r.coverage_cols) + " x " +
+                  std::to_string(r.coverage_rows) +
+                  " cells): the distortion is extrapolated elsewhere; show the target near the "
+                  "edges and corners of the image too");
+  }
+  const int rejected = r.views_total - r.views_used;
+  if (rejected * 5 > r.views_total) {
+    out.push_back(std::to_string(rejected) + " of " + std::to_string(r.views_total) +
+                  " views were rejected (see the views' reasons): check the detections");
+  }
+  return out;
+}
 
 Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(const TargetDescription& target,
                                                            std::span<const TargetObservation> observations,
@@ -663,7 +679,7 @@ Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(const TargetDescripti
   }
   fill_figures(result.camera, views, options, &result);
   fill_uncertainty(plain, cost, options, threads, &result);
-  add_quality_warnings(&result);
+  result.warnings = camera_quality_warnings(result, options);
   result.solve_cpu_s = cpu_now_s() - cpu0;
   report_progress(progress, 1.0, 1.0);
   return result;

@@ -47,6 +47,9 @@ struct CameraIntrinsicsOptions {
   double max_focal_relative_sigma = 0.01;
   /// Threads for the solver (0 = all cores).
   int threads = 0;
+  /// Compute the parameters' covariance (false: the sigmas are left not determined, for a
+  /// solve that only starts another, such as the camera chain's).
+  bool covariance = true;
 
   [[nodiscard]] Status validate() const;
 };
@@ -112,6 +115,18 @@ struct CameraIntrinsicsResult {
 [[nodiscard]] Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(
     const TargetDescription& target, std::span<const TargetObservation> observations,
     const CameraIntrinsicsOptions& options, const ProgressFn& progress);
+
+/// The coverage grid of `result` (coverage_cols, _rows, _counts, coverage) from the used
+/// corners `px` of a width x height image, `cols` columns and rows to make the cells about square.
+void set_coverage(int width, int height, int cols, std::span<const Eigen::Vector2d> px,
+                  CameraIntrinsicsResult* result);
+
+/// The warnings a camera result deserves: focal length not determined (covariance of full
+/// rank and relative sigma within options.max_focal_relative_sigma, else the views cannot tell
+/// focal length from distance), coverage below half the grid, more than a fifth of the views
+/// rejected; each with what to record instead.
+std::vector<std::string> camera_quality_warnings(const CameraIntrinsicsResult& result,
+                                                 const CameraIntrinsicsOptions& options);
 
 /// Kalibr's model name for the option: "pinhole-radtan" or "pinhole-equi".
 const char* camera_model_option_name(DistortionModel model);

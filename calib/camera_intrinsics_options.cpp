@@ -4,6 +4,7 @@
 #include <cmath>
 #include <string>
 
+#include "calib/camera_chain.hpp"
 #include "calib/camera_intrinsics.hpp"
 
 namespace imucal::calib {
@@ -26,6 +27,24 @@ Status CameraIntrinsicsOptions::validate() const {
   if (max_iterations < 1) return fail("the solver needs at least one iteration");
   if (coverage_cols < 1 || coverage_cols > 100) return fail("the coverage grid needs 1 to 100 columns");
   if (!(max_focal_relative_sigma > 0.0)) return fail("the focal sigma limit must be positive");
+  if (threads < 0) return fail("threads must be >= 0 (0 = all cores)");
+  return {};
+}
+
+Status CameraChainOptions::validate() const {
+  IMUCAL_TRY(intrinsics.validate());
+  auto fail = [](const std::string& msg) -> Status { return make_error(Errc::kInvalidArgument, msg); };
+  if (!(max_time_offset_s >= 0.0 && max_time_offset_s <= 1.0))
+    return fail("the time offset search must cover 0 to 1 s (max_time_offset_s)");
+  if (!(knot_spacing_s >= 0.0 && knot_spacing_s <= 1.0))
+    return fail("the knot spacing must be 0 (from the frame rate) to 1 s");
+  if (!(shared_view_fraction > 0.0 && shared_view_fraction <= 1.0))
+    return fail("the shared-view fraction of a frame interval must be in (0, 1]");
+  if (min_shared_views < 1) return fail("at least one shared view must link two cameras");
+  if (!(loss_sigmas > 0.0) || !std::isfinite(loss_sigmas)) return fail("the loss scale must be positive");
+  if (!(reject_sigmas >= 2.0) || !std::isfinite(reject_sigmas))
+    return fail("the corner rejection threshold must be at least 2 sigmas");
+  if (max_iterations < 1) return fail("the solver needs at least one iteration");
   if (threads < 0) return fail("threads must be >= 0 (0 = all cores)");
   return {};
 }

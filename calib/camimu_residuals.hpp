@@ -250,6 +250,58 @@ class BiasWalkResidual final : public ceres::CostFunction {
   Eigen::Matrix<double, N, 1> w1_;
 };
 
+/// The pose of the spline (world from body) at time t_s, from the knots of a window of
+/// N + 2 rotation knots (p[q0] ...) and N + 2 position knots (p[p0] ...) starting at knot
+/// `first`: the rotation with its derivatives (So3SegmentEval), the segment's first knot in the
+/// window (k0, clamped to 0..2), position, velocity and the position weights.
+template <int N>
+struct SplinePose {
+  So3SegmentEval<N> e;
+  int k0 = 0;
+  Eigen::Vector3d pos, vel;
+  Eigen::Matrix<double, N, 1> w0;
+};
+template <int N>
+SplinePose<N> spline_pose(double const* const* p, int q0, int p0, double t_s, int first,
+                          const SplineTiming<N>& timing, bool jacobians) {
+  SplinePose<N> out;
+  const SplineSegment seg = timing.segment(t_s);
+  out.k0 = std::max(0, std::min(2, seg.first_knot - first));
+  const double u = (t_s - timing.t0_s) / timing.dt_s - (first + out.k0);
+  std::array<Eigen::Matrix3d, N> Rk;
+  std::array<const Eigen::Matrix3d*, N> ptr;
+  for (int i = 0; i < N; ++i) {
+    Rk[i] = quat_matrix(p[q0 + out.k0 + i]);
+    ptr[i] = &Rk[i];
+  }
+  So3Segment<N>::evaluate(ptr.data(), u, timing.dt_s, So3Derivs::kVelocity, jacobians, &out.e);
+  out.w0 = RdSpline<N>::weights_at(u, 0, timing.dt_s);
+  const auto w1 = RdSpline<N>::weights_at(u, 1, timing.dt_s);
+  out.pos.setZero();
+  out.vel.setZero();
+  for (int i = 0; i < N; ++i) {
+    const Eigen::Map<const Eigen::Vector3d> P(p[p0 + out.k0 + i]);
+    out.pos += out.w0(i) * P;
+    out.vel += w1(i) * P;
+  }
+  return out;
+}
+
+/// A weighted 2-vector residual e with the Cauchy loss rho(s) = c2 log(1 + s / c2) folded in:
+/// r = g(s) e with g = sqrt(rho(s) / s), so that |r|^2 = rho(s); `L` (may be null) receives its
+/// exact Jacobian in e, g I + 2 g'(s) e e^T. c2 = infinity leaves e unchanged.
+inline void fold_cauchy(const Eigen::Vector2d& e, double c2, Eigen::Vector2d* r, Eigen::Matrix2d* L) {
+  const double s = e.squaredNorm();
+  double g = 1.0, dg = std::isinf(c2) ? 0.0 : -0.25 / c2;  // limits at s -> 0
+  if (!std::isinf(c2) && s > 1e-12 * c2) {
+    const double rho = c2 * std::log1p(s / c2), rho1 = 1.0 / (1.0 + s / c2);
+    g = std::sqrt(rho / s);
+    dg = (rho1 * s - rho) / (2.0 * s * s * g);
+  }
+  *r = g * e;
+  if (L) *L = g * Eigen::Matrix2d::Identity() + 2.0 * dg * e * e.transpose();
+}
+
 /// All target corners of one frame: reprojection at t_cam + timeshift with a Cauchy loss per
 /// corner applied inside (so the pose is evaluated once per frame). Blocks: N + 2 rotation knots,
 /// N + 2 position knots (the window the timeshift may move the frame in), R_cam_imu, t_cam_imu,
@@ -303,18 +355,16 @@ class FrameResidual final : public ceres::CostFunction {
   std::size_t corners() const { return points_.size(); }
 
  private:
-  struct Pose {
-    So3SegmentEval<N> e;
-    int k0 = 0;  // first knot of the segment in the window
-    Eigen::Vector3d pos, vel;
-    Eigen::Matrix<double, N, 1> w0;
-  };
-  Pose pose(double const* const* p, bool jacobians) const;
+  using Pose = SplinePose<N>;
+  Pose pose(double const* const* p, bool jacobians) const {
+    return spline_pose<N>(p, 0, kWindow, t_cam_s_ + p[kShift][0], first_, timing_, jacobians);
+  }
   bool evaluate_corners(double const* const* p, double* residuals, double** jac) const;
   bool evaluate_compressed(double const* const* p, double* residuals, double** jac) const;
-  /// The weighted residual of one corner with the Cauchy loss folded in (r' = g e, |r'|^2 =
-  /// rho(|e|^2)), and with `L` its derivative in e.
-  void fold(const Eigen::Vector2d& e, Eigen::Vector2d* r, Eigen::Matrix2d* L) const;
+  /// The weighted residual of one corner with the Cauchy loss folded in (fold_cauchy).
+  void fold(const Eigen::Vector2d& e, Eigen::Vector2d* r, Eigen::Matrix2d* L) const {
+    fold_cauchy(e, c2_, r, L);
+  }
   /// Projection and its Jacobian in p_cam.
   Eigen::Vector2d project(const Eigen::Vector3d& pc, Eigen::Matrix<double, 2, 3>* J) const;
 
@@ -329,47 +379,6 @@ class FrameResidual final : public ceres::CostFunction {
   double c2_;
   bool compressed_;
 };
-
-template <int N>
-void FrameResidual<N>::fold(const Eigen::Vector2d& e, Eigen::Vector2d* r, Eigen::Matrix2d* L) const {
-  // Cauchy loss rho(s) = c2 log(1 + s / c2) folded into the residual: r' = g(s) e with
-  // g = sqrt(rho(s) / s), so that |r'|^2 = rho(s); its exact Jacobian is g J + e g'(s) 2 e^T J.
-  const double s = e.squaredNorm();
-  double g = 1.0, dg = -0.25 / c2_;  // limits at s -> 0
-  if (s > 1e-12 * c2_) {
-    const double rho = c2_ * std::log1p(s / c2_), rho1 = 1.0 / (1.0 + s / c2_);
-    g = std::sqrt(rho / s);
-    dg = (rho1 * s - rho) / (2.0 * s * s * g);
-  }
-  *r = g * e;
-  if (L) *L = g * Eigen::Matrix2d::Identity() + 2.0 * dg * e * e.transpose();
-}
-
-template <int N>
-typename FrameResidual<N>::Pose FrameResidual<N>::pose(double const* const* p, bool jacobians) const {
-  Pose out;
-  const double t = t_cam_s_ + p[kShift][0];
-  SplineSegment seg = timing_.segment(t);
-  out.k0 = std::max(0, std::min(2, seg.first_knot - first_));
-  const double u = (t - timing_.t0_s) / timing_.dt_s - (first_ + out.k0);
-  std::array<Eigen::Matrix3d, N> Rk;
-  std::array<const Eigen::Matrix3d*, N> ptr;
-  for (int i = 0; i < N; ++i) {
-    Rk[i] = quat_matrix(p[out.k0 + i]);
-    ptr[i] = &Rk[i];
-  }
-  So3Segment<N>::evaluate(ptr.data(), u, timing_.dt_s, So3Derivs::kVelocity, jacobians, &out.e);
-  out.w0 = RdSpline<N>::weights_at(u, 0, timing_.dt_s);
-  const auto w1 = RdSpline<N>::weights_at(u, 1, timing_.dt_s);
-  out.pos.setZero();
-  out.vel.setZero();
-  for (int i = 0; i < N; ++i) {
-    const Eigen::Map<const Eigen::Vector3d> P(p[kWindow + out.k0 + i]);
-    out.pos += out.w0(i) * P;
-    out.vel += w1(i) * P;
-  }
-  return out;
-}
 
 template <int N>
 Eigen::Vector2d FrameResidual<N>::project(const Eigen::Vector3d& pc, Eigen::Matrix<double, 2, 3>* J) const {

@@ -1,0 +1,844 @@
+// The camera chain solve (calib/camera_chain.hpp); method in docs/camera-calibration.md,
+// "Several cameras".
+//
+// 1. Start: each camera alone (calib/camera_intrinsics.hpp), which also rejects its bad views,
+//    gives its intrinsics and the target's pose in every used view.
+// 2. Links: for each pair of cameras, the time offset that makes the relative pose of the two
+//    cameras most constant over the views they share (one camera's poses interpolated at the
+//    other's stamps, shifted), searched on a 1 ms grid and refined by a parabola; the chain is
+//    the spanning tree from cam0 that keeps the links with the most shared views.
+// 3. The joint solve: a cubic B-spline T_target_cam0(t), every camera's intrinsics, pose
+//    relative to cam0 and time offset (calib/camera_chain_residuals.hpp); a robust pass, corners
+//    beyond reject_sigmas robust sigmas dropped, plain passes with each camera's corner noise
+//    estimated from its residuals, and the marginal covariance of the calibration by a Schur
+//    complement over the trajectory (calib/marginal_covariance.hpp).
+
+#include "calib/camera_chain.hpp"
+
+#include <ceres/ceres.h>
+#include <time.h>
+
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <memory>
+#include <numeric>
+#include <queue>
+
+#include "calib/camera_chain_residuals.hpp"
+#include "calib/camimu_init.hpp"
+#include "calib/marginal_covariance.hpp"
+#include "calib/so3.hpp"
+#include "core/text_format.hpp"
+#include "core/threads.hpp"
+
+namespace imucal::calib {
+namespace {
+
+constexpr int kOrder = 4;  // cubic B-spline
+using Residual = chain::ChainFrameResidual<kOrder>;
+using Arr4 = std::array<double, 4>;
+using Arr3 = std::array<double, 3>;
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+// Weak priors on the knots (rad, m): they hold knots that no view reaches (a gap in the views,
+// the margins) and weigh nothing beside a view's corners.
+constexpr double kKnotPriorRad = 1.0;
+constexpr double kKnotPriorM = 1.0;
+// The single-camera start of each camera uses at most this many views, spread over the
+// recording; every view then gets its pose under that start by PnP.
+constexpr std::size_t kStartViews = 100;
+
+double cpu_now_s() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return kNaN;
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+Arr4 to_quat(const Eigen::Matrix3d& R) {
+  Eigen::Quaterniond q(R);
+  q.normalize();
+  return {q.x(), q.y(), q.z(), q.w()};
+}
+
+/// A camera's pose in one view: target (world) from camera, at the view's stamp (s from t0).
+struct PoseSample {
+  double t = 0.0;
+  Eigen::Matrix3d R_wc = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d p_wc = Eigen::Vector3d::Zero();
+};
+
+/// The pose of a camera's track at time t, interpolated between the two views around it when
+/// they are at most max_gap_s apart; false otherwise.
+bool interpolate(const std::vector<PoseSample>& track, double t, double max_gap_s, Eigen::Matrix3d* R,
+                 Eigen::Vector3d* p) {
+  const auto it =
+      std::upper_bound(track.begin(), track.end(), t, [](double x, const PoseSample& s) { return x < s.t; });
+  if (it == track.begin() || it == track.end()) return false;
+  const PoseSample& b = *it;
+  const PoseSample& a = *(it - 1);
+  if (b.t - a.t > max_gap_s) return false;
+  const double u = b.t > a.t ? (t - a.t) / (b.t - a.t) : 0.0;
+  *R = a.R_wc * so3::exp(u * so3::log(a.R_wc.transpose() * b.R_wc));
+  *p = (1.0 - u) * a.p_wc + u * b.p_wc;
+  return true;
+}
+
+/// The rotation nearest (chordal) to the mean of `Rs`.
+Eigen::Matrix3d mean_rotation(const std::vector<Eigen::Matrix3d>& Rs) {
+  Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+  for (const auto& R : Rs) sum += R;
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+  D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+  return svd.matrixU() * D * svd.matrixV().transpose();
+}
+
+/// How camera b sits against camera a, from the views they share.
+struct Link {
+  int shared = 0;                                      // b's views with a's pose interpolated at the offset
+  double shift = 0.0;                                  // t_a = t_b + shift
+  Eigen::Matrix3d R_ba = Eigen::Matrix3d::Identity();  // p_b = R_ba p_a + t_ba
+  Eigen::Vector3d t_ba = Eigen::Vector3d::Zero();
+  double score = std::numeric_limits<double>::infinity();
+};
+
+/// The relative poses T_a_b of b's views against a's track shifted by `shift`, and a score of
+/// their spread (median over the views of |t - median t|^2 + (distance x angle to the mean)^2).
+Link link_at(const std::vector<PoseSample>& a, const std::vector<PoseSample>& b, double shift,
+             double max_gap_s) {
+  std::vector<Eigen::Matrix3d> R_ab;
+  std::vector<Eigen::Vector3d> t_ab;
+  std::vector<double> dist;
+  for (const PoseSample& s : b) {
+    Eigen::Matrix3d Ra;
+    Eigen::Vector3d pa;
+    if (!interpolate(a, s.t + shift, max_gap_s, &Ra, &pa)) continue;
+    R_ab.push_back(Ra.transpose() * s.R_wc);
+    t_ab.push_back(Ra.transpose() * (s.p_wc - pa));
+    dist.push_back(pa.norm());
+  }
+  Link out;
+  out.shared = static_cast<int>(R_ab.size());
+  out.shift = shift;
+  if (R_ab.empty()) return out;
+  const Eigen::Matrix3d R = mean_rotation(R_ab);
+  Eigen::Vector3d t_med;
+  for (int k = 0; k < 3; ++k) {
+    std::vector<double> c;
+    for (const auto& t : t_ab) c.push_back(t(k));
+    t_med(k) = median(c);
+  }
+  std::vector<double> spread;
+  for (std::size_t i = 0; i < R_ab.size(); ++i) {
+    const double angle = so3::log(R.transpose() * R_ab[i]).norm();
+    spread.push_back((t_ab[i] - t_med).squaredNorm() + std::pow(dist[i] * angle, 2));
+  }
+  out.score = median(spread);
+  out.R_ba = R.transpose();
+  out.t_ba = -R.transpose() * t_med;
+  return out;
+}
+
+/// The link of b against a: the offset on a 1 ms grid within +-max_shift_s (0 alone when
+/// offsets are not estimated) with the smallest spread among those with at least min_shared
+/// views, refined by a parabola through its neighbours.
+Link find_link(const std::vector<PoseSample>& a, const std::vector<PoseSample>& b, double max_shift_s,
+               double max_gap_s, int min_shared) {
+  const double step = 1e-3;
+  const int n = static_cast<int>(std::floor(max_shift_s / step));
+  std::vector<Link> grid;
+  for (int k = -n; k <= n; ++k) grid.push_back(link_at(a, b, k * step, max_gap_s));
+  int best = -1;
+  for (int k = 0; k < static_cast<int>(grid.size()); ++k) {
+    if (grid[k].shared < min_shared) continue;
+    if (best < 0 || grid[k].score < grid[best].score) best = k;
+  }
+  if (best < 0) return Link{};
+  if (best > 0 && best + 1 < static_cast<int>(grid.size()) && grid[best - 1].shared >= min_shared &&
+      grid[best + 1].shared >= min_shared) {
+    const double y0 = grid[best - 1].score, y1 = grid[best].score, y2 = grid[best + 1].score;
+    const double den = y0 - 2.0 * y1 + y2;
+    if (den > 0.0) {
+      const double dx = std::clamp(0.5 * (y0 - y2) / den, -0.5, 0.5);
+      Link refined = link_at(a, b, grid[best].shift + dx * step, max_gap_s);
+      if (refined.shared >= min_shared) return refined;
+    }
+  }
+  return grid[best];
+}
+
+double median_interval_s(const std::vector<PoseSample>& track) {
+  std::vector<double> d;
+  for (std::size_t i = 1; i < track.size(); ++i) d.push_back(track[i].t - track[i - 1].t);
+  return d.empty() ? kNaN : median(d);
+}
+
+/// What the solver moves, at stable addresses.
+struct CameraBlocks {
+  Arr4 q{0, 0, 0, 1};  // R_cam_cam0
+  Arr3 t{0, 0, 0};
+  double shift = 0.0;
+  std::array<double, 4> intrinsics{}, distortion{};
+  double sigma_px = 0.3;
+};
+
+/// One view in the solve: the camera, its corners (target points and pixels) and which are kept.
+struct ViewData {
+  std::size_t camera = 0;
+  std::size_t report = 0;  // index into the camera's start views
+  double t = 0.0;          // stamp, s from t0
+  std::vector<Eigen::Vector3d> points;
+  std::vector<Eigen::Vector2d> px;
+  std::vector<char> keep;
+};
+
+class ChainSolver {
+ public:
+  ChainSolver(std::span<const CameraChainInput> cameras, const CameraChainOptions& options)
+      : inputs_(cameras), opt_(options), blocks_(cameras.size()) {}
+
+  Result<CameraChainResult> run(const TargetDescription& target, const ProgressFn& progress);
+
+ private:
+  Status start_cameras(const TargetDescription& target, const ProgressFn& progress);
+  Status link_cameras();
+  void initialise_spline();
+  /// Builds the problem at the current values (c2: the loss scale in sigmas, 0 = none).
+  void build(double loss_sigmas);
+  Status solve(double loss_sigmas, const std::string& stage);
+  bool views_in_window() const;
+  /// Residuals per camera in pixels at the current values (kept corners).
+  std::vector<std::vector<Eigen::Vector2d>> residuals_by_camera() const;
+  int reject_corners();
+  /// Re-estimates each camera's corner sigma from its residuals (robust: 1.4826 x the median
+  /// |component|, or the RMS); true when one moved by more than 10 %.
+  bool reestimate_sigmas(bool robust);
+  Status fill(CameraChainResult* out);
+  void fill_pairs(CameraChainResult* out) const;
+
+  std::span<const CameraChainInput> inputs_;
+  CameraChainOptions opt_;
+  std::vector<CameraIntrinsicsResult> starts_;
+  std::vector<std::vector<PoseSample>> tracks_;
+  std::vector<double> intervals_;
+  std::vector<int> parent_;
+  std::vector<Link> links_;
+  TimeNs t0_ns_ = 0;
+  std::vector<CameraBlocks> blocks_;
+  std::vector<ViewData> views_;
+  SplineTiming<kOrder> timing_;
+  std::vector<Arr4> q_;
+  std::vector<Arr3> p_;
+  std::unique_ptr<ceres::Problem> problem_;
+  std::vector<const Residual*> residuals_;  // of the last build, one per view in views_ order
+  std::vector<std::vector<double*>> residual_blocks_;
+  int iterations_ = 0;
+  std::vector<std::string> warnings_;
+};
+
+/// Every observation's ids index the target's points, with as many finite pixels.
+Status check_observations(std::span<const CameraChainInput> cameras, std::size_t points) {
+  for (const auto& cam : cameras) {
+    for (const auto& o : cam.observations) {
+      bool ok = o.ids.size() == o.px.size();
+      for (std::size_t i = 0; ok && i < o.ids.size(); ++i)
+        ok = o.ids[i] >= 0 && static_cast<std::size_t>(o.ids[i]) < points && o.px[i].allFinite();
+      if (!ok) {
+        return make_error(Errc::kInvalidArgument,
+                          cam.name + ": the detection at t_ns " + std::to_string(o.t_ns) +
+                              " holds a point id the target does not have (it has " + std::to_string(points) +
+                              " points), or ids and pixels that do not match: detect again with this target");
+      }
+    }
+  }
+  return {};
+}
+
+Status ChainSolver::start_cameras(const TargetDescription& target, const ProgressFn& progress) {
+  const std::vector<Eigen::Vector3d> points = target.points();
+  IMUCAL_TRY(check_observations(inputs_, points.size()));
+  t0_ns_ = std::numeric_limits<TimeNs>::max();
+  for (const auto& cam : inputs_)
+    for (const auto& o : cam.observations)
+      if (!o.empty()) t0_ns_ = std::min(t0_ns_, o.t_ns);
+  for (std::size_t c = 0; c < inputs_.size(); ++c) {
+    std::vector<TargetObservation> with;
+    for (const auto& o : inputs_[c].observations)
+      if (!o.empty()) with.push_back(o);
+    // The start: the camera alone on at most kStartViews views spread over the recording.
+    std::vector<TargetObservation> sample;
+    const std::size_t step = std::max<std::size_t>(1, (with.size() + kStartViews - 1) / kStartViews);
+    for (std::size_t i = 0; i < with.size(); i += step) sample.push_back(with[i]);
+    CameraIntrinsicsOptions o = opt_.intrinsics;
+    o.model = inputs_[c].model;
+    o.covariance = false;  // the joint solve gives the sigmas
+    auto r = calibrate_camera_intrinsics(target, sample, o, {});
+    if (!r.ok()) return r.error().context(inputs_[c].name);
+    CameraIntrinsicsResult s = std::move(*r);
+    // Every view's pose under that camera; views far worse than the others are left out.
+    const auto poses = camimu::pnp_poses(s.camera, with, points, t0_ns_, o.min_points_per_view,
+                                         std::numeric_limits<double>::max());
+    std::vector<double> rms;
+    for (const auto& p : poses) rms.push_back(p.rms_px);
+    const double limit = std::max(o.view_rms_factor * median(rms), o.view_rms_floor_px);
+    std::map<TimeNs, const camimu::FramePose*> pose_at;
+    for (const auto& p : poses) pose_at[p.t_ns] = &p;
+    CameraBlocks& b = blocks_[c];
+    std::copy(s.camera.intrinsics.data(), s.camera.intrinsics.data() + 4, b.intrinsics.begin());
+    std::copy(s.camera.distortion_coeffs.data(), s.camera.distortion_coeffs.data() + 4, b.distortion.begin());
+    b.sigma_px = std::max(0.01, std::isfinite(s.residual_sigma_px) ? s.residual_sigma_px : 0.3);
+    s.views.clear();
+    std::vector<PoseSample> track;
+    std::vector<Eigen::Vector2d> used_px;
+    for (const TargetObservation& obs : with) {
+      CameraViewReport v;
+      v.t_ns = obs.t_ns;
+      v.points = static_cast<int>(obs.ids.size());
+      const auto it = pose_at.find(obs.t_ns);
+      if (v.points < o.min_points_per_view) {
+        v.rejected_because = "too few points (" + std::to_string(v.points) + ")";
+      } else if (it == pose_at.end()) {
+        v.rejected_because = "no pose found for the start (the detection may be wrong)";
+      } else if (!(it->second->rms_px <= limit)) {
+        v.rms_px = it->second->rms_px;
+        v.rejected_because = "reprojection RMS " + format_number("%.3g", v.rms_px) +
+                             " px at the start, above " + format_number("%.3g", limit) + " px";
+      } else {
+        const camimu::FramePose& fp = *it->second;
+        v.used = true;
+        v.points_used = v.points;
+        v.rms_px = fp.rms_px;
+        v.q_cam_target = Eigen::Quaterniond(fp.R_wc.transpose());
+        v.t_cam_target = -fp.R_wc.transpose() * fp.p_wc;
+        PoseSample ps;
+        ps.t = fp.t_s;
+        ps.R_wc = fp.R_wc;
+        ps.p_wc = fp.p_wc;
+        track.push_back(ps);
+        ViewData vd;
+        vd.camera = c;
+        vd.report = s.views.size();
+        vd.t = ps.t;
+        for (std::size_t i = 0; i < obs.ids.size(); ++i) {
+          vd.points.push_back(points[static_cast<std::size_t>(obs.ids[i])]);
+          vd.px.push_back(obs.px[i]);
+        }
+        used_px.insert(used_px.end(), obs.px.begin(), obs.px.end());
+        vd.keep.assign(vd.px.size(), 1);
+        views_.push_back(std::move(vd));
+      }
+      s.views.push_back(std::move(v));
+    }
+    s.views_total = static_cast<int>(with.size());
+    s.views_used = static_cast<int>(track.size());
+    if (s.views_used < o.min_views) {
+      return make_error(Errc::kInsufficientData,
+                        inputs_[c].name + ": " + std::to_string(s.views_used) + " usable views of " +
+                            std::to_string(with.size()) + " with the target, fewer than the " +
+                            std::to_string(o.min_views) +
+                            " needed: record more views of the whole target in this camera");
+    }
+    set_coverage(s.camera.width, s.camera.height, o.coverage_cols, used_px, &s);
+    starts_.push_back(std::move(s));
+    std::sort(track.begin(), track.end(), [](const PoseSample& a, const PoseSample& b) { return a.t < b.t; });
+    intervals_.push_back(median_interval_s(track));
+    tracks_.push_back(std::move(track));
+    report_progress(progress, 0.4 * static_cast<double>(c + 1) / static_cast<double>(inputs_.size()), 1.0);
+  }
+  return {};
+}
+
+Status ChainSolver::link_cameras() {
+  const std::size_t n = inputs_.size();
+  // Every pair, both ways round the tree is built from: link[a][b] places b against a.
+  std::vector<std::vector<Link>> link(n, std::vector<Link>(n));
+  for (std::size_t a = 0; a < n; ++a) {
+    for (std::size_t b = 0; b < n; ++b) {
+      if (a == b) continue;
+      const double gap = 2.5 * intervals_[a];
+      link[a][b] =
+          find_link(tracks_[a], tracks_[b], opt_.estimate_time_offsets ? opt_.max_time_offset_s : 0.0,
+                    std::isfinite(gap) ? gap : 0.0, opt_.min_shared_views);
+    }
+  }
+  // The spanning tree from cam0 with the most shared views (Prim's on the largest links).
+  parent_.assign(n, -2);
+  links_.assign(n, Link{});
+  parent_[0] = -1;
+  for (std::size_t added = 1; added < n; ++added) {
+    int best_a = -1, best_b = -1;
+    for (std::size_t a = 0; a < n; ++a) {
+      if (parent_[a] == -2) continue;
+      for (std::size_t b = 0; b < n; ++b) {
+        if (parent_[b] != -2 || link[a][b].shared < opt_.min_shared_views) continue;
+        if (best_a < 0 || link[a][b].shared > link[best_a][best_b].shared) {
+          best_a = static_cast<int>(a);
+          best_b = static_cast<int>(b);
+        }
+      }
+    }
+    if (best_a < 0) {
+      std::string missing, linked;
+      for (std::size_t c = 0; c < n; ++c) {
+        std::string& s = parent_[c] == -2 ? missing : linked;
+        s += (s.empty() ? "" : ", ") + inputs_[c].name;
+      }
+      return make_error(Errc::kInsufficientData,
+                        missing + " never saw the target at the same time as " + linked + " (fewer than " +
+                            std::to_string(opt_.min_shared_views) +
+                            " shared views): the chain cannot place it; record the target where " + missing +
+                            " and a camera next to it both see it, for a few seconds of slow motion");
+    }
+    parent_[static_cast<std::size_t>(best_b)] = best_a;
+    links_[static_cast<std::size_t>(best_b)] =
+        link[static_cast<std::size_t>(best_a)][static_cast<std::size_t>(best_b)];
+  }
+  // Compose along the tree, in the order cameras were added (a parent before its children).
+  std::vector<bool> done(n, false);
+  done[0] = true;
+  for (std::size_t pass = 0; pass < n; ++pass) {
+    for (std::size_t c = 1; c < n; ++c) {
+      const int a = parent_[c];
+      if (done[c] || !done[static_cast<std::size_t>(a)]) continue;
+      const CameraBlocks& pa = blocks_[static_cast<std::size_t>(a)];
+      const Eigen::Matrix3d R_a0 = camimu::quat_matrix(pa.q.data());
+      const Eigen::Vector3d t_a0(pa.t[0], pa.t[1], pa.t[2]);
+      const Link& l = links_[c];
+      const Eigen::Matrix3d R_c0 = l.R_ba * R_a0;
+      const Eigen::Vector3d t_c0 = l.R_ba * t_a0 + l.t_ba;
+      blocks_[c].q = to_quat(R_c0);
+      blocks_[c].t = {t_c0.x(), t_c0.y(), t_c0.z()};
+      // t_a = t_c + l.shift and t_0 = t_a + shift_a.
+      blocks_[c].shift = opt_.estimate_time_offsets ? pa.shift + l.shift : 0.0;
+      done[c] = true;
+    }
+  }
+  return {};
+}
+
+void ChainSolver::initialise_spline() {
+  // cam0's pose from every view of every camera: T_w0 = T_wc T_c0 at cam0's time t + shift.
+  std::vector<PoseSample> body;
+  for (std::size_t c = 0; c < tracks_.size(); ++c) {
+    const Eigen::Matrix3d R_c0 = camimu::quat_matrix(blocks_[c].q.data());
+    const Eigen::Vector3d t_c0(blocks_[c].t[0], blocks_[c].t[1], blocks_[c].t[2]);
+    for (const PoseSample& s : tracks_[c]) {
+      PoseSample b;
+      b.t = s.t + blocks_[c].shift;
+      b.R_wc = s.R_wc * R_c0;
+      b.p_wc = s.R_wc * t_c0 + s.p_wc;
+      body.push_back(b);
+    }
+  }
+  std::sort(body.begin(), body.end(), [](const PoseSample& a, const PoseSample& b) { return a.t < b.t; });
+  double dt = opt_.knot_spacing_s;
+  if (!(dt > 0.0)) {
+    dt = std::numeric_limits<double>::infinity();
+    for (double i : intervals_)
+      if (std::isfinite(i) && i > 0.0) dt = std::min(dt, i);
+    if (!std::isfinite(dt)) dt = 0.05;
+  }
+  // Margins of two knot spacings, for offsets that move while solving.
+  const double t_start = body.front().t - 2.0 * dt;
+  const double t_end = body.back().t + 2.0 * dt;
+  timing_ = {t_start, dt, static_cast<int>(std::ceil((t_end - t_start) / dt)) + kOrder};
+  q_.resize(static_cast<std::size_t>(timing_.knots));
+  p_.resize(q_.size());
+  std::vector<double> tb;
+  for (const auto& b : body) tb.push_back(b.t);
+  for (int i = 0; i < timing_.knots; ++i) {
+    // Knot i weighs most at t0 + (i - (N - 2) / 2) dt.
+    const double tau = std::clamp(t_start + (i - 0.5 * (kOrder - 2)) * dt, tb.front(), tb.back());
+    const std::size_t j = std::min<std::size_t>(
+        static_cast<std::size_t>(std::upper_bound(tb.begin(), tb.end(), tau) - tb.begin()), tb.size() - 1);
+    const std::size_t i0 = j == 0 ? 0 : j - 1;
+    const double a = tb[j] > tb[i0] ? (tau - tb[i0]) / (tb[j] - tb[i0]) : 0.0;
+    const Eigen::Matrix3d R =
+        body[i0].R_wc * so3::exp(a * so3::log(body[i0].R_wc.transpose() * body[j].R_wc));
+    const Eigen::Vector3d p = (1 - a) * body[i0].p_wc + a * body[j].p_wc;
+    q_[static_cast<std::size_t>(i)] = to_quat(R);
+    p_[static_cast<std::size_t>(i)] = {p.x(), p.y(), p.z()};
+  }
+}
+
+void ChainSolver::build(double loss_sigmas) {
+  static camimu::RightQuaternionManifold quat_manifold;
+  ceres::Problem::Options po;
+  po.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_ = std::make_unique<ceres::Problem>(po);
+  residuals_.clear();
+  residual_blocks_.clear();
+  for (std::size_t i = 0; i < q_.size(); ++i) {
+    problem_->AddParameterBlock(q_[i].data(), 4, &quat_manifold);
+    problem_->AddResidualBlock(new camimu::RotationPrior(camimu::quat_matrix(q_[i].data()), kKnotPriorRad),
+                               nullptr, q_[i].data());
+    problem_->AddResidualBlock(new camimu::VectorPrior(Eigen::Vector3d(p_[i][0], p_[i][1], p_[i][2]),
+                                                       Eigen::Vector3d::Constant(kKnotPriorM)),
+                               nullptr, p_[i].data());
+  }
+  for (CameraBlocks& b : blocks_) problem_->AddParameterBlock(b.q.data(), 4, &quat_manifold);
+  for (const ViewData& v : views_) {
+    CameraBlocks& b = blocks_[v.camera];
+    std::vector<Eigen::Vector3d> pts;
+    std::vector<Eigen::Vector2d> px;
+    for (std::size_t i = 0; i < v.px.size(); ++i) {
+      if (!v.keep[i]) continue;
+      pts.push_back(v.points[i]);
+      px.push_back(v.px[i]);
+    }
+    const double t = v.t + b.shift;
+    const int first = std::clamp(timing_.segment(t).first_knot - 1, 0, timing_.knots - kOrder - 2);
+    auto* cost = new Residual(inputs_[v.camera].model, starts_[v.camera].camera.width,
+                              starts_[v.camera].camera.height, std::move(pts), std::move(px), v.t, first,
+                              timing_, b.sigma_px, loss_sigmas > 0.0 ? loss_sigmas * b.sigma_px : 0.0);
+    std::vector<double*> blocks;
+    for (int i = 0; i < Residual::kWindow; ++i)
+      blocks.push_back(q_[static_cast<std::size_t>(first + i)].data());
+    for (int i = 0; i < Residual::kWindow; ++i)
+      blocks.push_back(p_[static_cast<std::size_t>(first + i)].data());
+    for (double* x : {b.q.data(), b.t.data(), &b.shift, b.intrinsics.data(), b.distortion.data()})
+      blocks.push_back(x);
+    problem_->AddResidualBlock(cost, nullptr, blocks);
+    residuals_.push_back(cost);
+    residual_blocks_.push_back(std::move(blocks));
+  }
+  // cam0 is the reference: its pose and offset are not estimated.
+  problem_->SetParameterBlockConstant(blocks_[0].q.data());
+  problem_->SetParameterBlockConstant(blocks_[0].t.data());
+  problem_->SetParameterBlockConstant(&blocks_[0].shift);
+  if (!opt_.estimate_time_offsets)
+    for (CameraBlocks& b : blocks_) problem_->SetParameterBlockConstant(&b.shift);
+}
+
+bool ChainSolver::views_in_window() const {
+  for (std::size_t k = 0; k < residuals_.size(); ++k)
+    if (!residuals_[k]->in_window(blocks_[views_[k].camera].shift)) return false;
+  return true;
+}
+
+Status ChainSolver::solve(double loss_sigmas, const std::string& stage) {
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  so.trust_region_strategy_type = ceres::DOGLEG;
+  so.num_threads = threads_or_cores(opt_.threads);
+  so.max_num_iterations = opt_.max_iterations;
+  so.function_tolerance = 1e-9;
+  so.parameter_tolerance = 1e-10;
+  so.logging_type = ceres::SILENT;
+  // An offset that moves views out of the knot window they were built with: the problem is
+  // built again at the new offset and solved on.
+  constexpr int kAttempts = 8;
+  for (int attempt = 0; attempt < kAttempts; ++attempt) {
+    build(loss_sigmas);
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, problem_.get(), &summary);
+    iterations_ += static_cast<int>(summary.iterations.size());
+    if (!summary.IsSolutionUsable())
+      return make_error(Errc::kSolverFailed,
+                        "the camera chain solve failed (" + stage + "): " + summary.message);
+    if (views_in_window()) return {};
+  }
+  return make_error(Errc::kSolverFailed, "the cameras' time offsets did not settle (" + stage + ")");
+}
+
+std::vector<std::vector<Eigen::Vector2d>> ChainSolver::residuals_by_camera() const {
+  std::vector<std::vector<Eigen::Vector2d>> out(inputs_.size());
+  std::vector<Eigen::Vector2d> r;
+  for (std::size_t k = 0; k < residuals_.size(); ++k) {
+    residuals_[k]->pixel_residuals(residual_blocks_[k].data(), &r);
+    out[views_[k].camera].insert(out[views_[k].camera].end(), r.begin(), r.end());
+  }
+  return out;
+}
+
+bool ChainSolver::reestimate_sigmas(bool robust) {
+  const auto res = residuals_by_camera();
+  bool moved = false;
+  for (std::size_t c = 0; c < res.size(); ++c) {
+    if (res[c].empty()) continue;
+    double sigma = 0.0;
+    if (robust) {
+      std::vector<double> a;
+      for (const auto& r : res[c]) {
+        a.push_back(std::abs(r.x()));
+        a.push_back(std::abs(r.y()));
+      }
+      sigma = 1.4826 * median(a);
+    } else {
+      double sum = 0.0;
+      for (const auto& r : res[c]) sum += r.squaredNorm();
+      sigma = std::sqrt(sum / (2.0 * static_cast<double>(res[c].size())));
+    }
+    sigma = std::max(sigma, 0.005);
+    if (std::abs(sigma / blocks_[c].sigma_px - 1.0) > 0.1) moved = true;
+    blocks_[c].sigma_px = sigma;
+  }
+  return moved;
+}
+
+int ChainSolver::reject_corners() {
+  int dropped = 0;
+  std::vector<Eigen::Vector2d> r;
+  for (std::size_t k = 0; k < residuals_.size(); ++k) {
+    ViewData& v = views_[k];
+    residuals_[k]->pixel_residuals(residual_blocks_[k].data(), &r);
+    const double limit =
+        std::max(opt_.reject_sigmas * blocks_[v.camera].sigma_px, opt_.intrinsics.corner_floor_px);
+    std::size_t j = 0;
+    for (std::size_t i = 0; i < v.px.size(); ++i) {
+      if (!v.keep[i]) continue;
+      if (!(r[j].cwiseAbs().maxCoeff() <= limit)) {
+        v.keep[i] = 0;
+        ++dropped;
+      }
+      ++j;
+    }
+  }
+  return dropped;
+}
+
+/// d(T_cn_cnm1) / d(T_n_0, T_m_0) by central differences in the tangent spaces (right
+/// perturbations of the rotations, then translations), 6 x 12.
+Eigen::Matrix<double, 6, 12> relative_jacobian(const Eigen::Isometry3d& T_n0, const Eigen::Isometry3d& T_m0) {
+  const auto rel = [](const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) { return a * b.inverse(); };
+  const Eigen::Isometry3d T = rel(T_n0, T_m0);
+  const auto perturb = [](const Eigen::Isometry3d& X, const Eigen::Matrix<double, 6, 1>& d) {
+    Eigen::Isometry3d Y = X;
+    Y.linear() = X.linear() * so3::exp(d.head<3>());
+    Y.translation() = X.translation() + d.tail<3>();
+    return Y;
+  };
+  Eigen::Matrix<double, 6, 12> J;
+  const double h = 1e-6;
+  for (int k = 0; k < 12; ++k) {
+    Eigen::Matrix<double, 6, 1> d = Eigen::Matrix<double, 6, 1>::Zero();
+    d(k % 6) = h;
+    const Eigen::Isometry3d plus = k < 6 ? rel(perturb(T_n0, d), T_m0) : rel(T_n0, perturb(T_m0, d));
+    const Eigen::Isometry3d minus = k < 6 ? rel(perturb(T_n0, -d), T_m0) : rel(T_n0, perturb(T_m0, -d));
+    Eigen::Matrix<double, 6, 1> col;
+    col.head<3>() = (so3::log(T.linear().transpose() * plus.linear()) -
+                     so3::log(T.linear().transpose() * minus.linear())) /
+                    (2.0 * h);
+    col.tail<3>() = (plus.translation() - minus.translation()) / (2.0 * h);
+    J.col(k) = col;
+  }
+  return J;
+}
+
+Eigen::Isometry3d pose_of(const CameraBlocks& b) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = camimu::quat_matrix(b.q.data());
+  T.translation() = Eigen::Vector3d(b.t[0], b.t[1], b.t[2]);
+  return T;
+}
+
+void ChainSolver::fill_pairs(CameraChainResult* out) const {
+  const std::size_t n = inputs_.size();
+  for (std::size_t a = 0; a < n; ++a) {
+    auto& shared = out->cameras[a].shared_views;
+    shared.assign(n, 0);
+    for (std::size_t b = 0; b < n; ++b) {
+      if (a == b) continue;
+      // b's views with a view of a within the tolerance, both on cam0's time.
+      const double tol = opt_.shared_view_fraction * std::max(intervals_[a], intervals_[b]);
+      std::vector<double> ta;
+      for (const auto& s : tracks_[a]) ta.push_back(s.t + blocks_[a].shift);
+      for (const auto& s : tracks_[b]) {
+        const double t = s.t + blocks_[b].shift;
+        const auto it = std::lower_bound(ta.begin(), ta.end(), t - tol);
+        if (it != ta.end() && *it <= t + tol) ++shared[b];
+      }
+    }
+  }
+}
+
+Status ChainSolver::fill(CameraChainResult* out) {
+  const std::size_t n = inputs_.size();
+  std::vector<const double*> wanted;
+  for (std::size_t c = 0; c < n; ++c) {
+    wanted.push_back(blocks_[c].intrinsics.data());
+    wanted.push_back(blocks_[c].distortion.data());
+    if (c == 0) continue;
+    wanted.push_back(blocks_[c].q.data());
+    wanted.push_back(blocks_[c].t.data());
+    if (opt_.estimate_time_offsets) wanted.push_back(&blocks_[c].shift);
+  }
+  MarginalCovariance cov;
+  const bool have_cov = cov.compute(*problem_, wanted, threads_or_cores(opt_.threads));
+  if (!have_cov) warnings_.push_back("the covariance could not be computed: every sigma is not determined");
+  const auto block = [&](const double* a, const double* b, int ra, int cb) -> Eigen::MatrixXd {
+    if (have_cov && cov.has(a) && cov.has(b)) return cov.block(a, b);
+    return Eigen::MatrixXd::Constant(ra, cb, kNaN);
+  };
+  const auto res = residuals_by_camera();
+  double sum_all = 0.0;
+  std::size_t n_all = 0;
+  out->cameras.resize(n);
+  for (std::size_t c = 0; c < n; ++c) {
+    CameraChainCameraResult& r = out->cameras[c];
+    const CameraBlocks& b = blocks_[c];
+    r.name = inputs_[c].name;
+    r.intrinsics = starts_[c];
+    CameraIntrinsicsResult& k = r.intrinsics;
+    k.camera.intrinsics = Eigen::Vector4d(b.intrinsics.data());
+    k.camera.distortion_coeffs = Eigen::Vector4d(b.distortion.data());
+    Eigen::Matrix<double, 8, 8> C;
+    C << block(b.intrinsics.data(), b.intrinsics.data(), 4, 4),
+        block(b.intrinsics.data(), b.distortion.data(), 4, 4),
+        block(b.distortion.data(), b.intrinsics.data(), 4, 4),
+        block(b.distortion.data(), b.distortion.data(), 4, 4);
+    k.covariance = C;
+    k.covariance_ok = C.allFinite();
+    const Eigen::VectorXd s = sigma_of(C);
+    k.intrinsics_sigma = s.head<4>();
+    k.distortion_sigma = s.tail<4>();
+    const double rel = std::max(k.intrinsics_sigma[0] / k.camera.intrinsics[0],
+                                k.intrinsics_sigma[1] / k.camera.intrinsics[1]);
+    k.focal_well_determined = k.covariance_ok && rel <= opt_.intrinsics.max_focal_relative_sigma;
+    double sum = 0.0;
+    k.residuals_px.clear();
+    k.residual_rejected.clear();
+    const std::size_t step =
+        std::max<std::size_t>(1, (res[c].size() + CameraIntrinsicsResult::kMaxStoredResiduals - 1) /
+                                     CameraIntrinsicsResult::kMaxStoredResiduals);
+    for (std::size_t i = 0; i < res[c].size(); ++i) {
+      sum += res[c][i].squaredNorm();
+      if (i % step == 0) {
+        k.residuals_px.push_back(res[c][i].cast<float>());
+        k.residual_rejected.push_back(0);
+      }
+    }
+    r.rms_px = res[c].empty() ? kNaN : std::sqrt(sum / static_cast<double>(res[c].size()));
+    k.rms_px = r.rms_px;
+    k.residual_sigma_px = b.sigma_px;
+    k.points_used = static_cast<int>(res[c].size());
+    k.corners_rejected = 0;
+    for (const ViewData& v : views_)
+      if (v.camera == c) k.corners_rejected += static_cast<int>(std::count(v.keep.begin(), v.keep.end(), 0));
+    k.warnings = camera_quality_warnings(k, opt_.intrinsics);
+    sum_all += sum;
+    n_all += res[c].size();
+    r.views_used = static_cast<int>(
+        std::count_if(views_.begin(), views_.end(), [c](const ViewData& v) { return v.camera == c; }));
+    r.T_cam_cam0 = pose_of(b);
+    r.linked_to = parent_[c];
+    r.timeshift_cam0_s = b.shift;
+    r.timeshift_estimated = c > 0 && opt_.estimate_time_offsets;
+    r.timeshift_sigma_s = r.timeshift_estimated ? std::sqrt(block(&b.shift, &b.shift, 1, 1)(0, 0)) : 0.0;
+    if (c > 0) {
+      Eigen::Matrix<double, 6, 6> P;
+      P << block(b.q.data(), b.q.data(), 3, 3), block(b.q.data(), b.t.data(), 3, 3),
+          block(b.t.data(), b.q.data(), 3, 3), block(b.t.data(), b.t.data(), 3, 3);
+      r.T_cam_cam0_covariance = P;
+      // Relative to the camera before it: T_n_m = T_n_0 T_m_0^-1, its covariance propagated.
+      const CameraBlocks& m = blocks_[c - 1];
+      const Eigen::Isometry3d T_n0 = pose_of(b), T_m0 = pose_of(m);
+      r.T_cn_cnm1 = T_n0 * T_m0.inverse();
+      Eigen::Matrix<double, 12, 12> J12 = Eigen::Matrix<double, 12, 12>::Zero();
+      const double* nb[2] = {b.q.data(), b.t.data()};
+      const double* mb[2] = {m.q.data(), m.t.data()};
+      for (int i = 0; i < 2; ++i) {
+        for (int j = 0; j < 2; ++j) {
+          J12.block<3, 3>(3 * i, 3 * j) = block(nb[i], nb[j], 3, 3);
+          if (c - 1 > 0) {
+            J12.block<3, 3>(6 + 3 * i, 6 + 3 * j) = block(mb[i], mb[j], 3, 3);
+            J12.block<3, 3>(3 * i, 6 + 3 * j) = block(nb[i], mb[j], 3, 3);
+            J12.block<3, 3>(6 + 3 * i, 3 * j) = block(mb[i], nb[j], 3, 3);
+          }
+        }
+      }
+      const Eigen::Matrix<double, 6, 12> J = relative_jacobian(T_n0, T_m0);
+      const Eigen::Matrix<double, 6, 6> Crel = J * J12 * J.transpose();
+      const Eigen::VectorXd sr = sigma_of(Crel);
+      r.T_cn_cnm1_rotation_sigma_rad = sr.head<3>();
+      r.T_cn_cnm1_translation_sigma_m = sr.tail<3>();
+      const Eigen::Vector3d t = r.T_cn_cnm1.translation();
+      r.baseline_m = t.norm();
+      const Eigen::Vector3d g = t / std::max(r.baseline_m, 1e-12);
+      const double var = g.transpose() * Crel.bottomRightCorner<3, 3>() * g;
+      r.baseline_sigma_m = std::isnan(var) ? kNaN : std::sqrt(std::max(0.0, var));
+    }
+  }
+  out->rms_px = n_all > 0 ? std::sqrt(sum_all / static_cast<double>(n_all)) : kNaN;
+  fill_pairs(out);
+  // Stamps that say the cameras are synchronized, against the offsets the data show.
+  for (std::size_t c = 1; c < n; ++c) {
+    CameraChainCameraResult& r = out->cameras[c];
+    std::vector<double> t0;
+    for (const auto& s : tracks_[0]) t0.push_back(s.t);
+    for (const auto& s : tracks_[c])
+      if (std::binary_search(t0.begin(), t0.end(), s.t)) ++r.views_stamped_with_cam0;
+    if (!r.timeshift_estimated) continue;
+    const double z = std::abs(r.timeshift_cam0_s) / r.timeshift_sigma_s;
+    const bool same_stamps = 2 * r.views_stamped_with_cam0 > static_cast<int>(tracks_[c].size());
+    if (same_stamps && z > 3.0) {
+      warnings_.push_back(
+          r.name + "'s frames carry the same stamps as " + out->cameras[0].name + "'s, but show the scene " +
+          format_number("%.2f", 1e3 * r.timeshift_cam0_s) + " +- " +
+          format_number("%.2f", 1e3 * r.timeshift_sigma_s) + " ms " +
+          (r.timeshift_cam0_s > 0 ? "later" : "earlier") +
+          ": the cameras are not synchronized (or their stamps are not their exposure times); "
+          "the offset is estimated and used here, and any tool that trusts the stamps will be "
+          "off by it");
+    }
+  }
+  for (std::size_t c = 0; c < n; ++c) {
+    for (const auto& w : out->cameras[c].intrinsics.warnings) warnings_.push_back(inputs_[c].name + ": " + w);
+  }
+  return {};
+}
+
+Result<CameraChainResult> ChainSolver::run(const TargetDescription& target, const ProgressFn& progress) {
+  const double cpu0 = cpu_now_s();
+  IMUCAL_TRY(start_cameras(target, progress));
+  IMUCAL_TRY(link_cameras());
+  initialise_spline();
+  report_progress(progress, 0.45, 1.0);
+  IMUCAL_TRY(solve(opt_.loss_sigmas, "robust pass"));
+  reestimate_sigmas(true);
+  const int dropped = reject_corners();
+  report_progress(progress, 0.65, 1.0);
+  IMUCAL_TRY(solve(0.0, "final pass"));
+  // The corner noise from the plain residuals; solved again while it moves.
+  for (int k = 0; k < 3 && reestimate_sigmas(false); ++k) IMUCAL_TRY(solve(0.0, "final pass"));
+  report_progress(progress, 0.9, 1.0);
+  CameraChainResult out;
+  out.knot_spacing_s = timing_.dt_s;
+  IMUCAL_TRY(fill(&out));
+  if (dropped > 0) {
+    warnings_.push_back(std::to_string(dropped) + " corners beyond " +
+                        format_number("%g", opt_.reject_sigmas) +
+                        " robust sigmas of their camera were left out");
+  }
+  out.warnings = std::move(warnings_);
+  out.iterations = iterations_;
+  out.solve_cpu_s = cpu_now_s() - cpu0;
+  report_progress(progress, 1.0, 1.0);
+  return out;
+}
+
+}  // namespace
+
+Result<CameraChainResult> calibrate_camera_chain(const TargetDescription& target,
+                                                 std::span<const CameraChainInput> cameras,
+                                                 const CameraChainOptions& options,
+                                                 const ProgressFn& progress) {
+  IMUCAL_TRY(options.validate());
+  IMUCAL_TRY(target.validate());
+  if (cameras.size() < 2) {
+    return make_error(Errc::kInvalidArgument, "a camera chain needs at least two cameras");
+  }
+  ChainSolver solver(cameras, options);
+  return solver.run(target, progress);
+}
+
+}  // namespace imucal::calib
