@@ -212,6 +212,9 @@ class ChainSolver {
   Status start_cameras(const TargetDescription& target, const ProgressFn& progress);
   Status link_cameras();
   void initialise_spline();
+  /// The poses of cam0 for cameras triggered together: views within the shared-view tolerance of
+  /// each other, one per camera, share a pose.
+  void initialise_poses();
   /// Builds the problem at the current values (c2: the loss scale in sigmas, 0 = none).
   void build(double loss_sigmas);
   Status solve(double loss_sigmas, const std::string& stage);
@@ -238,8 +241,23 @@ class ChainSolver {
   SplineTiming<kOrder> timing_;
   std::vector<Arr4> q_;
   std::vector<Arr3> p_;
+  // Cameras triggered together (offsets held): one pose of cam0 per group of views with the same
+  // stamp, instead of the trajectory.
+  bool discrete_ = false;
+  std::vector<std::size_t> group_of_view_;  // views_ index -> its pose
   std::unique_ptr<ceres::Problem> problem_;
-  std::vector<const Residual*> residuals_;  // of the last build, one per view in views_ order
+  struct ResidualRef {
+    const Residual* spline = nullptr;
+    const chain::ChainPoseResidual* pose = nullptr;
+    void pixels(double const* const* p, std::vector<Eigen::Vector2d>* out) const {
+      if (spline) {
+        spline->pixel_residuals(p, out);
+      } else {
+        pose->pixel_residuals(p, out);
+      }
+    }
+  };
+  std::vector<ResidualRef> residuals_;  // of the last build, one per view in views_ order
   std::vector<std::vector<double*>> residual_blocks_;
   int iterations_ = 0;
   std::vector<std::string> warnings_;
@@ -470,6 +488,41 @@ void ChainSolver::initialise_spline() {
   }
 }
 
+void ChainSolver::initialise_poses() {
+  discrete_ = true;
+  double interval = std::numeric_limits<double>::infinity();
+  for (double i : intervals_)
+    if (std::isfinite(i) && i > 0.0) interval = std::min(interval, i);
+  const double tol = std::isfinite(interval) ? opt_.shared_view_fraction * interval : 1e-3;
+  std::vector<std::size_t> order(views_.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(),
+            [&](std::size_t a, std::size_t b) { return views_[a].t < views_[b].t; });
+  group_of_view_.assign(views_.size(), 0);
+  q_.clear();
+  p_.clear();
+  double group_t = -std::numeric_limits<double>::infinity();
+  std::vector<bool> has(inputs_.size(), false);
+  for (std::size_t i : order) {
+    const ViewData& v = views_[i];
+    if (!(v.t - group_t <= tol) || has[v.camera]) {
+      // A new pose from this view: T_w0 = T_wc T_c0.
+      const CameraViewReport& rep = starts_[v.camera].views[v.report];
+      const Eigen::Matrix3d R_wc = rep.q_cam_target.toRotationMatrix().transpose();
+      const Eigen::Vector3d p_wc = -R_wc * rep.t_cam_target;
+      const Eigen::Matrix3d R_c0 = camimu::quat_matrix(blocks_[v.camera].q.data());
+      const Eigen::Vector3d t_c0(blocks_[v.camera].t[0], blocks_[v.camera].t[1], blocks_[v.camera].t[2]);
+      const Eigen::Vector3d p = R_wc * t_c0 + p_wc;
+      q_.push_back(to_quat(R_wc * R_c0));
+      p_.push_back({p.x(), p.y(), p.z()});
+      group_t = v.t;
+      has.assign(inputs_.size(), false);
+    }
+    has[v.camera] = true;
+    group_of_view_[i] = q_.size() - 1;
+  }
+}
+
 void ChainSolver::build(double loss_sigmas) {
   static camimu::RightQuaternionManifold quat_manifold;
   ceres::Problem::Options po;
@@ -479,6 +532,7 @@ void ChainSolver::build(double loss_sigmas) {
   residual_blocks_.clear();
   for (std::size_t i = 0; i < q_.size(); ++i) {
     problem_->AddParameterBlock(q_[i].data(), 4, &quat_manifold);
+    if (discrete_) continue;  // every pose is a view's
     problem_->AddResidualBlock(new camimu::RotationPrior(camimu::quat_matrix(q_[i].data()), kKnotPriorRad),
                                nullptr, q_[i].data());
     problem_->AddResidualBlock(new camimu::VectorPrior(Eigen::Vector3d(p_[i][0], p_[i][1], p_[i][2]),
@@ -486,7 +540,8 @@ void ChainSolver::build(double loss_sigmas) {
                                nullptr, p_[i].data());
   }
   for (CameraBlocks& b : blocks_) problem_->AddParameterBlock(b.q.data(), 4, &quat_manifold);
-  for (const ViewData& v : views_) {
+  for (std::size_t k = 0; k < views_.size(); ++k) {
+    const ViewData& v = views_[k];
     CameraBlocks& b = blocks_[v.camera];
     std::vector<Eigen::Vector3d> pts;
     std::vector<Eigen::Vector2d> px;
@@ -495,33 +550,46 @@ void ChainSolver::build(double loss_sigmas) {
       pts.push_back(v.points[i]);
       px.push_back(v.px[i]);
     }
-    const double t = v.t + b.shift;
-    const int first = std::clamp(timing_.segment(t).first_knot - 1, 0, timing_.knots - kOrder - 2);
-    auto* cost = new Residual(inputs_[v.camera].model, starts_[v.camera].camera.width,
-                              starts_[v.camera].camera.height, std::move(pts), std::move(px), v.t, first,
-                              timing_, b.sigma_px, loss_sigmas > 0.0 ? loss_sigmas * b.sigma_px : 0.0);
+    const double loss_px = loss_sigmas > 0.0 ? loss_sigmas * b.sigma_px : 0.0;
+    const int width = starts_[v.camera].camera.width, height = starts_[v.camera].camera.height;
     std::vector<double*> blocks;
-    for (int i = 0; i < Residual::kWindow; ++i)
-      blocks.push_back(q_[static_cast<std::size_t>(first + i)].data());
-    for (int i = 0; i < Residual::kWindow; ++i)
-      blocks.push_back(p_[static_cast<std::size_t>(first + i)].data());
-    for (double* x : {b.q.data(), b.t.data(), &b.shift, b.intrinsics.data(), b.distortion.data()})
-      blocks.push_back(x);
-    problem_->AddResidualBlock(cost, nullptr, blocks);
-    residuals_.push_back(cost);
+    if (discrete_) {
+      const std::size_t g = group_of_view_[k];
+      auto* cost = new chain::ChainPoseResidual(chain::ViewCorners(
+          inputs_[v.camera].model, width, height, std::move(pts), std::move(px), b.sigma_px, loss_px));
+      blocks = {q_[g].data(), p_[g].data(), b.q.data(), b.t.data(), b.intrinsics.data(), b.distortion.data()};
+      problem_->AddResidualBlock(cost, nullptr, blocks);
+      residuals_.push_back({nullptr, cost});
+    } else {
+      const double t = v.t + b.shift;
+      const int first = std::clamp(timing_.segment(t).first_knot - 1, 0, timing_.knots - kOrder - 2);
+      auto* cost = new Residual(inputs_[v.camera].model, width, height, std::move(pts), std::move(px), v.t,
+                                first, timing_, b.sigma_px, loss_px);
+      for (int i = 0; i < Residual::kWindow; ++i)
+        blocks.push_back(q_[static_cast<std::size_t>(first + i)].data());
+      for (int i = 0; i < Residual::kWindow; ++i)
+        blocks.push_back(p_[static_cast<std::size_t>(first + i)].data());
+      for (double* x : {b.q.data(), b.t.data(), &b.shift, b.intrinsics.data(), b.distortion.data()})
+        blocks.push_back(x);
+      problem_->AddResidualBlock(cost, nullptr, blocks);
+      residuals_.push_back({cost, nullptr});
+    }
     residual_blocks_.push_back(std::move(blocks));
   }
   // cam0 is the reference: its pose and offset are not estimated.
   problem_->SetParameterBlockConstant(blocks_[0].q.data());
   problem_->SetParameterBlockConstant(blocks_[0].t.data());
-  problem_->SetParameterBlockConstant(&blocks_[0].shift);
-  if (!opt_.estimate_time_offsets)
-    for (CameraBlocks& b : blocks_) problem_->SetParameterBlockConstant(&b.shift);
+  if (!discrete_) {
+    problem_->SetParameterBlockConstant(&blocks_[0].shift);
+    if (!opt_.estimate_time_offsets)
+      for (CameraBlocks& cb : blocks_) problem_->SetParameterBlockConstant(&cb.shift);
+  }
 }
 
 bool ChainSolver::views_in_window() const {
   for (std::size_t k = 0; k < residuals_.size(); ++k)
-    if (!residuals_[k]->in_window(blocks_[views_[k].camera].shift)) return false;
+    if (residuals_[k].spline && !residuals_[k].spline->in_window(blocks_[views_[k].camera].shift))
+      return false;
   return true;
 }
 
@@ -554,7 +622,7 @@ std::vector<std::vector<Eigen::Vector2d>> ChainSolver::residuals_by_camera() con
   std::vector<std::vector<Eigen::Vector2d>> out(inputs_.size());
   std::vector<Eigen::Vector2d> r;
   for (std::size_t k = 0; k < residuals_.size(); ++k) {
-    residuals_[k]->pixel_residuals(residual_blocks_[k].data(), &r);
+    residuals_[k].pixels(residual_blocks_[k].data(), &r);
     out[views_[k].camera].insert(out[views_[k].camera].end(), r.begin(), r.end());
   }
   return out;
@@ -590,7 +658,7 @@ int ChainSolver::reject_corners() {
   std::vector<Eigen::Vector2d> r;
   for (std::size_t k = 0; k < residuals_.size(); ++k) {
     ViewData& v = views_[k];
-    residuals_[k]->pixel_residuals(residual_blocks_[k].data(), &r);
+    residuals_[k].pixels(residual_blocks_[k].data(), &r);
     const double limit =
         std::max(opt_.reject_sigmas * blocks_[v.camera].sigma_px, opt_.intrinsics.corner_floor_px);
     std::size_t j = 0;
@@ -758,6 +826,7 @@ Status ChainSolver::fill(CameraChainResult* out) {
       }
       const Eigen::Matrix<double, 6, 12> J = relative_jacobian(T_n0, T_m0);
       const Eigen::Matrix<double, 6, 6> Crel = J * J12 * J.transpose();
+      r.T_cn_cnm1_covariance = Crel;
       const Eigen::VectorXd sr = sigma_of(Crel);
       r.T_cn_cnm1_rotation_sigma_rad = sr.head<3>();
       r.T_cn_cnm1_translation_sigma_m = sr.tail<3>();
@@ -801,7 +870,11 @@ Result<CameraChainResult> ChainSolver::run(const TargetDescription& target, cons
   const double cpu0 = cpu_now_s();
   IMUCAL_TRY(start_cameras(target, progress));
   IMUCAL_TRY(link_cameras());
-  initialise_spline();
+  if (opt_.estimate_time_offsets) {
+    initialise_spline();
+  } else {
+    initialise_poses();
+  }
   report_progress(progress, 0.45, 1.0);
   IMUCAL_TRY(solve(opt_.loss_sigmas, "robust pass"));
   reestimate_sigmas(true);
@@ -812,7 +885,7 @@ Result<CameraChainResult> ChainSolver::run(const TargetDescription& target, cons
   for (int k = 0; k < 3 && reestimate_sigmas(false); ++k) IMUCAL_TRY(solve(0.0, "final pass"));
   report_progress(progress, 0.9, 1.0);
   CameraChainResult out;
-  out.knot_spacing_s = timing_.dt_s;
+  out.knot_spacing_s = discrete_ ? 0.0 : timing_.dt_s;
   IMUCAL_TRY(fill(&out));
   if (dropped > 0) {
     warnings_.push_back(std::to_string(dropped) + " corners beyond " +

@@ -31,8 +31,10 @@ struct CameraChainInput {
 struct CameraChainOptions {
   /// The single-camera solve that starts each camera (its rejection rules apply to the chain).
   CameraIntrinsicsOptions intrinsics;
-  /// Estimate each camera's time offset against cam0 (else they are held at 0, as for cameras
-  /// triggered together).
+  /// Estimate each camera's time offset against cam0 on the continuous-time trajectory. False:
+  /// cameras triggered together (Kalibr's model): the offsets are 0 and every group of views
+  /// with the same stamp (within shared_view_fraction of a frame interval) has its own pose of
+  /// cam0, so that still pairs, taken seconds apart, are calibrated as they are.
   bool estimate_time_offsets = true;
   /// The starting search for an offset covers +- this (s).
   double max_time_offset_s = 0.1;
@@ -68,6 +70,7 @@ struct CameraChainCameraResult {
   /// deviations of its rotation (rad, about its axes) and translation (m), and of the baseline
   /// |t| (m). NaN where not determined.
   Eigen::Isometry3d T_cn_cnm1 = Eigen::Isometry3d::Identity();
+  Eigen::Matrix<double, 6, 6> T_cn_cnm1_covariance = Eigen::Matrix<double, 6, 6>::Zero();  // as T_cam_cam0's
   Eigen::Vector3d T_cn_cnm1_rotation_sigma_rad = Eigen::Vector3d::Zero();
   Eigen::Vector3d T_cn_cnm1_translation_sigma_m = Eigen::Vector3d::Zero();
   double baseline_m = 0.0;
@@ -88,8 +91,8 @@ struct CameraChainCameraResult {
 
 struct CameraChainResult {
   std::vector<CameraChainCameraResult> cameras;
-  double knot_spacing_s = 0.0;
-  double rms_px = 0.0;  // all corners
+  double knot_spacing_s = 0.0;  // of the trajectory; 0 with one pose per stamp (offsets held)
+  double rms_px = 0.0;          // all corners
   int iterations = 0;
   double solve_cpu_s = 0.0;
   std::vector<std::string> warnings;

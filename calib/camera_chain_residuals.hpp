@@ -11,6 +11,10 @@
 //   r      = (pi(K_i, d_i; p_cami) - u) / sigma_i,   with the Cauchy loss folded in,
 // and for cam0 itself R_c0_c0 = I, t = 0, shift = 0 held constant.
 //
+// ChainPoseResidual is the same view against one pose of cam0 per stamp (cameras triggered
+// together, offsets held at 0; Kalibr's model): blocks R_target_cam0 (quaternion), p (R^3),
+// R_ci_c0, t_ci_c0, intrinsics, distortion.
+//
 // Parameter blocks: N + 2 rotation knots (RightQuaternionManifold), N + 2 position knots (R^3),
 // R_ci_c0 (quaternion), t_ci_c0 (R^3), shift (s), intrinsics fu fv pu pv (R^4), distortion (R^4).
 // The pose's Jacobians are the spline's analytic ones (calib/spline.hpp); the projection's, in
@@ -25,6 +29,9 @@
 #include <ceres/ceres.h>
 
 #include <Eigen/Core>
+#include <Eigen/Eigenvalues>
+#include <array>
+#include <limits>
 #include <vector>
 
 #include "calib/camimu_residuals.hpp"
@@ -32,32 +39,177 @@
 
 namespace imucal::calib::chain {
 
+using Mat14 = Eigen::Matrix<double, 14, 14>;
+using Vec14 = Eigen::Matrix<double, 14, 1>;
+inline constexpr int kCompressedRows = 15;
+
+/// The corners of one view, their weight and loss: what the residual is, whatever models the
+/// pose of cam0 relative to the target (world) at the view's time, (R_wb, p_wb).
+class ViewCorners {
+ public:
+  ViewCorners(DistortionModel model, int width, int height, std::vector<Eigen::Vector3d> points_w,
+              std::vector<Eigen::Vector2d> px, double sigma_px, double loss_scale_px)
+      : model_(model),
+        width_(width),
+        height_(height),
+        points_(std::move(points_w)),
+        px_(std::move(px)),
+        w_(1.0 / sigma_px),
+        c2_(loss_scale_px > 0.0 ? (loss_scale_px / sigma_px) * (loss_scale_px / sigma_px)
+                                : std::numeric_limits<double>::infinity()) {}
+
+  std::size_t size() const { return points_.size(); }
+  const Eigen::Vector3d& point(std::size_t k) const { return points_[k]; }
+
+  /// The unweighted pixel residuals (projected - detected), without the loss.
+  void pixel_residuals(const Eigen::Matrix3d& R_wb, const Eigen::Vector3d& p_wb, const double* q_ci,
+                       const double* t_ci, const double* intr, const double* dist,
+                       std::vector<Eigen::Vector2d>* out) const {
+    const Eigen::Matrix3d Rt = R_wb.transpose(), Rci = camimu::quat_matrix(q_ci);
+    const Eigen::Map<const Eigen::Vector3d> tci(t_ci);
+    const auto camera = CameraModel::from_params(model_, intr, dist, width_, height_);
+    out->clear();
+    for (std::size_t k = 0; k < points_.size(); ++k)
+      out->push_back(camera.project(Rci * (Rt * (points_[k] - p_wb)) + tci).px - px_[k]);
+  }
+
+  /// Corner k's weighted residual with the loss folded in at the camera point pc and, with `J`,
+  /// its Jacobian in pc (columns 0-2) and the 8 camera parameters (3-10).
+  Eigen::Vector2d corner(const double* intr, const double* dist, const Eigen::Vector3d& pc, std::size_t k,
+                         Eigen::Matrix<double, 2, 11>* J) const {
+    Eigen::Vector2d uv;
+    Eigen::Matrix<double, 2, 11> Jp = Eigen::Matrix<double, 2, 11>::Zero();
+    if (J) {
+      using Jet = ceres::Jet<double, 11>;
+      std::array<Jet, 4> kj, dj;
+      for (int i = 0; i < 4; ++i) {
+        kj[i] = Jet(intr[i], 3 + i);
+        dj[i] = Jet(dist[i], 7 + i);
+      }
+      const auto camera = CameraModelT<Jet>::from_params(model_, kj.data(), dj.data(), width_, height_);
+      Eigen::Matrix<Jet, 3, 1> x;
+      for (int i = 0; i < 3; ++i) x(i) = Jet(pc(i), i);
+      const auto pr = camera.project(x);
+      for (int r = 0; r < 2; ++r) {
+        uv(r) = pr.px(r).a;
+        Jp.row(r) = pr.px(r).v.transpose();
+      }
+    } else {
+      uv = CameraModel::from_params(model_, intr, dist, width_, height_).project(pc).px;
+    }
+    Eigen::Vector2d r;
+    Eigen::Matrix2d L;
+    camimu::fold_cauchy(w_ * (uv - px_[k]), c2_, &r, J ? &L : nullptr);
+    if (J) *J = w_ * L * Jp;
+    return r;
+  }
+
+  /// The compressed rows (see the file's comment) at the pose (R_wb, p_wb): `out` (15 values)
+  /// and, with `R`, the 14 x 14 factor whose columns are the rows' Jacobian in the camera frame's
+  /// motion (w, v: dp_cam = -[p_cam]x w + v) and the 8 camera parameters.
+  void compress(const Eigen::Matrix3d& R_wb, const Eigen::Vector3d& p_wb, const Eigen::Matrix3d& Rci,
+                const Eigen::Vector3d& tci, const double* intr, const double* dist, double* out,
+                Mat14* R) const {
+    const Eigen::Matrix3d Rt = R_wb.transpose();
+    double sum = 0.0;
+    Mat14 A = Mat14::Zero();
+    Vec14 b = Vec14::Zero();
+    for (std::size_t k = 0; k < points_.size(); ++k) {
+      const Eigen::Vector3d pc = Rci * (Rt * (points_[k] - p_wb)) + tci;
+      Eigen::Matrix<double, 2, 11> J;
+      const Eigen::Vector2d r = corner(intr, dist, pc, k, R ? &J : nullptr);
+      sum += r.squaredNorm();
+      if (!R) continue;
+      Eigen::Matrix<double, 2, 14> F;
+      F.leftCols<3>() = -J.leftCols<3>() * so3::hat(pc);
+      F.middleCols<3>(3) = J.leftCols<3>();
+      F.rightCols<8>() = J.rightCols<8>();
+      A.noalias() += F.transpose() * F;
+      b.noalias() += F.transpose() * r;
+    }
+    Eigen::Map<Eigen::Matrix<double, kCompressedRows, 1>> o(out);
+    if (!R) {
+      // Only the cost is asked for: the same norm, all of it in the last row.
+      o.setZero();
+      o(kCompressedRows - 1) = std::sqrt(sum);
+      return;
+    }
+    // A = V diag(l) V^T; R = diag(sqrt l) V^T; the residual R^-T b (directions of A below 1e-12 of
+    // its largest eigenvalue are taken as empty).
+    const Eigen::SelfAdjointEigenSolver<Mat14> es(A);
+    const Vec14 l = es.eigenvalues();
+    const double floor = 1e-12 * std::max(l.maxCoeff(), 0.0);
+    const Vec14 Vb = es.eigenvectors().transpose() * b;
+    for (int i = 0; i < 14; ++i) {
+      const bool empty = !(l(i) > floor);
+      const double sq = empty ? 0.0 : std::sqrt(l(i));
+      R->row(i) = sq * es.eigenvectors().col(i).transpose();
+      o(i) = empty ? 0.0 : Vb(i) / sq;
+    }
+    o(kCompressedRows - 1) = std::sqrt(std::max(0.0, sum - o.head<14>().squaredNorm()));
+  }
+
+ private:
+  DistortionModel model_;
+  int width_, height_;
+  std::vector<Eigen::Vector3d> points_;
+  std::vector<Eigen::Vector2d> px_;
+  double w_;
+  double c2_;
+};
+
+/// Writes R[:, 0:6] G, the rows' Jacobian in a block that moves the camera frame by (w, v) = G dx,
+/// into a 14-row block of `ambient` columns (the first 3 or `cols` of them).
+template <int Cols>
+inline void write_motion_block(double* J, int ambient, const Mat14& R,
+                               const Eigen::Matrix<double, 6, Cols>& G) {
+  const Eigen::Matrix<double, 14, Cols> RG = R.leftCols<6>() * G;
+  for (int r = 0; r < 14; ++r)
+    for (int c = 0; c < Cols; ++c) J[r * ambient + c] = RG(r, c);
+}
+
+/// The Jacobians both residuals share: the camera's pose relative to cam0 (R_ci_c0, t_ci_c0) and
+/// its 8 parameters.
+inline void write_camera_blocks(double* J_rci, double* J_tci, double* J_intr, double* J_dist, const Mat14& R,
+                                const Eigen::Matrix3d& Rci, const Eigen::Vector3d& tci) {
+  const Eigen::Matrix3d tx = so3::hat(tci);
+  Eigen::Matrix<double, 6, 3> G;
+  if (J_rci) {
+    G.topRows<3>() = Rci;
+    G.bottomRows<3>() = tx * Rci;
+    write_motion_block<3>(J_rci, 4, R, G);
+  }
+  if (J_tci) {
+    G.topRows<3>().setZero();
+    G.bottomRows<3>().setIdentity();
+    write_motion_block<3>(J_tci, 3, R, G);
+  }
+  for (int c = 0; c < 4; ++c) {
+    for (int r = 0; r < 14; ++r) {
+      if (J_intr) J_intr[r * 4 + c] = R(r, 6 + c);
+      if (J_dist) J_dist[r * 4 + c] = R(r, 10 + c);
+    }
+  }
+}
+
 template <int N>
 class ChainFrameResidual final : public ceres::CostFunction {
  public:
   static constexpr int kWindow = N + 2;
   static constexpr int kRci = 2 * kWindow, kTci = kRci + 1, kShift = kTci + 1, kIntr = kShift + 1,
                        kDist = kIntr + 1;
-
-  static constexpr int kCompressedRows = 15;
+  static constexpr int kCompressedRows = chain::kCompressedRows;
 
   ChainFrameResidual(DistortionModel model, int width, int height, std::vector<Eigen::Vector3d> points_w,
                      std::vector<Eigen::Vector2d> px, double t_cam_s, int first_window_knot,
                      const SplineTiming<N>& timing, double sigma_px, double loss_scale_px,
                      bool compressed = true)
-      : model_(model),
-        width_(width),
-        height_(height),
-        points_(std::move(points_w)),
-        px_(std::move(px)),
+      : corners_(model, width, height, std::move(points_w), std::move(px), sigma_px, loss_scale_px),
         t_cam_s_(t_cam_s),
         first_(first_window_knot),
         timing_(timing),
-        w_(1.0 / sigma_px),
-        c2_(loss_scale_px > 0.0 ? (loss_scale_px / sigma_px) * (loss_scale_px / sigma_px)
-                                : std::numeric_limits<double>::infinity()),
-        compressed_(compressed && 2 * points_.size() > kCompressedRows) {
-    set_num_residuals(compressed_ ? kCompressedRows : 2 * static_cast<int>(points_.size()));
+        compressed_(compressed && 2 * corners_.size() > kCompressedRows) {
+    set_num_residuals(compressed_ ? kCompressedRows : 2 * static_cast<int>(corners_.size()));
     auto* sizes = mutable_parameter_block_sizes();
     for (int i = 0; i < kWindow; ++i) sizes->push_back(4);
     for (int i = 0; i < kWindow; ++i) sizes->push_back(3);
@@ -69,7 +221,7 @@ class ChainFrameResidual final : public ceres::CostFunction {
     const int k = timing_.segment(t_cam_s_ + shift_s).first_knot - first_;
     return k >= 0 && k <= 2;
   }
-  std::size_t corners() const { return points_.size(); }
+  std::size_t corners() const { return corners_.size(); }
 
   bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
     return compressed_ ? evaluate_compressed(p, residuals, jac) : evaluate_corners(p, residuals, jac);
@@ -77,149 +229,52 @@ class ChainFrameResidual final : public ceres::CostFunction {
 
   /// The unweighted pixel residuals (projected - detected) at `p`, without the loss.
   void pixel_residuals(double const* const* p, std::vector<Eigen::Vector2d>* out) const {
-    const camimu::SplinePose<N> ps =
-        camimu::spline_pose<N>(p, 0, kWindow, t_cam_s_ + p[kShift][0], first_, timing_, false);
-    const Eigen::Matrix3d Rt = ps.e.R.transpose(), Rci = camimu::quat_matrix(p[kRci]);
-    const Eigen::Map<const Eigen::Vector3d> tci(p[kTci]);
-    const auto camera = CameraModel::from_params(model_, p[kIntr], p[kDist], width_, height_);
-    out->clear();
-    for (std::size_t k = 0; k < points_.size(); ++k)
-      out->push_back(camera.project(Rci * (Rt * (points_[k] - ps.pos)) + tci).px - px_[k]);
+    const camimu::SplinePose<N> ps = pose(p, false);
+    corners_.pixel_residuals(ps.e.R, ps.pos, p[kRci], p[kTci], p[kIntr], p[kDist], out);
   }
 
  private:
-  using Jet = ceres::Jet<double, 11>;
-
-  /// One corner's weighted residual with the loss folded in and, with `J`, its Jacobian in the
-  /// camera point (columns 0-2) and the 8 camera parameters (3-10).
-  Eigen::Vector2d corner(const CameraModelT<Jet>& camera_jet, const CameraModel& camera,
-                         const Eigen::Vector3d& pc, std::size_t k, Eigen::Matrix<double, 2, 11>* J) const {
-    Eigen::Vector2d uv;
-    Eigen::Matrix<double, 2, 11> Jp = Eigen::Matrix<double, 2, 11>::Zero();
-    if (J) {
-      Eigen::Matrix<Jet, 3, 1> x;
-      for (int i = 0; i < 3; ++i) x(i) = Jet(pc(i), i);
-      const auto pr = camera_jet.project(x);
-      for (int r = 0; r < 2; ++r) {
-        uv(r) = pr.px(r).a;
-        Jp.row(r) = pr.px(r).v.transpose();
-      }
-    } else {
-      uv = camera.project(pc).px;
-    }
-    Eigen::Vector2d r;
-    Eigen::Matrix2d L;
-    camimu::fold_cauchy(w_ * (uv - px_[k]), c2_, &r, J ? &L : nullptr);
-    if (J) *J = w_ * L * Jp;
-    return r;
-  }
-
-  CameraModelT<Jet> camera_jet(double const* const* p) const {
-    std::array<Jet, 4> kj, dj;
-    for (int i = 0; i < 4; ++i) {
-      kj[i] = Jet(p[kIntr][i], 3 + i);
-      dj[i] = Jet(p[kDist][i], 7 + i);
-    }
-    return CameraModelT<Jet>::from_params(model_, kj.data(), dj.data(), width_, height_);
+  camimu::SplinePose<N> pose(double const* const* p, bool jacobians) const {
+    return camimu::spline_pose<N>(p, 0, kWindow, t_cam_s_ + p[kShift][0], first_, timing_, jacobians);
   }
 
   bool evaluate_compressed(double const* const* p, double* residuals, double** jac) const {
-    const camimu::SplinePose<N> ps =
-        camimu::spline_pose<N>(p, 0, kWindow, t_cam_s_ + p[kShift][0], first_, timing_, jac != nullptr);
+    const camimu::SplinePose<N> ps = pose(p, jac != nullptr);
     const Eigen::Matrix3d Rt = ps.e.R.transpose(), Rci = camimu::quat_matrix(p[kRci]);
     const Eigen::Map<const Eigen::Vector3d> tci(p[kTci]);
-    const auto cj = camera_jet(p);
-    const auto camera = CameraModel::from_params(model_, p[kIntr], p[kDist], width_, height_);
-    using Mat14 = Eigen::Matrix<double, 14, 14>;
-    using Vec14 = Eigen::Matrix<double, 14, 1>;
-    Eigen::Map<Eigen::Matrix<double, kCompressedRows, 1>> out(residuals);
-    double sum = 0.0;
-    Mat14 A = Mat14::Zero();
-    Vec14 b = Vec14::Zero();
-    for (std::size_t k = 0; k < points_.size(); ++k) {
-      const Eigen::Vector3d pc = Rci * (Rt * (points_[k] - ps.pos)) + tci;
-      Eigen::Matrix<double, 2, 11> J;
-      const Eigen::Vector2d r = corner(cj, camera, pc, k, jac ? &J : nullptr);
-      sum += r.squaredNorm();
-      if (!jac) continue;
-      Eigen::Matrix<double, 2, 14> F;  // d r / d (w, v, k) of the camera frame and camera
-      F.leftCols<3>() = -J.leftCols<3>() * so3::hat(pc);
-      F.middleCols<3>(3) = J.leftCols<3>();
-      F.rightCols<8>() = J.rightCols<8>();
-      A.noalias() += F.transpose() * F;
-      b.noalias() += F.transpose() * r;
-    }
-    if (!jac) {
-      out.setZero();
-      out(kCompressedRows - 1) = std::sqrt(sum);
-      return true;
-    }
-    const Eigen::SelfAdjointEigenSolver<Mat14> es(A);
-    const Vec14 l = es.eigenvalues();
-    const double floor = 1e-12 * std::max(l.maxCoeff(), 0.0);
     Mat14 R;
-    const Vec14 Vb = es.eigenvectors().transpose() * b;
-    for (int i = 0; i < 14; ++i) {
-      const bool empty = !(l(i) > floor);
-      const double sq = empty ? 0.0 : std::sqrt(l(i));
-      R.row(i) = sq * es.eigenvectors().col(i).transpose();
-      out(i) = empty ? 0.0 : Vb(i) / sq;
-    }
-    out(kCompressedRows - 1) = std::sqrt(std::max(0.0, sum - out.head<14>().squaredNorm()));
-    constexpr int rows = kCompressedRows;
+    corners_.compress(ps.e.R, ps.pos, Rci, tci, p[kIntr], p[kDist], residuals, jac ? &R : nullptr);
+    if (!jac) return true;
     for (int blk = 0; blk <= kDist; ++blk)
-      if (jac[blk]) std::fill(jac[blk], jac[blk] + rows * parameter_block_sizes()[blk], 0.0);
+      if (jac[blk]) std::fill(jac[blk], jac[blk] + kCompressedRows * parameter_block_sizes()[blk], 0.0);
     const Eigen::Matrix3d tx = so3::hat(tci);
-    // A block that moves the camera frame by (w, v) = G dx: its 14 rows are R[:, 0:6] G.
-    const auto write = [&](double* J, int ambient, const Eigen::Matrix<double, 6, 3>& G) {
-      const Eigen::Matrix<double, 14, 3> RG = R.leftCols<6>() * G;
-      for (int r = 0; r < 14; ++r)
-        for (int c = 0; c < 3; ++c) J[r * ambient + c] = RG(r, c);
-    };
     Eigen::Matrix<double, 6, 3> G;
     for (int i = 0; i < N; ++i) {
       if (double* J = jac[ps.k0 + i]) {
         const Eigen::Matrix3d RD = Rci * ps.e.dR_dknot[i];
         G.topRows<3>() = -RD;
         G.bottomRows<3>() = -tx * RD;
-        write(J, 4, G);
+        write_motion_block<3>(J, 4, R, G);
       }
       if (double* J = jac[kWindow + ps.k0 + i]) {
         G.topRows<3>().setZero();
         G.bottomRows<3>() = -ps.w0(i) * Rci * Rt;
-        write(J, 3, G);
+        write_motion_block<3>(J, 3, R, G);
       }
-    }
-    if (double* J = jac[kRci]) {
-      G.topRows<3>() = Rci;
-      G.bottomRows<3>() = tx * Rci;
-      write(J, 4, G);
-    }
-    if (double* J = jac[kTci]) {
-      G.topRows<3>().setZero();
-      G.bottomRows<3>().setIdentity();
-      write(J, 3, G);
     }
     if (double* J = jac[kShift]) {
       const Eigen::Vector3d w = Rci * ps.e.omega;
       Eigen::Matrix<double, 6, 1> g;
       g.head<3>() = -w;
       g.tail<3>() = -tx * w - Rci * (Rt * ps.vel);
-      const Eigen::Matrix<double, 14, 1> Rg = R.leftCols<6>() * g;
-      for (int r = 0; r < 14; ++r) J[r] = Rg(r);
+      write_motion_block<1>(J, 1, R, g);
     }
-    for (int c = 0; c < 4; ++c) {
-      for (int r = 0; r < 14; ++r) {
-        if (jac[kIntr]) jac[kIntr][r * 4 + c] = R(r, 6 + c);
-        if (jac[kDist]) jac[kDist][r * 4 + c] = R(r, 10 + c);
-      }
-    }
+    write_camera_blocks(jac[kRci], jac[kTci], jac[kIntr], jac[kDist], R, Rci, tci);
     return true;
   }
 
   bool evaluate_corners(double const* const* p, double* residuals, double** jac) const {
-    const camimu::SplinePose<N> ps =
-        camimu::spline_pose<N>(p, 0, kWindow, t_cam_s_ + p[kShift][0], first_, timing_, jac != nullptr);
+    const camimu::SplinePose<N> ps = pose(p, jac != nullptr);
     const Eigen::Matrix3d Rt = ps.e.R.transpose(), Rci = camimu::quat_matrix(p[kRci]);
     const Eigen::Map<const Eigen::Vector3d> tci(p[kTci]);
     const int rows = num_residuals();
@@ -227,13 +282,12 @@ class ChainFrameResidual final : public ceres::CostFunction {
       for (int b = 0; b < kDist + 1; ++b)
         if (jac[b]) std::fill(jac[b], jac[b] + rows * parameter_block_sizes()[b], 0.0);
     }
-    const auto cj = camera_jet(p);
-    const auto camera = CameraModel::from_params(model_, p[kIntr], p[kDist], width_, height_);
-    for (std::size_t k = 0; k < points_.size(); ++k) {
-      const Eigen::Vector3d pb = Rt * (points_[k] - ps.pos);
+    for (std::size_t k = 0; k < corners_.size(); ++k) {
+      const Eigen::Vector3d pb = Rt * (corners_.point(k) - ps.pos);
       const Eigen::Vector3d pc = Rci * pb + tci;
       Eigen::Matrix<double, 2, 11> Jw;
-      Eigen::Map<Eigen::Vector2d>(residuals + 2 * k) = corner(cj, camera, pc, k, jac ? &Jw : nullptr);
+      Eigen::Map<Eigen::Vector2d>(residuals + 2 * k) =
+          corners_.corner(p[kIntr], p[kDist], pc, k, jac ? &Jw : nullptr);
       if (!jac) continue;
       const Eigen::Matrix<double, 2, 3> Jc = Jw.leftCols<3>();  // d r / d p_cam
       const Eigen::Matrix<double, 2, 3> Jb = Jc * Rci;          // d r / d p_body
@@ -265,16 +319,55 @@ class ChainFrameResidual final : public ceres::CostFunction {
     return true;
   }
 
-  DistortionModel model_;
-  int width_, height_;
-  std::vector<Eigen::Vector3d> points_;
-  std::vector<Eigen::Vector2d> px_;
+  ViewCorners corners_;
   double t_cam_s_;
   int first_;
   SplineTiming<N> timing_;
-  double w_;
-  double c2_;
   bool compressed_;
+};
+
+/// One view against one pose of cam0 (R_wb, p_wb as blocks), always compressed (a view has at
+/// least 8 corners, more rows than the 15 it compresses to).
+class ChainPoseResidual final : public ceres::CostFunction {
+ public:
+  static constexpr int kQ = 0, kP = 1, kRci = 2, kTci = 3, kIntr = 4, kDist = 5;
+
+  explicit ChainPoseResidual(ViewCorners corners) : corners_(std::move(corners)) {
+    set_num_residuals(kCompressedRows);
+    for (int s : {4, 3, 4, 3, 4, 4}) mutable_parameter_block_sizes()->push_back(s);
+  }
+
+  bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
+    const Eigen::Matrix3d Rb = camimu::quat_matrix(p[kQ]), Rci = camimu::quat_matrix(p[kRci]);
+    const Eigen::Map<const Eigen::Vector3d> pb(p[kP]), tci(p[kTci]);
+    Mat14 R;
+    corners_.compress(Rb, pb, Rci, tci, p[kIntr], p[kDist], residuals, jac ? &R : nullptr);
+    if (!jac) return true;
+    for (int blk = 0; blk <= kDist; ++blk)
+      if (jac[blk]) std::fill(jac[blk], jac[blk] + kCompressedRows * parameter_block_sizes()[blk], 0.0);
+    const Eigen::Matrix3d tx = so3::hat(tci);
+    Eigen::Matrix<double, 6, 3> G;
+    if (jac[kQ]) {  // R_wb <- R_wb Exp(d): p_body turns by -d, the camera frame with it
+      G.topRows<3>() = -Rci;
+      G.bottomRows<3>() = -tx * Rci;
+      write_motion_block<3>(jac[kQ], 4, R, G);
+    }
+    if (jac[kP]) {
+      G.topRows<3>().setZero();
+      G.bottomRows<3>() = -Rci * Rb.transpose();
+      write_motion_block<3>(jac[kP], 3, R, G);
+    }
+    write_camera_blocks(jac[kRci], jac[kTci], jac[kIntr], jac[kDist], R, Rci, tci);
+    return true;
+  }
+
+  void pixel_residuals(double const* const* p, std::vector<Eigen::Vector2d>* out) const {
+    corners_.pixel_residuals(camimu::quat_matrix(p[kQ]), Eigen::Vector3d(p[kP][0], p[kP][1], p[kP][2]),
+                             p[kRci], p[kTci], p[kIntr], p[kDist], out);
+  }
+
+ private:
+  ViewCorners corners_;
 };
 
 }  // namespace imucal::calib::chain

@@ -2,6 +2,7 @@
 
 #include <ceres/ceres.h>
 
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -42,6 +43,16 @@ Status CamImuOptions::validate() const {
   if (!(imu_max_rate_hz == 0.0 || imu_max_rate_hz >= 20.0))
     return make_error(Errc::kInvalidArgument,
                       "the IMU's largest rate must be 0 (one residual per sample) or at least 20 Hz");
+  for (const CamImuChainPrior& cp : chain_priors) {
+    const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(cp.covariance);
+    if (cp.camera < 1 || !cp.T_cn_cnm1.matrix().allFinite() || !cp.covariance.allFinite() ||
+        llt.info() != Eigen::Success) {
+      return make_error(Errc::kInvalidArgument,
+                        "the camera chain of " + cp.source +
+                            " has no usable pose or covariance for its camera " + std::to_string(cp.camera) +
+                            " (T_cn_cnm1 with a positive definite covariance is needed)");
+    }
+  }
   return {};
 }
 
@@ -312,6 +323,13 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended, int imu_stride)
       problem->SetParameterBlockConstant(cs.t_ci.data());
     }
     if (opt_.fixed.timeshift) problem->SetParameterBlockConstant(&cs.shift);
+  }
+  for (const CamImuChainPrior& cp : opt_.chain_priors) {
+    CameraState& n = st_.cams[static_cast<std::size_t>(cp.camera)];
+    CameraState& m = st_.cams[static_cast<std::size_t>(cp.camera - 1)];
+    problem->AddResidualBlock(
+        new RelativePosePrior(cp.T_cn_cnm1.linear(), cp.T_cn_cnm1.translation(), cp.covariance), nullptr,
+        {n.q_ci.data(), n.t_ci.data(), m.q_ci.data(), m.t_ci.data()});
   }
   const bool basic = !extended || model_ == CamImuModelKind::kBasic;
   const CamImuFixed& f = opt_.fixed;
@@ -789,6 +807,12 @@ Result<CamImuCalibrationResult> calibrate_camimu(const std::vector<CamImuSample>
                                                  const CamImuProgressFn& progress) {
   if (Status s = options.validate(); !s.ok()) return s.error();
   if (cameras.empty()) return make_error(Errc::kInvalidArgument, "no camera to calibrate against the IMU");
+  for (const CamImuChainPrior& cp : options.chain_priors) {
+    if (static_cast<std::size_t>(cp.camera) >= cameras.size())
+      return make_error(Errc::kInvalidArgument, "a camera chain prior names camera " +
+                                                    std::to_string(cp.camera) + ", but " +
+                                                    std::to_string(cameras.size()) + " are given");
+  }
   int k = 1;
   const std::vector<CamImuSample> averaged = average_imu(imu, options.imu_max_rate_hz, &k);
   CamImuOptions opt = options;

@@ -69,6 +69,17 @@ struct CamImuIntrinsicsPrior {
   std::string source = "MPU-6000 datasheet tolerances";
 };
 
+/// Camera n's pose relative to camera n - 1 from a camera chain (imucal calibrate camera with
+/// several cameras), with its 6 x 6 covariance (rotation as a right perturbation about camera
+/// n's axes, then translation, m): a Gaussian prior on T_cam_imu[n] T_cam_imu[n - 1]^-1, so that
+/// the pair's baseline comes from the chain's views where those know it better than the IMU.
+struct CamImuChainPrior {
+  int camera = 1;  // n >= 1
+  Eigen::Isometry3d T_cn_cnm1 = Eigen::Isometry3d::Identity();
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();
+  std::string source;  // for messages
+};
+
 struct CamImuOptions {
   /// kAuto: basic or extended by the evidence of the IMU residuals (docs/camimu-calibration.md,
   /// "Model choice"); the result says which and why.
@@ -105,6 +116,8 @@ struct CamImuOptions {
   /// initialisation (rotation from angular velocities, offset from the cross-correlation).
   std::vector<std::optional<Eigen::Isometry3d>> T_cam_imu_init;
   std::vector<std::optional<double>> timeshift_init_s;
+  /// Camera-camera extrinsics from a camera chain (empty: each camera through the IMU alone).
+  std::vector<CamImuChainPrior> chain_priors;
   /// Largest |time offset| the cross-correlation searches, s.
   double max_timeshift_s = 0.2;
   int max_iterations = 60;

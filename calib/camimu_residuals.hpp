@@ -529,6 +529,64 @@ bool FrameResidual<N>::evaluate_compressed(double const* const* p, double* resid
   return true;
 }
 
+/// A Gaussian prior on the pose of camera n relative to camera m (both as T_cam_imu blocks):
+/// r = L^-1 [Log(R_obs^T R_n R_m^T); t_n - R_n R_m^T t_m - t_obs], L L^T the covariance.
+/// Blocks: R_n (quaternion), t_n, R_m (quaternion), t_m. Its four tangent Jacobians by central
+/// differences (a dozen evaluations of a 6-vector; one such residual per camera pair).
+class RelativePosePrior final : public ceres::CostFunction {
+ public:
+  RelativePosePrior(const Eigen::Matrix3d& R_obs, const Eigen::Vector3d& t_obs,
+                    const Eigen::Matrix<double, 6, 6>& covariance)
+      : R_obs_t_(R_obs.transpose()), t_obs_(t_obs) {
+    Linv_ = Eigen::Matrix<double, 6, 6>(covariance.llt().matrixL()).inverse();
+    set_num_residuals(6);
+    for (int s : {4, 3, 4, 3}) mutable_parameter_block_sizes()->push_back(s);
+  }
+  bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
+    Eigen::Map<Eigen::Matrix<double, 6, 1>> out(residuals);
+    out = value(quat_matrix(p[0]), vec3(p[1]), quat_matrix(p[2]), vec3(p[3]));
+    if (!jac) return true;
+    const double h = 1e-7;
+    for (int b = 0; b < 4; ++b) {
+      if (!jac[b]) continue;
+      const int ambient = b % 2 == 0 ? 4 : 3;
+      std::fill(jac[b], jac[b] + 6 * ambient, 0.0);
+      for (int k = 0; k < 3; ++k) {
+        Eigen::Matrix<double, 6, 1> plus, minus;
+        for (int sign : {1, -1}) {
+          Eigen::Matrix3d Rn = quat_matrix(p[0]), Rm = quat_matrix(p[2]);
+          Eigen::Vector3d tn = vec3(p[1]), tm = vec3(p[3]);
+          Eigen::Vector3d d = Eigen::Vector3d::Zero();
+          d(k) = sign * h;
+          if (b == 0) Rn = Rn * so3::exp(d);
+          if (b == 1) tn += d;
+          if (b == 2) Rm = Rm * so3::exp(d);
+          if (b == 3) tm += d;
+          (sign > 0 ? plus : minus) = value(Rn, tn, Rm, tm);
+        }
+        const Eigen::Matrix<double, 6, 1> col = (plus - minus) / (2.0 * h);
+        for (int r = 0; r < 6; ++r) jac[b][r * ambient + k] = col(r);
+      }
+    }
+    return true;
+  }
+
+ private:
+  static Eigen::Vector3d vec3(const double* v) { return {v[0], v[1], v[2]}; }
+  Eigen::Matrix<double, 6, 1> value(const Eigen::Matrix3d& Rn, const Eigen::Vector3d& tn,
+                                    const Eigen::Matrix3d& Rm, const Eigen::Vector3d& tm) const {
+    const Eigen::Matrix3d R = Rn * Rm.transpose();
+    Eigen::Matrix<double, 6, 1> e;
+    e.head<3>() = so3::log(R_obs_t_ * R);
+    e.tail<3>() = tn - R * tm - t_obs_;
+    return Linv_ * e;
+  }
+
+  Eigen::Matrix3d R_obs_t_;
+  Eigen::Vector3d t_obs_;
+  Eigen::Matrix<double, 6, 6> Linv_;
+};
+
 /// A Gaussian prior on an R^n block: (x - x0) ./ sigma. Blocks: the one block.
 class VectorPrior final : public ceres::CostFunction {
  public:

@@ -115,6 +115,30 @@ TEST(CameraChain, CamerasAtDifferentRatesArePlacedByTheirOffsets) {
   EXPECT_FALSE(has_warning(*r, "not synchronized"));
 }
 
+// Still pairs seconds apart (a board held in a new place for each pair): no trajectory joins
+// them, so with the offsets held every pair gets its own pose, as in Kalibr.
+TEST(CameraChain, StillPairsWithOffsetsHeldGetOnePoseEach) {
+  TruthCamera c0{chain_camera(480.0, 322.0)};
+  TruthCamera c1{chain_camera(455.0, 316.0), pose(0.02, -0.03, 0.01, {-0.11, 0.004, 0.002}), 0.0};
+  c0.rate_hz = c1.rate_hz = 0.5;
+  const auto inputs = synthesize_chain({c0, c1}, 80.0, 0.15, 23);
+  CameraChainOptions o = test_options();
+  o.estimate_time_offsets = false;
+  auto r = calibrate_camera_chain(chain_board(), inputs, o, {});
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_EQ(r->knot_spacing_s, 0.0);
+  EXPECT_FALSE(r->cameras[1].timeshift_estimated);
+  EXPECT_EQ(r->cameras[1].timeshift_sigma_s, 0.0);
+  const auto& cam = r->cameras[1];
+  for (int i = 0; i < 4; ++i)
+    EXPECT_LT(std::abs(cam.intrinsics.camera.intrinsics(i) - c1.camera.intrinsics(i)),
+              3.0 * cam.intrinsics.intrinsics_sigma(i));
+  const Eigen::Vector3d e = cam.T_cam_cam0.translation() - c1.T_cam_cam0.translation();
+  for (int i = 0; i < 3; ++i)
+    EXPECT_LT(std::abs(e(i)), 3.0 * std::sqrt(cam.T_cam_cam0_covariance(3 + i, 3 + i)));
+  EXPECT_LT(r->rms_px, 0.3);
+}
+
 TEST(CameraChain, AThirdCameraThatOverlapsOnlyTheSecondIsChainedThroughIt) {
   TruthCamera c0{chain_camera(480.0, 322.0)};
   TruthCamera c1{chain_camera(460.0, 318.0), pose(0.01, -0.02, 0.0, {-0.10, 0.0, 0.0}), 0.0};
@@ -262,6 +286,79 @@ TEST(CameraChain, TheResidualsJacobiansMatchNumericOnes) {
     const Eigen::VectorXd gf = Jf.transpose() * rf, gc = Jc.transpose() * rc;
     EXPECT_LT((gf - gc).norm(), 1e-5 * std::max(1.0, gf.norm())) << (robust ? "robust" : "plain");
   }
+}
+
+// The per-stamp pose residual (offsets held): its 15 rows carry the Gauss-Newton matrix and the
+// gradient of the corners' pixel residuals, differentiated numerically in every tangent space.
+TEST(CameraChain, ThePoseResidualsRowsCarryTheCornersGaussNewtonMatrix) {
+  using chain::ChainPoseResidual;
+  std::vector<Eigen::Vector3d> pts;
+  std::vector<Eigen::Vector2d> px;
+  for (int i = 0; i < 12; ++i) {
+    pts.emplace_back(0.05 * (i % 4), 0.04 * (i / 4), 0.0);
+    px.emplace_back(290.0 + 12 * (i % 4) + 0.3 * i, 230.0 + 9 * (i / 4) - 0.2 * i);
+  }
+  const Eigen::Quaterniond qb(Eigen::AngleAxisd(0.2, Eigen::Vector3d(0.1, 1, 0.3).normalized()));
+  std::array<double, 4> q = {qb.x(), qb.y(), qb.z(), qb.w()};
+  std::array<double, 3> p = {0.1, 0.05, -0.7};
+  const Eigen::Quaterniond qc(Eigen::AngleAxisd(0.04, Eigen::Vector3d(0.3, 1, 0.2).normalized()));
+  std::array<double, 4> qci = {qc.x(), qc.y(), qc.z(), qc.w()};
+  std::array<double, 3> tci = {-0.1, 0.01, 0.02};
+  std::array<double, 4> intr = {480.0, 482.0, 320.0, 240.0};
+  std::array<double, 4> dist = {-0.2, 0.05, 0.001, -0.0005};
+  ChainPoseResidual cost(chain::ViewCorners(DistortionModel::kRadtan, 640, 480, pts, px, 1.0, 0.0));
+  std::vector<double*> blocks = {q.data(), p.data(), qci.data(), tci.data(), intr.data(), dist.data()};
+  const auto& sizes = cost.parameter_block_sizes();
+  const std::vector<bool> quat = {true, false, true, false, false, false};
+  std::vector<std::vector<double>> jac(blocks.size());
+  std::vector<double*> jp;
+  for (std::size_t b = 0; b < blocks.size(); ++b) {
+    jac[b].assign(static_cast<std::size_t>(chain::kCompressedRows * sizes[b]), 0.0);
+    jp.push_back(jac[b].data());
+  }
+  std::vector<double> rc(chain::kCompressedRows);
+  ASSERT_TRUE(cost.Evaluate(blocks.data(), rc.data(), jp.data()));
+  std::vector<Eigen::Vector2d> r0;
+  cost.pixel_residuals(blocks.data(), &r0);
+  const int n = static_cast<int>(2 * r0.size());
+  Eigen::MatrixXd Jn(n, 0), Jc(chain::kCompressedRows, 0);
+  camimu::RightQuaternionManifold manifold;
+  for (std::size_t b = 0; b < blocks.size(); ++b) {
+    const int tangent = quat[b] ? 3 : sizes[b];
+    Eigen::MatrixXd Bn(n, tangent), Bc(chain::kCompressedRows, tangent);
+    for (int k = 0; k < tangent; ++k) {
+      const std::vector<double> saved(blocks[b], blocks[b] + sizes[b]);
+      std::vector<Eigen::Vector2d> rp, rm;
+      const double h = quat[b] ? 1e-6 : 1e-6 * std::max(1.0, std::abs(saved[static_cast<std::size_t>(k)]));
+      for (int sign : {1, -1}) {
+        if (quat[b]) {
+          double d[3] = {0, 0, 0};
+          d[k] = sign * h;
+          manifold.Plus(saved.data(), d, blocks[b]);
+        } else {
+          blocks[b][k] = saved[static_cast<std::size_t>(k)] + sign * h;
+        }
+        cost.pixel_residuals(blocks.data(), sign > 0 ? &rp : &rm);
+        std::copy(saved.begin(), saved.end(), blocks[b]);
+      }
+      for (int i = 0; i < n / 2; ++i) Bn.block<2, 1>(2 * i, k) = (rp[i] - rm[i]) / (2 * h);
+      for (int r = 0; r < chain::kCompressedRows; ++r)
+        Bc(r, k) = jac[b][static_cast<std::size_t>(r * sizes[b] + k)];
+    }
+    Eigen::MatrixXd nn(n, Jn.cols() + tangent), nc(chain::kCompressedRows, Jc.cols() + tangent);
+    nn << Jn, Bn;
+    nc << Jc, Bc;
+    Jn = nn;
+    Jc = nc;
+  }
+  Eigen::VectorXd rn(n);
+  for (int i = 0; i < n / 2; ++i) rn.segment<2>(2 * i) = r0[static_cast<std::size_t>(i)];
+  const Eigen::VectorXd rcv = Eigen::Map<const Eigen::VectorXd>(rc.data(), chain::kCompressedRows);
+  EXPECT_NEAR(rcv.squaredNorm(), rn.squaredNorm(), 1e-9 * rn.squaredNorm());
+  const Eigen::MatrixXd Hn = Jn.transpose() * Jn, Hc = Jc.transpose() * Jc;
+  EXPECT_LT((Hn - Hc).norm(), 1e-5 * Hn.norm());
+  const Eigen::VectorXd gn = Jn.transpose() * rn, gc = Jc.transpose() * rcv;
+  EXPECT_LT((gn - gc).norm(), 1e-5 * std::max(1.0, gn.norm()));
 }
 
 }  // namespace
