@@ -215,6 +215,10 @@ class ChainSolver {
   /// The poses of cam0 for cameras triggered together: views within the shared-view tolerance of
   /// each other, one per camera, share a pose.
   void initialise_poses();
+  /// Views within shared_view_fraction of the shortest frame interval of each other on cam0's
+  /// time, one per camera, form a group (a stereo pair's two views of one instant): the index of
+  /// each view's group, and their number.
+  std::vector<std::size_t> group_views(std::size_t* groups) const;
   /// Builds the problem at the current values (c2: the loss scale in sigmas, 0 = none).
   void build(double loss_sigmas);
   Status solve(double loss_sigmas, const std::string& stage);
@@ -258,6 +262,7 @@ class ChainSolver {
     }
   };
   std::vector<ResidualRef> residuals_;  // of the last build, one per view in views_ order
+  std::vector<ceres::ResidualBlockId> residual_ids_;
   std::vector<std::vector<double*>> residual_blocks_;
   int iterations_ = 0;
   std::vector<std::string> warnings_;
@@ -488,38 +493,53 @@ void ChainSolver::initialise_spline() {
   }
 }
 
-void ChainSolver::initialise_poses() {
-  discrete_ = true;
+std::vector<std::size_t> ChainSolver::group_views(std::size_t* groups) const {
   double interval = std::numeric_limits<double>::infinity();
   for (double i : intervals_)
     if (std::isfinite(i) && i > 0.0) interval = std::min(interval, i);
   const double tol = std::isfinite(interval) ? opt_.shared_view_fraction * interval : 1e-3;
+  const auto t_of = [&](std::size_t k) { return views_[k].t + blocks_[views_[k].camera].shift; };
   std::vector<std::size_t> order(views_.size());
   std::iota(order.begin(), order.end(), 0);
-  std::sort(order.begin(), order.end(),
-            [&](std::size_t a, std::size_t b) { return views_[a].t < views_[b].t; });
-  group_of_view_.assign(views_.size(), 0);
-  q_.clear();
-  p_.clear();
+  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return t_of(a) < t_of(b); });
+  std::vector<std::size_t> group(views_.size(), 0);
+  *groups = 0;
   double group_t = -std::numeric_limits<double>::infinity();
   std::vector<bool> has(inputs_.size(), false);
   for (std::size_t i : order) {
-    const ViewData& v = views_[i];
-    if (!(v.t - group_t <= tol) || has[v.camera]) {
-      // A new pose from this view: T_w0 = T_wc T_c0.
-      const CameraViewReport& rep = starts_[v.camera].views[v.report];
-      const Eigen::Matrix3d R_wc = rep.q_cam_target.toRotationMatrix().transpose();
-      const Eigen::Vector3d p_wc = -R_wc * rep.t_cam_target;
-      const Eigen::Matrix3d R_c0 = camimu::quat_matrix(blocks_[v.camera].q.data());
-      const Eigen::Vector3d t_c0(blocks_[v.camera].t[0], blocks_[v.camera].t[1], blocks_[v.camera].t[2]);
-      const Eigen::Vector3d p = R_wc * t_c0 + p_wc;
-      q_.push_back(to_quat(R_wc * R_c0));
-      p_.push_back({p.x(), p.y(), p.z()});
-      group_t = v.t;
+    const std::size_t camera = views_[i].camera;
+    if (!(t_of(i) - group_t <= tol) || has[camera]) {
+      ++*groups;
+      group_t = t_of(i);
       has.assign(inputs_.size(), false);
     }
-    has[v.camera] = true;
-    group_of_view_[i] = q_.size() - 1;
+    has[camera] = true;
+    group[i] = *groups - 1;
+  }
+  return group;
+}
+
+void ChainSolver::initialise_poses() {
+  discrete_ = true;
+  std::size_t groups = 0;
+  group_of_view_ = group_views(&groups);
+  q_.assign(groups, Arr4{0, 0, 0, 0});
+  p_.assign(groups, Arr3{0, 0, 0});
+  std::vector<bool> set(groups, false);
+  for (std::size_t i = 0; i < views_.size(); ++i) {
+    const std::size_t g = group_of_view_[i];
+    if (set[g]) continue;
+    set[g] = true;
+    // The pose from the group's first view: T_w0 = T_wc T_c0.
+    const ViewData& v = views_[i];
+    const CameraViewReport& rep = starts_[v.camera].views[v.report];
+    const Eigen::Matrix3d R_wc = rep.q_cam_target.toRotationMatrix().transpose();
+    const Eigen::Vector3d p_wc = -R_wc * rep.t_cam_target;
+    const Eigen::Matrix3d R_c0 = camimu::quat_matrix(blocks_[v.camera].q.data());
+    const Eigen::Vector3d t_c0(blocks_[v.camera].t[0], blocks_[v.camera].t[1], blocks_[v.camera].t[2]);
+    const Eigen::Vector3d p = R_wc * t_c0 + p_wc;
+    q_[g] = to_quat(R_wc * R_c0);
+    p_[g] = {p.x(), p.y(), p.z()};
   }
 }
 
@@ -530,6 +550,7 @@ void ChainSolver::build(double loss_sigmas) {
   problem_ = std::make_unique<ceres::Problem>(po);
   residuals_.clear();
   residual_blocks_.clear();
+  residual_ids_.clear();
   for (std::size_t i = 0; i < q_.size(); ++i) {
     problem_->AddParameterBlock(q_[i].data(), 4, &quat_manifold);
     if (discrete_) continue;  // every pose is a view's
@@ -558,7 +579,7 @@ void ChainSolver::build(double loss_sigmas) {
       auto* cost = new chain::ChainPoseResidual(chain::ViewCorners(
           inputs_[v.camera].model, width, height, std::move(pts), std::move(px), b.sigma_px, loss_px));
       blocks = {q_[g].data(), p_[g].data(), b.q.data(), b.t.data(), b.intrinsics.data(), b.distortion.data()};
-      problem_->AddResidualBlock(cost, nullptr, blocks);
+      residual_ids_.push_back(problem_->AddResidualBlock(cost, nullptr, blocks));
       residuals_.push_back({nullptr, cost});
     } else {
       const double t = v.t + b.shift;
@@ -571,7 +592,7 @@ void ChainSolver::build(double loss_sigmas) {
         blocks.push_back(p_[static_cast<std::size_t>(first + i)].data());
       for (double* x : {b.q.data(), b.t.data(), &b.shift, b.intrinsics.data(), b.distortion.data()})
         blocks.push_back(x);
-      problem_->AddResidualBlock(cost, nullptr, blocks);
+      residual_ids_.push_back(problem_->AddResidualBlock(cost, nullptr, blocks));
       residuals_.push_back({cost, nullptr});
     }
     residual_blocks_.push_back(std::move(blocks));
@@ -740,11 +761,18 @@ Status ChainSolver::fill(CameraChainResult* out) {
     wanted.push_back(blocks_[c].t.data());
     if (opt_.estimate_time_offsets) wanted.push_back(&blocks_[c].shift);
   }
+  // The views of one instant (every camera's) form a cluster of the robust covariance: their
+  // corners share the errors of the detector, the lens model and the trajectory there.
+  std::size_t groups = 0;
+  const std::vector<std::size_t> group = group_views(&groups);
+  std::vector<std::vector<ceres::ResidualBlockId>> clusters(groups);
+  for (std::size_t k = 0; k < residual_ids_.size(); ++k) clusters[group[k]].push_back(residual_ids_[k]);
   MarginalCovariance cov;
-  const bool have_cov = cov.compute(*problem_, wanted, threads_or_cores(opt_.threads));
+  const bool have_cov = cov.compute(*problem_, wanted, threads_or_cores(opt_.threads), clusters);
   if (!have_cov) warnings_.push_back("the covariance could not be computed: every sigma is not determined");
   const auto block = [&](const double* a, const double* b, int ra, int cb) -> Eigen::MatrixXd {
-    if (have_cov && cov.has(a) && cov.has(b)) return cov.block(a, b);
+    if (have_cov && cov.has(a) && cov.has(b))
+      return cov.has_robust() ? cov.robust_block(a, b) : cov.block(a, b);
     return Eigen::MatrixXd::Constant(ra, cb, kNaN);
   };
   const auto res = residuals_by_camera();
@@ -852,8 +880,8 @@ Status ChainSolver::fill(CameraChainResult* out) {
     if (same_stamps && z > 3.0) {
       warnings_.push_back(
           r.name + "'s frames carry the same stamps as " + out->cameras[0].name + "'s, but show the scene " +
-          format_number("%.2f", 1e3 * r.timeshift_cam0_s) + " +- " +
-          format_number("%.2f", 1e3 * r.timeshift_sigma_s) + " ms " +
+          format_number("%.3f", 1e3 * std::abs(r.timeshift_cam0_s)) + " +- " +
+          format_number("%.2g", 1e3 * r.timeshift_sigma_s) + " ms " +
           (r.timeshift_cam0_s > 0 ? "later" : "earlier") +
           ": the cameras are not synchronized (or their stamps are not their exposure times); "
           "the offset is estimated and used here, and any tool that trusts the stamps will be "
@@ -888,9 +916,19 @@ Result<CameraChainResult> ChainSolver::run(const TargetDescription& target, cons
   out.knot_spacing_s = discrete_ ? 0.0 : timing_.dt_s;
   IMUCAL_TRY(fill(&out));
   if (dropped > 0) {
-    warnings_.push_back(std::to_string(dropped) + " corners beyond " +
-                        format_number("%g", opt_.reject_sigmas) +
-                        " robust sigmas of their camera were left out");
+    std::size_t total = 0;
+    for (const ViewData& v : views_) total += v.px.size();
+    std::string why = std::to_string(dropped) + " corners beyond " + format_number("%g", opt_.reject_sigmas) +
+                      " robust sigmas of their camera were left out";
+    if (20 * static_cast<std::size_t>(dropped) > total) {
+      why += " (" + format_number("%.0f", 100.0 * dropped / static_cast<double>(total)) +
+             " % of them): the model does not fit these views" +
+             (opt_.estimate_time_offsets
+                  ? std::string("; check the detections and the camera models")
+                  : std::string("; cameras that are not triggered together do this with the offsets held: "
+                                "calibrate again without holding them"));
+    }
+    warnings_.push_back(why);
   }
   out.warnings = std::move(warnings_);
   out.iterations = iterations_;

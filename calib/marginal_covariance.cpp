@@ -1,5 +1,6 @@
 #include "calib/marginal_covariance.hpp"
 
+#include <ceres/cost_function.h>
 #include <ceres/crs_matrix.h>
 
 #include <Eigen/Cholesky>
@@ -49,10 +50,13 @@ bool solve_nuisance(const Eigen::SparseMatrix<double>& H_ll, const Eigen::Matrix
 }  // namespace
 
 bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<const double*>& blocks,
-                                 int threads) {
+                                 int threads,
+                                 const std::vector<std::vector<ceres::ResidualBlockId>>& clusters) {
   offset_.clear();
   undetermined_.clear();
   nuisance_regularised_ = false;
+  robust_.resize(0, 0);
+  clusters_ = 0;
   std::set<const double*> wanted;
   std::vector<double*> order;  // the rest first, the wanted blocks last
   for (const double* b : blocks)
@@ -78,22 +82,59 @@ bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<cons
   ceres::Problem::EvaluateOptions eo;
   eo.parameter_blocks = order;
   eo.num_threads = threads;
+  // With clusters: every residual block in cluster order (the others one cluster each), so that
+  // the rows of cluster c are a known range.
+  std::vector<int> row_cluster;
+  if (!clusters.empty()) {
+    std::set<ceres::ResidualBlockId> clustered;
+    for (const auto& c : clusters) {
+      for (ceres::ResidualBlockId id : c) {
+        if (!clustered.insert(id).second) continue;
+        eo.residual_blocks.push_back(id);
+        row_cluster.insert(row_cluster.end(), problem.GetCostFunctionForResidualBlock(id)->num_residuals(),
+                           clusters_);
+      }
+      ++clusters_;
+    }
+    std::vector<ceres::ResidualBlockId> every;
+    problem.GetResidualBlocks(&every);
+    for (ceres::ResidualBlockId id : every) {
+      if (clustered.count(id)) continue;
+      eo.residual_blocks.push_back(id);
+      row_cluster.insert(row_cluster.end(), problem.GetCostFunctionForResidualBlock(id)->num_residuals(),
+                         clusters_++);
+    }
+  }
   ceres::CRSMatrix crs;
-  if (!problem.Evaluate(eo, nullptr, nullptr, nullptr, &crs)) return false;
+  std::vector<double> residuals;
+  if (!problem.Evaluate(eo, nullptr, clusters.empty() ? nullptr : &residuals, nullptr, &crs)) return false;
   Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor>> J(
       crs.num_rows, crs.num_cols, static_cast<Eigen::Index>(crs.values.size()), crs.rows.data(),
       crs.cols.data(), crs.values.data());
   const Eigen::SparseMatrix<double> H = Eigen::SparseMatrix<double>(J.transpose()) * J;
   Eigen::MatrixXd S = Eigen::MatrixXd(H.bottomRightCorner(ng, ng));
+  Eigen::MatrixXd X;  // H_ll^-1 H_lg
   if (nl > 0) {
     const Eigen::MatrixXd H_lg = Eigen::MatrixXd(H.topRightCorner(nl, ng));
-    Eigen::MatrixXd X;
     if (!solve_nuisance(H.topLeftCorner(nl, nl), H_lg, &X, &nuisance_regularised_)) {
       cov_ = Eigen::MatrixXd::Constant(ng, ng, std::nan(""));
       undetermined_.push_back({});  // nothing about the wanted blocks can be said
       return true;
     }
     S -= H_lg.transpose() * X;
+  }
+  // The scores of the clusters projected on the wanted blocks, u_c = [-X^T, I] J_c^T r_c.
+  Eigen::MatrixXd U;
+  if (!clusters.empty()) {
+    std::vector<Eigen::Triplet<double>> t;
+    for (std::size_t r = 0; r < residuals.size(); ++r)
+      if (residuals[r] != 0.0) t.emplace_back(static_cast<int>(r), row_cluster[r], residuals[r]);
+    Eigen::SparseMatrix<double> Rc(crs.num_rows, clusters_);
+    Rc.setFromTriplets(t.begin(), t.end());
+    const Eigen::SparseMatrix<double, Eigen::RowMajor> G =
+        Eigen::SparseMatrix<double>(J.transpose()) * Rc;  // n x C
+    U = Eigen::MatrixXd(G.bottomRows(ng));
+    if (nl > 0) U -= (Eigen::SparseMatrix<double>(G.topRows(nl)).transpose() * X).transpose();
   }
   S = 0.5 * (S + S.transpose());
   // Scale every coordinate to unit information, then split determined from undetermined.
@@ -122,12 +163,26 @@ bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<cons
     undetermined_.push_back(std::move(dir));
   }
   cov_ = d.asDiagonal() * inv * d.asDiagonal();
+  if (clusters_ > 1) {
+    const double c = static_cast<double>(clusters_);
+    robust_ = cov_ * (c / (c - 1.0) * U * U.transpose()) * cov_;
+  }
   for (int i = 0; i < ng; ++i) {
     if (null_weight(i) <= kNullComponent && std::isfinite(cov_(i, i))) continue;
-    cov_.row(i).setConstant(std::nan(""));
-    cov_.col(i).setConstant(std::nan(""));
+    for (Eigen::MatrixXd* m : {&cov_, &robust_}) {
+      if (m->size() == 0) continue;
+      m->row(i).setConstant(std::nan(""));
+      m->col(i).setConstant(std::nan(""));
+    }
   }
   return true;
+}
+
+Eigen::MatrixXd MarginalCovariance::robust_block(const double* a, const double* b) const {
+  const auto& [oa, na] = offset_.at(a);
+  const auto& [ob, nb] = offset_.at(b);
+  if (robust_.size() == 0) return Eigen::MatrixXd::Constant(na, nb, std::nan(""));
+  return robust_.block(oa, ob, na, nb);
 }
 
 Eigen::MatrixXd MarginalCovariance::block(const double* a, const double* b) const {

@@ -45,12 +45,25 @@ class MarginalCovariance {
   /// Computes the covariance of `blocks` (tangent space, loss functions applied) at the
   /// problem's current values. Blocks held constant are left out (has() is false for them).
   /// False only when the problem cannot be evaluated there.
-  bool compute(ceres::Problem& problem, const std::vector<const double*>& blocks, int threads);
+  ///
+  /// With `clusters` (groups of residual blocks whose errors may be shared, such as the views of
+  /// one frame), it also computes the cluster-robust (sandwich) covariance of the same blocks:
+  ///   Cov_r = S^-1 (C / (C - 1) sum_c u_c u_c^T) S^-1,  u_c = [-H_gl H_ll^-1, I] J_c^T r_c,
+  /// S the Schur complement above, C the number of clusters (every residual block in no cluster
+  /// is a cluster of its own). It equals the plain covariance in expectation when the residuals
+  /// are independent and correctly weighted, and grows when residuals of a cluster share an
+  /// error or the weights are too high (docs/camera-calibration.md, "Several cameras").
+  bool compute(ceres::Problem& problem, const std::vector<const double*>& blocks, int threads,
+               const std::vector<std::vector<ceres::ResidualBlockId>>& clusters = {});
 
   /// The covariance block of two blocks passed to compute(), tangent space; NaN where a
   /// coordinate is not determined.
   Eigen::MatrixXd block(const double* a, const double* b) const;
   bool has(const double* b) const { return offset_.count(b) != 0; }
+  /// The cluster-robust covariance block (compute() with clusters); NaN where not determined.
+  Eigen::MatrixXd robust_block(const double* a, const double* b) const;
+  bool has_robust() const { return robust_.size() > 0; }
+  int clusters() const { return clusters_; }
 
   /// The directions the data do not determine (empty when the wanted blocks are all determined).
   const std::vector<Direction>& undetermined() const { return undetermined_; }
@@ -60,6 +73,8 @@ class MarginalCovariance {
 
  private:
   Eigen::MatrixXd cov_;
+  Eigen::MatrixXd robust_;
+  int clusters_ = 0;
   std::map<const double*, std::pair<int, int>> offset_;  // offset, tangent size
   std::vector<Direction> undetermined_;
   bool nuisance_regularised_ = false;

@@ -13,6 +13,7 @@
 
 #include "calib/camera_chain.hpp"
 #include "calib/camera_chain_residuals.hpp"
+#include "calib/marginal_covariance.hpp"
 #include "tests/support/chain_views.hpp"
 
 namespace imucal::calib {
@@ -359,6 +360,61 @@ TEST(CameraChain, ThePoseResidualsRowsCarryTheCornersGaussNewtonMatrix) {
   EXPECT_LT((Hn - Hc).norm(), 1e-5 * Hn.norm());
   const Eigen::VectorXd gn = Jn.transpose() * rn, gc = Jc.transpose() * rcv;
   EXPECT_LT((gn - gc).norm(), 1e-5 * std::max(1.0, gn.norm()));
+}
+
+/// y = a + b x + e, a wanted, b a nuisance parameter; whitened with unit sigma.
+struct LineCost {
+  LineCost(double x, double y) : x_(x), y_(y) {}
+  template <class T>
+  bool operator()(const T* a, const T* b, T* r) const {
+    r[0] = a[0] + b[0] * T(x_) - T(y_);
+    return true;
+  }
+  double x_, y_;
+};
+
+/// The variance of `a` (plain and cluster-robust) fitted to clusters of `m` points whose errors
+/// are unit white noise plus, with `shared`, a unit error common to the cluster.
+std::pair<double, double> line_variances(bool shared, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> n01(0.0, 1.0);
+  std::uniform_real_distribution<double> ux(-1.0, 1.0);
+  double a = 0.0, b = 0.0;
+  ceres::Problem problem;
+  std::vector<std::vector<ceres::ResidualBlockId>> clusters;
+  constexpr int kClusters = 300, kPerCluster = 8;
+  for (int c = 0; c < kClusters; ++c) {
+    const double u = shared ? n01(rng) : 0.0;
+    clusters.emplace_back();
+    for (int k = 0; k < kPerCluster; ++k) {
+      const double x = ux(rng);
+      const double y = 1.0 + 0.5 * x + u + n01(rng);
+      clusters.back().push_back(problem.AddResidualBlock(
+          new ceres::AutoDiffCostFunction<LineCost, 1, 1, 1>(new LineCost(x, y)), nullptr, &a, &b));
+    }
+  }
+  ceres::Solver::Options o;
+  o.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(o, &problem, &summary);
+  MarginalCovariance cov;
+  EXPECT_TRUE(cov.compute(problem, {&a}, 1, clusters));
+  EXPECT_TRUE(cov.has_robust());
+  EXPECT_EQ(cov.clusters(), kClusters);
+  return {cov.block(&a, &a)(0, 0), cov.robust_block(&a, &a)(0, 0)};
+}
+
+// The sandwich equals the plain covariance on independent, correctly weighted residuals, and
+// grows when a cluster of 8 shares a unit error the plain covariance does not know of: the
+// variance of a cluster's sum is 8 + 64 instead of 8, so 9 times.
+TEST(MarginalCovariance, TheClusterRobustCovarianceSeesSharedErrors) {
+  const auto [plain, robust] = line_variances(false, 3);
+  EXPECT_NEAR(plain, 1.0 / 2400.0, 1e-6);  // 1 / n for the mean of n unit-noise points
+  EXPECT_NEAR(robust / plain, 1.0, 0.2);
+  const auto [plain_s, robust_s] = line_variances(true, 5);
+  EXPECT_NEAR(plain_s, 1.0 / 2400.0, 1e-6);  // the plain one does not see the shared error
+  EXPECT_GT(robust_s / plain_s, 6.5);
+  EXPECT_LT(robust_s / plain_s, 12.0);
 }
 
 }  // namespace
