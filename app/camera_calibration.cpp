@@ -321,7 +321,7 @@ std::string cache_path(const std::string& dir, std::uint64_t fingerprint) {
   return dir + "/" + name;
 }
 
-/// Opens the log, picks the stream and applies the damage policy.
+/// Opens the log, picks the stream (q.camera) and applies the damage policy.
 Result<std::unique_ptr<log::SessionLogReader>> open_log(const CameraCalibrationRequest& q,
                                                         CameraCalibrationReport* report) {
   auto reader = log::SessionLogReader::open(q.log_path);
@@ -424,15 +424,13 @@ Result<StreamDetections> detect_target_in_stream(const log::SessionLogReader& re
   return out;
 }
 
-Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequest& q) {
-  IMUCAL_TRY(q.intrinsics.validate());
-  IMUCAL_TRY(q.target.validate());
-  CameraCalibrationReport report;
-  report.log_path = q.log_path;
-  report.target = q.target;
-  report.target_source = q.target_source;
-  auto reader = open_log(q, &report);
-  if (!reader.ok()) return reader.error();
+namespace {
+
+/// The detection of one stream into `report` (its stream chosen by open_log): the figures, the
+/// warnings and the observations.
+Result<std::vector<calib::TargetObservation>> detect_for_report(const CameraCalibrationRequest& q,
+                                                                const log::SessionLogReader& reader,
+                                                                CameraCalibrationReport* report) {
   StreamDetectionRequest dq;
   dq.log_path = q.log_path;
   dq.target = q.target;
@@ -443,19 +441,85 @@ Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequ
   dq.cache_dir = q.cache_dir;
   dq.allow_damaged = q.allow_damaged;
   dq.progress = q.detection_progress;
-  auto found = detect_target_in_stream(**reader, report.stream_id, dq);
+  auto found = detect_target_in_stream(reader, report->stream_id, dq);
   if (!found.ok()) return found.error();
-  report.frames = found->frames;
-  report.frames_with_target = found->frames_with_target;
-  report.frames_failed = found->frames_failed;
-  report.detection_key = found->key;
-  report.detections_reused_from = found->reused_from;
-  report.detections_stored_in = found->stored_in;
-  report.detection_wall_s = found->wall_s;
-  report.detection_threads = found->threads;
-  report.warnings.insert(report.warnings.end(), found->warnings.begin(), found->warnings.end());
-  auto result =
-      calib::calibrate_camera_intrinsics(q.target, found->observations, q.intrinsics, q.solve_progress);
+  report->frames = found->frames;
+  report->frames_with_target = found->frames_with_target;
+  report->frames_failed = found->frames_failed;
+  report->detection_key = found->key;
+  report->detections_reused_from = found->reused_from;
+  report->detections_stored_in = found->stored_in;
+  report->detection_wall_s = found->wall_s;
+  report->detection_threads = found->threads;
+  report->warnings.insert(report->warnings.end(), found->warnings.begin(), found->warnings.end());
+  return std::move(found->observations);
+}
+
+/// A report for the log and target of `q`, with its stream opened (q.camera).
+Result<std::unique_ptr<log::SessionLogReader>> start_report(const CameraCalibrationRequest& q,
+                                                            CameraCalibrationReport* report) {
+  report->log_path = q.log_path;
+  report->target = q.target;
+  report->target_source = q.target_source;
+  return open_log(q, report);
+}
+
+}  // namespace
+
+Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q) {
+  IMUCAL_TRY(q.base.intrinsics.validate());
+  IMUCAL_TRY(q.base.target.validate());
+  if (q.cameras.size() < 2 || q.models.size() != q.cameras.size()) {
+    return make_error(Errc::kInvalidArgument,
+                      "a camera chain needs two or more cameras, each with its model");
+  }
+  calib::CameraChainOptions options = q.chain;
+  options.intrinsics = q.base.intrinsics;
+  options.threads = q.base.threads;
+  IMUCAL_TRY(options.validate());
+  CameraChainReport out;
+  std::vector<calib::CameraChainInput> inputs;
+  for (std::size_t c = 0; c < q.cameras.size(); ++c) {
+    CameraCalibrationRequest one = q.base;
+    one.camera = q.cameras[c];
+    CameraCalibrationReport report;
+    auto reader = start_report(one, &report);
+    if (!reader.ok()) return reader.error();
+    for (const auto& earlier : out.cameras) {
+      if (earlier.stream_id == report.stream_id) {
+        return make_error(Errc::kInvalidArgument, "camera stream '" + report.stream.name + "' is named twice")
+            .with_remedy("camera");
+      }
+    }
+    auto obs = detect_for_report(one, **reader, &report);
+    if (!obs.ok()) return obs.error();
+    calib::CameraChainInput in;
+    in.name = "cam" + std::to_string(c);
+    if (report.stream.name != in.name) in.name += " (" + report.stream.name + ")";
+    in.model = q.models[c];
+    in.observations = std::move(*obs);
+    inputs.push_back(std::move(in));
+    out.warnings.insert(out.warnings.end(), report.warnings.begin(), report.warnings.end());
+    out.cameras.push_back(std::move(report));
+  }
+  auto chain = calib::calibrate_camera_chain(q.base.target, inputs, options, q.base.solve_progress);
+  if (!chain.ok()) return chain.error().context(q.base.log_path);
+  for (std::size_t c = 0; c < out.cameras.size(); ++c)
+    out.cameras[c].intrinsics = chain->cameras[c].intrinsics;
+  out.warnings.insert(out.warnings.end(), chain->warnings.begin(), chain->warnings.end());
+  out.chain = std::move(*chain);
+  return out;
+}
+
+Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequest& q) {
+  IMUCAL_TRY(q.intrinsics.validate());
+  IMUCAL_TRY(q.target.validate());
+  CameraCalibrationReport report;
+  auto reader = start_report(q, &report);
+  if (!reader.ok()) return reader.error();
+  auto found = detect_for_report(q, **reader, &report);
+  if (!found.ok()) return found.error();
+  auto result = calib::calibrate_camera_intrinsics(q.target, *found, q.intrinsics, q.solve_progress);
   if (!result.ok()) return result.error().context("camera '" + report.stream.name + "' of " + q.log_path);
   report.intrinsics = std::move(*result);
   report.warnings.insert(report.warnings.end(), report.intrinsics.warnings.begin(),

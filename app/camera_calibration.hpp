@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "calib/camera_chain.hpp"
 #include "calib/camera_intrinsics.hpp"
 #include "calib/target_detection.hpp"
 #include "core/frame.hpp"
@@ -102,6 +103,27 @@ struct CameraCalibrationReport {
   calib::CameraIntrinsicsResult intrinsics;
   std::vector<std::string> warnings;  // of the detection, the log and the solve
 };
+
+/// Several camera streams of one log calibrated together (calib/camera_chain.hpp).
+struct CameraChainRequest {
+  /// The log, target, detection, threads, cache and damage policy as for one camera; its
+  /// `camera` is not used, and `intrinsics` holds the rejection rules of every camera.
+  CameraCalibrationRequest base;
+  std::vector<std::string> cameras;     // stream names, cam0 first; at least two
+  std::vector<DistortionModel> models;  // one per camera
+  calib::CameraChainOptions chain;      // its `intrinsics` and `threads` are set from base
+};
+
+struct CameraChainReport {
+  /// Per camera: the stream, its detection figures, and its intrinsics from the joint solve.
+  std::vector<CameraCalibrationReport> cameras;
+  calib::CameraChainResult chain;
+  std::vector<std::string> warnings;  // of the detections, the log and the joint solve
+};
+
+/// The detection over every named stream (or the stored detections), then the joint solve.
+/// Errors as calibrate_camera_log's, and the chain's (a camera that shares no view).
+[[nodiscard]] Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& request);
 
 /// Runs the detection (or reuses stored detections) and the intrinsics solve. Errors: the log's
 /// (kNotFound, kCorrupt: a damaged log without allow_damaged), kInsufficientData (too few views

@@ -8,6 +8,7 @@
 extern "C" __attribute__((visibility("default"))) const void* imucal_camera_module() {
   static const imucal::app::CameraModuleApi api{{imucal::kVersion, imucal::kModuleAbi},
                                                 &imucal::app::calibrate_camera_log,
+                                                &imucal::app::calibrate_camera_chain_log,
                                                 &imucal::app::calibrate_camimu_log,
                                                 &imucal::calib::TargetDetector::create};
   return &api;

@@ -17,6 +17,7 @@ inline constexpr const char* kCameraModuleEntry = "imucal_camera_module";
 struct CameraModuleApi {
   ModuleHeader header;
   decltype(&calibrate_camera_log) calibrate_camera;
+  decltype(&calibrate_camera_chain_log) calibrate_camera_chain;
   decltype(&calibrate_camimu_log) calibrate_camimu;
   decltype(&calib::TargetDetector::create) target_detector;
 };

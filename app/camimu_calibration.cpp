@@ -84,6 +84,27 @@ Status prepare_options(const CamImuRequest& q, CamImuReport* report) {
   if (q.imu_intrinsics) report->imu_intrinsics_source = q.imu_intrinsics->path;
   if (q.gsens) report->gsens_source = q.gsens->path;
   if (report->options.threads == 0) report->options.threads = q.threads;
+  // Camera-camera extrinsics from a camera chain, where the chain gives their covariance.
+  for (std::size_t i = 1; i < q.cameras.size(); ++i) {
+    const CamchainCamera& cam = q.cameras[i];
+    if (!cam.follows_in_file || !cam.T_cn_cnm1) continue;
+    if (!cam.T_cn_cnm1_covariance) {
+      report->notes.push_back(cam.source + ": its T_cn_cnm1 comes without a covariance, so it is not used; " +
+                              cam.name +
+                              " is placed through the IMU alone (imucal calibrate camera with both "
+                              "cameras gives the chain with its covariance)");
+      continue;
+    }
+    calib::CamImuChainPrior prior;
+    prior.camera = static_cast<int>(i);
+    prior.T_cn_cnm1 = *cam.T_cn_cnm1;
+    prior.covariance = *cam.T_cn_cnm1_covariance;
+    prior.source = cam.source;
+    report->options.chain_priors.push_back(prior);
+    report->notes.push_back(cam.name + "'s pose relative to " + q.cameras[i - 1].name +
+                            " enters from the camera chain in " + cam.source +
+                            " as a prior with its covariance");
+  }
   return {};
 }
 

@@ -68,6 +68,56 @@ Result<CanonicalImuModel> model_on_nominal_si(const NamedCalibration& c, const I
 
 }  // namespace
 
+namespace {
+
+/// A camera's T_cn_cnm1 (4 rows of 4, a rigid transform) and, when imucal wrote the file, the
+/// covariance under `imucal: T_cn_cnm1_covariance` (6 rows of 6; absent or with a null: none).
+Result<std::pair<Eigen::Isometry3d, std::optional<Eigen::Matrix<double, 6, 6>>>> read_chain_pose(
+    const YAML::Node& node, const std::string& where) {
+  Eigen::Matrix4d m;
+  try {
+    const YAML::Node rows = node["T_cn_cnm1"];
+    if (!rows.IsSequence() || rows.size() != 4) throw YAML::Exception(YAML::Mark(), "4 rows");
+    for (int r = 0; r < 4; ++r) {
+      if (!rows[r].IsSequence() || rows[r].size() != 4) throw YAML::Exception(YAML::Mark(), "4 columns");
+      for (int c = 0; c < 4; ++c) m(r, c) = rows[r][c].as<double>();
+    }
+  } catch (const YAML::Exception&) {
+    return make_error(Errc::kCorrupt, where + ": T_cn_cnm1 must be 4 rows of 4 numbers");
+  }
+  const Eigen::Matrix3d R = m.topLeftCorner<3, 3>();
+  if (!m.allFinite() || !(R.transpose() * R).isApprox(Eigen::Matrix3d::Identity(), 1e-6) ||
+      R.determinant() < 0 || !m.row(3).isApprox(Eigen::RowVector4d(0, 0, 0, 1))) {
+    return make_error(Errc::kCorrupt, where + ": T_cn_cnm1 is not a rigid transform");
+  }
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = R;
+  T.translation() = m.topRightCorner<3, 1>();
+  std::optional<Eigen::Matrix<double, 6, 6>> cov;
+  const YAML::Node c = node["imucal"] ? node["imucal"]["T_cn_cnm1_covariance"] : YAML::Node();
+  if (c && c.IsSequence() && c.size() == 6) {
+    Eigen::Matrix<double, 6, 6> C;
+    bool ok = true;
+    for (int r = 0; ok && r < 6; ++r) {
+      ok = c[r].IsSequence() && c[r].size() == 6;
+      for (int k = 0; ok && k < 6; ++k) {
+        ok = c[r][k].IsScalar();
+        if (ok) {
+          try {
+            C(r, k) = c[r][k].as<double>();
+          } catch (const YAML::Exception&) {
+            ok = false;
+          }
+        }
+      }
+    }
+    if (ok && C.allFinite()) cov = C;
+  }
+  return std::make_pair(T, cov);
+}
+
+}  // namespace
+
 Result<std::vector<CamchainCamera>> read_camchain(const std::string& path) {
   auto root = load_yaml(path);
   if (!root.ok()) return root.error();
@@ -94,6 +144,12 @@ Result<std::vector<CamchainCamera>> read_camchain(const std::string& path) {
     } catch (const YAML::Exception&) {
       return make_error(Errc::kCorrupt, path + " " + name + ": rostopic and camera_stream must be text");
     }
+    if (i > 0 && node["T_cn_cnm1"]) {
+      auto chain = read_chain_pose(node, path + " " + name);
+      if (!chain.ok()) return chain.error();
+      cam.T_cn_cnm1 = chain->first;
+      cam.T_cn_cnm1_covariance = chain->second;
+    }
     out.push_back(std::move(cam));
   }
   return out;
@@ -110,9 +166,11 @@ Result<std::vector<CamchainCamera>> read_camchain_files(const std::vector<std::s
   for (const auto& path : paths) {
     auto cams = read_camchain(path);
     if (!cams.ok()) return cams.error();
-    for (auto& cam : *cams) {
+    for (std::size_t k = 0; k < cams->size(); ++k) {
+      CamchainCamera& cam = (*cams)[k];
       cam.source = path + " " + cam.name;
       cam.name = "cam" + std::to_string(out.size());
+      cam.follows_in_file = k > 0;
       out.push_back(std::move(cam));
     }
   }

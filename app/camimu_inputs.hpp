@@ -6,6 +6,7 @@
 // blocks to fix. Formats and conversions: docs/camimu-calibration.md, "Inputs".
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <cstddef>
 #include <map>
 #include <optional>
@@ -30,6 +31,13 @@ struct CamchainCamera {
   CameraModel camera;
   std::string camera_stream;  // `imucal: camera_stream:` (written by imucal calibrate camera)
   std::string rostopic;       // Kalibr's topic, e.g. /cam0/image_raw
+  /// Kalibr's T_cn_cnm1 (camN >= 1 of a chain) and, from imucal's chain, its 6 x 6 covariance
+  /// (`imucal: T_cn_cnm1_covariance:`, rotation about camN's axes then translation).
+  std::optional<Eigen::Isometry3d> T_cn_cnm1;
+  std::optional<Eigen::Matrix<double, 6, 6>> T_cn_cnm1_covariance;
+  /// Set by read_camchain_files: the camera before it in the list is the one before it in the
+  /// same file, so T_cn_cnm1 relates the two.
+  bool follows_in_file = false;
 };
 
 /// The cameras of a camchain YAML in the order cam0, cam1, ... Errors: kNotFound (unreadable

@@ -25,6 +25,12 @@ Result<CameraCalibrationReport> calibrate_camera(const CameraCalibrationRequest&
   return (*api)->calibrate_camera(request);
 }
 
+Result<CameraChainReport> calibrate_camera_chain(const CameraChainRequest& request) {
+  auto api = load_module<CameraModuleApi>(kCameraModule, kCameraModuleEntry);
+  if (!api.ok()) return api.error();
+  return (*api)->calibrate_camera_chain(request);
+}
+
 Result<CamImuReport> calibrate_camimu(const CamImuRequest& request) {
   auto api = load_module<CameraModuleApi>(kCameraModule, kCameraModuleEntry);
   if (!api.ok()) return api.error();

@@ -29,6 +29,9 @@ namespace imucal::app {
 /// intrinsics solve); fails with the loader's error when the module cannot be loaded.
 [[nodiscard]] Result<CameraCalibrationReport> calibrate_camera(const CameraCalibrationRequest& request);
 
+/// app::calibrate_camera_chain_log through the camera module (several cameras in one solve).
+[[nodiscard]] Result<CameraChainReport> calibrate_camera_chain(const CameraChainRequest& request);
+
 /// app::calibrate_camimu_log through the camera module libimucal_camera.so (detection and the
 /// camera-IMU estimator); fails with the loader's error when the module cannot be loaded.
 [[nodiscard]] Result<CamImuReport> calibrate_camimu(const CamImuRequest& request);

@@ -44,9 +44,23 @@ struct FramePlan {
   TimeNs period_ns = 0;
 };
 
-Result<FramePlan> plan_frames(const CamImuSimOptions& options, const sim::CheckerboardMotion& traj) {
+/// One camera of the session: cam0 from the options' own fields, then more_cameras.
+struct SimCam {
+  CameraModel camera;
+  Eigen::Isometry3d T_cam_imu = Eigen::Isometry3d::Identity();
+  double timeshift_cam_imu_s = 0.0;
+};
+
+std::vector<SimCam> cameras_of(const CamImuSimOptions& options) {
+  std::vector<SimCam> out{{options.camera, options.T_cam_imu, options.timeshift_cam_imu_s}};
+  for (const auto& c : options.more_cameras) out.push_back({c.camera, c.T_cam_imu, c.timeshift_cam_imu_s});
+  return out;
+}
+
+Result<FramePlan> plan_frames(const CamImuSimOptions& options, const SimCam& cam,
+                              const sim::CheckerboardMotion& traj) {
   FramePlan plan;
-  const TimeNs shift_ns = s_to_ns(options.timeshift_cam_imu_s);
+  const TimeNs shift_ns = s_to_ns(cam.timeshift_cam_imu_s);
   const TimeNs half_exposure_ns = options.exposure_ns / 2;
   plan.period_ns = static_cast<TimeNs>(std::llround(1e9 / options.camera_rate_hz));
   const double period = static_cast<double>(plan.period_ns);
@@ -60,27 +74,36 @@ Result<FramePlan> plan_frames(const CamImuSimOptions& options, const sim::Checke
   return plan;
 }
 
-SimCameraScene scene_of(const CamImuSimOptions& options, TimeNs host_offset_ns) {
+SimCameraScene scene_of(const CamImuSimOptions& options, const SimCam& cam, std::size_t index,
+                        TimeNs host_offset_ns) {
   SimCameraScene scene;
-  scene.camera = options.camera;
+  scene.camera = cam.camera;
   scene.target = options.target;
-  scene.T_cam_imu = options.T_cam_imu;
-  scene.timeshift_cam_imu_s = options.timeshift_cam_imu_s;
+  scene.T_cam_imu = cam.T_cam_imu;
+  scene.timeshift_cam_imu_s = cam.timeshift_cam_imu_s;
   scene.exposure_ns = options.exposure_ns;
   scene.render.noise_sigma_dn = options.noise_sigma_dn;
   scene.render.supersampling = options.supersampling;
   scene.render.optics_blur_sigma_px = options.optics_blur_sigma_px;
   scene.motion_blur = options.motion_blur;
-  scene.seed = options.seed;
+  // Each camera's noise of its own.
+  scene.seed = options.seed + 7919 * index;
   scene.host_offset_ns = host_offset_ns;
   return scene;
 }
 
-/// The IMU session's options with the virtual camera attached.
-SimImuSessionOptions session_options(const CamImuSimOptions& options, const FramePlan& plan,
+SimSessionCamera session_camera(const CamImuSimOptions& options, const SimCam& sc, std::size_t c,
+                                const FramePlan& plan, const sim::CheckerboardMotion& traj,
+                                std::shared_ptr<SceneFrameSource>* source_out, const ProgressFn& progress,
+                                acq::CameraAcquisitionStats* stats);
+
+/// The IMU session's options with the virtual cameras attached (plans[c], sources[c] and
+/// stats[c] for camera c, the vectors sized to the cameras).
+SimImuSessionOptions session_options(const CamImuSimOptions& options, const std::vector<FramePlan>& plans,
                                      const sim::CheckerboardMotion& traj,
-                                     std::shared_ptr<SceneFrameSource>* source_out,
-                                     const ProgressFn& progress, acq::CameraAcquisitionStats* stats) {
+                                     std::vector<std::shared_ptr<SceneFrameSource>>* sources,
+                                     const ProgressFn& progress,
+                                     std::vector<acq::CameraAcquisitionStats>* stats) {
   SimImuSessionOptions o;
   o.kind = "camimu";
   o.script = "checkerboard";
@@ -101,24 +124,37 @@ SimImuSessionOptions session_options(const CamImuSimOptions& options, const Fram
       {"timestamp_source",
        "mid-exposure"}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   o.metadata.emplace_back("target", target_to_yaml(options.target));
+  const std::vector<SimCam> cams = cameras_of(options);
+  for (std::size_t c = 0; c < cams.size(); ++c) {
+    o.cameras.push_back(session_camera(options, cams[c], c, plans[c], traj, &(*sources)[c],
+                                       c == 0 ? progress : ProgressFn{}, &(*stats)[c]));
+  }
+  return o;
+}
+
+/// Camera c of the session: its virtual camera rendering the board along `traj`.
+SimSessionCamera session_camera(const CamImuSimOptions& options, const SimCam& sc, std::size_t c,
+                                const FramePlan& plan, const sim::CheckerboardMotion& traj,
+                                std::shared_ptr<SceneFrameSource>* source_out, const ProgressFn& progress,
+                                acq::CameraAcquisitionStats* stats) {
   SimSessionCamera cam;
-  cam.info.name = "cam0";
+  cam.info.name = "cam" + std::to_string(c);
   cam.info.backend = "sim";
   cam.info.device = "sim";
   cam.stream.encoding = options.image_encoding;
   cam.stream.png_level = 9;
   cam.stats_out = stats;
   const std::int64_t frames = plan.k1 - plan.k0 + 1;
-  cam.make = [&options, plan, frames, &traj, source_out, progress](
+  cam.make = [&options, sc, c, plan, frames, &traj, source_out, progress](
                  std::function<TimeNs()> clock,
                  TimeNs offset) -> Result<std::unique_ptr<drivers::camera::Camera>> {
-    auto source = SceneFrameSource::create(scene_of(options, offset), traj);
+    auto source = SceneFrameSource::create(scene_of(options, sc, c, offset), traj);
     if (!source.ok()) return source.error();
     *source_out = std::move(*source);
     auto render = SceneFrameSource::as_renderer(*source_out);
     drivers::camera::fake::VirtualCameraOptions vo;
-    vo.width = options.camera.width;
-    vo.height = options.camera.height;
+    vo.width = sc.camera.width;
+    vo.height = sc.camera.height;
     vo.rate_hz = options.camera_rate_hz;
     vo.exposure_ns = options.exposure_ns;
     vo.first_frame_ns = plan.k0 * plan.period_ns + offset;
@@ -132,25 +168,31 @@ SimImuSessionOptions session_options(const CamImuSimOptions& options, const Fram
     if (!camera.ok()) return camera.error();
     return std::unique_ptr<drivers::camera::Camera>(std::move(*camera));
   };
-  o.cameras.push_back(std::move(cam));
-  return o;
+  return cam;
 }
 
 /// The truth file: the IMU truth plus the camera in Kalibr camchain naming.
 YAML::Node camimu_truth_yaml(const CamImuSimOptions& options, const sim::SimTruth& truth,
                              const Eigen::Isometry3d& T_world_board, const CamImuSimSummary& sum) {
   YAML::Node doc = sim::truth_to_yaml(truth);
-  YAML::Node cam0(YAML::NodeType::Map);
-  cam0["T_cam_imu"] = matrix_yaml(options.T_cam_imu.matrix());
-  camera_to_yaml(options.camera, cam0);
-  cam0["timeshift_cam_imu"] = options.timeshift_cam_imu_s;
-  cam0["rate_hz"] = options.camera_rate_hz;
-  cam0["exposure_ns"] = options.exposure_ns;
-  cam0["timestamp"] = "mid-exposure";
   YAML::Node camera(YAML::NodeType::Map);
   camera["convention"] =
-      "T_cam_imu maps IMU (body) points into the camera frame; t_imu = t_cam + timeshift_cam_imu";
-  camera["cam0"] = cam0;
+      "T_cam_imu maps IMU (body) points into the camera frame; t_imu = t_cam + timeshift_cam_imu; "
+      "T_cn_cnm1 maps camera n-1's points into camera n's frame";
+  const std::vector<SimCam> cams = cameras_of(options);
+  for (std::size_t c = 0; c < cams.size(); ++c) {
+    YAML::Node cam(YAML::NodeType::Map);
+    cam["T_cam_imu"] = matrix_yaml(cams[c].T_cam_imu.matrix());
+    if (c > 0) cam["T_cn_cnm1"] = matrix_yaml((cams[c].T_cam_imu * cams[c - 1].T_cam_imu.inverse()).matrix());
+    camera_to_yaml(cams[c].camera, cam);
+    cam["timeshift_cam_imu"] = cams[c].timeshift_cam_imu_s;
+    // t_cam0 = t_cam + timeshift_cam_cam0 for the same scene.
+    cam["timeshift_cam_cam0"] = cams[c].timeshift_cam_imu_s - cams[0].timeshift_cam_imu_s;
+    cam["rate_hz"] = options.camera_rate_hz;
+    cam["exposure_ns"] = options.exposure_ns;
+    cam["timestamp"] = "mid-exposure";
+    camera["cam" + std::to_string(c)] = cam;
+  }
   camera["target"] = YAML::Load(target_to_yaml(options.target));
   camera["T_world_target"] = matrix_yaml(T_world_board.matrix());
   YAML::Node render(YAML::NodeType::Map);
@@ -180,25 +222,34 @@ Status simulate_camimu_session(const CamImuSimOptions& options, const std::strin
   if (!motion.ok()) return motion.error();
   const sim::CheckerboardMotion& traj = **motion;
 
-  auto plan = plan_frames(options, traj);
-  if (!plan.ok()) return plan.error();
-  acq::CameraAcquisitionStats camera_stats;
-  std::shared_ptr<SceneFrameSource> source;
+  const std::vector<SimCam> cams = cameras_of(options);
+  std::vector<FramePlan> plans;
+  for (const SimCam& c : cams) {
+    auto plan = plan_frames(options, c, traj);
+    if (!plan.ok()) return plan.error();
+    plans.push_back(*plan);
+  }
+  std::vector<acq::CameraAcquisitionStats> camera_stats(cams.size());
+  std::vector<std::shared_ptr<SceneFrameSource>> sources(cams.size());
   auto imu_truth = write_sim_imu_session(
-      session_options(options, *plan, traj, &source, progress, &camera_stats), traj, log_path, "");
+      session_options(options, plans, traj, &sources, progress, &camera_stats), traj, log_path, "");
   if (!imu_truth.ok()) return imu_truth.error();
-  if (!source) return make_error(Errc::kInternal, "camimu: the camera was never built");
   CamImuSimSummary sum;
   sum.imu_samples = imu_truth->recording.samples;
-  sum.frames = source->stats().frames;
-  sum.frames_all_corners_visible = source->stats().frames_all_points_visible;
-  sum.frames_no_corner_visible = source->stats().frames_no_point_visible;
-  sum.image_bytes = static_cast<std::int64_t>(camera_stats.stream.encoded_bytes);
-  if (camera_stats.stream.written != static_cast<std::uint64_t>(sum.frames)) {
-    return make_error(Errc::kInternal, "camimu: " + std::to_string(sum.frames) + " frames rendered but " +
-                                           std::to_string(camera_stats.stream.written) + " written");
+  for (std::size_t c = 0; c < cams.size(); ++c) {
+    const auto& source = sources[c];
+    if (!source) return make_error(Errc::kInternal, "camimu: a camera was never built");
+    const auto frames = static_cast<std::int64_t>(source->stats().frames);
+    sum.frames += frames;
+    sum.frames_all_corners_visible += source->stats().frames_all_points_visible;
+    sum.frames_no_corner_visible += source->stats().frames_no_point_visible;
+    sum.image_bytes += static_cast<std::int64_t>(camera_stats[c].stream.encoded_bytes);
+    if (camera_stats[c].stream.written != static_cast<std::uint64_t>(frames)) {
+      return make_error(Errc::kInternal, "camimu: " + std::to_string(frames) + " frames rendered but " +
+                                             std::to_string(camera_stats[c].stream.written) + " written");
+    }
   }
-  const Eigen::Isometry3d T_world_board = source->T_world_target();
+  const Eigen::Isometry3d T_world_board = sources[0]->T_world_target();
 
   const sim::SimTruth& truth = *imu_truth;
   sum.duration_s = truth.trajectory.duration_s;

@@ -26,6 +26,16 @@
 
 namespace imucal::sim {
 
+/// A further camera of the simulated session (cam1, cam2, ...), with its own intrinsics, pose on
+/// the rig and stamp offset; it renders the same board at the same rate and exposure as cam0.
+struct CamImuSimCamera {
+  CameraModel camera;
+  /// Points in the IMU (body) frame -> this camera's frame.
+  Eigen::Isometry3d T_cam_imu = Eigen::Isometry3d::Identity();
+  /// t_imu = t_cam + timeshift_cam_imu_s for this camera's stamps.
+  double timeshift_cam_imu_s = 0.0;
+};
+
 struct CamImuSimOptions {
   std::uint64_t seed = 1;
   /// The motion in front of the board (sim/motion.hpp): 60-90 s is what the
@@ -47,6 +57,8 @@ struct CamImuSimOptions {
   double timeshift_cam_imu_s = 0.0042;
   /// The board: inner corners and spacing (Kalibr semantics).
   TargetDescription target = default_sim_target();
+  /// Cameras after cam0 (a stereo pair: one; default none).
+  std::vector<CamImuSimCamera> more_cameras;
 
   // Image formation (sim/camera_render.hpp).
   /// Gaussian sensor noise, grey levels. Low by default to keep the fixture small (noise is
@@ -65,6 +77,11 @@ struct CamImuSimOptions {
   static CameraModel default_sim_camera();
   static Eigen::Isometry3d default_T_cam_imu();
   static TargetDescription default_sim_target();
+  /// The stereo partner of the default camera: 11 cm to cam0's left (its x axis), turned by
+  /// about a degree, a little different focal length and principal point, its stamps
+  /// `offset_s` later than cam0's for the same scene (0: the pair is synchronized).
+  static CamImuSimCamera default_stereo_camera(const CameraModel& cam0, const Eigen::Isometry3d& T_cam0_imu,
+                                               double timeshift_cam0_imu_s, double offset_s);
 
   /// Checks ranges; the message says which field is wrong and what is accepted.
   [[nodiscard]] Status validate() const;
@@ -73,7 +90,7 @@ struct CamImuSimOptions {
 /// What a simulated session holds (for the command's summary line).
 struct CamImuSimSummary {
   std::int64_t imu_samples = 0;
-  std::int64_t frames = 0;
+  std::int64_t frames = 0;                      // of every camera
   std::int64_t frames_all_corners_visible = 0;  // the whole inner-corner grid on the sensor
   std::int64_t frames_no_corner_visible = 0;
   double duration_s = 0.0;

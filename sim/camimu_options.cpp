@@ -14,6 +14,22 @@ namespace {
 
 double deg(double d) { return d * std::numbers::pi / 180.0; }
 
+Status check_camera_placement(const Eigen::Isometry3d& T_cam_imu, double timeshift_cam_imu_s) {
+  if (!T_cam_imu.matrix().allFinite() ||
+      !(T_cam_imu.linear().transpose() * T_cam_imu.linear()).isApprox(Eigen::Matrix3d::Identity(), 1e-9) ||
+      T_cam_imu.linear().determinant() < 0.0) {
+    return make_error(Errc::kInvalidArgument,
+                      "T_cam_imu must be a rigid transform (rotation and translation)");
+  }
+  if (T_cam_imu.translation().norm() > 1.0) {
+    return make_error(Errc::kInvalidArgument, "T_cam_imu translation must be in metres and below 1 m");
+  }
+  if (!(std::abs(timeshift_cam_imu_s) <= 0.5)) {
+    return make_error(Errc::kInvalidArgument, "timeshift_cam_imu must be in seconds, within +-0.5 s");
+  }
+  return {};
+}
+
 }  // namespace
 
 sim::CheckerboardMotionOptions CamImuSimOptions::default_motion() {
@@ -60,6 +76,29 @@ TargetDescription CamImuSimOptions::default_sim_target() {
   return t;
 }
 
+CamImuSimCamera CamImuSimOptions::default_stereo_camera(const CameraModel& cam0,
+                                                        const Eigen::Isometry3d& T_cam0_imu,
+                                                        double timeshift_cam0_imu_s, double offset_s) {
+  CamImuSimCamera c;
+  c.camera = cam0;
+  c.camera.intrinsics << cam0.intrinsics[0] * 1.021, cam0.intrinsics[1] * 1.018, cam0.intrinsics[2] - 3.7,
+      cam0.intrinsics[3] + 2.2;
+  c.camera.distortion_coeffs << cam0.distortion_coeffs[0] * 0.95, cam0.distortion_coeffs[1] * 1.1, -1.4e-4,
+      2.6e-4;
+  // p_cam1 = T_cam1_cam0 p_cam0: cam1 sits at +0.11 m along cam0's x axis.
+  Eigen::Isometry3d T_cam1_cam0 = Eigen::Isometry3d::Identity();
+  T_cam1_cam0.linear() = (Eigen::AngleAxisd(deg(0.6), Eigen::Vector3d::UnitX()) *
+                          Eigen::AngleAxisd(deg(-1.1), Eigen::Vector3d::UnitY()) *
+                          Eigen::AngleAxisd(deg(0.4), Eigen::Vector3d::UnitZ()))
+                             .toRotationMatrix();
+  T_cam1_cam0.translation() = -(T_cam1_cam0.linear() * Eigen::Vector3d(0.11, 0.0012, -0.0021));
+  c.T_cam_imu = T_cam1_cam0 * T_cam0_imu;
+  // A frame of cam1 stamped t shows the scene of IMU time t + shift1; the same scene as cam0's
+  // frame stamped t - offset: shift1 = shift0 - offset.
+  c.timeshift_cam_imu_s = timeshift_cam0_imu_s - offset_s;
+  return c;
+}
+
 Status CamImuSimOptions::validate() const {
   IMUCAL_TRY(motion.validate());
   if (imu) IMUCAL_TRY(imu->validate());
@@ -84,17 +123,12 @@ Status CamImuSimOptions::validate() const {
     return make_error(Errc::kInvalidArgument,
                       "an AprilGrid of tag36h11 has at most 587 tags (tagCols x tagRows)");
   }
-  if (!T_cam_imu.matrix().allFinite() ||
-      !(T_cam_imu.linear().transpose() * T_cam_imu.linear()).isApprox(Eigen::Matrix3d::Identity(), 1e-9) ||
-      T_cam_imu.linear().determinant() < 0.0) {
-    return make_error(Errc::kInvalidArgument,
-                      "T_cam_imu must be a rigid transform (rotation and translation)");
-  }
-  if (T_cam_imu.translation().norm() > 1.0) {
-    return make_error(Errc::kInvalidArgument, "T_cam_imu translation must be in metres and below 1 m");
-  }
-  if (!(std::abs(timeshift_cam_imu_s) <= 0.5)) {
-    return make_error(Errc::kInvalidArgument, "timeshift_cam_imu must be in seconds, within +-0.5 s");
+  IMUCAL_TRY(check_camera_placement(T_cam_imu, timeshift_cam_imu_s));
+  if (more_cameras.size() > 7)
+    return make_error(Errc::kInvalidArgument, "at most 8 cameras can be simulated");
+  for (const CamImuSimCamera& c : more_cameras) {
+    IMUCAL_TRY(validate_camera(c.camera));
+    IMUCAL_TRY(check_camera_placement(c.T_cam_imu, c.timeshift_cam_imu_s));
   }
   if (image_encoding != "png" && image_encoding != "webp") {
     return make_error(Errc::kInvalidArgument, "image encoding '" + image_encoding +

@@ -141,7 +141,10 @@ Result<calib::TargetObservation> decode_detection(const std::string& text, TimeN
   return o;
 }
 
-std::string camera_result_yaml(const CameraCalibrationReport& r) {
+namespace {
+
+/// One camera's camchain entry: Kalibr's keys and imucal's figures under `imucal`.
+YAML::Node camera_node(const CameraCalibrationReport& r) {
   const auto& res = r.intrinsics;
   YAML::Node cam(YAML::NodeType::Map);
   camera_to_yaml(res.camera, cam);
@@ -173,8 +176,45 @@ std::string camera_result_yaml(const CameraCalibrationReport& r) {
   for (const auto& w : r.warnings) warnings.push_back(w);
   q["warnings"] = warnings;
   cam["imucal"] = q;
+  return cam;
+}
+
+/// A number, or null where it is not determined (NaN, infinite).
+YAML::Node number_or_null(double v) {
+  return std::isfinite(v) ? YAML::Node(v) : YAML::Node(YAML::NodeType::Null);
+}
+
+YAML::Node flow3(const Eigen::Vector3d& v) {
+  YAML::Node n(YAML::NodeType::Sequence);
+  for (int i = 0; i < 3; ++i) n.push_back(number_or_null(v[i]));
+  n.SetStyle(YAML::EmitterStyle::Flow);
+  return n;
+}
+
+YAML::Node matrix_rows(const Eigen::Matrix4d& m) {
+  YAML::Node rows(YAML::NodeType::Sequence);
+  for (int r = 0; r < 4; ++r) {
+    YAML::Node row(YAML::NodeType::Sequence);
+    for (int c = 0; c < 4; ++c) row.push_back(m(r, c));
+    row.SetStyle(YAML::EmitterStyle::Flow);
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+/// The cameras each camera shares at least `min_shared` views with (Kalibr's cam_overlaps).
+std::vector<int> overlaps(const calib::CameraChainCameraResult& c, int min_shared) {
+  std::vector<int> out;
+  for (std::size_t j = 0; j < c.shared_views.size(); ++j)
+    if (c.shared_views[j] >= min_shared) out.push_back(static_cast<int>(j));
+  return out;
+}
+
+}  // namespace
+
+std::string camera_result_yaml(const CameraCalibrationReport& r) {
   YAML::Node root(YAML::NodeType::Map);
-  root["cam0"] = cam;
+  root["cam0"] = camera_node(r);
   YAML::Emitter out;
   out.SetDoublePrecision(17);
   out << root;
@@ -183,7 +223,9 @@ std::string camera_result_yaml(const CameraCalibrationReport& r) {
          std::string(out.c_str()) + "\n";
 }
 
-std::string camera_result_json(const CameraCalibrationReport& r) {
+namespace {
+
+json camera_json(const CameraCalibrationReport& r) {
   const auto& res = r.intrinsics;
   json views = json::array();
   for (const auto& v : res.views) {
@@ -246,7 +288,100 @@ std::string camera_result_json(const CameraCalibrationReport& r) {
       {"warnings", r.warnings},
       {"software_version", kVersion},
   };
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
+  return j;
+}
+
+}  // namespace
+
+std::string camera_result_json(const CameraCalibrationReport& r) {
+  return camera_json(r).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
+}
+
+std::string camera_chain_yaml(const CameraChainReport& r, int min_shared_views) {
+  YAML::Node root(YAML::NodeType::Map);
+  for (std::size_t c = 0; c < r.cameras.size(); ++c) {
+    const auto& cc = r.chain.cameras[c];
+    YAML::Node cam = camera_node(r.cameras[c]);
+    if (c > 0) cam["T_cn_cnm1"] = matrix_rows(cc.T_cn_cnm1.matrix());
+    YAML::Node ov(YAML::NodeType::Sequence);
+    for (int j : overlaps(cc, min_shared_views)) ov.push_back(j);
+    ov.SetStyle(YAML::EmitterStyle::Flow);
+    cam["cam_overlaps"] = ov;
+    YAML::Node q = cam["imucal"];
+    q["timeshift_cam_cam0"] = cc.timeshift_cam0_s;
+    q["timeshift_cam_cam0_sigma"] = c == 0 ? YAML::Node(0.0) : number_or_null(cc.timeshift_sigma_s);
+    q["timeshift_estimated"] = cc.timeshift_estimated;
+    if (c > 0) {
+      q["T_cn_cnm1_rotation_sigma_rad"] = flow3(cc.T_cn_cnm1_rotation_sigma_rad);
+      q["T_cn_cnm1_translation_sigma_m"] = flow3(cc.T_cn_cnm1_translation_sigma_m);
+      YAML::Node cov(YAML::NodeType::Sequence);
+      for (int i = 0; i < 6; ++i) {
+        YAML::Node row(YAML::NodeType::Sequence);
+        for (int j = 0; j < 6; ++j) row.push_back(number_or_null(cc.T_cn_cnm1_covariance(i, j)));
+        row.SetStyle(YAML::EmitterStyle::Flow);
+        cov.push_back(row);
+      }
+      q["T_cn_cnm1_covariance"] = cov;
+      q["baseline_m"] = cc.baseline_m;
+      q["baseline_sigma_m"] = number_or_null(cc.baseline_sigma_m);
+      q["T_cam_cam0"] = matrix_rows(cc.T_cam_cam0.matrix());
+      q["linked_to"] = "cam" + std::to_string(cc.linked_to);
+    }
+    YAML::Node shared(YAML::NodeType::Sequence);
+    for (int n : cc.shared_views) shared.push_back(n);
+    shared.SetStyle(YAML::EmitterStyle::Flow);
+    q["shared_views"] = shared;
+    q["views_stamped_with_cam0"] = cc.views_stamped_with_cam0;
+    q["chain_rms_px"] = cc.rms_px;
+    cam["imucal"] = q;
+    root["cam" + std::to_string(c)] = cam;
+  }
+  YAML::Emitter out;
+  out.SetDoublePrecision(17);
+  out << root;
+  return "# Camera chain (imucal calibrate camera, " + std::to_string(r.cameras.size()) +
+         " cameras in one solve); Kalibr camchain format (T_cn_cnm1, cam_overlaps), imucal's figures under\n"
+         "# camN.imucal; t_cam0 = t_camN + timeshift_cam_cam0 (docs/camera-calibration.md)\n" +
+         std::string(out.c_str()) + "\n";
+}
+
+std::string camera_chain_json(const CameraChainReport& r, int min_shared_views) {
+  json cams = json::array();
+  for (std::size_t c = 0; c < r.cameras.size(); ++c) {
+    const auto& cc = r.chain.cameras[c];
+    json j = camera_json(r.cameras[c]);
+    j["name"] = "cam" + std::to_string(c);
+    j["cam_overlaps"] = overlaps(cc, min_shared_views);
+    j["shared_views"] = cc.shared_views;
+    j["timeshift_cam_cam0_s"] = cc.timeshift_cam0_s;
+    j["timeshift_cam_cam0_sigma_s"] = c == 0 ? json(0.0) : finite_or_null(cc.timeshift_sigma_s);
+    j["timeshift_estimated"] = cc.timeshift_estimated;
+    j["views_stamped_with_cam0"] = cc.views_stamped_with_cam0;
+    j["chain_rms_px"] = finite_or_null(cc.rms_px);
+    if (c > 0) {
+      const Eigen::Matrix4d T = cc.T_cn_cnm1.matrix();
+      json rows = json::array();
+      for (int i = 0; i < 4; ++i) rows.push_back({T(i, 0), T(i, 1), T(i, 2), T(i, 3)});
+      j["T_cn_cnm1"] = rows;
+      const auto& rs = cc.T_cn_cnm1_rotation_sigma_rad;
+      const auto& ts = cc.T_cn_cnm1_translation_sigma_m;
+      j["T_cn_cnm1_rotation_sigma_rad"] = {finite_or_null(rs.x()), finite_or_null(rs.y()),
+                                           finite_or_null(rs.z())};
+      j["T_cn_cnm1_translation_sigma_m"] = {finite_or_null(ts.x()), finite_or_null(ts.y()),
+                                            finite_or_null(ts.z())};
+      j["baseline_m"] = cc.baseline_m;
+      j["baseline_sigma_m"] = finite_or_null(cc.baseline_sigma_m);
+      j["linked_to"] = "cam" + std::to_string(cc.linked_to);
+    }
+    cams.push_back(std::move(j));
+  }
+  const json out = {{"cameras", cams},
+                    {"knot_spacing_s", r.chain.knot_spacing_s},
+                    {"reprojection_rms_px", finite_or_null(r.chain.rms_px)},
+                    {"solver", {{"iterations", r.chain.iterations}, {"cpu_s", r.chain.solve_cpu_s}}},
+                    {"warnings", r.warnings},
+                    {"software_version", kVersion}};
+  return out.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 }  // namespace imucal::app

@@ -39,6 +39,14 @@ std::string encode_detection(const calib::TargetObservation& observation);
 /// Kalibr camchain YAML (`cam0:` with camera_model, intrinsics, distortion_model,
 /// distortion_coeffs, resolution, rostopic) plus imucal's keys under `cam0: imucal:`.
 std::string camera_result_yaml(const CameraCalibrationReport& report);
+/// Several cameras: every camera as camera_result_yaml's cam0 (cam0 ... camN), with Kalibr's
+/// T_cn_cnm1 (camN >= 1) and cam_overlaps (the cameras it shares at least `min_shared_views`
+/// views with), and the chain's figures under camN.imucal (time offset against cam0, the
+/// sigmas of T_cn_cnm1 and of the baseline, shared views); null where not determined.
+std::string camera_chain_yaml(const CameraChainReport& report, int min_shared_views);
+/// The same as JSON with every camera's views and figures (as camera_result_json's).
+std::string camera_chain_json(const CameraChainReport& report, int min_shared_views);
+
 /// Everything of the YAML plus the views (with their reasons), the coverage grid, the
 /// covariance and the timings, as JSON (indented, ending in a newline).
 std::string camera_result_json(const CameraCalibrationReport& report);

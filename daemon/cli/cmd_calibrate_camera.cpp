@@ -3,11 +3,13 @@
 
 #include <spdlog/spdlog.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "app/results/camera_results.hpp"
 #include "app/results/output.hpp"
@@ -22,9 +24,11 @@ namespace {
 
 struct CameraCliOptions {
   std::string log_path;
-  std::string camera;
+  std::vector<std::string> cameras;
   std::string target_path;
-  std::string model = "pinhole-radtan";
+  std::vector<std::string> models;
+  bool hold_time_offsets = false;
+  double knot_spacing_s = 0.0;
   int threads = 0;
   bool allow_damaged = false;
   DetectionStoreArgs detections;
@@ -35,13 +39,10 @@ struct CameraCliOptions {
 
 /// The target: --target, else the one the log names.
 
-void print_summary(const app::CameraCalibrationReport& r, const std::string& yaml_path) {
+/// One camera's intrinsics, sigmas and figures.
+void print_camera(const app::CameraCalibrationReport& r) {
   const auto& res = r.intrinsics;
   const auto& c = res.camera;
-  std::printf("camera calibration of %s (%s, %lld frames, %d with the target; detections %s)\n",
-              r.log_path.c_str(), r.stream.name.c_str(), static_cast<long long>(r.frames),
-              r.frames_with_target,
-              detections_in_words(r.detections_reused_from, r.detections_stored_in).c_str());
   std::printf("  model %s, %d x %d, target from %s\n", calib::camera_model_option_name(c.distortion_model),
               c.width, c.height, r.target_source.c_str());
   static const char* kIntrinsics[] = {"fu", "fv", "pu", "pv"};
@@ -59,8 +60,100 @@ void print_summary(const app::CameraCalibrationReport& r, const std::string& yam
       res.corners_rejected);
   std::printf("  coverage: %.0f %% of a %d x %d grid of the image\n", 100.0 * res.coverage, res.coverage_cols,
               res.coverage_rows);
+}
+
+void print_summary(const app::CameraCalibrationReport& r, const std::string& yaml_path) {
+  std::printf("camera calibration of %s (%s, %lld frames, %d with the target; detections %s)\n",
+              r.log_path.c_str(), r.stream.name.c_str(), static_cast<long long>(r.frames),
+              r.frames_with_target,
+              detections_in_words(r.detections_reused_from, r.detections_stored_in).c_str());
+  print_camera(r);
   std::printf("  wrote %s\n", yaml_path.c_str());
   if (r.warnings.empty()) std::printf("  no warnings\n");
+}
+
+/// A sigma, or "not determined".
+std::string sigma_text(double v, double scale, const char* format) {
+  if (!std::isfinite(v)) return "(not determined)";
+  char text[64];
+  std::snprintf(text, sizeof text, format, v * scale);
+  return std::string("+- ") + text;
+}
+
+void print_chain_summary(const app::CameraChainReport& r, const std::string& yaml_path) {
+  const auto& first = r.cameras.front();
+  std::printf("camera chain calibration of %s: %zu cameras in one solve, target from %s\n",
+              first.log_path.c_str(), r.cameras.size(), first.target_source.c_str());
+  for (std::size_t c = 0; c < r.cameras.size(); ++c) {
+    const auto& cam = r.cameras[c];
+    const auto& cc = r.chain.cameras[c];
+    std::printf("cam%zu (%s, %lld frames, %d with the target; detections %s)\n", c, cam.stream.name.c_str(),
+                static_cast<long long>(cam.frames), cam.frames_with_target,
+                detections_in_words(cam.detections_reused_from, cam.detections_stored_in).c_str());
+    print_camera(cam);
+    if (c == 0) continue;
+    const Eigen::Vector3d t = cc.T_cn_cnm1.translation();
+    const Eigen::AngleAxisd aa(cc.T_cn_cnm1.linear());
+    std::printf(
+        "  T_cn_cnm1 (against cam%zu): translation [%.2f %.2f %.2f] mm (sigma [%s %s %s]), rotation %.3f "
+        "deg\n",
+        c - 1, 1e3 * t.x(), 1e3 * t.y(), 1e3 * t.z(),
+        sigma_text(cc.T_cn_cnm1_translation_sigma_m.x(), 1e3, "%.2f").c_str(),
+        sigma_text(cc.T_cn_cnm1_translation_sigma_m.y(), 1e3, "%.2f").c_str(),
+        sigma_text(cc.T_cn_cnm1_translation_sigma_m.z(), 1e3, "%.2f").c_str(), aa.angle() * 180.0 / M_PI);
+    std::printf("  rotation sigma [%s %s %s] deg; baseline %.2f mm %s\n",
+                sigma_text(cc.T_cn_cnm1_rotation_sigma_rad.x(), 180.0 / M_PI, "%.4f").c_str(),
+                sigma_text(cc.T_cn_cnm1_rotation_sigma_rad.y(), 180.0 / M_PI, "%.4f").c_str(),
+                sigma_text(cc.T_cn_cnm1_rotation_sigma_rad.z(), 180.0 / M_PI, "%.4f").c_str(),
+                1e3 * cc.baseline_m, sigma_text(cc.baseline_sigma_m, 1e3, "%.2f mm").c_str());
+    if (cc.timeshift_estimated) {
+      std::printf("  time offset: t_cam0 = t_cam%zu %+.3f ms %s\n", c, 1e3 * cc.timeshift_cam0_s,
+                  sigma_text(cc.timeshift_sigma_s, 1e3, "%.3f ms").c_str());
+    } else {
+      std::printf("  time offset held at 0 (--hold-time-offsets)\n");
+    }
+  }
+  std::printf("shared views (row: camera, column: the camera it shares them with):\n");
+  for (std::size_t c = 0; c < r.chain.cameras.size(); ++c) {
+    std::printf("  cam%zu", c);
+    for (int n : r.chain.cameras[c].shared_views) std::printf(" %6d", n);
+    std::printf("\n");
+  }
+  std::printf("reprojection RMS %.4f px over all cameras; %d iterations, %.1f s of CPU\n", r.chain.rms_px,
+              r.chain.iterations, r.chain.solve_cpu_s);
+  std::printf("wrote %s\n", yaml_path.c_str());
+  if (r.warnings.empty()) std::printf("no warnings\n");
+}
+
+/// The camera streams to calibrate: --camera as given, else every camera stream of the log.
+std::vector<std::string> streams_to_calibrate(const CameraCliOptions& o) {
+  for (std::size_t i = 0; i < o.cameras.size(); ++i)
+    for (std::size_t j = 0; j < i; ++j)
+      if (o.cameras[i] == o.cameras[j])
+        throw CliExit{kExitUsage, "--camera " + o.cameras[i] + " is given twice"};
+  if (!o.cameras.empty()) return o.cameras;
+  auto reader = log::SessionLogReader::open(o.log_path);
+  if (!reader.ok()) fail(reader.error());
+  std::vector<std::string> names;
+  for (const auto& [id, info] : (*reader)->camera_streams()) names.push_back(info.name);
+  if (names.empty()) throw CliExit{kExitInput, o.log_path + " holds no camera stream"};
+  return names;
+}
+
+/// One model for every camera, or one per camera, in the order of the cameras.
+std::vector<DistortionModel> models_for(const CameraCliOptions& o, std::size_t cameras) {
+  std::vector<std::string> names = o.models.empty() ? std::vector<std::string>{"pinhole-radtan"} : o.models;
+  if (names.size() != 1 && names.size() != cameras) {
+    throw CliExit{kExitUsage, "--model: give one model for every camera, or one per camera (" +
+                                  std::to_string(cameras) + "), in the order of the cameras"};
+  }
+  std::vector<DistortionModel> out;
+  for (std::size_t c = 0; c < cameras; ++c) {
+    auto model = calib::parse_camera_model_option(names[names.size() == 1 ? 0 : c]);
+    if (!model.ok()) throw CliExit{kExitUsage, "--model: " + model.error().message};
+    out.push_back(*model);
+  }
+  return out;
 }
 
 void run(const CameraCliOptions& o) {
@@ -70,15 +163,15 @@ void run(const CameraCliOptions& o) {
   if (!o.target_path.empty()) outputs.inputs.push_back(o.target_path);
   if (auto s = app::check_output(o.yaml_path, outputs); !s.ok()) fail(s.error());
 
+  const std::vector<std::string> streams = streams_to_calibrate(o);
+  const std::vector<DistortionModel> models = models_for(o, streams.size());
   app::CameraCalibrationRequest q;
-  auto model = calib::parse_camera_model_option(o.model);
-  if (!model.ok()) throw CliExit{kExitUsage, "--model: " + model.error().message};
-  q.intrinsics.model = *model;
+  q.intrinsics.model = models.front();
   q.intrinsics.threads = o.threads;
   if (auto valid = q.intrinsics.validate(); !valid.ok()) throw CliExit{kExitUsage, valid.error().message};
   const app::TargetChoice target = resolve_target(o.target_path, o.log_path);
   q.log_path = o.log_path;
-  q.camera = o.camera;
+  q.camera = streams.front();
   q.target = target.target;
   q.target_source = target.source;
   q.threads = o.threads;
@@ -94,6 +187,29 @@ void run(const CameraCliOptions& o) {
     solving.update(f);
   };
 
+  if (streams.size() > 1) {
+    app::CameraChainRequest cq;
+    cq.base = q;
+    cq.cameras = streams;
+    cq.models = models;
+    cq.chain.estimate_time_offsets = !o.hold_time_offsets;
+    cq.chain.knot_spacing_s = o.knot_spacing_s;
+    auto report = app::calibrate_camera_chain(cq);
+    detecting.finish();
+    solving.finish();
+    if (!report.ok()) fail(report.error(), "calibrate camera");
+    for (const auto& w : report->warnings) spdlog::warn("{}", w);
+    const int min_shared = cq.chain.min_shared_views;
+    if (auto s = app::write_text_file(o.yaml_path, app::camera_chain_yaml(*report, min_shared), outputs);
+        !s.ok())
+      fail(s.error());
+    if (o.json) {
+      std::cout << app::camera_chain_json(*report, min_shared);
+    } else {
+      print_chain_summary(*report, o.yaml_path);
+    }
+    return;
+  }
   auto report = app::calibrate_camera(q);
   detecting.finish();
   solving.finish();
@@ -112,23 +228,45 @@ void setup(CLI::App& root) {
   CLI::App* cmd = calibrate_group(root)->add_subcommand(
       "camera",
       "Camera intrinsics (pinhole with radtan or equidistant distortion) from the calibration target in a "
-      "camera stream's frames; writes a Kalibr camchain YAML with sigmas and quality figures");
+      "log's camera streams; with several cameras one joint solve of every camera's intrinsics, their poses "
+      "relative to cam0 (T_cn_cnm1) and their time offsets; writes a Kalibr camchain YAML with sigmas and "
+      "quality figures");
+  cmd->footer(
+      "Examples:\n"
+      "  imucal calibrate camera rig.imulog -o camchain.yaml\n"
+      "  imucal calibrate camera stereo.imulog --camera left --camera right --model pinhole-equi -o "
+      "camchain.yaml");
   auto o = std::make_shared<CameraCliOptions>();
-  cmd->add_option("LOG", o->log_path, "Session log (.imulog) with the camera stream")->required();
-  cmd->add_option("--camera", o->camera, "Camera stream name (default: the first)");
+  cmd->add_option("LOG", o->log_path, "Session log (.imulog) with the camera streams")->required();
+  cmd->add_option(
+      "--camera", o->cameras,
+      "Camera stream name; repeat it for several cameras, the first becoming cam0 (default: every "
+      "camera stream of the log, in the log's order)");
   cmd->add_option(
       "--target", o->target_path,
       "Calibration target, Kalibr target YAML (default: the target in the log's rig configuration or "
       "metadata)");
-  cmd->add_option("--model", o->model, "Camera model: pinhole-radtan (default) or pinhole-equi (fisheye)")
+  cmd->add_option(
+         "--model", o->models,
+         "Camera model: pinhole-radtan (default) or pinhole-equi (fisheye); one for every camera, or "
+         "repeated once per camera in the order of the cameras")
       ->check(CLI::IsMember({"pinhole-radtan", "pinhole-equi"}));
+  cmd->add_flag("--hold-time-offsets", o->hold_time_offsets,
+                "Several cameras: hold their time offsets against cam0 at 0 (cameras triggered together) "
+                "instead of estimating them");
+  cmd->add_option(
+         "--knot-spacing", o->knot_spacing_s,
+         "Several cameras: knot spacing in s of the target's trajectory (default: the shortest frame "
+         "interval)")
+      ->check(CLI::Range(0.0, 1.0));
   cmd->add_option("--threads", o->threads,
                   "Worker threads for the detection and the solver (default: all cores)")
       ->check(CLI::Range(0, 256));
   add_detection_store_options(cmd, &o->detections);
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");
   cmd->add_option("-o,--output", o->yaml_path,
-                  "Write the camera as Kalibr camchain YAML (cam0) with imucal's figures")
+                  "Write the cameras as Kalibr camchain YAML (cam0, cam1 ... with T_cn_cnm1) with imucal's "
+                  "figures")
       ->required();
   cmd->add_flag("--force", o->force, "Replace the output file if it exists (never the log or the target)");
   cmd->add_flag("--json", o->json,

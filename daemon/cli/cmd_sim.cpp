@@ -338,11 +338,26 @@ void add_camimu(CLI::App* sim) {
       "--target", *target_path,
       "Kalibr target YAML to render: checkerboard or aprilgrid (default: checkerboard, 7 x 6 inner "
       "corners, 5 cm; e.g. config/aprilgrid-6x6.yaml)");
-  cmd->callback([o, co, cmd, target_path]() {
+  auto stereo = std::make_shared<bool>(false);
+  auto cam1_offset_ms = std::make_shared<double>(0.0);
+  CLI::Option* stereo_flag = cmd->add_flag(
+      "--stereo", *stereo,
+      "A second camera, cam1: 11 cm beside cam0 along its x axis, turned by about a degree, with its "
+      "own intrinsics (a stereo pair; the truth file has both cameras and T_cn_cnm1)");
+  cmd->add_option("--cam1-offset-ms", *cam1_offset_ms,
+                  "With --stereo: cam1 stamps its frames this many ms later than cam0 for the same scene "
+                  "(cameras that are not synchronized; default 0)")
+      ->check(CLI::Range(-100.0, 100.0))
+      ->needs(stereo_flag);
+  cmd->callback([o, co, cmd, target_path, stereo, cam1_offset_ms]() {
     if (!target_path->empty()) {
       auto target = load_target_yaml(*target_path);
       if (!target.ok()) fail(target.error(), "sim camimu --target");
       co->target = *target;
+    }
+    if (*stereo) {
+      co->more_cameras = {sim::CamImuSimOptions::default_stereo_camera(
+          co->camera, co->T_cam_imu, co->timeshift_cam_imu_s, 1e-3 * *cam1_offset_ms)};
     }
     co->seed = o->seed;
     co->imu_rate_hz = o->imu_rate_hz;
@@ -369,7 +384,8 @@ void add_camimu(CLI::App* sim) {
     }
     std::ostringstream msg;
     msg.precision(4);
-    msg << "wrote " << summary.imu_samples << " samples and " << summary.frames << " frames ("
+    msg << "wrote " << summary.imu_samples << " samples and " << summary.frames << " frames of "
+        << 1 + co->more_cameras.size() << (co->more_cameras.empty() ? " camera (" : " cameras (")
         << summary.duration_s << " s, IMU " << co->imu_rate_hz << " Hz, camera " << co->camera_rate_hz
         << " Hz) to " << o->out_path << "\n";
     msg << "truth: " << truth_path << "\n";
