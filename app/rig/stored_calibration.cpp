@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "app/camimu_inputs.hpp"
+#include "core/calibration_payload.hpp"
 #include "core/text_file.hpp"
 #include "core/text_format.hpp"
 #include "core/version.hpp"
@@ -132,14 +133,13 @@ Result<StoredCalibration> decode_latest(const drivers::LatestRecord& latest, con
   if (!latest.record) return out;
   const std::string where = device + " slot " + drivers::slot_name(latest.slot) + " (sequence " +
                             std::to_string(latest.record->sequence) + ")";
-  const json payload = json::from_cbor(latest.record->payload, true, false);
-  if (payload.is_discarded()) {
-    return make_error(Errc::kCorrupt,
-                      where +
-                          " holds an intact record whose payload is not CBOR: it was not written "
-                          "by imucal; write a new calibration");
+  const auto payload = calibration_payload_json(latest.record->payload);
+  if (!payload.ok()) {
+    return make_error(Errc::kCorrupt, where + " holds an intact record whose payload " +
+                                          payload.error().message +
+                                          ": it was not written by imucal; write a new calibration");
   }
-  auto record = calibration_record_from_json(payload);
+  auto record = calibration_record_from_json(*payload);
   if (!record.ok()) return record.error().context(where);
   out.record = std::move(*record);
   return out;
@@ -410,13 +410,13 @@ Result<Rollback> rollback_stored_calibration(const RigConfig& config) {
                                              drivers::slot_name(other) + " holds none (" + older->reason +
                                              ")");
     }
-    const json payload = json::from_cbor(older->record->payload, true, false);
-    if (payload.is_discarded()) {
-      return make_error(Errc::kCorrupt,
-                        std::string("slot ") + drivers::slot_name(other) +
-                            " holds a record whose payload is not CBOR: it cannot be restored");
+    const auto payload = calibration_payload_json(older->record->payload);
+    if (!payload.ok()) {
+      return make_error(Errc::kCorrupt, std::string("slot ") + drivers::slot_name(other) +
+                                            " holds a record whose payload " + payload.error().message +
+                                            ": it cannot be restored");
     }
-    auto record = calibration_record_from_json(payload);
+    auto record = calibration_record_from_json(*payload);
     if (!record.ok()) {
       return record.error().context(std::string("slot ") + drivers::slot_name(other) +
                                     " holds a record that cannot be restored");

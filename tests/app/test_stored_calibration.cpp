@@ -261,5 +261,35 @@ TEST(StoredCalibration, AnIntactRecordWithAForeignPayloadIsCorrupt) {
   EXPECT_NE(r.error().message.find("slot A"), std::string::npos) << r.error().message;
 }
 
+// A payload of 200,000 nested one-element arrays is 200 KB of intact record. nlohmann's CBOR
+// parser recursed once per level: store read, store verify, store rollback and imucald's session
+// start overflowed the stack (SIGSEGV). Now the depth is refused before the parser sees it.
+TEST(StoredCalibration, ADeeplyNestedPayloadIsCorruptNotACrash) {
+  const std::string dir = test::scratch_dir();
+  const RigConfig config = file_config(dir, 1 << 20);
+  auto dev = drivers::open_storage_device(config.storage, drivers::StorageAccess::kWrite);
+  ASSERT_TRUE(dev.ok());
+  auto store = drivers::CalibrationStore::open(**dev, 512, 1 << 20);
+  ASSERT_TRUE(store.ok());
+  const CalibrationRecord p = *calibration_record_from_file(write_static(dir));
+  const std::vector<std::uint8_t> good = nlohmann::json::to_cbor(calibration_record_json(p));
+  ASSERT_TRUE(store->write(good).ok());             // slot A: a good record, for the rollback
+  std::vector<std::uint8_t> nested(200'000, 0x81);  // array of one item, 200,000 deep
+  nested.push_back(0x00);
+  ASSERT_TRUE(store->write(nested).ok());  // slot B, the newest
+  auto r = read_stored_calibration(config);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, Errc::kCorrupt);
+  EXPECT_NE(r.error().message.find("slot B"), std::string::npos) << r.error().message;
+  EXPECT_NE(r.error().message.find("deeper than 32 levels"), std::string::npos) << r.error().message;
+  // With a good record newest again, a rollback to the nested one is refused for the same reason.
+  ASSERT_TRUE(store->write(good).ok());  // slot A again: the nested record is now the older one
+  ASSERT_TRUE(read_stored_calibration(config).ok());
+  auto rolled = rollback_stored_calibration(config);
+  ASSERT_FALSE(rolled.ok());
+  EXPECT_NE(rolled.error().message.find("deeper than 32 levels"), std::string::npos)
+      << rolled.error().message;
+}
+
 }  // namespace
 }  // namespace imucal::app
