@@ -320,18 +320,46 @@ Result<StoredCalibration> read_stored_calibration(const RigConfig& config) {
   return decode_latest(*latest, (*device)->name());
 }
 
-Result<StoredCalibration> write_stored_calibration(const RigConfig& config, const CalibrationRecord& record) {
+Result<StoredCalibration> write_stored_calibration(const RigConfig& config, const CalibrationRecord& record,
+                                                   const drivers::StoreWriteOptions& options) {
   CalibrationRecord rec = record;
   if (rec.rig.empty()) rec.rig = config.name;
   const json p = calibration_record_json(rec);
   // What is stored must read back as what was meant: the JSON form is checked as a reader sees it.
   IMUCAL_TRY(calibration_record_from_json(p));
   const std::vector<std::uint8_t> cbor = json::to_cbor(p);
+  // Before the device is opened for writing: a file backend creates its file there.
+  const std::string device_name =
+      config.storage.backend == StorageBackend::kFile    ? "file " + config.storage.path
+      : config.storage.backend == StorageBackend::kNvmem ? "nvmem " + config.storage.path
+                                                         : "the EEPROM on " + config.storage.i2c_device;
+  IMUCAL_TRY(drivers::CalibrationStore::check_fits(
+      device_name, static_cast<std::uint64_t>(config.storage.size_bytes), cbor.size()));
   auto device = drivers::open_storage_device(config.storage, drivers::StorageAccess::kWrite);
   if (!device.ok()) return device.error();
   auto store = open_store(**device, config);
   if (!store.ok()) return store.error();
-  auto written = store->write(cbor);
+  // The newest record's payload from a newer imucal (a newer record version in this framing) is
+  // kept as the newest unless the caller says to replace it, as a newer framing is by the store.
+  if (!options.replace_newer) {
+    auto latest = store->read_latest();
+    if (!latest.ok()) return latest.error();
+    if (latest->record) {
+      const auto payload = calibration_payload_json(latest->record->payload);
+      const json version = payload.ok() && payload->is_object() ? payload->value("version", json()) : json();
+      if (version.is_number_integer() && version.get<std::int64_t>() > kCalibrationRecordVersion) {
+        return make_error(
+                   Errc::kInvalidArgument,
+                   (*device)->name() + " slot " + drivers::slot_name(latest->slot) +
+                       " holds the newest record, of calibration record version " + version.dump() +
+                       ", written by a newer imucal (this one writes version " +
+                       std::to_string(kCalibrationRecordVersion) +
+                       "); nothing was written. Write with that imucal, or replace its record knowingly")
+            .with_remedy("replace_newer");
+      }
+    }
+  }
+  auto written = store->write(cbor, options);
   if (!written.ok()) return written.error();
   auto latest = store->read_latest();
   if (!latest.ok()) return latest.error();

@@ -83,9 +83,12 @@ struct Rollback {
 [[nodiscard]] Result<Rollback> rollback_stored_calibration(const RigConfig& config);
 
 /// Writes `record` (its rig set from the configuration when empty) as the next record: to the
-/// older slot, synced, read back byte for byte by the store and decoded again here.
-[[nodiscard]] Result<StoredCalibration> write_stored_calibration(const RigConfig& config,
-                                                                 const CalibrationRecord& record);
+/// older slot, synced, read back byte for byte by the store and decoded again here. The refusals
+/// of CalibrationStore::write (a record of a newer imucal without options.replace_newer, a region
+/// holding something else); a record too large for a slot is refused before the storage file is
+/// created.
+[[nodiscard]] Result<StoredCalibration> write_stored_calibration(
+    const RigConfig& config, const CalibrationRecord& record, const drivers::StoreWriteOptions& options = {});
 
 /// The record as YAML, for people (numbers in full precision, short lists on one line).
 std::string stored_calibration_yaml(const CalibrationRecord& record);

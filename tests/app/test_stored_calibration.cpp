@@ -291,5 +291,33 @@ TEST(StoredCalibration, ADeeplyNestedPayloadIsCorruptNotACrash) {
       << rolled.error().message;
 }
 
+// Before: the record of a newer imucal (a newer record version) was taken for an unreadable one,
+// and the next write made this imucal's record the newest over it, without a word.
+TEST(StoredCalibration, ARecordOfANewerImucalStaysTheNewestUnlessAsked) {
+  const std::string dir = test::scratch_dir();
+  const RigConfig config = file_config(dir);
+  const CalibrationRecord p = *calibration_record_from_file(write_static(dir));
+  ASSERT_TRUE(write_stored_calibration(config, p).ok());
+  nlohmann::json newer = calibration_record_json(p);
+  newer["version"] = kCalibrationRecordVersion + 1;
+  {
+    auto dev = drivers::open_storage_device(config.storage, drivers::StorageAccess::kWrite);
+    ASSERT_TRUE(dev.ok());
+    auto store = drivers::CalibrationStore::open(**dev, 512, 4096);
+    ASSERT_TRUE(store.ok());
+    ASSERT_TRUE(store->write(nlohmann::json::to_cbor(newer)).ok());  // slot B, sequence 2
+  }
+  auto refused = write_stored_calibration(config, p);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, Errc::kInvalidArgument);
+  EXPECT_NE(refused.error().message.find("written by a newer imucal"), std::string::npos)
+      << refused.error().message;
+  ASSERT_EQ(refused.error().remedies.size(), 1u);
+  EXPECT_EQ(refused.error().remedies[0].option, "replace_newer");
+  auto replaced = write_stored_calibration(config, p, drivers::StoreWriteOptions{true});
+  ASSERT_TRUE(replaced.ok()) << replaced.error().message;
+  EXPECT_EQ(replaced->sequence, 3u);
+}
+
 }  // namespace
 }  // namespace imucal::app
