@@ -172,6 +172,13 @@ TEST(CalibrationRecord, AThermalModelMakesItVersion2AndReadsBack) {
   refused([](json& x) { x["thermal"]["gyro"][1]["coeffs"] = json::array({1, 2}); }, "thermal.gyro[1].coeffs");
   refused([](json& x) { x["thermal"]["accel"].erase(2); }, "thermal.accel");
   refused([](json& x) { x["thermal"]["valid_range_c"] = json::array({50, 20}); }, "valid_range_c");
+  // A model fitted to temperatures no die reaches (one sample at 1e308 gave a reference of 7e61).
+  refused([](json& x) { x["thermal"]["reference_c"] = 7e61; }, "must be die temperatures");
+  refused(
+      [](json& x) {
+        x["thermal"]["valid_range_c"] = json::array({20, 1e308});
+      },
+      "must be die temperatures");
 }
 
 TEST(CalibrationRecord, SameCalibrationLooksAtTheImuAndTheCamerasOnly) {
