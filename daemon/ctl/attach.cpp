@@ -12,6 +12,7 @@
 #include <string>
 #include <utility>
 
+#include "core/printable_text.hpp"
 #include "daemon/ctl/console.hpp"
 #include "daemon/service/protocol.hpp"
 
@@ -212,7 +213,7 @@ int run(Connection& connection, Console& console) {
     if ((fds[0].revents & (POLLIN | POLLHUP | POLLERR)) != 0) {
       if (auto read = connection.read_some(); !read) {
         console.draw_if_due();
-        std::fprintf(stderr, "imucalctl: %s\n", read.error().message.c_str());
+        std::fprintf(stderr, "imucalctl: %s\n", printable_text(read.error().message).c_str());
         return 1;
       }
     }
@@ -251,7 +252,7 @@ int attach(Connection& connection, const AttachOptions& options) {
         connection.request(service::to_json(service::plain_request(service::Command::kSubscribe)), &early);
   }
   if (!replied) {
-    std::fprintf(stderr, "imucalctl: %s\n", replied.error().message.c_str());
+    std::fprintf(stderr, "imucalctl: %s\n", printable_text(replied.error().message).c_str());
     return 1;
   }
   for (const auto& message : early) {

@@ -464,5 +464,25 @@ TEST(ControlServer, OptionsAreValidated) {
   EXPECT_FALSE(options.validate().ok());
 }
 
+// Before: any name was taken, escape sequences and all, and shown on other clients' terminals.
+TEST(ControlRequest, AClientNameIsPrintableAndBounded) {
+  constexpr std::size_t kMaxName = 64;
+  for (const std::string& bad :
+       {std::string(R"({"cmd":"hello","client":"\u001b]0;pwned\u0007","role":"controller"})"),
+        std::string(R"({"cmd":"hello","client":"a\u009b2Jb"})"),
+        std::string(R"({"cmd":"hello","client":"a\nb"})"),
+        R"({"cmd":"hello","client":")" + std::string(kMaxName + 1, 'x') + "\"}"}) {
+    auto r = parse_request(bad);
+    ASSERT_FALSE(r.ok()) << bad;
+    EXPECT_NE(r.error().message.find("printable text (no control characters) of at most 64 bytes"),
+              std::string::npos)
+        << r.error().message;
+  }
+  auto longest = parse_request(R"({"cmd":"hello","client":")" + std::string(kMaxName, 'x') + "\"}");
+  ASSERT_TRUE(longest.ok());
+  EXPECT_EQ(longest->client.size(), kMaxName);
+  EXPECT_TRUE(parse_request(R"({"cmd":"hello","client":"imucalctl on Zoë's laptop"})").ok());
+}
+
 }  // namespace
 }  // namespace imucal::service
