@@ -269,12 +269,27 @@ static Result<CalibrationRecord> load_record(const std::string& result_path, boo
 }
 
 std::string keep_stored_cameras(CalibrationRecord& record, const StoredCalibration& stored) {
-  if (!record.cameras.empty() || !stored.record || stored.record->cameras.empty()) return {};
-  record.cameras = stored.record->cameras;
-  const std::string note = "cameras kept from the stored record (sequence " +
-                           std::to_string(stored.sequence) + "): this session did not calibrate them";
-  record.notes.push_back(note);
-  return note;
+  if (!stored.record) return {};
+  std::string said;
+  if (record.cameras.empty() && !stored.record->cameras.empty()) {
+    record.cameras = stored.record->cameras;
+    const std::string note = "cameras kept from the stored record (sequence " +
+                             std::to_string(stored.sequence) + "): this session did not calibrate them";
+    record.notes.push_back(note);
+    said = note;
+  }
+  // A thermal model belongs to the IMU calibration whose biases it refers to its reference
+  // temperature: it cannot be carried over to a new one, but its loss is said, not silent.
+  if (!record.thermal && stored.record->thermal) {
+    const std::string note = "the stored thermal model (sequence " + std::to_string(stored.sequence) +
+                             ", reference " + fixed(stored.record->thermal->reference_c, 1) +
+                             " deg C) is not kept: this session's IMU calibration was not corrected to its "
+                             "reference temperature; run the thermal step (or calibrate thermal) again to "
+                             "store one";
+    record.notes.push_back(note);
+    said += (said.empty() ? "" : "; ") + note;
+  }
+  return said;
 }
 
 Result<CalibrationRecord> calibration_record_from_files(const std::vector<std::string>& paths) {

@@ -61,7 +61,9 @@ CalibrationRecord calibration_record_from_camimu(const CamImuReport& report, con
 
 /// A session that calibrated only the IMU must not drop the cameras the rig's record holds:
 /// when `record` has no cameras and `stored` has some, they are carried over, with a note in its
-/// notes; returns what was done in words (empty when nothing was carried).
+/// notes. A stored thermal model is not carried over to a record without one (it belongs to the
+/// IMU calibration it corrected), but a note says it was dropped. Returns what was done in words
+/// (empty when nothing was carried or dropped).
 std::string keep_stored_cameras(CalibrationRecord& record, const StoredCalibration& stored);
 
 /// The newest valid record of the configured storage, decoded. A missing storage file or empty

@@ -200,6 +200,25 @@ TEST(StoredCalibration, AnIMUOnlySessionKeepsTheStoredCameras) {
   EXPECT_EQ(with.cameras[0].name, "mine");
 }
 
+// Before: an IMU-only session's record replaced one with a thermal model, which was dropped
+// without a word (the cameras were kept, with a note).
+TEST(StoredCalibration, AStoredThermalModelThatIsNotKeptIsSaidSo) {
+  const std::string dir = test::scratch_dir();
+  StoredCalibration stored;
+  stored.sequence = 4;
+  stored.record = *calibration_record_from_file(write_static(dir));
+  stored.record->thermal = ThermalModel{};
+  stored.record->thermal->reference_c = 35.0;
+  CalibrationRecord fresh = *calibration_record_from_file(write_static(dir));
+  const std::string said = keep_stored_cameras(fresh, stored);
+  EXPECT_FALSE(fresh.thermal) << "a thermal model belongs to the IMU calibration it corrected";
+  EXPECT_NE(said.find("the stored thermal model (sequence 4, reference 35.0 deg C) is not kept"),
+            std::string::npos)
+      << said;
+  ASSERT_FALSE(fresh.notes.empty());
+  EXPECT_EQ(fresh.notes.back(), said);
+}
+
 TEST(StoredCalibration, WritesReadsAndExportsThroughAFile) {
   const std::string dir = test::scratch_dir();
   const RigConfig config = file_config(dir);
