@@ -17,6 +17,7 @@
 #include <utility>
 
 #include "app/results/camera_results.hpp"
+#include "calib/observation_check.hpp"
 #include "core/threads.hpp"
 #include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
@@ -260,9 +261,10 @@ Result<Detected> detect_frames(const log::SessionLogReader& reader, int stream_i
   return out;
 }
 
-/// The observations of a stored set, when it is one for this many frames.
+/// The observations of a stored set, when it is one for this many frames and every id is one of
+/// the target's `target_points` points (a file may hold anything).
 std::optional<std::vector<calib::TargetObservation>> decode_set(
-    const Result<std::optional<log::DetectionSet>>& set, std::int64_t frames,
+    const Result<std::optional<log::DetectionSet>>& set, std::int64_t frames, int target_points,
     std::vector<std::string>* warnings) {
   if (!set.ok()) {
     warnings->push_back("stored detections not used: " + set.error().message);
@@ -272,8 +274,10 @@ std::optional<std::vector<calib::TargetObservation>> decode_set(
   std::vector<calib::TargetObservation> obs;
   for (const auto& d : (*set)->detections) {
     auto o = decode_detection(d.data, d.t_ns);
-    if (!o.ok()) {
-      warnings->push_back("stored detections not used: " + o.error().message);
+    const Status usable = o.ok() ? calib::check_observation(*o, target_points) : Status(o.error());
+    if (!usable.ok()) {
+      warnings->push_back("stored detections not used (the frames are searched again): " +
+                          usable.error().message);
       return std::nullopt;
     }
     obs.push_back(std::move(*o));
@@ -371,10 +375,12 @@ Result<StreamDetections> detect_target_in_stream(const log::SessionLogReader& re
   }
   std::optional<std::vector<calib::TargetObservation>> obs;
   if (q.reuse_detections) {
-    obs = decode_set(log::read_target_detections(q.log_path, stream_id, out.key), out.frames, &out.warnings);
+    const int points = q.target.point_count();
+    obs = decode_set(log::read_target_detections(q.log_path, stream_id, out.key), out.frames, points,
+                     &out.warnings);
     if (obs) out.reused_from = "the log";
     if (!obs && !cache.empty()) {
-      obs = decode_set(log::read_detection_cache(cache, out.key), out.frames, &out.warnings);
+      obs = decode_set(log::read_detection_cache(cache, out.key), out.frames, points, &out.warnings);
       if (obs) out.reused_from = cache;
     }
   }

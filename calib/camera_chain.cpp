@@ -30,6 +30,7 @@
 #include "calib/camera_chain_residuals.hpp"
 #include "calib/camimu_init.hpp"
 #include "calib/marginal_covariance.hpp"
+#include "calib/observation_check.hpp"
 #include "calib/so3.hpp"
 #include "core/text_format.hpp"
 #include "core/threads.hpp"
@@ -272,14 +273,8 @@ class ChainSolver {
 Status check_observations(std::span<const CameraChainInput> cameras, std::size_t points) {
   for (const auto& cam : cameras) {
     for (const auto& o : cam.observations) {
-      bool ok = o.ids.size() == o.px.size();
-      for (std::size_t i = 0; ok && i < o.ids.size(); ++i)
-        ok = o.ids[i] >= 0 && static_cast<std::size_t>(o.ids[i]) < points && o.px[i].allFinite();
-      if (!ok) {
-        return make_error(Errc::kInvalidArgument,
-                          cam.name + ": the detection at t_ns " + std::to_string(o.t_ns) +
-                              " holds a point id the target does not have (it has " + std::to_string(points) +
-                              " points), or ids and pixels that do not match: detect again with this target");
+      if (Status s = check_observation(o, static_cast<int>(points)); !s.ok()) {
+        return make_error(Errc::kInvalidArgument, cam.name + ": " + s.error().message);
       }
     }
   }

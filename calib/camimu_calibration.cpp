@@ -16,6 +16,7 @@
 #include "calib/camimu_init.hpp"
 #include "calib/camimu_residuals.hpp"
 #include "calib/marginal_covariance.hpp"
+#include "calib/observation_check.hpp"
 #include "core/threads.hpp"
 
 namespace imucal::calib {
@@ -812,6 +813,16 @@ Result<CamImuCalibrationResult> calibrate_camimu(const std::vector<CamImuSample>
       return make_error(Errc::kInvalidArgument, "a camera chain prior names camera " +
                                                     std::to_string(cp.camera) + ", but " +
                                                     std::to_string(cameras.size()) + " are given");
+  }
+  // Every id indexes the target's points (the initialisation's PnP, the residuals): a detection
+  // read from a file is checked before any of them is used.
+  const int target_points = target.point_count();
+  for (const CamImuCameraInput& cam : cameras) {
+    for (const TargetObservation& o : cam.observations) {
+      if (Status s = check_observation(o, target_points); !s.ok()) {
+        return make_error(Errc::kInvalidArgument, cam.name + ": " + s.error().message);
+      }
+    }
   }
   int k = 1;
   const std::vector<CamImuSample> averaged = average_imu(imu, options.imu_max_rate_hz, &k);

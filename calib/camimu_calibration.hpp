@@ -137,7 +137,8 @@ struct CamImuIteration {
 };
 using CamImuProgressFn = std::function<void(const CamImuIteration&)>;
 
-/// Runs the initialisation and the full problem. Errors: kInvalidArgument (options),
+/// Runs the initialisation and the full problem. Errors: kInvalidArgument (options, or an
+/// observation whose ids the target does not have: check_observation),
 /// kInsufficientData (too few frames with the target, IMU not covering the frames, too little
 /// rotation to align camera and IMU), kSolverFailed.
 [[nodiscard]] Result<CamImuCalibrationResult> calibrate_camimu(const std::vector<CamImuSample>& imu,

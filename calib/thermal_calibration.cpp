@@ -9,6 +9,7 @@
 #include <numbers>
 #include <string>
 
+#include "core/die_temperature.hpp"
 #include "core/text_format.hpp"
 
 namespace imucal::calib {
@@ -176,7 +177,7 @@ Status ThermalOptions::validate() const {
   if (max_order < 0 || max_order > kMaxOrder) {
     return make_error(Errc::kInvalidArgument, "max_order must be within 0..3");
   }
-  if (reference_c && !(std::isfinite(*reference_c) && *reference_c > -60.0 && *reference_c < 150.0)) {
+  if (reference_c && !(std::isfinite(*reference_c) && is_die_temperature(*reference_c))) {
     return make_error(Errc::kInvalidArgument, "reference_c must be a die temperature in deg C (-60..150)");
   }
   if (!(motion_window_s > 0.0) || !(max_gyro_step_radps > 0.0) || !(max_accel_step_mps2 > 0.0)) {
@@ -301,6 +302,14 @@ Result<Points> gather_points(std::span<const ImuSample> samples, const ThermalOp
     Point p;
     p.t_s = ns_to_s(s.t_ns);
     p.temp_c = o.temperature_scale * s.temperature + o.temperature_offset;
+    if (!is_die_temperature(p.temp_c)) {
+      return make_error(Errc::kCorrupt,
+                        "the sample at t_ns " + std::to_string(s.t_ns) + " gives a die temperature of " +
+                            format_number("%g", p.temp_c) + " deg C, outside " +
+                            fixed(kMinDieTemperatureC, 0) + ".." + fixed(kMaxDieTemperatureC, 0) +
+                            " deg C, which no die reaches: the recording's temperatures are wrong (for an "
+                            "import, check the temperature column and its scale and offset)");
+    }
     p.v.head<3>() = has_gyro ? o.gyro.to_si(s.gyro) : Eigen::Vector3d::Zero();
     p.v.tail<3>() = has_accel ? o.accel.to_si(s.accel) : Eigen::Vector3d::Zero();
     pts.push_back(p);

@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include "core/die_temperature.hpp"
+
 namespace imucal {
 namespace {
 
@@ -271,6 +273,13 @@ Result<ThermalModel> thermal_model_from_json(const json& t) {
   IMUCAL_TRY(r.matrix(t, "valid_range_c", "thermal.", range, true));
   if (!std::isfinite(m.reference_c) || !(range[0] <= range[1]))
     return make_error(Errc::kCorrupt, "thermal.reference_c must be a number and valid_range_c [min, max]");
+  if (!is_die_temperature(m.reference_c) || !is_die_temperature(range[0]) || !is_die_temperature(range[1])) {
+    return make_error(Errc::kCorrupt,
+                      "thermal.reference_c and valid_range_c must be die temperatures (" +
+                          std::to_string(static_cast<int>(kMinDieTemperatureC)) + ".." +
+                          std::to_string(static_cast<int>(kMaxDieTemperatureC)) +
+                          " deg C); the model was fitted to impossible temperatures: fit it again");
+  }
   m.min_c = range[0];
   m.max_c = range[1];
   if (const auto it = t.find("scale"); it != t.end() && it->is_object()) {

@@ -8,6 +8,7 @@
 
 #include "acquisition/recorder.hpp"
 #include "drivers/mpu6000/output_settings.hpp"
+#include "log/dataset_io.hpp"
 #include "log/session_log.hpp"
 #include "sim/motion.hpp"
 #include "sim/rig.hpp"
@@ -58,10 +59,12 @@ Result<drivers::mpu6000::Settings> sim_driver_settings(const SimImuSessionOption
 }
 
 Status refuse_existing_outputs(std::initializer_list<std::string> paths, bool overwrite) {
-  if (overwrite) return {};
   std::error_code ec;
   for (const std::string& p : paths) {
-    if (!p.empty() && std::filesystem::exists(p, ec))
+    if (p.empty()) continue;
+    // A device, FIFO, socket or folder is never replaced, overwrite or not.
+    IMUCAL_TRY(log::check_replaceable(p));
+    if (!overwrite && std::filesystem::exists(p, ec))
       return make_error(Errc::kAlreadyExists, p + " already exists");
   }
   return {};

@@ -7,6 +7,7 @@
 
 #include "core/text_file.hpp"
 #include "core/version.hpp"
+#include "log/dataset_io.hpp"
 
 namespace imucal::sim {
 namespace {
@@ -360,6 +361,8 @@ YAML::Node truth_to_yaml(const SimTruth& truth) {
 
 Status write_truth_yaml(const std::string& path, const YAML::Node& doc, bool overwrite) {
   std::error_code ec;
+  // A device, FIFO, socket or folder at the path is never replaced, overwrite or not.
+  IMUCAL_TRY(log::check_replaceable(path));
   if (!overwrite && std::filesystem::exists(path, ec)) {
     return make_error(Errc::kAlreadyExists, path + " already exists");
   }

@@ -8,23 +8,87 @@
 #include <filesystem>
 #include <fstream>
 
+#include "app/results/output_checks.hpp"
 #include "log/dataset_io.hpp"
 
 namespace imucal::app {
 
+namespace {
+
+/// `path` resolved as far as it exists (symbolic links, `..`), absolute.
+std::filesystem::path resolved(const std::string& path) {
+  std::error_code ec;
+  return std::filesystem::weakly_canonical(std::filesystem::absolute(path, ec), ec);
+}
+
+/// Whether two paths name one file: the same inode when both exist, else the same resolved path.
+bool same_file(const std::string& a, const std::string& b) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::exists(a, ec) && fs::exists(b, ec)) return fs::equivalent(a, b, ec);
+  const fs::path ra = resolved(a);
+  return !ra.empty() && ra == resolved(b);
+}
+
+/// Whether `inner` lies inside the folder `outer` (both resolved).
+bool inside(const std::filesystem::path& inner, const std::filesystem::path& outer) {
+  if (inner.empty() || outer.empty()) return false;
+  const std::filesystem::path rel = inner.lexically_relative(outer);
+  return !rel.empty() && rel != "." && *rel.begin() != "..";
+}
+
+}  // namespace
+
+Status check_not_input(const std::string& path, const std::vector<std::string>& inputs,
+                       const std::vector<std::string>& input_folders) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const std::string rule = "; write the result to another file (--force never replaces an input)";
+  for (const auto& input : inputs) {
+    if (input.empty()) continue;
+    if (same_file(path, input)) {
+      return make_error(Errc::kInvalidArgument, path + " is an input of this command" + rule);
+    }
+    if (fs::is_directory(path, ec) && fs::exists(input, ec) && inside(resolved(input), resolved(path))) {
+      return make_error(Errc::kInvalidArgument,
+                        path + " holds " + input + ", an input of this command" + rule);
+    }
+  }
+  for (const auto& folder : input_folders) {
+    if (folder.empty()) continue;
+    const fs::path r = resolved(path);
+    if (same_file(path, folder) || (fs::exists(path, ec) && inside(r, resolved(folder))) ||
+        (fs::is_directory(path, ec) && inside(resolved(folder), r))) {
+      return make_error(Errc::kInvalidArgument, path + " is, holds or lies in " + folder +
+                                                    ", an input folder of this command" + rule);
+    }
+  }
+  return {};
+}
+
 Status check_output(const std::string& path, const OutputPolicy& policy) {
   namespace fs = std::filesystem;
   std::error_code ec;
-  for (const auto& input : policy.inputs) {
-    if (fs::exists(path, ec) && fs::equivalent(path, input, ec)) {
-      return make_error(Errc::kInvalidArgument,
-                        path + " is an input of this command; write the result to another file");
-    }
-  }
+  IMUCAL_TRY(check_not_input(path, policy.inputs));
   if (fs::is_directory(path, ec))
     return make_error(Errc::kInvalidArgument, path + " is a folder, not a file");
   IMUCAL_TRY(log::check_replaceable(path));
   if (!policy.overwrite && fs::exists(path, ec)) return make_error(Errc::kAlreadyExists, path + " exists");
+  return {};
+}
+
+Status check_outputs(const std::vector<NamedOutput>& outputs, const OutputPolicy& policy) {
+  for (std::size_t i = 0; i < outputs.size(); ++i) {
+    if (outputs[i].path.empty()) continue;
+    for (std::size_t k = 0; k < i; ++k) {
+      if (!outputs[k].path.empty() && same_file(outputs[k].path, outputs[i].path)) {
+        return make_error(Errc::kInvalidArgument, outputs[k].option + " and " + outputs[i].option +
+                                                      " name the same file (" + outputs[i].path +
+                                                      "): give each output a file of its own");
+      }
+    }
+    IMUCAL_TRY(check_output(outputs[i].path, policy));
+  }
   return {};
 }
 

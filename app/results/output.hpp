@@ -17,8 +17,8 @@ struct OutputPolicy {
 };
 
 /// Whether `path` may be written under `policy`, checked before the work that produces it:
-/// kInvalidArgument when it is one of the inputs (whatever the policy), kAlreadyExists when it
-/// exists and may not be replaced.
+/// kInvalidArgument when it could replace one of the inputs (check_not_input, whatever the policy),
+/// kAlreadyExists when it exists and may not be replaced.
 [[nodiscard]] Status check_output(const std::string& path, const OutputPolicy& policy);
 
 /// Writes `text` as the whole content of `path` after check_output: into a temporary file beside

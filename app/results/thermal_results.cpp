@@ -10,6 +10,7 @@
 #include "app/initial_guess.hpp"
 #include "app/solvers.hpp"
 #include "app/streams.hpp"
+#include "core/die_temperature.hpp"
 #include "core/text_file.hpp"
 #include "core/text_format.hpp"
 #include "core/yaml_json.hpp"
@@ -305,6 +306,8 @@ void read_scale(const ThermalReader& r, const YAML::Node& root, calib::ThermalSc
     calib::ThermalScalePoint p;
     p.source = points[k]["source"].as<std::string>("");
     p.temperature_c = r.number(points[k], "temperature_c", where);
+    if (!is_die_temperature(p.temperature_c))
+      throw std::runtime_error(where + "temperature_c is not a die temperature (-60..150 deg C)");
     p.temperature_span_c = r.number(points[k], "temperature_span_c", where);
     p.gyro = vec3_of(points[k], "gyro_scale", where);
     p.gyro_sigma = vec3_of(points[k], "gyro_scale_sigma", where);
@@ -340,6 +343,13 @@ Result<ThermalFile> read_thermal_file(const std::string& path) {
     res.temp_max_c = range[1];
     if (!std::isfinite(res.reference_c) || !(res.temp_min_c <= res.temp_max_c))
       throw std::runtime_error("reference_temperature_c and valid_range_c [min, max] must be finite");
+    // A model fitted to impossible temperatures (an old build took 1e308 deg C) is not applied.
+    if (!is_die_temperature(res.reference_c) || !is_die_temperature(res.temp_min_c) ||
+        !is_die_temperature(res.temp_max_c)) {
+      throw std::runtime_error(
+          "reference_temperature_c and valid_range_c must be die temperatures (-60..150 deg C); fit the "
+          "model again with calibrate thermal");
+    }
     res.duration_s = r.number(root, "duration_s", "");
     res.samples = static_cast<std::size_t>(std::max(0.0, r.number(root, "samples", "")));
     res.bins = static_cast<int>(r.number(root, "bins", ""));
@@ -487,6 +497,12 @@ Result<calib::ThermalScalePoint> scale_point_from_log(const std::string& path, c
   for (const ImuSample& s : loaded->samples) {
     if (!std::isfinite(s.temperature)) continue;
     const double t = info.temperature_scale * s.temperature + info.temperature_offset;
+    if (!is_die_temperature(t)) {
+      return make_error(Errc::kCorrupt, "--scale-from " + path + ": the sample at t_ns " +
+                                            std::to_string(s.t_ns) + " gives a die temperature of " +
+                                            format_number("%g", t) +
+                                            " deg C, which no die reaches: its temperatures are wrong");
+    }
     sum += t, lo = std::min(lo, t), hi = std::max(hi, t), ++n;
   }
   if (n == 0) {

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "app/camimu_inputs.hpp"
+#include "core/calibration_payload.hpp"
 #include "core/text_file.hpp"
 #include "core/text_format.hpp"
 #include "core/version.hpp"
@@ -132,14 +133,13 @@ Result<StoredCalibration> decode_latest(const drivers::LatestRecord& latest, con
   if (!latest.record) return out;
   const std::string where = device + " slot " + drivers::slot_name(latest.slot) + " (sequence " +
                             std::to_string(latest.record->sequence) + ")";
-  const json payload = json::from_cbor(latest.record->payload, true, false);
-  if (payload.is_discarded()) {
-    return make_error(Errc::kCorrupt,
-                      where +
-                          " holds an intact record whose payload is not CBOR: it was not written "
-                          "by imucal; write a new calibration");
+  const auto payload = calibration_payload_json(latest.record->payload);
+  if (!payload.ok()) {
+    return make_error(Errc::kCorrupt, where + " holds an intact record whose payload " +
+                                          payload.error().message +
+                                          ": it was not written by imucal; write a new calibration");
   }
-  auto record = calibration_record_from_json(payload);
+  auto record = calibration_record_from_json(*payload);
   if (!record.ok()) return record.error().context(where);
   out.record = std::move(*record);
   return out;
@@ -269,12 +269,27 @@ static Result<CalibrationRecord> load_record(const std::string& result_path, boo
 }
 
 std::string keep_stored_cameras(CalibrationRecord& record, const StoredCalibration& stored) {
-  if (!record.cameras.empty() || !stored.record || stored.record->cameras.empty()) return {};
-  record.cameras = stored.record->cameras;
-  const std::string note = "cameras kept from the stored record (sequence " +
-                           std::to_string(stored.sequence) + "): this session did not calibrate them";
-  record.notes.push_back(note);
-  return note;
+  if (!stored.record) return {};
+  std::string said;
+  if (record.cameras.empty() && !stored.record->cameras.empty()) {
+    record.cameras = stored.record->cameras;
+    const std::string note = "cameras kept from the stored record (sequence " +
+                             std::to_string(stored.sequence) + "): this session did not calibrate them";
+    record.notes.push_back(note);
+    said = note;
+  }
+  // A thermal model belongs to the IMU calibration whose biases it refers to its reference
+  // temperature: it cannot be carried over to a new one, but its loss is said, not silent.
+  if (!record.thermal && stored.record->thermal) {
+    const std::string note = "the stored thermal model (sequence " + std::to_string(stored.sequence) +
+                             ", reference " + fixed(stored.record->thermal->reference_c, 1) +
+                             " deg C) is not kept: this session's IMU calibration was not corrected to its "
+                             "reference temperature; run the thermal step (or calibrate thermal) again to "
+                             "store one";
+    record.notes.push_back(note);
+    said += (said.empty() ? "" : "; ") + note;
+  }
+  return said;
 }
 
 Result<CalibrationRecord> calibration_record_from_files(const std::vector<std::string>& paths) {
@@ -320,18 +335,46 @@ Result<StoredCalibration> read_stored_calibration(const RigConfig& config) {
   return decode_latest(*latest, (*device)->name());
 }
 
-Result<StoredCalibration> write_stored_calibration(const RigConfig& config, const CalibrationRecord& record) {
+Result<StoredCalibration> write_stored_calibration(const RigConfig& config, const CalibrationRecord& record,
+                                                   const drivers::StoreWriteOptions& options) {
   CalibrationRecord rec = record;
   if (rec.rig.empty()) rec.rig = config.name;
   const json p = calibration_record_json(rec);
   // What is stored must read back as what was meant: the JSON form is checked as a reader sees it.
   IMUCAL_TRY(calibration_record_from_json(p));
   const std::vector<std::uint8_t> cbor = json::to_cbor(p);
+  // Before the device is opened for writing: a file backend creates its file there.
+  const std::string device_name =
+      config.storage.backend == StorageBackend::kFile    ? "file " + config.storage.path
+      : config.storage.backend == StorageBackend::kNvmem ? "nvmem " + config.storage.path
+                                                         : "the EEPROM on " + config.storage.i2c_device;
+  IMUCAL_TRY(drivers::CalibrationStore::check_fits(
+      device_name, static_cast<std::uint64_t>(config.storage.size_bytes), cbor.size()));
   auto device = drivers::open_storage_device(config.storage, drivers::StorageAccess::kWrite);
   if (!device.ok()) return device.error();
   auto store = open_store(**device, config);
   if (!store.ok()) return store.error();
-  auto written = store->write(cbor);
+  // The newest record's payload from a newer imucal (a newer record version in this framing) is
+  // kept as the newest unless the caller says to replace it, as a newer framing is by the store.
+  if (!options.replace_newer) {
+    auto latest = store->read_latest();
+    if (!latest.ok()) return latest.error();
+    if (latest->record) {
+      const auto payload = calibration_payload_json(latest->record->payload);
+      const json version = payload.ok() && payload->is_object() ? payload->value("version", json()) : json();
+      if (version.is_number_integer() && version.get<std::int64_t>() > kCalibrationRecordVersion) {
+        return make_error(
+                   Errc::kInvalidArgument,
+                   (*device)->name() + " slot " + drivers::slot_name(latest->slot) +
+                       " holds the newest record, of calibration record version " + version.dump() +
+                       ", written by a newer imucal (this one writes version " +
+                       std::to_string(kCalibrationRecordVersion) +
+                       "); nothing was written. Write with that imucal, or replace its record knowingly")
+            .with_remedy("replace_newer");
+      }
+    }
+  }
+  auto written = store->write(cbor, options);
   if (!written.ok()) return written.error();
   auto latest = store->read_latest();
   if (!latest.ok()) return latest.error();
@@ -410,13 +453,13 @@ Result<Rollback> rollback_stored_calibration(const RigConfig& config) {
                                              drivers::slot_name(other) + " holds none (" + older->reason +
                                              ")");
     }
-    const json payload = json::from_cbor(older->record->payload, true, false);
-    if (payload.is_discarded()) {
-      return make_error(Errc::kCorrupt,
-                        std::string("slot ") + drivers::slot_name(other) +
-                            " holds a record whose payload is not CBOR: it cannot be restored");
+    const auto payload = calibration_payload_json(older->record->payload);
+    if (!payload.ok()) {
+      return make_error(Errc::kCorrupt, std::string("slot ") + drivers::slot_name(other) +
+                                            " holds a record whose payload " + payload.error().message +
+                                            ": it cannot be restored");
     }
-    auto record = calibration_record_from_json(payload);
+    auto record = calibration_record_from_json(*payload);
     if (!record.ok()) {
       return record.error().context(std::string("slot ") + drivers::slot_name(other) +
                                     " holds a record that cannot be restored");

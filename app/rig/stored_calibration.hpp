@@ -61,7 +61,9 @@ CalibrationRecord calibration_record_from_camimu(const CamImuReport& report, con
 
 /// A session that calibrated only the IMU must not drop the cameras the rig's record holds:
 /// when `record` has no cameras and `stored` has some, they are carried over, with a note in its
-/// notes; returns what was done in words (empty when nothing was carried).
+/// notes. A stored thermal model is not carried over to a record without one (it belongs to the
+/// IMU calibration it corrected), but a note says it was dropped. Returns what was done in words
+/// (empty when nothing was carried or dropped).
 std::string keep_stored_cameras(CalibrationRecord& record, const StoredCalibration& stored);
 
 /// The newest valid record of the configured storage, decoded. A missing storage file or empty
@@ -83,9 +85,12 @@ struct Rollback {
 [[nodiscard]] Result<Rollback> rollback_stored_calibration(const RigConfig& config);
 
 /// Writes `record` (its rig set from the configuration when empty) as the next record: to the
-/// older slot, synced, read back byte for byte by the store and decoded again here.
-[[nodiscard]] Result<StoredCalibration> write_stored_calibration(const RigConfig& config,
-                                                                 const CalibrationRecord& record);
+/// older slot, synced, read back byte for byte by the store and decoded again here. The refusals
+/// of CalibrationStore::write (a record of a newer imucal without options.replace_newer, a region
+/// holding something else); a record too large for a slot is refused before the storage file is
+/// created.
+[[nodiscard]] Result<StoredCalibration> write_stored_calibration(
+    const RigConfig& config, const CalibrationRecord& record, const drivers::StoreWriteOptions& options = {});
 
 /// The record as YAML, for people (numbers in full precision, short lists on one line).
 std::string stored_calibration_yaml(const CalibrationRecord& record);

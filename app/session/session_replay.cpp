@@ -72,6 +72,7 @@ struct LoggedSession {
   int final_id = 0;
   double final_wall_s = 0.0;
   double end_s = 0.0;
+  TimeNs last_event_ns = log::kTimeMin;  // the latest stamp of any session event read
 };
 
 /// A field the replay reads from a logged event, the JSON kind it must have, and whether the
@@ -118,7 +119,7 @@ const std::map<std::string, std::vector<Field>>& replay_fields() {
       {"key", {{"key", V::string, true}}},
       {"fault", {{"source", V::string, false}, {"text", V::string, false}}},
       {"stop", {{"reason", V::string, false}}},
-      {"written", {{"ok", V::boolean, true}, {"error", V::string, false}}},
+      {"written", {{"ok", V::boolean, true}, {"error", V::string, false}, {"where", V::string, false}}},
       {"applied", {{"id", V::number_integer, true}, {"wall_s", V::number_float, false}}},
       {"status", {{"state", V::string, false}, {"step", V::string, false}}},
       {"solve", {{"id", V::number_integer, false}, {"final", V::boolean, false}}},
@@ -179,6 +180,7 @@ Result<LoggedSession> read_session_events(const log::SessionLogReader& reader, c
     if (const std::string defect = event_defect(m, e.t_ns); !defect.empty()) return damaged(defect);
     const std::string type = m.value("type", "");
     const double t_s = static_cast<double>(e.t_ns) * 1e-9;
+    s.last_event_ns = std::max(s.last_event_ns, e.t_ns);
     if (type == "status" && m.value("state", "") == "running" && !m.value("step", "").empty() &&
         (s.step_starts.empty() || s.step_starts.back().second != m.value("step", ""))) {
       s.step_starts.emplace_back(t_s, m.value("step", ""));
@@ -216,9 +218,12 @@ double max_difference(const json& a, const json& b) {
     return m;
   }
   if (a.is_object() && b.is_object()) {
+    // Every key of either: a key only one of them has (an emptied result) is a difference.
     double m = 0.0;
     for (auto it = a.begin(); it != a.end(); ++it)
       m = std::max(m, b.contains(it.key()) ? max_difference(it.value(), b[it.key()]) : INFINITY);
+    for (auto it = b.begin(); it != b.end(); ++it)
+      if (!a.contains(it.key())) m = INFINITY;
     return m;
   }
   return a == b ? 0.0 : INFINITY;
@@ -329,8 +334,15 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   }
   ReplayHost host(*config, info, *dir, logged->preflight, motion_log);
   SessionEngine engine(*config, info, host);
-  if (auto s = engine.start(logged->steps); !s.ok())
-    return s.error().context("starting the replayed session");
+  if (auto s = engine.start(logged->steps); !s.ok()) {
+    // The steps come from the log: one the engine refuses is the log's defect, not usage.
+    const Error e = s.error().context("starting the replayed session");
+    if (e.code != Errc::kInvalidArgument) return e;
+    return make_error(Errc::kCorrupt,
+                      options.log_path + ": " + e.message +
+                          ": the log was altered or written by another version, and cannot be "
+                          "replayed");
+  }
 
   ReplaySummary summary;
   std::size_t next = 0;
@@ -356,16 +368,15 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
     ++summary.samples;
     return true;
   }));
-  // The engine stamps what it logs with the sample time it has reached: an input far after the
-  // last sample was not written by it.
-  if (!diverged && next < logged->inputs.size() && summary.samples > 0 &&
-      logged->inputs.back().t_ns - last_sample_ns > kMaxInputAfterLastSampleNs) {
-    return make_error(
-        Errc::kCorrupt,
-        options.log_path + ": a session event is stamped " +
-            std::to_string(static_cast<double>(logged->inputs.back().t_ns - last_sample_ns) * 1e-9) +
-            " s after the recording's last sample: the log was altered or is damaged, and "
-            "cannot be replayed");
+  // The engine stamps what it logs with the sample time it has reached: an event (an input, or
+  // the result and the outcome) far after the last sample was not written by it.
+  if (!diverged && summary.samples > 0 && logged->last_event_ns > last_sample_ns &&
+      logged->last_event_ns - last_sample_ns > kMaxInputAfterLastSampleNs) {
+    return make_error(Errc::kCorrupt,
+                      options.log_path + ": a session event is stamped " +
+                          std::to_string(static_cast<double>(logged->last_event_ns - last_sample_ns) * 1e-9) +
+                          " s after the recording's last sample: the log was altered or is damaged, and "
+                          "cannot be replayed");
   }
   if (!diverged && !apply_until(std::nullopt)) diverged = true;
   if (diverged) {

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "app/results/allan_results.hpp"
-#include "app/results/output.hpp"
+#include "app/results/output_checks.hpp"
 #include "app/stream_stats.hpp"
 #include "app/streams.hpp"
 #include "daemon/cli/command.hpp"
@@ -32,11 +32,8 @@ struct AllanCliOptions {
 
 void run(const AllanCliOptions& o) {
   const app::OutputPolicy outputs{o.force, {o.log_path}};
-  for (const auto* path : {&o.yaml_path, &o.json_path}) {
-    if (!path->empty()) {
-      if (auto s = app::check_output(*path, outputs); !s.ok()) fail(s.error());
-    }
-  }
+  if (auto s = app::check_outputs({{"-o", o.yaml_path}, {"--json", o.json_path}}, outputs); !s.ok())
+    fail(s.error());
   auto loaded = app::load_imu_stream(
       o.log_path, o.stream, o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse);
   if (!loaded.ok()) fail(loaded.error());

@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "app/initial_guess.hpp"
-#include "app/results/output.hpp"
+#include "app/results/output_checks.hpp"
 #include "app/results/static_results.hpp"
 #include "app/results/thermal_results.hpp"
 #include "app/solvers.hpp"
@@ -125,14 +125,13 @@ void print_summary(const std::string& log_path, const ImuStreamInfo& info, std::
 }
 
 void run(const StaticCliOptions& o) {
-  // Outputs are checked before the work: never the log itself, never an existing file without
-  // --force.
-  const app::OutputPolicy outputs{o.force, {o.log_path}};
-  for (const auto* path : {&o.yaml_path, &o.json_path}) {
-    if (!path->empty()) {
-      if (auto s = app::check_output(*path, outputs); !s.ok()) fail(s.error());
-    }
-  }
+  // Outputs are checked before the work: never an input (the log, the thermal model, the fixed
+  // g-sensitivity), never each other, never an existing file without --force.
+  app::OutputPolicy outputs{o.force, {o.log_path}};
+  if (!o.thermal_path.empty()) outputs.inputs.push_back(o.thermal_path);
+  if (o.gsens.size() == 2) outputs.inputs.push_back(o.gsens[1]);
+  if (auto s = app::check_outputs({{"-o", o.yaml_path}, {"--json", o.json_path}}, outputs); !s.ok())
+    fail(s.error());
   // The options are checked before the log is read.
   const app::GravityChoice gravity = resolve_gravity(o.grav);
   calib::StaticCalibrationOptions opt = method_options(o, gravity.mps2);

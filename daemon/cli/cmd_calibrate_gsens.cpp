@@ -11,7 +11,7 @@
 #include "app/calibration_check.hpp"
 #include "app/initial_guess.hpp"
 #include "app/results/gsens_results.hpp"
-#include "app/results/output.hpp"
+#include "app/results/output_checks.hpp"
 #include "app/streams.hpp"
 #include "calib/gsens_calibration.hpp"
 #include "daemon/cli/calibrate_group.hpp"
@@ -97,15 +97,12 @@ void print_summary(const std::string& log_path, const ImuStreamInfo& info, std::
 }
 
 void run(const GsensCliOptions& o) {
-  // Outputs are checked before the work: never the log or the prior, never an existing file
-  // without --force.
+  // Outputs are checked before the work: never the log or the prior, never each other, never an
+  // existing file without --force.
   app::OutputPolicy outputs{o.force, {o.log_path}};
   if (!o.intrinsics_path.empty()) outputs.inputs.push_back(o.intrinsics_path);
-  for (const auto* path : {&o.yaml_path, &o.json_path}) {
-    if (!path->empty()) {
-      if (auto s = app::check_output(*path, outputs); !s.ok()) fail(s.error());
-    }
-  }
+  if (auto s = app::check_outputs({{"-o", o.yaml_path}, {"--json", o.json_path}}, outputs); !s.ok())
+    fail(s.error());
   const app::GravityChoice gravity = resolve_gravity(o.grav);
   calib::GSensitivityOptions opt;
   opt.gravity_mps2 = gravity.mps2;

@@ -80,7 +80,9 @@ void print_summary(const calib::ThermalResult& r, const std::string& log_path, c
 }
 
 void run(const ThermalCliOptions& o) {
+  // Never an input (the log, the static pose recordings), whatever --force says.
   app::OutputPolicy outputs{o.force, {o.log_path}};
+  outputs.inputs.insert(outputs.inputs.end(), o.scale_from.begin(), o.scale_from.end());
   if (auto s = app::check_output(o.yaml_path, outputs); !s.ok()) fail(s.error());
 
   Progress progress("thermal calibration", 2.0 + static_cast<double>(o.scale_from.size()));

@@ -3,6 +3,7 @@
 #include <iostream>
 #include <memory>
 
+#include "app/results/output_checks.hpp"
 #include "daemon/cli/command.hpp"
 #include "log/dataset_io.hpp"
 
@@ -26,6 +27,8 @@ void setup(CLI::App& root) {
   cmd->add_flag("--force", o->force, "Replace DIR if it already holds a dataset");
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Export what is readable from a damaged log");
   cmd->callback([o] {
+    // DIR is replaced with --force: never when it holds the log.
+    if (auto s = app::check_not_input(o->dir, {o->log_path}); !s.ok()) fail(s.error());
     Progress progress("exporting", 1.0);
     log::OutputOptions options;
     options.force = o->force;

@@ -4,6 +4,7 @@
 #include <memory>
 #include <sstream>
 
+#include "app/results/output_checks.hpp"
 #include "daemon/cli/command.hpp"
 #include "log/dataset_io.hpp"
 
@@ -64,9 +65,12 @@ void apply_raw(const RawOptions& o, ImuUnits& units, AxisConversion& accel, Axis
   }
 }
 
-/// Runs an import with a progress display and prints its summary.
+/// Runs an import with a progress display and prints its summary. The log is never one of the
+/// dataset's files (`inputs`) or inside its folder (`input_folder`), whatever --force says.
 template <class F>
-void run_import(const std::string& out_path, bool force, F&& do_import) {
+void run_import(const std::string& out_path, bool force, const std::vector<std::string>& inputs,
+                const std::string& input_folder, F&& do_import) {
+  if (auto s = app::check_not_input(out_path, inputs, {input_folder}); !s.ok()) fail(s.error());
   Progress progress("importing", 1.0);
   log::OutputOptions options;
   options.force = force;
@@ -102,7 +106,7 @@ void setup(CLI::App& root) {
     cmd->add_option("DIR", *dir, "Dataset folder")->required();
     add_common(cmd, *common);
     cmd->callback([common, dir] {
-      run_import(common->out_path, common->force,
+      run_import(common->out_path, common->force, {}, *dir,
                  [&](const log::OutputOptions& o) { return log::import_euroc(*dir, common->out_path, o); });
     });
   }
@@ -120,7 +124,7 @@ void setup(CLI::App& root) {
       apply_raw(*raw, in->units, in->accel, in->gyro);
       in->rate_hz = raw->rate_hz;
       in->unit_check = !raw->no_unit_check;
-      run_import(common->out_path, common->force,
+      run_import(common->out_path, common->force, {in->accel_path, in->gyro_path}, "",
                  [&](const log::OutputOptions& o) { return log::import_ascii(*in, common->out_path, o); });
     });
   }
@@ -176,7 +180,7 @@ void setup(CLI::App& root) {
       const bool raw_units = in->units == ImuUnits::kRaw;
       in->temperature_scale = ts->count() ? *temp_scale : (raw_units ? 1.0 / 340.0 : 1.0);
       in->temperature_offset = to->count() ? *temp_offset : (raw_units ? 36.53 : 0.0);
-      run_import(common->out_path, common->force,
+      run_import(common->out_path, common->force, {in->path}, "",
                  [&](const log::OutputOptions& o) { return log::import_csv(*in, common->out_path, o); });
     });
   }

@@ -18,6 +18,7 @@
 
 #include "acquisition/recorder.hpp"
 #include "app/module_loader.hpp"
+#include "app/results/output_checks.hpp"
 #include "app/rig/cameras.hpp"
 #include "app/rig/rig.hpp"
 #include "core/rig_config.hpp"
@@ -166,6 +167,7 @@ void run_record(const RecordArgs& a) {
   if (!(a.duration_s > 0.0) || !std::isfinite(a.duration_s)) {
     throw CliExit{kExitUsage, "--duration must be a positive number of seconds"};
   }
+  if (auto s = app::check_not_input(a.out_path, {a.config_path}); !s.ok()) fail(s.error());
   const RigConfig config = take(load_rig_config(a.config_path), "reading the rig configuration");
   const bool sim = a.sim || config.imu.bus == ImuBus::kSim;
   if (a.realtime && !sim) throw CliExit{kExitUsage, "--realtime needs --sim (or imu.bus: sim)"};

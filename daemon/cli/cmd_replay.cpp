@@ -65,8 +65,15 @@ void run(const ReplayArgs& a) {
     for (const auto& n : s.notes) std::printf("  note: %s\n", n.c_str());
   }
   if (!same_outcome || !same_result) {
-    throw CliExit{kExitSolver, "replay: the replayed session differs from the live one (outcome " +
-                                   s.outcome + " vs " + s.live_outcome + ")"};
+    const auto named = [](const std::string& outcome, const char* none) {
+      return outcome.empty() ? std::string(none) : outcome;
+    };
+    throw CliExit{
+        kExitSolver,
+        "replay: the replayed session differs from the live one (outcome " +
+            named(s.outcome, "none: the replay did not reach the end") + " vs " +
+            named(s.live_outcome, "none logged: the live session was killed or stopped before its end") +
+            (same_result ? std::string() : "; the results differ") + ")"};
   }
 }
 

@@ -15,8 +15,10 @@
 #include <vector>
 
 #include "app/module_loader.hpp"
+#include "app/results/output_checks.hpp"
 #include "core/text_format.hpp"
 #include "daemon/cli/command.hpp"
+#include "log/dataset_io.hpp"
 #include "log/session_log.hpp"
 #include "sim/camimu.hpp"
 #include "sim/imu_error_model.hpp"
@@ -194,11 +196,19 @@ sim::ImuModelParams make_params(const SimCommon& o, const CLI::App* cmd, bool* f
   return p;
 }
 
-void refuse_overwrite(const SimCommon& o, const std::string& truth_path) {
-  if (o.force) return;
+/// The log and its truth file, checked before the work: never an input (--truth, --target), never
+/// a device, FIFO, socket or folder, and an existing file only with --force.
+void refuse_overwrite(const SimCommon& o, const std::string& truth_path,
+                      const std::vector<std::string>& more_inputs = {}) {
+  std::vector<std::string> inputs = more_inputs;
+  inputs.push_back(o.truth_in);
   std::error_code ec;
   for (const std::string& p : {o.out_path, truth_path}) {
-    if (std::filesystem::exists(p, ec)) throw CliExit{kExitUsage, p + " exists; pass --force to replace it"};
+    if (auto s = app::check_not_input(p, inputs); !s.ok()) fail(s.error());
+    if (auto s = log::check_replaceable(p); !s.ok()) fail(s.error());
+    if (!o.force && std::filesystem::exists(p, ec)) {
+      throw CliExit{kExitUsage, p + " exists; pass --force to replace it"};
+    }
   }
 }
 
@@ -366,7 +376,7 @@ void add_camimu(CLI::App* sim) {
     co->imu = make_params(*o, cmd, &co->imu_params_from_file);
     co->overwrite = o->force;
     const std::string truth_path = sim::truth_path_for(o->out_path);
-    refuse_overwrite(*o, truth_path);
+    refuse_overwrite(*o, truth_path, {*target_path});
     auto valid = co->validate();
     if (!valid.ok()) fail(valid.error(), "sim camimu");
     auto render = app::load_module<sim::RenderModuleApi>(sim::kRenderModule, sim::kRenderModuleEntry);

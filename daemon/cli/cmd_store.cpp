@@ -19,6 +19,7 @@ struct StoreOptions {
   std::string config_path;
   std::vector<std::string> results;
   bool json = false;
+  bool replace_newer = false;
 };
 
 RigConfig load_config(const std::string& path) {
@@ -129,7 +130,7 @@ CalibrationRecord record_of(const std::vector<std::string>& results) {
 void run_write(const StoreOptions& o) {
   const RigConfig config = load_config(o.config_path);
   const CalibrationRecord record = record_of(o.results);
-  auto written = app::write_stored_calibration(config, record);
+  auto written = app::write_stored_calibration(config, record, drivers::StoreWriteOptions{o.replace_newer});
   if (!written.ok()) fail(written.error(), "writing the calibration");
   std::cout << "written and verified: " << written->device << " slot " << drivers::slot_name(written->slot)
             << ", sequence " << written->sequence << ", " << written->payload_bytes << " payload bytes\n";
@@ -189,6 +190,9 @@ void setup(CLI::App& root) {
       "exported calibration) as the next record; synced, read back and verified");
   add_config(write);
   write->add_option("RESULT", o->results, "Result files: at most one static and one camimu")->required();
+  write->add_flag("--replace-newer", o->replace_newer,
+                  "Write even over a record a newer imucal wrote (of a newer format version), which is "
+                  "otherwise kept");
   write->callback([o] { run_write(*o); });
 
   CLI::App* rollback = store->add_subcommand(

@@ -6,12 +6,14 @@
 #include <termios.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <string>
 #include <utility>
 
+#include "core/printable_text.hpp"
 #include "daemon/ctl/console.hpp"
 #include "daemon/service/protocol.hpp"
 
@@ -112,6 +114,10 @@ std::pair<int, int> terminal_size() {
 // The elapsed time in the header moves on once a second while a session runs.
 constexpr auto kTick = std::chrono::seconds(1);
 
+// A controlling console says hello again this often, so that the service never takes it for an
+// idle controller (ControlServerOptions::controller_idle_after) while the operator watches.
+constexpr auto kKeepAlive = std::chrono::seconds(60);
+
 class Console {
  public:
   Console(Connection& connection, bool observe, bool tty)
@@ -153,6 +159,18 @@ class Console {
 
   void redraw_now() { dirty_ = true, last_draw_ = Clock::now() - kRedrawInterval; }
 
+  // Says hello as controller again when a keep-alive is due; returns the poll timeout until the
+  // next one (-1 for an observer, which needs none).
+  int keep_alive_if_due() {
+    if (state_.observe) return -1;
+    const auto now = Clock::now();
+    if (now >= next_keep_alive_) {
+      send(service::to_json(service::hello_request("imucalctl", service::Role::kController)));
+      next_keep_alive_ = now + kKeepAlive;
+    }
+    return static_cast<int>(std::chrono::ceil<std::chrono::milliseconds>(next_keep_alive_ - now).count());
+  }
+
   // Draws when due; returns the poll timeout until the next draw (-1: nothing pending).
   int draw_if_due() {
     const auto now = Clock::now();
@@ -190,6 +208,7 @@ class Console {
   bool dirty_ = true;
   Clock::time_point last_draw_;
   Clock::time_point last_message_ = Clock::now();
+  Clock::time_point next_keep_alive_ = Clock::now() + kKeepAlive;
 };
 
 // The poll loop over the service, the keyboard and the signals.
@@ -203,7 +222,9 @@ int run(Connection& connection, Console& console) {
     while (auto message = connection.buffered()) {
       console.show(*message);
     }
-    const int timeout = console.draw_if_due();
+    const int draw = console.draw_if_due();
+    const int keep_alive = console.keep_alive_if_due();
+    const int timeout = draw < 0 ? keep_alive : keep_alive < 0 ? draw : std::min(draw, keep_alive);
     pollfd fds[3] = {
         {connection.fd(), POLLIN, 0}, {signals.fd(), POLLIN, 0}, {keyboard ? STDIN_FILENO : -1, POLLIN, 0}};
     if (::poll(fds, 3, timeout) < 0 && errno != EINTR) {
@@ -212,7 +233,7 @@ int run(Connection& connection, Console& console) {
     if ((fds[0].revents & (POLLIN | POLLHUP | POLLERR)) != 0) {
       if (auto read = connection.read_some(); !read) {
         console.draw_if_due();
-        std::fprintf(stderr, "imucalctl: %s\n", read.error().message.c_str());
+        std::fprintf(stderr, "imucalctl: %s\n", printable_text(read.error().message).c_str());
         return 1;
       }
     }
@@ -251,7 +272,7 @@ int attach(Connection& connection, const AttachOptions& options) {
         connection.request(service::to_json(service::plain_request(service::Command::kSubscribe)), &early);
   }
   if (!replied) {
-    std::fprintf(stderr, "imucalctl: %s\n", replied.error().message.c_str());
+    std::fprintf(stderr, "imucalctl: %s\n", printable_text(replied.error().message).c_str());
     return 1;
   }
   for (const auto& message : early) {

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <sstream>
 
+#include "core/printable_text.hpp"
 #include "core/text_format.hpp"
 #include "daemon/service/protocol.hpp"
 
@@ -427,14 +428,19 @@ std::string render(const ConsoleState& state, const RenderOptions& options) {
       if (room > 0) mid.back() = "  ... (more than fits: a larger terminal shows it all)";
     }
   }
+  // The service's text (prompts, messages, a controller's name in a refusal) reaches the terminal
+  // only with its control characters replaced: no escape sequence of a client's gets through.
   std::string screen;
   for (const auto* part : {&top, &mid, &bottom}) {
-    for (const auto& line : *part) screen += (line.size() > width ? line.substr(0, width) : line) + '\n';
+    for (const auto& line : *part)
+      screen += printable_text(line.size() > width ? line.substr(0, width) : line) + '\n';
   }
   return screen;
 }
 
-std::optional<std::string> plain_line(const json& message) {
+namespace {
+
+std::optional<std::string> plain_line_of(const json& message) {
   const std::string type = str(message, "type");
   if (type == "status") {
     std::string line = "status: " + str(message, "state");
@@ -488,6 +494,14 @@ std::optional<std::string> plain_line(const json& message) {
   return std::nullopt;
 }
 
+}  // namespace
+
+std::optional<std::string> plain_line(const json& message) {
+  auto line = plain_line_of(message);
+  if (line) *line = printable_text(*line);
+  return line;
+}
+
 std::string status_text(const json& status) {
   std::ostringstream out;
   out << "state:   " << str(status, "state") << '\n';
@@ -509,7 +523,7 @@ std::string status_text(const json& status) {
   if (status.is_object() && status.contains("devices") && !status["devices"].empty()) {
     out << "devices: " << status["devices"].dump(-1, ' ', false, json::error_handler_t::replace) << '\n';
   }
-  return out.str();
+  return printable_text(out.str(), true);
 }
 
 bool session_running(const ConsoleState& state) { return is_running(state.status); }

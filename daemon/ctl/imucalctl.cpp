@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "core/printable_text.hpp"
 #include "daemon/ctl/attach.hpp"
 #include "daemon/ctl/client.hpp"
 #include "daemon/ctl/console.hpp"
@@ -46,7 +47,7 @@ std::string default_socket() {
 }
 
 int fail(const std::string& message, int code) {
-  std::fprintf(stderr, "imucalctl: %s\n", message.c_str());
+  std::fprintf(stderr, "imucalctl: %s\n", imucal::printable_text(message).c_str());  // the service's words
   return code;
 }
 

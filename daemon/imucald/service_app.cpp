@@ -51,6 +51,25 @@ std::string storage_unwritable(const StorageConfig& config) {
   return device.ok() ? std::string() : device.error().message;
 }
 
+/// Why the storage path cannot be what its backend needs (a FIFO, socket or folder; for the file
+/// backend anything but a regular file), judged from the file's type without opening it; empty
+/// when it can (or is not there yet).
+std::string storage_type_problem(const StorageConfig& s) {
+  if (s.backend == StorageBackend::kI2cEeprom) return {};
+  std::error_code ec;
+  const auto status = std::filesystem::status(s.path, ec);
+  if (!std::filesystem::exists(status)) return {};
+  if (s.backend == StorageBackend::kFile && !std::filesystem::is_regular_file(status)) {
+    return "not a regular file (a FIFO, device, socket or folder): storage.backend file needs one; fix "
+           "storage.path";
+  }
+  if (std::filesystem::is_fifo(status) || std::filesystem::is_socket(status) ||
+      std::filesystem::is_directory(status)) {
+    return "a FIFO, socket or folder, not an nvmem file: fix storage.path";
+  }
+  return {};
+}
+
 /// "present", or why a device node or file is not there on this machine.
 std::string presence(const std::string& path) {
   std::error_code ec;
@@ -117,11 +136,21 @@ int check_configuration(const ServiceOptions& options) {
   if (c.cameras.empty()) std::printf("  cameras   none (no motion step)\n");
   const StorageConfig& st = c.storage;
   const std::string where = st.backend == StorageBackend::kI2cEeprom ? st.i2c_device : st.path;
+  const std::string storage_problem = storage_type_problem(st);
   std::printf("  storage   %s %s, %d bytes at offset %d (%s)\n", storage_backend_name(st.backend),
               where.c_str(), st.size_bytes, st.offset_bytes,
-              st.backend == StorageBackend::kFile && !std::filesystem::exists(where)
+              !storage_problem.empty() ? storage_problem.c_str()
+              : st.backend == StorageBackend::kFile && !std::filesystem::exists(where)
                   ? "not written yet"
                   : presence(where).c_str());
+  if (!storage_problem.empty()) {
+    std::fprintf(stderr, "imucald: %s\n",
+                 config_unusable_message(
+                     options.config_path,
+                     make_error(Errc::kInvalidArgument, "storage.path " + where + " is " + storage_problem))
+                     .c_str());
+    return kExitConfigUnusable;
+  }
   std::printf("  state dir %s: %s\n", options.state_dir.c_str(), state_dir_note(options.state_dir).c_str());
 
   // The modules a session of this configuration loads. The solver's names are those of

@@ -108,6 +108,15 @@ class ControlServer::Impl : public std::enable_shared_from_this<ControlServer::I
  private:
   void hello(Client& client, const Request& request);
   Status control(Client& client, const Request& request);
+  // Connections not being closed.
+  std::size_t active() const;
+  // Closes the longest silent connection that is not the controller and has been silent for
+  // evict_idle_after (subscribers first), to make room; false when there is none.
+  bool evict_idlest();
+  // Whether the controller may be taken from its holder by `client`: it is silent for long.
+  bool controller_idle(const Client& client) const;
+  // Makes an idle controller (controller_idle) an observer, telling it who took the role.
+  void take_idle_controller(const Client& client, const std::string& by);
   void log(const std::string& text) const {
     if (options_.log) {
       options_.log(text);
@@ -203,6 +212,8 @@ class Client : public std::enable_shared_from_this<Client> {
   std::string name;
   std::optional<Role> role;
   bool subscribed = false;
+  bool reserved = false;  // admitted to the place kept for the operator's console
+  std::chrono::steady_clock::time_point last_heard = std::chrono::steady_clock::now();
 
  private:
   void on_read(const boost::system::error_code& ec, std::size_t n) {
@@ -240,6 +251,7 @@ class Client : public std::enable_shared_from_this<Client> {
       }
       if (!line.empty()) {
         heard_ = true;
+        last_heard = std::chrono::steady_clock::now();
         silent_.cancel();
         server.on_line(*this, line);
       }
@@ -332,9 +344,13 @@ void ControlServer::Impl::accept() {
     }
     if (!ec) {
       auto client = std::make_shared<Client>(std::move(socket), weak);
+      // Every place taken: the longest silent connection that does not control gives its place.
+      if (self->active() >= self->options_.max_clients + 1) self->evict_idlest();
+      const std::size_t before = self->active();
       self->clients_.insert(client);
-      // One place beyond max_clients is the operator's (see hello()).
-      if (self->clients_.size() > self->options_.max_clients + 1) {
+      // One place beyond max_clients is the operator's (see hello() and on_line()).
+      client->reserved = before >= self->options_.max_clients;
+      if (before > self->options_.max_clients) {
         // Refused with a reason rather than left unanswered in the backlog.
         const Status refused =
             make_error(Errc::kUnsupported, "too many clients (" + std::to_string(self->options_.max_clients) +
@@ -368,8 +384,18 @@ void ControlServer::Impl::on_line(Client& client, std::string_view line) {
     case Command::kStatus:
       reply({});
       client.send(std::make_shared<const std::string>(to_line(host_.status())));
+      // The operator's place answers one status query; then it is free again.
+      if (client.reserved && &client != controller_) client.close_after_sending(*this);
       return;
     case Command::kSubscribe:
+      if (client.reserved && &client != controller_) {
+        reply(make_error(Errc::kUnsupported,
+                         "too many clients (" + std::to_string(options_.max_clients) +
+                             "): the last place is kept for the operator's console, which says hello as "
+                             "controller before it subscribes; close another observer and retry"));
+        client.close_after_sending(*this);
+        return;
+      }
       reply({});
       client.subscribed = true;
       for (const auto& message : host_.snapshot()) {
@@ -381,13 +407,67 @@ void ControlServer::Impl::on_line(Client& client, std::string_view line) {
   }
 }
 
+std::size_t ControlServer::Impl::active() const {
+  std::size_t n = 0;
+  for (const auto& c : clients_) n += c->closed() ? 0 : 1;
+  return n;
+}
+
+bool ControlServer::Impl::evict_idlest() {
+  const auto now = std::chrono::steady_clock::now();
+  Client* victim = nullptr;
+  for (const auto& c : clients_) {
+    if (c->closed() || c.get() == controller_ || now - c->last_heard < options_.evict_idle_after) continue;
+    // Subscribers first, then the longest silent.
+    if (!victim || (c->subscribed && !victim->subscribed) ||
+        (c->subscribed == victim->subscribed && c->last_heard < victim->last_heard)) {
+      victim = c.get();
+    }
+  }
+  if (!victim) return false;
+  const auto silent_s = std::chrono::duration_cast<std::chrono::seconds>(now - victim->last_heard).count();
+  const Status why = make_error(Errc::kUnsupported,
+                                "every place of the control socket was taken and this "
+                                "connection had sent nothing for " +
+                                    std::to_string(silent_s) + " s: it is closed to make room for a new one");
+  victim->send(std::make_shared<const std::string>(to_line(make_reply("", why))));
+  log("control socket: closing " + (victim->name.empty() ? std::string("a client") : victim->name) +
+      ", silent for " + std::to_string(silent_s) + " s, to make room for a new connection");
+  victim->close_after_sending(*this);
+  return true;
+}
+
+bool ControlServer::Impl::controller_idle(const Client& client) const {
+  return controller_ != nullptr && controller_ != &client &&
+         std::chrono::steady_clock::now() - controller_->last_heard >= options_.controller_idle_after;
+}
+
+void ControlServer::Impl::take_idle_controller(const Client& client, const std::string& by) {
+  if (!controller_idle(client)) return;
+  // A controller silent for long gives the role up to the one asking: it stays, as an observer.
+  Client* idle = controller_;
+  const auto silent_s =
+      std::chrono::duration_cast<std::chrono::seconds>(std::chrono::steady_clock::now() - idle->last_heard)
+          .count();
+  idle->role = Role::kObserver;
+  controller_ = nullptr;
+  const std::string who = by.empty() ? "another client" : by;
+  const Status taken = make_error(
+      Errc::kAlreadyExists, "this connection had sent nothing for " + std::to_string(silent_s) +
+                                " s and lost the controller role to " + who + "; it is an observer now");
+  idle->send(std::make_shared<const std::string>(to_line(make_reply("hello", taken))));
+  log("control socket: the controller role passed from " + idle->name + " (silent for " +
+      std::to_string(silent_s) + " s) to " + who);
+}
+
 void ControlServer::Impl::hello(Client& client, const Request& request) {
   Status status;
+  if (request.role == Role::kController) take_idle_controller(client, request.client);
   if (request.role == Role::kController && controller_ != nullptr && controller_ != &client) {
     status =
         make_error(Errc::kAlreadyExists, "another controller is attached (" + controller_->name +
                                              "); attach as an observer, or detach the other console first");
-  } else if (request.role == Role::kObserver && clients_.size() > options_.max_clients) {
+  } else if (request.role == Role::kObserver && client.reserved) {
     // The place beyond max_clients is kept for the operator's console.
     status = make_error(Errc::kUnsupported, "too many clients (" + std::to_string(options_.max_clients) +
                                                 "): the last place is kept for the operator's console; "
@@ -415,6 +495,7 @@ Status ControlServer::Impl::control(Client& client, const Request& request) {
         Errc::kInvalidArgument,
         "this connection is an observer; say {\"cmd\":\"hello\",\"role\":\"controller\"} first");
   }
+  take_idle_controller(client, client.name);
   if (controller_ != nullptr && controller_ != &client) {
     return make_error(Errc::kAlreadyExists,
                       "another controller is attached (" + controller_->name +

@@ -28,11 +28,21 @@ struct ControlServerOptions {
   // read its last lines: a peer that never reads must not hold its descriptor forever.
   std::chrono::milliseconds close_timeout{5000};
   // More connections get an error reply and are closed. One place beyond it is kept for the
-  // operator's console: a connection there may control (or ask once), not observe.
+  // operator's console: a connection there may control, or ask for the status once (it is then
+  // closed), but neither observe nor subscribe.
   std::size_t max_clients = 32;
   // A connection that sends nothing this long after connecting is closed with a reply saying
   // so: idle connections must not take the places the operator needs.
   std::chrono::milliseconds silent_timeout{10000};
+  // When every place is taken (the reserved one included), a new connection is not refused while
+  // another connection, not the controller, has sent nothing for this long: the longest silent
+  // one (subscribers first) is closed with a reply saying why, and the new one takes its place.
+  // So connections that asked once and stay open cannot lock the operator out.
+  std::chrono::milliseconds evict_idle_after{30000};
+  // A controller that has sent nothing for this long gives the role to another client that asks
+  // for it (hello as controller, or a control command); it stays connected, as an observer, and
+  // is told. imucalctl attach says hello again every minute, so a console in use never idles.
+  std::chrono::milliseconds controller_idle_after{600000};
   std::function<void(const std::string&)> log;  // optional: why a connection was dropped
 
   Status validate() const;

@@ -3,8 +3,13 @@
 #include <algorithm>
 #include <array>
 
+#include "core/printable_text.hpp"
+
 namespace imucal::service {
 namespace {
+
+/// The longest client name a hello may give, bytes: it is shown on terminals and in the log.
+constexpr std::size_t kMaxClientNameBytes = 64;
 
 using nlohmann::json;
 
@@ -39,7 +44,14 @@ Status parse_hello(const json& object, Request& request) {
     if (!it->is_string()) {
       return invalid("hello: \"client\" must be a string (the client's name)");
     }
-    request.client = it->get<std::string>();
+    // The name reaches other clients' terminals ("another controller is attached (NAME)") and
+    // the service's log: printable and bounded, or refused.
+    const auto& name = it->get_ref<const std::string&>();
+    if (name.size() > kMaxClientNameBytes || !is_printable_text(name)) {
+      return invalid("hello: \"client\" must be printable text (no control characters) of at most " +
+                     std::to_string(kMaxClientNameBytes) + " bytes");
+    }
+    request.client = name;
   }
   if (const auto it = object.find("role"); it != object.end()) {
     if (!it->is_string() || (*it != "observer" && *it != "controller")) {

@@ -17,7 +17,7 @@ enum class Role { kObserver, kController };
 
 struct Request {
   Command command = Command::kStatus;
-  std::string client;              // hello: the client's name, for the log
+  std::string client;              // hello: the client's name (printable, 64 bytes at most)
   Role role = Role::kObserver;     // hello
   std::vector<std::string> steps;  // start: empty = the configured steps
   std::string key;                 // key (abort and accept set it too)

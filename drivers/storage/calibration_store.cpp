@@ -78,17 +78,51 @@ Result<LatestRecord> CalibrationStore::read_latest() {
   return latest;
 }
 
-Result<WriteReport> CalibrationStore::write(std::span<const std::uint8_t> payload) {
-  if (payload.size() > max_payload_bytes()) {
+Status CalibrationStore::check_fits(const std::string& device, std::uint64_t region_bytes,
+                                    std::size_t payload_bytes) {
+  const std::uint64_t slot = region_bytes / 2;
+  if (slot < kRecordHeaderBytes || payload_bytes > slot - kRecordHeaderBytes) {
     return make_error(
         Errc::kInvalidArgument,
-        "the calibration record needs " + std::to_string(payload.size() + kRecordHeaderBytes) +
-            " bytes, a slot of " + device_->name() + " holds " + std::to_string(slot_bytes_) +
+        "the calibration record needs " + std::to_string(payload_bytes + kRecordHeaderBytes) +
+            " bytes, a slot of " + device + " holds " + std::to_string(slot) +
             " (half of storage.size_bytes); nothing was written. Raise storage.size_bytes or store "
             "fewer results");
   }
+  return {};
+}
+
+Result<WriteReport> CalibrationStore::write(std::span<const std::uint8_t> payload,
+                                            const StoreWriteOptions& options) {
+  IMUCAL_TRY(check_fits(device_->name(), 2 * slot_bytes_, payload.size()));
   auto latest = read_latest();
   if (!latest.ok()) return latest.error();
+  for (const SlotReport& r : latest->slots) {
+    // A newer imucal's record is not damage: it is kept unless the caller says to replace it.
+    if (r.defect == RecordDefect::kNewerVersion && !options.replace_newer) {
+      return make_error(Errc::kInvalidArgument,
+                        device_->name() + " slot " + slot_name(r.slot) + " holds a record of " + r.reason +
+                            "; nothing was written. Write with that imucal, or replace its record "
+                            "knowingly")
+          .with_remedy("replace_newer");
+    }
+  }
+  if (!latest->record) {
+    // No record of imucal's anywhere, and bytes that are neither erased nor an imucal header:
+    // the region is something else's (a session log named as storage.path by mistake).
+    for (const SlotReport& r : latest->slots) {
+      if (r.defect == RecordDefect::kBadMagic) {
+        return make_error(Errc::kInvalidArgument,
+                          device_->name() + " slot " + slot_name(r.slot) + " (byte " +
+                              std::to_string(r.offset) + ") holds data that is not a calibration record (" +
+                              r.reason +
+                              ") and no slot holds one: storage.path, storage.offset_bytes or "
+                              "storage.size_bytes name something else, which is never written over; "
+                              "nothing was written. Fix those keys, or erase the region (all 0x00 "
+                              "or 0xFF) if its content is not needed");
+      }
+    }
+  }
   std::uint32_t sequence = 1;
   int target = 0;
   if (latest->record) {

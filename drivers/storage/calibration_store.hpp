@@ -42,6 +42,12 @@ struct LatestRecord {
   std::array<SlotReport, 2> slots;
 };
 
+/// What a write may replace besides an older or damaged record of this imucal's.
+struct StoreWriteOptions {
+  /// A record of a newer format version (a newer imucal's): kept unless this is set.
+  bool replace_newer = false;
+};
+
 struct WriteReport {
   int slot = 0;
   std::uint32_t sequence = 0;
@@ -59,10 +65,20 @@ class CalibrationStore {
   [[nodiscard]] Result<std::array<SlotReport, 2>> inspect();
   /// The newest valid record, or none; device errors are errors.
   [[nodiscard]] Result<LatestRecord> read_latest();
-  /// Writes `payload` as the next record (see the header comment). A payload that does not fit a
-  /// slot is refused before anything is written (kInvalidArgument); a read-back that differs
-  /// from what was written is a failed write (kDevice).
-  [[nodiscard]] Result<WriteReport> write(std::span<const std::uint8_t> payload);
+  /// Writes `payload` as the next record (see the header comment). Refused before anything is
+  /// written (kInvalidArgument): a payload that does not fit a slot; a slot holding a record of a
+  /// newer format version (without options.replace_newer; remedy "replace_newer"); a region
+  /// that holds no record of imucal's and bytes that are neither erased nor an imucal record
+  /// header (storage.path names another file, or the region overlaps other data). A read-back
+  /// that differs from what was written is a failed write (kDevice).
+  [[nodiscard]] Result<WriteReport> write(std::span<const std::uint8_t> payload,
+                                          const StoreWriteOptions& options = {});
+
+  /// Whether a payload of `payload_bytes` fits a slot of a region of `region_bytes`
+  /// (kInvalidArgument naming `device` and what to change): checked by write(), and by callers
+  /// before they open a device for writing, so that a refused write creates no storage file.
+  [[nodiscard]] static Status check_fits(const std::string& device, std::uint64_t region_bytes,
+                                         std::size_t payload_bytes);
 
   /// The record one slot holds (0 = A, 1 = B), decoded, or why it holds none; device errors
   /// are errors.

@@ -106,6 +106,8 @@ const char* record_defect_name(RecordDefect d) {
       return "bad header CRC";
     case RecordDefect::kUnsupportedVersion:
       return "unsupported version";
+    case RecordDefect::kNewerVersion:
+      return "newer version";
     case RecordDefect::kPayloadTooLong:
       return "payload too long";
     case RecordDefect::kBadPayloadCrc:
@@ -142,7 +144,14 @@ DecodedRecord decode_record(std::span<const std::uint8_t> b) {
   if (const RecordDefect d = check_header(b, header_len, reason); d != RecordDefect::kNone) {
     return defect(d, std::move(reason));
   }
-  if (const std::uint16_t version = get_u16(b, 4); version != kRecordVersion) {
+  if (const std::uint16_t version = get_u16(b, 4); version > kRecordVersion) {
+    return defect(RecordDefect::kNewerVersion,
+                  "format version " + std::to_string(version) +
+                      ", written by a newer imucal (this one reads "
+                      "version " +
+                      std::to_string(kRecordVersion) +
+                      "): not damage; read it with that imucal, or update this one");
+  } else if (version != kRecordVersion) {
     return defect(RecordDefect::kUnsupportedVersion,
                   "format version " + std::to_string(version) + ", this imucal reads version " +
                       std::to_string(kRecordVersion) +

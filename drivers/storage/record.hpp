@@ -44,7 +44,8 @@ enum class RecordDefect {
   kBadMagic,            // not an imucal record
   kBadHeaderLength,     // header length outside 24..256
   kBadHeaderCrc,        // the header is damaged (torn write, bit rot)
-  kUnsupportedVersion,  // a record of another format version
+  kUnsupportedVersion,  // a record of a format version no imucal writes (0)
+  kNewerVersion,        // a record of a newer format version: written by a newer imucal, not damage
   kPayloadTooLong,      // the payload length runs past the bytes present (torn or damaged)
   kBadPayloadCrc,       // the payload is damaged (torn write, bit rot)
 };

@@ -152,7 +152,9 @@ Result<std::unique_ptr<StorageDevice>> open_file_storage(const std::string& path
   if (path.empty()) return make_error(Errc::kInvalidArgument, "no storage file given; set storage.path");
   const bool write = access == StorageAccess::kWrite;
   if (write) IMUCAL_TRY(create_file(path, min_size));
-  const int fd = ::open(path.c_str(), (write ? O_RDWR : O_RDONLY) | O_CLOEXEC);
+  // O_NONBLOCK: opening a FIFO for reading would wait for a writer (store read, and imucald's
+  // event loop, hung); a regular file ignores the flag.
+  const int fd = ::open(path.c_str(), (write ? O_RDWR : O_RDONLY) | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
   if (fd < 0) {
     if (errno == ENOENT) {
       return make_error(Errc::kNotFound, "no calibration file at " + path +
@@ -164,7 +166,9 @@ Result<std::unique_ptr<StorageDevice>> open_file_storage(const std::string& path
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
     ::close(fd);
     return make_error(Errc::kInvalidArgument,
-                      path + " is not a regular file; storage.backend file needs one");
+                      path +
+                          " is not a regular file (a FIFO, device, socket or folder); storage.backend file "
+                          "needs one: fix storage.path");
   }
   const auto size = static_cast<std::uint64_t>(st.st_size);
   if (size < min_size) {
@@ -176,6 +180,7 @@ Result<std::unique_ptr<StorageDevice>> open_file_storage(const std::string& path
             " (storage.offset_bytes + storage.size_bytes): fix those keys, or move the file away "
             "so that a new one is created");
   }
+  ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
   return std::unique_ptr<StorageDevice>(new FdStorage(fd, size, "file " + path, 1 << 20, false));
 }
 
@@ -185,7 +190,8 @@ Result<std::unique_ptr<StorageDevice>> open_nvmem_storage(const std::string& pat
     return make_error(Errc::kInvalidArgument,
                       "no nvmem file given; set storage.path (e.g. /sys/bus/nvmem/devices/1-00500/nvmem)");
   }
-  const int fd = ::open(path.c_str(), (access == StorageAccess::kWrite ? O_RDWR : O_RDONLY) | O_CLOEXEC);
+  const int fd = ::open(path.c_str(), (access == StorageAccess::kWrite ? O_RDWR : O_RDONLY) | O_CLOEXEC |
+                                          O_NONBLOCK | O_NOCTTY);
   if (fd < 0) {
     if (errno == ENOENT || errno == ENODEV || errno == ENXIO) {
       return make_error(Errc::kDevice,
@@ -202,6 +208,11 @@ Result<std::unique_ptr<StorageDevice>> open_nvmem_storage(const std::string& pat
     ::close(fd);
     return make_error(Errc::kDevice, "cannot stat " + path + ": " + errno_text(err));
   }
+  if (S_ISFIFO(st.st_mode) || S_ISSOCK(st.st_mode) || S_ISDIR(st.st_mode)) {
+    ::close(fd);
+    return make_error(Errc::kInvalidArgument,
+                      path + " is a FIFO, socket or folder, not an nvmem file: fix storage.path");
+  }
   const auto size = static_cast<std::uint64_t>(st.st_size);
   if (size < min_size) {
     ::close(fd);
@@ -212,6 +223,7 @@ Result<std::unique_ptr<StorageDevice>> open_nvmem_storage(const std::string& pat
             " (storage.offset_bytes + storage.size_bytes): is it the right EEPROM? Lower those keys "
             "to fit it");
   }
+  ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
   return std::unique_ptr<StorageDevice>(
       new FdStorage(fd, size, "nvmem " + path, std::max<std::size_t>(chunk_bytes, 1), true));
 }

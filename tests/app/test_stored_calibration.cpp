@@ -200,6 +200,25 @@ TEST(StoredCalibration, AnIMUOnlySessionKeepsTheStoredCameras) {
   EXPECT_EQ(with.cameras[0].name, "mine");
 }
 
+// Before: an IMU-only session's record replaced one with a thermal model, which was dropped
+// without a word (the cameras were kept, with a note).
+TEST(StoredCalibration, AStoredThermalModelThatIsNotKeptIsSaidSo) {
+  const std::string dir = test::scratch_dir();
+  StoredCalibration stored;
+  stored.sequence = 4;
+  stored.record = *calibration_record_from_file(write_static(dir));
+  stored.record->thermal = ThermalModel{};
+  stored.record->thermal->reference_c = 35.0;
+  CalibrationRecord fresh = *calibration_record_from_file(write_static(dir));
+  const std::string said = keep_stored_cameras(fresh, stored);
+  EXPECT_FALSE(fresh.thermal) << "a thermal model belongs to the IMU calibration it corrected";
+  EXPECT_NE(said.find("the stored thermal model (sequence 4, reference 35.0 deg C) is not kept"),
+            std::string::npos)
+      << said;
+  ASSERT_FALSE(fresh.notes.empty());
+  EXPECT_EQ(fresh.notes.back(), said);
+}
+
 TEST(StoredCalibration, WritesReadsAndExportsThroughAFile) {
   const std::string dir = test::scratch_dir();
   const RigConfig config = file_config(dir);
@@ -259,6 +278,64 @@ TEST(StoredCalibration, AnIntactRecordWithAForeignPayloadIsCorrupt) {
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().code, Errc::kCorrupt);
   EXPECT_NE(r.error().message.find("slot A"), std::string::npos) << r.error().message;
+}
+
+// A payload of 200,000 nested one-element arrays is 200 KB of intact record. nlohmann's CBOR
+// parser recursed once per level: store read, store verify, store rollback and imucald's session
+// start overflowed the stack (SIGSEGV). Now the depth is refused before the parser sees it.
+TEST(StoredCalibration, ADeeplyNestedPayloadIsCorruptNotACrash) {
+  const std::string dir = test::scratch_dir();
+  const RigConfig config = file_config(dir, 1 << 20);
+  auto dev = drivers::open_storage_device(config.storage, drivers::StorageAccess::kWrite);
+  ASSERT_TRUE(dev.ok());
+  auto store = drivers::CalibrationStore::open(**dev, 512, 1 << 20);
+  ASSERT_TRUE(store.ok());
+  const CalibrationRecord p = *calibration_record_from_file(write_static(dir));
+  const std::vector<std::uint8_t> good = nlohmann::json::to_cbor(calibration_record_json(p));
+  ASSERT_TRUE(store->write(good).ok());             // slot A: a good record, for the rollback
+  std::vector<std::uint8_t> nested(200'000, 0x81);  // array of one item, 200,000 deep
+  nested.push_back(0x00);
+  ASSERT_TRUE(store->write(nested).ok());  // slot B, the newest
+  auto r = read_stored_calibration(config);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, Errc::kCorrupt);
+  EXPECT_NE(r.error().message.find("slot B"), std::string::npos) << r.error().message;
+  EXPECT_NE(r.error().message.find("deeper than 32 levels"), std::string::npos) << r.error().message;
+  // With a good record newest again, a rollback to the nested one is refused for the same reason.
+  ASSERT_TRUE(store->write(good).ok());  // slot A again: the nested record is now the older one
+  ASSERT_TRUE(read_stored_calibration(config).ok());
+  auto rolled = rollback_stored_calibration(config);
+  ASSERT_FALSE(rolled.ok());
+  EXPECT_NE(rolled.error().message.find("deeper than 32 levels"), std::string::npos)
+      << rolled.error().message;
+}
+
+// Before: the record of a newer imucal (a newer record version) was taken for an unreadable one,
+// and the next write made this imucal's record the newest over it, without a word.
+TEST(StoredCalibration, ARecordOfANewerImucalStaysTheNewestUnlessAsked) {
+  const std::string dir = test::scratch_dir();
+  const RigConfig config = file_config(dir);
+  const CalibrationRecord p = *calibration_record_from_file(write_static(dir));
+  ASSERT_TRUE(write_stored_calibration(config, p).ok());
+  nlohmann::json newer = calibration_record_json(p);
+  newer["version"] = kCalibrationRecordVersion + 1;
+  {
+    auto dev = drivers::open_storage_device(config.storage, drivers::StorageAccess::kWrite);
+    ASSERT_TRUE(dev.ok());
+    auto store = drivers::CalibrationStore::open(**dev, 512, 4096);
+    ASSERT_TRUE(store.ok());
+    ASSERT_TRUE(store->write(nlohmann::json::to_cbor(newer)).ok());  // slot B, sequence 2
+  }
+  auto refused = write_stored_calibration(config, p);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, Errc::kInvalidArgument);
+  EXPECT_NE(refused.error().message.find("written by a newer imucal"), std::string::npos)
+      << refused.error().message;
+  ASSERT_EQ(refused.error().remedies.size(), 1u);
+  EXPECT_EQ(refused.error().remedies[0].option, "replace_newer");
+  auto replaced = write_stored_calibration(config, p, drivers::StoreWriteOptions{true});
+  ASSERT_TRUE(replaced.ok()) << replaced.error().message;
+  EXPECT_EQ(replaced->sequence, 3u);
 }
 
 }  // namespace

@@ -347,5 +347,32 @@ TEST(CamImuCalibration, RefusesARecordingWithoutEnoughViewsOrRotation) {
   EXPECT_EQ(r.error().code, Errc::kInvalidArgument);
 }
 
+// Detections come back from the detection cache or a log, which may hold anything: an id the
+// target does not have indexed the target's points unchecked (a huge id: SIGSEGV in the PnP of
+// the initialisation; one past the last: a read past the buffer and a wrong T_cam_imu, exit 0).
+TEST(CamImuCalibration, RefusesAnObservationWithAPointIdTheTargetDoesNotHave) {
+  test::CamImuSynthOptions so;
+  so.duration_s = 12.0;
+  auto synth = test::make_camimu_synth(so);
+  const int points = synth.target.point_count();
+  ASSERT_GE(synth.cameras[0].observations.size(), 30u);
+  for (const int bad : {4'000'000, points, -1}) {
+    auto hostile = synth;
+    hostile.cameras[0].observations[5].ids.back() = bad;
+    auto r = calibrate_camimu(hostile.imu, hostile.cameras, hostile.target, fast_options());
+    ASSERT_FALSE(r.ok()) << bad;
+    EXPECT_EQ(r.error().code, Errc::kInvalidArgument);
+    EXPECT_NE(r.error().message.find("point id " + std::to_string(bad) + ", outside the target's " +
+                                     std::to_string(points) + " points"),
+              std::string::npos)
+        << r.error().message;
+  }
+  auto uneven = synth;
+  uneven.cameras[0].observations[7].px.pop_back();
+  auto r = calibrate_camimu(uneven.imu, uneven.cameras, uneven.target, fast_options());
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("pixel positions"), std::string::npos) << r.error().message;
+}
+
 }  // namespace
 }  // namespace imucal::calib

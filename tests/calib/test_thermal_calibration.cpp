@@ -161,6 +161,25 @@ TEST(ThermalCalibration, RefusesWithoutTemperatureOrWhenTheRigMoves) {
   EXPECT_NE(r.error().message.find("moved"), std::string::npos) << r.error().message;
 }
 
+// Before: one sample at 1e308 was fitted like any other (a reference of 7e61 deg C, exit 0),
+// which `calibrate static --thermal` then applied.
+TEST(ThermalCalibration, RefusesATemperatureNoDieReaches) {
+  WarmUp w = simulate_warm_up(5, 1, 600.0, 50.0, 20.0, 40.0);
+  for (const double raw : {1e308, -1e308, 1e6}) {
+    std::vector<ImuSample> hostile = w.samples;
+    hostile[100].temperature = raw;
+    auto r = calib::calibrate_thermal(hostile, w.options);
+    ASSERT_FALSE(r.ok()) << raw;
+    EXPECT_EQ(r.error().code, Errc::kCorrupt);
+    EXPECT_NE(r.error().message.find("the sample at t_ns " + std::to_string(hostile[100].t_ns) +
+                                     " gives a die temperature of"),
+              std::string::npos)
+        << r.error().message;
+    EXPECT_NE(r.error().message.find("which no die reaches"), std::string::npos) << r.error().message;
+  }
+  EXPECT_TRUE(calib::calibrate_thermal(w.samples, w.options).ok());
+}
+
 TEST(ThermalCalibration, StepProfileHoldsThenWarms) {
   sim::ImuModelParams p;
   p.temp_profile = sim::TemperatureProfile::kStep;

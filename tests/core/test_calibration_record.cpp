@@ -5,6 +5,7 @@
 
 #include <cmath>
 
+#include "core/calibration_payload.hpp"
 #include "core/calibration_record.hpp"
 
 namespace imucal {
@@ -171,6 +172,13 @@ TEST(CalibrationRecord, AThermalModelMakesItVersion2AndReadsBack) {
   refused([](json& x) { x["thermal"]["gyro"][1]["coeffs"] = json::array({1, 2}); }, "thermal.gyro[1].coeffs");
   refused([](json& x) { x["thermal"]["accel"].erase(2); }, "thermal.accel");
   refused([](json& x) { x["thermal"]["valid_range_c"] = json::array({50, 20}); }, "valid_range_c");
+  // A model fitted to temperatures no die reaches (one sample at 1e308 gave a reference of 7e61).
+  refused([](json& x) { x["thermal"]["reference_c"] = 7e61; }, "must be die temperatures");
+  refused(
+      [](json& x) {
+        x["thermal"]["valid_range_c"] = json::array({20, 1e308});
+      },
+      "must be die temperatures");
 }
 
 TEST(CalibrationRecord, SameCalibrationLooksAtTheImuAndTheCamerasOnly) {
@@ -188,6 +196,59 @@ TEST(CalibrationRecord, SameCalibrationLooksAtTheImuAndTheCamerasOnly) {
   b = a;
   b.imu.sigma.krebs = KrebsImuSigma{};
   EXPECT_FALSE(same_calibration(a, b));
+}
+
+// The stored payload is walked before nlohmann's recursive CBOR parser sees it: a nesting that
+// would overflow the stack, a length beyond the bytes, or a payload no record could be is refused.
+TEST(CalibrationRecord, APayloadIsBoundedInDepthAndSizeBeforeItIsParsed) {
+  const json j = calibration_record_json(a_record());
+  const std::vector<std::uint8_t> good = json::to_cbor(j);
+  auto back = calibration_payload_json(good);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(*back, j);
+
+  const auto nested = [](std::size_t depth, std::uint8_t open, std::vector<std::uint8_t> tail) {
+    std::vector<std::uint8_t> b(depth, open);
+    b.insert(b.end(), tail.begin(), tail.end());
+    return b;
+  };
+  // 32 levels are read, 33 are not: definite arrays (0x81), maps ({0: ...}: 0xA1 0x00), tags
+  // (0xC1) and indefinite arrays (0x9F ... 0xFF).
+  EXPECT_TRUE(calibration_payload_json(nested(32, 0x81, {0x00})).ok());
+  for (const auto& deep : {nested(33, 0x81, {0x00}), nested(1'000'000, 0x81, {0x00}),
+                           nested(1'000'000, 0xC1, {0x00}), nested(100'000, 0x9F, {})}) {
+    auto r = calibration_payload_json(deep.size() > kMaxCalibrationPayloadBytes
+                                          ? std::span(deep).first(kMaxCalibrationPayloadBytes)
+                                          : std::span(deep));
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().code, Errc::kCorrupt);
+    EXPECT_NE(r.error().message.find("deeper than 32 levels"), std::string::npos) << r.error().message;
+  }
+  std::vector<std::uint8_t> maps;
+  for (int i = 0; i < 40; ++i) maps.insert(maps.end(), {0xA1, 0x00});
+  maps.push_back(0x00);
+  EXPECT_NE(calibration_payload_json(maps).error().message.find("deeper than 32"), std::string::npos);
+
+  const std::pair<std::vector<std::uint8_t>, const char*> bad[] = {
+      {{0x9B, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF}, "more items than the bytes"},  // 2^64-1 items
+      {{0xBB, 0x7F, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF}, "map longer than the bytes"},
+      {{0x7A, 0xFF, 0xFF, 0xFF, 0xFF, 0x61}, "string longer than the bytes"},
+      {{0x82, 0x00}, "more items than the bytes"},
+      {{0x19, 0x01}, "truncated"},  // a 16-bit number with one byte
+      {{0x00, 0x00}, "after its CBOR item"},
+      {{0xFF}, "break byte"},
+      {{0x1C}, "reserved"},
+      {{}, "truncated"}};
+  for (const auto& [bytes, why] : bad) {
+    auto r = calibration_payload_json(bytes);
+    ASSERT_FALSE(r.ok()) << why;
+    EXPECT_NE(r.error().message.find(why), std::string::npos) << r.error().message;
+  }
+  std::vector<std::uint8_t> long_string = {0x5A, 0x00, 0x04, 0x00, 0x00};  // 256 KiB of bytes
+  long_string.resize(long_string.size() + 256 * 1024);
+  auto r = calibration_payload_json(long_string);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("more than a record"), std::string::npos) << r.error().message;
 }
 
 }  // namespace

@@ -4,7 +4,8 @@
 #    on this machine are reported, not fatal) pass with exit 0 and a summary;
 #  - a missing file and an invalid one exit 78 (EX_CONFIG) with a message that names the file;
 #  - the service itself (no --check) exits 78 on a missing configuration, the status the unit's
-#    RestartPreventExitStatus= names.
+#    RestartPreventExitStatus= names;
+#  - a FIFO at storage.path exits 78, naming it (nothing is opened, so nothing waits on it).
 #
 #   check_imucald_check.sh IMUCALD SOURCE_DIR
 set -u
@@ -41,4 +42,12 @@ sed "s/^name: spi-rig-example/&\nnot_a_key: 1/" "$src/config/rig-spi-example.yam
 expect 78 "the rig configuration $tmp/bad.yaml cannot be used" -- --config "$tmp/bad.yaml" --check
 grep -q "not_a_key" "$tmp/out" || { echo "FAIL: the message does not name the bad key"; fail=1; }
 expect 78 "Edit $tmp/missing.yaml" -- --config "$tmp/missing.yaml" --socket "$tmp/s.sock" --state-dir "$tmp"
+
+# A FIFO at storage.path is no storage file: --check said "present" (and the service's event loop
+# then waited on it for good).
+mkfifo "$tmp/calibration.fifo"
+cp "$src/config/checkerboard-7x6.yaml" "$tmp/"  # the target file the configuration names
+sed "s|^  path: /var/lib/imucal/calibration.bin|  path: $tmp/calibration.fifo|" "$src/config/rig.yaml" >"$tmp/fifo.yaml"
+grep -q "calibration.fifo" "$tmp/fifo.yaml" || { echo "FAIL: the storage path was not replaced"; fail=1; }
+expect 78 "storage.path $tmp/calibration.fifo is not a regular file" -- --config "$tmp/fifo.yaml" --state-dir "$tmp" --check
 exit $fail

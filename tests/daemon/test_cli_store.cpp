@@ -3,6 +3,7 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <filesystem>
 #include <fstream>
@@ -161,6 +162,8 @@ TEST(CliStore, ErrorsHaveTheirExitCodes) {
   auto too_big = test::run_cli({"store", "write", "--config", rig.config, rig.result});
   EXPECT_EQ(too_big.exit_code, cli::kExitUsage) << too_big.err;
   EXPECT_THAT(too_big.err, HasSubstr("storage.size_bytes"));
+  // A refused write leaves no storage file behind (it was created before the refusal).
+  EXPECT_FALSE(std::filesystem::exists(rig.storage));
   auto missing = test::run_cli({"store", "write", "--config", rig.config, rig.dir + "/none.yaml"});
   EXPECT_EQ(missing.exit_code, cli::kExitInput) << missing.err;
   auto no_config = test::run_cli({"store", "read", "--config", rig.dir + "/none-rig.yaml"});
@@ -172,6 +175,30 @@ TEST(CliStore, ErrorsHaveTheirExitCodes) {
   auto short_file = test::run_cli({"store", "read", "--config", rig.config});
   EXPECT_EQ(short_file.exit_code, cli::kExitUsage) << short_file.err;
   EXPECT_THAT(short_file.err, HasSubstr("storage.offset_bytes"));
+}
+
+// Before: `store write` wrote its record into whatever regular file storage.path named (a session
+// log given by mistake was destroyed, exit 0), and `store read` waited for good on a FIFO there.
+TEST(CliStore, NeverWritesOverAnotherFileNorWaitsOnAFifo) {
+  const Rig rig = make_rig();
+  std::filesystem::copy_file(test::source_path("fixtures/static.imulog"), rig.storage);
+  const std::string before = test::read_file(rig.storage);
+  auto w = test::run_cli({"store", "write", "--config", rig.config, rig.result});
+  EXPECT_EQ(w.exit_code, cli::kExitUsage) << w.err;
+  EXPECT_THAT(w.err, HasSubstr("holds data that is not a calibration record"));
+  EXPECT_THAT(w.err, HasSubstr("nothing was written"));
+  EXPECT_TRUE(test::read_file(rig.storage) == before) << "the file at storage.path was changed";
+
+  std::filesystem::remove(rig.storage);
+  ASSERT_EQ(::mkfifo(rig.storage.c_str(), 0600), 0);
+  for (const char* sub : {"read", "verify"}) {
+    auto r = test::run_cli({"store", sub, "--config", rig.config});
+    EXPECT_EQ(r.exit_code, cli::kExitUsage) << sub << ": " << r.err;
+    EXPECT_THAT(r.err, HasSubstr(rig.storage + " is not a regular file"));
+  }
+  auto fifo_write = test::run_cli({"store", "write", "--config", rig.config, rig.result});
+  EXPECT_EQ(fifo_write.exit_code, cli::kExitUsage) << fifo_write.err;
+  EXPECT_TRUE(std::filesystem::is_fifo(rig.storage));
 }
 
 }  // namespace

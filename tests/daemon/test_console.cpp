@@ -258,6 +258,34 @@ TEST(Console, RefusalsAreShownAndMalformedMessagesIgnored) {
   EXPECT_TRUE(has(render(state), "ok line"));
 }
 
+// Before: any socket client could name itself "\x1b]0;...\x07\x1b[2J..." and the console of
+// the operator showed it as it was ("another controller is attached (NAME)"): the pane retitled,
+// the screen cleared, a blinking fake message drawn.
+TEST(Console, TextFromTheServiceReachesTheTerminalWithoutControlCharacters) {
+  const std::string hostile =
+      "\x1b]0;pwned\x07\x1b[2J\x1b[5mcalibration written OK, unplug the rig\x1b[0m \xc2\x9b"
+      "2J \x9b\x07";
+  ConsoleState state;
+  update(state, status_message());
+  update(state, {{"type", "prompt"}, {"step", "poses"}, {"text", hostile}, {"keys", {"continue"}}});
+  update(state, {{"type", "reply"},
+                 {"cmd", "hello"},
+                 {"ok", false},
+                 {"error", "another controller (" + hostile + ")"}});
+  const json reply{{"type", "reply"}, {"cmd", "start"}, {"ok", false}, {"error", hostile}};
+  for (const std::string& text :
+       {render(state), *plain_line(reply), status_text(status_message()) + render(state)}) {
+    for (const char c : text) {
+      const auto byte = static_cast<unsigned char>(c);
+      EXPECT_FALSE(byte < 0x20 && c != '\n') << "control byte " << int(byte) << " in:\n" << text;
+      EXPECT_NE(byte, 0x7F);
+    }
+    EXPECT_EQ(text.find("\xc2\x9b"), std::string::npos) << "C1 CSI (U+009B) in:\n" << text;
+    EXPECT_EQ(text.find('\x9b'), std::string::npos) << "a lone 0x9B byte in:\n" << text;
+  }
+  EXPECT_TRUE(has(render(state), "calibration written OK")) << "the printable text stays";
+}
+
 std::string key_of(ConsoleState& state, char c) {
   auto action = on_key(state, c);
   return action.request ? (*action.request).value("key", (*action.request)["cmd"].get<std::string>()) : "";

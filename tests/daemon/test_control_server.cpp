@@ -370,6 +370,89 @@ TEST(ControlServer, ClientsBeyondTheLimitAreToldWhyAndTheOperatorStillGetsIn) {
   EXPECT_TRUE(first.request({{"cmd", "status"}}).ok());
 }
 
+// Before: 33 connections that sent one subscribe or status and stayed open took every place, the
+// reserved one included, and `imucalctl status`, `start` and `attach` were refused for good (40
+// here, at the default limit of 32).
+TEST(ControlServer, FortyHostileClientsCannotLockTheOperatorOut) {
+  const test::SocketDir dir;
+  auto options = options_in(dir);
+  options.evict_idle_after = std::chrono::milliseconds(200);
+  TestService service(options);
+  ASSERT_TRUE(service.ok()) << service.error;
+  std::vector<Connection> hostile;
+  for (int i = 0; i < 40; ++i) {
+    hostile.push_back(connect(options.path));
+    (void)hostile.back().send(i % 2 == 0 ? json{{"cmd", "subscribe"}} : json{{"cmd", "status"}});
+  }
+  ASSERT_TRUE(TestService::wait_for([&] { return service.clients() <= options.max_clients + 1; }));
+  // Past the idle time, the operator's status query and console get in, every time.
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  for (int round = 0; round < 3; ++round) {
+    Connection status = connect(options.path);
+    auto asked = status.request({{"cmd", "status"}});
+    ASSERT_TRUE(asked.ok()) << asked.error().message;
+  }
+  Connection console = connect(options.path);
+  auto hello = console.request({{"cmd", "hello"}, {"client", "console"}, {"role", "controller"}});
+  ASSERT_TRUE(hello.ok()) << hello.error().message;
+  auto subscribed = console.request({{"cmd", "subscribe"}});
+  ASSERT_TRUE(subscribed.ok()) << subscribed.error().message;
+  // The console holds the reserved place now: a status query gets the place of the longest
+  // silent subscriber.
+  Connection late = connect(options.path);
+  auto asked = late.request({{"cmd", "status"}});
+  ASSERT_TRUE(asked.ok()) << asked.error().message;
+  EXPECT_LE(service.clients(), options.max_clients + 1);
+}
+
+// In the place kept for the operator, a connection may ask for the status once (then it is
+// closed) but not subscribe without the controller role.
+TEST(ControlServer, TheReservedPlaceAnswersOnceAndDoesNotObserve) {
+  const test::SocketDir dir;
+  auto options = options_in(dir);
+  options.max_clients = 2;
+  TestService service(options);
+  ASSERT_TRUE(service.ok()) << service.error;
+  Connection first = connect(options.path);
+  Connection second = connect(options.path);
+  ASSERT_TRUE(first.request({{"cmd", "subscribe"}}).ok());
+  ASSERT_TRUE(second.request({{"cmd", "subscribe"}}).ok());
+  Connection third = connect(options.path);
+  auto subscribe = third.request({{"cmd", "subscribe"}});
+  ASSERT_FALSE(subscribe.ok());
+  EXPECT_NE(subscribe.error().message.find("the last place is kept for the operator's console"),
+            std::string::npos)
+      << subscribe.error().message;
+  ASSERT_TRUE(TestService::wait_for([&] { return service.clients() == 2; }));
+  Connection asks = connect(options.path);
+  ASSERT_TRUE(asks.request({{"cmd", "status"}}).ok());
+  ASSERT_TRUE(TestService::wait_for([&] { return service.clients() == 2; })) << "the place is free again";
+}
+
+// Before: a client that took the controller role and went silent held it for good.
+TEST(ControlServer, AnIdleControllerGivesTheRoleToTheNextThatAsks) {
+  const test::SocketDir dir;
+  auto options = options_in(dir);
+  options.controller_idle_after = std::chrono::seconds(2);
+  TestService service(options);
+  ASSERT_TRUE(service.ok()) << service.error;
+  Connection idle = connect(options.path);
+  ASSERT_TRUE(idle.request({{"cmd", "hello"}, {"client", "idler"}, {"role", "controller"}}).ok());
+  Connection console = connect(options.path);
+  auto early = console.request({{"cmd", "hello"}, {"client", "console"}, {"role", "controller"}});
+  ASSERT_FALSE(early.ok()) << "a controller that spoke just now keeps the role";
+  std::this_thread::sleep_for(std::chrono::milliseconds(2200));
+  auto late = console.request({{"cmd", "hello"}, {"client", "console"}, {"role", "controller"}});
+  ASSERT_TRUE(late.ok()) << late.error().message;
+  const json told = reply_to(idle, "hello");
+  EXPECT_EQ(told["ok"], false);
+  EXPECT_NE(told["error"].get<std::string>().find("lost the controller role to console"), std::string::npos)
+      << told;
+  auto refused = idle.request({{"cmd", "abort"}});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("observer"), std::string::npos) << refused.error().message;
+}
+
 // A connection that says nothing is closed after silent_timeout, with a reply saying so, so
 // that idle connections cannot fill the places; one that spoke stays.
 TEST(ControlServer, ASilentConnectionIsClosedAndTakesNoPlace) {
@@ -462,6 +545,26 @@ TEST(ControlServer, OptionsAreValidated) {
   options.path = "/tmp/x.sock";
   options.max_clients = 0;
   EXPECT_FALSE(options.validate().ok());
+}
+
+// Before: any name was taken, escape sequences and all, and shown on other clients' terminals.
+TEST(ControlRequest, AClientNameIsPrintableAndBounded) {
+  constexpr std::size_t kMaxName = 64;
+  for (const std::string& bad :
+       {std::string(R"({"cmd":"hello","client":"\u001b]0;pwned\u0007","role":"controller"})"),
+        std::string(R"({"cmd":"hello","client":"a\u009b2Jb"})"),
+        std::string(R"({"cmd":"hello","client":"a\nb"})"),
+        R"({"cmd":"hello","client":")" + std::string(kMaxName + 1, 'x') + "\"}"}) {
+    auto r = parse_request(bad);
+    ASSERT_FALSE(r.ok()) << bad;
+    EXPECT_NE(r.error().message.find("printable text (no control characters) of at most 64 bytes"),
+              std::string::npos)
+        << r.error().message;
+  }
+  auto longest = parse_request(R"({"cmd":"hello","client":")" + std::string(kMaxName, 'x') + "\"}");
+  ASSERT_TRUE(longest.ok());
+  EXPECT_EQ(longest->client.size(), kMaxName);
+  EXPECT_TRUE(parse_request(R"({"cmd":"hello","client":"imucalctl on Zoë's laptop"})").ok());
 }
 
 }  // namespace

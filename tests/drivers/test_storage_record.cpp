@@ -74,7 +74,8 @@ struct FieldCase {
 TEST(StorageRecord, EveryCorruptedHeaderFieldIsRejectedWithItsReason) {
   const FieldCase cases[] = {
       {"magic", 0, 0x41424344, 4, true, RecordDefect::kBadMagic, "magic"},
-      {"version", 4, 2, 2, true, RecordDefect::kUnsupportedVersion, "format version 2"},
+      {"version", 4, 2, 2, true, RecordDefect::kNewerVersion, "format version 2, written by a newer imucal"},
+      {"version 0", 4, 0, 2, true, RecordDefect::kUnsupportedVersion, "format version 0"},
       {"version (unsealed)", 4, 2, 2, false, RecordDefect::kBadHeaderCrc, "header CRC32"},
       {"header length (too small)", 6, 8, 2, true, RecordDefect::kBadHeaderLength, "header length 8"},
       {"header length (too large)", 6, 4000, 2, true, RecordDefect::kBadHeaderLength, "header length 4000"},
@@ -108,7 +109,7 @@ TEST(StorageRecord, EverySingleBitFlipIsDetected) {
   }
 }
 
-TEST(StorageRecord, ALongerHeaderOfALaterVersionIsUnsupportedNotDamaged) {
+TEST(StorageRecord, ALongerHeaderOfALaterVersionIsNewerNotDamaged) {
   // Version 2 with a 32-byte header: the header CRC sits in its last four bytes.
   Bytes b = encode_record(3, payload_of(8));
   b.insert(b.begin() + 20, 8, 0);
@@ -116,7 +117,8 @@ TEST(StorageRecord, ALongerHeaderOfALaterVersionIsUnsupportedNotDamaged) {
   b[6] = 32;
   put_u32(b, 28, crc32(std::span<const std::uint8_t>(b).first(28)));
   const DecodedRecord d = decode_record(b);
-  EXPECT_EQ(d.defect, RecordDefect::kUnsupportedVersion) << d.reason;
+  EXPECT_EQ(d.defect, RecordDefect::kNewerVersion) << d.reason;
+  EXPECT_NE(d.reason.find("written by a newer imucal"), std::string::npos) << d.reason;
 }
 
 }  // namespace

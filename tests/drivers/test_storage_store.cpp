@@ -157,7 +157,7 @@ TEST(StorageStore, ARegionOutsideTheDeviceIsRefused) {
   EXPECT_FALSE(CalibrationStore::open(dev, 0, 40).ok());
 }
 
-TEST(StorageStore, AnUnsupportedVersionIsReportedNotRead) {
+TEST(StorageStore, ANewerVersionIsReportedNotRead) {
   MemoryStorage dev(512);
   auto store = open_store(dev, 0, 512);
   ASSERT_TRUE(store.write(payload(1, 20)).ok());
@@ -168,8 +168,64 @@ TEST(StorageStore, AnUnsupportedVersionIsReportedNotRead) {
   auto latest = store.read_latest();
   ASSERT_TRUE(latest.ok());
   EXPECT_FALSE(latest->record);
-  EXPECT_EQ(latest->slots[0].defect, RecordDefect::kUnsupportedVersion);
-  EXPECT_NE(latest->slots[0].reason.find("version 7"), std::string::npos);
+  EXPECT_EQ(latest->slots[0].defect, RecordDefect::kNewerVersion);
+  EXPECT_NE(latest->slots[0].reason.find("version 7, written by a newer imucal"), std::string::npos);
+}
+
+/// Gives slot `slot` of a 512-byte region at 0 format version `version`, its header CRC resealed.
+void set_version(Bytes& b, int slot, std::uint8_t version) {
+  const std::size_t at = static_cast<std::size_t>(slot) * 256;
+  b[at + 4] = version;
+  const std::uint32_t crc = crc32(std::span<const std::uint8_t>(b).subspan(at, 20));
+  for (int i = 0; i < 4; ++i) b[at + 20 + i] = static_cast<std::uint8_t>(crc >> (8 * i));
+}
+
+// A newer imucal's record is not damage. Before: it was taken for an invalid slot, and the next
+// write (which goes to the slot not holding the newest valid record) replaced it.
+TEST(StorageStore, ARecordOfANewerVersionIsNeverReplacedUnlessAsked) {
+  MemoryStorage dev(512);
+  auto store = open_store(dev, 0, 512);
+  ASSERT_TRUE(store.write(payload(1, 20)).ok());  // A, sequence 1
+  ASSERT_TRUE(store.write(payload(2, 20)).ok());  // B, sequence 2
+  set_version(dev.bytes(), 1, 2);                 // B: a newer imucal's record
+  const Bytes before = dev.bytes();
+  const int writes = dev.writes();
+  auto w = store.write(payload(3, 20));
+  ASSERT_FALSE(w.ok());
+  EXPECT_EQ(w.error().code, Errc::kInvalidArgument);
+  EXPECT_NE(w.error().message.find("slot B holds a record of format version 2, written by a newer imucal"),
+            std::string::npos)
+      << w.error().message;
+  ASSERT_EQ(w.error().remedies.size(), 1u);
+  EXPECT_EQ(w.error().remedies[0].option, "replace_newer");
+  EXPECT_EQ(dev.writes(), writes);
+  EXPECT_TRUE(dev.bytes() == before);
+  // Asked explicitly, the write goes where it would have gone.
+  auto replaced = store.write(payload(3, 20), StoreWriteOptions{true});
+  ASSERT_TRUE(replaced.ok()) << replaced.error().message;
+  EXPECT_EQ(replaced->slot, 1);
+}
+
+// Before: a region of another file's bytes (a session log named as storage.path) was written over.
+TEST(StorageStore, ARegionOfSomethingElseIsNeverWrittenOver) {
+  Bytes foreign(512);
+  const std::string sqlite = "SQLite format 3";
+  std::copy(sqlite.begin(), sqlite.end(), foreign.begin());
+  for (std::size_t i = sqlite.size() + 1; i < foreign.size(); ++i)
+    foreign[i] = static_cast<std::uint8_t>(i * 7);
+  MemoryStorage dev(foreign);
+  auto store = open_store(dev, 0, 512);
+  auto w = store.write(payload(1, 20));
+  ASSERT_FALSE(w.ok());
+  EXPECT_EQ(w.error().code, Errc::kInvalidArgument);
+  EXPECT_NE(w.error().message.find("holds data that is not a calibration record"), std::string::npos)
+      << w.error().message;
+  EXPECT_EQ(dev.writes(), 0);
+  EXPECT_TRUE(dev.bytes() == foreign);
+  // An erased region (0x00 or 0xFF), or one with imucal's record in a slot, is written as before.
+  MemoryStorage erased(Bytes(512, 0xFF));
+  auto fresh = open_store(erased, 0, 512);
+  EXPECT_TRUE(fresh.write(payload(1, 20)).ok());
 }
 
 }  // namespace
