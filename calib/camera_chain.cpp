@@ -919,7 +919,8 @@ Result<CameraChainResult> ChainSolver::run(const TargetDescription& target, cons
       why += " (" + format_number("%.0f", 100.0 * dropped / static_cast<double>(total)) +
              " % of them): the model does not fit these views" +
              (opt_.estimate_time_offsets
-                  ? std::string("; check the detections and the camera models")
+                  ? std::string("; check the detections and the camera models (still pairs taken seconds "
+                                "apart, which no smooth motion joins, are calibrated with the offsets held)")
                   : std::string("; cameras that are not triggered together do this with the offsets held: "
                                 "calibrate again without holding them"));
     }
