@@ -48,4 +48,15 @@ Result<YAML::Node> read_yaml_file(const std::string& path) {
   }
 }
 
+YAML::Node yaml_matrix_rows(const Eigen::MatrixXd& m) {
+  YAML::Node rows(YAML::NodeType::Sequence);
+  for (Eigen::Index r = 0; r < m.rows(); ++r) {
+    YAML::Node row(YAML::NodeType::Sequence);
+    for (Eigen::Index c = 0; c < m.cols(); ++c) row.push_back(m(r, c));
+    row.SetStyle(YAML::EmitterStyle::Flow);
+    rows.push_back(row);
+  }
+  return rows;
+}
+
 }  // namespace imucal

@@ -5,6 +5,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <Eigen/Core>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -19,5 +20,9 @@ nlohmann::json yaml_to_json(const YAML::Node& node);
 /// The YAML document of a result file (at most kMaxResultFileBytes): the read's errors, or
 /// kCorrupt "PATH: not valid YAML (...)".
 [[nodiscard]] Result<YAML::Node> read_yaml_file(const std::string& path);
+
+/// A matrix as a sequence of its rows, each in flow style (Kalibr's layout of T_cam_imu,
+/// T_cn_cnm1 and the IMU matrices).
+YAML::Node yaml_matrix_rows(const Eigen::MatrixXd& m);
 
 }  // namespace imucal

@@ -11,6 +11,7 @@
 #include <set>
 #include <vector>
 
+#include "core/yaml_json.hpp"
 #include "drivers/camera/fake/virtual_camera.hpp"
 #include "sim/camera_render.hpp"
 #include "sim/camera_scene.hpp"
@@ -19,21 +20,6 @@
 #include "sim/truth.hpp"
 
 namespace imucal::sim {
-namespace {
-
-YAML::Node matrix_yaml(const Eigen::Matrix4d& m) {
-  YAML::Node rows(YAML::NodeType::Sequence);
-  for (int r = 0; r < 4; ++r) {
-    YAML::Node row(YAML::NodeType::Sequence);
-    for (int c = 0; c < 4; ++c) row.push_back(m(r, c));
-    row.SetStyle(YAML::EmitterStyle::Flow);
-    rows.push_back(row);
-  }
-  return rows;
-}
-
-}  // namespace
-
 namespace {
 
 /// The frames of the session: frame k (k = 0, 1, ...) is stamped t_cam = (k0 + k) * period on
@@ -182,8 +168,9 @@ YAML::Node camimu_truth_yaml(const CamImuSimOptions& options, const sim::SimTrut
   const std::vector<SimCam> cams = cameras_of(options);
   for (std::size_t c = 0; c < cams.size(); ++c) {
     YAML::Node cam(YAML::NodeType::Map);
-    cam["T_cam_imu"] = matrix_yaml(cams[c].T_cam_imu.matrix());
-    if (c > 0) cam["T_cn_cnm1"] = matrix_yaml((cams[c].T_cam_imu * cams[c - 1].T_cam_imu.inverse()).matrix());
+    cam["T_cam_imu"] = yaml_matrix_rows(cams[c].T_cam_imu.matrix());
+    if (c > 0)
+      cam["T_cn_cnm1"] = yaml_matrix_rows((cams[c].T_cam_imu * cams[c - 1].T_cam_imu.inverse()).matrix());
     camera_to_yaml(cams[c].camera, cam);
     cam["timeshift_cam_imu"] = cams[c].timeshift_cam_imu_s;
     // t_cam0 = t_cam + timeshift_cam_cam0 for the same scene.
@@ -194,7 +181,7 @@ YAML::Node camimu_truth_yaml(const CamImuSimOptions& options, const sim::SimTrut
     camera["cam" + std::to_string(c)] = cam;
   }
   camera["target"] = YAML::Load(target_to_yaml(options.target));
-  camera["T_world_target"] = matrix_yaml(T_world_board.matrix());
+  camera["T_world_target"] = yaml_matrix_rows(T_world_board.matrix());
   YAML::Node render(YAML::NodeType::Map);
   render["noise_sigma_dn"] = options.noise_sigma_dn;
   render["supersampling"] = options.supersampling;

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/version.hpp"
+#include "core/yaml_json.hpp"
 
 namespace imucal::app {
 namespace {
@@ -191,17 +192,6 @@ YAML::Node flow3(const Eigen::Vector3d& v) {
   return n;
 }
 
-YAML::Node matrix_rows(const Eigen::Matrix4d& m) {
-  YAML::Node rows(YAML::NodeType::Sequence);
-  for (int r = 0; r < 4; ++r) {
-    YAML::Node row(YAML::NodeType::Sequence);
-    for (int c = 0; c < 4; ++c) row.push_back(m(r, c));
-    row.SetStyle(YAML::EmitterStyle::Flow);
-    rows.push_back(row);
-  }
-  return rows;
-}
-
 /// The cameras each camera shares at least `min_shared` views with (Kalibr's cam_overlaps).
 std::vector<int> overlaps(const calib::CameraChainCameraResult& c, int min_shared) {
   std::vector<int> out;
@@ -302,7 +292,7 @@ std::string camera_chain_yaml(const CameraChainReport& r, int min_shared_views) 
   for (std::size_t c = 0; c < r.cameras.size(); ++c) {
     const auto& cc = r.chain.cameras[c];
     YAML::Node cam = camera_node(r.cameras[c]);
-    if (c > 0) cam["T_cn_cnm1"] = matrix_rows(cc.T_cn_cnm1.matrix());
+    if (c > 0) cam["T_cn_cnm1"] = yaml_matrix_rows(cc.T_cn_cnm1.matrix());
     YAML::Node ov(YAML::NodeType::Sequence);
     for (int j : overlaps(cc, min_shared_views)) ov.push_back(j);
     ov.SetStyle(YAML::EmitterStyle::Flow);
@@ -324,7 +314,7 @@ std::string camera_chain_yaml(const CameraChainReport& r, int min_shared_views) 
       q["T_cn_cnm1_covariance"] = cov;
       q["baseline_m"] = cc.baseline_m;
       q["baseline_sigma_m"] = number_or_null(cc.baseline_sigma_m);
-      q["T_cam_cam0"] = matrix_rows(cc.T_cam_cam0.matrix());
+      q["T_cam_cam0"] = yaml_matrix_rows(cc.T_cam_cam0.matrix());
       q["linked_to"] = "cam" + std::to_string(cc.linked_to);
     }
     YAML::Node shared(YAML::NodeType::Sequence);
