@@ -77,7 +77,7 @@ struct CamImuSimOptions {
   static CameraModel default_sim_camera();
   static Eigen::Isometry3d default_T_cam_imu();
   static TargetDescription default_sim_target();
-  /// The stereo partner of the default camera: 11 cm to cam0's left (its x axis), turned by
+  /// The stereo partner of the default camera: 11 cm along cam0's x axis (to its right), turned by
   /// about a degree, a little different focal length and principal point, its stamps
   /// `offset_s` later than cam0's for the same scene (0: the pair is synchronized).
   static CamImuSimCamera default_stereo_camera(const CameraModel& cam0, const Eigen::Isometry3d& T_cam0_imu,

@@ -252,8 +252,9 @@ void setup(CLI::App& root) {
          "repeated once per camera in the order of the cameras")
       ->check(CLI::IsMember({"pinhole-radtan", "pinhole-equi"}));
   cmd->add_flag("--hold-time-offsets", o->hold_time_offsets,
-                "Several cameras: hold their time offsets against cam0 at 0 (cameras triggered together) "
-                "instead of estimating them");
+                "Several cameras: hold their time offsets against cam0 at 0 and give every instant its own "
+                "pose (cameras triggered together, or still pairs taken seconds apart) instead of estimating "
+                "the offsets on a trajectory");
   cmd->add_option(
          "--knot-spacing", o->knot_spacing_s,
          "Several cameras: knot spacing in s of the target's trajectory (default: the shortest frame "
