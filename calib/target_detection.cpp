@@ -15,7 +15,6 @@
 #include <utility>
 
 #include "calib/checkerboard_grid.hpp"
-#include "calib/observation_check.hpp"
 
 namespace imucal::calib {
 namespace {
