@@ -11,6 +11,7 @@
 #include "core/calibration_record.hpp"
 #include "core/text_file.hpp"
 #include "core/version.hpp"
+#include "core/yaml_json.hpp"
 
 namespace imucal::app {
 namespace {
@@ -27,11 +28,7 @@ YAML::Node flow_vec(const Eigen::VectorXd& v) {
 }
 
 /// A matrix as rows in flow style (Kalibr's layout for T_cam_imu, M, A, C_gyro_i).
-YAML::Node rows(const Eigen::MatrixXd& m) {
-  YAML::Node n(YAML::NodeType::Sequence);
-  for (Eigen::Index r = 0; r < m.rows(); ++r) n.push_back(flow_vec(m.row(r).transpose()));
-  return n;
-}
+YAML::Node rows(const Eigen::MatrixXd& m) { return yaml_matrix_rows(m); }
 
 std::string emit(const YAML::Node& root, const std::string& header) {
   YAML::Emitter out;

@@ -18,7 +18,7 @@
 namespace imucal {
 namespace {
 
-std::string write_config(const std::string& dir, const std::string& camera_lines, int imu_rate = 200) {
+std::string write_record_config(const std::string& dir, const std::string& camera_lines, int imu_rate = 200) {
   const std::string path = dir + "/rig.yaml";
   std::ofstream out(path);
   out << "name: test\nimu:\n  bus: sim\n  accel_range_g: 4\n  gyro_range_dps: 500\n  rate_hz: " << imu_rate
@@ -34,7 +34,7 @@ const char* kSimCamera =
 
 TEST(RecordCameras, SimulatedRigRecordsTheRenderedTargetBesideTheImu) {
   const std::string dir = test::scratch_dir();
-  const std::string cfg = write_config(dir, kSimCamera);
+  const std::string cfg = write_record_config(dir, kSimCamera);
   const std::string log_path = dir + "/cam.imulog";
   const auto res =
       test::run_cli({"record", "--config", cfg, "-o", log_path, "--sim", "--duration", "3", "--json"});
@@ -81,7 +81,7 @@ TEST(RecordCameras, SimulatedRigRecordsTheRenderedTargetBesideTheImu) {
 
 TEST(RecordCameras, RealTimeTestPatternKeepsEveryFrameAndSample) {
   const std::string dir = test::scratch_dir();
-  const std::string cfg = write_config(dir, kSimCamera, 1000);
+  const std::string cfg = write_record_config(dir, kSimCamera, 1000);
   const std::string log_path = dir + "/rt.imulog";
   const auto res = test::run_cli({"record", "--config", cfg, "-o", log_path, "--sim", "--realtime",
                                   "--sim-camera", "pattern", "--duration", "2", "--json"});
@@ -96,7 +96,7 @@ TEST(RecordCameras, RealTimeTestPatternKeepsEveryFrameAndSample) {
 
 TEST(RecordCameras, CameraConfigurationErrorsStopBeforeAnythingIsWritten) {
   const std::string dir = test::scratch_dir();
-  const std::string cfg = write_config(dir, kSimCamera);
+  const std::string cfg = write_record_config(dir, kSimCamera);
   const std::string log_path = dir + "/none.imulog";
   auto res = test::run_cli({"record", "--config", cfg, "-o", log_path, "--sim", "--sim-motion", "still"});
   EXPECT_EQ(res.exit_code, 2);
@@ -104,18 +104,18 @@ TEST(RecordCameras, CameraConfigurationErrorsStopBeforeAnythingIsWritten) {
   EXPECT_FALSE(std::filesystem::exists(log_path));
 
   const std::string bad =
-      write_config(dir,
-                   "cameras:\n  - name: cam0\n    backend: sim\n    width: 320\n    height: 240\n"
-                   "    rate_hz: 15\n    pixel_format: YUYV\n");
+      write_record_config(dir,
+                          "cameras:\n  - name: cam0\n    backend: sim\n    width: 320\n    height: 240\n"
+                          "    rate_hz: 15\n    pixel_format: YUYV\n");
   res = test::run_cli({"record", "--config", bad, "-o", log_path, "--sim", "--duration", "1"});
   EXPECT_EQ(res.exit_code, 2);
   EXPECT_NE(res.err.find("GREY"), std::string::npos) << res.err;
   EXPECT_FALSE(std::filesystem::exists(log_path));
 
   const std::string v4l2 =
-      write_config(dir,
-                   "cameras:\n  - name: cam0\n    backend: v4l2\n    device: /dev/video97\n"
-                   "    width: 320\n    height: 240\n    rate_hz: 15\n    pixel_format: GREY\n");
+      write_record_config(dir,
+                          "cameras:\n  - name: cam0\n    backend: v4l2\n    device: /dev/video97\n"
+                          "    width: 320\n    height: 240\n    rate_hz: 15\n    pixel_format: GREY\n");
   res = test::run_cli({"record", "--config", v4l2, "-o", log_path, "--sim", "--duration", "1"});
   EXPECT_EQ(res.exit_code, 2);
   EXPECT_NE(res.err.find("simulated cameras only"), std::string::npos) << res.err;
@@ -126,7 +126,7 @@ TEST(RecordCameras, CameraConfigurationErrorsStopBeforeAnythingIsWritten) {
 // --force too (naming the holder), and the first one's log comes out complete.
 TEST(RecordCameras, ASecondRecorderOnTheSameLogIsRefused) {
   const std::string dir = test::scratch_dir();
-  const std::string cfg = write_config(dir, "");
+  const std::string cfg = write_record_config(dir, "");
   const std::string log_path = dir + "/busy.imulog";
   const std::string first = std::string(IMUCAL_CLI_PATH) + " record --config " + cfg + " -o " + log_path +
                             " --sim --realtime --duration 3 > " + dir + "/first.txt 2>&1 &";
