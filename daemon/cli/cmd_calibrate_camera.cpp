@@ -163,13 +163,13 @@ void run(const CameraCliOptions& o) {
   if (!o.target_path.empty()) outputs.inputs.push_back(o.target_path);
   if (auto s = app::check_output(o.yaml_path, outputs); !s.ok()) fail(s.error());
 
+  const app::TargetChoice target = resolve_target(o.target_path, o.log_path);
   const std::vector<std::string> streams = streams_to_calibrate(o);
   const std::vector<DistortionModel> models = models_for(o, streams.size());
   app::CameraCalibrationRequest q;
   q.intrinsics.model = models.front();
   q.intrinsics.threads = o.threads;
   if (auto valid = q.intrinsics.validate(); !valid.ok()) throw CliExit{kExitUsage, valid.error().message};
-  const app::TargetChoice target = resolve_target(o.target_path, o.log_path);
   q.log_path = o.log_path;
   q.camera = streams.front();
   q.target = target.target;
