@@ -21,6 +21,7 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
 #include <memory>
@@ -230,6 +231,17 @@ class ChainSolver {
   /// Re-estimates each camera's corner sigma from its residuals (robust: 1.4826 x the median
   /// |component|, or the RMS); true when one moved by more than 10 %.
   bool reestimate_sigmas(bool robust);
+  /// A block of the solution's covariance (cluster-robust where it could be computed; NaN where
+  /// not determined), rows x cols.
+  using BlockCovariance = std::function<Eigen::MatrixXd(const double*, const double*, int, int)>;
+  BlockCovariance solution_covariance(MarginalCovariance* cov);
+  /// Camera c's result: its camera and sigmas, residual figures, pose and offset.
+  void fill_camera(std::size_t c, const BlockCovariance& block, const std::vector<Eigen::Vector2d>& res,
+                   CameraChainCameraResult* r) const;
+  /// Camera c's pose relative to camera c - 1 and its covariance, and the baseline's sigma.
+  void fill_relative(std::size_t c, const BlockCovariance& block, CameraChainCameraResult* r) const;
+  /// Stamps that say the cameras are synchronized, against the offsets the data show.
+  void check_synchronization(CameraChainResult* out);
   Status fill(CameraChainResult* out);
   void fill_pairs(CameraChainResult* out) const;
 
@@ -745,10 +757,9 @@ void ChainSolver::fill_pairs(CameraChainResult* out) const {
   }
 }
 
-Status ChainSolver::fill(CameraChainResult* out) {
-  const std::size_t n = inputs_.size();
+ChainSolver::BlockCovariance ChainSolver::solution_covariance(MarginalCovariance* cov) {
   std::vector<const double*> wanted;
-  for (std::size_t c = 0; c < n; ++c) {
+  for (std::size_t c = 0; c < blocks_.size(); ++c) {
     wanted.push_back(blocks_[c].intrinsics.data());
     wanted.push_back(blocks_[c].distortion.data());
     if (c == 0) continue;
@@ -762,111 +773,113 @@ Status ChainSolver::fill(CameraChainResult* out) {
   const std::vector<std::size_t> group = group_views(&groups);
   std::vector<std::vector<ceres::ResidualBlockId>> clusters(groups);
   for (std::size_t k = 0; k < residual_ids_.size(); ++k) clusters[group[k]].push_back(residual_ids_[k]);
-  MarginalCovariance cov;
-  const bool have_cov = cov.compute(*problem_, wanted, threads_or_cores(opt_.threads), clusters);
-  if (!have_cov) warnings_.push_back("the covariance could not be computed: every sigma is not determined");
-  const auto block = [&](const double* a, const double* b, int ra, int cb) -> Eigen::MatrixXd {
-    if (have_cov && cov.has(a) && cov.has(b))
-      return cov.has_robust() ? cov.robust_block(a, b) : cov.block(a, b);
+  const bool have = cov->compute(*problem_, wanted, threads_or_cores(opt_.threads), clusters);
+  if (!have) warnings_.push_back("the covariance could not be computed: every sigma is not determined");
+  return [cov, have](const double* a, const double* b, int ra, int cb) -> Eigen::MatrixXd {
+    if (have && cov->has(a) && cov->has(b))
+      return cov->has_robust() ? cov->robust_block(a, b) : cov->block(a, b);
     return Eigen::MatrixXd::Constant(ra, cb, kNaN);
   };
-  const auto res = residuals_by_camera();
-  double sum_all = 0.0;
-  std::size_t n_all = 0;
-  out->cameras.resize(n);
-  for (std::size_t c = 0; c < n; ++c) {
-    CameraChainCameraResult& r = out->cameras[c];
-    const CameraBlocks& b = blocks_[c];
-    r.name = inputs_[c].name;
-    r.intrinsics = starts_[c];
-    CameraIntrinsicsResult& k = r.intrinsics;
-    k.camera.intrinsics = Eigen::Vector4d(b.intrinsics.data());
-    k.camera.distortion_coeffs = Eigen::Vector4d(b.distortion.data());
-    Eigen::Matrix<double, 8, 8> C;
-    C << block(b.intrinsics.data(), b.intrinsics.data(), 4, 4),
-        block(b.intrinsics.data(), b.distortion.data(), 4, 4),
-        block(b.distortion.data(), b.intrinsics.data(), 4, 4),
-        block(b.distortion.data(), b.distortion.data(), 4, 4);
-    k.covariance = C;
-    k.covariance_ok = C.allFinite();
-    const Eigen::VectorXd s = sigma_of(C);
-    k.intrinsics_sigma = s.head<4>();
-    k.distortion_sigma = s.tail<4>();
-    const double rel = std::max(k.intrinsics_sigma[0] / k.camera.intrinsics[0],
-                                k.intrinsics_sigma[1] / k.camera.intrinsics[1]);
-    k.focal_well_determined = k.covariance_ok && rel <= opt_.intrinsics.max_focal_relative_sigma;
-    double sum = 0.0;
-    k.residuals_px.clear();
-    k.residual_rejected.clear();
-    const std::size_t step =
-        std::max<std::size_t>(1, (res[c].size() + CameraIntrinsicsResult::kMaxStoredResiduals - 1) /
-                                     CameraIntrinsicsResult::kMaxStoredResiduals);
-    for (std::size_t i = 0; i < res[c].size(); ++i) {
-      sum += res[c][i].squaredNorm();
-      if (i % step == 0) {
-        k.residuals_px.push_back(res[c][i].cast<float>());
-        k.residual_rejected.push_back(0);
-      }
-    }
-    r.rms_px = res[c].empty() ? kNaN : std::sqrt(sum / static_cast<double>(res[c].size()));
-    k.rms_px = r.rms_px;
-    k.residual_sigma_px = b.sigma_px;
-    k.points_used = static_cast<int>(res[c].size());
-    k.corners_rejected = 0;
-    for (const ViewData& v : views_)
-      if (v.camera == c) k.corners_rejected += static_cast<int>(std::count(v.keep.begin(), v.keep.end(), 0));
-    k.warnings = camera_quality_warnings(k, opt_.intrinsics);
-    sum_all += sum;
-    n_all += res[c].size();
-    r.views_used = static_cast<int>(
-        std::count_if(views_.begin(), views_.end(), [c](const ViewData& v) { return v.camera == c; }));
-    r.T_cam_cam0 = pose_of(b);
-    r.linked_to = parent_[c];
-    r.timeshift_cam0_s = b.shift;
-    r.timeshift_estimated = c > 0 && opt_.estimate_time_offsets;
-    r.timeshift_sigma_s = r.timeshift_estimated ? std::sqrt(block(&b.shift, &b.shift, 1, 1)(0, 0)) : 0.0;
-    if (c > 0) {
-      Eigen::Matrix<double, 6, 6> P;
-      P << block(b.q.data(), b.q.data(), 3, 3), block(b.q.data(), b.t.data(), 3, 3),
-          block(b.t.data(), b.q.data(), 3, 3), block(b.t.data(), b.t.data(), 3, 3);
-      r.T_cam_cam0_covariance = P;
-      // Relative to the camera before it: T_n_m = T_n_0 T_m_0^-1, its covariance propagated.
-      const CameraBlocks& m = blocks_[c - 1];
-      const Eigen::Isometry3d T_n0 = pose_of(b), T_m0 = pose_of(m);
-      r.T_cn_cnm1 = T_n0 * T_m0.inverse();
-      Eigen::Matrix<double, 12, 12> J12 = Eigen::Matrix<double, 12, 12>::Zero();
-      const double* nb[2] = {b.q.data(), b.t.data()};
-      const double* mb[2] = {m.q.data(), m.t.data()};
-      for (int i = 0; i < 2; ++i) {
-        for (int j = 0; j < 2; ++j) {
-          J12.block<3, 3>(3 * i, 3 * j) = block(nb[i], nb[j], 3, 3);
-          if (c - 1 > 0) {
-            J12.block<3, 3>(6 + 3 * i, 6 + 3 * j) = block(mb[i], mb[j], 3, 3);
-            J12.block<3, 3>(3 * i, 6 + 3 * j) = block(nb[i], mb[j], 3, 3);
-            J12.block<3, 3>(6 + 3 * i, 3 * j) = block(mb[i], nb[j], 3, 3);
-          }
-        }
-      }
-      const Eigen::Matrix<double, 6, 12> J = relative_jacobian(T_n0, T_m0);
-      const Eigen::Matrix<double, 6, 6> Crel = J * J12 * J.transpose();
-      r.T_cn_cnm1_covariance = Crel;
-      const Eigen::VectorXd sr = sigma_of(Crel);
-      r.T_cn_cnm1_rotation_sigma_rad = sr.head<3>();
-      r.T_cn_cnm1_translation_sigma_m = sr.tail<3>();
-      const Eigen::Vector3d t = r.T_cn_cnm1.translation();
-      r.baseline_m = t.norm();
-      const Eigen::Vector3d g = t / std::max(r.baseline_m, 1e-12);
-      const double var = g.transpose() * Crel.bottomRightCorner<3, 3>() * g;
-      r.baseline_sigma_m = std::isnan(var) ? kNaN : std::sqrt(std::max(0.0, var));
+}
+
+void ChainSolver::fill_camera(std::size_t c, const BlockCovariance& block,
+                              const std::vector<Eigen::Vector2d>& res, CameraChainCameraResult* r) const {
+  const CameraBlocks& b = blocks_[c];
+  r->name = inputs_[c].name;
+  r->intrinsics = starts_[c];
+  CameraIntrinsicsResult& k = r->intrinsics;
+  k.camera.intrinsics = Eigen::Vector4d(b.intrinsics.data());
+  k.camera.distortion_coeffs = Eigen::Vector4d(b.distortion.data());
+  Eigen::Matrix<double, 8, 8> C;
+  C << block(b.intrinsics.data(), b.intrinsics.data(), 4, 4),
+      block(b.intrinsics.data(), b.distortion.data(), 4, 4),
+      block(b.distortion.data(), b.intrinsics.data(), 4, 4),
+      block(b.distortion.data(), b.distortion.data(), 4, 4);
+  k.covariance = C;
+  k.covariance_ok = C.allFinite();
+  const Eigen::VectorXd s = sigma_of(C);
+  k.intrinsics_sigma = s.head<4>();
+  k.distortion_sigma = s.tail<4>();
+  const double rel = std::max(k.intrinsics_sigma[0] / k.camera.intrinsics[0],
+                              k.intrinsics_sigma[1] / k.camera.intrinsics[1]);
+  k.focal_well_determined = k.covariance_ok && rel <= opt_.intrinsics.max_focal_relative_sigma;
+  double sum = 0.0;
+  k.residuals_px.clear();
+  k.residual_rejected.clear();
+  const std::size_t step =
+      std::max<std::size_t>(1, (res.size() + CameraIntrinsicsResult::kMaxStoredResiduals - 1) /
+                                   CameraIntrinsicsResult::kMaxStoredResiduals);
+  for (std::size_t i = 0; i < res.size(); ++i) {
+    sum += res[i].squaredNorm();
+    if (i % step == 0) {
+      k.residuals_px.push_back(res[i].cast<float>());
+      k.residual_rejected.push_back(0);
     }
   }
-  out->rms_px = n_all > 0 ? std::sqrt(sum_all / static_cast<double>(n_all)) : kNaN;
-  fill_pairs(out);
-  // Stamps that say the cameras are synchronized, against the offsets the data show.
-  for (std::size_t c = 1; c < n; ++c) {
+  r->rms_px = res.empty() ? kNaN : std::sqrt(sum / static_cast<double>(res.size()));
+  k.rms_px = r->rms_px;
+  k.residual_sigma_px = b.sigma_px;
+  k.points_used = static_cast<int>(res.size());
+  k.corners_rejected = 0;
+  r->views_used = 0;
+  for (const ViewData& v : views_) {
+    if (v.camera != c) continue;
+    k.corners_rejected += static_cast<int>(std::count(v.keep.begin(), v.keep.end(), 0));
+    ++r->views_used;
+  }
+  k.warnings = camera_quality_warnings(k, opt_.intrinsics);
+  r->T_cam_cam0 = pose_of(b);
+  r->linked_to = parent_[c];
+  r->timeshift_cam0_s = b.shift;
+  r->timeshift_estimated = c > 0 && opt_.estimate_time_offsets;
+  r->timeshift_sigma_s = r->timeshift_estimated ? std::sqrt(block(&b.shift, &b.shift, 1, 1)(0, 0)) : 0.0;
+  if (c > 0) {
+    Eigen::Matrix<double, 6, 6> P;
+    P << block(b.q.data(), b.q.data(), 3, 3), block(b.q.data(), b.t.data(), 3, 3),
+        block(b.t.data(), b.q.data(), 3, 3), block(b.t.data(), b.t.data(), 3, 3);
+    r->T_cam_cam0_covariance = P;
+    fill_relative(c, block, r);
+  }
+}
+
+void ChainSolver::fill_relative(std::size_t c, const BlockCovariance& block,
+                                CameraChainCameraResult* r) const {
+  // Relative to the camera before it: T_n_m = T_n_0 T_m_0^-1, its covariance propagated through
+  // the joint covariance of both poses (cam0's is the reference, not an estimate).
+  const CameraBlocks& b = blocks_[c];
+  const CameraBlocks& m = blocks_[c - 1];
+  const Eigen::Isometry3d T_n0 = pose_of(b), T_m0 = pose_of(m);
+  r->T_cn_cnm1 = T_n0 * T_m0.inverse();
+  Eigen::Matrix<double, 12, 12> P12 = Eigen::Matrix<double, 12, 12>::Zero();
+  const double* nb[2] = {b.q.data(), b.t.data()};
+  const double* mb[2] = {m.q.data(), m.t.data()};
+  for (int i = 0; i < 2; ++i) {
+    for (int j = 0; j < 2; ++j) {
+      P12.block<3, 3>(3 * i, 3 * j) = block(nb[i], nb[j], 3, 3);
+      if (c - 1 == 0) continue;
+      P12.block<3, 3>(6 + 3 * i, 6 + 3 * j) = block(mb[i], mb[j], 3, 3);
+      P12.block<3, 3>(3 * i, 6 + 3 * j) = block(nb[i], mb[j], 3, 3);
+      P12.block<3, 3>(6 + 3 * i, 3 * j) = block(mb[i], nb[j], 3, 3);
+    }
+  }
+  const Eigen::Matrix<double, 6, 12> J = relative_jacobian(T_n0, T_m0);
+  const Eigen::Matrix<double, 6, 6> Crel = J * P12 * J.transpose();
+  r->T_cn_cnm1_covariance = Crel;
+  const Eigen::VectorXd sr = sigma_of(Crel);
+  r->T_cn_cnm1_rotation_sigma_rad = sr.head<3>();
+  r->T_cn_cnm1_translation_sigma_m = sr.tail<3>();
+  const Eigen::Vector3d t = r->T_cn_cnm1.translation();
+  r->baseline_m = t.norm();
+  const Eigen::Vector3d g = t / std::max(r->baseline_m, 1e-12);
+  const double var = g.transpose() * Crel.bottomRightCorner<3, 3>() * g;
+  r->baseline_sigma_m = std::isnan(var) ? kNaN : std::sqrt(std::max(0.0, var));
+}
+
+void ChainSolver::check_synchronization(CameraChainResult* out) {
+  std::vector<double> t0;
+  for (const auto& s : tracks_[0]) t0.push_back(s.t);
+  for (std::size_t c = 1; c < out->cameras.size(); ++c) {
     CameraChainCameraResult& r = out->cameras[c];
-    std::vector<double> t0;
-    for (const auto& s : tracks_[0]) t0.push_back(s.t);
     for (const auto& s : tracks_[c])
       if (std::binary_search(t0.begin(), t0.end(), s.t)) ++r.views_stamped_with_cam0;
     if (!r.timeshift_estimated) continue;
@@ -883,7 +896,24 @@ Status ChainSolver::fill(CameraChainResult* out) {
           "off by it");
     }
   }
-  for (std::size_t c = 0; c < n; ++c) {
+}
+
+Status ChainSolver::fill(CameraChainResult* out) {
+  MarginalCovariance cov;
+  const BlockCovariance block = solution_covariance(&cov);
+  const auto res = residuals_by_camera();
+  double sum_all = 0.0;
+  std::size_t n_all = 0;
+  out->cameras.resize(inputs_.size());
+  for (std::size_t c = 0; c < inputs_.size(); ++c) {
+    fill_camera(c, block, res[c], &out->cameras[c]);
+    for (const auto& e : res[c]) sum_all += e.squaredNorm();
+    n_all += res[c].size();
+  }
+  out->rms_px = n_all > 0 ? std::sqrt(sum_all / static_cast<double>(n_all)) : kNaN;
+  fill_pairs(out);
+  check_synchronization(out);
+  for (std::size_t c = 0; c < inputs_.size(); ++c) {
     for (const auto& w : out->cameras[c].intrinsics.warnings) warnings_.push_back(inputs_[c].name + ": " + w);
   }
   return {};

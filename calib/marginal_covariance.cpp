@@ -47,6 +47,47 @@ bool solve_nuisance(const Eigen::SparseMatrix<double>& H_ll, const Eigen::Matrix
   return true;
 }
 
+/// Every residual block in cluster order (the blocks in no cluster one cluster each), so that the
+/// rows of a cluster are known: the blocks into `order`, each row's cluster into `row_cluster`.
+/// Returns the number of clusters.
+int order_clusters(ceres::Problem& problem, const std::vector<std::vector<ceres::ResidualBlockId>>& clusters,
+                   std::vector<ceres::ResidualBlockId>* order, std::vector<int>* row_cluster) {
+  int n = 0;
+  std::set<ceres::ResidualBlockId> clustered;
+  const auto add = [&](ceres::ResidualBlockId id, int cluster) {
+    order->push_back(id);
+    row_cluster->insert(row_cluster->end(), problem.GetCostFunctionForResidualBlock(id)->num_residuals(),
+                        cluster);
+  };
+  for (const auto& c : clusters) {
+    for (ceres::ResidualBlockId id : c)
+      if (clustered.insert(id).second) add(id, n);
+    ++n;
+  }
+  std::vector<ceres::ResidualBlockId> every;
+  problem.GetResidualBlocks(&every);
+  for (ceres::ResidualBlockId id : every)
+    if (!clustered.count(id)) add(id, n++);
+  return n;
+}
+
+/// The clusters' scores J_c^T r_c projected on the wanted parameters (the last ng columns of J)
+/// through the Schur complement: u_c = g_c - X^T l_c, X = H_ll^-1 H_lg (ng x clusters).
+template <class Jacobian>
+Eigen::MatrixXd cluster_scores(const Jacobian& J, const std::vector<double>& residuals,
+                               const std::vector<int>& row_cluster, int clusters, const Eigen::MatrixXd& X,
+                               int nl, int ng) {
+  std::vector<Eigen::Triplet<double>> t;
+  for (std::size_t r = 0; r < residuals.size(); ++r)
+    if (residuals[r] != 0.0) t.emplace_back(static_cast<int>(r), row_cluster[r], residuals[r]);
+  Eigen::SparseMatrix<double> Rc(J.rows(), clusters);
+  Rc.setFromTriplets(t.begin(), t.end());
+  const Eigen::SparseMatrix<double, Eigen::RowMajor> G = Eigen::SparseMatrix<double>(J.transpose()) * Rc;
+  Eigen::MatrixXd U = Eigen::MatrixXd(G.bottomRows(ng));
+  if (nl > 0) U -= (Eigen::SparseMatrix<double>(G.topRows(nl)).transpose() * X).transpose();
+  return U;
+}
+
 }  // namespace
 
 bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<const double*>& blocks,
@@ -82,29 +123,8 @@ bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<cons
   ceres::Problem::EvaluateOptions eo;
   eo.parameter_blocks = order;
   eo.num_threads = threads;
-  // With clusters: every residual block in cluster order (the others one cluster each), so that
-  // the rows of cluster c are a known range.
   std::vector<int> row_cluster;
-  if (!clusters.empty()) {
-    std::set<ceres::ResidualBlockId> clustered;
-    for (const auto& c : clusters) {
-      for (ceres::ResidualBlockId id : c) {
-        if (!clustered.insert(id).second) continue;
-        eo.residual_blocks.push_back(id);
-        row_cluster.insert(row_cluster.end(), problem.GetCostFunctionForResidualBlock(id)->num_residuals(),
-                           clusters_);
-      }
-      ++clusters_;
-    }
-    std::vector<ceres::ResidualBlockId> every;
-    problem.GetResidualBlocks(&every);
-    for (ceres::ResidualBlockId id : every) {
-      if (clustered.count(id)) continue;
-      eo.residual_blocks.push_back(id);
-      row_cluster.insert(row_cluster.end(), problem.GetCostFunctionForResidualBlock(id)->num_residuals(),
-                         clusters_++);
-    }
-  }
+  if (!clusters.empty()) clusters_ = order_clusters(problem, clusters, &eo.residual_blocks, &row_cluster);
   ceres::CRSMatrix crs;
   std::vector<double> residuals;
   if (!problem.Evaluate(eo, nullptr, clusters.empty() ? nullptr : &residuals, nullptr, &crs)) return false;
@@ -125,17 +145,7 @@ bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<cons
   }
   // The scores of the clusters projected on the wanted blocks, u_c = [-X^T, I] J_c^T r_c.
   Eigen::MatrixXd U;
-  if (!clusters.empty()) {
-    std::vector<Eigen::Triplet<double>> t;
-    for (std::size_t r = 0; r < residuals.size(); ++r)
-      if (residuals[r] != 0.0) t.emplace_back(static_cast<int>(r), row_cluster[r], residuals[r]);
-    Eigen::SparseMatrix<double> Rc(crs.num_rows, clusters_);
-    Rc.setFromTriplets(t.begin(), t.end());
-    const Eigen::SparseMatrix<double, Eigen::RowMajor> G =
-        Eigen::SparseMatrix<double>(J.transpose()) * Rc;  // n x C
-    U = Eigen::MatrixXd(G.bottomRows(ng));
-    if (nl > 0) U -= (Eigen::SparseMatrix<double>(G.topRows(nl)).transpose() * X).transpose();
-  }
+  if (!clusters.empty()) U = cluster_scores(J, residuals, row_cluster, clusters_, X, nl, ng);
   S = 0.5 * (S + S.transpose());
   // Scale every coordinate to unit information, then split determined from undetermined.
   Eigen::VectorXd d(ng);
