@@ -3,6 +3,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <vector>
 
@@ -16,6 +17,22 @@ const char* distortion_model_name(DistortionModel model) {
       return "equidistant";
   }
   return "unknown";
+}
+
+const char* shutter_kind_name(Shutter::Kind kind) { return kind == Shutter::Kind::kRolling ? "rolling" : "global"; }
+const char* readout_name(Shutter::Readout readout) {
+  return readout == Shutter::Readout::kBottomToTop ? "bottom_to_top" : "top_to_bottom";
+}
+const char* stamp_row_name(Shutter::StampRow stamp_row) {
+  switch (stamp_row) {
+    case Shutter::StampRow::kFirst:
+      return "first";
+    case Shutter::StampRow::kMiddle:
+      return "middle";
+    case Shutter::StampRow::kLast:
+      return "last";
+  }
+  return "first";
 }
 
 Status validate_camera(const CameraModel& c) {
@@ -49,6 +66,14 @@ Status validate_camera(const CameraModel& c) {
   if (!c.distortion_coeffs.allFinite()) {
     return make_error(Errc::kInvalidArgument, "camera distortion_coeffs must be finite");
   }
+  // A rolling shutter reads a frame out in at most a second (a line delay of 1e-3 s on a 1000-row
+  // sensor); more is a unit mix-up (microseconds given as seconds).
+  if (c.shutter.rolling() &&
+      !(std::isfinite(c.shutter.line_delay_s) && c.shutter.line_delay_s >= 0.0 && c.shutter.readout_s(c.height) <= 1.0)) {
+    return make_error(Errc::kInvalidArgument,
+                      "camera line_delay_s must be seconds per row, >= 0, with the whole frame read out in at "
+                      "most 1 s (30 us per row is 3.0e-05)");
+  }
   return {};
 }
 
@@ -79,6 +104,52 @@ Result<std::string> read_string(const YAML::Node& node, const char* key, const s
   } catch (const YAML::Exception&) {
     return make_error(Errc::kInvalidArgument, source + ": '" + key + "' must be a string");
   }
+}
+
+/// imucal's shutter keys of a camera map; absent: global.
+Status read_shutter(const YAML::Node& node, const std::string& source, Shutter* out) {
+  *out = Shutter{};
+  if (!node["shutter"]) return {};
+  auto kind = read_string(node, "shutter", source);
+  if (!kind.ok()) return kind.error();
+  if (*kind == "global") return {};
+  if (*kind != "rolling") {
+    return make_error(Errc::kInvalidArgument, source + ": shutter '" + *kind + "' is not known (global or rolling)");
+  }
+  out->kind = Shutter::Kind::kRolling;
+  const YAML::Node delay = node["line_delay_s"];
+  if (!delay) {
+    return make_error(Errc::kInvalidArgument,
+                      source + ": a rolling shutter needs line_delay_s (seconds per row; 3.0e-05 for 30 us)");
+  }
+  try {
+    out->line_delay_s = delay.as<double>();
+  } catch (const YAML::Exception&) {
+    return make_error(Errc::kInvalidArgument, source + ": 'line_delay_s' must be a number (seconds per row)");
+  }
+  if (node["readout_direction"]) {
+    auto dir = read_string(node, "readout_direction", source);
+    if (!dir.ok()) return dir.error();
+    if (*dir == "bottom_to_top") {
+      out->readout = Shutter::Readout::kBottomToTop;
+    } else if (*dir != "top_to_bottom") {
+      return make_error(Errc::kInvalidArgument, source + ": readout_direction '" + *dir +
+                                                    "' is not known (top_to_bottom or bottom_to_top)");
+    }
+  }
+  if (node["stamp_row"]) {
+    auto row = read_string(node, "stamp_row", source);
+    if (!row.ok()) return row.error();
+    if (*row == "middle") {
+      out->stamp_row = Shutter::StampRow::kMiddle;
+    } else if (*row == "last") {
+      out->stamp_row = Shutter::StampRow::kLast;
+    } else if (*row != "first") {
+      return make_error(Errc::kInvalidArgument,
+                        source + ": stamp_row '" + *row + "' is not known (first, middle or last)");
+    }
+  }
+  return {};
 }
 
 }  // namespace
@@ -124,6 +195,7 @@ Result<CameraModel> camera_from_yaml(const YAML::Node& node, const std::string& 
   }
   camera.width = static_cast<int>(w);
   camera.height = static_cast<int>(h);
+  if (auto s = read_shutter(node, source, &camera.shutter); !s.ok()) return s.error();
   if (auto s = validate_camera(camera); !s.ok()) return s.error().context(source);
   return camera;
 }
@@ -146,6 +218,12 @@ void camera_to_yaml(const CameraModel& camera, YAML::Node& node) {
   resolution.push_back(camera.height);
   resolution.SetStyle(YAML::EmitterStyle::Flow);
   node["resolution"] = resolution;
+  if (camera.shutter.rolling()) {
+    node["shutter"] = shutter_kind_name(camera.shutter.kind);
+    node["line_delay_s"] = camera.shutter.line_delay_s;
+    node["readout_direction"] = readout_name(camera.shutter.readout);
+    node["stamp_row"] = stamp_row_name(camera.shutter.stamp_row);
+  }
 }
 
 Result<CameraModel> parse_camera_yaml(const std::string& text, const std::string& source) {

@@ -24,6 +24,39 @@ namespace imucal {
 
 enum class DistortionModel { kRadtan, kEquidistant };
 
+/// How the image rows are exposed. A global shutter exposes every row at once; a rolling shutter
+/// starts row after row, `line_delay_s` apart, in the readout direction, so that image row v is
+/// seen at t_stamp + row_time(v). The frame's stamp refers to one row (`stamp_row`): the first
+/// row read out, the middle row or the last. Kalibr's camchain has no such fields; imucal writes
+/// them beside Kalibr's (shutter, line_delay_s, readout_direction, stamp_row: docs/conventions.md §5).
+struct Shutter {
+  enum class Kind { kGlobal, kRolling };
+  enum class Readout { kTopToBottom, kBottomToTop };
+  enum class StampRow { kFirst, kMiddle, kLast };
+  Kind kind = Kind::kGlobal;
+  double line_delay_s = 0.0;  // rolling: time between the starts of consecutive rows
+  Readout readout = Readout::kTopToBottom;
+  StampRow stamp_row = StampRow::kFirst;
+
+  bool rolling() const { return kind == Kind::kRolling; }
+  /// The readout position (0 = first row read) of image row coordinate v (pixels, centres at
+  /// integers) minus that of the stamped row, for a sensor of `height` rows: row_time(v) =
+  /// row_offset(v) * line_delay_s. Zero for a global shutter.
+  double row_offset(double v, int height) const {
+    if (!rolling()) return 0.0;
+    const double last = static_cast<double>(height - 1);
+    const double line = readout == Readout::kTopToBottom ? v : last - v;
+    const double ref = stamp_row == StampRow::kFirst ? 0.0 : stamp_row == StampRow::kMiddle ? 0.5 * last : last;
+    return line - ref;
+  }
+  double row_time(double v, int height) const { return row_offset(v, height) * line_delay_s; }
+  /// The whole frame's readout, s (0 for a global shutter).
+  double readout_s(int height) const { return rolling() ? line_delay_s * (height - 1) : 0.0; }
+};
+const char* shutter_kind_name(Shutter::Kind kind);         // "global", "rolling"
+const char* readout_name(Shutter::Readout readout);        // "top_to_bottom", "bottom_to_top"
+const char* stamp_row_name(Shutter::StampRow stamp_row);   // "first", "middle", "last"
+
 /// Kalibr's name: "radtan" or "equidistant".
 const char* distortion_model_name(DistortionModel model);
 
@@ -75,6 +108,7 @@ struct CameraModelT {
   Vec4 distortion_coeffs = Vec4::Zero();  // radtan: k1 k2 p1 p2; equidistant: k1 k2 k3 k4
   int width = 0;                          // resolution, pixels
   int height = 0;
+  Shutter shutter;                        // global unless the camera file says rolling
 
   struct Projection {
     Vec2 px = Vec2::Zero();
@@ -202,6 +236,7 @@ struct CameraModelT {
     out.distortion_coeffs = distortion_coeffs.template cast<U>();
     out.width = width;
     out.height = height;
+    out.shutter = shutter;
     return out;
   }
 
@@ -225,10 +260,12 @@ using CameraModel = CameraModelT<double>;
 [[nodiscard]] Status validate_camera(const CameraModel& camera);
 
 /// Reads one camera from a Kalibr camchain entry (the map under `cam0:`): camera_model must be
-/// "pinhole"; distortion_model "radtan" or "equidistant". `source` names the file in errors.
+/// "pinhole"; distortion_model "radtan" or "equidistant"; imucal's optional shutter keys
+/// (absent: global). `source` names the file in errors.
 [[nodiscard]] Result<CameraModel> camera_from_yaml(const YAML::Node& node, const std::string& source);
 /// Writes camera_model, intrinsics, distortion_model, distortion_coeffs and resolution into
-/// the map `node` (other keys, such as T_cam_imu, are left as they are).
+/// the map `node`, and for a rolling shutter imucal's shutter keys (other keys, such as
+/// T_cam_imu, are left as they are).
 void camera_to_yaml(const CameraModel& camera, YAML::Node& node);
 
 /// The same for YAML text holding one camera map.

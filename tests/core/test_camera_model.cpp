@@ -133,6 +133,50 @@ TEST(CameraModel, YamlRoundTripKalibrNames) {
   }
 }
 
+// imucal's shutter keys: written only for a rolling shutter, read back exactly; a camera map
+// without them is global; the row times follow the readout direction and the stamped row.
+TEST(CameraModel, RollingShutterKeysRoundTripAndGiveEachRowItsTime) {
+  EXPECT_EQ(camera_to_yaml_text(radtan_camera()).find("shutter"), std::string::npos);
+  CameraModel c = radtan_camera();
+  c.shutter.kind = Shutter::Kind::kRolling;
+  c.shutter.line_delay_s = 29.5e-6;
+  c.shutter.readout = Shutter::Readout::kBottomToTop;
+  c.shutter.stamp_row = Shutter::StampRow::kMiddle;
+  auto back = parse_camera_yaml(camera_to_yaml_text(c), "test");
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_TRUE(back->shutter.rolling());
+  EXPECT_DOUBLE_EQ(back->shutter.line_delay_s, 29.5e-6);
+  EXPECT_EQ(back->shutter.readout, Shutter::Readout::kBottomToTop);
+  EXPECT_EQ(back->shutter.stamp_row, Shutter::StampRow::kMiddle);
+  // Bottom to top, stamped at the middle row: the last image row is read first.
+  const int h = c.height;
+  EXPECT_DOUBLE_EQ(c.shutter.row_offset(h - 1, h), -0.5 * (h - 1));
+  EXPECT_DOUBLE_EQ(c.shutter.row_offset(0, h), 0.5 * (h - 1));
+  EXPECT_DOUBLE_EQ(c.shutter.readout_s(h), 29.5e-6 * (h - 1));
+  Shutter first;
+  first.kind = Shutter::Kind::kRolling;
+  first.line_delay_s = 1e-5;
+  EXPECT_DOUBLE_EQ(first.row_time(100.0, h), 1e-3);
+  EXPECT_DOUBLE_EQ(Shutter{}.row_time(100.0, h), 0.0);  // global
+
+  const std::string base =
+      "camera_model: pinhole\ndistortion_model: radtan\nintrinsics: [450, 450, 188, 120]\n"
+      "distortion_coeffs: [0,0,0,0]\nresolution: [376, 240]\n";
+  auto global = parse_camera_yaml(base + "shutter: global\n", "cam.yaml");
+  ASSERT_TRUE(global.ok());
+  EXPECT_FALSE(global->shutter.rolling());
+  auto no_delay = parse_camera_yaml(base + "shutter: rolling\n", "cam.yaml");
+  ASSERT_FALSE(no_delay.ok());
+  EXPECT_NE(no_delay.error().message.find("needs line_delay_s"), std::string::npos);
+  // Microseconds written as seconds: 30 s per row.
+  auto micro = parse_camera_yaml(base + "shutter: rolling\nline_delay_s: 30\n", "cam.yaml");
+  ASSERT_FALSE(micro.ok());
+  EXPECT_NE(micro.error().message.find("3.0e-05"), std::string::npos) << micro.error().message;
+  auto dir = parse_camera_yaml(base + "shutter: rolling\nline_delay_s: 3e-5\nreadout_direction: left\n", "cam.yaml");
+  ASSERT_FALSE(dir.ok());
+  EXPECT_NE(dir.error().message.find("top_to_bottom or bottom_to_top"), std::string::npos);
+}
+
 TEST(CameraModel, ReadsKalibrCamchainEntry) {
   const std::string text = R"(
 T_cam_imu:
