@@ -10,14 +10,17 @@
 #include <condition_variable>
 #include <cstdio>
 #include <deque>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <thread>
 #include <utility>
 
 #include "app/results/camera_results.hpp"
 #include "calib/observation_check.hpp"
+#include "core/text_format.hpp"
 #include "core/threads.hpp"
 #include "log/frame_codec.hpp"
 #include "log/session_log.hpp"
@@ -472,6 +475,120 @@ Result<std::unique_ptr<log::SessionLogReader>> start_report(const CameraCalibrat
 
 }  // namespace
 
+namespace {
+
+/// The median interval between the views with the target, s (infinite with fewer than two).
+double median_view_interval_s(std::span<const calib::TargetObservation> views) {
+  std::vector<double> dt;
+  for (std::size_t i = 1; i < views.size(); ++i)
+    dt.push_back(1e-9 * static_cast<double>(views[i].t_ns - views[i - 1].t_ns));
+  if (dt.empty()) return std::numeric_limits<double>::infinity();
+  std::nth_element(dt.begin(), dt.begin() + static_cast<long>(dt.size() / 2), dt.end());
+  return dt[dt.size() / 2];
+}
+
+/// The `count` consecutive views (of those with the target) over which the corners move the most
+/// from view to view: where a rolling shutter shows most.
+std::span<const calib::TargetObservation> fastest_views(std::span<const calib::TargetObservation> views,
+                                                        std::size_t count) {
+  if (views.size() <= count) return views;
+  std::vector<double> motion(views.size(), 0.0);  // mean corner displacement from the view before, px
+  for (std::size_t i = 1; i < views.size(); ++i) {
+    const auto& a = views[i - 1];
+    const auto& b = views[i];
+    double sum = 0.0;
+    int n = 0;
+    for (std::size_t j = 0, k = 0; j < a.ids.size() && k < b.ids.size();) {
+      if (a.ids[j] < b.ids[k]) {
+        ++j;
+      } else if (b.ids[k] < a.ids[j]) {
+        ++k;
+      } else {
+        sum += (a.px[j] - b.px[k]).norm();
+        ++n;
+        ++j;
+        ++k;
+      }
+    }
+    motion[i] = n > 0 ? sum / n : 0.0;
+  }
+  double window = 0.0, best = -1.0;
+  std::size_t first = 0;
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    window += motion[i];
+    if (i >= count) window -= motion[i - count];
+    if (i + 1 >= count && window > best) {
+      best = window;
+      first = i + 1 - count;
+    }
+  }
+  return views.subspan(first, count);
+}
+
+/// The shutter of a single camera as the request asks (CameraCalibrationRequest::shutter): the
+/// views also solved on a trajectory with the line delay, whose solution replaces the per-view
+/// one when the camera is rolling. The evidence (kAuto) is taken on the kShutterTestViews
+/// consecutive views that move the most; only a rolling camera is then solved on all of them.
+Status solve_shutter(const CameraCalibrationRequest& q, std::span<const calib::TargetObservation> views,
+                     CameraCalibrationReport* report) {
+  using Mode = calib::ShutterSolveOptions::Mode;
+  if (q.shutter.mode == Mode::kGlobal && !q.shutter.line_delay_s) return {};
+  const bool automatic = q.shutter.mode == Mode::kAuto && !q.shutter.line_delay_s;
+  // A rolling shutter shows only in motion, on views that a smooth trajectory joins: a video.
+  constexpr double kMaxVideoIntervalS = 0.2;
+  const double interval = median_view_interval_s(views);
+  if (automatic && !(interval <= kMaxVideoIntervalS)) {
+    report->shutter_choice =
+        "global: the views are " + format_number("%.2f", interval) +
+        " s apart (not a video), so a rolling shutter cannot show; --shutter rolling tries anyway";
+    return {};
+  }
+  calib::CameraChainOptions options;
+  options.intrinsics = q.intrinsics;
+  options.threads = q.threads;
+  options.shutter = q.shutter;
+  calib::CameraChainInput in;
+  in.name = report->stream.name;
+  in.model = q.intrinsics.model;
+  in.shutter = q.known_shutter;
+  // The test on the views that move the most (a few seconds of them, not the whole recording).
+  constexpr std::size_t kShutterTestViews = 200;
+  const bool subset = automatic && views.size() > kShutterTestViews;
+  const auto tested = subset ? fastest_views(views, kShutterTestViews) : views;
+  in.observations.assign(tested.begin(), tested.end());
+  auto chain = calib::calibrate_camera_chain(q.target, std::span(&in, 1), options, {});
+  if (chain.ok() && subset && chain->cameras.front().intrinsics.camera.shutter.rolling()) {
+    // Rolling on the test's views: every view solved with the line delay (started from the test's).
+    const std::string why = chain->cameras.front().shutter_choice + " (on the " +
+                            std::to_string(kShutterTestViews) + " consecutive views that move the most)";
+    options.shutter.mode = calib::ShutterSolveOptions::Mode::kRolling;
+    in.shutter = chain->cameras.front().intrinsics.camera.shutter;
+    in.observations.assign(views.begin(), views.end());
+    chain = calib::calibrate_camera_chain(q.target, std::span(&in, 1), options, {});
+    if (chain.ok()) chain->cameras.front().shutter_choice = why;
+  }
+  if (!chain.ok()) {
+    if (!automatic) return chain.error().context("camera '" + report->stream.name + "' of " + q.log_path);
+    report->shutter_choice =
+        "global: the rolling-shutter test on the trajectory failed (" + chain.error().message + ")";
+    return {};
+  }
+  const calib::CameraChainCameraResult& c = chain->cameras.front();
+  report->shutter_choice = c.shutter_choice;
+  if (subset && !c.intrinsics.camera.shutter.rolling())
+    report->shutter_choice +=
+        " (on the " + std::to_string(kShutterTestViews) + " consecutive views that move the most)";
+  if (!c.intrinsics.camera.shutter.rolling()) return {};
+  // Rolling: the trajectory's solution replaces the per-view one (whose intrinsics the motion
+  // during the readout biased); the views' figures stay those of the per-view start.
+  report->intrinsics = c.intrinsics;
+  report->line_delay_sigma_s = c.line_delay_sigma_s;
+  report->warnings.insert(report->warnings.end(), chain->warnings.begin(), chain->warnings.end());
+  return {};
+}
+
+}  // namespace
+
 Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q) {
   IMUCAL_TRY(q.base.intrinsics.validate());
   IMUCAL_TRY(q.base.target.validate());
@@ -481,7 +598,7 @@ Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q
   }
   calib::CameraChainOptions options = q.chain;
   options.intrinsics = q.base.intrinsics;
-  options.threads = q.base.threads;
+  options.threads = q.chain.threads > 0 ? q.chain.threads : q.base.threads;
   IMUCAL_TRY(options.validate());
   CameraChainReport out;
   std::vector<calib::CameraChainInput> inputs;
@@ -504,14 +621,18 @@ Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q
     if (report.stream.name != in.name) in.name += " (" + report.stream.name + ")";
     in.model = q.models[c];
     in.observations = std::move(*obs);
+    in.shutter = c < q.shutters.size() ? q.shutters[c] : q.base.known_shutter;
     inputs.push_back(std::move(in));
     out.warnings.insert(out.warnings.end(), report.warnings.begin(), report.warnings.end());
     out.cameras.push_back(std::move(report));
   }
   auto chain = calib::calibrate_camera_chain(q.base.target, inputs, options, q.base.solve_progress);
   if (!chain.ok()) return chain.error().context(q.base.log_path);
-  for (std::size_t c = 0; c < out.cameras.size(); ++c)
+  for (std::size_t c = 0; c < out.cameras.size(); ++c) {
     out.cameras[c].intrinsics = chain->cameras[c].intrinsics;
+    out.cameras[c].line_delay_sigma_s = chain->cameras[c].line_delay_sigma_s;
+    out.cameras[c].shutter_choice = chain->cameras[c].shutter_choice;
+  }
   out.warnings.insert(out.warnings.end(), chain->warnings.begin(), chain->warnings.end());
   out.chain = std::move(*chain);
   return out;
@@ -530,6 +651,7 @@ Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequ
   report.intrinsics = std::move(*result);
   report.warnings.insert(report.warnings.end(), report.intrinsics.warnings.begin(),
                          report.intrinsics.warnings.end());
+  IMUCAL_TRY(solve_shutter(q, *found, &report));
   return report;
 }
 

@@ -10,6 +10,8 @@
 // (app/camimu_calibration.hpp).
 
 #include <cstdint>
+#include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -73,6 +75,12 @@ struct CameraCalibrationRequest {
   std::string target_source;  // for the outputs: the file, or where in the log it came from
   calib::DetectionOptions detection;
   calib::CameraIntrinsicsOptions intrinsics;
+  /// The shutter (docs/camera-calibration.md, "Rolling shutter"): kGlobal solves each view with
+  /// its own pose, as always; otherwise the views are also solved on a trajectory with the line
+  /// delay freed (kAuto keeps rolling only by the evidence) or held (line_delay_s). `known` is
+  /// the camera's readout direction and stamped row (and a line delay to start from).
+  calib::ShutterSolveOptions shutter{calib::ShutterSolveOptions::Mode::kGlobal, std::nullopt};
+  Shutter known_shutter;
   int threads = 0;  // detection workers; 0 = all cores
   /// Calibrate from the readable part of a damaged log (else a damaged log is refused).
   bool allow_damaged = false;
@@ -101,6 +109,10 @@ struct CameraCalibrationReport {
   double detection_wall_s = 0.0;       // 0 when reused
   int detection_threads = 0;
   calib::CameraIntrinsicsResult intrinsics;
+  /// The line delay's sigma (s per row; NaN: global, held or not determined) and why this
+  /// shutter (empty: global, nothing asked).
+  double line_delay_sigma_s = std::numeric_limits<double>::quiet_NaN();
+  std::string shutter_choice;
   std::vector<std::string> warnings;  // of the detection, the log and the solve
 };
 
@@ -111,7 +123,10 @@ struct CameraChainRequest {
   CameraCalibrationRequest base;
   std::vector<std::string> cameras;     // stream names, cam0 first; at least two
   std::vector<DistortionModel> models;  // one per camera
-  calib::CameraChainOptions chain;      // its `intrinsics` and `threads` are set from base
+  /// Each camera's shutter as known (empty: base.known_shutter for every camera).
+  std::vector<Shutter> shutters;
+  /// Its `intrinsics` are set from base, and its `threads` too unless given (> 0).
+  calib::CameraChainOptions chain;
 };
 
 struct CameraChainReport {

@@ -21,6 +21,7 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <limits>
 #include <map>
@@ -191,6 +192,14 @@ struct CameraBlocks {
   double shift = 0.0;
   std::array<double, 4> intrinsics{}, distortion{};
   double sigma_px = 0.3;
+  // The shutter: rolling views have a line delay block (held when line_delay_fixed); `test`:
+  // freed after the global solution, kept by request (keep_rolling) or by the evidence.
+  bool rolling = false;
+  bool line_delay_fixed = true;
+  double line_delay = 0.0;  // s per row
+  bool test = false;
+  bool keep_rolling = false;
+  std::string shutter_choice;
 };
 
 /// One view in the solve: the camera, its corners (target points and pixels) and which are kept.
@@ -224,6 +233,13 @@ class ChainSolver {
   /// Builds the problem at the current values (c2: the loss scale in sigmas, 0 = none).
   void build(double loss_sigmas);
   Status solve(double loss_sigmas, const std::string& stage);
+  /// Each camera's shutter plan from the options and its input (CameraBlocks' fields).
+  Status plan_shutters();
+  /// After the global solution: the line delays to test freed and solved; rolling kept where
+  /// asked for or where the evidence shows it (BIC), else the global solution restored. Kept, the
+  /// corners the global model rejected are taken back and judged by the rolling one (`dropped`:
+  /// the corners left out, updated).
+  Status choose_shutter(int* dropped);
   bool views_in_window() const;
   /// Residuals per camera in pixels at the current values (kept corners).
   std::vector<std::vector<Eigen::Vector2d>> residuals_by_camera() const;
@@ -278,6 +294,7 @@ class ChainSolver {
   std::vector<ceres::ResidualBlockId> residual_ids_;
   std::vector<std::vector<double*>> residual_blocks_;
   int iterations_ = 0;
+  double last_cost_ = 0.0;  // of the last solve
   std::vector<std::string> warnings_;
 };
 
@@ -592,13 +609,15 @@ void ChainSolver::build(double loss_sigmas) {
       const double t = v.t + b.shift;
       const int first = std::clamp(timing_.segment(t).first_knot - 1, 0, timing_.knots - kOrder - 2);
       auto* cost = new Residual(inputs_[v.camera].model, width, height, std::move(pts), std::move(px), v.t,
-                                first, timing_, b.sigma_px, loss_px);
+                                first, timing_, b.sigma_px, loss_px, /*compressed=*/true,
+                                b.rolling ? &inputs_[v.camera].shutter : nullptr);
       for (int i = 0; i < Residual::kWindow; ++i)
         blocks.push_back(q_[static_cast<std::size_t>(first + i)].data());
       for (int i = 0; i < Residual::kWindow; ++i)
         blocks.push_back(p_[static_cast<std::size_t>(first + i)].data());
       for (double* x : {b.q.data(), b.t.data(), &b.shift, b.intrinsics.data(), b.distortion.data()})
         blocks.push_back(x);
+      if (b.rolling) blocks.push_back(&b.line_delay);
       residual_ids_.push_back(problem_->AddResidualBlock(cost, nullptr, blocks));
       residuals_.push_back({cost, nullptr});
     }
@@ -611,13 +630,18 @@ void ChainSolver::build(double loss_sigmas) {
     problem_->SetParameterBlockConstant(&blocks_[0].shift);
     if (!opt_.estimate_time_offsets)
       for (CameraBlocks& cb : blocks_) problem_->SetParameterBlockConstant(&cb.shift);
+    for (CameraBlocks& cb : blocks_)
+      if (cb.rolling && cb.line_delay_fixed && problem_->HasParameterBlock(&cb.line_delay))
+        problem_->SetParameterBlockConstant(&cb.line_delay);
   }
 }
 
 bool ChainSolver::views_in_window() const {
   for (std::size_t k = 0; k < residuals_.size(); ++k)
-    if (residuals_[k].spline && !residuals_[k].spline->in_window(blocks_[views_[k].camera].shift))
-      return false;
+    if (residuals_[k].spline) {
+      const CameraBlocks& b = blocks_[views_[k].camera];
+      if (!residuals_[k].spline->in_window(b.shift, b.rolling ? b.line_delay : 0.0)) return false;
+    }
   return true;
 }
 
@@ -641,6 +665,7 @@ Status ChainSolver::solve(double loss_sigmas, const std::string& stage) {
     if (!summary.IsSolutionUsable())
       return make_error(Errc::kSolverFailed,
                         "the camera chain solve failed (" + stage + "): " + summary.message);
+    last_cost_ = summary.final_cost;
     if (views_in_window()) return {};
   }
   return make_error(Errc::kSolverFailed, "the cameras' time offsets did not settle (" + stage + ")");
@@ -762,6 +787,7 @@ ChainSolver::BlockCovariance ChainSolver::solution_covariance(MarginalCovariance
   for (std::size_t c = 0; c < blocks_.size(); ++c) {
     wanted.push_back(blocks_[c].intrinsics.data());
     wanted.push_back(blocks_[c].distortion.data());
+    if (blocks_[c].rolling && !blocks_[c].line_delay_fixed) wanted.push_back(&blocks_[c].line_delay);
     if (c == 0) continue;
     wanted.push_back(blocks_[c].q.data());
     wanted.push_back(blocks_[c].t.data());
@@ -790,6 +816,14 @@ void ChainSolver::fill_camera(std::size_t c, const BlockCovariance& block,
   CameraIntrinsicsResult& k = r->intrinsics;
   k.camera.intrinsics = Eigen::Vector4d(b.intrinsics.data());
   k.camera.distortion_coeffs = Eigen::Vector4d(b.distortion.data());
+  k.camera.shutter = inputs_[c].shutter;
+  k.camera.shutter.kind = b.rolling ? Shutter::Kind::kRolling : Shutter::Kind::kGlobal;
+  k.camera.shutter.line_delay_s = b.rolling ? b.line_delay : 0.0;
+  r->shutter_choice = b.shutter_choice;
+  if (b.rolling && !b.line_delay_fixed) {
+    const double var = block(&b.line_delay, &b.line_delay, 1, 1)(0, 0);
+    r->line_delay_sigma_s = std::isfinite(var) ? std::sqrt(std::max(var, 0.0)) : kNaN;
+  }
   Eigen::Matrix<double, 8, 8> C;
   C << block(b.intrinsics.data(), b.intrinsics.data(), 4, 4),
       block(b.intrinsics.data(), b.distortion.data(), 4, 4),
@@ -919,8 +953,133 @@ Status ChainSolver::fill(CameraChainResult* out) {
   return {};
 }
 
+Status ChainSolver::plan_shutters() {
+  using Mode = ShutterSolveOptions::Mode;
+  const ShutterSolveOptions& o = opt_.shutter;
+  for (std::size_t c = 0; c < inputs_.size(); ++c) {
+    CameraBlocks& b = blocks_[c];
+    const Shutter& in = inputs_[c].shutter;
+    b.line_delay = in.rolling() ? in.line_delay_s : 0.0;
+    if (o.mode == Mode::kGlobal && !o.line_delay_s) {
+      b.shutter_choice = in.rolling()
+                             ? "global, as requested (--shutter global; the camera is known to be rolling)"
+                             : "global, as requested (--shutter global)";
+      continue;
+    }
+    if (!opt_.estimate_time_offsets) {
+      if (o.mode == Mode::kRolling || o.line_delay_s)
+        return make_error(Errc::kInvalidArgument,
+                          "a rolling shutter needs the cameras' trajectory: calibrate without "
+                          "--hold-time-offsets (the time offsets are then estimated as well)");
+      b.shutter_choice =
+          "global: with one pose per instant (--hold-time-offsets) a rolling shutter is not modelled";
+      continue;
+    }
+    if (o.line_delay_s) {
+      b.rolling = true;
+      b.line_delay = *o.line_delay_s;
+      b.shutter_choice = "rolling, line delay held at the given value (--line-delay)";
+      continue;
+    }
+    b.test = true;
+    b.keep_rolling = o.mode == Mode::kRolling;
+  }
+  return {};
+}
+
+Status ChainSolver::choose_shutter(int* dropped) {
+  bool any = false, choose = false;
+  for (const CameraBlocks& b : blocks_) {
+    any = any || b.test;
+    choose = choose || (b.test && !b.keep_rolling);
+  }
+  if (!any) return {};
+  // The global solution and its cost at the current weights (the last re-estimate of the corner
+  // sigmas may have moved them a little without a solve); the rolling one at the same weights
+  // (both plain least squares) gives the likelihood ratio.
+  const std::vector<CameraBlocks> global_blocks = blocks_;
+  const std::vector<Arr4> global_q = q_;
+  const std::vector<Arr3> global_p = p_;
+  build(0.0);
+  double global_cost = 0.0;
+  problem_->Evaluate(ceres::Problem::EvaluateOptions(), &global_cost, nullptr, nullptr, nullptr);
+  double k = 0.0;
+  for (CameraBlocks& b : blocks_) {
+    if (!b.test) continue;
+    b.rolling = true;
+    b.line_delay_fixed = false;
+    k += 1.0;
+  }
+  IMUCAL_TRY(solve(0.0, "rolling shutter"));
+  const double lr = 2.0 * (global_cost - last_cost_);
+  double n = 0.0;
+  for (std::size_t v = 0; v < views_.size(); ++v)
+    if (blocks_[views_[v].camera].test)
+      n += 2.0 * static_cast<double>(std::count(views_[v].keep.begin(), views_[v].keep.end(), 1));
+  const double threshold = shutter_bic_threshold(k, n);
+  double readout = 0.0;  // the longest of the freed cameras, s
+  for (std::size_t c = 0; c < blocks_.size(); ++c)
+    if (blocks_[c].test)
+      readout = std::max(readout, std::abs(blocks_[c].line_delay) * (starts_[c].camera.height - 1));
+  char text[400];
+  if (choose && lr > threshold && readout < kMinRollingReadoutS) {
+    std::snprintf(
+        text, sizeof text,
+        "global, chosen by the evidence: the line delay found reads a frame out in %.3f ms, less than the "
+        "%.1f ms of any rolling-shutter sensor (its chi-square drop %.1f against %.1f is what the model "
+        "leaves, not a shutter); --shutter rolling keeps it anyway",
+        1e3 * readout, 1e3 * kMinRollingReadoutS, lr, threshold);
+  } else if (choose && !(lr > threshold)) {
+    std::snprintf(
+        text, sizeof text,
+        "global, chosen by the evidence: freeing the line delay lowers the chi-square by only %.1f, less "
+        "than the %.1f it costs (BIC: k ln n, n = %.0f corner measurements); --shutter rolling "
+        "estimates it anyway",
+        lr, threshold, n);
+  }
+  if (choose && (!(lr > threshold) || readout < kMinRollingReadoutS)) {
+    blocks_ = global_blocks;
+    q_ = global_q;
+    p_ = global_p;
+    for (CameraBlocks& b : blocks_)
+      if (b.test) b.shutter_choice = text;
+    build(0.0);
+    last_cost_ = global_cost;
+    return {};
+  }
+  std::snprintf(
+      text, sizeof text,
+      choose ? "rolling, chosen by the evidence: freeing the line delay lowers the chi-square by %.1f, "
+               "more than the %.1f it costs (BIC: k ln n, n = %.0f corner measurements)"
+             : "rolling, as requested (--shutter rolling); the line delay lowers the chi-square by %.1f "
+               "(BIC threshold %.1f, n = %.0f corner measurements)",
+      lr, threshold, n);
+  for (CameraBlocks& b : blocks_)
+    if (b.test) b.shutter_choice = text;
+  // The corners the global model's misfit had rejected (the views moving fastest) are taken back
+  // and judged again: the robust pass, the rejection and the plain passes of run(), rolling.
+  for (ViewData& v : views_) std::fill(v.keep.begin(), v.keep.end(), 1);
+  IMUCAL_TRY(solve(opt_.loss_sigmas, "rolling shutter"));
+  reestimate_sigmas(true);
+  *dropped = reject_corners();
+  IMUCAL_TRY(solve(0.0, "rolling shutter"));
+  // Weighted anew by the corner noise the rolling model leaves (the global one's overstated it).
+  for (int round = 0; round < 3 && reestimate_sigmas(false); ++round)
+    IMUCAL_TRY(solve(0.0, "rolling shutter"));
+  for (std::size_t c = 0; c < blocks_.size(); ++c) {
+    if (!blocks_[c].test || !(blocks_[c].line_delay < 0.0)) continue;
+    warnings_.push_back(
+        inputs_[c].name + ": the line delay came out negative (" +
+        format_number("%.2f", 1e6 * blocks_[c].line_delay) +
+        " us per row): the rows are read out the other way round; calibrate again with --readout " +
+        (inputs_[c].shutter.readout == Shutter::Readout::kTopToBottom ? "bottom_to_top" : "top_to_bottom"));
+  }
+  return {};
+}
+
 Result<CameraChainResult> ChainSolver::run(const TargetDescription& target, const ProgressFn& progress) {
   const double cpu0 = cpu_now_s();
+  IMUCAL_TRY(plan_shutters());
   IMUCAL_TRY(start_cameras(target, progress));
   IMUCAL_TRY(link_cameras());
   if (opt_.estimate_time_offsets) {
@@ -931,11 +1090,12 @@ Result<CameraChainResult> ChainSolver::run(const TargetDescription& target, cons
   report_progress(progress, 0.45, 1.0);
   IMUCAL_TRY(solve(opt_.loss_sigmas, "robust pass"));
   reestimate_sigmas(true);
-  const int dropped = reject_corners();
+  int dropped = reject_corners();
   report_progress(progress, 0.65, 1.0);
   IMUCAL_TRY(solve(0.0, "final pass"));
   // The corner noise from the plain residuals; solved again while it moves.
   for (int k = 0; k < 3 && reestimate_sigmas(false); ++k) IMUCAL_TRY(solve(0.0, "final pass"));
+  IMUCAL_TRY(choose_shutter(&dropped));
   report_progress(progress, 0.9, 1.0);
   CameraChainResult out;
   out.knot_spacing_s = discrete_ ? 0.0 : timing_.dt_s;
@@ -971,9 +1131,7 @@ Result<CameraChainResult> calibrate_camera_chain(const TargetDescription& target
                                                  const ProgressFn& progress) {
   IMUCAL_TRY(options.validate());
   IMUCAL_TRY(target.validate());
-  if (cameras.size() < 2) {
-    return make_error(Errc::kInvalidArgument, "a camera chain needs at least two cameras");
-  }
+  if (cameras.empty()) return make_error(Errc::kInvalidArgument, "no camera to calibrate");
   ChainSolver solver(cameras, options);
   return solver.run(target, progress);
 }

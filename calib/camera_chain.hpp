@@ -9,11 +9,13 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <limits>
 #include <span>
 #include <string>
 #include <vector>
 
 #include "calib/camera_intrinsics.hpp"
+#include "calib/shutter_options.hpp"
 #include "calib/target_detection.hpp"
 #include "core/progress.hpp"
 #include "core/result.hpp"
@@ -26,6 +28,9 @@ struct CameraChainInput {
   std::string name;
   DistortionModel model = DistortionModel::kRadtan;
   std::vector<TargetObservation> observations;
+  /// The camera's shutter as known (a rolling one's readout direction, stamped row and line
+  /// delay to start from); what the solve does with it is CameraChainOptions::shutter.
+  Shutter shutter;
 };
 
 struct CameraChainOptions {
@@ -51,6 +56,10 @@ struct CameraChainOptions {
   double reject_sigmas = 5.0;
   int max_iterations = 100;
   int threads = 0;
+  /// Rolling shutters (docs/camera-calibration.md, "Rolling shutter"): each corner at its row's
+  /// time on the trajectory, the line delay estimated, held, or chosen by the evidence. Needs the
+  /// trajectory (estimate_time_offsets); with one pose per instant every camera is global.
+  ShutterSolveOptions shutter;
 
   [[nodiscard]] Status validate() const;
 };
@@ -87,6 +96,10 @@ struct CameraChainCameraResult {
   int views_stamped_with_cam0 = 0;
   int views_used = 0;
   double rms_px = 0.0;  // of this camera's corners in the joint solve
+  /// The shutter solved is intrinsics.camera.shutter; the line delay's sigma (s per row; NaN:
+  /// global, held or not determined) and why this shutter.
+  double line_delay_sigma_s = std::numeric_limits<double>::quiet_NaN();
+  std::string shutter_choice;
 };
 
 struct CameraChainResult {
@@ -98,7 +111,8 @@ struct CameraChainResult {
   std::vector<std::string> warnings;
 };
 
-/// Calibrates the chain (at least two cameras; cam0 is the first). Errors: kInsufficientData
+/// Calibrates the chain (cam0 is the first; a single camera is calibrated on the trajectory, as a
+/// rolling shutter needs). Errors: kInsufficientData
 /// (a camera with too few views, or one that shares no views with the others: the message names
 /// it and says what to record), kSolverFailed. `progress` receives the fraction done.
 [[nodiscard]] Result<CameraChainResult> calibrate_camera_chain(const TargetDescription& target,

@@ -60,6 +60,8 @@ class ViewCorners {
 
   std::size_t size() const { return points_.size(); }
   const Eigen::Vector3d& point(std::size_t k) const { return points_[k]; }
+  const Eigen::Vector2d& observed(std::size_t k) const { return px_[k]; }
+  int height() const { return height_; }
 
   /// The unweighted pixel residuals (projected - detected), without the loss.
   void pixel_residuals(const Eigen::Matrix3d& R_wb, const Eigen::Vector3d& p_wb, const double* q_ci,
@@ -71,6 +73,15 @@ class ViewCorners {
     out->clear();
     for (std::size_t k = 0; k < points_.size(); ++k)
       out->push_back(camera.project(Rci * (Rt * (points_[k] - p_wb)) + tci).px - px_[k]);
+  }
+  /// Corner k's alone (a rolling shutter's corners each have their own pose).
+  Eigen::Vector2d pixel_residual(std::size_t k, const Eigen::Matrix3d& R_wb, const Eigen::Vector3d& p_wb,
+                                 const double* q_ci, const double* t_ci, const double* intr,
+                                 const double* dist) const {
+    const auto camera = CameraModel::from_params(model_, intr, dist, width_, height_);
+    const Eigen::Vector3d pc = camimu::quat_matrix(q_ci) * (R_wb.transpose() * (points_[k] - p_wb)) +
+                               Eigen::Map<const Eigen::Vector3d>(t_ci);
+    return camera.project(pc).px - px_[k];
   }
 
   /// Corner k's weighted residual with the loss folded in at the camera point pc and, with `J`,
@@ -200,28 +211,53 @@ class ChainFrameResidual final : public ceres::CostFunction {
                        kDist = kIntr + 1;
   static constexpr int kCompressedRows = chain::kCompressedRows;
 
+  static constexpr int kLineDelay = kDist + 1;  // a rolling shutter's
+
+  /// `rolling`: a rolling shutter (the readout direction and stamped row of `shutter`), corner k
+  /// seen at t_cam + shift + row_offset(v_k) line_delay with the line delay as one more block;
+  /// each corner then has its own pose and the view is not compressed (as camimu::FrameResidual).
   ChainFrameResidual(DistortionModel model, int width, int height, std::vector<Eigen::Vector3d> points_w,
                      std::vector<Eigen::Vector2d> px, double t_cam_s, int first_window_knot,
                      const SplineTiming<N>& timing, double sigma_px, double loss_scale_px,
-                     bool compressed = true)
+                     bool compressed = true, const Shutter* rolling = nullptr)
       : corners_(model, width, height, std::move(points_w), std::move(px), sigma_px, loss_scale_px),
         t_cam_s_(t_cam_s),
         first_(first_window_knot),
         timing_(timing),
-        compressed_(compressed && 2 * corners_.size() > kCompressedRows) {
+        compressed_(compressed && rolling == nullptr && 2 * corners_.size() > kCompressedRows),
+        rolling_(rolling != nullptr) {
     set_num_residuals(compressed_ ? kCompressedRows : 2 * static_cast<int>(corners_.size()));
     auto* sizes = mutable_parameter_block_sizes();
     for (int i = 0; i < kWindow; ++i) sizes->push_back(4);
     for (int i = 0; i < kWindow; ++i) sizes->push_back(3);
     for (int s : {4, 3, 1, 4, 4}) sizes->push_back(s);
+    if (rolling_) {
+      sizes->push_back(1);
+      off_min_ = std::numeric_limits<double>::infinity();
+      off_max_ = -off_min_;
+      Shutter shutter = *rolling;  // its readout and stamped row, whatever kind it says
+      shutter.kind = Shutter::Kind::kRolling;
+      for (std::size_t k = 0; k < corners_.size(); ++k) {
+        const double off = shutter.row_offset(corners_.observed(k).y(), height);
+        row_offset_.push_back(off);
+        off_min_ = std::min(off_min_, off);
+        off_max_ = std::max(off_max_, off);
+      }
+      if (row_offset_.empty()) off_min_ = off_max_ = 0.0;  // a view left without corners
+    }
   }
 
-  /// False when the shift has moved the view out of the knot window it was built with.
-  bool in_window(double shift_s) const {
-    const int k = timing_.segment(t_cam_s_ + shift_s).first_knot - first_;
-    return k >= 0 && k <= 2;
+  /// False when the shift (and a rolling shutter's line delay) has moved a corner of the view out
+  /// of the knot window it was built with.
+  bool in_window(double shift_s, double line_delay_s = 0.0) const {
+    for (double off : {off_min_, off_max_}) {
+      const int k = timing_.segment(t_cam_s_ + shift_s + off * line_delay_s).first_knot - first_;
+      if (k < 0 || k > 2) return false;
+    }
+    return true;
   }
   std::size_t corners() const { return corners_.size(); }
+  bool rolling() const { return rolling_; }
 
   bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
     return compressed_ ? evaluate_compressed(p, residuals, jac) : evaluate_corners(p, residuals, jac);
@@ -231,11 +267,20 @@ class ChainFrameResidual final : public ceres::CostFunction {
   void pixel_residuals(double const* const* p, std::vector<Eigen::Vector2d>* out) const {
     const camimu::SplinePose<N> ps = pose(p, false);
     corners_.pixel_residuals(ps.e.R, ps.pos, p[kRci], p[kTci], p[kIntr], p[kDist], out);
+    if (!rolling_) return;
+    for (std::size_t k = 0; k < corners_.size(); ++k) {
+      const camimu::SplinePose<N> pk = corner_pose(p, k, false);
+      (*out)[k] = corners_.pixel_residual(k, pk.e.R, pk.pos, p[kRci], p[kTci], p[kIntr], p[kDist]);
+    }
   }
 
  private:
   camimu::SplinePose<N> pose(double const* const* p, bool jacobians) const {
     return camimu::spline_pose<N>(p, 0, kWindow, t_cam_s_ + p[kShift][0], first_, timing_, jacobians);
+  }
+  camimu::SplinePose<N> corner_pose(double const* const* p, std::size_t k, bool jacobians) const {
+    return camimu::spline_pose<N>(p, 0, kWindow, t_cam_s_ + p[kShift][0] + row_offset_[k] * p[kLineDelay][0],
+                                  first_, timing_, jacobians);
   }
 
   bool evaluate_compressed(double const* const* p, double* residuals, double** jac) const {
@@ -274,15 +319,21 @@ class ChainFrameResidual final : public ceres::CostFunction {
   }
 
   bool evaluate_corners(double const* const* p, double* residuals, double** jac) const {
-    const camimu::SplinePose<N> ps = pose(p, jac != nullptr);
-    const Eigen::Matrix3d Rt = ps.e.R.transpose(), Rci = camimu::quat_matrix(p[kRci]);
+    camimu::SplinePose<N> ps = pose(p, jac != nullptr);
+    Eigen::Matrix3d Rt = ps.e.R.transpose();
+    const Eigen::Matrix3d Rci = camimu::quat_matrix(p[kRci]);
     const Eigen::Map<const Eigen::Vector3d> tci(p[kTci]);
     const int rows = num_residuals();
+    const int blocks = static_cast<int>(parameter_block_sizes().size());
     if (jac) {
-      for (int b = 0; b < kDist + 1; ++b)
+      for (int b = 0; b < blocks; ++b)
         if (jac[b]) std::fill(jac[b], jac[b] + rows * parameter_block_sizes()[b], 0.0);
     }
     for (std::size_t k = 0; k < corners_.size(); ++k) {
+      if (rolling_) {
+        ps = corner_pose(p, k, jac != nullptr);
+        Rt = ps.e.R.transpose();
+      }
       const Eigen::Vector3d pb = Rt * (corners_.point(k) - ps.pos);
       const Eigen::Vector3d pc = Rci * pb + tci;
       Eigen::Matrix<double, 2, 11> Jw;
@@ -300,10 +351,16 @@ class ChainFrameResidual final : public ceres::CostFunction {
       }
       if (jac[kRci]) camimu::put<2>(jac[kRci], 4, row, rows, -Jc * Rci * so3::hat(pb));
       if (jac[kTci]) camimu::put<2>(jac[kTci], 3, row, rows, Jc);
-      if (jac[kShift]) {
+      if (jac[kShift] || (rolling_ && jac[kLineDelay])) {
         const Eigen::Vector2d d = Jb * (so3::hat(pb) * ps.e.omega - Rt * ps.vel);
-        jac[kShift][row] = d(0);
-        jac[kShift][row + 1] = d(1);
+        if (jac[kShift]) {
+          jac[kShift][row] = d(0);
+          jac[kShift][row + 1] = d(1);
+        }
+        if (rolling_ && jac[kLineDelay]) {
+          jac[kLineDelay][row] = row_offset_[k] * d(0);
+          jac[kLineDelay][row + 1] = row_offset_[k] * d(1);
+        }
       }
       for (int c = 0; c < 4; ++c) {
         if (jac[kIntr]) {
@@ -324,6 +381,9 @@ class ChainFrameResidual final : public ceres::CostFunction {
   int first_;
   SplineTiming<N> timing_;
   bool compressed_;
+  bool rolling_;
+  std::vector<double> row_offset_;  // rolling: each corner's row_offset(v)
+  double off_min_ = 0.0, off_max_ = 0.0;
 };
 
 /// One view against one pose of cam0 (R_wb, p_wb as blocks), always compressed (a view has at

@@ -46,6 +46,11 @@ Status CameraChainOptions::validate() const {
     return fail("the corner rejection threshold must be at least 2 sigmas");
   if (max_iterations < 1) return fail("the solver needs at least one iteration");
   if (threads < 0) return fail("threads must be >= 0 (0 = all cores)");
+  if (shutter.line_delay_s &&
+      (!(std::isfinite(*shutter.line_delay_s) && std::abs(*shutter.line_delay_s) <= 1e-3) ||
+       shutter.mode == ShutterSolveOptions::Mode::kGlobal))
+    return fail(
+        "a line delay is seconds per row within +-1e-3 (30 us is 3.0e-05), for a rolling shutter only");
   return {};
 }
 

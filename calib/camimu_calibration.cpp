@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <iomanip>
 #include <memory>
@@ -17,6 +18,7 @@
 #include "calib/camimu_residuals.hpp"
 #include "calib/marginal_covariance.hpp"
 #include "calib/observation_check.hpp"
+#include "core/text_format.hpp"
 #include "core/threads.hpp"
 
 namespace imucal::calib {
@@ -44,6 +46,12 @@ Status CamImuOptions::validate() const {
   if (!(imu_max_rate_hz == 0.0 || imu_max_rate_hz >= 20.0))
     return make_error(Errc::kInvalidArgument,
                       "the IMU's largest rate must be 0 (one residual per sample) or at least 20 Hz");
+  if (shutter.line_delay_s &&
+      (!(std::isfinite(*shutter.line_delay_s) && std::abs(*shutter.line_delay_s) <= 1e-3) ||
+       shutter.mode == CamImuShutterOptions::Mode::kGlobal))
+    return make_error(
+        Errc::kInvalidArgument,
+        "a line delay is seconds per row within +-1e-3 (30 us is 3.0e-05), for a rolling shutter only");
   for (const CamImuChainPrior& cp : chain_priors) {
     const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(cp.covariance);
     if (cp.camera < 1 || !cp.T_cn_cnm1.matrix().allFinite() || !cp.covariance.allFinite() ||
@@ -149,6 +157,7 @@ Status Estimator<N>::initialise() {
     if (Status s = initialise_camera(c, gyro); !s.ok()) return s;
     if (st_.cams[c].poses.size() > st_.cams[ref].poses.size()) ref = c;
   }
+  plan_shutters();
   model_ = opt_.model;
   if (opt_.imu_init) prior0_ = *opt_.imu_init;
   {
@@ -307,13 +316,15 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended, int imu_stride)
       std::vector<Eigen::Vector3d> pts;
       for (int id : obs.ids) pts.push_back(points_[static_cast<std::size_t>(id)]);
       auto* cost = new FrameResidual<N>(cameras_[c].camera, std::move(pts), obs.px, t_s(obs.t_ns), first,
-                                        st_.pose, cs.sigma_px, opt_.reprojection_loss_sigmas * cs.sigma_px);
+                                        st_.pose, cs.sigma_px, opt_.reprojection_loss_sigmas * cs.sigma_px,
+                                        /*compressed=*/true, cs.rolling);
       std::vector<double*> blocks;
       for (int i = 0; i < FrameResidual<N>::kWindow; ++i) blocks.push_back(st_.q[first + i].data());
       for (int i = 0; i < FrameResidual<N>::kWindow; ++i) blocks.push_back(st_.p[first + i].data());
       blocks.push_back(cs.q_ci.data());
       blocks.push_back(cs.t_ci.data());
       blocks.push_back(&cs.shift);
+      if (cs.rolling) blocks.push_back(&cs.line_delay);
       problem->AddResidualBlock(cost, nullptr, blocks);
       frames_.push_back(cost);
       frame_camera_.push_back(c);
@@ -323,7 +334,10 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended, int imu_stride)
       problem->SetParameterBlockConstant(cs.q_ci.data());
       problem->SetParameterBlockConstant(cs.t_ci.data());
     }
-    if (opt_.fixed.timeshift) problem->SetParameterBlockConstant(&cs.shift);
+    if (opt_.fixed.timeshift && problem->HasParameterBlock(&cs.shift))
+      problem->SetParameterBlockConstant(&cs.shift);
+    if (cs.rolling && cs.line_delay_fixed && problem->HasParameterBlock(&cs.line_delay))
+      problem->SetParameterBlockConstant(&cs.line_delay);
   }
   for (const CamImuChainPrior& cp : opt_.chain_priors) {
     CameraState& n = st_.cams[static_cast<std::size_t>(cp.camera)];
@@ -403,7 +417,7 @@ const MarginalCovariance* Estimator<N>::solution_covariance() {
   if (covariance_ || covariance_failed_) return covariance_.get();
   std::vector<const double*> blocks;
   const auto want = [&](const double* b) {
-    if (!problem_->IsParameterBlockConstant(b)) blocks.push_back(b);
+    if (problem_->HasParameterBlock(b) && !problem_->IsParameterBlockConstant(b)) blocks.push_back(b);
   };
   for (const double* b :
        {st_.Sa.data(), st_.Ma.data(), st_.Sg.data(), st_.Mg.data(), st_.C.data(), st_.B.data(), st_.g.data()})
@@ -412,6 +426,7 @@ const MarginalCovariance* Estimator<N>::solution_covariance() {
     want(cs.q_ci.data());
     want(cs.t_ci.data());
     want(&cs.shift);
+    if (cs.rolling) want(&cs.line_delay);
   }
   for (int i = 0; i < N; ++i) {
     want(st_.ba[static_cast<std::size_t>(i)].data());
@@ -431,8 +446,10 @@ const MarginalCovariance* Estimator<N>::solution_covariance() {
 
 template <int N>
 bool Estimator<N>::frames_in_window() const {
-  for (std::size_t k = 0; k < frames_.size(); ++k)
-    if (!frames_[k]->in_window(st_.cams[frame_camera_[k]].shift)) return false;
+  for (std::size_t k = 0; k < frames_.size(); ++k) {
+    const CameraState& cs = st_.cams[frame_camera_[k]];
+    if (!frames_[k]->in_window(cs.shift, cs.rolling ? cs.line_delay : 0.0)) return false;
+  }
   return true;
 }
 
@@ -648,6 +665,120 @@ Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solve
 }
 
 template <int N>
+void Estimator<N>::plan_shutters() {
+  using Mode = CamImuShutterOptions::Mode;
+  using Plan = CameraState::ShutterPlan;
+  const CamImuShutterOptions& o = opt_.shutter;
+  for (std::size_t c = 0; c < cameras_.size(); ++c) {
+    CameraState& cs = st_.cams[c];
+    const Shutter& file = cameras_[c].camera.shutter;
+    cs.rolling = false;
+    cs.line_delay_fixed = true;
+    cs.line_delay = file.rolling() ? file.line_delay_s : 0.0;
+    if (o.line_delay_s) {
+      cs.shutter_plan = Plan::kHeld;
+      cs.rolling = true;
+      cs.line_delay = *o.line_delay_s;
+      cs.shutter_choice = "rolling, line delay held at the given value (--line-delay)";
+    } else if (o.mode == Mode::kGlobal) {
+      cs.shutter_plan = Plan::kGlobal;
+      cs.line_delay = 0.0;
+      cs.shutter_choice = file.rolling()
+                              ? "global, as requested (--shutter global; the camera file says rolling)"
+                              : "global, as requested (--shutter global)";
+    } else {
+      cs.shutter_plan = o.mode == Mode::kRolling ? Plan::kEstimate : Plan::kChoose;
+    }
+  }
+}
+
+template <int N>
+Status Estimator<N>::choose_shutter(bool extended, ceres::Solver::Summary* summary) {
+  using Plan = CameraState::ShutterPlan;
+  std::vector<std::size_t> tested;
+  for (std::size_t c = 0; c < st_.cams.size(); ++c) {
+    const Plan plan = st_.cams[c].shutter_plan;
+    if (plan == Plan::kEstimate || plan == Plan::kChoose) tested.push_back(c);
+  }
+  if (tested.empty()) return {};
+  // The global solution with its weights; its cost against the rolling one at the same weights is
+  // the likelihood ratio (the loss is the same Cauchy on both). The cost is evaluated anew: the
+  // last re-estimate of the noise may have moved the weights a little without a solve.
+  const State<N> global_state = st_;
+  const ceres::Solver::Summary global_summary = *summary;
+  rebuild(extended);
+  double global_cost = 0.0;
+  problem_->Evaluate(ceres::Problem::EvaluateOptions(), &global_cost, nullptr, nullptr, nullptr);
+  bool choose = false;
+  for (std::size_t c : tested) {
+    CameraState& cs = st_.cams[c];
+    cs.rolling = true;
+    cs.line_delay_fixed = false;
+    choose = choose || cs.shutter_plan == Plan::kChoose;
+  }
+  if (Status s = solve(extended, "rolling shutter", summary); !s.ok()) return s;
+  const double lr = 2.0 * (global_cost - summary->final_cost);
+  double measurements = 0.0;
+  for (std::size_t k = 0; k < frames_.size(); ++k)
+    if (frames_[k]->rolling()) measurements += 2.0 * static_cast<double>(frames_[k]->corners());
+  const double k = static_cast<double>(tested.size());
+  const double threshold = shutter_bic_threshold(k, measurements);
+  double readout = 0.0;  // the longest of the freed cameras, s
+  for (std::size_t c : tested)
+    readout = std::max(readout, std::abs(st_.cams[c].line_delay) * (cameras_[c].camera.height - 1));
+  char text[400];
+  if (choose && lr > threshold && readout < kMinRollingReadoutS) {
+    std::snprintf(
+        text, sizeof text,
+        "global, chosen by the evidence: the line delay found reads a frame out in %.3f ms, less than the "
+        "%.1f ms of any rolling-shutter sensor (its chi-square drop %.1f against %.1f is what the model "
+        "leaves, not a shutter); --shutter rolling keeps it anyway",
+        1e3 * readout, 1e3 * kMinRollingReadoutS, lr, threshold);
+  } else if (choose && !(lr > threshold)) {
+    std::snprintf(
+        text, sizeof text,
+        "global, chosen by the evidence: freeing the line delay lowers the chi-square by only %.1f, less "
+        "than the %.1f it costs (BIC: k ln n, n = %.0f corner measurements); --shutter rolling "
+        "estimates it anyway",
+        lr, threshold, measurements);
+  }
+  if (choose && (!(lr > threshold) || readout < kMinRollingReadoutS)) {
+    st_ = global_state;
+    *summary = global_summary;
+    for (std::size_t c : tested) st_.cams[c].shutter_choice = text;
+    rebuild(extended);
+    return {};
+  }
+  if (choose) {
+    std::snprintf(
+        text, sizeof text,
+        "rolling, chosen by the evidence: freeing the line delay lowers the chi-square by %.1f, more "
+        "than the %.1f it costs (BIC: k ln n, n = %.0f corner measurements)",
+        lr, threshold, measurements);
+  } else {
+    std::snprintf(text, sizeof text,
+                  "rolling, as requested (--shutter rolling); the line delay lowers the chi-square by %.1f "
+                  "(BIC threshold %.1f)",
+                  lr, threshold);
+  }
+  for (std::size_t c : tested) st_.cams[c].shutter_choice = text;
+  // Weighted anew by the corner noise the rolling model leaves (the global one's overstated it).
+  for (int round = 0; round < 3 && reestimate_corner_sigma(); ++round)
+    if (Status s = solve(extended, "rolling shutter", summary); !s.ok()) return s;
+  for (std::size_t c : tested) {
+    if (st_.cams[c].line_delay < 0.0)
+      warnings_.push_back(
+          cameras_[c].name + ": the line delay came out negative (" +
+          format_number("%.2f", 1e6 * st_.cams[c].line_delay) +
+          " us per row): the rows are read out the other way round than the camera file says; "
+          "calibrate again with --readout " +
+          (cameras_[c].camera.shutter.readout == Shutter::Readout::kTopToBottom ? "bottom_to_top"
+                                                                                : "top_to_bottom"));
+  }
+  return {};
+}
+
+template <int N>
 void Estimator<N>::warn_rejected_frames() {
   for (std::size_t c = 0; c < cameras_.size(); ++c) {
     const auto& rejected = st_.cams[c].rejected;
@@ -735,6 +866,7 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
     model_choice_ = std::string(camimu_model_name(model_)) + ", as requested (--model)";
   if (Status s = reweighted_stages(automatic, &summary); !s.ok()) return s.error();
   const bool extended = model_ == CamImuModelKind::kExtended;
+  if (Status s = choose_shutter(extended, &summary); !s.ok()) return s.error();
   if (!extended) fits.clear();
   quality_.final_cost = summary.final_cost;
   // A covariance the model choice computed at this solution is counted as the covariance's.
@@ -743,8 +875,7 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   quality_.parameters = problem_->NumParameters();
   // Counted as measurements: two per corner, not the compressed rows the solver sees.
   quality_.residuals = problem_->NumResiduals();
-  for (const auto* f : frames_)
-    quality_.residuals += 2 * static_cast<int>(f->corners()) - FrameResidual<N>::kCompressedRows;
+  for (const auto* f : frames_) quality_.residuals += 2 * static_cast<int>(f->corners()) - f->num_residuals();
   quality_.spline_knots = st_.pose.knots;
   fits.push_back(signal_fit(extended ? "extended" : "basic"));
   quality_.accel_residual_rms = fits.back().accel_residual_rms;  // per axis, SI

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "calib/shutter_options.hpp"
 #include "calib/target_detection.hpp"
 #include "core/camera_model.hpp"
 #include "core/camimu_calibration.hpp"
@@ -80,6 +81,9 @@ struct CamImuChainPrior {
   std::string source;  // for messages
 };
 
+/// The cameras' shutters in the solve (docs/camimu-calibration.md, "Rolling shutter").
+using CamImuShutterOptions = ShutterSolveOptions;
+
 struct CamImuOptions {
   /// kAuto: basic or extended by the evidence of the IMU residuals (docs/camimu-calibration.md,
   /// "Model choice"); the result says which and why.
@@ -116,6 +120,7 @@ struct CamImuOptions {
   /// initialisation (rotation from angular velocities, offset from the cross-correlation).
   std::vector<std::optional<Eigen::Isometry3d>> T_cam_imu_init;
   std::vector<std::optional<double>> timeshift_init_s;
+  CamImuShutterOptions shutter;
   /// Camera-camera extrinsics from a camera chain (empty: each camera through the IMU alone).
   std::vector<CamImuChainPrior> chain_priors;
   /// Largest |time offset| the cross-correlation searches, s.

@@ -64,6 +64,14 @@ struct CameraState {
   TimeshiftEstimate xcorr;
   Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();  // of the rotation alignment
   double sigma_px = 0.3;                                // corner noise, per coordinate
+  // The shutter: rolling frames have a line delay block (held when line_delay_fixed); `plan`
+  // says what run() does with it (CamImuShutterOptions).
+  enum class ShutterPlan { kGlobal, kHeld, kEstimate, kChoose };
+  ShutterPlan shutter_plan = ShutterPlan::kGlobal;
+  bool rolling = false;
+  bool line_delay_fixed = true;
+  double line_delay = 0.0;  // s per row
+  std::string shutter_choice;
 };
 
 /// Everything the solver moves, at stable addresses.
@@ -135,6 +143,12 @@ class Estimator {
   /// show until the weights hold, the last to kFinalTolerance.
   Status reweighted_stages(bool automatic, ceres::Solver::Summary* summary);
   bool frames_in_window() const;
+  /// Each camera's shutter plan from the options and its camera file (initialise()).
+  void plan_shutters();
+  /// After the global solution: the line delay of the cameras that estimate or choose it freed
+  /// and solved; rolling kept where asked for or where the evidence shows it (BIC), else the
+  /// global solution restored. Leaves the chosen model solved and the reasons in shutter_choice.
+  Status choose_shutter(bool extended, ceres::Solver::Summary* summary);
   /// Basic or extended by the evidence (kAuto): the drop of the data cost that freeing the
   /// intrinsics buys against the parameters it costs (BIC). Leaves the chosen model solved.
   Status choose_model(ceres::Solver::Summary* summary);

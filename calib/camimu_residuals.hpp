@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include "calib/so3.hpp"
@@ -305,7 +306,13 @@ inline void fold_cauchy(const Eigen::Vector2d& e, double c2, Eigen::Vector2d* r,
 /// All target corners of one frame: reprojection at t_cam + timeshift with a Cauchy loss per
 /// corner applied inside (so the pose is evaluated once per frame). Blocks: N + 2 rotation knots,
 /// N + 2 position knots (the window the timeshift may move the frame in), R_cam_imu, t_cam_imu,
-/// timeshift.
+/// timeshift, and for a rolling shutter the line delay.
+///
+/// Rolling shutter: corner k, observed in image row v_k, is seen at t_cam + timeshift +
+/// row_offset(v_k) line_delay (core/camera_model.hpp Shutter; the observed row stands for the
+/// row the corner was read out in, which differs from it by the pixel noise only), so each corner
+/// has its own pose on the spline; d r / d line_delay = row_offset(v_k) d r / d timeshift. The
+/// corners then do not share one pose and are not compressed.
 ///
 /// Compressed (the default): every parameter moves the corners only through the camera's pose,
 /// dp_cam = -[p_cam]x w + v for a rigid motion (w, v) of the camera frame, so the 2n corner rows
@@ -321,7 +328,8 @@ class FrameResidual final : public ceres::CostFunction {
   static constexpr int kCompressedRows = 7;
   FrameResidual(const CameraModel& camera, std::vector<Eigen::Vector3d> points_w,
                 std::vector<Eigen::Vector2d> px, double t_cam_s, int first_window_knot,
-                const SplineTiming<N>& timing, double sigma_px, double loss_scale_px, bool compressed = true)
+                const SplineTiming<N>& timing, double sigma_px, double loss_scale_px, bool compressed = true,
+                bool rolling = false)
       : camera_(camera),
         camera_jet_(camera.cast<ceres::Jet<double, 3>>()),
         points_(std::move(points_w)),
@@ -331,21 +339,42 @@ class FrameResidual final : public ceres::CostFunction {
         timing_(timing),
         w_(1.0 / sigma_px),
         c2_((loss_scale_px / sigma_px) * (loss_scale_px / sigma_px)),
-        compressed_(compressed) {
+        compressed_(compressed && !rolling),
+        rolling_(rolling) {
     set_num_residuals(compressed_ ? kCompressedRows : 2 * static_cast<int>(points_.size()));
     auto* sizes = mutable_parameter_block_sizes();
     for (int i = 0; i < kWindow; ++i) sizes->push_back(4);
     for (int i = 0; i < kWindow; ++i) sizes->push_back(3);
     for (int s : {4, 3, 1}) sizes->push_back(s);
+    if (rolling_) {
+      sizes->push_back(1);
+      off_min_ = std::numeric_limits<double>::infinity();
+      off_max_ = -off_min_;
+      // The camera's readout direction and stamped row, whatever kind its file says (a camera
+      // whose shutter is being tested is still global there).
+      Shutter shutter = camera_.shutter;
+      shutter.kind = Shutter::Kind::kRolling;
+      for (const auto& q : px_) {
+        const double off = shutter.row_offset(q.y(), camera_.height);
+        row_offset_.push_back(off);
+        off_min_ = std::min(off_min_, off);
+        off_max_ = std::max(off_max_, off);
+      }
+      if (row_offset_.empty()) off_min_ = off_max_ = 0.0;  // a frame without corners
+    }
   }
-  static constexpr int kRci = 2 * kWindow, kTci = kRci + 1, kShift = kTci + 1;
+  static constexpr int kRci = 2 * kWindow, kTci = kRci + 1, kShift = kTci + 1, kLineDelay = kShift + 1;
 
-  /// The segment's first knot for a timeshift, relative to the window; false when the shift has
-  /// moved the frame out of the window (the problem is then rebuilt).
-  bool in_window(double shift_s) const {
-    const int k = timing_.segment(t_cam_s_ + shift_s).first_knot - first_;
-    return k >= 0 && k <= 2;
+  /// Whether every corner's time (for a timeshift and a line delay) lies in a segment of the
+  /// window; false when they have moved the frame out of it (the problem is then rebuilt).
+  bool in_window(double shift_s, double line_delay_s = 0.0) const {
+    for (double off : {off_min_, off_max_}) {
+      const int k = timing_.segment(t_cam_s_ + shift_s + off * line_delay_s).first_knot - first_;
+      if (k < 0 || k > 2) return false;
+    }
+    return true;
   }
+  bool rolling() const { return rolling_; }
   /// Weighted residuals with the loss folded in (compressed or per corner, see above).
   bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
     return compressed_ ? evaluate_compressed(p, residuals, jac) : evaluate_corners(p, residuals, jac);
@@ -358,6 +387,11 @@ class FrameResidual final : public ceres::CostFunction {
   using Pose = SplinePose<N>;
   Pose pose(double const* const* p, bool jacobians) const {
     return spline_pose<N>(p, 0, kWindow, t_cam_s_ + p[kShift][0], first_, timing_, jacobians);
+  }
+  /// The pose at corner k's time (a rolling shutter's row).
+  Pose corner_pose(double const* const* p, std::size_t k, bool jacobians) const {
+    return spline_pose<N>(p, 0, kWindow, t_cam_s_ + p[kShift][0] + row_offset_[k] * p[kLineDelay][0], first_,
+                          timing_, jacobians);
   }
   bool evaluate_corners(double const* const* p, double* residuals, double** jac) const;
   bool evaluate_compressed(double const* const* p, double* residuals, double** jac) const;
@@ -378,6 +412,9 @@ class FrameResidual final : public ceres::CostFunction {
   double w_;
   double c2_;
   bool compressed_;
+  bool rolling_;
+  std::vector<double> row_offset_;  // rolling: each corner's row_offset(v)
+  double off_min_ = 0.0, off_max_ = 0.0;
 };
 
 template <int N>
@@ -393,25 +430,33 @@ Eigen::Vector2d FrameResidual<N>::project(const Eigen::Vector3d& pc, Eigen::Matr
 
 template <int N>
 void FrameResidual<N>::pixel_residuals(double const* const* p, std::vector<Eigen::Vector2d>* out) const {
-  const Pose ps = pose(p, false);
-  const Eigen::Matrix3d Rt = ps.e.R.transpose(), Rci = quat_matrix(p[kRci]);
+  Pose ps = pose(p, false);
+  const Eigen::Matrix3d Rci = quat_matrix(p[kRci]);
   const Eigen::Map<const Eigen::Vector3d> tci(p[kTci]);
   out->clear();
-  for (std::size_t k = 0; k < points_.size(); ++k)
-    out->push_back(project(Rci * (Rt * (points_[k] - ps.pos)) + tci, nullptr) - px_[k]);
+  for (std::size_t k = 0; k < points_.size(); ++k) {
+    if (rolling_) ps = corner_pose(p, k, false);
+    out->push_back(project(Rci * (ps.e.R.transpose() * (points_[k] - ps.pos)) + tci, nullptr) - px_[k]);
+  }
 }
 
 template <int N>
 bool FrameResidual<N>::evaluate_corners(double const* const* p, double* residuals, double** jac) const {
-  const Pose ps = pose(p, jac != nullptr);
-  const Eigen::Matrix3d Rt = ps.e.R.transpose(), Rci = quat_matrix(p[kRci]);
+  Pose ps = pose(p, jac != nullptr);
+  Eigen::Matrix3d Rt = ps.e.R.transpose();
+  const Eigen::Matrix3d Rci = quat_matrix(p[kRci]);
   const Eigen::Map<const Eigen::Vector3d> tci(p[kTci]);
   const int rows = num_residuals();
+  const int blocks = static_cast<int>(parameter_block_sizes().size());
   if (jac) {
-    for (int b = 0; b < 2 * kWindow + 3; ++b)
+    for (int b = 0; b < blocks; ++b)
       if (jac[b]) std::fill(jac[b], jac[b] + rows * parameter_block_sizes()[b], 0.0);
   }
   for (std::size_t k = 0; k < points_.size(); ++k) {
+    if (rolling_) {
+      ps = corner_pose(p, k, jac != nullptr);
+      Rt = ps.e.R.transpose();
+    }
     const Eigen::Vector3d pb = Rt * (points_[k] - ps.pos);
     const Eigen::Vector3d pc = Rci * pb + tci;
     Eigen::Matrix<double, 2, 3> Jp;
@@ -430,10 +475,16 @@ bool FrameResidual<N>::evaluate_corners(double const* const* p, double* residual
     }
     if (jac[kRci]) put<2>(jac[kRci], 4, row, rows, -Jc * Rci * so3::hat(pb));
     if (jac[kTci]) put<2>(jac[kTci], 3, row, rows, Jc);
-    if (jac[kShift]) {
+    if (jac[kShift] || (rolling_ && jac[kLineDelay])) {
       const Eigen::Vector2d d = Jb * (so3::hat(pb) * ps.e.omega - Rt * ps.vel);
-      jac[kShift][row] = d(0);
-      jac[kShift][row + 1] = d(1);
+      if (jac[kShift]) {
+        jac[kShift][row] = d(0);
+        jac[kShift][row + 1] = d(1);
+      }
+      if (rolling_ && jac[kLineDelay]) {
+        jac[kLineDelay][row] = row_offset_[k] * d(0);
+        jac[kLineDelay][row + 1] = row_offset_[k] * d(1);
+      }
     }
   }
   return true;

@@ -31,6 +31,7 @@ std::string Estimator<N>::coordinate_name(const double* b, int i) const {
     if (b == cs.q_ci.data()) return name + " rotation about the IMU " + ax + " axis";
     if (b == cs.t_ci.data()) return name + " translation " + ax + " (camera frame)";
     if (b == &cs.shift) return name + " time offset";
+    if (b == &cs.line_delay) return name + " line delay";
   }
   for (const auto* knots : {&st_.ba, &st_.bg})
     for (const auto& k : *knots)
@@ -134,6 +135,8 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
       cr.translation_sigma_m = sigma3(cs.t_ci.data());
     }
     if (cov.has(&cs.shift)) cr.timeshift_sigma_s = sigma_of(block(&cs.shift, &cs.shift))(0);
+    if (cs.rolling && cov.has(&cs.line_delay))
+      cr.line_delay_sigma_s = sigma_of(block(&cs.line_delay, &cs.line_delay))(0);
   }
   quality_.covariance_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() +
                           (reused ? covariance_compute_s_ : 0.0);
@@ -240,6 +243,9 @@ void Estimator<N>::fill_result(CamImuCalibrationResult* out) {
     cr.T_cam_imu.linear() = quat_matrix(st_.cams[c].q_ci.data());
     cr.T_cam_imu.translation() = vec(st_.cams[c].t_ci);
     cr.timeshift_cam_imu_s = st_.cams[c].shift;
+    cr.camera.shutter.kind = st_.cams[c].rolling ? Shutter::Kind::kRolling : Shutter::Kind::kGlobal;
+    cr.camera.shutter.line_delay_s = st_.cams[c].rolling ? st_.cams[c].line_delay : 0.0;
+    cr.shutter_choice = st_.cams[c].shutter_choice;
     cr.corner_sigma_px = st_.cams[c].sigma_px;
     cr.rejected_frames = st_.cams[c].rejected;
   }

@@ -321,6 +321,10 @@ json calibration_record_json(const CalibrationRecord& rec) {
                        {"translation_sigma_m", vec_json(c.translation_sigma_m)},
                        {"timeshift_cam_imu_s", num(c.timeshift_cam_imu_s)},
                        {"timeshift_sigma_s", num(c.timeshift_sigma_s)}});
+    if (c.line_delay_s) {
+      cameras.back()["line_delay_s"] = num(*c.line_delay_s);
+      cameras.back()["line_delay_sigma_s"] = num(c.line_delay_sigma_s);
+    }
   }
   json files = json::array();
   for (const RecordSourceFile& f : rec.files) {
@@ -393,6 +397,14 @@ Result<CalibrationRecord> calibration_record_from_json(const json& j) {
     IMUCAL_TRY(r.figure(c, "timeshift_cam_imu_s", where, cam.timeshift_cam_imu_s));
     if (std::isnan(cam.timeshift_cam_imu_s)) cam.timeshift_cam_imu_s = 0.0;
     IMUCAL_TRY(r.figure(c, "timeshift_sigma_s", where, cam.timeshift_sigma_s));
+    if (c.contains("line_delay_s")) {
+      double d = 0.0;
+      IMUCAL_TRY(r.figure(c, "line_delay_s", where, d));
+      if (!std::isfinite(d))
+        return make_error(Errc::kCorrupt, where + "line_delay_s must be a number (s per row)");
+      cam.line_delay_s = d;
+      IMUCAL_TRY(r.figure(c, "line_delay_sigma_s", where, cam.line_delay_sigma_s));
+    }
     rec.cameras.push_back(cam);
   }
   if (j.contains("gravity_mps2") && !j["gravity_mps2"].is_null()) {
@@ -442,7 +454,10 @@ bool same_calibration(const CalibrationRecord& a, const CalibrationRecord& b) {
         !same(c.rotation_sigma_rad, d.rotation_sigma_rad) ||
         !same(c.translation_sigma_m, d.translation_sigma_m) ||
         !same(Eigen::Vector2d(c.timeshift_cam_imu_s, c.timeshift_sigma_s),
-              Eigen::Vector2d(d.timeshift_cam_imu_s, d.timeshift_sigma_s)))
+              Eigen::Vector2d(d.timeshift_cam_imu_s, d.timeshift_sigma_s)) ||
+        c.line_delay_s.has_value() != d.line_delay_s.has_value() ||
+        (c.line_delay_s && !same(Eigen::Vector2d(*c.line_delay_s, c.line_delay_sigma_s),
+                                 Eigen::Vector2d(*d.line_delay_s, d.line_delay_sigma_s))))
       return false;
   }
   return true;

@@ -12,7 +12,8 @@
 //            "sigma": {"model", static: "accel"/"gyro" {"misalignment", "scale", "bias"}, "G";
 //                      camimu: "S_a", "M_a", "b_a", "S_g", "M_g", "C_bg_rad", "B_g", "b_g"}},
 //    "cameras": [{"name", "stream", "T_cam_imu" (4 rows), "rotation_sigma_rad",
-//                 "translation_sigma_m", "timeshift_cam_imu_s", "timeshift_sigma_s"}],
+//                 "translation_sigma_m", "timeshift_cam_imu_s", "timeshift_sigma_s",
+//                 rolling shutter only: "line_delay_s", "line_delay_sigma_s"}],
 //    "gravity_mps2", "source": {"files": [{"path", "kind", "method", "fixed"}], "notes": [...]},
 //    "thermal" (optional): {"form", "reference_c", "valid_range_c": [min, max], "scale",
 //                           "gyro"/"accel": 3 x {"order", "coeffs" (c_1..c_order), "sigma"} or
@@ -69,6 +70,10 @@ struct CameraRecord {
   Eigen::Vector3d translation_sigma_m = Eigen::Vector3d::Constant(kNotDetermined);
   double timeshift_cam_imu_s = 0.0;
   double timeshift_sigma_s = kNotDetermined;
+  /// A rolling shutter's line delay (s per row) as the camera-IMU solve used it, and its sigma
+  /// (not determined when held); absent for a global shutter.
+  std::optional<double> line_delay_s;
+  double line_delay_sigma_s = kNotDetermined;
 };
 
 /// A result the record was built from.

@@ -19,7 +19,9 @@ const char* distortion_model_name(DistortionModel model) {
   return "unknown";
 }
 
-const char* shutter_kind_name(Shutter::Kind kind) { return kind == Shutter::Kind::kRolling ? "rolling" : "global"; }
+const char* shutter_kind_name(Shutter::Kind kind) {
+  return kind == Shutter::Kind::kRolling ? "rolling" : "global";
+}
 const char* readout_name(Shutter::Readout readout) {
   return readout == Shutter::Readout::kBottomToTop ? "bottom_to_top" : "top_to_bottom";
 }
@@ -67,12 +69,14 @@ Status validate_camera(const CameraModel& c) {
     return make_error(Errc::kInvalidArgument, "camera distortion_coeffs must be finite");
   }
   // A rolling shutter reads a frame out in at most a second (a line delay of 1e-3 s on a 1000-row
-  // sensor); more is a unit mix-up (microseconds given as seconds).
+  // sensor); more is a unit mix-up (microseconds given as seconds). A negative line delay is a
+  // readout the other way round than readout_direction says, as a solve may find it.
   if (c.shutter.rolling() &&
-      !(std::isfinite(c.shutter.line_delay_s) && c.shutter.line_delay_s >= 0.0 && c.shutter.readout_s(c.height) <= 1.0)) {
-    return make_error(Errc::kInvalidArgument,
-                      "camera line_delay_s must be seconds per row, >= 0, with the whole frame read out in at "
-                      "most 1 s (30 us per row is 3.0e-05)");
+      !(std::isfinite(c.shutter.line_delay_s) && std::abs(c.shutter.readout_s(c.height)) <= 1.0)) {
+    return make_error(
+        Errc::kInvalidArgument,
+        "camera line_delay_s must be seconds per row, with the whole frame read out in at most 1 s "
+        "(30 us per row is 3.0e-05)");
   }
   return {};
 }
@@ -114,7 +118,8 @@ Status read_shutter(const YAML::Node& node, const std::string& source, Shutter* 
   if (!kind.ok()) return kind.error();
   if (*kind == "global") return {};
   if (*kind != "rolling") {
-    return make_error(Errc::kInvalidArgument, source + ": shutter '" + *kind + "' is not known (global or rolling)");
+    return make_error(Errc::kInvalidArgument,
+                      source + ": shutter '" + *kind + "' is not known (global or rolling)");
   }
   out->kind = Shutter::Kind::kRolling;
   const YAML::Node delay = node["line_delay_s"];

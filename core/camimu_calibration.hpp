@@ -47,7 +47,7 @@ inline const char* camimu_model_name(CamImuModelKind kind) {
 struct CamImuCameraResult {
   std::string name = "cam0";
   std::string stream;  // the camera stream of the log
-  CameraModel camera;  // intrinsics used (fixed in the problem)
+  CameraModel camera;  // intrinsics used (fixed in the problem) and the shutter solved
   Eigen::Isometry3d T_cam_imu = Eigen::Isometry3d::Identity();
   /// Standard deviations: rotation as a small-angle vector about the camera axes (rad), i.e.
   /// of delta in R_cam_imu = exp(delta) R_est, and translation (m), camera frame. NaN: not
@@ -56,6 +56,10 @@ struct CamImuCameraResult {
   Eigen::Vector3d translation_sigma_m = Eigen::Vector3d::Constant(kNotDetermined);
   double timeshift_cam_imu_s = 0.0;
   double timeshift_sigma_s = kNotDetermined;
+  /// The shutter solved is camera.shutter (its line delay as estimated or held); the line
+  /// delay's sigma (s per row; NaN: global, held, or not determined) and why this shutter.
+  double line_delay_sigma_s = kNotDetermined;
+  std::string shutter_choice;
   int frames = 0;           // frames with the target that entered the problem
   int corners = 0;          // corner observations that entered the problem
   int outlier_corners = 0;  // down-weighted by the robust loss (residual above its scale)

@@ -126,6 +126,8 @@ class ConfigParser {
   Status parse_data_ready(const YAML::Node& node, ImuConfig& imu) const;
   Status parse_mounting(const YAML::Node& node, Eigen::Matrix3d& R_rig_imu) const;
   Status parse_camera(const YAML::Node& node, const std::string& path, CameraConfig& cam) const;
+  /// The camera's optional shutter keys (docs/config.md, `cameras[]`).
+  Status parse_shutter(const YAML::Node& node, const std::string& path, CameraConfig& cam) const;
   Status parse_target(const YAML::Node& node, RigConfig& config) const;
   Status parse_storage(const YAML::Node& node, StorageConfig& storage) const;
   Status parse_session(const YAML::Node& node, SessionConfig& session) const;
@@ -434,8 +436,9 @@ Status ConfigParser::parse_mounting(const YAML::Node& node, Eigen::Matrix3d& R_r
 }
 
 Status ConfigParser::parse_camera(const YAML::Node& node, const std::string& path, CameraConfig& cam) const {
-  IMUCAL_TRY(
-      check_map(node, path, {"name", "backend", "device", "width", "height", "rate_hz", "pixel_format"}));
+  IMUCAL_TRY(check_map(node, path,
+                       {"name", "backend", "device", "width", "height", "rate_hz", "pixel_format", "shutter",
+                        "line_delay_us", "readout_direction", "stamp_row"}));
   if (!node["name"]) return error(node, path + ".name", "missing (e.g. cam0)");
   auto name = get_string(node["name"], path + ".name");
   if (!name.ok()) return name.error();
@@ -512,6 +515,55 @@ Status ConfigParser::parse_camera(const YAML::Node& node, const std::string& pat
     }
     cam.pixel_format = *f;
   }
+  return parse_shutter(node, path, cam);
+}
+
+Status ConfigParser::parse_shutter(const YAML::Node& node, const std::string& path, CameraConfig& cam) const {
+  cam.shutter = Shutter{};
+  std::string kind = "global";
+  if (const YAML::Node n = node["shutter"]) {
+    auto k = get_string(n, path + ".shutter");
+    if (!k.ok()) return k.error();
+    if (*k != "global" && *k != "rolling")
+      return error(n, path + ".shutter", "'" + *k + "' is not allowed (global or rolling)");
+    kind = *k;
+  }
+  if (kind == "global") {
+    for (const char* key : {"line_delay_us", "readout_direction", "stamp_row"})
+      if (node[key])
+        return error(node[key], path + "." + key, "is for a rolling shutter: add shutter: rolling");
+    return {};
+  }
+  cam.shutter.kind = Shutter::Kind::kRolling;
+  if (const YAML::Node n = node["line_delay_us"]) {
+    auto d = get_double(n, path + ".line_delay_us");
+    if (!d.ok()) return d.error();
+    if (!(*d >= 0.0) || *d * 1e-6 * (cam.height - 1) > 1.0)
+      return error(n, path + ".line_delay_us",
+                   "must be >= 0 microseconds per row (0: estimated), the frame read out within 1 s");
+    cam.shutter.line_delay_s = *d * 1e-6;
+  }
+  if (const YAML::Node n = node["readout_direction"]) {
+    auto d = get_string(n, path + ".readout_direction");
+    if (!d.ok()) return d.error();
+    if (*d != "top_to_bottom" && *d != "bottom_to_top")
+      return error(n, path + ".readout_direction",
+                   "'" + *d + "' is not allowed (top_to_bottom or bottom_to_top)");
+    cam.shutter.readout =
+        *d == "bottom_to_top" ? Shutter::Readout::kBottomToTop : Shutter::Readout::kTopToBottom;
+  }
+  if (const YAML::Node n = node["stamp_row"]) {
+    auto r = get_string(n, path + ".stamp_row");
+    if (!r.ok()) return r.error();
+    if (*r != "first" && *r != "middle" && *r != "last")
+      return error(n, path + ".stamp_row", "'" + *r + "' is not allowed (first, middle or last)");
+    cam.shutter.stamp_row = *r == "middle" ? Shutter::StampRow::kMiddle
+                            : *r == "last" ? Shutter::StampRow::kLast
+                                           : Shutter::StampRow::kFirst;
+  }
+  if (cam.backend == CameraBackend::kSim && !(cam.shutter.line_delay_s > 0.0))
+    return error(node, path + ".line_delay_us",
+                 "the virtual camera renders a rolling shutter with a line delay > 0");
   return {};
 }
 

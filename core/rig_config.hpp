@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "core/camera_model.hpp"
 #include "core/result.hpp"
 #include "core/target.hpp"
 
@@ -64,6 +65,10 @@ struct CameraConfig {
   int height = 0;
   double rate_hz = 0.0;
   std::string pixel_format;  // V4L2 fourcc ("GREY", "YUYV") or GenICam name ("Mono8")
+  /// The shutter as the integrator knows it (docs/config.md): global (the default) or rolling,
+  /// with the readout direction, the row the stamps mark and, when known (a datasheet, the sensor
+  /// mode), the line delay: the session then holds it; 0 = rolling with the line delay estimated.
+  Shutter shutter;
 };
 
 enum class StorageBackend { kFile, kNvmem, kI2cEeprom };

@@ -104,6 +104,12 @@ std::string rig_config_to_yaml(const RigConfig& c) {
     out << YAML::Key << "height" << YAML::Value << cam.height;
     out << YAML::Key << "rate_hz" << YAML::Value << num(cam.rate_hz);
     out << YAML::Key << "pixel_format" << YAML::Value << YAML::DoubleQuoted << cam.pixel_format;
+    if (cam.shutter.rolling()) {
+      out << YAML::Key << "shutter" << YAML::Value << "rolling";
+      out << YAML::Key << "line_delay_us" << YAML::Value << num(1e6 * cam.shutter.line_delay_s);
+      out << YAML::Key << "readout_direction" << YAML::Value << readout_name(cam.shutter.readout);
+      out << YAML::Key << "stamp_row" << YAML::Value << stamp_row_name(cam.shutter.stamp_row);
+    }
     out << YAML::EndMap;
   }
   out << YAML::EndSeq;
@@ -165,7 +171,13 @@ std::string rig_config_to_json(const RigConfig& c) {
                     {"width", cam.width},
                     {"height", cam.height},
                     {"rate_hz", cam.rate_hz},
-                    {"pixel_format", cam.pixel_format}});
+                    {"pixel_format", cam.pixel_format},
+                    {"shutter", shutter_kind_name(cam.shutter.kind)}});
+    if (cam.shutter.rolling()) {
+      cams.back()["line_delay_us"] = 1e6 * cam.shutter.line_delay_s;
+      cams.back()["readout_direction"] = readout_name(cam.shutter.readout);
+      cams.back()["stamp_row"] = stamp_row_name(cam.shutter.stamp_row);
+    }
   }
   json storage = {{"backend", storage_backend_name(c.storage.backend)},
                   {"size_bytes", c.storage.size_bytes},

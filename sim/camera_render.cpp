@@ -291,7 +291,8 @@ Status TargetRenderer::build_aprilgrid_cells() {
   return {};
 }
 
-void TargetRenderer::accumulate(const Eigen::Isometry3d& T_cam_target, float weight, float* out) const {
+void TargetRenderer::accumulate(const Eigen::Isometry3d& T_cam_target, float weight, float* out,
+                                std::size_t first, std::size_t last) const {
   const Eigen::Isometry3d T_target_cam = T_cam_target.inverse();
   Eigen::Matrix3d R = T_target_cam.linear();
   Eigen::Vector3d o = T_target_cam.translation();  // camera centre
@@ -303,7 +304,7 @@ void TargetRenderer::accumulate(const Eigen::Isometry3d& T_cam_target, float wei
     R.row(2) = -R.row(2);
     o.z() = -o.z();
     const CellPattern cells{edges_x_, edges_y_, cell_dn_};
-    accumulate_pattern(cells, R, o, weight, out);
+    accumulate_pattern(cells, R, o, weight, out, first, last);
     return;
   }
   const double sx = target_.col_spacing_m;
@@ -318,18 +319,18 @@ void TargetRenderer::accumulate(const Eigen::Isometry3d& T_cam_target, float wei
                                bg,
                                look.white_dn - bg,
                                look.black_dn - look.white_dn};
-  accumulate_pattern(checker, R, o, weight, out);
+  accumulate_pattern(checker, R, o, weight, out, first, last);
 }
 
 template <class Pattern>
 void TargetRenderer::accumulate_pattern(const Pattern& pattern, const Eigen::Matrix3d& R,
-                                        const Eigen::Vector3d& o, float weight, float* out) const {
+                                        const Eigen::Vector3d& o, float weight, float* out, std::size_t first,
+                                        std::size_t last) const {
   const double bg = options_.appearance.background_dn;
   const float bg_w = static_cast<float>(bg) * weight;
-  const std::size_t n_px = ray_valid_.size();
   // The printed side faces z < 0 here; from behind the board shows nothing.
   if (!(o.z() < 0.0)) {
-    for (std::size_t i = 0; i < n_px; ++i) out[i] += bg_w;
+    for (std::size_t i = first; i < last; ++i) out[i] += bg_w;
     return;
   }
   const int ns = options_.supersampling;
@@ -337,7 +338,7 @@ void TargetRenderer::accumulate_pattern(const Pattern& pattern, const Eigen::Mat
   const double mean_weight = weight / static_cast<double>(ns * ns);
   constexpr double kMinHalfWidth = 1e-9;  // m; below this a sample is a point sample
 
-  for (std::size_t i = 0; i < n_px; ++i) {
+  for (std::size_t i = first; i < last; ++i) {
     if (!ray_valid_[i]) {
       out[i] += bg_w;
       continue;
@@ -416,8 +417,29 @@ cv::Mat TargetRenderer::render(std::span<const Eigen::Isometry3d> T_cam_target_s
     acc.setTo(static_cast<float>(options_.appearance.background_dn));
   }
   for (const auto& T : T_cam_target_sub_exposures) accumulate(T, 1.0f / static_cast<float>(k), a);
+  return finish(&acc, rng);
+}
+
+cv::Mat TargetRenderer::render_rows(std::span<const Eigen::Isometry3d> T_cam_target_rows, int sub_exposures,
+                                    Rng* rng) const {
+  cv::Mat acc = cv::Mat::zeros(camera_.height, camera_.width, CV_32F);
+  float* a = acc.ptr<float>();
+  const auto h = static_cast<std::size_t>(camera_.height), w = static_cast<std::size_t>(camera_.width);
+  const auto k = static_cast<std::size_t>(std::max(sub_exposures, 0));
+  if (k == 0 || T_cam_target_rows.size() != k * h) {
+    acc.setTo(static_cast<float>(options_.appearance.background_dn));
+  } else {
+    for (std::size_t i = 0; i < k; ++i)
+      for (std::size_t r = 0; r < h; ++r)
+        accumulate(T_cam_target_rows[i * h + r], 1.0f / static_cast<float>(k), a, r * w, (r + 1) * w);
+  }
+  return finish(&acc, rng);
+}
+
+cv::Mat TargetRenderer::finish(cv::Mat* irradiance, Rng* rng) const {
+  cv::Mat& acc = *irradiance;
   apply_optics(&acc);
-  a = acc.ptr<float>();
+  const float* a = acc.ptr<float>();
   cv::Mat out(camera_.height, camera_.width, CV_8U);
   std::uint8_t* o = out.ptr<std::uint8_t>();
   const double sigma = options_.noise_sigma_dn;

@@ -60,6 +60,11 @@ class TargetRenderer {
   /// clamped to [0, 255].
   [[nodiscard]] cv::Mat render(std::span<const Eigen::Isometry3d> T_cam_target_sub_exposures, Rng* rng) const;
 
+  /// A rolling-shutter frame: `sub_exposures` sub-exposures of every row, the pose of row r in
+  /// sub-exposure i at T_cam_target_rows[i * height + r]; otherwise as render().
+  [[nodiscard]] cv::Mat render_rows(std::span<const Eigen::Isometry3d> T_cam_target_rows, int sub_exposures,
+                                    Rng* rng) const;
+
   /// Projection of every target point (TargetDescription::points()) at one pose.
   CornerTruth project_corners(const Eigen::Isometry3d& T_cam_target) const;
 
@@ -77,10 +82,17 @@ class TargetRenderer {
 
  private:
   TargetRenderer() = default;
-  void accumulate(const Eigen::Isometry3d& T_cam_target, float weight, float* out) const;
+  /// Adds weight x the board's irradiance at one pose to the pixels [first, last) (row-major).
+  void accumulate(const Eigen::Isometry3d& T_cam_target, float weight, float* out, std::size_t first,
+                  std::size_t last) const;
+  void accumulate(const Eigen::Isometry3d& T_cam_target, float weight, float* out) const {
+    accumulate(T_cam_target, weight, out, 0, ray_valid_.size());
+  }
   template <class Pattern>
   void accumulate_pattern(const Pattern& pattern, const Eigen::Matrix3d& R, const Eigen::Vector3d& o,
-                          float weight, float* out) const;
+                          float weight, float* out, std::size_t first, std::size_t last) const;
+  /// Optics, noise and rounding of an accumulated irradiance.
+  cv::Mat finish(cv::Mat* irradiance, Rng* rng) const;
   void apply_optics(cv::Mat* irradiance) const;
   [[nodiscard]] Status build_aprilgrid_cells();
 

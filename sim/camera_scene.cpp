@@ -67,11 +67,19 @@ Status SceneFrameSource::render(TimeNs t_mid_host_ns, std::span<std::uint8_t> pi
         renderer_->sub_exposures_needed(T_cam_board_at(t_open), T_cam_board_at(t_open + scene_.exposure_ns));
   }
   subs_.clear();
+  // A rolling shutter exposes row r from t_open + row_time(r) (the stamp's row at t_open).
+  const Shutter& shutter = scene_.camera.shutter;
+  const int rows = shutter.rolling() ? scene_.camera.height : 1;
   for (int i = 0; i < n_sub; ++i) {
     const double f = scene_.motion_blur ? (i + 0.5) / n_sub : 0.5;
-    subs_.push_back(T_cam_board_at(t_open + static_cast<TimeNs>(std::llround(f * scene_.exposure_ns))));
+    const TimeNs t = t_open + static_cast<TimeNs>(std::llround(f * scene_.exposure_ns));
+    for (int r = 0; r < rows; ++r) {
+      const double dt = shutter.row_time(r, scene_.camera.height);
+      subs_.push_back(T_cam_board_at(t + static_cast<TimeNs>(std::llround(dt * 1e9))));
+    }
   }
-  const cv::Mat image = renderer_->render(subs_, &noise_);
+  const cv::Mat image =
+      shutter.rolling() ? renderer_->render_rows(subs_, n_sub, &noise_) : renderer_->render(subs_, &noise_);
   const CornerTruth truth = renderer_->project_corners(T_cam_board_at(t_mid_imu));
   if (truth.visible_count == static_cast<int>(truth.px.size())) ++stats_.frames_all_points_visible;
   if (truth.visible_count == 0) ++stats_.frames_no_point_visible;

@@ -50,8 +50,14 @@ Result<FramePlan> plan_frames(const CamImuSimOptions& options, const SimCam& cam
   const TimeNs half_exposure_ns = options.exposure_ns / 2;
   plan.period_ns = static_cast<TimeNs>(std::llround(1e9 / options.camera_rate_hz));
   const double period = static_cast<double>(plan.period_ns);
-  const TimeNs t_begin = traj.start_ns() + half_exposure_ns - shift_ns;  // earliest t_cam
-  const TimeNs t_end = traj.end_ns() - (options.exposure_ns - half_exposure_ns) - shift_ns;
+  // A rolling shutter's rows are exposed from row_time(first row) to row_time(last row) after
+  // the stamp's row: every row's exposure lies inside the trajectory.
+  const Shutter& sh = cam.camera.shutter;
+  const int h = cam.camera.height;
+  const double rt0 = std::min(sh.row_time(0, h), sh.row_time(h - 1, h));
+  const double rt1 = std::max(sh.row_time(0, h), sh.row_time(h - 1, h));
+  const TimeNs t_begin = traj.start_ns() + half_exposure_ns - shift_ns - s_to_ns(rt0);  // earliest t_cam
+  const TimeNs t_end = traj.end_ns() - (options.exposure_ns - half_exposure_ns) - shift_ns - s_to_ns(rt1);
   plan.k0 = static_cast<std::int64_t>(std::ceil(static_cast<double>(t_begin) / period));
   plan.k1 = static_cast<std::int64_t>(std::floor(static_cast<double>(t_end) / period));
   if (plan.k1 < plan.k0) {

@@ -144,6 +144,11 @@ Result<calib::TargetObservation> decode_detection(const std::string& text, TimeN
 
 namespace {
 
+/// A number, or null where it is not determined (NaN, infinite).
+YAML::Node number_or_null(double v) {
+  return std::isfinite(v) ? YAML::Node(v) : YAML::Node(YAML::NodeType::Null);
+}
+
 /// One camera's camchain entry: Kalibr's keys and imucal's figures under `imucal`.
 YAML::Node camera_node(const CameraCalibrationReport& r) {
   const auto& res = r.intrinsics;
@@ -156,6 +161,8 @@ YAML::Node camera_node(const CameraCalibrationReport& r) {
   q["reprojection_rms_px"] = res.rms_px;
   q["residual_sigma_px"] = res.residual_sigma_px;
   q["focal_well_determined"] = res.focal_well_determined;
+  if (res.camera.shutter.rolling()) q["line_delay_sigma_s"] = number_or_null(r.line_delay_sigma_s);
+  if (!r.shutter_choice.empty()) q["shutter_choice"] = r.shutter_choice;
   q["coverage"] = res.coverage;
   YAML::Node grid(YAML::NodeType::Sequence);
   grid.push_back(res.coverage_cols);
@@ -178,11 +185,6 @@ YAML::Node camera_node(const CameraCalibrationReport& r) {
   q["warnings"] = warnings;
   cam["imucal"] = q;
   return cam;
-}
-
-/// A number, or null where it is not determined (NaN, infinite).
-YAML::Node number_or_null(double v) {
-  return std::isfinite(v) ? YAML::Node(v) : YAML::Node(YAML::NodeType::Null);
 }
 
 YAML::Node flow3(const Eigen::Vector3d& v) {
@@ -248,6 +250,12 @@ json camera_json(const CameraCalibrationReport& r) {
       {"reprojection_rms_px", res.rms_px},
       {"residual_sigma_px", res.residual_sigma_px},
       {"focal_well_determined", res.focal_well_determined},
+      {"shutter", shutter_kind_name(res.camera.shutter.kind)},
+      {"line_delay_s", res.camera.shutter.rolling() ? json(res.camera.shutter.line_delay_s) : json(nullptr)},
+      {"line_delay_sigma_s", finite_or_null(r.line_delay_sigma_s)},
+      {"readout_direction", readout_name(res.camera.shutter.readout)},
+      {"stamp_row", stamp_row_name(res.camera.shutter.stamp_row)},
+      {"shutter_choice", r.shutter_choice},
       {"coverage", res.coverage},
       {"coverage_grid",
        {{"cols", res.coverage_cols}, {"rows", res.coverage_rows}, {"counts", res.coverage_counts}}},

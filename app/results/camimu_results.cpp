@@ -118,11 +118,19 @@ json krebs_sigma_json(const KrebsImuSigma& s) {
 }
 
 json camera_model_json(const CameraModel& c) {
-  return {{"camera_model", "pinhole"},
-          {"intrinsics", vec_json(c.intrinsics)},
-          {"distortion_model", distortion_model_name(c.distortion_model)},
-          {"distortion_coeffs", vec_json(c.distortion_coeffs)},
-          {"resolution", {c.width, c.height}}};
+  json j = {{"camera_model", "pinhole"},
+            {"intrinsics", vec_json(c.intrinsics)},
+            {"distortion_model", distortion_model_name(c.distortion_model)},
+            {"distortion_coeffs", vec_json(c.distortion_coeffs)},
+            {"resolution", {c.width, c.height}}};
+  // The shutter's keys as camera_to_yaml writes them (read back by camera_from_yaml).
+  if (c.shutter.rolling()) {
+    j["shutter"] = shutter_kind_name(c.shutter.kind);
+    j["line_delay_s"] = c.shutter.line_delay_s;
+    j["readout_direction"] = readout_name(c.shutter.readout);
+    j["stamp_row"] = stamp_row_name(c.shutter.stamp_row);
+  }
+  return j;
 }
 
 /// The rotation angle of a rotation matrix, rad.
@@ -183,6 +191,8 @@ json camera_json(const CamImuCameraResult& c, const CamImuCameraReport* in) {
             {"translation_sigma_m", vec_json(c.translation_sigma_m)},
             {"timeshift_cam_imu_s", c.timeshift_cam_imu_s},
             {"timeshift_sigma_s", num(c.timeshift_sigma_s)},
+            {"line_delay_sigma_s", num(c.line_delay_sigma_s)},
+            {"shutter_choice", c.shutter_choice},
             {"frames", c.frames},
             {"corners", c.corners},
             {"outlier_corners", c.outlier_corners},
@@ -323,6 +333,10 @@ CamImuCameraResult read_camera(const json& j, const std::string& path) {
   c.timeshift_cam_imu_s = j.at("timeshift_cam_imu_s").get<double>();
   c.timeshift_sigma_s =
       j.at("timeshift_sigma_s").is_null() ? std::nan("") : j.at("timeshift_sigma_s").get<double>();
+  // Results written before the shutter was solved have neither.
+  if (j.contains("line_delay_sigma_s") && !j.at("line_delay_sigma_s").is_null())
+    c.line_delay_sigma_s = j.at("line_delay_sigma_s").get<double>();
+  c.shutter_choice = j.value("shutter_choice", std::string());
   c.frames = j.at("frames").get<int>();
   c.corners = j.at("corners").get<int>();
   c.outlier_corners = j.at("outlier_corners").get<int>();
@@ -496,6 +510,8 @@ std::string camimu_camchain_yaml(const CamImuReport& r) {
     q["rotation_sigma_rad"] = flow_vec(c.rotation_sigma_rad);
     q["translation_sigma_m"] = flow_vec(c.translation_sigma_m);
     q["timeshift_sigma_s"] = c.timeshift_sigma_s;
+    if (c.camera.shutter.rolling()) q["line_delay_sigma_s"] = c.line_delay_sigma_s;
+    if (!c.shutter_choice.empty()) q["shutter_choice"] = c.shutter_choice;
     q["reprojection_rms_px"] = c.reprojection_rms_px;
     q["corner_sigma_px"] = c.corner_sigma_px;
     q["frames"] = c.frames;
@@ -589,6 +605,11 @@ std::string camimu_calibration_yaml(const CamImuReport& r) {
     cam["translation_sigma_m"] = flow_vec(c.translation_sigma_m);
     cam["timeshift_cam_imu"] = c.timeshift_cam_imu_s;
     cam["timeshift_sigma_s"] = c.timeshift_sigma_s;
+    cam["shutter"] = shutter_kind_name(c.camera.shutter.kind);
+    if (c.camera.shutter.rolling()) {
+      cam["line_delay_s"] = c.camera.shutter.line_delay_s;
+      cam["line_delay_sigma_s"] = c.line_delay_sigma_s;
+    }
     cams["cam" + std::to_string(i)] = cam;
   }
   root["cameras"] = cams;

@@ -79,7 +79,7 @@ json camimu_payload(const json& r, const std::string& path) {
   for (const auto& [name, c] : r.at("cameras").items()) {
     json cam = {{"name", name}};
     for (const char* key : {"stream", "T_cam_imu", "rotation_sigma_rad", "translation_sigma_m",
-                            "timeshift_cam_imu", "timeshift_sigma_s"}) {
+                            "timeshift_cam_imu", "timeshift_sigma_s", "line_delay_s", "line_delay_sigma_s"}) {
       if (c.contains(key))
         cam[std::string(key) == "timeshift_cam_imu" ? "timeshift_cam_imu_s" : key] = c[key];
     }
@@ -185,6 +185,10 @@ CalibrationRecord calibration_record_from_camimu(const CamImuReport& report, con
     cam.translation_sigma_m = c.translation_sigma_m;
     cam.timeshift_cam_imu_s = c.timeshift_cam_imu_s;
     cam.timeshift_sigma_s = c.timeshift_sigma_s;
+    if (c.camera.shutter.rolling()) {
+      cam.line_delay_s = c.camera.shutter.line_delay_s;
+      cam.line_delay_sigma_s = c.line_delay_sigma_s;
+    }
     rec.cameras.push_back(cam);
   }
   rec.gravity_mps2 = report.options.gravity_mps2;

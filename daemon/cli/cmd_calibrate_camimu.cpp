@@ -11,6 +11,7 @@
 #include <iostream>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -36,6 +37,10 @@ struct CamImuCliOptions {
   std::string gsens_path;
   std::string imu_stream;
   std::string model = "auto";
+  std::string shutter = "auto";
+  std::optional<double> line_delay_us;
+  std::string readout;    // empty: the camera file's
+  std::string stamp_row;  // empty: the camera file's
   bool keep_noise = false;
   bool no_prior = false;
   std::vector<std::string> fix;
@@ -72,6 +77,8 @@ std::vector<std::string> check_outputs(const CamImuCliOptions& o, const app::Out
 /// The method's options from the command line, checked before the log is read.
 app::CamImuRequest build_request(const CamImuCliOptions& o) {
   app::CamImuRequest q;
+  if (o.line_delay_us && o.shutter == "global")
+    throw CliExit{kExitUsage, "--line-delay is for a rolling shutter: drop --shutter global"};
   q.log_path = o.log_path;
   q.imu_stream = o.imu_stream;
   if (!o.camera_paths.empty()) {
@@ -100,6 +107,17 @@ app::CamImuRequest build_request(const CamImuCliOptions& o) {
   q.options.model = o.model == "basic"      ? CamImuModelKind::kBasic
                     : o.model == "extended" ? CamImuModelKind::kExtended
                                             : CamImuModelKind::kAuto;
+  q.options.shutter.mode = o.shutter == "global"    ? calib::CamImuShutterOptions::Mode::kGlobal
+                           : o.shutter == "rolling" ? calib::CamImuShutterOptions::Mode::kRolling
+                                                    : calib::CamImuShutterOptions::Mode::kAuto;
+  if (o.line_delay_us) q.options.shutter.line_delay_s = *o.line_delay_us * 1e-6;
+  for (auto& cam : q.cameras) {
+    if (o.readout == "bottom_to_top") cam.camera.shutter.readout = Shutter::Readout::kBottomToTop;
+    if (o.readout == "top_to_bottom") cam.camera.shutter.readout = Shutter::Readout::kTopToBottom;
+    if (o.stamp_row == "first") cam.camera.shutter.stamp_row = Shutter::StampRow::kFirst;
+    if (o.stamp_row == "middle") cam.camera.shutter.stamp_row = Shutter::StampRow::kMiddle;
+    if (o.stamp_row == "last") cam.camera.shutter.stamp_row = Shutter::StampRow::kLast;
+  }
   q.options.imu_noise_from_residuals = !o.keep_noise;
   q.options.prior.enabled = !o.no_prior;
   for (const auto& name : o.fix) {
@@ -149,6 +167,14 @@ void print_camera(const CamImuCalibrationResult& res, const CamImuCameraResult& 
               sig3(c.translation_sigma_m, 1e3, 2, fixed_T).c_str());
   std::printf("    timeshift_cam_imu %.4f ms +- %s ms (t_imu = t_cam + shift)\n", c.timeshift_cam_imu_s * 1e3,
               sig(c.timeshift_sigma_s * 1e3, 4, fixed_shift).c_str());
+  if (c.camera.shutter.rolling()) {
+    std::printf(
+        "    rolling shutter: line delay %.3f us/row +- %s us (readout %.2f ms, %s, stamp at the %s row)\n",
+        c.camera.shutter.line_delay_s * 1e6, sig(c.line_delay_sigma_s * 1e6, 3).c_str(),
+        c.camera.shutter.readout_s(c.camera.height) * 1e3, readout_name(c.camera.shutter.readout),
+        stamp_row_name(c.camera.shutter.stamp_row));
+  }
+  if (!c.shutter_choice.empty()) std::printf("    shutter: %s\n", c.shutter_choice.c_str());
   std::printf("    reprojection RMS %.4f px over %d corners, %d down-weighted as outliers\n",
               c.reprojection_rms_px, c.corners, c.outlier_corners);
 }
@@ -278,6 +304,26 @@ void add_options(CLI::App* cmd, CamImuCliOptions* o) {
                   "extended (Krebs: S, M, C_bg, B_g) or basic (biases)")
       ->capture_default_str()
       ->check(CLI::IsMember({"auto", "basic", "extended"}));
+  cmd->add_option(
+         "--shutter", o->shutter,
+         "Camera shutter: auto (global or rolling, whichever the data support; the summary says why), "
+         "global, or rolling (its line delay estimated)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "global", "rolling"}));
+  cmd->add_option(
+         "--line-delay", o->line_delay_us,
+         "Hold a rolling shutter's line delay at this value, microseconds per row (the sensor mode's "
+         "readout time / rows, from its datasheet or libcamera)")
+      ->check(CLI::Range(-1000.0, 1000.0));
+  cmd->add_option("--readout", o->readout,
+                  "Rolling shutter readout direction: top_to_bottom or bottom_to_top (default: the camera "
+                  "file's, else top_to_bottom)")
+      ->check(CLI::IsMember({"top_to_bottom", "bottom_to_top"}));
+  cmd->add_option(
+         "--stamp-row", o->stamp_row,
+         "The row a frame's stamp refers to: first, middle or last (default: the camera file's, else "
+         "first)")
+      ->check(CLI::IsMember({"first", "middle", "last"}));
   cmd->add_flag("--no-prior", o->no_prior,
                 "No prior on the extended model's intrinsics (default: the MPU-6000 datasheet tolerances, "
                 "docs/camimu-calibration.md)");

@@ -139,6 +139,47 @@ TEST(CamImuResiduals, FrameResidualJacobiansMatchNumericOnesIncludingTheTimeshif
   check_jacobians(cost, blocks, 2e-5);
 }
 
+// A rolling shutter: every corner at its own row's time, the line delay one more block. The
+// frame is placed near a knot so that its corners straddle two segments of the spline.
+TEST(CamImuResiduals, RollingShutterFrameResidualJacobiansMatchNumericOnesAcrossAKnot) {
+  constexpr int N = 4;
+  CameraModel camera = sim::CamImuSimOptions::default_sim_camera();
+  camera.shutter.kind = Shutter::Kind::kRolling;
+  camera.shutter.line_delay_s = 40e-6;  // 240 rows: 9.6 ms of readout
+  camera.shutter.stamp_row = Shutter::StampRow::kMiddle;
+  const SplineTiming<N> timing{0.0, 0.01, 40};
+  std::vector<Block> blocks =
+      frame_blocks(N + 2, Eigen::Vector3d(0.02, -0.01, 0.015), Eigen::Vector3d(0.01, -0.02, 0.005),
+                   Eigen::Vector3d::Zero(), {0.02, -0.01, 0.03}, 0.002);
+  blocks.push_back({40e-6});
+  std::vector<Eigen::Vector3d> pts;
+  std::vector<Eigen::Vector2d> px;
+  for (int k = 0; k < 8; ++k) {
+    pts.emplace_back(-0.1 + 0.03 * k, 0.06 * (k % 4) - 0.09, 1.0 + 0.02 * k);
+    px.emplace_back(140.0 + 9.0 * k, 20.0 + 28.0 * k + (k == 5 ? 5.0 : 0.3));  // rows 20 .. 216
+  }
+  // t_cam 0.1 + shift 0.002: the middle row at 0.102 s, the corners from 0.0977 s to 0.1056 s,
+  // across a knot.
+  const int first = timing.segment(0.102).first_knot - 1;
+  ASSERT_NE(timing.segment(0.1 + 0.002 + (20.0 - 119.5) * 40e-6).first_knot,
+            timing.segment(0.1 + 0.002 + (216.0 - 119.5) * 40e-6).first_knot);
+  const FrameResidual<N> cost(camera, pts, px, 0.1, first, timing, 0.3, 0.9, /*compressed=*/true,
+                              /*rolling=*/true);
+  ASSERT_EQ(cost.num_residuals(), 16);  // not compressed
+  ASSERT_EQ(static_cast<int>(cost.parameter_block_sizes().size()), 2 * (N + 2) + 4);
+  EXPECT_TRUE(cost.in_window(0.002, 40e-6));
+  check_jacobians(cost, blocks, 2e-5);
+  // With a line delay of 0 it is the global-shutter residual.
+  const FrameResidual<N> global(camera, pts, px, 0.1, first, timing, 0.3, 0.9, /*compressed=*/false);
+  blocks.back() = {0.0};
+  std::vector<double*> ptr;
+  for (auto& b : blocks) ptr.push_back(b.data());
+  Eigen::VectorXd r_rolling(16), r_global(16);
+  ASSERT_TRUE(cost.Evaluate(ptr.data(), r_rolling.data(), nullptr));
+  ASSERT_TRUE(global.Evaluate(ptr.data(), r_global.data(), nullptr));
+  EXPECT_LT((r_rolling - r_global).norm(), 1e-12);
+}
+
 // The solver's form of a frame (7 rows) against the corners' own rows: the same cost, gradient
 // J^T r and Gauss-Newton matrix J^T J over all blocks, with corners in the robust loss's tail.
 TEST(CamImuResiduals, CompressedFrameResidualHasTheCornersCostGradientAndNormalMatrix) {

@@ -196,6 +196,30 @@ TEST(CalibrationRecord, SameCalibrationLooksAtTheImuAndTheCamerasOnly) {
   b = a;
   b.imu.sigma.krebs = KrebsImuSigma{};
   EXPECT_FALSE(same_calibration(a, b));
+  b = a;
+  b.cameras[0].line_delay_s = 30e-6;  // a rolling shutter now
+  EXPECT_FALSE(same_calibration(a, b));
+}
+
+// A rolling shutter's line delay is kept with its sigma; a global camera has neither key.
+TEST(CalibrationRecord, ARollingShuttersLineDelayReadsBack) {
+  CalibrationRecord r = a_record();
+  EXPECT_FALSE(calibration_record_json(r)["cameras"][0].contains("line_delay_s"));
+  r.cameras[0].line_delay_s = 29.7e-6;
+  r.cameras[0].line_delay_sigma_s = 0.2e-6;
+  const json j = calibration_record_json(r);
+  EXPECT_DOUBLE_EQ(j["cameras"][0]["line_delay_s"].get<double>(), 29.7e-6);
+  auto back = calibration_record_from_json(json::from_cbor(json::to_cbor(j)));
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  ASSERT_TRUE(back->cameras[0].line_delay_s);
+  EXPECT_DOUBLE_EQ(*back->cameras[0].line_delay_s, 29.7e-6);
+  EXPECT_DOUBLE_EQ(back->cameras[0].line_delay_sigma_s, 0.2e-6);
+  EXPECT_TRUE(same_calibration(*back, r));
+  json bad = j;
+  bad["cameras"][0]["line_delay_s"] = nullptr;
+  auto refused = calibration_record_from_json(bad);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("line_delay_s"), std::string::npos);
 }
 
 // The stored payload is walked before nlohmann's recursive CBOR parser sees it: a nesting that

@@ -132,6 +132,28 @@ TEST(RigConfig, NormalizedYamlRoundTrips) {
   EXPECT_THAT(json, HasSubstr("\"targetCols\": 7"));
 }
 
+TEST(RigConfig, ARollingShutterCameraKeepsItsShutterThroughTheNormalizedYaml) {
+  auto c = parse_rig_config(
+      "imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: sim, width: 752, height: 480, rate_hz: 20,\n"
+      "     shutter: rolling, line_delay_us: 30, readout_direction: bottom_to_top, stamp_row: middle}\n"
+      "  - {name: cam1, backend: v4l2, device: /dev/video0, width: 640, height: 480, rate_hz: 30, shutter: "
+      "rolling}\n"
+      "target: {target_type: checkerboard, targetCols: 7, targetRows: 6, rowSpacingMeters: 0.06, "
+      "colSpacingMeters: 0.06}\n");
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  const Shutter& s = c->cameras[0].shutter;
+  EXPECT_TRUE(s.rolling());
+  EXPECT_DOUBLE_EQ(s.line_delay_s, 30e-6);
+  EXPECT_EQ(s.readout, Shutter::Readout::kBottomToTop);
+  EXPECT_EQ(s.stamp_row, Shutter::StampRow::kMiddle);
+  EXPECT_TRUE(c->cameras[1].shutter.rolling());
+  EXPECT_EQ(c->cameras[1].shutter.line_delay_s, 0.0);  // estimated by the session
+  auto again = parse_rig_config(rig_config_to_yaml(*c));
+  ASSERT_TRUE(again.ok()) << again.error().message;
+  EXPECT_DOUBLE_EQ(again->cameras[0].shutter.line_delay_s, 30e-6);
+  EXPECT_EQ(again->cameras[0].shutter.stamp_row, Shutter::StampRow::kMiddle);
+}
+
 TEST(RigConfig, SidesNameTheRigsFrontLeftAndTop) {
   const std::string base = "name: r\nimu: {bus: sim}\n";
   auto c = parse_rig_config(base + "sides: {front: -y, left: +X, top: +z}\n");
@@ -261,6 +283,15 @@ INSTANTIATE_TEST_SUITE_P(
         InvalidCase{"imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: sim, width: 640, height: 480, "
                     "rate_hz: 20, pixel_format: GRAY8}\n",
                     "cameras[0].pixel_format", 3, "fourcc"},
+        InvalidCase{"imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: sim, width: 640, height: 480, "
+                    "rate_hz: 20, shutter: slit}\n",
+                    "cameras[0].shutter", 3, "global or rolling"},
+        InvalidCase{"imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: sim, width: 640, height: 480, "
+                    "rate_hz: 20, line_delay_us: 30}\n",
+                    "cameras[0].line_delay_us", 3, "add shutter: rolling"},
+        InvalidCase{"imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: sim, width: 640, height: 480, "
+                    "rate_hz: 20, shutter: rolling}\n",
+                    "cameras[0].line_delay_us", 3, "line delay > 0"},
         InvalidCase{
             "imu: {bus: sim}\ncameras:\n  - {name: cam0, backend: sim, width: 640, height: 480, "
             "rate_hz: 20}\n  - {name: cam0, backend: sim, width: 640, height: 480, rate_hz: 20}\n"

@@ -238,6 +238,34 @@ TEST(CameraRender, MotionBlurAveragesSubExposures) {
   EXPECT_LT(d.rms_px, 0.15);
 }
 
+// A rolling shutter: every row of the frame is the row of the image rendered at that row's pose
+// (without lens blur, which mixes rows); the board moving during the readout is sheared.
+TEST(CameraRender, RollingShutterRowsAreRenderedAtTheirOwnPoses) {
+  const TargetDescription t = board();
+  CameraRenderOptions opt;
+  opt.optics_blur_sigma_px = 0.0;
+  const CameraModel camera = radtan_camera();
+  auto r = CheckerboardRenderer::create(camera, t, opt);
+  ASSERT_TRUE(r.ok());
+  const int h = camera.height;
+  std::vector<Eigen::Isometry3d> rows;
+  for (int y = 0; y < h; ++y)
+    rows.push_back(
+        pose(t, Eigen::Vector3d(0.1, 0.0, 0.0), 0.5, 0.02 * y / (h - 1), 0.0));  // ~12 px over the frame
+  const cv::Mat rolling = (*r)->render_rows(rows, 1, nullptr);
+  for (int y : {0, h / 3, h / 2, h - 1}) {
+    const std::vector<Eigen::Isometry3d> one = {rows[static_cast<std::size_t>(y)]};
+    const cv::Mat global = (*r)->render(one, nullptr);
+    EXPECT_EQ(cv::norm(rolling.row(y), global.row(y), cv::NORM_INF), 0.0) << "row " << y;
+  }
+  // Not the global image of any one pose: the first and last rows come from poses 12 px apart.
+  const std::vector<Eigen::Isometry3d> first = {rows.front()};
+  EXPECT_GT(cv::norm(rolling, (*r)->render(first, nullptr), cv::NORM_INF), 100.0);
+  // A pose list of the wrong length gives the background, not a read past its end.
+  rows.pop_back();
+  EXPECT_EQ(cv::countNonZero((*r)->render_rows(rows, 1, nullptr) != opt.appearance.background_dn), 0);
+}
+
 TEST(CameraRender, RejectsBadInput) {
   TargetDescription april;
   april.type = TargetDescription::Type::kAprilgrid;
