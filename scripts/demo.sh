@@ -25,8 +25,9 @@ elapsed() {
 LOG=""
 trap 'rc=$?; if [ $rc -ne 0 ] && [ -n "$LOG" ]; then echo "imucal demo: failed; the end of $LOG:" >&2; tail -n 20 "$LOG" >&2; fi' EXIT
 
-# The shipped virtual rig, with its calibration storage in a file-backed EEPROM image here.
-sed -e "s|path: /var/lib/imucal/calibration.bin|path: $OUT/eeprom.bin|" config/rig.yaml >"$OUT/rig.yaml"
+# The shipped virtual rig with a stereo pair (config/rig-stereo.yaml), its calibration storage in a
+# file-backed EEPROM image here.
+sed -e "s|path: /var/lib/imucal/calibration.bin|path: $OUT/eeprom.bin|" config/rig-stereo.yaml >"$OUT/rig.yaml"
 cp config/checkerboard-7x6.yaml "$OUT/"
 
 echo "imucal demo: a guided calibration session of the service imucald on the virtual rig."

@@ -145,6 +145,7 @@ struct ResultFiles {
   json static_result;                        // imu-static.json
   json camimu_result;                        // camimu/result.json
   std::map<std::string, YAML::Node> camera;  // camera-NAME.yaml by camera name
+  YAML::Node chain;                          // cameras-chain.yaml (a rig with several cameras)
 };
 
 ResultFiles read_result_files(const json& result) {
@@ -158,6 +159,11 @@ ResultFiles read_result_files(const json& result) {
       f.static_result = read_json(path.string());
     } else if (file == "result.json" && path.parent_path().filename() == "camimu") {
       f.camimu_result = read_json(path.string());
+    } else if (file == "cameras-chain.yaml") {
+      try {
+        f.chain = YAML::LoadFile(path.string());
+      } catch (const std::exception&) {
+      }
     } else if (file.starts_with("camera-") && file.ends_with(".yaml")) {
       try {
         f.camera[file.substr(7, file.size() - 12)] = YAML::LoadFile(path.string());
@@ -225,6 +231,42 @@ void imu_rows(const json& imu, const json& static_result, const CanonicalImuMode
     for (int j = 0; j < 3; ++j)
       rows.push_back(compared(std::string("gyro g-sensitivity G_") + kAxis[i] + kAxis[j], "(rad/s)/(m/s^2)",
                               G(i, j), truth.G(i, j), G_sigma(i, j)));
+}
+
+/// The rows of camera n >= 1 of the chain (cameras-chain.yaml) against camera n - 1: the
+/// baseline, the relative rotation's error about camera n's axes and the time offset against cam0,
+/// with the chain's sigmas.
+void pair_rows(const YAML::Node& cam, const std::string& name, const VirtualCameraTruth& truth,
+               const VirtualCameraTruth& before, const VirtualCameraTruth& cam0,
+               std::vector<TruthRow>& rows) {
+  const YAML::Node own = cam["imucal"];
+  const auto get = [&](const YAML::Node& n) {
+    return n && n.IsScalar() && n.Scalar() != "~" && n.Scalar() != "null" ? n.as<double>() : kNotDetermined;
+  };
+  const auto item = [&](const char* key, int i) {
+    const YAML::Node n = own ? own[key] : YAML::Node();
+    return n && n.IsSequence() && n.size() > static_cast<std::size_t>(i) ? get(n[i]) : kNotDetermined;
+  };
+  Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+  for (int r = 0; r < 4; ++r)
+    for (int k = 0; k < 4; ++k) T(r, k) = cam["T_cn_cnm1"][r][k].as<double>();
+  const Eigen::Isometry3d T_true = truth.T_cam_imu * before.T_cam_imu.inverse();
+  rows.push_back(compared(name + " baseline", "mm", 1e3 * T.topRightCorner<3, 1>().norm(),
+                          1e3 * T_true.translation().norm(),
+                          1e3 * get(own ? own["baseline_sigma_m"] : YAML::Node())));
+  const Eigen::AngleAxisd e_aa(Eigen::Matrix3d(T.topLeftCorner<3, 3>() * T_true.linear().transpose()));
+  const Eigen::Vector3d e = e_aa.angle() * e_aa.axis();
+  constexpr double kDeg = 180.0 / std::numbers::pi;
+  for (int i = 0; i < 3; ++i) {
+    TruthRow r = compared(name + " rel. rotation " + kAxis[i], "deg", kNotDetermined, kNotDetermined,
+                          kDeg * item("T_cn_cnm1_rotation_sigma_rad", i));
+    r.error_only = e(i) * kDeg;
+    rows.push_back(r);
+  }
+  rows.push_back(compared(name + " offset to cam0", "ms",
+                          1e3 * get(own ? own["timeshift_cam_cam0"] : YAML::Node()),
+                          1e3 * (truth.timeshift_cam_imu_s - cam0.timeshift_cam_imu_s),
+                          1e3 * get(own ? own["timeshift_cam_cam0_sigma"] : YAML::Node())));
 }
 
 /// The rows of one camera: intrinsics (camera-NAME.yaml), rotation, translation and time offset
@@ -419,8 +461,21 @@ class VirtualServiceRig final : public ServiceRig {
           notes << "  " << name << ": no such virtual camera, not compared\n";
           continue;
         }
-        camera_rows(c, files, sim_camera_for(cc->width, cc->height), CamImuSimOptions::default_T_cam_imu(),
-                    kVirtualTimeshiftCamImuS, rows, notes);
+        const VirtualCameraTruth truth =
+            virtual_camera_truth(*cc, static_cast<std::size_t>(cc - options_.cameras.begin()));
+        camera_rows(c, files, truth.camera, truth.T_cam_imu, truth.timeshift_cam_imu_s, rows, notes);
+      }
+    }
+    // The chain's pairs: camN against camN-1 in the configuration's order.
+    for (std::size_t n = 1; files.chain && files.chain.IsMap() && n < options_.cameras.size(); ++n) {
+      const YAML::Node cam = files.chain["cam" + std::to_string(n)];
+      if (!cam || !cam["T_cn_cnm1"]) continue;
+      try {
+        pair_rows(cam, options_.cameras[n].name, virtual_camera_truth(options_.cameras[n], n),
+                  virtual_camera_truth(options_.cameras[n - 1], n - 1),
+                  virtual_camera_truth(options_.cameras[0], 0), rows);
+      } catch (const std::exception& e) {
+        notes << "  " << options_.cameras[n].name << ": the camera chain not read (" << e.what() << ")\n";
       }
     }
     std::ostringstream head;
@@ -439,7 +494,9 @@ class VirtualServiceRig final : public ServiceRig {
     head << "; true biases: " << window << ".\n"
          << "  Cameras: intrinsics (camera-NAME.yaml), then the camera-IMU calibration (t_imu = t_cam + time "
             "offset; "
-            "the rotation's error about the camera's axes, R_est = Exp(e) R_true).\n";
+            "the rotation's error about the camera's axes, R_est = Exp(e) R_true); with several cameras the "
+            "camera chain's baseline, relative rotation (about the camera's axes) and time offset of each "
+            "camera against the one before.\n";
     return head.str() + table_text(rows) + notes.str();
   }
 

@@ -2,8 +2,11 @@
 // The virtual rig's cameras, assembled in one place for `imucal record --sim` and the service's
 // virtual rig (sim/service_rig.hpp): each configured camera becomes a virtual camera
 // (drivers/camera/fake) of the configured size and rate whose renderer draws the configured target
-// through the simulated lens at that size, mounted at CamImuSimOptions::default_T_cam_imu and
-// stamping on the rig's clock kVirtualTimeshiftCamImuS late.
+// through the simulated lens at that size. The first camera is mounted at
+// CamImuSimOptions::default_T_cam_imu; every further one is its stereo partner
+// (CamImuSimOptions::default_stereo_camera: 11 cm along cam0's x axis, its own intrinsics), the
+// second beside it on the other side, and so on. All stamp on the rig's clock
+// kVirtualTimeshiftCamImuS late.
 
 #include <cstddef>
 #include <cstdint>
@@ -27,9 +30,17 @@ inline constexpr TimeNs kVirtualExposureNs = 4'000'000;
 /// driver stamps a frame after its exposure. The camera-IMU calibration finds it.
 inline constexpr double kVirtualTimeshiftCamImuS = -0.004;
 
-/// What the rig's camera number `index` sees: the simulated lens at the configured size, the
-/// target, the default mounting, the time offset kVirtualTimeshiftCamImuS, its own noise (seed +
-/// index). Host time is trajectory time + host_offset_ns.
+/// The truth of the rig's camera number `index` (virtual_cameras.hpp's header): its camera model
+/// (with the configured shutter), T_cam_imu and time offset.
+struct VirtualCameraTruth {
+  CameraModel camera;
+  Eigen::Isometry3d T_cam_imu = Eigen::Isometry3d::Identity();
+  double timeshift_cam_imu_s = 0.0;
+};
+VirtualCameraTruth virtual_camera_truth(const CameraConfig& camera, std::size_t index);
+
+/// What the rig's camera number `index` sees: its truth (virtual_camera_truth), the target, its
+/// own noise (seed + index). Host time is trajectory time + host_offset_ns.
 SimCameraScene virtual_camera_scene(const CameraConfig& camera, const TargetDescription& target,
                                     std::uint64_t seed, std::size_t index, TimeNs host_offset_ns = 0);
 
