@@ -1016,46 +1016,23 @@ Status ChainSolver::choose_shutter(int* dropped) {
   for (std::size_t v = 0; v < views_.size(); ++v)
     if (blocks_[views_[v].camera].test)
       n += 2.0 * static_cast<double>(std::count(views_[v].keep.begin(), views_[v].keep.end(), 1));
-  const double threshold = shutter_bic_threshold(k, n);
   double readout = 0.0;  // the longest of the freed cameras, s
   for (std::size_t c = 0; c < blocks_.size(); ++c)
     if (blocks_[c].test)
       readout = std::max(readout, std::abs(blocks_[c].line_delay) * (starts_[c].camera.height - 1));
-  char text[400];
-  if (choose && lr > threshold && readout < kMinRollingReadoutS) {
-    std::snprintf(
-        text, sizeof text,
-        "global, chosen by the evidence: the line delay found reads a frame out in %.3f ms, less than the "
-        "%.1f ms of any rolling-shutter sensor (its chi-square drop %.1f against %.1f is what the model "
-        "leaves, not a shutter); --shutter rolling keeps it anyway",
-        1e3 * readout, 1e3 * kMinRollingReadoutS, lr, threshold);
-  } else if (choose && !(lr > threshold)) {
-    std::snprintf(
-        text, sizeof text,
-        "global, chosen by the evidence: freeing the line delay lowers the chi-square by only %.1f, less "
-        "than the %.1f it costs (BIC: k ln n, n = %.0f corner measurements); --shutter rolling "
-        "estimates it anyway",
-        lr, threshold, n);
-  }
-  if (choose && (!(lr > threshold) || readout < kMinRollingReadoutS)) {
+  const ShutterVerdict verdict = judge_shutter(choose, lr, k, n, readout);
+  if (!verdict.rolling) {
     blocks_ = global_blocks;
     q_ = global_q;
     p_ = global_p;
     for (CameraBlocks& b : blocks_)
-      if (b.test) b.shutter_choice = text;
+      if (b.test) b.shutter_choice = verdict.text;
     build(0.0);
     last_cost_ = global_cost;
     return {};
   }
-  std::snprintf(
-      text, sizeof text,
-      choose ? "rolling, chosen by the evidence: freeing the line delay lowers the chi-square by %.1f, "
-               "more than the %.1f it costs (BIC: k ln n, n = %.0f corner measurements)"
-             : "rolling, as requested (--shutter rolling); the line delay lowers the chi-square by %.1f "
-               "(BIC threshold %.1f, n = %.0f corner measurements)",
-      lr, threshold, n);
   for (CameraBlocks& b : blocks_)
-    if (b.test) b.shutter_choice = text;
+    if (b.test) b.shutter_choice = verdict.text;
   // The corners the global model's misfit had rejected (the views moving fastest) are taken back
   // and judged again: the robust pass, the rejection and the plain passes of run(), rolling.
   for (ViewData& v : views_) std::fill(v.keep.begin(), v.keep.end(), 1);

@@ -722,46 +722,18 @@ Status Estimator<N>::choose_shutter(bool extended, ceres::Solver::Summary* summa
   for (std::size_t k = 0; k < frames_.size(); ++k)
     if (frames_[k]->rolling()) measurements += 2.0 * static_cast<double>(frames_[k]->corners());
   const double k = static_cast<double>(tested.size());
-  const double threshold = shutter_bic_threshold(k, measurements);
   double readout = 0.0;  // the longest of the freed cameras, s
   for (std::size_t c : tested)
     readout = std::max(readout, std::abs(st_.cams[c].line_delay) * (cameras_[c].camera.height - 1));
-  char text[400];
-  if (choose && lr > threshold && readout < kMinRollingReadoutS) {
-    std::snprintf(
-        text, sizeof text,
-        "global, chosen by the evidence: the line delay found reads a frame out in %.3f ms, less than the "
-        "%.1f ms of any rolling-shutter sensor (its chi-square drop %.1f against %.1f is what the model "
-        "leaves, not a shutter); --shutter rolling keeps it anyway",
-        1e3 * readout, 1e3 * kMinRollingReadoutS, lr, threshold);
-  } else if (choose && !(lr > threshold)) {
-    std::snprintf(
-        text, sizeof text,
-        "global, chosen by the evidence: freeing the line delay lowers the chi-square by only %.1f, less "
-        "than the %.1f it costs (BIC: k ln n, n = %.0f corner measurements); --shutter rolling "
-        "estimates it anyway",
-        lr, threshold, measurements);
-  }
-  if (choose && (!(lr > threshold) || readout < kMinRollingReadoutS)) {
+  const ShutterVerdict verdict = judge_shutter(choose, lr, k, measurements, readout);
+  if (!verdict.rolling) {
     st_ = global_state;
     *summary = global_summary;
-    for (std::size_t c : tested) st_.cams[c].shutter_choice = text;
+    for (std::size_t c : tested) st_.cams[c].shutter_choice = verdict.text;
     rebuild(extended);
     return {};
   }
-  if (choose) {
-    std::snprintf(
-        text, sizeof text,
-        "rolling, chosen by the evidence: freeing the line delay lowers the chi-square by %.1f, more "
-        "than the %.1f it costs (BIC: k ln n, n = %.0f corner measurements)",
-        lr, threshold, measurements);
-  } else {
-    std::snprintf(text, sizeof text,
-                  "rolling, as requested (--shutter rolling); the line delay lowers the chi-square by %.1f "
-                  "(BIC threshold %.1f)",
-                  lr, threshold);
-  }
-  for (std::size_t c : tested) st_.cams[c].shutter_choice = text;
+  for (std::size_t c : tested) st_.cams[c].shutter_choice = verdict.text;
   // Weighted anew by the corner noise the rolling model leaves (the global one's overstated it).
   for (int round = 0; round < 3 && reestimate_corner_sigma(); ++round)
     if (Status s = solve(extended, "rolling shutter", summary); !s.ok()) return s;

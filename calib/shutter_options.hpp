@@ -4,7 +4,9 @@
 // share it. Method: docs/camimu-calibration.md and docs/camera-calibration.md, "Rolling shutter".
 
 #include <cmath>
+#include <cstdio>
 #include <optional>
+#include <string>
 
 namespace imucal::calib {
 
@@ -32,5 +34,48 @@ inline double shutter_bic_threshold(double k, double n) { return k * std::log(n 
 /// motion-dependent bias): statistically clear on a rendered recording with 0.03 px of corner
 /// noise (-0.24 +- 0.03 us per row, 0.06 ms, on the camera fixture), physically nothing.
 inline constexpr double kMinRollingReadoutS = 0.5e-3;
+
+/// What the evidence says of line delays freed after the global solution: `lr` the drop of the
+/// chi-square, `k` the line delays freed, `n` their cameras' corner measurements, `readout_s`
+/// the longest readout found; `choose` false when rolling was asked for (kept whatever the
+/// evidence). `rolling` false: the global solution is to be restored.
+struct ShutterVerdict {
+  bool rolling = false;
+  std::string text;  // the result's shutter_choice
+};
+inline ShutterVerdict judge_shutter(bool choose, double lr, double k, double n, double readout_s) {
+  const double threshold = shutter_bic_threshold(k, n);
+  char text[400];
+  ShutterVerdict v;
+  v.rolling = !choose || (lr > threshold && readout_s >= kMinRollingReadoutS);
+  if (!v.rolling && lr > threshold) {
+    std::snprintf(
+        text, sizeof text,
+        "global, chosen by the evidence: the line delay found reads a frame out in %.3f ms, less than "
+        "the %.1f ms of any rolling-shutter sensor (its chi-square drop %.1f against %.1f is what the "
+        "model leaves, not a shutter); --shutter rolling keeps it anyway",
+        1e3 * readout_s, 1e3 * kMinRollingReadoutS, lr, threshold);
+  } else if (!v.rolling) {
+    std::snprintf(
+        text, sizeof text,
+        "global, chosen by the evidence: freeing the line delay lowers the chi-square by only %.1f, less "
+        "than the %.1f it costs (BIC: k ln n, n = %.0f corner measurements); --shutter rolling "
+        "estimates it anyway",
+        lr, threshold, n);
+  } else if (choose) {
+    std::snprintf(
+        text, sizeof text,
+        "rolling, chosen by the evidence: freeing the line delay lowers the chi-square by %.1f, more "
+        "than the %.1f it costs (BIC: k ln n, n = %.0f corner measurements)",
+        lr, threshold, n);
+  } else {
+    std::snprintf(text, sizeof text,
+                  "rolling, as requested (--shutter rolling); the line delay lowers the chi-square by %.1f "
+                  "(BIC threshold %.1f, n = %.0f corner measurements)",
+                  lr, threshold, n);
+  }
+  v.text = text;
+  return v;
+}
 
 }  // namespace imucal::calib

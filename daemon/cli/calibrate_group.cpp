@@ -60,6 +60,46 @@ app::TargetChoice resolve_target(const std::string& target_path, const std::stri
   return *t;
 }
 
+void add_shutter_options(CLI::App* cmd, ShutterArgs* args, const std::string& shutter_help) {
+  cmd->add_option("--shutter", args->shutter, shutter_help)
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "global", "rolling"}));
+  cmd->add_option(
+         "--line-delay", args->line_delay_us,
+         "Hold a rolling shutter's line delay at this value, microseconds per row (the sensor mode's "
+         "readout time / rows, from its datasheet or libcamera)")
+      ->check(CLI::Range(-1000.0, 1000.0));
+  cmd->add_option("--readout", args->readout,
+                  "Rolling shutter readout direction: top_to_bottom or bottom_to_top (default: the camera "
+                  "file's, else top_to_bottom)")
+      ->check(CLI::IsMember({"top_to_bottom", "bottom_to_top"}));
+  cmd->add_option(
+         "--stamp-row", args->stamp_row,
+         "The row a frame's stamp refers to: first, middle or last (default: the camera file's, else "
+         "first)")
+      ->check(CLI::IsMember({"first", "middle", "last"}));
+}
+
+calib::ShutterSolveOptions shutter_solve_options(const ShutterArgs& args) {
+  using Mode = calib::ShutterSolveOptions::Mode;
+  if (args.line_delay_us && args.shutter == "global")
+    throw CliExit{kExitUsage, "--line-delay is for a rolling shutter: drop --shutter global"};
+  calib::ShutterSolveOptions o;
+  o.mode = args.shutter == "global"    ? Mode::kGlobal
+           : args.shutter == "rolling" ? Mode::kRolling
+                                       : Mode::kAuto;
+  if (args.line_delay_us) o.line_delay_s = 1e-6 * *args.line_delay_us;
+  return o;
+}
+
+void apply_shutter_args(const ShutterArgs& args, Shutter* shutter) {
+  if (args.readout == "bottom_to_top") shutter->readout = Shutter::Readout::kBottomToTop;
+  if (args.readout == "top_to_bottom") shutter->readout = Shutter::Readout::kTopToBottom;
+  if (args.stamp_row == "first") shutter->stamp_row = Shutter::StampRow::kFirst;
+  if (args.stamp_row == "middle") shutter->stamp_row = Shutter::StampRow::kMiddle;
+  if (args.stamp_row == "last") shutter->stamp_row = Shutter::StampRow::kLast;
+}
+
 void add_detection_store_options(CLI::App* cmd, DetectionStoreArgs* args) {
   cmd->add_flag(
       "--no-reuse", args->no_reuse,

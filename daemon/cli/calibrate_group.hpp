@@ -8,11 +8,28 @@
 
 #include "app/initial_guess.hpp"
 #include "app/results/camera_results.hpp"
+#include "calib/shutter_options.hpp"
+#include "core/camera_model.hpp"
 
 namespace imucal::cli {
 
 /// The `calibrate` subcommand of `root`, created on the first call.
 CLI::App* calibrate_group(CLI::App& root);
+
+/// A rolling shutter as `calibrate camera` and `calibrate camimu` take it: --shutter (its help,
+/// `shutter_help`, is the command's own), --line-delay, --readout, --stamp-row (empty: the camera
+/// file's, where there is one).
+struct ShutterArgs {
+  std::string shutter = "auto";
+  std::optional<double> line_delay_us;
+  std::string readout;
+  std::string stamp_row;
+};
+void add_shutter_options(CLI::App* cmd, ShutterArgs* args, const std::string& shutter_help);
+/// The solve's options; --line-delay with --shutter global is a usage error (exit 2).
+calib::ShutterSolveOptions shutter_solve_options(const ShutterArgs& args);
+/// --readout and --stamp-row, where given, into `shutter`.
+void apply_shutter_args(const ShutterArgs& args, Shutter* shutter);
 
 /// Local gravity as the calibrate commands take it: --gravity, or --latitude [--height].
 struct GravityArgs {

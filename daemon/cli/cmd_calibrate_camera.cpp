@@ -30,10 +30,7 @@ struct CameraCliOptions {
   std::string target_path;
   std::vector<std::string> models;
   bool hold_time_offsets = false;
-  std::string shutter = "auto";
-  std::optional<double> line_delay_us;
-  std::string readout = "top_to_bottom";
-  std::string stamp_row = "first";
+  ShutterArgs shutter;
   double knot_spacing_s = 0.0;
   int threads = 0;
   bool allow_damaged = false;
@@ -173,8 +170,7 @@ std::vector<DistortionModel> models_for(const CameraCliOptions& o, std::size_t c
 }
 
 void run(const CameraCliOptions& o) {
-  if (o.line_delay_us && o.shutter == "global")
-    throw CliExit{kExitUsage, "--line-delay is for a rolling shutter: drop --shutter global"};
+  const calib::ShutterSolveOptions shutter = shutter_solve_options(o.shutter);  // exit 2 before any work
   // Outputs are checked before the work: never the log or the target file, never an existing
   // file without --force.
   app::OutputPolicy outputs{o.force, {o.log_path}};
@@ -197,15 +193,8 @@ void run(const CameraCliOptions& o) {
   q.reuse_detections = !o.detections.no_reuse;
   q.store_detections = o.detections.store_in_log;
   q.cache_dir = detection_cache_dir(o.detections);
-  q.shutter.mode = o.shutter == "global"    ? calib::ShutterSolveOptions::Mode::kGlobal
-                   : o.shutter == "rolling" ? calib::ShutterSolveOptions::Mode::kRolling
-                                            : calib::ShutterSolveOptions::Mode::kAuto;
-  if (o.line_delay_us) q.shutter.line_delay_s = 1e-6 * *o.line_delay_us;
-  q.known_shutter.readout =
-      o.readout == "bottom_to_top" ? Shutter::Readout::kBottomToTop : Shutter::Readout::kTopToBottom;
-  q.known_shutter.stamp_row = o.stamp_row == "middle" ? Shutter::StampRow::kMiddle
-                              : o.stamp_row == "last" ? Shutter::StampRow::kLast
-                                                      : Shutter::StampRow::kFirst;
+  q.shutter = shutter;
+  apply_shutter_args(o.shutter, &q.known_shutter);
   Progress detecting("detecting the target", 1.0);
   Progress solving("solving", 1.0);
   q.detection_progress = [&detecting](double f) { detecting.update(f); };
@@ -283,25 +272,11 @@ void setup(CLI::App& root) {
                 "Several cameras: hold their time offsets against cam0 at 0 and give every instant its own "
                 "pose (cameras triggered together, or still pairs taken seconds apart) instead of estimating "
                 "the offsets on a trajectory");
-  cmd->add_option(
-         "--shutter", o->shutter,
-         "Camera shutter: auto (a video is also solved on a trajectory with a rolling shutter's line "
-         "delay, kept when the data support it; the summary says why), global (each view its own "
-         "pose), or rolling (the line delay estimated)")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"auto", "global", "rolling"}));
-  cmd->add_option(
-         "--line-delay", o->line_delay_us,
-         "Hold a rolling shutter's line delay at this value, microseconds per row (the sensor mode's "
-         "readout time / rows)")
-      ->check(CLI::Range(-1000.0, 1000.0));
-  cmd->add_option("--readout", o->readout,
-                  "Rolling shutter readout direction: top_to_bottom or bottom_to_top")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"top_to_bottom", "bottom_to_top"}));
-  cmd->add_option("--stamp-row", o->stamp_row, "The row a frame's stamp refers to: first, middle or last")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"first", "middle", "last"}));
+  add_shutter_options(
+      cmd, &o->shutter,
+      "Camera shutter: auto (a video is also solved on a trajectory with a rolling shutter's line "
+      "delay, kept when the data support it; the summary says why), global (each view its own "
+      "pose), or rolling (the line delay estimated)");
   cmd->add_option(
          "--knot-spacing", o->knot_spacing_s,
          "Several cameras: knot spacing in s of the target's trajectory (default: the shortest frame "

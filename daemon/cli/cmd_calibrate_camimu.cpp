@@ -37,10 +37,7 @@ struct CamImuCliOptions {
   std::string gsens_path;
   std::string imu_stream;
   std::string model = "auto";
-  std::string shutter = "auto";
-  std::optional<double> line_delay_us;
-  std::string readout;    // empty: the camera file's
-  std::string stamp_row;  // empty: the camera file's
+  ShutterArgs shutter;
   bool keep_noise = false;
   bool no_prior = false;
   std::vector<std::string> fix;
@@ -77,8 +74,7 @@ std::vector<std::string> check_outputs(const CamImuCliOptions& o, const app::Out
 /// The method's options from the command line, checked before the log is read.
 app::CamImuRequest build_request(const CamImuCliOptions& o) {
   app::CamImuRequest q;
-  if (o.line_delay_us && o.shutter == "global")
-    throw CliExit{kExitUsage, "--line-delay is for a rolling shutter: drop --shutter global"};
+  const calib::ShutterSolveOptions shutter = shutter_solve_options(o.shutter);  // exit 2 before any work
   q.log_path = o.log_path;
   q.imu_stream = o.imu_stream;
   if (!o.camera_paths.empty()) {
@@ -107,17 +103,8 @@ app::CamImuRequest build_request(const CamImuCliOptions& o) {
   q.options.model = o.model == "basic"      ? CamImuModelKind::kBasic
                     : o.model == "extended" ? CamImuModelKind::kExtended
                                             : CamImuModelKind::kAuto;
-  q.options.shutter.mode = o.shutter == "global"    ? calib::CamImuShutterOptions::Mode::kGlobal
-                           : o.shutter == "rolling" ? calib::CamImuShutterOptions::Mode::kRolling
-                                                    : calib::CamImuShutterOptions::Mode::kAuto;
-  if (o.line_delay_us) q.options.shutter.line_delay_s = *o.line_delay_us * 1e-6;
-  for (auto& cam : q.cameras) {
-    if (o.readout == "bottom_to_top") cam.camera.shutter.readout = Shutter::Readout::kBottomToTop;
-    if (o.readout == "top_to_bottom") cam.camera.shutter.readout = Shutter::Readout::kTopToBottom;
-    if (o.stamp_row == "first") cam.camera.shutter.stamp_row = Shutter::StampRow::kFirst;
-    if (o.stamp_row == "middle") cam.camera.shutter.stamp_row = Shutter::StampRow::kMiddle;
-    if (o.stamp_row == "last") cam.camera.shutter.stamp_row = Shutter::StampRow::kLast;
-  }
+  q.options.shutter = shutter;
+  for (auto& cam : q.cameras) apply_shutter_args(o.shutter, &cam.camera.shutter);
   q.options.imu_noise_from_residuals = !o.keep_noise;
   q.options.prior.enabled = !o.no_prior;
   for (const auto& name : o.fix) {
@@ -304,26 +291,10 @@ void add_options(CLI::App* cmd, CamImuCliOptions* o) {
                   "extended (Krebs: S, M, C_bg, B_g) or basic (biases)")
       ->capture_default_str()
       ->check(CLI::IsMember({"auto", "basic", "extended"}));
-  cmd->add_option(
-         "--shutter", o->shutter,
-         "Camera shutter: auto (global or rolling, whichever the data support; the summary says why), "
-         "global, or rolling (its line delay estimated)")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"auto", "global", "rolling"}));
-  cmd->add_option(
-         "--line-delay", o->line_delay_us,
-         "Hold a rolling shutter's line delay at this value, microseconds per row (the sensor mode's "
-         "readout time / rows, from its datasheet or libcamera)")
-      ->check(CLI::Range(-1000.0, 1000.0));
-  cmd->add_option("--readout", o->readout,
-                  "Rolling shutter readout direction: top_to_bottom or bottom_to_top (default: the camera "
-                  "file's, else top_to_bottom)")
-      ->check(CLI::IsMember({"top_to_bottom", "bottom_to_top"}));
-  cmd->add_option(
-         "--stamp-row", o->stamp_row,
-         "The row a frame's stamp refers to: first, middle or last (default: the camera file's, else "
-         "first)")
-      ->check(CLI::IsMember({"first", "middle", "last"}));
+  add_shutter_options(
+      cmd, &o->shutter,
+      "Camera shutter: auto (global or rolling, whichever the data support; the summary says why), "
+      "global, or rolling (its line delay estimated)");
   cmd->add_flag("--no-prior", o->no_prior,
                 "No prior on the extended model's intrinsics (default: the MPU-6000 datasheet tolerances, "
                 "docs/camimu-calibration.md)");
