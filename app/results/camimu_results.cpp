@@ -117,6 +117,11 @@ json krebs_sigma_json(const KrebsImuSigma& s) {
           {"B_g", mat_json(s.B_g)}, {"b_g", vec_json(s.b_g)}};
 }
 
+/// A sigma for YAML: null where it is not determined (held, or NaN).
+YAML::Node yaml_sigma(double v) {
+  return std::isfinite(v) ? YAML::Node(v) : YAML::Node(YAML::NodeType::Null);
+}
+
 json camera_model_json(const CameraModel& c) {
   json j = {{"camera_model", "pinhole"},
             {"intrinsics", vec_json(c.intrinsics)},
@@ -510,7 +515,7 @@ std::string camimu_camchain_yaml(const CamImuReport& r) {
     q["rotation_sigma_rad"] = flow_vec(c.rotation_sigma_rad);
     q["translation_sigma_m"] = flow_vec(c.translation_sigma_m);
     q["timeshift_sigma_s"] = c.timeshift_sigma_s;
-    if (c.camera.shutter.rolling()) q["line_delay_sigma_s"] = c.line_delay_sigma_s;
+    if (c.camera.shutter.rolling()) q["line_delay_sigma_s"] = yaml_sigma(c.line_delay_sigma_s);
     if (!c.shutter_choice.empty()) q["shutter_choice"] = c.shutter_choice;
     q["reprojection_rms_px"] = c.reprojection_rms_px;
     q["corner_sigma_px"] = c.corner_sigma_px;
@@ -608,7 +613,7 @@ std::string camimu_calibration_yaml(const CamImuReport& r) {
     cam["shutter"] = shutter_kind_name(c.camera.shutter.kind);
     if (c.camera.shutter.rolling()) {
       cam["line_delay_s"] = c.camera.shutter.line_delay_s;
-      cam["line_delay_sigma_s"] = c.line_delay_sigma_s;
+      cam["line_delay_sigma_s"] = yaml_sigma(c.line_delay_sigma_s);
     }
     cams["cam" + std::to_string(i)] = cam;
   }
