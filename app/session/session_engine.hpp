@@ -126,8 +126,9 @@ class SessionEngine {
   [[nodiscard]] Result<std::vector<StepId>> plan(const std::vector<std::string>& steps) const;
   /// One IMU sample, in time order.
   void on_sample(const ImuSample& sample);
-  /// A camera frame at `t_ns`; `target_seen` when the target was detected in it.
-  void on_frame(TimeNs t_ns, bool target_seen);
+  /// A frame of camera `camera` (its index in the configuration) at `t_ns`; `target_seen` when
+  /// the target was detected in it.
+  void on_frame(std::size_t camera, TimeNs t_ns, bool target_seen);
   /// An operator key: continue, redo, abort, accept, reject, skip. Errors say why it does not
   /// apply now.
   [[nodiscard]] Status key(const std::string& key);
@@ -280,6 +281,12 @@ class SessionEngine {
   long motion_count_ = 0;
   long frames_ = 0, frames_seen_ = 0;
   TimeNs last_seen_ns_ = -1;
+  // Several cameras: each one's frames and detections, its last detection, and the instants at
+  // which every camera saw the target (within half a frame interval of each other).
+  std::vector<long> camera_frames_, camera_seen_;
+  std::vector<TimeNs> camera_last_seen_ns_;
+  long frames_shared_ = 0;
+  TimeNs last_shared_ns_ = -1;
   long saturated_ = 0;
   // solve and review
   int final_id_ = 0;

@@ -233,7 +233,7 @@ double max_difference(const json& a, const json& b) {
 bool apply(SessionEngine& engine, ReplayHost& host, const json& m, ReplaySummary& summary, std::string* why) {
   const std::string type = m.value("type", "");
   if (type == "frame") {
-    engine.on_frame(m.value("t_ns", TimeNs{0}), m.value("seen", false));
+    engine.on_frame(m.value("camera", std::size_t{0}), m.value("t_ns", TimeNs{0}), m.value("seen", false));
   } else if (type == "key") {
     ++summary.keys;
     (void)engine.key(m.value("key", ""));

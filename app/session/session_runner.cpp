@@ -601,7 +601,7 @@ void SessionRunner::on_frame(std::size_t camera, drivers::camera::Frame& frame,
         !s.ok())
       warn("session log: " + s.error().message);
   }
-  engine_.on_frame(t_ns, seen);
+  engine_.on_frame(camera, t_ns, seen);
 }
 
 void SessionRunner::fault(const std::string& source, const std::string& text) { engine_.fault(source, text); }

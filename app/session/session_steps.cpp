@@ -129,7 +129,7 @@ void SessionEngine::on_sample(const ImuSample& sample) {
   }
 }
 
-void SessionEngine::on_frame(TimeNs t_ns, bool target_seen) {
+void SessionEngine::on_frame(std::size_t camera, TimeNs t_ns, bool target_seen) {
   if (state_ != SessionState::kRunning || current_ >= steps_.size() || steps_[current_].id != StepId::kMotion)
     return;
   ++frames_;
@@ -137,6 +137,22 @@ void SessionEngine::on_frame(TimeNs t_ns, bool target_seen) {
     ++frames_seen_;
     last_seen_ns_ = t_ns;
   }
+  if (camera >= camera_frames_.size()) return;
+  ++camera_frames_[camera];
+  if (!target_seen) return;
+  ++camera_seen_[camera];
+  camera_last_seen_ns_[camera] = t_ns;
+  // An instant every camera saw the target: each one's last detection within half a frame
+  // interval (of the slowest camera) of this one, counted once.
+  if (camera_frames_.size() < 2) return;
+  double rate = 0.0;
+  for (const CameraConfig& c : config_.cameras) rate = rate == 0.0 ? c.rate_hz : std::min(rate, c.rate_hz);
+  const TimeNs half = rate > 0.0 ? static_cast<TimeNs>(0.5e9 / rate) : 25'000'000;
+  if (last_shared_ns_ >= 0 && std::abs(t_ns - last_shared_ns_) < half) return;
+  for (TimeNs seen : camera_last_seen_ns_)
+    if (seen < 0 || std::abs(t_ns - seen) >= half) return;
+  ++frames_shared_;
+  last_shared_ns_ = t_ns;
 }
 
 std::optional<SessionEngine::TemperatureTrend> SessionEngine::temperature_trend(
@@ -525,6 +541,25 @@ void SessionEngine::sample_motion(const ImuSample& si) {
             fixed(accel_std.z(), 1),
         "Target seen in " + std::to_string(frames_seen_) + " of " + std::to_string(frames_) + " frames",
         "Time left " + fixed(std::max(0.0, config_.session.motion_s - elapsed), 0) + " s"};
+    // Several cameras: each one's detection rate and the instants all of them saw the target
+    // (what the camera chain is solved from).
+    if (camera_frames_.size() >= 2) {
+      std::string rates = "Target seen:";
+      long fewest = -1;
+      for (std::size_t c = 0; c < camera_frames_.size(); ++c) {
+        const long n = camera_frames_[c];
+        rates +=
+            " " + config_.cameras[c].name + " " +
+            (n > 0 ? fixed(100.0 * static_cast<double>(camera_seen_[c]) / static_cast<double>(n), 0) + " %"
+                   : std::string("no frame"));
+        fewest = fewest < 0 ? n : std::min(fewest, n);
+      }
+      const double shared =
+          fewest > 0 ? 100.0 * static_cast<double>(frames_shared_) / static_cast<double>(fewest) : 0.0;
+      rates += "; all cameras at once " + fixed(shared, 0) + " %";
+      lines.insert(lines.begin() + 3, rates);
+      if (elapsed > 10.0 && shared < 50.0) lines.push_back("Keep the target where every camera sees it");
+    }
     for (int a = 0; a < 3; ++a) {
       if (elapsed > 10.0 && gyro_rms[a] < 20.0 * kDeg)
         lines.push_back(std::string("Rotate more about ") + "xyz"[a]);
@@ -534,7 +569,10 @@ void SessionEngine::sample_motion(const ImuSample& si) {
     live(lines, std::min(1.0, elapsed / config_.session.motion_s),
          {{"gyro_rms_dps", {gyro_rms.x() / kDeg, gyro_rms.y() / kDeg, gyro_rms.z() / kDeg}},
           {"frames", frames_},
-          {"frames_seen", frames_seen_}});
+          {"frames_seen", frames_seen_},
+          {"camera_frames", camera_frames_},
+          {"camera_frames_seen", camera_seen_},
+          {"frames_seen_by_every_camera", frames_shared_}});
   }
   if (elapsed >= config_.session.motion_s) advance();
 }

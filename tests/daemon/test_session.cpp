@@ -622,7 +622,7 @@ TEST(Session, MotionStepShowsExcitationDetectionAndSaturation) {
     const bool seen =
         !ss.of_type("prompt").empty() &&
         t - static_cast<TimeNs>(ss.of_type("prompt").back().value("t", 0.0) * 1e9) < 4'000'000'000;
-    engine.on_frame(t, seen);
+    engine.on_frame(0, t, seen);
     if (!turned) {
       turned = true;
       // Half a turn in 0.2 s: about 1700 deg/s at its peak, far beyond the +-500 deg/s range.
@@ -644,6 +644,54 @@ TEST(Session, MotionStepShowsExcitationDetectionAndSaturation) {
   }
   EXPECT_TRUE(lost);
   EXPECT_TRUE(counted);
+}
+
+// Two cameras: the motion step shows each one's detection rate and the share of instants both see
+// the target, and asks to keep it where every camera sees it when that share is low.
+TEST(Session, MotionStepWithTwoCamerasShowsEachRateAndTheSharedShare) {
+  ModuleDir modules;
+  RigConfig config = session_config({"preflight", "motion"});
+  config.session.motion_s = 14.0;
+  ASSERT_EQ(config.cameras.size(), 1u);
+  config.cameras.push_back(config.cameras[0]);
+  config.cameras[1].name = "cam1";
+  SimSession s(config);
+  s.scripted_ = false;
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  TimeNs last_frame = -1;
+  s.run(60.0, [&](SimSession& ss) {
+    auto& engine = ss.runner_->engine();
+    if (engine.status().value("step", "") != "motion" || ss.of_type("prompt").empty()) return;
+    const TimeNs t = ss.rig_->now_ns();
+    if (last_frame >= 0 && t - last_frame < 50'000'000) return;  // both cameras at their 20 Hz
+    last_frame = t;
+    // cam0 sees the target throughout, cam1 only in the first 4 s of the step.
+    const bool early =
+        t - static_cast<TimeNs>(ss.of_type("prompt").back().value("t", 0.0) * 1e9) < 4'000'000'000;
+    engine.on_frame(0, t, true);
+    engine.on_frame(1, t, early);
+  });
+  EXPECT_EQ(s.outcome(), "recorded");
+  bool rates = false, advice = false;
+  json last;
+  for (const auto& m : s.of_type("live")) {
+    for (const auto& line : m.value("lines", json::array())) {
+      const std::string l = line.get<std::string>();
+      rates = rates || (l.find("Target seen: cam0 100 % cam1 ") != std::string::npos &&
+                        l.find("all cameras at once") != std::string::npos);
+      advice = advice || l.find("Keep the target where every camera sees it") != std::string::npos;
+    }
+    if (m.contains("figures") && m["figures"].contains("frames_seen_by_every_camera")) last = m["figures"];
+  }
+  EXPECT_TRUE(rates);
+  EXPECT_TRUE(advice);
+  ASSERT_FALSE(last.is_null());
+  const long both = last["frames_seen_by_every_camera"].get<long>();
+  const long cam0 = last["camera_frames_seen"][0].get<long>();
+  const long cam1 = last["camera_frames_seen"][1].get<long>();
+  EXPECT_GT(both, 0);
+  EXPECT_EQ(both, cam1);  // every instant cam1 saw the target, cam0 saw it too
+  EXPECT_LT(2 * cam1, cam0);
 }
 
 }  // namespace
