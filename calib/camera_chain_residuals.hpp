@@ -351,17 +351,11 @@ class ChainFrameResidual final : public ceres::CostFunction {
       }
       if (jac[kRci]) camimu::put<2>(jac[kRci], 4, row, rows, -Jc * Rci * so3::hat(pb));
       if (jac[kTci]) camimu::put<2>(jac[kTci], 3, row, rows, Jc);
-      if (jac[kShift] || (rolling_ && jac[kLineDelay])) {
-        const Eigen::Vector2d d = Jb * (so3::hat(pb) * ps.e.omega - Rt * ps.vel);
-        if (jac[kShift]) {
-          jac[kShift][row] = d(0);
-          jac[kShift][row + 1] = d(1);
-        }
-        if (rolling_ && jac[kLineDelay]) {
-          jac[kLineDelay][row] = row_offset_[k] * d(0);
-          jac[kLineDelay][row + 1] = row_offset_[k] * d(1);
-        }
-      }
+      double* j_line_delay = rolling_ ? jac[kLineDelay] : nullptr;
+      if (jac[kShift] || j_line_delay)
+        camimu::put_time_jacobians(jac[kShift], j_line_delay, row,
+                                   Jb * (so3::hat(pb) * ps.e.omega - Rt * ps.vel),
+                                   rolling_ ? row_offset_[k] : 0.0);
       for (int c = 0; c < 4; ++c) {
         if (jac[kIntr]) {
           jac[kIntr][row * 4 + c] = Jw(0, 3 + c);

@@ -288,6 +288,21 @@ SplinePose<N> spline_pose(double const* const* p, int q0, int p0, double t_s, in
   return out;
 }
 
+/// A corner's rows (row, row + 1) of the Jacobians in the time offset and a rolling shutter's line
+/// delay (either may be null): `d` is d r / d t at the corner's time, and its time moves by
+/// `row_offset` per unit of line delay.
+inline void put_time_jacobians(double* j_shift, double* j_line_delay, int row, const Eigen::Vector2d& d,
+                               double row_offset) {
+  if (j_shift) {
+    j_shift[row] = d(0);
+    j_shift[row + 1] = d(1);
+  }
+  if (j_line_delay) {
+    j_line_delay[row] = row_offset * d(0);
+    j_line_delay[row + 1] = row_offset * d(1);
+  }
+}
+
 /// A weighted 2-vector residual e with the Cauchy loss rho(s) = c2 log(1 + s / c2) folded in:
 /// r = g(s) e with g = sqrt(rho(s) / s), so that |r|^2 = rho(s); `L` (may be null) receives its
 /// exact Jacobian in e, g I + 2 g'(s) e e^T. c2 = infinity leaves e unchanged.
@@ -475,17 +490,10 @@ bool FrameResidual<N>::evaluate_corners(double const* const* p, double* residual
     }
     if (jac[kRci]) put<2>(jac[kRci], 4, row, rows, -Jc * Rci * so3::hat(pb));
     if (jac[kTci]) put<2>(jac[kTci], 3, row, rows, Jc);
-    if (jac[kShift] || (rolling_ && jac[kLineDelay])) {
-      const Eigen::Vector2d d = Jb * (so3::hat(pb) * ps.e.omega - Rt * ps.vel);
-      if (jac[kShift]) {
-        jac[kShift][row] = d(0);
-        jac[kShift][row + 1] = d(1);
-      }
-      if (rolling_ && jac[kLineDelay]) {
-        jac[kLineDelay][row] = row_offset_[k] * d(0);
-        jac[kLineDelay][row + 1] = row_offset_[k] * d(1);
-      }
-    }
+    double* j_line_delay = rolling_ ? jac[kLineDelay] : nullptr;
+    if (jac[kShift] || j_line_delay)
+      put_time_jacobians(jac[kShift], j_line_delay, row, Jb * (so3::hat(pb) * ps.e.omega - Rt * ps.vel),
+                         rolling_ ? row_offset_[k] : 0.0);
   }
   return true;
 }
