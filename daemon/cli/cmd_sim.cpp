@@ -17,6 +17,7 @@
 #include "app/module_loader.hpp"
 #include "app/results/output_checks.hpp"
 #include "core/text_format.hpp"
+#include "daemon/cli/calibrate_group.hpp"
 #include "daemon/cli/command.hpp"
 #include "log/dataset_io.hpp"
 #include "log/session_log.hpp"
@@ -328,6 +329,52 @@ void add_gsens(CLI::App* sim) {
   });
 }
 
+/// The simulated camera's sensor and shutter: --resolution, --line-delay, --readout, --stamp-row.
+struct SimCameraArgs {
+  std::string resolution;
+  double line_delay_us = 0.0;
+  ShutterArgs shutter;  // its readout and stamp_row
+};
+
+void add_sim_camera_options(CLI::App* cmd, SimCameraArgs* a) {
+  cmd->add_option("--resolution", a->resolution,
+                  "Camera resolution WIDTHxHEIGHT, the default lens on that sensor (default 376x240; the "
+                  "WVGA sensor unbinned is 752x480)");
+  CLI::Option* line_delay =
+      cmd->add_option(
+             "--line-delay", a->line_delay_us,
+             "Rolling shutter: microseconds between the starts of consecutive rows (0: global shutter, "
+             "the default; 30 us on 480 rows reads a frame out in 14.4 ms). Every camera renders each "
+             "row at its own time and the truth has the line delay")
+          ->check(CLI::Range(0.0, 1000.0));
+  cmd->add_option("--readout", a->shutter.readout,
+                  "With --line-delay: top_to_bottom (default) or bottom_to_top")
+      ->check(CLI::IsMember({"top_to_bottom", "bottom_to_top"}))
+      ->needs(line_delay);
+  cmd->add_option("--stamp-row", a->shutter.stamp_row,
+                  "With --line-delay: the row whose mid-exposure the frame's stamp marks: first (default), "
+                  "middle or last")
+      ->check(CLI::IsMember({"first", "middle", "last"}))
+      ->needs(line_delay);
+}
+
+/// The camera the arguments describe (the default lens on the given sensor, its shutter).
+void apply_sim_camera_args(const SimCameraArgs& a, CameraModel* camera) {
+  if (!a.resolution.empty()) {
+    int w = 0, h = 0;
+    char x = 0;
+    std::istringstream in(a.resolution);
+    if (!(in >> w >> x >> h) || x != 'x' || !in.eof() || w < 16 || h < 16 || w > 8192 || h > 8192)
+      throw CliExit{kExitUsage, "--resolution takes WIDTHxHEIGHT in pixels, 16-8192 each, e.g. 752x480"};
+    *camera = sim::sim_camera_for(w, h);
+  }
+  if (a.line_delay_us > 0.0) {
+    camera->shutter.kind = Shutter::Kind::kRolling;
+    camera->shutter.line_delay_s = a.line_delay_us * 1e-6;
+    apply_shutter_args(a.shutter, &camera->shutter);
+  }
+}
+
 /// `sim camimu`: checkerboard motion with rendered frames, through its own session writer.
 void add_camimu(CLI::App* sim) {
   auto o = std::make_shared<SimCommon>();
@@ -360,47 +407,10 @@ void add_camimu(CLI::App* sim) {
                   "(cameras that are not synchronized; default 0)")
       ->check(CLI::Range(-100.0, 100.0))
       ->needs(stereo_flag);
-  auto line_delay_us = std::make_shared<double>(0.0);
-  auto readout = std::make_shared<std::string>("top_to_bottom");
-  auto stamp_row = std::make_shared<std::string>("first");
-  auto resolution = std::make_shared<std::string>();
-  cmd->add_option("--resolution", *resolution,
-                  "Camera resolution WIDTHxHEIGHT, the default lens on that sensor (default 376x240; the "
-                  "WVGA sensor unbinned is 752x480)");
-  CLI::Option* line_delay_opt =
-      cmd->add_option(
-             "--line-delay", *line_delay_us,
-             "Rolling shutter: microseconds between the starts of consecutive rows (0: global shutter, "
-             "the default; 30 us on 480 rows reads a frame out in 14.4 ms). Every camera renders each "
-             "row at its own time and the truth has the line delay")
-          ->check(CLI::Range(0.0, 1000.0));
-  cmd->add_option("--readout", *readout, "With --line-delay: top_to_bottom (default) or bottom_to_top")
-      ->check(CLI::IsMember({"top_to_bottom", "bottom_to_top"}))
-      ->needs(line_delay_opt);
-  cmd->add_option("--stamp-row", *stamp_row,
-                  "With --line-delay: the row whose mid-exposure the frame's stamp marks: first (default), "
-                  "middle or last")
-      ->check(CLI::IsMember({"first", "middle", "last"}))
-      ->needs(line_delay_opt);
-  cmd->callback([o, co, cmd, target_path, stereo, cam1_offset_ms, line_delay_us, readout, stamp_row,
-                 resolution]() {
-    if (!resolution->empty()) {
-      int w = 0, h = 0;
-      char x = 0;
-      std::istringstream in(*resolution);
-      if (!(in >> w >> x >> h) || x != 'x' || !in.eof() || w < 16 || h < 16 || w > 8192 || h > 8192)
-        throw CliExit{kExitUsage, "--resolution takes WIDTHxHEIGHT in pixels, 16-8192 each, e.g. 752x480"};
-      co->camera = sim::sim_camera_for(w, h);
-    }
-    if (*line_delay_us > 0.0) {
-      co->camera.shutter.kind = Shutter::Kind::kRolling;
-      co->camera.shutter.line_delay_s = *line_delay_us * 1e-6;
-      co->camera.shutter.readout =
-          *readout == "bottom_to_top" ? Shutter::Readout::kBottomToTop : Shutter::Readout::kTopToBottom;
-      co->camera.shutter.stamp_row = *stamp_row == "middle" ? Shutter::StampRow::kMiddle
-                                     : *stamp_row == "last" ? Shutter::StampRow::kLast
-                                                            : Shutter::StampRow::kFirst;
-    }
+  auto camera_args = std::make_shared<SimCameraArgs>();
+  add_sim_camera_options(cmd, camera_args.get());
+  cmd->callback([o, co, cmd, target_path, stereo, cam1_offset_ms, camera_args]() {
+    apply_sim_camera_args(*camera_args, &co->camera);
     if (!target_path->empty()) {
       auto target = load_target_yaml(*target_path);
       if (!target.ok()) fail(target.error(), "sim camimu --target");
