@@ -46,16 +46,18 @@ struct Shutter {
     if (!rolling()) return 0.0;
     const double last = static_cast<double>(height - 1);
     const double line = readout == Readout::kTopToBottom ? v : last - v;
-    const double ref = stamp_row == StampRow::kFirst ? 0.0 : stamp_row == StampRow::kMiddle ? 0.5 * last : last;
+    const double ref = stamp_row == StampRow::kFirst    ? 0.0
+                       : stamp_row == StampRow::kMiddle ? 0.5 * last
+                                                        : last;
     return line - ref;
   }
   double row_time(double v, int height) const { return row_offset(v, height) * line_delay_s; }
   /// The whole frame's readout, s (0 for a global shutter).
   double readout_s(int height) const { return rolling() ? line_delay_s * (height - 1) : 0.0; }
 };
-const char* shutter_kind_name(Shutter::Kind kind);         // "global", "rolling"
-const char* readout_name(Shutter::Readout readout);        // "top_to_bottom", "bottom_to_top"
-const char* stamp_row_name(Shutter::StampRow stamp_row);   // "first", "middle", "last"
+const char* shutter_kind_name(Shutter::Kind kind);        // "global", "rolling"
+const char* readout_name(Shutter::Readout readout);       // "top_to_bottom", "bottom_to_top"
+const char* stamp_row_name(Shutter::StampRow stamp_row);  // "first", "middle", "last"
 
 /// Kalibr's name: "radtan" or "equidistant".
 const char* distortion_model_name(DistortionModel model);
@@ -108,7 +110,7 @@ struct CameraModelT {
   Vec4 distortion_coeffs = Vec4::Zero();  // radtan: k1 k2 p1 p2; equidistant: k1 k2 k3 k4
   int width = 0;                          // resolution, pixels
   int height = 0;
-  Shutter shutter;                        // global unless the camera file says rolling
+  Shutter shutter;  // global unless the camera file says rolling
 
   struct Projection {
     Vec2 px = Vec2::Zero();

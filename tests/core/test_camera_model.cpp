@@ -172,7 +172,8 @@ TEST(CameraModel, RollingShutterKeysRoundTripAndGiveEachRowItsTime) {
   auto micro = parse_camera_yaml(base + "shutter: rolling\nline_delay_s: 30\n", "cam.yaml");
   ASSERT_FALSE(micro.ok());
   EXPECT_NE(micro.error().message.find("3.0e-05"), std::string::npos) << micro.error().message;
-  auto dir = parse_camera_yaml(base + "shutter: rolling\nline_delay_s: 3e-5\nreadout_direction: left\n", "cam.yaml");
+  auto dir =
+      parse_camera_yaml(base + "shutter: rolling\nline_delay_s: 3e-5\nreadout_direction: left\n", "cam.yaml");
   ASSERT_FALSE(dir.ok());
   EXPECT_NE(dir.error().message.find("top_to_bottom or bottom_to_top"), std::string::npos);
 }
