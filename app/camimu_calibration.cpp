@@ -4,7 +4,11 @@
 
 #include "app/camimu_calibration.hpp"
 
+#include <cmath>
+#include <cstdio>
+
 #include "app/camera_calibration.hpp"
+#include "app/camimu_self_check.hpp"
 #include "app/results/thermal_results.hpp"
 #include "app/streams.hpp"
 
@@ -108,6 +112,34 @@ Status prepare_options(const CamImuRequest& q, CamImuReport* report) {
   return {};
 }
 
+/// Where the parts disagree on a camera's extrinsics and time offset beyond chance (their
+/// chi-square's probability below 5 %), that camera's sigmas are scaled by sqrt(chi-square / dof):
+/// the spread of the parts is then what the sigmas promise (docs/camimu-calibration.md,
+/// "Self-check").
+void scale_by_self_check(CamImuCalibrationResult* r, std::vector<std::string>* notes) {
+  SplitCheck& sc = r->self_check;
+  if (sc.verdict != SplitCheck::Verdict::kAgree && sc.verdict != SplitCheck::Verdict::kDisagree) return;
+  for (CamImuCameraResult& c : r->cameras) {
+    int dof = 0;
+    const double chi = split_chi_square(sc, c.name + " ", &dof);
+    if (dof == 0 || !(chi_square_probability(chi, dof) < 0.05)) continue;
+    const double k = std::sqrt(chi / dof);
+    c.rotation_sigma_rad *= k;
+    c.translation_sigma_m *= k;
+    c.timeshift_sigma_s *= k;
+    c.line_delay_sigma_s *= k;
+    sc.scaled.emplace_back(c.name, k);
+    char text[300];
+    std::snprintf(
+        text, sizeof text,
+        "%s's sigmas (extrinsics, time offset, line delay) are scaled by %.2f: the parts of the "
+        "recording spread that much more than their own sigmas allow (chi-square %.1f for %d degrees "
+        "of freedom)",
+        c.name.c_str(), k, chi, dof);
+    notes->emplace_back(text);
+  }
+}
+
 }  // namespace
 
 Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& q) {
@@ -166,6 +198,17 @@ Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& q) {
   auto result = calib::calibrate_camimu(samples, inputs, q.target, report.options, q.solve_progress);
   if (!result.ok()) return result.error().context("camera-IMU calibration of " + q.log_path);
   report.result = std::move(*result);
+  if (q.self_check_parts >= 2) {
+    if (q.solve_progress) q.solve_progress({"self-check", q.self_check_parts, 0.0, 0.0});
+    report.result.self_check = camimu_self_check(samples, inputs, q.target, report.options, report.result,
+                                                 q.self_check_parts, report.options.threads);
+    scale_by_self_check(&report.result, &report.notes);
+    const SplitCheck& sc = report.result.self_check;
+    if (sc.verdict == SplitCheck::Verdict::kDisagree)
+      report.result.warnings.push_back("self-check: " + sc.summary + "; " + sc.advice);
+    else if (sc.verdict == SplitCheck::Verdict::kNotDetermined)
+      report.notes.push_back(sc.summary);
+  }
   report.warnings.insert(report.warnings.end(), report.result.warnings.begin(), report.result.warnings.end());
   return report;
 }

@@ -53,6 +53,9 @@ struct CamImuRequest {
   calib::CamImuOptions options;
   std::string gravity_source;
   int threads = 0;  // detection workers; 0 = all cores
+  /// The self-check (app/camimu_self_check.hpp): this many consecutive parts calibrated apart
+  /// and compared; 0 or 1: none.
+  int self_check_parts = 2;
   bool allow_damaged = false;
   bool reuse_detections = true;
   bool store_detections = false;  // in the log; else in cache_dir when given (StreamDetectionRequest)

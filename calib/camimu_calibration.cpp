@@ -43,6 +43,8 @@ Status CamImuOptions::validate() const {
     return make_error(Errc::kInvalidArgument, "the largest time offset searched must be within (0, 1] s");
   if (max_iterations < 1)
     return make_error(Errc::kInvalidArgument, "at least one solver iteration is needed");
+  if (!(covariance_cluster_s >= 0.0 && covariance_cluster_s <= 3600.0))
+    return make_error(Errc::kInvalidArgument, "the covariance's cluster length must be within 0-3600 s");
   if (!(imu_max_rate_hz == 0.0 || imu_max_rate_hz >= 20.0))
     return make_error(Errc::kInvalidArgument,
                       "the IMU's largest rate must be 0 (one residual per sample) or at least 20 Hz");
@@ -271,6 +273,7 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended, int imu_stride)
   imu_blocks_.clear();
   imu_index_.clear();
   priors_.clear();
+  timed_residuals_.clear();
   for (std::size_t k = 0; k < imu_.size(); k += static_cast<std::size_t>(imu_stride)) {
     const CamImuSample& s = imu_[k];
     const double t = t_s(s.t_ns);
@@ -286,7 +289,7 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended, int imu_stride)
     for (double* b : {st_.g.data(), st_.Sa.data(), st_.Ma.data(), st_.Sg.data(), st_.Mg.data(), st_.C.data(),
                       st_.B.data()})
       blocks.push_back(b);
-    problem->AddResidualBlock(cost, nullptr, blocks);
+    timed_residuals_.push_back({problem->AddResidualBlock(cost, nullptr, blocks), t});
     imu_residuals_.push_back(cost);
     imu_blocks_.push_back(std::move(blocks));
     imu_index_.push_back(k);
@@ -325,7 +328,7 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended, int imu_stride)
       blocks.push_back(cs.t_ci.data());
       blocks.push_back(&cs.shift);
       if (cs.rolling) blocks.push_back(&cs.line_delay);
-      problem->AddResidualBlock(cost, nullptr, blocks);
+      timed_residuals_.push_back({problem->AddResidualBlock(cost, nullptr, blocks), t});
       frames_.push_back(cost);
       frame_camera_.push_back(c);
       frame_blocks_.push_back(std::move(blocks));
@@ -432,9 +435,22 @@ const MarginalCovariance* Estimator<N>::solution_covariance() {
     want(st_.ba[static_cast<std::size_t>(i)].data());
     want(st_.bg[static_cast<std::size_t>(i)].data());
   }
+  // The clusters of the robust covariance: the frames and IMU samples of one time block share
+  // their errors (detector bias, blur, lens misfit, unmodelled IMU behaviour over the block).
+  std::vector<std::vector<ceres::ResidualBlockId>> clusters;
+  if (opt_.covariance_cluster_s > 0.0 && !timed_residuals_.empty()) {
+    double first = timed_residuals_.front().second;
+    for (const auto& [id, t] : timed_residuals_) first = std::min(first, t);
+    for (const auto& [id, t] : timed_residuals_) {
+      const auto c = static_cast<std::size_t>(std::floor((t - first) / opt_.covariance_cluster_s));
+      if (c >= clusters.size()) clusters.resize(c + 1);
+      clusters[c].push_back(id);
+    }
+    std::erase_if(clusters, [](const auto& c) { return c.empty(); });
+  }
   const auto start = std::chrono::steady_clock::now();
   auto cov = std::make_unique<MarginalCovariance>();
-  const bool ok = cov->compute(*problem_, blocks, threads_or_cores(opt_.threads));
+  const bool ok = cov->compute(*problem_, blocks, threads_or_cores(opt_.threads), clusters);
   covariance_compute_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (!ok) {
     covariance_failed_ = true;

@@ -129,6 +129,10 @@ struct CamImuOptions {
   int threads = 0;  // 0 = all cores
   /// Compute the standard deviations (ceres::Covariance); off saves time in tests.
   bool covariance = true;
+  /// Length of the time blocks whose residuals (frames and IMU samples) form one cluster of the
+  /// cluster-robust covariance, s; 0: the plain covariance only. Every sigma is the larger of
+  /// the plain and the cluster-robust one (docs/camimu-calibration.md, "Uncertainty").
+  double covariance_cluster_s = 1.0;
 
   [[nodiscard]] Status validate() const;
 };

@@ -194,6 +194,9 @@ class Estimator {
   std::vector<const ImuResidual<N>*> imu_residuals_;
   std::vector<std::vector<double*>> imu_blocks_;
   std::vector<std::size_t> imu_index_;  // imu_ sample of each IMU residual
+  /// Every frame and IMU residual of the last build with its time (s), for the robust
+  /// covariance's clusters.
+  std::vector<std::pair<ceres::ResidualBlockId, double>> timed_residuals_;
   struct Prior {
     const ceres::CostFunction* cost;
     double* block;

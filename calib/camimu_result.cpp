@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <iomanip>
 #include <sstream>
 
@@ -89,9 +90,22 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
       text += (i ? " | " : "") + out->undetermined[i];
     warnings_.push_back(text);
   }
-  const auto block = [&](const double* a, const double* b) { return cov.block(a, b); };
+  // Every sigma is the larger of the plain one and the cluster-robust one (where computed): the
+  // robust estimate is itself noisy with few clusters, and the plain one holds where the
+  // residuals are independent and correctly weighted (docs/camimu-calibration.md, "Uncertainty").
+  using BlockFn = std::function<Eigen::MatrixXd(const double*, const double*)>;
+  const BlockFn plain = [&](const double* a, const double* b) { return cov.block(a, b); };
+  const BlockFn robust = [&](const double* a, const double* b) { return cov.robust_block(a, b); };
+  const auto larger = [&](const std::function<Eigen::MatrixXd(const BlockFn&)>& of) -> Eigen::VectorXd {
+    Eigen::VectorXd s = sigma_of(of(plain));
+    if (!cov.has_robust()) return s;
+    const Eigen::VectorXd r = sigma_of(of(robust));
+    for (Eigen::Index i = 0; i < s.size(); ++i)
+      if (std::isfinite(s(i)) && std::isfinite(r(i))) s(i) = std::max(s(i), r(i));
+    return s;
+  };
   const auto sigma3 = [&](const double* b) -> Eigen::Vector3d {
-    return cov.has(b) ? Eigen::Vector3d(sigma_of(block(b, b)).head(3))
+    return cov.has(b) ? Eigen::Vector3d(larger([&](const BlockFn& f) { return f(b, b); }).head(3))
                       : Eigen::Vector3d::Constant(kNotDetermined);
   };
   KrebsImuSigma& s = out->imu_sigma;
@@ -101,27 +115,30 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
   s.M_g = sigma3(st_.Mg.data());
   s.C_bg = sigma3(st_.C.data());
   if (cov.has(st_.B.data())) {
-    const Eigen::VectorXd d = sigma_of(block(st_.B.data(), st_.B.data()));
+    const Eigen::VectorXd d = larger([&](const BlockFn& f) { return f(st_.B.data(), st_.B.data()); });
     for (int r = 0; r < 3; ++r)
       for (int c = 0; c < 3; ++c) s.B_g(r, c) = d(3 * r + c);
   }
   if (cov.has(st_.g.data()))
     out->gravity_sigma_rad =
-        Eigen::Vector2d(sigma_of(block(st_.g.data(), st_.g.data())).head(2)) / opt_.gravity_mps2;
+        Eigen::Vector2d(larger([&](const BlockFn& f) { return f(st_.g.data(), st_.g.data()); }).head(2)) /
+        opt_.gravity_mps2;
   // The biases at the start: b(t0) = sum_i w_i knot_i.
   const auto w = RdSpline<N>::weights_at(st_.bias.segment(st_.bias.t0_s).u, 0, st_.bias.dt_s);
   for (auto [knots, sig] : {std::pair{&st_.ba, &s.b_a}, std::pair{&st_.bg, &s.b_g}}) {
     bool all = true;
     for (int i = 0; i < N; ++i) all = all && cov.has((*knots)[static_cast<std::size_t>(i)].data());
     if (!all) continue;
-    Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
-    for (int i = 0; i < N; ++i)
-      for (int j = i; j < N; ++j) {
-        const Eigen::Matrix3d Cij =
-            block((*knots)[static_cast<std::size_t>(i)].data(), (*knots)[static_cast<std::size_t>(j)].data());
-        C += w(i) * w(j) * (i == j ? Cij : Eigen::Matrix3d(Cij + Cij.transpose()));
-      }
-    *sig = sigma_of(C);
+    *sig = larger([&](const BlockFn& f) -> Eigen::MatrixXd {
+      Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+      for (int i = 0; i < N; ++i)
+        for (int j = i; j < N; ++j) {
+          const Eigen::Matrix3d Cij =
+              f((*knots)[static_cast<std::size_t>(i)].data(), (*knots)[static_cast<std::size_t>(j)].data());
+          C += w(i) * w(j) * (i == j ? Cij : Eigen::Matrix3d(Cij + Cij.transpose()));
+        }
+      return C;
+    });
   }
   for (std::size_t c = 0; c < st_.cams.size(); ++c) {
     CamImuCameraResult& cr = out->cameras[c];
@@ -129,15 +146,20 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
     if (cov.has(cs.q_ci.data())) {
       // Right perturbation -> about the camera axes: R Exp(d) = Exp(R d) R.
       const Eigen::Matrix3d R = quat_matrix(cs.q_ci.data());
-      const Eigen::Matrix3d C = block(cs.q_ci.data(), cs.q_ci.data());
-      cr.rotation_sigma_rad = C.allFinite() ? Eigen::Vector3d(sigma_of(R * C * R.transpose()))
-                                            : Eigen::Vector3d::Constant(kNotDetermined);
+      cr.rotation_sigma_rad = larger([&](const BlockFn& f) -> Eigen::MatrixXd {
+        const Eigen::Matrix3d C = f(cs.q_ci.data(), cs.q_ci.data());
+        return C.allFinite() ? Eigen::Matrix3d(R * C * R.transpose())
+                             : Eigen::Matrix3d::Constant(kNotDetermined);
+      });
       cr.translation_sigma_m = sigma3(cs.t_ci.data());
     }
-    if (cov.has(&cs.shift)) cr.timeshift_sigma_s = sigma_of(block(&cs.shift, &cs.shift))(0);
+    if (cov.has(&cs.shift))
+      cr.timeshift_sigma_s = larger([&](const BlockFn& f) { return f(&cs.shift, &cs.shift); })(0);
     if (cs.rolling && cov.has(&cs.line_delay))
-      cr.line_delay_sigma_s = sigma_of(block(&cs.line_delay, &cs.line_delay))(0);
+      cr.line_delay_sigma_s = larger([&](const BlockFn& f) { return f(&cs.line_delay, &cs.line_delay); })(0);
   }
+  quality_.covariance_clusters = cov.has_robust() ? cov.clusters() : 0;
+  quality_.covariance_cluster_s = cov.has_robust() ? opt_.covariance_cluster_s : 0.0;
   quality_.covariance_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() +
                           (reused ? covariance_compute_s_ : 0.0);
 }

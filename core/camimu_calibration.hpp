@@ -18,6 +18,7 @@
 
 #include "core/camera_model.hpp"
 #include "core/imu_model.hpp"
+#include "core/split_check.hpp"
 #include "core/time.hpp"
 
 namespace imucal {
@@ -140,7 +141,11 @@ struct CamImuQuality {
   double solve_s = 0.0;       // wall time of the full solve (without the initialisation)
   double init_s = 0.0;        // wall time of the initialisation
   double covariance_s = 0.0;  // wall time of the covariance
-  double jacobian_s = 0.0;    // of the solve: residual and Jacobian evaluation
+  /// The cluster-robust covariance: its time blocks (s) and how many there were (0: the plain
+  /// covariance only, docs/camimu-calibration.md "Uncertainty").
+  double covariance_cluster_s = 0.0;
+  int covariance_clusters = 0;
+  double jacobian_s = 0.0;  // of the solve: residual and Jacobian evaluation
   double linear_solver_s = 0.0;
   /// IMU samples averaged into one residual (1: every sample its own), and the residuals: above
   /// CamImuOptions::imu_max_rate_hz the per-sample figures above are those of the averages.
@@ -186,6 +191,9 @@ struct CamImuCalibrationResult {
   /// The directions the recording does not determine, in words (their sigmas are NaN).
   std::vector<std::string> undetermined;
   std::vector<std::string> warnings;  // observability, residuals, outliers
+  /// The parts of the recording calibrated apart and compared (app/camimu_self_check.hpp);
+  /// verdict kNotRun when not asked for.
+  SplitCheck self_check;
 
   static constexpr double kStandardGravityMps2 = 9.80665;
 };

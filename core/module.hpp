@@ -12,6 +12,6 @@ struct ModuleHeader {
 };
 
 /// Raised whenever the API structs or the types they pass change shape.
-inline constexpr int kModuleAbi = 5;
+inline constexpr int kModuleAbi = 6;
 
 }  // namespace imucal

@@ -176,6 +176,8 @@ json quality_json(const CamImuQuality& q) {
            vec_json(Eigen::Map<const Eigen::VectorXd>(
                q.gyro_fit_sigma_radps.data(), static_cast<Eigen::Index>(q.gyro_fit_sigma_radps.size())))},
           {"imu_residuals", q.imu_residuals},
+          {"covariance_cluster_s", q.covariance_cluster_s},
+          {"covariance_clusters", q.covariance_clusters},
           {"timings_s",
            {{"init", q.init_s},
             {"solve", q.solve_s},
@@ -392,6 +394,8 @@ CamImuQuality read_quality(const json& j) {
   q.knot_spacing_s = j.value("knot_spacing_s", 0.0);
   q.knot_spacing_chosen = j.value("knot_spacing_chosen", false);
   q.imu_residuals = j.value("imu_residuals", 0);
+  q.covariance_cluster_s = j.value("covariance_cluster_s", 0.0);
+  q.covariance_clusters = j.value("covariance_clusters", 0);
   const json& t = j.at("timings_s");
   q.init_s = t.at("init").get<double>();
   q.solve_s = t.at("solve").get<double>();
@@ -475,6 +479,9 @@ CamImuCalibrationResult read_result_json(const json& j, const std::string& path)
   // Results written before the signals were stored have none.
   if (j.contains("imu_signals")) r.signal_fits = read_signals(j["imu_signals"]);
   r.quality = read_quality(j.at("quality"));
+  // Results written before the self-check have none (not run).
+  if (j.contains("self_check") && j["self_check"].is_object())
+    r.self_check = read_split_check(j["self_check"]);
   r.warnings = j.at("warnings").get<std::vector<std::string>>();
   r.model_choice = j.value("model_choice", std::string());
   r.undetermined = j.value("undetermined", std::vector<std::string>());
@@ -675,6 +682,7 @@ std::string camimu_result_json(const CamImuReport& r) {
   j["biases"] = biases;
   j["imu_signals"] = signals_json(res.signal_fits, t0);
   j["quality"] = quality_json(res.quality);
+  j["self_check"] = split_check_json(res.self_check);
   j["inputs"] = inputs_json(r);
   j["notes"] = r.notes;
   j["warnings"] = r.warnings;

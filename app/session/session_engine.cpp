@@ -680,6 +680,10 @@ json SessionEngine::result_message() const {
                       {"reprojection_rms_px", cam.reprojection_rms_px}});
     }
     m["cameras"] = cams;
+    const SplitCheck& sc = final_->camimu->result.self_check;
+    if (sc.verdict != SplitCheck::Verdict::kNotRun)
+      m["self_check"] = {
+          {"verdict", split_check_verdict_name(sc.verdict)}, {"summary", sc.summary}, {"advice", sc.advice}};
   }
   return m;
 }

@@ -611,6 +611,12 @@ void SessionEngine::evaluate_gates() {
       gates_.push_back(
           {cam.name + " extrinsics without a sigma", static_cast<double>(missing), 0.0, missing == 0, 0});
     }
+    // The halves of the recording, calibrated apart, agree within their sigmas (a self-check that
+    // could not be made does not pass: its sigmas are then unchecked).
+    const SplitCheck& sc = res.self_check;
+    if (sc.verdict != SplitCheck::Verdict::kNotRun)
+      gates_.push_back({"self-check: largest difference of the parts (sigmas)", sc.worst_z, sc.z_limit,
+                        sc.verdict == SplitCheck::Verdict::kAgree, 1});
   }
   gates_pass_ = std::all_of(gates_.begin(), gates_.end(), [](const Gate& g) { return g.pass; });
 }
@@ -695,6 +701,9 @@ void SessionEngine::review() {
       lines.push_back(cam.name + ": reprojection RMS " + fixed(cam.reprojection_rms_px, 3) +
                       " px, time offset " + fixed(cam.timeshift_cam_imu_s * 1e3, 3) + " ms");
     }
+    const SplitCheck& sc = final_->camimu->result.self_check;
+    if (sc.verdict != SplitCheck::Verdict::kNotRun) lines.push_back("Self-check: " + sc.summary);
+    if (!sc.advice.empty()) lines.push_back("  " + sc.advice);
   } else if (final_->record) {
     // Cameras the record will keep from the stored one (app::keep_stored_cameras): said, so
     // that the operator accepts knowing what is written.

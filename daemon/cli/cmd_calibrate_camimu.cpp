@@ -44,6 +44,7 @@ struct CamImuCliOptions {
   calib::CamImuOptions defaults;
   GravityArgs grav;
   int threads = 0;
+  int self_check = 2;
   bool allow_damaged = false;
   DetectionStoreArgs detections;
   bool force = false;
@@ -115,6 +116,7 @@ app::CamImuRequest build_request(const CamImuCliOptions& o) {
   q.gravity_source = gravity.source;
   q.options.threads = o.threads;
   q.threads = o.threads;
+  q.self_check_parts = o.self_check;
   q.allow_damaged = o.allow_damaged;
   q.reuse_detections = !o.detections.no_reuse;
   q.store_detections = o.detections.store_in_log;
@@ -170,6 +172,29 @@ void print_vec(const char* name, const Eigen::Vector3d& v, const Eigen::Vector3d
   std::printf("    %-4s [%.6f %.6f %.6f] +- %s\n", name, v[0], v[1], v[2], sig3(s, 1.0, 6, fixed).c_str());
 }
 
+/// The self-check's verdict, and the parameters that differ most when the parts disagree.
+void print_self_check(const SplitCheck& c) {
+  if (c.verdict == SplitCheck::Verdict::kNotRun) return;
+  std::printf("  self-check: %s (%.1f s)\n", c.summary.c_str(), c.wall_s);
+  if (c.verdict != SplitCheck::Verdict::kDisagree) return;
+  std::vector<const SplitCheckParameter*> worst;
+  for (const auto& p : c.parameters)
+    if (std::isfinite(p.worst_z)) worst.push_back(&p);
+  std::sort(worst.begin(), worst.end(), [](auto* a, auto* b) { return a->worst_z > b->worst_z; });
+  for (std::size_t i = 0; i < worst.size() && i < 3 && worst[i]->worst_z > c.z_limit; ++i) {
+    std::string parts;
+    for (std::size_t k = 0; k < worst[i]->values.size(); ++k) {
+      char text[80];
+      std::snprintf(text, sizeof text, "%s%.4g +- %.2g", k ? ", " : "", worst[i]->values[k],
+                    worst[i]->sigmas[k]);
+      parts += text;
+    }
+    std::printf("    %s: %s %s (%.1f combined sigmas apart)\n", worst[i]->name.c_str(), parts.c_str(),
+                worst[i]->unit.c_str(), worst[i]->worst_z);
+  }
+  std::printf("    %s\n", c.advice.c_str());
+}
+
 void print_summary(const app::CamImuReport& r, const std::string& out_dir) {
   const auto& res = r.result;
   std::printf("camera-IMU calibration of %s (%s, %zu samples, %s; model %s; %d iterations)\n",
@@ -216,6 +241,7 @@ void print_summary(const app::CamImuReport& r, const std::string& out_dir) {
     std::printf("  IMU biases at %.2f deg C: the samples were corrected with the thermal model %s\n",
                 r.thermal->reference_c, r.thermal_source.c_str());
   }
+  print_self_check(res.self_check);
   if (r.warnings.empty()) std::printf("  no warnings\n");
 }
 
@@ -240,6 +266,10 @@ void run(const CamImuCliOptions& o) {
     if (f >= 1.0) p->finish();
   };
   q.solve_progress = [](const calib::CamImuIteration& it) {
+    if (it.stage == "self-check") {
+      std::fprintf(stderr, "self-check: calibrating %d parts of the recording apart\n", it.iteration);
+      return;
+    }
     std::fprintf(stderr, "%s: iteration %3d  cost %.6e  |gradient| %.3e\n", it.stage.c_str(), it.iteration,
                  it.cost, it.gradient_max_norm);
   };
@@ -329,6 +359,12 @@ void add_solver_options(CLI::App* cmd, CamImuCliOptions* o) {
                   "sample its own residual)")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 100000.0));
+  cmd->add_option(
+         "--covariance-blocks", d.covariance_cluster_s,
+         "Length of the time blocks whose residuals may share their errors, s: every sigma is the larger "
+         "of the plain and the cluster-robust one over these blocks (0: the plain covariance only)")
+      ->check(CLI::Range(0.0, 3600.0))
+      ->capture_default_str();
   cmd->add_option("--max-iterations", d.max_iterations, "Solver iterations at most")
       ->capture_default_str()
       ->check(CLI::Range(1, 10000));
@@ -337,6 +373,12 @@ void add_solver_options(CLI::App* cmd, CamImuCliOptions* o) {
       ->check(CLI::Range(0, 256));
   add_gravity_options(cmd, &o->grav);
   add_detection_store_options(cmd, &o->detections);
+  cmd->add_option(
+         "--self-check", o->self_check,
+         "Calibrate this many consecutive parts of the recording apart and compare them against their "
+         "sigmas (2: the halves; 0: no self-check)")
+      ->check(CLI::Range(0, 8))
+      ->capture_default_str();
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");
   cmd->add_option("-o,--output", o->out_dir,
                   "Folder for camchain-imucam.yaml, imu.yaml, calibration.yaml and result.json (created)")

@@ -248,7 +248,15 @@ TEST(CamImuResults, CalibrationYamlIsReadByTheStaticResultReaders) {
 }
 
 TEST(CamImuResults, ResultJsonReadsBack) {
-  const CamImuReport r = report();
+  CamImuReport r = report();
+  r.result.quality.covariance_cluster_s = 1.0;
+  r.result.quality.covariance_clusters = 35;
+  SplitCheck& sc = r.result.self_check;
+  sc.parts = 2;
+  sc.spans_s = {{0.0, 17.0}, {17.0, 34.0}};
+  sc.part_errors = {"", ""};
+  sc.parameters = {{"cam0 translation x", "mm", {0.5, 2.5}, {0.5, 0.6}}};
+  judge_split_check(&sc);
   const std::string path = write("result.json", camimu_result_json(r));
   const auto j = nlohmann::json::parse(test::read_file(path));
   EXPECT_EQ(j["fixed"][0], "timeshift");
@@ -295,6 +303,12 @@ TEST(CamImuResults, ResultJsonReadsBack) {
   EXPECT_EQ(back->quality.xcorr[0][1].second, 0.9);
   EXPECT_EQ(back->quality.iterations, 17);
   EXPECT_EQ(back->warnings, res.warnings);
+  EXPECT_EQ(back->quality.covariance_clusters, 35);
+  EXPECT_EQ(back->quality.covariance_cluster_s, 1.0);
+  EXPECT_EQ(back->self_check.verdict, SplitCheck::Verdict::kAgree);
+  EXPECT_EQ(back->self_check.summary, sc.summary);
+  ASSERT_EQ(back->self_check.parameters.size(), 1u);
+  EXPECT_EQ(back->self_check.parameters[0].values, sc.parameters[0].values);
 
   auto bad = read_camimu_result(write("bad.json", "{\"model\": \"extended\"}"));
   ASSERT_FALSE(bad.ok());

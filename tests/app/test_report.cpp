@@ -147,6 +147,15 @@ CamImuReport camimu_report() {
   res.quality.accel_sigma = 0.045;
   res.quality.gyro_sigma = 0.0011;
   r.warnings = {"z rotation barely excited"};
+  // The halves disagree on cam0's translation x by 6 combined sigmas; part 2 of cam1 was not solved.
+  SplitCheck& sc = res.self_check;
+  sc.parts = 2;
+  sc.spans_s = {{0.0, 5.0}, {5.0, 10.0}};
+  sc.part_errors = {"", ""};
+  sc.parameters = {{"cam0 translation x", "mm", {31.0, 37.0}, {0.7, 0.7}},
+                   {"cam1 time offset", "ms", {-3.1, std::nan("")}, {0.1, std::nan("")}}};
+  judge_split_check(&sc);
+  sc.scaled = {{"cam0", 1.7}};
   return r;
 }
 
@@ -180,6 +189,13 @@ TEST(Report, CamImuResultFolderFromItsWriter) {
   EXPECT_NE(html.find("z rotation barely excited"), std::string::npos);
   EXPECT_NE(html.find("4.20 &plusmn; 0.14"), std::string::npos);   // cam0's time shift, ms
   EXPECT_NE(html.find("-3.10 &plusmn; 0.14"), std::string::npos);  // cam1's
+  // The self-check: its verdict, advice, scale and every part, the difference beyond the limit in bold.
+  EXPECT_NE(html.find("<h2>Self-check</h2>"), std::string::npos);
+  EXPECT_NE(html.find("the two halves disagree beyond their sigmas"), std::string::npos);
+  EXPECT_NE(html.find("cam0's sigmas in this report are scaled by 1.7"), std::string::npos);
+  EXPECT_NE(html.find("part 2 (5-10 s)"), std::string::npos);
+  EXPECT_NE(html.find("<b>6.1</b>"), std::string::npos);
+  EXPECT_NE(html.find("not solved"), std::string::npos);
   // Written once: a second run refuses without overwrite.
   EXPECT_EQ(write_report(o).error().code, Errc::kAlreadyExists);
 }

@@ -41,6 +41,13 @@ struct CamImuSynthOptions {
   /// y, with its own time offset.
   bool second_camera = false;
   double second_timeshift_s = -0.0123;
+  /// A pixel offset shared by every corner of a frame (standard deviation per coordinate), as a
+  /// detector's bias on a blurred frame: errors the corners' independent noise does not model.
+  double frame_shared_px = 0.0;
+  /// From this time on (s; negative: never) every camera sits moved by `moved_by_m` (camera
+  /// frame): a recording whose halves disagree.
+  double moved_at_s = -1.0;
+  Eigen::Vector3d moved_by_m = Eigen::Vector3d::Zero();
 };
 
 inline CamImuSynth make_camimu_synth(const CamImuSynthOptions& o) {
@@ -80,6 +87,7 @@ inline CamImuSynth make_camimu_synth(const CamImuSynthOptions& o) {
   }
   std::mt19937_64 rng(o.seed * 7919 + 1);
   std::normal_distribution<double> noise(0.0, o.corner_sigma_px);
+  std::normal_distribution<double> shared_noise(0.0, 1.0);
   const auto points = out.target.points();
   const TimeNs frame_ns = static_cast<TimeNs>(1e9 / o.camera_rate_hz);
   for (std::size_t c = 0; c < out.T_cams_imu.size(); ++c) {
@@ -94,7 +102,14 @@ inline CamImuSynth make_camimu_synth(const CamImuSynthOptions& o) {
       Eigen::Isometry3d T_world_body = Eigen::Isometry3d::Identity();
       T_world_body.linear() = s.q_world_body.toRotationMatrix();
       T_world_body.translation() = s.p_world_body;
-      const Eigen::Isometry3d T_cam_target = out.T_cams_imu[c] * T_world_body.inverse() * out.T_world_target;
+      Eigen::Isometry3d T_cam_imu = out.T_cams_imu[c];
+      if (o.moved_at_s >= 0.0 && static_cast<double>(tc) * 1e-9 >= o.moved_at_s)
+        T_cam_imu.translation() += o.moved_by_m;
+      const Eigen::Isometry3d T_cam_target = T_cam_imu * T_world_body.inverse() * out.T_world_target;
+      // Drawn only when asked for, so that the other recordings' noise stays as it was.
+      Eigen::Vector2d shared = Eigen::Vector2d::Zero();
+      if (o.frame_shared_px > 0.0)
+        shared = o.frame_shared_px * Eigen::Vector2d(shared_noise(rng), shared_noise(rng));
       calib::TargetObservation obs;
       obs.t_ns = tc;
       obs.width = cam.camera.width;
@@ -103,7 +118,7 @@ inline CamImuSynth make_camimu_synth(const CamImuSynthOptions& o) {
         const auto pr = cam.camera.project(T_cam_target * points[k]);
         if (!pr.valid()) continue;
         obs.ids.push_back(static_cast<int>(k));
-        obs.px.push_back(pr.px + Eigen::Vector2d(noise(rng), noise(rng)));
+        obs.px.push_back(pr.px + shared + Eigen::Vector2d(noise(rng), noise(rng)));
       }
       if (!obs.ids.empty()) cam.observations.push_back(std::move(obs));
     }

@@ -180,6 +180,14 @@ TEST(CliCalibrateCamimu, FixtureWithinFewSigmasOfTruth) {
     }
     expect_within("B_g row", e, s, k);
   }
+  // The self-check (on by default): the halves of this consistent recording agree, and say so.
+  const json& sc = j["self_check"];
+  EXPECT_EQ(sc["verdict"], "agree") << sc.dump(1);
+  EXPECT_EQ(sc["parts"], 2);
+  EXPECT_GE(sc["parameters"].size(), 7u);
+  EXPECT_NE(r.out.find("self-check: the two halves agree within their sigmas"), std::string::npos) << r.out;
+  EXPECT_NE(r.err.find("self-check: calibrating 2 parts of the recording apart"), std::string::npos) << r.err;
+  EXPECT_GT(j["quality"]["covariance_clusters"].get<int>(), 10);
   // The canonical record is read by `calibrate check` and the static readers.
   EXPECT_EQ(YAML::LoadFile(out + "/calibration.yaml")["input_units"].as<std::string>(), "raw");
   EXPECT_EQ(YAML::LoadFile(out + "/imu.yaml")["imu0"]["model"].as<std::string>(), "scale-misalignment");
@@ -227,8 +235,9 @@ TEST(CliCalibrateCamimu, AWeaklyExcitedRecordingGivesSigmasNeverZerosAndNamesWha
   std::ofstream(dir + "/camera.yaml") << e.c_str() << "\n";
   const std::string out = dir + "/out";
   auto r = run_cli({"calibrate", "camimu", log, "--camera", dir + "/camera.yaml", "--model", "extended", "-o",
-                    out, "--threads", "2"});
+                    out, "--threads", "2", "--self-check", "0"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out.find("self-check"), std::string::npos) << r.out;  // --self-check 0: none
   // The prior held what the recording could not tell, and the command says which.
   EXPECT_NE(r.err.find("set mostly by the prior"), std::string::npos) << r.err;
   EXPECT_NE(r.out.find("prior: MPU-6000 datasheet tolerances"), std::string::npos) << r.out;
@@ -238,6 +247,7 @@ TEST(CliCalibrateCamimu, AWeaklyExcitedRecordingGivesSigmasNeverZerosAndNamesWha
     EXPECT_EQ(r.out.find(zero), std::string::npos) << zero << " in\n" << r.out;
   const json j = json::parse(read_file(out + "/result.json"));
   expect_no_zero_sigma(j, "result.json");
+  EXPECT_EQ(j["self_check"]["verdict"], "not run");
   ASSERT_FALSE(j["prior"].is_null());
   EXPECT_FALSE(j["prior"]["dominated"].empty());
   for (int i = 0; i < 3; ++i) EXPECT_LT(std::abs(j["imu"]["krebs"]["S_a"][i].get<double>() - 1.0), 0.1);
