@@ -18,6 +18,7 @@
 #include <thread>
 #include <utility>
 
+#include "app/camera_self_check.hpp"
 #include "app/results/camera_results.hpp"
 #include "calib/observation_check.hpp"
 #include "core/text_format.hpp"
@@ -587,6 +588,15 @@ Status solve_shutter(const CameraCalibrationRequest& q, std::span<const calib::T
   return {};
 }
 
+/// The self-check's verdict and its scaling notes among the warnings, when the parts disagree or
+/// their spread scaled a sigma.
+void add_self_check_warnings(const SplitCheck* check, const std::vector<std::string>& notes,
+                             std::vector<std::string>* warnings) {
+  if (check->verdict == SplitCheck::Verdict::kDisagree)
+    warnings->push_back("self-check: " + check->summary + "; " + check->advice);
+  for (const auto& n : notes) warnings->push_back("self-check: " + n);
+}
+
 }  // namespace
 
 Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q) {
@@ -635,6 +645,16 @@ Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q
   }
   out.warnings.insert(out.warnings.end(), chain->warnings.begin(), chain->warnings.end());
   out.chain = std::move(*chain);
+  if (q.base.self_check_parts >= 2) {
+    out.self_check =
+        chain_self_check(q.base.target, inputs, options, out.chain, q.base.self_check_parts, options.threads);
+    add_self_check_warnings(&out.self_check, scale_chain_by_self_check(&out.chain, &out.self_check),
+                            &out.warnings);
+    for (std::size_t c = 0; c < out.cameras.size(); ++c) {
+      out.cameras[c].intrinsics = out.chain.cameras[c].intrinsics;
+      out.cameras[c].line_delay_sigma_s = out.chain.cameras[c].line_delay_sigma_s;
+    }
+  }
   return out;
 }
 
@@ -652,6 +672,14 @@ Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequ
   report.warnings.insert(report.warnings.end(), report.intrinsics.warnings.begin(),
                          report.intrinsics.warnings.end());
   IMUCAL_TRY(solve_shutter(q, *found, &report));
+  if (q.self_check_parts >= 2) {
+    report.self_check = camera_self_check(q.target, *found, q.intrinsics, report.intrinsics,
+                                          report.stream.name, q.self_check_parts, q.threads);
+    add_self_check_warnings(&report.self_check,
+                            scale_camera_by_self_check(&report.intrinsics, &report.line_delay_sigma_s,
+                                                       report.stream.name, &report.self_check),
+                            &report.warnings);
+  }
   return report;
 }
 

@@ -21,6 +21,7 @@
 #include "core/frame.hpp"
 #include "core/progress.hpp"
 #include "core/result.hpp"
+#include "core/split_check.hpp"
 #include "core/target.hpp"
 #include "log/session_log.hpp"
 
@@ -82,6 +83,9 @@ struct CameraCalibrationRequest {
   calib::ShutterSolveOptions shutter{calib::ShutterSolveOptions::Mode::kGlobal, std::nullopt};
   Shutter known_shutter;
   int threads = 0;  // detection workers; 0 = all cores
+  /// The self-check (app/camera_self_check.hpp): this many consecutive parts of the recording
+  /// calibrated apart and compared; 0 or 1: none (the CLI asks for the halves).
+  int self_check_parts = 0;
   /// Calibrate from the readable part of a damaged log (else a damaged log is refused).
   bool allow_damaged = false;
   /// As StreamDetectionRequest: reuse stored detections; store new ones in the log (else in
@@ -113,6 +117,8 @@ struct CameraCalibrationReport {
   /// shutter (empty: global, nothing asked).
   double line_delay_sigma_s = std::numeric_limits<double>::quiet_NaN();
   std::string shutter_choice;
+  /// The parts of the recording calibrated apart (kNotRun unless asked for).
+  SplitCheck self_check;
   std::vector<std::string> warnings;  // of the detection, the log and the solve
 };
 
@@ -133,6 +139,7 @@ struct CameraChainReport {
   /// Per camera: the stream, its detection figures, and its intrinsics from the joint solve.
   std::vector<CameraCalibrationReport> cameras;
   calib::CameraChainResult chain;
+  SplitCheck self_check;              // of the chain (kNotRun unless asked for)
   std::vector<std::string> warnings;  // of the detections, the log and the joint solve
 };
 

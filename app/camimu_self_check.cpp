@@ -8,7 +8,6 @@
 #include <cmath>
 #include <optional>
 #include <string>
-#include <thread>
 
 #include "core/threads.hpp"
 
@@ -23,15 +22,9 @@ Eigen::Vector3d rotation_difference(const Eigen::Matrix3d& part, const Eigen::Ma
   return aa.angle() * aa.axis();
 }
 
-/// The parameters of one part's result, in the order of `names` (built from the first part that
-/// was solved, so that every part lists the same).
-struct Row {
-  std::string name, unit;
-  double value, sigma;
-};
-
-std::vector<Row> rows_of(const CamImuCalibrationResult& r, const CamImuCalibrationResult& full) {
-  std::vector<Row> rows;
+/// The compared parameters of one part's result.
+std::vector<SplitCheckRow> rows_of(const CamImuCalibrationResult& r, const CamImuCalibrationResult& full) {
+  std::vector<SplitCheckRow> rows;
   const char* xyz[] = {"x", "y", "z"};
   for (std::size_t c = 0; c < r.cameras.size() && c < full.cameras.size(); ++c) {
     const CamImuCameraResult& cr = r.cameras[c];
@@ -40,23 +33,27 @@ std::vector<Row> rows_of(const CamImuCalibrationResult& r, const CamImuCalibrati
       rows.push_back({cr.name + " rotation about " + xyz[a], "deg", d(a) * kRadToDeg,
                       cr.rotation_sigma_rad(a) * kRadToDeg});
     for (int a = 0; a < 3; ++a)
-      rows.push_back({cr.name + " translation " + std::string(xyz[a]), "mm", cr.T_cam_imu.translation()(a) * 1e3,
-                      cr.translation_sigma_m(a) * 1e3});
-    rows.push_back({cr.name + " time offset", "ms", cr.timeshift_cam_imu_s * 1e3, cr.timeshift_sigma_s * 1e3});
+      rows.push_back({cr.name + " translation " + std::string(xyz[a]), "mm",
+                      cr.T_cam_imu.translation()(a) * 1e3, cr.translation_sigma_m(a) * 1e3});
+    rows.push_back(
+        {cr.name + " time offset", "ms", cr.timeshift_cam_imu_s * 1e3, cr.timeshift_sigma_s * 1e3});
     if (cr.camera.shutter.kind == Shutter::Kind::kRolling && std::isfinite(cr.line_delay_sigma_s))
-      rows.push_back({cr.name + " line delay", "us", cr.camera.shutter.line_delay_s * 1e6, cr.line_delay_sigma_s * 1e6});
+      rows.push_back(
+          {cr.name + " line delay", "us", cr.camera.shutter.line_delay_s * 1e6, cr.line_delay_sigma_s * 1e6});
   }
   if (r.model == CamImuModelKind::kExtended) {
     // Intrinsics the prior mostly set are the prior in every part: no check of the data.
     const auto dominated = [&](const std::string& name) {
-      return std::find(full.prior_dominated.begin(), full.prior_dominated.end(), name) != full.prior_dominated.end();
+      return std::find(full.prior_dominated.begin(), full.prior_dominated.end(), name) !=
+             full.prior_dominated.end();
     };
     const KrebsImuModel& m = r.imu;
     const KrebsImuSigma& s = r.imu_sigma;
-    const auto add3 = [&](const std::string& name, const Eigen::Vector3d& v, const Eigen::Vector3d& sig, double k,
-                          const char* unit) {
+    const auto add3 = [&](const std::string& name, const Eigen::Vector3d& v, const Eigen::Vector3d& sig,
+                          double k, const char* unit) {
       for (int a = 0; a < 3; ++a)
-        if (!dominated(name + " " + xyz[a])) rows.push_back({name + " " + xyz[a], unit, v(a) * k, sig(a) * k});
+        if (!dominated(name + " " + xyz[a]))
+          rows.push_back({name + " " + xyz[a], unit, v(a) * k, sig(a) * k});
     };
     add3("S_a", m.S_a, s.S_a, 1e3, "1e-3");
     add3("M_a", m.M_a, s.M_a, 1e3, "mrad");
@@ -67,7 +64,7 @@ std::vector<Row> rows_of(const CamImuCalibrationResult& r, const CamImuCalibrati
       for (int j = 0; j < 3; ++j)
         if (!dominated("B_g " + std::string(xyz[i]) + xyz[j]))
           rows.push_back({"B_g " + std::string(xyz[i]) + xyz[j], "1e-4 rad/s per m/s^2", m.B_g(i, j) * 1e4,
-                        s.B_g(i, j) * 1e4});
+                          s.B_g(i, j) * 1e4});
   }
   return rows;
 }
@@ -75,9 +72,9 @@ std::vector<Row> rows_of(const CamImuCalibrationResult& r, const CamImuCalibrati
 }  // namespace
 
 SplitCheck camimu_self_check(const std::vector<calib::CamImuSample>& imu,
-                             const std::vector<calib::CamImuCameraInput>& cameras, const TargetDescription& target,
-                             const calib::CamImuOptions& options, const CamImuCalibrationResult& full, int parts,
-                             int threads) {
+                             const std::vector<calib::CamImuCameraInput>& cameras,
+                             const TargetDescription& target, const calib::CamImuOptions& options,
+                             const CamImuCalibrationResult& full, int parts, int threads) {
   SplitCheck check;
   check.parts = std::clamp(parts, 2, 8);
   const auto start = std::chrono::steady_clock::now();
@@ -94,7 +91,8 @@ SplitCheck camimu_self_check(const std::vector<calib::CamImuSample>& imu,
   opt.model = full.model;
   opt.knot_spacing_s = full.quality.knot_spacing_s;
   bool rolling = false, global = false;
-  for (const auto& c : full.cameras) (c.camera.shutter.kind == Shutter::Kind::kRolling ? rolling : global) = true;
+  for (const auto& c : full.cameras)
+    (c.camera.shutter.kind == Shutter::Kind::kRolling ? rolling : global) = true;
   if (!opt.shutter.line_delay_s)
     opt.shutter.mode = rolling && !global   ? calib::ShutterSolveOptions::Mode::kRolling
                        : global && !rolling ? calib::ShutterSolveOptions::Mode::kGlobal
@@ -103,63 +101,34 @@ SplitCheck camimu_self_check(const std::vector<calib::CamImuSample>& imu,
   const int workers = threads_or_cores(threads);
   opt.threads = std::max(1, workers / check.parts);
 
-  const double span = static_cast<double>(last - first);
-  std::vector<std::vector<calib::CamImuCameraInput>> part_cameras(static_cast<std::size_t>(check.parts));
-  std::vector<std::vector<calib::CamImuSample>> part_imu(static_cast<std::size_t>(check.parts));
+  const auto spans = split_spans(first, last, check.parts, &check.spans_s);
+  std::vector<std::vector<calib::CamImuCameraInput>> part_cameras(spans.size());
+  std::vector<std::vector<calib::CamImuSample>> part_imu(spans.size());
   // The IMU covers each part's frames with a margin for the time offset and the spline's ends.
   const auto margin = static_cast<TimeNs>((options.max_timeshift_s + 0.5) * 1e9);
-  for (int p = 0; p < check.parts; ++p) {
-    const auto from = first + static_cast<TimeNs>(span * p / check.parts);
-    const auto to = p + 1 == check.parts ? last + 1 : first + static_cast<TimeNs>(span * (p + 1) / check.parts);
-    check.spans_s.emplace_back(static_cast<double>(from - first) * 1e-9, static_cast<double>(to - first) * 1e-9);
-    auto& cams = part_cameras[static_cast<std::size_t>(p)];
+  for (std::size_t p = 0; p < spans.size(); ++p) {
+    const auto [from, to] = spans[p];
     for (const auto& cam : cameras) {
       calib::CamImuCameraInput in = cam;
       in.observations.clear();
       for (const auto& o : cam.observations)
         if (o.t_ns >= from && o.t_ns < to) in.observations.push_back(o);
-      cams.push_back(std::move(in));
+      part_cameras[p].push_back(std::move(in));
     }
     for (const auto& s : imu)
-      if (s.t_ns >= from - margin && s.t_ns < to + margin) part_imu[static_cast<std::size_t>(p)].push_back(s);
+      if (s.t_ns >= from - margin && s.t_ns < to + margin) part_imu[p].push_back(s);
   }
-  std::vector<std::optional<CamImuCalibrationResult>> results(static_cast<std::size_t>(check.parts));
-  check.part_errors.assign(static_cast<std::size_t>(check.parts), "");
-  const auto solve = [&](int p) {
+  std::vector<std::optional<std::vector<SplitCheckRow>>> rows(spans.size());
+  check.part_errors.assign(spans.size(), "");
+  run_side_by_side(check.parts, workers, [&](int p) {
     const auto i = static_cast<std::size_t>(p);
     auto r = calib::calibrate_camimu(part_imu[i], part_cameras[i], target, opt);
     if (r.ok())
-      results[i] = std::move(*r);
+      rows[i] = rows_of(*r, full);
     else
       check.part_errors[i] = r.error().message;
-  };
-  // Parts run side by side, as many at once as there are workers.
-  for (int p0 = 0; p0 < check.parts; p0 += workers) {
-    std::vector<std::thread> pool;
-    for (int p = p0; p < std::min(check.parts, p0 + workers); ++p) pool.emplace_back(solve, p);
-    for (auto& t : pool) t.join();
-  }
-  std::vector<std::vector<Row>> rows(static_cast<std::size_t>(check.parts));
-  const std::vector<Row>* layout = nullptr;
-  for (int p = 0; p < check.parts; ++p) {
-    const auto i = static_cast<std::size_t>(p);
-    if (!results[i]) continue;
-    rows[i] = rows_of(*results[i], full);
-    if (layout == nullptr || rows[i].size() > layout->size()) layout = &rows[i];
-  }
-  if (layout != nullptr) {
-    for (std::size_t k = 0; k < layout->size(); ++k) {
-      SplitCheckParameter par;
-      par.name = (*layout)[k].name;
-      par.unit = (*layout)[k].unit;
-      for (const auto& part : rows) {
-        const auto it = std::find_if(part.begin(), part.end(), [&](const Row& r) { return r.name == par.name; });
-        par.values.push_back(it == part.end() ? std::nan("") : it->value);
-        par.sigmas.push_back(it == part.end() ? std::nan("") : it->sigma);
-      }
-      check.parameters.push_back(std::move(par));
-    }
-  }
+  });
+  fill_split_parameters(&check, rows);
   judge_split_check(&check);
   check.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return check;

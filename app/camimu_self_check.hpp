@@ -19,8 +19,8 @@ namespace imucal::app {
 /// rotations the reference the parts' rotations are compared about. `threads` are shared out
 /// among the parts. Never fails: a part that cannot be calibrated is named in part_errors.
 SplitCheck camimu_self_check(const std::vector<calib::CamImuSample>& imu,
-                             const std::vector<calib::CamImuCameraInput>& cameras, const TargetDescription& target,
-                             const calib::CamImuOptions& options, const CamImuCalibrationResult& full, int parts,
-                             int threads);
+                             const std::vector<calib::CamImuCameraInput>& cameras,
+                             const TargetDescription& target, const calib::CamImuOptions& options,
+                             const CamImuCalibrationResult& full, int parts, int threads);
 
 }  // namespace imucal::app

@@ -21,9 +21,45 @@ const char* split_check_verdict_name(SplitCheck::Verdict v) {
   }
 }
 
+std::vector<std::pair<TimeNs, TimeNs>> split_spans(TimeNs first, TimeNs last, int parts,
+                                                   std::vector<std::pair<double, double>>* spans_s) {
+  std::vector<std::pair<TimeNs, TimeNs>> spans;
+  const double span = static_cast<double>(last - first);
+  for (int p = 0; p < parts; ++p) {
+    const auto from = first + static_cast<TimeNs>(span * p / parts);
+    const auto to = p + 1 == parts ? last + 1 : first + static_cast<TimeNs>(span * (p + 1) / parts);
+    spans.emplace_back(from, to);
+    if (spans_s != nullptr)
+      spans_s->emplace_back(static_cast<double>(from - first) * 1e-9, static_cast<double>(to - first) * 1e-9);
+  }
+  return spans;
+}
+
+void fill_split_parameters(SplitCheck* check,
+                           const std::vector<std::optional<std::vector<SplitCheckRow>>>& parts) {
+  const std::vector<SplitCheckRow>* layout = nullptr;
+  for (const auto& part : parts)
+    if (part && (layout == nullptr || part->size() > layout->size())) layout = &*part;
+  if (layout == nullptr) return;
+  for (const SplitCheckRow& row : *layout) {
+    SplitCheckParameter par{row.name, row.unit, {}, {}};
+    for (const auto& part : parts) {
+      const SplitCheckRow* hit = nullptr;
+      if (part)
+        for (const auto& r : *part)
+          if (r.name == row.name) hit = &r;
+      par.values.push_back(hit != nullptr ? hit->value : std::nan(""));
+      par.sigmas.push_back(hit != nullptr ? hit->sigma : std::nan(""));
+    }
+    check->parameters.push_back(std::move(par));
+  }
+}
+
 namespace {
 
-std::string parts_name(int parts) { return parts == 2 ? "the two halves" : "the " + std::to_string(parts) + " parts"; }
+std::string parts_name(int parts) {
+  return parts == 2 ? "the two halves" : "the " + std::to_string(parts) + " parts";
+}
 
 /// The two-sided standard normal quantile: z with P(|Z| > z) = a.
 double two_sided_z(double a) { return std::sqrt(2.0) * boost::math::erfc_inv(a); }
@@ -76,9 +112,8 @@ void judge_split_check(SplitCheck* check) {
   check->dof = 0;
   check->summary.clear();
   check->advice.clear();
-  const int solved =
-      static_cast<int>(std::count_if(check->part_errors.begin(), check->part_errors.end(),
-                                     [](const std::string& e) { return e.empty(); }));
+  const int solved = static_cast<int>(std::count_if(check->part_errors.begin(), check->part_errors.end(),
+                                                    [](const std::string& e) { return e.empty(); }));
   double chi = 0.0;
   int compared = 0;
   for (SplitCheckParameter& p : check->parameters) {
@@ -102,13 +137,15 @@ void judge_split_check(SplitCheck* check) {
   const std::string who = parts_name(check->parts);
   if (solved < 2 || compared == 0) {
     check->verdict = SplitCheck::Verdict::kNotDetermined;
-    std::string why = solved < 2 ? "fewer than two parts could be calibrated" : "no parameter had a sigma in two parts";
+    std::string why =
+        solved < 2 ? "fewer than two parts could be calibrated" : "no parameter had a sigma in two parts";
     for (std::size_t i = 0; i < check->part_errors.size(); ++i)
       if (!check->part_errors[i].empty())
         why += "; part " + std::to_string(i + 1) + ": " + check->part_errors[i];
     check->summary = "self-check not determined: " + why;
     check->advice =
-        "record longer (each part must be calibrated on its own: about 20 s of varied motion per part), or run "
+        "record longer (each part must be calibrated on its own: about 20 s of varied motion per part), or "
+        "run "
         "with fewer parts";
     return;
   }
@@ -119,19 +156,23 @@ void judge_split_check(SplitCheck* check) {
   const bool agree = check->worst_z <= check->z_limit && check->p_value >= 1e-3;
   check->verdict = agree ? SplitCheck::Verdict::kAgree : SplitCheck::Verdict::kDisagree;
   char text[600];
-  std::snprintf(text, sizeof text,
-                "%s %s: the largest difference is %.1f combined sigmas (%s; limit %.1f), chi-square %.1f for %d "
-                "degrees of freedom (p = %.2g)",
-                who.c_str(), agree ? "agree within their sigmas" : "disagree beyond their sigmas", check->worst_z,
-                check->worst.c_str(), check->z_limit, chi, check->dof, check->p_value);
+  std::snprintf(
+      text, sizeof text,
+      "%s %s: the largest difference is %.1f combined sigmas (%s; limit %.1f), chi-square %.1f for %d "
+      "degrees of freedom (p = %.2g)",
+      who.c_str(), agree ? "agree within their sigmas" : "disagree beyond their sigmas", check->worst_z,
+      check->worst.c_str(), check->z_limit, chi, check->dof, check->p_value);
   check->summary = text;
   if (!agree) {
-    std::snprintf(text, sizeof text,
-                  "the parts of this recording give results that differ more than their sigmas allow (about %.1f "
-                  "times, from the chi-square): read the sigmas as lower bounds, and check what the model leaves "
-                  "out: the camera's intrinsics (a lens model that fits the whole image), the IMU noise figures, "
-                  "motion that excites every axis in every part; then record again",
-                  std::sqrt(chi / std::max(check->dof, 1)));
+    std::snprintf(
+        text, sizeof text,
+        "the parts of this recording give results that differ more than their sigmas allow (about %.1f "
+        "times, from the chi-square): read the sigmas as lower bounds, and check what the model leaves "
+        "out: %s; then record again",
+        std::sqrt(chi / std::max(check->dof, 1)),
+        check->suspects.empty() ? "the camera's intrinsics (a lens model that fits the whole image), the IMU "
+                                  "noise figures, motion that excites every axis in every part"
+                                : check->suspects.c_str());
     check->advice = text;
   }
 }
@@ -177,6 +218,7 @@ nlohmann::json split_check_json(const SplitCheck& c) {
           {"z_limit", c.z_limit},
           {"summary", c.summary},
           {"advice", c.advice},
+          {"suspects", c.suspects},
           {"wall_s", c.wall_s},
           {"sigmas_scaled", scaled},
           {"parameters", params}};
@@ -185,8 +227,8 @@ nlohmann::json split_check_json(const SplitCheck& c) {
 SplitCheck read_split_check(const nlohmann::json& j) {
   SplitCheck c;
   const std::string v = j.at("verdict").get<std::string>();
-  for (auto k : {SplitCheck::Verdict::kNotRun, SplitCheck::Verdict::kNotDetermined, SplitCheck::Verdict::kAgree,
-                 SplitCheck::Verdict::kDisagree})
+  for (auto k : {SplitCheck::Verdict::kNotRun, SplitCheck::Verdict::kNotDetermined,
+                 SplitCheck::Verdict::kAgree, SplitCheck::Verdict::kDisagree})
     if (v == split_check_verdict_name(k)) c.verdict = k;
   c.parts = j.at("parts").get<int>();
   for (const auto& s : j.at("spans_s")) c.spans_s.emplace_back(s.at(0).get<double>(), s.at(1).get<double>());
@@ -199,9 +241,11 @@ SplitCheck read_split_check(const nlohmann::json& j) {
   c.z_limit = j.at("z_limit").get<double>();
   c.summary = j.at("summary").get<std::string>();
   c.advice = j.at("advice").get<std::string>();
+  c.suspects = j.value("suspects", std::string());
   c.wall_s = j.value("wall_s", 0.0);
   if (j.contains("sigmas_scaled"))
-    for (const auto& [name, factor] : j["sigmas_scaled"].items()) c.scaled.emplace_back(name, factor.get<double>());
+    for (const auto& [name, factor] : j["sigmas_scaled"].items())
+      c.scaled.emplace_back(name, factor.get<double>());
   for (const auto& p : j.at("parameters")) {
     SplitCheckParameter q;
     q.name = p.at("name").get<std::string>();

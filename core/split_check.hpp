@@ -8,9 +8,12 @@
 
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
+
+#include "core/time.hpp"
 
 namespace imucal {
 
@@ -29,9 +32,9 @@ struct SplitCheckParameter {
 struct SplitCheck {
   enum class Verdict { kNotRun, kNotDetermined, kAgree, kDisagree };
   Verdict verdict = Verdict::kNotRun;
-  int parts = 0;                                  // asked for (0: not run)
+  int parts = 0;                                   // asked for (0: not run)
   std::vector<std::pair<double, double>> spans_s;  // each part's span, s from the first frame
-  std::vector<std::string> part_errors;           // per part: empty when it was solved
+  std::vector<std::string> part_errors;            // per part: empty when it was solved
   std::vector<SplitCheckParameter> parameters;
   /// sum over parameters and parts of ((x_i - weighted mean) / s_i)^2, its degrees of freedom
   /// (sum of parts - 1 per parameter) and its upper-tail probability. Correlations between
@@ -47,6 +50,9 @@ struct SplitCheck {
   /// when they do not (empty when they agree).
   std::string summary;
   std::string advice;
+  /// What the advice names to check when the parts disagree (set before judge_split_check;
+  /// empty: the camera-IMU solve's inputs).
+  std::string suspects;
   double wall_s = 0.0;  // of the parts' solves
   /// The factors the whole recording's sigmas were scaled by where the parts disagreed (a
   /// camera's name, or a group of parameters, and sqrt(chi-square / dof) of its parameters).
@@ -59,7 +65,24 @@ double split_chi_square(const SplitCheck& check, const std::string& prefix, int*
 /// The upper-tail probability of a chi-square with `dof` degrees of freedom.
 double chi_square_probability(double chi_square, int dof);
 
-const char* split_check_verdict_name(SplitCheck::Verdict v);  // "not run", "not determined", ...
+const char* split_check_verdict_name(SplitCheck::Verdict v);
+
+/// `parts` consecutive spans of equal duration covering [first, last] (the last one ends after
+/// `last`), and their times in s from `first` for SplitCheck::spans_s.
+std::vector<std::pair<TimeNs, TimeNs>> split_spans(TimeNs first, TimeNs last, int parts,
+                                                   std::vector<std::pair<double, double>>* spans_s);
+
+/// One part's value of one parameter, as a solver's result gives it.
+struct SplitCheckRow {
+  std::string name, unit;
+  double value = 0.0, sigma = 0.0;
+};
+/// The parameters of `check` from every part's rows (empty optional: the part was not solved):
+/// the parameters of the part that has the most, each with every part's value and sigma (NaN
+/// where a part does not have it).
+void fill_split_parameters(
+    SplitCheck* check,
+    const std::vector<std::optional<std::vector<SplitCheckRow>>>& parts);  // "not run", "not determined", ...
 
 /// The comparison (chi-square, worst differences, verdict, summary and advice) of the parameters
 /// and part_errors already filled in `check`. The parts agree when the largest difference is

@@ -53,6 +53,11 @@ struct ResidualSeries {
 Figure reprojection_figure(const std::string& id, const std::vector<ResidualSeries>& series,
                            const std::string& what);
 
+/// The result's self-check (core/split_check.hpp, the "self_check" object) as a section: the
+/// verdict, the advice, any scaled sigmas and every compared parameter in every part; a section
+/// without a title when the result has none or it was not run.
+Section self_check_section(const nlohmann::json& result);
+
 /// Gnuplot's line colours used across the report for x, y, z (colour-blind safe).
 inline constexpr const char* kAxisColour[3] = {"#0072b2", "#d55e00", "#009e73"};
 

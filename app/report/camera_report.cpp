@@ -131,6 +131,7 @@ Result<Document> camera_document(const nlohmann::json& r, BuildContext& ctx) {
         "written before they were stored): there is no scatter of them.</p>\n";
   }
   doc.sections.push_back(std::move(views));
+  if (auto sc = self_check_section(r); !sc.title.empty()) doc.sections.push_back(std::move(sc));
   return doc;
 }
 

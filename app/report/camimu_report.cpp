@@ -372,48 +372,6 @@ Section overview_section(const nlohmann::json& r) {
   return {"Result", t.to_html() + (notes.empty() ? "" : "<ul class=\"note\">" + notes + "</ul>\n"), {}};
 }
 
-/// The self-check (core/split_check.hpp): the verdict, the advice, and every compared parameter
-/// in every part with its sigma and the largest difference in combined sigmas.
-Section self_check_section(const nlohmann::json& sc) {
-  const std::string verdict = at(sc, "verdict").get<std::string>();
-  std::string html = "<p>" + escape(at(sc, "summary").get<std::string>()) + "</p>\n";
-  if (const std::string advice = at(sc, "advice").get<std::string>(); !advice.empty())
-    html += "<p class=\"note\">" + escape(advice) + "</p>\n";
-  const nlohmann::json scaled = sc.value("sigmas_scaled", nlohmann::json::object());
-  for (const auto& [name, factor] : scaled.items())
-    html += "<p class=\"note\">" + escape(name) + "'s sigmas in this report are scaled by " +
-            num(factor.get<double>(), 3) +
-            " (the parts spread that much more than their own sigmas allow).</p>\n";
-  const auto& spans = at(sc, "spans_s");
-  std::vector<std::string> head{"parameter"};
-  for (std::size_t i = 0; i < spans.size(); ++i)
-    head.push_back("part " + std::to_string(i + 1) + " (" + num(spans[i].at(0).get<double>(), 3) + "-" +
-                   num(spans[i].at(1).get<double>(), 3) + " s)");
-  head.push_back("largest difference (combined sigmas)");
-  Table t{head, {}};
-  const double limit = number(sc, "z_limit");
-  for (const auto& p : at(sc, "parameters")) {
-    std::vector<std::string> row{escape(at(p, "name").get<std::string>()) + " (" +
-                                 escape(at(p, "unit").get<std::string>()) + ")"};
-    const auto& v = at(p, "values");
-    const auto& sg = at(p, "sigmas");
-    for (std::size_t i = 0; i < v.size() && i < sg.size(); ++i)
-      row.push_back(v[i].is_null() ? "not solved"
-                                   : with_sigma(v[i].get<double>(),
-                                                sg[i].is_null() ? std::nan("") : sg[i].get<double>()));
-    const double z = number(p, "worst_z");
-    row.push_back(std::isfinite(z) && z > limit ? "<b>" + num(z, 2) + "</b>" : num(z, 2));
-    t.rows.push_back(std::move(row));
-  }
-  if (verdict != "not run" && !t.rows.empty()) html += t.to_html();
-  html +=
-      "<p class=\"note\">Each part of the recording was calibrated on its own with the whole solve's "
-      "choices; rotations are the small-angle difference to the whole recording's, about the camera's axes. "
-      "The parts agree when no difference exceeds the limit and the chi-square's probability is at least "
-      "0.001.</p>\n";
-  return {"Self-check", html, {}};
-}
-
 }  // namespace
 
 Result<Document> camimu_document(const nlohmann::json& r, BuildContext& ctx) {
@@ -429,9 +387,7 @@ Result<Document> camimu_document(const nlohmann::json& r, BuildContext& ctx) {
   doc.sections.push_back(overview_section(r));
   doc.sections.push_back(cameras_section(r));
   doc.sections.push_back(imu_section(r));
-  if (r.contains("self_check") && r["self_check"].is_object() &&
-      r["self_check"].value("verdict", std::string("not run")) != "not run")
-    doc.sections.push_back(self_check_section(r["self_check"]));
+  if (auto sc = self_check_section(r); !sc.title.empty()) doc.sections.push_back(std::move(sc));
   Figure reprojection = camimu_reprojection_figure(r);
   Section quality{
       "Quality",

@@ -1,6 +1,7 @@
 // The session summary of a report (from the log, app/stream_stats.hpp) and the JSON readers the
 // document builders share.
 
+#include <cmath>
 #include <string>
 
 #include "app/report/builders.hpp"
@@ -113,6 +114,52 @@ Result<Section> session_section(const std::string& log_path, bool in_progress) {
     sec.html += "<p class=\"note\">Also recorded (structured, see <code>imucal info</code>): " + long_keys +
                 ".</p>\n";
   return sec;
+}
+
+/// The self-check (core/split_check.hpp): the verdict, the advice, and every compared parameter
+/// in every part with its sigma and the largest difference in combined sigmas.
+Section self_check_section(const nlohmann::json& r) {
+  if (!r.contains("self_check") || !r["self_check"].is_object() ||
+      r["self_check"].value("verdict", std::string("not run")) == "not run")
+    return {};
+  const nlohmann::json& sc = r["self_check"];
+  const std::string verdict = at(sc, "verdict").get<std::string>();
+  std::string html = "<p>" + escape(at(sc, "summary").get<std::string>()) + "</p>\n";
+  if (const std::string advice = at(sc, "advice").get<std::string>(); !advice.empty())
+    html += "<p class=\"note\">" + escape(advice) + "</p>\n";
+  const nlohmann::json scaled = sc.value("sigmas_scaled", nlohmann::json::object());
+  for (const auto& [name, factor] : scaled.items())
+    html += "<p class=\"note\">" + escape(name) + "'s sigmas in this report are scaled by " +
+            num(factor.get<double>(), 3) +
+            " (the parts spread that much more than their own sigmas allow).</p>\n";
+  const auto& spans = at(sc, "spans_s");
+  std::vector<std::string> head{"parameter"};
+  for (std::size_t i = 0; i < spans.size(); ++i)
+    head.push_back("part " + std::to_string(i + 1) + " (" + num(spans[i].at(0).get<double>(), 3) + "-" +
+                   num(spans[i].at(1).get<double>(), 3) + " s)");
+  head.push_back("largest difference (combined sigmas)");
+  Table t{head, {}};
+  const double limit = number(sc, "z_limit");
+  for (const auto& p : at(sc, "parameters")) {
+    std::vector<std::string> row{escape(at(p, "name").get<std::string>()) + " (" +
+                                 escape(at(p, "unit").get<std::string>()) + ")"};
+    const auto& v = at(p, "values");
+    const auto& sg = at(p, "sigmas");
+    for (std::size_t i = 0; i < v.size() && i < sg.size(); ++i)
+      row.push_back(v[i].is_null() ? "not solved"
+                                   : with_sigma(v[i].get<double>(),
+                                                sg[i].is_null() ? std::nan("") : sg[i].get<double>()));
+    const double z = number(p, "worst_z");
+    row.push_back(std::isfinite(z) && z > limit ? "<b>" + num(z, 2) + "</b>" : num(z, 2));
+    t.rows.push_back(std::move(row));
+  }
+  if (verdict != "not run" && !t.rows.empty()) html += t.to_html();
+  html +=
+      "<p class=\"note\">Each part of the recording was calibrated on its own with the whole solve's "
+      "choices; rotations are the small-angle difference to the whole recording's, about the camera's axes. "
+      "The parts agree when no difference exceeds the limit and the chi-square's probability is at least "
+      "0.001.</p>\n";
+  return {"Self-check", html, {}};
 }
 
 }  // namespace imucal::app::report

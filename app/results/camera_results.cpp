@@ -292,7 +292,9 @@ json camera_json(const CameraCalibrationReport& r) {
 }  // namespace
 
 std::string camera_result_json(const CameraCalibrationReport& r) {
-  return camera_json(r).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
+  json j = camera_json(r);
+  j["self_check"] = split_check_json(r.self_check);
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 std::string camera_chain_yaml(const CameraChainReport& r, int min_shared_views) {
@@ -377,6 +379,7 @@ std::string camera_chain_json(const CameraChainReport& r, int min_shared_views) 
                     {"knot_spacing_s", r.chain.knot_spacing_s},
                     {"reprojection_rms_px", finite_or_null(r.chain.rms_px)},
                     {"solver", {{"iterations", r.chain.iterations}, {"cpu_s", r.chain.solve_cpu_s}}},
+                    {"self_check", split_check_json(r.self_check)},
                     {"warnings", r.warnings},
                     {"software_version", kVersion}};
   return out.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";

@@ -2,8 +2,12 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
 #include "core/target.hpp"
 #include "daemon/cli/command.hpp"
@@ -130,6 +134,37 @@ std::string detections_in_words(const std::string& reused_from, const std::strin
   if (!reused_from.empty()) return "reused from " + reused_from;
   if (!stored_in.empty()) return "stored in " + stored_in;
   return "not stored";
+}
+
+void add_self_check_option(CLI::App* cmd, int* parts) {
+  cmd->add_option(
+         "--self-check", *parts,
+         "Calibrate this many consecutive parts of the recording apart and compare them against their "
+         "sigmas (2: the halves; 0: no self-check)")
+      ->check(CLI::Range(0, 8))
+      ->capture_default_str();
+}
+
+void print_self_check(const SplitCheck& c, const std::string& indent) {
+  if (c.verdict == SplitCheck::Verdict::kNotRun) return;
+  std::printf("%sself-check: %s (%.1f s)\n", indent.c_str(), c.summary.c_str(), c.wall_s);
+  if (c.verdict != SplitCheck::Verdict::kDisagree) return;
+  std::vector<const SplitCheckParameter*> worst;
+  for (const auto& p : c.parameters)
+    if (std::isfinite(p.worst_z)) worst.push_back(&p);
+  std::sort(worst.begin(), worst.end(), [](auto* a, auto* b) { return a->worst_z > b->worst_z; });
+  for (std::size_t i = 0; i < worst.size() && i < 3 && worst[i]->worst_z > c.z_limit; ++i) {
+    std::string parts;
+    for (std::size_t k = 0; k < worst[i]->values.size(); ++k) {
+      char text[80];
+      std::snprintf(text, sizeof text, "%s%.4g +- %.2g", k ? ", " : "", worst[i]->values[k],
+                    worst[i]->sigmas[k]);
+      parts += text;
+    }
+    std::printf("%s  %s: %s %s (%.1f combined sigmas apart)\n", indent.c_str(), worst[i]->name.c_str(),
+                parts.c_str(), worst[i]->unit.c_str(), worst[i]->worst_z);
+  }
+  std::printf("%s  %s\n", indent.c_str(), c.advice.c_str());
 }
 
 }  // namespace imucal::cli

@@ -10,6 +10,7 @@
 #include "app/results/camera_results.hpp"
 #include "calib/shutter_options.hpp"
 #include "core/camera_model.hpp"
+#include "core/split_check.hpp"
 
 namespace imucal::cli {
 
@@ -58,5 +59,12 @@ void add_detection_store_options(CLI::App* cmd, DetectionStoreArgs* args);
 std::string detection_cache_dir(const DetectionStoreArgs& args);
 /// "reused from the log", "stored in FILE", "not stored" for the summaries.
 std::string detections_in_words(const std::string& reused_from, const std::string& stored_in);
+
+/// --self-check K: the parts of the recording calibrated apart and compared (2 by default: the
+/// halves; 0: none).
+void add_self_check_option(CLI::App* cmd, int* parts);
+/// The self-check's verdict in a summary (`indent` before each line), and the parameters that
+/// differ most when the parts disagree; nothing when it was not run.
+void print_self_check(const SplitCheck& check, const std::string& indent);
 
 }  // namespace imucal::cli

@@ -33,6 +33,7 @@ struct CameraCliOptions {
   ShutterArgs shutter;
   double knot_spacing_s = 0.0;
   int threads = 0;
+  int self_check = 2;
   bool allow_damaged = false;
   DetectionStoreArgs detections;
   bool force = false;
@@ -81,6 +82,7 @@ void print_summary(const app::CameraCalibrationReport& r, const std::string& yam
               r.frames_with_target,
               detections_in_words(r.detections_reused_from, r.detections_stored_in).c_str());
   print_camera(r);
+  print_self_check(r.self_check, "  ");
   std::printf("  wrote %s\n", yaml_path.c_str());
   if (r.warnings.empty()) std::printf("  no warnings\n");
 }
@@ -134,6 +136,7 @@ void print_chain_summary(const app::CameraChainReport& r, const std::string& yam
   }
   std::printf("reprojection RMS %.4f px over all cameras; %d iterations, %.1f s of CPU\n", r.chain.rms_px,
               r.chain.iterations, r.chain.solve_cpu_s);
+  print_self_check(r.self_check, "");
   std::printf("wrote %s\n", yaml_path.c_str());
   if (r.warnings.empty()) std::printf("no warnings\n");
 }
@@ -189,6 +192,7 @@ void run(const CameraCliOptions& o) {
   q.target = target.target;
   q.target_source = target.source;
   q.threads = o.threads;
+  q.self_check_parts = o.self_check;
   q.allow_damaged = o.allow_damaged;
   q.reuse_detections = !o.detections.no_reuse;
   q.store_detections = o.detections.store_in_log;
@@ -285,6 +289,7 @@ void setup(CLI::App& root) {
   cmd->add_option("--threads", o->threads,
                   "Worker threads for the detection and the solver (default: all cores)")
       ->check(CLI::Range(0, 256));
+  add_self_check_option(cmd, &o->self_check);
   add_detection_store_options(cmd, &o->detections);
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");
   cmd->add_option("-o,--output", o->yaml_path,

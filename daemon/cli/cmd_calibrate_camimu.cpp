@@ -172,29 +172,6 @@ void print_vec(const char* name, const Eigen::Vector3d& v, const Eigen::Vector3d
   std::printf("    %-4s [%.6f %.6f %.6f] +- %s\n", name, v[0], v[1], v[2], sig3(s, 1.0, 6, fixed).c_str());
 }
 
-/// The self-check's verdict, and the parameters that differ most when the parts disagree.
-void print_self_check(const SplitCheck& c) {
-  if (c.verdict == SplitCheck::Verdict::kNotRun) return;
-  std::printf("  self-check: %s (%.1f s)\n", c.summary.c_str(), c.wall_s);
-  if (c.verdict != SplitCheck::Verdict::kDisagree) return;
-  std::vector<const SplitCheckParameter*> worst;
-  for (const auto& p : c.parameters)
-    if (std::isfinite(p.worst_z)) worst.push_back(&p);
-  std::sort(worst.begin(), worst.end(), [](auto* a, auto* b) { return a->worst_z > b->worst_z; });
-  for (std::size_t i = 0; i < worst.size() && i < 3 && worst[i]->worst_z > c.z_limit; ++i) {
-    std::string parts;
-    for (std::size_t k = 0; k < worst[i]->values.size(); ++k) {
-      char text[80];
-      std::snprintf(text, sizeof text, "%s%.4g +- %.2g", k ? ", " : "", worst[i]->values[k],
-                    worst[i]->sigmas[k]);
-      parts += text;
-    }
-    std::printf("    %s: %s %s (%.1f combined sigmas apart)\n", worst[i]->name.c_str(), parts.c_str(),
-                worst[i]->unit.c_str(), worst[i]->worst_z);
-  }
-  std::printf("    %s\n", c.advice.c_str());
-}
-
 void print_summary(const app::CamImuReport& r, const std::string& out_dir) {
   const auto& res = r.result;
   std::printf("camera-IMU calibration of %s (%s, %zu samples, %s; model %s; %d iterations)\n",
@@ -241,7 +218,7 @@ void print_summary(const app::CamImuReport& r, const std::string& out_dir) {
     std::printf("  IMU biases at %.2f deg C: the samples were corrected with the thermal model %s\n",
                 r.thermal->reference_c, r.thermal_source.c_str());
   }
-  print_self_check(res.self_check);
+  print_self_check(res.self_check, "  ");
   if (r.warnings.empty()) std::printf("  no warnings\n");
 }
 

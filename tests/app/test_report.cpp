@@ -231,6 +231,13 @@ TEST(Report, CameraResultFromItsWriter) {
   ASSERT_TRUE(before.ok()) << before.error().message;
   EXPECT_EQ(before->figures, 2);
   EXPECT_NE(test::read_file(old.html_path).find("there is no scatter of them"), std::string::npos);
+  EXPECT_EQ(test::read_file(old.html_path).find("Self-check"), std::string::npos);  // not run: no section
+  // The halves, which agree.
+  r.self_check.parts = 2;
+  r.self_check.spans_s = {{0.0, 30.0}, {30.0, 60.0}};
+  r.self_check.part_errors = {"", ""};
+  r.self_check.parameters = {{"cam0 fu", "px", {200.2, 200.3}, {0.1, 0.1}}};
+  judge_split_check(&r.self_check);
   // With them: the used corners and the one the corner test rejected.
   res.points_used = 3;
   res.corners_rejected = 1;
@@ -249,6 +256,9 @@ TEST(Report, CameraResultFromItsWriter) {
   EXPECT_EQ(count(html, "<figure class=\"plot\""), 3u);
   EXPECT_NE(html.find("data-plot=\"camera-reprojection\""), std::string::npos);
   EXPECT_NE(html.find("4 of 4 stored"), std::string::npos);
+  EXPECT_NE(html.find("<h2>Self-check</h2>"), std::string::npos);
+  EXPECT_NE(html.find("the two halves agree within their sigmas"), std::string::npos);
+  EXPECT_NE(html.find("part 2 (30-60 s)"), std::string::npos);
 }
 
 }  // namespace

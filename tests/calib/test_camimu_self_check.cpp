@@ -44,8 +44,8 @@ TEST(CamImuSigmas, TheClusterRobustSigmasGrowWithErrorsSharedByAFrame) {
   EXPECT_EQ(plain->quality.covariance_clusters, 0);
   EXPECT_GE(robust->quality.covariance_clusters, 19);
   const double err = (r.T_cam_imu.translation() - synth.T_cam_imu.translation()).norm();
-  std::printf("translation sigma plain %.3f mm, robust %.3f mm; error %.3f mm\n", p.translation_sigma_m.norm() * 1e3,
-              r.translation_sigma_m.norm() * 1e3, err * 1e3);
+  std::printf("translation sigma plain %.3f mm, robust %.3f mm; error %.3f mm\n",
+              p.translation_sigma_m.norm() * 1e3, r.translation_sigma_m.norm() * 1e3, err * 1e3);
   EXPECT_GT(r.translation_sigma_m.norm(), 1.5 * p.translation_sigma_m.norm());
   EXPECT_GT(r.timeshift_sigma_s, 1.5 * p.timeshift_sigma_s);
   // Never below the plain one.
@@ -63,7 +63,8 @@ SelfCheckRun run_self_check(const test::CamImuSynthOptions& so) {
   auto full = calib::calibrate_camimu(synth.imu, synth.cameras, synth.target, options);
   EXPECT_TRUE(full.ok()) << full.error().message;
   if (!full.ok()) return {};
-  SelfCheckRun run{*full, app::camimu_self_check(synth.imu, synth.cameras, synth.target, options, *full, 2, 2)};
+  SelfCheckRun run{*full,
+                   app::camimu_self_check(synth.imu, synth.cameras, synth.target, options, *full, 2, 2)};
   std::printf("%s\n", run.check.summary.c_str());
   return run;
 }

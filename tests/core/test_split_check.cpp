@@ -1,10 +1,10 @@
 // The self-check's comparison of the parts of a recording (core/split_check.hpp).
 
-#include "core/split_check.hpp"
-
 #include <gtest/gtest.h>
 
 #include <cmath>
+
+#include "core/split_check.hpp"
 
 namespace imucal {
 namespace {

@@ -86,6 +86,11 @@ TEST(CliCalibrateCamera, FixtureWithinThreeSigmasOfTruthAndDetectionsReused) {
     EXPECT_NEAR(j["distortion_coeffs"][i].get<double>(), first["distortion_coeffs"][i].as<double>(), 1e-12);
   }
   EXPECT_EQ(j["views_used"].get<int>(), first["imucal"]["views_used"].as<int>());
+  // The self-check (the halves, by default): this rendered recording's halves agree.
+  EXPECT_EQ(j["self_check"]["verdict"], "agree") << j["self_check"].dump(1);
+  EXPECT_EQ(j["self_check"]["parts"], 2);
+  EXPECT_EQ(j["self_check"]["parameters"].size(), 8u);  // fu fv pu pv k1 k2 p1 p2
+  EXPECT_TRUE(j["self_check"]["sigmas_scaled"].empty());
 }
 
 // --store-detections keeps the old way: the detections go into the log (when it is complete and
