@@ -11,6 +11,7 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <tuple>
 
 #include "calib/rk4.hpp"
 #include "calib/static_detector.hpp"
@@ -95,6 +96,39 @@ Result<Eigen::Vector3d> yaml_vector(const YAML::Node& section, const char* key, 
   }
   if (!out.allFinite()) return make_error(Errc::kCorrupt, what + " holds a value that is not finite");
   return out;
+}
+
+/// The factors and sigmas of `accel:` and `gyro:` (calibrate static's result), or nothing when any
+/// is missing or malformed: they only widen a held calibration's sigmas, never refuse the file.
+std::optional<NamedCalibration::Spread> read_spread(const YAML::Node& root) {
+  const auto matrix = [](const YAML::Node& m, Eigen::Matrix3d* out) {
+    if (!m || !m.IsSequence() || m.size() != 3) return false;
+    for (std::size_t r = 0; r < 3; ++r) {
+      if (!m[r].IsSequence() || m[r].size() != 3) return false;
+      for (std::size_t c = 0; c < 3; ++c)
+        (*out)(static_cast<int>(r), static_cast<int>(c)) = m[r][c].as<double>();
+    }
+    return true;
+  };
+  const auto vector = [](const YAML::Node& v, Eigen::Vector3d* out) {
+    if (!v || !v.IsSequence() || v.size() != 3) return false;
+    for (std::size_t i = 0; i < 3; ++i) (*out)(static_cast<int>(i)) = v[i].as<double>();
+    return true;
+  };
+  NamedCalibration::Spread s;
+  try {
+    for (auto [key, triad, sigma] :
+         {std::tuple{"accel", &s.accel, &s.accel_sigma}, std::tuple{"gyro", &s.gyro, &s.gyro_sigma}}) {
+      const YAML::Node t = root[key];
+      if (!t || !t.IsMap() || !t["sigma"]) return std::nullopt;
+      if (!matrix(t["misalignment"], &triad->T) || !vector(t["scale"], &triad->scale) ||
+          !matrix(t["sigma"]["misalignment"], &sigma->T) || !vector(t["sigma"]["scale"], &sigma->scale))
+        return std::nullopt;
+    }
+  } catch (const YAML::Exception&) {
+    return std::nullopt;
+  }
+  return s;
 }
 
 }  // namespace
@@ -326,6 +360,7 @@ Result<NamedCalibration> parse_imucal_calibration(const std::string& yaml_text, 
   out.model.A_g = *A_g;
   out.model.b_g = *b_g;
   out.model.G = *G;
+  out.spread = read_spread(root);
   if (const YAML::Node units = root["input_units"]) {
     const std::string s = units.IsScalar() ? units.Scalar() : std::string();
     if (s == imu_units_name(ImuUnits::kSi)) {

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "core/imu.hpp"
+#include "core/imu_calibration.hpp"
 #include "core/imu_model.hpp"
 #include "core/result.hpp"
 #include "core/time.hpp"
@@ -133,6 +134,14 @@ struct NamedCalibration {
   CanonicalImuModel model;
   std::optional<ImuUnits> input_units;  // when the file says
   std::string accelerometer_of;         // crossed: the calibration whose accelerometer it has
+  /// The static result's factors (A = T diag(scale) per triad) with their standard deviations
+  /// (NaN where not determined), when the file has them: what `calibrate camimu` propagates into
+  /// the cameras' rotation sigmas when it holds this calibration (app::held_axes_covariance).
+  struct Spread {
+    TedaldiTriad accel, gyro;
+    TriadSigma accel_sigma, gyro_sigma;
+  };
+  std::optional<Spread> spread;
 };
 
 /// For each calibration after the first, that calibration's gyroscope (A_g, b_g and G) with the

@@ -31,11 +31,13 @@ void intrinsic_rows(const std::string& cam, const calib::CameraIntrinsicsResult&
   for (int i = 0; i < 4; ++i)
     rows->push_back({cam + " " + coeff[i], "", r.camera.distortion_coeffs(i), r.distortion_sigma(i)});
   if (r.camera.shutter.rolling() && std::isfinite(line_delay_sigma_s))
-    rows->push_back({cam + " line delay", "us", r.camera.shutter.line_delay_s * 1e6, line_delay_sigma_s * 1e6});
+    rows->push_back(
+        {cam + " line delay", "us", r.camera.shutter.line_delay_s * 1e6, line_delay_sigma_s * 1e6});
 }
 
 /// The chain's parameters of one part; rotations as the small-angle difference to the whole's.
-std::vector<SplitCheckRow> chain_rows(const calib::CameraChainResult& r, const calib::CameraChainResult& full) {
+std::vector<SplitCheckRow> chain_rows(const calib::CameraChainResult& r,
+                                      const calib::CameraChainResult& full) {
   std::vector<SplitCheckRow> rows;
   const char* xyz[] = {"x", "y", "z"};
   for (std::size_t c = 0; c < r.cameras.size() && c < full.cameras.size(); ++c) {
@@ -78,26 +80,30 @@ std::vector<calib::TargetObservation> views_in(const std::vector<calib::TargetOb
 /// `prefix` when their probability is below 5 %, else 1 (and nothing recorded).
 double scale_of(SplitCheck* check, const std::string& prefix, const std::string& who,
                 std::vector<std::string>* notes) {
-  if (check->verdict != SplitCheck::Verdict::kAgree && check->verdict != SplitCheck::Verdict::kDisagree) return 1.0;
+  if (check->verdict != SplitCheck::Verdict::kAgree && check->verdict != SplitCheck::Verdict::kDisagree)
+    return 1.0;
   int dof = 0;
   const double chi = split_chi_square(*check, prefix, &dof);
   if (dof == 0 || !(chi_square_probability(chi, dof) < 0.05)) return 1.0;
   const double k = std::sqrt(chi / dof);
   check->scaled.emplace_back(who, k);
   char text[300];
-  std::snprintf(text, sizeof text,
-                "%s's sigmas are scaled by %.2f: the parts of the recording spread that much more than their own "
-                "sigmas allow (chi-square %.1f for %d degrees of freedom)",
-                who.c_str(), k, chi, dof);
+  std::snprintf(
+      text, sizeof text,
+      "%s's sigmas are scaled by %.2f: the parts of the recording spread that much more than their own "
+      "sigmas allow (chi-square %.1f for %d degrees of freedom)",
+      who.c_str(), k, chi, dof);
   notes->emplace_back(text);
   return k;
 }
 
 }  // namespace
 
-SplitCheck camera_self_check(const TargetDescription& target, const std::vector<calib::TargetObservation>& views,
-                             const calib::CameraIntrinsicsOptions& options, const calib::CameraIntrinsicsResult& full,
-                             const std::string& name, int parts, int threads) {
+SplitCheck camera_self_check(const TargetDescription& target,
+                             const std::vector<calib::TargetObservation>& views,
+                             const calib::CameraIntrinsicsOptions& options,
+                             const calib::CameraIntrinsicsResult& full, const std::string& name, int parts,
+                             int threads) {
   SplitCheck check;
   check.parts = std::clamp(parts, 2, 8);
   const auto start = std::chrono::steady_clock::now();
@@ -140,9 +146,10 @@ SplitCheck camera_self_check(const TargetDescription& target, const std::vector<
   return check;
 }
 
-SplitCheck chain_self_check(const TargetDescription& target, const std::vector<calib::CameraChainInput>& cameras,
-                            const calib::CameraChainOptions& options, const calib::CameraChainResult& full, int parts,
-                            int threads) {
+SplitCheck chain_self_check(const TargetDescription& target,
+                            const std::vector<calib::CameraChainInput>& cameras,
+                            const calib::CameraChainOptions& options, const calib::CameraChainResult& full,
+                            int parts, int threads) {
   SplitCheck check;
   check.parts = std::clamp(parts, 2, 8);
   const auto start = std::chrono::steady_clock::now();
@@ -180,8 +187,9 @@ SplitCheck chain_self_check(const TargetDescription& target, const std::vector<c
   return check;
 }
 
-std::vector<std::string> scale_camera_by_self_check(calib::CameraIntrinsicsResult* camera, double* line_delay_sigma_s,
-                                                    const std::string& name, SplitCheck* check) {
+std::vector<std::string> scale_camera_by_self_check(calib::CameraIntrinsicsResult* camera,
+                                                    double* line_delay_sigma_s, const std::string& name,
+                                                    SplitCheck* check) {
   std::vector<std::string> notes;
   const double k = scale_of(check, name + " ", name, &notes);
   camera->intrinsics_sigma *= k;

@@ -17,20 +17,24 @@ namespace imucal::app {
 
 /// One camera: its views solved per part as the whole was (per-view poses, or on the trajectory
 /// with the line delay when the whole found a rolling shutter). `name` prefixes the parameters.
-SplitCheck camera_self_check(const TargetDescription& target, const std::vector<calib::TargetObservation>& views,
-                             const calib::CameraIntrinsicsOptions& options, const calib::CameraIntrinsicsResult& full,
-                             const std::string& name, int parts, int threads);
+SplitCheck camera_self_check(const TargetDescription& target,
+                             const std::vector<calib::TargetObservation>& views,
+                             const calib::CameraIntrinsicsOptions& options,
+                             const calib::CameraIntrinsicsResult& full, const std::string& name, int parts,
+                             int threads);
 
 /// A chain: every camera's views of a part (by its own stamps, cut at cam0's times).
-SplitCheck chain_self_check(const TargetDescription& target, const std::vector<calib::CameraChainInput>& cameras,
-                            const calib::CameraChainOptions& options, const calib::CameraChainResult& full, int parts,
-                            int threads);
+SplitCheck chain_self_check(const TargetDescription& target,
+                            const std::vector<calib::CameraChainInput>& cameras,
+                            const calib::CameraChainOptions& options, const calib::CameraChainResult& full,
+                            int parts, int threads);
 
 /// Scales, per camera whose parameters spread with a chi-square probability below 5 %, its
 /// intrinsics' and relative pose's sigmas (and covariance) by sqrt(chi-square / dof); returns the
 /// notes that say so.
 std::vector<std::string> scale_chain_by_self_check(calib::CameraChainResult* chain, SplitCheck* check);
-std::vector<std::string> scale_camera_by_self_check(calib::CameraIntrinsicsResult* camera, double* line_delay_sigma_s,
-                                                    const std::string& name, SplitCheck* check);
+std::vector<std::string> scale_camera_by_self_check(calib::CameraIntrinsicsResult* camera,
+                                                    double* line_delay_sigma_s, const std::string& name,
+                                                    SplitCheck* check);
 
 }  // namespace imucal::app

@@ -140,6 +140,35 @@ void scale_by_self_check(CamImuCalibrationResult* r, std::vector<std::string>* n
   }
 }
 
+/// With a static calibration held (--imu-intrinsics, the service's static result), the body
+/// frame is the one its accelerometer axes define, and its error is every camera's rotation
+/// error too: its covariance (held_axes_covariance) is added to each camera's rotation sigma.
+void add_held_axes(const CamImuRequest& q, CamImuReport* report) {
+  if (!q.imu_intrinsics || !report->options.fixed.C_bg) return;
+  if (!q.imu_intrinsics->spread) {
+    report->notes.push_back(
+        q.imu_intrinsics->path +
+        " gives no sigmas of its scales and misalignments: the cameras' rotation sigmas leave "
+        "out the uncertainty of the IMU axes it holds");
+    return;
+  }
+  const Eigen::Matrix3d body = held_axes_covariance(*q.imu_intrinsics->spread);
+  for (CamImuCameraResult& c : report->result.cameras) {
+    const Eigen::Matrix3d R = c.T_cam_imu.linear();
+    const Eigen::Matrix3d cam = R * body * R.transpose();
+    for (int a = 0; a < 3; ++a)
+      c.rotation_sigma_rad(a) = std::sqrt(c.rotation_sigma_rad(a) * c.rotation_sigma_rad(a) + cam(a, a));
+  }
+  char text[400];
+  std::snprintf(
+      text, sizeof text,
+      "the cameras' rotation sigmas include the uncertainty of the IMU axes that %s holds (its scales' "
+      "and misalignments' sigmas: %.4f, %.4f, %.4f deg about the body axes)",
+      q.imu_intrinsics->path.c_str(), std::sqrt(body(0, 0)) * 180.0 / M_PI,
+      std::sqrt(body(1, 1)) * 180.0 / M_PI, std::sqrt(body(2, 2)) * 180.0 / M_PI);
+  report->notes.emplace_back(text);
+}
+
 }  // namespace
 
 Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& q) {
@@ -209,6 +238,7 @@ Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& q) {
     else if (sc.verdict == SplitCheck::Verdict::kNotDetermined)
       report.notes.push_back(sc.summary);
   }
+  add_held_axes(q, &report);
   report.warnings.insert(report.warnings.end(), report.result.warnings.begin(), report.result.warnings.end());
   return report;
 }

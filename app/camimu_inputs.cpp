@@ -262,6 +262,56 @@ Result<GsensInput> read_gsens_input(const std::string& path) {
   return out;
 }
 
+namespace {
+
+/// The gyro's raw-to-body map of a static calibration's factors (units cancel in its rotation).
+std::optional<Eigen::Matrix3d> gyro_to_body(const TedaldiTriad& accel, const TedaldiTriad& gyro) {
+  CanonicalImuModel c;
+  c.A_a = accel.TK();
+  c.A_g = gyro.TK();
+  auto k = krebs_from_canonical(c);
+  if (!k.ok()) return std::nullopt;
+  return Eigen::Matrix3d(k->R_canonical_body.transpose() * c.A_g);
+}
+
+}  // namespace
+
+Eigen::Matrix3d held_axes_covariance(const NamedCalibration::Spread& spread) {
+  const auto nominal = gyro_to_body(spread.accel, spread.gyro);
+  const Eigen::Matrix3d undetermined = Eigen::Matrix3d::Constant(std::nan(""));
+  if (!nominal) return undetermined;
+  const Eigen::Matrix3d inverse = nominal->inverse();
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  const auto add = [&](const TedaldiTriad& accel, const TedaldiTriad& gyro) {
+    const auto moved = gyro_to_body(accel, gyro);
+    if (!moved) return false;
+    // The rotation part of moved * nominal^-1: its antisymmetric part, small.
+    const Eigen::Matrix3d m = *moved * inverse;
+    const Eigen::Vector3d d(0.5 * (m(2, 1) - m(1, 2)), 0.5 * (m(0, 2) - m(2, 0)), 0.5 * (m(1, 0) - m(0, 1)));
+    cov += d * d.transpose();
+    return true;
+  };
+  for (int triad = 0; triad < 2; ++triad) {
+    const TriadSigma& sigma = triad == 0 ? spread.accel_sigma : spread.gyro_sigma;
+    const TedaldiTriad& base = triad == 0 ? spread.accel : spread.gyro;
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        if (i == j || sigma.T(i, j) == 0.0) continue;  // the unit diagonal, and entries not estimated
+        if (!std::isfinite(sigma.T(i, j))) return undetermined;
+        TedaldiTriad t = base;
+        t.T(i, j) += sigma.T(i, j);
+        if (!(triad == 0 ? add(t, spread.gyro) : add(spread.accel, t))) return undetermined;
+      }
+      if (sigma.scale(i) == 0.0) continue;
+      if (!std::isfinite(sigma.scale(i))) return undetermined;
+      TedaldiTriad t = base;
+      t.scale(i) += sigma.scale(i);
+      if (!(triad == 0 ? add(t, spread.gyro) : add(spread.accel, t))) return undetermined;
+    }
+  }
+  return cov;
+}
+
 Result<ImuPrior> imu_prior(const std::optional<NamedCalibration>& intrinsics,
                            const std::optional<GsensInput>& gsens, const ImuStreamInfo& info) {
   ImuPrior out;

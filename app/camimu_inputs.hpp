@@ -97,6 +97,15 @@ struct ImuPrior {
 [[nodiscard]] Result<ImuPrior> imu_prior(const std::optional<NamedCalibration>& intrinsics,
                                          const std::optional<GsensInput>& gsens, const ImuStreamInfo& info);
 
+/// The covariance (rad^2, about the Krebs body axes) of the body frame a held static calibration
+/// defines, from its factors' standard deviations: the gyro's map into the body frame
+/// (R_canonical_body^T A_g, the body frame set by the accelerometer's axes) is recomputed with
+/// each scale and misalignment moved by its sigma, and the rotation it turns by is summed in
+/// squares (the factors taken as independent). A camera's rotation against the IMU, solved with
+/// that calibration held, is off by the same rotation. NaN when a moved factor's sigma is not
+/// determined.
+Eigen::Matrix3d held_axes_covariance(const NamedCalibration::Spread& spread);
+
 /// The IMU samples on the stream's nominal SI (ImuStreamInfo::accel/gyro to_si), as the
 /// estimator takes them; samples flagged saturated are left out and counted in `*saturated`.
 std::vector<calib::CamImuSample> camimu_samples(const std::vector<ImuSample>& samples,

@@ -181,6 +181,8 @@ static Result<std::vector<std::string>> solve_camimu(
   prior.path = static_yaml;
   prior.model = out.imu->canonical;
   prior.input_units = info.units;
+  prior.spread = NamedCalibration::Spread{out.imu->model.accel, out.imu->model.gyro, out.imu->accel_sigma,
+                                          out.imu->gyro_sigma};
   q.imu_intrinsics = std::move(prior);
   q.gravity_source = "standard gravity";
   q.threads = 2;

@@ -7,9 +7,11 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "app/calibration_check.hpp"
 #include "app/camimu_inputs.hpp"
 #include "app/results/camimu_results.hpp"
 #include "app/results/static_results.hpp"
@@ -331,6 +333,53 @@ TEST(CamImuInputs, GsensToKrebsRoundTripsThroughCanonical) {
   EXPECT_LT((back->model.B_g - k.B_g).cwiseAbs().maxCoeff(), 1e-15);
   // With the identity gyro it is G itself.
   EXPECT_EQ(krebs_gsens_from_canonical(G, KrebsImuModel{}), G);
+}
+
+// The rotation a held static calibration's axes may be off by, from its factors' sigmas, with
+// known answers on an aligned IMU: an accelerometer misalignment T(0,1) = e turns the body frame
+// (x along the accelerometer's x axis) by e about z; a gyro misalignment T(0,1) = e is half a
+// rotation (e/2 about z) and half a shear; scales turn nothing.
+TEST(CamImuInputs, TheHeldAxesCovarianceComesFromTheStaticSigmas) {
+  NamedCalibration::Spread s;
+  EXPECT_TRUE(held_axes_covariance(s).isZero(0.0));  // no sigma: nothing added
+  s.accel_sigma.T(0, 1) = 3e-4;
+  s.gyro_sigma.T(0, 1) = 2e-4;
+  s.accel_sigma.scale = s.gyro_sigma.scale = Eigen::Vector3d::Constant(1e-3);
+  const Eigen::Matrix3d cov = held_axes_covariance(s);
+  EXPECT_NEAR(cov(2, 2), 3e-4 * 3e-4 + 1e-4 * 1e-4, 1e-10);
+  EXPECT_NEAR(cov(0, 0), 0.0, 1e-12);
+  EXPECT_NEAR(cov(1, 1), 0.0, 1e-12);
+  EXPECT_NEAR(cov(0, 2), 0.0, 1e-12);
+  // A sigma the static calibration could not determine leaves the added rotation undetermined.
+  s.gyro_sigma.T(1, 2) = std::nan("");
+  EXPECT_TRUE(held_axes_covariance(s).array().isNaN().all());
+}
+
+// The static result YAML carries its factors' sigmas, read beside the canonical model.
+TEST(CamImuInputs, TheStaticResultsSigmasAreReadForThePropagation) {
+  const std::string dir = test::scratch_dir();
+  const std::string path = dir + "/static.yaml";
+  std::ofstream(path)
+      << "canonical:\n  A_a: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n  b_a: [0, 0, 0]\n"
+         "  A_g: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n  b_g: [0, 0, 0]\n"
+         "  G: [[0, 0, 0], [0, 0, 0], [0, 0, 0]]\n"
+         "accel:\n  misalignment: [[1, 0.01, 0], [0, 1, 0], [0, 0, 1]]\n  scale: [1, 1, 1]\n"
+         "  sigma:\n    misalignment: [[0, 2e-4, 0], [0, 0, 0], [0, 0, 0]]\n    scale: [1e-3, 1e-3, 1e-3]\n"
+         "gyro:\n  misalignment: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n  scale: [1, 1, 1]\n"
+         "  sigma:\n    misalignment: [[0, .nan, 0], [0, 0, 0], [0, 0, 0]]\n    scale: [0, 0, 0]\n";
+  auto c = read_imucal_calibration(path);
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  ASSERT_TRUE(c->spread.has_value());
+  EXPECT_DOUBLE_EQ(c->spread->accel.T(0, 1), 0.01);
+  EXPECT_DOUBLE_EQ(c->spread->accel_sigma.T(0, 1), 2e-4);
+  EXPECT_TRUE(std::isnan(c->spread->gyro_sigma.T(0, 1)));
+  // A file without them (imu_tk's, or an older one) still reads, without a spread.
+  std::ofstream(path) << "canonical:\n  A_a: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n  b_a: [0, 0, 0]\n"
+                         "  A_g: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n  b_g: [0, 0, 0]\n"
+                         "  G: [[0, 0, 0], [0, 0, 0], [0, 0, 0]]\n";
+  auto bare = read_imucal_calibration(path);
+  ASSERT_TRUE(bare.ok()) << bare.error().message;
+  EXPECT_FALSE(bare->spread.has_value());
 }
 
 TEST(CamImuInputs, StaticResultOnRawCountsBecomesTheKrebsStartAndFixesTheIntrinsics) {
