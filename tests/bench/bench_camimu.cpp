@@ -16,6 +16,7 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -266,6 +267,41 @@ std::string verdict_text(const Verdict& v) {
   return s;
 }
 
+/// The share of |error| / sigma within 1, 2 and 3 over every run of each variable's entries, and
+/// over all (a normal error with an honest sigma gives 68.3, 95.4 and 99.7 %); errors without a
+/// finite sigma are counted apart.
+void print_coverage(const Collector& c) {
+  std::printf("\ncoverage: share of |error| / sigma within 1, 2, 3 (normal: 68.3, 95.4, 99.7 %%)\n");
+  std::array<int, 3> all{};
+  int all_n = 0, all_missing = 0;
+  for (const Variable& v : variables()) {
+    std::array<int, 3> within{};
+    int n = 0, missing = 0;
+    for (const std::string& name : v.entries) {
+      const Entry& e = c.at(name);
+      for (std::size_t k = 0; k < e.err.size(); ++k) {
+        if (!(std::isfinite(e.sigma[k]) && e.sigma[k] > 0.0)) {
+          ++missing;
+          continue;
+        }
+        const double z = std::abs(e.err[k]) / e.sigma[k];
+        for (int b = 0; b < 3; ++b) within[static_cast<std::size_t>(b)] += z <= b + 1;
+        ++n;
+      }
+    }
+    for (int b = 0; b < 3; ++b) all[static_cast<std::size_t>(b)] += within[static_cast<std::size_t>(b)];
+    all_n += n;
+    all_missing += missing;
+    if (n > 0)
+      std::printf("%-14s %5.1f %5.1f %5.1f %%  (%d errors%s)\n", v.name.c_str(), 100.0 * within[0] / n,
+                  100.0 * within[1] / n, 100.0 * within[2] / n, n,
+                  missing ? (", " + std::to_string(missing) + " without a sigma").c_str() : "");
+  }
+  if (all_n > 0)
+    std::printf("%-14s %5.1f %5.1f %5.1f %%  (%d errors, %d without a sigma)\n", "all", 100.0 * all[0] / all_n,
+                100.0 * all[1] / all_n, 100.0 * all[2] / all_n, all_n, all_missing);
+}
+
 /// The accuracy table: one row per entry, then per variable the mean over its entries (the
 /// paper's definition of its figure). Returns the number of failed checks.
 int print_accuracy(const Collector& c, int runs) {
@@ -300,6 +336,7 @@ int print_accuracy(const Collector& c, int runs) {
           sum_sd / n <= v.paper ? "ok" : "FAIL");
     }
   }
+  print_coverage(c);
   return failed;
 }
 
