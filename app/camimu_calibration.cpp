@@ -115,7 +115,7 @@ Status prepare_options(const CamImuRequest& q, CamImuReport* report) {
 /// Where the parts disagree on a camera's extrinsics and time offset beyond chance (their
 /// chi-square's probability below 5 %), that camera's sigmas are scaled by sqrt(chi-square / dof):
 /// the spread of the parts is then what the sigmas promise (docs/camimu-calibration.md,
-/// "Self-check").
+/// "Uncertainty and quality").
 void scale_by_self_check(CamImuCalibrationResult* r, std::vector<std::string>* notes) {
   SplitCheck& sc = r->self_check;
   if (sc.verdict != SplitCheck::Verdict::kAgree && sc.verdict != SplitCheck::Verdict::kDisagree) return;

@@ -4,7 +4,7 @@
 // compared against their own sigmas. Parts that disagree by more than their sigmas allow mean
 // that the sigmas (or the model) do not hold for this recording. The comparison lives here, with
 // no solver, so that results, reports and the service read the same record;
-// app/camimu_self_check.hpp runs the parts. Method: docs/camimu-calibration.md, "Self-check".
+// app/camimu_self_check.hpp runs the parts. Method: docs/camimu-calibration.md, "Uncertainty and quality".
 
 #include <limits>
 #include <nlohmann/json.hpp>

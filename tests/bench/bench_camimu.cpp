@@ -298,8 +298,8 @@ void print_coverage(const Collector& c) {
                   missing ? (", " + std::to_string(missing) + " without a sigma").c_str() : "");
   }
   if (all_n > 0)
-    std::printf("%-14s %5.1f %5.1f %5.1f %%  (%d errors, %d without a sigma)\n", "all", 100.0 * all[0] / all_n,
-                100.0 * all[1] / all_n, 100.0 * all[2] / all_n, all_n, all_missing);
+    std::printf("%-14s %5.1f %5.1f %5.1f %%  (%d errors, %d without a sigma)\n", "all",
+                100.0 * all[0] / all_n, 100.0 * all[1] / all_n, 100.0 * all[2] / all_n, all_n, all_missing);
 }
 
 /// The accuracy table: one row per entry, then per variable the mean over its entries (the
