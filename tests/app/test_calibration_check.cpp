@@ -377,7 +377,7 @@ TEST(CalibrationCheck, CrossingGivesEachGyroscopeTheFirstAccelerometer) {
   const Synth s = synthetic(16);
   auto set = build_check_set(s.rec.samples);
   ASSERT_TRUE(set.ok()) << set.error().message;
-  NamedCalibration truth{"truth.yaml", "imucal", "/x/truth.yaml", s.truth, ImuUnits::kSi, ""};
+  NamedCalibration truth{"truth.yaml", "imucal", "/x/truth.yaml", s.truth, ImuUnits::kSi, "", std::nullopt};
   NamedCalibration accel_off = truth;  // +0.5 % on the accelerometer's z axis, the truth's gyro
   accel_off.name = "accel_off.yaml";
   accel_off.model.A_a = Eigen::Vector3d(1.0, 1.0, 1.005).asDiagonal() * s.truth.A_a;
@@ -417,9 +417,9 @@ TEST(CalibrationCheckFormats, JsonReportHoldsTheSetAndOneEntryPerCalibration) {
   const Synth s = synthetic(15);
   auto set = build_check_set(s.rec.samples);
   ASSERT_TRUE(set.ok());
-  NamedCalibration truth{"truth.yaml", "imucal", "/x/truth.yaml", s.truth, ImuUnits::kSi, ""};
-  NamedCalibration ident{"a.calib + g.calib", "imu_tk",     "a.calib,g.calib",
-                         CanonicalImuModel{}, std::nullopt, ""};
+  NamedCalibration truth{"truth.yaml", "imucal", "/x/truth.yaml", s.truth, ImuUnits::kSi, "", std::nullopt};
+  NamedCalibration ident{"a.calib + g.calib", "imu_tk", "a.calib,g.calib", CanonicalImuModel{},
+                         std::nullopt,        "",       std::nullopt};
   const std::vector<CheckFiguresPair> figs = {check_calibration(*set, truth.model, 9.80665),
                                               check_calibration(*set, ident.model, 9.80665)};
   const auto j = nlohmann::json::parse(

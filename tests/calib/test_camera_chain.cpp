@@ -232,12 +232,15 @@ TEST(CameraChain, TheResidualsJacobiansMatchNumericOnes) {
     // Rolling: the corners' times t_view + shift + v * 30 us span 54.1-56.0 ms, across the knot at 55.
     const double t_view = rolling ? 0.0355 : 0.21;
     const int first = rolling ? knots.segment(t_view + shift + 250 * 30e-6).first_knot - 1 : 3;
-    if (rolling)
+    if (rolling) {
       ASSERT_NE(knots.segment(t_view + shift + 220 * 30e-6).first_knot,
                 knots.segment(t_view + shift + 283 * 30e-6).first_knot);
+    }
     R cost(DistortionModel::kRadtan, 640, 480, pts, px, t_view, first, knots, 0.2, robust ? 0.3 : 0.0, false,
            rolling ? &rs : nullptr);
-    if (rolling) ASSERT_TRUE(cost.in_window(shift, line_delay));
+    if (rolling) {
+      ASSERT_TRUE(cost.in_window(shift, line_delay));
+    }
     std::vector<double*> blocks;
     for (auto& x : q) blocks.push_back(x.data());
     for (auto& x : p) blocks.push_back(x.data());

@@ -19,7 +19,7 @@ struct Synth {
   Eigen::Matrix3d G;
 };
 
-struct SynthConfig {
+struct GsensSynthConfig {
   unsigned seed = 1;
   double rate_hz = 100.0;
   double hold_s = 30.0;
@@ -38,7 +38,7 @@ struct SynthConfig {
 
 /// SI samples: holds with the gravity reaction along each face, smooth quarter turns between them;
 /// gyro = bias walk + G a + rotation + white noise, accelerometer = a + white noise.
-Synth make_holds(const SynthConfig& cfg) {
+Synth make_holds(const GsensSynthConfig& cfg) {
   std::mt19937 rng(cfg.seed);
   std::normal_distribution<double> nd(0.0, 1.0);
   auto randn3 = [&] { return Eigen::Vector3d(nd(rng), nd(rng), nd(rng)); };
@@ -100,7 +100,7 @@ Eigen::Vector3d bias_at(const Synth& s, TimeNs t_ns) {
 }
 
 TEST(GSensCalibration, RecoversGWithinItsSigmas) {
-  SynthConfig cfg;
+  GsensSynthConfig cfg;
   cfg.seed = 7;
   const Synth s = make_holds(cfg);
   auto res = calibrate_gsens(s.samples, si_options());
@@ -136,7 +136,7 @@ TEST(GSensCalibration, SigmasAreHonestOverSeeds) {
   double sum_sq = 0.0;
   int count = 0;
   for (unsigned seed = 100; seed < 130; ++seed) {
-    SynthConfig cfg;
+    GsensSynthConfig cfg;
     cfg.seed = seed;
     const Synth s = make_holds(cfg);
     auto res = calibrate_gsens(s.samples, si_options());
@@ -154,7 +154,7 @@ TEST(GSensCalibration, SigmasAreHonestOverSeeds) {
 }
 
 TEST(GSensCalibration, RefusesMissingFacesAndNamesThem) {
-  SynthConfig cfg;
+  GsensSynthConfig cfg;
   // -y is never up: +z, +x, +y, -z, -x, +z.
   cfg.faces = {Eigen::Vector3d::UnitZ(),  Eigen::Vector3d::UnitX(),  Eigen::Vector3d::UnitY(),
                -Eigen::Vector3d::UnitZ(), -Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitZ()};
@@ -165,7 +165,7 @@ TEST(GSensCalibration, RefusesMissingFacesAndNamesThem) {
   EXPECT_NE(res.error().message.find("+z 55 s"), std::string::npos) << res.error().message;
 
   // Holds too short to count: none at all.
-  cfg = SynthConfig{};
+  cfg = GsensSynthConfig{};
   cfg.hold_s = 8.0;
   res = calibrate_gsens(make_holds(cfg).samples, si_options());
   ASSERT_FALSE(res.ok());
@@ -174,7 +174,7 @@ TEST(GSensCalibration, RefusesMissingFacesAndNamesThem) {
 }
 
 TEST(GSensCalibration, WarnsAboutARotatingHold) {
-  SynthConfig cfg;
+  GsensSynthConfig cfg;
   cfg.seed = 3;
   cfg.turning_hold = 2;
   cfg.turn_rate = 0.003;  // 5 deg over the 30 s hold
@@ -188,7 +188,7 @@ TEST(GSensCalibration, WarnsAboutARotatingHold) {
 }
 
 TEST(GSensCalibration, LatitudeRemovesTheVerticalEarthRate) {
-  SynthConfig cfg;
+  GsensSynthConfig cfg;
   cfg.seed = 11;
   const Synth s = make_holds(cfg);
   GSensitivityOptions opt = si_options();
