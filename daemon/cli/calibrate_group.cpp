@@ -140,7 +140,7 @@ void add_self_check_option(CLI::App* cmd, int* parts) {
   cmd->add_option(
          "--self-check", *parts,
          "Calibrate this many consecutive parts of the recording apart and compare them against their "
-         "sigmas (2: the halves; 0: no self-check)")
+         "sigmas (2: the halves; 0 or 1: no self-check)")
       ->check(CLI::Range(0, 8))
       ->capture_default_str();
 }

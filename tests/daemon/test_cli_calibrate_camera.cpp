@@ -61,7 +61,7 @@ TEST(CliCalibrateCamera, FixtureWithinThreeSigmasOfTruthAndDetectionsReused) {
   const test::ScopedCacheDir cache(dir + "/cache");
   const std::string log = test::copy_fixture("camimu.imulog", dir);
   const std::string before = read_file(log);
-  auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml"});
+  auto r = run_cli({"calibrate", "camera", "--self-check", "0", log, "-o", dir + "/cam.yaml"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("detections stored in " + dir + "/cache/detections/"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("target from target metadata"), std::string::npos) << r.out;
@@ -98,10 +98,12 @@ TEST(CliCalibrateCamera, FixtureWithinThreeSigmasOfTruthAndDetectionsReused) {
 TEST(CliCalibrateCamera, StoreDetectionsInTheLogWhenAsked) {
   const std::string dir = scratch_dir();
   const std::string log = test::copy_fixture("camimu.imulog", dir);
-  auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml", "--store-detections", "--no-cache"});
+  auto r = run_cli({"calibrate", "camera", "--self-check", "0", log, "-o", dir + "/cam.yaml",
+                    "--store-detections", "--no-cache"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("detections stored in the log"), std::string::npos) << r.out;
-  r = run_cli({"calibrate", "camera", log, "-o", dir + "/again.yaml", "--json", "--no-cache"});
+  r = run_cli(
+      {"calibrate", "camera", "--self-check", "0", log, "-o", dir + "/again.yaml", "--json", "--no-cache"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["detections"]["reused_from"].get<std::string>(), "the log");
@@ -117,7 +119,8 @@ TEST(CliCalibrateCamera, WrongTargetStopsEarlyNamingTheBoardSeen) {
     std::ofstream(target) << "target_type: checkerboard\ntargetCols: 5\ntargetRows: 4\n"
                              "rowSpacingMeters: 0.05\ncolSpacingMeters: 0.05\n";
   }
-  auto r = run_cli({"calibrate", "camera", log, "--target", target, "-o", dir + "/cam.yaml"});
+  auto r =
+      run_cli({"calibrate", "camera", "--self-check", "0", log, "--target", target, "-o", dir + "/cam.yaml"});
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(r.err.find("a checkerboard of 7 x 6 inner corners"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("the target file says a checkerboard of 5 x 4 inner corners"), std::string::npos)
@@ -136,14 +139,15 @@ TEST(CliCalibrateCamera, FramesFailingTheirChecksumAreDamage) {
   ASSERT_TRUE(test::run_sql(log,
                             "UPDATE frames SET data_crc32 = (data_crc32 + 1) % 4294967296 WHERE rowid IN "
                             "(SELECT rowid FROM frames ORDER BY t_ns LIMIT 3 OFFSET 100)"));
-  auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml"});
+  auto r = run_cli({"calibrate", "camera", "--self-check", "0", log, "-o", dir + "/cam.yaml"});
   EXPECT_EQ(r.exit_code, 3) << r.err;
   EXPECT_NE(r.err.find("has damaged frames"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("--allow-damaged"), std::string::npos) << r.err;
   // It stopped at the first damaged frame.
   EXPECT_NE(r.err.find("detecting the target: stopped at"), std::string::npos) << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir + "/cam.yaml"));
-  r = run_cli({"calibrate", "camera", log, "--allow-damaged", "-o", dir + "/cam.yaml", "--json"});
+  r = run_cli({"calibrate", "camera", "--self-check", "0", log, "--allow-damaged", "-o", dir + "/cam.yaml",
+               "--json"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.err.find("3 of the 1200 frames of camera stream 'cam0'"), std::string::npos) << r.err;
   const auto j = nlohmann::json::parse(r.out);
@@ -157,11 +161,11 @@ TEST(CliCalibrateCamera, OutputRules) {
   const std::string out = dir + "/cam.yaml";
   { std::ofstream(out) << "keep me\n"; }
   // Refusals come before any work: the log is not searched (no detections are stored).
-  auto r = run_cli({"calibrate", "camera", log, "-o", out});
+  auto r = run_cli({"calibrate", "camera", "--self-check", "0", log, "-o", out});
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("pass --force"), std::string::npos) << r.err;
   EXPECT_EQ(read_file(out), "keep me\n");
-  r = run_cli({"calibrate", "camera", log, "-o", log, "--force"});
+  r = run_cli({"calibrate", "camera", "--self-check", "0", log, "-o", log, "--force"});
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("input"), std::string::npos) << r.err;
   const std::string target = dir + "/target.yaml";
@@ -169,12 +173,12 @@ TEST(CliCalibrateCamera, OutputRules) {
     std::ofstream(target) << "target_type: checkerboard\ntargetCols: 7\ntargetRows: 6\n"
                              "rowSpacingMeters: 0.05\ncolSpacingMeters: 0.05\n";
   }
-  r = run_cli({"calibrate", "camera", log, "--target", target, "-o", target, "--force"});
+  r = run_cli({"calibrate", "camera", "--self-check", "0", log, "--target", target, "-o", target, "--force"});
   EXPECT_EQ(r.exit_code, 2);
-  r = run_cli({"calibrate", "camera", log, "-o", out, "--model", "omni"});
+  r = run_cli({"calibrate", "camera", "--self-check", "0", log, "-o", out, "--model", "omni"});
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(read_file(out), "keep me\n");
-  r = run_cli({"calibrate", "camera", log, "--camera", "cam9", "-o", dir + "/x.yaml"});
+  r = run_cli({"calibrate", "camera", "--self-check", "0", log, "--camera", "cam9", "-o", dir + "/x.yaml"});
   EXPECT_EQ(r.exit_code, 3);
   EXPECT_NE(r.err.find("cam9"), std::string::npos) << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir + "/x.yaml"));
@@ -187,11 +191,11 @@ TEST(CliCalibrateCamera, DamagedLogIsNeverWritten) {
   const std::string log = test::copy_fixture("camimu.imulog", dir);
   std::filesystem::resize_file(log, std::filesystem::file_size(log) * 7 / 10);
   const std::string before = read_file(log);
-  auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml"});
+  auto r = run_cli({"calibrate", "camera", "--self-check", "0", log, "-o", dir + "/cam.yaml"});
   EXPECT_EQ(r.exit_code, 3);
   EXPECT_NE(r.err.find("--allow-damaged"), std::string::npos) << r.err;
-  r = run_cli({"calibrate", "camera", log, "--allow-damaged", "--store-detections", "-o", dir + "/cam.yaml",
-               "--json"});
+  r = run_cli({"calibrate", "camera", "--self-check", "0", log, "--allow-damaged", "--store-detections", "-o",
+               dir + "/cam.yaml", "--json"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.err.find("detections not stored in the log: it is damaged"), std::string::npos) << r.err;
   const auto j = nlohmann::json::parse(r.out);
@@ -211,7 +215,7 @@ TEST(CliCalibrateCamera, EurocImportNeedsTargetAndCalibratesTheSame) {
   r = run_cli({"import", "euroc", dir + "/euroc", "-o", log});
   ASSERT_EQ(r.exit_code, 0) << r.err;
 
-  r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml"});
+  r = run_cli({"calibrate", "camera", "--self-check", "0", log, "-o", dir + "/cam.yaml"});
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("pass --target"), std::string::npos) << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir + "/cam.yaml"));
@@ -221,7 +225,8 @@ TEST(CliCalibrateCamera, EurocImportNeedsTargetAndCalibratesTheSame) {
     std::ofstream(target) << "target_type: checkerboard\ntargetCols: 7\ntargetRows: 6\n"
                              "rowSpacingMeters: 0.05\ncolSpacingMeters: 0.05\n";
   }
-  r = run_cli({"calibrate", "camera", log, "--target", target, "--threads", "2", "-o", dir + "/cam.yaml"});
+  r = run_cli({"calibrate", "camera", "--self-check", "0", log, "--target", target, "--threads", "2", "-o",
+               dir + "/cam.yaml"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   expect_truth_within_three_sigmas(dir + "/cam.yaml");
   EXPECT_EQ(YAML::LoadFile(dir + "/cam.yaml")["cam0"]["imucal"]["target_source"].as<std::string>(), target);

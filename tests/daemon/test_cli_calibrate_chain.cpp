@@ -42,7 +42,7 @@ TEST(CliCalibrateChain, AStereoPairTenMillisecondsApartIsCalibratedWithinItsSigm
   const std::string dir = test::scratch_dir();
   const std::string log = stereo_log(dir, "10");
   const std::string out = dir + "/chain.yaml";
-  auto r = test::run_cli({"calibrate", "camera", log, "-o", out});
+  auto r = test::run_cli({"calibrate", "camera", "--self-check", "0", log, "-o", out});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("2 cameras in one solve"));
   EXPECT_THAT(r.err, HasSubstr("not synchronized"))
@@ -113,7 +113,8 @@ TEST(CliCalibrateChain, AStereoPairTenMillisecondsApartIsCalibratedWithinItsSigm
   // The camera-IMU calibration with the chain: the pair's relative pose enters as a prior with the
   // chain's covariance, and the result's T_cn_cnm1 agrees with the chain's within its sigmas.
   const std::string camimu = dir + "/camimu";
-  auto c = test::run_cli({"calibrate", "camimu", log, "--camera", out, "--threads", "2", "-o", camimu});
+  auto c = test::run_cli(
+      {"calibrate", "camimu", "--self-check", "0", log, "--camera", out, "--threads", "2", "-o", camimu});
   ASSERT_EQ(c.exit_code, 0) << c.err;
   EXPECT_THAT(c.out + c.err, HasSubstr("enters from the camera chain"));
   const YAML::Node ci = YAML::LoadFile(camimu + "/camchain-imucam.yaml");
@@ -132,12 +133,12 @@ TEST(CliCalibrateChain, AStereoPairTenMillisecondsApartIsCalibratedWithinItsSigm
 TEST(CliCalibrateChain, ModelsAndCamerasAreCheckedBeforeAnyWork) {
   const std::string dir = test::scratch_dir();
   const std::string log = test::copy_fixture("camimu.imulog", dir);
-  auto r = test::run_cli(
-      {"calibrate", "camera", log, "--camera", "cam0", "--camera", "cam0", "-o", dir + "/x.yaml"});
+  auto r = test::run_cli({"calibrate", "camera", "--self-check", "0", log, "--camera", "cam0", "--camera",
+                          "cam0", "-o", dir + "/x.yaml"});
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_THAT(r.err, HasSubstr("given twice"));
-  r = test::run_cli({"calibrate", "camera", log, "--model", "pinhole-radtan", "--model", "pinhole-equi", "-o",
-                     dir + "/y.yaml"});
+  r = test::run_cli({"calibrate", "camera", "--self-check", "0", log, "--model", "pinhole-radtan", "--model",
+                     "pinhole-equi", "-o", dir + "/y.yaml"});
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_THAT(r.err, HasSubstr("one per camera"));
   EXPECT_FALSE(std::filesystem::exists(dir + "/y.yaml"));

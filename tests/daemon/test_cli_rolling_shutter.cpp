@@ -55,7 +55,7 @@ TEST(CliRollingShutter, ThirtyMicrosecondsPerRowAreFoundAndTheTruthHeldWithinThe
 
   // The camera alone: the trajectory with the line delay replaces the per-view solve.
   const std::string cam = dir + "/camera.yaml";
-  auto c = test::run_cli({"calibrate", "camera", log, "--threads", "2", "-o", cam});
+  auto c = test::run_cli({"calibrate", "camera", "--self-check", "0", log, "--threads", "2", "-o", cam});
   ASSERT_EQ(c.exit_code, 0) << c.err;
   EXPECT_THAT(c.out, HasSubstr("shutter: rolling, chosen by the evidence"));
   const YAML::Node cy = YAML::LoadFile(cam)["cam0"];
@@ -71,7 +71,8 @@ TEST(CliRollingShutter, ThirtyMicrosecondsPerRowAreFoundAndTheTruthHeldWithinThe
 
   // Camera and IMU: the line delay chosen by the evidence, within 3 sigma and 1 us of the truth.
   const std::string out = dir + "/camimu";
-  auto r = test::run_cli({"calibrate", "camimu", log, "--camera", cam, "--threads", "2", "-o", out});
+  auto r = test::run_cli(
+      {"calibrate", "camimu", "--self-check", "0", log, "--camera", cam, "--threads", "2", "-o", out});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("shutter: rolling, chosen by the evidence"));
   const YAML::Node ci = YAML::LoadFile(out + "/camchain-imucam.yaml")["cam0"];
@@ -97,8 +98,8 @@ TEST(CliRollingShutter, ThirtyMicrosecondsPerRowAreFoundAndTheTruthHeldWithinThe
   const double rms_rolling = ci["imucal"]["reprojection_rms_px"].as<double>();
 
   // The global model on the same data fits clearly worse.
-  auto g = test::run_cli({"calibrate", "camimu", log, "--camera", cam, "--shutter", "global", "--threads",
-                          "2", "-o", dir + "/global"});
+  auto g = test::run_cli({"calibrate", "camimu", "--self-check", "0", log, "--camera", cam, "--shutter",
+                          "global", "--threads", "2", "-o", dir + "/global"});
   ASSERT_EQ(g.exit_code, 0) << g.err;
   const YAML::Node gi = YAML::LoadFile(dir + "/global/camchain-imucam.yaml")["cam0"];
   EXPECT_FALSE(gi["shutter"]);
@@ -109,20 +110,20 @@ TEST(CliRollingShutter, AGlobalShutterStaysGlobalAndAForcedLineDelayIsZeroWithin
   const std::string dir = test::scratch_dir();
   const std::string log = rs_recording(dir, "0", "376x240");
   const std::string cam = dir + "/camera.yaml";
-  auto c = test::run_cli({"calibrate", "camera", log, "--threads", "2", "-o", cam});
+  auto c = test::run_cli({"calibrate", "camera", "--self-check", "0", log, "--threads", "2", "-o", cam});
   ASSERT_EQ(c.exit_code, 0) << c.err;
   EXPECT_THAT(c.out, HasSubstr("shutter: global, chosen by the evidence"));
   EXPECT_FALSE(YAML::LoadFile(cam)["cam0"]["shutter"]);
 
-  auto r =
-      test::run_cli({"calibrate", "camimu", log, "--camera", cam, "--threads", "2", "-o", dir + "/auto"});
+  auto r = test::run_cli({"calibrate", "camimu", "--self-check", "0", log, "--camera", cam, "--threads", "2",
+                          "-o", dir + "/auto"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("shutter: global, chosen by the evidence"));
   EXPECT_EQ(YAML::LoadFile(dir + "/auto/calibration.yaml")["cameras"]["cam0"]["shutter"].as<std::string>(),
             "global");
 
-  auto f = test::run_cli({"calibrate", "camimu", log, "--camera", cam, "--shutter", "rolling", "--threads",
-                          "2", "-o", dir + "/rolling"});
+  auto f = test::run_cli({"calibrate", "camimu", "--self-check", "0", log, "--camera", cam, "--shutter",
+                          "rolling", "--threads", "2", "-o", dir + "/rolling"});
   ASSERT_EQ(f.exit_code, 0) << f.err;
   const YAML::Node ci = YAML::LoadFile(dir + "/rolling/camchain-imucam.yaml")["cam0"];
   ASSERT_EQ(ci["shutter"].as<std::string>(), "rolling");
@@ -132,8 +133,9 @@ TEST(CliRollingShutter, AGlobalShutterStaysGlobalAndAForcedLineDelayIsZeroWithin
 
 TEST(CliRollingShutter, BadShutterArgumentsAreRefusedBeforeAnyWork) {
   const std::string dir = test::scratch_dir();
-  auto r = test::run_cli({"calibrate", "camimu", dir + "/none.imulog", "--camera", dir + "/none.yaml",
-                          "--shutter", "global", "--line-delay", "30", "-o", dir + "/out"});
+  auto r =
+      test::run_cli({"calibrate", "camimu", "--self-check", "0", dir + "/none.imulog", "--camera",
+                     dir + "/none.yaml", "--shutter", "global", "--line-delay", "30", "-o", dir + "/out"});
   EXPECT_NE(r.exit_code, 0);
   EXPECT_THAT(r.err, HasSubstr("--line-delay is for a rolling shutter"));
   auto s =

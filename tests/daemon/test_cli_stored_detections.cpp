@@ -52,7 +52,7 @@ TEST(CliStoredDetections, AnIdTheTargetDoesNotHaveMakesTheFramesBeSearchedAgain)
   set.detections.push_back({o.t_ns, app::encode_detection(o)});
   ASSERT_TRUE(log::write_target_detections(log, *stream, set).ok());
 
-  auto r = run_cli({"calibrate", "camera", log, "-o", dir + "/cam.yaml", "--no-cache"});
+  auto r = run_cli({"calibrate", "camera", "--self-check", "0", log, "-o", dir + "/cam.yaml", "--no-cache"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const std::string expected =
       "stored detections not used (the frames are searched again): the detection at "
