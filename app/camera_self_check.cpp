@@ -76,10 +76,10 @@ std::vector<calib::TargetObservation> views_in(const std::vector<calib::TargetOb
   return out;
 }
 
-/// The factor a group's sigmas are scaled by: sqrt(chi-square / dof) of the parameters named
-/// `prefix` when their probability is below 5 %, else 1 (and nothing recorded).
-double scale_of(SplitCheck* check, const std::string& prefix, const std::string& who,
-                std::vector<std::string>* notes) {
+}  // namespace
+
+double split_scale(SplitCheck* check, const std::string& prefix, const std::string& who,
+                   std::vector<std::string>* notes) {
   if (check->verdict != SplitCheck::Verdict::kAgree && check->verdict != SplitCheck::Verdict::kDisagree)
     return 1.0;
   int dof = 0;
@@ -96,8 +96,6 @@ double scale_of(SplitCheck* check, const std::string& prefix, const std::string&
   notes->emplace_back(text);
   return k;
 }
-
-}  // namespace
 
 SplitCheck camera_self_check(const TargetDescription& target,
                              const std::vector<calib::TargetObservation>& views,
@@ -191,7 +189,7 @@ std::vector<std::string> scale_camera_by_self_check(calib::CameraIntrinsicsResul
                                                     double* line_delay_sigma_s, const std::string& name,
                                                     SplitCheck* check) {
   std::vector<std::string> notes;
-  const double k = scale_of(check, name + " ", name, &notes);
+  const double k = split_scale(check, name + " ", name, &notes);
   camera->intrinsics_sigma *= k;
   camera->distortion_sigma *= k;
   camera->covariance *= k * k;
@@ -204,7 +202,7 @@ std::vector<std::string> scale_chain_by_self_check(calib::CameraChainResult* cha
   for (std::size_t c = 0; c < chain->cameras.size(); ++c) {
     auto& cr = chain->cameras[c];
     const std::string cam = "cam" + std::to_string(c);
-    const double k = scale_of(check, cam + " ", cam, &notes);
+    const double k = split_scale(check, cam + " ", cam, &notes);
     cr.intrinsics.intrinsics_sigma *= k;
     cr.intrinsics.distortion_sigma *= k;
     cr.intrinsics.covariance *= k * k;

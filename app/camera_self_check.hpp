@@ -6,6 +6,7 @@
 // compared against their sigmas. Compiled into the camera module. Docs:
 // docs/camera-calibration.md, "Self-check".
 
+#include <string>
 #include <vector>
 
 #include "calib/camera_chain.hpp"
@@ -28,6 +29,13 @@ SplitCheck chain_self_check(const TargetDescription& target,
                             const std::vector<calib::CameraChainInput>& cameras,
                             const calib::CameraChainOptions& options, const calib::CameraChainResult& full,
                             int parts, int threads);
+
+/// The factor a group's sigmas are scaled by: sqrt(chi-square / dof) of the parameters whose
+/// names start with `prefix` when their probability is below 5 %, recorded in check->scaled
+/// under `who` with a note in `notes`; else 1 (and nothing recorded). The camera-IMU self-check
+/// uses it too.
+double split_scale(SplitCheck* check, const std::string& prefix, const std::string& who,
+                   std::vector<std::string>* notes);
 
 /// Scales, per camera whose parameters spread with a chi-square probability below 5 %, its
 /// intrinsics' and relative pose's sigmas (and covariance) by sqrt(chi-square / dof); returns the

@@ -8,6 +8,7 @@
 #include <cstdio>
 
 #include "app/camera_calibration.hpp"
+#include "app/camera_self_check.hpp"
 #include "app/camimu_self_check.hpp"
 #include "app/results/thermal_results.hpp"
 #include "app/streams.hpp"
@@ -117,26 +118,12 @@ Status prepare_options(const CamImuRequest& q, CamImuReport* report) {
 /// the spread of the parts is then what the sigmas promise (docs/camimu-calibration.md,
 /// "Uncertainty and quality").
 void scale_by_self_check(CamImuCalibrationResult* r, std::vector<std::string>* notes) {
-  SplitCheck& sc = r->self_check;
-  if (sc.verdict != SplitCheck::Verdict::kAgree && sc.verdict != SplitCheck::Verdict::kDisagree) return;
   for (CamImuCameraResult& c : r->cameras) {
-    int dof = 0;
-    const double chi = split_chi_square(sc, c.name + " ", &dof);
-    if (dof == 0 || !(chi_square_probability(chi, dof) < 0.05)) continue;
-    const double k = std::sqrt(chi / dof);
+    const double k = split_scale(&r->self_check, c.name + " ", c.name, notes);
     c.rotation_sigma_rad *= k;
     c.translation_sigma_m *= k;
     c.timeshift_sigma_s *= k;
     c.line_delay_sigma_s *= k;
-    sc.scaled.emplace_back(c.name, k);
-    char text[300];
-    std::snprintf(
-        text, sizeof text,
-        "%s's sigmas (extrinsics, time offset, line delay) are scaled by %.2f: the parts of the "
-        "recording spread that much more than their own sigmas allow (chi-square %.1f for %d degrees "
-        "of freedom)",
-        c.name.c_str(), k, chi, dof);
-    notes->emplace_back(text);
   }
 }
 
