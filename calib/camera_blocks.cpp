@@ -36,7 +36,8 @@ void hold_unused_camera_entries(ceres::Problem* problem, CameraModelKind model, 
   hold(problem, distortion4, distortion_coeff_count(model.distortion), 4);
 }
 
-Eigen::Matrix<double, 10, 10> camera_covariance(CameraModelKind model, const std::array<const double*, 3>& blocks,
+Eigen::Matrix<double, 10, 10> camera_covariance(CameraModelKind model,
+                                                const std::array<const double*, 3>& blocks,
                                                 const CovarianceBlockFn& block) {
   const std::array<int, 3> used = {4, projection_param_count(model.projection),
                                    distortion_coeff_count(model.distortion)};

@@ -29,7 +29,8 @@ using CovarianceBlockFn = std::function<Eigen::MatrixXd(const double*, const dou
 
 /// The 10 x 10 covariance of [intrinsics, projection, distortion] from the tangent-space blocks
 /// of `block`, with 0 in the rows and columns of the entries the model does not use.
-Eigen::Matrix<double, 10, 10> camera_covariance(CameraModelKind model, const std::array<const double*, 3>& blocks,
+Eigen::Matrix<double, 10, 10> camera_covariance(CameraModelKind model,
+                                                const std::array<const double*, 3>& blocks,
                                                 const CovarianceBlockFn& block);
 
 }  // namespace imucal::calib

@@ -33,10 +33,9 @@ Eigen::Vector2d residual_under(const CameraIntrinsicsResult& r, const CameraView
 }
 
 /// The residuals of every candidate in `solved` on the views all of them use: [candidate][corner].
-std::vector<std::vector<Eigen::Vector2d>> common_residuals(const TargetDescription& target,
-                                                           std::span<const TargetObservation> observations,
-                                                           const std::vector<const CameraIntrinsicsResult*>& solved,
-                                                           int* views) {
+std::vector<std::vector<Eigen::Vector2d>> common_residuals(
+    const TargetDescription& target, std::span<const TargetObservation> observations,
+    const std::vector<const CameraIntrinsicsResult*>& solved, int* views) {
   const std::vector<Eigen::Vector3d> points = target.points();
   std::vector<std::vector<Eigen::Vector2d>> out(solved.size());
   *views = 0;
@@ -92,12 +91,13 @@ std::string reason_for(const CameraModelChoice& c) {
   }
   std::string out = camera_model_name(c.chosen) + ": ";
   if (next) {
-    out += "BIC lower by " + format_number("%.1f", next->delta_bic) + " than " + camera_model_name(next->model) +
-           ", the next best (RMS " + format_number("%.3f", std::sqrt(chosen->rss_px2 / c.common_corners)) +
-           " vs " + format_number("%.3f", std::sqrt(next->rss_px2 / c.common_corners)) + " px";
+    out += "BIC lower by " + format_number("%.1f", next->delta_bic) + " than " +
+           camera_model_name(next->model) + ", the next best (RMS " +
+           format_number("%.3f", std::sqrt(chosen->rss_px2 / c.common_corners)) + " vs " +
+           format_number("%.3f", std::sqrt(next->rss_px2 / c.common_corners)) + " px";
   } else {
-    out += "the only model compared (RMS " + format_number("%.3f", std::sqrt(chosen->rss_px2 / c.common_corners)) +
-           " px";
+    out += "the only model compared (RMS " +
+           format_number("%.3f", std::sqrt(chosen->rss_px2 / c.common_corners)) + " px";
   }
   out += " over " + std::to_string(c.common_corners) + " corners of " + std::to_string(c.common_views) +
          " views every compared model explains)";

@@ -56,7 +56,8 @@ bool undistort_fov(const T* d, const Eigen::Matrix<T, 2, 1>& md, Eigen::Matrix<T
   const T rd = md.norm();
   if (abs(w) < T(1e-4) || rd < T(1e-16)) {
     // The series' inverse to the same order, and the centre.
-    const T factor = abs(w) < T(1e-4) ? T(1) + w * w * (T(1.0 / 12.0) - rd * rd / T(3)) : T(2) * tan(w / T(2)) / w;
+    const T factor =
+        abs(w) < T(1e-4) ? T(1) + w * w * (T(1.0 / 12.0) - rd * rd / T(3)) : T(2) * tan(w / T(2)) / w;
     *m = md / factor;
     return true;
   }

@@ -43,7 +43,8 @@ CameraModel model_camera(CameraModelKind kind, Eigen::Vector4d k, Eigen::Vector2
 /// Views of the board with its centre on the ray of a random pixel anywhere in the image (also
 /// beyond 90 degrees off the axis where the model reaches), facing the camera within 35 degrees;
 /// views showing fewer than half the corners are redrawn.
-std::vector<TargetObservation> wide_views(const CameraModel& camera, unsigned seed, int views, double noise_px) {
+std::vector<TargetObservation> wide_views(const CameraModel& camera, unsigned seed, int views,
+                                          double noise_px) {
   const TargetDescription target = wide_board();
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> uni(0.0, 1.0);
@@ -54,11 +55,13 @@ std::vector<TargetObservation> wide_views(const CameraModel& camera, unsigned se
   std::vector<TargetObservation> out;
   while (static_cast<int>(out.size()) < views) {
     Eigen::Vector3d ray;
-    const Eigen::Vector2d px(camera.width * (0.03 + 0.94 * uni(rng)), camera.height * (0.03 + 0.94 * uni(rng)));
+    const Eigen::Vector2d px(camera.width * (0.03 + 0.94 * uni(rng)),
+                             camera.height * (0.03 + 0.94 * uni(rng)));
     if (!camera.unproject(px, &ray)) continue;
     const Eigen::Vector3d axis = Eigen::Vector3d(uni(rng) - 0.5, uni(rng) - 0.5, 0.0).normalized();
-    const Eigen::Matrix3d R = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), ray).toRotationMatrix() *
-                              Eigen::AngleAxisd((5.0 + 30.0 * uni(rng)) * M_PI / 180.0, axis).toRotationMatrix();
+    const Eigen::Matrix3d R =
+        Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), ray).toRotationMatrix() *
+        Eigen::AngleAxisd((5.0 + 30.0 * uni(rng)) * M_PI / 180.0, axis).toRotationMatrix();
     const Eigen::Vector3d at = ray * (0.25 + 0.3 * uni(rng));
     TargetObservation obs;
     obs.t_ns = static_cast<TimeNs>(out.size()) * 50'000'000;
@@ -88,11 +91,12 @@ void expect_model_within_sigmas(const CameraIntrinsicsResult& r, const CameraMod
   const std::vector<std::string> names = kalibr_parameter_names(truth.kind());
   for (std::size_t j = 0; j < used.size(); ++j) {
     const int i = used[j];
-    EXPECT_TRUE(std::isfinite(sigma[i]) && sigma[i] > 0.0) << name << " " << names[j] << " sigma " << sigma[i];
+    EXPECT_TRUE(std::isfinite(sigma[i]) && sigma[i] > 0.0)
+        << name << " " << names[j] << " sigma " << sigma[i];
     EXPECT_LE(std::abs(est[i] - ref[i]), k * sigma[i])
         << name << " " << names[j] << ": " << est[i] << " vs truth " << ref[i] << ", sigma " << sigma[i];
-    std::printf("%s %s %.6f truth %.6f sigma %.2g (%.2f sigma)\n", name.c_str(), names[j].c_str(), est[i], ref[i],
-                sigma[i], (est[i] - ref[i]) / sigma[i]);
+    std::printf("%s %s %.6f truth %.6f sigma %.2g (%.2f sigma)\n", name.c_str(), names[j].c_str(), est[i],
+                ref[i], sigma[i], (est[i] - ref[i]) / sigma[i]);
   }
   for (int i = 0; i < 10; ++i) {
     if (std::find(used.begin(), used.end(), i) != used.end()) continue;
@@ -107,8 +111,8 @@ std::vector<CameraModel> wide_model_cameras() {
   return {
       model_camera({P::kPinhole, D::kFov}, {190.0, 189.5, 188.7, 120.4}, {0, 0}, {0.9, 0, 0, 0}, 376, 240),
       model_camera({P::kOmni, D::kNone}, {270.0, 269.4, 188.2, 119.1}, {0.8, 0}, {0, 0, 0, 0}, 376, 240),
-      model_camera({P::kOmni, D::kRadtan}, {270.0, 269.4, 188.2, 119.1}, {0.8, 0}, {-0.04, 0.008, 1e-4, -1e-4},
-                   376, 240),
+      model_camera({P::kOmni, D::kRadtan}, {270.0, 269.4, 188.2, 119.1}, {0.8, 0},
+                   {-0.04, 0.008, 1e-4, -1e-4}, 376, 240),
       model_camera({P::kEucm, D::kNone}, {110.0, 109.8, 188.2, 119.1}, {0.6, 1.1}, {0, 0, 0, 0}, 376, 240),
       model_camera({P::kDs, D::kNone}, {110.0, 109.8, 188.2, 119.1}, {-0.15, 0.6}, {0, 0, 0, 0}, 376, 240),
   };

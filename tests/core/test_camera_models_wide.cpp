@@ -59,7 +59,9 @@ std::vector<WideCase> wide_cases() {
   };
 }
 
-double angle_deg(const Eigen::Vector3d& ray) { return std::acos(ray.normalized().z()) * 180.0 / std::numbers::pi; }
+double angle_deg(const Eigen::Vector3d& ray) {
+  return std::acos(ray.normalized().z()) * 180.0 / std::numbers::pi;
+}
 
 TEST(CameraModelsWide, NamesAndParameterCountsAreKalibrs) {
   for (const auto& c : wide_cases()) {
@@ -67,7 +69,8 @@ TEST(CameraModelsWide, NamesAndParameterCountsAreKalibrs) {
     const auto parsed = parse_camera_model_name(c.name);
     ASSERT_TRUE(parsed.has_value()) << c.name;
     EXPECT_EQ(*parsed, c.camera.kind());
-    EXPECT_TRUE(validate_camera(c.camera).ok()) << c.name << ": " << validate_camera(c.camera).error().message;
+    EXPECT_TRUE(validate_camera(c.camera).ok())
+        << c.name << ": " << validate_camera(c.camera).error().message;
   }
   EXPECT_EQ(kalibr_intrinsics_layout(ProjectionModel::kDs), "[xi, alpha, fu, fv, pu, pv]");
   EXPECT_EQ(kalibr_intrinsics_layout(ProjectionModel::kEucm), "[alpha, beta, fu, fv, pu, pv]");
@@ -132,7 +135,8 @@ TEST(CameraModelsWide, JetDerivativesMatchNumeric) {
       for (int k = 0; k < 2; ++k) je[k] = Jet(cam.projection_params[k], 7 + k);
       for (int k = 0; k < 4; ++k) jd[k] = Jet(cam.distortion_coeffs[k], 9 + k);
       const auto jcam = CameraModelT<Jet>::from_params(cam.kind(), ji, je, jd, cam.width, cam.height);
-      const auto proj = jcam.project(Eigen::Matrix<Jet, 3, 1>(Jet(point.x(), 0), Jet(point.y(), 1), Jet(point.z(), 2)));
+      const auto proj =
+          jcam.project(Eigen::Matrix<Jet, 3, 1>(Jet(point.x(), 0), Jet(point.y(), 1), Jet(point.z(), 2)));
       ASSERT_TRUE(proj.in_front) << c.name << " " << point.transpose();
       auto eval = [&](int index, double delta) {
         Eigen::Matrix<double, 13, 1> x;
@@ -209,7 +213,8 @@ TEST(CameraModelsWide, KalibrCamchainEntriesReadAndWriteBack) {
     const YAML::Node written = YAML::Load(emitter.c_str());
     const YAML::Node original = YAML::Load(entry);
     for (const char* key : {"camera_model", "distortion_model"})
-      EXPECT_EQ(written["cam0"][key].as<std::string>(), original[key].as<std::string>()) << name << " " << key;
+      EXPECT_EQ(written["cam0"][key].as<std::string>(), original[key].as<std::string>())
+          << name << " " << key;
     for (const char* key : {"intrinsics", "distortion_coeffs", "resolution"}) {
       const auto a = written["cam0"][key].as<std::vector<double>>();
       const auto b = original[key].as<std::vector<double>>();
