@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cmath>
+#include <limits>
 #include <set>
 
 #include "app/results/static_results.hpp"
@@ -116,7 +117,53 @@ Result<std::pair<Eigen::Isometry3d, std::optional<Eigen::Matrix<double, 6, 6>>>>
   return std::make_pair(T, cov);
 }
 
+/// A number of the file, or NaN for null.
+double number_or_nan(const YAML::Node& n) {
+  return n.IsNull() ? std::numeric_limits<double>::quiet_NaN() : n.as<double>();
+}
+
+/// The intrinsics' covariance a camera's `imucal:` map gives (CamchainCamera's doc).
+Status read_intrinsics_covariance(const YAML::Node& node, const std::string& where, CamchainCamera* cam) {
+  const YAML::Node q = node["imucal"];
+  if (!q || !q.IsMap()) return {};
+  const std::string bad = where + ": imucal.intrinsics_covariance must be 8 rows of 8 numbers (or null)";
+  try {
+    if (const YAML::Node c = q["intrinsics_covariance"]) {
+      if (!c.IsSequence() || c.size() != 8) return make_error(Errc::kCorrupt, bad);
+      Eigen::MatrixXd C(8, 8);
+      for (int r = 0; r < 8; ++r) {
+        if (!c[r].IsSequence() || c[r].size() != 8) return make_error(Errc::kCorrupt, bad);
+        for (int k = 0; k < 8; ++k) C(r, k) = number_or_nan(c[r][k]);
+      }
+      for (int r = 0; r < 8; ++r)
+        if (C(r, r) < 0.0)
+          return make_error(Errc::kCorrupt, where + ": imucal.intrinsics_covariance has a negative variance");
+      cam->intrinsics_covariance = C;
+      cam->intrinsics_covariance_source = "the covariance of " + where;
+      return {};
+    }
+    // Sigmas alone are not propagated: the intrinsics' errors are strongly correlated (focal
+    // length with distortion, principal point with tilt), and taken as independent they overstate
+    // the extrinsics' sigmas many times over (a 13 mm translation sigma instead of 0.4 mm on the
+    // DAVIS recording of docs/benchmarks.md).
+    if (q["intrinsics_sigma"])
+      cam->intrinsics_covariance_source =
+          where +
+          " gives the intrinsics' sigmas but not their covariance (a file of an older imucal: run "
+          "calibrate camera again to have it propagated)";
+  } catch (const YAML::Exception&) {
+    return make_error(Errc::kCorrupt, bad);
+  }
+  return {};
+}
+
 }  // namespace
+
+void set_intrinsics_covariance(const calib::CameraIntrinsicsResult& solved, CamchainCamera* camera) {
+  if (!solved.covariance_ok) return;
+  camera->intrinsics_covariance = solved.covariance;
+  camera->intrinsics_covariance_source = "the covariance of " + camera->source;
+}
 
 Result<std::vector<CamchainCamera>> read_camchain(const std::string& path) {
   auto root = load_yaml(path);
@@ -144,6 +191,7 @@ Result<std::vector<CamchainCamera>> read_camchain(const std::string& path) {
     } catch (const YAML::Exception&) {
       return make_error(Errc::kCorrupt, path + " " + name + ": rostopic and camera_stream must be text");
     }
+    if (Status st = read_intrinsics_covariance(node, path + " " + name, &cam); !st.ok()) return st.error();
     if (i > 0 && node["T_cn_cnm1"]) {
       auto chain = read_chain_pose(node, path + " " + name);
       if (!chain.ok()) return chain.error();

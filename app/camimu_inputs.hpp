@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "app/calibration_check.hpp"
+#include "calib/camera_intrinsics.hpp"
 #include "calib/camimu_calibration.hpp"
 #include "core/camera_model.hpp"
 #include "core/frame.hpp"
@@ -35,10 +36,19 @@ struct CamchainCamera {
   /// (`imucal: T_cn_cnm1_covariance:`, rotation about camN's axes then translation).
   std::optional<Eigen::Isometry3d> T_cn_cnm1;
   std::optional<Eigen::Matrix<double, 6, 6>> T_cn_cnm1_covariance;
+  /// The intrinsics' 8 x 8 covariance [intrinsics, distortion_coeffs] (`imucal:
+  /// intrinsics_covariance:`, NaN where the file says null) and what it came from; empty when
+  /// the file has none (a Kalibr camchain; sigmas alone are not used, the source then says why).
+  Eigen::MatrixXd intrinsics_covariance;
+  std::string intrinsics_covariance_source;
   /// Set by read_camchain_files: the camera before it in the list is the one before it in the
   /// same file, so T_cn_cnm1 relates the two.
   bool follows_in_file = false;
 };
+
+/// A camera solved in this process (a session's camera step): its intrinsics' covariance as
+/// read_camchain reads it from the file that step writes (none when it was not determined).
+void set_intrinsics_covariance(const calib::CameraIntrinsicsResult& solved, CamchainCamera* camera);
 
 /// The cameras of a camchain YAML in the order cam0, cam1, ... Errors: kNotFound (unreadable
 /// file), kCorrupt (not YAML, no cam0, a malformed camera).

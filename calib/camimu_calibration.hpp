@@ -39,6 +39,13 @@ struct CamImuCameraInput {
   std::string stream;
   CameraModel camera;
   std::vector<TargetObservation> observations;
+  /// The covariance of the held intrinsics [fu fv pu pv, distortion_coeffs] (8 x 8, from the
+  /// camera's own calibration; NaN rows where it did not determine one), propagated into the
+  /// result's sigmas (CamImuOptions::propagate_intrinsics); empty: not known, left out. The
+  /// source names it in the result (CamImuCameraResult::intrinsics_uncertainty), or says why
+  /// there is none.
+  Eigen::MatrixXd intrinsics_covariance;
+  std::string intrinsics_covariance_source;
 };
 
 /// IMU noise in Kalibr's continuous-time units (imu.yaml; `imucal allan` measures them).
@@ -133,6 +140,10 @@ struct CamImuOptions {
   /// cluster-robust covariance, s; 0: the plain covariance only. Every sigma is the larger of
   /// the plain and the cluster-robust one (docs/camimu-calibration.md, "Uncertainty").
   double covariance_cluster_s = 1.0;
+  /// Add the held intrinsics' covariance (CamImuCameraInput::intrinsics_covariance) to the
+  /// sigmas, linearised at the solution: the spread their own error causes in the result
+  /// (docs/camimu-calibration.md, "Uncertainty").
+  bool propagate_intrinsics = true;
 
   [[nodiscard]] Status validate() const;
 };

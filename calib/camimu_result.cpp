@@ -67,6 +67,22 @@ std::string Estimator<N>::describe(const MarginalCovariance::Direction& dir) con
   return text + ": " + (why.empty() ? "the recording does not tell them apart" : why);
 }
 
+namespace {
+
+std::string intrinsics_uncertainty(const CamImuCameraInput& in, bool propagate) {
+  if (!propagate) return "not propagated (held as given)";
+  if (intrinsics_directions(in.intrinsics_covariance).empty())
+    return "not known: " +
+           (in.intrinsics_covariance_source.empty()
+                ? std::string("the camera file gives no covariance of them")
+                : in.intrinsics_covariance_source) +
+           "; the sigmas here leave the intrinsics' own error out";
+  return "propagated: " + (in.intrinsics_covariance_source.empty() ? std::string("the camera's covariance")
+                                                                   : in.intrinsics_covariance_source);
+}
+
+}  // namespace
+
 template <int N>
 void Estimator<N>::covariance(CamImuCalibrationResult* out) {
   // The computation is counted once, where it ran (often during the model choice).
@@ -94,8 +110,13 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
   // robust estimate is itself noisy with few clusters, and the plain one holds where the
   // residuals are independent and correctly weighted (docs/camimu-calibration.md, "Uncertainty").
   using BlockFn = std::function<Eigen::MatrixXd(const double*, const double*)>;
-  const BlockFn plain = [&](const double* a, const double* b) { return cov.block(a, b); };
-  const BlockFn robust = [&](const double* a, const double* b) { return cov.robust_block(a, b); };
+  // Both carry the held intrinsics' share (zero where none was propagated).
+  const BlockFn plain = [&](const double* a, const double* b) {
+    return Eigen::MatrixXd(cov.block(a, b) + cov.held_block(a, b));
+  };
+  const BlockFn robust = [&](const double* a, const double* b) {
+    return Eigen::MatrixXd(cov.robust_block(a, b) + cov.held_block(a, b));
+  };
   const auto larger = [&](const std::function<Eigen::MatrixXd(const BlockFn&)>& of) -> Eigen::VectorXd {
     Eigen::VectorXd s = sigma_of(of(plain));
     if (!cov.has_robust()) return s;
@@ -152,7 +173,13 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
                              : Eigen::Matrix3d::Constant(kNotDetermined);
       });
       cr.translation_sigma_m = sigma3(cs.t_ci.data());
+      if (cov.has_held()) {
+        const Eigen::Matrix3d C = cov.held_block(cs.q_ci.data(), cs.q_ci.data());
+        cr.rotation_sigma_from_intrinsics_rad = sigma_of(R * C * R.transpose());
+        cr.translation_sigma_from_intrinsics_m = sigma_of(cov.held_block(cs.t_ci.data(), cs.t_ci.data()));
+      }
     }
+    cr.intrinsics_uncertainty = intrinsics_uncertainty(cameras_[c], opt_.propagate_intrinsics);
     if (cov.has(&cs.shift))
       cr.timeshift_sigma_s = larger([&](const BlockFn& f) { return f(&cs.shift, &cs.shift); })(0);
     if (cs.rolling && cov.has(&cs.line_delay))

@@ -158,6 +158,18 @@ YAML::Node camera_node(const CameraCalibrationReport& r) {
   YAML::Node q(YAML::NodeType::Map);
   q["intrinsics_sigma"] = flow(res.intrinsics_sigma);
   q["distortion_coeffs_sigma"] = flow(res.distortion_sigma);
+  if (res.covariance_ok) {
+    // The 8 x 8 covariance of [intrinsics, distortion_coeffs], row by row; calibrate camimu
+    // propagates it into its sigmas (docs/camimu-calibration.md, "Uncertainty").
+    YAML::Node cov(YAML::NodeType::Sequence);
+    for (int i = 0; i < 8; ++i) {
+      YAML::Node row(YAML::NodeType::Sequence);
+      for (int j = 0; j < 8; ++j) row.push_back(number_or_null(res.covariance(i, j)));
+      row.SetStyle(YAML::EmitterStyle::Flow);
+      cov.push_back(row);
+    }
+    q["intrinsics_covariance"] = cov;
+  }
   q["reprojection_rms_px"] = res.rms_px;
   q["residual_sigma_px"] = res.residual_sigma_px;
   q["focal_well_determined"] = res.focal_well_determined;

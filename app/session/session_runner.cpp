@@ -110,6 +110,7 @@ static Status solve_camera_chain(const RigConfig& config, const std::string& dir
     intrinsics.camera = cam.intrinsics.camera;
     intrinsics.camera_stream = cam.stream.name;
     intrinsics.rostopic = "/" + cam.stream.name + "/image_raw";
+    set_intrinsics_covariance(cam.intrinsics, &intrinsics);
     if (c > 0) {
       intrinsics.T_cn_cnm1 = chain->chain.cameras[c].T_cn_cnm1;
       intrinsics.T_cn_cnm1_covariance = chain->chain.cameras[c].T_cn_cnm1_covariance;
@@ -172,6 +173,7 @@ static Result<std::vector<std::string>> solve_camimu(
     intrinsics.camera = cam->intrinsics.camera;
     intrinsics.camera_stream = cam->stream.name;
     intrinsics.rostopic = "/" + cam->stream.name + "/image_raw";
+    set_intrinsics_covariance(cam->intrinsics, &intrinsics);
     q.cameras.push_back(std::move(intrinsics));
   }
   // The static result as the IMU's prior, as solved (its file names it in the report).

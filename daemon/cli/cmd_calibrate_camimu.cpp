@@ -164,6 +164,14 @@ void print_camera(const CamImuCalibrationResult& res, const CamImuCameraResult& 
         stamp_row_name(c.camera.shutter.stamp_row));
   }
   if (!c.shutter_choice.empty()) std::printf("    shutter: %s\n", c.shutter_choice.c_str());
+  if (!c.intrinsics_uncertainty.empty()) {
+    std::printf("    intrinsics (held): %s", c.intrinsics_uncertainty.c_str());
+    if (c.translation_sigma_from_intrinsics_m.allFinite())
+      std::printf("; their share of the sigmas: translation %s mm, rotation %s deg",
+                  sig3(c.translation_sigma_from_intrinsics_m, 1e3, 2).c_str(),
+                  sig3(c.rotation_sigma_from_intrinsics_rad, kDeg, 4).c_str());
+    std::printf("\n");
+  }
   std::printf("    reprojection RMS %.4f px over %d corners, %d down-weighted as outliers\n",
               c.reprojection_rms_px, c.corners, c.outlier_corners);
 }

@@ -2,10 +2,15 @@
 // and text, the result YAML (read back as a Kalibr camera) and JSON.
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "app/camimu_inputs.hpp"
 #include "app/results/camera_results.hpp"
 #include "core/rig_config.hpp"
 
@@ -144,6 +149,47 @@ TEST(CameraResults, YamlIsAKalibrCamchainWithImucalKeys) {
   EXPECT_TRUE(q["focal_well_determined"].as<bool>());
   EXPECT_EQ(q["target"]["targetCols"].as<int>(), 7);
   EXPECT_EQ(q["warnings"][0].as<std::string>(), "a warning");
+}
+
+// The intrinsics' covariance goes into the camera file, and calibrate camimu reads it back to
+// propagate it; a file with sigmas only (an older imucal's) is read without one, and says why.
+TEST(CameraResults, TheIntrinsicsCovarianceRoundTripsThroughTheCameraFile) {
+  auto r = sample_report();
+  Eigen::Matrix<double, 8, 8> A;
+  for (int i = 0; i < 8; ++i)
+    for (int j = 0; j < 8; ++j) A(i, j) = std::sin(1.0 + i + 3.0 * j);
+  r.intrinsics.covariance = A * A.transpose() * 1e-3;
+  r.intrinsics.covariance(7, 7) = std::numeric_limits<double>::quiet_NaN();
+  const auto dir = std::filesystem::temp_directory_path() / ("imucal_cov_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const auto write_text = [&](const std::string& name, const std::string& text) {
+    const std::string path = (dir / name).string();
+    std::ofstream(path) << text;
+    return path;
+  };
+  const std::string text = camera_result_yaml(r);
+  auto cams = read_camchain(write_text("full.yaml", text));
+  ASSERT_TRUE(cams.ok()) << cams.error().message;
+  const Eigen::MatrixXd& C = (*cams)[0].intrinsics_covariance;
+  ASSERT_EQ(C.rows(), 8);
+  EXPECT_TRUE(std::isnan(C(7, 7)));
+  for (int i = 0; i < 7; ++i)
+    for (int j = 0; j < 7; ++j) EXPECT_DOUBLE_EQ(C(i, j), r.intrinsics.covariance(i, j)) << i << " " << j;
+  EXPECT_NE((*cams)[0].intrinsics_covariance_source.find("the covariance of"), std::string::npos);
+
+  YAML::Node root = YAML::Load(text);
+  root["cam0"]["imucal"].remove("intrinsics_covariance");
+  cams = read_camchain(write_text("sigmas.yaml", YAML::Dump(root)));
+  ASSERT_TRUE(cams.ok()) << cams.error().message;
+  EXPECT_EQ((*cams)[0].intrinsics_covariance.size(), 0);
+  EXPECT_NE((*cams)[0].intrinsics_covariance_source.find("not their covariance"), std::string::npos)
+      << (*cams)[0].intrinsics_covariance_source;
+
+  root["cam0"]["imucal"]["intrinsics_covariance"] = std::vector<double>{1.0, 2.0};
+  cams = read_camchain(write_text("bad.yaml", YAML::Dump(root)));
+  ASSERT_FALSE(cams.ok());
+  EXPECT_NE(cams.error().message.find("8 rows of 8"), std::string::npos) << cams.error().message;
+  std::filesystem::remove_all(dir);
 }
 
 TEST(CameraResults, JsonCarriesViewsAndUndeterminedSigmasAsNull) {
