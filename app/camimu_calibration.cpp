@@ -62,6 +62,10 @@ Result<calib::CamImuCameraInput> detect_camera(const CamImuRequest& q, const log
   in.name = cam.name;
   in.stream = stream.name;
   in.camera = cam.camera;
+  const auto [note, warning] =
+      stamp_row_from_stream(stream, cam.stamp_row_given, cam.name, &in.camera.shutter);
+  if (!note.empty()) report->notes.push_back(note);
+  if (!warning.empty()) report->warnings.push_back(warning);
   in.intrinsics_covariance = cam.intrinsics_covariance;
   in.intrinsics_covariance_source = cam.intrinsics_covariance_source;
   for (auto& o : found->observations) {

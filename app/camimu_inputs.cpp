@@ -159,6 +159,25 @@ Status read_intrinsics_covariance(const YAML::Node& node, const std::string& whe
 
 }  // namespace
 
+std::pair<std::string, std::string> stamp_row_from_stream(const CameraStreamInfo& stream, bool given,
+                                                          const std::string& who, Shutter* shutter) {
+  const auto logged = stamp_row_of_timestamp_source(stream.timestamp_source);
+  if (!logged || *logged == shutter->stamp_row) return {};
+  const std::string row = stamp_row_name(*logged);
+  if (given) {
+    return {"", who + " says its stamps refer to the " + stamp_row_name(shutter->stamp_row) +
+                    " row, but the log's camera stream '" + stream.name + "' stamps its frames at " +
+                    stream.timestamp_source + " (the " + row +
+                    " row): the camera's is used; a rolling shutter's time offset and line delay depend on "
+                    "which is right (--stamp-row)"};
+  }
+  shutter->stamp_row = *logged;
+  return {who + ": the log's camera stream '" + stream.name + "' stamps its frames at " +
+              stream.timestamp_source + ", so a rolling shutter's rows are timed from the " + row +
+              " row (--stamp-row to say otherwise)",
+          ""};
+}
+
 void set_intrinsics_covariance(const calib::CameraIntrinsicsResult& solved, CamchainCamera* camera) {
   if (!solved.covariance_ok) return;
   camera->intrinsics_covariance = solved.covariance;
@@ -192,6 +211,7 @@ Result<std::vector<CamchainCamera>> read_camchain(const std::string& path) {
       return make_error(Errc::kCorrupt, path + " " + name + ": rostopic and camera_stream must be text");
     }
     if (Status st = read_intrinsics_covariance(node, path + " " + name, &cam); !st.ok()) return st.error();
+    cam.stamp_row_given = static_cast<bool>(node["stamp_row"]);
     if (i > 0 && node["T_cn_cnm1"]) {
       auto chain = read_chain_pose(node, path + " " + name);
       if (!chain.ok()) return chain.error();

@@ -158,6 +158,7 @@ static Result<std::vector<std::string>> solve_camimu(
     // estimated on the trajectory (docs/config.md); a global one as always.
     const Shutter& shutter = config.cameras[i].shutter;
     cq.known_shutter = shutter;
+    cq.known_stamp_row = shutter.rolling();  // the configuration's rolling camera names its row
     if (shutter.rolling()) {
       cq.shutter.mode = calib::ShutterSolveOptions::Mode::kRolling;
       if (shutter.line_delay_s > 0.0) cq.shutter.line_delay_s = shutter.line_delay_s;

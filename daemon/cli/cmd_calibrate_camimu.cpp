@@ -105,7 +105,10 @@ app::CamImuRequest build_request(const CamImuCliOptions& o) {
                     : o.model == "extended" ? CamImuModelKind::kExtended
                                             : CamImuModelKind::kAuto;
   q.options.shutter = shutter;
-  for (auto& cam : q.cameras) apply_shutter_args(o.shutter, &cam.camera.shutter);
+  for (auto& cam : q.cameras) {
+    apply_shutter_args(o.shutter, &cam.camera.shutter);
+    cam.stamp_row_given = cam.stamp_row_given || !o.shutter.stamp_row.empty();
+  }
   q.options.imu_noise_from_residuals = !o.keep_noise;
   q.options.prior.enabled = !o.no_prior;
   for (const auto& name : o.fix) {

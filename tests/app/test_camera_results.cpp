@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <tuple>
 
 #include "app/camimu_inputs.hpp"
 #include "app/results/camera_results.hpp"
@@ -190,6 +191,38 @@ TEST(CameraResults, TheIntrinsicsCovarianceRoundTripsThroughTheCameraFile) {
   ASSERT_FALSE(cams.ok());
   EXPECT_NE(cams.error().message.find("8 rows of 8"), std::string::npos) << cams.error().message;
   std::filesystem::remove_all(dir);
+}
+
+// The row a frame's stamp refers to comes from what the log says of its camera stream's stamps,
+// unless the camera file or --stamp-row named it: then a disagreement is a warning.
+TEST(CameraResults, TheStampedRowComesFromTheLogsTimestampSource) {
+  CameraStreamInfo stream;
+  stream.name = "cam0";
+  stream.timestamp_source = "end-of-frame";
+  Shutter shutter;  // first row, the default
+  auto [note, warning] = stamp_row_from_stream(stream, false, "cam0", &shutter);
+  EXPECT_EQ(shutter.stamp_row, Shutter::StampRow::kLast);
+  EXPECT_NE(note.find("end-of-frame"), std::string::npos) << note;
+  EXPECT_TRUE(warning.empty());
+
+  Shutter named;
+  named.stamp_row = Shutter::StampRow::kFirst;
+  std::tie(note, warning) = stamp_row_from_stream(stream, true, "cam0", &named);
+  EXPECT_EQ(named.stamp_row, Shutter::StampRow::kFirst);  // the file's is kept
+  EXPECT_TRUE(note.empty());
+  EXPECT_NE(warning.find("--stamp-row"), std::string::npos) << warning;
+
+  stream.timestamp_source = "mid-exposure";  // where the backends put start-of-exposure stamps
+  Shutter mid;
+  mid.stamp_row = Shutter::StampRow::kLast;
+  std::tie(note, warning) = stamp_row_from_stream(stream, false, "cam0", &mid);
+  EXPECT_EQ(mid.stamp_row, Shutter::StampRow::kFirst);
+  stream.timestamp_source = "dataset";  // says nothing: left as it is
+  Shutter left;
+  left.stamp_row = Shutter::StampRow::kMiddle;
+  std::tie(note, warning) = stamp_row_from_stream(stream, false, "cam0", &left);
+  EXPECT_EQ(left.stamp_row, Shutter::StampRow::kMiddle);
+  EXPECT_TRUE(note.empty() && warning.empty());
 }
 
 TEST(CameraResults, JsonCarriesViewsAndUndeterminedSigmasAsNull) {
