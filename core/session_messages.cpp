@@ -16,11 +16,11 @@ struct Name {
   const char* name;
 };
 
-constexpr Name<StepId> kStepNames[] = {
-    {StepId::kPreflight, "preflight"}, {StepId::kWarmup, "warmup"}, {StepId::kThermal, "thermal"},
-    {StepId::kStill, "still"},         {StepId::kPoses, "poses"},   {StepId::kGsens, "gsens"},
-    {StepId::kMotion, "motion"},       {StepId::kSolve, "solve"},   {StepId::kReview, "review"},
-    {StepId::kWrite, "write"}};
+constexpr Name<StepId> kStepNames[] = {{StepId::kPreflight, "preflight"}, {StepId::kWarmup, "warmup"},
+                                       {StepId::kThermal, "thermal"},     {StepId::kStill, "still"},
+                                       {StepId::kPoses, "poses"},         {StepId::kGsens, "gsens"},
+                                       {StepId::kMotion, "motion"},       {StepId::kSolve, "solve"},
+                                       {StepId::kReview, "review"},       {StepId::kWrite, "write"}};
 constexpr Name<StepState> kStepStateNames[] = {{StepState::kPending, "pending"},
                                                {StepState::kActive, "active"},
                                                {StepState::kDone, "done"},
@@ -31,9 +31,9 @@ constexpr Name<SessionState> kSessionStateNames[] = {
     {SessionState::kDone, "done"}, {SessionState::kAborted, "aborted"}, {SessionState::kFailed, "failed"}};
 constexpr Name<MessageLevel> kLevelNames[] = {
     {MessageLevel::kInfo, "info"}, {MessageLevel::kWarning, "warning"}, {MessageLevel::kError, "error"}};
-constexpr Name<Outcome> kOutcomeNames[] = {{Outcome::kWritten, "written"},     {Outcome::kCompleted, "completed"},
-                                           {Outcome::kRecorded, "recorded"},   {Outcome::kRejected, "rejected"},
-                                           {Outcome::kAborted, "aborted"},     {Outcome::kFailed, "failed"}};
+constexpr Name<Outcome> kOutcomeNames[] = {
+    {Outcome::kWritten, "written"},   {Outcome::kCompleted, "completed"}, {Outcome::kRecorded, "recorded"},
+    {Outcome::kRejected, "rejected"}, {Outcome::kAborted, "aborted"},     {Outcome::kFailed, "failed"}};
 
 /// The operator's keys: the protocol's name and the console's letter.
 struct KeyInfo {
@@ -84,7 +84,8 @@ struct Encoder {
   json operator()(const Status& m) const {
     json j = stamped("status", m.t);
     json steps = json::array();
-    for (const auto& s : m.steps) steps.push_back({{"name", step_name(s.name)}, {"state", step_state_name(s.state)}});
+    for (const auto& s : m.steps)
+      steps.push_back({{"name", step_name(s.name)}, {"state", step_state_name(s.state)}});
     j["state"] = session_state_name(m.state);
     j["rig"] = m.rig;
     j["steps"] = steps;
@@ -95,8 +96,11 @@ struct Encoder {
       const ServiceDevices& d = m.service->devices;
       json cams = json::array();
       for (const auto& c : d.cameras)
-        cams.push_back(
-            {{"name", c.name}, {"state", c.state}, {"frames", c.frames}, {"faults", c.faults}, {"error", c.error}});
+        cams.push_back({{"name", c.name},
+                        {"state", c.state},
+                        {"frames", c.frames},
+                        {"faults", c.faults},
+                        {"error", c.error}});
       j["devices"] = {{"imu",
                        {{"state", d.imu.state},
                         {"sim", d.imu.sim},
@@ -144,7 +148,8 @@ struct Encoder {
                     {"accel_slope_mps2_per_c", vec(f.accel_slope_mps2_per_c)}};
   }
   static void figures(json& j, const PoseFigures& f) {
-    j["figures"] = {{"poses", f.poses}, {"still", f.still}, {"missing", f.missing}, {"scale_sigma", f.scale_sigma}};
+    j["figures"] = {
+        {"poses", f.poses}, {"still", f.still}, {"missing", f.missing}, {"scale_sigma", f.scale_sigma}};
   }
   static void figures(json& j, const MotionFigures& f) {
     j["figures"] = {{"gyro_rms_dps", vec(f.gyro_rms_dps)},
@@ -245,7 +250,8 @@ json Encoder::operator()(const ResultSummary& m) const {
   }
   if (m.imu) {
     const auto& c = *m.imu;
-    j["imu"] = {{"A_a", mat(c.A_a)}, {"b_a", vec(c.b_a)}, {"A_g", mat(c.A_g)}, {"b_g", vec(c.b_g)}, {"G", mat(c.G)}};
+    j["imu"] = {
+        {"A_a", mat(c.A_a)}, {"b_a", vec(c.b_a)}, {"A_g", mat(c.A_g)}, {"b_g", vec(c.b_g)}, {"G", mat(c.G)}};
   }
   if (m.cameras) {
     json cams = json::array();
@@ -260,8 +266,9 @@ json Encoder::operator()(const ResultSummary& m) const {
     j["cameras"] = cams;
   }
   if (m.self_check)
-    j["self_check"] = {
-        {"verdict", m.self_check->verdict}, {"summary", m.self_check->summary}, {"advice", m.self_check->advice}};
+    j["self_check"] = {{"verdict", m.self_check->verdict},
+                       {"summary", m.self_check->summary},
+                       {"advice", m.self_check->advice}};
   return j;
 }
 
@@ -337,8 +344,12 @@ Result<StepState> parse_step_state(std::string_view name) {
 Result<SessionState> parse_session_state(std::string_view name) {
   return value_of(kSessionStateNames, name, "a session state");
 }
-Result<MessageLevel> parse_level(std::string_view name) { return value_of(kLevelNames, name, "a message level"); }
-Result<Outcome> parse_outcome(std::string_view name) { return value_of(kOutcomeNames, name, "a session outcome"); }
+Result<MessageLevel> parse_level(std::string_view name) {
+  return value_of(kLevelNames, name, "a message level");
+}
+Result<Outcome> parse_outcome(std::string_view name) {
+  return value_of(kOutcomeNames, name, "a session outcome");
+}
 
 Result<OperatorKey> parse_key(std::string_view name) {
   for (const auto& k : kKeys)

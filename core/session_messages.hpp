@@ -126,29 +126,13 @@ struct Status {
   std::optional<ServiceStatus> service;  // imucald's devices, session folder and version
 };
 
-/// What a prompt asks of the operator. Not on the wire: the engine says it to the hosts in its
-/// process (the virtual rig's scripted operator); a decoded prompt has kUnknown.
-enum class PromptAsk {
-  kUnknown,
-  kBegin,       // preflight passed: go on
-  kRecheck,     // preflight failed: fix a device, check again
-  kHoldStill,   // warm-up, thermal, still start: leave the rig still
-  kNextPose,    // poses: turn to a new orientation (`up`: the side not yet up, if any)
-  kFace,        // six-face holds: put `up` up and hold it
-  kMove,        // motion: move the rig in front of the target
-  kWait,        // solving, writing: nothing to do
-  kReview,      // accept or reject the result
-  kRedoOrAbort  // a fault stopped the step: redo it once fixed, or abort
-};
-
 struct Prompt {
   std::optional<double> t;
   std::optional<StepId> step;
   std::string text;
   std::vector<OperatorKey> keys;
-  std::vector<std::string> art;        // a drawing of the rig's attitude (none: no "art")
-  std::optional<Eigen::Vector3d> up;   // the axis the operator is asked to turn up
-  PromptAsk ask = PromptAsk::kUnknown;  // in the process only (above)
+  std::vector<std::string> art;       // a drawing of the rig's attitude (none: no "art")
+  std::optional<Eigen::Vector3d> up;  // the axis the operator is asked to turn up
   bool offers(OperatorKey key) const;
 };
 
@@ -333,8 +317,9 @@ struct Done {
   std::optional<std::string> session_dir;  // the session's folder (the runner adds it)
 };
 
-using SessionMessage = std::variant<SessionStart, Status, Prompt, Live, Message, Fault, Preflight, Key, Stop,
-                                    Solve, Applied, ResultSummary, Written, PoseCaptured, FaceHeld, Review, Done>;
+using SessionMessage =
+    std::variant<SessionStart, Status, Prompt, Live, Message, Fault, Preflight, Key, Stop, Solve, Applied,
+                 ResultSummary, Written, PoseCaptured, FaceHeld, Review, Done>;
 
 /// The message's "type" on the wire.
 const char* type_name(const SessionMessage& message);
@@ -357,6 +342,9 @@ std::string dump(const SessionMessage& message);
 /// The same from a line of JSON text.
 [[nodiscard]] Result<SessionMessage> parse(std::string_view text);
 [[nodiscard]] Result<PreflightReport> decode_preflight_report(const nlohmann::json& report);
+/// The "type" of a message's JSON text, whether or not the rest decodes ("" when it has none):
+/// for a reader that tolerates damage in some kinds and not in others.
+std::string type_of(std::string_view text);
 
 /// What the engine saw of a camera frame in the motion step: the session log's "frame" event.
 struct FrameEvent {

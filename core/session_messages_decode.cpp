@@ -67,7 +67,8 @@ class Fields {
     if (v.is_null()) return out;
     if (!v.is_array()) return wrong(key, v, "an array of strings"), out;
     for (const auto& e : v) {
-      if (!e.is_string()) return fail("has an entry of \"" + std::string(key) + "\" that is not a string"), out;
+      if (!e.is_string())
+        return fail("has an entry of \"" + std::string(key) + "\" that is not a string"), out;
       out.push_back(e.get<std::string>());
     }
     return out;
@@ -172,7 +173,8 @@ Result<PreflightReport> read_report(const json& j, const std::string& where) {
   if (devices.is_array()) {
     for (const auto& d : devices) {
       Fields df(d, where + ": a device");
-      r.devices.push_back({df.text("name"), df.flag("ok"), df.text("detail", false), df.text("advice", false)});
+      r.devices.push_back(
+          {df.text("name"), df.flag("ok"), df.text("detail", false), df.text("advice", false)});
       if (!df.ok()) return make_error(Errc::kCorrupt, df.error());
     }
   }
@@ -191,7 +193,8 @@ Result<SessionMessage> read_status(Fields& f) {
   if (steps.is_array()) {
     for (const auto& s : steps) {
       Fields sf(s, f.where() + ": a step");
-      m.steps.push_back({sf.named(parse_step(sf.text("name"))), sf.named(parse_step_state(sf.text("state")))});
+      m.steps.push_back(
+          {sf.named(parse_step(sf.text("name"))), sf.named(parse_step_state(sf.text("state")))});
       if (!sf.ok()) f.fail(": " + sf.error());
     }
   }
@@ -202,16 +205,16 @@ Result<SessionMessage> read_status(Fields& f) {
     ServiceStatus s;
     Fields devices(f.object("devices"), f.where() + ": devices");
     Fields imu(devices.object("imu"), f.where() + ": devices: imu");
-    s.devices.imu = {imu.text("state"),         imu.flag("sim"),   imu.integer("samples"),
-                     imu.integer("faults"),     imu.number("rate_hz"), imu.text("gyro_offsets"),
+    s.devices.imu = {imu.text("state"),     imu.flag("sim"),       imu.integer("samples"),
+                     imu.integer("faults"), imu.number("rate_hz"), imu.text("gyro_offsets"),
                      imu.text("error")};
     s.devices.storage = devices.text("storage");
     const json& cams = devices.array("cameras", false);
     if (cams.is_array()) {
       for (const auto& c : cams) {
         Fields cf(c, f.where() + ": a camera");
-        s.devices.cameras.push_back(
-            {cf.text("name"), cf.text("state"), cf.integer("frames"), cf.integer("faults"), cf.text("error")});
+        s.devices.cameras.push_back({cf.text("name"), cf.text("state"), cf.integer("frames"),
+                                     cf.integer("faults"), cf.text("error")});
         if (!cf.ok()) f.fail(": " + cf.error());
       }
     }
@@ -252,16 +255,19 @@ LiveFigures read_figures(Fields& f, const std::optional<StepId>& step) {
       break;
     case StepId::kThermal: {
       const auto range = g.numbers("range_c", 2);
-      out = ThermalFigures{g.number("temperature_c"), g.number("rate_c_per_min"), {range[0], range[1]},
-                           g.vector3("gyro_slope_dps_per_c"), g.vector3("accel_slope_mps2_per_c")};
+      out = ThermalFigures{g.number("temperature_c"),
+                           g.number("rate_c_per_min"),
+                           {range[0], range[1]},
+                           g.vector3("gyro_slope_dps_per_c"),
+                           g.vector3("accel_slope_mps2_per_c")};
       break;
     }
     case StepId::kPoses:
       out = PoseFigures{g.count("poses"), g.flag("still"), g.texts("missing"), g.number("scale_sigma")};
       break;
     case StepId::kMotion:
-      out = MotionFigures{g.vector3("gyro_rms_dps"),    g.integer("frames"),
-                          g.integer("frames_seen"),     g.integers("camera_frames"),
+      out = MotionFigures{g.vector3("gyro_rms_dps"),        g.integer("frames"),
+                          g.integer("frames_seen"),         g.integers("camera_frames"),
                           g.integers("camera_frames_seen"), g.integer("frames_seen_by_every_camera")};
       break;
     default:
@@ -318,7 +324,8 @@ Result<SessionMessage> read_result(Fields& f) {
   }
   if (f.has("self_check")) {
     Fields g(f.object("self_check"), f.where() + ": self_check");
-    m.self_check = ResultSummary::SelfCheck{g.text("verdict"), g.text("summary", false), g.text("advice", false)};
+    m.self_check =
+        ResultSummary::SelfCheck{g.text("verdict"), g.text("summary", false), g.text("advice", false)};
     if (!g.ok()) f.fail(": " + g.error());
   }
   return finish(f, std::move(m));
@@ -331,7 +338,8 @@ Result<SessionMessage> read_review(Fields& f) {
   const json& gates = f.array("gates", false);
   for (const auto& gate : gates.is_array() ? gates : json::array()) {
     Fields g(gate, f.where() + ": a gate");
-    Review::Gate out{g.text("name"), g.number("value"), g.number("limit", false), g.flag("pass"), std::nullopt};
+    Review::Gate out{g.text("name"), g.number("value"), g.number("limit", false), g.flag("pass"),
+                     std::nullopt};
     if (g.has("digits")) out.digits = static_cast<int>(g.integer("digits"));
     if (!g.ok()) f.fail(": " + g.error());
     m.gates.push_back(std::move(out));
@@ -375,13 +383,15 @@ Result<SessionMessage> read_simple(const std::string& type, Fields& f) {
     return finish(f, SessionStart{stamp(f), f.texts("steps", false)});
   }
   if (type == "message")
-    return finish(f, Message{stamp(f), f.named(parse_level(f.text("level"))), f.text("text"), MessageCause::kNone});
+    return finish(
+        f, Message{stamp(f), f.named(parse_level(f.text("level"))), f.text("text"), MessageCause::kNone});
   if (type == "fault")
     return finish(f, Fault{stamp(f), f.text("source", false), f.step("step", false), f.text("text", false),
                            f.text("advice", false)});
   if (type == "preflight") {
     const json& j = f.object("report", false);
-    auto report = j.is_null() ? Result<PreflightReport>(PreflightReport{}) : read_report(j, f.where() + ": report");
+    auto report =
+        j.is_null() ? Result<PreflightReport>(PreflightReport{}) : read_report(j, f.where() + ": report");
     if (!report.ok()) return report.error();
     return finish(f, Preflight{stamp(f), std::move(*report)});
   }
@@ -403,7 +413,9 @@ Result<SessionMessage> read_simple(const std::string& type, Fields& f) {
 
 }  // namespace
 
-Result<PreflightReport> decode_preflight_report(const json& report) { return read_report(report, "a preflight report"); }
+Result<PreflightReport> decode_preflight_report(const json& report) {
+  return read_report(report, "a preflight report");
+}
 
 Result<SessionMessage> decode(const json& message) {
   if (!message.is_object()) return make_error(Errc::kCorrupt, "a session message that is not a JSON object");
@@ -426,6 +438,13 @@ Result<SessionMessage> parse(std::string_view text) {
   const json j = json::parse(text.begin(), text.end(), nullptr, /*allow_exceptions=*/false);
   if (j.is_discarded()) return make_error(Errc::kCorrupt, "a session message that is not valid JSON");
   return decode(j);
+}
+
+std::string type_of(std::string_view text) {
+  const json j = json::parse(text.begin(), text.end(), nullptr, /*allow_exceptions=*/false);
+  if (!j.is_object()) return {};
+  const auto it = j.find("type");
+  return it != j.end() && it->is_string() ? it->get<std::string>() : std::string();
 }
 
 Result<FrameEvent> parse_frame_event(std::string_view text) {
