@@ -147,7 +147,7 @@ class Fields {
     return v.get<double>();
   }
   void wrong(const char* key, const json& v, const char* kind) {
-    fail("has \"" + std::string(key) + "\" as " + v.type_name() + ", not " + kind);
+    fail(": \"" + std::string(key) + "\" is " + v.type_name() + ", not " + kind);
   }
   const json& j_;
   std::string where_;
@@ -418,10 +418,10 @@ Result<PreflightReport> decode_preflight_report(const json& report) {
 }
 
 Result<SessionMessage> decode(const json& message) {
-  if (!message.is_object()) return make_error(Errc::kCorrupt, "a session message that is not a JSON object");
+  if (!message.is_object()) return make_error(Errc::kCorrupt, "the session message is not a JSON object");
   const auto type_it = message.find("type");
   if (type_it == message.end() || !type_it->is_string())
-    return make_error(Errc::kCorrupt, "a session message without a \"type\" (a string)");
+    return make_error(Errc::kCorrupt, "the session message has no type (a string)");
   const std::string type = type_it->get<std::string>();
   Fields f(message, "the session message (" + type + ")");
   if (type == "status") return read_status(f);
@@ -436,7 +436,8 @@ Result<SessionMessage> decode(const json& message) {
 
 Result<SessionMessage> parse(std::string_view text) {
   const json j = json::parse(text.begin(), text.end(), nullptr, /*allow_exceptions=*/false);
-  if (j.is_discarded()) return make_error(Errc::kCorrupt, "a session message that is not valid JSON");
+  if (j.is_discarded())
+    return make_error(Errc::kCorrupt, "the session message is not a JSON object (not valid JSON)");
   return decode(j);
 }
 

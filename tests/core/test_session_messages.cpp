@@ -128,8 +128,8 @@ void expect_error(const std::string& line, const std::string& words) {
 TEST(SessionMessages, DamagedOrForeignMessagesGiveErrorsNotCrashes) {
   expect_error("not json", "not valid JSON");
   expect_error("[1,2]", "not a JSON object");
-  expect_error(R"j({"text":"x"})j", "without a \"type\"");
-  expect_error(R"j({"type":7})j", "without a \"type\"");
+  expect_error(R"j({"text":"x"})j", "has no type");
+  expect_error(R"j({"type":7})j", "has no type");
   // A newer service's message kind.
   expect_error(R"j({"type":"weather","t":1.0})j", "\"weather\", which this version does not know");
   // An older one without a field this version needs.
@@ -140,11 +140,11 @@ TEST(SessionMessages, DamagedOrForeignMessagesGiveErrorsNotCrashes) {
   // Wrong kinds and names outside their tables.
   expect_error(R"j({"type":"live","step":"still","lines":[1,"ok"],"progress":0.5})j",
                "\"lines\" that is not a string");
-  expect_error(R"j({"type":"live","step":"still","lines":[],"progress":"half"})j", "\"progress\" as string");
+  expect_error(R"j({"type":"live","step":"still","lines":[],"progress":"half"})j", "\"progress\" is string");
   expect_error(R"j({"type":"prompt","step":"poses","text":"x","keys":["pause"]})j", "'pause' is not a key");
   expect_error(R"j({"type":"prompt","step":"dance","text":"x","keys":[]})j", "'dance' is not a session step");
   expect_error(R"j({"type":"status","state":"sleeping"})j", "'sleeping' is not a session state");
-  expect_error(R"j({"type":"review","pass":"yes"})j", "\"pass\" as string");
+  expect_error(R"j({"type":"review","pass":"yes"})j", "\"pass\" is string");
   expect_error(R"j({"type":"review","pass":true,"gates":[{"pass":1}]})j", "a gate has no \"name\"");
   expect_error(R"j({"type":"pose","index":1,"up":[1,2]})j", "\"up\" that is not 3 numbers");
   expect_error(R"j({"type":"result","imu":{"A_a":[[1,0,0],[0,1,0]]}})j", "\"A_a\" that is not 3x3");
