@@ -462,53 +462,6 @@ const MarginalCovariance* Estimator<N>::solution_covariance() {
 }
 
 template <int N>
-std::vector<MarginalCovariance::HeldScore> Estimator<N>::held_intrinsics() const {
-  std::vector<MarginalCovariance::HeldScore> out;
-  if (!opt_.propagate_intrinsics) return out;
-  for (std::size_t c = 0; c < cameras_.size(); ++c) {
-    const CameraModel& camera = cameras_[c].camera;
-    // +-1 sigma along each direction: the projection is linear over it to far below the noise.
-    std::vector<std::pair<CameraModel, CameraModel>> moves;
-    for (const Eigen::VectorXd& l : intrinsics_directions(cameras_[c].intrinsics_covariance)) {
-      CameraModel plus = camera, minus = camera;
-      plus.intrinsics += l.head<4>();
-      minus.intrinsics -= l.head<4>();
-      plus.distortion_coeffs += l.tail<4>();
-      minus.distortion_coeffs -= l.tail<4>();
-      moves.emplace_back(plus, minus);
-    }
-    if (moves.empty()) continue;
-    std::vector<MarginalCovariance::HeldScore> scores(moves.size());
-    for (std::size_t k = 0; k < frames_.size(); ++k) {
-      if (frame_camera_[k] != c) continue;
-      const auto per_move = frames_[k]->intrinsics_scores(frame_blocks_[k].data(), moves, 0.5);
-      for (std::size_t j = 0; j < moves.size(); ++j)
-        for (std::size_t b = 0; b < per_move[j].size(); ++b)
-          scores[j].emplace_back(frame_blocks_[k][b], per_move[j][b]);
-    }
-    for (auto& s : scores) out.push_back(std::move(s));
-  }
-  return out;
-}
-
-std::vector<Eigen::VectorXd> intrinsics_directions(const Eigen::MatrixXd& covariance) {
-  std::vector<Eigen::VectorXd> out;
-  if (covariance.rows() != 8 || covariance.cols() != 8) return out;
-  // Coordinates the camera's own solve did not determine (NaN) are left out.
-  Eigen::MatrixXd C = covariance;
-  for (int i = 0; i < 8; ++i)
-    if (!std::isfinite(C(i, i))) {
-      C.row(i).setZero();
-      C.col(i).setZero();
-    }
-  if (!C.allFinite()) return out;
-  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (C + C.transpose()));
-  for (int j = 0; j < 8; ++j)
-    if (es.eigenvalues()(j) > 0.0) out.push_back(es.eigenvectors().col(j) * std::sqrt(es.eigenvalues()(j)));
-  return out;
-}
-
-template <int N>
 bool Estimator<N>::frames_in_window() const {
   for (std::size_t k = 0; k < frames_.size(); ++k) {
     const CameraState& cs = st_.cams[frame_camera_[k]];

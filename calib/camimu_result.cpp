@@ -67,6 +67,53 @@ std::string Estimator<N>::describe(const MarginalCovariance::Direction& dir) con
   return text + ": " + (why.empty() ? "the recording does not tell them apart" : why);
 }
 
+template <int N>
+std::vector<MarginalCovariance::HeldScore> Estimator<N>::held_intrinsics() const {
+  std::vector<MarginalCovariance::HeldScore> out;
+  if (!opt_.propagate_intrinsics) return out;
+  for (std::size_t c = 0; c < cameras_.size(); ++c) {
+    const CameraModel& camera = cameras_[c].camera;
+    // +-1 sigma along each direction: the projection is linear over it to far below the noise.
+    std::vector<std::pair<CameraModel, CameraModel>> moves;
+    for (const Eigen::VectorXd& l : intrinsics_directions(cameras_[c].intrinsics_covariance)) {
+      CameraModel plus = camera, minus = camera;
+      plus.intrinsics += l.head<4>();
+      minus.intrinsics -= l.head<4>();
+      plus.distortion_coeffs += l.tail<4>();
+      minus.distortion_coeffs -= l.tail<4>();
+      moves.emplace_back(plus, minus);
+    }
+    if (moves.empty()) continue;
+    std::vector<MarginalCovariance::HeldScore> scores(moves.size());
+    for (std::size_t k = 0; k < frames_.size(); ++k) {
+      if (frame_camera_[k] != c) continue;
+      const auto per_move = frames_[k]->intrinsics_scores(frame_blocks_[k].data(), moves, 0.5);
+      for (std::size_t j = 0; j < moves.size(); ++j)
+        for (std::size_t b = 0; b < per_move[j].size(); ++b)
+          scores[j].emplace_back(frame_blocks_[k][b], per_move[j][b]);
+    }
+    for (auto& s : scores) out.push_back(std::move(s));
+  }
+  return out;
+}
+
+std::vector<Eigen::VectorXd> intrinsics_directions(const Eigen::MatrixXd& covariance) {
+  std::vector<Eigen::VectorXd> out;
+  if (covariance.rows() != 8 || covariance.cols() != 8) return out;
+  // Coordinates the camera's own solve did not determine (NaN) are left out.
+  Eigen::MatrixXd C = covariance;
+  for (int i = 0; i < 8; ++i)
+    if (!std::isfinite(C(i, i))) {
+      C.row(i).setZero();
+      C.col(i).setZero();
+    }
+  if (!C.allFinite()) return out;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (C + C.transpose()));
+  for (int j = 0; j < 8; ++j)
+    if (es.eigenvalues()(j) > 0.0) out.push_back(es.eigenvectors().col(j) * std::sqrt(es.eigenvalues()(j)));
+  return out;
+}
+
 namespace {
 
 std::string intrinsics_uncertainty(const CamImuCameraInput& in, bool propagate) {
@@ -79,6 +126,24 @@ std::string intrinsics_uncertainty(const CamImuCameraInput& in, bool propagate) 
            "; the sigmas here leave the intrinsics' own error out";
   return "propagated: " + (in.intrinsics_covariance_source.empty() ? std::string("the camera's covariance")
                                                                    : in.intrinsics_covariance_source);
+}
+
+/// The directions the covariance leaves undetermined, in words (out->undetermined), and the
+/// warnings they and a regularised nuisance deserve.
+void note_undetermined(const MarginalCovariance& cov,
+                       const std::function<std::string(const MarginalCovariance::Direction&)>& describe,
+                       CamImuCalibrationResult* out, std::vector<std::string>* warnings) {
+  if (cov.nuisance_regularised())
+    warnings->push_back(
+        "parts of the trajectory or the bias splines are not determined by the data (no frame or IMU "
+        "sample constrains them); the sigmas are conditioned on a weak prior there");
+  for (const auto& dir : cov.undetermined()) out->undetermined.push_back(describe(dir));
+  if (!out->undetermined.empty()) {
+    std::string text = "the recording does not determine every parameter; not determined (sigma NaN): ";
+    for (std::size_t i = 0; i < out->undetermined.size(); ++i)
+      text += (i ? " | " : "") + out->undetermined[i];
+    warnings->push_back(text);
+  }
 }
 
 }  // namespace
@@ -95,17 +160,8 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
     return;
   }
   const MarginalCovariance& cov = *computed;
-  if (cov.nuisance_regularised())
-    warnings_.push_back(
-        "parts of the trajectory or the bias splines are not determined by the data (no frame or IMU "
-        "sample constrains them); the sigmas are conditioned on a weak prior there");
-  for (const auto& dir : cov.undetermined()) out->undetermined.push_back(describe(dir));
-  if (!out->undetermined.empty()) {
-    std::string text = "the recording does not determine every parameter; not determined (sigma NaN): ";
-    for (std::size_t i = 0; i < out->undetermined.size(); ++i)
-      text += (i ? " | " : "") + out->undetermined[i];
-    warnings_.push_back(text);
-  }
+  note_undetermined(
+      cov, [this](const MarginalCovariance::Direction& d) { return describe(d); }, out, &warnings_);
   // Every sigma is the larger of the plain one and the cluster-robust one (where computed): the
   // robust estimate is itself noisy with few clusters, and the plain one holds where the
   // residuals are independent and correctly weighted (docs/camimu-calibration.md, "Uncertainty").
@@ -381,12 +437,13 @@ void excitation(const std::vector<CamImuSample>& imu, const Eigen::Vector3d& b_g
 
 // The members above, for the spline orders calibrate_camimu() runs (the others are instantiated
 // where they are defined, by its use of Estimator<N>::run()).
-#define IMUCAL_CAMIMU_RESULT_MEMBERS(N)                                                    \
-  template std::string Estimator<N>::coordinate_name(const double*, int) const;            \
-  template std::string Estimator<N>::describe(const MarginalCovariance::Direction&) const; \
-  template void Estimator<N>::covariance(CamImuCalibrationResult*);                        \
-  template void Estimator<N>::check_against_prior(CamImuCalibrationResult*);               \
-  template void Estimator<N>::fill_result(CamImuCalibrationResult*);                       \
+#define IMUCAL_CAMIMU_RESULT_MEMBERS(N)                                                      \
+  template std::string Estimator<N>::coordinate_name(const double*, int) const;              \
+  template std::string Estimator<N>::describe(const MarginalCovariance::Direction&) const;   \
+  template void Estimator<N>::covariance(CamImuCalibrationResult*);                          \
+  template std::vector<MarginalCovariance::HeldScore> Estimator<N>::held_intrinsics() const; \
+  template void Estimator<N>::check_against_prior(CamImuCalibrationResult*);                 \
+  template void Estimator<N>::fill_result(CamImuCalibrationResult*);                         \
   template ImuSignalFit Estimator<N>::signal_fit(const std::string&) const;
 IMUCAL_CAMIMU_RESULT_MEMBERS(4)
 IMUCAL_CAMIMU_RESULT_MEMBERS(5)

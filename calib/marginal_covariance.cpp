@@ -119,6 +119,20 @@ Eigen::MatrixXd cluster_scores(const Jacobian& J, const std::vector<double>& res
   return projected_scores(J, Rc, X, nl, ng);
 }
 
+/// An undetermined direction (unit vector v over `coords`) as the coordinates it moves, largest
+/// first (those of at least 0.1 of the largest).
+MarginalCovariance::Direction direction_of(const Eigen::VectorXd& v,
+                                           const std::vector<MarginalCovariance::Coordinate>& coords) {
+  MarginalCovariance::Direction dir;
+  const double top = v.cwiseAbs().maxCoeff();
+  std::vector<int> idx;
+  for (int i = 0; i < static_cast<int>(v.size()); ++i)
+    if (std::abs(v(i)) >= 0.1 * top) idx.push_back(i);
+  std::sort(idx.begin(), idx.end(), [&](int a, int b) { return std::abs(v(a)) > std::abs(v(b)); });
+  for (int i : idx) dir.parts.push_back({coords[static_cast<std::size_t>(i)], v(i)});
+  return dir;
+}
+
 }  // namespace
 
 bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<const double*>& blocks,
@@ -200,14 +214,7 @@ bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<cons
       continue;
     }
     null_weight += V.col(k).cwiseAbs2();
-    Direction dir;
-    const double top = V.col(k).cwiseAbs().maxCoeff();
-    std::vector<int> idx;
-    for (int i = 0; i < ng; ++i)
-      if (std::abs(V(i, k)) >= 0.1 * top) idx.push_back(i);
-    std::sort(idx.begin(), idx.end(), [&](int a, int b) { return std::abs(V(a, k)) > std::abs(V(b, k)); });
-    for (int i : idx) dir.parts.push_back({coords[static_cast<std::size_t>(i)], V(i, k)});
-    undetermined_.push_back(std::move(dir));
+    undetermined_.push_back(direction_of(V.col(k), coords));
   }
   cov_ = d.asDiagonal() * inv * d.asDiagonal();
   if (clusters_ > 1) {

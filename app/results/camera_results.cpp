@@ -149,6 +149,18 @@ YAML::Node number_or_null(double v) {
   return std::isfinite(v) ? YAML::Node(v) : YAML::Node(YAML::NodeType::Null);
 }
 
+/// A covariance matrix row by row (flow style), null where not determined.
+YAML::Node covariance_rows(const Eigen::MatrixXd& m) {
+  YAML::Node rows(YAML::NodeType::Sequence);
+  for (Eigen::Index i = 0; i < m.rows(); ++i) {
+    YAML::Node row(YAML::NodeType::Sequence);
+    for (Eigen::Index j = 0; j < m.cols(); ++j) row.push_back(number_or_null(m(i, j)));
+    row.SetStyle(YAML::EmitterStyle::Flow);
+    rows.push_back(row);
+  }
+  return rows;
+}
+
 /// One camera's camchain entry: Kalibr's keys and imucal's figures under `imucal`.
 YAML::Node camera_node(const CameraCalibrationReport& r) {
   const auto& res = r.intrinsics;
@@ -158,18 +170,9 @@ YAML::Node camera_node(const CameraCalibrationReport& r) {
   YAML::Node q(YAML::NodeType::Map);
   q["intrinsics_sigma"] = flow(res.intrinsics_sigma);
   q["distortion_coeffs_sigma"] = flow(res.distortion_sigma);
-  if (res.covariance_ok) {
-    // The 8 x 8 covariance of [intrinsics, distortion_coeffs], row by row; calibrate camimu
-    // propagates it into its sigmas (docs/camimu-calibration.md, "Uncertainty").
-    YAML::Node cov(YAML::NodeType::Sequence);
-    for (int i = 0; i < 8; ++i) {
-      YAML::Node row(YAML::NodeType::Sequence);
-      for (int j = 0; j < 8; ++j) row.push_back(number_or_null(res.covariance(i, j)));
-      row.SetStyle(YAML::EmitterStyle::Flow);
-      cov.push_back(row);
-    }
-    q["intrinsics_covariance"] = cov;
-  }
+  // The 8 x 8 covariance of [intrinsics, distortion_coeffs]; calibrate camimu propagates it into
+  // its sigmas (docs/camimu-calibration.md, "Uncertainty").
+  if (res.covariance_ok) q["intrinsics_covariance"] = covariance_rows(res.covariance);
   q["reprojection_rms_px"] = res.rms_px;
   q["residual_sigma_px"] = res.residual_sigma_px;
   q["focal_well_determined"] = res.focal_well_determined;
@@ -326,14 +329,7 @@ std::string camera_chain_yaml(const CameraChainReport& r, int min_shared_views) 
     if (c > 0) {
       q["T_cn_cnm1_rotation_sigma_rad"] = flow3(cc.T_cn_cnm1_rotation_sigma_rad);
       q["T_cn_cnm1_translation_sigma_m"] = flow3(cc.T_cn_cnm1_translation_sigma_m);
-      YAML::Node cov(YAML::NodeType::Sequence);
-      for (int i = 0; i < 6; ++i) {
-        YAML::Node row(YAML::NodeType::Sequence);
-        for (int j = 0; j < 6; ++j) row.push_back(number_or_null(cc.T_cn_cnm1_covariance(i, j)));
-        row.SetStyle(YAML::EmitterStyle::Flow);
-        cov.push_back(row);
-      }
-      q["T_cn_cnm1_covariance"] = cov;
+      q["T_cn_cnm1_covariance"] = covariance_rows(cc.T_cn_cnm1_covariance);
       q["baseline_m"] = cc.baseline_m;
       q["baseline_sigma_m"] = number_or_null(cc.baseline_sigma_m);
       q["T_cam_cam0"] = yaml_matrix_rows(cc.T_cam_cam0.matrix());

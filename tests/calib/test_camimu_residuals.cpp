@@ -183,6 +183,25 @@ TEST(CamImuResiduals, RollingShutterFrameResidualJacobiansMatchNumericOnesAcross
 
 // The solver's form of a frame (7 rows) against the corners' own rows: the same cost, gradient
 // J^T r and Gauss-Newton matrix J^T J over all blocks, with corners in the robust loss's tail.
+/// The knot window of a frame whose twelve corners (twelve_corners) lie ahead of the camera.
+std::vector<Block> twelve_corner_frame_blocks(int n) {
+  return frame_blocks(n + 2, Eigen::Vector3d(0.03, -0.02, 0.01), Eigen::Vector3d(0.02, -0.01, 0.004),
+                      Eigen::Vector3d(0.1, -0.2, 3.0), {0.03, -0.02, 0.01}, 0.006);
+}
+
+/// Twelve board points and their detections: 0.4 px of noise, corner 3 an 8 px outlier.
+std::pair<std::vector<Eigen::Vector3d>, std::vector<Eigen::Vector2d>> twelve_corners() {
+  std::vector<Eigen::Vector3d> pts;
+  std::vector<Eigen::Vector2d> px;
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0.0, 0.4);
+  for (int k = 0; k < 12; ++k) {
+    pts.emplace_back(-0.15 + 0.03 * k, 0.05 * (k % 4) - 0.07, 1.1 + 0.01 * k);
+    px.emplace_back(120.0 + 11.0 * k + noise(rng) + (k == 3 ? 8.0 : 0.0), 100.0 + 6.0 * (k % 4) + noise(rng));
+  }
+  return {pts, px};
+}
+
 /// The Jacobian of `cost` at `blocks` in tangent coordinates (quaternion blocks: their first three
 /// ambient columns), stacked over the blocks, and its residuals into *r.
 Eigen::MatrixXd stacked_tangent_jacobian(const ceres::CostFunction& cost, std::vector<Block>& blocks,
@@ -216,17 +235,10 @@ TEST(CamImuResiduals, CompressedFrameResidualHasTheCornersCostGradientAndNormalM
   constexpr int N = 4;
   const CameraModel camera = sim::CamImuSimOptions::default_sim_camera();
   const SplineTiming<N> timing{0.0, 0.05, 20};
-  std::vector<Block> blocks =
-      frame_blocks(N + 2, Eigen::Vector3d(0.03, -0.02, 0.01), Eigen::Vector3d(0.02, -0.01, 0.004),
-                   Eigen::Vector3d(0.1, -0.2, 3.0), {0.03, -0.02, 0.01}, 0.006);
-  std::vector<Eigen::Vector3d> pts;
-  std::vector<Eigen::Vector2d> px;
-  std::mt19937 rng(5);
-  std::normal_distribution<double> noise(0.0, 0.4);
-  for (int k = 0; k < 12; ++k) {
-    pts.emplace_back(-0.15 + 0.03 * k, 0.05 * (k % 4) - 0.07, 1.1 + 0.01 * k);
-    px.emplace_back(120.0 + 11.0 * k + noise(rng) + (k == 3 ? 8.0 : 0.0), 100.0 + 6.0 * (k % 4) + noise(rng));
-  }
+  std::vector<Block> blocks = twelve_corner_frame_blocks(N);
+  const auto corners = twelve_corners();
+  const auto& pts = corners.first;
+  const auto& px = corners.second;
   const FrameResidual<N> full(camera, pts, px, 0.21, 1, timing, 0.3, 0.9, false);
   const FrameResidual<N> compact(camera, pts, px, 0.21, 1, timing, 0.3, 0.9, true);
   ASSERT_EQ(compact.num_residuals(), 7);
@@ -325,15 +337,10 @@ TEST(CamImuResiduals, IntrinsicsScoresAreTheCornersJacobianTimesTheirChange) {
   constexpr int N = 4;
   const CameraModel camera = sim::CamImuSimOptions::default_sim_camera();
   const SplineTiming<N> timing{0.0, 0.05, 20};
-  std::vector<Block> blocks =
-      frame_blocks(N + 2, Eigen::Vector3d(0.03, -0.02, 0.01), Eigen::Vector3d(0.02, -0.01, 0.004),
-                   Eigen::Vector3d(0.1, -0.2, 3.0), {0.03, -0.02, 0.01}, 0.006);
-  std::vector<Eigen::Vector3d> pts;
-  std::vector<Eigen::Vector2d> px;
-  for (int k = 0; k < 12; ++k) {
-    pts.emplace_back(-0.15 + 0.03 * k, 0.05 * (k % 4) - 0.07, 1.1 + 0.01 * k);
-    px.emplace_back(120.0 + 11.0 * k + (k == 3 ? 8.0 : 0.3), 100.0 + 6.0 * (k % 4));
-  }
+  std::vector<Block> blocks = twelve_corner_frame_blocks(N);
+  const auto corners = twelve_corners();
+  const auto& pts = corners.first;
+  const auto& px = corners.second;
   const Eigen::Vector4d dk(0.8, 0.7, -0.3, 0.2), dd(0.01, -0.004, 0.001, 0.0);
   const auto moved = [&](double f) {
     CameraModel c = camera;
