@@ -19,6 +19,7 @@
 #include <utility>
 
 #include "app/camera_self_check.hpp"
+#include "app/camimu_inputs.hpp"
 #include "app/results/camera_results.hpp"
 #include "calib/observation_check.hpp"
 #include "core/text_format.hpp"
@@ -552,6 +553,8 @@ Status solve_shutter(const CameraCalibrationRequest& q, std::span<const calib::T
   in.name = report->stream.name;
   in.model = q.intrinsics.model;
   in.shutter = q.known_shutter;
+  const auto [note, warning] = stamp_row_from_stream(report->stream, q.known_stamp_row, in.name, &in.shutter);
+  if (!warning.empty()) report->warnings.push_back(warning);
   // The test on the views that move the most (a few seconds of them, not the whole recording).
   constexpr std::size_t kShutterTestViews = 200;
   const bool subset = automatic && views.size() > kShutterTestViews;
@@ -580,6 +583,7 @@ Status solve_shutter(const CameraCalibrationRequest& q, std::span<const calib::T
     report->shutter_choice +=
         " (on the " + std::to_string(kShutterTestViews) + " consecutive views that move the most)";
   if (!c.intrinsics.camera.shutter.rolling()) return {};
+  if (!note.empty()) report->shutter_choice += "; " + note;
   // Rolling: the trajectory's solution replaces the per-view one (whose intrinsics the motion
   // during the readout biased); the views' figures stay those of the per-view start.
   report->intrinsics = c.intrinsics;
@@ -645,6 +649,10 @@ Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q
     }
     in.observations = std::move(*obs);
     in.shutter = c < q.shutters.size() ? q.shutters[c] : q.base.known_shutter;
+    const auto [note, warning] =
+        stamp_row_from_stream(report.stream, q.base.known_stamp_row, in.name, &in.shutter);
+    for (const std::string& text : {note, warning})
+      if (!text.empty()) report.warnings.push_back(text);
     inputs.push_back(std::move(in));
     out.warnings.insert(out.warnings.end(), report.warnings.begin(), report.warnings.end());
     out.cameras.push_back(std::move(report));

@@ -86,6 +86,9 @@ struct CameraCalibrationRequest {
   /// the camera's readout direction and stamped row (and a line delay to start from).
   calib::ShutterSolveOptions shutter{calib::ShutterSolveOptions::Mode::kGlobal, std::nullopt};
   Shutter known_shutter;
+  /// known_shutter's stamp_row was named (--stamp-row, the rig configuration's rolling camera);
+  /// else the row comes from the log's camera stream (app/camimu_inputs.hpp stamp_row_from_stream).
+  bool known_stamp_row = false;
   int threads = 0;  // detection workers; 0 = all cores
   /// The self-check (app/camera_self_check.hpp): this many consecutive parts of the recording
   /// calibrated apart and compared; 0 or 1: none (the CLI asks for the halves).

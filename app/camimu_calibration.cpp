@@ -62,6 +62,12 @@ Result<calib::CamImuCameraInput> detect_camera(const CamImuRequest& q, const log
   in.name = cam.name;
   in.stream = stream.name;
   in.camera = cam.camera;
+  const auto [note, warning] =
+      stamp_row_from_stream(stream, cam.stamp_row_given, cam.name, &in.camera.shutter);
+  if (!note.empty()) report->notes.push_back(note);
+  if (!warning.empty()) report->warnings.push_back(warning);
+  in.intrinsics_covariance = cam.intrinsics_covariance;
+  in.intrinsics_covariance_source = cam.intrinsics_covariance_source;
   for (auto& o : found->observations) {
     if (!o.empty()) in.observations.push_back(std::move(o));
   }
@@ -120,8 +126,16 @@ Status prepare_options(const CamImuRequest& q, CamImuReport* report) {
 void scale_by_self_check(CamImuCalibrationResult* r, std::vector<std::string>* notes) {
   for (CamImuCameraResult& c : r->cameras) {
     const double k = split_scale(&r->self_check, c.name + " ", c.name, notes);
-    c.rotation_sigma_rad *= k;
-    c.translation_sigma_m *= k;
+    // The parts were compared without the held intrinsics' share (they share the intrinsics):
+    // only the rest is scaled.
+    const auto scale = [k](Eigen::Vector3d* s, const Eigen::Vector3d& held) {
+      for (int a = 0; a < 3; ++a) {
+        const double h2 = std::isfinite(held(a)) ? held(a) * held(a) : 0.0;
+        (*s)(a) = std::sqrt(k * k * std::max((*s)(a) * (*s)(a)-h2, 0.0) + h2);
+      }
+    };
+    scale(&c.rotation_sigma_rad, c.rotation_sigma_from_intrinsics_rad);
+    scale(&c.translation_sigma_m, c.translation_sigma_from_intrinsics_m);
     c.timeshift_sigma_s *= k;
     c.line_delay_sigma_s *= k;
   }

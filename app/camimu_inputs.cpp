@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cmath>
+#include <limits>
 #include <set>
 
 #include "app/results/static_results.hpp"
@@ -116,7 +117,79 @@ Result<std::pair<Eigen::Isometry3d, std::optional<Eigen::Matrix<double, 6, 6>>>>
   return std::make_pair(T, cov);
 }
 
+/// A number of the file, or NaN for null.
+double number_or_nan(const YAML::Node& n) {
+  return n.IsNull() ? std::numeric_limits<double>::quiet_NaN() : n.as<double>();
+}
+
+/// The intrinsics' covariance a camera's `imucal:` map gives (CamchainCamera's doc): the file
+/// holds it in Kalibr's order of the model's n parameters, n x n.
+Status read_intrinsics_covariance(const YAML::Node& node, const std::string& where, CamchainCamera* cam) {
+  const YAML::Node q = node["imucal"];
+  if (!q || !q.IsMap()) return {};
+  const std::vector<int> order = kalibr_parameter_indices(cam->camera.kind());
+  const auto n = static_cast<int>(order.size());
+  std::string names;
+  for (const std::string& name : kalibr_parameter_names(cam->camera.kind()))
+    names += (names.empty() ? "" : ", ") + name;
+  const std::string bad = where + ": imucal.intrinsics_covariance must be " + std::to_string(n) + " rows of " +
+                          std::to_string(n) + " numbers (or null), in the order " + names;
+  try {
+    if (const YAML::Node c = q["intrinsics_covariance"]) {
+      if (!c.IsSequence() || static_cast<int>(c.size()) != n) return make_error(Errc::kCorrupt, bad);
+      Eigen::MatrixXd C = Eigen::MatrixXd::Zero(10, 10);
+      for (int r = 0; r < n; ++r) {
+        if (!c[r].IsSequence() || static_cast<int>(c[r].size()) != n) return make_error(Errc::kCorrupt, bad);
+        for (int k = 0; k < n; ++k) C(order[r], order[k]) = number_or_nan(c[r][k]);
+      }
+      for (int r = 0; r < 10; ++r)
+        if (C(r, r) < 0.0)
+          return make_error(Errc::kCorrupt, where + ": imucal.intrinsics_covariance has a negative variance");
+      cam->intrinsics_covariance = C;
+      cam->intrinsics_covariance_source = "the covariance of " + where;
+      return {};
+    }
+    // Sigmas alone are not propagated: the intrinsics' errors are strongly correlated (focal
+    // length with distortion, principal point with tilt), and taken as independent they overstate
+    // the extrinsics' sigmas many times over (a 13 mm translation sigma instead of 0.4 mm on the
+    // DAVIS recording of docs/benchmarks.md).
+    if (q["intrinsics_sigma"])
+      cam->intrinsics_covariance_source =
+          where +
+          " gives the intrinsics' sigmas but not their covariance (a file of an older imucal: run "
+          "calibrate camera again to have it propagated)";
+  } catch (const YAML::Exception&) {
+    return make_error(Errc::kCorrupt, bad);
+  }
+  return {};
+}
+
 }  // namespace
+
+std::pair<std::string, std::string> stamp_row_from_stream(const CameraStreamInfo& stream, bool given,
+                                                          const std::string& who, Shutter* shutter) {
+  const auto logged = stamp_row_of_timestamp_source(stream.timestamp_source);
+  if (!logged || *logged == shutter->stamp_row) return {};
+  const std::string row = stamp_row_name(*logged);
+  if (given) {
+    return {"", who + " says its stamps refer to the " + stamp_row_name(shutter->stamp_row) +
+                    " row, but the log's camera stream '" + stream.name + "' stamps its frames at " +
+                    stream.timestamp_source + " (the " + row +
+                    " row): the camera's is used; a rolling shutter's time offset and line delay depend on "
+                    "which is right (--stamp-row)"};
+  }
+  shutter->stamp_row = *logged;
+  return {who + ": the log's camera stream '" + stream.name + "' stamps its frames at " +
+              stream.timestamp_source + ", so a rolling shutter's rows are timed from the " + row +
+              " row (--stamp-row to say otherwise)",
+          ""};
+}
+
+void set_intrinsics_covariance(const calib::CameraIntrinsicsResult& solved, CamchainCamera* camera) {
+  if (!solved.covariance_ok) return;
+  camera->intrinsics_covariance = solved.covariance;
+  camera->intrinsics_covariance_source = "the covariance of " + camera->source;
+}
 
 Result<std::vector<CamchainCamera>> read_camchain(const std::string& path) {
   auto root = load_yaml(path);
@@ -144,6 +217,8 @@ Result<std::vector<CamchainCamera>> read_camchain(const std::string& path) {
     } catch (const YAML::Exception&) {
       return make_error(Errc::kCorrupt, path + " " + name + ": rostopic and camera_stream must be text");
     }
+    if (Status st = read_intrinsics_covariance(node, path + " " + name, &cam); !st.ok()) return st.error();
+    cam.stamp_row_given = static_cast<bool>(node["stamp_row"]);
     if (i > 0 && node["T_cn_cnm1"]) {
       auto chain = read_chain_pose(node, path + " " + name);
       if (!chain.ok()) return chain.error();

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "app/calibration_check.hpp"
+#include "calib/camera_intrinsics.hpp"
 #include "calib/camimu_calibration.hpp"
 #include "core/camera_model.hpp"
 #include "core/frame.hpp"
@@ -35,10 +36,30 @@ struct CamchainCamera {
   /// (`imucal: T_cn_cnm1_covariance:`, rotation about camN's axes then translation).
   std::optional<Eigen::Isometry3d> T_cn_cnm1;
   std::optional<Eigen::Matrix<double, 6, 6>> T_cn_cnm1_covariance;
+  /// The intrinsics' covariance in the solves' 10 x 10 layout [fu fv pu pv, projection (2),
+  /// distortion (4)] (the file's `imucal: intrinsics_covariance:` is in Kalibr's order of the
+  /// model's parameters, NaN where it says null) and what it came from; empty when
+  /// the file has none (a Kalibr camchain; sigmas alone are not used, the source then says why).
+  Eigen::MatrixXd intrinsics_covariance;
+  std::string intrinsics_covariance_source;
+  /// The file (or --stamp-row) names the row the frames' stamps refer to (`stamp_row`); else it
+  /// is taken from the log's camera stream (stamp_row_from_stream).
+  bool stamp_row_given = false;
   /// Set by read_camchain_files: the camera before it in the list is the one before it in the
   /// same file, so T_cn_cnm1 relates the two.
   bool follows_in_file = false;
 };
+
+/// What the log's camera stream says its stamps refer to (CameraStreamInfo::timestamp_source,
+/// core/camera_model.hpp stamp_row_of_timestamp_source), set into *shutter unless `given` (the
+/// camera file or --stamp-row named the row): then a warning when the two differ. `who` names
+/// the camera in the texts. Returns {note, warning}, either empty when there is nothing to say.
+std::pair<std::string, std::string> stamp_row_from_stream(const CameraStreamInfo& stream, bool given,
+                                                          const std::string& who, Shutter* shutter);
+
+/// A camera solved in this process (a session's camera step): its intrinsics' covariance as
+/// read_camchain reads it from the file that step writes (none when it was not determined).
+void set_intrinsics_covariance(const calib::CameraIntrinsicsResult& solved, CamchainCamera* camera);
 
 /// The cameras of a camchain YAML in the order cam0, cam1, ... Errors: kNotFound (unreadable
 /// file), kCorrupt (not YAML, no cam0, a malformed camera).

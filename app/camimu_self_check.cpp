@@ -98,6 +98,9 @@ SplitCheck camimu_self_check(const std::vector<calib::CamImuSample>& imu,
                        : global && !rolling ? calib::ShutterSolveOptions::Mode::kGlobal
                                             : opt.shutter.mode;
   opt.covariance = true;
+  // The parts share the held intrinsics, so their error does not separate them: compared
+  // without it (the full result's sigmas carry it).
+  opt.propagate_intrinsics = false;
   const int workers = threads_or_cores(threads);
   opt.threads = std::max(1, workers / check.parts);
 

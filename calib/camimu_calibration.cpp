@@ -450,7 +450,8 @@ const MarginalCovariance* Estimator<N>::solution_covariance() {
   }
   const auto start = std::chrono::steady_clock::now();
   auto cov = std::make_unique<MarginalCovariance>();
-  const bool ok = cov->compute(*problem_, blocks, threads_or_cores(opt_.threads), clusters);
+  const bool ok =
+      cov->compute(*problem_, blocks, threads_or_cores(opt_.threads), clusters, held_intrinsics());
   covariance_compute_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (!ok) {
     covariance_failed_ = true;

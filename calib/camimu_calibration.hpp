@@ -39,6 +39,14 @@ struct CamImuCameraInput {
   std::string stream;
   CameraModel camera;
   std::vector<TargetObservation> observations;
+  /// The covariance of the held intrinsics in the solves' layout [fu fv pu pv, projection (2),
+  /// distortion (4)] (10 x 10, from the camera's own calibration, 0 in the rows the model does not
+  /// use; NaN rows where it did not determine one), propagated into the
+  /// result's sigmas (CamImuOptions::propagate_intrinsics); empty: not known, left out. The
+  /// source names it in the result (CamImuCameraResult::intrinsics_uncertainty), or says why
+  /// there is none.
+  Eigen::MatrixXd intrinsics_covariance;
+  std::string intrinsics_covariance_source;
 };
 
 /// IMU noise in Kalibr's continuous-time units (imu.yaml; `imucal allan` measures them).
@@ -133,6 +141,10 @@ struct CamImuOptions {
   /// cluster-robust covariance, s; 0: the plain covariance only. Every sigma is the larger of
   /// the plain and the cluster-robust one (docs/camimu-calibration.md, "Uncertainty").
   double covariance_cluster_s = 1.0;
+  /// Add the held intrinsics' covariance (CamImuCameraInput::intrinsics_covariance) to the
+  /// sigmas, linearised at the solution: the spread their own error causes in the result
+  /// (docs/camimu-calibration.md, "Uncertainty").
+  bool propagate_intrinsics = true;
 
   [[nodiscard]] Status validate() const;
 };

@@ -176,6 +176,11 @@ class Estimator {
   /// true when it moved by more than 10 % for any camera.
   bool reestimate_corner_sigma();
   void covariance(CamImuCalibrationResult* out);
+  /// The scores (J^T dr) of every camera's held intrinsics moved along the columns of a square
+  /// root of their covariance (CamImuCameraInput::intrinsics_covariance), for
+  /// MarginalCovariance's held inputs; empty when no camera has one or opt_.propagate_intrinsics
+  /// is off.
+  std::vector<MarginalCovariance::HeldScore> held_intrinsics() const;
   void fill_result(CamImuCalibrationResult* out);
   /// Measured and predicted IMU signals of the problem as it stands.
   ImuSignalFit signal_fit(const std::string& model) const;
@@ -212,6 +217,13 @@ class Estimator {
   bool covariance_failed_ = false;
   double covariance_compute_s_ = 0.0;  // wall time of the last computation of covariance_
 };
+
+/// Columns l_j with sum_j l_j l_j^T = the 10 x 10 covariance of a camera's [fu fv pu pv,
+/// projection (2), distortion (4)] (its eigenvectors times the square roots of the positive
+/// eigenvalues); coordinates whose
+/// variance is NaN (not determined by the camera's solve) are left out. Empty for an empty or
+/// malformed matrix.
+std::vector<Eigen::VectorXd> intrinsics_directions(const Eigen::MatrixXd& covariance);
 
 /// Excitation per body axis and the observability warnings it implies.
 void excitation(const std::vector<CamImuSample>& imu, const Eigen::Vector3d& b_g, CamImuQuality* q,

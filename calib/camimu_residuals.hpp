@@ -396,6 +396,15 @@ class FrameResidual final : public ceres::CostFunction {
   }
   /// The same without the robust loss, in pixels.
   void pixel_residuals(double const* const* p, std::vector<Eigen::Vector2d>* out) const;
+  /// The Gauss-Newton change of the gradient, J^T dr, when the camera's intrinsics move along
+  /// each of `moves` (the camera moved by +-h along the direction, the corners' change taken as
+  /// (plus(p_cam) - minus(p_cam)) * scale, scale = 1 / (2 h)): per move, one tangent-space vector
+  /// per parameter block (quaternion blocks: 3). J and dr are the corners' own (uncompressed)
+  /// ones, so the result does not depend on the compressed rows' basis. For MarginalCovariance's
+  /// held inputs.
+  std::vector<std::vector<Eigen::VectorXd>> intrinsics_scores(
+      double const* const* p, const std::vector<std::pair<CameraModel, CameraModel>>& moves,
+      double scale) const;
   std::size_t corners() const { return points_.size(); }
 
  private:
@@ -453,6 +462,50 @@ void FrameResidual<N>::pixel_residuals(double const* const* p, std::vector<Eigen
     if (rolling_) ps = corner_pose(p, k, false);
     out->push_back(project(Rci * (ps.e.R.transpose() * (points_[k] - ps.pos)) + tci, nullptr) - px_[k]);
   }
+}
+
+template <int N>
+std::vector<std::vector<Eigen::VectorXd>> FrameResidual<N>::intrinsics_scores(
+    double const* const* p, const std::vector<std::pair<CameraModel, CameraModel>>& moves,
+    double scale) const {
+  // The corners' Jacobian (the uncompressed form of this frame) and each move's corner changes.
+  const FrameResidual corners(camera_, points_, px_, t_cam_s_, first_, timing_, 1.0 / w_, std::sqrt(c2_) / w_,
+                              /*compressed=*/false, rolling_);
+  const int m = corners.num_residuals();
+  const auto& sizes = corners.parameter_block_sizes();
+  std::vector<std::vector<double>> jac(sizes.size());
+  std::vector<double*> jptr;
+  for (std::size_t b = 0; b < sizes.size(); ++b) {
+    jac[b].assign(static_cast<std::size_t>(m * sizes[b]), 0.0);
+    jptr.push_back(jac[b].data());
+  }
+  Eigen::VectorXd r(m);
+  corners.Evaluate(p, r.data(), jptr.data());
+  std::vector<std::vector<Eigen::VectorXd>> out;
+  for (const auto& [plus, minus] : moves) {
+    Eigen::VectorXd dr(m);
+    Pose ps = pose(p, false);
+    const Eigen::Matrix3d Rci = quat_matrix(p[kRci]);
+    const Eigen::Map<const Eigen::Vector3d> tci(p[kTci]);
+    for (std::size_t k = 0; k < points_.size(); ++k) {
+      if (rolling_) ps = corner_pose(p, k, false);
+      const Eigen::Vector3d pc = Rci * (ps.e.R.transpose() * (points_[k] - ps.pos)) + tci;
+      Eigen::Vector2d rk;
+      Eigen::Matrix2d L;
+      fold(w_ * (project(pc, nullptr) - px_[k]), &rk, &L);
+      dr.segment<2>(2 * static_cast<Eigen::Index>(k)) =
+          L * (w_ * scale * (plus.project(pc).px - minus.project(pc).px));
+    }
+    std::vector<Eigen::VectorXd> scores;
+    for (std::size_t b = 0; b < sizes.size(); ++b) {
+      const int cols = sizes[b] == 4 ? 3 : sizes[b];  // quaternions: the tangent columns first
+      const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> J(
+          jac[b].data(), m, sizes[b]);
+      scores.push_back(J.leftCols(cols).transpose() * dr);
+    }
+    out.push_back(std::move(scores));
+  }
+  return out;
 }
 
 template <int N>

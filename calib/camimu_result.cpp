@@ -68,6 +68,91 @@ std::string Estimator<N>::describe(const MarginalCovariance::Direction& dir) con
 }
 
 template <int N>
+std::vector<MarginalCovariance::HeldScore> Estimator<N>::held_intrinsics() const {
+  std::vector<MarginalCovariance::HeldScore> out;
+  if (!opt_.propagate_intrinsics) return out;
+  for (std::size_t c = 0; c < cameras_.size(); ++c) {
+    const CameraModel& camera = cameras_[c].camera;
+    // +-1 sigma along each direction: the projection is linear over it to far below the noise.
+    std::vector<std::pair<CameraModel, CameraModel>> moves;
+    for (const Eigen::VectorXd& l : intrinsics_directions(cameras_[c].intrinsics_covariance)) {
+      CameraModel plus = camera, minus = camera;
+      plus.intrinsics += l.head<4>();
+      minus.intrinsics -= l.head<4>();
+      plus.projection_params += l.segment<2>(4);
+      minus.projection_params -= l.segment<2>(4);
+      plus.distortion_coeffs += l.tail<4>();
+      minus.distortion_coeffs -= l.tail<4>();
+      moves.emplace_back(plus, minus);
+    }
+    if (moves.empty()) continue;
+    std::vector<MarginalCovariance::HeldScore> scores(moves.size());
+    for (std::size_t k = 0; k < frames_.size(); ++k) {
+      if (frame_camera_[k] != c) continue;
+      const auto per_move = frames_[k]->intrinsics_scores(frame_blocks_[k].data(), moves, 0.5);
+      for (std::size_t j = 0; j < moves.size(); ++j)
+        for (std::size_t b = 0; b < per_move[j].size(); ++b)
+          scores[j].emplace_back(frame_blocks_[k][b], per_move[j][b]);
+    }
+    for (auto& s : scores) out.push_back(std::move(s));
+  }
+  return out;
+}
+
+std::vector<Eigen::VectorXd> intrinsics_directions(const Eigen::MatrixXd& covariance) {
+  std::vector<Eigen::VectorXd> out;
+  if (covariance.rows() != 10 || covariance.cols() != 10) return out;
+  // Coordinates the camera's own solve did not determine (NaN) are left out.
+  Eigen::MatrixXd C = covariance;
+  for (int i = 0; i < 10; ++i)
+    if (!std::isfinite(C(i, i))) {
+      C.row(i).setZero();
+      C.col(i).setZero();
+    }
+  if (!C.allFinite()) return out;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (C + C.transpose()));
+  // The rows the model does not use are 0: their eigenvalues, 0 to rounding, are no direction.
+  const double floor = 1e-12 * es.eigenvalues().cwiseAbs().maxCoeff();
+  for (int j = 0; j < 10; ++j)
+    if (es.eigenvalues()(j) > floor) out.push_back(es.eigenvectors().col(j) * std::sqrt(es.eigenvalues()(j)));
+  return out;
+}
+
+namespace {
+
+std::string intrinsics_uncertainty(const CamImuCameraInput& in, bool propagate) {
+  if (!propagate) return "not propagated (held as given)";
+  if (intrinsics_directions(in.intrinsics_covariance).empty())
+    return "not known: " +
+           (in.intrinsics_covariance_source.empty()
+                ? std::string("the camera file gives no covariance of them")
+                : in.intrinsics_covariance_source) +
+           "; the sigmas here leave the intrinsics' own error out";
+  return "propagated: " + (in.intrinsics_covariance_source.empty() ? std::string("the camera's covariance")
+                                                                   : in.intrinsics_covariance_source);
+}
+
+/// The directions the covariance leaves undetermined, in words (out->undetermined), and the
+/// warnings they and a regularised nuisance deserve.
+void note_undetermined(const MarginalCovariance& cov,
+                       const std::function<std::string(const MarginalCovariance::Direction&)>& describe,
+                       CamImuCalibrationResult* out, std::vector<std::string>* warnings) {
+  if (cov.nuisance_regularised())
+    warnings->push_back(
+        "parts of the trajectory or the bias splines are not determined by the data (no frame or IMU "
+        "sample constrains them); the sigmas are conditioned on a weak prior there");
+  for (const auto& dir : cov.undetermined()) out->undetermined.push_back(describe(dir));
+  if (!out->undetermined.empty()) {
+    std::string text = "the recording does not determine every parameter; not determined (sigma NaN): ";
+    for (std::size_t i = 0; i < out->undetermined.size(); ++i)
+      text += (i ? " | " : "") + out->undetermined[i];
+    warnings->push_back(text);
+  }
+}
+
+}  // namespace
+
+template <int N>
 void Estimator<N>::covariance(CamImuCalibrationResult* out) {
   // The computation is counted once, where it ran (often during the model choice).
   const auto start = std::chrono::steady_clock::now();
@@ -79,23 +164,19 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
     return;
   }
   const MarginalCovariance& cov = *computed;
-  if (cov.nuisance_regularised())
-    warnings_.push_back(
-        "parts of the trajectory or the bias splines are not determined by the data (no frame or IMU "
-        "sample constrains them); the sigmas are conditioned on a weak prior there");
-  for (const auto& dir : cov.undetermined()) out->undetermined.push_back(describe(dir));
-  if (!out->undetermined.empty()) {
-    std::string text = "the recording does not determine every parameter; not determined (sigma NaN): ";
-    for (std::size_t i = 0; i < out->undetermined.size(); ++i)
-      text += (i ? " | " : "") + out->undetermined[i];
-    warnings_.push_back(text);
-  }
+  note_undetermined(
+      cov, [this](const MarginalCovariance::Direction& d) { return describe(d); }, out, &warnings_);
   // Every sigma is the larger of the plain one and the cluster-robust one (where computed): the
   // robust estimate is itself noisy with few clusters, and the plain one holds where the
   // residuals are independent and correctly weighted (docs/camimu-calibration.md, "Uncertainty").
   using BlockFn = std::function<Eigen::MatrixXd(const double*, const double*)>;
-  const BlockFn plain = [&](const double* a, const double* b) { return cov.block(a, b); };
-  const BlockFn robust = [&](const double* a, const double* b) { return cov.robust_block(a, b); };
+  // Both carry the held intrinsics' share (zero where none was propagated).
+  const BlockFn plain = [&](const double* a, const double* b) {
+    return Eigen::MatrixXd(cov.block(a, b) + cov.held_block(a, b));
+  };
+  const BlockFn robust = [&](const double* a, const double* b) {
+    return Eigen::MatrixXd(cov.robust_block(a, b) + cov.held_block(a, b));
+  };
   const auto larger = [&](const std::function<Eigen::MatrixXd(const BlockFn&)>& of) -> Eigen::VectorXd {
     Eigen::VectorXd s = sigma_of(of(plain));
     if (!cov.has_robust()) return s;
@@ -152,7 +233,13 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
                              : Eigen::Matrix3d::Constant(kNotDetermined);
       });
       cr.translation_sigma_m = sigma3(cs.t_ci.data());
+      if (cov.has_held()) {
+        const Eigen::Matrix3d C = cov.held_block(cs.q_ci.data(), cs.q_ci.data());
+        cr.rotation_sigma_from_intrinsics_rad = sigma_of(R * C * R.transpose());
+        cr.translation_sigma_from_intrinsics_m = sigma_of(cov.held_block(cs.t_ci.data(), cs.t_ci.data()));
+      }
     }
+    cr.intrinsics_uncertainty = intrinsics_uncertainty(cameras_[c], opt_.propagate_intrinsics);
     if (cov.has(&cs.shift))
       cr.timeshift_sigma_s = larger([&](const BlockFn& f) { return f(&cs.shift, &cs.shift); })(0);
     if (cs.rolling && cov.has(&cs.line_delay))
@@ -354,12 +441,13 @@ void excitation(const std::vector<CamImuSample>& imu, const Eigen::Vector3d& b_g
 
 // The members above, for the spline orders calibrate_camimu() runs (the others are instantiated
 // where they are defined, by its use of Estimator<N>::run()).
-#define IMUCAL_CAMIMU_RESULT_MEMBERS(N)                                                    \
-  template std::string Estimator<N>::coordinate_name(const double*, int) const;            \
-  template std::string Estimator<N>::describe(const MarginalCovariance::Direction&) const; \
-  template void Estimator<N>::covariance(CamImuCalibrationResult*);                        \
-  template void Estimator<N>::check_against_prior(CamImuCalibrationResult*);               \
-  template void Estimator<N>::fill_result(CamImuCalibrationResult*);                       \
+#define IMUCAL_CAMIMU_RESULT_MEMBERS(N)                                                      \
+  template std::string Estimator<N>::coordinate_name(const double*, int) const;              \
+  template std::string Estimator<N>::describe(const MarginalCovariance::Direction&) const;   \
+  template void Estimator<N>::covariance(CamImuCalibrationResult*);                          \
+  template std::vector<MarginalCovariance::HeldScore> Estimator<N>::held_intrinsics() const; \
+  template void Estimator<N>::check_against_prior(CamImuCalibrationResult*);                 \
+  template void Estimator<N>::fill_result(CamImuCalibrationResult*);                         \
   template ImuSignalFit Estimator<N>::signal_fit(const std::string&) const;
 IMUCAL_CAMIMU_RESULT_MEMBERS(4)
 IMUCAL_CAMIMU_RESULT_MEMBERS(5)

@@ -71,6 +71,40 @@ int order_clusters(ceres::Problem& problem, const std::vector<std::vector<ceres:
   return n;
 }
 
+/// The held inputs' scores (tangent vectors per block) in the columns of `order` (the rest
+/// first, the wanted blocks last), projected: u_j = g_j,wanted - X^T g_j,rest.
+Eigen::MatrixXd held_scores(ceres::Problem& problem, const std::vector<double*>& order,
+                            const std::vector<MarginalCovariance::HeldScore>& held, const Eigen::MatrixXd& X,
+                            int nl, int ng) {
+  std::map<const double*, int> column;
+  int n = 0;
+  for (double* b : order) {
+    column[b] = n;
+    n += problem.ParameterBlockTangentSize(b);
+  }
+  Eigen::MatrixXd G = Eigen::MatrixXd::Zero(n, static_cast<Eigen::Index>(held.size()));
+  for (std::size_t j = 0; j < held.size(); ++j)
+    for (const auto& [block, g] : held[j]) {
+      const auto it = column.find(block);
+      if (it == column.end()) continue;  // held constant, or not in the problem
+      G.col(static_cast<Eigen::Index>(j)).segment(it->second, g.size()) += g;
+    }
+  Eigen::MatrixXd U = G.bottomRows(ng);
+  if (nl > 0) U -= X.transpose() * G.topRows(nl);
+  return U;
+}
+
+/// Scores J^T D (any residual-space columns D) projected on the wanted parameters (the last ng
+/// columns of J) through the Schur complement: U = [-X^T, I] J^T D, X = H_ll^-1 H_lg.
+template <class Jacobian>
+Eigen::MatrixXd projected_scores(const Jacobian& J, const Eigen::SparseMatrix<double>& D,
+                                 const Eigen::MatrixXd& X, int nl, int ng) {
+  const Eigen::SparseMatrix<double, Eigen::RowMajor> G = Eigen::SparseMatrix<double>(J.transpose()) * D;
+  Eigen::MatrixXd U = Eigen::MatrixXd(G.bottomRows(ng));
+  if (nl > 0) U -= (Eigen::SparseMatrix<double>(G.topRows(nl)).transpose() * X).transpose();
+  return U;
+}
+
 /// The clusters' scores J_c^T r_c projected on the wanted parameters (the last ng columns of J)
 /// through the Schur complement: u_c = g_c - X^T l_c, X = H_ll^-1 H_lg (ng x clusters).
 template <class Jacobian>
@@ -82,21 +116,34 @@ Eigen::MatrixXd cluster_scores(const Jacobian& J, const std::vector<double>& res
     if (residuals[r] != 0.0) t.emplace_back(static_cast<int>(r), row_cluster[r], residuals[r]);
   Eigen::SparseMatrix<double> Rc(J.rows(), clusters);
   Rc.setFromTriplets(t.begin(), t.end());
-  const Eigen::SparseMatrix<double, Eigen::RowMajor> G = Eigen::SparseMatrix<double>(J.transpose()) * Rc;
-  Eigen::MatrixXd U = Eigen::MatrixXd(G.bottomRows(ng));
-  if (nl > 0) U -= (Eigen::SparseMatrix<double>(G.topRows(nl)).transpose() * X).transpose();
-  return U;
+  return projected_scores(J, Rc, X, nl, ng);
+}
+
+/// An undetermined direction (unit vector v over `coords`) as the coordinates it moves, largest
+/// first (those of at least 0.1 of the largest).
+MarginalCovariance::Direction direction_of(const Eigen::VectorXd& v,
+                                           const std::vector<MarginalCovariance::Coordinate>& coords) {
+  MarginalCovariance::Direction dir;
+  const double top = v.cwiseAbs().maxCoeff();
+  std::vector<int> idx;
+  for (int i = 0; i < static_cast<int>(v.size()); ++i)
+    if (std::abs(v(i)) >= 0.1 * top) idx.push_back(i);
+  std::sort(idx.begin(), idx.end(), [&](int a, int b) { return std::abs(v(a)) > std::abs(v(b)); });
+  for (int i : idx) dir.parts.push_back({coords[static_cast<std::size_t>(i)], v(i)});
+  return dir;
 }
 
 }  // namespace
 
 bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<const double*>& blocks,
                                  int threads,
-                                 const std::vector<std::vector<ceres::ResidualBlockId>>& clusters) {
+                                 const std::vector<std::vector<ceres::ResidualBlockId>>& clusters,
+                                 const std::vector<HeldScore>& held) {
   offset_.clear();
   undetermined_.clear();
   nuisance_regularised_ = false;
   robust_.resize(0, 0);
+  held_.resize(0, 0);
   clusters_ = 0;
   std::set<const double*> wanted;
   std::vector<double*> order;  // the rest first, the wanted blocks last
@@ -125,6 +172,7 @@ bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<cons
   eo.num_threads = threads;
   std::vector<int> row_cluster;
   if (!clusters.empty()) clusters_ = order_clusters(problem, clusters, &eo.residual_blocks, &row_cluster);
+  if (!held.empty() && eo.residual_blocks.empty()) problem.GetResidualBlocks(&eo.residual_blocks);
   ceres::CRSMatrix crs;
   std::vector<double> residuals;
   if (!problem.Evaluate(eo, nullptr, clusters.empty() ? nullptr : &residuals, nullptr, &crs)) return false;
@@ -146,6 +194,9 @@ bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<cons
   // The scores of the clusters projected on the wanted blocks, u_c = [-X^T, I] J_c^T r_c.
   Eigen::MatrixXd U;
   if (!clusters.empty()) U = cluster_scores(J, residuals, row_cluster, clusters_, X, nl, ng);
+  // The held inputs' scores projected the same way, u_j = [-X^T, I] J^T dr_j.
+  Eigen::MatrixXd Uh;
+  if (!held.empty()) Uh = held_scores(problem, order, held, X, nl, ng);
   S = 0.5 * (S + S.transpose());
   // Scale every coordinate to unit information, then split determined from undetermined.
   Eigen::VectorXd d(ng);
@@ -163,23 +214,17 @@ bool MarginalCovariance::compute(ceres::Problem& problem, const std::vector<cons
       continue;
     }
     null_weight += V.col(k).cwiseAbs2();
-    Direction dir;
-    const double top = V.col(k).cwiseAbs().maxCoeff();
-    std::vector<int> idx;
-    for (int i = 0; i < ng; ++i)
-      if (std::abs(V(i, k)) >= 0.1 * top) idx.push_back(i);
-    std::sort(idx.begin(), idx.end(), [&](int a, int b) { return std::abs(V(a, k)) > std::abs(V(b, k)); });
-    for (int i : idx) dir.parts.push_back({coords[static_cast<std::size_t>(i)], V(i, k)});
-    undetermined_.push_back(std::move(dir));
+    undetermined_.push_back(direction_of(V.col(k), coords));
   }
   cov_ = d.asDiagonal() * inv * d.asDiagonal();
   if (clusters_ > 1) {
     const double c = static_cast<double>(clusters_);
     robust_ = cov_ * (c / (c - 1.0) * U * U.transpose()) * cov_;
   }
+  if (Uh.size() > 0) held_ = cov_ * (Uh * Uh.transpose()) * cov_;
   for (int i = 0; i < ng; ++i) {
     if (null_weight(i) <= kNullComponent && std::isfinite(cov_(i, i))) continue;
-    for (Eigen::MatrixXd* m : {&cov_, &robust_}) {
+    for (Eigen::MatrixXd* m : {&cov_, &robust_, &held_}) {
       if (m->size() == 0) continue;
       m->row(i).setConstant(std::nan(""));
       m->col(i).setConstant(std::nan(""));
@@ -193,6 +238,13 @@ Eigen::MatrixXd MarginalCovariance::robust_block(const double* a, const double* 
   const auto& [ob, nb] = offset_.at(b);
   if (robust_.size() == 0) return Eigen::MatrixXd::Constant(na, nb, std::nan(""));
   return robust_.block(oa, ob, na, nb);
+}
+
+Eigen::MatrixXd MarginalCovariance::held_block(const double* a, const double* b) const {
+  const auto& [oa, na] = offset_.at(a);
+  const auto& [ob, nb] = offset_.at(b);
+  if (held_.size() == 0) return Eigen::MatrixXd::Zero(na, nb);
+  return held_.block(oa, ob, na, nb);
 }
 
 Eigen::MatrixXd MarginalCovariance::block(const double* a, const double* b) const {

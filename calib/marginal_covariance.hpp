@@ -53,8 +53,22 @@ class MarginalCovariance {
   /// is a cluster of its own). It equals the plain covariance in expectation when the residuals
   /// are independent and correctly weighted, and grows when residuals of a cluster share an
   /// error or the weights are too high (docs/camera-calibration.md, "Several cameras").
+  ///
+  /// With `held` (inputs held fixed in the problem whose own uncertainty should reach the result,
+  /// such as a camera's intrinsics), each entry is the change of the gradient's Gauss-Newton part,
+  /// J^T dr, when the held input moves by one column of a square root of its covariance (L with
+  /// L L^T = its covariance): tangent-space vectors per parameter block (a block may appear more
+  /// than once: its parts are summed; constant blocks are ignored). Its effect on the wanted
+  /// blocks, linearised at the solution, is
+  ///   Cov_h = S^-1 (sum_j u_j u_j^T) S^-1,  u_j = [-H_gl H_ll^-1, I] J^T dr_j,
+  /// the spread that the input's own error (independent of these data) causes in the wanted
+  /// blocks: solving again with the input moved by L's column j moves them by -S^-1 u_j.
+  /// held_block() returns it; block() and robust_block() leave it out, so callers add it where
+  /// the result's sigmas are formed.
+  using HeldScore = std::vector<std::pair<const double*, Eigen::VectorXd>>;
   bool compute(ceres::Problem& problem, const std::vector<const double*>& blocks, int threads,
-               const std::vector<std::vector<ceres::ResidualBlockId>>& clusters = {});
+               const std::vector<std::vector<ceres::ResidualBlockId>>& clusters = {},
+               const std::vector<HeldScore>& held = {});
 
   /// The covariance block of two blocks passed to compute(), tangent space; NaN where a
   /// coordinate is not determined.
@@ -63,6 +77,10 @@ class MarginalCovariance {
   /// The cluster-robust covariance block (compute() with clusters); NaN where not determined.
   Eigen::MatrixXd robust_block(const double* a, const double* b) const;
   bool has_robust() const { return robust_.size() > 0; }
+  /// The held inputs' share of the covariance (compute() with held; zero without); NaN where a
+  /// coordinate is not determined.
+  Eigen::MatrixXd held_block(const double* a, const double* b) const;
+  bool has_held() const { return held_.size() > 0; }
   int clusters() const { return clusters_; }
 
   /// The directions the data do not determine (empty when the wanted blocks are all determined).
@@ -74,6 +92,7 @@ class MarginalCovariance {
  private:
   Eigen::MatrixXd cov_;
   Eigen::MatrixXd robust_;
+  Eigen::MatrixXd held_;
   int clusters_ = 0;
   std::map<const double*, std::pair<int, int>> offset_;  // offset, tangent size
   std::vector<Direction> undetermined_;

@@ -115,6 +115,13 @@ const char* shutter_kind_name(Shutter::Kind kind) {
 const char* readout_name(Shutter::Readout readout) {
   return readout == Shutter::Readout::kBottomToTop ? "bottom_to_top" : "top_to_bottom";
 }
+std::optional<Shutter::StampRow> stamp_row_of_timestamp_source(const std::string& timestamp_source) {
+  if (timestamp_source == "mid-exposure" || timestamp_source == "start-of-exposure")
+    return Shutter::StampRow::kFirst;
+  if (timestamp_source == "end-of-frame") return Shutter::StampRow::kLast;
+  return std::nullopt;
+}
+
 const char* stamp_row_name(Shutter::StampRow stamp_row) {
   switch (stamp_row) {
     case Shutter::StampRow::kFirst:

@@ -113,6 +113,13 @@ const char* shutter_kind_name(Shutter::Kind kind);        // "global", "rolling"
 const char* readout_name(Shutter::Readout readout);       // "top_to_bottom", "bottom_to_top"
 const char* stamp_row_name(Shutter::StampRow stamp_row);  // "first", "middle", "last"
 
+/// The row a camera stream's stamps refer to, from the session log's timestamp_source:
+/// "mid-exposure" (the backends move start-of-exposure stamps there: V4L2's
+/// V4L2_BUF_FLAG_TSTAMP_SRC_SOE, libcamera's SensorTimestamp) and "start-of-exposure" refer to
+/// the first row read out, "end-of-frame" (V4L2's TSTAMP_SRC_EOF, a UVC camera's default) to the
+/// last. Empty for a source that does not say ("dataset", "", unknown names).
+std::optional<Shutter::StampRow> stamp_row_of_timestamp_source(const std::string& timestamp_source);
+
 /// Kalibr's name: "radtan", "equidistant", "none" or "fov".
 const char* distortion_model_name(DistortionModel model);
 

@@ -61,6 +61,12 @@ struct CamImuCameraResult {
   /// delay's sigma (s per row; NaN: global, held, or not determined) and why this shutter.
   double line_delay_sigma_s = kNotDetermined;
   std::string shutter_choice;
+  /// How the held intrinsics' own uncertainty entered the sigmas above ("propagated: ...", or
+  /// "not known: ..." when the camera file gives none), and their share of the rotation and
+  /// translation sigmas (NaN: not propagated).
+  std::string intrinsics_uncertainty;
+  Eigen::Vector3d rotation_sigma_from_intrinsics_rad = Eigen::Vector3d::Constant(kNotDetermined);
+  Eigen::Vector3d translation_sigma_from_intrinsics_m = Eigen::Vector3d::Constant(kNotDetermined);
   int frames = 0;           // frames with the target that entered the problem
   int corners = 0;          // corner observations that entered the problem
   int outlier_corners = 0;  // down-weighted by the robust loss (residual above its scale)

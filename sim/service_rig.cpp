@@ -148,12 +148,10 @@ struct ResultFiles {
   YAML::Node chain;                          // cameras-chain.yaml (a rig with several cameras)
 };
 
-ResultFiles read_result_files(const json& result) {
+ResultFiles read_result_files(const session_msg::ResultSummary& result) {
   ResultFiles f;
-  if (!result.contains("files") || !result["files"].is_array()) return f;
-  for (const auto& entry : result["files"]) {
-    if (!entry.is_string()) continue;
-    const std::filesystem::path path(entry.get<std::string>());
+  for (const std::string& entry : result.files) {
+    const std::filesystem::path path(entry);
     const std::string file = path.filename().string();
     if (file == "imu-static.json") {
       f.static_result = read_json(path.string());
@@ -180,10 +178,11 @@ const char* kAxis[3] = {"x", "y", "z"};
 
 /// The IMU's rows: the static result (the message's canonical model, the sigmas of its file)
 /// beside the truth in the frame that result is expressed in.
-void imu_rows(const json& imu, const json& static_result, const CanonicalImuModel& truth, bool counts,
-              double accel_si_per_unit, double gyro_si_per_unit, std::vector<TruthRow>& rows) {
-  const Eigen::Matrix3d A_a = mat3(imu.at("A_a")), A_g = mat3(imu.at("A_g")), G = mat3(imu.at("G"));
-  const Eigen::Vector3d b_a = vec3(imu.at("b_a")), b_g = vec3(imu.at("b_g"));
+void imu_rows(const session_msg::ResultSummary::Imu& imu, const json& static_result,
+              const CanonicalImuModel& truth, bool counts, double accel_si_per_unit, double gyro_si_per_unit,
+              std::vector<TruthRow>& rows) {
+  const Eigen::Matrix3d &A_a = imu.A_a, &A_g = imu.A_g, &G = imu.G;
+  const Eigen::Vector3d &b_a = imu.b_a, &b_g = imu.b_g;
   const std::string scale_unit_a = counts ? "(m/s^2)/count" : "1",
                     scale_unit_g = counts ? "(rad/s)/count" : "1";
   constexpr double kDeg = 180.0 / std::numbers::pi;
@@ -271,10 +270,10 @@ void pair_rows(const YAML::Node& cam, const std::string& name, const VirtualCame
 
 /// The rows of one camera: intrinsics (camera-NAME.yaml), rotation, translation and time offset
 /// (the result message, the sigmas of camimu/result.json), beside the virtual camera's truth.
-void camera_rows(const json& c, const ResultFiles& files, const CameraModel& truth_camera,
-                 const Eigen::Isometry3d& T_true, double timeshift_true_s, std::vector<TruthRow>& rows,
-                 std::ostringstream& notes) {
-  const std::string name = c.value("name", "cam");
+void camera_rows(const session_msg::ResultSummary::Camera& c, const ResultFiles& files,
+                 const CameraModel& truth_camera, const Eigen::Isometry3d& T_true, double timeshift_true_s,
+                 std::vector<TruthRow>& rows, std::ostringstream& notes) {
+  const std::string name = c.name.empty() ? "cam" : c.name;
   json sig;
   if (files.camimu_result.is_object() && files.camimu_result.contains("cameras"))
     for (const auto& rc : files.camimu_result["cameras"])
@@ -312,9 +311,8 @@ void camera_rows(const json& c, const ResultFiles& files, const CameraModel& tru
   } else {
     notes << "  " << name << ": no intrinsics file in the result\n";
   }
-  const auto& qj = c.at("q_cam_imu_wxyz");
-  const Eigen::Quaterniond q(qj[0].get<double>(), qj[1].get<double>(), qj[2].get<double>(),
-                             qj[3].get<double>());
+  const Eigen::Quaterniond q(c.q_cam_imu_wxyz[0], c.q_cam_imu_wxyz[1], c.q_cam_imu_wxyz[2],
+                             c.q_cam_imu_wxyz[3]);
   const Eigen::Quaterniond q_true(T_true.rotation());
   // The error as a rotation about the camera's axes, R_est = Exp(e) R_true, the axes of the
   // rotation sigmas (calib/camimu_calibration.cpp).
@@ -328,21 +326,20 @@ void camera_rows(const json& c, const ResultFiles& files, const CameraModel& tru
     r.error_only = e(i) * kDeg;
     rows.push_back(r);
   }
-  const Eigen::Vector3d t = vec3(c.at("t_cam_imu_m"));
+  const Eigen::Vector3d& t = c.t_cam_imu_m;
   const Eigen::Vector3d t_sigma = sigma3(sig.is_object() ? sig.value("translation_sigma_m", json()) : json());
   for (int i = 0; i < 3; ++i)
     rows.push_back(compared(name + " translation " + kAxis[i], "mm", t(i) * 1e3,
                             T_true.translation()(i) * 1e3, t_sigma(i) * 1e3));
   const json shift_sigma = sig.is_object() ? sig.value("timeshift_sigma_s", json()) : json();
-  rows.push_back(compared(name + " time offset", "ms", c.value("timeshift_cam_imu_s", kNotDetermined) * 1e3,
-                          timeshift_true_s * 1e3,
+  rows.push_back(compared(name + " time offset", "ms", c.timeshift_cam_imu_s * 1e3, timeshift_true_s * 1e3,
                           shift_sigma.is_number() ? shift_sigma.get<double>() * 1e3 : kNotDetermined));
   notes.setf(std::ios::fixed);
   notes.precision(4);
   notes << "  " << name << " rotation R_cam_imu: estimated q_wxyz (" << q.w() << ", " << q.x() << ", "
         << q.y() << ", " << q.z() << "), true (" << q_true.w() << ", " << q_true.x() << ", " << q_true.y()
         << ", " << q_true.z() << "), " << q.angularDistance(q_true) * kDeg << " deg apart; reprojection RMS "
-        << c.value("reprojection_rms_px", 0.0) << " px\n";
+        << c.reprojection_rms_px << " px\n";
   notes.unsetf(std::ios::fixed);
 }
 
@@ -414,8 +411,9 @@ class VirtualServiceRig final : public ServiceRig {
     unplug_imu_at_ns_ = rig_->now_ns() + static_cast<TimeNs>(after_s * 1e9);
   }
 
-  void on_message(const json& message) override {
-    if (message.value("type", "") == "prompt") mark_bias_window(message.value("step", ""));
+  void on_message(const session_msg::SessionMessage& message) override {
+    if (const auto* prompt = std::get_if<session_msg::Prompt>(&message); prompt && prompt->step)
+      mark_bias_window(*prompt->step);
     if (operator_) operator_->on_message(message, rig_->now_ns());
   }
 
@@ -436,8 +434,8 @@ class VirtualServiceRig final : public ServiceRig {
     return std::unique_ptr<drivers::camera::Camera>(std::move(*camera));
   }
 
-  std::string truth_report(const json& result) const override {
-    if (!result.contains("imu")) return {};
+  std::string truth_report(const session_msg::ResultSummary& result) const override {
+    if (!result.imu) return {};
     const ResultFiles files = read_result_files(result);
     const bool counts = rig_->stream_info().units == ImuUnits::kRaw;
     const ImuModelParams& p = rig_->params();
@@ -447,18 +445,17 @@ class VirtualServiceRig final : public ServiceRig {
     // A result corrected to a thermal model's reference temperature: the truth is the bias there,
     // the simulator's temperature parts over the window replaced by its part at T_ref.
     std::optional<double> reference_c;
-    if (result.contains("thermal") && result["thermal"].value("determined", false))
-      reference_c = result["thermal"].value("reference_c", 0.0);
+    if (result.thermal && result.thermal->determined) reference_c = result.thermal->reference_c;
     const std::string window = realised_biases(at_session.accel_bias, at_session.gyro_bias, reference_c);
     const double accel_si = counts ? p.accel_mps2_per_count() : 1.0,
                  gyro_si = counts ? p.gyro_radps_per_count() : 1.0;
     std::vector<TruthRow> rows;
     std::ostringstream notes;
-    imu_rows(result["imu"], files.static_result, canonical_in_tedaldi_frame(at_session, counts), counts,
+    imu_rows(*result.imu, files.static_result, canonical_in_tedaldi_frame(at_session, counts), counts,
              accel_si, gyro_si, rows);
-    if (result.contains("cameras")) {
-      for (const auto& c : result["cameras"]) {
-        const std::string name = c.value("name", "");
+    if (result.cameras) {
+      for (const auto& c : *result.cameras) {
+        const std::string& name = c.name;
         auto cc = std::find_if(options_.cameras.begin(), options_.cameras.end(),
                                [&](const CameraConfig& k) { return k.name == name; });
         if (cc == options_.cameras.end()) {
@@ -509,11 +506,11 @@ class VirtualServiceRig final : public ServiceRig {
 
   /// The window of the biases' truth: from the (last) start of the still step to the first step
   /// after the poses.
-  void mark_bias_window(const std::string& step) {
+  void mark_bias_window(session_msg::StepId step) {
     if (bias_end_) return;
-    if (step == "still") {
+    if (step == session_msg::StepId::kStill) {
       bias_begin_ = rig_->sensor_stats();
-    } else if (bias_begin_ && step != "poses") {
+    } else if (bias_begin_ && step != session_msg::StepId::kPoses) {
       bias_end_ = rig_->sensor_stats();
     }
   }

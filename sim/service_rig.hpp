@@ -12,7 +12,6 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
-#include <nlohmann/json.hpp>
 #include <optional>
 #include <span>
 #include <string>
@@ -23,6 +22,7 @@
 #include "core/module.hpp"
 #include "core/result.hpp"
 #include "core/rig_config.hpp"
+#include "core/session_messages.hpp"
 #include "core/time.hpp"
 #include "drivers/camera/camera.hpp"
 #include "drivers/mpu6000/mpu6000.hpp"
@@ -51,7 +51,7 @@ struct ServiceRigOptions {
   /// The scripted operator: "" (nobody moves the rig), "motion" (moves it as the prompts ask),
   /// "full" (also presses the keys, through press_key).
   std::string operator_mode;
-  std::function<void(const std::string& key)> press_key;
+  std::function<void(session_msg::OperatorKey key)> press_key;
 };
 
 /// What a tick of the virtual rig did and when the next one is due.
@@ -81,7 +81,7 @@ class ServiceRig {
   /// The IMU stops answering `after_s` seconds of rig time from now (a yanked cable).
   virtual void unplug_imu_after(double after_s) = 0;
   /// The session's messages, for the scripted operator.
-  virtual void on_message(const nlohmann::json& message) = 0;
+  virtual void on_message(const session_msg::SessionMessage& message) = 0;
   /// Whether the scripted operator presses keys.
   virtual bool operator_presses_keys() const = 0;
   /// Whether the cameras can render (the target is there and the renderer loaded).
@@ -92,7 +92,7 @@ class ServiceRig {
       std::size_t index, std::uint32_t disconnect_after) = 0;
   /// A session's "result" message beside the virtual rig's truth, as text; empty when the message
   /// holds no IMU result.
-  virtual std::string truth_report(const nlohmann::json& result) const = 0;
+  virtual std::string truth_report(const session_msg::ResultSummary& result) const = 0;
 };
 
 /// The virtual rig (sim/service_rig.cpp): the module's entry; tests link imucal_sim_service.

@@ -118,12 +118,12 @@ RigState OperatorTrajectory::at(TimeNs t_ns) const {
 }
 
 ScriptedOperator::ScriptedOperator(OperatorTrajectory& trajectory, const ScriptedOperatorOptions& options,
-                                   std::function<void(const std::string& key)> press)
+                                   std::function<void(Key key)> press)
     : trajectory_(trajectory), options_(options), press_(std::move(press)), rng_(options.seed) {
   ups_ = spread_directions(26, rng_);
 }
 
-void ScriptedOperator::press_at(const std::string& key, TimeNs t_ns) {
+void ScriptedOperator::press_at(Key key, TimeNs t_ns) {
   if (!options_.press_keys) return;
   keys_.emplace_back(t_ns, key);
   std::stable_sort(keys_.begin(), keys_.end(),
@@ -132,7 +132,7 @@ void ScriptedOperator::press_at(const std::string& key, TimeNs t_ns) {
 
 void ScriptedOperator::on_time(TimeNs now_ns) {
   while (!keys_.empty() && keys_.front().first <= now_ns) {
-    const std::string key = keys_.front().second;
+    const Key key = keys_.front().second;
     keys_.erase(keys_.begin());
     press_(key);
   }
@@ -168,48 +168,51 @@ void ScriptedOperator::wave(TimeNs now_ns) {
   ++turns_;
 }
 
-void ScriptedOperator::on_message(const nlohmann::json& m, TimeNs now_ns) {
-  const std::string type = m.value("type", ""), step = m.value("step", ""), text = m.value("text", "");
+void ScriptedOperator::on_message(const session_msg::SessionMessage& m, TimeNs now_ns) {
+  namespace msg = session_msg;
   const TimeNs react = now_ns + static_cast<TimeNs>(options_.reaction_s * 1e9);
-  auto has_key = [&](const char* key) {
-    const auto keys = m.value("keys", nlohmann::json::array());
-    return std::find(keys.begin(), keys.end(), key) != keys.end();
-  };
-  if (type == "fault") {
-    if (options_.abort_on_fault) press_at("abort", react);
+  if (std::holds_alternative<msg::Fault>(m)) {
+    if (options_.abort_on_fault) press_at(Key::kAbort, react);
     return;
   }
-  if (type == "prompt") {
-    if (step == "preflight" && has_key("continue")) press_at("continue", react);
-    // The poses step prompts again after each capture (naming the next side); the operator turns
-    // on its own after each capture, so only the step's start, or a redo after a fault, starts a turn.
-    const bool restart = last_prompt_step_ != step || last_prompt_failed_;
-    last_prompt_step_ = step;
-    last_prompt_failed_ = !has_key("continue") && !has_key("skip") && has_key("redo");
-    if (step == "poses" && !has_key("redo")) return;
-    if (step == "poses" && restart) turn_to_up(ups_[next_up_++ % ups_.size()], now_ns);
-    if (step == "motion") {
-      if (options_.wave) {
-        wave(now_ns);
-      } else {
-        press_at("skip", react);  // no target to wave at
-      }
-    }
-    if (step == "review" && has_key("accept")) press_at(options_.accept ? "accept" : "reject", react);
-    // The face asked for, as the prompt gives it (the axis that goes up).
-    if (const auto& up = m.value("up", nlohmann::json());
-        step == "gsens" && up.is_array() && up.size() == 3) {
-      face_up_ = Eigen::Vector3d(up[0].get<double>(), up[1].get<double>(), up[2].get<double>());
-      turn_to_up(face_up_, now_ns);
-    }
+  if (const auto* prompt = std::get_if<msg::Prompt>(&m)) {
+    on_prompt(*prompt, now_ns);
     return;
   }
-  if (type == "message") {
-    const bool captured = text.rfind("Pose ", 0) == 0 && text.find("captured") != std::string::npos;
-    const bool too_close = text.rfind("Too close", 0) == 0;
-    if (captured || too_close) turn_to_up(ups_[next_up_++ % ups_.size()], now_ns);
-    // "This is +Y up (...); ...": the wrong face is up, turn to the one asked for.
-    if (text.rfind("This is ", 0) == 0) turn_to_up(face_up_, now_ns);
+  // A pose was captured, or the hold was refused as too close to one: on to the next direction.
+  if (std::holds_alternative<msg::PoseCaptured>(m)) turn_to_up(ups_[next_up_++ % ups_.size()], now_ns);
+  if (const auto* message = std::get_if<msg::Message>(&m)) {
+    if (message->cause == msg::MessageCause::kPoseRefused) turn_to_up(ups_[next_up_++ % ups_.size()], now_ns);
+    // The wrong face is up: turn to the one asked for.
+    if (message->cause == msg::MessageCause::kWrongFace) turn_to_up(face_up_, now_ns);
+  }
+}
+
+void ScriptedOperator::on_prompt(const session_msg::Prompt& p, TimeNs now_ns) {
+  using session_msg::StepId;
+  const TimeNs react = now_ns + static_cast<TimeNs>(options_.reaction_s * 1e9);
+  if (p.step == StepId::kPreflight && p.offers(Key::kContinue)) press_at(Key::kContinue, react);
+  // The poses step prompts again after each capture (naming the next side); the operator turns
+  // on its own after each capture, so only the step's start, or a redo after a fault (a prompt
+  // that offers only redo and abort), starts a turn.
+  const bool restart = last_prompt_step_ != p.step || last_prompt_failed_;
+  last_prompt_step_ = p.step;
+  last_prompt_failed_ = !p.offers(Key::kContinue) && !p.offers(Key::kSkip) && p.offers(Key::kRedo);
+  if (p.step == StepId::kPoses && !p.offers(Key::kRedo)) return;
+  if (p.step == StepId::kPoses && restart) turn_to_up(ups_[next_up_++ % ups_.size()], now_ns);
+  if (p.step == StepId::kMotion) {
+    if (options_.wave) {
+      wave(now_ns);
+    } else {
+      press_at(Key::kSkip, react);  // no target to wave at
+    }
+  }
+  if (p.step == StepId::kReview && p.offers(Key::kAccept))
+    press_at(options_.accept ? Key::kAccept : Key::kReject, react);
+  // The face asked for, as the prompt gives it (the axis that goes up).
+  if (p.step == StepId::kGsens && p.up) {
+    face_up_ = *p.up;
+    turn_to_up(face_up_, now_ns);
   }
 }
 

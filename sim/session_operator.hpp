@@ -9,11 +9,11 @@
 #include <functional>
 #include <memory>
 #include <mutex>
-#include <nlohmann/json.hpp>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "core/session_messages.hpp"
 #include "core/time.hpp"
 #include "sim/trajectory.hpp"
 
@@ -82,32 +82,37 @@ struct ScriptedOperatorOptions {
   std::uint64_t seed = 1;
 };
 
-/// Reads the session's messages (app/session/session_engine.hpp, docs/service.md) and acts on
-/// the trajectory or presses keys. Call on_message() for each message and on_time() as sample
-/// time passes; keys go to `press` at their time.
+/// Reads the session's messages (core/session_messages.hpp) as the engine emits them and acts on
+/// the trajectory or presses keys: on what a prompt asks and the keys it offers, on a captured
+/// pose and on the engine's reasons for refusing a hold, never on the text meant for a person.
+/// Call on_message() for each message and on_time() as sample time passes; keys go to `press`
+/// at their time.
 class ScriptedOperator {
  public:
+  using Key = session_msg::OperatorKey;
   ScriptedOperator(OperatorTrajectory& trajectory, const ScriptedOperatorOptions& options,
-                   std::function<void(const std::string& key)> press);
-  void on_message(const nlohmann::json& message, TimeNs now_ns);
+                   std::function<void(Key key)> press);
+  void on_message(const session_msg::SessionMessage& message, TimeNs now_ns);
   void on_time(TimeNs now_ns);
   int turns() const { return turns_; }
 
  private:
   void turn_to_up(const Eigen::Vector3d& up_body, TimeNs now_ns);
   void wave(TimeNs now_ns);
-  void press_at(const std::string& key, TimeNs t_ns);
+  void press_at(Key key, TimeNs t_ns);
+  void on_prompt(const session_msg::Prompt& prompt, TimeNs now_ns);
 
   OperatorTrajectory& trajectory_;
   ScriptedOperatorOptions options_;
-  std::function<void(const std::string&)> press_;
+  std::function<void(Key)> press_;
   std::mt19937_64 rng_;
   std::vector<Eigen::Vector3d> ups_;  // pose directions, well spread over the sphere
   std::size_t next_up_ = 0;
-  std::vector<std::pair<TimeNs, std::string>> keys_;  // pending, in time order
+  std::vector<std::pair<TimeNs, Key>> keys_;  // pending, in time order
   int turns_ = 0;
   TimeNs busy_until_ns_ = 0;
-  std::string last_prompt_step_;     // the poses step's later prompts (the next side) are no new start
+  std::optional<session_msg::StepId> last_prompt_step_;  // the poses step's later prompts (the next
+                                                         // side) are no new start
   bool last_prompt_failed_ = false;  // ... unless the one before was a fault's (redo, abort)
   Eigen::Vector3d face_up_ = Eigen::Vector3d::UnitX();  // the six-face step's face asked for
 };

@@ -61,6 +61,15 @@ std::vector<double> intrinsics_sigmas(const calib::CameraIntrinsicsResult& r) {
 std::vector<double> distortion_sigmas(const calib::CameraIntrinsicsResult& r) {
   return kalibr_distortion(r.camera.distortion_model, r.distortion_sigma);
 }
+/// The covariance of the model's parameters in Kalibr's order (kalibr_parameter_indices).
+Eigen::MatrixXd kalibr_covariance(const calib::CameraIntrinsicsResult& r) {
+  const std::vector<int> order = kalibr_parameter_indices(r.camera.kind());
+  const auto n = static_cast<Eigen::Index>(order.size());
+  Eigen::MatrixXd out(n, n);
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (Eigen::Index j = 0; j < n; ++j) out(i, j) = r.covariance(order[i], order[j]);
+  return out;
+}
 
 /// The choice of `--model auto`: the chosen model, the reason and every candidate's figures.
 json model_choice_json(const std::optional<calib::CameraModelChoice>& c) {
@@ -184,6 +193,18 @@ YAML::Node number_or_null(double v) {
   return std::isfinite(v) ? YAML::Node(v) : YAML::Node(YAML::NodeType::Null);
 }
 
+/// A covariance matrix row by row (flow style), null where not determined.
+YAML::Node covariance_rows(const Eigen::MatrixXd& m) {
+  YAML::Node rows(YAML::NodeType::Sequence);
+  for (Eigen::Index i = 0; i < m.rows(); ++i) {
+    YAML::Node row(YAML::NodeType::Sequence);
+    for (Eigen::Index j = 0; j < m.cols(); ++j) row.push_back(number_or_null(m(i, j)));
+    row.SetStyle(YAML::EmitterStyle::Flow);
+    rows.push_back(row);
+  }
+  return rows;
+}
+
 /// One camera's camchain entry: Kalibr's keys and imucal's figures under `imucal`.
 YAML::Node camera_node(const CameraCalibrationReport& r) {
   const auto& res = r.intrinsics;
@@ -194,6 +215,10 @@ YAML::Node camera_node(const CameraCalibrationReport& r) {
   q["intrinsics_sigma"] = flow_sigmas(intrinsics_sigmas(res));
   q["distortion_coeffs_sigma"] = flow_sigmas(distortion_sigmas(res));
   if (r.model_choice) q["model_choice"] = r.model_choice->reason;
+  // The covariance of the model's parameters in Kalibr's order (intrinsics, then
+  // distortion_coeffs); calibrate camimu propagates it into its sigmas
+  // (docs/camimu-calibration.md, "Uncertainty").
+  if (res.covariance_ok) q["intrinsics_covariance"] = covariance_rows(kalibr_covariance(res));
   q["reprojection_rms_px"] = res.rms_px;
   q["residual_sigma_px"] = res.residual_sigma_px;
   q["focal_well_determined"] = res.focal_well_determined;
@@ -270,10 +295,11 @@ json camera_json(const CameraCalibrationReport& r) {
   }
   // The covariance of the model's parameters in Kalibr's order (covariance_order).
   json cov = json::array();
-  const std::vector<int> order = kalibr_parameter_indices(res.camera.kind());
-  for (int i : order) {
+  const Eigen::MatrixXd kalibr_cov = kalibr_covariance(res);
+  for (Eigen::Index i = 0; i < kalibr_cov.rows(); ++i) {
     json row = json::array();
-    for (int j : order) row.push_back(res.covariance_ok ? json(res.covariance(i, j)) : json(nullptr));
+    for (Eigen::Index j = 0; j < kalibr_cov.cols(); ++j)
+      row.push_back(res.covariance_ok ? finite_or_null(kalibr_cov(i, j)) : json(nullptr));
     cov.push_back(row);
   }
   json j = {
@@ -356,14 +382,7 @@ std::string camera_chain_yaml(const CameraChainReport& r, int min_shared_views) 
     if (c > 0) {
       q["T_cn_cnm1_rotation_sigma_rad"] = flow3(cc.T_cn_cnm1_rotation_sigma_rad);
       q["T_cn_cnm1_translation_sigma_m"] = flow3(cc.T_cn_cnm1_translation_sigma_m);
-      YAML::Node cov(YAML::NodeType::Sequence);
-      for (int i = 0; i < 6; ++i) {
-        YAML::Node row(YAML::NodeType::Sequence);
-        for (int j = 0; j < 6; ++j) row.push_back(number_or_null(cc.T_cn_cnm1_covariance(i, j)));
-        row.SetStyle(YAML::EmitterStyle::Flow);
-        cov.push_back(row);
-      }
-      q["T_cn_cnm1_covariance"] = cov;
+      q["T_cn_cnm1_covariance"] = covariance_rows(cc.T_cn_cnm1_covariance);
       q["baseline_m"] = cc.baseline_m;
       q["baseline_sigma_m"] = number_or_null(cc.baseline_sigma_m);
       q["T_cam_cam0"] = yaml_matrix_rows(cc.T_cam_cam0.matrix());

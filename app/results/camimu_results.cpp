@@ -200,6 +200,9 @@ json camera_json(const CamImuCameraResult& c, const CamImuCameraReport* in) {
             {"timeshift_sigma_s", num(c.timeshift_sigma_s)},
             {"line_delay_sigma_s", num(c.line_delay_sigma_s)},
             {"shutter_choice", c.shutter_choice},
+            {"intrinsics_uncertainty", c.intrinsics_uncertainty},
+            {"rotation_sigma_from_intrinsics_rad", vec_json(c.rotation_sigma_from_intrinsics_rad)},
+            {"translation_sigma_from_intrinsics_m", vec_json(c.translation_sigma_from_intrinsics_m)},
             {"frames", c.frames},
             {"corners", c.corners},
             {"outlier_corners", c.outlier_corners},
@@ -344,6 +347,12 @@ CamImuCameraResult read_camera(const json& j, const std::string& path) {
   if (j.contains("line_delay_sigma_s") && !j.at("line_delay_sigma_s").is_null())
     c.line_delay_sigma_s = j.at("line_delay_sigma_s").get<double>();
   c.shutter_choice = j.value("shutter_choice", std::string());
+  // Results written before the held intrinsics were propagated have none of these.
+  c.intrinsics_uncertainty = j.value("intrinsics_uncertainty", std::string());
+  if (j.contains("rotation_sigma_from_intrinsics_rad"))
+    c.rotation_sigma_from_intrinsics_rad = read_vec<3>(j.at("rotation_sigma_from_intrinsics_rad"));
+  if (j.contains("translation_sigma_from_intrinsics_m"))
+    c.translation_sigma_from_intrinsics_m = read_vec<3>(j.at("translation_sigma_from_intrinsics_m"));
   c.frames = j.at("frames").get<int>();
   c.corners = j.at("corners").get<int>();
   c.outlier_corners = j.at("outlier_corners").get<int>();
@@ -524,6 +533,7 @@ std::string camimu_camchain_yaml(const CamImuReport& r) {
     q["timeshift_sigma_s"] = c.timeshift_sigma_s;
     if (c.camera.shutter.rolling()) q["line_delay_sigma_s"] = yaml_sigma(c.line_delay_sigma_s);
     if (!c.shutter_choice.empty()) q["shutter_choice"] = c.shutter_choice;
+    if (!c.intrinsics_uncertainty.empty()) q["intrinsics_uncertainty"] = c.intrinsics_uncertainty;
     q["reprojection_rms_px"] = c.reprojection_rms_px;
     q["corner_sigma_px"] = c.corner_sigma_px;
     q["frames"] = c.frames;

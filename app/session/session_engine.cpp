@@ -14,82 +14,9 @@
 namespace imucal::app::session {
 
 using nlohmann::json;
-
-namespace {
-
-constexpr StepId kAllSteps[] = {StepId::kPreflight, StepId::kWarmup, StepId::kThermal, StepId::kStill,
-                                StepId::kPoses,     StepId::kGsens,  StepId::kMotion,  StepId::kSolve,
-                                StepId::kReview,    StepId::kWrite};
-
-}  // namespace
-
-const char* step_name(StepId step) {
-  switch (step) {
-    case StepId::kPreflight:
-      return "preflight";
-    case StepId::kWarmup:
-      return "warmup";
-    case StepId::kThermal:
-      return "thermal";
-    case StepId::kStill:
-      return "still";
-    case StepId::kPoses:
-      return "poses";
-    case StepId::kGsens:
-      return "gsens";
-    case StepId::kMotion:
-      return "motion";
-    case StepId::kSolve:
-      return "solve";
-    case StepId::kReview:
-      return "review";
-    case StepId::kWrite:
-      return "write";
-  }
-  return "?";
-}
-
-const char* step_state_name(StepState state) {
-  switch (state) {
-    case StepState::kPending:
-      return "pending";
-    case StepState::kActive:
-      return "active";
-    case StepState::kDone:
-      return "done";
-    case StepState::kSkipped:
-      return "skipped";
-    case StepState::kFailed:
-      return "failed";
-  }
-  return "?";
-}
-
-const char* session_state_name(SessionState state) {
-  switch (state) {
-    case SessionState::kIdle:
-      return "idle";
-    case SessionState::kRunning:
-      return "running";
-    case SessionState::kReview:
-      return "review";
-    case SessionState::kDone:
-      return "done";
-    case SessionState::kAborted:
-      return "aborted";
-    case SessionState::kFailed:
-      return "failed";
-  }
-  return "?";
-}
-
-Result<StepId> parse_step(const std::string& name) {
-  for (StepId id : kAllSteps)
-    if (name == step_name(id)) return id;
-  std::string all;
-  for (StepId id : kAllSteps) all += std::string(all.empty() ? "" : ", ") + step_name(id);
-  return make_error(Errc::kInvalidArgument, "'" + name + "' is not a session step (" + all + ")");
-}
+using session_msg::MessageLevel;
+using session_msg::Outcome;
+using K = session_msg::OperatorKey;
 
 std::vector<StepId> configured_steps(const RigConfig& config) {
   std::vector<StepId> out;
@@ -98,35 +25,12 @@ std::vector<StepId> configured_steps(const RigConfig& config) {
       if (auto id = parse_step(name); id.ok()) out.push_back(*id);
     return out;
   }
-  for (StepId id : kAllSteps) {
+  for (StepId id : session_msg::all_steps()) {
     if (id == StepId::kGsens || id == StepId::kThermal) continue;
     if (id == StepId::kMotion && config.cameras.empty()) continue;
     out.push_back(id);
   }
   return out;
-}
-
-bool PreflightReport::ok() const {
-  return std::all_of(devices.begin(), devices.end(), [](const Device& d) { return d.ok; });
-}
-
-json PreflightReport::to_json() const {
-  json devs = json::array();
-  for (const auto& d : devices) {
-    devs.push_back({{"name", d.name}, {"ok", d.ok}, {"detail", d.detail}});
-    if (!d.advice.empty()) devs.back()["advice"] = d.advice;
-  }
-  return {{"rig", rig}, {"devices", devs}, {"stored", stored ? *stored : json()}};
-}
-
-PreflightReport PreflightReport::from_json(const json& j) {
-  PreflightReport r;
-  r.rig = j.value("rig", "");
-  for (const auto& d : j.value("devices", json::array()))
-    r.devices.push_back(
-        {d.value("name", ""), d.value("ok", false), d.value("detail", ""), d.value("advice", "")});
-  if (j.contains("stored") && !j["stored"].is_null()) r.stored = j["stored"];
-  return r;
 }
 
 SessionEngine::SessionEngine(const RigConfig& config, const ImuStreamInfo& info, EngineHost& host)
@@ -184,7 +88,7 @@ Status SessionEngine::start(const std::vector<std::string>& names) {
   for (StepId id : *ids) steps_.push_back({id});
   state_ = SessionState::kRunning;
   session_start_ns_ = now_ns_;
-  emit({{"type", "session"}, {"event", "start"}, {"steps", names}});
+  emit(session_msg::SessionStart{std::nullopt, names});
   enter(0);
   return {};
 }
@@ -195,7 +99,8 @@ void SessionEngine::reset() {
   waiting_ = failed_step_ = false;
   step_start_ns_ = session_start_ns_ = -1;
   last_live_ns_ = 0;
-  last_prompt_ = last_live_ = json();
+  last_prompt_.reset();
+  last_live_.reset();
   last_messages_.clear();
   window_ = std::make_unique<Window>(info_.rate_hz);
   samples_ = std::make_shared<std::vector<ImuSample>>();
@@ -221,59 +126,60 @@ void SessionEngine::reset() {
   gates_pass_ = false;
 }
 
-void SessionEngine::emit(json message) {
-  if (!message.contains("t")) message["t"] = static_cast<double>(now_ns_) * 1e-9;
-  if (message["type"] == "prompt") last_prompt_ = message;
-  if (message["type"] == "live") last_live_ = message;
-  if (message["type"] == "message" || message["type"] == "fault") {
+void SessionEngine::emit(SessionMessage message) {
+  if (!session_msg::time_of(message)) session_msg::set_time(message, static_cast<double>(now_ns_) * 1e-9);
+  if (std::holds_alternative<session_msg::Prompt>(message)) last_prompt_ = message;
+  if (std::holds_alternative<session_msg::Live>(message)) last_live_ = message;
+  if (std::holds_alternative<session_msg::Message>(message) ||
+      std::holds_alternative<session_msg::Fault>(message)) {
     last_messages_.push_back(message);
     if (last_messages_.size() > 8) last_messages_.pop_front();
   }
   host_.emit(message);
 }
 
-void SessionEngine::prompt(const std::string& text, std::vector<std::string> keys,
-                           std::vector<std::string> art, const Eigen::Vector3d* up) {
-  waiting_ = std::find(keys.begin(), keys.end(), "continue") != keys.end() ||
-             std::find(keys.begin(), keys.end(), "accept") != keys.end();
-  const char* step = current_ < steps_.size() ? step_name(steps_[current_].id) : "";
-  json m = {{"type", "prompt"}, {"step", step}, {"text", text}, {"keys", std::move(keys)}};
-  if (!art.empty()) m["art"] = std::move(art);
-  if (up) m["up"] = {up->x(), up->y(), up->z()};
+std::optional<StepId> SessionEngine::step_now() const {
+  if (current_ < steps_.size()) return steps_[current_].id;
+  return std::nullopt;
+}
+
+void SessionEngine::prompt(const std::string& text, std::vector<K> keys, std::vector<std::string> art,
+                           const Eigen::Vector3d* up) {
+  waiting_ = std::find(keys.begin(), keys.end(), K::kContinue) != keys.end() ||
+             std::find(keys.begin(), keys.end(), K::kAccept) != keys.end();
+  session_msg::Prompt m;
+  m.step = step_now();
+  m.text = text;
+  m.keys = std::move(keys);
+  m.art = std::move(art);
+  if (up) m.up = *up;
   emit(std::move(m));
 }
 
-void SessionEngine::live(std::vector<std::string> lines, double progress, json figures) {
-  const char* step = current_ < steps_.size() ? step_name(steps_[current_].id) : "";
-  json m = {{"type", "live"}, {"step", step}, {"lines", std::move(lines)}, {"progress", progress}};
-  if (!figures.is_null()) m["figures"] = std::move(figures);
-  emit(std::move(m));
+void SessionEngine::live(std::vector<std::string> lines, double progress, session_msg::LiveFigures figures) {
+  emit(session_msg::Live{std::nullopt, step_now(), std::move(lines), progress, std::move(figures)});
 }
 
-void SessionEngine::message(const std::string& level, const std::string& text) {
-  emit({{"type", "message"}, {"level", level}, {"text", text}});
+void SessionEngine::message(MessageLevel level, const std::string& text, session_msg::MessageCause cause) {
+  emit(session_msg::Message{std::nullopt, level, text, cause});
 }
 
-json SessionEngine::status() const {
-  json steps = json::array();
-  for (const auto& s : steps_)
-    steps.push_back({{"name", step_name(s.id)}, {"state", step_state_name(s.state)}});
-  json j = {
-      {"type", "status"},
-      {"state", session_state_name(state_)},
-      {"rig", config_.name},
-      {"steps", steps},
-      {"step", current_ < steps_.size() && running() ? step_name(steps_[current_].id) : ""},
-      {"poses", poses_.size()},
-      {"elapsed_s", session_start_ns_ < 0 ? 0.0 : static_cast<double>(now_ns_ - session_start_ns_) * 1e-9}};
-  return j;
+session_msg::Status SessionEngine::status() const {
+  session_msg::Status m;
+  for (const auto& s : steps_) m.steps.push_back({s.id, s.state});
+  m.state = state_;
+  m.rig = config_.name;
+  if (current_ < steps_.size() && running()) m.step = steps_[current_].id;
+  m.poses = poses_.size();
+  m.elapsed_s = session_start_ns_ < 0 ? 0.0 : static_cast<double>(now_ns_ - session_start_ns_) * 1e-9;
+  return m;
 }
 
-std::vector<json> SessionEngine::snapshot() const {
-  std::vector<json> out = {status()};
+std::vector<SessionMessage> SessionEngine::snapshot() const {
+  std::vector<SessionMessage> out = {status()};
   for (const auto& m : last_messages_) out.push_back(m);
-  if (!last_prompt_.is_null()) out.push_back(last_prompt_);
-  if (!last_live_.is_null()) out.push_back(last_live_);
+  if (last_prompt_) out.push_back(*last_prompt_);
+  if (last_live_) out.push_back(*last_live_);
   return out;
 }
 
@@ -289,9 +195,9 @@ void SessionEngine::enter(std::size_t index) {
       return s.id == StepId::kWrite && s.state == StepState::kDone;
     });
     if (written) {
-      finish(SessionState::kDone, "written", "The calibration was written, read back and verified.");
+      finish(SessionState::kDone, Outcome::kWritten, "The calibration was written, read back and verified.");
     } else {
-      finish(SessionState::kDone, final_ ? "completed" : "recorded",
+      finish(SessionState::kDone, final_ ? Outcome::kCompleted : Outcome::kRecorded,
              final_ ? "The session is complete; the calibration was not written (no write step)."
                     : "The session is complete; nothing was solved (no solve step).");
     }
@@ -310,7 +216,7 @@ void SessionEngine::advance() {
   enter(current_ + 1);
 }
 
-void SessionEngine::finish(SessionState state, const std::string& outcome, const std::string& text) {
+void SessionEngine::finish(SessionState state, Outcome outcome, const std::string& text) {
   if (recording_) {
     recording_ = false;
     host_.recording_finished();
@@ -318,17 +224,17 @@ void SessionEngine::finish(SessionState state, const std::string& outcome, const
   state_ = state;
   waiting_ = false;
   emit(status());
-  json done = {{"type", "done"}, {"outcome", outcome}, {"text", text}};
+  session_msg::Done done;
+  done.outcome = outcome;
+  done.text = text;
   // Where the record went (storage, slot, sequence), named on the end screen.
-  if (outcome == "written" && !written_to_.empty()) done["stored"] = written_to_;
+  if (outcome == Outcome::kWritten && !written_to_.empty()) done.stored = written_to_;
   // The reports to open, when the final solve drew them.
   if (final_) {
-    json reports = json::array();
     for (const auto& f : final_->result_files)
-      if (f.size() > 5 && f.compare(f.size() - 5, 5, ".html") == 0) reports.push_back(f);
-    if (!reports.empty()) done["reports"] = reports;
+      if (f.size() > 5 && f.compare(f.size() - 5, 5, ".html") == 0) done.reports.push_back(f);
   }
-  emit(done);
+  emit(std::move(done));
 }
 
 void SessionEngine::begin_step() {
@@ -342,7 +248,7 @@ void SessionEngine::begin_step() {
       prompt(thermal_planned() ? "Warming up: leave the rig still until the IMU's temperature settles; the "
                                  "warm-up is recorded for the thermal model"
                                : "Warming up: leave the rig still until the IMU's temperature settles",
-             {"skip", "abort"});
+             {K::kSkip, K::kAbort});
       break;
     case StepId::kThermal:
       // A warm-up just before goes on into this step: its recording is kept.
@@ -350,12 +256,12 @@ void SessionEngine::begin_step() {
       prompt(
           "Thermal: leave the rig still while it warms up (or cools down); the bias is fitted against "
           "the die temperature. c ends the recording",
-          {"continue", "skip", "abort"});
+          {K::kContinue, K::kSkip, K::kAbort});
       break;
     case StepId::kStill:
       still_since_ns_ = -1;
       samples_->clear();
-      prompt("Keep the rig still for " + fixed(config_.session.still_s, 0) + " s", {"abort"});
+      prompt("Keep the rig still for " + fixed(config_.session.still_s, 0) + " s", {K::kAbort});
       break;
     case StepId::kPoses:
       // The attitude of the still start is not a pose (the static method counts it apart): the
@@ -378,7 +284,7 @@ void SessionEngine::begin_step() {
       camera_last_seen_ns_.assign(config_.cameras.size(), -1);
       prompt("Move the rig in front of the target: rotate about every axis and move along every axis, for " +
                  fixed(config_.session.motion_s, 0) + " s",
-             {"continue", "skip", "abort"});
+             {K::kContinue, K::kSkip, K::kAbort});
       break;
     case StepId::kSolve:
       request_final_solve();
@@ -390,13 +296,13 @@ void SessionEngine::begin_step() {
       if (!gates_pass_ &&
           std::none_of(steps_.begin(), steps_.end(), [](const Step& s) { return s.id == StepId::kReview; })) {
         steps_[current_].state = StepState::kFailed;
-        finish(SessionState::kFailed, "failed",
+        finish(SessionState::kFailed, Outcome::kFailed,
                "Not written: a quality gate failed and there is no review step to accept it.");
         return;
       }
       if (!final_ || !final_->record) {
         steps_[current_].state = StepState::kFailed;
-        finish(SessionState::kFailed, "failed", "Nothing to write: the solve produced no record.");
+        finish(SessionState::kFailed, Outcome::kFailed, "Nothing to write: the solve produced no record.");
         return;
       }
       prompt("Writing the calibration to the rig's storage", {});
@@ -408,14 +314,14 @@ void SessionEngine::begin_step() {
 void SessionEngine::run_preflight() {
   const PreflightReport report = host_.preflight();
   stored_ = report.stored ? *report.stored : json();
-  emit({{"type", "preflight"}, {"report", report.to_json()}});
+  emit(session_msg::Preflight{std::nullopt, report});
   std::vector<std::string> lines;
   for (const auto& d : report.devices)
     lines.push_back((d.ok ? "ok    " : "FAIL  ") + d.name + ": " + d.detail);
   lines.push_back(report.stored
                       ? "stored calibration: " + report.stored->value("summary", std::string("present"))
                       : "stored calibration: none");
-  live(lines, 1.0, report.to_json());
+  live(lines, 1.0, report);
   if (!report.ok()) {
     steps_[current_].state = StepState::kFailed;
     failed_step_ = true;
@@ -427,65 +333,61 @@ void SessionEngine::run_preflight() {
     prompt(advice.empty()
                ? "A device failed its check (see above). Fix it and press r to check again, or a to abort"
                : "A device failed its check: " + advice + ". Then press r to check again, or a to abort",
-           {"redo", "abort"});
+           {K::kRedo, K::kAbort});
     return;
   }
-  prompt("Rig '" + report.rig + "': every device answers. Press c to begin", {"continue", "abort"});
+  prompt("Rig '" + report.rig + "': every device answers. Press c to begin", {K::kContinue, K::kAbort});
 }
 
-Status SessionEngine::key(const std::string& key) {
-  static const std::vector<std::string> kKeys = {"continue", "redo", "abort", "accept", "reject", "skip"};
-  if (std::find(kKeys.begin(), kKeys.end(), key) == kKeys.end())
-    return make_error(Errc::kInvalidArgument,
-                      "'" + key + "' is not a key (continue, redo, abort, accept, reject, skip)");
+Status SessionEngine::key(K key) {
   if (!running()) return make_error(Errc::kInvalidArgument, "no session is running (start one first)");
-  emit({{"type", "key"}, {"key", key}});
+  emit(session_msg::Key{std::nullopt, key});
   const StepId id = steps_[current_].id;
-  if (key == "abort") {
+  if (key == K::kAbort) {
     steps_[current_].state = StepState::kFailed;
-    finish(SessionState::kAborted, "aborted",
+    finish(SessionState::kAborted, Outcome::kAborted,
            "Aborted by the operator. What was recorded is kept; the stored calibration is unchanged.");
     return {};
   }
-  if (key == "redo") {
+  if (key == K::kRedo) {
     if (failed_step_) {
       if (auto s = host_.recover(); !s.ok()) {
-        message("error", "Still failing: " + s.error().message);
+        message(MessageLevel::kError, "Still failing: " + s.error().message);
         return {};
       }
       steps_[current_].state = StepState::kActive;
       failed_step_ = false;
       emit(status());  // the step is no longer marked failed
-      message("info", std::string("Redoing step ") + step_name(id));
+      message(MessageLevel::kInfo, std::string("Redoing step ") + step_name(id));
       begin_step();
       return {};
     }
     if (id == StepId::kPoses && !poses_.empty()) {
       poses_.pop_back();
-      message("info", "Dropped pose " + std::to_string(poses_.size() + 1) + "; " +
-                          std::to_string(poses_.size()) + " remain");
+      message(MessageLevel::kInfo, "Dropped pose " + std::to_string(poses_.size() + 1) + "; " +
+                                       std::to_string(poses_.size()) + " remain");
       poses_prompt();
       return {};
     }
     if (id == StepId::kGsens) {
       face_ = std::max(0, face_ - 1);
       still_since_ns_ = -1;
-      message("info", "Redoing the last face");
+      message(MessageLevel::kInfo, "Redoing the last face");
       face_prompt();
       return {};
     }
     return make_error(Errc::kInvalidArgument, std::string("nothing to redo in step ") + step_name(id));
   }
-  if (key == "skip") {
+  if (key == K::kSkip) {
     if (!step_skippable(id))
       return make_error(Errc::kInvalidArgument, std::string("step ") + step_name(id) + " cannot be skipped");
     steps_[current_].state = StepState::kSkipped;
-    message("info", std::string("Skipped step ") + step_name(id));
+    message(MessageLevel::kInfo, std::string("Skipped step ") + step_name(id));
     if (id == StepId::kThermal) thermal_->clear();  // skipped: no thermal model
     enter(current_ + 1);
     return {};
   }
-  if (key == "continue") {
+  if (key == K::kContinue) {
     if (failed_step_) return make_error(Errc::kInvalidArgument, "the step failed: redo it (r) or abort (a)");
     if (id == StepId::kPreflight || id == StepId::kMotion) {
       advance();
@@ -497,8 +399,8 @@ Status SessionEngine::key(const std::string& key) {
     }
     if (id == StepId::kPoses) {
       if (static_cast<int>(poses_.size()) < config_.session.poses_min) {
-        message("warning", "Only " + std::to_string(poses_.size()) + " poses; at least " +
-                               std::to_string(config_.session.poses_min) + " are needed");
+        message(MessageLevel::kWarning, "Only " + std::to_string(poses_.size()) + " poses; at least " +
+                                            std::to_string(config_.session.poses_min) + " are needed");
         return {};
       }
       advance();
@@ -509,8 +411,8 @@ Status SessionEngine::key(const std::string& key) {
   // accept / reject: the review.
   if (id != StepId::kReview)
     return make_error(Errc::kInvalidArgument, "there is nothing to accept or reject yet");
-  if (key == "reject") {
-    finish(SessionState::kDone, "rejected",
+  if (key == K::kReject) {
+    finish(SessionState::kDone, Outcome::kRejected,
            "Rejected: the results are kept in the session folder; the stored calibration is unchanged.");
     return {};
   }
@@ -522,24 +424,21 @@ Status SessionEngine::key(const std::string& key) {
 
 void SessionEngine::fault(const std::string& source, const std::string& text) {
   if (!running()) return;
-  emit({{"type", "fault"},
-        {"source", source},
-        {"step", step_name(steps_[current_].id)},
-        {"text", text},
-        {"advice",
-         "What was recorded is kept. Fix the " + source + " and press r to redo the step, or a to abort"}});
+  emit(session_msg::Fault{
+      std::nullopt, source, steps_[current_].id, text,
+      "What was recorded is kept. Fix the " + source + " and press r to redo the step, or a to abort"});
   steps_[current_].state = StepState::kFailed;
   failed_step_ = true;
   emit(status());
   prompt(source + " fault: " + text + ". Press r to redo the step once fixed, or a to abort",
-         {"redo", "abort"});
+         {K::kRedo, K::kAbort});
 }
 
 void SessionEngine::terminate(const std::string& reason) {
   if (!running()) return;
-  emit({{"type", "stop"}, {"reason", reason}});
+  emit(session_msg::Stop{std::nullopt, reason});
   steps_[current_].state = StepState::kFailed;
-  finish(SessionState::kAborted, "aborted",
+  finish(SessionState::kAborted, Outcome::kAborted,
          "Stopped: " + reason + ". What was recorded is kept; the stored calibration is unchanged.");
 }
 
@@ -562,7 +461,7 @@ void SessionEngine::request_quick_solve() {
   job.t_end_ns = now_ns_;
   quick_in_flight_ = job.id;
   quick_poses_ = poses_.size();
-  emit({{"type", "solve"}, {"id", job.id}, {"final", false}, {"samples", job.samples->size()}});
+  emit(session_msg::Solve{std::nullopt, job.id, false, job.samples->size(), std::nullopt, std::nullopt});
   host_.solve(job);
 }
 
@@ -585,16 +484,11 @@ void SessionEngine::request_final_solve() {
   job.t_end_ns = now_ns_;
   final_id_ = job.id;
   const std::size_t thermal_means = job.thermal_samples ? job.thermal_samples->size() : 0;
-  emit({{"type", "solve"},
-        {"id", job.id},
-        {"final", true},
-        {"samples", job.samples->size()},
-        {"thermal_means", thermal_means},
-        {"camimu", job.camimu}});
+  emit(session_msg::Solve{std::nullopt, job.id, true, job.samples->size(), thermal_means, job.camimu});
   std::string what = poses ? std::to_string(job.samples->size()) + " samples" : std::string();
   if (thermal_means > 0) what += (what.empty() ? "" : ", ") + std::string("the thermal recording");
   if (job.camimu) what += " and the camera frames";
-  prompt("Solving: " + what, {"abort"});
+  prompt("Solving: " + what, {K::kAbort});
   host_.solve(job);
 }
 
@@ -604,7 +498,7 @@ void SessionEngine::solve_progress(double fraction, const std::string& text) {
 }
 
 void SessionEngine::solve_finished(int id, SolveOutcome outcome) {
-  emit({{"type", "applied"}, {"id", id}, {"error", outcome.error}, {"wall_s", outcome.wall_s}});
+  emit(session_msg::Applied{std::nullopt, id, outcome.error, outcome.wall_s});
   if (!running()) return;
   if (id == quick_in_flight_) {
     quick_in_flight_ = 0;
@@ -612,8 +506,8 @@ void SessionEngine::solve_finished(int id, SolveOutcome outcome) {
       // Feedback only: the final solve decides. The method's advice for a whole recording does
       // not apply mid-session, so only its finding is shown.
       const std::string finding = outcome.error.substr(0, outcome.error.find(';'));
-      message("info", "No quick solve yet after " + std::to_string(quick_poses_) + " poses (" + finding +
-                          "); go on with the poses");
+      message(MessageLevel::kInfo, "No quick solve yet after " + std::to_string(quick_poses_) + " poses (" +
+                                       finding + "); go on with the poses");
       return;
     }
     quick_ = std::move(outcome.imu);
@@ -625,9 +519,10 @@ void SessionEngine::solve_finished(int id, SolveOutcome outcome) {
     auto sigma = [](double v) {
       return std::isfinite(v) ? fixed(v * 1e3, 2) + "e-3" : std::string("undetermined");
     };
-    message("info", "Quick solve (" + std::to_string(quick_poses_) + " poses): scale sigma accel " +
-                        sigma(sa) + ", gyro " + sigma(sg) + " (target " +
-                        fixed(config_.session.pose_sigma_target * 1e3, 2) + "e-3)");
+    message(MessageLevel::kInfo, "Quick solve (" + std::to_string(quick_poses_) +
+                                     " poses): scale sigma accel " + sigma(sa) + ", gyro " + sigma(sg) +
+                                     " (target " + fixed(config_.session.pose_sigma_target * 1e3, 2) +
+                                     "e-3)");
     // New poses came while it ran: solve again with them.
     if (poses_.size() > quick_poses_ && !quick_pending_) request_quick_solve();
     return;
@@ -640,60 +535,47 @@ void SessionEngine::solve_finished(int id, SolveOutcome outcome) {
   }
   if (!final_->error.empty()) {
     steps_[current_].state = StepState::kFailed;
-    finish(SessionState::kFailed, "failed",
+    finish(SessionState::kFailed, Outcome::kFailed,
            "The solve failed: " + final_->error + ". The recording is kept; replay it with `imucal replay`.");
     return;
   }
   advance();
 }
 
-json SessionEngine::result_message() const {
-  json m = {{"type", "result"}, {"files", final_->result_files}};
-  auto mat = [](const Eigen::Matrix3d& M) {
-    return json::array(
-        {{M(0, 0), M(0, 1), M(0, 2)}, {M(1, 0), M(1, 1), M(1, 2)}, {M(2, 0), M(2, 1), M(2, 2)}});
-  };
-  auto vec = [](const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); };
+session_msg::ResultSummary SessionEngine::result_message() const {
+  session_msg::ResultSummary m;
+  m.files = final_->result_files;
   if (final_->thermal) {
     const auto& t = *final_->thermal;
-    m["thermal"] = {{"determined", t.determined}};
-    if (t.determined) {
-      m["thermal"]["reference_c"] = t.reference_c;
-      m["thermal"]["valid_range_c"] = {t.temp_min_c, t.temp_max_c};
-    } else {
-      m["thermal"]["reason"] = t.reason;
-    }
+    m.thermal = {
+        t.determined, t.determined ? t.reference_c : 0.0,
+        t.determined ? std::array<double, 2>{t.temp_min_c, t.temp_max_c} : std::array<double, 2>{0.0, 0.0},
+        t.determined ? std::string() : t.reason};
   }
   if (final_->imu) {
     const auto& c = final_->imu->canonical;
-    m["imu"] = {
-        {"A_a", mat(c.A_a)}, {"b_a", vec(c.b_a)}, {"A_g", mat(c.A_g)}, {"b_g", vec(c.b_g)}, {"G", mat(c.G)}};
+    m.imu = session_msg::ResultSummary::Imu{c.A_a, c.b_a, c.A_g, c.b_g, c.G};
   }
   if (final_->camimu) {
-    json cams = json::array();
+    m.cameras.emplace();
     for (const auto& cam : final_->camimu->result.cameras) {
       const Eigen::Quaterniond q(cam.T_cam_imu.rotation());
-      cams.push_back({{"name", cam.name},
-                      {"t_cam_imu_m", vec(cam.T_cam_imu.translation())},
-                      {"q_cam_imu_wxyz", {q.w(), q.x(), q.y(), q.z()}},
-                      {"timeshift_cam_imu_s", cam.timeshift_cam_imu_s},
-                      {"reprojection_rms_px", cam.reprojection_rms_px}});
+      m.cameras->push_back({cam.name, cam.T_cam_imu.translation(),
+                            Eigen::Vector4d(q.w(), q.x(), q.y(), q.z()), cam.timeshift_cam_imu_s,
+                            cam.reprojection_rms_px});
     }
-    m["cameras"] = cams;
     const SplitCheck& sc = final_->camimu->result.self_check;
     if (sc.verdict != SplitCheck::Verdict::kNotRun)
-      m["self_check"] = {
-          {"verdict", split_check_verdict_name(sc.verdict)}, {"summary", sc.summary}, {"advice", sc.advice}};
+      m.self_check =
+          session_msg::ResultSummary::SelfCheck{split_check_verdict_name(sc.verdict), sc.summary, sc.advice};
   }
   return m;
 }
 
 void SessionEngine::write_finished(const Status& status, const std::string& where) {
   written_to_ = status.ok() ? where : std::string();
-  emit({{"type", "written"},
-        {"ok", status.ok()},
-        {"error", status.ok() ? "" : status.error().message},
-        {"where", written_to_}});
+  emit(session_msg::Written{std::nullopt, status.ok(), status.ok() ? "" : status.error().message,
+                            written_to_});
   if (!running() || steps_[current_].id != StepId::kWrite) return;
   if (!status.ok()) {
     fault("storage", status.error().message);

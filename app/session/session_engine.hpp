@@ -16,7 +16,6 @@
 #include <cstdint>
 #include <deque>
 #include <memory>
-#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
@@ -29,38 +28,27 @@
 #include "core/imu.hpp"
 #include "core/result.hpp"
 #include "core/rig_config.hpp"
+#include "core/session_messages.hpp"
 #include "core/time.hpp"
 
 namespace imucal::app::session {
 
-enum class StepId { kPreflight, kWarmup, kThermal, kStill, kPoses, kGsens, kMotion, kSolve, kReview, kWrite };
-enum class StepState { kPending, kActive, kDone, kSkipped, kFailed };
-enum class SessionState { kIdle, kRunning, kReview, kDone, kAborted, kFailed };
-
-const char* step_name(StepId step);
-const char* step_state_name(StepState state);
-const char* session_state_name(SessionState state);
-[[nodiscard]] Result<StepId> parse_step(const std::string& name);
+// The words of the session's messages (core/session_messages.hpp).
+using session_msg::parse_step;
+using session_msg::session_state_name;
+using session_msg::SessionMessage;
+using session_msg::SessionState;
+using session_msg::step_name;
+using session_msg::step_state_name;
+using session_msg::StepId;
+using session_msg::StepState;
 
 /// The steps a configuration runs: session.steps, or every step that applies (gsens and thermal
 /// only when listed, motion only with cameras).
 std::vector<StepId> configured_steps(const RigConfig& config);
 
 /// What the host found when it probed the rig (step 1).
-struct PreflightReport {
-  struct Device {
-    std::string name;  // "imu", "cam0", "storage"
-    bool ok = false;
-    std::string detail;  // "MPU-6000 on /dev/spidev0.0, WHO_AM_I 0x68, self-test passed" or the error
-    std::string advice;  // when it failed: what the operator can do ("hold the rig still ...")
-  };
-  std::vector<Device> devices;
-  std::string rig;                       // the configuration's name
-  std::optional<nlohmann::json> stored;  // the calibration on the rig's storage (its summary)
-  bool ok() const;
-  nlohmann::json to_json() const;
-  static PreflightReport from_json(const nlohmann::json& j);
-};
+using session_msg::PreflightReport;
 
 /// A solve the engine asks for. Quick: the static method over the samples so far (live sigmas
 /// while poses are captured). Final: the thermal model (after a thermal step), the static method
@@ -98,8 +86,8 @@ struct SolveOutcome {
 class EngineHost {
  public:
   virtual ~EngineHost() = default;
-  /// A message for the operator and the session log ({"type": ...}, docs/service.md).
-  virtual void emit(const nlohmann::json& message) = 0;
+  /// A message for the operator and the session log (docs/service.md).
+  virtual void emit(const SessionMessage& message) = 0;
   /// Probes the devices and reads the stored calibration (step 1, and again on redo).
   virtual PreflightReport preflight() = 0;
   /// Runs a solve off the engine's thread; the host calls SessionEngine::solve_finished() later.
@@ -129,9 +117,8 @@ class SessionEngine {
   /// A frame of camera `camera` (its index in the configuration) at `t_ns`; `target_seen` when
   /// the target was detected in it.
   void on_frame(std::size_t camera, TimeNs t_ns, bool target_seen);
-  /// An operator key: continue, redo, abort, accept, reject, skip. Errors say why it does not
-  /// apply now.
-  [[nodiscard]] Status key(const std::string& key);
+  /// An operator key. Errors say why it does not apply now.
+  [[nodiscard]] Status key(session_msg::OperatorKey key);
   /// A device or storage fault from the host: the step stops and the operator is told how to go on.
   void fault(const std::string& source, const std::string& text);
   /// Ends a running session from outside (the service stops: SIGTERM): like abort, with the reason.
@@ -152,10 +139,10 @@ class SessionEngine {
   TimeNs step_start_ns() const { return step_start_ns_; }
   /// Sample time of the engine: the last sample's.
   TimeNs now_ns() const { return now_ns_; }
-  /// {"type":"status", ...}
-  nlohmann::json status() const;
+  /// The session's state now (not stamped).
+  session_msg::Status status() const;
   /// Messages that bring a new observer up to date (status, the last prompt and live figures).
-  std::vector<nlohmann::json> snapshot() const;
+  std::vector<SessionMessage> snapshot() const;
   /// The final solve's outcome once it is in.
   const std::optional<SolveOutcome>& result() const { return final_; }
   /// The review's quality gates (after the final solve).
@@ -179,19 +166,21 @@ class SessionEngine {
 
   void reset();
   void evaluate_gates();
-  nlohmann::json result_message() const;
-  void emit(nlohmann::json message);
+  session_msg::ResultSummary result_message() const;
+  void emit(SessionMessage message);
   /// `art`: lines of a drawing that go with the prompt (the rig's attitude), none when empty.
   /// `up`: the axis the operator is asked to turn up (samples' frame), for a client to draw.
-  void prompt(const std::string& text, std::vector<std::string> keys, std::vector<std::string> art = {},
-              const Eigen::Vector3d* up = nullptr);
+  void prompt(const std::string& text, std::vector<session_msg::OperatorKey> keys,
+              std::vector<std::string> art = {}, const Eigen::Vector3d* up = nullptr);
   void poses_prompt();  // the poses step's prompt, with the next direction not yet covered
   void face_prompt();   // the six-face step's prompt for face_
-  void live(std::vector<std::string> lines, double progress, nlohmann::json figures = {});
-  void message(const std::string& level, const std::string& text);
+  void live(std::vector<std::string> lines, double progress, session_msg::LiveFigures figures = {});
+  void message(session_msg::MessageLevel level, const std::string& text,
+               session_msg::MessageCause cause = session_msg::MessageCause::kNone);
   void enter(std::size_t index);
   void advance();
-  void finish(SessionState state, const std::string& outcome, const std::string& text);
+  void finish(SessionState state, session_msg::Outcome outcome, const std::string& text);
+  std::optional<StepId> step_now() const;  // the step of the current index (none past the end)
   void begin_step();
   bool step_skippable(StepId id) const;
 
@@ -221,8 +210,8 @@ class SessionEngine {
   void request_quick_solve();
   void request_final_solve();
   void review();
-  std::vector<std::string> difference_to_stored(nlohmann::json* diff) const;
-  nlohmann::json coverage() const;
+  std::vector<std::string> difference_to_stored(std::optional<session_msg::Review::Difference>* diff) const;
+  std::vector<std::string> coverage() const;
   std::string missing_words() const;  // the directions not yet up, in the guide's words
   calib::StaticCalibrationOptions static_options() const;
   ImuSample to_si(const ImuSample& raw) const;
@@ -241,8 +230,8 @@ class SessionEngine {
   TimeNs step_start_ns_ = -1;
   TimeNs session_start_ns_ = -1;
   TimeNs last_live_ns_ = 0;
-  nlohmann::json last_prompt_, last_live_;
-  std::deque<nlohmann::json> last_messages_;
+  std::optional<SessionMessage> last_prompt_, last_live_;
+  std::deque<SessionMessage> last_messages_;
 
   std::unique_ptr<Window> window_;
   std::shared_ptr<std::vector<ImuSample>> samples_;  // from the still step on

@@ -6,13 +6,14 @@
 #include <filesystem>
 #include <map>
 #include <optional>
+#include <variant>
 
 #include "app/session/session_runner.hpp"
 #include "log/session_log.hpp"
 
 namespace imucal::app::session {
 
-using nlohmann::json;
+namespace msg = session_msg;
 
 namespace {
 
@@ -20,10 +21,11 @@ namespace {
 /// sample time it has reached; a write may end a little after the samples stop).
 constexpr TimeNs kMaxInputAfterLastSampleNs = 10'000'000'000;
 
-/// An input the live session applied to its engine, at the engine's sample time.
+/// An input the live session applied to its engine, at the engine's sample time: a message it
+/// logged or what the engine saw of a camera frame.
 struct Input {
   TimeNs t_ns = 0;
-  json message;
+  std::variant<msg::SessionMessage, msg::FrameEvent> message;
 };
 
 /// The engine's host during a replay: the logged preflight, solves run at once and held until
@@ -38,9 +40,9 @@ class ReplayHost final : public EngineHost {
         preflight_(std::move(preflight)),
         motion_log_(std::move(motion_log)) {}
 
-  void emit(const json& message) override {
-    if (message.value("type", "") == "result") result_ = message;
-    if (message.value("type", "") == "done") outcome_ = message.value("outcome", "");
+  void emit(const msg::SessionMessage& message) override {
+    if (const auto* r = std::get_if<msg::ResultSummary>(&message)) result_ = *r;
+    if (const auto* d = std::get_if<msg::Done>(&message)) outcome_ = msg::outcome_name(d->outcome);
   }
   PreflightReport preflight() override { return preflight_; }
   void solve(const SolveJob& job) override {
@@ -51,7 +53,7 @@ class ReplayHost final : public EngineHost {
   Status recover() override { return {}; }
 
   std::map<int, SolveOutcome> outcomes_;
-  json result_;
+  std::optional<msg::ResultSummary> result_;
   std::string outcome_;
 
  private:
@@ -66,7 +68,8 @@ struct LoggedSession {
   std::vector<std::string> steps;
   PreflightReport preflight;
   std::vector<Input> inputs;
-  json result;
+  std::optional<msg::ResultSummary> result;
+  std::string result_defect;  // the logged result could not be read: why
   std::string outcome;
   std::vector<std::pair<double, std::string>> step_starts;  // rig time (s), step
   int final_id = 0;
@@ -75,85 +78,45 @@ struct LoggedSession {
   TimeNs last_event_ns = log::kTimeMin;  // the latest stamp of any session event read
 };
 
-/// A field the replay reads from a logged event, the JSON kind it must have, and whether the
-/// event means nothing without it.
-struct Field {
-  const char* name;
-  json::value_t kind;  // number_integer stands for any integer, number_float for any number
-  bool required;
-};
+/// Whether the replay reads events of this type: one of them that cannot be decoded makes the
+/// log one that cannot be replayed. The others (prompts, live figures, messages, ...) only
+/// informed the operator.
+bool replay_reads(const std::string& type) {
+  static const char* const kTypes[] = {"key",    "fault", "stop",    "written",   "applied",
+                                       "status", "solve", "session", "preflight", "done"};
+  return std::any_of(std::begin(kTypes), std::end(kTypes), [&](const char* t) { return type == t; });
+}
 
-bool has_kind(const json& v, json::value_t kind) {
-  switch (kind) {
-    case json::value_t::number_integer:
-      return v.is_number_integer();
-    case json::value_t::number_float:
-      return v.is_number();
-    default:
-      return v.type() == kind;
+/// What the replay takes from one logged session event.
+void take_event(LoggedSession& s, const msg::SessionMessage& m, TimeNs t_ns, bool* started,
+                bool* second_start) {
+  const double t_s = static_cast<double>(t_ns) * 1e-9;
+  if (const auto* st = std::get_if<msg::Status>(&m)) {
+    if (st->state == SessionState::kRunning && st->step &&
+        (s.step_starts.empty() || s.step_starts.back().second != step_name(*st->step)))
+      s.step_starts.emplace_back(t_s, step_name(*st->step));
   }
-}
-
-const char* kind_name(json::value_t kind) {
-  switch (kind) {
-    case json::value_t::string:
-      return "a string";
-    case json::value_t::boolean:
-      return "true or false";
-    case json::value_t::number_integer:
-      return "an integer";
-    case json::value_t::number_float:
-      return "a number";
-    case json::value_t::array:
-      return "an array";
-    default:
-      return "an object";
-  }
-}
-
-/// The fields of each event type the replay reads (docs/service-session.md, "Session log").
-const std::map<std::string, std::vector<Field>>& replay_fields() {
-  using V = json::value_t;
-  static const std::map<std::string, std::vector<Field>> fields = {
-      {"frame", {{"t_ns", V::number_integer, true}, {"seen", V::boolean, true}}},
-      {"key", {{"key", V::string, true}}},
-      {"fault", {{"source", V::string, false}, {"text", V::string, false}}},
-      {"stop", {{"reason", V::string, false}}},
-      {"written", {{"ok", V::boolean, true}, {"error", V::string, false}, {"where", V::string, false}}},
-      {"applied", {{"id", V::number_integer, true}, {"wall_s", V::number_float, false}}},
-      {"status", {{"state", V::string, false}, {"step", V::string, false}}},
-      {"solve", {{"id", V::number_integer, false}, {"final", V::boolean, false}}},
-      {"session", {{"event", V::string, false}, {"steps", V::array, false}}},
-      {"preflight", {{"report", V::object, false}}},
-      {"result", {}},
-      {"done", {{"outcome", V::string, true}}},
-  };
-  return fields;
-}
-
-/// Why a logged event cannot be replayed as it stands, or empty.
-std::string event_defect(const json& m, TimeNs t_ns) {
-  const std::string where = "the session event at t_ns " + std::to_string(t_ns);
-  if (m.is_discarded() || !m.is_object()) return where + " is not a JSON object";
-  const auto type_it = m.find("type");
-  if (type_it == m.end() || !type_it->is_string()) return where + " has no type (a string)";
-  const auto fields = replay_fields().find(type_it->get<std::string>());
-  if (fields == replay_fields().end()) return {};
-  for (const Field& f : fields->second) {
-    const auto it = m.find(f.name);
-    if (it == m.end()) {
-      if (f.required) return where + " (" + fields->first + ") has no \"" + f.name + "\"";
-      continue;
+  if (const auto* solve = std::get_if<msg::Solve>(&m); solve && solve->final) s.final_id = solve->id;
+  if (const auto* a = std::get_if<msg::Applied>(&m); a && a->id == s.final_id) s.final_wall_s = a->wall_s;
+  s.end_s = t_s;
+  if (const auto* start = std::get_if<msg::SessionStart>(&m)) {
+    if (*started) {
+      *second_start = true;  // one session per log; a second start is not ours to replay
+      return;
     }
-    if (!has_kind(*it, f.kind))
-      return where + " (" + fields->first + "): \"" + f.name + "\" is " + it->type_name() + ", not " +
-             kind_name(f.kind);
-    if (fields->first == "session" && std::string(f.name) == "steps") {
-      for (const auto& step : *it)
-        if (!step.is_string()) return where + " (session): a step that is not a string";
-    }
+    *started = true;
+    s.steps = start->steps;
+  } else if (const auto* p = std::get_if<msg::Preflight>(&m)) {
+    s.preflight = p->report;
+  } else if (std::holds_alternative<msg::Key>(m) || std::holds_alternative<msg::Applied>(m) ||
+             std::holds_alternative<msg::Fault>(m) || std::holds_alternative<msg::Written>(m) ||
+             std::holds_alternative<msg::Stop>(m)) {
+    s.inputs.push_back({t_ns, m});
+  } else if (const auto* r = std::get_if<msg::ResultSummary>(&m)) {
+    s.result = *r;
+  } else if (const auto* d = std::get_if<msg::Done>(&m)) {
+    s.outcome = msg::outcome_name(d->outcome);
   }
-  return {};
 }
 
 Result<LoggedSession> read_session_events(const log::SessionLogReader& reader, const std::string& path) {
@@ -167,41 +130,32 @@ Result<LoggedSession> read_session_events(const log::SessionLogReader& reader, c
                                           ": the log was altered or is damaged, and cannot be replayed "
                                           "(imucal info shows what it holds)");
   };
+  bool second_start = false;
   for (const auto& e : *events) {
-    if (e.kind != "frame" && e.kind != "session") continue;
-    json m = json::parse(e.message, nullptr, false);
+    const std::string where = "the session event at t_ns " + std::to_string(e.t_ns);
     if (e.kind == "frame") {
       // What the engine saw of a camera frame in the motion step (the runner's frame event).
-      if (m.is_object()) m["type"] = "frame";
-      if (const std::string defect = event_defect(m, e.t_ns); !defect.empty()) return damaged(defect);
-      s.inputs.push_back({e.t_ns, m});
+      auto frame = msg::parse_frame_event(e.message);
+      if (!frame.ok()) return damaged(where + ": " + frame.error().message);
+      s.inputs.push_back({e.t_ns, *frame});
       continue;
     }
-    if (const std::string defect = event_defect(m, e.t_ns); !defect.empty()) return damaged(defect);
-    const std::string type = m.value("type", "");
-    const double t_s = static_cast<double>(e.t_ns) * 1e-9;
+    if (e.kind != "session") continue;
+    auto m = msg::parse(e.message);
+    if (!m.ok()) {
+      const std::string type = msg::type_of(e.message);
+      // A result that cannot be read is a result that differs from the replay's (below).
+      if (type == "result") {
+        s.result_defect = m.error().message;
+        s.result.reset();
+        continue;
+      }
+      if (type.empty() || replay_reads(type)) return damaged(where + ": " + m.error().message);
+      continue;
+    }
     s.last_event_ns = std::max(s.last_event_ns, e.t_ns);
-    if (type == "status" && m.value("state", "") == "running" && !m.value("step", "").empty() &&
-        (s.step_starts.empty() || s.step_starts.back().second != m.value("step", ""))) {
-      s.step_starts.emplace_back(t_s, m.value("step", ""));
-    }
-    if (type == "solve" && m.value("final", false)) s.final_id = m.value("id", 0);
-    if (type == "applied" && m.value("id", -1) == s.final_id) s.final_wall_s = m.value("wall_s", 0.0);
-    s.end_s = t_s;
-    if (type == "session" && m.value("event", "") == "start") {
-      if (started) break;  // one session per log; a second start is not ours to replay
-      started = true;
-      for (const auto& n : m.value("steps", json::array()))
-        if (n.is_string()) s.steps.push_back(n.get<std::string>());
-    } else if (type == "preflight") {
-      s.preflight = PreflightReport::from_json(m.value("report", json::object()));
-    } else if (type == "key" || type == "applied" || type == "fault" || type == "written" || type == "stop") {
-      s.inputs.push_back({e.t_ns, m});
-    } else if (type == "result") {
-      s.result = m;
-    } else if (type == "done") {
-      s.outcome = m.value("outcome", "");
-    }
+    take_event(s, *m, e.t_ns, &started, &second_start);
+    if (second_start) break;
   }
   if (!started)
     return make_error(Errc::kInsufficientData,
@@ -210,44 +164,57 @@ Result<LoggedSession> read_session_events(const log::SessionLogReader& reader, c
   return s;
 }
 
-double max_difference(const json& a, const json& b) {
-  if (a.is_number() && b.is_number()) return std::abs(a.get<double>() - b.get<double>());
-  if (a.is_array() && b.is_array() && a.size() == b.size()) {
-    double m = 0.0;
-    for (std::size_t i = 0; i < a.size(); ++i) m = std::max(m, max_difference(a[i], b[i]));
-    return m;
+/// The largest |a - b| over the entries of two vectors or matrices of the same shape.
+template <typename A, typename B>
+double max_difference(const Eigen::MatrixBase<A>& a, const Eigen::MatrixBase<B>& b) {
+  return (a - b).cwiseAbs().maxCoeff();
+}
+
+/// The largest difference of the canonical model's and the cameras' entries; infinity when one
+/// has a part the other has not, or a camera of another name.
+double max_difference(const msg::ResultSummary& a, const msg::ResultSummary& b) {
+  double m = 0.0;
+  if (a.imu.has_value() != b.imu.has_value()) return INFINITY;
+  if (a.imu) {
+    const auto &x = *a.imu, &y = *b.imu;
+    m = std::max({max_difference(x.A_a, y.A_a), max_difference(x.b_a, y.b_a), max_difference(x.A_g, y.A_g),
+                  max_difference(x.b_g, y.b_g), max_difference(x.G, y.G)});
   }
-  if (a.is_object() && b.is_object()) {
-    // Every key of either: a key only one of them has (an emptied result) is a difference.
-    double m = 0.0;
-    for (auto it = a.begin(); it != a.end(); ++it)
-      m = std::max(m, b.contains(it.key()) ? max_difference(it.value(), b[it.key()]) : INFINITY);
-    for (auto it = b.begin(); it != b.end(); ++it)
-      if (!a.contains(it.key())) m = INFINITY;
-    return m;
+  if (a.cameras.has_value() != b.cameras.has_value()) return INFINITY;
+  if (!a.cameras) return m;
+  if (a.cameras->size() != b.cameras->size()) return INFINITY;
+  for (std::size_t i = 0; i < a.cameras->size(); ++i) {
+    const auto &x = (*a.cameras)[i], &y = (*b.cameras)[i];
+    if (x.name != y.name) return INFINITY;
+    m = std::max({m, max_difference(x.t_cam_imu_m, y.t_cam_imu_m),
+                  max_difference(x.q_cam_imu_wxyz, y.q_cam_imu_wxyz),
+                  std::abs(x.timeshift_cam_imu_s - y.timeshift_cam_imu_s),
+                  std::abs(x.reprojection_rms_px - y.reprojection_rms_px)});
   }
-  return a == b ? 0.0 : INFINITY;
+  return m;
 }
 
 /// Applies one logged input to the engine. False when the replay diverged.
-bool apply(SessionEngine& engine, ReplayHost& host, const json& m, ReplaySummary& summary, std::string* why) {
-  const std::string type = m.value("type", "");
-  if (type == "frame") {
-    engine.on_frame(m.value("camera", std::size_t{0}), m.value("t_ns", TimeNs{0}), m.value("seen", false));
-  } else if (type == "key") {
+bool apply(SessionEngine& engine, ReplayHost& host, const Input& input, ReplaySummary& summary,
+           std::string* why) {
+  if (const auto* frame = std::get_if<msg::FrameEvent>(&input.message)) {
+    engine.on_frame(frame->camera, frame->t_ns, frame->seen);
+    return true;
+  }
+  const auto& m = std::get<msg::SessionMessage>(input.message);
+  if (const auto* key = std::get_if<msg::Key>(&m)) {
     ++summary.keys;
-    (void)engine.key(m.value("key", ""));
-  } else if (type == "fault") {
+    (void)engine.key(key->key);
+  } else if (const auto* fault = std::get_if<msg::Fault>(&m)) {
     ++summary.faults;
-    engine.fault(m.value("source", ""), m.value("text", ""));
-  } else if (type == "stop") {
-    engine.terminate(m.value("reason", ""));
-  } else if (type == "written") {
-    const bool ok = m.value("ok", false);
-    engine.write_finished(ok ? Status{} : Status(make_error(Errc::kIo, m.value("error", ""))),
-                          m.value("where", std::string()));
-  } else if (type == "applied") {
-    const int id = m.value("id", 0);
+    engine.fault(fault->source, fault->text);
+  } else if (const auto* stop = std::get_if<msg::Stop>(&m)) {
+    engine.terminate(stop->reason);
+  } else if (const auto* written = std::get_if<msg::Written>(&m)) {
+    engine.write_finished(written->ok ? Status{} : Status(make_error(Errc::kIo, written->error)),
+                          written->where.value_or(std::string()));
+  } else if (const auto* applied = std::get_if<msg::Applied>(&m)) {
+    const int id = applied->id;
     auto it = host.outcomes_.find(id);
     if (it == host.outcomes_.end()) {
       *why = "the log applied solve " + std::to_string(id) + ", which the replay never requested";
@@ -282,20 +249,26 @@ Result<std::string> output_folder(const std::string& out_dir) {
 
 /// The live session's logged result against the replay's: the largest difference of the
 /// canonical model's and the cameras' entries, or infinity when only one of them has a result.
-void compare_results(const json& live, const json& replayed, ReplaySummary* summary) {
-  if (live.is_null() && replayed.is_null()) return;
+void compare_results(const LoggedSession& logged, const std::optional<msg::ResultSummary>& replayed,
+                     ReplaySummary* summary) {
+  const auto& live = logged.result;
+  if (!logged.result_defect.empty()) {
+    summary->live_result = true;
+    summary->max_difference = INFINITY;
+    summary->notes.push_back("the live session's logged result cannot be read (" + logged.result_defect +
+                             ")");
+    return;
+  }
+  if (!live && !replayed) return;
   summary->live_result = true;
-  if (!live.is_null() && !replayed.is_null()) {
-    summary->max_difference =
-        std::max(max_difference(live.value("imu", json()), replayed.value("imu", json())),
-                 max_difference(live.value("cameras", json()), replayed.value("cameras", json())));
+  if (live && replayed) {
+    summary->max_difference = max_difference(*live, *replayed);
     return;
   }
   summary->max_difference = INFINITY;
-  summary->notes.push_back(live.is_null()
-                               ? "the replay produced a result but the live session logged none (its "
-                                 "result event is missing)"
-                               : "the live session logged a result but the replay produced none");
+  summary->notes.push_back(!live ? "the replay produced a result but the live session logged none (its "
+                                   "result event is missing)"
+                                 : "the live session logged a result but the replay produced none");
 }
 
 }  // namespace
@@ -351,7 +324,7 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
   // t = INT64_MAX), after it.
   auto apply_until = [&](std::optional<TimeNs> t_ns) {
     while (next < logged->inputs.size() && (!t_ns || logged->inputs[next].t_ns < *t_ns)) {
-      if (!apply(engine, host, logged->inputs[next].message, summary, &why)) return false;
+      if (!apply(engine, host, logged->inputs[next], summary, &why)) return false;
       ++next;
     }
     return true;
@@ -396,7 +369,7 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
     summary.imu = engine.result()->imu;
     summary.result_files = engine.result()->result_files;
   }
-  compare_results(logged->result, host.result_, &summary);
+  compare_results(*logged, host.result_, &summary);
   return summary;
 }
 

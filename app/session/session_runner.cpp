@@ -110,6 +110,7 @@ static Status solve_camera_chain(const RigConfig& config, const std::string& dir
     intrinsics.camera = cam.intrinsics.camera;
     intrinsics.camera_stream = cam.stream.name;
     intrinsics.rostopic = "/" + cam.stream.name + "/image_raw";
+    set_intrinsics_covariance(cam.intrinsics, &intrinsics);
     if (c > 0) {
       intrinsics.T_cn_cnm1 = chain->chain.cameras[c].T_cn_cnm1;
       intrinsics.T_cn_cnm1_covariance = chain->chain.cameras[c].T_cn_cnm1_covariance;
@@ -157,6 +158,7 @@ static Result<std::vector<std::string>> solve_camimu(
     // estimated on the trajectory (docs/config.md); a global one as always.
     const Shutter& shutter = config.cameras[i].shutter;
     cq.known_shutter = shutter;
+    cq.known_stamp_row = shutter.rolling();  // the configuration's rolling camera names its row
     if (shutter.rolling()) {
       cq.shutter.mode = calib::ShutterSolveOptions::Mode::kRolling;
       if (shutter.line_delay_s > 0.0) cq.shutter.line_delay_s = shutter.line_delay_s;
@@ -172,6 +174,7 @@ static Result<std::vector<std::string>> solve_camimu(
     intrinsics.camera = cam->intrinsics.camera;
     intrinsics.camera_stream = cam->stream.name;
     intrinsics.rostopic = "/" + cam->stream.name + "/image_raw";
+    set_intrinsics_covariance(cam->intrinsics, &intrinsics);
     q.cameras.push_back(std::move(intrinsics));
   }
   // The static result as the IMU's prior, as solved (its file names it in the report).
@@ -597,9 +600,8 @@ void SessionRunner::on_frame(std::size_t camera, drivers::camera::Frame& frame,
   // Replay reads what the engine saw from this event (docs/service-session.md).
   if (log_) {
     // At the engine's time, as replay applies inputs (after the sample of that time).
-    const json e = {{"camera", camera}, {"t_ns", t_ns}, {"seen", seen}};
     if (auto s = log_->append_event(
-            {engine_.now_ns(), "frame", e.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)});
+            {engine_.now_ns(), "frame", session_msg::dump(session_msg::FrameEvent{camera, t_ns, seen})});
         !s.ok())
       warn("session log: " + s.error().message);
   }
@@ -608,23 +610,21 @@ void SessionRunner::on_frame(std::size_t camera, drivers::camera::Frame& frame,
 
 void SessionRunner::fault(const std::string& source, const std::string& text) { engine_.fault(source, text); }
 
-void SessionRunner::emit(const json& message) {
-  const std::string type = message.value("type", "");
-  if (type == "done" && !dir_.empty() && !message.contains("session_dir")) {
+void SessionRunner::emit(const SessionMessage& message) {
+  const auto* done = std::get_if<session_msg::Done>(&message);
+  if (done && !dir_.empty() && !done->session_dir) {
     // The end of a session names its folder (where the logs, results and reports are).
-    json done = message;
-    done["session_dir"] = dir_;
-    emit(done);
+    session_msg::Done named = *done;
+    named.session_dir = dir_;
+    emit(named);
     return;
   }
   if (log_) {
-    if (auto s = log_->append_event({engine_.now_ns(), "session",
-                                     message.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)});
-        !s.ok())
+    if (auto s = log_->append_event({engine_.now_ns(), "session", session_msg::dump(message)}); !s.ok())
       warn("session log: " + s.error().message);
   }
   if (options_.broadcast) options_.broadcast(message);
-  if (type == "done") {
+  if (done) {
     if (log_) (void)log_->flush();
     close_log();
   }

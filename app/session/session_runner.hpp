@@ -9,7 +9,6 @@
 #include <functional>
 #include <memory>
 #include <mutex>
-#include <nlohmann/json.hpp>
 #include <span>
 #include <string>
 #include <thread>
@@ -40,7 +39,7 @@ struct RunnerOptions {
   /// solves and writes run inline, on the caller's thread (replay, tests).
   std::function<void(std::function<void()>)> post;
   /// Every message the engine emits, for observers (the control socket).
-  std::function<void(const nlohmann::json&)> broadcast;
+  std::function<void(const SessionMessage&)> broadcast;
   /// Probes the devices and reads the stored calibration (preflight step).
   std::function<PreflightReport()> preflight;
   /// Reopens the devices after a fault.
@@ -123,7 +122,7 @@ class SessionRunner final : public EngineHost {
   bool busy();
 
   // EngineHost
-  void emit(const nlohmann::json& message) override;
+  void emit(const SessionMessage& message) override;
   PreflightReport preflight() override;
   void solve(const SolveJob& job) override;
   void write(const CalibrationRecord& record) override;

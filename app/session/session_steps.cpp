@@ -13,6 +13,8 @@
 namespace imucal::app::session {
 
 using nlohmann::json;
+using session_msg::MessageLevel;
+using K = session_msg::OperatorKey;
 
 namespace {
 
@@ -158,7 +160,7 @@ void SessionEngine::on_frame(std::size_t camera, TimeNs t_ns, bool target_seen) 
 std::optional<SessionEngine::TemperatureTrend> SessionEngine::temperature_trend(
     const ImuSample& si, const std::string& no_temperature) {
   if (!std::isfinite(si.temperature)) {
-    message("warning", no_temperature);
+    message(MessageLevel::kWarning, no_temperature);
     return std::nullopt;
   }
   if (temps_.empty() || si.t_ns - last_temp_ns_ >= 500'000'000) {
@@ -200,10 +202,11 @@ void SessionEngine::sample_warmup(const ImuSample& si) {
           "Elapsed " + fixed(elapsed, 0) + " s of at most " + fixed(config_.session.warmup_timeout_s, 0) +
               " s"},
          std::min(1.0, trend->window_s / config_.session.warmup_window_s),
-         {{"temperature_c", si.temperature}, {"rate_c_per_min", rate}});
+         session_msg::WarmupFigures{si.temperature, rate});
   }
   if (trend->settled) {
-    message("info", "Warm: " + fixed(si.temperature, 2) + " C, changing " + fixed(rate, 2) + " C/min");
+    message(MessageLevel::kInfo,
+            "Warm: " + fixed(si.temperature, 2) + " C, changing " + fixed(rate, 2) + " C/min");
     advance();
   } else if (elapsed > config_.session.warmup_timeout_s) {
     fault("imu", "the temperature did not settle within " + fixed(config_.session.warmup_timeout_s, 0) +
@@ -220,7 +223,7 @@ void SessionEngine::record_thermal(const ImuSample& si, bool still) {
     // The model needs one attitude throughout (gravity's projection is in the accelerometer's
     // bias): a recording the rig moved in starts again.
     if (!thermal_->empty())
-      message("warning",
+      message(MessageLevel::kWarning,
               "Motion during the thermal recording: it starts again from here; keep the rig still");
     thermal_->clear();
     thermal_sum_ = {};
@@ -303,11 +306,7 @@ void SessionEngine::sample_thermal(const ImuSample& si) {
           "Elapsed " + fixed(elapsed, 0) + " s of at most " + fixed(config_.session.thermal_timeout_s, 0) +
               " s; c ends the recording"},
          std::min(1.0, (hi - lo) / config_.session.thermal_min_span_c),
-         {{"temperature_c", si.temperature},
-          {"rate_c_per_min", rate},
-          {"range_c", {lo, hi}},
-          {"gyro_slope_dps_per_c", {gyro_slope.x() / kDeg, gyro_slope.y() / kDeg, gyro_slope.z() / kDeg}},
-          {"accel_slope_mps2_per_c", {accel_slope.x(), accel_slope.y(), accel_slope.z()}}});
+         session_msg::ThermalFigures{si.temperature, rate, {lo, hi}, gyro_slope / kDeg, accel_slope});
   }
   if (trend->settled) {
     end_thermal("the temperature settled at " + fixed(si.temperature, 2) + " C");
@@ -321,14 +320,15 @@ void SessionEngine::end_thermal(const std::string& why) {
   const double minutes =
       thermal_->empty() ? 0.0 : seconds(thermal_->back().t_ns - thermal_->front().t_ns) / 60.0;
   if (hi - lo < config_.session.thermal_min_span_c) {
-    message("warning",
+    message(MessageLevel::kWarning,
             "Thermal recording " + why + ": the die moved " + fixed(hi - lo, 2) +
                 " C, less than session.thermal_min_span_c (" + fixed(config_.session.thermal_min_span_c, 1) +
                 " C): no thermal model. Start from a cold rig, or warm it (a heater), for a model");
     thermal_->clear();
   } else {
-    message("info", "Thermal recording " + why + ": " + fixed(lo, 2) + " .. " + fixed(hi, 2) + " C over " +
-                        fixed(minutes, 1) + " min; the model is fitted with the final solve");
+    message(MessageLevel::kInfo, "Thermal recording " + why + ": " + fixed(lo, 2) + " .. " + fixed(hi, 2) +
+                                     " C over " + fixed(minutes, 1) +
+                                     " min; the model is fitted with the final solve");
   }
   advance();
 }
@@ -337,7 +337,7 @@ void SessionEngine::sample_still(const ImuSample& si, bool still) {
   if (!still) {
     if (still_since_ns_ >= 0 || samples_->size() > window_->size) {
       if (still_since_ns_ >= 0)
-        message("warning", "Motion detected: keep the rig still; the countdown restarts");
+        message(MessageLevel::kWarning, "Motion detected: keep the rig still; the countdown restarts");
       still_since_ns_ = -1;
       samples_->clear();  // the still period the calibration uses must be still from its start
     }
@@ -358,7 +358,8 @@ void SessionEngine::sample_still(const ImuSample& si, bool still) {
   if (held >= config_.session.still_s) {
     gyro_bias_ = still_gyro_sum_ / static_cast<double>(still_count_);
     bias_known_ = true;
-    message("info", "Still start done: gyro bias " + fixed(gyro_bias_.norm() / kDeg, 3) + " deg/s");
+    message(MessageLevel::kInfo,
+            "Still start done: gyro bias " + fixed(gyro_bias_.norm() / kDeg, 3) + " deg/s");
     advance();
   }
 }
@@ -372,18 +373,18 @@ void SessionEngine::poses_prompt() {
                                   [&](const Eigen::Vector3d& p) { return angle_deg(p, kFaces[f]) < 50.0; });
     if (!near) {
       text += ". Next: " + guide_.instruction(kFaces[f]);
-      prompt(text, {"continue", "redo", "abort"}, guide_.drawing(kFaces[f]), &kFaces[f]);
+      prompt(text, {K::kContinue, K::kRedo, K::kAbort}, guide_.drawing(kFaces[f]), &kFaces[f]);
       return;
     }
   }
   if (!poses_.empty()) text += ". Every side has been up: now tilt between them";
-  prompt(text, {"continue", "redo", "abort"});
+  prompt(text, {K::kContinue, K::kRedo, K::kAbort});
 }
 
 void SessionEngine::face_prompt() {
   prompt("Six-face holds, " + std::to_string(face_ + 1) + " of 6: " + guide_.instruction(kFaces[face_]) +
              ", and hold it still",
-         {"redo", "skip", "abort"}, guide_.drawing(kFaces[face_]), &kFaces[face_]);
+         {K::kRedo, K::kSkip, K::kAbort}, guide_.drawing(kFaces[face_]), &kFaces[face_]);
 }
 
 std::string SessionEngine::missing_words() const {
@@ -396,8 +397,8 @@ std::string SessionEngine::missing_words() const {
   return words;
 }
 
-json SessionEngine::coverage() const {
-  json missing = json::array();
+std::vector<std::string> SessionEngine::coverage() const {
+  std::vector<std::string> missing;
   for (int f = 0; f < 6; ++f) {
     const bool near = std::any_of(poses_.begin(), poses_.end(),
                                   [&](const Eigen::Vector3d& p) { return angle_deg(p, kFaces[f]) < 50.0; });
@@ -411,20 +412,22 @@ void SessionEngine::capture_pose() {
   for (std::size_t i = 0; i < poses_.size(); ++i) {
     const double a = angle_deg(up, poses_[i]);
     if (a < config_.session.pose_min_angle_deg) {
-      message("warning", "Too close to pose " + std::to_string(i + 1) + " (" + fixed(a, 0) +
-                             " deg apart): turn at least " + fixed(config_.session.pose_min_angle_deg, 0) +
-                             " deg further");
+      message(MessageLevel::kWarning,
+              "Too close to pose " + std::to_string(i + 1) + " (" + fixed(a, 0) +
+                  " deg apart): turn at least " + fixed(config_.session.pose_min_angle_deg, 0) +
+                  " deg further",
+              session_msg::MessageCause::kPoseRefused);
       need_motion_ = true;
       return;
     }
   }
   poses_.push_back(up);
   need_motion_ = true;
-  emit({{"type", "pose"}, {"index", poses_.size()}, {"up", {up.x(), up.y(), up.z()}}});
+  emit(session_msg::PoseCaptured{std::nullopt, poses_.size(), up});
   std::string text = "Pose " + std::to_string(poses_.size()) + " captured";
   const std::string missing = missing_words();
   if (!missing.empty()) text += "; not yet up: " + missing;
-  message("info", text);
+  message(MessageLevel::kInfo, text);
   poses_prompt();  // the next direction to cover
   // The quick solve waits for the rig to move on: the static detector needs the end of the hold
   // (its variance window reaches past it) to count it as an attitude.
@@ -464,12 +467,12 @@ void SessionEngine::sample_poses(const ImuSample& si, bool still) {
                                   : "Scale sigma: " + fixed(scale_sigma * 1e3, 2) + "e-3 (target " +
                                         fixed(config_.session.pose_sigma_target * 1e3, 2) + "e-3)"},
          std::min(1.0, static_cast<double>(poses_.size()) / target),
-         {{"poses", poses_.size()}, {"still", still}, {"missing", coverage()}, {"scale_sigma", scale_sigma}});
+         session_msg::PoseFigures{poses_.size(), still, coverage(), scale_sigma});
   }
   // Done: enough poses and the last quick solve, over all of them, meets the sigma target.
   if (static_cast<int>(poses_.size()) >= target && quick_ && quick_poses_ == poses_.size() &&
       scale_sigma <= config_.session.pose_sigma_target) {
-    message("info",
+    message(MessageLevel::kInfo,
             std::to_string(poses_.size()) + " poses, scale sigma " + fixed(scale_sigma * 1e3, 2) + "e-3");
     advance();
   }
@@ -490,8 +493,10 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
       int nearest = 0;
       for (int f = 1; f < 6; ++f)
         if (angle_deg(up, kFaces[f]) < angle_deg(up, kFaces[nearest])) nearest = f;
-      message("warning", "This is " + guide_.up_name(kFaces[nearest]) + " (" + fixed(off, 0) + " deg off); " +
-                             guide_.instruction(kFaces[face_]));
+      message(MessageLevel::kWarning,
+              "This is " + guide_.up_name(kFaces[nearest]) + " (" + fixed(off, 0) + " deg off); " +
+                  guide_.instruction(kFaces[face_]),
+              session_msg::MessageCause::kWrongFace);
       need_motion_ = true;
     }
     return;
@@ -504,12 +509,12 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
           "Faces done: " + std::to_string(face_) + " of 6"},
          (face_ + std::min(1.0, held / config_.session.gsens_hold_s)) / 6.0);
   if (held < config_.session.gsens_hold_s) return;
-  emit({{"type", "face"}, {"face", kFaceNames[face_]}, {"up", {up.x(), up.y(), up.z()}}});
+  emit(session_msg::FaceHeld{std::nullopt, kFaceNames[face_], up});
   ++face_;
   need_motion_ = true;
   still_since_ns_ = -1;
   if (face_ >= 6) {
-    message("info", "All six faces held");
+    message(MessageLevel::kInfo, "All six faces held");
     advance();
     return;
   }
@@ -526,7 +531,8 @@ void SessionEngine::sample_motion(const ImuSample& si) {
   const double gyro_fs = info_.gyro_full_scale_dps * kDeg;
   if ((accel_fs > 0 && si.accel.cwiseAbs().maxCoeff() > 0.98 * accel_fs) ||
       (gyro_fs > 0 && si.gyro.cwiseAbs().maxCoeff() > 0.98 * gyro_fs)) {
-    if (saturated_++ % 200 == 0) message("warning", "Too fast: the IMU saturates; move more gently");
+    if (saturated_++ % 200 == 0)
+      message(MessageLevel::kWarning, "Too fast: the IMU saturates; move more gently");
   }
   const double elapsed = seconds(si.t_ns - step_start_ns_);
   if (live_due()) {
@@ -567,12 +573,12 @@ void SessionEngine::sample_motion(const ImuSample& si) {
     if (frames_ > 0 && last_seen_ns_ >= 0 && si.t_ns - last_seen_ns_ > 1'000'000'000)
       lines.push_back("Target lost: bring it back into view");
     live(lines, std::min(1.0, elapsed / config_.session.motion_s),
-         {{"gyro_rms_dps", {gyro_rms.x() / kDeg, gyro_rms.y() / kDeg, gyro_rms.z() / kDeg}},
-          {"frames", frames_},
-          {"frames_seen", frames_seen_},
-          {"camera_frames", camera_frames_},
-          {"camera_frames_seen", camera_seen_},
-          {"frames_seen_by_every_camera", frames_shared_}});
+         session_msg::MotionFigures{gyro_rms / kDeg,
+                                    frames_,
+                                    frames_seen_,
+                                    {camera_frames_.begin(), camera_frames_.end()},
+                                    {camera_seen_.begin(), camera_seen_.end()},
+                                    frames_shared_});
   }
   if (elapsed >= config_.session.motion_s) advance();
 }
@@ -621,7 +627,8 @@ void SessionEngine::evaluate_gates() {
   gates_pass_ = std::all_of(gates_.begin(), gates_.end(), [](const Gate& g) { return g.pass; });
 }
 
-std::vector<std::string> SessionEngine::difference_to_stored(json* diff) const {
+std::vector<std::string> SessionEngine::difference_to_stored(
+    std::optional<session_msg::Review::Difference>* diff) const {
   if (!final_->imu) return {};
   if (stored_.is_null() || !stored_.contains("imu")) return {"Stored calibration: none; this is the first"};
   const json& imu = stored_["imu"];
@@ -646,10 +653,7 @@ std::vector<std::string> SessionEngine::difference_to_stored(json* diff) const {
     auto v3 = [](const Eigen::Vector3d& v, double k, int d) {
       return fixed(v.x() * k, d) + " " + fixed(v.y() * k, d) + " " + fixed(v.z() * k, d);
     };
-    *diff = {{"b_a", {db_a.x(), db_a.y(), db_a.z()}},
-             {"b_g", {db_g.x(), db_g.y(), db_g.z()}},
-             {"scale_a", {ds_a.x(), ds_a.y(), ds_a.z()}},
-             {"scale_g", {ds_g.x(), ds_g.y(), ds_g.z()}}};
+    *diff = session_msg::Review::Difference{db_a, db_g, ds_a, ds_g};
     const std::string unit = info_.units == ImuUnits::kRaw ? " counts" : "";
     return {"Change to the stored calibration (" + stored_.value("summary", std::string("stored")) + "):",
             "  accel bias " + v3(db_a, 1.0, 3) + unit + ", scale " + v3(ds_a, 1e3, 3) + " e-3",
@@ -661,10 +665,8 @@ std::vector<std::string> SessionEngine::difference_to_stored(json* diff) const {
 
 void SessionEngine::review() {
   state_ = SessionState::kReview;
-  json gates = json::array();
-  for (const auto& g : gates_)
-    gates.push_back(
-        {{"name", g.name}, {"value", g.value}, {"limit", g.limit}, {"pass", g.pass}, {"digits", g.digits}});
+  session_msg::Review review_message;
+  for (const auto& g : gates_) review_message.gates.push_back({g.name, g.value, g.limit, g.pass, g.digits});
   std::vector<std::string> lines;
   if (final_->imu) {
     const auto& r = *final_->imu;
@@ -710,23 +712,21 @@ void SessionEngine::review() {
     for (const std::string& note : final_->record->notes)
       if (note.starts_with("cameras kept")) lines.push_back("Cameras: " + note);
   }
-  json diff;
-  for (auto& line : difference_to_stored(&diff)) lines.push_back(std::move(line));
-  emit({{"type", "review"},
-        {"pass", gates_pass_},
-        {"gates", gates},
-        {"lines", lines},
-        {"difference_to_stored", diff},
-        {"files", final_->result_files}});
+  for (auto& line : difference_to_stored(&review_message.difference_to_stored))
+    lines.push_back(std::move(line));
+  review_message.pass = gates_pass_;
+  review_message.lines = std::move(lines);
+  review_message.files = final_->result_files;
+  emit(std::move(review_message));
   if (gates_pass_ && config_.session.auto_write) {
-    message("info", "Every gate passed; writing (session.auto_write)");
+    message(MessageLevel::kInfo, "Every gate passed; writing (session.auto_write)");
     state_ = SessionState::kRunning;
     advance();
     return;
   }
   prompt(gates_pass_ ? "Every gate passed. Press y to accept and write, n to reject"
                      : "A gate failed. Press y to write anyway, n to reject",
-         {"accept", "reject", "abort"});
+         {K::kAccept, K::kReject, K::kAbort});
 }
 
 }  // namespace imucal::app::session

@@ -80,7 +80,7 @@ void add_shutter_options(CLI::App* cmd, ShutterArgs* args, const std::string& sh
   cmd->add_option(
          "--stamp-row", args->stamp_row,
          "The row a frame's stamp refers to: first, middle or last (default: the camera file's, else "
-         "first)")
+         "what the log says of the stream's stamps: end-of-frame the last row, mid-exposure the first)")
       ->check(CLI::IsMember({"first", "middle", "last"}));
 }
 

@@ -209,6 +209,7 @@ void run(const CameraCliOptions& o) {
   q.cache_dir = detection_cache_dir(o.detections);
   q.shutter = shutter;
   apply_shutter_args(o.shutter, &q.known_shutter);
+  q.known_stamp_row = !o.shutter.stamp_row.empty();
   Progress detecting("detecting the target", 1.0);
   Progress solving("solving", 1.0);
   q.detection_progress = [&detecting](double f) { detecting.update(f); };

@@ -105,7 +105,10 @@ app::CamImuRequest build_request(const CamImuCliOptions& o) {
                     : o.model == "extended" ? CamImuModelKind::kExtended
                                             : CamImuModelKind::kAuto;
   q.options.shutter = shutter;
-  for (auto& cam : q.cameras) apply_shutter_args(o.shutter, &cam.camera.shutter);
+  for (auto& cam : q.cameras) {
+    apply_shutter_args(o.shutter, &cam.camera.shutter);
+    cam.stamp_row_given = cam.stamp_row_given || !o.shutter.stamp_row.empty();
+  }
   q.options.imu_noise_from_residuals = !o.keep_noise;
   q.options.prior.enabled = !o.no_prior;
   for (const auto& name : o.fix) {
@@ -164,6 +167,14 @@ void print_camera(const CamImuCalibrationResult& res, const CamImuCameraResult& 
         stamp_row_name(c.camera.shutter.stamp_row));
   }
   if (!c.shutter_choice.empty()) std::printf("    shutter: %s\n", c.shutter_choice.c_str());
+  if (!c.intrinsics_uncertainty.empty()) {
+    std::printf("    intrinsics (held): %s", c.intrinsics_uncertainty.c_str());
+    if (c.translation_sigma_from_intrinsics_m.allFinite())
+      std::printf("; their share of the sigmas: translation %s mm, rotation %s deg",
+                  sig3(c.translation_sigma_from_intrinsics_m, 1e3, 2).c_str(),
+                  sig3(c.rotation_sigma_from_intrinsics_rad, kDeg, 4).c_str());
+    std::printf("\n");
+  }
   std::printf("    reprojection RMS %.4f px over %d corners, %d down-weighted as outliers\n",
               c.reprojection_rms_px, c.corners, c.outlier_corners);
 }

@@ -13,141 +13,95 @@ namespace imucal::ctl {
 namespace {
 
 using nlohmann::json;
+namespace msg = session_msg;
 
-// Service messages are parsed defensively: a field of the wrong type reads as absent.
-std::string str(const json& j, const char* key) {
-  if (j.is_object()) {
-    const auto it = j.find(key);
-    if (it != j.end() && it->is_string()) {
-      return it->get<std::string>();
-    }
+std::string step_text(const std::optional<msg::StepId>& step) { return step ? msg::step_name(*step) : ""; }
+
+std::string mark(msg::StepState state) {
+  switch (state) {
+    case msg::StepState::kDone:
+      return "[x]";
+    case msg::StepState::kActive:
+      return "[>]";
+    case msg::StepState::kSkipped:
+      return "[-]";
+    case msg::StepState::kFailed:
+      return "[!]";
+    case msg::StepState::kPending:
+      break;
   }
-  return {};
-}
-
-std::optional<double> num(const json& j, const char* key) {
-  if (j.is_object()) {
-    const auto it = j.find(key);
-    if (it != j.end() && it->is_number()) {
-      return it->get<double>();
-    }
-  }
-  return std::nullopt;
-}
-
-bool flag(const json& j, const char* key, bool fallback) {
-  if (j.is_object()) {
-    const auto it = j.find(key);
-    if (it != j.end() && it->is_boolean()) {
-      return it->get<bool>();
-    }
-  }
-  return fallback;
-}
-
-const json& array(const json& j, const char* key) {
-  static const json empty = json::array();
-  if (j.is_object()) {
-    const auto it = j.find(key);
-    if (it != j.end() && it->is_array()) {
-      return *it;
-    }
-  }
-  return empty;
-}
-
-std::string mark(const std::string& state) {
-  if (state == "done") return "[x]";
-  if (state == "active") return "[>]";
-  if (state == "skipped") return "[-]";
-  if (state == "failed") return "[!]";
   return "[ ]";
 }
 
-std::string fault_text(const json& message) {
+std::string fault_text(const msg::Fault& message) {
   std::string text = "FAULT";
-  if (const auto step = str(message, "step"); !step.empty()) {
-    text += " [" + step + "]";
+  if (message.step) {
+    text += " [" + step_text(message.step) + "]";
   }
-  text += ": " + str(message, "text");
-  if (const auto advice = str(message, "advice"); !advice.empty()) {
-    text += " -- " + advice;
+  text += ": " + message.text;
+  if (!message.advice.empty()) {
+    text += " -- " + message.advice;
   }
   return text;
 }
 
-std::string message_text(const json& message) {
-  const std::string level = str(message, "level").empty() ? "info" : str(message, "level");
-  return level + ": " + str(message, "text");
+std::string message_text(const msg::Message& message) {
+  return std::string(msg::level_name(message.level)) + ": " + message.text;
 }
 
 // "step 3 of 5: poses" from the status's step list, or just the step's name.
-std::string step_position(const json& status) {
-  const std::string step = str(status, "step");
-  const json& steps = array(status, "steps");
-  for (std::size_t i = 0; i < steps.size(); ++i) {
-    if (str(steps[i], "name") == step && !step.empty()) {
-      return "step " + std::to_string(i + 1) + " of " + std::to_string(steps.size()) + ": " + step;
+std::string step_position(const msg::Status& status) {
+  if (!status.step) return "";
+  const std::string step = step_text(status.step);
+  for (std::size_t i = 0; i < status.steps.size(); ++i) {
+    if (status.steps[i].name == *status.step) {
+      return "step " + std::to_string(i + 1) + " of " + std::to_string(status.steps.size()) + ": " + step;
     }
   }
-  return step.empty() ? "" : "step: " + step;
+  return "step: " + step;
 }
 
-bool is_running(const json& status) {
-  const std::string state = str(status, "state");
-  return state == "running" || state == "review";
+bool is_running(const msg::Status& status) {
+  return status.state == msg::SessionState::kRunning || status.state == msg::SessionState::kReview;
 }
 
 std::string header(const ConsoleState& state, double idle_s) {
-  const json& status = state.status;
-  if (!status.is_object()) {
+  if (!state.status) {
     return "imucal  (waiting for the service's status)";
   }
-  std::string line = "imucal  rig " + (str(status, "rig").empty() ? "?" : str(status, "rig"));
-  line += "  |  " + (str(status, "state").empty() ? "?" : str(status, "state"));
+  const msg::Status& status = *state.status;
+  std::string line = "imucal  rig " + (status.rig.empty() ? "?" : status.rig);
+  line += "  |  " + std::string(msg::session_state_name(status.state));
   if (const auto position = step_position(status); !position.empty()) {
     line += "  |  " + position;
   }
-  if (auto elapsed = num(status, "elapsed_s"); elapsed && str(status, "state") != "idle") {
+  if (double elapsed = status.elapsed_s; std::isfinite(elapsed) && status.state != msg::SessionState::kIdle) {
     // Status comes at step changes; the session's clock (every message's "t") and the wall
     // time since the last message carry the elapsed time between them.
     if (is_running(status)) {
       if (state.status_clock_s >= 0.0 && state.clock_s > state.status_clock_s) {
-        *elapsed += state.clock_s - state.status_clock_s;
+        elapsed += state.clock_s - state.status_clock_s;
       }
-      *elapsed += std::clamp(idle_s, 0.0, 86400.0);
+      elapsed += std::clamp(idle_s, 0.0, 86400.0);
     }
-    line += "  |  " + fixed(*elapsed, 0) + " s";
+    line += "  |  " + fixed(elapsed, 0) + " s";
   }
   return line;
 }
 
-std::string gate_line(const json& gate) {
-  std::string line = "  " + std::string(flag(gate, "pass", false) ? "pass " : "FAIL ") + str(gate, "name");
-  const auto value = num(gate, "value");
-  const auto limit = num(gate, "limit");
+std::string gate_line(const msg::Review::Gate& gate) {
+  std::string line = "  " + std::string(gate.pass ? "pass " : "FAIL ") + gate.name;
   // The decimals the service chose for the figure (a count has none); 3 from older services.
-  const auto digits = num(gate, "digits");
-  const int d = digits && *digits >= 0 && *digits <= 9 ? static_cast<int>(*digits) : 3;
-  if (value) {
-    line += "  " + fixed(*value, d);
-  } else if (gate.is_object() && gate.contains("value") && gate["value"].is_null()) {
+  const int d = gate.digits && *gate.digits >= 0 && *gate.digits <= 9 ? *gate.digits : 3;
+  if (std::isfinite(gate.value)) {
+    line += "  " + fixed(gate.value, d);
+  } else {
     line += "  not determined";  // a figure that could not be computed (NaN travels as null)
   }
-  if (limit) {
-    line += "  (limit " + fixed(*limit, d) + ")";
+  if (std::isfinite(gate.limit)) {
+    line += "  (limit " + fixed(gate.limit, d) + ")";
   }
   return line;
-}
-
-const char* key_letter(const std::string& key) {
-  if (key == "continue") return "c";
-  if (key == "redo") return "r";
-  if (key == "abort") return "a";
-  if (key == "accept") return "y";
-  if (key == "reject") return "n";
-  if (key == "skip") return "s";
-  return nullptr;
 }
 
 std::string key_help(const ConsoleState& state) {
@@ -157,19 +111,16 @@ std::string key_help(const ConsoleState& state) {
   if (state.observe) {
     return "observing (keys are not sent)  q detach";
   }
-  if (state.status.is_object() && !is_running(state.status)) {
-    return std::string(state.done.is_object() ? "c start the next session" : "c start a session") +
-           "  q detach";
+  if (state.status && !is_running(*state.status)) {
+    return std::string(state.done ? "c start the next session" : "c start a session") + "  q detach";
   }
   std::string help;
-  for (const auto& key : array(state.prompt, "keys")) {
-    if (key.is_string()) {
-      if (const char* letter = key_letter(key.get<std::string>())) {
-        help += std::string(letter) + " " + key.get<std::string>() + "  ";
-      }
+  if (state.prompt) {
+    for (const msg::OperatorKey key : state.prompt->keys) {
+      help += std::string(1, msg::key_letter(key)) + " " + msg::key_name(key) + "  ";
     }
   }
-  if (state.status.is_object()) {
+  if (state.status) {
     help += "R restart  ";
   }
   return help + "q detach";
@@ -222,25 +173,26 @@ struct Block {
 
 Block steps_block(const ConsoleState& state, bool compact) {
   Block block;
-  const json& steps = array(state.status, "steps");
+  if (!state.status) return block;
+  const auto& steps = state.status->steps;
   if (compact) {
     std::string line;
     for (const auto& step : steps) {
-      line += (line.empty() ? " " : "  ") + mark(str(step, "state")) + " " + str(step, "name");
+      line += (line.empty() ? " " : "  ") + mark(step.state) + " " + msg::step_name(step.name);
     }
     if (!line.empty()) block.lines.push_back(line);
     return block;
   }
   for (const auto& step : steps) {
-    block.lines.push_back(" " + mark(str(step, "state")) + " " + str(step, "name"));
+    block.lines.push_back(" " + mark(step.state) + " " + msg::step_name(step.name));
   }
   return block;
 }
 
 Block prompt_block(const ConsoleState& state) {
   Block block;
-  if (state.prompt.is_object()) {
-    block.lines = {"", ">> " + str(state.prompt, "text")};
+  if (state.prompt) {
+    block.lines = {"", ">> " + state.prompt->text};
   }
   return block;
 }
@@ -248,53 +200,47 @@ Block prompt_block(const ConsoleState& state) {
 Block art_block(const ConsoleState& state) {
   Block block;
   block.wraps = false;
-  for (const auto& line : array(state.prompt, "art")) {
-    if (line.is_string()) block.lines.push_back("   " + line.get<std::string>());
-  }
+  if (!state.prompt) return block;
+  for (const auto& line : state.prompt->art) block.lines.push_back("   " + line);
   return block;
 }
 
 Block live_block(const ConsoleState& state, int width) {
   Block block;
-  if (!state.live.is_object()) return block;
+  if (!state.live) return block;
   block.lines.emplace_back("");
-  for (const auto& line : array(state.live, "lines")) {
-    if (line.is_string()) block.lines.push_back("   " + line.get<std::string>());
-  }
-  if (const auto progress = num(state.live, "progress")) {
-    block.lines.push_back("   " + progress_bar(*progress, std::clamp(width - 12, 10, 50)));
+  for (const auto& line : state.live->lines) block.lines.push_back("   " + line);
+  if (std::isfinite(state.live->progress)) {
+    block.lines.push_back("   " + progress_bar(state.live->progress, std::clamp(width - 12, 10, 50)));
   }
   return block;
 }
 
 Block review_block(const ConsoleState& state) {
   Block block;
-  if (!state.review.is_object()) return block;
+  if (!state.review) return block;
   block.lines.emplace_back("");
-  block.lines.push_back(std::string("Review: ") + (flag(state.review, "pass", false) ? "PASS" : "FAIL"));
-  for (const auto& gate : array(state.review, "gates")) {
+  block.lines.push_back(std::string("Review: ") + (state.review->pass ? "PASS" : "FAIL"));
+  for (const auto& gate : state.review->gates) {
     block.lines.push_back(gate_line(gate));
   }
-  for (const auto& line : array(state.review, "lines")) {
-    if (line.is_string()) block.lines.push_back("  " + line.get<std::string>());
-  }
+  for (const auto& line : state.review->lines) block.lines.push_back("  " + line);
   return block;
 }
 
 Block done_block(const ConsoleState& state) {
   Block block;
-  if (!state.done.is_object()) return block;
+  if (!state.done) return block;
+  const msg::Done& done = *state.done;
   block.lines.emplace_back("");
-  block.lines.push_back("Session " + str(state.done, "outcome") + ": " + str(state.done, "text"));
-  if (const std::string stored = str(state.done, "stored"); !stored.empty()) {
-    block.lines.push_back("Stored on: " + stored);
+  block.lines.push_back("Session " + std::string(msg::outcome_name(done.outcome)) + ": " + done.text);
+  if (done.stored && !done.stored->empty()) {
+    block.lines.push_back("Stored on: " + *done.stored);
   }
-  if (const std::string dir = str(state.done, "session_dir"); !dir.empty()) {
-    block.lines.push_back("Session folder: " + dir);
+  if (done.session_dir && !done.session_dir->empty()) {
+    block.lines.push_back("Session folder: " + *done.session_dir);
   }
-  for (const auto& report : array(state.done, "reports")) {
-    if (report.is_string()) block.lines.push_back("Report: " + report.get<std::string>());
-  }
+  for (const auto& report : done.reports) block.lines.push_back("Report: " + report);
   return block;
 }
 
@@ -333,64 +279,76 @@ std::vector<std::string> middle(const ConsoleState& state, std::size_t width, in
   return out;
 }
 
-}  // namespace
-
-void update(ConsoleState& state, const json& message) {
-  const std::string type = str(message, "type");
-  if (const auto t = num(message, "t"); t && std::isfinite(*t)) {
-    if (type == "status" || state.status_clock_s < 0.0) state.status_clock_s = *t;
-    state.clock_s = *t;
-  } else if (type == "status") {
-    state.status_clock_s = -1.0;  // a status without the clock (a snapshot): the next message's
+void update_reply(ConsoleState& state, const service::Reply& reply) {
+  if (!reply.ok) {
+    if (state.start_after_done && reply.cmd == service::command_name(service::Command::kAbort)) {
+      state.start_after_done = false;  // nothing to abort: start at once
+      state.outbox.push_back(service::to_json(service::plain_request(service::Command::kStart)));
+    }
+    state.notice = reply.cmd + " refused: " + reply.error;
+  } else if (reply.cmd == service::command_name(service::Command::kKey) ||
+             reply.cmd == service::command_name(service::Command::kAbort) ||
+             reply.cmd == service::command_name(service::Command::kStart) ||
+             reply.cmd == service::command_name(service::Command::kAccept)) {
+    state.notice.clear();
   }
-  if (type == "status") {
-    if (str(message, "step") != str(state.status, "step")) {
-      state.live = nullptr;  // figures of the previous step are no longer news
+}
+
+/// What the console does with each kind of session message.
+struct Fold {
+  ConsoleState& state;
+  void operator()(const msg::Status& m) const {
+    if (!state.status || m.step != state.status->step) {
+      state.live.reset();  // figures of the previous step are no longer news
     }
-    const std::string session = str(message, "state");
-    if (session == "running" || session == "idle") {
-      state.review = nullptr;
+    if (m.state == msg::SessionState::kRunning || m.state == msg::SessionState::kIdle) {
+      state.review.reset();
     }
-    if (session == "running") {
-      state.done = nullptr;
+    if (m.state == msg::SessionState::kRunning) {
+      state.done.reset();
     }
-    state.status = message;
-  } else if (type == "prompt") {
-    if (str(message, "step") != str(state.live, "step")) {
-      state.live = nullptr;
+    state.status = m;
+  }
+  void operator()(const msg::Prompt& m) const {
+    if (!state.live || m.step != state.live->step) {
+      state.live.reset();
     }
-    state.prompt = message;
-  } else if (type == "live") {
-    state.live = message;
-  } else if (type == "message") {
-    add_recent(state, message_text(message));
-  } else if (type == "fault") {
-    add_recent(state, fault_text(message));
-  } else if (type == "review") {
-    state.review = message;
-  } else if (type == "done") {
-    state.done = message;
-    state.prompt = nullptr;
-    state.live = nullptr;
+    state.prompt = m;
+  }
+  void operator()(const msg::Live& m) const { state.live = m; }
+  void operator()(const msg::Message& m) const { add_recent(state, message_text(m)); }
+  void operator()(const msg::Fault& m) const { add_recent(state, fault_text(m)); }
+  void operator()(const msg::Review& m) const { state.review = m; }
+  void operator()(const msg::Done& m) const {
+    state.done = m;
+    state.prompt.reset();
+    state.live.reset();
     if (state.start_after_done) {
       state.start_after_done = false;  // restart: the session ended, the next one starts
       state.outbox.push_back(service::to_json(service::plain_request(service::Command::kStart)));
     }
-  } else if (type == "reply") {
-    if (!flag(message, "ok", true)) {
-      if (state.start_after_done && str(message, "cmd") == service::command_name(service::Command::kAbort)) {
-        state.start_after_done = false;  // nothing to abort: start at once
-        state.outbox.push_back(service::to_json(service::plain_request(service::Command::kStart)));
-      }
-      state.notice = str(message, "cmd") + " refused: " + str(message, "error");
-    } else if (const std::string cmd = str(message, "cmd");
-               cmd == service::command_name(service::Command::kKey) ||
-               cmd == service::command_name(service::Command::kAbort) ||
-               cmd == service::command_name(service::Command::kStart) ||
-               cmd == service::command_name(service::Command::kAccept)) {
-      state.notice.clear();
-    }
   }
+  template <typename Other>
+  void operator()(const Other&) const {}  // the log's bookkeeping: nothing to show
+};
+
+}  // namespace
+
+void update(ConsoleState& state, const json& message) {
+  if (const auto reply = service::parse_reply(message)) {
+    update_reply(state, *reply);
+    return;
+  }
+  const auto decoded = msg::decode(message);
+  if (!decoded.ok()) return;
+  const bool is_status = std::holds_alternative<msg::Status>(*decoded);
+  if (const auto t = msg::time_of(*decoded); t && std::isfinite(*t)) {
+    if (is_status || state.status_clock_s < 0.0) state.status_clock_s = *t;
+    state.clock_s = *t;
+  } else if (is_status) {
+    state.status_clock_s = -1.0;  // a status without the clock (a snapshot): the next message's
+  }
+  std::visit(Fold{state}, *decoded);
 }
 
 std::string render(const ConsoleState& state, const RenderOptions& options) {
@@ -440,58 +398,56 @@ std::string render(const ConsoleState& state, const RenderOptions& options) {
 
 namespace {
 
-std::optional<std::string> plain_line_of(const json& message) {
-  const std::string type = str(message, "type");
-  if (type == "status") {
-    std::string line = "status: " + str(message, "state");
-    if (const auto position = step_position(message); !position.empty()) {
+/// One line per kind of session message; none for the log's bookkeeping.
+struct PlainLine {
+  std::optional<std::string> operator()(const msg::Status& m) const {
+    std::string line = "status: " + std::string(msg::session_state_name(m.state));
+    if (const auto position = step_position(m); !position.empty()) {
       line += ", " + position;
     }
     return line;
   }
-  if (type == "prompt") {
-    return "prompt [" + str(message, "step") + "]: " + str(message, "text");
+  std::optional<std::string> operator()(const msg::Prompt& m) const {
+    return "prompt [" + step_text(m.step) + "]: " + m.text;
   }
-  if (type == "live") {
-    std::string line = "live [" + str(message, "step") + "]:";
-    for (const auto& text : array(message, "lines")) {
-      if (text.is_string()) {
-        line += " " + text.get<std::string>() + ";";
-      }
-    }
-    if (const auto progress = num(message, "progress")) {
-      line += " " + fixed(100.0 * std::clamp(*progress, 0.0, 1.0), 0) + "%";
+  std::optional<std::string> operator()(const msg::Live& m) const {
+    std::string line = "live [" + step_text(m.step) + "]:";
+    for (const auto& text : m.lines) line += " " + text + ";";
+    if (std::isfinite(m.progress)) {
+      line += " " + fixed(100.0 * std::clamp(m.progress, 0.0, 1.0), 0) + "%";
     }
     return line;
   }
-  if (type == "message") {
-    return message_text(message);
-  }
-  if (type == "fault") {
-    return fault_text(message);
-  }
-  if (type == "review") {
-    std::string line = std::string("review: ") + (flag(message, "pass", false) ? "pass" : "fail");
-    for (const auto& gate : array(message, "gates")) {
-      line += ";" + gate_line(gate).substr(1);
-    }
+  std::optional<std::string> operator()(const msg::Message& m) const { return message_text(m); }
+  std::optional<std::string> operator()(const msg::Fault& m) const { return fault_text(m); }
+  std::optional<std::string> operator()(const msg::Review& m) const {
+    std::string line = std::string("review: ") + (m.pass ? "pass" : "fail");
+    for (const auto& gate : m.gates) line += ";" + gate_line(gate).substr(1);
     return line;
   }
-  if (type == "done") {
-    const std::string stored = str(message, "stored"), dir = str(message, "session_dir");
+  std::optional<std::string> operator()(const msg::Done& m) const {
+    const std::string stored = m.stored.value_or(""), dir = m.session_dir.value_or("");
     std::string reports;
-    for (const auto& report : array(message, "reports")) {
-      if (report.is_string()) reports += (reports.empty() ? " (report " : ", ") + report.get<std::string>();
-    }
-    return "done: " + str(message, "outcome") + ": " + str(message, "text") +
+    for (const auto& report : m.reports) reports += (reports.empty() ? " (report " : ", ") + report;
+    return "done: " + std::string(msg::outcome_name(m.outcome)) + ": " + m.text +
            (stored.empty() ? std::string() : " (stored on " + stored + ")") +
            (dir.empty() ? std::string() : " (session folder " + dir + ")") +
            (reports.empty() ? "" : reports + ")");
   }
-  if (type == "reply" && !flag(message, "ok", true)) {
-    return "error: " + str(message, "cmd") + " refused: " + str(message, "error");
+  template <typename Other>
+  std::optional<std::string> operator()(const Other&) const {
+    return std::nullopt;
   }
-  return std::nullopt;
+};
+
+std::optional<std::string> plain_line_of(const json& message) {
+  if (const auto reply = service::parse_reply(message)) {
+    if (reply->ok) return std::nullopt;
+    return "error: " + reply->cmd + " refused: " + reply->error;
+  }
+  const auto decoded = msg::decode(message);
+  if (!decoded.ok()) return std::nullopt;
+  return std::visit(PlainLine{}, *decoded);
 }
 
 }  // namespace
@@ -503,30 +459,44 @@ std::optional<std::string> plain_line(const json& message) {
 }
 
 std::string status_text(const json& status) {
+  const auto decoded = msg::decode(status);
+  if (!decoded.ok() || !std::holds_alternative<msg::Status>(*decoded)) {
+    return printable_text("the service's status cannot be read (" +
+                              (decoded.ok() ? std::string("not a status") : decoded.error().message) + ")\n",
+                          true);
+  }
+  return status_text(std::get<msg::Status>(*decoded));
+}
+
+std::string status_text(const msg::Status& status) {
   std::ostringstream out;
-  out << "state:   " << str(status, "state") << '\n';
-  out << "rig:     " << str(status, "rig") << '\n';
+  out << "state:   " << msg::session_state_name(status.state) << '\n';
+  out << "rig:     " << status.rig << '\n';
   if (const auto position = step_position(status); !position.empty()) {
     out << "step:    " << position << '\n';
   }
-  const json& steps = array(status, "steps");
-  if (!steps.empty()) {
+  if (!status.steps.empty()) {
     out << "steps:  ";
-    for (const auto& step : steps) {
-      out << ' ' << mark(str(step, "state")) << ' ' << str(step, "name");
+    for (const auto& step : status.steps) {
+      out << ' ' << mark(step.state) << ' ' << msg::step_name(step.name);
     }
     out << '\n';
   }
-  if (const auto elapsed = num(status, "elapsed_s")) {
-    out << "elapsed: " << fixed(*elapsed, 1) << " s\n";
+  if (std::isfinite(status.elapsed_s)) {
+    out << "elapsed: " << fixed(status.elapsed_s, 1) << " s\n";
   }
-  if (status.is_object() && status.contains("devices") && !status["devices"].empty()) {
-    out << "devices: " << status["devices"].dump(-1, ' ', false, json::error_handler_t::replace) << '\n';
+  if (status.service) {
+    // The devices as the service reports them (their JSON form, printed).
+    msg::Status devices_only;
+    devices_only.service = status.service;
+    out << "devices: "
+        << msg::encode(devices_only).at("devices").dump(-1, ' ', false, json::error_handler_t::replace)
+        << '\n';
   }
   return printable_text(out.str(), true);
 }
 
-bool session_running(const ConsoleState& state) { return is_running(state.status); }
+bool session_running(const ConsoleState& state) { return state.status && is_running(*state.status); }
 
 KeyAction on_key(ConsoleState& state, char key) {
   if (key == 'q' || key == 3 || key == 4) {
@@ -545,13 +515,13 @@ KeyAction on_key(ConsoleState& state, char key) {
   if (state.observe) {
     return {};
   }
-  auto key_request = [](const char* name) { return service::to_json(service::key_request(name)); };
+  auto key_request = [](msg::OperatorKey key) { return service::to_json(service::key_request(key)); };
   auto ask = [&state](std::string question, json request, bool then_start = false) {
     state.confirm = Confirm{std::move(question), std::move(request), then_start};
     return KeyAction{};
   };
   const bool start_key = key == 'c' || key == ' ' || key == '\r' || key == '\n' || key == 'R';
-  if (state.status.is_object() && !is_running(state.status)) {
+  if (state.status && !is_running(*state.status)) {
     if (start_key) {
       state.notice.clear();
       return {service::to_json(service::plain_request(service::Command::kStart)), false};
@@ -559,9 +529,12 @@ KeyAction on_key(ConsoleState& state, char key) {
     state.notice = "No session is running: press c to start one";
     return {};
   }
-  const std::string step =
-      str(state.status, "step").empty() ? str(state.prompt, "step") : str(state.status, "step");
-  const auto progress = str(state.live, "step") == step ? num(state.live, "progress") : std::nullopt;
+  const std::string step = state.status && state.status->step ? step_text(state.status->step)
+                           : state.prompt                     ? step_text(state.prompt->step)
+                                                              : std::string();
+  std::optional<double> progress;
+  if (state.live && step_text(state.live->step) == step && std::isfinite(state.live->progress))
+    progress = state.live->progress;
   switch (key) {
     case 'c':
     case ' ':
@@ -571,11 +544,11 @@ KeyAction on_key(ConsoleState& state, char key) {
       if (progress && *progress < 0.999 && step != "preflight") {
         return ask(
             "End the " + step + " step now, at " + fixed(100.0 * std::clamp(*progress, 0.0, 1.0), 0) + " %?",
-            key_request("continue"));
+            key_request(msg::OperatorKey::kContinue));
       }
-      return {key_request("continue"), false};
+      return {key_request(msg::OperatorKey::kContinue), false};
     case 'r':
-      return {key_request("redo"), false};
+      return {key_request(msg::OperatorKey::kRedo), false};
     case 'a':
       return ask("Abort the session? What was recorded is kept, nothing is written.",
                  service::to_json(service::plain_request(service::Command::kAbort)));
@@ -583,14 +556,14 @@ KeyAction on_key(ConsoleState& state, char key) {
       return ask("Restart: abort this session and start a new one?",
                  service::to_json(service::plain_request(service::Command::kAbort)), true);
     case 'y':
-      return {key_request("accept"), false};
+      return {key_request(msg::OperatorKey::kAccept), false};
     case 'n':
       return ask("Reject this calibration? Nothing is written; the results stay in the session folder.",
-                 key_request("reject"));
+                 key_request(msg::OperatorKey::kReject));
     case 's':
       return ask("Skip the " + (step.empty() ? std::string("current") : step) +
                      " step? What it recorded is not used.",
-                 key_request("skip"));
+                 key_request(msg::OperatorKey::kSkip));
     default:
       return {};
   }

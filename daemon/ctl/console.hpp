@@ -8,6 +8,8 @@
 #include <optional>
 #include <string>
 
+#include "core/session_messages.hpp"
+
 namespace imucal::ctl {
 
 /// A key that throws work away (abort, reject, skip, ending a step early, restart) asks first.
@@ -18,14 +20,14 @@ struct Confirm {
 };
 
 struct ConsoleState {
-  nlohmann::json status;              // the last {"type":"status"} (null until one arrives)
-  nlohmann::json prompt;              // the prompt in force (null when none)
-  nlohmann::json live;                // the last live figures of the current step
-  nlohmann::json review;              // the review in force
-  nlohmann::json done;                // the session's outcome
-  std::deque<std::string> recent;     // the last messages and faults, oldest first
-  std::string notice;                 // the last refusal from the service or local hint
-  bool observe = false;               // observer: keys other than q are not sent
+  std::optional<session_msg::Status> status;  // the last status (none until one arrives)
+  std::optional<session_msg::Prompt> prompt;  // the prompt in force
+  std::optional<session_msg::Live> live;      // the last live figures of the current step
+  std::optional<session_msg::Review> review;  // the review in force
+  std::optional<session_msg::Done> done;      // the session's outcome
+  std::deque<std::string> recent;             // the last messages and faults, oldest first
+  std::string notice;                         // the last refusal from the service or local hint
+  bool observe = false;                       // observer: keys other than q are not sent
   std::optional<Confirm> confirm;     // a destructive key was pressed; waiting for y (or anything else: no)
   bool start_after_done = false;      // restart: the abort is sent, the start follows the end
   std::deque<nlohmann::json> outbox;  // requests update() made (a restart's start); attach sends them
@@ -36,7 +38,9 @@ struct ConsoleState {
   std::size_t max_recent = 5;
 };
 
-/// Folds one service message into the state; unknown types and malformed fields are ignored.
+/// Folds one line from the service into the state: a reply to a request, or a session message
+/// (decoded by core/session_messages.hpp). A message that does not decode (an unknown type, a
+/// malformed field) is ignored.
 void update(ConsoleState& state, const nlohmann::json& message);
 
 struct RenderOptions {
@@ -53,8 +57,10 @@ std::string render(const ConsoleState& state, const RenderOptions& options = {})
 /// (successful replies, unknown types).
 std::optional<std::string> plain_line(const nlohmann::json& message);
 
-/// A status message as a short multi-line text (imucalctl status).
+/// A status message as a short multi-line text (imucalctl status); a line that is not a status
+/// says so.
 std::string status_text(const nlohmann::json& status);
+std::string status_text(const session_msg::Status& status);
 
 struct KeyAction {
   std::optional<nlohmann::json> request;  // to send to the service

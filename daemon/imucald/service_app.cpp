@@ -209,7 +209,7 @@ Status Service::init() {
   app::session::RunnerOptions ro;
   ro.state_dir = options_.state_dir;
   ro.post = [this](std::function<void()> f) { boost::asio::post(io_, std::move(f)); };
-  ro.broadcast = [this](const json& m) { on_message(m); };
+  ro.broadcast = [this](const session_msg::SessionMessage& m) { on_message(m); };
   ro.preflight = [this] { return preflight(); };
   ro.recover = [this]() -> Status {
     if (imu_state_ == "open") return {};
@@ -301,9 +301,9 @@ Status Service::open_virtual_rig() {
   so.cold_start_c = options_.sim_cold_start_c;
   so.time_scale = options_.time_scale;
   so.operator_mode = options_.sim_operator;
-  so.press_key = [this](const std::string& k) {
+  so.press_key = [this](session_msg::OperatorKey k) {
     if (auto s = runner_->engine().key(k); !s.ok())
-      spdlog::warn("scripted operator: key {}: {}", k, s.error().message);
+      spdlog::warn("scripted operator: key {}: {}", session_msg::key_name(k), s.error().message);
   };
   auto rig = (*module)->create(so);
   if (!rig.ok()) return rig.error();
@@ -361,37 +361,41 @@ void Service::imu_failed(const Error& error) {
   // what it does on any fault (a script cannot plug the IMU back in), at once.
   if (scripted) {
     boost::asio::post(io_, [this] {
-      if (auto s = runner_->engine().key("abort"); !s.ok())
+      if (auto s = runner_->engine().key(session_msg::OperatorKey::kAbort); !s.ok())
         spdlog::warn("scripted operator: abort: {}", s.error().message);
     });
   }
 }
 
-void Service::on_message(const json& m) {
+void Service::on_message(const session_msg::SessionMessage& m) {
+  using session_msg::Outcome;
   server_->broadcast(m);
   if (sim_rig_) sim_rig_->on_message(m);
-  const std::string type = m.value("type", "");
-  if (type == "prompt") {
-    spdlog::info("[{}] {}", m.value("step", ""), m.value("text", ""));
-    notifier_.status(m.value("step", "") + ": " + m.value("text", ""));
-  } else if (type == "message" || type == "fault") {
-    const std::string text = m.value("text", "");
-    if (m.value("level", "") == "warning" || type == "fault") {
-      spdlog::warn("{}", text);
+  if (const auto* prompt = std::get_if<session_msg::Prompt>(&m)) {
+    const std::string step = prompt->step ? session_msg::step_name(*prompt->step) : "";
+    spdlog::info("[{}] {}", step, prompt->text);
+    notifier_.status(step + ": " + prompt->text);
+  } else if (const auto* message = std::get_if<session_msg::Message>(&m)) {
+    if (message->level == session_msg::MessageLevel::kWarning) {
+      spdlog::warn("{}", message->text);
     } else {
-      spdlog::info("{}", text);
+      spdlog::info("{}", message->text);
     }
-  } else if (type == "result" && sim_rig_ && m.contains("imu")) {
-    const std::string table = sim_rig_->truth_report(m);
+  } else if (const auto* fault = std::get_if<session_msg::Fault>(&m)) {
+    spdlog::warn("{}", fault->text);
+  } else if (const auto* result = std::get_if<session_msg::ResultSummary>(&m);
+             result && sim_rig_ && result->imu) {
+    const std::string table = sim_rig_->truth_report(*result);
     const std::string path = runner_->session_dir() + "/sim-truth.txt";
     std::ofstream(path) << "The session's result beside the virtual rig's truth\n" << table;
     spdlog::info("result beside the virtual rig's truth ({}):\n{}", path, table);
-  } else if (type == "done") {
-    spdlog::info("session {}: {}", m.value("outcome", ""), m.value("text", ""));
+  } else if (const auto* done = std::get_if<session_msg::Done>(&m)) {
+    const std::string outcome = session_msg::outcome_name(done->outcome);
+    spdlog::info("session {}: {}", outcome, done->text);
     set_gyro_offsets(true);  // the record on the storage now, new or not
-    notifier_.status("idle: last session " + m.value("outcome", ""));
+    notifier_.status("idle: last session " + outcome);
     if (options_.exit_after_session) {
-      exit_code_ = m.value("outcome", "") == "written" || m.value("outcome", "") == "completed" ? 0 : 1;
+      exit_code_ = done->outcome == Outcome::kWritten || done->outcome == Outcome::kCompleted ? 0 : 1;
       boost::asio::post(io_, [this] { shutdown("the session ended"); });
     }
   }
@@ -638,33 +642,31 @@ void Service::camera_failed(std::size_t index, const Error& error) {
   runner_->fault(name, error.message);
 }
 
-json Service::status() {
-  json s = runner_->engine().status();
-  s["devices"] = {{"imu",
-                   {{"state", imu_state_},
-                    {"sim", options_.sim},
-                    {"samples", samples_},
-                    {"faults", imu_faults_},
-                    {"rate_hz", stream_info_.rate_hz},
-                    {"gyro_offsets", gyro_offsets_},
-                    {"error", imu_error_}}},
-                  {"storage", storage_name(config_.storage)}};
-  json cams = json::array();
+session_msg::Status Service::status() {
+  session_msg::Status s = runner_->engine().status();
+  session_msg::ServiceStatus service;
+  service.devices.imu = {imu_state_,
+                         options_.sim,
+                         static_cast<std::int64_t>(samples_),
+                         static_cast<std::int64_t>(imu_faults_),
+                         stream_info_.rate_hz,
+                         gyro_offsets_,
+                         imu_error_};
+  service.devices.storage = storage_name(config_.storage);
   for (std::size_t i = 0; i < config_.cameras.size(); ++i) {
     const CameraSlot* slot = i < cameras_.size() ? &cameras_[i] : nullptr;
-    cams.push_back({{"name", config_.cameras[i].name},
-                    {"state", slot ? slot->state : "closed"},
-                    {"frames", slot ? slot->frames : 0},
-                    {"faults", slot ? slot->faults : 0},
-                    {"error", slot ? slot->error : ""}});
+    service.devices.cameras.push_back({config_.cameras[i].name, slot ? slot->state : "closed",
+                                       slot ? static_cast<std::int64_t>(slot->frames) : 0,
+                                       slot ? static_cast<std::int64_t>(slot->faults) : 0,
+                                       slot ? slot->error : ""});
   }
-  s["devices"]["cameras"] = cams;
-  s["session_dir"] = runner_->session_dir();
-  s["version"] = kVersion;
+  service.session_dir = runner_->session_dir();
+  service.version = kVersion;
+  s.service = std::move(service);
   return s;
 }
 
-std::vector<json> Service::snapshot() {
+std::vector<session_msg::SessionMessage> Service::snapshot() {
   auto s = runner_->engine().snapshot();
   if (!s.empty()) s[0] = status();
   return s;
@@ -693,7 +695,7 @@ Status Service::start(const std::vector<std::string>& steps) {
   return {};
 }
 
-Status Service::key(const std::string& key) { return runner_->engine().key(key); }
+Status Service::key(session_msg::OperatorKey key) { return runner_->engine().key(key); }
 
 void Service::arm_watchdog() {
   const auto interval = notifier_.watchdog_interval();

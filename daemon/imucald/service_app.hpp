@@ -69,10 +69,10 @@ class Service final : public service::SessionHost {
   int run();
 
   // service::SessionHost
-  nlohmann::json status() override;
-  std::vector<nlohmann::json> snapshot() override;
+  session_msg::Status status() override;
+  std::vector<session_msg::SessionMessage> snapshot() override;
   Status start(const std::vector<std::string>& steps) override;
-  Status key(const std::string& key) override;
+  Status key(session_msg::OperatorKey key) override;
 
  private:
   Status open_imu();
@@ -87,7 +87,7 @@ class Service final : public service::SessionHost {
   void read_camera(std::size_t index);
   void camera_failed(std::size_t index, const Error& error);
   void sim_tick();
-  void on_message(const nlohmann::json& message);
+  void on_message(const session_msg::SessionMessage& message);
   void on_samples(std::span<const ImuSample> samples);
   void imu_failed(const Error& error);
   app::session::PreflightReport preflight();

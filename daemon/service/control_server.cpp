@@ -383,7 +383,7 @@ void ControlServer::Impl::on_line(Client& client, std::string_view line) {
       return;
     case Command::kStatus:
       reply({});
-      client.send(std::make_shared<const std::string>(to_line(host_.status())));
+      client.send(std::make_shared<const std::string>(to_line(session_msg::encode(host_.status()))));
       // The operator's place answers one status query; then it is free again.
       if (client.reserved && &client != controller_) client.close_after_sending(*this);
       return;
@@ -399,7 +399,7 @@ void ControlServer::Impl::on_line(Client& client, std::string_view line) {
       reply({});
       client.subscribed = true;
       for (const auto& message : host_.snapshot()) {
-        client.send(std::make_shared<const std::string>(to_line(message)));
+        client.send(std::make_shared<const std::string>(to_line(session_msg::encode(message))));
       }
       return;
     default:
@@ -601,6 +601,10 @@ Result<std::unique_ptr<ControlServer>> ControlServer::create(asio::io_context& i
 ControlServer::ControlServer(std::shared_ptr<Impl> impl) : impl_(std::move(impl)) {}
 ControlServer::~ControlServer() { impl_->close(); }
 void ControlServer::broadcast(const json& message) { impl_->broadcast(message); }
+
+void ControlServer::broadcast(const session_msg::SessionMessage& message) {
+  impl_->broadcast(session_msg::encode(message));
+}
 std::size_t ControlServer::clients() const { return impl_->clients(); }
 void ControlServer::close() { impl_->close(); }
 

@@ -61,7 +61,10 @@ class ControlServer {
   ControlServer(const ControlServer&) = delete;
   ControlServer& operator=(const ControlServer&) = delete;
 
-  /// Sends `message` to every subscribed client. Call on the io thread.
+  /// Sends the session's `message` to every subscribed client, as its JSON line. Call on the io
+  /// thread.
+  void broadcast(const session_msg::SessionMessage& message);
+  /// The same with a line already in JSON (a test's).
   void broadcast(const nlohmann::json& message);
   /// Connected clients.
   std::size_t clients() const;

@@ -82,23 +82,18 @@ Status parse_start(const json& object, Request& request) {
 Status parse_key(const json& object, Request& request) {
   const auto it = object.find("key");
   if (it == object.end() || !it->is_string()) {
-    return invalid("key: \"key\" must be a string, one of continue, redo, abort, accept, reject, skip");
+    return invalid("key: \"key\" must be a string, one of " + session_msg::key_list());
   }
-  const auto& keys = operator_keys();
-  if (std::find(keys.begin(), keys.end(), it->get_ref<const std::string&>()) == keys.end()) {
-    return invalid("key: unknown key \"" + it->get<std::string>() +
-                   "\"; use one of continue, redo, abort, accept, reject, skip");
+  const auto key = session_msg::parse_key(it->get_ref<const std::string&>());
+  if (!key.ok()) {
+    return invalid("key: unknown key \"" + it->get<std::string>() + "\"; use one of " +
+                   session_msg::key_list());
   }
-  request.key = it->get<std::string>();
+  request.key = *key;
   return {};
 }
 
 }  // namespace
-
-const std::vector<std::string>& operator_keys() {
-  static const std::vector<std::string> keys{"continue", "redo", "abort", "accept", "reject", "skip"};
-  return keys;
-}
 
 const char* command_name(Command command) {
   for (const auto& info : kCommands) {
@@ -145,10 +140,10 @@ Result<Request> parse_request(std::string_view line) {
       IMUCAL_TRY(parse_key(object, request));
       break;
     case Command::kAbort:
-      request.key = "abort";
+      request.key = session_msg::OperatorKey::kAbort;
       break;
     case Command::kAccept:
-      request.key = "accept";
+      request.key = session_msg::OperatorKey::kAccept;
       break;
     case Command::kStatus:
     case Command::kSubscribe:
@@ -168,7 +163,7 @@ json to_json(const Request& request) {
       if (!request.steps.empty()) object["steps"] = request.steps;
       break;
     case Command::kKey:
-      object["key"] = request.key;
+      object["key"] = session_msg::key_name(request.key);
       break;
     case Command::kStatus:
     case Command::kSubscribe:
@@ -194,18 +189,18 @@ Request start_request(std::vector<std::string> steps) {
   return r;
 }
 
-Request key_request(std::string key) {
+Request key_request(session_msg::OperatorKey key) {
   Request r;
   r.command = Command::kKey;
-  r.key = std::move(key);
+  r.key = key;
   return r;
 }
 
 Request plain_request(Command command) {
   Request r;
   r.command = command;
-  if (command == Command::kAbort) r.key = "abort";
-  if (command == Command::kAccept) r.key = "accept";
+  if (command == Command::kAbort) r.key = session_msg::OperatorKey::kAbort;
+  if (command == Command::kAccept) r.key = session_msg::OperatorKey::kAccept;
   return r;
 }
 
@@ -225,6 +220,21 @@ json make_reply(std::string_view cmd, const Status& status) {
   if (!status.ok()) {
     reply["error"] = status.error().message;
   }
+  return reply;
+}
+
+std::optional<Reply> parse_reply(const json& message) {
+  if (!message.is_object()) return std::nullopt;
+  const auto text = [&](const char* key) {
+    const auto it = message.find(key);
+    return it != message.end() && it->is_string() ? it->get<std::string>() : std::string();
+  };
+  if (text("type") != "reply") return std::nullopt;
+  Reply reply;
+  reply.cmd = text("cmd");
+  const auto ok = message.find("ok");
+  reply.ok = ok == message.end() || !ok->is_boolean() || ok->get<bool>();
+  reply.error = text("error");
   return reply;
 }
 

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/result.hpp"
+#include "core/session_messages.hpp"
 
 namespace imucal::service {
 
@@ -20,11 +21,9 @@ struct Request {
   std::string client;              // hello: the client's name (printable, 64 bytes at most)
   Role role = Role::kObserver;     // hello
   std::vector<std::string> steps;  // start: empty = the configured steps
-  std::string key;                 // key (abort and accept set it too)
+  // key (abort and accept set it too)
+  session_msg::OperatorKey key = session_msg::OperatorKey::kContinue;
 };
-
-/// The keys an operator can send, in the form the session takes them.
-const std::vector<std::string>& operator_keys();
 
 const char* command_name(Command command);
 bool is_control(Command command);  // start, key, abort, accept: controller only
@@ -41,7 +40,7 @@ nlohmann::json to_json(const Request& request);
 /// the configured ones), key with an operator key, and the commands without fields.
 Request hello_request(std::string client, Role role);
 Request start_request(std::vector<std::string> steps);
-Request key_request(std::string key);
+Request key_request(session_msg::OperatorKey key);
 Request plain_request(Command command);
 
 /// The "cmd" of a line that may not parse as a request, for its error reply ("" when none).
@@ -49,6 +48,16 @@ std::string command_of(std::string_view line);
 
 /// {"type":"reply","cmd":cmd,"ok":true} or with ok:false and "error".
 nlohmann::json make_reply(std::string_view cmd, const Status& status);
+
+/// A reply as a client reads it (make_reply's inverse).
+struct Reply {
+  std::string cmd;
+  bool ok = true;
+  std::string error;  // when not ok
+};
+/// The reply a line holds; none when it is not a reply (a session message). A field of the wrong
+/// kind reads as absent.
+std::optional<Reply> parse_reply(const nlohmann::json& message);
 
 /// One JSON line, newline included; invalid UTF-8 is replaced rather than thrown on.
 std::string to_line(const nlohmann::json& message);

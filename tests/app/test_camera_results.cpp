@@ -2,10 +2,16 @@
 // and text, the result YAML (read back as a Kalibr camera) and JSON.
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
+#include <tuple>
 
+#include "app/camimu_inputs.hpp"
 #include "app/results/camera_results.hpp"
 #include "core/rig_config.hpp"
 
@@ -144,6 +150,98 @@ TEST(CameraResults, YamlIsAKalibrCamchainWithImucalKeys) {
   EXPECT_TRUE(q["focal_well_determined"].as<bool>());
   EXPECT_EQ(q["target"]["targetCols"].as<int>(), 7);
   EXPECT_EQ(q["warnings"][0].as<std::string>(), "a warning");
+}
+
+// The intrinsics' covariance goes into the camera file, and calibrate camimu reads it back to
+// propagate it; a file with sigmas only (an older imucal's) is read without one, and says why.
+TEST(CameraResults, TheIntrinsicsCovarianceRoundTripsThroughTheCameraFile) {
+  const auto dir = std::filesystem::temp_directory_path() / ("imucal_cov_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const auto write_text = [&](const std::string& name, const std::string& text) {
+    const std::string path = (dir / name).string();
+    std::ofstream(path) << text;
+    return path;
+  };
+  // A pinhole and an omnidirectional camera: the file holds the model's own parameters in
+  // Kalibr's order (omni: xi first), the reader puts them back in the solves' 10 x 10 layout.
+  for (const bool omni : {false, true}) {
+    SCOPED_TRACE(omni ? "omni-radtan" : "pinhole-radtan");
+    auto r = sample_report();
+    if (omni) {
+      r.intrinsics.camera.projection = ProjectionModel::kOmni;
+      r.intrinsics.camera.projection_params = {0.9, 0.0};
+    }
+    const std::vector<int> used = kalibr_parameter_indices(r.intrinsics.camera.kind());
+    const auto n = static_cast<int>(used.size());
+    ASSERT_EQ(n, omni ? 9 : 8);
+    Eigen::MatrixXd A(n, n);
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j) A(i, j) = std::sin(1.0 + i + 3.0 * j);
+    const Eigen::MatrixXd packed = A * A.transpose() * 1e-3;
+    r.intrinsics.covariance.setZero();
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j) r.intrinsics.covariance(used[i], used[j]) = packed(i, j);
+    r.intrinsics.covariance(9, 9) = std::numeric_limits<double>::quiet_NaN();  // p2 not determined
+    const std::string text = camera_result_yaml(r);
+    const YAML::Node file = YAML::Load(text)["cam0"]["imucal"]["intrinsics_covariance"];
+    ASSERT_EQ(static_cast<int>(file.size()), n);
+    EXPECT_DOUBLE_EQ(file[0][0].as<double>(), r.intrinsics.covariance(used[0], used[0]));
+    auto cams = read_camchain(write_text("full.yaml", text));
+    ASSERT_TRUE(cams.ok()) << cams.error().message;
+    const Eigen::MatrixXd& C = (*cams)[0].intrinsics_covariance;
+    ASSERT_EQ(C.rows(), 10);
+    EXPECT_TRUE(std::isnan(C(9, 9)));
+    for (int i = 0; i < 9; ++i)
+      for (int j = 0; j < 9; ++j) EXPECT_DOUBLE_EQ(C(i, j), r.intrinsics.covariance(i, j)) << i << " " << j;
+    EXPECT_NE((*cams)[0].intrinsics_covariance_source.find("the covariance of"), std::string::npos);
+
+    YAML::Node root = YAML::Load(text);
+    root["cam0"]["imucal"].remove("intrinsics_covariance");
+    cams = read_camchain(write_text("sigmas.yaml", YAML::Dump(root)));
+    ASSERT_TRUE(cams.ok()) << cams.error().message;
+    EXPECT_EQ((*cams)[0].intrinsics_covariance.size(), 0);
+    EXPECT_NE((*cams)[0].intrinsics_covariance_source.find("not their covariance"), std::string::npos)
+        << (*cams)[0].intrinsics_covariance_source;
+
+    root["cam0"]["imucal"]["intrinsics_covariance"] = std::vector<double>{1.0, 2.0};
+    cams = read_camchain(write_text("bad.yaml", YAML::Dump(root)));
+    ASSERT_FALSE(cams.ok());
+    const std::string expected = omni ? "9 rows of 9" : "8 rows of 8";
+    EXPECT_NE(cams.error().message.find(expected), std::string::npos) << cams.error().message;
+  }
+  std::filesystem::remove_all(dir);
+}
+
+// The row a frame's stamp refers to comes from what the log says of its camera stream's stamps,
+// unless the camera file or --stamp-row named it: then a disagreement is a warning.
+TEST(CameraResults, TheStampedRowComesFromTheLogsTimestampSource) {
+  CameraStreamInfo stream;
+  stream.name = "cam0";
+  stream.timestamp_source = "end-of-frame";
+  Shutter shutter;  // first row, the default
+  auto [note, warning] = stamp_row_from_stream(stream, false, "cam0", &shutter);
+  EXPECT_EQ(shutter.stamp_row, Shutter::StampRow::kLast);
+  EXPECT_NE(note.find("end-of-frame"), std::string::npos) << note;
+  EXPECT_TRUE(warning.empty());
+
+  Shutter named;
+  named.stamp_row = Shutter::StampRow::kFirst;
+  std::tie(note, warning) = stamp_row_from_stream(stream, true, "cam0", &named);
+  EXPECT_EQ(named.stamp_row, Shutter::StampRow::kFirst);  // the file's is kept
+  EXPECT_TRUE(note.empty());
+  EXPECT_NE(warning.find("--stamp-row"), std::string::npos) << warning;
+
+  stream.timestamp_source = "mid-exposure";  // where the backends put start-of-exposure stamps
+  Shutter mid;
+  mid.stamp_row = Shutter::StampRow::kLast;
+  std::tie(note, warning) = stamp_row_from_stream(stream, false, "cam0", &mid);
+  EXPECT_EQ(mid.stamp_row, Shutter::StampRow::kFirst);
+  stream.timestamp_source = "dataset";  // says nothing: left as it is
+  Shutter left;
+  left.stamp_row = Shutter::StampRow::kMiddle;
+  std::tie(note, warning) = stamp_row_from_stream(stream, false, "cam0", &left);
+  EXPECT_EQ(left.stamp_row, Shutter::StampRow::kMiddle);
+  EXPECT_TRUE(note.empty() && warning.empty());
 }
 
 TEST(CameraResults, JsonCarriesViewsAndUndeterminedSigmasAsNull) {

@@ -2,6 +2,7 @@
 // differences: quaternion blocks through the manifold's right perturbation (tangent columns in
 // the first three ambient ones), every other block in its ambient coordinates.
 
+#include <ceres/solver.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -182,13 +183,14 @@ TEST(CamImuResiduals, RollingShutterFrameResidualJacobiansMatchNumericOnesAcross
 
 // The solver's form of a frame (7 rows) against the corners' own rows: the same cost, gradient
 // J^T r and Gauss-Newton matrix J^T J over all blocks, with corners in the robust loss's tail.
-TEST(CamImuResiduals, CompressedFrameResidualHasTheCornersCostGradientAndNormalMatrix) {
-  constexpr int N = 4;
-  const CameraModel camera = sim::CamImuSimOptions::default_sim_camera();
-  const SplineTiming<N> timing{0.0, 0.05, 20};
-  std::vector<Block> blocks =
-      frame_blocks(N + 2, Eigen::Vector3d(0.03, -0.02, 0.01), Eigen::Vector3d(0.02, -0.01, 0.004),
-                   Eigen::Vector3d(0.1, -0.2, 3.0), {0.03, -0.02, 0.01}, 0.006);
+/// The knot window of a frame whose twelve corners (twelve_corners) lie ahead of the camera.
+std::vector<Block> twelve_corner_frame_blocks(int n) {
+  return frame_blocks(n + 2, Eigen::Vector3d(0.03, -0.02, 0.01), Eigen::Vector3d(0.02, -0.01, 0.004),
+                      Eigen::Vector3d(0.1, -0.2, 3.0), {0.03, -0.02, 0.01}, 0.006);
+}
+
+/// Twelve board points and their detections: 0.4 px of noise, corner 3 an 8 px outlier.
+std::pair<std::vector<Eigen::Vector3d>, std::vector<Eigen::Vector2d>> twelve_corners() {
   std::vector<Eigen::Vector3d> pts;
   std::vector<Eigen::Vector2d> px;
   std::mt19937 rng(5);
@@ -197,38 +199,53 @@ TEST(CamImuResiduals, CompressedFrameResidualHasTheCornersCostGradientAndNormalM
     pts.emplace_back(-0.15 + 0.03 * k, 0.05 * (k % 4) - 0.07, 1.1 + 0.01 * k);
     px.emplace_back(120.0 + 11.0 * k + noise(rng) + (k == 3 ? 8.0 : 0.0), 100.0 + 6.0 * (k % 4) + noise(rng));
   }
+  return {pts, px};
+}
+
+/// The Jacobian of `cost` at `blocks` in tangent coordinates (quaternion blocks: their first three
+/// ambient columns), stacked over the blocks, and its residuals into *r.
+Eigen::MatrixXd stacked_tangent_jacobian(const ceres::CostFunction& cost, std::vector<Block>& blocks,
+                                         Eigen::VectorXd* r) {
+  const int m = cost.num_residuals();
+  const auto& sizes = cost.parameter_block_sizes();
+  std::vector<double*> ptr;
+  for (auto& b : blocks) ptr.push_back(b.data());
+  std::vector<Block> jac(blocks.size());
+  std::vector<double*> jptr;
+  int cols = 0;
+  for (std::size_t i = 0; i < blocks.size(); ++i) {
+    jac[i].assign(static_cast<std::size_t>(m * sizes[i]), 0.0);
+    jptr.push_back(jac[i].data());
+    cols += sizes[i] == 4 ? 3 : sizes[i];
+  }
+  r->resize(m);
+  EXPECT_TRUE(cost.Evaluate(ptr.data(), r->data(), jptr.data()));
+  Eigen::MatrixXd J(m, cols);
+  int c0 = 0;
+  for (std::size_t i = 0; i < blocks.size(); ++i) {
+    const int dims = sizes[i] == 4 ? 3 : sizes[i];
+    for (int row = 0; row < m; ++row)
+      for (int c = 0; c < dims; ++c) J(row, c0 + c) = jac[i][static_cast<std::size_t>(row * sizes[i] + c)];
+    c0 += dims;
+  }
+  return J;
+}
+
+TEST(CamImuResiduals, CompressedFrameResidualHasTheCornersCostGradientAndNormalMatrix) {
+  constexpr int N = 4;
+  const CameraModel camera = sim::CamImuSimOptions::default_sim_camera();
+  const SplineTiming<N> timing{0.0, 0.05, 20};
+  std::vector<Block> blocks = twelve_corner_frame_blocks(N);
+  const auto corners = twelve_corners();
+  const auto& pts = corners.first;
+  const auto& px = corners.second;
   const FrameResidual<N> full(camera, pts, px, 0.21, 1, timing, 0.3, 0.9, false);
   const FrameResidual<N> compact(camera, pts, px, 0.21, 1, timing, 0.3, 0.9, true);
   ASSERT_EQ(compact.num_residuals(), 7);
   ASSERT_EQ(full.num_residuals(), 24);
-  // Both Jacobians in tangent coordinates, stacked over the blocks.
-  const auto stacked = [&](const FrameResidual<N>& cost, Eigen::VectorXd* r) {
-    const int m = cost.num_residuals();
-    const auto& sizes = cost.parameter_block_sizes();
-    std::vector<double*> ptr;
-    for (auto& b : blocks) ptr.push_back(b.data());
-    std::vector<Block> jac(blocks.size());
-    std::vector<double*> jptr;
-    int cols = 0;
-    for (std::size_t i = 0; i < blocks.size(); ++i) {
-      jac[i].assign(static_cast<std::size_t>(m * sizes[i]), 0.0);
-      jptr.push_back(jac[i].data());
-      cols += sizes[i] == 4 ? 3 : sizes[i];
-    }
-    r->resize(m);
-    EXPECT_TRUE(cost.Evaluate(ptr.data(), r->data(), jptr.data()));
-    Eigen::MatrixXd J(m, cols);
-    int c0 = 0;
-    for (std::size_t i = 0; i < blocks.size(); ++i) {
-      const int dims = sizes[i] == 4 ? 3 : sizes[i];
-      for (int row = 0; row < m; ++row)
-        for (int c = 0; c < dims; ++c) J(row, c0 + c) = jac[i][static_cast<std::size_t>(row * sizes[i] + c)];
-      c0 += dims;
-    }
-    return J;
-  };
   Eigen::VectorXd rf, rc;
-  const Eigen::MatrixXd Jf = stacked(full, &rf), Jc = stacked(compact, &rc);
+  const Eigen::MatrixXd Jf = stacked_tangent_jacobian(full, blocks, &rf);
+  const Eigen::MatrixXd Jc = stacked_tangent_jacobian(compact, blocks, &rc);
   EXPECT_NEAR(rc.squaredNorm(), rf.squaredNorm(), 1e-9 * rf.squaredNorm());
   const Eigen::VectorXd gf = Jf.transpose() * rf, gc = Jc.transpose() * rc;
   EXPECT_LT((gc - gf).norm(), 1e-7 * gf.norm()) << gf.transpose() << "\n" << gc.transpose();
@@ -294,6 +311,123 @@ class SumAndZ final : public ceres::SizedCostFunction<2, 1, 1, 1> {
     return true;
   }
 };
+
+/// r = (a + b x + c z + d x^2 - y) / sigma with y = 1 + x / 2: a line in x with a term in z whose
+/// coefficient c may be held, and a nuisance d.
+class LineWithHeldTerm final : public ceres::SizedCostFunction<1, 1, 1, 1, 1> {
+ public:
+  LineWithHeldTerm(double x, double z, double sigma) : x_(x), z_(z), w_(1.0 / sigma) {}
+  bool Evaluate(double const* const* p, double* r, double** jac) const override {
+    r[0] = w_ * (p[0][0] + p[1][0] * x_ + p[2][0] * z_ + p[3][0] * x_ * x_ - 1.0 - 0.5 * x_);
+    const double d[4] = {1.0, x_, z_, x_ * x_};
+    if (jac)
+      for (int b = 0; b < 4; ++b)
+        if (jac[b]) jac[b][0] = w_ * d[b];
+    return true;
+  }
+
+ private:
+  double x_, z_, w_;
+};
+
+// The change of the gradient when the camera's intrinsics move (for the held-input covariance):
+// J^T dr with the corners' Jacobian and the corners' numeric change, the same for the compressed
+// and the uncompressed form of a frame.
+TEST(CamImuResiduals, IntrinsicsScoresAreTheCornersJacobianTimesTheirChange) {
+  constexpr int N = 4;
+  const CameraModel camera = sim::CamImuSimOptions::default_sim_camera();
+  const SplineTiming<N> timing{0.0, 0.05, 20};
+  std::vector<Block> blocks = twelve_corner_frame_blocks(N);
+  const auto corners = twelve_corners();
+  const auto& pts = corners.first;
+  const auto& px = corners.second;
+  const Eigen::Vector4d dk(0.8, 0.7, -0.3, 0.2), dd(0.01, -0.004, 0.001, 0.0);
+  const auto moved = [&](double f) {
+    CameraModel c = camera;
+    c.intrinsics += f * dk;
+    c.distortion_coeffs += f * dd;
+    return c;
+  };
+  std::vector<double*> ptr;
+  for (auto& b : blocks) ptr.push_back(b.data());
+  const FrameResidual<N> full(camera, pts, px, 0.21, 1, timing, 0.3, 0.9, false);
+  const FrameResidual<N> compact(camera, pts, px, 0.21, 1, timing, 0.3, 0.9, true);
+  // Numeric: the corners' residuals of cameras moved by +-1e-3 of the direction.
+  const auto residuals_of = [&](double f) {
+    const FrameResidual<N> r(moved(f), pts, px, 0.21, 1, timing, 0.3, 0.9, false);
+    Eigen::VectorXd out(r.num_residuals());
+    EXPECT_TRUE(r.Evaluate(ptr.data(), out.data(), nullptr));
+    return out;
+  };
+  const Eigen::VectorXd dr = (residuals_of(1e-3) - residuals_of(-1e-3)) / 2e-3;
+  EXPECT_GT(dr.norm(), 0.05);  // not a comparison of zeros
+  Eigen::VectorXd rf;
+  const Eigen::MatrixXd Jf = stacked_tangent_jacobian(full, blocks, &rf);
+  const Eigen::VectorXd expected = Jf.transpose() * dr;
+  const std::vector<std::pair<CameraModel, CameraModel>> moves = {{moved(1.0), moved(-1.0)}};
+  for (const FrameResidual<N>* cost : {&full, &compact}) {
+    const auto scores = cost->intrinsics_scores(ptr.data(), moves, 0.5);
+    ASSERT_EQ(scores.size(), 1u);
+    ASSERT_EQ(scores[0].size(), blocks.size());
+    Eigen::VectorXd stacked(expected.size());
+    Eigen::Index at = 0;
+    for (const auto& g : scores[0]) {
+      stacked.segment(at, g.size()) = g;
+      at += g.size();
+    }
+    ASSERT_EQ(at, expected.size());
+    EXPECT_LT((stacked - expected).norm(), 1e-3 * expected.norm()) << stacked.transpose() << "\n"
+                                                                   << expected.transpose();
+  }
+}
+
+// A held input's covariance, propagated, is the spread its own error causes in the wanted
+// parameters: y = a + b x + c z + d x^2 with c held (sigma 0.3) and d a nuisance. The problem is
+// linear, so solving with c moved by its sigma shifts (a, b) by exactly one column of the share.
+TEST(MarginalCovariance, AHeldInputsShareIsTheShiftItsErrorCauses) {
+  const double sigma_c = 0.3;
+  std::vector<double> xs, zs;
+  for (int i = 0; i < 12; ++i) {
+    xs.push_back(0.1 * i);
+    zs.push_back(std::sin(0.7 * i) + 0.2 * i);
+  }
+  double a = 0.2, b = -0.4, c = 0.7, d = 3.0;
+  ceres::Problem problem;
+  for (std::size_t i = 0; i < xs.size(); ++i)
+    problem.AddResidualBlock(new LineWithHeldTerm(xs[i], zs[i], 0.1), nullptr, &a, &b, &c, &d);
+  problem.SetParameterBlockConstant(&c);
+  const auto solve = [&] {
+    ceres::Solver::Options so;
+    so.function_tolerance = so.gradient_tolerance = so.parameter_tolerance = 1e-14;
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem, &summary);
+    return Eigen::Vector2d(a, b);
+  };
+  const Eigen::Vector2d at_c = solve();
+  // J^T dr with dr_i = z_i sigma_c / 0.1 and J_i = [1, x_i, x_i^2] / 0.1 for a, b, d.
+  Eigen::Vector3d g = Eigen::Vector3d::Zero();
+  for (std::size_t i = 0; i < xs.size(); ++i)
+    g += Eigen::Vector3d(1.0, xs[i], xs[i] * xs[i]) / 0.1 * (zs[i] * sigma_c / 0.1);
+  const MarginalCovariance::HeldScore score = {{&a, Eigen::VectorXd::Constant(1, g(0))},
+                                               {&b, Eigen::VectorXd::Constant(1, g(1))},
+                                               {&d, Eigen::VectorXd::Constant(1, g(2))}};
+  MarginalCovariance held;
+  ASSERT_TRUE(held.compute(problem, {&a, &b}, 1, {}, {score}));
+  ASSERT_TRUE(held.has_held());
+  c += sigma_c;
+  const Eigen::Vector2d shift = solve() - at_c;
+  Eigen::Matrix2d share;
+  for (int i = 0; i < 2; ++i)
+    for (int j = 0; j < 2; ++j) share(i, j) = held.held_block(i ? &b : &a, j ? &b : &a)(0, 0);
+  EXPECT_LT((share - shift * shift.transpose()).norm(), 1e-6 * share.norm()) << share << "\n" << shift;
+  EXPECT_GT(shift.norm(), 0.05);  // not a comparison of zeros
+  // The data's own covariance is unchanged by the held input; without one there is no share.
+  MarginalCovariance plain;
+  ASSERT_TRUE(plain.compute(problem, {&a, &b}, 1));
+  EXPECT_FALSE(plain.has_held());
+  EXPECT_EQ(plain.held_block(&a, &a)(0, 0), 0.0);
+  EXPECT_NEAR(plain.block(&a, &b)(0, 0), held.block(&a, &b)(0, 0), 1e-12);
+}
 
 TEST(MarginalCovariance, AnUndeterminedDirectionGivesNanForItsCoordinatesAndNamesThem) {
   double x = 0.4, y = 0.6, z = 2.0, w = 5.0;

@@ -52,6 +52,57 @@ TEST(CamImuSigmas, TheClusterRobustSigmasGrowWithErrorsSharedByAFrame) {
   for (int a = 0; a < 3; ++a) EXPECT_GE(r.rotation_sigma_rad(a), p.rotation_sigma_rad(a) * (1 - 1e-9));
 }
 
+// The held intrinsics' covariance, rank one (one direction l: the focal lengths 0.2 px longer
+// and the principal point 0.1 px right), reaches the sigmas as what moving the intrinsics by l
+// does to the result: solving again with the camera moved by l shifts the extrinsics by the
+// propagated share, axis by axis (with the weights held, so that only l differs).
+TEST(CamImuSigmas, HeldIntrinsicsReachTheSigmasAsTheirEffectOnTheResult) {
+  test::CamImuSynthOptions so;
+  so.seed = 12;
+  so.duration_s = 20.0;
+  so.corner_sigma_px = 0.1;
+  so.imu_errors = false;
+  auto synth = test::make_camimu_synth(so);
+  Eigen::VectorXd l = Eigen::VectorXd::Zero(10);  // [fu fv pu pv, projection (2), distortion (4)]
+  l.head<3>() << 0.2, 0.2, 0.1;
+  synth.cameras[0].intrinsics_covariance = l * l.transpose();
+  synth.cameras[0].intrinsics_covariance_source = "a test covariance";
+  auto options = self_check_options(0.0);
+  options.corner_sigma_px = 0.1;
+  options.imu_noise_from_residuals = false;
+  auto held = calib::calibrate_camimu(synth.imu, synth.cameras, synth.target, options);
+  ASSERT_TRUE(held.ok()) << held.error().message;
+  auto moved_cameras = synth.cameras;
+  moved_cameras[0].camera.intrinsics += l.head<4>();
+  auto moved = calib::calibrate_camimu(synth.imu, moved_cameras, synth.target, options);
+  ASSERT_TRUE(moved.ok()) << moved.error().message;
+  auto without = options;
+  without.propagate_intrinsics = false;
+  auto bare = calib::calibrate_camimu(synth.imu, synth.cameras, synth.target, without);
+  ASSERT_TRUE(bare.ok()) << bare.error().message;
+
+  const auto& h = held->cameras[0];
+  EXPECT_NE(h.intrinsics_uncertainty.find("propagated: a test covariance"), std::string::npos)
+      << h.intrinsics_uncertainty;
+  ASSERT_TRUE(h.translation_sigma_from_intrinsics_m.allFinite());
+  const Eigen::Vector3d shift = moved->cameras[0].T_cam_imu.translation() - h.T_cam_imu.translation();
+  const Eigen::Vector3d share = h.translation_sigma_from_intrinsics_m;
+  std::printf("moved by l: translation shift [%.3f %.3f %.3f] mm, propagated share [%.3f %.3f %.3f] mm\n",
+              shift.x() * 1e3, shift.y() * 1e3, shift.z() * 1e3, share.x() * 1e3, share.y() * 1e3,
+              share.z() * 1e3);
+  int largest = 0;
+  share.maxCoeff(&largest);
+  EXPECT_GT(share(largest), 0.1 * bare->cameras[0].translation_sigma_m(largest));  // l matters here
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(std::abs(shift(a)), share(a), 0.15 * share(largest) + 1e-5) << a;
+  // The total is the data's sigma and the share in quadrature; without propagation, no share.
+  for (int a = 0; a < 3; ++a) {
+    const double data = bare->cameras[0].translation_sigma_m(a);
+    EXPECT_NEAR(h.translation_sigma_m(a), std::hypot(data, share(a)), 0.02 * h.translation_sigma_m(a));
+  }
+  EXPECT_FALSE(bare->cameras[0].translation_sigma_from_intrinsics_m.allFinite());
+  EXPECT_NE(bare->cameras[0].intrinsics_uncertainty.find("not propagated"), std::string::npos);
+}
+
 struct SelfCheckRun {
   CamImuCalibrationResult full;
   SplitCheck check;

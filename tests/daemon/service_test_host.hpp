@@ -2,6 +2,7 @@
 // A SessionHost for tests and a ControlServer running on its own thread, so tests talk to it
 // through real sockets (the in-process client, imucalctl processes, a tmux pane).
 
+#include <gtest/gtest.h>
 #include <stdlib.h>
 
 #include <boost/asio/executor_work_guard.hpp>
@@ -37,16 +38,18 @@ class SocketDir {
   std::string path;
 };
 
+/// A session host whose status and snapshot a test gives as the JSON it expects on the socket
+/// (decoded here, as the service's own would be typed).
 class TestHost : public service::SessionHost {
  public:
-  nlohmann::json status() override {
+  session_msg::Status status() override {
     std::lock_guard lock(mutex_);
-    return status_;
+    return std::get<session_msg::Status>(typed(status_));
   }
-  std::vector<nlohmann::json> snapshot() override {
+  std::vector<session_msg::SessionMessage> snapshot() override {
     std::lock_guard lock(mutex_);
-    std::vector<nlohmann::json> messages{status_};
-    messages.insert(messages.end(), extra_snapshot_.begin(), extra_snapshot_.end());
+    std::vector<session_msg::SessionMessage> messages{typed(status_)};
+    for (const auto& m : extra_snapshot_) messages.push_back(typed(m));
     return messages;
   }
   Status start(const std::vector<std::string>& steps) override {
@@ -54,10 +57,10 @@ class TestHost : public service::SessionHost {
     starts_.push_back(steps);
     return {};
   }
-  Status key(const std::string& key) override {
+  Status key(session_msg::OperatorKey key) override {
     std::lock_guard lock(mutex_);
-    keys_.push_back(key);
-    if (key == "skip") {
+    keys_.emplace_back(session_msg::key_name(key));
+    if (key == session_msg::OperatorKey::kSkip) {
       return make_error(Errc::kInvalidArgument, "the step 'preflight' cannot be skipped");
     }
     return {};
@@ -81,6 +84,15 @@ class TestHost : public service::SessionHost {
   }
 
  private:
+  /// A test's message, decoded; a test that gives one the decoder refuses is wrong.
+  static session_msg::SessionMessage typed(const nlohmann::json& message) {
+    auto m = session_msg::decode(message);
+    if (!m.ok()) {
+      ADD_FAILURE() << "the test host's message does not decode: " << m.error().message;
+      return session_msg::Status{};
+    }
+    return *m;
+  }
   std::mutex mutex_;
   nlohmann::json status_{{"type", "status"},
                          {"state", "running"},
@@ -91,7 +103,6 @@ class TestHost : public service::SessionHost {
                            {{"name", "still"}, {"state", "done"}},
                            {{"name", "poses"}, {"state", "active"}},
                            {{"name", "solve"}, {"state", "pending"}}}},
-                         {"devices", {{"imu", "ok"}}},
                          {"elapsed_s", 12.3}};
   std::vector<nlohmann::json> extra_snapshot_;
   std::vector<std::string> keys_;

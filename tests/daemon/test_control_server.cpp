@@ -75,9 +75,9 @@ TEST(ControlRequest, ParsesEveryCommand) {
   EXPECT_EQ(start->steps, (std::vector<std::string>{"poses", "solve"}));
   auto key = parse_request(R"({"cmd":"key","key":"redo","future_field":1})");
   ASSERT_TRUE(key.ok());
-  EXPECT_EQ(key->key, "redo");
-  EXPECT_EQ(parse_request(R"({"cmd":"abort"})")->key, "abort");
-  EXPECT_EQ(parse_request(R"({"cmd":"accept"})")->key, "accept");
+  EXPECT_EQ(key->key, session_msg::OperatorKey::kRedo);
+  EXPECT_EQ(parse_request(R"({"cmd":"abort"})")->key, session_msg::OperatorKey::kAbort);
+  EXPECT_EQ(parse_request(R"({"cmd":"accept"})")->key, session_msg::OperatorKey::kAccept);
   EXPECT_TRUE(is_control(Command::kStart));
   EXPECT_FALSE(is_control(Command::kSubscribe));
 }
@@ -93,7 +93,7 @@ TEST(ControlRequest, EveryRequestAClientBuildsParsesBackToItself) {
                                 start_request({"poses", "solve"}),
                                 plain_request(Command::kAbort),
                                 plain_request(Command::kAccept)};
-  for (const std::string& key : operator_keys()) requests.push_back(key_request(key));
+  for (session_msg::OperatorKey key : session_msg::all_keys()) requests.push_back(key_request(key));
   for (const Request& sent : requests) {
     const std::string line = to_line(to_json(sent));
     auto got = parse_request(std::string_view(line).substr(0, line.size() - 1));
@@ -152,7 +152,7 @@ TEST(ControlServer, StatusIsAReplyThenTheStatusEvenAfterTheClientStopsWriting) {
   ASSERT_TRUE(client.send({{"cmd", "status"}}).ok());
   ::shutdown(client.fd(), SHUT_WR);  // like `echo '{"cmd":"status"}' | socat - UNIX:...`
   EXPECT_EQ(receive(client), (json{{"type", "reply"}, {"cmd", "status"}, {"ok", true}}));
-  EXPECT_EQ(receive(client), service.host.status());
+  EXPECT_EQ(receive(client), session_msg::encode(service.host.status()));
   auto end = client.receive(std::chrono::seconds(10));
   ASSERT_FALSE(end.ok());
   EXPECT_EQ(end.error().code, Errc::kNotFound);  // the server closed after answering

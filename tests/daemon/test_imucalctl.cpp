@@ -100,7 +100,7 @@ TEST_F(Imucalctl, StatusAsTextAndJson) {
   EXPECT_TRUE(has(text.out, "state:   running\nrig:     sim\nstep:    step 3 of 4: poses")) << text.out;
   const Outcome as_json = imucalctl({"--socket", dir.socket(), "status", "--json"});
   EXPECT_EQ(as_json.exit_code, 0) << as_json.err;
-  EXPECT_EQ(json::parse(as_json.out), service.host.status());
+  EXPECT_EQ(json::parse(as_json.out), session_msg::encode(service.host.status()));
 }
 
 TEST_F(Imucalctl, SocketFromTheEnvironment) {
@@ -173,7 +173,8 @@ TEST_F(Imucalctl, AttachOnAPipePrintsOneLinePerMessage) {
   const Process process = spawn({"--socket", dir.socket(), "attach", "--observe"}, test::scratch_dir());
   auto output = [&] { return test::read_file(process.out_path); };
   ASSERT_TRUE(TestService::wait_for([&] { return has(output(), "status: running"); })) << output();
-  service.broadcast({{"type", "prompt"}, {"step", "poses"}, {"text", "Hold it still"}});
+  service.broadcast(
+      {{"type", "prompt"}, {"step", "poses"}, {"text", "Hold it still"}, {"keys", json::array()}});
   service.broadcast({{"type", "live"}, {"step", "poses"}, {"lines", {"Poses: 7 of 12"}}, {"progress", 0.25}});
   ASSERT_TRUE(TestService::wait_for([&] { return has(output(), "Poses: 7 of 12; 25%"); })) << output();
   service.close();  // the service goes away: imucalctl says so and exits 1

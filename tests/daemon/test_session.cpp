@@ -67,13 +67,21 @@ class SimSession {
       std::lock_guard lock(mutex_);
       posted_.push_back(std::move(f));
     };
-    o.broadcast = [this](const json& m) {
+    o.broadcast = [this](const session_msg::SessionMessage& typed) {
+      // Kept as the socket's JSON: the tests check what a client sees.
+      const json m = session_msg::encode(typed);
+      // Every message the engine emits decodes back to itself (the log and the socket's form).
+      auto decoded = session_msg::decode(m);
+      EXPECT_TRUE(decoded.ok()) << m.dump() << ": " << (decoded.ok() ? "" : decoded.error().message);
+      if (decoded.ok()) {
+        EXPECT_EQ(session_msg::dump(*decoded), m.dump(-1, ' ', false, json::error_handler_t::replace));
+      }
       messages_.push_back(m);
       if (m.value("type", "") == "prompt" && first_prompt_ns_ < 0) first_prompt_ns_ = rig_->now_ns();
       if (m.value("type", "") == "review") review_ns_ = rig_->now_ns();
       if (m.value("type", "") == "fault" && redo_faults_)
         keys_.emplace_back(rig_->now_ns() + 2'000'000'000, "redo");
-      if (scripted_) op_->on_message(m, rig_->now_ns());
+      if (scripted_) op_->on_message(typed, rig_->now_ns());
       if (!scripted_ && m.value("type", "") == "prompt" && m.value("step", "") == "preflight")
         keys_.emplace_back(rig_->now_ns() + 500'000'000, "continue");
     };
@@ -113,10 +121,11 @@ class SimSession {
     sim::ScriptedOperatorOptions oo;
     oo.abort_on_fault = false;  // the tests press redo themselves
     op_ = std::make_unique<sim::ScriptedOperator>(rig_->trajectory(), oo,
-                                                  [this](const std::string& key) { press(key); });
+                                                  [this](session_msg::OperatorKey key) { press(key); });
   }
 
-  void press(const std::string& key) { (void)runner_->engine().key(key); }
+  void press(session_msg::OperatorKey key) { (void)runner_->engine().key(key); }
+  void press(const std::string& key) { press(*session_msg::parse_key(key)); }
 
   /// Runs until the session ends or `max_s` of rig time passed.
   void run(double max_s, const std::function<void(SimSession&)>& each_batch = nullptr) {
@@ -142,7 +151,7 @@ class SimSession {
       if (each_batch) each_batch(*this);
     }
     std::printf("run ended at rig time %.2f s, session %s\n", ns_to_s(rig_->now_ns()),
-                runner_->engine().status().value("state", "").c_str());
+                session_msg::session_state_name(runner_->engine().status().state));
   }
 
   /// `imucal replay` of the session's log into <dir>/replay.
@@ -360,13 +369,13 @@ TEST(Session, MotionDuringTheStillStartRestartsTheCountdown) {
   bool bumped = false;
   s.run(60.0, [&](SimSession& ss) {
     const auto st = ss.runner_->engine().status();
-    if (!bumped && st.value("step", "") == "still" && ss.of_type("live").size() > 0 &&
+    if (!bumped && st.step == session_msg::StepId::kStill && ss.of_type("live").size() > 0 &&
         ss.of_type("live").back().value("progress", 0.0) > 0.5) {
       bumped = true;
       ss.rig_->trajectory().turn(ss.rig_->now_ns(), 1.0,
                                  Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX())));
     }
-    if (st.value("step", "") == "poses") ss.press("abort");
+    if (st.step == session_msg::StepId::kPoses) ss.press("abort");
   });
   ASSERT_TRUE(bumped);
   EXPECT_TRUE(s.said("Motion detected"));
@@ -386,7 +395,8 @@ TEST(Session, APoseTooCloseToAnEarlierOneIsRefused) {
     ss.rig_->trajectory().turn(ss.rig_->now_ns() + 100'000'000, 1.0, q);
   };
   s.run(120.0, [&](SimSession& ss) {
-    const auto step = ss.runner_->engine().status().value("step", "");
+    const auto status_step = ss.runner_->engine().status().step;
+    const std::string step = status_step ? session_msg::step_name(*status_step) : "";
     if (!first && step == "poses") {
       first = true;
       turn(ss, 60.0);
@@ -616,7 +626,7 @@ TEST(Session, MotionStepShowsExcitationDetectionAndSaturation) {
   bool turned = false;
   s.run(60.0, [&](SimSession& ss) {
     auto& engine = ss.runner_->engine();
-    if (engine.status().value("step", "") != "motion") return;
+    if (engine.status().step != session_msg::StepId::kMotion) return;
     const TimeNs t = ss.rig_->now_ns();
     // The target is seen for the first 4 s, then lost.
     const bool seen =
@@ -661,7 +671,7 @@ TEST(Session, MotionStepWithTwoCamerasShowsEachRateAndTheSharedShare) {
   TimeNs last_frame = -1;
   s.run(60.0, [&](SimSession& ss) {
     auto& engine = ss.runner_->engine();
-    if (engine.status().value("step", "") != "motion" || ss.of_type("prompt").empty()) return;
+    if (engine.status().step != session_msg::StepId::kMotion || ss.of_type("prompt").empty()) return;
     const TimeNs t = ss.rig_->now_ns();
     if (last_frame >= 0 && t - last_frame < 50'000'000) return;  // both cameras at their 20 Hz
     last_frame = t;
@@ -738,7 +748,7 @@ TEST(Session, AFailedSelfTestSaysToHoldTheRigStillAndRedoChecksAgain) {
   EXPECT_EQ(prompts.back().value("text", ""),
             "A device failed its check: imu: the self-test fails when the rig moves during it: hold the rig "
             "still. Then press r to check again, or a to abort");
-  ASSERT_TRUE(s.runner_->engine().key("redo").ok());
+  ASSERT_TRUE(s.runner_->engine().key(session_msg::OperatorKey::kRedo).ok());
   EXPECT_TRUE(s.said("every device answers"));
 }
 

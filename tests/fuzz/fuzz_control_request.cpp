@@ -3,6 +3,7 @@
 // request must be well formed, and the reply to it must serialise.
 #include <cstdint>
 #include <cstdlib>
+#include <string>
 #include <string_view>
 
 #include "daemon/service/protocol.hpp"
@@ -14,8 +15,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (request.ok()) {
     const bool needs_key = request->command == Command::kKey || request->command == Command::kAbort ||
                            request->command == Command::kAccept;
-    if (needs_key && request->key.empty()) {
-      std::abort();
+    if (needs_key) {
+      // The key, typed, goes back on the line as the same key.
+      const std::string again = to_line(to_json(*request));
+      const auto back = parse_request(std::string_view(again).substr(0, again.size() - 1));
+      if (!back.ok() || back->key != request->key) {
+        std::abort();
+      }
     }
     for (const auto& step : request->steps) {
       if (step.empty()) {

@@ -203,15 +203,27 @@ nlohmann::json mat_json(const Eigen::Matrix3d& m) {
 }
 nlohmann::json vec_json(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 
+/// A result message written as JSON, typed as the service hands it to the rig.
+session_msg::ResultSummary service_rig_result(const nlohmann::json& message) {
+  auto m = session_msg::decode(message);
+  EXPECT_TRUE(m.ok()) << m.error().message;
+  return m.ok() ? std::get<session_msg::ResultSummary>(*m) : session_msg::ResultSummary{};
+}
+
+session_msg::Prompt service_rig_prompt(session_msg::StepId step, const std::string& text) {
+  return {std::nullopt, step, text, {}, {}, std::nullopt};
+}
+
 TEST(ServiceRig, TheTruthReportWithoutResultFilesShowsEveryQuantityWithoutSigmas) {
   auto rig = make(options(0.0, false));
   ASSERT_TRUE(rig);
-  EXPECT_EQ(rig->truth_report(nlohmann::json{{"type", "result"}}), "");
+  EXPECT_EQ(rig->truth_report(service_rig_result(nlohmann::json{{"type", "result"}})), "");
   const nlohmann::json I = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
   const nlohmann::json zero = {0, 0, 0};
   const nlohmann::json result = {
+      {"type", "result"},
       {"imu", {{"A_a", I}, {"A_g", I}, {"G", {zero, zero, zero}}, {"b_a", zero}, {"b_g", zero}}}};
-  const std::string text = rig->truth_report(result);
+  const std::string text = rig->truth_report(service_rig_result(result));
   // Scales, misalignments and biases of both triads; no G (none estimated) and no camera.
   EXPECT_NE(text.find("21 quantities, 0 with a sigma"), std::string::npos) << text;
   const TableRow scale = table_row(text, "accel scale x");
@@ -235,11 +247,11 @@ TEST(ServiceRig, TheTruthTableShowsEveryEstimatedQuantityWithItsErrorAgainstTheT
   ASSERT_TRUE(rig);
   // The biases' truth is their mean over the still and pose steps.
   auto none = [](std::span<const ImuSample>) {};
-  rig->on_message({{"type", "prompt"}, {"step", "still"}, {"text", "Keep still"}});
+  rig->on_message(service_rig_prompt(session_msg::StepId::kStill, "Keep still"));
   for (int i = 0; i < 50; ++i) ASSERT_TRUE(rig->tick(false, none).ok());
-  rig->on_message({{"type", "prompt"}, {"step", "poses"}, {"text", "Turn"}});
+  rig->on_message(service_rig_prompt(session_msg::StepId::kPoses, "Turn"));
   for (int i = 0; i < 50; ++i) ASSERT_TRUE(rig->tick(false, none).ok());
-  rig->on_message({{"type", "prompt"}, {"step", "motion"}, {"text", "Move"}});
+  rig->on_message(service_rig_prompt(session_msg::StepId::kMotion, "Move"));
 
   // The truth of the rig drawn from the seed (scales, misalignments, G do not wander), in the
   // frame of the static result, and the virtual camera's.
@@ -302,7 +314,7 @@ TEST(ServiceRig, TheTruthTableShowsEveryEstimatedQuantityWithItsErrorAgainstTheT
                                     {"q_cam_imu_wxyz", {q.w(), q.x(), q.y(), q.z()}},
                                     {"timeshift_cam_imu_s", shift},
                                     {"reprojection_rms_px", 0.05}}}}};
-  const std::string text = rig->truth_report(result);
+  const std::string text = rig->truth_report(service_rig_result(result));
 
   // Every estimated quantity has its row: 9 accelerometer, 12 gyroscope, 9 G, 4 intrinsics, 4
   // distortion, 3 rotation, 3 translation, the time offset.

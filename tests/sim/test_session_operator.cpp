@@ -66,9 +66,14 @@ TEST(SessionOperator, TheScriptedOperatorFacesTheBoardAndTheCameraSeesIt) {
   ScriptedOperatorOptions oo;
   oo.wave = motion;
   oo.wave_T_op_motion = follow_transform(*motion);
-  std::vector<std::string> keys;
-  ScriptedOperator op(traj, oo, [&](const std::string& k) { keys.push_back(k); });
-  op.on_message({{"type", "prompt"}, {"step", "motion"}, {"text", "Move the rig"}, {"keys", {"skip"}}},
+  std::vector<session_msg::OperatorKey> keys;
+  ScriptedOperator op(traj, oo, [&](session_msg::OperatorKey k) { keys.push_back(k); });
+  op.on_message(session_msg::Prompt{std::nullopt,
+                                    session_msg::StepId::kMotion,
+                                    "Move the rig",
+                                    {session_msg::OperatorKey::kSkip},
+                                    {},
+                                    std::nullopt},
                 2 * kS);
   op.on_time(40 * kS);
   EXPECT_TRUE(keys.empty()) << "the operator moves instead of skipping";
@@ -88,6 +93,79 @@ TEST(SessionOperator, TheScriptedOperatorFacesTheBoardAndTheCameraSeesIt) {
   const auto& stats = (*source)->stats();
   EXPECT_EQ(stats.frames, 48);
   EXPECT_GE(stats.frames_all_points_visible, 40) << "the whole board in most frames";
+}
+
+namespace msg = session_msg;
+
+msg::Prompt operator_prompt(msg::StepId step, std::vector<msg::OperatorKey> keys,
+                            std::optional<Eigen::Vector3d> up = std::nullopt) {
+  return {std::nullopt, step, "words a person reads", std::move(keys), {}, up};
+}
+
+TEST(SessionOperator, TheScriptedOperatorActsOnTypedMessagesNotOnTheirText) {
+  using K = msg::OperatorKey;
+  OperatorTrajectory traj;
+  ScriptedOperatorOptions oo;
+  oo.reaction_s = 0.5;
+  std::vector<std::pair<TimeNs, K>> pressed;
+  TimeNs now = 0;
+  ScriptedOperator op(traj, oo, [&](K k) { pressed.emplace_back(now, k); });
+  auto at = [&](TimeNs t) {
+    now = t;
+    op.on_time(t);
+  };
+
+  // The preflight's prompt offers continue: pressed after the reaction time.
+  op.on_message(operator_prompt(msg::StepId::kPreflight, {K::kContinue, K::kAbort}), 1 * kS);
+  at(1 * kS + kS / 4);
+  EXPECT_TRUE(pressed.empty());
+  at(2 * kS);
+  ASSERT_EQ(pressed.size(), 1u);
+  EXPECT_EQ(pressed[0].second, K::kContinue);
+  // A failed preflight offers redo and abort: nothing to press for a script.
+  op.on_message(operator_prompt(msg::StepId::kPreflight, {K::kRedo, K::kAbort}), 2 * kS);
+  at(4 * kS);
+  EXPECT_EQ(pressed.size(), 1u);
+
+  // The poses step: its first prompt starts a turn, its later prompts (the next side) do not.
+  op.on_message(operator_prompt(msg::StepId::kPoses, {K::kContinue, K::kRedo, K::kAbort}), 4 * kS);
+  EXPECT_EQ(op.turns(), 1);
+  op.on_message(operator_prompt(msg::StepId::kPoses, {K::kContinue, K::kRedo, K::kAbort}), 5 * kS);
+  EXPECT_EQ(op.turns(), 1);
+  // A captured pose and a refused hold each start the next turn; the same words without the
+  // engine's reason do not.
+  op.on_message(msg::PoseCaptured{std::nullopt, 1, Eigen::Vector3d::UnitZ()}, 8 * kS);
+  EXPECT_EQ(op.turns(), 2);
+  op.on_message(
+      msg::Message{std::nullopt, msg::MessageLevel::kWarning, "anything", msg::MessageCause::kPoseRefused},
+      12 * kS);
+  EXPECT_EQ(op.turns(), 3);
+  op.on_message(
+      msg::Message{std::nullopt, msg::MessageLevel::kInfo, "Pose 2 captured", msg::MessageCause::kNone},
+      16 * kS);
+  op.on_message(msg::Message{std::nullopt, msg::MessageLevel::kWarning, "Too close to pose 1",
+                             msg::MessageCause::kNone},
+                16 * kS);
+  EXPECT_EQ(op.turns(), 3);
+
+  // The six-face step: the face the prompt asks for goes up; the wrong face up turns to it again.
+  const Eigen::Vector3d face(0.0, -1.0, 0.0);
+  op.on_message(operator_prompt(msg::StepId::kGsens, {K::kRedo, K::kSkip, K::kAbort}, face), 20 * kS);
+  EXPECT_EQ(op.turns(), 4);
+  const TimeNs settled = traj.busy_until_ns() + kS;
+  const Eigen::Vector3d up_in_body = traj.at(settled).q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+  EXPECT_LT((up_in_body - face).norm(), 1e-6) << up_in_body.transpose();
+  op.on_message(msg::Message{std::nullopt, msg::MessageLevel::kWarning, "x", msg::MessageCause::kWrongFace},
+                30 * kS);
+  EXPECT_EQ(op.turns(), 5);
+
+  // The review offers accept: accepted. A fault: aborted.
+  op.on_message(operator_prompt(msg::StepId::kReview, {K::kAccept, K::kReject, K::kAbort}), 40 * kS);
+  op.on_message(msg::Fault{std::nullopt, "imu", msg::StepId::kReview, "gone", ""}, 41 * kS);
+  at(45 * kS);
+  ASSERT_EQ(pressed.size(), 3u);
+  EXPECT_EQ(pressed[1].second, K::kAccept);
+  EXPECT_EQ(pressed[2].second, K::kAbort);
 }
 
 }  // namespace
