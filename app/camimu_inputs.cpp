@@ -132,8 +132,8 @@ Status read_intrinsics_covariance(const YAML::Node& node, const std::string& whe
   std::string names;
   for (const std::string& name : kalibr_parameter_names(cam->camera.kind()))
     names += (names.empty() ? "" : ", ") + name;
-  const std::string bad = where + ": imucal.intrinsics_covariance must be " + std::to_string(n) + " rows of " +
-                          std::to_string(n) + " numbers (or null), in the order " + names;
+  const std::string bad = where + ": imucal.intrinsics_covariance must be " + std::to_string(n) +
+                          " rows of " + std::to_string(n) + " numbers (or null), in the order " + names;
   try {
     if (const YAML::Node c = q["intrinsics_covariance"]) {
       if (!c.IsSequence() || static_cast<int>(c.size()) != n) return make_error(Errc::kCorrupt, bad);

@@ -61,6 +61,7 @@ struct View {
   std::vector<char> keep;  // per corner
   Pose pose{1, 0, 0, 0, 0, 0, 1};
   bool active = true;
+  bool no_start_pose = false;  // rejected because the start camera gave it no pose
 
   int kept() const { return static_cast<int>(std::count(keep.begin(), keep.end(), 1)); }
 };
@@ -186,9 +187,13 @@ struct StartShape {
 };
 
 /// The start shapes of a model (docs/camera-calibration.md, "Start"): the undistorted pinhole;
-/// FOV w of 0.5 and 1 rad; omni xi of 0.5 and 1; eucm (alpha, beta) = (0.5, 1) and ds (xi,
-/// alpha) = (0, 0.5), both the stereographic projection, which reaches beyond 180 degrees.
+/// FOV w of 0.5 and 1 rad; omni xi of 0.5, 1 and 1.5; eucm alpha of 0.5, 0.6 and 0.7 with beta
+/// 1; ds xi of -0.3 to 0.3 with alpha of 0.5 and 0.6 (xi 0 and alpha 0.5, as eucm's (0.5, 1),
+/// is the stereographic projection, which reaches beyond 180 degrees). Omni's and ds's image
+/// scale near the centre is f / (1 + xi).
 std::vector<StartShape> start_shapes(CameraModelKind model) {
+  const Eigen::Vector4d none = Eigen::Vector4d::Zero();
+  std::vector<StartShape> out;
   switch (model.projection) {
     case ProjectionModel::kPinhole:
       if (model.distortion == DistortionModel::kFov) {
@@ -196,11 +201,15 @@ std::vector<StartShape> start_shapes(CameraModelKind model) {
       }
       return {StartShape{}};
     case ProjectionModel::kOmni:
-      return {{{0.5, 0}, Eigen::Vector4d::Zero(), 1.5}, {{1.0, 0}, Eigen::Vector4d::Zero(), 2.0}};
+      for (double xi : {0.5, 1.0, 1.5}) out.push_back({{xi, 0}, none, 1.0 + xi});
+      return out;
     case ProjectionModel::kEucm:
-      return {{{0.5, 1.0}, Eigen::Vector4d::Zero(), 1.0}};
+      for (double alpha : {0.5, 0.6, 0.7}) out.push_back({{alpha, 1.0}, none, 1.0});
+      return out;
     case ProjectionModel::kDs:
-      return {{{0.0, 0.5}, Eigen::Vector4d::Zero(), 1.0}};
+      for (double xi : {-0.3, -0.15, 0.0, 0.15, 0.3})
+        for (double alpha : {0.5, 0.6}) out.push_back({{xi, alpha}, none, 1.0 + xi});
+      return out;
   }
   return {StartShape{}};
 }
@@ -257,10 +266,12 @@ std::vector<double> homography_focals(int width, int height, const std::vector<V
   return focals;
 }
 
-/// The starting camera (docs/camera-calibration.md, "Start"): for each of the model's start
-/// shapes, a geometric grid of focal lengths around the homographies' (quarter octaves) scored
-/// by the reprojection of per-view poses; the best of all.
-CameraModel start_camera_for(CameraModelKind model, int width, int height, const std::vector<View>& views) {
+/// The starting cameras (docs/camera-calibration.md, "Start"), best first: for each of the
+/// model's start shapes, the best of a geometric grid of focal lengths around the homographies'
+/// (quarter octaves) scored by the reprojection of per-view poses; shapes under which no focal
+/// length gives a pose are left out (all of them: the first shape at the homographies' focal).
+std::vector<CameraModel> start_cameras_for(CameraModelKind model, int width, int height,
+                                           const std::vector<View>& views) {
   std::vector<std::size_t> sample;
   constexpr std::size_t kSample = 40;
   const std::size_t step = std::max<std::size_t>(1, views.size() / kSample);
@@ -270,9 +281,10 @@ CameraModel start_camera_for(CameraModelKind model, int width, int height, const
   const bool have = !focals.empty();
   const double base = have ? median(focals) : static_cast<double>(width);
   const int span = have ? 4 : 8;
-  CameraModel best = start_camera(model, width, height, base, start_shapes(model).front());
-  double best_score = std::numeric_limits<double>::infinity();
+  std::vector<std::pair<double, CameraModel>> scored;
   for (const StartShape& shape : start_shapes(model)) {
+    CameraModel best = start_camera(model, width, height, base, shape);
+    double best_score = std::numeric_limits<double>::infinity();
     for (int k = -span; k <= span; ++k) {
       const CameraModel camera =
           start_camera(model, width, height, base * shape.focal_factor * std::pow(2.0, k / 4.0), shape);
@@ -282,8 +294,14 @@ CameraModel start_camera_for(CameraModelKind model, int width, int height, const
         best = camera;
       }
     }
+    if (std::isfinite(best_score)) scored.emplace_back(best_score, best);
   }
-  return best;
+  std::stable_sort(scored.begin(), scored.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<CameraModel> out;
+  for (auto& [score, camera] : scored) out.push_back(std::move(camera));
+  if (out.empty()) out.push_back(start_camera(model, width, height, base, start_shapes(model).front()));
+  return out;
 }
 
 // ---- solve ---------------------------------------------------------------------------------
@@ -318,7 +336,7 @@ class IntrinsicsProblem {
  public:
   IntrinsicsProblem(CameraBlocks* camera, std::vector<View>* views, CameraModelKind model, bool robust,
                     double loss_px)
-      : loss_(loss_px) {
+      : loss_(loss_px), model_(model) {
     ceres::Problem::Options po;
     po.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     po.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
@@ -397,8 +415,19 @@ class IntrinsicsProblem {
   int residuals() const { return residuals_; }
   int poses() const { return static_cast<int>(poses_.size()); }
 
+  /// Holds the projection's first parameter (xi, or eucm's alpha) at its value.
+  void hold_first_projection_param() {
+    if (projection_param_count(model_.projection) == 1) {
+      problem_->SetParameterBlockConstant(projection_);
+    } else {
+      problem_->SetManifold(projection_, &first_held_);
+    }
+  }
+
  private:
   ceres::CauchyLoss loss_;
+  CameraModelKind model_;
+  ceres::SubsetManifold first_held_{2, {0}};
   ceres::ProductManifold<ceres::QuaternionManifold, ceres::EuclideanManifold<3>> pose_manifold_;
   std::unique_ptr<ceres::Problem> problem_;
   std::vector<double*> poses_;
@@ -555,6 +584,203 @@ Error too_few_views(const std::vector<View>& views, const CameraIntrinsicsResult
                         "distances, across the image");
 }
 
+/// Another start's solution and how much more it costs per corner than the kept one.
+struct StartSolution {
+  CameraBlocks camera;
+  double cost_per_corner = 0.0;
+};
+
+/// The robust pass (docs/camera-calibration.md, "Start"): from the best start, and for a model
+/// with projection parameters (which trade against the focal length, so that one start can end
+/// in a local minimum) from each of its kMaxStarts best start shapes, keeping the solve with the
+/// lowest cost per corner. The winner's views (poses, rejections) and reports are kept, the
+/// others' solutions go to `others`.
+Status solve_from_starts(const std::vector<CameraModel>& starts, const CameraIntrinsicsOptions& options,
+                         int threads, const ProgressFn& progress, std::vector<View>* views,
+                         CameraIntrinsicsResult* result, CameraBlocks* blocks, double* cost,
+                         std::vector<StartSolution>* others) {
+  constexpr std::size_t kMaxStarts = 3;
+  const std::size_t tries =
+      projection_param_count(options.model.projection) > 0 ? std::min(kMaxStarts, starts.size()) : 1;
+  std::optional<Error> first_error;
+  double best = std::numeric_limits<double>::infinity();
+  int iterations = result->iterations;
+  for (std::size_t s = 0; s < tries; ++s) {
+    std::vector<View> v = *views;
+    CameraIntrinsicsResult r = *result;
+    for (View& view : v) {
+      if (!view.active) continue;
+      const auto pose = pose_from_pnp(starts[s], view);
+      if (pose) {
+        view.pose = *pose;
+      } else {
+        reject_view(view, &r, "no pose found for the start (the detection may be wrong)");
+        view.no_start_pose = true;
+      }
+    }
+    if (active_count(v) < options.min_views) {
+      if (!first_error) first_error = too_few_views(v, r, options);
+      continue;
+    }
+    CameraBlocks b{starts[s].intrinsics, starts[s].projection_params, starts[s].distortion_coeffs};
+    double c = 0.0;
+    int corners = 0;
+    bool solved = false;
+    {
+      IntrinsicsProblem robust(&b, &v, options.model, true, options.robust_loss_px);
+      const double from = 0.05 + 0.45 * static_cast<double>(s) / static_cast<double>(tries);
+      ProgressCallback cb(progress, from, from + 0.45 / static_cast<double>(tries), options.max_iterations);
+      solved = robust.solve(options.max_iterations, threads, &cb, &iterations, &c);
+      corners = robust.residuals();
+    }
+    if (!solved || !b.intrinsics.allFinite() || !b.projection.allFinite() || !b.distortion.allFinite()) {
+      if (!first_error)
+        first_error = make_error(Errc::kSolverFailed,
+                                 "the camera solve (robust pass) did not converge; check the target "
+                                 "description against the target that was recorded");
+      continue;
+    }
+    const double per_corner = c / std::max(1, corners);
+    if (per_corner < best) {
+      if (std::isfinite(best)) others->push_back({*blocks, best});
+      best = per_corner;
+      *views = std::move(v);
+      *result = std::move(r);
+      *blocks = b;
+      *cost = c;
+    } else {
+      others->push_back({b, per_corner});
+    }
+  }
+  result->iterations = iterations;
+  if (!std::isfinite(best)) return *first_error;
+  for (StartSolution& o : *others) o.cost_per_corner -= best;
+  return {};
+}
+
+/// The views the start camera gave no pose (a wide lens's border beyond the start's field of
+/// view) tried again under the robust pass's camera; when any finds its pose now, the robust pass
+/// runs again with them.
+Status readmit_views(CameraModelKind model, const CameraIntrinsicsOptions& options, int threads,
+                     std::vector<View>* views, CameraIntrinsicsResult* result, CameraBlocks* blocks,
+                     double* cost) {
+  CameraModel camera;
+  camera.projection = model.projection;
+  camera.distortion_model = model.distortion;
+  camera.width = result->camera.width;
+  camera.height = result->camera.height;
+  camera.intrinsics = blocks->intrinsics;
+  camera.projection_params = blocks->projection;
+  camera.distortion_coeffs = blocks->distortion;
+  int readmitted = 0;
+  for (View& v : *views) {
+    if (v.active || !v.no_start_pose) continue;
+    const auto pose = pose_from_pnp(camera, v);
+    if (!pose) continue;
+    v.pose = *pose;
+    v.active = true;
+    v.no_start_pose = false;
+    result->views[v.report].rejected_because.clear();
+    ++readmitted;
+  }
+  if (readmitted == 0) return {};
+  IntrinsicsProblem robust(blocks, views, model, true, options.robust_loss_px);
+  if (!robust.solve(options.max_iterations, threads, nullptr, &result->iterations, cost)) {
+    return make_error(Errc::kSolverFailed,
+                      "the camera solve (robust pass with the views found again) did not converge; check the "
+                      "target description against the target that was recorded");
+  }
+  return {};
+}
+
+/// The camera's parameters as the 10-vector of the covariance.
+Eigen::Matrix<double, 10, 1> parameter_vector(const CameraBlocks& b) {
+  Eigen::Matrix<double, 10, 1> x;
+  x << b.intrinsics, b.projection, b.distortion;
+  return x;
+}
+
+/// Widens the covariance for the other starts' cameras that fit as well (CameraIntrinsicsResult::
+/// ambiguity): the chi-square of the difference in cost below 4, the difference beyond 3 sigmas
+/// in one of the model's parameters.
+void widen_for_equal_fits(const std::vector<StartSolution>& others, int corners,
+                          CameraIntrinsicsResult* result) {
+  if (!result->covariance_ok || !(result->residual_sigma_px > 0.0)) return;
+  const double var = result->residual_sigma_px * result->residual_sigma_px;
+  const std::vector<int> used = kalibr_parameter_indices(result->camera.kind());
+  const std::vector<std::string> names = kalibr_parameter_names(result->camera.kind());
+  CameraBlocks kept{result->camera.intrinsics, result->camera.projection_params,
+                    result->camera.distortion_coeffs};
+  const Eigen::Matrix<double, 10, 1> x = parameter_vector(kept);
+  Eigen::Matrix<double, 10, 10> widened = result->covariance;
+  for (const StartSolution& o : others) {
+    const double chi2 = 2.0 * o.cost_per_corner * corners / var;
+    if (!(chi2 < 4.0)) continue;
+    const Eigen::Matrix<double, 10, 1> d = parameter_vector(o.camera) - x;
+    bool apart = false;
+    for (int i : used) apart = apart || std::abs(d[i]) > 3.0 * std::sqrt(result->covariance(i, i));
+    if (!apart) continue;
+    widened += d * d.transpose();
+    std::string kept_text, other_text;
+    for (std::size_t j = 0; j < used.size(); ++j) {
+      kept_text += (j ? ", " : "") + names[j] + " " + format_number("%.4g", x[used[j]]);
+      other_text += (j ? ", " : "") + names[j] + " " + format_number("%.4g", x[used[j]] + d[used[j]]);
+    }
+    result->ambiguity = "the views fit two cameras equally well (chi-square of the difference " +
+                        format_number("%.2g", chi2) + "): [" + kept_text + "] (kept) and [" + other_text +
+                        "]; the sigmas are widened to cover both";
+  }
+  if (result->ambiguity.empty()) return;
+  set_camera_covariance(widened, result);
+  result->warnings.push_back(
+      result->ambiguity +
+      ": the model's parameters are not determined by these views (the image they give "
+      "is); show the target nearer the image's edges and at more angles, or choose a model "
+      "with fewer parameters");
+}
+
+/// The profile check (docs/camera-calibration.md, "Uncertainty"): the omni, eucm and ds models'
+/// projection parameters trade against the focal length and the distortion along a curved
+/// valley, which the covariance (a quadratic about the solution) makes too narrow. The first
+/// projection parameter is held at kProfileSigmas of its sigma on either side and the rest solved
+/// again; where the cost rises by less than the quadratic's kProfileSigmas^2 (in chi-square) on
+/// the flatter side, the covariance is stretched along the path the solution took there (the
+/// other parameters follow the valley's curve, not the quadratic's straight line):
+/// C += (k^2 - 1) u u^T, u = (profiled - solved) / kProfileSigmas, k^2 = kProfileSigmas^2 /
+/// chi-square (at most 100).
+void profile_first_projection_param(const CameraBlocks& solved, const std::vector<View>& views, double cost,
+                                    const CameraIntrinsicsOptions& options, int threads,
+                                    CameraIntrinsicsResult* result) {
+  constexpr double kProfileSigmas = 3.0;
+  if (projection_param_count(options.model.projection) == 0 || !result->covariance_ok) return;
+  const double var = result->residual_sigma_px * result->residual_sigma_px;
+  const double sigma = std::sqrt(result->covariance(4, 4));
+  if (!(var > 0.0) || !(sigma > 0.0)) return;
+  double least = std::numeric_limits<double>::infinity();
+  Eigen::Matrix<double, 10, 1> path = Eigen::Matrix<double, 10, 1>::Zero();  // the flatter side's, per sigma
+  for (const double side : {-1.0, 1.0}) {
+    CameraBlocks b = solved;
+    b.projection[0] += side * kProfileSigmas * sigma;
+    std::vector<View> v = views;
+    IntrinsicsProblem problem(&b, &v, options.model, false, options.robust_loss_px);
+    problem.hold_first_projection_param();
+    int iterations = 0;
+    double c = 0.0;
+    if (!problem.solve(options.max_iterations, threads, nullptr, &iterations, &c)) continue;
+    const double chi2 = 2.0 * (c - cost) / var;
+    if (chi2 < least) {
+      least = chi2;
+      path = (parameter_vector(b) - parameter_vector(solved)) / kProfileSigmas;
+    }
+  }
+  result->profile_chi2 = least;
+  const double expected = kProfileSigmas * kProfileSigmas;
+  if (!(least < expected)) return;
+  const double k2 = std::min(100.0, expected / std::max(least, 1e-9));
+  set_camera_covariance(result->covariance + (k2 - 1.0) * path * path.transpose(), result);
+  result->profile_stretch = std::sqrt(k2);
+}
+
 // ---- figures -------------------------------------------------------------------------------
 
 void fill_figures(const CameraModel& camera, const std::vector<View>& views,
@@ -706,30 +932,14 @@ Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(const TargetDescripti
     return make_error(Errc::kInvalidArgument,
                       "camera model " + camera_model_name(options.model) + " is not one imucal calibrates");
   }
-  CameraModel camera = start_camera_for(options.model, width, height, usable);
-  for (View& v : views) {
-    if (!v.active) continue;
-    const auto pose = pose_from_pnp(camera, v);
-    if (pose) {
-      v.pose = *pose;
-    } else {
-      reject_view(v, &result, "no pose found for the start (the detection may be wrong)");
-    }
-  }
-  if (active_count(views) < options.min_views) return too_few_views(views, result, options);
+  const std::vector<CameraModel> starts = start_cameras_for(options.model, width, height, usable);
   report_progress(progress, 0.05, 1.0);
-
-  CameraBlocks blocks{camera.intrinsics, camera.projection_params, camera.distortion_coeffs};
+  CameraBlocks blocks;
   double cost = 0.0;
-  {
-    IntrinsicsProblem robust(&blocks, &views, options.model, true, options.robust_loss_px);
-    ProgressCallback cb(progress, 0.05, 0.5, options.max_iterations);
-    if (!robust.solve(options.max_iterations, threads, &cb, &result.iterations, &cost)) {
-      return make_error(Errc::kSolverFailed,
-                        "the camera solve (robust pass) did not converge; check the target "
-                        "description against the target that was recorded");
-    }
-  }
+  std::vector<StartSolution> others;
+  IMUCAL_TRY(solve_from_starts(starts, options, threads, progress, &views, &result, &blocks, &cost, &others));
+  IMUCAL_TRY(readmit_views(options.model, options, threads, &views, &result, &blocks, &cost));
+  CameraModel camera = starts.front();
   camera.intrinsics = blocks.intrinsics;
   camera.projection_params = blocks.projection;
   camera.distortion_coeffs = blocks.distortion;
@@ -755,7 +965,9 @@ Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(const TargetDescripti
   }
   fill_figures(result.camera, views, options, &result);
   fill_uncertainty(plain, cost, options, threads, &result);
+  profile_first_projection_param(blocks, views, cost, options, threads, &result);
   result.warnings = camera_quality_warnings(result, options);
+  widen_for_equal_fits(others, plain.residuals(), &result);
   result.solve_cpu_s = cpu_now_s() - cpu0;
   report_progress(progress, 1.0, 1.0);
   return result;

@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <span>
 #include <string>
@@ -107,6 +108,17 @@ struct CameraIntrinsicsResult {
   /// The focal lengths are determined (relative sigma below the option's limit, covariance of
   /// full rank). False for degenerate sets such as fronto-parallel views at one distance.
   bool focal_well_determined = false;
+  /// Not empty when another start ended in a camera that fits the views as well (its cost
+  /// within a chi-square of 4 of this one's) but lies beyond 3 sigmas of it: which of them the
+  /// solve kept, the other, and that the covariance was widened by their difference (d d^T) to
+  /// cover both (docs/camera-calibration.md, "Robust pass").
+  std::string ambiguity;
+  /// The profile check of the projection's first parameter (omni and ds xi, eucm alpha; docs/
+  /// camera-calibration.md, "Uncertainty"): the least chi-square rise of the cost with it held 3
+  /// sigmas away (9 for a quadratic valley; NaN: not checked) and the factor its sigma was
+  /// stretched by (1: not stretched).
+  double profile_chi2 = std::numeric_limits<double>::quiet_NaN();
+  double profile_stretch = 1.0;
   std::vector<std::string> warnings;
   int iterations = 0;  // solver iterations over all passes
   double solve_cpu_s = 0.0;

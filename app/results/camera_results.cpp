@@ -222,6 +222,10 @@ YAML::Node camera_node(const CameraCalibrationReport& r) {
   q["reprojection_rms_px"] = res.rms_px;
   q["residual_sigma_px"] = res.residual_sigma_px;
   q["focal_well_determined"] = res.focal_well_determined;
+  if (std::isfinite(res.profile_chi2)) {
+    q["profile_chi2"] = res.profile_chi2;
+    q["profile_sigma_stretch"] = res.profile_stretch;
+  }
   if (res.camera.shutter.rolling()) q["line_delay_sigma_s"] = number_or_null(r.line_delay_sigma_s);
   if (!r.shutter_choice.empty()) q["shutter_choice"] = r.shutter_choice;
   q["coverage"] = res.coverage;
@@ -318,6 +322,10 @@ json camera_json(const CameraCalibrationReport& r) {
       {"reprojection_rms_px", res.rms_px},
       {"residual_sigma_px", res.residual_sigma_px},
       {"focal_well_determined", res.focal_well_determined},
+      {"profile_check",
+       {{"chi2", finite_or_null(res.profile_chi2)},
+        {"sigma_stretch", res.profile_stretch},
+        {"ambiguity", res.ambiguity.empty() ? json(nullptr) : json(res.ambiguity)}}},
       {"shutter", shutter_kind_name(res.camera.shutter.kind)},
       {"line_delay_s", res.camera.shutter.rolling() ? json(res.camera.shutter.line_delay_s) : json(nullptr)},
       {"line_delay_sigma_s", finite_or_null(r.line_delay_sigma_s)},

@@ -105,14 +105,15 @@ void expect_model_within_sigmas(const CameraIntrinsicsResult& r, const CameraMod
   }
 }
 
-// omni-radtan (k1, k2 6 sigmas off) and ds-none (xi traded against the focal length, 16 sigmas
-// off at the same RMS) do not yet recover their truth from this start: not listed until they do.
 std::vector<CameraModel> wide_model_cameras() {
   using P = ProjectionModel;
   using D = DistortionModel;
   return {
       model_camera({P::kPinhole, D::kFov}, {190.0, 189.5, 188.7, 120.4}, {0, 0}, {0.9, 0, 0, 0}, 376, 240),
       model_camera({P::kOmni, D::kNone}, {270.0, 269.4, 188.2, 119.1}, {0.8, 0}, {0, 0, 0, 0}, 376, 240),
+      model_camera({P::kOmni, D::kRadtan}, {270.0, 269.4, 188.2, 119.1}, {0.8, 0},
+                   {-0.04, 0.008, 1e-4, -1e-4}, 376, 240),
+      model_camera({P::kDs, D::kNone}, {110.0, 109.8, 188.2, 119.1}, {-0.15, 0.6}, {0, 0, 0, 0}, 376, 240),
       model_camera({P::kEucm, D::kNone}, {110.0, 109.8, 188.2, 119.1}, {0.6, 1.1}, {0, 0, 0, 0}, 376, 240),
   };
 }
@@ -127,6 +128,9 @@ TEST(CameraModelsCalib, EachModelRecoversItsParametersWithinThreeSigmas) {
     ASSERT_TRUE(r.ok()) << camera_model_name(truth.kind()) << ": " << r.error().message;
     EXPECT_EQ(r->views_used, 24) << camera_model_name(truth.kind());
     EXPECT_LT(r->rms_px, 0.35) << camera_model_name(truth.kind());
+    std::printf("%s: profile chi-square %.2f, sigma stretched %.2f times; %s\n",
+                camera_model_name(truth.kind()).c_str(), r->profile_chi2, r->profile_stretch,
+                r->ambiguity.empty() ? "one solution" : r->ambiguity.c_str());
     expect_model_within_sigmas(*r, truth, 3.0);
   }
 }
@@ -134,9 +138,7 @@ TEST(CameraModelsCalib, EachModelRecoversItsParametersWithinThreeSigmas) {
 // A 200-degree lens (double sphere): the pinhole models cannot see the views beyond 90 degrees
 // and are left out; the double sphere model has the lowest BIC of those compared, and its
 // calibration holds the truth within 3 sigmas.
-// Disabled: eucm-none wins by a BIC of 5.6 at the same RMS, ds-none's solve ending in the local
-// minimum above; enabled again once the double sphere's start finds the truth.
-TEST(CameraModelsCalib, DISABLED_AutoChoosesDoubleSphereForA200DegreeLens) {
+TEST(CameraModelsCalib, AutoChoosesDoubleSphereForA200DegreeLens) {
   const CameraModel truth = model_camera({ProjectionModel::kDs, DistortionModel::kNone},
                                          {96.0, 95.8, 199.6, 200.3}, {-0.15, 0.6}, {0, 0, 0, 0}, 400, 400);
   Eigen::Vector3d edge;
