@@ -7,25 +7,40 @@
 #include <string>
 
 #include "calib/camimu_calibration.hpp"
+#include "core/text_format.hpp"
 
 namespace imucal::calib {
+namespace {
+
+/// "lo-hi" of two limits, as the messages give a range.
+std::string range_text(double lo, double hi) {
+  return format_number("%g", lo) + "-" + format_number("%g", hi);
+}
+
+}  // namespace
 
 Status CamImuOptions::validate() const {
   using L = CamImuLimits;
   if (spline_order < L::kMinSplineOrder || spline_order > L::kMaxSplineOrder)
-    return make_error(Errc::kInvalidArgument, "spline order must be 4, 5 or 6 (cubic to quintic)");
+    return make_error(Errc::kInvalidArgument, "spline order must be within " +
+                                                  range_text(L::kMinSplineOrder, L::kMaxSplineOrder) +
+                                                  " (4 cubic, 6 quintic)");
   if (!(knot_spacing_s == 0.0 ||
         (knot_spacing_s >= L::kMinKnotSpacingS && knot_spacing_s <= L::kMaxKnotSpacingS)))
-    return make_error(Errc::kInvalidArgument,
-                      "knot spacing must be 0 (chosen from the motion) or within 0.005-0.5 s");
+    return make_error(Errc::kInvalidArgument, "knot spacing must be 0 (chosen from the motion) or within " +
+                                                  range_text(L::kMinKnotSpacingS, L::kMaxKnotSpacingS) +
+                                                  " s");
   if (!(bias_knot_spacing_s >= std::max(knot_spacing_s, L::kMinBiasKnotSpacingS) &&
         bias_knot_spacing_s <= L::kMaxBiasKnotSpacingS))
     return make_error(Errc::kInvalidArgument,
-                      "bias knot spacing must be within 0.05-60 s and at least the knot spacing");
+                      "bias knot spacing must be within " +
+                          range_text(L::kMinBiasKnotSpacingS, L::kMaxBiasKnotSpacingS) +
+                          " s and at least the knot spacing");
   if (!(corner_sigma_px >= 0.0 && corner_sigma_px <= L::kMaxCornerSigmaPx) ||
       !(reprojection_loss_sigmas > 0.0))
-    return make_error(Errc::kInvalidArgument,
-                      "the corner sigma must be within 0-50 px (0: estimated) and the loss scale positive");
+    return make_error(Errc::kInvalidArgument, "the corner sigma must be within " +
+                                                  range_text(0.0, L::kMaxCornerSigmaPx) +
+                                                  " px (0: estimated) and the loss scale positive");
   if (!(noise.accel_noise_density > 0 && noise.gyro_noise_density > 0 && noise.accel_random_walk > 0 &&
         noise.gyro_random_walk > 0))
     return make_error(Errc::kInvalidArgument, "every IMU noise figure must be positive (imu.yaml)");
@@ -34,13 +49,16 @@ Status CamImuOptions::validate() const {
   if (!(max_timeshift_s > 0.0 && max_timeshift_s <= 1.0))
     return make_error(Errc::kInvalidArgument, "the largest time offset searched must be within (0, 1] s");
   if (max_iterations < 1 || max_iterations > L::kMaxIterations)
-    return make_error(Errc::kInvalidArgument, "the solver's iterations must be within 1-10000");
+    return make_error(Errc::kInvalidArgument,
+                      "the solver's iterations must be within " + range_text(1, L::kMaxIterations));
   if (!(covariance_cluster_s >= 0.0 && covariance_cluster_s <= L::kMaxCovarianceClusterS))
-    return make_error(Errc::kInvalidArgument, "the covariance's cluster length must be within 0-3600 s");
+    return make_error(Errc::kInvalidArgument, "the covariance's cluster length must be within " +
+                                                  range_text(0.0, L::kMaxCovarianceClusterS) + " s");
   if (!(imu_max_rate_hz == 0.0 ||
         (imu_max_rate_hz >= L::kMinImuMaxRateHz && imu_max_rate_hz <= L::kMaxImuMaxRateHz)))
     return make_error(Errc::kInvalidArgument,
-                      "the IMU's largest rate must be 0 (one residual per sample) or within 20-100000 Hz");
+                      "the IMU's largest rate must be 0 (one residual per sample) or within " +
+                          range_text(L::kMinImuMaxRateHz, L::kMaxImuMaxRateHz) + " Hz");
   if (shutter.line_delay_s &&
       (!(std::isfinite(*shutter.line_delay_s) && std::abs(*shutter.line_delay_s) <= 1e-3) ||
        shutter.mode == CamImuShutterOptions::Mode::kGlobal))
