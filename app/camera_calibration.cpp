@@ -634,6 +634,19 @@ Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q
     in.name = "cam" + std::to_string(c);
     if (report.stream.name != in.name) in.name += " (" + report.stream.name + ")";
     in.model = q.models[c];
+    if (!q.base.model_candidates.empty()) {
+      // Each camera's model by the evidence of its own views (at most kChoiceViews of them,
+      // spread over the recording, as the chain's start uses).
+      constexpr std::size_t kChoiceViews = 100;
+      std::vector<calib::TargetObservation> sample;
+      const std::size_t step = std::max<std::size_t>(1, (obs->size() + kChoiceViews - 1) / kChoiceViews);
+      for (std::size_t i = 0; i < obs->size(); i += step) sample.push_back((*obs)[i]);
+      auto chosen =
+          calib::choose_camera_model(q.base.target, sample, q.base.intrinsics, q.base.model_candidates);
+      if (!chosen.ok()) return chosen.error().context(in.name + " of " + q.base.log_path);
+      in.model = chosen->choice.chosen;
+      report.model_choice = std::move(chosen->choice);
+    }
     in.observations = std::move(*obs);
     in.shutter = c < q.shutters.size() ? q.shutters[c] : q.base.known_shutter;
     const auto [note, warning] =
@@ -666,17 +679,26 @@ Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q
   return out;
 }
 
-Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequest& q) {
-  IMUCAL_TRY(q.intrinsics.validate());
+Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequest& request) {
+  IMUCAL_TRY(request.intrinsics.validate());
+  CameraCalibrationRequest q = request;  // its model replaced by the chosen one (--model auto)
   IMUCAL_TRY(q.target.validate());
   CameraCalibrationReport report;
   auto reader = start_report(q, &report);
   if (!reader.ok()) return reader.error();
   auto found = detect_for_report(q, **reader, &report);
   if (!found.ok()) return found.error();
-  auto result = calib::calibrate_camera_intrinsics(q.target, *found, q.intrinsics, q.solve_progress);
-  if (!result.ok()) return result.error().context("camera '" + report.stream.name + "' of " + q.log_path);
-  report.intrinsics = std::move(*result);
+  if (!q.model_candidates.empty()) {
+    auto chosen = calib::choose_camera_model(q.target, *found, q.intrinsics, q.model_candidates);
+    if (!chosen.ok()) return chosen.error().context("camera '" + report.stream.name + "' of " + q.log_path);
+    report.intrinsics = std::move(chosen->result);
+    report.model_choice = std::move(chosen->choice);
+    q.intrinsics.model = report.model_choice->chosen;
+  } else {
+    auto result = calib::calibrate_camera_intrinsics(q.target, *found, q.intrinsics, q.solve_progress);
+    if (!result.ok()) return result.error().context("camera '" + report.stream.name + "' of " + q.log_path);
+    report.intrinsics = std::move(*result);
+  }
   report.warnings.insert(report.warnings.end(), report.intrinsics.warnings.begin(),
                          report.intrinsics.warnings.end());
   IMUCAL_TRY(solve_shutter(q, *found, &report));

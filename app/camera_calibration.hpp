@@ -17,6 +17,7 @@
 
 #include "calib/camera_chain.hpp"
 #include "calib/camera_intrinsics.hpp"
+#include "calib/camera_model_choice.hpp"
 #include "calib/target_detection.hpp"
 #include "core/frame.hpp"
 #include "core/progress.hpp"
@@ -76,6 +77,9 @@ struct CameraCalibrationRequest {
   std::string target_source;  // for the outputs: the file, or where in the log it came from
   calib::DetectionOptions detection;
   calib::CameraIntrinsicsOptions intrinsics;
+  /// The model chosen by the evidence among these (calib/camera_model_choice.hpp; empty: the
+  /// model of `intrinsics`). For a chain, each camera's own.
+  std::vector<CameraModelKind> model_candidates;
   /// The shutter (docs/camera-calibration.md, "Rolling shutter"): kGlobal solves each view with
   /// its own pose, as always; otherwise the views are also solved on a trajectory with the line
   /// delay freed (kAuto keeps rolling only by the evidence) or held (line_delay_s). `known` is
@@ -116,6 +120,8 @@ struct CameraCalibrationReport {
   double detection_wall_s = 0.0;       // 0 when reused
   int detection_threads = 0;
   calib::CameraIntrinsicsResult intrinsics;
+  /// The model chosen by the evidence (`--model auto`: CameraCalibrationRequest::choose_model).
+  std::optional<calib::CameraModelChoice> model_choice;
   /// The line delay's sigma (s per row; NaN: global, held or not determined) and why this
   /// shutter (empty: global, nothing asked).
   double line_delay_sigma_s = std::numeric_limits<double>::quiet_NaN();
@@ -131,7 +137,7 @@ struct CameraChainRequest {
   /// `camera` is not used, and `intrinsics` holds the rejection rules of every camera.
   CameraCalibrationRequest base;
   std::vector<std::string> cameras;     // stream names, cam0 first; at least two
-  std::vector<DistortionModel> models;  // one per camera
+  std::vector<CameraModelKind> models;  // one per camera
   /// Each camera's shutter as known (empty: base.known_shutter for every camera).
   std::vector<Shutter> shutters;
   /// Its `intrinsics` are set from base, and its `threads` too unless given (> 0).

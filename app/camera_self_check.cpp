@@ -17,19 +17,26 @@ namespace {
 
 constexpr double kRadToDeg = 180.0 / 3.14159265358979323846;
 constexpr const char* kCameraSuspects =
-    "the lens model (one that fits the whole image: a wide lens needs pinhole-equi), the target's size and "
+    "the lens model (one that fits the whole image: a wide lens needs pinhole-equi, beyond 180 degrees "
+    "ds-none or "
+    "eucm-none; --model auto chooses by the evidence), the target's size and "
     "flatness, views that cover the whole image in every part";
 
 void intrinsic_rows(const std::string& cam, const calib::CameraIntrinsicsResult& r, double line_delay_sigma_s,
                     std::vector<SplitCheckRow>* rows) {
   const char* focal[] = {"fu", "fv", "pu", "pv"};
-  const char* radtan[] = {"k1", "k2", "p1", "p2"};
-  const char* equi[] = {"k1", "k2", "k3", "k4"};
-  const char** coeff = r.camera.distortion_model == DistortionModel::kRadtan ? radtan : equi;
+  const auto projection = projection_param_names(r.camera.projection);
+  const auto coeff = distortion_coeff_names(r.camera.distortion_model);
   for (int i = 0; i < 4; ++i)
     rows->push_back({cam + " " + focal[i], "px", r.camera.intrinsics(i), r.intrinsics_sigma(i)});
-  for (int i = 0; i < 4; ++i)
-    rows->push_back({cam + " " + coeff[i], "", r.camera.distortion_coeffs(i), r.distortion_sigma(i)});
+  for (std::size_t i = 0; i < projection.size(); ++i) {
+    const auto e = static_cast<Eigen::Index>(i);
+    rows->push_back({cam + " " + projection[i], "", r.camera.projection_params(e), r.projection_sigma(e)});
+  }
+  for (std::size_t i = 0; i < coeff.size(); ++i) {
+    const auto e = static_cast<Eigen::Index>(i);
+    rows->push_back({cam + " " + coeff[i], "", r.camera.distortion_coeffs(e), r.distortion_sigma(e)});
+  }
   if (r.camera.shutter.rolling() && std::isfinite(line_delay_sigma_s))
     rows->push_back(
         {cam + " line delay", "us", r.camera.shutter.line_delay_s * 1e6, line_delay_sigma_s * 1e6});
@@ -191,6 +198,7 @@ std::vector<std::string> scale_camera_by_self_check(calib::CameraIntrinsicsResul
   std::vector<std::string> notes;
   const double k = split_scale(check, name + " ", name, &notes);
   camera->intrinsics_sigma *= k;
+  camera->projection_sigma *= k;
   camera->distortion_sigma *= k;
   camera->covariance *= k * k;
   *line_delay_sigma_s *= k;
@@ -204,6 +212,7 @@ std::vector<std::string> scale_chain_by_self_check(calib::CameraChainResult* cha
     const std::string cam = "cam" + std::to_string(c);
     const double k = split_scale(check, cam + " ", cam, &notes);
     cr.intrinsics.intrinsics_sigma *= k;
+    cr.intrinsics.projection_sigma *= k;
     cr.intrinsics.distortion_sigma *= k;
     cr.intrinsics.covariance *= k * k;
     cr.line_delay_sigma_s *= k;

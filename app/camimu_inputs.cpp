@@ -122,20 +122,27 @@ double number_or_nan(const YAML::Node& n) {
   return n.IsNull() ? std::numeric_limits<double>::quiet_NaN() : n.as<double>();
 }
 
-/// The intrinsics' covariance a camera's `imucal:` map gives (CamchainCamera's doc).
+/// The intrinsics' covariance a camera's `imucal:` map gives (CamchainCamera's doc): the file
+/// holds it in Kalibr's order of the model's n parameters, n x n.
 Status read_intrinsics_covariance(const YAML::Node& node, const std::string& where, CamchainCamera* cam) {
   const YAML::Node q = node["imucal"];
   if (!q || !q.IsMap()) return {};
-  const std::string bad = where + ": imucal.intrinsics_covariance must be 8 rows of 8 numbers (or null)";
+  const std::vector<int> order = kalibr_parameter_indices(cam->camera.kind());
+  const auto n = static_cast<int>(order.size());
+  std::string names;
+  for (const std::string& name : kalibr_parameter_names(cam->camera.kind()))
+    names += (names.empty() ? "" : ", ") + name;
+  const std::string bad = where + ": imucal.intrinsics_covariance must be " + std::to_string(n) +
+                          " rows of " + std::to_string(n) + " numbers (or null), in the order " + names;
   try {
     if (const YAML::Node c = q["intrinsics_covariance"]) {
-      if (!c.IsSequence() || c.size() != 8) return make_error(Errc::kCorrupt, bad);
-      Eigen::MatrixXd C(8, 8);
-      for (int r = 0; r < 8; ++r) {
-        if (!c[r].IsSequence() || c[r].size() != 8) return make_error(Errc::kCorrupt, bad);
-        for (int k = 0; k < 8; ++k) C(r, k) = number_or_nan(c[r][k]);
+      if (!c.IsSequence() || static_cast<int>(c.size()) != n) return make_error(Errc::kCorrupt, bad);
+      Eigen::MatrixXd C = Eigen::MatrixXd::Zero(10, 10);
+      for (int r = 0; r < n; ++r) {
+        if (!c[r].IsSequence() || static_cast<int>(c[r].size()) != n) return make_error(Errc::kCorrupt, bad);
+        for (int k = 0; k < n; ++k) C(order[r], order[k]) = number_or_nan(c[r][k]);
       }
-      for (int r = 0; r < 8; ++r)
+      for (int r = 0; r < 10; ++r)
         if (C(r, r) < 0.0)
           return make_error(Errc::kCorrupt, where + ": imucal.intrinsics_covariance has a negative variance");
       cam->intrinsics_covariance = C;

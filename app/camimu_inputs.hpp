@@ -36,8 +36,9 @@ struct CamchainCamera {
   /// (`imucal: T_cn_cnm1_covariance:`, rotation about camN's axes then translation).
   std::optional<Eigen::Isometry3d> T_cn_cnm1;
   std::optional<Eigen::Matrix<double, 6, 6>> T_cn_cnm1_covariance;
-  /// The intrinsics' 8 x 8 covariance [intrinsics, distortion_coeffs] (`imucal:
-  /// intrinsics_covariance:`, NaN where the file says null) and what it came from; empty when
+  /// The intrinsics' covariance in the solves' 10 x 10 layout [fu fv pu pv, projection (2),
+  /// distortion (4)] (the file's `imucal: intrinsics_covariance:` is in Kalibr's order of the
+  /// model's parameters, NaN where it says null) and what it came from; empty when
   /// the file has none (a Kalibr camchain; sigmas alone are not used, the source then says why).
   Eigen::MatrixXd intrinsics_covariance;
   std::string intrinsics_covariance_source;

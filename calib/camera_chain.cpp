@@ -29,6 +29,8 @@
 #include <numeric>
 #include <queue>
 
+#include "calib/camera_blocks.hpp"
+#include "calib/camera_chain_links.hpp"
 #include "calib/camera_chain_residuals.hpp"
 #include "calib/camimu_init.hpp"
 #include "calib/marginal_covariance.hpp"
@@ -39,6 +41,10 @@
 
 namespace imucal::calib {
 namespace {
+
+using chain::find_link;
+using chain::Link;
+using chain::PoseSample;
 
 constexpr int kOrder = 4;  // cubic B-spline
 using Residual = chain::ChainFrameResidual<kOrder>;
@@ -72,113 +78,6 @@ Arr4 to_quat(const Eigen::Matrix3d& R) {
   return {q.x(), q.y(), q.z(), q.w()};
 }
 
-/// A camera's pose in one view: target (world) from camera, at the view's stamp (s from t0).
-struct PoseSample {
-  double t = 0.0;
-  Eigen::Matrix3d R_wc = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d p_wc = Eigen::Vector3d::Zero();
-};
-
-/// The pose of a camera's track at time t, interpolated between the two views around it when
-/// they are at most max_gap_s apart; false otherwise.
-bool interpolate(const std::vector<PoseSample>& track, double t, double max_gap_s, Eigen::Matrix3d* R,
-                 Eigen::Vector3d* p) {
-  const auto it =
-      std::upper_bound(track.begin(), track.end(), t, [](double x, const PoseSample& s) { return x < s.t; });
-  if (it == track.begin() || it == track.end()) return false;
-  const PoseSample& b = *it;
-  const PoseSample& a = *(it - 1);
-  if (b.t - a.t > max_gap_s) return false;
-  const double u = b.t > a.t ? (t - a.t) / (b.t - a.t) : 0.0;
-  *R = a.R_wc * so3::exp(u * so3::log(a.R_wc.transpose() * b.R_wc));
-  *p = (1.0 - u) * a.p_wc + u * b.p_wc;
-  return true;
-}
-
-/// The rotation nearest (chordal) to the mean of `Rs`.
-Eigen::Matrix3d mean_rotation(const std::vector<Eigen::Matrix3d>& Rs) {
-  Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
-  for (const auto& R : Rs) sum += R;
-  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
-  D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
-  return svd.matrixU() * D * svd.matrixV().transpose();
-}
-
-/// How camera b sits against camera a, from the views they share.
-struct Link {
-  int shared = 0;                                      // b's views with a's pose interpolated at the offset
-  double shift = 0.0;                                  // t_a = t_b + shift
-  Eigen::Matrix3d R_ba = Eigen::Matrix3d::Identity();  // p_b = R_ba p_a + t_ba
-  Eigen::Vector3d t_ba = Eigen::Vector3d::Zero();
-  double score = std::numeric_limits<double>::infinity();
-};
-
-/// The relative poses T_a_b of b's views against a's track shifted by `shift`, and a score of
-/// their spread (median over the views of |t - median t|^2 + (distance x angle to the mean)^2).
-Link link_at(const std::vector<PoseSample>& a, const std::vector<PoseSample>& b, double shift,
-             double max_gap_s) {
-  std::vector<Eigen::Matrix3d> R_ab;
-  std::vector<Eigen::Vector3d> t_ab;
-  std::vector<double> dist;
-  for (const PoseSample& s : b) {
-    Eigen::Matrix3d Ra;
-    Eigen::Vector3d pa;
-    if (!interpolate(a, s.t + shift, max_gap_s, &Ra, &pa)) continue;
-    R_ab.push_back(Ra.transpose() * s.R_wc);
-    t_ab.push_back(Ra.transpose() * (s.p_wc - pa));
-    dist.push_back(pa.norm());
-  }
-  Link out;
-  out.shared = static_cast<int>(R_ab.size());
-  out.shift = shift;
-  if (R_ab.empty()) return out;
-  const Eigen::Matrix3d R = mean_rotation(R_ab);
-  Eigen::Vector3d t_med;
-  for (int k = 0; k < 3; ++k) {
-    std::vector<double> c;
-    for (const auto& t : t_ab) c.push_back(t(k));
-    t_med(k) = median(c);
-  }
-  std::vector<double> spread;
-  for (std::size_t i = 0; i < R_ab.size(); ++i) {
-    const double angle = so3::log(R.transpose() * R_ab[i]).norm();
-    spread.push_back((t_ab[i] - t_med).squaredNorm() + std::pow(dist[i] * angle, 2));
-  }
-  out.score = median(spread);
-  out.R_ba = R.transpose();
-  out.t_ba = -R.transpose() * t_med;
-  return out;
-}
-
-/// The link of b against a: the offset on a 1 ms grid within +-max_shift_s (0 alone when
-/// offsets are not estimated) with the smallest spread among those with at least min_shared
-/// views, refined by a parabola through its neighbours.
-Link find_link(const std::vector<PoseSample>& a, const std::vector<PoseSample>& b, double max_shift_s,
-               double max_gap_s, int min_shared) {
-  const double step = 1e-3;
-  const int n = static_cast<int>(std::floor(max_shift_s / step));
-  std::vector<Link> grid;
-  for (int k = -n; k <= n; ++k) grid.push_back(link_at(a, b, k * step, max_gap_s));
-  int best = -1;
-  for (int k = 0; k < static_cast<int>(grid.size()); ++k) {
-    if (grid[k].shared < min_shared) continue;
-    if (best < 0 || grid[k].score < grid[best].score) best = k;
-  }
-  if (best < 0) return Link{};
-  if (best > 0 && best + 1 < static_cast<int>(grid.size()) && grid[best - 1].shared >= min_shared &&
-      grid[best + 1].shared >= min_shared) {
-    const double y0 = grid[best - 1].score, y1 = grid[best].score, y2 = grid[best + 1].score;
-    const double den = y0 - 2.0 * y1 + y2;
-    if (den > 0.0) {
-      const double dx = std::clamp(0.5 * (y0 - y2) / den, -0.5, 0.5);
-      Link refined = link_at(a, b, grid[best].shift + dx * step, max_gap_s);
-      if (refined.shared >= min_shared) return refined;
-    }
-  }
-  return grid[best];
-}
-
 double median_interval_s(const std::vector<PoseSample>& track) {
   std::vector<double> d;
   for (std::size_t i = 1; i < track.size(); ++i) d.push_back(track[i].t - track[i - 1].t);
@@ -191,6 +90,7 @@ struct CameraBlocks {
   Arr3 t{0, 0, 0};
   double shift = 0.0;
   std::array<double, 4> intrinsics{}, distortion{};
+  std::array<double, 2> projection{};  // the model's parameters first, the rest held at 0
   double sigma_px = 0.3;
   // The shutter: rolling views have a line delay block (held when line_delay_fixed); `test`:
   // freed after the global solution, kept by request (keep_rolling) or by the evidence.
@@ -342,6 +242,7 @@ Status ChainSolver::start_cameras(const TargetDescription& target, const Progres
     CameraBlocks& b = blocks_[c];
     std::copy(s.camera.intrinsics.data(), s.camera.intrinsics.data() + 4, b.intrinsics.begin());
     std::copy(s.camera.distortion_coeffs.data(), s.camera.distortion_coeffs.data() + 4, b.distortion.begin());
+    std::copy(s.camera.projection_params.data(), s.camera.projection_params.data() + 2, b.projection.begin());
     b.sigma_px = std::max(0.01, std::isfinite(s.residual_sigma_px) ? s.residual_sigma_px : 0.3);
     s.views.clear();
     std::vector<PoseSample> track;
@@ -602,7 +503,8 @@ void ChainSolver::build(double loss_sigmas) {
       const std::size_t g = group_of_view_[k];
       auto* cost = new chain::ChainPoseResidual(chain::ViewCorners(
           inputs_[v.camera].model, width, height, std::move(pts), std::move(px), b.sigma_px, loss_px));
-      blocks = {q_[g].data(), p_[g].data(), b.q.data(), b.t.data(), b.intrinsics.data(), b.distortion.data()};
+      blocks = {q_[g].data(),        p_[g].data(),        b.q.data(),         b.t.data(),
+                b.intrinsics.data(), b.projection.data(), b.distortion.data()};
       residual_ids_.push_back(problem_->AddResidualBlock(cost, nullptr, blocks));
       residuals_.push_back({nullptr, cost});
     } else {
@@ -615,7 +517,8 @@ void ChainSolver::build(double loss_sigmas) {
         blocks.push_back(q_[static_cast<std::size_t>(first + i)].data());
       for (int i = 0; i < Residual::kWindow; ++i)
         blocks.push_back(p_[static_cast<std::size_t>(first + i)].data());
-      for (double* x : {b.q.data(), b.t.data(), &b.shift, b.intrinsics.data(), b.distortion.data()})
+      for (double* x :
+           {b.q.data(), b.t.data(), &b.shift, b.intrinsics.data(), b.projection.data(), b.distortion.data()})
         blocks.push_back(x);
       if (b.rolling) blocks.push_back(&b.line_delay);
       residual_ids_.push_back(problem_->AddResidualBlock(cost, nullptr, blocks));
@@ -623,6 +526,9 @@ void ChainSolver::build(double loss_sigmas) {
     }
     residual_blocks_.push_back(std::move(blocks));
   }
+  for (std::size_t c = 0; c < blocks_.size(); ++c)
+    hold_unused_camera_entries(problem_.get(), inputs_[c].model, blocks_[c].projection.data(),
+                               blocks_[c].distortion.data());
   // cam0 is the reference: its pose and offset are not estimated.
   problem_->SetParameterBlockConstant(blocks_[0].q.data());
   problem_->SetParameterBlockConstant(blocks_[0].t.data());
@@ -785,8 +691,9 @@ void ChainSolver::fill_pairs(CameraChainResult* out) const {
 ChainSolver::BlockCovariance ChainSolver::solution_covariance(MarginalCovariance* cov) {
   std::vector<const double*> wanted;
   for (std::size_t c = 0; c < blocks_.size(); ++c) {
-    wanted.push_back(blocks_[c].intrinsics.data());
-    wanted.push_back(blocks_[c].distortion.data());
+    for (const double* x :
+         {blocks_[c].intrinsics.data(), blocks_[c].projection.data(), blocks_[c].distortion.data()})
+      if (problem_->HasParameterBlock(x) && !problem_->IsParameterBlockConstant(x)) wanted.push_back(x);
     if (blocks_[c].rolling && !blocks_[c].line_delay_fixed) wanted.push_back(&blocks_[c].line_delay);
     if (c == 0) continue;
     wanted.push_back(blocks_[c].q.data());
@@ -815,6 +722,7 @@ void ChainSolver::fill_camera(std::size_t c, const BlockCovariance& block,
   r->intrinsics = starts_[c];
   CameraIntrinsicsResult& k = r->intrinsics;
   k.camera.intrinsics = Eigen::Vector4d(b.intrinsics.data());
+  k.camera.projection_params = Eigen::Vector2d(b.projection.data());
   k.camera.distortion_coeffs = Eigen::Vector4d(b.distortion.data());
   k.camera.shutter = inputs_[c].shutter;
   k.camera.shutter.kind = b.rolling ? Shutter::Kind::kRolling : Shutter::Kind::kGlobal;
@@ -824,16 +732,18 @@ void ChainSolver::fill_camera(std::size_t c, const BlockCovariance& block,
     const double var = block(&b.line_delay, &b.line_delay, 1, 1)(0, 0);
     r->line_delay_sigma_s = std::isfinite(var) ? std::sqrt(std::max(var, 0.0)) : kNaN;
   }
-  Eigen::Matrix<double, 8, 8> C;
-  C << block(b.intrinsics.data(), b.intrinsics.data(), 4, 4),
-      block(b.intrinsics.data(), b.distortion.data(), 4, 4),
-      block(b.distortion.data(), b.intrinsics.data(), 4, 4),
-      block(b.distortion.data(), b.distortion.data(), 4, 4);
-  k.covariance = C;
-  k.covariance_ok = C.allFinite();
-  const Eigen::VectorXd s = sigma_of(C);
-  k.intrinsics_sigma = s.head<4>();
-  k.distortion_sigma = s.tail<4>();
+  const Eigen::Matrix<double, 10, 10> C = camera_covariance(
+      inputs_[c].model, {b.intrinsics.data(), b.projection.data(), b.distortion.data()}, block);
+  set_camera_covariance(C.allFinite() ? std::optional(C) : std::nullopt, &k);
+  if (!k.covariance_ok) {
+    // Keep the sigmas of the parameters that were determined (NaN: not determined).
+    k.covariance = C;
+    const Eigen::VectorXd s = sigma_of(C);
+    for (int i = 0; i < 4; ++i) k.intrinsics_sigma[i] = s[i];
+    for (int i = 0; i < projection_param_count(k.camera.projection); ++i) k.projection_sigma[i] = s[4 + i];
+    for (int i = 0; i < distortion_coeff_count(k.camera.distortion_model); ++i)
+      k.distortion_sigma[i] = s[6 + i];
+  }
   const double rel = std::max(k.intrinsics_sigma[0] / k.camera.intrinsics[0],
                               k.intrinsics_sigma[1] / k.camera.intrinsics[1]);
   k.focal_well_determined = k.covariance_ok && rel <= opt_.intrinsics.max_focal_relative_sigma;

@@ -26,7 +26,7 @@ namespace imucal::calib {
 /// One camera of the chain: its name (for messages), model and detections in time order.
 struct CameraChainInput {
   std::string name;
-  DistortionModel model = DistortionModel::kRadtan;
+  CameraModelKind model{ProjectionModel::kPinhole, DistortionModel::kRadtan};
   std::vector<TargetObservation> observations;
   /// The camera's shutter as known (a rolling one's readout direction, stamped row and line
   /// delay to start from); what the solve does with it is CameraChainOptions::shutter.

@@ -13,17 +13,19 @@
 //
 // ChainPoseResidual is the same view against one pose of cam0 per stamp (cameras triggered
 // together, offsets held at 0; Kalibr's model): blocks R_target_cam0 (quaternion), p (R^3),
-// R_ci_c0, t_ci_c0, intrinsics, distortion.
+// R_ci_c0, t_ci_c0, intrinsics, projection, distortion.
 //
 // Parameter blocks: N + 2 rotation knots (RightQuaternionManifold), N + 2 position knots (R^3),
-// R_ci_c0 (quaternion), t_ci_c0 (R^3), shift (s), intrinsics fu fv pu pv (R^4), distortion (R^4).
-// The pose's Jacobians are the spline's analytic ones (calib/spline.hpp); the projection's, in
-// the camera point and the 8 camera parameters, come from one Jet evaluation per corner.
+// R_ci_c0 (quaternion), t_ci_c0 (R^3), shift (s), intrinsics fu fv pu pv (R^4), the projection's
+// parameters (R^2: omni xi, eucm alpha beta, ds xi alpha), distortion (R^4); the entries a model
+// does not use are held by the solve. The pose's Jacobians are the spline's analytic ones
+// (calib/spline.hpp); the projection's, in the camera point and the 10 camera parameters, come
+// from one Jet evaluation per corner.
 //
 // Compressed (the default), as the camera-IMU frame residual (calib/camimu_residuals.hpp): every
-// parameter moves the corners through the camera frame's rigid motion (w, v) or the 8 camera
-// parameters k, so the 2n corner rows r = F G dx (F: 2n x 14 in (w, v, k)) are replaced by 15
-// rows with the same cost, gradient and Gauss-Newton matrix: 14 rows R G (R^T R = F^T F), their
+// parameter moves the corners through the camera frame's rigid motion (w, v) or the 10 camera
+// parameters k, so the 2n corner rows r = F G dx (F: 2n x 16 in (w, v, k)) are replaced by 17
+// rows with the same cost, gradient and Gauss-Newton matrix: 16 rows R G (R^T R = F^T F), their
 // residual R^-T F^T r, and a last row with the rest of |r|^2.
 
 #include <ceres/ceres.h>
@@ -39,15 +41,18 @@
 
 namespace imucal::calib::chain {
 
-using Mat14 = Eigen::Matrix<double, 14, 14>;
-using Vec14 = Eigen::Matrix<double, 14, 1>;
-inline constexpr int kCompressedRows = 15;
+/// The camera frame's motion (w, v) and the camera's 10 parameters (4 intrinsics, 2 of the
+/// projection, 4 of the distortion).
+inline constexpr int kFactorCols = 16;
+using Mat16 = Eigen::Matrix<double, kFactorCols, kFactorCols>;
+using Vec16 = Eigen::Matrix<double, kFactorCols, 1>;
+inline constexpr int kCompressedRows = kFactorCols + 1;
 
 /// The corners of one view, their weight and loss: what the residual is, whatever models the
 /// pose of cam0 relative to the target (world) at the view's time, (R_wb, p_wb).
 class ViewCorners {
  public:
-  ViewCorners(DistortionModel model, int width, int height, std::vector<Eigen::Vector3d> points_w,
+  ViewCorners(CameraModelKind model, int width, int height, std::vector<Eigen::Vector3d> points_w,
               std::vector<Eigen::Vector2d> px, double sigma_px, double loss_scale_px)
       : model_(model),
         width_(width),
@@ -65,11 +70,11 @@ class ViewCorners {
 
   /// The unweighted pixel residuals (projected - detected), without the loss.
   void pixel_residuals(const Eigen::Matrix3d& R_wb, const Eigen::Vector3d& p_wb, const double* q_ci,
-                       const double* t_ci, const double* intr, const double* dist,
+                       const double* t_ci, const double* intr, const double* proj, const double* dist,
                        std::vector<Eigen::Vector2d>* out) const {
     const Eigen::Matrix3d Rt = R_wb.transpose(), Rci = camimu::quat_matrix(q_ci);
     const Eigen::Map<const Eigen::Vector3d> tci(t_ci);
-    const auto camera = CameraModel::from_params(model_, intr, dist, width_, height_);
+    const auto camera = CameraModel::from_params(model_, intr, proj, dist, width_, height_);
     out->clear();
     for (std::size_t k = 0; k < points_.size(); ++k)
       out->push_back(camera.project(Rci * (Rt * (points_[k] - p_wb)) + tci).px - px_[k]);
@@ -77,27 +82,30 @@ class ViewCorners {
   /// Corner k's alone (a rolling shutter's corners each have their own pose).
   Eigen::Vector2d pixel_residual(std::size_t k, const Eigen::Matrix3d& R_wb, const Eigen::Vector3d& p_wb,
                                  const double* q_ci, const double* t_ci, const double* intr,
-                                 const double* dist) const {
-    const auto camera = CameraModel::from_params(model_, intr, dist, width_, height_);
+                                 const double* proj, const double* dist) const {
+    const auto camera = CameraModel::from_params(model_, intr, proj, dist, width_, height_);
     const Eigen::Vector3d pc = camimu::quat_matrix(q_ci) * (R_wb.transpose() * (points_[k] - p_wb)) +
                                Eigen::Map<const Eigen::Vector3d>(t_ci);
     return camera.project(pc).px - px_[k];
   }
 
   /// Corner k's weighted residual with the loss folded in at the camera point pc and, with `J`,
-  /// its Jacobian in pc (columns 0-2) and the 8 camera parameters (3-10).
-  Eigen::Vector2d corner(const double* intr, const double* dist, const Eigen::Vector3d& pc, std::size_t k,
-                         Eigen::Matrix<double, 2, 11>* J) const {
+  /// its Jacobian in pc (columns 0-2) and the 10 camera parameters (3-12).
+  Eigen::Vector2d corner(const double* intr, const double* proj, const double* dist,
+                         const Eigen::Vector3d& pc, std::size_t k, Eigen::Matrix<double, 2, 13>* J) const {
     Eigen::Vector2d uv;
-    Eigen::Matrix<double, 2, 11> Jp = Eigen::Matrix<double, 2, 11>::Zero();
+    Eigen::Matrix<double, 2, 13> Jp = Eigen::Matrix<double, 2, 13>::Zero();
     if (J) {
-      using Jet = ceres::Jet<double, 11>;
+      using Jet = ceres::Jet<double, 13>;
       std::array<Jet, 4> kj, dj;
+      std::array<Jet, 2> ej;
       for (int i = 0; i < 4; ++i) {
         kj[i] = Jet(intr[i], 3 + i);
-        dj[i] = Jet(dist[i], 7 + i);
+        dj[i] = Jet(dist[i], 9 + i);
       }
-      const auto camera = CameraModelT<Jet>::from_params(model_, kj.data(), dj.data(), width_, height_);
+      for (int i = 0; i < 2; ++i) ej[i] = Jet(proj[i], 7 + i);
+      const auto camera =
+          CameraModelT<Jet>::from_params(model_, kj.data(), ej.data(), dj.data(), width_, height_);
       Eigen::Matrix<Jet, 3, 1> x;
       for (int i = 0; i < 3; ++i) x(i) = Jet(pc(i), i);
       const auto pr = camera.project(x);
@@ -106,7 +114,7 @@ class ViewCorners {
         Jp.row(r) = pr.px(r).v.transpose();
       }
     } else {
-      uv = CameraModel::from_params(model_, intr, dist, width_, height_).project(pc).px;
+      uv = CameraModel::from_params(model_, intr, proj, dist, width_, height_).project(pc).px;
     }
     Eigen::Vector2d r;
     Eigen::Matrix2d L;
@@ -115,26 +123,26 @@ class ViewCorners {
     return r;
   }
 
-  /// The compressed rows (see the file's comment) at the pose (R_wb, p_wb): `out` (15 values)
-  /// and, with `R`, the 14 x 14 factor whose columns are the rows' Jacobian in the camera frame's
-  /// motion (w, v: dp_cam = -[p_cam]x w + v) and the 8 camera parameters.
+  /// The compressed rows (see the file's comment) at the pose (R_wb, p_wb): `out` (17 values)
+  /// and, with `R`, the 16 x 16 factor whose columns are the rows' Jacobian in the camera frame's
+  /// motion (w, v: dp_cam = -[p_cam]x w + v) and the 10 camera parameters.
   void compress(const Eigen::Matrix3d& R_wb, const Eigen::Vector3d& p_wb, const Eigen::Matrix3d& Rci,
-                const Eigen::Vector3d& tci, const double* intr, const double* dist, double* out,
-                Mat14* R) const {
+                const Eigen::Vector3d& tci, const double* intr, const double* proj, const double* dist,
+                double* out, Mat16* R) const {
     const Eigen::Matrix3d Rt = R_wb.transpose();
     double sum = 0.0;
-    Mat14 A = Mat14::Zero();
-    Vec14 b = Vec14::Zero();
+    Mat16 A = Mat16::Zero();
+    Vec16 b = Vec16::Zero();
     for (std::size_t k = 0; k < points_.size(); ++k) {
       const Eigen::Vector3d pc = Rci * (Rt * (points_[k] - p_wb)) + tci;
-      Eigen::Matrix<double, 2, 11> J;
-      const Eigen::Vector2d r = corner(intr, dist, pc, k, R ? &J : nullptr);
+      Eigen::Matrix<double, 2, 13> J;
+      const Eigen::Vector2d r = corner(intr, proj, dist, pc, k, R ? &J : nullptr);
       sum += r.squaredNorm();
       if (!R) continue;
-      Eigen::Matrix<double, 2, 14> F;
+      Eigen::Matrix<double, 2, kFactorCols> F;
       F.leftCols<3>() = -J.leftCols<3>() * so3::hat(pc);
       F.middleCols<3>(3) = J.leftCols<3>();
-      F.rightCols<8>() = J.rightCols<8>();
+      F.rightCols<10>() = J.rightCols<10>();
       A.noalias() += F.transpose() * F;
       b.noalias() += F.transpose() * r;
     }
@@ -147,21 +155,21 @@ class ViewCorners {
     }
     // A = V diag(l) V^T; R = diag(sqrt l) V^T; the residual R^-T b (directions of A below 1e-12 of
     // its largest eigenvalue are taken as empty).
-    const Eigen::SelfAdjointEigenSolver<Mat14> es(A);
-    const Vec14 l = es.eigenvalues();
+    const Eigen::SelfAdjointEigenSolver<Mat16> es(A);
+    const Vec16 l = es.eigenvalues();
     const double floor = 1e-12 * std::max(l.maxCoeff(), 0.0);
-    const Vec14 Vb = es.eigenvectors().transpose() * b;
-    for (int i = 0; i < 14; ++i) {
+    const Vec16 Vb = es.eigenvectors().transpose() * b;
+    for (int i = 0; i < kFactorCols; ++i) {
       const bool empty = !(l(i) > floor);
       const double sq = empty ? 0.0 : std::sqrt(l(i));
       R->row(i) = sq * es.eigenvectors().col(i).transpose();
       o(i) = empty ? 0.0 : Vb(i) / sq;
     }
-    o(kCompressedRows - 1) = std::sqrt(std::max(0.0, sum - o.head<14>().squaredNorm()));
+    o(kCompressedRows - 1) = std::sqrt(std::max(0.0, sum - o.head<kFactorCols>().squaredNorm()));
   }
 
  private:
-  DistortionModel model_;
+  CameraModelKind model_;
   int width_, height_;
   std::vector<Eigen::Vector3d> points_;
   std::vector<Eigen::Vector2d> px_;
@@ -170,19 +178,19 @@ class ViewCorners {
 };
 
 /// Writes R[:, 0:6] G, the rows' Jacobian in a block that moves the camera frame by (w, v) = G dx,
-/// into a 14-row block of `ambient` columns (the first 3 or `cols` of them).
+/// into a 16-row block of `ambient` columns (the first 3 or `cols` of them).
 template <int Cols>
-inline void write_motion_block(double* J, int ambient, const Mat14& R,
+inline void write_motion_block(double* J, int ambient, const Mat16& R,
                                const Eigen::Matrix<double, 6, Cols>& G) {
-  const Eigen::Matrix<double, 14, Cols> RG = R.leftCols<6>() * G;
-  for (int r = 0; r < 14; ++r)
+  const Eigen::Matrix<double, kFactorCols, Cols> RG = R.leftCols<6>() * G;
+  for (int r = 0; r < kFactorCols; ++r)
     for (int c = 0; c < Cols; ++c) J[r * ambient + c] = RG(r, c);
 }
 
 /// The Jacobians both residuals share: the camera's pose relative to cam0 (R_ci_c0, t_ci_c0) and
-/// its 8 parameters.
-inline void write_camera_blocks(double* J_rci, double* J_tci, double* J_intr, double* J_dist, const Mat14& R,
-                                const Eigen::Matrix3d& Rci, const Eigen::Vector3d& tci) {
+/// its 10 parameters.
+inline void write_camera_blocks(double* J_rci, double* J_tci, double* J_intr, double* J_proj, double* J_dist,
+                                const Mat16& R, const Eigen::Matrix3d& Rci, const Eigen::Vector3d& tci) {
   const Eigen::Matrix3d tx = so3::hat(tci);
   Eigen::Matrix<double, 6, 3> G;
   if (J_rci) {
@@ -195,11 +203,13 @@ inline void write_camera_blocks(double* J_rci, double* J_tci, double* J_intr, do
     G.bottomRows<3>().setIdentity();
     write_motion_block<3>(J_tci, 3, R, G);
   }
-  for (int c = 0; c < 4; ++c) {
-    for (int r = 0; r < 14; ++r) {
+  for (int r = 0; r < kFactorCols; ++r) {
+    for (int c = 0; c < 4; ++c) {
       if (J_intr) J_intr[r * 4 + c] = R(r, 6 + c);
-      if (J_dist) J_dist[r * 4 + c] = R(r, 10 + c);
+      if (J_dist) J_dist[r * 4 + c] = R(r, 12 + c);
     }
+    for (int c = 0; c < 2; ++c)
+      if (J_proj) J_proj[r * 2 + c] = R(r, 10 + c);
   }
 }
 
@@ -208,7 +218,7 @@ class ChainFrameResidual final : public ceres::CostFunction {
  public:
   static constexpr int kWindow = N + 2;
   static constexpr int kRci = 2 * kWindow, kTci = kRci + 1, kShift = kTci + 1, kIntr = kShift + 1,
-                       kDist = kIntr + 1;
+                       kProj = kIntr + 1, kDist = kProj + 1;
   static constexpr int kCompressedRows = chain::kCompressedRows;
 
   static constexpr int kLineDelay = kDist + 1;  // a rolling shutter's
@@ -216,7 +226,7 @@ class ChainFrameResidual final : public ceres::CostFunction {
   /// `rolling`: a rolling shutter (the readout direction and stamped row of `shutter`), corner k
   /// seen at t_cam + shift + row_offset(v_k) line_delay with the line delay as one more block;
   /// each corner then has its own pose and the view is not compressed (as camimu::FrameResidual).
-  ChainFrameResidual(DistortionModel model, int width, int height, std::vector<Eigen::Vector3d> points_w,
+  ChainFrameResidual(CameraModelKind model, int width, int height, std::vector<Eigen::Vector3d> points_w,
                      std::vector<Eigen::Vector2d> px, double t_cam_s, int first_window_knot,
                      const SplineTiming<N>& timing, double sigma_px, double loss_scale_px,
                      bool compressed = true, const Shutter* rolling = nullptr)
@@ -230,7 +240,7 @@ class ChainFrameResidual final : public ceres::CostFunction {
     auto* sizes = mutable_parameter_block_sizes();
     for (int i = 0; i < kWindow; ++i) sizes->push_back(4);
     for (int i = 0; i < kWindow; ++i) sizes->push_back(3);
-    for (int s : {4, 3, 1, 4, 4}) sizes->push_back(s);
+    for (int s : {4, 3, 1, 4, 2, 4}) sizes->push_back(s);
     if (rolling_) {
       sizes->push_back(1);
       off_min_ = std::numeric_limits<double>::infinity();
@@ -266,11 +276,11 @@ class ChainFrameResidual final : public ceres::CostFunction {
   /// The unweighted pixel residuals (projected - detected) at `p`, without the loss.
   void pixel_residuals(double const* const* p, std::vector<Eigen::Vector2d>* out) const {
     const camimu::SplinePose<N> ps = pose(p, false);
-    corners_.pixel_residuals(ps.e.R, ps.pos, p[kRci], p[kTci], p[kIntr], p[kDist], out);
+    corners_.pixel_residuals(ps.e.R, ps.pos, p[kRci], p[kTci], p[kIntr], p[kProj], p[kDist], out);
     if (!rolling_) return;
     for (std::size_t k = 0; k < corners_.size(); ++k) {
       const camimu::SplinePose<N> pk = corner_pose(p, k, false);
-      (*out)[k] = corners_.pixel_residual(k, pk.e.R, pk.pos, p[kRci], p[kTci], p[kIntr], p[kDist]);
+      (*out)[k] = corners_.pixel_residual(k, pk.e.R, pk.pos, p[kRci], p[kTci], p[kIntr], p[kProj], p[kDist]);
     }
   }
 
@@ -287,8 +297,8 @@ class ChainFrameResidual final : public ceres::CostFunction {
     const camimu::SplinePose<N> ps = pose(p, jac != nullptr);
     const Eigen::Matrix3d Rt = ps.e.R.transpose(), Rci = camimu::quat_matrix(p[kRci]);
     const Eigen::Map<const Eigen::Vector3d> tci(p[kTci]);
-    Mat14 R;
-    corners_.compress(ps.e.R, ps.pos, Rci, tci, p[kIntr], p[kDist], residuals, jac ? &R : nullptr);
+    Mat16 R;
+    corners_.compress(ps.e.R, ps.pos, Rci, tci, p[kIntr], p[kProj], p[kDist], residuals, jac ? &R : nullptr);
     if (!jac) return true;
     for (int blk = 0; blk <= kDist; ++blk)
       if (jac[blk]) std::fill(jac[blk], jac[blk] + kCompressedRows * parameter_block_sizes()[blk], 0.0);
@@ -314,7 +324,7 @@ class ChainFrameResidual final : public ceres::CostFunction {
       g.tail<3>() = -tx * w - Rci * (Rt * ps.vel);
       write_motion_block<1>(J, 1, R, g);
     }
-    write_camera_blocks(jac[kRci], jac[kTci], jac[kIntr], jac[kDist], R, Rci, tci);
+    write_camera_blocks(jac[kRci], jac[kTci], jac[kIntr], jac[kProj], jac[kDist], R, Rci, tci);
     return true;
   }
 
@@ -336,9 +346,9 @@ class ChainFrameResidual final : public ceres::CostFunction {
       }
       const Eigen::Vector3d pb = Rt * (corners_.point(k) - ps.pos);
       const Eigen::Vector3d pc = Rci * pb + tci;
-      Eigen::Matrix<double, 2, 11> Jw;
+      Eigen::Matrix<double, 2, 13> Jw;
       Eigen::Map<Eigen::Vector2d>(residuals + 2 * k) =
-          corners_.corner(p[kIntr], p[kDist], pc, k, jac ? &Jw : nullptr);
+          corners_.corner(p[kIntr], p[kProj], p[kDist], pc, k, jac ? &Jw : nullptr);
       if (!jac) continue;
       const Eigen::Matrix<double, 2, 3> Jc = Jw.leftCols<3>();  // d r / d p_cam
       const Eigen::Matrix<double, 2, 3> Jb = Jc * Rci;          // d r / d p_body
@@ -362,8 +372,14 @@ class ChainFrameResidual final : public ceres::CostFunction {
           jac[kIntr][(row + 1) * 4 + c] = Jw(1, 3 + c);
         }
         if (jac[kDist]) {
-          jac[kDist][row * 4 + c] = Jw(0, 7 + c);
-          jac[kDist][(row + 1) * 4 + c] = Jw(1, 7 + c);
+          jac[kDist][row * 4 + c] = Jw(0, 9 + c);
+          jac[kDist][(row + 1) * 4 + c] = Jw(1, 9 + c);
+        }
+      }
+      if (jac[kProj]) {
+        for (int c = 0; c < 2; ++c) {
+          jac[kProj][row * 2 + c] = Jw(0, 7 + c);
+          jac[kProj][(row + 1) * 2 + c] = Jw(1, 7 + c);
         }
       }
     }
@@ -381,21 +397,21 @@ class ChainFrameResidual final : public ceres::CostFunction {
 };
 
 /// One view against one pose of cam0 (R_wb, p_wb as blocks), always compressed (a view has at
-/// least 8 corners, more rows than the 15 it compresses to).
+/// least 8 corners: 16 rows, and the 17 it compresses to carry the same cost).
 class ChainPoseResidual final : public ceres::CostFunction {
  public:
-  static constexpr int kQ = 0, kP = 1, kRci = 2, kTci = 3, kIntr = 4, kDist = 5;
+  static constexpr int kQ = 0, kP = 1, kRci = 2, kTci = 3, kIntr = 4, kProj = 5, kDist = 6;
 
   explicit ChainPoseResidual(ViewCorners corners) : corners_(std::move(corners)) {
     set_num_residuals(kCompressedRows);
-    for (int s : {4, 3, 4, 3, 4, 4}) mutable_parameter_block_sizes()->push_back(s);
+    for (int s : {4, 3, 4, 3, 4, 2, 4}) mutable_parameter_block_sizes()->push_back(s);
   }
 
   bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
     const Eigen::Matrix3d Rb = camimu::quat_matrix(p[kQ]), Rci = camimu::quat_matrix(p[kRci]);
     const Eigen::Map<const Eigen::Vector3d> pb(p[kP]), tci(p[kTci]);
-    Mat14 R;
-    corners_.compress(Rb, pb, Rci, tci, p[kIntr], p[kDist], residuals, jac ? &R : nullptr);
+    Mat16 R;
+    corners_.compress(Rb, pb, Rci, tci, p[kIntr], p[kProj], p[kDist], residuals, jac ? &R : nullptr);
     if (!jac) return true;
     for (int blk = 0; blk <= kDist; ++blk)
       if (jac[blk]) std::fill(jac[blk], jac[blk] + kCompressedRows * parameter_block_sizes()[blk], 0.0);
@@ -411,13 +427,13 @@ class ChainPoseResidual final : public ceres::CostFunction {
       G.bottomRows<3>() = -Rci * Rb.transpose();
       write_motion_block<3>(jac[kP], 3, R, G);
     }
-    write_camera_blocks(jac[kRci], jac[kTci], jac[kIntr], jac[kDist], R, Rci, tci);
+    write_camera_blocks(jac[kRci], jac[kTci], jac[kIntr], jac[kProj], jac[kDist], R, Rci, tci);
     return true;
   }
 
   void pixel_residuals(double const* const* p, std::vector<Eigen::Vector2d>* out) const {
     corners_.pixel_residuals(camimu::quat_matrix(p[kQ]), Eigen::Vector3d(p[kP][0], p[kP][1], p[kP][2]),
-                             p[kRci], p[kTci], p[kIntr], p[kDist], out);
+                             p[kRci], p[kTci], p[kIntr], p[kProj], p[kDist], out);
   }
 
  private:

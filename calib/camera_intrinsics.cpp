@@ -29,6 +29,8 @@
 #include <opencv2/core.hpp>
 #include <optional>
 
+#include "calib/camera_blocks.hpp"
+#include "calib/ray_pnp.hpp"
 #include "core/text_format.hpp"
 #include "core/threads.hpp"
 
@@ -59,6 +61,7 @@ struct View {
   std::vector<char> keep;  // per corner
   Pose pose{1, 0, 0, 0, 0, 0, 1};
   bool active = true;
+  bool no_start_pose = false;  // rejected because the start camera gave it no pose
 
   int kept() const { return static_cast<int>(std::count(keep.begin(), keep.end(), 1)); }
 };
@@ -73,40 +76,46 @@ void transform_point(const T* pose, const T* p_target, T* p_cam) {
 
 /// Reprojection residual of one target point, in pixels.
 struct ReprojectionCost {
-  ReprojectionCost(const Eigen::Vector3d& p_target, const Vec2& px, DistortionModel model)
+  ReprojectionCost(const Eigen::Vector3d& p_target, const Vec2& px, CameraModelKind model)
       : p_target_(p_target), px_(px), model_(model) {}
 
   template <class T>
-  bool operator()(const T* intrinsics, const T* distortion, const T* pose, T* residual) const {
+  bool operator()(const T* intrinsics, const T* projection, const T* distortion, const T* pose,
+                  T* residual) const {
     const T p[3] = {T(p_target_.x()), T(p_target_.y()), T(p_target_.z())};
-    T c[3];
-    transform_point(pose, p, c);
-    // Behind the camera the projection means nothing: the step is refused.
-    if (!(c[2] > T(1e-9))) return false;
-    const auto camera = CameraModelT<T>::from_params(model_, intrinsics, distortion, 0, 0);
-    const Eigen::Matrix<T, 2, 1> uv =
-        camera.to_pixel(camera.distort(Eigen::Matrix<T, 2, 1>(c[0] / c[2], c[1] / c[2])));
+    Eigen::Matrix<T, 3, 1> c;
+    transform_point(pose, p, c.data());
+    const auto camera = CameraModelT<T>::from_params(model_, intrinsics, projection, distortion, 0, 0);
+    // Outside the projection's domain (behind a pinhole camera) the projection means nothing:
+    // the step is refused.
+    Eigen::Matrix<T, 2, 1> m;
+    bool computed = false;
+    if (!camera.normalise(c, &m, &computed)) return false;
+    const Eigen::Matrix<T, 2, 1> uv = camera.to_pixel(camera.distort(m));
     residual[0] = uv.x() - T(px_.x());
     residual[1] = uv.y() - T(px_.y());
     return true;
   }
 
-  static ceres::CostFunction* create(const Eigen::Vector3d& p_target, const Vec2& px, DistortionModel model) {
-    return new ceres::AutoDiffCostFunction<ReprojectionCost, 2, 4, 4, 7>(
+  static ceres::CostFunction* create(const Eigen::Vector3d& p_target, const Vec2& px, CameraModelKind model) {
+    return new ceres::AutoDiffCostFunction<ReprojectionCost, 2, 4, 2, 4, 7>(
         new ReprojectionCost(p_target, px, model));
   }
 
   Eigen::Vector3d p_target_;
   Vec2 px_;
-  DistortionModel model_;
+  CameraModelKind model_;
 };
 
-/// The residual of corner `i` of `view` under `camera`; NaN when the point is behind the camera.
+/// The residual of corner `i` of `view` under `camera`; NaN when the point is outside the
+/// projection's domain (behind a pinhole camera).
 Vec2 residual_of(const CameraModel& camera, const View& view, std::size_t i) {
   Eigen::Vector3d c;
   transform_point(view.pose.data(), view.target[i].data(), c.data());
-  if (!(c.z() > 1e-9)) return Vec2::Constant(std::numeric_limits<double>::quiet_NaN());
-  return camera.to_pixel(camera.distort(Vec2(c.x() / c.z(), c.y() / c.z()))) - view.px[i];
+  Vec2 m;
+  bool computed = false;
+  if (!camera.normalise(c, &m, &computed)) return Vec2::Constant(std::numeric_limits<double>::quiet_NaN());
+  return camera.to_pixel(camera.distort(m)) - view.px[i];
 }
 
 /// RMS (per point, Euclidean) of the kept corners of a view.
@@ -142,56 +151,85 @@ std::optional<double> focal_from_homography(const cv::Mat& H, double cx, double 
   return 1.0 / std::sqrt(a);
 }
 
-/// The pose of a view under `camera` from its observations undistorted through the camera
-/// (solvePnP, IPPE for planar targets, on normalised coordinates); nullopt when it fails.
+/// The pose of a view under `camera` from its observations unprojected through the camera
+/// (calib/ray_pnp.hpp: also for views beyond 90 degrees off the axis); nullopt when it fails or
+/// a target point falls outside the projection's domain.
 std::optional<Pose> pose_from_pnp(const CameraModel& camera, const View& view) {
-  std::vector<cv::Point3d> obj;
-  std::vector<cv::Point2d> img;
+  std::vector<Eigen::Vector3d> rays, points;
   for (std::size_t i = 0; i < view.px.size(); ++i) {
     if (!view.keep[i]) continue;
     Eigen::Vector3d ray;
-    if (!camera.unproject(view.px[i], &ray) || !(ray.z() > 0.05)) continue;
-    obj.emplace_back(view.target[i].x(), view.target[i].y(), view.target[i].z());
-    img.emplace_back(ray.x() / ray.z(), ray.y() / ray.z());
+    if (!camera.unproject(view.px[i], &ray)) continue;
+    rays.push_back(ray);
+    points.push_back(view.target[i]);
   }
-  if (obj.size() < 4) return std::nullopt;
-  cv::Mat rvec, tvec;
-  const cv::Mat K = cv::Mat::eye(3, 3, CV_64F);
-  bool ok = false;
-  try {
-    ok = cv::solvePnP(obj, img, K, cv::noArray(), rvec, tvec, false, cv::SOLVEPNP_IPPE);
-  } catch (const cv::Exception&) {
-    ok = false;
-  }
-  if (!ok) return std::nullopt;
-  const Eigen::Vector3d r(rvec.at<double>(0), rvec.at<double>(1), rvec.at<double>(2));
-  const double angle = r.norm();
-  const Eigen::Quaterniond q =
-      angle > 0.0 ? Eigen::Quaterniond(Eigen::AngleAxisd(angle, r / angle)) : Eigen::Quaterniond::Identity();
-  Pose pose{q.w(), q.x(), q.y(), q.z(), tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2)};
+  const auto found = pose_from_rays(points, rays, false);
+  if (!found) return std::nullopt;
+  const Eigen::Quaterniond q(found->R_cam_target);
+  const Eigen::Vector3d& t = found->t_cam_target;
+  Pose pose{q.w(), q.x(), q.y(), q.z(), t.x(), t.y(), t.z()};
   for (const auto& p : view.target) {
     Eigen::Vector3d c;
     transform_point(pose.data(), p.data(), c.data());
-    if (!(c.z() > 0.0)) return std::nullopt;
+    Vec2 m;
+    bool computed = false;
+    if (!camera.normalise(c, &m, &computed)) return std::nullopt;
   }
-  if (!std::all_of(pose.begin(), pose.end(), [](double v) { return std::isfinite(v); })) return std::nullopt;
   return pose;
 }
 
-CameraModel start_camera(DistortionModel model, int width, int height, double focal) {
+/// A shape the start tries for a model: the projection's parameters and distortion, and the
+/// ratio of the focal length to the image scale near the centre (omni and ds: 1 + xi).
+struct StartShape {
+  Eigen::Vector2d projection = Eigen::Vector2d::Zero();
+  Eigen::Vector4d distortion = Eigen::Vector4d::Zero();
+  double focal_factor = 1.0;
+};
+
+/// The start shapes of a model (docs/camera-calibration.md, "Start"): the undistorted pinhole;
+/// FOV w of 0.5 and 1 rad; omni xi of 0.5, 1 and 1.5; eucm alpha of 0.5, 0.6 and 0.7 with beta
+/// 1; ds xi of -0.3 to 0.3 with alpha of 0.5 and 0.6 (xi 0 and alpha 0.5, as eucm's (0.5, 1),
+/// is the stereographic projection, which reaches beyond 180 degrees). Omni's and ds's image
+/// scale near the centre is f / (1 + xi).
+std::vector<StartShape> start_shapes(CameraModelKind model) {
+  const Eigen::Vector4d none = Eigen::Vector4d::Zero();
+  std::vector<StartShape> out;
+  switch (model.projection) {
+    case ProjectionModel::kPinhole:
+      if (model.distortion == DistortionModel::kFov) {
+        return {{{0, 0}, {0.5, 0, 0, 0}, 1.0}, {{0, 0}, {1.0, 0, 0, 0}, 1.0}};
+      }
+      return {StartShape{}};
+    case ProjectionModel::kOmni:
+      for (double xi : {0.5, 1.0, 1.5}) out.push_back({{xi, 0}, none, 1.0 + xi});
+      return out;
+    case ProjectionModel::kEucm:
+      for (double alpha : {0.5, 0.6, 0.7}) out.push_back({{alpha, 1.0}, none, 1.0});
+      return out;
+    case ProjectionModel::kDs:
+      for (double xi : {-0.3, -0.15, 0.0, 0.15, 0.3})
+        for (double alpha : {0.5, 0.6}) out.push_back({{xi, alpha}, none, 1.0 + xi});
+      return out;
+  }
+  return {StartShape{}};
+}
+
+CameraModel start_camera(CameraModelKind model, int width, int height, double focal,
+                         const StartShape& shape) {
   CameraModel camera;
-  camera.distortion_model = model;
+  camera.projection = model.projection;
+  camera.distortion_model = model.distortion;
   camera.width = width;
   camera.height = height;
   camera.intrinsics = {focal, focal, 0.5 * (width - 1), 0.5 * (height - 1)};
-  camera.distortion_coeffs.setZero();
+  camera.projection_params = shape.projection;
+  camera.distortion_coeffs = shape.distortion;
   return camera;
 }
 
-/// Median RMS of the sample views' PnP poses under a camera with focal length `focal`.
-double focal_score(DistortionModel model, int width, int height, double focal, const std::vector<View>& views,
+/// Median RMS of the sample views' PnP poses under `camera`.
+double start_score(const CameraModel& camera, const std::vector<View>& views,
                    const std::vector<std::size_t>& sample) {
-  const CameraModel camera = start_camera(model, width, height, focal);
   std::vector<double> rms;
   for (std::size_t i : sample) {
     View v = views[i];
@@ -205,12 +243,9 @@ double focal_score(DistortionModel model, int width, int height, double focal, c
   return median(rms);
 }
 
-/// The starting focal length (docs/camera-calibration.md, "Start").
-double start_focal(DistortionModel model, int width, int height, const std::vector<View>& views) {
-  std::vector<std::size_t> sample;
-  constexpr std::size_t kSample = 40;
-  const std::size_t step = std::max<std::size_t>(1, views.size() / kSample);
-  for (std::size_t i = 0; i < views.size(); i += step) sample.push_back(i);
+/// The focal lengths of the views' homographies (principal point at the centre).
+std::vector<double> homography_focals(int width, int height, const std::vector<View>& views,
+                                      const std::vector<std::size_t>& sample) {
   std::vector<double> focals;
   for (std::size_t i : sample) {
     std::vector<cv::Point2d> src, dst;
@@ -228,22 +263,45 @@ double start_focal(DistortionModel model, int width, int height, const std::vect
     const auto f = focal_from_homography(H, 0.5 * (width - 1), 0.5 * (height - 1));
     if (f && *f > 0.05 * width && *f < 50.0 * width) focals.push_back(*f);
   }
-  // The homography estimate, or the image width when every view was degenerate for it, then a
-  // geometric grid around it (quarter octaves) scored by reprojection.
+  return focals;
+}
+
+/// The starting cameras (docs/camera-calibration.md, "Start"), best first: for each of the
+/// model's start shapes, the best of a geometric grid of focal lengths around the homographies'
+/// (quarter octaves) scored by the reprojection of per-view poses; shapes under which no focal
+/// length gives a pose are left out (all of them: the first shape at the homographies' focal).
+std::vector<CameraModel> start_cameras_for(CameraModelKind model, int width, int height,
+                                           const std::vector<View>& views) {
+  std::vector<std::size_t> sample;
+  constexpr std::size_t kSample = 40;
+  const std::size_t step = std::max<std::size_t>(1, views.size() / kSample);
+  for (std::size_t i = 0; i < views.size(); i += step) sample.push_back(i);
+  const std::vector<double> focals = homography_focals(width, height, views, sample);
+  // The homography estimate, or the image width when every view was degenerate for it.
   const bool have = !focals.empty();
   const double base = have ? median(focals) : static_cast<double>(width);
   const int span = have ? 4 : 8;
-  double best = base;
-  double best_score = std::numeric_limits<double>::infinity();
-  for (int k = -span; k <= span; ++k) {
-    const double f = base * std::pow(2.0, k / 4.0);
-    const double score = focal_score(model, width, height, f, views, sample);
-    if (score < best_score) {
-      best_score = score;
-      best = f;
+  std::vector<std::pair<double, CameraModel>> scored;
+  for (const StartShape& shape : start_shapes(model)) {
+    CameraModel best = start_camera(model, width, height, base, shape);
+    double best_score = std::numeric_limits<double>::infinity();
+    for (int k = -span; k <= span; ++k) {
+      const CameraModel camera =
+          start_camera(model, width, height, base * shape.focal_factor * std::pow(2.0, k / 4.0), shape);
+      const double score = start_score(camera, views, sample);
+      if (score < best_score) {
+        best_score = score;
+        best = camera;
+      }
     }
+    if (std::isfinite(best_score)) scored.emplace_back(best_score, best);
   }
-  return best;
+  std::stable_sort(scored.begin(), scored.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<CameraModel> out;
+  for (auto& [score, camera] : scored) out.push_back(std::move(camera));
+  if (out.empty()) out.push_back(start_camera(model, width, height, base, start_shapes(model).front()));
+  return out;
 }
 
 // ---- solve ---------------------------------------------------------------------------------
@@ -264,42 +322,54 @@ class ProgressCallback final : public ceres::IterationCallback {
   int max_;
 };
 
+/// The camera's parameter blocks: intrinsics fu fv pu pv, the projection's two parameters and
+/// four distortion coefficients, of which a model uses the first projection_param_count and
+/// distortion_coeff_count; the others stay constant.
+struct CameraBlocks {
+  Eigen::Vector4d intrinsics = Eigen::Vector4d::Zero();
+  Eigen::Vector2d projection = Eigen::Vector2d::Zero();
+  Eigen::Vector4d distortion = Eigen::Vector4d::Zero();
+};
+
 /// The least-squares problem over the active views; kept alive for the covariance.
 class IntrinsicsProblem {
  public:
-  IntrinsicsProblem(Eigen::Vector4d* intrinsics, Eigen::Vector4d* distortion, std::vector<View>* views,
-                    DistortionModel model, bool robust, double loss_px)
-      : loss_(loss_px) {
+  IntrinsicsProblem(CameraBlocks* camera, std::vector<View>* views, CameraModelKind model, bool robust,
+                    double loss_px)
+      : loss_(loss_px), model_(model) {
     ceres::Problem::Options po;
     po.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     po.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     problem_ = std::make_unique<ceres::Problem>(po);
+    intrinsics_ = camera->intrinsics.data();
+    projection_ = camera->projection.data();
+    distortion_ = camera->distortion.data();
     for (View& v : *views) {
       if (!v.active) continue;
       for (std::size_t i = 0; i < v.px.size(); ++i) {
         if (!v.keep[i]) continue;
         problem_->AddResidualBlock(ReprojectionCost::create(v.target[i], v.px[i], model),
-                                   robust ? &loss_ : nullptr, intrinsics->data(), distortion->data(),
+                                   robust ? &loss_ : nullptr, intrinsics_, projection_, distortion_,
                                    v.pose.data());
         ++residuals_;
       }
       problem_->SetManifold(v.pose.data(), &pose_manifold_);
       poses_.push_back(v.pose.data());
     }
-    intrinsics_ = intrinsics->data();
-    distortion_ = distortion->data();
+    if (residuals_ == 0) return;
+    // The entries a model does not use are held (at the start's 0).
+    hold_unused_camera_entries(problem_.get(), model, projection_, distortion_);
   }
 
   /// Solves; false when the solver gives no usable solution.
   bool solve(int max_iterations, int threads, ProgressCallback* callback, int* iterations, double* cost) {
     ceres::Solver::Options o;
     o.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
-    // Poses first in the elimination: the reduced camera system is 8 x 8.
+    // Poses first in the elimination: the reduced camera system is at most 10 x 10.
     o.linear_solver_type = ceres::DENSE_SCHUR;
     auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
     for (double* p : poses_) ordering->AddElementToGroup(p, 0);
-    ordering->AddElementToGroup(intrinsics_, 1);
-    ordering->AddElementToGroup(distortion_, 1);
+    for (double* p : {intrinsics_, projection_, distortion_}) ordering->AddElementToGroup(p, 1);
     o.linear_solver_ordering = ordering;
     o.num_threads = threads;
     o.max_num_iterations = max_iterations;
@@ -315,24 +385,29 @@ class IntrinsicsProblem {
     return summary.IsSolutionUsable();
   }
 
-  /// The 8 x 8 covariance of [intrinsics, distortion] (unscaled: J'J inverse), or nullopt when
-  /// the problem is rank deficient.
-  std::optional<Eigen::Matrix<double, 8, 8>> covariance(int threads) {
+  /// The 10 x 10 covariance of [intrinsics, projection, distortion] (unscaled: J'J inverse; 0 in
+  /// the rows and columns of the entries held), or nullopt when the problem is rank deficient.
+  std::optional<Eigen::Matrix<double, 10, 10>> covariance(int threads) {
     ceres::Covariance::Options co;
     co.algorithm_type = ceres::SPARSE_QR;
     co.num_threads = threads;
     ceres::Covariance cov(co);
-    const std::vector<std::pair<const double*, const double*>> blocks = {
-        {intrinsics_, intrinsics_}, {intrinsics_, distortion_}, {distortion_, distortion_}};
-    if (!cov.Compute(blocks, problem_.get())) return std::nullopt;
-    Eigen::Matrix<double, 4, 4, Eigen::RowMajor> kk, kd, dd;
-    if (!cov.GetCovarianceBlock(intrinsics_, intrinsics_, kk.data()) ||
-        !cov.GetCovarianceBlock(intrinsics_, distortion_, kd.data()) ||
-        !cov.GetCovarianceBlock(distortion_, distortion_, dd.data())) {
-      return std::nullopt;
+    const std::array<double*, 3> blocks = {intrinsics_, projection_, distortion_};
+    const std::array<int, 3> sizes = {4, 2, 4};
+    const std::array<int, 3> offsets = {0, 4, 6};
+    std::vector<std::pair<const double*, const double*>> pairs;
+    for (std::size_t a = 0; a < 3; ++a)
+      for (std::size_t b = a; b < 3; ++b) pairs.emplace_back(blocks[a], blocks[b]);
+    if (!cov.Compute(pairs, problem_.get())) return std::nullopt;
+    Eigen::Matrix<double, 10, 10> out = Eigen::Matrix<double, 10, 10>::Zero();
+    for (std::size_t a = 0; a < 3; ++a) {
+      for (std::size_t b = a; b < 3; ++b) {
+        Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> block(sizes[a], sizes[b]);
+        if (!cov.GetCovarianceBlock(blocks[a], blocks[b], block.data())) return std::nullopt;
+        out.block(offsets[a], offsets[b], sizes[a], sizes[b]) = block;
+        out.block(offsets[b], offsets[a], sizes[b], sizes[a]) = block.transpose();
+      }
     }
-    Eigen::Matrix<double, 8, 8> out;
-    out << kk, kd, kd.transpose(), dd;
     if (!out.allFinite()) return std::nullopt;
     return out;
   }
@@ -340,12 +415,24 @@ class IntrinsicsProblem {
   int residuals() const { return residuals_; }
   int poses() const { return static_cast<int>(poses_.size()); }
 
+  /// Holds the projection's first parameter (xi, or eucm's alpha) at its value.
+  void hold_first_projection_param() {
+    if (projection_param_count(model_.projection) == 1) {
+      problem_->SetParameterBlockConstant(projection_);
+    } else {
+      problem_->SetManifold(projection_, &first_held_);
+    }
+  }
+
  private:
   ceres::CauchyLoss loss_;
+  CameraModelKind model_;
+  ceres::SubsetManifold first_held_{2, {0}};
   ceres::ProductManifold<ceres::QuaternionManifold, ceres::EuclideanManifold<3>> pose_manifold_;
   std::unique_ptr<ceres::Problem> problem_;
   std::vector<double*> poses_;
   double* intrinsics_ = nullptr;
+  double* projection_ = nullptr;
   double* distortion_ = nullptr;
   int residuals_ = 0;
 };
@@ -497,6 +584,203 @@ Error too_few_views(const std::vector<View>& views, const CameraIntrinsicsResult
                         "distances, across the image");
 }
 
+/// Another start's solution and how much more it costs per corner than the kept one.
+struct StartSolution {
+  CameraBlocks camera;
+  double cost_per_corner = 0.0;
+};
+
+/// The robust pass (docs/camera-calibration.md, "Start"): from the best start, and for a model
+/// with projection parameters (which trade against the focal length, so that one start can end
+/// in a local minimum) from each of its kMaxStarts best start shapes, keeping the solve with the
+/// lowest cost per corner. The winner's views (poses, rejections) and reports are kept, the
+/// others' solutions go to `others`.
+Status solve_from_starts(const std::vector<CameraModel>& starts, const CameraIntrinsicsOptions& options,
+                         int threads, const ProgressFn& progress, std::vector<View>* views,
+                         CameraIntrinsicsResult* result, CameraBlocks* blocks, double* cost,
+                         std::vector<StartSolution>* others) {
+  constexpr std::size_t kMaxStarts = 3;
+  const std::size_t tries =
+      projection_param_count(options.model.projection) > 0 ? std::min(kMaxStarts, starts.size()) : 1;
+  std::optional<Error> first_error;
+  double best = std::numeric_limits<double>::infinity();
+  int iterations = result->iterations;
+  for (std::size_t s = 0; s < tries; ++s) {
+    std::vector<View> v = *views;
+    CameraIntrinsicsResult r = *result;
+    for (View& view : v) {
+      if (!view.active) continue;
+      const auto pose = pose_from_pnp(starts[s], view);
+      if (pose) {
+        view.pose = *pose;
+      } else {
+        reject_view(view, &r, "no pose found for the start (the detection may be wrong)");
+        view.no_start_pose = true;
+      }
+    }
+    if (active_count(v) < options.min_views) {
+      if (!first_error) first_error = too_few_views(v, r, options);
+      continue;
+    }
+    CameraBlocks b{starts[s].intrinsics, starts[s].projection_params, starts[s].distortion_coeffs};
+    double c = 0.0;
+    int corners = 0;
+    bool solved = false;
+    {
+      IntrinsicsProblem robust(&b, &v, options.model, true, options.robust_loss_px);
+      const double from = 0.05 + 0.45 * static_cast<double>(s) / static_cast<double>(tries);
+      ProgressCallback cb(progress, from, from + 0.45 / static_cast<double>(tries), options.max_iterations);
+      solved = robust.solve(options.max_iterations, threads, &cb, &iterations, &c);
+      corners = robust.residuals();
+    }
+    if (!solved || !b.intrinsics.allFinite() || !b.projection.allFinite() || !b.distortion.allFinite()) {
+      if (!first_error)
+        first_error = make_error(Errc::kSolverFailed,
+                                 "the camera solve (robust pass) did not converge; check the target "
+                                 "description against the target that was recorded");
+      continue;
+    }
+    const double per_corner = c / std::max(1, corners);
+    if (per_corner < best) {
+      if (std::isfinite(best)) others->push_back({*blocks, best});
+      best = per_corner;
+      *views = std::move(v);
+      *result = std::move(r);
+      *blocks = b;
+      *cost = c;
+    } else {
+      others->push_back({b, per_corner});
+    }
+  }
+  result->iterations = iterations;
+  if (!std::isfinite(best)) return *first_error;
+  for (StartSolution& o : *others) o.cost_per_corner -= best;
+  return {};
+}
+
+/// The views the start camera gave no pose (a wide lens's border beyond the start's field of
+/// view) tried again under the robust pass's camera; when any finds its pose now, the robust pass
+/// runs again with them.
+Status readmit_views(CameraModelKind model, const CameraIntrinsicsOptions& options, int threads,
+                     std::vector<View>* views, CameraIntrinsicsResult* result, CameraBlocks* blocks,
+                     double* cost) {
+  CameraModel camera;
+  camera.projection = model.projection;
+  camera.distortion_model = model.distortion;
+  camera.width = result->camera.width;
+  camera.height = result->camera.height;
+  camera.intrinsics = blocks->intrinsics;
+  camera.projection_params = blocks->projection;
+  camera.distortion_coeffs = blocks->distortion;
+  int readmitted = 0;
+  for (View& v : *views) {
+    if (v.active || !v.no_start_pose) continue;
+    const auto pose = pose_from_pnp(camera, v);
+    if (!pose) continue;
+    v.pose = *pose;
+    v.active = true;
+    v.no_start_pose = false;
+    result->views[v.report].rejected_because.clear();
+    ++readmitted;
+  }
+  if (readmitted == 0) return {};
+  IntrinsicsProblem robust(blocks, views, model, true, options.robust_loss_px);
+  if (!robust.solve(options.max_iterations, threads, nullptr, &result->iterations, cost)) {
+    return make_error(Errc::kSolverFailed,
+                      "the camera solve (robust pass with the views found again) did not converge; check the "
+                      "target description against the target that was recorded");
+  }
+  return {};
+}
+
+/// The camera's parameters as the 10-vector of the covariance.
+Eigen::Matrix<double, 10, 1> parameter_vector(const CameraBlocks& b) {
+  Eigen::Matrix<double, 10, 1> x;
+  x << b.intrinsics, b.projection, b.distortion;
+  return x;
+}
+
+/// Widens the covariance for the other starts' cameras that fit as well (CameraIntrinsicsResult::
+/// ambiguity): the chi-square of the difference in cost below 4, the difference beyond 3 sigmas
+/// in one of the model's parameters.
+void widen_for_equal_fits(const std::vector<StartSolution>& others, int corners,
+                          CameraIntrinsicsResult* result) {
+  if (!result->covariance_ok || !(result->residual_sigma_px > 0.0)) return;
+  const double var = result->residual_sigma_px * result->residual_sigma_px;
+  const std::vector<int> used = kalibr_parameter_indices(result->camera.kind());
+  const std::vector<std::string> names = kalibr_parameter_names(result->camera.kind());
+  CameraBlocks kept{result->camera.intrinsics, result->camera.projection_params,
+                    result->camera.distortion_coeffs};
+  const Eigen::Matrix<double, 10, 1> x = parameter_vector(kept);
+  Eigen::Matrix<double, 10, 10> widened = result->covariance;
+  for (const StartSolution& o : others) {
+    const double chi2 = 2.0 * o.cost_per_corner * corners / var;
+    if (!(chi2 < 4.0)) continue;
+    const Eigen::Matrix<double, 10, 1> d = parameter_vector(o.camera) - x;
+    bool apart = false;
+    for (int i : used) apart = apart || std::abs(d[i]) > 3.0 * std::sqrt(result->covariance(i, i));
+    if (!apart) continue;
+    widened += d * d.transpose();
+    std::string kept_text, other_text;
+    for (std::size_t j = 0; j < used.size(); ++j) {
+      kept_text += (j ? ", " : "") + names[j] + " " + format_number("%.4g", x[used[j]]);
+      other_text += (j ? ", " : "") + names[j] + " " + format_number("%.4g", x[used[j]] + d[used[j]]);
+    }
+    result->ambiguity = "the views fit two cameras equally well (chi-square of the difference " +
+                        format_number("%.2g", chi2) + "): [" + kept_text + "] (kept) and [" + other_text +
+                        "]; the sigmas are widened to cover both";
+  }
+  if (result->ambiguity.empty()) return;
+  set_camera_covariance(widened, result);
+  result->warnings.push_back(
+      result->ambiguity +
+      ": the model's parameters are not determined by these views (the image they give "
+      "is); show the target nearer the image's edges and at more angles, or choose a model "
+      "with fewer parameters");
+}
+
+/// The profile check (docs/camera-calibration.md, "Uncertainty"): the omni, eucm and ds models'
+/// projection parameters trade against the focal length and the distortion along a curved
+/// valley, which the covariance (a quadratic about the solution) makes too narrow. The first
+/// projection parameter is held at kProfileSigmas of its sigma on either side and the rest solved
+/// again; where the cost rises by less than the quadratic's kProfileSigmas^2 (in chi-square) on
+/// the flatter side, the covariance is stretched along the path the solution took there (the
+/// other parameters follow the valley's curve, not the quadratic's straight line):
+/// C += (k^2 - 1) u u^T, u = (profiled - solved) / kProfileSigmas, k^2 = kProfileSigmas^2 /
+/// chi-square (at most 100).
+void profile_first_projection_param(const CameraBlocks& solved, const std::vector<View>& views, double cost,
+                                    const CameraIntrinsicsOptions& options, int threads,
+                                    CameraIntrinsicsResult* result) {
+  constexpr double kProfileSigmas = 3.0;
+  if (projection_param_count(options.model.projection) == 0 || !result->covariance_ok) return;
+  const double var = result->residual_sigma_px * result->residual_sigma_px;
+  const double sigma = std::sqrt(result->covariance(4, 4));
+  if (!(var > 0.0) || !(sigma > 0.0)) return;
+  double least = std::numeric_limits<double>::infinity();
+  Eigen::Matrix<double, 10, 1> path = Eigen::Matrix<double, 10, 1>::Zero();  // the flatter side's, per sigma
+  for (const double side : {-1.0, 1.0}) {
+    CameraBlocks b = solved;
+    b.projection[0] += side * kProfileSigmas * sigma;
+    std::vector<View> v = views;
+    IntrinsicsProblem problem(&b, &v, options.model, false, options.robust_loss_px);
+    problem.hold_first_projection_param();
+    int iterations = 0;
+    double c = 0.0;
+    if (!problem.solve(options.max_iterations, threads, nullptr, &iterations, &c)) continue;
+    const double chi2 = 2.0 * (c - cost) / var;
+    if (chi2 < least) {
+      least = chi2;
+      path = (parameter_vector(b) - parameter_vector(solved)) / kProfileSigmas;
+    }
+  }
+  result->profile_chi2 = least;
+  const double expected = kProfileSigmas * kProfileSigmas;
+  if (!(least < expected)) return;
+  const double k2 = std::min(100.0, expected / std::max(least, 1e-9));
+  set_camera_covariance(result->covariance + (k2 - 1.0) * path * path.transpose(), result);
+  result->profile_stretch = std::sqrt(k2);
+}
+
 // ---- figures -------------------------------------------------------------------------------
 
 void fill_figures(const CameraModel& camera, const std::vector<View>& views,
@@ -543,21 +827,15 @@ void fill_figures(const CameraModel& camera, const std::vector<View>& views,
 void fill_uncertainty(IntrinsicsProblem& problem, double cost, const CameraIntrinsicsOptions& options,
                       int threads, CameraIntrinsicsResult* result) {
   const double n = 2.0 * problem.residuals();  // coordinates: 2 per corner
-  const double p = 8.0 + 6.0 * problem.poses();
+  const double p = free_camera_params(result->camera.kind()) + 6.0 * problem.poses();
   const double dof = n - p;
   result->residual_sigma_px =
       dof > 0.0 ? std::sqrt(2.0 * cost / dof) : std::numeric_limits<double>::quiet_NaN();
   const auto cov = options.covariance ? problem.covariance(threads) : std::nullopt;
-  const double inf = std::numeric_limits<double>::infinity();
   if (cov && dof > 0.0) {
-    result->covariance = *cov * (result->residual_sigma_px * result->residual_sigma_px);
-    result->covariance_ok = true;
-    const Eigen::Matrix<double, 8, 1> sigma = result->covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
-    result->intrinsics_sigma = sigma.head<4>();
-    result->distortion_sigma = sigma.tail<4>();
+    set_camera_covariance(*cov * (result->residual_sigma_px * result->residual_sigma_px), result);
   } else {
-    result->intrinsics_sigma.setConstant(inf);
-    result->distortion_sigma.setConstant(inf);
+    set_camera_covariance(std::nullopt, result);
   }
   const auto& k = result->camera.intrinsics;
   const double rel = std::max(result->intrinsics_sigma[0] / k[0], result->intrinsics_sigma[1] / k[1]);
@@ -565,6 +843,25 @@ void fill_uncertainty(IntrinsicsProblem& problem, double cost, const CameraIntri
 }
 
 }  // namespace
+
+void set_camera_covariance(const std::optional<Eigen::Matrix<double, 10, 10>>& covariance,
+                           CameraIntrinsicsResult* result) {
+  const double inf = std::numeric_limits<double>::infinity();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  result->covariance_ok = covariance.has_value();
+  result->covariance = covariance.value_or(Eigen::Matrix<double, 10, 10>::Zero());
+  const Eigen::Matrix<double, 10, 1> sigma =
+      covariance ? Eigen::Matrix<double, 10, 1>(result->covariance.diagonal().cwiseMax(0.0).cwiseSqrt())
+                 : Eigen::Matrix<double, 10, 1>::Constant(inf);
+  result->intrinsics_sigma = sigma.head<4>();
+  result->projection_sigma = sigma.segment<2>(4);
+  result->distortion_sigma = sigma.tail<4>();
+  // The entries the model does not have are no parameters: NaN, never a sigma of 0.
+  for (int i = projection_param_count(result->camera.projection); i < 2; ++i)
+    result->projection_sigma[i] = nan;
+  for (int i = distortion_coeff_count(result->camera.distortion_model); i < 4; ++i)
+    result->distortion_sigma[i] = nan;
+}
 
 void set_coverage(int width, int height, int cols, std::span<const Eigen::Vector2d> px,
                   CameraIntrinsicsResult* result) {
@@ -631,47 +928,36 @@ Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(const TargetDescripti
   std::vector<View> usable;
   for (const View& v : views)
     if (v.active) usable.push_back(v);
-  CameraModel camera =
-      start_camera(options.model, width, height, start_focal(options.model, width, height, usable));
-  for (View& v : views) {
-    if (!v.active) continue;
-    const auto pose = pose_from_pnp(camera, v);
-    if (pose) {
-      v.pose = *pose;
-    } else {
-      reject_view(v, &result, "no pose found for the start (the detection may be wrong)");
-    }
+  if (!camera_model_supported(options.model)) {
+    return make_error(Errc::kInvalidArgument,
+                      "camera model " + camera_model_name(options.model) + " is not one imucal calibrates");
   }
-  if (active_count(views) < options.min_views) return too_few_views(views, result, options);
+  const std::vector<CameraModel> starts = start_cameras_for(options.model, width, height, usable);
   report_progress(progress, 0.05, 1.0);
-
-  Eigen::Vector4d intrinsics = camera.intrinsics;
-  Eigen::Vector4d distortion = camera.distortion_coeffs;
+  CameraBlocks blocks;
   double cost = 0.0;
-  {
-    IntrinsicsProblem robust(&intrinsics, &distortion, &views, options.model, true, options.robust_loss_px);
-    ProgressCallback cb(progress, 0.05, 0.5, options.max_iterations);
-    if (!robust.solve(options.max_iterations, threads, &cb, &result.iterations, &cost)) {
-      return make_error(Errc::kSolverFailed,
-                        "the camera solve (robust pass) did not converge; check the target "
-                        "description against the target that was recorded");
-    }
-  }
-  camera.intrinsics = intrinsics;
-  camera.distortion_coeffs = distortion;
+  std::vector<StartSolution> others;
+  IMUCAL_TRY(solve_from_starts(starts, options, threads, progress, &views, &result, &blocks, &cost, &others));
+  IMUCAL_TRY(readmit_views(options.model, options, threads, &views, &result, &blocks, &cost));
+  CameraModel camera = starts.front();
+  camera.intrinsics = blocks.intrinsics;
+  camera.projection_params = blocks.projection;
+  camera.distortion_coeffs = blocks.distortion;
   reject_views(camera, views, options, &result);
   result.corners_rejected = reject_corners(camera, views, options, &result);
   if (active_count(views) < options.min_views) return too_few_views(views, result, options);
 
-  IntrinsicsProblem plain(&intrinsics, &distortion, &views, options.model, false, options.robust_loss_px);
+  IntrinsicsProblem plain(&blocks, &views, options.model, false, options.robust_loss_px);
   ProgressCallback cb(progress, 0.5, 0.9, options.max_iterations);
   if (!plain.solve(options.max_iterations, threads, &cb, &result.iterations, &cost) ||
-      !intrinsics.allFinite() || !distortion.allFinite()) {
+      !blocks.intrinsics.allFinite() || !blocks.projection.allFinite() || !blocks.distortion.allFinite()) {
     return make_error(Errc::kSolverFailed, "the camera solve (final pass) did not converge");
   }
-  result.camera.distortion_model = options.model;
-  result.camera.intrinsics = intrinsics;
-  result.camera.distortion_coeffs = distortion;
+  result.camera.projection = options.model.projection;
+  result.camera.distortion_model = options.model.distortion;
+  result.camera.intrinsics = blocks.intrinsics;
+  result.camera.projection_params = blocks.projection;
+  result.camera.distortion_coeffs = blocks.distortion;
   if (auto valid = validate_camera(result.camera); !valid.ok()) {
     return make_error(Errc::kSolverFailed, "the camera solve gave an unusable camera (" +
                                                valid.error().message +
@@ -679,7 +965,9 @@ Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(const TargetDescripti
   }
   fill_figures(result.camera, views, options, &result);
   fill_uncertainty(plain, cost, options, threads, &result);
+  profile_first_projection_param(blocks, views, cost, options, threads, &result);
   result.warnings = camera_quality_warnings(result, options);
+  widen_for_equal_fits(others, plain.residuals(), &result);
   result.solve_cpu_s = cpu_now_s() - cpu0;
   report_progress(progress, 1.0, 1.0);
   return result;

@@ -1,6 +1,6 @@
 #pragma once
-// Camera intrinsic calibration from target observations: a pinhole camera with radtan or
-// equidistant distortion (core/camera_model.hpp) and one target pose per view, by
+// Camera intrinsic calibration from target observations: a camera of one of Kalibr's models
+// (core/camera_model.hpp) and one target pose per view, by
 // Levenberg-Marquardt on the reprojection errors (Ceres), with outlier views and corners
 // rejected and the parameters' standard deviations from the solver covariance.
 // Method, figures and their meaning: docs/camera-calibration.md.
@@ -8,6 +8,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <limits>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -22,7 +24,7 @@
 namespace imucal::calib {
 
 struct CameraIntrinsicsOptions {
-  DistortionModel model = DistortionModel::kRadtan;
+  CameraModelKind model{ProjectionModel::kPinhole, DistortionModel::kRadtan};
   /// Fewest usable views; fewer is refused (the pose of every view is unknown, and a handful of
   /// views at different tilts is what separates the focal length from the distance).
   int min_views = 5;
@@ -70,12 +72,16 @@ struct CameraViewReport {
 
 struct CameraIntrinsicsResult {
   CameraModel camera;
-  /// Standard deviations of fu, fv, pu, pv and of the distortion coefficients, from the
-  /// covariance of the final solve scaled by the residual variance (sigma^2 = RSS / (n - p)).
+  /// Standard deviations of fu, fv, pu, pv, of the projection's parameters and of the distortion
+  /// coefficients, from the covariance of the final solve scaled by the residual variance
+  /// (sigma^2 = RSS / (n - p)); infinite where not determined, NaN for the entries the model does
+  /// not have (kalibr_intrinsics and kalibr_distortion give the model's own, in Kalibr's order).
   Eigen::Vector4d intrinsics_sigma = Eigen::Vector4d::Zero();
+  Eigen::Vector2d projection_sigma = Eigen::Vector2d::Zero();
   Eigen::Vector4d distortion_sigma = Eigen::Vector4d::Zero();
-  /// The 8 x 8 covariance of [intrinsics, distortion_coeffs].
-  Eigen::Matrix<double, 8, 8> covariance = Eigen::Matrix<double, 8, 8>::Zero();
+  /// The 10 x 10 covariance of [intrinsics, projection_params, distortion_coeffs] (0 in the rows
+  /// and columns of the entries the model does not have).
+  Eigen::Matrix<double, 10, 10> covariance = Eigen::Matrix<double, 10, 10>::Zero();
   bool covariance_ok = false;  // false: the problem is rank deficient (sigmas are infinite)
 
   double rms_px = 0.0;             // RMS of the used corners' reprojection errors (Euclidean, px)
@@ -102,6 +108,17 @@ struct CameraIntrinsicsResult {
   /// The focal lengths are determined (relative sigma below the option's limit, covariance of
   /// full rank). False for degenerate sets such as fronto-parallel views at one distance.
   bool focal_well_determined = false;
+  /// Not empty when another start ended in a camera that fits the views as well (its cost
+  /// within a chi-square of 4 of this one's) but lies beyond 3 sigmas of it: which of them the
+  /// solve kept, the other, and that the covariance was widened by their difference (d d^T) to
+  /// cover both (docs/camera-calibration.md, "Robust pass").
+  std::string ambiguity;
+  /// The profile check of the projection's first parameter (omni and ds xi, eucm alpha; docs/
+  /// camera-calibration.md, "Uncertainty"): the least chi-square rise of the cost with it held 3
+  /// sigmas away (9 for a quadratic valley; NaN: not checked) and the factor its sigma was
+  /// stretched by (1: not stretched).
+  double profile_chi2 = std::numeric_limits<double>::quiet_NaN();
+  double profile_stretch = 1.0;
   std::vector<std::string> warnings;
   int iterations = 0;  // solver iterations over all passes
   double solve_cpu_s = 0.0;
@@ -128,9 +145,18 @@ void set_coverage(int width, int height, int cols, std::span<const Eigen::Vector
 std::vector<std::string> camera_quality_warnings(const CameraIntrinsicsResult& result,
                                                  const CameraIntrinsicsOptions& options);
 
-/// Kalibr's model name for the option: "pinhole-radtan" or "pinhole-equi".
-const char* camera_model_option_name(DistortionModel model);
-/// Parses "pinhole-radtan" / "pinhole-equi" (also "radtan", "equidistant", "pinhole-equidistant").
-[[nodiscard]] Result<DistortionModel> parse_camera_model_option(const std::string& text);
+/// Sets the result's covariance (scaled; nullopt: not determined) and the sigmas from it: infinite
+/// when not determined, NaN for the entries result->camera's model does not have.
+void set_camera_covariance(const std::optional<Eigen::Matrix<double, 10, 10>>& covariance,
+                           CameraIntrinsicsResult* result);
+
+/// Kalibr's model name for the option: "pinhole-radtan", "pinhole-equi", "ds-none", ...
+std::string camera_model_option_name(CameraModelKind model);
+/// Parses Kalibr's model names (camera_model_name; also "radtan", "equidistant",
+/// "pinhole-equidistant" for pinhole-radtan and pinhole-equi).
+[[nodiscard]] Result<CameraModelKind> parse_camera_model_option(const std::string& text);
+/// The candidates of `--model auto` (calib/camera_model_choice.hpp): Kalibr's models
+/// pinhole-radtan, pinhole-equi, pinhole-fov, omni-none, omni-radtan, eucm-none, ds-none.
+std::vector<CameraModelKind> default_model_candidates();
 
 }  // namespace imucal::calib

@@ -54,16 +54,25 @@ Status CameraChainOptions::validate() const {
   return {};
 }
 
-const char* camera_model_option_name(DistortionModel model) {
-  return model == DistortionModel::kRadtan ? "pinhole-radtan" : "pinhole-equi";
+std::string camera_model_option_name(CameraModelKind model) { return camera_model_name(model); }
+
+Result<CameraModelKind> parse_camera_model_option(const std::string& text) {
+  if (text == "radtan") return CameraModelKind{ProjectionModel::kPinhole, DistortionModel::kRadtan};
+  if (text == "equidistant") return CameraModelKind{ProjectionModel::kPinhole, DistortionModel::kEquidistant};
+  if (auto kind = parse_camera_model_name(text)) return *kind;
+  return make_error(
+      Errc::kInvalidArgument,
+      "unknown camera model '" + text +
+          "': use pinhole-radtan, pinhole-equi, pinhole-fov, pinhole-none, omni-none, omni-radtan, "
+          "eucm-none or ds-none");
 }
 
-Result<DistortionModel> parse_camera_model_option(const std::string& text) {
-  if (text == "pinhole-radtan" || text == "radtan") return DistortionModel::kRadtan;
-  if (text == "pinhole-equi" || text == "pinhole-equidistant" || text == "equidistant")
-    return DistortionModel::kEquidistant;
-  return make_error(Errc::kInvalidArgument,
-                    "unknown camera model '" + text + "': use pinhole-radtan or pinhole-equi");
+std::vector<CameraModelKind> default_model_candidates() {
+  using P = ProjectionModel;
+  using D = DistortionModel;
+  return {{P::kPinhole, D::kRadtan}, {P::kPinhole, D::kEquidistant}, {P::kPinhole, D::kFov},
+          {P::kOmni, D::kNone},      {P::kOmni, D::kRadtan},         {P::kEucm, D::kNone},
+          {P::kDs, D::kNone}};
 }
 
 }  // namespace imucal::calib

@@ -39,8 +39,9 @@ struct CamImuCameraInput {
   std::string stream;
   CameraModel camera;
   std::vector<TargetObservation> observations;
-  /// The covariance of the held intrinsics [fu fv pu pv, distortion_coeffs] (8 x 8, from the
-  /// camera's own calibration; NaN rows where it did not determine one), propagated into the
+  /// The covariance of the held intrinsics in the solves' layout [fu fv pu pv, projection (2),
+  /// distortion (4)] (10 x 10, from the camera's own calibration, 0 in the rows the model does not
+  /// use; NaN rows where it did not determine one), propagated into the
   /// result's sigmas (CamImuOptions::propagate_intrinsics); empty: not known, left out. The
   /// source names it in the result (CamImuCameraResult::intrinsics_uncertainty), or says why
   /// there is none.

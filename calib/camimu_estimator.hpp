@@ -218,8 +218,9 @@ class Estimator {
   double covariance_compute_s_ = 0.0;  // wall time of the last computation of covariance_
 };
 
-/// Columns l_j with sum_j l_j l_j^T = the 8 x 8 covariance of a camera's [fu fv pu pv, d0..d3]
-/// (its eigenvectors times the square roots of the positive eigenvalues); coordinates whose
+/// Columns l_j with sum_j l_j l_j^T = the 10 x 10 covariance of a camera's [fu fv pu pv,
+/// projection (2), distortion (4)] (its eigenvectors times the square roots of the positive
+/// eigenvalues); coordinates whose
 /// variance is NaN (not determined by the camera's solve) are left out. Empty for an empty or
 /// malformed matrix.
 std::vector<Eigen::VectorXd> intrinsics_directions(const Eigen::MatrixXd& covariance);

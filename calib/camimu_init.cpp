@@ -3,9 +3,8 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
-#include <opencv2/calib3d.hpp>
-#include <opencv2/core/eigen.hpp>
 
+#include "calib/ray_pnp.hpp"
 #include "calib/so3.hpp"
 
 namespace imucal::calib::camimu {
@@ -17,27 +16,20 @@ std::vector<FramePose> pnp_poses(const CameraModel& camera,
   std::vector<FramePose> poses;
   for (const auto& obs : observations) {
     if (static_cast<int>(obs.ids.size()) < min_corners) continue;
-    std::vector<cv::Point3d> object;
-    std::vector<cv::Point2d> rays;
+    std::vector<Eigen::Vector3d> object, rays;
     for (std::size_t k = 0; k < obs.ids.size(); ++k) {
       Eigen::Vector3d ray;
-      if (!camera.unproject(obs.px[k], &ray) || ray.z() <= 0) continue;
-      const Eigen::Vector3d& P = target_points[obs.ids[k]];
-      object.emplace_back(P.x(), P.y(), P.z());
-      rays.emplace_back(ray.x() / ray.z(), ray.y() / ray.z());
+      if (!camera.unproject(obs.px[k], &ray)) continue;
+      object.push_back(target_points[obs.ids[k]]);
+      rays.push_back(ray);
     }
     if (static_cast<int>(object.size()) < min_corners) continue;
-    cv::Mat rvec, tvec;
-    const cv::Matx33d K = cv::Matx33d::eye();
-    // IPPE is exact for planar targets and returns the better of the two planar solutions.
-    if (!cv::solvePnP(object, rays, K, cv::noArray(), rvec, tvec, false, cv::SOLVEPNP_IPPE)) continue;
-    cv::solvePnPRefineLM(object, rays, K, cv::noArray(), rvec, tvec);
-    cv::Mat Rcv;
-    cv::Rodrigues(rvec, Rcv);
-    Eigen::Matrix3d R_ct;
-    Eigen::Vector3d t_ct;
-    cv::cv2eigen(Rcv, R_ct);
-    cv::cv2eigen(tvec, t_ct);
+    // Turned towards the view's mean ray, so that a view far off the axis (a fisheye's border)
+    // is solved as a central one (calib/ray_pnp.hpp).
+    const auto found = pose_from_rays(object, rays, true);
+    if (!found) continue;
+    const Eigen::Matrix3d& R_ct = found->R_cam_target;
+    const Eigen::Vector3d& t_ct = found->t_cam_target;
     double sq = 0.0;
     int n = 0;
     for (std::size_t k = 0; k < obs.ids.size(); ++k) {

@@ -79,6 +79,8 @@ std::vector<MarginalCovariance::HeldScore> Estimator<N>::held_intrinsics() const
       CameraModel plus = camera, minus = camera;
       plus.intrinsics += l.head<4>();
       minus.intrinsics -= l.head<4>();
+      plus.projection_params += l.segment<2>(4);
+      minus.projection_params -= l.segment<2>(4);
       plus.distortion_coeffs += l.tail<4>();
       minus.distortion_coeffs -= l.tail<4>();
       moves.emplace_back(plus, minus);
@@ -99,18 +101,20 @@ std::vector<MarginalCovariance::HeldScore> Estimator<N>::held_intrinsics() const
 
 std::vector<Eigen::VectorXd> intrinsics_directions(const Eigen::MatrixXd& covariance) {
   std::vector<Eigen::VectorXd> out;
-  if (covariance.rows() != 8 || covariance.cols() != 8) return out;
+  if (covariance.rows() != 10 || covariance.cols() != 10) return out;
   // Coordinates the camera's own solve did not determine (NaN) are left out.
   Eigen::MatrixXd C = covariance;
-  for (int i = 0; i < 8; ++i)
+  for (int i = 0; i < 10; ++i)
     if (!std::isfinite(C(i, i))) {
       C.row(i).setZero();
       C.col(i).setZero();
     }
   if (!C.allFinite()) return out;
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (C + C.transpose()));
-  for (int j = 0; j < 8; ++j)
-    if (es.eigenvalues()(j) > 0.0) out.push_back(es.eigenvectors().col(j) * std::sqrt(es.eigenvalues()(j)));
+  // The rows the model does not use are 0: their eigenvalues, 0 to rounding, are no direction.
+  const double floor = 1e-12 * es.eigenvalues().cwiseAbs().maxCoeff();
+  for (int j = 0; j < 10; ++j)
+    if (es.eigenvalues()(j) > floor) out.push_back(es.eigenvectors().col(j) * std::sqrt(es.eigenvalues()(j)));
   return out;
 }
 

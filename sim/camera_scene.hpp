@@ -93,5 +93,10 @@ class SceneFrameSource {
 /// The simulated camera at another resolution: the default camera's lens (its field of view
 /// across the width, its distortion) on a sensor of width x height, principal point centred.
 CameraModel sim_camera_for(int width, int height);
+/// A lens of `model` on that sensor (sim_camera_for's for pinhole-radtan): pinhole-equi, -fov and
+/// -none of about 100 degrees across; omni-none and omni-radtan (xi 0.8) of about 120; eucm-none
+/// (alpha 0.6, beta 1.1) and ds-none (xi -0.15, alpha 0.6) of about 195 degrees across the
+/// width, the image circle filling the sensor's height.
+CameraModel sim_camera_for(int width, int height, CameraModelKind model);
 
 }  // namespace imucal::sim

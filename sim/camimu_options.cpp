@@ -83,8 +83,13 @@ CamImuSimCamera CamImuSimOptions::default_stereo_camera(const CameraModel& cam0,
   c.camera = cam0;
   c.camera.intrinsics << cam0.intrinsics[0] * 1.021, cam0.intrinsics[1] * 1.018, cam0.intrinsics[2] - 3.7,
       cam0.intrinsics[3] + 2.2;
-  c.camera.distortion_coeffs << cam0.distortion_coeffs[0] * 0.95, cam0.distortion_coeffs[1] * 1.1, -1.4e-4,
-      2.6e-4;
+  if (distortion_coeff_count(cam0.distortion_model) == 4) {
+    c.camera.distortion_coeffs << cam0.distortion_coeffs[0] * 0.95, cam0.distortion_coeffs[1] * 1.1, -1.4e-4,
+        2.6e-4;
+  } else {
+    c.camera.distortion_coeffs[0] *= 0.97;  // fov's w; none has no coefficient
+  }
+  c.camera.projection_params *= 0.98;
   // p_cam1 = T_cam1_cam0 p_cam0: cam1 sits at +0.11 m along cam0's x axis.
   Eigen::Isometry3d T_cam1_cam0 = Eigen::Isometry3d::Identity();
   T_cam1_cam0.linear() = (Eigen::AngleAxisd(deg(0.6), Eigen::Vector3d::UnitX()) *
@@ -148,6 +153,37 @@ CameraModel sim_camera_for(int width, int height) {
   c.intrinsics << c.intrinsics[0] * scale, c.intrinsics[1] * scale, (width - 1) / 2.0, (height - 1) / 2.0;
   c.width = width;
   c.height = height;
+  return c;
+}
+
+CameraModel sim_camera_for(int width, int height, CameraModelKind model) {
+  using P = ProjectionModel;
+  using D = DistortionModel;
+  CameraModel c = sim_camera_for(width, height);
+  if (model == c.kind()) return c;
+  const double scale = static_cast<double>(width) / CamImuSimOptions::default_sim_camera().width;
+  c.projection = model.projection;
+  c.distortion_model = model.distortion;
+  c.projection_params.setZero();
+  c.distortion_coeffs.setZero();
+  double f = 150.0;  // at 376 px across
+  if (model == CameraModelKind{P::kPinhole, D::kEquidistant}) {
+    c.distortion_coeffs << 0.02, -0.01, 0.004, -0.001;
+  } else if (model == CameraModelKind{P::kPinhole, D::kFov}) {
+    f = 190.0;
+    c.distortion_coeffs[0] = 0.9;
+  } else if (model.projection == P::kOmni) {
+    f = 270.0;
+    c.projection_params[0] = 0.8;
+    if (model.distortion == D::kRadtan) c.distortion_coeffs << -0.04, 0.008, 1e-4, -1e-4;
+  } else if (model.projection == P::kEucm) {
+    f = 110.0;
+    c.projection_params << 0.6, 1.1;
+  } else if (model.projection == P::kDs) {
+    f = 110.0;
+    c.projection_params << -0.15, 0.6;
+  }
+  c.intrinsics << f * scale, f * scale * 0.998, (width - 1) / 2.0 + 0.7, (height - 1) / 2.0 - 0.4;
   return c;
 }
 

@@ -288,9 +288,13 @@ void camera_rows(const session_msg::ResultSummary::Camera& c, const ResultFiles&
       const YAML::Node own = cam["imucal"];
       auto own_list = [&](const char* key, int i) { return own ? list(own[key], i) : kNotDetermined; };
       const char* kIntrinsics[4] = {"fx", "fy", "cx", "cy"};
+      // Kalibr's intrinsics hold the projection's parameters (omni, eucm, ds) before fu fv pu pv.
+      const auto projection =
+          parse_projection_name(cam["camera_model"] ? cam["camera_model"].as<std::string>() : "pinhole");
+      const int extra = projection ? projection_param_count(*projection) : 0;
       for (int i = 0; i < 4; ++i)
-        rows.push_back(compared(name + " " + kIntrinsics[i], "px", list(cam["intrinsics"], i),
-                                truth_camera.intrinsics[i], own_list("intrinsics_sigma", i)));
+        rows.push_back(compared(name + " " + kIntrinsics[i], "px", list(cam["intrinsics"], extra + i),
+                                truth_camera.intrinsics[i], own_list("intrinsics_sigma", extra + i)));
       const std::string model = cam["distortion_model"] ? cam["distortion_model"].as<std::string>() : "";
       if (model == "radtan" && truth_camera.distortion_model == DistortionModel::kRadtan) {
         const char* kCoeffs[4] = {"k1", "k2", "p1", "p2"};

@@ -4,6 +4,7 @@
 // is no reprojection scatter.
 
 #include <string>
+#include <vector>
 
 #include "app/report/builders.hpp"
 
@@ -16,13 +17,26 @@ std::string parameters_html(const nlohmann::json& r) {
   const auto& d = at(r, "distortion_coeffs");
   const auto& ds = at(r, "distortion_coeffs_sigma");
   auto value = [](const nlohmann::json& v) { return v.is_null() ? std::nan("") : v.get<double>(); };
-  Table t{{"parameter", "value (px)"}, {}};
-  const char* names[] = {"fx", "fy", "cx", "cy"};
-  for (std::size_t i = 0; i < 4 && i < k.size(); ++i)
-    t.rows.push_back({names[i], with_sigma(value(k[i]), value(ks[i]))});
+  // The parameters in Kalibr's order, named by covariance_order (omni xi; eucm alpha beta; ds xi
+  // alpha; then fu fv pu pv; then the distortion's coefficients).
+  std::vector<std::string> names;
+  if (r.contains("covariance_order")) {
+    for (const auto& n : r["covariance_order"]) names.push_back(n.get<std::string>());
+  }
+  auto name_of = [&](std::size_t i, const std::string& fallback) {
+    return i < names.size() ? names[i] : fallback;
+  };
+  Table t{{"parameter", "value"}, {}};
+  const std::size_t extra = k.size() > 4 ? k.size() - 4 : 0;
+  const char* pinhole[] = {"fu (px)", "fv (px)", "pu (px)", "pv (px)"};
+  for (std::size_t i = 0; i < k.size(); ++i) {
+    const std::string label =
+        i < extra ? name_of(i, "e" + std::to_string(i)) : std::string(pinhole[i - extra]);
+    t.rows.push_back({label, with_sigma(value(k[i]), i < ks.size() ? value(ks[i]) : std::nan(""))});
+  }
   for (std::size_t i = 0; i < d.size(); ++i)
-    t.rows.push_back(
-        {"k" + std::to_string(i + 1), with_sigma(value(d[i]), i < ds.size() ? value(ds[i]) : std::nan(""))});
+    t.rows.push_back({name_of(k.size() + i, "k" + std::to_string(i + 1)),
+                      with_sigma(value(d[i]), i < ds.size() ? value(ds[i]) : std::nan(""))});
   const auto& res = at(r, "resolution");
   Table q{{"", ""}, {}};
   q.rows.push_back(

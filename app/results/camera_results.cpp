@@ -37,21 +37,65 @@ Result<TargetDescription> parse_target_node(const YAML::Node& node, const std::s
   return t;
 }
 
-YAML::Node flow(const Eigen::Vector4d& v) {
+/// A sigma for JSON: infinite (undetermined) as null.
+json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+/// A sigma list for YAML: infinite (undetermined) as null.
+YAML::Node flow_sigmas(const std::vector<double>& v) {
   YAML::Node n(YAML::NodeType::Sequence);
-  for (int i = 0; i < 4; ++i) n.push_back(v[i]);
+  for (double x : v) n.push_back(std::isfinite(x) ? YAML::Node(x) : YAML::Node(YAML::NodeType::Null));
   n.SetStyle(YAML::EmitterStyle::Flow);
   return n;
 }
 
-json vec(const Eigen::Vector4d& v) { return json::array({v[0], v[1], v[2], v[3]}); }
+json sigma_vec(const std::vector<double>& v) {
+  json out = json::array();
+  for (double x : v) out.push_back(finite_or_null(x));
+  return out;
+}
 
-/// A sigma for JSON: infinite (undetermined) as null.
-json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+/// The sigmas of the model's intrinsics and distortion_coeffs, in Kalibr's order.
+std::vector<double> intrinsics_sigmas(const calib::CameraIntrinsicsResult& r) {
+  return kalibr_intrinsics(r.camera.projection, r.intrinsics_sigma, r.projection_sigma);
+}
+std::vector<double> distortion_sigmas(const calib::CameraIntrinsicsResult& r) {
+  return kalibr_distortion(r.camera.distortion_model, r.distortion_sigma);
+}
+/// The covariance of the model's parameters in Kalibr's order (kalibr_parameter_indices).
+Eigen::MatrixXd kalibr_covariance(const calib::CameraIntrinsicsResult& r) {
+  const std::vector<int> order = kalibr_parameter_indices(r.camera.kind());
+  const auto n = static_cast<Eigen::Index>(order.size());
+  Eigen::MatrixXd out(n, n);
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (Eigen::Index j = 0; j < n; ++j) out(i, j) = r.covariance(order[i], order[j]);
+  return out;
+}
 
-json sigma_vec(const Eigen::Vector4d& v) {
-  return json::array(
-      {finite_or_null(v[0]), finite_or_null(v[1]), finite_or_null(v[2]), finite_or_null(v[3])});
+/// The choice of `--model auto`: the chosen model, the reason and every candidate's figures.
+json model_choice_json(const std::optional<calib::CameraModelChoice>& c) {
+  if (!c) return nullptr;
+  json fits = json::array();
+  for (const auto& f : c->fits) {
+    json jf = {{"model", camera_model_name(f.model)},
+               {"compared", f.compared},
+               {"views_used", f.views_used},
+               {"rms_px", f.rms_px}};
+    if (f.compared) {
+      jf["rss_px2"] = f.rss_px2;
+      jf["params"] = f.params;
+      jf["bic"] = f.bic;
+      jf["delta_bic"] = f.delta_bic;
+    } else {
+      jf["why_not"] = f.why_not;
+    }
+    fits.push_back(jf);
+  }
+  return {{"chosen", camera_model_name(c->chosen)},
+          {"criterion", "BIC"},
+          {"reason", c->reason},
+          {"common_views", c->common_views},
+          {"common_corners", c->common_corners},
+          {"candidates", fits}};
 }
 
 /// Each used view's corner residuals as a flat dx, dy list (px, to 1e-4) and which the corner
@@ -168,14 +212,20 @@ YAML::Node camera_node(const CameraCalibrationReport& r) {
   camera_to_yaml(res.camera, cam);
   cam["rostopic"] = "/" + r.stream.name + "/image_raw";
   YAML::Node q(YAML::NodeType::Map);
-  q["intrinsics_sigma"] = flow(res.intrinsics_sigma);
-  q["distortion_coeffs_sigma"] = flow(res.distortion_sigma);
-  // The 8 x 8 covariance of [intrinsics, distortion_coeffs]; calibrate camimu propagates it into
-  // its sigmas (docs/camimu-calibration.md, "Uncertainty").
-  if (res.covariance_ok) q["intrinsics_covariance"] = covariance_rows(res.covariance);
+  q["intrinsics_sigma"] = flow_sigmas(intrinsics_sigmas(res));
+  q["distortion_coeffs_sigma"] = flow_sigmas(distortion_sigmas(res));
+  if (r.model_choice) q["model_choice"] = r.model_choice->reason;
+  // The covariance of the model's parameters in Kalibr's order (intrinsics, then
+  // distortion_coeffs); calibrate camimu propagates it into its sigmas
+  // (docs/camimu-calibration.md, "Uncertainty").
+  if (res.covariance_ok) q["intrinsics_covariance"] = covariance_rows(kalibr_covariance(res));
   q["reprojection_rms_px"] = res.rms_px;
   q["residual_sigma_px"] = res.residual_sigma_px;
   q["focal_well_determined"] = res.focal_well_determined;
+  if (std::isfinite(res.profile_chi2)) {
+    q["profile_chi2"] = res.profile_chi2;
+    q["profile_sigma_stretch"] = res.profile_stretch;
+  }
   if (res.camera.shutter.rolling()) q["line_delay_sigma_s"] = number_or_null(r.line_delay_sigma_s);
   if (!r.shutter_choice.empty()) q["shutter_choice"] = r.shutter_choice;
   q["coverage"] = res.coverage;
@@ -247,24 +297,35 @@ json camera_json(const CameraCalibrationReport& r) {
     }
     views.push_back(jv);
   }
+  // The covariance of the model's parameters in Kalibr's order (covariance_order).
   json cov = json::array();
-  for (int i = 0; i < 8; ++i) {
+  const Eigen::MatrixXd kalibr_cov = kalibr_covariance(res);
+  for (Eigen::Index i = 0; i < kalibr_cov.rows(); ++i) {
     json row = json::array();
-    for (int j = 0; j < 8; ++j) row.push_back(res.covariance_ok ? json(res.covariance(i, j)) : json(nullptr));
+    for (Eigen::Index j = 0; j < kalibr_cov.cols(); ++j)
+      row.push_back(res.covariance_ok ? finite_or_null(kalibr_cov(i, j)) : json(nullptr));
     cov.push_back(row);
   }
   json j = {
-      {"camera_model", "pinhole"},
+      {"camera_model", projection_model_name(res.camera.projection)},
       {"distortion_model", distortion_model_name(res.camera.distortion_model)},
-      {"intrinsics", vec(res.camera.intrinsics)},
-      {"distortion_coeffs", vec(res.camera.distortion_coeffs)},
+      {"model", camera_model_name(res.camera.kind())},
+      {"intrinsics",
+       kalibr_intrinsics(res.camera.projection, res.camera.intrinsics, res.camera.projection_params)},
+      {"distortion_coeffs", kalibr_distortion(res.camera.distortion_model, res.camera.distortion_coeffs)},
       {"resolution", {res.camera.width, res.camera.height}},
-      {"intrinsics_sigma", sigma_vec(res.intrinsics_sigma)},
-      {"distortion_coeffs_sigma", sigma_vec(res.distortion_sigma)},
+      {"intrinsics_sigma", sigma_vec(intrinsics_sigmas(res))},
+      {"distortion_coeffs_sigma", sigma_vec(distortion_sigmas(res))},
       {"covariance", cov},
+      {"covariance_order", kalibr_parameter_names(res.camera.kind())},
+      {"model_choice", model_choice_json(r.model_choice)},
       {"reprojection_rms_px", res.rms_px},
       {"residual_sigma_px", res.residual_sigma_px},
       {"focal_well_determined", res.focal_well_determined},
+      {"profile_check",
+       {{"chi2", finite_or_null(res.profile_chi2)},
+        {"sigma_stretch", res.profile_stretch},
+        {"ambiguity", res.ambiguity.empty() ? json(nullptr) : json(res.ambiguity)}}},
       {"shutter", shutter_kind_name(res.camera.shutter.kind)},
       {"line_delay_s", res.camera.shutter.rolling() ? json(res.camera.shutter.line_delay_s) : json(nullptr)},
       {"line_delay_sigma_s", finite_or_null(r.line_delay_sigma_s)},

@@ -123,10 +123,10 @@ YAML::Node yaml_sigma(double v) {
 }
 
 json camera_model_json(const CameraModel& c) {
-  json j = {{"camera_model", "pinhole"},
-            {"intrinsics", vec_json(c.intrinsics)},
+  json j = {{"camera_model", projection_model_name(c.projection)},
+            {"intrinsics", kalibr_intrinsics(c.projection, c.intrinsics, c.projection_params)},
             {"distortion_model", distortion_model_name(c.distortion_model)},
-            {"distortion_coeffs", vec_json(c.distortion_coeffs)},
+            {"distortion_coeffs", kalibr_distortion(c.distortion_model, c.distortion_coeffs)},
             {"resolution", {c.width, c.height}}};
   // The shutter's keys as camera_to_yaml writes them (read back by camera_from_yaml).
   if (c.shutter.rolling()) {

@@ -84,7 +84,7 @@ static Status solve_camera_chain(const RigConfig& config, const std::string& dir
   bool any_rolling = false;
   for (const CameraConfig& c : config.cameras) {
     cq.cameras.push_back(c.name);
-    cq.models.push_back(DistortionModel::kRadtan);
+    cq.models.push_back(CameraModelKind{ProjectionModel::kPinhole, DistortionModel::kRadtan});
     cq.shutters.push_back(c.shutter);
     any_rolling = any_rolling || c.shutter.rolling();
   }

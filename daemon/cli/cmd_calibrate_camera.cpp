@@ -47,16 +47,20 @@ struct CameraCliOptions {
 void print_camera(const app::CameraCalibrationReport& r) {
   const auto& res = r.intrinsics;
   const auto& c = res.camera;
-  std::printf("  model %s, %d x %d, target from %s\n", calib::camera_model_option_name(c.distortion_model),
+  std::printf("  model %s, %d x %d, target from %s\n", calib::camera_model_option_name(c.kind()).c_str(),
               c.width, c.height, r.target_source.c_str());
-  static const char* kIntrinsics[] = {"fu", "fv", "pu", "pv"};
-  static const char* kRadtan[] = {"k1", "k2", "p1", "p2"};
-  static const char* kEqui[] = {"k1", "k2", "k3", "k4"};
-  const char** dist = c.distortion_model == DistortionModel::kRadtan ? kRadtan : kEqui;
-  for (int i = 0; i < 4; ++i)
-    std::printf("  %s %12.5f +- %.5f px\n", kIntrinsics[i], c.intrinsics[i], res.intrinsics_sigma[i]);
-  for (int i = 0; i < 4; ++i)
-    std::printf("  %s %12.6f +- %.6f\n", dist[i], c.distortion_coeffs[i], res.distortion_sigma[i]);
+  if (r.model_choice) std::printf("  model chosen by the evidence: %s\n", r.model_choice->reason.c_str());
+  // Kalibr's order: the projection's parameters, fu fv pu pv, the distortion's coefficients.
+  const std::vector<std::string> names = kalibr_parameter_names(c.kind());
+  const std::vector<int> index = kalibr_parameter_indices(c.kind());
+  Eigen::Matrix<double, 10, 1> value, sigma;
+  value << c.intrinsics, c.projection_params, c.distortion_coeffs;
+  sigma << res.intrinsics_sigma, res.projection_sigma, res.distortion_sigma;
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    const bool px = index[i] < 4;
+    std::printf(px ? "  %-5s %12.5f +- %.5f px\n" : "  %-5s %12.6f +- %.6f\n", names[i].c_str(),
+                value[index[i]], sigma[index[i]]);
+  }
   std::printf(
       "  reprojection RMS %.4f px (residual sigma %.4f px per coordinate) over %d corners in %d views; "
       "%d views and %d corners rejected\n",
@@ -156,14 +160,18 @@ std::vector<std::string> streams_to_calibrate(const CameraCliOptions& o) {
   return names;
 }
 
-/// One model for every camera, or one per camera, in the order of the cameras.
-std::vector<DistortionModel> models_for(const CameraCliOptions& o, std::size_t cameras) {
+/// One model for every camera, or one per camera, in the order of the cameras ("auto": every
+/// camera's by the evidence, set apart by the caller).
+std::vector<CameraModelKind> models_for(const CameraCliOptions& o, std::size_t cameras) {
   std::vector<std::string> names = o.models.empty() ? std::vector<std::string>{"pinhole-radtan"} : o.models;
+  if (names.size() == 1 && names.front() == "auto") names.front() = "pinhole-radtan";
+  if (std::find(names.begin(), names.end(), "auto") != names.end())
+    throw CliExit{kExitUsage, "--model auto chooses every camera's model: give it alone"};
   if (names.size() != 1 && names.size() != cameras) {
     throw CliExit{kExitUsage, "--model: give one model for every camera, or one per camera (" +
                                   std::to_string(cameras) + "), in the order of the cameras"};
   }
-  std::vector<DistortionModel> out;
+  std::vector<CameraModelKind> out;
   for (std::size_t c = 0; c < cameras; ++c) {
     auto model = calib::parse_camera_model_option(names[names.size() == 1 ? 0 : c]);
     if (!model.ok()) throw CliExit{kExitUsage, "--model: " + model.error().message};
@@ -182,9 +190,11 @@ void run(const CameraCliOptions& o) {
 
   const app::TargetChoice target = resolve_target(o.target_path, o.log_path);
   const std::vector<std::string> streams = streams_to_calibrate(o);
-  const std::vector<DistortionModel> models = models_for(o, streams.size());
+  const std::vector<CameraModelKind> models = models_for(o, streams.size());
   app::CameraCalibrationRequest q;
   q.intrinsics.model = models.front();
+  if (o.models.size() == 1 && o.models.front() == "auto")
+    q.model_candidates = calib::default_model_candidates();
   q.intrinsics.threads = o.threads;
   if (auto valid = q.intrinsics.validate(); !valid.ok()) throw CliExit{kExitUsage, valid.error().message};
   q.log_path = o.log_path;
@@ -249,7 +259,8 @@ void run(const CameraCliOptions& o) {
 void setup(CLI::App& root) {
   CLI::App* cmd = calibrate_group(root)->add_subcommand(
       "camera",
-      "Camera intrinsics (pinhole with radtan or equidistant distortion) from the calibration target in a "
+      "Camera intrinsics (Kalibr's camera models: pinhole-radtan, pinhole-equi, pinhole-fov, omni-none, "
+      "omni-radtan, eucm-none, ds-none, or chosen by the evidence) from the calibration target in a "
       "log's camera streams; with several cameras one joint solve of every camera's intrinsics, their poses "
       "relative to cam0 (T_cn_cnm1) and their time offsets; writes a Kalibr camchain YAML with sigmas and "
       "quality figures");
@@ -257,7 +268,8 @@ void setup(CLI::App& root) {
       "Examples:\n"
       "  imucal calibrate camera rig.imulog -o camchain.yaml\n"
       "  imucal calibrate camera stereo.imulog --camera left --camera right --model pinhole-equi -o "
-      "camchain.yaml");
+      "camchain.yaml\n"
+      "  imucal calibrate camera fisheye.imulog --model auto -o camchain.yaml");
   auto o = std::make_shared<CameraCliOptions>();
   cmd->add_option("LOG", o->log_path, "Session log (.imulog) with the camera streams")->required();
   cmd->add_option(
@@ -270,9 +282,13 @@ void setup(CLI::App& root) {
       "metadata)");
   cmd->add_option(
          "--model", o->models,
-         "Camera model: pinhole-radtan (default) or pinhole-equi (fisheye); one for every camera, or "
-         "repeated once per camera in the order of the cameras")
-      ->check(CLI::IsMember({"pinhole-radtan", "pinhole-equi"}));
+         "Camera model, Kalibr's names: pinhole-radtan (default), pinhole-equi (fisheye to about 180 "
+         "degrees), pinhole-fov, omni-none, omni-radtan (Mei's unified model), eucm-none (extended "
+         "unified), ds-none (double sphere; lenses beyond 180 degrees), or auto: every model calibrated "
+         "and the one with the lowest BIC on the views they share kept (the summary and the JSON say "
+         "why); one for every camera, or repeated once per camera in the order of the cameras")
+      ->check(CLI::IsMember({"pinhole-radtan", "pinhole-equi", "pinhole-fov", "omni-none", "omni-radtan",
+                             "eucm-none", "ds-none", "auto"}));
   cmd->add_flag("--hold-time-offsets", o->hold_time_offsets,
                 "Several cameras: hold their time offsets against cam0 at 0 and give every instant its own "
                 "pose (cameras triggered together, or still pairs taken seconds apart) instead of estimating "

@@ -332,11 +332,29 @@ void add_gsens(CLI::App* sim) {
 /// The simulated camera's sensor and shutter: --resolution, --line-delay, --readout, --stamp-row.
 struct SimCameraArgs {
   std::string resolution;
+  std::string model;               // Kalibr's name; empty: pinhole-radtan
+  std::vector<double> intrinsics;  // Kalibr's order for the model; empty: the preset lens's
+  std::vector<double> distortion;
   double line_delay_us = 0.0;
   ShutterArgs shutter;  // its readout and stamp_row
 };
 
 void add_sim_camera_options(CLI::App* cmd, SimCameraArgs* a) {
+  cmd->add_option(
+         "--camera-model", a->model,
+         "Lens model, Kalibr's names: pinhole-radtan (default), pinhole-equi, pinhole-fov, omni-none, "
+         "omni-radtan, eucm-none, ds-none; a lens of that model on the sensor (eucm-none and ds-none: "
+         "about 195 degrees across), its parameters in the truth file")
+      ->check(CLI::IsMember({"pinhole-radtan", "pinhole-equi", "pinhole-fov", "pinhole-none", "omni-none",
+                             "omni-radtan", "eucm-none", "ds-none"}));
+  cmd->add_option("--camera-intrinsics", a->intrinsics,
+                  "The lens's intrinsics in Kalibr's order for its model, comma-separated: fu,fv,pu,pv; omni "
+                  "xi first; eucm alpha,beta first; ds xi,alpha first (default: the model's preset lens)")
+      ->delimiter(',');
+  cmd->add_option("--camera-distortion", a->distortion,
+                  "The lens's distortion_coeffs, comma-separated: radtan k1,k2,p1,p2; equi k1..k4; fov w "
+                  "(default: the model's preset lens)")
+      ->delimiter(',');
   cmd->add_option("--resolution", a->resolution,
                   "Camera resolution WIDTHxHEIGHT, the default lens on that sensor (default 376x240; the "
                   "WVGA sensor unbinned is 752x480)");
@@ -360,13 +378,22 @@ void add_sim_camera_options(CLI::App* cmd, SimCameraArgs* a) {
 
 /// The camera the arguments describe (the default lens on the given sensor, its shutter).
 void apply_sim_camera_args(const SimCameraArgs& a, CameraModel* camera) {
+  int w = camera->width, h = camera->height;
   if (!a.resolution.empty()) {
-    int w = 0, h = 0;
     char x = 0;
     std::istringstream in(a.resolution);
     if (!(in >> w >> x >> h) || x != 'x' || !in.eof() || w < 16 || h < 16 || w > 8192 || h > 8192)
       throw CliExit{kExitUsage, "--resolution takes WIDTHxHEIGHT in pixels, 16-8192 each, e.g. 752x480"};
-    *camera = sim::sim_camera_for(w, h);
+  }
+  const auto model = parse_camera_model_name(a.model.empty() ? "pinhole-radtan" : a.model);
+  if (!model) throw CliExit{kExitUsage, "--camera-model: unknown model '" + a.model + "'"};
+  if (!a.resolution.empty() || !a.model.empty()) *camera = sim::sim_camera_for(w, h, *model);
+  if (!a.intrinsics.empty() || !a.distortion.empty()) {
+    std::vector<double> intrinsics = a.intrinsics;
+    if (intrinsics.empty())
+      intrinsics = kalibr_intrinsics(camera->projection, camera->intrinsics, camera->projection_params);
+    if (auto s = set_kalibr_parameters(camera, intrinsics, a.distortion); !s.ok())
+      throw CliExit{kExitUsage, "--camera-intrinsics/--camera-distortion: " + s.error().message};
   }
   if (a.line_delay_us > 0.0) {
     camera->shutter.kind = Shutter::Kind::kRolling;

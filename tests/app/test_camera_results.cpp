@@ -155,12 +155,6 @@ TEST(CameraResults, YamlIsAKalibrCamchainWithImucalKeys) {
 // The intrinsics' covariance goes into the camera file, and calibrate camimu reads it back to
 // propagate it; a file with sigmas only (an older imucal's) is read without one, and says why.
 TEST(CameraResults, TheIntrinsicsCovarianceRoundTripsThroughTheCameraFile) {
-  auto r = sample_report();
-  Eigen::Matrix<double, 8, 8> A;
-  for (int i = 0; i < 8; ++i)
-    for (int j = 0; j < 8; ++j) A(i, j) = std::sin(1.0 + i + 3.0 * j);
-  r.intrinsics.covariance = A * A.transpose() * 1e-3;
-  r.intrinsics.covariance(7, 7) = std::numeric_limits<double>::quiet_NaN();
   const auto dir = std::filesystem::temp_directory_path() / ("imucal_cov_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   const auto write_text = [&](const std::string& name, const std::string& text) {
@@ -168,28 +162,53 @@ TEST(CameraResults, TheIntrinsicsCovarianceRoundTripsThroughTheCameraFile) {
     std::ofstream(path) << text;
     return path;
   };
-  const std::string text = camera_result_yaml(r);
-  auto cams = read_camchain(write_text("full.yaml", text));
-  ASSERT_TRUE(cams.ok()) << cams.error().message;
-  const Eigen::MatrixXd& C = (*cams)[0].intrinsics_covariance;
-  ASSERT_EQ(C.rows(), 8);
-  EXPECT_TRUE(std::isnan(C(7, 7)));
-  for (int i = 0; i < 7; ++i)
-    for (int j = 0; j < 7; ++j) EXPECT_DOUBLE_EQ(C(i, j), r.intrinsics.covariance(i, j)) << i << " " << j;
-  EXPECT_NE((*cams)[0].intrinsics_covariance_source.find("the covariance of"), std::string::npos);
+  // A pinhole and an omnidirectional camera: the file holds the model's own parameters in
+  // Kalibr's order (omni: xi first), the reader puts them back in the solves' 10 x 10 layout.
+  for (const bool omni : {false, true}) {
+    SCOPED_TRACE(omni ? "omni-radtan" : "pinhole-radtan");
+    auto r = sample_report();
+    if (omni) {
+      r.intrinsics.camera.projection = ProjectionModel::kOmni;
+      r.intrinsics.camera.projection_params = {0.9, 0.0};
+    }
+    const std::vector<int> used = kalibr_parameter_indices(r.intrinsics.camera.kind());
+    const auto n = static_cast<int>(used.size());
+    ASSERT_EQ(n, omni ? 9 : 8);
+    Eigen::MatrixXd A(n, n);
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j) A(i, j) = std::sin(1.0 + i + 3.0 * j);
+    const Eigen::MatrixXd packed = A * A.transpose() * 1e-3;
+    r.intrinsics.covariance.setZero();
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j) r.intrinsics.covariance(used[i], used[j]) = packed(i, j);
+    r.intrinsics.covariance(9, 9) = std::numeric_limits<double>::quiet_NaN();  // p2 not determined
+    const std::string text = camera_result_yaml(r);
+    const YAML::Node file = YAML::Load(text)["cam0"]["imucal"]["intrinsics_covariance"];
+    ASSERT_EQ(static_cast<int>(file.size()), n);
+    EXPECT_DOUBLE_EQ(file[0][0].as<double>(), r.intrinsics.covariance(used[0], used[0]));
+    auto cams = read_camchain(write_text("full.yaml", text));
+    ASSERT_TRUE(cams.ok()) << cams.error().message;
+    const Eigen::MatrixXd& C = (*cams)[0].intrinsics_covariance;
+    ASSERT_EQ(C.rows(), 10);
+    EXPECT_TRUE(std::isnan(C(9, 9)));
+    for (int i = 0; i < 9; ++i)
+      for (int j = 0; j < 9; ++j) EXPECT_DOUBLE_EQ(C(i, j), r.intrinsics.covariance(i, j)) << i << " " << j;
+    EXPECT_NE((*cams)[0].intrinsics_covariance_source.find("the covariance of"), std::string::npos);
 
-  YAML::Node root = YAML::Load(text);
-  root["cam0"]["imucal"].remove("intrinsics_covariance");
-  cams = read_camchain(write_text("sigmas.yaml", YAML::Dump(root)));
-  ASSERT_TRUE(cams.ok()) << cams.error().message;
-  EXPECT_EQ((*cams)[0].intrinsics_covariance.size(), 0);
-  EXPECT_NE((*cams)[0].intrinsics_covariance_source.find("not their covariance"), std::string::npos)
-      << (*cams)[0].intrinsics_covariance_source;
+    YAML::Node root = YAML::Load(text);
+    root["cam0"]["imucal"].remove("intrinsics_covariance");
+    cams = read_camchain(write_text("sigmas.yaml", YAML::Dump(root)));
+    ASSERT_TRUE(cams.ok()) << cams.error().message;
+    EXPECT_EQ((*cams)[0].intrinsics_covariance.size(), 0);
+    EXPECT_NE((*cams)[0].intrinsics_covariance_source.find("not their covariance"), std::string::npos)
+        << (*cams)[0].intrinsics_covariance_source;
 
-  root["cam0"]["imucal"]["intrinsics_covariance"] = std::vector<double>{1.0, 2.0};
-  cams = read_camchain(write_text("bad.yaml", YAML::Dump(root)));
-  ASSERT_FALSE(cams.ok());
-  EXPECT_NE(cams.error().message.find("8 rows of 8"), std::string::npos) << cams.error().message;
+    root["cam0"]["imucal"]["intrinsics_covariance"] = std::vector<double>{1.0, 2.0};
+    cams = read_camchain(write_text("bad.yaml", YAML::Dump(root)));
+    ASSERT_FALSE(cams.ok());
+    const std::string expected = omni ? "9 rows of 9" : "8 rows of 8";
+    EXPECT_NE(cams.error().message.find(expected), std::string::npos) << cams.error().message;
+  }
   std::filesystem::remove_all(dir);
 }
 

@@ -213,6 +213,7 @@ TEST(CameraChain, TheResidualsJacobiansMatchNumericOnes) {
   std::array<double, 3> tci = {-0.1, 0.01, 0.02};
   double shift = 0.012;
   std::array<double, 4> intr = {480.0, 482.0, 320.0, 240.0};
+  std::array<double, 2> proj = {0.0, 0.0};  // pinhole: the projection block is held
   std::array<double, 4> dist = {-0.2, 0.05, 0.001, -0.0005};
   std::vector<Eigen::Vector3d> pts;
   std::vector<Eigen::Vector2d> px;
@@ -236,15 +237,16 @@ TEST(CameraChain, TheResidualsJacobiansMatchNumericOnes) {
       ASSERT_NE(knots.segment(t_view + shift + 220 * 30e-6).first_knot,
                 knots.segment(t_view + shift + 283 * 30e-6).first_knot);
     }
-    R cost(DistortionModel::kRadtan, 640, 480, pts, px, t_view, first, knots, 0.2, robust ? 0.3 : 0.0, false,
-           rolling ? &rs : nullptr);
+    R cost({ProjectionModel::kPinhole, DistortionModel::kRadtan}, 640, 480, pts, px, t_view, first, knots,
+           0.2, robust ? 0.3 : 0.0, false, rolling ? &rs : nullptr);
     if (rolling) {
       ASSERT_TRUE(cost.in_window(shift, line_delay));
     }
     std::vector<double*> blocks;
     for (auto& x : q) blocks.push_back(x.data());
     for (auto& x : p) blocks.push_back(x.data());
-    for (double* x : {qci.data(), tci.data(), &shift, intr.data(), dist.data()}) blocks.push_back(x);
+    for (double* x : {qci.data(), tci.data(), &shift, intr.data(), proj.data(), dist.data()})
+      blocks.push_back(x);
     if (rolling) blocks.push_back(&line_delay);
     const auto& sizes = cost.parameter_block_sizes();
     const int rows = cost.num_residuals();
@@ -288,7 +290,8 @@ TEST(CameraChain, TheResidualsJacobiansMatchNumericOnes) {
     }
     if (rolling) continue;  // a rolling shutter's views are not compressed
     // The compressed form: the same cost, gradient and Gauss-Newton matrix in 15 rows.
-    R packed(DistortionModel::kRadtan, 640, 480, pts, px, 0.21, 3, timing, 0.2, robust ? 0.3 : 0.0, true);
+    R packed({ProjectionModel::kPinhole, DistortionModel::kRadtan}, 640, 480, pts, px, 0.21, 3, timing, 0.2,
+             robust ? 0.3 : 0.0, true);
     ASSERT_EQ(packed.num_residuals(), R::kCompressedRows);
     std::vector<std::vector<double>> pjac(blocks.size());
     std::vector<double*> pjp;
@@ -341,10 +344,14 @@ TEST(CameraChain, ThePoseResidualsRowsCarryTheCornersGaussNewtonMatrix) {
   std::array<double, 3> tci = {-0.1, 0.01, 0.02};
   std::array<double, 4> intr = {480.0, 482.0, 320.0, 240.0};
   std::array<double, 4> dist = {-0.2, 0.05, 0.001, -0.0005};
-  ChainPoseResidual cost(chain::ViewCorners(DistortionModel::kRadtan, 640, 480, pts, px, 1.0, 0.0));
-  std::vector<double*> blocks = {q.data(), p.data(), qci.data(), tci.data(), intr.data(), dist.data()};
+  // Mei's model with radtan: every one of the 10 camera parameters moves the corners.
+  std::array<double, 2> proj = {0.4, 0.0};
+  ChainPoseResidual cost(
+      chain::ViewCorners({ProjectionModel::kOmni, DistortionModel::kRadtan}, 640, 480, pts, px, 1.0, 0.0));
+  std::vector<double*> blocks = {q.data(),    p.data(),    qci.data(), tci.data(),
+                                 intr.data(), proj.data(), dist.data()};
   const auto& sizes = cost.parameter_block_sizes();
-  const std::vector<bool> quat = {true, false, true, false, false, false};
+  const std::vector<bool> quat = {true, false, true, false, false, false, false};
   std::vector<std::vector<double>> jac(blocks.size());
   std::vector<double*> jp;
   for (std::size_t b = 0; b < blocks.size(); ++b) {

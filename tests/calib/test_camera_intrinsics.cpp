@@ -121,7 +121,7 @@ void expect_within_sigmas(const CameraIntrinsicsResult& r, const CameraModel& tr
 
 CameraIntrinsicsOptions options_for(const CameraModel& c) {
   CameraIntrinsicsOptions o;
-  o.model = c.distortion_model;
+  o.model = c.kind();
   o.threads = 1;
   return o;
 }
@@ -325,10 +325,12 @@ TEST(CameraIntrinsics, OptionsValidateAndModelNames) {
   EXPECT_TRUE(o.validate().ok());
   o.min_views = 2;
   EXPECT_FALSE(o.validate().ok());
-  EXPECT_EQ(*parse_camera_model_option("pinhole-equi"), DistortionModel::kEquidistant);
-  EXPECT_EQ(*parse_camera_model_option("pinhole-radtan"), DistortionModel::kRadtan);
-  EXPECT_FALSE(parse_camera_model_option("omni-radtan").ok());
-  EXPECT_STREQ(camera_model_option_name(DistortionModel::kEquidistant), "pinhole-equi");
+  const CameraModelKind equi{ProjectionModel::kPinhole, DistortionModel::kEquidistant};
+  EXPECT_EQ(*parse_camera_model_option("pinhole-equi"), equi);
+  EXPECT_EQ(*parse_camera_model_option("pinhole-radtan"),
+            (CameraModelKind{ProjectionModel::kPinhole, DistortionModel::kRadtan}));
+  EXPECT_FALSE(parse_camera_model_option("omni-equi").ok());
+  EXPECT_EQ(camera_model_option_name(equi), "pinhole-equi");
 }
 
 }  // namespace

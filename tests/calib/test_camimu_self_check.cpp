@@ -63,8 +63,8 @@ TEST(CamImuSigmas, HeldIntrinsicsReachTheSigmasAsTheirEffectOnTheResult) {
   so.corner_sigma_px = 0.1;
   so.imu_errors = false;
   auto synth = test::make_camimu_synth(so);
-  Eigen::VectorXd l = Eigen::VectorXd::Zero(8);
-  l << 0.2, 0.2, 0.1, 0.0, 0.0, 0.0, 0.0, 0.0;
+  Eigen::VectorXd l = Eigen::VectorXd::Zero(10);  // [fu fv pu pv, projection (2), distortion (4)]
+  l.head<3>() << 0.2, 0.2, 0.1;
   synth.cameras[0].intrinsics_covariance = l * l.transpose();
   synth.cameras[0].intrinsics_covariance_source = "a test covariance";
   auto options = self_check_options(0.0);

@@ -205,19 +205,36 @@ TEST(CameraModel, BadYamlSaysWhatIsWrong) {
   EXPECT_NE(missing.error().message.find("cam.yaml"), std::string::npos);
   EXPECT_NE(missing.error().message.find("intrinsics"), std::string::npos);
 
+  auto kb = parse_camera_yaml(
+      "camera_model: kb4\ndistortion_model: none\nintrinsics: [1,1,1,1]\n"
+      "distortion_coeffs: []\nresolution: [10,10]\n",
+      "cam.yaml");
+  ASSERT_FALSE(kb.ok());
+  EXPECT_NE(kb.error().message.find("pinhole, omni, eucm or ds"), std::string::npos);
+
+  // Kalibr's omni intrinsics hold xi first: four numbers are one too few.
   auto omni = parse_camera_yaml(
-      "camera_model: omni\ndistortion_model: radtan\nintrinsics: [1,1,1,1,1]\n"
+      "camera_model: omni\ndistortion_model: radtan\nintrinsics: [1,1,1,1]\n"
       "distortion_coeffs: [0,0,0,0]\nresolution: [10,10]\n",
       "cam.yaml");
   ASSERT_FALSE(omni.ok());
-  EXPECT_NE(omni.error().message.find("omni"), std::string::npos);
+  EXPECT_NE(omni.error().message.find("[xi, fu, fv, pu, pv]"), std::string::npos) << omni.error().message;
 
+  // fov has one coefficient, w.
   auto fov = parse_camera_yaml(
       "camera_model: pinhole\ndistortion_model: fov\nintrinsics: [1,1,1,1]\n"
       "distortion_coeffs: [0,0,0,0]\nresolution: [10,10]\n",
       "cam.yaml");
   ASSERT_FALSE(fov.ok());
-  EXPECT_NE(fov.error().message.find("radtan or equidistant"), std::string::npos);
+  EXPECT_NE(fov.error().message.find("list of 1 numbers"), std::string::npos) << fov.error().message;
+
+  // ds with radtan is no model Kalibr has.
+  auto ds_radtan = parse_camera_yaml(
+      "camera_model: ds\ndistortion_model: radtan\nintrinsics: [0,0.5,1,1,1,1]\n"
+      "distortion_coeffs: [0,0,0,0]\nresolution: [10,10]\n",
+      "cam.yaml");
+  ASSERT_FALSE(ds_radtan.ok());
+  EXPECT_NE(ds_radtan.error().message.find("ds-radtan"), std::string::npos) << ds_radtan.error().message;
 
   // Principal point outside the image: intrinsics probably for another resolution.
   auto pp = parse_camera_yaml(

@@ -108,7 +108,8 @@ TEST(CameraModelOpenCv, JetDerivativesMatchNumeric) {
       jd[k] = Jet(dist[k], 7 + k);
     }
     for (int k = 0; k < 3; ++k) jp[k] = Jet(point[k], k);
-    const auto cam = CameraModelT<Jet>::from_params(model, ji, jd, 376, 240);
+    const Jet je[2] = {Jet(0.0), Jet(0.0)};
+    const auto cam = CameraModelT<Jet>::from_params({ProjectionModel::kPinhole, model}, ji, je, jd, 376, 240);
     const auto proj = cam.project(Eigen::Matrix<Jet, 3, 1>(jp[0], jp[1], jp[2]));
     ASSERT_TRUE(proj.valid());
 
@@ -123,7 +124,8 @@ TEST(CameraModelOpenCv, JetDerivativesMatchNumeric) {
         i2[index - 3] += delta;
       else
         d2[index - 7] += delta;
-      const auto c = CameraModel::from_params(model, i2, d2, 376, 240);
+      const double e2[2] = {0.0, 0.0};
+      const auto c = CameraModel::from_params({ProjectionModel::kPinhole, model}, i2, e2, d2, 376, 240);
       return c.project(Eigen::Vector3d(p2[0], p2[1], p2[2])).px;
     };
     for (int k = 0; k < 11; ++k) {

@@ -77,7 +77,7 @@ inline std::vector<CameraChainInput> synthesize_chain(const std::vector<TruthCam
   for (std::size_t c = 0; c < cams.size(); ++c) {
     CameraChainInput in;
     in.name = "cam" + std::to_string(c);
-    in.model = cams[c].camera.distortion_model;
+    in.model = cams[c].camera.kind();
     const int frames = static_cast<int>(duration_s * cams[c].rate_hz);
     for (int k = 0; k < frames; ++k) {
       const double t = k / cams[c].rate_hz + cams[c].stamp_phase_s;
