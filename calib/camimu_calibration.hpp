@@ -92,6 +92,22 @@ struct CamImuChainPrior {
 /// The cameras' shutters in the solve (docs/camimu-calibration.md, "Rolling shutter").
 using CamImuShutterOptions = ShutterSolveOptions;
 
+/// The ranges CamImuOptions::validate() accepts, one per option; `calibrate camimu`'s checks
+/// and its --help use the same, and it validates before the camera module loads.
+struct CamImuLimits {
+  static constexpr int kMinSplineOrder = 4;          // cubic
+  static constexpr int kMaxSplineOrder = 6;          // quintic
+  static constexpr double kMinKnotSpacingS = 0.005;  // or 0: chosen from the motion
+  static constexpr double kMaxKnotSpacingS = 0.5;
+  static constexpr double kMinBiasKnotSpacingS = 0.05;  // and at least the knot spacing
+  static constexpr double kMaxBiasKnotSpacingS = 60.0;
+  static constexpr double kMaxCornerSigmaPx = 50.0;  // 0: estimated
+  static constexpr double kMinImuMaxRateHz = 20.0;   // or 0: one residual per sample
+  static constexpr double kMaxImuMaxRateHz = 100000.0;
+  static constexpr double kMaxCovarianceClusterS = 3600.0;
+  static constexpr int kMaxIterations = 10000;
+};
+
 struct CamImuOptions {
   /// kAuto: basic or extended by the evidence of the IMU residuals (docs/camimu-calibration.md,
   /// "Model choice"); the result says which and why.

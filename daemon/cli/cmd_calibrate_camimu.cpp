@@ -242,6 +242,9 @@ void run(const CamImuCliOptions& o) {
   outputs.inputs.insert(outputs.inputs.end(), o.camera_paths.begin(), o.camera_paths.end());
   const std::vector<std::string> paths = check_outputs(o, outputs);
   app::CamImuRequest q = build_request(o);
+  // The options are checked here, before the camera module loads (one range per option:
+  // calib::CamImuLimits, which the flags' checks above use too).
+  if (Status s = q.options.validate(); !s.ok()) fail(s.error(), "calibrate camimu");
   const app::TargetChoice target = resolve_target(o.target_path, o.log_path);
   q.target = target.target;
   q.target_source = target.source;
@@ -328,34 +331,37 @@ void add_solver_options(CLI::App* cmd, CamImuCliOptions* o) {
   auto& d = o->defaults;
   cmd->add_option(
          "--knot-spacing", d.knot_spacing_s,
-         "Pose spline knot spacing, s (0: chosen from the motion, 0.01-0.05 s; the summary says which)")
+         "Pose spline knot spacing, s: 0 (chosen from the motion, 0.01-0.05 s; the summary says which) or "
+         "0.005-0.5")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1.0));
-  cmd->add_option("--spline-order", d.spline_order, "Pose spline order (degree + 1)")
+      ->check(CLI::Range(0.0, calib::CamImuLimits::kMaxKnotSpacingS));
+  cmd->add_option("--spline-order", d.spline_order, "Pose spline order (degree + 1): 4 cubic to 6 quintic")
       ->capture_default_str()
-      ->check(CLI::Range(3, 8));
-  cmd->add_option("--bias-knot-spacing", d.bias_knot_spacing_s, "Bias spline knot spacing, s")
+      ->check(CLI::Range(calib::CamImuLimits::kMinSplineOrder, calib::CamImuLimits::kMaxSplineOrder));
+  cmd->add_option("--bias-knot-spacing", d.bias_knot_spacing_s,
+                  "Bias spline knot spacing, s (at least the knot spacing)")
       ->capture_default_str()
-      ->check(CLI::Range(0.05, 100.0));
+      ->check(
+          CLI::Range(calib::CamImuLimits::kMinBiasKnotSpacingS, calib::CamImuLimits::kMaxBiasKnotSpacingS));
   cmd->add_option("--corner-sigma", d.corner_sigma_px,
                   "Corner noise, px (standard deviation per coordinate); 0: estimated per camera from the "
                   "reprojection residuals")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 10.0));
+      ->check(CLI::Range(0.0, calib::CamImuLimits::kMaxCornerSigmaPx));
   cmd->add_option("--imu-max-rate", d.imu_max_rate_hz,
-                  "IMU samples above this rate are averaged in groups into one residual each, Hz (0: every "
-                  "sample its own residual)")
+                  "IMU samples above this rate are averaged in groups into one residual each, Hz: 0 (every "
+                  "sample its own residual) or 20-100000")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 100000.0));
+      ->check(CLI::Range(0.0, calib::CamImuLimits::kMaxImuMaxRateHz));
   cmd->add_option(
          "--covariance-blocks", d.covariance_cluster_s,
          "Length of the time blocks whose residuals may share their errors, s: every sigma is the larger "
          "of the plain and the cluster-robust one over these blocks (0: the plain covariance only)")
-      ->check(CLI::Range(0.0, 3600.0))
+      ->check(CLI::Range(0.0, calib::CamImuLimits::kMaxCovarianceClusterS))
       ->capture_default_str();
   cmd->add_option("--max-iterations", d.max_iterations, "Solver iterations at most")
       ->capture_default_str()
-      ->check(CLI::Range(1, 10000));
+      ->check(CLI::Range(1, calib::CamImuLimits::kMaxIterations));
   cmd->add_option("--threads", o->threads,
                   "Worker threads for the detection and the solver (default: all cores)")
       ->check(CLI::Range(0, 256));

@@ -77,6 +77,41 @@ TEST(CliCalibrateCamimu, ArgumentErrorsComeBeforeAnyWork) {
   EXPECT_NE(r.err.find("is a file"), std::string::npos) << r.err;
 }
 
+// One range per option (calib::CamImuLimits): the flags' checks and the solver's validate() agree,
+// and the options are refused before the camera module loads (here it cannot: its folder does
+// not exist, so an option error that came after the loading would be a module error).
+TEST(CliCalibrateCamimu, OptionsAreRefusedWithTheSolversRangesBeforeTheModuleLoads) {
+  const std::string dir = scratch_dir();
+  const std::string log = source_path("fixtures/camimu.imulog");
+  const std::string cam = camera_yaml(dir);
+  const std::string out = dir + "/out";
+  const test::ScopedModuleDir no_module(dir + "/no-module-here");
+  // Within the flag's range but not the solver's (0 or 0.005-0.5 s): validate() says so.
+  auto r = run_cli({"calibrate", "camimu", log, "--camera", cam, "--knot-spacing", "0.001", "-o", out});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("knot spacing must be 0"), std::string::npos) << r.err;
+  r = run_cli({"calibrate", "camimu", log, "--camera", cam, "--knot-spacing", "0.1", "--bias-knot-spacing",
+               "0.06", "-o", out});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("at least the knot spacing"), std::string::npos) << r.err;
+  r = run_cli({"calibrate", "camimu", log, "--camera", cam, "--imu-max-rate", "10", "-o", out});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("20-100000 Hz"), std::string::npos) << r.err;
+  // The flags' own ranges are the solver's: a spline order it does not run is refused by name.
+  for (const char* order : {"3", "7"}) {
+    r = run_cli({"calibrate", "camimu", log, "--camera", cam, "--spline-order", order, "-o", out});
+    EXPECT_EQ(r.exit_code, 2) << order;
+    EXPECT_NE(r.err.find("not in range 4 to 6"), std::string::npos) << r.err;
+  }
+  r = run_cli({"calibrate", "camimu", log, "--camera", cam, "--corner-sigma", "60", "-o", out});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_FALSE(std::filesystem::exists(out));
+  // Valid options reach the module, whose absence is then the error.
+  r = run_cli({"calibrate", "camimu", log, "--camera", cam, "--knot-spacing", "0.02", "-o", out});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("libimucal_camera.so"), std::string::npos) << r.err;
+}
+
 /// The estimate of a rotation against the truth as a small-angle vector (rad).
 Eigen::Vector3d rotation_error(const Eigen::Matrix3d& est, const Eigen::Matrix3d& truth) {
   const Eigen::AngleAxisd aa(est * truth.transpose());
