@@ -14,14 +14,16 @@ Status CamImuOptions::validate() const {
   using L = CamImuLimits;
   if (spline_order < L::kMinSplineOrder || spline_order > L::kMaxSplineOrder)
     return make_error(Errc::kInvalidArgument, "spline order must be 4, 5 or 6 (cubic to quintic)");
-  if (!(knot_spacing_s == 0.0 || (knot_spacing_s >= L::kMinKnotSpacingS && knot_spacing_s <= L::kMaxKnotSpacingS)))
+  if (!(knot_spacing_s == 0.0 ||
+        (knot_spacing_s >= L::kMinKnotSpacingS && knot_spacing_s <= L::kMaxKnotSpacingS)))
     return make_error(Errc::kInvalidArgument,
                       "knot spacing must be 0 (chosen from the motion) or within 0.005-0.5 s");
   if (!(bias_knot_spacing_s >= std::max(knot_spacing_s, L::kMinBiasKnotSpacingS) &&
         bias_knot_spacing_s <= L::kMaxBiasKnotSpacingS))
     return make_error(Errc::kInvalidArgument,
                       "bias knot spacing must be within 0.05-60 s and at least the knot spacing");
-  if (!(corner_sigma_px >= 0.0 && corner_sigma_px <= L::kMaxCornerSigmaPx) || !(reprojection_loss_sigmas > 0.0))
+  if (!(corner_sigma_px >= 0.0 && corner_sigma_px <= L::kMaxCornerSigmaPx) ||
+      !(reprojection_loss_sigmas > 0.0))
     return make_error(Errc::kInvalidArgument,
                       "the corner sigma must be within 0-50 px (0: estimated) and the loss scale positive");
   if (!(noise.accel_noise_density > 0 && noise.gyro_noise_density > 0 && noise.accel_random_walk > 0 &&
@@ -35,7 +37,8 @@ Status CamImuOptions::validate() const {
     return make_error(Errc::kInvalidArgument, "the solver's iterations must be within 1-10000");
   if (!(covariance_cluster_s >= 0.0 && covariance_cluster_s <= L::kMaxCovarianceClusterS))
     return make_error(Errc::kInvalidArgument, "the covariance's cluster length must be within 0-3600 s");
-  if (!(imu_max_rate_hz == 0.0 || (imu_max_rate_hz >= L::kMinImuMaxRateHz && imu_max_rate_hz <= L::kMaxImuMaxRateHz)))
+  if (!(imu_max_rate_hz == 0.0 ||
+        (imu_max_rate_hz >= L::kMinImuMaxRateHz && imu_max_rate_hz <= L::kMaxImuMaxRateHz)))
     return make_error(Errc::kInvalidArgument,
                       "the IMU's largest rate must be 0 (one residual per sample) or within 20-100000 Hz");
   if (shutter.line_delay_s &&

@@ -20,6 +20,7 @@
 #include "core/version.hpp"
 #include "drivers/camera/aravis/aravis_module.hpp"
 #include "drivers/camera/libcamera/libcamera_module.hpp"
+#include "drivers/mpu6000/output_settings.hpp"
 #include "drivers/storage/storage_device.hpp"
 
 namespace imucal::imucald {
@@ -433,10 +434,14 @@ void Service::set_gyro_offsets(bool from_record) {
       }
     }
   }
-  // The registers count 1/32.8 deg/s whatever the range: 4 output counts at +-250 deg/s, 2 at
-  // +-500, 1 at +-1000, 1/2 at +-2000. The stored bias is in counts of the configured range.
-  int fs = 0;
-  for (int r = config_.imu.gyro_range_dps; r > 250; r /= 2) ++fs;
+  // The stored bias is in output counts of the configured range; the driver converts it into
+  // register counts (drivers::mpu6000::gyro_offset_register_for_bias).
+  const auto range = drivers::mpu6000::gyro_range_for(config_.imu.gyro_range_dps);
+  if (!range.ok()) {
+    gyro_offsets_ = "not set: " + range.error().message;
+    spdlog::error("gyro offset registers: {}", range.error().message);
+    return;
+  }
   auto current = read_offsets();
   if (!current.ok()) {
     gyro_offsets_ = "not set: " + current.error().message;
@@ -444,9 +449,7 @@ void Service::set_gyro_offsets(bool from_record) {
     return;
   }
   drivers::mpu6000::OffsetRegisters regs = *current;  // the accelerometer's factory trims stay
-  for (int i = 0; i < 3; ++i)
-    regs.gyro[i] =
-        static_cast<std::int16_t>(std::clamp(std::lround(-bias[i] * (1 << fs) / 4.0), -32768L, 32767L));
+  for (int i = 0; i < 3; ++i) regs.gyro[i] = drivers::mpu6000::gyro_offset_register_for_bias(bias[i], *range);
   if (auto st = write_offsets(regs); !st.ok()) {
     gyro_offsets_ = "not set: " + st.error().message;
     spdlog::error("gyro offset registers: {}", st.error().message);

@@ -665,6 +665,12 @@ Result<SelfTestResult> Mpu6000::self_test(const DelayFn& delay) {
   return result;
 }
 
+std::int16_t gyro_offset_register_for_bias(double bias_counts, GyroRange range) {
+  const double value = -bias_counts / gyro_output_counts_per_offset_count(range);
+  if (!std::isfinite(value)) return 0;
+  return static_cast<std::int16_t>(std::clamp(std::round(value), -32768.0, 32767.0));
+}
+
 Result<OffsetRegisters> Mpu6000::read_offsets() {
   bus_.set_speed_hz(settings_.config_speed_hz);
   std::array<std::uint8_t, 6> a{};

@@ -121,6 +121,11 @@ struct OffsetRegisters {
   std::array<std::int16_t, 3> gyro{};
 };
 
+/// The gyro offset register value that cancels a bias of `bias_counts` output counts at range
+/// `range` (reg::gyro_output_counts_per_offset_count), rounded to the nearest register count and
+/// held within int16.
+std::int16_t gyro_offset_register_for_bias(double bias_counts, GyroRange range);
+
 struct SelfTestAxis {
   double factory_trim = 0.0;  // FT, counts at the self-test range
   double response = 0.0;      // STR = output(self-test on) - output(self-test off), counts

@@ -230,6 +230,13 @@ constexpr double gyro_lsb_per_dps(GyroRange r) {
 /// Offset register scales (offset application note): accel at +-16 g, gyro at +-1000 dps.
 constexpr double kAccelOffsetLsbPerG = 2048.0;
 constexpr double kGyroOffsetLsbPerDps = 32.8;
+/// Output counts one gyro offset register count adds at range r: the register counts
+/// 1 / kGyroOffsetLsbPerDps deg/s whatever the range, which is 4 output counts at +-250 deg/s, 2
+/// at +-500, 1 at +-1000 and 1/2 at +-2000 (the chip scales by powers of two; the datasheet's
+/// rounded sensitivities, 131 / 32.8, give 3.99).
+constexpr double gyro_output_counts_per_offset_count(GyroRange r) {
+  return 4.0 / static_cast<double>(1 << (static_cast<int>(r) & 3));
+}
 
 /// Low-pass filter bandwidths per DLPF_CFG 0..6 (RM 4.3), accel / gyro in Hz.
 constexpr int kDlpfAccelBandwidthHz[7] = {260, 184, 94, 44, 21, 10, 5};

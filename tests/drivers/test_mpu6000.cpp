@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstddef>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <optional>
@@ -697,6 +698,46 @@ TEST(Mpu6000Driver, OffsetRegistersRoundTripAndShiftTheOutput) {
   EXPECT_EQ(after.gyro[0] - before.gyro[0], 50);
   EXPECT_EQ(after.gyro[1] - before.gyro[1], -25);
   EXPECT_EQ(after.gyro[2] - before.gyro[2], 0);
+}
+
+// The register counts 1/32.8 deg/s at every range: a bias of 100 output counts is 25 register
+// counts at +-250 deg/s and 200 at +-2000; the value is rounded and held within int16.
+TEST(Mpu6000Offsets, AGyroBiasInOutputCountsBecomesRegisterCountsOfItsRange) {
+  EXPECT_EQ(gyro_offset_register_for_bias(100.0, GyroRange::k250dps), -25);
+  EXPECT_EQ(gyro_offset_register_for_bias(100.0, GyroRange::k500dps), -50);
+  EXPECT_EQ(gyro_offset_register_for_bias(100.0, GyroRange::k1000dps), -100);
+  EXPECT_EQ(gyro_offset_register_for_bias(100.0, GyroRange::k2000dps), -200);
+  EXPECT_EQ(gyro_offset_register_for_bias(-7.0, GyroRange::k250dps), 2);  // 1.75 rounded
+  EXPECT_EQ(gyro_offset_register_for_bias(1e6, GyroRange::k2000dps), -32768);
+  EXPECT_EQ(gyro_offset_register_for_bias(-1e6, GyroRange::k2000dps), 32767);
+  EXPECT_EQ(gyro_offset_register_for_bias(std::numeric_limits<double>::quiet_NaN(), GyroRange::k250dps), 0);
+}
+
+// Through the chip: the output's gyro counts, written back as the registers for that bias,
+// bring the output to zero within the register's resolution (1/2 output count at +-2000 deg/s).
+TEST(Mpu6000Offsets, TheRegistersForTheOutputsBiasCancelIt) {
+  auto source = [](TimeNs) {
+    SensorReading r;
+    r.specific_force = {0.0, 0.0, kStandardGravity};
+    r.angular_rate = {0.21, -0.37, 0.05};
+    return r;
+  };
+  Harness h(spi_8khz(), {}, {}, source);
+  ASSERT_TRUE(h.run_for(400 * kMs).ok());
+  ASSERT_FALSE(h.out.empty());
+  const RawSample before = h.out.back();
+  auto regs = h.driver.read_offsets();
+  ASSERT_TRUE(regs.ok());
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_GT(std::abs(before.gyro[i]), 10) << i;
+    regs->gyro[i] = gyro_offset_register_for_bias(before.gyro[i], spi_8khz().gyro_range);
+  }
+  ASSERT_TRUE(h.driver.write_offsets(*regs).ok());
+  h.out.clear();
+  ASSERT_TRUE(h.run_for(100 * kMs).ok());
+  ASSERT_FALSE(h.out.empty());
+  for (int i = 0; i < 3; ++i)
+    EXPECT_LE(std::abs(h.out.back().gyro[i]), 1) << i << " before " << before.gyro[i];
 }
 
 TEST(Mpu6000Settings, ValidationExplainsWhatIsWrong) {

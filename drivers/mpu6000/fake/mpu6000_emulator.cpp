@@ -173,7 +173,8 @@ void Mpu6000Emulator::generate(std::uint64_t k) {
 
     const auto gyro_off_reg = be16_reg(addr(Register::XG_OFFS_USRH) + 2 * i);
     // Gyro offset registers count 1/32.8 deg/s (4 LSB at +-250 dps).
-    const double gyro_offset = std::nearbyint(gyro_off_reg * 4.0 / (1 << fs));
+    const double gyro_offset = std::nearbyint(
+        gyro_off_reg * reg::gyro_output_counts_per_offset_count(static_cast<reg::GyroRange>(fs)));
     double w = reading.angular_rate[i] * 180.0 / std::numbers::pi * lsb_per_dps;
     if (gyro_st & st_bit) w += ft_g[i] * options_.gyro_self_test_gain * lsb_per_dps / 131.0;
     truth.gyro[i] = saturate(std::nearbyint(w) + gyro_offset);
