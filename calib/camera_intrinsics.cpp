@@ -30,6 +30,7 @@
 #include <optional>
 
 #include "calib/camera_blocks.hpp"
+#include "calib/marginal_covariance.hpp"
 #include "calib/ray_pnp.hpp"
 #include "core/text_format.hpp"
 #include "core/threads.hpp"
@@ -386,28 +387,22 @@ class IntrinsicsProblem {
   }
 
   /// The 10 x 10 covariance of [intrinsics, projection, distortion] (unscaled: J'J inverse; 0 in
-  /// the rows and columns of the entries held), or nullopt when the problem is rank deficient.
+  /// the rows and columns of the entries held), or nullopt when the data do not determine every
+  /// used entry. (ceres::Covariance is not used: with the manifold that holds a block's unused
+  /// entries, its lifting to the ambient space frees memory it did not allocate in the sanitized
+  /// build; MarginalCovariance works in the tangent space, whose coordinates are the used entries.)
   std::optional<Eigen::Matrix<double, 10, 10>> covariance(int threads) {
-    ceres::Covariance::Options co;
-    co.algorithm_type = ceres::SPARSE_QR;
-    co.num_threads = threads;
-    ceres::Covariance cov(co);
-    const std::array<double*, 3> blocks = {intrinsics_, projection_, distortion_};
-    const std::array<int, 3> sizes = {4, 2, 4};
-    const std::array<int, 3> offsets = {0, 4, 6};
-    std::vector<std::pair<const double*, const double*>> pairs;
-    for (std::size_t a = 0; a < 3; ++a)
-      for (std::size_t b = a; b < 3; ++b) pairs.emplace_back(blocks[a], blocks[b]);
-    if (!cov.Compute(pairs, problem_.get())) return std::nullopt;
-    Eigen::Matrix<double, 10, 10> out = Eigen::Matrix<double, 10, 10>::Zero();
-    for (std::size_t a = 0; a < 3; ++a) {
-      for (std::size_t b = a; b < 3; ++b) {
-        Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> block(sizes[a], sizes[b]);
-        if (!cov.GetCovarianceBlock(blocks[a], blocks[b], block.data())) return std::nullopt;
-        out.block(offsets[a], offsets[b], sizes[a], sizes[b]) = block;
-        out.block(offsets[b], offsets[a], sizes[b], sizes[a]) = block.transpose();
-      }
-    }
+    std::vector<const double*> wanted;
+    for (const double* x : {intrinsics_, projection_, distortion_})
+      if (problem_->HasParameterBlock(x) && !problem_->IsParameterBlockConstant(x)) wanted.push_back(x);
+    MarginalCovariance cov;
+    if (!cov.compute(*problem_, wanted, threads)) return std::nullopt;
+    const Eigen::Matrix<double, 10, 10> out = camera_covariance(
+        model_, {intrinsics_, projection_, distortion_},
+        [&cov](const double* a, const double* b, int rows, int cols) -> Eigen::MatrixXd {
+          if (cov.has(a) && cov.has(b)) return cov.block(a, b);
+          return Eigen::MatrixXd::Constant(rows, cols, std::numeric_limits<double>::quiet_NaN());
+        });
     if (!out.allFinite()) return std::nullopt;
     return out;
   }
