@@ -712,6 +712,11 @@ void SessionEngine::review() {
     for (const std::string& note : final_->record->notes)
       if (note.starts_with("cameras kept")) lines.push_back("Cameras: " + note);
   }
+  // A stored thermal model the record does not carry on (app::keep_stored_cameras): said too.
+  if (final_->record) {
+    for (const std::string& note : final_->record->notes)
+      if (note.starts_with("the stored thermal model")) lines.push_back("Thermal: " + note);
+  }
   for (auto& line : difference_to_stored(&review_message.difference_to_stored))
     lines.push_back(std::move(line));
   review_message.pass = gates_pass_;

@@ -104,6 +104,7 @@ class SimSession {
     o.complete_record = [this](CalibrationRecord& record) -> Status {
       ++completions_;
       record.notes.push_back("completed by the host");
+      for (const auto& note : host_notes_) record.notes.push_back(note);
       return {};
     };
     o.write_storage = [this](const CalibrationRecord& payload) -> Result<std::string> {
@@ -193,6 +194,7 @@ class SimSession {
   int failing_self_tests_ = 0;  // preflights that report a self-test spoilt by motion
   std::optional<CalibrationRecord> written_;
   int completions_ = 0;
+  std::vector<std::string> host_notes_;  // added to the record by complete_record
 };
 
 const std::vector<std::string> kImuSteps = {"preflight", "warmup", "still", "poses",
@@ -201,6 +203,12 @@ const std::vector<std::string> kImuSteps = {"preflight", "warmup", "still", "pos
 TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult) {
   ModuleDir modules;
   SimSession s(session_config(kImuSteps));
+  // What the service's keep_stored_cameras says of a stored thermal model it cannot keep.
+  const std::string thermal_note =
+      "the stored thermal model (sequence 3, reference 41.0 deg C) is not kept: this session's IMU "
+      "calibration was not corrected to its reference temperature; run the thermal step (or calibrate "
+      "thermal) again to store one";
+  s.host_notes_ = {thermal_note};
   ASSERT_TRUE(s.runner_->start({}).ok());
   s.run(400.0);
   if (s.outcome() != "written")
@@ -218,8 +226,9 @@ TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult
   EXPECT_EQ(s.written_->imu.source, "static");
   EXPECT_EQ(s.written_->imu.stream, s.rig_->stream_info().name);
   EXPECT_EQ(s.written_->imu.input_units, "raw");
-  ASSERT_EQ(s.written_->notes.size(), 1u);
+  ASSERT_EQ(s.written_->notes.size(), 2u);
   EXPECT_EQ(s.written_->notes[0], "completed by the host");
+  EXPECT_EQ(s.written_->notes[1], thermal_note);
   ASSERT_EQ(s.written_->files.size(), 1u);
   EXPECT_EQ(s.written_->files[0].path, s.runner_->session_dir() + "/imu-static.yaml");
   EXPECT_GE(s.runner_->engine().poses().size(), 18u);
@@ -245,6 +254,8 @@ TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult
     EXPECT_TRUE(has_line("Gyro bias: " + three(b_g, 180.0 / M_PI, 3) + " deg/s (" + three(m.b_g, 1.0, 1) +
                          " counts)"))
         << review[0].dump(1);
+    // The stored thermal model the record does not keep is said in the review, before the accept.
+    EXPECT_TRUE(has_line("Thermal: " + thermal_note)) << review[0].dump(1);
     // An accelerometer bias of a few hundred counts is a fraction of a m/s^2 (the virtual rig's
     // MPU-6000 at +-4 g: 1/8192 g a count), a gyro bias of a few counts a few deg/s at most.
     EXPECT_LT(b_a.norm(), 1.0);
