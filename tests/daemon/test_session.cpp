@@ -763,6 +763,30 @@ TEST(Session, AFailedSelfTestSaysToHoldTheRigStillAndRedoChecksAgain) {
   EXPECT_TRUE(s.said("every device answers"));
 }
 
+// A session that waits for a key it needs (here a failed preflight's redo) and uses no sample
+// ends after session.operator_wait_s of sample time, saying why, instead of recording without end
+// (about 1 GB a day at real time, 16 GB in 21 minutes at time-scale 0); the replay ends the same.
+TEST(Session, ASessionWaitingForAKeyStopsAfterTheOperatorWait) {
+  RigConfig config = session_config({"preflight", "still"});
+  config.session.operator_wait_s = 60.0;
+  SimSession s(config);
+  s.scripted_ = false;  // nobody presses redo: only the unscripted continue at the preflight
+  s.failing_self_tests_ = 1;
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  const TimeNs started = s.rig_->now_ns();
+  s.run(300.0);
+  EXPECT_EQ(s.outcome(), "aborted");
+  EXPECT_TRUE(s.said("no key for 1 min while the session waited for one (session.operator_wait_s)"));
+  EXPECT_LT(ns_to_s(s.rig_->now_ns() - started), 65.0);
+  auto reader = log::SessionLogReader::open(s.runner_->log_path());
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_TRUE((*reader)->health().complete);
+  auto replay = s.replay();
+  ASSERT_TRUE(replay.ok()) << replay.error().message;
+  EXPECT_EQ(replay->live_outcome, "aborted");
+  EXPECT_EQ(replay->outcome, "aborted");
+}
+
 TEST(Session, PoseGuidanceNamesTheRigsSidesWhenTheConfigurationDoes) {
   ModuleDir modules;
   RigConfig config = session_config({"preflight", "still", "gsens"});
