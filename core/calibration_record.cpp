@@ -128,7 +128,10 @@ class Reader {
       out = kNotDetermined;
       return {};
     }
-    if (!it->is_number()) return make_error(Errc::kCorrupt, where + key + " must be a number or null");
+    // A record writes what was not determined as null, never as an infinity or NaN (CBOR can
+    // hold them): such a figure is an altered record, not one to serve as "not determined".
+    if (!it->is_number() || !std::isfinite(it->get<double>()))
+      return make_error(Errc::kCorrupt, where + key + " must be a finite number or null");
     out = it->get<double>();
     return {};
   }
@@ -410,6 +413,7 @@ Result<CalibrationRecord> calibration_record_from_json(const json& j) {
   if (j.contains("gravity_mps2") && !j["gravity_mps2"].is_null()) {
     double g = 0.0;
     IMUCAL_TRY(r.figure(j, "gravity_mps2", "", g));
+    if (!(g > 0.0)) return make_error(Errc::kCorrupt, "gravity_mps2 must be a positive number (m/s^2)");
     rec.gravity_mps2 = g;
   }
   if (j.contains("thermal") && !j["thermal"].is_null()) {

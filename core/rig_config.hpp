@@ -114,6 +114,7 @@ struct SessionConfig {
   double gate_gravity_rms_mps2 = 0.05;  // review gate: gravity-magnitude residual RMS
   double gate_scale_sigma = 3e-3;       // review gate: largest scale-factor sigma
   double gate_reprojection_px = 1.0;    // review gate: camera-IMU reprojection RMS
+  double operator_wait_s = 1800.0;      // a session waiting this long for a key it needs ends
   bool auto_write = false;              // write without the operator's accept when every gate passes
 };
 

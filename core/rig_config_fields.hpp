@@ -30,6 +30,7 @@ inline constexpr SessionNumber kSessionNumbers[] = {
     {"gate_gravity_rms_mps2", &SessionConfig::gate_gravity_rms_mps2, 1e-6, 10.0},
     {"gate_scale_sigma", &SessionConfig::gate_scale_sigma, 1e-7, 1.0},
     {"gate_reprojection_px", &SessionConfig::gate_reprojection_px, 0.01, 100.0},
+    {"operator_wait_s", &SessionConfig::operator_wait_s, 60.0, 86400.0},
 };
 
 }  // namespace imucal::rig_config_detail

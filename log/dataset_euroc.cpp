@@ -421,6 +421,7 @@ Result<ImportSummary> import_euroc(const std::string& dir, const std::string& ou
   {
     SessionLogWriterOptions staged;
     staged.staged = true;
+    staged.commit_data_interval_ns = 0;  // nothing reads it before close()
     auto writer = SessionLogWriter::create(out->temp_path(), staged);
     if (!writer.ok()) return writer.error().context("cannot create the session log");
     SessionLogWriter& w = **writer;

@@ -43,6 +43,7 @@ class ImuLogSink {
                                                     ProgressFn progress) {
     SessionLogWriterOptions staged;
     staged.staged = true;
+    staged.commit_data_interval_ns = 0;  // nothing reads it before close()
     auto writer = SessionLogWriter::create(out.temp_path(), staged);
     if (!writer.ok()) return writer.error().context("cannot create the session log");
     IMUCAL_TRY((*writer)->set_metadata(

@@ -78,6 +78,13 @@ class PendingOutput {
 /// holds a flock on it) is refused too (kIo, naming the process). A missing path is fine.
 [[nodiscard]] Status check_replaceable(const std::string& path);
 
+/// Removes what writers killed before their rename left beside `final_path`:
+/// "<path>.partial-<pid>-<n>" (an import or export, with its -wal, -shm and -journal) and
+/// "<path>.tmp-<pid>" (a result file), once no process <pid> runs. A running process's
+/// temporaries and every other name are left alone. PendingOutput::begin and the result writers
+/// call it before they write.
+void remove_stale_temporaries(const std::string& final_path);
+
 /// Renames `from` to `to`; unless `replace`, fails with kAlreadyExists when `to` exists, atomically
 /// (renameat2 RENAME_NOREPLACE, or link + unlink where the filesystem lacks it), so of two
 /// processes writing one output the second is refused instead of replacing the first's.

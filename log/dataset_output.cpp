@@ -1,6 +1,7 @@
 // Outputs that appear only when complete: write under a temporary name, rename on success.
 
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -13,6 +14,7 @@
 #include <fstream>
 #include <sstream>
 #include <system_error>
+#include <vector>
 
 #include "log/dataset_io.hpp"
 #include "log/session_log_sqlite.hpp"
@@ -27,7 +29,52 @@ void remove_file_family(const std::string& path) {
   for (const char* suffix : {"", "-wal", "-shm", "-journal"}) fs::remove(path + suffix, ec);
 }
 
+/// The writer's process id in a temporary's name after `final_name` (".tmp-<pid>",
+/// ".partial-<pid>-<n>", either with a SQLite companion's suffix), or 0 when it is not one.
+pid_t temporary_owner(const std::string& entry, const std::string& final_name) {
+  if (entry.size() <= final_name.size() || entry.compare(0, final_name.size(), final_name) != 0) return 0;
+  std::string rest = entry.substr(final_name.size());
+  for (const std::string suffix : {"-wal", "-shm", "-journal"}) {
+    if (rest.size() > suffix.size() && rest.ends_with(suffix)) {
+      rest.resize(rest.size() - suffix.size());
+      break;
+    }
+  }
+  const auto digits = [](const std::string& t) {
+    return !t.empty() && t.size() <= 9 && t.find_first_not_of("0123456789") == std::string::npos;
+  };
+  std::string pid;
+  if (rest.starts_with(".tmp-")) {
+    pid = rest.substr(5);
+  } else if (rest.starts_with(".partial-")) {
+    const std::string tail = rest.substr(9);
+    const auto dash = tail.find('-');
+    if (dash == std::string::npos || !digits(tail.substr(dash + 1))) return 0;
+    pid = tail.substr(0, dash);
+  }
+  if (!digits(pid)) return 0;
+  return static_cast<pid_t>(std::stol(pid));
+}
+
 }  // namespace
+
+void remove_stale_temporaries(const std::string& final_path) {
+  std::string base = final_path;
+  while (base.size() > 1 && base.back() == '/') base.pop_back();
+  const fs::path path(base);
+  const std::string name = path.filename().string();
+  if (name.empty()) return;
+  const fs::path parent = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  std::vector<fs::path> stale;
+  std::error_code ec;
+  for (fs::directory_iterator it(parent, ec), end; !ec && it != end; it.increment(ec)) {
+    const pid_t pid = temporary_owner(it->path().filename().string(), name);
+    if (pid <= 0 || pid == ::getpid()) continue;          // not a temporary, or this process's own
+    if (::kill(pid, 0) == 0 || errno != ESRCH) continue;  // its writer may still run
+    stale.push_back(it->path());
+  }
+  for (const fs::path& p : stale) fs::remove_all(p, ec);
+}
 
 PendingOutput::PendingOutput(std::string final_path, std::string temp_path, Kind kind, bool force)
     : final_path_(std::move(final_path)), temp_path_(std::move(temp_path)), kind_(kind), force_(force) {}
@@ -79,6 +126,7 @@ Result<PendingOutput> PendingOutput::begin(const std::string& final_path, Kind k
     }
     if (kind == Kind::kFile) IMUCAL_TRY(check_replaceable(final_path));
   }
+  remove_stale_temporaries(final_path);
   std::string temp = final_path;
   while (!temp.empty() && temp.back() == '/') temp.pop_back();
   // Unique per process and output, so two outputs to one path never share a temporary.

@@ -35,15 +35,19 @@ struct SessionLogWriterOptions {
   /// Longest time between commits; a power cut loses at most this much.
   TimeNs commit_interval_ns = 500'000'000;
   /// Also commit when the IMU samples of the open transaction span this much sample time (0:
-  /// off). A writer fed faster than real time (a simulation, an import) bounds what a failure
-  /// such as a full disk can take with it by data, not by the wall clock.
-  TimeNs commit_data_interval_ns = 0;
+  /// off). A writer fed faster than real time (a simulation, the service's virtual rig at
+  /// time-scale 0) bounds what a failure such as a kill or a full disk can take with it by data,
+  /// not by the wall clock. With this bound on, a log that is not staged also commits its first
+  /// IMU samples (with the metadata and streams declared before them) at once, so a log killed
+  /// early is a session log with samples, whatever the rate it is fed at.
+  TimeNs commit_data_interval_ns = 500'000'000;
   /// Replace an existing file at the path instead of failing.
   bool overwrite = false;
   /// The path is a temporary file that is renamed into place only once closed (an import): a
   /// failure part way leaves nothing worth keeping, so there is no journal and commits are not
   /// synced until close(), which syncs the whole file. The closed log is the same as one written
-  /// otherwise. Several times faster for bulk writes; never for recording.
+  /// otherwise. Several times faster for bulk writes (set commit_data_interval_ns to 0 there);
+  /// never for recording.
   bool staged = false;
 };
 

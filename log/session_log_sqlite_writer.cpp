@@ -430,6 +430,12 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
 
   Status maybe_commit() {
     if (!in_txn_) return {};
+    // The first samples commit at once with what was declared before them: a log killed in its
+    // first interval (22,000 samples at time-scale 0) keeps its streams and samples.
+    if (txn_has_data_ && !data_committed_ && !options_.staged && options_.commit_data_interval_ns > 0) {
+      data_committed_ = true;
+      return commit();
+    }
     if (monotonic_now_ns() - txn_start_ns_ >= options_.commit_interval_ns) return commit();
     if (options_.commit_data_interval_ns > 0 && txn_has_data_ &&
         txn_data_end_ns_ - txn_data_start_ns_ >= options_.commit_data_interval_ns)
@@ -490,6 +496,7 @@ class SqliteSessionLogWriter final : public SessionLogWriter {
   bool in_txn_ = false;
   TimeNs txn_start_ns_ = 0;
   bool txn_has_data_ = false;
+  bool data_committed_ = false;  // a transaction holding IMU samples was committed
   TimeNs txn_data_start_ns_ = 0, txn_data_end_ns_ = kTimeMin;
   bool closed_ = false;
   std::optional<Error> failed_;

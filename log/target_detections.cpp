@@ -2,8 +2,15 @@
 
 #include "log/target_detections.hpp"
 
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdint>
+#include <cstring>
 #include <ctime>
 #include <filesystem>
+#include <fstream>
 
 #include "core/text_format.hpp"
 #include "log/session_log_sqlite.hpp"
@@ -178,6 +185,14 @@ Result<std::optional<DetectionSet>> read_set(const std::string& log_path, FileKi
 
 Status write_set(const std::string& log_path, FileKind kind, int stream_id, const DetectionSet& set) {
   if (set.target_key.empty()) return make_error(Errc::kInvalidArgument, "a detection set needs a target key");
+  // A file without write permission is read-only to every user: root, whom the mode does not
+  // stop, does not write into it either.
+  struct stat st {};
+  if (::stat(log_path.c_str(), &st) == 0 && (st.st_mode & 0222) == 0) {
+    return make_error(Errc::kIo, std::string(kind_name(kind)) + " " + log_path +
+                                     " is read-only (no write permission): detections not stored; "
+                                     "chmod u+w it to store them");
+  }
   auto db = open_file(log_path, true, kind);
   if (!db.ok()) return db.error();
   sqlite3* h = db->get();
@@ -215,8 +230,39 @@ Status write_target_detections(const std::string& log_path, int stream_id, const
   return write_set(log_path, FileKind::kLog, stream_id, set);
 }
 
+namespace {
+
+/// The cache is imucal's own file: a symbolic link, FIFO, device or folder at its path is
+/// refused (never followed or opened), whatever it points to.
+Status check_cache_path(const std::string& cache_path) {
+  struct stat st {};
+  if (::lstat(cache_path.c_str(), &st) != 0 || S_ISREG(st.st_mode)) return {};
+  return make_error(Errc::kIo, "the detection cache " + cache_path +
+                                   (S_ISLNK(st.st_mode) ? " is a symbolic link" : " is not a regular file") +
+                                   ": not followed or opened; remove it (the cache is made again) or pass "
+                                   "--no-cache");
+}
+
+/// True when the file at `path` is a damaged detection cache: not an SQLite database at all
+/// (garbage, cut short), or one whose header carries the cache's application id. Another
+/// program's SQLite file (a session log among them) is not.
+bool damaged_cache(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  char header[72] = {};
+  in.read(header, sizeof header);
+  if (in.gcount() < static_cast<std::streamsize>(sizeof header) ||
+      std::string(header, 16) != std::string("SQLite format 3\0", 16))
+    return true;
+  const auto byte = [&](int i) { return static_cast<std::uint32_t>(static_cast<unsigned char>(header[i])); };
+  const std::uint32_t id = byte(68) << 24 | byte(69) << 16 | byte(70) << 8 | byte(71);
+  return id == static_cast<std::uint32_t>(kDetectionCacheApplicationId);
+}
+
+}  // namespace
+
 Result<std::optional<DetectionSet>> read_detection_cache(const std::string& cache_path,
                                                          const std::string& target_key) {
+  IMUCAL_TRY(check_cache_path(cache_path));
   std::error_code ec;
   if (!std::filesystem::exists(cache_path, ec)) return std::optional<DetectionSet>{};
   return read_set(cache_path, FileKind::kCache, 0, target_key);
@@ -230,7 +276,27 @@ Status write_detection_cache(const std::string& cache_path, const DetectionSet& 
     return make_error(Errc::kIo,
                       "cannot create the detection cache folder " + parent.string() + ": " + ec.message());
   }
-  return write_set(cache_path, FileKind::kCache, 0, set);
+  IMUCAL_TRY(check_cache_path(cache_path));
+  Status written = write_set(cache_path, FileKind::kCache, 0, set);
+  if (written.ok() || written.error().code != Errc::kCorrupt || !damaged_cache(cache_path)) return written;
+  // A damaged cache would refuse every later run: a new one holding this set takes its place in
+  // one rename (the others' sets are searched again when asked for).
+  const std::string fresh = cache_path + ".new-" + std::to_string(::getpid());
+  std::filesystem::remove(fresh, ec);
+  Status made = write_set(fresh, FileKind::kCache, 0, set);
+  // The damaged file's journal must not be played back into its successor.
+  if (made.ok()) {
+    for (const char* suffix : {"-journal", "-wal", "-shm"}) std::filesystem::remove(cache_path + suffix, ec);
+  }
+  if (made.ok() && ::rename(fresh.c_str(), cache_path.c_str()) != 0)
+    made = make_error(
+        Errc::kIo, "cannot replace the damaged detection cache " + cache_path + ": " + std::strerror(errno));
+  if (!made.ok()) {
+    std::filesystem::remove(fresh, ec);
+    return made.error().context("the detection cache " + cache_path + " is damaged (" +
+                                written.error().message + ") and was not replaced");
+  }
+  return {};
 }
 
 }  // namespace imucal::log

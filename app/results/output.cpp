@@ -94,6 +94,7 @@ Status check_outputs(const std::vector<NamedOutput>& outputs, const OutputPolicy
 
 Status write_text_file(const std::string& path, const std::string& text, const OutputPolicy& policy) {
   IMUCAL_TRY(check_output(path, policy));
+  log::remove_stale_temporaries(path);  // a killed writer's "<path>.tmp-<pid>"
   const std::string temp = path + ".tmp-" + std::to_string(::getpid());
   const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) {

@@ -97,6 +97,8 @@ void SessionEngine::reset() {
   steps_.clear();
   current_ = 0;
   waiting_ = failed_step_ = false;
+  operator_since_ns_ = -1;
+  sampled_ = false;
   step_start_ns_ = session_start_ns_ = -1;
   last_live_ns_ = 0;
   last_prompt_.reset();
@@ -147,6 +149,7 @@ void SessionEngine::prompt(const std::string& text, std::vector<K> keys, std::ve
                            const Eigen::Vector3d* up) {
   waiting_ = std::find(keys.begin(), keys.end(), K::kContinue) != keys.end() ||
              std::find(keys.begin(), keys.end(), K::kAccept) != keys.end();
+  operator_since_ns_ = now_ns_;
   session_msg::Prompt m;
   m.step = step_now();
   m.text = text;
@@ -235,6 +238,29 @@ void SessionEngine::finish(SessionState state, Outcome outcome, const std::strin
       if (f.size() > 5 && f.compare(f.size() - 5, 5, ".html") == 0) done.reports.push_back(f);
   }
   emit(std::move(done));
+}
+
+bool SessionEngine::operator_wait_over() const {
+  if (operator_since_ns_ < 0 || current_ >= steps_.size()) return false;
+  const bool waits_for_a_key =
+      state_ == SessionState::kReview ||
+      (state_ == SessionState::kRunning && (failed_step_ || steps_[current_].id == StepId::kPreflight));
+  if (!waits_for_a_key) return false;
+  return static_cast<double>(now_ns_ - operator_since_ns_) * 1e-9 >= config_.session.operator_wait_s;
+}
+
+void SessionEngine::end_operator_wait() {
+  const bool review = state_ == SessionState::kReview;
+  steps_[current_].state = StepState::kFailed;
+  const std::string waited = fixed(config_.session.operator_wait_s / 60.0, 0) + " min";
+  finish(SessionState::kAborted, Outcome::kAborted,
+         "Stopped: no key for " + waited +
+             " while the session waited for one (session.operator_wait_s), so that its recording "
+             "does not grow without end. What was recorded is kept; the stored calibration is "
+             "unchanged. " +
+             (review ? "The results stay in the session folder (imucal store write writes them); "
+                       "or start a new session."
+                     : "Start a new session when the rig is ready."));
 }
 
 void SessionEngine::begin_step() {
@@ -342,6 +368,7 @@ void SessionEngine::run_preflight() {
 Status SessionEngine::key(K key) {
   if (!running()) return make_error(Errc::kInvalidArgument, "no session is running (start one first)");
   emit(session_msg::Key{std::nullopt, key});
+  operator_since_ns_ = now_ns_;
   const StepId id = steps_[current_].id;
   if (key == K::kAbort) {
     steps_[current_].state = StepState::kFailed;

@@ -216,6 +216,11 @@ class SessionEngine {
   calib::StaticCalibrationOptions static_options() const;
   ImuSample to_si(const ImuSample& raw) const;
   bool live_due();
+  /// True once the session has waited session.operator_wait_s of sample time for a key while
+  /// it uses no sample (preflight, a failed step, the review): then it ends, so that its
+  /// recording stays bounded, and says so.
+  bool operator_wait_over() const;
+  void end_operator_wait();
 
   RigConfig config_;
   PoseGuide guide_;
@@ -225,6 +230,10 @@ class SessionEngine {
   std::vector<Step> steps_;
   std::size_t current_ = 0;
   bool waiting_ = false;  // the step waits for the operator (prompt with keys)
+  // Sample time of the last prompt or key: a session that waits for a key and uses no sample
+  // stops once it has waited session.operator_wait_s from here (operator_wait_over()).
+  TimeNs operator_since_ns_ = -1;
+  bool sampled_ = false;  // a sample came since start(): before, now_ns_ may be another session's
   bool failed_step_ = false;
   TimeNs now_ns_ = 0;
   TimeNs step_start_ns_ = -1;

@@ -93,6 +93,16 @@ bool SessionEngine::live_due() {
 
 void SessionEngine::on_sample(const ImuSample& sample) {
   now_ns_ = sample.t_ns;
+  if (!sampled_ && running()) {
+    // The first prompt (the preflight's) was stamped before the session's first sample, with
+    // whatever time the engine had: the wait counts from this sample, live and in replay.
+    sampled_ = true;
+    if (operator_since_ns_ >= 0) operator_since_ns_ = now_ns_;
+  }
+  if (operator_wait_over()) {
+    end_operator_wait();
+    return;
+  }
   if (state_ != SessionState::kRunning || current_ >= steps_.size()) return;
   const StepId id = steps_[current_].id;
   const ImuSample si = to_si(sample);
@@ -711,6 +721,11 @@ void SessionEngine::review() {
     // that the operator accepts knowing what is written.
     for (const std::string& note : final_->record->notes)
       if (note.starts_with("cameras kept")) lines.push_back("Cameras: " + note);
+  }
+  // A stored thermal model the record does not carry on (app::keep_stored_cameras): said too.
+  if (final_->record) {
+    for (const std::string& note : final_->record->notes)
+      if (note.starts_with("the stored thermal model")) lines.push_back("Thermal: " + note);
   }
   for (auto& line : difference_to_stored(&review_message.difference_to_stored))
     lines.push_back(std::move(line));

@@ -1,7 +1,10 @@
 // imucal sim static|gsens|still|camimu: simulated MPU-6000 recordings with their ground truth
 // (docs/simulator.md, docs/simulator-camera.md).
 
+#include <fcntl.h>
 #include <fmt/printf.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -33,8 +36,33 @@
 namespace imucal::cli {
 namespace {
 
-/// What a log that stopped early (a write failed) still holds, for the error message.
-std::string kept_in(const std::string& log_path) {
+/// The file at a path before a run, held (O_PATH: nothing opened for reading or writing, a device
+/// untouched) so that its inode cannot be reused: a log the run did not replace is still it.
+class FileBefore {
+ public:
+  explicit FileBefore(const std::string& path) : fd_(::open(path.c_str(), O_PATH | O_CLOEXEC | O_NOFOLLOW)) {}
+  ~FileBefore() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  FileBefore(const FileBefore&) = delete;
+  FileBefore& operator=(const FileBefore&) = delete;
+  /// True when `path` names the file that was there.
+  bool still_at(const std::string& path) const {
+    struct stat held {};
+    struct stat now {};
+    return fd_ >= 0 && ::fstat(fd_, &held) == 0 && ::lstat(path.c_str(), &now) == 0 &&
+           held.st_dev == now.st_dev && held.st_ino == now.st_ino;
+  }
+
+ private:
+  int fd_;
+};
+
+/// What a log that stopped early (a write failed) still holds, for the error message. A file the
+/// run never replaced (another recording's live log, refused) holds nothing of this run's.
+std::string kept_in(const std::string& log_path, const FileBefore& before) {
+  if (before.still_at(log_path))
+    return "; nothing was written: " + log_path + " is the file that was there before, left as it was";
   auto reader = log::SessionLogReader::open(log_path);
   if (!reader.ok() || (*reader)->imu_streams().empty()) return "; nothing was kept";
   const int id = (*reader)->imu_streams().begin()->first;
@@ -228,6 +256,7 @@ void run(const SimCommon& o, const CLI::App* cmd, const std::string& kind, const
   opt.overwrite = o.force;
   const std::string truth_path = sim::truth_path_for(o.out_path);
   refuse_overwrite(o, truth_path);
+  const FileBefore before(o.out_path);
   Progress progress("simulating " + kind, 1.0);
   auto truth = sim::write_sim_imu_session(opt, traj, o.out_path, truth_path,
                                           [&progress](double done) { progress.update(done); });
@@ -236,7 +265,8 @@ void run(const SimCommon& o, const CLI::App* cmd, const std::string& kind, const
     const Error& e = truth.error();
     // A refused overwrite is answered as in every command (exit 2), an unwritable path is exit 7.
     if (e.code == Errc::kAlreadyExists) throw CliExit{kExitUsage, e.message + "; pass --force to replace it"};
-    if (e.code == Errc::kIo) throw CliExit{kExitIo, "sim " + kind + ": " + e.message + kept_in(o.out_path)};
+    if (e.code == Errc::kIo)
+      throw CliExit{kExitIo, "sim " + kind + ": " + e.message + kept_in(o.out_path, before)};
     fail(e, "sim " + kind);
   }
   std::ostringstream msg;

@@ -90,6 +90,10 @@ class FdStorage final : public StorageDevice {
 
 Error open_error(const std::string& what, const std::string& path, int err, bool device) {
   std::string msg = "cannot open " + what + " " + path + ": " + errno_text(err);
+  // A path that cannot name a file (a loop of symbolic links, a file where a folder should be,
+  // a name too long) is the configuration's to fix, like a FIFO there: not an I/O failure.
+  if (!device && (err == ELOOP || err == ENOTDIR || err == ENAMETOOLONG))
+    return make_error(Errc::kInvalidArgument, msg + ": fix storage.path");
   if (err == EACCES || err == EPERM || err == EROFS) {
     msg += ". Run as a user that may write it (see `ls -l " + path + "`)";
     msg += device ? "; nvmem files of at24 are root-only unless a udev rule changes their mode" : "";

@@ -4,6 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
+#include <limits>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "core/calibration_payload.hpp"
 #include "core/calibration_record.hpp"
@@ -179,6 +184,30 @@ TEST(CalibrationRecord, AThermalModelMakesItVersion2AndReadsBack) {
         x["thermal"]["valid_range_c"] = json::array({20, 1e308});
       },
       "must be die temperatures");
+}
+
+// A figure the record holds as an infinity or NaN (CBOR can carry them; a record writes null for
+// "not determined") is refused as an altered record (before: an infinite gravity was read, then
+// served as null, "~", by store read).
+TEST(CalibrationRecord, AFigureThatIsNotFiniteIsRefused) {
+  const json j = calibration_record_json(a_record());
+  const double inf = std::numeric_limits<double>::infinity();
+  for (const auto& [spoil, says] : std::vector<std::pair<std::function<void(json&)>, std::string>>{
+           {[&](json& x) { x["gravity_mps2"] = inf; }, "gravity_mps2 must be a finite number or null"},
+           {[&](json& x) { x["gravity_mps2"] = -9.8; }, "gravity_mps2 must be a positive number"},
+           {[&](json& x) { x["cameras"][0]["timeshift_sigma_s"] = -inf; },
+            "timeshift_sigma_s must be a finite number or null"},
+           {[&](json& x) { x["cameras"][0]["timeshift_cam_imu_s"] = std::nan(""); },
+            "timeshift_cam_imu_s must be a finite number or null"}}) {
+    json bad = json::from_cbor(json::to_cbor(j));
+    spoil(bad);
+    auto x = calibration_record_from_json(json::from_cbor(json::to_cbor(bad)));
+    ASSERT_FALSE(x.ok()) << "accepted: " << says;
+    EXPECT_EQ(x.error().code, Errc::kCorrupt);
+    EXPECT_NE(x.error().message.find(says), std::string::npos) << x.error().message;
+  }
+  auto fine = calibration_record_from_json(j);
+  ASSERT_TRUE(fine.ok()) << fine.error().message;
 }
 
 TEST(CalibrationRecord, SameCalibrationLooksAtTheImuAndTheCamerasOnly) {

@@ -1,8 +1,13 @@
 // imucal sim: writes a log and its truth, refuses to overwrite, repeats a run from a truth
 // file, rejects bad options with usage errors.
 
+#include <fcntl.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/file.h>
+#include <sys/wait.h>
+#include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
 #include <cstdlib>
@@ -49,6 +54,38 @@ TEST(CliSim, StillWritesLogAndTruthAndRefusesToOverwrite) {
   auto forced = test::run_cli({"sim", "still", "--seed", "3", "--duration", "2", "-o", log, "--force"});
   EXPECT_EQ(forced.exit_code, 0) << forced.err;
   EXPECT_NEAR(static_cast<double>(sample_count(log)), 197.0, 1.0);
+}
+
+// sim --force over a live recording is refused and says nothing of this run was written (before:
+// "stopped, N samples (S s) kept in LOG", counting the recording's own samples as the sim's).
+TEST(CliSim, ARefusedLiveLogIsNotCalledTheSimulationsKeptSamples) {
+  const fs::path dir = test::scratch_dir();
+  const std::string log = (dir / "live.imulog").string();
+  ASSERT_EQ(test::run_cli({"sim", "still", "--seed", "3", "--duration", "2", "-o", log}).exit_code, 0);
+  const std::string before = test::read_file(log);
+  int ready[2];
+  ASSERT_EQ(::pipe(ready), 0);
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {  // holds the writer's lock, as `record` does
+    const int fd = ::open(log.c_str(), O_RDONLY);
+    if (fd < 0 || ::flock(fd, LOCK_EX) != 0) _exit(1);
+    (void)!::write(ready[1], "x", 1);
+    ::sleep(30);
+    _exit(0);
+  }
+  char c = 0;
+  ASSERT_EQ(::read(ready[0], &c, 1), 1);
+  auto r = test::run_cli({"sim", "still", "--seed", "4", "--duration", "2", "-o", log, "--force"});
+  ::kill(child, SIGKILL);
+  ::waitpid(child, nullptr, 0);
+  ::close(ready[0]);
+  ::close(ready[1]);
+  EXPECT_EQ(r.exit_code, 7) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("is being written by process"));
+  EXPECT_THAT(r.err, HasSubstr("nothing was written: " + log + " is the file that was there before"));
+  EXPECT_THAT(r.err, testing::Not(HasSubstr("kept in")));
+  EXPECT_EQ(test::read_file(log), before);
 }
 
 TEST(CliSim, StaticAndGsensWithTruthFromFile) {

@@ -104,6 +104,7 @@ class SimSession {
     o.complete_record = [this](CalibrationRecord& record) -> Status {
       ++completions_;
       record.notes.push_back("completed by the host");
+      for (const auto& note : host_notes_) record.notes.push_back(note);
       return {};
     };
     o.write_storage = [this](const CalibrationRecord& payload) -> Result<std::string> {
@@ -193,6 +194,7 @@ class SimSession {
   int failing_self_tests_ = 0;  // preflights that report a self-test spoilt by motion
   std::optional<CalibrationRecord> written_;
   int completions_ = 0;
+  std::vector<std::string> host_notes_;  // added to the record by complete_record
 };
 
 const std::vector<std::string> kImuSteps = {"preflight", "warmup", "still", "poses",
@@ -201,6 +203,12 @@ const std::vector<std::string> kImuSteps = {"preflight", "warmup", "still", "pos
 TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult) {
   ModuleDir modules;
   SimSession s(session_config(kImuSteps));
+  // What the service's keep_stored_cameras says of a stored thermal model it cannot keep.
+  const std::string thermal_note =
+      "the stored thermal model (sequence 3, reference 41.0 deg C) is not kept: this session's IMU "
+      "calibration was not corrected to its reference temperature; run the thermal step (or calibrate "
+      "thermal) again to store one";
+  s.host_notes_ = {thermal_note};
   ASSERT_TRUE(s.runner_->start({}).ok());
   s.run(400.0);
   if (s.outcome() != "written")
@@ -218,8 +226,9 @@ TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult
   EXPECT_EQ(s.written_->imu.source, "static");
   EXPECT_EQ(s.written_->imu.stream, s.rig_->stream_info().name);
   EXPECT_EQ(s.written_->imu.input_units, "raw");
-  ASSERT_EQ(s.written_->notes.size(), 1u);
+  ASSERT_EQ(s.written_->notes.size(), 2u);
   EXPECT_EQ(s.written_->notes[0], "completed by the host");
+  EXPECT_EQ(s.written_->notes[1], thermal_note);
   ASSERT_EQ(s.written_->files.size(), 1u);
   EXPECT_EQ(s.written_->files[0].path, s.runner_->session_dir() + "/imu-static.yaml");
   EXPECT_GE(s.runner_->engine().poses().size(), 18u);
@@ -245,6 +254,8 @@ TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult
     EXPECT_TRUE(has_line("Gyro bias: " + three(b_g, 180.0 / M_PI, 3) + " deg/s (" + three(m.b_g, 1.0, 1) +
                          " counts)"))
         << review[0].dump(1);
+    // The stored thermal model the record does not keep is said in the review, before the accept.
+    EXPECT_TRUE(has_line("Thermal: " + thermal_note)) << review[0].dump(1);
     // An accelerometer bias of a few hundred counts is a fraction of a m/s^2 (the virtual rig's
     // MPU-6000 at +-4 g: 1/8192 g a count), a gyro bias of a few counts a few deg/s at most.
     EXPECT_LT(b_a.norm(), 1.0);
@@ -750,6 +761,30 @@ TEST(Session, AFailedSelfTestSaysToHoldTheRigStillAndRedoChecksAgain) {
             "still. Then press r to check again, or a to abort");
   ASSERT_TRUE(s.runner_->engine().key(session_msg::OperatorKey::kRedo).ok());
   EXPECT_TRUE(s.said("every device answers"));
+}
+
+// A session that waits for a key it needs (here a failed preflight's redo) and uses no sample
+// ends after session.operator_wait_s of sample time, saying why, instead of recording without end
+// (about 1 GB a day at real time, 16 GB in 21 minutes at time-scale 0); the replay ends the same.
+TEST(Session, ASessionWaitingForAKeyStopsAfterTheOperatorWait) {
+  RigConfig config = session_config({"preflight", "still"});
+  config.session.operator_wait_s = 60.0;
+  SimSession s(config);
+  s.scripted_ = false;  // nobody presses redo: only the unscripted continue at the preflight
+  s.failing_self_tests_ = 1;
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  const TimeNs started = s.rig_->now_ns();
+  s.run(300.0);
+  EXPECT_EQ(s.outcome(), "aborted");
+  EXPECT_TRUE(s.said("no key for 1 min while the session waited for one (session.operator_wait_s)"));
+  EXPECT_LT(ns_to_s(s.rig_->now_ns() - started), 65.0);
+  auto reader = log::SessionLogReader::open(s.runner_->log_path());
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_TRUE((*reader)->health().complete);
+  auto replay = s.replay();
+  ASSERT_TRUE(replay.ok()) << replay.error().message;
+  EXPECT_EQ(replay->live_outcome, "aborted");
+  EXPECT_EQ(replay->outcome, "aborted");
 }
 
 TEST(Session, PoseGuidanceNamesTheRigsSidesWhenTheConfigurationDoes) {

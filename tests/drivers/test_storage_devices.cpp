@@ -75,6 +75,21 @@ TEST(StorageFile, AShortFileIsRefusedNotGrown) {
   EXPECT_EQ(std::filesystem::file_size(path), 100u);
 }
 
+// A loop of symbolic links at storage.path is the configuration's to fix (exit 2 at the CLI), as a
+// FIFO there is; before: an I/O error (exit 7). Reading or writing, nothing is created.
+TEST(StorageFile, ALoopOfSymbolicLinksIsAPathToFix) {
+  const std::string dir = test::scratch_dir();
+  std::filesystem::create_symlink(dir + "/b.bin", dir + "/a.bin");
+  std::filesystem::create_symlink(dir + "/a.bin", dir + "/b.bin");
+  for (const StorageAccess access : {StorageAccess::kRead, StorageAccess::kWrite}) {
+    auto dev = open_file_storage(dir + "/a.bin", 512, access);
+    ASSERT_FALSE(dev.ok());
+    EXPECT_EQ(dev.error().code, Errc::kInvalidArgument) << dev.error().message;
+    EXPECT_NE(dev.error().message.find("fix storage.path"), std::string::npos) << dev.error().message;
+  }
+  EXPECT_TRUE(std::filesystem::is_symlink(dir + "/a.bin"));
+}
+
 TEST(StorageFile, AMissingFolderSaysSo) {
   auto dev = open_file_storage(test::scratch_dir() + "/no/such/dir/c.bin", 512, StorageAccess::kWrite);
   ASSERT_FALSE(dev.ok());

@@ -1,6 +1,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -366,6 +368,34 @@ TEST(DatasetOutput, PendingOutputRemovesUncommittedAndRefusesExisting) {
   auto no_dir = PendingOutput::begin((dir / "nope/o.imulog").string(), PendingOutput::Kind::kFile, false);
   ASSERT_FALSE(no_dir.ok());
   EXPECT_THAT(no_dir.error().message, HasSubstr("does not exist"));
+}
+
+// What writers killed before their rename left ("<path>.partial-<pid>-<n>" with its -wal, a
+// result's "<path>.tmp-<pid>") is removed by the next writer of that path once the writer is
+// gone (before: left for good); a running process's temporaries and other names are kept.
+TEST(DatasetOutput, AKilledWritersTemporariesAreRemovedByTheNextWriter) {
+  const fs::path dir = test::scratch_dir();
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) _exit(0);
+  ASSERT_EQ(waitpid(child, nullptr, 0), child);
+  const std::string dead = std::to_string(child);
+  const std::string alive = std::to_string(getppid());
+  const std::vector<std::string> stale = {"o.imulog.partial-" + dead + "-0",
+                                          "o.imulog.partial-" + dead + "-0-wal", "o.imulog.tmp-" + dead};
+  const std::vector<std::string> kept = {"o.imulog.partial-" + alive + "-0", "o.imulog.tmp-x" + dead,
+                                         "p.imulog.tmp-" + dead, "o.imulog.partial-" + dead};
+  for (const auto& name : stale) test::write_file((dir / name).string(), "left by a killed writer");
+  for (const auto& name : kept) test::write_file((dir / name).string(), "not ours to remove");
+  fs::create_directory(dir / ("e.partial-" + dead + "-3"));  // an export's folder
+  test::write_file((dir / ("e.partial-" + dead + "-3") / "imu0.csv").string(), "t");
+  auto out = PendingOutput::begin((dir / "o.imulog").string(), PendingOutput::Kind::kFile, false);
+  ASSERT_TRUE(out.ok()) << out.error().message;
+  for (const auto& name : stale) EXPECT_FALSE(fs::exists(dir / name)) << name;
+  for (const auto& name : kept) EXPECT_TRUE(fs::exists(dir / name)) << name;
+  auto folder = PendingOutput::begin((dir / "e").string(), PendingOutput::Kind::kDirectory, false);
+  ASSERT_TRUE(folder.ok()) << folder.error().message;
+  EXPECT_FALSE(fs::exists(dir / ("e.partial-" + dead + "-3")));
 }
 
 }  // namespace

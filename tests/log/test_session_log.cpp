@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 #include <sqlite3.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -584,6 +585,43 @@ TEST(SessionLog, DestructorWithoutCloseKeepsDataIncomplete) {
   EXPECT_FALSE((*reader)->health().complete);
   EXPECT_FALSE((*reader)->health().damaged) << (*reader)->health().damage_message;
   EXPECT_EQ(*(*reader)->imu_count(*(*reader)->find_imu_stream()), 123);
+}
+
+// A writer fed faster than the wall clock (the service's virtual rig at time-scale 0) and killed
+// within its first commit interval: its metadata, stream and first samples were committed at
+// once, and every further 0.5 s of sample time, with the default options. Before, nothing after
+// the schema was committed for the first 0.5 s of wall time: the log had no stream and no sample.
+TEST(SessionLog, AWriterFedFasterThanRealTimeCommitsByDataFromItsFirstSamples) {
+  const std::string path = scratch_dir() + "/killed-early.imulog";
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    auto writer = SessionLogWriter::create(path);
+    if (!writer.ok()) _exit(10);
+    if (!(*writer)->set_metadata("rig_config", "{}").ok()) _exit(11);
+    auto id = (*writer)->add_imu_stream(test_raw_imu_info());
+    if (!id.ok()) _exit(12);
+    // 3 s of samples at 1 kHz, in batches as the acquisition hands them over: far less than
+    // the 0.5 s of wall time the old writer waited for before its first commit.
+    for (int batch = 0; batch < 30; ++batch) {
+      if (!(*writer)->append_imu(*id, make_raw_samples(100, batch * 100'000'000LL, batch * 100)).ok())
+        _exit(13);
+    }
+    _exit(0);  // killed: nothing closed, nothing destroyed
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status));
+  ASSERT_EQ(WEXITSTATUS(status), 0);
+  auto reader = SessionLogReader::open(path);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_FALSE((*reader)->health().complete);
+  EXPECT_FALSE((*reader)->health().damaged) << (*reader)->health().damage_message;
+  EXPECT_TRUE((*reader)->metadata().contains("rig_config"));
+  auto stream = (*reader)->find_imu_stream();
+  ASSERT_TRUE(stream.ok()) << stream.error().message;
+  // Committed: the first batch at once, then every 0.5 s of sample time.
+  EXPECT_GE(*(*reader)->imu_count(*stream), 2500);
 }
 
 }  // namespace

@@ -329,6 +329,7 @@ int write_then_crash(const std::string& path, const std::function<int(SessionLog
   if (pid == 0) {
     SessionLogWriterOptions options;
     options.commit_interval_ns = 3600 * kNsPerSecond;
+    options.commit_data_interval_ns = 0;
     auto writer = SessionLogWriter::create(path, options);
     if (!writer.ok()) _exit(10);
     const int id = *(*writer)->add_imu_stream(test_raw_imu_info());

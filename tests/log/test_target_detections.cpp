@@ -212,6 +212,67 @@ TEST(DetectionCache, RoundTripAndFileKinds) {
   EXPECT_EQ(t.error().code, Errc::kCorrupt);
 }
 
+// A log without write permission is not written by root either (before: root, whom the mode does
+// not stop, stored the detections in a 0444 log).
+TEST(TargetDetections, ALogWithoutWritePermissionIsNotWrittenByRootEither) {
+  const std::string path = make_log(scratch_dir());
+  ASSERT_EQ(chmod(path.c_str(), 0444), 0);
+  const std::string before = file_bytes(path);
+  const Status s = write_target_detections(path, 2, sample_set("k1"));
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().code, Errc::kIo);
+  EXPECT_NE(s.error().message.find("read-only"), std::string::npos) << s.error().message;
+  EXPECT_EQ(file_bytes(path), before);
+}
+
+// The cache is never reached through a symbolic link (before: the link was followed and the file
+// it named written), nor is anything but a regular file opened at its path.
+TEST(DetectionCache, ASymbolicLinkAtTheCachePathIsNotFollowed) {
+  const std::string dir = scratch_dir();
+  const std::string elsewhere = dir + "/elsewhere.sqlite";
+  ASSERT_TRUE(write_detection_cache(elsewhere, sample_set("k1")).ok());
+  const std::string before = file_bytes(elsewhere);
+  const std::string link = dir + "/cache.sqlite";
+  std::filesystem::create_symlink(elsewhere, link);
+  const Status s = write_detection_cache(link, sample_set("k2"));
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().code, Errc::kIo);
+  EXPECT_NE(s.error().message.find("is a symbolic link"), std::string::npos) << s.error().message;
+  EXPECT_EQ(file_bytes(elsewhere), before);
+  EXPECT_FALSE(read_detection_cache(link, "k1").ok());
+  const std::string fifo = dir + "/fifo.sqlite";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  const Status f = write_detection_cache(fifo, sample_set("k2"));
+  ASSERT_FALSE(f.ok());
+  EXPECT_NE(f.error().message.find("not a regular file"), std::string::npos) << f.error().message;
+}
+
+// A damaged cache file (garbage, or a cache cut short) is replaced by a new one holding the set
+// (before: every later write was refused as "not a detection cache", for good).
+TEST(DetectionCache, ADamagedCacheIsReplaced) {
+  const std::string dir = scratch_dir();
+  const std::string garbage = dir + "/garbage.sqlite";
+  {
+    std::ofstream out(garbage, std::ios::binary);
+    out << std::string(4096, 'x');
+  }
+  const Status g = write_detection_cache(garbage, sample_set("k1"));
+  ASSERT_TRUE(g.ok()) << g.error().message;
+  auto back = read_detection_cache(garbage, "k1");
+  ASSERT_TRUE(back.ok() && back->has_value()) << (back.ok() ? "none" : back.error().message);
+  EXPECT_EQ((*back)->detections.size(), 2u);
+
+  const std::string cut = dir + "/cut.sqlite";
+  ASSERT_TRUE(write_detection_cache(cut, sample_set("k1")).ok());
+  std::filesystem::resize_file(cut, 100);
+  const Status c = write_detection_cache(cut, sample_set("k2"));
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  auto again = read_detection_cache(cut, "k2");
+  ASSERT_TRUE(again.ok() && again->has_value()) << (again.ok() ? "none" : again.error().message);
+  for (const auto& entry : std::filesystem::directory_iterator(dir))
+    EXPECT_EQ(entry.path().string().find(".new-"), std::string::npos) << entry.path();
+}
+
 // The stream's fingerprint names its content: equal for a copy, different once a frame changes.
 TEST(DetectionCache, FrameFingerprintFollowsTheContent) {
   const std::string dir = scratch_dir();
