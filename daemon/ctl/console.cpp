@@ -496,12 +496,24 @@ std::string status_text(const msg::Status& status) {
     out << "elapsed: " << fixed(status.elapsed_s, 1) << " s\n";
   }
   if (status.service) {
-    // The devices as the service reports them (their JSON form, printed).
-    msg::Status devices_only;
-    devices_only.service = status.service;
-    out << "devices: "
-        << msg::encode(devices_only).at("devices").dump(-1, ' ', false, json::error_handler_t::replace)
-        << '\n';
+    // The devices, one line each, in words (`status --json` has the fields).
+    const msg::ServiceDevices& d = status.service->devices;
+    out << "imu:     " << (d.imu.sim ? "virtual rig, " : "") << d.imu.state;
+    if (d.imu.rate_hz > 0.0) out << ", " << fixed(d.imu.rate_hz, 0) << " Hz";
+    out << ", " << d.imu.samples << " samples, " << d.imu.faults
+        << (d.imu.faults == 1 ? " fault" : " faults");
+    if (!d.imu.gyro_offsets.empty()) out << ", gyro offset registers " << d.imu.gyro_offsets;
+    if (!d.imu.error.empty()) out << "; error: " << d.imu.error;
+    out << '\n';
+    for (const auto& c : d.cameras) {
+      out << "camera:  " << c.name << " " << c.state << ", " << c.frames << " frames, " << c.faults
+          << (c.faults == 1 ? " fault" : " faults");
+      if (!c.error.empty()) out << "; error: " << c.error;
+      out << '\n';
+    }
+    if (!d.storage.empty()) out << "storage: " << d.storage << '\n';
+    if (!status.service->session_dir.empty()) out << "session: " << status.service->session_dir << '\n';
+    if (!status.service->version.empty()) out << "service: imucald " << status.service->version << '\n';
   }
   return printable_text(out.str(), true);
 }

@@ -88,8 +88,9 @@ int run_status(Connection& connection, bool as_json) {
   return 0;
 }
 
-// A control request: claims the controller role for this connection, then sends it.
-int run_control(Connection& connection, const json& request) {
+// A control request: claims the controller role for this connection, then sends it; `done` is
+// printed once the service accepted it.
+int run_control(Connection& connection, const json& request, const char* done) {
   const service::Request hello = service::hello_request("imucalctl", service::Role::kController);
   if (auto reply = connection.request(service::to_json(hello)); !reply) {
     return fail(reply.error().message, kRefused);
@@ -97,6 +98,7 @@ int run_control(Connection& connection, const json& request) {
   if (auto reply = connection.request(request); !reply) {
     return fail(reply.error().message, kRefused);
   }
+  std::printf("%s\n", done);
   return 0;
 }
 
@@ -192,13 +194,17 @@ int main(int argc, char** argv) {
     return run_status(*connection, as_json);
   }
   if (start->parsed()) {
-    return run_control(*connection, service::to_json(service::start_request(steps)));
+    return run_control(*connection, service::to_json(service::start_request(steps)),
+                       "session started: 'imucalctl attach' follows it, 'imucalctl status' shows its state");
   }
   if (abort->parsed()) {
-    return run_control(*connection, service::to_json(service::plain_request(service::Command::kAbort)));
+    return run_control(*connection, service::to_json(service::plain_request(service::Command::kAbort)),
+                       "session aborted: what was recorded is kept, nothing is written");
   }
   if (accept->parsed()) {
-    return run_control(*connection, service::to_json(service::plain_request(service::Command::kAccept)));
+    return run_control(
+        *connection, service::to_json(service::plain_request(service::Command::kAccept)),
+        "result accepted: the service writes it to the rig ('imucalctl status' shows the outcome)");
   }
   return imucal::ctl::attach(*connection, {observe});
 }

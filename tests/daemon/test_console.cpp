@@ -491,6 +491,29 @@ TEST(Console, StatusTextForImucalctlStatus) {
   const std::string text = status_text(status_message());
   EXPECT_TRUE(has(text, "state:   running\nrig:     sim\nstep:    step 2 of 4: poses\n")) << text;
   EXPECT_TRUE(has(text, "elapsed: 12.3 s")) << text;  // imucalctl status keeps the decimal
+  // The devices in words, one line each (they were printed as raw JSON).
+  json with_devices = status_message();
+  with_devices["devices"] = {
+      {"imu",
+       {{"state", "open"},
+        {"sim", false},
+        {"samples", 1200},
+        {"faults", 1},
+        {"rate_hz", 500.0},
+        {"gyro_offsets", "stored bias"},
+        {"error", ""}}},
+      {"storage", "nvmem /sys/bus/nvmem/devices/1-00500/nvmem"},
+      {"cameras", {{{"name", "cam0"}, {"state", "closed"}, {"frames", 0}, {"faults", 0}, {"error", ""}}}}};
+  with_devices["session_dir"] = "/var/lib/imucal/sessions/a";
+  with_devices["version"] = "0.1.0";
+  const std::string devices = status_text(with_devices);
+  EXPECT_TRUE(
+      has(devices, "imu:     open, 500 Hz, 1200 samples, 1 fault, gyro offset registers stored bias\n"))
+      << devices;
+  EXPECT_TRUE(has(devices, "camera:  cam0 closed, 0 frames, 0 faults\n")) << devices;
+  EXPECT_TRUE(has(devices, "storage: nvmem /sys/bus/nvmem/devices/1-00500/nvmem\n")) << devices;
+  EXPECT_TRUE(has(devices, "service: imucald 0.1.0\n")) << devices;
+  EXPECT_FALSE(has(devices, "{")) << devices;
 }
 
 }  // namespace

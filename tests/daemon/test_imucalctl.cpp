@@ -113,7 +113,9 @@ TEST_F(Imucalctl, SocketFromTheEnvironment) {
 
 TEST_F(Imucalctl, StartAbortAcceptReachTheHost) {
   ASSERT_TRUE(service.ok()) << service.error;
-  EXPECT_EQ(imucalctl({"--socket", dir.socket(), "start", "--steps", "poses,solve"}).exit_code, 0);
+  const Outcome started = imucalctl({"--socket", dir.socket(), "start", "--steps", "poses,solve"});
+  EXPECT_EQ(started.exit_code, 0);
+  EXPECT_TRUE(has(started.out, "session started")) << "start printed nothing";
   EXPECT_EQ(imucalctl({"--socket", dir.socket(), "start"}).exit_code, 0);
   EXPECT_EQ(imucalctl({"--socket", dir.socket(), "abort"}).exit_code, 0);
   EXPECT_EQ(imucalctl({"--socket", dir.socket(), "accept"}).exit_code, 0);
