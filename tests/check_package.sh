@@ -5,11 +5,13 @@
 #    the unit, sysusers.d and tmpfiles.d entries, man pages and bash completion;
 #  - the unit's ExecStart names a program that is in the root; its --config is the package's
 #    conffile and lies in ConfigurationDirectory=; its --state-dir is StateDirectory= and the
-#    tmpfiles.d folder; RestartPreventExitStatus= holds imucald's configuration status, 78;
+#    tmpfiles.d folder; RestartPreventExitStatus= holds imucald's configuration status, 78, and its
+#    device-absent status, 69;
 #  - the maintainer scripts ran: user imucal exists in the root's /etc/passwd, the state folder
 #    exists and belongs to it, and nothing enabled the service;
 #  - the installed imucald --check reads the installed configuration (modules found beside the
-#    installed program, as on a rig) and exits 0; on a broken copy it exits 78;
+#    installed program, as on a rig) and exits 0 with --devices-may-appear-later (the example's
+#    devices are not on this machine: 69 without it); on a broken copy it exits 78;
 #  - lintian reports no errors (its warnings are printed).
 # As root the package is installed with `dpkg --root` (an empty dpkg database; --force-depends,
 # since the root holds no other package; --force-script-chrootless, so the maintainer scripts run
@@ -97,7 +99,7 @@ check "--config $config is in ConfigurationDirectory=$(key ConfigurationDirector
   test "$(dirname "$config")" = "/etc/$(key ConfigurationDirectory)"
 check "--state-dir $state is StateDirectory=$(key StateDirectory)" test "$state" = "/var/lib/$(key StateDirectory)"
 check "--state-dir $state is the tmpfiles.d folder" grep -q "^d $state " "$root/usr/lib/tmpfiles.d/imucal.conf"
-check "RestartPreventExitStatus=78" test "$(key RestartPreventExitStatus)" = 78
+check "RestartPreventExitStatus=78 69" test "$(key RestartPreventExitStatus)" = "78 69"
 check "the unit is not enabled" sh -c "! find '$root/etc/systemd' -name imucald.service 2>/dev/null | grep -q ."
 
 # What the maintainer scripts did.
@@ -110,8 +112,9 @@ fi
 
 # The installed service reads the installed configuration.
 unset IMUCAL_MODULE_DIR
-if "$root$program" --config "$root$config" --state-dir "$tmp/state" --check >"$tmp/check.log" 2>&1; then
-  echo "ok: $program --config $config --check"
+if "$root$program" --config "$root$config" --state-dir "$tmp/state" --check --devices-may-appear-later \
+  >"$tmp/check.log" 2>&1; then
+  echo "ok: $program --config $config --check --devices-may-appear-later"
   sed 's/^/  /' "$tmp/check.log"
 else
   echo "FAIL: $program --config $config --check exited $?:"

@@ -20,6 +20,7 @@
 #include "core/text_format.hpp"
 #include "core/version.hpp"
 #include "daemon/cli/command.hpp"
+#include "daemon/common/unknown_command.hpp"
 #include "log/dataset_io.hpp"
 
 namespace imucal::cli {
@@ -253,6 +254,13 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
+    // A mistyped command would be "A subcommand is required": name the nearest one.
+    const std::string unknown =
+        e.get_exit_code() != 0 ? imucal::cli::unknown_command_message(app, "imucal", argc, argv) : "";
+    if (!unknown.empty()) {
+      std::cerr << "imucal: " << unknown << "\n";
+      return checked_stdout(kExitUsage);
+    }
     const int rc = app.exit(e);
     code = rc == 0 ? kExitOk : kExitUsage;
   } catch (const CliExit& e) {

@@ -106,7 +106,7 @@ std::string gate_line(const msg::Review::Gate& gate) {
 
 std::string key_help(const ConsoleState& state) {
   if (state.confirm) {
-    return state.confirm->question + "  y: yes  any other key: no";
+    return state.confirm->question + "  y: yes  n: no  (another key: no, then its own action)";
   }
   if (state.observe) {
     return "observing (keys are not sent)  q detach";
@@ -283,7 +283,7 @@ void update_reply(ConsoleState& state, const service::Reply& reply) {
   if (!reply.ok) {
     if (state.start_after_done && reply.cmd == service::command_name(service::Command::kAbort)) {
       state.start_after_done = false;  // nothing to abort: start at once
-      state.outbox.push_back(service::to_json(service::plain_request(service::Command::kStart)));
+      state.outbox.push_back(service::to_json(service::start_request(state.restart_steps)));
     }
     state.notice = reply.cmd + " refused: " + reply.error;
   } else if (reply.cmd == service::command_name(service::Command::kKey) ||
@@ -300,6 +300,12 @@ struct Fold {
   void operator()(const msg::Status& m) const {
     if (!state.status || m.step != state.status->step) {
       state.live.reset();  // figures of the previous step are no longer news
+    }
+    if (state.status && (m.step != state.status->step || m.state != state.status->state)) {
+      // A question about the step that ended ("End the poses step now?") and the notice about
+      // it ("Not done: ...", a refusal) no longer apply.
+      state.confirm.reset();
+      state.notice.clear();
     }
     if (m.state == msg::SessionState::kRunning || m.state == msg::SessionState::kIdle) {
       state.review.reset();
@@ -325,7 +331,7 @@ struct Fold {
     state.live.reset();
     if (state.start_after_done) {
       state.start_after_done = false;  // restart: the session ended, the next one starts
-      state.outbox.push_back(service::to_json(service::plain_request(service::Command::kStart)));
+      state.outbox.push_back(service::to_json(service::start_request(state.restart_steps)));
     }
   }
   template <typename Other>
@@ -388,10 +394,14 @@ std::string render(const ConsoleState& state, const RenderOptions& options) {
   }
   // The service's text (prompts, messages, a controller's name in a refusal) reaches the terminal
   // only with its control characters replaced: no escape sequence of a client's gets through.
+  // Lines are separated, not ended, by '\n': a newline after the last row of a full terminal
+  // would scroll the screen by one and push the header out.
   std::string screen;
   for (const auto* part : {&top, &mid, &bottom}) {
-    for (const auto& line : *part)
-      screen += printable_text(line.size() > width ? line.substr(0, width) : line) + '\n';
+    for (const auto& line : *part) {
+      if (!screen.empty()) screen += '\n';
+      screen += printable_text(line.size() > width ? line.substr(0, width) : line);
+    }
   }
   return screen;
 }
@@ -486,12 +496,24 @@ std::string status_text(const msg::Status& status) {
     out << "elapsed: " << fixed(status.elapsed_s, 1) << " s\n";
   }
   if (status.service) {
-    // The devices as the service reports them (their JSON form, printed).
-    msg::Status devices_only;
-    devices_only.service = status.service;
-    out << "devices: "
-        << msg::encode(devices_only).at("devices").dump(-1, ' ', false, json::error_handler_t::replace)
-        << '\n';
+    // The devices, one line each, in words (`status --json` has the fields).
+    const msg::ServiceDevices& d = status.service->devices;
+    out << "imu:     " << (d.imu.sim ? "virtual rig, " : "") << d.imu.state;
+    if (d.imu.rate_hz > 0.0) out << ", " << fixed(d.imu.rate_hz, 0) << " Hz";
+    out << ", " << d.imu.samples << " samples, " << d.imu.faults
+        << (d.imu.faults == 1 ? " fault" : " faults");
+    if (!d.imu.gyro_offsets.empty()) out << ", gyro offset registers " << d.imu.gyro_offsets;
+    if (!d.imu.error.empty()) out << "; error: " << d.imu.error;
+    out << '\n';
+    for (const auto& c : d.cameras) {
+      out << "camera:  " << c.name << " " << c.state << ", " << c.frames << " frames, " << c.faults
+          << (c.faults == 1 ? " fault" : " faults");
+      if (!c.error.empty()) out << "; error: " << c.error;
+      out << '\n';
+    }
+    if (!d.storage.empty()) out << "storage: " << d.storage << '\n';
+    if (!status.service->session_dir.empty()) out << "session: " << status.service->session_dir << '\n';
+    if (!status.service->version.empty()) out << "service: imucald " << status.service->version << '\n';
   }
   return printable_text(out.str(), true);
 }
@@ -503,14 +525,22 @@ KeyAction on_key(ConsoleState& state, char key) {
     return {std::nullopt, true};
   }
   if (state.confirm) {
+    // The answer is one key: y or n (or Esc). Another key also declines, and then does what it
+    // does without a question pending (`a` asks to abort), rather than being swallowed.
     Confirm confirm = std::move(*state.confirm);
     state.confirm.reset();
-    if (key != 'y') {
-      state.notice = "Not done: " + confirm.question;
-      return {};
+    if (key == 'y') {
+      state.start_after_done = confirm.then_start;
+      if (confirm.then_start) {
+        // R restarts the session it ends: the same steps, not the configured ones.
+        state.restart_steps.clear();
+        if (state.status)
+          for (const auto& s : state.status->steps) state.restart_steps.push_back(msg::step_name(s.name));
+      }
+      return {confirm.request, false};
     }
-    state.start_after_done = confirm.then_start;
-    return {confirm.request, false};
+    state.notice = "Not done: " + confirm.question;
+    if (key == 'n' || key == 27) return {};
   }
   if (state.observe) {
     return {};

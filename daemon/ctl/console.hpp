@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "core/session_messages.hpp"
 
@@ -28,9 +29,10 @@ struct ConsoleState {
   std::deque<std::string> recent;             // the last messages and faults, oldest first
   std::string notice;                         // the last refusal from the service or local hint
   bool observe = false;                       // observer: keys other than q are not sent
-  std::optional<Confirm> confirm;     // a destructive key was pressed; waiting for y (or anything else: no)
-  bool start_after_done = false;      // restart: the abort is sent, the start follows the end
-  std::deque<nlohmann::json> outbox;  // requests update() made (a restart's start); attach sends them
+  std::optional<Confirm> confirm;  // a destructive key was pressed; waiting for y (or anything else: no)
+  bool start_after_done = false;   // restart: the abort is sent, the start follows the end
+  std::vector<std::string> restart_steps;  // restart: the steps of the session restarted
+  std::deque<nlohmann::json> outbox;       // requests update() made (a restart's start); attach sends them
   // The session clock (seconds, the messages' "t"): the latest seen, and the status's. The
   // header's elapsed time runs on between status messages from these.
   double clock_s = -1.0;
@@ -50,7 +52,8 @@ struct RenderOptions {
   double idle_s = 0.0;  // wall time since the last message, added to a running session's elapsed
 };
 
-/// The whole screen as text (lines separated by '\n', no terminal control codes).
+/// The whole screen as text: lines separated by '\n', with none after the last (a full terminal
+/// would scroll), no terminal control codes.
 std::string render(const ConsoleState& state, const RenderOptions& options = {});
 
 /// One line for a message when stdout is not a terminal; nothing for messages without news
@@ -69,7 +72,9 @@ struct KeyAction {
 
 /// While a session runs: c, space, enter: continue (asks first when it ends a step before its
 /// time); r: redo; y: accept; n: reject, s: skip, a: abort, R: restart (these ask y/n first).
-/// With no session running: c, space, enter or R start one. q, Ctrl-C, Ctrl-D: detach.
+/// With no session running: c, space, enter or R start one. q, Ctrl-C, Ctrl-D: detach. A pending
+/// question takes one key: y sends its request, n or Esc declines; another key declines and then
+/// acts as above.
 KeyAction on_key(ConsoleState& state, char key);
 
 /// True while a session runs (state running or review).

@@ -8,12 +8,15 @@
 #include <sys/un.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <vector>
 
+#include "core/closest_word.hpp"
 #include "core/printable_text.hpp"
+#include "core/version.hpp"
 #include "daemon/ctl/attach.hpp"
 #include "daemon/ctl/client.hpp"
 #include "daemon/ctl/console.hpp"
@@ -85,8 +88,9 @@ int run_status(Connection& connection, bool as_json) {
   return 0;
 }
 
-// A control request: claims the controller role for this connection, then sends it.
-int run_control(Connection& connection, const json& request) {
+// A control request: claims the controller role for this connection, then sends it; `done` is
+// printed once the service accepted it.
+int run_control(Connection& connection, const json& request, const char* done) {
   const service::Request hello = service::hello_request("imucalctl", service::Role::kController);
   if (auto reply = connection.request(service::to_json(hello)); !reply) {
     return fail(reply.error().message, kRefused);
@@ -94,7 +98,32 @@ int run_control(Connection& connection, const json& request) {
   if (auto reply = connection.request(request); !reply) {
     return fail(reply.error().message, kRefused);
   }
+  std::printf("%s\n", done);
   return 0;
+}
+
+/// The first word of the command line that is not an option (nor --socket's value) when it names
+/// no subcommand: "unknown command 'stauts'; did you mean 'status'?" and the commands. Empty when
+/// there is no such word.
+std::string unknown_command_message(const CLI::App& app, int argc, char** argv) {
+  std::vector<std::string> names;
+  for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; }))
+    names.push_back(sub->get_name());
+  for (int i = 1; i < argc; ++i) {
+    const std::string word = argv[i];
+    if (word == "--socket") {
+      ++i;  // its value
+      continue;
+    }
+    if (word.empty() || word[0] == '-') continue;
+    if (std::find(names.begin(), names.end(), word) != names.end()) return {};
+    std::string all;
+    for (const auto& n : names) all += (all.empty() ? "" : ", ") + n;
+    const std::string near = imucal::closest_word(word, names, word.size() <= 3 ? 1 : 2);
+    return "unknown command '" + word + "'" + (near.empty() ? "" : "; did you mean '" + near + "'?") +
+           " The commands: " + all + " (imucalctl --help)";
+  }
+  return {};
 }
 
 }  // namespace
@@ -102,6 +131,13 @@ int run_control(Connection& connection, const json& request) {
 int main(int argc, char** argv) {
   CLI::App app{"imucalctl: control and watch the imucald calibration service"};
   app.require_subcommand(1);
+  app.set_version_flag("--version", std::string("imucalctl ") + imucal::kVersion);
+  app.footer(
+      "Examples:\n"
+      "  imucalctl attach              the operator console (c starts a session, q detaches)\n"
+      "  imucalctl status              the session's state and the rig's devices\n"
+      "  imucalctl start --steps preflight,poses,solve\n"
+      "  IMUCAL_SOCKET=/tmp/s.sock imucalctl status --json");
   std::string socket_path = default_socket();
   app.add_option("--socket", socket_path, "the service's control socket (env IMUCAL_SOCKET)")
       ->capture_default_str()
@@ -110,23 +146,38 @@ int main(int argc, char** argv) {
   bool as_json = false;
   auto* status = app.add_subcommand("status", "print the session's state");
   status->add_flag("--json", as_json, "print the status message as JSON");
+  status->footer("Example:\n  imucalctl status --json | jq .state");
 
   std::vector<std::string> steps;
   auto* start = app.add_subcommand("start", "start a calibration session");
   start->add_option("--steps", steps, "the steps to run, comma separated (default: the configured ones)")
       ->delimiter(',');
+  start->footer(
+      "Examples:\n  imucalctl start\n  imucalctl start --steps preflight,warmup,poses,solve,review,write");
 
   auto* abort = app.add_subcommand("abort", "abort the running session");
+  abort->footer("Example:\n  imucalctl abort    (what was recorded is kept, nothing is written)");
   auto* accept = app.add_subcommand("accept", "accept the result under review (it is written to the rig)");
+  accept->footer("Example:\n  imucalctl status && imucalctl accept");
 
   bool observe = false;
   auto* attach = app.add_subcommand("attach", "the operator console: prompts, live figures, keys");
   attach->add_flag("--observe", observe, "watch only; another console may control");
+  attach->footer(
+      "Examples:\n  imucalctl attach\n  imucalctl attach --observe    (watch a session another console "
+      "controls)");
 
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    // --help is a parse "error" with code 0; everything else is a bad command line.
+    // --help and --version are parse "errors" with code 0; everything else is a bad command line.
+    // A mistyped command would otherwise be "A subcommand is required": name the nearest one.
+    if (e.get_exit_code() != 0) {
+      if (const std::string unknown = unknown_command_message(app, argc, argv); !unknown.empty()) {
+        std::fprintf(stderr, "imucalctl: %s\n", imucal::printable_text(unknown).c_str());
+        return 2;
+      }
+    }
     return app.exit(e) == 0 ? 0 : 2;
   }
 
@@ -143,13 +194,17 @@ int main(int argc, char** argv) {
     return run_status(*connection, as_json);
   }
   if (start->parsed()) {
-    return run_control(*connection, service::to_json(service::start_request(steps)));
+    return run_control(*connection, service::to_json(service::start_request(steps)),
+                       "session started: 'imucalctl attach' follows it, 'imucalctl status' shows its state");
   }
   if (abort->parsed()) {
-    return run_control(*connection, service::to_json(service::plain_request(service::Command::kAbort)));
+    return run_control(*connection, service::to_json(service::plain_request(service::Command::kAbort)),
+                       "session aborted: what was recorded is kept, nothing is written");
   }
   if (accept->parsed()) {
-    return run_control(*connection, service::to_json(service::plain_request(service::Command::kAccept)));
+    return run_control(
+        *connection, service::to_json(service::plain_request(service::Command::kAccept)),
+        "result accepted: the service writes it to the rig ('imucalctl status' shows the outcome)");
   }
   return imucal::ctl::attach(*connection, {observe});
 }

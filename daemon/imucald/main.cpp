@@ -68,7 +68,11 @@ int main(int argc, char** argv) {
   app.add_flag("--check", check,
                "Read and validate the configuration, print what the service would use and load the "
                "modules it needs, opening no device; exit 0 when usable, 78 when the configuration is "
-               "unusable, 1 when a module cannot be loaded");
+               "unusable, 69 when a configured device node is not on this machine, 1 when a module "
+               "cannot be loaded");
+  app.add_flag("--devices-may-appear-later", o.devices_may_appear_later,
+               "A configured device node that is not there is no error: --check exits 0, and the service "
+               "exits 1 (restarted by the unit) instead of 69 (not restarted) when the IMU's is missing");
   bool quiet = false;
   app.add_flag("-q,--quiet", quiet, "Log warnings and errors only");
   CLI11_PARSE(app, argc, argv);
@@ -101,6 +105,7 @@ int main(int argc, char** argv) {
   if (auto s = service.init(); !s.ok()) {
     spdlog::error("{}", s.error().message);
     if (service.config_unusable()) return imucal::imucald::kExitConfigUnusable;
+    if (service.device_absent()) return imucal::imucald::kExitDeviceAbsent;
     return s.error().code == imucal::Errc::kInvalidArgument ? 2 : 1;
   }
   return service.run();

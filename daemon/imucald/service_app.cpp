@@ -87,7 +87,44 @@ std::string state_dir_note(const std::string& dir) {
   return "exists, not writable by this user (the service writes it as user imucal)";
 }
 
+/// Each absent device as one line for --check and the service's error.
+std::string absent_list(const std::vector<std::string>& absent) {
+  std::string out;
+  for (const std::string& a : absent) out += (out.empty() ? "" : ", ") + a;
+  return out;
+}
+
+bool node_absent(const std::string& path) {
+  std::error_code ec;
+  return !path.empty() && !std::filesystem::exists(path, ec);
+}
+
 }  // namespace
+
+std::vector<std::string> absent_devices(const RigConfig& c, bool sim, bool imu_only) {
+  std::vector<std::string> absent;
+  if (sim || c.imu.bus == ImuBus::kSim) return absent;
+  if (app::resolve_imu_driver(c.imu) != ImuDriver::kIio) {
+    if (node_absent(c.imu.device)) absent.push_back("imu.device " + c.imu.device);
+    if (c.imu.data_ready) {
+      const std::string chip = c.imu.data_ready->chip.rfind('/', 0) == 0 ? c.imu.data_ready->chip
+                                                                         : "/dev/" + c.imu.data_ready->chip;
+      if (node_absent(chip)) absent.push_back("imu.data_ready.chip " + chip);
+    }
+  }
+  if (imu_only) return absent;
+  for (std::size_t i = 0; i < c.cameras.size(); ++i) {
+    const CameraConfig& cam = c.cameras[i];
+    if (cam.backend == CameraBackend::kV4l2 && node_absent(cam.device))
+      absent.push_back("cameras[" + std::to_string(i) + "].device " + cam.device);
+  }
+  const StorageConfig& st = c.storage;
+  if (st.backend == StorageBackend::kI2cEeprom && node_absent(st.i2c_device))
+    absent.push_back("storage.i2c_device " + st.i2c_device);
+  if (st.backend == StorageBackend::kNvmem && node_absent(st.path))
+    absent.push_back("storage.path " + st.path);
+  return absent;
+}
 
 std::string config_unusable_message(const std::string& config_path, const Error& error) {
   return "the rig configuration " + config_path + " cannot be used: " + error.message + "\nEdit " +
@@ -180,10 +217,20 @@ int check_configuration(const ServiceOptions& options) {
     names += (names.empty() ? "" : ", ") + std::string(m.name);
   }
   std::printf("  modules   %s: loaded\n", names.c_str());
-  std::printf(
-      "Devices are not opened by --check; a device not found here is reported when the service "
-      "starts.\n");
-  return 0;
+  std::printf("Devices are not opened by --check, only looked for.\n");
+  const std::vector<std::string> absent = absent_devices(c, sim, false);
+  if (absent.empty()) return 0;
+  if (options.devices_may_appear_later) {
+    std::printf("Not on this machine yet: %s (--devices-may-appear-later: not an error).\n",
+                absent_list(absent).c_str());
+    return 0;
+  }
+  std::fprintf(stderr,
+               "imucald: configured devices not on this machine: %s. Fix the paths in %s, or load their "
+               "drivers at boot (/etc/modules-load.d; docs/service.md, \"Devices\"); give "
+               "--devices-may-appear-later if they are expected later (exit %d)\n",
+               absent_list(absent).c_str(), options.config_path.c_str(), kExitDeviceAbsent);
+  return kExitDeviceAbsent;
 }
 
 Service::Service(ServiceOptions options)
@@ -205,6 +252,17 @@ Status Service::init() {
   }
   config_ = *config;
   if (config_.imu.bus == ImuBus::kSim) options_.sim = true;
+  if (const auto absent = absent_devices(config_, options_.sim, true);
+      !absent.empty() && !options_.devices_may_appear_later) {
+    device_absent_ = true;
+    return make_error(Errc::kNotFound,
+                      "the IMU's device is not on this machine: " + absent_list(absent) + ". Fix " +
+                          options_.config_path +
+                          " or load the driver at boot (docs/service.md, \"Devices\"), " +
+                          "then start the service again (systemctl restart imucald); the service is not "
+                          "restarted until then (exit " +
+                          std::to_string(kExitDeviceAbsent) + ")");
+  }
   IMUCAL_TRY(open_imu());
 
   app::session::RunnerOptions ro;
@@ -513,7 +571,7 @@ app::session::PreflightReport Service::preflight() {
     if (stored->record) {
       json s = calibration_record_json(*stored->record);
       s["summary"] = "sequence " + std::to_string(stored->sequence) + " in slot " +
-                     std::to_string(stored->slot) +
+                     drivers::slot_name(stored->slot) +
                      (stored->record->created_utc.empty() ? "" : ", written " + stored->record->created_utc);
       r.stored = s;
     }

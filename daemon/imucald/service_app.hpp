@@ -29,6 +29,14 @@ namespace imucal::imucald {
 /// does not restart the service until the file is fixed.
 inline constexpr int kExitConfigUnusable = 78;
 
+/// imucald's exit status when a device of its configuration is not on this machine (sysexits.h
+/// EX_UNAVAILABLE): `--check` when any configured device node is absent, the service when the
+/// IMU's is. The unit lists it in RestartPreventExitStatus= too: a device that is not there does
+/// not come back by restarting every two seconds. `--devices-may-appear-later` turns both off
+/// (--check reports the nodes and exits 0; the service exits 1, which the unit restarts until
+/// its start limit).
+inline constexpr int kExitDeviceAbsent = 69;
+
 struct ServiceOptions {
   std::string config_path = "/etc/imucal/rig.yaml";
   std::string socket_path = "/run/imucal/imucald.sock";
@@ -45,7 +53,16 @@ struct ServiceOptions {
   std::optional<double> sim_cold_start_c;         // virtual rig: its die starts here and warms (thermal step)
   std::optional<std::vector<std::string>> start;  // start a session at launch with these steps
   bool exit_after_session = false;
+  // The configured devices may appear after the service starts (a driver loaded later): an
+  // absent one is no reason for kExitDeviceAbsent.
+  bool devices_may_appear_later = false;
 };
+
+/// The configured device nodes that are not on this machine, each as "KEY PATH" ("imu.device
+/// /dev/spidev0.0"); none for the virtual rig (`sim`). `imu_only`: only those the service opens
+/// when it starts (the IMU's bus node and data-ready chip; not a node the kernel's inv-mpu6050
+/// driver owns). Otherwise also the V4L2 cameras' nodes and the nvmem or i2c-eeprom storage.
+std::vector<std::string> absent_devices(const RigConfig& config, bool sim, bool imu_only);
 
 /// The error for a configuration that cannot be used: what is wrong and the file to edit.
 std::string config_unusable_message(const std::string& config_path, const Error& error);
@@ -53,7 +70,9 @@ std::string config_unusable_message(const std::string& config_path, const Error&
 /// imucald --check, a dry run: reads and validates the configuration, prints what the service
 /// would use (IMU, cameras, storage, state folder; whether their device nodes exist on this
 /// machine) and loads the modules the configuration needs, opening no device. Returns the exit
-/// status: 0 usable, kExitConfigUnusable, 1 when a module cannot be loaded (a broken installation).
+/// status: 0 usable, kExitConfigUnusable, kExitDeviceAbsent when a configured device node is not
+/// on this machine (unless options.devices_may_appear_later), 1 when a module cannot be loaded (a
+/// broken installation).
 int check_configuration(const ServiceOptions& options);
 
 class Service final : public service::SessionHost {
@@ -64,6 +83,9 @@ class Service final : public service::SessionHost {
   [[nodiscard]] Status init();
   /// After a failed init(): whether it failed on the configuration (exit kExitConfigUnusable).
   [[nodiscard]] bool config_unusable() const { return config_unusable_; }
+  /// After a failed init(): whether it failed on an IMU device node that is not on this machine
+  /// (exit kExitDeviceAbsent; never with devices_may_appear_later).
+  [[nodiscard]] bool device_absent() const { return device_absent_; }
   /// Runs the event loop until SIGTERM/SIGINT (or the session's end with exit_after_session).
   /// Returns the process exit code.
   int run();
@@ -134,6 +156,7 @@ class Service final : public service::SessionHost {
   bool start_pending_ = false;  // --start waits for the first samples
   bool quit_ = false;
   bool config_unusable_ = false;
+  bool device_absent_ = false;
   int exit_code_ = 0;
 };
 

@@ -237,5 +237,20 @@ TEST_F(CliExitCodes, EveryDocumentedCodeIsProducedByACase) {
     EXPECT_NE(std::find(produced.begin(), produced.end(), code), produced.end()) << "no case exits " << code;
 }
 
+// A typo said "A subcommand is required" and nothing else.
+TEST(CliUnknownCommand, AMistypedCommandNamesTheNearestOneAtEachLevel) {
+  const auto top = test::run_cli({"calibrat"});
+  EXPECT_EQ(top.exit_code, 2) << top.err;
+  EXPECT_NE(top.err.find("unknown command 'calibrat'; did you mean 'calibrate'?"), std::string::npos)
+      << top.err;
+  const auto nested = test::run_cli({"calibrate", "statc"});
+  EXPECT_EQ(nested.exit_code, 2) << nested.err;
+  EXPECT_NE(nested.err.find("did you mean 'static'?"), std::string::npos) << nested.err;
+  const auto far = test::run_cli({"frobnicate"});
+  EXPECT_EQ(far.exit_code, 2) << far.err;
+  EXPECT_EQ(far.err.find("did you mean"), std::string::npos) << far.err;
+  EXPECT_NE(far.err.find("unknown command 'frobnicate'"), std::string::npos) << far.err;
+}
+
 }  // namespace
 }  // namespace imucal

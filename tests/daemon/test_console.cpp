@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <tuple>
+#include <utility>
 #include <vector>
 
 #include "daemon/ctl/console.hpp"
@@ -56,11 +57,14 @@ TEST(Console, RendersHeaderStepsPromptLiveAndKeys) {
   }
 }
 
+// The screen's lines: separated by '\n', the last one without.
 std::vector<std::string> lines_of(const std::string& screen) {
   std::vector<std::string> lines;
-  for (std::size_t start = 0, end; (end = screen.find('\n', start)) != std::string::npos; start = end + 1) {
+  std::size_t start = 0;
+  for (std::size_t end; (end = screen.find('\n', start)) != std::string::npos; start = end + 1) {
     lines.push_back(screen.substr(start, end - start));
   }
+  if (start < screen.size()) lines.push_back(screen.substr(start));
   return lines;
 }
 
@@ -289,6 +293,44 @@ TEST(Console, TextFromTheServiceReachesTheTerminalWithoutControlCharacters) {
   EXPECT_TRUE(has(render(state), "calibration written OK")) << "the printable text stays";
 }
 
+// A session's end screen with long session folder and report paths.
+ConsoleState end_console() {
+  ConsoleState state = busy_console();
+  update(state, {{"type", "done"},
+                 {"outcome", "written"},
+                 {"text", "The calibration was written, read back and verified."},
+                 {"stored", "slot B, sequence 4, file /var/lib/imucal/calibration.bin"},
+                 {"session_dir", "/var/lib/imucal/sessions/bench-rig-07-20261128T060000Z"},
+                 {"reports",
+                  {"/var/lib/imucal/sessions/bench-rig-07-20261128T060000Z/report.html",
+                   "/var/lib/imucal/sessions/bench-rig-07-20261128T060000Z/camimu-report.html"}}});
+  update(state, {{"type", "status"}, {"state", "done"}, {"rig", "bench-rig-07"}, {"elapsed_s", 300.0}});
+  return state;
+}
+
+// Every line ended in '\n', the last one too: on a full 80x24 terminal the screen scrolled by one
+// and the header went; on the end screen the folder and report paths were the lines cut.
+TEST(Console, AFullScreenHasNoNewlineAfterItsLastLineSoTheTerminalDoesNotScroll) {
+  for (const auto& [width, height] : std::vector<std::pair<int, int>>{{80, 24}, {160, 48}}) {
+    for (const ConsoleState& state : {busy_console(), end_console()}) {
+      const std::string screen = render(state, {width, height});
+      ASSERT_FALSE(screen.empty());
+      EXPECT_NE(screen.back(), '\n') << width << "x" << height << ":\n" << screen;
+      // At most height - 1 newlines: the cursor stays on the last row.
+      EXPECT_LT(std::count(screen.begin(), screen.end(), '\n'), height) << screen;
+      EXPECT_EQ(screen.rfind("imucal  rig bench-rig-07", 0), 0u) << screen;
+    }
+    const std::string end = render(end_console(), {width, height});
+    const std::string folder = "/var/lib/imucal/sessions/bench-rig-07-20261128T060000Z";
+    std::string joined = end;  // a path longer than the width wraps: join its pieces
+    joined.erase(std::remove_if(joined.begin(), joined.end(), [](char c) { return c == ' ' || c == '\n'; }),
+                 joined.end());
+    EXPECT_TRUE(has(joined, "Sessionfolder:" + folder)) << end;
+    EXPECT_TRUE(has(joined, "Report:" + folder + "/report.html")) << end;
+    EXPECT_TRUE(has(joined, "Report:" + folder + "/camimu-report.html")) << end;
+  }
+}
+
 std::string key_of(ConsoleState& state, char c) {
   auto action = on_key(state, c);
   return action.request ? (*action.request).value("key", (*action.request)["cmd"].get<std::string>()) : "";
@@ -332,12 +374,53 @@ TEST(Console, EndingAStepBeforeItsTimeAsksFirst) {
   update(state, {{"type", "live"}, {"step", "motion"}, {"lines", {"18 of 60 s"}}, {"progress", 0.3}});
   EXPECT_EQ(key_of(state, 'c'), "");
   EXPECT_TRUE(has(render(state), "End the motion step now, at 30 %?")) << render(state);
-  EXPECT_EQ(key_of(state, ' '), "");  // no
+  EXPECT_EQ(key_of(state, 'n'), "");  // no
   EXPECT_EQ(key_of(state, 'c'), "");
   EXPECT_EQ(key_of(state, 'y'), "continue");
   // Once the step's time is up, continue goes at once.
   update(state, {{"type", "live"}, {"step", "motion"}, {"lines", {"60 of 60 s"}}, {"progress", 1.0}});
   EXPECT_EQ(key_of(state, 'c'), "continue");
+}
+
+// `c` then `a` only cancelled: the question swallowed the key that was meant as a key.
+TEST(Console, AQuestionTakesOneKeyAndAnotherKeyStillActs) {
+  ConsoleState state;
+  update(state, status_message("running", "motion"));
+  update(state, {{"type", "live"}, {"step", "motion"}, {"lines", {"18 of 60 s"}}, {"progress", 0.3}});
+  EXPECT_EQ(key_of(state, 'c'), "");
+  ASSERT_TRUE(state.confirm.has_value());
+  EXPECT_EQ(key_of(state, 'a'), "");  // declines the first question and asks the abort's
+  ASSERT_TRUE(state.confirm.has_value());
+  EXPECT_TRUE(has(render(state), "Abort the session?")) << render(state);
+  EXPECT_EQ(key_of(state, 'y'), "abort");
+  EXPECT_FALSE(state.confirm.has_value());
+  EXPECT_EQ(key_of(state, 'r'), "redo");  // the next key is its own
+  // n and Esc only answer.
+  EXPECT_EQ(key_of(state, 's'), "");
+  EXPECT_EQ(key_of(state, 27), "");
+  EXPECT_FALSE(state.confirm.has_value());
+  EXPECT_TRUE(has(render(state), "Not done: Skip the motion step?")) << render(state);
+  EXPECT_EQ(key_of(state, 'r'), "redo");
+}
+
+// A declined "Not done" stayed on the screen through the later steps.
+TEST(Console, AStepChangeClearsTheQuestionAndTheNotDoneNotice) {
+  ConsoleState state;
+  update(state, status_message("running", "poses"));
+  EXPECT_EQ(key_of(state, 's'), "");
+  EXPECT_EQ(key_of(state, 'n'), "");
+  EXPECT_TRUE(has(render(state), "Not done: Skip the poses step?")) << render(state);
+  update(state, status_message("running", "poses"));  // the same step: it still applies
+  EXPECT_TRUE(has(render(state), "Not done: Skip the poses step?")) << render(state);
+  update(state, status_message("running", "solve"));
+  EXPECT_FALSE(has(render(state), "Not done")) << render(state);
+  // A question still open when its step ends goes too: `y` must not skip the next step.
+  EXPECT_EQ(key_of(state, 's'), "");
+  ASSERT_TRUE(state.confirm.has_value());
+  update(state, status_message("running", "poses"));
+  EXPECT_FALSE(state.confirm.has_value());
+  EXPECT_FALSE(has(render(state), "Skip the solve step?")) << render(state);
+  EXPECT_EQ(key_of(state, 'y'), "accept");
 }
 
 TEST(Console, AnIdleOrFinishedConsoleStartsTheNextSession) {
@@ -368,6 +451,9 @@ TEST(Console, RestartAbortsThenStartsWhenTheSessionHasEnded) {
   update(state, {{"type", "done"}, {"outcome", "aborted"}, {"text", "Aborted by the operator."}});
   ASSERT_EQ(state.outbox.size(), 1u);
   EXPECT_EQ(state.outbox.front().value("cmd", ""), "start");
+  // The same steps as the session it ended (the start took the configured ones).
+  EXPECT_EQ(state.outbox.front().value("steps", json()), json({"preflight", "poses", "solve", "write"}))
+      << state.outbox.front();
 }
 
 TEST(Console, ObserversSendNothing) {
@@ -405,6 +491,29 @@ TEST(Console, StatusTextForImucalctlStatus) {
   const std::string text = status_text(status_message());
   EXPECT_TRUE(has(text, "state:   running\nrig:     sim\nstep:    step 2 of 4: poses\n")) << text;
   EXPECT_TRUE(has(text, "elapsed: 12.3 s")) << text;  // imucalctl status keeps the decimal
+  // The devices in words, one line each (they were printed as raw JSON).
+  json with_devices = status_message();
+  with_devices["devices"] = {
+      {"imu",
+       {{"state", "open"},
+        {"sim", false},
+        {"samples", 1200},
+        {"faults", 1},
+        {"rate_hz", 500.0},
+        {"gyro_offsets", "stored bias"},
+        {"error", ""}}},
+      {"storage", "nvmem /sys/bus/nvmem/devices/1-00500/nvmem"},
+      {"cameras", {{{"name", "cam0"}, {"state", "closed"}, {"frames", 0}, {"faults", 0}, {"error", ""}}}}};
+  with_devices["session_dir"] = "/var/lib/imucal/sessions/a";
+  with_devices["version"] = "0.1.0";
+  const std::string devices = status_text(with_devices);
+  EXPECT_TRUE(
+      has(devices, "imu:     open, 500 Hz, 1200 samples, 1 fault, gyro offset registers stored bias\n"))
+      << devices;
+  EXPECT_TRUE(has(devices, "camera:  cam0 closed, 0 frames, 0 faults\n")) << devices;
+  EXPECT_TRUE(has(devices, "storage: nvmem /sys/bus/nvmem/devices/1-00500/nvmem\n")) << devices;
+  EXPECT_TRUE(has(devices, "service: imucald 0.1.0\n")) << devices;
+  EXPECT_FALSE(has(devices, "{")) << devices;
 }
 
 }  // namespace

@@ -113,7 +113,9 @@ TEST_F(Imucalctl, SocketFromTheEnvironment) {
 
 TEST_F(Imucalctl, StartAbortAcceptReachTheHost) {
   ASSERT_TRUE(service.ok()) << service.error;
-  EXPECT_EQ(imucalctl({"--socket", dir.socket(), "start", "--steps", "poses,solve"}).exit_code, 0);
+  const Outcome started = imucalctl({"--socket", dir.socket(), "start", "--steps", "poses,solve"});
+  EXPECT_EQ(started.exit_code, 0);
+  EXPECT_TRUE(has(started.out, "session started")) << "start printed nothing";
   EXPECT_EQ(imucalctl({"--socket", dir.socket(), "start"}).exit_code, 0);
   EXPECT_EQ(imucalctl({"--socket", dir.socket(), "abort"}).exit_code, 0);
   EXPECT_EQ(imucalctl({"--socket", dir.socket(), "accept"}).exit_code, 0);
@@ -166,6 +168,36 @@ TEST_F(Imucalctl, BadCommandLineIsExitCode2) {
   ::unsetenv("IMUCAL_SOCKET");
   EXPECT_EQ(from_env.exit_code, 2) << from_env.err;
   EXPECT_TRUE(has(from_env.err, "(IMUCAL_SOCKET)")) << from_env.err;
+}
+
+// A typo said "A subcommand is required" and nothing else.
+TEST_F(Imucalctl, AMistypedCommandNamesTheNearestOne) {
+  const Outcome typo = imucalctl({"--socket", dir.socket(), "stauts"});
+  EXPECT_EQ(typo.exit_code, 2);
+  EXPECT_TRUE(has(typo.err, "unknown command 'stauts'; did you mean 'status'?")) << typo.err;
+  EXPECT_TRUE(has(typo.err, "status, start, abort, accept, attach")) << typo.err;
+  EXPECT_TRUE(has(imucalctl({"atach"}).err, "did you mean 'attach'?"));
+  const Outcome far = imucalctl({"frobnicate"});
+  EXPECT_EQ(far.exit_code, 2);
+  EXPECT_TRUE(has(far.err, "unknown command 'frobnicate'")) << far.err;
+  EXPECT_FALSE(has(far.err, "did you mean")) << far.err;
+}
+
+TEST_F(Imucalctl, VersionAndHelpWithExamples) {
+  const Outcome version = imucalctl({"--version"});
+  EXPECT_EQ(version.exit_code, 0) << version.err;
+  EXPECT_EQ(version.out.rfind("imucalctl ", 0), 0u) << version.out;
+  for (const std::vector<std::string>& args : std::vector<std::vector<std::string>>{{"--help"},
+                                                                                    {"status", "--help"},
+                                                                                    {"start", "--help"},
+                                                                                    {"abort", "--help"},
+                                                                                    {"accept", "--help"},
+                                                                                    {"attach", "--help"}}) {
+    const Outcome help = imucalctl(args);
+    EXPECT_EQ(help.exit_code, 0) << args[0];
+    EXPECT_TRUE(has(help.out, "Example")) << args[0] << ":\n" << help.out;
+    EXPECT_TRUE(has(help.out, "  imucalctl ")) << args[0] << ":\n" << help.out;
+  }
 }
 
 TEST_F(Imucalctl, AttachOnAPipePrintsOneLinePerMessage) {

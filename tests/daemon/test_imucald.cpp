@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iterator>
 #include <nlohmann/json.hpp>
 #include <regex>
 #include <sstream>
@@ -350,6 +351,94 @@ TEST(Imucald, SocketModesThatAreNotPermissionBitsAreRefused) {
   }
 }
 
+/// The SPI example configuration with every device node under `dir`, where none of them exists.
+std::string write_absent_device_config(const std::string& dir) {
+  std::string text = test::read_file(test::source_path("config/rig-spi-example.yaml"));
+  for (const std::string& from :
+       std::vector<std::string>{"device: /dev/spidev0.0", "chip: gpiochip0", "device: /dev/video0",
+                                "path: /sys/bus/nvmem/devices/1-00500/nvmem"}) {
+    const auto at = text.find(from);
+    if (at == std::string::npos) {
+      ADD_FAILURE() << from << " is no longer in config/rig-spi-example.yaml";
+      continue;
+    }
+    const std::string key = from.substr(0, from.find(' '));
+    // A V4L2 camera needs a /dev/video node name; no machine has this many.
+    const std::string to =
+        from == "device: /dev/video0" ? "/dev/video987" : dir + "/absent-" + std::to_string(at);
+    text.replace(at, from.size(), key + " " + to);
+  }
+  const std::string path = dir + "/absent.yaml";
+  std::ofstream(path) << text;
+  return path;
+}
+
+int run_status(const std::string& cmd) {
+  const int rc = std::system(cmd.c_str());
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+// The first install's restart loop: --check passed a configuration whose devices are all missing.
+TEST(Imucald, CheckExits69WhenAConfiguredDeviceIsAbsentUnlessTheyMayAppearLater) {
+  const std::string dir = test::scratch_dir();
+  const std::string config = write_absent_device_config(dir);
+  const std::string base =
+      std::string(IMUCALD_PATH) + " --config " + config + " --state-dir " + dir + " --check";
+  EXPECT_EQ(run_status(base + " >" + dir + "/out 2>" + dir + "/err"), 69) << test::read_file(dir + "/err");
+  const std::string err = test::read_file(dir + "/err");
+  for (const char* key : {"imu.device", "imu.data_ready.chip", "cameras[0].device", "storage.path"})
+    EXPECT_TRUE(has(err, key)) << key << ": " << err;
+  EXPECT_TRUE(has(err, "--devices-may-appear-later")) << err;
+
+  EXPECT_EQ(run_status(base + " --devices-may-appear-later >" + dir + "/out 2>" + dir + "/err"), 0)
+      << test::read_file(dir + "/err");
+  EXPECT_TRUE(has(test::read_file(dir + "/out"), "Not on this machine yet: imu.device"))
+      << test::read_file(dir + "/out");
+}
+
+// The service itself: exit 69, which the unit's RestartPreventExitStatus= names, not 1.
+TEST(Imucald, TheServiceExits69WhenTheImuDeviceIsAbsentAnd1WhenItMayAppearLater) {
+  const std::string dir = test::scratch_dir();
+  const std::string config = write_absent_device_config(dir);
+  const std::string socket = short_socket_path();
+  const std::string base =
+      std::string(IMUCALD_PATH) + " --config " + config + " --socket " + socket + " --state-dir " + dir;
+  EXPECT_EQ(run_status(base + " 2>" + dir + "/err"), 69) << test::read_file(dir + "/err");
+  EXPECT_TRUE(has(test::read_file(dir + "/err"), "the IMU's device is not on this machine: imu.device"))
+      << test::read_file(dir + "/err");
+  EXPECT_EQ(run_status(base + " --devices-may-appear-later 2>" + dir + "/err"), 1)
+      << test::read_file(dir + "/err");
+}
+
+/// The value of `key=` in a unit file's text (the last one), or "".
+std::string unit_value(const std::string& unit, const std::string& key) {
+  std::string value;
+  std::istringstream in(unit);
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind(key + "=", 0) == 0) value = line.substr(key.size() + 1);
+  return value;
+}
+
+// RestartSec=2 with systemd's default limit (5 starts in 10 s) could never trip: 284 restarts in
+// 11 minutes. The limit's interval must hold its burst of starts, and the "device absent" and
+// "configuration unusable" statuses must not be restarted at all.
+TEST(Imucald, TheUnitDoesNotRestartOnAbsentDevicesAndItsStartLimitCanTrip) {
+  const std::string unit = test::read_file(test::source_path("systemd/imucald.service.in"));
+  ASSERT_FALSE(unit.empty());
+  std::istringstream prevent(unit_value(unit, "RestartPreventExitStatus"));
+  std::vector<std::string> codes{std::istream_iterator<std::string>(prevent), {}};
+  EXPECT_NE(std::find(codes.begin(), codes.end(), "69"), codes.end());
+  EXPECT_NE(std::find(codes.begin(), codes.end(), "78"), codes.end());
+  const std::string interval = unit_value(unit, "StartLimitIntervalSec");
+  const std::string burst = unit_value(unit, "StartLimitBurst");
+  const std::string restart_sec = unit_value(unit, "RestartSec");
+  ASSERT_FALSE(interval.empty()) << "no StartLimitIntervalSec= (systemd's default is 10 s)";
+  ASSERT_FALSE(burst.empty()) << "no StartLimitBurst=";
+  ASSERT_FALSE(restart_sec.empty());
+  // Each start takes at least RestartSec; allow one more second per start for the start itself.
+  EXPECT_GT(std::stod(interval), std::stod(burst) * (std::stod(restart_sec) + 1.0));
+}
+
 TEST(Imucald, AMissingConfigurationIsAClearError) {
   const std::string dir = test::scratch_dir();
   const std::string cmd = std::string(IMUCALD_PATH) + " --config " + dir + "/none.yaml --socket " + dir +
@@ -381,7 +470,10 @@ TEST(Imucald, TheReviewShowsTheChangeToTheStoredCalibration) {
   ASSERT_EQ(logs.size(), 2u);
   EXPECT_TRUE(has(all_events(logs[0]), "Stored calibration: none; this is the first"));
   const std::string second = all_events(logs[1]);
-  EXPECT_TRUE(has(second, "Change to the stored calibration (sequence 1 in slot")) << second.substr(0, 3000);
+  // One name per slot: A and B, as `imucal store` and the end screen say (it was "slot 0" here).
+  EXPECT_TRUE(has(second, "Change to the stored calibration (sequence 1 in slot A"))
+      << second.substr(0, 3000);
+  EXPECT_FALSE(has(second, "in slot 0")) << second.substr(0, 3000);
   EXPECT_TRUE(has(second, R"("difference_to_stored":{"b_a")"));
   // And the second write went to the other slot.
   const auto stored = test::run_cli({"store", "read", "--config", dir + "/rig.yaml"});

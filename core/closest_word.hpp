@@ -1,0 +1,41 @@
+#pragma once
+// The nearest of a few words to a mistyped one, for "did you mean ...?" hints (imucalctl's
+// subcommands). Header-only.
+
+#include <algorithm>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace imucal {
+
+/// Levenshtein distance: the insertions, deletions and substitutions that turn `a` into `b`.
+inline std::size_t word_edit_distance(std::string_view a, std::string_view b) {
+  std::vector<std::size_t> prev(b.size() + 1), cur(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) prev[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    cur[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j)
+      cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (a[i - 1] == b[j - 1] ? 0 : 1)});
+    std::swap(prev, cur);
+  }
+  return prev[b.size()];
+}
+
+/// The candidate nearest `word` when at most `max_distance` edits away (the first of equals), else
+/// empty.
+inline std::string closest_word(std::string_view word, const std::vector<std::string>& candidates,
+                                std::size_t max_distance) {
+  std::string best;
+  std::size_t best_distance = max_distance + 1;
+  for (const std::string& c : candidates) {
+    const std::size_t d = word_edit_distance(word, c);
+    if (d < best_distance) {
+      best_distance = d;
+      best = c;
+    }
+  }
+  return best;
+}
+
+}  // namespace imucal
