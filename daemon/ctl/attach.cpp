@@ -159,6 +159,16 @@ class Console {
 
   void redraw_now() { dirty_ = true, last_draw_ = Clock::now() - kRedrawInterval; }
 
+  // The service went away: draws the last screen at once, marked as such (false without a
+  // terminal, where the caller prints the reason).
+  bool lost(const std::string& why) {
+    service_lost(state_, why);
+    if (!tty_) return false;
+    const auto [width, height] = terminal_size();
+    write_all(STDOUT_FILENO, "\x1b[H\x1b[2J" + render(state_, {width, height, 0.0}));
+    return true;
+  }
+
   // Says hello as controller again when a keep-alive is due; returns the poll timeout until the
   // next one (-1 for an observer, which needs none).
   int keep_alive_if_due() {
@@ -232,8 +242,10 @@ int run(Connection& connection, Console& console) {
     }
     if ((fds[0].revents & (POLLIN | POLLHUP | POLLERR)) != 0) {
       if (auto read = connection.read_some(); !read) {
-        console.draw_if_due();
-        std::fprintf(stderr, "imucalctl: %s\n", printable_text(read.error().message).c_str());
+        // The last screen stays, marked as no longer live, with what to do; a pipe gets the line.
+        if (!console.lost(read.error().message)) {
+          std::fprintf(stderr, "imucalctl: %s\n", printable_text(read.error().message).c_str());
+        }
         return 1;
       }
     }

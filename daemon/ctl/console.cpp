@@ -66,6 +66,9 @@ bool is_running(const msg::Status& status) {
 }
 
 std::string header(const ConsoleState& state, double idle_s) {
+  if (!state.lost.empty()) {
+    return "imucal  |  imucald is gone: below is the last it sent, no longer live";
+  }
   if (!state.status) {
     return "imucal  (waiting for the service's status)";
   }
@@ -105,6 +108,9 @@ std::string gate_line(const msg::Review::Gate& gate) {
 }
 
 std::string key_help(const ConsoleState& state) {
+  if (!state.lost.empty()) {
+    return "imucalctl has ended; run it again once imucald is back";
+  }
   if (state.confirm) {
     return state.confirm->question + "  y: yes  n: no  (another key: no, then its own action)";
   }
@@ -355,6 +361,20 @@ void update(ConsoleState& state, const json& message) {
     state.status_clock_s = -1.0;  // a status without the clock (a snapshot): the next message's
   }
   std::visit(Fold{state}, *decoded);
+}
+
+void service_lost(ConsoleState& state, const std::string& why) {
+  state.lost = why.empty() ? "the connection ended" : why;
+  state.confirm.reset();
+  state.start_after_done = false;
+  state.outbox.clear();
+  const bool running = state.status && is_running(*state.status) && !state.done;
+  state.notice = state.lost + ": imucald stopped or restarted" +
+                 (running ? ", and the session it was running ended with it (what it recorded stays in "
+                            "its session folder; the stored calibration is unchanged)"
+                          : "") +
+                 ". See why with `systemctl status imucald` and `journalctl -u imucald`, then run "
+                 "imucalctl again.";
 }
 
 std::string render(const ConsoleState& state, const RenderOptions& options) {

@@ -28,6 +28,7 @@ struct ConsoleState {
   std::optional<session_msg::Done> done;      // the session's outcome
   std::deque<std::string> recent;             // the last messages and faults, oldest first
   std::string notice;                         // the last refusal from the service or local hint
+  std::string lost;                           // why the connection to imucald ended (empty while connected)
   bool observe = false;                       // observer: keys other than q are not sent
   std::optional<Confirm> confirm;  // a destructive key was pressed; waiting for y (or anything else: no)
   bool start_after_done = false;   // restart: the abort is sent, the start follows the end
@@ -55,6 +56,11 @@ struct RenderOptions {
 /// The whole screen as text: lines separated by '\n', with none after the last (a full terminal
 /// would scroll), no terminal control codes.
 std::string render(const ConsoleState& state, const RenderOptions& options = {});
+
+/// The connection to imucald ended (`why`: the client's error): the screen keeps the last state
+/// the service sent, under a header and a notice that say it is gone and what to do; no question
+/// stays open and no key is offered.
+void service_lost(ConsoleState& state, const std::string& why);
 
 /// One line for a message when stdout is not a terminal; nothing for messages without news
 /// (successful replies, unknown types).

@@ -423,6 +423,29 @@ TEST(Console, AStepChangeClearsTheQuestionAndTheNotDoneNotice) {
   EXPECT_EQ(key_of(state, 'y'), "accept");
 }
 
+TEST(Console, AServiceThatIsGoneLeavesTheLastScreenMarkedWithWhatToDo) {
+  ConsoleState state;
+  update(state, status_message("running", "poses"));
+  update(state, kPrompt);
+  EXPECT_EQ(key_of(state, 'a'), "");  // a question open when the service goes
+  ASSERT_TRUE(state.confirm.has_value());
+  service_lost(state, "imucald closed the connection");
+  const std::string screen = render(state, {80, 24});
+  EXPECT_FALSE(state.confirm.has_value());
+  EXPECT_TRUE(has(screen, "imucald is gone")) << screen;
+  EXPECT_FALSE(has(screen, "|  running")) << screen;  // the header no longer claims a live session
+  EXPECT_TRUE(has(screen, "Turn the rig to a new orientation")) << screen;  // the last state stays
+  EXPECT_TRUE(has(screen, "session it was running ended with it")) << screen;
+  EXPECT_TRUE(has(screen, "journalctl -u imucald")) << screen;
+  EXPECT_FALSE(has(screen, "c continue")) << screen;  // no key is offered
+  EXPECT_TRUE(has(screen, "run it again once imucald is back")) << screen;
+  // Idle when it went: nothing about a session.
+  ConsoleState idle;
+  update(idle, status_message("idle", ""));
+  service_lost(idle, "imucald closed the connection");
+  EXPECT_FALSE(has(render(idle), "session it was running")) << render(idle);
+}
+
 TEST(Console, AnIdleOrFinishedConsoleStartsTheNextSession) {
   ConsoleState state;
   update(
