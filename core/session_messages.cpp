@@ -150,6 +150,8 @@ struct Encoder {
   static void figures(json& j, const PoseFigures& f) {
     j["figures"] = {
         {"poses", f.poses}, {"still", f.still}, {"missing", f.missing}, {"scale_sigma", f.scale_sigma}};
+    // Written only when said, so that the events of logs from before it encode back the same.
+    if (f.poses_needed > 0) j["figures"]["poses_needed"] = f.poses_needed;
   }
   static void figures(json& j, const MotionFigures& f) {
     j["figures"] = {{"gyro_rms_dps", vec(f.gyro_rms_dps)},

@@ -152,6 +152,7 @@ struct PoseFigures {
   bool still = false;
   std::vector<std::string> missing;  // the faces not yet up: "+X", "-Z", ...
   double scale_sigma = 0.0;          // NaN before the first quick solve
+  std::size_t poses_needed = 0;      // the fewest poses that may end the step (0: not said)
 };
 struct MotionFigures {
   Eigen::Vector3d gyro_rms_dps = Eigen::Vector3d::Zero();

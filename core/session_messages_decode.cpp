@@ -263,7 +263,8 @@ LiveFigures read_figures(Fields& f, const std::optional<StepId>& step) {
       break;
     }
     case StepId::kPoses:
-      out = PoseFigures{g.count("poses"), g.flag("still"), g.texts("missing"), g.number("scale_sigma")};
+      out = PoseFigures{g.count("poses"), g.flag("still"), g.texts("missing"), g.number("scale_sigma"),
+                        g.count("poses_needed", false)};
       break;
     case StepId::kMotion:
       out = MotionFigures{g.vector3("gyro_rms_dps"),        g.integer("frames"),

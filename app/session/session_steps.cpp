@@ -477,7 +477,8 @@ void SessionEngine::sample_poses(const ImuSample& si, bool still) {
                                   : "Scale sigma: " + fixed(scale_sigma * 1e3, 2) + "e-3 (target " +
                                         fixed(config_.session.pose_sigma_target * 1e3, 2) + "e-3)"},
          std::min(1.0, static_cast<double>(poses_.size()) / target),
-         session_msg::PoseFigures{poses_.size(), still, coverage(), scale_sigma});
+         session_msg::PoseFigures{poses_.size(), still, coverage(), scale_sigma,
+                                  static_cast<std::size_t>(std::max(config_.session.poses_min, 0))});
   }
   // Done: enough poses and the last quick solve, over all of them, meets the sigma target.
   if (static_cast<int>(poses_.size()) >= target && quick_ && quick_poses_ == poses_.size() &&

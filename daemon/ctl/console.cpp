@@ -12,6 +12,9 @@
 namespace imucal::ctl {
 namespace {
 
+/// The start of the notice for a poses step the operator tried to end too soon.
+constexpr const char* kNotYetPoses = "Not yet: the poses step ends with at least ";
+
 using nlohmann::json;
 namespace msg = session_msg;
 
@@ -327,7 +330,13 @@ struct Fold {
     }
     state.prompt = m;
   }
-  void operator()(const msg::Live& m) const { state.live = m; }
+  void operator()(const msg::Live& m) const {
+    state.live = m;
+    // "Not yet: the poses step ends with at least ..." no longer applies once there are enough.
+    const auto* poses = std::get_if<msg::PoseFigures>(&m.figures);
+    if (poses && poses->poses >= poses->poses_needed && state.notice.rfind(kNotYetPoses, 0) == 0)
+      state.notice.clear();
+  }
   void operator()(const msg::Message& m) const { add_recent(state, message_text(m)); }
   void operator()(const msg::Fault& m) const { add_recent(state, fault_text(m)); }
   void operator()(const msg::Review& m) const { state.review = m; }
@@ -590,6 +599,16 @@ KeyAction on_key(ConsoleState& state, char key) {
     case ' ':
     case '\r':
     case '\n':
+      // The service ends the poses step only with its fewest poses: do not offer what it refuses.
+      if (const auto* poses = state.live && step_text(state.live->step) == step
+                                  ? std::get_if<msg::PoseFigures>(&state.live->figures)
+                                  : nullptr;
+          poses && poses->poses < poses->poses_needed) {
+        state.notice = kNotYetPoses + std::to_string(poses->poses_needed) + " poses (" +
+                       std::to_string(poses->poses) +
+                       " so far); turn the rig to a new orientation and hold it still";
+        return {};
+      }
       // Going on before the step's own end throws its remaining time away: ask.
       if (progress && *progress < 0.999 && step != "preflight") {
         return ask(

@@ -91,6 +91,15 @@ TEST(SessionMessages, DecodedFieldsAreTyped) {
   const auto& figures = std::get<PoseFigures>(std::get<Live>(*live).figures);
   EXPECT_TRUE(std::isnan(figures.scale_sigma));
   EXPECT_EQ(figures.missing, (std::vector<std::string>{"+X", "-X"}));
+  EXPECT_EQ(figures.poses_needed, 0u);  // not said in a log from before it: 0, and not written back
+
+  // Said: it goes through the wire and back.
+  Live with_needed;
+  with_needed.step = StepId::kPoses;
+  with_needed.figures = PoseFigures{7, true, {}, 0.5, 12};
+  auto back = parse(encode(SessionMessage(with_needed)).dump());
+  ASSERT_TRUE(back.ok());
+  EXPECT_EQ(std::get<PoseFigures>(std::get<Live>(*back).figures).poses_needed, 12u);
 
   auto status = parse(wire_lines()[3]);
   ASSERT_TRUE(status.ok());

@@ -446,6 +446,29 @@ TEST(Console, AServiceThatIsGoneLeavesTheLastScreenMarkedWithWhatToDo) {
   EXPECT_FALSE(has(render(idle), "session it was running")) << render(idle);
 }
 
+TEST(Console, EndingThePosesStepIsNotOfferedBeforeTheServiceWouldAcceptIt) {
+  ConsoleState state;
+  update(state, status_message("running", "poses"));
+  update(state, kPrompt);
+  json live = kLive;
+  live["figures"] = {{"poses", 7},
+                     {"still", false},
+                     {"missing", json::array()},
+                     {"scale_sigma", 0.002},
+                     {"poses_needed", 12}};
+  update(state, live);
+  EXPECT_EQ(key_of(state, 'c'), "");  // nothing sent, no question asked
+  EXPECT_FALSE(state.confirm.has_value());
+  EXPECT_TRUE(has(render(state), "Not yet: the poses step ends with at least 12 poses (7 so far)"))
+      << render(state);
+  live["figures"]["poses"] = 12;
+  update(state, live);
+  EXPECT_FALSE(has(render(state), "Not yet")) << render(state);  // no longer applies
+  EXPECT_EQ(key_of(state, 'c'), "");                             // 50 %: asks first, as before
+  ASSERT_TRUE(state.confirm.has_value());
+  EXPECT_EQ(key_of(state, 'y'), "continue");
+}
+
 TEST(Console, AnIdleOrFinishedConsoleStartsTheNextSession) {
   ConsoleState state;
   update(
