@@ -386,12 +386,13 @@ class VirtualServiceRig final : public ServiceRig {
     const double scale = options_.time_scale;
     if (scale != 1.0 && worker_busy) {
       paused_ = true;
-      return ServiceRigTick{false, std::chrono::steady_clock::now() + kBusyWait};
+      return ServiceRigTick{false, std::chrono::steady_clock::now() + kBusyWait, {}};
     }
     if (paused_) {
       // Wall time spent waiting does not count as rig time.
       paused_ = false;
       if (scale > 0.0) wall_start_ = std::chrono::steady_clock::now() - wall_offset(scale);
+      pace_wall_start_.reset();
     }
     if (unplug_imu_at_ns_ >= 0 && rig_->now_ns() >= unplug_imu_at_ns_) {
       unplug_imu_at_ns_ = -1;
@@ -401,9 +402,12 @@ class VirtualServiceRig final : public ServiceRig {
     IMUCAL_TRY(rig_->advance(kTickNs, batch_));
     deliver(batch_);
     if (operator_) operator_->on_time(rig_->now_ns());
-    ServiceRigTick t{true, std::nullopt};
+    ServiceRigTick t{true, std::nullopt, {}};
     // Rig time runs `scale` times as fast as wall time.
-    if (scale > 0.0) t.next = wall_start_ + wall_offset(scale);
+    if (scale > 0.0) {
+      t.next = wall_start_ + wall_offset(scale);
+      t.pace_notice = check_pace(scale);
+    }
     return t;
   }
 
@@ -540,6 +544,34 @@ class VirtualServiceRig final : public ServiceRig {
     return what;
   }
 
+  /// The pace reached over the last window against the one asked: a notice when it falls below
+  /// 80 % of it (once), and when it is back above 95 %.
+  std::string check_pace(double scale) {
+    const auto now = std::chrono::steady_clock::now();
+    if (!pace_wall_start_) {
+      pace_wall_start_ = now;
+      pace_rig_start_ns_ = rig_->now_ns();
+      return {};
+    }
+    const double wall_s = std::chrono::duration<double>(now - *pace_wall_start_).count();
+    if (wall_s < options_.pace_window_s) return {};
+    const double pace = static_cast<double>(rig_->now_ns() - pace_rig_start_ns_) * 1e-9 / wall_s;
+    pace_wall_start_ = now;
+    pace_rig_start_ns_ = rig_->now_ns();
+    if (!pace_slow_ && pace < 0.8 * scale) {
+      pace_slow_ = true;
+      return "The virtual rig runs at " + format_number("%.2g", pace) + "x real time, slower than the " +
+             format_number("%g", scale) +
+             "x asked (--time-scale): this machine is too busy to keep up. The session's results "
+             "do not change, it only takes longer";
+    }
+    if (pace_slow_ && pace >= 0.95 * scale) {
+      pace_slow_ = false;
+      return "The virtual rig is back at the " + format_number("%g", scale) + "x asked";
+    }
+    return {};
+  }
+
   std::chrono::nanoseconds wall_offset(double scale) const {
     const double rig_s = static_cast<double>(rig_->now_ns() - rig_start_ns_) * 1e-9;
     return std::chrono::nanoseconds(static_cast<std::int64_t>(rig_s / scale * 1e9));
@@ -581,6 +613,9 @@ class VirtualServiceRig final : public ServiceRig {
   TimeNs rig_start_ns_ = 0;
   TimeNs unplug_imu_at_ns_ = -1;
   bool paused_ = false;
+  std::optional<std::chrono::steady_clock::time_point> pace_wall_start_;  // the pace window's start
+  TimeNs pace_rig_start_ns_ = 0;
+  bool pace_slow_ = false;  // the last pace notice said "slower"
   std::optional<TrajectorySensorStats> bias_begin_, bias_end_;
 };
 

@@ -48,6 +48,9 @@ struct ServiceRigOptions {
   std::optional<double> cold_start_c;
   /// Rig seconds per wall-clock second; 0: as fast as the host computes.
   double time_scale = 1.0;
+  /// The wall time over which the pace reached is measured against time_scale (ServiceRigTick's
+  /// pace_notice), s.
+  double pace_window_s = 5.0;
   /// The scripted operator: "" (nobody moves the rig), "motion" (moves it as the prompts ask),
   /// "full" (also presses the keys, through press_key).
   std::string operator_mode;
@@ -60,6 +63,9 @@ struct ServiceRigTick {
   bool advanced = false;
   /// When the next tick is due on the steady clock; empty: at once.
   std::optional<std::chrono::steady_clock::time_point> next;
+  /// Set when the pace reached over the last pace_window_s falls below 80 % of time_scale (the
+  /// host cannot keep up), and again when it is back above 95 %: a sentence for the operator.
+  std::string pace_notice;
 };
 
 class ServiceRig {

@@ -461,6 +461,10 @@ void SessionEngine::fault(const std::string& source, const std::string& text) {
          {K::kRedo, K::kAbort});
 }
 
+void SessionEngine::note(const std::string& text) {
+  if (running()) message(MessageLevel::kWarning, text);
+}
+
 void SessionEngine::terminate(const std::string& reason) {
   if (!running()) return;
   emit(session_msg::Stop{std::nullopt, reason});

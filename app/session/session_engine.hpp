@@ -121,6 +121,9 @@ class SessionEngine {
   [[nodiscard]] Status key(session_msg::OperatorKey key);
   /// A device or storage fault from the host: the step stops and the operator is told how to go on.
   void fault(const std::string& source, const std::string& text);
+  /// A warning from the host that changes nothing in the session (the virtual rig slower than
+  /// asked): shown to the operator while a session runs, ignored otherwise.
+  void note(const std::string& text);
   /// Ends a running session from outside (the service stops: SIGTERM): like abort, with the reason.
   void terminate(const std::string& reason);
   void solve_progress(double fraction, const std::string& text);

@@ -113,6 +113,8 @@ class SessionRunner final : public EngineHost {
   void on_frame(std::size_t camera, drivers::camera::Frame& frame, drivers::camera::TimestampMeaning meaning);
   /// An IMU or camera fault (`source` "imu", "cam0", "storage"): stored and given to the engine.
   void fault(const std::string& source, const std::string& text);
+  /// A warning that changes nothing in the session (SessionEngine::note).
+  void note(const std::string& text) { engine_.note(text); }
   const std::string& session_dir() const { return dir_; }
   std::string log_path() const { return dir_.empty() ? std::string() : dir_ + "/session.imulog"; }
   /// Waits until the worker has run every job queued so far (tests, shutdown). Their results

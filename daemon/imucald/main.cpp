@@ -34,7 +34,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--sim", o.sim, "Use the virtual rig (also when the configuration says imu.bus: sim)");
   app.add_option("--time-scale", o.time_scale,
-                 "Virtual rig: rig seconds per wall-clock second (0: as fast as it computes)")
+                 "Virtual rig: rig seconds per wall-clock second (0: as fast as it computes); when the "
+                 "machine cannot keep up, the session and the journal say so")
       ->capture_default_str()
       ->check(imucal::cli::finite_number(imucal::cli::NumberSign::kNonNegative));
   app.add_option("--sim-operator", o.sim_operator,

@@ -381,6 +381,10 @@ void Service::sim_tick() {
   if (tick->advanced) {
     for (std::size_t i = 0; cameras_streaming_ && i < cameras_.size(); ++i) read_camera(i);
   }
+  if (!tick->pace_notice.empty()) {
+    spdlog::warn("{}", tick->pace_notice);
+    if (runner_) runner_->note(tick->pace_notice);
+  }
   if (!tick->next) {
     boost::asio::post(io_, [this] { sim_tick(); });
     return;

@@ -9,6 +9,7 @@
 #include <numbers>
 #include <sstream>
 #include <thread>
+#include <vector>
 
 #include "drivers/mpu6000/output_settings.hpp"
 #include "sim/camera_scene.hpp"
@@ -106,6 +107,26 @@ TEST(ServiceRig, AtRealTimeTheWorkerDoesNotStopTheClock) {
   ASSERT_TRUE(tick.ok());
   EXPECT_TRUE(tick->advanced);
   EXPECT_GE(rig->now_ns() - before, 20'000'000);
+}
+
+TEST(ServiceRig, AHostThatCannotKeepUpIsToldOnceThatTheRigRunsSlowerThanAsked) {
+  ServiceRigOptions o = options(1.0, false);
+  o.pace_window_s = 0.2;
+  auto rig = make(o);
+  ASSERT_TRUE(rig);
+  auto none = [](std::span<const ImuSample>) {};
+  // Each tick is 20 ms of rig time; 40 ms of wall time between them is half the pace asked,
+  // however fast the machine.
+  std::vector<std::string> notices;
+  for (int i = 0; i < 20; ++i) {
+    auto tick = rig->tick(false, none);
+    ASSERT_TRUE(tick.ok());
+    if (!tick->pace_notice.empty()) notices.push_back(tick->pace_notice);
+    std::this_thread::sleep_for(std::chrono::milliseconds(40));
+  }
+  ASSERT_EQ(notices.size(), 1u) << (notices.empty() ? "" : notices.back());  // said once, not per window
+  EXPECT_NE(notices[0].find("slower than the 1x asked"), std::string::npos) << notices[0];
+  EXPECT_NE(notices[0].find("--time-scale"), std::string::npos) << notices[0];
 }
 
 TEST(ServiceRig, AnUnpluggedImuFailsTheTickAfterItsTime) {
