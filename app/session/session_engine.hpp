@@ -214,6 +214,9 @@ class SessionEngine {
   void request_final_solve();
   void review();
   std::vector<std::string> difference_to_stored(std::optional<session_msg::Review::Difference>* diff) const;
+  std::vector<std::string> imu_difference_to_stored(
+      std::optional<session_msg::Review::Difference>* diff) const;
+  std::vector<std::string> camera_difference_to_stored() const;
   std::vector<std::string> coverage() const;
   std::string missing_words() const;  // the directions not yet up, in the guide's words
   calib::StaticCalibrationOptions static_options() const;

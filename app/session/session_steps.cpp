@@ -1,5 +1,6 @@
 // The session's recording steps, sample by sample: warm-up, thermal recording, still start,
 // static poses, six-face holds, checkerboard motion; and the review's gates.
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -42,6 +43,27 @@ std::string figures(const Eigen::Vector3d& v, double k, int digits) {
     out += std::isfinite(v[i]) ? fixed(v[i] * k, digits) : std::string("not determined");
   }
   return out;
+}
+
+/// Three figures with their sigmas: "a b c +- sa sb sc".
+std::string figures_with_sigmas(const Eigen::Vector3d& v, const Eigen::Vector3d& sigma, double k,
+                                int digits) {
+  return figures(v, k, digits) + " +- " + figures(sigma, k, digits);
+}
+
+/// What the record will store of a camera, in true units with sigmas (two lines).
+std::vector<std::string> camera_review_lines(const CamImuCameraResult& cam) {
+  const Eigen::AngleAxisd aa(cam.T_cam_imu.rotation());
+  const Eigen::Vector3d rotvec = aa.angle() * aa.axis();
+  std::string offset = fixed(cam.timeshift_cam_imu_s * 1e3, 3) + " +- " +
+                       (std::isfinite(cam.timeshift_sigma_s) ? fixed(cam.timeshift_sigma_s * 1e3, 3)
+                                                             : std::string("not determined")) +
+                       " ms";
+  return {cam.name + " T_cam_imu: rotation vector " + figures(rotvec, 1.0 / kDeg, 3) +
+              " deg (sigma about the camera's x y z " + figures(cam.rotation_sigma_rad, 1.0 / kDeg, 3) +
+              " deg), translation " +
+              figures_with_sigmas(cam.T_cam_imu.translation(), cam.translation_sigma_m, 1e3, 2) + " mm",
+          "  time offset " + offset + ", reprojection RMS " + fixed(cam.reprojection_rms_px, 3) + " px"};
 }
 
 /// The review's lines for the thermal model: range, orders, drift without it and what is left.
@@ -640,6 +662,46 @@ void SessionEngine::evaluate_gates() {
 
 std::vector<std::string> SessionEngine::difference_to_stored(
     std::optional<session_msg::Review::Difference>* diff) const {
+  std::vector<std::string> lines = imu_difference_to_stored(diff);
+  for (auto& line : camera_difference_to_stored()) lines.push_back(std::move(line));
+  return lines;
+}
+
+std::vector<std::string> SessionEngine::camera_difference_to_stored() const {
+  if (!final_->camimu || stored_.is_null() || !stored_.contains("cameras") || !stored_["cameras"].is_array())
+    return {};
+  std::vector<std::string> lines;
+  for (const auto& cam : final_->camimu->result.cameras) {
+    const json* old = nullptr;
+    for (const json& c : stored_["cameras"])
+      if (c.is_object() && c.value("name", std::string()) == cam.name) old = &c;
+    if (!old) {
+      lines.push_back("  " + cam.name + ": not in the stored calibration (new)");
+      continue;
+    }
+    try {
+      Eigen::Matrix4d T;
+      for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) T(r, c) = old->at("T_cam_imu").at(r).at(c).get<double>();
+      const Eigen::Matrix3d R_old = T.topLeftCorner<3, 3>();
+      const Eigen::Vector3d dt = cam.T_cam_imu.translation() - T.topRightCorner<3, 1>();
+      const double angle = Eigen::AngleAxisd(cam.T_cam_imu.rotation() * R_old.transpose()).angle();
+      const double dshift = cam.timeshift_cam_imu_s - old->at("timeshift_cam_imu_s").get<double>();
+      lines.push_back("  " + cam.name + ": translation " + figures(dt, 1e3, 2) + " mm (" +
+                      fixed(dt.norm() * 1e3, 2) + " mm), rotation " + fixed(angle / kDeg, 3) +
+                      " deg, time offset " + fixed(dshift * 1e3, 3) + " ms");
+    } catch (const json::exception&) {
+      lines.push_back("  " + cam.name + ": stored, but not comparable (its fields are incomplete)");
+    }
+  }
+  if (!lines.empty() && !final_->imu)
+    lines.insert(lines.begin(), "Change to the stored calibration (" +
+                                    stored_.value("summary", std::string("stored")) + "):");
+  return lines;
+}
+
+std::vector<std::string> SessionEngine::imu_difference_to_stored(
+    std::optional<session_msg::Review::Difference>* diff) const {
   if (!final_->imu) return {};
   if (stored_.is_null() || !stored_.contains("imu")) return {"Stored calibration: none; this is the first"};
   const json& imu = stored_["imu"];
@@ -665,10 +727,15 @@ std::vector<std::string> SessionEngine::difference_to_stored(
       return fixed(v.x() * k, d) + " " + fixed(v.y() * k, d) + " " + fixed(v.z() * k, d);
     };
     *diff = session_msg::Review::Difference{db_a, db_g, ds_a, ds_g};
-    const std::string unit = info_.units == ImuUnits::kRaw ? " counts" : "";
+    // In the units the correction outputs (m/s^2, deg/s), and in counts beside on raw input.
+    const bool counts = info_.units == ImuUnits::kRaw;
+    const Eigen::Vector3d da = c.A_a * db_a, dg = c.A_g * db_g;
     return {"Change to the stored calibration (" + stored_.value("summary", std::string("stored")) + "):",
-            "  accel bias " + v3(db_a, 1.0, 3) + unit + ", scale " + v3(ds_a, 1e3, 3) + " e-3",
-            "  gyro bias " + v3(db_g, 1.0, 3) + unit + ", scale " + v3(ds_g, 1e3, 3) + " e-3"};
+            "  accel bias " + v3(da, 1.0, 4) + " m/s^2" +
+                (counts ? " (" + v3(db_a, 1.0, 2) + " counts)" : "") + ", scale " + v3(ds_a, 1e3, 3) + " e-3",
+            "  gyro bias " + v3(dg, 1.0 / kDeg, 4) + " deg/s" +
+                (counts ? " (" + v3(db_g, 1.0, 2) + " counts)" : "") + ", scale " + v3(ds_g, 1e3, 3) +
+                " e-3"};
   } catch (const json::exception&) {
     return {"Stored calibration: present but not comparable (its IMU fields are incomplete)"};
   }
@@ -710,10 +777,8 @@ void SessionEngine::review() {
     }
   }
   if (final_->camimu) {
-    for (const auto& cam : final_->camimu->result.cameras) {
-      lines.push_back(cam.name + ": reprojection RMS " + fixed(cam.reprojection_rms_px, 3) +
-                      " px, time offset " + fixed(cam.timeshift_cam_imu_s * 1e3, 3) + " ms");
-    }
+    for (const auto& cam : final_->camimu->result.cameras)
+      for (auto& line : camera_review_lines(cam)) lines.push_back(std::move(line));
     const SplitCheck& sc = final_->camimu->result.self_check;
     if (sc.verdict != SplitCheck::Verdict::kNotRun) lines.push_back("Self-check: " + sc.summary);
     if (!sc.advice.empty()) lines.push_back("  " + sc.advice);

@@ -19,6 +19,7 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "log/session_log.hpp"
@@ -475,6 +476,14 @@ TEST(Imucald, TheReviewShowsTheChangeToTheStoredCalibration) {
       << second.substr(0, 3000);
   EXPECT_FALSE(has(second, "in slot 0")) << second.substr(0, 3000);
   EXPECT_TRUE(has(second, R"("difference_to_stored":{"b_a")"));
+  // The change in the units the correction outputs (counts only beside them, on raw input).
+  for (const auto& [what, unit] :
+       {std::pair{"  accel bias ", " m/s^2"}, std::pair{"  gyro bias ", " deg/s"}}) {
+    const std::size_t at = second.find(what);
+    ASSERT_NE(at, std::string::npos) << what;
+    const std::string line = second.substr(at, second.find('"', at) - at);
+    EXPECT_TRUE(has(line, unit)) << line;
+  }
   // And the second write went to the other slot.
   const auto stored = test::run_cli({"store", "read", "--config", dir + "/rig.yaml"});
   EXPECT_TRUE(has(stored.out, "sequence 2")) << stored.out;
@@ -523,6 +532,11 @@ TEST(Imucald, TheMotionStepRecordsTheCameraAndTheRecordHoldsTheCameraImuCalibrat
   const std::string events = all_events(log);
   EXPECT_TRUE(has(events, R"("step":"motion")")) << "the motion step ran";
   EXPECT_TRUE(has(events, "Target seen in")) << "live detection figures";
+  // The review shows what the write will store of the camera, in true units with sigmas.
+  EXPECT_TRUE(has(events, "cam0 T_cam_imu: rotation vector ")) << events.substr(0, 3000);
+  EXPECT_TRUE(has(events, " deg (sigma about the camera's x y z ")) << events.substr(0, 3000);
+  EXPECT_TRUE(has(events, " mm\"")) << "the translation with its sigmas, in mm";
+  EXPECT_TRUE(has(events, "  time offset ")) << events.substr(0, 3000);
 
   // The record on the storage holds the camera, T_cam_imu near the virtual camera's mounting.
   const auto stored = test::run_cli({"store", "read", "--config", config, "--json"});
