@@ -113,21 +113,11 @@ TEST(CliImport, OutputsThatAreNotFilesOrAreLiveLogsAreRefused) {
   // A live log: a child holds the writer's lock (as `record` does) while import is asked to
   // replace it with --force.
   const std::string before = test::read_file(log);
-  int ready[2];
-  ASSERT_EQ(::pipe(ready), 0);
-  const pid_t child = ::fork();
-  if (child == 0) {
-    const int fd = ::open(log.c_str(), O_RDONLY);
-    if (fd < 0 || ::flock(fd, LOCK_EX) != 0) _exit(1);
-    (void)!::write(ready[1], "x", 1);
-    ::sleep(30);
-    _exit(0);
+  {
+    const test::WriterLockHolder writer(log);
+    ASSERT_TRUE(writer.held());
+    r = test::run_cli(with(ascii, {"-o", log, "--force"}));
   }
-  char c = 0;
-  ASSERT_EQ(::read(ready[0], &c, 1), 1);
-  r = test::run_cli(with(ascii, {"-o", log, "--force"}));
-  ::kill(child, SIGKILL);
-  ::waitpid(child, nullptr, 0);
   EXPECT_EQ(r.exit_code, cli::kExitIo) << r.err;
   EXPECT_THAT(r.err, HasSubstr("is being written by process"));
   EXPECT_EQ(test::read_file(log), before) << "the live log was replaced";

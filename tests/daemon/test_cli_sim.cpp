@@ -63,24 +63,12 @@ TEST(CliSim, ARefusedLiveLogIsNotCalledTheSimulationsKeptSamples) {
   const std::string log = (dir / "live.imulog").string();
   ASSERT_EQ(test::run_cli({"sim", "still", "--seed", "3", "--duration", "2", "-o", log}).exit_code, 0);
   const std::string before = test::read_file(log);
-  int ready[2];
-  ASSERT_EQ(::pipe(ready), 0);
-  const pid_t child = ::fork();
-  ASSERT_GE(child, 0);
-  if (child == 0) {  // holds the writer's lock, as `record` does
-    const int fd = ::open(log.c_str(), O_RDONLY);
-    if (fd < 0 || ::flock(fd, LOCK_EX) != 0) _exit(1);
-    (void)!::write(ready[1], "x", 1);
-    ::sleep(30);
-    _exit(0);
+  test::CommandResult r;
+  {
+    const test::WriterLockHolder writer(log);
+    ASSERT_TRUE(writer.held());
+    r = test::run_cli({"sim", "still", "--seed", "4", "--duration", "2", "-o", log, "--force"});
   }
-  char c = 0;
-  ASSERT_EQ(::read(ready[0], &c, 1), 1);
-  auto r = test::run_cli({"sim", "still", "--seed", "4", "--duration", "2", "-o", log, "--force"});
-  ::kill(child, SIGKILL);
-  ::waitpid(child, nullptr, 0);
-  ::close(ready[0]);
-  ::close(ready[1]);
   EXPECT_EQ(r.exit_code, 7) << r.err;
   // Refused before the run (the output check sees the writer's lock); a writer that takes the
   // lock after that check gets "nothing was written: LOG is the file that was there before"

@@ -218,13 +218,14 @@ void stream_checks(double rate_hz) {
   // beyond half a period are bounded loosely (a tenth) so that a stalled host does not fail it.
   const auto outside =
       std::count_if(err.begin(), err.end(), [&](double e) { return std::abs(e) >= 0.5 * period; });
-  const std::size_t tail = std::min<std::size_t>(100, err.size());
-  const Figures last = figures(std::vector<double>(err.end() - static_cast<std::ptrdiff_t>(tail), err.end()));
+  const std::size_t last_n = std::min<std::size_t>(100, err.size());
+  const Figures last =
+      figures(std::vector<double>(err.end() - static_cast<std::ptrdiff_t>(last_n), err.end()));
   check(std::abs(f.median) < 0.25 * period && std::abs(last.median) < 0.25 * period &&
             static_cast<double>(outside) <= 0.1 * static_cast<double>(err.size()),
         "the stamps follow their own pulses: median (of all, and of the last 100) within a quarter "
         "period, 90 % within half a period",
-        "median " + us(f.median) + ", of the last " + std::to_string(tail) + " " + us(last.median) + ", " +
+        "median " + us(f.median) + ", of the last " + std::to_string(last_n) + " " + us(last.median) + ", " +
             std::to_string(outside) + " of " + std::to_string(err.size()) + " beyond half a period");
 }
 

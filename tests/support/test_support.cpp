@@ -1,7 +1,10 @@
 #include "tests/support/test_support.hpp"
 
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <signal.h>
 #include <sqlite3.h>
+#include <sys/file.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -60,6 +63,29 @@ ScopedCacheDir::~ScopedCacheDir() { unsetenv("IMUCAL_CACHE_DIR"); }
 
 ScopedModuleDir::ScopedModuleDir(const std::string& dir) { setenv("IMUCAL_MODULE_DIR", dir.c_str(), 1); }
 ScopedModuleDir::~ScopedModuleDir() { unsetenv("IMUCAL_MODULE_DIR"); }
+
+WriterLockHolder::WriterLockHolder(const std::string& path) {
+  int ready[2];
+  if (::pipe(ready) != 0) return;
+  child_ = ::fork();
+  if (child_ == 0) {
+    const int fd = ::open(path.c_str(), O_RDONLY);
+    if (fd < 0 || ::flock(fd, LOCK_EX) != 0) _exit(1);
+    (void)!::write(ready[1], "x", 1);
+    ::sleep(30);
+    _exit(0);
+  }
+  ::close(ready[1]);
+  char c = 0;
+  held_ = child_ > 0 && ::read(ready[0], &c, 1) == 1;
+  ::close(ready[0]);
+}
+
+WriterLockHolder::~WriterLockHolder() {
+  if (child_ <= 0) return;
+  ::kill(child_, SIGKILL);
+  ::waitpid(child_, nullptr, 0);
+}
 
 CommandResult run_cli(const std::vector<std::string>& args, unsigned limit_s) {
   CommandResult result;

@@ -56,4 +56,19 @@ class ScopedModuleDir {
   ScopedModuleDir& operator=(const ScopedModuleDir&) = delete;
 };
 
+/// A child process that holds the writer's lock (flock LOCK_EX) on `path`, as `record` does on
+/// its live log, from construction (held() once it has it) until destruction (the child killed).
+class WriterLockHolder {
+ public:
+  explicit WriterLockHolder(const std::string& path);
+  ~WriterLockHolder();
+  WriterLockHolder(const WriterLockHolder&) = delete;
+  WriterLockHolder& operator=(const WriterLockHolder&) = delete;
+  bool held() const { return held_; }
+
+ private:
+  int child_ = -1;
+  bool held_ = false;
+};
+
 }  // namespace imucal::test
