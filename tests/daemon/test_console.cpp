@@ -435,8 +435,10 @@ TEST(Console, AServiceThatIsGoneLeavesTheLastScreenMarkedWithWhatToDo) {
   EXPECT_TRUE(has(screen, "imucald is gone")) << screen;
   EXPECT_FALSE(has(screen, "|  running")) << screen;  // the header no longer claims a live session
   EXPECT_TRUE(has(screen, "Turn the rig to a new orientation")) << screen;  // the last state stays
-  EXPECT_TRUE(has(screen, "session it was running ended with it")) << screen;
-  EXPECT_TRUE(has(screen, "journalctl -u imucald")) << screen;
+  // The notice, whole (the screen wraps it at 80 columns).
+  EXPECT_TRUE(has(screen, "! imucald closed the connection: imucald stopped")) << screen;
+  EXPECT_TRUE(has(state.notice, "session it was running ended with it")) << state.notice;
+  EXPECT_TRUE(has(state.notice, "journalctl -u imucald")) << state.notice;
   EXPECT_FALSE(has(screen, "c continue")) << screen;  // no key is offered
   EXPECT_TRUE(has(screen, "run it again once imucald is back")) << screen;
   // Idle when it went: nothing about a session.
