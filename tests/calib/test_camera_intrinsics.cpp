@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "calib/camera_intrinsics.hpp"
+#include "tests/support/board_view.hpp"
 
 namespace imucal::calib {
 namespace {
@@ -80,16 +81,8 @@ std::vector<TargetObservation> synthesize(const CameraModel& camera, const Targe
       at.x() = 0.3 * (uni(rng) - 0.5);
       at.y() = 0.2 * (uni(rng) - 0.5);
     }
-    TargetObservation obs;
-    obs.t_ns = static_cast<TimeNs>(out.size()) * 50'000'000;
-    obs.width = camera.width;
-    obs.height = camera.height;
-    for (std::size_t i = 0; i < points.size(); ++i) {
-      const auto p = camera.project(R * (points[i] - centre) + at);
-      if (!p.valid()) continue;
-      obs.ids.push_back(static_cast<int>(i));
-      obs.px.push_back(p.px + Eigen::Vector2d(noise(rng), noise(rng)));
-    }
+    TargetObservation obs = test::board_view(camera, points, centre, R, at,
+                                             static_cast<TimeNs>(out.size()) * 50'000'000, noise, rng);
     if (obs.ids.size() * 2 >= points.size()) out.push_back(std::move(obs));
   }
   return out;

@@ -13,6 +13,7 @@
 
 #include "calib/camera_intrinsics.hpp"
 #include "calib/camera_model_choice.hpp"
+#include "tests/support/board_view.hpp"
 
 namespace imucal::calib {
 namespace {
@@ -63,16 +64,8 @@ std::vector<TargetObservation> wide_views(const CameraModel& camera, unsigned se
         Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), ray).toRotationMatrix() *
         Eigen::AngleAxisd((5.0 + 30.0 * uni(rng)) * M_PI / 180.0, axis).toRotationMatrix();
     const Eigen::Vector3d at = ray * (0.25 + 0.3 * uni(rng));
-    TargetObservation obs;
-    obs.t_ns = static_cast<TimeNs>(out.size()) * 50'000'000;
-    obs.width = camera.width;
-    obs.height = camera.height;
-    for (std::size_t i = 0; i < points.size(); ++i) {
-      const auto p = camera.project(R * (points[i] - centre) + at);
-      if (!p.valid()) continue;
-      obs.ids.push_back(static_cast<int>(i));
-      obs.px.push_back(p.px + Eigen::Vector2d(noise(rng), noise(rng)));
-    }
+    TargetObservation obs = test::board_view(camera, points, centre, R, at,
+                                             static_cast<TimeNs>(out.size()) * 50'000'000, noise, rng);
     if (obs.ids.size() * 2 >= points.size()) out.push_back(std::move(obs));
   }
   return out;
