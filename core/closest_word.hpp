@@ -1,6 +1,6 @@
 #pragma once
-// The nearest of a few words to a mistyped one, for "did you mean ...?" hints (imucalctl's
-// subcommands). Header-only.
+// The nearest of a few words to a mistyped one, for "did you mean ...?" hints (the programs'
+// subcommands), and the answer to a mistyped command in one wording. Header-only.
 
 #include <algorithm>
 #include <string>
@@ -36,6 +36,18 @@ inline std::string closest_word(std::string_view word, const std::vector<std::st
     }
   }
   return best;
+}
+
+/// The answer to a command word that names none of `commands` (the subcommands at `path`, such
+/// as "imucal calibrate"): "unknown command 'statc'; did you mean 'static'? The commands of
+/// 'imucal calibrate': ... (imucal calibrate --help)". The programs find the word; this words it.
+inline std::string unknown_command_text(const std::string& word, const std::vector<std::string>& commands,
+                                        const std::string& path) {
+  std::string all;
+  for (const auto& c : commands) all += (all.empty() ? "" : ", ") + c;
+  const std::string near = closest_word(word, commands, word.size() <= 3 ? 1 : 2);
+  return "unknown command '" + word + "'" + (near.empty() ? "" : "; did you mean '" + near + "'?") +
+         " The commands of '" + path + "': " + all + " (" + path + " --help)";
 }
 
 }  // namespace imucal

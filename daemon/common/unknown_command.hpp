@@ -36,11 +36,7 @@ inline std::string unknown_command_message(const CLI::App& app, const std::strin
       path += " " + word;
       continue;
     }
-    std::string all;
-    for (const auto& n : names) all += (all.empty() ? "" : ", ") + n;
-    const std::string near = closest_word(word, names, word.size() <= 3 ? 1 : 2);
-    return "unknown command '" + word + "'" + (near.empty() ? "" : "; did you mean '" + near + "'?") +
-           " The commands of '" + path + "': " + all + " (" + path + " --help)";
+    return unknown_command_text(word, names, path);
   }
   return {};
 }

@@ -103,8 +103,10 @@ int run_control(Connection& connection, const json& request, const char* done) {
 }
 
 /// The first word of the command line that is not an option (nor --socket's value) when it names
-/// no subcommand: "unknown command 'stauts'; did you mean 'status'?" and the commands. Empty when
-/// there is no such word.
+/// no subcommand: "unknown command 'stauts'; did you mean 'status'?" and the commands (worded by
+/// core/closest_word.hpp). Empty when there is no such word. This is the walk of
+/// daemon/common/unknown_command.hpp for one level and this program's one option with a value:
+/// daemon/ctl may not use daemon/common (tests/check_layering.sh).
 std::string unknown_command_message(const CLI::App& app, int argc, char** argv) {
   std::vector<std::string> names;
   for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; }))
@@ -117,11 +119,7 @@ std::string unknown_command_message(const CLI::App& app, int argc, char** argv) 
     }
     if (word.empty() || word[0] == '-') continue;
     if (std::find(names.begin(), names.end(), word) != names.end()) return {};
-    std::string all;
-    for (const auto& n : names) all += (all.empty() ? "" : ", ") + n;
-    const std::string near = imucal::closest_word(word, names, word.size() <= 3 ? 1 : 2);
-    return "unknown command '" + word + "'" + (near.empty() ? "" : "; did you mean '" + near + "'?") +
-           " The commands: " + all + " (imucalctl --help)";
+    return imucal::unknown_command_text(word, names, "imucalctl");
   }
   return {};
 }
