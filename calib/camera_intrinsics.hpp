@@ -42,6 +42,11 @@ struct CameraIntrinsicsOptions {
   double corner_floor_px = 0.5;
   /// Solver iterations per pass.
   int max_iterations = 100;
+  /// The starts are solved on at most this many views, spread evenly over the recording; every
+  /// view then joins from that solution, so that the passes over all of them begin at the
+  /// solution and take a few iterations (0: every view from the start). Consecutive views of a
+  /// recording repeat each other: the subset finds the same minimum.
+  int start_views = 150;
   /// Coverage grid: the image is cut into coverage_cols columns and as many rows as make the
   /// cells about square.
   int coverage_cols = 10;

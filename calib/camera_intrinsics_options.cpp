@@ -25,6 +25,8 @@ Status CameraIntrinsicsOptions::validate() const {
   if (!(corner_floor_px >= 0.0) || !std::isfinite(corner_floor_px))
     return fail("the corner rejection floor must be >= 0 px");
   if (max_iterations < 1) return fail("the solver needs at least one iteration");
+  if (start_views != 0 && start_views < min_views)
+    return fail("the starts need at least min_views views (start_views; 0 = every view)");
   if (coverage_cols < 1 || coverage_cols > 100) return fail("the coverage grid needs 1 to 100 columns");
   if (!(max_focal_relative_sigma > 0.0)) return fail("the focal sigma limit must be positive");
   if (threads < 0) return fail("threads must be >= 0 (0 = all cores)");
