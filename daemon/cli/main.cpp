@@ -1,5 +1,6 @@
 // imucal: the offline command-line tool. Subcommands live in cmd_*.cpp.
 
+#include <malloc.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
@@ -229,6 +230,12 @@ int checked_stdout(int code) {
 
 int main(int argc, char** argv) {
   using namespace imucal::cli;
+  // The solvers allocate and free the same large blocks (Jacobians, normal equations) every
+  // iteration; by default glibc hands each back to the kernel and faults it in again, a fifth of
+  // the camera-IMU solve's time. A command that ends after its solve keeps them (glibc's largest
+  // mmap threshold; docs/benchmarks.md, "End to end").
+  mallopt(M_MMAP_THRESHOLD, 32 << 20);
+  mallopt(M_TRIM_THRESHOLD, 512 << 20);
   // Results go to stdout, diagnostics (warnings, progress, logs) to stderr.
   spdlog::set_default_logger(spdlog::stderr_color_mt("imucal"));
   spdlog::set_pattern("%^%l%$: %v");
