@@ -365,7 +365,7 @@ class IntrinsicsProblem {
   /// Solves; false when the solver gives no usable solution.
   bool solve(int max_iterations, int threads, ProgressCallback* callback, int* iterations, double* cost) {
     ceres::Solver::Options o;
-    // Dogleg: a rejected step costs no new factorization (docs/camera-calibration.md, "Speed").
+    // Dogleg: a rejected step costs no new factorization (docs/camera-calibration.md, "Method").
     o.trust_region_strategy_type = ceres::DOGLEG;
     // Poses first in the elimination: the reduced camera system is at most 10 x 10.
     o.linear_solver_type = ceres::DENSE_SCHUR;
@@ -711,8 +711,7 @@ Status solve_starts_on_subset(const std::vector<CameraModel>& starts, const Came
   }
   if (active_count(*views) < options.min_views) return too_few_views(*views, *result, options);
   IntrinsicsProblem robust(blocks, views, options.model, true, options.robust_loss_px);
-  ProgressCallback cb(progress, 0.45, 0.5, options.max_iterations);
-  if (!robust.solve(options.max_iterations, threads, &cb, &result->iterations, cost) ||
+  if (!robust.solve(options.max_iterations, threads, nullptr, &result->iterations, cost) ||
       !blocks->intrinsics.allFinite() || !blocks->projection.allFinite() || !blocks->distortion.allFinite()) {
     return make_error(Errc::kSolverFailed,
                       "the camera solve (robust pass over every view) did not converge; check the target "
@@ -996,10 +995,7 @@ Result<CameraIntrinsicsResult> calibrate_camera_intrinsics(const TargetDescripti
   IMUCAL_TRY(
       solve_starts_on_subset(starts, options, threads, progress, &views, &result, &blocks, &cost, &others));
   IMUCAL_TRY(readmit_views(options.model, options, threads, &views, &result, &blocks, &cost));
-  CameraModel camera = starts.front();
-  camera.intrinsics = blocks.intrinsics;
-  camera.projection_params = blocks.projection;
-  camera.distortion_coeffs = blocks.distortion;
+  const CameraModel camera = camera_of(options.model, width, height, blocks);
   reject_views(camera, views, options, &result);
   result.corners_rejected = reject_corners(camera, views, options, &result);
   if (active_count(views) < options.min_views) return too_few_views(views, result, options);
