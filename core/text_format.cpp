@@ -1,5 +1,6 @@
 #include "core/text_format.hpp"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -11,6 +12,11 @@ std::string fixed(double value, int digits) {
   char text[64];
   std::snprintf(text, sizeof text, "%.*f", digits, value);
   return text;
+}
+
+int decimals_for_sigma(double sigma, int least) {
+  if (!std::isfinite(sigma) || !(sigma > 0.0)) return least;
+  return std::clamp(1 - static_cast<int>(std::floor(std::log10(sigma))), least, 9);
 }
 
 std::string format_number(const char* format, double value) {

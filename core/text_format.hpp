@@ -10,6 +10,12 @@ namespace imucal {
 /// `value` with `digits` digits after the point ("%.*f"): fixed(1.23456, 2) is "1.23".
 std::string fixed(double value, int digits);
 
+/// Digits after the point that show `sigma` to two significant digits, and never fewer than
+/// `least` (nor more than 9): decimals_for_sigma(0.0021, 2) is 4, decimals_for_sigma(0.25, 2) is 2;
+/// `least` for a sigma that is not finite or not positive. For a figure and its sigma alike, so
+/// that a small sigma is never printed as 0.
+int decimals_for_sigma(double sigma, int least);
+
 /// `value` through one printf conversion for a double (`format` such as "%.3f" or "%+.2e").
 std::string format_number(const char* format, double value);
 

@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -91,12 +92,20 @@ void print_summary(const app::CameraCalibrationReport& r, const std::string& yam
   if (r.warnings.empty()) std::printf("  no warnings\n");
 }
 
-/// A sigma, or "not determined".
-std::string sigma_text(double v, double scale, const char* format) {
+/// The smallest finite entry (NaN when none is).
+double smallest_finite(const Eigen::Vector3d& v) {
+  double m = std::nan("");
+  for (double x : v)
+    if (std::isfinite(x) && !(x >= m)) m = x;
+  return m;
+}
+
+/// A sigma with `decimals` decimals and its unit, or "not determined".
+std::string sigma_text(double v, double scale, int decimals, const char* unit) {
   if (!std::isfinite(v)) return "(not determined)";
   char text[64];
-  std::snprintf(text, sizeof text, format, v * scale);
-  return std::string("+- ") + text;
+  std::snprintf(text, sizeof text, "+- %.*f%s", decimals, v * scale, unit);
+  return text;
 }
 
 void print_chain_summary(const app::CameraChainReport& r, const std::string& yaml_path) {
@@ -111,23 +120,28 @@ void print_chain_summary(const app::CameraChainReport& r, const std::string& yam
                 detections_in_words(cam.detections_reused_from, cam.detections_stored_in).c_str());
     print_camera(cam);
     if (c == 0) continue;
-    const Eigen::Vector3d t = cc.T_cn_cnm1.translation();
+    // Every figure to two significant digits of its sigma (a sigma of 0.002 mm is not "0.00").
+    const Eigen::Vector3d t = 1e3 * cc.T_cn_cnm1.translation();
+    const Eigen::Vector3d t_sigma = 1e3 * cc.T_cn_cnm1_translation_sigma_m;
+    const int td = decimals_for_sigma(smallest_finite(t_sigma), 2);
     const Eigen::AngleAxisd aa(cc.T_cn_cnm1.linear());
     std::printf(
-        "  T_cn_cnm1 (against cam%zu): translation [%.2f %.2f %.2f] mm (sigma [%s %s %s]), rotation %.3f "
+        "  T_cn_cnm1 (against cam%zu): translation [%.*f %.*f %.*f] mm (sigma [%s %s %s]), rotation %.3f "
         "deg\n",
-        c - 1, 1e3 * t.x(), 1e3 * t.y(), 1e3 * t.z(),
-        sigma_text(cc.T_cn_cnm1_translation_sigma_m.x(), 1e3, "%.2f").c_str(),
-        sigma_text(cc.T_cn_cnm1_translation_sigma_m.y(), 1e3, "%.2f").c_str(),
-        sigma_text(cc.T_cn_cnm1_translation_sigma_m.z(), 1e3, "%.2f").c_str(), aa.angle() * 180.0 / M_PI);
-    std::printf("  rotation sigma [%s %s %s] deg; baseline %.2f mm %s\n",
-                sigma_text(cc.T_cn_cnm1_rotation_sigma_rad.x(), 180.0 / M_PI, "%.4f").c_str(),
-                sigma_text(cc.T_cn_cnm1_rotation_sigma_rad.y(), 180.0 / M_PI, "%.4f").c_str(),
-                sigma_text(cc.T_cn_cnm1_rotation_sigma_rad.z(), 180.0 / M_PI, "%.4f").c_str(),
-                1e3 * cc.baseline_m, sigma_text(cc.baseline_sigma_m, 1e3, "%.2f mm").c_str());
+        c - 1, td, t.x(), td, t.y(), td, t.z(), sigma_text(t_sigma.x(), 1.0, td, "").c_str(),
+        sigma_text(t_sigma.y(), 1.0, td, "").c_str(), sigma_text(t_sigma.z(), 1.0, td, "").c_str(),
+        aa.angle() * 180.0 / M_PI);
+    const Eigen::Vector3d r_sigma = cc.T_cn_cnm1_rotation_sigma_rad * 180.0 / M_PI;
+    const int rd = decimals_for_sigma(smallest_finite(r_sigma), 4);
+    const int bd = decimals_for_sigma(1e3 * cc.baseline_sigma_m, 2);
+    std::printf("  rotation sigma [%s %s %s] deg; baseline %.*f mm %s\n",
+                sigma_text(r_sigma.x(), 1.0, rd, "").c_str(), sigma_text(r_sigma.y(), 1.0, rd, "").c_str(),
+                sigma_text(r_sigma.z(), 1.0, rd, "").c_str(), bd, 1e3 * cc.baseline_m,
+                sigma_text(cc.baseline_sigma_m, 1e3, bd, " mm").c_str());
     if (cc.timeshift_estimated) {
-      std::printf("  time offset: t_cam0 = t_cam%zu %+.3f ms %s\n", c, 1e3 * cc.timeshift_cam0_s,
-                  sigma_text(cc.timeshift_sigma_s, 1e3, "%.3f ms").c_str());
+      const int od = decimals_for_sigma(1e3 * cc.timeshift_sigma_s, 3);
+      std::printf("  time offset: t_cam0 = t_cam%zu %+.*f ms %s\n", c, od, 1e3 * cc.timeshift_cam0_s,
+                  sigma_text(cc.timeshift_sigma_s, 1e3, od, " ms").c_str());
     } else {
       std::printf("  time offset held at 0 (--hold-time-offsets)\n");
     }

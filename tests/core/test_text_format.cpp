@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <regex>
 
 #include "core/text_format.hpp"
@@ -28,6 +29,17 @@ TEST(TextFormat, NumbersHexAndStamps) {
   EXPECT_EQ(format_hex(0xabc, 2), "0xABC");
   EXPECT_TRUE(std::regex_match(utc_now_iso8601(), std::regex(R"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ)")))
       << utc_now_iso8601();
+}
+
+TEST(TextFormat, ASigmaGetsTwoSignificantDigitsAndNeverReadsAsZero) {
+  EXPECT_EQ(decimals_for_sigma(0.0021, 2), 4);  // "0.0021", not "0.00"
+  EXPECT_EQ(decimals_for_sigma(0.25, 2), 2);
+  EXPECT_EQ(decimals_for_sigma(0.099, 2), 3);
+  EXPECT_EQ(decimals_for_sigma(3.7, 2), 2);  // never fewer than asked for
+  EXPECT_EQ(decimals_for_sigma(1e-15, 2), 9);
+  EXPECT_EQ(decimals_for_sigma(std::nan(""), 3), 3);
+  EXPECT_EQ(decimals_for_sigma(0.0, 3), 3);
+  EXPECT_NE(fixed(0.0021, decimals_for_sigma(0.0021, 2)), fixed(0.0, decimals_for_sigma(0.0021, 2)));
 }
 
 }  // namespace
