@@ -373,6 +373,19 @@ std::string camera_result_json(const CameraCalibrationReport& r) {
   return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
+/// The self-check as comment lines of the camchain file (a key of its own would be counted as a
+/// camera by Kalibr's reader, which takes every top-level key for one); empty when not run.
+static std::string self_check_comment(const SplitCheck& check) {
+  if (check.verdict == SplitCheck::Verdict::kNotRun) return "";
+  std::string text = "# self-check: " + check.summary + "\n";
+  for (const auto& [who, k] : check.scaled) {
+    char line[160];
+    std::snprintf(line, sizeof line, "# self-check: %s's sigmas scaled by %.2f\n", who.c_str(), k);
+    text += line;
+  }
+  return text;
+}
+
 std::string camera_chain_yaml(const CameraChainReport& r, int min_shared_views) {
   YAML::Node root(YAML::NodeType::Map);
   for (std::size_t c = 0; c < r.cameras.size(); ++c) {
@@ -411,7 +424,7 @@ std::string camera_chain_yaml(const CameraChainReport& r, int min_shared_views) 
   return "# Camera chain (imucal calibrate camera, " + std::to_string(r.cameras.size()) +
          " cameras in one solve); Kalibr camchain format (T_cn_cnm1, cam_overlaps), imucal's figures under\n"
          "# camN.imucal; t_cam0 = t_camN + timeshift_cam_cam0 (docs/camera-calibration.md)\n" +
-         std::string(out.c_str()) + "\n";
+         self_check_comment(r.self_check) + std::string(out.c_str()) + "\n";
 }
 
 std::string camera_chain_json(const CameraChainReport& r, int min_shared_views) {

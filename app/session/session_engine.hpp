@@ -29,6 +29,7 @@
 #include "core/result.hpp"
 #include "core/rig_config.hpp"
 #include "core/session_messages.hpp"
+#include "core/split_check.hpp"
 #include "core/time.hpp"
 
 namespace imucal::app::session {
@@ -74,6 +75,9 @@ struct SolveOutcome {
   std::optional<calib::ThermalResult> thermal;
   std::optional<StaticCalibrationResult> imu;
   std::optional<CamImuReport> camimu;
+  /// With several cameras: the camera chain's self-check (its halves calibrated apart; kNotRun
+  /// with one camera), whose scaling the chain's sigmas in `camimu`'s inputs already carry.
+  SplitCheck chain_self_check;
   /// The record to store (core/calibration_record.hpp), built from the typed results above by
   /// run_solve and completed by the host (RunnerOptions::complete_record); empty for a quick solve.
   std::optional<CalibrationRecord> record;

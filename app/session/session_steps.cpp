@@ -779,6 +779,13 @@ void SessionEngine::review() {
   if (final_->camimu) {
     for (const auto& cam : final_->camimu->result.cameras)
       for (auto& line : camera_review_lines(cam)) lines.push_back(std::move(line));
+    const SplitCheck& chain = final_->chain_self_check;
+    if (chain.verdict != SplitCheck::Verdict::kNotRun) {
+      lines.push_back("Camera chain self-check: " + chain.summary);
+      for (const auto& [who, k] : chain.scaled)
+        lines.push_back("  " + who + "'s sigmas scaled by " + fixed(k, 2) +
+                        " (its parts spread that much more)");
+    }
     const SplitCheck& sc = final_->camimu->result.self_check;
     if (sc.verdict != SplitCheck::Verdict::kNotRun) lines.push_back("Self-check: " + sc.summary);
     if (!sc.advice.empty()) lines.push_back("  " + sc.advice);

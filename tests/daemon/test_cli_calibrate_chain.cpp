@@ -19,6 +19,7 @@
 namespace imucal {
 namespace {
 
+using ::testing::ContainsRegex;
 using ::testing::HasSubstr;
 
 Eigen::Matrix4d matrix_of(const YAML::Node& rows) {
@@ -47,6 +48,10 @@ TEST(CliCalibrateChain, AStereoPairTenMillisecondsApartIsCalibratedWithinItsSigm
   EXPECT_THAT(r.out, HasSubstr("2 cameras in one solve"));
   EXPECT_THAT(r.err, HasSubstr("not synchronized"))
       << "the offset between identically stamped cameras is not said";
+  // Every chain figure with two significant digits of its sigma: a sigma is never shown as 0.
+  EXPECT_THAT(r.out, ContainsRegex("baseline [0-9.]+ mm \\+- [0-9.]*[1-9][0-9.]* mm")) << r.out;
+  EXPECT_THAT(r.out, ContainsRegex("time offset: t_cam0 = t_cam1 [-+][0-9.]+ ms \\+- [0-9.]*[1-9][0-9.]* ms"))
+      << r.out;
 
   const YAML::Node truth = YAML::LoadFile(dir + "/stereo.truth.yaml")["camera"];
   const YAML::Node chain = YAML::LoadFile(out);
@@ -109,6 +114,11 @@ TEST(CliCalibrateChain, AStereoPairTenMillisecondsApartIsCalibratedWithinItsSigm
     EXPECT_FALSE(sc["sigmas_scaled"].empty()) << sc.dump(1);
     EXPECT_THAT(json["warnings"].dump(), HasSubstr("self-check: the two halves disagree"));
   }
+  // The camchain file says what the self-check found in comments: Kalibr takes every top-level
+  // key for a camera, so the file keeps cam0 and cam1 only.
+  const std::string again = test::read_file(dir + "/again.yaml");
+  EXPECT_THAT(again, HasSubstr("\n# self-check: " + sc["summary"].get<std::string>() + "\n"));
+  EXPECT_EQ(YAML::Load(again).size(), 2u);
 
   // The camera-IMU calibration with the chain: the pair's relative pose enters as a prior with the
   // chain's covariance, and the result's T_cn_cnm1 agrees with the chain's within its sigmas.
