@@ -1,6 +1,7 @@
 #include "core/calibration_record.hpp"
 
 #include <cmath>
+#include <cstdint>
 
 #include "core/die_temperature.hpp"
 
@@ -356,15 +357,17 @@ Result<CalibrationRecord> calibration_record_from_json(const json& j) {
                                           kCalibrationFormat + "\")");
   }
   const json version = j.value("version", json());
-  if (!version.is_number_integer() || version.get<int>() < kOldestCalibrationRecordVersion ||
-      version.get<int>() > kCalibrationRecordVersion) {
-    return make_error(Errc::kCorrupt,
-                      "calibration record version " +
-                          version.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
-                          ", this imucal reads versions " + std::to_string(kOldestCalibrationRecordVersion) +
-                          " to " + std::to_string(kCalibrationRecordVersion) +
-                          " (a newer imucal wrote it: update imucal)");
+  const std::string named = version.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+  const std::string reads = ", this imucal reads versions " +
+                            std::to_string(kOldestCalibrationRecordVersion) + " to " +
+                            std::to_string(kCalibrationRecordVersion);
+  if (version.is_number_integer() && version.get<std::int64_t>() > kCalibrationRecordVersion) {
+    // Not damage: the session and `store` say so and never write over it unasked.
+    return make_error(Errc::kNewerVersion, "calibration record version " + named + reads +
+                                               " (a newer imucal wrote it: update imucal)");
   }
+  if (!version.is_number_integer() || version.get<std::int64_t>() < kOldestCalibrationRecordVersion)
+    return make_error(Errc::kCorrupt, "calibration record version " + named + reads);
   const Reader r;
   CalibrationRecord rec;
   IMUCAL_TRY(r.text(j, "created_utc", "", rec.created_utc));

@@ -24,6 +24,8 @@ const char* errc_name(Errc code) {
       return "solver failed";
     case Errc::kAlreadyExists:
       return "already exists";
+    case Errc::kNewerVersion:
+      return "written by a newer imucal";
     case Errc::kInternal:
       return "internal error";
   }

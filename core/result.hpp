@@ -21,6 +21,7 @@ enum class Errc {
   kDevice,            // hardware misbehaved (wrong WHO_AM_I, bus error, ...)
   kTimeout,           // something did not happen in time
   kInsufficientData,  // the recording does not contain what the method needs
+  kNewerVersion,      // data a newer imucal wrote: not damage; that imucal (or an update) reads it
   kSolverFailed,      // an estimator did not converge or is ill-conditioned
   kInternal,          // a bug
 };

@@ -147,6 +147,13 @@ Result<StoredCalibration> decode_latest(const drivers::LatestRecord& latest, con
 
 }  // namespace
 
+std::string newer_slot_on(const StoredCalibration& stored) {
+  for (const drivers::SlotReport& s : stored.slots)
+    if (s.defect == drivers::RecordDefect::kNewerVersion)
+      return std::string("slot ") + drivers::slot_name(s.slot) + ": " + s.reason;
+  return "";
+}
+
 CalibrationRecord calibration_record_from_static(const StaticCalibrationResult& r, const ImuStreamInfo& info,
                                                  const std::string& path) {
   CalibrationRecord rec = new_record();

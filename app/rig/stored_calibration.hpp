@@ -35,6 +35,17 @@ struct StoredCalibration {
   std::string note;                        // why there are no slots to report, when there are none
 };
 
+/// A slot that holds a record in a newer imucal's framing ("slot B: format version 7, written by a
+/// newer imucal ..."), empty when none does: not damage, and never written over unasked, so that a
+/// session's write would be refused.
+std::string newer_slot_on(const StoredCalibration& stored);
+
+/// What an operator or a user can do about a record a newer imucal wrote (the payload
+/// Errc::kNewerVersion, or a slot newer_slot_on names).
+inline constexpr const char* kNewerRecordAdvice =
+    "a newer imucal wrote the rig's calibration and this one never writes over it: update imucal on "
+    "the rig and restart imucald, or abort to keep the rig as it is";
+
 /// The record of a static calibration of `info`'s stream: the canonical model and Tedaldi's
 /// sigmas (G's only when the g-sensitivity was estimated; else not determined). `path` names
 /// the result file in the record's sources.

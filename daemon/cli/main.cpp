@@ -45,6 +45,7 @@ int exit_code_for(Errc code) {
       return kExitUsage;
     case Errc::kNotFound:
     case Errc::kCorrupt:
+    case Errc::kNewerVersion:
       return kExitInput;
     case Errc::kIo:
       return kExitIo;

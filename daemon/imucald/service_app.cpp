@@ -562,8 +562,12 @@ app::session::PreflightReport Service::preflight() {
            : std::string()});
   auto stored = app::read_stored_calibration(config_);
   if (!stored.ok()) {
+    r.devices.push_back({"storage", false, storage_name(config_.storage) + ": " + stored.error().message,
+                         stored.error().code == Errc::kNewerVersion ? app::kNewerRecordAdvice : ""});
+  } else if (const std::string newer = app::newer_slot_on(*stored); !newer.empty()) {
+    // Found now, not when the session's write is refused at its end.
     r.devices.push_back(
-        {"storage", false, storage_name(config_.storage) + ": " + stored.error().message, {}});
+        {"storage", false, storage_name(config_.storage) + ": " + newer, app::kNewerRecordAdvice});
   } else {
     const std::string unwritable = storage_unwritable(config_.storage);
     r.devices.push_back(

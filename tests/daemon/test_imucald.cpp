@@ -22,6 +22,11 @@
 #include <utility>
 #include <vector>
 
+#include "core/calibration_record.hpp"
+#include "core/rig_config.hpp"
+#include "drivers/storage/calibration_store.hpp"
+#include "drivers/storage/record.hpp"
+#include "drivers/storage/storage_device.hpp"
 #include "log/session_log.hpp"
 #include "tests/support/test_support.hpp"
 
@@ -640,6 +645,53 @@ TEST(Imucald, PreflightFailsAStorageTheServiceCannotWrite) {
   EXPECT_FALSE(has(events, R"("step":"warmup")")) << "the session does not go on past a failed preflight";
   ::kill(daemon.pid(), SIGTERM);
   EXPECT_EQ(daemon.wait(), 0);
+}
+
+// A record a newer imucal wrote (its payload's version, or its slot's framing) is named at the
+// preflight with what to do, before anything is recorded. Before: a newer payload left the
+// operator at "fix it and press r"; a newer framing passed and the session's write, at its end,
+// was refused.
+TEST(Imucald, PreflightNamesARecordOfANewerImucalAndWhatToDo) {
+  for (const bool framing : {false, true}) {
+    SCOPED_TRACE(framing ? "a newer framing" : "a newer payload");
+    const std::string dir = test::scratch_dir();
+    const std::string config = write_config(dir);
+    auto rig = load_rig_config(config);
+    ASSERT_TRUE(rig.ok()) << rig.error().message;
+    {
+      auto dev = drivers::open_storage_device(rig->storage, drivers::StorageAccess::kWrite);
+      ASSERT_TRUE(dev.ok()) << dev.error().message;
+      auto store =
+          drivers::CalibrationStore::open(**dev, static_cast<std::uint64_t>(rig->storage.offset_bytes),
+                                          static_cast<std::uint64_t>(rig->storage.size_bytes));
+      ASSERT_TRUE(store.ok()) << store.error().message;
+      nlohmann::json record = calibration_record_json(CalibrationRecord{});
+      if (!framing) record["version"] = kCalibrationRecordVersion + 1;
+      ASSERT_TRUE(store->write(nlohmann::json::to_cbor(record)).ok());  // slot A
+    }
+    if (framing) {
+      // Slot A's header: format version 7, its CRC (bytes 20..23 over 0..19) resealed.
+      std::string bytes = test::read_file(rig->storage.path);
+      const auto at = static_cast<std::size_t>(rig->storage.offset_bytes);
+      bytes[at + 4] = 7;
+      const std::uint32_t crc = drivers::crc32(
+          std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(bytes.data()) + at, 20));
+      for (int i = 0; i < 4; ++i)
+        bytes[at + 20 + static_cast<std::size_t>(i)] = static_cast<char>(crc >> (8 * i));
+      std::ofstream(rig->storage.path, std::ios::binary) << bytes;
+    }
+    const std::string before = test::read_file(rig->storage.path);
+    Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start", "default"}, config);
+    ASSERT_TRUE(wait_for([&] { return has(all_events(session_log(dir)), "update imucal on the rig"); }, 60))
+        << test::read_file(dir + "/imucald.log") << all_events(session_log(dir)).substr(0, 3000);
+    const std::string events = all_events(session_log(dir));
+    EXPECT_TRUE(has(events, "written by a newer imucal")) << events.substr(0, 3000);
+    EXPECT_FALSE(has(events, "Fix it and press r")) << "the generic advice instead of what to do";
+    EXPECT_FALSE(has(events, R"("step":"warmup")")) << "the session does not go on past a failed preflight";
+    ::kill(daemon.pid(), SIGTERM);
+    EXPECT_EQ(daemon.wait(), 0);
+    EXPECT_EQ(test::read_file(rig->storage.path), before) << "the newer record is untouched";
+  }
 }
 
 /// The stored record's gyro bias (counts), from `imucal store read --json`.
