@@ -109,7 +109,20 @@ TEST(CalibrationRecord, AMalformedRecordIsRefusedNamingWhatIsWrong) {
     EXPECT_NE(r.error().message.find(says), std::string::npos) << r.error().message;
   };
   refused([](json& j) { j["format"] = "other"; }, "not an imucal calibration");
-  refused([](json& j) { j["version"] = 3; }, "version 3");
+  refused([](json& j) { j["version"] = 0; }, "version 0");
+  {
+    // A newer version is not damage: named as a newer imucal's, with its own code.
+    json j = good;
+    j["version"] = 3;
+    auto r = calibration_record_from_json(j);
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().code, Errc::kNewerVersion);
+    EXPECT_NE(r.error().message.find("version 3"), std::string::npos) << r.error().message;
+    EXPECT_NE(r.error().message.find("a newer imucal wrote it: update imucal"), std::string::npos);
+    j["version"] = 0;
+    EXPECT_EQ(calibration_record_from_json(j).error().message.find("newer"), std::string::npos)
+        << "an older version than any is not a newer imucal's";
+  }
   refused([](json& j) { j["version"] = "2"; }, "version \"2\"");
   refused([](json& j) { j.erase("imu"); }, "no imu");
   refused([](json& j) { j["imu"]["A_a"][1] = json::array({1, 2}); }, "imu.A_a");
