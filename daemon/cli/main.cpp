@@ -246,6 +246,17 @@ int main(int argc, char** argv) {
       "imucal: calibrate MPU-6000 IMUs and camera-IMU rigs, offline tools.\n"
       "Run 'imucal COMMAND --help' for the options of a command."};
   app.set_version_flag("--version", std::string("imucal ") + imucal::kVersion);
+  app.footer(
+      "Examples:\n"
+      "  imucal sim static -o static.imulog                  # a recording of the virtual rig, with its "
+      "truth\n"
+      "  imucal calibrate static static.imulog -o imu.yaml   # the IMU's intrinsics from its still poses\n"
+      "  imucal sim camimu -o camimu.imulog                  # IMU and rendered camera frames\n"
+      "  imucal calibrate camera camimu.imulog -o camchain.yaml\n"
+      "  imucal calibrate camimu camimu.imulog --camera camchain.yaml -o camimu\n"
+      "  imucal record --config /etc/imucal/rig.yaml --duration 60 -o rig.imulog   # the rig's own devices\n"
+      "  imucal store read --config /etc/imucal/rig.yaml     # the calibration on the rig's storage\n"
+      "The service's guided session: imucalctl (docs/service.md).");
   app.require_subcommand(1);
   app.fallthrough();
   bool verbose = false;

@@ -254,3 +254,48 @@ TEST(CliUnknownCommand, AMistypedCommandNamesTheNearestOneAtEachLevel) {
 
 }  // namespace
 }  // namespace imucal
+
+namespace imucal {
+namespace {
+
+// `imucal --help` ends with examples; each names a command that exists and only options that
+// command's own help lists (a renamed command or option fails here, not in a user's shell).
+TEST(CliHelp, TheExamplesOfImucalsHelpNameRealCommandsAndOptions) {
+  const auto help = test::run_cli({"--help"});
+  ASSERT_EQ(help.exit_code, 0) << help.err;
+  const std::size_t at = help.out.find("Examples:\n");
+  ASSERT_NE(at, std::string::npos) << help.out;
+  std::istringstream lines(help.out.substr(at + 10));
+  std::string line;
+  int examples = 0;
+  while (std::getline(lines, line) && line.rfind("  imucal ", 0) == 0) {
+    ++examples;
+    std::istringstream words(line.substr(0, line.find('#')));
+    std::string word;
+    words >> word;  // "imucal"
+    std::vector<std::string> command, options;
+    while (words >> word) {
+      if (word.rfind("-", 0) == 0) {
+        options.push_back(word);
+      } else if (options.empty() && word.find('.') == std::string::npos) {
+        command.push_back(word);  // a subcommand: before any option, not a file name
+      }
+    }
+    std::vector<std::string> args = command;
+    args.push_back("--help");
+    const auto sub = test::run_cli(args);
+    ASSERT_EQ(sub.exit_code, 0) << line << "\n" << sub.err;
+    // As the help lists an option: "  -o,--output TEXT", "  --duration FLOAT".
+    const auto listed = [&](const std::string& o) {
+      return sub.out.find(" " + o + ",") != std::string::npos ||
+             sub.out.find(" " + o + " ") != std::string::npos ||
+             sub.out.find("," + o + " ") != std::string::npos;
+    };
+    for (const auto& o : options)
+      EXPECT_TRUE(listed(o)) << line << ": " << o << " is not an option of that command";
+  }
+  EXPECT_GE(examples, 5) << help.out;
+}
+
+}  // namespace
+}  // namespace imucal
