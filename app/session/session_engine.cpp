@@ -339,7 +339,20 @@ void SessionEngine::begin_step() {
 
 void SessionEngine::run_preflight() {
   const PreflightReport report = host_.preflight();
-  stored_ = report.stored ? *report.stored : json();
+  stored_.reset();
+  stored_unreadable_.clear();
+  if (report.stored) {
+    // The host sends the record's JSON form with a summary beside; read into the record once.
+    json j = *report.stored;
+    const std::string summary = j.is_object() ? j.value("summary", std::string("stored")) : "stored";
+    if (j.is_object()) j.erase("summary");
+    auto record = calibration_record_from_json(j);
+    if (record.ok()) {
+      stored_ = StoredAtPreflight{std::move(*record), summary};
+    } else {
+      stored_unreadable_ = record.error().message;
+    }
+  }
   emit(session_msg::Preflight{std::nullopt, report});
   std::vector<std::string> lines;
   for (const auto& d : report.devices)

@@ -668,77 +668,59 @@ std::vector<std::string> SessionEngine::difference_to_stored(
 }
 
 std::vector<std::string> SessionEngine::camera_difference_to_stored() const {
-  if (!final_->camimu || stored_.is_null() || !stored_.contains("cameras") || !stored_["cameras"].is_array())
-    return {};
+  if (!final_->camimu || !stored_) return {};
   std::vector<std::string> lines;
   for (const auto& cam : final_->camimu->result.cameras) {
-    const json* old = nullptr;
-    for (const json& c : stored_["cameras"])
-      if (c.is_object() && c.value("name", std::string()) == cam.name) old = &c;
-    if (!old) {
+    const auto& stored = stored_->record.cameras;
+    const auto old =
+        std::find_if(stored.begin(), stored.end(), [&](const CameraRecord& c) { return c.name == cam.name; });
+    if (old == stored.end()) {
       lines.push_back("  " + cam.name + ": not in the stored calibration (new)");
       continue;
     }
-    try {
-      Eigen::Matrix4d T;
-      for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c) T(r, c) = old->at("T_cam_imu").at(r).at(c).get<double>();
-      const Eigen::Matrix3d R_old = T.topLeftCorner<3, 3>();
-      const Eigen::Vector3d dt = cam.T_cam_imu.translation() - T.topRightCorner<3, 1>();
-      const double angle = Eigen::AngleAxisd(cam.T_cam_imu.rotation() * R_old.transpose()).angle();
-      const double dshift = cam.timeshift_cam_imu_s - old->at("timeshift_cam_imu_s").get<double>();
-      lines.push_back("  " + cam.name + ": translation " + figures(dt, 1e3, 2) + " mm (" +
-                      fixed(dt.norm() * 1e3, 2) + " mm), rotation " + fixed(angle / kDeg, 3) +
-                      " deg, time offset " + fixed(dshift * 1e3, 3) + " ms");
-    } catch (const json::exception&) {
-      lines.push_back("  " + cam.name + ": stored, but not comparable (its fields are incomplete)");
-    }
+    const Eigen::Matrix3d R_old = old->T_cam_imu.topLeftCorner<3, 3>();
+    const Eigen::Vector3d dt = cam.T_cam_imu.translation() - old->T_cam_imu.topRightCorner<3, 1>();
+    const double angle = Eigen::AngleAxisd(cam.T_cam_imu.rotation() * R_old.transpose()).angle();
+    const double dshift = cam.timeshift_cam_imu_s - old->timeshift_cam_imu_s;
+    lines.push_back("  " + cam.name + ": translation " + figures(dt, 1e3, 2) + " mm (" +
+                    fixed(dt.norm() * 1e3, 2) + " mm), rotation " + fixed(angle / kDeg, 3) +
+                    " deg, time offset " + fixed(dshift * 1e3, 3) + " ms");
   }
   if (!lines.empty() && !final_->imu)
-    lines.insert(lines.begin(), "Change to the stored calibration (" +
-                                    stored_.value("summary", std::string("stored")) + "):");
+    lines.insert(lines.begin(), "Change to the stored calibration (" + stored_->summary + "):");
   return lines;
 }
 
 std::vector<std::string> SessionEngine::imu_difference_to_stored(
     std::optional<session_msg::Review::Difference>* diff) const {
   if (!final_->imu) return {};
-  if (stored_.is_null() || !stored_.contains("imu")) return {"Stored calibration: none; this is the first"};
-  const json& imu = stored_["imu"];
-  const std::string units = info_.units == ImuUnits::kRaw ? "raw" : "si";
-  if (imu.value("input_units", units) != units)
-    return {"Stored calibration: for " + imu.value("input_units", std::string("?")) +
-            " input, not comparable"};
-  auto vec = [](const json& j) {
-    return Eigen::Vector3d(j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>());
-  };
-  auto mat = [&](const json& j) {
-    Eigen::Matrix3d m;
-    for (int r = 0; r < 3; ++r) m.row(r) = vec(j.at(r)).transpose();
-    return m;
-  };
-  try {
-    const auto& c = final_->imu->canonical;
-    const Eigen::Vector3d db_a = c.b_a - vec(imu.at("b_a")), db_g = c.b_g - vec(imu.at("b_g"));
-    // Scale changes as relative changes of the correction's diagonal.
-    const Eigen::Vector3d ds_a = c.A_a.diagonal().cwiseQuotient(mat(imu.at("A_a")).diagonal()).array() - 1.0;
-    const Eigen::Vector3d ds_g = c.A_g.diagonal().cwiseQuotient(mat(imu.at("A_g")).diagonal()).array() - 1.0;
-    auto v3 = [](const Eigen::Vector3d& v, double k, int d) {
-      return fixed(v.x() * k, d) + " " + fixed(v.y() * k, d) + " " + fixed(v.z() * k, d);
-    };
-    *diff = session_msg::Review::Difference{db_a, db_g, ds_a, ds_g};
-    // In the units the correction outputs (m/s^2, deg/s), and in counts beside on raw input.
-    const bool counts = info_.units == ImuUnits::kRaw;
-    const Eigen::Vector3d da = c.A_a * db_a, dg = c.A_g * db_g;
-    return {"Change to the stored calibration (" + stored_.value("summary", std::string("stored")) + "):",
-            "  accel bias " + v3(da, 1.0, 4) + " m/s^2" +
-                (counts ? " (" + v3(db_a, 1.0, 2) + " counts)" : "") + ", scale " + v3(ds_a, 1e3, 3) + " e-3",
-            "  gyro bias " + v3(dg, 1.0 / kDeg, 4) + " deg/s" +
-                (counts ? " (" + v3(db_g, 1.0, 2) + " counts)" : "") + ", scale " + v3(ds_g, 1e3, 3) +
-                " e-3"};
-  } catch (const json::exception&) {
-    return {"Stored calibration: present but not comparable (its IMU fields are incomplete)"};
+  if (!stored_) {
+    return {stored_unreadable_.empty()
+                ? "Stored calibration: none; this is the first"
+                : "Stored calibration: present but not comparable (" + stored_unreadable_ + ")"};
   }
+  const ImuRecord& imu = stored_->record.imu;
+  const std::string units = info_.units == ImuUnits::kRaw ? "raw" : "si";
+  if (imu.input_units != units)
+    return {"Stored calibration: for " + imu.input_units + " input, not comparable"};
+  const auto& c = final_->imu->canonical;
+  const CanonicalImuModel& old = imu.model;
+  const Eigen::Vector3d db_a = c.b_a - old.b_a, db_g = c.b_g - old.b_g;
+  // Scale changes as relative changes of the correction's diagonal.
+  const Eigen::Vector3d ds_a = c.A_a.diagonal().cwiseQuotient(old.A_a.diagonal()).array() - 1.0;
+  const Eigen::Vector3d ds_g = c.A_g.diagonal().cwiseQuotient(old.A_g.diagonal()).array() - 1.0;
+  auto v3 = [](const Eigen::Vector3d& v, double k, int d) {
+    return fixed(v.x() * k, d) + " " + fixed(v.y() * k, d) + " " + fixed(v.z() * k, d);
+  };
+  *diff = session_msg::Review::Difference{db_a, db_g, ds_a, ds_g};
+  // In the units the correction outputs (m/s^2, deg/s), and in counts beside on raw input.
+  const bool counts = info_.units == ImuUnits::kRaw;
+  const Eigen::Vector3d da = c.A_a * db_a, dg = c.A_g * db_g;
+  return {"Change to the stored calibration (" + stored_->summary + "):",
+          "  accel bias " + v3(da, 1.0, 4) + " m/s^2" + (counts ? " (" + v3(db_a, 1.0, 2) + " counts)" : "") +
+              ", scale " + v3(ds_a, 1e3, 3) + " e-3",
+          "  gyro bias " + v3(dg, 1.0 / kDeg, 4) + " deg/s" +
+              (counts ? " (" + v3(db_g, 1.0, 2) + " counts)" : "") + ", scale " + v3(ds_g, 1e3, 3) + " e-3"};
 }
 
 void SessionEngine::review() {
