@@ -113,6 +113,7 @@ struct Encoder {
                       {"cameras", cams}};
       j["session_dir"] = m.service->session_dir;
       j["version"] = m.service->version;
+      j["recorded_bytes"] = m.service->recorded_bytes;
     }
     return j;
   }

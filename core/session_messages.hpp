@@ -109,6 +109,9 @@ struct ServiceStatus {
   ServiceDevices devices;
   std::string session_dir;
   std::string version;
+  /// Bytes the session folder's logs hold on disk (session.imulog, motion.imulog and their
+  /// write-ahead files): what the session has recorded so far (0: no session yet).
+  std::int64_t recorded_bytes = 0;
 };
 
 struct Status {

@@ -222,6 +222,7 @@ Result<SessionMessage> read_status(Fields& f) {
     if (!imu.ok()) f.fail(": " + imu.error());
     s.session_dir = f.text("session_dir", false);
     s.version = f.text("version", false);
+    s.recorded_bytes = static_cast<std::int64_t>(f.count("recorded_bytes", false));  // older services: 0
     m.service = std::move(s);
   }
   return finish(f, std::move(m));

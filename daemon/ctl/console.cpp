@@ -68,6 +68,14 @@ bool is_running(const msg::Status& status) {
   return status.state == msg::SessionState::kRunning || status.state == msg::SessionState::kReview;
 }
 
+/// Bytes as "850 kB", "12.3 MB" or "1.42 GB" (decimal units, as df -H).
+std::string recorded_text(std::int64_t bytes) {
+  const double b = static_cast<double>(bytes);
+  if (b < 1e6) return fixed(b / 1e3, 0) + " kB";
+  if (b < 1e9) return fixed(b / 1e6, 1) + " MB";
+  return fixed(b / 1e9, 2) + " GB";
+}
+
 std::string header(const ConsoleState& state, double idle_s) {
   if (!state.lost.empty()) {
     return "imucal  |  imucald is gone: below is the last it sent, no longer live";
@@ -91,6 +99,10 @@ std::string header(const ConsoleState& state, double idle_s) {
       elapsed += std::clamp(idle_s, 0.0, 86400.0);
     }
     line += "  |  " + fixed(elapsed, 0) + " s";
+  }
+  // What the session has recorded, so that a session left at a prompt is seen to grow.
+  if (state.recorded_bytes > 0 && status.state != msg::SessionState::kIdle) {
+    line += "  |  " + recorded_text(state.recorded_bytes) + " recorded";
   }
   return line;
 }
@@ -322,6 +334,7 @@ struct Fold {
     if (m.state == msg::SessionState::kRunning) {
       state.done.reset();
     }
+    if (m.service) state.recorded_bytes = m.service->recorded_bytes;
     state.status = m;
   }
   void operator()(const msg::Prompt& m) const {
@@ -541,7 +554,12 @@ std::string status_text(const msg::Status& status) {
       out << '\n';
     }
     if (!d.storage.empty()) out << "storage: " << d.storage << '\n';
-    if (!status.service->session_dir.empty()) out << "session: " << status.service->session_dir << '\n';
+    if (!status.service->session_dir.empty()) {
+      out << "session: " << status.service->session_dir;
+      if (status.service->recorded_bytes > 0)
+        out << " (" << recorded_text(status.service->recorded_bytes) << " recorded)";
+      out << '\n';
+    }
     if (!status.service->version.empty()) out << "service: imucald " << status.service->version << '\n';
   }
   return printable_text(out.str(), true);

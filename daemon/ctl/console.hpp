@@ -38,6 +38,9 @@ struct ConsoleState {
   // header's elapsed time runs on between status messages from these.
   double clock_s = -1.0;
   double status_clock_s = -1.0;
+  /// What the session has recorded (bytes; the service's status carries it every few seconds
+  /// while a session runs, the engine's own status at step changes does not); -1: not yet said.
+  std::int64_t recorded_bytes = -1;
   std::size_t max_recent = 5;
 };
 

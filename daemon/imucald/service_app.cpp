@@ -399,6 +399,15 @@ void Service::on_samples(std::span<const ImuSample> samples) {
   samples_ += samples.size();
   runner_->on_samples(samples);
   sync_cameras();
+  // The service's status every few seconds of a session (the engine's comes at step changes):
+  // what the session has recorded, seen to grow while it waits at a prompt.
+  if (runner_->engine().running()) {
+    const auto now = std::chrono::steady_clock::now();
+    if (now - last_status_sent_ >= kStatusInterval) {
+      last_status_sent_ = now;
+      server_->broadcast(status());
+    }
+  }
   if (start_pending_ && samples_ > 0) {
     start_pending_ = false;
     boost::asio::post(io_, [this] {
@@ -711,6 +720,20 @@ void Service::camera_failed(std::size_t index, const Error& error) {
   runner_->fault(name, error.message);
 }
 
+/// Bytes the session folder's logs hold on disk (*.imulog and their SQLite -wal and -shm files).
+static std::int64_t recorded_bytes(const std::string& dir) {
+  if (dir.empty()) return 0;
+  std::int64_t total = 0;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {
+    if (e.path().filename().string().find(".imulog") == std::string::npos) continue;
+    std::error_code size_ec;
+    const auto size = e.file_size(size_ec);
+    if (!size_ec) total += static_cast<std::int64_t>(size);
+  }
+  return total;
+}
+
 session_msg::Status Service::status() {
   session_msg::Status s = runner_->engine().status();
   session_msg::ServiceStatus service;
@@ -731,6 +754,7 @@ session_msg::Status Service::status() {
   }
   service.session_dir = runner_->session_dir();
   service.version = kVersion;
+  service.recorded_bytes = recorded_bytes(service.session_dir);
   s.service = std::move(service);
   return s;
 }

@@ -154,6 +154,8 @@ class Service final : public service::SessionHost {
   std::string imu_error_;
   std::uint64_t samples_ = 0, imu_faults_ = 0;
   bool start_pending_ = false;  // --start waits for the first samples
+  static constexpr std::chrono::seconds kStatusInterval{5};
+  std::chrono::steady_clock::time_point last_status_sent_{};
   bool quit_ = false;
   bool config_unusable_ = false;
   bool device_absent_ = false;

@@ -26,6 +26,26 @@ json status_message(const std::string& state = "running", const std::string& ste
           {"elapsed_s", 12.34}};
 }
 
+/// A status as imucald sends it, with its devices, session folder and what it has recorded.
+json service_status() {
+  json m = status_message();
+  m["devices"] = {
+      {"imu",
+       {{"state", "open"},
+        {"sim", false},
+        {"samples", 1200},
+        {"faults", 1},
+        {"rate_hz", 500.0},
+        {"gyro_offsets", "stored bias"},
+        {"error", ""}}},
+      {"storage", "nvmem /sys/bus/nvmem/devices/1-00500/nvmem"},
+      {"cameras", {{{"name", "cam0"}, {"state", "closed"}, {"frames", 0}, {"faults", 0}, {"error", ""}}}}};
+  m["session_dir"] = "/var/lib/imucal/sessions/a";
+  m["version"] = "0.1.0";
+  m["recorded_bytes"] = 48'312'345;
+  return m;
+}
+
 const json kPrompt{{"type", "prompt"},
                    {"step", "poses"},
                    {"text", "Turn the rig to a new orientation and hold it still"},
@@ -540,21 +560,7 @@ TEST(Console, StatusTextForImucalctlStatus) {
   EXPECT_TRUE(has(text, "state:   running\nrig:     sim\nstep:    step 2 of 4: poses\n")) << text;
   EXPECT_TRUE(has(text, "elapsed: 12.3 s")) << text;  // imucalctl status keeps the decimal
   // The devices in words, one line each (they were printed as raw JSON).
-  json with_devices = status_message();
-  with_devices["devices"] = {
-      {"imu",
-       {{"state", "open"},
-        {"sim", false},
-        {"samples", 1200},
-        {"faults", 1},
-        {"rate_hz", 500.0},
-        {"gyro_offsets", "stored bias"},
-        {"error", ""}}},
-      {"storage", "nvmem /sys/bus/nvmem/devices/1-00500/nvmem"},
-      {"cameras", {{{"name", "cam0"}, {"state", "closed"}, {"frames", 0}, {"faults", 0}, {"error", ""}}}}};
-  with_devices["session_dir"] = "/var/lib/imucal/sessions/a";
-  with_devices["version"] = "0.1.0";
-  const std::string devices = status_text(with_devices);
+  const std::string devices = status_text(service_status());
   EXPECT_TRUE(
       has(devices, "imu:     open, 500 Hz, 1200 samples, 1 fault, gyro offset registers stored bias\n"))
       << devices;
@@ -562,6 +568,23 @@ TEST(Console, StatusTextForImucalctlStatus) {
   EXPECT_TRUE(has(devices, "storage: nvmem /sys/bus/nvmem/devices/1-00500/nvmem\n")) << devices;
   EXPECT_TRUE(has(devices, "service: imucald 0.1.0\n")) << devices;
   EXPECT_FALSE(has(devices, "{")) << devices;
+  EXPECT_TRUE(has(devices, "session: /var/lib/imucal/sessions/a (48.3 MB recorded)\n")) << devices;
+}
+
+// What the session has recorded shows in the header, from the service's status that comes every
+// few seconds; the engine's own status at a step change (without the service's part) keeps it.
+TEST(Console, TheHeaderShowsWhatTheSessionHasRecorded) {
+  ConsoleState state;
+  update(state, status_message());
+  EXPECT_FALSE(has(render(state), "recorded")) << "nothing said yet";
+  update(state, service_status());
+  EXPECT_TRUE(has(render(state), "  |  48.3 MB recorded")) << render(state);
+  update(state, status_message("running", "solve"));
+  EXPECT_TRUE(has(render(state), "  |  48.3 MB recorded")) << render(state);
+  json more = service_status();
+  more["recorded_bytes"] = 2'150'000'000;
+  update(state, more);
+  EXPECT_TRUE(has(render(state), "  |  2.15 GB recorded")) << render(state);
 }
 
 }  // namespace

@@ -174,6 +174,9 @@ TEST(Imucald, AnOperatorAtTheConsoleRunsAWholeSessionAndTheRecordIsWritten) {
   ASSERT_TRUE(wait_for([&] { return has(screen(), "Press y to accept"); }, 300)) << screen();
   const std::string review = screen();
   EXPECT_TRUE(has(review, "gravity residual")) << review;
+  // The header says what the session has recorded (the service's status every few seconds, also
+  // while it waits for a key).
+  EXPECT_TRUE(wait_for([&] { return has(screen(), "B recorded"); }, 20)) << screen();
   ASSERT_EQ(tmux.run("send-keys -t op y"), 0);
   ASSERT_TRUE(wait_for([&] { return has(screen(), "written, read back and verified"); }, 60)) << screen();
   // The end screen names the slot and sequence the record went to, and the session's folder.
