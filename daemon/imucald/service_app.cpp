@@ -408,13 +408,16 @@ void Service::on_samples(std::span<const ImuSample> samples) {
       server_->broadcast(status());
     }
   }
-  if (start_pending_ && samples_ > 0) {
-    start_pending_ = false;
-    boost::asio::post(io_, [this] {
-      if (auto s = start(*options_.start); !s.ok()) {
+  if (pending_start_ && samples_ > 0) {
+    std::vector<std::string> steps = std::move(*pending_start_);
+    pending_start_.reset();
+    boost::asio::post(io_, [this, steps] {
+      if (auto s = start(steps); !s.ok()) {
         spdlog::error("starting the session: {}", s.error().message);
-        exit_code_ = 1;
-        shutdown("the session could not start");
+        if (options_.start) {
+          exit_code_ = 1;
+          shutdown("the session could not start");
+        }
       }
     });
   }
@@ -774,6 +777,20 @@ Status Service::start(const std::vector<std::string>& steps) {
   if (run.empty()) {
     for (auto id : app::session::configured_steps(config_)) run.emplace_back(app::session::step_name(id));
   }
+  if (samples_ == 0) {
+    // Right after the service is ready the driver may still be bringing the chip up (its resets
+    // take 200 ms), and a self-test then cannot run: the session starts with the first samples,
+    // so that its preflight finds the chip streaming.
+    if (pending_start_) {
+      return make_error(Errc::kInvalidArgument,
+                        "a session is already starting: it waits for the IMU's first samples");
+    }
+    // Steps the engine would refuse are refused now, not when the samples come.
+    if (auto planned = runner_->engine().plan(run); !planned.ok()) return planned.error();
+    pending_start_ = run;
+    spdlog::info("the session starts with the IMU's first samples");
+    return {};
+  }
   if (sim_rig_ && options_.sim_unplug_imu_after_s > 0.0) {
     sim_rig_->unplug_imu_after(options_.sim_unplug_imu_after_s);
     options_.sim_unplug_imu_after_s = 0.0;  // once
@@ -819,7 +836,7 @@ int Service::run() {
   arm_watchdog();
   // --start: once samples flow, so that the session starts on the rig's clock like one that
   // imucalctl starts.
-  start_pending_ = options_.start.has_value();
+  if (options_.start) pending_start_ = *options_.start;
   notifier_.ready();
   notifier_.status("idle");
   spdlog::info("imucald {} ready: rig '{}', socket {}", kVersion, config_.name, options_.socket_path);

@@ -153,7 +153,9 @@ class Service final : public service::SessionHost {
   std::string imu_state_ = "closed";
   std::string imu_error_;
   std::uint64_t samples_ = 0, imu_faults_ = 0;
-  bool start_pending_ = false;  // --start waits for the first samples
+  /// A session asked for before the IMU's first samples (--start, or a client right after the
+  /// service is ready): it starts with them.
+  std::optional<std::vector<std::string>> pending_start_;
   static constexpr std::chrono::seconds kStatusInterval{5};
   std::chrono::steady_clock::time_point last_status_sent_{};
   bool quit_ = false;

@@ -732,6 +732,29 @@ TEST(Imucald, PreflightNamesARecordOfANewerImucalAndWhatToDo) {
   }
 }
 
+// A session asked for as soon as the service listens, before the chip streams (its resets take
+// 200 ms of rig time: 10 s of wall time at a time scale of 0.02), starts with the first samples,
+// and its preflight finds the chip streaming. Before: the preflight's self-test could not run
+// ("call poll() until it streams") and the IMU failed its check.
+TEST(Imucald, ASessionStartedRightAfterTheServiceListensStartsWithTheFirstSamples) {
+  const std::string dir = test::scratch_dir();
+  Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0.02"});
+  ASSERT_TRUE(wait_for([&] { return daemon.ready(); }, 30)) << test::read_file(dir + "/imucald.log");
+  const std::string out = dir + "/start.txt";
+  EXPECT_EQ(std::system((std::string(IMUCALCTL_PATH) + " --socket " + daemon.socket() +
+                         " start --steps preflight,still > " + out + " 2>&1")
+                            .c_str()),
+            0)
+      << test::read_file(out);
+  ASSERT_TRUE(wait_for([&] { return has(all_events(session_log(dir)), R"("type":"preflight")"); }, 120))
+      << test::read_file(dir + "/imucald.log");
+  const std::string events = all_events(session_log(dir));
+  EXPECT_FALSE(has(events, "until it streams")) << events.substr(0, 3000);
+  EXPECT_TRUE(has(events, "self-test passed")) << events.substr(0, 3000);
+  ::kill(daemon.pid(), SIGTERM);
+  EXPECT_EQ(daemon.wait(), 0);
+}
+
 /// The stored record's gyro bias (counts), from `imucal store read --json`.
 std::vector<double> stored_gyro_bias(const std::string& config) {
   const auto r = test::run_cli({"store", "read", "--config", config, "--json"});
