@@ -534,13 +534,14 @@ void Service::set_gyro_offsets(bool from_record) {
   spdlog::info("gyro offset registers: {}", gyro_offsets_);
 }
 
-std::string Service::self_test() {
+Service::SelfTest Service::self_test() {
+  using Outcome = SelfTest::Outcome;
   if (rig_ && rig_->iio()) {
     // The kernel's driver owns the chip's registers and offers no self-test.
-    return kNoSelfTestThroughIio;
+    return {Outcome::kNotAvailable, kNoSelfTestThroughIio};
   }
   drivers::mpu6000::Mpu6000* driver = this->driver();
-  if (!driver) return "not open";
+  if (!driver) return {Outcome::kCouldNotRun, "self-test could not run: the IMU is not open"};
   // The chip's self-test runs outside streaming; the driver reconfigures and streams again after it.
   auto result = driver->self_test([this](TimeNs d) {
     if (sim_rig_) {
@@ -549,27 +550,27 @@ std::string Service::self_test() {
       std::this_thread::sleep_for(std::chrono::nanoseconds(d));
     }
   });
-  if (!result.ok()) return "self-test could not run: " + result.error().message;
-  return std::string(result->pass() ? "self-test passed" : "SELF-TEST FAILED") + " (" + result->summary() +
-         ")";
+  if (!result.ok()) return {Outcome::kCouldNotRun, "self-test could not run: " + result.error().message};
+  return {
+      result->pass() ? Outcome::kPassed : Outcome::kFailed,
+      std::string(result->pass() ? "self-test passed" : "SELF-TEST FAILED") + " (" + result->summary() + ")"};
 }
 
 app::session::PreflightReport Service::preflight() {
   app::session::PreflightReport r;
-  const std::string test = imu_state_ == "open" ? self_test() : "";
-  const bool test_ok = test.rfind("self-test passed", 0) == 0 || test == kNoSelfTestThroughIio;
+  const bool open = imu_state_ == "open";
+  const SelfTest test = open ? self_test() : SelfTest{};
   r.devices.push_back(
-      {"imu", imu_state_ == "open" && test_ok,
-       imu_state_ == "open"
-           ? std::string(options_.sim ? "virtual MPU-6000 (register emulator)" : rig_->describe()) +
-                 (rig_ && rig_->iio() ? ", " : ", WHO_AM_I answered, ") + test + ", " +
-                 std::to_string(samples_) + " samples so far" +
-                 (config_.storage.program_gyro_offsets ? ", gyro offset registers " + gyro_offsets_
-                                                       : std::string())
-           : "not open: " + imu_error_,
+      {"imu", open && test.ok(),
+       open ? std::string(options_.sim ? "virtual MPU-6000 (register emulator)" : rig_->describe()) +
+                  (rig_ && rig_->iio() ? ", " : ", WHO_AM_I answered, ") + test.text + ", " +
+                  std::to_string(samples_) + " samples so far" +
+                  (config_.storage.program_gyro_offsets ? ", gyro offset registers " + gyro_offsets_
+                                                        : std::string())
+            : "not open: " + imu_error_,
        // The chip's self-test compares outputs with and without its test force: motion during
        // it spoils the comparison, the most common cause of a failure on a working chip.
-       imu_state_ == "open" && !test_ok && test.rfind("SELF-TEST FAILED", 0) == 0
+       open && test.outcome == SelfTest::Outcome::kFailed
            ? "the self-test fails when the rig moves during it: hold the rig still on a steady surface"
            : std::string()});
   auto stored = app::read_stored_calibration(config_);

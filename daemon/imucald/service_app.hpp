@@ -113,7 +113,15 @@ class Service final : public service::SessionHost {
   void on_samples(std::span<const ImuSample> samples);
   void imu_failed(const Error& error);
   app::session::PreflightReport preflight();
-  std::string self_test();
+  /// The chip's self-test for the preflight: its outcome as a value and its words.
+  struct SelfTest {
+    enum class Outcome { kPassed, kFailed, kCouldNotRun, kNotAvailable };  // kNotAvailable: IIO
+    Outcome outcome = Outcome::kCouldNotRun;
+    std::string text;
+    /// The IMU passes its check: the test passed, or the kernel's driver offers none.
+    bool ok() const { return outcome == Outcome::kPassed || outcome == Outcome::kNotAvailable; }
+  };
+  SelfTest self_test();
   /// Writes, syncs and verifies the record; returns where it went (storage, slot, sequence).
   Result<std::string> write_storage(const CalibrationRecord& record);
   /// storage.program_gyro_offsets: the stored gyro bias into the chip's gyro offset registers
