@@ -35,6 +35,11 @@ constexpr Name<Outcome> kOutcomeNames[] = {
     {Outcome::kWritten, "written"},   {Outcome::kCompleted, "completed"}, {Outcome::kRecorded, "recorded"},
     {Outcome::kRejected, "rejected"}, {Outcome::kAborted, "aborted"},     {Outcome::kFailed, "failed"}};
 
+constexpr Name<DeviceState> kDeviceStateNames[] = {{DeviceState::kClosed, "closed"},
+                                                   {DeviceState::kOpen, "open"},
+                                                   {DeviceState::kStreaming, "streaming"},
+                                                   {DeviceState::kFailed, "failed"}};
+
 /// The operator's keys: the protocol's name and the console's letter.
 struct KeyInfo {
   OperatorKey key;
@@ -97,12 +102,12 @@ struct Encoder {
       json cams = json::array();
       for (const auto& c : d.cameras)
         cams.push_back({{"name", c.name},
-                        {"state", c.state},
+                        {"state", device_state_name(c.state)},
                         {"frames", c.frames},
                         {"faults", c.faults},
                         {"error", c.error}});
       j["devices"] = {{"imu",
-                       {{"state", d.imu.state},
+                       {{"state", device_state_name(d.imu.state)},
                         {"sim", d.imu.sim},
                         {"samples", d.imu.samples},
                         {"faults", d.imu.faults},
@@ -303,6 +308,7 @@ const char* step_state_name(StepState state) { return name_of(kStepStateNames, s
 const char* session_state_name(SessionState state) { return name_of(kSessionStateNames, state); }
 const char* level_name(MessageLevel level) { return name_of(kLevelNames, level); }
 const char* outcome_name(Outcome outcome) { return name_of(kOutcomeNames, outcome); }
+const char* device_state_name(DeviceState state) { return name_of(kDeviceStateNames, state); }
 
 const char* key_name(OperatorKey key) {
   for (const auto& k : kKeys)
@@ -352,6 +358,9 @@ Result<MessageLevel> parse_level(std::string_view name) {
 }
 Result<Outcome> parse_outcome(std::string_view name) {
   return value_of(kOutcomeNames, name, "a session outcome");
+}
+Result<DeviceState> parse_device_state(std::string_view name) {
+  return value_of(kDeviceStateNames, name, "a device state");
 }
 
 Result<OperatorKey> parse_key(std::string_view name) {

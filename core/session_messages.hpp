@@ -34,6 +34,9 @@ enum class OperatorKey { kContinue, kRedo, kAbort, kAccept, kReject, kSkip };
 enum class MessageLevel { kInfo, kWarning, kError };
 /// How a session ended (the "done" message).
 enum class Outcome { kWritten, kCompleted, kRecorded, kRejected, kAborted, kFailed };
+/// A device of the service (the status's "devices"): an IMU is open, closed or failed; a camera
+/// streams (in the motion step), is closed, or failed.
+enum class DeviceState { kClosed, kOpen, kStreaming, kFailed };
 
 const char* step_name(StepId step);
 const char* step_state_name(StepState state);
@@ -43,6 +46,7 @@ const char* key_name(OperatorKey key);
 char key_letter(OperatorKey key);
 const char* level_name(MessageLevel level);
 const char* outcome_name(Outcome outcome);
+const char* device_state_name(DeviceState state);
 
 /// Every step, in protocol order; every operator key, in the order the protocol lists them.
 const std::vector<StepId>& all_steps();
@@ -57,6 +61,7 @@ std::string key_list();
 [[nodiscard]] Result<OperatorKey> parse_key(std::string_view name);
 [[nodiscard]] Result<MessageLevel> parse_level(std::string_view name);
 [[nodiscard]] Result<Outcome> parse_outcome(std::string_view name);
+[[nodiscard]] Result<DeviceState> parse_device_state(std::string_view name);
 
 // ---- the messages ----------------------------------------------------------------------------
 // Each carries `t`, the engine's sample time in seconds when it emitted it; a status made for an
@@ -86,7 +91,7 @@ struct SessionStart {
 /// The service's devices, added to the engine's status by imucald.
 struct ServiceDevices {
   struct Imu {
-    std::string state;  // "open", "closed", "failed"
+    DeviceState state = DeviceState::kClosed;
     bool sim = false;
     std::int64_t samples = 0;
     std::int64_t faults = 0;
@@ -96,7 +101,7 @@ struct ServiceDevices {
   };
   struct Camera {
     std::string name;
-    std::string state;
+    DeviceState state = DeviceState::kClosed;
     std::int64_t frames = 0;
     std::int64_t faults = 0;
     std::string error;

@@ -205,16 +205,20 @@ Result<SessionMessage> read_status(Fields& f) {
     ServiceStatus s;
     Fields devices(f.object("devices"), f.where() + ": devices");
     Fields imu(devices.object("imu"), f.where() + ": devices: imu");
-    s.devices.imu = {imu.text("state"),     imu.flag("sim"),       imu.integer("samples"),
-                     imu.integer("faults"), imu.number("rate_hz"), imu.text("gyro_offsets"),
+    s.devices.imu = {imu.named(parse_device_state(imu.text("state"))),
+                     imu.flag("sim"),
+                     imu.integer("samples"),
+                     imu.integer("faults"),
+                     imu.number("rate_hz"),
+                     imu.text("gyro_offsets"),
                      imu.text("error")};
     s.devices.storage = devices.text("storage");
     const json& cams = devices.array("cameras", false);
     if (cams.is_array()) {
       for (const auto& c : cams) {
         Fields cf(c, f.where() + ": a camera");
-        s.devices.cameras.push_back({cf.text("name"), cf.text("state"), cf.integer("frames"),
-                                     cf.integer("faults"), cf.text("error")});
+        s.devices.cameras.push_back({cf.text("name"), cf.named(parse_device_state(cf.text("state"))),
+                                     cf.integer("frames"), cf.integer("faults"), cf.text("error")});
         if (!cf.ok()) f.fail(": " + cf.error());
       }
     }

@@ -540,7 +540,7 @@ std::string status_text(const msg::Status& status) {
   if (status.service) {
     // The devices, one line each, in words (`status --json` has the fields).
     const msg::ServiceDevices& d = status.service->devices;
-    out << "imu:     " << (d.imu.sim ? "virtual rig, " : "") << d.imu.state;
+    out << "imu:     " << (d.imu.sim ? "virtual rig, " : "") << msg::device_state_name(d.imu.state);
     if (d.imu.rate_hz > 0.0) out << ", " << fixed(d.imu.rate_hz, 0) << " Hz";
     out << ", " << d.imu.samples << " samples, " << d.imu.faults
         << (d.imu.faults == 1 ? " fault" : " faults");
@@ -548,8 +548,8 @@ std::string status_text(const msg::Status& status) {
     if (!d.imu.error.empty()) out << "; error: " << d.imu.error;
     out << '\n';
     for (const auto& c : d.cameras) {
-      out << "camera:  " << c.name << " " << c.state << ", " << c.frames << " frames, " << c.faults
-          << (c.faults == 1 ? " fault" : " faults");
+      out << "camera:  " << c.name << " " << msg::device_state_name(c.state) << ", " << c.frames
+          << " frames, " << c.faults << (c.faults == 1 ? " fault" : " faults");
       if (!c.error.empty()) out << "; error: " << c.error;
       out << '\n';
     }

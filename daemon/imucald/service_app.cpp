@@ -26,6 +26,7 @@
 namespace imucal::imucald {
 
 using nlohmann::json;
+using session_msg::DeviceState;
 
 namespace {
 
@@ -271,7 +272,7 @@ Status Service::init() {
   ro.broadcast = [this](const session_msg::SessionMessage& m) { on_message(m); };
   ro.preflight = [this] { return preflight(); };
   ro.recover = [this]() -> Status {
-    if (imu_state_ == "open") return {};
+    if (imu_state_ == DeviceState::kOpen) return {};
     return open_imu();
   };
   ro.complete_record = [config = config_](CalibrationRecord& record) -> Status {
@@ -309,14 +310,14 @@ Status Service::open_imu() {
   if (options_.sim) {
     IMUCAL_TRY(open_virtual_rig());
     stream_info_ = sim_rig_->stream_info();
-    imu_state_ = "open";
+    imu_state_ = DeviceState::kOpen;
     if (!runner_ || !runner_->engine().running()) set_gyro_offsets(true);
     boost::asio::post(io_, [this] { sim_tick(); });
     return {};
   }
   auto rig = app::open_imu_rig(config_);
   if (!rig.ok()) {
-    imu_state_ = "failed";
+    imu_state_ = DeviceState::kFailed;
     imu_error_ = rig.error().message;
     return rig.error();
   }
@@ -327,7 +328,7 @@ Status Service::open_imu() {
         on_samples(s);
         return !quit_;
       });
-  imu_state_ = "open";
+  imu_state_ = DeviceState::kOpen;
   if (!runner_ || !runner_->engine().running()) set_gyro_offsets(true);
   io_.stop();  // run() restarts the loop with the acquisition on it
   return {};
@@ -339,7 +340,7 @@ void Service::close_imu() {
   acquisition_.reset();
   rig_.reset();
   sim_rig_.reset();
-  if (imu_state_ == "open") imu_state_ = "closed";
+  if (imu_state_ == DeviceState::kOpen) imu_state_ = DeviceState::kClosed;
 }
 
 Status Service::open_virtual_rig() {
@@ -425,12 +426,12 @@ void Service::on_samples(std::span<const ImuSample> samples) {
 
 void Service::imu_failed(const Error& error) {
   ++imu_faults_;
-  imu_state_ = "failed";
+  imu_state_ = DeviceState::kFailed;
   imu_error_ = error.message;
   spdlog::error("IMU: {}", error.message);
   const bool scripted = sim_rig_ && sim_rig_->operator_presses_keys();
   close_imu();
-  imu_state_ = "failed";
+  imu_state_ = DeviceState::kFailed;
   runner_->fault("imu", error.message);
   // The virtual rig's clock stopped with its IMU, and the scripted operator with it: it does
   // what it does on any fault (a script cannot plug the IMU back in), at once.
@@ -491,7 +492,8 @@ Status Service::write_offsets(const drivers::mpu6000::OffsetRegisters& regs) {
 }
 
 void Service::set_gyro_offsets(bool from_record) {
-  if (!config_.storage.program_gyro_offsets || imu_state_ != "open" || (!rig_ && !sim_rig_)) return;
+  if (!config_.storage.program_gyro_offsets || imu_state_ != DeviceState::kOpen || (!rig_ && !sim_rig_))
+    return;
   std::array<double, 3> bias{0.0, 0.0, 0.0};
   std::string source = "cleared (power-up zero) while a session records";
   if (from_record) {
@@ -558,7 +560,7 @@ Service::SelfTest Service::self_test() {
 
 app::session::PreflightReport Service::preflight() {
   app::session::PreflightReport r;
-  const bool open = imu_state_ == "open";
+  const bool open = imu_state_ == DeviceState::kOpen;
   const SelfTest test = open ? self_test() : SelfTest{};
   r.devices.push_back(
       {"imu", open && test.ok(),
@@ -659,7 +661,7 @@ Status Service::start_cameras() {
       slot.camera = std::move(*camera);
     }
     if (auto s = slot.camera->start(); !s.ok()) return s.error().context("camera " + cc.name + ": starting");
-    slot.state = "streaming";
+    slot.state = DeviceState::kStreaming;
     if (!options_.sim) {
       const int fd = ::dup(slot.camera->fd());
       if (fd < 0) return make_error(Errc::kIo, "camera " + cc.name + ": cannot wait on its descriptor");
@@ -684,7 +686,7 @@ void Service::stop_cameras() {
     }
     if (slot.camera) (void)slot.camera->stop();
     slot.camera.reset();
-    if (slot.state == "streaming") slot.state = "closed";
+    if (slot.state == DeviceState::kStreaming) slot.state = DeviceState::kClosed;
   }
 }
 
@@ -719,7 +721,7 @@ void Service::camera_failed(std::size_t index, const Error& error) {
   stop_cameras();
   CameraSlot& slot = cameras_[index];
   ++slot.faults;
-  slot.state = "failed";
+  slot.state = DeviceState::kFailed;
   slot.error = error.message;
   runner_->fault(name, error.message);
 }
@@ -751,7 +753,7 @@ session_msg::Status Service::status() {
   service.devices.storage = storage_name(config_.storage);
   for (std::size_t i = 0; i < config_.cameras.size(); ++i) {
     const CameraSlot* slot = i < cameras_.size() ? &cameras_[i] : nullptr;
-    service.devices.cameras.push_back({config_.cameras[i].name, slot ? slot->state : "closed",
+    service.devices.cameras.push_back({config_.cameras[i].name, slot ? slot->state : DeviceState::kClosed,
                                        slot ? static_cast<std::int64_t>(slot->frames) : 0,
                                        slot ? static_cast<std::int64_t>(slot->faults) : 0,
                                        slot ? slot->error : ""});
@@ -770,7 +772,7 @@ std::vector<session_msg::SessionMessage> Service::snapshot() {
 }
 
 Status Service::start(const std::vector<std::string>& steps) {
-  if (imu_state_ != "open") {
+  if (imu_state_ != DeviceState::kOpen) {
     return make_error(Errc::kDevice,
                       "the IMU is not open (" + imu_error_ + "); check it and restart imucald");
   }

@@ -152,13 +152,14 @@ class Service final : public service::SessionHost {
     std::unique_ptr<drivers::camera::Camera> camera;
     std::unique_ptr<boost::asio::posix::stream_descriptor> wait;  // hardware: the camera's fd
     std::uint64_t frames = 0, faults = 0;
-    std::string state = "closed", error;
+    session_msg::DeviceState state = session_msg::DeviceState::kClosed;
+    std::string error;
   };
   std::vector<CameraSlot> cameras_;
   bool cameras_streaming_ = false;
   int camera_starts_ = 0;
   std::string gyro_offsets_ = "off";  // what the gyro offset registers hold, for status and preflight
-  std::string imu_state_ = "closed";
+  session_msg::DeviceState imu_state_ = session_msg::DeviceState::kClosed;
   std::string imu_error_;
   std::uint64_t samples_ = 0, imu_faults_ = 0;
   /// A session asked for before the IMU's first samples (--start, or a client right after the

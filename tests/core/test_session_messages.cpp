@@ -86,6 +86,16 @@ TEST(SessionMessages, DecodedFieldsAreTyped) {
   EXPECT_EQ(*p.up, Eigen::Vector3d(0, 0, -1));
   EXPECT_EQ(p.t, 126.75);
 
+  // The service's devices: their states are values of one table.
+  auto with_devices = parse(wire_lines()[4]);
+  ASSERT_TRUE(with_devices.ok());
+  const auto& service = std::get<Status>(*with_devices).service;
+  ASSERT_TRUE(service.has_value());
+  EXPECT_EQ(service->devices.imu.state, DeviceState::kOpen);
+  ASSERT_EQ(service->devices.cameras.size(), 1u);
+  EXPECT_EQ(service->devices.cameras[0].state, DeviceState::kClosed);
+  EXPECT_EQ(service->recorded_bytes, 48312345);
+
   auto live = parse(wire_lines()[11]);
   ASSERT_TRUE(live.ok());
   const auto& figures = std::get<PoseFigures>(std::get<Live>(*live).figures);
@@ -153,6 +163,9 @@ TEST(SessionMessages, DamagedOrForeignMessagesGiveErrorsNotCrashes) {
   expect_error(R"j({"type":"prompt","step":"poses","text":"x","keys":["pause"]})j", "'pause' is not a key");
   expect_error(R"j({"type":"prompt","step":"dance","text":"x","keys":[]})j", "'dance' is not a session step");
   expect_error(R"j({"type":"status","state":"sleeping"})j", "'sleeping' is not a session state");
+  expect_error(
+      R"j({"type":"status","state":"idle","devices":{"imu":{"state":"opened","sim":false,"samples":0,"faults":0,"rate_hz":0,"gyro_offsets":"","error":""},"storage":"x"}})j",
+      "'opened' is not a device state");
   expect_error(R"j({"type":"review","pass":"yes"})j", "\"pass\" is string");
   expect_error(R"j({"type":"review","pass":true,"gates":[{"pass":1}]})j", "a gate has no \"name\"");
   expect_error(R"j({"type":"pose","index":1,"up":[1,2]})j", "\"up\" that is not 3 numbers");
