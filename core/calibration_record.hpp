@@ -39,6 +39,9 @@ inline constexpr const char* kCalibrationFormat = "imucal.calibration";
 inline constexpr int kCalibrationRecordVersion = 2;
 /// The oldest version still read (1: no thermal model).
 inline constexpr int kOldestCalibrationRecordVersion = 1;
+/// The methods' names, as the record's sources and the result files state them.
+inline constexpr const char* kStaticMethod = "static multi-position (Tedaldi 2013)";
+inline constexpr const char* kCamImuMethod = "continuous-time camera-IMU (Krebs 2012)";
 /// The canonical form's equations, as the record states them.
 inline constexpr const char* kCanonicalForm = "a = A_a (a_raw - b_a); w = A_g (w_raw - b_g) - G a";
 

@@ -598,7 +598,7 @@ std::string camimu_imu_yaml(const CamImuReport& r) {
 std::string camimu_calibration_yaml(const CamImuReport& r) {
   const auto& res = r.result;
   YAML::Node root(YAML::NodeType::Map);
-  root["method"] = "continuous-time camera-IMU (Krebs 2012)";
+  root["method"] = kCamImuMethod;
   root["model"] = camimu_model_name(res.model);
   root["model_choice"] = res.model_choice;
   root["stream"] = r.imu_stream.name;
@@ -659,7 +659,7 @@ std::string camimu_result_json(const CamImuReport& r) {
                       {"b_g", vec_json(b.b_g)}});
   }
   json j;
-  j["method"] = "continuous-time camera-IMU (Krebs 2012)";
+  j["method"] = kCamImuMethod;
   j["software_version"] = kVersion;
   j["model"] = camimu_model_name(res.model);
   j["model_choice"] = res.model_choice;

@@ -46,7 +46,7 @@ std::string static_result_yaml(const calib::StaticCalibrationResult& r, const Im
   YAML::Emitter y;
   y.SetDoublePrecision(12);
   y << YAML::BeginMap;
-  y << YAML::Key << "method" << YAML::Value << "static multi-position (Tedaldi 2013)";
+  y << YAML::Key << "method" << YAML::Value << kStaticMethod;
   y << YAML::Key << "stream" << YAML::Value << info.name;
   y << YAML::Key << "input_units" << YAML::Value << imu_units_name(info.units);
   y << YAML::Key << "canonical" << YAML::Value << YAML::BeginMap;
@@ -91,7 +91,7 @@ std::string static_result_json(const calib::StaticCalibrationResult& r, const Im
                                const std::string& gravity_source,
                                const std::map<std::string, std::string>& log_metadata) {
   json j;
-  j["method"] = "static multi-position (Tedaldi 2013)";
+  j["method"] = kStaticMethod;
   j["convention"] = "corrected = misalignment * diag(scale) * (raw - bias)";
   j["input_units"] = imu_units_name(info.units);
   j["stream"] = info.name;

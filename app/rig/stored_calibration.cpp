@@ -22,9 +22,6 @@ namespace {
 
 using nlohmann::json;
 
-constexpr const char* kStaticMethod = "static multi-position (Tedaldi 2013)";
-constexpr const char* kCamImuMethod = "continuous-time camera-IMU (Krebs 2012)";
-
 json new_payload() {
   return {
       {"format", kCalibrationFormat},     {"version", kCalibrationRecordVersion},
