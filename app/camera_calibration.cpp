@@ -667,8 +667,12 @@ Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q
   out.warnings.insert(out.warnings.end(), chain->warnings.begin(), chain->warnings.end());
   out.chain = std::move(*chain);
   if (q.base.self_check_parts >= 2) {
+    // The parts side by side on the detection's workers, each solved on one thread when there are
+    // as many parts as workers (so the session's chain, solved on one thread to replay alike,
+    // checks its halves on two cores and stays reproducible).
+    const int workers = q.base.threads > 0 ? q.base.threads : options.threads;
     out.self_check =
-        chain_self_check(q.base.target, inputs, options, out.chain, q.base.self_check_parts, options.threads);
+        chain_self_check(q.base.target, inputs, options, out.chain, q.base.self_check_parts, workers);
     add_self_check_warnings(&out.self_check, scale_chain_by_self_check(&out.chain, &out.self_check),
                             &out.warnings);
     for (std::size_t c = 0; c < out.cameras.size(); ++c) {
