@@ -2,7 +2,8 @@
 # The Debian package of a built tree: cpack (DEB) packages BUILD_DIR into a scratch folder, the
 # package is installed into a fresh root and checked:
 #  - the file is imucal_VERSION_ARCH.deb, with the programs, the modules (the virtual rig's too),
-#    the unit, sysusers.d and tmpfiles.d entries, man pages and bash completion;
+#    the unit, sysusers.d and tmpfiles.d entries, man pages and bash completion, the examples with
+#    the virtual rig's target file, and every doc the programs' messages cite (docs/NAME.md);
 #  - the unit's ExecStart names a program that is in the root; its --config is the package's
 #    conffile and lies in ConfigurationDirectory=; its --state-dir is StateDirectory= and the
 #    tmpfiles.d folder; RestartPreventExitStatus= holds imucald's configuration status, 78, and its
@@ -22,6 +23,7 @@
 #   check_package.sh BUILD_DIR
 set -u
 build=$1
+src=$(cd "$(dirname "$0")/.." && pwd)
 
 for tool in dpkg-deb dpkg-shlibdeps cpack; do
   if ! command -v "$tool" >/dev/null 2>&1; then
@@ -79,8 +81,14 @@ done
 for f in usr/share/man/man1/imucal.1.gz usr/share/man/man8/imucald.8.gz usr/share/man/man1/imucalctl.1.gz \
   usr/share/bash-completion/completions/imucal usr/share/bash-completion/completions/imucald \
   usr/share/bash-completion/completions/imucalctl usr/share/doc/imucal/copyright \
-  usr/share/doc/imucal/changelog.gz usr/lib/sysusers.d/imucal.conf usr/lib/tmpfiles.d/imucal.conf; do
+  usr/share/doc/imucal/changelog.gz usr/lib/sysusers.d/imucal.conf usr/lib/tmpfiles.d/imucal.conf \
+  usr/share/imucal/examples/rig.yaml usr/share/imucal/examples/checkerboard-7x6.yaml; do
   check "$f" test -f "$root/$f"
+done
+# Every doc the programs' messages cite ("docs/NAME.md") is installed as the manual's NAME.md.
+for doc in $(grep -rhoE 'docs/[a-z-]+\.md' "$src"/app "$src"/core "$src"/daemon "$src"/drivers "$src"/calib "$src"/sim \
+  --include='*.cpp' --include='*.hpp' | sort -u); do
+  check "$doc installed" test -f "$root/usr/share/doc/imucal/${doc#docs/}"
 done
 
 # The unit's paths against the package's files.

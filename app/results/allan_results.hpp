@@ -1,6 +1,6 @@
 #pragma once
 // The noise figures of the Allan deviation of a still recording: the analysis of the samples and
-// its result files (Kalibr imu.yaml, JSON with the curves; docs/allan.md).
+// its result files (Kalibr imu.yaml, JSON with the curves; docs/static-calibration.md, "Allan deviation").
 
 #include <Eigen/Core>
 #include <string>
