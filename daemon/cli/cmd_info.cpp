@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "app/stream_stats.hpp"
+#include "core/printable_text.hpp"
 #include "daemon/cli/command.hpp"
 
 namespace imucal::cli {
@@ -183,7 +184,9 @@ int run_info(const std::string& path, bool as_json) {
       << (as_json
               ? summary_json(path, *summary).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) +
                     "\n"
-              : summary_text(path, *summary));
+              // Names, devices and metadata come from the file: no control character reaches the
+              // terminal (an escape sequence in a log's metadata could retitle or clear it).
+              : printable_text(summary_text(path, *summary), true));
   std::cout.flush();
   if (summary->health.damaged) {
     std::cerr

@@ -88,6 +88,23 @@ TEST(CliInfo, TextSummaryOfARealLog) {
   EXPECT_TRUE(r.err.empty()) << r.err;
 }
 
+// Text from the file reaches the terminal without control characters: a log's metadata holding
+// an escape sequence that would retitle the terminal and clear its screen.
+TEST(CliInfo, ControlCharactersFromTheLogDoNotReachTheTerminal) {
+  const std::string log = test::scratch_dir() + "/session.imulog";
+  {
+    auto writer = log::SessionLogWriter::create(log);
+    ASSERT_TRUE(writer.ok()) << writer.error().message;
+    ASSERT_TRUE((*writer)->set_metadata("rig", "\x1b]0;pwned\x07\x1b[2Jcalibration written OK").ok());
+    ASSERT_TRUE((*writer)->close().ok());
+  }
+  auto r = test::run_cli({"info", log});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out.find('\x1b'), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find('\x07'), std::string::npos) << r.out;
+  EXPECT_THAT(r.out, HasSubstr("calibration written OK"));  // the printable part stays
+}
+
 TEST(CliInfo, JsonSummaryHasEveryDocumentedField) {
   const std::string log = write_log(test::scratch_dir() + "/session.imulog");
   auto r = test::run_cli({"info", "--json", log});
