@@ -45,6 +45,7 @@ namespace {
 using chain::find_link;
 using chain::Link;
 using chain::PoseSample;
+using chain::relative_jacobian;
 
 constexpr int kOrder = 4;  // cubic B-spline
 using Residual = chain::ChainFrameResidual<kOrder>;
@@ -631,34 +632,6 @@ int ChainSolver::reject_corners() {
     }
   }
   return dropped;
-}
-
-/// d(T_cn_cnm1) / d(T_n_0, T_m_0) by central differences in the tangent spaces (right
-/// perturbations of the rotations, then translations), 6 x 12.
-Eigen::Matrix<double, 6, 12> relative_jacobian(const Eigen::Isometry3d& T_n0, const Eigen::Isometry3d& T_m0) {
-  const auto rel = [](const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) { return a * b.inverse(); };
-  const Eigen::Isometry3d T = rel(T_n0, T_m0);
-  const auto perturb = [](const Eigen::Isometry3d& X, const Eigen::Matrix<double, 6, 1>& d) {
-    Eigen::Isometry3d Y = X;
-    Y.linear() = X.linear() * so3::exp(d.head<3>());
-    Y.translation() = X.translation() + d.tail<3>();
-    return Y;
-  };
-  Eigen::Matrix<double, 6, 12> J;
-  const double h = 1e-6;
-  for (int k = 0; k < 12; ++k) {
-    Eigen::Matrix<double, 6, 1> d = Eigen::Matrix<double, 6, 1>::Zero();
-    d(k % 6) = h;
-    const Eigen::Isometry3d plus = k < 6 ? rel(perturb(T_n0, d), T_m0) : rel(T_n0, perturb(T_m0, d));
-    const Eigen::Isometry3d minus = k < 6 ? rel(perturb(T_n0, -d), T_m0) : rel(T_n0, perturb(T_m0, -d));
-    Eigen::Matrix<double, 6, 1> col;
-    col.head<3>() = (so3::log(T.linear().transpose() * plus.linear()) -
-                     so3::log(T.linear().transpose() * minus.linear())) /
-                    (2.0 * h);
-    col.tail<3>() = (plus.translation() - minus.translation()) / (2.0 * h);
-    J.col(k) = col;
-  }
-  return J;
 }
 
 Eigen::Isometry3d pose_of(const CameraBlocks& b) {

@@ -5,6 +5,7 @@
 // Internal to the chain estimator.
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <limits>
 #include <vector>
 
@@ -31,5 +32,10 @@ struct Link {
 /// views, refined by a parabola through its neighbours.
 Link find_link(const std::vector<PoseSample>& a, const std::vector<PoseSample>& b, double max_shift_s,
                double max_gap_s, int min_shared);
+
+/// d(T_cn_cnm1) / d(T_n_0, T_m_0) by central differences in the tangent spaces (right
+/// perturbations of the rotations, then translations), 6 x 12: how a camera's pose relative to the
+/// one before moves with both cameras' poses relative to cam0.
+Eigen::Matrix<double, 6, 12> relative_jacobian(const Eigen::Isometry3d& T_n0, const Eigen::Isometry3d& T_m0);
 
 }  // namespace imucal::calib::chain
