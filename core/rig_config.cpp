@@ -131,6 +131,7 @@ class ConfigParser {
   Status parse_target(const YAML::Node& node, RigConfig& config) const;
   Status parse_storage(const YAML::Node& node, StorageConfig& storage) const;
   Status parse_session(const YAML::Node& node, SessionConfig& session) const;
+  Status parse_live_view(const YAML::Node& node, LiveViewConfig& live) const;
   Status parse_sides(const YAML::Node& node, RigSides& sides) const;
 
   std::string source_;
@@ -658,6 +659,37 @@ Status ConfigParser::parse_storage(const YAML::Node& node, StorageConfig& storag
   return {};
 }
 
+Status ConfigParser::parse_live_view(const YAML::Node& node, LiveViewConfig& live) const {
+  IMUCAL_TRY(check_map(node, "live_view", {"enabled", "address", "port", "frame_rate_hz", "width"}));
+  if (const YAML::Node n = node["enabled"]) {
+    if (!n.IsScalar() || (n.Scalar() != "true" && n.Scalar() != "false"))
+      return error(n, "live_view.enabled", "expected true or false");
+    live.enabled = n.Scalar() == "true";
+  }
+  if (const YAML::Node n = node["address"]) {
+    auto a = get_string(n, "live_view.address");
+    if (!a.ok()) return a.error();
+    const bool address_chars =
+        !a->empty() && a->size() <= 45 && std::all_of(a->begin(), a->end(), [](char c) {
+          return std::isxdigit(static_cast<unsigned char>(c)) || c == '.' || c == ':';
+        });
+    if (!address_chars)
+      return error(n, "live_view.address",
+                   "'" + printable(*a) +
+                       "' is not an IP address (127.0.0.1, the default; 0.0.0.0 for every interface)");
+    live.address = *a;
+  }
+  IMUCAL_CFG_INT(node, "port", "live_view.port", live.port, x >= 1 && x <= 65535, "1..65535");
+  if (const YAML::Node n = node["frame_rate_hz"]) {
+    auto v = get_double(n, "live_view.frame_rate_hz");
+    if (!v.ok()) return v.error();
+    if (!(*v >= 0.2 && *v <= 30.0)) return error(n, "live_view.frame_rate_hz", "is not in range 0.2 to 30");
+    live.frame_rate_hz = *v;
+  }
+  IMUCAL_CFG_INT(node, "width", "live_view.width", live.width, x >= 80 && x <= 1920, "80..1920 pixels");
+  return {};
+}
+
 Status ConfigParser::parse_session(const YAML::Node& node, SessionConfig& session) const {
   std::vector<std::string> allowed = {"steps", "poses", "poses_min", "auto_write"};
   for (const auto& n : kSessionNumbers) allowed.emplace_back(n.key);
@@ -779,9 +811,11 @@ Result<RigConfig> ConfigParser::parse(const std::string& text) {
                       source_ + ":" + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg);
   }
   if (!root.IsMap())
-    return error(root, "",
-                 "expected a mapping with keys name, imu, sides, cameras, target, storage, session");
-  IMUCAL_TRY(check_map(root, "", {"name", "imu", "sides", "cameras", "target", "storage", "session"}));
+    return error(
+        root, "",
+        "expected a mapping with keys name, imu, sides, cameras, target, storage, session, live_view");
+  IMUCAL_TRY(
+      check_map(root, "", {"name", "imu", "sides", "cameras", "target", "storage", "session", "live_view"}));
   RigConfig config;
   if (const YAML::Node n = root["name"]) {
     auto name = get_string(n, "name");
@@ -820,6 +854,7 @@ Result<RigConfig> ConfigParser::parse(const std::string& text) {
   }
   if (const YAML::Node n = root["storage"]) IMUCAL_TRY(parse_storage(n, config.storage));
   if (const YAML::Node n = root["session"]) IMUCAL_TRY(parse_session(n, config.session));
+  if (const YAML::Node n = root["live_view"]) IMUCAL_TRY(parse_live_view(n, config.live_view));
   return config;
 }
 

@@ -118,6 +118,17 @@ struct SessionConfig {
   bool auto_write = false;              // write without the operator's accept when every gate passes
 };
 
+/// The live view (imucald serves the session to a web browser, docs/service.md "Live view"): off
+/// unless enabled; on the loopback address unless another is given. Watching is open to whoever
+/// reaches the address; the keys need the token imucald writes to its state folder.
+struct LiveViewConfig {
+  bool enabled = false;
+  std::string address = "127.0.0.1";  // an IPv4 or IPv6 address to bind; 0.0.0.0 for every interface
+  int port = 8421;
+  double frame_rate_hz = 4.0;  // each camera's frames sent to the page, at most this often
+  int width = 320;             // a frame is shrunk by a whole factor to at most this many columns
+};
+
 /// Names of the session's steps in protocol order.
 const std::vector<std::string>& session_step_names();
 
@@ -137,6 +148,7 @@ struct RigConfig {
   std::optional<TargetDescription> target;  // required when cameras are configured
   StorageConfig storage;
   SessionConfig session;
+  LiveViewConfig live_view;
 };
 
 /// MPU-6000 DLPF bandwidths (gyro, Hz) indexed by DLPF_CFG 0..6.

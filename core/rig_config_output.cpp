@@ -139,6 +139,13 @@ std::string rig_config_to_yaml(const RigConfig& c) {
   out << YAML::Key << "poses_min" << YAML::Value << c.session.poses_min;
   out << YAML::Key << "auto_write" << YAML::Value << c.session.auto_write;
   out << YAML::EndMap;
+  out << YAML::Key << "live_view" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "enabled" << YAML::Value << c.live_view.enabled;
+  out << YAML::Key << "address" << YAML::Value << c.live_view.address;
+  out << YAML::Key << "port" << YAML::Value << c.live_view.port;
+  out << YAML::Key << "frame_rate_hz" << YAML::Value << num(c.live_view.frame_rate_hz);
+  out << YAML::Key << "width" << YAML::Value << c.live_view.width;
+  out << YAML::EndMap;
   out << YAML::EndMap;
   return std::string(out.c_str()) + "\n";
 }
@@ -196,7 +203,13 @@ std::string rig_config_to_json(const RigConfig& c) {
                   {"poses_min", c.session.poses_min},
                   {"auto_write", c.session.auto_write}};
   for (const auto& n : kSessionNumbers) session[n.key] = c.session.*n.member;
-  json root = {{"name", c.name}, {"imu", imu}, {"cameras", cams}, {"storage", storage}, {"session", session}};
+  json live_view = {{"enabled", c.live_view.enabled},
+                    {"address", c.live_view.address},
+                    {"port", c.live_view.port},
+                    {"frame_rate_hz", c.live_view.frame_rate_hz},
+                    {"width", c.live_view.width}};
+  json root = {{"name", c.name},     {"imu", imu},         {"cameras", cams},
+               {"storage", storage}, {"session", session}, {"live_view", live_view}};
   if (c.sides) {
     root["sides"] = {{"front", axis_text(c.sides->front)},
                      {"left", axis_text(c.sides->left)},

@@ -119,6 +119,9 @@ struct Encoder {
       j["session_dir"] = m.service->session_dir;
       j["version"] = m.service->version;
       j["recorded_bytes"] = m.service->recorded_bytes;
+      if (m.service->live_view)
+        j["live_view"] = {{"url", m.service->live_view->url},
+                          {"token_file", m.service->live_view->token_file}};
     }
     return j;
   }
@@ -166,6 +169,20 @@ struct Encoder {
                     {"camera_frames", f.camera_frames},
                     {"camera_frames_seen", f.camera_frames_seen},
                     {"frames_seen_by_every_camera", f.frames_seen_by_every_camera}};
+    // Written only when known, so that the events of logs from before it encode back the same.
+    if (!f.coverage.empty()) {
+      json cov = json::array();
+      for (const CameraCoverage& c : f.coverage)
+        cov.push_back({{"cols", c.cols},
+                       {"rows", c.rows},
+                       {"cells", c.cells},
+                       {"views", c.views},
+                       {"x", c.x},
+                       {"y", c.y},
+                       {"size", c.size},
+                       {"skew", c.skew}});
+      j["figures"]["coverage"] = cov;
+    }
   }
   json operator()(const Message& m) const {
     json j = stamped("message", m.t);

@@ -110,6 +110,11 @@ struct ServiceDevices {
   std::string storage;
   std::vector<Camera> cameras;
 };
+/// Where the live view is served (none: it is off), and the file that holds its keys' token.
+struct LiveViewAddress {
+  std::string url;         // "http://127.0.0.1:8421/"
+  std::string token_file;  // readable by the imucal group only
+};
 struct ServiceStatus {
   ServiceDevices devices;
   std::string session_dir;
@@ -117,6 +122,7 @@ struct ServiceStatus {
   /// Bytes the session folder's logs hold on disk (session.imulog, motion.imulog and their
   /// write-ahead files): what the session has recorded so far (0: no session yet).
   std::int64_t recorded_bytes = 0;
+  std::optional<LiveViewAddress> live_view;
 };
 
 struct Status {
@@ -162,6 +168,15 @@ struct PoseFigures {
   double scale_sigma = 0.0;          // NaN before the first quick solve
   std::size_t poses_needed = 0;      // the fewest poses that may end the step (0: not said)
 };
+/// Where in a camera's image the target has been seen so far (the motion step): corners per cell
+/// of a grid over the image, and how much of the image's breadth, height, scale and tilt the
+/// views span, each from 0 to 1 (the measures of ROS's camera_calibration: docs/service.md).
+struct CameraCoverage {
+  int cols = 0, rows = 0;
+  std::vector<std::int64_t> cells;  // row-major, cols x rows
+  std::int64_t views = 0;           // frames in which the target was found
+  double x = 0.0, y = 0.0, size = 0.0, skew = 0.0;
+};
 struct MotionFigures {
   Eigen::Vector3d gyro_rms_dps = Eigen::Vector3d::Zero();
   std::int64_t frames = 0;
@@ -169,6 +184,7 @@ struct MotionFigures {
   std::vector<std::int64_t> camera_frames;
   std::vector<std::int64_t> camera_frames_seen;
   std::int64_t frames_seen_by_every_camera = 0;
+  std::vector<CameraCoverage> coverage;  // each camera's, in configuration order (none: not known)
 };
 /// The figures of a live message, by step (the preflight's are its report); none for the others.
 using LiveFigures =

@@ -227,6 +227,11 @@ Result<SessionMessage> read_status(Fields& f) {
     s.session_dir = f.text("session_dir", false);
     s.version = f.text("version", false);
     s.recorded_bytes = static_cast<std::int64_t>(f.count("recorded_bytes", false));  // older services: 0
+    if (f.has("live_view")) {
+      Fields lv(f.object("live_view"), f.where() + ": live_view");
+      s.live_view = LiveViewAddress{lv.text("url"), lv.text("token_file")};
+      if (!lv.ok()) f.fail(": " + lv.error());
+    }
     m.service = std::move(s);
   }
   return finish(f, std::move(m));
@@ -241,6 +246,33 @@ Result<SessionMessage> read_prompt(Fields& f) {
   m.art = f.texts("art", false);
   if (f.has("up")) m.up = f.vector3("up");
   return finish(f, std::move(m));
+}
+
+/// The motion figures' coverage (absent from older services: none).
+std::vector<CameraCoverage> read_coverage(Fields& g) {
+  std::vector<CameraCoverage> out;
+  const json& cov = g.array("coverage", false);
+  if (!cov.is_array()) return out;
+  for (const auto& c : cov) {
+    Fields cf(c, g.where() + ": coverage");
+    CameraCoverage m;
+    m.cols = static_cast<int>(cf.count("cols"));
+    m.rows = static_cast<int>(cf.count("rows"));
+    m.cells = cf.integers("cells");
+    m.views = cf.integer("views");
+    m.x = cf.number("x");
+    m.y = cf.number("y");
+    m.size = cf.number("size");
+    m.skew = cf.number("skew");
+    if (cf.ok() && m.cells.size() != static_cast<std::size_t>(m.cols) * static_cast<std::size_t>(m.rows))
+      cf.fail("has " + std::to_string(m.cells.size()) + " cells, not cols x rows");
+    if (!cf.ok()) {
+      g.fail(": " + cf.error());
+      return {};
+    }
+    out.push_back(std::move(m));
+  }
+  return out;
 }
 
 LiveFigures read_figures(Fields& f, const std::optional<StepId>& step) {
@@ -271,11 +303,17 @@ LiveFigures read_figures(Fields& f, const std::optional<StepId>& step) {
       out = PoseFigures{g.count("poses"), g.flag("still"), g.texts("missing"), g.number("scale_sigma"),
                         g.count("poses_needed", false)};
       break;
-    case StepId::kMotion:
-      out = MotionFigures{g.vector3("gyro_rms_dps"),        g.integer("frames"),
-                          g.integer("frames_seen"),         g.integers("camera_frames"),
-                          g.integers("camera_frames_seen"), g.integer("frames_seen_by_every_camera")};
+    case StepId::kMotion: {
+      MotionFigures m{g.vector3("gyro_rms_dps"),
+                      g.integer("frames"),
+                      g.integer("frames_seen"),
+                      g.integers("camera_frames"),
+                      g.integers("camera_frames_seen"),
+                      g.integer("frames_seen_by_every_camera"),
+                      read_coverage(g)};
+      out = std::move(m);
       break;
+    }
     default:
       g.fail("are not expected in this step");
   }

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "core/rig_config.hpp"
 #include "core/target.hpp"
@@ -468,6 +469,43 @@ TEST(RigConfig, SessionSectionRefusesWhatCannotRun) {
     auto c = parse_rig_config(std::string("imu: {bus: sim}\n") + yaml + "\n");
     ASSERT_FALSE(c.ok()) << yaml;
     EXPECT_NE(c.error().message.find(fragment), std::string::npos) << yaml << " -> " << c.error().message;
+  }
+}
+
+TEST(RigConfig, TheLiveViewIsOffUnlessEnabledAndRoundTrips) {
+  auto base = load_rig_config(test::source_path("config/rig.yaml"));
+  ASSERT_TRUE(base.ok()) << base.error().message;
+  EXPECT_FALSE(base->live_view.enabled);
+  EXPECT_EQ(base->live_view.address, "127.0.0.1");
+  EXPECT_EQ(base->live_view.port, 8421);
+  const std::string text =
+      "imu:\n  bus: sim\nlive_view:\n  enabled: true\n  address: 0.0.0.0\n  port: 9000\n"
+      "  frame_rate_hz: 2.5\n  width: 640\n";
+  auto c = parse_rig_config(text);
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_TRUE(c->live_view.enabled);
+  EXPECT_EQ(c->live_view.address, "0.0.0.0");
+  EXPECT_EQ(c->live_view.port, 9000);
+  EXPECT_DOUBLE_EQ(c->live_view.frame_rate_hz, 2.5);
+  EXPECT_EQ(c->live_view.width, 640);
+  auto again = parse_rig_config(rig_config_to_yaml(*c));
+  ASSERT_TRUE(again.ok()) << again.error().message;
+  EXPECT_EQ(again->live_view.port, 9000);
+  EXPECT_TRUE(again->live_view.enabled);
+  const auto j = nlohmann::json::parse(rig_config_to_json(*c));
+  EXPECT_EQ(j["live_view"]["address"], "0.0.0.0");
+  EXPECT_EQ(j["live_view"]["port"], 9000);
+  for (const auto& [bad, says] :
+       std::vector<std::pair<std::string, std::string>>{{"  enabled: yes please\n", "live_view.enabled"},
+                                                        {"  address: my-laptop\n", "not an IP address"},
+                                                        {"  port: 0\n", "live_view.port"},
+                                                        {"  port: 70000\n", "live_view.port"},
+                                                        {"  frame_rate_hz: 100\n", "live_view.frame_rate_hz"},
+                                                        {"  width: 10\n", "live_view.width"},
+                                                        {"  colour: blue\n", "colour"}}) {
+    auto r = parse_rig_config("imu:\n  bus: sim\nlive_view:\n" + bad);
+    ASSERT_FALSE(r.ok()) << bad;
+    EXPECT_NE(r.error().message.find(says), std::string::npos) << r.error().message;
   }
 }
 
