@@ -483,6 +483,8 @@ Status SessionRunner::open_motion_log() {
   camera_streams_.clear();
   camera_streams_.resize(config_.cameras.size());
   live_.assign(config_.cameras.size(), {});
+  coverage_.assign(config_.cameras.size(), {});
+  view_sent_.assign(config_.cameras.size(), {});
   motion_shared_ = log::synchronized_writer(*motion_log_);
   return {};
 }
@@ -602,6 +604,14 @@ void SessionRunner::on_frame(std::size_t camera, drivers::camera::Frame& frame,
       obs->height = f.height;
       live_[camera].found.emplace_back(f.t_ns, encode_detection(*obs));
     }
+    if (camera < coverage_.size()) {
+      ViewCoverage& coverage = coverage_[camera];
+      if (coverage.width() != f.width || coverage.height() != f.height)
+        coverage = ViewCoverage(f.width, f.height);
+      if (seen) coverage.add(obs->px, obs->ids, *config_.target);
+      send_view(camera, f, seen ? obs->px : std::vector<Eigen::Vector2d>{},
+                seen ? obs->ids : std::vector<int>{});
+    }
   });
   if (!recorded) return;  // dropped: counted by the stream, reported when the log closes
   // Replay reads what the engine saw from this event (docs/service-session.md).
@@ -615,9 +625,39 @@ void SessionRunner::on_frame(std::size_t camera, drivers::camera::Frame& frame,
   engine_.on_frame(camera, t_ns, seen);
 }
 
+void SessionRunner::send_view(std::size_t camera, const acq::PublishedFrame& f,
+                              const std::vector<Eigen::Vector2d>& px, const std::vector<int>& ids) {
+  if (!options_.view_frame || camera >= view_sent_.size()) return;
+  if (options_.view_watched && !options_.view_watched()) return;
+  const auto now = std::chrono::steady_clock::now();
+  const auto interval = std::chrono::duration<double>(1.0 / std::max(options_.view_rate_hz, 1e-3));
+  if (view_sent_[camera] != std::chrono::steady_clock::time_point{} && now - view_sent_[camera] < interval)
+    return;
+  view_sent_[camera] = now;
+  ViewFrame v =
+      make_view_frame(f.grey.data(), f.width, f.height, options_.view_width, px, ids, *config_.target);
+  v.camera = camera;
+  v.name = config_.cameras[camera].name;
+  v.t_ns = f.t_ns;
+  v.coverage = coverage_[camera].figures();
+  options_.view_frame(std::move(v));
+}
+
 void SessionRunner::fault(const std::string& source, const std::string& text) { engine_.fault(source, text); }
 
 void SessionRunner::emit(const SessionMessage& message) {
+  // The motion step's figures gain each camera's coverage, which the runner keeps (the engine
+  // sees only whether a frame showed the target).
+  if (const auto* live = std::get_if<session_msg::Live>(&message); live && !coverage_.empty()) {
+    if (const auto* figures = std::get_if<session_msg::MotionFigures>(&live->figures);
+        figures && figures->coverage.empty()) {
+      session_msg::Live covered = *live;
+      auto& f = std::get<session_msg::MotionFigures>(covered.figures);
+      for (const ViewCoverage& c : coverage_) f.coverage.push_back(c.figures());
+      emit(covered);
+      return;
+    }
+  }
   const auto* done = std::get_if<session_msg::Done>(&message);
   if (done && !dir_.empty() && !done->session_dir) {
     // The end of a session names its folder (where the logs, results and reports are).

@@ -4,6 +4,7 @@
 // message, the result files and report.html), runs the solves on a worker thread and hands
 // results back on the engine's thread, and writes the accepted record through the storage
 // function it is given. Devices stay with the caller: it feeds samples and frames in.
+#include <chrono>
 #include <condition_variable>
 #include <deque>
 #include <functional>
@@ -15,6 +16,7 @@
 #include <vector>
 
 #include "app/session/session_engine.hpp"
+#include "app/session/view_coverage.hpp"
 #include "core/imu.hpp"
 #include "core/result.hpp"
 #include "core/rig_config.hpp"
@@ -28,6 +30,10 @@ class TargetDetector;
 }
 namespace imucal::acq {
 class CameraStream;
+}
+
+namespace imucal::acq {
+struct PublishedFrame;
 }
 
 namespace imucal::app::session {
@@ -66,6 +72,14 @@ struct RunnerOptions {
   /// the encoder falls behind: for the virtual rig, whose frames come as fast as it computes
   /// (acq::CameraStreamOptions::block_when_full).
   bool frames_wait_for_encoder = false;
+  /// The live view (docs/service.md, "Live view"): while `view_watched` says someone watches,
+  /// each camera's recorded frames, shrunk to at most `view_width` columns with the target's
+  /// corners and the camera's coverage, at most `view_rate_hz` a camera (wall clock). Called on
+  /// on_frame()'s thread. Empty: no view is made.
+  std::function<void(ViewFrame&&)> view_frame;
+  std::function<bool()> view_watched;
+  double view_rate_hz = 4.0;
+  int view_width = 320;
 };
 
 /// The motion step's own log in a session folder: the IMU and the cameras from the step's start
@@ -141,6 +155,9 @@ class SessionRunner final : public EngineHost {
   Result<acq::CameraStream*> camera_stream(std::size_t camera, const drivers::camera::Frame& frame,
                                            drivers::camera::TimestampMeaning meaning);
   void close_motion_log();
+  /// The live view's frame of a recorded frame, when it is watched and its camera's turn has come.
+  void send_view(std::size_t camera, const acq::PublishedFrame& f, const std::vector<Eigen::Vector2d>& px,
+                 const std::vector<int>& ids);
   void sync_motion_log();
   void motion_log_error(const Error& error);
   void warn(const std::string& text) const;
@@ -167,6 +184,9 @@ class SessionRunner final : public EngineHost {
     std::vector<std::pair<TimeNs, std::string>> found;  // (frame time, encoded observation)
   };
   std::vector<LiveDetections> live_;
+  // Each camera's coverage (made at its first frame) and when it last gave the live view a frame.
+  std::vector<ViewCoverage> coverage_;
+  std::vector<std::chrono::steady_clock::time_point> view_sent_;
   std::unique_ptr<calib::TargetDetector> detector_;
   TimeNs motion_step_start_ns_ = -1;  // the motion step the log was opened for
   // One worker runs solves and writes in order.

@@ -611,7 +611,8 @@ void SessionEngine::sample_motion(const ImuSample& si) {
                                     frames_seen_,
                                     {camera_frames_.begin(), camera_frames_.end()},
                                     {camera_seen_.begin(), camera_seen_.end()},
-                                    frames_shared_});
+                                    frames_shared_,
+                                    {}});  // the coverage: the runner adds it (it has the corners)
   }
   if (elapsed >= config_.session.motion_s) advance();
 }
