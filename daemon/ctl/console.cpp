@@ -288,12 +288,90 @@ void put(std::vector<std::string>& out, const Block& block, std::size_t width) {
 
 // The middle of the screen. `level` says how much was given up to fit: 0 all, 1 the step list on
 // one line, 2 without the drawing, then older messages one by one.
+/// A coverage as text rows, one mark a cell (coverage_block).
+std::vector<std::string> coverage_grid(const session_msg::CameraCoverage& coverage) {
+  std::vector<std::string> out;
+  if (coverage.cols <= 0 || coverage.rows <= 0 ||
+      coverage.cells.size() !=
+          static_cast<std::size_t>(coverage.cols) * static_cast<std::size_t>(coverage.rows))
+    return out;
+  const std::int64_t most = *std::max_element(coverage.cells.begin(), coverage.cells.end());
+  static constexpr char kMarks[] = {'.', ':', '+', '#'};
+  for (int r = 0; r < coverage.rows; ++r) {
+    std::string line;
+    for (int c = 0; c < coverage.cols; ++c) {
+      const std::int64_t n = coverage.cells[static_cast<std::size_t>(r * coverage.cols + c)];
+      if (n <= 0 || most <= 0) {
+        line += ' ';
+        continue;
+      }
+      // Quarters of the most-seen cell's count: a cell seen at all shows at least '.'.
+      const auto level = std::min<std::int64_t>(3, (4 * n - 1) / most);
+      line += kMarks[level];
+    }
+    out.push_back(line);
+  }
+  return out;
+}
+
+/// Each camera's coverage in the motion step (the live view's, in text): a grid over its image,
+/// each cell a mark from ' ' (no corner seen) through '.', ':', '+' to '#' (the most-seen cells),
+/// the cameras side by side, and a line each with the spans across, down, in size and in tilt.
+/// `grid`: false when the screen is short (only the spans).
+Block coverage_block(const ConsoleState& state, bool grid) {
+  Block block;
+  block.wraps = false;  // a grid is cut, never wrapped
+  std::vector<std::string>& out = block.lines;
+  const auto* motion = state.live ? std::get_if<msg::MotionFigures>(&state.live->figures) : nullptr;
+  if (!motion || motion->coverage.empty()) return block;
+  const auto& cov = motion->coverage;
+  const auto name = [&](std::size_t i) {
+    const bool named =
+        state.status && state.status->service && i < state.status->service->devices.cameras.size();
+    return named ? state.status->service->devices.cameras[i].name : "cam" + std::to_string(i);
+  };
+  const auto pct = [](double v) {
+    return fixed(100.0 * std::clamp(std::isfinite(v) ? v : 0.0, 0.0, 1.0), 0) + "%";
+  };
+  if (grid) {
+    std::vector<std::vector<std::string>> grids;
+    std::size_t rows = 0;
+    for (const auto& c : cov) {
+      grids.push_back(coverage_grid(c));
+      rows = std::max(rows, grids.back().size());
+    }
+    std::string title = "  where the target was seen:";
+    for (std::size_t i = 0; i < cov.size(); ++i) {
+      const std::size_t w = grids[i].empty() ? 0 : grids[i][0].size() + 2;
+      std::string n = name(i).substr(0, std::max<std::size_t>(w, 4));
+      title += "  " + n + std::string(w > n.size() ? w - n.size() : 0, ' ');
+    }
+    out.push_back(title);
+    for (std::size_t r = 0; r < rows; ++r) {
+      std::string line(std::string("  where the target was seen:").size(), ' ');
+      for (const auto& g : grids) {
+        const std::string cells = r < g.size() ? g[r] : std::string(g.empty() ? 0 : g[0].size(), ' ');
+        const std::size_t pad = std::max<std::size_t>(cells.size() + 2, 4) - (cells.size() + 2);
+        line += "  |" + cells + "|" + std::string(pad, ' ');
+      }
+      out.push_back(line);
+    }
+  }
+  for (std::size_t i = 0; i < cov.size(); ++i) {
+    const auto& c = cov[i];
+    out.push_back("  " + name(i) + ": across " + pct(c.x) + ", down " + pct(c.y) + ", size " + pct(c.size) +
+                  ", tilt " + pct(c.skew) + " (" + std::to_string(c.views) + " views)");
+  }
+  return block;
+}
+
 std::vector<std::string> middle(const ConsoleState& state, std::size_t width, int level, std::size_t recent) {
   std::vector<std::string> out;
   put(out, steps_block(state, level >= 1), width);
   put(out, prompt_block(state), width);
   if (level < 2) put(out, art_block(state), width);
   put(out, live_block(state, static_cast<int>(width)), width);
+  put(out, coverage_block(state, level < 2), width);
   put(out, review_block(state), width);
   put(out, done_block(state), width);
   put(out, recent_block(state, recent), width);
@@ -561,6 +639,9 @@ std::string status_text(const msg::Status& status) {
       out << '\n';
     }
     if (!status.service->version.empty()) out << "service: imucald " << status.service->version << '\n';
+    if (status.service->live_view)
+      out << "live view: " << status.service->live_view->url << " (its keys need the token in "
+          << status.service->live_view->token_file << ")\n";
   }
   return printable_text(out.str(), true);
 }

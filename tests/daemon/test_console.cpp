@@ -589,3 +589,51 @@ TEST(Console, TheHeaderShowsWhatTheSessionHasRecorded) {
 
 }  // namespace
 }  // namespace imucal::ctl
+
+namespace imucal::ctl {
+namespace {
+
+/// The motion step's live figures with each camera's coverage, as imucald sends them.
+nlohmann::json motion_live_with_coverage() {
+  std::vector<std::int64_t> cam0(48, 0), cam1(48, 0);
+  cam0[0] = 40;  // the top left cell, most seen
+  cam0[9] = 10;  // one down and right: a quarter of the most
+  cam1[47] = 5;  // the bottom right cell
+  auto cov = [](const std::vector<std::int64_t>& cells, double x, int views) {
+    return nlohmann::json{{"cols", 8}, {"rows", 6}, {"cells", cells}, {"views", views},
+                          {"x", x},    {"y", 0.25}, {"size", 0.5},    {"skew", 0.0}};
+  };
+  return {{"type", "live"},
+          {"step", "motion"},
+          {"lines", {"18 of 60 s"}},
+          {"progress", 0.3},
+          {"figures",
+           {{"gyro_rms_dps", {30.0, 20.0, 10.0}},
+            {"frames", 400},
+            {"frames_seen", 300},
+            {"camera_frames", {200, 200}},
+            {"camera_frames_seen", {160, 140}},
+            {"frames_seen_by_every_camera", 120},
+            {"coverage", {cov(cam0, 0.714, 12), cov(cam1, 1.0, 9)}}}}};
+}
+
+TEST(Console, TheMotionStepShowsWhereEachCameraSawTheTarget) {
+  ConsoleState state;
+  update(state, status_message("running", "motion"));
+  update(state, motion_live_with_coverage());
+  const std::string screen = render(state, {80});
+  EXPECT_TRUE(has(screen, "where the target was seen:  cam0        cam1")) << screen;
+  // Row 1: the most-seen cell '#', nothing else in cam0's first row; cam1's empty.
+  EXPECT_TRUE(has(screen, "|#       |  |        |")) << screen;
+  // Row 2: a cell seen a quarter as often as the most: '.'.
+  EXPECT_TRUE(has(screen, "| .      |  |        |")) << screen;
+  EXPECT_TRUE(has(screen, "|        |  |       #|")) << screen;
+  EXPECT_TRUE(has(screen, "cam0: across 71%, down 25%, size 50%, tilt 0% (12 views)")) << screen;
+  EXPECT_TRUE(has(screen, "cam1: across 100%, down 25%, size 50%, tilt 0% (9 views)")) << screen;
+  // A short screen keeps the spans and drops the grid first.
+  const std::string small = render(state, {80, 14});
+  EXPECT_TRUE(has(small, "cam0: across 71%")) << small;
+}
+
+}  // namespace
+}  // namespace imucal::ctl
