@@ -74,6 +74,11 @@ int main(int argc, char** argv) {
   app.add_flag("--devices-may-appear-later", o.devices_may_appear_later,
                "A configured device node that is not there is no error: --check exits 0, and the service "
                "exits 1 (restarted by the unit) instead of 69 (not restarted) when the IMU's is missing");
+  std::string live_view;
+  app.add_option("--live-view", live_view,
+                 "Serve the live view at [ADDRESS:]PORT (address 127.0.0.1 unless given), whatever the "
+                 "configuration's live_view says: a web browser there shows each camera's frames, the "
+                 "target found in them and the session's prompts (docs/service.md, \"Live view\")");
   bool quiet = false;
   app.add_flag("-q,--quiet", quiet, "Log warnings and errors only");
   CLI11_PARSE(app, argc, argv);
@@ -91,6 +96,27 @@ int main(int argc, char** argv) {
     return 2;
   }
   o.socket_mode = value;
+  if (!live_view.empty()) {
+    const auto colon = live_view.rfind(':');
+    const std::string port = colon == std::string::npos ? live_view : live_view.substr(colon + 1);
+    const bool digits =
+        !port.empty() && port.size() <= 5 && port.find_first_not_of("0123456789") == std::string::npos;
+    const int value = digits ? std::stoi(port) : 0;
+    if (value < 1 || value > 65535) {
+      std::fprintf(stderr,
+                   "imucald: --live-view '%s' is not [ADDRESS:]PORT: give a port 1..65535, as 8421 or "
+                   "127.0.0.1:8421\n",
+                   live_view.c_str());
+      return 2;
+    }
+    o.live_view_port = value;
+    if (colon != std::string::npos) {
+      std::string address = live_view.substr(0, colon);
+      if (address.size() >= 2 && address.front() == '[' && address.back() == ']')
+        address = address.substr(1, address.size() - 2);
+      o.live_view_address = address;
+    }
+  }
   if (check) return imucal::imucald::check_configuration(o);
   if (start_opt->count() > 0) {
     std::vector<std::string> steps;

@@ -294,6 +294,10 @@ Status Service::init() {
                  {"source", options_.sim ? "sim" : "hardware"},
                  {"service", json{{"version", kVersion}, {"config", options_.config_path}}.dump(
                                  -1, ' ', false, nlohmann::json::error_handler_t::replace)}};
+  ro.view_frame = [this](ViewFrame&& frame) { view_frame(std::move(frame)); };
+  ro.view_watched = [this] { return live_ && live_->watchers() > 0; };
+  ro.view_rate_hz = config_.live_view.frame_rate_hz;
+  ro.view_width = config_.live_view.width;
   runner_ = std::make_unique<app::session::SessionRunner>(config_, stream_info_, ro);
 
   service::ControlServerOptions so;
@@ -302,7 +306,74 @@ Status Service::init() {
   auto server = service::ControlServer::create(io_, so, *this);
   if (!server.ok()) return server.error().context("control socket " + options_.socket_path);
   server_ = std::move(*server);
+  if (options_.live_view_port) {
+    config_.live_view.enabled = true;
+    config_.live_view.port = *options_.live_view_port;
+    if (options_.live_view_address) config_.live_view.address = *options_.live_view_address;
+  }
+  const std::optional<int> passed = service::listening_socket_from_systemd();
+  if (config_.live_view.enabled) {
+    // The live view is not the calibration: a view that cannot open is said, and the service runs.
+    if (auto s = open_live_view(passed); !s.ok()) spdlog::error("{}", s.error().message);
+  } else if (passed) {
+    spdlog::warn(
+        "systemd passed a socket for the live view (imucald.socket), but live_view.enabled is not true in "
+        "{}: the live view stays off",
+        options_.config_path);
+    ::close(*passed);
+  }
   return {};
+}
+
+Status Service::open_live_view(std::optional<int> passed_socket) {
+  auto token = service::make_token();
+  if (!token.ok()) return token.error();
+  // The token goes where only the service's user and group read it: the same people the
+  // control socket lets in.
+  std::error_code ec;
+  std::filesystem::create_directories(options_.state_dir, ec);
+  live_token_file_ = options_.state_dir + "/" + kLiveViewTokenFile;
+  const std::string tmp = live_token_file_ + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::trunc);
+    out << *token << "\n";
+    out.close();
+    if (!out) return make_error(Errc::kIo, "live view: cannot write its token to " + tmp);
+  }
+  std::filesystem::permissions(tmp,
+                               std::filesystem::perms::owner_read | std::filesystem::perms::owner_write |
+                                   std::filesystem::perms::group_read,
+                               ec);
+  if (!ec) std::filesystem::rename(tmp, live_token_file_, ec);
+  if (ec) return make_error(Errc::kIo, "live view: its token file " + live_token_file_ + ": " + ec.message());
+  service::LiveViewOptions lo;
+  lo.address = config_.live_view.address;
+  lo.port = static_cast<unsigned short>(config_.live_view.port);
+  lo.listen_fd = passed_socket.value_or(-1);
+  lo.token = *token;
+  lo.version = kVersion;
+  lo.rig = config_.name;
+  for (const auto& c : config_.cameras) lo.cameras.push_back(c.name);
+  lo.log = [](const std::string& text) { spdlog::info("live view: {}", text); };
+  auto live = service::LiveViewServer::create(io_, lo, *this);
+  if (!live.ok()) {
+    if (passed_socket) return live.error();
+    return make_error(live.error().code,
+                      live.error().message +
+                          ". Under its systemd unit imucald has no network of its own: there, enable the "
+                          "socket unit instead (systemctl enable --now imucald.socket, then restart imucald; "
+                          "docs/service.md, \"Live view\")");
+  }
+  live_ = std::move(*live);
+  spdlog::info("live view on {} (the keys need the token in {})", live_->url(), live_token_file_);
+  return {};
+}
+
+void Service::view_frame(ViewFrame&& frame) {
+  if (!live_) return;
+  auto png = app::session::view_frame_png(frame);
+  if (!png.ok()) return;  // a frame the view misses; the recording has it
+  live_->frame(std::move(frame), std::move(*png));
 }
 
 Status Service::open_imu() {
@@ -406,7 +477,9 @@ void Service::on_samples(std::span<const ImuSample> samples) {
     const auto now = std::chrono::steady_clock::now();
     if (now - last_status_sent_ >= kStatusInterval) {
       last_status_sent_ = now;
-      server_->broadcast(status());
+      const session_msg::Status now_status = status();
+      server_->broadcast(now_status);
+      if (live_) live_->broadcast(now_status);
     }
   }
   if (pending_start_ && samples_ > 0) {
@@ -446,6 +519,7 @@ void Service::imu_failed(const Error& error) {
 void Service::on_message(const session_msg::SessionMessage& m) {
   using session_msg::Outcome;
   server_->broadcast(m);
+  if (live_) live_->broadcast(m);
   if (sim_rig_) sim_rig_->on_message(m);
   if (const auto* prompt = std::get_if<session_msg::Prompt>(&m)) {
     const std::string step = prompt->step ? session_msg::step_name(*prompt->step) : "";
@@ -761,6 +835,7 @@ session_msg::Status Service::status() {
   service.session_dir = runner_->session_dir();
   service.version = kVersion;
   service.recorded_bytes = recorded_bytes(service.session_dir);
+  if (live_) service.live_view = session_msg::LiveViewAddress{live_->url(), live_token_file_};
   s.service = std::move(service);
   return s;
 }
@@ -859,6 +934,7 @@ int Service::run() {
   io_.restart();
   io_.poll();
   server_->close();
+  if (live_) live_->close();
   return exit_code_;
 }
 

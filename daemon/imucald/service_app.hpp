@@ -17,6 +17,7 @@
 #include "app/session/session_runner.hpp"
 #include "core/rig_config.hpp"
 #include "daemon/service/control_server.hpp"
+#include "daemon/service/live_view_server.hpp"
 #include "daemon/service/notify.hpp"
 #include "daemon/service/session_host.hpp"
 #include "drivers/camera/camera.hpp"
@@ -56,7 +57,13 @@ struct ServiceOptions {
   // The configured devices may appear after the service starts (a driver loaded later): an
   // absent one is no reason for kExitDeviceAbsent.
   bool devices_may_appear_later = false;
+  // --live-view [ADDRESS:]PORT: the live view on, there, whatever the configuration says.
+  std::optional<std::string> live_view_address;
+  std::optional<int> live_view_port;
 };
+
+/// The file, in the state folder, that holds the live view's token (mode 0640).
+inline constexpr const char* kLiveViewTokenFile = "live-view.token";
 
 /// The configured device nodes that are not on this machine, each as "KEY PATH" ("imu.device
 /// /dev/spidev0.0"); none for the virtual rig (`sim`). `imu_only`: only those the service opens
@@ -110,6 +117,11 @@ class Service final : public service::SessionHost {
   void camera_failed(std::size_t index, const Error& error);
   void sim_tick();
   void on_message(const session_msg::SessionMessage& message);
+  /// The live view (config live_view, or --live-view): its token written to the state folder,
+  /// then its server, on the socket systemd passed (imucald.socket) or bound here.
+  Status open_live_view(std::optional<int> passed_socket);
+  /// A camera's frame for the live view, encoded.
+  void view_frame(ViewFrame&& frame);
   void on_samples(std::span<const ImuSample> samples);
   void imu_failed(const Error& error);
   app::session::PreflightReport preflight();
@@ -141,6 +153,8 @@ class Service final : public service::SessionHost {
   boost::asio::steady_timer sim_timer_, watchdog_timer_;
   service::Notifier notifier_;
   std::unique_ptr<service::ControlServer> server_;
+  std::unique_ptr<service::LiveViewServer> live_;
+  std::string live_token_file_;
   std::unique_ptr<app::session::SessionRunner> runner_;
   ImuStreamInfo stream_info_;
   // The IMU: hardware or virtual.

@@ -64,4 +64,12 @@ void WatchdogPinger::schedule() {
   });
 }
 
+std::optional<int> listening_socket_from_systemd() {
+  const int n = sd_listen_fds(1);
+  if (n < 1) return std::nullopt;
+  for (int fd = SD_LISTEN_FDS_START; fd < SD_LISTEN_FDS_START + n; ++fd)
+    if (sd_is_socket(fd, AF_UNSPEC, SOCK_STREAM, 1) > 0) return fd;
+  return std::nullopt;
+}
+
 }  // namespace imucal::service

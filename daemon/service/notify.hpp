@@ -34,6 +34,11 @@ class Notifier {
   unsigned sent_ = 0;
 };
 
+/// The listening TCP socket systemd passed (socket activation: imucald.socket, docs/service.md
+/// "Live view"), or none. Taken once: the variables that name it are removed, so that no child
+/// process inherits them.
+std::optional<int> listening_socket_from_systemd();
+
 /// Pings the watchdog from the service's event loop at half the period systemd expects, while
 /// `healthy` (when given) says the service works. A stuck loop or an unhealthy service stops
 /// the pings, and systemd restarts it (WatchdogSec=, Restart=on-failure).

@@ -3,6 +3,7 @@
 #  - systemd-analyze verify passes on the unit (ExecStart pointed at a built binary, since the
 #    installed path does not exist here);
 #  - systemd-analyze security --offline rates its exposure at most MAX_EXPOSURE;
+#  - the live view's socket unit (imucald.socket) passes verify beside the unit;
 #  - systemd-sysusers and systemd-tmpfiles accept the sysusers.d and tmpfiles.d entries in a
 #    scratch root and create the user, its device groups and the state folder.
 # Exit 77 (skip) when systemd-analyze is not installed.
@@ -22,6 +23,8 @@ trap 'rm -rf "$tmp"' EXIT
 DESTDIR="$tmp/dest" cmake --install "$build" --component service >/dev/null
 
 unit=$(find "$tmp/dest" -name imucald.service -path '*/lib/systemd/system/*')
+socket_unit=$(find "$tmp/dest" -name imucald.socket -path '*/lib/systemd/system/*')
+[ -n "$socket_unit" ] || { echo "FAIL: the live view's socket unit is not installed"; exit 1; }
 sysusers=$(find "$tmp/dest" -path '*/lib/sysusers.d/imucal.conf')
 tmpfiles=$(find "$tmp/dest" -path '*/lib/tmpfiles.d/imucal.conf')
 [ -n "$unit" ] && [ -n "$sysusers" ] && [ -n "$tmpfiles" ] || { echo "FAIL: unit, sysusers.d or tmpfiles.d entry not installed"; exit 1; }
@@ -35,6 +38,13 @@ if ! out=$(systemd-analyze verify "$tmp/verify/imucald.service" 2>&1) || [ -n "$
   echo "FAIL: systemd-analyze verify:"; echo "$out"; exit 1
 fi
 echo "verify: OK"
+cp "$socket_unit" "$tmp/verify/imucald.socket"
+if ! out=$(systemd-analyze verify "$tmp/verify/imucald.socket" 2>&1) || [ -n "$out" ]; then
+  echo "FAIL: systemd-analyze verify imucald.socket:"; echo "$out"; exit 1
+fi
+grep -q '^ListenStream=127.0.0.1:8421$' "$tmp/verify/imucald.socket" ||
+  { echo "FAIL: the live view's socket is not on this machine's loopback by default"; exit 1; }
+echo "verify imucald.socket: OK"
 
 level=$(systemd-analyze security --offline=yes "$tmp/verify/imucald.service" 2>/dev/null |
   sed -n 's/.*Overall exposure level for imucald.service: \([0-9.]*\).*/\1/p')

@@ -29,108 +29,11 @@
 #include "drivers/storage/record.hpp"
 #include "drivers/storage/storage_device.hpp"
 #include "log/session_log.hpp"
+#include "tests/support/imucald_process.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal {
 namespace {
-
-bool has(const std::string& text, const std::string& fragment) {
-  return text.find(fragment) != std::string::npos;
-}
-
-bool wait_for(const std::function<bool()>& done, double seconds = 120.0) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-  while (std::chrono::steady_clock::now() < end) {
-    if (done()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  return done();
-}
-
-/// A rig configuration in `dir` with its storage there too; `extra` is appended (a session
-/// section); `camera` replaces the camera's size and rate.
-std::string write_config(const std::string& dir, const std::string& extra = "",
-                         const std::string& camera = "") {
-  std::ifstream in(test::source_path("config/rig.yaml"));
-  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (!camera.empty())
-    text = std::regex_replace(text, std::regex("    width: 640\n    height: 480\n    rate_hz: 20\n"), camera);
-  text = std::regex_replace(text, std::regex("path: /var/lib/imucal/calibration.bin"),
-                            "path: " + dir + "/eeprom.bin");
-  text = std::regex_replace(text, std::regex("target: checkerboard-7x6.yaml"),
-                            "target: " + test::source_path("config/checkerboard-7x6.yaml"));
-  const std::string path = dir + "/rig.yaml";
-  std::ofstream(path) << text << extra;
-  return path;
-}
-
-/// A socket path short enough for sun_path (107 bytes): the scratch folders are deeper.
-std::string short_socket_path() {
-  char tmpl[] = "/tmp/imucald-test-XXXXXX";
-  if (!::mkdtemp(tmpl)) return "/tmp/imucald-test.sock";
-  return std::string(tmpl) + "/s.sock";
-}
-
-/// imucald started with fork/exec; killed (SIGKILL) if still running at the end.
-class Daemon {
- public:
-  Daemon(const std::string& dir, const std::vector<std::string>& extra, const std::string& config = "")
-      : socket_(short_socket_path()) {
-    std::vector<std::string> args = {IMUCALD_PATH,   "--config", config.empty() ? write_config(dir) : config,
-                                     "--socket",     socket_,    "--state-dir",
-                                     dir + "/state", "--sim",    "-q"};
-    args.insert(args.end(), extra.begin(), extra.end());
-    pid_ = ::fork();
-    if (pid_ == 0) {
-      const std::string log = dir + "/imucald.log";
-      (void)!std::freopen(log.c_str(), "w", stderr);
-      std::vector<char*> argv;
-      for (auto& a : args) argv.push_back(a.data());
-      argv.push_back(nullptr);
-      ::execv(argv[0], argv.data());
-      std::_Exit(127);
-    }
-  }
-  ~Daemon() {
-    if (pid_ > 0 && !exited_) {
-      ::kill(pid_, SIGKILL);
-      (void)wait();
-    }
-  }
-  const std::string& socket() const { return socket_; }
-  pid_t pid() const { return pid_; }
-  bool ready() const { return std::filesystem::exists(socket_); }
-  /// Waits for the process; its exit status, or 128 + signal.
-  int wait() {
-    int status = 0;
-    ::waitpid(pid_, &status, 0);
-    exited_ = true;
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  }
-
- private:
-  std::string socket_;
-  pid_t pid_ = -1;
-  bool exited_ = false;
-};
-
-std::string session_log(const std::string& dir) {
-  const auto sessions = std::filesystem::path(dir) / "state" / "sessions";
-  if (!std::filesystem::exists(sessions)) return "";
-  for (const auto& e : std::filesystem::directory_iterator(sessions))
-    return (e.path() / "session.imulog").string();
-  return "";
-}
-
-std::string all_events(const std::string& log) {
-  auto reader = log::SessionLogReader::open(log);
-  if (!reader.ok()) return "";
-  auto events = (*reader)->events();
-  std::string out;
-  if (events.ok())
-    for (const auto& e : *events) out += e.message + "\n";
-  return out;
-}
 
 class Tmux {
  public:
@@ -155,9 +58,9 @@ TEST(Imucald, AnOperatorAtTheConsoleRunsAWholeSessionAndTheRecordIsWritten) {
   // The virtual rig is moved by the scripted operator; the keys come from the person at the console.
   // The session is started from the console itself, so its steps come from the configuration.
   const std::string config =
-      write_config(dir, "session:\n  steps: [preflight, still, poses, solve, review, write]\n");
-  Daemon daemon(dir, {"--sim-operator", "motion", "--time-scale", "0"}, config);
-  ASSERT_TRUE(wait_for([&] { return daemon.ready(); }, 30)) << test::read_file(dir + "/imucald.log");
+      test::write_config(dir, "session:\n  steps: [preflight, still, poses, solve, review, write]\n");
+  test::Daemon daemon(dir, {"--sim-operator", "motion", "--time-scale", "0"}, config);
+  ASSERT_TRUE(test::wait_for([&] { return daemon.ready(); }, 30)) << test::read_file(dir + "/imucald.log");
   const std::string ctl = std::string(IMUCALCTL_PATH) + " --socket " + daemon.socket();
 
   Tmux tmux("imucald-test-" + std::to_string(::getpid()));
@@ -165,46 +68,47 @@ TEST(Imucald, AnOperatorAtTheConsoleRunsAWholeSessionAndTheRecordIsWritten) {
   ASSERT_EQ(
       tmux.run("new-session -d -s op -x 110 -y 40 '" + ctl + " attach; echo $? > " + dir + "/exit_code'"), 0);
   auto screen = [&] { return tmux.capture(pane); };
-  ASSERT_TRUE(wait_for([&] { return has(screen(), "c start a session"); })) << screen();
+  ASSERT_TRUE(test::wait_for([&] { return test::has(screen(), "c start a session"); })) << screen();
   ASSERT_EQ(tmux.run("send-keys -t op c"), 0);
-  ASSERT_TRUE(wait_for([&] { return has(screen(), "Press c to begin"); })) << screen();
-  EXPECT_TRUE(has(screen(), "preflight")) << screen();
+  ASSERT_TRUE(test::wait_for([&] { return test::has(screen(), "Press c to begin"); })) << screen();
+  EXPECT_TRUE(test::has(screen(), "preflight")) << screen();
   ASSERT_EQ(tmux.run("send-keys -t op c"), 0);
   // The operator sees the poses come in, then the review with its gates.
-  ASSERT_TRUE(wait_for([&] { return has(screen(), "Press y to accept"); }, 300)) << screen();
+  ASSERT_TRUE(test::wait_for([&] { return test::has(screen(), "Press y to accept"); }, 300)) << screen();
   const std::string review = screen();
-  EXPECT_TRUE(has(review, "gravity residual")) << review;
+  EXPECT_TRUE(test::has(review, "gravity residual")) << review;
   // The header says what the session has recorded (the service's status every few seconds, also
   // while it waits for a key).
-  EXPECT_TRUE(wait_for([&] { return has(screen(), "B recorded"); }, 20)) << screen();
+  EXPECT_TRUE(test::wait_for([&] { return test::has(screen(), "B recorded"); }, 20)) << screen();
   ASSERT_EQ(tmux.run("send-keys -t op y"), 0);
-  ASSERT_TRUE(wait_for([&] { return has(screen(), "written, read back and verified"); }, 60)) << screen();
+  ASSERT_TRUE(test::wait_for([&] { return test::has(screen(), "written, read back and verified"); }, 60))
+      << screen();
   // The end screen names the slot and sequence the record went to, and the session's folder.
-  EXPECT_TRUE(has(screen(), "slot A, sequence 1")) << screen();
-  EXPECT_TRUE(has(screen(), "Session folder: ")) << screen();
-  EXPECT_TRUE(has(screen(), "/report.html")) << screen();
-  EXPECT_TRUE(has(screen(), "c start the next session")) << screen();
+  EXPECT_TRUE(test::has(screen(), "slot A, sequence 1")) << screen();
+  EXPECT_TRUE(test::has(screen(), "Session folder: ")) << screen();
+  EXPECT_TRUE(test::has(screen(), "/report.html")) << screen();
+  EXPECT_TRUE(test::has(screen(), "c start the next session")) << screen();
   ASSERT_EQ(tmux.run("send-keys -t op q"), 0);
-  ASSERT_TRUE(wait_for([&] { return !test::read_file(dir + "/exit_code").empty(); }, 10));
+  ASSERT_TRUE(test::wait_for([&] { return !test::read_file(dir + "/exit_code").empty(); }, 10));
   EXPECT_EQ(test::read_file(dir + "/exit_code"), "0\n");
 
   // The record is on the storage and reads back.
   const auto stored = test::run_cli({"store", "read", "--config", dir + "/rig.yaml"});
   EXPECT_EQ(stored.exit_code, 0) << stored.err;
-  EXPECT_TRUE(has(stored.out, "static")) << stored.out;
+  EXPECT_TRUE(test::has(stored.out, "static")) << stored.out;
   // The keys pressed in the terminal are in the session log.
-  const std::string events = all_events(session_log(dir));
-  EXPECT_TRUE(has(events, R"("key":"continue")")) << "continue from the console";
-  EXPECT_TRUE(has(events, R"("key":"accept")")) << "accept from the console";
+  const std::string events = test::all_events(test::session_log(dir));
+  EXPECT_TRUE(test::has(events, R"("key":"continue")")) << "continue from the console";
+  EXPECT_TRUE(test::has(events, R"("key":"accept")")) << "accept from the console";
   // The poses step named the next side to turn up and sent its drawing (no sides configured:
   // the IMU's axes); on accelerated time the step passes too fast to catch on the screen.
-  EXPECT_TRUE(has(events, "Next: Turn the rig so that the IMU's +X axis points up")) << "pose guidance";
-  EXPECT_TRUE(has(events, R"("art":[)")) << "pose drawing";
+  EXPECT_TRUE(test::has(events, "Next: Turn the rig so that the IMU's +X axis points up")) << "pose guidance";
+  EXPECT_TRUE(test::has(events, R"("art":[)")) << "pose drawing";
   // The session's report was drawn while its log was still open, and says so.
   const std::string report =
-      test::read_file(std::filesystem::path(session_log(dir)).parent_path().string() + "/report.html");
-  EXPECT_TRUE(has(report, "still being recorded when this report was drawn")) << report.substr(0, 2000);
-  EXPECT_FALSE(has(report, "not closed cleanly"));
+      test::read_file(std::filesystem::path(test::session_log(dir)).parent_path().string() + "/report.html");
+  EXPECT_TRUE(test::has(report, "still being recorded when this report was drawn")) << report.substr(0, 2000);
+  EXPECT_FALSE(test::has(report, "not closed cleanly"));
   ::kill(daemon.pid(), SIGTERM);
   EXPECT_EQ(daemon.wait(), 0);
 }
@@ -212,30 +116,30 @@ TEST(Imucald, AnOperatorAtTheConsoleRunsAWholeSessionAndTheRecordIsWritten) {
 TEST(Imucald, SigtermEndsTheSessionCleanlyAndLeavesTheStoredRecordAlone) {
   const std::string dir = test::scratch_dir();
   // At 20x real time the session is in its warm-up or still start a few seconds in.
-  Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "20", "--start", "default"});
-  ASSERT_TRUE(wait_for([&] { return !session_log(dir).empty(); }, 30))
+  test::Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "20", "--start", "default"});
+  ASSERT_TRUE(test::wait_for([&] { return !test::session_log(dir).empty(); }, 30))
       << test::read_file(dir + "/imucald.log");
   std::this_thread::sleep_for(std::chrono::seconds(2));
   ::kill(daemon.pid(), SIGTERM);
   EXPECT_EQ(daemon.wait(), 0) << test::read_file(dir + "/imucald.log");
-  auto reader = log::SessionLogReader::open(session_log(dir));
+  auto reader = log::SessionLogReader::open(test::session_log(dir));
   ASSERT_TRUE(reader.ok()) << reader.error().message;
   EXPECT_TRUE((*reader)->health().complete);
-  const std::string events = all_events(session_log(dir));
-  EXPECT_TRUE(has(events, R"("type":"stop")")) << events.substr(0, 2000);
-  EXPECT_TRUE(has(events, R"("outcome":"aborted")"));
+  const std::string events = test::all_events(test::session_log(dir));
+  EXPECT_TRUE(test::has(events, R"("type":"stop")")) << events.substr(0, 2000);
+  EXPECT_TRUE(test::has(events, R"("outcome":"aborted")"));
   EXPECT_FALSE(std::filesystem::exists(dir + "/eeprom.bin")) << "nothing was written to the storage";
 }
 
 TEST(Imucald, SigkillDuringTheRecordingLeavesAReadableLog) {
   const std::string dir = test::scratch_dir();
-  Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "20", "--start", "default"});
-  ASSERT_TRUE(wait_for([&] { return !session_log(dir).empty(); }, 30))
+  test::Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "20", "--start", "default"});
+  ASSERT_TRUE(test::wait_for([&] { return !test::session_log(dir).empty(); }, 30))
       << test::read_file(dir + "/imucald.log");
   std::this_thread::sleep_for(std::chrono::seconds(3));
   ::kill(daemon.pid(), SIGKILL);
   EXPECT_EQ(daemon.wait(), 128 + SIGKILL);
-  auto reader = log::SessionLogReader::open(session_log(dir));
+  auto reader = log::SessionLogReader::open(test::session_log(dir));
   ASSERT_TRUE(reader.ok()) << reader.error().message;
   EXPECT_FALSE((*reader)->health().complete);
   auto id = (*reader)->find_imu_stream();
@@ -244,16 +148,16 @@ TEST(Imucald, SigkillDuringTheRecordingLeavesAReadableLog) {
   ASSERT_TRUE(n.ok());
   // 3 s at 20x real time and 200 Hz is about 12000 samples; the last commit interval may be lost.
   EXPECT_GT(*n, 2000);
-  EXPECT_TRUE(has(all_events(session_log(dir)), R"("type":"prompt")"));
+  EXPECT_TRUE(test::has(test::all_events(test::session_log(dir)), R"("type":"prompt")"));
 }
 
 TEST(Imucald, ReplayOfTheFixtureSessionReachesItsLoggedResult) {
   const auto r = test::run_cli({"replay", test::source_path("fixtures/service-session.imulog"), "-o",
                                 test::scratch_dir() + "/replay", "--json"});
   ASSERT_EQ(r.exit_code, 0) << r.err << r.out;
-  EXPECT_TRUE(has(r.out, R"("same": true)")) << r.out;
-  EXPECT_TRUE(has(r.out, R"("max_difference": 0.0)")) << r.out;
-  EXPECT_TRUE(has(r.out, R"("outcome": "written")")) << r.out;
+  EXPECT_TRUE(test::has(r.out, R"("same": true)")) << r.out;
+  EXPECT_TRUE(test::has(r.out, R"("max_difference": 0.0)")) << r.out;
+  EXPECT_TRUE(test::has(r.out, R"("outcome": "written")")) << r.out;
 }
 
 // A session log altered or cut short is not replayed as if it were whole: a field of the wrong
@@ -305,8 +209,8 @@ TEST(Imucald, ReplayOfAnAlteredLogSaysSoInItsExitCode) {
     ASSERT_TRUE(test::run_sql(log, c.sql)) << c.what;
     const auto r = test::run_cli({"replay", log, "-o", case_dir + "/replay"});
     EXPECT_EQ(r.exit_code, c.exit_code) << c.what << ": " << r.err << r.out;
-    EXPECT_TRUE(has(r.err, c.message)) << c.what << ": " << r.err;
-    EXPECT_FALSE(has(r.err, "unexpected")) << c.what << ": " << r.err;
+    EXPECT_TRUE(test::has(r.err, c.message)) << c.what << ": " << r.err;
+    EXPECT_FALSE(test::has(r.err, "unexpected")) << c.what << ": " << r.err;
   }
   // An invalid rig configuration inside the log is damage of the log, not a command-line error.
   {
@@ -316,14 +220,14 @@ TEST(Imucald, ReplayOfAnAlteredLogSaysSoInItsExitCode) {
     ASSERT_TRUE(test::run_sql(log, "update metadata set value='{\"imu\": 5}' where key='rig_config'"));
     const auto r = test::run_cli({"replay", log, "-o", case_dir + "/replay"});
     EXPECT_EQ(r.exit_code, 3) << r.err;
-    EXPECT_TRUE(has(r.err, "rig_config")) << r.err;
+    EXPECT_TRUE(test::has(r.err, "rig_config")) << r.err;
     ASSERT_TRUE(test::run_sql(
         log,
         "update metadata set value='{\"target\": {\"target_type\": \"dartboard\"}}' where key='rig_config'"));
     const auto camera =
         test::run_cli({"calibrate", "camera", "--self-check", "0", log, "-o", case_dir + "/camera.yaml"});
     EXPECT_EQ(camera.exit_code, 3) << camera.err;
-    EXPECT_TRUE(has(camera.err, "rig_config")) << camera.err;
+    EXPECT_TRUE(test::has(camera.err, "rig_config")) << camera.err;
   }
   // Cut short: the reader finds the damage that info reports.
   const std::string cut_dir = dir + "/cut";
@@ -332,19 +236,19 @@ TEST(Imucald, ReplayOfAnAlteredLogSaysSoInItsExitCode) {
   std::filesystem::resize_file(cut, std::filesystem::file_size(cut) * 2 / 3);
   auto r = test::run_cli({"replay", cut, "-o", cut_dir + "/replay"});
   EXPECT_EQ(r.exit_code, 3) << r.err << r.out;
-  EXPECT_TRUE(has(r.err, "is damaged")) << r.err;
+  EXPECT_TRUE(test::has(r.err, "is damaged")) << r.err;
   // -o naming a file.
   test::write_file(dir + "/a-file", "x");
   r = test::run_cli({"replay", test::source_path("fixtures/service-session.imulog"), "-o", dir + "/a-file"});
   EXPECT_EQ(r.exit_code, 2) << r.err;
-  EXPECT_TRUE(has(r.err, "is not a folder")) << r.err;
+  EXPECT_TRUE(test::has(r.err, "is not a folder")) << r.err;
   EXPECT_EQ(test::read_file(dir + "/a-file"), "x");
 }
 
 TEST(Imucald, ReplayRefusesALogThatIsNoServiceSession) {
   const auto r = test::run_cli({"replay", test::source_path("fixtures/static.imulog")});
   EXPECT_EQ(r.exit_code, 4) << r.err;
-  EXPECT_TRUE(has(r.err, "no service session")) << r.err;
+  EXPECT_TRUE(test::has(r.err, "no service session")) << r.err;
 }
 
 // A socket mode that is not octal permission bits with read and write for the owner is refused
@@ -356,7 +260,7 @@ TEST(Imucald, SocketModesThatAreNotPermissionBitsAreRefused) {
                             "/s.sock --state-dir " + dir + " --socket-mode '" + mode + "' 2>" + dir + "/err";
     const int rc = std::system(cmd.c_str());
     EXPECT_EQ(WEXITSTATUS(rc), 2) << mode;
-    EXPECT_TRUE(has(test::read_file(dir + "/err"), "is not a socket mode"))
+    EXPECT_TRUE(test::has(test::read_file(dir + "/err"), "is not a socket mode"))
         << mode << ": " << test::read_file(dir + "/err");
   }
 }
@@ -397,12 +301,12 @@ TEST(Imucald, CheckExits69WhenAConfiguredDeviceIsAbsentUnlessTheyMayAppearLater)
   EXPECT_EQ(run_status(base + " >" + dir + "/out 2>" + dir + "/err"), 69) << test::read_file(dir + "/err");
   const std::string err = test::read_file(dir + "/err");
   for (const char* key : {"imu.device", "imu.data_ready.chip", "cameras[0].device", "storage.path"})
-    EXPECT_TRUE(has(err, key)) << key << ": " << err;
-  EXPECT_TRUE(has(err, "--devices-may-appear-later")) << err;
+    EXPECT_TRUE(test::has(err, key)) << key << ": " << err;
+  EXPECT_TRUE(test::has(err, "--devices-may-appear-later")) << err;
 
   EXPECT_EQ(run_status(base + " --devices-may-appear-later >" + dir + "/out 2>" + dir + "/err"), 0)
       << test::read_file(dir + "/err");
-  EXPECT_TRUE(has(test::read_file(dir + "/out"), "Not on this machine yet: imu.device"))
+  EXPECT_TRUE(test::has(test::read_file(dir + "/out"), "Not on this machine yet: imu.device"))
       << test::read_file(dir + "/out");
 }
 
@@ -410,11 +314,11 @@ TEST(Imucald, CheckExits69WhenAConfiguredDeviceIsAbsentUnlessTheyMayAppearLater)
 TEST(Imucald, TheServiceExits69WhenTheImuDeviceIsAbsentAnd1WhenItMayAppearLater) {
   const std::string dir = test::scratch_dir();
   const std::string config = write_absent_device_config(dir);
-  const std::string socket = short_socket_path();
+  const std::string socket = test::short_socket_path();
   const std::string base =
       std::string(IMUCALD_PATH) + " --config " + config + " --socket " + socket + " --state-dir " + dir;
   EXPECT_EQ(run_status(base + " 2>" + dir + "/err"), 69) << test::read_file(dir + "/err");
-  EXPECT_TRUE(has(test::read_file(dir + "/err"), "the IMU's device is not on this machine: imu.device"))
+  EXPECT_TRUE(test::has(test::read_file(dir + "/err"), "the IMU's device is not on this machine: imu.device"))
       << test::read_file(dir + "/err");
   EXPECT_EQ(run_status(base + " --devices-may-appear-later 2>" + dir + "/err"), 1)
       << test::read_file(dir + "/err");
@@ -455,7 +359,7 @@ TEST(Imucald, AMissingConfigurationIsAClearError) {
                           "/s.sock --state-dir " + dir + " 2>" + dir + "/err";
   const int rc = std::system(cmd.c_str());
   EXPECT_NE(WEXITSTATUS(rc), 0);
-  EXPECT_TRUE(has(test::read_file(dir + "/err"), "cannot open the rig configuration"))
+  EXPECT_TRUE(test::has(test::read_file(dir + "/err"), "cannot open the rig configuration"))
       << test::read_file(dir + "/err");
 }
 
@@ -468,9 +372,9 @@ namespace {
 TEST(Imucald, TheReviewShowsTheChangeToTheStoredCalibration) {
   const std::string dir = test::scratch_dir();
   for (int run = 0; run < 2; ++run) {
-    Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start",
-                        "preflight,warmup,still,poses,solve,review,write", "--exit-after-session", "--seed",
-                        std::to_string(21 + run)});
+    test::Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start",
+                              "preflight,warmup,still,poses,solve,review,write", "--exit-after-session",
+                              "--seed", std::to_string(21 + run)});
     ASSERT_EQ(daemon.wait(), 0) << test::read_file(dir + "/imucald.log");
   }
   std::vector<std::string> logs;
@@ -478,24 +382,24 @@ TEST(Imucald, TheReviewShowsTheChangeToTheStoredCalibration) {
     logs.push_back((e.path() / "session.imulog").string());
   std::sort(logs.begin(), logs.end());
   ASSERT_EQ(logs.size(), 2u);
-  EXPECT_TRUE(has(all_events(logs[0]), "Stored calibration: none; this is the first"));
-  const std::string second = all_events(logs[1]);
+  EXPECT_TRUE(test::has(test::all_events(logs[0]), "Stored calibration: none; this is the first"));
+  const std::string second = test::all_events(logs[1]);
   // One name per slot: A and B, as `imucal store` and the end screen say (it was "slot 0" here).
-  EXPECT_TRUE(has(second, "Change to the stored calibration (sequence 1 in slot A"))
+  EXPECT_TRUE(test::has(second, "Change to the stored calibration (sequence 1 in slot A"))
       << second.substr(0, 3000);
-  EXPECT_FALSE(has(second, "in slot 0")) << second.substr(0, 3000);
-  EXPECT_TRUE(has(second, R"("difference_to_stored":{"b_a")"));
+  EXPECT_FALSE(test::has(second, "in slot 0")) << second.substr(0, 3000);
+  EXPECT_TRUE(test::has(second, R"("difference_to_stored":{"b_a")"));
   // The change in the units the correction outputs (counts only beside them, on raw input).
   for (const auto& [what, unit] :
        {std::pair{"  accel bias ", " m/s^2"}, std::pair{"  gyro bias ", " deg/s"}}) {
     const std::size_t at = second.find(what);
     ASSERT_NE(at, std::string::npos) << what;
     const std::string line = second.substr(at, second.find('"', at) - at);
-    EXPECT_TRUE(has(line, unit)) << line;
+    EXPECT_TRUE(test::has(line, unit)) << line;
   }
   // And the second write went to the other slot.
   const auto stored = test::run_cli({"store", "read", "--config", dir + "/rig.yaml"});
-  EXPECT_TRUE(has(stored.out, "sequence 2")) << stored.out;
+  EXPECT_TRUE(test::has(stored.out, "sequence 2")) << stored.out;
 }
 
 }  // namespace
@@ -519,8 +423,8 @@ TEST(Imucald, TheMotionStepRecordsTheCameraAndTheRecordHoldsTheCameraImuCalibrat
   const std::string dir = test::scratch_dir();
   // A small camera at 10 Hz and a 30 s motion step keep the test short; the protocol is the
   // shipped one otherwise.
-  const std::string config = write_config(dir, "session:\n  poses: 12\n  motion_s: 30\n",
-                                          "    width: 320\n    height: 240\n    rate_hz: 10\n");
+  const std::string config = test::write_config(dir, "session:\n  poses: 12\n  motion_s: 30\n",
+                                                "    width: 320\n    height: 240\n    rate_hz: 10\n");
   // A calibration stored before, with cam0 5 mm and 1 ms away from what the session will find:
   // the review shows the change, read from the stored record as typed fields.
   CalibrationRecord before;
@@ -540,11 +444,11 @@ TEST(Imucald, TheMotionStepRecordsTheCameraAndTheRecordHoldsTheCameraImuCalibrat
     ASSERT_TRUE(store.ok()) << store.error().message;
     ASSERT_TRUE(store->write(nlohmann::json::to_cbor(calibration_record_json(before))).ok());
   }
-  Daemon daemon(dir,
-                {"--sim-operator", "full", "--time-scale", "0", "--start", "default", "--exit-after-session"},
-                config);
+  test::Daemon daemon(
+      dir, {"--sim-operator", "full", "--time-scale", "0", "--start", "default", "--exit-after-session"},
+      config);
   ASSERT_EQ(daemon.wait(), 0) << test::read_file(dir + "/imucald.log");
-  const std::string log = session_log(dir);
+  const std::string log = test::session_log(dir);
   const std::string session = std::filesystem::path(log).parent_path().string();
 
   // The motion step's own log: the IMU and the camera's frames, the camera streaming only then.
@@ -557,19 +461,19 @@ TEST(Imucald, TheMotionStepRecordsTheCameraAndTheRecordHoldsTheCameraImuCalibrat
   ASSERT_TRUE(frames.ok());
   EXPECT_GE(*frames, 290);  // 30 s at 10 Hz
   EXPECT_LE(*frames, 320);
-  const std::string events = all_events(log);
-  EXPECT_TRUE(has(events, R"("step":"motion")")) << "the motion step ran";
-  EXPECT_TRUE(has(events, "Target seen in")) << "live detection figures";
+  const std::string events = test::all_events(log);
+  EXPECT_TRUE(test::has(events, R"("step":"motion")")) << "the motion step ran";
+  EXPECT_TRUE(test::has(events, "Target seen in")) << "live detection figures";
   // The review shows what the write will store of the camera, in true units with sigmas.
-  EXPECT_TRUE(has(events, "cam0 T_cam_imu: rotation vector ")) << events.substr(0, 3000);
-  EXPECT_TRUE(has(events, " deg (sigma about the camera's x y z ")) << events.substr(0, 3000);
-  EXPECT_TRUE(has(events, " mm\"")) << "the translation with its sigmas, in mm";
-  EXPECT_TRUE(has(events, "  time offset ")) << events.substr(0, 3000);
+  EXPECT_TRUE(test::has(events, "cam0 T_cam_imu: rotation vector ")) << events.substr(0, 3000);
+  EXPECT_TRUE(test::has(events, " deg (sigma about the camera's x y z ")) << events.substr(0, 3000);
+  EXPECT_TRUE(test::has(events, " mm\"")) << "the translation with its sigmas, in mm";
+  EXPECT_TRUE(test::has(events, "  time offset ")) << events.substr(0, 3000);
 
   // The record on the storage holds the camera, T_cam_imu near the virtual camera's mounting.
   const auto stored = test::run_cli({"store", "read", "--config", config, "--json"});
   ASSERT_EQ(stored.exit_code, 0) << stored.err;
-  EXPECT_TRUE(has(stored.out, R"("T_cam_imu")")) << stored.out.substr(0, 2000);
+  EXPECT_TRUE(test::has(stored.out, R"("T_cam_imu")")) << stored.out.substr(0, 2000);
   // Every camera-IMU parameter the session estimated is stored with a sigma, none a zero.
   const auto record = nlohmann::json::parse(stored.out, nullptr, false);
   ASSERT_FALSE(record.is_discarded());
@@ -583,9 +487,9 @@ TEST(Imucald, TheMotionStepRecordsTheCameraAndTheRecordHoldsTheCameraImuCalibrat
         1e3 * (now->cameras[0].T_cam_imu.topRightCorner<3, 1>() - old_cam.T_cam_imu.topRightCorner<3, 1>());
     const std::string change = "  cam0: translation " + fixed(dt.x(), 2) + " " + fixed(dt.y(), 2) + " " +
                                fixed(dt.z(), 2) + " mm (" + fixed(dt.norm(), 2) + " mm), rotation ";
-    EXPECT_TRUE(has(events, change)) << change << "\n" << events.substr(0, 3000);
+    EXPECT_TRUE(test::has(events, change)) << change << "\n" << events.substr(0, 3000);
     const double dshift = 1e3 * (now->cameras[0].timeshift_cam_imu_s - old_cam.timeshift_cam_imu_s);
-    EXPECT_TRUE(has(events, " deg, time offset " + fixed(dshift, 3) + " ms")) << events.substr(0, 3000);
+    EXPECT_TRUE(test::has(events, " deg, time offset " + fixed(dshift, 3) + " ms")) << events.substr(0, 3000);
   }
   ASSERT_FALSE(record["calibration"]["cameras"].empty());
   for (const auto& c : record["calibration"]["cameras"]) {
@@ -613,14 +517,15 @@ TEST(Imucald, TheMotionStepRecordsTheCameraAndTheRecordHoldsTheCameraImuCalibrat
   // Replay reaches the same camera-IMU result from the two logs.
   const auto r = test::run_cli({"replay", log, "-o", dir + "/replay", "--json"});
   ASSERT_EQ(r.exit_code, 0) << r.err << r.out;
-  EXPECT_TRUE(has(r.out, R"("same": true)")) << r.out;
+  EXPECT_TRUE(test::has(r.out, R"("same": true)")) << r.out;
   EXPECT_TRUE(std::filesystem::exists(dir + "/replay/camimu/calibration.yaml"));
 
   // A later session of the IMU only keeps the stored cameras, and its review says so.
-  Daemon imu_only(dir,
-                  {"--sim-operator", "full", "--time-scale", "0", "--start",
-                   "preflight,warmup,still,poses,solve,review,write", "--exit-after-session", "--seed", "5"},
-                  config);
+  test::Daemon imu_only(
+      dir,
+      {"--sim-operator", "full", "--time-scale", "0", "--start",
+       "preflight,warmup,still,poses,solve,review,write", "--exit-after-session", "--seed", "5"},
+      config);
   ASSERT_EQ(imu_only.wait(), 0) << test::read_file(dir + "/imucald.log");
   const auto after = test::run_cli({"store", "read", "--config", config, "--json"});
   ASSERT_EQ(after.exit_code, 0) << after.err;
@@ -628,29 +533,30 @@ TEST(Imucald, TheMotionStepRecordsTheCameraAndTheRecordHoldsTheCameraImuCalibrat
   ASSERT_FALSE(kept.is_discarded());
   EXPECT_EQ(kept["sequence"], record["sequence"].get<int>() + 1);
   EXPECT_EQ(kept["calibration"]["cameras"], record["calibration"]["cameras"]);
-  EXPECT_TRUE(has(after.out, "cameras kept from the stored record (sequence")) << after.out.substr(0, 3000);
+  EXPECT_TRUE(test::has(after.out, "cameras kept from the stored record (sequence"))
+      << after.out.substr(0, 3000);
   std::string review_events;
   for (const auto& e : std::filesystem::directory_iterator(std::filesystem::path(dir) / "state" / "sessions"))
-    review_events += all_events((e.path() / "session.imulog").string());
-  EXPECT_TRUE(has(review_events, "Cameras: cameras kept from the stored record"));
+    review_events += test::all_events((e.path() / "session.imulog").string());
+  EXPECT_TRUE(test::has(review_events, "Cameras: cameras kept from the stored record"));
 }
 
 TEST(Imucald, ACameraLostInTheMotionStepStopsItAndKeepsWhatWasRecorded) {
   const std::string dir = test::scratch_dir();
-  const std::string config = write_config(dir, "session:\n  poses: 12\n  motion_s: 30\n",
-                                          "    width: 320\n    height: 240\n    rate_hz: 10\n");
+  const std::string config = test::write_config(dir, "session:\n  poses: 12\n  motion_s: 30\n",
+                                                "    width: 320\n    height: 240\n    rate_hz: 10\n");
   // The scripted operator aborts on a fault (a script cannot plug a cable back in).
-  Daemon daemon(dir,
-                {"--sim-operator", "full", "--time-scale", "0", "--start", "default", "--exit-after-session",
-                 "--sim-unplug-camera", "50"},
-                config);
+  test::Daemon daemon(dir,
+                      {"--sim-operator", "full", "--time-scale", "0", "--start", "default",
+                       "--exit-after-session", "--sim-unplug-camera", "50"},
+                      config);
   EXPECT_EQ(daemon.wait(), 1) << test::read_file(dir + "/imucald.log");
-  const std::string log = session_log(dir);
-  const std::string events = all_events(log);
-  EXPECT_TRUE(has(events, R"("source":"cam0")")) << events.substr(0, 3000);
-  EXPECT_TRUE(has(events, "disconnected"));
-  EXPECT_TRUE(has(events, "press r to redo the step")) << "the way to continue";
-  EXPECT_TRUE(has(events, R"("outcome":"aborted")"));
+  const std::string log = test::session_log(dir);
+  const std::string events = test::all_events(log);
+  EXPECT_TRUE(test::has(events, R"("source":"cam0")")) << events.substr(0, 3000);
+  EXPECT_TRUE(test::has(events, "disconnected"));
+  EXPECT_TRUE(test::has(events, "press r to redo the step")) << "the way to continue";
+  EXPECT_TRUE(test::has(events, R"("outcome":"aborted")"));
   EXPECT_FALSE(std::filesystem::exists(dir + "/eeprom.bin")) << "the storage is untouched";
   // Every frame the camera gave before it vanished is in the motion log, which is complete.
   auto motion =
@@ -667,19 +573,21 @@ TEST(Imucald, ACameraLostInTheMotionStepStopsItAndKeepsWhatWasRecorded) {
 TEST(Imucald, PreflightFailsAStorageTheServiceCannotWrite) {
   const std::string dir = test::scratch_dir();
   // A folder that does not exist: not writable even for root, which the tests may run as.
-  std::string config = write_config(dir);
+  std::string config = test::write_config(dir);
   {
     std::string text = test::read_file(config);
     text = std::regex_replace(text, std::regex("path: " + dir + "/eeprom.bin"),
                               "path: " + dir + "/none/eeprom.bin");
     std::ofstream(config) << text;
   }
-  Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start", "default"}, config);
-  ASSERT_TRUE(wait_for([&] { return has(all_events(session_log(dir)), "not writable"); }, 60))
-      << test::read_file(dir + "/imucald.log") << all_events(session_log(dir)).substr(0, 3000);
-  const std::string events = all_events(session_log(dir));
-  EXPECT_TRUE(has(events, "cannot create " + dir + "/none/eeprom.bin")) << events.substr(0, 3000);
-  EXPECT_FALSE(has(events, R"("step":"warmup")")) << "the session does not go on past a failed preflight";
+  test::Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start", "default"}, config);
+  ASSERT_TRUE(
+      test::wait_for([&] { return test::has(test::all_events(test::session_log(dir)), "not writable"); }, 60))
+      << test::read_file(dir + "/imucald.log") << test::all_events(test::session_log(dir)).substr(0, 3000);
+  const std::string events = test::all_events(test::session_log(dir));
+  EXPECT_TRUE(test::has(events, "cannot create " + dir + "/none/eeprom.bin")) << events.substr(0, 3000);
+  EXPECT_FALSE(test::has(events, R"("step":"warmup")"))
+      << "the session does not go on past a failed preflight";
   ::kill(daemon.pid(), SIGTERM);
   EXPECT_EQ(daemon.wait(), 0);
 }
@@ -692,7 +600,7 @@ TEST(Imucald, PreflightNamesARecordOfANewerImucalAndWhatToDo) {
   for (const bool framing : {false, true}) {
     SCOPED_TRACE(framing ? "a newer framing" : "a newer payload");
     const std::string dir = test::scratch_dir();
-    const std::string config = write_config(dir);
+    const std::string config = test::write_config(dir);
     auto rig = load_rig_config(config);
     ASSERT_TRUE(rig.ok()) << rig.error().message;
     {
@@ -718,14 +626,16 @@ TEST(Imucald, PreflightNamesARecordOfANewerImucalAndWhatToDo) {
       std::ofstream(rig->storage.path, std::ios::binary) << bytes;
     }
     const std::string before = test::read_file(rig->storage.path);
-    Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start", "default"}, config);
-    ASSERT_TRUE(wait_for([&] { return has(all_events(session_log(dir)), "update imucal on the rig"); }, 60))
-        << test::read_file(dir + "/imucald.log") << all_events(session_log(dir)).substr(0, 3000);
-    const std::string events = all_events(session_log(dir));
-    EXPECT_TRUE(has(events, framing ? "written by a newer imucal" : "a newer imucal wrote it"))
+    test::Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start", "default"}, config);
+    ASSERT_TRUE(test::wait_for(
+        [&] { return test::has(test::all_events(test::session_log(dir)), "update imucal on the rig"); }, 60))
+        << test::read_file(dir + "/imucald.log") << test::all_events(test::session_log(dir)).substr(0, 3000);
+    const std::string events = test::all_events(test::session_log(dir));
+    EXPECT_TRUE(test::has(events, framing ? "written by a newer imucal" : "a newer imucal wrote it"))
         << events.substr(0, 3000);
-    EXPECT_FALSE(has(events, "Fix it and press r")) << "the generic advice instead of what to do";
-    EXPECT_FALSE(has(events, R"("step":"warmup")")) << "the session does not go on past a failed preflight";
+    EXPECT_FALSE(test::has(events, "Fix it and press r")) << "the generic advice instead of what to do";
+    EXPECT_FALSE(test::has(events, R"("step":"warmup")"))
+        << "the session does not go on past a failed preflight";
     ::kill(daemon.pid(), SIGTERM);
     EXPECT_EQ(daemon.wait(), 0);
     EXPECT_EQ(test::read_file(rig->storage.path), before) << "the newer record is untouched";
@@ -738,19 +648,20 @@ TEST(Imucald, PreflightNamesARecordOfANewerImucalAndWhatToDo) {
 // ("call poll() until it streams") and the IMU failed its check.
 TEST(Imucald, ASessionStartedRightAfterTheServiceListensStartsWithTheFirstSamples) {
   const std::string dir = test::scratch_dir();
-  Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0.02"});
-  ASSERT_TRUE(wait_for([&] { return daemon.ready(); }, 30)) << test::read_file(dir + "/imucald.log");
+  test::Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0.02"});
+  ASSERT_TRUE(test::wait_for([&] { return daemon.ready(); }, 30)) << test::read_file(dir + "/imucald.log");
   const std::string out = dir + "/start.txt";
   EXPECT_EQ(std::system((std::string(IMUCALCTL_PATH) + " --socket " + daemon.socket() +
                          " start --steps preflight,still > " + out + " 2>&1")
                             .c_str()),
             0)
       << test::read_file(out);
-  ASSERT_TRUE(wait_for([&] { return has(all_events(session_log(dir)), R"("type":"preflight")"); }, 120))
+  ASSERT_TRUE(test::wait_for(
+      [&] { return test::has(test::all_events(test::session_log(dir)), R"("type":"preflight")"); }, 120))
       << test::read_file(dir + "/imucald.log");
-  const std::string events = all_events(session_log(dir));
-  EXPECT_FALSE(has(events, "until it streams")) << events.substr(0, 3000);
-  EXPECT_TRUE(has(events, "self-test passed")) << events.substr(0, 3000);
+  const std::string events = test::all_events(test::session_log(dir));
+  EXPECT_FALSE(test::has(events, "until it streams")) << events.substr(0, 3000);
+  EXPECT_TRUE(test::has(events, "self-test passed")) << events.substr(0, 3000);
   ::kill(daemon.pid(), SIGTERM);
   EXPECT_EQ(daemon.wait(), 0);
 }
@@ -765,7 +676,7 @@ std::vector<double> stored_gyro_bias(const std::string& config) {
 
 TEST(Imucald, TheStoredGyroBiasGoesIntoTheOffsetRegistersAndSessionsSeeTheChipWithout) {
   const std::string dir = test::scratch_dir();
-  std::string config = write_config(dir);
+  std::string config = test::write_config(dir);
   {
     std::string text = test::read_file(config);
     text = std::regex_replace(text, std::regex("(path: " + dir + "/eeprom.bin)"),
@@ -782,7 +693,7 @@ TEST(Imucald, TheStoredGyroBiasGoesIntoTheOffsetRegistersAndSessionsSeeTheChipWi
                                             "--seed",
                                             "5"};
   {
-    Daemon first(dir, session, config);
+    test::Daemon first(dir, session, config);
     ASSERT_EQ(first.wait(), 0) << test::read_file(dir + "/imucald.log");
   }
   const std::vector<double> b1 = stored_gyro_bias(config);
@@ -791,8 +702,8 @@ TEST(Imucald, TheStoredGyroBiasGoesIntoTheOffsetRegistersAndSessionsSeeTheChipWi
   // At start the service programs the stored bias: at +-500 deg/s one register count is two
   // output counts, against the bias.
   {
-    Daemon idle(dir, {"--seed", "5"}, config);
-    ASSERT_TRUE(wait_for([&] { return idle.ready(); }, 30)) << test::read_file(dir + "/imucald.log");
+    test::Daemon idle(dir, {"--seed", "5"}, config);
+    ASSERT_TRUE(test::wait_for([&] { return idle.ready(); }, 30)) << test::read_file(dir + "/imucald.log");
     const std::string status = dir + "/status.json";
     ASSERT_EQ(std::system(
                   (std::string(IMUCALCTL_PATH) + " --socket " + idle.socket() + " status --json > " + status)
@@ -801,7 +712,7 @@ TEST(Imucald, TheStoredGyroBiasGoesIntoTheOffsetRegistersAndSessionsSeeTheChipWi
     const std::string expected =
         "[" + std::to_string(std::lround(-b1[0] / 2)) + " " + std::to_string(std::lround(-b1[1] / 2)) + " " +
         std::to_string(std::lround(-b1[2] / 2)) + "] from the stored gyro bias (sequence 1)";
-    EXPECT_TRUE(has(test::read_file(status), expected))
+    EXPECT_TRUE(test::has(test::read_file(status), expected))
         << test::read_file(status) << "\nexpected " << expected;
     ::kill(idle.pid(), SIGTERM);
     EXPECT_EQ(idle.wait(), 0);
@@ -810,10 +721,10 @@ TEST(Imucald, TheStoredGyroBiasGoesIntoTheOffsetRegistersAndSessionsSeeTheChipWi
   // A session clears them first: it calibrates the chip as it powers up, and finds the same bias.
   for (const auto& e : std::filesystem::directory_iterator(std::filesystem::path(dir) / "state" / "sessions"))
     std::filesystem::rename(e.path(), dir + "/first-session");
-  Daemon second(dir, session, config);
+  test::Daemon second(dir, session, config);
   ASSERT_EQ(second.wait(), 0) << test::read_file(dir + "/imucald.log");
-  EXPECT_TRUE(
-      has(all_events(session_log(dir)), "gyro offset registers [0 0 0] from cleared (power-up zero)"));
+  EXPECT_TRUE(test::has(test::all_events(test::session_log(dir)),
+                        "gyro offset registers [0 0 0] from cleared (power-up zero)"));
   const std::vector<double> b2 = stored_gyro_bias(config);
   ASSERT_EQ(b2.size(), 3u);
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(b2[i], b1[i], 0.05) << "axis " << i;
@@ -822,16 +733,16 @@ TEST(Imucald, TheStoredGyroBiasGoesIntoTheOffsetRegistersAndSessionsSeeTheChipWi
 TEST(Imucald, AnImuLostMidSessionStopsTheStepAndKeepsWhatWasRecorded) {
   const std::string dir = test::scratch_dir();
   // 40 s into the session: in the poses step. The scripted operator aborts on a fault.
-  Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start",
-                      "preflight,warmup,still,poses,solve,review,write", "--exit-after-session",
-                      "--sim-unplug-imu", "40"});
+  test::Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start",
+                            "preflight,warmup,still,poses,solve,review,write", "--exit-after-session",
+                            "--sim-unplug-imu", "40"});
   EXPECT_EQ(daemon.wait(), 1) << test::read_file(dir + "/imucald.log");
-  const std::string log = session_log(dir);
-  const std::string events = all_events(log);
-  EXPECT_TRUE(has(events, R"("type":"fault")")) << events.substr(0, 3000);
-  EXPECT_TRUE(has(events, R"("source":"imu")"));
-  EXPECT_TRUE(has(events, "press r to redo the step"));
-  EXPECT_TRUE(has(events, R"("outcome":"aborted")"));
+  const std::string log = test::session_log(dir);
+  const std::string events = test::all_events(log);
+  EXPECT_TRUE(test::has(events, R"("type":"fault")")) << events.substr(0, 3000);
+  EXPECT_TRUE(test::has(events, R"("source":"imu")"));
+  EXPECT_TRUE(test::has(events, "press r to redo the step"));
+  EXPECT_TRUE(test::has(events, R"("outcome":"aborted")"));
   EXPECT_FALSE(std::filesystem::exists(dir + "/eeprom.bin")) << "the storage is untouched";
   auto reader = log::SessionLogReader::open(log);
   ASSERT_TRUE(reader.ok()) << reader.error().message;
