@@ -99,7 +99,7 @@ void SessionEngine::reset() {
   waiting_ = failed_step_ = false;
   operator_since_ns_ = -1;
   sampled_ = false;
-  step_start_ns_ = session_start_ns_ = -1;
+  step_start_ns_ = session_start_ns_ = session_end_ns_ = -1;
   last_live_ns_ = 0;
   last_prompt_.reset();
   last_live_.reset();
@@ -174,7 +174,9 @@ session_msg::Status SessionEngine::status() const {
   m.rig = config_.name;
   if (current_ < steps_.size() && running()) m.step = steps_[current_].id;
   m.poses = poses_.size();
-  m.elapsed_s = session_start_ns_ < 0 ? 0.0 : static_cast<double>(now_ns_ - session_start_ns_) * 1e-9;
+  // A session that ended keeps the time it took; samples still come after it.
+  const TimeNs until = session_end_ns_ >= 0 ? session_end_ns_ : now_ns_;
+  m.elapsed_s = session_start_ns_ < 0 ? 0.0 : static_cast<double>(until - session_start_ns_) * 1e-9;
   return m;
 }
 
@@ -226,6 +228,7 @@ void SessionEngine::finish(SessionState state, Outcome outcome, const std::strin
   }
   state_ = state;
   waiting_ = false;
+  session_end_ns_ = now_ns_;
   emit(status());
   session_msg::Done done;
   done.outcome = outcome;

@@ -248,6 +248,7 @@ class SessionEngine {
   TimeNs now_ns_ = 0;
   TimeNs step_start_ns_ = -1;
   TimeNs session_start_ns_ = -1;
+  TimeNs session_end_ns_ = -1;  // when it ended: its elapsed time stops there
   TimeNs last_live_ns_ = 0;
   std::optional<SessionMessage> last_prompt_, last_live_;
   std::deque<SessionMessage> last_messages_;

@@ -372,6 +372,27 @@ TEST(Session, AbortKeepsTheRecordingAndWritesNothing) {
   EXPECT_GT(*n, 200 * 20);  // warm-up, still start and three poses at 200 Hz
 }
 
+TEST(Session, ASessionThatEndedKeepsTheTimeItTook) {
+  ModuleDir modules;
+  SimSession s(session_config(kImuSteps));
+  ASSERT_TRUE(s.runner_->start({}).ok());
+  s.run(500.0, [](SimSession& ss) {
+    if (ss.runner_->engine().poses().size() == 2) ss.press("abort");
+  });
+  ASSERT_EQ(s.outcome(), "aborted");
+  const double took = s.runner_->engine().status().elapsed_s;
+  EXPECT_GT(took, 10.0);
+  // Samples go on coming after the end (the IMU streams while the service runs): the session's
+  // elapsed time does not grow with them.
+  std::vector<ImuSample> batch;
+  for (int i = 0; i < 100; ++i) {  // 2 s
+    batch.clear();
+    ASSERT_TRUE(s.rig_->advance(20'000'000, batch).ok());
+    s.runner_->on_samples(batch);
+  }
+  EXPECT_DOUBLE_EQ(s.runner_->engine().status().elapsed_s, took);
+}
+
 TEST(Session, MotionDuringTheStillStartRestartsTheCountdown) {
   ModuleDir modules;
   SimSession s(session_config({"preflight", "still", "poses"}));
