@@ -10,6 +10,7 @@
 
 #include "app/report/builders.hpp"
 #include "core/camimu_calibration.hpp"
+#include "core/text_format.hpp"
 
 namespace imucal::app::report {
 namespace {
@@ -145,10 +146,12 @@ Figure xcorr_figure(const nlohmann::json& r) {
   f.title = "Time offset: angular-speed cross-correlation";
   f.caption =
       "Cross-correlation of the camera's angular speed (from its target poses) with the gyroscope's, "
-      "per camera, against the lag; the peak (dashed) started the time-offset estimate.";
+      "per camera, against the lag (t_imu = t_cam + lag); the peak (dashed) started the time-offset "
+      "estimate, the solve's result is the solid line";
   f.height_px = 380;
   const auto& q = at(r, "quality");
-  std::string s, plot;
+  const auto& cameras = at(r, "cameras");
+  std::string s, plot, results;
   int i = 0;
   for (const auto& curve : at(q, "xcorr")) {
     std::vector<std::vector<double>> rows;
@@ -167,9 +170,20 @@ Figure xcorr_figure(const nlohmann::json& r) {
       s += "set arrow from " + num(p, 10) + ", graph 0 to " + num(p, 10) +
            ", graph 1 nohead dashtype 2 lc rgb '" + kAxisColour[i % 3] + "'\n";
     }
+    if (static_cast<std::size_t>(i) < cameras.size() &&
+        cameras[static_cast<std::size_t>(i)].contains("timeshift_cam_imu_s")) {
+      const auto& cam = cameras[static_cast<std::size_t>(i)];
+      const double t = cam["timeshift_cam_imu_s"].get<double>() * 1e3;
+      s += "set arrow from " + num(t, 10) + ", graph 0 to " + num(t, 10) + ", graph 1 nohead lw 2 lc rgb '" +
+           kAxisColour[i % 3] + "'\n";
+      results +=
+          std::string(results.empty() ? "" : ", ") + cam.value("name", "cam" + n) + " " + fixed(t, 2) + " ms";
+    }
     ++i;
   }
   if (plot.empty()) return {};
+  if (!results.empty()) f.caption += " (" + results + ")";
+  f.caption += ".";
   f.script = s + "set grid\nset key outside right top\nset xlabel 'lag (ms)'\nset ylabel 'correlation'\n" +
              plot + "\n";
   return f;
@@ -212,16 +226,17 @@ Figure residuals_figure(const nlohmann::json& r) {
   const Eigen::Vector3d ra = vec3(at(q, "accel_residual_rms_mps2")),
                         rg = vec3(at(q, "gyro_residual_rms_radps"));
   std::vector<std::vector<double>> rows;
-  for (int a = 0; a < 3; ++a) rows.push_back({static_cast<double>(a), ra[a], rg[a]});
+  // The gyroscope in deg/s, as the report's other gyroscope figures.
+  for (int a = 0; a < 3; ++a) rows.push_back({static_cast<double>(a), ra[a], rg[a] * kDeg});
   f.script =
       datablock("r", rows) +
       "set multiplot layout 1,2\nset style fill solid 0.8 noborder\nset boxwidth 0.6\nset grid ytics\n"
       "set xtics ('x' 0, 'y' 1, 'z' 2)\nset xrange [-0.7:2.7]\nset yrange [0:*]\nunset key\n"
       "set title 'accelerometer'\nset ylabel 'RMS (m/s^2)'\nplot $r using 1:2 with boxes lc rgb '#0072b2', " +
       num(number(q, "accel_sigma_mps2"), 10) +
-      " with lines dashtype 2 lw 2 lc rgb '#d55e00'\nset title 'gyroscope'\nset ylabel 'RMS (rad/s)'\n"
+      " with lines dashtype 2 lw 2 lc rgb '#d55e00'\nset title 'gyroscope'\nset ylabel 'RMS (deg/s)'\n"
       "plot $r using 1:3 with boxes lc rgb '#0072b2', " +
-      num(number(q, "gyro_sigma_radps"), 10) +
+      num(number(q, "gyro_sigma_radps") * kDeg, 10) +
       " with lines dashtype 2 lw 2 lc rgb '#d55e00'\nunset multiplot\n";
   return f;
 }

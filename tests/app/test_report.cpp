@@ -187,6 +187,9 @@ TEST(Report, CamImuResultFolderFromItsWriter) {
                          "camimu-imu-fit-basic", "camimu-imu-fit-extended", "camimu-imu-fit-residuals"})
     EXPECT_NE(html.find(std::string("data-plot=\"") + id + "\""), std::string::npos) << id;
   EXPECT_NE(html.find("z rotation barely excited"), std::string::npos);
+  // The cross-correlation figure marks the result beside the peak that started it.
+  EXPECT_NE(html.find("the solve&#39;s result is the solid line (cam0 4.20 ms, cam1 -3.10 ms)."),
+            std::string::npos);
   EXPECT_NE(html.find("4.20 &plusmn; 0.14"), std::string::npos);   // cam0's time shift, ms
   EXPECT_NE(html.find("-3.10 &plusmn; 0.14"), std::string::npos);  // cam1's
   // The self-check: its verdict, advice, scale and every part, the difference beyond the limit in bold.
