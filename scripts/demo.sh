@@ -60,7 +60,8 @@ step "Every estimated quantity beside the virtual rig's truth ($SESSION/sim-trut
 cat "$SESSION/sim-truth.txt"
 
 step "Done in $(elapsed)"
-echo "Session folder: $SESSION/ (session.imulog, motion.imulog, imu-static.yaml, camimu/, report.html)"
+echo "Session folder: $SESSION/ (session.imulog, motion.imulog, imu-static.yaml, camimu/)"
+echo "Reports:        $SESSION/report.html (the IMU), $SESSION/report-camimu.html (the cameras and the camera-IMU calibration)"
 echo "Storage image:  $OUT/eeprom.bin"
 echo "Watch a session in a web browser (the live view; Ctrl-C ends it):"
 echo "  $IMUCALD --config $OUT/rig.yaml --socket /tmp/imucald.sock --state-dir /tmp/imucal-state \\"

@@ -65,16 +65,44 @@ std::string number(double v, const char* format) {
   return buf;
 }
 
+/// The text with every line longer than `width` broken at spaces, the continuation indented by
+/// two more spaces than the line (the table's own rows fit; its notes and headings are prose).
+std::string wrapped(const std::string& text, std::size_t width = 100) {
+  std::istringstream in(text);
+  std::string out;
+  for (std::string line; std::getline(in, line);) {
+    const std::size_t indent =
+        line.find_first_not_of(' ') == std::string::npos ? 0 : line.find_first_not_of(' ');
+    while (line.size() > width) {
+      std::size_t cut = line.rfind(' ', width);
+      if (cut == std::string::npos || cut <= indent + 2) break;
+      out += line.substr(0, cut) + "\n";
+      line = std::string(indent + 2, ' ') + line.substr(cut + 1);
+    }
+    out += line + "\n";
+  }
+  return out;
+}
+
+/// The table, 100 columns wide, a space before every column (a wide number shifts its row, never
+/// joins its neighbour): a figure that has no sigma says "not determined" across the sigma's and
+/// the ratio's columns.
 std::string table_text(const std::vector<TruthRow>& rows) {
   std::ostringstream out;
   auto line = [&](const std::string& name, const std::string& unit, const std::string& est,
                   const std::string& tru, const std::string& err, const std::string& rel,
-                  const std::string& sig, const std::string& ratio) {
-    out << "  " << std::left << std::setw(26) << name << ' ' << std::setw(16) << unit << std::right
-        << std::setw(14) << est << std::setw(14) << tru << std::setw(12) << err << std::setw(11) << rel
-        << std::setw(16) << sig << std::setw(13) << ratio << '\n';
+                  const std::optional<std::pair<std::string, std::string>>& sigma_ratio) {
+    out << "  " << std::left << std::setw(23) << name << ' ' << std::setw(15) << unit << std::right << ' '
+        << std::setw(12) << est << ' ' << std::setw(12) << tru << ' ' << std::setw(8) << err << ' '
+        << std::setw(8) << rel;
+    if (sigma_ratio) {
+      out << ' ' << std::setw(8) << sigma_ratio->first << ' ' << std::setw(5) << sigma_ratio->second << '\n';
+    } else {
+      out << ' ' << std::setw(14) << "not determined" << '\n';
+    }
   };
-  line("quantity", "unit", "estimate", "truth", "error", "rel.error", "1-sigma", "error/sigma");
+  line("quantity", "unit", "estimate", "truth", "error", "rel.err",
+       std::pair<std::string, std::string>("1-sigma", "e/sig"));
   int with_sigma = 0, within[3] = {0, 0, 0};
   double worst = 0.0;
   std::string worst_name;
@@ -91,10 +119,10 @@ std::string table_text(const std::vector<TruthRow>& rows) {
       }
     }
     const bool values = !r.error_only;
-    line(r.name, r.unit, values ? number(r.estimate, "%.7g") : "-", values ? number(r.truth, "%.7g") : "-",
-         number(error, "%.3g"),
-         values && r.truth != 0.0 ? number(error / std::abs(r.truth), "%.2e") : std::string("-"),
-         sig ? number(r.sigma, "%.3g") : std::string("not determined"), sig ? number(ratio, "%.2f") : "-");
+    line(r.name, r.unit, values ? number(r.estimate, "%.6g") : "-", values ? number(r.truth, "%.6g") : "-",
+         number(error, "%.2g"),
+         values && r.truth != 0.0 ? number(error / std::abs(r.truth), "%.1e") : std::string("-"),
+         sig ? std::optional(std::pair(number(r.sigma, "%.2g"), number(ratio, "%.1f"))) : std::nullopt);
   }
   out << "  " << rows.size() << " quantities, " << with_sigma
       << " with a sigma: |error/sigma| <= 1: " << within[0] << ", <= 2: " << within[1]
@@ -485,7 +513,7 @@ class VirtualServiceRig final : public ServiceRig {
     }
     std::ostringstream head;
     head << "  Every estimated quantity: estimate, truth, error = estimate - truth, relative error = error / "
-            "|truth|, the result's 1-sigma and error / sigma.\n"
+            "|truth|, the result's 1-sigma and error / sigma (e/sig).\n"
          << "  IMU: the static result (the record's IMU), in the frame it reports in (z along the "
             "accelerometer's "
             "z axis)";
@@ -502,7 +530,7 @@ class VirtualServiceRig final : public ServiceRig {
             "the rotation's error about the camera's axes, R_est = Exp(e) R_true); with several cameras the "
             "camera chain's baseline, relative rotation (about the camera's axes) and time offset of each "
             "camera against the one before.\n";
-    return head.str() + table_text(rows) + notes.str();
+    return wrapped(head.str() + table_text(rows) + notes.str());
   }
 
  private:

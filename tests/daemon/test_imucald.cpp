@@ -411,7 +411,7 @@ namespace {
 /// Column `column` (0 unit, 1 estimate, 2 truth, 3 error, 4 relative error) of the row `name` of
 /// the table in sim-truth.txt, as a number.
 double truth_figure(const std::string& text, const std::string& name, int column) {
-  const auto at = text.find("\n  " + name + "  ");
+  const auto at = text.find("\n  " + name + " ");
   if (at == std::string::npos) return NAN;
   std::istringstream in(text.substr(at + 3 + name.size()));
   std::string word;

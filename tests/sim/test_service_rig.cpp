@@ -195,7 +195,8 @@ struct TableRow {
 
 TableRow table_row(const std::string& text, const std::string& name) {
   TableRow r;
-  const auto at = text.find("\n  " + name + "  ");
+  // The name, then its padding or the column's space: "accel scale x" is no row of "accel scale xy".
+  const auto at = text.find("\n  " + name + " ");
   if (at == std::string::npos) return r;
   std::istringstream in(text.substr(at + 3 + name.size(), text.find('\n', at + 1) - at - 3 - name.size()));
   std::vector<std::string> t;
@@ -207,9 +208,9 @@ TableRow table_row(const std::string& text, const std::string& name) {
   r.truth = t[2];
   r.error = t[3];
   r.relative = t[4];
-  if (t[5] == "not" && t.size() >= 8 && t[6] == "determined") {
-    r.sigma = "not determined";
-    r.ratio = t[7];
+  if (t[5] == "not" && t[6] == "determined") {
+    r.sigma = "not determined";  // across the sigma's and the ratio's columns
+    r.ratio = "-";
   } else {
     r.sigma = t[5];
     r.ratio = t[6];
@@ -340,6 +341,9 @@ TEST(ServiceRig, TheTruthTableShowsEveryEstimatedQuantityWithItsErrorAgainstTheT
   // Every estimated quantity has its row: 9 accelerometer, 12 gyroscope, 9 G, 4 intrinsics, 4
   // distortion, 3 rotation, 3 translation, the time offset.
   EXPECT_NE(text.find("\n  45 quantities, 43 with a sigma"), std::string::npos) << text;
+  // The table and its notes fit 100 columns (the demo's last screen).
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);) EXPECT_LE(line.size(), 100u) << line;
   for (const char* name :
        {"accel scale y", "accel misalignment xy", "accel misalignment yz", "accel bias z", "gyro scale z",
         "gyro misalignment zx", "gyro bias y", "gyro g-sensitivity G_zy", "cam0 fy", "cam0 cx", "cam0 cy",
@@ -348,11 +352,12 @@ TEST(ServiceRig, TheTruthTableShowsEveryEstimatedQuantityWithItsErrorAgainstTheT
 
   const TableRow scale = table_row(text, "accel scale x");
   ASSERT_TRUE(scale.found) << text;
-  EXPECT_NEAR(num(scale.truth), scale_x, scale_x * 1e-6);
-  EXPECT_NEAR(num(scale.error), scale_x * 1e-3, scale_x * 1e-5);
-  EXPECT_EQ(scale.relative, "1.00e-03");
-  EXPECT_EQ(scale.ratio, "2.00");
-  EXPECT_EQ(table_row(text, "accel scale y").ratio, "0.00");
+  // (Estimates and truths are printed to 6 digits, errors and sigmas to 2, ratios to 0.1.)
+  EXPECT_NEAR(num(scale.truth), scale_x, scale_x * 1e-5);
+  EXPECT_NEAR(num(scale.error), scale_x * 1e-3, scale_x * 5e-5);
+  EXPECT_EQ(scale.relative, "1.0e-03");
+  EXPECT_EQ(scale.ratio, "2.0");
+  EXPECT_EQ(table_row(text, "accel scale y").ratio, "0.0");
   // The accelerometer's bias in m/s^2 at the nominal sensitivity, with a sigma of one count; its
   // truth the mean over the still and pose steps, near the turn-on bias after 2 s.
   const TableRow bias = table_row(text, "accel bias x");
@@ -360,36 +365,35 @@ TEST(ServiceRig, TheTruthTableShowsEveryEstimatedQuantityWithItsErrorAgainstTheT
   EXPECT_EQ(bias.unit, "m/s^2");
   EXPECT_NEAR(num(bias.estimate), est.b_a.x() * lsb, 1e-6);
   EXPECT_NEAR(num(bias.truth), p.accel_bias.x(), 0.01);
-  // (The error and the sigma are printed to 3 digits.)
   const double bias_error = num(bias.estimate) - num(bias.truth);
-  EXPECT_NEAR(num(bias.error), bias_error, 0.005 * std::abs(bias_error));
-  EXPECT_NEAR(num(bias.sigma), lsb, 0.005 * lsb);
-  EXPECT_NEAR(num(bias.ratio), bias_error / lsb, 0.01);
+  EXPECT_NEAR(num(bias.error), bias_error, 0.05 * std::abs(bias_error));
+  EXPECT_NEAR(num(bias.sigma), lsb, 0.05 * lsb);
+  EXPECT_NEAR(num(bias.ratio), bias_error / lsb, 0.06);
   const TableRow gyro_bias = table_row(text, "gyro bias x");
   EXPECT_EQ(gyro_bias.unit, "deg/s");
   EXPECT_NEAR(num(gyro_bias.truth), p.gyro_bias.x() * 180.0 / std::numbers::pi, 0.01);
-  EXPECT_NEAR(num(gyro_bias.sigma), p.gyro_radps_per_count() * 180.0 / std::numbers::pi, 1e-4);
+  EXPECT_NEAR(num(gyro_bias.sigma), p.gyro_radps_per_count() * 180.0 / std::numbers::pi, 5e-4);
   EXPECT_EQ(table_row(text, "gyro misalignment zy").sigma, "not determined");
   EXPECT_EQ(table_row(text, "gyro misalignment zy").ratio, "-");
   EXPECT_EQ(table_row(text, "gyro g-sensitivity G_xy").unit, "(rad/s)/(m/s^2)");
 
   const TableRow fx = table_row(text, "cam0 fx");
   EXPECT_EQ(fx.unit, "px");
-  EXPECT_NEAR(num(fx.truth), camera.intrinsics[0], 1e-4);
+  EXPECT_NEAR(num(fx.truth), camera.intrinsics[0], 1e-3);
   EXPECT_NEAR(num(fx.error), 0.3, 1e-6);
-  EXPECT_EQ(fx.ratio, "3.00");
-  EXPECT_EQ(table_row(text, "cam0 distortion k2").ratio, "0.00");
+  EXPECT_EQ(fx.ratio, "3.0");
+  EXPECT_EQ(table_row(text, "cam0 distortion k2").ratio, "0.0");
 
   const TableRow rot_x = table_row(text, "cam0 rotation about x");
   EXPECT_EQ(rot_x.unit, "deg");
-  EXPECT_NEAR(num(rot_x.error), 0.001 * 180.0 / std::numbers::pi, 1e-4);
-  EXPECT_EQ(rot_x.ratio, "2.00");
+  EXPECT_NEAR(num(rot_x.error), 0.001 * 180.0 / std::numbers::pi, 1e-3);
+  EXPECT_EQ(rot_x.ratio, "2.0");
   EXPECT_EQ(table_row(text, "cam0 rotation about y").sigma, "not determined");
   const TableRow ty = table_row(text, "cam0 translation y");
   EXPECT_EQ(ty.unit, "mm");
-  EXPECT_NEAR(num(ty.truth), T.translation().y() * 1e3, 1e-6);
+  EXPECT_NEAR(num(ty.truth), T.translation().y() * 1e3, 1e-3);
   EXPECT_NEAR(num(ty.error), 1.0, 1e-6);
-  EXPECT_EQ(ty.ratio, "2.00");
+  EXPECT_EQ(ty.ratio, "2.0");
 
   // The virtual camera stamps late: the truth of the time offset is not zero.
   const TableRow offset = table_row(text, "cam0 time offset");
@@ -397,7 +401,7 @@ TEST(ServiceRig, TheTruthTableShowsEveryEstimatedQuantityWithItsErrorAgainstTheT
   EXPECT_NEAR(num(offset.truth), kVirtualTimeshiftCamImuS * 1e3, 1e-9);
   EXPECT_NE(num(offset.truth), 0.0);
   EXPECT_NEAR(num(offset.error), 0.1, 1e-6);
-  EXPECT_EQ(offset.ratio, "2.00");
+  EXPECT_EQ(offset.ratio, "2.0");
 }
 
 }  // namespace
