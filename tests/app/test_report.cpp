@@ -22,16 +22,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-bool gnuplot_on_path() {
-  const char* path = std::getenv("PATH");
-  std::stringstream ss(path ? path : "");
-  std::string dir;
-  while (std::getline(ss, dir, ':')) {
-    if (!dir.empty() && ::access((fs::path(dir) / "gnuplot").c_str(), X_OK) == 0) return true;
-  }
-  return false;
-}
-
 std::size_t count(const std::string& text, const std::string& what) {
   std::size_t n = 0;
   for (auto p = text.find(what); p != std::string::npos; p = text.find(what, p + 1)) ++n;
@@ -160,7 +150,7 @@ CamImuReport camimu_report() {
 }
 
 TEST(Report, CamImuResultFolderFromItsWriter) {
-  if (!gnuplot_on_path()) GTEST_SKIP() << "gnuplot is not installed (Debian package gnuplot-nox)";
+  if (!test::on_path("gnuplot")) GTEST_SKIP() << "gnuplot is not installed (Debian package gnuplot-nox)";
   const std::string dir = test::scratch_dir();
   fs::create_directories(dir + "/out");
   std::ofstream(dir + "/out/result.json") << camimu_result_json(camimu_report());
@@ -204,7 +194,7 @@ TEST(Report, CamImuResultFolderFromItsWriter) {
 }
 
 TEST(Report, CameraResultFromItsWriter) {
-  if (!gnuplot_on_path()) GTEST_SKIP() << "gnuplot is not installed (Debian package gnuplot-nox)";
+  if (!test::on_path("gnuplot")) GTEST_SKIP() << "gnuplot is not installed (Debian package gnuplot-nox)";
   CameraCalibrationReport r;
   r.stream.name = "cam0";
   auto& res = r.intrinsics;

@@ -109,32 +109,57 @@ class TestHost : public service::SessionHost {
   std::vector<std::vector<std::string>> starts_;
 };
 
-/// A ControlServer on a thread of its own; call() runs a function on that thread and waits.
-class TestService {
+/// An io_context run by a thread of its own; call() runs a function on that thread and waits.
+class IoThread {
  public:
-  explicit TestService(service::ControlServerOptions options) : work_(io_.get_executor()) {
-    auto created = service::ControlServer::create(io_, options, host);
-    if (created) {
-      server_ = std::move(*created);
-    } else {
-      error = created.error().message;
-    }
-    thread_ = std::thread([this] { io_.run(); });
-  }
-  /// Runs f on the server's thread and returns its result.
+  IoThread() : work_(io.get_executor()), thread_([this] { io.run(); }) {}
+  ~IoThread() { stop(); }
+  IoThread(const IoThread&) = delete;
+  IoThread& operator=(const IoThread&) = delete;
+  /// Runs f on the thread and returns its result.
   template <class F>
   auto call(F&& f) {
     std::packaged_task<decltype(f())()> task(std::forward<F>(f));
     auto future = task.get_future();
-    boost::asio::post(io_, [&task] { task(); });
+    boost::asio::post(io, [&task] { task(); });
     return future.get();
+  }
+  /// Lets the loop end and joins the thread (once).
+  void stop() {
+    if (!thread_.joinable()) return;
+    work_.reset();
+    io.stop();
+    thread_.join();
+  }
+  boost::asio::io_context io;
+
+ private:
+  boost::asio::executor_work_guard<boost::asio::io_context::executor_type> work_;
+  std::thread thread_;
+};
+
+/// A ControlServer on a thread of its own.
+class TestService {
+ public:
+  explicit TestService(service::ControlServerOptions options) {
+    loop_.call([&] {
+      auto created = service::ControlServer::create(loop_.io, options, host);
+      if (created) {
+        server_ = std::move(*created);
+      } else {
+        error = created.error().message;
+      }
+    });
+  }
+  /// Runs f on the server's thread and returns its result.
+  template <class F>
+  auto call(F&& f) {
+    return loop_.call(std::forward<F>(f));
   }
 
   ~TestService() {
     call([this] { server_.reset(); });
-    work_.reset();
-    io_.stop();
-    thread_.join();
+    loop_.stop();
   }
   TestService(const TestService&) = delete;
   TestService& operator=(const TestService&) = delete;
@@ -176,10 +201,9 @@ class TestService {
   std::string error;
 
  private:
-  boost::asio::io_context io_;
-  boost::asio::executor_work_guard<boost::asio::io_context::executor_type> work_;
+  // Declared first: destroyed last, after the server (whose handlers it runs) is gone.
+  IoThread loop_;
   std::unique_ptr<service::ControlServer> server_;
-  std::thread thread_;
 };
 
 }  // namespace imucal::test

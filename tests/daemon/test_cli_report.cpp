@@ -22,19 +22,8 @@ namespace {
 namespace fs = std::filesystem;
 using test::run_cli;
 
-/// Whether `program` is an executable on PATH.
-bool on_path(const std::string& program) {
-  const char* path = std::getenv("PATH");
-  std::stringstream ss(path ? path : "");
-  std::string dir;
-  while (std::getline(ss, dir, ':')) {
-    if (!dir.empty() && ::access((fs::path(dir) / program).c_str(), X_OK) == 0) return true;
-  }
-  return false;
-}
-
 #define REQUIRE_GNUPLOT()                                                                                \
-  if (!on_path("gnuplot"))                                                                               \
+  if (!test::on_path("gnuplot"))                                                                         \
   GTEST_SKIP() << "gnuplot is not installed (Debian package gnuplot-nox, scripts/install-deps.sh): the " \
                   "report's figures cannot be drawn"
 
@@ -187,7 +176,7 @@ TEST_F(CliReport, RefusesOutputsItMayNotWrite) {
   EXPECT_EQ(test::read_file(out + "/exists.html"), "old");
   r = run_cli({"report", result(), "-o", result()});
   EXPECT_EQ(r.exit_code, 2) << r.err;
-  if (!on_path("gnuplot")) return;
+  if (!test::on_path("gnuplot")) return;
   r = run_cli({"report", result(), "-o", out + "/no/such/folder/r.html"});
   EXPECT_EQ(r.exit_code, 7) << r.err;
   EXPECT_NE(r.err.find("could not write"), std::string::npos) << r.err;
@@ -256,7 +245,8 @@ TEST_F(CliReport, AFigureWithNothingToPlotIsANoteNotAFailure) {
 /// The browser: every figure decodes (the page marks each one), and the screenshot shows them.
 TEST_F(CliReport, RendersInAHeadlessBrowser) {
   REQUIRE_GNUPLOT();
-  if (!on_path("chromium")) GTEST_SKIP() << "chromium is not installed (scripts/install-deps.sh --test)";
+  if (!test::on_path("chromium"))
+    GTEST_SKIP() << "chromium is not installed (scripts/install-deps.sh --test)";
   const std::string out = test::scratch_dir();
   auto r = run_cli({"report", result(), "--log", log(), "-o", out + "/report.html"});
   ASSERT_EQ(r.exit_code, 0) << r.err;

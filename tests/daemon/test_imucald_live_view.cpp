@@ -29,23 +29,22 @@ namespace {
 
 namespace fs = std::filesystem;
 
-bool chromium_here() {
-  const char* path = std::getenv("PATH");
-  std::stringstream ss(path ? path : "");
-  for (std::string dir; std::getline(ss, dir, ':');)
-    if (!dir.empty() && ::access((fs::path(dir) / "chromium").c_str(), X_OK) == 0) return true;
-  return false;
+/// The loopback address at `port` (0: any port).
+sockaddr_in loopback(int port) {
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = htons(static_cast<std::uint16_t>(port));
+  return a;
 }
 
 /// A TCP port free on the loopback now (bound and released; the service binds it next).
 int free_loopback_port() {
   const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  sockaddr_in a = loopback(0);
   socklen_t len = sizeof a;
   int port = 0;
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+  if (::bind(fd, reinterpret_cast<const sockaddr*>(&a), sizeof a) == 0 &&
       ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
     port = ntohs(a.sin_port);
   ::close(fd);
@@ -55,14 +54,11 @@ int free_loopback_port() {
 /// One HTTP exchange on the loopback: the whole response, or "" when nothing answers.
 std::string http_exchange(int port, const std::string& request) {
   const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  a.sin_port = htons(static_cast<std::uint16_t>(port));
+  const sockaddr_in a = loopback(port);
   timeval tv{10, 0};
   ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
   std::string out;
-  if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+  if (::connect(fd, reinterpret_cast<const sockaddr*>(&a), sizeof a) == 0 &&
       ::send(fd, request.data(), request.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(request.size())) {
     char buf[8192];
     for (ssize_t n; (n = ::recv(fd, buf, sizeof buf, 0)) > 0;) out.append(buf, static_cast<std::size_t>(n));
@@ -90,13 +86,10 @@ class Watcher {
  private:
   void run() {
     const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    a.sin_port = htons(static_cast<std::uint16_t>(port_));
+    const sockaddr_in a = loopback(port_);
     timeval tv{1, 0};
     ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-    if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) return (void)::close(fd);
+    if (::connect(fd, reinterpret_cast<const sockaddr*>(&a), sizeof a) != 0) return (void)::close(fd);
     const std::string req = "GET /events HTTP/1.1\r\nHost: x\r\n\r\n";
     (void)::send(fd, req.data(), req.size(), MSG_NOSIGNAL);
     std::string pending;
@@ -173,7 +166,8 @@ long cells_total(const std::string& cells) {
 }
 
 TEST(ImucaldLiveView, ABrowserSeesThePromptsAndWhatTheCameraSees) {
-  if (!chromium_here()) GTEST_SKIP() << "chromium is not installed (scripts/install-deps.sh --test)";
+  if (!test::on_path("chromium"))
+    GTEST_SKIP() << "chromium is not installed (scripts/install-deps.sh --test)";
   const std::string dir = test::scratch_dir();
   const int port = free_loopback_port();
   ASSERT_GT(port, 0);
@@ -432,10 +426,7 @@ TEST(ImucaldLiveView, TheSocketSystemdPassesIsServedAndAViewThatCannotOpenLeaves
   // The port taken: said in the journal, and the service runs on (its socket answers).
   const std::string dir2 = test::scratch_dir();
   const int taken_fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  a.sin_port = 0;
+  sockaddr_in a = loopback(0);
   socklen_t len = sizeof a;
   ASSERT_EQ(::bind(taken_fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
   ASSERT_EQ(::listen(taken_fd, 1), 0);

@@ -30,32 +30,28 @@ constexpr const char* kToken = "0123456789abcdef0123456789abcdef";
 /// A live view server on a thread of its own, on a free loopback port.
 class LiveView {
  public:
-  explicit LiveView(service::LiveViewOptions options = {}) : work_(io_.get_executor()) {
+  explicit LiveView(service::LiveViewOptions options = {}) {
     options.port = 0;
     if (options.token.empty()) options.token = kToken;
     if (options.cameras.empty()) options.cameras = {"cam0"};
     options.rig = "sim";
-    auto created = service::LiveViewServer::create(io_, options, host);
-    if (created.ok()) {
-      server_ = std::move(*created);
-      port = server_->port();
-    } else {
-      error = created.error().message;
-    }
-    thread_ = std::thread([this] { io_.run(); });
+    loop_.call([&] {
+      auto created = service::LiveViewServer::create(loop_.io, options, host);
+      if (created.ok()) {
+        server_ = std::move(*created);
+        port = server_->port();
+      } else {
+        error = created.error().message;
+      }
+    });
+  }
+  ~LiveView() {
+    loop_.call([this] { server_.reset(); });
+    loop_.stop();
   }
   template <class F>
   auto call(F&& f) {
-    std::packaged_task<decltype(f())()> task(std::forward<F>(f));
-    auto future = task.get_future();
-    boost::asio::post(io_, [&task] { task(); });
-    return future.get();
-  }
-  ~LiveView() {
-    call([this] { server_.reset(); });
-    work_.reset();
-    io_.stop();
-    thread_.join();
+    return loop_.call(std::forward<F>(f));
   }
   void broadcast(const nlohmann::json& message) {
     auto m = session_msg::decode(message);
@@ -77,10 +73,8 @@ class LiveView {
   unsigned short port = 0;
 
  private:
-  boost::asio::io_context io_;
-  boost::asio::executor_work_guard<boost::asio::io_context::executor_type> work_;
+  test::IoThread loop_;
   std::unique_ptr<service::LiveViewServer> server_;
-  std::thread thread_;
 };
 
 /// A client connection with a receive timeout.

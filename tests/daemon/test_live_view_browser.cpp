@@ -8,20 +8,16 @@
 #include <stdlib.h>
 #include <unistd.h>
 
-#include <boost/asio/executor_work_guard.hpp>
-#include <boost/asio/io_context.hpp>
-#include <boost/asio/post.hpp>
 #include <filesystem>
-#include <future>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
-#include <thread>
 
 #include "app/session/view_coverage.hpp"
 #include "calib/target_detection.hpp"
 #include "daemon/service/live_view_server.hpp"
 #include "sim/camera_render.hpp"
 #include "tests/daemon/service_test_host.hpp"
+#include "tests/support/chain_views.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal {
@@ -29,38 +25,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-bool chromium_on_path() {
-  const char* path = std::getenv("PATH");
-  std::stringstream ss(path ? path : "");
-  for (std::string dir; std::getline(ss, dir, ':');)
-    if (!dir.empty() && ::access((fs::path(dir) / "chromium").c_str(), X_OK) == 0) return true;
-  return false;
-}
-
-CameraModel browser_test_camera() {
-  CameraModel c;
-  c.distortion_model = DistortionModel::kRadtan;
-  c.width = 640;
-  c.height = 480;
-  c.intrinsics = {520.0, 521.0, 318.0, 243.0};
-  c.distortion_coeffs = Eigen::Vector4d(-0.2, 0.05, 0.0003, -0.0002);
-  return c;
-}
-
-TargetDescription browser_test_board() {
-  TargetDescription t;
-  t.type = TargetDescription::Type::kCheckerboard;
-  t.cols = 7;
-  t.rows = 6;
-  t.col_spacing_m = 0.04;
-  t.row_spacing_m = 0.04;
-  return t;
-}
-
 TEST(LiveViewBrowser, TheCornersThePageDrawsAreWhereTheRenderersTruthProjectsThem) {
-  if (!chromium_on_path()) GTEST_SKIP() << "chromium is not installed (scripts/install-deps.sh --test)";
-  const CameraModel camera = browser_test_camera();
-  const TargetDescription board = browser_test_board();
+  if (!test::on_path("chromium"))
+    GTEST_SKIP() << "chromium is not installed (scripts/install-deps.sh --test)";
+  const CameraModel camera = test::chain_camera(520.0, 318.0);
+  const TargetDescription board = test::chain_board();
   auto renderer = sim::TargetRenderer::create(camera, board, {});
   ASSERT_TRUE(renderer.ok()) << renderer.error().message;
   // The board 0.6 m ahead, turned 20 degrees about y and 10 about x, off centre.
@@ -72,12 +41,12 @@ TEST(LiveViewBrowser, TheCornersThePageDrawsAreWhereTheRenderersTruthProjectsThe
   const Eigen::Isometry3d poses[] = {T};
   const cv::Mat image = (*renderer)->render(poses, nullptr);
   const sim::CornerTruth truth = (*renderer)->project_corners(T);
-  ASSERT_EQ(truth.visible_count, 42);
+  ASSERT_EQ(truth.visible_count, 48);
 
   auto detector = calib::TargetDetector::create(board);
   ASSERT_TRUE(detector.ok()) << detector.error().message;
   auto obs = (*detector)->detect(calib::GrayView{image.data, image.cols, image.rows, 0});
-  ASSERT_TRUE(obs.ok() && obs->ids.size() == 42u) << "the detector did not find the whole board";
+  ASSERT_TRUE(obs.ok() && obs->ids.size() == 48u) << "the detector did not find the whole board";
 
   ViewFrame frame =
       app::session::make_view_frame(image.data, image.cols, image.rows, 320, obs->px, obs->ids, board);
@@ -85,18 +54,16 @@ TEST(LiveViewBrowser, TheCornersThePageDrawsAreWhereTheRenderersTruthProjectsThe
   auto png = app::session::view_frame_png(frame);
   ASSERT_TRUE(png.ok());
 
-  boost::asio::io_context io;
-  auto work = boost::asio::make_work_guard(io);
   test::TestHost host;
+  test::IoThread loop;
   service::LiveViewOptions options;
   options.port = 0;
   options.cameras = {"cam0"};
   options.token = "x";
-  auto server = service::LiveViewServer::create(io, options, host);
+  auto server = loop.call([&] { return service::LiveViewServer::create(loop.io, options, host); });
   ASSERT_TRUE(server.ok()) << server.error().message;
-  (*server)->frame(frame, *png);
+  loop.call([&] { (*server)->frame(frame, *png); });
   const std::string url = (*server)->url() + "?camera=0&seq=1";
-  std::thread loop([&] { io.run(); });
 
   const std::string out = test::scratch_dir();
   const std::string chromium =
@@ -108,11 +75,8 @@ TEST(LiveViewBrowser, TheCornersThePageDrawsAreWhereTheRenderersTruthProjectsThe
   const int shot_rc = std::system((chromium + " --window-size=400,300 --screenshot=" + out + "/shot.png '" +
                                    url + "' > " + out + "/err2 2>&1")
                                       .c_str());
-  boost::asio::post(io, [&] {
-    (*server)->close();
-    work.reset();
-  });
-  loop.join();
+  loop.call([&] { server->reset(); });
+  loop.stop();
   ASSERT_EQ(dom_rc, 0) << test::read_file(out + "/err1");
   ASSERT_EQ(shot_rc, 0) << test::read_file(out + "/err2");
   EXPECT_NE(test::read_file(out + "/dom.html").find("<title>frame-drawn 1</title>"), std::string::npos)
@@ -151,7 +115,7 @@ TEST(LiveViewBrowser, TheCornersThePageDrawsAreWhereTheRenderersTruthProjectsThe
     ++found;
     worst = std::max(worst, (sum / n - want).norm());
   }
-  EXPECT_EQ(found, 42) << "corners drawn near the truth";
+  EXPECT_EQ(found, 48) << "corners drawn near the truth";
   EXPECT_LT(worst, 1.5) << "the farthest drawn corner from the truth, shrunk pixels";
 }
 

@@ -23,6 +23,9 @@ struct CommandResult {
 /// that has not ended after that many seconds is ended by SIGALRM (exit code 128 + 14).
 CommandResult run_cli(const std::vector<std::string>& args, unsigned limit_s = 0);
 
+/// Whether `program` is an executable in a folder of PATH (tests that need a tool skip without it).
+bool on_path(const std::string& program);
+
 /// Reads a whole file; empty when missing.
 std::string read_file(const std::string& path);
 
