@@ -12,6 +12,30 @@
 #include "daemon/common/number_check.hpp"
 #include "daemon/imucald/service_app.hpp"
 
+/// --live-view [ADDRESS:]PORT into the options; false (said on stderr) when it is not that.
+static bool parse_live_view(const std::string& live_view, imucal::imucald::ServiceOptions& o) {
+  const auto colon = live_view.rfind(':');
+  const std::string port = colon == std::string::npos ? live_view : live_view.substr(colon + 1);
+  const bool digits =
+      !port.empty() && port.size() <= 5 && port.find_first_not_of("0123456789") == std::string::npos;
+  const int value = digits ? std::stoi(port) : 0;
+  if (value < 1 || value > 65535) {
+    std::fprintf(stderr,
+                 "imucald: --live-view '%s' is not [ADDRESS:]PORT: give a port 1..65535, as 8421 or "
+                 "127.0.0.1:8421\n",
+                 live_view.c_str());
+    return false;
+  }
+  o.live_view_port = value;
+  if (colon != std::string::npos) {
+    std::string address = live_view.substr(0, colon);
+    if (address.size() >= 2 && address.front() == '[' && address.back() == ']')
+      address = address.substr(1, address.size() - 2);
+    o.live_view_address = address;
+  }
+  return true;
+}
+
 int main(int argc, char** argv) {
   using imucal::imucald::Service;
   using imucal::imucald::ServiceOptions;
@@ -96,27 +120,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   o.socket_mode = value;
-  if (!live_view.empty()) {
-    const auto colon = live_view.rfind(':');
-    const std::string port = colon == std::string::npos ? live_view : live_view.substr(colon + 1);
-    const bool digits =
-        !port.empty() && port.size() <= 5 && port.find_first_not_of("0123456789") == std::string::npos;
-    const int value = digits ? std::stoi(port) : 0;
-    if (value < 1 || value > 65535) {
-      std::fprintf(stderr,
-                   "imucald: --live-view '%s' is not [ADDRESS:]PORT: give a port 1..65535, as 8421 or "
-                   "127.0.0.1:8421\n",
-                   live_view.c_str());
-      return 2;
-    }
-    o.live_view_port = value;
-    if (colon != std::string::npos) {
-      std::string address = live_view.substr(0, colon);
-      if (address.size() >= 2 && address.front() == '[' && address.back() == ']')
-        address = address.substr(1, address.size() - 2);
-      o.live_view_address = address;
-    }
-  }
+  if (!live_view.empty() && !parse_live_view(live_view, o)) return 2;
   if (check) return imucal::imucald::check_configuration(o);
   if (start_opt->count() > 0) {
     std::vector<std::string> steps;
