@@ -342,8 +342,11 @@ void cli_checks(double rate_hz, const std::string& cli) {
   std::ofstream(config)
       << "name: qemu-iio\nimu:\n  bus: i2c\n  device: /dev/i2c-0\n  driver: auto\n  rate_hz: " << rate_hz
       << "\n  dlpf_hz: " << rig_config(rate_hz, imucal::ImuDriver::kAuto).imu.dlpf_hz << "\n";
+  // The pulses go on until the recording ends (stop() below), up to a minute: the program's start
+  // in the guest took over 4 s on a loaded CI machine, and a fixed 6 s of pulses then ended before
+  // its 2 s of samples were in.
   Pulses pulses(rate_hz);
-  pulses.start(static_cast<int>(6 * rate_hz));
+  pulses.start(static_cast<int>(60 * rate_hz));
   auto run = [&](std::vector<std::string> args, std::string& out) {
     const std::string out_path = tmp + "/cli.out";
     args.insert(args.begin(), cli);
@@ -392,7 +395,7 @@ void service_checks(double rate_hz, const std::string& imucald, const std::strin
   const std::string dir = "/sys/bus/iio/devices/iio:device0";
   write_text(dir + "/in_anglvel_y_calibbias", "7");  // cleared by the service: no stored bias
   Pulses pulses(rate_hz);
-  pulses.start(static_cast<int>(20 * rate_hz));
+  pulses.start(static_cast<int>(60 * rate_hz));  // until the service has exited (stop() below)
   const pid_t pid = ::fork();
   if (pid == 0) {
     const std::string out = tmp + "/imucald.out";
