@@ -1,8 +1,8 @@
 // imucald's live view during virtual-rig sessions: the page in headless Chromium at the poses
 // step and the motion step (the prompt is the session's, the image changes, the coverage grows,
 // the corners drawn are where the frame's detection put them), the keys refused without the
-// token, and twenty watchers during a 1 kHz + 30 fps recording. Skips, saying so, without
-// chromium.
+// token, twenty watchers during a 1 kHz + 30 fps recording, and a page left open while the service
+// restarts. Skips, saying so, without chromium.
 #include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -21,6 +22,7 @@
 #include <vector>
 
 #include "log/session_log.hpp"
+#include "tests/support/headless_browser.hpp"
 #include "tests/support/imucald_process.hpp"
 #include "tests/support/test_support.hpp"
 
@@ -382,6 +384,62 @@ TEST(ImucaldLiveView, TwentyWatchersDuringA1kHzAnd30FpsRecordingLoseNoSampleOrFr
 
 namespace imucal {
 namespace {
+
+/// A rig configuration whose rig is called `name`, with the live view on `port`.
+std::string named_rig_config(const std::string& dir, const std::string& name, int port) {
+  const std::string path =
+      test::write_config(dir, "live_view:\n  enabled: true\n  port: " + std::to_string(port) + "\n");
+  const std::string text =
+      std::regex_replace(test::read_file(path), std::regex("\nname: sim\n"), "\nname: " + name + "\n");
+  std::ofstream(path) << text;
+  return path;
+}
+
+/// The page left open in a browser (its event stream, as a phone shows it) while the service stops
+/// and another starts on the same port: it says the connection is lost and keeps what it showed,
+/// then comes back by itself with the new service's state.
+TEST(ImucaldLiveView, APageLeftOpenReconnectsWhenTheServiceRestarts) {
+  if (!test::on_path("chromium"))
+    GTEST_SKIP() << "chromium is not installed (scripts/install-deps.sh --test)";
+  const std::string dir = test::scratch_dir();
+  const int port = free_loopback_port();
+  ASSERT_GT(port, 0);
+  fs::create_directories(dir + "/a");
+  fs::create_directories(dir + "/b");
+  auto first = std::make_unique<test::Daemon>(dir + "/a", std::vector<std::string>{},
+                                              named_rig_config(dir + "/a", "bench-rig-a", port));
+  ASSERT_TRUE(test::wait_for([&] { return first->ready(); }, 60)) << test::read_file(dir + "/a/imucald.log");
+
+  test::HeadlessBrowser browser(dir + "/profile", dir + "/chromium.log");
+  ASSERT_TRUE(browser.open("http://127.0.0.1:" + std::to_string(port) + "/")) << browser.error();
+  // What the operator sees: the connection's state, the rig's name, the lost-connection banner.
+  const std::string look =
+      "[document.body.dataset.conn, document.getElementById('h-rig').textContent,"
+      " getComputedStyle(document.getElementById('lost')).display !== 'none'].join('|')";
+  std::string seen;
+  EXPECT_TRUE(test::wait_for([&] { return (seen = browser.text(look)) == "live|rig bench-rig-a|false"; }, 30))
+      << seen << " " << browser.error();
+
+  ::kill(first->pid(), SIGTERM);
+  EXPECT_EQ(first->wait_for_exit(30), 0)
+      << "the service stops with a page open: " << test::read_file(dir + "/a/imucald.log");
+  first.reset();
+  EXPECT_TRUE(test::wait_for([&] { return (seen = browser.text(look)) == "lost|rig bench-rig-a|true"; }, 30))
+      << seen << " " << browser.error();
+  EXPECT_TRUE(test::has(browser.text("document.getElementById('lost').textContent"),
+                        "What is shown is the last the rig sent"));
+
+  // Gone for a while (longer than one retry), then another service on the same port.
+  std::this_thread::sleep_for(std::chrono::seconds(4));
+  EXPECT_EQ(browser.text("document.body.dataset.conn"), "lost");
+  test::Daemon second(dir + "/b", {}, named_rig_config(dir + "/b", "bench-rig-b", port));
+  ASSERT_TRUE(test::wait_for([&] { return second.ready(); }, 60)) << test::read_file(dir + "/b/imucald.log");
+  EXPECT_TRUE(test::wait_for([&] { return (seen = browser.text(look)) == "live|rig bench-rig-b|false"; }, 30))
+      << "the page comes back by itself: " << seen << " " << browser.error();
+  EXPECT_EQ(browser.text("document.getElementById('h-state').textContent"), "idle");
+  ::kill(second.pid(), SIGTERM);
+  EXPECT_EQ(second.wait_for_exit(30), 0) << test::read_file(dir + "/b/imucald.log");
+}
 
 /// imucald under systemd-socket-activate, as imucald.socket starts it: the socket is passed.
 TEST(ImucaldLiveView, TheSocketSystemdPassesIsServedAndAViewThatCannotOpenLeavesTheServiceRunning) {
