@@ -12,6 +12,6 @@ struct ModuleHeader {
 };
 
 /// Raised whenever the API structs or the types they pass change shape.
-inline constexpr int kModuleAbi = 6;
+inline constexpr int kModuleAbi = 7;
 
 }  // namespace imucal

@@ -83,6 +83,14 @@ Status SceneFrameSource::render(TimeNs t_mid_host_ns, std::span<std::uint8_t> pi
   const CornerTruth truth = renderer_->project_corners(T_cam_board_at(t_mid_imu));
   if (truth.visible_count == static_cast<int>(truth.px.size())) ++stats_.frames_all_points_visible;
   if (truth.visible_count == 0) ++stats_.frames_no_point_visible;
+  {
+    std::vector<Eigen::Vector2d> corners = truth.px;
+    for (std::size_t i = 0; i < corners.size(); ++i)
+      if (i >= truth.visible.size() || !truth.visible[i]) corners[i].setConstant(std::nan(""));
+    std::lock_guard lock(recent_mutex_);
+    recent_.emplace_back(t_mid_host_ns, std::move(corners));
+    if (recent_.size() > 64) recent_.pop_front();
+  }
   const std::size_t w = static_cast<std::size_t>(image.cols);
   if (pixels.size() != w * static_cast<std::size_t>(image.rows)) {
     return make_error(Errc::kInvalidArgument, "simulated camera: the buffer does not match the render size");
@@ -92,6 +100,13 @@ Status SceneFrameSource::render(TimeNs t_mid_host_ns, std::span<std::uint8_t> pi
   }
   ++stats_.frames;
   return {};
+}
+
+std::optional<std::vector<Eigen::Vector2d>> SceneFrameSource::corners_at(TimeNs t_mid_host_ns) const {
+  std::lock_guard lock(recent_mutex_);
+  for (const auto& [t, corners] : recent_)
+    if (t == t_mid_host_ns) return corners;
+  return std::nullopt;
 }
 
 drivers::camera::fake::FrameRenderer SceneFrameSource::as_renderer(std::shared_ptr<SceneFrameSource> source) {

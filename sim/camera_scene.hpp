@@ -10,7 +10,10 @@
 
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <deque>
 #include <memory>
+#include <mutex>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -67,6 +70,12 @@ class SceneFrameSource {
   /// The virtual camera's renderer: this source, shared.
   static drivers::camera::fake::FrameRenderer as_renderer(std::shared_ptr<SceneFrameSource> source);
 
+  /// The target's points where the frame stamped (mid-exposure) at host time t_mid_host_ns shows
+  /// them, by point id (NaN where a point is behind the camera or off the sensor): the truth of
+  /// one of the last 64 frames rendered, for a check of what was drawn or detected; nothing for
+  /// an older or unknown stamp. Safe beside render() on another thread.
+  std::optional<std::vector<Eigen::Vector2d>> corners_at(TimeNs t_mid_host_ns) const;
+
   const SceneFrameStats& stats() const { return stats_; }
   const Eigen::Isometry3d& T_world_target() const { return T_world_board_; }
 
@@ -81,6 +90,8 @@ class SceneFrameSource {
   Rng noise_;
   std::vector<Eigen::Isometry3d> subs_;
   SceneFrameStats stats_;
+  mutable std::mutex recent_mutex_;
+  std::deque<std::pair<TimeNs, std::vector<Eigen::Vector2d>>> recent_;  // corners_at()
 };
 
 /// The virtual camera's renderer for `scene` along `trajectory` (kept alive by the renderer),

@@ -466,6 +466,11 @@ class VirtualServiceRig final : public ServiceRig {
     return std::unique_ptr<drivers::camera::Camera>(std::move(*camera));
   }
 
+  std::optional<std::vector<Eigen::Vector2d>> truth_corners(std::size_t index, TimeNs t_ns) const override {
+    if (index >= sources_.size()) return std::nullopt;
+    return sources_[index]->corners_at(t_ns);
+  }
+
   std::string truth_report(const session_msg::ResultSummary& result) const override {
     if (!result.imu) return {};
     const ResultFiles files = read_result_files(result);
@@ -619,14 +624,15 @@ class VirtualServiceRig final : public ServiceRig {
     if (!motion.ok()) return motion.error().context("the virtual rig's motion");
     motion_ = std::move(*motion);
     const Eigen::Isometry3d T_op = follow_transform(*motion_);
-    // The trajectory belongs to the rig, which outlives its cameras' renderers here.
-    std::shared_ptr<const Trajectory> trajectory(&rig_->trajectory(), [](const Trajectory*) {});
+    // The trajectory belongs to the rig, which outlives its cameras' sources here.
     for (std::size_t i = 0; i < options_.cameras.size(); ++i) {
       const SimCameraScene scene =
           virtual_camera_scene(options_.cameras[i], *options_.target, options_.seed, i);
-      auto renderer = make_scene_renderer(scene, trajectory, T_op * motion_->T_world_board(scene.target));
-      if (!renderer.ok()) return renderer.error().context("camera " + options_.cameras[i].name);
-      renderers_.push_back(std::move(*renderer));
+      auto source =
+          SceneFrameSource::create(scene, rig_->trajectory(), T_op * motion_->T_world_board(scene.target));
+      if (!source.ok()) return source.error().context("camera " + options_.cameras[i].name);
+      sources_.push_back(std::move(*source));
+      renderers_.push_back(SceneFrameSource::as_renderer(sources_.back()));
     }
     return {};
   }
@@ -635,6 +641,7 @@ class VirtualServiceRig final : public ServiceRig {
   std::unique_ptr<SessionRig> rig_;
   std::unique_ptr<ScriptedOperator> operator_;
   std::shared_ptr<const CheckerboardMotion> motion_;
+  std::vector<std::shared_ptr<SceneFrameSource>> sources_;  // one per camera, behind renderers_
   std::vector<drivers::camera::fake::FrameRenderer> renderers_;
   std::vector<ImuSample> batch_;
   std::chrono::steady_clock::time_point wall_start_;

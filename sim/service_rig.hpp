@@ -8,6 +8,7 @@
 // it runs the virtual rig (app/module_loader.hpp): the rig's service does not link the simulator.
 // This header is the one part of sim/ that imucald includes.
 
+#include <Eigen/Core>
 #include <chrono>
 #include <cstdint>
 #include <functional>
@@ -99,6 +100,9 @@ class ServiceRig {
   /// A session's "result" message beside the virtual rig's truth, as text; empty when the message
   /// holds no IMU result.
   virtual std::string truth_report(const session_msg::ResultSummary& result) const = 0;
+  /// Where camera `index`'s frame stamped t_ns truly shows the target's points, by point id (NaN
+  /// where not on the sensor); nothing once the frame is older than the last 64 rendered.
+  virtual std::optional<std::vector<Eigen::Vector2d>> truth_corners(std::size_t index, TimeNs t_ns) const = 0;
 };
 
 /// The virtual rig (sim/service_rig.cpp): the module's entry; tests link imucal_sim_service.

@@ -371,9 +371,26 @@ Status Service::open_live_view(std::optional<int> passed_socket) {
 
 void Service::view_frame(ViewFrame&& frame) {
   if (!live_) return;
+  if (sim_rig_ && runner_) write_view_truth(frame);
   auto png = app::session::view_frame_png(frame);
   if (!png.ok()) return;  // a frame the view misses; the recording has it
   live_->frame(std::move(frame), std::move(*png));
+}
+
+// The virtual rig's truth of each frame the view is sent, beside what was drawn on it: one line
+// "camera t_ns x y x y ..." (full-size pixels, by point id, nan where not on the sensor) in the
+// session folder's sim-view-truth.txt (docs/service.md, "Live view").
+void Service::write_view_truth(const ViewFrame& frame) {
+  const auto corners = sim_rig_->truth_corners(frame.camera, frame.t_ns);
+  if (!corners) return;
+  std::ofstream out(runner_->session_dir() + "/sim-view-truth.txt", std::ios::app);
+  out << frame.camera << ' ' << frame.t_ns;
+  char xy[64];
+  for (const Eigen::Vector2d& p : *corners) {
+    std::snprintf(xy, sizeof xy, " %.3f %.3f", p.x(), p.y());
+    out << xy;
+  }
+  out << '\n';
 }
 
 Status Service::open_imu() {

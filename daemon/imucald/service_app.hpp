@@ -122,6 +122,7 @@ class Service final : public service::SessionHost {
   Status open_live_view(std::optional<int> passed_socket);
   /// A camera's frame for the live view, encoded.
   void view_frame(ViewFrame&& frame);
+  void write_view_truth(const ViewFrame& frame);
   void on_samples(std::span<const ImuSample> samples);
   void imu_failed(const Error& error);
   app::session::PreflightReport preflight();

@@ -1,6 +1,7 @@
 // imucald's live view during virtual-rig sessions: the page in headless Chromium at the poses
 // step and the motion step (the prompt is the session's, the image changes, the coverage grows,
-// the corners drawn are where the frame's detection put them), the keys refused without the
+// the corners drawn are where the frame's detection put them and where the virtual camera's
+// truth has them), the keys refused without the
 // token, twenty watchers during a 1 kHz + 30 fps recording, and a page left open while the service
 // restarts. Skips, saying so, without chromium.
 #include <gtest/gtest.h>
@@ -233,7 +234,7 @@ TEST(ImucaldLiveView, ABrowserSeesThePromptsAndWhatTheCameraSees) {
   // Frames with the target, each drawn alone at 1:1 (the page's ?camera view, in Chromium's
   // virtual time since it opens no stream): the image changes from one to the next, and the
   // corners drawn are the frame's detection, moved into the shrunk image.
-  const auto latest_seen_frame = [&](long after) {
+  const auto latest_seen_frame = [&](long after, double not_before_s) {
     nlohmann::json f;
     (void)test::wait_for(
         [&] {
@@ -241,9 +242,10 @@ TEST(ImucaldLiveView, ABrowserSeesThePromptsAndWhatTheCameraSees) {
           const auto body = r.find("\r\n\r\n");
           if (body == std::string::npos) return false;
           f = nlohmann::json::parse(r.substr(body + 4), nullptr, false);
-          return f.is_object() && f.value("seen", false) && f.value("seq", 0L) > after;
+          return f.is_object() && f.value("seen", false) && f.value("seq", 0L) > after &&
+                 f.value("t", 0.0) >= not_before_s;
         },
-        30);
+        60);
     return f;
   };
   const auto shot_of = [&](long seq) {
@@ -257,9 +259,11 @@ TEST(ImucaldLiveView, ABrowserSeesThePromptsAndWhatTheCameraSees) {
     return cv::imread(file, cv::IMREAD_COLOR);
   };
   Watcher watching(port, false);  // frames are made while someone watches
-  const nlohmann::json first = latest_seen_frame(0);
+  const nlohmann::json first = latest_seen_frame(0, 0.0);
   ASSERT_TRUE(first.is_object() && first.contains("seq"));
-  const nlohmann::json frame = latest_seen_frame(first["seq"].get<long>());
+  // Half a second of the rig's time later: on a loaded machine the virtual rig runs far slower
+  // than asked, and two frames 0.1 s apart once looked alike to the last grey level.
+  const nlohmann::json frame = latest_seen_frame(first["seq"].get<long>(), first["t"].get<double>() + 0.5);
   ASSERT_TRUE(frame.is_object() && frame.contains("seq"));
   const cv::Mat before = shot_of(first["seq"].get<long>());
   const cv::Mat shot = shot_of(frame["seq"].get<long>());
@@ -272,10 +276,8 @@ TEST(ImucaldLiveView, ABrowserSeesThePromptsAndWhatTheCameraSees) {
     for (int u = 0; u < w; ++u)
       change += std::abs(int(shot.at<cv::Vec3b>(v, u)[1]) - int(before.at<cv::Vec3b>(v, u)[1]));
   EXPECT_GT(change / (w * h), 2.0) << "the image changes (mean grey-level difference)";
-  int found = 0;
-  double worst = 0.0;
-  for (const auto& c : frame["corners"]) {
-    const double x = c[0].get<double>(), y = c[1].get<double>();
+  // The distance from (x, y) to the centre of the magenta cross drawn within 6 px of it; -1: none.
+  const auto drawn_off = [&](double x, double y) {
     double sx = 0, sy = 0;
     int n = 0;
     for (int v = static_cast<int>(y) - 6; v <= static_cast<int>(y) + 6; ++v)
@@ -284,12 +286,49 @@ TEST(ImucaldLiveView, ABrowserSeesThePromptsAndWhatTheCameraSees) {
         const cv::Vec3b p = shot.at<cv::Vec3b>(v, u);
         if (p[2] > 200 && p[0] > 200 && p[1] < 90) sx += u, sy += v, ++n;
       }
-    if (n == 0) continue;
+    return n == 0 ? -1.0 : std::hypot(sx / n - x, sy / n - y);
+  };
+  int found = 0;
+  double worst = 0.0;
+  for (const auto& c : frame["corners"]) {
+    const double off = drawn_off(c[0].get<double>(), c[1].get<double>());
+    if (off < 0) continue;
     ++found;
-    worst = std::max(worst, std::hypot(sx / n - x, sy / n - y));
+    worst = std::max(worst, off);
   }
   EXPECT_EQ(found, static_cast<int>(frame["corners"].size()));
   EXPECT_LT(worst, 1.5);
+
+  // The same crosses against the virtual camera's truth of that frame (sim-view-truth.txt: what
+  // the renderer projected, not what the detector found), moved into the shrunk image.
+  const std::string session = fs::path(test::session_log(dir)).parent_path().string();
+  const double t_frame = frame["t"].get<double>();
+  const double shrink = frame["full_width"].get<double>() / w;
+  std::vector<double> truth;
+  std::stringstream truth_lines(test::read_file(session + "/sim-view-truth.txt"));
+  for (std::string line; std::getline(truth_lines, line);) {
+    std::stringstream fields(line);
+    long camera = -1;
+    long long t_ns = 0;
+    fields >> camera >> t_ns;
+    if (camera != 0 || std::abs(static_cast<double>(t_ns) * 1e-9 - t_frame) > 1e-6) continue;
+    truth.clear();
+    for (std::string v; fields >> v;) truth.push_back(std::strtod(v.c_str(), nullptr));
+  }
+  ASSERT_EQ(truth.size(), 2 * frame["corners"].size()) << "the frame's truth in " << session;
+  int truth_found = 0, truth_visible = 0;
+  double truth_worst = 0.0;
+  for (std::size_t i = 0; i + 1 < truth.size(); i += 2) {
+    if (!std::isfinite(truth[i]) || !std::isfinite(truth[i + 1])) continue;
+    ++truth_visible;
+    const double off = drawn_off((truth[i] + 0.5) / shrink - 0.5, (truth[i + 1] + 0.5) / shrink - 0.5);
+    if (off < 0) continue;
+    ++truth_found;
+    truth_worst = std::max(truth_worst, off);
+  }
+  EXPECT_EQ(truth_visible, static_cast<int>(frame["corners"].size()));
+  EXPECT_EQ(truth_found, truth_visible);
+  EXPECT_LT(truth_worst, 1.5) << "the drawn corners against the virtual camera's truth (view pixels)";
 
   // No solve step: the session ends "recorded", which --exit-after-session reports as 1.
   EXPECT_EQ(daemon.wait(), 1) << test::read_file(dir + "/imucald.log");
