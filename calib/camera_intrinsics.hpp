@@ -145,7 +145,8 @@ void set_coverage(int width, int height, int cols, std::span<const Eigen::Vector
 
 /// The warnings a camera result deserves: focal length not determined (covariance of full
 /// rank and relative sigma within options.max_focal_relative_sigma, else the views cannot tell
-/// focal length from distance), coverage below half the grid, more than a fifth of the views
+/// focal length from distance), coverage below half the grid, corners in fewer than half the
+/// cells along the image's edges, more than a fifth of the views
 /// rejected; each with what to record instead.
 std::vector<std::string> camera_quality_warnings(const CameraIntrinsicsResult& result,
                                                  const CameraIntrinsicsOptions& options);

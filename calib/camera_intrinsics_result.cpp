@@ -67,6 +67,24 @@ std::vector<std::string> camera_quality_warnings(const CameraIntrinsicsResult& r
                   " cells): the distortion is extrapolated elsewhere; show the target near the "
                   "edges and corners of the image too");
   }
+  // The outer ring of cells: a wide lens's distortion is largest there, and the share of the
+  // whole grid can look fine with the target never near the edges.
+  const int cols = r.coverage_cols, rows = r.coverage_rows;
+  if (cols >= 3 && rows >= 3 && r.coverage_counts.size() == static_cast<std::size_t>(cols) * rows) {
+    int ring = 0, reached = 0;
+    for (int y = 0; y < rows; ++y)
+      for (int x = 0; x < cols; ++x) {
+        if (y != 0 && y != rows - 1 && x != 0 && x != cols - 1) continue;
+        ++ring;
+        if (r.coverage_counts[static_cast<std::size_t>(y) * cols + x] > 0) ++reached;
+      }
+    if (2 * reached < ring) {
+      out.push_back("the corners reached only " + std::to_string(reached) + " of the " +
+                    std::to_string(ring) +
+                    " cells along the image's edges: the distortion there, the largest with a wide lens, "
+                    "is extrapolated; show the target near the edges and into the corners of the image too");
+    }
+  }
   const int rejected = r.views_total - r.views_used;
   if (rejected * 5 > r.views_total) {
     out.push_back(std::to_string(rejected) + " of " + std::to_string(r.views_total) +

@@ -317,6 +317,53 @@ TEST(CameraIntrinsics, CoverageCountsTheCellsHit) {
   EXPECT_TRUE(warned);
 }
 
+bool warns_of_edges(const std::vector<std::string>& warnings) {
+  for (const auto& w : warnings)
+    if (w.find("cells along the image's edges") != std::string::npos) return true;
+  return false;
+}
+
+TEST(CameraIntrinsics, WarnsWhenTheTargetNeverReachedTheImagesEdges) {
+  // Views whose corners all stay in the middle of the image: most of the grid's inner cells
+  // can be covered while the outer ring stays empty, and that is said apart.
+  const CameraModel truth = radtan_camera();
+  std::vector<TargetObservation> middle;
+  for (const auto& o : synthesize(truth, board(), 11, {.views = 120})) {
+    bool inside = true;
+    for (const auto& px : o.px)
+      inside = inside && px.x() > 0.12 * truth.width && px.x() < 0.88 * truth.width &&
+               px.y() > 0.14 * truth.height && px.y() < 0.86 * truth.height;
+    if (inside) middle.push_back(o);
+  }
+  ASSERT_GE(middle.size(), 5u);
+  auto m = calibrate_camera_intrinsics(board(), middle, options_for(truth), {});
+  ASSERT_TRUE(m.ok()) << m.error().message;
+  EXPECT_TRUE(warns_of_edges(m->warnings));
+
+  // The counts alone: 10 x 8 cells, the outer ring's 32 cells; 15 of them reached is too few,
+  // 16 is enough.
+  CameraIntrinsicsResult r;
+  r.coverage_cols = 10;
+  r.coverage_rows = 8;
+  r.coverage = 1.0;
+  r.covariance_ok = true;
+  r.camera = truth;
+  r.intrinsics_sigma.setConstant(1e-3);
+  r.coverage_counts.assign(80, 0);
+  for (int y = 1; y < 7; ++y)
+    for (int x = 1; x < 9; ++x) r.coverage_counts[static_cast<std::size_t>(y * 10 + x)] = 5;
+  for (int x = 0; x < 10; ++x) r.coverage_counts[static_cast<std::size_t>(x)] = 1;      // the top row
+  for (int y = 1; y < 6; ++y) r.coverage_counts[static_cast<std::size_t>(y * 10)] = 1;  // 5 on the left
+  EXPECT_TRUE(warns_of_edges(camera_quality_warnings(r, options_for(truth))));
+  r.coverage_counts[60] = 1;
+  EXPECT_FALSE(warns_of_edges(camera_quality_warnings(r, options_for(truth))));
+  // And the fixture's well-spread views do not warn.
+  auto spread =
+      calibrate_camera_intrinsics(board(), synthesize(truth, board(), 9, {}), options_for(truth), {});
+  ASSERT_TRUE(spread.ok()) << spread.error().message;
+  EXPECT_FALSE(warns_of_edges(spread->warnings));
+}
+
 TEST(CameraIntrinsics, RefusesMixedImageSizesAndBadIds) {
   const CameraModel truth = radtan_camera();
   auto obs = synthesize(truth, board(), 4, {});
