@@ -5,10 +5,7 @@
 // the page does. The time reported for the fan-out is the loop thread's CPU time
 // (CLOCK_THREAD_CPUTIME_ID), not the wall clock: the watchers' threads share the machine.
 #include <benchmark/benchmark.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
 #include <time.h>
-#include <unistd.h>
 
 #include <atomic>
 #include <boost/asio/post.hpp>
@@ -22,6 +19,7 @@
 #include "app/session/view_coverage.hpp"
 #include "daemon/service/live_view_server.hpp"
 #include "tests/daemon/service_test_host.hpp"
+#include "tests/support/live_view_client.hpp"
 
 namespace imucal {
 namespace {
@@ -85,82 +83,36 @@ void BM_ViewFrameAndPng(benchmark::State& state) {
 }
 BENCHMARK(BM_ViewFrameAndPng)->Arg(320)->Arg(640)->Unit(benchmark::kMillisecond);
 
-sockaddr_in loopback(int port) {
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  a.sin_port = htons(static_cast<std::uint16_t>(port));
-  return a;
-}
-
-int connect_loopback(int port) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  const sockaddr_in a = loopback(port);
-  timeval tv{1, 0};
-  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-  if (::connect(fd, reinterpret_cast<const sockaddr*>(&a), sizeof a) != 0) {
-    ::close(fd);
-    return -1;
-  }
-  return fd;
-}
-
 /// A watcher: the event stream read as it comes; with `fetch`, each frame's PNG fetched on a
 /// connection of its own (as the page's image element does).
 class Watcher {
  public:
-  Watcher(int port, bool fetch) : port_(port), fetch_(fetch), thread_([this] { run(); }) {}
-  ~Watcher() {
-    stop_ = true;
-    thread_.join();
-  }
+  Watcher(int port, bool fetch)
+      : port_(port),
+        fetch_(fetch),
+        reader_(port, [this](const std::vector<std::string>& events) { on(events); }) {}
   long frames() const { return frames_; }
   /// PNG fetches not answered 200 (the server's connection limit).
   long refused() const { return refused_; }
 
  private:
-  void run() {
-    const int fd = connect_loopback(port_);
-    if (fd < 0) return;
-    const std::string req = "GET /events HTTP/1.1\r\nHost: x\r\n\r\n";
-    (void)::send(fd, req.data(), req.size(), MSG_NOSIGNAL);
-    std::string pending;
-    char buf[65536];
-    while (!stop_) {
-      const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
-      if (n == 0) break;
-      if (n < 0) continue;
-      pending.append(buf, static_cast<std::size_t>(n));
-      long seq = -1;
-      for (auto end = pending.find("\n\n"); end != std::string::npos; end = pending.find("\n\n")) {
-        const std::string ev = pending.substr(0, end);
-        pending.erase(0, end + 2);
-        if (ev.rfind("event: frame\n", 0) != 0) continue;
-        const auto q = ev.find("\"seq\":");
-        if (q != std::string::npos) seq = std::atol(ev.c_str() + q + 6);
-        if (fetch_ && seq >= 0) fetch(seq);
-        ++frames_;
+  void on(const std::vector<std::string>& events) {
+    for (const std::string& ev : events) {
+      if (ev.rfind("event: frame\n", 0) != 0) continue;
+      const auto q = ev.find("\"seq\":");
+      if (fetch_ && q != std::string::npos) {
+        const std::string png = test::http_exchange(
+            port_, "GET /frame/0.png?seq=" + std::to_string(std::atol(ev.c_str() + q + 6)) +
+                       " HTTP/1.1\r\nHost: x\r\n\r\n");
+        if (png.rfind("HTTP/1.1 200", 0) != 0) ++refused_;
       }
+      ++frames_;
     }
-    ::close(fd);
-  }
-  void fetch(long seq) {
-    const int fd = connect_loopback(port_);
-    if (fd < 0) return;
-    const std::string req = "GET /frame/0.png?seq=" + std::to_string(seq) + " HTTP/1.1\r\nHost: x\r\n\r\n";
-    (void)::send(fd, req.data(), req.size(), MSG_NOSIGNAL);
-    char buf[65536];
-    std::string head;
-    for (ssize_t n; (n = ::recv(fd, buf, sizeof buf, 0)) > 0;)
-      if (head.size() < 12) head.append(buf, static_cast<std::size_t>(n));
-    if (head.rfind("HTTP/1.1 200", 0) != 0) ++refused_;
-    ::close(fd);
   }
   int port_;
   bool fetch_;
-  std::atomic<bool> stop_{false};
   std::atomic<long> frames_{0}, refused_{0};
-  std::thread thread_;
+  test::EventStreamReader reader_;  // last: its thread calls on() until it is destroyed
 };
 
 double thread_cpu_s() {

@@ -25,6 +25,7 @@
 #include "log/session_log.hpp"
 #include "tests/support/headless_browser.hpp"
 #include "tests/support/imucald_process.hpp"
+#include "tests/support/live_view_client.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal {
@@ -32,99 +33,47 @@ namespace {
 
 namespace fs = std::filesystem;
 
-/// The loopback address at `port` (0: any port).
-sockaddr_in loopback(int port) {
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  a.sin_port = htons(static_cast<std::uint16_t>(port));
-  return a;
-}
-
-/// A TCP port free on the loopback now (bound and released; the service binds it next).
-int free_loopback_port() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a = loopback(0);
-  socklen_t len = sizeof a;
-  int port = 0;
-  if (::bind(fd, reinterpret_cast<const sockaddr*>(&a), sizeof a) == 0 &&
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
-    port = ntohs(a.sin_port);
-  ::close(fd);
-  return port;
-}
-
-/// One HTTP exchange on the loopback: the whole response, or "" when nothing answers.
-std::string http_exchange(int port, const std::string& request) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  const sockaddr_in a = loopback(port);
-  timeval tv{10, 0};
-  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-  std::string out;
-  if (::connect(fd, reinterpret_cast<const sockaddr*>(&a), sizeof a) == 0 &&
-      ::send(fd, request.data(), request.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(request.size())) {
-    char buf[8192];
-    for (ssize_t n; (n = ::recv(fd, buf, sizeof buf, 0)) > 0;) out.append(buf, static_cast<std::size_t>(n));
-  }
-  ::close(fd);
-  return out;
-}
+using test::free_loopback_port;
+using test::http_exchange;
+using test::loopback;
 
 /// A browser watching: the event stream read as it comes and, with `fetch`, the latest frame's
 /// PNG fetched whenever the last fetch is done (as the page does: a frame that came meanwhile is
 /// skipped, never the stream). While one watches, the service makes frames for the view.
 class Watcher {
  public:
-  Watcher(int port, bool fetch) : port_(port), fetch_(fetch), thread_([this] { run(); }) {}
-  ~Watcher() { (void)stop(); }
+  Watcher(int port, bool fetch)
+      : port_(port),
+        fetch_(fetch),
+        reader_(port, [this](const std::vector<std::string>& events) { on(events); }) {}
   /// Stops watching; the PNGs fetched.
   long stop() {
-    stop_ = true;
-    if (thread_.joinable()) thread_.join();
+    reader_.stop();
     return pngs_;
   }
   /// Frames announced on the stream (after stop()).
   long frames() const { return frames_; }
 
  private:
-  void run() {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    const sockaddr_in a = loopback(port_);
-    timeval tv{1, 0};
-    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-    if (::connect(fd, reinterpret_cast<const sockaddr*>(&a), sizeof a) != 0) return (void)::close(fd);
-    const std::string req = "GET /events HTTP/1.1\r\nHost: x\r\n\r\n";
-    (void)::send(fd, req.data(), req.size(), MSG_NOSIGNAL);
-    std::string pending;
-    char buf[65536];
-    while (!stop_) {
-      const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
-      if (n == 0) break;
-      if (n < 0) continue;
-      pending.append(buf, static_cast<std::size_t>(n));
-      std::string latest;  // "camera.png?seq=S" of the last frame announced so far
-      for (auto end = pending.find("\n\n"); end != std::string::npos; end = pending.find("\n\n")) {
-        const std::string ev = pending.substr(0, end);
-        pending.erase(0, end + 2);
-        // {"camera":N,...,"seq":S,...}: keys in order; the corners between them can be long.
-        if (ev.rfind("event: frame\n", 0) != 0) continue;
-        ++frames_;
-        const auto c = ev.find("\"camera\":"), q = ev.find("\"seq\":");
-        if (c == std::string::npos || q == std::string::npos) continue;
-        latest = std::to_string(std::atol(ev.c_str() + c + 9)) +
-                 ".png?seq=" + std::to_string(std::atol(ev.c_str() + q + 6));
-      }
-      if (!fetch_ || latest.empty()) continue;
-      const std::string png = http_exchange(port_, "GET /frame/" + latest + " HTTP/1.1\r\nHost: x\r\n\r\n");
-      if (png.rfind("HTTP/1.1 200", 0) == 0) ++pngs_;
+  void on(const std::vector<std::string>& events) {
+    std::string latest;  // "camera.png?seq=S" of the last frame announced so far
+    for (const std::string& ev : events) {
+      // {"camera":N,...,"seq":S,...}: keys in order; the corners between them can be long.
+      if (ev.rfind("event: frame\n", 0) != 0) continue;
+      ++frames_;
+      const auto c = ev.find("\"camera\":"), q = ev.find("\"seq\":");
+      if (c == std::string::npos || q == std::string::npos) continue;
+      latest = std::to_string(std::atol(ev.c_str() + c + 9)) +
+               ".png?seq=" + std::to_string(std::atol(ev.c_str() + q + 6));
     }
-    ::close(fd);
+    if (!fetch_ || latest.empty()) return;
+    const std::string png = http_exchange(port_, "GET /frame/" + latest + " HTTP/1.1\r\nHost: x\r\n\r\n");
+    if (png.rfind("HTTP/1.1 200", 0) == 0) ++pngs_;
   }
   int port_;
   bool fetch_;
-  std::atomic<bool> stop_{false};
   long pngs_ = 0, frames_ = 0;
-  std::thread thread_;
+  test::EventStreamReader reader_;  // last: its thread calls on() until it is stopped
 };
 
 /// The page's DOM after Chromium ran it for a few seconds of its virtual time, in its ?poll=1
