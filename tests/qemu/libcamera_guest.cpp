@@ -322,7 +322,8 @@ void lc_record_checks(const std::string& id, const std::string& cli) {
                         << "target: {target_type: checkerboard, targetCols: 7, targetRows: 6, "
                         << "rowSpacingMeters: 0.06, colSpacingMeters: 0.06}\n";
   q::Pulses pulses(200.0);
-  pulses.start(200 * 12);
+  pulses.start(
+      200 * 120);  // until the recording has ended (stop() below): its start in a loaded guest took seconds
   auto run = [&](const std::string& args, std::string& out) {
     const std::string out_path = tmp + "/cli.out";
     const int rc = std::system((cli + " " + args + " >" + out_path + " 2>&1").c_str());
