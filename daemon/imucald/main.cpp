@@ -12,6 +12,24 @@
 #include "daemon/common/number_check.hpp"
 #include "daemon/imucald/service_app.hpp"
 
+/// --socket-mode into the options; false (said on stderr) when it is not a socket mode. Octal
+/// digits only, permission bits only (no setuid, setgid or sticky bit), and read and write for
+/// the owner: a socket its owner cannot use is a service nobody can reach.
+static bool parse_socket_mode(const std::string& mode, imucal::imucald::ServiceOptions& o) {
+  const bool octal =
+      !mode.empty() && mode.size() <= 4 && mode.find_first_not_of("01234567") == std::string::npos;
+  const unsigned value = octal ? static_cast<unsigned>(std::stoul(mode, nullptr, 8)) : 0u;
+  if (!octal || value > 0777u || (value & 0600u) != 0600u) {
+    std::fprintf(stderr,
+                 "imucald: --socket-mode '%s' is not a socket mode: give octal permission bits like 0660 "
+                 "(at most 0777, with read and write for the owner)\n",
+                 mode.c_str());
+    return false;
+  }
+  o.socket_mode = value;
+  return true;
+}
+
 /// --live-view [ADDRESS:]PORT into the options; false (said on stderr) when it is not that.
 static bool parse_live_view(const std::string& live_view, imucal::imucald::ServiceOptions& o) {
   const auto colon = live_view.rfind(':');
@@ -107,19 +125,7 @@ int main(int argc, char** argv) {
   app.add_flag("-q,--quiet", quiet, "Log warnings and errors only");
   CLI11_PARSE(app, argc, argv);
   if (quiet) spdlog::set_level(spdlog::level::warn);
-  // Octal digits only, permission bits only (no setuid, setgid or sticky bit), and read and
-  // write for the owner: a socket its owner cannot use is a service nobody can reach.
-  const bool octal =
-      !mode.empty() && mode.size() <= 4 && mode.find_first_not_of("01234567") == std::string::npos;
-  const unsigned value = octal ? static_cast<unsigned>(std::stoul(mode, nullptr, 8)) : 0u;
-  if (!octal || value > 0777u || (value & 0600u) != 0600u) {
-    std::fprintf(stderr,
-                 "imucald: --socket-mode '%s' is not a socket mode: give octal permission bits like 0660 "
-                 "(at most 0777, with read and write for the owner)\n",
-                 mode.c_str());
-    return 2;
-  }
-  o.socket_mode = value;
+  if (!parse_socket_mode(mode, o)) return 2;
   if (!live_view.empty() && !parse_live_view(live_view, o)) return 2;
   if (check) return imucal::imucald::check_configuration(o);
   if (start_opt->count() > 0) {
