@@ -83,38 +83,6 @@ void BM_ViewFrameAndPng(benchmark::State& state) {
 }
 BENCHMARK(BM_ViewFrameAndPng)->Arg(320)->Arg(640)->Unit(benchmark::kMillisecond);
 
-/// A watcher: the event stream read as it comes; with `fetch`, each frame's PNG fetched on a
-/// connection of its own (as the page's image element does).
-class Watcher {
- public:
-  Watcher(int port, bool fetch)
-      : port_(port),
-        fetch_(fetch),
-        reader_(port, [this](const std::vector<std::string>& events) { on(events); }) {}
-  long frames() const { return frames_; }
-  /// PNG fetches not answered 200 (the server's connection limit).
-  long refused() const { return refused_; }
-
- private:
-  void on(const std::vector<std::string>& events) {
-    for (const std::string& ev : events) {
-      if (ev.rfind("event: frame\n", 0) != 0) continue;
-      const auto q = ev.find("\"seq\":");
-      if (fetch_ && q != std::string::npos) {
-        const std::string png = test::http_exchange(
-            port_, "GET /frame/0.png?seq=" + std::to_string(std::atol(ev.c_str() + q + 6)) +
-                       " HTTP/1.1\r\nHost: x\r\n\r\n");
-        if (png.rfind("HTTP/1.1 200", 0) != 0) ++refused_;
-      }
-      ++frames_;
-    }
-  }
-  int port_;
-  bool fetch_;
-  std::atomic<long> frames_{0}, refused_{0};
-  test::EventStreamReader reader_;  // last: its thread calls on() until it is destroyed
-};
-
 double thread_cpu_s() {
   timespec ts{};
   ::clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
@@ -152,8 +120,8 @@ void BM_LiveViewFanOut(benchmark::State& state) {
   if (!server) return state.SkipWithError(error.c_str());
   const int port = loop.call([&] { return static_cast<int>(server->port()); });
   {
-    std::vector<std::unique_ptr<Watcher>> ws;
-    for (int i = 0; i < watchers; ++i) ws.push_back(std::make_unique<Watcher>(port, fetch));
+    std::vector<std::unique_ptr<test::Watcher>> ws;
+    for (int i = 0; i < watchers; ++i) ws.push_back(std::make_unique<test::Watcher>(port, fetch));
     while (loop.call([&] { return server->watchers(); }) < static_cast<std::size_t>(watchers))
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
 

@@ -37,44 +37,7 @@ using test::free_loopback_port;
 using test::http_exchange;
 using test::loopback;
 
-/// A browser watching: the event stream read as it comes and, with `fetch`, the latest frame's
-/// PNG fetched whenever the last fetch is done (as the page does: a frame that came meanwhile is
-/// skipped, never the stream). While one watches, the service makes frames for the view.
-class Watcher {
- public:
-  Watcher(int port, bool fetch)
-      : port_(port),
-        fetch_(fetch),
-        reader_(port, [this](const std::vector<std::string>& events) { on(events); }) {}
-  /// Stops watching; the PNGs fetched.
-  long stop() {
-    reader_.stop();
-    return pngs_;
-  }
-  /// Frames announced on the stream (after stop()).
-  long frames() const { return frames_; }
-
- private:
-  void on(const std::vector<std::string>& events) {
-    std::string latest;  // "camera.png?seq=S" of the last frame announced so far
-    for (const std::string& ev : events) {
-      // {"camera":N,...,"seq":S,...}: keys in order; the corners between them can be long.
-      if (ev.rfind("event: frame\n", 0) != 0) continue;
-      ++frames_;
-      const auto c = ev.find("\"camera\":"), q = ev.find("\"seq\":");
-      if (c == std::string::npos || q == std::string::npos) continue;
-      latest = std::to_string(std::atol(ev.c_str() + c + 9)) +
-               ".png?seq=" + std::to_string(std::atol(ev.c_str() + q + 6));
-    }
-    if (!fetch_ || latest.empty()) return;
-    const std::string png = http_exchange(port_, "GET /frame/" + latest + " HTTP/1.1\r\nHost: x\r\n\r\n");
-    if (png.rfind("HTTP/1.1 200", 0) == 0) ++pngs_;
-  }
-  int port_;
-  bool fetch_;
-  long pngs_ = 0, frames_ = 0;
-  test::EventStreamReader reader_;  // last: its thread calls on() until it is stopped
-};
+using test::Watcher;
 
 /// The page's DOM after Chromium ran it for a few seconds of its virtual time, in its ?poll=1
 /// mode (a stream that never ends would hold virtual time still). A caller that needs later

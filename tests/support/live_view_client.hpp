@@ -8,6 +8,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <cstdlib>
 #include <functional>
 #include <string>
 #include <thread>
@@ -108,6 +109,52 @@ class EventStreamReader {
   Handler on_events_;
   std::atomic<bool> stop_{false};
   std::thread thread_;
+};
+
+/// A browser watching: the event stream read as it comes and, with `fetch`, the latest frame's
+/// PNG fetched once the events that came together are read (as the page does: a frame that came
+/// meanwhile is skipped, never the stream). The counts move after the fetch, so that a caller
+/// waiting for frames() also waits for the PNG. While one watches, the service makes frames for
+/// the view.
+class Watcher {
+ public:
+  Watcher(int port, bool fetch)
+      : port_(port),
+        fetch_(fetch),
+        reader_(port, [this](const std::vector<std::string>& events) { on(events); }) {}
+  /// Stops watching; the PNGs fetched.
+  long stop() {
+    reader_.stop();
+    return pngs_;
+  }
+  /// Frames announced on the stream.
+  long frames() const { return frames_; }
+  /// PNG fetches not answered 200 (the server's connection limit).
+  long refused() const { return refused_; }
+
+ private:
+  void on(const std::vector<std::string>& events) {
+    std::string latest;  // "camera.png?seq=S" of the last frame announced so far
+    long announced = 0;
+    for (const std::string& ev : events) {
+      // {"camera":N,...,"seq":S,...}: keys in order; the corners between them can be long.
+      if (ev.rfind("event: frame\n", 0) != 0) continue;
+      ++announced;
+      const auto c = ev.find("\"camera\":"), q = ev.find("\"seq\":");
+      if (c == std::string::npos || q == std::string::npos) continue;
+      latest = std::to_string(std::atol(ev.c_str() + c + 9)) +
+               ".png?seq=" + std::to_string(std::atol(ev.c_str() + q + 6));
+    }
+    if (fetch_ && !latest.empty()) {
+      const std::string png = http_exchange(port_, "GET /frame/" + latest + " HTTP/1.1\r\nHost: x\r\n\r\n");
+      ++(png.rfind("HTTP/1.1 200", 0) == 0 ? pngs_ : refused_);
+    }
+    frames_ += announced;
+  }
+  int port_;
+  bool fetch_;
+  std::atomic<long> frames_{0}, pngs_{0}, refused_{0};
+  EventStreamReader reader_;  // last: its thread calls on() until it is stopped
 };
 
 }  // namespace imucal::test
