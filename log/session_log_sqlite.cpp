@@ -221,7 +221,7 @@ Status SqliteSessionLogReader::open() {
     if (const std::string truncated = truncation_of(path_); !truncated.empty()) note_damage(truncated);
   }
   // A live log's writer has its -wal; and its file must not be opened and closed here (OpenHere).
-  const bool wal_missing = !live && wal_mode_without_wal(path_);
+  const bool wal_mode = !live && in_wal_mode(path_);
   sqlite3* raw = nullptr;
   const int rc = sqlite3_open_v2(path_.c_str(), &raw, SQLITE_OPEN_READONLY | SQLITE_OPEN_NOMUTEX,
                                  sqlite::strict_vfs_name());
@@ -236,11 +236,8 @@ Status SqliteSessionLogReader::open() {
   // consistent snapshot (the table and index counts must agree).
   (void)sqlite::exec(db_.get(), "BEGIN");
   if (Status schema = read_schema(); !schema.ok()) {
-    if (!wal_missing) return schema;
-    return make_error(Errc::kCorrupt,
-                      path_ + " holds no session tables, and its write-ahead log " + path_ +
-                          "-wal is missing: a log that was not closed keeps its data there; "
-                          "copy that file next to the log (it was lost or not copied with it)");
+    if (!wal_mode || !tables_.empty()) return schema;
+    return make_error(Errc::kCorrupt, no_tables_in_wal_mode(path_, wal));
   }
   IMUCAL_TRY(read_metadata());
   read_streams();

@@ -227,6 +227,7 @@ std::string truncation_of(const std::string& path);
 /// were committed and are lost. Only called when no writer holds the log (a live -wal grows).
 struct WalCheck {
   bool present = false;
+  std::size_t size = 0;           // bytes, when present
   std::string damage;             // committed frames that will not be replayed; empty when none
   bool torn_tail = false;         // the file ends inside a frame, or in frames no commit ends
   bool commits_replayed = false;  // SQLite reads pages of at least one commit from it
@@ -234,8 +235,13 @@ struct WalCheck {
 
 WalCheck check_wal(const std::string& path);
 
-/// A log in WAL mode whose LOG-wal is missing or empty: an unclosed log may hold no tables.
-bool wal_mode_without_wal(const std::string& path);
+/// True when the file's header says WAL mode (bytes 18 and 19 are 2).
+bool in_wal_mode(const std::string& path);
+
+/// Why a log in WAL mode holds no tables, from its LOG-wal as `wal` describes it: the -wal is
+/// missing (not copied with the log), holds only frames no commit ends (the writer stopped
+/// while creating the log), or is empty (either).
+std::string no_tables_in_wal_mode(const std::string& path, const WalCheck& wal);
 
 /// True when a writer holds the log `st` describes (its flock, see lock_for_writing).
 bool being_written(const std::string& path, const struct stat& st);

@@ -91,6 +91,7 @@ WalCheck check_wal(const std::string& path) {
   if (!in) return out;
   out.present = true;
   const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  out.size = bytes.size();
   if (bytes.empty()) return out;
   const auto* b = reinterpret_cast<const unsigned char*>(bytes.data());
   // SQLite ignores a -wal whose header is bad, with every commit in it.
@@ -172,16 +173,36 @@ WalCheck check_wal(const std::string& path) {
 }
 
 /// A log in WAL mode (header bytes 18 and 19 are 2) keeps what its writer committed since the
-/// last checkpoint in LOG-wal: without it (or with an empty one), an unclosed log may hold no
-/// tables at all.
-bool wal_mode_without_wal(const std::string& path) {
+/// last checkpoint in LOG-wal: without it, an unclosed log may hold no tables at all.
+bool in_wal_mode(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   unsigned char h[20] = {};
   in.read(reinterpret_cast<char*>(h), sizeof h);
-  std::error_code ec;
-  // Empty counts as missing: opening such a log creates an empty one.
-  const auto wal_size = std::filesystem::file_size(path + "-wal", ec);
-  return in.gcount() == sizeof h && h[18] == 2 && (ec || wal_size == 0);
+  return in.gcount() == sizeof h && h[18] == 2;
+}
+
+std::string no_tables_in_wal_mode(const std::string& path, const WalCheck& wal) {
+  static const std::string kCopy =
+      "a log that was not closed keeps its data there; copy that file next to the log";
+  static const std::string kAgain = "nothing was recorded; record the session again";
+  // As found before SQLite opened the log (its read-only open creates an empty -wal).
+  if (!wal.present) {
+    return path + " holds no session tables, and its write-ahead log " + path + "-wal is missing: " + kCopy +
+           " (it was lost or not copied with it)";
+  }
+  if (wal.size > 0 && !wal.commits_replayed && wal.damage.empty()) {
+    return path + " was stopped while it was being created, before its first commit (its write-ahead log " +
+           path + "-wal holds no commit): " + kAgain;
+  }
+  if (wal.size == 0) {
+    // Reading a log whose -wal was lost leaves an empty one behind, as does a writer stopped
+    // before its first commit: the two look the same.
+    return path + " holds no session tables, and its write-ahead log " + path +
+           "-wal is empty: either the log was copied without its -wal (" + kCopy +
+           "), or its writer stopped before its first commit (then " + kAgain + ")";
+  }
+  return path + " holds no session tables: its write-ahead log " + path + "-wal is damaged (" + wal.damage +
+         ")";
 }
 
 /// True when a writer holds the log `st` describes (its flock, see lock_for_writing). A file

@@ -447,8 +447,62 @@ TEST(SessionLogDamage, ADamagedWriteAheadLogIsReported) {
   for (int attempt = 0; attempt < 2; ++attempt) {  // the first open leaves an empty -wal behind
     auto r = SessionLogReader::open(alone);
     ASSERT_FALSE(r.ok());
-    EXPECT_NE(r.error().message.find("-wal is missing"), std::string::npos) << r.error().message;
+    EXPECT_NE(r.error().message.find(attempt == 0 ? "-wal is missing" : "-wal is empty"), std::string::npos)
+        << r.error().message;
+    EXPECT_NE(r.error().message.find("copy that file next to the log"), std::string::npos)
+        << r.error().message;
   }
+}
+
+// What the writer does when it creates a log, stopped (killed) inside that first transaction:
+// the main file holds only its header, in WAL mode, and the -wal either nothing (the pages were
+// still in memory) or pages that no commit ends. Before, the first was called a log whose -wal
+// is missing (copy it) although it lay beside it, and the second the same.
+void create_and_die_before_commit(const std::string& path, bool spill_pages) {
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    sqlite3* db = nullptr;
+    if (sqlite3_open(path.c_str(), &db) != SQLITE_OK) _exit(10);
+    const std::string setup = std::string("PRAGMA journal_mode=WAL; PRAGMA synchronous=FULL;") +
+                              (spill_pages ? "PRAGMA cache_size=2;" : "") +
+                              "BEGIN; CREATE TABLE metadata(key TEXT PRIMARY KEY, value TEXT);";
+    if (sqlite3_exec(db, setup.c_str(), nullptr, nullptr, nullptr) != SQLITE_OK) _exit(11);
+    for (int i = 0; i < 400; ++i) {
+      const std::string row =
+          "INSERT INTO metadata VALUES('k" + std::to_string(i) + "', '" + std::string(200, 'x') + "');";
+      if (sqlite3_exec(db, row.c_str(), nullptr, nullptr, nullptr) != SQLITE_OK) _exit(12);
+    }
+    _exit(0);  // killed: no commit, nothing closed
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status));
+  ASSERT_EQ(WEXITSTATUS(status), 0);
+}
+
+TEST(SessionLogDamage, ALogStoppedBeforeItsFirstCommitIsNamedSoAndNotCalledMissingItsWal) {
+  const std::string dir = scratch_dir();
+  const std::string spilled = dir + "/spilled.imulog";
+  create_and_die_before_commit(spilled, true);
+  ASSERT_GT(fs::file_size(spilled + "-wal"), 0u);
+  auto r = SessionLogReader::open(spilled);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, Errc::kCorrupt);
+  EXPECT_NE(r.error().message.find("before its first commit"), std::string::npos) << r.error().message;
+  EXPECT_NE(r.error().message.find("record the session again"), std::string::npos) << r.error().message;
+  EXPECT_EQ(r.error().message.find("missing"), std::string::npos) << r.error().message;
+
+  const std::string in_memory = dir + "/in-memory.imulog";
+  create_and_die_before_commit(in_memory, false);
+  ASSERT_TRUE(fs::exists(in_memory + "-wal"));
+  ASSERT_EQ(fs::file_size(in_memory + "-wal"), 0u);
+  r = SessionLogReader::open(in_memory);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, Errc::kCorrupt);
+  EXPECT_NE(r.error().message.find("-wal is empty"), std::string::npos) << r.error().message;
+  EXPECT_NE(r.error().message.find("before its first commit"), std::string::npos) << r.error().message;
+  EXPECT_EQ(r.error().message.find("missing"), std::string::npos) << r.error().message;
 }
 
 }  // namespace
