@@ -2,33 +2,66 @@
 
 #include <algorithm>
 #include <cmath>
+#include <span>
 
 #include "calib/static_detector.hpp"
 
 namespace imucal::app {
 
-StreamTiming timing_of(const std::vector<TimeNs>& times) {
-  StreamTiming t;
-  t.count = static_cast<std::int64_t>(times.size());
-  if (times.empty()) return t;
-  t.t_first_ns = times.front();
-  t.t_last_ns = times.back();
-  if (times.size() < 2) return t;
-  std::vector<TimeNs> periods(times.size() - 1);
-  for (std::size_t i = 1; i < times.size(); ++i) periods[i - 1] = times[i] - times[i - 1];
-  t.median_period_ns = median_interval_ns(times);
-  const TimeNs span_ns = t.t_last_ns - t.t_first_ns;
-  if (span_ns > 0) t.measured_rate_hz = static_cast<double>(times.size() - 1) / ns_to_s(span_ns);
-  for (std::size_t i = 0; i < periods.size(); ++i) {
-    const TimeNs p = periods[i];
-    if (p <= 0) ++t.non_increasing;
-    if (t.median_period_ns > 0 && step_lost_samples(times, i, t.median_period_ns)) ++t.gap_intervals;
-    if (p > t.longest_interval_ns) {
-      t.longest_interval_ns = p;
-      t.longest_interval_at_ns = times[i + 1];
+TimingAccumulator::TimingAccumulator(std::size_t median_window)
+    : median_window_(std::max<std::size_t>(median_window, 4)) {
+  window_.reserve(std::min<std::size_t>(median_window_, 4096));
+}
+
+void TimingAccumulator::add(TimeNs t_ns) {
+  if (t_.count == 0) t_.t_first_ns = t_ns;
+  t_.t_last_ns = t_ns;
+  ++t_.count;
+  window_.push_back(t_ns);
+  if (!median_known_) {
+    if (window_.size() < median_window_) return;
+    t_.median_period_ns = median_interval_ns(window_);
+    median_known_ = true;
+  }
+  judge(false);
+}
+
+// Judges the intervals from window_[next_] on whose neighbours are known (all that remain when
+// `last`), then drops the timestamps no later judgement needs: the one before next_ and after.
+void TimingAccumulator::judge(bool last) {
+  const std::span<const TimeNs> w(window_);
+  for (; next_ + (last ? 1 : 2) < w.size(); ++next_) {
+    const TimeNs p = w[next_ + 1] - w[next_];
+    if (p <= 0) ++t_.non_increasing;
+    // step_lost_samples looks one timestamp back (when there is one) and two ahead.
+    const std::size_t from = next_ == 0 ? 0 : next_ - 1;
+    if (t_.median_period_ns > 0 && step_lost_samples(w.subspan(from), next_ - from, t_.median_period_ns))
+      ++t_.gap_intervals;
+    if (p > t_.longest_interval_ns) {
+      t_.longest_interval_ns = p;
+      t_.longest_interval_at_ns = w[next_ + 1];
     }
   }
-  return t;
+  if (next_ > 1) {
+    window_.erase(window_.begin(), window_.begin() + static_cast<std::ptrdiff_t>(next_ - 1));
+    next_ = 1;
+  }
+}
+
+StreamTiming TimingAccumulator::finish() {
+  if (!median_known_) t_.median_period_ns = median_interval_ns(window_);
+  median_known_ = true;
+  judge(true);
+  const TimeNs span_ns = t_.t_last_ns - t_.t_first_ns;
+  if (t_.count >= 2 && span_ns > 0)
+    t_.measured_rate_hz = static_cast<double>(t_.count - 1) / ns_to_s(span_ns);
+  return t_;
+}
+
+StreamTiming timing_of(const std::vector<TimeNs>& times) {
+  TimingAccumulator acc(std::max<std::size_t>(times.size(), 4));
+  for (const TimeNs t : times) acc.add(t);
+  return acc.finish();
 }
 
 std::string LogSummary::meta(const std::string& key) const {
@@ -42,10 +75,9 @@ ImuStreamStats imu_stats(const log::SessionLogReader& log, int id, const ImuStre
   ImuStreamStats st;
   st.id = id;
   st.info = info;
-  std::vector<TimeNs> times;
-  if (auto count = log.imu_count(id); count.ok()) times.reserve(static_cast<std::size_t>(*count));
+  TimingAccumulator times;
   const Status read = log.for_each_imu(id, log::kTimeMin, log::kTimeMax, [&](const ImuSample& s) {
-    times.push_back(s.t_ns);
+    times.add(s.t_ns);
     if (s.flags & kImuFlagGapBefore) ++st.flagged_gap;
     if (s.flags & kImuFlagDeviceReset) ++st.flagged_reset;
     if (s.flags & (kImuFlagAccelSaturated | kImuFlagGyroSaturated)) ++st.flagged_saturated;
@@ -54,7 +86,7 @@ ImuStreamStats imu_stats(const log::SessionLogReader& log, int id, const ImuStre
   });
   // A damaged stream still has statistics for what was read before the damage.
   if (!read.ok()) st.read_error = read.error().message;
-  st.timing = timing_of(times);
+  st.timing = times.finish();
   return st;
 }
 

@@ -33,6 +33,30 @@ struct StreamTiming {
   double duration_s() const { return ns_to_s(t_last_ns - t_first_ns); }
 };
 
+/// Statistics of timestamps given one at a time, in recording order, in bounded memory: the
+/// median interval is that of the first `median_window` timestamps (all of them in a shorter
+/// stream), and every interval is then judged against it as it comes. A log of any length
+/// costs 8 bytes per timestamp of that window, not per timestamp.
+class TimingAccumulator {
+ public:
+  static constexpr std::size_t kDefaultMedianWindow = std::size_t{1} << 20;  // 17 min at 1 kHz
+
+  explicit TimingAccumulator(std::size_t median_window = kDefaultMedianWindow);
+
+  void add(TimeNs t_ns);
+  /// The statistics of every timestamp added.
+  StreamTiming finish();
+
+ private:
+  void judge(bool last);
+
+  std::size_t median_window_;
+  bool median_known_ = false;
+  std::vector<TimeNs> window_;  // the first timestamps, then the last few still to be judged
+  std::size_t next_ = 0;        // index in window_ of the next interval's start to judge
+  StreamTiming t_;
+};
+
 /// Statistics of `times` (in recording order).
 StreamTiming timing_of(const std::vector<TimeNs>& times);
 

@@ -51,6 +51,56 @@ TEST(StreamStats, TimingOfHandMadeTimes) {
   EXPECT_EQ(timing_of({}).count, 0);
 }
 
+// A log of any length is summarised in bounded memory: the median interval comes from the
+// first timestamps, and each later interval is judged as it comes. Short windows here, so that
+// every way an interval can fall (inside the window, across its end, after it, the last one)
+// is met; the figures are those of the whole vector.
+TEST(StreamStats, TimingInBoundedMemoryMatchesTheWholeStream) {
+  std::vector<TimeNs> times;
+  TimeNs t = 1000;
+  for (int i = 0; i < 200; ++i) {
+    // 10 ns steps; a lost sample at 7, 40 and 199 (the last interval), a step back at 120,
+    // jitter that makes up for itself at 60-61, and the longest interval at 150.
+    TimeNs step = 10;
+    if (i == 7 || i == 40 || i == 199) step = 20;
+    if (i == 120) step = -3;
+    if (i == 60) step = 16;
+    if (i == 61) step = 4;
+    if (i == 150) step = 55;
+    times.push_back(t);
+    t += step;
+  }
+  const StreamTiming whole = timing_of(times);
+  EXPECT_EQ(whole.gap_intervals, 3);  // 7, 40 and 150 (199 is the step after the last timestamp)
+  EXPECT_EQ(whole.non_increasing, 1);
+  for (const std::size_t window : {4u, 5u, 8u, 41u, 199u, 200u, 1000u}) {
+    SCOPED_TRACE(window);
+    TimingAccumulator acc(window);
+    for (const TimeNs x : times) acc.add(x);
+    const StreamTiming bounded = acc.finish();
+    EXPECT_EQ(bounded.count, whole.count);
+    EXPECT_EQ(bounded.t_first_ns, whole.t_first_ns);
+    EXPECT_EQ(bounded.t_last_ns, whole.t_last_ns);
+    EXPECT_EQ(bounded.median_period_ns, 10);
+    EXPECT_EQ(bounded.gap_intervals, whole.gap_intervals);
+    EXPECT_EQ(bounded.non_increasing, whole.non_increasing);
+    EXPECT_EQ(bounded.longest_interval_ns, whole.longest_interval_ns);
+    EXPECT_EQ(bounded.longest_interval_at_ns, whole.longest_interval_at_ns);
+    EXPECT_DOUBLE_EQ(bounded.measured_rate_hz, whole.measured_rate_hz);
+  }
+  // One and two timestamps.
+  TimingAccumulator one(4);
+  one.add(5);
+  EXPECT_EQ(one.finish().count, 1);
+  TimingAccumulator two(4);
+  two.add(5);
+  two.add(25);
+  const StreamTiming t2 = two.finish();
+  EXPECT_EQ(t2.median_period_ns, 20);
+  EXPECT_EQ(t2.longest_interval_ns, 20);
+  EXPECT_EQ(t2.gap_intervals, 0);
+}
+
 TEST(CleanRun, LongestRunBetweenGaps) {
   auto loaded = load_imu_stream(test::source_path("fixtures/broken-gap.imulog"), "", DamagePolicy::kRefuse);
   ASSERT_TRUE(loaded.ok());
