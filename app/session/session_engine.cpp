@@ -255,7 +255,8 @@ bool SessionEngine::operator_wait_over() const {
 void SessionEngine::end_operator_wait() {
   const bool review = state_ == SessionState::kReview;
   steps_[current_].state = StepState::kFailed;
-  const std::string waited = fixed(config_.session.operator_wait_s / 60.0, 0) + " min";
+  const double wait_s = config_.session.operator_wait_s;
+  const std::string waited = wait_s < 120.0 ? fixed(wait_s, 0) + " s" : fixed(wait_s / 60.0, 0) + " min";
   finish(SessionState::kAborted, Outcome::kAborted,
          "Stopped: no key for " + waited +
              " while the session waited for one (session.operator_wait_s), so that its recording "

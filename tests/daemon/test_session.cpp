@@ -81,7 +81,8 @@ class SimSession {
       if (m.value("type", "") == "review") review_ns_ = rig_->now_ns();
       if (m.value("type", "") == "fault" && redo_faults_)
         keys_.emplace_back(rig_->now_ns() + 2'000'000'000, "redo");
-      if (scripted_) op_->on_message(typed, rig_->now_ns());
+      const bool review_prompt = m.value("type", "") == "prompt" && m.value("step", "") == "review";
+      if (scripted_ && (answer_review_ || !review_prompt)) op_->on_message(typed, rig_->now_ns());
       if (!scripted_ && m.value("type", "") == "prompt" && m.value("step", "") == "preflight")
         keys_.emplace_back(rig_->now_ns() + 500'000'000, "continue");
     };
@@ -190,6 +191,7 @@ class SimSession {
   std::vector<std::pair<TimeNs, std::string>> keys_;
   TimeNs first_prompt_ns_ = -1, review_ns_ = -1;
   bool started_ = false, redo_faults_ = true, scripted_ = true;
+  bool answer_review_ = true;  // the scripted operator accepts the review
   int recoveries_ = 0, write_calls_ = 0, fail_writes_ = 0;
   int failing_self_tests_ = 0;  // preflights that report a self-test spoilt by motion
   std::optional<CalibrationRecord> written_;
@@ -797,7 +799,7 @@ TEST(Session, ASessionWaitingForAKeyStopsAfterTheOperatorWait) {
   const TimeNs started = s.rig_->now_ns();
   s.run(300.0);
   EXPECT_EQ(s.outcome(), "aborted");
-  EXPECT_TRUE(s.said("no key for 1 min while the session waited for one (session.operator_wait_s)"));
+  EXPECT_TRUE(s.said("no key for 60 s while the session waited for one (session.operator_wait_s)"));
   EXPECT_LT(ns_to_s(s.rig_->now_ns() - started), 65.0);
   auto reader = log::SessionLogReader::open(s.runner_->log_path());
   ASSERT_TRUE(reader.ok()) << reader.error().message;
@@ -806,6 +808,37 @@ TEST(Session, ASessionWaitingForAKeyStopsAfterTheOperatorWait) {
   ASSERT_TRUE(replay.ok()) << replay.error().message;
   EXPECT_EQ(replay->live_outcome, "aborted");
   EXPECT_EQ(replay->outcome, "aborted");
+}
+
+// The other two waits for a key: the review nobody answers, and a failed step (the storage
+// write) nobody redoes or aborts. Each ends after session.operator_wait_s, says so and keeps
+// what was recorded; at the review the results stay in the session folder.
+TEST(Session, TheReviewAndAFailedStepAlsoStopAfterTheOperatorWait) {
+  ModuleDir modules;
+  for (const bool review : {true, false}) {
+    SCOPED_TRACE(review ? "the review unanswered" : "a failed write nobody redoes");
+    RigConfig config = session_config({"preflight", "still", "poses", "solve", "review", "write"});
+    config.session.operator_wait_s = 60.0;
+    SimSession s(config);
+    if (review) {
+      s.answer_review_ = false;
+    } else {
+      s.fail_writes_ = 1;
+      s.redo_faults_ = false;
+    }
+    ASSERT_TRUE(s.runner_->start({}).ok());
+    s.run(900.0);
+    EXPECT_EQ(s.outcome(), "aborted");
+    EXPECT_TRUE(s.said("no key for 60 s while the session waited for one (session.operator_wait_s)"));
+    ASSERT_GE(s.review_ns_, 0) << "the session reached its review";
+    // From the review (or the failed write just after it) to the end: the wait, and no more.
+    EXPECT_LT(ns_to_s(s.rig_->now_ns() - s.review_ns_), 60.0 + 15.0);
+    EXPECT_EQ(s.write_calls_, review ? 0 : 1);
+    EXPECT_TRUE(s.said("The results stay in the session folder"));  // a failed write keeps them too
+    auto reader = log::SessionLogReader::open(s.runner_->log_path());
+    ASSERT_TRUE(reader.ok()) << reader.error().message;
+    EXPECT_TRUE((*reader)->health().complete);
+  }
 }
 
 TEST(Session, PoseGuidanceNamesTheRigsSidesWhenTheConfigurationDoes) {
