@@ -105,6 +105,51 @@ TEST(CliCalibrateThermal, AFileThatIsNoThermalModelIsRefusedAndNothingIsWritten)
   EXPECT_FALSE(std::filesystem::exists(out));
 }
 
+// Temperatures no die reaches, met where a user's files bring them in. Before: one sample at
+// 1e308 deg C in a warm-up gave a model with a reference of 7e61 deg C and exit 0, and
+// `calibrate static --thermal` then applied that model.
+TEST(CliCalibrateThermal, TemperaturesNoDieReachesAreRefusedInTheWarmUpTheScaleLogsAndTheModel) {
+  const std::string dir = test::scratch_dir();
+  const std::string warm = dir + "/warmup.imulog", thermal = dir + "/thermal.yaml";
+  ASSERT_EQ(sim_warm_up(warm, "20", "60").exit_code, 0);
+  ASSERT_EQ(run_cli({"calibrate", "thermal", warm, "-o", thermal}).exit_code, 0);
+  const std::string one_hot =
+      "update imu_samples set temperature=1e308 where rowid=(select min(rowid)+100 from imu_samples)";
+
+  const std::string bad_warm = dir + "/bad-warmup.imulog";
+  std::filesystem::copy_file(warm, bad_warm);
+  ASSERT_TRUE(test::run_sql(bad_warm, one_hot));
+  const std::string out = dir + "/out.yaml";
+  auto r = run_cli({"calibrate", "thermal", bad_warm, "-o", out});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("which no die reaches"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(out));
+
+  const std::string bad_poses = test::copy_fixture("static.imulog", dir);
+  ASSERT_TRUE(test::run_sql(bad_poses, one_hot));
+  r = run_cli({"calibrate", "thermal", warm, "--scale-from", bad_poses, "--scale-from",
+               test::source_path("fixtures/static.imulog"), "-o", out});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("--scale-from " + bad_poses), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("which no die reaches"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(out));
+
+  // A model whose reference, or range, no die reaches: `calibrate static --thermal` refuses it.
+  for (const auto& [key, value] :
+       {std::pair{"reference_temperature_c", "7e61"}, std::pair{"valid_range_c", "[20, 1e308]"}}) {
+    SCOPED_TRACE(key);
+    YAML::Node model = YAML::LoadFile(thermal);
+    model[key] = YAML::Load(value);
+    const std::string bad_model = dir + "/bad-thermal.yaml";
+    std::ofstream(bad_model) << model;
+    r = run_cli({"calibrate", "static", test::source_path("fixtures/static.imulog"), "--thermal", bad_model,
+                 "-o", out});
+    EXPECT_EQ(r.exit_code, 3) << r.err;
+    EXPECT_NE(r.err.find("must be die temperatures"), std::string::npos) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(out));
+  }
+}
+
 /// b_a, b_g (counts) of a canonical block of a result YAML.
 Eigen::Vector3d canonical_vec(const YAML::Node& y, const char* key) {
   const YAML::Node v = y["canonical"][key];

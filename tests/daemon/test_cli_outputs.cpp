@@ -3,8 +3,15 @@
 // with exit 2 and a message that says what to do, and the input is left byte for byte.
 
 #include <gtest/gtest.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/sysmacros.h>
+#include <sys/un.h>
+#include <unistd.h>
 
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -54,6 +61,7 @@ TEST(CliOutputs, NoOutputNamesAnInputOrAnotherOutputWhateverForceSays) {
       {{"calibrate", "static", poses, "--gsens", "fix", gsens, "--json", gsens, "--force"},
        gsens,
        input_rule},
+      {{"calibrate", "static", poses, "--gsens", "fix", gsens, "-o", gsens, "--force"}, gsens, input_rule},
       {{"calibrate", "static", poses, "-o", out, "--json", out}, poses, "-o and --json name the same file"},
       {{"calibrate", "static", poses, "-o", out, "--json", dir + "/./out.yaml"}, poses, "name the same file"},
       {{"calibrate", "gsens", poses, "-o", out, "--json", out}, poses, "-o and --json name the same file"},
@@ -96,6 +104,36 @@ TEST(CliOutputs, SimNeverReplacesAFifoOrItsTruthInput) {
   ASSERT_EQ(::lstat(fifo.c_str(), &st), 0);
   EXPECT_TRUE(S_ISFIFO(st.st_mode));
   EXPECT_FALSE(fs::exists(dir + "/a.imulog"));
+
+  // A socket, and a device node (root only), at LOG.truth.yaml: the same refusal.
+  char short_dir[] = "/tmp/imucal-sim-XXXXXX";  // sun_path holds 107 bytes: the scratch folder is deeper
+  ASSERT_NE(::mkdtemp(short_dir), nullptr);
+  const std::string socket_path = std::string(short_dir) + "/s.truth.yaml";
+  const int sock = ::socket(AF_UNIX, SOCK_STREAM, 0);
+  ASSERT_GE(sock, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", socket_path.c_str());
+  ASSERT_EQ(::bind(sock, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0) << std::strerror(errno);
+  std::vector<std::string> specials = {socket_path};
+  const std::string device = dir + "/d.truth.yaml";
+  if (::mknod(device.c_str(), S_IFCHR | 0600, makedev(1, 3)) == 0) {  // /dev/null's numbers
+    specials.push_back(device);
+  } else {
+    std::printf("device-node case not run: mknod needs root (%s)\n", std::strerror(errno));
+  }
+  for (const std::string& special : specials) {
+    const std::string log = special.substr(0, special.size() - std::string(".truth.yaml").size()) + ".imulog";
+    r = run_cli({"sim", "still", "--seed", "1", "--duration", "2", "-o", log, "--force"});
+    EXPECT_EQ(r.exit_code, 2) << special << ": " << r.err;
+    EXPECT_NE(r.err.find(special + " exists and is not a regular file"), std::string::npos) << r.err;
+    struct stat sst {};
+    ASSERT_EQ(::lstat(special.c_str(), &sst), 0);
+    EXPECT_TRUE(S_ISSOCK(sst.st_mode) || S_ISCHR(sst.st_mode)) << special << " was replaced";
+    EXPECT_FALSE(fs::exists(log));
+  }
+  ::close(sock);
+  fs::remove_all(short_dir);
 
   const std::string truth = dir + "/b.truth.yaml";
   fs::copy_file(test::source_path("fixtures/still.truth.yaml"), truth);

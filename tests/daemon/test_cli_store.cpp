@@ -5,17 +5,25 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
 
+#include "core/calibration_record.hpp"
+#include "core/rig_config.hpp"
 #include "daemon/cli/command.hpp"
+#include "drivers/storage/calibration_store.hpp"
+#include "drivers/storage/storage_device.hpp"
 #include "tests/support/test_support.hpp"
 
 namespace imucal {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 struct Rig {
   std::string dir, config, storage, result;
@@ -199,6 +207,79 @@ TEST(CliStore, NeverWritesOverAnotherFileNorWaitsOnAFifo) {
   auto fifo_write = test::run_cli({"store", "write", "--config", rig.config, rig.result});
   EXPECT_EQ(fifo_write.exit_code, cli::kExitUsage) << fifo_write.err;
   EXPECT_TRUE(std::filesystem::is_fifo(rig.storage));
+}
+
+// The storage holds a record this imucal must not read, or must not replace, or its path loops.
+// Before: a payload nested 200,000 deep crashed `store read` and `store verify` (a stack
+// overflow); a record of a newer imucal was taken for damage, and `store write` wrote over it
+// (exit 0); a loop of symbolic links exited 7, as a failed write does.
+TEST(CliStore, ANestedANewerOrALoopedStorageIsNamedWithItsExitCodeAndKept) {
+  {
+    SCOPED_TRACE("a payload nested 200,000 deep in a 1 MiB region");
+    const Rig rig = make_rig(1 << 20);
+    ASSERT_EQ(test::run_cli({"store", "write", "--config", rig.config, rig.result}).exit_code, 0);
+    auto rig_config = load_rig_config(rig.config);
+    ASSERT_TRUE(rig_config.ok()) << rig_config.error().message;
+    {
+      auto dev = drivers::open_storage_device(rig_config->storage, drivers::StorageAccess::kWrite);
+      ASSERT_TRUE(dev.ok()) << dev.error().message;
+      auto store = drivers::CalibrationStore::open(**dev, 128, 1 << 20);
+      ASSERT_TRUE(store.ok()) << store.error().message;
+      std::vector<std::uint8_t> nested(200'000, 0x81);  // an array of one item, 200,000 deep
+      nested.push_back(0x00);
+      ASSERT_TRUE(store->write(nested).ok());  // slot B, the newest
+    }
+    for (const char* sub : {"read", "verify"}) {
+      auto r = test::run_cli({"store", sub, "--config", rig.config});
+      EXPECT_EQ(r.exit_code, cli::kExitInput) << sub << ": " << r.err;
+      EXPECT_THAT(r.err, HasSubstr("deeper than 32 levels"));
+      EXPECT_THAT(r.err, Not(HasSubstr("unexpected")));
+    }
+  }
+  {
+    SCOPED_TRACE("a record of a newer imucal");
+    const Rig rig = make_rig();
+    ASSERT_EQ(test::run_cli({"store", "write", "--config", rig.config, rig.result}).exit_code, 0);
+    auto read = test::run_cli({"store", "read", "--json", "--config", rig.config});
+    ASSERT_EQ(read.exit_code, 0) << read.err;
+    nlohmann::json newer = nlohmann::json::parse(read.out)["calibration"];
+    newer["version"] = kCalibrationRecordVersion + 1;
+    auto rig_config = load_rig_config(rig.config);
+    ASSERT_TRUE(rig_config.ok()) << rig_config.error().message;
+    {
+      auto dev = drivers::open_storage_device(rig_config->storage, drivers::StorageAccess::kWrite);
+      ASSERT_TRUE(dev.ok()) << dev.error().message;
+      auto store = drivers::CalibrationStore::open(**dev, 128, 4096);
+      ASSERT_TRUE(store.ok()) << store.error().message;
+      ASSERT_TRUE(store->write(nlohmann::json::to_cbor(newer)).ok());  // slot B, sequence 2
+    }
+    const std::string before = test::read_file(rig.storage);
+    auto r = test::run_cli({"store", "read", "--config", rig.config});
+    EXPECT_EQ(r.exit_code, cli::kExitInput) << r.err;
+    EXPECT_THAT(r.err, HasSubstr("newer imucal"));
+    auto w = test::run_cli({"store", "write", "--config", rig.config, rig.result});
+    EXPECT_EQ(w.exit_code, cli::kExitUsage) << w.err;
+    EXPECT_THAT(w.err, HasSubstr("written by a newer imucal"));
+    EXPECT_THAT(w.err, HasSubstr("--replace-newer"));
+    EXPECT_TRUE(test::read_file(rig.storage) == before) << "the newer record was written over";
+    auto replaced = test::run_cli({"store", "write", "--replace-newer", "--config", rig.config, rig.result});
+    ASSERT_EQ(replaced.exit_code, 0) << replaced.err;
+    EXPECT_THAT(replaced.out, HasSubstr("sequence 3"));
+    EXPECT_EQ(test::run_cli({"store", "read", "--config", rig.config}).exit_code, 0);
+  }
+  {
+    SCOPED_TRACE("a loop of symbolic links at storage.path");
+    const Rig rig = make_rig();
+    std::filesystem::create_symlink(rig.storage, rig.storage);
+    for (const char* sub : {"read", "verify", "write"}) {
+      std::vector<std::string> args = {"store", sub, "--config", rig.config};
+      if (std::string(sub) == "write") args.push_back(rig.result);
+      auto r = test::run_cli(args);
+      EXPECT_EQ(r.exit_code, cli::kExitUsage) << sub << ": " << r.err;
+      EXPECT_THAT(r.err, HasSubstr("fix storage.path"));
+    }
+    EXPECT_TRUE(std::filesystem::is_symlink(rig.storage));
+  }
 }
 
 }  // namespace

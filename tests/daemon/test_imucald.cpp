@@ -3,6 +3,7 @@
 // committed fixture session.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -180,6 +181,10 @@ TEST(Imucald, ReplayOfAnAlteredLogSaysSoInItsExitCode) {
        "update events set message=json_set(message,'$.id','x') where "
        "json_extract(message,'$.type')='applied'",
        3, "\"id\" is string, not an integer"},
+      {"a written event whose where is a number",
+       "update events set message=json_set(message,'$.where',12) where "
+       "json_extract(message,'$.type')='written'",
+       3, "\"where\" is number, not a string"},
       {"a written event whose ok is text",
        "update events set message=json_set(message,'$.ok','yes') where "
        "json_extract(message,'$.type')='written'",
@@ -639,6 +644,59 @@ TEST(Imucald, PreflightNamesARecordOfANewerImucalAndWhatToDo) {
     ::kill(daemon.pid(), SIGTERM);
     EXPECT_EQ(daemon.wait(), 0);
     EXPECT_EQ(test::read_file(rig->storage.path), before) << "the newer record is untouched";
+  }
+}
+
+// A storage region the service cannot read, met at a session's preflight: a FIFO at
+// storage.path (before: the event loop blocked in its open, for good) and a record whose payload
+// nests 200,000 levels deep in a 1 MiB region (before: a stack overflow). Each is named at the
+// preflight, the service still answers, and it ends cleanly with the storage as it was.
+TEST(Imucald, AStorageItCannotReadIsNamedAtThePreflightAndTheServiceStillAnswers) {
+  for (const bool fifo : {true, false}) {
+    SCOPED_TRACE(fifo ? "a FIFO at storage.path" : "a deeply nested record");
+    const std::string dir = test::scratch_dir();
+    std::string config = test::write_config(dir);
+    {
+      std::string text = test::read_file(config);
+      text = std::regex_replace(text, std::regex("size_bytes: 4096"), "size_bytes: 1048576");
+      test::write_file(config, text);
+    }
+    auto rig = load_rig_config(config);
+    ASSERT_TRUE(rig.ok()) << rig.error().message;
+    if (fifo) {
+      ASSERT_EQ(::mkfifo(rig->storage.path.c_str(), 0600), 0);
+    } else {
+      auto dev = drivers::open_storage_device(rig->storage, drivers::StorageAccess::kWrite);
+      ASSERT_TRUE(dev.ok()) << dev.error().message;
+      auto store =
+          drivers::CalibrationStore::open(**dev, static_cast<std::uint64_t>(rig->storage.offset_bytes),
+                                          static_cast<std::uint64_t>(rig->storage.size_bytes));
+      ASSERT_TRUE(store.ok()) << store.error().message;
+      std::vector<std::uint8_t> nested(200'000, 0x81);  // an array of one item, 200,000 deep
+      nested.push_back(0x00);
+      ASSERT_TRUE(store->write(nested).ok());
+    }
+    const std::string before = fifo ? std::string() : test::read_file(rig->storage.path);
+    test::Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start", "default"}, config);
+    const char* named = fifo ? "is not a regular file" : "deeper than 32 levels";
+    ASSERT_TRUE(
+        test::wait_for([&] { return test::has(test::all_events(test::session_log(dir)), named); }, 60))
+        << test::read_file(dir + "/imucald.log") << test::all_events(test::session_log(dir)).substr(0, 3000);
+    EXPECT_FALSE(test::has(test::all_events(test::session_log(dir)), R"("step":"warmup")"))
+        << "the session does not go on past a failed preflight";
+    const std::string out = dir + "/status.txt";
+    EXPECT_EQ(std::system((std::string(IMUCALCTL_PATH) + " --socket " + daemon.socket() + " status > " + out +
+                           " 2>&1")
+                              .c_str()),
+              0)
+        << test::read_file(out);
+    ::kill(daemon.pid(), SIGTERM);
+    EXPECT_EQ(daemon.wait_for_exit(30), 0) << test::read_file(dir + "/imucald.log");
+    if (fifo) {
+      EXPECT_TRUE(std::filesystem::is_fifo(rig->storage.path));
+    } else {
+      EXPECT_EQ(test::read_file(rig->storage.path), before) << "the record is untouched";
+    }
   }
 }
 
