@@ -299,8 +299,10 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
 
   const std::string motion_log =
       (std::filesystem::path(options.log_path).parent_path() / kMotionLogFile).string();
-  if (std::find(logged->steps.begin(), logged->steps.end(), "motion") != logged->steps.end() &&
-      !std::filesystem::exists(motion_log)) {
+  // Planned is not run: a session that ended before its motion step has no motion log.
+  const bool motion_ran = std::any_of(logged->step_starts.begin(), logged->step_starts.end(),
+                                      [](const auto& start) { return start.second == "motion"; });
+  if (motion_ran && !std::filesystem::exists(motion_log)) {
     return make_error(Errc::kNotFound, "the session ran the motion step, but its motion log " + motion_log +
                                            " is missing: replay reads it beside the session log (copy the "
                                            "whole session folder)");

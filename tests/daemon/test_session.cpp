@@ -789,8 +789,10 @@ TEST(Session, AFailedSelfTestSaysToHoldTheRigStillAndRedoChecksAgain) {
 // A session that waits for a key it needs (here a failed preflight's redo) and uses no sample
 // ends after session.operator_wait_s of sample time, saying why, instead of recording without end
 // (about 1 GB a day at real time, 16 GB in 21 minutes at time-scale 0); the replay ends the same.
+// The motion step is planned but never reached: the replay needs no motion log (before, it
+// refused the folder for the motion log the session never wrote).
 TEST(Session, ASessionWaitingForAKeyStopsAfterTheOperatorWait) {
-  RigConfig config = session_config({"preflight", "still"});
+  RigConfig config = session_config({"preflight", "still", "motion"});
   config.session.operator_wait_s = 60.0;
   SimSession s(config);
   s.scripted_ = false;  // nobody presses redo: only the unscripted continue at the preflight
@@ -801,6 +803,7 @@ TEST(Session, ASessionWaitingForAKeyStopsAfterTheOperatorWait) {
   EXPECT_EQ(s.outcome(), "aborted");
   EXPECT_TRUE(s.said("no key for 60 s while the session waited for one (session.operator_wait_s)"));
   EXPECT_LT(ns_to_s(s.rig_->now_ns() - started), 65.0);
+  EXPECT_FALSE(std::filesystem::exists(s.runner_->session_dir() + "/motion.imulog"));
   auto reader = log::SessionLogReader::open(s.runner_->log_path());
   ASSERT_TRUE(reader.ok()) << reader.error().message;
   EXPECT_TRUE((*reader)->health().complete);
