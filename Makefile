@@ -9,7 +9,7 @@ TEST_DIR := build/test
 PACKAGE_DIR := build/package
 FORMAT_FILES = $(shell git ls-files '*.cpp' '*.hpp' 2>/dev/null)
 
-.PHONY: all deps test-deps build demo test bench package format format-check clean
+.PHONY: all deps test-deps build demo test hostile bench package format format-check clean
 
 all: build
 
@@ -44,6 +44,12 @@ $(TEST_DIR)/build.ninja:
 test: test-deps format-check $(TEST_DIR)/build.ninja
 	cmake --build $(TEST_DIR) -j $(JOBS)
 	ctest --test-dir $(TEST_DIR) --output-on-failure -j $(JOBS) --timeout 900
+
+# The hostile cases of docs/hostile-inputs.md alone (tests/hostile-cases.txt), in the test build.
+HOSTILE_TESTS = $(shell sed -e 's/\#.*//' -e 's/[[:space:]]//g' -e '/^$$/d' tests/hostile-cases.txt | paste -sd'|')
+hostile: test-deps $(TEST_DIR)/build.ninja
+	cmake --build $(TEST_DIR) -j $(JOBS)
+	ctest --test-dir $(TEST_DIR) --output-on-failure -j $(JOBS) --timeout 900 -R '^($(HOSTILE_TESTS)|hostile.cases_listed)$$'
 
 bench: deps
 	cmake -S . -B build/bench $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Release -DIMUCAL_BUILD_TESTS=ON
