@@ -109,7 +109,7 @@ struct SimCommon {
 };
 
 void add_common(CLI::App* cmd, SimCommon& o, bool drops = true) {
-  cmd->add_option("--seed", o.seed, "Random seed: the same seed gives the same recording")->required();
+  cmd->add_option("--seed", o.seed, "Random seed: the same seed gives the same recording (default 1)");
   cmd->add_option("--imu-rate", o.imu_rate_hz,
                   "IMU output rate in Hz: 1000/n (DLPF on) or 8000/n (DLPF off), n = 1..256 (default 100; "
                   "camimu 200)")

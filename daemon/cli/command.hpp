@@ -40,6 +40,10 @@ int exit_code_for(Errc code);
 /// Throws CliExit for a failed Result, with the error's message prefixed by `what`.
 [[noreturn]] void fail(const Error& error, const std::string& what = "");
 
+/// Puts every command's examples at the end of its --help (cli/examples.cpp); called once all
+/// commands are set up.
+void add_examples(CLI::App& root);
+
 class CommandRegistrar {
  public:
   using Setup = std::function<void(CLI::App& root)>;
