@@ -597,6 +597,17 @@ TEST(Imucald, PreflightFailsAStorageTheServiceCannotWrite) {
   EXPECT_EQ(daemon.wait(), 0);
 }
 
+/// Writes `payload` as the next record of the rig's storage region, as a writer of that
+/// version of imucal would.
+void store_payload(const RigConfig& rig, const std::vector<std::uint8_t>& payload) {
+  auto dev = drivers::open_storage_device(rig.storage, drivers::StorageAccess::kWrite);
+  ASSERT_TRUE(dev.ok()) << dev.error().message;
+  auto store = drivers::CalibrationStore::open(**dev, static_cast<std::uint64_t>(rig.storage.offset_bytes),
+                                               static_cast<std::uint64_t>(rig.storage.size_bytes));
+  ASSERT_TRUE(store.ok()) << store.error().message;
+  ASSERT_TRUE(store->write(payload).ok());
+}
+
 // A record a newer imucal wrote (its payload's version, or its slot's framing) is named at the
 // preflight with what to do, before anything is recorded. Before: a newer payload left the
 // operator at "fix it and press r"; a newer framing passed and the session's write, at its end,
@@ -609,15 +620,9 @@ TEST(Imucald, PreflightNamesARecordOfANewerImucalAndWhatToDo) {
     auto rig = load_rig_config(config);
     ASSERT_TRUE(rig.ok()) << rig.error().message;
     {
-      auto dev = drivers::open_storage_device(rig->storage, drivers::StorageAccess::kWrite);
-      ASSERT_TRUE(dev.ok()) << dev.error().message;
-      auto store =
-          drivers::CalibrationStore::open(**dev, static_cast<std::uint64_t>(rig->storage.offset_bytes),
-                                          static_cast<std::uint64_t>(rig->storage.size_bytes));
-      ASSERT_TRUE(store.ok()) << store.error().message;
       nlohmann::json record = calibration_record_json(CalibrationRecord{});
       if (!framing) record["version"] = kCalibrationRecordVersion + 1;
-      ASSERT_TRUE(store->write(nlohmann::json::to_cbor(record)).ok());  // slot A
+      ASSERT_NO_FATAL_FAILURE(store_payload(*rig, nlohmann::json::to_cbor(record)));  // slot A
     }
     if (framing) {
       // Slot A's header: format version 7, its CRC (bytes 20..23 over 0..19) resealed.
@@ -666,15 +671,9 @@ TEST(Imucald, AStorageItCannotReadIsNamedAtThePreflightAndTheServiceStillAnswers
     if (fifo) {
       ASSERT_EQ(::mkfifo(rig->storage.path.c_str(), 0600), 0);
     } else {
-      auto dev = drivers::open_storage_device(rig->storage, drivers::StorageAccess::kWrite);
-      ASSERT_TRUE(dev.ok()) << dev.error().message;
-      auto store =
-          drivers::CalibrationStore::open(**dev, static_cast<std::uint64_t>(rig->storage.offset_bytes),
-                                          static_cast<std::uint64_t>(rig->storage.size_bytes));
-      ASSERT_TRUE(store.ok()) << store.error().message;
       std::vector<std::uint8_t> nested(200'000, 0x81);  // an array of one item, 200,000 deep
       nested.push_back(0x00);
-      ASSERT_TRUE(store->write(nested).ok());
+      ASSERT_NO_FATAL_FAILURE(store_payload(*rig, nested));
     }
     const std::string before = fifo ? std::string() : test::read_file(rig->storage.path);
     test::Daemon daemon(dir, {"--sim-operator", "full", "--time-scale", "0", "--start", "default"}, config);
