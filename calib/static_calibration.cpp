@@ -823,11 +823,34 @@ StaticQuality quality_figures(const std::vector<Transfer>& transfers, const Cand
   return q;
 }
 
+/// A nominal accelerometer conversion under which the still start does not read about gravity
+/// hides every attitude: an offset it does not know (a sensor whose zero is mid-range: raw
+/// 16-bit counts near 32768) turns all the poses' means one way. It is set aside, with a warning:
+/// the attitudes are then told apart about the centre of the poses' means, and the solve starts
+/// from an ellipsoid fit, so the biases take the offset.
+void set_aside_an_implausible_accel_conversion(const StillStart& still, StaticCalibrationOptions* opt,
+                                               std::vector<std::string>* warnings) {
+  if (!opt->accel_init) return;
+  const double a = opt->accel_init->to_si(still.accel_mean_raw).norm();
+  const double g = opt->gravity_mps2;
+  if (a > 0.5 * g && a < 2.0 * g) return;
+  warnings->push_back(
+      "at rest the accelerometer reads " + format_number("%.3g", a) + " m/s^2 (" +
+      format_number("%.2g", a / g) +
+      " g) through its stream's nominal conversion: its values carry an offset or a scale that conversion "
+      "does not have (raw counts of a sensor whose zero is mid-range sit near 32768). The poses were told "
+      "apart about the centre of their means and the solve started from an ellipsoid fit, so the biases "
+      "hold that offset; to see them near zero, import with --accel-offset and --gyro-offset (the counts at "
+      "zero)");
+  opt->accel_init.reset();
+}
+
 }  // namespace
 
 Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samples,
-                                                 const StaticCalibrationOptions& opt) {
-  IMUCAL_TRY(opt.validate());
+                                                 const StaticCalibrationOptions& given) {
+  IMUCAL_TRY(given.validate());
+  StaticCalibrationOptions opt = given;  // its nominal accelerometer conversion may be set aside
   StaticCalibrationResult res;
   res.gravity_mps2 = opt.gravity_mps2;
   if (samples.size() < 1000) {
@@ -843,6 +866,7 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   const StaticDetection detection = detect_variance(*scan, opt.window_s);
   Result<StillStart> still = find_still_start(samples, *scan, detection, opt, &res.warnings);
   if (!still.ok()) return still.error();
+  set_aside_an_implausible_accel_conversion(*still, &opt, &res.warnings);
   res.init_still_s = still->length_s;
   res.init_still_from_allan = still->from_allan;
   res.sigma_init_sq = still->sigma_init_sq;

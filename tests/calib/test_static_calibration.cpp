@@ -139,6 +139,20 @@ TEST(StaticCalibration, RawCountsWithLargeOffsetsAndEllipsoidStart) {
   ASSERT_TRUE(res2.ok()) << res2.error().message;
   EXPECT_TRUE(res2->model.accel.scale.isApprox(res->model.accel.scale, 1e-6));
   EXPECT_TRUE(res2->quality.before_available);
+
+  // A nominal conversion that does not know the offset (raw counts imported without it) reads
+  // 4 g at rest and turned every pose one way: it is set aside, said so, and the answer is the
+  // same. Before: "found at most 1 distinct static attitudes ... Record again".
+  opt.accel_init = test::counts_conversion(cfg.accel_lsb, 0.0);
+  auto res3 = calibrate_static(rec.samples, opt);
+  ASSERT_TRUE(res3.ok()) << res3.error().message;
+  EXPECT_TRUE(res3->model.accel.scale.isApprox(res->model.accel.scale, 1e-6));
+  EXPECT_TRUE(res3->model.accel.bias.isApprox(res->model.accel.bias, 1e-6));
+  EXPECT_EQ(res3->distinct_attitudes, res->distinct_attitudes);
+  EXPECT_FALSE(res3->quality.before_available);
+  ASSERT_FALSE(res3->warnings.empty());
+  EXPECT_NE(res3->warnings.front().find("carry an offset"), std::string::npos) << res3->warnings.front();
+  EXPECT_NE(res3->warnings.front().find("--accel-offset"), std::string::npos) << res3->warnings.front();
 }
 
 TEST(StaticCalibration, EstimatedGyroBiasAgreesWithStillBias) {
