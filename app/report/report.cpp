@@ -68,6 +68,13 @@ Result<nlohmann::json> read_result(const std::string& path) {
   try {
     const YAML::Node y = YAML::Load(*text);
     if (y.IsMap() && y["format"] && y["format"].as<std::string>("") == kThermalFormat) return yaml_to_json(y);
+    if (y.IsMap() && y["cam0"]) {
+      return make_error(Errc::kCorrupt,
+                        path +
+                            " is a camera chain (calibrate camera -o), which keeps the cameras but not the "
+                            "views a report draws: run calibrate camera LOG --json > camera.json and give "
+                            "camera.json");
+    }
   } catch (const YAML::Exception&) {
   }
   return make_error(Errc::kCorrupt,
