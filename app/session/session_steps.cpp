@@ -51,6 +51,12 @@ std::string figures_with_sigmas(const Eigen::Vector3d& v, const Eigen::Vector3d&
   return figures(v, k, digits) + " +- " + figures(sigma, k, digits);
 }
 
+/// The sigma of A b from b's, each entry of b independent (A's own uncertainty left out: it
+/// moves A b by far less than the bias's own on any pose set that determines the scales).
+Eigen::Vector3d sigma_through(const Eigen::Matrix3d& A, const Eigen::Vector3d& sigma) {
+  return (A.cwiseAbs2() * sigma.cwiseAbs2()).cwiseSqrt();
+}
+
 /// What the record will store of a camera, in true units with sigmas (two lines).
 std::vector<std::string> camera_review_lines(const CamImuCameraResult& cam) {
   const Eigen::AngleAxisd aa(cam.T_cam_imu.rotation());
@@ -737,10 +743,13 @@ void SessionEngine::review() {
     // model's own b_a and b_g are counts, shown beside.
     const Eigen::Vector3d b_a = m.A_a * m.b_a, b_g = m.A_g * m.b_g;
     const bool counts = info_.units == ImuUnits::kRaw;
-    lines.push_back("Accel bias: " + figures(b_a, 1.0, 4) + " m/s^2" +
-                    (counts ? " (" + figures(m.b_a, 1.0, 1) + " counts)" : std::string()));
-    lines.push_back("Gyro bias: " + figures(b_g, 1.0 / kDeg, 3) + " deg/s" +
-                    (counts ? " (" + figures(m.b_g, 1.0, 1) + " counts)" : std::string()));
+    // With their sigmas (the model's b = -Tedaldi's bias: the same sigma).
+    const Eigen::Vector3d s_a = r.accel_sigma.bias, s_g = r.gyro_sigma.bias;
+    lines.push_back("Accel bias: " + figures_with_sigmas(b_a, sigma_through(m.A_a, s_a), 1.0, 4) + " m/s^2" +
+                    (counts ? " (" + figures_with_sigmas(m.b_a, s_a, 1.0, 1) + " counts)" : std::string()));
+    lines.push_back("Gyro bias: " + figures_with_sigmas(b_g, sigma_through(m.A_g, s_g), 1.0 / kDeg, 3) +
+                    " deg/s" +
+                    (counts ? " (" + figures_with_sigmas(m.b_g, s_g, 1.0, 1) + " counts)" : std::string()));
     lines.push_back("Accel scale sigma (relative): " +
                     figures(r.accel_sigma.scale.cwiseQuotient(r.model.accel.scale.cwiseAbs()), 1e3, 3) +
                     " e-3");

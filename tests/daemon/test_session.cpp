@@ -245,16 +245,24 @@ TEST(Session, FullSimulatedSessionWritesAVerifiedRecordAndReplaysToTheSameResult
       return fixed(v.x() * k, d) + " " + fixed(v.y() * k, d) + " " + fixed(v.z() * k, d);
     };
     const Eigen::Vector3d b_a = m.A_a * m.b_a, b_g = m.A_g * m.b_g;
+    // Each with its sigma: the model's b is minus Tedaldi's bias, whose sigma the record keeps;
+    // through A, each entry independent.
+    ASSERT_TRUE(s.written_->imu.sigma.accel && s.written_->imu.sigma.gyro);
+    const Eigen::Vector3d s_a = s.written_->imu.sigma.accel->bias, s_g = s.written_->imu.sigma.gyro->bias;
+    const Eigen::Vector3d s_a_si = (m.A_a.cwiseAbs2() * s_a.cwiseAbs2()).cwiseSqrt(),
+                          s_g_si = (m.A_g.cwiseAbs2() * s_g.cwiseAbs2()).cwiseSqrt();
+    EXPECT_TRUE((s_a.array() > 0).all() && (s_g.array() > 0).all());
     std::vector<std::string> lines;
     for (const auto& l : review[0]["lines"]) lines.push_back(l.get<std::string>());
     const auto has_line = [&](const std::string& want) {
       return std::find(lines.begin(), lines.end(), want) != lines.end();
     };
-    EXPECT_TRUE(
-        has_line("Accel bias: " + three(b_a, 1.0, 4) + " m/s^2 (" + three(m.b_a, 1.0, 1) + " counts)"))
+    EXPECT_TRUE(has_line("Accel bias: " + three(b_a, 1.0, 4) + " +- " + three(s_a_si, 1.0, 4) + " m/s^2 (" +
+                         three(m.b_a, 1.0, 1) + " +- " + three(s_a, 1.0, 1) + " counts)"))
         << review[0].dump(1);
-    EXPECT_TRUE(has_line("Gyro bias: " + three(b_g, 180.0 / M_PI, 3) + " deg/s (" + three(m.b_g, 1.0, 1) +
-                         " counts)"))
+    EXPECT_TRUE(has_line("Gyro bias: " + three(b_g, 180.0 / M_PI, 3) + " +- " +
+                         three(s_g_si, 180.0 / M_PI, 3) + " deg/s (" + three(m.b_g, 1.0, 1) + " +- " +
+                         three(s_g, 1.0, 1) + " counts)"))
         << review[0].dump(1);
     // The stored thermal model the record does not keep is said in the review, before the accept.
     EXPECT_TRUE(has_line("Thermal: " + thermal_note)) << review[0].dump(1);
