@@ -42,9 +42,10 @@ start=$(date +%s.%N)
 read -r wall rss < <(tail -n 1 "$d/time")
 log=$(session_log "$d/state")
 size=$(stat -c %s "$log")
-info=$("$IMUCAL" info --json "$log")
-samples=$(python3 -c 'import json,sys; j=json.load(sys.stdin); print(j["imu_streams"][0]["count"])' <<< "$info")
-rig_s=$(python3 -c 'import json,sys; j=json.load(sys.stdin); print(round(j["duration_s"]))' <<< "$info")
+# From info's text: "  duration: 1800.000 s (...)" and "    samples: N, nominal ...".
+info=$("$IMUCAL" info "$log")
+samples=$(awk '$1 == "samples:" { sub(/,$/, "", $2); print $2; exit }' <<< "$info")
+rig_s=$(awk '$1 == "duration:" { printf "%.0f", $2; exit }' <<< "$info")
 outcome=$("$IMUCAL" replay "$log" -o "$d/replay" 2>&1 | grep -m1 '^outcome' || true)
 echo "ended after $wall s of wall time (peak RSS $((rss / 1024)) MB): $rig_s s of rig time, $samples samples, log $((size / 1048576)) MB; replay: $outcome"
 
@@ -71,9 +72,9 @@ for k in $(seq "$KILLS"); do
   wait "$pid" 2>/dev/null || true
   log=$(session_log "$d/state")
   n=0
-  if [ -n "$log" ] && "$IMUCAL" info --json "$log" > "$d/info.json" 2> "$d/info.err"; then
+  if [ -n "$log" ] && "$IMUCAL" info "$log" > "$d/info.txt" 2> "$d/info.err"; then
     readable=$((readable + 1))
-    n=$(python3 -c 'import json; j=json.load(open("'"$d/info.json"'")); print(sum(s["count"] for s in j["imu_streams"]))')
+    n=$(awk '$1 == "samples:" { sub(/,$/, "", $2); n += $2 } END { print n + 0 }' "$d/info.txt")
     [ "$n" -gt 0 ] && with_samples=$((with_samples + 1))
   fi
   echo "  kill $k (time-scale $((k % 2 ? 0 : 20))): $([ -n "$log" ] && echo "a log" || echo "no log"), $n samples $(head -c 160 "$d/info.err" 2> /dev/null)"

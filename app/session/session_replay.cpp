@@ -271,6 +271,18 @@ void compare_results(const LoggedSession& logged, const std::optional<msg::Resul
                                  : "the live session logged a result but the replay produced none");
 }
 
+/// The motion log beside the session log, when the session began its motion step (planned is
+/// not run: a session that ended before that step has none).
+Status check_motion_log(const LoggedSession& logged, const std::string& motion_log) {
+  const bool motion_ran = std::any_of(logged.step_starts.begin(), logged.step_starts.end(),
+                                      [](const auto& start) { return start.second == "motion"; });
+  if (!motion_ran || std::filesystem::exists(motion_log)) return {};
+  return make_error(Errc::kNotFound,
+                    "the session ran the motion step, but its motion log " + motion_log +
+                        " is missing: replay reads it beside the session log (copy the whole "
+                        "session folder)");
+}
+
 }  // namespace
 
 Result<ReplaySummary> replay_session(const ReplayOptions& options) {
@@ -299,14 +311,7 @@ Result<ReplaySummary> replay_session(const ReplayOptions& options) {
 
   const std::string motion_log =
       (std::filesystem::path(options.log_path).parent_path() / kMotionLogFile).string();
-  // Planned is not run: a session that ended before its motion step has no motion log.
-  const bool motion_ran = std::any_of(logged->step_starts.begin(), logged->step_starts.end(),
-                                      [](const auto& start) { return start.second == "motion"; });
-  if (motion_ran && !std::filesystem::exists(motion_log)) {
-    return make_error(Errc::kNotFound, "the session ran the motion step, but its motion log " + motion_log +
-                                           " is missing: replay reads it beside the session log (copy the "
-                                           "whole session folder)");
-  }
+  IMUCAL_TRY(check_motion_log(*logged, motion_log));
   ReplayHost host(*config, info, *dir, logged->preflight, motion_log);
   SessionEngine engine(*config, info, host);
   if (auto s = engine.start(logged->steps); !s.ok()) {
