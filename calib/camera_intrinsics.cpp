@@ -32,6 +32,7 @@
 #include "calib/camera_blocks.hpp"
 #include "calib/marginal_covariance.hpp"
 #include "calib/ray_pnp.hpp"
+#include "calib/reprojection_cost.hpp"
 #include "core/text_format.hpp"
 #include "core/threads.hpp"
 
@@ -74,39 +75,6 @@ void transform_point(const T* pose, const T* p_target, T* p_cam) {
   p_cam[1] += pose[5];
   p_cam[2] += pose[6];
 }
-
-/// Reprojection residual of one target point, in pixels.
-struct ReprojectionCost {
-  ReprojectionCost(const Eigen::Vector3d& p_target, const Vec2& px, CameraModelKind model)
-      : p_target_(p_target), px_(px), model_(model) {}
-
-  template <class T>
-  bool operator()(const T* intrinsics, const T* projection, const T* distortion, const T* pose,
-                  T* residual) const {
-    const T p[3] = {T(p_target_.x()), T(p_target_.y()), T(p_target_.z())};
-    Eigen::Matrix<T, 3, 1> c;
-    transform_point(pose, p, c.data());
-    const auto camera = CameraModelT<T>::from_params(model_, intrinsics, projection, distortion, 0, 0);
-    // Outside the projection's domain (behind a pinhole camera) the projection means nothing:
-    // the step is refused.
-    Eigen::Matrix<T, 2, 1> m;
-    bool computed = false;
-    if (!camera.normalise(c, &m, &computed)) return false;
-    const Eigen::Matrix<T, 2, 1> uv = camera.to_pixel(camera.distort(m));
-    residual[0] = uv.x() - T(px_.x());
-    residual[1] = uv.y() - T(px_.y());
-    return true;
-  }
-
-  static ceres::CostFunction* create(const Eigen::Vector3d& p_target, const Vec2& px, CameraModelKind model) {
-    return new ceres::AutoDiffCostFunction<ReprojectionCost, 2, 4, 2, 4, 7>(
-        new ReprojectionCost(p_target, px, model));
-  }
-
-  Eigen::Vector3d p_target_;
-  Vec2 px_;
-  CameraModelKind model_;
-};
 
 /// The residual of corner `i` of `view` under `camera`; NaN when the point is outside the
 /// projection's domain (behind a pinhole camera).
@@ -349,7 +317,7 @@ class IntrinsicsProblem {
       if (!v.active) continue;
       for (std::size_t i = 0; i < v.px.size(); ++i) {
         if (!v.keep[i]) continue;
-        problem_->AddResidualBlock(ReprojectionCost::create(v.target[i], v.px[i], model),
+        problem_->AddResidualBlock(new ReprojectionCost(v.target[i], v.px[i], model),
                                    robust ? &loss_ : nullptr, intrinsics_, projection_, distortion_,
                                    v.pose.data());
         ++residuals_;
