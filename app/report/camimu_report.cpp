@@ -31,8 +31,10 @@ std::string vec_sigma(const Eigen::Vector3d& v, const Eigen::Vector3d& s, double
   return out;
 }
 
-/// Standard deviations of small rotation angles (about the estimate), per axis.
-std::string sigmas(const Eigen::Vector3d& s, double scale) {
+/// Standard deviations of small rotation angles (about the estimate), per axis; "fixed" for a
+/// rotation the solve held (its sigma is then absent, not undetermined).
+std::string sigmas(const Eigen::Vector3d& s, double scale, bool fixed) {
+  if (fixed) return "fixed";
   std::string out;
   for (int a = 0; a < 3; ++a) out += std::string(a ? "<br>" : "") + "xyz"[a] + ": " + num(s[a] * scale, 2);
   return out;
@@ -56,7 +58,7 @@ Section cameras_section(const nlohmann::json& r) {
     t.rows.push_back(
         {escape(name),
          vec_sigma(vec3(at(c, "t_cam_imu_m")), vec3(at(c, "translation_sigma_m")), 1e3, held(r, "T_cam_imu")),
-         sigmas(vec3(at(c, "rotation_sigma_rad")), kDeg),
+         sigmas(vec3(at(c, "rotation_sigma_rad")), kDeg, held(r, "T_cam_imu")),
          with_sigma(number(c, "timeshift_cam_imu_s") * 1e3, number(c, "timeshift_sigma_s") * 1e3,
                     held(r, "timeshift")),
          num(number(c, "reprojection_rms_px"), 4),
@@ -90,14 +92,15 @@ Section imu_section(const nlohmann::json& r) {
   row("S_g", "gyroscope scale S_g", "S_g");
   row("M_g", "gyroscope misalignment M_g", "M_g");
   row("b_g", "gyroscope bias b_g (rad/s, start)", "b_g");
-  t.rows.push_back({"gyro-to-body rotation C_bg", num(number(imu, "C_bg_angle_rad") * kDeg, 4) +
-                                                      " deg; sigma " +
-                                                      sigmas(vec3(at(s, "C_bg_rad")), kDeg)});
+  const std::string c_bg = num(number(imu, "C_bg_angle_rad") * kDeg, 4) + " deg";
+  t.rows.push_back({"gyro-to-body rotation C_bg",
+                    held(r, "C_bg") ? c_bg + " (fixed)"
+                                    : c_bg + "; sigma " + sigmas(vec3(at(s, "C_bg_rad")), kDeg, false)});
   const Eigen::Matrix3d B = mat3(at(k, "B_g")), sB = mat3(at(s, "B_g"));
   std::string b;
   for (int i = 0; i < 3; ++i) {
     b += i ? "<br>" : "";
-    for (int j = 0; j < 3; ++j) b += (j ? "; " : "") + with_sigma(B(i, j), sB(i, j));
+    for (int j = 0; j < 3; ++j) b += (j ? "; " : "") + with_sigma(B(i, j), sB(i, j), held(r, "B_g"));
   }
   t.rows.push_back({"g-sensitivity B_g (rad/s per m/s<sup>2</sup>)", b});
   std::string fixed;

@@ -193,6 +193,40 @@ TEST(Report, CamImuResultFolderFromItsWriter) {
   EXPECT_EQ(write_report(o).error().code, Errc::kAlreadyExists);
 }
 
+TEST(Report, CamImuBasicModelShowsItsHeldParametersAsFixedNotUndetermined) {
+  if (!test::on_path("gnuplot")) GTEST_SKIP() << "gnuplot is not installed (Debian package gnuplot-nox)";
+  // The basic model holds S, M, C_bg and B_g: their sigmas are absent (NaN), and the report says
+  // they were fixed rather than calling them undetermined.
+  CamImuReport r = camimu_report();
+  r.result.model = CamImuModelKind::kBasic;
+  r.result.fixed = {"S_a", "M_a", "S_g", "M_g", "C_bg", "B_g"};
+  const double nan = std::nan("");
+  r.result.imu_sigma.S_a = r.result.imu_sigma.M_a = r.result.imu_sigma.S_g = r.result.imu_sigma.M_g =
+      Eigen::Vector3d::Constant(nan);
+  r.result.imu_sigma.C_bg = Eigen::Vector3d::Constant(nan);
+  r.result.imu_sigma.B_g = Eigen::Matrix3d::Constant(nan);
+  r.result.imu_sigma.b_a = {0.004, 0.003, 0.005};
+  r.result.imu_sigma.b_g = {2e-4, 1e-4, 3e-4};
+  const std::string dir = test::scratch_dir();
+  fs::create_directories(dir + "/out");
+  std::ofstream(dir + "/out/result.json") << camimu_result_json(r);
+  ReportOptions o;
+  o.result_path = dir + "/out";
+  o.html_path = dir + "/camimu.html";
+  o.png_dir = dir + "/png";
+  ASSERT_TRUE(write_report(o).ok());
+  const std::string html = test::read_file(o.html_path);
+  const auto imu = html.find("<h2>IMU</h2>");
+  ASSERT_NE(imu, std::string::npos);
+  const std::string section = html.substr(imu, html.find("<h2>", imu + 4) - imu);
+  EXPECT_EQ(section.find("undetermined"), std::string::npos) << section;
+  EXPECT_EQ(section.find("not determined"), std::string::npos) << section;
+  EXPECT_NE(section.find("deg (fixed)"), std::string::npos) << section;         // C_bg
+  EXPECT_EQ(count(section, "0 (fixed); 0 (fixed); 0 (fixed)"), 3u) << section;  // B_g's rows
+  // The biases are estimated: with their sigmas.
+  EXPECT_NE(section.find("&plusmn;"), std::string::npos);
+}
+
 TEST(Report, CameraResultFromItsWriter) {
   if (!test::on_path("gnuplot")) GTEST_SKIP() << "gnuplot is not installed (Debian package gnuplot-nox)";
   CameraCalibrationReport r;
