@@ -841,7 +841,9 @@ void set_aside_an_implausible_accel_conversion(const StillStart& still, StaticCa
       "does not have (raw counts of a sensor whose zero is mid-range sit near 32768). The poses were told "
       "apart about the centre of their means and the solve started from an ellipsoid fit, so the biases "
       "hold that offset; to see them near zero, import with --accel-offset and --gyro-offset (the counts at "
-      "zero)");
+      "zero). If the scale is what is wrong (a full-scale range other than the one the import assumed), the "
+      "fitted scales hold it instead: import with --accel-scale and --gyro-scale (m/s^2 and rad/s per count "
+      "at the sensor's range)");
   opt->accel_init.reset();
 }
 

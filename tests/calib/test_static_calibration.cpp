@@ -153,6 +153,9 @@ TEST(StaticCalibration, RawCountsWithLargeOffsetsAndEllipsoidStart) {
   ASSERT_FALSE(res3->warnings.empty());
   EXPECT_NE(res3->warnings.front().find("carry an offset"), std::string::npos) << res3->warnings.front();
   EXPECT_NE(res3->warnings.front().find("--accel-offset"), std::string::npos) << res3->warnings.front();
+  // A wrong scale trips the same check: the warning names the scale's options too.
+  EXPECT_NE(res3->warnings.front().find("--accel-scale and --gyro-scale"), std::string::npos)
+      << res3->warnings.front();
 }
 
 TEST(StaticCalibration, EstimatedGyroBiasAgreesWithStillBias) {
