@@ -11,6 +11,10 @@
 #include "app/report/html.hpp"
 #include "core/result.hpp"
 
+namespace YAML {
+class Node;
+}
+
 namespace imucal::app::report {
 
 /// Where the document's inputs are, and what was left out of it (shown on stdout).
@@ -24,8 +28,15 @@ struct BuildContext {
 [[nodiscard]] Result<Document> static_document(const nlohmann::json& result, BuildContext& ctx);
 [[nodiscard]] Result<Document> allan_document(const nlohmann::json& result, BuildContext& ctx);
 [[nodiscard]] Result<Document> camera_document(const nlohmann::json& result, BuildContext& ctx);
+/// A camera chain: calibrate camera --json of several cameras, or the camchain YAML of one or
+/// several (calibrate camera -o) as camera_chain_from_yaml gives it.
+[[nodiscard]] Result<Document> camera_chain_document(const nlohmann::json& result, BuildContext& ctx);
 [[nodiscard]] Result<Document> camimu_document(const nlohmann::json& result, BuildContext& ctx);
 [[nodiscard]] Result<Document> thermal_document(const nlohmann::json& result, BuildContext& ctx);
+
+/// A camchain YAML (cam0 ... camN with imucal's figures under camN.imucal) in the shape of
+/// calibrate camera --json of several cameras, without the views the YAML does not keep.
+nlohmann::json camera_chain_from_yaml(const YAML::Node& camchain);
 
 /// The session log's summary (rig, recording, streams, health) as a section; errors name the log.
 /// `in_progress`: the log is still being written, so an open end is expected.

@@ -3,13 +3,22 @@
 // each view. The JSON has the coverage grid and per-view RMS, not per-corner residuals, so there
 // is no reprojection scatter.
 
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
 #include <string>
 #include <vector>
 
 #include "app/report/builders.hpp"
+#include "core/camera_model.hpp"
+#include "core/yaml_json.hpp"
 
 namespace imucal::app::report {
 namespace {
+
+/// " of cam1" for the figure id suffix "-cam1"; nothing for a single camera's report.
+std::string title_of(const std::string& suffix) { return suffix.empty() ? "" : " of " + suffix.substr(1); }
 
 std::string parameters_html(const nlohmann::json& r) {
   const auto& k = at(r, "intrinsics");
@@ -51,15 +60,15 @@ std::string parameters_html(const nlohmann::json& r) {
   return q.to_html() + t.to_html() + "<p class=\"note\">Distortion coefficients are unitless.</p>\n";
 }
 
-Figure coverage_figure(const nlohmann::json& r) {
+Figure coverage_figure(const nlohmann::json& r, const std::string& suffix = "") {
   const auto& g = at(r, "coverage_grid");
   const int cols = at(g, "cols").get<int>(), rows = at(g, "rows").get<int>();
   const auto& counts = at(g, "counts");
   const auto& res = at(r, "resolution");
   const double w = res[0].get<double>(), h = res[1].get<double>();
   Figure f;
-  f.id = "camera-coverage";
-  f.title = "Target coverage of the image";
+  f.id = "camera-coverage" + suffix;
+  f.title = "Target coverage of the image" + title_of(suffix);
   f.caption = "Target corners of the used views in each cell of a " + std::to_string(cols) + " x " +
               std::to_string(rows) + " grid over the image (pixel coordinates, origin top left).";
   f.height_px = static_cast<int>(960.0 * h / w) + 60;
@@ -80,10 +89,10 @@ Figure coverage_figure(const nlohmann::json& r) {
   return f;
 }
 
-Figure views_figure(const nlohmann::json& r) {
+Figure views_figure(const nlohmann::json& r, const std::string& suffix = "") {
   Figure f;
-  f.id = "camera-view-rms";
-  f.title = "Reprojection error per view";
+  f.id = "camera-view-rms" + suffix;
+  f.title = "Reprojection error per view" + title_of(suffix);
   f.caption =
       "RMS reprojection error of each view with the target, in frame order: used views and rejected "
       "ones (as an outlier or for too few corners).";
@@ -122,7 +131,141 @@ Figure camera_reprojection_figure(const nlohmann::json& r) {
                                  std::to_string(res.value("of_corners", 0)) + " stored;");
 }
 
+constexpr double kDeg = 180.0 / M_PI;
+
+double or_nan(const nlohmann::json& j, const char* key) {
+  return j.contains(key) && j[key].is_number() ? j[key].get<double>() : std::nan("");
+}
+
+/// Each camera after cam0 against the camera it is linked to (T_cn_cnm1), its baseline and its
+/// time offset to cam0, all with their sigmas.
+std::string chain_html(const nlohmann::json& cams) {
+  Table t{{"camera", "relative to", "translation (mm)", "rotation angle (deg)", "baseline (mm)",
+           "time offset to cam0 (ms)", "chain RMS (px)"},
+          {}};
+  for (const auto& c : cams) {
+    const std::string name = escape(at(c, "name").get<std::string>());
+    const double dt = or_nan(c, "timeshift_cam_cam0_s") * 1e3;
+    const bool estimated = c.value("timeshift_estimated", false);
+    const std::string offset =
+        estimated ? with_sigma(dt, or_nan(c, "timeshift_cam_cam0_sigma_s") * 1e3) : num(dt) + " (held)";
+    if (!c.contains("T_cn_cnm1")) {
+      t.rows.push_back(
+          {name, "(reference)", "-", "-", "-", "0 (reference)", num(or_nan(c, "chain_rms_px"), 4)});
+      continue;
+    }
+    Eigen::Matrix4d T;
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) T(i, j) = at(c, "T_cn_cnm1")[i][j].get<double>();
+    const Eigen::Vector3d ts = c.contains("T_cn_cnm1_translation_sigma_m")
+                                   ? vec3(c["T_cn_cnm1_translation_sigma_m"])
+                                   : Eigen::Vector3d::Constant(std::nan(""));
+    const Eigen::Vector3d rs = c.contains("T_cn_cnm1_rotation_sigma_rad")
+                                   ? vec3(c["T_cn_cnm1_rotation_sigma_rad"])
+                                   : Eigen::Vector3d::Constant(std::nan(""));
+    std::string tr, rot;
+    for (int a = 0; a < 3; ++a)
+      tr += std::string(a ? "<br>" : "") + "xyz"[a] + ": " + with_sigma(1e3 * T(a, 3), 1e3 * ts[a]);
+    const double angle = std::acos(std::clamp((T.topLeftCorner<3, 3>().trace() - 1.0) / 2.0, -1.0, 1.0));
+    rot = num(angle * kDeg, 5) + "; sigma";
+    for (int a = 0; a < 3; ++a) rot += std::string(" ") + "xyz"[a] + " " + num(rs[a] * kDeg, 2);
+    t.rows.push_back({name, escape(c.value("linked_to", std::string("cam0"))), tr, rot,
+                      with_sigma(1e3 * or_nan(c, "baseline_m"), 1e3 * or_nan(c, "baseline_sigma_m")), offset,
+                      num(or_nan(c, "chain_rms_px"), 4)});
+  }
+  return t.to_html() +
+         "<p class=\"note\">T_cn_cnm1 maps a point from the camera before to this camera (Kalibr's "
+         "camchain). The time offset is added to the camera's stamps to give cam0's time; held: the "
+         "cameras were taken as triggered together.</p>\n";
+}
+
+/// The views each pair of cameras shares (the chain is built through them).
+std::string covisibility_html(const nlohmann::json& cams) {
+  std::vector<std::string> head{"views shared"};
+  for (const auto& c : cams) head.push_back(escape(at(c, "name").get<std::string>()));
+  Table t{head, {}};
+  for (std::size_t i = 0; i < cams.size(); ++i) {
+    const auto& c = cams[i];
+    std::vector<std::string> row{escape(at(c, "name").get<std::string>())};
+    const auto shared = c.contains("shared_views") ? c["shared_views"] : nlohmann::json::array();
+    for (std::size_t j = 0; j < cams.size(); ++j)
+      row.push_back(j == i || j >= shared.size() ? "-" : std::to_string(shared[j].get<int>()));
+    t.rows.push_back(std::move(row));
+  }
+  return t.to_html();
+}
+
 }  // namespace
+
+nlohmann::json camera_chain_from_yaml(const YAML::Node& y) {
+  nlohmann::json cams = nlohmann::json::array(), warnings = nlohmann::json::array();
+  for (int c = 0;; ++c) {
+    const std::string name = "cam" + std::to_string(c);
+    const YAML::Node cam = y[name];
+    if (!cam) break;
+    nlohmann::json j = yaml_to_json(cam);
+    nlohmann::json q = j.contains("imucal") ? j["imucal"] : nlohmann::json::object();
+    j.erase("imucal");
+    for (auto it = q.begin(); it != q.end(); ++it) j[it.key()] = it.value();
+    j["name"] = name;
+    // The figures the YAML keeps under other names (it keeps no views).
+    if (j.contains("timeshift_cam_cam0")) j["timeshift_cam_cam0_s"] = j["timeshift_cam_cam0"];
+    if (j.contains("timeshift_cam_cam0_sigma"))
+      j["timeshift_cam_cam0_sigma_s"] = j["timeshift_cam_cam0_sigma"];
+    j["views_total"] = j.value("views_used", 0) + j.value("views_rejected", 0);
+    j["coverage_grid_dims"] = j.contains("coverage_grid") ? j["coverage_grid"] : nlohmann::json();
+    j.erase("coverage_grid");
+    const auto projection = parse_projection_name(j.value("camera_model", std::string()));
+    const auto distortion = parse_distortion_name(j.value("distortion_model", std::string()));
+    if (projection && distortion) j["covariance_order"] = kalibr_parameter_names({*projection, *distortion});
+    if (j.contains("warnings"))
+      for (const auto& w : j["warnings"])
+        if (std::find(warnings.begin(), warnings.end(), w) == warnings.end()) warnings.push_back(w);
+    cams.push_back(std::move(j));
+  }
+  return {{"cameras", cams}, {"warnings", warnings}, {"from_camchain_yaml", true}};
+}
+
+Result<Document> camera_chain_document(const nlohmann::json& r, BuildContext& ctx) {
+  const auto& cams = at(r, "cameras");
+  Document doc;
+  doc.title = cams.size() > 1 ? "Camera chain calibration" : "Camera intrinsics calibration";
+  doc.subtitle = "Report of " + ctx.result_path + " (" + std::to_string(cams.size()) + " camera" +
+                 (cams.size() == 1 ? ")" : "s)");
+  for (const auto& w : at(r, "warnings")) doc.warnings.push_back(w.get<std::string>());
+  if (!ctx.log_path.empty()) {
+    auto session = session_section(ctx.log_path, ctx.log_in_progress);
+    if (!session.ok()) return session.error();
+    doc.sections.push_back(std::move(*session));
+  }
+  const bool from_yaml = r.value("from_camchain_yaml", false);
+  if (from_yaml)
+    ctx.notes.push_back(
+        "drawn from the camchain YAML, which keeps each camera's figures but not its views: for the "
+        "coverage and per-view figures and the self-check, run calibrate camera LOG --json > camera.json "
+        "and give camera.json");
+  if (cams.size() > 1)
+    doc.sections.push_back(
+        {"Chain",
+         chain_html(cams) + "<h3>Views shared by each pair of cameras</h3>\n" + covisibility_html(cams),
+         {}});
+  for (const auto& c : cams) {
+    const std::string name = at(c, "name").get<std::string>();
+    Section s{escape(name) + " (stream " + escape(c.value("camera_stream", std::string("-"))) + ")",
+              parameters_html(c),
+              {}};
+    if (c.contains("views") && c.contains("coverage_grid")) {
+      s.figures = {coverage_figure(c, "-" + name), views_figure(c, "-" + name)};
+    } else {
+      s.html +=
+          "<p class=\"note\">The camchain YAML keeps the figures of this camera, not its views: "
+          "the coverage and per-view figures need the JSON result (calibrate camera LOG --json).</p>\n";
+    }
+    doc.sections.push_back(std::move(s));
+  }
+  if (auto sc = self_check_section(r); !sc.title.empty()) doc.sections.push_back(std::move(sc));
+  return doc;
+}
 
 Result<Document> camera_document(const nlohmann::json& r, BuildContext& ctx) {
   Document doc;

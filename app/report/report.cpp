@@ -68,20 +68,24 @@ Result<nlohmann::json> read_result(const std::string& path) {
   try {
     const YAML::Node y = YAML::Load(*text);
     if (y.IsMap() && y["format"] && y["format"].as<std::string>("") == kThermalFormat) return yaml_to_json(y);
+    // The camera YAML (calibrate camera -o): its cameras and figures, not its views.
     if (y.IsMap() && y["cam0"]) {
-      return make_error(Errc::kCorrupt,
-                        path +
-                            " is a camera chain (calibrate camera -o), which keeps the cameras but not the "
-                            "views a report draws: run calibrate camera LOG --json > camera.json and give "
-                            "camera.json");
+      if (!y["cam0"].IsMap() || !y["cam0"]["imucal"])
+        return make_error(Errc::kCorrupt,
+                          path +
+                              " is a camchain without imucal's figures (cam0.imucal: sigmas, residuals, "
+                              "coverage), as Kalibr writes it: give the YAML or the --json of imucal "
+                              "calibrate camera");
+      return camera_chain_from_yaml(y);
     }
   } catch (const YAML::Exception&) {
   }
-  return make_error(Errc::kCorrupt,
-                    path +
-                        " is not JSON: give the JSON of a result (calibrate static --json, allan --json, "
-                        "calibrate camera --json, calibrate camimu's folder) or a thermal model (calibrate "
-                        "thermal -o)");
+  return make_error(
+      Errc::kCorrupt,
+      path +
+          " is not JSON: give the JSON of a result (calibrate static --json, allan --json, "
+          "calibrate camera --json, calibrate camimu's folder), a camera YAML (calibrate camera -o) "
+          "or a thermal model (calibrate thermal -o)");
 }
 
 Result<Document> build_document(ReportKind kind, const nlohmann::json& result, BuildContext& ctx) {
@@ -95,6 +99,8 @@ Result<Document> build_document(ReportKind kind, const nlohmann::json& result, B
         return allan_document(result, ctx);
       case ReportKind::kCamera:
         return camera_document(result, ctx);
+      case ReportKind::kCameraChain:
+        return camera_chain_document(result, ctx);
       case ReportKind::kCamImu:
         return camimu_document(result, ctx);
       case ReportKind::kThermal:
@@ -193,6 +199,8 @@ const char* report_kind_name(ReportKind kind) {
       return "camera-IMU calibration";
     case ReportKind::kCamera:
       return "camera calibration";
+    case ReportKind::kCameraChain:
+      return "camera chain calibration";
     case ReportKind::kThermal:
       return "thermal calibration";
   }
@@ -209,11 +217,15 @@ Result<ReportKind> detect_report_kind(const nlohmann::json& r, const std::string
     if (r.contains("intrinsics") && r.contains("views") && r.contains("coverage_grid"))
       return ReportKind::kCamera;
     if (r.value("format", nlohmann::json()) == kThermalFormat) return ReportKind::kThermal;
+    if (r.contains("cameras") && r["cameras"].is_array() && !r["cameras"].empty() &&
+        r["cameras"][0].is_object() && r["cameras"][0].contains("intrinsics"))
+      return ReportKind::kCameraChain;
   }
-  return make_error(Errc::kCorrupt, origin +
-                                        " is no result imucal writes: give the JSON of calibrate static "
-                                        "--json, allan --json, calibrate camera --json, or the output folder "
-                                        "of calibrate camimu");
+  return make_error(Errc::kCorrupt,
+                    origin +
+                        " is no result imucal writes: give the JSON of calibrate static "
+                        "--json, allan --json, calibrate camera --json, the YAML of calibrate "
+                        "camera -o, or the output folder of calibrate camimu");
 }
 
 Result<ReportSummary> write_report(const ReportOptions& o) {

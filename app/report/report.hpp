@@ -1,8 +1,8 @@
 #pragma once
 // `imucal report`: one self-contained HTML page (figures embedded as SVG data URIs, no network)
-// of a calibration result (static, Allan, camera, camera-IMU, thermal), with its figures drawn by gnuplot;
-// optionally the same figures as PNG files. The kind of result is read from the file's content.
-// docs/report.md describes each kind.
+// of a calibration result (static, Allan, camera or camera chain, camera-IMU, thermal), with its figures
+// drawn by gnuplot; optionally the same figures as PNG files. The kind of result is read from the file's
+// content. docs/report.md describes each kind.
 
 #include <nlohmann/json_fwd.hpp>
 #include <string>
@@ -14,11 +14,12 @@ namespace imucal::app::report {
 
 /// The results a report is made of.
 enum class ReportKind {
-  kStatic,   // imucal calibrate static --json
-  kAllan,    // imucal allan --json
-  kCamImu,   // imucal calibrate camimu: OUT_DIR/result.json
-  kCamera,   // imucal calibrate camera --json
-  kThermal,  // imucal calibrate thermal -o (YAML)
+  kStatic,       // imucal calibrate static --json
+  kAllan,        // imucal allan --json
+  kCamImu,       // imucal calibrate camimu: OUT_DIR/result.json
+  kCamera,       // imucal calibrate camera --json
+  kCameraChain,  // imucal calibrate camera --json of several cameras, or its YAML (-o) of one or several
+  kThermal,      // imucal calibrate thermal -o (YAML)
 };
 const char* report_kind_name(ReportKind kind);
 

@@ -29,15 +29,18 @@ void run(const app::report::ReportOptions& options) {
 }
 
 void setup(CLI::App& root) {
-  CLI::App* cmd = root.add_subcommand(
-      "report",
-      "HTML report of a calibration result (static, Allan, camera, camera-IMU, thermal), figures drawn by "
-      "gnuplot");
+  CLI::App* cmd = root.add_subcommand("report",
+                                      "HTML report of a calibration result (static, Allan, camera or camera "
+                                      "chain, camera-IMU, thermal), figures "
+                                      "drawn by "
+                                      "gnuplot");
   auto o = std::make_shared<app::report::ReportOptions>();
   o->generator = std::string("imucal ") + kVersion + " report";
-  cmd->add_option("RESULT", o->result_path,
-                  "Result JSON (calibrate static --json, allan --json, calibrate camera --json), calibrate "
-                  "camimu's output folder, or calibrate thermal's YAML")
+  cmd->add_option(
+         "RESULT", o->result_path,
+         "Result JSON (calibrate static --json, allan --json, calibrate camera --json), calibrate "
+         "camera's YAML (-o; its tables, no figures), calibrate camimu's output folder, or calibrate "
+         "thermal's YAML")
       ->required();
   cmd->add_option("--log", o->log_path, "The session log the result came from (signals, per-pose figures)");
   cmd->add_option("-o,--output", o->html_path, "The HTML report to write")->required();

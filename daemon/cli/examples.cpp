@@ -61,6 +61,7 @@ const std::vector<Examples>& examples() {
       {{"report"},
        {"imucal report imu.json --log static.imulog -o static.html",
         "imucal report camera.json -o camera.html   # from calibrate camera LOG --json > camera.json",
+        "imucal report cam.yaml -o cam.html         # calibrate camera -o's YAML: its tables, no figures",
         "imucal report ./camimu -o camimu.html      # calibrate camimu's output folder"}},
       {{"replay"}, {"imucal replay /var/lib/imucal/sessions/NAME/session.imulog -o ./replay"}},
       {{"store", "read"},

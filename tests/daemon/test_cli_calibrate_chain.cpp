@@ -10,6 +10,7 @@
 
 #include <Eigen/Geometry>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -21,6 +22,7 @@ namespace {
 
 using ::testing::ContainsRegex;
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 Eigen::Matrix4d matrix_of(const YAML::Node& rows) {
   Eigen::Matrix4d m;
@@ -138,6 +140,32 @@ TEST(CliCalibrateChain, AStereoPairTenMillisecondsApartIsCalibratedWithinItsSigm
   const double dshift =
       ci["cam1"]["timeshift_cam_imu"].as<double>() - ci["cam0"]["timeshift_cam_imu"].as<double>();
   EXPECT_NEAR(dshift, q["timeshift_cam_cam0"].as<double>(), 0.001);
+
+  // The report of the chain, from its JSON (with each camera's figures) and from its YAML (the
+  // figures the file keeps, and a note on what it does not).
+  if (!test::on_path("gnuplot")) GTEST_SKIP() << "gnuplot is not installed (Debian package gnuplot-nox)";
+  std::ofstream(dir + "/chain.json") << j.out;
+  auto rj = test::run_cli({"report", dir + "/chain.json", "-o", dir + "/chain-json.html"});
+  ASSERT_EQ(rj.exit_code, 0) << rj.err;
+  EXPECT_THAT(rj.out, HasSubstr("report (camera chain calibration)"));
+  const std::string html = test::read_file(dir + "/chain-json.html");
+  EXPECT_THAT(html, HasSubstr("<h2>Chain</h2>"));
+  EXPECT_THAT(html, HasSubstr("Views shared by each pair of cameras"));
+  for (const char* id :
+       {"camera-coverage-cam0", "camera-view-rms-cam0", "camera-coverage-cam1", "camera-view-rms-cam1"})
+    EXPECT_THAT(html, HasSubstr(std::string("data-plot=\"") + id + "\"")) << id;
+  EXPECT_THAT(html, HasSubstr("<h2>Self-check</h2>"));
+  // The baseline with its sigma, in mm, as the chain file has it.
+  const double baseline_mm = 1e3 * json["cameras"][1]["baseline_m"].get<double>();
+  EXPECT_THAT(html, HasSubstr(std::to_string(static_cast<int>(baseline_mm)))) << baseline_mm;
+  auto ry = test::run_cli({"report", out, "-o", dir + "/chain-yaml.html"});
+  ASSERT_EQ(ry.exit_code, 0) << ry.err;
+  EXPECT_THAT(ry.out, HasSubstr("drawn from the camchain YAML"));
+  const std::string yhtml = test::read_file(dir + "/chain-yaml.html");
+  EXPECT_THAT(yhtml, HasSubstr("<h2>Chain</h2>"));
+  EXPECT_THAT(yhtml, HasSubstr("<h2>cam1 (stream cam1)</h2>"));
+  EXPECT_THAT(yhtml, HasSubstr("the coverage and per-view figures need the JSON result"));
+  EXPECT_THAT(yhtml, Not(HasSubstr("undetermined")));
 }
 
 TEST(CliCalibrateChain, ModelsAndCamerasAreCheckedBeforeAnyWork) {
