@@ -619,7 +619,9 @@ Status Estimator<N>::solve(bool extended, const std::string& stage, ceres::Solve
   int imu_stride = 1;
   if (preliminary && imu_.size() >= 2) {
     const double rate = 1e9 / static_cast<double>(std::max<TimeNs>(imu_median_interval_ns(imu_), 1));
-    imu_stride = std::max(1, static_cast<int>(std::lround(rate / kPreliminaryImuRateHz)));
+    const auto by_rate = std::lround(rate / kPreliminaryImuRateHz);
+    const auto by_knots = static_cast<long>(std::floor(rate * st_.pose.dt_s / kPreliminaryImuPerKnot));
+    imu_stride = static_cast<int>(std::max(1L, std::min(by_rate, by_knots)));
   }
   for (int attempt = 0; attempt < kAttempts; ++attempt) {
     window_check = attempt + 1 < kAttempts;

@@ -36,8 +36,13 @@ inline constexpr double kPreliminaryTolerance = 1e-2;
 inline constexpr double kIntermediateTolerance = 1e-4;
 inline constexpr double kFinalTolerance = 1e-7;
 // The first stage takes IMU samples at this rate at most (every k-th sample): it only brings the
-// trajectory near, and the IMU residuals set its cost.
+// trajectory near, and the IMU residuals set its cost. It keeps at least
+// kPreliminaryImuPerKnot samples in each knot interval: with two (100 Hz against knots 20 ms
+// apart) a wiggle of the spline between them is seen by no residual, grows in the first stage's
+// steps, and the next stage starts from a cost 1e8 times the first stage's end and needs 30
+// iterations to undo it (docs/camimu-calibration.md, "Speed").
 inline constexpr double kPreliminaryImuRateHz = 100.0;
+inline constexpr double kPreliminaryImuPerKnot = 4.0;
 using Arr4 = std::array<double, 4>;
 
 inline Arr4 to_quat(const Eigen::Matrix3d& R) {
