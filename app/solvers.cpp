@@ -12,6 +12,15 @@ std::future<void> load_static_solver_meanwhile() {
   });
 }
 
+Status load_session_modules(bool cameras) {
+  if (auto api = load_module<calib::SolveModuleApi>(calib::kSolveModule, calib::kSolveModuleEntry); !api.ok())
+    return api.error();
+  if (!cameras) return {};
+  if (auto api = load_module<CameraModuleApi>(kCameraModule, kCameraModuleEntry); !api.ok())
+    return api.error();
+  return {};
+}
+
 Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samples,
                                                  const calib::StaticCalibrationOptions& options) {
   auto api = load_module<calib::SolveModuleApi>(calib::kSolveModule, calib::kSolveModuleEntry);

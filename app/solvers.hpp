@@ -21,6 +21,12 @@ namespace imucal::app {
 /// for: a load that failed is tried again, and reported, by calibrate_static.
 [[nodiscard]] std::future<void> load_static_solver_meanwhile();
 
+/// Loads the modules a session solves with (the solver module; the camera module too with
+/// `cameras`) when it starts: a loaded module stays mapped, so a package upgrade during the
+/// session replaces the files on disk but not what the session solves with, and a module that
+/// cannot be loaded refuses the start instead of the solve after the recording.
+[[nodiscard]] Status load_session_modules(bool cameras);
+
 /// calib::calibrate_static; fails with the loader's error when the module cannot be loaded.
 [[nodiscard]] Result<StaticCalibrationResult> calibrate_static(
     std::span<const ImuSample> samples, const calib::StaticCalibrationOptions& options);

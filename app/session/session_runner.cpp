@@ -398,6 +398,9 @@ bool SessionRunner::busy() {
 Status SessionRunner::start(const std::vector<std::string>& steps) {
   // A start that would be refused makes no session folder (status would point at an empty one).
   if (auto plan = engine_.plan(steps); !plan.ok()) return plan.error();
+  // The solver modules now, not at the solve: an upgrade during the session cannot swap them.
+  if (Status s = load_session_modules(!config_.cameras.empty()); !s.ok())
+    return s.error().context("loading the solver modules for the session");
   close_log();
   motion_step_start_ns_ = -1;
   if (!options_.session_dir.empty()) {

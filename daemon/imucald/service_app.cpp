@@ -8,9 +8,11 @@
 #include <boost/asio/post.hpp>
 #include <cerrno>
 #include <csignal>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <string_view>
 #include <thread>
 
 #include "app/camera_module.hpp"
@@ -238,7 +240,8 @@ Service::Service(ServiceOptions options)
     : options_(std::move(options)),
       signals_(io_, SIGINT, SIGTERM, SIGHUP),
       sim_timer_(io_),
-      watchdog_timer_(io_) {}
+      watchdog_timer_(io_),
+      upgrade_timer_(io_) {}
 
 Service::~Service() {
   runner_.reset();  // joins the worker before the devices go
@@ -913,6 +916,41 @@ void Service::arm_watchdog() {
   });
 }
 
+namespace {
+
+/// Whether this process's program was replaced on disk: an upgrade renames the new file over the
+/// old one, and /proc/self/exe then names the old one "... (deleted)".
+bool program_replaced() {
+  std::array<char, 4096> buf{};
+  const ssize_t n = ::readlink("/proc/self/exe", buf.data(), buf.size() - 1);
+  return n > 0 && std::string_view(buf.data(), static_cast<std::size_t>(n)).ends_with(" (deleted)");
+}
+
+}  // namespace
+
+void Service::arm_upgrade_check() {
+  if (std::getenv("NOTIFY_SOCKET") == nullptr) return;
+  upgrade_timer_.expires_after(std::chrono::seconds(2));
+  upgrade_timer_.async_wait([this](const boost::system::error_code& ec) {
+    if (ec || quit_) return;
+    if (!program_replaced()) return arm_upgrade_check();
+    if (runner_->engine().running()) {
+      if (!upgrade_noted_)
+        spdlog::warn(
+            "imucald's program was replaced (an upgrade): it restarts into the new version when the "
+            "session ends");
+      upgrade_noted_ = true;
+      return arm_upgrade_check();
+    }
+    exit_code_ = kExitUpgraded;
+    spdlog::warn(
+        "its program was replaced (an upgrade) and no session runs: exit {}, which systemd restarts into "
+        "the new version",
+        kExitUpgraded);
+    shutdown("an upgrade");
+  });
+}
+
 void Service::shutdown(const std::string& why) {
   if (quit_) return;
   spdlog::info("stopping: {}", why);
@@ -929,6 +967,7 @@ int Service::run() {
     shutdown(sig == SIGTERM ? "SIGTERM" : sig == SIGHUP ? "SIGHUP" : "SIGINT");
   });
   arm_watchdog();
+  arm_upgrade_check();
   // --start: once samples flow, so that the session starts on the rig's clock like one that
   // imucalctl starts.
   if (options_.start) pending_start_ = *options_.start;

@@ -38,6 +38,11 @@ inline constexpr int kExitConfigUnusable = 78;
 /// its start limit).
 inline constexpr int kExitDeviceAbsent = 69;
 
+/// imucald's exit status when its program was replaced on disk (a package upgrade) while it ran
+/// (sysexits.h EX_TEMPFAIL): under systemd it exits with it once no session runs, and the unit's
+/// Restart=on-failure starts the new version. A session in progress is never cut short by it.
+inline constexpr int kExitUpgraded = 75;
+
 struct ServiceOptions {
   std::string config_path = "/etc/imucal/rig.yaml";
   std::string socket_path = "/run/imucal/imucald.sock";
@@ -145,13 +150,17 @@ class Service final : public service::SessionHost {
   [[nodiscard]] Result<drivers::mpu6000::OffsetRegisters> read_offsets();
   [[nodiscard]] Status write_offsets(const drivers::mpu6000::OffsetRegisters& regs);
   void arm_watchdog();
+  /// Under systemd (NOTIFY_SOCKET set): every few seconds, whether the program was replaced on
+  /// disk; if so, exits with kExitUpgraded once no session runs.
+  void arm_upgrade_check();
   void shutdown(const std::string& why);
 
   ServiceOptions options_;
   RigConfig config_;
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;
-  boost::asio::steady_timer sim_timer_, watchdog_timer_;
+  boost::asio::steady_timer sim_timer_, watchdog_timer_, upgrade_timer_;
+  bool upgrade_noted_ = false;
   service::Notifier notifier_;
   std::unique_ptr<service::ControlServer> server_;
   std::unique_ptr<service::LiveViewServer> live_;

@@ -3,7 +3,9 @@
 // committed fixture session.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/un.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -11,6 +13,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -810,6 +813,85 @@ TEST(Imucald, AnImuLostMidSessionStopsTheStepAndKeepsWhatWasRecorded) {
   ASSERT_TRUE(n.ok());
   EXPECT_GT(*n, 7000) << "the samples before the loss (40 s at 197 Hz) are kept";
   EXPECT_LT(*n, 8200);
+}
+
+}  // namespace
+}  // namespace imucal
+
+namespace imucal {
+namespace {
+
+TEST(Imucald, AnUpgradeDuringASessionWaitsForItsEndThenTheServiceExits75ForSystemdToRestartIt) {
+  // A package upgrade renames the new program over the running one. Under systemd (NOTIFY_SOCKET
+  // set) imucald notices; a session in progress runs on with the modules it loaded when it
+  // started, and once it has ended imucald exits 75, which the unit's Restart=on-failure restarts
+  // into the new version.
+  namespace fs = std::filesystem;
+  const std::string dir = test::scratch_dir();
+  fs::create_directories(dir + "/bin");
+  const std::string program = dir + "/bin/imucald";
+  fs::copy_file(IMUCALD_PATH, program);
+  const std::string notify = test::short_socket_path();
+  const int sock = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  ASSERT_GE(sock, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strncpy(addr.sun_path, notify.c_str(), sizeof addr.sun_path - 1);
+  ASSERT_EQ(::bind(sock, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+  const std::string socket = test::short_socket_path();
+  std::vector<std::string> args = {program,
+                                   "--config",
+                                   test::write_config(dir),
+                                   "--socket",
+                                   socket,
+                                   "--state-dir",
+                                   dir + "/state",
+                                   "--sim",
+                                   "-q",
+                                   "--sim-operator",
+                                   "full",
+                                   "--time-scale",
+                                   "5",
+                                   "--start",
+                                   "default"};
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    (void)!std::freopen((dir + "/imucald.log").c_str(), "w", stderr);
+    ::setenv("NOTIFY_SOCKET", notify.c_str(), 1);
+    ::setenv("IMUCAL_MODULE_DIR", fs::path(IMUCALD_PATH).parent_path().c_str(), 1);
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    ::execv(argv[0], argv.data());
+    std::_Exit(127);
+  }
+  const auto log = [&] { return test::read_file(dir + "/imucald.log"); };
+  ASSERT_TRUE(test::wait_for([&] { return !test::session_log(dir).empty(); }, 30)) << log();
+  // The upgrade: a new file renamed over the program (and over nothing the session needs now).
+  fs::copy_file(IMUCALD_PATH, program + ".new");
+  fs::rename(program + ".new", program);
+  ASSERT_TRUE(test::wait_for(
+      [&] { return test::has(log(), "restarts into the new version when the session ends"); }, 15))
+      << log();
+  int status = 0;
+  EXPECT_EQ(::waitpid(pid, &status, WNOHANG), 0) << "the session was cut short: " << log();
+  // The session ends (aborted by the operator); then the service exits 75.
+  EXPECT_EQ(
+      std::system((std::string(IMUCALCTL_PATH) + " --socket " + socket + " abort > /dev/null 2>&1").c_str()),
+      0);
+  bool exited = test::wait_for([&] { return ::waitpid(pid, &status, WNOHANG) == pid; }, 20);
+  if (!exited) {
+    ::kill(pid, SIGKILL);
+    ::waitpid(pid, &status, 0);
+  }
+  ::close(sock);
+  ASSERT_TRUE(exited) << log();
+  ASSERT_TRUE(WIFEXITED(status)) << log();
+  EXPECT_EQ(WEXITSTATUS(status), 75) << log();
+  EXPECT_TRUE(test::has(log(), "its program was replaced (an upgrade) and no session runs")) << log();
+  auto reader = log::SessionLogReader::open(test::session_log(dir));
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_TRUE((*reader)->health().complete);
 }
 
 }  // namespace
