@@ -64,11 +64,12 @@ $(PACKAGE_DIR)/build.ninja:
 	  -DCMAKE_EXE_LINKER_FLAGS=-Wl,-z,now -DCMAKE_MODULE_LINKER_FLAGS=-Wl,-z,now \
 	  -DCMAKE_SHARED_LINKER_FLAGS=-Wl,-z,now
 
-# The Debian package $(PACKAGE_DIR)/imucal_VERSION_ARCH.deb (CPack; docs/service.md).
+# The Debian packages $(PACKAGE_DIR)/imucal_VERSION_ARCH.deb and the camera backends'
+# imucal-aravis_ and imucal-libcamera_ (CPack; docs/service.md).
 package: deps $(PACKAGE_DIR)/build.ninja
 	cmake --build $(PACKAGE_DIR) -j $(JOBS)
 	cmake --build $(PACKAGE_DIR) --target package
-	@ls -l $(PACKAGE_DIR)/imucal_*.deb
+	@ls -l $(PACKAGE_DIR)/imucal*.deb
 
 format:
 	clang-format -i $(FORMAT_FILES)

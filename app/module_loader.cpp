@@ -27,6 +27,14 @@ std::vector<fs::path> search_dirs() {
   return {dir, dir.parent_path() / "lib" / "imucal"};
 }
 
+/// The Debian package a module comes in: the camera backends have packages of their own
+/// (cmake/packaging.cmake), so that a rig without such a camera does not pull in its libraries.
+std::string package_of(std::string_view name) {
+  if (name == "imucal_aravis") return "imucal-aravis";
+  if (name == "imucal_libcamera") return "imucal-libcamera";
+  return "imucal";
+}
+
 Result<const void*> load_uncached(std::string_view name, const char* entry) {
   const std::string file = "lib" + std::string(name) + ".so";
   const auto dirs = search_dirs();
@@ -63,9 +71,13 @@ Result<const void*> load_uncached(std::string_view name, const char* entry) {
     }
     return api;
   }
-  return make_error(Errc::kUnsupported,
-                    "the module " + file + " is not in " + (tried.empty() ? "any folder" : tried) +
-                        "; reinstall imucal, or set IMUCAL_MODULE_DIR to the folder that holds it");
+  return make_error(
+      Errc::kUnsupported,
+      "the module " + file + " is not in " + (tried.empty() ? "any folder" : tried) +
+          (package_of(name) == "imucal"
+               ? "; reinstall imucal, or set IMUCAL_MODULE_DIR to the folder that holds it"
+               : "; install the package " + package_of(name) + " (apt-get install " + package_of(name) +
+                     "), or set IMUCAL_MODULE_DIR to the folder that holds it"));
 }
 
 }  // namespace

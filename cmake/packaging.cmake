@@ -3,8 +3,9 @@
 #    imucald.8, imucalctl.1; skipped with a warning when help2man is missing);
 #  - bash completion for the three programs;
 #  - the copyright file, the changelog and an example udev rule in the documentation folder.
-# Then CPack's DEB generator: imucal_VERSION_ARCH.deb from everything the install puts in place,
-# with packaging/debian/'s maintainer scripts and conffiles. `make package` builds it from a tree
+# Then CPack's DEB generator: imucal_VERSION_ARCH.deb from everything the install puts in place
+# but the camera backends, with packaging/debian/'s maintainer scripts and conffiles, and
+# imucal-aravis_VERSION_ARCH.deb and imucal-libcamera_VERSION_ARCH.deb with those modules. `make package` builds it from a tree
 # configured for /usr; `cpack --config BUILD/CPackConfig.cmake` packages any built tree (the unit's
 # paths are set at install time, so the prefix the tree was configured with does not matter).
 include(GNUInstallDirs)
@@ -53,13 +54,18 @@ foreach(program imucal imucald imucalctl)
 endforeach()
 
 configure_file(${IMUCAL_PACKAGING_DIR}/changelog.in ${PROJECT_BINARY_DIR}/packaging/changelog @ONLY)
-install(CODE "
-  execute_process(COMMAND gzip -9nc \"${PROJECT_BINARY_DIR}/packaging/changelog\"
-                  OUTPUT_FILE \"${PROJECT_BINARY_DIR}/packaging/changelog.gz\" COMMAND_ERROR_IS_FATAL ANY)" COMPONENT doc)
+# Compressed when configuring: the main package and each backend's install it on their own.
+execute_process(COMMAND gzip -9nc ${PROJECT_BINARY_DIR}/packaging/changelog
+                OUTPUT_FILE ${PROJECT_BINARY_DIR}/packaging/changelog.gz COMMAND_ERROR_IS_FATAL ANY)
 install(FILES ${PROJECT_BINARY_DIR}/packaging/changelog.gz ${IMUCAL_PACKAGING_DIR}/copyright
         DESTINATION ${CMAKE_INSTALL_DOCDIR} COMPONENT doc)
 install(FILES ${IMUCAL_PACKAGING_DIR}/60-imucal-devices.rules
         DESTINATION ${CMAKE_INSTALL_DOCDIR}/examples COMPONENT doc)
+# Each camera backend's package has the copyright and changelog in its own documentation folder.
+foreach(backend aravis libcamera)
+  install(FILES ${PROJECT_BINARY_DIR}/packaging/changelog.gz ${IMUCAL_PACKAGING_DIR}/copyright
+          DESTINATION ${CMAKE_INSTALL_DATADIR}/doc/imucal-${backend} COMPONENT ${backend})
+endforeach()
 
 # CPack, DEB generator.
 set(CPACK_GENERATOR DEB)
@@ -87,16 +93,41 @@ set(CPACK_PACKAGING_INSTALL_PREFIX /usr)
 set(CPACK_SET_DESTDIR ON)
 set(CPACK_INSTALL_PREFIX /usr)
 set(CPACK_STRIP_FILES ON)
-# Depends: the libraries' packages (dpkg-shlibdeps, from dpkg-dev) and systemd for the unit,
-# sysusers.d and tmpfiles.d.
+# Three packages: imucal (the programs, the solver, camera, renderer and virtual-rig modules, the
+# unit, docs) and one per camera backend, imucal-aravis and imucal-libcamera, whose libraries a
+# rig without such a camera does not need (Aravis and libcamera pull in GStreamer, udev and
+# more). The service names the package when a configured camera needs a module that is not
+# installed (app/module_loader.cpp).
+set(CPACK_DEB_COMPONENT_INSTALL ON)
+set(CPACK_COMPONENTS_GROUPING ONE_PER_GROUP)
+set(CPACK_COMPONENTS_ALL service doc aravis libcamera)
+# Depends: the libraries' packages (dpkg-shlibdeps, from dpkg-dev), per package; systemd for the
+# unit, sysusers.d and tmpfiles.d.
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
-set(CPACK_DEBIAN_PACKAGE_DEPENDS "systemd")
+set(CPACK_DEBIAN_MAIN_PACKAGE_NAME imucal)
+set(CPACK_DEBIAN_MAIN_PACKAGE_DEPENDS "systemd")
 # gnuplot draws the figures of the reports (imucal report, and the report of every service
 # session); i2c-tools brings the udev rule that gives /dev/i2c-N to group i2c.
-set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "gnuplot-nox")
-set(CPACK_DEBIAN_PACKAGE_SUGGESTS "i2c-tools")
-set(CPACK_DEBIAN_PACKAGE_CONTROL_EXTRA
+set(CPACK_DEBIAN_MAIN_PACKAGE_RECOMMENDS "gnuplot-nox")
+set(CPACK_DEBIAN_MAIN_PACKAGE_SUGGESTS "i2c-tools, imucal-aravis, imucal-libcamera")
+set(CPACK_DEBIAN_MAIN_PACKAGE_CONTROL_EXTRA
     ${IMUCAL_PACKAGING_DIR}/debian/conffiles ${IMUCAL_PACKAGING_DIR}/debian/postinst
     ${IMUCAL_PACKAGING_DIR}/debian/prerm ${IMUCAL_PACKAGING_DIR}/debian/postrm)
+# CPack puts CPACK_PACKAGE_DESCRIPTION_SUMMARY before every package's description (its synopsis).
+set(CPACK_DEBIAN_MAIN_DESCRIPTION "${CPACK_PACKAGE_DESCRIPTION}")
+foreach(backend aravis libcamera)
+  string(TOUPPER ${backend} upper)
+  set(CPACK_DEBIAN_${upper}_PACKAGE_NAME imucal-${backend})
+  set(CPACK_DEBIAN_${upper}_PACKAGE_DEPENDS "imucal (= ${PROJECT_VERSION})")
+endforeach()
+set(CPACK_DEBIAN_ARAVIS_DESCRIPTION
+    "The GenICam camera backend of imucal: the module through which imucal's service\nand tools read GigE Vision and USB3 Vision cameras with Aravis. Install it on a\nrig whose configuration names an aravis camera.")
+set(CPACK_DEBIAN_LIBCAMERA_DESCRIPTION
+    "The libcamera backend of imucal: the module through which imucal's service and\ntools read cameras with libcamera (Raspberry Pi cameras and other CSI-2\nsensors). Install it on a rig whose configuration names a libcamera camera.")
 set(CPACK_DEBIAN_PACKAGE_CONTROL_STRICT_PERMISSION ON)
 include(CPack)
+cpack_add_component_group(main)
+cpack_add_component(service GROUP main)
+cpack_add_component(doc GROUP main)
+cpack_add_component(aravis)
+cpack_add_component(libcamera)

@@ -1,7 +1,10 @@
 #!/bin/sh
 # The Debian package of a built tree: cpack (DEB) packages BUILD_DIR into a scratch folder, the
 # package is installed into a fresh root and checked:
-#  - the file is imucal_VERSION_ARCH.deb, with the programs, the modules (the virtual rig's too),
+#  - the files are imucal_VERSION_ARCH.deb, with the programs, the modules (the virtual rig's too),
+#    and imucal-aravis_VERSION_ARCH.deb and imucal-libcamera_VERSION_ARCH.deb with the camera
+#    backends' modules (not the main package's dependencies; each depends on imucal of its version);
+#    all three are installed into the root;
 #    the unit, sysusers.d and tmpfiles.d entries, man pages and bash completion, the examples with
 #    the virtual rig's target file, and every doc the programs' messages cite (docs/NAME.md);
 #  - the unit's ExecStart names a program that is in the root; its --config is the package's
@@ -49,16 +52,33 @@ grep -i "warning" "$tmp/cpack.log" && echo "(cpack's warnings above)"
 version=$(sed -n 's/^set(CPACK_PACKAGE_VERSION "\(.*\)")/\1/p' "$build/CPackConfig.cmake")
 arch=$(dpkg --print-architecture)
 deb="$tmp/pkg/imucal_${version}_${arch}.deb"
-[ -f "$deb" ] || { echo "FAIL: no $(basename "$deb"):"; ls "$tmp/pkg"; exit 1; }
-echo "package: $(basename "$deb"), $(du -k "$deb" | cut -f1) KiB"
-dpkg-deb --field "$deb" Depends Recommends | sed 's/^/  /'
+backends=""
+for b in aravis libcamera; do
+  backends="$backends $tmp/pkg/imucal-${b}_${version}_${arch}.deb"
+done
+for d in "$deb" $backends; do
+  [ -f "$d" ] || { echo "FAIL: no $(basename "$d"):"; ls "$tmp/pkg"; exit 1; }
+  echo "package: $(basename "$d"), $(du -k "$d" | cut -f1) KiB"
+  dpkg-deb --field "$d" Depends Recommends Suggests | sed 's/^/  /'
+done
+# The camera backends' libraries are not the main package's dependencies, and each backend's
+# package depends on the main one of the same version.
+check "imucal does not depend on Aravis or libcamera" sh -c \
+  "! dpkg-deb --field '$deb' Depends | grep -Eq 'libaravis|libcamera'"
+check "imucal suggests its camera backends" sh -c \
+  "dpkg-deb --field '$deb' Suggests | grep -q imucal-aravis && dpkg-deb --field '$deb' Suggests | grep -q imucal-libcamera"
+for b in aravis libcamera; do
+  check "imucal-$b depends on imucal (= $version)" sh -c \
+    "dpkg-deb --field '$tmp/pkg/imucal-${b}_${version}_${arch}.deb' Depends | grep -qF 'imucal (= $version)'"
+done
 
 root="$tmp/root"
 mkdir -p "$root/var/lib/dpkg/info" "$root/var/lib/dpkg/updates"
 : >"$root/var/lib/dpkg/status"
 if [ "$(id -u)" = 0 ] && command -v dpkg >/dev/null 2>&1; then
   echo "install: dpkg --root (maintainer scripts with DPKG_ROOT)"
-  if ! dpkg --root="$root" --log=/dev/null --force-depends --force-script-chrootless -i "$deb" >"$tmp/dpkg.log" 2>&1; then
+  # shellcheck disable=SC2086 # the backends' paths hold no spaces (mktemp)
+  if ! dpkg --root="$root" --log=/dev/null --force-depends --force-script-chrootless -i "$deb" $backends >"$tmp/dpkg.log" 2>&1; then
     echo "FAIL: dpkg --root:"
     cat "$tmp/dpkg.log"
     exit 1
@@ -66,7 +86,7 @@ if [ "$(id -u)" = 0 ] && command -v dpkg >/dev/null 2>&1; then
   grep -q '^Status: install ok installed' "$root/var/lib/dpkg/status" || { echo "FAIL: dpkg does not list imucal as installed"; fail=1; }
 else
   echo "install: dpkg-deb -x, then the postinst with DPKG_ROOT (not root: dpkg --root cannot set owners)"
-  dpkg-deb -x "$deb" "$root"
+  for d in "$deb" $backends; do dpkg-deb -x "$d" "$root"; done
   dpkg-deb -e "$deb" "$tmp/control"
   DPKG_ROOT="$root" "$tmp/control/postinst" configure >"$tmp/postinst.log" 2>&1 || { echo "FAIL: postinst:"; cat "$tmp/postinst.log"; exit 1; }
 fi
@@ -151,7 +171,8 @@ if ! command -v lintian >/dev/null 2>&1; then
   exit 1
 fi
 # As root lintian says so on stderr; the tags go to stdout.
-lintian --no-tag-display-limit "$deb" >"$tmp/lintian.log" 2>"$tmp/lintian.err"
+# shellcheck disable=SC2086
+lintian --no-tag-display-limit "$deb" $backends >"$tmp/lintian.log" 2>"$tmp/lintian.err"
 errors=$(grep -c '^E:' "$tmp/lintian.log")
 warnings=$(grep -c '^W:' "$tmp/lintian.log")
 echo "lintian: $errors errors, $warnings warnings"

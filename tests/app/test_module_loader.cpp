@@ -49,6 +49,16 @@ TEST(ModuleLoader, MissingModuleNamesWhereItLookedAndWhatToDo) {
   EXPECT_NE(api.error().message.find("libimucal_nosuch.so"), std::string::npos) << api.error().message;
   EXPECT_NE(api.error().message.find(empty), std::string::npos) << api.error().message;
   EXPECT_NE(api.error().message.find("IMUCAL_MODULE_DIR"), std::string::npos) << api.error().message;
+  EXPECT_NE(api.error().message.find("reinstall imucal"), std::string::npos) << api.error().message;
+  // A camera backend comes in a package of its own: the message names it.
+  for (const char* backend : {"aravis", "libcamera"}) {
+    const std::string name = std::string("imucal_") + backend;
+    auto missing = app::load_module_api(name, (name + "_module").c_str());
+    ASSERT_FALSE(missing.ok());
+    EXPECT_NE(missing.error().message.find(std::string("apt-get install imucal-") + backend),
+              std::string::npos)
+        << missing.error().message;
+  }
 }
 
 TEST(ModuleLoader, ABrokenFileIsRefusedWithTheLoadersReason) {

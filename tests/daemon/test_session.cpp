@@ -781,6 +781,7 @@ TEST(Session, SixFaceHoldsArePromptedAndChecked) {
 }
 
 TEST(Session, AFailedSelfTestSaysToHoldTheRigStillAndRedoChecksAgain) {
+  ModuleDir modules;  // a session loads its solver modules when it starts
   SimSession s(session_config({"preflight", "still"}));
   s.failing_self_tests_ = 1;
   ASSERT_TRUE(s.runner_->start({}).ok());
@@ -800,6 +801,7 @@ TEST(Session, AFailedSelfTestSaysToHoldTheRigStillAndRedoChecksAgain) {
 // The motion step is planned but never reached: the replay needs no motion log (before, it
 // refused the folder for the motion log the session never wrote).
 TEST(Session, ASessionWaitingForAKeyStopsAfterTheOperatorWait) {
+  ModuleDir modules;  // a session loads its solver modules when it starts
   RigConfig config = session_config({"preflight", "still", "motion"});
   config.session.operator_wait_s = 60.0;
   SimSession s(config);
