@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: BSD-3-Clause
 # imucal: the two commands of the quick start are `make demo` and `make test`.
 # Build trees: build/release (demo, benchmarks), build/test (sanitizers, the test suite) and
 # build/package (the Debian package, make package).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "acquisition/asio_acquisition.hpp"
 
 #include <fcntl.h>

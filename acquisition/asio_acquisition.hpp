@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The acquisition loop on a Boost.Asio event loop: the form a rig runs (real time).
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // One camera in a recording: takes every frame the camera has ready into its CameraStream,
 // and turns what goes wrong with the camera into events in the log instead of ending the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The camera side of acquisition: the acquisition thread hands each dequeued frame to publish(),
 // which copies its pixels (converted to 8-bit grey) into a free slot of a fixed pool and gives the

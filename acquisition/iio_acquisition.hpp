@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The acquisition loop over the kernel's inv-mpu6050 driver (drivers/iio/iio_imu.hpp): the IIO
 // buffer's scans become samples in counts with the kernel's timestamps, checked the way the

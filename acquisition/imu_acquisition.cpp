@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "acquisition/imu_acquisition.hpp"
 
 #include <algorithm>

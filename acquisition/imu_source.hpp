@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // What the recorder, the event loop and the rig service need from an IMU acquisition, whatever
 // reads the chip: ImuAcquisition (imucal's own MPU-6000 driver over spidev or i2c-dev, times

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The producer side of IMU acquisition: the acquisition thread publishes timestamped samples;
 // the stream copies them into one SPSC ring per consumer (live displays, detectors) and into the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The IMU's mounting on the rig: R_rig_imu rotates IMU-frame vectors into the rig frame
 // (v_rig = R_rig_imu * v_imu), as given by the rig configuration (imu.R_rig_imu).

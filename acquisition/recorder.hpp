@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The recording session around the acquisition loop: record_imu_session() creates the session
 // log, writes the metadata (rig configuration, driver settings, mounting, timing), records for a

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A bounded lock-free single-producer single-consumer ring buffer.
 //

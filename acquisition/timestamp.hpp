@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Per-sample time reconstruction for a FIFO-buffered IMU woken by a data-ready interrupt, in the
 // manner of the Linux inv_mpu6050 IIO driver: the kernel timestamps each data-ready edge (with

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Checking given IMU calibrations on a recording of static poses, with two figures that need no
 // ground truth (docs/static-calibration.md, "Checking a calibration"):

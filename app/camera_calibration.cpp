@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Camera calibration of a log's camera stream (app/camera_calibration.hpp): detection over the
 // frames on worker threads, stored detections, the intrinsics solve. Compiled into the camera
 // module libimucal_camera.so.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Camera intrinsic calibration of a camera stream in a session log: the target is searched in
 // every frame on all cores (or the detections stored in the log by an earlier run are reused),

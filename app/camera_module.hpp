@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The camera module, libimucal_camera.so: target detection over a log's frames (OpenCV,
 // libapriltag), the camera intrinsics solve and the camera-IMU calibration (Ceres), loaded by the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera calibration's self-check (app/camera_self_check.hpp).
 
 #include "app/camera_self_check.hpp"

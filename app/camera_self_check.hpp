@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The camera calibration's self-check (core/split_check.hpp), as the camera-IMU one
 // (app/camimu_self_check.hpp): the views cut by time into consecutive parts, each part solved

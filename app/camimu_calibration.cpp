@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Camera-IMU calibration of a log (app/camimu_calibration.hpp): the streams, the detections
 // through detect_target_in_stream (shared with the camera calibration), the estimator. Compiled
 // into the camera module libimucal_camera.so.

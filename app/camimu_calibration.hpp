@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Camera-IMU calibration of a session log: the IMU stream converted to nominal SI, the cameras of
 // camchain YAMLs matched to the log's camera streams, the target found in their frames (or the

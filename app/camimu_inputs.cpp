@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/camimu_inputs.hpp"
 
 #include <yaml-cpp/yaml.h>

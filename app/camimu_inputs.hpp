@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The inputs of the camera-IMU calibration that need no solver, so the program can read and check
 // them before it loads the camera module: the cameras of a camchain YAML and the log streams

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera-IMU self-check (app/camimu_self_check.hpp).
 
 #include "app/camimu_self_check.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The camera-IMU self-check (core/split_check.hpp): the recording's frames cut into consecutive
 // parts of equal duration, each part calibrated apart with the full solve's choices (IMU model,

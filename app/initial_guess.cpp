@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/initial_guess.hpp"
 
 #include "calib/gravity.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // What the static calibration assumes before it estimates: the local gravity magnitude and
 // the nominal initial guesses, from the stream's description (its nominal conversion, or the

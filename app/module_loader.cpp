@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/module_loader.hpp"
 
 #include <dlfcn.h>

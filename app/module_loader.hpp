@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Loading the program's own shared modules at the point of use. The heavy dependencies live in
 // modules so that a program pays for them only in the commands that need them: the static solver

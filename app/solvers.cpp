@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/solvers.hpp"
 
 #include "app/camera_module.hpp"

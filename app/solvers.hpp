@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The estimators that need Ceres, called through the solver module libimucal_solve.so
 // (app/module_loader.hpp), so that programs load Ceres and its BLAS/LAPACK/SuiteSparse chain only

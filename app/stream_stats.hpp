@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Timing statistics of the streams of a session log (rates, gaps, durations, flagged samples)
 // and the longest clean run of an IMU stream, for `imucal info`, `imucal allan` and the rig

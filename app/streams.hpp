@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Loading one IMU stream from a session log under a damage policy: what every command that
 // works on a recorded stream (calibrate, allan, the rig service) does before its method.

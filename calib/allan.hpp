@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Overlapping Allan deviation (IEEE Std 952-1997, annex C; Tedaldi 2013 eq. 3.17) and the
 // noise figures read from it.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A camera's parameter blocks in a Ceres problem, shared by the single-camera and the chain
 // solves: intrinsics fu fv pu pv (4), the projection's parameters (2: omni xi; eucm alpha beta;

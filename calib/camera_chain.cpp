@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera chain solve (calib/camera_chain.hpp); method in docs/camera-calibration.md,
 // "Several cameras".
 //

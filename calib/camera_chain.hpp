@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Several cameras calibrated together (a camera chain, as Kalibr's kalibr_calibrate_cameras):
 // every camera's intrinsics, each camera's pose relative to cam0 and its time offset against

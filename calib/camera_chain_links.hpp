@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // How the cameras of a chain sit against each other before the joint solve
 // (calib/camera_chain.cpp, step 2): each camera's track of target poses, and the link of one

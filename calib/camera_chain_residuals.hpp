@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The residual of the camera chain solve (calib/camera_chain.cpp): one view of one camera
 // against the continuous-time trajectory of the reference camera (cam0) relative to the target,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Camera intrinsic calibration (calib/camera_intrinsics.hpp); method in docs/camera-calibration.md.
 //
 // 1. Start: the focal length from each view's homography (Zhang's two constraints with the

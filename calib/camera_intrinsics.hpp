@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Camera intrinsic calibration from target observations: a camera of one of Kalibr's models
 // (core/camera_model.hpp) and one target pose per view, by

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The options of the camera intrinsic calibration, checked without the solver (so that a
 // program can refuse bad options before it loads the camera module).
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // What a camera solve's result says beside its camera (calib/camera_intrinsics.hpp): the sigmas
 // from its covariance, the image's coverage by the corners, and the warnings about its quality.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "calib/camera_model_choice.hpp"
 
 #include <algorithm>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The camera model chosen by the evidence (`--model auto`, docs/camera-calibration.md, "Choosing
 // the model"): every candidate model calibrated on the same views, the candidates that explain

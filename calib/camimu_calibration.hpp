@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Continuous-time camera-IMU calibration with the extended IMU model (Krebs 2012, chapters 3-5;
 // Furgale, Rehder and Siegwart's batch formulation). The body pose is a uniform cumulative

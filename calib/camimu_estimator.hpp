@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The camera-IMU estimator (calib/camimu_calibration.hpp runs it): its state, the solver's
 // callbacks and the Estimator class. Internal to calib: camimu_calibration.cpp holds the

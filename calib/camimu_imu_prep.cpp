@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "calib/camimu_imu_prep.hpp"
 
 #include <Eigen/SparseCholesky>

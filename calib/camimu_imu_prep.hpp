@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The IMU samples of the camera-IMU problem prepared before the solve (calib/camimu_calibration.cpp):
 // a fast IMU averaged down to the rate the pose spline can use, and the spline's knot spacing

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "calib/camimu_init.hpp"
 
 #include <Eigen/SVD>

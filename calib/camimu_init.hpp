@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Initialisation of the camera-IMU problem without a prior (Furgale et al. 2013; Kalibr does the
 // same steps): camera poses from the target by PnP, the camera's angular rate by differencing

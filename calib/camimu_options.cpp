@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // CamImuOptions::validate(): in the light calib library, so that a program checks the options
 // before it loads the camera module that solves (docs/architecture.md).
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The residuals of the camera-IMU problem (calib/camimu_calibration.cpp), with analytic
 // Jacobians built on the spline Jacobians of calib/spline.hpp. Internal to the estimator.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // What the camera-IMU estimator reports from a solution (calib/camimu_estimator.hpp): the
 // covariance and the directions the data leave undetermined, the result, the checks against the
 // prior, the measured and predicted signals, and the motion's excitation.

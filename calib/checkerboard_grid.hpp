@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The checkerboard's inner corners as a grid of X junctions: the first, cheap search of the
 // checkerboard detector (target_detection.cpp), which also tells it when the slower searches

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Closed-form ellipsoid fit of static accelerometer means, the initial guess of the Tedaldi
 // accelerometer model when no nominal conversion is known.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Local gravity magnitude, and the Earth rotation a still gyro sees along it.
 

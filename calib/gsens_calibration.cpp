@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The six-orientation g-sensitivity experiment (calib/gsens_calibration.hpp).
 
 #include "calib/gsens_calibration.hpp"

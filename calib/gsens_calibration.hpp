@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The static six-orientation g-sensitivity experiment (Krebs 2012, section 5.2.3): the rig is held
 // still with each of its six faces up in turn; in every still hold the gyro's mean is

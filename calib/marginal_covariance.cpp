@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "calib/marginal_covariance.hpp"
 
 #include <ceres/cost_function.h>

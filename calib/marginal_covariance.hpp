@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The covariance of a few parameter blocks of a large least-squares problem, marginalised over
 // all the others by a Schur complement: with H = J^T J split into the blocks of interest (g) and

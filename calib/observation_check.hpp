@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Target observations read back from a file (the detection cache, a log) are checked against the
 // target before any of their ids indexes its points.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Quality figures of a static multi-position calibration (Tedaldi 2013, sections 4.1.1 and
 // 4.2.1), computed over the static intervals only, so they need no ground truth.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "calib/ray_pnp.hpp"
 
 #include <opencv2/calib3d.hpp>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The pose of a planar target from the rays of its corners, for any camera model: the rays are
 // turned so that their mean is the optical axis, solved there as a pinhole view (IPPE, exact for

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The residual of the single-camera solve (calib/camera_intrinsics.cpp): one target point seen in
 // one view, in pixels, with the camera's parameters and the view's pose free. Internal to that

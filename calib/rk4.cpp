@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "calib/rk4.hpp"
 
 namespace imucal::calib {

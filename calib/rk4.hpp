@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Quaternion integration of body angular rates by the normalised fourth-order Runge-Kutta
 // method (RK4n), Tedaldi 2013 eqs. 3.10-3.16, with its exact reverse-mode derivative.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // How a solve treats the cameras' shutters (core/camera_model.hpp Shutter): the camera-IMU solve
 // (calib/camimu_calibration.hpp) and the camera solve on a trajectory (calib/camera_chain.hpp)

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // SO(3) helpers for the splines and the camera-IMU problem: the exponential and logarithm maps
 // and the right Jacobian with its inverse (Sola, Deray, Atchuthan, "A micro Lie theory", 2018,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The solver module, libimucal_solve.so: the estimators that need Ceres, loaded by the programs
 // only in the commands that solve (app/module_loader.hpp). Tests and benchmarks link the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Uniform B-splines for continuous-time estimation: R^d splines (position, biases) and
 // cumulative SO(3) splines (orientation), of order N (degree N - 1), with analytic time

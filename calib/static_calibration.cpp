@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "calib/static_calibration.hpp"
 
 #include <ceres/ceres.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Static multi-position IMU calibration without equipment (Tedaldi, Pretto, Menegatti 2013/2014,
 // the method of imu_tk): the variance static detector (eq. 3.9) with the threshold multiplier

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The variance static detector of Tedaldi 2013, eq. 3.9, in O(n) with running sums.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The six faces of a rig held still with one axis up, as the static calibration sees them: which
 // face each static pose lies on, which faces a recording lacks (in the operator's words), and the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The gyroscope of the static calibration (eqs. 3.5-3.16): the motions between static poses, the
 // gravity direction carried through them by the corrected gyro, the solve, its covariance and the

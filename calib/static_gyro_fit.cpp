@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "calib/static_gyro_fit.hpp"
 
 #include <Eigen/Dense>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The gyroscope at rest in the static calibration: one linear fit of its bias, g-sensitivity and
 // bias drift over the still start and every pose's mean, with Newey-West covariances. Internal to

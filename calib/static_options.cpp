@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The options of the static calibration, checked without the solver (so that a program can
 // validate them before it loads libimucal_solve.so).
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The scan of a recording before a static method: time base, breaks and invalid samples, and the
 // variance static detector over it (calib/static_scan.hpp).
 

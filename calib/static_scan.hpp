@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The scan of a recording that the static methods share (the calibration, calib/static_steps.hpp,
 // the six-orientation g-sensitivity experiment, calib/gsens_calibration.hpp, and the check of a

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The steps of the static calibration that need no solver: the still start (given, or found and
 // its length chosen from the gyroscope Allan deviation) and the pseudo-inverse of the normal
 // matrix. Declared in calib/static_steps.hpp.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The steps of calibrate_static (calib/static_calibration.hpp) that stand on their own: the initial
 // still period and the covariance helper (the scan of the input and the static detector, which the

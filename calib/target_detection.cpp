@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "calib/target_detection.hpp"
 
 #include <apriltag/apriltag.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Calibration-target detection in 8-bit grey images: the checkerboard (OpenCV's detector with
 // subpixel refinement) and Kalibr's AprilGrid (tag36h11 through libapriltag). A detection is the

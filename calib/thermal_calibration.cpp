@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "calib/thermal_calibration.hpp"
 
 #include <Eigen/Cholesky>

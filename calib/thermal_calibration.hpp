@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Bias against die temperature from a still recording over a temperature range (a warm-up from
 // cold, a heat soak, holds at several temperatures), per gyro and accelerometer axis; the model,

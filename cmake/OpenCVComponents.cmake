@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: BSD-3-Clause
 # Debian splits OpenCV into per-module -dev packages; only the metapackage libopencv-dev ships
 # OpenCVConfig.cmake, and it pulls in ~45 packages (video I/O, GUI, contrib) that imucal never
 # uses. This finds the few modules we need directly and defines imported targets with the

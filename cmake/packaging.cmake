@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: BSD-3-Clause
 # The Debian package and what it adds to `cmake --install` (packaging/):
 #  - a man page per program, made at install time from its --help by help2man (imucal.1,
 #    imucald.8, imucalctl.1; skipped with a warning when help2man is missing);

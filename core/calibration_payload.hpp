@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The calibration record's payload as the storage holds it (CBOR of the record's JSON form,
 // core/calibration_record.hpp), decoded with bounds: nlohmann's CBOR parser recurses once per

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The calibration as the rig stores it (docs/storage.md): one typed record, and its JSON form in
 // one place (calibration_record.cpp). The storage holds that JSON encoded as CBOR; `store read`

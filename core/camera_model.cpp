@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "core/camera_model.hpp"
 
 #include <yaml-cpp/yaml.h>

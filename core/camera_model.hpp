@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Camera models as small value types templated on the scalar, so that Ceres autodiff can
 // evaluate them on Jets. Kalibr's models, a projection and a distortion:

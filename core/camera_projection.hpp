@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The projections and the FOV distortion of the camera models beyond the pinhole
 // (core/camera_model.hpp), as free functions templated on the scalar (Ceres Jets). Each maps a

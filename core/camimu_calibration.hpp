@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The record of a continuous-time camera-IMU calibration (Krebs 2012, the lineage of Furgale and
 // Rehder's Kalibr): every camera's extrinsics and time offset, the IMU's intrinsics in the Krebs

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The nearest of a few words to a mistyped one, for "did you mean ...?" hints (the programs'
 // subcommands), and the answer to a mistyped command in one wording. Header-only.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Camera frames and stream descriptions shared by drivers, acquisition and calib.
 

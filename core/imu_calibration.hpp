@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The record of a static multi-position IMU calibration (Tedaldi, Pretto, Menegatti 2013/2014):
 // the estimated model with its uncertainty, the static intervals it used, quality figures and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // What every imucal shared module (libimucal_solve.so, libimucal_render.so) and the programs that
 // load them (app/module_loader.hpp) agree on.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Text from outside the program (a socket client, a file) made safe to show on a terminal.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Progress of long work (recording, simulation, import, export, detection over frames, solves),
 // one shape everywhere: the fraction done, in [0, 1]. Programs show it their own way (the CLI's

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Value-or-error for everything that can fail on input or hardware. Exceptions are not used
 // across hardware or file boundaries; asserts are for bugs only.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "core/rig_config.hpp"
 
 #include <yaml-cpp/depthguard.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Rig configuration: which IMU bus and settings, which cameras, which calibration target, where
 // the calibration is stored. Read from YAML (docs/config.md lists every key and its default).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Internal to core/rig_config.cpp and core/rig_config_output.cpp: the table of the session's
 // numeric settings that the parser and both writers share.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The rig configuration written out (core/rig_config.hpp): the normalized YAML that reads back
 // to the same configuration, and the JSON a session log stores.
 

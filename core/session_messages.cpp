@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The session messages' name tables and their encoder (the decoder is in
 // session_messages_decode.cpp).
 #include "core/session_messages.hpp"

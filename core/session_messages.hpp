@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The guided session's messages (docs/service.md, "Messages"): what the session engine
 // (app/session/session_engine.hpp) emits and its hosts act on, as one variant of typed structs.

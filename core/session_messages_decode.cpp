@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The session messages' decoder: the one place their JSON is read back by field name.
 #include <cmath>
 #include <limits>

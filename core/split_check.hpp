@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The self-check of a calibration without ground truth: the recording is cut into consecutive
 // parts (halves by default), each part is calibrated apart, and the parts' estimates are

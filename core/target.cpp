@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "core/target.hpp"
 
 #include <yaml-cpp/depthguard.h>

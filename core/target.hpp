@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Calibration target descriptions. Kalibr target YAML is accepted as is:
 //   target_type: 'checkerboard'   targetCols: 6  targetRows: 7  rowSpacingMeters: 0.06  colSpacingMeters:

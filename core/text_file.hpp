@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Reading a whole text file that a user names (datasets, configurations, targets): one read of
 // the known size, refusing what is not a regular file (a FIFO would block, /dev/zero never ends)

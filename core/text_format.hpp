@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Small text helpers every layer uses for messages, reports and file stamps (one home each).
 

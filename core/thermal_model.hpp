@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The thermal model as it is applied and stored (docs/thermal.md): per gyro and accelerometer
 // axis, the change of the bias with die temperature about a reference temperature,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The worker-thread count of an option where 0 means "one per core", and independent jobs run
 // side by side on that many threads.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Time is int64 nanoseconds on CLOCK_MONOTONIC. Names carry the unit (t_ns, period_ns).
 // Doubles in seconds appear only inside estimators, converted at the boundary with these.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A camera frame as the live view shows it (docs/service.md, "Live view"): shrunk, with the
 // target's corners found in it and the camera's coverage so far. The session runner

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // YAML files for the readers of result files: a file read and parsed with one error form, and a
 // YAML document as JSON for the readers that take either (a result YAML into the calibration

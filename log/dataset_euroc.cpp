@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // EuRoC/ASL dataset folders, both ways. Layout (per sensor folder under mav0/):
 //   imuN/data.csv    #timestamp [ns],w_RS_S_x [rad s^-1],...,a_RS_S_z [m s^-2]
 //   camN/data.csv    #timestamp [ns],filename       camN/data/<filename> (PNG)

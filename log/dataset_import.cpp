@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Imports of plain-text accelerometer/gyroscope files and generic CSV into session logs.
 
 #include <algorithm>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Import and export of dataset formats (docs/datasets.md):
 //   - EuRoC/ASL folders (mav0/imuN/data.csv, mav0/camN/data.csv + data/<t_ns>.png, sensor.yaml),

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Outputs that appear only when complete: write under a temporary name, rename on success.
 
 #include <fcntl.h>

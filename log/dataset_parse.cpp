@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Text parsing for dataset imports: exact decimal times, shortest round-trip doubles, "t x y z"
 // files, generic CSV, accelerometer/gyroscope pairing (the unit sanity check is in
 // dataset_units.cpp).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The unit sanity check of dataset imports (log/dataset_io.hpp, UnitCheck and check_units()):
 // whether an import's accelerometer values look like the units it was told, from the median
 // magnitude of an evenly spaced subset.

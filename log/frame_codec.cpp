@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "log/frame_codec.hpp"
 
 #include <png.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Camera-frame encoding and decoding for the session log, on libpng and libwebp directly.
 //

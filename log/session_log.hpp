@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The session log: one SQLite database (.imulog) per recording. See docs/session-log.md for
 // the schema. Writer: WAL mode, batched inserts, commits at a bounded interval, so a power

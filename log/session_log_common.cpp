@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Parts of the session log interface that do not depend on the storage engine.
 
 #include "log/session_log.hpp"

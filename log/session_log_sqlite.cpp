@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The session log on SQLite, its reader: SessionLogReader::open, the checks of a file before
 // and after SQLite opens it, and the salvage of a damaged one. The writer is in
 // session_log_sqlite_writer.cpp. Schema and guarantees: docs/session-log.md.

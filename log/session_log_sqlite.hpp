@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Internal to the session log implementation: small RAII wrappers around the SQLite C API and
 // the schema text and row helpers shared by the writer (session_log_sqlite_writer.cpp), the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The session log on SQLite: the checks of a log file made outside SQLite, before and while the
 // reader opens it (size and header, truncation, the write-ahead log, a live writer).
 // Schema and guarantees: docs/session-log.md.

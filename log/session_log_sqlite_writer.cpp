@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The session log on SQLite, its writer: SessionLogWriter::create, the writer's file lock.
 // Schema and guarantees: docs/session-log.md.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // A session-log writer shared by threads (log/session_log.hpp synchronized_writer()).
 
 #include <mutex>

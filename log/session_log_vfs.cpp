@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // CRC-32 for frame data, and a thin SQLite VFS over the default one, used by the session log reader. SQLite
 // fills a short read of a database page with zeros, so the partial last page of a truncated file would be
 // decoded as (made-up) rows. Through this VFS such a read of the main database file fails

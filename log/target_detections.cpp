@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Stored target detections in a session log (log/target_detections.hpp, docs/session-log.md).
 
 #include "log/target_detections.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Target detections stored in a session log, so that the frames of a camera stream are searched
 // for the calibration target once: `imucal calibrate camera` stores what it found and later runs

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # The hostile cases too slow for the test suite, with their figures (docs/hostile-inputs.md):
 #   1. a session nobody answers, at time-scale 0: how long it records and how large its log grows
 #      before session.operator_wait_s (default 30 min of rig time) ends it;

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Records the virtual rig in real time, IMU at 1 kHz and one 752x480 camera at 30 fps, and prints
 # the samples and frames lost and the peak RSS (docs/benchmarks.md, "Recording IMU and a camera").
 #   scripts/bench-record-camera.sh [IMUCAL] [SECONDS]

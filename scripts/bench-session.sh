@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Operator time of the guided session on the virtual rig (docs/benchmarks.md, "Guided session"):
 # imucald runs whole sessions with the scripted operator (0.8 s reaction, 1.5 s per pose change)
 # for several seeds, and `imucal replay` reads each log back: rig time per step, first prompt to

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Program start: wall time, peak resident memory and shared-library count of `imucal --version`
 # and of a whole static calibration of the committed fixture, as a user runs them.
 # Usage: scripts/bench-startup.sh [IMUCAL] [RUNS]    (default build/release/daemon/imucal, 20 runs)

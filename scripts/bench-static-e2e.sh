@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # End-to-end time of a static calibration from text files, as a user runs it: `imucal import
 # ascii` of the Xsens MTi example pair (512 s, 100 Hz, raw counts; ../shared/data/xsens_mti) plus
 # `imucal calibrate static` of the log, median wall time and peak RSS of RUNS runs of each.

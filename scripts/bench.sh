@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Runs every benchmark binary of a build tree (Google Benchmark or bench commands) and prints
 # their figures. Usage: scripts/bench.sh [BUILD_DIR]   (make bench does this)
 set -euo pipefail

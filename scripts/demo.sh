@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # The main job on the built-in simulated rig: the service imucald runs a whole guided session on
 # the virtual rig (the MPU-6000 emulator behind the real driver and acquisition), with a scripted
 # operator who turns the rig as the prompts ask (1.5 s per pose change), moves it in front of the

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Installs the Debian 12 packages imucal needs, only those missing; fast when all are present.
 #   scripts/install-deps.sh          build + run (make demo)
 #   scripts/install-deps.sh --test   also the test tools (GoogleTest, QEMU for device tests, ...)

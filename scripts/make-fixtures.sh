@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Regenerates the fixture logs in fixtures/ and their ground truth with the built imucal:
 #   scripts/make-fixtures.sh [IMUCAL]      (default build/release/daemon/imucal)
 #   SKIP_CAMIMU=1 scripts/make-fixtures.sh  leaves camimu.imulog alone (it takes longest)

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # The static calibration's sigmas against the spread of a real recording: the Xsens MTi example
 # pair (512 s, 100 Hz, raw counts, 38 static intervals; ../shared/data/xsens_mti) is calibrated
 # whole, then split by poses into two halves that share the still start (the first 18 poses after

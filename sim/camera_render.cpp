@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "sim/camera_render.hpp"
 
 #include <apriltag/apriltag.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The virtual rig's camera: renders a printed calibration target (core/target.hpp) as an 8-bit
 // grey image through a distorting camera model (core/camera_model.hpp). Two targets:

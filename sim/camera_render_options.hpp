@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The options of the virtual rig's camera renderer (sim/camera_render.hpp), apart from the
 // renderer so that a program can check them without loading OpenCV.

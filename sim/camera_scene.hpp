@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // What the virtual rig's camera sees: the target fixed in the world, the rig moving along a
 // checkerboard motion, the camera mounted at T_cam_imu, frames exposed around their stamps and

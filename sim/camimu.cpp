@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "sim/camimu.hpp"
 
 #include <yaml-cpp/yaml.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The simulated camera-IMU session: the virtual rig moved in front of a checkerboard, its IMU
 // recorded at imu_rate_hz and its camera rendered at camera_rate_hz into one session log, with

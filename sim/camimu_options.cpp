@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera-IMU session's options: defaults and checks, without the renderer (OpenCV) that
 // simulate_camimu_session (sim/camimu.cpp, in libimucal_render.so) needs.
 

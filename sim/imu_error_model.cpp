@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "sim/imu_error_model.hpp"
 
 #include <algorithm>

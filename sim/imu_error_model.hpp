@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The simulated MPU-6000: the extended IMU error model of Krebs (2012, ch. 3), with noise and
 // bias values after its appendix A and the MPU-6000 datasheet, quantised to the chip's int16

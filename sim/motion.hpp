@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Motion scripts of the virtual rig (sim::Trajectory implementations), deterministic under a
 // seed. All motions are analytic: attitudes follow minimum-jerk (quintic) profiles along

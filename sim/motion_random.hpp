@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Portable, seeded random numbers for the virtual rig. std::mt19937_64 is fully specified by
 // the standard, but the std:: distributions are not (their output differs between library

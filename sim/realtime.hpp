@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The virtual rig in real time, to run the event-loop acquisition (asio_acquisition.hpp) the
 // way a rig does: the MPU-6000 register emulator is advanced to CLOCK_MONOTONIC by a ticker

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The virtual rig of `imucal record --sim`: the MPU-6000 emulator behind the real driver and
 // acquisition loop, moved along a motion script, with the configuration's cameras as virtual

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The renderer module, libimucal_render.so: the simulated camera-IMU session, whose camera
 // renderer needs OpenCV, loaded by the CLI only for `sim camimu` (app/module_loader.hpp).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The virtual rig's IMU path, built the way a rig is: the MPU-6000 register emulator (its own
 // oscillator, FIFO, data-ready pin) on a simulated bus, the simulated data-ready line with

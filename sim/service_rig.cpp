@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The service's virtual rig (sim/service_rig.hpp), built into libimucal_virtual_rig.so.
 
 #include "sim/service_rig.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The virtual rig of the service (`imucald --sim`, `make demo`): the MPU-6000 register emulator
 // behind the real driver and acquisition loop (sim/session_rig.hpp), its cameras

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Writes a simulated IMU session into a session log: the virtual rig moves along a
 // sim::Trajectory, the MPU-6000 error model (sim/imu_error_model.hpp) turns the motion into

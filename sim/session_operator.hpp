@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The virtual rig's operator for guided sessions (imucald --sim, `make demo`, the service's
 // tests): a trajectory that is extended while it runs, and a scripted operator that reads the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The virtual rig for guided sessions: the MPU-6000 emulator, the real driver and acquisition
 // loop (sim/rig.hpp) on simulated time, moved along an OperatorTrajectory by a ScriptedOperator

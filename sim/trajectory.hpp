@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Rigid-body motion of the simulated rig. Frames: world W is z-up with gravity (0, 0, -g);
 // body B is the IMU's orthogonal accelerometer frame (the frame the calibration reports in).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Ground truth of a simulated recording: the IMU model parameters, the corrections a calibration
 // should find (in the canonical form of docs/conventions.md section 4 and in the Tedaldi form), and a

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The virtual rig's cameras, assembled in one place for `imucal record --sim` and the service's
 // virtual rig (sim/service_rig.hpp): each configured camera becomes a virtual camera

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The entry point of libimucal_virtual_rig.so (sim/service_rig.hpp). Everything else in the
 // module is hidden: it carries its own copies of the imucal libraries it needs.
 

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Every test named in tests/hostile-cases.txt is a test of this build tree, so that
 # `make hostile` runs what the list says. Usage: tests/check_hostile_cases.sh SOURCE_DIR BUILD_DIR
 set -euo pipefail

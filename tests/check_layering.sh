@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Fails when a module includes a header of a module it must not depend on. The rules are the
 # table in docs/architecture.md:
 #   core          nothing of ours

@@ -1,4 +1,5 @@
 #!/bin/sh
+# SPDX-License-Identifier: BSD-3-Clause
 # The Debian package of a built tree: cpack (DEB) packages BUILD_DIR into a scratch folder, the
 # package is installed into a fresh root and checked:
 #  - the files are imucal_VERSION_ARCH.deb, with the programs, the modules (the virtual rig's too),

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Checks what an installed program links.
 #  - No program depends on the solver, renderer or camera libraries: Ceres (static, but it brings
 #    glog, SuiteSparse, BLAS and LAPACK), OpenCV, libapriltag, Aravis (with glib and libusb),

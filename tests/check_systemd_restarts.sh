@@ -1,4 +1,5 @@
 #!/bin/sh
+# SPDX-License-Identifier: BSD-3-Clause
 # The restart policy of imucald.service under a real systemd: systemd (/lib/systemd/systemd) boots
 # as PID 1 of its own PID, mount, cgroup, network, UTS and IPC namespaces, on a throwaway root (an
 # overlay of / whose writes go to a tmpfs), with the unit, sysusers.d and tmpfiles.d entries and

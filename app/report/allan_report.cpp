@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The report of an Allan analysis (imucal allan --json): the noise figures per axis and the
 // Allan deviation curves with the fitted lines.
 

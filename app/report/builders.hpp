@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The documents of each kind of report (internal to app/report): what they show and the gnuplot
 // scripts of their figures. report.cpp reads the inputs, picks one, draws and writes.

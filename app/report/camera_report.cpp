@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The report of a camera intrinsics calibration (imucal calibrate camera --json): intrinsics and
 // distortion with their sigmas, the target's coverage of the image and the reprojection error of
 // each view. The JSON has the coverage grid and per-view RMS, not per-corner residuals, so there

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The report of a camera-IMU calibration (imucal calibrate camimu, OUT_DIR/result.json): the
 // cameras' extrinsics and time offsets, the IMU's Krebs model, all with sigmas; the IMU residuals
 // against the noise the solve assumed; the biases over time and the angular-speed

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Figures drawn by gnuplot (Debian package gnuplot-nox), run as a child process: a figure is a
 // gnuplot script with its data inline (datablocks), rendered to SVG for the HTML report or to

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The HTML side of a report: escaping, number formatting, tables, and the page that embeds the
 // figures as base64 data URIs (no network, no external file).

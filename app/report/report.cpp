@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/report/report.hpp"
 
 #include <unistd.h>

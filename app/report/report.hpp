@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // `imucal report`: one self-contained HTML page (figures embedded as SVG data URIs, no network)
 // of a calibration result (static, Allan, camera or camera chain, camera-IMU, thermal), with its figures

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The reprojection-error figure shared by the camera and the camera-IMU reports.
 #include <algorithm>
 #include <cmath>

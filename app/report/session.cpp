@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The session summary of a report (from the log, app/stream_stats.hpp) and the JSON readers the
 // document builders share.
 

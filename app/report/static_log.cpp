@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/report/static_log.hpp"
 
 #include <algorithm>

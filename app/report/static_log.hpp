@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // What a static report takes from the log beside the result (internal to app/report): the
 // samples of the calibrated stream, the result's static intervals located in them, and per-pose

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The report of a static calibration (imucal calibrate static --json): parameters with their
 // sigmas, quality before and after, the threshold search and, with the log, the signals, the
 // per-pose figures and the pose directions.

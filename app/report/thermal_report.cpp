@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The report of a thermal calibration (imucal calibrate thermal -o THERMAL.yaml): the model per
 // axis, and per sensor the bias against die temperature before compensation (the bin means
 // about their value at the reference temperature) with the fitted curve and its 2-sigma band,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The noise figures of the Allan deviation of a still recording: the analysis of the samples and
 // its result files (Kalibr imu.yaml, JSON with the curves; docs/static-calibration.md, "Allan deviation").

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The camera calibration's pieces that need no solver, no OpenCV and no detector, so the
 // program can use them before (or without) loading the camera module: where the target comes

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The outputs of the camera-IMU calibration, with no solver dependency, for the CLI, the service
 // and reports: Kalibr's camchain-imucam.yaml and imu.yaml, the canonical record

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/results/gsens_results.hpp"
 
 #include <yaml-cpp/yaml.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The six-orientation g-sensitivity experiment's result files (YAML and JSON, docs/gsens.md).
 

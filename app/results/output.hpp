@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Writing a result file: the output checks every command makes before its work (an input is never
 // written over, an existing file only when asked) and the atomic write (a temporary file beside

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The checks that keep a command's outputs off its inputs and off each other (app/results/output.hpp
 // applies them to every result file; commands that write other kinds of output call them too).

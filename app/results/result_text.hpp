@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Pieces the result writers of app/results share (internal to them): matrices, vectors, triads,
 // error figures and static intervals as JSON and as YAML.

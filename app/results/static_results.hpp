@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The static calibration's result files (docs/static-calibration.md): YAML and JSON, for the CLI
 // and the rig service, and the g-sensitivity matrix read back from one.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/results/thermal_results.hpp"
 
 #include <yaml-cpp/yaml.h>

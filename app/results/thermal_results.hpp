@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The thermal calibration's result file (`calibrate thermal -o THERMAL.yaml`, docs/thermal.md):
 // written here, read back by `calibrate static --thermal`, `calibrate camimu --thermal` and the

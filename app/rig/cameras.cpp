@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/rig/cameras.hpp"
 
 #include "app/module_loader.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The rig's cameras assembled from their configuration (cameras[] in docs/config.md): each is
 // opened through the backend it names (V4L2 in the program; Aravis and libcamera through their

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/rig/rig.hpp"
 
 #include "drivers/bus/i2cdev_bus.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The hardware IMU rig assembled from its configuration: either imucal's own driver (the bus,
 // spidev or i2c-dev, the data-ready line through libgpiod when configured, the MPU-6000 driver

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/rig/stored_calibration.hpp"
 
 #include <yaml-cpp/yaml.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The calibration as it is stored on the rig (docs/storage.md): the typed record of
 // core/calibration_record.hpp, encoded as CBOR of its JSON form into the A/B record store of

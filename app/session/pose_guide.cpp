@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/session/pose_guide.hpp"
 
 #include <Eigen/Geometry>

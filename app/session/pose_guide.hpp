@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // What the operator is asked to do with the rig, in words and as a small drawing: which side goes
 // up, named by the rig's own sides when the configuration names them (`sides`: front, left, top)

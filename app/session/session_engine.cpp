@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The session's flow: steps, keys, faults, solves, review and write. The per-sample work of the
 // recording steps is in session_steps.cpp.
 #include "app/session/session_engine.hpp"

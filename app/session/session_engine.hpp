@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The guided calibration session (docs/service-session.md): a state machine over the protocol's
 // steps (preflight, warm-up, thermal recording, still start, static poses, six-face holds, checkerboard

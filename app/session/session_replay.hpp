@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // `imucal replay LOG`: runs a recorded session's logic again from its session log, with no
 // devices. The samples are fed to a new engine (session_engine.hpp) and the operator's keys,

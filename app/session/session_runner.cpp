@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "app/session/session_runner.hpp"
 
 #include <algorithm>

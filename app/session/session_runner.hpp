@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The host of a session engine for the service and for replay: it records the session into its
 // own folder (<state_dir>/sessions/<rig>-<UTC time>/: session.imulog with every sample, frame and

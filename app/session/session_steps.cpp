@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The session's recording steps, sample by sample: warm-up, thermal recording, still start,
 // static poses, six-face holds, checkerboard motion; and the review's gates.
 #include <Eigen/Geometry>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Stillness over the last half second of samples (SI units): the accelerometer's largest axis
 // standard deviation and the gyro's mean and largest axis standard deviation, kept as running

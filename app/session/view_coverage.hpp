@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // What the live view and the console show of a camera during the motion step (docs/service.md,
 // "Live view"): where in its image the target has been seen so far, and the frame itself, shrunk.

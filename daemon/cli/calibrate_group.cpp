@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "daemon/cli/calibrate_group.hpp"
 
 #include <spdlog/spdlog.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The `calibrate` parent subcommand. Each method (static, camera, camimu, gsens) adds its own
 // subcommand to it from its cmd_*.cpp:

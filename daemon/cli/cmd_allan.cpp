@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal allan LOG: noise figures of a still recording from the overlapping Allan deviation,
 // written as a Kalibr imu.yaml and as JSON with the curves (docs/static-calibration.md).
 

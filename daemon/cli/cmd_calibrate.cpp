@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal calibrate static LOG: static multi-position IMU calibration (Tedaldi et al.), see
 // docs/static-calibration.md.
 

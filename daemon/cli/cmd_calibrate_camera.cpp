@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal calibrate camera LOG: camera intrinsics from the calibration target in a log's frames,
 // see docs/camera-calibration.md.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal calibrate camimu LOG: camera-IMU extrinsics, time offsets and the IMU's intrinsics from
 // the target seen by the cameras while the rig moves, see docs/camimu-calibration.md.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal calibrate check LOG: evaluates given IMU calibrations (imucal's result YAML, imu_tk's
 // calib files) on one fixed set of static intervals and motions of a recording, with two figures
 // that need no ground truth; see docs/static-calibration.md, "Checking a calibration".

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal calibrate gsens LOG: the static six-orientation g-sensitivity experiment (Krebs 2012,
 // section 5.2.3), see docs/gsens.md.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal calibrate thermal LOG: bias against die temperature from a still recording over a
 // temperature range (docs/thermal.md).
 

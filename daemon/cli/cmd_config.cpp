@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal config check FILE [--json]: validate a rig configuration and print it normalized.
 
 #include <iostream>

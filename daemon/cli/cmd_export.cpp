@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal export euroc LOG DIR: a session log as an EuRoC/ASL folder (docs/datasets.md).
 
 #include <iostream>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal import euroc|ascii|csv: dataset formats into a session log (docs/datasets.md).
 
 #include <iostream>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal info [--json] LOG: what a session log holds and whether it is healthy.
 // The output fields are documented in docs/session-log.md.
 

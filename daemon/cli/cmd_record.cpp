@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal record: acquire the rig's MPU-6000 into a session log, on hardware (spidev / i2c-dev,
 // data-ready through libgpiod, on the Boost.Asio event loop) or, with --sim, through the same
 // driver and acquisition code against the register-level emulator: on simulated time (as fast

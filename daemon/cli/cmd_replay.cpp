@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal replay LOG: runs a whole service session's logic again from its session log, with no
 // devices, and compares the result with the one the live session reached (docs/service-session.md).
 

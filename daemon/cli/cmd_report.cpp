@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal report RESULT: one self-contained HTML page of a calibration result with its figures
 // drawn by gnuplot, optionally the figures as PNG files (docs/report.md).
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal sim static|gsens|still|camimu: simulated MPU-6000 recordings with their ground truth
 // (docs/simulator.md, docs/simulator-camera.md).
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal store read|write|verify --config RIG.yaml [RESULT...]: the calibration record on the
 // rig's storage (A/B slots, docs/storage.md): print it, write results into it, check it.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Subcommands of the offline CLI register themselves: each cmd_*.cpp defines one static
 // CommandRegistrar whose setup function adds a CLI11 subcommand to the root app. The

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Examples at the end of every command's --help (the root's own are in main.cpp). One table,
 // so that no command is left with the root's examples only; tests/daemon/test_cli_exit_codes.cpp
 // runs every line's command with --help and finds each option it uses.

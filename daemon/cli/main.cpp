@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal: the offline command-line tool. Subcommands live in cmd_*.cpp.
 
 #include <malloc.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // CLI11 checks for option values that say what is wanted in a short message, unlike CLI11's
 // PositiveNumber, whose range names the largest double in 310 digits. Used by imucal and imucald

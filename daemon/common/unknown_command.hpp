@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // "unknown command 'calibrat'; did you mean 'calibrate'?" for a program with CLI11 subcommands,
 // nested ones too (imucal calibrate static): CLI11 itself only says "A subcommand is required".

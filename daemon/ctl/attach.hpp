@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // imucalctl attach: the operator console on a terminal, or one line per message when stdout is
 // not one. Keys are read raw from the terminal (no echo, no line buffering); the terminal is

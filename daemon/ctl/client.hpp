@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // imucalctl's side of the control socket: a blocking connection that writes request lines and
 // reads message lines (docs/service.md).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The operator console's model and renderer, free of terminals and sockets so tests check them
 // as text: update() folds a service message into the state, render() draws the screen,

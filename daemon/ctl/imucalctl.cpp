@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucalctl: talks to the imucald service over its control socket (docs/service.md).
 //
 //   imucalctl [--socket PATH] status [--json] | start [--steps a,b,c] | abort | accept |

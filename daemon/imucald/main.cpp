@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucald: the on-rig calibration service (docs/service.md). Idle until a session is started
 // (imucalctl start, or --start); a session runs the guided protocol of app/session.
 
@@ -123,6 +124,12 @@ int main(int argc, char** argv) {
                  "target found in them and the session's prompts (docs/service.md, \"Live view\")");
   bool quiet = false;
   app.add_flag("-q,--quiet", quiet, "Log warnings and errors only");
+  app.footer(
+      "Examples:\n"
+      "  imucald --check                              # validate /etc/imucal/rig.yaml, exit 0/78/69\n"
+      "  sudo systemctl enable --now imucald          # as the packaged service\n"
+      "  imucald --sim --config /usr/share/imucal/examples/rig.yaml --socket /tmp/imucal-try/s.sock \\\n"
+      "          --state-dir /tmp/imucal-try/state    # the virtual rig, for trying imucalctl attach");
   CLI11_PARSE(app, argc, argv);
   if (quiet) spdlog::set_level(spdlog::level::warn);
   if (!parse_socket_mode(mode, o)) return 2;

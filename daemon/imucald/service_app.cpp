@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "daemon/imucald/service_app.hpp"
 
 #include <spdlog/spdlog.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // imucald's parts: the IMU source (the rig's hardware on the Boost.Asio event loop, or the
 // virtual rig on accelerated time), the session runner (app/session), the control socket

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The service's control socket: JSON lines over a Unix stream socket, on the service's one
 // Boost.Asio event loop (docs/service.md). Any number of observers; at most one controller.

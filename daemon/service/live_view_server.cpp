@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "daemon/service/live_view_server.hpp"
 
 #include <sys/socket.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The live view: the guided session served to a web browser over HTTP (Boost.Beast) on the
 // service's one event loop (docs/service.md, "Live view"). One self-contained page; the session's

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "daemon/service/notify.hpp"
 
 #include <systemd/sd-daemon.h>

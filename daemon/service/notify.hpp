@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Readiness, status and watchdog messages to systemd (sd_notify), for a Type=notify unit with
 // WatchdogSec=. Every call is a no-op when the service was not started by systemd

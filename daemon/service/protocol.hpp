@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The control protocol's requests: one JSON object per line from a client (docs/service.md).
 // parse_request is a pure function over untrusted bytes (fuzzed by fuzz_control_request).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // What the control socket needs from the service: the guided session as seen from outside.
 // imucald implements it around its session; tests implement it with a scripted host. Every

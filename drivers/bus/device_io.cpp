@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/bus/device_io.hpp"
 
 #include <fcntl.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // What the Linux bus drivers (SpidevBus, I2cDevBus) share: the system calls they make on their
 // device node, behind an interface so that tests can substitute a fake kernel, and the hex

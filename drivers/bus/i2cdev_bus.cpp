@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/bus/i2cdev_bus.hpp"
 
 #include <linux/i2c-dev.h>

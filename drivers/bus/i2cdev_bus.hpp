@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The MPU-6000 on a Linux i2c-dev node (/dev/i2c-N) at address 0x68 (AD0 low) or 0x69 (AD0 high).
 //

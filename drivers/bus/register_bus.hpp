@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Register access to a sensor, independent of the bus. Implementations: SpidevBus, I2cDevBus
 // (real devices), and the MPU-6000 emulator in drivers/sim. Errors are values, never exceptions.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/bus/spidev_bus.hpp"
 
 #include <linux/spi/spidev.h>

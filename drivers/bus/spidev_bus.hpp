@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The MPU-6000 on a Linux spidev node (/dev/spidevB.C): SPI mode 3, 8-bit words, MSB first.
 // A read sends the register address with bit 7 set (reg | 0x80) and clocks out the data in the

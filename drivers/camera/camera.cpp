@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/camera/camera.hpp"
 
 namespace imucal::drivers::camera {

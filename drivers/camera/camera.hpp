@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // One interface for every camera backend: V4L2 (v4l2/), libcamera (libcamera/), Aravis/GenICam
 // (aravis/) and, as a peer, the virtual camera of the simulated rig (fake/). The rig assembly

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/camera/clock_sync.hpp"
 
 #include <algorithm>

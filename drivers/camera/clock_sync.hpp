@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Mapping a device's own clock onto the host's CLOCK_MONOTONIC.
 //

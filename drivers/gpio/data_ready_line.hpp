@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The MPU-6000's data-ready interrupt as seen by the host: rising edges with a kernel
 // timestamp on CLOCK_MONOTONIC. Implementations: the libgpiod 1.6 line (real GPIO chip) and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/gpio/gpiod_line.hpp"
 
 #include <gpiod.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // DataReadyLine on a real GPIO chip through the libgpiod 1.6 C API (GPIO character device,
 // uAPI v1): the MPU-6000 INT pin (active high, the chip's default) wired to a GPIO input,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/iio/iio_imu.hpp"
 
 #include <fcntl.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The MPU-6000 through the kernel's own driver (inv-mpu6050, Linux IIO): for a rig whose device
 // tree binds the chip to the kernel, so that neither spidev nor i2c-dev can reach it.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/mpu6000/mpu6000.hpp"
 
 #include <algorithm>

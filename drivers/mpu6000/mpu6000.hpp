@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // MPU-6000 driver: a clock-agnostic state machine over a RegisterBus.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Driver settings from what a rig configuration or a simulation asks for: an output rate, the
 // low-pass filter bandwidth and the full-scale ranges. The MPU-6000 produces only

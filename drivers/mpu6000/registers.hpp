@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // MPU-6000 register map, bit definitions and FIFO layout.
 //

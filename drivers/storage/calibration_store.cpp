@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/storage/calibration_store.hpp"
 
 #include <algorithm>

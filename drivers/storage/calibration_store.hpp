@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Two slots (A/B) for the calibration record inside a region of a StorageDevice, so that a
 // write cut at any byte (power loss, a pulled cable) leaves the previous calibration readable.

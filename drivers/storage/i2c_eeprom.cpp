@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The i2c-eeprom backend of storage_device.hpp: a 24Cxx EEPROM through i2c-dev.
 
 #include <linux/i2c-dev.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/storage/record.hpp"
 
 #include <zlib.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The calibration record as it lies in one storage slot: a fixed header followed by the payload
 // (imucal's calibration as CBOR, app/stored_calibration.hpp; opaque bytes here).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/storage/storage_device.hpp"
 
 #include <fcntl.h>

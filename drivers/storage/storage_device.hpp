@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Non-volatile storage for the calibration record, behind one interface, with three backends
 // chosen by the rig configuration's `storage:` section (docs/config.md, docs/storage.md):

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: BSD-3-Clause
 # bash completion for imucal, imucald and imucalctl (installed under each name). Subcommands,
 # options and the choices of an option are read from the program's own --help (CLI11's
 # "Subcommands:" section and option lines), so the completion follows the program; an option

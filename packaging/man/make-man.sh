@@ -1,4 +1,5 @@
 #!/bin/sh
+# SPDX-License-Identifier: BSD-3-Clause
 # A gzipped man page of one of imucal's programs, from its --help (help2man) with the sections
 # of an include file (FILES, EXIT STATUS, SEE ALSO) and, for a program with subcommands, the
 # --help of each subcommand and of theirs (imucal calibrate static). Run at install time.

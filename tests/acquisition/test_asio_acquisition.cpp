@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The event-loop acquisition (acquisition/asio_acquisition.hpp) for real: the real-time
 // simulated rig (sim/realtime.hpp) ticks the emulated chip along CLOCK_MONOTONIC
 // and signals data-ready edges on an eventfd, the Asio loop wakes on that descriptor and on its

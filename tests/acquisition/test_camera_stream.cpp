@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera path of acquisition: frames copied out of the device's buffers into a bounded pool,
 // encoded off the acquisition thread into the session log, drops counted; and whole recordings of
 // the simulated IMU with the virtual camera, including the camera failing or stalling while the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // `imucal record --sim`: the emulator, the MPU-6000 driver, the data-ready line, the
 // timestamper, the stream and the session-log writer, end to end through the CLI; and the
 // acquisition loop on the simulated rig, with every sample time compared to the emulator's truth.

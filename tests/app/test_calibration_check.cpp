@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Checking given calibrations on a fixed set of static intervals and motions: the rotation
 // convention on a known rotation, the figures of the true and of perturbed models on a synthetic
 // recording, the breaks the set never crosses, and the two calibration formats read.

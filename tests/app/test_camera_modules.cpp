@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera modules load through the program's module loader and work across the boundary:
 // libimucal_aravis.so streams Aravis's fake camera, libimucal_libcamera.so starts libcamera.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera calibration's solver-free pieces: the target a log names, stored detections' key
 // and text, the result YAML (read back as a Kalibr camera) and JSON.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera-IMU calibration's solver-free pieces, from a hand-built result: Kalibr's
 // camchain-imucam.yaml and imu.yaml (the scale-misalignment matrices give back the canonical
 // model), the canonical record read by the static result's readers, result.json read back, the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // nominal_guess: initial guesses from the stream description or given values.
 
 #include <gtest/gtest.h>

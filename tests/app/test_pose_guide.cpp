@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The operator's pose guidance: words and drawing by the rig's named sides or the IMU's axes.
 #include <gtest/gtest.h>
 

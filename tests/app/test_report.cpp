@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The report's pieces without the CLI: kind detection, number formatting, base64, and the
 // camera-IMU and camera reports of results written by their own writers (app/camimu_results,
 // app/camera_results), so that a change of those schemas shows here. Drawing needs gnuplot; those

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The result schemas: documented keys of the static calibration and Allan outputs, and the
 // whole-file writer.
 

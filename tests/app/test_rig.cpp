@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Hardware rig assembly from a configuration, without hardware: settings, mounting, metadata
 // and the errors of a rig whose devices are missing.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The MPU-6000 through the kernel's inv-mpu6050 IIO driver, without a kernel: a fake sysfs tree
 // laid out as Linux 6.1's driver makes it (attributes, scan_elements, buffer/) and a FIFO
 // standing for /dev/iio:deviceN, written with scans in the driver's layout (big-endian 16-bit

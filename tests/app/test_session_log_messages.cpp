@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The session log's messages against core/session_messages.hpp: every event of a log recorded by
 // an earlier build decodes, and encodes back to the bytes the log holds.
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The stored calibration (app/stored_calibration.hpp): records from the static and camimu results
 // (typed, and through their files) and their merge, the cameras an IMU-only session keeps, and the
 // round trip (write, read, export, rollback) through a file-backed storage region.

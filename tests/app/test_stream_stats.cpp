@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Stream statistics and the clean run of the Allan deviation, against the fixtures' known
 // figures (fixtures/README.md: 98.5 Hz measured at a nominal 100 Hz).
 

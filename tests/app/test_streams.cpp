@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // load_imu_stream: the damage policy, stream selection and the damage warning.
 
 #include <gtest/gtest.h>

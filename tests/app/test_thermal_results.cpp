@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The thermal result file (app/results/thermal_results.hpp): written and read back unchanged,
 // refused when it is something else; and the correction of samples to the reference temperature,
 // checked on a warm-up generated here (not by the simulator): after the correction a second fit

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // What the live view and the console show of a camera (app/session/view_coverage.hpp): the
 // coverage's grid and ROS camera_calibration's four measures, and the shrunk frame with its
 // corners moved into the shrunk image's pixels.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // bench_acquisition [SECONDS]: figures for docs/benchmarks.md.
 //  1. Timestamp accuracy on the synthetic line (acquisition/timestamp_synthetic.hpp): RMS error
 //     of the reconstructed sample times against the truth, 30 us RMS edge jitter.

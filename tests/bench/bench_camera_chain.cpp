@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera chain's joint solve against the single-camera solves it replaces, on synthetic
 // corners of a stereo pair (tests/support/chain_views.hpp): 2 x VIEWS views at 15 Hz, 48 corners
 // each, 0.15 px noise, the second camera 10 ms off. Prints the CPU and wall time of each, and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera-IMU calibration (calib/camimu_calibration.hpp) against the truth over many seeds:
 // the accuracy and speed study of docs/benchmarks.md ("Camera-IMU calibration"). Each seed makes a
 // synthetic recording (tests/calib/camimu_synth.hpp: the simulator's checkerboard motion and

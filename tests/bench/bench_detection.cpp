@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Speed of calibration-target detection on 752 x 480 frames: the checkerboard (rendered by the
 // virtual camera) with both OpenCV methods, a frame without a board, and Kalibr's AprilGrid
 // (tests/calib/aprilgrid_image.hpp) at two quad decimations; single thread, and a batch of

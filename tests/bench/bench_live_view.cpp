@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // What the live view costs the service's event loop (docs/benchmarks.md, "Live view"): a camera
 // frame made into the view's frame and PNG (done on the loop for each frame sent, at most
 // live_view.frame_rate_hz a camera, and only while somebody watches), and one frame event with a

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // FIFO budget of the MPU-6000 driver: runs the real driver against the register emulator with
 // its bus timing model and prints, per configuration, the bus time used, the samples produced,
 // delivered and lost, and the highest FIFO level. Simulated time, so the figures are

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Speed of the virtual camera: ray precomputation, frame rendering (per supersampling and with
 // motion blur), and lossless encoding of the frames. See docs/benchmarks.md.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Throughput of the SPSC ring buffer (items/s): single-thread push+pop, and producer/consumer
 // on two threads with single and bulk operations, for a small POD and for ImuSample.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Session log throughput: IMU sample inserts (raw and SI streams, as the writer is used while
 // recording: batches, commits every 500 ms) and reads (whole stream and a time window).
 // The log files go to $IMUCAL_BENCH_DIR, else the system temporary directory: point it at the

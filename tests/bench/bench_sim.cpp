@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Simulator speed: simulated seconds per wall-clock second, for the motion + IMU model alone and
 // for a whole session written to a session log. Prints the median of several runs.
 //   build/release/tests/bench_sim [SCRATCH_DIR]

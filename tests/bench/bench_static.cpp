@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Static multi-position calibration on the virtual rig: statistical validity over many seeds
 // (mean error vs spread, reported sigma vs observed spread, per parameter) and the speed of a
 // whole run (log import included) with its breakdown. Prints figures; asserts nothing.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // checkerboard_frames: synthetic checkerboard frames with exact corner truth, a second generator
 // written apart from the virtual camera (sim/camera_render.*) to measure the detector on frames
 // it was not made with (docs/benchmarks.md, "Target detection on frames from elsewhere").

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // detection_folder: the target detector on a folder of images that imucal did not make (public
 // calibration images, frames of tests/bench/checkerboard_frames.cpp), in file-name order as a
 // recording's frames: CPU time per frame (this thread's), frames/s per core, frames found, and,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // What ignoring a rolling shutter costs, and what modelling it gives back (docs/benchmarks.md,
 // "Rolling shutter"). For each line delay and motion scale, a recording of the analytic generator
 // (tests/support/rs_analytic_rig.hpp: it shares no code with the simulator; 752 x 480, 20 Hz,

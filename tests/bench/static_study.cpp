@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The static calibration against the virtual rig's truth over many seeds: for every parameter the
 // mean error, the spread of the errors and the RMS of the reported sigmas, so that bias (mean
 // error against spread) and honesty (reported sigma against spread) can be read off. Each seed

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The thermal calibration on a real recording given as CSV (t_s,gx,gy,gz,ax,ay,az,temp_c with a
 // header line; rad/s, m/s^2, deg C; "nan" for a sensor the device does not have), beside PX4's
 // thermal calibration as its Tools/process_sensor_caldata.py does it: a 31-sample median filter,

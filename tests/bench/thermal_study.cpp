@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The thermal calibration against the virtual MPU-6000's truth over many seeds: still warm-ups
 // from 20 towards 60 deg C with cubic bias-temperature truths (docs/benchmarks.md, "Thermal
 // calibration"). Prints the RMS of error/sigma of the fitted coefficients, the orders chosen, and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "tests/calib/aprilgrid_image.hpp"
 
 #include <apriltag/apriltag.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Test-only images of Kalibr's AprilGrid with known corner positions.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A synthetic camera-IMU recording for the estimator's tests and the accuracy study: the
 // simulator's checkerboard motion and IMU error model (MPU-6000 noise), and the target corners

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Helpers the target detection tests share (test_target_detection.cpp, checkerboards;
 // test_aprilgrid_detection.cpp, AprilGrids): in a named namespace, so that unity builds of the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // AprilGrid detection on images of Kalibr's targets drawn here (tests/calib/aprilgrid_image.hpp):
 // the tags, their ids and corners at any turn, half-resolution search, the region of the frame
 // before, partial views and tags off the grid.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera chain solve on synthetic views: a board moving smoothly in front of two or three
 // cameras with their own intrinsics, poses and time offsets, projected with pixel noise; the
 // estimate must hold the truth within its reported sigmas, find an offset between cameras that

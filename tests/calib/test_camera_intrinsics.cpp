@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Camera intrinsics on synthetic observations: target points projected through a known camera at
 // known poses, with pixel noise; the estimate must hold the truth within its reported sigmas.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera models beyond pinhole-radtan and pinhole-equi in the intrinsic calibration:
 // observations projected through a known camera at known poses with pixel noise, the estimate
 // within 3 of its own sigmas; a lens of 200 degrees, on which the evidence (--model auto)

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The continuous-time camera-IMU estimator (calib/camimu_calibration.hpp) on synthetic
 // recordings from the simulator's motion and IMU model: convergence without a prior, accuracy
 // against the truth in units of the reported sigma, the basic model's bias, and refusals.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera-IMU residuals' analytic Jacobians (calib/camimu_residuals.hpp) against central
 // differences: quaternion blocks through the manifold's right perturbation (tangent columns in
 // the first three ambient ones), every other block in its ambient coordinates.

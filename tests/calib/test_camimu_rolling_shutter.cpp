@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera-IMU solve with a rolling shutter (calib/camimu_calibration.hpp, CamImuShutterOptions)
 // on recordings of a generator that shares no code with the simulator
 // (tests/support/rs_analytic_rig.hpp: an analytic trajectory and IMU, each corner projected at the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera-IMU sigmas against errors the residual model leaves out: the cluster-robust
 // covariance over time blocks, and the self-check that calibrates the halves of a recording
 // apart (app/camimu_self_check.hpp, core/split_check.hpp).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The six-orientation g-sensitivity experiment on synthetic holds: known G, bias walk and noise.
 
 #include <gtest/gtest.h>

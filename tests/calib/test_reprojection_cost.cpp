@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The single-camera solve's residual with staged Jacobians (calib/reprojection_cost.hpp) against
 // automatic differentiation of the same residual over all 17 parameters, for every camera model
 // imucal calibrates.

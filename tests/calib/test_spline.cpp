@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Uniform B-splines (calib/spline.hpp): basis properties, time derivatives against finite
 // differences of the value, and every analytic Jacobian against a numeric one.
 

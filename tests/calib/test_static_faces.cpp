@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The six faces of calib/static_faces.hpp: face assignment, missing faces in the operator's
 // words, and the known-orientation fit against a model it must recover exactly (no noise), with
 // sigmas that follow the noise when there is some.

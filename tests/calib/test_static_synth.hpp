@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A small synthetic multi-position recording for the static calibration tests (Tedaldi 2013,
 // section 4.1 in spirit): a still start, then smooth rotations between random attitudes with

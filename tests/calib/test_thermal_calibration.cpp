@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The thermal calibration (calib/thermal_calibration.hpp) on simulated still warm-ups of the
 // virtual MPU-6000 with non-linear bias-temperature truths: coefficients within their sigmas, the
 // order the truth has chosen on most seeds, "not determined" for a flat temperature, refusals.

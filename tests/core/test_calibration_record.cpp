@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The calibration record (core/calibration_record.hpp): its JSON form in both directions, a record
 // as an earlier build stored it, undetermined figures, and the checks of a malformed record.
 

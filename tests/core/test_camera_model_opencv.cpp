@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera models against OpenCV's implementations of the same models, and their use with
 // Ceres Jets.
 

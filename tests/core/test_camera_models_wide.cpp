@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The camera models beyond pinhole-radtan and pinhole-equi (core/camera_projection.hpp):
 // projection and unprojection over the whole field of view, Jet derivatives against central
 // differences, and Kalibr camchain entries read and written back with the same numbers.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The session messages' encoder and decoder (core/session_messages.hpp): every kind decoded from
 // the JSON the engine writes and encoded back to the same bytes; messages from an older or newer
 // version, or damaged, give errors that name the problem.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The self-check's comparison of the parts of a recording (core/split_check.hpp).
 
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The text helpers every layer shares (core/text_format.hpp): the one number parser, and the
 // formatting of numbers, hex and UTC stamps.
 

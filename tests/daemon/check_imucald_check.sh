@@ -1,4 +1,5 @@
 #!/bin/sh
+# SPDX-License-Identifier: BSD-3-Clause
 # imucald --check, the dry run, and the exit status of a configuration that cannot be used:
 #  - the virtual rig's configuration passes with exit 0 and a summary, and so does the SPI
 #    example with --devices-may-appear-later (no device opened; its nodes, not on this machine,

@@ -1,4 +1,5 @@
 #!/bin/sh
+# SPDX-License-Identifier: BSD-3-Clause
 # The service's systemd files as installed by `cmake --install --component service`:
 #  - systemd-analyze verify passes on the unit (ExecStart pointed at a built binary, since the
 #    installed path does not exist here);

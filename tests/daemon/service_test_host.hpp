@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A SessionHost for tests and a ControlServer running on its own thread, so tests talk to it
 // through real sockets (the in-process client, imucalctl processes, a tmux pane).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // `imucal calibrate static` on the damaged fixture logs (fixtures/README.md). The gap and
 // saturation fixtures keep enough usable poses (40 recorded): the result must agree with the truth
 // within its reported sigma and say what was excluded. The truncated log is refused unless

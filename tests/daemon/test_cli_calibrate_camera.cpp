@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal calibrate camera on the committed camera-IMU fixture: the intrinsics against the
 // simulator's truth within the reported sigmas, stored detections reused, output-file rules, the
 // target's sources, and a log imported from a EuRoC folder (PNG frames).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal calibrate camimu: argument and output-file errors before any work, and the committed
 // camera-IMU fixture calibrated against the simulator's truth (extrinsics, time offset, IMU
 // intrinsics) within a few of the reported sigmas.

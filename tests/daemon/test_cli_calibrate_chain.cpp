@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal calibrate camera with several cameras: a stereo pair rendered by the virtual rig
 // (`imucal sim camimu --stereo`), its second camera stamping the same scene 10 ms later than the
 // first under the same stamps; the joint solve must hold the truth (intrinsics, T_cn_cnm1,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // `imucal calibrate check` on the committed static fixture: the truth's canonical model (with its
 // g-sensitivity) scores better than the same model with a gyro scale error, in both formats the
 // command reads, and bad calibration arguments end with the documented exit codes.

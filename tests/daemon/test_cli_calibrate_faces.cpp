@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // `imucal calibrate static` on six-face recordings of the virtual rig (`imucal sim gsens`): what
 // the holds determine is fitted within its sigmas of the truth, what they do not is named and has
 // no sigma, and a recording with too few faces is refused naming the faces it lacks.

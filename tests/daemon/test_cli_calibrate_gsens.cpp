@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // `imucal calibrate gsens` on the committed six-face fixture (fixtures/gsens.imulog, its truth in
 // fixtures/gsens.truth.yaml): G within the reported sigmas, the output accepted by
 // `calibrate static --gsens fix`, refusals.

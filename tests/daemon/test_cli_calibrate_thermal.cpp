@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // `imucal calibrate thermal` on a still warm-up recorded by `imucal sim still --temp-profile`:
 // the YAML's coefficients against the seed's truth within their sigmas, the reference and range,
 // and the refusal of a span too small. Then `calibrate static --thermal` on a static protocol

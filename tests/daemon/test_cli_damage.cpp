@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The damage matrix through the commands a user runs: variants of the static fixture log with a
 // page overwritten or a byte flipped, each through `imucal info`, `calibrate static` and
 // `export euroc`. A command may exit 0 only with every sample the log holds, or with the loss

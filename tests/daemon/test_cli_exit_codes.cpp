@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The exit codes of docs/cli.md, checked across commands for the same situation: an input that is
 // missing, a folder, a FIFO, not a session log or empty exits 3 in every command that reads it (and
 // never blocks); an output that exists is refused with exit 2 and left as it was; an output in a

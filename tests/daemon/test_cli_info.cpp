@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal info: text and JSON summaries of a real log, gaps, incomplete and damaged logs, and
 // files that are not logs.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // No output of a command may name any of its inputs, whatever --force says, nor another of its
 // outputs; and no command replaces a device, FIFO or socket. Each case is refused before any work,
 // with exit 2 and a message that says what to do, and the input is left byte for byte.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Real recordings from other people's IMUs (../shared/data, beside the repository; absent in a
 // user's clone, where these tests skip and say why). The static calibration is judged against
 // the peer it follows, imu_tk, by `calibrate check` on one fixed set of poses and motions.

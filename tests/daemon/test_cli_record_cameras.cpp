@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // `imucal record` with cameras: the IMU and the configured cameras into one log on one clock,
 // on the virtual rig (rendered target or test pattern, simulated or real time), and the errors
 // a camera configuration can give before anything is written.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal replay on altered copies of the service-session fixture: the comparison with the live
 // session's result covers every key of both, and what the log holds (its steps, its stamps) is
 // judged as the log's content (exit 3), not as the command line (exit 2) or as a match (exit 0).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal report: the HTML report of the static calibration of the committed fixture (with and
 // without its log), of an Allan analysis, the PNG figures, the errors, and the page in a
 // headless browser. Tests that need gnuplot or chromium skip, saying so, where they are missing.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // A rolling-shutter camera of the virtual rig (`imucal sim camimu --line-delay 30 --resolution
 // 752x480`: each of the 480 rows rendered at its own time, 14.4 ms of readout): `calibrate camera`
 // and `calibrate camimu` must choose the rolling shutter by the evidence and hold the truth (the

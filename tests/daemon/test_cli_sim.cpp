@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal sim: writes a log and its truth, refuses to overwrite, repeats a run from a truth
 // file, rejects bad options with usage errors.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucal store read|write|verify against a file-backed storage region in the test's scratch
 // folder, with a static result computed from the fixture log by the CLI itself.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Detections read back from a log or the detection cache are a file's content: a point id the
 // target does not have is never used to index its points. The set is not trusted, the frames are
 // searched again, and a warning says why.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // A wide lens through the commands: the virtual rig renders a double sphere (ds-none) camera
 // (`imucal sim camimu --camera-model ds-none`), `calibrate camera --model ds-none` writes its
 // parameters in Kalibr's order with their covariance and the profile check, and `calibrate

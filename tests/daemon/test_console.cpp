@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The operator console's model, renderer and keys, as text: no terminal needed.
 #include <gtest/gtest.h>
 

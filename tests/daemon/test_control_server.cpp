@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The control socket against a test host: roles, broadcasts, hostile input, slow peers, the
 // socket file's mode and life cycle; and the request parser.
 #include <grp.h>

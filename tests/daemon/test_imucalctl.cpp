@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucalctl as a process against a test server: the commands, their errors and exit codes, the
 // console on a pipe, and the console in a real terminal (a tmux pane) with keys pressed.
 #include <fcntl.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucald as a process on the virtual rig: an operator at imucalctl's console in a terminal (a
 // tmux pane) through a whole session, SIGTERM and SIGKILL in the middle of one, and replay of the
 // committed fixture session.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // imucald's live view during virtual-rig sessions: the page in headless Chromium at the poses
 // step and the motion step (the prompt is the session's, the image changes, the coverage grows,
 // the corners drawn are where the frame's detection put them and where the virtual camera's

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The live view's server (daemon/service/live_view_server.hpp) through real TCP connections: the
 // page, the event stream with the session's messages and the frames, the frames' PNG by
 // sequence, the keys behind the token, and hostile clients (malformed, oversized and slow

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The live view in a real browser: a frame of the virtual camera's renderer, searched by the
 // detector the session uses, shrunk and sent as the session's runner and imucald send it, is
 // drawn by the page in headless Chromium; the corners drawn in the screenshot are compared with

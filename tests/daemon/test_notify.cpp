@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Notifier against a real AF_UNIX datagram socket given as NOTIFY_SOCKET, as systemd does.
 #include <gtest/gtest.h>
 #include <sys/socket.h>

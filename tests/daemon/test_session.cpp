@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The guided session end to end on the virtual rig: the engine and its runner (app/session), the
 // emulated MPU-6000 behind the real driver and acquisition (sim/session_rig.hpp) moved by the
 // scripted operator, the static solve through the solver module, the session log, and replay.

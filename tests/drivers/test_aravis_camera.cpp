@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The Aravis backend against Aravis's own fakes: the in-process fake camera ("Fake_1") and a
 // GigE Vision fake camera served on the loopback interface in this process, reached through the
 // normal GigE Vision discovery, control and stream path.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // I2cDevBus: functionality check and mode choice at open, the I2C_RDWR and SMBus transactions
 // it builds, its errors and counters. A fake i2c-dev stands in for the kernel here; the real
 // kernel path (i2c-stub, SMBus mode) runs in tests/qemu.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // SpidevBus: the transfers it builds (read bit, per-transfer clock, mode 3, 8-bit words), its
 // errors and counters. A fake spidev stands in for the kernel (no SPI controller here); the
 // open/ioctl error paths also run against real device nodes.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The MPU-6000 register emulator on its own: reset values, rates, FIFO semantics, oscillator,
 // quantization, bus timing. These pin down the behaviour the driver tests rely on.
 

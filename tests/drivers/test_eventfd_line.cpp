@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The eventfd-backed simulated data-ready line (drivers/gpio/fake/eventfd_line.hpp): edges
 // are scheduled at their kernel-like timestamps, released by time, and read through a real
 // descriptor that is readable exactly while edges are.

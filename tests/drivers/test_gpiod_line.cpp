@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // GpiodDataReadyLine: what can be checked without a GPIO chip (the Debian kernel has neither
 // gpio-sim nor gpio-mockup): configuration and lookup errors, the event-clock rule and the
 // timestamp conversion; then edge numbering over a fake kernel event queue that drops edges as

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The libcamera backend without a camera (this machine has none): the camera manager starts,
 // the list is reported, an unknown id is refused clearly. Streaming needs a sensor or a UVC
 // camera and is not exercised here (docs/cameras.md).

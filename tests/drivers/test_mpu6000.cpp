@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The MPU-6000 driver against the register emulator, end to end: probe, configuration with
 // read-back, streaming with every sample checked against the emulator's truth, and recovery
 // from each injected fault without passing on a damaged sample.

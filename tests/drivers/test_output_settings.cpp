@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Driver settings from a requested rate, filter and ranges (drivers/mpu6000/output_settings.hpp).
 
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The storage backends (drivers/storage/storage_device.hpp): the file backend on real files, the
 // nvmem backend on a regular file standing in for the sysfs attribute, and the i2c-eeprom
 // backend against a fake kernel (DeviceIo) that behaves like a 24Cxx on an adapter: page

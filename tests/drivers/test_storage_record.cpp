@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The calibration record (drivers/storage/record.hpp): encode/decode round trip, and every
 // header field corrupted is refused with its own reason.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The A/B calibration store (drivers/storage/calibration_store.hpp) on the in-memory device with
 // fault injection: alternation, a power cut at every byte of a write (with and without torn
 // bytes after the cut), read-back mismatches, and payloads that do not fit.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The V4L2 camera backend: open errors on real nodes, then a fake kernel (formats that adjust
 // like a driver does, an mmap queue whose buffers the test completes with chosen sequence
 // numbers, flags and stamps) for format refusal, the timestamp-clock policy, sequence gaps,

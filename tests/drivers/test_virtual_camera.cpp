@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The virtual camera (drivers/camera/fake): frames at their times on the simulated clock and in
 // real time, buffer ownership, drops when the consumer holds every buffer, and the faults it can
 // play (a stall, an unplugged camera).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Fuzz target: the calibration record (drivers/storage/record.hpp) and the A/B store reading a
 // device image of arbitrary bytes (drivers/storage/calibration_store.hpp). Checks what they
 // promise: no crash or out-of-range read on any input, a record that decodes encodes back to

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Fuzz target: one line from a control socket client (daemon/service/protocol.hpp). Any bytes
 // must give a request or an error with a message, never a crash or an exception; a parsed
 // request must be well formed, and the reply to it must serialise.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Fuzz target: the text formats a user imports (log/dataset_io.hpp): whitespace "t x y z" files,
 // generic CSV with a column spec, EuRoC imu0 and cam0 CSVs, and time and number fields. The first
 // byte picks the parser, the rest is the file. Any bytes must give rows or an error with a

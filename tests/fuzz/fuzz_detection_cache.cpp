@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Fuzz target: stored target detections as `calibrate camera` and `calibrate camimu` read them
 // back (app/camera_calibration.cpp): a detection cache file (log/target_detections.hpp) of
 // arbitrary bytes, or one detection's text (app/results/camera_results.hpp), the first byte

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // A deterministic driver for libFuzzer-style targets (LLVMFuzzerTestOneInput), so every fuzz
 // target runs in the test suite under g++ with the sanitizers of the test build, without
 // clang's libFuzzer. It runs each seed input, then a fixed number of inputs mutated from the

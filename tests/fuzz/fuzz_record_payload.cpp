@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Fuzz target: the payload of a stored calibration record (CBOR of the record's JSON form,
 // core/calibration_record.hpp) as `store read`, `store verify`, `store rollback` and imucald's
 // session start decode it. Checks what they promise: no crash (a deep nesting overflowed the

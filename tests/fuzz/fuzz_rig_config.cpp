@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Fuzz target: a rig configuration file (core/rig_config.hpp) and a Kalibr target YAML
 // (core/target.hpp), the first byte choosing which. Any bytes must give a configuration or an
 // error with a message, never a crash, an uncaught exception (yaml-cpp's or nlohmann's) or a

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Fuzz target: the session log reader (log/session_log.hpp) on a damaged file. The input is
 // written to a file and opened as a log; every stream, sample, frame and event is read, with the
 // salvage of the readable part where the reader finds damage. Any bytes must give a log or an error with a

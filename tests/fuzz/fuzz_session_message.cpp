@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Fuzz target: one session message as the console reads it from the socket and replay from a
 // session log (core/session_messages.hpp). Any bytes must give a message or an error with a
 // message, never a crash or an exception; a decoded message must encode, and decode again to

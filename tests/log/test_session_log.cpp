@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Session log: round trips of every field, time-range reads, writer rules.
 
 #include <gtest/gtest.h>

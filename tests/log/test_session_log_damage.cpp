@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Session log: files that are not logs, newer schemas, truncated and overwritten files, and a
 // writer that dies mid-recording.
 

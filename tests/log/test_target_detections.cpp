@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Stored target detections in a session log: round trip, replacement, what they leave alone, and
 // logs they must not write into.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Runs inside the QEMU guest (tests/qemu/run-in-qemu.sh) with i2c-stub (chip_addr=0x50), i2c-dev
 // and at24: the calibration store on a real kernel I2C stack, through both EEPROM backends.
 //

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Builds a kernel module that the Debian kernel does not ship (its option is unset) as an
 # out-of-tree module: the driver's source from Debian's linux-source-<major.minor> package,
 # compiled against the linux-headers (kbuild) of the exact kernel that run-in-qemu.sh boots.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Runs inside the QEMU guest (tests/qemu/run-in-qemu.sh --module gpio-sim) against the kernel's
 // GPIO simulator: GpiodDataReadyLine through libgpiod 1.6 and the GPIO character device (uAPI
 // v1) on a real gpiolib, then the acquisition loop with the MPU-6000 emulator's data-ready

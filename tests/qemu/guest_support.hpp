@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // What the QEMU guest programs share: a check line per result ("ok - ..." / "FAIL - ..."), and
 // a camera's frames taken the way a consumer takes them (wait on fd(), dequeue).

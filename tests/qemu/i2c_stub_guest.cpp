@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Runs inside the QEMU guest (tests/qemu/run-in-qemu.sh) against the kernel's i2c-stub
 // (chip_addr=0x68,0x50) through i2c-dev: I2cDevBus and the MPU-6000 driver on a real kernel
 // I2C stack.

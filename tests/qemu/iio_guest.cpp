@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Runs inside the QEMU guest (tests/qemu/run-in-qemu.sh) against the kernel's own MPU-6000
 // driver, inv-mpu6050 (IIO), bound to an i2c-stub chip at 0x68 on /dev/i2c-0:
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The rig of the QEMU tests that meet the kernel's inv-mpu6050 driver (tests/qemu/iio_guest.cpp):
 // an i2c-stub chip at 0x68 on /dev/i2c-0 whose registers are prepared so that the driver binds

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Runs inside the QEMU guest (tests/qemu/run-in-qemu.sh --module vimc) against the kernel's
 // virtual media-controller camera: the libcamera backend on libcamera 0.0.3's vimc pipeline
 // handler (and its IPA module, package libcamera-ipa), over real V4L2 subdevices and buffers.

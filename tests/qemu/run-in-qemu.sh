@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Runs one command on the Debian 6.1 kernel under QEMU (TCG), with kernel modules loaded, so
 # that device tests meet real kernel drivers (i2c-stub + i2c-dev, vivid, at24) on a machine
 # that has none of them. The guest's root is the host's root, shared read-only over 9p; the
@@ -40,7 +41,7 @@ while [ $# -gt 0 ]; do
     --timeout) timeout_s=$2; shift 2 ;;
     --cwd) cwd=$2; shift 2 ;;
     --) shift; break ;;
-    -h|--help) sed -n '2,/^set -euo/{/^set -euo/!p}' "$0"; exit 0 ;;
+    -h|--help) sed -n '3,/^set -euo/{/^set -euo/!p}' "$0"; exit 0 ;;
     *) die "unknown option '$1' (see --help)" ;;
   esac
 done

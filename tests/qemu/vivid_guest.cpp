@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Runs inside the QEMU guest (tests/qemu/run-in-qemu.sh --module vivid) against the kernel's
 // virtual video driver: the V4L2 camera backend on a real V4L2 stack (videobuf2, mmap buffers,
 // driver timestamps).

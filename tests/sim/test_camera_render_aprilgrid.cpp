@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The AprilGrid renderer: the tags decode with libapriltag (the detector most rigs will use) to
 // the intended ids with their corners in Kalibr's point order, the refined corners sit where
 // project_corners() puts them, and the board looks as kalibr_create_target_pdf prints it.

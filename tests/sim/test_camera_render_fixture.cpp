@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The committed camera-IMU fixture (fixtures/camimu.imulog, `imucal sim camimu --seed 104`) was
 // rendered by the checkerboard path of the renderer: re-rendering its first frames must give
 // the stored pixels exactly. A change to the renderer that moves a single grey level of the

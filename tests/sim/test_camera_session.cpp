@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The simulated camera-IMU session: log content, truth file, frame timing (mid-exposure and
 // the timeshift sign), determinism and input checks.
 

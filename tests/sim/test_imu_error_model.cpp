@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The IMU error model against its own definition (docs/simulator.md): a still rig measures
 // gravity through S, M and the bias; the canonical and Tedaldi corrections invert the model;
 // quantisation, saturation, temperature and noise levels.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Motion scripts against their own definitions: rates and accelerations equal finite
 // differences of attitude and position, segments match the motion, determinism, excitation.
 

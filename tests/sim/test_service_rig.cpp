@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The service's virtual rig (sim/service_rig.hpp): its clock's pace against the wall clock, the
 // wait while the service's worker is busy, the injected IMU fault, its cameras on the rig's clock
 // and the final table of the result beside its truth.

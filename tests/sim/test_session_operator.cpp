@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The guided session's virtual operator in front of the target: the operator trajectory follows
 // the simulator's checkerboard motion after a turn that faces the board, without a jump in
 // position, velocity or attitude, and the virtual camera sees the board through the motion.

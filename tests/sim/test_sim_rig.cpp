@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The simulated IMU path (sim/rig.hpp) under host stalls: what the FIFO holds is
 // delivered late but intact, what it cannot hold is lost behind one flagged gap, and every
 // delivered sample is a frame the chip wrote, stamped near its true instant.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Simulated sessions written to a session log: stream description, events, determinism, gaps,
 // saturation and the truth file round trip.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // One synthetic view of a planar target through a camera, for the tests of the camera solves:
 // the board's points about its centre, turned by R and put at `at` in the camera frame,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Synthetic views for the camera chain (tests/calib/test_camera_chain.cpp and
 // tests/bench/bench_camera_chain.cpp): a board moving smoothly in front of cameras with their own

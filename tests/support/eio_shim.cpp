@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // An LD_PRELOAD shim that makes reads of one file fail with EIO part way through, as a failing
 // disk or a network filesystem does: the file whose path ends with $IMUCAL_EIO_PATH returns EIO
 // from the read that would go past $IMUCAL_EIO_AFTER bytes. Used by the import fault tests.

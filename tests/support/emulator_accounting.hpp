@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Test helpers for the simulated IMU path: a smooth sensor source, and the accounting of
 // delivered samples against the frames the emulated MPU-6000 wrote into its FIFO (matched by

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Headless Chromium driven through its DevTools protocol on a pipe (--remote-debugging-pipe: the
 // browser reads commands on its fd 3 and answers on its fd 4, each message a JSON text ended by a

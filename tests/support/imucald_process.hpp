@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // imucald as a process on the virtual rig, for the tests that run it (test_imucald.cpp,
 // test_imucald_live_view.cpp): its configuration, the process, its session log.

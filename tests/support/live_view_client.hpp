@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A client of imucald's live view over loopback TCP, for its tests and its benchmark: plain
 // HTTP exchanges, and the event stream (GET /events) read on a thread of its own, as a browser

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A cubic written about another reference point, for comparing the virtual IMU's temperature
 // truth (about its start temperature) with a fit about its own reference.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A second generator of synthetic camera-IMU recordings, with a rolling-shutter camera, for testing
 // the calibration on data that the project's simulator did not make: it shares no code with sim/,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Helpers that several test files share. The test executables are unity builds in `make test`
 // (tests/CMakeLists.txt), where test files of one module share a translation unit, so a helper

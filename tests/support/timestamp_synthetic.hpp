@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A synthetic data-ready / FIFO timing generator with ground truth, for testing and measuring
 // the timestamper (tests/acquisition/test_timestamp.cpp, tests/bench/bench_acquisition.cpp).

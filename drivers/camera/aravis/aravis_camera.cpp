@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/camera/aravis/aravis_camera.hpp"
 
 #include <arv.h>

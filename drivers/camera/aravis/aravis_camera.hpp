@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // GenICam cameras through Aravis 0.8: GigE Vision, USB3 Vision, and Aravis's own fake camera
 // (interface "Fake", device "Fake_1"; tests and demos).

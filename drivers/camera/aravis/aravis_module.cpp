@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The entry point of libimucal_aravis.so (drivers/camera/aravis/aravis_module.hpp). Everything
 // else in the module is hidden: it carries its own copies of the imucal libraries it needs.
 

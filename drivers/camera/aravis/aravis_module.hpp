@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The Aravis camera module, libimucal_aravis.so: the GenICam backend (aravis_camera.hpp) with
 // Aravis and glib, loaded by a program only when a rig names an Aravis camera

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/camera/fake/virtual_camera.hpp"
 
 #include <sys/eventfd.h>

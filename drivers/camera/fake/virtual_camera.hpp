@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The virtual camera: a peer of the V4L2, libcamera and Aravis backends (drivers/camera/camera.hpp)
 // whose images come from a renderer the simulated rig supplies (sim/ builds it on the target

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/camera/libcamera/libcamera_camera.hpp"
 
 #include <libcamera/libcamera.h>

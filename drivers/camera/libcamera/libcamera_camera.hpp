@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // Cameras through libcamera (0.0.3, Debian 12): CSI sensors behind an ISP (Raspberry Pi,
 // Rockchip, i.MX), and UVC webcams through its uvcvideo pipeline.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The libcamera camera module, libimucal_libcamera.so: the libcamera backend
 // (libcamera_camera.hpp), loaded by a program only when a rig names a libcamera camera

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/camera/v4l2/v4l2_camera.hpp"
 
 #include <fcntl.h>

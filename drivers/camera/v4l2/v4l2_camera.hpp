@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // The V4L2 camera backend: a video capture node (/dev/videoN) streaming through mmap buffers.
 // docs/cameras.md ("V4L2") describes what it does and refuses.

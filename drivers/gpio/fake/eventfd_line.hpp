@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A simulated data-ready line with a real file descriptor, for the real-time virtual rig
 // (sim/realtime.hpp) and the event-loop acquisition: an eventfd in semaphore mode whose count

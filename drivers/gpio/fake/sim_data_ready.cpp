@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/gpio/fake/sim_data_ready.hpp"
 
 #include <algorithm>

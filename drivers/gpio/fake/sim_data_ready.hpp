@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A simulated data-ready line: the emulated chip raises its INT pin at a true host time, the
 // "kernel" timestamps the edge after a latency with Gaussian jitter, and wait() hands edges out

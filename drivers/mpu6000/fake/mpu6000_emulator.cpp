@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/mpu6000/fake/mpu6000_emulator.hpp"
 
 #include <algorithm>

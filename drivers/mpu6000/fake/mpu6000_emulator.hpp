@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // An MPU-6000 that speaks the register protocol as a RegisterBus, for tests, benchmarks and the
 // virtual rig. It models what the driver depends on: reset values and DEVICE_RESET, sleep and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #include "drivers/storage/fake/memory_storage.hpp"
 
 #include <algorithm>

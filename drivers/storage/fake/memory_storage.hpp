@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 #pragma once
 // A StorageDevice in memory, with the faults a real one has: a write cut after a given number
 // of bytes (power loss), optionally leaving torn bytes after the cut (a page half programmed),
