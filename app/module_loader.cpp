@@ -72,13 +72,13 @@ Result<const void*> load_uncached(std::string_view name, const char* entry) {
     }
     return api;
   }
-  return make_error(
-      Errc::kUnsupported,
-      "the module " + file + " is not in " + (tried.empty() ? "any folder" : tried) +
-          (package_of(name) == "imucal"
-               ? "; reinstall imucal, or set IMUCAL_MODULE_DIR to the folder that holds it"
-               : "; install the package " + package_of(name) + " (apt-get install " + package_of(name) +
-                     "), or set IMUCAL_MODULE_DIR to the folder that holds it"));
+  const std::string package = package_of(name);
+  const std::string remedy = package == "imucal"
+                                 ? "reinstall imucal"
+                                 : "install the package " + package + " (apt-get install " + package + ")";
+  return make_error(Errc::kUnsupported, "the module " + file + " is not in " +
+                                            (tried.empty() ? "any folder" : tried) + "; " + remedy +
+                                            ", or set IMUCAL_MODULE_DIR to the folder that holds it");
 }
 
 }  // namespace

@@ -214,7 +214,7 @@ nlohmann::json camera_chain_from_yaml(const YAML::Node& y) {
     if (j.contains("timeshift_cam_cam0_sigma"))
       j["timeshift_cam_cam0_sigma_s"] = j["timeshift_cam_cam0_sigma"];
     j["views_total"] = j.value("views_used", 0) + j.value("views_rejected", 0);
-    j["coverage_grid_dims"] = j.contains("coverage_grid") ? j["coverage_grid"] : nlohmann::json();
+    // Its coverage_grid is the grid's size only, without the counts the figure draws.
     j.erase("coverage_grid");
     const auto projection = parse_projection_name(j.value("camera_model", std::string()));
     const auto distortion = parse_distortion_name(j.value("distortion_model", std::string()));

@@ -30,11 +30,10 @@ void run(const app::report::ReportOptions& options) {
 }
 
 void setup(CLI::App& root) {
-  CLI::App* cmd = root.add_subcommand("report",
-                                      "HTML report of a calibration result (static, Allan, camera or camera "
-                                      "chain, camera-IMU, thermal), figures "
-                                      "drawn by "
-                                      "gnuplot");
+  CLI::App* cmd = root.add_subcommand(
+      "report",
+      "HTML report of a calibration result (static, Allan, camera or camera chain, camera-IMU, thermal), "
+      "figures drawn by gnuplot");
   auto o = std::make_shared<app::report::ReportOptions>();
   o->generator = std::string("imucal ") + kVersion + " report";
   cmd->add_option(

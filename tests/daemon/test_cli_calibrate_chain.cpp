@@ -156,9 +156,11 @@ TEST(CliCalibrateChain, AStereoPairTenMillisecondsApartIsCalibratedWithinItsSigm
        {"camera-coverage-cam0", "camera-view-rms-cam0", "camera-coverage-cam1", "camera-view-rms-cam1"})
     EXPECT_THAT(html, HasSubstr(std::string("data-plot=\"") + id + "\"")) << id;
   EXPECT_THAT(html, HasSubstr("<h2>Self-check</h2>"));
-  // The baseline with its sigma, in mm, as the chain file has it.
+  // The baseline with its sigma, in mm, as the chain file has it (a table cell "110.021 ± 0.017").
   const double baseline_mm = 1e3 * json["cameras"][1]["baseline_m"].get<double>();
-  EXPECT_THAT(html, HasSubstr(std::to_string(static_cast<int>(baseline_mm)))) << baseline_mm;
+  EXPECT_THAT(html, ContainsRegex("<td>" + std::to_string(static_cast<int>(baseline_mm)) +
+                                  "\\.[0-9]+ &plusmn; 0\\.[0-9]+</td>"))
+      << baseline_mm;
   auto ry = test::run_cli({"report", out, "-o", dir + "/chain-yaml.html"});
   ASSERT_EQ(ry.exit_code, 0) << ry.err;
   EXPECT_THAT(ry.out, HasSubstr("drawn from the camchain YAML"));
