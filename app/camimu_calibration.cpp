@@ -17,6 +17,16 @@
 namespace imucal::app {
 namespace {
 
+/// The held intrinsics' sigmas in Kalibr's order, from the covariance's diagonal (its layout:
+/// fu fv pu pv, projection (2), distortion (4)); NaN where it gives none.
+void set_intrinsics_sigmas(const CamchainCamera& cam, CamImuCameraReport* cr) {
+  Eigen::Matrix<double, 10, 1> s = Eigen::Matrix<double, 10, 1>::Constant(kNotDetermined);
+  if (cam.intrinsics_covariance.rows() == 10 && cam.intrinsics_covariance.cols() == 10)
+    s = cam.intrinsics_covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
+  cr->intrinsics_sigma = kalibr_intrinsics(cam.camera.projection, s.head<4>(), s.segment<2>(4));
+  cr->distortion_coeffs_sigma = kalibr_distortion(cam.camera.distortion_model, s.tail<4>());
+}
+
 /// The cameras of every camchain file, renumbered cam0..camN in the order given.
 /// The target in one camera's frames, as the estimator's input and the report's figures.
 Result<calib::CamImuCameraInput> detect_camera(const CamImuRequest& q, const log::SessionLogReader& reader,
@@ -57,6 +67,7 @@ Result<calib::CamImuCameraInput> detect_camera(const CamImuRequest& q, const log
   cr.detections_reused_from = found->reused_from;
   cr.detections_stored_in = found->stored_in;
   cr.detection_wall_s = found->wall_s;
+  set_intrinsics_sigmas(cam, &cr);
   report->cameras.push_back(cr);
 
   calib::CamImuCameraInput in;

@@ -79,6 +79,9 @@ struct CamImuCameraReport {
   std::string detections_reused_from;  // StreamDetections::reused_from
   std::string detections_stored_in;    // StreamDetections::stored_in
   double detection_wall_s = 0.0;
+  /// The held intrinsics' standard deviations, from the camera file's covariance, in Kalibr's
+  /// order (kalibr_intrinsics, kalibr_distortion); NaN where the file gives none.
+  std::vector<double> intrinsics_sigma, distortion_coeffs_sigma;
 };
 
 struct CamImuReport {

@@ -1,8 +1,13 @@
 // SPDX-License-Identifier: BSD-3-Clause
 #include "core/calibration_record.hpp"
 
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <tuple>
 
 #include "core/die_temperature.hpp"
 
@@ -13,6 +18,27 @@ using nlohmann::json;
 
 /// A figure: not finite (not determined) as null.
 json num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+/// A sigma as a version 3 record keeps it: in single precision where that holds it (a normal
+/// float; CBOR then stores 4 bytes instead of 9, and a sigma's eighth digit means nothing).
+double single(double v) {
+  const float f = static_cast<float>(v);
+  return std::isfinite(f) && std::abs(v) >= static_cast<double>(std::numeric_limits<float>::min())
+             ? static_cast<double>(f)
+             : v;
+}
+
+/// Every number under a key that names a sigma ("sigma", "rotation_sigma_rad", ...) in single().
+void single_precision_sigmas(json& j, bool sigma) {
+  if (j.is_number_float() && sigma) {
+    j = single(j.get<double>());
+  } else if (j.is_object()) {
+    for (auto& [key, value] : j.items())
+      single_precision_sigmas(value, sigma || key.find("sigma") != std::string::npos);
+  } else if (j.is_array()) {
+    for (auto& value : j) single_precision_sigmas(value, sigma);
+  }
+}
 
 template <typename Derived>
 json vec_json(const Eigen::MatrixBase<Derived>& v) {
@@ -62,6 +88,26 @@ json thermal_axes_json(const std::array<ThermalAxisModel, 3>& axes) {
     }
   }
   return a;
+}
+
+/// A list of sigmas: null where not determined.
+json sigmas_json(const std::vector<double>& v) {
+  json a = json::array();
+  for (double x : v) a.push_back(num(x));
+  return a;
+}
+
+/// A camera's intrinsics in Kalibr's keys and orders (camera_to_yaml's, without the shutter,
+/// which the record keeps as line_delay_s) and their sigmas.
+json intrinsics_json(const CameraIntrinsicsRecord& k) {
+  const CameraModel& c = k.camera;
+  return {{"camera_model", projection_model_name(c.projection)},
+          {"intrinsics", kalibr_intrinsics(c.projection, c.intrinsics, c.projection_params)},
+          {"distortion_model", distortion_model_name(c.distortion_model)},
+          {"distortion_coeffs", kalibr_distortion(c.distortion_model, c.distortion_coeffs)},
+          {"resolution", {c.width, c.height}},
+          {"intrinsics_sigma", sigmas_json(k.intrinsics_sigma)},
+          {"distortion_coeffs_sigma", sigmas_json(k.distortion_coeffs_sigma)}};
 }
 
 /// Reading the JSON form: every problem names the key.
@@ -139,6 +185,34 @@ class Reader {
   }
 };
 
+/// A camera's intrinsics block (camera_from_yaml reads the model, so its rules are the camera
+/// file's) with as many sigmas as figures.
+Status read_intrinsics(const json& j, const std::string& where, CameraRecord& cam) {
+  if (!j.is_object()) return make_error(Errc::kCorrupt, where + "camera must be a mapping");
+  // JSON is YAML: the block goes through the camera file's reader.
+  YAML::Node node;
+  try {
+    node = YAML::Load(j.dump(-1, ' ', false, json::error_handler_t::replace));
+  } catch (const YAML::Exception& e) {
+    return make_error(Errc::kCorrupt, where + "camera is not a camera (" + e.what() + ")");
+  }
+  auto camera = camera_from_yaml(node, where + "camera");
+  if (!camera.ok()) return make_error(Errc::kCorrupt, camera.error().message);
+  CameraIntrinsicsRecord k;
+  k.camera = *camera;
+  const std::size_t n_intrinsics = static_cast<std::size_t>(4 + projection_param_count(k.camera.projection));
+  const std::size_t n_coeffs = static_cast<std::size_t>(distortion_coeff_count(k.camera.distortion_model));
+  const Reader r;
+  for (auto [key, n, out] : {std::tuple{"intrinsics_sigma", n_intrinsics, &k.intrinsics_sigma},
+                             std::tuple{"distortion_coeffs_sigma", n_coeffs, &k.distortion_coeffs_sigma}}) {
+    Eigen::VectorXd v(static_cast<Eigen::Index>(n));
+    IMUCAL_TRY(r.matrix(j, key, where + "camera.", v, false));
+    out->assign(v.data(), v.data() + v.size());
+  }
+  cam.intrinsics = std::move(k);
+  return {};
+}
+
 Status read_sigma(const json& j, ImuSigmaRecord& s) {
   const Reader r;
   if (!j.is_object()) return make_error(Errc::kCorrupt, "imu.sigma must be a mapping");
@@ -212,6 +286,16 @@ bool same(const M& a, const M& b) {
   return true;
 }
 
+/// Equal as sigmas are stored: in single precision (a version 3 record), NaN equal to NaN.
+template <typename M>
+bool same_sigma_values(const M& a, const M& b) {
+  for (Eigen::Index i = 0; i < a.size(); ++i) {
+    const double x = single(a.data()[i]), y = single(b.data()[i]);
+    if (!(x == y || (std::isnan(x) && std::isnan(y)))) return false;
+  }
+  return true;
+}
+
 bool same_thermal(const std::optional<ThermalModel>& a, const std::optional<ThermalModel>& b) {
   if (a.has_value() != b.has_value()) return false;
   if (!a) return true;
@@ -222,28 +306,49 @@ bool same_thermal(const std::optional<ThermalModel>& a, const std::optional<Ther
     const ThermalAxisModel& x = i < 3 ? a->gyro[i] : a->accel[i - 3];
     const ThermalAxisModel& y = i < 3 ? b->gyro[i] : b->accel[i - 3];
     if (x.determined != y.determined || x.coeffs.size() != y.coeffs.size() || !same(x.coeffs, y.coeffs) ||
-        !same(x.sigma, y.sigma))
+        !same_sigma_values(x.sigma, y.sigma))
       return false;
   }
   if (a->scale_model.has_value() != b->scale_model.has_value()) return false;
   if (!a->scale_model) return true;
   const ThermalScaleModel &x = *a->scale_model, &y = *b->scale_model;
-  return same(x.gyro_k, y.gyro_k) && same(x.gyro_sigma, y.gyro_sigma) && same(x.accel_k, y.accel_k) &&
-         same(x.accel_sigma, y.accel_sigma) && x.temperatures_c == y.temperatures_c;
+  return same(x.gyro_k, y.gyro_k) && same_sigma_values(x.gyro_sigma, y.gyro_sigma) &&
+         same(x.accel_k, y.accel_k) && same(x.accel_sigma, y.accel_sigma) &&
+         x.temperatures_c == y.temperatures_c;
+}
+
+bool same_intrinsics(const std::optional<CameraIntrinsicsRecord>& a,
+                     const std::optional<CameraIntrinsicsRecord>& b) {
+  if (a.has_value() != b.has_value()) return false;
+  if (!a) return true;
+  const CameraModel &x = a->camera, &y = b->camera;
+  const auto list = [](const std::vector<double>& v) {
+    return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
+  };
+  return x.kind() == y.kind() && x.width == y.width && x.height == y.height &&
+         same(x.intrinsics, y.intrinsics) && same(x.projection_params, y.projection_params) &&
+         same(x.distortion_coeffs, y.distortion_coeffs) &&
+         a->intrinsics_sigma.size() == b->intrinsics_sigma.size() &&
+         a->distortion_coeffs_sigma.size() == b->distortion_coeffs_sigma.size() &&
+         same_sigma_values(list(a->intrinsics_sigma), list(b->intrinsics_sigma)) &&
+         same_sigma_values(list(a->distortion_coeffs_sigma), list(b->distortion_coeffs_sigma));
 }
 
 bool same_sigma(const ImuSigmaRecord& a, const ImuSigmaRecord& b) {
   auto triad = [](const std::optional<TriadSigma>& x, const std::optional<TriadSigma>& y) {
     return x.has_value() == y.has_value() &&
-           (!x || (same(x->T, y->T) && same(x->scale, y->scale) && same(x->bias, y->bias)));
+           (!x || (same_sigma_values(x->T, y->T) && same_sigma_values(x->scale, y->scale) &&
+                   same_sigma_values(x->bias, y->bias)));
   };
   if (a.model != b.model || !triad(a.accel, b.accel) || !triad(a.gyro, b.gyro)) return false;
-  if (a.G.has_value() != b.G.has_value() || (a.G && !same(*a.G, *b.G))) return false;
+  if (a.G.has_value() != b.G.has_value() || (a.G && !same_sigma_values(*a.G, *b.G))) return false;
   if (a.krebs.has_value() != b.krebs.has_value()) return false;
   if (!a.krebs) return true;
   const KrebsImuSigma &x = *a.krebs, &y = *b.krebs;
-  return same(x.S_a, y.S_a) && same(x.M_a, y.M_a) && same(x.b_a, y.b_a) && same(x.S_g, y.S_g) &&
-         same(x.M_g, y.M_g) && same(x.C_bg, y.C_bg) && same(x.B_g, y.B_g) && same(x.b_g, y.b_g);
+  return same_sigma_values(x.S_a, y.S_a) && same_sigma_values(x.M_a, y.M_a) &&
+         same_sigma_values(x.b_a, y.b_a) && same_sigma_values(x.S_g, y.S_g) &&
+         same_sigma_values(x.M_g, y.M_g) && same_sigma_values(x.C_bg, y.C_bg) &&
+         same_sigma_values(x.B_g, y.B_g) && same_sigma_values(x.b_g, y.b_g);
 }
 
 }  // namespace
@@ -330,6 +435,7 @@ json calibration_record_json(const CalibrationRecord& rec) {
       cameras.back()["line_delay_s"] = num(*c.line_delay_s);
       cameras.back()["line_delay_sigma_s"] = num(c.line_delay_sigma_s);
     }
+    if (c.intrinsics) cameras.back()["camera"] = intrinsics_json(*c.intrinsics);
   }
   json files = json::array();
   for (const RecordSourceFile& f : rec.files) {
@@ -337,10 +443,14 @@ json calibration_record_json(const CalibrationRecord& rec) {
     if (f.fixed) file["fixed"] = *f.fixed;
     files.push_back(file);
   }
+  // The oldest version that holds what the record holds, so that an older imucal reads a record
+  // it can read in full, and refuses one it would read in part (a newer version).
+  const bool intrinsics = std::any_of(rec.cameras.begin(), rec.cameras.end(),
+                                      [](const CameraRecord& c) { return c.intrinsics.has_value(); });
   json j = {{"format", kCalibrationFormat},
-            // Version 2 only where it differs from 1: a record without a thermal model stays
-            // readable by every imucal that reads version 1.
-            {"version", rec.thermal ? kCalibrationRecordVersion : kOldestCalibrationRecordVersion},
+            {"version", intrinsics    ? 3
+                        : rec.thermal ? 2
+                                      : kOldestCalibrationRecordVersion},
             {"created_utc", rec.created_utc},
             {"software_version", rec.software_version},
             {"imu", imu},
@@ -349,6 +459,8 @@ json calibration_record_json(const CalibrationRecord& rec) {
   if (!rec.rig.empty()) j["rig"] = rec.rig;
   if (rec.gravity_mps2) j["gravity_mps2"] = num(*rec.gravity_mps2);
   if (rec.thermal) j["thermal"] = thermal_model_json(*rec.thermal);
+  // Version 3 on: the sigmas in single precision (versions 1 and 2 stay as they were written).
+  if (intrinsics) single_precision_sigmas(j, false);
   return j;
 }
 
@@ -412,6 +524,8 @@ Result<CalibrationRecord> calibration_record_from_json(const json& j) {
       cam.line_delay_s = d;
       IMUCAL_TRY(r.figure(c, "line_delay_sigma_s", where, cam.line_delay_sigma_s));
     }
+    if (const auto it = c.find("camera"); it != c.end() && !it->is_null())
+      IMUCAL_TRY(read_intrinsics(*it, where, cam));
     rec.cameras.push_back(cam);
   }
   if (j.contains("gravity_mps2") && !j["gravity_mps2"].is_null()) {
@@ -459,13 +573,16 @@ bool same_calibration(const CalibrationRecord& a, const CalibrationRecord& b) {
   for (std::size_t k = 0; k < a.cameras.size(); ++k) {
     const CameraRecord &c = a.cameras[k], &d = b.cameras[k];
     if (c.name != d.name || c.stream != d.stream || !same(c.T_cam_imu, d.T_cam_imu) ||
-        !same(c.rotation_sigma_rad, d.rotation_sigma_rad) ||
-        !same(c.translation_sigma_m, d.translation_sigma_m) ||
-        !same(Eigen::Vector2d(c.timeshift_cam_imu_s, c.timeshift_sigma_s),
-              Eigen::Vector2d(d.timeshift_cam_imu_s, d.timeshift_sigma_s)) ||
+        !same_sigma_values(c.rotation_sigma_rad, d.rotation_sigma_rad) ||
+        !same_sigma_values(c.translation_sigma_m, d.translation_sigma_m) ||
+        c.timeshift_cam_imu_s != d.timeshift_cam_imu_s ||
+        !same_sigma_values(Eigen::Matrix<double, 1, 1>(c.timeshift_sigma_s),
+                           Eigen::Matrix<double, 1, 1>(d.timeshift_sigma_s)) ||
         c.line_delay_s.has_value() != d.line_delay_s.has_value() ||
-        (c.line_delay_s && !same(Eigen::Vector2d(*c.line_delay_s, c.line_delay_sigma_s),
-                                 Eigen::Vector2d(*d.line_delay_s, d.line_delay_sigma_s))))
+        (c.line_delay_s && (*c.line_delay_s != *d.line_delay_s ||
+                            !same_sigma_values(Eigen::Matrix<double, 1, 1>(c.line_delay_sigma_s),
+                                               Eigen::Matrix<double, 1, 1>(d.line_delay_sigma_s)))) ||
+        !same_intrinsics(c.intrinsics, d.intrinsics))
       return false;
   }
   return true;

@@ -6,7 +6,8 @@
 // (app/stored_calibration.hpp); adding a field touches this type, its two functions below and
 // their test (tests/core/test_calibration_record.cpp).
 //
-// JSON form (version 2 when it holds "thermal", else version 1, which every version reads):
+// JSON form (version 3 when a camera carries its intrinsics, else 2 when it holds "thermal", else
+// version 1, which every version reads):
 //   {"format": "imucal.calibration", "version": 1, "created_utc", "software_version", "rig",
 //    "imu": {"stream", "input_units", "form", "A_a", "b_a", "A_g", "b_g", "G",   (canonical form)
 //            "source": "static"|"camimu",
@@ -14,7 +15,10 @@
 //                      camimu: "S_a", "M_a", "b_a", "S_g", "M_g", "C_bg_rad", "B_g", "b_g"}},
 //    "cameras": [{"name", "stream", "T_cam_imu" (4 rows), "rotation_sigma_rad",
 //                 "translation_sigma_m", "timeshift_cam_imu_s", "timeshift_sigma_s",
-//                 rolling shutter only: "line_delay_s", "line_delay_sigma_s"}],
+//                 rolling shutter only: "line_delay_s", "line_delay_sigma_s",
+//                 version 3: "camera": {"camera_model", "intrinsics", "distortion_model",
+//                   "distortion_coeffs", "resolution" (Kalibr's keys and orders),
+//                   "intrinsics_sigma", "distortion_coeffs_sigma" (null where not known)}}],
 //    "gravity_mps2", "source": {"files": [{"path", "kind", "method", "fixed"}], "notes": [...]},
 //    "thermal" (optional): {"form", "reference_c", "valid_range_c": [min, max], "scale",
 //                           "gyro"/"accel": 3 x {"order", "coeffs" (c_1..c_order), "sigma"} or
@@ -28,6 +32,7 @@
 #include <string>
 #include <vector>
 
+#include "core/camera_model.hpp"
 #include "core/camimu_calibration.hpp"
 #include "core/imu_calibration.hpp"
 #include "core/imu_model.hpp"
@@ -37,7 +42,7 @@
 namespace imucal {
 
 inline constexpr const char* kCalibrationFormat = "imucal.calibration";
-inline constexpr int kCalibrationRecordVersion = 2;
+inline constexpr int kCalibrationRecordVersion = 3;
 /// The oldest version still read (1: no thermal model).
 inline constexpr int kOldestCalibrationRecordVersion = 1;
 /// The methods' names, as the record's sources and the result files state them.
@@ -66,6 +71,15 @@ struct ImuRecord {
   ImuSigmaRecord sigma;
 };
 
+/// A camera's intrinsics as the record keeps them: the model (its shutter is the record's
+/// line_delay_s), and the standard deviation of each figure in Kalibr's order (NaN: not
+/// determined; all NaN when the calibration that gave the intrinsics stated none).
+struct CameraIntrinsicsRecord {
+  CameraModel camera;
+  std::vector<double> intrinsics_sigma;         // as kalibr_intrinsics
+  std::vector<double> distortion_coeffs_sigma;  // as kalibr_distortion
+};
+
 struct CameraRecord {
   std::string name;    // cam0, ...
   std::string stream;  // the camera stream of the log
@@ -78,6 +92,8 @@ struct CameraRecord {
   /// (not determined when held); absent for a global shutter.
   std::optional<double> line_delay_s;
   double line_delay_sigma_s = kNotDetermined;
+  /// The intrinsics the extrinsics were found with (version 3 on; absent in older records).
+  std::optional<CameraIntrinsicsRecord> intrinsics;
 };
 
 /// A result the record was built from.

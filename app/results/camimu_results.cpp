@@ -123,6 +123,21 @@ YAML::Node yaml_sigma(double v) {
   return std::isfinite(v) ? YAML::Node(v) : YAML::Node(YAML::NodeType::Null);
 }
 
+/// The intrinsics a camera-IMU solve held, as the stored record keeps them (Kalibr's keys
+/// without the shutter, and the sigmas of the camera file; null where it gave none).
+YAML::Node held_intrinsics_node(const CameraIntrinsicsRecord& k) {
+  YAML::Node node(YAML::NodeType::Map);
+  camera_to_yaml(k.camera, node);
+  for (const auto& [key, values] : {std::pair{"intrinsics_sigma", &k.intrinsics_sigma},
+                                    std::pair{"distortion_coeffs_sigma", &k.distortion_coeffs_sigma}}) {
+    YAML::Node list(YAML::NodeType::Sequence);
+    for (double v : *values) list.push_back(yaml_sigma(v));
+    list.SetStyle(YAML::EmitterStyle::Flow);
+    node[key] = list;
+  }
+  return node;
+}
+
 json camera_model_json(const CameraModel& c) {
   json j = {{"camera_model", projection_model_name(c.projection)},
             {"intrinsics", kalibr_intrinsics(c.projection, c.intrinsics, c.projection_params)},
@@ -515,6 +530,24 @@ KalibrImuIntrinsics kalibr_from_krebs(const KrebsImuModel& k) {
   return out;
 }
 
+CameraIntrinsicsRecord held_intrinsics(const CamImuReport& report, std::size_t i) {
+  CameraIntrinsicsRecord k;
+  k.camera = report.result.cameras.at(i).camera;
+  k.camera.shutter = Shutter{};
+  if (i < report.cameras.size()) {
+    k.intrinsics_sigma = report.cameras[i].intrinsics_sigma;
+    k.distortion_coeffs_sigma = report.cameras[i].distortion_coeffs_sigma;
+  }
+  // A report made without the camera files' covariance: as many sigmas, none known.
+  const auto none = Eigen::Vector4d::Constant(kNotDetermined);
+  if (k.intrinsics_sigma.empty())
+    k.intrinsics_sigma =
+        kalibr_intrinsics(k.camera.projection, none, Eigen::Vector2d::Constant(kNotDetermined));
+  if (k.distortion_coeffs_sigma.empty())
+    k.distortion_coeffs_sigma = kalibr_distortion(k.camera.distortion_model, none);
+  return k;
+}
+
 std::string camimu_camchain_yaml(const CamImuReport& r) {
   YAML::Node root(YAML::NodeType::Map);
   const auto& cams = r.result.cameras;
@@ -633,6 +666,7 @@ std::string camimu_calibration_yaml(const CamImuReport& r) {
       cam["line_delay_s"] = c.camera.shutter.line_delay_s;
       cam["line_delay_sigma_s"] = yaml_sigma(c.line_delay_sigma_s);
     }
+    cam["camera"] = held_intrinsics_node(held_intrinsics(r, i));
     cams["cam" + std::to_string(i)] = cam;
   }
   root["cameras"] = cams;

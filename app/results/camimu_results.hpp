@@ -10,6 +10,7 @@
 #include <string>
 
 #include "app/camimu_calibration.hpp"
+#include "core/calibration_record.hpp"
 #include "core/camimu_calibration.hpp"
 #include "core/imu_model.hpp"
 #include "core/result.hpp"
@@ -34,6 +35,11 @@ struct KalibrImuIntrinsics {
   Eigen::Matrix3d C_gyro_i = Eigen::Matrix3d::Identity();
 };
 KalibrImuIntrinsics kalibr_from_krebs(const KrebsImuModel& model);
+
+/// The intrinsics camera `i` of the result was solved with, as the stored record and
+/// calibration.yaml keep them: the model without its shutter (the line delay is kept beside) and
+/// the camera file's sigmas (NaN where it gave none).
+CameraIntrinsicsRecord held_intrinsics(const CamImuReport& report, std::size_t i);
 
 /// camchain-imucam.yaml: per camN Kalibr's keys (camera_model, intrinsics, distortion_model,
 /// distortion_coeffs, resolution, rostopic, T_cam_imu as 4 rows, timeshift_cam_imu, T_cn_cnm1

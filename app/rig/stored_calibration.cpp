@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "app/camimu_inputs.hpp"
+#include "app/results/camimu_results.hpp"
 #include "core/calibration_payload.hpp"
 #include "core/text_file.hpp"
 #include "core/text_format.hpp"
@@ -76,8 +77,9 @@ json camimu_payload(const json& r, const std::string& path) {
   p["imu"]["sigma"] = sigma;
   for (const auto& [name, c] : r.at("cameras").items()) {
     json cam = {{"name", name}};
-    for (const char* key : {"stream", "T_cam_imu", "rotation_sigma_rad", "translation_sigma_m",
-                            "timeshift_cam_imu", "timeshift_sigma_s", "line_delay_s", "line_delay_sigma_s"}) {
+    for (const char* key :
+         {"stream", "T_cam_imu", "rotation_sigma_rad", "translation_sigma_m", "timeshift_cam_imu",
+          "timeshift_sigma_s", "line_delay_s", "line_delay_sigma_s", "camera"}) {
       if (c.contains(key))
         cam[std::string(key) == "timeshift_cam_imu" ? "timeshift_cam_imu_s" : key] = c[key];
     }
@@ -194,6 +196,7 @@ CalibrationRecord calibration_record_from_camimu(const CamImuReport& report, con
       cam.line_delay_s = c.camera.shutter.line_delay_s;
       cam.line_delay_sigma_s = c.line_delay_sigma_s;
     }
+    cam.intrinsics = held_intrinsics(report, i);
     rec.cameras.push_back(cam);
   }
   rec.gravity_mps2 = report.options.gravity_mps2;

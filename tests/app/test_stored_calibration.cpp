@@ -48,6 +48,10 @@ CamImuReport camimu_report(bool fixed_intrinsics) {
   if (fixed_intrinsics) res.fixed = {"S_a", "M_a", "S_g", "M_g", "C_bg"};
   CamImuCameraResult c;
   c.stream = "cam0";
+  c.camera.intrinsics = Eigen::Vector4d(458.6, 457.3, 367.2, 248.4);
+  c.camera.distortion_coeffs = Eigen::Vector4d(-0.28, 0.07, 2e-4, 2e-5);
+  c.camera.width = 752;
+  c.camera.height = 480;
   c.T_cam_imu.translation() = Eigen::Vector3d(0.03, -0.02, 0.01);
   c.timeshift_cam_imu_s = 0.0042;
   c.timeshift_sigma_s = 1.4e-4;

@@ -62,6 +62,7 @@ TEST(CalibrationRecord, ItsJsonFormReadsBackAsTheSameRecordThroughCbor) {
   const json j = calibration_record_json(r);
   EXPECT_EQ(j["format"], kCalibrationFormat);
   EXPECT_EQ(j["version"], 1);  // no thermal model: readable by the builds that read version 1
+  EXPECT_EQ(j["cameras"][0]["rotation_sigma_rad"][0].get<double>(), 4.8e-5);  // as versions 1 and 2 wrote it
   // Figures that were not determined are null, never 0.
   EXPECT_TRUE(j["imu"]["sigma"]["accel"]["scale"][1].is_null());
   EXPECT_TRUE(j["cameras"][0]["translation_sigma_m"][0].is_null());
@@ -114,11 +115,11 @@ TEST(CalibrationRecord, AMalformedRecordIsRefusedNamingWhatIsWrong) {
   {
     // A newer version is not damage: named as a newer imucal's, with its own code.
     json j = good;
-    j["version"] = 3;
+    j["version"] = 4;
     auto r = calibration_record_from_json(j);
     ASSERT_FALSE(r.ok());
     EXPECT_EQ(r.error().code, Errc::kNewerVersion);
-    EXPECT_NE(r.error().message.find("version 3"), std::string::npos) << r.error().message;
+    EXPECT_NE(r.error().message.find("version 4"), std::string::npos) << r.error().message;
     EXPECT_NE(r.error().message.find("a newer imucal wrote it: update imucal"), std::string::npos);
     j["version"] = 0;
     EXPECT_EQ(calibration_record_from_json(j).error().message.find("newer"), std::string::npos)
@@ -133,6 +134,75 @@ TEST(CalibrationRecord, AMalformedRecordIsRefusedNamingWhatIsWrong) {
   refused([](json& j) { j["cameras"][0]["T_cam_imu"] = json::array({1, 2, 3}); }, "cam0 T_cam_imu");
   refused([](json& j) { j["imu"]["sigma"]["accel"]["bias"] = "big"; }, "imu.sigma.accel.bias");
   refused([](json& j) { j["source"]["notes"] = json::array({1}); }, "source.notes");
+}
+
+/// A fisheye camera's intrinsics as a camera-IMU solve held them, one sigma not known.
+CameraIntrinsicsRecord some_intrinsics() {
+  CameraIntrinsicsRecord k;
+  k.camera.projection = ProjectionModel::kPinhole;
+  k.camera.distortion_model = DistortionModel::kEquidistant;
+  k.camera.intrinsics = Eigen::Vector4d(259.5, 259.1, 172.4, 128.9);
+  k.camera.distortion_coeffs = Eigen::Vector4d(-0.03, 0.012, -0.004, 0.0007);
+  k.camera.width = 346;
+  k.camera.height = 260;
+  k.intrinsics_sigma = {0.41, 0.40, 0.22, kNotDetermined};
+  k.distortion_coeffs_sigma = {0.002, 0.004, 0.003, 0.001};
+  return k;
+}
+
+TEST(CalibrationRecord, ACameraWithItsIntrinsicsMakesItVersion3AndReadsBack) {
+  CalibrationRecord r = a_record();
+  r.cameras[0].intrinsics = some_intrinsics();
+  const json j = calibration_record_json(r);
+  // Version 3: an older imucal refuses it as a newer one's instead of dropping the intrinsics.
+  EXPECT_EQ(j["version"], 3);
+  const json& cam = j["cameras"][0]["camera"];
+  EXPECT_EQ(cam["camera_model"], "pinhole");
+  EXPECT_EQ(cam["distortion_model"], "equidistant");
+  EXPECT_EQ(cam["intrinsics"][2], 172.4);
+  EXPECT_EQ(cam["resolution"], json::array({346, 260}));
+  EXPECT_TRUE(cam["intrinsics_sigma"][3].is_null());  // not known, never 0
+  // Its sigmas in single precision (4 bytes of CBOR each), its figures in full.
+  EXPECT_EQ(cam["intrinsics_sigma"][0].get<double>(), static_cast<double>(0.41f));
+  EXPECT_EQ(j["cameras"][0]["rotation_sigma_rad"][0].get<double>(), static_cast<double>(4.8e-5f));
+  EXPECT_EQ(j["cameras"][0]["T_cam_imu"][0][3].get<double>(), 0.031);
+  EXPECT_LT(json::to_cbor(j).size(), json::to_cbor(calibration_record_json(a_record())).size() + 250)
+      << "a camera's intrinsics with sigmas add less than 250 bytes";
+  EXPECT_FALSE(cam.contains("shutter"));  // the record's line_delay_s says it
+  auto back = calibration_record_from_json(json::from_cbor(json::to_cbor(j)));
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  ASSERT_TRUE(back->cameras[0].intrinsics);
+  EXPECT_TRUE(same_calibration(*back, r));
+  EXPECT_EQ(calibration_record_json(*back), j);
+  EXPECT_EQ(back->cameras[0].intrinsics->camera.intrinsics[3], 128.9);
+  EXPECT_TRUE(std::isnan(back->cameras[0].intrinsics->intrinsics_sigma[3]));
+  // A changed focal length is another calibration.
+  CalibrationRecord other = *back;
+  other.cameras[0].intrinsics->camera.intrinsics[0] += 0.01;
+  EXPECT_FALSE(same_calibration(other, r));
+  other.cameras[0].intrinsics.reset();
+  EXPECT_FALSE(same_calibration(other, r));
+}
+
+TEST(CalibrationRecord, MalformedIntrinsicsAreRefusedNamingTheCamera) {
+  CalibrationRecord rec = a_record();
+  rec.cameras[0].intrinsics = some_intrinsics();
+  const json good = calibration_record_json(rec);
+  auto refused = [&](const std::function<void(json&)>& spoil, const std::string& says) {
+    json j = good;
+    spoil(j);
+    auto r = calibration_record_from_json(j);
+    ASSERT_FALSE(r.ok()) << "accepted intrinsics whose " << says << " is wrong";
+    EXPECT_EQ(r.error().code, Errc::kCorrupt);
+    EXPECT_NE(r.error().message.find(says), std::string::npos) << r.error().message;
+  };
+  refused([](json& j) { j["cameras"][0]["camera"] = 3; }, "camera cam0 camera must be a mapping");
+  refused([](json& j) { j["cameras"][0]["camera"]["intrinsics"] = json::array({1, 2}); }, "intrinsics");
+  refused([](json& j) { j["cameras"][0]["camera"]["camera_model"] = "kannala"; }, "camera_model");
+  refused([](json& j) { j["cameras"][0]["camera"]["intrinsics_sigma"] = json::array({1}); },
+          "cam0 camera.intrinsics_sigma");
+  refused([](json& j) { j["cameras"][0]["camera"].erase("distortion_coeffs_sigma"); },
+          "camera.distortion_coeffs_sigma");
 }
 
 ThermalModel a_thermal_model() {
