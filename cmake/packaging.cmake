@@ -108,9 +108,11 @@ set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
 set(CPACK_DEBIAN_MAIN_PACKAGE_NAME imucal)
 set(CPACK_DEBIAN_MAIN_PACKAGE_DEPENDS "systemd")
 # gnuplot draws the figures of the reports (imucal report, and the report of every service
-# session); i2c-tools brings the udev rule that gives /dev/i2c-N to group i2c.
-set(CPACK_DEBIAN_MAIN_PACKAGE_RECOMMENDS "gnuplot-nox")
-set(CPACK_DEBIAN_MAIN_PACKAGE_SUGGESTS "i2c-tools, imucal-aravis, imucal-libcamera")
+# session). Suggested, not recommended: apt follows its recommends (groff, then ghostscript,
+# imagemagick, perl) to 123 packages and 249 MB on a rig, where --no-install-recommends takes 45
+# and 64 MB (docs/service.md, "Installing"). i2c-tools brings the udev rule that gives /dev/i2c-N
+# to group i2c.
+set(CPACK_DEBIAN_MAIN_PACKAGE_SUGGESTS "gnuplot-nox, i2c-tools, imucal-aravis, imucal-libcamera")
 set(CPACK_DEBIAN_MAIN_PACKAGE_CONTROL_EXTRA
     ${IMUCAL_PACKAGING_DIR}/debian/conffiles ${IMUCAL_PACKAGING_DIR}/debian/postinst
     ${IMUCAL_PACKAGING_DIR}/debian/prerm ${IMUCAL_PACKAGING_DIR}/debian/postrm)

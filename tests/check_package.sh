@@ -68,6 +68,9 @@ check "imucal does not depend on Aravis or libcamera" sh -c \
   "! dpkg-deb --field '$deb' Depends | grep -Eq 'libaravis|libcamera'"
 check "imucal suggests its camera backends" sh -c \
   "dpkg-deb --field '$deb' Suggests | grep -q imucal-aravis && dpkg-deb --field '$deb' Suggests | grep -q imucal-libcamera"
+# gnuplot-nox is suggested, not recommended: its recommends would add 123 packages (docs/service.md).
+check "imucal suggests gnuplot-nox and recommends nothing" sh -c \
+  "dpkg-deb --field '$deb' Suggests | grep -q gnuplot-nox && [ -z \"\$(dpkg-deb --field '$deb' Recommends)\" ]"
 for b in aravis libcamera; do
   check "imucal-$b depends on imucal (= $version)" sh -c \
     "dpkg-deb --field '$tmp/pkg/imucal-${b}_${version}_${arch}.deb' Depends | grep -qF 'imucal (= $version)'"

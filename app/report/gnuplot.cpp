@@ -21,7 +21,7 @@ namespace {
 
 constexpr const char* kInstallHint =
     "gnuplot is not installed: the report's figures are drawn by gnuplot. Install the Debian package "
-    "gnuplot-nox (apt-get install gnuplot-nox, or scripts/install-deps.sh)";
+    "gnuplot-nox (apt-get install --no-install-recommends gnuplot-nox, or scripts/install-deps.sh)";
 
 std::string read_whole(const std::string& path) {
   std::ifstream in(path, std::ios::binary);

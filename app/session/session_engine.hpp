@@ -221,7 +221,8 @@ class SessionEngine {
   std::vector<std::string> difference_to_stored(std::optional<session_msg::Review::Difference>* diff) const;
   std::vector<std::string> imu_difference_to_stored(
       std::optional<session_msg::Review::Difference>* diff) const;
-  std::vector<std::string> camera_difference_to_stored() const;
+  /// The cameras the review shows: the record's, or the camera-IMU result's without a record.
+  std::vector<CameraRecord> review_cameras() const;
   std::vector<std::string> coverage() const;
   std::string missing_words() const;  // the directions not yet up, in the guide's words
   calib::StaticCalibrationOptions static_options() const;

@@ -8,6 +8,8 @@
 #include <numbers>
 #include <sstream>
 
+#include "app/rig/stored_calibration.hpp"
+#include "app/session/review_lines.hpp"
 #include "app/session/session_engine.hpp"
 #include "app/session/session_window.hpp"
 #include "core/text_format.hpp"
@@ -33,76 +35,6 @@ const char* kFaceNames[6] = {"+X", "-X", "+Y", "-Y", "+Z", "-Z"};
 
 double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b)) / kDeg;
-}
-
-/// Three figures times `k` with `digits` decimals; one that could not be determined (not finite)
-/// reads "not determined", never a number.
-std::string figures(const Eigen::Vector3d& v, double k, int digits) {
-  std::string out;
-  for (int i = 0; i < 3; ++i) {
-    if (i > 0) out += " ";
-    out += std::isfinite(v[i]) ? fixed(v[i] * k, digits) : std::string("not determined");
-  }
-  return out;
-}
-
-/// Three figures with their sigmas: "a b c +- sa sb sc".
-std::string figures_with_sigmas(const Eigen::Vector3d& v, const Eigen::Vector3d& sigma, double k,
-                                int digits) {
-  return figures(v, k, digits) + " +- " + figures(sigma, k, digits);
-}
-
-/// The sigma of A b from b's, each entry of b independent. A's own uncertainty is left out: it
-/// adds about sigma(A) |b|, a hundredth of a count for the MPU-6000's biases of a few hundred
-/// counts at relative scale sigmas near 1e-4, but not for an input whose zero is far from 0 (raw
-/// counts near 32768), which the rig's driver never gives.
-Eigen::Vector3d sigma_through(const Eigen::Matrix3d& A, const Eigen::Vector3d& sigma) {
-  return (A.cwiseAbs2() * sigma.cwiseAbs2()).cwiseSqrt();
-}
-
-/// What the record will store of a camera, in true units with sigmas (two lines).
-std::vector<std::string> camera_review_lines(const CamImuCameraResult& cam) {
-  const Eigen::AngleAxisd aa(cam.T_cam_imu.rotation());
-  const Eigen::Vector3d rotvec = aa.angle() * aa.axis();
-  std::string offset = fixed(cam.timeshift_cam_imu_s * 1e3, 3) + " +- " +
-                       (std::isfinite(cam.timeshift_sigma_s) ? fixed(cam.timeshift_sigma_s * 1e3, 3)
-                                                             : std::string("not determined")) +
-                       " ms";
-  return {cam.name + " T_cam_imu: rotation vector " + figures(rotvec, 1.0 / kDeg, 3) +
-              " deg (sigma about the camera's x y z " + figures(cam.rotation_sigma_rad, 1.0 / kDeg, 3) +
-              " deg), translation " +
-              figures_with_sigmas(cam.T_cam_imu.translation(), cam.translation_sigma_m, 1e3, 2) + " mm",
-          "  time offset " + offset + ", reprojection RMS " + fixed(cam.reprojection_rms_px, 3) + " px"};
-}
-
-/// The review's lines for the thermal model: range, orders, drift without it and what is left.
-std::vector<std::string> thermal_lines(const calib::ThermalResult& t) {
-  if (!t.determined) return {"Thermal model: not determined: " + t.reason};
-  const auto axes = [](const std::array<calib::ThermalAxisFit, 3>& fits,
-                       double calib::ThermalAxisFit::*member) {
-    Eigen::Vector3d v;
-    for (int a = 0; a < 3; ++a)
-      v[a] = fits[a].determined ? fits[a].*member : std::numeric_limits<double>::quiet_NaN();
-    return v;
-  };
-  const auto orders = [](const std::array<calib::ThermalAxisFit, 3>& fits) {
-    std::string out;
-    for (const auto& f : fits)
-      out += (out.empty() ? "" : " ") + (f.determined ? std::to_string(f.order) : "-");
-    return out;
-  };
-  const double mg = 1e3 / kStandardGravity;
-  return {"Thermal model: reference " + fixed(t.reference_c, 2) + " C, valid " + fixed(t.temp_min_c, 2) +
-              " .. " + fixed(t.temp_max_c, 2) + " C, " + std::to_string(t.bins) + " bins; orders gyro " +
-              orders(t.gyro) + ", accel " + orders(t.accel),
-          "  gyro drift over the range " +
-              figures(axes(t.gyro, &calib::ThermalAxisFit::uncompensated_drift), 1.0 / kDeg, 4) +
-              " deg/s; left about the fit (RMS) " +
-              figures(axes(t.gyro, &calib::ThermalAxisFit::residual_rms), 1.0 / kDeg, 4) + " deg/s",
-          "  accel drift over the range " +
-              figures(axes(t.accel, &calib::ThermalAxisFit::uncompensated_drift), mg, 3) +
-              " mg; left about the fit (RMS) " +
-              figures(axes(t.accel, &calib::ThermalAxisFit::residual_rms), mg, 3) + " mg"};
 }
 
 }  // namespace
@@ -670,67 +602,54 @@ void SessionEngine::evaluate_gates() {
   gates_pass_ = std::all_of(gates_.begin(), gates_.end(), [](const Gate& g) { return g.pass; });
 }
 
-std::vector<std::string> SessionEngine::difference_to_stored(
-    std::optional<session_msg::Review::Difference>* diff) const {
-  std::vector<std::string> lines = imu_difference_to_stored(diff);
-  for (auto& line : camera_difference_to_stored()) lines.push_back(std::move(line));
-  return lines;
+std::vector<CameraRecord> SessionEngine::review_cameras() const {
+  if (final_->record) return final_->record->cameras;
+  // A solve without a record (none is written): the cameras as the record would hold them.
+  if (!final_->camimu) return {};
+  return calibration_record_from_camimu(*final_->camimu, "").cameras;
 }
 
-std::vector<std::string> SessionEngine::camera_difference_to_stored() const {
-  if (!final_->camimu || !stored_) return {};
-  std::vector<std::string> lines;
-  for (const auto& cam : final_->camimu->result.cameras) {
-    const auto& stored = stored_->record.cameras;
-    const auto old =
-        std::find_if(stored.begin(), stored.end(), [&](const CameraRecord& c) { return c.name == cam.name; });
-    if (old == stored.end()) {
-      lines.push_back("  " + cam.name + ": not in the stored calibration (new)");
-      continue;
-    }
-    const Eigen::Matrix3d R_old = old->T_cam_imu.topLeftCorner<3, 3>();
-    const Eigen::Vector3d dt = cam.T_cam_imu.translation() - old->T_cam_imu.topRightCorner<3, 1>();
-    const double angle = Eigen::AngleAxisd(cam.T_cam_imu.rotation() * R_old.transpose()).angle();
-    const double dshift = cam.timeshift_cam_imu_s - old->timeshift_cam_imu_s;
-    lines.push_back("  " + cam.name + ": translation " + figures(dt, 1e3, 2) + " mm (" +
-                    fixed(dt.norm() * 1e3, 2) + " mm), rotation " + fixed(angle / kDeg, 3) +
-                    " deg, time offset " + fixed(dshift * 1e3, 3) + " ms");
+std::vector<std::string> SessionEngine::difference_to_stored(
+    std::optional<session_msg::Review::Difference>* diff) const {
+  if (!stored_) {
+    if (!final_->imu) return {};
+    return {stored_unreadable_.empty()
+                ? "Stored calibration: none; this is the first"
+                : "Stored calibration: present but not comparable (" + stored_unreadable_ + ")"};
   }
-  if (!lines.empty() && !final_->imu)
-    lines.insert(lines.begin(), "Change to the stored calibration (" + stored_->summary + "):");
+  std::vector<std::string> lines = imu_difference_to_stored(diff);
+  if (final_->record && final_->record->thermal) {
+    for (auto& line : thermal_change_lines(*final_->record->thermal, stored_->record.thermal, info_))
+      lines.push_back(std::move(line));
+  }
+  if (final_->camimu) {
+    for (const CameraRecord& cam : review_cameras()) {
+      const auto& stored = stored_->record.cameras;
+      const auto old = std::find_if(stored.begin(), stored.end(),
+                                    [&](const CameraRecord& c) { return c.name == cam.name; });
+      lines.push_back(old == stored.end() ? "  " + cam.name + ": not in the stored calibration (new)"
+                                          : camera_change_line(cam, *old));
+    }
+  }
+  if (lines.empty()) return lines;
+  lines.insert(lines.begin(), "Change to the stored calibration (" + stored_->summary + "):");
   return lines;
 }
 
 std::vector<std::string> SessionEngine::imu_difference_to_stored(
     std::optional<session_msg::Review::Difference>* diff) const {
   if (!final_->imu) return {};
-  if (!stored_) {
-    return {stored_unreadable_.empty()
-                ? "Stored calibration: none; this is the first"
-                : "Stored calibration: present but not comparable (" + stored_unreadable_ + ")"};
-  }
   const ImuRecord& imu = stored_->record.imu;
   const std::string units = info_.units == ImuUnits::kRaw ? "raw" : "si";
   if (imu.input_units != units)
-    return {"Stored calibration: for " + imu.input_units + " input, not comparable"};
+    return {"  IMU: the stored one is for " + imu.input_units + " input, not comparable"};
   const auto& c = final_->imu->canonical;
   const CanonicalImuModel& old = imu.model;
-  const Eigen::Vector3d db_a = c.b_a - old.b_a, db_g = c.b_g - old.b_g;
-  // Scale changes as relative changes of the correction's diagonal.
-  const Eigen::Vector3d ds_a = c.A_a.diagonal().cwiseQuotient(old.A_a.diagonal()).array() - 1.0;
-  const Eigen::Vector3d ds_g = c.A_g.diagonal().cwiseQuotient(old.A_g.diagonal()).array() - 1.0;
-  auto v3 = [](const Eigen::Vector3d& v, double k, int d) {
-    return fixed(v.x() * k, d) + " " + fixed(v.y() * k, d) + " " + fixed(v.z() * k, d);
-  };
-  *diff = session_msg::Review::Difference{db_a, db_g, ds_a, ds_g};
-  // In the units the correction outputs (m/s^2, deg/s), and in counts beside on raw input.
-  const bool counts = info_.units == ImuUnits::kRaw;
-  const Eigen::Vector3d da = c.A_a * db_a, dg = c.A_g * db_g;
-  return {"Change to the stored calibration (" + stored_->summary + "):",
-          "  accel bias " + v3(da, 1.0, 4) + " m/s^2" + (counts ? " (" + v3(db_a, 1.0, 2) + " counts)" : "") +
-              ", scale " + v3(ds_a, 1e3, 3) + " e-3",
-          "  gyro bias " + v3(dg, 1.0 / kDeg, 4) + " deg/s" +
-              (counts ? " (" + v3(db_g, 1.0, 2) + " counts)" : "") + ", scale " + v3(ds_g, 1e3, 3) + " e-3"};
+  *diff = session_msg::Review::Difference{
+      c.b_a - old.b_a, c.b_g - old.b_g,
+      Eigen::Vector3d(c.A_a.diagonal().cwiseQuotient(old.A_a.diagonal()).array() - 1.0),
+      Eigen::Vector3d(c.A_g.diagonal().cwiseQuotient(old.A_g.diagonal()).array() - 1.0)};
+  return imu_change_lines(c, old, info_.units == ImuUnits::kRaw);
 }
 
 void SessionEngine::review() {
@@ -738,32 +657,9 @@ void SessionEngine::review() {
   session_msg::Review review_message;
   for (const auto& g : gates_) review_message.gates.push_back({g.name, g.value, g.limit, g.pass, g.digits});
   std::vector<std::string> lines;
-  if (final_->imu) {
-    const auto& r = *final_->imu;
-    const auto& m = r.canonical;
-    // The biases as the correction removes them, in the units it outputs: a = A_a (a_in - b_a)
-    // subtracts A_a b_a m/s^2, w = A_g (w_in - b_g) - G a subtracts A_g b_g rad/s. On raw input the
-    // model's own b_a and b_g are counts, shown beside.
-    const Eigen::Vector3d b_a = m.A_a * m.b_a, b_g = m.A_g * m.b_g;
-    const bool counts = info_.units == ImuUnits::kRaw;
-    // With their sigmas (the model's b = -Tedaldi's bias: the same sigma).
-    const Eigen::Vector3d s_a = r.accel_sigma.bias, s_g = r.gyro_sigma.bias;
-    lines.push_back("Accel bias: " + figures_with_sigmas(b_a, sigma_through(m.A_a, s_a), 1.0, 4) + " m/s^2" +
-                    (counts ? " (" + figures_with_sigmas(m.b_a, s_a, 1.0, 1) + " counts)" : std::string()));
-    lines.push_back("Gyro bias: " + figures_with_sigmas(b_g, sigma_through(m.A_g, s_g), 1.0 / kDeg, 3) +
-                    " deg/s" +
-                    (counts ? " (" + figures_with_sigmas(m.b_g, s_g, 1.0, 1) + " counts)" : std::string()));
-    lines.push_back("Accel scale sigma (relative): " +
-                    figures(r.accel_sigma.scale.cwiseQuotient(r.model.accel.scale.cwiseAbs()), 1e3, 3) +
-                    " e-3");
-    lines.push_back("Gyro scale sigma (relative): " +
-                    figures(r.gyro_sigma.scale.cwiseQuotient(r.model.gyro.scale.cwiseAbs()), 1e3, 3) +
-                    " e-3");
-    lines.push_back("Static intervals " + std::to_string(r.intervals.size()) + ", attitudes " +
-                    std::to_string(r.distinct_attitudes));
-  }
+  if (final_->imu) lines = imu_review_lines(*final_->imu, info_);
   if (final_->thermal) {
-    for (auto& line : thermal_lines(*final_->thermal)) lines.push_back(std::move(line));
+    for (auto& line : thermal_review_lines(*final_->thermal)) lines.push_back(std::move(line));
     if (final_->thermal->determined && final_->imu) {
       lines.push_back("The biases above are those at " + fixed(final_->thermal->reference_c, 2) +
                       " C: the samples were corrected to the thermal model's reference temperature");
@@ -772,8 +668,14 @@ void SessionEngine::review() {
     }
   }
   if (final_->camimu) {
-    for (const auto& cam : final_->camimu->result.cameras)
-      for (auto& line : camera_review_lines(cam)) lines.push_back(std::move(line));
+    const auto& solved = final_->camimu->result.cameras;
+    for (const CameraRecord& cam : review_cameras()) {
+      const auto it = std::find_if(solved.begin(), solved.end(),
+                                   [&](const CamImuCameraResult& c) { return c.name == cam.name; });
+      for (auto& line :
+           camera_review_lines(cam, it == solved.end() ? kNotDetermined : it->reprojection_rms_px))
+        lines.push_back(std::move(line));
+    }
     const SplitCheck& chain = final_->chain_self_check;
     if (chain.verdict != SplitCheck::Verdict::kNotRun) {
       lines.push_back("Camera chain self-check: " + chain.summary);

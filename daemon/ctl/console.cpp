@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <sstream>
 
 #include "core/printable_text.hpp"
@@ -123,6 +124,9 @@ std::string gate_line(const msg::Review::Gate& gate) {
   return line;
 }
 
+/// Rows one press of d or u scrolls the review by.
+constexpr std::size_t kReviewScrollRows = 8;
+
 std::string key_help(const ConsoleState& state) {
   if (!state.lost.empty()) {
     return "imucalctl has ended; run it again once imucald is back";
@@ -238,15 +242,34 @@ Block live_block(const ConsoleState& state, int width) {
   return block;
 }
 
-Block review_block(const ConsoleState& state) {
+/// The review: its verdict, gates and lines, wrapped to `width`. When more rows than `rows` are
+/// needed, a window of them from state.review_offset on, with a line that says where it is and
+/// which keys scroll (the operator must be able to read all of what the write stores).
+Block review_block(const ConsoleState& state, std::size_t width, std::size_t rows) {
   Block block;
+  block.wraps = false;  // wrapped here, so that the window counts screen rows
   if (!state.review) return block;
   block.lines.emplace_back("");
   block.lines.push_back(std::string("Review: ") + (state.review->pass ? "PASS" : "FAIL"));
-  for (const auto& gate : state.review->gates) {
-    block.lines.push_back(gate_line(gate));
+  std::vector<std::string> body;
+  for (const auto& gate : state.review->gates)
+    for (auto& piece : wrap(gate_line(gate), width)) body.push_back(std::move(piece));
+  for (const auto& line : state.review->lines)
+    for (auto& piece : wrap("  " + line, width)) body.push_back(std::move(piece));
+  if (body.size() <= rows) {
+    state.review_last_offset = 0;
+    block.lines.insert(block.lines.end(), body.begin(), body.end());
+    return block;
   }
-  for (const auto& line : state.review->lines) block.lines.push_back("  " + line);
+  const std::size_t shown = std::max<std::size_t>(rows, 2) - 1;  // one row says where this is
+  state.review_last_offset = body.size() - shown;
+  const std::size_t first = std::min(state.review_offset, state.review_last_offset);
+  block.lines.insert(block.lines.end(), body.begin() + static_cast<std::ptrdiff_t>(first),
+                     body.begin() + static_cast<std::ptrdiff_t>(first + shown));
+  block.lines.push_back("  -- review rows " + std::to_string(first + 1) + "-" +
+                        std::to_string(first + shown) + " of " + std::to_string(body.size()) +
+                        (first + shown < body.size() ? "; d: more" : "") + (first > 0 ? "; u: back" : "") +
+                        " --");
   return block;
 }
 
@@ -366,14 +389,15 @@ Block coverage_block(const ConsoleState& state, bool grid) {
   return block;
 }
 
-std::vector<std::string> middle(const ConsoleState& state, std::size_t width, int level, std::size_t recent) {
+std::vector<std::string> middle(const ConsoleState& state, std::size_t width, int level, std::size_t recent,
+                                std::size_t review_rows = std::numeric_limits<std::size_t>::max()) {
   std::vector<std::string> out;
   put(out, steps_block(state, level >= 1), width);
   put(out, prompt_block(state), width);
   if (level < 2) put(out, art_block(state), width);
   put(out, live_block(state, static_cast<int>(width)), width);
   put(out, coverage_block(state, level < 2), width);
-  put(out, review_block(state), width);
+  put(out, review_block(state, width, review_rows), width);
   put(out, done_block(state), width);
   put(out, recent_block(state, recent), width);
   return out;
@@ -431,7 +455,10 @@ struct Fold {
   }
   void operator()(const msg::Message& m) const { add_recent(state, message_text(m)); }
   void operator()(const msg::Fault& m) const { add_recent(state, fault_text(m)); }
-  void operator()(const msg::Review& m) const { state.review = m; }
+  void operator()(const msg::Review& m) const {
+    state.review = m;
+    state.review_offset = 0;
+  }
   void operator()(const msg::Done& m) const {
     state.done = m;
     state.prompt.reset();
@@ -507,6 +534,13 @@ std::string render(const ConsoleState& state, const RenderOptions& options) {
         break;
       }
       mid = middle(state, width, level, recent);
+    }
+    if (mid.size() > room && state.review) {
+      // The review in a window of the rows left (d and u scroll it), rather than cut at the end.
+      // Everything but the window: middle() with a window of one row and its marker, less those.
+      const std::size_t others = middle(state, width, level, recent, 0).size() - 2;
+      const std::size_t rows = room > others ? room - others : 0;
+      mid = middle(state, width, level, recent, std::max<std::size_t>(rows, 3));
     }
     if (mid.size() > room) {
       mid.resize(room);
@@ -670,6 +704,13 @@ KeyAction on_key(ConsoleState& state, char key) {
     }
     state.notice = "Not done: " + confirm.question;
     if (key == 'n' || key == 27) return {};
+  }
+  if (state.review && (key == 'd' || key == 'u')) {
+    // Scrolling the review is the console's own: an observer may do it too.
+    const std::size_t at = std::min(state.review_offset, state.review_last_offset);
+    state.review_offset = key == 'd' ? std::min(at + kReviewScrollRows, state.review_last_offset)
+                                     : at - std::min(at, kReviewScrollRows);
+    return {};
   }
   if (state.observe) {
     return {};

@@ -26,11 +26,15 @@ struct ConsoleState {
   std::optional<session_msg::Prompt> prompt;  // the prompt in force
   std::optional<session_msg::Live> live;      // the last live figures of the current step
   std::optional<session_msg::Review> review;  // the review in force
-  std::optional<session_msg::Done> done;      // the session's outcome
-  std::deque<std::string> recent;             // the last messages and faults, oldest first
-  std::string notice;                         // the last refusal from the service or local hint
-  std::string lost;                           // why the connection to imucald ended (empty while connected)
-  bool observe = false;                       // observer: keys other than q are not sent
+  std::size_t review_offset = 0;              // its first row shown when it does not fit (d, u)
+  /// The largest first row the last render could show (render sets it), so that d stops at the
+  /// review's end and u goes back at once.
+  mutable std::size_t review_last_offset = 0;
+  std::optional<session_msg::Done> done;  // the session's outcome
+  std::deque<std::string> recent;         // the last messages and faults, oldest first
+  std::string notice;                     // the last refusal from the service or local hint
+  std::string lost;                       // why the connection to imucald ended (empty while connected)
+  bool observe = false;                   // observer: keys other than q are not sent
   std::optional<Confirm> confirm;  // a destructive key was pressed; waiting for y (or anything else: no)
   bool start_after_done = false;   // restart: the abort is sent, the start follows the end
   std::vector<std::string> restart_steps;  // restart: the steps of the session restarted

@@ -170,6 +170,53 @@ TEST(Console, At80x24TheHeaderAndKeysStayAndNothingIsCut) {
   EXPECT_FALSE(has(screen, "more than fits")) << screen;
 }
 
+TEST(Console, AReviewTallerThanTheTerminalScrollsAndHidesNothing) {
+  ConsoleState state;
+  update(state, status_message("review", "solve"));
+  json lines = json::array();
+  for (int i = 1; i <= 40; ++i) lines.push_back("review line " + std::to_string(i));
+  update(state, {{"type", "review"},
+                 {"pass", true},
+                 {"gates", {{{"name", "gravity residual"}, {"value", 1.2}, {"limit", 2.0}, {"pass", true}}}},
+                 {"lines", lines}});
+  update(state, {{"type", "prompt"},
+                 {"step", "review"},
+                 {"text", "Press y to accept"},
+                 {"keys", {"accept", "reject"}}});
+  const auto seen = [&] {
+    std::vector<int> out;
+    for (const auto& line : lines_of(render(state, {80, 24}))) {
+      if (line.rfind("  review line ", 0) == 0) out.push_back(std::stoi(line.substr(14)));
+    }
+    return out;
+  };
+  auto first = lines_of(render(state, {80, 24}));
+  ASSERT_LE(first.size(), 24u);
+  EXPECT_EQ(first.front().rfind("imucal  rig sim  |  review", 0), 0u) << first.front();
+  EXPECT_EQ(first.back(), "y accept  n reject  R restart  q detach");
+  const std::string screen = render(state, {80, 24});
+  EXPECT_FALSE(has(screen, "more than fits")) << screen;
+  EXPECT_TRUE(has(screen, "  pass gravity residual")) << screen;
+  EXPECT_TRUE(has(screen, "of 41; d: more --")) << screen;
+  // d and u move the window; every line is seen on the way down, and u goes back.
+  std::vector<bool> shown(41, false);
+  std::vector<int> window = seen();
+  ASSERT_FALSE(window.empty());
+  EXPECT_EQ(window.front(), 1);
+  for (int press = 0; press < 10; ++press) {
+    for (int n : seen()) shown[static_cast<std::size_t>(n)] = true;
+    EXPECT_FALSE(on_key(state, 'd').request.has_value());  // the console's own: nothing is sent
+  }
+  for (int i = 1; i <= 40; ++i) EXPECT_TRUE(shown[static_cast<std::size_t>(i)]) << "review line " << i;
+  EXPECT_EQ(seen().back(), 40);
+  EXPECT_TRUE(has(render(state, {80, 24}), "; u: back --"));
+  for (int press = 0; press < 10; ++press) on_key(state, 'u');
+  EXPECT_EQ(seen().front(), 1);
+  // A terminal tall enough shows it all, without the window.
+  EXPECT_FALSE(has(render(state, {80, 70}), "review rows"));
+  EXPECT_FALSE(state.confirm.has_value());  // scrolling asks nothing
+}
+
 TEST(Console, At160x48EverythingShowsWithTheDrawing) {
   const std::string screen = render(busy_console(), {160, 48});
   EXPECT_LE(lines_of(screen).size(), 48u);

@@ -118,6 +118,89 @@ TEST(Imucald, AnOperatorAtTheConsoleRunsAWholeSessionAndTheRecordIsWritten) {
   EXPECT_EQ(daemon.wait(), 0);
 }
 
+/// The text of the screen line that starts with `label`, with the continuation lines the
+/// console wrapped it onto (a full-width line followed by one indented by two) joined back.
+std::string wrapped_line(const std::string& screen, const std::string& label, std::size_t width) {
+  std::vector<std::string> lines;
+  std::istringstream in(screen);
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  for (std::size_t i = 0; i < lines.size(); ++i) {
+    if (lines[i].rfind(label, 0) != 0) continue;
+    std::string out = lines[i];
+    for (std::size_t k = i;
+         k + 1 < lines.size() && lines[k].size() == width && lines[k + 1].rfind("  ", 0) == 0; ++k)
+      out += lines[k + 1].substr(2);
+    return out;
+  }
+  return {};
+}
+
+// The whole session at an operator's 80x24 terminal and at 160x48: the review, taller than 24
+// rows, scrolls with d so that every line of it is seen before y; the end screen keeps the header
+// first and the keys last, and its session folder and report paths are whole (wrapped, never cut).
+TEST(Imucald, TheEndScreenAt80x24And160x48ShowsTheFolderAndTheReportsWhole) {
+  if (std::system("tmux -V >/dev/null 2>&1") != 0)
+    GTEST_SKIP() << "tmux is not installed (apt-get install tmux): the console is not tested in a terminal";
+  for (const auto& [columns, rows] : std::vector<std::pair<std::size_t, int>>{{80, 24}, {160, 48}}) {
+    SCOPED_TRACE(std::to_string(columns) + "x" + std::to_string(rows));
+    const std::string dir = test::scratch_dir() + "/" + std::to_string(columns);
+    std::filesystem::create_directories(dir);
+    const std::string config =
+        test::write_config(dir, "session:\n  steps: [preflight, still, poses, solve, review, write]\n");
+    test::Daemon daemon(dir, {"--sim-operator", "motion", "--time-scale", "0"}, config);
+    ASSERT_TRUE(test::wait_for([&] { return daemon.ready(); }, 30)) << test::read_file(dir + "/imucald.log");
+    const std::string ctl = std::string(IMUCALCTL_PATH) + " --socket " + daemon.socket();
+    Tmux tmux("imucald-end-" + std::to_string(::getpid()) + "-" + std::to_string(columns));
+    const std::string pane = dir + "/pane.txt";
+    ASSERT_EQ(tmux.run("new-session -d -s op -x " + std::to_string(columns) + " -y " + std::to_string(rows) +
+                       " '" + ctl + " attach; echo $? > " + dir + "/exit_code'"),
+              0);
+    auto screen = [&] { return tmux.capture(pane); };
+    ASSERT_TRUE(test::wait_for([&] { return test::has(screen(), "c start a session"); })) << screen();
+    ASSERT_EQ(tmux.run("send-keys -t op c"), 0);
+    ASSERT_TRUE(test::wait_for([&] { return test::has(screen(), "Press c to begin"); })) << screen();
+    ASSERT_EQ(tmux.run("send-keys -t op c"), 0);
+    ASSERT_TRUE(test::wait_for([&] { return test::has(screen(), "y accept"); }, 300)) << screen();
+    // Every line the write stores is seen, scrolling where the review does not fit.
+    std::string seen = screen();
+    for (int press = 0; press < 12 && test::has(screen(), "d: more"); ++press) {
+      ASSERT_EQ(tmux.run("send-keys -t op d"), 0);
+      std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the console redraws at once
+      seen += screen();
+    }
+    for (const char* part :
+         {"Accel bias: ", "Gyro bias: ", "Accel scale against nominal", "Gyro scale against nominal",
+          "Accel misalignment (mrad): yz ", "Gyro misalignment (mrad): yz ", "G-sensitivity",
+          "Static intervals ", "Stored calibration: none; this is the first"})
+      EXPECT_TRUE(test::has(seen, part)) << part << "\n" << seen;
+    if (rows == 24) {
+      EXPECT_TRUE(test::has(seen, "-- review rows 1-")) << seen;  // it did not fit
+    }
+    ASSERT_EQ(tmux.run("send-keys -t op y"), 0);
+    ASSERT_TRUE(test::wait_for([&] { return test::has(screen(), "c start the next session"); }, 60))
+        << screen();
+    const std::string end = screen();
+    std::vector<std::string> lines;
+    std::istringstream in(end);
+    for (std::string line; std::getline(in, line);) lines.push_back(line);
+    while (!lines.empty() && lines.back().empty()) lines.pop_back();  // the pane's rows below the screen
+    ASSERT_FALSE(lines.empty());
+    EXPECT_EQ(lines.front().rfind("imucal  rig ", 0), 0u) << end;  // the header was not scrolled away
+    EXPECT_TRUE(test::has(lines.back(), "q detach")) << end;
+    EXPECT_LE(lines.size(), static_cast<std::size_t>(rows)) << end;
+    const std::string folder = std::filesystem::path(test::session_log(dir)).parent_path().string();
+    EXPECT_EQ(wrapped_line(end, "Session folder: ", columns), "Session folder: " + folder) << end;
+    const std::string report = wrapped_line(end, "Report: ", columns);
+    ASSERT_FALSE(report.empty()) << end;
+    EXPECT_TRUE(std::filesystem::is_regular_file(report.substr(8))) << report << "\n" << end;
+    EXPECT_TRUE(test::has(report, folder)) << report;
+    ASSERT_EQ(tmux.run("send-keys -t op q"), 0);
+    ASSERT_TRUE(test::wait_for([&] { return !test::read_file(dir + "/exit_code").empty(); }, 10));
+    ::kill(daemon.pid(), SIGTERM);
+    EXPECT_EQ(daemon.wait(), 0);
+  }
+}
+
 TEST(Imucald, SigtermEndsTheSessionCleanlyAndLeavesTheStoredRecordAlone) {
   const std::string dir = test::scratch_dir();
   // At 20x real time the session is in its warm-up or still start a few seconds in.
@@ -478,6 +561,10 @@ TEST(Imucald, TheMotionStepRecordsTheCameraAndTheRecordHoldsTheCameraImuCalibrat
   EXPECT_TRUE(test::has(events, " deg (sigma about the camera's x y z ")) << events.substr(0, 3000);
   EXPECT_TRUE(test::has(events, " mm\"")) << "the translation with its sigmas, in mm";
   EXPECT_TRUE(test::has(events, "  time offset ")) << events.substr(0, 3000);
+  EXPECT_TRUE(test::has(events, "  intrinsics (pinhole-radtan, ")) << events.substr(0, 3000);
+  EXPECT_TRUE(test::has(events, "  distortion: k1 ")) << events.substr(0, 3000);
+  // The record stored before held no intrinsics: the change says so instead of inventing one.
+  EXPECT_TRUE(test::has(events, "; intrinsics not in the stored record")) << events.substr(0, 3000);
 
   // The record on the storage holds the camera, T_cam_imu near the virtual camera's mounting.
   const auto stored = test::run_cli({"store", "read", "--config", config, "--json"});
@@ -511,7 +598,19 @@ TEST(Imucald, TheMotionStepRecordsTheCameraAndTheRecordHoldsTheCameraImuCalibrat
     }
     ASSERT_TRUE(c["timeshift_sigma_s"].is_number()) << c.dump();
     EXPECT_GT(c["timeshift_sigma_s"].get<double>(), 0.0);
+    // The intrinsics the extrinsics were found with, each with the camera step's sigma.
+    ASSERT_TRUE(c.contains("camera")) << c.dump();
+    for (const char* key : {"intrinsics_sigma", "distortion_coeffs_sigma"}) {
+      ASSERT_EQ(c["camera"][key].size(),
+                c["camera"][std::string(key).substr(0, std::string(key).size() - 6)].size())
+          << key;
+      for (const auto& v : c["camera"][key]) {
+        ASSERT_TRUE(v.is_number()) << key << " " << c.dump();
+        EXPECT_GT(v.get<double>(), 0.0) << key;
+      }
+    }
   }
+  EXPECT_EQ(record["calibration"]["version"], 3);
   // The final table beside the virtual camera's truth: translation (mm), rotation (deg) and the
   // time offset (ms; the virtual camera stamps 4 ms late) found.
   const std::string truth = test::read_file(session + "/sim-truth.txt");
@@ -667,7 +766,7 @@ TEST(Imucald, AStorageItCannotReadIsNamedAtThePreflightAndTheServiceStillAnswers
     std::string config = test::write_config(dir);
     {
       std::string text = test::read_file(config);
-      text = std::regex_replace(text, std::regex("size_bytes: 4096"), "size_bytes: 1048576");
+      text = std::regex_replace(text, std::regex("size_bytes: 8192"), "size_bytes: 1048576");
       test::write_file(config, text);
     }
     auto rig = load_rig_config(config);
