@@ -13,6 +13,7 @@
 #include "app/camimu_self_check.hpp"
 #include "app/results/thermal_results.hpp"
 #include "app/streams.hpp"
+#include "log/session_log.hpp"
 
 namespace imucal::app {
 namespace {
@@ -58,7 +59,8 @@ Result<calib::CamImuCameraInput> detect_camera(const CamImuRequest& q, const log
   CamImuCameraReport cr;
   cr.name = cam.name;
   cr.source = cam.source;
-  cr.rostopic = cam.rostopic.empty() ? "/" + stream.name + "/image_raw" : cam.rostopic;
+  cr.rostopic = cam.rostopic.empty() ? camera_rostopic(stream) : cam.rostopic;
+  cr.cam_overlaps = cam.cam_overlaps;
   cr.stream = stream;
   cr.stream_id = stream_id;
   cr.frames = found->frames;
@@ -199,14 +201,22 @@ Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& q) {
   }
   const std::vector<CamchainCamera>* cams = &q.cameras;
 
-  auto loaded = load_imu_stream(q.log_path, q.imu_stream,
-                                q.allow_damaged ? DamagePolicy::kAllow : DamagePolicy::kRefuse);
+  std::string imu_stream = q.imu_stream;
+  if (imu_stream.empty() && !q.imu_rostopic.empty()) {
+    // The --imu file's topic chooses among a bag's IMU streams, as Kalibr's does.
+    if (auto log = log::SessionLogReader::open(q.log_path); log.ok()) {
+      imu_stream = imu_stream_of_topic((*log)->imu_streams(), q.imu_rostopic);
+    }
+  }
+  auto loaded =
+      load_imu_stream(q.log_path, imu_stream, q.allow_damaged ? DamagePolicy::kAllow : DamagePolicy::kRefuse);
   if (!loaded.ok()) return loaded.error();
   if (loaded->damaged())
     report.warnings.push_back(loaded->damage_warning() + ": calibrated from its readable part only");
   const auto& reader = *loaded->reader;
   report.imu_stream = loaded->info;
-  report.imu_rostopic = q.imu_rostopic.empty() ? "/" + loaded->info.name : q.imu_rostopic;
+  report.imu_rostopic = q.imu_rostopic.empty() ? imu_rostopic(loaded->info) : q.imu_rostopic;
+  report.imu_update_rate = q.imu_update_rate > 0.0 ? q.imu_update_rate : loaded->info.rate_hz;
   if (auto it = reader.metadata().find("software_version"); it != reader.metadata().end())
     report.log_software_version = it->second;
   IMUCAL_TRY(prepare_options(q, &report));

@@ -42,7 +42,10 @@ struct CamImuRequest {
   /// read_kalibr_imu_noise); empty: CamImuNoise's defaults, the MPU-6000 datasheet's.
   std::optional<calib::CamImuNoise> imu_noise;
   std::string imu_noise_source;
-  std::string imu_rostopic;  // for imu.yaml; empty: /STREAM
+  /// The --imu file's rostopic (chooses the IMU stream when imu_stream is empty; for imu.yaml) and
+  /// update_rate (for imu.yaml; 0: the stream's rate).
+  std::string imu_rostopic;
+  double imu_update_rate = 0.0;
   /// A prior static calibration (--imu-intrinsics) and a g-sensitivity (--gsens): initial values
   /// and fixed blocks (app::imu_prior).
   std::optional<NamedCalibration> imu_intrinsics;
@@ -68,10 +71,11 @@ struct CamImuRequest {
 
 /// One camera as it entered the problem.
 struct CamImuCameraReport {
-  std::string name;         // cam0, ...
-  std::string source;       // the camchain YAML and its key
-  std::string rostopic;     // as given, else /STREAM/image_raw
-  CameraStreamInfo stream;  // the log's stream
+  std::string name;                              // cam0, ...
+  std::string source;                            // the camchain YAML and its key
+  std::string rostopic;                          // as given, else /STREAM/image_raw
+  std::optional<std::vector<int>> cam_overlaps;  // as given (CamchainCamera::cam_overlaps)
+  CameraStreamInfo stream;                       // the log's stream
   int stream_id = 0;
   std::int64_t frames = 0;
   int frames_with_target = 0;
@@ -90,6 +94,7 @@ struct CamImuReport {
   ImuStreamInfo imu_stream;
   std::size_t imu_samples = 0;
   std::string imu_rostopic = "/imu0";
+  double imu_update_rate = 0.0;  // Hz, as given (the --imu file's), else the stream's
   TargetDescription target;
   std::string target_source;
   std::string noise_source;  // the imu.yaml, or "defaults (MPU-6000 datasheet)"

@@ -46,6 +46,16 @@ std::optional<int> stream_named(const std::string& name, const std::map<int, Cam
   return std::nullopt;
 }
 
+/// The stream imported from a ROS bag's topic `topic` (its device is "rosbag:TOPIC").
+std::optional<int> stream_of_bag_topic(const std::string& topic,
+                                       const std::map<int, CameraStreamInfo>& streams) {
+  if (topic.empty()) return std::nullopt;
+  for (const auto& [id, info] : streams) {
+    if (info.device == "rosbag:" + topic) return id;
+  }
+  return std::nullopt;
+}
+
 std::string stream_list(const std::map<int, CameraStreamInfo>& streams) {
   std::string names;
   for (const auto& [id, info] : streams) names += (names.empty() ? "" : ", ") + info.name;
@@ -215,8 +225,12 @@ Result<std::vector<CamchainCamera>> read_camchain(const std::string& path) {
       if (node["rostopic"]) cam.rostopic = node["rostopic"].as<std::string>();
       if (node["imucal"] && node["imucal"]["camera_stream"])
         cam.camera_stream = node["imucal"]["camera_stream"].as<std::string>();
+      if (node["cam_overlaps"]) cam.cam_overlaps = node["cam_overlaps"].as<std::vector<int>>();
     } catch (const YAML::Exception&) {
-      return make_error(Errc::kCorrupt, path + " " + name + ": rostopic and camera_stream must be text");
+      return make_error(Errc::kCorrupt,
+                        path + " " + name +
+                            ": rostopic and camera_stream must be text, cam_overlaps a list of "
+                            "camera numbers");
     }
     if (Status st = read_intrinsics_covariance(node, path + " " + name, &cam); !st.ok()) return st.error();
     cam.stamp_row_given = static_cast<bool>(node["stamp_row"]);
@@ -242,8 +256,12 @@ Result<std::vector<CamchainCamera>> read_camchain_files(const std::vector<std::s
   for (const auto& path : paths) {
     auto cams = read_camchain(path);
     if (!cams.ok()) return cams.error();
+    const int first = static_cast<int>(out.size());
     for (std::size_t k = 0; k < cams->size(); ++k) {
       CamchainCamera& cam = (*cams)[k];
+      if (cam.cam_overlaps) {
+        for (int& other : *cam.cam_overlaps) other += first;  // the file's numbers, counted from its first
+      }
       cam.source = path + " " + cam.name;
       cam.name = "cam" + std::to_string(out.size());
       cam.follows_in_file = k > 0;
@@ -259,6 +277,7 @@ Result<std::vector<int>> match_camera_streams(const std::vector<CamchainCamera>&
   std::set<int> used;
   for (const auto& cam : cameras) {
     std::optional<int> id = stream_named(cam.camera_stream, streams);
+    if (!id) id = stream_of_bag_topic(cam.rostopic, streams);
     if (!id) id = stream_named(stream_of_topic(cam.rostopic), streams);
     if (!id && cameras.size() == 1 && streams.size() == 1) id = streams.begin()->first;
     if (!id) {
@@ -302,6 +321,50 @@ Result<calib::CamImuNoise> read_kalibr_imu_noise(const std::string& path) {
       return make_error(Errc::kCorrupt, path + ": " + key + " must be a positive number");
   }
   return noise;
+}
+
+Result<KalibrImuTopic> read_kalibr_imu_topic(const std::string& path) {
+  auto root = load_yaml(path);
+  if (!root.ok()) return root.error();
+  YAML::Node node = *root;
+  if (node.IsMap() && !node["accelerometer_noise_density"] && node["imu0"]) node = node["imu0"];
+  KalibrImuTopic out;
+  if (!node.IsMap()) return out;
+  try {
+    if (node["rostopic"]) out.rostopic = node["rostopic"].as<std::string>();
+    if (node["update_rate"]) out.update_rate = node["update_rate"].as<double>();
+  } catch (const YAML::Exception&) {
+    return make_error(Errc::kCorrupt,
+                      path + ": rostopic must be text and update_rate a number (Kalibr imu.yaml)");
+  }
+  if (node["update_rate"] && !(std::isfinite(out.update_rate) && out.update_rate > 0.0))
+    return make_error(Errc::kCorrupt, path + ": update_rate must be a positive number of Hz");
+  return out;
+}
+
+std::string camera_rostopic(const CameraStreamInfo& stream) {
+  const std::string bag = "rosbag:";
+  if (stream.device.compare(0, bag.size(), bag) == 0) return stream.device.substr(bag.size());
+  return "/" + stream.name + "/image_raw";
+}
+
+std::string imu_rostopic(const ImuStreamInfo& stream) {
+  const std::string bag = "rosbag:";
+  if (stream.device.compare(0, bag.size(), bag) == 0) return stream.device.substr(bag.size());
+  return "/" + stream.name;
+}
+
+std::string imu_stream_of_topic(const std::map<int, ImuStreamInfo>& streams, const std::string& topic) {
+  if (topic.empty()) return {};
+  for (const auto& [id, info] : streams) {
+    if (info.device == "rosbag:" + topic) return info.name;
+  }
+  std::string name = topic;
+  while (!name.empty() && name.front() == '/') name.erase(name.begin());
+  for (const auto& [id, info] : streams) {
+    if (info.name == name) return info.name;
+  }
+  return {};
 }
 
 CanonicalImuModel canonical_on_nominal_si(const CanonicalImuModel& m, const ImuStreamInfo& info) {

@@ -33,6 +33,9 @@ struct CamchainCamera {
   CameraModel camera;
   std::string camera_stream;  // `imucal: camera_stream:` (written by imucal calibrate camera)
   std::string rostopic;       // Kalibr's topic, e.g. /cam0/image_raw
+  /// Kalibr's cam_overlaps: the cameras it shares views with, numbered as the cameras of all
+  /// files together (cam0, cam1, ... in the order given); empty when the file has none.
+  std::optional<std::vector<int>> cam_overlaps;
   /// Kalibr's T_cn_cnm1 (camN >= 1 of a chain) and, from imucal's chain, its 6 x 6 covariance
   /// (`imucal: T_cn_cnm1_covariance:`, rotation about camN's axes then translation).
   std::optional<Eigen::Isometry3d> T_cn_cnm1;
@@ -81,6 +84,24 @@ void set_intrinsics_covariance(const calib::CameraIntrinsicsResult& solved, Camc
 /// writes it, or under `imu0:` as kalibr_calibrate_imu_camera and `calibrate camimu` write it).
 /// Errors: kNotFound, kCorrupt (a figure missing, not a positive number).
 [[nodiscard]] Result<calib::CamImuNoise> read_kalibr_imu_noise(const std::string& path);
+
+/// What else a Kalibr imu.yaml says, where it says it: the IMU's topic and its rate, which the
+/// camera-IMU result's imu.yaml gives back as they were given.
+struct KalibrImuTopic {
+  std::string rostopic;      // empty: not given
+  double update_rate = 0.0;  // Hz; 0: not given
+};
+/// kCorrupt when `rostopic` is not text or `update_rate` not a positive number.
+[[nodiscard]] Result<KalibrImuTopic> read_kalibr_imu_topic(const std::string& path);
+
+/// The ROS topic of a log's stream: the bag topic it was imported from (device "rosbag:TOPIC"),
+/// else the one Kalibr's tools give it (/NAME/image_raw for a camera, /NAME for an IMU).
+std::string camera_rostopic(const CameraStreamInfo& stream);
+std::string imu_rostopic(const ImuStreamInfo& stream);
+
+/// The IMU stream imported from the ROS bag topic `topic` (its device "rosbag:TOPIC"), or the
+/// stream named as the topic (`/imu0` and `imu0` name imu0); empty when none is.
+std::string imu_stream_of_topic(const std::map<int, ImuStreamInfo>& streams, const std::string& topic);
 
 /// A canonical model for the stream's input values re-expressed for its nominal SI values
 /// (si = scale .* (raw - offset), ImuStreamInfo::accel/gyro): A' = A diag(scale)^-1,

@@ -134,31 +134,9 @@ Result<std::vector<std::uint8_t>> read_binary(const fs::path& path) {
 /// PNG bytes of a stored frame: PNG as is, other encodings decoded and encoded losslessly.
 Result<std::vector<std::uint8_t>> frame_png(const CameraFrame& frame) {
   if (frame.encoding == "png") return frame.data;
-  Image image;
-  const std::size_t pixels = static_cast<std::size_t>(std::max(frame.width, 0)) * std::max(frame.height, 0);
-  if (frame.encoding == "gray8" || frame.encoding == "GREY" || frame.encoding == "Y800") {
-    if (frame.data.size() != pixels || pixels == 0) {
-      return make_error(Errc::kCorrupt, "frame at t_ns " + std::to_string(frame.t_ns) + " holds " +
-                                            std::to_string(frame.data.size()) + " bytes, expected " +
-                                            std::to_string(pixels) + " for " + frame.encoding);
-    }
-    image = Image{frame.width, frame.height, 1, 8, frame.data};
-  } else if (frame.encoding == "Y16 " || frame.encoding == "gray16") {
-    if (frame.data.size() != 2 * pixels || pixels == 0) {
-      return make_error(Errc::kCorrupt, "frame at t_ns " + std::to_string(frame.t_ns) +
-                                            " has the wrong size for " + frame.encoding);
-    }
-    image = Image{frame.width, frame.height, 1, 16, frame.data};  // little-endian host
-  } else {
-    auto decoded = decode_image(frame.data);
-    if (!decoded.ok()) {
-      return make_error(Errc::kUnsupported,
-                        "frame at t_ns " + std::to_string(frame.t_ns) + " has encoding '" + frame.encoding +
-                            "', which cannot be converted to PNG (" + decoded.error().message + ")");
-    }
-    image = std::move(*decoded);
-  }
-  return encode_png(image);
+  auto image = frame_image(frame);
+  if (!image.ok()) return image.error();
+  return encode_png(*image);
 }
 
 struct ImuFolder {
@@ -402,6 +380,32 @@ Status write_camera_folder(SessionLogWriter& w, const CameraFolder& f, ImportSum
 }
 
 }  // namespace
+
+Result<Image> frame_image(const CameraFrame& frame) {
+  const std::size_t pixels = static_cast<std::size_t>(std::max(frame.width, 0)) * std::max(frame.height, 0);
+  if (frame.encoding == "gray8" || frame.encoding == "GREY" || frame.encoding == "Y800") {
+    if (frame.data.size() != pixels || pixels == 0) {
+      return make_error(Errc::kCorrupt, "frame at t_ns " + std::to_string(frame.t_ns) + " holds " +
+                                            std::to_string(frame.data.size()) + " bytes, expected " +
+                                            std::to_string(pixels) + " for " + frame.encoding);
+    }
+    return Image{frame.width, frame.height, 1, 8, frame.data};
+  }
+  if (frame.encoding == "Y16 " || frame.encoding == "gray16") {
+    if (frame.data.size() != 2 * pixels || pixels == 0) {
+      return make_error(Errc::kCorrupt, "frame at t_ns " + std::to_string(frame.t_ns) +
+                                            " has the wrong size for " + frame.encoding);
+    }
+    return Image{frame.width, frame.height, 1, 16, frame.data};  // little-endian host
+  }
+  auto decoded = decode_image(frame.data);
+  if (!decoded.ok()) {
+    return make_error(Errc::kUnsupported, "frame at t_ns " + std::to_string(frame.t_ns) + " has encoding '" +
+                                              frame.encoding + "', which cannot be decoded (" +
+                                              decoded.error().message + ")");
+  }
+  return std::move(*decoded);
+}
 
 Result<ImportSummary> import_euroc(const std::string& dir, const std::string& out_path,
                                    const OutputOptions& options) {

@@ -6,7 +6,8 @@
 //     form that reads back to the same double, PNG bytes are copied unchanged;
 //   - plain-text accelerometer and gyroscope files ("t x y z" rows, t in seconds), as imu_tk
 //     and many IMU tools write them, in raw counts or SI;
-//   - generic CSV with a column mapping.
+//   - generic CSV with a column mapping;
+//   - ROS 1 bags (sensor_msgs/Imu, Image, CompressedImage topics; log/rosbag.hpp), both ways.
 // Every import writes a session log through a temporary file next to the output, renamed into
 // place only when complete; a failure removes it. An existing output is replaced only with
 // `force`. Parse errors name the file, the line (and column) and what is wrong.
@@ -21,11 +22,13 @@
 #include <string_view>
 #include <vector>
 
+#include "core/frame.hpp"
 #include "core/imu.hpp"
 #include "core/progress.hpp"
 #include "core/result.hpp"
 #include "core/text_file.hpp"
 #include "core/time.hpp"
+#include "log/frame_codec.hpp"
 
 namespace imucal::log {
 
@@ -384,6 +387,31 @@ struct ExportSummary {
 /// refused unless `allow_damaged`.
 [[nodiscard]] Result<ExportSummary> export_euroc(const std::string& log_path, const std::string& dir,
                                                  const OutputOptions& options, bool allow_damaged = false);
+
+/// The pixels of a stored frame: PNG and WebP decoded, raw gray8 and gray16 as they are.
+[[nodiscard]] Result<Image> frame_image(const CameraFrame& frame);
+
+/// A ROS 1 bag import (log/rosbag.hpp, docs/datasets.md).
+struct BagImport {
+  std::string path;
+  /// The topics to import, in stream order (sensor_msgs/Imu topics become imu0, imu1, ...; image
+  /// topics cam0, cam1, ...). Empty: every Imu, Image and CompressedImage topic, by name.
+  std::vector<std::string> topics;
+  /// Stamp with the time the bag received each message instead of its header.stamp.
+  bool receive_time = false;
+  /// Import the whole chunks of a bag that is cut short or damaged (a note says where it ends).
+  bool allow_damaged = false;
+};
+[[nodiscard]] Result<ImportSummary> import_bag(const BagImport& in, const std::string& out_path,
+                                               const OutputOptions& options);
+
+enum class BagCompression { kNone, kBz2, kLz4 };
+/// Writes a session log as a ROS 1 bag that Kalibr and rosbag read: each IMU stream as
+/// sensor_msgs/Imu on /imuN (SI), each camera as sensor_msgs/Image on /camN/image_raw (mono8,
+/// mono16 or bgr8), stamped (header and receive time) with the log's times.
+[[nodiscard]] Result<ExportSummary> export_bag(const std::string& log_path, const std::string& bag_path,
+                                               const OutputOptions& options, bool allow_damaged = false,
+                                               BagCompression compression = BagCompression::kNone);
 
 // EuRoC pieces, exposed for tests.
 struct EurocImageRow {

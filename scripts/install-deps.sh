@@ -9,7 +9,7 @@ build_pkgs=(
   build-essential cmake ninja-build pkg-config ccache time
   libeigen3-dev libceres-dev
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev libopencv-calib3d-dev
-  libboost-dev libgpiod-dev libpng-dev libwebp-dev libsqlite3-dev sqlite3 zlib1g-dev libyaml-cpp-dev nlohmann-json3-dev
+  libboost-dev libgpiod-dev libpng-dev libwebp-dev libbz2-dev liblz4-dev libzstd-dev libsqlite3-dev sqlite3 zlib1g-dev libyaml-cpp-dev nlohmann-json3-dev
   libspdlog-dev libfmt-dev libcli11-dev libsystemd-dev
   libaravis-dev libusb-1.0-0-dev libcamera-dev libapriltag-dev
   gnuplot-nox
@@ -23,6 +23,8 @@ test_pkgs=(
   chromium
   tmux systemd
   lintian
+  python3-rosbag python3-sensor-msgs python3-roslz4  # ROS's own bag writer and reader, for rosbag.python_bags
+  python3-lz4 python3-zstandard  # a second writer of rosbag2 mcap chunks, for rosbag.python_bags
 )
 
 want=("${build_pkgs[@]}")

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
+#include "app/camimu_inputs.hpp"
 #include "core/version.hpp"
 #include "core/yaml_json.hpp"
 
@@ -211,7 +212,7 @@ YAML::Node camera_node(const CameraCalibrationReport& r) {
   const auto& res = r.intrinsics;
   YAML::Node cam(YAML::NodeType::Map);
   camera_to_yaml(res.camera, cam);
-  cam["rostopic"] = "/" + r.stream.name + "/image_raw";
+  cam["rostopic"] = camera_rostopic(r.stream);
   YAML::Node q(YAML::NodeType::Map);
   q["intrinsics_sigma"] = flow_sigmas(intrinsics_sigmas(res));
   q["distortion_coeffs_sigma"] = flow_sigmas(distortion_sigmas(res));

@@ -4,6 +4,8 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -557,6 +559,14 @@ std::string camimu_camchain_yaml(const CamImuReport& r) {
     YAML::Node cam(YAML::NodeType::Map);
     camera_to_yaml(c.camera, cam);
     cam["rostopic"] = in != nullptr ? in->rostopic : "/" + c.stream + "/image_raw";
+    // Kalibr's cam_overlaps as the camera files gave them; one camera overlaps none.
+    if (in != nullptr && in->cam_overlaps) {
+      cam["cam_overlaps"] = *in->cam_overlaps;
+      cam["cam_overlaps"].SetStyle(YAML::EmitterStyle::Flow);
+    } else if (cams.size() == 1) {
+      cam["cam_overlaps"] = YAML::Node(YAML::NodeType::Sequence);
+      cam["cam_overlaps"].SetStyle(YAML::EmitterStyle::Flow);
+    }
     cam["T_cam_imu"] = rows(matrix_of(c.T_cam_imu));
     cam["timeshift_cam_imu"] = c.timeshift_cam_imu_s;
     // Kalibr's chain: each camera from the one before it.
@@ -587,6 +597,14 @@ std::string camimu_camchain_yaml(const CamImuReport& r) {
               "figures under camN.imucal\n# (docs/camimu-calibration.md)\n");
 }
 
+namespace {
+double six_significant(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.6g", v);
+  return std::strtod(text, nullptr);
+}
+}  // namespace
+
 std::string camimu_imu_yaml(const CamImuReport& r) {
   const auto& res = r.result;
   const auto& n = r.options.noise;
@@ -599,7 +617,9 @@ std::string camimu_imu_yaml(const CamImuReport& r) {
   imu["model"] = res.model == CamImuModelKind::kBasic ? "calibrated" : "scale-misalignment";
   imu["rostopic"] = r.imu_rostopic;
   imu["time_offset"] = 0.0;
-  imu["update_rate"] = r.imu_stream.rate_hz;
+  // As the --imu file gave it; else the stream's rate to six digits (a rate measured from stamps
+  // carries the jitter of its intervals).
+  imu["update_rate"] = r.imu_update_rate > 0.0 ? r.imu_update_rate : six_significant(r.imu_stream.rate_hz);
   if (res.model == CamImuModelKind::kExtended) {
     const KalibrImuIntrinsics k = kalibr_from_krebs(res.imu);
     YAML::Node accel(YAML::NodeType::Map), gyro(YAML::NodeType::Map);

@@ -119,8 +119,7 @@ void add_detection_store_options(CLI::App* cmd, DetectionStoreArgs* args) {
                 "~/.cache/imucal)");
 }
 
-std::string detection_cache_dir(const DetectionStoreArgs& args) {
-  if (args.no_cache) return {};
+std::string user_cache_dir() {
   auto env = [](const char* name) {
     const char* v = std::getenv(name);
     return v != nullptr ? std::string(v) : std::string();
@@ -128,6 +127,12 @@ std::string detection_cache_dir(const DetectionStoreArgs& args) {
   std::string base = env("IMUCAL_CACHE_DIR");
   if (base.empty() && !env("XDG_CACHE_HOME").empty()) base = env("XDG_CACHE_HOME") + "/imucal";
   if (base.empty() && !env("HOME").empty()) base = env("HOME") + "/.cache/imucal";
+  return base;
+}
+
+std::string detection_cache_dir(const DetectionStoreArgs& args) {
+  if (args.no_cache) return {};
+  const std::string base = user_cache_dir();
   return base.empty() ? std::string() : base + "/detections";
 }
 

@@ -55,6 +55,10 @@ struct DetectionStoreArgs {
   bool no_cache = false;
 };
 void add_detection_store_options(CLI::App* cmd, DetectionStoreArgs* args);
+/// The user's cache folder: $IMUCAL_CACHE_DIR, else $XDG_CACHE_HOME/imucal, else
+/// $HOME/.cache/imucal; empty when none is set.
+std::string user_cache_dir();
+
 /// The detection cache folder: $IMUCAL_CACHE_DIR, else $XDG_CACHE_HOME/imucal, else
 /// $HOME/.cache/imucal, with "/detections" appended; empty with --no-cache or when none is set.
 std::string detection_cache_dir(const DetectionStoreArgs& args);

@@ -15,6 +15,7 @@
 #include "app/results/output_checks.hpp"
 #include "app/stream_stats.hpp"
 #include "app/streams.hpp"
+#include "daemon/cli/bag_input.hpp"
 #include "daemon/cli/command.hpp"
 
 namespace imucal::cli {
@@ -22,6 +23,7 @@ namespace {
 
 struct AllanCliOptions {
   std::string log_path;
+  std::vector<std::string> topics;  // LOG a ROS bag: the topics to import
   std::string stream;
   std::string rostopic = "/imu0";
   bool allow_motion = false;
@@ -31,10 +33,11 @@ struct AllanCliOptions {
   std::string json_path;
 };
 
-void run(const AllanCliOptions& o) {
-  const app::OutputPolicy outputs{o.force, {o.log_path}};
-  if (auto s = app::check_outputs({{"-o", o.yaml_path}, {"--json", o.json_path}}, outputs); !s.ok())
+void run(const AllanCliOptions& given) {
+  const app::OutputPolicy outputs{given.force, {given.log_path}};
+  if (auto s = app::check_outputs({{"-o", given.yaml_path}, {"--json", given.json_path}}, outputs); !s.ok())
     fail(s.error());
+  const AllanCliOptions o = with_log_of_input(given);
   auto loaded = app::load_imu_stream(
       o.log_path, o.stream, o.allow_damaged ? app::DamagePolicy::kAllow : app::DamagePolicy::kRefuse);
   if (!loaded.ok()) fail(loaded.error());
@@ -123,7 +126,8 @@ void setup(CLI::App& root) {
   CLI::App* cmd =
       root.add_subcommand("allan", "Noise figures of a still recording (Allan deviation), Kalibr imu.yaml");
   auto o = std::make_shared<AllanCliOptions>();
-  cmd->add_option("LOG", o->log_path, "Session log (.imulog) of the rig at rest")->required();
+  cmd->add_option("LOG", o->log_path, "Session log (.imulog) of the rig at rest, or a ROS 1 bag")->required();
+  add_bag_topics_option(cmd, &o->topics);
   cmd->add_option("--stream", o->stream, "IMU stream name (default: the first)");
   cmd->add_option("--rostopic", o->rostopic, "rostopic written to imu.yaml");
   cmd->add_flag("--allow-motion", o->allow_motion, "Do not refuse a recording in which the rig moves");

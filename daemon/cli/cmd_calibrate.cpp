@@ -21,6 +21,7 @@
 #include "app/solvers.hpp"
 #include "app/streams.hpp"
 #include "calib/static_calibration.hpp"
+#include "daemon/cli/bag_input.hpp"
 #include "daemon/cli/calibrate_group.hpp"
 #include "daemon/cli/command.hpp"
 
@@ -29,6 +30,7 @@ namespace {
 
 struct StaticCliOptions {
   std::string log_path;
+  std::vector<std::string> topics;  // LOG a ROS bag: the topics to import
   std::string stream;
   GravityArgs grav;
   double init_still_s = 0.0;
@@ -125,14 +127,16 @@ void print_summary(const std::string& log_path, const ImuStreamInfo& info, std::
   if (res->warnings.empty()) std::cout << "  no warnings\n";
 }
 
-void run(const StaticCliOptions& o) {
-  // Outputs are checked before the work: never an input (the log, the thermal model, the fixed
-  // g-sensitivity), never each other, never an existing file without --force.
-  app::OutputPolicy outputs{o.force, {o.log_path}};
-  if (!o.thermal_path.empty()) outputs.inputs.push_back(o.thermal_path);
-  if (o.gsens.size() == 2) outputs.inputs.push_back(o.gsens[1]);
-  if (auto s = app::check_outputs({{"-o", o.yaml_path}, {"--json", o.json_path}}, outputs); !s.ok())
+void run(const StaticCliOptions& as_given) {
+  // Outputs are checked before the work: never an input (the log or bag, the thermal model, the
+  // fixed g-sensitivity), never each other, never an existing file without --force.
+  app::OutputPolicy outputs{as_given.force, {as_given.log_path}};
+  if (!as_given.thermal_path.empty()) outputs.inputs.push_back(as_given.thermal_path);
+  if (as_given.gsens.size() == 2) outputs.inputs.push_back(as_given.gsens[1]);
+  if (auto s = app::check_outputs({{"-o", as_given.yaml_path}, {"--json", as_given.json_path}}, outputs);
+      !s.ok())
     fail(s.error());
+  const StaticCliOptions o = with_log_of_input(as_given);
   // The options are checked before the log is read.
   const app::GravityChoice gravity = resolve_gravity(o.grav);
   calib::StaticCalibrationOptions opt = method_options(o, gravity.mps2);
@@ -210,7 +214,9 @@ void setup(CLI::App& root) {
       "static",
       "Static multi-position IMU calibration (Tedaldi et al.): accel and gyro scale, misalignment, bias");
   auto o = std::make_shared<StaticCliOptions>();
-  cmd->add_option("LOG", o->log_path, "Session log (.imulog) of the static protocol")->required();
+  cmd->add_option("LOG", o->log_path, "Session log (.imulog) of the static protocol, or a ROS 1 bag")
+      ->required();
+  add_bag_topics_option(cmd, &o->topics);
   cmd->add_option("--stream", o->stream, "IMU stream name (default: the first)");
   add_gravity_options(cmd, &o->grav);
   cmd->add_option("--init-still", o->init_still_s,

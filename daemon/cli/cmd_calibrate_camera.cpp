@@ -19,6 +19,7 @@
 #include "app/solvers.hpp"
 #include "calib/camera_intrinsics.hpp"
 #include "core/text_format.hpp"
+#include "daemon/cli/bag_input.hpp"
 #include "daemon/cli/calibrate_group.hpp"
 #include "daemon/cli/command.hpp"
 #include "log/session_log.hpp"
@@ -28,6 +29,7 @@ namespace {
 
 struct CameraCliOptions {
   std::string log_path;
+  std::vector<std::string> topics;  // LOG a ROS bag: the topics to import
   std::vector<std::string> cameras;
   std::string target_path;
   std::vector<std::string> models;
@@ -195,13 +197,14 @@ std::vector<CameraModelKind> models_for(const CameraCliOptions& o, std::size_t c
   return out;
 }
 
-void run(const CameraCliOptions& o) {
-  const calib::ShutterSolveOptions shutter = shutter_solve_options(o.shutter);  // exit 2 before any work
-  // Outputs are checked before the work: never the log or the target file, never an existing
-  // file without --force.
-  app::OutputPolicy outputs{o.force, {o.log_path}};
-  if (!o.target_path.empty()) outputs.inputs.push_back(o.target_path);
-  if (auto s = app::check_output(o.yaml_path, outputs); !s.ok()) fail(s.error());
+void run(const CameraCliOptions& given) {
+  const calib::ShutterSolveOptions shutter = shutter_solve_options(given.shutter);  // exit 2 before any work
+  // Outputs are checked before the work: never the log (or the bag) or the target file, never an
+  // existing file without --force.
+  app::OutputPolicy outputs{given.force, {given.log_path}};
+  if (!given.target_path.empty()) outputs.inputs.push_back(given.target_path);
+  if (auto s = app::check_output(given.yaml_path, outputs); !s.ok()) fail(s.error());
+  const CameraCliOptions o = with_log_of_input(given);
 
   const app::TargetChoice target = resolve_target(o.target_path, o.log_path);
   const std::vector<std::string> streams = streams_to_calibrate(o);
@@ -284,9 +287,13 @@ void setup(CLI::App& root) {
       "  imucal calibrate camera rig.imulog -o camchain.yaml\n"
       "  imucal calibrate camera stereo.imulog --camera left --camera right --model pinhole-equi -o "
       "camchain.yaml\n"
-      "  imucal calibrate camera fisheye.imulog --model auto -o camchain.yaml");
+      "  imucal calibrate camera fisheye.imulog --model auto -o camchain.yaml\n"
+      "  imucal calibrate camera calib.bag --topics /cam0/image_raw /cam1/image_raw -o camchain.yaml   # "
+      "a Kalibr bag");
   auto o = std::make_shared<CameraCliOptions>();
-  cmd->add_option("LOG", o->log_path, "Session log (.imulog) with the camera streams")->required();
+  cmd->add_option("LOG", o->log_path, "Session log (.imulog) with the camera streams, or a ROS 1 bag")
+      ->required();
+  add_bag_topics_option(cmd, &o->topics);
   cmd->add_option(
       "--camera", o->cameras,
       "Camera stream name; repeat it for several cameras, the first becoming cam0 (default: every "

@@ -21,6 +21,7 @@
 #include "app/results/camimu_results.hpp"
 #include "app/results/output.hpp"
 #include "app/solvers.hpp"
+#include "daemon/cli/bag_input.hpp"
 #include "daemon/cli/calibrate_group.hpp"
 #include "daemon/cli/command.hpp"
 #include "log/session_log.hpp"
@@ -30,6 +31,7 @@ namespace {
 
 struct CamImuCliOptions {
   std::string log_path;
+  std::vector<std::string> topics;  // LOG a ROS bag: the topics to import
   std::vector<std::string> camera_paths;
   std::string target_path;
   std::string imu_path;
@@ -89,6 +91,10 @@ app::CamImuRequest build_request(const CamImuCliOptions& o) {
     if (!noise.ok()) fail(noise.error(), "--imu");
     q.imu_noise = *noise;
     q.imu_noise_source = o.imu_path;
+    auto topic = app::read_kalibr_imu_topic(o.imu_path);
+    if (!topic.ok()) fail(topic.error(), "--imu");
+    q.imu_rostopic = topic->rostopic;
+    q.imu_update_rate = topic->update_rate;
   }
   if (!o.imu_intrinsics_path.empty()) {
     auto c = app::read_imucal_calibration(o.imu_intrinsics_path);
@@ -234,14 +240,15 @@ void print_summary(const app::CamImuReport& r, const std::string& out_dir) {
   if (r.warnings.empty()) std::printf("  no warnings\n");
 }
 
-void run(const CamImuCliOptions& o) {
-  app::OutputPolicy outputs{o.force, {o.log_path}};
-  for (const auto* input :
-       {&o.target_path, &o.imu_path, &o.imu_intrinsics_path, &o.gsens_path, &o.thermal_path}) {
+void run(const CamImuCliOptions& given) {
+  app::OutputPolicy outputs{given.force, {given.log_path}};
+  for (const auto* input : {&given.target_path, &given.imu_path, &given.imu_intrinsics_path,
+                            &given.gsens_path, &given.thermal_path}) {
     if (!input->empty()) outputs.inputs.push_back(*input);
   }
-  outputs.inputs.insert(outputs.inputs.end(), o.camera_paths.begin(), o.camera_paths.end());
-  const std::vector<std::string> paths = check_outputs(o, outputs);
+  outputs.inputs.insert(outputs.inputs.end(), given.camera_paths.begin(), given.camera_paths.end());
+  const std::vector<std::string> paths = check_outputs(given, outputs);
+  const CamImuCliOptions o = with_log_of_input(given);
   app::CamImuRequest q = build_request(o);
   // The options are checked here, before the camera module loads (one range per option:
   // calib::CamImuLimits, which the flags' checks above use too).
@@ -287,7 +294,9 @@ void run(const CamImuCliOptions& o) {
 }
 
 void add_options(CLI::App* cmd, CamImuCliOptions* o) {
-  cmd->add_option("LOG", o->log_path, "Session log (.imulog) with the IMU and camera streams")->required();
+  cmd->add_option("LOG", o->log_path, "Session log (.imulog) with the IMU and camera streams, or a ROS 1 bag")
+      ->required();
+  add_bag_topics_option(cmd, &o->topics);
   cmd->add_option("--camera", o->camera_paths,
                   "Camera intrinsics: the YAML of imucal calibrate camera or a Kalibr camchain (cam0..camN); "
                   "repeat for more files")

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// imucal import euroc|ascii|csv: dataset formats into a session log (docs/datasets.md).
+// imucal import euroc|bag|rosbag2|ascii|csv: dataset formats into a session log (docs/datasets.md).
 
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <sstream>
@@ -93,10 +94,47 @@ void run_import(const std::string& out_path, bool force, const std::vector<std::
   for (const auto& note : s.notes) std::cout << "note: " << note << "\n";
 }
 
+/// `import bag` and `import rosbag2`: one importer, which reads both kinds.
+void add_bag_import(CLI::App* import_cmd, const char* name, const char* arg, const char* description) {
+  auto common = std::make_shared<CommonOptions>();
+  auto in = std::make_shared<log::BagImport>();
+  CLI::App* cmd = import_cmd->add_subcommand(name, description);
+  cmd->add_option(arg, in->path,
+                  std::string(name) == "bag" ? "The bag file" : "The rosbag2 folder or storage file")
+      ->required();
+  cmd->add_option("--topics", in->topics,
+                  "Topics to import, as Kalibr names them (/cam0/image_raw /imu0); Imu topics become imu0, "
+                  "imu1, ... and image topics cam0, cam1, ... in this order (default: every Imu, Image and "
+                  "CompressedImage topic, by name)")
+      ->expected(1, -1);
+  cmd->add_flag("--bag-time", in->receive_time,
+                "Stamp messages with the time the bag received them instead of their header.stamp");
+  cmd->add_flag("--allow-damaged", in->allow_damaged,
+                "Import the whole chunks of a bag that is cut short or damaged");
+  add_common(cmd, *common);
+  cmd->callback([common, in] {
+    std::error_code ec;
+    const bool folder = std::filesystem::is_directory(in->path, ec);
+    run_import(common->out_path, common->force, folder ? std::vector<std::string>{} : std::vector{in->path},
+               folder ? in->path : "", [&](const log::OutputOptions& o) {
+                 auto summary = log::import_bag(*in, common->out_path, o);
+                 // A bag in a form imucal does not read (format 1.2, a JPEG image, a Bayer
+                 // encoding) is an input it cannot use: exit 3, as for a malformed one (docs/cli.md).
+                 if (!summary.ok() && summary.error().code == Errc::kUnsupported) {
+                   Error e = summary.error();
+                   e.code = Errc::kCorrupt;
+                   return Result<log::ImportSummary>(std::move(e));
+                 }
+                 return summary;
+               });
+  });
+}
+
 void setup(CLI::App& root) {
-  CLI::App* import_cmd = root.add_subcommand("import",
-                                             "Import a dataset (EuRoC, ASCII accel/gyro files, CSV) into a "
-                                             "session log");
+  CLI::App* import_cmd =
+      root.add_subcommand("import",
+                          "Import a dataset (EuRoC, ROS 1 and ROS 2 bags, ASCII accel/gyro files, CSV) "
+                          "into a session log");
   import_cmd->require_subcommand(1);
 
   {
@@ -111,6 +149,12 @@ void setup(CLI::App& root) {
                  [&](const log::OutputOptions& o) { return log::import_euroc(*dir, common->out_path, o); });
     });
   }
+  add_bag_import(import_cmd, "bag", "BAG",
+                 "ROS 1 bag (format 2.0; plain, bz2 or lz4 chunks), or a ROS 2 bag: sensor_msgs/Imu, Image, "
+                 "CompressedImage");
+  add_bag_import(import_cmd, "rosbag2", "DIR",
+                 "ROS 2 bag: a rosbag2 folder (metadata.yaml; sqlite3 .db3 or mcap storage) or one .db3 or "
+                 ".mcap file: sensor_msgs/msg/Imu, Image, CompressedImage");
   {
     auto common = std::make_shared<CommonOptions>();
     auto raw = std::make_shared<RawOptions>();

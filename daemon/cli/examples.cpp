@@ -51,6 +51,12 @@ const std::vector<Examples>& examples() {
       {{"allan"},
        {"imucal allan still.imulog -o imu.yaml --json allan.json   # Kalibr's imu.yaml, and the curves"}},
       {{"import", "euroc"}, {"imucal import euroc ./V1_01_easy/mav0 -o v101.imulog"}},
+      {{"import", "bag"},
+       {"imucal import bag calib.bag -o calib.imulog   # every Imu and image topic",
+        "imucal import bag calib.bag --topics /cam0/image_raw /cam1/image_raw /imu0 -o calib.imulog"}},
+      {{"import", "rosbag2"},
+       {"imucal import rosbag2 ./calib_ros2 -o calib.imulog   # a rosbag2 folder (metadata.yaml, .db3 or "
+        ".mcap)"}},
       {{"import", "ascii"},
        {"imucal import ascii --accel acc.txt --gyro gyro.txt --units si -o imu.imulog",
         "imucal import ascii --accel acc.txt --gyro gyro.txt --units raw --accel-offset 32768 -o "
@@ -59,6 +65,7 @@ const std::vector<Examples>& examples() {
        {"imucal import csv imu.csv --columns t=0,ax=1,ay=2,az=3,gx=4,gy=5,gz=6 --time-unit ns --units si -o "
         "imu.imulog"}},
       {{"export", "euroc"}, {"imucal export euroc rig.imulog ./rig-euroc   # DIR/mav0/imu0, DIR/mav0/cam0"}},
+      {{"export", "bag"}, {"imucal export bag rig.imulog rig.bag   # /imu0 and /cam0/image_raw, for Kalibr"}},
       {{"report"},
        {"imucal report imu.json --log static.imulog -o static.html",
         "imucal report camera.json -o camera.html   # from calibrate camera LOG --json > camera.json",

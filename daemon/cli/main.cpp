@@ -66,21 +66,16 @@ int exit_code_for(Errc code) {
 
 std::string remedy_flag(const Remedy& remedy) {
   // Library option names (the fields of the options structs) and the flags that set them.
-  static const std::map<std::string, std::string> kFlags = {{"accel_scale", "--accel-scale"},
-                                                            {"allow_damaged", "--allow-damaged"},
-                                                            {"camera", "--camera"},
-                                                            {"columns", "--columns"},
-                                                            {"delimiter", "--delimiter"},
-                                                            {"gyro_scale", "--gyro-scale"},
-                                                            {"init_still_s", "--init-still"},
-                                                            {"min_interval_s", "--min-interval"},
-                                                            {"multiplier", "--multiplier"},
-                                                            {"rate_hz", "--rate"},
-                                                            {"replace_newer", "--replace-newer"},
-                                                            {"skip_header", "--skip-header"},
-                                                            {"target", "--target"},
-                                                            {"time_unit", "--time-unit"},
-                                                            {"units", "--units"}};
+  static const std::map<std::string, std::string> kFlags = {
+      {"accel_scale", "--accel-scale"}, {"allow_damaged", "--allow-damaged"},
+      {"camera", "--camera"},           {"columns", "--columns"},
+      {"delimiter", "--delimiter"},     {"gyro_scale", "--gyro-scale"},
+      {"init_still_s", "--init-still"}, {"min_interval_s", "--min-interval"},
+      {"multiplier", "--multiplier"},   {"rate_hz", "--rate"},
+      {"receive_time", "--bag-time"},   {"replace_newer", "--replace-newer"},
+      {"skip_header", "--skip-header"}, {"target", "--target"},
+      {"time_unit", "--time-unit"},     {"units", "--units"},
+  };
   if (remedy.option == "unit_check" && remedy.value == "off") return "--no-unit-check";
   const auto it = kFlags.find(remedy.option);
   const std::string flag = it != kFlags.end() ? it->second : remedy.option;

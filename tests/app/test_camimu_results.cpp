@@ -496,5 +496,57 @@ TEST(CamImuInputs, FixedBlocksAndNoiseFile) {
   EXPECT_NE(missing.error().message.find("accelerometer_random_walk"), std::string::npos);
 }
 
+TEST(CamImuInputs, TheImuFilesTopicChoosesTheStreamAndItsRateIsGivenBack) {
+  auto topic =
+      read_kalibr_imu_topic(write("kalibr-imu.yaml",
+                                  "imu0:\n  accelerometer_noise_density: 0.002\n  rostopic: /vi/imu\n"
+                                  "  update_rate: 200.0\n"));
+  ASSERT_TRUE(topic.ok()) << topic.error().message;
+  EXPECT_EQ(topic->rostopic, "/vi/imu");
+  EXPECT_EQ(topic->update_rate, 200.0);
+  auto bad = read_kalibr_imu_topic(write("bad-rate.yaml", "rostopic: /imu0\nupdate_rate: -5\n"));
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message.find("update_rate"), std::string::npos);
+
+  std::map<int, ImuStreamInfo> streams;
+  streams[1].name = "imu0";
+  streams[1].device = "rosbag:/dvs/imu";
+  streams[2].name = "imu1";
+  streams[2].device = "rosbag:/vi/imu";
+  EXPECT_EQ(imu_stream_of_topic(streams, "/vi/imu"), "imu1");  // the bag's topic, whatever the name
+  EXPECT_EQ(imu_stream_of_topic(streams, "/imu0"), "imu0");    // else the stream of that name
+  EXPECT_EQ(imu_stream_of_topic(streams, "/other"), "");
+
+  // imu.yaml gives the rate back as given, else the stream's to six digits.
+  CamImuReport r = report();
+  r.imu_stream.rate_hz = 1002.0039920159681;
+  EXPECT_EQ(YAML::Load(camimu_imu_yaml(r))["imu0"]["update_rate"].as<double>(), 1002.0);
+  r.imu_update_rate = 1000.0;
+  EXPECT_EQ(YAML::Load(camimu_imu_yaml(r))["imu0"]["update_rate"].as<double>(), 1000.0);
+}
+
+TEST(CamImuInputs, CamOverlapsAreReadRenumberedAcrossFilesAndWrittenBack) {
+  const std::string pinhole =
+      "  camera_model: pinhole\n  intrinsics: [400, 400, 320, 240]\n  distortion_model: radtan\n"
+      "  distortion_coeffs: [0, 0, 0, 0]\n  resolution: [640, 480]\n";
+  const std::string chain =
+      "cam0:\n" + pinhole + "  cam_overlaps: [1]\ncam1:\n" + pinhole + "  cam_overlaps: [0]\n";
+  const std::string a = write("chain-a.yaml", chain);
+  const std::string b = write("chain-b.yaml", chain);
+  auto cams = read_camchain_files({a, b});
+  ASSERT_TRUE(cams.ok()) << cams.error().message;
+  ASSERT_EQ(cams->size(), 4u);
+  EXPECT_EQ(*(*cams)[0].cam_overlaps, std::vector<int>{1});
+  EXPECT_EQ(*(*cams)[3].cam_overlaps, std::vector<int>{2});  // the second file's cam1: cam3 overlaps cam2
+
+  CamImuReport r = report();
+  r.cameras[0].cam_overlaps = std::vector<int>{1};
+  r.cameras[1].cam_overlaps = std::vector<int>{0};
+  const YAML::Node root = YAML::Load(camimu_camchain_yaml(r));
+  EXPECT_EQ(root["cam1"]["cam_overlaps"].as<std::vector<int>>(), std::vector<int>{0});
+  r.cameras[0].cam_overlaps.reset();
+  EXPECT_FALSE(YAML::Load(camimu_camchain_yaml(r))["cam0"]["cam_overlaps"]);  // not given, not guessed
+}
+
 }  // namespace
 }  // namespace imucal::app

@@ -94,6 +94,45 @@ TEST(CliCalibrateCamera, FixtureWithinThreeSigmasOfTruthAndDetectionsReused) {
   EXPECT_TRUE(j["self_check"]["sigmas_scaled"].empty());
 }
 
+// A Kalibr user's ROS bag where a log goes: imported once into the cache and read from there; as
+// with a EuRoC import, a bag names no target, so --target gives it, and the camera comes out as
+// from the log it was exported from. The bag is an input like the log (never an output).
+TEST(CliCalibrateCamera, ARosBagIsImportedOnceAndCalibratesLikeItsLog) {
+  const std::string dir = scratch_dir();
+  const test::ScopedCacheDir cache(dir + "/cache");
+  const std::string bag = dir + "/camimu.bag";
+  auto r = run_cli({"export", "bag", source_path("fixtures/camimu.imulog"), bag});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string bag_bytes = read_file(bag);
+  const std::string target = dir + "/target.yaml";
+  {
+    std::ofstream(target) << "target_type: checkerboard\ntargetCols: 7\ntargetRows: 6\n"
+                             "rowSpacingMeters: 0.05\ncolSpacingMeters: 0.05\n";
+  }
+  r = run_cli({"calibrate", "camera", "--self-check", "0", bag, "--target", target, "--threads", "2", "-o",
+               dir + "/cam.yaml"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find(bag + " is a ROS bag: imported 11820 IMU samples and 1200 frames into " + dir +
+                       "/cache/bags/camimu-"),
+            std::string::npos)
+      << r.err;
+  expect_truth_within_three_sigmas(dir + "/cam.yaml");
+  EXPECT_EQ(YAML::LoadFile(dir + "/cam.yaml")["cam0"]["rostopic"].as<std::string>(), "/cam0/image_raw");
+  // The next command reads the import; the bag is never an output, and is never written.
+  r = run_cli({"allan", bag, "-o", dir + "/imu.yaml"});
+  EXPECT_NE(r.err.find("reading the log imported from it before"), std::string::npos) << r.err;
+  r = run_cli({"calibrate", "camera", "--self-check", "0", bag, "--target", target, "-o", bag, "--force"});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_TRUE(read_file(bag) == bag_bytes) << "the bag was modified";
+  // A topic it does not have: the bag's topics are listed.
+  r = run_cli({"calibrate", "camera", bag, "--topics", "/left/image_raw", "--target", target, "-o",
+               dir + "/none.yaml"});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("its topics: /cam0/image_raw (sensor_msgs/Image), /imu0 (sensor_msgs/Imu)"),
+            std::string::npos)
+      << r.err;
+}
+
 // --store-detections keeps the old way: the detections go into the log (when it is complete and
 // undamaged) and the next run reuses them from there, with no cache at all.
 TEST(CliCalibrateCamera, StoreDetectionsInTheLogWhenAsked) {
