@@ -603,7 +603,27 @@ double six_significant(double v) {
   std::snprintf(text, sizeof text, "%.6g", v);
   return std::strtod(text, nullptr);
 }
+
+double update_rate_of(const CamImuReport& r) {
+  // As the --imu file gave it; else the stream's rate to six digits (a rate measured from stamps
+  // carries the jitter of its intervals).
+  return r.imu_update_rate > 0.0 ? r.imu_update_rate : six_significant(r.imu_stream.rate_hz);
+}
 }  // namespace
+
+std::string camimu_imu_input_yaml(const CamImuReport& r) {
+  const auto& n = r.options.noise;
+  YAML::Node imu(YAML::NodeType::Map);
+  imu["accelerometer_noise_density"] = n.accel_noise_density;
+  imu["accelerometer_random_walk"] = n.accel_random_walk;
+  imu["gyroscope_noise_density"] = n.gyro_noise_density;
+  imu["gyroscope_random_walk"] = n.gyro_random_walk;
+  imu["rostopic"] = r.imu_rostopic;
+  imu["update_rate"] = update_rate_of(r);
+  return emit(
+      imu, std::string("# IMU noise model (Kalibr's --imu form) the camera-IMU calibration used; from ") +
+               r.noise_source + "\n# (imucal calibrate camimu; its result: " + kCamImuImuResultFile + ")\n");
+}
 
 std::string camimu_imu_yaml(const CamImuReport& r) {
   const auto& res = r.result;
@@ -617,9 +637,7 @@ std::string camimu_imu_yaml(const CamImuReport& r) {
   imu["model"] = res.model == CamImuModelKind::kBasic ? "calibrated" : "scale-misalignment";
   imu["rostopic"] = r.imu_rostopic;
   imu["time_offset"] = 0.0;
-  // As the --imu file gave it; else the stream's rate to six digits (a rate measured from stamps
-  // carries the jitter of its intervals).
-  imu["update_rate"] = r.imu_update_rate > 0.0 ? r.imu_update_rate : six_significant(r.imu_stream.rate_hz);
+  imu["update_rate"] = update_rate_of(r);
   if (res.model == CamImuModelKind::kExtended) {
     const KalibrImuIntrinsics k = kalibr_from_krebs(res.imu);
     YAML::Node accel(YAML::NodeType::Map), gyro(YAML::NodeType::Map);

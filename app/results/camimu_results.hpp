@@ -19,7 +19,8 @@ namespace imucal::app {
 
 /// The file names the command writes into its output folder.
 inline constexpr const char* kCamchainImucamFile = "camchain-imucam.yaml";
-inline constexpr const char* kCamImuImuFile = "imu.yaml";
+inline constexpr const char* kCamImuImuFile = "imu.yaml";  // the --imu form (flat), for the next run
+inline constexpr const char* kCamImuImuResultFile = "imu-imucam.yaml";  // Kalibr's result form (imu0:)
 inline constexpr const char* kCamImuCalibrationFile = "calibration.yaml";
 inline constexpr const char* kCamImuJsonFile = "result.json";
 
@@ -40,6 +41,10 @@ KalibrImuIntrinsics kalibr_from_krebs(const KrebsImuModel& model);
 /// calibration.yaml keep them: the model without its shutter (the line delay is kept beside) and
 /// the camera file's sigmas (NaN where it gave none).
 CameraIntrinsicsRecord held_intrinsics(const CamImuReport& report, std::size_t i);
+
+/// imu.yaml: the IMU file as Kalibr's --imu reads it (flat: the four noise figures the problem
+/// used, rostopic, update_rate), which `calibrate camimu --imu` reads too.
+std::string camimu_imu_input_yaml(const CamImuReport& report);
 
 /// camchain-imucam.yaml: per camN Kalibr's keys (camera_model, intrinsics, distortion_model,
 /// distortion_coeffs, resolution, rostopic, T_cam_imu as 4 rows, timeshift_cam_imu, T_cn_cnm1

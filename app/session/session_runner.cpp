@@ -220,7 +220,8 @@ static Result<std::vector<std::string>> solve_camimu(
   if (ec) return make_error(Errc::kIo, "cannot create " + out_dir + ": " + ec.message());
   const std::pair<const char*, std::string> texts[] = {
       {kCamchainImucamFile, camimu_camchain_yaml(*report)},
-      {kCamImuImuFile, camimu_imu_yaml(*report)},
+      {kCamImuImuFile, camimu_imu_input_yaml(*report)},
+      {kCamImuImuResultFile, camimu_imu_yaml(*report)},
       {kCamImuJsonFile, camimu_result_json(*report)},
       {kCamImuCalibrationFile, camimu_calibration_yaml(*report)}};
   for (const auto& [name, text] : texts) {

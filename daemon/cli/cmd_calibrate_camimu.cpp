@@ -67,8 +67,8 @@ std::vector<std::string> check_outputs(const CamImuCliOptions& o, const app::Out
   if (fs::exists(o.out_dir, ec) && !fs::is_directory(o.out_dir, ec))
     throw CliExit{kExitUsage, o.out_dir + " is a file: -o takes the folder to write the results into"};
   std::vector<std::string> paths;
-  for (const char* name :
-       {app::kCamchainImucamFile, app::kCamImuImuFile, app::kCamImuCalibrationFile, app::kCamImuJsonFile}) {
+  for (const char* name : {app::kCamchainImucamFile, app::kCamImuImuFile, app::kCamImuImuResultFile,
+                           app::kCamImuCalibrationFile, app::kCamImuJsonFile}) {
     paths.push_back((fs::path(o.out_dir) / name).string());
     if (auto s = app::check_output(paths.back(), policy); !s.ok()) fail(s.error());
   }
@@ -229,9 +229,9 @@ void print_summary(const app::CamImuReport& r, const std::string& out_dir) {
   std::printf("  pose spline: knots every %.3f s (%s), %d IMU samples per residual\n", q.knot_spacing_s,
               q.knot_spacing_chosen ? "chosen from the motion" : "as given", q.imu_samples_per_residual);
   for (const auto& u : res.undetermined) std::printf("  not determined: %s\n", u.c_str());
-  std::printf("  noise from %s; wrote %s, %s, %s, %s in %s\n", r.noise_source.c_str(),
-              app::kCamchainImucamFile, app::kCamImuImuFile, app::kCamImuCalibrationFile,
-              app::kCamImuJsonFile, out_dir.c_str());
+  std::printf("  noise from %s; wrote %s, %s, %s, %s, %s in %s\n", r.noise_source.c_str(),
+              app::kCamchainImucamFile, app::kCamImuImuFile, app::kCamImuImuResultFile,
+              app::kCamImuCalibrationFile, app::kCamImuJsonFile, out_dir.c_str());
   if (r.thermal) {
     std::printf("  IMU biases at %.2f deg C: the samples were corrected with the thermal model %s\n",
                 r.thermal->reference_c, r.thermal_source.c_str());
@@ -281,13 +281,14 @@ void run(const CamImuCliOptions& given) {
   std::error_code ec;
   std::filesystem::create_directories(o.out_dir, ec);
   if (ec) throw CliExit{kExitIo, "could not create " + o.out_dir + ": " + ec.message()};
-  const std::string texts[] = {app::camimu_camchain_yaml(*report), app::camimu_imu_yaml(*report),
-                               app::camimu_calibration_yaml(*report), app::camimu_result_json(*report)};
+  const std::string texts[] = {app::camimu_camchain_yaml(*report), app::camimu_imu_input_yaml(*report),
+                               app::camimu_imu_yaml(*report), app::camimu_calibration_yaml(*report),
+                               app::camimu_result_json(*report)};
   for (std::size_t i = 0; i < paths.size(); ++i) {
     if (auto s = app::write_text_file(paths[i], texts[i], outputs); !s.ok()) fail(s.error());
   }
   if (o.json) {
-    std::cout << texts[3];
+    std::cout << texts[4];
   } else {
     print_summary(*report, o.out_dir);
   }

@@ -523,6 +523,17 @@ TEST(CamImuInputs, TheImuFilesTopicChoosesTheStreamAndItsRateIsGivenBack) {
   EXPECT_EQ(YAML::Load(camimu_imu_yaml(r))["imu0"]["update_rate"].as<double>(), 1002.0);
   r.imu_update_rate = 1000.0;
   EXPECT_EQ(YAML::Load(camimu_imu_yaml(r))["imu0"]["update_rate"].as<double>(), 1000.0);
+  // imu.yaml is the flat --imu form: the next run reads back the same noise, topic and rate.
+  const std::string flat = write("imu-input.yaml", camimu_imu_input_yaml(r));
+  EXPECT_FALSE(YAML::LoadFile(flat)["imu0"]);
+  auto noise = read_kalibr_imu_noise(flat);
+  ASSERT_TRUE(noise.ok()) << noise.error().message;
+  EXPECT_EQ(noise->gyro_noise_density, r.options.noise.gyro_noise_density);
+  EXPECT_EQ(noise->accel_random_walk, r.options.noise.accel_random_walk);
+  auto again = read_kalibr_imu_topic(flat);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->rostopic, r.imu_rostopic);
+  EXPECT_EQ(again->update_rate, 1000.0);
 }
 
 TEST(CamImuInputs, CamOverlapsAreReadRenumberedAcrossFilesAndWrittenBack) {

@@ -226,7 +226,15 @@ TEST(CliCalibrateCamimu, FixtureWithinFewSigmasOfTruth) {
   EXPECT_GT(j["quality"]["covariance_clusters"].get<int>(), 10);
   // The canonical record is read by `calibrate check` and the static readers.
   EXPECT_EQ(YAML::LoadFile(out + "/calibration.yaml")["input_units"].as<std::string>(), "raw");
-  EXPECT_EQ(YAML::LoadFile(out + "/imu.yaml")["imu0"]["model"].as<std::string>(), "scale-misalignment");
+  EXPECT_EQ(YAML::LoadFile(out + "/imu-imucam.yaml")["imu0"]["model"].as<std::string>(),
+            "scale-misalignment");
+  // imu.yaml is the IMU file as Kalibr's --imu takes it (flat), for the next run.
+  const YAML::Node imu = YAML::LoadFile(out + "/imu.yaml");
+  EXPECT_FALSE(imu["imu0"]);
+  for (const char* key : {"accelerometer_noise_density", "accelerometer_random_walk",
+                          "gyroscope_noise_density", "gyroscope_random_walk", "rostopic", "update_rate"})
+    EXPECT_TRUE(imu[key]) << key;
+  EXPECT_EQ(imu["update_rate"].as<double>(), 200.0);  // the fixture's nominal rate
 }
 
 /// Every sigma in a JSON tree is null (not determined) or positive: never 0.
