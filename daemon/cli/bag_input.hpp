@@ -17,11 +17,11 @@ namespace imucal::cli {
 std::string bag_cache_dir();
 
 /// The session log a command reads for its LOG argument: `path` itself, or, when `path` is a ROS 1
-/// bag or a ROS 2 bag (a rosbag2 folder, .db3 or .mcap file), the log it is imported into (`topics` as `imucal import bag --topics`, every Imu and image
-/// topic when empty). The import is kept in bag_cache_dir() under a name made of the bag's path,
-/// size, modification time and the topics, and reused while the bag is unchanged; without a cache
-/// folder it goes into a temporary folder removed when the program ends. What the import says is
-/// printed on stderr. A bag that does not import ends the program with its exit code.
+/// bag or a ROS 2 bag (a rosbag2 folder, .db3 or .mcap file), the log it is imported into (`topics` as
+/// `imucal import bag --topics`, every Imu and image topic when empty). The import is kept in bag_cache_dir()
+/// under a name made of the bag's path, size, modification time and the topics, and reused while the bag is
+/// unchanged; without a cache folder it goes into a temporary folder removed when the program ends. What the
+/// import says is printed on stderr. A bag that does not import ends the program with its exit code.
 std::string log_of_input(const std::string& path, const std::vector<std::string>& topics);
 
 /// `--topics` for a command that takes a log: the topics to import when LOG is a ROS 1 bag.
