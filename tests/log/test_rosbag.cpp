@@ -472,6 +472,13 @@ TEST(Rosbag2Messages, CdrImuAndImageDecodeBitForBitWithTheirAlignment) {
   ASSERT_TRUE(image.ok()) << image.error().message;
   EXPECT_EQ(image->encoding, "mono16");
   EXPECT_EQ(image->image.data, im.image.data);
+  // A stamp written as (1 s, 1.5e9 ns), as a bag of ROS 2's own tests holds (0 s, 1e9 ns), is the
+  // time it adds up to.
+  auto late = bytes;
+  const std::uint32_t nsec = 1'500'000'000U, sec = 1;
+  std::memcpy(late.data() + 4, &sec, 4);
+  std::memcpy(late.data() + 8, &nsec, 4);
+  EXPECT_EQ(*rosbag2::header_stamp_cdr(late), 2'500'000'000);
   // Big-endian CDR is named, a message cut short is damage.
   auto big = bytes;
   big[1] = 0x00;
