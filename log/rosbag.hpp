@@ -15,7 +15,6 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <functional>
-#include <map>
 #include <memory>
 #include <span>
 #include <string>
@@ -52,13 +51,6 @@ struct BagDamage {
   std::string message;  // what is wrong there
 };
 
-/// What a bag holds, from its connections and chunks (the index when it is whole).
-struct BagSummary {
-  std::int64_t chunks = 0;
-  std::map<std::string, std::int64_t> compression;  // chunk count per compression
-  std::map<std::uint32_t, std::int64_t> messages;   // per connection id
-};
-
 /// Reads a bag front to back, chunk by chunk; memory is one chunk (a few MB) at a time.
 class BagReader {
  public:
@@ -79,10 +71,6 @@ class BagReader {
   /// error. `progress` gets the fraction of the file read.
   [[nodiscard]] Status for_each_message(const std::function<Status(const MessageView&)>& visit,
                                         BagDamage& damage, const std::function<void(double)>& progress = {});
-
-  const BagSummary& summary() const;
-  const std::string& path() const;
-  std::uint64_t size() const;
 
  private:
   struct State;

@@ -39,8 +39,6 @@ class Bag2Reader {
   [[nodiscard]] Status for_each_message(const std::function<Status(const rosbag::MessageView&)>& visit,
                                         rosbag::BagDamage& damage,
                                         const std::function<void(double)>& progress = {});
-  /// "sqlite3" or "mcap".
-  const std::string& storage() const;
 
  private:
   struct State;

@@ -443,7 +443,6 @@ Result<std::vector<std::string>> folder_files(const fs::path& dir) {
 
 struct Bag2Reader::State {
   std::vector<std::string> files;
-  std::string storage;
   std::map<std::string, Connection> by_topic;                                // unified, ids 0..n-1
   std::vector<std::map<std::uint32_t, const Connection*>> file_connections;  // per file: its ids
   bool read = false;
@@ -470,8 +469,6 @@ struct Bag2Reader::State {
 Bag2Reader::Bag2Reader(std::unique_ptr<State> state) : state_(std::move(state)) {}
 Bag2Reader::~Bag2Reader() = default;
 
-const std::string& Bag2Reader::storage() const { return state_->storage; }
-
 bool is_rosbag2(const std::string& path) {
   std::error_code ec;
   if (fs::is_directory(path, ec)) return fs::exists(fs::path(path) / "metadata.yaml", ec);
@@ -493,11 +490,9 @@ Result<std::unique_ptr<Bag2Reader>> Bag2Reader::open(const std::string& path) {
         path + (fs::exists(path, ec) ? " is not a file or folder" : ": No such file or folder"));
   }
   for (const auto& f : s->files) {
-    const std::string storage = storage_of_file(f);
-    if (storage.empty())
+    if (storage_of_file(f).empty()) {
       return make_error(Errc::kCorrupt, f + " is neither a rosbag2 sqlite3 (.db3) nor an mcap file");
-    if (!s->storage.empty() && s->storage != storage) s->storage += "+";
-    if (s->storage.find(storage) == std::string::npos) s->storage += storage;
+    }
   }
   return std::unique_ptr<Bag2Reader>(new Bag2Reader(std::move(s)));
 }

@@ -8,6 +8,7 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <map>
 
 #include "log/rosbag.hpp"
 #include "log/rosbag_format.hpp"
@@ -56,9 +57,7 @@ struct BagReader::State {
   std::uint64_t size = 0;
   std::uint64_t first_record = 0;  // after the bag header record
   std::uint64_t index_pos = 0;
-  std::uint32_t chunk_count = 0;
   std::map<std::uint32_t, Connection> connections;
-  BagSummary summary;
 
   ~State() {
     if (fd >= 0) ::close(fd);
@@ -125,26 +124,12 @@ struct BagReader::State {
         auto c = connection_from(r->fields, r->data);
         if (!c.ok()) return c.error();
         found[c->id] = std::move(*c);
-      } else if (*op == format::kOpChunkInfo) {
-        IMUCAL_TRY(count_chunk_info(*r));
-      } else {
+      } else if (*op != format::kOpChunkInfo) {  // chunk infos: the chunks themselves are read instead
         return make_error(Errc::kCorrupt, "a record of kind " + std::to_string(*op) + " in the index");
       }
       at = r->next;
     }
     connections = std::move(found);
-    return {};
-  }
-
-  Status count_chunk_info(const FileRecord& r) {
-    auto count = r.fields.u32("count");
-    if (!count.ok()) return count.error();
-    if (r.data.size() != std::uint64_t{*count} * 8)
-      return make_error(Errc::kCorrupt, "a chunk info of the wrong size");
-    ++summary.chunks;
-    for (std::uint32_t i = 0; i < *count; ++i) {
-      summary.messages[format::le32(r.data.data() + 8 * i)] += format::le32(r.data.data() + 8 * i + 4);
-    }
     return {};
   }
 
@@ -201,10 +186,6 @@ struct BagReader::State {
 BagReader::BagReader(std::unique_ptr<State> state) : state_(std::move(state)) {}
 BagReader::~BagReader() = default;
 
-const BagSummary& BagReader::summary() const { return state_->summary; }
-const std::string& BagReader::path() const { return state_->path; }
-std::uint64_t BagReader::size() const { return state_->size; }
-
 Result<std::unique_ptr<BagReader>> BagReader::open(const std::string& path) {
   namespace fs = std::filesystem;
   std::error_code ec;
@@ -256,12 +237,9 @@ Result<std::unique_ptr<BagReader>> BagReader::open(const std::string& path) {
     return make_error(Errc::kCorrupt, path + ": the first record is not a bag header");
   }
   auto index_pos = header->fields.u64("index_pos");
-  auto chunk_count = header->fields.u32("chunk_count");
   if (!index_pos.ok()) return index_pos.error().context(path + ": its bag header");
-  if (!chunk_count.ok()) return chunk_count.error().context(path + ": its bag header");
   s->first_record = header->next;
   s->index_pos = *index_pos;
-  s->chunk_count = *chunk_count;
   return std::unique_ptr<BagReader>(new BagReader(std::move(s)));
 }
 
@@ -269,12 +247,10 @@ Result<std::vector<Connection>> BagReader::connections() {
   State& s = *state_;
   bool from_index = false;
   if (s.has_index()) {
-    s.summary = {};
     from_index = s.read_index_connections().ok();
   }
   if (!from_index) {
     // No index (a bag not closed, or cut short): the connection records inside the chunks.
-    s.summary = {};
     BagDamage damage;
     IMUCAL_TRY(for_each_message([](const MessageView&) { return Status{}; }, damage));
   }
@@ -290,7 +266,6 @@ Status BagReader::for_each_message(const std::function<Status(const MessageView&
   damage.size = s.size;
   const bool indexed = s.has_index();
   const std::uint64_t end = indexed ? s.index_pos : s.size;
-  const bool count = !indexed || s.summary.chunks == 0;
   auto stop = [&](std::uint64_t at, const std::string& what) {
     damage.damaged = true;
     damage.offset = at;
@@ -317,11 +292,6 @@ Status BagReader::for_each_message(const std::function<Status(const MessageView&
         stop(at, "the chunk at byte " + std::to_string(at) + ": " + views.error().message);
         return {};
       }
-      if (count) {
-        ++s.summary.chunks;
-        for (const auto& v : *views) ++s.summary.messages[v.connection->id];
-      }
-      ++s.summary.compression[compression];
       for (const auto& v : *views) IMUCAL_TRY(visit(v));
       ++damage.chunks_read;
     } else if (*op == format::kOpConnection) {
