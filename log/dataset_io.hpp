@@ -402,6 +402,9 @@ struct BagImport {
   /// Import the whole chunks of a bag that is cut short or damaged (a note says where it ends).
   bool allow_damaged = false;
 };
+/// Imports a ROS 1 bag or a ROS 2 bag (folder, .db3 or .mcap) into a session log. A bag cut short
+/// or damaged, and one in a form imucal does not read (ROS 1 format 1.2, JPEG images, Bayer
+/// encodings), is Errc::kCorrupt with what is wrong named.
 [[nodiscard]] Result<ImportSummary> import_bag(const BagImport& in, const std::string& out_path,
                                                const OutputOptions& options);
 

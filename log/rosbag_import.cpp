@@ -386,10 +386,8 @@ std::string damage_text(const BagDamage& d) {
          std::to_string(d.chunks_read) + " whole chunks)";
 }
 
-}  // namespace
-
-Result<ImportSummary> import_bag(const BagImport& in, const std::string& out_path,
-                                 const OutputOptions& options) {
+Result<ImportSummary> import_bag_as_read(const BagImport& in, const std::string& out_path,
+                                         const OutputOptions& options) {
   auto out = PendingOutput::begin(out_path, PendingOutput::Kind::kFile, options.force);
   if (!out.ok()) return out.error();
   auto src = open_source(in.path);
@@ -442,6 +440,20 @@ Result<ImportSummary> import_bag(const BagImport& in, const std::string& out_pat
   return summary;
 }
 
+}  // namespace
+
+Result<ImportSummary> import_bag(const BagImport& in, const std::string& out_path,
+                                 const OutputOptions& options) {
+  auto summary = import_bag_as_read(in, out_path, options);
+  // A bag in a form imucal does not read is an input it cannot use, as a malformed one is.
+  if (!summary.ok() && summary.error().code == Errc::kUnsupported) {
+    Error e = summary.error();
+    e.code = Errc::kCorrupt;
+    return e;
+  }
+  return summary;
+}
+
 // ---------------------------------------------------------------------------------------------
 
 namespace {
@@ -458,59 +470,151 @@ rosbag::ChunkCompression chunk_compression(BagCompression c) {
   return rosbag::ChunkCompression::kNone;
 }
 
-Status export_imu(const SessionLogReader& r, int id, const ImuStreamInfo& info, rosbag::BagWriter& bag,
-                  ExportSummary& summary) {
-  auto conn = bag.add_connection("/" + info.name, rosbag::kImuType);
-  if (!conn.ok()) return conn.error();
-  const bool raw = info.units == ImuUnits::kRaw;
+// One message of the bag being written, held until its window is written in time order.
+struct OutMessage {
+  TimeNs t_ns = 0;
+  std::uint32_t connection = 0;
+  std::vector<std::uint8_t> data;
+};
+
+// What export writes of one stream: its connection, the next sequence number, and for a camera
+// its frames' times (to find the next frame past a gap without reading images).
+struct ExportStream {
+  int id = 0;
+  bool camera = false;
+  std::string name;
+  bool raw = false;
+  const ImuStreamInfo* imu = nullptr;
+  std::uint32_t connection = 0;
   std::uint32_t seq = 0;
-  std::optional<Error> failure;
-  IMUCAL_TRY(r.for_each_imu(id, kTimeMin, kTimeMax, [&](const ImuSample& s) {
-    rosbag::ImuMessage m;
-    m.stamp_ns = s.t_ns;
-    m.frame_id = info.name;
-    m.accel = raw ? info.accel.to_si(s.accel) : s.accel;
-    m.gyro = raw ? info.gyro.to_si(s.gyro) : s.gyro;
-    if (Status st = bag.write(*conn, s.t_ns, rosbag::encode_imu(m, seq++)); !st.ok()) {
-      failure = st.error();
-      return false;
-    }
-    return true;
-  }));
-  if (failure) return *failure;
-  summary.imu_samples += seq;
-  if (raw) {
-    summary.notes.push_back(info.name +
-                            " holds raw counts: exported in SI (rad/s, m/s^2) with the stream's nominal "
-                            "conversion si = scale * (raw - offset)");
+  std::vector<TimeNs> frame_times;
+};
+
+// Messages are written in windows of this much time, each sorted by time across streams, as
+// rosbag record interleaves them; it bounds the images held at once.
+constexpr TimeNs kExportWindowNs = 250'000'000;
+
+// The first message time of a stream at or after t_ns, if any.
+Result<std::optional<TimeNs>> next_time(const SessionLogReader& r, const ExportStream& s, TimeNs t_ns) {
+  if (s.camera) {
+    const auto it = std::lower_bound(s.frame_times.begin(), s.frame_times.end(), t_ns);
+    if (it == s.frame_times.end()) return std::optional<TimeNs>{};
+    return std::optional<TimeNs>{*it};
   }
-  return {};
+  std::optional<TimeNs> first;
+  IMUCAL_TRY(r.for_each_imu(s.id, t_ns, kTimeMax, [&](const ImuSample& sample) {
+    first = sample.t_ns;
+    return false;
+  }));
+  return first;
 }
 
-Status export_camera(const SessionLogReader& r, int id, const CameraStreamInfo& info, rosbag::BagWriter& bag,
-                     ExportSummary& summary) {
-  auto conn = bag.add_connection("/" + info.name + "/image_raw", rosbag::kImageType);
-  if (!conn.ok()) return conn.error();
-  std::uint32_t seq = 0;
+Status collect_imu(const SessionLogReader& r, ExportStream& s, TimeNs t0, TimeNs t1,
+                   std::vector<OutMessage>& out) {
+  return r.for_each_imu(s.id, t0, t1, [&](const ImuSample& sample) {
+    rosbag::ImuMessage m;
+    m.stamp_ns = sample.t_ns;
+    m.frame_id = s.name;
+    m.accel = s.raw ? s.imu->accel.to_si(sample.accel) : sample.accel;
+    m.gyro = s.raw ? s.imu->gyro.to_si(sample.gyro) : sample.gyro;
+    out.push_back({sample.t_ns, s.connection, rosbag::encode_imu(m, s.seq++)});
+    return true;
+  });
+}
+
+Status collect_frames(const SessionLogReader& r, ExportStream& s, TimeNs t0, TimeNs t1,
+                      std::vector<OutMessage>& out) {
   std::optional<Error> failure;
-  IMUCAL_TRY(r.for_each_frame(id, kTimeMin, kTimeMax, [&](const CameraFrame& frame) {
+  IMUCAL_TRY(r.for_each_frame(s.id, t0, t1, [&](const CameraFrame& frame) {
     auto image = frame_image(frame);
     if (!image.ok()) {
-      failure = image.error().context(info.name);
+      failure = image.error().context(s.name);
       return false;
     }
     rosbag::ImageMessage m;
     m.stamp_ns = frame.t_ns;
-    m.frame_id = info.name;
+    m.frame_id = s.name;
     m.image = std::move(*image);
-    if (Status st = bag.write(*conn, frame.t_ns, rosbag::encode_image(m, seq++)); !st.ok()) {
-      failure = st.error();
-      return false;
-    }
+    out.push_back({frame.t_ns, s.connection, rosbag::encode_image(m, s.seq++)});
     return true;
   }));
   if (failure) return *failure;
-  summary.frames += seq;
+  return {};
+}
+
+Result<std::vector<ExportStream>> export_streams(const SessionLogReader& r, rosbag::BagWriter& bag,
+                                                 ExportSummary& summary) {
+  std::vector<ExportStream> streams;
+  for (const auto& [id, info] : r.imu_streams()) {
+    auto conn = bag.add_connection("/" + info.name, rosbag::kImuType);
+    if (!conn.ok()) return conn.error();
+    ExportStream s;
+    s.id = id;
+    s.name = info.name;
+    s.raw = info.units == ImuUnits::kRaw;
+    s.imu = &info;
+    s.connection = *conn;
+    streams.push_back(std::move(s));
+    if (info.units == ImuUnits::kRaw) {
+      summary.notes.push_back(info.name +
+                              " holds raw counts: exported in SI (rad/s, m/s^2) with the stream's nominal "
+                              "conversion si = scale * (raw - offset)");
+    }
+  }
+  for (const auto& [id, info] : r.camera_streams()) {
+    auto conn = bag.add_connection("/" + info.name + "/image_raw", rosbag::kImageType);
+    if (!conn.ok()) return conn.error();
+    auto times = r.frame_times(id);
+    if (!times.ok()) return times.error();
+    ExportStream s;
+    s.id = id;
+    s.camera = true;
+    s.name = info.name;
+    s.frame_times = std::move(*times);
+    std::sort(s.frame_times.begin(), s.frame_times.end());
+    s.connection = *conn;
+    streams.push_back(std::move(s));
+  }
+  return streams;
+}
+
+// Every stream's messages, window by window in time order; a gap with no message is skipped.
+Status export_messages(const SessionLogReader& r, rosbag::BagWriter& bag, ExportSummary& summary,
+                       const ProgressFn& progress) {
+  auto streams = export_streams(r, bag, summary);
+  if (!streams.ok()) return streams.error();
+  std::int64_t total = 0;
+  for (const auto& s : *streams) {
+    auto n = s.camera ? r.frame_count(s.id) : r.imu_count(s.id);
+    if (!n.ok()) return n.error();
+    total += *n;
+  }
+  std::int64_t written = 0;
+  TimeNs t0 = kTimeMin;
+  std::vector<OutMessage> window;
+  while (true) {
+    std::optional<TimeNs> start;
+    for (const auto& s : *streams) {
+      auto t = next_time(r, s, t0);
+      if (!t.ok()) return t.error();
+      if (*t && (!start || **t < *start)) start = *t;
+    }
+    if (!start) break;
+    const TimeNs t1 = *start > kTimeMax - kExportWindowNs ? kTimeMax : *start + kExportWindowNs;
+    window.clear();
+    for (auto& s : *streams) {
+      IMUCAL_TRY(s.camera ? collect_frames(r, s, *start, t1, window) : collect_imu(r, s, *start, t1, window));
+    }
+    std::stable_sort(window.begin(), window.end(),
+                     [](const OutMessage& a, const OutMessage& b) { return a.t_ns < b.t_ns; });
+    for (const auto& m : window) IMUCAL_TRY(bag.write(m.connection, m.t_ns, m.data));
+    written += static_cast<std::int64_t>(window.size());
+    report_progress(progress, static_cast<double>(written),
+                    static_cast<double>(std::max<std::int64_t>(total, 1)));
+    if (t1 == kTimeMax) break;
+    t0 = t1;
+  }
+  for (const auto& s : *streams) (s.camera ? summary.frames : summary.imu_samples) += s.seq;
   return {};
 }
 
@@ -536,16 +640,7 @@ Result<ExportSummary> export_bag(const std::string& log_path, const std::string&
   {
     auto bag = rosbag::BagWriter::create(out->temp_path(), chunk_compression(compression));
     if (!bag.ok()) return bag.error();
-    const double total = static_cast<double>(r.imu_streams().size() + r.camera_streams().size());
-    double done = 0;
-    for (const auto& [id, info] : r.imu_streams()) {
-      IMUCAL_TRY(export_imu(r, id, info, **bag, summary));
-      report_progress(options.progress, ++done, total);
-    }
-    for (const auto& [id, info] : r.camera_streams()) {
-      IMUCAL_TRY(export_camera(r, id, info, **bag, summary));
-      report_progress(options.progress, ++done, total);
-    }
+    IMUCAL_TRY(export_messages(r, **bag, summary, options.progress));
     IMUCAL_TRY((*bag)->close());
   }
   if (r.health().damaged) summary.notes.push_back("log damaged: " + r.health().damage_message);

@@ -70,7 +70,7 @@ std::string bag_cache_dir() {
   return base.empty() ? std::string() : base + "/bags";
 }
 
-std::string log_of_input(const std::string& path, const std::vector<std::string>& topics) {
+std::string log_of_input(const std::string& path, const std::vector<std::string>& topics, bool use_cache) {
   if (!is_bag(path)) return path;
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) return path;  // the command's own reading says why
@@ -93,7 +93,7 @@ std::string log_of_input(const std::string& path, const std::vector<std::string>
   char hex[17];
   std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(std::hash<std::string>{}(key)));
   static TempFolder temp;
-  std::string folder = bag_cache_dir();
+  std::string folder = use_cache ? bag_cache_dir() : std::string();
   if (!folder.empty()) {
     fs::create_directories(folder, ec);
     if (ec) folder.clear();
@@ -117,7 +117,6 @@ std::string log_of_input(const std::string& path, const std::vector<std::string>
   if (!summary.ok()) {
     Error e = summary.error();
     e.remedies.clear();  // the import's own options are imucal import bag's
-    if (e.code == Errc::kUnsupported) e.code = Errc::kCorrupt;  // a form imucal does not read: exit 3
     if (e.code == Errc::kCorrupt && e.message.find("is damaged") != std::string::npos)
       e.message += " (imucal import bag --allow-damaged imports them into a log to give here)";
     fail(e, "importing the ROS bag " + path);
@@ -130,7 +129,7 @@ std::string log_of_input(const std::string& path, const std::vector<std::string>
 
 void add_bag_topics_option(CLI::App* cmd, std::vector<std::string>* topics) {
   cmd->add_option("--topics", *topics,
-                  "When LOG is a ROS 1 bag: the topics to import, in stream order (imucal import bag "
+                  "When the log is a ROS bag: the topics to import, in stream order (imucal import bag "
                   "--topics; default every Imu, Image and CompressedImage topic)")
       ->expected(1, -1);
 }

@@ -20,9 +20,11 @@ std::string bag_cache_dir();
 /// bag or a ROS 2 bag (a rosbag2 folder, .db3 or .mcap file), the log it is imported into (`topics` as
 /// `imucal import bag --topics`, every Imu and image topic when empty). The import is kept in bag_cache_dir()
 /// under a name made of the bag's path, size, modification time and the topics, and reused while the bag is
-/// unchanged; without a cache folder it goes into a temporary folder removed when the program ends. What the
-/// import says is printed on stderr. A bag that does not import ends the program with its exit code.
-std::string log_of_input(const std::string& path, const std::vector<std::string>& topics);
+/// unchanged; without a cache folder, or with `use_cache` false (--no-cache), it goes into a temporary folder
+/// removed when the program ends. What the import says is printed on stderr. A bag that does not import ends
+/// the program with its exit code.
+std::string log_of_input(const std::string& path, const std::vector<std::string>& topics,
+                         bool use_cache = true);
 
 /// `--topics` for a command that takes a log: the topics to import when LOG is a ROS 1 bag.
 void add_bag_topics_option(CLI::App* cmd, std::vector<std::string>* topics);
@@ -32,7 +34,9 @@ void add_bag_topics_option(CLI::App* cmd, std::vector<std::string>* topics);
 template <class Options>
 Options with_log_of_input(const Options& options) {
   Options out = options;
-  out.log_path = log_of_input(options.log_path, options.topics);
+  bool use_cache = true;
+  if constexpr (requires { options.detections.no_cache; }) use_cache = !options.detections.no_cache;
+  out.log_path = log_of_input(options.log_path, options.topics, use_cache);
   return out;
 }
 

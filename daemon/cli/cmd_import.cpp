@@ -116,17 +116,8 @@ void add_bag_import(CLI::App* import_cmd, const char* name, const char* arg, con
     std::error_code ec;
     const bool folder = std::filesystem::is_directory(in->path, ec);
     run_import(common->out_path, common->force, folder ? std::vector<std::string>{} : std::vector{in->path},
-               folder ? in->path : "", [&](const log::OutputOptions& o) {
-                 auto summary = log::import_bag(*in, common->out_path, o);
-                 // A bag in a form imucal does not read (format 1.2, a JPEG image, a Bayer
-                 // encoding) is an input it cannot use: exit 3, as for a malformed one (docs/cli.md).
-                 if (!summary.ok() && summary.error().code == Errc::kUnsupported) {
-                   Error e = summary.error();
-                   e.code = Errc::kCorrupt;
-                   return Result<log::ImportSummary>(std::move(e));
-                 }
-                 return summary;
-               });
+               folder ? in->path : "",
+               [&](const log::OutputOptions& o) { return log::import_bag(*in, common->out_path, o); });
   });
 }
 
