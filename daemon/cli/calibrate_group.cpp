@@ -115,8 +115,8 @@ void add_detection_store_options(CLI::App* cmd, DetectionStoreArgs* args) {
       "Store the detections in the log itself (it is otherwise never written; the default keeps them "
       "in the detection cache)");
   cmd->add_flag("--no-cache", args->no_cache,
-                "Neither read nor write the detection cache ($IMUCAL_CACHE_DIR, $XDG_CACHE_HOME/imucal or "
-                "~/.cache/imucal)");
+                "Neither read nor write the cache of detections and of bag imports ($IMUCAL_CACHE_DIR, "
+                "$XDG_CACHE_HOME/imucal or ~/.cache/imucal)");
 }
 
 std::string user_cache_dir() {

@@ -51,7 +51,7 @@ void run(const AllanCliOptions& given) {
 
   // The longest run without gaps, resets or saturation: the Allan deviation needs even sampling.
   auto clean = app::longest_clean_run(s);
-  if (!clean.ok()) throw CliExit{kExitInput, "the timestamps of " + o.log_path + " do not increase"};
+  if (!clean.ok()) throw CliExit{kExitInput, "the timestamps of " + given.log_path + " do not increase"};
   const double rate_hz = clean->rate_hz;
   const std::size_t best0 = clean->begin, best1 = clean->end;
   const int breaks = clean->breaks;
@@ -84,7 +84,7 @@ void run(const AllanCliOptions& given) {
   auto analysed = app::analyse_allan(accel, gyro, rate_hz);
   if (!analysed.ok()) fail(analysed.error());
   app::AllanReport& report = *analysed;
-  report.log_path = o.log_path;
+  report.log_path = given.log_path;  // a bag, not its import
   report.stream = info.name;
   report.rostopic = o.rostopic;
   const auto& fa = report.accel_fits;
@@ -104,7 +104,7 @@ void run(const AllanCliOptions& given) {
     if (auto w = app::write_text_file(o.json_path, app::allan_json(report), outputs); !w.ok())
       fail(w.error());
   }
-  std::cout << "Allan deviation of " << o.log_path << " (" << info.name << ", " << accel.size() / rate_hz
+  std::cout << "Allan deviation of " << given.log_path << " (" << info.name << ", " << accel.size() / rate_hz
             << " s at " << rate_hz << " Hz)\n";
   for (int a = 0; a < 3; ++a) {
     std::cout << "  accel "

@@ -181,7 +181,7 @@ void run(const StaticCliOptions& as_given) {
   if (auto valid = opt.validate(); !valid.ok()) throw CliExit{kExitUsage, valid.error().message};
 
   auto res = app::calibrate_static(samples, opt);
-  if (!res.ok()) fail(res.error(), "static calibration of " + o.log_path);
+  if (!res.ok()) fail(res.error(), "static calibration of " + as_given.log_path);
   if (loaded->damaged()) {
     res->warnings.insert(res->warnings.begin(),
                          loaded->damage_warning() + ": calibrated from its readable part only");
@@ -206,7 +206,7 @@ void run(const StaticCliOptions& as_given) {
     if (auto s = app::write_text_file(o.json_path, json, outputs); !s.ok()) fail(s.error());
   }
 
-  print_summary(o.log_path, info, samples.size(), *res);
+  print_summary(as_given.log_path, info, samples.size(), *res);
 }
 
 void setup(CLI::App& root) {

@@ -275,6 +275,7 @@ void run(const CamImuCliOptions& given) {
 
   auto report = app::calibrate_camimu(q);
   if (!report.ok()) fail(report.error(), "calibrate camimu");
+  report->log_path = given.log_path;  // a bag, not its import
   // What was assumed (default noise, the frame of a given G) is said whatever the log level.
   for (const auto& n : report->notes) std::fprintf(stderr, "note: %s\n", n.c_str());
   for (const auto& w : report->warnings) spdlog::warn("{}", w);

@@ -7,13 +7,23 @@
 #include <string>
 
 #include "app/report/report.hpp"
+#include "app/results/output.hpp"
 #include "core/version.hpp"
+#include "daemon/cli/bag_input.hpp"
 #include "daemon/cli/command.hpp"
 
 namespace imucal::cli {
 namespace {
 
-void run(const app::report::ReportOptions& options) {
+void run(const app::report::ReportOptions& given, const std::vector<std::string>& topics) {
+  // A bag given as --log is read through its import (the calibration's, when the topics are the same);
+  // the bag itself is an input no output may name.
+  if (!given.log_path.empty()) {
+    const app::OutputPolicy inputs{true, {given.log_path}};  // only "not an input": --force is checked after
+    if (auto s = app::check_output(given.html_path, inputs); !s.ok()) fail(s.error());
+  }
+  app::report::ReportOptions options = given;
+  if (!options.log_path.empty()) options.log_path = log_of_input(given.log_path, topics);
   auto summary = app::report::write_report(options);
   if (!summary.ok()) {
     // An existing output is refused in the CLI's own words.
@@ -42,11 +52,14 @@ void setup(CLI::App& root) {
          "camera's YAML (-o; its tables, no figures), calibrate camimu's output folder, or calibrate "
          "thermal's YAML")
       ->required();
-  cmd->add_option("--log", o->log_path, "The session log the result came from (signals, per-pose figures)");
+  cmd->add_option("--log", o->log_path,
+                  "The session log (or ROS bag) the result came from (signals, per-pose figures)");
+  auto topics = std::make_shared<std::vector<std::string>>();
+  add_bag_topics_option(cmd, topics.get());
   cmd->add_option("-o,--output", o->html_path, "The HTML report to write")->required();
   cmd->add_option("--png-dir", o->png_dir, "Also write every figure as a PNG file into this folder");
   cmd->add_flag("--force", o->overwrite, "Replace a report and PNG files that exist");
-  cmd->callback([o] { run(*o); });
+  cmd->callback([o, topics] { run(*o, *topics); });
 }
 
 const CommandRegistrar registrar(80, setup);

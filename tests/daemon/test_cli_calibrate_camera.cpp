@@ -118,6 +118,10 @@ TEST(CliCalibrateCamera, ARosBagIsImportedOnceAndCalibratesLikeItsLog) {
       << r.err;
   expect_truth_within_three_sigmas(dir + "/cam.yaml");
   EXPECT_EQ(YAML::LoadFile(dir + "/cam.yaml")["cam0"]["rostopic"].as<std::string>(), "/cam0/image_raw");
+  // The result names the bag the user gave, not the import in the cache.
+  EXPECT_NE(read_file(dir + "/cam.yaml").find("log: " + bag + "\n"), std::string::npos)
+      << read_file(dir + "/cam.yaml");
+  EXPECT_EQ(read_file(dir + "/cam.yaml").find("/cache/bags/"), std::string::npos);
   // The next command reads the import; the bag is never an output, and is never written.
   r = run_cli({"allan", bag, "-o", dir + "/imu.yaml"});
   EXPECT_NE(r.err.find("reading the log imported from it before"), std::string::npos) << r.err;
@@ -131,6 +135,12 @@ TEST(CliCalibrateCamera, ARosBagIsImportedOnceAndCalibratesLikeItsLog) {
   EXPECT_NE(r.err.find("its topics: /cam0/image_raw (sensor_msgs/Image), /imu0 (sensor_msgs/Imu)"),
             std::string::npos)
       << r.err;
+  // --no-cache: the import goes into a temporary folder, never into the cache.
+  const test::ScopedCacheDir other(dir + "/cache2");
+  r = run_cli({"calibrate", "camera", bag, "--topics", "/left/image_raw", "--target", target, "--no-cache",
+               "-o", dir + "/none.yaml"});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/cache2/bags"));
 }
 
 // --store-detections keeps the old way: the detections go into the log (when it is complete and
