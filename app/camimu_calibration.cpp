@@ -232,12 +232,12 @@ Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& q) {
 
   // With a thermal model the solve sees a copy corrected to its reference temperature.
   std::vector<ImuSample> corrected;
-  if (!q.thermal_path.empty()) {
+  if (q.thermal) {
     corrected = loaded->samples;
-    auto applied = apply_thermal_file(q.thermal_path, corrected, loaded->info);
+    auto applied = apply_thermal_file(*q.thermal, corrected, loaded->info);
     if (!applied.ok()) return applied.error().with_remedy("thermal");
     report.thermal = applied->model;
-    report.thermal_source = q.thermal_path;
+    report.thermal_source = q.thermal->path;
     report.warnings.insert(report.warnings.end(), applied->warnings.begin(), applied->warnings.end());
   }
   std::size_t saturated = 0;

@@ -17,6 +17,7 @@
 
 #include "app/calibration_check.hpp"
 #include "app/camimu_inputs.hpp"
+#include "app/results/thermal_results.hpp"
 #include "calib/camimu_calibration.hpp"
 #include "calib/target_detection.hpp"
 #include "core/camimu_calibration.hpp"
@@ -50,9 +51,9 @@ struct CamImuRequest {
   /// and fixed blocks (app::imu_prior).
   std::optional<NamedCalibration> imu_intrinsics;
   std::optional<GsensInput> gsens;
-  /// A thermal model (calibrate thermal -o): the IMU samples are corrected to its reference
-  /// temperature before the solve; empty: none.
-  std::string thermal_path;
+  /// A thermal model (calibrate thermal -o, or the session's fit): the IMU samples are corrected
+  /// to its reference temperature before the solve.
+  std::optional<ThermalFile> thermal;
   /// Model, spline, noise weights, fixed blocks (merged with those the priors fix), threads.
   calib::CamImuOptions options;
   std::string gravity_source;

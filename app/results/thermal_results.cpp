@@ -472,15 +472,13 @@ Result<AppliedThermal> apply_thermal(const calib::ThermalResult& result, std::ve
   return applied;
 }
 
-Result<AppliedThermal> apply_thermal_file(const std::string& path, std::vector<ImuSample>& samples,
+Result<AppliedThermal> apply_thermal_file(const ThermalFile& file, std::vector<ImuSample>& samples,
                                           const ImuStreamInfo& info) {
-  auto file = read_thermal_file(path);
-  if (!file.ok()) return file.error();
-  auto applied = apply_thermal(file->result, samples, info, path);
-  if (!applied.ok()) return applied.error().context("--thermal " + path);
-  if (!file->stream.empty() && file->stream != info.name) {
-    applied->warnings.insert(applied->warnings.begin(), "the thermal model " + path + " is of stream " +
-                                                            file->stream + " (" + file->log +
+  auto applied = apply_thermal(file.result, samples, info, file.path);
+  if (!applied.ok()) return applied.error().context("the thermal model " + file.path);
+  if (!file.stream.empty() && file.stream != info.name) {
+    applied->warnings.insert(applied->warnings.begin(), "the thermal model " + file.path + " is of stream " +
+                                                            file.stream + " (" + file.log +
                                                             "), applied to stream " + info.name);
   }
   return applied;

@@ -83,10 +83,11 @@ struct AppliedThermal {
                                                    std::vector<ImuSample>& samples, const ImuStreamInfo& info,
                                                    const std::string& source);
 
-/// Reads `path` and corrects `samples` (the caller's copy of `info`'s stream) to the model's
-/// reference temperature. A raw stream's model is converted with the log's nominal conversion,
-/// as `calibrate thermal` converted it. Errors name the file and say what to do.
-[[nodiscard]] Result<AppliedThermal> apply_thermal_file(const std::string& path,
+/// Corrects `samples` (the caller's copy of `info`'s stream) to the reference temperature of a
+/// thermal file (read_thermal_file, or the session's own fit as one). A raw stream's model is
+/// converted with the log's nominal conversion, as `calibrate thermal` converted it; a model of
+/// another stream is applied with a warning. Errors name the file and say what to do.
+[[nodiscard]] Result<AppliedThermal> apply_thermal_file(const ThermalFile& file,
                                                         std::vector<ImuSample>& samples,
                                                         const ImuStreamInfo& info);
 

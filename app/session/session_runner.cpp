@@ -136,7 +136,7 @@ static Status solve_camera_chain(const RigConfig& config, const std::string& dir
 /// one last.
 static Result<std::vector<std::string>> solve_camimu(
     const RigConfig& config, const std::string& dir, const std::string& static_yaml,
-    const ImuStreamInfo& info, const MotionLogSource& source, const std::string& thermal_yaml,
+    const ImuStreamInfo& info, const MotionLogSource& source, const std::optional<ThermalFile>& thermal,
     SolveOutcome& out, const std::function<void(double, const std::string&)>& progress) {
   const std::string log = source.path.empty() ? dir + "/" + kMotionLogFile : source.path;
   if (!config.target) return make_error(Errc::kInvalidArgument, "the configuration names no target");
@@ -146,7 +146,7 @@ static Result<std::vector<std::string>> solve_camimu(
   q.target = *config.target;
   q.target_source = "the rig configuration";
   q.store_detections = source.store_detections;
-  q.thermal_path = thermal_yaml;  // the session's model: the camimu samples corrected as the static ones
+  q.thermal = thermal;  // the session's model: the camimu samples corrected as the static ones
   if (config.cameras.size() >= 2) {
     IMUCAL_TRY(solve_camera_chain(config, dir, log, source, progress, &q, &files, &out.chain_self_check));
   }
@@ -235,10 +235,10 @@ static Result<std::vector<std::string>> solve_camimu(
 /// The thermal model of a session's thermal recording (SolveJob::thermal_samples, SI means),
 /// into out.thermal; a fit that cannot be made (the rig moved, too small a span) is a result not
 /// determined, with the reason, and the session goes on without the correction. When determined
-/// it is written to <dir>/thermal.yaml (the `calibrate thermal` format), whose path is returned.
-static Result<std::string> solve_thermal(const SolveJob& job, const RigConfig& config,
-                                         const ImuStreamInfo& info, const std::string& dir,
-                                         SolveOutcome& out) {
+/// it is written to <dir>/thermal.yaml (the `calibrate thermal` format) and returned as that file.
+static Result<std::optional<ThermalFile>> solve_thermal(const SolveJob& job, const RigConfig& config,
+                                                        const ImuStreamInfo& info, const std::string& dir,
+                                                        SolveOutcome& out) {
   calib::ThermalOptions options;  // the means are in SI units and deg C already
   options.min_span_c = config.session.thermal_min_span_c;
   // Bins of 20 s from 800 s of recording on; a shorter recording (the operator ended it) gets
@@ -251,14 +251,20 @@ static Result<std::string> solve_thermal(const SolveJob& job, const RigConfig& c
     calib::ThermalResult failed;
     failed.reason = fit.error().message;
     out.thermal = std::move(failed);
-    return std::string();
+    return std::optional<ThermalFile>();
   }
   out.thermal = std::move(*fit);
-  if (!out.thermal->determined) return std::string();
-  const std::string path = dir + "/thermal.yaml";
-  IMUCAL_TRY(write_text_file(path, thermal_result_yaml(*out.thermal, info, dir + "/session.imulog")));
-  out.result_files.push_back(path);
-  return path;
+  if (!out.thermal->determined) return std::optional<ThermalFile>();
+  ThermalFile file;
+  file.path = dir + "/thermal.yaml";
+  file.log = dir + "/session.imulog";
+  file.stream = info.name;
+  file.input_units = imu_units_name(info.units);
+  file.result = *out.thermal;
+  file.model = calib::thermal_model(file.result);
+  IMUCAL_TRY(write_text_file(file.path, thermal_result_yaml(*out.thermal, info, file.log)));
+  out.result_files.push_back(file.path);
+  return std::optional<ThermalFile>(std::move(file));
 }
 
 static SolveOutcome run_solve_timed(const SolveJob& job, const RigConfig& config, const ImuStreamInfo& info,
@@ -266,18 +272,18 @@ static SolveOutcome run_solve_timed(const SolveJob& job, const RigConfig& config
                                     const std::function<void(double, const std::string&)>& progress,
                                     const MotionLogSource& motion_log) {
   SolveOutcome out;
-  std::string thermal_yaml;
+  std::optional<ThermalFile> thermal;
   std::optional<AppliedThermal> applied;  // the model on the stream's input units and what it left
   std::vector<ImuSample> corrected;       // a copy of the samples at the model's T_ref
   if (job.final && job.thermal_samples && !job.thermal_samples->empty()) {
     if (progress)
       progress(0.0, "Thermal model from " + std::to_string(job.thermal_samples->size()) + " means of 0.1 s");
-    auto path = solve_thermal(job, config, info, dir, out);
-    if (!path.ok()) {
-      out.error = "writing the thermal model: " + path.error().message;
+    auto fitted = solve_thermal(job, config, info, dir, out);
+    if (!fitted.ok()) {
+      out.error = "writing the thermal model: " + fitted.error().message;
       return out;
     }
-    thermal_yaml = *path;
+    thermal = std::move(*fitted);
     if (out.thermal->determined && !job.samples->empty()) {
       corrected = *job.samples;
       auto a = apply_thermal(*out.thermal, corrected, info, "thermal.yaml");
@@ -321,7 +327,7 @@ static SolveOutcome run_solve_timed(const SolveJob& job, const RigConfig& config
   // The record to store, from the typed results (the files above are for people and tools).
   CalibrationRecord record = calibration_record_from_static(*out.imu, info, yaml_path);
   if (job.camimu) {
-    auto files = solve_camimu(config, dir, yaml_path, info, motion_log, thermal_yaml, out, progress);
+    auto files = solve_camimu(config, dir, yaml_path, info, motion_log, thermal, out, progress);
     if (!files.ok()) {
       out.error = files.error().message;
       return out;

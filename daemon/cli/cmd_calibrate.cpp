@@ -158,8 +158,10 @@ void run(const StaticCliOptions& as_given) {
   std::optional<app::AppliedThermal> thermal;
   if (!o.thermal_path.empty()) {
     corrected = loaded->samples;
-    auto applied = app::apply_thermal_file(o.thermal_path, corrected, info);
-    if (!applied.ok()) fail(applied.error());
+    auto file = app::read_thermal_file(o.thermal_path);
+    if (!file.ok()) fail(file.error(), "--thermal");
+    auto applied = app::apply_thermal_file(*file, corrected, info);
+    if (!applied.ok()) fail(applied.error(), "--thermal");
     thermal = std::move(*applied);
   }
   const std::vector<ImuSample>& samples = thermal ? corrected : loaded->samples;

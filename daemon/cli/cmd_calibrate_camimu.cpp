@@ -101,7 +101,11 @@ app::CamImuRequest build_request(const CamImuCliOptions& o) {
     if (!c.ok()) fail(c.error(), "--imu-intrinsics");
     q.imu_intrinsics = *c;
   }
-  q.thermal_path = o.thermal_path;
+  if (!o.thermal_path.empty()) {
+    auto t = app::read_thermal_file(o.thermal_path);
+    if (!t.ok()) fail(t.error(), "--thermal");
+    q.thermal = std::move(*t);
+  }
   if (!o.gsens_path.empty()) {
     auto g = app::read_gsens_input(o.gsens_path);
     if (!g.ok()) fail(g.error(), "--gsens");
