@@ -350,7 +350,7 @@ void add_solver_options(CLI::App* cmd, CamImuCliOptions* o) {
          "Pose spline knot spacing, s: 0 (chosen from the motion, 0.01-0.05 s; the summary says which) or "
          "0.005-0.5")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, calib::CamImuLimits::kMaxKnotSpacingS));
+      ->check(zero_or_range(calib::CamImuLimits::kMinKnotSpacingS, calib::CamImuLimits::kMaxKnotSpacingS));
   cmd->add_option("--spline-order", d.spline_order, "Pose spline order (degree + 1): 4 cubic to 6 quintic")
       ->capture_default_str()
       ->check(CLI::Range(calib::CamImuLimits::kMinSplineOrder, calib::CamImuLimits::kMaxSplineOrder));
@@ -368,7 +368,7 @@ void add_solver_options(CLI::App* cmd, CamImuCliOptions* o) {
                   "IMU samples above this rate are averaged in groups into one residual each, Hz: 0 (every "
                   "sample its own residual) or 20-100000")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, calib::CamImuLimits::kMaxImuMaxRateHz));
+      ->check(zero_or_range(calib::CamImuLimits::kMinImuMaxRateHz, calib::CamImuLimits::kMaxImuMaxRateHz));
   cmd->add_option(
          "--covariance-blocks", d.covariance_cluster_s,
          "Length of the time blocks whose residuals may share their errors, s: every sigma is the larger "

@@ -6,6 +6,7 @@
 
 #include <CLI/CLI.hpp>
 #include <optional>
+#include <sstream>
 #include <string>
 
 #include "core/text_format.hpp"
@@ -29,6 +30,27 @@ inline CLI::Validator finite_number(NumberSign sign) {
       sign == NumberSign::kPositive      ? "NUMBER>0"
       : sign == NumberSign::kNonNegative ? "NUMBER>=0"
                                          : "NUMBER");
+}
+
+/// 0 (an option's "chosen for you" or "off") or a finite number within [lo, hi]: the one range of an
+/// option whose library check reads the same (CamImuOptions::validate()).
+inline CLI::Validator zero_or_range(double lo, double hi) {
+  auto bound = [](double v) {
+    std::ostringstream s;
+    s << v;
+    return s.str();
+  };
+  const std::string range = bound(lo) + " - " + bound(hi);
+  return CLI::Validator(
+      [lo, hi, range](std::string& text) -> std::string {
+        const std::optional<double> number = parse_finite_number(text);
+        const std::string shown = text.size() > 40 ? text.substr(0, 40) + "..." : text;
+        if (!number) return "'" + shown + "' is not a finite number";
+        if (*number != 0.0 && (*number < lo || *number > hi))
+          return "'" + shown + "' must be 0 or in " + range;
+        return {};
+      },
+      "0 or [" + range + "]");
 }
 
 /// A value that is not empty (an empty value is a mistake, never "the default").
