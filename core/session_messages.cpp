@@ -340,6 +340,12 @@ char key_letter(OperatorKey key) {
   return '?';
 }
 
+std::optional<OperatorKey> key_of_letter(char letter) {
+  for (const auto& k : kKeys)
+    if (k.letter == letter) return k.key;
+  return std::nullopt;
+}
+
 const std::vector<StepId>& all_steps() {
   static const std::vector<StepId> steps = [] {
     std::vector<StepId> out;

@@ -45,6 +45,8 @@ const char* session_state_name(SessionState state);
 const char* key_name(OperatorKey key);
 /// The console's letter for a key: c, r, a, y, n, s.
 char key_letter(OperatorKey key);
+/// The key a console letter stands for, if any.
+std::optional<OperatorKey> key_of_letter(char letter);
 const char* level_name(MessageLevel level);
 const char* outcome_name(Outcome outcome);
 const char* device_state_name(DeviceState state);

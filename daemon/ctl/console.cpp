@@ -127,29 +127,38 @@ std::string gate_line(const msg::Review::Gate& gate) {
 /// Rows one press of d or u scrolls the review by.
 constexpr std::size_t kReviewScrollRows = 8;
 
+/// The console's own keys; the operator's (c, r, a, y, n, s) are msg::key_letter's.
+constexpr char kQuitKey = 'q', kRestartKey = 'R', kScrollDownKey = 'd', kScrollUpKey = 'u', kYesKey = 'y',
+               kNoKey = 'n', kEscapeKey = 27, kCtrlC = 3, kCtrlD = 4;
+
+std::string letter(char key) { return std::string(1, key); }
+
 std::string key_help(const ConsoleState& state) {
   if (!state.lost.empty()) {
     return "imucalctl has ended; run it again once imucald is back";
   }
   if (state.confirm) {
-    return state.confirm->question + "  y: yes  n: no  (another key: no, then its own action)";
+    return state.confirm->question + "  " + letter(kYesKey) + ": yes  " + letter(kNoKey) +
+           ": no  (another key: no, then its own action)";
   }
   if (state.observe) {
-    return "observing (keys are not sent)  q detach";
+    return "observing (keys are not sent)  " + letter(kQuitKey) + " detach";
   }
   if (state.status && !is_running(*state.status)) {
-    return std::string(state.done ? "c start the next session" : "c start a session") + "  q detach";
+    return letter(msg::key_letter(msg::OperatorKey::kContinue)) +
+           (state.done ? " start the next session" : " start a session") + "  " + letter(kQuitKey) +
+           " detach";
   }
   std::string help;
   if (state.prompt) {
     for (const msg::OperatorKey key : state.prompt->keys) {
-      help += std::string(1, msg::key_letter(key)) + " " + msg::key_name(key) + "  ";
+      help += letter(msg::key_letter(key)) + " " + msg::key_name(key) + "  ";
     }
   }
   if (state.status) {
-    help += "R restart  ";
+    help += letter(kRestartKey) + " restart  ";
   }
-  return help + "q detach";
+  return help + letter(kQuitKey) + " detach";
 }
 
 void add_recent(ConsoleState& state, std::string text) {
@@ -684,7 +693,7 @@ std::string status_text(const msg::Status& status) {
 bool session_running(const ConsoleState& state) { return state.status && is_running(*state.status); }
 
 KeyAction on_key(ConsoleState& state, char key) {
-  if (key == 'q' || key == 3 || key == 4) {
+  if (key == kQuitKey || key == kCtrlC || key == kCtrlD) {
     return {std::nullopt, true};
   }
   if (state.confirm) {
@@ -692,7 +701,7 @@ KeyAction on_key(ConsoleState& state, char key) {
     // does without a question pending (`a` asks to abort), rather than being swallowed.
     Confirm confirm = std::move(*state.confirm);
     state.confirm.reset();
-    if (key == 'y') {
+    if (key == kYesKey) {
       state.start_after_done = confirm.then_start;
       if (confirm.then_start) {
         // R restarts the session it ends: the same steps, not the configured ones.
@@ -703,13 +712,13 @@ KeyAction on_key(ConsoleState& state, char key) {
       return {confirm.request, false};
     }
     state.notice = "Not done: " + confirm.question;
-    if (key == 'n' || key == 27) return {};
+    if (key == kNoKey || key == kEscapeKey) return {};
   }
-  if (state.review && (key == 'd' || key == 'u')) {
+  if (state.review && (key == kScrollDownKey || key == kScrollUpKey)) {
     // Scrolling the review is the console's own: an observer may do it too.
     const std::size_t at = std::min(state.review_offset, state.review_last_offset);
-    state.review_offset = key == 'd' ? std::min(at + kReviewScrollRows, state.review_last_offset)
-                                     : at - std::min(at, kReviewScrollRows);
+    state.review_offset = key == kScrollDownKey ? std::min(at + kReviewScrollRows, state.review_last_offset)
+                                                : at - std::min(at, kReviewScrollRows);
     return {};
   }
   if (state.observe) {
@@ -720,26 +729,31 @@ KeyAction on_key(ConsoleState& state, char key) {
     state.confirm = Confirm{std::move(question), std::move(request), then_start};
     return KeyAction{};
   };
-  const bool start_key = key == 'c' || key == ' ' || key == '\r' || key == '\n' || key == 'R';
+  // Space and Enter are c's; R (restart) is the console's own.
+  const bool go_on = key == ' ' || key == '\r' || key == '\n';
+  const std::optional<msg::OperatorKey> op = go_on ? msg::OperatorKey::kContinue : msg::key_of_letter(key);
   if (state.status && !is_running(*state.status)) {
-    if (start_key) {
+    if (op == msg::OperatorKey::kContinue || key == kRestartKey) {
       state.notice.clear();
       return {service::to_json(service::plain_request(service::Command::kStart)), false};
     }
-    state.notice = "No session is running: press c to start one";
+    state.notice = "No session is running: press " + letter(msg::key_letter(msg::OperatorKey::kContinue)) +
+                   " to start one";
     return {};
   }
+  if (key == kRestartKey) {
+    return ask("Restart: abort this session and start a new one?",
+               service::to_json(service::plain_request(service::Command::kAbort)), true);
+  }
+  if (!op) return {};
   const std::string step = state.status && state.status->step ? step_text(state.status->step)
                            : state.prompt                     ? step_text(state.prompt->step)
                                                               : std::string();
   std::optional<double> progress;
   if (state.live && step_text(state.live->step) == step && std::isfinite(state.live->progress))
     progress = state.live->progress;
-  switch (key) {
-    case 'c':
-    case ' ':
-    case '\r':
-    case '\n':
+  switch (*op) {
+    case msg::OperatorKey::kContinue:
       // The service ends the poses step only with its fewest poses: do not offer what it refuses.
       if (const auto* poses = state.live && step_text(state.live->step) == step
                                   ? std::get_if<msg::PoseFigures>(&state.live->figures)
@@ -757,26 +771,22 @@ KeyAction on_key(ConsoleState& state, char key) {
             key_request(msg::OperatorKey::kContinue));
       }
       return {key_request(msg::OperatorKey::kContinue), false};
-    case 'r':
+    case msg::OperatorKey::kRedo:
       return {key_request(msg::OperatorKey::kRedo), false};
-    case 'a':
+    case msg::OperatorKey::kAbort:
       return ask("Abort the session? What was recorded is kept, nothing is written.",
                  service::to_json(service::plain_request(service::Command::kAbort)));
-    case 'R':
-      return ask("Restart: abort this session and start a new one?",
-                 service::to_json(service::plain_request(service::Command::kAbort)), true);
-    case 'y':
+    case msg::OperatorKey::kAccept:
       return {key_request(msg::OperatorKey::kAccept), false};
-    case 'n':
+    case msg::OperatorKey::kReject:
       return ask("Reject this calibration? Nothing is written; the results stay in the session folder.",
                  key_request(msg::OperatorKey::kReject));
-    case 's':
+    case msg::OperatorKey::kSkip:
       return ask("Skip the " + (step.empty() ? std::string("current") : step) +
                      " step? What it recorded is not used.",
                  key_request(msg::OperatorKey::kSkip));
-    default:
-      return {};
   }
+  return {};
 }
 
 std::string progress_bar(double progress, int width) {

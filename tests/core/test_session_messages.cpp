@@ -128,7 +128,9 @@ TEST(SessionMessages, TheOperatorKeysHaveOneTable) {
     auto back = parse_key(key_name(k));
     ASSERT_TRUE(back.ok());
     EXPECT_EQ(*back, k);
+    EXPECT_EQ(key_of_letter(key_letter(k)), k);  // the console reads its letters from the same table
   }
+  EXPECT_EQ(key_of_letter('q'), std::nullopt);
   EXPECT_EQ(key_letter(OperatorKey::kAccept), 'y');
   EXPECT_EQ(key_letter(OperatorKey::kReject), 'n');
   auto bad = parse_key("pause");
