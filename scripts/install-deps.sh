@@ -23,6 +23,7 @@ test_pkgs=(
   chromium
   tmux systemd
   lintian
+  python3  # tests/check_layering.py (layering.rules)
   python3-rosbag python3-sensor-msgs python3-roslz4  # ROS's own bag writer and reader, for rosbag.python_bags
   python3-lz4 python3-zstandard  # a second writer of rosbag2 mcap chunks, for rosbag.python_bags
 )
