@@ -438,7 +438,14 @@ json encode(const PreflightReport& report) {
     devs.push_back({{"name", d.name}, {"ok", d.ok}, {"detail", d.detail}});
     if (!d.advice.empty()) devs.back()["advice"] = d.advice;
   }
-  return {{"rig", report.rig}, {"devices", devs}, {"stored", report.stored ? *report.stored : json()}};
+  json stored;  // the record's own JSON form with its summary beside
+  if (report.stored) {
+    stored = calibration_record_json(report.stored->record);
+    stored["summary"] = report.stored->summary;
+  }
+  json j = {{"rig", report.rig}, {"devices", devs}, {"stored", stored}};
+  if (!report.stored_unreadable.empty()) j["stored_unreadable"] = report.stored_unreadable;
+  return j;
 }
 
 std::string dump(const SessionMessage& message) {

@@ -19,6 +19,7 @@
 #include <variant>
 #include <vector>
 
+#include "core/calibration_record.hpp"
 #include "core/result.hpp"
 #include "core/time.hpp"
 
@@ -78,9 +79,17 @@ struct PreflightReport {
     std::string detail;  // "MPU-6000 on /dev/spidev0.0, WHO_AM_I 0x68, self-test passed" or the error
     std::string advice;  // when it failed: what the operator can do ("hold the rig still ...")
   };
+  /// The calibration on the rig's storage.
+  struct Stored {
+    CalibrationRecord record;
+    std::string summary;  // where it is: "sequence 3 in slot B, written ..."
+  };
   std::vector<Device> devices;
-  std::string rig;                       // the configuration's name
-  std::optional<nlohmann::json> stored;  // the calibration on the rig's storage (its record and summary)
+  std::string rig;               // the configuration's name
+  std::optional<Stored> stored;  // none: nothing stored (or stored_unreadable says why it is not here)
+  /// A stored record that did not read back from a message (a damaged session log): why. The
+  /// session then says the stored calibration is present but not comparable.
+  std::string stored_unreadable;
   bool ok() const;
 };
 

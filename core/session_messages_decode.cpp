@@ -180,7 +180,21 @@ Result<PreflightReport> read_report(const json& j, const std::string& where) {
     }
   }
   const json& stored = f.at("stored", false);
-  if (!stored.is_null()) r.stored = stored;
+  if (stored.is_object()) {
+    json j = stored;
+    const std::string summary = j.value("summary", std::string("stored"));
+    j.erase("summary");
+    auto record = calibration_record_from_json(j);
+    if (record.ok()) {
+      r.stored = PreflightReport::Stored{std::move(*record), summary};
+    } else {
+      r.stored_unreadable = record.error().message;
+    }
+  } else if (!stored.is_null()) {
+    r.stored_unreadable = "the stored record is not a mapping";
+  }
+  if (std::string said = f.text("stored_unreadable", false); !said.empty())
+    r.stored_unreadable = std::move(said);
   if (!f.ok()) return make_error(Errc::kCorrupt, f.error());
   return r;
 }

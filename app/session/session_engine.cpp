@@ -344,27 +344,15 @@ void SessionEngine::begin_step() {
 
 void SessionEngine::run_preflight() {
   const PreflightReport report = host_.preflight();
-  stored_.reset();
-  stored_unreadable_.clear();
-  if (report.stored) {
-    // The host sends the record's JSON form with a summary beside; read into the record once.
-    json j = *report.stored;
-    const std::string summary = j.is_object() ? j.value("summary", std::string("stored")) : "stored";
-    if (j.is_object()) j.erase("summary");
-    auto record = calibration_record_from_json(j);
-    if (record.ok()) {
-      stored_ = StoredAtPreflight{std::move(*record), summary};
-    } else {
-      stored_unreadable_ = record.error().message;
-    }
-  }
+  stored_ = report.stored;
+  stored_unreadable_ = report.stored_unreadable;
   emit(session_msg::Preflight{std::nullopt, report});
   std::vector<std::string> lines;
   for (const auto& d : report.devices)
     lines.push_back((d.ok ? "ok    " : "FAIL  ") + d.name + ": " + d.detail);
-  lines.push_back(report.stored
-                      ? "stored calibration: " + report.stored->value("summary", std::string("present"))
-                      : "stored calibration: none");
+  lines.push_back(report.stored                       ? "stored calibration: " + report.stored->summary
+                  : !report.stored_unreadable.empty() ? "stored calibration: present, not readable"
+                                                      : "stored calibration: none");
   live(lines, 1.0, report);
   if (!report.ok()) {
     steps_[current_].state = StepState::kFailed;

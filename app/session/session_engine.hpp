@@ -303,13 +303,9 @@ class SessionEngine {
   int final_id_ = 0;
   std::optional<SolveOutcome> final_;
   std::vector<Gate> gates_;
-  /// The calibration on the storage at preflight, read once into its typed record (none: nothing
-  /// stored, or a record that does not read, whose reason is stored_unreadable_).
-  struct StoredAtPreflight {
-    CalibrationRecord record;
-    std::string summary;  // "sequence 3 in slot B, written ..."
-  };
-  std::optional<StoredAtPreflight> stored_;
+  /// The calibration on the storage at preflight (none: nothing stored, or a record that did not
+  /// read, whose reason is stored_unreadable_).
+  std::optional<PreflightReport::Stored> stored_;
   std::string stored_unreadable_;
   bool gates_pass_ = false;
   std::string written_to_;  // where the last write put the record (storage, slot, sequence)

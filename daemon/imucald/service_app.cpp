@@ -687,11 +687,10 @@ app::session::PreflightReport Service::preflight() {
              (unwritable.empty() ? ": readable and writable" : ": readable, not writable: " + unwritable),
          {}});
     if (stored->record) {
-      json s = calibration_record_json(*stored->record);
-      s["summary"] = "sequence " + std::to_string(stored->sequence) + " in slot " +
-                     drivers::slot_name(stored->slot) +
-                     (stored->record->created_utc.empty() ? "" : ", written " + stored->record->created_utc);
-      r.stored = s;
+      r.stored = app::session::PreflightReport::Stored{
+          *stored->record,
+          "sequence " + std::to_string(stored->sequence) + " in slot " + drivers::slot_name(stored->slot) +
+              (stored->record->created_utc.empty() ? "" : ", written " + stored->record->created_utc)};
     }
   }
   for (const CameraConfig& cc : config_.cameras) {

@@ -15,44 +15,47 @@ namespace {
 
 // One line per kind and variant, as the engine and imucald write them (keys sorted, NaN as null).
 const std::vector<std::string>& wire_lines() {
-  static const std::vector<std::string> lines = {
-      R"j({"event":"start","steps":["preflight","poses","solve"],"t":100.25,"type":"session"})j",
-      R"j({"event":"start","steps":[],"t":0.0,"type":"session"})j",
-      R"j({"elapsed_s":0.0,"poses":0,"rig":"sim","state":"running","step":"preflight","steps":[{"name":"preflight","state":"active"},{"name":"poses","state":"pending"}],"t":100.25,"type":"status"})j",
-      R"j({"elapsed_s":12.5,"poses":3,"rig":"sim","state":"idle","step":"","steps":[],"type":"status"})j",
-      R"j({"devices":{"cameras":[{"error":"","faults":0,"frames":12,"name":"cam0","state":"closed"}],"imu":{"error":"","faults":1,"gyro_offsets":"cleared","rate_hz":200.0,"samples":4000,"sim":true,"state":"open"},"storage":"file x.bin"},"elapsed_s":1.5,"poses":0,"recorded_bytes":48312345,"rig":"sim","session_dir":"/var/lib/imucal/sessions/a","state":"done","step":"","steps":[{"name":"write","state":"done"}],"type":"status","version":"1.2.3"})j",
-      R"j({"keys":["continue","abort"],"step":"preflight","t":100.25,"text":"Rig 'sim': every device answers. Press c to begin","type":"prompt"})j",
-      R"j({"art":["  +--+","  |  |"],"keys":["continue","redo","abort"],"step":"poses","t":126.75,"text":"Turn the rig","type":"prompt","up":[0.0,0.0,-1.0]})j",
-      R"j({"keys":[],"step":"write","t":214.2,"text":"Writing the calibration to the rig's storage","type":"prompt"})j",
-      R"j({"figures":{"devices":[{"detail":"virtual MPU-6000","name":"imu","ok":true},{"advice":"hold the rig still","detail":"self-test failed","name":"imu2","ok":false}],"rig":"sim","stored":null},"lines":["ok    imu: virtual MPU-6000","stored calibration: none"],"progress":1.0,"step":"preflight","t":100.25,"type":"live"})j",
-      R"j({"figures":{"rate_c_per_min":0.0,"temperature_c":34.73294117647059},"lines":["Temperature 34.73 C"],"progress":0.0,"step":"warmup","t":101.67,"type":"live"})j",
-      R"j({"figures":{"accel_slope_mps2_per_c":[null,null,null],"gyro_slope_dps_per_c":[0.001,-0.002,0.0],"range_c":[30.0,31.5],"rate_c_per_min":0.5,"temperature_c":31.5},"lines":["Temperature 31.50 C"],"progress":0.75,"step":"thermal","t":300.0,"type":"live"})j",
-      R"j({"figures":{"missing":["+X","-X"],"poses":0,"scale_sigma":null,"still":true},"lines":["Captured: turn to a new orientation"],"progress":0.0,"step":"poses","t":126.79,"type":"live"})j",
-      R"j({"figures":{"camera_frames":[100,98],"camera_frames_seen":[80,70],"frames":100,"frames_seen":80,"frames_seen_by_every_camera":60,"gyro_rms_dps":[40.0,35.5,20.25]},"lines":["Rotation RMS"],"progress":0.5,"step":"motion","t":400.0,"type":"live"})j",
-      R"j({"figures":{"camera_frames":[100],"camera_frames_seen":[80],"coverage":[{"cells":[0,3,1,0,0,2],"cols":3,"rows":2,"size":0.25,"skew":0.0,"views":4,"x":0.5,"y":1.0}],"frames":100,"frames_seen":80,"frames_seen_by_every_camera":80,"gyro_rms_dps":[40.0,35.5,20.25]},"lines":["Rotation RMS"],"progress":0.5,"step":"motion","t":400.0,"type":"live"})j",
-      R"j({"devices":{"cameras":[],"imu":{"error":"","faults":0,"gyro_offsets":"off","rate_hz":200.0,"samples":4000,"sim":true,"state":"open"},"storage":"file x.bin"},"elapsed_s":1.5,"live_view":{"token_file":"/var/lib/imucal/live-view.token","url":"http://127.0.0.1:8421/"},"poses":0,"recorded_bytes":0,"rig":"sim","session_dir":"","state":"idle","step":"","steps":[],"type":"status","version":"1.2.3"})j",
-      R"j({"lines":["Still: 0.1 of 10 s"],"progress":0.014720934500000001,"step":"still","t":116.9,"type":"live"})j",
-      R"j({"level":"info","t":116.748123754,"text":"Warm: 34.77 C, changing 0.13 C/min","type":"message"})j",
-      R"j({"level":"warning","t":120.0,"text":"Too close to pose 1","type":"message"})j",
-      R"j({"advice":"What was recorded is kept. Fix the cam0 and press r to redo the step, or a to abort","source":"cam0","step":"motion","t":410.0,"text":"disconnected","type":"fault"})j",
-      R"j({"report":{"devices":[{"detail":"MPU-6000","name":"imu","ok":true}],"rig":"sim","stored":{"imu":{"b_a":[1,2,3]},"summary":"sequence 4 in slot 1"}},"t":100.25,"type":"preflight"})j",
-      R"j({"key":"continue","t":101.66690970500001,"type":"key"})j",
-      R"j({"reason":"SIGTERM","t":5.0,"type":"stop"})j",
-      R"j({"final":false,"id":1,"samples":10632,"t":170.71766624900002,"type":"solve"})j",
-      R"j({"camimu":true,"final":true,"id":12,"samples":19045,"t":213.4,"thermal_means":0,"type":"solve"})j",
-      R"j({"error":"","id":12,"t":214.0,"type":"applied","wall_s":0.75})j",
-      R"j({"files":["a/imu-static.yaml"],"imu":{"A_a":[[1.0,0.0,0.0],[0.0,1.0,0.0],[0.0,0.0,1.0]],"A_g":[[1.0,0.0,0.0],[0.0,1.0,0.0],[0.0,0.0,1.0]],"G":[[0.0,0.0,0.0],[0.0,0.0,0.0],[0.0,0.0,0.0]],"b_a":[0.1,0.2,0.3],"b_g":[-0.1,-0.2,-0.3]},"t":213.4,"type":"result"})j",
-      R"j({"cameras":[{"name":"cam0","q_cam_imu_wxyz":[1.0,0.0,0.0,0.0],"reprojection_rms_px":0.25,"t_cam_imu_m":[0.01,0.02,0.03],"timeshift_cam_imu_s":0.004}],"files":[],"self_check":{"advice":"","summary":"agree","verdict":"agree"},"t":1.0,"thermal":{"determined":true,"reference_c":35.0,"valid_range_c":[30.0,40.0]},"type":"result"})j",
-      R"j({"files":[],"t":1.0,"thermal":{"determined":false,"reason":"span too small"},"type":"result"})j",
-      R"j({"error":"","ok":true,"t":214.2,"type":"written","where":"slot B, sequence 4"})j",
-      R"j({"error":"no space","ok":false,"t":214.2,"type":"written"})j",
-      R"j({"index":1,"t":131.458790131,"type":"pose","up":[0.6931851421610691,-0.48751084786920024,0.5308743089442094]})j",
-      R"j({"face":"+X","t":140.0,"type":"face","up":[0.99,0.01,0.0]})j",
-      R"j({"difference_to_stored":null,"files":["f"],"gates":[{"digits":4,"limit":0.05,"name":"gravity residual RMS (m/s^2)","pass":true,"value":0.00102898324260714},{"limit":0.0,"name":"cam0 extrinsics without a sigma","pass":false,"value":null}],"lines":["Accel bias: 0.1"],"pass":false,"t":213.4,"type":"review"})j",
-      R"j({"difference_to_stored":{"b_a":[0.1,0.0,0.0],"b_g":[0.0,0.2,0.0],"scale_a":[0.001,0.0,0.0],"scale_g":[0.0,0.0,0.002]},"files":[],"gates":[],"lines":[],"pass":true,"t":213.4,"type":"review"})j",
-      R"j({"outcome":"written","reports":["a/report.html"],"session_dir":"a","stored":"slot B","t":214.2,"text":"The calibration was written, read back and verified.","type":"done"})j",
-      R"j({"outcome":"aborted","t":3.0,"text":"Aborted by the operator.","type":"done"})j",
-  };
+  static const std::
+      vector<std::string>
+          lines =
+              {
+                  R"j({"event":"start","steps":["preflight","poses","solve"],"t":100.25,"type":"session"})j",
+                  R"j({"event":"start","steps":[],"t":0.0,"type":"session"})j",
+                  R"j({"elapsed_s":0.0,"poses":0,"rig":"sim","state":"running","step":"preflight","steps":[{"name":"preflight","state":"active"},{"name":"poses","state":"pending"}],"t":100.25,"type":"status"})j",
+                  R"j({"elapsed_s":12.5,"poses":3,"rig":"sim","state":"idle","step":"","steps":[],"type":"status"})j",
+                  R"j({"devices":{"cameras":[{"error":"","faults":0,"frames":12,"name":"cam0","state":"closed"}],"imu":{"error":"","faults":1,"gyro_offsets":"cleared","rate_hz":200.0,"samples":4000,"sim":true,"state":"open"},"storage":"file x.bin"},"elapsed_s":1.5,"poses":0,"recorded_bytes":48312345,"rig":"sim","session_dir":"/var/lib/imucal/sessions/a","state":"done","step":"","steps":[{"name":"write","state":"done"}],"type":"status","version":"1.2.3"})j",
+                  R"j({"keys":["continue","abort"],"step":"preflight","t":100.25,"text":"Rig 'sim': every device answers. Press c to begin","type":"prompt"})j",
+                  R"j({"art":["  +--+","  |  |"],"keys":["continue","redo","abort"],"step":"poses","t":126.75,"text":"Turn the rig","type":"prompt","up":[0.0,0.0,-1.0]})j",
+                  R"j({"keys":[],"step":"write","t":214.2,"text":"Writing the calibration to the rig's storage","type":"prompt"})j",
+                  R"j({"figures":{"devices":[{"detail":"virtual MPU-6000","name":"imu","ok":true},{"advice":"hold the rig still","detail":"self-test failed","name":"imu2","ok":false}],"rig":"sim","stored":null},"lines":["ok    imu: virtual MPU-6000","stored calibration: none"],"progress":1.0,"step":"preflight","t":100.25,"type":"live"})j",
+                  R"j({"figures":{"rate_c_per_min":0.0,"temperature_c":34.73294117647059},"lines":["Temperature 34.73 C"],"progress":0.0,"step":"warmup","t":101.67,"type":"live"})j",
+                  R"j({"figures":{"accel_slope_mps2_per_c":[null,null,null],"gyro_slope_dps_per_c":[0.001,-0.002,0.0],"range_c":[30.0,31.5],"rate_c_per_min":0.5,"temperature_c":31.5},"lines":["Temperature 31.50 C"],"progress":0.75,"step":"thermal","t":300.0,"type":"live"})j",
+                  R"j({"figures":{"missing":["+X","-X"],"poses":0,"scale_sigma":null,"still":true},"lines":["Captured: turn to a new orientation"],"progress":0.0,"step":"poses","t":126.79,"type":"live"})j",
+                  R"j({"figures":{"camera_frames":[100,98],"camera_frames_seen":[80,70],"frames":100,"frames_seen":80,"frames_seen_by_every_camera":60,"gyro_rms_dps":[40.0,35.5,20.25]},"lines":["Rotation RMS"],"progress":0.5,"step":"motion","t":400.0,"type":"live"})j",
+                  R"j({"figures":{"camera_frames":[100],"camera_frames_seen":[80],"coverage":[{"cells":[0,3,1,0,0,2],"cols":3,"rows":2,"size":0.25,"skew":0.0,"views":4,"x":0.5,"y":1.0}],"frames":100,"frames_seen":80,"frames_seen_by_every_camera":80,"gyro_rms_dps":[40.0,35.5,20.25]},"lines":["Rotation RMS"],"progress":0.5,"step":"motion","t":400.0,"type":"live"})j",
+                  R"j({"devices":{"cameras":[],"imu":{"error":"","faults":0,"gyro_offsets":"off","rate_hz":200.0,"samples":4000,"sim":true,"state":"open"},"storage":"file x.bin"},"elapsed_s":1.5,"live_view":{"token_file":"/var/lib/imucal/live-view.token","url":"http://127.0.0.1:8421/"},"poses":0,"recorded_bytes":0,"rig":"sim","session_dir":"","state":"idle","step":"","steps":[],"type":"status","version":"1.2.3"})j",
+                  R"j({"lines":["Still: 0.1 of 10 s"],"progress":0.014720934500000001,"step":"still","t":116.9,"type":"live"})j",
+                  R"j({"level":"info","t":116.748123754,"text":"Warm: 34.77 C, changing 0.13 C/min","type":"message"})j",
+                  R"j({"level":"warning","t":120.0,"text":"Too close to pose 1","type":"message"})j",
+                  R"j({"advice":"What was recorded is kept. Fix the cam0 and press r to redo the step, or a to abort","source":"cam0","step":"motion","t":410.0,"text":"disconnected","type":"fault"})j",
+                  R"j({"report":{"devices":[{"detail":"MPU-6000","name":"imu","ok":true}],"rig":"sim","stored":null,"stored_unreadable":"no key imu"},"t":100.25,"type":"preflight"})j",
+                  R"j({"key":"continue","t":101.66690970500001,"type":"key"})j",
+                  R"j({"reason":"SIGTERM","t":5.0,"type":"stop"})j",
+                  R"j({"final":false,"id":1,"samples":10632,"t":170.71766624900002,"type":"solve"})j",
+                  R"j({"camimu":true,"final":true,"id":12,"samples":19045,"t":213.4,"thermal_means":0,"type":"solve"})j",
+                  R"j({"error":"","id":12,"t":214.0,"type":"applied","wall_s":0.75})j",
+                  R"j({"files":["a/imu-static.yaml"],"imu":{"A_a":[[1.0,0.0,0.0],[0.0,1.0,0.0],[0.0,0.0,1.0]],"A_g":[[1.0,0.0,0.0],[0.0,1.0,0.0],[0.0,0.0,1.0]],"G":[[0.0,0.0,0.0],[0.0,0.0,0.0],[0.0,0.0,0.0]],"b_a":[0.1,0.2,0.3],"b_g":[-0.1,-0.2,-0.3]},"t":213.4,"type":"result"})j",
+                  R"j({"cameras":[{"name":"cam0","q_cam_imu_wxyz":[1.0,0.0,0.0,0.0],"reprojection_rms_px":0.25,"t_cam_imu_m":[0.01,0.02,0.03],"timeshift_cam_imu_s":0.004}],"files":[],"self_check":{"advice":"","summary":"agree","verdict":"agree"},"t":1.0,"thermal":{"determined":true,"reference_c":35.0,"valid_range_c":[30.0,40.0]},"type":"result"})j",
+                  R"j({"files":[],"t":1.0,"thermal":{"determined":false,"reason":"span too small"},"type":"result"})j",
+                  R"j({"error":"","ok":true,"t":214.2,"type":"written","where":"slot B, sequence 4"})j",
+                  R"j({"error":"no space","ok":false,"t":214.2,"type":"written"})j",
+                  R"j({"index":1,"t":131.458790131,"type":"pose","up":[0.6931851421610691,-0.48751084786920024,0.5308743089442094]})j",
+                  R"j({"face":"+X","t":140.0,"type":"face","up":[0.99,0.01,0.0]})j",
+                  R"j({"difference_to_stored":null,"files":["f"],"gates":[{"digits":4,"limit":0.05,"name":"gravity residual RMS (m/s^2)","pass":true,"value":0.00102898324260714},{"limit":0.0,"name":"cam0 extrinsics without a sigma","pass":false,"value":null}],"lines":["Accel bias: 0.1"],"pass":false,"t":213.4,"type":"review"})j",
+                  R"j({"difference_to_stored":{"b_a":[0.1,0.0,0.0],"b_g":[0.0,0.2,0.0],"scale_a":[0.001,0.0,0.0],"scale_g":[0.0,0.0,0.002]},"files":[],"gates":[],"lines":[],"pass":true,"t":213.4,"type":"review"})j",
+                  R"j({"outcome":"written","reports":["a/report.html"],"session_dir":"a","stored":"slot B","t":214.2,"text":"The calibration was written, read back and verified.","type":"done"})j",
+                  R"j({"outcome":"aborted","t":3.0,"text":"Aborted by the operator.","type":"done"})j",
+              };
   return lines;
 }
 
@@ -120,6 +123,36 @@ TEST(SessionMessages, DecodedFieldsAreTyped) {
   auto done = parse(wire_lines().back());
   ASSERT_TRUE(done.ok());
   EXPECT_EQ(std::get<Done>(*done).outcome, Outcome::kAborted);
+}
+
+// The stored record reaches the engine typed: the wire carries its JSON form and summary, and a
+// record that does not read is said, not dropped.
+TEST(SessionMessages, ThePreflightCarriesTheStoredRecordTyped) {
+  PreflightReport report;
+  report.rig = "sim";
+  CalibrationRecord record;
+  record.created_utc = "2026-12-04T15:00:00Z";
+  record.imu.stream = "imu0";
+  record.imu.input_units = "raw";
+  record.imu.model.b_a = Eigen::Vector3d(-359.02, 84.8, -86.05);
+  record.gravity_mps2 = 9.80665;
+  report.stored = PreflightReport::Stored{record, "sequence 4 in slot B"};
+  auto back = parse(encode(SessionMessage(Preflight{100.25, report})).dump());
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  const PreflightReport& got = std::get<Preflight>(*back).report;
+  ASSERT_TRUE(got.stored.has_value());
+  EXPECT_EQ(got.stored->summary, "sequence 4 in slot B");
+  EXPECT_EQ(got.stored->record.imu.model.b_a, record.imu.model.b_a);
+  EXPECT_EQ(calibration_record_json(got.stored->record), calibration_record_json(record));
+  EXPECT_TRUE(got.stored_unreadable.empty());
+
+  // A record that does not read: no record, and why.
+  auto bad = parse(
+      R"j({"report":{"devices":[],"rig":"sim","stored":{"imu":{"b_a":[1,2,3]},"summary":"s"}},"t":1.0,"type":"preflight"})j");
+  ASSERT_TRUE(bad.ok()) << bad.error().message;
+  const PreflightReport& unread = std::get<Preflight>(*bad).report;
+  EXPECT_FALSE(unread.stored.has_value());
+  EXPECT_FALSE(unread.stored_unreadable.empty());
 }
 
 TEST(SessionMessages, TheOperatorKeysHaveOneTable) {
