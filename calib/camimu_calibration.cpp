@@ -217,20 +217,13 @@ void Estimator<N>::initialise_spline(std::size_t ref) {
 }
 
 template <int N>
-void Estimator<N>::build(ceres::Problem* problem, bool extended, int imu_stride) {
+BuiltProblem<N> Estimator<N>::build(ceres::Problem* problem, bool extended, int imu_stride) {
   static RightQuaternionManifold quat_manifold;
   static ceres::SphereManifold<3> sphere;
   for (auto& q : st_.q) problem->AddParameterBlock(q.data(), 4, &quat_manifold);
   problem->AddParameterBlock(st_.C.data(), 4, &quat_manifold);
   problem->AddParameterBlock(st_.g.data(), 3, &sphere);
-  frames_.clear();
-  frame_camera_.clear();
-  frame_blocks_.clear();
-  imu_residuals_.clear();
-  imu_blocks_.clear();
-  imu_index_.clear();
-  priors_.clear();
-  timed_residuals_.clear();
+  BuiltProblem<N> built;
   for (std::size_t k = 0; k < imu_.size(); k += static_cast<std::size_t>(imu_stride)) {
     const CamImuSample& s = imu_[k];
     const double t = t_s(s.t_ns);
@@ -246,10 +239,10 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended, int imu_stride)
     for (double* b : {st_.g.data(), st_.Sa.data(), st_.Ma.data(), st_.Sg.data(), st_.Mg.data(), st_.C.data(),
                       st_.B.data()})
       blocks.push_back(b);
-    timed_residuals_.push_back({problem->AddResidualBlock(cost, nullptr, blocks), t});
-    imu_residuals_.push_back(cost);
-    imu_blocks_.push_back(std::move(blocks));
-    imu_index_.push_back(k);
+    built.timed_residuals.push_back({problem->AddResidualBlock(cost, nullptr, blocks), t});
+    built.imu_residuals.push_back(cost);
+    built.imu_blocks.push_back(std::move(blocks));
+    built.imu_index.push_back(k);
   }
   // Bias random walk: three-point Gauss-Legendre quadrature of |db/dt|^2 per bias segment.
   const double gl_u[3] = {0.5 - 0.5 * std::sqrt(0.6), 0.5, 0.5 + 0.5 * std::sqrt(0.6)};
@@ -285,10 +278,10 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended, int imu_stride)
       blocks.push_back(cs.t_ci.data());
       blocks.push_back(&cs.shift);
       if (cs.rolling) blocks.push_back(&cs.line_delay);
-      timed_residuals_.push_back({problem->AddResidualBlock(cost, nullptr, blocks), t});
-      frames_.push_back(cost);
-      frame_camera_.push_back(c);
-      frame_blocks_.push_back(std::move(blocks));
+      built.timed_residuals.push_back({problem->AddResidualBlock(cost, nullptr, blocks), t});
+      built.frames.push_back(cost);
+      built.frame_camera.push_back(c);
+      built.frame_blocks.push_back(std::move(blocks));
     }
     if (opt_.fixed.T_cam_imu) {
       problem->SetParameterBlockConstant(cs.q_ci.data());
@@ -314,7 +307,8 @@ void Estimator<N>::build(ceres::Problem* problem, bool extended, int imu_stride)
         std::pair{st_.C.data(), basic || f.C_bg}, std::pair{st_.B.data(), basic || f.B_g}}) {
     if (fixed) problem->SetParameterBlockConstant(block);
   }
-  if (!basic && opt_.prior.enabled) add_priors(problem);
+  if (!basic && opt_.prior.enabled) add_priors(problem, &built.priors);
+  return built;
 }
 
 template <int N>
@@ -331,7 +325,7 @@ KrebsImuSigma Estimator<N>::prior_sigmas() const {
 }
 
 template <int N>
-void Estimator<N>::add_priors(ceres::Problem* problem) {
+void Estimator<N>::add_priors(ceres::Problem* problem, std::vector<typename BuiltProblem<N>::Prior>* priors) {
   const KrebsImuSigma ps = prior_sigmas();
   const auto add = [&](double* block, ceres::CostFunction* cost) {
     if (problem->IsParameterBlockConstant(block)) {
@@ -339,7 +333,7 @@ void Estimator<N>::add_priors(ceres::Problem* problem) {
       return;
     }
     problem->AddResidualBlock(cost, nullptr, block);
-    priors_.push_back({cost, block});
+    priors->push_back({cost, block});
   };
   add(st_.Sa.data(), new VectorPrior(prior0_.S_a, ps.S_a));
   add(st_.Sg.data(), new VectorPrior(prior0_.S_g, ps.S_g));
@@ -353,7 +347,7 @@ template <int N>
 double Estimator<N>::prior_cost() const {
   double cost = 0.0;
   std::vector<double> r;
-  for (const Prior& p : priors_) {
+  for (const auto& p : built_.priors) {
     r.resize(static_cast<std::size_t>(p.cost->num_residuals()));
     const double* params[] = {p.block};
     p.cost->Evaluate(params, r.data(), nullptr);
@@ -369,7 +363,7 @@ void Estimator<N>::rebuild(bool extended, int imu_stride) {
   problem_ = std::make_unique<ceres::Problem>(po);
   covariance_.reset();
   covariance_failed_ = false;
-  build(problem_.get(), extended, imu_stride);
+  built_ = build(problem_.get(), extended, imu_stride);
 }
 
 template <int N>
@@ -395,10 +389,10 @@ const MarginalCovariance* Estimator<N>::solution_covariance() {
   // The clusters of the robust covariance: the frames and IMU samples of one time block share
   // their errors (detector bias, blur, lens misfit, unmodelled IMU behaviour over the block).
   std::vector<std::vector<ceres::ResidualBlockId>> clusters;
-  if (opt_.covariance_cluster_s > 0.0 && !timed_residuals_.empty()) {
-    double first = timed_residuals_.front().second;
-    for (const auto& [id, t] : timed_residuals_) first = std::min(first, t);
-    for (const auto& [id, t] : timed_residuals_) {
+  if (opt_.covariance_cluster_s > 0.0 && !built_.timed_residuals.empty()) {
+    double first = built_.timed_residuals.front().second;
+    for (const auto& [id, t] : built_.timed_residuals) first = std::min(first, t);
+    for (const auto& [id, t] : built_.timed_residuals) {
       const auto c = static_cast<std::size_t>(std::floor((t - first) / opt_.covariance_cluster_s));
       if (c >= clusters.size()) clusters.resize(c + 1);
       clusters[c].push_back(id);
@@ -420,9 +414,9 @@ const MarginalCovariance* Estimator<N>::solution_covariance() {
 
 template <int N>
 bool Estimator<N>::frames_in_window() const {
-  for (std::size_t k = 0; k < frames_.size(); ++k) {
-    const CameraState& cs = st_.cams[frame_camera_[k]];
-    if (!frames_[k]->in_window(cs.shift, cs.rolling ? cs.line_delay : 0.0)) return false;
+  for (std::size_t k = 0; k < built_.frames.size(); ++k) {
+    const CameraState& cs = st_.cams[built_.frame_camera[k]];
+    if (!built_.frames[k]->in_window(cs.shift, cs.rolling ? cs.line_delay : 0.0)) return false;
   }
   return true;
 }
@@ -433,11 +427,11 @@ bool Estimator<N>::reestimate_corner_sigma() {
   std::vector<std::vector<double>> comps(st_.cams.size());
   std::vector<Eigen::Vector2d> e;
   bool changed = false;
-  for (std::size_t k = 0; k < frames_.size(); ++k) {
-    frames_[k]->pixel_residuals(frame_blocks_[k].data(), &e);
+  for (std::size_t k = 0; k < built_.frames.size(); ++k) {
+    built_.frames[k]->pixel_residuals(built_.frame_blocks[k].data(), &e);
     for (const auto& v : e) {
-      comps[frame_camera_[k]].push_back(std::abs(v.x()));
-      comps[frame_camera_[k]].push_back(std::abs(v.y()));
+      comps[built_.frame_camera[k]].push_back(std::abs(v.x()));
+      comps[built_.frame_camera[k]].push_back(std::abs(v.y()));
     }
   }
   for (std::size_t c = 0; c < comps.size(); ++c) {
@@ -453,15 +447,15 @@ bool Estimator<N>::reestimate_corner_sigma() {
 
 template <int N>
 bool Estimator<N>::reestimate_imu_noise() {
-  if (!opt_.imu_noise_from_residuals || imu_residuals_.empty()) return false;
+  if (!opt_.imu_noise_from_residuals || built_.imu_residuals.empty()) return false;
   double sa = 0.0, sg = 0.0;
   Eigen::Matrix<double, 6, 1> r;
-  for (std::size_t k = 0; k < imu_residuals_.size(); ++k) {
-    imu_residuals_[k]->Evaluate(imu_blocks_[k].data(), r.data(), nullptr);
+  for (std::size_t k = 0; k < built_.imu_residuals.size(); ++k) {
+    built_.imu_residuals[k]->Evaluate(built_.imu_blocks[k].data(), r.data(), nullptr);
     sa += (r.head<3>() * quality_.accel_sigma).squaredNorm();
     sg += (r.tail<3>() * quality_.gyro_sigma).squaredNorm();
   }
-  const double n = 3.0 * static_cast<double>(imu_residuals_.size());
+  const double n = 3.0 * static_cast<double>(built_.imu_residuals.size());
   bool changed = false;
   for (auto [rms, sigma, given, flag] :
        {std::tuple{std::sqrt(sa / n), &quality_.accel_sigma, quality_.accel_sigma_given,
@@ -550,7 +544,7 @@ Status Estimator<N>::choose_model(ceres::Solver::Summary* summary) {
   }
   int k = 0;
   double W = wald_statistic(&k);
-  const double n = static_cast<double>(std::max<std::size_t>(imu_residuals_.size(), 2));
+  const double n = static_cast<double>(std::max<std::size_t>(built_.imu_residuals.size(), 2));
   const double threshold = k * std::log(n);
   char text[400];
   if (!std::isfinite(W)) {
@@ -695,8 +689,8 @@ Status Estimator<N>::choose_shutter(bool extended, ceres::Solver::Summary* summa
   if (Status s = solve(extended, "rolling shutter", summary); !s.ok()) return s;
   const double lr = 2.0 * (global_cost - summary->final_cost);
   double measurements = 0.0;
-  for (std::size_t k = 0; k < frames_.size(); ++k)
-    if (frames_[k]->rolling()) measurements += 2.0 * static_cast<double>(frames_[k]->corners());
+  for (std::size_t k = 0; k < built_.frames.size(); ++k)
+    if (built_.frames[k]->rolling()) measurements += 2.0 * static_cast<double>(built_.frames[k]->corners());
   const double k = static_cast<double>(tested.size());
   double readout = 0.0;  // the longest of the freed cameras, s
   for (std::size_t c : tested)
@@ -823,7 +817,8 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   quality_.parameters = problem_->NumParameters();
   // Counted as measurements: two per corner, not the compressed rows the solver sees.
   quality_.residuals = problem_->NumResiduals();
-  for (const auto* f : frames_) quality_.residuals += 2 * static_cast<int>(f->corners()) - f->num_residuals();
+  for (const auto* f : built_.frames)
+    quality_.residuals += 2 * static_cast<int>(f->corners()) - f->num_residuals();
   quality_.spline_knots = st_.pose.knots;
   fits.push_back(signal_fit(extended ? "extended" : "basic"));
   quality_.accel_residual_rms = fits.back().accel_residual_rms;  // per axis, SI

@@ -118,6 +118,25 @@ class StopWhen final : public ceres::IterationCallback {
   std::function<bool()> stop_;
 };
 
+/// The residuals of a built problem, kept for what is computed from it afterwards: the robust
+/// covariance's clusters, the reported residuals and signals, the prior's cost.
+template <int N>
+struct BuiltProblem {
+  std::vector<const FrameResidual<N>*> frames;
+  std::vector<std::size_t> frame_camera;
+  std::vector<std::vector<double*>> frame_blocks;
+  std::vector<const ImuResidual<N>*> imu_residuals;
+  std::vector<std::vector<double*>> imu_blocks;
+  std::vector<std::size_t> imu_index;  // imu_ sample of each IMU residual
+  /// Every frame and IMU residual with its time (s), for the robust covariance's clusters.
+  std::vector<std::pair<ceres::ResidualBlockId, double>> timed_residuals;
+  struct Prior {
+    const ceres::CostFunction* cost;
+    double* block;
+  };
+  std::vector<Prior> priors;
+};
+
 template <int N>
 class Estimator {
  public:
@@ -134,8 +153,8 @@ class Estimator {
   void warn_rejected_frames();
   void initialise_spline(std::size_t ref);
   /// The problem at the current values; every `imu_stride`-th IMU sample (the first stage
-  /// takes fewer).
-  void build(ceres::Problem* problem, bool extended, int imu_stride = 1);
+  /// takes fewer). Returns its residuals.
+  BuiltProblem<N> build(ceres::Problem* problem, bool extended, int imu_stride = 1);
   /// One stage to the relative cost tolerance `tolerance` (kPreliminaryTolerance, ...).
   Status solve(bool extended, const std::string& stage, ceres::Solver::Summary* summary,
                double tolerance = kFinalTolerance);
@@ -164,9 +183,10 @@ class Estimator {
   /// The prior's standard deviation of every intrinsic (CamImuIntrinsicsPrior about prior0_),
   /// whether the block is free or not.
   KrebsImuSigma prior_sigmas() const;
-  /// The prior terms of the free intrinsic blocks (extended model, prior enabled).
-  void add_priors(ceres::Problem* problem);
-  /// The cost of the prior terms of the last build (0 without).
+  /// The prior terms of the free intrinsic blocks (extended model, prior enabled), added to
+  /// `priors`.
+  void add_priors(ceres::Problem* problem, std::vector<typename BuiltProblem<N>::Prior>* priors);
+  /// The cost of the prior terms of problem_ (0 without).
   double prior_cost() const;
   /// The Wald statistic of the free intrinsics against their start with the data's information
   /// alone (see choose_model); NaN when the covariance leaves a direction undetermined. `*k`
@@ -199,20 +219,7 @@ class Estimator {
   const CamImuProgressFn& progress_;
   TimeNs t0_ns_ = 0;
   State<N> st_;
-  std::vector<const FrameResidual<N>*> frames_;  // of the last build
-  std::vector<std::size_t> frame_camera_;
-  std::vector<std::vector<double*>> frame_blocks_;
-  std::vector<const ImuResidual<N>*> imu_residuals_;
-  std::vector<std::vector<double*>> imu_blocks_;
-  std::vector<std::size_t> imu_index_;  // imu_ sample of each IMU residual
-  /// Every frame and IMU residual of the last build with its time (s), for the robust
-  /// covariance's clusters.
-  std::vector<std::pair<ceres::ResidualBlockId, double>> timed_residuals_;
-  struct Prior {
-    const ceres::CostFunction* cost;
-    double* block;
-  };
-  std::vector<Prior> priors_;                           // of the last build
+  BuiltProblem<N> built_;                               // the residuals of problem_
   KrebsImuModel prior0_;                                // the prior's centre (the starting model)
   CamImuModelKind model_ = CamImuModelKind::kExtended;  // the model solved (kAuto resolved)
   std::string model_choice_;

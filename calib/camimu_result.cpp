@@ -88,12 +88,12 @@ std::vector<MarginalCovariance::HeldScore> Estimator<N>::held_intrinsics() const
     }
     if (moves.empty()) continue;
     std::vector<MarginalCovariance::HeldScore> scores(moves.size());
-    for (std::size_t k = 0; k < frames_.size(); ++k) {
-      if (frame_camera_[k] != c) continue;
-      const auto per_move = frames_[k]->intrinsics_scores(frame_blocks_[k].data(), moves, 0.5);
+    for (std::size_t k = 0; k < built_.frames.size(); ++k) {
+      if (built_.frame_camera[k] != c) continue;
+      const auto per_move = built_.frames[k]->intrinsics_scores(built_.frame_blocks[k].data(), moves, 0.5);
       for (std::size_t j = 0; j < moves.size(); ++j)
         for (std::size_t b = 0; b < per_move[j].size(); ++b)
-          scores[j].emplace_back(frame_blocks_[k][b], per_move[j][b]);
+          scores[j].emplace_back(built_.frame_blocks[k][b], per_move[j][b]);
     }
     for (auto& s : scores) out.push_back(std::move(s));
   }
@@ -254,7 +254,7 @@ void Estimator<N>::covariance(CamImuCalibrationResult* out) {
 
 template <int N>
 void Estimator<N>::check_against_prior(CamImuCalibrationResult* out) {
-  if (priors_.empty()) return;
+  if (built_.priors.empty()) return;
   const CamImuIntrinsicsPrior& pr = opt_.prior;
   out->prior_source = pr.source;
   KrebsImuSigma& ps = out->prior_sigma;  // NaN where a block has no prior (held fixed)
@@ -361,17 +361,17 @@ void Estimator<N>::fill_result(CamImuCalibrationResult* out) {
   }
   std::vector<Eigen::Vector2d> e;
   std::vector<std::vector<Eigen::Vector2f>> all(cameras_.size());
-  for (std::size_t k = 0; k < frames_.size(); ++k) {
-    CamImuCameraResult& cr = out->cameras[frame_camera_[k]];
-    const double outlier_px = opt_.reprojection_loss_sigmas * st_.cams[frame_camera_[k]].sigma_px;
+  for (std::size_t k = 0; k < built_.frames.size(); ++k) {
+    CamImuCameraResult& cr = out->cameras[built_.frame_camera[k]];
+    const double outlier_px = opt_.reprojection_loss_sigmas * st_.cams[built_.frame_camera[k]].sigma_px;
     cr.outlier_px = outlier_px;
-    frames_[k]->pixel_residuals(frame_blocks_[k].data(), &e);
+    built_.frames[k]->pixel_residuals(built_.frame_blocks[k].data(), &e);
     cr.frames += 1;
     for (const auto& v : e) {
       cr.corners += 1;
-      sq[frame_camera_[k]] += v.squaredNorm();
+      sq[built_.frame_camera[k]] += v.squaredNorm();
       if (v.norm() > outlier_px) cr.outlier_corners += 1;
-      all[frame_camera_[k]].push_back(v.cast<float>());
+      all[built_.frame_camera[k]].push_back(v.cast<float>());
     }
   }
   // Every k-th corner when there are more than the result keeps.
@@ -391,18 +391,18 @@ template <int N>
 ImuSignalFit Estimator<N>::signal_fit(const std::string& model) const {
   ImuSignalFit fit;
   fit.model = model;
-  const std::size_t n = imu_residuals_.size(), cap = ImuSignalFit::kMaxSamples;
+  const std::size_t n = built_.imu_residuals.size(), cap = ImuSignalFit::kMaxSamples;
   const std::size_t step = std::max<std::size_t>(1, (n + cap - 1) / cap);
   Eigen::Vector3d sa = Eigen::Vector3d::Zero(), sg = Eigen::Vector3d::Zero();
   for (std::size_t k = 0; k < n; ++k) {
     Eigen::Matrix<double, 6, 1> r;
-    imu_residuals_[k]->Evaluate(imu_blocks_[k].data(), r.data(), nullptr);
+    built_.imu_residuals[k]->Evaluate(built_.imu_blocks[k].data(), r.data(), nullptr);
     // r = (predicted - measured) / sigma.
     const Eigen::Vector3d da = r.head<3>() * quality_.accel_sigma, dg = r.tail<3>() * quality_.gyro_sigma;
     sa += da.cwiseAbs2();
     sg += dg.cwiseAbs2();
     if (k % step != 0) continue;
-    const CamImuSample& s = imu_[imu_index_[k]];
+    const CamImuSample& s = imu_[built_.imu_index[k]];
     fit.t_ns.push_back(s.t_ns);
     fit.accel_measured.push_back(s.accel.cast<float>());
     fit.accel_predicted.push_back((s.accel + da).cast<float>());
