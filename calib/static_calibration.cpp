@@ -566,8 +566,28 @@ void widen_for_held_misalignment(const Candidate& best, const StaticCalibrationO
   }
 }
 
-Status solve_accelerometer(const Candidate& best, AccelModel model, std::span<const ImuSample> samples,
-                           const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
+/// The accelerometer's part of the static result.
+struct AccelPiece {
+  TedaldiTriad triad;
+  Eigen::MatrixXd covariance;
+  TriadSigma sigma;
+  FitDof dof;
+  StaticAccelModel model = StaticAccelModel::kFull;
+  std::string reason;              // why that model
+  std::vector<std::string> fixed;  // parameters held instead of fitted
+  double faces_direction_rms_rad = 0.0;
+  double faces_rotation_rad = 0.0;
+  int poses_off_faces = 0;
+  double residual_rms = 0.0;
+  int iterations = 0;
+  std::vector<StaticIntervalInfo> intervals;
+  std::vector<std::string> warnings;
+};
+
+Result<AccelPiece> solve_accelerometer(const Candidate& best, AccelModel model,
+                                       std::span<const ImuSample> samples,
+                                       const StaticCalibrationOptions& opt) {
+  AccelPiece a;
   AccelSolve final;
   if (model == AccelModel::kFaces) {
     const KnownOrientationFit fit = fit_known_orientation(best.means, best.faces, opt.gravity_mps2);
@@ -575,45 +595,44 @@ Status solve_accelerometer(const Candidate& best, AccelModel model, std::span<co
       return make_error(Errc::kSolverFailed, "the known-orientation accelerometer fit failed: " + fit.error);
     if (magnitude_after_faces(best.means.size())) {
       // Misalignment from the faces, scales and biases from the magnitude with it held.
-      final = solve_accel(best.means, opt.gravity_mps2, fit.triad, &res->accel_covariance, true);
+      final = solve_accel(best.means, opt.gravity_mps2, fit.triad, &a.covariance, true);
       if (!final.ok) return make_error(Errc::kSolverFailed, "the accelerometer's scale and bias fit failed");
       const Eigen::Vector3d angle_sigma = fit.covariance.diagonal().head<3>().cwiseMax(0.0).cwiseSqrt();
-      widen_for_held_misalignment(best, opt, final.p, angle_sigma, &res->accel_covariance);
-      res->accel_covariance.topLeftCorner<3, 3>() = fit.covariance.topLeftCorner<3, 3>();
-      res->accel_dof = {static_cast<int>(best.means.size()), 6};
+      widen_for_held_misalignment(best, opt, final.p, angle_sigma, &a.covariance);
+      a.covariance.topLeftCorner<3, 3>() = fit.covariance.topLeftCorner<3, 3>();
+      a.dof = {static_cast<int>(best.means.size()), 6};
     } else {
       final = first_accel_solve(best, model, opt);
-      res->accel_covariance = fit.covariance;
-      res->accel_dof = {fit.residuals, fit.parameters};
+      a.covariance = fit.covariance;
+      a.dof = {fit.residuals, fit.parameters};
     }
-    res->faces_direction_rms_rad = fit.direction_rms_rad;
-    res->faces_rotation_rad = fit.q_angle_rad;
-    res->poses_off_faces = static_cast<int>(std::count(best.faces.begin(), best.faces.end(), -1));
-    res->accel_model = StaticAccelModel::kFaces;
-    res->accel_model_reason =
+    a.faces_direction_rms_rad = fit.direction_rms_rad;
+    a.faces_rotation_rad = fit.q_angle_rad;
+    a.poses_off_faces = static_cast<int>(std::count(best.faces.begin(), best.faces.end(), -1));
+    a.model = StaticAccelModel::kFaces;
+    a.reason =
         std::to_string(best.distinct) + " distinct attitudes, fewer than the " +
         std::to_string(opt.min_attitudes) +
         " the magnitude form needs, on all six faces: the misalignment from the poses taken as lying flat on "
         "their faces with gravity along their axes (the form PX4 and ArduPilot use), scales and biases " +
         (magnitude_after_faces(best.means.size()) ? std::string("from the gravity magnitude")
                                                   : std::string("from the faces too (fewer than 9 poses)"));
-    if (opt.accel_model == AccelModel::kFaces) res->accel_model_reason = "chosen with --accel-model faces";
-    if (res->poses_off_faces > 0) {
-      res->warnings.push_back(
-          std::to_string(res->poses_off_faces) + " static pose(s) lie on no face (more than " +
+    if (opt.accel_model == AccelModel::kFaces) a.reason = "chosen with --accel-model faces";
+    if (a.poses_off_faces > 0) {
+      a.warnings.push_back(
+          std::to_string(a.poses_off_faces) + " static pose(s) lie on no face (more than " +
           format_number("%.0f", opt.face_max_angle_deg) +
           " deg from every axis): left out of the accelerometer fit, used for the gyroscope");
     }
     if (fit.direction_rms_rad > 1.0 * M_PI / 180.0) {
-      res->warnings.push_back(
-          "the poses lie " + format_number("%.2f", fit.direction_rms_rad * 180.0 / M_PI) +
-          " deg RMS from their faces' axes: they were not flat on level faces, and the "
-          "misalignment is only as good as that (--accel-model scale-bias fits scales and "
-          "biases without assuming the faces)");
+      a.warnings.push_back("the poses lie " + format_number("%.2f", fit.direction_rms_rad * 180.0 / M_PI) +
+                           " deg RMS from their faces' axes: they were not flat on level faces, and the "
+                           "misalignment is only as good as that (--accel-model scale-bias fits scales and "
+                           "biases without assuming the faces)");
     }
   } else {
     const bool fix = model == AccelModel::kScaleBias;
-    final = solve_accel(best.means, opt.gravity_mps2, accel_triad(best.solve.p), &res->accel_covariance, fix);
+    final = solve_accel(best.means, opt.gravity_mps2, accel_triad(best.solve.p), &a.covariance, fix);
     if (!final.ok) {
       return make_error(Errc::kSolverFailed,
                         "the accelerometer covariance could not be computed: the static attitudes do not "
@@ -621,49 +640,47 @@ Status solve_accelerometer(const Candidate& best, AccelModel model, std::span<co
                             std::string(fix ? "6" : "9") +
                             " parameters; record poses covering more directions");
     }
-    res->accel_dof = {static_cast<int>(best.means.size()), fix ? 6 : 9};
+    a.dof = {static_cast<int>(best.means.size()), fix ? 6 : 9};
     if (fix) {
       widen_for_held_misalignment(best, opt, final.p, Eigen::Vector3d::Constant(opt.misalignment_prior_rad),
-                                  &res->accel_covariance);
-      res->accel_model = StaticAccelModel::kScaleBias;
-      res->accel_fixed = {"misalignment alpha_yz", "misalignment alpha_zy", "misalignment alpha_zx"};
-      res->accel_model_reason =
-          opt.accel_model == AccelModel::kScaleBias
-              ? "chosen with --accel-model scale-bias"
-              : std::to_string(best.distinct) + " distinct attitudes, fewer than the " +
-                    std::to_string(opt.min_attitudes) +
-                    " the full model needs, not on all six faces (missing: " +
-                    missing_faces_in_words(face_counts(best.faces)) +
-                    "): scales and biases from the gravity magnitude, misalignment held at zero";
-      res->warnings.push_back("the accelerometer misalignment was not determined (held at zero; " +
-                              res->accel_model_reason +
-                              "); the scale and bias sigmas include a misalignment of " +
-                              format_number("%.3f", opt.misalignment_prior_rad) + " rad");
+                                  &a.covariance);
+      a.model = StaticAccelModel::kScaleBias;
+      a.fixed = {"misalignment alpha_yz", "misalignment alpha_zy", "misalignment alpha_zx"};
+      a.reason = opt.accel_model == AccelModel::kScaleBias
+                     ? "chosen with --accel-model scale-bias"
+                     : std::to_string(best.distinct) + " distinct attitudes, fewer than the " +
+                           std::to_string(opt.min_attitudes) +
+                           " the full model needs, not on all six faces (missing: " +
+                           missing_faces_in_words(face_counts(best.faces)) +
+                           "): scales and biases from the gravity magnitude, misalignment held at zero";
+      a.warnings.push_back("the accelerometer misalignment was not determined (held at zero; " + a.reason +
+                           "); the scale and bias sigmas include a misalignment of " +
+                           format_number("%.3f", opt.misalignment_prior_rad) + " rad");
     } else {
-      res->accel_model = StaticAccelModel::kFull;
-      res->accel_model_reason = std::to_string(best.distinct) + " distinct attitudes (" +
-                                std::to_string(opt.min_attitudes) + " needed): Tedaldi's magnitude form";
+      a.model = StaticAccelModel::kFull;
+      a.reason = std::to_string(best.distinct) + " distinct attitudes (" + std::to_string(opt.min_attitudes) +
+                 " needed): Tedaldi's magnitude form";
     }
   }
-  res->model.accel = accel_triad(final.p);
-  if (!res->accel_dof.determined()) {
-    res->warnings.push_back("the accelerometer fit is exact: " + std::to_string(res->accel_dof.residuals) +
-                            " residuals for its " + std::to_string(res->accel_dof.parameters) +
-                            " parameters leave nothing to check it against, and its sigmas are undetermined. "
-                            "Record more poses (36-50)");
+  a.triad = accel_triad(final.p);
+  if (!a.dof.determined()) {
+    a.warnings.push_back("the accelerometer fit is exact: " + std::to_string(a.dof.residuals) +
+                         " residuals for its " + std::to_string(a.dof.parameters) +
+                         " parameters leave nothing to check it against, and its sigmas are undetermined. "
+                         "Record more poses (36-50)");
   }
-  res->accel_residual_rms = final.rms;
-  res->accel_iterations = best.solve.iterations + final.iterations;
-  res->accel_sigma = accel_sigma(res->accel_covariance);
+  a.residual_rms = final.rms;
+  a.iterations = best.solve.iterations + final.iterations;
+  a.sigma = accel_sigma(a.covariance);
   if (model == AccelModel::kScaleBias) {
     const double nan = std::numeric_limits<double>::quiet_NaN();
-    res->accel_sigma.T(0, 1) = res->accel_sigma.T(0, 2) = res->accel_sigma.T(1, 2) = nan;
+    a.sigma.T(0, 1) = a.sigma.T(0, 2) = a.sigma.T(1, 2) = nan;
   }
   for (std::size_t k = 0; k < best.intervals.size(); ++k) {
     const auto& iv = best.intervals[k];
-    res->intervals.push_back({samples[iv.begin].t_ns, samples[iv.end - 1].t_ns, iv.size(), best.means[k]});
+    a.intervals.push_back({samples[iv.begin].t_ns, samples[iv.end - 1].t_ns, iv.size(), best.means[k]});
   }
-  return {};
+  return a;
 }
 
 // ---- g-sensitivity ---------------------------------------------------------------------------
@@ -674,10 +691,13 @@ Status solve_accelerometer(const Candidate& best, AccelModel model, std::span<co
 /// bias walk) through the final accelerometer; the pose fit stays when that cannot be had (holds
 /// shorter than its minimum), with a warning.
 void six_face_gsens(std::span<const ImuSample> samples, const StaticCalibrationOptions& opt,
-                    const Eigen::Vector3d& s0, StaticCalibrationResult* res, GyroStaticFit* f) {
+                    const Eigen::Vector3d& s0, const TedaldiTriad& accel, std::vector<std::string>* warnings,
+                    GyroStaticFit* f) {
   GSensitivityOptions g;
   g.gravity_mps2 = opt.gravity_mps2;
-  const CanonicalImuModel c = canonical_from_tedaldi(res->model);
+  TedaldiImuModel model;  // the accelerometer's canonical form: the gyro is not solved yet
+  model.accel = accel;
+  const CanonicalImuModel c = canonical_from_tedaldi(model);
   g.A_a = c.A_a;
   g.b_a = c.b_a;
   g.A_g = s0.asDiagonal();
@@ -685,11 +705,11 @@ void six_face_gsens(std::span<const ImuSample> samples, const StaticCalibrationO
   g.max_face_angle_deg = std::max(opt.face_max_angle_deg, 30.0);
   const Result<GSensitivityResult> r = calibrate_gsens(samples, g);
   if (!r.ok()) {
-    res->warnings.push_back("the g-sensitivity comes from the " + std::to_string(f->dof.residuals) +
-                            " pose means with " + std::to_string(f->dof.dof()) +
-                            " degrees of freedom per axis, too few for trustworthy sigmas; the six-face "
-                            "experiment could not be used: " +
-                            r.error().message);
+    warnings->push_back("the g-sensitivity comes from the " + std::to_string(f->dof.residuals) +
+                        " pose means with " + std::to_string(f->dof.dof()) +
+                        " degrees of freedom per axis, too few for trustworthy sigmas; the six-face "
+                        "experiment could not be used: " +
+                        r.error().message);
     return;
   }
   const Eigen::Vector3d inv = s0.cwiseInverse();
@@ -702,19 +722,27 @@ void six_face_gsens(std::span<const ImuSample> samples, const StaticCalibrationO
     f->bias_sigma[i] = r->b_g_sigma[i];
   }
   f->dof = {r->dof.residuals / 3, r->dof.parameters / 3};
-  for (const auto& w : r->warnings) res->warnings.push_back("g-sensitivity (six-face holds): " + w);
+  for (const auto& w : r->warnings) warnings->push_back("g-sensitivity (six-face holds): " + w);
 }
 
 /// The gyro's static model with the final accelerometer calibration. When G is neglected for
 /// being indistinguishable from zero, two: the bias and its drift fitted to the poses, and the
 /// still start's mean (Tedaldi's); the caller keeps the one whose gyro carries gravity better.
-std::vector<GyroStaticFit> final_gyro_static_fits(const Candidate& best, const ScannedRecording& scan,
-                                                  std::span<const ImuSample> samples, const StillStart& still,
-                                                  const StaticCalibrationOptions& opt,
-                                                  StaticCalibrationResult* res) {
-  res->gsens_mode = effective_gsens(opt, best);
-  if (res->gsens_mode != opt.gsens) {
-    res->warnings.push_back(
+struct GsensPiece {
+  GSensitivityMode mode = GSensitivityMode::kOff;
+  double wald = std::numeric_limits<double>::quiet_NaN();
+  FitDof dof;
+  std::vector<GyroStaticFit> fits;  // one, or two when G is neglected (see above)
+  std::vector<std::string> warnings;
+};
+
+GsensPiece final_gyro_static_fits(const Candidate& best, const ScannedRecording& scan,
+                                  std::span<const ImuSample> samples, const StillStart& still,
+                                  const StaticCalibrationOptions& opt, const TedaldiTriad& accel) {
+  GsensPiece p;
+  p.mode = effective_gsens(opt, best);
+  if (p.mode != opt.gsens) {
+    p.warnings.push_back(
         "the gyro g-sensitivity was not estimated: " + std::to_string(best.means.size()) +
         " static poses are too few to fit it (" + std::to_string(opt.min_poses_for_gsens) +
         " needed, or a pose on each of the six faces); it is neglected (Tedaldi's model), which "
@@ -724,13 +752,12 @@ std::vector<GyroStaticFit> final_gyro_static_fits(const Candidate& best, const S
   // far less than G's own uncertainty).
   const Eigen::Vector3d s0 = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
   const Eigen::Matrix3d H_fixed = s0.cwiseInverse().asDiagonal() * opt.gsens_fixed;
-  GyroStaticFit f =
-      fit_gyro_static(pose_means(best, still, res->model.accel, scan), still, res->gsens_mode, H_fixed);
-  if (res->gsens_mode == GSensitivityMode::kEstimate &&
+  GyroStaticFit f = fit_gyro_static(pose_means(best, still, accel, scan), still, p.mode, H_fixed);
+  if (p.mode == GSensitivityMode::kEstimate &&
       best.means.size() < static_cast<std::size_t>(opt.min_poses_for_gsens)) {
-    six_face_gsens(samples, opt, s0, res, &f);
+    six_face_gsens(samples, opt, s0, accel, &p.warnings, &f);
   }
-  if (res->gsens_mode == GSensitivityMode::kEstimate) {
+  if (p.mode == GSensitivityMode::kEstimate) {
     // Is G distinguishable from zero at all? The Wald statistic of its nine entries (their
     // correlations neglected) against the chi-square 95 % point; below it, estimating G only
     // adds its noise to every gyro sample (on the real recordings of docs/static-calibration.md
@@ -738,20 +765,20 @@ std::vector<GyroStaticFit> final_gyro_static_fits(const Candidate& best, const S
     double w = 0.0;
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) w += (f.H(i, j) / f.H_sigma(i, j)) * (f.H(i, j) / f.H_sigma(i, j));
-    res->gsens_wald = w;
+    p.wald = w;
     if (std::isfinite(w) && w < kGsensWaldLimit) {
       // Not a warning: there is nothing to do about it. The summary and the JSON say so.
-      res->gsens_mode = GSensitivityMode::kOff;
-      const PoseMeans m = pose_means(best, still, res->model.accel, scan);
-      std::vector<GyroStaticFit> two = {
-          fit_gyro_static(m, still, GSensitivityMode::kEstimate, H_fixed, false),
-          fit_gyro_static(m, still, GSensitivityMode::kOff, H_fixed)};
-      res->gsens_dof = two[0].dof;
-      return two;
+      p.mode = GSensitivityMode::kOff;
+      const PoseMeans m = pose_means(best, still, accel, scan);
+      p.fits = {fit_gyro_static(m, still, GSensitivityMode::kEstimate, H_fixed, false),
+                fit_gyro_static(m, still, GSensitivityMode::kOff, H_fixed)};
+      p.dof = p.fits[0].dof;
+      return p;
     }
   }
-  res->gsens_dof = f.dof;
-  return {f};
+  p.dof = f.dof;
+  p.fits = {f};
+  return p;
 }
 
 /// The recording with every gyro sample's g-sensitivity removed (w_raw - H a(t), a(t) the
@@ -767,31 +794,42 @@ ScannedRecording without_gsens(const ScannedRecording& scan, const GyroStaticFit
   return out;
 }
 
-/// Canonical G = A_g H (minus the Earth's vertical rate when the latitude is known) and its sigma.
-void set_gsens_result(const GyroStaticFit& f, const StaticCalibrationOptions& opt,
-                      StaticCalibrationResult* res) {
-  res->gsens_residual_rms = f.rms;
-  const Eigen::Matrix3d A = res->model.gyro.TK();
-  if (res->gsens_mode == GSensitivityMode::kFixed) {
-    res->canonical.G = opt.gsens_fixed;
-    res->gsens_residual_rms = (opt.gyro_init ? opt.gyro_init->scale.mean() : 1.0) * f.rms;
-    return;
+/// The g-sensitivity's part of the result: canonical G = A_g H (minus the Earth's vertical rate
+/// when the latitude is known) and its sigma; none when it is neglected.
+struct GsensOutcome {
+  std::optional<Eigen::Matrix3d> G;
+  Eigen::Matrix3d sigma = Eigen::Matrix3d::Zero();
+  double earth_rate_removed = 0.0;
+  double residual_rms = 0.0;
+};
+
+GsensOutcome gsens_outcome(const GyroStaticFit& f, GSensitivityMode mode, const TedaldiTriad& gyro,
+                           const StaticCalibrationOptions& opt) {
+  GsensOutcome out;
+  out.residual_rms = f.rms;
+  const Eigen::Matrix3d A = gyro.TK();
+  if (mode == GSensitivityMode::kFixed) {
+    out.G = opt.gsens_fixed;
+    out.residual_rms = (opt.gyro_init ? opt.gyro_init->scale.mean() : 1.0) * f.rms;
+    return out;
   }
-  if (res->gsens_mode == GSensitivityMode::kOff) return;
-  res->canonical.G = A * f.H;
+  if (mode == GSensitivityMode::kOff) return out;
+  Eigen::Matrix3d G = A * f.H;
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {
       double var = 0.0;
       for (int k = 0; k < 3; ++k) var += A(i, k) * A(i, k) * f.H_sigma(k, j) * f.H_sigma(k, j);
-      res->gsens_sigma(i, j) = std::sqrt(var);
+      out.sigma(i, j) = std::sqrt(var);
     }
   }
   if (opt.latitude_deg) {
-    res->earth_rate_removed = earth_rate_gsens(*opt.latitude_deg, opt.gravity_mps2);
-    res->canonical.G -= res->earth_rate_removed * Eigen::Matrix3d::Identity();
+    out.earth_rate_removed = earth_rate_gsens(*opt.latitude_deg, opt.gravity_mps2);
+    G -= out.earth_rate_removed * Eigen::Matrix3d::Identity();
   }
+  out.G = G;
   const Eigen::Vector3d s0 = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
-  res->gsens_residual_rms = s0.mean() * f.rms;
+  out.residual_rms = s0.mean() * f.rms;
+  return out;
 }
 
 // ---- quality figures (4.1.1) -----------------------------------------------------------------
@@ -850,6 +888,50 @@ void set_aside_an_implausible_accel_conversion(const StillStart& still, StaticCa
 
 }  // namespace
 
+/// The gyro solve kept (of one per static model) with the transfers it used.
+struct GyroChoice {
+  GyroPiece gyro;
+  std::vector<Transfer> transfers;
+  std::vector<std::string> transfer_warnings;
+  std::size_t fit = 0;  // of GsensPiece::fits
+};
+
+/// The result, assembled once from the steps' pieces (warnings in the order the steps ran).
+void put_pieces(const AccelPiece& a, const GsensPiece& gsens, const GyroChoice& chosen,
+                StaticCalibrationResult* out) {
+  StaticCalibrationResult& res = *out;
+  res.model.accel = a.triad;
+  res.accel_covariance = a.covariance;
+  res.accel_sigma = a.sigma;
+  res.accel_dof = a.dof;
+  res.accel_model = a.model;
+  res.accel_model_reason = a.reason;
+  res.accel_fixed = a.fixed;
+  res.faces_direction_rms_rad = a.faces_direction_rms_rad;
+  res.faces_rotation_rad = a.faces_rotation_rad;
+  res.poses_off_faces = a.poses_off_faces;
+  res.accel_residual_rms = a.residual_rms;
+  res.accel_iterations = a.iterations;
+  res.intervals = a.intervals;
+  res.gsens_mode = gsens.mode;
+  res.gsens_wald = gsens.wald;
+  res.gsens_dof = gsens.dof;
+  const GyroPiece& g = chosen.gyro;
+  res.gyro_bias_from_poses = gsens.fits.size() == 2 && chosen.fit == 0;
+  res.gyro_transfers = static_cast<int>(chosen.transfers.size());
+  res.model.gyro = g.triad;
+  res.gyro_covariance = g.covariance;
+  res.gyro_sigma = g.sigma;
+  res.gyro_dof = g.dof;
+  res.gyro_fixed = g.fixed;
+  res.gyro_residual_rms = g.residual_rms;
+  res.gyro_iterations = g.iterations;
+  const std::vector<std::string>* const steps_said[] = {&a.warnings, &gsens.warnings,
+                                                        &chosen.transfer_warnings, &g.warnings};
+  for (const std::vector<std::string>* said : steps_said)
+    res.warnings.insert(res.warnings.end(), said->begin(), said->end());
+}
+
 Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samples,
                                                  const StaticCalibrationOptions& given) {
   IMUCAL_TRY(given.validate());
@@ -886,36 +968,40 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   res.distinct_attitudes = best->distinct;
 
   t0 = Clock::now();
-  IMUCAL_TRY(solve_accelerometer(*best, model, samples, opt, &res));
+  Result<AccelPiece> accel = solve_accelerometer(*best, model, samples, opt);
+  if (!accel.ok()) return accel.error();
   res.timings.accel_s = seconds_since(t0);
 
   t0 = Clock::now();
-  const std::vector<GyroStaticFit> gfits = final_gyro_static_fits(*best, *scan, samples, *still, opt, &res);
+  const GsensPiece gsens = final_gyro_static_fits(*best, *scan, samples, *still, opt, accel->triad);
   // One gyro solve per static model; with two (G neglected: the bias from the poses or from the
   // still start), the one with the smaller residual of eq. 3.8 is kept, warnings and all.
-  std::optional<StaticCalibrationResult> chosen;
-  std::vector<Transfer> chosen_transfers;
-  std::size_t chosen_fit = 0;
-  for (std::size_t k = 0; k < gfits.size(); ++k) {
-    StaticCalibrationResult r = res;
-    r.gyro_bias_from_poses = gfits.size() == 2 && k == 0;
-    const ScannedRecording corrected = without_gsens(*scan, gfits[k], r.model.accel);
-    Result<std::vector<Transfer>> transfers = collect_transfers(best->intervals, corrected, samples, opt, &r);
+  std::optional<GyroChoice> chosen;
+  for (std::size_t k = 0; k < gsens.fits.size(); ++k) {
+    const ScannedRecording corrected = without_gsens(*scan, gsens.fits[k], accel->triad);
+    std::vector<std::string> transfer_warnings;
+    Result<std::vector<Transfer>> transfers =
+        collect_transfers(best->intervals, corrected, samples, opt, &transfer_warnings);
     if (!transfers.ok()) return transfers.error();
-    const GyroSolveInput gyro_input{best->intervals, best->means, gfits[k].bias, gfits[k].bias_sigma};
-    IMUCAL_TRY(solve_gyroscope(&*transfers, gyro_input, corrected, samples, opt, &r));
-    if (!chosen || r.gyro_residual_rms < chosen->gyro_residual_rms) {
-      chosen = std::move(r);
-      chosen_transfers = std::move(*transfers);
-      chosen_fit = k;
+    const GyroSolveInput gyro_input{best->intervals, best->means, gsens.fits[k].bias,
+                                    gsens.fits[k].bias_sigma};
+    Result<GyroPiece> gyro = solve_gyroscope(
+        &*transfers, gyro_input, AccelForGyro{accel->triad, accel->covariance}, corrected, samples, opt);
+    if (!gyro.ok()) return gyro.error();
+    if (!chosen || gyro->residual_rms < chosen->gyro.residual_rms) {
+      chosen = GyroChoice{std::move(*gyro), std::move(*transfers), std::move(transfer_warnings), k};
     }
   }
-  res = std::move(*chosen);
   res.timings.gyro_s = seconds_since(t0);
 
-  res.quality = quality_figures(chosen_transfers, *best, *scan, samples, *still, opt, res.model);
+  put_pieces(*accel, gsens, *chosen, &res);
+  res.quality = quality_figures(chosen->transfers, *best, *scan, samples, *still, opt, res.model);
   res.canonical = canonical_from_tedaldi(res.model);
-  set_gsens_result(gfits[chosen_fit], opt, &res);
+  const GsensOutcome G = gsens_outcome(gsens.fits[chosen->fit], res.gsens_mode, res.model.gyro, opt);
+  if (G.G) res.canonical.G = *G.G;
+  res.gsens_sigma = G.sigma;
+  res.earth_rate_removed = G.earth_rate_removed;
+  res.gsens_residual_rms = G.residual_rms;
   return res;
 }
 

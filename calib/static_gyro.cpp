@@ -298,7 +298,7 @@ Result<std::vector<Transfer>> collect_transfers(const std::vector<StaticInterval
                                                 const ScannedRecording& scan,
                                                 std::span<const ImuSample> samples,
                                                 const StaticCalibrationOptions& opt,
-                                                StaticCalibrationResult* res) {
+                                                std::vector<std::string>* warnings) {
   std::vector<Transfer> transfers;
   int dropped = 0, dropped_gap = 0, dropped_sat = 0;
   for (std::size_t k = 0; k + 1 < intervals.size(); ++k) {
@@ -324,19 +324,17 @@ Result<std::vector<Transfer>> collect_transfers(const std::vector<StaticInterval
     transfers.push_back(std::move(tr));
   }
   if (dropped > 0) {
-    res->warnings.push_back(
-        std::to_string(dropped) + " motion(s) between static poses were not used for the " +
-        "gyroscope: " + std::to_string(dropped_gap) + " contain a gap or a device reset, " +
-        std::to_string(dropped_sat) + " contain saturated gyro samples");
+    warnings->push_back(std::to_string(dropped) + " motion(s) between static poses were not used for the " +
+                        "gyroscope: " + std::to_string(dropped_gap) + " contain a gap or a device reset, " +
+                        std::to_string(dropped_sat) + " contain saturated gyro samples");
   }
-  res->gyro_transfers = static_cast<int>(transfers.size());
+  const int usable = static_cast<int>(transfers.size());
   // Each motion gives two independent equations (a direction): more than the gyro's 9 parameters
   // (12 with its bias) take 5 (7). Six faces in turn give exactly 5.
   const int min_transfers = opt.estimate_gyro_bias ? 7 : 5;
-  if (res->gyro_transfers < min_transfers) {
+  if (usable < min_transfers) {
     return make_error(Errc::kInsufficientData,
-                      "only " + std::to_string(res->gyro_transfers) + " of " +
-                          std::to_string(res->gyro_transfers + dropped) +
+                      "only " + std::to_string(usable) + " of " + std::to_string(usable + dropped) +
                           " motions between consecutive static poses can be integrated (at least " +
                           std::to_string(min_transfers) + " needed for the gyroscope; " +
                           std::to_string(dropped_sat) + " contain saturated gyro samples (" +
@@ -465,8 +463,8 @@ void set_transfer_directions(std::vector<Transfer>* transfers, const std::vector
 /// solution; the small rotation inside the static intervals is neglected in dr/dtheta_a).
 Eigen::MatrixXd accel_uncertainty_in_gyro(const Eigen::MatrixXd& Jg, const std::vector<Transfer>& transfers,
                                           const std::vector<Eigen::Vector3d>& means,
-                                          const StaticCalibrationResult& res) {
-  const Vec9 pa = accel_params(res.model.accel);
+                                          const AccelForGyro& accel, const TedaldiTriad& gyro) {
+  const Vec9 pa = accel_params(accel.triad);
   std::vector<Eigen::Matrix<double, 3, 9>> du(means.size());
   for (std::size_t k = 0; k < means.size(); ++k) {
     for (int i = 0; i < 9; ++i) {
@@ -481,17 +479,17 @@ Eigen::MatrixXd accel_uncertainty_in_gyro(const Eigen::MatrixXd& Jg, const std::
   }
   const std::size_t m_rows = 3 * transfers.size();
   Eigen::MatrixXd Ja(m_rows, 9);
-  const Eigen::Matrix3d A = res.model.gyro.TK();
+  const Eigen::Matrix3d A = gyro.TK();
   std::vector<Eigen::Vector3d> w;
   for (std::size_t t = 0; t < transfers.size(); ++t) {
     const auto& tr = transfers[t];
     w.resize(tr.gyro_raw.size());
-    for (std::size_t i = 0; i < w.size(); ++i) w[i] = A * (tr.gyro_raw[i] + res.model.gyro.bias);
+    for (std::size_t i = 0; i < w.size(); ++i) w[i] = A * (tr.gyro_raw[i] + gyro.bias);
     const Eigen::Matrix3d R = quat_to_matrix(integrate_rk4n(w, tr.t_s));
     Ja.middleRows(3 * t, 3) = du[tr.pose0 + 1] - R.transpose() * du[tr.pose0];
   }
   const Eigen::MatrixXd D = -normal_pseudo_inverse(Jg) * (Jg.transpose() * Ja);
-  return D * res.accel_covariance * D.transpose();
+  return D * accel.covariance * D.transpose();
 }
 
 TriadSigma gyro_sigma(const Eigen::MatrixXd& cov, bool bias_estimated,
@@ -632,42 +630,42 @@ std::vector<int> undetermined_gyro_parameters(const Eigen::MatrixXd& J, const st
 /// a misalignment angle whose sigma exceeds the limit, or a scale whose relative sigma does.
 Status gyro_solve(std::vector<Transfer>* transfers, const GyroSolveInput& best, const ScannedRecording& scan,
                   std::span<const ImuSample> samples, const StaticCalibrationOptions& opt,
-                  const std::vector<int>& held, StaticCalibrationResult* res, std::vector<int>* weak) {
+                  const AccelForGyro& accel, const std::vector<int>& held, GyroPiece* g,
+                  std::vector<int>* weak) {
   const TedaldiTriad gyro0 = initial_gyro(best.bias, opt);
   const int threads = threads_or_cores(opt.threads);
   GyroFit fit(*transfers, gyro0, opt.estimate_gyro_bias, threads, held);
   TedaldiTriad gyro_current = gyro0;
   for (int pass = 0; pass < 2; ++pass) {
-    set_transfer_directions(transfers, best.intervals, scan, samples, res->model.accel, gyro_current,
-                            threads);
-    IMUCAL_TRY(fit.solve(&res->gyro_iterations, pass == 0));
+    set_transfer_directions(transfers, best.intervals, scan, samples, accel.triad, gyro_current, threads);
+    IMUCAL_TRY(fit.solve(&g->iterations, pass == 0));
     gyro_current = fit.triad();
   }
   const double m_res = 3.0 * static_cast<double>(transfers->size());
-  res->gyro_residual_rms = std::sqrt(2.0 * fit.final_cost() / m_res);
-  res->model.gyro = fit.triad();
+  g->residual_rms = std::sqrt(2.0 * fit.final_cost() / m_res);
+  g->triad = fit.triad();
   // One Jacobian evaluation at the solution serves both the covariance and the propagation of
   // the accelerometer uncertainty.
   Result<Eigen::MatrixXd> Jg = fit.jacobian();
   if (!Jg.ok()) return Jg.error();
-  res->gyro_dof = {static_cast<int>(m_res), fit.fitted()};
-  const double s2 = res->gyro_dof.determined() ? 2.0 * fit.final_cost() / res->gyro_dof.dof()
-                                               : std::numeric_limits<double>::quiet_NaN();
+  g->dof = {static_cast<int>(m_res), fit.fitted()};
+  const double s2 =
+      g->dof.determined() ? 2.0 * fit.final_cost() / g->dof.dof() : std::numeric_limits<double>::quiet_NaN();
   if (held.empty()) {
-    res->gyro_covariance = normal_pseudo_inverse(*Jg) * s2;
+    g->covariance = normal_pseudo_inverse(*Jg) * s2;
   } else {
-    res->gyro_covariance = held_covariance(*Jg, held, s2, res->model.gyro.scale, opt);
+    g->covariance = held_covariance(*Jg, held, s2, g->triad.scale, opt);
   }
-  res->gyro_covariance += accel_uncertainty_in_gyro(*Jg, *transfers, best.means, *res);
-  res->gyro_sigma = gyro_sigma(res->gyro_covariance, opt.estimate_gyro_bias, best.bias_sigma);
-  if (weak) *weak = undetermined_gyro_parameters(*Jg, held, s2, res->model.gyro.scale, opt);
+  g->covariance += accel_uncertainty_in_gyro(*Jg, *transfers, best.means, accel, g->triad);
+  g->sigma = gyro_sigma(g->covariance, opt.estimate_gyro_bias, best.bias_sigma);
+  if (weak) *weak = undetermined_gyro_parameters(*Jg, held, s2, g->triad.scale, opt);
   const double nan = std::numeric_limits<double>::quiet_NaN();
   static const int row[] = {0, 0, 1, 1, 2, 2}, col[] = {1, 2, 0, 2, 0, 1};
   for (int i : held) {
     if (i < 6)
-      res->gyro_sigma.T(row[i], col[i]) = nan;
+      g->sigma.T(row[i], col[i]) = nan;
     else
-      res->gyro_sigma.scale[i - 6] = nan;
+      g->sigma.scale[i - 6] = nan;
   }
   return {};
 }
@@ -675,16 +673,16 @@ Status gyro_solve(std::vector<Transfer>* transfers, const GyroSolveInput& best, 
 /// The gyro at its nominal scale without misalignment, the bias from the static poses: what is
 /// left when the motions determine none of its scales and misalignments.
 void nominal_gyro(const std::vector<Transfer>& transfers, const GyroSolveInput& best,
-                  const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
+                  const StaticCalibrationOptions& opt, GyroPiece* g) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  res->model.gyro = initial_gyro(best.bias, opt);
+  g->triad = initial_gyro(best.bias, opt);
   const int n = opt.estimate_gyro_bias ? 12 : 9;
-  res->gyro_dof = {3 * static_cast<int>(transfers.size()), 0};
-  res->gyro_covariance = Eigen::MatrixXd::Zero(n, n);
-  res->gyro_sigma = gyro_sigma(res->gyro_covariance, false, best.bias_sigma);
-  res->gyro_sigma.T.setConstant(nan);
-  res->gyro_sigma.T.diagonal().setZero();
-  res->gyro_sigma.scale.setConstant(nan);
+  g->dof = {3 * static_cast<int>(transfers.size()), 0};
+  g->covariance = Eigen::MatrixXd::Zero(n, n);
+  g->sigma = gyro_sigma(g->covariance, false, best.bias_sigma);
+  g->sigma.T.setConstant(nan);
+  g->sigma.T.diagonal().setZero();
+  g->sigma.scale.setConstant(nan);
 }
 
 }  // namespace
@@ -692,35 +690,35 @@ void nominal_gyro(const std::vector<Transfer>& transfers, const GyroSolveInput& 
 /// Eqs. 3.5-3.16: the gyro solve. Parameters the motions leave undetermined (a few motions about
 /// one or two axes, as six faces turned in sequence give) are held at their nominal values (no
 /// misalignment, the nominal scale), named, and the rest solved again.
-Status solve_gyroscope(std::vector<Transfer>* transfers, const GyroSolveInput& best,
-                       const ScannedRecording& scan, std::span<const ImuSample> samples,
-                       const StaticCalibrationOptions& opt, StaticCalibrationResult* res) {
+Result<GyroPiece> solve_gyroscope(std::vector<Transfer>* transfers, const GyroSolveInput& best,
+                                  const AccelForGyro& accel, const ScannedRecording& scan,
+                                  std::span<const ImuSample> samples, const StaticCalibrationOptions& opt) {
+  GyroPiece g;
   std::vector<int> held;
   for (int round = 0; round < 3; ++round) {
     std::vector<int> weak;
-    IMUCAL_TRY(gyro_solve(transfers, best, scan, samples, opt, held, res, &weak));
+    IMUCAL_TRY(gyro_solve(transfers, best, scan, samples, opt, accel, held, &g, &weak));
     if (weak.empty()) break;
     held.insert(held.end(), weak.begin(), weak.end());
     std::sort(held.begin(), held.end());
     if (held.size() == 9) {
-      nominal_gyro(*transfers, best, opt, res);
+      nominal_gyro(*transfers, best, opt, &g);
       break;
     }
   }
-  res->gyro_fixed.clear();
-  for (int i : held) res->gyro_fixed.emplace_back(gyro_parameter_name(i));
+  g.fixed.clear();
+  for (int i : held) g.fixed.emplace_back(gyro_parameter_name(i));
   if (!held.empty()) {
     std::string names;
-    for (const auto& n : res->gyro_fixed) names += (names.empty() ? "" : ", ") + n;
-    res->warnings.push_back(
-        "the " + std::to_string(transfers->size()) +
-        " motions between the static poses do not determine the gyroscope's " + names + " (sigma above " +
-        format_number("%.3f", opt.gyro_max_misalignment_sigma_rad) + " rad or " +
-        format_number("%.1f", 100.0 * opt.gyro_max_scale_rel_sigma) +
-        " %): held at nominal (no misalignment, the nominal scale). Turn the rig about each "
-        "of its three axes between holds, both ways");
+    for (const auto& n : g.fixed) names += (names.empty() ? "" : ", ") + n;
+    g.warnings.push_back("the " + std::to_string(transfers->size()) +
+                         " motions between the static poses do not determine the gyroscope's " + names +
+                         " (sigma above " + format_number("%.3f", opt.gyro_max_misalignment_sigma_rad) +
+                         " rad or " + format_number("%.1f", 100.0 * opt.gyro_max_scale_rel_sigma) +
+                         " %): held at nominal (no misalignment, the nominal scale). Turn the rig about each "
+                         "of its three axes between holds, both ways");
   }
-  return {};
+  return g;
 }
 
 }  // namespace imucal::calib

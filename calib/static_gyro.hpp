@@ -63,12 +63,13 @@ std::vector<PoseDirections> pose_directions(const std::vector<StaticInterval>& i
                                             int threads);
 
 /// The motions between consecutive static poses that can be integrated: none crossing a gap, a
-/// reset or a saturated gyro sample. Refuses when too few remain for the gyroscope.
+/// reset or a saturated gyro sample (a warning in `warnings` counts those left out). Refuses when
+/// too few remain for the gyroscope.
 Result<std::vector<Transfer>> collect_transfers(const std::vector<StaticInterval>& intervals,
                                                 const ScannedRecording& scan,
                                                 std::span<const ImuSample> samples,
                                                 const StaticCalibrationOptions& opt,
-                                                StaticCalibrationResult* res);
+                                                std::vector<std::string>* warnings);
 
 /// The gyro model before the solve: the nominal scale, the given bias (input units, canonical sign).
 TedaldiTriad initial_gyro(const Eigen::Vector3d& bias_raw, const StaticCalibrationOptions& opt);
@@ -80,10 +81,29 @@ struct GyroSolveInput {
   Eigen::Vector3d bias, bias_sigma;           // gyro bias (input units, canonical sign), its sigma
 };
 
-/// Eqs. 3.5-3.16 on the transfers (their directions are set here); the model, covariance, sigmas,
-/// dof and held parameters go into res.
-Status solve_gyroscope(std::vector<Transfer>* transfers, const GyroSolveInput& best,
-                       const ScannedRecording& scan, std::span<const ImuSample> samples,
-                       const StaticCalibrationOptions& opt, StaticCalibrationResult* res);
+/// What the gyro solve takes of the accelerometer's result: its model (the poses' reference
+/// directions) and covariance (their uncertainty, carried into the gyro's).
+struct AccelForGyro {
+  const TedaldiTriad& triad;
+  const Eigen::MatrixXd& covariance;
+};
+
+/// The gyroscope's part of the static result.
+struct GyroPiece {
+  TedaldiTriad triad;
+  int iterations = 0;
+  double residual_rms = 0.0;  // of eq. 3.8 residuals (unit vectors)
+  FitDof dof;
+  Eigen::MatrixXd covariance;
+  TriadSigma sigma;
+  std::vector<std::string> fixed;  // parameters the motions leave undetermined, held at nominal
+  std::vector<std::string> warnings;
+};
+
+/// Eqs. 3.5-3.16 on the transfers (their directions are set here): the gyro's model, covariance,
+/// sigmas, dof and held parameters.
+Result<GyroPiece> solve_gyroscope(std::vector<Transfer>* transfers, const GyroSolveInput& best,
+                                  const AccelForGyro& accel, const ScannedRecording& scan,
+                                  std::span<const ImuSample> samples, const StaticCalibrationOptions& opt);
 
 }  // namespace imucal::calib
