@@ -307,12 +307,7 @@ void SessionEngine::begin_step() {
       face_prompt();
       break;
     case StepId::kMotion:
-      gyro_sq_ = accel_sum_ = accel_sq_ = Eigen::Vector3d::Zero();
-      motion_count_ = frames_ = frames_seen_ = saturated_ = frames_shared_ = 0;
-      last_seen_ns_ = last_shared_ns_ = -1;
-      camera_frames_.assign(config_.cameras.size(), 0);
-      camera_seen_.assign(config_.cameras.size(), 0);
-      camera_last_seen_ns_.assign(config_.cameras.size(), -1);
+      motion_ = MotionState(config_.cameras.size());
       prompt("Move the rig in front of the target: rotate about every axis and move along every axis, for " +
                  fixed(config_.session.motion_s, 0) + " s",
              {K::kContinue, K::kSkip, K::kAbort});

@@ -286,19 +286,25 @@ class SessionEngine {
   int quick_in_flight_ = 0;  // id, 0 = none
   std::size_t quick_poses_ = 0;
   std::optional<StaticCalibrationResult> quick_;
-  // motion
-  Eigen::Vector3d gyro_sq_ = Eigen::Vector3d::Zero(), accel_sum_ = Eigen::Vector3d::Zero(),
-                  accel_sq_ = Eigen::Vector3d::Zero();
-  long motion_count_ = 0;
-  long frames_ = 0, frames_seen_ = 0;
-  TimeNs last_seen_ns_ = -1;
-  // Several cameras: each one's frames and detections, its last detection, and the instants at
-  // which every camera saw the target (within half a frame interval of each other).
-  std::vector<long> camera_frames_, camera_seen_;
-  std::vector<TimeNs> camera_last_seen_ns_;
-  long frames_shared_ = 0;
-  TimeNs last_shared_ns_ = -1;
-  long saturated_ = 0;
+  /// The motion step's figures, made anew on entering it.
+  struct MotionState {
+    MotionState() = default;
+    explicit MotionState(std::size_t cameras)
+        : camera_frames(cameras, 0), camera_seen(cameras, 0), camera_last_seen_ns(cameras, -1) {}
+    Eigen::Vector3d gyro_sq = Eigen::Vector3d::Zero(), accel_sum = Eigen::Vector3d::Zero(),
+                    accel_sq = Eigen::Vector3d::Zero();
+    long count = 0;  // samples
+    long frames = 0, frames_seen = 0;
+    TimeNs last_seen_ns = -1;
+    // Several cameras: each one's frames and detections, its last detection, and the instants at
+    // which every camera saw the target (within half a frame interval of each other).
+    std::vector<long> camera_frames, camera_seen;
+    std::vector<TimeNs> camera_last_seen_ns;
+    long frames_shared = 0;
+    TimeNs last_shared_ns = -1;
+    long saturated = 0;
+  };
+  MotionState motion_;
   // solve and review
   int final_id_ = 0;
   std::optional<SolveOutcome> final_;

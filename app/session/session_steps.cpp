@@ -107,27 +107,27 @@ void SessionEngine::on_sample(const ImuSample& sample) {
 void SessionEngine::on_frame(std::size_t camera, TimeNs t_ns, bool target_seen) {
   if (state_ != SessionState::kRunning || current_ >= steps_.size() || steps_[current_].id != StepId::kMotion)
     return;
-  ++frames_;
+  ++motion_.frames;
   if (target_seen) {
-    ++frames_seen_;
-    last_seen_ns_ = t_ns;
+    ++motion_.frames_seen;
+    motion_.last_seen_ns = t_ns;
   }
-  if (camera >= camera_frames_.size()) return;
-  ++camera_frames_[camera];
+  if (camera >= motion_.camera_frames.size()) return;
+  ++motion_.camera_frames[camera];
   if (!target_seen) return;
-  ++camera_seen_[camera];
-  camera_last_seen_ns_[camera] = t_ns;
+  ++motion_.camera_seen[camera];
+  motion_.camera_last_seen_ns[camera] = t_ns;
   // An instant every camera saw the target: each one's last detection within half a frame
   // interval (of the slowest camera) of this one, counted once.
-  if (camera_frames_.size() < 2) return;
+  if (motion_.camera_frames.size() < 2) return;
   double rate = 0.0;
   for (const CameraConfig& c : config_.cameras) rate = rate == 0.0 ? c.rate_hz : std::min(rate, c.rate_hz);
   const TimeNs half = rate > 0.0 ? static_cast<TimeNs>(0.5e9 / rate) : 25'000'000;
-  if (last_shared_ns_ >= 0 && std::abs(t_ns - last_shared_ns_) < half) return;
-  for (TimeNs seen : camera_last_seen_ns_)
+  if (motion_.last_shared_ns >= 0 && std::abs(t_ns - motion_.last_shared_ns) < half) return;
+  for (TimeNs seen : motion_.camera_last_seen_ns)
     if (seen < 0 || std::abs(t_ns - seen) >= half) return;
-  ++frames_shared_;
-  last_shared_ns_ = t_ns;
+  ++motion_.frames_shared;
+  motion_.last_shared_ns = t_ns;
 }
 
 std::optional<SessionEngine::TemperatureTrend> SessionEngine::temperature_trend(
@@ -497,45 +497,49 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
 
 void SessionEngine::sample_motion(const ImuSample& si) {
   const Eigen::Vector3d w = si.gyro - gyro_bias_;
-  gyro_sq_ += w.cwiseProduct(w);
-  accel_sum_ += si.accel;
-  accel_sq_ += si.accel.cwiseProduct(si.accel);
-  ++motion_count_;
+  motion_.gyro_sq += w.cwiseProduct(w);
+  motion_.accel_sum += si.accel;
+  motion_.accel_sq += si.accel.cwiseProduct(si.accel);
+  ++motion_.count;
   const double accel_fs = info_.accel_full_scale_g * kStandardGravity;
   const double gyro_fs = info_.gyro_full_scale_dps * kDeg;
   if ((accel_fs > 0 && si.accel.cwiseAbs().maxCoeff() > 0.98 * accel_fs) ||
       (gyro_fs > 0 && si.gyro.cwiseAbs().maxCoeff() > 0.98 * gyro_fs)) {
-    if (saturated_++ % 200 == 0)
+    if (motion_.saturated++ % 200 == 0)
       message(MessageLevel::kWarning, "Too fast: the IMU saturates; move more gently");
   }
   const double elapsed = seconds(si.t_ns - step_start_ns_);
   if (live_due()) {
-    const double n = static_cast<double>(motion_count_);
-    const Eigen::Vector3d gyro_rms = (gyro_sq_ / n).cwiseSqrt();
+    const double n = static_cast<double>(motion_.count);
+    const Eigen::Vector3d gyro_rms = (motion_.gyro_sq / n).cwiseSqrt();
     const Eigen::Vector3d accel_std =
-        (accel_sq_ / n - (accel_sum_ / n).cwiseProduct(accel_sum_ / n)).cwiseMax(0).cwiseSqrt();
+        (motion_.accel_sq / n - (motion_.accel_sum / n).cwiseProduct(motion_.accel_sum / n))
+            .cwiseMax(0)
+            .cwiseSqrt();
     std::vector<std::string> lines = {
         "Rotation RMS deg/s  x " + fixed(gyro_rms.x() / kDeg, 0) + "  y " + fixed(gyro_rms.y() / kDeg, 0) +
             "  z " + fixed(gyro_rms.z() / kDeg, 0),
         "Acceleration std m/s^2  x " + fixed(accel_std.x(), 1) + "  y " + fixed(accel_std.y(), 1) + "  z " +
             fixed(accel_std.z(), 1),
-        "Target seen in " + std::to_string(frames_seen_) + " of " + std::to_string(frames_) + " frames",
+        "Target seen in " + std::to_string(motion_.frames_seen) + " of " + std::to_string(motion_.frames) +
+            " frames",
         "Time left " + fixed(std::max(0.0, config_.session.motion_s - elapsed), 0) + " s"};
     // Several cameras: each one's detection rate and the instants all of them saw the target
     // (what the camera chain is solved from).
-    if (camera_frames_.size() >= 2) {
+    if (motion_.camera_frames.size() >= 2) {
       std::string rates = "Target seen:";
       long fewest = -1;
-      for (std::size_t c = 0; c < camera_frames_.size(); ++c) {
-        const long n = camera_frames_[c];
+      for (std::size_t c = 0; c < motion_.camera_frames.size(); ++c) {
+        const long n = motion_.camera_frames[c];
         rates +=
             " " + config_.cameras[c].name + " " +
-            (n > 0 ? fixed(100.0 * static_cast<double>(camera_seen_[c]) / static_cast<double>(n), 0) + " %"
+            (n > 0 ? fixed(100.0 * static_cast<double>(motion_.camera_seen[c]) / static_cast<double>(n), 0) +
+                         " %"
                    : std::string("no frame"));
         fewest = fewest < 0 ? n : std::min(fewest, n);
       }
       const double shared =
-          fewest > 0 ? 100.0 * static_cast<double>(frames_shared_) / static_cast<double>(fewest) : 0.0;
+          fewest > 0 ? 100.0 * static_cast<double>(motion_.frames_shared) / static_cast<double>(fewest) : 0.0;
       rates += "; all cameras at once " + fixed(shared, 0) + " %";
       lines.insert(lines.begin() + 3, rates);
       if (elapsed > 10.0 && shared < 50.0) lines.push_back("Keep the target where every camera sees it");
@@ -544,15 +548,15 @@ void SessionEngine::sample_motion(const ImuSample& si) {
       if (elapsed > 10.0 && gyro_rms[a] < 20.0 * kDeg)
         lines.push_back(std::string("Rotate more about ") + "xyz"[a]);
     }
-    if (frames_ > 0 && last_seen_ns_ >= 0 && si.t_ns - last_seen_ns_ > 1'000'000'000)
+    if (motion_.frames > 0 && motion_.last_seen_ns >= 0 && si.t_ns - motion_.last_seen_ns > 1'000'000'000)
       lines.push_back("Target lost: bring it back into view");
     live(lines, std::min(1.0, elapsed / config_.session.motion_s),
          session_msg::MotionFigures{gyro_rms / kDeg,
-                                    frames_,
-                                    frames_seen_,
-                                    {camera_frames_.begin(), camera_frames_.end()},
-                                    {camera_seen_.begin(), camera_seen_.end()},
-                                    frames_shared_,
+                                    motion_.frames,
+                                    motion_.frames_seen,
+                                    {motion_.camera_frames.begin(), motion_.camera_frames.end()},
+                                    {motion_.camera_seen.begin(), motion_.camera_seen.end()},
+                                    motion_.frames_shared,
                                     {}});  // the coverage: the runner adds it (it has the corners)
   }
   if (elapsed >= config_.session.motion_s) advance();
