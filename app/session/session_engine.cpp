@@ -108,25 +108,15 @@ void SessionEngine::reset() {
   window_ = std::make_unique<Window>(info_.rate_hz);
   samples_ = std::make_shared<std::vector<ImuSample>>();
   recording_ = true;
-  temps_.clear();
+  warmup_ = {};
   thermal_ = std::make_shared<std::vector<ImuSample>>();
   thermal_sum_ = {};
   still_since_ns_ = -1;
   bias_known_ = false;
   still_gyro_sum_.setZero();
   still_count_ = 0;
-  poses_.clear();
-  need_motion_ = false;
-  quick_pending_ = false;
-  last_still_ns_ = 0;
-  face_ = 0;
-  quick_in_flight_ = 0;
-  quick_poses_ = 0;
-  quick_.reset();
-  final_id_ = 0;
-  final_.reset();
-  gates_.clear();
-  gates_pass_ = false;
+  pose_ = {};
+  solve_ = {};
 }
 
 void SessionEngine::emit(SessionMessage message) {
@@ -174,7 +164,7 @@ session_msg::Status SessionEngine::status() const {
   m.state = state_;
   m.rig = config_.name;
   if (current_ < steps_.size() && running()) m.step = steps_[current_].id;
-  m.poses = poses_.size();
+  m.poses = pose_.ups.size();
   // A session that ended keeps the time it took; samples still come after it.
   const TimeNs until = session_end_ns_ >= 0 ? session_end_ns_ : now_ns_;
   m.elapsed_s = session_start_ns_ < 0 ? 0.0 : static_cast<double>(until - session_start_ns_) * 1e-9;
@@ -203,9 +193,9 @@ void SessionEngine::enter(std::size_t index) {
     if (written) {
       finish(SessionState::kDone, Outcome::kWritten, "The calibration was written, read back and verified.");
     } else {
-      finish(SessionState::kDone, final_ ? Outcome::kCompleted : Outcome::kRecorded,
-             final_ ? "The session is complete; the calibration was not written (no write step)."
-                    : "The session is complete; nothing was solved (no solve step).");
+      finish(SessionState::kDone, solve_.final ? Outcome::kCompleted : Outcome::kRecorded,
+             solve_.final ? "The session is complete; the calibration was not written (no write step)."
+                          : "The session is complete; nothing was solved (no solve step).");
     }
     return;
   }
@@ -235,10 +225,10 @@ void SessionEngine::finish(SessionState state, Outcome outcome, const std::strin
   done.outcome = outcome;
   done.text = text;
   // Where the record went (storage, slot, sequence), named on the end screen.
-  if (outcome == Outcome::kWritten && !written_to_.empty()) done.stored = written_to_;
+  if (outcome == Outcome::kWritten && !solve_.written_to.empty()) done.stored = solve_.written_to;
   // The reports to open, when the final solve drew them.
-  if (final_) {
-    for (const auto& f : final_->result_files)
+  if (solve_.final) {
+    for (const auto& f : solve_.final->result_files)
       if (f.size() > 5 && f.compare(f.size() - 5, 5, ".html") == 0) done.reports.push_back(f);
   }
   emit(std::move(done));
@@ -275,7 +265,7 @@ void SessionEngine::begin_step() {
       run_preflight();
       break;
     case StepId::kWarmup:
-      temps_.clear();
+      warmup_ = {};
       prompt(thermal_planned() ? "Warming up: leave the rig still until the IMU's temperature settles; the "
                                  "warm-up is recorded for the thermal model"
                                : "Warming up: leave the rig still until the IMU's temperature settles",
@@ -283,7 +273,7 @@ void SessionEngine::begin_step() {
       break;
     case StepId::kThermal:
       // A warm-up just before goes on into this step: its recording is kept.
-      temps_.clear();
+      warmup_ = {};
       prompt(
           "Thermal: leave the rig still while it warms up (or cools down); the bias is fitted against "
           "the die temperature. c ends the recording",
@@ -297,12 +287,12 @@ void SessionEngine::begin_step() {
     case StepId::kPoses:
       // The attitude of the still start is not a pose (the static method counts it apart): the
       // first pose comes after the first turn.
-      need_motion_ = true;
+      pose_.need_motion = true;
       poses_prompt();
       break;
     case StepId::kGsens:
-      face_ = 0;
-      need_motion_ = false;
+      pose_.face = 0;
+      pose_.need_motion = false;
       still_since_ns_ = -1;
       face_prompt();
       break;
@@ -319,20 +309,20 @@ void SessionEngine::begin_step() {
       review();
       break;
     case StepId::kWrite:
-      if (!gates_pass_ &&
+      if (!solve_.gates_pass &&
           std::none_of(steps_.begin(), steps_.end(), [](const Step& s) { return s.id == StepId::kReview; })) {
         steps_[current_].state = StepState::kFailed;
         finish(SessionState::kFailed, Outcome::kFailed,
                "Not written: a quality gate failed and there is no review step to accept it.");
         return;
       }
-      if (!final_ || !final_->record) {
+      if (!solve_.final || !solve_.final->record) {
         steps_[current_].state = StepState::kFailed;
         finish(SessionState::kFailed, Outcome::kFailed, "Nothing to write: the solve produced no record.");
         return;
       }
       prompt("Writing the calibration to the rig's storage", {});
-      host_.write(*final_->record);
+      host_.write(*solve_.final->record);
       break;
   }
 }
@@ -390,15 +380,15 @@ Status SessionEngine::key(K key) {
       begin_step();
       return {};
     }
-    if (id == StepId::kPoses && !poses_.empty()) {
-      poses_.pop_back();
-      message(MessageLevel::kInfo, "Dropped pose " + std::to_string(poses_.size() + 1) + "; " +
-                                       std::to_string(poses_.size()) + " remain");
+    if (id == StepId::kPoses && !pose_.ups.empty()) {
+      pose_.ups.pop_back();
+      message(MessageLevel::kInfo, "Dropped pose " + std::to_string(pose_.ups.size() + 1) + "; " +
+                                       std::to_string(pose_.ups.size()) + " remain");
       poses_prompt();
       return {};
     }
     if (id == StepId::kGsens) {
-      face_ = std::max(0, face_ - 1);
+      pose_.face = std::max(0, pose_.face - 1);
       still_since_ns_ = -1;
       message(MessageLevel::kInfo, "Redoing the last face");
       face_prompt();
@@ -426,8 +416,8 @@ Status SessionEngine::key(K key) {
       return {};
     }
     if (id == StepId::kPoses) {
-      if (static_cast<int>(poses_.size()) < config_.session.poses_min) {
-        message(MessageLevel::kWarning, "Only " + std::to_string(poses_.size()) + " poses; at least " +
+      if (static_cast<int>(pose_.ups.size()) < config_.session.poses_min) {
+        message(MessageLevel::kWarning, "Only " + std::to_string(pose_.ups.size()) + " poses; at least " +
                                             std::to_string(config_.session.poses_min) + " are needed");
         return {};
       }
@@ -444,7 +434,7 @@ Status SessionEngine::key(K key) {
            "Rejected: the results are kept in the session folder; the stored calibration is unchanged.");
     return {};
   }
-  if (!final_ || !final_->error.empty())
+  if (!solve_.final || !solve_.final->error.empty())
     return make_error(Errc::kInvalidArgument, "the solve failed; there is nothing to accept");
   advance();
   return {};
@@ -485,14 +475,14 @@ calib::StaticCalibrationOptions SessionEngine::static_options() const {
 }
 
 void SessionEngine::request_quick_solve() {
-  if (quick_in_flight_ != 0 || static_cast<int>(poses_.size()) < 9) return;
+  if (pose_.quick_in_flight != 0 || static_cast<int>(pose_.ups.size()) < 9) return;
   SolveJob job;
   job.id = next_solve_id_++;
   job.samples = std::make_shared<const std::vector<ImuSample>>(*samples_);
   job.static_options = static_options();
   job.t_end_ns = now_ns_;
-  quick_in_flight_ = job.id;
-  quick_poses_ = poses_.size();
+  pose_.quick_in_flight = job.id;
+  pose_.quick_poses = pose_.ups.size();
   emit(session_msg::Solve{std::nullopt, job.id, false, job.samples->size(), std::nullopt, std::nullopt});
   host_.solve(job);
 }
@@ -514,7 +504,7 @@ void SessionEngine::request_final_solve() {
     return s.id == StepId::kMotion && s.state == StepState::kDone;
   });
   job.t_end_ns = now_ns_;
-  final_id_ = job.id;
+  solve_.final_id = job.id;
   const std::size_t thermal_means = job.thermal_samples ? job.thermal_samples->size() : 0;
   emit(session_msg::Solve{std::nullopt, job.id, true, job.samples->size(), thermal_means, job.camimu});
   std::string what = poses ? std::to_string(job.samples->size()) + " samples" : std::string();
@@ -532,43 +522,44 @@ void SessionEngine::solve_progress(double fraction, const std::string& text) {
 void SessionEngine::solve_finished(int id, SolveOutcome outcome) {
   emit(session_msg::Applied{std::nullopt, id, outcome.error, outcome.wall_s});
   if (!running()) return;
-  if (id == quick_in_flight_) {
-    quick_in_flight_ = 0;
+  if (id == pose_.quick_in_flight) {
+    pose_.quick_in_flight = 0;
     if (!outcome.error.empty() || !outcome.imu) {
       // Feedback only: the final solve decides. The method's advice for a whole recording does
       // not apply mid-session, so only its finding is shown.
       const std::string finding = outcome.error.substr(0, outcome.error.find(';'));
-      message(MessageLevel::kInfo, "No quick solve yet after " + std::to_string(quick_poses_) + " poses (" +
-                                       finding + "); go on with the poses");
+      message(MessageLevel::kInfo, "No quick solve yet after " + std::to_string(pose_.quick_poses) +
+                                       " poses (" + finding + "); go on with the poses");
       return;
     }
-    quick_ = std::move(outcome.imu);
+    pose_.quick = std::move(outcome.imu);
     const auto rel = [](const Eigen::Vector3d& sigma, const Eigen::Vector3d& scale) {
       return sigma.cwiseQuotient(scale.cwiseAbs()).maxCoeff();
     };
-    const double sa = rel(quick_->accel_sigma.scale, quick_->model.accel.scale);
-    const double sg = rel(quick_->gyro_sigma.scale, quick_->model.gyro.scale);
+    const double sa = rel(pose_.quick->accel_sigma.scale, pose_.quick->model.accel.scale);
+    const double sg = rel(pose_.quick->gyro_sigma.scale, pose_.quick->model.gyro.scale);
     auto sigma = [](double v) {
       return std::isfinite(v) ? fixed(v * 1e3, 2) + "e-3" : std::string("undetermined");
     };
-    message(MessageLevel::kInfo, "Quick solve (" + std::to_string(quick_poses_) +
+    message(MessageLevel::kInfo, "Quick solve (" + std::to_string(pose_.quick_poses) +
                                      " poses): scale sigma accel " + sigma(sa) + ", gyro " + sigma(sg) +
                                      " (target " + fixed(config_.session.pose_sigma_target * 1e3, 2) +
                                      "e-3)");
     // New poses came while it ran: solve again with them.
-    if (poses_.size() > quick_poses_ && !quick_pending_) request_quick_solve();
+    if (pose_.ups.size() > pose_.quick_poses && !pose_.quick_pending) request_quick_solve();
     return;
   }
-  if (id != final_id_) return;
-  final_ = std::move(outcome);
-  if (final_->error.empty()) {
+  if (id != solve_.final_id) return;
+  solve_.final = std::move(outcome);
+  if (solve_.final->error.empty()) {
     evaluate_gates();
     emit(result_message());
   }
-  if (!final_->error.empty()) {
+  if (!solve_.final->error.empty()) {
     steps_[current_].state = StepState::kFailed;
     finish(SessionState::kFailed, Outcome::kFailed,
-           "The solve failed: " + final_->error + ". The recording is kept; replay it with `imucal replay`.");
+           "The solve failed: " + solve_.final->error +
+               ". The recording is kept; replay it with `imucal replay`.");
     return;
   }
   advance();
@@ -576,27 +567,27 @@ void SessionEngine::solve_finished(int id, SolveOutcome outcome) {
 
 session_msg::ResultSummary SessionEngine::result_message() const {
   session_msg::ResultSummary m;
-  m.files = final_->result_files;
-  if (final_->thermal) {
-    const auto& t = *final_->thermal;
+  m.files = solve_.final->result_files;
+  if (solve_.final->thermal) {
+    const auto& t = *solve_.final->thermal;
     m.thermal = {
         t.determined, t.determined ? t.reference_c : 0.0,
         t.determined ? std::array<double, 2>{t.temp_min_c, t.temp_max_c} : std::array<double, 2>{0.0, 0.0},
         t.determined ? std::string() : t.reason};
   }
-  if (final_->imu) {
-    const auto& c = final_->imu->canonical;
+  if (solve_.final->imu) {
+    const auto& c = solve_.final->imu->canonical;
     m.imu = session_msg::ResultSummary::Imu{c.A_a, c.b_a, c.A_g, c.b_g, c.G};
   }
-  if (final_->camimu) {
+  if (solve_.final->camimu) {
     m.cameras.emplace();
-    for (const auto& cam : final_->camimu->result.cameras) {
+    for (const auto& cam : solve_.final->camimu->result.cameras) {
       const Eigen::Quaterniond q(cam.T_cam_imu.rotation());
       m.cameras->push_back({cam.name, cam.T_cam_imu.translation(),
                             Eigen::Vector4d(q.w(), q.x(), q.y(), q.z()), cam.timeshift_cam_imu_s,
                             cam.reprojection_rms_px});
     }
-    const SplitCheck& sc = final_->camimu->result.self_check;
+    const SplitCheck& sc = solve_.final->camimu->result.self_check;
     if (sc.verdict != SplitCheck::Verdict::kNotRun)
       m.self_check =
           session_msg::ResultSummary::SelfCheck{split_check_verdict_name(sc.verdict), sc.summary, sc.advice};
@@ -605,9 +596,9 @@ session_msg::ResultSummary SessionEngine::result_message() const {
 }
 
 void SessionEngine::write_finished(const Status& status, const std::string& where) {
-  written_to_ = status.ok() ? where : std::string();
+  solve_.written_to = status.ok() ? where : std::string();
   emit(session_msg::Written{std::nullopt, status.ok(), status.ok() ? "" : status.error().message,
-                            written_to_});
+                            solve_.written_to});
   if (!running() || steps_[current_].id != StepId::kWrite) return;
   if (!status.ok()) {
     fault("storage", status.error().message);

@@ -152,7 +152,7 @@ class SessionEngine {
   /// Messages that bring a new observer up to date (status, the last prompt and live figures).
   std::vector<SessionMessage> snapshot() const;
   /// The final solve's outcome once it is in.
-  const std::optional<SolveOutcome>& result() const { return final_; }
+  const std::optional<SolveOutcome>& result() const { return solve_.final; }
   /// The review's quality gates (after the final solve).
   struct Gate {
     std::string name;
@@ -161,9 +161,9 @@ class SessionEngine {
     bool pass = false;
     int digits = 3;  // decimals the value and the limit are shown with
   };
-  const std::vector<Gate>& gates() const { return gates_; }
+  const std::vector<Gate>& gates() const { return solve_.gates; }
   /// Poses captured so far (gravity directions in the IMU frame).
-  const std::vector<Eigen::Vector3d>& poses() const { return poses_; }
+  const std::vector<Eigen::Vector3d>& poses() const { return pose_.ups; }
 
  private:
   struct Window;  // stillness over the last 0.5 s
@@ -259,9 +259,12 @@ class SessionEngine {
   std::shared_ptr<std::vector<ImuSample>> samples_;  // from the still step on
   bool recording_ = true;
 
-  // warm-up
-  std::deque<std::pair<double, double>> temps_;  // (t s, deg C), one per 0.5 s
-  TimeNs last_temp_ns_ = 0;
+  /// The warm-up's temperatures, made anew on entering the warm-up or thermal step.
+  struct WarmupState {
+    std::deque<std::pair<double, double>> temps;  // (t s, deg C), one per 0.5 s
+    TimeNs last_temp_ns = 0;
+  };
+  WarmupState warmup_;
   // thermal recording
   struct ThermalMean {  // the 0.1 s mean being summed
     TimeNs first_ns = -1, last_ns = 0;
@@ -276,16 +279,19 @@ class SessionEngine {
   bool bias_known_ = false;
   Eigen::Vector3d still_gyro_sum_ = Eigen::Vector3d::Zero();
   long still_count_ = 0;
-  // poses and faces
-  std::vector<Eigen::Vector3d> poses_;
-  bool need_motion_ = false;    // after a capture or a refusal the rig must move first
-  bool quick_pending_ = false;  // a pose was captured: solve once the rig has moved for 0.5 s
-  TimeNs last_still_ns_ = 0;
-  int face_ = 0;  // six-face: the face prompted
-  int next_solve_id_ = 1;
-  int quick_in_flight_ = 0;  // id, 0 = none
-  std::size_t quick_poses_ = 0;
-  std::optional<StaticCalibrationResult> quick_;
+  int next_solve_id_ = 1;  // unique over the engine's life
+  /// The poses (and six faces) captured this session and their quick solves, made anew with it.
+  struct PoseState {
+    std::vector<Eigen::Vector3d> ups;  // the up direction of each pose captured
+    bool need_motion = false;          // after a capture or a refusal the rig must move first
+    bool quick_pending = false;        // a pose was captured: solve once the rig has moved for 0.5 s
+    TimeNs last_still_ns = 0;
+    int face = 0;             // six-face: the face prompted
+    int quick_in_flight = 0;  // id, 0 = none
+    std::size_t quick_poses = 0;
+    std::optional<StaticCalibrationResult> quick;
+  };
+  PoseState pose_;
   /// The motion step's figures, made anew on entering it.
   struct MotionState {
     MotionState() = default;
@@ -305,16 +311,19 @@ class SessionEngine {
     long saturated = 0;
   };
   MotionState motion_;
-  // solve and review
-  int final_id_ = 0;
-  std::optional<SolveOutcome> final_;
-  std::vector<Gate> gates_;
+  /// The final solve, its review and the write, made anew with the session.
+  struct SolveState {
+    int final_id = 0;
+    std::optional<SolveOutcome> final;
+    std::vector<Gate> gates;
+    bool gates_pass = false;
+    std::string written_to;  // where the write put the record (storage, slot, sequence)
+  };
+  SolveState solve_;
   /// The calibration on the storage at preflight (none: nothing stored, or a record that did not
   /// read, whose reason is stored_unreadable_).
   std::optional<PreflightReport::Stored> stored_;
   std::string stored_unreadable_;
-  bool gates_pass_ = false;
-  std::string written_to_;  // where the last write put the record (storage, slot, sequence)
 };
 
 }  // namespace imucal::app::session

@@ -136,27 +136,28 @@ std::optional<SessionEngine::TemperatureTrend> SessionEngine::temperature_trend(
     message(MessageLevel::kWarning, no_temperature);
     return std::nullopt;
   }
-  if (temps_.empty() || si.t_ns - last_temp_ns_ >= 500'000'000) {
-    temps_.emplace_back(seconds(si.t_ns), si.temperature);
-    last_temp_ns_ = si.t_ns;
+  if (warmup_.temps.empty() || si.t_ns - warmup_.last_temp_ns >= 500'000'000) {
+    warmup_.temps.emplace_back(seconds(si.t_ns), si.temperature);
+    warmup_.last_temp_ns = si.t_ns;
     // Keep the shortest tail that still spans the window.
-    while (temps_.size() > 2 && temps_.back().first - temps_[1].first >= config_.session.warmup_window_s)
-      temps_.pop_front();
+    while (warmup_.temps.size() > 2 &&
+           warmup_.temps.back().first - warmup_.temps[1].first >= config_.session.warmup_window_s)
+      warmup_.temps.pop_front();
   }
   TemperatureTrend trend;
   // Rate: least-squares slope over the window, deg C per minute.
-  if (temps_.size() >= 3) {
+  if (warmup_.temps.size() >= 3) {
     double mt = 0, mc = 0;
-    for (const auto& [t, c] : temps_) mt += t, mc += c;
-    mt /= static_cast<double>(temps_.size());
-    mc /= static_cast<double>(temps_.size());
+    for (const auto& [t, c] : warmup_.temps) mt += t, mc += c;
+    mt /= static_cast<double>(warmup_.temps.size());
+    mc /= static_cast<double>(warmup_.temps.size());
     double num = 0, den = 0;
-    for (const auto& [t, c] : temps_) num += (t - mt) * (c - mc), den += (t - mt) * (t - mt);
+    for (const auto& [t, c] : warmup_.temps) num += (t - mt) * (c - mc), den += (t - mt) * (t - mt);
     trend.rate_c_per_min = den > 0 ? 60.0 * num / den : 0.0;
   }
-  trend.window_s = temps_.back().first - temps_.front().first;
+  trend.window_s = warmup_.temps.back().first - warmup_.temps.front().first;
   trend.elapsed_s = seconds(si.t_ns - step_start_ns_);
-  // The window starts with the step (temps_ is cleared there): a full one is as old as the step.
+  // The window starts with the step (warmup_.temps is cleared there): a full one is as old as the step.
   trend.settled = trend.window_s >= config_.session.warmup_window_s &&
                   std::abs(trend.rate_c_per_min) < config_.session.warmup_rate_c_per_min;
   return trend;
@@ -342,7 +343,7 @@ void SessionEngine::poses_prompt() {
                      fixed(config_.session.hold_s, 1) + " s); " + std::to_string(config_.session.poses) +
                      " poses, all directions";
   for (int f = 0; f < 6; ++f) {
-    const bool near = std::any_of(poses_.begin(), poses_.end(),
+    const bool near = std::any_of(pose_.ups.begin(), pose_.ups.end(),
                                   [&](const Eigen::Vector3d& p) { return angle_deg(p, kFaces[f]) < 50.0; });
     if (!near) {
       text += ". Next: " + guide_.instruction(kFaces[f]);
@@ -350,20 +351,20 @@ void SessionEngine::poses_prompt() {
       return;
     }
   }
-  if (!poses_.empty()) text += ". Every side has been up: now tilt between them";
+  if (!pose_.ups.empty()) text += ". Every side has been up: now tilt between them";
   prompt(text, {K::kContinue, K::kRedo, K::kAbort});
 }
 
 void SessionEngine::face_prompt() {
-  prompt("Six-face holds, " + std::to_string(face_ + 1) + " of 6: " + guide_.instruction(kFaces[face_]) +
-             ", and hold it still",
-         {K::kRedo, K::kSkip, K::kAbort}, guide_.drawing(kFaces[face_]), &kFaces[face_]);
+  prompt("Six-face holds, " + std::to_string(pose_.face + 1) +
+             " of 6: " + guide_.instruction(kFaces[pose_.face]) + ", and hold it still",
+         {K::kRedo, K::kSkip, K::kAbort}, guide_.drawing(kFaces[pose_.face]), &kFaces[pose_.face]);
 }
 
 std::string SessionEngine::missing_words() const {
   std::string words;
   for (int f = 0; f < 6; ++f) {
-    const bool near = std::any_of(poses_.begin(), poses_.end(),
+    const bool near = std::any_of(pose_.ups.begin(), pose_.ups.end(),
                                   [&](const Eigen::Vector3d& p) { return angle_deg(p, kFaces[f]) < 50.0; });
     if (!near) words += (words.empty() ? "" : ", ") + guide_.up_name(kFaces[f]);
   }
@@ -373,7 +374,7 @@ std::string SessionEngine::missing_words() const {
 std::vector<std::string> SessionEngine::coverage() const {
   std::vector<std::string> missing;
   for (int f = 0; f < 6; ++f) {
-    const bool near = std::any_of(poses_.begin(), poses_.end(),
+    const bool near = std::any_of(pose_.ups.begin(), pose_.ups.end(),
                                   [&](const Eigen::Vector3d& p) { return angle_deg(p, kFaces[f]) < 50.0; });
     if (!near) missing.push_back(kFaceNames[f]);
   }
@@ -382,86 +383,86 @@ std::vector<std::string> SessionEngine::coverage() const {
 
 void SessionEngine::capture_pose() {
   const Eigen::Vector3d up = window_->accel_mean().normalized();
-  for (std::size_t i = 0; i < poses_.size(); ++i) {
-    const double a = angle_deg(up, poses_[i]);
+  for (std::size_t i = 0; i < pose_.ups.size(); ++i) {
+    const double a = angle_deg(up, pose_.ups[i]);
     if (a < config_.session.pose_min_angle_deg) {
       message(MessageLevel::kWarning,
               "Too close to pose " + std::to_string(i + 1) + " (" + fixed(a, 0) +
                   " deg apart): turn at least " + fixed(config_.session.pose_min_angle_deg, 0) +
                   " deg further",
               session_msg::MessageCause::kPoseRefused);
-      need_motion_ = true;
+      pose_.need_motion = true;
       return;
     }
   }
-  poses_.push_back(up);
-  need_motion_ = true;
-  emit(session_msg::PoseCaptured{std::nullopt, poses_.size(), up});
-  std::string text = "Pose " + std::to_string(poses_.size()) + " captured";
+  pose_.ups.push_back(up);
+  pose_.need_motion = true;
+  emit(session_msg::PoseCaptured{std::nullopt, pose_.ups.size(), up});
+  std::string text = "Pose " + std::to_string(pose_.ups.size()) + " captured";
   const std::string missing = missing_words();
   if (!missing.empty()) text += "; not yet up: " + missing;
   message(MessageLevel::kInfo, text);
   poses_prompt();  // the next direction to cover
   // The quick solve waits for the rig to move on: the static detector needs the end of the hold
   // (its variance window reaches past it) to count it as an attitude.
-  quick_pending_ = true;
+  pose_.quick_pending = true;
 }
 
 void SessionEngine::sample_poses(const ImuSample& si, bool still) {
-  if (still) last_still_ns_ = si.t_ns;
+  if (still) pose_.last_still_ns = si.t_ns;
   if (!still) {
     still_since_ns_ = -1;
-    need_motion_ = false;
-    if (quick_pending_ && seconds(si.t_ns - last_still_ns_) >= 0.5) {
-      quick_pending_ = false;
+    pose_.need_motion = false;
+    if (pose_.quick_pending && seconds(si.t_ns - pose_.last_still_ns) >= 0.5) {
+      pose_.quick_pending = false;
       request_quick_solve();
     }
-  } else if (!need_motion_) {
+  } else if (!pose_.need_motion) {
     if (still_since_ns_ < 0) still_since_ns_ = si.t_ns;
     if (seconds(si.t_ns - still_since_ns_) >= config_.session.hold_s) capture_pose();
   }
   const int target = config_.session.poses;
   double scale_sigma = NAN;
-  if (quick_) {
-    scale_sigma =
-        std::max(quick_->accel_sigma.scale.cwiseQuotient(quick_->model.accel.scale.cwiseAbs()).maxCoeff(),
-                 quick_->gyro_sigma.scale.cwiseQuotient(quick_->model.gyro.scale.cwiseAbs()).maxCoeff());
+  if (pose_.quick) {
+    scale_sigma = std::max(
+        pose_.quick->accel_sigma.scale.cwiseQuotient(pose_.quick->model.accel.scale.cwiseAbs()).maxCoeff(),
+        pose_.quick->gyro_sigma.scale.cwiseQuotient(pose_.quick->model.gyro.scale.cwiseAbs()).maxCoeff());
   }
   if (live_due()) {
-    const double held = still_since_ns_ < 0 || need_motion_ ? 0.0 : seconds(si.t_ns - still_since_ns_);
+    const double held = still_since_ns_ < 0 || pose_.need_motion ? 0.0 : seconds(si.t_ns - still_since_ns_);
     const std::string missing = missing_words();
-    live({std::string(need_motion_ ? "Captured: turn to a new orientation"
-                                   : (still ? "Still: " + fixed(held, 1) + " of " +
-                                                  fixed(config_.session.hold_s, 1) + " s"
-                                            : "Moving")),
-          "Poses: " + std::to_string(poses_.size()) + " of " + std::to_string(target) +
+    live({std::string(pose_.need_motion ? "Captured: turn to a new orientation"
+                                        : (still ? "Still: " + fixed(held, 1) + " of " +
+                                                       fixed(config_.session.hold_s, 1) + " s"
+                                                 : "Moving")),
+          "Poses: " + std::to_string(pose_.ups.size()) + " of " + std::to_string(target) +
               (missing.empty() ? "; every side has been up" : "; not yet up: " + missing),
           std::isnan(scale_sigma) ? std::string("Scale sigma: after 9 poses")
                                   : "Scale sigma: " + fixed(scale_sigma * 1e3, 2) + "e-3 (target " +
                                         fixed(config_.session.pose_sigma_target * 1e3, 2) + "e-3)"},
-         std::min(1.0, static_cast<double>(poses_.size()) / target),
-         session_msg::PoseFigures{poses_.size(), still, coverage(), scale_sigma,
+         std::min(1.0, static_cast<double>(pose_.ups.size()) / target),
+         session_msg::PoseFigures{pose_.ups.size(), still, coverage(), scale_sigma,
                                   static_cast<std::size_t>(std::max(config_.session.poses_min, 0))});
   }
   // Done: enough poses and the last quick solve, over all of them, meets the sigma target.
-  if (static_cast<int>(poses_.size()) >= target && quick_ && quick_poses_ == poses_.size() &&
+  if (static_cast<int>(pose_.ups.size()) >= target && pose_.quick && pose_.quick_poses == pose_.ups.size() &&
       scale_sigma <= config_.session.pose_sigma_target) {
     message(MessageLevel::kInfo,
-            std::to_string(poses_.size()) + " poses, scale sigma " + fixed(scale_sigma * 1e3, 2) + "e-3");
+            std::to_string(pose_.ups.size()) + " poses, scale sigma " + fixed(scale_sigma * 1e3, 2) + "e-3");
     advance();
   }
 }
 
 void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
-  if (face_ >= 6) return;
+  if (pose_.face >= 6) return;
   if (!still) {
     still_since_ns_ = -1;
-    need_motion_ = false;
+    pose_.need_motion = false;
     return;
   }
-  if (need_motion_) return;
+  if (pose_.need_motion) return;
   const Eigen::Vector3d up = window_->accel_mean().normalized();
-  const double off = angle_deg(up, kFaces[face_]);
+  const double off = angle_deg(up, kFaces[pose_.face]);
   if (off > 15.0) {
     if (still_since_ns_ < 0 || seconds(si.t_ns - still_since_ns_) > 1.0) {
       int nearest = 0;
@@ -469,25 +470,25 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
         if (angle_deg(up, kFaces[f]) < angle_deg(up, kFaces[nearest])) nearest = f;
       message(MessageLevel::kWarning,
               "This is " + guide_.up_name(kFaces[nearest]) + " (" + fixed(off, 0) + " deg off); " +
-                  guide_.instruction(kFaces[face_]),
+                  guide_.instruction(kFaces[pose_.face]),
               session_msg::MessageCause::kWrongFace);
-      need_motion_ = true;
+      pose_.need_motion = true;
     }
     return;
   }
   if (still_since_ns_ < 0) still_since_ns_ = si.t_ns;
   const double held = seconds(si.t_ns - still_since_ns_);
   if (live_due())
-    live({"Holding " + guide_.up_name(kFaces[face_]) + ": " + fixed(held, 1) + " of " +
+    live({"Holding " + guide_.up_name(kFaces[pose_.face]) + ": " + fixed(held, 1) + " of " +
               fixed(config_.session.gsens_hold_s, 0) + " s",
-          "Faces done: " + std::to_string(face_) + " of 6"},
-         (face_ + std::min(1.0, held / config_.session.gsens_hold_s)) / 6.0);
+          "Faces done: " + std::to_string(pose_.face) + " of 6"},
+         (pose_.face + std::min(1.0, held / config_.session.gsens_hold_s)) / 6.0);
   if (held < config_.session.gsens_hold_s) return;
-  emit(session_msg::FaceHeld{std::nullopt, kFaceNames[face_], up});
-  ++face_;
-  need_motion_ = true;
+  emit(session_msg::FaceHeld{std::nullopt, kFaceNames[pose_.face], up});
+  ++pose_.face;
+  pose_.need_motion = true;
   still_since_ns_ = -1;
-  if (face_ >= 6) {
+  if (pose_.face >= 6) {
     message(MessageLevel::kInfo, "All six faces held");
     advance();
     return;
@@ -563,70 +564,72 @@ void SessionEngine::sample_motion(const ImuSample& si) {
 }
 
 void SessionEngine::evaluate_gates() {
-  gates_.clear();
+  solve_.gates.clear();
   const auto& s = config_.session;
-  if (final_->imu) {
-    const auto& r = *final_->imu;
+  if (solve_.final->imu) {
+    const auto& r = *solve_.final->imu;
     const double scale_sigma =
         std::max(r.accel_sigma.scale.cwiseQuotient(r.model.accel.scale.cwiseAbs()).maxCoeff(),
                  r.gyro_sigma.scale.cwiseQuotient(r.model.gyro.scale.cwiseAbs()).maxCoeff());
-    gates_.push_back({"gravity residual RMS (m/s^2)", r.quality.accel_after.mean_mps2,
-                      s.gate_gravity_rms_mps2, r.quality.accel_after.mean_mps2 <= s.gate_gravity_rms_mps2,
-                      4});
+    solve_.gates.push_back({"gravity residual RMS (m/s^2)", r.quality.accel_after.mean_mps2,
+                            s.gate_gravity_rms_mps2,
+                            r.quality.accel_after.mean_mps2 <= s.gate_gravity_rms_mps2, 4});
     // Shown in units of 1e-3 (the figures are a few 1e-4), judged on the figure itself.
-    gates_.push_back({"largest scale sigma (relative, e-3)", scale_sigma * 1e3, s.gate_scale_sigma * 1e3,
-                      std::isfinite(scale_sigma) && scale_sigma <= s.gate_scale_sigma, 2});
-    gates_.push_back(
+    solve_.gates.push_back({"largest scale sigma (relative, e-3)", scale_sigma * 1e3,
+                            s.gate_scale_sigma * 1e3,
+                            std::isfinite(scale_sigma) && scale_sigma <= s.gate_scale_sigma, 2});
+    solve_.gates.push_back(
         {"distinct attitudes", static_cast<double>(r.distinct_attitudes), 9.0, r.distinct_attitudes >= 9, 0});
   }
-  if (final_->camimu) {
-    const auto& res = final_->camimu->result;
+  if (solve_.final->camimu) {
+    const auto& res = solve_.final->camimu->result;
     const auto fixed = [&](const char* name) {
       return std::find(res.fixed.begin(), res.fixed.end(), name) != res.fixed.end();
     };
     for (const auto& cam : res.cameras) {
-      gates_.push_back({cam.name + " reprojection RMS (px)", cam.reprojection_rms_px, s.gate_reprojection_px,
-                        cam.reprojection_rms_px <= s.gate_reprojection_px, 3});
+      solve_.gates.push_back({cam.name + " reprojection RMS (px)", cam.reprojection_rms_px,
+                              s.gate_reprojection_px, cam.reprojection_rms_px <= s.gate_reprojection_px, 3});
       // Every estimated extrinsic and time offset carries a sigma before it goes to storage.
       int missing = 0;
       if (!fixed("T_cam_imu"))
         missing += static_cast<int>((!cam.rotation_sigma_rad.array().isFinite()).count() +
                                     (!cam.translation_sigma_m.array().isFinite()).count());
       if (!fixed("timeshift")) missing += std::isfinite(cam.timeshift_sigma_s) ? 0 : 1;
-      gates_.push_back(
+      solve_.gates.push_back(
           {cam.name + " extrinsics without a sigma", static_cast<double>(missing), 0.0, missing == 0, 0});
     }
     // The halves of the recording, calibrated apart, agree within their sigmas (a self-check that
     // could not be made does not pass: its sigmas are then unchecked).
     const SplitCheck& sc = res.self_check;
     if (sc.verdict != SplitCheck::Verdict::kNotRun)
-      gates_.push_back({"self-check: largest difference of the parts (sigmas)", sc.worst_z, sc.z_limit,
-                        sc.verdict == SplitCheck::Verdict::kAgree, 1});
+      solve_.gates.push_back({"self-check: largest difference of the parts (sigmas)", sc.worst_z, sc.z_limit,
+                              sc.verdict == SplitCheck::Verdict::kAgree, 1});
   }
-  gates_pass_ = std::all_of(gates_.begin(), gates_.end(), [](const Gate& g) { return g.pass; });
+  solve_.gates_pass =
+      std::all_of(solve_.gates.begin(), solve_.gates.end(), [](const Gate& g) { return g.pass; });
 }
 
 std::vector<CameraRecord> SessionEngine::review_cameras() const {
-  if (final_->record) return final_->record->cameras;
+  if (solve_.final->record) return solve_.final->record->cameras;
   // A solve without a record (none is written): the cameras as the record would hold them.
-  if (!final_->camimu) return {};
-  return calibration_record_from_camimu(*final_->camimu, "").cameras;
+  if (!solve_.final->camimu) return {};
+  return calibration_record_from_camimu(*solve_.final->camimu, "").cameras;
 }
 
 std::vector<std::string> SessionEngine::difference_to_stored(
     std::optional<session_msg::Review::Difference>* diff) const {
   if (!stored_) {
-    if (!final_->imu) return {};
+    if (!solve_.final->imu) return {};
     return {stored_unreadable_.empty()
                 ? "Stored calibration: none; this is the first"
                 : "Stored calibration: present but not comparable (" + stored_unreadable_ + ")"};
   }
   std::vector<std::string> lines = imu_difference_to_stored(diff);
-  if (final_->record && final_->record->thermal) {
-    for (auto& line : thermal_change_lines(*final_->record->thermal, stored_->record.thermal, info_))
+  if (solve_.final->record && solve_.final->record->thermal) {
+    for (auto& line : thermal_change_lines(*solve_.final->record->thermal, stored_->record.thermal, info_))
       lines.push_back(std::move(line));
   }
-  if (final_->camimu) {
+  if (solve_.final->camimu) {
     for (const CameraRecord& cam : review_cameras()) {
       const auto& stored = stored_->record.cameras;
       const auto old = std::find_if(stored.begin(), stored.end(),
@@ -642,12 +645,12 @@ std::vector<std::string> SessionEngine::difference_to_stored(
 
 std::vector<std::string> SessionEngine::imu_difference_to_stored(
     std::optional<session_msg::Review::Difference>* diff) const {
-  if (!final_->imu) return {};
+  if (!solve_.final->imu) return {};
   const ImuRecord& imu = stored_->record.imu;
   const std::string units = info_.units == ImuUnits::kRaw ? "raw" : "si";
   if (imu.input_units != units)
     return {"  IMU: the stored one is for " + imu.input_units + " input, not comparable"};
-  const auto& c = final_->imu->canonical;
+  const auto& c = solve_.final->imu->canonical;
   const CanonicalImuModel& old = imu.model;
   *diff = session_msg::Review::Difference{
       c.b_a - old.b_a, c.b_g - old.b_g,
@@ -659,20 +662,21 @@ std::vector<std::string> SessionEngine::imu_difference_to_stored(
 void SessionEngine::review() {
   state_ = SessionState::kReview;
   session_msg::Review review_message;
-  for (const auto& g : gates_) review_message.gates.push_back({g.name, g.value, g.limit, g.pass, g.digits});
+  for (const auto& g : solve_.gates)
+    review_message.gates.push_back({g.name, g.value, g.limit, g.pass, g.digits});
   std::vector<std::string> lines;
-  if (final_->imu) lines = imu_review_lines(*final_->imu, info_);
-  if (final_->thermal) {
-    for (auto& line : thermal_review_lines(*final_->thermal)) lines.push_back(std::move(line));
-    if (final_->thermal->determined && final_->imu) {
-      lines.push_back("The biases above are those at " + fixed(final_->thermal->reference_c, 2) +
+  if (solve_.final->imu) lines = imu_review_lines(*solve_.final->imu, info_);
+  if (solve_.final->thermal) {
+    for (auto& line : thermal_review_lines(*solve_.final->thermal)) lines.push_back(std::move(line));
+    if (solve_.final->thermal->determined && solve_.final->imu) {
+      lines.push_back("The biases above are those at " + fixed(solve_.final->thermal->reference_c, 2) +
                       " C: the samples were corrected to the thermal model's reference temperature");
-      for (const auto& w : final_->imu->warnings)
+      for (const auto& w : solve_.final->imu->warnings)
         if (w.starts_with("thermal: ")) lines.push_back("  " + w.substr(9));
     }
   }
-  if (final_->camimu) {
-    const auto& solved = final_->camimu->result.cameras;
+  if (solve_.final->camimu) {
+    const auto& solved = solve_.final->camimu->result.cameras;
     for (const CameraRecord& cam : review_cameras()) {
       const auto it = std::find_if(solved.begin(), solved.end(),
                                    [&](const CamImuCameraResult& c) { return c.name == cam.name; });
@@ -680,41 +684,41 @@ void SessionEngine::review() {
            camera_review_lines(cam, it == solved.end() ? kNotDetermined : it->reprojection_rms_px))
         lines.push_back(std::move(line));
     }
-    const SplitCheck& chain = final_->chain_self_check;
+    const SplitCheck& chain = solve_.final->chain_self_check;
     if (chain.verdict != SplitCheck::Verdict::kNotRun) {
       lines.push_back("Camera chain self-check: " + chain.summary);
       for (const auto& [who, k] : chain.scaled)
         lines.push_back("  " + who + "'s sigmas scaled by " + fixed(k, 2) +
                         " (its parts spread that much more)");
     }
-    const SplitCheck& sc = final_->camimu->result.self_check;
+    const SplitCheck& sc = solve_.final->camimu->result.self_check;
     if (sc.verdict != SplitCheck::Verdict::kNotRun) lines.push_back("Self-check: " + sc.summary);
     if (!sc.advice.empty()) lines.push_back("  " + sc.advice);
-  } else if (final_->record) {
+  } else if (solve_.final->record) {
     // Cameras the record will keep from the stored one (app::keep_stored_cameras): said, so
     // that the operator accepts knowing what is written.
-    for (const std::string& note : final_->record->notes)
+    for (const std::string& note : solve_.final->record->notes)
       if (note.starts_with("cameras kept")) lines.push_back("Cameras: " + note);
   }
   // A stored thermal model the record does not carry on (app::keep_stored_cameras): said too.
-  if (final_->record) {
-    for (const std::string& note : final_->record->notes)
+  if (solve_.final->record) {
+    for (const std::string& note : solve_.final->record->notes)
       if (note.starts_with("the stored thermal model")) lines.push_back("Thermal: " + note);
   }
   for (auto& line : difference_to_stored(&review_message.difference_to_stored))
     lines.push_back(std::move(line));
-  review_message.pass = gates_pass_;
+  review_message.pass = solve_.gates_pass;
   review_message.lines = std::move(lines);
-  review_message.files = final_->result_files;
+  review_message.files = solve_.final->result_files;
   emit(std::move(review_message));
-  if (gates_pass_ && config_.session.auto_write) {
+  if (solve_.gates_pass && config_.session.auto_write) {
     message(MessageLevel::kInfo, "Every gate passed; writing (session.auto_write)");
     state_ = SessionState::kRunning;
     advance();
     return;
   }
-  prompt(gates_pass_ ? "Every gate passed. Press y to accept and write, n to reject"
-                     : "A gate failed. Press y to write anyway, n to reject",
+  prompt(solve_.gates_pass ? "Every gate passed. Press y to accept and write, n to reject"
+                           : "A gate failed. Press y to write anyway, n to reject",
          {K::kAccept, K::kReject, K::kAbort});
 }
 
