@@ -111,10 +111,7 @@ void SessionEngine::reset() {
   warmup_ = {};
   thermal_ = std::make_shared<std::vector<ImuSample>>();
   thermal_sum_ = {};
-  still_since_ns_ = -1;
-  bias_known_ = false;
-  still_gyro_sum_.setZero();
-  still_count_ = 0;
+  still_ = {};
   pose_ = {};
   solve_ = {};
 }
@@ -280,7 +277,7 @@ void SessionEngine::begin_step() {
           {K::kContinue, K::kSkip, K::kAbort});
       break;
     case StepId::kStill:
-      still_since_ns_ = -1;
+      still_.since_ns = -1;
       samples_->clear();
       prompt("Keep the rig still for " + fixed(config_.session.still_s, 0) + " s", {K::kAbort});
       break;
@@ -293,7 +290,7 @@ void SessionEngine::begin_step() {
     case StepId::kGsens:
       pose_.face = 0;
       pose_.need_motion = false;
-      still_since_ns_ = -1;
+      still_.since_ns = -1;
       face_prompt();
       break;
     case StepId::kMotion:
@@ -389,7 +386,7 @@ Status SessionEngine::key(K key) {
     }
     if (id == StepId::kGsens) {
       pose_.face = std::max(0, pose_.face - 1);
-      still_since_ns_ = -1;
+      still_.since_ns = -1;
       message(MessageLevel::kInfo, "Redoing the last face");
       face_prompt();
       return {};

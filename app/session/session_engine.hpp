@@ -273,12 +273,16 @@ class SessionEngine {
     long count = 0;
   } thermal_sum_;
   std::shared_ptr<std::vector<ImuSample>> thermal_;  // the means so far (SI, deg C)
-  // still start
-  TimeNs still_since_ns_ = -1;
-  Eigen::Vector3d gyro_bias_ = Eigen::Vector3d::Zero();
-  bool bias_known_ = false;
-  Eigen::Vector3d still_gyro_sum_ = Eigen::Vector3d::Zero();
-  long still_count_ = 0;
+  /// The holds: since when the rig is still (the still start, a pose, a face), and the still
+  /// start's gyro bias; made anew with the session.
+  struct StillState {
+    TimeNs since_ns = -1;                                // -1: moving
+    Eigen::Vector3d gyro_sum = Eigen::Vector3d::Zero();  // the still start's, so far
+    long count = 0;
+    Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();
+    bool bias_known = false;
+  };
+  StillState still_;
   int next_solve_id_ = 1;  // unique over the engine's life
   /// The poses (and six faces) captured this session and their quick solves, made anew with it.
   struct PoseState {

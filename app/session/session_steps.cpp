@@ -77,7 +77,7 @@ void SessionEngine::on_sample(const ImuSample& sample) {
   const double gyro_limit = config_.session.still_gyro_dps * kDeg;
   bool still = window_->full() && window_->accel_std() < config_.session.still_accel_mps2 &&
                window_->gyro_std() < 0.5 * gyro_limit;
-  if (still && bias_known_) still = (window_->gyro_mean() - gyro_bias_).norm() < gyro_limit;
+  if (still && still_.bias_known) still = (window_->gyro_mean() - still_.gyro_bias).norm() < gyro_limit;
   switch (id) {
     case StepId::kWarmup:
       if (thermal_planned()) record_thermal(si, still);
@@ -309,31 +309,31 @@ void SessionEngine::end_thermal(const std::string& why) {
 
 void SessionEngine::sample_still(const ImuSample& si, bool still) {
   if (!still) {
-    if (still_since_ns_ >= 0 || samples_->size() > window_->size) {
-      if (still_since_ns_ >= 0)
+    if (still_.since_ns >= 0 || samples_->size() > window_->size) {
+      if (still_.since_ns >= 0)
         message(MessageLevel::kWarning, "Motion detected: keep the rig still; the countdown restarts");
-      still_since_ns_ = -1;
+      still_.since_ns = -1;
       samples_->clear();  // the still period the calibration uses must be still from its start
     }
     return;
   }
-  if (still_since_ns_ < 0) {
-    still_since_ns_ = si.t_ns;
-    still_gyro_sum_.setZero();
-    still_count_ = 0;
+  if (still_.since_ns < 0) {
+    still_.since_ns = si.t_ns;
+    still_.gyro_sum.setZero();
+    still_.count = 0;
   }
-  still_gyro_sum_ += si.gyro;
-  ++still_count_;
-  const double held = seconds(si.t_ns - still_since_ns_);
+  still_.gyro_sum += si.gyro;
+  ++still_.count;
+  const double held = seconds(si.t_ns - still_.since_ns);
   if (live_due()) {
     live({"Still: " + fixed(held, 1) + " of " + fixed(config_.session.still_s, 0) + " s"},
          std::min(1.0, held / config_.session.still_s));
   }
   if (held >= config_.session.still_s) {
-    gyro_bias_ = still_gyro_sum_ / static_cast<double>(still_count_);
-    bias_known_ = true;
+    still_.gyro_bias = still_.gyro_sum / static_cast<double>(still_.count);
+    still_.bias_known = true;
     message(MessageLevel::kInfo,
-            "Still start done: gyro bias " + fixed(gyro_bias_.norm() / kDeg, 3) + " deg/s");
+            "Still start done: gyro bias " + fixed(still_.gyro_bias.norm() / kDeg, 3) + " deg/s");
     advance();
   }
 }
@@ -411,15 +411,15 @@ void SessionEngine::capture_pose() {
 void SessionEngine::sample_poses(const ImuSample& si, bool still) {
   if (still) pose_.last_still_ns = si.t_ns;
   if (!still) {
-    still_since_ns_ = -1;
+    still_.since_ns = -1;
     pose_.need_motion = false;
     if (pose_.quick_pending && seconds(si.t_ns - pose_.last_still_ns) >= 0.5) {
       pose_.quick_pending = false;
       request_quick_solve();
     }
   } else if (!pose_.need_motion) {
-    if (still_since_ns_ < 0) still_since_ns_ = si.t_ns;
-    if (seconds(si.t_ns - still_since_ns_) >= config_.session.hold_s) capture_pose();
+    if (still_.since_ns < 0) still_.since_ns = si.t_ns;
+    if (seconds(si.t_ns - still_.since_ns) >= config_.session.hold_s) capture_pose();
   }
   const int target = config_.session.poses;
   double scale_sigma = NAN;
@@ -429,7 +429,7 @@ void SessionEngine::sample_poses(const ImuSample& si, bool still) {
         pose_.quick->gyro_sigma.scale.cwiseQuotient(pose_.quick->model.gyro.scale.cwiseAbs()).maxCoeff());
   }
   if (live_due()) {
-    const double held = still_since_ns_ < 0 || pose_.need_motion ? 0.0 : seconds(si.t_ns - still_since_ns_);
+    const double held = still_.since_ns < 0 || pose_.need_motion ? 0.0 : seconds(si.t_ns - still_.since_ns);
     const std::string missing = missing_words();
     live({std::string(pose_.need_motion ? "Captured: turn to a new orientation"
                                         : (still ? "Still: " + fixed(held, 1) + " of " +
@@ -456,7 +456,7 @@ void SessionEngine::sample_poses(const ImuSample& si, bool still) {
 void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
   if (pose_.face >= 6) return;
   if (!still) {
-    still_since_ns_ = -1;
+    still_.since_ns = -1;
     pose_.need_motion = false;
     return;
   }
@@ -464,7 +464,7 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
   const Eigen::Vector3d up = window_->accel_mean().normalized();
   const double off = angle_deg(up, kFaces[pose_.face]);
   if (off > 15.0) {
-    if (still_since_ns_ < 0 || seconds(si.t_ns - still_since_ns_) > 1.0) {
+    if (still_.since_ns < 0 || seconds(si.t_ns - still_.since_ns) > 1.0) {
       int nearest = 0;
       for (int f = 1; f < 6; ++f)
         if (angle_deg(up, kFaces[f]) < angle_deg(up, kFaces[nearest])) nearest = f;
@@ -476,8 +476,8 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
     }
     return;
   }
-  if (still_since_ns_ < 0) still_since_ns_ = si.t_ns;
-  const double held = seconds(si.t_ns - still_since_ns_);
+  if (still_.since_ns < 0) still_.since_ns = si.t_ns;
+  const double held = seconds(si.t_ns - still_.since_ns);
   if (live_due())
     live({"Holding " + guide_.up_name(kFaces[pose_.face]) + ": " + fixed(held, 1) + " of " +
               fixed(config_.session.gsens_hold_s, 0) + " s",
@@ -487,7 +487,7 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
   emit(session_msg::FaceHeld{std::nullopt, kFaceNames[pose_.face], up});
   ++pose_.face;
   pose_.need_motion = true;
-  still_since_ns_ = -1;
+  still_.since_ns = -1;
   if (pose_.face >= 6) {
     message(MessageLevel::kInfo, "All six faces held");
     advance();
@@ -497,7 +497,7 @@ void SessionEngine::sample_gsens(const ImuSample& si, bool still) {
 }
 
 void SessionEngine::sample_motion(const ImuSample& si) {
-  const Eigen::Vector3d w = si.gyro - gyro_bias_;
+  const Eigen::Vector3d w = si.gyro - still_.gyro_bias;
   motion_.gyro_sq += w.cwiseProduct(w);
   motion_.accel_sum += si.accel;
   motion_.accel_sq += si.accel.cwiseProduct(si.accel);
