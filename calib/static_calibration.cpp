@@ -155,13 +155,6 @@ int count_distinct(std::span<const Eigen::Vector3d> directions, double min_angle
   return static_cast<int>(reps.size());
 }
 
-TedaldiTriad triad_from_conversion(const AxisConversion& c) {
-  TedaldiTriad t;
-  t.scale = c.scale;
-  t.bias = -c.offset;
-  return t;
-}
-
 TriadSigma accel_sigma(const Eigen::MatrixXd& cov) {
   TriadSigma s;
   const Eigen::VectorXd d = sigmas_of(cov);
@@ -832,60 +825,6 @@ GsensOutcome gsens_outcome(const GyroStaticFit& f, GSensitivityMode mode, const 
   return out;
 }
 
-// ---- quality figures (4.1.1) -----------------------------------------------------------------
-
-StaticQuality quality_figures(const std::vector<Transfer>& transfers, const Candidate& best,
-                              const ScannedRecording& scan, std::span<const ImuSample> samples,
-                              const StillStart& still, const StaticCalibrationOptions& opt,
-                              const TedaldiImuModel& model) {
-  StaticQuality q;
-  std::vector<GravityTransfer> checks;
-  for (const auto& tr : transfers) checks.push_back({tr.u0, tr.u1, tr.gyro_raw, tr.t_s});
-  q.accel_after = gravity_magnitude_error(best.means, model.accel, opt.gravity_mps2);
-  q.gyro_after = gravity_direction_error(checks, model.gyro, opt.gravity_mps2);
-  if (!opt.accel_init) return q;
-  TedaldiTriad gyro_nominal;
-  gyro_nominal.scale = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
-  gyro_nominal.bias = opt.gyro_init ? Eigen::Vector3d(-opt.gyro_init->offset) : Eigen::Vector3d::Zero();
-  q.before_available = true;
-  const TedaldiTriad accel_nominal = triad_from_conversion(*opt.accel_init);
-  q.accel_before = gravity_magnitude_error(best.means, accel_nominal, opt.gravity_mps2);
-  // Gravity directions from the nominal accelerometer, rates from the nominal gyro.
-  std::vector<GravityTransfer> nominal = checks;
-  const auto dirs = pose_directions(best.intervals, scan.accel, scan.gyro, samples, accel_nominal,
-                                    initial_gyro(still.gyro_bias_raw, opt), threads_or_cores(opt.threads));
-  for (std::size_t k = 0; k < nominal.size(); ++k) {
-    nominal[k].u0 = dirs[transfers[k].pose0].u_end;
-    nominal[k].u1 = dirs[transfers[k].pose0 + 1].u_start;
-  }
-  q.gyro_before = gravity_direction_error(nominal, gyro_nominal, opt.gravity_mps2);
-  return q;
-}
-
-/// A nominal accelerometer conversion under which the still start does not read about gravity
-/// hides every attitude: an offset it does not know (a sensor whose zero is mid-range: raw
-/// 16-bit counts near 32768) turns all the poses' means one way. It is set aside, with a warning:
-/// the attitudes are then told apart about the centre of the poses' means, and the solve starts
-/// from an ellipsoid fit, so the biases take the offset.
-void set_aside_an_implausible_accel_conversion(const StillStart& still, StaticCalibrationOptions* opt,
-                                               std::vector<std::string>* warnings) {
-  if (!opt->accel_init) return;
-  const double a = opt->accel_init->to_si(still.accel_mean_raw).norm();
-  const double g = opt->gravity_mps2;
-  if (a > 0.5 * g && a < 2.0 * g) return;
-  warnings->push_back(
-      "at rest the accelerometer reads " + format_number("%.3g", a) + " m/s^2 (" +
-      format_number("%.2g", a / g) +
-      " g) through its stream's nominal conversion: its values carry an offset or a scale that conversion "
-      "does not have (raw counts of a sensor whose zero is mid-range sit near 32768). The poses were told "
-      "apart about the centre of their means and the solve started from an ellipsoid fit, so the biases "
-      "hold that offset; to see them near zero, import with --accel-offset and --gyro-offset (the counts at "
-      "zero). If the scale is what is wrong (a full-scale range other than the one the import assumed), the "
-      "fitted scales hold it instead: import with --accel-scale and --gyro-scale (m/s^2 and rad/s per count "
-      "at the sensor's range)");
-  opt->accel_init.reset();
-}
-
 }  // namespace
 
 /// The gyro solve kept (of one per static model) with the transfers it used.
@@ -995,7 +934,8 @@ Result<StaticCalibrationResult> calibrate_static(std::span<const ImuSample> samp
   res.timings.gyro_s = seconds_since(t0);
 
   put_pieces(*accel, gsens, *chosen, &res);
-  res.quality = quality_figures(chosen->transfers, *best, *scan, samples, *still, opt, res.model);
+  res.quality = quality_figures(chosen->transfers, best->intervals, best->means, *scan, samples, *still, opt,
+                                res.model);
   res.canonical = canonical_from_tedaldi(res.model);
   const GsensOutcome G = gsens_outcome(gsens.fits[chosen->fit], res.gsens_mode, res.model.gyro, opt);
   if (G.G) res.canonical.G = *G.G;

@@ -11,7 +11,9 @@
 #include <string>
 
 #include "calib/allan.hpp"
+#include "calib/quality.hpp"
 #include "calib/static_gyro.hpp"
+#include "core/threads.hpp"
 
 namespace imucal::calib {
 
@@ -146,6 +148,61 @@ Eigen::MatrixXd normal_pseudo_inverse(const Eigen::MatrixXd& J) {
     inv_sq[i] = 1.0 / (sv[i] * sv[i]);
   }
   return svd.matrixV() * inv_sq.asDiagonal() * svd.matrixV().transpose();
+}
+
+TedaldiTriad triad_from_conversion(const AxisConversion& c) {
+  TedaldiTriad t;
+  t.scale = c.scale;
+  t.bias = -c.offset;
+  return t;
+}
+
+StaticQuality quality_figures(const std::vector<Transfer>& transfers,
+                              const std::vector<StaticInterval>& intervals,
+                              const std::vector<Eigen::Vector3d>& means, const ScannedRecording& scan,
+                              std::span<const ImuSample> samples, const StillStart& still,
+                              const StaticCalibrationOptions& opt, const TedaldiImuModel& model) {
+  StaticQuality q;
+  std::vector<GravityTransfer> checks;
+  for (const auto& tr : transfers) checks.push_back({tr.u0, tr.u1, tr.gyro_raw, tr.t_s});
+  q.accel_after = gravity_magnitude_error(means, model.accel, opt.gravity_mps2);
+  q.gyro_after = gravity_direction_error(checks, model.gyro, opt.gravity_mps2);
+  if (!opt.accel_init) return q;
+  TedaldiTriad gyro_nominal;
+  gyro_nominal.scale = opt.gyro_init ? opt.gyro_init->scale : Eigen::Vector3d::Ones();
+  gyro_nominal.bias = opt.gyro_init ? Eigen::Vector3d(-opt.gyro_init->offset) : Eigen::Vector3d::Zero();
+  q.before_available = true;
+  const TedaldiTriad accel_nominal = triad_from_conversion(*opt.accel_init);
+  q.accel_before = gravity_magnitude_error(means, accel_nominal, opt.gravity_mps2);
+  // Gravity directions from the nominal accelerometer, rates from the nominal gyro.
+  std::vector<GravityTransfer> nominal = checks;
+  const auto dirs = pose_directions(intervals, scan.accel, scan.gyro, samples, accel_nominal,
+                                    initial_gyro(still.gyro_bias_raw, opt), threads_or_cores(opt.threads));
+  for (std::size_t k = 0; k < nominal.size(); ++k) {
+    nominal[k].u0 = dirs[transfers[k].pose0].u_end;
+    nominal[k].u1 = dirs[transfers[k].pose0 + 1].u_start;
+  }
+  q.gyro_before = gravity_direction_error(nominal, gyro_nominal, opt.gravity_mps2);
+  return q;
+}
+
+void set_aside_an_implausible_accel_conversion(const StillStart& still, StaticCalibrationOptions* opt,
+                                               std::vector<std::string>* warnings) {
+  if (!opt->accel_init) return;
+  const double a = opt->accel_init->to_si(still.accel_mean_raw).norm();
+  const double g = opt->gravity_mps2;
+  if (a > 0.5 * g && a < 2.0 * g) return;
+  warnings->push_back(
+      "at rest the accelerometer reads " + format_number("%.3g", a) + " m/s^2 (" +
+      format_number("%.2g", a / g) +
+      " g) through its stream's nominal conversion: its values carry an offset or a scale that conversion "
+      "does not have (raw counts of a sensor whose zero is mid-range sit near 32768). The poses were told "
+      "apart about the centre of their means and the solve started from an ellipsoid fit, so the biases "
+      "hold that offset; to see them near zero, import with --accel-offset and --gyro-offset (the counts at "
+      "zero). If the scale is what is wrong (a full-scale range other than the one the import assumed), the "
+      "fitted scales hold it instead: import with --accel-scale and --gyro-scale (m/s^2 and rad/s per count "
+      "at the sensor's range)");
+  opt->accel_init.reset();
 }
 
 }  // namespace imucal::calib
