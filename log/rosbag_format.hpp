@@ -45,6 +45,12 @@ std::uint64_t ros_time(TimeNs t_ns);
 /// The stored form back to ns; kCorrupt when the nanoseconds are 1e9 or more.
 [[nodiscard]] Result<TimeNs> time_ns(std::uint64_t stored);
 
+/// A message header's stamp in ns (ROS 1: uint32 seconds; ROS 2: int32). Nanoseconds of 1e9 or
+/// more are the time they add up to: ROS 2's own test bags (rosbag2_py) hold (0 s, 1e9 ns) for 1 s.
+inline TimeNs header_stamp_ns(std::int64_t sec, std::uint32_t nsec) {
+  return static_cast<TimeNs>(sec) * 1'000'000'000 + nsec;
+}
+
 /// The fields of a record's header.
 class Fields {
  public:

@@ -483,8 +483,7 @@ struct ExportStream {
   int id = 0;
   bool camera = false;
   std::string name;
-  bool raw = false;
-  const ImuStreamInfo* imu = nullptr;
+  const ImuStreamInfo* imu = nullptr;  // an IMU stream's
   std::uint32_t connection = 0;
   std::uint32_t seq = 0;
   std::vector<TimeNs> frame_times;
@@ -515,8 +514,9 @@ Status collect_imu(const SessionLogReader& r, ExportStream& s, TimeNs t0, TimeNs
     rosbag::ImuMessage m;
     m.stamp_ns = sample.t_ns;
     m.frame_id = s.name;
-    m.accel = s.raw ? s.imu->accel.to_si(sample.accel) : sample.accel;
-    m.gyro = s.raw ? s.imu->gyro.to_si(sample.gyro) : sample.gyro;
+    const bool raw = s.imu->units == ImuUnits::kRaw;
+    m.accel = raw ? s.imu->accel.to_si(sample.accel) : sample.accel;
+    m.gyro = raw ? s.imu->gyro.to_si(sample.gyro) : sample.gyro;
     out.push_back({sample.t_ns, s.connection, rosbag::encode_imu(m, s.seq++)});
     return true;
   });
@@ -551,7 +551,6 @@ Result<std::vector<ExportStream>> export_streams(const SessionLogReader& r, rosb
     ExportStream s;
     s.id = id;
     s.name = info.name;
-    s.raw = info.units == ImuUnits::kRaw;
     s.imu = &info;
     s.connection = *conn;
     streams.push_back(std::move(s));

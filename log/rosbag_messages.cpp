@@ -71,9 +71,7 @@ Result<Header> read_header(Cursor& c) {
   const std::uint32_t nsec = c.u32();
   h.frame_id = c.text();
   if (!c.ok()) return make_error(Errc::kCorrupt, "the message ends inside its header");
-  // A stamp of 1e9 ns or more is the time it adds up to: ROS 2's own test bags (rosbag2_py) hold
-  // (0 s, 1e9 ns) for 1 s.
-  h.stamp_ns = static_cast<TimeNs>(sec) * 1'000'000'000 + nsec;
+  h.stamp_ns = format::header_stamp_ns(sec, nsec);
   return h;
 }
 
