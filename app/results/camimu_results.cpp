@@ -13,6 +13,7 @@
 #include "app/camimu_inputs.hpp"
 #include "core/calibration_record.hpp"
 #include "core/text_file.hpp"
+#include "core/text_format.hpp"
 #include "core/version.hpp"
 #include "core/yaml_json.hpp"
 
@@ -598,11 +599,7 @@ std::string camimu_camchain_yaml(const CamImuReport& r) {
 }
 
 namespace {
-double six_significant(double v) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%.6g", v);
-  return std::strtod(text, nullptr);
-}
+double six_significant(double v) { return std::strtod(format_number("%.6g", v).c_str(), nullptr); }
 
 double update_rate_of(const CamImuReport& r) {
   // As the --imu file gave it; else the stream's rate to six digits (a rate measured from stamps

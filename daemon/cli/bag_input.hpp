@@ -26,7 +26,7 @@ std::string bag_cache_dir();
 std::string log_of_input(const std::string& path, const std::vector<std::string>& topics,
                          bool use_cache = true);
 
-/// `--topics` for a command that takes a log: the topics to import when LOG is a ROS 1 bag.
+/// `--topics` for a command that takes a log: the topics to import when the log is a ROS bag.
 void add_bag_topics_option(CLI::App* cmd, std::vector<std::string>* topics);
 
 /// `options` with its log_path the log to read (log_of_input of log_path and topics), for the
