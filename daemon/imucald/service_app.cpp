@@ -19,12 +19,14 @@
 #include "app/camera_module.hpp"
 #include "app/module_loader.hpp"
 #include "app/rig/cameras.hpp"
+#include "app/rig/rig.hpp"
 #include "app/rig/stored_calibration.hpp"
 #include "core/version.hpp"
 #include "drivers/camera/aravis/aravis_module.hpp"
 #include "drivers/camera/libcamera/libcamera_module.hpp"
 #include "drivers/mpu6000/output_settings.hpp"
 #include "drivers/storage/storage_device.hpp"
+#include "sim/service_rig.hpp"
 
 namespace imucal::imucald {
 
@@ -32,10 +34,6 @@ using nlohmann::json;
 using session_msg::DeviceState;
 
 namespace {
-
-/// The preflight's self-test line when the kernel's inv-mpu6050 driver reads the chip.
-constexpr const char* kNoSelfTestThroughIio =
-    "self-test not available (the kernel's inv-mpu6050 driver owns the chip and has none)";
 
 std::string storage_name(const StorageConfig& s) {
   return std::string(storage_backend_name(s.backend)) + " " +
@@ -240,13 +238,12 @@ int check_configuration(const ServiceOptions& options) {
 Service::Service(ServiceOptions options)
     : options_(std::move(options)),
       signals_(io_, SIGINT, SIGTERM, SIGHUP),
-      sim_timer_(io_),
       watchdog_timer_(io_),
       upgrade_timer_(io_) {}
 
 Service::~Service() {
   runner_.reset();  // joins the worker before the devices go
-  close_imu();
+  if (rig_) close_imu();
 }
 
 Status Service::init() {
@@ -268,6 +265,22 @@ Status Service::init() {
                           "restarted until then (exit " +
                           std::to_string(kExitDeviceAbsent) + ")");
   }
+  RigEvents events;
+  events.samples = [this](std::span<const ImuSample> s) { on_samples(s); };
+  events.imu_failed = [this](const Error& e) { imu_failed(e); };
+  events.camera_readable = [this](std::size_t i) {
+    if (cameras_streaming_ && i < cameras_.size()) read_camera(i);
+  };
+  events.notice = [this](const std::string& text) {
+    spdlog::warn("{}", text);
+    if (runner_) runner_->note(text);
+  };
+  events.worker_busy = [this] { return runner_ && runner_->busy(); };
+  events.press_key = [this](session_msg::OperatorKey k) {
+    if (auto s = runner_->engine().key(k); !s.ok())
+      spdlog::warn("scripted operator: key {}: {}", session_msg::key_name(k), s.error().message);
+  };
+  rig_ = make_rig(config_, options_, io_, std::move(events));
   IMUCAL_TRY(open_imu());
 
   app::session::RunnerOptions ro;
@@ -293,9 +306,9 @@ Status Service::init() {
   ro.write_storage = [this](const CalibrationRecord& record) { return write_storage(record); };
   ro.warn = [](const std::string& text) { spdlog::warn("{}", text); };
   // The virtual rig's frames come as fast as it computes: they wait for the encoder.
-  ro.frames_wait_for_encoder = options_.sim;
+  ro.frames_wait_for_encoder = rig_->simulated();
   ro.metadata = {{"rig_config", rig_config_to_json(config_)},
-                 {"source", options_.sim ? "sim" : "hardware"},
+                 {"source", rig_->simulated() ? "sim" : "hardware"},
                  {"service", json{{"version", kVersion}, {"config", options_.config_path}}.dump(
                                  -1, ' ', false, nlohmann::json::error_handler_t::replace)}};
   ro.view_frame = [this](ViewFrame&& frame) { view_frame(std::move(frame)); };
@@ -375,7 +388,7 @@ Status Service::open_live_view(std::optional<int> passed_socket) {
 
 void Service::view_frame(ViewFrame&& frame) {
   if (!live_) return;
-  if (sim_rig_ && runner_) write_view_truth(frame);
+  if (runner_) write_view_truth(frame);
   auto png = app::session::view_frame_png(frame);
   if (!png.ok()) return;  // a frame the view misses; the recording has it
   live_->frame(std::move(frame), std::move(*png));
@@ -385,7 +398,7 @@ void Service::view_frame(ViewFrame&& frame) {
 // "camera t_ns x y x y ..." (full-size pixels, by point id, nan where not on the sensor) in the
 // session folder's sim-view-truth.txt (docs/service.md, "Live view").
 void Service::write_view_truth(const ViewFrame& frame) {
-  const auto corners = sim_rig_->truth_corners(frame.camera, frame.t_ns);
+  const auto corners = rig_->truth_corners(frame.camera, frame.t_ns);
   if (!corners) return;
   std::ofstream out(runner_->session_dir() + "/sim-view-truth.txt", std::ios::app);
   out << frame.camera << ' ' << frame.t_ns;
@@ -399,93 +412,21 @@ void Service::write_view_truth(const ViewFrame& frame) {
 
 Status Service::open_imu() {
   close_imu();
-  if (options_.sim) {
-    IMUCAL_TRY(open_virtual_rig());
-    stream_info_ = sim_rig_->stream_info();
-    imu_state_ = DeviceState::kOpen;
-    if (!runner_ || !runner_->engine().running()) set_gyro_offsets(true);
-    boost::asio::post(io_, [this] { sim_tick(); });
-    return {};
-  }
-  auto rig = app::open_imu_rig(config_);
-  if (!rig.ok()) {
+  if (auto s = rig_->open_imu(); !s.ok()) {
     imu_state_ = DeviceState::kFailed;
-    imu_error_ = rig.error().message;
-    return rig.error();
+    imu_error_ = s.error().message;
+    return s;
   }
-  rig_ = std::move(*rig);
   stream_info_ = rig_->stream_info();
-  acquisition_ =
-      std::make_unique<acq::AsioAcquisition>(io_, rig_->source(), [this](std::span<const ImuSample> s) {
-        on_samples(s);
-        return !quit_;
-      });
   imu_state_ = DeviceState::kOpen;
   if (!runner_ || !runner_->engine().running()) set_gyro_offsets(true);
-  io_.stop();  // run() restarts the loop with the acquisition on it
   return {};
 }
 
 void Service::close_imu() {
   stop_cameras();
-  sim_timer_.cancel();
-  acquisition_.reset();
-  rig_.reset();
-  sim_rig_.reset();
+  rig_->close_imu();
   if (imu_state_ == DeviceState::kOpen) imu_state_ = DeviceState::kClosed;
-}
-
-Status Service::open_virtual_rig() {
-  auto module =
-      app::load_module<sim::VirtualRigModuleApi>(sim::kVirtualRigModule, sim::kVirtualRigModuleEntry);
-  if (!module.ok()) return module.error().context("the virtual rig");
-  auto settings = app::driver_settings(config_.imu);
-  if (!settings.ok()) return settings.error();
-  auto mounting = app::imu_mounting(config_.imu);
-  if (!mounting.ok()) return mounting.error();
-  sim::ServiceRigOptions so;
-  so.settings = *settings;
-  so.mounting = *mounting;
-  so.cameras = config_.cameras;
-  so.target = config_.target;
-  so.motion_s = config_.session.motion_s;
-  so.seed = options_.seed;
-  so.cold_start_c = options_.sim_cold_start_c;
-  so.time_scale = options_.time_scale;
-  so.operator_mode = options_.sim_operator;
-  so.press_key = [this](session_msg::OperatorKey k) {
-    if (auto s = runner_->engine().key(k); !s.ok())
-      spdlog::warn("scripted operator: key {}: {}", session_msg::key_name(k), s.error().message);
-  };
-  auto rig = (*module)->create(so);
-  if (!rig.ok()) return rig.error();
-  sim_rig_ = std::move(*rig);
-  return {};
-}
-
-void Service::sim_tick() {
-  if (!sim_rig_ || quit_) return;
-  auto tick =
-      sim_rig_->tick(runner_->busy(), [this](std::span<const ImuSample> batch) { on_samples(batch); });
-  if (!tick.ok()) {
-    imu_failed(tick.error());
-    return;
-  }
-  if (tick->advanced) {
-    for (std::size_t i = 0; cameras_streaming_ && i < cameras_.size(); ++i) read_camera(i);
-  }
-  if (!tick->pace_notice.empty()) {
-    spdlog::warn("{}", tick->pace_notice);
-    if (runner_) runner_->note(tick->pace_notice);
-  }
-  if (!tick->next) {
-    boost::asio::post(io_, [this] { sim_tick(); });
-    return;
-  }
-  sim_timer_.expires_at(*tick->next);
-  sim_timer_.async_wait([this](const boost::system::error_code& ec) {
-    if (!ec) sim_tick();
-  });
 }
 
 void Service::on_samples(std::span<const ImuSample> samples) {
@@ -519,11 +460,12 @@ void Service::on_samples(std::span<const ImuSample> samples) {
 }
 
 void Service::imu_failed(const Error& error) {
+  if (quit_) return;
   ++imu_faults_;
   imu_state_ = DeviceState::kFailed;
   imu_error_ = error.message;
   spdlog::error("IMU: {}", error.message);
-  const bool scripted = sim_rig_ && sim_rig_->operator_presses_keys();
+  const bool scripted = rig_->operator_presses_keys();
   close_imu();
   imu_state_ = DeviceState::kFailed;
   runner_->fault("imu", error.message);
@@ -541,7 +483,7 @@ void Service::on_message(const session_msg::SessionMessage& m) {
   using session_msg::Outcome;
   server_->broadcast(m);
   if (live_) live_->broadcast(m);
-  if (sim_rig_) sim_rig_->on_message(m);
+  rig_->on_message(m);
   if (const auto* prompt = std::get_if<session_msg::Prompt>(&m)) {
     const std::string step = prompt->step ? session_msg::step_name(*prompt->step) : "";
     spdlog::info("[{}] {}", step, prompt->text);
@@ -554,12 +496,13 @@ void Service::on_message(const session_msg::SessionMessage& m) {
     }
   } else if (const auto* fault = std::get_if<session_msg::Fault>(&m)) {
     spdlog::warn("{}", fault->text);
-  } else if (const auto* result = std::get_if<session_msg::ResultSummary>(&m);
-             result && sim_rig_ && result->imu) {
-    const std::string table = sim_rig_->truth_report(*result);
-    const std::string path = runner_->session_dir() + "/sim-truth.txt";
-    std::ofstream(path) << "The session's result beside the virtual rig's truth\n" << table;
-    spdlog::info("result beside the virtual rig's truth ({}):\n{}", path, table);
+  } else if (const auto* result = std::get_if<session_msg::ResultSummary>(&m)) {
+    // The virtual rig's truth beside the result; the hardware has none.
+    if (const std::string table = rig_->truth_report(*result); !table.empty()) {
+      const std::string path = runner_->session_dir() + "/sim-truth.txt";
+      std::ofstream(path) << "The session's result beside the virtual rig's truth\n" << table;
+      spdlog::info("result beside the virtual rig's truth ({}):\n{}", path, table);
+    }
   } else if (const auto* done = std::get_if<session_msg::Done>(&m)) {
     const std::string outcome = session_msg::outcome_name(done->outcome);
     spdlog::info("session {}: {}", outcome, done->text);
@@ -572,23 +515,8 @@ void Service::on_message(const session_msg::SessionMessage& m) {
   }
 }
 
-drivers::mpu6000::Mpu6000* Service::driver() {
-  return sim_rig_ ? &sim_rig_->driver() : rig_ ? rig_->driver() : nullptr;
-}
-
-Result<drivers::mpu6000::OffsetRegisters> Service::read_offsets() {
-  if (rig_) return rig_->read_offsets();
-  return driver()->read_offsets();
-}
-
-Status Service::write_offsets(const drivers::mpu6000::OffsetRegisters& regs) {
-  if (rig_) return rig_->write_offsets(regs);
-  return driver()->write_offsets(regs);
-}
-
 void Service::set_gyro_offsets(bool from_record) {
-  if (!config_.storage.program_gyro_offsets || imu_state_ != DeviceState::kOpen || (!rig_ && !sim_rig_))
-    return;
+  if (!config_.storage.program_gyro_offsets || imu_state_ != DeviceState::kOpen || !rig_->imu_open()) return;
   std::array<double, 3> bias{0.0, 0.0, 0.0};
   std::string source = "cleared (power-up zero) while a session records";
   if (from_record) {
@@ -613,7 +541,7 @@ void Service::set_gyro_offsets(bool from_record) {
     spdlog::error("gyro offset registers: {}", range.error().message);
     return;
   }
-  auto current = read_offsets();
+  auto current = rig_->read_offsets();
   if (!current.ok()) {
     gyro_offsets_ = "not set: " + current.error().message;
     spdlog::error("gyro offset registers: {}", current.error().message);
@@ -621,7 +549,7 @@ void Service::set_gyro_offsets(bool from_record) {
   }
   drivers::mpu6000::OffsetRegisters regs = *current;  // the accelerometer's factory trims stay
   for (int i = 0; i < 3; ++i) regs.gyro[i] = drivers::mpu6000::gyro_offset_register_for_bias(bias[i], *range);
-  if (auto st = write_offsets(regs); !st.ok()) {
+  if (auto st = rig_->write_offsets(regs); !st.ok()) {
     gyro_offsets_ = "not set: " + st.error().message;
     spdlog::error("gyro offset registers: {}", st.error().message);
     return;
@@ -631,37 +559,13 @@ void Service::set_gyro_offsets(bool from_record) {
   spdlog::info("gyro offset registers: {}", gyro_offsets_);
 }
 
-Service::SelfTest Service::self_test() {
-  using Outcome = SelfTest::Outcome;
-  if (rig_ && rig_->iio()) {
-    // The kernel's driver owns the chip's registers and offers no self-test.
-    return {Outcome::kNotAvailable, kNoSelfTestThroughIio};
-  }
-  drivers::mpu6000::Mpu6000* driver = this->driver();
-  if (!driver) return {Outcome::kCouldNotRun, "self-test could not run: the IMU is not open"};
-  // The chip's self-test runs outside streaming; the driver reconfigures and streams again after it.
-  auto result = driver->self_test([this](TimeNs d) {
-    if (sim_rig_) {
-      sim_rig_->stall(d);
-    } else {
-      std::this_thread::sleep_for(std::chrono::nanoseconds(d));
-    }
-  });
-  if (!result.ok()) return {Outcome::kCouldNotRun, "self-test could not run: " + result.error().message};
-  return {
-      result->pass() ? Outcome::kPassed : Outcome::kFailed,
-      std::string(result->pass() ? "self-test passed" : "SELF-TEST FAILED") + " (" + result->summary() + ")"};
-}
-
 app::session::PreflightReport Service::preflight() {
   app::session::PreflightReport r;
   const bool open = imu_state_ == DeviceState::kOpen;
-  const SelfTest test = open ? self_test() : SelfTest{};
+  const SelfTest test = open ? rig_->self_test() : SelfTest{};
   r.devices.push_back(
       {"imu", open && test.ok(),
-       open ? std::string(options_.sim ? "virtual MPU-6000 (register emulator)" : rig_->describe()) +
-                  (rig_ && rig_->iio() ? ", " : ", WHO_AM_I answered, ") + test.text + ", " +
-                  std::to_string(samples_) + " samples so far" +
+       open ? rig_->describe_imu() + ", " + test.text + ", " + std::to_string(samples_) + " samples so far" +
                   (config_.storage.program_gyro_offsets ? ", gyro offset registers " + gyro_offsets_
                                                         : std::string())
             : "not open: " + imu_error_,
@@ -693,26 +597,8 @@ app::session::PreflightReport Service::preflight() {
               (stored->record->created_utc.empty() ? "" : ", written " + stored->record->created_utc)};
     }
   }
-  for (const CameraConfig& cc : config_.cameras) {
-    // Opened and closed here; the motion step streams it.
-    if (options_.sim) {
-      r.devices.push_back({cc.name,
-                           sim_rig_ && sim_rig_->cameras_ready(),
-                           "virtual camera " + std::to_string(cc.width) + "x" + std::to_string(cc.height) +
-                               " at " + std::to_string(static_cast<int>(cc.rate_hz)) +
-                               " Hz, rendering the target",
-                           {}});
-      continue;
-    }
-    auto camera = app::open_camera(cc);
-    r.devices.push_back({cc.name,
-                         camera.ok(),
-                         camera.ok() ? std::string((*camera)->backend()) + " " + cc.device + " opened, " +
-                                           std::to_string(cc.width) + "x" + std::to_string(cc.height) + " " +
-                                           cc.pixel_format
-                                     : camera.error().message,
-                         {}});
-  }
+  // Each camera opened and closed here; the motion step streams it.
+  for (std::size_t i = 0; i < config_.cameras.size(); ++i) r.devices.push_back(rig_->check_camera(i));
   return r;
 }
 
@@ -745,25 +631,13 @@ Status Service::start_cameras() {
   for (std::size_t i = 0; i < config_.cameras.size(); ++i) {
     const CameraConfig& cc = config_.cameras[i];
     CameraSlot& slot = cameras_[i];
-    if (sim_rig_) {
-      auto camera = sim_rig_->open_camera(i, camera_starts_ == 0 ? options_.sim_unplug_camera_after : 0);
-      if (!camera.ok()) return camera.error();
-      slot.camera = std::move(*camera);
-    } else {
-      auto camera = app::open_camera(cc);
-      if (!camera.ok()) return camera.error();
-      slot.camera = std::move(*camera);
-    }
+    auto camera = rig_->open_camera(i);
+    if (!camera.ok()) return camera.error();
+    slot.camera = std::move(*camera);
     if (auto s = slot.camera->start(); !s.ok()) return s.error().context("camera " + cc.name + ": starting");
     slot.state = DeviceState::kStreaming;
-    if (!options_.sim) {
-      const int fd = ::dup(slot.camera->fd());
-      if (fd < 0) return make_error(Errc::kIo, "camera " + cc.name + ": cannot wait on its descriptor");
-      slot.wait = std::make_unique<boost::asio::posix::stream_descriptor>(io_, fd);
-      wait_camera(i);
-    }
+    IMUCAL_TRY(rig_->watch_camera(i, *slot.camera));
   }
-  ++camera_starts_;
   spdlog::info("cameras streaming for the motion step");
   return {};
 }
@@ -771,26 +645,12 @@ Status Service::start_cameras() {
 void Service::stop_cameras() {
   if (!cameras_streaming_) return;
   cameras_streaming_ = false;
+  rig_->unwatch_cameras();
   for (auto& slot : cameras_) {
-    if (slot.wait) {
-      boost::system::error_code ec;
-      slot.wait->cancel(ec);
-      slot.wait->close(ec);
-      slot.wait.reset();
-    }
     if (slot.camera) (void)slot.camera->stop();
     slot.camera.reset();
     if (slot.state == DeviceState::kStreaming) slot.state = DeviceState::kClosed;
   }
-}
-
-void Service::wait_camera(std::size_t index) {
-  cameras_[index].wait->async_wait(boost::asio::posix::stream_descriptor::wait_read,
-                                   [this, index](const boost::system::error_code& ec) {
-                                     if (ec || !cameras_streaming_ || index >= cameras_.size()) return;
-                                     read_camera(index);
-                                     if (cameras_streaming_ && cameras_[index].wait) wait_camera(index);
-                                   });
 }
 
 void Service::read_camera(std::size_t index) {
@@ -838,7 +698,7 @@ session_msg::Status Service::status() {
   session_msg::Status s = runner_->engine().status();
   session_msg::ServiceStatus service;
   service.devices.imu = {imu_state_,
-                         options_.sim,
+                         rig_->simulated(),
                          static_cast<std::int64_t>(samples_),
                          static_cast<std::int64_t>(imu_faults_),
                          stream_info_.rate_hz,
@@ -889,10 +749,7 @@ Status Service::start(const std::vector<std::string>& steps) {
     spdlog::info("the session starts with the IMU's first samples");
     return {};
   }
-  if (sim_rig_ && options_.sim_unplug_imu_after_s > 0.0) {
-    sim_rig_->unplug_imu_after(options_.sim_unplug_imu_after_s);
-    options_.sim_unplug_imu_after_s = 0.0;  // once
-  }
+  rig_->session_starting();
   // The session calibrates the chip as it powers up: no bias removed inside it.
   set_gyro_offsets(false);
   if (auto s = runner_->start(run); !s.ok()) {
@@ -957,7 +814,7 @@ void Service::shutdown(const std::string& why) {
   notifier_.stopping();
   if (runner_->engine().running()) runner_->engine().terminate("the service is stopping (" + why + ")");
   quit_ = true;
-  if (acquisition_) acquisition_->stop();
+  rig_->stop();
   io_.stop();
 }
 
@@ -976,14 +833,9 @@ int Service::run() {
   spdlog::info("imucald {} ready: rig '{}', socket {}", kVersion, config_.name, options_.socket_path);
   while (!quit_) {
     io_.restart();
-    if (acquisition_) {
-      // Runs once: returns on shutdown or on the IMU's error (then imu_failed() closes it and a
-      // redo reopens it).
-      const Status s = acquisition_->run();
-      if (!s.ok() && !quit_) imu_failed(s.error());
-    } else {
-      io_.run();
-    }
+    // Returns on shutdown, or on the IMU's error (then imu_failed() has closed it and a redo
+    // reopens it).
+    rig_->run();
   }
   // Let the worker finish a solve or a write that is under way, then close the log.
   runner_->drain();

@@ -1,10 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
 #pragma once
-// imucald's parts: the IMU source (the rig's hardware on the Boost.Asio event loop, or the
-// virtual rig on accelerated time), the session runner (app/session), the control socket
-// (daemon/service) and systemd's notifications, on one io_context. docs/service.md.
+// imucald's parts: the rig (daemon/imucald/rig.hpp: its hardware on the Boost.Asio event loop,
+// or the virtual rig on accelerated time, chosen once at start-up), the session runner (app/session), the
+// control socket (daemon/service) and systemd's notifications, on one io_context. docs/service.md.
 #include <boost/asio/io_context.hpp>
-#include <boost/asio/posix/stream_descriptor.hpp>
 #include <boost/asio/signal_set.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <chrono>
@@ -13,16 +12,15 @@
 #include <string>
 #include <vector>
 
-#include "acquisition/asio_acquisition.hpp"
-#include "app/rig/rig.hpp"
 #include "app/session/session_runner.hpp"
 #include "core/rig_config.hpp"
+#include "daemon/imucald/rig.hpp"
+#include "daemon/imucald/service_options.hpp"
 #include "daemon/service/control_server.hpp"
 #include "daemon/service/live_view_server.hpp"
 #include "daemon/service/notify.hpp"
 #include "daemon/service/session_host.hpp"
 #include "drivers/camera/camera.hpp"
-#include "sim/service_rig.hpp"
 
 namespace imucal::imucald {
 
@@ -43,30 +41,6 @@ inline constexpr int kExitDeviceAbsent = 69;
 /// (sysexits.h EX_TEMPFAIL): under systemd it exits with it once no session runs, and the unit's
 /// Restart=on-failure starts the new version. A session in progress is never cut short by it.
 inline constexpr int kExitUpgraded = 75;
-
-struct ServiceOptions {
-  std::string config_path = "/etc/imucal/rig.yaml";
-  std::string socket_path = "/run/imucal/imucald.sock";
-  unsigned socket_mode = 0660;
-  std::string state_dir = "/var/lib/imucal";
-  bool sim = false;         // the virtual rig (also when imu.bus is sim)
-  double time_scale = 1.0;  // virtual rig: rig seconds per wall second; 0 = as fast as it computes
-  // virtual rig: "" (nobody moves it), "motion" (moves it), "full" (moves it and presses keys)
-  std::string sim_operator;
-  std::uint64_t seed = 1;
-  std::uint32_t sim_unplug_camera_after = 0;  // virtual rig: its cameras vanish after this many frames (once)
-  double sim_unplug_imu_after_s =
-      0.0;  // virtual rig: the IMU stops answering this long into a session (once)
-  std::optional<double> sim_cold_start_c;         // virtual rig: its die starts here and warms (thermal step)
-  std::optional<std::vector<std::string>> start;  // start a session at launch with these steps
-  bool exit_after_session = false;
-  // The configured devices may appear after the service starts (a driver loaded later): an
-  // absent one is no reason for kExitDeviceAbsent.
-  bool devices_may_appear_later = false;
-  // --live-view [ADDRESS:]PORT: the live view on, there, whatever the configuration says.
-  std::optional<std::string> live_view_address;
-  std::optional<int> live_view_port;
-};
 
 /// The file, in the state folder, that holds the live view's token (mode 0640).
 inline constexpr const char* kLiveViewTokenFile = "live-view.token";
@@ -112,16 +86,12 @@ class Service final : public service::SessionHost {
  private:
   Status open_imu();
   void close_imu();
-  /// The virtual rig, from its module.
-  Status open_virtual_rig();
   /// Streams the cameras while the session's motion step runs, and only then.
   void sync_cameras();
   Status start_cameras();
   void stop_cameras();
-  void wait_camera(std::size_t index);
   void read_camera(std::size_t index);
   void camera_failed(std::size_t index, const Error& error);
-  void sim_tick();
   void on_message(const session_msg::SessionMessage& message);
   /// The live view (config live_view, or --live-view): its token written to the state folder,
   /// then its server, on the socket systemd passed (imucald.socket) or bound here.
@@ -132,24 +102,11 @@ class Service final : public service::SessionHost {
   void on_samples(std::span<const ImuSample> samples);
   void imu_failed(const Error& error);
   app::session::PreflightReport preflight();
-  /// The chip's self-test for the preflight: its outcome as a value and its words.
-  struct SelfTest {
-    enum class Outcome { kPassed, kFailed, kCouldNotRun, kNotAvailable };  // kNotAvailable: IIO
-    Outcome outcome = Outcome::kCouldNotRun;
-    std::string text;
-    /// The IMU passes its check: the test passed, or the kernel's driver offers none.
-    bool ok() const { return outcome == Outcome::kPassed || outcome == Outcome::kNotAvailable; }
-  };
-  SelfTest self_test();
   /// Writes, syncs and verifies the record; returns where it went (storage, slot, sequence).
   Result<std::string> write_storage(const CalibrationRecord& record);
   /// storage.program_gyro_offsets: the stored gyro bias into the chip's gyro offset registers
   /// (`from_record`), or the registers back to their power-up zero (before a session records).
   void set_gyro_offsets(bool from_record);
-  drivers::mpu6000::Mpu6000* driver();
-  /// The chip's offset registers, through whichever driver reads it.
-  [[nodiscard]] Result<drivers::mpu6000::OffsetRegisters> read_offsets();
-  [[nodiscard]] Status write_offsets(const drivers::mpu6000::OffsetRegisters& regs);
   void arm_watchdog();
   /// Under systemd (NOTIFY_SOCKET set): every few seconds, whether the program was replaced on
   /// disk; if so, exits with kExitUpgraded once no session runs.
@@ -160,7 +117,7 @@ class Service final : public service::SessionHost {
   RigConfig config_;
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;
-  boost::asio::steady_timer sim_timer_, watchdog_timer_, upgrade_timer_;
+  boost::asio::steady_timer watchdog_timer_, upgrade_timer_;
   bool upgrade_noted_ = false;
   service::Notifier notifier_;
   std::unique_ptr<service::ControlServer> server_;
@@ -168,21 +125,17 @@ class Service final : public service::SessionHost {
   std::string live_token_file_;
   std::unique_ptr<app::session::SessionRunner> runner_;
   ImuStreamInfo stream_info_;
-  // The IMU: hardware or virtual.
-  std::unique_ptr<app::ImuRig> rig_;
-  std::unique_ptr<acq::AsioAcquisition> acquisition_;
-  std::unique_ptr<sim::ServiceRig> sim_rig_;
+  // The rig: hardware or virtual, chosen in init().
+  std::unique_ptr<Rig> rig_;
   // The cameras: built when the motion step starts, closed when it ends.
   struct CameraSlot {
     std::unique_ptr<drivers::camera::Camera> camera;
-    std::unique_ptr<boost::asio::posix::stream_descriptor> wait;  // hardware: the camera's fd
     std::uint64_t frames = 0, faults = 0;
     session_msg::DeviceState state = session_msg::DeviceState::kClosed;
     std::string error;
   };
   std::vector<CameraSlot> cameras_;
   bool cameras_streaming_ = false;
-  int camera_starts_ = 0;
   std::string gyro_offsets_ = "off";  // what the gyro offset registers hold, for status and preflight
   session_msg::DeviceState imu_state_ = session_msg::DeviceState::kClosed;
   std::string imu_error_;
