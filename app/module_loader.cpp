@@ -88,10 +88,15 @@ Result<const void*> load_module_api(std::string_view name, const char* entry) {
   static std::map<std::string, const void*, std::less<>> loaded;
   const std::lock_guard lock(mutex);
   const std::string key = std::string(name) + "/" + entry;
-  if (auto it = loaded.find(key); it != loaded.end()) return it->second;
-  auto api = load_uncached(name, entry);
-  if (api.ok()) loaded.emplace(key, *api);
-  return api;
+  auto it = loaded.find(key);
+  if (it == loaded.end()) {
+    auto api = load_uncached(name, entry);
+    if (!api.ok()) return api;
+    it = loaded.emplace(key, *api).first;
+  }
+  // The module's messages in the program's words, as they are now (core/option_words.hpp).
+  static_cast<const ModuleHeader*>(it->second)->use_vocabulary(option_vocabulary());
+  return it->second;
 }
 
 }  // namespace imucal::app

@@ -37,6 +37,7 @@
 #include "calib/marginal_covariance.hpp"
 #include "calib/observation_check.hpp"
 #include "calib/so3.hpp"
+#include "core/option_words.hpp"
 #include "core/text_format.hpp"
 #include "core/threads.hpp"
 
@@ -845,24 +846,25 @@ Status ChainSolver::plan_shutters() {
     const Shutter& in = inputs_[c].shutter;
     b.line_delay = in.rolling() ? in.line_delay_s : 0.0;
     if (o.mode == Mode::kGlobal && !o.line_delay_s) {
-      b.shutter_choice = in.rolling()
-                             ? "global, as requested (--shutter global; the camera is known to be rolling)"
-                             : "global, as requested (--shutter global)";
+      b.shutter_choice = "global, as requested (" + option_words(CalibOption::kShutter, "global") +
+                         (in.rolling() ? "; the camera is known to be rolling)" : ")");
       continue;
     }
     if (!opt_.estimate_time_offsets) {
       if (o.mode == Mode::kRolling || o.line_delay_s)
         return make_error(Errc::kInvalidArgument,
-                          "a rolling shutter needs the cameras' trajectory: calibrate without "
-                          "--hold-time-offsets (the time offsets are then estimated as well)");
-      b.shutter_choice =
-          "global: with one pose per instant (--hold-time-offsets) a rolling shutter is not modelled";
+                          "a rolling shutter needs the cameras' trajectory: calibrate with the time offsets "
+                          "estimated, not held (" +
+                              option_words(CalibOption::kHoldTimeOffsets) + ")");
+      b.shutter_choice = "global: with one pose per instant (" + option_words(CalibOption::kHoldTimeOffsets) +
+                         ") a rolling shutter is not modelled";
       continue;
     }
     if (o.line_delay_s) {
       b.rolling = true;
       b.line_delay = *o.line_delay_s;
-      b.shutter_choice = "rolling, line delay held at the given value (--line-delay)";
+      b.shutter_choice =
+          "rolling, line delay held at the given value (" + option_words(CalibOption::kLineDelay) + ")";
       continue;
     }
     b.test = true;
@@ -932,8 +934,11 @@ Status ChainSolver::choose_shutter(int* dropped) {
     warnings_.push_back(
         inputs_[c].name + ": the line delay came out negative (" +
         format_number("%.2f", 1e6 * blocks_[c].line_delay) +
-        " us per row): the rows are read out the other way round; calibrate again with --readout " +
-        (inputs_[c].shutter.readout == Shutter::Readout::kTopToBottom ? "bottom_to_top" : "top_to_bottom"));
+        " us per row): the rows are read out the other way round; calibrate again with the other readout (" +
+        option_words(CalibOption::kReadout, inputs_[c].shutter.readout == Shutter::Readout::kTopToBottom
+                                                ? "bottom_to_top"
+                                                : "top_to_bottom") +
+        ")");
   }
   return {};
 }

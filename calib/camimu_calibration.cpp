@@ -19,6 +19,7 @@
 #include "calib/camimu_residuals.hpp"
 #include "calib/marginal_covariance.hpp"
 #include "calib/observation_check.hpp"
+#include "core/option_words.hpp"
 #include "core/text_format.hpp"
 #include "core/threads.hpp"
 
@@ -546,7 +547,7 @@ Status Estimator<N>::choose_model(ceres::Solver::Summary* summary) {
   double W = wald_statistic(&k);
   const double n = static_cast<double>(std::max<std::size_t>(built_.imu_residuals.size(), 2));
   const double threshold = k * std::log(n);
-  char text[400];
+  char text[640];
   if (!std::isfinite(W)) {
     // The likelihood ratio: the basic model solved to convergence from the first stage too.
     const double extended_cost = summary->final_cost - prior_cost();
@@ -576,8 +577,8 @@ Status Estimator<N>::choose_model(ceres::Solver::Summary* summary) {
         text, sizeof text,
         "basic, chosen by the evidence: freeing the extended model's %d intrinsics lowers the "
         "chi-square by only %.1f, less than the %.1f they cost (BIC: k ln n, n = %.0f IMU residuals); "
-        "--model extended estimates them anyway",
-        k, W, threshold, n);
+        "asking for the extended model (%s) estimates them anyway",
+        k, W, threshold, n, option_words(CalibOption::kCamImuModel, "extended").c_str());
   }
   model_choice_ = text;
   return {};
@@ -649,13 +650,13 @@ void Estimator<N>::plan_shutters() {
       cs.shutter_plan = Plan::kHeld;
       cs.rolling = true;
       cs.line_delay = *o.line_delay_s;
-      cs.shutter_choice = "rolling, line delay held at the given value (--line-delay)";
+      cs.shutter_choice =
+          "rolling, line delay held at the given value (" + option_words(CalibOption::kLineDelay) + ")";
     } else if (o.mode == Mode::kGlobal) {
       cs.shutter_plan = Plan::kGlobal;
       cs.line_delay = 0.0;
-      cs.shutter_choice = file.rolling()
-                              ? "global, as requested (--shutter global; the camera file says rolling)"
-                              : "global, as requested (--shutter global)";
+      cs.shutter_choice = "global, as requested (" + option_words(CalibOption::kShutter, "global") +
+                          (file.rolling() ? "; the camera file says rolling)" : ")");
     } else {
       cs.shutter_plan = o.mode == Mode::kRolling ? Plan::kEstimate : Plan::kChoose;
     }
@@ -713,9 +714,12 @@ Status Estimator<N>::choose_shutter(bool extended, ceres::Solver::Summary* summa
           cameras_[c].name + ": the line delay came out negative (" +
           format_number("%.2f", 1e6 * st_.cams[c].line_delay) +
           " us per row): the rows are read out the other way round than the camera file says; "
-          "calibrate again with --readout " +
-          (cameras_[c].camera.shutter.readout == Shutter::Readout::kTopToBottom ? "bottom_to_top"
-                                                                                : "top_to_bottom"));
+          "calibrate again with the other readout (" +
+          option_words(CalibOption::kReadout,
+                       cameras_[c].camera.shutter.readout == Shutter::Readout::kTopToBottom
+                           ? "bottom_to_top"
+                           : "top_to_bottom") +
+          ")");
   }
   return {};
 }
@@ -785,9 +789,9 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   const bool automatic = model_ == CamImuModelKind::kAuto && !all_fixed;
   if (model_ == CamImuModelKind::kAuto) model_ = CamImuModelKind::kExtended;  // the first stage stops early
   if (all_fixed && opt_.model == CamImuModelKind::kAuto)
-    model_choice_ =
-        "extended with every intrinsic held at its given value (--imu-intrinsics, --gsens or "
-        "--fix): nothing to choose";
+    model_choice_ = "extended with every intrinsic held at its given value (" +
+                    option_words(CalibOption::kImuIntrinsics) + ", " + option_words(CalibOption::kGsens) +
+                    " or " + option_words(CalibOption::kFix) + "): nothing to choose";
   // The first stage is preliminary unless the basic model was asked for (then it is that model's).
   // A preliminary stage runs on fewer IMU samples: the cost at the start is that of all of them.
   const bool preliminary = model_ == CamImuModelKind::kExtended;
@@ -805,7 +809,8 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
   std::vector<ImuSignalFit> fits;
   fits.push_back(signal_fit("basic"));
   if (!automatic && model_choice_.empty())
-    model_choice_ = std::string(camimu_model_name(model_)) + ", as requested (--model)";
+    model_choice_ = std::string(camimu_model_name(model_)) + ", as requested (" +
+                    option_words(CalibOption::kCamImuModel, camimu_model_name(model_)) + ")";
   if (Status s = reweighted_stages(automatic, &summary); !s.ok()) return s.error();
   const bool extended = model_ == CamImuModelKind::kExtended;
   if (Status s = choose_shutter(extended, &summary); !s.ok()) return s.error();
@@ -841,14 +846,14 @@ Result<CamImuCalibrationResult> Estimator<N>::run() {
                    quality_.accel_sigma, quality_.accel_noise_from_residuals, "accelerometer"},
         std::tuple{quality_.gyro_residual_rms.norm() / std::sqrt(3.0), quality_.gyro_sigma_given,
                    quality_.gyro_sigma, quality_.gyro_noise_from_residuals, "gyroscope"}}) {
-    char text[400];
+    char text[640];
     if (from_residuals) {
       std::snprintf(
           text, sizeof text,
           "the %s residuals (RMS %.4g per sample) are %.1f times the noise the given figures imply "
           "(%.4g): the problem was weighted with the residuals' own RMS instead, so that the sigmas "
-          "account for it (--keep-noise keeps the given figures)",
-          what, rms, rms / given, given);
+          "account for it (the given figures are kept with %s)",
+          what, rms, rms / given, given, option_words(CalibOption::kKeepNoise).c_str());
       warnings_.emplace_back(text);
     } else if (rms > 3.0 * used || rms < used / 3.0) {
       std::snprintf(

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "calib/camimu_estimator.hpp"
+#include "core/option_words.hpp"
 
 namespace imucal::calib::camimu {
 
@@ -294,13 +295,14 @@ void Estimator<N>::check_against_prior(CamImuCalibrationResult* out) {
       const double off = e.value(i) - e.centre(i);
       const double n = std::abs(off) / e.prior_sigma(i);
       if (n > 3.0 || std::abs(off) > e.bound) {
-        char text[320];
+        char text[640];
         std::snprintf(
             text, sizeof text,
             "%s = %.6g is %.1f prior sigmas from its prior %.6g +- %.3g (%s)%s: check the IMU's units "
-            "and noise figures, or give a static calibration (--imu-intrinsics)",
+            "and noise figures, or give a static calibration (%s)",
             label.c_str(), e.value(i), n, e.centre(i), e.prior_sigma(i), pr.source.c_str(),
-            std::abs(off) > e.bound ? ", beyond what a working sensor shows" : "");
+            std::abs(off) > e.bound ? ", beyond what a working sensor shows" : "",
+            option_words(CalibOption::kImuIntrinsics).c_str());
         warnings_.emplace_back(text);
       }
       if (!(e.sigma(i) < 0.5 * e.prior_sigma(i))) out->prior_dominated.push_back(label);

@@ -9,6 +9,8 @@
 #include <optional>
 #include <string>
 
+#include "core/option_words.hpp"
+
 namespace imucal::calib {
 
 /// kAuto:    global or rolling by the evidence: the global solution, then the line delay freed;
@@ -46,7 +48,8 @@ struct ShutterVerdict {
 };
 inline ShutterVerdict judge_shutter(bool choose, double lr, double k, double n, double readout_s) {
   const double threshold = shutter_bic_threshold(k, n);
-  char text[400];
+  char text[640];
+  const std::string rolling = option_words(CalibOption::kShutter, "rolling");
   ShutterVerdict v;
   v.rolling = !choose || (lr > threshold && readout_s >= kMinRollingReadoutS);
   if (!v.rolling && lr > threshold) {
@@ -54,15 +57,15 @@ inline ShutterVerdict judge_shutter(bool choose, double lr, double k, double n, 
         text, sizeof text,
         "global, chosen by the evidence: the line delay found reads a frame out in %.3f ms, less than "
         "the %.1f ms of any rolling-shutter sensor (its chi-square drop %.1f against %.1f is what the "
-        "model leaves, not a shutter); --shutter rolling keeps it anyway",
-        1e3 * readout_s, 1e3 * kMinRollingReadoutS, lr, threshold);
+        "model leaves, not a shutter); asking for a rolling shutter (%s) keeps it anyway",
+        1e3 * readout_s, 1e3 * kMinRollingReadoutS, lr, threshold, rolling.c_str());
   } else if (!v.rolling) {
     std::snprintf(
         text, sizeof text,
         "global, chosen by the evidence: freeing the line delay lowers the chi-square by only %.1f, less "
-        "than the %.1f it costs (BIC: k ln n, n = %.0f corner measurements); --shutter rolling "
-        "estimates it anyway",
-        lr, threshold, n);
+        "than the %.1f it costs (BIC: k ln n, n = %.0f corner measurements); asking for a rolling shutter "
+        "(%s) estimates it anyway",
+        lr, threshold, n, rolling.c_str());
   } else if (choose) {
     std::snprintf(
         text, sizeof text,
@@ -71,9 +74,9 @@ inline ShutterVerdict judge_shutter(bool choose, double lr, double k, double n, 
         lr, threshold, n);
   } else {
     std::snprintf(text, sizeof text,
-                  "rolling, as requested (--shutter rolling); the line delay lowers the chi-square by %.1f "
+                  "rolling, as requested (%s); the line delay lowers the chi-square by %.1f "
                   "(BIC threshold %.1f, n = %.0f corner measurements)",
-                  lr, threshold, n);
+                  rolling.c_str(), lr, threshold, n);
   }
   v.text = text;
   return v;

@@ -24,6 +24,7 @@
 #include "calib/static_gyro.hpp"
 #include "calib/static_gyro_fit.hpp"
 #include "calib/static_steps.hpp"
+#include "core/option_words.hpp"
 #include "core/threads.hpp"
 
 namespace imucal::calib {
@@ -610,7 +611,8 @@ Result<AccelPiece> solve_accelerometer(const Candidate& best, AccelModel model,
         "their faces with gravity along their axes (the form PX4 and ArduPilot use), scales and biases " +
         (magnitude_after_faces(best.means.size()) ? std::string("from the gravity magnitude")
                                                   : std::string("from the faces too (fewer than 9 poses)"));
-    if (opt.accel_model == AccelModel::kFaces) a.reason = "chosen with --accel-model faces";
+    if (opt.accel_model == AccelModel::kFaces)
+      a.reason = "chosen with " + option_words(CalibOption::kAccelModel, "faces");
     if (a.poses_off_faces > 0) {
       a.warnings.push_back(
           std::to_string(a.poses_off_faces) + " static pose(s) lie on no face (more than " +
@@ -620,8 +622,9 @@ Result<AccelPiece> solve_accelerometer(const Candidate& best, AccelModel model,
     if (fit.direction_rms_rad > 1.0 * M_PI / 180.0) {
       a.warnings.push_back("the poses lie " + format_number("%.2f", fit.direction_rms_rad * 180.0 / M_PI) +
                            " deg RMS from their faces' axes: they were not flat on level faces, and the "
-                           "misalignment is only as good as that (--accel-model scale-bias fits scales and "
-                           "biases without assuming the faces)");
+                           "misalignment is only as good as that (the scale-bias model, " +
+                           option_words(CalibOption::kAccelModel, "scale-bias") +
+                           ", fits scales and biases without assuming the faces)");
     }
   } else {
     const bool fix = model == AccelModel::kScaleBias;
@@ -640,7 +643,7 @@ Result<AccelPiece> solve_accelerometer(const Candidate& best, AccelModel model,
       a.model = StaticAccelModel::kScaleBias;
       a.fixed = {"misalignment alpha_yz", "misalignment alpha_zy", "misalignment alpha_zx"};
       a.reason = opt.accel_model == AccelModel::kScaleBias
-                     ? "chosen with --accel-model scale-bias"
+                     ? "chosen with " + option_words(CalibOption::kAccelModel, "scale-bias")
                      : std::to_string(best.distinct) + " distinct attitudes, fewer than the " +
                            std::to_string(opt.min_attitudes) +
                            " the full model needs, not on all six faces (missing: " +

@@ -13,6 +13,7 @@
 #include "calib/allan.hpp"
 #include "calib/quality.hpp"
 #include "calib/static_gyro.hpp"
+#include "core/option_words.hpp"
 #include "core/threads.hpp"
 
 namespace imucal::calib {
@@ -198,10 +199,11 @@ void set_aside_an_implausible_accel_conversion(const StillStart& still, StaticCa
       " g) through its stream's nominal conversion: its values carry an offset or a scale that conversion "
       "does not have (raw counts of a sensor whose zero is mid-range sit near 32768). The poses were told "
       "apart about the centre of their means and the solve started from an ellipsoid fit, so the biases "
-      "hold that offset; to see them near zero, import with --accel-offset and --gyro-offset (the counts at "
-      "zero). If the scale is what is wrong (a full-scale range other than the one the import assumed), the "
-      "fitted scales hold it instead: import with --accel-scale and --gyro-scale (m/s^2 and rad/s per count "
-      "at the sensor's range)");
+      "hold that offset; to see them near zero, import with the counts at zero given (" +
+      option_words(CalibOption::kImportOffsets) +
+      "). If the scale is what is wrong (a full-scale range other than the one the import assumed), the "
+      "fitted scales hold it instead: import with the scales given (" +
+      option_words(CalibOption::kImportScales) + ": m/s^2 and rad/s per count at the sensor's range)");
   opt->accel_init.reset();
 }
 

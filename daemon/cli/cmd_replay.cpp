@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "app/session/option_words.hpp"
 #include "app/session/session_replay.hpp"
 #include "daemon/cli/command.hpp"
 
@@ -22,6 +23,8 @@ struct ReplayArgs {
 };
 
 void run(const ReplayArgs& a) {
+  // The replayed session says what the live one said, in the session's words.
+  set_option_vocabulary(&app::session::session_option_words);
   auto summary = app::session::replay_session(a.options);
   if (!summary.ok()) fail(summary.error(), "replay of " + a.options.log_path);
   const auto& s = *summary;

@@ -22,6 +22,7 @@
 #include "core/text_format.hpp"
 #include "core/version.hpp"
 #include "daemon/cli/command.hpp"
+#include "daemon/cli/option_flags.hpp"
 #include "daemon/common/unknown_command.hpp"
 #include "log/dataset_io.hpp"
 
@@ -237,6 +238,8 @@ int main(int argc, char** argv) {
   spdlog::set_default_logger(spdlog::stderr_color_mt("imucal"));
   spdlog::set_pattern("%^%l%$: %v");
   spdlog::set_level(spdlog::level::warn);
+  // The calibrations' messages name this program's flags (core/option_words.hpp).
+  imucal::set_option_vocabulary(&cli_option_words);
 
   CLI::App app{
       "imucal: calibrate MPU-6000 IMUs and camera-IMU rigs, offline tools.\n"

@@ -234,6 +234,10 @@ TEST(CamImuCalibration, AutoModelPicksBasicForAnIdealImuAndExtendedForAMiscalibr
   ASSERT_TRUE(r.ok()) << r.error().message;
   EXPECT_EQ(r->model, CamImuModelKind::kExtended);
   EXPECT_NE(r->model_choice.find("nothing to choose"), std::string::npos) << r->model_choice;
+  // calib/ names what was held by quantity; the CLI would name its flags (core/option_words.hpp).
+  EXPECT_NE(r->model_choice.find("(IMU intrinsics: given, g-sensitivity: given or held intrinsics: given)"),
+            std::string::npos)
+      << r->model_choice;
   EXPECT_LE(std::count(stages.begin(), stages.end(), "basic"), 13);  // the first stage alone
   so.imu_errors = true;
   const auto real = test::make_camimu_synth(so);
