@@ -339,11 +339,11 @@ Result<std::unique_ptr<log::SessionLogReader>> open_log(const CameraCalibrationR
   const auto& health = (*reader)->health();
   if (health.damaged) {
     if (!q.allow_damaged) {
-      return make_error(Errc::kCorrupt, q.log_path + " is damaged (" + health.damage_message +
+      return make_error(Errc::kCorrupt, q.shown_log() + " is damaged (" + health.damage_message +
                                             "); only its readable part can be used")
           .with_remedy("allow_damaged");
     }
-    report->warnings.push_back(q.log_path + " is damaged (" + health.damage_message +
+    report->warnings.push_back(q.shown_log() + " is damaged (" + health.damage_message +
                                "): calibrated from its readable part only");
   }
   auto id = (*reader)->find_camera_stream(q.camera);
@@ -470,7 +470,7 @@ Result<std::vector<calib::TargetObservation>> detect_for_report(const CameraCali
 /// A report for the log and target of `q`, with its stream opened (q.camera).
 Result<std::unique_ptr<log::SessionLogReader>> start_report(const CameraCalibrationRequest& q,
                                                             CameraCalibrationReport* report) {
-  report->log_path = q.log_path;
+  report->log_path = q.shown_log();
   report->target = q.target;
   report->target_source = q.target_source;
   return open_log(q, report);
@@ -573,7 +573,7 @@ Status solve_shutter(const CameraCalibrationRequest& q, std::span<const calib::T
     if (chain.ok()) chain->cameras.front().shutter_choice = why;
   }
   if (!chain.ok()) {
-    if (!automatic) return chain.error().context("camera '" + report->stream.name + "' of " + q.log_path);
+    if (!automatic) return chain.error().context("camera '" + report->stream.name + "' of " + q.shown_log());
     report->shutter_choice =
         "global: the rolling-shutter test on the trajectory failed (" + chain.error().message + ")";
     return {};
@@ -644,7 +644,7 @@ Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q
       for (std::size_t i = 0; i < obs->size(); i += step) sample.push_back((*obs)[i]);
       auto chosen =
           calib::choose_camera_model(q.base.target, sample, q.base.intrinsics, q.base.model_candidates);
-      if (!chosen.ok()) return chosen.error().context(in.name + " of " + q.base.log_path);
+      if (!chosen.ok()) return chosen.error().context(in.name + " of " + q.base.shown_log());
       in.model = chosen->choice.chosen;
       report.model_choice = std::move(chosen->choice);
     }
@@ -659,7 +659,7 @@ Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q
     out.cameras.push_back(std::move(report));
   }
   auto chain = calib::calibrate_camera_chain(q.base.target, inputs, options, q.base.solve_progress);
-  if (!chain.ok()) return chain.error().context(q.base.log_path);
+  if (!chain.ok()) return chain.error().context(q.base.shown_log());
   for (std::size_t c = 0; c < out.cameras.size(); ++c) {
     out.cameras[c].intrinsics = chain->cameras[c].intrinsics;
     out.cameras[c].line_delay_sigma_s = chain->cameras[c].line_delay_sigma_s;
@@ -695,13 +695,15 @@ Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequ
   if (!found.ok()) return found.error();
   if (!q.model_candidates.empty()) {
     auto chosen = calib::choose_camera_model(q.target, *found, q.intrinsics, q.model_candidates);
-    if (!chosen.ok()) return chosen.error().context("camera '" + report.stream.name + "' of " + q.log_path);
+    if (!chosen.ok())
+      return chosen.error().context("camera '" + report.stream.name + "' of " + q.shown_log());
     report.intrinsics = std::move(chosen->result);
     report.model_choice = std::move(chosen->choice);
     q.intrinsics.model = report.model_choice->chosen;
   } else {
     auto result = calib::calibrate_camera_intrinsics(q.target, *found, q.intrinsics, q.solve_progress);
-    if (!result.ok()) return result.error().context("camera '" + report.stream.name + "' of " + q.log_path);
+    if (!result.ok())
+      return result.error().context("camera '" + report.stream.name + "' of " + q.shown_log());
     report.intrinsics = std::move(*result);
   }
   report.warnings.insert(report.warnings.end(), report.intrinsics.warnings.begin(),

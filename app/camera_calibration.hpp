@@ -73,6 +73,10 @@ struct StreamDetections {
 
 struct CameraCalibrationRequest {
   std::string log_path;
+  /// What the results and messages call the log: the file the user gave when log_path is its
+  /// import (a ROS bag's, in the cache); empty: log_path.
+  std::string log_name;
+  const std::string& shown_log() const { return log_name.empty() ? log_path : log_name; }
   std::string camera;  // camera stream name; empty = the first
   TargetDescription target;
   std::string target_source;  // for the outputs: the file, or where in the log it came from

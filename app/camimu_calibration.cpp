@@ -189,7 +189,7 @@ void add_held_axes(const CamImuRequest& q, CamImuReport* report) {
 Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& q) {
   IMUCAL_TRY(q.target.validate());
   CamImuReport report;
-  report.log_path = q.log_path;
+  report.log_path = q.shown_log();
   report.target = q.target;
   report.target_source = q.target_source;
   report.gravity_source = q.gravity_source;
@@ -248,7 +248,7 @@ Result<CamImuReport> calibrate_camimu_log(const CamImuRequest& q) {
                               " saturated IMU samples left out: the motion exceeded the sensor's range");
   }
   auto result = calib::calibrate_camimu(samples, inputs, q.target, report.options, q.solve_progress);
-  if (!result.ok()) return result.error().context("camera-IMU calibration of " + q.log_path);
+  if (!result.ok()) return result.error().context("camera-IMU calibration of " + q.shown_log());
   report.result = std::move(*result);
   if (q.self_check_parts >= 2) {
     if (q.solve_progress) q.solve_progress({"self-check", q.self_check_parts, 0.0, 0.0});

@@ -32,6 +32,10 @@ namespace imucal::app {
 
 struct CamImuRequest {
   std::string log_path;
+  /// What the results and messages call the log: the file the user gave when log_path is its
+  /// import (a ROS bag's, in the cache); empty: log_path.
+  std::string log_name;
+  const std::string& shown_log() const { return log_name.empty() ? log_path : log_name; }
   std::string imu_stream;  // IMU stream name; empty = the first
   /// The cameras' intrinsics, cam0..camN in order (the CLI reads them from camchain YAMLs,
   /// read_camchain_files; the service takes its own intrinsics solve's).

@@ -95,7 +95,7 @@ Result<Document> allan_document(const nlohmann::json& r, BuildContext& ctx) {
         "bounds from the longest averaging time (record for hours to measure them)");
   }
   if (!ctx.log_path.empty()) {
-    auto session = session_section(ctx.log_path, ctx.log_in_progress);
+    auto session = session_section(ctx.log_path, ctx.log_in_progress, ctx.log_name);
     if (!session.ok()) return session.error();
     doc.sections.push_back(std::move(*session));
   }

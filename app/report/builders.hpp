@@ -24,6 +24,8 @@ struct BuildContext {
   std::string log_path;  // empty: no log given
   std::vector<std::string> notes;
   bool log_in_progress = false;  // ReportOptions::log_in_progress
+  std::string log_name;          // ReportOptions::log_name
+  const std::string& shown_log() const { return log_name.empty() ? log_path : log_name; }
 };
 
 [[nodiscard]] Result<Document> static_document(const nlohmann::json& result, BuildContext& ctx);
@@ -40,8 +42,10 @@ struct BuildContext {
 nlohmann::json camera_chain_from_yaml(const YAML::Node& camchain);
 
 /// The session log's summary (rig, recording, streams, health) as a section; errors name the log.
-/// `in_progress`: the log is still being written, so an open end is expected.
-[[nodiscard]] Result<Section> session_section(const std::string& log_path, bool in_progress = false);
+/// `in_progress`: the log is still being written, so an open end is expected. `shown`: what the
+/// page calls the log (a bag, when log_path is its import); empty: log_path.
+[[nodiscard]] Result<Section> session_section(const std::string& log_path, bool in_progress = false,
+                                              const std::string& shown = {});
 
 // Reading result JSON: errors (kCorrupt) name the key, thrown as JsonError and caught by the
 // document builders, which turn them into Result errors naming the file.

@@ -235,7 +235,7 @@ Result<Document> camera_chain_document(const nlohmann::json& r, BuildContext& ct
                  (cams.size() == 1 ? ")" : "s)");
   for (const auto& w : at(r, "warnings")) doc.warnings.push_back(w.get<std::string>());
   if (!ctx.log_path.empty()) {
-    auto session = session_section(ctx.log_path, ctx.log_in_progress);
+    auto session = session_section(ctx.log_path, ctx.log_in_progress, ctx.log_name);
     if (!session.ok()) return session.error();
     doc.sections.push_back(std::move(*session));
   }
@@ -275,7 +275,7 @@ Result<Document> camera_document(const nlohmann::json& r, BuildContext& ctx) {
       "Report of " + ctx.result_path + " (camera stream " + r.value("camera_stream", std::string("-")) + ")";
   for (const auto& w : at(r, "warnings")) doc.warnings.push_back(w.get<std::string>());
   if (!ctx.log_path.empty()) {
-    auto session = session_section(ctx.log_path, ctx.log_in_progress);
+    auto session = session_section(ctx.log_path, ctx.log_in_progress, ctx.log_name);
     if (!session.ok()) return session.error();
     doc.sections.push_back(std::move(*session));
   }

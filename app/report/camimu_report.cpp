@@ -399,7 +399,7 @@ Result<Document> camimu_document(const nlohmann::json& r, BuildContext& ctx) {
   doc.subtitle = "Report of " + ctx.result_path;
   for (const auto& w : at(r, "warnings")) doc.warnings.push_back(w.get<std::string>());
   if (!ctx.log_path.empty()) {
-    auto session = session_section(ctx.log_path, ctx.log_in_progress);
+    auto session = session_section(ctx.log_path, ctx.log_in_progress, ctx.log_name);
     if (!session.ok()) return session.error();
     doc.sections.push_back(std::move(*session));
   }

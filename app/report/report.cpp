@@ -244,7 +244,7 @@ Result<ReportSummary> write_report(const ReportOptions& o) {
 
   ReportSummary summary;
   summary.kind = *kind;
-  BuildContext ctx{*path, o.log_path, {}, o.log_in_progress};
+  BuildContext ctx{*path, o.log_path, {}, o.log_in_progress, o.log_name};
   auto doc = build_document(*kind, *result, ctx);
   if (!doc.ok()) return doc.error();
   auto figures = draw(*doc, o, work->path(), summary);

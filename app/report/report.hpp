@@ -31,10 +31,12 @@ const char* report_kind_name(ReportKind kind);
 struct ReportOptions {
   std::string result_path;  // a result JSON, or a folder holding result.json (camimu)
   std::string log_path;     // the session log the result came from; empty: figures from it are left out
-  std::string html_path;    // the report
-  std::string png_dir;      // empty: no PNG files
-  bool overwrite = false;   // replace an existing report and PNG files
-  std::string generator;    // shown at the foot of the page ("imucal 0.3.0")
+  std::string
+      log_name;  // what the page calls the log (a ROS bag, when log_path is its import); empty: log_path
+  std::string html_path;   // the report
+  std::string png_dir;     // empty: no PNG files
+  bool overwrite = false;  // replace an existing report and PNG files
+  std::string generator;   // shown at the foot of the page ("imucal 0.3.0")
   /// The log is still being written (a session report drawn before the session ends): its
   /// missing end is not reported as an interrupted recording.
   bool log_in_progress = false;

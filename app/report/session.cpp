@@ -90,13 +90,14 @@ Table camera_table(const LogSummary& s) {
 
 }  // namespace
 
-Result<Section> session_section(const std::string& log_path, bool in_progress) {
+Result<Section> session_section(const std::string& log_path, bool in_progress, const std::string& shown) {
+  const std::string& name = shown.empty() ? log_path : shown;
   auto summary = summarize_log(log_path);
-  if (!summary.ok()) return summary.error().context("the log " + log_path);
+  if (!summary.ok()) return summary.error().context("the log " + name);
   const LogSummary& s = *summary;
   Section sec;
   sec.title = "Session";
-  sec.html = "<p>Log <code>" + escape(log_path) + "</code>: " +
+  sec.html = "<p>Log <code>" + escape(name) + "</code>: " +
              (s.any_time ? num(ns_to_s(s.t_end_ns - s.t_start_ns), 6) + " s recorded, " : std::string()) +
              std::to_string(s.imu.size()) + " IMU stream(s), " + std::to_string(s.cameras.size()) +
              " camera stream(s), " + std::to_string(s.event_count) + " event(s); " +

@@ -186,10 +186,10 @@ Result<Document> static_document(const nlohmann::json& r, BuildContext& ctx) {
   Document doc;
   doc.title = "Static IMU calibration";
   doc.subtitle =
-      "Report of " + ctx.result_path + (ctx.log_path.empty() ? "" : " with the log " + ctx.log_path);
+      "Report of " + ctx.result_path + (ctx.log_path.empty() ? "" : " with the log " + ctx.shown_log());
   for (const auto& w : at(r, "warnings")) doc.warnings.push_back(w.get<std::string>());
   if (!ctx.log_path.empty()) {
-    auto session = session_section(ctx.log_path, ctx.log_in_progress);
+    auto session = session_section(ctx.log_path, ctx.log_in_progress, ctx.log_name);
     if (!session.ok()) return session.error();
     doc.sections.push_back(std::move(*session));
   }

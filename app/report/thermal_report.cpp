@@ -208,7 +208,7 @@ Result<Document> thermal_document(const nlohmann::json& r, BuildContext& ctx) {
   for (const auto& w : r.value("warnings", nlohmann::json::array()))
     doc.warnings.push_back(w.get<std::string>());
   if (!ctx.log_path.empty()) {
-    auto session = session_section(ctx.log_path, ctx.log_in_progress);
+    auto session = session_section(ctx.log_path, ctx.log_in_progress, ctx.log_name);
     if (!session.ok()) return session.error();
     doc.sections.push_back(std::move(*session));
   }

@@ -216,6 +216,7 @@ void run(const CameraCliOptions& given) {
   q.intrinsics.threads = o.threads;
   if (auto valid = q.intrinsics.validate(); !valid.ok()) throw CliExit{kExitUsage, valid.error().message};
   q.log_path = o.log_path;
+  q.log_name = given.log_path;  // a bag, not its import
   q.camera = streams.front();
   q.target = target.target;
   q.target_source = target.source;
@@ -248,7 +249,6 @@ void run(const CameraCliOptions& given) {
     detecting.finish();
     solving.finish();
     if (!report.ok()) fail(report.error(), "calibrate camera");
-    for (auto& camera : report->cameras) camera.log_path = given.log_path;  // a bag, not its import
     for (const auto& w : report->warnings) spdlog::warn("{}", w);
     const int min_shared = cq.chain.min_shared_views;
     if (auto s = app::write_text_file(o.yaml_path, app::camera_chain_yaml(*report, min_shared), outputs);
@@ -265,7 +265,6 @@ void run(const CameraCliOptions& given) {
   detecting.finish();
   solving.finish();
   if (!report.ok()) fail(report.error(), "calibrate camera");
-  report->log_path = given.log_path;  // a bag, not its import
   for (const auto& w : report->warnings) spdlog::warn("{}", w);
   if (auto s = app::write_text_file(o.yaml_path, app::camera_result_yaml(*report), outputs); !s.ok())
     fail(s.error());

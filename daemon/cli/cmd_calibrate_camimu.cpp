@@ -254,6 +254,7 @@ void run(const CamImuCliOptions& given) {
   const std::vector<std::string> paths = check_outputs(given, outputs);
   const CamImuCliOptions o = with_log_of_input(given);
   app::CamImuRequest q = build_request(o);
+  q.log_name = given.log_path;  // a bag, not its import
   // The options are checked here, before the camera module loads (one range per option:
   // calib::CamImuLimits, which the flags' checks above use too).
   if (Status s = q.options.validate(); !s.ok()) fail(s.error(), "calibrate camimu");
@@ -279,7 +280,6 @@ void run(const CamImuCliOptions& given) {
 
   auto report = app::calibrate_camimu(q);
   if (!report.ok()) fail(report.error(), "calibrate camimu");
-  report->log_path = given.log_path;  // a bag, not its import
   // What was assumed (default noise, the frame of a given G) is said whatever the log level.
   for (const auto& n : report->notes) std::fprintf(stderr, "note: %s\n", n.c_str());
   for (const auto& w : report->warnings) spdlog::warn("{}", w);

@@ -23,7 +23,10 @@ void run(const app::report::ReportOptions& given, const std::vector<std::string>
     if (auto s = app::check_output(given.html_path, inputs); !s.ok()) fail(s.error());
   }
   app::report::ReportOptions options = given;
-  if (!options.log_path.empty()) options.log_path = log_of_input(given.log_path, topics);
+  if (!options.log_path.empty()) {
+    options.log_path = log_of_input(given.log_path, topics);
+    options.log_name = given.log_path;  // the page names the bag, not its import
+  }
   auto summary = app::report::write_report(options);
   if (!summary.ok()) {
     // An existing output is refused in the CLI's own words.

@@ -122,6 +122,11 @@ TEST(CliCalibrateCamera, ARosBagIsImportedOnceAndCalibratesLikeItsLog) {
   EXPECT_NE(read_file(dir + "/cam.yaml").find("log: " + bag + "\n"), std::string::npos)
       << read_file(dir + "/cam.yaml");
   EXPECT_EQ(read_file(dir + "/cam.yaml").find("/cache/bags/"), std::string::npos);
+  // So does its report's session section, read from the import.
+  r = run_cli({"report", dir + "/cam.yaml", "--log", bag, "-o", dir + "/cam.html"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(read_file(dir + "/cam.html").find("Log <code>" + bag + "</code>"), std::string::npos);
+  EXPECT_EQ(read_file(dir + "/cam.html").find("/cache/bags/"), std::string::npos);
   // The next command reads the import; the bag is never an output, and is never written.
   r = run_cli({"allan", bag, "-o", dir + "/imu.yaml"});
   EXPECT_NE(r.err.find("reading the log imported from it before"), std::string::npos) << r.err;
