@@ -40,8 +40,7 @@ SessionEngine::SessionEngine(const RigConfig& config, const ImuStreamInfo& info,
       info_(info),
       host_(host),
       window_(std::make_unique<Window>(info.rate_hz)),
-      samples_(std::make_shared<std::vector<ImuSample>>()),
-      thermal_(std::make_shared<std::vector<ImuSample>>()) {}
+      samples_(std::make_shared<std::vector<ImuSample>>()) {}
 
 SessionEngine::~SessionEngine() = default;
 
@@ -86,7 +85,7 @@ Status SessionEngine::start(const std::vector<std::string>& names) {
   auto ids = plan(names);
   if (!ids.ok()) return ids.error();
   reset();
-  for (StepId id : *ids) steps_.push_back({id});
+  for (StepId id : *ids) progress_.steps.push_back({id});
   state_ = SessionState::kRunning;
   session_start_ns_ = now_ns_;
   emit(session_msg::SessionStart{std::nullopt, names});
@@ -95,12 +94,10 @@ Status SessionEngine::start(const std::vector<std::string>& names) {
 }
 
 void SessionEngine::reset() {
-  steps_.clear();
-  current_ = 0;
-  waiting_ = failed_step_ = false;
+  progress_ = {};
   operator_since_ns_ = -1;
   sampled_ = false;
-  step_start_ns_ = session_start_ns_ = session_end_ns_ = -1;
+  session_start_ns_ = session_end_ns_ = -1;
   last_live_ns_ = 0;
   last_prompt_.reset();
   last_live_.reset();
@@ -109,8 +106,7 @@ void SessionEngine::reset() {
   samples_ = std::make_shared<std::vector<ImuSample>>();
   recording_ = true;
   warmup_ = {};
-  thermal_ = std::make_shared<std::vector<ImuSample>>();
-  thermal_sum_ = {};
+  thermal_ = {};
   still_ = {};
   pose_ = {};
   solve_ = {};
@@ -129,14 +125,14 @@ void SessionEngine::emit(SessionMessage message) {
 }
 
 std::optional<StepId> SessionEngine::step_now() const {
-  if (current_ < steps_.size()) return steps_[current_].id;
+  if (progress_.current < progress_.steps.size()) return progress_.steps[progress_.current].id;
   return std::nullopt;
 }
 
 void SessionEngine::prompt(const std::string& text, std::vector<K> keys, std::vector<std::string> art,
                            const Eigen::Vector3d* up) {
-  waiting_ = std::find(keys.begin(), keys.end(), K::kContinue) != keys.end() ||
-             std::find(keys.begin(), keys.end(), K::kAccept) != keys.end();
+  progress_.waiting = std::find(keys.begin(), keys.end(), K::kContinue) != keys.end() ||
+                      std::find(keys.begin(), keys.end(), K::kAccept) != keys.end();
   operator_since_ns_ = now_ns_;
   session_msg::Prompt m;
   m.step = step_now();
@@ -157,10 +153,10 @@ void SessionEngine::message(MessageLevel level, const std::string& text, session
 
 session_msg::Status SessionEngine::status() const {
   session_msg::Status m;
-  for (const auto& s : steps_) m.steps.push_back({s.id, s.state});
+  for (const auto& s : progress_.steps) m.steps.push_back({s.id, s.state});
   m.state = state_;
   m.rig = config_.name;
-  if (current_ < steps_.size() && running()) m.step = steps_[current_].id;
+  if (progress_.current < progress_.steps.size() && running()) m.step = progress_.steps[progress_.current].id;
   m.poses = pose_.ups.size();
   // A session that ended keeps the time it took; samples still come after it.
   const TimeNs until = session_end_ns_ >= 0 ? session_end_ns_ : now_ns_;
@@ -182,9 +178,9 @@ bool SessionEngine::step_skippable(StepId id) const {
 }
 
 void SessionEngine::enter(std::size_t index) {
-  current_ = index;
-  if (current_ >= steps_.size()) {
-    const bool written = std::any_of(steps_.begin(), steps_.end(), [](const Step& s) {
+  progress_.current = index;
+  if (progress_.current >= progress_.steps.size()) {
+    const bool written = std::any_of(progress_.steps.begin(), progress_.steps.end(), [](const Step& s) {
       return s.id == StepId::kWrite && s.state == StepState::kDone;
     });
     if (written) {
@@ -196,17 +192,18 @@ void SessionEngine::enter(std::size_t index) {
     }
     return;
   }
-  steps_[current_].state = StepState::kActive;
-  waiting_ = failed_step_ = false;
-  step_start_ns_ = now_ns_;
+  progress_.steps[progress_.current].state = StepState::kActive;
+  progress_.waiting = progress_.failed = false;
+  progress_.start_ns = now_ns_;
   emit(status());
   begin_step();
 }
 
 void SessionEngine::advance() {
-  if (current_ < steps_.size() && steps_[current_].state == StepState::kActive)
-    steps_[current_].state = StepState::kDone;
-  enter(current_ + 1);
+  if (progress_.current < progress_.steps.size() &&
+      progress_.steps[progress_.current].state == StepState::kActive)
+    progress_.steps[progress_.current].state = StepState::kDone;
+  enter(progress_.current + 1);
 }
 
 void SessionEngine::finish(SessionState state, Outcome outcome, const std::string& text) {
@@ -215,7 +212,7 @@ void SessionEngine::finish(SessionState state, Outcome outcome, const std::strin
     host_.recording_finished();
   }
   state_ = state;
-  waiting_ = false;
+  progress_.waiting = false;
   session_end_ns_ = now_ns_;
   emit(status());
   session_msg::Done done;
@@ -232,17 +229,18 @@ void SessionEngine::finish(SessionState state, Outcome outcome, const std::strin
 }
 
 bool SessionEngine::operator_wait_over() const {
-  if (operator_since_ns_ < 0 || current_ >= steps_.size()) return false;
+  if (operator_since_ns_ < 0 || progress_.current >= progress_.steps.size()) return false;
   const bool waits_for_a_key =
       state_ == SessionState::kReview ||
-      (state_ == SessionState::kRunning && (failed_step_ || steps_[current_].id == StepId::kPreflight));
+      (state_ == SessionState::kRunning &&
+       (progress_.failed || progress_.steps[progress_.current].id == StepId::kPreflight));
   if (!waits_for_a_key) return false;
   return static_cast<double>(now_ns_ - operator_since_ns_) * 1e-9 >= config_.session.operator_wait_s;
 }
 
 void SessionEngine::end_operator_wait() {
   const bool review = state_ == SessionState::kReview;
-  steps_[current_].state = StepState::kFailed;
+  progress_.steps[progress_.current].state = StepState::kFailed;
   const double wait_s = config_.session.operator_wait_s;
   const std::string waited = wait_s < 120.0 ? fixed(wait_s, 0) + " s" : fixed(wait_s / 60.0, 0) + " min";
   finish(SessionState::kAborted, Outcome::kAborted,
@@ -256,7 +254,7 @@ void SessionEngine::end_operator_wait() {
 }
 
 void SessionEngine::begin_step() {
-  const StepId id = steps_[current_].id;
+  const StepId id = progress_.steps[progress_.current].id;
   switch (id) {
     case StepId::kPreflight:
       run_preflight();
@@ -306,15 +304,15 @@ void SessionEngine::begin_step() {
       review();
       break;
     case StepId::kWrite:
-      if (!solve_.gates_pass &&
-          std::none_of(steps_.begin(), steps_.end(), [](const Step& s) { return s.id == StepId::kReview; })) {
-        steps_[current_].state = StepState::kFailed;
+      if (!solve_.gates_pass && std::none_of(progress_.steps.begin(), progress_.steps.end(),
+                                             [](const Step& s) { return s.id == StepId::kReview; })) {
+        progress_.steps[progress_.current].state = StepState::kFailed;
         finish(SessionState::kFailed, Outcome::kFailed,
                "Not written: a quality gate failed and there is no review step to accept it.");
         return;
       }
       if (!solve_.final || !solve_.final->record) {
-        steps_[current_].state = StepState::kFailed;
+        progress_.steps[progress_.current].state = StepState::kFailed;
         finish(SessionState::kFailed, Outcome::kFailed, "Nothing to write: the solve produced no record.");
         return;
       }
@@ -337,8 +335,8 @@ void SessionEngine::run_preflight() {
                                                       : "stored calibration: none");
   live(lines, 1.0, report);
   if (!report.ok()) {
-    steps_[current_].state = StepState::kFailed;
-    failed_step_ = true;
+    progress_.steps[progress_.current].state = StepState::kFailed;
+    progress_.failed = true;
     emit(status());
     // The device's own advice when it has one (a self-test spoilt by motion: hold the rig still).
     std::string advice;
@@ -357,21 +355,21 @@ Status SessionEngine::key(K key) {
   if (!running()) return make_error(Errc::kInvalidArgument, "no session is running (start one first)");
   emit(session_msg::Key{std::nullopt, key});
   operator_since_ns_ = now_ns_;
-  const StepId id = steps_[current_].id;
+  const StepId id = progress_.steps[progress_.current].id;
   if (key == K::kAbort) {
-    steps_[current_].state = StepState::kFailed;
+    progress_.steps[progress_.current].state = StepState::kFailed;
     finish(SessionState::kAborted, Outcome::kAborted,
            "Aborted by the operator. What was recorded is kept; the stored calibration is unchanged.");
     return {};
   }
   if (key == K::kRedo) {
-    if (failed_step_) {
+    if (progress_.failed) {
       if (auto s = host_.recover(); !s.ok()) {
         message(MessageLevel::kError, "Still failing: " + s.error().message);
         return {};
       }
-      steps_[current_].state = StepState::kActive;
-      failed_step_ = false;
+      progress_.steps[progress_.current].state = StepState::kActive;
+      progress_.failed = false;
       emit(status());  // the step is no longer marked failed
       message(MessageLevel::kInfo, std::string("Redoing step ") + step_name(id));
       begin_step();
@@ -396,14 +394,15 @@ Status SessionEngine::key(K key) {
   if (key == K::kSkip) {
     if (!step_skippable(id))
       return make_error(Errc::kInvalidArgument, std::string("step ") + step_name(id) + " cannot be skipped");
-    steps_[current_].state = StepState::kSkipped;
+    progress_.steps[progress_.current].state = StepState::kSkipped;
     message(MessageLevel::kInfo, std::string("Skipped step ") + step_name(id));
-    if (id == StepId::kThermal) thermal_->clear();  // skipped: no thermal model
-    enter(current_ + 1);
+    if (id == StepId::kThermal) thermal_.means.clear();  // skipped: no thermal model
+    enter(progress_.current + 1);
     return {};
   }
   if (key == K::kContinue) {
-    if (failed_step_) return make_error(Errc::kInvalidArgument, "the step failed: redo it (r) or abort (a)");
+    if (progress_.failed)
+      return make_error(Errc::kInvalidArgument, "the step failed: redo it (r) or abort (a)");
     if (id == StepId::kPreflight || id == StepId::kMotion) {
       advance();
       return {};
@@ -440,10 +439,10 @@ Status SessionEngine::key(K key) {
 void SessionEngine::fault(const std::string& source, const std::string& text) {
   if (!running()) return;
   emit(session_msg::Fault{
-      std::nullopt, source, steps_[current_].id, text,
+      std::nullopt, source, progress_.steps[progress_.current].id, text,
       "What was recorded is kept. Fix the " + source + " and press r to redo the step, or a to abort"});
-  steps_[current_].state = StepState::kFailed;
-  failed_step_ = true;
+  progress_.steps[progress_.current].state = StepState::kFailed;
+  progress_.failed = true;
   emit(status());
   prompt(source + " fault: " + text + ". Press r to redo the step once fixed, or a to abort",
          {K::kRedo, K::kAbort});
@@ -456,7 +455,7 @@ void SessionEngine::note(const std::string& text) {
 void SessionEngine::terminate(const std::string& reason) {
   if (!running()) return;
   emit(session_msg::Stop{std::nullopt, reason});
-  steps_[current_].state = StepState::kFailed;
+  progress_.steps[progress_.current].state = StepState::kFailed;
   finish(SessionState::kAborted, Outcome::kAborted,
          "Stopped: " + reason + ". What was recorded is kept; the stored calibration is unchanged.");
 }
@@ -492,12 +491,13 @@ void SessionEngine::request_final_solve() {
   SolveJob job;
   job.id = next_solve_id_++;
   job.final = true;
-  const bool poses =
-      std::any_of(steps_.begin(), steps_.end(), [](const Step& s) { return s.id == StepId::kPoses; });
+  const bool poses = std::any_of(progress_.steps.begin(), progress_.steps.end(),
+                                 [](const Step& s) { return s.id == StepId::kPoses; });
   job.samples = std::make_shared<const std::vector<ImuSample>>(poses ? *samples_ : std::vector<ImuSample>());
-  if (!thermal_->empty()) job.thermal_samples = std::make_shared<const std::vector<ImuSample>>(*thermal_);
+  if (!thermal_.means.empty())
+    job.thermal_samples = std::make_shared<const std::vector<ImuSample>>(thermal_.means);
   job.static_options = static_options();
-  job.camimu = std::any_of(steps_.begin(), steps_.end(), [](const Step& s) {
+  job.camimu = std::any_of(progress_.steps.begin(), progress_.steps.end(), [](const Step& s) {
     return s.id == StepId::kMotion && s.state == StepState::kDone;
   });
   job.t_end_ns = now_ns_;
@@ -512,7 +512,9 @@ void SessionEngine::request_final_solve() {
 }
 
 void SessionEngine::solve_progress(double fraction, const std::string& text) {
-  if (!running() || current_ >= steps_.size() || steps_[current_].id != StepId::kSolve) return;
+  if (!running() || progress_.current >= progress_.steps.size() ||
+      progress_.steps[progress_.current].id != StepId::kSolve)
+    return;
   live({text}, fraction);
 }
 
@@ -553,7 +555,7 @@ void SessionEngine::solve_finished(int id, SolveOutcome outcome) {
     emit(result_message());
   }
   if (!solve_.final->error.empty()) {
-    steps_[current_].state = StepState::kFailed;
+    progress_.steps[progress_.current].state = StepState::kFailed;
     finish(SessionState::kFailed, Outcome::kFailed,
            "The solve failed: " + solve_.final->error +
                ". The recording is kept; replay it with `imucal replay`.");
@@ -596,7 +598,7 @@ void SessionEngine::write_finished(const Status& status, const std::string& wher
   solve_.written_to = status.ok() ? where : std::string();
   emit(session_msg::Written{std::nullopt, status.ok(), status.ok() ? "" : status.error().message,
                             solve_.written_to});
-  if (!running() || steps_[current_].id != StepId::kWrite) return;
+  if (!running() || progress_.steps[progress_.current].id != StepId::kWrite) return;
   if (!status.ok()) {
     fault("storage", status.error().message);
     return;

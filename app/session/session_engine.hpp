@@ -139,12 +139,13 @@ class SessionEngine {
   SessionState state() const { return state_; }
   /// The step under way while a session runs and the step has not failed; empty otherwise.
   std::optional<StepId> current_step() const {
-    if (state_ != SessionState::kRunning || current_ >= steps_.size() || failed_step_) return std::nullopt;
-    return steps_[current_].id;
+    if (state_ != SessionState::kRunning || progress_.current >= progress_.steps.size() || progress_.failed)
+      return std::nullopt;
+    return progress_.steps[progress_.current].id;
   }
   bool running() const { return state_ == SessionState::kRunning || state_ == SessionState::kReview; }
   /// When the step under way started (sample time); a redo starts it again.
-  TimeNs step_start_ns() const { return step_start_ns_; }
+  TimeNs step_start_ns() const { return progress_.start_ns; }
   /// Sample time of the engine: the last sample's.
   TimeNs now_ns() const { return now_ns_; }
   /// The session's state now (not stamped).
@@ -239,16 +240,20 @@ class SessionEngine {
   ImuStreamInfo info_;
   EngineHost& host_;
   SessionState state_ = SessionState::kIdle;
-  std::vector<Step> steps_;
-  std::size_t current_ = 0;
-  bool waiting_ = false;  // the step waits for the operator (prompt with keys)
+  /// The session's steps and where it is in them, made anew with each session.
+  struct StepProgress {
+    std::vector<Step> steps;
+    std::size_t current = 0;
+    bool waiting = false;  // the step waits for the operator (prompt with keys)
+    bool failed = false;   // the current step failed: it waits for redo, skip or abort
+    TimeNs start_ns = -1;  // when the current step started (sample time)
+  };
+  StepProgress progress_;
   // Sample time of the last prompt or key: a session that waits for a key and uses no sample
   // stops once it has waited session.operator_wait_s from here (operator_wait_over()).
   TimeNs operator_since_ns_ = -1;
   bool sampled_ = false;  // a sample came since start(): before, now_ns_ may be another session's
-  bool failed_step_ = false;
   TimeNs now_ns_ = 0;
-  TimeNs step_start_ns_ = -1;
   TimeNs session_start_ns_ = -1;
   TimeNs session_end_ns_ = -1;  // when it ended: its elapsed time stops there
   TimeNs last_live_ns_ = 0;
@@ -265,14 +270,17 @@ class SessionEngine {
     TimeNs last_temp_ns = 0;
   };
   WarmupState warmup_;
-  // thermal recording
-  struct ThermalMean {  // the 0.1 s mean being summed
-    TimeNs first_ns = -1, last_ns = 0;
-    Eigen::Vector3d accel = Eigen::Vector3d::Zero(), gyro = Eigen::Vector3d::Zero();
-    double temperature = 0.0;
-    long count = 0;
-  } thermal_sum_;
-  std::shared_ptr<std::vector<ImuSample>> thermal_;  // the means so far (SI, deg C)
+  /// The thermal recording, made anew with the session (and when the rig moves during it).
+  struct ThermalState {
+    struct Mean {  // the 0.1 s mean being summed
+      TimeNs first_ns = -1, last_ns = 0;
+      Eigen::Vector3d accel = Eigen::Vector3d::Zero(), gyro = Eigen::Vector3d::Zero();
+      double temperature = 0.0;
+      long count = 0;
+    } sum;
+    std::vector<ImuSample> means;  // the means so far (SI, deg C)
+  };
+  ThermalState thermal_;
   /// The holds: since when the rig is still (the still start, a pose, a face), and the still
   /// start's gyro bias; made anew with the session.
   struct StillState {

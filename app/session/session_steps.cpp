@@ -66,12 +66,12 @@ void SessionEngine::on_sample(const ImuSample& sample) {
     end_operator_wait();
     return;
   }
-  if (state_ != SessionState::kRunning || current_ >= steps_.size()) return;
-  const StepId id = steps_[current_].id;
+  if (state_ != SessionState::kRunning || progress_.current >= progress_.steps.size()) return;
+  const StepId id = progress_.steps[progress_.current].id;
   const ImuSample si = to_si(sample);
   window_->add(si.accel, si.gyro);
   if (recording_ && id >= StepId::kStill && id <= StepId::kMotion) samples_->push_back(sample);
-  if (failed_step_ || id > StepId::kMotion) return;
+  if (progress_.failed || id > StepId::kMotion) return;
   // Still: the accelerometer and gyro barely vary over the window, and once the gyro bias is
   // known the gyro mean (bias removed) is small: a slow steady turn varies little but is no pose.
   const double gyro_limit = config_.session.still_gyro_dps * kDeg;
@@ -105,7 +105,8 @@ void SessionEngine::on_sample(const ImuSample& sample) {
 }
 
 void SessionEngine::on_frame(std::size_t camera, TimeNs t_ns, bool target_seen) {
-  if (state_ != SessionState::kRunning || current_ >= steps_.size() || steps_[current_].id != StepId::kMotion)
+  if (state_ != SessionState::kRunning || progress_.current >= progress_.steps.size() ||
+      progress_.steps[progress_.current].id != StepId::kMotion)
     return;
   ++motion_.frames;
   if (target_seen) {
@@ -156,7 +157,7 @@ std::optional<SessionEngine::TemperatureTrend> SessionEngine::temperature_trend(
     trend.rate_c_per_min = den > 0 ? 60.0 * num / den : 0.0;
   }
   trend.window_s = warmup_.temps.back().first - warmup_.temps.front().first;
-  trend.elapsed_s = seconds(si.t_ns - step_start_ns_);
+  trend.elapsed_s = seconds(si.t_ns - progress_.start_ns);
   // The window starts with the step (warmup_.temps is cleared there): a full one is as old as the step.
   trend.settled = trend.window_s >= config_.session.warmup_window_s &&
                   std::abs(trend.rate_c_per_min) < config_.session.warmup_rate_c_per_min;
@@ -189,23 +190,23 @@ void SessionEngine::sample_warmup(const ImuSample& si) {
 }
 
 bool SessionEngine::thermal_planned() const {
-  return std::any_of(steps_.begin(), steps_.end(), [](const Step& s) { return s.id == StepId::kThermal; });
+  return std::any_of(progress_.steps.begin(), progress_.steps.end(),
+                     [](const Step& s) { return s.id == StepId::kThermal; });
 }
 
 void SessionEngine::record_thermal(const ImuSample& si, bool still) {
   if (!still) {
     // The model needs one attitude throughout (gravity's projection is in the accelerometer's
     // bias): a recording the rig moved in starts again.
-    if (!thermal_->empty())
+    if (!thermal_.means.empty())
       message(MessageLevel::kWarning,
               "Motion during the thermal recording: it starts again from here; keep the rig still");
-    thermal_->clear();
-    thermal_sum_ = {};
+    thermal_ = {};
     return;
   }
   if (!std::isfinite(si.temperature) || (si.flags & (kImuFlagAccelSaturated | kImuFlagGyroSaturated)) != 0)
     return;
-  ThermalMean& m = thermal_sum_;
+  ThermalState::Mean& m = thermal_.sum;
   if (m.count > 0 && si.t_ns - m.first_ns >= 100'000'000) {
     const double n = static_cast<double>(m.count);
     ImuSample mean;
@@ -213,7 +214,7 @@ void SessionEngine::record_thermal(const ImuSample& si, bool still) {
     mean.accel = m.accel / n;
     mean.gyro = m.gyro / n;
     mean.temperature = m.temperature / n;
-    thermal_->push_back(mean);
+    thermal_.means.push_back(mean);
     m = {};
   }
   if (m.count == 0) m.first_ns = si.t_ns;
@@ -262,15 +263,15 @@ std::pair<Eigen::Vector3d, Eigen::Vector3d> thermal_slopes(const std::vector<Imu
 void SessionEngine::sample_thermal(const ImuSample& si) {
   const auto trend = temperature_trend(si, "The IMU reports no temperature: no thermal model");
   if (!trend) {
-    thermal_->clear();
+    thermal_.means.clear();
     advance();
     return;
   }
   const double rate = trend->rate_c_per_min, elapsed = trend->elapsed_s;
   if (live_due()) {
-    auto [lo, hi] = temperature_range(*thermal_);
-    if (thermal_->empty()) lo = hi = si.temperature;
-    const auto [gyro_slope, accel_slope] = thermal_slopes(*thermal_);
+    auto [lo, hi] = temperature_range(thermal_.means);
+    if (thermal_.means.empty()) lo = hi = si.temperature;
+    const auto [gyro_slope, accel_slope] = thermal_slopes(thermal_.means);
     live({"Temperature " + fixed(si.temperature, 2) + " C, changing " + fixed(rate, 2) +
               " C/min (the recording ends below " + fixed(config_.session.warmup_rate_c_per_min, 2) + ")",
           "Recorded " + fixed(lo, 2) + " .. " + fixed(hi, 2) + " C: a span of " + fixed(hi - lo, 2) +
@@ -290,15 +291,15 @@ void SessionEngine::sample_thermal(const ImuSample& si) {
 }
 
 void SessionEngine::end_thermal(const std::string& why) {
-  const auto [lo, hi] = temperature_range(*thermal_);
+  const auto [lo, hi] = temperature_range(thermal_.means);
   const double minutes =
-      thermal_->empty() ? 0.0 : seconds(thermal_->back().t_ns - thermal_->front().t_ns) / 60.0;
+      thermal_.means.empty() ? 0.0 : seconds(thermal_.means.back().t_ns - thermal_.means.front().t_ns) / 60.0;
   if (hi - lo < config_.session.thermal_min_span_c) {
     message(MessageLevel::kWarning,
             "Thermal recording " + why + ": the die moved " + fixed(hi - lo, 2) +
                 " C, less than session.thermal_min_span_c (" + fixed(config_.session.thermal_min_span_c, 1) +
                 " C): no thermal model. Start from a cold rig, or warm it (a heater), for a model");
-    thermal_->clear();
+    thermal_.means.clear();
   } else {
     message(MessageLevel::kInfo, "Thermal recording " + why + ": " + fixed(lo, 2) + " .. " + fixed(hi, 2) +
                                      " C over " + fixed(minutes, 1) +
@@ -509,7 +510,7 @@ void SessionEngine::sample_motion(const ImuSample& si) {
     if (motion_.saturated++ % 200 == 0)
       message(MessageLevel::kWarning, "Too fast: the IMU saturates; move more gently");
   }
-  const double elapsed = seconds(si.t_ns - step_start_ns_);
+  const double elapsed = seconds(si.t_ns - progress_.start_ns);
   if (live_due()) {
     const double n = static_cast<double>(motion_.count);
     const Eigen::Vector3d gyro_rms = (motion_.gyro_sq / n).cwiseSqrt();
