@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "app/camimu_inputs.hpp"
+#include "app/results/result_text.hpp"
 #include "core/calibration_record.hpp"
 #include "core/text_file.hpp"
 #include "core/text_format.hpp"
@@ -294,21 +295,12 @@ json inputs_json(const CamImuReport& r) {
 
 // ---- reading result.json -----------------------------------------------------------------------
 
-template <int N>
-Eigen::Matrix<double, N, 1> read_vec(const json& j) {
-  if (!j.is_array() || j.size() != N) throw std::runtime_error("expected " + std::to_string(N) + " numbers");
-  Eigen::Matrix<double, N, 1> v;
-  for (int i = 0; i < N; ++i) v[i] = j[i].is_null() ? std::nan("") : j[i].get<double>();
-  return v;
-}
-
-template <int R, int C>
-Eigen::Matrix<double, R, C> read_mat(const json& j) {
-  if (!j.is_array() || j.size() != R) throw std::runtime_error("expected " + std::to_string(R) + " rows");
-  Eigen::Matrix<double, R, C> m;
-  for (int r = 0; r < R; ++r) m.row(r) = read_vec<C>(j[r]).transpose();
-  return m;
-}
+using result_text::read_canonical;
+using result_text::read_list;
+using result_text::read_mat;
+using result_text::read_thermal;
+using result_text::read_units;
+using result_text::read_vec;
 
 KrebsImuModel read_krebs(const json& j) {
   KrebsImuModel k;
@@ -334,16 +326,6 @@ KrebsImuSigma read_krebs_sigma(const json& j) {
   s.B_g = read_mat<3, 3>(j.at("B_g"));
   s.b_g = read_vec<3>(j.at("b_g"));
   return s;
-}
-
-CanonicalImuModel read_canonical(const json& j) {
-  CanonicalImuModel c;
-  c.A_a = read_mat<3, 3>(j.at("A_a"));
-  c.b_a = read_vec<3>(j.at("b_a"));
-  c.A_g = read_mat<3, 3>(j.at("A_g"));
-  c.b_g = read_vec<3>(j.at("b_g"));
-  c.G = read_mat<3, 3>(j.at("G"));
-  return c;
 }
 
 CamImuCameraResult read_camera(const json& j, const std::string& path) {
@@ -777,6 +759,69 @@ Result<CamImuCalibrationResult> read_camimu_result(const std::string& path) {
   } catch (const std::exception& e) {
     return make_error(Errc::kCorrupt,
                       path + ": not a camera-IMU result.json (" + std::string(e.what()) + ")");
+  }
+}
+
+namespace {
+
+CamImuCameraResult read_calibration_camera(const json& c, CamImuCameraReport& held,
+                                           const std::string& where) {
+  CamImuCameraResult cam;
+  cam.stream = c.at("stream").get<std::string>();
+  cam.T_cam_imu.matrix() = read_mat<4, 4>(c.at("T_cam_imu"));
+  if (!cam.T_cam_imu.matrix().allFinite())
+    throw std::runtime_error(where + "T_cam_imu must be finite numbers");
+  cam.rotation_sigma_rad = read_vec<3>(c.at("rotation_sigma_rad"));
+  cam.translation_sigma_m = read_vec<3>(c.at("translation_sigma_m"));
+  cam.timeshift_cam_imu_s = c.at("timeshift_cam_imu").get<double>();
+  const json& ts = c.at("timeshift_sigma_s");
+  cam.timeshift_sigma_s = ts.is_null() ? std::nan("") : ts.get<double>();
+  // The held intrinsics as held_intrinsics_node wrote them (a global shutter), with their sigmas.
+  const json& k = c.at("camera");
+  auto camera = camera_from_yaml(YAML::Load(k.dump(-1, ' ', false, json::error_handler_t::replace)), where);
+  if (!camera.ok()) throw std::runtime_error(camera.error().message);
+  cam.camera = *camera;
+  held.intrinsics_sigma = read_list(k.at("intrinsics_sigma"));
+  held.distortion_coeffs_sigma = read_list(k.at("distortion_coeffs_sigma"));
+  if (c.value("shutter", std::string()) == shutter_kind_name(Shutter::Kind::kRolling)) {
+    cam.camera.shutter.kind = Shutter::Kind::kRolling;
+    cam.camera.shutter.line_delay_s = c.at("line_delay_s").get<double>();
+    if (!std::isfinite(cam.camera.shutter.line_delay_s))
+      throw std::runtime_error(where + "line_delay_s must be a number (s per row)");
+    const json& s = c.at("line_delay_sigma_s");
+    cam.line_delay_sigma_s = s.is_null() ? std::nan("") : s.get<double>();
+  }
+  return cam;
+}
+
+}  // namespace
+
+Result<CamImuCalibrationFile> parse_camimu_calibration(const json& r, const std::string& origin) {
+  try {
+    CamImuCalibrationFile f;
+    CamImuReport& report = f.report;
+    report.imu_stream.name = r.at("stream").get<std::string>();
+    report.imu_stream.units = read_units(r.at("input_units"));
+    f.canonical_input = read_canonical(r.at("canonical"));
+    report.result.imu_sigma = read_krebs_sigma(r.at("krebs").at("sigma"));
+    // cam0, cam1, ... in their order (the typed record names them so).
+    const json& cams = r.at("cameras");
+    if (!cams.is_object()) throw std::runtime_error("cameras must be a mapping of cam0, cam1, ...");
+    for (std::size_t i = 0; i < cams.size(); ++i) {
+      const std::string name = "cam" + std::to_string(i);
+      if (!cams.contains(name)) throw std::runtime_error("cameras: " + name + " is missing");
+      report.cameras.emplace_back();
+      report.result.cameras.push_back(read_calibration_camera(cams[name], report.cameras.back(), name + " "));
+    }
+    report.options.gravity_mps2 = r.at("gravity").get<double>();
+    if (!(report.options.gravity_mps2 > 0.0))
+      throw std::runtime_error("gravity must be a positive number (m/s^2)");
+    report.thermal = read_thermal(r);
+    report.result.fixed = r.value("fixed", std::vector<std::string>());
+    return f;
+  } catch (const std::exception& e) {
+    return make_error(Errc::kCorrupt, origin + ": a key the calibration needs is missing or malformed (" +
+                                          std::string(e.what()) + ")");
   }
 }
 

@@ -7,6 +7,7 @@
 // docs/camimu-calibration.md, "Outputs".
 
 #include <Eigen/Core>
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "app/camimu_calibration.hpp"
@@ -66,5 +67,18 @@ std::string camimu_result_json(const CamImuReport& report);
 /// The result record of a result.json written by camimu_result_json. Errors: kNotFound,
 /// kCorrupt (not JSON, a key missing or of the wrong type), naming the file.
 [[nodiscard]] Result<CamImuCalibrationResult> read_camimu_result(const std::string& path);
+
+/// What a stored record takes of a calibration.yaml written by camimu_calibration_yaml, typed: the
+/// IMU stream (name, units), the IMU's Krebs sigmas, each camera (stream, T_cam_imu and its sigmas,
+/// time offset, shutter and line delay, intrinsics and their sigmas), gravity, the thermal model
+/// and the fixed blocks in `report`, and the canonical model on the stream's input values as the
+/// file gives it. The report's other fields keep their defaults.
+struct CamImuCalibrationFile {
+  CamImuReport report;
+  CanonicalImuModel canonical_input;
+};
+/// `root`: the file as JSON (yaml_to_json). Errors: kCorrupt naming `origin` and the key.
+[[nodiscard]] Result<CamImuCalibrationFile> parse_camimu_calibration(const nlohmann::json& root,
+                                                                     const std::string& origin);
 
 }  // namespace imucal::app

@@ -1,17 +1,22 @@
 // SPDX-License-Identifier: BSD-3-Clause
 #pragma once
-// Pieces the result writers of app/results share (internal to them): matrices, vectors, triads,
-// error figures and static intervals as JSON and as YAML.
+// Pieces the result writers and readers of app/results share (internal to them): matrices,
+// vectors, triads, error figures and static intervals as JSON and as YAML, and read back.
 
 #include <yaml-cpp/yaml.h>
 
 #include <Eigen/Core>
+#include <cmath>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <stdexcept>
 #include <string>
+#include <type_traits>
+#include <vector>
 
 #include "calib/static_calibration.hpp"
 #include "core/calibration_record.hpp"
+#include "core/imu.hpp"
 #include "core/imu_model.hpp"
 #include "core/thermal_model.hpp"
 
@@ -25,6 +30,70 @@ inline json mat_json(const Eigen::Matrix3d& m) {
   return j;
 }
 inline json vec_json(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
+
+// Reading a result's JSON form (a YAML result through yaml_to_json): a key of the wrong shape
+// throws, and the reader says which file (kCorrupt).
+template <int N>
+Eigen::Matrix<double, N, 1> read_vec(const json& j) {
+  if (!j.is_array() || j.size() != N) throw std::runtime_error("expected " + std::to_string(N) + " numbers");
+  Eigen::Matrix<double, N, 1> v;
+  for (int i = 0; i < N; ++i) v[i] = j[i].is_null() ? std::nan("") : j[i].get<double>();
+  return v;
+}
+template <int R, int C>
+Eigen::Matrix<double, R, C> read_mat(const json& j) {
+  if (!j.is_array() || j.size() != R) throw std::runtime_error("expected " + std::to_string(R) + " rows");
+  Eigen::Matrix<double, R, C> m;
+  for (int r = 0; r < R; ++r) m.row(r) = read_vec<C>(j[r]).transpose();
+  return m;
+}
+/// A list of numbers of any length, null as NaN (not determined).
+inline std::vector<double> read_list(const json& j) {
+  if (!j.is_array()) throw std::runtime_error("expected a list of numbers");
+  std::vector<double> v;
+  for (const json& x : j) v.push_back(x.is_null() ? std::nan("") : x.get<double>());
+  return v;
+}
+/// The canonical block (A_a, b_a, A_g, b_g, G) of a result; every entry finite.
+inline CanonicalImuModel read_canonical(const json& j) {
+  // Each entry's problem named by its key.
+  const auto entry = [&j](const char* key, auto& out) {
+    using M = std::remove_reference_t<decltype(out)>;
+    try {
+      if constexpr (M::ColsAtCompileTime == 1) {
+        out = read_vec<M::RowsAtCompileTime>(j.at(key));
+      } else {
+        out = read_mat<M::RowsAtCompileTime, M::ColsAtCompileTime>(j.at(key));
+      }
+    } catch (const std::exception& e) {
+      throw std::runtime_error(std::string("canonical.") + key + ": " + e.what());
+    }
+    if (!out.allFinite())
+      throw std::runtime_error(std::string("canonical.") + key + ": must be finite numbers");
+  };
+  CanonicalImuModel c;
+  entry("A_a", c.A_a);
+  entry("b_a", c.b_a);
+  entry("A_g", c.A_g);
+  entry("b_g", c.b_g);
+  entry("G", c.G);
+  return c;
+}
+/// A stream's units by name ("si", "raw").
+inline ImuUnits read_units(const json& j) {
+  const std::string name = j.get<std::string>();
+  for (ImuUnits u : {ImuUnits::kSi, ImuUnits::kRaw})
+    if (name == imu_units_name(u)) return u;
+  throw std::runtime_error("input_units '" + name + "' is neither " + imu_units_name(ImuUnits::kSi) +
+                           " nor " + imu_units_name(ImuUnits::kRaw));
+}
+/// A thermal model as result files write it (emit_thermal), when present.
+inline std::optional<ThermalModel> read_thermal(const json& r) {
+  if (!r.contains("thermal") || r["thermal"].is_null()) return std::nullopt;
+  auto thermal = thermal_model_from_json(r["thermal"]);
+  if (!thermal.ok()) throw std::runtime_error(thermal.error().message);
+  return *thermal;
+}
 
 inline json figures_json(const calib::ErrorFigures& f) {
   return {{"count", f.count},

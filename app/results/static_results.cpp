@@ -43,6 +43,44 @@ Result<Eigen::Matrix3d> read_gsens_matrix(const std::string& path) {
   return G;
 }
 
+namespace {
+
+calib::TriadSigma read_triad_sigma(const json& j) {
+  calib::TriadSigma s;
+  s.T = read_mat<3, 3>(j.at("misalignment"));
+  s.scale = read_vec<3>(j.at("scale"));
+  s.bias = read_vec<3>(j.at("bias"));
+  return s;
+}
+
+}  // namespace
+
+Result<StaticResultFile> parse_static_result(const json& r, const std::string& origin) {
+  try {
+    StaticResultFile f;
+    f.info.name = r.at("stream").get<std::string>();
+    f.info.units = read_units(r.at("input_units"));
+    calib::StaticCalibrationResult& res = f.result;
+    res.canonical = read_canonical(r.at("canonical"));
+    res.accel_sigma = read_triad_sigma(r.at("accel").at("sigma"));
+    res.gyro_sigma = read_triad_sigma(r.at("gyro").at("sigma"));
+    // G's sigma is a figure only where G was estimated; "off" reads as YAML's false.
+    const json& gsens = r.value("gsens", json::object());
+    const json mode = gsens.value("mode", json());
+    res.gsens_mode = mode == json(gsens_mode_name(GSensitivityMode::kEstimate)) ? GSensitivityMode::kEstimate
+                     : mode == json(gsens_mode_name(GSensitivityMode::kFixed))  ? GSensitivityMode::kFixed
+                                                                                : GSensitivityMode::kOff;
+    if (res.gsens_mode == GSensitivityMode::kEstimate) res.gsens_sigma = read_mat<3, 3>(gsens.at("G_sigma"));
+    res.gravity_mps2 = r.at("gravity").get<double>();
+    if (!(res.gravity_mps2 > 0.0)) throw std::runtime_error("gravity must be a positive number (m/s^2)");
+    res.thermal = read_thermal(r);
+    return f;
+  } catch (const std::exception& e) {
+    return make_error(Errc::kCorrupt, origin + ": a key the calibration needs is missing or malformed (" +
+                                          std::string(e.what()) + ")");
+  }
+}
+
 std::string static_result_yaml(const calib::StaticCalibrationResult& r, const ImuStreamInfo& info) {
   YAML::Emitter y;
   y.SetDoublePrecision(12);

@@ -12,6 +12,7 @@
 
 #include "app/camimu_inputs.hpp"
 #include "app/results/camimu_results.hpp"
+#include "app/results/static_results.hpp"
 #include "core/calibration_payload.hpp"
 #include "core/text_file.hpp"
 #include "core/text_format.hpp"
@@ -24,13 +25,6 @@ namespace {
 
 using nlohmann::json;
 
-json new_payload() {
-  return {
-      {"format", kCalibrationFormat},     {"version", kCalibrationRecordVersion},
-      {"created_utc", utc_now_iso8601()}, {"software_version", kVersion},
-      {"cameras", json::array()},         {"source", {{"files", json::array()}, {"notes", json::array()}}}};
-}
-
 CalibrationRecord new_record() {
   CalibrationRecord r;
   r.created_utc = utc_now_iso8601();
@@ -40,58 +34,6 @@ CalibrationRecord new_record() {
 
 constexpr const char* kTedaldiSigmaModel = "tedaldi: corrected = misalignment * diag(scale) * (raw - bias)";
 constexpr const char* kKrebsForm = "a_raw = S_a M_a a + b_a; w_raw = S_g M_g C_bg^T w + B_g C_bg^T a + b_g";
-
-// The canonical block (A_a, b_a, A_g, b_g, G, form) of a result, with its stream and units.
-json imu_block(const json& root, const json& canonical, const std::string& source) {
-  json imu = {{"stream", root.value("stream", "")}, {"input_units", root.value("input_units", "")}};
-  for (const char* key : {"form", "A_a", "b_a", "A_g", "b_g", "G"}) imu[key] = canonical.at(key);
-  imu["source"] = source;
-  return imu;
-}
-
-json static_payload(const json& r, const std::string& path) {
-  json p = new_payload();
-  p["imu"] = imu_block(r, r.at("canonical"), "static");
-  json sigma = {{"model", "tedaldi: corrected = misalignment * diag(scale) * (raw - bias)"}};
-  for (const char* triad : {"accel", "gyro"}) sigma[triad] = r.at(triad).at("sigma");
-  if (r.contains("gsens") && r["gsens"].contains("G_sigma")) {
-    // G's sigma is a figure only where G was estimated (the file writes zeros otherwise).
-    sigma["G"] =
-        r["gsens"].value("mode", json()) == json("estimate")  // "off" reads as a YAML boolean
-            ? r["gsens"]["G_sigma"]
-            : json::array({json::array({nullptr, nullptr, nullptr}), json::array({nullptr, nullptr, nullptr}),
-                           json::array({nullptr, nullptr, nullptr})});
-  }
-  p["imu"]["sigma"] = sigma;
-  if (r.contains("gravity")) p["gravity_mps2"] = r["gravity"];
-  if (r.contains("thermal")) p["thermal"] = r["thermal"];
-  p["source"]["files"].push_back({{"path", path}, {"kind", "static"}, {"method", kStaticMethod}});
-  return p;
-}
-
-json camimu_payload(const json& r, const std::string& path) {
-  json p = new_payload();
-  p["imu"] = imu_block(r, r.at("canonical"), "camimu");
-  json sigma = r.at("krebs").value("sigma", json::object());
-  sigma["model"] = "krebs: " + r.at("krebs").value("form", std::string(kKrebsForm));
-  p["imu"]["sigma"] = sigma;
-  for (const auto& [name, c] : r.at("cameras").items()) {
-    json cam = {{"name", name}};
-    for (const char* key :
-         {"stream", "T_cam_imu", "rotation_sigma_rad", "translation_sigma_m", "timeshift_cam_imu",
-          "timeshift_sigma_s", "line_delay_s", "line_delay_sigma_s", "camera"}) {
-      if (c.contains(key))
-        cam[std::string(key) == "timeshift_cam_imu" ? "timeshift_cam_imu_s" : key] = c[key];
-    }
-    p["cameras"].push_back(cam);
-  }
-  if (r.contains("gravity")) p["gravity_mps2"] = r["gravity"];
-  if (r.contains("thermal")) p["thermal"] = r["thermal"];
-  json file = {{"path", path}, {"kind", "camimu"}, {"method", kCamImuMethod}};
-  if (r.contains("fixed")) file["fixed"] = r["fixed"];
-  p["source"]["files"].push_back(file);
-  return p;
-}
 
 Result<json> load_document(const std::string& path) {
   auto text = read_text_file(path, kMaxResultFileBytes);
@@ -173,12 +115,17 @@ CalibrationRecord calibration_record_from_static(const StaticCalibrationResult& 
   return rec;
 }
 
-CalibrationRecord calibration_record_from_camimu(const CamImuReport& report, const std::string& path) {
+namespace {
+
+/// The record of a camera-IMU calibration whose canonical model on the stream's input values is
+/// `canonical_input`: from a report (converted) or from its calibration.yaml (as written).
+CalibrationRecord camimu_record(const CamImuReport& report, const CanonicalImuModel& canonical_input,
+                                const std::string& path) {
   const CamImuCalibrationResult& res = report.result;
   CalibrationRecord rec = new_record();
   rec.imu.stream = report.imu_stream.name;
   rec.imu.input_units = imu_units_name(report.imu_stream.units);
-  rec.imu.model = canonical_on_input_units(res.canonical, report.imu_stream);
+  rec.imu.model = canonical_input;
   rec.imu.source = "camimu";
   rec.imu.sigma.model = std::string("krebs: ") + kKrebsForm;
   rec.imu.sigma.krebs = res.imu_sigma;
@@ -203,6 +150,12 @@ CalibrationRecord calibration_record_from_camimu(const CamImuReport& report, con
   rec.thermal = report.thermal;
   rec.files.push_back({path, "camimu", kCamImuMethod, res.fixed});
   return rec;
+}
+
+}  // namespace
+
+CalibrationRecord calibration_record_from_camimu(const CamImuReport& report, const std::string& path) {
+  return camimu_record(report, canonical_on_input_units(report.result.canonical, report.imu_stream), path);
 }
 
 Result<CalibrationRecord> merge_calibration_records(CalibrationRecord stat, const CalibrationRecord& cam) {
@@ -254,30 +207,27 @@ static Result<CalibrationRecord> load_record(const std::string& result_path, boo
   // `store read --json` wraps the calibration with the state of the slots.
   const json& r = doc->is_object() && doc->contains("calibration") ? (*doc)["calibration"] : *doc;
   if (!r.is_object()) return make_error(Errc::kCorrupt, path + ": not a calibration result (not a mapping)");
-  try {
-    json p;
-    if (r.value("format", json()) == kCalibrationFormat) {
-      exported = true;
-      p = r;
-    } else {
-      const std::string method = r.value("method", "");
-      if (method == kStaticMethod) {
-        p = static_payload(r, path);
-      } else if (method == kCamImuMethod) {
-        p = camimu_payload(r, path);
-      } else {
-        return make_error(Errc::kCorrupt, path +
-                                              ": neither a static result (calibrate static -o), a camimu "
-                                              "calibration.yaml nor an exported stored calibration");
-      }
-    }
-    auto record = calibration_record_from_json(p);
+  if (r.value("format", json()) == kCalibrationFormat) {
+    exported = true;
+    auto record = calibration_record_from_json(r);
     if (!record.ok()) return record.error().context(path);
     return record;
-  } catch (const json::exception& e) {
-    return make_error(Errc::kCorrupt, path + ": a key the calibration needs is missing or malformed (" +
-                                          std::string(e.what()) + ")");
   }
+  // A result: read typed, and made a record by the builders the service uses.
+  const json method = r.value("method", json());
+  if (method == json(kStaticMethod)) {
+    auto file = parse_static_result(r, path);
+    if (!file.ok()) return file.error();
+    return calibration_record_from_static(file->result, file->info, path);
+  }
+  if (method == json(kCamImuMethod)) {
+    auto file = parse_camimu_calibration(r, path);
+    if (!file.ok()) return file.error();
+    return camimu_record(file->report, file->canonical_input, path);
+  }
+  return make_error(Errc::kCorrupt, path +
+                                        ": neither a static result (calibrate static -o), a camimu "
+                                        "calibration.yaml nor an exported stored calibration");
 }
 
 std::string keep_stored_cameras(CalibrationRecord& record, const StoredCalibration& stored) {

@@ -185,6 +185,30 @@ TEST(StoredCalibration, OtherFilesAreRefusedWithTheReason) {
   EXPECT_EQ(calibration_record_from_file(dir + "/none.yaml").error().code, Errc::kNotFound);
   std::ofstream(dir + "/bad.yaml") << "method: static multi-position (Tedaldi 2013)\ncanonical: {A_a: 3}\n";
   EXPECT_EQ(calibration_record_from_file(dir + "/bad.yaml").error().code, Errc::kCorrupt);
+  // The typed readers name the file and what is wrong in it.
+  const auto damaged = [&](const std::string& path, const std::string& from, const std::string& to) {
+    std::string text = test::read_file(path);
+    const auto at = text.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    text.replace(at, from.size(), to);
+    std::ofstream(path, std::ios::trunc) << text;
+    auto r = calibration_record_from_file(path);
+    EXPECT_FALSE(r.ok());
+    return r.ok() ? Error{} : r.error();
+  };
+  const std::string stat = write_static(dir);
+  Error e = damaged(stat, "input_units: raw", "input_units: volts");
+  EXPECT_EQ(e.code, Errc::kCorrupt);
+  EXPECT_NE(e.message.find(stat + ": "), std::string::npos) << e.message;
+  EXPECT_NE(e.message.find("input_units 'volts'"), std::string::npos) << e.message;
+  e = damaged(write_static(dir), "b_a: [", "b_a: [.nan, ");
+  EXPECT_EQ(e.code, Errc::kCorrupt);
+  EXPECT_NE(e.message.find("canonical.b_a: expected 3 numbers"), std::string::npos) << e.message;
+  const std::string cam = write_camimu(dir, false) + "/calibration.yaml";
+  e = damaged(cam, "timeshift_cam_imu:", "time_shift:");
+  EXPECT_EQ(e.code, Errc::kCorrupt);
+  EXPECT_NE(e.message.find(cam + ": "), std::string::npos) << e.message;
+  EXPECT_NE(e.message.find("timeshift_cam_imu"), std::string::npos) << e.message;
 }
 
 TEST(StoredCalibration, AnIMUOnlySessionKeepsTheStoredCameras) {
