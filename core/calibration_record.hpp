@@ -50,6 +50,10 @@ inline constexpr const char* kStaticMethod = "static multi-position (Tedaldi 201
 inline constexpr const char* kCamImuMethod = "continuous-time camera-IMU (Krebs 2012)";
 /// The canonical form's equations, as the record states them.
 inline constexpr const char* kCanonicalForm = "a = A_a (a_raw - b_a); w = A_g (w_raw - b_g) - G a";
+/// Tedaldi's convention (the static method's triads), and Krebs' form (the camera-IMU solve's).
+inline constexpr const char* kTedaldiConvention = "corrected = misalignment * diag(scale) * (raw - bias)";
+inline constexpr const char* kKrebsForm =
+    "a_raw = S_a M_a a + b_a; w_raw = S_g M_g C_bg^T w + B_g C_bg^T a + b_g";
 
 /// The sigmas of the method that estimated the IMU, in that method's own parameters.
 struct ImuSigmaRecord {

@@ -50,7 +50,7 @@ YAML::Node string_list(const std::vector<std::string>& items) {
 
 YAML::Node canonical_node(const CanonicalImuModel& c) {
   YAML::Node n(YAML::NodeType::Map);
-  n["form"] = "a = A_a (a_raw - b_a); w = A_g (w_raw - b_g) - G a";
+  n["form"] = kCanonicalForm;
   n["A_a"] = rows(c.A_a);
   n["b_a"] = flow_vec(c.b_a);
   n["A_g"] = rows(c.A_g);
@@ -61,7 +61,7 @@ YAML::Node canonical_node(const CanonicalImuModel& c) {
 
 YAML::Node krebs_node(const KrebsImuModel& k, const KrebsImuSigma& s) {
   YAML::Node n(YAML::NodeType::Map);
-  n["form"] = "a_raw = S_a M_a a + b_a; w_raw = S_g M_g C_bg^T w + B_g C_bg^T a + b_g";
+  n["form"] = kKrebsForm;
   n["S_a"] = flow_vec(k.S_a);
   n["M_a"] = flow_vec(k.M_a);
   n["b_a"] = flow_vec(k.b_a);

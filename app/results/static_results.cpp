@@ -89,7 +89,7 @@ std::string static_result_yaml(const calib::StaticCalibrationResult& r, const Im
   y << YAML::Key << "stream" << YAML::Value << info.name;
   y << YAML::Key << "input_units" << YAML::Value << imu_units_name(info.units);
   y << YAML::Key << "canonical" << YAML::Value << YAML::BeginMap;
-  y << YAML::Key << "form" << YAML::Value << "a = A_a (a_raw - b_a); w = A_g (w_raw - b_g) - G a";
+  y << YAML::Key << "form" << YAML::Value << kCanonicalForm;
   emit_matrix(y, "A_a", r.canonical.A_a);
   emit_vector(y, "b_a", r.canonical.b_a);
   emit_matrix(y, "A_g", r.canonical.A_g);
@@ -101,7 +101,7 @@ std::string static_result_yaml(const calib::StaticCalibrationResult& r, const Im
   emit_matrix(y, "G_sigma", r.gsens_sigma);
   y << YAML::Key << "earth_rate_removed" << YAML::Value << r.earth_rate_removed;
   y << YAML::EndMap;
-  y << YAML::Key << "convention" << YAML::Value << "corrected = misalignment * diag(scale) * (raw - bias)";
+  y << YAML::Key << "convention" << YAML::Value << kTedaldiConvention;
   emit_triad(y, "accel", r.model.accel, r.accel_sigma);
   emit_triad(y, "gyro", r.model.gyro, r.gyro_sigma);
   // What the recording determined: the accelerometer form used and why, and the parameters held
@@ -131,7 +131,7 @@ std::string static_result_json(const calib::StaticCalibrationResult& r, const Im
                                const std::map<std::string, std::string>& log_metadata) {
   json j;
   j["method"] = kStaticMethod;
-  j["convention"] = "corrected = misalignment * diag(scale) * (raw - bias)";
+  j["convention"] = kTedaldiConvention;
   j["input_units"] = imu_units_name(info.units);
   j["stream"] = info.name;
   j["accel"] = triad_json(r.model.accel, r.accel_sigma);

@@ -32,9 +32,6 @@ CalibrationRecord new_record() {
   return r;
 }
 
-constexpr const char* kTedaldiSigmaModel = "tedaldi: corrected = misalignment * diag(scale) * (raw - bias)";
-constexpr const char* kKrebsForm = "a_raw = S_a M_a a + b_a; w_raw = S_g M_g C_bg^T w + B_g C_bg^T a + b_g";
-
 Result<json> load_document(const std::string& path) {
   auto text = read_text_file(path, kMaxResultFileBytes);
   if (!text.ok()) return text.error();
@@ -103,7 +100,7 @@ CalibrationRecord calibration_record_from_static(const StaticCalibrationResult& 
   rec.imu.input_units = imu_units_name(info.units);
   rec.imu.model = r.canonical;
   rec.imu.source = "static";
-  rec.imu.sigma.model = kTedaldiSigmaModel;
+  rec.imu.sigma.model = std::string("tedaldi: ") + kTedaldiConvention;
   rec.imu.sigma.accel = r.accel_sigma;
   rec.imu.sigma.gyro = r.gyro_sigma;
   rec.imu.sigma.G = r.gsens_mode == GSensitivityMode::kEstimate
