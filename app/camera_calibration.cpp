@@ -23,6 +23,7 @@
 #include "app/camimu_inputs.hpp"
 #include "app/results/camera_results.hpp"
 #include "calib/observation_check.hpp"
+#include "core/option_words.hpp"
 #include "core/text_format.hpp"
 #include "core/threads.hpp"
 #include "log/frame_codec.hpp"
@@ -541,9 +542,9 @@ Status solve_shutter(const CameraCalibrationRequest& q, std::span<const calib::T
   constexpr double kMaxVideoIntervalS = 0.2;
   const double interval = median_view_interval_s(views);
   if (automatic && !(interval <= kMaxVideoIntervalS)) {
-    report->shutter_choice =
-        "global: the views are " + format_number("%.2f", interval) +
-        " s apart (not a video), so a rolling shutter cannot show; --shutter rolling tries anyway";
+    report->shutter_choice = "global: the views are " + format_number("%.2f", interval) +
+                             " s apart (not a video), so a rolling shutter cannot show; asking for one (" +
+                             option_words(CalibOption::kShutter, "rolling") + ") tries anyway";
     return {};
   }
   calib::CameraChainOptions options;
