@@ -846,8 +846,7 @@ Status ChainSolver::plan_shutters() {
     const Shutter& in = inputs_[c].shutter;
     b.line_delay = in.rolling() ? in.line_delay_s : 0.0;
     if (o.mode == Mode::kGlobal && !o.line_delay_s) {
-      b.shutter_choice = "global, as requested (" + option_words(CalibOption::kShutter, "global") +
-                         (in.rolling() ? "; the camera is known to be rolling)" : ")");
+      b.shutter_choice = global_as_requested(in.rolling() ? "the camera is known to be rolling" : "");
       continue;
     }
     if (!opt_.estimate_time_offsets) {
@@ -863,8 +862,7 @@ Status ChainSolver::plan_shutters() {
     if (o.line_delay_s) {
       b.rolling = true;
       b.line_delay = *o.line_delay_s;
-      b.shutter_choice =
-          "rolling, line delay held at the given value (" + option_words(CalibOption::kLineDelay) + ")";
+      b.shutter_choice = line_delay_as_given();
       continue;
     }
     b.test = true;
@@ -935,10 +933,7 @@ Status ChainSolver::choose_shutter(int* dropped) {
         inputs_[c].name + ": the line delay came out negative (" +
         format_number("%.2f", 1e6 * blocks_[c].line_delay) +
         " us per row): the rows are read out the other way round; calibrate again with the other readout (" +
-        option_words(CalibOption::kReadout, inputs_[c].shutter.readout == Shutter::Readout::kTopToBottom
-                                                ? "bottom_to_top"
-                                                : "top_to_bottom") +
-        ")");
+        other_readout_words(inputs_[c].shutter.readout) + ")");
   }
   return {};
 }

@@ -650,13 +650,11 @@ void Estimator<N>::plan_shutters() {
       cs.shutter_plan = Plan::kHeld;
       cs.rolling = true;
       cs.line_delay = *o.line_delay_s;
-      cs.shutter_choice =
-          "rolling, line delay held at the given value (" + option_words(CalibOption::kLineDelay) + ")";
+      cs.shutter_choice = line_delay_as_given();
     } else if (o.mode == Mode::kGlobal) {
       cs.shutter_plan = Plan::kGlobal;
       cs.line_delay = 0.0;
-      cs.shutter_choice = "global, as requested (" + option_words(CalibOption::kShutter, "global") +
-                          (file.rolling() ? "; the camera file says rolling)" : ")");
+      cs.shutter_choice = global_as_requested(file.rolling() ? "the camera file says rolling" : "");
     } else {
       cs.shutter_plan = o.mode == Mode::kRolling ? Plan::kEstimate : Plan::kChoose;
     }
@@ -715,11 +713,7 @@ Status Estimator<N>::choose_shutter(bool extended, ceres::Solver::Summary* summa
           format_number("%.2f", 1e6 * st_.cams[c].line_delay) +
           " us per row): the rows are read out the other way round than the camera file says; "
           "calibrate again with the other readout (" +
-          option_words(CalibOption::kReadout,
-                       cameras_[c].camera.shutter.readout == Shutter::Readout::kTopToBottom
-                           ? "bottom_to_top"
-                           : "top_to_bottom") +
-          ")");
+          other_readout_words(cameras_[c].camera.shutter.readout) + ")");
   }
   return {};
 }

@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 
+#include "core/camera_model.hpp"
 #include "core/option_words.hpp"
 
 namespace imucal::calib {
@@ -37,6 +38,24 @@ inline double shutter_bic_threshold(double k, double n) { return k * std::log(n 
 /// motion-dependent bias): statistically clear on a rendered recording with 0.03 px of corner
 /// noise (-0.24 +- 0.03 us per row, 0.06 ms, on the camera fixture), physically nothing.
 inline constexpr double kMinRollingReadoutS = 0.5e-3;
+
+/// The shutter choice the user made: global (`note`: what else is known of the camera, or
+/// empty), or rolling with the line delay given.
+inline std::string global_as_requested(const std::string& note) {
+  return "global, as requested (" + option_words(CalibOption::kShutter, "global") +
+         (note.empty() ? "" : "; ") + note + ")";
+}
+inline std::string line_delay_as_given() {
+  return "rolling, line delay held at the given value (" + option_words(CalibOption::kLineDelay) + ")";
+}
+
+/// The advice when a line delay comes out negative: the readout other than `current`, in the
+/// host's words ("--readout bottom_to_top").
+inline std::string other_readout_words(Shutter::Readout current) {
+  return option_words(CalibOption::kReadout, readout_name(current == Shutter::Readout::kTopToBottom
+                                                              ? Shutter::Readout::kBottomToTop
+                                                              : Shutter::Readout::kTopToBottom));
+}
 
 /// What the evidence says of line delays freed after the global solution: `lr` the drop of the
 /// chi-square, `k` the line delays freed, `n` their cameras' corner measurements, `readout_s`
