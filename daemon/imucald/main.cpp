@@ -9,7 +9,6 @@
 #include <cstdio>
 #include <sstream>
 
-#include "app/session/option_words.hpp"
 #include "core/version.hpp"
 #include "daemon/common/number_check.hpp"
 #include "daemon/imucald/service_app.hpp"
@@ -63,8 +62,6 @@ int main(int argc, char** argv) {
   spdlog::set_default_logger(spdlog::stderr_color_mt("imucald"));
   spdlog::set_pattern("%^%l%$: %v");
   spdlog::set_level(spdlog::level::info);
-  // The calibrations' messages speak the session's words (core/option_words.hpp).
-  imucal::set_option_vocabulary(&imucal::app::session::session_option_words);
 
   ServiceOptions o;
   CLI::App app{

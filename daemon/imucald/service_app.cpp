@@ -21,6 +21,7 @@
 #include "app/rig/cameras.hpp"
 #include "app/rig/rig.hpp"
 #include "app/rig/stored_calibration.hpp"
+#include "app/session/option_words.hpp"
 #include "core/version.hpp"
 #include "drivers/camera/aravis/aravis_module.hpp"
 #include "drivers/camera/libcamera/libcamera_module.hpp"
@@ -239,7 +240,10 @@ Service::Service(ServiceOptions options)
     : options_(std::move(options)),
       signals_(io_, SIGINT, SIGTERM, SIGHUP),
       watchdog_timer_(io_),
-      upgrade_timer_(io_) {}
+      upgrade_timer_(io_) {
+  // The calibrations' messages speak the session's words (core/option_words.hpp).
+  set_option_vocabulary(&app::session::session_option_words);
+}
 
 Service::~Service() {
   runner_.reset();  // joins the worker before the devices go
@@ -516,7 +520,7 @@ void Service::on_message(const session_msg::SessionMessage& m) {
 }
 
 void Service::set_gyro_offsets(bool from_record) {
-  if (!config_.storage.program_gyro_offsets || imu_state_ != DeviceState::kOpen || !rig_->imu_open()) return;
+  if (!config_.storage.program_gyro_offsets || !rig_->imu_open()) return;
   std::array<double, 3> bias{0.0, 0.0, 0.0};
   std::string source = "cleared (power-up zero) while a session records";
   if (from_record) {
