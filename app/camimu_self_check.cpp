@@ -99,6 +99,15 @@ SplitCheck camimu_self_check(const std::vector<calib::CamImuSample>& imu,
                        : global && !rolling ? calib::ShutterSolveOptions::Mode::kGlobal
                                             : opt.shutter.mode;
   opt.covariance = true;
+  // Each part starts where the whole ended: the extrinsics and time offsets (not the IMU model,
+  // whose starting value is also the intrinsics' prior). The parts' own solution does not
+  // depend on it; their solve takes fewer iterations and skips the cross-correlation.
+  opt.T_cam_imu_init.clear();
+  opt.timeshift_init_s.clear();
+  for (const auto& c : full.cameras) {
+    opt.T_cam_imu_init.emplace_back(c.T_cam_imu);
+    opt.timeshift_init_s.emplace_back(c.timeshift_cam_imu_s);
+  }
   // The parts share the held intrinsics, so their error does not separate them: compared
   // without it (the full result's sigmas carry it).
   opt.propagate_intrinsics = false;

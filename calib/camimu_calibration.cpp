@@ -267,21 +267,25 @@ BuiltProblem<N> Estimator<N>::build(ceres::Problem* problem, bool extended, int 
       if (obs.ids.size() < 4 || !st_.pose.covers(t)) continue;
       if (std::binary_search(cs.rejected.begin(), cs.rejected.end(), obs.t_ns)) continue;
       const int first = std::clamp(st_.pose.segment(t).first_knot - 1, 0, st_.pose.knots - N - 2);
+      const bool rolling =
+          cs.rolling && (cs.rolling_frames.empty() ||
+                         std::binary_search(cs.rolling_frames.begin(), cs.rolling_frames.end(), obs.t_ns));
       std::vector<Eigen::Vector3d> pts;
       for (int id : obs.ids) pts.push_back(points_[static_cast<std::size_t>(id)]);
       auto* cost = new FrameResidual<N>(cameras_[c].camera, std::move(pts), obs.px, t_s(obs.t_ns), first,
                                         st_.pose, cs.sigma_px, opt_.reprojection_loss_sigmas * cs.sigma_px,
-                                        /*compressed=*/true, cs.rolling);
+                                        /*compressed=*/true, rolling);
       std::vector<double*> blocks;
       for (int i = 0; i < FrameResidual<N>::kWindow; ++i) blocks.push_back(st_.q[first + i].data());
       for (int i = 0; i < FrameResidual<N>::kWindow; ++i) blocks.push_back(st_.p[first + i].data());
       blocks.push_back(cs.q_ci.data());
       blocks.push_back(cs.t_ci.data());
       blocks.push_back(&cs.shift);
-      if (cs.rolling) blocks.push_back(&cs.line_delay);
+      if (rolling) blocks.push_back(&cs.line_delay);
       built.timed_residuals.push_back({problem->AddResidualBlock(cost, nullptr, blocks), t});
       built.frames.push_back(cost);
       built.frame_camera.push_back(c);
+      built.frame_t_ns.push_back(obs.t_ns);
       built.frame_blocks.push_back(std::move(blocks));
     }
     if (opt_.fixed.T_cam_imu) {
@@ -678,12 +682,18 @@ Status Estimator<N>::choose_shutter(bool extended, ceres::Solver::Summary* summa
   rebuild(extended);
   double global_cost = 0.0;
   problem_->Evaluate(ceres::Problem::EvaluateOptions(), &global_cost, nullptr, nullptr, nullptr);
-  bool choose = false;
+  bool choose = false, only_choose = true;
+  for (std::size_t c : tested) {
+    choose = choose || st_.cams[c].shutter_plan == Plan::kChoose;
+    only_choose = only_choose && st_.cams[c].shutter_plan == Plan::kChoose;
+  }
+  // A choice is tested on the frames that carry the line delay's information; a rolling shutter
+  // asked for is solved on every frame from the start.
+  const std::string subset = only_choose ? pick_shutter_test_frames(tested) : std::string();
   for (std::size_t c : tested) {
     CameraState& cs = st_.cams[c];
     cs.rolling = true;
     cs.line_delay_fixed = false;
-    choose = choose || cs.shutter_plan == Plan::kChoose;
   }
   if (Status s = solve(extended, "rolling shutter", summary); !s.ok()) return s;
   const double lr = 2.0 * (global_cost - summary->final_cost);
@@ -698,11 +708,19 @@ Status Estimator<N>::choose_shutter(bool extended, ceres::Solver::Summary* summa
   if (!verdict.rolling) {
     st_ = global_state;
     *summary = global_summary;
-    for (std::size_t c : tested) st_.cams[c].shutter_choice = verdict.text;
+    for (std::size_t c : tested) st_.cams[c].shutter_choice = verdict.text + subset;
     rebuild(extended);
     return {};
   }
-  for (std::size_t c : tested) st_.cams[c].shutter_choice = verdict.text;
+  for (std::size_t c : tested) {
+    st_.cams[c].shutter_choice = verdict.text + subset;
+    st_.cams[c].rolling_frames.clear();
+  }
+  // Every frame rolling from the test's solution.
+  if (!subset.empty()) {
+    rebuild(extended);
+    if (Status s = solve(extended, "rolling shutter", summary); !s.ok()) return s;
+  }
   // Weighted anew by the corner noise the rolling model leaves (the global one's overstated it).
   for (int round = 0; round < 3 && reestimate_corner_sigma(); ++round)
     if (Status s = solve(extended, "rolling shutter", summary); !s.ok()) return s;
@@ -716,6 +734,50 @@ Status Estimator<N>::choose_shutter(bool extended, ceres::Solver::Summary* summa
           other_readout_words(cameras_[c].camera.shutter.readout) + ")");
   }
   return {};
+}
+
+template <int N>
+std::string Estimator<N>::pick_shutter_test_frames(const std::vector<std::size_t>& tested) {
+  // A frame's information on the line delay at the global solution: on its time offset (the
+  // squared norm of its rows' derivative in it: the compressed rows keep the corners' J^T J) times
+  // the spread of its corners' rows (what a line delay adds to a shift of the whole frame).
+  std::vector<std::vector<std::pair<double, TimeNs>>> info(st_.cams.size());
+  for (std::size_t k = 0; k < built_.frames.size(); ++k) {
+    const std::size_t c = built_.frame_camera[k];
+    if (std::find(tested.begin(), tested.end(), c) == tested.end()) continue;
+    const FrameResidual<N>& f = *built_.frames[k];
+    std::vector<double> r(static_cast<std::size_t>(f.num_residuals())), d(r.size());
+    std::vector<double*> jac(built_.frame_blocks[k].size(), nullptr);
+    jac[FrameResidual<N>::kShift] = d.data();
+    if (!f.Evaluate(built_.frame_blocks[k].data(), r.data(), jac.data())) continue;
+    double dt2 = 0.0;
+    for (double v : d) dt2 += v * v;
+    info[c].emplace_back(dt2 * f.row_variance(), built_.frame_t_ns[k]);
+  }
+  int used = 0, all = 0;
+  for (std::size_t c : tested) {
+    auto& frames = info[c];
+    all += static_cast<int>(frames.size());
+    std::sort(frames.begin(), frames.end(), std::greater<>());
+    double total = 0.0;
+    for (const auto& f : frames) total += f.first;
+    std::size_t n = 0;
+    for (double sum = 0.0;
+         n < frames.size() && (sum < kShutterTestShare * total || n < kShutterTestMinFrames); ++n)
+      sum += frames[n].first;
+    used += static_cast<int>(n);
+    CameraState& cs = st_.cams[c];
+    cs.rolling_frames.clear();
+    if (n == frames.size()) continue;
+    for (std::size_t i = 0; i < n; ++i) cs.rolling_frames.push_back(frames[i].second);
+    std::sort(cs.rolling_frames.begin(), cs.rolling_frames.end());
+  }
+  if (used == all) return {};
+  char text[200];
+  std::snprintf(text, sizeof text,
+                "; tested on the %d of %d frames that hold %.0f %% of the line delay's information", used,
+                all, 100.0 * kShutterTestShare);
+  return text;
 }
 
 template <int N>

@@ -36,6 +36,11 @@ inline constexpr int kPreliminaryIterations = 12;
 inline constexpr double kPreliminaryTolerance = 1e-2;
 inline constexpr double kIntermediateTolerance = 1e-4;
 inline constexpr double kFinalTolerance = 1e-7;
+// The shutter test (choose_shutter) frees the line delay on the frames that hold this share of its
+// information at the global solution, at least this many (docs/camimu-calibration.md, "Rolling
+// shutter"); a rolling verdict then solves every frame rolling.
+inline constexpr double kShutterTestShare = 0.75;
+inline constexpr int kShutterTestMinFrames = 200;
 // The first stage takes IMU samples at this rate at most (every k-th sample): it only brings the
 // trajectory near, and the IMU residuals set its cost. It keeps at least
 // kPreliminaryImuPerKnot samples in each knot interval: with two (100 Hz against knots 20 ms
@@ -75,6 +80,9 @@ struct CameraState {
   enum class ShutterPlan { kGlobal, kHeld, kEstimate, kChoose };
   ShutterPlan shutter_plan = ShutterPlan::kGlobal;
   bool rolling = false;
+  /// The shutter test's frames read out row by row (ascending stamps; empty: every frame when
+  /// rolling): choose_shutter tests on the frames that carry most of the line delay's information.
+  std::vector<TimeNs> rolling_frames;
   bool line_delay_fixed = true;
   double line_delay = 0.0;  // s per row
   std::string shutter_choice;
@@ -124,6 +132,7 @@ template <int N>
 struct BuiltProblem {
   std::vector<const FrameResidual<N>*> frames;
   std::vector<std::size_t> frame_camera;
+  std::vector<TimeNs> frame_t_ns;  // each frame's stamp
   std::vector<std::vector<double*>> frame_blocks;
   std::vector<const ImuResidual<N>*> imu_residuals;
   std::vector<std::vector<double*>> imu_blocks;
@@ -174,6 +183,11 @@ class Estimator {
   /// and solved; rolling kept where asked for or where the evidence shows it (BIC), else the
   /// global solution restored. Leaves the chosen model solved and the reasons in shutter_choice.
   Status choose_shutter(bool extended, ceres::Solver::Summary* summary);
+  /// The frames the shutter test reads out row by row, per tested camera (CameraState::
+  /// rolling_frames): by the line delay's information at the global solution, the fewest that
+  /// hold kShutterTestShare of it (at least kShutterTestMinFrames). A sentence for the verdict,
+  /// empty when every frame is tested.
+  std::string pick_shutter_test_frames(const std::vector<std::size_t>& tested);
   /// Basic or extended by the evidence (kAuto): the drop of the data cost that freeing the
   /// intrinsics buys against the parameters it costs (BIC). Leaves the chosen model solved.
   Status choose_model(ceres::Solver::Summary* summary);

@@ -407,6 +407,15 @@ class FrameResidual final : public ceres::CostFunction {
       double const* const* p, const std::vector<std::pair<CameraModel, CameraModel>>& moves,
       double scale) const;
   std::size_t corners() const { return points_.size(); }
+  /// The variance of the corners' image rows, px^2 (0 without corners).
+  double row_variance() const {
+    if (px_.empty()) return 0.0;
+    double mean = 0.0, sq = 0.0;
+    for (const auto& q : px_) mean += q.y();
+    mean /= static_cast<double>(px_.size());
+    for (const auto& q : px_) sq += (q.y() - mean) * (q.y() - mean);
+    return sq / static_cast<double>(px_.size());
+  }
 
  private:
   using Pose = SplinePose<N>;

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "core/text_format.hpp"
+#include "core/threads.hpp"
 #include "core/version.hpp"
 #include "daemon/cli/command.hpp"
 #include "daemon/cli/option_flags.hpp"
@@ -234,6 +235,7 @@ int main(int argc, char** argv) {
   // mmap threshold; docs/benchmarks.md, "End to end").
   mallopt(M_MMAP_THRESHOLD, 32 << 20);
   mallopt(M_TRIM_THRESHOLD, 512 << 20);
+  imucal::limit_openmp_teams();
   // Results go to stdout, diagnostics (warnings, progress, logs) to stderr.
   spdlog::set_default_logger(spdlog::stderr_color_mt("imucal"));
   spdlog::set_pattern("%^%l%$: %v");

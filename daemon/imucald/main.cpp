@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <sstream>
 
+#include "core/threads.hpp"
 #include "core/version.hpp"
 #include "daemon/common/number_check.hpp"
 #include "daemon/imucald/service_app.hpp"
@@ -58,6 +59,7 @@ static bool parse_live_view(const std::string& live_view, imucal::imucald::Servi
 int main(int argc, char** argv) {
   using imucal::imucald::Service;
   using imucal::imucald::ServiceOptions;
+  imucal::limit_openmp_teams();  // before the solver modules load
   // The journal adds the time; a level prefix is enough.
   spdlog::set_default_logger(spdlog::stderr_color_mt("imucald"));
   spdlog::set_pattern("%^%l%$: %v");
