@@ -685,6 +685,21 @@ Result<CameraChainReport> calibrate_camera_chain_log(const CameraChainRequest& q
   return out;
 }
 
+std::vector<calib::TargetObservation> spread_views(const std::vector<calib::TargetObservation>& views,
+                                                   int max_views) {
+  std::vector<calib::TargetObservation> seen;  // the views with the target
+  for (const auto& v : views)
+    if (!v.empty()) seen.push_back(v);
+  const auto n = static_cast<long>(seen.size());
+  if (max_views <= 0 || n <= max_views) return seen;
+  std::vector<calib::TargetObservation> out;
+  out.reserve(static_cast<std::size_t>(max_views));
+  for (long k = 0; k < n; ++k)
+    if (k == 0 || k * max_views / n != (k - 1) * max_views / n)
+      out.push_back(seen[static_cast<std::size_t>(k)]);
+  return out;
+}
+
 Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequest& request) {
   IMUCAL_TRY(request.intrinsics.validate());
   CameraCalibrationRequest q = request;  // its model replaced by the chosen one (--model auto)
@@ -694,15 +709,21 @@ Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequ
   if (!reader.ok()) return reader.error();
   auto found = detect_for_report(q, **reader, &report);
   if (!found.ok()) return found.error();
+  // The solve and its self-check on views spread over the recording; the shutter test keeps
+  // the consecutive views it needs.
+  const std::vector<calib::TargetObservation> views = spread_views(*found, q.max_views);
+  const auto with_target =
+      std::count_if(found->begin(), found->end(), [](const auto& o) { return !o.empty(); });
+  report.views_not_chosen = static_cast<int>(with_target) - static_cast<int>(views.size());
   if (!q.model_candidates.empty()) {
-    auto chosen = calib::choose_camera_model(q.target, *found, q.intrinsics, q.model_candidates);
+    auto chosen = calib::choose_camera_model(q.target, views, q.intrinsics, q.model_candidates);
     if (!chosen.ok())
       return chosen.error().context("camera '" + report.stream.name + "' of " + q.shown_log());
     report.intrinsics = std::move(chosen->result);
     report.model_choice = std::move(chosen->choice);
     q.intrinsics.model = report.model_choice->chosen;
   } else {
-    auto result = calib::calibrate_camera_intrinsics(q.target, *found, q.intrinsics, q.solve_progress);
+    auto result = calib::calibrate_camera_intrinsics(q.target, views, q.intrinsics, q.solve_progress);
     if (!result.ok())
       return result.error().context("camera '" + report.stream.name + "' of " + q.shown_log());
     report.intrinsics = std::move(*result);
@@ -710,8 +731,12 @@ Result<CameraCalibrationReport> calibrate_camera_log(const CameraCalibrationRequ
   report.warnings.insert(report.warnings.end(), report.intrinsics.warnings.begin(),
                          report.intrinsics.warnings.end());
   IMUCAL_TRY(solve_shutter(q, *found, &report));
+  // A rolling camera is solved on the trajectory through every view (solve_shutter), and so are
+  // its parts.
+  const bool rolling = report.intrinsics.camera.shutter.rolling();
+  if (rolling) report.views_not_chosen = 0;
   if (q.self_check_parts >= 2) {
-    report.self_check = camera_self_check(q.target, *found, q.intrinsics, report.intrinsics,
+    report.self_check = camera_self_check(q.target, rolling ? *found : views, q.intrinsics, report.intrinsics,
                                           report.stream.name, q.self_check_parts, q.threads);
     add_self_check_warnings(&report.self_check,
                             scale_camera_by_self_check(&report.intrinsics, &report.line_delay_sigma_s,

@@ -95,6 +95,11 @@ struct CameraCalibrationRequest {
   /// else the row comes from the log's camera stream (app/camimu_inputs.hpp stamp_row_from_stream).
   bool known_stamp_row = false;
   int threads = 0;  // detection workers; 0 = all cores
+  /// One camera: the solve (and its self-check) takes at most this many of the views with the
+  /// target, spread evenly over the recording (spread_views); 0: every view. Consecutive views
+  /// of a video repeat each other (docs/camera-calibration.md, "Views").
+  int max_views = kDefaultMaxViews;
+  static constexpr int kDefaultMaxViews = 400;
   /// The self-check (app/camera_self_check.hpp): this many consecutive parts of the recording
   /// calibrated apart and compared; 0 or 1: none (the CLI asks for the halves).
   int self_check_parts = 0;
@@ -108,6 +113,12 @@ struct CameraCalibrationRequest {
   ProgressFn detection_progress;
   ProgressFn solve_progress;
 };
+
+/// At most `max_views` of the views with the target (the empty ones left out), spread evenly: the
+/// first of each of max_views equal runs of consecutive views (all of them when there are no
+/// more, or max_views is 0).
+std::vector<calib::TargetObservation> spread_views(const std::vector<calib::TargetObservation>& views,
+                                                   int max_views);
 
 struct CameraCalibrationReport {
   std::string log_path;
@@ -124,6 +135,8 @@ struct CameraCalibrationReport {
   std::string detections_stored_in;    // StreamDetections::stored_in
   double detection_wall_s = 0.0;       // 0 when reused
   int detection_threads = 0;
+  /// Views with the target that the solve did not take (CameraCalibrationRequest::max_views).
+  int views_not_chosen = 0;
   calib::CameraIntrinsicsResult intrinsics;
   /// The model chosen by the evidence (`--model auto`: CameraCalibrationRequest::choose_model).
   std::optional<calib::CameraModelChoice> model_choice;

@@ -54,8 +54,12 @@ std::string parameters_html(const nlohmann::json& r) {
        escape(at(r, "camera_model").get<std::string>() + "-" + at(r, "distortion_model").get<std::string>()) +
            ", " + std::to_string(res[0].get<int>()) + " x " + std::to_string(res[1].get<int>())});
   q.rows.push_back({"reprojection RMS", num(number(r, "reprojection_rms_px"), 4) + " px"});
+  const int not_chosen = r.value("views_not_chosen", 0);
   q.rows.push_back({"views", std::to_string(at(r, "views_used").get<int>()) + " used of " +
-                                 std::to_string(at(r, "views_total").get<int>())});
+                                 std::to_string(at(r, "views_total").get<int>()) +
+                                 (not_chosen > 0 ? " (spread evenly; " + std::to_string(not_chosen) +
+                                                       " more views with the target not chosen)"
+                                                 : std::string())});
   q.rows.push_back({"coverage", num(number(r, "coverage") * 100.0, 3) + " % of the image grid"});
   q.rows.push_back({"focal length well determined", r.value("focal_well_determined", false) ? "yes" : "no"});
   return q.to_html() + t.to_html() + "<p class=\"note\">Distortion coefficients are unitless.</p>\n";

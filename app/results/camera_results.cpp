@@ -240,6 +240,7 @@ YAML::Node camera_node(const CameraCalibrationReport& r) {
   q["frames_with_target"] = r.frames_with_target;
   q["views_used"] = res.views_used;
   q["views_rejected"] = views_rejected(r);
+  q["views_not_chosen"] = r.views_not_chosen;
   q["corners_used"] = res.points_used;
   q["corners_rejected"] = res.corners_rejected;
   q["log"] = r.log_path;
@@ -343,6 +344,7 @@ json camera_json(const CameraCalibrationReport& r) {
       {"views_total", res.views_total},
       {"views_used", res.views_used},
       {"views_rejected", views_rejected(r)},
+      {"views_not_chosen", r.views_not_chosen},
       {"corners_used", res.points_used},
       {"corners_rejected", res.corners_rejected},
       {"residuals", residuals_json(res)},

@@ -37,6 +37,7 @@ struct CameraCliOptions {
   ShutterArgs shutter;
   double knot_spacing_s = 0.0;
   int threads = 0;
+  int max_views = app::CameraCalibrationRequest::kDefaultMaxViews;
   int self_check = 2;
   bool allow_damaged = false;
   DetectionStoreArgs detections;
@@ -70,6 +71,11 @@ void print_camera(const app::CameraCalibrationReport& r) {
       "%d views and %d corners rejected\n",
       res.rms_px, res.residual_sigma_px, res.points_used, res.views_used, res.views_total - res.views_used,
       res.corners_rejected);
+  if (r.views_not_chosen > 0)
+    std::printf(
+        "  views: %d of the %d with the target, spread evenly over the recording (its consecutive views "
+        "repeat each other; --max-views 0 solves every one)\n",
+        res.views_total, res.views_total + r.views_not_chosen);
   std::printf("  coverage: %.0f %% of a %d x %d grid of the image\n", 100.0 * res.coverage, res.coverage_cols,
               res.coverage_rows);
   if (c.shutter.rolling()) {
@@ -221,6 +227,7 @@ void run(const CameraCliOptions& given) {
   q.target = target.target;
   q.target_source = target.source;
   q.threads = o.threads;
+  q.max_views = o.max_views;
   q.self_check_parts = o.self_check;
   q.allow_damaged = o.allow_damaged;
   q.reuse_detections = !o.detections.no_reuse;
@@ -329,6 +336,12 @@ void setup(CLI::App& root) {
   cmd->add_option("--threads", o->threads,
                   "Worker threads for the detection and the solver (default: all cores)")
       ->check(CLI::Range(0, 256));
+  cmd->add_option("--max-views", o->max_views,
+                  "One camera: solve on at most this many of the views with the target, spread evenly over "
+                  "the recording (consecutive views of a video repeat each other; the self-check's parts use "
+                  "the same views, so the sigmas stay honest); 0: every view. A rolling-shutter camera is "
+                  "solved on every view")
+      ->check(CLI::Range(0, 1000000));
   add_self_check_option(cmd, &o->self_check);
   add_detection_store_options(cmd, &o->detections);
   cmd->add_flag("--allow-damaged", o->allow_damaged, "Calibrate from what is readable in a damaged log");

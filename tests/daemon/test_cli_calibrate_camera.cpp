@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -87,6 +88,13 @@ TEST(CliCalibrateCamera, FixtureWithinThreeSigmasOfTruthAndDetectionsReused) {
     EXPECT_NEAR(j["distortion_coeffs"][i].get<double>(), first["distortion_coeffs"][i].as<double>(), 1e-12);
   }
   EXPECT_EQ(j["views_used"].get<int>(), first["imucal"]["views_used"].as<int>());
+  // The solve takes 400 of the views with the target, spread over the recording; the rest are
+  // counted apart from the rejected ones.
+  EXPECT_EQ(j["views_total"].get<int>(), 400);
+  EXPECT_EQ(j["views_total"].get<int>() + j["views_not_chosen"].get<int>(),
+            j["frames_with_target"].get<int>());
+  EXPECT_GT(j["views_not_chosen"].get<int>(), 0);
+  EXPECT_EQ(first["imucal"]["views_not_chosen"].as<int>(), j["views_not_chosen"].get<int>());
   // The self-check (the halves, by default): this rendered recording's halves agree.
   EXPECT_EQ(j["self_check"]["verdict"], "agree") << j["self_check"].dump(1);
   EXPECT_EQ(j["self_check"]["parts"], 2);
@@ -157,11 +165,21 @@ TEST(CliCalibrateCamera, StoreDetectionsInTheLogWhenAsked) {
                     "--store-detections", "--no-cache"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("detections stored in the log"), std::string::npos) << r.out;
-  r = run_cli(
-      {"calibrate", "camera", "--self-check", "0", log, "-o", dir + "/again.yaml", "--json", "--no-cache"});
+  EXPECT_NE(r.out.find("  views: 400 of the "), std::string::npos) << r.out;
+  // Every view with the target when asked (--max-views 0); the camera within the sigmas of the
+  // one from the views spread over the recording.
+  r = run_cli({"calibrate", "camera", "--self-check", "0", log, "-o", dir + "/again.yaml", "--json",
+               "--no-cache", "--max-views", "0"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["detections"]["reused_from"].get<std::string>(), "the log");
+  EXPECT_EQ(j["views_not_chosen"].get<int>(), 0);
+  EXPECT_EQ(j["views_total"].get<int>(), j["frames_with_target"].get<int>());
+  const YAML::Node spread = YAML::LoadFile(dir + "/cam.yaml")["cam0"];
+  for (int i = 0; i < 4; ++i)
+    EXPECT_LE(std::abs(j["intrinsics"][i].get<double>() - spread["intrinsics"][i].as<double>()),
+              spread["imucal"]["intrinsics_sigma"][i].as<double>())
+        << "intrinsics[" << i << "]";
 }
 
 // A target file that does not match the board stops within the first frames and says what the
