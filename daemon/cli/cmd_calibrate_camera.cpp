@@ -341,6 +341,7 @@ void setup(CLI::App& root) {
                   "the recording (consecutive views of a video repeat each other; the self-check's parts use "
                   "the same views, so the sigmas stay honest); 0: every view. A rolling-shutter camera is "
                   "solved on every view")
+      ->capture_default_str()
       ->check(CLI::Range(0, 1000000));
   add_self_check_option(cmd, &o->self_check);
   add_detection_store_options(cmd, &o->detections);
