@@ -695,8 +695,7 @@ std::vector<calib::TargetObservation> spread_views(const std::vector<calib::Targ
   std::vector<calib::TargetObservation> out;
   out.reserve(static_cast<std::size_t>(max_views));
   for (long k = 0; k < n; ++k)
-    if (k == 0 || k * max_views / n != (k - 1) * max_views / n)
-      out.push_back(seen[static_cast<std::size_t>(k)]);
+    if (calib::opens_slot(k, n, max_views)) out.push_back(seen[static_cast<std::size_t>(k)]);
   return out;
 }
 

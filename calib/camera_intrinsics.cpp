@@ -657,9 +657,7 @@ Status solve_starts_on_subset(const std::vector<CameraModel>& starts, const Came
   int k = 0;
   for (const View& v : *views) {
     if (!v.active) continue;
-    // The first view of each of start_views equal slots of the active views.
-    const long slot = static_cast<long>(k) * options.start_views / active;
-    if (k == 0 || slot != static_cast<long>(k - 1) * options.start_views / active) subset.push_back(v);
+    if (opens_slot(k, active, options.start_views)) subset.push_back(v);
     ++k;
   }
   CameraIntrinsicsResult on_subset = *result;

@@ -24,6 +24,13 @@
 
 namespace imucal::calib {
 
+/// Whether item k of n consecutive ones opens one of `slots` equal runs of them: the items for
+/// which it holds are `slots` of them spread evenly, the first among them (every item when
+/// n <= slots). The solve's start subset and a long recording's views are chosen by it.
+inline bool opens_slot(long k, long n, long slots) {
+  return n <= slots || k == 0 || k * slots / n != (k - 1) * slots / n;
+}
+
 struct CameraIntrinsicsOptions {
   CameraModelKind model{ProjectionModel::kPinhole, DistortionModel::kRadtan};
   /// Fewest usable views; fewer is refused (the pose of every view is unknown, and a handful of

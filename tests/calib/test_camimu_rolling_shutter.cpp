@@ -51,8 +51,8 @@ TEST(CamImuRollingShutter, TheEvidencePicksRollingAndTheLineDelayAndExtrinsicsHo
   const CamImuCameraResult& c = r->cameras[0];
   ASSERT_TRUE(c.camera.shutter.rolling()) << c.shutter_choice;
   EXPECT_EQ(c.shutter_choice.rfind("rolling, chosen by the evidence", 0), 0u) << c.shutter_choice;
-  // The test frees the line delay on the frames that carry most of its information (800 frames
-  // here); the rolling solution is then solved on every frame.
+  // The test frees the line delay on the frames that carry most of its information; the rolling
+  // solution is then solved on every frame.
   EXPECT_NE(c.shutter_choice.find("; tested on the "), std::string::npos) << c.shutter_choice;
   const double ld = c.camera.shutter.line_delay_s;
   ASSERT_TRUE(std::isfinite(c.line_delay_sigma_s));
